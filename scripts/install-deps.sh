@@ -1,0 +1,30 @@
+#!/usr/bin/env bash
+# Installs every build, test and benchmark dependency of voxeld from Debian 12
+# packages. Used by the README and by .ci/run; safe to run again.
+#   --container   also install podman/buildah/debootstrap for the image test
+set -euo pipefail
+
+pkgs=(
+  # toolchain
+  build-essential cmake pkg-config git ca-certificates
+  # GL through EGL: glvnd loaders + headers, Mesa's EGL and DRI drivers (llvmpipe)
+  libegl-dev libgl-dev libopengl-dev libegl1 libegl-mesa0 libgl1-mesa-dri
+  # HTTP, JSON, meshes
+  libmicrohttpd-dev libcjson-dev libdraco-dev draco
+  # OpenVDB and what its headers need
+  libopenvdb-dev libopenvdb-tools libboost-dev libboost-iostreams-dev
+  libtbb-dev libimath-dev libblosc-dev zlib1g-dev
+  # FFT, images, tests, service
+  libfftw3-dev libpng-dev libcmocka-dev libsystemd-dev systemd nettle-dev
+  # integration tests and benchmarks
+  curl jq procps psmisc
+)
+if [[ "${1:-}" == "--container" ]]; then
+  pkgs+=(podman buildah debootstrap)
+fi
+
+SUDO=""
+if [[ $(id -u) -ne 0 ]]; then SUDO="sudo"; fi
+export DEBIAN_FRONTEND=noninteractive
+$SUDO apt-get update -qq
+$SUDO apt-get install -y -qq --no-install-recommends "${pkgs[@]}"

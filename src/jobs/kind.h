@@ -1,0 +1,82 @@
+/* The job table: one row per job kind (libvips operations, Redis commands).
+ *
+ * A job runs in stages on fixed threads:
+ *   parse   HTTP thread   validate + normalise params (defaults filled in)
+ *   run_gl  GL thread     the GL part; the only stage that may call GL
+ *   run_cpu CPU worker    heavy CPU work (FFT, meshing), may be NULL
+ *   encode  CPU worker    write the outputs, may be NULL
+ * `state` carries data between stages; free_state frees it whatever happens.
+ * Stages report progress through vx_run_progress, which also tells them to
+ * stop (cancel, time limit). */
+#ifndef VX_JOBS_KIND_H
+#define VX_JOBS_KIND_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#include <cjson/cJSON.h>
+
+#include "mesh/mesh.h"
+#include "util/err.h"
+
+typedef struct vx_gl vx_gl;
+
+/* Limits engines enforce on request-sized allocations (0 = default). */
+typedef struct vx_limits {
+    uint64_t max_upload_bytes;
+    uint64_t max_triangles;
+    uint64_t max_image_pixels;  /* width * height of any rendered image */
+    uint64_t max_job_memory;    /* bytes an engine may allocate for one job */
+    double job_timeout_s;
+} vx_limits;
+
+/* One run of one job, owned by the job runner; kinds only use it through
+ * the functions below, from the stage they are called in. */
+typedef struct vx_job_run vx_job_run;
+
+/* Sets progress (0..1, clamped, never decreasing). Returns -1 and fills err
+ * (VX_ECANCELED / VX_ETIMEOUT) when the job must stop; the stage then
+ * cleans up and returns -1 with that err. */
+int vx_run_progress(vx_job_run *r, double fraction, vx_err *err);
+/* The GL context; only valid in run_gl. */
+vx_gl *vx_run_gl(vx_job_run *r);
+/* The limits in force. */
+const vx_limits *vx_run_limits(const vx_job_run *r);
+/* The stats object of the job (owned by the run): kinds add numbers to it. */
+cJSON *vx_run_stats(vx_job_run *r);
+/* Declares an output NAME (first declared = primary result) and returns the
+ * path to write it to (owned by the run, valid until the run ends). */
+const char *vx_run_output(vx_job_run *r, const char *name, const char *file_ext,
+                          const char *content_type, vx_err *err);
+
+typedef struct vx_kind {
+    const char *name;
+    const char *summary;
+    /* Returns an owned normalised copy of params (NULL input = {}), or NULL
+     * with err (VX_EUNPROC, code "invalid_params", message naming the field). */
+    cJSON *(*parse)(const cJSON *params, const vx_limits *lim, vx_err *err);
+    int (*run_gl)(vx_job_run *r, const vx_mesh *mesh, const cJSON *params, void **state,
+                  vx_err *err);
+    int (*run_cpu)(vx_job_run *r, const cJSON *params, void *state, vx_err *err);
+    int (*encode)(vx_job_run *r, const cJSON *params, void *state, vx_err *err);
+    void (*free_state)(void *state);
+} vx_kind;
+
+/* The table (src/jobs/kinds.c); NULL when name is unknown. Any thread. */
+const vx_kind *vx_kind_find(const char *name);
+/* Number of rows and row i, for listings (/v1/info). */
+size_t vx_kind_count(void);
+const vx_kind *vx_kind_at(size_t i);
+
+/* Helpers for parse functions: read an optional number/int/bool field,
+ * checking type and range; the default is used when absent. Return 0 or -1
+ * with err naming the field. */
+int vx_param_number(const cJSON *params, const char *field, double def, double lo, double hi,
+                    double *out, vx_err *err);
+int vx_param_int(const cJSON *params, const char *field, long def, long lo, long hi, long *out,
+                 vx_err *err);
+int vx_param_bool(const cJSON *params, const char *field, int def, int *out, vx_err *err);
+/* Fails (VX_EUNPROC) if params has a field not in the NULL-terminated list. */
+int vx_param_only(const cJSON *params, const char *const *known, vx_err *err);
+
+#endif

@@ -1,0 +1,104 @@
+/* vx_mesh: a polygon mesh as uploaded, plus the triangulated view that the
+ * rasterizing engines draw.
+ *
+ * The face structure is kept (quads and n-gons matter to Gregory patches);
+ * `tri` is a fan triangulation of every face, made once at load time. When
+ * every face is already a triangle, `face_start` is NULL and `tri` aliases
+ * `face_idx` (no copy). Positions are doubles: engines normalise in double
+ * before converting to float for upload.
+ *
+ * Readers (OBJ, Draco) and writers (OBJ, binary PLY, Draco) live beside this
+ * file. Any thread may call these functions on meshes it owns. */
+#ifndef VX_MESH_H
+#define VX_MESH_H
+
+#include <stddef.h>
+#include <stdint.h>
+#include <stdio.h>
+
+#include "util/err.h"
+
+typedef enum vx_mesh_format {
+    VX_MESH_OBJ = 1,
+    VX_MESH_DRACO = 2,
+} vx_mesh_format;
+
+typedef struct vx_mesh {
+    size_t nverts;
+    double *pos; /* 3 * nverts */
+
+    size_t nfaces;
+    uint32_t *face_start; /* nfaces + 1 offsets into face_idx, or NULL: all triangles */
+    uint32_t *face_idx;   /* zero-based vertex indices, face after face */
+
+    size_t ntris;
+    uint32_t *tri; /* 3 * ntris; aliases face_idx when face_start == NULL */
+
+    /* What load-time analysis found (vx_mesh_analyze). */
+    double bbox_min[3], bbox_max[3];
+    size_t faces_by_size[3];   /* triangles, quads, n-gons (n >= 5) */
+    size_t boundary_edges;     /* undirected edges used by exactly one face; 0 = closed */
+    size_t nonmanifold_edges;  /* undirected edges used by three or more faces */
+    size_t degenerate_tris;    /* triangles of zero area (kept, reported) */
+    size_t ntexcoords, nnormals; /* vt / vn records seen (not kept) */
+} vx_mesh;
+
+/* Limits a reader enforces while it streams; 0 = no limit. */
+typedef struct vx_mesh_limits {
+    size_t max_vertices;
+    size_t max_triangles; /* counted on the triangulated view */
+} vx_mesh_limits;
+
+/* Returns an owned empty mesh, or NULL on allocation failure. */
+vx_mesh *vx_mesh_new(void);
+/* Frees the mesh and its arrays; NULL is a no-op. */
+void vx_mesh_free(vx_mesh *m);
+
+/* Number of vertices of face f, and a pointer to its indices (owned by m). */
+uint32_t vx_mesh_face_size(const vx_mesh *m, size_t f);
+const uint32_t *vx_mesh_face(const vx_mesh *m, size_t f);
+
+/* Builds `tri` from the faces (fan) if needed and fills bbox, faces_by_size,
+ * boundary/non-manifold edge counts and degenerate_tris. Readers call it;
+ * code that builds a mesh by hand calls it before use. */
+int vx_mesh_analyze(vx_mesh *m, vx_err *err);
+
+/* Reads an OBJ file, streaming it line by line (memory: the mesh plus one
+ * line). Keeps v and f; validates vt, vn and every f index form (v, v/t,
+ * v//n, v/t/n, negative indices). Errors (VX_EINVAL, code obj_*) name the
+ * line: index out of range, NaN/Inf, junk tokens, a face using one vertex
+ * twice; no faces is VX_EUNPROC (obj_no_faces); a limit is VX_ETOOBIG.
+ * Returns an owned analysed mesh or NULL. */
+vx_mesh *vx_obj_read_file(FILE *f, const vx_mesh_limits *lim, vx_err *err);
+vx_mesh *vx_obj_read_path(const char *path, const vx_mesh_limits *lim, vx_err *err);
+
+/* Reads a Draco file through libdraco. A point cloud is VX_EUNPROC
+ * (draco_point_cloud); truncated or corrupt data is VX_EINVAL (draco_corrupt).
+ * Returns an owned analysed mesh or NULL. */
+vx_mesh *vx_draco_read_path(const char *path, const vx_mesh_limits *lim, vx_err *err);
+
+/* Reads either format by looking at the first bytes ("DRACO" magic). */
+vx_mesh *vx_mesh_read_path(const char *path, const vx_mesh_limits *lim, vx_err *err);
+
+/* Sniffs the first bytes of a file: VX_MESH_DRACO for the "DRACO" magic,
+ * VX_MESH_OBJ for text, 0 for binary junk. */
+vx_mesh_format vx_mesh_sniff(const unsigned char *head, size_t n);
+
+/* Optional per-vertex normals and per-face groups for the writers. */
+typedef struct vx_mesh_write_opts {
+    const float *normals;       /* 3 * nverts, or NULL */
+    const uint32_t *face_group; /* nfaces group ids (patch ids), or NULL */
+    const char *group_prefix;   /* OBJ group name prefix, default "patch" */
+    int draco_quantization_bits; /* position quantisation, 0 = 16 */
+} vx_mesh_write_opts;
+
+/* Writers. OBJ keeps the face structure (and writes vn, and "g" groups when
+ * face_group is set); PLY is binary little-endian with float positions,
+ * optional normals and a per-face "patch" int when face_group is set; Draco
+ * writes the triangulated view. Return 0 or -1 (VX_EIO). */
+int vx_obj_write_path(const vx_mesh *m, const vx_mesh_write_opts *o, const char *path, vx_err *err);
+int vx_ply_write_path(const vx_mesh *m, const vx_mesh_write_opts *o, const char *path, vx_err *err);
+int vx_draco_write_path(const vx_mesh *m, const vx_mesh_write_opts *o, const char *path,
+                        vx_err *err);
+
+#endif

@@ -1,0 +1,40 @@
+#include "util/err.h"
+
+#include <stdio.h>
+#include <string.h>
+
+int vx_err_setv(vx_err *err, vx_err_kind kind, const char *code, const char *fmt, va_list ap)
+{
+    if (!err) return -1;
+    err->kind = kind;
+    snprintf(err->code, sizeof err->code, "%s", code);
+    vsnprintf(err->message, sizeof err->message, fmt, ap);
+    return -1;
+}
+
+int vx_err_set(vx_err *err, vx_err_kind kind, const char *code, const char *fmt, ...)
+{
+    va_list ap;
+    va_start(ap, fmt);
+    vx_err_setv(err, kind, code, fmt, ap);
+    va_end(ap);
+    return -1;
+}
+
+void vx_err_clear(vx_err *err)
+{
+    if (!err) return;
+    err->kind = VX_EOK;
+    err->code[0] = 0;
+    err->message[0] = 0;
+}
+
+const char *vx_err_kind_name(vx_err_kind kind)
+{
+    static const char *names[] = {"ok",       "invalid", "unprocessable", "too_big",
+                                  "not_found", "conflict", "media",        "busy",
+                                  "canceled", "timeout",  "gpu",          "io",
+                                  "internal"};
+    if ((unsigned)kind < sizeof names / sizeof names[0]) return names[kind];
+    return "unknown";
+}

@@ -1,0 +1,50 @@
+/* vx_err: the error a failing call hands back to its caller.
+ *
+ * Every fallible function returns 0 / -1 (or a pointer / NULL) and fills a
+ * caller-supplied vx_err. The code is a stable machine-readable string that
+ * ends up in the HTTP error body; the kind decides the HTTP status, which
+ * only daemon/http maps. Functions log where an error is detected; callers
+ * propagate silently. */
+#ifndef VX_ERR_H
+#define VX_ERR_H
+
+#include <stdarg.h>
+
+typedef enum vx_err_kind {
+    VX_EOK = 0,
+    VX_EINVAL,      /* malformed input: bad syntax, truncated data (400) */
+    VX_EUNPROC,     /* well-formed but unusable: bad params, no faces (422) */
+    VX_ETOOBIG,     /* a configured limit was exceeded (413 for bodies, 422 for params) */
+    VX_ENOTFOUND,   /* unknown id (404) */
+    VX_ECONFLICT,   /* state does not allow the operation (409) */
+    VX_EMEDIA,      /* unsupported content type (415) */
+    VX_EBUSY,       /* queue full (429) */
+    VX_ECANCELED,   /* job canceled */
+    VX_ETIMEOUT,    /* job ran past its time limit */
+    VX_EGPU,        /* GL error, out of GPU memory, context lost */
+    VX_EIO,         /* file system error (500) */
+    VX_EINTERNAL,   /* a bug or an allocation failure (500) */
+} vx_err_kind;
+
+typedef struct vx_err {
+    vx_err_kind kind;
+    char code[48];     /* e.g. "obj_index_out_of_range" */
+    char message[512]; /* human readable, names the line/parameter */
+} vx_err;
+
+/* Fills err (may be NULL) and returns -1, so callers can `return vx_err_set(...)`. */
+int vx_err_set(vx_err *err, vx_err_kind kind, const char *code, const char *fmt, ...)
+    __attribute__((format(printf, 4, 5)));
+int vx_err_setv(vx_err *err, vx_err_kind kind, const char *code, const char *fmt, va_list ap);
+/* Resets err to VX_EOK. */
+void vx_err_clear(vx_err *err);
+/* Short name of a kind, for logs. */
+const char *vx_err_kind_name(vx_err_kind kind);
+
+#define VX_FREE(p)                                                                                 \
+    do {                                                                                           \
+        free(p);                                                                                   \
+        (p) = NULL;                                                                                \
+    } while (0)
+
+#endif

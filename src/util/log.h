@@ -1,0 +1,35 @@
+/* Structured logging to stderr: one line per event, key=value pairs, with
+ * the "<N>" syslog priority prefix that journald understands, e.g.
+ *   <6>ts=2026-11-21T10:00:00.123Z level=info event=http.request status=200
+ * Thread-safe: any thread may log. */
+#ifndef VX_LOG_H
+#define VX_LOG_H
+
+typedef enum vx_log_level {
+    VX_LOG_ERR = 3,
+    VX_LOG_WARN = 4,
+    VX_LOG_INFO = 6,
+    VX_LOG_DEBUG = 7,
+} vx_log_level;
+
+/* Messages above this level are dropped. Default VX_LOG_INFO. */
+void vx_log_set_level(vx_log_level level);
+vx_log_level vx_log_get_level(void);
+/* Parses "error|warn|info|debug"; returns 0 or -1. */
+int vx_log_parse_level(const char *s, vx_log_level *out);
+
+/* Logs event=EVENT followed by the caller's already formatted key=value pairs.
+ * Values with spaces must be quoted by the caller (see vx_log_quote). */
+void vx_log(vx_log_level level, const char *event, const char *fmt, ...)
+    __attribute__((format(printf, 3, 4)));
+
+/* Writes s into buf as a log value: bare if it has no space/quote/=, else
+ * double-quoted with escapes. Returns buf. */
+const char *vx_log_quote(char *buf, unsigned long size, const char *s);
+
+#define VX_ERROR(ev, ...) vx_log(VX_LOG_ERR, ev, __VA_ARGS__)
+#define VX_WARN(ev, ...) vx_log(VX_LOG_WARN, ev, __VA_ARGS__)
+#define VX_INFO(ev, ...) vx_log(VX_LOG_INFO, ev, __VA_ARGS__)
+#define VX_DEBUG(ev, ...) vx_log(VX_LOG_DEBUG, ev, __VA_ARGS__)
+
+#endif
