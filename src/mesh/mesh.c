@@ -1,0 +1,143 @@
+/* Mesh type, triangulated view and load-time analysis. */
+#include "mesh/mesh.h"
+
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+vx_mesh *vx_mesh_new(void) { return calloc(1, sizeof(vx_mesh)); }
+
+void vx_mesh_free(vx_mesh *m)
+{
+    if (!m) return;
+    if (m->tri != m->face_idx) free(m->tri);
+    free(m->face_idx);
+    free(m->face_start);
+    free(m->pos);
+    free(m);
+}
+
+uint32_t vx_mesh_face_size(const vx_mesh *m, size_t f)
+{
+    return m->face_start ? m->face_start[f + 1] - m->face_start[f] : 3;
+}
+
+const uint32_t *vx_mesh_face(const vx_mesh *m, size_t f)
+{
+    return m->face_idx + (m->face_start ? m->face_start[f] : 3 * f);
+}
+
+static int cmp_u64(const void *a, const void *b)
+{
+    uint64_t x = *(const uint64_t *)a, y = *(const uint64_t *)b;
+    return (x > y) - (x < y);
+}
+
+/* Sorts 64-bit keys: LSD radix sort on 16-bit digits (qsort is several
+ * times slower on the 10^7-edge meshes the reader accepts). */
+static void sort_u64(uint64_t *a, size_t n)
+{
+    if (n < 4096) {
+        qsort(a, n, sizeof *a, cmp_u64);
+        return;
+    }
+    uint64_t *tmp = malloc(n * sizeof *tmp);
+    if (!tmp) {
+        qsort(a, n, sizeof *a, cmp_u64);
+        return;
+    }
+    uint64_t *src = a, *dst = tmp;
+    for (int shift = 0; shift < 64; shift += 16) {
+        size_t count[65537] = {0};
+        for (size_t i = 0; i < n; i++) count[((src[i] >> shift) & 0xffff) + 1]++;
+        if (count[1] == n) continue; /* this digit is zero everywhere */
+        for (int d = 0; d < 65536; d++) count[d + 1] += count[d];
+        for (size_t i = 0; i < n; i++) dst[count[(src[i] >> shift) & 0xffff]++] = src[i];
+        uint64_t *t = src;
+        src = dst;
+        dst = t;
+    }
+    if (src != a) memcpy(a, src, n * sizeof *a);
+    free(tmp);
+}
+
+int vx_mesh_analyze(vx_mesh *m, vx_err *err)
+{
+    /* Triangulated view: a fan per face. */
+    if (m->face_start && !m->tri) {
+        size_t nt = 0;
+        for (size_t f = 0; f < m->nfaces; f++) nt += vx_mesh_face_size(m, f) - 2;
+        m->tri = malloc(3 * nt * sizeof(uint32_t) + 1);
+        if (!m->tri) return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for %zu triangles", nt);
+        size_t t = 0;
+        for (size_t f = 0; f < m->nfaces; f++) {
+            const uint32_t *v = vx_mesh_face(m, f);
+            uint32_t n = vx_mesh_face_size(m, f);
+            for (uint32_t k = 1; k + 1 < n; k++) {
+                m->tri[3 * t] = v[0];
+                m->tri[3 * t + 1] = v[k];
+                m->tri[3 * t + 2] = v[k + 1];
+                t++;
+            }
+        }
+        m->ntris = nt;
+    } else if (!m->face_start) {
+        m->tri = m->face_idx;
+        m->ntris = m->nfaces;
+    }
+
+    for (int a = 0; a < 3; a++) {
+        m->bbox_min[a] = m->nverts ? INFINITY : 0;
+        m->bbox_max[a] = m->nverts ? -INFINITY : 0;
+    }
+    for (size_t i = 0; i < m->nverts; i++)
+        for (int a = 0; a < 3; a++) {
+            double x = m->pos[3 * i + a];
+            if (x < m->bbox_min[a]) m->bbox_min[a] = x;
+            if (x > m->bbox_max[a]) m->bbox_max[a] = x;
+        }
+
+    m->faces_by_size[0] = m->faces_by_size[1] = m->faces_by_size[2] = 0;
+    size_t nedges = 0;
+    for (size_t f = 0; f < m->nfaces; f++) {
+        uint32_t n = vx_mesh_face_size(m, f);
+        m->faces_by_size[n == 3 ? 0 : n == 4 ? 1 : 2]++;
+        nedges += n;
+    }
+
+    m->degenerate_tris = 0;
+    for (size_t t = 0; t < m->ntris; t++) {
+        const double *a = m->pos + 3 * m->tri[3 * t], *b = m->pos + 3 * m->tri[3 * t + 1],
+                     *c = m->pos + 3 * m->tri[3 * t + 2];
+        double u[3] = {b[0] - a[0], b[1] - a[1], b[2] - a[2]};
+        double v[3] = {c[0] - a[0], c[1] - a[1], c[2] - a[2]};
+        double x = u[1] * v[2] - u[2] * v[1], y = u[2] * v[0] - u[0] * v[2],
+               z = u[0] * v[1] - u[1] * v[0];
+        if (x == 0 && y == 0 && z == 0) m->degenerate_tris++;
+    }
+
+    /* Edge use counts: sort the undirected edges of the faces (not of the
+     * fan triangles, whose inner diagonals are not mesh edges). */
+    uint64_t *keys = malloc(nedges * sizeof *keys + 1);
+    if (!keys) return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for %zu edges", nedges);
+    size_t e = 0;
+    for (size_t f = 0; f < m->nfaces; f++) {
+        const uint32_t *v = vx_mesh_face(m, f);
+        uint32_t n = vx_mesh_face_size(m, f);
+        for (uint32_t k = 0; k < n; k++) {
+            uint64_t a = v[k], b = v[(k + 1) % n];
+            keys[e++] = a < b ? (a << 32 | b) : (b << 32 | a);
+        }
+    }
+    sort_u64(keys, nedges);
+    m->boundary_edges = m->nonmanifold_edges = 0;
+    for (size_t i = 0; i < nedges;) {
+        size_t j = i;
+        while (j < nedges && keys[j] == keys[i]) j++;
+        if (j - i == 1) m->boundary_edges++;
+        else if (j - i > 2) m->nonmanifold_edges++;
+        i = j;
+    }
+    free(keys);
+    return 0;
+}
