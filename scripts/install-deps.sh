@@ -17,7 +17,7 @@ pkgs=(
   # FFT, images, tests, service
   libfftw3-dev libpng-dev libcmocka-dev libsystemd-dev systemd nettle-dev
   # integration tests and benchmarks
-  curl jq procps psmisc
+  curl jq procps psmisc python3 python3-yaml python3-jsonschema
 )
 if [[ "${1:-}" == "--container" ]]; then
   pkgs+=(podman buildah debootstrap)
