@@ -1,0 +1,580 @@
+/* Content-addressed mesh store and result budget (store.h). */
+#include "store/store.h"
+
+#include <dirent.h>
+#include <errno.h>
+#include <fcntl.h>
+#include <nettle/sha2.h>
+#include <pthread.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include "util/fsutil.h"
+#include "util/log.h"
+
+typedef struct mesh_entry {
+    char id[65];
+    char ext[8];
+    cJSON *meta;
+} mesh_entry;
+
+typedef struct result_entry {
+    char jid[48];
+    uint64_t bytes;
+    double last_access; /* wall clock, so it survives restarts via mtime */
+} result_entry;
+
+struct vx_store {
+    char dir[2048];
+    vx_store_desc desc;
+    pthread_mutex_t lock;
+    mesh_entry *meshes; /* sorted by id */
+    size_t nmeshes, capmeshes;
+    result_entry *results;
+    size_t nresults, capresults;
+    uint64_t results_bytes;
+    unsigned long upload_seq;
+};
+
+struct vx_upload {
+    vx_store *s;
+    int fd;
+    char path[2300];
+    struct sha256_ctx sha;
+    uint64_t bytes;
+    unsigned char head[64];
+    size_t nhead;
+    char buf[1 << 16]; /* write coalescing: network chunks are small */
+    size_t nbuf;
+};
+
+int vx_store_valid_mesh_id(const char *id)
+{
+    if (!id || strlen(id) != 64) return 0;
+    for (int i = 0; i < 64; i++)
+        if (!((id[i] >= '0' && id[i] <= '9') || (id[i] >= 'a' && id[i] <= 'f'))) return 0;
+    return 1;
+}
+
+static int valid_jid(const char *s)
+{
+    size_t n = strlen(s);
+    if (n == 0 || n >= sizeof(((result_entry *)0)->jid)) return 0;
+    for (size_t i = 0; i < n; i++)
+        if (!((s[i] >= '0' && s[i] <= '9') || (s[i] >= 'a' && s[i] <= 'f'))) return 0;
+    return 1;
+}
+
+/* Binary search: index of id, or the insertion point with *found = 0. */
+static size_t mesh_find(vx_store *s, const char *id, int *found)
+{
+    size_t lo = 0, hi = s->nmeshes;
+    while (lo < hi) {
+        size_t mid = (lo + hi) / 2;
+        int c = strcmp(s->meshes[mid].id, id);
+        if (c == 0) {
+            *found = 1;
+            return mid;
+        }
+        if (c < 0) lo = mid + 1;
+        else hi = mid;
+    }
+    *found = 0;
+    return lo;
+}
+
+static int mesh_insert(vx_store *s, const char *id, const char *ext, cJSON *meta)
+{
+    int found;
+    size_t at = mesh_find(s, id, &found);
+    if (found) {
+        cJSON_Delete(s->meshes[at].meta);
+        s->meshes[at].meta = meta;
+        return 0;
+    }
+    if (s->nmeshes == s->capmeshes) {
+        size_t cap = s->capmeshes ? 2 * s->capmeshes : 64;
+        mesh_entry *n = realloc(s->meshes, cap * sizeof *n);
+        if (!n) return -1;
+        s->meshes = n;
+        s->capmeshes = cap;
+    }
+    memmove(s->meshes + at + 1, s->meshes + at, (s->nmeshes - at) * sizeof *s->meshes);
+    mesh_entry *e = &s->meshes[at];
+    snprintf(e->id, sizeof e->id, "%s", id);
+    snprintf(e->ext, sizeof e->ext, "%s", ext);
+    e->meta = meta;
+    s->nmeshes++;
+    return 0;
+}
+
+static void load_meshes(vx_store *s)
+{
+    char dir[2100];
+    snprintf(dir, sizeof dir, "%s/meshes", s->dir);
+    DIR *d = opendir(dir);
+    if (!d) return;
+    struct dirent *e;
+    while ((e = readdir(d))) {
+        char id[65];
+        const char *dot = strchr(e->d_name, '.');
+        if (!dot || dot - e->d_name != 64) continue;
+        memcpy(id, e->d_name, 64);
+        id[64] = 0;
+        if (!vx_store_valid_mesh_id(id) || strcmp(dot, ".json") != 0) continue;
+        char path[2300];
+        snprintf(path, sizeof path, "%s/%s", dir, e->d_name);
+        char *text = vx_read_file(path, 1 << 20, NULL, NULL);
+        cJSON *meta = text ? cJSON_Parse(text) : NULL;
+        free(text);
+        const cJSON *fmt = cJSON_GetObjectItemCaseSensitive(meta, "format");
+        if (!cJSON_IsString(fmt)) {
+            VX_WARN("store.bad_metadata", "path=%s", path);
+            cJSON_Delete(meta);
+            continue;
+        }
+        const char *ext = strcmp(fmt->valuestring, "draco") == 0 ? "drc" : "obj";
+        char mpath[2300];
+        snprintf(mpath, sizeof mpath, "%s/%s.%s", dir, id, ext);
+        if (access(mpath, R_OK) != 0) {
+            VX_WARN("store.missing_mesh_file", "path=%s", mpath);
+            cJSON_Delete(meta);
+            continue;
+        }
+        mesh_insert(s, id, ext, meta);
+    }
+    closedir(d);
+    /* A mesh file without metadata is a commit that never finished: it was
+     * never acknowledged, so it can go. */
+    d = opendir(dir);
+    if (!d) return;
+    while ((e = readdir(d))) {
+        const char *dot = strchr(e->d_name, '.');
+        if (!dot || strcmp(dot, ".json") == 0 || dot - e->d_name != 64) continue;
+        char id[65];
+        memcpy(id, e->d_name, 64);
+        id[64] = 0;
+        int found;
+        mesh_find(s, id, &found);
+        if (!found) {
+            char path[2300];
+            snprintf(path, sizeof path, "%s/%s", dir, e->d_name);
+            unlink(path);
+        }
+    }
+    closedir(d);
+}
+
+static int result_add_locked(vx_store *s, const char *jid, uint64_t bytes, double t)
+{
+    for (size_t i = 0; i < s->nresults; i++)
+        if (strcmp(s->results[i].jid, jid) == 0) {
+            s->results_bytes -= s->results[i].bytes;
+            s->results[i].bytes = bytes;
+            s->results[i].last_access = t;
+            s->results_bytes += bytes;
+            return 0;
+        }
+    if (s->nresults == s->capresults) {
+        size_t cap = s->capresults ? 2 * s->capresults : 64;
+        result_entry *n = realloc(s->results, cap * sizeof *n);
+        if (!n) return -1;
+        s->results = n;
+        s->capresults = cap;
+    }
+    result_entry *e = &s->results[s->nresults++];
+    snprintf(e->jid, sizeof e->jid, "%s", jid);
+    e->bytes = bytes;
+    e->last_access = t;
+    s->results_bytes += bytes;
+    return 0;
+}
+
+static void load_results(vx_store *s)
+{
+    char dir[2100];
+    snprintf(dir, sizeof dir, "%s/results", s->dir);
+    DIR *d = opendir(dir);
+    if (!d) return;
+    struct dirent *e;
+    while ((e = readdir(d))) {
+        if (e->d_name[0] == '.' || !valid_jid(e->d_name)) continue;
+        char path[2300];
+        struct stat st;
+        snprintf(path, sizeof path, "%s/%s", dir, e->d_name);
+        if (stat(path, &st) != 0 || !S_ISDIR(st.st_mode)) continue;
+        double t = (double)st.st_mtim.tv_sec + st.st_mtim.tv_nsec * 1e-9;
+        result_add_locked(s, e->d_name, vx_tree_bytes(path), t);
+    }
+    closedir(d);
+}
+
+vx_store *vx_store_open(const char *data_dir, const vx_store_desc *desc, vx_err *err)
+{
+    vx_store *s = calloc(1, sizeof *s);
+    if (!s) {
+        vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory");
+        return NULL;
+    }
+    if (snprintf(s->dir, sizeof s->dir, "%s", data_dir) >= (int)sizeof s->dir) {
+        free(s);
+        vx_err_set(err, VX_EIO, "path_too_long", "data dir path too long");
+        return NULL;
+    }
+    if (desc) s->desc = *desc;
+    pthread_mutex_init(&s->lock, NULL);
+    static const char *subs[] = {"", "/meshes", "/results", "/tmp"};
+    for (size_t i = 0; i < 4; i++) {
+        char p[2100];
+        snprintf(p, sizeof p, "%s%s", s->dir, subs[i]);
+        if (vx_mkdirs(p, err)) {
+            vx_store_close(s);
+            return NULL;
+        }
+    }
+    char tmp[2100];
+    snprintf(tmp, sizeof tmp, "%s/tmp", s->dir);
+    vx_remove_tree(tmp);
+    if (vx_mkdirs(tmp, err)) {
+        vx_store_close(s);
+        return NULL;
+    }
+    load_meshes(s);
+    load_results(s);
+    VX_INFO("store.open", "dir=%s meshes=%zu results=%zu results_bytes=%llu", s->dir, s->nmeshes,
+            s->nresults, (unsigned long long)s->results_bytes);
+    return s;
+}
+
+void vx_store_close(vx_store *s)
+{
+    if (!s) return;
+    for (size_t i = 0; i < s->nmeshes; i++) cJSON_Delete(s->meshes[i].meta);
+    free(s->meshes);
+    free(s->results);
+    pthread_mutex_destroy(&s->lock);
+    free(s);
+}
+
+const char *vx_store_dir(const vx_store *s) { return s->dir; }
+
+int vx_store_writable(vx_store *s)
+{
+    char p[2200];
+    snprintf(p, sizeof p, "%s/tmp/.probe.%d", s->dir, (int)gettid());
+    int fd = open(p, O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0600);
+    if (fd < 0) return 0;
+    int ok = write(fd, "x", 1) == 1;
+    close(fd);
+    unlink(p);
+    return ok;
+}
+
+/* --- uploads ------------------------------------------------------------ */
+
+vx_upload *vx_upload_begin(vx_store *s, vx_err *err)
+{
+    vx_upload *u = calloc(1, sizeof *u);
+    if (!u) {
+        vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory");
+        return NULL;
+    }
+    pthread_mutex_lock(&s->lock);
+    unsigned long seq = ++s->upload_seq;
+    pthread_mutex_unlock(&s->lock);
+    u->s = s;
+    snprintf(u->path, sizeof u->path, "%s/tmp/upload-%lu-%lu", s->dir, (unsigned long)getpid(), seq);
+    u->fd = open(u->path, O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0640);
+    if (u->fd < 0) {
+        vx_err_set(err, VX_EIO, "upload_failed", "create %s: %s", u->path, strerror(errno));
+        free(u);
+        return NULL;
+    }
+    sha256_init(&u->sha);
+    return u;
+}
+
+static int upload_flush(vx_upload *u, vx_err *err)
+{
+    size_t off = 0;
+    while (off < u->nbuf) {
+        ssize_t n = write(u->fd, u->buf + off, u->nbuf - off);
+        if (n < 0 && errno == EINTR) continue;
+        if (n <= 0) return vx_err_set(err, VX_EIO, "upload_failed", "write: %s", strerror(errno));
+        off += (size_t)n;
+    }
+    u->nbuf = 0;
+    return 0;
+}
+
+int vx_upload_write(vx_upload *u, const void *data, size_t n, vx_err *err)
+{
+    const unsigned char *p = data;
+    sha256_update(&u->sha, n, p);
+    if (u->nhead < sizeof u->head) {
+        size_t k = sizeof u->head - u->nhead < n ? sizeof u->head - u->nhead : n;
+        memcpy(u->head + u->nhead, p, k);
+        u->nhead += k;
+    }
+    u->bytes += n;
+    while (n) {
+        size_t k = sizeof u->buf - u->nbuf < n ? sizeof u->buf - u->nbuf : n;
+        memcpy(u->buf + u->nbuf, p, k);
+        u->nbuf += k;
+        p += k;
+        n -= k;
+        if (u->nbuf == sizeof u->buf && upload_flush(u, err)) return -1;
+    }
+    return 0;
+}
+
+uint64_t vx_upload_bytes(const vx_upload *u) { return u->bytes; }
+
+const unsigned char *vx_upload_head(const vx_upload *u, size_t *n)
+{
+    *n = u->nhead;
+    return u->head;
+}
+
+const char *vx_upload_path(const vx_upload *u) { return u->path; }
+
+int vx_upload_finish(vx_upload *u, char id[65], vx_err *err)
+{
+    if (upload_flush(u, err)) return -1;
+    if (fsync(u->fd) != 0)
+        return vx_err_set(err, VX_EIO, "upload_failed", "fsync: %s", strerror(errno));
+    uint8_t digest[SHA256_DIGEST_SIZE];
+    sha256_digest(&u->sha, sizeof digest, digest);
+    for (int i = 0; i < SHA256_DIGEST_SIZE; i++) sprintf(id + 2 * i, "%02x", digest[i]);
+    return 0;
+}
+
+void vx_upload_abort(vx_upload *u)
+{
+    if (!u) return;
+    if (u->fd >= 0) close(u->fd);
+    unlink(u->path);
+    free(u);
+}
+
+/* --- meshes ------------------------------------------------------------- */
+
+int vx_store_mesh_commit(vx_store *s, vx_upload *u, const char *id, const char *ext,
+                         const cJSON *meta, int *existed, vx_err *err)
+{
+    char dir[2100], path[2300], mpath[2300];
+    snprintf(dir, sizeof dir, "%s/meshes", s->dir);
+    snprintf(path, sizeof path, "%s/%s.%s", dir, id, ext);
+    snprintf(mpath, sizeof mpath, "%s/%s.json", dir, id);
+    *existed = 0;
+    pthread_mutex_lock(&s->lock);
+    int found;
+    mesh_find(s, id, &found);
+    if (found) {
+        pthread_mutex_unlock(&s->lock);
+        *existed = 1;
+        vx_upload_abort(u);
+        return 0;
+    }
+    close(u->fd);
+    u->fd = -1;
+    int rc = -1;
+    char *text = cJSON_PrintUnformatted(meta);
+    if (!text) {
+        vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory");
+    } else if (rename(u->path, path) != 0) {
+        vx_err_set(err, VX_EIO, "store_failed", "rename %s: %s", path, strerror(errno));
+    } else if (vx_fsync_dir(dir, err) == 0 && vx_write_atomic(mpath, text, strlen(text), err) == 0) {
+        cJSON *copy = cJSON_Duplicate(meta, 1);
+        if (copy && mesh_insert(s, id, ext, copy) == 0) rc = 0;
+        else {
+            cJSON_Delete(copy);
+            vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory");
+        }
+    }
+    pthread_mutex_unlock(&s->lock);
+    free(text);
+    vx_upload_abort(u);
+    if (rc) {
+        unlink(mpath);
+        unlink(path);
+    }
+    return rc;
+}
+
+cJSON *vx_store_mesh_meta(vx_store *s, const char *id, vx_err *err)
+{
+    pthread_mutex_lock(&s->lock);
+    int found;
+    size_t at = mesh_find(s, id, &found);
+    cJSON *copy = found ? cJSON_Duplicate(s->meshes[at].meta, 1) : NULL;
+    pthread_mutex_unlock(&s->lock);
+    if (!found) vx_err_set(err, VX_ENOTFOUND, "mesh_not_found", "no mesh with id %.80s", id);
+    return copy;
+}
+
+int vx_store_mesh_path(vx_store *s, const char *id, char *buf, size_t n, vx_err *err)
+{
+    pthread_mutex_lock(&s->lock);
+    int found;
+    size_t at = mesh_find(s, id, &found);
+    if (found) snprintf(buf, n, "%s/meshes/%s.%s", s->dir, id, s->meshes[at].ext);
+    pthread_mutex_unlock(&s->lock);
+    if (!found) return vx_err_set(err, VX_ENOTFOUND, "mesh_not_found", "no mesh with id %.80s", id);
+    return 0;
+}
+
+int vx_store_mesh_delete(vx_store *s, const char *id, vx_err *err)
+{
+    pthread_mutex_lock(&s->lock);
+    int found;
+    size_t at = mesh_find(s, id, &found);
+    if (!found) {
+        pthread_mutex_unlock(&s->lock);
+        return vx_err_set(err, VX_ENOTFOUND, "mesh_not_found", "no mesh with id %.80s", id);
+    }
+    char path[2300];
+    /* Metadata first: without it the mesh no longer exists, even if the
+     * process dies before the data file is gone (load_meshes cleans up). */
+    snprintf(path, sizeof path, "%s/meshes/%s.json", s->dir, id);
+    unlink(path);
+    snprintf(path, sizeof path, "%s/meshes/%s.%s", s->dir, id, s->meshes[at].ext);
+    unlink(path);
+    cJSON_Delete(s->meshes[at].meta);
+    memmove(s->meshes + at, s->meshes + at + 1, (s->nmeshes - at - 1) * sizeof *s->meshes);
+    s->nmeshes--;
+    pthread_mutex_unlock(&s->lock);
+    snprintf(path, sizeof path, "%s/meshes", s->dir);
+    return vx_fsync_dir(path, err);
+}
+
+cJSON *vx_store_mesh_list(vx_store *s, const char *after, int limit, char next[65])
+{
+    cJSON *arr = cJSON_CreateArray();
+    next[0] = 0;
+    pthread_mutex_lock(&s->lock);
+    size_t i = 0;
+    if (after && *after) {
+        int found;
+        i = mesh_find(s, after, &found);
+        if (found) i++;
+    }
+    int n = 0;
+    for (; i < s->nmeshes && n < limit; i++, n++)
+        cJSON_AddItemToArray(arr, cJSON_Duplicate(s->meshes[i].meta, 1));
+    if (i < s->nmeshes && n > 0) snprintf(next, 65, "%s", s->meshes[i - 1].id);
+    pthread_mutex_unlock(&s->lock);
+    return arr;
+}
+
+size_t vx_store_mesh_count(vx_store *s)
+{
+    pthread_mutex_lock(&s->lock);
+    size_t n = s->nmeshes;
+    pthread_mutex_unlock(&s->lock);
+    return n;
+}
+
+/* --- results ------------------------------------------------------------ */
+
+int vx_store_result_dir(vx_store *s, const char *jid, char *buf, size_t n, vx_err *err)
+{
+    if (!valid_jid(jid)) return vx_err_set(err, VX_EINTERNAL, "bad_job_id", "bad job id");
+    snprintf(buf, n, "%s/results/%s", s->dir, jid);
+    vx_remove_tree(buf); /* left over from an interrupted earlier attempt */
+    pthread_mutex_lock(&s->lock);
+    for (size_t i = 0; i < s->nresults; i++)
+        if (strcmp(s->results[i].jid, jid) == 0) {
+            s->results_bytes -= s->results[i].bytes;
+            s->results[i] = s->results[--s->nresults];
+            break;
+        }
+    pthread_mutex_unlock(&s->lock);
+    return vx_mkdirs(buf, err);
+}
+
+void vx_store_result_added(vx_store *s, const char *jid)
+{
+    char path[2200];
+    snprintf(path, sizeof path, "%s/results/%s", s->dir, jid);
+    uint64_t bytes = vx_tree_bytes(path);
+    vx_fsync_dir(path, NULL);
+    pthread_mutex_lock(&s->lock);
+    result_add_locked(s, jid, bytes, vx_now());
+    pthread_mutex_unlock(&s->lock);
+}
+
+int vx_store_result_file(vx_store *s, const char *jid, const char *file, char *buf, size_t n,
+                         vx_err *err)
+{
+    char dir[2200];
+    snprintf(dir, sizeof dir, "%s/results/%s", s->dir, jid);
+    pthread_mutex_lock(&s->lock);
+    int found = 0;
+    for (size_t i = 0; i < s->nresults; i++)
+        if (strcmp(s->results[i].jid, jid) == 0) {
+            s->results[i].last_access = vx_now();
+            found = 1;
+            break;
+        }
+    pthread_mutex_unlock(&s->lock);
+    if (!found || access(dir, F_OK) != 0)
+        return vx_err_set(err, VX_ENOTFOUND, "result_evicted",
+                          "the results of job %s were removed by the results budget", jid);
+    /* The mtime of the dir carries the LRU order across restarts. */
+    utimensat(AT_FDCWD, dir, NULL, 0);
+    snprintf(buf, n, "%s/%s", dir, file);
+    return 0;
+}
+
+void vx_store_result_remove(vx_store *s, const char *jid)
+{
+    char dir[2200];
+    snprintf(dir, sizeof dir, "%s/results/%s", s->dir, jid);
+    pthread_mutex_lock(&s->lock);
+    for (size_t i = 0; i < s->nresults; i++)
+        if (strcmp(s->results[i].jid, jid) == 0) {
+            s->results_bytes -= s->results[i].bytes;
+            s->results[i] = s->results[--s->nresults];
+            break;
+        }
+    pthread_mutex_unlock(&s->lock);
+    vx_remove_tree(dir);
+}
+
+int vx_store_results_evict(vx_store *s)
+{
+    int removed = 0;
+    for (;;) {
+        char victim[48] = {0};
+        double now = vx_now();
+        pthread_mutex_lock(&s->lock);
+        size_t oldest = (size_t)-1;
+        for (size_t i = 0; i < s->nresults; i++)
+            if (oldest == (size_t)-1 || s->results[i].last_access < s->results[oldest].last_access)
+                oldest = i;
+        if (oldest != (size_t)-1) {
+            int over_bytes = s->desc.results_max_bytes && s->results_bytes > s->desc.results_max_bytes;
+            int too_old = s->desc.results_max_age_s > 0 &&
+                          now - s->results[oldest].last_access > s->desc.results_max_age_s;
+            if (over_bytes || too_old) snprintf(victim, sizeof victim, "%s", s->results[oldest].jid);
+        }
+        pthread_mutex_unlock(&s->lock);
+        if (!victim[0]) break;
+        VX_INFO("store.evict", "job=%s", victim);
+        vx_store_result_remove(s, victim);
+        removed++;
+    }
+    return removed;
+}
+
+uint64_t vx_store_results_bytes(vx_store *s)
+{
+    pthread_mutex_lock(&s->lock);
+    uint64_t b = s->results_bytes;
+    pthread_mutex_unlock(&s->lock);
+    return b;
+}

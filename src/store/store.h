@@ -1,0 +1,81 @@
+/* The data directory: content-addressed meshes and per-job results.
+ *
+ *   DATA/meshes/<sha256>.<obj|drc>   the uploaded bytes, as sent
+ *   DATA/meshes/<sha256>.json        its metadata (the API's Mesh resource)
+ *   DATA/results/<job id>/<name>.<ext>
+ *   DATA/tmp/                        uploads in flight (emptied at start)
+ *   DATA/journal.log                 job journal (src/jobs/journal.c)
+ *
+ * A mesh is acknowledged only after its file and metadata are fsync'd and
+ * renamed into place (file first, metadata last: metadata present = mesh
+ * complete). Results live under a byte/idle-age budget, least recently used
+ * evicted first. All functions are thread-safe. */
+#ifndef VX_STORE_H
+#define VX_STORE_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#include <cjson/cJSON.h>
+
+#include "util/err.h"
+
+typedef struct vx_store vx_store;
+
+typedef struct vx_store_desc {
+    uint64_t results_max_bytes; /* 0 = no byte budget */
+    double results_max_age_s;   /* since last access; 0 = no age limit */
+} vx_store_desc;
+
+/* Opens (creating) the data dir. Owned; close with vx_store_close. */
+vx_store *vx_store_open(const char *data_dir, const vx_store_desc *desc, vx_err *err);
+void vx_store_close(vx_store *s);
+const char *vx_store_dir(const vx_store *s);
+/* 1 when a file can be created in the data dir now. */
+int vx_store_writable(vx_store *s);
+
+/* An upload streamed to a temp file and hashed as it arrives. */
+typedef struct vx_upload vx_upload;
+vx_upload *vx_upload_begin(vx_store *s, vx_err *err);
+int vx_upload_write(vx_upload *u, const void *data, size_t n, vx_err *err);
+uint64_t vx_upload_bytes(const vx_upload *u);
+/* The first bytes received (up to 64), for sniffing the format. */
+const unsigned char *vx_upload_head(const vx_upload *u, size_t *n);
+/* Flushes and fsyncs the temp file and writes the hex SHA-256 into id. */
+int vx_upload_finish(vx_upload *u, char id[65], vx_err *err);
+const char *vx_upload_path(const vx_upload *u);
+/* Removes the temp file and frees u; NULL is a no-op. */
+void vx_upload_abort(vx_upload *u);
+
+/* Moves a finished upload into the store as mesh `id` with the extension
+ * and metadata given, durably; frees u. Sets *existed when the mesh was
+ * already there (u is then discarded). */
+int vx_store_mesh_commit(vx_store *s, vx_upload *u, const char *id, const char *ext,
+                         const cJSON *meta, int *existed, vx_err *err);
+/* Owned copy of a mesh's metadata, or NULL (VX_ENOTFOUND mesh_not_found). */
+cJSON *vx_store_mesh_meta(vx_store *s, const char *id, vx_err *err);
+/* Path of the mesh file into buf; -1 (VX_ENOTFOUND) when unknown. */
+int vx_store_mesh_path(vx_store *s, const char *id, char *buf, size_t n, vx_err *err);
+int vx_store_mesh_delete(vx_store *s, const char *id, vx_err *err);
+/* Page of metadata sorted by id, starting after `after` (NULL = first).
+ * Returns an owned array; next[0] = 0 when this is the last page. */
+cJSON *vx_store_mesh_list(vx_store *s, const char *after, int limit, char next[65]);
+size_t vx_store_mesh_count(vx_store *s);
+/* 1 when id is 64 lowercase hex digits. */
+int vx_store_valid_mesh_id(const char *id);
+
+/* Creates DATA/results/<jid>/ (empty) and writes its path into buf. */
+int vx_store_result_dir(vx_store *s, const char *jid, char *buf, size_t n, vx_err *err);
+/* Records a finished result dir in the budget (after its files are written). */
+void vx_store_result_added(vx_store *s, const char *jid);
+/* Path of an output file; marks the result used (LRU). -1 with VX_ENOTFOUND
+ * code result_evicted when the result dir is gone. */
+int vx_store_result_file(vx_store *s, const char *jid, const char *file, char *buf, size_t n,
+                         vx_err *err);
+void vx_store_result_remove(vx_store *s, const char *jid);
+/* Evicts least recently used results until the budget holds; returns how
+ * many were removed. Called after each job and periodically. */
+int vx_store_results_evict(vx_store *s);
+uint64_t vx_store_results_bytes(vx_store *s);
+
+#endif

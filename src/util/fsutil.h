@@ -1,0 +1,29 @@
+/* File-system helpers for durable writes. Any thread. */
+#ifndef VX_FSUTIL_H
+#define VX_FSUTIL_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#include "util/err.h"
+
+/* mkdir -p with mode 0750; 0 or -1 (VX_EIO). */
+int vx_mkdirs(const char *path, vx_err *err);
+/* fsync of a directory, so renames and creations inside it survive a crash. */
+int vx_fsync_dir(const char *dir, vx_err *err);
+/* Writes data to path atomically: temp file, fsync, rename, fsync dir. */
+int vx_write_atomic(const char *path, const void *data, size_t len, vx_err *err);
+/* Reads a whole (small) file into an owned NUL-terminated buffer; NULL on error. */
+char *vx_read_file(const char *path, size_t max, size_t *len, vx_err *err);
+/* rm -r of a directory tree (results); 0 or -1. */
+int vx_remove_tree(const char *path);
+/* Total bytes of the regular files under a directory tree. */
+uint64_t vx_tree_bytes(const char *path);
+/* Wall clock as seconds since the epoch, and RFC 3339 UTC with milliseconds. */
+double vx_now(void);
+double vx_mono(void);
+void vx_rfc3339(double t, char out[32]);
+/* Parses a size with an optional K/M/G/T suffix (powers of 1024); 0 or -1. */
+int vx_parse_size(const char *s, uint64_t *out);
+
+#endif
