@@ -1,0 +1,79 @@
+/* The job table and its runners.
+ *
+ * Jobs are created by HTTP threads (vx_jobs_submit), journaled before they
+ * are acknowledged, queued, run by the one GL thread (the only thread that
+ * owns the EGL context) and finished by CPU workers (encoding, writing
+ * outputs). On open, the journal is replayed: jobs that were queued or
+ * running are queued again. All functions are thread-safe unless noted. */
+#ifndef VX_JOBS_H
+#define VX_JOBS_H
+
+#include <stddef.h>
+
+#include <cjson/cJSON.h>
+
+#include "gl/gl.h"
+#include "jobs/kind.h"
+#include "store/store.h"
+
+typedef struct vx_jobs vx_jobs;
+
+typedef struct vx_jobs_hooks {
+    /* A job reached succeeded / failed / canceled (run_s < 0: never ran). */
+    void (*finished)(void *ud, const char *jid, const char *kind, const char *state, double run_s);
+    /* Any state or progress change worth waking a waiter for. */
+    void (*changed)(void *ud, const char *jid);
+    void *ud;
+} vx_jobs_hooks;
+
+typedef struct vx_jobs_desc {
+    vx_store *store;        /* required; not owned */
+    const char *journal;    /* journal path, default DATA/journal.log */
+    vx_limits limits;
+    size_t max_queued;      /* queued jobs before 429; default 64 */
+    size_t history;         /* finished jobs kept; default 10000 */
+    int workers;            /* CPU workers; default 2 */
+    vx_gl_desc gl;
+    vx_jobs_hooks hooks;
+} vx_jobs_desc;
+
+/* Opens the journal and replays it. Owned. Does not start threads. */
+vx_jobs *vx_jobs_open(const vx_jobs_desc *desc, vx_err *err);
+/* Starts the GL thread (creating the context) and the workers; returns
+ * once the context is up, or -1 with the reason it could not be made. */
+int vx_jobs_start(vx_jobs *j, vx_err *err);
+/* Stops taking jobs; a running job that does not finish at its next progress
+ * check is queued again; joins the threads and compacts the journal. */
+void vx_jobs_stop(vx_jobs *j);
+void vx_jobs_free(vx_jobs *j);
+
+/* Validates and queues a job; returns its API JSON (owned). Errors:
+ * VX_ENOTFOUND mesh_not_found, VX_EUNPROC unknown_kind / invalid_params,
+ * VX_EBUSY queue_full, VX_EIO journal. */
+cJSON *vx_jobs_submit(vx_jobs *j, const char *mesh, const char *kind, const cJSON *params,
+                      vx_err *err);
+/* API JSON of a job (owned) or NULL (VX_ENOTFOUND job_not_found);
+ * *terminal = 1 when it has finished. */
+cJSON *vx_jobs_get(vx_jobs *j, const char *jid, int *terminal, vx_err *err);
+/* Cancels: a queued job at once (*was_running = 0), a running one at its
+ * next progress check (*was_running = 1). VX_ECONFLICT job_finished. */
+cJSON *vx_jobs_cancel(vx_jobs *j, const char *jid, int *was_running, vx_err *err);
+/* Page of jobs by id (= creation order) after `after`, optional state filter. */
+cJSON *vx_jobs_list(vx_jobs *j, const char *after, int limit, const char *state, char next[40]);
+/* Where an output of a finished job is: path, content type and the file name
+ * for Content-Disposition. name NULL = the primary output. Errors:
+ * job_not_found, job_not_finished / job_failed / job_canceled (VX_ECONFLICT),
+ * output_not_found, result_evicted (VX_ENOTFOUND). */
+int vx_jobs_output(vx_jobs *j, const char *jid, const char *name, char *path, size_t pathn,
+                   char ctype[64], char fname[128], vx_err *err);
+
+int vx_jobs_ready(vx_jobs *j);
+/* Copy of the GL info taken when the context came up (zeroed before). */
+vx_gl_info vx_jobs_gl_info(vx_jobs *j);
+size_t vx_jobs_queue_depth(vx_jobs *j);
+size_t vx_jobs_queue_capacity(vx_jobs *j);
+size_t vx_jobs_running(vx_jobs *j);
+/* 1 when s is a well-formed job id. */
+int vx_jobs_valid_id(const char *s);
+
+#endif
