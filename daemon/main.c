@@ -1,2 +1,147 @@
+/* voxeld: configuration, signals, sd_notify and the wiring of store, jobs
+ * (GL thread + workers) and the HTTP API. */
+#include <errno.h>
+#include <pthread.h>
+#include <signal.h>
 #include <stdio.h>
-int main(void) { puts("voxeld " VX_VERSION); return 0; }
+#include <stdlib.h>
+#include <string.h>
+#include <systemd/sd-daemon.h>
+#include <unistd.h>
+
+#include "config.h"
+#include "http.h"
+#include "jobs/jobs.h"
+#include "metrics.h"
+#include "store/store.h"
+#include "util/fsutil.h"
+#include "util/log.h"
+
+/* The jobs hooks need the HTTP layer, which starts after the jobs. */
+static vx_http *g_http;
+
+static void on_job_finished(void *ud, const char *jid, const char *kind, const char *state, double run_s)
+{
+    vx_metrics_job(kind, state, run_s);
+}
+
+static void on_job_changed(void *ud, const char *jid, int terminal)
+{
+    vx_http *h = __atomic_load_n(&g_http, __ATOMIC_ACQUIRE);
+    vx_http_job_changed(h, jid, terminal);
+}
+
+static int list_devices(void)
+{
+    vx_gl_device devs[32];
+    vx_err err;
+    int n = vx_gl_list_devices(devs, 32, &err);
+    if (n < 0) {
+        fprintf(stderr, "voxeld: %s\n", err.message);
+        return 1;
+    }
+    printf("%d EGL device(s), in the order --egl-device auto tries them:\n", n);
+    for (int i = 0; i < n; i++) printf("  %d  %-9s %s\n", devs[i].index, devs[i].kind, devs[i].name);
+    return 0;
+}
+
+int main(int argc, char **argv)
+{
+    vx_config cfg;
+    int rc = vx_config_load(&cfg, argc, argv);
+    if (rc) return rc > 0 ? 0 : 2;
+    vx_log_set_level(cfg.log_level);
+    if (cfg.list_devices) return list_devices();
+
+    /* Signals are taken synchronously by the main thread: block them
+     * before any thread starts so every thread inherits the mask. */
+    sigset_t sigs;
+    sigemptyset(&sigs);
+    sigaddset(&sigs, SIGTERM);
+    sigaddset(&sigs, SIGINT);
+    sigaddset(&sigs, SIGHUP);
+    pthread_sigmask(SIG_BLOCK, &sigs, NULL);
+    signal(SIGPIPE, SIG_IGN);
+
+    double start = vx_now();
+    VX_INFO("voxeld.start", "version=%s pid=%d data_dir=%s", VX_VERSION, (int)getpid(), cfg.data_dir);
+    vx_err err;
+    vx_err_clear(&err);
+    vx_store_desc sd = {.results_max_bytes = cfg.results_max_bytes,
+                        .results_max_age_s = cfg.results_max_age_s};
+    vx_store *store = vx_store_open(cfg.data_dir, &sd, &err);
+    if (!store) {
+        VX_ERROR("voxeld.fatal", "stage=store code=%s message=\"%s\"", err.code, err.message);
+        return 1;
+    }
+    vx_mkdirs(cfg.cache_dir, NULL);
+    vx_jobs_desc jd = {
+        .store = store,
+        .limits = {.max_upload_bytes = cfg.max_upload_bytes,
+                   .max_triangles = cfg.max_triangles,
+                   .max_image_pixels = cfg.max_image_pixels,
+                   .max_job_memory = cfg.max_job_memory,
+                   .job_timeout_s = cfg.job_timeout_s},
+        .max_queued = cfg.max_queued_jobs,
+        .history = cfg.job_history,
+        .workers = cfg.workers,
+        .gl = {.device = cfg.egl_device, .debug = cfg.gl_debug, .robust = 1},
+        .hooks = {.finished = on_job_finished, .changed = on_job_changed},
+    };
+    vx_jobs *jobs = vx_jobs_open(&jd, &err);
+    if (!jobs) {
+        VX_ERROR("voxeld.fatal", "stage=journal code=%s message=\"%s\"", err.code, err.message);
+        vx_store_close(store);
+        return 1;
+    }
+    if (vx_jobs_start(jobs, &err)) {
+        char q[600];
+        VX_ERROR("voxeld.fatal", "stage=gl code=%s message=%s", err.code,
+                 vx_log_quote(q, sizeof q, err.message));
+        fprintf(stderr, "voxeld: cannot create the OpenGL context: %s\n", err.message);
+        vx_jobs_free(jobs);
+        vx_store_close(store);
+        return 1;
+    }
+    vx_gl_info gi = vx_jobs_gl_info(jobs);
+    char qr[300], qv[200];
+    VX_INFO("gl.ready", "device_kind=%s device_index=%d renderer=%s version=%s robust=%d",
+            gi.device_kind, gi.device_index, vx_log_quote(qr, sizeof qr, gi.renderer),
+            vx_log_quote(qv, sizeof qv, gi.version), gi.robust);
+
+    vx_http_desc hd = {.cfg = &cfg, .store = store, .jobs = jobs, .start_time = start};
+    vx_http *http = vx_http_start(&hd, &err);
+    if (!http) {
+        VX_ERROR("voxeld.fatal", "stage=http code=%s message=\"%s\"", err.code, err.message);
+        vx_jobs_free(jobs);
+        vx_store_close(store);
+        return 1;
+    }
+    __atomic_store_n(&g_http, http, __ATOMIC_RELEASE);
+    sd_notifyf(0, "READY=1\nSTATUS=serving on %s (port %d), GL: %s", cfg.listen, vx_http_port(http),
+               gi.renderer);
+    VX_INFO("voxeld.ready", "port=%d", vx_http_port(http));
+
+    for (;;) {
+        struct timespec ts = {.tv_sec = 60};
+        int sig = sigtimedwait(&sigs, NULL, &ts);
+        if (sig == SIGTERM || sig == SIGINT) {
+            VX_INFO("voxeld.signal", "signal=%s", sig == SIGTERM ? "TERM" : "INT");
+            break;
+        }
+        if (sig == SIGHUP) VX_INFO("voxeld.signal", "signal=HUP action=none");
+        if (sig < 0 && errno == EAGAIN) vx_store_results_evict(store); /* age budget */
+    }
+
+    sd_notify(0, "STOPPING=1");
+    /* Order (issue #2): stop accepting, answer every held request, let the
+     * running job finish or go back to the queue, flush the journal. */
+    vx_http_quiesce(http);
+    vx_jobs_stop(jobs);
+    vx_http_stop(http, 2.0);
+    __atomic_store_n(&g_http, NULL, __ATOMIC_RELEASE);
+    vx_jobs_free(jobs);
+    vx_store_close(store);
+    VX_INFO("voxeld.exit", "status=0");
+    return 0;
+}

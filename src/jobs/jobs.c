@@ -243,9 +243,9 @@ static int journal_locked(vx_jobs *j, job *jb, vx_err *err)
     return rc;
 }
 
-static void notify(vx_jobs *j, const char *jid)
+static void notify(vx_jobs *j, const char *jid, int terminal)
 {
-    if (j->desc.hooks.changed) j->desc.hooks.changed(j->desc.hooks.ud, jid);
+    if (j->desc.hooks.changed) j->desc.hooks.changed(j->desc.hooks.ud, jid, terminal);
 }
 
 /* ---- replay --------------------------------------------------------- */
@@ -532,7 +532,7 @@ static void run_finish(vx_jobs *j, vx_job_run *r, int ok, const vx_err *e)
                 vx_log_quote(qm, sizeof qm, ok ? "-" : e->message));
         if (j->desc.hooks.finished) j->desc.hooks.finished(j->desc.hooks.ud, id, kind, state_names[st], run_s);
     }
-    notify(j, id);
+    notify(j, id, !requeue);
     run_free(r);
     if (ok) vx_store_results_evict(j->desc.store);
 }
@@ -574,7 +574,7 @@ static void run_job_gl(vx_jobs *j, vx_gl *gl, mesh_cache *mc, job *jb)
     vx_err_clear(&err);
     if (journal_locked(j, jb, &err)) VX_ERROR("jobs.journal_failed", "job=%s code=%s", jb->id, err.code);
     pthread_mutex_unlock(&j->lock);
-    notify(j, jb->id);
+    notify(j, jb->id, 0);
     VX_INFO("job.started", "job=%s kind=%s mesh=%.12s attempt=%d", jb->id, jb->kind->name, jb->mesh,
             jb->attempts);
 
@@ -843,7 +843,7 @@ cJSON *vx_jobs_cancel(vx_jobs *j, const char *jid, int *was_running, vx_err *err
     if (changed) {
         VX_INFO("job.finished", "job=%s state=canceled run_ms=0", jid);
         if (j->desc.hooks.finished) j->desc.hooks.finished(j->desc.hooks.ud, jid, jb->kind->name, "canceled", -1);
-        notify(j, jid);
+        notify(j, jid, 1);
     }
     return out;
 }

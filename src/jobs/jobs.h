@@ -21,8 +21,8 @@ typedef struct vx_jobs vx_jobs;
 typedef struct vx_jobs_hooks {
     /* A job reached succeeded / failed / canceled (run_s < 0: never ran). */
     void (*finished)(void *ud, const char *jid, const char *kind, const char *state, double run_s);
-    /* Any state or progress change worth waking a waiter for. */
-    void (*changed)(void *ud, const char *jid);
+    /* A job changed state; terminal = it has finished (wakes ?wait). */
+    void (*changed)(void *ud, const char *jid, int terminal);
     void *ud;
 } vx_jobs_hooks;
 

@@ -1,0 +1,287 @@
+#include "config.h"
+
+#include <ctype.h>
+#include <errno.h>
+#include <getopt.h>
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+#include <unistd.h>
+
+#include "util/fsutil.h"
+
+typedef enum opt_type { T_STR, T_SIZE, T_COUNT, T_SECONDS, T_DEVICE, T_LEVEL, T_BOOL } opt_type;
+
+typedef struct opt_def {
+    const char *name;
+    opt_type type;
+    size_t off;
+    size_t len; /* strings */
+    const char *help;
+} opt_def;
+
+#define F(field) offsetof(vx_config, field)
+#define S(field) F(field), sizeof(((vx_config *)0)->field)
+
+static const opt_def opts[] = {
+    {"listen", T_STR, S(listen), "ADDR:PORT to listen on (IPv6 as [ADDR]:PORT; port 0 = any free)"},
+    {"data-dir", T_STR, S(data_dir), "data directory (default $STATE_DIRECTORY or ./voxeld-data)"},
+    {"cache-dir", T_STR, S(cache_dir), "cache directory (default $CACHE_DIRECTORY or DATA/cache)"},
+    {"token-file", T_STR, S(token_file), "file holding the bearer token required on /v1 routes"},
+    {"egl-device", T_DEVICE, F(egl_device), 0, "EGL device index, or auto (default)"},
+    {"log-level", T_LEVEL, F(log_level), 0, "error, warn, info (default) or debug"},
+    {"gl-debug", T_BOOL, F(gl_debug), 0, "KHR_debug messages to the log: yes (default) or no"},
+    {"http-threads", T_COUNT, F(http_threads), 0, "HTTP thread pool size (default 4)"},
+    {"workers", T_COUNT, F(workers), 0, "CPU worker threads (default: number of CPUs)"},
+    {"max-upload-bytes", T_SIZE, F(max_upload_bytes), 0, "largest mesh upload (default 1G)"},
+    {"max-triangles", T_SIZE, F(max_triangles), 0, "most triangles in a mesh (default 20000000)"},
+    {"max-queued-jobs", T_SIZE, F(max_queued_jobs), 0, "queued jobs before 429 (default 64)"},
+    {"job-timeout", T_SECONDS, F(job_timeout_s), 0, "longest a job may run, seconds (default 600)"},
+    {"request-timeout", T_SECONDS, F(request_timeout_s), 0,
+     "longest a request is held by ?wait, seconds (default 60)"},
+    {"connection-timeout", T_SECONDS, F(connection_timeout_s), 0,
+     "idle connections are closed after this, seconds (default 30)"},
+    {"max-connections", T_SIZE, F(max_connections), 0, "open connections in all (default 512)"},
+    {"max-connections-per-ip", T_SIZE, F(max_connections_per_ip), 0,
+     "open connections from one IP (default 64)"},
+    {"max-image-pixels", T_SIZE, F(max_image_pixels), 0,
+     "largest rendered image, width*height (default 67108864)"},
+    {"max-job-memory", T_SIZE, F(max_job_memory), 0, "memory one job may use (default 4G)"},
+    {"max-json-bytes", T_SIZE, F(max_json_bytes), 0, "largest JSON request body (default 16M)"},
+    {"results-max-bytes", T_SIZE, F(results_max_bytes), 0,
+     "results kept on disk before LRU eviction (default 10G; 0 = no limit)"},
+    {"results-max-age", T_SECONDS, F(results_max_age_s), 0,
+     "results unused this long are evicted, seconds (default 604800; 0 = never)"},
+    {"job-history", T_SIZE, F(job_history), 0, "finished jobs remembered (default 10000)"},
+};
+#define NOPTS (sizeof opts / sizeof opts[0])
+
+static void defaults(vx_config *c)
+{
+    memset(c, 0, sizeof *c);
+    snprintf(c->listen, sizeof c->listen, "127.0.0.1:8080");
+    const char *sd = getenv("STATE_DIRECTORY");
+    /* systemd may pass several colon-separated directories: use the first. */
+    if (sd && *sd) {
+        snprintf(c->data_dir, sizeof c->data_dir, "%s", sd);
+        char *colon = strchr(c->data_dir, ':');
+        if (colon) *colon = 0;
+    } else {
+        snprintf(c->data_dir, sizeof c->data_dir, "voxeld-data");
+    }
+    const char *cd = getenv("CACHE_DIRECTORY");
+    if (cd && *cd) {
+        snprintf(c->cache_dir, sizeof c->cache_dir, "%s", cd);
+        char *colon = strchr(c->cache_dir, ':');
+        if (colon) *colon = 0;
+    }
+    c->egl_device = -1;
+    c->log_level = VX_LOG_INFO;
+    c->gl_debug = 1;
+    c->http_threads = 4;
+    long ncpu = sysconf(_SC_NPROCESSORS_ONLN);
+    c->workers = ncpu > 0 ? (int)ncpu : 2;
+    c->max_upload_bytes = 1ull << 30;
+    c->max_triangles = 20000000;
+    c->max_queued_jobs = 64;
+    c->job_timeout_s = 600;
+    c->request_timeout_s = 60;
+    c->connection_timeout_s = 30;
+    c->max_connections = 512;
+    c->max_connections_per_ip = 64;
+    c->max_image_pixels = 8192ull * 8192ull;
+    c->max_job_memory = 4ull << 30;
+    c->max_json_bytes = 16ull << 20;
+    c->results_max_bytes = 10ull << 30;
+    c->results_max_age_s = 7 * 86400;
+    c->job_history = 10000;
+}
+
+static int set_opt(vx_config *c, const opt_def *d, const char *val, const char *where)
+{
+    char *base = (char *)c;
+    uint64_t u;
+    char *end;
+    switch (d->type) {
+    case T_STR:
+        if (strlen(val) >= d->len) goto bad;
+        snprintf(base + d->off, d->len, "%s", val);
+        return 0;
+    case T_SIZE:
+        if (vx_parse_size(val, &u)) goto bad;
+        *(uint64_t *)(base + d->off) = u;
+        return 0;
+    case T_COUNT: {
+        errno = 0;
+        long v = strtol(val, &end, 10);
+        if (errno || *end || v < 1 || v > 1024) goto bad;
+        *(int *)(base + d->off) = (int)v;
+        return 0;
+    }
+    case T_SECONDS: {
+        errno = 0;
+        double v = strtod(val, &end);
+        if (errno || *end || end == val || !isfinite(v) || v < 0) goto bad;
+        *(double *)(base + d->off) = v;
+        return 0;
+    }
+    case T_DEVICE: {
+        if (strcmp(val, "auto") == 0) {
+            *(int *)(base + d->off) = -1;
+            return 0;
+        }
+        errno = 0;
+        long v = strtol(val, &end, 10);
+        if (errno || *end || end == val || v < 0 || v > 255) goto bad;
+        *(int *)(base + d->off) = (int)v;
+        return 0;
+    }
+    case T_LEVEL:
+        if (vx_log_parse_level(val, (vx_log_level *)(base + d->off))) goto bad;
+        return 0;
+    case T_BOOL:
+        if (!strcmp(val, "yes") || !strcmp(val, "true") || !strcmp(val, "1")) *(int *)(base + d->off) = 1;
+        else if (!strcmp(val, "no") || !strcmp(val, "false") || !strcmp(val, "0")) *(int *)(base + d->off) = 0;
+        else goto bad;
+        return 0;
+    }
+bad:
+    fprintf(stderr, "voxeld: %s: invalid value for %s: '%s'\n", where, d->name, val);
+    return -1;
+}
+
+static const opt_def *find_opt(const char *name)
+{
+    for (size_t i = 0; i < NOPTS; i++)
+        if (strcmp(opts[i].name, name) == 0) return &opts[i];
+    return NULL;
+}
+
+static char *trim(char *s)
+{
+    while (isspace((unsigned char)*s)) s++;
+    char *e = s + strlen(s);
+    while (e > s && isspace((unsigned char)e[-1])) *--e = 0;
+    return s;
+}
+
+static int load_file(vx_config *c, const char *path)
+{
+    FILE *f = fopen(path, "re");
+    if (!f) {
+        fprintf(stderr, "voxeld: cannot open config file %s: %s\n", path, strerror(errno));
+        return -1;
+    }
+    char line[2048], where[1200];
+    int lineno = 0, rc = 0;
+    while (fgets(line, sizeof line, f)) {
+        lineno++;
+        char *hash = strchr(line, '#');
+        if (hash) *hash = 0;
+        char *s = trim(line);
+        if (!*s) continue;
+        char *eq = strchr(s, '=');
+        snprintf(where, sizeof where, "%s:%d", path, lineno);
+        if (!eq) {
+            fprintf(stderr, "voxeld: %s: expected key = value\n", where);
+            rc = -1;
+            continue;
+        }
+        *eq = 0;
+        char *key = trim(s), *val = trim(eq + 1);
+        const opt_def *d = find_opt(key);
+        if (!d) {
+            fprintf(stderr, "voxeld: %s: unknown key '%s'\n", where, key);
+            rc = -1;
+            continue;
+        }
+        if (set_opt(c, d, val, where)) rc = -1;
+    }
+    fclose(f);
+    return rc;
+}
+
+void vx_config_usage(FILE *out)
+{
+    fprintf(out, "usage: voxeld [--listen ADDR:PORT] [--data-dir DIR] [options]\n\n"
+                 "Serves mesh jobs (voxel grids, renders, Gregory meshes) over HTTP/JSON on one\n"
+                 "headless OpenGL context. Runs in the foreground and logs to stderr.\n\n"
+                 "  --config FILE                 read options from FILE (key = value lines)\n");
+    for (size_t i = 0; i < NOPTS; i++) {
+        char flag[64];
+        snprintf(flag, sizeof flag, "--%s %s", opts[i].name,
+                 opts[i].type == T_BOOL ? "yes|no" : opts[i].type == T_STR ? "VALUE" : "N");
+        fprintf(out, "  %-29s %s\n", flag, opts[i].help);
+    }
+    fprintf(out, "  --list-egl-devices            list EGL devices in the order tried, and exit\n"
+                 "  --help                        this text\n"
+                 "  --version                     print the version and exit\n\n"
+                 "Sizes take K, M, G, T suffixes (powers of 1024).\n");
+}
+
+int vx_config_load(vx_config *c, int argc, char **argv)
+{
+    defaults(c);
+    struct option lopts[NOPTS + 5];
+    for (size_t i = 0; i < NOPTS; i++)
+        lopts[i] = (struct option){opts[i].name, required_argument, NULL, (int)(256 + i)};
+    lopts[NOPTS] = (struct option){"config", required_argument, NULL, 'c'};
+    lopts[NOPTS + 1] = (struct option){"help", no_argument, NULL, 'h'};
+    lopts[NOPTS + 2] = (struct option){"version", no_argument, NULL, 'V'};
+    lopts[NOPTS + 3] = (struct option){"list-egl-devices", no_argument, NULL, 'L'};
+    lopts[NOPTS + 4] = (struct option){0, 0, 0, 0};
+
+    /* Pass 1: --config, --help, --version (the file comes before the flags). */
+    opterr = 0;
+    optind = 1;
+    int ch;
+    while ((ch = getopt_long(argc, argv, "", lopts, NULL)) != -1) {
+        if (ch == 'h') {
+            vx_config_usage(stdout);
+            return 1;
+        }
+        if (ch == 'V') {
+            printf("voxeld %s\n", VX_VERSION);
+            return 1;
+        }
+        if (ch == 'c') snprintf(c->config_file, sizeof c->config_file, "%s", optarg);
+    }
+    if (c->config_file[0] && load_file(c, c->config_file)) return -1;
+
+    /* Pass 2: flags override the file. */
+    opterr = 1;
+    optind = 1;
+    while ((ch = getopt_long(argc, argv, "", lopts, NULL)) != -1) {
+        if (ch == '?' || ch == ':') {
+            vx_config_usage(stderr);
+            return -1;
+        }
+        if (ch == 'L') c->list_devices = 1;
+        if (ch >= 256 && set_opt(c, &opts[ch - 256], optarg, "command line")) return -1;
+    }
+    if (optind < argc) {
+        fprintf(stderr, "voxeld: unexpected argument '%s'\n", argv[optind]);
+        return -1;
+    }
+    if (!c->cache_dir[0]) snprintf(c->cache_dir, sizeof c->cache_dir, "%s/cache", c->data_dir);
+    if (c->token_file[0]) {
+        vx_err err;
+        size_t len;
+        char *tok = vx_read_file(c->token_file, sizeof c->token, &len, &err);
+        if (!tok) {
+            fprintf(stderr, "voxeld: token file: %s\n", err.message);
+            return -1;
+        }
+        snprintf(c->token, sizeof c->token, "%s", trim(tok));
+        free(tok);
+        if (!c->token[0]) {
+            fprintf(stderr, "voxeld: token file %s is empty\n", c->token_file);
+            return -1;
+        }
+    }
+    if (c->max_queued_jobs < 1) {
+        fprintf(stderr, "voxeld: max-queued-jobs must be at least 1\n");
+        return -1;
+    }
+    return 0;
+}

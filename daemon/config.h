@@ -1,0 +1,49 @@
+/* Daemon configuration: defaults, then the config file (--config), then
+ * command-line flags, each overriding the one before. The config file has
+ * one `key = value` per line, the keys being the long flag names without
+ * the dashes; `#` starts a comment. */
+#ifndef VX_CONFIG_H
+#define VX_CONFIG_H
+
+#include <stdint.h>
+#include <stdio.h>
+
+#include "util/log.h"
+
+typedef struct vx_config {
+    char listen[256];
+    char data_dir[1024];
+    char cache_dir[1024];
+    char config_file[1024];
+    char token_file[1024];
+    char token[512];         /* read from token_file; empty = no auth */
+    int egl_device;          /* -1 = auto */
+    vx_log_level log_level;
+    int http_threads;
+    int workers;
+    uint64_t max_upload_bytes;
+    uint64_t max_triangles;
+    uint64_t max_queued_jobs;
+    double job_timeout_s;
+    double request_timeout_s;    /* cap on how long ?wait holds a request */
+    double connection_timeout_s; /* idle connections are closed after this */
+    uint64_t max_connections;
+    uint64_t max_connections_per_ip;
+    uint64_t max_image_pixels;
+    uint64_t max_job_memory;
+    uint64_t max_json_bytes;
+    uint64_t results_max_bytes;
+    double results_max_age_s;
+    uint64_t job_history;
+    int gl_debug;
+    int list_devices; /* --list-egl-devices: print and exit */
+} vx_config;
+
+/* Fills cfg from defaults, $STATE_DIRECTORY / $CACHE_DIRECTORY, the config
+ * file and argv. Returns 0 to run, 1 when the program should exit 0
+ * (--help, --version), -1 on a bad option (message printed). */
+int vx_config_load(vx_config *cfg, int argc, char **argv);
+/* Prints the usage text. */
+void vx_config_usage(FILE *out);
+
+#endif

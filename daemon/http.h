@@ -1,0 +1,31 @@
+/* The HTTP/JSON API (api/openapi.yaml) on libmicrohttpd: a thread pool with
+ * epoll, uploads streamed to the store, ?wait held by suspending the
+ * connection. HTTP threads never touch GL. */
+#ifndef VX_HTTP_H
+#define VX_HTTP_H
+
+#include "config.h"
+#include "jobs/jobs.h"
+#include "store/store.h"
+
+typedef struct vx_http vx_http;
+
+typedef struct vx_http_desc {
+    const vx_config *cfg;
+    vx_store *store;
+    vx_jobs *jobs;
+    double start_time;
+} vx_http_desc;
+
+/* Binds and starts serving. Owned; stop with vx_http_stop. */
+vx_http *vx_http_start(const vx_http_desc *desc, vx_err *err);
+/* The port actually bound (useful with port 0). */
+int vx_http_port(vx_http *h);
+/* The jobs hook: wakes requests waiting on jid once it has finished. */
+void vx_http_job_changed(vx_http *h, const char *jid, int terminal);
+/* Stops accepting connections and answers every held request now. */
+void vx_http_quiesce(vx_http *h);
+/* Waits up to grace_s for open requests, then stops and frees. */
+void vx_http_stop(vx_http *h, double grace_s);
+
+#endif

@@ -1,0 +1,26 @@
+/* Prometheus metrics: counters and histograms fed by the HTTP layer and the
+ * job runner, rendered in the text exposition format (version 0.0.4).
+ * Thread-safe. */
+#ifndef VX_METRICS_H
+#define VX_METRICS_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#include "gl/gl.h"
+
+typedef struct vx_metrics_gauges {
+    size_t queue_depth, queue_capacity, running, meshes;
+    uint64_t results_bytes;
+    int ready;
+    vx_gl_info gl;
+    double start_time;
+} vx_metrics_gauges;
+
+void vx_metrics_request(const char *route, const char *method, int status, double seconds,
+                        uint64_t bytes_in, uint64_t bytes_out);
+void vx_metrics_job(const char *kind, const char *state, double run_s);
+/* Owned text of every family. */
+char *vx_metrics_render(const vx_metrics_gauges *g);
+
+#endif
