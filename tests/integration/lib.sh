@@ -1,0 +1,144 @@
+# Sourced by tests/integration/test_*.sh: start a real voxeld on a free port
+# with a temp data dir, talk to it with curl, assert with jq.
+#
+# Every request made through `api` is recorded in $VX_API_LOG (JSON lines)
+# so that test_zz_openapi.sh can check each response against
+# api/openapi.yaml and that every operation in it was exercised.
+set -uo pipefail
+: "${VOXELD:?VOXELD must point at the voxeld binary}"
+: "${VX_TOOLS:?}" "${VX_MESH_DIR:?}" "${VX_SOURCE_DIR:?}"
+
+TMP=$(mktemp -d "${TMPDIR:-/tmp}/voxeld-it.XXXXXX")
+VX_API_LOG=${VX_API_LOG:-$TMP/api.jsonl}
+DATA=$TMP/data
+PASS=0
+FAIL=0
+PID=
+PORT=
+BASE=
+NREQ=0
+STATUS=
+BODY=
+HDRS=
+CTYPE=
+TOKEN=
+
+cleanup() {
+    if [[ -n "$PID" ]] && kill -0 "$PID" 2>/dev/null; then kill -KILL "$PID" 2>/dev/null; fi
+    if [[ $FAIL -eq 0 && -z "${VX_KEEP_TMP:-}" ]]; then rm -rf "$TMP"; else echo "kept $TMP"; fi
+}
+trap cleanup EXIT
+
+# start_daemon [extra voxeld flags...]: waits for the ready line.
+start_daemon() {
+    touch "$TMP/daemon.log"
+    local from
+    from=$(($(wc -l <"$TMP/daemon.log") + 1))
+    "$VOXELD" --listen 127.0.0.1:0 --data-dir "$DATA" --workers 2 --http-threads 4 "$@" \
+        2>>"$TMP/daemon.log" &
+    PID=$!
+    local i
+    for i in $(seq 1 600); do
+        PORT=$(tail -n +"$from" "$TMP/daemon.log" | grep -a 'event=voxeld.ready' | sed -n 's/.*port=\([0-9]*\).*/\1/p')
+        if [[ -n "$PORT" ]]; then
+            BASE="http://127.0.0.1:$PORT"
+            return 0
+        fi
+        if ! kill -0 "$PID" 2>/dev/null; then
+            echo "voxeld exited during start:"; tail -n 20 "$TMP/daemon.log"; PID=; return 1
+        fi
+        sleep 0.1
+    done
+    echo "voxeld did not become ready"; tail -n 20 "$TMP/daemon.log"; return 1
+}
+
+# stop_daemon: SIGTERM, expect exit status 0.
+stop_daemon() {
+    kill -TERM "$PID"
+    local rc=0
+    wait "$PID" || rc=$?
+    PID=
+    check "daemon exits 0 on SIGTERM (got $rc)" test "$rc" -eq 0
+}
+
+kill9_daemon() {
+    kill -KILL "$PID"
+    wait "$PID" 2>/dev/null
+    PID=
+}
+
+# api METHOD PATH [curl args...]: sets STATUS, BODY (file), HDRS (file), CTYPE.
+api() {
+    local method=$1 path=$2
+    shift 2
+    NREQ=$((NREQ + 1))
+    BODY=$TMP/r$NREQ.body
+    HDRS=$TMP/r$NREQ.headers
+    local auth=()
+    if [[ -n "$TOKEN" ]]; then auth=(-H "Authorization: Bearer $TOKEN"); fi
+    local out
+    if [[ "$method" == HEAD ]]; then
+        out=$(curl -sS -I -o /dev/null -D "$HDRS" -w '%{http_code} %{content_type}' "${auth[@]}" "$@" "$BASE$path")
+        : >"$BODY"
+    else
+        out=$(curl -sS -X "$method" -o "$BODY" -D "$HDRS" -w '%{http_code} %{content_type}' "${auth[@]}" "$@" "$BASE$path")
+    fi
+    STATUS=${out%% *}
+    CTYPE=${out#* }
+    [[ "$CTYPE" == "$out" ]] && CTYPE=
+    local headers
+    headers=$(tr -d '\r' <"$HDRS" | awk -F': ' 'NF>=2 && $1 !~ /^HTTP/ {printf "%s\t%s\n", tolower($1), substr($0, length($1)+3)}' |
+        jq -R -s 'split("\n") | map(select(length>0) | split("\t") | {(.[0]): .[1]}) | add // {}')
+    jq -cn --arg m "$method" --arg p "$path" --argjson s "${STATUS:-0}" --arg ct "$CTYPE" \
+        --argjson h "$headers" --arg b "$BODY" \
+        '{method:$m, path:$p, status:$s, content_type:$ct, headers:$h, body_file:$b}' >>"$VX_API_LOG"
+}
+
+# jqb FILTER: jq on the last body.
+jqb() { jq -r "$@" "$BODY"; }
+header() { tr -d '\r' <"$HDRS" | awk -F': ' -v n="$(echo "$1" | tr A-Z a-z)" 'tolower($1)==n {print substr($0, length($1)+3)}' | tail -n 1; }
+
+check() {
+    local what=$1
+    shift
+    if "$@" >/dev/null 2>&1; then
+        PASS=$((PASS + 1))
+    else
+        FAIL=$((FAIL + 1))
+        echo "FAIL: $what"
+        if [[ -n "$BODY" && -f "$BODY" ]]; then echo "  last status $STATUS body: $(head -c 400 "$BODY")"; fi
+    fi
+}
+
+expect_status() { check "$1: status $2 (got $STATUS)" test "$STATUS" = "$2"; }
+
+# expect_error WHAT STATUS [CODE]: status, JSON error body, optional code.
+expect_error() {
+    local what=$1 st=$2 code=${3:-}
+    check "$what: status $st (got $STATUS)" test "$STATUS" = "$st"
+    check "$what: JSON error body" jq -e '.error.code and .error.message and (.error|length)==2' "$BODY"
+    if [[ -n "$code" ]]; then check "$what: error code $code (got $(jqb .error.code 2>/dev/null))" test "$(jqb .error.code)" = "$code"; fi
+}
+
+# upload FILE [content-type]: POST /v1/meshes, sets MESH_ID.
+upload() {
+    local ct=${2:-model/obj}
+    api POST /v1/meshes -H "Content-Type: $ct" --data-binary "@$1"
+    MESH_ID=$(jqb '.id // empty')
+}
+
+# wait_job JID [seconds]: polls with ?wait until the job has finished.
+wait_job() {
+    local jid=$1 limit=${2:-120} t=0
+    while ((t < limit)); do
+        api GET "/v1/jobs/$jid?wait=10"
+        case "$(jqb .state)" in succeeded | failed | canceled) return 0 ;; esac
+        t=$((t + 10))
+    done
+    return 1
+}
+
+finish() {
+    echo "$(basename "$0"): $PASS passed, $FAIL failed"
+    [[ $FAIL -eq 0 ]]
+}

@@ -1,0 +1,73 @@
+#!/usr/bin/env bash
+# Bearer token on every /v1 route when --token-file is given; none on the
+# ops endpoints; off by default. Also the config file and flag precedence.
+source "$(dirname "$0")/lib.sh"
+source "$(dirname "$0")/box.sh"
+printf 's3cret-token\n' >"$TMP/token"
+cat >"$TMP/voxeld.conf" <<CONF
+# test config
+token-file = $TMP/token
+max-queued-jobs = 7
+log-level = debug
+CONF
+start_daemon --config "$TMP/voxeld.conf" --max-queued-jobs 5 || exit 1
+box_obj "$TMP/box.obj" 0 0 0 1 1 1
+
+api GET /v1/info
+expect_error "no token" 401 unauthorized
+check "WWW-Authenticate" bash -c "grep -qi '^www-authenticate: Bearer' '$HDRS'"
+api GET /v1/meshes -H "Authorization: Bearer wrong"
+expect_error "wrong token" 401 unauthorized
+api GET /v1/meshes -H "Authorization: Bearer s3cret-token-and-more"
+expect_error "token with a suffix" 401 unauthorized
+api POST /v1/meshes -H "Content-Type: model/obj" --data-binary "@$TMP/box.obj"
+expect_error "upload without token" 401 unauthorized
+api GET /v1/jobs/0123456789abcdef0123456789abcdef
+expect_error "job without token" 401 unauthorized
+api GET /livez
+expect_status "livez needs no token" 200
+api GET /readyz
+expect_status "readyz needs no token" 200
+api GET /metrics
+expect_status "metrics need no token" 200
+
+TOKEN=s3cret-token
+api GET /v1/info
+expect_status "info with token" 200
+check "info says auth" jq -e '.auth == true' "$BODY"
+check "flag beats the config file" jq -e '.limits.max_queued_jobs == 5' "$BODY"
+upload "$TMP/box.obj"
+expect_status "upload with token" 201
+api POST "/v1/jobs?wait=60" -H "Content-Type: application/json" -d "{\"mesh\":\"$MESH_ID\",\"kind\":\"preview\",\"params\":{\"width\":32,\"height\":32}}"
+check "job with token" jq -e '.state == "succeeded"' "$BODY"
+check "debug level from the config file" grep -q 'level=debug' "$TMP/daemon.log"
+stop_daemon
+
+TOKEN=
+start_daemon || exit 1
+api GET /v1/info
+expect_status "no token configured: open" 200
+check "info says no auth" jq -e '.auth == false' "$BODY"
+stop_daemon
+
+# Command line errors fail fast with a message.
+"$VOXELD" --max-queued-jobs lots 2>"$TMP/err1"
+check "bad flag value exits 2" test $? -eq 2
+check "bad flag value is named" grep -q 'max-queued-jobs' "$TMP/err1"
+printf 'no-such-key = 1\n' >"$TMP/bad.conf"
+"$VOXELD" --config "$TMP/bad.conf" 2>"$TMP/err2"
+check "unknown config key exits 2" test $? -eq 2
+check "unknown config key is named" grep -q "no-such-key" "$TMP/err2"
+"$VOXELD" --version >"$TMP/version"
+check "--version" grep -q '^voxeld [0-9]' "$TMP/version"
+"$VOXELD" --help >"$TMP/help"
+check "--help lists every limit" bash -c "for f in max-upload-bytes max-triangles max-queued-jobs job-timeout request-timeout connection-timeout max-connections-per-ip; do grep -q -- \"--\$f\" '$TMP/help' || exit 1; done"
+"$VOXELD" --egl-device 99 --listen 127.0.0.1:0 --data-dir "$TMP/d2" 2>"$TMP/err3"
+check "missing EGL device fails start" test $? -ne 0
+check "missing EGL device is explained" grep -qi 'device' "$TMP/err3"
+STATE_DIRECTORY=$TMP/statedir timeout 20 "$VOXELD" --listen 127.0.0.1:0 2>"$TMP/sd.log" &
+SPID=$!
+for i in $(seq 1 100); do grep -q voxeld.ready "$TMP/sd.log" && break; sleep 0.1; done
+kill -TERM $SPID; wait $SPID
+check "STATE_DIRECTORY is the default data dir" test -f "$TMP/statedir/journal.log"
+finish

@@ -1,0 +1,154 @@
+#!/usr/bin/env bash
+# Bad input gets a 4xx with a JSON error body, loses nothing, and leaves the
+# daemon serving. Each case names the status and error code it expects.
+source "$(dirname "$0")/lib.sh"
+source "$(dirname "$0")/box.sh"
+start_daemon --max-upload-bytes 2M --max-json-bytes 4K --max-triangles 100000 --max-image-pixels 1000000 || exit 1
+
+box_obj "$TMP/box.obj" 0 0 0 1 1 1
+upload "$TMP/box.obj"
+BOX=$MESH_ID
+JSON=(-H "Content-Type: application/json")
+bad_obj() { # NAME STATUS CODE TEXT: upload an OBJ given as text
+    printf '%b' "$4" >"$TMP/bad.obj"
+    api POST /v1/meshes -H "Content-Type: model/obj" --data-binary "@$TMP/bad.obj"
+    expect_error "$1" "$2" "$3"
+}
+
+# --- malformed meshes (400) and unusable ones (422) ---
+bad_obj "junk token in v" 400 obj_junk 'v 0 0 0\nv 1 0 0\nv 0 1 abc\nf 1 2 3\n'
+check "message names the line" jq -e '.error.message | test("line 3")' "$BODY"
+bad_obj "unknown keyword" 400 obj_junk 'v 0 0 0\nv 1 0 0\nv 0 1 0\nfoo 1 2\nf 1 2 3\n'
+bad_obj "NaN coordinate" 400 obj_nan 'v 0 0 0\nv 1 nan 0\nv 0 1 0\nf 1 2 3\n'
+bad_obj "Inf coordinate" 400 obj_nan 'v 0 0 0\nv 1 0 0\nv 0 inf 0\nf 1 2 3\n'
+bad_obj "index out of range" 400 obj_index 'v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 4\n'
+check "index message names the line" jq -e '.error.message | test("line 4")' "$BODY"
+bad_obj "index zero" 400 obj_index 'v 0 0 0\nv 1 0 0\nv 0 1 0\nf 0 1 2\n'
+bad_obj "negative index out of range" 400 obj_index 'v 0 0 0\nv 1 0 0\nv 0 1 0\nf -1 -2 -4\n'
+bad_obj "texcoord index out of range" 400 obj_index 'v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nf 1/1 2/2 3/1\n'
+bad_obj "face with two vertices" 400 obj_face_short 'v 0 0 0\nv 1 0 0\nf 1 2\n'
+bad_obj "face repeating a vertex" 400 obj_face_repeat 'v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 2\n'
+bad_obj "no faces" 422 obj_no_faces 'v 0 0 0\nv 1 0 0\nv 0 1 0\n'
+bad_obj "only degenerate triangles" 422 degenerate_mesh 'v 0 0 0\nv 1 0 0\nv 2 0 0\nf 1 2 3\n'
+head -c 3000 /dev/urandom >"$TMP/noise.bin"
+printf 'DRACO' | cat - "$TMP/noise.bin" >"$TMP/corrupt.drc"
+api POST /v1/meshes -H "Content-Type: model/x-draco" --data-binary "@$TMP/corrupt.drc"
+expect_error "corrupt Draco" 400 draco_corrupt
+draco_encoder -i "$VX_MESH_DIR/spot_triangulated.obj" -o "$TMP/spot.drc" >/dev/null 2>&1
+head -c 2000 "$TMP/spot.drc" >"$TMP/trunc.drc"
+api POST /v1/meshes -H "Content-Type: model/x-draco" --data-binary "@$TMP/trunc.drc"
+expect_error "truncated Draco" 400 draco_corrupt
+draco_encoder -point_cloud -i "$VX_MESH_DIR/spot_triangulated.obj" -o "$TMP/pc.drc" >/dev/null 2>&1
+api POST /v1/meshes -H "Content-Type: model/x-draco" --data-binary "@$TMP/pc.drc"
+expect_error "Draco point cloud" 422 draco_point_cloud
+
+# --- content types, sizes ---
+api POST /v1/meshes -H "Content-Type: image/png" --data-binary "@$TMP/box.obj"
+expect_error "wrong content type for a mesh" 415 unsupported_media_type
+api POST /v1/meshes -H "Content-Type: model/obj" --data-binary "@$TMP/spot.drc"
+expect_error "OBJ declared, Draco sent" 415 unsupported_media_type
+api POST /v1/meshes -H "Content-Type: model/x-draco" --data-binary "@$TMP/box.obj"
+expect_error "Draco declared, text sent" 415 unsupported_media_type
+api POST /v1/meshes -H "Content-Type: application/octet-stream" --data-binary "@$TMP/noise.bin"
+expect_error "binary junk, sniffed" 415 unsupported_media_type
+api POST /v1/meshes -H "Content-Type: model/obj" --data-binary ""
+expect_error "empty body" 400 empty_body
+api POST /v1/meshes -H "Content-Type: model/obj" --data-binary "@$VX_MESH_DIR/stanford-bunny.obj"
+expect_error "upload over max-upload-bytes" 413 too_large
+api POST /v1/meshes -H "Content-Type: model/obj" -H "Transfer-Encoding: chunked" --data-binary "@$VX_MESH_DIR/stanford-bunny.obj"
+expect_error "chunked upload over the limit" 413 too_large
+api POST /v1/meshes -H "Content-Type: model/obj" --data-binary "@$VX_MESH_DIR/ogre.obj" -H "Expect:"
+expect_error "ogre over the limit without Expect" 413 too_large
+head -c 1900000 "$VX_MESH_DIR/ogre.obj" | awk '/^v /' >"$TMP/many.obj"
+nv=$(wc -l <"$TMP/many.obj")
+for i in $(seq 1 3 $((nv - 2))); do echo "f $i $((i + 1)) $((i + 2))"; done >>"$TMP/many.obj"
+if [[ $(grep -c '^f' "$TMP/many.obj") -gt 100000 && $(stat -c %s "$TMP/many.obj") -lt 2000000 ]]; then
+    api POST /v1/meshes -H "Content-Type: model/obj" --data-binary "@$TMP/many.obj"
+    expect_error "more triangles than max-triangles" 413 mesh_too_big
+fi
+code=$(curl -s -o "$TMP/411.body" -w '%{http_code}' -X POST -H "Content-Type: model/obj" -H "Content-Length:" "$BASE/v1/meshes")
+check "no length: 411 (got $code)" test "$code" = 411
+check "411 JSON error" jq -e '.error.code == "length_required"' "$TMP/411.body"
+
+# --- JSON job requests ---
+api POST /v1/jobs "${JSON[@]}" -d '{"mesh": '
+expect_error "malformed JSON" 400 invalid_json
+api POST /v1/jobs "${JSON[@]}" -d '[1,2]'
+expect_error "JSON not an object" 400 invalid_request
+api POST /v1/jobs "${JSON[@]}" -d '{"kind":"preview"}'
+expect_error "missing mesh" 400 invalid_request
+api POST /v1/jobs "${JSON[@]}" -d "{\"mesh\":\"$BOX\",\"kind\":7}"
+expect_error "kind not a string" 400 invalid_request
+api POST /v1/jobs "${JSON[@]}" -d "{\"mesh\":\"$BOX\",\"kind\":\"preview\",\"color\":1}"
+expect_error "unknown top-level field" 400 invalid_request
+api POST /v1/jobs -H "Content-Type: text/plain" -d "{\"mesh\":\"$BOX\",\"kind\":\"preview\"}"
+expect_error "job body not JSON content type" 415 unsupported_media_type
+api POST /v1/jobs "${JSON[@]}" -d "{\"mesh\":\"$BOX\",\"kind\":\"preview\",\"params\":{\"pad\":\"$(head -c 5000 /dev/zero | tr '\0' x)\"}}"
+expect_error "JSON over max-json-bytes" 413 too_large
+api POST /v1/jobs "${JSON[@]}" -d "{\"mesh\":\"$(printf '0%.0s' {1..64})\",\"kind\":\"preview\"}"
+expect_error "unknown mesh id" 404 mesh_not_found
+api POST /v1/jobs "${JSON[@]}" -d '{"mesh":"../../etc/passwd","kind":"preview"}'
+expect_error "malformed mesh id" 404 mesh_not_found
+api POST /v1/jobs "${JSON[@]}" -d "{\"mesh\":\"$BOX\",\"kind\":\"teleport\"}"
+expect_error "unknown kind" 422 unknown_kind
+api POST /v1/jobs "${JSON[@]}" -d "{\"mesh\":\"$BOX\",\"kind\":\"preview\",\"params\":{\"width\":-5}}"
+expect_error "negative width" 422 invalid_params
+check "message names the field" jq -e '.error.message | test("width")' "$BODY"
+api POST /v1/jobs "${JSON[@]}" -d "{\"mesh\":\"$BOX\",\"kind\":\"preview\",\"params\":{\"width\":5000,\"height\":5000}}"
+expect_error "image over max-image-pixels" 422 invalid_params
+api POST /v1/jobs "${JSON[@]}" -d "{\"mesh\":\"$BOX\",\"kind\":\"preview\",\"params\":{\"elevation\":\"high\"}}"
+expect_error "string for a number" 422 invalid_params
+api POST /v1/jobs "${JSON[@]}" -d "{\"mesh\":\"$BOX\",\"kind\":\"preview\",\"params\":{\"zoom\":2}}"
+expect_error "unknown parameter" 422 invalid_params
+api POST /v1/jobs "${JSON[@]}" -d "{\"mesh\":\"$BOX\",\"kind\":\"preview\",\"params\":{\"samples\":3}}"
+expect_error "samples not a power of two" 422 invalid_params
+api POST /v1/jobs "${JSON[@]}" -d "{\"mesh\":\"$BOX\",\"kind\":\"preview\",\"params\":{\"color\":[1,0]}}"
+expect_error "colour with two components" 422 invalid_params
+api POST "/v1/jobs?wait=soon" "${JSON[@]}" -d "{\"mesh\":\"$BOX\",\"kind\":\"preview\"}"
+expect_error "bad wait" 400 invalid_request
+
+# --- ids, routes, methods, queries ---
+api GET "/v1/jobs/0123456789abcdef0123456789abcdef"
+expect_error "unknown job" 404 job_not_found
+api GET "/v1/jobs/not-a-job"
+expect_error "malformed job id" 404 job_not_found
+api DELETE "/v1/jobs/0123456789abcdef0123456789abcdef"
+expect_error "cancel unknown job" 404 job_not_found
+api GET "/v1/jobs/0123456789abcdef0123456789abcdef/result"
+expect_error "result of unknown job" 404 job_not_found
+api GET "/v1/meshes/xyz"
+expect_error "malformed mesh id" 404 mesh_not_found
+api GET /v1/nothing
+expect_error "unknown route" 404 not_found
+api PUT "/v1/meshes/$BOX"
+expect_error "PUT on a mesh" 405 method_not_allowed
+check "405 lists Allow" bash -c "grep -qi '^allow: GET, HEAD, DELETE' '$HDRS'"
+api DELETE /v1/meshes
+expect_error "DELETE the collection" 405 method_not_allowed
+api POST /livez
+expect_error "POST livez" 405 method_not_allowed
+api PATCH /v1/jobs
+expect_error "PATCH jobs" 405 method_not_allowed
+api POST "/v1/jobs/0123456789abcdef0123456789abcdef/result"
+expect_error "POST a result" 405 method_not_allowed
+api GET "/v1/meshes?limit=0"
+expect_error "limit 0" 400 invalid_request
+api GET "/v1/meshes?limit=abc"
+expect_error "limit not a number" 400 invalid_request
+api GET "/v1/meshes?after=zzz"
+expect_error "after not an id" 400 invalid_request
+api GET "/v1/jobs?state=sleeping"
+expect_error "unknown state filter" 400 invalid_request
+api GET "/v1/jobs/0123456789abcdef0123456789abcdef?wait=-1"
+expect_error "negative wait" 400 invalid_request
+
+# Nothing was lost and the daemon still serves.
+api GET "/v1/meshes/$BOX"
+expect_status "the box is still there" 200
+api POST "/v1/jobs?wait=60" "${JSON[@]}" -d "{\"mesh\":\"$BOX\",\"kind\":\"preview\",\"params\":{\"width\":64,\"height\":64}}"
+check "a good job still runs" jq -e '.state == "succeeded"' "$BODY"
+api GET /v1/meshes
+check "only the box was stored" jq -e '(.items|length) == 1' "$BODY"
+check "no temp files left" test -z "$(ls -A "$DATA/tmp")"
+stop_daemon
+finish

@@ -1,0 +1,150 @@
+#!/usr/bin/env bash
+# The job path end to end with the `preview` kind: queue -> GL thread ->
+# encoder -> result; ?wait, cancel, 429, results with ETag, listing.
+source "$(dirname "$0")/lib.sh"
+source "$(dirname "$0")/box.sh"
+start_daemon --max-queued-jobs 3 || exit 1
+
+# A 2 x 1 x 1 box far from the origin: the camera must aim at its centre.
+box_obj "$TMP/box.obj" 100 -5 7 102 -4 8
+upload "$TMP/box.obj"
+expect_status "upload box" 201
+BOX=$MESH_ID
+
+# Front view (camera on +Z), orthographic: a 2:1 rectangle in the middle.
+api POST "/v1/jobs?wait=60" -H "Content-Type: application/json" \
+    -d "{\"mesh\":\"$BOX\",\"kind\":\"preview\",\"params\":{\"azimuth\":0,\"elevation\":0,\"fov\":0,\"width\":300,\"height\":200,\"samples\":1}}"
+expect_status "preview with wait" 202
+JID=$(jqb .id)
+check "Location of the job" test "$(header Location)" = "/v1/jobs/$JID"
+check "job succeeded within the wait" jq -e '.state == "succeeded" and .progress == 1' "$BODY"
+check "job resource fields" jq -e '.kind == "preview" and .mesh == "'"$BOX"'" and .error == null and .attempts == 1' "$BODY"
+check "normalised params" jq -e '.params.azimuth == 0 and .params.width == 300 and .params.ambient != null and .params.color != null' "$BODY"
+check "timings" jq -e '.timings.queue_ms >= 0 and .timings.run_ms >= 0 and .timings.total_ms >= .timings.run_ms' "$BODY"
+check "stats" jq -e '.stats.triangles == 12 and .stats.width == 300 and .stats.pixels_covered > 0 and .stats.gpu_ms >= 0' "$BODY"
+check "outputs" jq -e '.outputs.image == "/v1/jobs/'"$JID"'/result/image"' "$BODY"
+
+api GET "/v1/jobs/$JID/result"
+expect_status "result" 200
+check "result content type" test "$CTYPE" = "image/png"
+check "result disposition" bash -c "grep -qi 'content-disposition: attachment; filename=\"$JID-image.png\"' '$HDRS'"
+ETAG=$(header ETag)
+check "result has an ETag" test -n "$ETAG"
+cp "$BODY" "$TMP/front.png"
+"$VX_TOOLS/pngstat" "$TMP/front.png" >"$TMP/front.json"
+check "png decodes 300x200" jq -e '.width == 300 and .height == 200' "$TMP/front.json"
+# The silhouette: centred, twice as wide as tall, covered pixels = stats.
+check "front view centred" jq -e '((.centroid[0] - 149.5)|fabs) < 2 and ((.centroid[1] - 99.5)|fabs) < 2' "$TMP/front.json"
+check "front view 2:1" jq -e '((.bbox[2]-.bbox[0]+1) / (.bbox[3]-.bbox[1]+1) - 2 | fabs) < 0.08' "$TMP/front.json"
+check "front view fills the box" jq -e '.covered > 0.9 * (.bbox[2]-.bbox[0]+1) * (.bbox[3]-.bbox[1]+1)' "$TMP/front.json"
+api GET "/v1/jobs/$JID/result/image" -H "If-None-Match: $ETAG"
+expect_status "conditional GET" 304
+api GET "/v1/jobs/$JID/result/image"
+expect_status "named result" 200
+check "named result = primary" cmp -s "$BODY" "$TMP/front.png"
+api HEAD "/v1/jobs/$JID/result"
+expect_status "HEAD result" 200
+
+# Side view (camera on +X): the visible face is 1 x 1.
+api POST "/v1/jobs?wait=60" -H "Content-Type: application/json" \
+    -d "{\"mesh\":\"$BOX\",\"kind\":\"preview\",\"params\":{\"azimuth\":90,\"elevation\":0,\"fov\":0,\"width\":200,\"height\":200}}"
+J2=$(jqb .id)
+check "side view succeeded" jq -e '.state == "succeeded"' "$BODY"
+api GET "/v1/jobs/$J2/result"
+"$VX_TOOLS/pngstat" "$BODY" >"$TMP/side.json"
+check "side view square" jq -e '((.bbox[2]-.bbox[0]+1) / (.bbox[3]-.bbox[1]+1) - 1 | fabs) < 0.08' "$TMP/side.json"
+check "side view narrower than front" test "$(jq '.bbox[2]-.bbox[0]' "$TMP/side.json")" -lt "$(jq '.bbox[2]-.bbox[0]' "$TMP/front.json")"
+
+# A real mesh, perspective: something in the middle, background in corners.
+upload "$VX_MESH_DIR/spot_triangulated.obj"
+SPOT=$MESH_ID
+api POST /v1/jobs -H "Content-Type: application/json" -d "{\"mesh\":\"$SPOT\",\"kind\":\"preview\"}"
+expect_status "preview without wait" 202
+J3=$(jqb .id)
+check "queued or running at first" jq -e '.state == "queued" or .state == "running" or .state == "succeeded"' "$BODY"
+wait_job "$J3"
+check "spot preview succeeded" jq -e '.state == "succeeded" and .params.width == 512' "$BODY"
+api GET "/v1/jobs/$J3/result"
+"$VX_TOOLS/pngstat" "$BODY" >"$TMP/spot.json"
+check "spot: covers a good part of the image" jq -e '.covered > 512*512*0.05' "$TMP/spot.json"
+check "spot: roughly centred" jq -e '((.centroid[0]-255.5)|fabs) < 80 and ((.centroid[1]-255.5)|fabs) < 80' "$TMP/spot.json"
+
+# GET ?wait on a finished job answers at once.
+api GET "/v1/jobs/$J3?wait=30"
+expect_status "GET wait on finished job" 200
+
+# Queue limit and cancel: a slow job holds the GL thread, three fill the
+# queue, the fourth gets 429; cancel a queued one, then the running one.
+upload "$VX_MESH_DIR/ogre.obj"
+OGRE=$MESH_ID
+slow='"params":{"width":8192,"height":8192,"samples":8}'
+api POST /v1/jobs -H "Content-Type: application/json" -d "{\"mesh\":\"$OGRE\",\"kind\":\"preview\",$slow}"
+SLOW=$(jqb .id)
+for i in 1 2 3 4 5 6; do
+    api GET "/v1/jobs/$SLOW"
+    [[ "$(jqb .state)" == running ]] && break
+    sleep 0.5
+done
+Q=()
+for i in 1 2 3; do
+    api POST /v1/jobs -H "Content-Type: application/json" -d "{\"mesh\":\"$OGRE\",\"kind\":\"preview\",$slow}"
+    expect_status "fill queue $i" 202
+    Q+=("$(jqb .id)")
+done
+api POST /v1/jobs -H "Content-Type: application/json" -d "{\"mesh\":\"$OGRE\",\"kind\":\"preview\"}"
+expect_error "queue full" 429 queue_full
+check "429 has Retry-After" test -n "$(header Retry-After)"
+api GET /readyz
+expect_status "readyz with a full queue" 503
+check "readyz says queue" jq -e '.checks.queue == false' "$BODY"
+
+api DELETE "/v1/jobs/${Q[2]}"
+expect_status "cancel queued job" 200
+check "canceled at once" jq -e '.state == "canceled" and .error.code == "canceled"' "$BODY"
+api DELETE "/v1/jobs/${Q[2]}"
+expect_error "cancel twice" 409 job_finished
+api GET "/v1/jobs/${Q[2]}/result"
+expect_error "result of canceled job" 409 job_canceled
+api GET "/v1/jobs/${Q[1]}/result"
+expect_error "result of queued job" 409 job_not_finished
+api GET "/v1/jobs?state=queued&limit=10"
+expect_status "list queued" 200
+check "two queued listed" jq -e '[.items[].id] == ["'"${Q[0]}"'","'"${Q[1]}"'"]' "$BODY"
+api GET "/v1/jobs?limit=2"
+check "list paging" jq -e '(.items|length) == 2 and (.next|type) == "string"' "$BODY"
+api GET "/v1/jobs?limit=2&after=$(jqb .next)"
+check "list second page" jq -e '(.items|length) == 2' "$BODY"
+
+# The running job: cancel is requested (202) and lands at its next check.
+api GET "/v1/jobs/$SLOW"
+if [[ "$(jqb .state)" == running ]]; then
+    api DELETE "/v1/jobs/$SLOW"
+    expect_status "cancel running job" 202
+    check "cancel requested" jq -e '.cancel_requested == true' "$BODY"
+fi
+wait_job "$SLOW"
+check "slow job ended canceled (or had finished)" jq -e '.state == "canceled" or .state == "succeeded"' "$BODY"
+for j in "${Q[0]}" "${Q[1]}"; do api DELETE "/v1/jobs/$j"; done
+
+# ?wait times out and answers with the job as it is.
+api POST /v1/jobs -H "Content-Type: application/json" -d "{\"mesh\":\"$OGRE\",\"kind\":\"preview\",$slow}"
+J5=$(jqb .id)
+t0=$(date +%s.%N)
+api GET "/v1/jobs/$J5?wait=1"
+t1=$(date +%s.%N)
+expect_status "wait that times out" 200
+check "held about 1 s" awk -v a="$t0" -v b="$t1" 'BEGIN{exit !((b-a) >= 0.9 && (b-a) < 5)}'
+check "still not finished" jq -e '.state == "queued" or .state == "running"' "$BODY"
+api DELETE "/v1/jobs/$J5"
+wait_job "$J5"
+
+# Unknown job and output names.
+api GET "/v1/jobs/$JID/result/nope"
+expect_error "unknown output" 404 output_not_found
+
+api GET /metrics
+check "metrics: job histogram" grep -q 'voxeld_job_duration_seconds_count{kind="preview"}' "$BODY"
+check "metrics: jobs_total" grep -q 'voxeld_jobs_total{kind="preview",state="succeeded"}' "$BODY"
+
+stop_daemon
+finish

@@ -1,0 +1,77 @@
+#!/usr/bin/env bash
+# kill -9 loses no acknowledged upload or job; queued jobs run after a
+# restart; SIGTERM puts the running job back in the queue; results persist.
+source "$(dirname "$0")/lib.sh"
+source "$(dirname "$0")/box.sh"
+start_daemon || exit 1
+
+box_obj "$TMP/box.obj" 0 0 0 3 2 1
+upload "$TMP/box.obj"
+BOX=$MESH_ID
+upload "$VX_MESH_DIR/rocker-arm.obj"
+ROCKER=$MESH_ID
+api POST "/v1/jobs?wait=60" -H "Content-Type: application/json" -d "{\"mesh\":\"$BOX\",\"kind\":\"preview\",\"params\":{\"width\":64,\"height\":64}}"
+DONE=$(jqb .id)
+check "first job done" jq -e '.state == "succeeded"' "$BODY"
+api GET "/v1/jobs/$DONE/result"
+cp "$BODY" "$TMP/done.png"
+
+# Many acknowledged jobs, then kill -9 straight away.
+JOBS=()
+for i in $(seq 1 8); do
+    api POST /v1/jobs -H "Content-Type: application/json" \
+        -d "{\"mesh\":\"$ROCKER\",\"kind\":\"preview\",\"params\":{\"width\":1024,\"height\":1024,\"azimuth\":$((i * 40))}}"
+    [[ "$STATUS" == 202 ]] && JOBS+=("$(jqb .id)")
+done
+upload "$VX_MESH_DIR/fandisk.obj"
+[[ "$STATUS" == 201 ]] && FANDISK=$MESH_ID
+kill9_daemon
+check "8 jobs were acknowledged" test "${#JOBS[@]}" -eq 8
+
+start_daemon || exit 1
+for m in "$BOX" "$ROCKER" "$FANDISK"; do
+    api GET "/v1/meshes/$m"
+    expect_status "mesh $m after kill -9" 200
+done
+api GET "/v1/jobs/$DONE/result"
+check "finished result kept" cmp -s "$BODY" "$TMP/done.png"
+for j in "${JOBS[@]}"; do
+    wait_job "$j" 300
+    check "job $j finished after restart" jq -e '.state == "succeeded"' "$BODY"
+done
+api GET "/v1/jobs/${JOBS[7]}/result"
+"$VX_TOOLS/pngstat" "$BODY" >"$TMP/last.json"
+check "re-run job's image is real" jq -e '.width == 1024 and .covered > 1000' "$TMP/last.json"
+
+# SIGTERM with a job running: it is queued again and finishes next time.
+api POST /v1/jobs -H "Content-Type: application/json" \
+    -d "{\"mesh\":\"$ROCKER\",\"kind\":\"preview\",\"params\":{\"width\":4096,\"height\":4096,\"samples\":8}}"
+LONG=$(jqb .id)
+api POST /v1/jobs -H "Content-Type: application/json" -d "{\"mesh\":\"$BOX\",\"kind\":\"preview\"}"
+NEXT=$(jqb .id)
+# A held request is answered on shutdown, not dropped.
+curl -s -o "$TMP/held.json" -w '%{http_code}' "$BASE/v1/jobs/$NEXT?wait=30" >"$TMP/held.code" &
+CURL=$!
+sleep 0.5
+stop_daemon
+wait "$CURL"
+check "held request answered at shutdown ($(cat "$TMP/held.code"))" test "$(cat "$TMP/held.code")" = 200
+check "held answer is the job" jq -e '.id == "'"$NEXT"'"' "$TMP/held.json"
+check "journal says a clean stop" grep -q 'event=jobs.stopped' "$TMP/daemon.log"
+start_daemon || exit 1
+for j in "$LONG" "$NEXT"; do
+    wait_job "$j" 300
+    check "job $j finished after SIGTERM + restart" jq -e '.state == "succeeded"' "$BODY"
+done
+
+# The result budget: a tiny byte budget evicts the least recently used.
+stop_daemon
+start_daemon --results-max-bytes 1 || exit 1
+api POST "/v1/jobs?wait=60" -H "Content-Type: application/json" -d "{\"mesh\":\"$BOX\",\"kind\":\"preview\",\"params\":{\"width\":32,\"height\":32}}"
+EVJ=$(jqb .id)
+api GET "/v1/jobs/$DONE/result"
+expect_error "evicted result" 410 result_evicted
+api GET "/v1/jobs/$DONE"
+check "the evicted job is still known" jq -e '.state == "succeeded"' "$BODY"
+stop_daemon
+finish

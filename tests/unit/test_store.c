@@ -1,0 +1,206 @@
+/* Store: upload hashing, commit/dedup, metadata, listing, delete, restart,
+ * incomplete commits, result budget and LRU eviction. */
+#include <setjmp.h>
+#include <stdarg.h>
+#include <stddef.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+#include <unistd.h>
+#include <cmocka.h>
+
+#include "store/store.h"
+#include "util/fsutil.h"
+
+static char dir[256];
+
+static int setup(void **state)
+{
+    snprintf(dir, sizeof dir, "/tmp/vx-store-XXXXXX");
+    return mkdtemp(dir) ? 0 : -1;
+}
+
+static int teardown(void **state)
+{
+    vx_remove_tree(dir);
+    return 0;
+}
+
+/* Uploads text in small chunks and commits it; returns the id. */
+static void put(vx_store *s, const char *text, char id[65], int *existed)
+{
+    vx_err err;
+    vx_upload *u = vx_upload_begin(s, &err);
+    assert_non_null(u);
+    size_t n = strlen(text);
+    for (size_t off = 0; off < n; off += 3)
+        assert_int_equal(vx_upload_write(u, text + off, n - off < 3 ? n - off : 3, &err), 0);
+    assert_int_equal(vx_upload_finish(u, id, &err), 0);
+    cJSON *meta = cJSON_CreateObject();
+    cJSON_AddStringToObject(meta, "id", id);
+    cJSON_AddStringToObject(meta, "format", "obj");
+    assert_int_equal(vx_store_mesh_commit(s, u, id, "obj", meta, existed, &err), 0);
+    cJSON_Delete(meta);
+}
+
+static void test_hash_commit_dedup(void **state)
+{
+    vx_err err;
+    vx_store *s = vx_store_open(dir, NULL, &err);
+    assert_non_null(s);
+    char id[65];
+    int existed;
+    put(s, "abc", id, &existed);
+    /* SHA-256("abc"), FIPS 180-2 example */
+    assert_string_equal(id, "ba7816bf8f01cfea414140de5dae2223b00361a396177a9cb410ff61f20015ad");
+    assert_int_equal(existed, 0);
+    put(s, "abc", id, &existed);
+    assert_int_equal(existed, 1);
+    assert_int_equal(vx_store_mesh_count(s), 1);
+    char path[512];
+    assert_int_equal(vx_store_mesh_path(s, id, path, sizeof path, &err), 0);
+    char *text = vx_read_file(path, 100, NULL, &err);
+    assert_string_equal(text, "abc");
+    free(text);
+    cJSON *m = vx_store_mesh_meta(s, id, &err);
+    assert_string_equal(cJSON_GetStringValue(cJSON_GetObjectItem(m, "id")), id);
+    cJSON_Delete(m);
+    assert_null(vx_store_mesh_meta(s, "00", &err));
+    assert_int_equal(err.kind, VX_ENOTFOUND);
+    assert_string_equal(err.code, "mesh_not_found");
+    vx_store_close(s);
+
+    /* Reopen: the mesh is still there; an orphan mesh file (commit that
+     * never wrote its metadata) and leftover temp uploads are cleaned. */
+    char orphan[512], tmpf[512];
+    snprintf(orphan, sizeof orphan, "%s/meshes/%064d.obj", dir, 0);
+    FILE *f = fopen(orphan, "w");
+    fputs("x", f);
+    fclose(f);
+    snprintf(tmpf, sizeof tmpf, "%s/tmp/upload-1-1", dir);
+    f = fopen(tmpf, "w");
+    fclose(f);
+    s = vx_store_open(dir, NULL, &err);
+    assert_int_equal(vx_store_mesh_count(s), 1);
+    assert_int_not_equal(access(orphan, F_OK), 0);
+    assert_int_not_equal(access(tmpf, F_OK), 0);
+    assert_int_equal(vx_store_mesh_delete(s, id, &err), 0);
+    assert_int_equal(vx_store_mesh_delete(s, id, &err), -1);
+    assert_int_equal(vx_store_mesh_count(s), 0);
+    vx_store_close(s);
+}
+
+static void test_list_pages(void **state)
+{
+    vx_err err;
+    char sub[300];
+    snprintf(sub, sizeof sub, "%s/list", dir);
+    vx_store *s = vx_store_open(sub, NULL, &err);
+    char id[65], text[32];
+    int existed;
+    for (int i = 0; i < 7; i++) {
+        snprintf(text, sizeof text, "mesh %d", i);
+        put(s, text, id, &existed);
+    }
+    char next[65], after[65] = "", prev[65] = "";
+    int total = 0;
+    for (int page = 0; page < 10; page++) {
+        cJSON *arr = vx_store_mesh_list(s, after[0] ? after : NULL, 3, next);
+        const cJSON *it;
+        cJSON_ArrayForEach(it, arr)
+        {
+            const char *cur = cJSON_GetStringValue(cJSON_GetObjectItem(it, "id"));
+            assert_true(strcmp(prev, cur) < 0); /* sorted, no repeats */
+            snprintf(prev, sizeof prev, "%s", cur);
+            total++;
+        }
+        cJSON_Delete(arr);
+        if (!next[0]) break;
+        snprintf(after, sizeof after, "%s", next);
+    }
+    assert_int_equal(total, 7);
+    assert_true(vx_store_valid_mesh_id(prev));
+    assert_false(vx_store_valid_mesh_id("ABC"));
+    vx_store_close(s);
+}
+
+static void write_result(vx_store *s, const char *jid, size_t bytes)
+{
+    char d[512], p[600];
+    vx_err err;
+    assert_int_equal(vx_store_result_dir(s, jid, d, sizeof d, &err), 0);
+    snprintf(p, sizeof p, "%s/out.bin", d);
+    char *buf = calloc(1, bytes);
+    assert_int_equal(vx_write_atomic(p, buf, bytes, &err), 0);
+    free(buf);
+    vx_store_result_added(s, jid);
+}
+
+static void test_results_budget(void **state)
+{
+    vx_err err;
+    char sub[300];
+    snprintf(sub, sizeof sub, "%s/res", dir);
+    vx_store_desc d = {.results_max_bytes = 2500};
+    vx_store *s = vx_store_open(sub, &d, &err);
+    write_result(s, "aaaa", 1000);
+    usleep(20000);
+    write_result(s, "bbbb", 1000);
+    usleep(20000);
+    char p[600];
+    /* Reading aaaa makes bbbb the least recently used. */
+    assert_int_equal(vx_store_result_file(s, "aaaa", "out.bin", p, sizeof p, &err), 0);
+    usleep(20000);
+    write_result(s, "cccc", 1000);
+    assert_int_equal(vx_store_results_bytes(s), 3000);
+    assert_int_equal(vx_store_results_evict(s), 1);
+    assert_int_equal(vx_store_results_bytes(s), 2000);
+    assert_int_equal(vx_store_result_file(s, "bbbb", "out.bin", p, sizeof p, &err), -1);
+    assert_string_equal(err.code, "result_evicted");
+    assert_int_equal(vx_store_result_file(s, "aaaa", "out.bin", p, sizeof p, &err), 0);
+    assert_int_equal(vx_store_result_file(s, "cccc", "out.bin", p, sizeof p, &err), 0);
+    vx_store_close(s);
+    /* Sizes are found again on open. */
+    s = vx_store_open(sub, &d, &err);
+    assert_int_equal(vx_store_results_bytes(s), 2000);
+    vx_store_close(s);
+    /* An age budget of ~0 s evicts everything unused. */
+    vx_store_desc aged = {.results_max_age_s = 0.001};
+    s = vx_store_open(sub, &aged, &err);
+    usleep(5000);
+    assert_int_equal(vx_store_results_evict(s), 2);
+    assert_int_equal(vx_store_results_bytes(s), 0);
+    vx_store_close(s);
+}
+
+static void test_upload_abort(void **state)
+{
+    vx_err err;
+    vx_store *s = vx_store_open(dir, NULL, &err);
+    vx_upload *u = vx_upload_begin(s, &err);
+    char path[2400];
+    snprintf(path, sizeof path, "%s", vx_upload_path(u));
+    vx_upload_write(u, "DRACO....", 9, &err);
+    size_t n;
+    const unsigned char *head = vx_upload_head(u, &n);
+    assert_int_equal(n, 9);
+    assert_memory_equal(head, "DRACO", 5);
+    assert_int_equal(vx_upload_bytes(u), 9);
+    vx_upload_abort(u);
+    assert_int_not_equal(access(path, F_OK), 0);
+    assert_true(vx_store_writable(s));
+    vx_store_close(s);
+}
+
+int main(void)
+{
+    const struct CMUnitTest tests[] = {
+        cmocka_unit_test(test_hash_commit_dedup),
+        cmocka_unit_test(test_list_pages),
+        cmocka_unit_test(test_results_budget),
+        cmocka_unit_test(test_upload_abort),
+    };
+    return cmocka_run_group_tests(tests, setup, teardown);
+}
