@@ -47,7 +47,7 @@ static const struct {
     const char *name; /* metrics label: the path template */
     const char *allow;
 } routes[] = {
-    [R_UNKNOWN] = {"unknown", ""},
+    [R_UNKNOWN] = {"unmatched", ""},
     [R_LIVEZ] = {"/livez", "GET, HEAD"},
     [R_READYZ] = {"/readyz", "GET, HEAD"},
     [R_METRICS] = {"/metrics", "GET, HEAD"},
@@ -455,7 +455,7 @@ static int h_mesh_list(vx_http *h, struct MHD_Connection *c, req *r)
     const char *after = query(c, "after");
     if (parse_limit(c, &limit))
         return send_error(c, r, 400, "invalid_request", "limit must be an integer in [1, 1000]");
-    if (after && *after && !vx_store_valid_mesh_id(after))
+    if (after && !vx_store_valid_mesh_id(after))
         return send_error(c, r, 400, "invalid_request", "after must be a mesh id");
     char next[65];
     cJSON *doc = cJSON_CreateObject();
@@ -519,7 +519,7 @@ static int h_upload_done(vx_http *h, struct MHD_Connection *c, req *r)
         snprintf(msg, sizeof msg, "the body is larger than the %s-byte upload limit", max);
         return send_error(c, r, 413, "too_large", msg);
     }
-    if (vx_upload_bytes(r->up) == 0) return send_error(c, r, 400, "empty_body", "the body is empty");
+    if (vx_upload_bytes(r->up) == 0) return send_error(c, r, 422, "obj_no_faces", "the body is empty: no faces");
     char id[65];
     if (vx_upload_finish(r->up, id, &err)) return send_err(c, r, &err);
     cJSON *meta = vx_store_mesh_meta(h->d.store, id, NULL);
@@ -602,7 +602,7 @@ static int h_job_post_done(vx_http *h, struct MHD_Connection *c, req *r)
     if (!cJSON_IsObject(doc)) msg = "the body must be a JSON object";
     else if (!cJSON_IsString(mesh)) msg = "\"mesh\" (a mesh id string) is required";
     else if (!cJSON_IsString(kind)) msg = "\"kind\" (a job kind string) is required";
-    else if (params && !cJSON_IsObject(params) && !cJSON_IsNull(params)) msg = "\"params\" must be an object";
+    else if (params && !cJSON_IsObject(params)) msg = "\"params\" must be an object";
     else {
         const cJSON *it;
         cJSON_ArrayForEach(it, doc) if (strcmp(it->string, "mesh") && strcmp(it->string, "kind") &&
@@ -616,10 +616,9 @@ static int h_job_post_done(vx_http *h, struct MHD_Connection *c, req *r)
     vx_err_clear(&err);
     cJSON *job = NULL;
     if (!vx_store_valid_mesh_id(mesh->valuestring))
-        vx_err_set(&err, VX_ENOTFOUND, "mesh_not_found", "no mesh with id %.80s", mesh->valuestring);
+        vx_err_set(&err, VX_EINVAL, "invalid_request", "\"mesh\" must be a mesh id (64 hex digits)");
     else
-        job = vx_jobs_submit(h->d.jobs, mesh->valuestring, kind->valuestring,
-                             cJSON_IsObject(params) ? params : NULL, &err);
+        job = vx_jobs_submit(h->d.jobs, mesh->valuestring, kind->valuestring, params, &err);
     cJSON_Delete(doc);
     if (!job) return send_err(c, r, &err);
     char jid[33];
@@ -645,7 +644,7 @@ static int h_job_list(vx_http *h, struct MHD_Connection *c, req *r)
     const char *after = query(c, "after"), *state = query(c, "state");
     if (parse_limit(c, &limit))
         return send_error(c, r, 400, "invalid_request", "limit must be an integer in [1, 1000]");
-    if (after && *after && !vx_jobs_valid_id(after))
+    if (after && !vx_jobs_valid_id(after))
         return send_error(c, r, 400, "invalid_request", "after must be a job id");
     static const char *states[] = {"queued", "running", "succeeded", "failed", "canceled"};
     if (state) {
@@ -719,7 +718,7 @@ static int first_call(vx_http *h, struct MHD_Connection *c, req *r)
     if (r->route == R_UNKNOWN) return send_error(c, r, 404, "not_found", "no such route");
     if (!strncmp(routes[r->route].name, "/v1/", 4) && h->auth && !auth_ok(h, c))
         return send_error_h(c, r, 401, "unauthorized", "a valid bearer token is required",
-                            MHD_HTTP_HEADER_WWW_AUTHENTICATE, "Bearer");
+                            MHD_HTTP_HEADER_WWW_AUTHENTICATE, "Bearer realm=\"voxeld\"");
     if (!method_allowed(r->route, r->method)) {
         char msg[96];
         snprintf(msg, sizeof msg, "method %s is not allowed here", r->method);
@@ -730,10 +729,28 @@ static int first_call(vx_http *h, struct MHD_Connection *c, req *r)
     if (h->stopping || !vx_jobs_ready(h->d.jobs))
         return send_error_h(c, r, 503, "not_ready", "the daemon is not ready", MHD_HTTP_HEADER_RETRY_AFTER, "5");
 
+    char mt[128];
+    media_type(header(c, MHD_HTTP_HEADER_CONTENT_TYPE), mt, sizeof mt);
+    if (r->route == R_MESHES) {
+        if (!strcmp(mt, "model/obj") || !strcmp(mt, "text/plain")) r->declared = MEDIA_OBJ;
+        else if (!strcmp(mt, "model/x-draco") || !strcmp(mt, "application/x-draco")) r->declared = MEDIA_DRACO;
+        else if (!mt[0] || !strcmp(mt, "application/octet-stream")) r->declared = MEDIA_SNIFF;
+        else {
+            char msg[200];
+            snprintf(msg, sizeof msg, "cannot take '%.100s': send model/obj, model/x-draco or "
+                                      "application/octet-stream", mt);
+            return send_error(c, r, 415, "unsupported_media_type", msg);
+        }
+        r->body = BODY_UPLOAD;
+    } else {
+        if (strcmp(mt, "application/json") != 0)
+            return send_error(c, r, 415, "unsupported_media_type", "the body must be application/json");
+        r->body = BODY_JSON;
+    }
     const char *cl = header(c, MHD_HTTP_HEADER_CONTENT_LENGTH);
     const char *te = header(c, MHD_HTTP_HEADER_TRANSFER_ENCODING);
     uint64_t limit = r->route == R_MESHES ? h->d.cfg->max_upload_bytes : h->d.cfg->max_json_bytes;
-    if (!cl && !(te && strcasestr(te, "chunked")))
+    if (r->route == R_MESHES && !cl && !(te && strcasestr(te, "chunked")))
         return send_error(c, r, 411, "length_required", "Content-Length or chunked encoding is required");
     if (cl) {
         char *end;
@@ -747,26 +764,10 @@ static int first_call(vx_http *h, struct MHD_Connection *c, req *r)
             return send_error(c, r, 413, "too_large", msg);
         }
     }
-    char mt[128];
-    media_type(header(c, MHD_HTTP_HEADER_CONTENT_TYPE), mt, sizeof mt);
-    if (r->route == R_MESHES) {
-        if (!strcmp(mt, "model/obj") || !strcmp(mt, "text/plain")) r->declared = MEDIA_OBJ;
-        else if (!strcmp(mt, "model/x-draco") || !strcmp(mt, "application/x-draco")) r->declared = MEDIA_DRACO;
-        else if (!mt[0] || !strcmp(mt, "application/octet-stream")) r->declared = MEDIA_SNIFF;
-        else {
-            char msg[200];
-            snprintf(msg, sizeof msg, "cannot take '%.100s': send model/obj, model/x-draco or "
-                                      "application/octet-stream", mt);
-            return send_error(c, r, 415, "unsupported_media_type", msg);
-        }
+    if (r->body == BODY_UPLOAD) {
         vx_err err;
         r->up = vx_upload_begin(h->d.store, &err);
         if (!r->up) return send_err(c, r, &err);
-        r->body = BODY_UPLOAD;
-    } else {
-        if (strcmp(mt, "application/json") != 0)
-            return send_error(c, r, 415, "unsupported_media_type", "the body must be application/json");
-        r->body = BODY_JSON;
     }
     return -1;
 }
@@ -871,7 +872,11 @@ static void on_completed(void *cls, struct MHD_Connection *c, void **con_cls,
     double dt = vx_mono() - r->t0;
     const char *route = routes[r->route].name;
     int status = r->status ? r->status : 499; /* closed before an answer */
-    vx_metrics_request(route, r->method, status, dt, r->bytes_in, r->bytes_out);
+    static const char *known[] = {"GET", "HEAD", "POST", "PUT", "DELETE", "PATCH", "OPTIONS", NULL};
+    const char *mlabel = "other";
+    for (int i = 0; known[i]; i++)
+        if (!strcmp(known[i], r->method)) mlabel = known[i];
+    vx_metrics_request(route, mlabel, status, dt, r->bytes_in, r->bytes_out);
     vx_log_level lvl = (r->route == R_LIVEZ || r->route == R_READYZ || r->route == R_METRICS) && status < 400
                            ? VX_LOG_DEBUG : VX_LOG_INFO;
     vx_log(lvl, "http.request", "method=%s route=%s status=%d ms=%.2f bytes_in=%llu bytes_out=%llu%s",

@@ -200,8 +200,8 @@ char *vx_metrics_render(const vx_metrics_gauges *g)
               "# HELP voxeld_results_bytes Bytes of job results on disk.\n"
               "# TYPE voxeld_results_bytes gauge\nvoxeld_results_bytes %llu\n"
               "# HELP voxeld_up 1 when ready to run jobs.\n# TYPE voxeld_up gauge\nvoxeld_up %d\n"
-              "# HELP voxeld_start_time_seconds Start time of the process since the epoch.\n"
-              "# TYPE voxeld_start_time_seconds gauge\nvoxeld_start_time_seconds %.3f\n",
+              "# HELP process_start_time_seconds Start time of the process since the epoch.\n"
+              "# TYPE process_start_time_seconds gauge\nprocess_start_time_seconds %.3f\n",
               g->queue_depth, g->queue_capacity, g->running, g->meshes,
               (unsigned long long)g->results_bytes, g->ready, g->start_time);
     sb_printf(&b,

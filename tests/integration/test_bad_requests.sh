@@ -52,7 +52,7 @@ expect_error "Draco declared, text sent" 415 unsupported_media_type
 api POST /v1/meshes -H "Content-Type: application/octet-stream" --data-binary "@$TMP/noise.bin"
 expect_error "binary junk, sniffed" 415 unsupported_media_type
 api POST /v1/meshes -H "Content-Type: model/obj" --data-binary ""
-expect_error "empty body" 400 empty_body
+expect_error "empty body" 422 obj_no_faces
 api POST /v1/meshes -H "Content-Type: model/obj" --data-binary "@$VX_MESH_DIR/stanford-bunny.obj"
 expect_error "upload over max-upload-bytes" 413 too_large
 api POST /v1/meshes -H "Content-Type: model/obj" -H "Transfer-Encoding: chunked" --data-binary "@$VX_MESH_DIR/stanford-bunny.obj"
@@ -88,7 +88,9 @@ expect_error "JSON over max-json-bytes" 413 too_large
 api POST /v1/jobs "${JSON[@]}" -d "{\"mesh\":\"$(printf '0%.0s' {1..64})\",\"kind\":\"preview\"}"
 expect_error "unknown mesh id" 404 mesh_not_found
 api POST /v1/jobs "${JSON[@]}" -d '{"mesh":"../../etc/passwd","kind":"preview"}'
-expect_error "malformed mesh id" 404 mesh_not_found
+expect_error "malformed mesh id in a job" 400 invalid_request
+api POST /v1/jobs "${JSON[@]}" -d "{\"mesh\":\"$BOX\",\"kind\":\"preview\",\"params\":null}"
+expect_error "params null" 400 invalid_request
 api POST /v1/jobs "${JSON[@]}" -d "{\"mesh\":\"$BOX\",\"kind\":\"teleport\"}"
 expect_error "unknown kind" 422 unknown_kind
 api POST /v1/jobs "${JSON[@]}" -d "{\"mesh\":\"$BOX\",\"kind\":\"preview\",\"params\":{\"width\":-5}}"
