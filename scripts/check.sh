@@ -1,0 +1,17 @@
+#!/usr/bin/env bash
+# Builds voxeld twice and runs every test on each build:
+#   build/       warnings as errors, all tests (unit, integration, deploy)
+#   build-asan/  AddressSanitizer + UndefinedBehaviorSanitizer, unit + integration
+# This is the README's test command and what CI (.ci/run) runs.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+jobs=$(nproc)
+
+cmake -S . -B build -DVX_WERROR=ON
+cmake --build build -j"$jobs"
+ctest --test-dir build --output-on-failure -j2
+
+cmake -S . -B build-asan -DVX_WERROR=ON -DVX_SANITIZE=ON -DCMAKE_BUILD_TYPE=Debug
+cmake --build build-asan -j"$jobs"
+ASAN_OPTIONS=abort_on_error=0:detect_leaks=1 \
+    ctest --test-dir build-asan --output-on-failure -j2 -L 'unit|integration'
