@@ -76,6 +76,9 @@ vx_mesh *vx_obj_read_path(const char *path, const vx_mesh_limits *lim, vx_err *e
  * (draco_point_cloud); truncated or corrupt data is VX_EINVAL (draco_corrupt).
  * Returns an owned analysed mesh or NULL. */
 vx_mesh *vx_draco_read_path(const char *path, const vx_mesh_limits *lim, vx_err *err);
+/* The same from an open file, read from its current position to the end
+ * (vx_mesh_read_path hands over the file it sniffed). */
+vx_mesh *vx_draco_read_file(FILE *f, const vx_mesh_limits *lim, vx_err *err);
 
 /* Reads either format by looking at the first bytes ("DRACO" magic). */
 vx_mesh *vx_mesh_read_path(const char *path, const vx_mesh_limits *lim, vx_err *err);

@@ -1,0 +1,291 @@
+/* Draco reader and writer: a C++ shim over libdraco behind the C API of
+ * mesh.h. Nothing thrown inside (std::bad_alloc from the vectors libdraco
+ * fills, anything else) may cross into C, so every entry point catches all. */
+#include <algorithm>
+#include <cerrno>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <memory>
+#include <new>
+#include <vector>
+
+#include <sys/stat.h>
+
+#include "draco/compression/decode.h"
+#include "draco/compression/encode.h"
+#include "draco/core/decoder_buffer.h"
+#include "draco/core/encoder_buffer.h"
+#include "draco/mesh/mesh.h"
+
+extern "C" {
+#include "mesh/mesh.h"
+#include "util/log.h"
+}
+
+namespace
+{
+
+/* Draco must have the whole encoding in memory; refuse anything that could
+ * not be a mesh the daemon would accept anyway before reading it all. */
+constexpr size_t kMaxDracoFile = size_t(1) << 30;
+
+struct MeshDeleter {
+    void operator()(vx_mesh *m) const { vx_mesh_free(m); }
+};
+using MeshPtr = std::unique_ptr<vx_mesh, MeshDeleter>;
+
+/* The largest file the limits can justify: a generous 128 bytes per vertex
+ * and per triangle covers uncompressed sequential encodings with several
+ * attributes. Only when both limits are set; otherwise the hard cap. */
+size_t file_bound(const vx_mesh_limits *lim)
+{
+    if (!lim || !lim->max_vertices || !lim->max_triangles) return kMaxDracoFile;
+    size_t n = lim->max_vertices + lim->max_triangles;
+    if (n > (kMaxDracoFile - (1 << 20)) / 128) return kMaxDracoFile;
+    return (size_t(1) << 20) + 128 * n;
+}
+
+/* Reads f to the end into data; fails past `bound` bytes. Returns 0, or -1
+ * with err set. */
+int slurp(FILE *f, size_t bound, std::vector<char> &data, vx_err *err)
+{
+    size_t used = 0;
+    data.resize(size_t(1) << 16);
+    for (;;) {
+        if (used == data.size()) {
+            /* The buffer is one byte over the bound at most: enough to tell. */
+            if (used > bound)
+                return vx_err_set(err, VX_ETOOBIG, "mesh_too_big",
+                                  "Draco file larger than %zu bytes (the limit)", bound);
+            data.resize(std::min(data.size() * 2, bound + 1));
+        }
+        size_t got = std::fread(data.data() + used, 1, data.size() - used, f);
+        used += got;
+        if (got == 0) {
+            if (std::ferror(f))
+                return vx_err_set(err, VX_EIO, "mesh_io", "read error: %s", std::strerror(errno));
+            break;
+        }
+    }
+    if (used > bound)
+        return vx_err_set(err, VX_ETOOBIG, "mesh_too_big",
+                          "Draco file is %zu bytes, more than %zu (the limit)", used, bound);
+    data.resize(used);
+    return 0;
+}
+
+vx_mesh *decode(const std::vector<char> &data, const vx_mesh_limits *lim, vx_err *err)
+{
+    draco::DecoderBuffer buf;
+    buf.Init(data.data(), data.size());
+    /* Works on a copy of the buffer: the position stays at the start. */
+    auto type = draco::Decoder::GetEncodedGeometryType(&buf);
+    if (!type.ok()) {
+        vx_err_set(err, VX_EINVAL, "draco_corrupt", "not a valid Draco file: %s",
+                   type.status().error_msg());
+        return nullptr;
+    }
+    if (type.value() == draco::POINT_CLOUD) {
+        vx_err_set(err, VX_EUNPROC, "draco_point_cloud",
+                   "the Draco file holds a point cloud, not a mesh");
+        return nullptr;
+    }
+    if (type.value() != draco::TRIANGULAR_MESH) {
+        vx_err_set(err, VX_EINVAL, "draco_corrupt", "unknown Draco geometry type %d",
+                   int(type.value()));
+        return nullptr;
+    }
+    draco::Decoder dec;
+    auto res = dec.DecodeMeshFromBuffer(&buf);
+    if (!res.ok()) {
+        vx_err_set(err, VX_EINVAL, "draco_corrupt", "corrupt or truncated Draco mesh: %s",
+                   res.status().error_msg());
+        return nullptr;
+    }
+    const draco::Mesh &dm = *res.value();
+    size_t np = dm.num_points(), nf = dm.num_faces();
+    if (nf == 0) {
+        vx_err_set(err, VX_EUNPROC, "draco_no_faces", "the Draco mesh has no faces");
+        return nullptr;
+    }
+    const draco::PointAttribute *pa = dm.GetNamedAttribute(draco::GeometryAttribute::POSITION);
+    if (!pa || pa->num_components() < 3) {
+        vx_err_set(err, VX_EUNPROC, "draco_no_positions",
+                   "the Draco mesh has no three-component POSITION attribute");
+        return nullptr;
+    }
+    if (lim && lim->max_vertices && np > lim->max_vertices) {
+        vx_err_set(err, VX_ETOOBIG, "mesh_too_big", "%zu vertices, more than %zu (the limit)", np,
+                   lim->max_vertices);
+        return nullptr;
+    }
+    if (lim && lim->max_triangles && nf > lim->max_triangles) {
+        vx_err_set(err, VX_ETOOBIG, "mesh_too_big", "%zu triangles, more than %zu (the limit)", nf,
+                   lim->max_triangles);
+        return nullptr;
+    }
+    if (nf > UINT32_MAX / 3) {
+        vx_err_set(err, VX_ETOOBIG, "mesh_too_big", "%zu triangles", nf);
+        return nullptr;
+    }
+
+    MeshPtr m(vx_mesh_new());
+    if (!m) throw std::bad_alloc();
+    m->pos = static_cast<double *>(std::malloc(3 * np * sizeof(double) + 1));
+    m->face_idx = static_cast<uint32_t *>(std::malloc(3 * nf * sizeof(uint32_t)));
+    if (!m->pos || !m->face_idx) throw std::bad_alloc();
+    for (size_t i = 0; i < np; i++) {
+        draco::AttributeValueIndex avi = pa->mapped_index(draco::PointIndex(uint32_t(i)));
+        double *v = m->pos + 3 * i;
+        /* The decoder validated the mapping; checked again because a bad
+         * index here would read out of bounds, not just give a wrong mesh. */
+        if (avi.value() >= pa->size() || !pa->ConvertValue<double>(avi, 3, v)) {
+            vx_err_set(err, VX_EINVAL, "draco_corrupt", "vertex %zu has no position", i);
+            return nullptr;
+        }
+        if (!std::isfinite(v[0]) || !std::isfinite(v[1]) || !std::isfinite(v[2])) {
+            vx_err_set(err, VX_EINVAL, "draco_nan", "vertex %zu has a NaN or infinite coordinate",
+                       i);
+            return nullptr;
+        }
+    }
+    for (size_t f = 0; f < nf; f++) {
+        const draco::Mesh::Face &face = dm.face(draco::FaceIndex(uint32_t(f)));
+        for (int k = 0; k < 3; k++) {
+            uint32_t p = face[k].value();
+            if (p >= np) {
+                vx_err_set(err, VX_EINVAL, "draco_corrupt", "face %zu uses point %u of %zu", f, p,
+                           np);
+                return nullptr;
+            }
+            m->face_idx[3 * f + k] = p;
+        }
+    }
+    m->nverts = np;
+    m->nfaces = nf;
+    if (vx_mesh_analyze(m.get(), err)) return nullptr;
+    return m.release();
+}
+
+vx_mesh *read_file(FILE *f, const vx_mesh_limits *lim, vx_err *err)
+{
+    try {
+        std::vector<char> data;
+        if (slurp(f, file_bound(lim), data, err)) return nullptr;
+        return decode(data, lim, err);
+    } catch (const std::bad_alloc &) {
+        vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory to decode the Draco mesh");
+    } catch (...) {
+        vx_err_set(err, VX_EINTERNAL, "draco_internal", "libdraco failed unexpectedly");
+    }
+    return nullptr;
+}
+
+/* Adds a float attribute with one value per point (identity mapping). */
+void add_float3(draco::Mesh &dm, draco::GeometryAttribute::Type type, size_t n, const double *d,
+                const float *f)
+{
+    draco::GeometryAttribute ga;
+    ga.Init(type, nullptr, 3, draco::DT_FLOAT32, false, sizeof(float) * 3, 0);
+    int id = dm.AddAttribute(ga, true, uint32_t(n));
+    draco::PointAttribute *att = dm.attribute(id);
+    for (size_t i = 0; i < n; i++) {
+        float v[3];
+        for (int a = 0; a < 3; a++)
+            v[a] = d ? float(d[3 * i + a]) : f[3 * i + a];
+        att->SetAttributeValue(draco::AttributeValueIndex(uint32_t(i)), v);
+    }
+}
+
+int write_file(const char *path, const char *data, size_t size, vx_err *err)
+{
+    FILE *f = std::fopen(path, "wb");
+    if (!f)
+        return vx_err_set(err, VX_EIO, "mesh_io", "cannot create %s: %s", path,
+                          std::strerror(errno));
+    struct stat st;
+    /* Only a regular file is removed after a failure, never a device. */
+    bool regular = fstat(fileno(f), &st) == 0 && S_ISREG(st.st_mode);
+    errno = 0;
+    bool ok = std::fwrite(data, 1, size, f) == size;
+    int e = errno;
+    if (std::fclose(f) && ok) {
+        ok = false;
+        e = errno;
+    }
+    if (ok) return 0;
+    if (regular) std::remove(path);
+    VX_ERROR("mesh.write_failed", "errno=%d", e);
+    return vx_err_set(err, VX_EIO, "mesh_io", "cannot write %s: %s", path,
+                      std::strerror(e ? e : EIO));
+}
+
+int write_path(const vx_mesh *m, const vx_mesh_write_opts *o, const char *path, vx_err *err)
+{
+    int bits = o && o->draco_quantization_bits ? o->draco_quantization_bits : 16;
+    if (bits < 1 || bits > 30)
+        return vx_err_set(err, VX_EUNPROC, "invalid_params",
+                          "Draco quantisation must be 1 to 30 bits, got %d", bits);
+    /* The triangulated view; a mesh of triangles not yet analysed has it
+     * in face_idx already. */
+    const uint32_t *tri = m->tri ? m->tri : m->face_start ? nullptr : m->face_idx;
+    size_t ntris = m->tri ? m->ntris : m->nfaces;
+    if (!tri && m->nfaces)
+        return vx_err_set(err, VX_EINTERNAL, "mesh_not_analyzed",
+                          "the mesh has no triangulated view (vx_mesh_analyze)");
+
+    draco::Mesh dm;
+    dm.set_num_points(uint32_t(m->nverts));
+    add_float3(dm, draco::GeometryAttribute::POSITION, m->nverts, m->pos, nullptr);
+    if (o && o->normals)
+        add_float3(dm, draco::GeometryAttribute::NORMAL, m->nverts, nullptr, o->normals);
+    dm.SetNumFaces(ntris);
+    for (size_t t = 0; t < ntris; t++) {
+        draco::Mesh::Face face;
+        for (int k = 0; k < 3; k++)
+            face[k] = draco::PointIndex(tri[3 * t + k]);
+        dm.SetFace(draco::FaceIndex(uint32_t(t)), face);
+    }
+
+    draco::Encoder enc;
+    enc.SetAttributeQuantization(draco::GeometryAttribute::POSITION, bits);
+    /* Draco's own default for normals: well under a degree of error. */
+    enc.SetAttributeQuantization(draco::GeometryAttribute::NORMAL, 10);
+    draco::EncoderBuffer out;
+    draco::Status st = enc.EncodeMeshToBuffer(dm, &out);
+    if (!st.ok())
+        return vx_err_set(err, VX_EIO, "draco_encode", "Draco encoding failed: %s", st.error_msg());
+    return write_file(path, out.data(), out.size(), err);
+}
+
+} // namespace
+
+extern "C" vx_mesh *vx_draco_read_file(FILE *f, const vx_mesh_limits *lim, vx_err *err)
+{
+    return read_file(f, lim, err);
+}
+
+extern "C" vx_mesh *vx_draco_read_path(const char *path, const vx_mesh_limits *lim, vx_err *err)
+{
+    FILE *f = std::fopen(path, "rb");
+    if (!f) {
+        vx_err_set(err, VX_EIO, "mesh_io", "cannot open %s: %s", path, std::strerror(errno));
+        return nullptr;
+    }
+    vx_mesh *m = read_file(f, lim, err);
+    std::fclose(f);
+    return m;
+}
+
+extern "C" int vx_draco_write_path(const vx_mesh *m, const vx_mesh_write_opts *o, const char *path,
+                                   vx_err *err)
+{
+    try {
+        return write_path(m, o, path, err);
+    } catch (const std::bad_alloc &) {
+        return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory to encode the Draco mesh");
+    } catch (...) {
+        return vx_err_set(err, VX_EIO, "draco_encode", "libdraco failed unexpectedly");
+    }
+}
