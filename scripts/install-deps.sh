@@ -1,7 +1,6 @@
 #!/usr/bin/env bash
 # Installs every build, test and benchmark dependency of voxeld from Debian 12
 # packages. Used by the README and by .ci/run; safe to run again.
-#   --container   also install podman/buildah/debootstrap for the image test
 set -euo pipefail
 
 pkgs=(
@@ -18,10 +17,9 @@ pkgs=(
   libfftw3-dev libpng-dev libcmocka-dev libsystemd-dev systemd nettle-dev
   # integration tests and benchmarks
   curl jq procps psmisc python3 python3-yaml python3-jsonschema
+  # the container image test (tests/deploy): podman builds the Dockerfile
+  podman buildah debootstrap
 )
-if [[ "${1:-}" == "--container" ]]; then
-  pkgs+=(podman buildah debootstrap)
-fi
 
 SUDO=""
 if [[ $(id -u) -ne 0 ]]; then SUDO="sudo"; fi
