@@ -823,7 +823,10 @@ static enum MHD_Result on_request(void *cls, struct MHD_Connection *c, const cha
         r->route = route_of(url, r->id, sizeof r->id, r->name, sizeof r->name);
         int rc = first_call(h, c, r);
         if (rc >= 0) return rc;
-        if (r->body != BODY_NONE) return MHD_YES; /* the body follows */
+        /* Answer on the next call even without a body: a response queued
+         * in the first call makes libmicrohttpd 0.9.75 close the
+         * connection (it cannot know yet that no body follows). */
+        return MHD_YES;
     } else if (r->answered) {
         *data_size = 0; /* an early answer was queued: drop what still arrives */
         return MHD_YES;

@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Installs every build, test and benchmark dependency of voxeld from Debian 12
 # packages. Used by the README and by .ci/run; safe to run again.
+#   --bench   also what bench/ compares against (wrk, nginx as the HTTP peer)
 set -euo pipefail
 
 pkgs=(
@@ -20,6 +21,9 @@ pkgs=(
   # the container image test (tests/deploy): podman builds the Dockerfile
   podman buildah debootstrap
 )
+if [[ "${1:-}" == "--bench" ]]; then
+  pkgs+=(wrk nginx-light)
+fi
 
 SUDO=""
 if [[ $(id -u) -ne 0 ]]; then SUDO="sudo"; fi
