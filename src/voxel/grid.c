@@ -1,0 +1,77 @@
+/* Grids and bit grids (voxel.h). */
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "voxel/voxel.h"
+
+uint64_t vx_bitgrid_bytes(const int dims[3], int supersample)
+{
+    uint64_t wx = ((uint64_t)dims[0] + 31) / 32;
+    uint64_t rows = (uint64_t)dims[1] * (uint64_t)dims[2];
+    uint64_t b = wx * rows * 4;
+    if (supersample == 2) b += (uint64_t)dims[0] * rows;
+    return b;
+}
+
+int vx_bitgrid_alloc(vx_bitgrid *g, const vx_grid *grid, int with_counts, vx_err *err)
+{
+    memset(g, 0, sizeof *g);
+    g->grid = *grid;
+    g->wx = ((size_t)grid->dims[0] + 31) / 32;
+    size_t rows = (size_t)grid->dims[1] * (size_t)grid->dims[2];
+    g->bits = calloc(g->wx * rows + 1, sizeof *g->bits);
+    if (with_counts) g->counts = calloc((size_t)grid->dims[0] * rows + 1, 1);
+    if (!g->bits || (with_counts && !g->counts)) {
+        vx_bitgrid_free(g);
+        return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for a %dx%dx%d grid",
+                          grid->dims[0], grid->dims[1], grid->dims[2]);
+    }
+    return 0;
+}
+
+void vx_bitgrid_free(vx_bitgrid *g)
+{
+    if (!g) return;
+    free(g->bits);
+    free(g->counts);
+    g->bits = NULL;
+    g->counts = NULL;
+}
+
+uint64_t vx_bitgrid_count(const vx_bitgrid *g)
+{
+    size_t n = g->wx * (size_t)g->grid.dims[1] * (size_t)g->grid.dims[2];
+    uint64_t c = 0;
+    for (size_t i = 0; i < n; i++) c += (uint64_t)__builtin_popcount(g->bits[i]);
+    return c;
+}
+
+int vx_grid_from_voxel_size(const vx_mesh *m, double h, int padding, vx_grid *out, vx_err *err)
+{
+    if (!(h > 0) || !isfinite(h))
+        return vx_err_set(err, VX_EUNPROC, "invalid_params", "voxel_size must be a positive number");
+    if (padding < 0) return vx_err_set(err, VX_EUNPROC, "invalid_params", "padding must be >= 0");
+    for (int a = 0; a < 3; a++) {
+        double ext = m->bbox_max[a] - m->bbox_min[a];
+        double n = ceil(ext / h);
+        if (n < 1) n = 1;
+        if (n + 2.0 * padding > 1 << 20)
+            return vx_err_set(err, VX_EUNPROC, "invalid_params",
+                              "voxel_size %g gives %.0f cells along an axis", h, n);
+        out->dims[a] = (int)n + 2 * padding;
+        /* centre the grid on the bbox: the leftover of ceil splits evenly */
+        out->origin[a] = m->bbox_min[a] - (n * h - ext) / 2 - padding * h;
+    }
+    out->h = h;
+    return 0;
+}
+
+int vx_grid_from_resolution(const vx_mesh *m, int resolution, int padding, vx_grid *out, vx_err *err)
+{
+    if (resolution < 1) return vx_err_set(err, VX_EUNPROC, "invalid_params", "resolution must be >= 1");
+    double ext = 0;
+    for (int a = 0; a < 3; a++) ext = fmax(ext, m->bbox_max[a] - m->bbox_min[a]);
+    if (!(ext > 0)) return vx_err_set(err, VX_EUNPROC, "degenerate_mesh", "the mesh has an empty bbox");
+    return vx_grid_from_voxel_size(m, ext / resolution, padding, out, err);
+}

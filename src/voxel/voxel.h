@@ -1,0 +1,94 @@
+/* Solid voxelization (issue #3): a mesh -> a bit grid, on the GL thread.
+ *
+ * Grid convention: voxel (i,j,k) covers origin + [i,i+1) x [j,j+1) x [k,k+1)
+ * times h and is inside when its centre origin + (i+0.5, j+0.5, k+0.5) h is.
+ * The result is bit-packed with x fastest: bit (i,j,k) is bit i % 32 (least
+ * significant first) of word (k * ny + j) * wx + i / 32, wx = ceil(nx / 32).
+ * That is also the layout of the `raw1` output, row padding aside.
+ *
+ * Methods: `peel` (seed 000, depth peeling along x, entry/exit pairing on
+ * the GPU), `slice` (seed 003, a near plane stepped through the slices),
+ * `auto` (the fastest correct one for the request). */
+#ifndef VX_VOXEL_H
+#define VX_VOXEL_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#include "gl/gl.h"
+#include "mesh/mesh.h"
+#include "util/err.h"
+
+typedef struct vx_grid {
+    double origin[3];
+    double h; /* voxel edge */
+    int dims[3];
+} vx_grid;
+
+typedef enum vx_method { VX_METHOD_AUTO = 0, VX_METHOD_PEEL, VX_METHOD_SLICE } vx_method;
+typedef enum vx_inside {
+    VX_INSIDE_NONZERO = 0, /* signed crossings: front face +1, back face -1; union of parts */
+    VX_INSIDE_PARITY,      /* entry/exit pairing as in the seeds */
+    VX_INSIDE_ROBUST,      /* for meshes with holes: majority of parity along x, y and z */
+} vx_inside;
+typedef enum vx_fill { VX_FILL_SOLID = 0, VX_FILL_SURFACE } vx_fill;
+
+typedef struct vx_voxelize_desc {
+    vx_grid grid;
+    vx_method method;
+    vx_inside inside;
+    vx_fill fill;
+    int supersample; /* 1 (default) or 2: 2x2 pixels x 2 planes per voxel (seed 003) */
+    int threshold;   /* with supersample 2: samples inside (1..8) to set a voxel; default 4 */
+    int max_layers;  /* peel: depth layers before giving up (0 = 256) */
+    uint64_t max_memory; /* bytes of GPU + CPU memory this job may use (0 = no limit) */
+    /* Called between passes with progress 0..1; nonzero return stops the job
+     * (err filled by the callee). May be NULL. */
+    int (*progress)(void *ud, double fraction, vx_err *err);
+    void *ud;
+} vx_voxelize_desc;
+
+typedef struct vx_bitgrid {
+    vx_grid grid;
+    size_t wx;       /* 32-bit words per x row */
+    uint32_t *bits;  /* wx * ny * nz words */
+    uint8_t *counts; /* supersample 2: samples inside per voxel (0..8), x fastest; else NULL */
+} vx_bitgrid;
+
+typedef struct vx_voxelize_stats {
+    const char *method;     /* "peel" or "slice" as run */
+    uint64_t voxels_inside;
+    int layers;             /* peel: depth layers peeled (max over axes for robust) */
+    int slices;             /* slice: slices drawn */
+    int chunks;             /* slabs the grid was split into to fit GPU limits */
+    double upload_ms;       /* CPU: normalise in double + upload */
+    double gpu_peel_ms, gpu_fill_ms, gpu_slice_ms; /* GPU timer per stage */
+    double readback_ms;
+} vx_voxelize_stats;
+
+/* Bytes a grid of these dims needs on the CPU (bits + counts). */
+uint64_t vx_bitgrid_bytes(const int dims[3], int supersample);
+int vx_bitgrid_alloc(vx_bitgrid *g, const vx_grid *grid, int with_counts, vx_err *err);
+void vx_bitgrid_free(vx_bitgrid *g);
+static inline int vx_bitgrid_get(const vx_bitgrid *g, int i, int j, int k)
+{
+    size_t w = ((size_t)k * (size_t)g->grid.dims[1] + (size_t)j) * g->wx + (size_t)(i >> 5);
+    return (int)((g->bits[w] >> (i & 31)) & 1u);
+}
+uint64_t vx_bitgrid_count(const vx_bitgrid *g);
+
+/* Grid covering the mesh bbox: `resolution` cells along the longest axis,
+ * the others proportional (at least 1), plus `padding` voxels each side. */
+int vx_grid_from_resolution(const vx_mesh *m, int resolution, int padding, vx_grid *out, vx_err *err);
+/* Grid of voxel edge h covering the bbox plus padding. */
+int vx_grid_from_voxel_size(const vx_mesh *m, double h, int padding, vx_grid *out, vx_err *err);
+
+/* Voxelizes m into out (allocated here; free with vx_bitgrid_free). GL thread. */
+int vx_voxelize(vx_gl *gl, const vx_mesh *m, const vx_voxelize_desc *d, vx_bitgrid *out,
+                vx_voxelize_stats *st, vx_err *err);
+int vx_voxelize_peel(vx_gl *gl, const vx_mesh *m, const vx_voxelize_desc *d, vx_bitgrid *out,
+                     vx_voxelize_stats *st, vx_err *err);
+int vx_voxelize_slice(vx_gl *gl, const vx_mesh *m, const vx_voxelize_desc *d, vx_bitgrid *out,
+                      vx_voxelize_stats *st, vx_err *err);
+
+#endif
