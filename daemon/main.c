@@ -130,7 +130,10 @@ int main(int argc, char **argv)
             break;
         }
         if (sig == SIGHUP) VX_INFO("voxeld.signal", "signal=HUP action=none");
-        if (sig < 0 && errno == EAGAIN) vx_store_results_evict(store); /* age budget */
+        if (sig < 0 && errno == EAGAIN) { /* once a minute */
+            vx_store_results_evict(store); /* the age budget */
+            vx_jobs_maintain(jobs, 16L << 20);
+        }
     }
 
     sd_notify(0, "STOPPING=1");

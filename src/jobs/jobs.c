@@ -248,6 +248,22 @@ static void notify(vx_jobs *j, const char *jid, int terminal)
     if (j->desc.hooks.changed) j->desc.hooks.changed(j->desc.hooks.ud, jid, terminal);
 }
 
+/* Rewrites the journal as one snapshot per job. Caller holds the lock (or
+ * runs before any thread starts). */
+static int compact_locked(vx_jobs *j, vx_err *err)
+{
+    cJSON **recs = calloc(j->njobs + 1, sizeof *recs);
+    if (!recs) return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory");
+    for (size_t i = 0; i < j->njobs; i++) {
+        recs[i] = cJSON_CreateObject();
+        cJSON_AddItemToObject(recs[i], "job", job_json(j->jobs[i], 0));
+    }
+    int rc = vx_journal_compact(j->journal, recs, j->njobs, err);
+    for (size_t i = 0; i < j->njobs; i++) cJSON_Delete(recs[i]);
+    free(recs);
+    return rc;
+}
+
 /* ---- replay --------------------------------------------------------- */
 
 static void replay_one(const cJSON *rec, void *ud)
@@ -379,15 +395,7 @@ vx_jobs *vx_jobs_open(const vx_jobs_desc *desc, vx_err *err)
     size_t nd;
     trim_history_locked(j, dropped, &nd, 256);
     for (size_t i = 0; i < nd; i++) vx_store_result_remove(desc->store, dropped[i]);
-    cJSON **recs = calloc(j->njobs + 1, sizeof *recs);
-    for (size_t i = 0; recs && i < j->njobs; i++) {
-        recs[i] = cJSON_CreateObject();
-        cJSON_AddItemToObject(recs[i], "job", job_json(j->jobs[i], 0));
-    }
-    int rc = recs ? vx_journal_compact(j->journal, recs, j->njobs, err) : -1;
-    for (size_t i = 0; recs && i < j->njobs; i++) cJSON_Delete(recs[i]);
-    free(recs);
-    if (rc) {
+    if (compact_locked(j, err)) {
         vx_jobs_free(j);
         return NULL;
     }
@@ -718,17 +726,21 @@ void vx_jobs_stop(vx_jobs *j)
     j->workers = NULL;
     j->started = 0;
     pthread_mutex_lock(&j->lock);
-    cJSON **recs = calloc(j->njobs + 1, sizeof *recs);
-    for (size_t i = 0; recs && i < j->njobs; i++) {
-        recs[i] = cJSON_CreateObject();
-        cJSON_AddItemToObject(recs[i], "job", job_json(j->jobs[i], 0));
-    }
     vx_err err;
-    if (recs) vx_journal_compact(j->journal, recs, j->njobs, &err);
-    for (size_t i = 0; recs && i < j->njobs; i++) cJSON_Delete(recs[i]);
-    free(recs);
+    compact_locked(j, &err);
     pthread_mutex_unlock(&j->lock);
     VX_INFO("jobs.stopped", "jobs=%zu queued=%zu", j->njobs, vx_queue_depth(j->queue));
+}
+
+void vx_jobs_maintain(vx_jobs *j, long max_journal_bytes)
+{
+    if (vx_journal_size(j->journal) <= max_journal_bytes) return;
+    vx_err err;
+    pthread_mutex_lock(&j->lock);
+    int rc = compact_locked(j, &err);
+    pthread_mutex_unlock(&j->lock);
+    if (rc) VX_ERROR("journal.compact_failed", "code=%s", err.code);
+    else VX_INFO("journal.compacted", "bytes=%ld", vx_journal_size(j->journal));
 }
 
 void vx_jobs_free(vx_jobs *j)
@@ -819,6 +831,7 @@ cJSON *vx_jobs_get(vx_jobs *j, const char *jid, int *terminal, vx_err *err)
 cJSON *vx_jobs_cancel(vx_jobs *j, const char *jid, int *was_running, vx_err *err)
 {
     *was_running = 0;
+    char kind[64] = "";
     pthread_mutex_lock(&j->lock);
     job *jb = vx_jobs_valid_id(jid) ? find_job(j, jid) : NULL;
     cJSON *out = NULL;
@@ -828,6 +841,7 @@ cJSON *vx_jobs_cancel(vx_jobs *j, const char *jid, int *was_running, vx_err *err
     } else if (is_terminal(jb->state)) {
         vx_err_set(err, VX_ECONFLICT, "job_finished", "job %s already %s", jid, state_names[jb->state]);
     } else if (jb->state == ST_QUEUED) {
+        snprintf(kind, sizeof kind, "%s", jb->kind->name);
         vx_queue_remove(j->queue, jb);
         jb->state = ST_CANCELED;
         jb->finished = vx_now();
@@ -842,7 +856,7 @@ cJSON *vx_jobs_cancel(vx_jobs *j, const char *jid, int *was_running, vx_err *err
     pthread_mutex_unlock(&j->lock);
     if (changed) {
         VX_INFO("job.finished", "job=%s state=canceled run_ms=0", jid);
-        if (j->desc.hooks.finished) j->desc.hooks.finished(j->desc.hooks.ud, jid, jb->kind->name, "canceled", -1);
+        if (j->desc.hooks.finished) j->desc.hooks.finished(j->desc.hooks.ud, jid, kind, "canceled", -1);
         notify(j, jid, 1);
     }
     return out;

@@ -46,6 +46,9 @@ int vx_jobs_start(vx_jobs *j, vx_err *err);
  * check is queued again; joins the threads and compacts the journal. */
 void vx_jobs_stop(vx_jobs *j);
 void vx_jobs_free(vx_jobs *j);
+/* Housekeeping, called periodically: compacts the journal once it is
+ * larger than max_journal_bytes. */
+void vx_jobs_maintain(vx_jobs *j, long max_journal_bytes);
 
 /* Validates and queues a job; returns its API JSON (owned). Errors:
  * VX_ENOTFOUND mesh_not_found, VX_EUNPROC unknown_kind / invalid_params,
