@@ -512,21 +512,15 @@ static int h_upload_done(vx_http *h, struct MHD_Connection *c, req *r)
 {
     vx_err err;
     vx_err_clear(&err);
-    char max[32];
-    snprintf(max, sizeof max, "%llu", (unsigned long long)h->d.cfg->max_upload_bytes);
     if (r->too_big) {
         char msg[128];
-        snprintf(msg, sizeof msg, "the body is larger than the %s-byte upload limit", max);
+        snprintf(msg, sizeof msg, "the body is larger than the %llu-byte upload limit",
+                 (unsigned long long)h->d.cfg->max_upload_bytes);
         return send_error(c, r, 413, "too_large", msg);
     }
     if (vx_upload_bytes(r->up) == 0) return send_error(c, r, 422, "obj_no_faces", "the body is empty: no faces");
     char id[65];
     if (vx_upload_finish(r->up, id, &err)) return send_err(c, r, &err);
-    cJSON *meta = vx_store_mesh_meta(h->d.store, id, NULL);
-    if (meta) {
-        VX_INFO("mesh.uploaded", "mesh=%s new=0", id);
-        return send_json(c, r, 200, meta, NULL, NULL);
-    }
     size_t nhead;
     const unsigned char *head = vx_upload_head(r->up, &nhead);
     vx_mesh_format fmt = vx_mesh_sniff(head, nhead);
@@ -539,6 +533,11 @@ static int h_upload_done(vx_http *h, struct MHD_Connection *c, req *r)
     if (r->declared == MEDIA_SNIFF && fmt == 0)
         return send_error(c, r, 415, "unsupported_media_type",
                           "the body is neither an OBJ (text) nor a Draco file");
+    cJSON *meta = vx_store_mesh_meta(h->d.store, id, NULL);
+    if (meta) {
+        VX_INFO("mesh.uploaded", "mesh=%s new=0", id);
+        return send_json(c, r, 200, meta, NULL, NULL);
+    }
     if (r->declared == MEDIA_OBJ) fmt = VX_MESH_OBJ;
     vx_mesh_limits lim = {.max_triangles = h->d.cfg->max_triangles};
     double t = vx_mono();
@@ -956,12 +955,13 @@ vx_http *vx_http_start(const vx_http_desc *desc, vx_err *err)
     unsigned flags = MHD_USE_INTERNAL_POLLING_THREAD | MHD_USE_EPOLL | MHD_ALLOW_SUSPEND_RESUME |
                      MHD_USE_ERROR_LOG | (v6 ? MHD_USE_IPv6 : 0);
     h->mhd = MHD_start_daemon(
-        flags, 0, NULL, NULL, on_request, h, MHD_OPTION_SOCK_ADDR, (struct sockaddr *)&ss,
+        flags, 0, NULL, NULL, on_request, h, MHD_OPTION_EXTERNAL_LOGGER, mhd_log, NULL,
+        MHD_OPTION_SOCK_ADDR, (struct sockaddr *)&ss,
         MHD_OPTION_THREAD_POOL_SIZE, (unsigned)cfg->http_threads, MHD_OPTION_CONNECTION_TIMEOUT,
         (unsigned)ceil(cfg->connection_timeout_s), MHD_OPTION_CONNECTION_LIMIT,
         (unsigned)cfg->max_connections, MHD_OPTION_PER_IP_CONNECTION_LIMIT,
         (unsigned)cfg->max_connections_per_ip, MHD_OPTION_CONNECTION_MEMORY_LIMIT, (size_t)(256 * 1024),
-        MHD_OPTION_NOTIFY_COMPLETED, on_completed, h, MHD_OPTION_EXTERNAL_LOGGER, mhd_log, NULL,
+        MHD_OPTION_NOTIFY_COMPLETED, on_completed, h,
         MHD_OPTION_LISTENING_ADDRESS_REUSE, 1u, MHD_OPTION_END);
     if (!h->mhd) {
         vx_err_set(err, VX_EIO, "listen_failed", "cannot listen on %s: %s", cfg->listen, strerror(errno));

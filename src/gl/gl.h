@@ -25,7 +25,7 @@ typedef struct vx_gl_desc {
 
 typedef struct vx_gl_info {
     char vendor[128], renderer[256], version[128], glsl[64];
-    char device_kind[16]; /* "nvidia", "hardware", "software", "surfaceless" */
+    char device_kind[16]; /* "nvidia", "hardware", "other", "software", "surfaceless" */
     int device_index;     /* EGL device index, -1 for surfaceless */
     char egl_vendor[64], egl_version[64];
     int robust;           /* the context has reset notification */
@@ -35,8 +35,9 @@ typedef struct vx_gl_info {
 
 typedef struct vx_gl_device {
     int index;
-    char kind[16];       /* as in vx_gl_info */
-    char name[128];      /* DRM node or extension summary */
+    char kind[16];       /* as in vx_gl_info; "other" = an EGL device that is neither
+                            NVIDIA, nor has a DRM node, nor is Mesa's software one */
+    char name[128];      /* DRM node ("cuda=N node" for NVIDIA) or extension summary */
 } vx_gl_device;
 
 /* Lists EGL devices in the order automatic choice tries them; returns count
@@ -47,7 +48,8 @@ int vx_gl_list_devices(vx_gl_device *out, int max, vx_err *err);
  * becomes the GL thread. Fails (VX_EGPU, code gl_unsupported) with a clear
  * message when GL 4.5 core with compute shaders is not available. Owned. */
 vx_gl *vx_gl_new(const vx_gl_desc *desc, vx_err *err);
-/* Destroys the context; NULL is a no-op. */
+/* Destroys the context; NULL is a no-op. The EGL display stays initialised
+ * (it is shared per device and process; a later vx_gl_new reuses it). */
 void vx_gl_free(vx_gl *gl);
 const vx_gl_info *vx_gl_get_info(const vx_gl *gl);
 
@@ -70,12 +72,16 @@ GLuint vx_gl_compute_program(vx_gl *gl, const char *cs, vx_err *err);
 /* The embedded text of shaders/NAME, or NULL. Any thread. */
 const char *vx_shader_source(const char *name);
 
-/* GPU time of a region: begin/end a GL_TIME_ELAPSED query. */
+/* GPU time of a region: begin/end a GL_TIME_ELAPSED query. Not nestable
+ * (GL allows one active GL_TIME_ELAPSED query). GL thread. */
 typedef struct vx_gl_timer {
     GLuint q;
+    double cpu_start_ms; /* wall clock at begin: an upper bound for the GPU time */
 } vx_gl_timer;
 void vx_gl_timer_begin(vx_gl_timer *t);
-/* Ends the query and waits for its result, in milliseconds. */
+/* Ends the query and waits for its result, in milliseconds. A result longer
+ * than the wall-clock time since begin is a driver bug (llvmpipe can report
+ * the time since boot): the wall-clock time is returned instead. */
 double vx_gl_timer_end_ms(vx_gl_timer *t);
 
 #endif

@@ -27,38 +27,64 @@ const uint32_t *vx_mesh_face(const vx_mesh *m, size_t f)
     return m->face_idx + (m->face_start ? m->face_start[f] : 3 * f);
 }
 
-static int cmp_u64(const void *a, const void *b)
+static int cmp_u32(const void *a, const void *b)
 {
-    uint64_t x = *(const uint64_t *)a, y = *(const uint64_t *)b;
+    uint32_t x = *(const uint32_t *)a, y = *(const uint32_t *)b;
     return (x > y) - (x < y);
 }
 
-/* Sorts 64-bit keys: LSD radix sort on 16-bit digits (qsort is several
- * times slower on the 10^7-edge meshes the reader accepts). */
-static void sort_u64(uint64_t *a, size_t n)
+/* Counts boundary (used once) and non-manifold (used 3+ times) undirected
+ * edges. Edges are bucketed by their lower vertex (CSR: 4 bytes per edge
+ * plus 4 per vertex), then each small bucket is sorted: a quarter of the
+ * memory of sorting 64-bit edge keys, which matters at 10^7 triangles. */
+static int count_edges(vx_mesh *m, size_t nedges, vx_err *err)
 {
-    if (n < 4096) {
-        qsort(a, n, sizeof *a, cmp_u64);
-        return;
+    m->boundary_edges = m->nonmanifold_edges = 0;
+    if (nedges >= UINT32_MAX)
+        return vx_err_set(err, VX_ETOOBIG, "mesh_too_big", "%zu edges is too many", nedges);
+    uint32_t *start = calloc(m->nverts + 1, sizeof *start);
+    uint32_t *nbr = malloc(nedges * sizeof *nbr + 1);
+    if (!start || !nbr) {
+        free(start);
+        free(nbr);
+        return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for %zu edges", nedges);
     }
-    uint64_t *tmp = malloc(n * sizeof *tmp);
-    if (!tmp) {
-        qsort(a, n, sizeof *a, cmp_u64);
-        return;
+    for (size_t f = 0; f < m->nfaces; f++) {
+        const uint32_t *v = vx_mesh_face(m, f);
+        uint32_t n = vx_mesh_face_size(m, f);
+        for (uint32_t k = 0; k < n; k++) {
+            uint32_t a = v[k], b = v[(k + 1) % n];
+            start[a < b ? a : b]++;
+        }
     }
-    uint64_t *src = a, *dst = tmp;
-    for (int shift = 0; shift < 64; shift += 16) {
-        size_t count[65537] = {0};
-        for (size_t i = 0; i < n; i++) count[((src[i] >> shift) & 0xffff) + 1]++;
-        if (count[1] == n) continue; /* this digit is zero everywhere */
-        for (int d = 0; d < 65536; d++) count[d + 1] += count[d];
-        for (size_t i = 0; i < n; i++) dst[count[(src[i] >> shift) & 0xffff]++] = src[i];
-        uint64_t *t = src;
-        src = dst;
-        dst = t;
+    for (size_t i = 1; i <= m->nverts; i++) start[i] += start[i - 1];
+    start[m->nverts] = (uint32_t)nedges;
+    /* start[v] holds the end of v's bucket; filling backwards leaves it at
+     * the bucket's beginning. */
+    for (size_t f = 0; f < m->nfaces; f++) {
+        const uint32_t *v = vx_mesh_face(m, f);
+        uint32_t n = vx_mesh_face_size(m, f);
+        for (uint32_t k = 0; k < n; k++) {
+            uint32_t a = v[k], b = v[(k + 1) % n];
+            if (a < b) nbr[--start[a]] = b;
+            else nbr[--start[b]] = a;
+        }
     }
-    if (src != a) memcpy(a, src, n * sizeof *a);
-    free(tmp);
+    for (size_t v = 0; v < m->nverts; v++) {
+        uint32_t *e = nbr + start[v];
+        size_t n = start[v + 1] - start[v];
+        if (n > 1) qsort(e, n, sizeof *e, cmp_u32);
+        for (size_t i = 0; i < n;) {
+            size_t j = i;
+            while (j < n && e[j] == e[i]) j++;
+            if (j - i == 1) m->boundary_edges++;
+            else if (j - i > 2) m->nonmanifold_edges++;
+            i = j;
+        }
+    }
+    free(start);
+    free(nbr);
+    return 0;
 }
 
 int vx_mesh_analyze(vx_mesh *m, vx_err *err)
@@ -116,28 +142,5 @@ int vx_mesh_analyze(vx_mesh *m, vx_err *err)
         if (x == 0 && y == 0 && z == 0) m->degenerate_tris++;
     }
 
-    /* Edge use counts: sort the undirected edges of the faces (not of the
-     * fan triangles, whose inner diagonals are not mesh edges). */
-    uint64_t *keys = malloc(nedges * sizeof *keys + 1);
-    if (!keys) return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for %zu edges", nedges);
-    size_t e = 0;
-    for (size_t f = 0; f < m->nfaces; f++) {
-        const uint32_t *v = vx_mesh_face(m, f);
-        uint32_t n = vx_mesh_face_size(m, f);
-        for (uint32_t k = 0; k < n; k++) {
-            uint64_t a = v[k], b = v[(k + 1) % n];
-            keys[e++] = a < b ? (a << 32 | b) : (b << 32 | a);
-        }
-    }
-    sort_u64(keys, nedges);
-    m->boundary_edges = m->nonmanifold_edges = 0;
-    for (size_t i = 0; i < nedges;) {
-        size_t j = i;
-        while (j < nedges && keys[j] == keys[i]) j++;
-        if (j - i == 1) m->boundary_edges++;
-        else if (j - i > 2) m->nonmanifold_edges++;
-        i = j;
-    }
-    free(keys);
-    return 0;
+    return count_edges(m, nedges, err);
 }

@@ -23,7 +23,19 @@ typedef struct vx_preview_stats {
     double gpu_ms;          /* draw + resolve, GPU timer */
     double upload_ms;
     uint64_t pixels_covered;
+    int samples;            /* MSAA samples used (p->samples clamped to GL_MAX_SAMPLES) */
 } vx_preview_stats;
+
+/* Framing: the mesh is scaled so that its bounding sphere (centred on the
+ * bbox centre) has radius 1. Orthographic views show exactly that sphere
+ * across the smaller image dimension; perspective views place the camera
+ * so a sphere VX_PREVIEW_MARGIN times larger just fits. */
+#define VX_PREVIEW_MARGIN 1.05
+/* Direction towards the key light in view space (unnormalised): from the
+ * camera, slightly up and to the left. */
+#define VX_PREVIEW_LIGHT_X (-0.25)
+#define VX_PREVIEW_LIGHT_Y 0.35
+#define VX_PREVIEW_LIGHT_Z 1.0
 
 /* Renders into rgba (width*height*4 bytes, top row first). GL thread. */
 int vx_preview_render(vx_gl *gl, const vx_mesh *m, const vx_preview_params *p, uint8_t *rgba,

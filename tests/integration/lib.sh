@@ -10,6 +10,9 @@ set -uo pipefail
 
 TMP=$(mktemp -d "${TMPDIR:-/tmp}/voxeld-it.XXXXXX")
 VX_API_LOG=${VX_API_LOG:-$TMP/api.jsonl}
+# Response bodies outlive the test's temp dir: the contract check reads them.
+BODIES=${VX_API_LOG%.jsonl}.bodies/$(basename "$0" .sh)-$$
+mkdir -p "$BODIES"
 DATA=$TMP/data
 PASS=0
 FAIL=0
@@ -72,8 +75,8 @@ api() {
     local method=$1 path=$2
     shift 2
     NREQ=$((NREQ + 1))
-    BODY=$TMP/r$NREQ.body
-    HDRS=$TMP/r$NREQ.headers
+    BODY=$BODIES/r$NREQ.body
+    HDRS=$BODIES/r$NREQ.headers
     local auth=()
     if [[ -n "$TOKEN" ]]; then auth=(-H "Authorization: Bearer $TOKEN"); fi
     local out

@@ -31,7 +31,7 @@ JOB_OK = {
     "finished": "2026-11-21T22:40:01.291Z", "error": None,
     "timings": {"queue_ms": 4.1, "run_ms": 36.9, "total_ms": 41.0},
     "stats": {"triangles": 12, "width": 64, "height": 48, "pixels_covered": 900,
-              "gpu_ms": 0.4, "upload_ms": 0.1},
+              "gpu_ms": 0.4, "upload_ms": 0.1, "samples": 4, "run_ms": 3.2},
     "outputs": {"image": "/v1/jobs/%s/result/image" % JID},
 }
 MESH_OK = {

@@ -1,0 +1,364 @@
+/* The preview renderer (preview.h): one MSAA draw of the whole mesh. */
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+#include "preview/preview.h"
+#include "util/log.h"
+
+/* Every GL object one render creates, so that every exit path deletes the
+ * same set (names of 0 are ignored by glDelete*). */
+typedef struct objs {
+    GLuint vbo, ibo, vao;
+    GLuint fbo, rb_color, rb_depth;          /* single-sample: resolve target */
+    GLuint fbo_ms, rb_ms_color, rb_ms_depth; /* multisample draw target */
+} objs;
+
+static void objs_free(objs *o)
+{
+    GLuint bufs[2] = {o->vbo, o->ibo};
+    glDeleteBuffers(2, bufs);
+    glDeleteVertexArrays(1, &o->vao);
+    GLuint fbos[2] = {o->fbo, o->fbo_ms};
+    glDeleteFramebuffers(2, fbos);
+    GLuint rbs[4] = {o->rb_color, o->rb_depth, o->rb_ms_color, o->rb_ms_depth};
+    glDeleteRenderbuffers(4, rbs);
+    memset(o, 0, sizeof *o);
+}
+
+static double now_ms(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (double)ts.tv_sec * 1e3 + (double)ts.tv_nsec / 1e6;
+}
+
+static void normalize3(double v[3])
+{
+    double l = sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+    if (l > 0)
+        for (int i = 0; i < 3; i++)
+            v[i] /= l;
+}
+
+static void cross3(const double a[3], const double b[3], double out[3])
+{
+    out[0] = a[1] * b[2] - a[2] * b[1];
+    out[1] = a[2] * b[0] - a[0] * b[2];
+    out[2] = a[0] * b[1] - a[1] * b[0];
+}
+
+static double dot3(const double a[3], const double b[3])
+{
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+}
+
+/* Column-major view and projection for the orbit camera around the origin
+ * (where the normalised mesh's bbox centre is). */
+static void camera(const vx_preview_params *p, float view[16], float proj[16])
+{
+    const double deg = M_PI / 180.0;
+    double az = p->azimuth_deg * deg, el = p->elevation_deg * deg;
+    double aspect = (double)p->width / (double)p->height;
+    /* Unit vector from the centre to the eye: azimuth 0 is +Z, positive
+     * azimuth swings towards +X, elevation lifts towards +Y. */
+    double e[3] = {cos(el) * sin(az), sin(el), cos(el) * cos(az)};
+
+    double dist, near, far;
+    memset(proj, 0, 16 * sizeof *proj);
+    if (p->fov_deg > 0) {
+        double tv = tan(0.5 * p->fov_deg * deg), th = aspect * tv;
+        /* The narrower of the two half-angles decides: the sphere must fit
+         * both ways, whatever the aspect ratio. */
+        double half = atan(tv < th ? tv : th);
+        dist = VX_PREVIEW_MARGIN / sin(half);
+        near = dist - 1.1;
+        far = dist + 1.1;
+        if (near < 0.01 * dist) near = 0.01 * dist;
+        double f = 1.0 / tv;
+        proj[0] = (float)(f / aspect);
+        proj[5] = (float)f;
+        proj[10] = (float)((far + near) / (near - far));
+        proj[11] = -1.0f;
+        proj[14] = (float)(2.0 * far * near / (near - far));
+    } else {
+        /* The unit sphere fills the smaller image dimension. */
+        double hx = aspect >= 1 ? aspect : 1, hy = aspect >= 1 ? 1 : 1 / aspect;
+        dist = 3.0;
+        near = dist - 1.1;
+        far = dist + 1.1;
+        proj[0] = (float)(1.0 / hx);
+        proj[5] = (float)(1.0 / hy);
+        proj[10] = (float)(-2.0 / (far - near));
+        proj[14] = (float)(-(far + near) / (far - near));
+        proj[15] = 1.0f;
+    }
+
+    double eye[3] = {dist * e[0], dist * e[1], dist * e[2]};
+    double f[3] = {-e[0], -e[1], -e[2]}, up[3] = {0, 1, 0}, s[3], u[3];
+    cross3(f, up, s);
+    normalize3(s);
+    cross3(s, f, u);
+    memset(view, 0, 16 * sizeof *view);
+    for (int i = 0; i < 3; i++) {
+        view[4 * i + 0] = (float)s[i];
+        view[4 * i + 1] = (float)u[i];
+        view[4 * i + 2] = (float)-f[i];
+    }
+    view[12] = (float)-dot3(s, eye);
+    view[13] = (float)-dot3(u, eye);
+    view[14] = (float)dot3(f, eye);
+    view[15] = 1.0f;
+}
+
+/* Centre the bbox at the origin and scale the bounding sphere to radius 1,
+ * in double (coordinates far from the origin, like +1e6, would lose the
+ * mesh's detail if shifted after conversion), then upload as floats. */
+static int upload(vx_gl *gl, const vx_mesh *m, objs *o, vx_err *err)
+{
+    double c[3], r2 = 0;
+    for (int a = 0; a < 3; a++)
+        c[a] = 0.5 * (m->bbox_min[a] + m->bbox_max[a]);
+    for (size_t i = 0; i < m->nverts; i++) {
+        const double *v = m->pos + 3 * i;
+        double dx = v[0] - c[0], dy = v[1] - c[1], dz = v[2] - c[2];
+        double d2 = dx * dx + dy * dy + dz * dz;
+        if (d2 > r2) r2 = d2;
+    }
+    double inv = r2 > 0 ? 1.0 / sqrt(r2) : 1.0;
+
+    GLsizeiptr vbytes = (GLsizeiptr)(m->nverts * 3 * sizeof(float));
+    GLsizeiptr ibytes = (GLsizeiptr)(m->ntris * 3 * sizeof(uint32_t));
+    glCreateBuffers(1, &o->vbo);
+    glNamedBufferStorage(o->vbo, vbytes, NULL, GL_DYNAMIC_STORAGE_BIT);
+    if (vx_gl_check(gl, "preview.vertex_buffer", err)) return -1;
+    /* Converted in slices: bounded extra memory whatever the mesh size. */
+    enum { CHUNK = 65536 };
+    float *tmp = malloc(CHUNK * 3 * sizeof *tmp);
+    if (!tmp) return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for upload");
+    for (size_t i0 = 0; i0 < m->nverts; i0 += CHUNK) {
+        size_t n = m->nverts - i0 < CHUNK ? m->nverts - i0 : CHUNK;
+        for (size_t k = 0; k < n; k++)
+            for (int a = 0; a < 3; a++)
+                tmp[3 * k + a] = (float)((m->pos[3 * (i0 + k) + a] - c[a]) * inv);
+        glNamedBufferSubData(o->vbo, (GLintptr)(i0 * 3 * sizeof(float)),
+                             (GLsizeiptr)(n * 3 * sizeof(float)), tmp);
+    }
+    free(tmp);
+    if (vx_gl_check(gl, "preview.vertex_upload", err)) return -1;
+
+    glCreateBuffers(1, &o->ibo);
+    glNamedBufferStorage(o->ibo, ibytes, m->tri, 0);
+    if (vx_gl_check(gl, "preview.index_buffer", err)) return -1;
+
+    glCreateVertexArrays(1, &o->vao);
+    glVertexArrayVertexBuffer(o->vao, 0, o->vbo, 0, 3 * sizeof(float));
+    glVertexArrayAttribFormat(o->vao, 0, 3, GL_FLOAT, GL_FALSE, 0);
+    glVertexArrayAttribBinding(o->vao, 0, 0);
+    glEnableVertexArrayAttrib(o->vao, 0);
+    glVertexArrayElementBuffer(o->vao, o->ibo);
+    return vx_gl_check(gl, "preview.vertex_array", err);
+}
+
+static int targets(vx_gl *gl, int w, int h, int samples, objs *o, vx_err *err)
+{
+    glCreateFramebuffers(1, &o->fbo);
+    glCreateRenderbuffers(1, &o->rb_color);
+    glNamedRenderbufferStorage(o->rb_color, GL_RGBA8, w, h);
+    glNamedFramebufferRenderbuffer(o->fbo, GL_COLOR_ATTACHMENT0, GL_RENDERBUFFER, o->rb_color);
+    GLuint draw = o->fbo;
+    if (samples > 1) {
+        glCreateFramebuffers(1, &o->fbo_ms);
+        glCreateRenderbuffers(1, &o->rb_ms_color);
+        glCreateRenderbuffers(1, &o->rb_ms_depth);
+        glNamedRenderbufferStorageMultisample(o->rb_ms_color, samples, GL_RGBA8, w, h);
+        glNamedRenderbufferStorageMultisample(o->rb_ms_depth, samples, GL_DEPTH_COMPONENT24, w, h);
+        glNamedFramebufferRenderbuffer(o->fbo_ms, GL_COLOR_ATTACHMENT0, GL_RENDERBUFFER,
+                                       o->rb_ms_color);
+        glNamedFramebufferRenderbuffer(o->fbo_ms, GL_DEPTH_ATTACHMENT, GL_RENDERBUFFER,
+                                       o->rb_ms_depth);
+        draw = o->fbo_ms;
+    } else {
+        glCreateRenderbuffers(1, &o->rb_depth);
+        glNamedRenderbufferStorage(o->rb_depth, GL_DEPTH_COMPONENT24, w, h);
+        glNamedFramebufferRenderbuffer(o->fbo, GL_DEPTH_ATTACHMENT, GL_RENDERBUFFER, o->rb_depth);
+    }
+    if (vx_gl_check(gl, "preview.framebuffer", err)) return -1;
+    GLenum st = glCheckNamedFramebufferStatus(draw, GL_FRAMEBUFFER);
+    if (st != GL_FRAMEBUFFER_COMPLETE) {
+        VX_ERROR("preview.fbo_incomplete", "status=0x%x samples=%d", st, samples);
+        return vx_err_set(err, VX_EGPU, "gl_error",
+                          "preview framebuffer %dx%d with %d samples is incomplete (0x%x)", w, h,
+                          samples, st);
+    }
+    return 0;
+}
+
+/* Turns the resolved premultiplied coverage image into the final picture:
+ * composite over the background (which may be translucent), count covered
+ * pixels, and flip rows so the top row comes first. */
+static uint64_t finish(uint8_t *rgba, int w, int h, const float bg[4])
+{
+    uint8_t bg8[4];
+    for (int i = 0; i < 4; i++)
+        bg8[i] = (uint8_t)lrint(255.0 * bg[i]);
+    uint64_t covered = 0;
+    const size_t n = (size_t)w * (size_t)h;
+    for (size_t i = 0; i < n; i++) {
+        uint8_t *px = rgba + 4 * i;
+        if (px[3] == 0) {
+            memcpy(px, bg8, 4);
+            continue;
+        }
+        covered++;
+        if (px[3] == 255) continue; /* fully covered: already the shaded colour */
+        /* Edge pixel: px holds coverage-weighted colour, px[3] the coverage. */
+        double cov = px[3] / 255.0, ba = bg[3] * (1.0 - cov), oa = cov + ba;
+        for (int k = 0; k < 3; k++) {
+            double v = (px[k] / 255.0 + bg[k] * ba) / oa;
+            px[k] = (uint8_t)lrint(255.0 * (v > 1 ? 1 : v));
+        }
+        px[3] = (uint8_t)lrint(255.0 * oa);
+    }
+    const size_t stride = (size_t)w * 4;
+    uint8_t *tmp = malloc(stride);
+    if (tmp) {
+        for (int y = 0; y < h / 2; y++) {
+            uint8_t *a = rgba + (size_t)y * stride, *b = rgba + (size_t)(h - 1 - y) * stride;
+            memcpy(tmp, a, stride);
+            memcpy(a, b, stride);
+            memcpy(b, tmp, stride);
+        }
+        free(tmp);
+    } else {
+        /* No memory for one row: swap byte by byte instead. */
+        for (int y = 0; y < h / 2; y++) {
+            uint8_t *a = rgba + (size_t)y * stride, *b = rgba + (size_t)(h - 1 - y) * stride;
+            for (size_t k = 0; k < stride; k++) {
+                uint8_t t = a[k];
+                a[k] = b[k];
+                b[k] = t;
+            }
+        }
+    }
+    return covered;
+}
+
+int vx_preview_render(vx_gl *gl, const vx_mesh *m, const vx_preview_params *p, uint8_t *rgba,
+                      vx_preview_stats *st, vx_err *err)
+{
+    vx_preview_stats dummy;
+    if (!st) st = &dummy;
+    memset(st, 0, sizeof *st);
+    const int w = p->width, h = p->height;
+    if (w <= 0 || h <= 0)
+        return vx_err_set(err, VX_EUNPROC, "invalid_params", "preview size %dx%d is not positive",
+                          w, h);
+    GLint max_rb = 0;
+    glGetIntegerv(GL_MAX_RENDERBUFFER_SIZE, &max_rb);
+    if (w > max_rb || h > max_rb)
+        return vx_err_set(err, VX_EUNPROC, "invalid_params",
+                          "preview size %dx%d exceeds this GPU's limit of %d pixels per side", w, h,
+                          max_rb);
+    /* A bad index would make the GPU read outside the vertex buffer: a
+     * hand-built or corrupted mesh must fail here, not fault there. */
+    const size_t nidx = 3 * m->ntris;
+    for (size_t i = 0; i < nidx; i++)
+        if (m->tri[i] >= m->nverts)
+            return vx_err_set(err, VX_EINTERNAL, "mesh_invalid",
+                              "triangle %zu uses vertex %u of %zu", i / 3, m->tri[i], m->nverts);
+
+    int samples = p->samples < 1 ? 1 : p->samples;
+    long max_samples = vx_gl_get_info(gl)->max_samples;
+    if (samples > max_samples) {
+        VX_INFO("preview.samples_clamped", "asked=%d max=%ld", samples, max_samples);
+        samples = max_samples < 1 ? 1 : (int)max_samples;
+    }
+    st->samples = samples;
+
+    GLuint prog = vx_gl_program(gl, "preview.vert", "preview.frag", err);
+    if (!prog) return -1;
+    /* Errors left by earlier work must not be blamed on this render. */
+    if (glGetError() != GL_NO_ERROR) {
+        VX_WARN("preview.stale_gl_error", "where=before_render");
+        while (glGetError() != GL_NO_ERROR) {
+        }
+    }
+
+    objs o = {0};
+    int rc = -1;
+    const int draw = m->ntris > 0 && m->nverts > 0;
+    double t0 = now_ms();
+    if (draw && upload(gl, m, &o, err)) goto done;
+    glFinish(); /* so upload_ms is the upload, not just its queueing */
+    st->upload_ms = now_ms() - t0;
+    if (targets(gl, w, h, samples, &o, err)) goto done;
+
+    float view[16], proj[16];
+    camera(p, view, proj);
+    double l[3] = {VX_PREVIEW_LIGHT_X, VX_PREVIEW_LIGHT_Y, VX_PREVIEW_LIGHT_Z};
+    normalize3(l);
+    glProgramUniformMatrix4fv(prog, 0, 1, GL_FALSE, view);
+    glProgramUniformMatrix4fv(prog, 1, 1, GL_FALSE, proj);
+    glProgramUniform3f(prog, 2, p->color[0], p->color[1], p->color[2]);
+    glProgramUniform1f(prog, 3, p->ambient);
+    glProgramUniform3f(prog, 4, (float)l[0], (float)l[1], (float)l[2]);
+
+    GLuint target = samples > 1 ? o.fbo_ms : o.fbo;
+    glBindFramebuffer(GL_FRAMEBUFFER, target);
+    glViewport(0, 0, w, h);
+    /* State other code may have left behind. */
+    glDisable(GL_CULL_FACE);
+    glDisable(GL_BLEND);
+    glDisable(GL_SCISSOR_TEST);
+    glEnable(GL_MULTISAMPLE);
+    glEnable(GL_DEPTH_TEST);
+    glDepthFunc(GL_LESS);
+    glDepthMask(GL_TRUE);
+    glColorMask(GL_TRUE, GL_TRUE, GL_TRUE, GL_TRUE);
+    const float clear[4] = {0, 0, 0, 0}, one = 1.0f;
+    glClearNamedFramebufferfv(target, GL_COLOR, 0, clear);
+    glClearNamedFramebufferfv(target, GL_DEPTH, 0, &one);
+    /* Begun after the clear: llvmpipe (Mesa 22.3) loses the start of a time
+     * query begun before the first command on a newly bound framebuffer
+     * and then reports the time since boot. */
+    vx_gl_timer timer;
+    vx_gl_timer_begin(&timer);
+    if (draw) {
+        glUseProgram(prog);
+        glBindVertexArray(o.vao);
+        /* glDrawElements counts in GLsizei: split meshes beyond 2^31 indices. */
+        const size_t step = (size_t)3 << 28;
+        for (size_t first = 0; first < nidx; first += step) {
+            size_t count = nidx - first < step ? nidx - first : step;
+            glDrawElements(GL_TRIANGLES, (GLsizei)count, GL_UNSIGNED_INT,
+                           (const void *)(uintptr_t)(first * sizeof(uint32_t)));
+        }
+        glBindVertexArray(0);
+        glUseProgram(0);
+    }
+    if (samples > 1)
+        glBlitNamedFramebuffer(o.fbo_ms, o.fbo, 0, 0, w, h, 0, 0, w, h, GL_COLOR_BUFFER_BIT,
+                               GL_NEAREST);
+    st->gpu_ms = vx_gl_timer_end_ms(&timer);
+    glBindFramebuffer(GL_FRAMEBUFFER, 0);
+
+    glBindBuffer(GL_PIXEL_PACK_BUFFER, 0);
+    glPixelStorei(GL_PACK_ALIGNMENT, 1);
+    glPixelStorei(GL_PACK_ROW_LENGTH, 0);
+    glBindFramebuffer(GL_READ_FRAMEBUFFER, o.fbo);
+    glReadBuffer(GL_COLOR_ATTACHMENT0);
+    glReadPixels(0, 0, w, h, GL_RGBA, GL_UNSIGNED_BYTE, rgba);
+    glBindFramebuffer(GL_READ_FRAMEBUFFER, 0);
+    if (vx_gl_check(gl, "preview.draw", err)) goto done;
+
+    st->pixels_covered = finish(rgba, w, h, p->background);
+    rc = 0;
+done:
+    glBindFramebuffer(GL_FRAMEBUFFER, 0);
+    glBindVertexArray(0);
+    glUseProgram(0);
+    objs_free(&o);
+    return rc;
+}

@@ -1,0 +1,42 @@
+#!/usr/bin/env bash
+# Jobs that go wrong fail cleanly and the daemon keeps serving: GL context
+# loss (rebuilt, job retried once), loss twice (job fails), the job time
+# limit. VOXELD_TEST_LOSE_CONTEXT=N makes the runner treat the next N GL
+# stages as if the context had been reset (robustness reset status), since
+# a real reset cannot be provoked on llvmpipe.
+source "$(dirname "$0")/lib.sh"
+source "$(dirname "$0")/box.sh"
+box_obj "$TMP/box.obj" 0 0 0 1 1 1
+JSON=(-H "Content-Type: application/json")
+
+VOXELD_TEST_LOSE_CONTEXT=1 start_daemon || exit 1
+upload "$TMP/box.obj"
+BOX=$MESH_ID
+api POST "/v1/jobs?wait=60" "${JSON[@]}" -d "{\"mesh\":\"$BOX\",\"kind\":\"preview\",\"params\":{\"width\":64,\"height\":64}}"
+check "job survives a context loss" jq -e '.state == "succeeded" and .stats.context_rebuilds == 1' "$BODY"
+check "loss logged" grep -q 'event=gl.context_lost' "$TMP/daemon.log"
+api GET "$(jqb .outputs.image)"
+"$VX_TOOLS/pngstat" "$BODY" >"$TMP/p.json"
+check "image after the rebuild is real" jq -e '.covered > 100' "$TMP/p.json"
+api POST "/v1/jobs?wait=60" "${JSON[@]}" -d "{\"mesh\":\"$BOX\",\"kind\":\"preview\",\"params\":{\"width\":64,\"height\":64}}"
+check "next job needs no rebuild" jq -e '.state == "succeeded" and (.stats.context_rebuilds == null)' "$BODY"
+stop_daemon
+
+VOXELD_TEST_LOSE_CONTEXT=2 start_daemon || exit 1
+api POST "/v1/jobs?wait=60" "${JSON[@]}" -d "{\"mesh\":\"$BOX\",\"kind\":\"preview\",\"params\":{\"width\":64,\"height\":64}}"
+check "lost twice: the job fails" jq -e '.state == "failed" and .error.code == "context_lost"' "$BODY"
+api GET "/v1/jobs/$(jqb .id)/result"
+expect_error "no result for a failed job" 409 job_failed
+api POST "/v1/jobs?wait=60" "${JSON[@]}" -d "{\"mesh\":\"$BOX\",\"kind\":\"preview\",\"params\":{\"width\":64,\"height\":64}}"
+check "the daemon still runs jobs" jq -e '.state == "succeeded"' "$BODY"
+stop_daemon
+
+start_daemon --job-timeout 0.2 || exit 1
+upload "$VX_MESH_DIR/ogre.obj"
+api POST "/v1/jobs?wait=60" "${JSON[@]}" -d "{\"mesh\":\"$MESH_ID\",\"kind\":\"preview\",\"params\":{\"width\":4096,\"height\":4096,\"samples\":4}}"
+check "over the time limit: job_timeout" jq -e '.state == "failed" and .error.code == "job_timeout"' "$BODY"
+check "no result dir for the failed job" test ! -e "$DATA/results/$(jqb .id)"
+api GET /metrics
+check "failed job counted" grep -q 'voxeld_jobs_total{kind="preview",state="failed"} 1' "$BODY"
+stop_daemon
+finish
