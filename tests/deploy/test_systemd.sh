@@ -177,4 +177,73 @@ check "WATCHDOG=1 sent repeatedly ($NW)" test "$NW" -ge 3
 check "longest WATCHDOG=1 gap ${GAP}s < 3 s" awk -v g="$GAP" 'BEGIN {exit !(g < 3)}'
 check "no unknown notification fields" bash -c "! grep -vE ' (READY=1|STOPPING=1|WATCHDOG=1|STATUS=.*|MAINPID=[0-9]+|ERRNO=[0-9]+|EXTEND_TIMEOUT_USEC=[0-9]+)\$' '$NLOG'"
 
+# ---- (d) the system call filter lets llvmpipe work ---------------------------------
+# No seccomp without systemd here, so: every system call voxeld makes while it
+# starts, renders a preview on llvmpipe and stops (strace -f) must be allowed
+# by the unit's SystemCallFilter= lines. This is the check that moves when an
+# engine starts linking something new (TBB, OpenVDB, FFTW threads).
+if ! command -v strace >/dev/null; then
+    echo "note: strace not installed: system call filter check skipped"
+elif ! strace -f -qq -o /dev/null true 2>/dev/null; then
+    echo "note: strace cannot trace here: system call filter check skipped"
+else
+    strace -f -qq -o "$TMP/trace.txt" "$VOXELD" --listen 127.0.0.1:0 --data-dir "$TMP/sc-data" \
+        --workers 2 --http-threads 4 2>"$TMP/sc.log" &
+    SPID=$!
+    PORT=
+    for i in $(seq 1 600); do
+        PORT=$(sed -n 's/.*event=voxeld.ready.*port=\([0-9]*\).*/\1/p' "$TMP/sc.log")
+        [[ -n "$PORT" ]] && break
+        kill -0 "$SPID" 2>/dev/null || break
+        sleep 0.1
+    done
+    PID=$(sed -n 's/.*event=voxeld.start.* pid=\([0-9]*\).*/\1/p' "$TMP/sc.log")
+    check "voxeld under strace ready" test -n "$PORT"
+    BASE=http://127.0.0.1:${PORT:-1}
+    upload "$TMP/box.obj"
+    api POST "/v1/jobs?wait=60" -H "Content-Type: application/json" \
+        -d "{\"mesh\":\"$MESH_ID\",\"kind\":\"preview\",\"params\":{\"width\":128,\"height\":128}}"
+    check "preview under strace succeeded" jq -e '.state == "succeeded"' "$BODY"
+    [[ -n "$PID" ]] && kill -TERM "$PID"
+    rc=0
+    wait "$SPID" || rc=$?
+    PID=
+    check "voxeld under strace exits 0 (got $rc)" test "$rc" -eq 0
+    systemd-analyze syscall-filter >"$TMP/syscall-groups.txt" 2>/dev/null
+    python3 - "$UNIT" "$TMP/syscall-groups.txt" "$TMP/trace.txt" >"$TMP/syscalls-denied.txt" <<'PY'
+import re, sys
+unit, groups_file, trace = sys.argv[1:4]
+groups, cur = {}, None
+for line in open(groups_file):
+    s = line.strip()
+    if line.startswith("@"):
+        cur = s.split()[0]
+        groups[cur] = []
+    elif s and not s.startswith("#") and cur:
+        groups[cur].append(s)
+def expand(names):
+    out = set()
+    for n in names:
+        out |= expand(groups.get(n, [])) if n.startswith("@") else {n}
+    return out
+allow, deny = set(), set()
+for line in open(unit):
+    m = re.match(r"SystemCallFilter=(~?)(.*)", line.strip())
+    if m:
+        (deny if m.group(1) else allow).update(expand(m.group(2).split()))
+allowed = allow - deny
+used = set()
+for line in open(trace):
+    m = re.match(r"\d+\s+(?:<\.\.\. (\w+) resumed>|(\w+)\()", line)
+    if m:
+        used.add(m.group(1) or m.group(2))
+print("used", len(used), "allowed", len(allowed), file=sys.stderr)
+for name in sorted(used - allowed):
+    print(name)
+PY
+    check "system calls traced" test "$(grep -c . "$TMP/trace.txt")" -gt 100
+    check "every system call voxeld made is allowed by the unit: $(tr '\n' ' ' <"$TMP/syscalls-denied.txt")" \
+        test ! -s "$TMP/syscalls-denied.txt"
+fi
+
 finish
