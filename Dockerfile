@@ -70,7 +70,8 @@ ENV NVIDIA_VISIBLE_DEVICES=all \
 # runtime passes in (--device /dev/dri). Debian's base image has video (44)
 # but may lack render.
 RUN getent group render >/dev/null || groupadd --system render \
- && useradd --system --uid 10001 --user-group --groups video,render \
+ && groupadd --gid 10001 voxeld \
+ && useradd --uid 10001 --gid 10001 --groups video,render --no-log-init \
       --home-dir /var/lib/voxeld --no-create-home --shell /usr/sbin/nologin voxeld \
  && install -d -o voxeld -g voxeld -m 0750 /var/lib/voxeld
 
