@@ -18,6 +18,8 @@ pkgs=(
   libfftw3-dev libpng-dev libcmocka-dev libsystemd-dev systemd nettle-dev
   # integration tests and benchmarks
   curl jq procps psmisc python3 python3-yaml python3-jsonschema
+  # tests/deploy/test_systemd.sh: the system calls voxeld makes vs the unit's filter
+  strace
   # the container image test (tests/deploy): podman builds the Dockerfile
   podman buildah debootstrap
 )

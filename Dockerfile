@@ -1,0 +1,89 @@
+# voxeld image: headless OpenGL (EGL) mesh service.
+#
+#   docker build -t voxeld .
+#   GPU:  docker run --gpus all -e NVIDIA_DRIVER_CAPABILITIES=graphics,compute,utility \
+#           -p 8080:8080 -v voxeld-data:/var/lib/voxeld voxeld
+#   CPU:  docker run -p 8080:8080 -v voxeld-data:/var/lib/voxeld voxeld   (Mesa llvmpipe)
+#
+# Both stages use the full debian:bookworm image (not -slim): it is the one
+# image that tests/deploy/test_container.sh can build offline (debootstrap).
+ARG BASE=debian:bookworm
+
+# ---- build -------------------------------------------------------------------
+FROM ${BASE} AS build
+ARG JOBS=2
+ENV DEBIAN_FRONTEND=noninteractive
+# The build subset of scripts/install-deps.sh (no tests, benchmarks, podman).
+RUN apt-get update -qq \
+ && apt-get install -y -qq --no-install-recommends \
+      build-essential cmake pkg-config \
+      libegl-dev libgl-dev libopengl-dev \
+      libmicrohttpd-dev libcjson-dev libdraco-dev \
+      libopenvdb-dev libboost-dev libboost-iostreams-dev libtbb-dev libimath-dev \
+      libblosc-dev zlib1g-dev \
+      libfftw3-dev libpng-dev libsystemd-dev nettle-dev \
+ && rm -rf /var/lib/apt/lists/*
+WORKDIR /src
+COPY . .
+RUN cmake -S . -B /build -DCMAKE_BUILD_TYPE=Release -DVX_TESTS=OFF \
+ && cmake --build /build -j"${JOBS}" \
+ && strip /build/voxeld \
+ && /build/voxeld --version
+# The runtime packages of every shared library voxeld links, whatever the
+# engines link by then: ldd -> owning package (a safety net for the explicit
+# list below). /lib and /usr/lib are the same directory (merged /usr), but
+# dpkg knows each file under one of the two names only.
+RUN set -e; for lib in $(ldd /build/voxeld | awk '$2 == "=>" && $3 ~ /^\// {print $3}'); do \
+      real=$(readlink -f "$lib"); \
+      for f in "$lib" "$real" "/usr$real" "${real#/usr}"; do \
+        if p=$(dpkg -S "$f" 2>/dev/null); then echo "${p%%:*}"; break; fi; \
+      done; \
+    done | sort -u >/build/runtime-packages \
+ && cat /build/runtime-packages
+
+# ---- runtime -------------------------------------------------------------------
+FROM ${BASE}
+ENV DEBIAN_FRONTEND=noninteractive
+COPY --from=build /build/runtime-packages /tmp/runtime-packages
+# libegl-mesa0 + libgl1-mesa-dri: Mesa's EGL and llvmpipe, the CPU fallback
+# (dlopened by libglvnd, so ldd does not see them). OpenVDB and FFTW are
+# listed even before the engines link them. curl: the HEALTHCHECK.
+RUN apt-get update -qq \
+ && apt-get install -y -qq --no-install-recommends \
+      libmicrohttpd12 libcjson1 libdraco7 libpng16-16 libsystemd0 libnettle8 \
+      libegl1 libopengl0 libgl1 libegl-mesa0 libgl1-mesa-dri \
+      libfftw3-single3 libfftw3-double3 libopenvdb10.0 \
+      curl \
+      $(cat /tmp/runtime-packages) \
+ && rm -rf /var/lib/apt/lists/* /tmp/runtime-packages
+
+# NVIDIA through glvnd: the NVIDIA container toolkit mounts libEGL_nvidia.so.0
+# and the driver when NVIDIA_DRIVER_CAPABILITIES includes graphics; this
+# vendor file makes libglvnd's libEGL load it (EGL device platform).
+RUN mkdir -p /usr/share/glvnd/egl_vendor.d \
+ && printf '%s\n' '{"file_format_version":"1.0.0","ICD":{"library_path":"libEGL_nvidia.so.0"}}' \
+      >/usr/share/glvnd/egl_vendor.d/10_nvidia.json
+ENV NVIDIA_VISIBLE_DEVICES=all \
+    NVIDIA_DRIVER_CAPABILITIES=graphics,compute,utility
+
+# Non-root user; video/render give access to /dev/dri render nodes that a
+# runtime passes in (--device /dev/dri). Debian's base image has video (44)
+# but may lack render.
+RUN getent group render >/dev/null || groupadd --system render \
+ && groupadd --gid 10001 voxeld \
+ && useradd --uid 10001 --gid 10001 --groups video,render --no-log-init \
+      --home-dir /var/lib/voxeld --no-create-home --shell /usr/sbin/nologin voxeld \
+ && install -d -o voxeld -g voxeld -m 0750 /var/lib/voxeld
+
+COPY --from=build /build/voxeld /usr/bin/voxeld
+
+USER voxeld
+WORKDIR /var/lib/voxeld
+VOLUME /var/lib/voxeld
+EXPOSE 8080
+HEALTHCHECK --interval=30s --timeout=5s --start-period=60s --retries=3 \
+  CMD curl -fsS -o /dev/null http://127.0.0.1:8080/readyz || exit 1
+# SIGTERM (docker stop) is a graceful stop: exit 0.
+STOPSIGNAL SIGTERM
+ENTRYPOINT ["voxeld"]
+CMD ["--listen", "0.0.0.0:8080", "--data-dir", "/var/lib/voxeld"]
