@@ -226,6 +226,7 @@ bad "unknown method" '{"method":"magic"}' params.method
 bad "unknown inside" '{"inside":"odd"}' params.inside
 bad "threshold 9" '{"supersample":2,"threshold":9}' params.threshold
 bad "supersample 3" '{"supersample":3}' params.supersample
+bad "supersample 2 with peel" '{"supersample":2,"method":"peel"}' params.supersample
 bad "unknown format" '{"format":"stl"}' params.format
 bad "unknown field" '{"colour":"red"}' params.colour
 

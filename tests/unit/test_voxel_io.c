@@ -342,6 +342,7 @@ static void test_params(void **st)
     expect_invalid("{\"inside\":\"odd\"}", "params.inside");
     expect_invalid("{\"threshold\":9}", "params.threshold");
     expect_invalid("{\"supersample\":3}", "params.supersample");
+    expect_invalid("{\"supersample\":2,\"method\":\"peel\"}", "params.supersample");
     expect_invalid("{\"format\":\"stl\"}", "params.format");
     expect_invalid("{\"colour\":1}", "params.colour");
     /* 2048^3 bits is 1 GiB: twice that (CPU + GPU) is over a 1 GiB limit */
