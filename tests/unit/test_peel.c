@@ -394,7 +394,7 @@ static void test_real_meshes_256(void **state)
         double t0 = now_s();
         run_peel(m, &d, &b, &st);
         double t1 = now_s();
-        printf("%s: %.0f ms wall, peel %.1f ms, fill %.1f ms, layers %d, upload %.1f ms, "
+        printf("%s: %.0f ms wall, peel %.1f ms, fill %.3f ms, layers %d, upload %.1f ms, "
                "readback %.1f ms\n",
                names[n], 1e3 * (t1 - t0), st.gpu_peel_ms, st.gpu_fill_ms, st.layers, st.upload_ms,
                st.readback_ms);
@@ -654,6 +654,91 @@ static void test_dispatcher(void **state)
     vx_mesh_free(m);
 }
 
+/* Midpoint subdivision 1 -> 4 of every `every`-th triangle (every = 1:
+ * all, with shared edge midpoints so the mesh stays watertight; otherwise
+ * T-junctions appear, which is fine for timing). */
+static vx_mesh *subdivide(const vx_mesh *m, int every)
+{
+    size_t nt = m->ntris, nsplit = (nt + every - 1) / every;
+    size_t nv = m->nverts + 3 * nsplit, nt2 = nt + 3 * nsplit;
+    double *p = malloc(nv * 3 * sizeof *p);
+    uint32_t *f = malloc(nt2 * 3 * sizeof *f);
+    memcpy(p, m->pos, m->nverts * 3 * sizeof *p);
+    size_t v = m->nverts, t2 = 0;
+    for (size_t t = 0; t < nt; t++) {
+        const uint32_t *a = m->tri + 3 * t;
+        if (t % every) {
+            memcpy(f + 3 * t2++, a, 3 * sizeof *f);
+            continue;
+        }
+        uint32_t mid[3];
+        for (int e = 0; e < 3; e++) {
+            for (int k = 0; k < 3; k++)
+                p[3 * v + k] = 0.5 * (m->pos[3 * a[e] + k] + m->pos[3 * a[(e + 1) % 3] + k]);
+            mid[e] = (uint32_t)v++;
+        }
+        uint32_t q[12] = {a[0],   mid[0], mid[2], mid[0], a[1],   mid[1],
+                          mid[2], mid[1], a[2],   mid[0], mid[1], mid[2]};
+        memcpy(f + 3 * t2, q, sizeof q);
+        t2 += 4;
+    }
+    vx_mesh *r = mesh_from(v, p, t2, f);
+    free(p);
+    free(f);
+    return r;
+}
+
+/* Timings for the report; runs only with VX_PEEL_BENCH=1. */
+static void test_bench(void **state)
+{
+    if (!getenv("VX_PEEL_BENCH")) skip();
+    const char *names[] = {"spot_triangulated.obj", "stanford-bunny.obj", "ogre.obj"};
+    vx_mesh *ms[5];
+    for (int i = 0; i < 3; i++) {
+        char path[512];
+        snprintf(path, sizeof path, "%s/%s", VX_MESH_DIR, names[i]);
+        ms[i] = vx_obj_read_path(path, NULL, NULL);
+        assert_non_null(ms[i]);
+    }
+    vx_mesh *o4 = subdivide(ms[2], 1);
+    ms[3] = subdivide(o4, 4);
+    vx_mesh_free(o4);
+    const char *labels[] = {"spot", "bunny", "ogre", "ogre-subdiv"};
+    for (int i = 0; i < 4; i++)
+        for (int res = 128; res <= 256; res *= 2) {
+            for (int rep = 0; rep < 2; rep++) {
+                vx_voxelize_desc d = {0};
+                grid_res(ms[i], res, 0, &d.grid);
+                vx_bitgrid b;
+                vx_voxelize_stats st;
+                double t0 = now_s();
+                run_peel(ms[i], &d, &b, &st);
+                if (rep)
+                    printf("BENCH %-12s %7zu tris %4d^3: peel %8.1f ms fill %7.2f ms layers %3d "
+                           "chunks %d upload %.1f readback %.1f wall %.0f ms\n",
+                           labels[i], ms[i]->ntris, res, st.gpu_peel_ms, st.gpu_fill_ms, st.layers,
+                           st.chunks, st.upload_ms, st.readback_ms, 1e3 * (now_s() - t0));
+                vx_bitgrid_free(&b);
+            }
+        }
+    for (int res = 512; res <= 1024; res *= 2) {
+        vx_voxelize_desc d = {0};
+        grid_res(ms[1], res, 0, &d.grid);
+        vx_bitgrid b;
+        vx_voxelize_stats st;
+        double t0 = now_s();
+        run_peel(ms[1], &d, &b, &st);
+        printf("BENCH %-12s %7zu tris %4d^3: peel %8.1f ms fill %7.2f ms layers %3d chunks %d "
+               "upload %.1f readback %.1f wall %.0f ms (%dx%dx%d)\n",
+               "bunny", ms[1]->ntris, res, st.gpu_peel_ms, st.gpu_fill_ms, st.layers, st.chunks,
+               st.upload_ms, st.readback_ms, 1e3 * (now_s() - t0), d.grid.dims[0], d.grid.dims[1],
+               d.grid.dims[2]);
+        vx_bitgrid_free(&b);
+    }
+    for (int i = 0; i < 4; i++)
+        vx_mesh_free(ms[i]);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -669,6 +754,7 @@ int main(void)
         cmocka_unit_test(test_slabs),
         cmocka_unit_test(test_limits_and_progress),
         cmocka_unit_test(test_dispatcher),
+        cmocka_unit_test(test_bench),
     };
     return cmocka_run_group_tests(tests, setup, teardown);
 }
