@@ -212,6 +212,11 @@ static GLuint new_array(GLenum fmt, int w, int h, int layers)
     return t;
 }
 
+static int first_cap(const peel_ctx *c)
+{
+    return c->max_layers + 1 < PEEL_FIRST_CAP ? c->max_layers + 1 : PEEL_FIRST_CAP;
+}
+
 static uint64_t layer_bytes(uint64_t pixels, int cap)
 {
     return pixels * 8u * (uint64_t)cap;
@@ -223,7 +228,7 @@ static uint64_t layer_bytes(uint64_t pixels, int cap)
 static int grow(peel_ctx *c, int need, int keep)
 {
     peel_objs *o = &c->o;
-    int cap = o->cap ? o->cap : PEEL_FIRST_CAP;
+    int cap = o->cap ? o->cap : first_cap(c);
     while (cap < need)
         cap *= 2;
     if (cap > c->max_layers + 1) cap = c->max_layers + 1;
@@ -602,8 +607,7 @@ static uint64_t estimate(const peel_ctx *c, int rows, int surface)
     if (surface) return b + (uint64_t)c->m->ntris * 8u + slab_bytes(c, rows);
     b += slab_bytes(c, rows) * (uint64_t)c->naxes;
     uint64_t px = max_image(c, rows);
-    int first = c->max_layers + 1 < PEEL_FIRST_CAP ? c->max_layers + 1 : PEEL_FIRST_CAP;
-    return b + px * 8u + layer_bytes(px, first);
+    return b + px * 8u + layer_bytes(px, first_cap(c));
 }
 
 static int plan(peel_ctx *c, int surface)
@@ -649,7 +653,7 @@ static int plan(peel_ctx *c, int surface)
     if (need > c->limit) return too_big(c, need);
     c->rows = (int)rows;
     c->nslabs = (int)(((uint64_t)c->dims[2] + rows - 1) / rows);
-    c->fixed_bytes = need - (surface ? 0 : layer_bytes(max_image(c, c->rows), PEEL_FIRST_CAP));
+    c->fixed_bytes = need - (surface ? 0 : layer_bytes(max_image(c, c->rows), first_cap(c)));
     return 0;
 }
 

@@ -739,6 +739,44 @@ static void test_bench(void **state)
         vx_mesh_free(ms[i]);
 }
 
+/* Large grids (memory and minutes): VX_PEEL_BIG=1. A cube filling a 1024^3
+ * grid (128 MiB of bits: one SSBO at llvmpipe's limit) and a 2048^3 grid
+ * (1 GiB of bits, several slabs) must give exact counts. */
+static void test_big(void **state)
+{
+    if (!getenv("VX_PEEL_BIG")) skip();
+    vx_mesh *m = box((double[]){0, 0, 0}, (double[]){1, 1, 1});
+    for (int res = 1024; res <= 2048; res *= 2) {
+        vx_voxelize_desc d = {0};
+        grid_res(m, res, 0, &d.grid);
+        vx_bitgrid b;
+        vx_voxelize_stats st;
+        double t0 = now_s();
+        run_peel(m, &d, &b, &st);
+        printf("BIG cube %d^3: %llu voxels, chunks %d, peel %.1f ms fill %.1f ms readback %.1f ms "
+               "wall %.0f ms\n",
+               res, (unsigned long long)st.voxels_inside, st.chunks, st.gpu_peel_ms, st.gpu_fill_ms,
+               st.readback_ms, 1e3 * (now_s() - t0));
+        assert_int_equal(st.voxels_inside, (uint64_t)res * res * res);
+        vx_bitgrid_free(&b);
+    }
+    vx_mesh_free(m);
+    m = vx_obj_read_path(VX_MESH_DIR "/stanford-bunny.obj", NULL, NULL);
+    vx_voxelize_desc d = {0};
+    grid_res(m, 2048, 0, &d.grid);
+    vx_bitgrid b;
+    vx_voxelize_stats st;
+    double t0 = now_s();
+    run_peel(m, &d, &b, &st);
+    printf("BIG bunny 2048 (%dx%dx%d): %llu voxels, chunks %d, layers %d, peel %.1f ms fill %.1f "
+           "ms readback %.1f ms wall %.0f ms\n",
+           d.grid.dims[0], d.grid.dims[1], d.grid.dims[2], (unsigned long long)st.voxels_inside,
+           st.chunks, st.layers, st.gpu_peel_ms, st.gpu_fill_ms, st.readback_ms,
+           1e3 * (now_s() - t0));
+    vx_bitgrid_free(&b);
+    vx_mesh_free(m);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -755,6 +793,7 @@ int main(void)
         cmocka_unit_test(test_limits_and_progress),
         cmocka_unit_test(test_dispatcher),
         cmocka_unit_test(test_bench),
+        cmocka_unit_test(test_big),
     };
     return cmocka_run_group_tests(tests, setup, teardown);
 }
