@@ -5,13 +5,6 @@
 
 #include "voxel/voxel.h"
 
-/* slice.c (seed 003) is written on another branch. Until it is merged the
- * symbol may be missing, so it is referenced weakly and a missing one is an
- * error. Remove this pragma once slice.c is in the library: a weak reference
- * does not make the linker pull slice.o out of the static library, so with
- * nothing else referencing it the pointer would stay NULL. */
-#pragma weak vx_voxelize_slice
-
 int vx_voxelize(vx_gl *gl, const vx_mesh *m, const vx_voxelize_desc *d, vx_bitgrid *out,
                 vx_voxelize_stats *st, vx_err *err)
 {
@@ -56,8 +49,5 @@ int vx_voxelize(vx_gl *gl, const vx_mesh *m, const vx_voxelize_desc *d, vx_bitgr
                               "method peel has no supersampling; use slice or auto");
         return vx_voxelize_peel(gl, m, &dd, out, st, err);
     }
-    if (!vx_voxelize_slice)
-        return vx_err_set(err, VX_EUNPROC, "method_unavailable",
-                          "method slice is not built into this binary");
     return vx_voxelize_slice(gl, m, &dd, out, st, err);
 }
