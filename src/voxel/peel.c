@@ -245,6 +245,8 @@ static int grow(peel_ctx *c, int need, int keep)
     GLuint nl = new_array(GL_R32F, o->w, o->h, cap), nc = new_array(GL_R32UI, o->w, o->h, cap);
     glClearTexImage(nc, 0, GL_RED_INTEGER, GL_UNSIGNED_INT, NULL);
     if (keep > 0) {
+        /* The last pass's image atomics must land before the copy. */
+        glMemoryBarrier(GL_ALL_BARRIER_BITS);
         glCopyImageSubData(o->layers, GL_TEXTURE_2D_ARRAY, 0, 0, 0, 0, nl, GL_TEXTURE_2D_ARRAY, 0,
                            0, 0, 0, o->w, o->h, keep);
         glCopyImageSubData(o->counts, GL_TEXTURE_2D_ARRAY, 0, 0, 0, 0, nc, GL_TEXTURE_2D_ARRAY, 0,
@@ -345,9 +347,10 @@ static int peel(peel_ctx *c, int axis, int k0, int rows, int *nlayers)
     glBindVertexArray(o->vao);
 
     int rc = -1, L;
-    const float none = PEEL_NONE, one = 1.0f;
+    /* GL_COLOR clears read four values even for a one-channel target. */
+    const float none[4] = {PEEL_NONE, PEEL_NONE, PEEL_NONE, PEEL_NONE}, one = 1.0f;
     for (L = 0;; L++) {
-        glClearNamedFramebufferfv(o->fbo, GL_COLOR, 0, &none);
+        glClearNamedFramebufferfv(o->fbo, GL_COLOR, 0, none);
         glClearNamedFramebufferfv(o->fbo, GL_DEPTH, 0, &one);
         /* Begun after the clear (see preview/render.c: llvmpipe's timer). */
         vx_gl_timer t;
