@@ -379,6 +379,73 @@ static void test_overlapping_spheres(void **state)
     vx_mesh_free(m);
 }
 
+static void test_coincident_faces(void **state)
+{
+    /* Two boxes touching face to face: at x = 1 two crossings share one
+     * depth. Peeling keeps one fragment per depth; the per-layer counts
+     * must still see both, or the second box would come out empty. */
+    vx_mesh *parts[2] = {box((double[]){0, 0, 0}, (double[]){1, 1, 1}),
+                         box((double[]){1, 0, 0}, (double[]){2, 1, 1})};
+    vx_mesh *m = merge(parts, 2);
+    vx_voxelize_desc d = {.grid = {{0, 0, 0}, 0.125, {16, 8, 8}}};
+    vx_bitgrid b;
+    vx_voxelize_stats st;
+    for (int rule = VX_INSIDE_NONZERO; rule <= VX_INSIDE_ROBUST; rule++) {
+        d.inside = (vx_inside)rule;
+        run_peel(m, &d, &b, &st);
+        assert_int_equal(vx_bitgrid_count(&b), 1024);
+        vx_bitgrid_free(&b);
+    }
+    vx_mesh_free(m);
+    /* The same box twice: winding 2 inside (nonzero: solid), four crossings
+     * per ray (parity: empty), as the reference says. */
+    vx_mesh_free(parts[1]);
+    parts[1] = box((double[]){0, 0, 0}, (double[]){1, 1, 1});
+    m = merge(parts, 2);
+    d.grid.dims[0] = 8;
+    d.inside = VX_INSIDE_NONZERO;
+    run_peel(m, &d, &b, &st);
+    assert_int_equal(vx_bitgrid_count(&b), 512);
+    vx_bitgrid_free(&b);
+    d.inside = VX_INSIDE_PARITY;
+    run_peel(m, &d, &b, &st);
+    assert_int_equal(vx_bitgrid_count(&b), 0);
+    vx_bitgrid_free(&b);
+    vx_mesh_free(m);
+    for (int i = 0; i < 2; i++)
+        vx_mesh_free(parts[i]);
+}
+
+static void test_grid_cuts_mesh(void **state)
+{
+    /* A grid over part of a sphere (the mesh reaches outside it along every
+     * axis, also below the grid along the rays): crossings outside the grid
+     * still count. */
+    vx_mesh *m = sphere(0, 0, 0, 1, 0);
+    vx_voxelize_desc d = {.grid = {{-0.3, -0.75, -1.1}, 1.0 / 32, {40, 30, 50}}};
+    for (int rule = VX_INSIDE_NONZERO; rule <= VX_INSIDE_PARITY; rule++) {
+        d.inside = (vx_inside)rule;
+        vx_bitgrid b;
+        vx_voxelize_stats st;
+        run_peel(m, &d, &b, &st);
+        double iou;
+        compare_ref(rule ? "cut sphere parity" : "cut sphere nonzero", m, &d.grid, (vx_inside)rule,
+                    &b, &iou);
+        assert_true(iou >= 0.999);
+        vx_bitgrid_free(&b);
+    }
+    vx_mesh_free(m);
+    /* no triangles at all: an empty grid */
+    vx_mesh *e = vx_mesh_new();
+    vx_bitgrid b;
+    vx_voxelize_stats st;
+    run_peel(e, &d, &b, &st);
+    assert_int_equal(vx_bitgrid_count(&b), 0);
+    assert_int_equal(st.layers, 0);
+    vx_bitgrid_free(&b);
+    vx_mesh_free(e);
+}
+
 static void test_real_meshes_256(void **state)
 {
     const char *names[] = {"spot_triangulated.obj", "fandisk.obj", "rocker-arm.obj"};
@@ -816,6 +883,8 @@ int main(void)
         cmocka_unit_test(test_torus),
         cmocka_unit_test(test_hollow_and_nested),
         cmocka_unit_test(test_overlapping_spheres),
+        cmocka_unit_test(test_coincident_faces),
+        cmocka_unit_test(test_grid_cuts_mesh),
         cmocka_unit_test(test_real_meshes_256),
         cmocka_unit_test(test_bunny_robust),
         cmocka_unit_test(test_surface),
