@@ -486,25 +486,40 @@ static int tri_setup(const peel_ctx *c, size_t t, double v[3][3], double n[3], i
     return 1;
 }
 
-/* Voxel range [i0, i1] of row (j, k) where the box can touch the plane. */
-static void plane_range(const double v0[3], const double n[3], double hs, int j, int k, int *i0,
-                        int *i1)
+/* Axis the triangle's normal is closest to: rows are walked across the
+ * other two axes and, along this one, only the few voxels near the plane
+ * are tested (at most ~6 per row), so the work follows the triangle's area
+ * whatever its orientation. */
+static int dominant(const double n[3])
 {
-    if (!(fabs(n[0]) > 1e-6 * (fabs(n[1]) + fabs(n[2])))) return;
-    double r = hs * (fabs(n[0]) + fabs(n[1]) + fabs(n[2]));
-    double d = n[0] * v0[0] + n[1] * v0[1] + n[2] * v0[2];
-    double rest = n[1] * (j + 0.5) + n[2] * (k + 0.5);
-    double x0 = (d - rest - r) / n[0], x1 = (d - rest + r) / n[0];
-    double a = fmax(floor(fmin(x0, x1) - 0.5) - 1, *i0),
-           b = fmin(ceil(fmax(x0, x1) - 0.5) + 1, *i1);
-    *i0 = (int)a;
-    *i1 = (int)b;
+    int d = 0;
+    for (int a = 1; a < 3; a++)
+        if (fabs(n[a]) > fabs(n[d])) d = a;
+    return d;
+}
+
+/* Voxel range [*t0, *t1] along axis d, in the row whose other two voxel
+ * coordinates are in r (r[d] ignored), where a box can touch the plane;
+ * widened by one voxel for rounding. */
+static void plane_range(const double v0[3], const double n[3], double hs, int d, const int r[3],
+                        int *t0, int *t1)
+{
+    if (n[d] == 0) return; /* degenerate triangle: the whole bbox */
+    double rad = hs * (fabs(n[0]) + fabs(n[1]) + fabs(n[2]));
+    double dd = n[0] * v0[0] + n[1] * v0[1] + n[2] * v0[2], rest = 0;
+    for (int a = 0; a < 3; a++)
+        if (a != d) rest += n[a] * (r[a] + 0.5);
+    double x0 = (dd - rest - rad) / n[d], x1 = (dd - rest + rad) / n[d];
+    double a = fmax(floor(fmin(x0, x1) - 0.5) - 1, *t0),
+           b = fmin(ceil(fmax(x0, x1) - 0.5) + 1, *t1);
+    *t0 = (int)a;
+    *t1 = (int)b;
 }
 
 /* Splits the triangles: the GPU takes those whose tests fit one invocation
  * (SURF_GPU_WORK), the CPU the rest (a huge triangle on a big grid would
- * otherwise keep one invocation busy for seconds; the CPU walks only the
- * rows of its bbox and, in each, the x range near its plane). */
+ * otherwise keep one invocation busy for seconds; the CPU walks the same
+ * rows as the shader). */
 static int surface_lists(peel_ctx *c, uint32_t **gpu, size_t *ngpu)
 {
     const vx_mesh *m = c->m;
@@ -518,13 +533,10 @@ static int surface_lists(peel_ctx *c, uint32_t **gpu, size_t *ngpu)
         double v[3][3], n[3];
         int lo[3], hi[3];
         if (!tri_setup(c, t, v, n, lo, hi)) continue;
-        double rows = (double)(hi[1] - lo[1] + 1) * (hi[2] - lo[2] + 1);
-        double xw = hi[0] - lo[0] + 1;
-        if (fabs(n[0]) > 1e-6 * (fabs(n[1]) + fabs(n[2]))) {
-            double pw = (2 * fabs(n[1]) + 2 * fabs(n[2]) + fabs(n[0])) / fabs(n[0]) + 4;
-            if (pw < xw) xw = pw;
-        }
-        if (rows * xw <= SURF_GPU_WORK)
+        int d = dominant(n), a1 = (d + 1) % 3, a2 = (d + 2) % 3;
+        double rows = (double)(hi[a1] - lo[a1] + 1) * (hi[a2] - lo[a2] + 1);
+        double along = n[d] != 0 ? fmin(hi[d] - lo[d] + 1, 6) : hi[d] - lo[d] + 1;
+        if (rows * along <= SURF_GPU_WORK)
             (*gpu)[(*ngpu)++] = (uint32_t)t;
         else
             c->cpu_tris[c->ncpu_tris++] = (uint32_t)t;
@@ -538,18 +550,19 @@ static void surface_cpu(peel_ctx *c)
     uint32_t *bits = c->out->bits;
     for (size_t q = 0; q < c->ncpu_tris; q++) {
         double v[3][3], n[3], ctr[3];
-        int lo[3], hi[3];
+        int lo[3], hi[3], r[3];
         if (!tri_setup(c, c->cpu_tris[q], v, n, lo, hi)) continue;
-        for (int k = lo[2]; k <= hi[2]; k++)
-            for (int j = lo[1]; j <= hi[1]; j++) {
-                int i0 = lo[0], i1 = hi[0];
-                plane_range(v[0], n, hs, j, k, &i0, &i1);
-                ctr[1] = j + 0.5;
-                ctr[2] = k + 0.5;
-                for (int i = i0; i <= i1; i++) {
-                    ctr[0] = i + 0.5;
+        int d = dominant(n), a1 = (d + 1) % 3, a2 = (d + 2) % 3;
+        for (r[a2] = lo[a2]; r[a2] <= hi[a2]; r[a2]++)
+            for (r[a1] = lo[a1]; r[a1] <= hi[a1]; r[a1]++) {
+                int t0 = lo[d], t1 = hi[d];
+                plane_range(v[0], n, hs, d, r, &t0, &t1);
+                for (r[d] = t0; r[d] <= t1; r[d]++) {
+                    for (int a = 0; a < 3; a++)
+                        ctr[a] = r[a] + 0.5;
                     if (tri_box(ctr, v, n, hs))
-                        bits[((size_t)k * c->dims[1] + j) * c->wx + (i >> 5)] |= 1u << (i & 31);
+                        bits[((size_t)r[2] * c->dims[1] + r[1]) * c->wx + (r[0] >> 5)] |=
+                            1u << (r[0] & 31);
                 }
             }
     }

@@ -537,6 +537,40 @@ static void test_bunny_robust(void **state)
     vx_mesh_free(m);
 }
 
+/* Midpoint subdivision 1 -> 4 of every `every`-th triangle (every = 1:
+ * all, with shared edge midpoints so the mesh stays watertight; otherwise
+ * T-junctions appear, which is fine for timing). */
+static vx_mesh *subdivide(const vx_mesh *m, int every)
+{
+    size_t nt = m->ntris, nsplit = (nt + every - 1) / every;
+    size_t nv = m->nverts + 3 * nsplit, nt2 = nt + 3 * nsplit;
+    double *p = malloc(nv * 3 * sizeof *p);
+    uint32_t *f = malloc(nt2 * 3 * sizeof *f);
+    memcpy(p, m->pos, m->nverts * 3 * sizeof *p);
+    size_t v = m->nverts, t2 = 0;
+    for (size_t t = 0; t < nt; t++) {
+        const uint32_t *a = m->tri + 3 * t;
+        if (t % every) {
+            memcpy(f + 3 * t2++, a, 3 * sizeof *f);
+            continue;
+        }
+        uint32_t mid[3];
+        for (int e = 0; e < 3; e++) {
+            for (int k = 0; k < 3; k++)
+                p[3 * v + k] = 0.5 * (m->pos[3 * a[e] + k] + m->pos[3 * a[(e + 1) % 3] + k]);
+            mid[e] = (uint32_t)v++;
+        }
+        uint32_t q[12] = {a[0],   mid[0], mid[2], mid[0], a[1],   mid[1],
+                          mid[2], mid[1], a[2],   mid[0], mid[1], mid[2]};
+        memcpy(f + 3 * t2, q, sizeof q);
+        t2 += 4;
+    }
+    vx_mesh *r = mesh_from(v, p, t2, f);
+    free(p);
+    free(f);
+    return r;
+}
+
 static void test_surface(void **state)
 {
     vx_mesh *m = sphere(0, 0, 0, 1, 0);
@@ -621,6 +655,20 @@ static void test_surface(void **state)
     printf("big triangle: %llu voxels, %zu sampled points missed\n",
            (unsigned long long)vx_bitgrid_count(&surf), missing);
     assert_int_equal(missing, 0);
+    /* split 1 -> 4 the parts go to the GPU: the same voxels (up to the
+     * rounding margin of the new midpoints) */
+    vx_mesh *split = subdivide(big, 1);
+    vx_bitgrid surf4;
+    run_peel(split, &db, &surf4, &st);
+    size_t words = surf.wx * 128 * 128, diff = 0;
+    for (size_t w = 0; w < words; w++)
+        diff += (size_t)__builtin_popcount(surf.bits[w] ^ surf4.bits[w]);
+    printf("big triangle on the CPU vs split on the GPU: %llu vs %llu voxels, %zu differ\n",
+           (unsigned long long)vx_bitgrid_count(&surf),
+           (unsigned long long)vx_bitgrid_count(&surf4), diff);
+    assert_true(diff <= vx_bitgrid_count(&surf) / 1000);
+    vx_bitgrid_free(&surf4);
+    vx_mesh_free(split);
     vx_bitgrid_free(&surf);
     vx_mesh_free(big);
 }
@@ -751,40 +799,6 @@ static void test_dispatcher(void **state)
     vx_mesh_free(m);
 }
 
-/* Midpoint subdivision 1 -> 4 of every `every`-th triangle (every = 1:
- * all, with shared edge midpoints so the mesh stays watertight; otherwise
- * T-junctions appear, which is fine for timing). */
-static vx_mesh *subdivide(const vx_mesh *m, int every)
-{
-    size_t nt = m->ntris, nsplit = (nt + every - 1) / every;
-    size_t nv = m->nverts + 3 * nsplit, nt2 = nt + 3 * nsplit;
-    double *p = malloc(nv * 3 * sizeof *p);
-    uint32_t *f = malloc(nt2 * 3 * sizeof *f);
-    memcpy(p, m->pos, m->nverts * 3 * sizeof *p);
-    size_t v = m->nverts, t2 = 0;
-    for (size_t t = 0; t < nt; t++) {
-        const uint32_t *a = m->tri + 3 * t;
-        if (t % every) {
-            memcpy(f + 3 * t2++, a, 3 * sizeof *f);
-            continue;
-        }
-        uint32_t mid[3];
-        for (int e = 0; e < 3; e++) {
-            for (int k = 0; k < 3; k++)
-                p[3 * v + k] = 0.5 * (m->pos[3 * a[e] + k] + m->pos[3 * a[(e + 1) % 3] + k]);
-            mid[e] = (uint32_t)v++;
-        }
-        uint32_t q[12] = {a[0],   mid[0], mid[2], mid[0], a[1],   mid[1],
-                          mid[2], mid[1], a[2],   mid[0], mid[1], mid[2]};
-        memcpy(f + 3 * t2, q, sizeof q);
-        t2 += 4;
-    }
-    vx_mesh *r = mesh_from(v, p, t2, f);
-    free(p);
-    free(f);
-    return r;
-}
-
 /* Timings for the report; runs only with VX_PEEL_BENCH=1. */
 static void test_bench(void **state)
 {
@@ -830,6 +844,22 @@ static void test_bench(void **state)
                "bunny", ms[1]->ntris, res, st.gpu_peel_ms, st.gpu_fill_ms, st.layers, st.chunks,
                st.upload_ms, st.readback_ms, 1e3 * (now_s() - t0), d.grid.dims[0], d.grid.dims[1],
                d.grid.dims[2]);
+        vx_bitgrid_free(&b);
+    }
+    for (int mode = 0; mode < 2; mode++) {
+        vx_voxelize_desc d = {0};
+        if (mode == 0)
+            d.inside = VX_INSIDE_ROBUST;
+        else
+            d.fill = VX_FILL_SURFACE;
+        grid_res(ms[1], 256, 0, &d.grid);
+        vx_bitgrid b;
+        vx_voxelize_stats st;
+        double t0 = now_s();
+        run_peel(ms[1], &d, &b, &st);
+        printf("BENCH bunny %s 256^3: peel %.1f ms fill %.2f ms layers %d wall %.0f ms\n",
+               mode ? "surface" : "robust", st.gpu_peel_ms, st.gpu_fill_ms, st.layers,
+               1e3 * (now_s() - t0));
         vx_bitgrid_free(&b);
     }
     for (int i = 0; i < 4; i++)
