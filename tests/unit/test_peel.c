@@ -434,6 +434,22 @@ static void test_grid_cuts_mesh(void **state)
         assert_true(iou >= 0.999);
         vx_bitgrid_free(&b);
     }
+    /* degenerate grids: one voxel thick along each axis in turn */
+    for (int a = 0; a < 3; a++) {
+        vx_voxelize_desc d1 = {.grid = {{-0.9, -0.9, -0.9}, 1.0 / 16, {29, 29, 29}}};
+        d1.grid.dims[a] = 1;
+        d1.grid.origin[a] = -0.03;
+        for (int rule = VX_INSIDE_NONZERO; rule <= VX_INSIDE_ROBUST; rule++) {
+            d1.inside = (vx_inside)rule;
+            vx_bitgrid b;
+            vx_voxelize_stats st;
+            run_peel(m, &d1, &b, &st);
+            double iou;
+            compare_ref("one voxel thick", m, &d1.grid, VX_INSIDE_NONZERO, &b, &iou);
+            assert_true(iou >= 0.99);
+            vx_bitgrid_free(&b);
+        }
+    }
     vx_mesh_free(m);
     /* no triangles at all: an empty grid */
     vx_mesh *e = vx_mesh_new();
@@ -525,6 +541,18 @@ static void test_bunny_robust(void **state)
                     pts[NU + nb][2] = k;
                     nb++;
                 }
+    /* open mesh, single rules: the same crossings counted from each centre
+     * towards +x as the reference does */
+    for (int rule = VX_INSIDE_NONZERO; rule <= VX_INSIDE_PARITY; rule++) {
+        vx_voxelize_desc d1 = {.grid = d.grid, .inside = (vx_inside)rule};
+        vx_bitgrid b1;
+        double iou;
+        run_peel(m, &d1, &b1, &st);
+        compare_ref(rule ? "bunny (open) parity" : "bunny (open) nonzero", m, &d.grid,
+                    (vx_inside)rule, &b1, &iou);
+        assert_true(iou >= 0.999);
+        vx_bitgrid_free(&b1);
+    }
     size_t ru = winding_agree(m, &b, pts, NU), rb = winding_agree(m, &b, pts + NU, nb);
     size_t pu = winding_agree(m, &par, pts, NU), pb = winding_agree(m, &par, pts + NU, nb);
     printf("bunny 64^3 vs winding number: robust %zu/%d uniform, %zu/%d boundary; parity only "
