@@ -857,6 +857,10 @@ static void test_bench(void **state)
                            "chunks %d upload %.1f readback %.1f wall %.0f ms\n",
                            labels[i], ms[i]->ntris, res, st.gpu_peel_ms, st.gpu_fill_ms, st.layers,
                            st.chunks, st.upload_ms, st.readback_ms, 1e3 * (now_s() - t0));
+                if (rep && res == 256 && i < 3) {
+                    double iou;
+                    compare_ref(labels[i], ms[i], &d.grid, VX_INSIDE_NONZERO, &b, &iou);
+                }
                 vx_bitgrid_free(&b);
             }
         }
