@@ -35,6 +35,11 @@
  * several overlapping open shells. Meshes with self-intersections make
  * parity itself differ from the intended solid along all three axes.
  *
+ * With several slabs, x and y rays draw only the triangles that reach the
+ * slab (slab_buckets); z rays (robust) cross every slab, so the z peel is
+ * repeated for each slab with the whole mesh: robust mode on a grid that
+ * needs several slabs pays that once per slab.
+ *
  * Known limits: parts thinner than the voxel spacing between two centres
  * vanish (seed 000 §3; use fill=surface to catch them); a mesh that
  * extends below the grid along the ray has its crossings mapped to depth
@@ -61,7 +66,8 @@ typedef struct peel_objs {
     GLuint layers, counts;     /* R32F / R32UI arrays of cap layers */
     int w, h, cap;
     GLuint ssbo[3];
-    GLuint list; /* surface: the triangles the GPU takes */
+    GLuint list;     /* surface: the triangles the GPU takes */
+    GLuint ibo_slab; /* several slabs: triangles grouped by the slabs they reach */
     GLuint query;
 } peel_objs;
 
@@ -83,6 +89,7 @@ typedef struct peel_ctx {
     int slab, axis_i; /* for progress */
     size_t ncpu_tris;
     uint32_t *cpu_tris; /* surface: triangles too large for one invocation */
+    size_t *slab_first; /* with o.ibo_slab: first triangle of each slab, nslabs + 1 */
 } peel_ctx;
 
 static double now_ms(void)
@@ -105,8 +112,8 @@ static void layers_free(peel_objs *o)
 static void objs_free(peel_objs *o)
 {
     layers_free(o);
-    GLuint b[6] = {o->vbo, o->ibo, o->ssbo[0], o->ssbo[1], o->ssbo[2], o->list};
-    glDeleteBuffers(6, b);
+    GLuint b[7] = {o->vbo, o->ibo, o->ssbo[0], o->ssbo[1], o->ssbo[2], o->list, o->ibo_slab};
+    glDeleteBuffers(7, b);
     glDeleteVertexArrays(1, &o->vao);
     glDeleteQueries(1, &o->query);
     memset(o, 0, sizeof *o);
@@ -284,15 +291,80 @@ static int targets(peel_ctx *c, int w, int h)
     return grow(c, 1, 0);
 }
 
-static void draw_mesh(const vx_mesh *m)
+/* Draws triangles [first, first + n) of the bound element buffer. */
+static void draw_tris(size_t first, size_t n)
 {
-    /* glDrawElements counts in GLsizei: split meshes beyond 2^31 indices. */
-    const size_t nidx = 3 * m->ntris, step = (size_t)3 << 28;
-    for (size_t first = 0; first < nidx; first += step) {
-        size_t count = nidx - first < step ? nidx - first : step;
-        glDrawElements(GL_TRIANGLES, (GLsizei)count, GL_UNSIGNED_INT,
-                       (const void *)(uintptr_t)(first * sizeof(uint32_t)));
+    /* glDrawElements counts in GLsizei: split beyond 2^31 indices. */
+    const size_t step = (size_t)1 << 28;
+    for (size_t t = 0; t < n; t += step) {
+        size_t count = n - t < step ? n - t : step;
+        glDrawElements(GL_TRIANGLES, (GLsizei)(3 * count), GL_UNSIGNED_INT,
+                       (const void *)(uintptr_t)((first + t) * 3 * sizeof(uint32_t)));
     }
+}
+
+/* Triangle t's voxel rows along z in grid units, widened by one. */
+static void tri_zrange(const peel_ctx *c, size_t t, double *lo, double *hi)
+{
+    const vx_grid *g = &c->d->grid;
+    *lo = INFINITY;
+    *hi = -INFINITY;
+    for (int v = 0; v < 3; v++) {
+        double z = (c->m->pos[3 * (size_t)c->m->tri[3 * t + v] + 2] - g->origin[2]) / g->h;
+        *lo = fmin(*lo, z);
+        *hi = fmax(*hi, z);
+    }
+    *lo = floor(*lo) - 1;
+    *hi = ceil(*hi) + 1;
+}
+
+/* With several slabs, x and y rays need only the triangles that reach the
+ * slab's rows: an element buffer with the triangles grouped by slab (one
+ * reaching several slabs is repeated) saves drawing the whole mesh in every
+ * pass of every slab. Skipped (whole mesh per slab) when the copies would
+ * not fit max_memory. */
+static int slab_buckets(peel_ctx *c)
+{
+    if (c->nslabs < 2 || c->m->ntris == 0) return 0;
+    size_t *first = calloc((size_t)c->nslabs + 1, sizeof *first);
+    if (!first) return vx_err_set(c->err, VX_EINTERNAL, "out_of_memory", "no memory for slabs");
+    for (size_t t = 0; t < c->m->ntris; t++) {
+        double lo, hi;
+        tri_zrange(c, t, &lo, &hi);
+        for (int s = 0; s < c->nslabs; s++) {
+            double k0 = (double)s * c->rows, k1 = k0 + c->rows;
+            if (hi >= k0 && lo <= k1) first[s + 1]++;
+        }
+    }
+    for (int s = 0; s < c->nslabs; s++)
+        first[s + 1] += first[s];
+    uint64_t bytes = (uint64_t)first[c->nslabs] * 12u;
+    if (c->fixed_bytes + bytes + layer_bytes(c->max_pixels, first_cap(c)) > c->limit) {
+        free(first);
+        return 0;
+    }
+    uint32_t *idx = malloc(bytes + 4);
+    size_t *fill = malloc(((size_t)c->nslabs + 1) * sizeof *fill);
+    if (!idx || !fill) {
+        free(first), free(idx), free(fill);
+        return vx_err_set(c->err, VX_EINTERNAL, "out_of_memory", "no memory for slabs");
+    }
+    memcpy(fill, first, ((size_t)c->nslabs + 1) * sizeof *fill);
+    for (size_t t = 0; t < c->m->ntris; t++) {
+        double lo, hi;
+        tri_zrange(c, t, &lo, &hi);
+        for (int s = 0; s < c->nslabs; s++) {
+            double k0 = (double)s * c->rows, k1 = k0 + c->rows;
+            if (hi >= k0 && lo <= k1) memcpy(idx + 3 * fill[s]++, c->m->tri + 3 * t, 12);
+        }
+    }
+    free(fill);
+    glCreateBuffers(1, &c->o.ibo_slab);
+    glNamedBufferStorage(c->o.ibo_slab, (GLsizeiptr)(bytes + 4), idx, 0);
+    free(idx);
+    c->fixed_bytes += bytes;
+    c->slab_first = first;
+    return vx_gl_check(c->gl, "peel.slab_index", c->err);
 }
 
 /* Extent and first index of grid axis a in the slab's image. */
@@ -345,6 +417,13 @@ static int peel(peel_ctx *c, int axis, int k0, int rows, int *nlayers)
     glColorMask(GL_TRUE, GL_TRUE, GL_TRUE, GL_TRUE);
     glUseProgram(p);
     glBindVertexArray(o->vao);
+    /* z rays cross every slab: they need the whole mesh */
+    size_t first = 0, ntri = c->m->ntris;
+    if (c->slab_first && axis != 2) {
+        first = c->slab_first[c->slab];
+        ntri = c->slab_first[c->slab + 1] - first;
+    }
+    glVertexArrayElementBuffer(o->vao, c->slab_first && axis != 2 ? o->ibo_slab : o->ibo);
 
     int rc = -1, L;
     /* GL_COLOR clears read four values even for a one-channel target. */
@@ -359,7 +438,7 @@ static int peel(peel_ctx *c, int axis, int k0, int rows, int *nlayers)
         glBindImageTexture(0, o->counts, 0, GL_TRUE, 0, GL_READ_WRITE, GL_R32UI);
         glProgramUniform1i(p, 2, L - 1);
         glBeginQuery(GL_ANY_SAMPLES_PASSED, o->query);
-        draw_mesh(c->m);
+        draw_tris(first, ntri);
         glEndQuery(GL_ANY_SAMPLES_PASSED);
         GLuint passed = 0;
         glGetQueryObjectuiv(o->query, GL_QUERY_RESULT, &passed);
@@ -669,7 +748,8 @@ static int plan(peel_ctx *c, int surface)
     if (need > c->limit) return too_big(c, need);
     c->rows = (int)rows;
     c->nslabs = (int)(((uint64_t)c->dims[2] + rows - 1) / rows);
-    c->fixed_bytes = need - (surface ? 0 : layer_bytes(max_image(c, c->rows), first_cap(c)));
+    c->max_pixels = max_image(c, c->rows);
+    c->fixed_bytes = need - (surface ? 0 : layer_bytes(c->max_pixels, first_cap(c)));
     return 0;
 }
 
@@ -757,6 +837,7 @@ int vx_voxelize_peel(vx_gl *gl, const vx_mesh *m, const vx_voxelize_desc *d, vx_
         }
         surface_cpu(&c);
     } else {
+        if (slab_buckets(&c)) goto done;
         glFinish(); /* so upload_ms is the upload, not just its queueing */
         st->upload_ms = now_ms() - t0;
         for (int s = 0; s < c.naxes; s++) {
@@ -807,6 +888,7 @@ int vx_voxelize_peel(vx_gl *gl, const vx_mesh *m, const vx_voxelize_desc *d, vx_
 done:
     free(gpu_list);
     free(c.cpu_tris);
+    free(c.slab_first);
     objs_free(&c.o);
     if (rc) vx_bitgrid_free(out);
     return rc;
