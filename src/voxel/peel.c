@@ -36,9 +36,9 @@
  * parity itself differ from the intended solid along all three axes.
  *
  * With several slabs, x and y rays draw only the triangles that reach the
- * slab (slab_buckets); z rays (robust) cross every slab, so the z peel is
- * repeated for each slab with the whole mesh: robust mode on a grid that
- * needs several slabs pays that once per slab.
+ * slab (slab_buckets); z rays (robust) cross every slab: they are peeled
+ * once over the whole grid and their layers kept for the fill of each
+ * slab.
  *
  * Known limits: parts thinner than the voxel spacing between two centres
  * vanish (seed 000 §3; use fill=surface to catch them); a mesh that
@@ -58,13 +58,18 @@
 #define SURF_GPU_WORK 16384       /* voxel tests one GPU invocation may take */
 #define SURF_MARGIN 1e-4          /* grid units the boxes grow by: float rounding */
 
+/* A peel image: the pass target and the layer arrays. */
+typedef struct layer_set {
+    GLuint fbo, depth_rb, cur; /* the pass's target: R32F colour + 32F depth */
+    GLuint layers, counts;     /* R32F / R32UI arrays of cap layers */
+    int w, h, cap;
+} layer_set;
+
 /* Every GL object one call creates, so every exit path deletes the same set
  * (names of 0 are ignored by glDelete*). */
 typedef struct peel_objs {
     GLuint vbo, ibo, vao;
-    GLuint fbo, depth_rb, cur; /* the pass's target: R32F colour + 32F depth */
-    GLuint layers, counts;     /* R32F / R32UI arrays of cap layers */
-    int w, h, cap;
+    layer_set ls[2]; /* x and y rays; z rays (robust: peeled once, filled per slab) */
     GLuint ssbo[3];
     GLuint list;     /* surface: the triangles the GPU takes */
     GLuint ibo_slab; /* several slabs: triangles grouped by the slabs they reach */
@@ -83,8 +88,9 @@ typedef struct peel_ctx {
     size_t wx;
     double tlo[3], thi[3]; /* mesh bbox in grid units */
     uint64_t fixed_bytes;  /* everything but the layer arrays */
+    uint64_t first_layers; /* the layer arrays as first allocated */
+    uint64_t layers_now;   /* the layer arrays as allocated now */
     uint64_t limit;        /* max_memory, or UINT64_MAX */
-    uint64_t max_pixels;   /* largest peel image over the axes */
     peel_objs o;
     int slab, axis_i; /* for progress */
     size_t ncpu_tris;
@@ -99,7 +105,7 @@ static double now_ms(void)
     return (double)ts.tv_sec * 1e3 + (double)ts.tv_nsec / 1e6;
 }
 
-static void layers_free(peel_objs *o)
+static void layers_free(layer_set *o)
 {
     GLuint t[3] = {o->cur, o->layers, o->counts};
     glDeleteTextures(3, t);
@@ -111,7 +117,8 @@ static void layers_free(peel_objs *o)
 
 static void objs_free(peel_objs *o)
 {
-    layers_free(o);
+    layers_free(&o->ls[0]);
+    layers_free(&o->ls[1]);
     GLuint b[7] = {o->vbo, o->ibo, o->ssbo[0], o->ssbo[1], o->ssbo[2], o->list, o->ibo_slab};
     glDeleteBuffers(7, b);
     glDeleteVertexArrays(1, &o->vao);
@@ -232,15 +239,14 @@ static uint64_t layer_bytes(uint64_t pixels, int cap)
 /* Grows the layer arrays to hold at least `need` layers (doubling), keeping
  * the first `keep`. Checks max_memory first: old and new live together
  * while the old layers are copied. */
-static int grow(peel_ctx *c, int need, int keep)
+static int grow(peel_ctx *c, layer_set *o, int need, int keep)
 {
-    peel_objs *o = &c->o;
     int cap = o->cap ? o->cap : first_cap(c);
     while (cap < need)
         cap *= 2;
     if (cap > c->max_layers + 1) cap = c->max_layers + 1;
     uint64_t px = (uint64_t)o->w * (uint64_t)o->h;
-    uint64_t total = c->fixed_bytes + layer_bytes(px, o->cap) + layer_bytes(px, cap);
+    uint64_t total = c->fixed_bytes + c->layers_now + layer_bytes(px, cap);
     if (total > c->limit) return too_big(c, total);
     GLint max_layers = 0;
     glGetIntegerv(GL_MAX_ARRAY_TEXTURE_LAYERS, &max_layers);
@@ -263,16 +269,17 @@ static int grow(peel_ctx *c, int need, int keep)
     glDeleteTextures(2, old);
     o->layers = nl;
     o->counts = nc;
+    c->layers_now += layer_bytes(px, cap) - layer_bytes(px, o->cap);
     o->cap = cap;
     return vx_gl_check(c->gl, "peel.layers", c->err);
 }
 
 /* The pass target and the layer arrays for a w x h image (kept while the
  * size stays the same: slabs of one size share them). */
-static int targets(peel_ctx *c, int w, int h)
+static int targets(peel_ctx *c, layer_set *o, int w, int h)
 {
-    peel_objs *o = &c->o;
     if (o->fbo && o->w == w && o->h == h) return 0;
+    c->layers_now -= layer_bytes((uint64_t)o->w * (uint64_t)o->h, o->cap);
     layers_free(o);
     o->w = w;
     o->h = h;
@@ -288,7 +295,7 @@ static int targets(peel_ctx *c, int w, int h)
     if (stt != GL_FRAMEBUFFER_COMPLETE)
         return vx_err_set(c->err, VX_EGPU, "gl_error",
                           "peel framebuffer %dx%d is incomplete (0x%x)", w, h, stt);
-    return grow(c, 1, 0);
+    return grow(c, o, 1, 0);
 }
 
 /* Draws triangles [first, first + n) of the bound element buffer. */
@@ -339,7 +346,7 @@ static int slab_buckets(peel_ctx *c)
     for (int s = 0; s < c->nslabs; s++)
         first[s + 1] += first[s];
     uint64_t bytes = (uint64_t)first[c->nslabs] * 12u;
-    if (c->fixed_bytes + bytes + layer_bytes(c->max_pixels, first_cap(c)) > c->limit) {
+    if (c->fixed_bytes + bytes + c->first_layers > c->limit) {
         free(first);
         return 0;
     }
@@ -375,13 +382,13 @@ static int slab_ext(const peel_ctx *c, int a, int k0, int rows, int *off)
 }
 
 /* Peels the mesh along `axis` for the slab; returns the layer count. */
-static int peel(peel_ctx *c, int axis, int k0, int rows, int *nlayers)
+static int peel(peel_ctx *c, layer_set *o, int axis, int k0, int rows, int *nlayers)
 {
-    peel_objs *o = &c->o;
+    peel_objs *po = &c->o;
     int ua = (axis + 1) % 3, va = (axis + 2) % 3, uoff, voff;
     int w = slab_ext(c, ua, k0, rows, &uoff), h = slab_ext(c, va, k0, rows, &voff);
     *nlayers = 0;
-    if (targets(c, w, h)) return -1;
+    if (targets(c, o, w, h)) return -1;
     glClearTexImage(o->counts, 0, GL_RED_INTEGER, GL_UNSIGNED_INT, NULL);
     if (c->m->ntris == 0) return vx_gl_check(c->gl, "peel.clear", c->err);
 
@@ -416,14 +423,14 @@ static int peel(peel_ctx *c, int axis, int k0, int rows, int *nlayers)
     glDepthMask(GL_TRUE);
     glColorMask(GL_TRUE, GL_TRUE, GL_TRUE, GL_TRUE);
     glUseProgram(p);
-    glBindVertexArray(o->vao);
+    glBindVertexArray(po->vao);
     /* z rays cross every slab: they need the whole mesh */
     size_t first = 0, ntri = c->m->ntris;
     if (c->slab_first && axis != 2) {
         first = c->slab_first[c->slab];
         ntri = c->slab_first[c->slab + 1] - first;
     }
-    glVertexArrayElementBuffer(o->vao, c->slab_first && axis != 2 ? o->ibo_slab : o->ibo);
+    glVertexArrayElementBuffer(po->vao, c->slab_first && axis != 2 ? po->ibo_slab : po->ibo);
 
     int rc = -1, L;
     /* GL_COLOR clears read four values even for a one-channel target. */
@@ -437,13 +444,13 @@ static int peel(peel_ctx *c, int axis, int k0, int rows, int *nlayers)
         glBindTextureUnit(0, o->layers);
         glBindImageTexture(0, o->counts, 0, GL_TRUE, 0, GL_READ_WRITE, GL_R32UI);
         glProgramUniform1i(p, 2, L - 1);
-        glBeginQuery(GL_ANY_SAMPLES_PASSED, o->query);
+        glBeginQuery(GL_ANY_SAMPLES_PASSED, po->query);
         draw_tris(first, ntri);
         glEndQuery(GL_ANY_SAMPLES_PASSED);
         GLuint passed = 0;
-        glGetQueryObjectuiv(o->query, GL_QUERY_RESULT, &passed);
+        glGetQueryObjectuiv(po->query, GL_QUERY_RESULT, &passed);
         if (passed && L < c->max_layers) {
-            if (L >= o->cap && grow(c, L + 1, L)) {
+            if (L >= o->cap && grow(c, o, L + 1, L)) {
                 vx_gl_timer_end_ms(&t);
                 goto done;
             }
@@ -474,9 +481,9 @@ done:
 }
 
 /* Fills the slab's bits for the layers peeled along `axis` into ssbo[slot]. */
-static int fill(peel_ctx *c, int axis, int slot, int mode, int k0, int rows, int nlayers)
+static int fill(peel_ctx *c, const layer_set *o, int axis, int slot, int mode, int k0, int rows,
+                int nlayers)
 {
-    peel_objs *o = &c->o;
     GLuint p = c->prog_fill;
     glProgramUniform2i(p, 0, o->w, o->h);
     glProgramUniform1i(p, 1, nlayers);
@@ -491,7 +498,7 @@ static int fill(peel_ctx *c, int axis, int slot, int mode, int k0, int rows, int
     glUseProgram(p);
     glBindTextureUnit(0, o->layers);
     glBindTextureUnit(1, o->counts);
-    glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 0, o->ssbo[slot]);
+    glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 0, c->o.ssbo[slot]);
     dispatch_2d((uint64_t)o->w * (uint64_t)o->h);
     glMemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT | GL_BUFFER_UPDATE_BARRIER_BIT);
     c->st->gpu_fill_ms += timer_end_compute(&t);
@@ -680,29 +687,38 @@ static uint64_t slab_bytes(const peel_ctx *c, int rows)
     return (uint64_t)c->wx * 4u * (uint64_t)c->dims[1] * (uint64_t)rows;
 }
 
-/* Largest peel image over the axes this request peels. */
+/* Largest peel image of the x and y rays (layer set 0). */
 static uint64_t max_image(const peel_ctx *c, int rows)
 {
     uint64_t px = (uint64_t)c->dims[1] * (uint64_t)rows;
     if (c->naxes == 3) {
         uint64_t py = (uint64_t)rows * (uint64_t)c->dims[0];
-        uint64_t pz = (uint64_t)c->dims[0] * (uint64_t)c->dims[1];
         if (py > px) px = py;
-        if (pz > px) px = pz;
     }
     return px;
 }
 
+/* The z rays' image (robust only; layer set 1). */
+static uint64_t z_image(const peel_ctx *c)
+{
+    return c->naxes == 3 ? (uint64_t)c->dims[0] * (uint64_t)c->dims[1] : 0;
+}
+
+/* The layer arrays as first allocated. */
+static uint64_t first_layers(const peel_ctx *c, int rows)
+{
+    return layer_bytes(max_image(c, rows), first_cap(c)) + layer_bytes(z_image(c), first_cap(c));
+}
+
 /* Memory a slab height needs: CPU grid, mesh buffers, slab SSBOs, the pass
- * target and the first layer arrays. */
+ * targets and the first layer arrays. */
 static uint64_t estimate(const peel_ctx *c, int rows, int surface)
 {
     uint64_t b = vx_bitgrid_bytes(c->dims, 1);
     b += (uint64_t)c->m->nverts * 12u + (uint64_t)c->m->ntris * 12u;
     if (surface) return b + (uint64_t)c->m->ntris * 8u + slab_bytes(c, rows);
     b += slab_bytes(c, rows) * (uint64_t)c->naxes;
-    uint64_t px = max_image(c, rows);
-    return b + px * 8u + layer_bytes(px, first_cap(c));
+    return b + (max_image(c, rows) + z_image(c)) * 8u + first_layers(c, rows);
 }
 
 static int plan(peel_ctx *c, int surface)
@@ -748,8 +764,8 @@ static int plan(peel_ctx *c, int surface)
     if (need > c->limit) return too_big(c, need);
     c->rows = (int)rows;
     c->nslabs = (int)(((uint64_t)c->dims[2] + rows - 1) / rows);
-    c->max_pixels = max_image(c, c->rows);
-    c->fixed_bytes = need - (surface ? 0 : layer_bytes(c->max_pixels, first_cap(c)));
+    c->first_layers = surface ? 0 : first_layers(c, c->rows);
+    c->fixed_bytes = need - c->first_layers;
     return 0;
 }
 
@@ -847,17 +863,23 @@ int vx_voxelize_peel(vx_gl *gl, const vx_mesh *m, const vx_voxelize_desc *d, vx_
         }
         if (vx_gl_check(gl, "peel.ssbo", err)) goto done;
         const int mode = c.naxes == 3 ? VX_INSIDE_PARITY : (int)d->inside;
+        int nl[3] = {0, 0, 0};
         for (c.slab = 0; c.slab < c.nslabs; c.slab++) {
             int k0 = c.slab * c.rows, rows = c.dims[2] - k0 < c.rows ? c.dims[2] - k0 : c.rows;
             for (c.axis_i = 0; c.axis_i < c.naxes; c.axis_i++) {
-                int axis = c.axis_i, nl = 0;
+                int axis = c.axis_i;
                 /* x rays write whole words; y and z rays OR single bits. */
                 if (axis > 0)
                     glClearNamedBufferData(c.o.ssbo[axis], GL_R32UI, GL_RED_INTEGER,
                                            GL_UNSIGNED_INT, NULL);
-                if (peel(&c, axis, k0, rows, &nl)) goto done;
-                if (nl > st->layers) st->layers = nl;
-                if (fill(&c, axis, axis, mode, k0, rows, nl)) goto done;
+                /* z rays cross every slab: peeled once, their layers kept
+                 * (set 1) and filled slab by slab. */
+                layer_set *ls = &c.o.ls[axis == 2];
+                if (axis < 2 || c.slab == 0) {
+                    if (peel(&c, ls, axis, k0, rows, &nl[axis])) goto done;
+                    if (nl[axis] > st->layers) st->layers = nl[axis];
+                }
+                if (fill(&c, ls, axis, axis, mode, k0, rows, nl[axis])) goto done;
             }
             if (c.naxes == 3) {
                 uint64_t words = slab_bytes(&c, rows) / 4;
