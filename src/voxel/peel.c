@@ -26,14 +26,16 @@
  * pairing), robust (majority of parity along x, y and z; see below).
  *
  * Robust mode and where it fails: a hole in an open mesh spoils the parity
- * of the rays that pass through it, along one axis at a time. A voxel is
+ * of the rays that pass through it, along one axis at a time (crossings are
+ * counted from the centre towards +ray, as the reference does). A voxel is
  * still right when the rays along the other two axes are clean. It fails
- * where two of the three rays through a voxel meet holes: holes aligned
- * with two axes (a mesh missing a face of a box-like part: rays along both
- * in-plane axes of a missing cap leak), large missing regions (a bowl with
- * no lid: everything under the rim is inside for one axis only), or
- * several overlapping open shells. Meshes with self-intersections make
- * parity itself differ from the intended solid along all three axes.
+ * where the rays along two of the three axes through a voxel meet holes: a
+ * box-like part missing two faces with different normals (top and +x side:
+ * inside it, the z and the x rays both miss their exit, so 2 of 3 say
+ * outside); a large missing region that rays of two axes pass through (a
+ * sphere with a big cap cut off at 45 degrees to two axes); several
+ * overlapping open shells. Self-intersecting meshes make parity differ from
+ * the intended union along every axis (use nonzero for those).
  *
  * With several slabs, x and y rays draw only the triangles that reach the
  * slab (slab_buckets); z rays (robust) cross every slab: they are peeled
