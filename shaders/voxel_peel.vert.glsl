@@ -6,7 +6,7 @@
 layout(location = 0) in vec3 a_pos;
 layout(location = 0) uniform ivec3 u_axes;
 layout(location = 1) uniform vec4 u_ndc; // window x = p*u_ndc.x + u_ndc.y, y = p*u_ndc.z + u_ndc.w
-noperspective out float v_t;
+invariant noperspective out float v_t; // bit-identical in every pass
 invariant gl_Position;
 
 void main()

@@ -3,8 +3,6 @@
 // box the triangle touches, by the separating-axis triangle/box test
 // (Akenine-Moller 2001), one invocation per triangle of the list (the CPU
 // keeps the triangles whose work would be too large for one invocation).
-// Rows (j,k) of the triangle's bbox are walked, and in each row only the x
-// range where the box can touch the triangle's plane is tested.
 layout(local_size_x = 64) in;
 layout(std430, binding = 0) buffer Bits { uint bits[]; };
 layout(std430, binding = 1) readonly buffer Pos { float pos[]; };
@@ -49,24 +47,32 @@ void main()
     vec3 n = cross(b - a, c - b);
     float m = u_hs - 0.5;
     // voxel i (box [i, i+1]) can touch [lo, hi] when ceil(lo) - 1 <= i <= floor(hi)
-    ivec3 lo = ivec3(ceil(min(a, min(b, c)) - m)) - 1, hi = ivec3(floor(max(a, max(b, c)) + m));
+    // (clamped before int(): a vertex may lie far outside the grid)
+    vec3 gmax = vec3(u_grid.x, u_grid.y, u_k0 + u_grid.w) + 2.0;
+    ivec3 lo = ivec3(ceil(clamp(min(a, min(b, c)) - m, vec3(-2.0), gmax))) - 1;
+    ivec3 hi = ivec3(floor(clamp(max(a, max(b, c)) + m, vec3(-2.0), gmax)));
     lo = max(lo, ivec3(0, 0, u_k0));
     hi = min(hi, ivec3(u_grid.x - 1, u_grid.y - 1, u_k0 + u_grid.w - 1));
-    float r = u_hs * (abs(n.x) + abs(n.y) + abs(n.z)), d = dot(n, a);
-    for (int k = lo.z; k <= hi.z; k++)
-        for (int j = lo.y; j <= hi.y; j++) {
-            int i0 = lo.x, i1 = hi.x;
-            if (abs(n.x) > 1e-6 * (abs(n.y) + abs(n.z))) {
-                // |n.c - d| <= r with c.x = i + 0.5, widened by one voxel for rounding
-                float rest = n.y * (float(j) + 0.5) + n.z * (float(k) + 0.5);
-                float x0 = (d - rest - r) / n.x, x1 = (d - rest + r) / n.x;
-                float g = float(u_grid.x) + 2.0; // clamp first: n.x may be tiny
-                i0 = max(i0, int(floor(clamp(min(x0, x1) - 0.5, -2.0, g))) - 1);
-                i1 = min(i1, int(ceil(clamp(max(x0, x1) - 0.5, -2.0, g))) + 1);
+    // Walk rows across the two axes other than the one the normal is
+    // closest to; along that one only the voxels near the plane (widened by
+    // one voxel for rounding). The CPU path in peel.c does the same.
+    int d = abs(n.x) >= abs(n.y) ? (abs(n.x) >= abs(n.z) ? 0 : 2) : (abs(n.y) >= abs(n.z) ? 1 : 2);
+    int a1 = (d + 1) % 3, a2 = (d + 2) % 3;
+    float rad = u_hs * (abs(n.x) + abs(n.y) + abs(n.z)), dd = dot(n, a);
+    ivec3 r;
+    for (r[a2] = lo[a2]; r[a2] <= hi[a2]; r[a2]++)
+        for (r[a1] = lo[a1]; r[a1] <= hi[a1]; r[a1]++) {
+            int t0 = lo[d], t1 = hi[d];
+            if (n[d] != 0.0) {
+                float rest = n[a1] * (float(r[a1]) + 0.5) + n[a2] * (float(r[a2]) + 0.5);
+                float x0 = (dd - rest - rad) / n[d], x1 = (dd - rest + rad) / n[d];
+                float l = float(lo[d]) - 2.0, h = float(hi[d]) + 2.0;
+                t0 = max(t0, int(floor(clamp(min(x0, x1) - 0.5, l, h))) - 1);
+                t1 = min(t1, int(ceil(clamp(max(x0, x1) - 0.5, l, h))) + 1);
             }
-            for (int i = i0; i <= i1; i++)
-                if (tri_box(vec3(i, j, k) + 0.5, a, b, c, n))
-                    atomicOr(bits[((k - u_k0) * u_grid.y + j) * u_grid.z + (i >> 5)],
-                             1u << (i & 31));
+            for (r[d] = t0; r[d] <= t1; r[d]++)
+                if (tri_box(vec3(r) + 0.5, a, b, c, n))
+                    atomicOr(bits[((r.z - u_k0) * u_grid.y + r.y) * u_grid.z + (r.x >> 5)],
+                             1u << (r.x & 31));
         }
 }

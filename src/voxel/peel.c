@@ -26,14 +26,21 @@
  * pairing), robust (majority of parity along x, y and z; see below).
  *
  * Robust mode and where it fails: a hole in an open mesh spoils the parity
- * of the rays that pass through it, along one axis at a time. A voxel is
+ * of the rays that pass through it, along one axis at a time (crossings are
+ * counted from the centre towards +ray, as the reference does). A voxel is
  * still right when the rays along the other two axes are clean. It fails
- * where two of the three rays through a voxel meet holes: holes aligned
- * with two axes (a mesh missing a face of a box-like part: rays along both
- * in-plane axes of a missing cap leak), large missing regions (a bowl with
- * no lid: everything under the rim is inside for one axis only), or
- * several overlapping open shells. Meshes with self-intersections make
- * parity itself differ from the intended solid along all three axes.
+ * where the rays along two of the three axes through a voxel meet holes: a
+ * box-like part missing two faces with different normals (top and +x side:
+ * inside it, the z and the x rays both miss their exit, so 2 of 3 say
+ * outside); a large missing region that rays of two axes pass through (a
+ * sphere with a big cap cut off at 45 degrees to two axes); several
+ * overlapping open shells. Self-intersecting meshes make parity differ from
+ * the intended union along every axis (use nonzero for those).
+ *
+ * With several slabs, x and y rays draw only the triangles that reach the
+ * slab (slab_buckets); z rays (robust) cross every slab: they are peeled
+ * once over the whole grid and their layers kept for the fill of each
+ * slab.
  *
  * Known limits: parts thinner than the voxel spacing between two centres
  * vanish (seed 000 §3; use fill=surface to catch them); a mesh that
@@ -53,15 +60,21 @@
 #define SURF_GPU_WORK 16384       /* voxel tests one GPU invocation may take */
 #define SURF_MARGIN 1e-4          /* grid units the boxes grow by: float rounding */
 
+/* A peel image: the pass target and the layer arrays. */
+typedef struct layer_set {
+    GLuint fbo, depth_rb, cur; /* the pass's target: R32F colour + 32F depth */
+    GLuint layers, counts;     /* R32F / R32UI arrays of cap layers */
+    int w, h, cap;
+} layer_set;
+
 /* Every GL object one call creates, so every exit path deletes the same set
  * (names of 0 are ignored by glDelete*). */
 typedef struct peel_objs {
     GLuint vbo, ibo, vao;
-    GLuint fbo, depth_rb, cur; /* the pass's target: R32F colour + 32F depth */
-    GLuint layers, counts;     /* R32F / R32UI arrays of cap layers */
-    int w, h, cap;
+    layer_set ls[2]; /* x and y rays; z rays (robust: peeled once, filled per slab) */
     GLuint ssbo[3];
-    GLuint list; /* surface: the triangles the GPU takes */
+    GLuint list;     /* surface: the triangles the GPU takes */
+    GLuint ibo_slab; /* several slabs: triangles grouped by the slabs they reach */
     GLuint query;
 } peel_objs;
 
@@ -77,12 +90,14 @@ typedef struct peel_ctx {
     size_t wx;
     double tlo[3], thi[3]; /* mesh bbox in grid units */
     uint64_t fixed_bytes;  /* everything but the layer arrays */
+    uint64_t first_layers; /* the layer arrays as first allocated */
+    uint64_t layers_now;   /* the layer arrays as allocated now */
     uint64_t limit;        /* max_memory, or UINT64_MAX */
-    uint64_t max_pixels;   /* largest peel image over the axes */
     peel_objs o;
     int slab, axis_i; /* for progress */
     size_t ncpu_tris;
     uint32_t *cpu_tris; /* surface: triangles too large for one invocation */
+    size_t *slab_first; /* with o.ibo_slab: first triangle of each slab, nslabs + 1 */
 } peel_ctx;
 
 static double now_ms(void)
@@ -92,7 +107,7 @@ static double now_ms(void)
     return (double)ts.tv_sec * 1e3 + (double)ts.tv_nsec / 1e6;
 }
 
-static void layers_free(peel_objs *o)
+static void layers_free(layer_set *o)
 {
     GLuint t[3] = {o->cur, o->layers, o->counts};
     glDeleteTextures(3, t);
@@ -104,9 +119,10 @@ static void layers_free(peel_objs *o)
 
 static void objs_free(peel_objs *o)
 {
-    layers_free(o);
-    GLuint b[6] = {o->vbo, o->ibo, o->ssbo[0], o->ssbo[1], o->ssbo[2], o->list};
-    glDeleteBuffers(6, b);
+    layers_free(&o->ls[0]);
+    layers_free(&o->ls[1]);
+    GLuint b[7] = {o->vbo, o->ibo, o->ssbo[0], o->ssbo[1], o->ssbo[2], o->list, o->ibo_slab};
+    glDeleteBuffers(7, b);
     glDeleteVertexArrays(1, &o->vao);
     glDeleteQueries(1, &o->query);
     memset(o, 0, sizeof *o);
@@ -225,15 +241,14 @@ static uint64_t layer_bytes(uint64_t pixels, int cap)
 /* Grows the layer arrays to hold at least `need` layers (doubling), keeping
  * the first `keep`. Checks max_memory first: old and new live together
  * while the old layers are copied. */
-static int grow(peel_ctx *c, int need, int keep)
+static int grow(peel_ctx *c, layer_set *o, int need, int keep)
 {
-    peel_objs *o = &c->o;
     int cap = o->cap ? o->cap : first_cap(c);
     while (cap < need)
         cap *= 2;
     if (cap > c->max_layers + 1) cap = c->max_layers + 1;
     uint64_t px = (uint64_t)o->w * (uint64_t)o->h;
-    uint64_t total = c->fixed_bytes + layer_bytes(px, o->cap) + layer_bytes(px, cap);
+    uint64_t total = c->fixed_bytes + c->layers_now + layer_bytes(px, cap);
     if (total > c->limit) return too_big(c, total);
     GLint max_layers = 0;
     glGetIntegerv(GL_MAX_ARRAY_TEXTURE_LAYERS, &max_layers);
@@ -245,6 +260,8 @@ static int grow(peel_ctx *c, int need, int keep)
     GLuint nl = new_array(GL_R32F, o->w, o->h, cap), nc = new_array(GL_R32UI, o->w, o->h, cap);
     glClearTexImage(nc, 0, GL_RED_INTEGER, GL_UNSIGNED_INT, NULL);
     if (keep > 0) {
+        /* The last pass's image atomics must land before the copy. */
+        glMemoryBarrier(GL_ALL_BARRIER_BITS);
         glCopyImageSubData(o->layers, GL_TEXTURE_2D_ARRAY, 0, 0, 0, 0, nl, GL_TEXTURE_2D_ARRAY, 0,
                            0, 0, 0, o->w, o->h, keep);
         glCopyImageSubData(o->counts, GL_TEXTURE_2D_ARRAY, 0, 0, 0, 0, nc, GL_TEXTURE_2D_ARRAY, 0,
@@ -254,16 +271,17 @@ static int grow(peel_ctx *c, int need, int keep)
     glDeleteTextures(2, old);
     o->layers = nl;
     o->counts = nc;
+    c->layers_now += layer_bytes(px, cap) - layer_bytes(px, o->cap);
     o->cap = cap;
     return vx_gl_check(c->gl, "peel.layers", c->err);
 }
 
 /* The pass target and the layer arrays for a w x h image (kept while the
  * size stays the same: slabs of one size share them). */
-static int targets(peel_ctx *c, int w, int h)
+static int targets(peel_ctx *c, layer_set *o, int w, int h)
 {
-    peel_objs *o = &c->o;
     if (o->fbo && o->w == w && o->h == h) return 0;
+    c->layers_now -= layer_bytes((uint64_t)o->w * (uint64_t)o->h, o->cap);
     layers_free(o);
     o->w = w;
     o->h = h;
@@ -279,18 +297,83 @@ static int targets(peel_ctx *c, int w, int h)
     if (stt != GL_FRAMEBUFFER_COMPLETE)
         return vx_err_set(c->err, VX_EGPU, "gl_error",
                           "peel framebuffer %dx%d is incomplete (0x%x)", w, h, stt);
-    return grow(c, 1, 0);
+    return grow(c, o, 1, 0);
 }
 
-static void draw_mesh(const vx_mesh *m)
+/* Draws triangles [first, first + n) of the bound element buffer. */
+static void draw_tris(size_t first, size_t n)
 {
-    /* glDrawElements counts in GLsizei: split meshes beyond 2^31 indices. */
-    const size_t nidx = 3 * m->ntris, step = (size_t)3 << 28;
-    for (size_t first = 0; first < nidx; first += step) {
-        size_t count = nidx - first < step ? nidx - first : step;
-        glDrawElements(GL_TRIANGLES, (GLsizei)count, GL_UNSIGNED_INT,
-                       (const void *)(uintptr_t)(first * sizeof(uint32_t)));
+    /* glDrawElements counts in GLsizei: split beyond 2^31 indices. */
+    const size_t step = (size_t)1 << 28;
+    for (size_t t = 0; t < n; t += step) {
+        size_t count = n - t < step ? n - t : step;
+        glDrawElements(GL_TRIANGLES, (GLsizei)(3 * count), GL_UNSIGNED_INT,
+                       (const void *)(uintptr_t)((first + t) * 3 * sizeof(uint32_t)));
     }
+}
+
+/* Triangle t's voxel rows along z in grid units, widened by one. */
+static void tri_zrange(const peel_ctx *c, size_t t, double *lo, double *hi)
+{
+    const vx_grid *g = &c->d->grid;
+    *lo = INFINITY;
+    *hi = -INFINITY;
+    for (int v = 0; v < 3; v++) {
+        double z = (c->m->pos[3 * (size_t)c->m->tri[3 * t + v] + 2] - g->origin[2]) / g->h;
+        *lo = fmin(*lo, z);
+        *hi = fmax(*hi, z);
+    }
+    *lo = floor(*lo) - 1;
+    *hi = ceil(*hi) + 1;
+}
+
+/* With several slabs, x and y rays need only the triangles that reach the
+ * slab's rows: an element buffer with the triangles grouped by slab (one
+ * reaching several slabs is repeated) saves drawing the whole mesh in every
+ * pass of every slab. Skipped (whole mesh per slab) when the copies would
+ * not fit max_memory. */
+static int slab_buckets(peel_ctx *c)
+{
+    if (c->nslabs < 2 || c->m->ntris == 0) return 0;
+    size_t *first = calloc((size_t)c->nslabs + 1, sizeof *first);
+    if (!first) return vx_err_set(c->err, VX_EINTERNAL, "out_of_memory", "no memory for slabs");
+    for (size_t t = 0; t < c->m->ntris; t++) {
+        double lo, hi;
+        tri_zrange(c, t, &lo, &hi);
+        for (int s = 0; s < c->nslabs; s++) {
+            double k0 = (double)s * c->rows, k1 = k0 + c->rows;
+            if (hi >= k0 && lo <= k1) first[s + 1]++;
+        }
+    }
+    for (int s = 0; s < c->nslabs; s++)
+        first[s + 1] += first[s];
+    uint64_t bytes = (uint64_t)first[c->nslabs] * 12u;
+    if (c->fixed_bytes + bytes + c->first_layers > c->limit) {
+        free(first);
+        return 0;
+    }
+    uint32_t *idx = malloc(bytes + 4);
+    size_t *fill = malloc(((size_t)c->nslabs + 1) * sizeof *fill);
+    if (!idx || !fill) {
+        free(first), free(idx), free(fill);
+        return vx_err_set(c->err, VX_EINTERNAL, "out_of_memory", "no memory for slabs");
+    }
+    memcpy(fill, first, ((size_t)c->nslabs + 1) * sizeof *fill);
+    for (size_t t = 0; t < c->m->ntris; t++) {
+        double lo, hi;
+        tri_zrange(c, t, &lo, &hi);
+        for (int s = 0; s < c->nslabs; s++) {
+            double k0 = (double)s * c->rows, k1 = k0 + c->rows;
+            if (hi >= k0 && lo <= k1) memcpy(idx + 3 * fill[s]++, c->m->tri + 3 * t, 12);
+        }
+    }
+    free(fill);
+    glCreateBuffers(1, &c->o.ibo_slab);
+    glNamedBufferStorage(c->o.ibo_slab, (GLsizeiptr)(bytes + 4), idx, 0);
+    free(idx);
+    c->fixed_bytes += bytes;
+    c->slab_first = first;
+    return vx_gl_check(c->gl, "peel.slab_index", c->err);
 }
 
 /* Extent and first index of grid axis a in the slab's image. */
@@ -301,13 +384,13 @@ static int slab_ext(const peel_ctx *c, int a, int k0, int rows, int *off)
 }
 
 /* Peels the mesh along `axis` for the slab; returns the layer count. */
-static int peel(peel_ctx *c, int axis, int k0, int rows, int *nlayers)
+static int peel(peel_ctx *c, layer_set *o, int axis, int k0, int rows, int *nlayers)
 {
-    peel_objs *o = &c->o;
+    peel_objs *po = &c->o;
     int ua = (axis + 1) % 3, va = (axis + 2) % 3, uoff, voff;
     int w = slab_ext(c, ua, k0, rows, &uoff), h = slab_ext(c, va, k0, rows, &voff);
     *nlayers = 0;
-    if (targets(c, w, h)) return -1;
+    if (targets(c, o, w, h)) return -1;
     glClearTexImage(o->counts, 0, GL_RED_INTEGER, GL_UNSIGNED_INT, NULL);
     if (c->m->ntris == 0) return vx_gl_check(c->gl, "peel.clear", c->err);
 
@@ -342,12 +425,20 @@ static int peel(peel_ctx *c, int axis, int k0, int rows, int *nlayers)
     glDepthMask(GL_TRUE);
     glColorMask(GL_TRUE, GL_TRUE, GL_TRUE, GL_TRUE);
     glUseProgram(p);
-    glBindVertexArray(o->vao);
+    glBindVertexArray(po->vao);
+    /* z rays cross every slab: they need the whole mesh */
+    size_t first = 0, ntri = c->m->ntris;
+    if (c->slab_first && axis != 2) {
+        first = c->slab_first[c->slab];
+        ntri = c->slab_first[c->slab + 1] - first;
+    }
+    glVertexArrayElementBuffer(po->vao, c->slab_first && axis != 2 ? po->ibo_slab : po->ibo);
 
     int rc = -1, L;
-    const float none = PEEL_NONE, one = 1.0f;
+    /* GL_COLOR clears read four values even for a one-channel target. */
+    const float none[4] = {PEEL_NONE, PEEL_NONE, PEEL_NONE, PEEL_NONE}, one = 1.0f;
     for (L = 0;; L++) {
-        glClearNamedFramebufferfv(o->fbo, GL_COLOR, 0, &none);
+        glClearNamedFramebufferfv(o->fbo, GL_COLOR, 0, none);
         glClearNamedFramebufferfv(o->fbo, GL_DEPTH, 0, &one);
         /* Begun after the clear (see preview/render.c: llvmpipe's timer). */
         vx_gl_timer t;
@@ -355,13 +446,13 @@ static int peel(peel_ctx *c, int axis, int k0, int rows, int *nlayers)
         glBindTextureUnit(0, o->layers);
         glBindImageTexture(0, o->counts, 0, GL_TRUE, 0, GL_READ_WRITE, GL_R32UI);
         glProgramUniform1i(p, 2, L - 1);
-        glBeginQuery(GL_ANY_SAMPLES_PASSED, o->query);
-        draw_mesh(c->m);
+        glBeginQuery(GL_ANY_SAMPLES_PASSED, po->query);
+        draw_tris(first, ntri);
         glEndQuery(GL_ANY_SAMPLES_PASSED);
         GLuint passed = 0;
-        glGetQueryObjectuiv(o->query, GL_QUERY_RESULT, &passed);
+        glGetQueryObjectuiv(po->query, GL_QUERY_RESULT, &passed);
         if (passed && L < c->max_layers) {
-            if (L >= o->cap && grow(c, L + 1, L)) {
+            if (L >= o->cap && grow(c, o, L + 1, L)) {
                 vx_gl_timer_end_ms(&t);
                 goto done;
             }
@@ -392,9 +483,9 @@ done:
 }
 
 /* Fills the slab's bits for the layers peeled along `axis` into ssbo[slot]. */
-static int fill(peel_ctx *c, int axis, int slot, int mode, int k0, int rows, int nlayers)
+static int fill(peel_ctx *c, const layer_set *o, int axis, int slot, int mode, int k0, int rows,
+                int nlayers)
 {
-    peel_objs *o = &c->o;
     GLuint p = c->prog_fill;
     glProgramUniform2i(p, 0, o->w, o->h);
     glProgramUniform1i(p, 1, nlayers);
@@ -409,7 +500,7 @@ static int fill(peel_ctx *c, int axis, int slot, int mode, int k0, int rows, int
     glUseProgram(p);
     glBindTextureUnit(0, o->layers);
     glBindTextureUnit(1, o->counts);
-    glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 0, o->ssbo[slot]);
+    glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 0, c->o.ssbo[slot]);
     dispatch_2d((uint64_t)o->w * (uint64_t)o->h);
     glMemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT | GL_BUFFER_UPDATE_BARRIER_BIT);
     c->st->gpu_fill_ms += timer_end_compute(&t);
@@ -483,25 +574,40 @@ static int tri_setup(const peel_ctx *c, size_t t, double v[3][3], double n[3], i
     return 1;
 }
 
-/* Voxel range [i0, i1] of row (j, k) where the box can touch the plane. */
-static void plane_range(const double v0[3], const double n[3], double hs, int j, int k, int *i0,
-                        int *i1)
+/* Axis the triangle's normal is closest to: rows are walked across the
+ * other two axes and, along this one, only the few voxels near the plane
+ * are tested (at most ~6 per row), so the work follows the triangle's area
+ * whatever its orientation. */
+static int dominant(const double n[3])
 {
-    if (!(fabs(n[0]) > 1e-6 * (fabs(n[1]) + fabs(n[2])))) return;
-    double r = hs * (fabs(n[0]) + fabs(n[1]) + fabs(n[2]));
-    double d = n[0] * v0[0] + n[1] * v0[1] + n[2] * v0[2];
-    double rest = n[1] * (j + 0.5) + n[2] * (k + 0.5);
-    double x0 = (d - rest - r) / n[0], x1 = (d - rest + r) / n[0];
-    double a = fmax(floor(fmin(x0, x1) - 0.5) - 1, *i0),
-           b = fmin(ceil(fmax(x0, x1) - 0.5) + 1, *i1);
-    *i0 = (int)a;
-    *i1 = (int)b;
+    int d = 0;
+    for (int a = 1; a < 3; a++)
+        if (fabs(n[a]) > fabs(n[d])) d = a;
+    return d;
+}
+
+/* Voxel range [*t0, *t1] along axis d, in the row whose other two voxel
+ * coordinates are in r (r[d] ignored), where a box can touch the plane;
+ * widened by one voxel for rounding. */
+static void plane_range(const double v0[3], const double n[3], double hs, int d, const int r[3],
+                        int *t0, int *t1)
+{
+    if (n[d] == 0) return; /* degenerate triangle: the whole bbox */
+    double rad = hs * (fabs(n[0]) + fabs(n[1]) + fabs(n[2]));
+    double dd = n[0] * v0[0] + n[1] * v0[1] + n[2] * v0[2], rest = 0;
+    for (int a = 0; a < 3; a++)
+        if (a != d) rest += n[a] * (r[a] + 0.5);
+    double x0 = (dd - rest - rad) / n[d], x1 = (dd - rest + rad) / n[d];
+    double a = fmax(floor(fmin(x0, x1) - 0.5) - 1, *t0),
+           b = fmin(ceil(fmax(x0, x1) - 0.5) + 1, *t1);
+    *t0 = (int)a;
+    *t1 = (int)b;
 }
 
 /* Splits the triangles: the GPU takes those whose tests fit one invocation
  * (SURF_GPU_WORK), the CPU the rest (a huge triangle on a big grid would
- * otherwise keep one invocation busy for seconds; the CPU walks only the
- * rows of its bbox and, in each, the x range near its plane). */
+ * otherwise keep one invocation busy for seconds; the CPU walks the same
+ * rows as the shader). */
 static int surface_lists(peel_ctx *c, uint32_t **gpu, size_t *ngpu)
 {
     const vx_mesh *m = c->m;
@@ -515,13 +621,10 @@ static int surface_lists(peel_ctx *c, uint32_t **gpu, size_t *ngpu)
         double v[3][3], n[3];
         int lo[3], hi[3];
         if (!tri_setup(c, t, v, n, lo, hi)) continue;
-        double rows = (double)(hi[1] - lo[1] + 1) * (hi[2] - lo[2] + 1);
-        double xw = hi[0] - lo[0] + 1;
-        if (fabs(n[0]) > 1e-6 * (fabs(n[1]) + fabs(n[2]))) {
-            double pw = (2 * fabs(n[1]) + 2 * fabs(n[2]) + fabs(n[0])) / fabs(n[0]) + 4;
-            if (pw < xw) xw = pw;
-        }
-        if (rows * xw <= SURF_GPU_WORK)
+        int d = dominant(n), a1 = (d + 1) % 3, a2 = (d + 2) % 3;
+        double rows = (double)(hi[a1] - lo[a1] + 1) * (hi[a2] - lo[a2] + 1);
+        double along = n[d] != 0 ? fmin(hi[d] - lo[d] + 1, 6) : hi[d] - lo[d] + 1;
+        if (rows * along <= SURF_GPU_WORK)
             (*gpu)[(*ngpu)++] = (uint32_t)t;
         else
             c->cpu_tris[c->ncpu_tris++] = (uint32_t)t;
@@ -535,18 +638,19 @@ static void surface_cpu(peel_ctx *c)
     uint32_t *bits = c->out->bits;
     for (size_t q = 0; q < c->ncpu_tris; q++) {
         double v[3][3], n[3], ctr[3];
-        int lo[3], hi[3];
+        int lo[3], hi[3], r[3];
         if (!tri_setup(c, c->cpu_tris[q], v, n, lo, hi)) continue;
-        for (int k = lo[2]; k <= hi[2]; k++)
-            for (int j = lo[1]; j <= hi[1]; j++) {
-                int i0 = lo[0], i1 = hi[0];
-                plane_range(v[0], n, hs, j, k, &i0, &i1);
-                ctr[1] = j + 0.5;
-                ctr[2] = k + 0.5;
-                for (int i = i0; i <= i1; i++) {
-                    ctr[0] = i + 0.5;
+        int d = dominant(n), a1 = (d + 1) % 3, a2 = (d + 2) % 3;
+        for (r[a2] = lo[a2]; r[a2] <= hi[a2]; r[a2]++)
+            for (r[a1] = lo[a1]; r[a1] <= hi[a1]; r[a1]++) {
+                int t0 = lo[d], t1 = hi[d];
+                plane_range(v[0], n, hs, d, r, &t0, &t1);
+                for (r[d] = t0; r[d] <= t1; r[d]++) {
+                    for (int a = 0; a < 3; a++)
+                        ctr[a] = r[a] + 0.5;
                     if (tri_box(ctr, v, n, hs))
-                        bits[((size_t)k * c->dims[1] + j) * c->wx + (i >> 5)] |= 1u << (i & 31);
+                        bits[((size_t)r[2] * c->dims[1] + r[1]) * c->wx + (r[0] >> 5)] |=
+                            1u << (r[0] & 31);
                 }
             }
     }
@@ -585,29 +689,38 @@ static uint64_t slab_bytes(const peel_ctx *c, int rows)
     return (uint64_t)c->wx * 4u * (uint64_t)c->dims[1] * (uint64_t)rows;
 }
 
-/* Largest peel image over the axes this request peels. */
+/* Largest peel image of the x and y rays (layer set 0). */
 static uint64_t max_image(const peel_ctx *c, int rows)
 {
     uint64_t px = (uint64_t)c->dims[1] * (uint64_t)rows;
     if (c->naxes == 3) {
         uint64_t py = (uint64_t)rows * (uint64_t)c->dims[0];
-        uint64_t pz = (uint64_t)c->dims[0] * (uint64_t)c->dims[1];
         if (py > px) px = py;
-        if (pz > px) px = pz;
     }
     return px;
 }
 
+/* The z rays' image (robust only; layer set 1). */
+static uint64_t z_image(const peel_ctx *c)
+{
+    return c->naxes == 3 ? (uint64_t)c->dims[0] * (uint64_t)c->dims[1] : 0;
+}
+
+/* The layer arrays as first allocated. */
+static uint64_t first_layers(const peel_ctx *c, int rows)
+{
+    return layer_bytes(max_image(c, rows), first_cap(c)) + layer_bytes(z_image(c), first_cap(c));
+}
+
 /* Memory a slab height needs: CPU grid, mesh buffers, slab SSBOs, the pass
- * target and the first layer arrays. */
+ * targets and the first layer arrays. */
 static uint64_t estimate(const peel_ctx *c, int rows, int surface)
 {
     uint64_t b = vx_bitgrid_bytes(c->dims, 1);
     b += (uint64_t)c->m->nverts * 12u + (uint64_t)c->m->ntris * 12u;
     if (surface) return b + (uint64_t)c->m->ntris * 8u + slab_bytes(c, rows);
     b += slab_bytes(c, rows) * (uint64_t)c->naxes;
-    uint64_t px = max_image(c, rows);
-    return b + px * 8u + layer_bytes(px, first_cap(c));
+    return b + (max_image(c, rows) + z_image(c)) * 8u + first_layers(c, rows);
 }
 
 static int plan(peel_ctx *c, int surface)
@@ -653,7 +766,8 @@ static int plan(peel_ctx *c, int surface)
     if (need > c->limit) return too_big(c, need);
     c->rows = (int)rows;
     c->nslabs = (int)(((uint64_t)c->dims[2] + rows - 1) / rows);
-    c->fixed_bytes = need - (surface ? 0 : layer_bytes(max_image(c, c->rows), first_cap(c)));
+    c->first_layers = surface ? 0 : first_layers(c, c->rows);
+    c->fixed_bytes = need - c->first_layers;
     return 0;
 }
 
@@ -741,6 +855,7 @@ int vx_voxelize_peel(vx_gl *gl, const vx_mesh *m, const vx_voxelize_desc *d, vx_
         }
         surface_cpu(&c);
     } else {
+        if (slab_buckets(&c)) goto done;
         glFinish(); /* so upload_ms is the upload, not just its queueing */
         st->upload_ms = now_ms() - t0;
         for (int s = 0; s < c.naxes; s++) {
@@ -750,17 +865,23 @@ int vx_voxelize_peel(vx_gl *gl, const vx_mesh *m, const vx_voxelize_desc *d, vx_
         }
         if (vx_gl_check(gl, "peel.ssbo", err)) goto done;
         const int mode = c.naxes == 3 ? VX_INSIDE_PARITY : (int)d->inside;
+        int nl[3] = {0, 0, 0};
         for (c.slab = 0; c.slab < c.nslabs; c.slab++) {
             int k0 = c.slab * c.rows, rows = c.dims[2] - k0 < c.rows ? c.dims[2] - k0 : c.rows;
             for (c.axis_i = 0; c.axis_i < c.naxes; c.axis_i++) {
-                int axis = c.axis_i, nl = 0;
+                int axis = c.axis_i;
                 /* x rays write whole words; y and z rays OR single bits. */
                 if (axis > 0)
                     glClearNamedBufferData(c.o.ssbo[axis], GL_R32UI, GL_RED_INTEGER,
                                            GL_UNSIGNED_INT, NULL);
-                if (peel(&c, axis, k0, rows, &nl)) goto done;
-                if (nl > st->layers) st->layers = nl;
-                if (fill(&c, axis, axis, mode, k0, rows, nl)) goto done;
+                /* z rays cross every slab: peeled once, their layers kept
+                 * (set 1) and filled slab by slab. */
+                layer_set *ls = &c.o.ls[axis == 2];
+                if (axis < 2 || c.slab == 0) {
+                    if (peel(&c, ls, axis, k0, rows, &nl[axis])) goto done;
+                    if (nl[axis] > st->layers) st->layers = nl[axis];
+                }
+                if (fill(&c, ls, axis, axis, mode, k0, rows, nl[axis])) goto done;
             }
             if (c.naxes == 3) {
                 uint64_t words = slab_bytes(&c, rows) / 4;
@@ -791,6 +912,7 @@ int vx_voxelize_peel(vx_gl *gl, const vx_mesh *m, const vx_voxelize_desc *d, vx_
 done:
     free(gpu_list);
     free(c.cpu_tris);
+    free(c.slab_first);
     objs_free(&c.o);
     if (rc) vx_bitgrid_free(out);
     return rc;

@@ -87,9 +87,17 @@ int vx_grid_from_resolution(const vx_mesh *m, int resolution, int padding, vx_gr
 /* Grid of voxel edge h covering the bbox plus padding. */
 int vx_grid_from_voxel_size(const vx_mesh *m, double h, int padding, vx_grid *out, vx_err *err);
 
-/* Voxelizes m into out (allocated here; free with vx_bitgrid_free). GL thread. */
+/* Voxelizes m into out (allocated here; free with vx_bitgrid_free). GL thread.
+ * Validates d (VX_EUNPROC invalid_params), then auto runs slice when
+ * supersample is 2 (peeling has no supersampling), else peel; st->method
+ * says which ran. */
 int vx_voxelize(vx_gl *gl, const vx_mesh *m, const vx_voxelize_desc *d, vx_bitgrid *out,
                 vx_voxelize_stats *st, vx_err *err);
+/* Depth peeling along x (src/voxel/peel.c); also runs fill=surface (GPU
+ * triangle/box tests). Takes d as given (vx_voxelize validates and fills
+ * defaults); supersample is ignored. Errors: VX_ETOOBIG job_memory_limit
+ * (max_memory), grid_too_large (GPU limits), VX_EUNPROC too_many_layers
+ * (max_layers), VX_EGPU, or the progress hook's own. */
 int vx_voxelize_peel(vx_gl *gl, const vx_mesh *m, const vx_voxelize_desc *d, vx_bitgrid *out,
                      vx_voxelize_stats *st, vx_err *err);
 int vx_voxelize_slice(vx_gl *gl, const vx_mesh *m, const vx_voxelize_desc *d, vx_bitgrid *out,

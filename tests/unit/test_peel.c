@@ -379,6 +379,89 @@ static void test_overlapping_spheres(void **state)
     vx_mesh_free(m);
 }
 
+static void test_coincident_faces(void **state)
+{
+    /* Two boxes touching face to face: at x = 1 two crossings share one
+     * depth. Peeling keeps one fragment per depth; the per-layer counts
+     * must still see both, or the second box would come out empty. */
+    vx_mesh *parts[2] = {box((double[]){0, 0, 0}, (double[]){1, 1, 1}),
+                         box((double[]){1, 0, 0}, (double[]){2, 1, 1})};
+    vx_mesh *m = merge(parts, 2);
+    vx_voxelize_desc d = {.grid = {{0, 0, 0}, 0.125, {16, 8, 8}}};
+    vx_bitgrid b;
+    vx_voxelize_stats st;
+    for (int rule = VX_INSIDE_NONZERO; rule <= VX_INSIDE_ROBUST; rule++) {
+        d.inside = (vx_inside)rule;
+        run_peel(m, &d, &b, &st);
+        assert_int_equal(vx_bitgrid_count(&b), 1024);
+        vx_bitgrid_free(&b);
+    }
+    vx_mesh_free(m);
+    /* The same box twice: winding 2 inside (nonzero: solid), four crossings
+     * per ray (parity: empty), as the reference says. */
+    vx_mesh_free(parts[1]);
+    parts[1] = box((double[]){0, 0, 0}, (double[]){1, 1, 1});
+    m = merge(parts, 2);
+    d.grid.dims[0] = 8;
+    d.inside = VX_INSIDE_NONZERO;
+    run_peel(m, &d, &b, &st);
+    assert_int_equal(vx_bitgrid_count(&b), 512);
+    vx_bitgrid_free(&b);
+    d.inside = VX_INSIDE_PARITY;
+    run_peel(m, &d, &b, &st);
+    assert_int_equal(vx_bitgrid_count(&b), 0);
+    vx_bitgrid_free(&b);
+    vx_mesh_free(m);
+    for (int i = 0; i < 2; i++)
+        vx_mesh_free(parts[i]);
+}
+
+static void test_grid_cuts_mesh(void **state)
+{
+    /* A grid over part of a sphere (the mesh reaches outside it along every
+     * axis, also below the grid along the rays): crossings outside the grid
+     * still count. */
+    vx_mesh *m = sphere(0, 0, 0, 1, 0);
+    vx_voxelize_desc d = {.grid = {{-0.3, -0.75, -1.1}, 1.0 / 32, {40, 30, 50}}};
+    for (int rule = VX_INSIDE_NONZERO; rule <= VX_INSIDE_PARITY; rule++) {
+        d.inside = (vx_inside)rule;
+        vx_bitgrid b;
+        vx_voxelize_stats st;
+        run_peel(m, &d, &b, &st);
+        double iou;
+        compare_ref(rule ? "cut sphere parity" : "cut sphere nonzero", m, &d.grid, (vx_inside)rule,
+                    &b, &iou);
+        assert_true(iou >= 0.999);
+        vx_bitgrid_free(&b);
+    }
+    /* degenerate grids: one voxel thick along each axis in turn */
+    for (int a = 0; a < 3; a++) {
+        vx_voxelize_desc d1 = {.grid = {{-0.9, -0.9, -0.9}, 1.0 / 16, {29, 29, 29}}};
+        d1.grid.dims[a] = 1;
+        d1.grid.origin[a] = -0.03;
+        for (int rule = VX_INSIDE_NONZERO; rule <= VX_INSIDE_ROBUST; rule++) {
+            d1.inside = (vx_inside)rule;
+            vx_bitgrid b;
+            vx_voxelize_stats st;
+            run_peel(m, &d1, &b, &st);
+            double iou;
+            compare_ref("one voxel thick", m, &d1.grid, VX_INSIDE_NONZERO, &b, &iou);
+            assert_true(iou >= 0.99);
+            vx_bitgrid_free(&b);
+        }
+    }
+    vx_mesh_free(m);
+    /* no triangles at all: an empty grid */
+    vx_mesh *e = vx_mesh_new();
+    vx_bitgrid b;
+    vx_voxelize_stats st;
+    run_peel(e, &d, &b, &st);
+    assert_int_equal(vx_bitgrid_count(&b), 0);
+    assert_int_equal(st.layers, 0);
+    vx_bitgrid_free(&b);
+    vx_mesh_free(e);
+}
+
 static void test_real_meshes_256(void **state)
 {
     const char *names[] = {"spot_triangulated.obj", "fandisk.obj", "rocker-arm.obj"};
@@ -406,6 +489,22 @@ static void test_real_meshes_256(void **state)
     }
 }
 
+/* Agreement of a bit grid with the winding number (> 0.5 inside) at the
+ * sampled centres. */
+static size_t winding_agree(const vx_mesh *m, const vx_bitgrid *b, const int (*pts)[3], int n)
+{
+    size_t agree = 0;
+    const vx_grid *g = &b->grid;
+    for (int q = 0; q < n; q++) {
+        double c[3];
+        for (int a = 0; a < 3; a++)
+            c[a] = g->origin[a] + (pts[q][a] + .5) * g->h;
+        agree +=
+            (ref_winding_number(m, c) > 0.5) == vx_bitgrid_get(b, pts[q][0], pts[q][1], pts[q][2]);
+    }
+    return agree;
+}
+
 static void test_bunny_robust(void **state)
 {
     vx_mesh *m = vx_obj_read_path(VX_MESH_DIR "/stanford-bunny.obj", NULL, NULL);
@@ -413,31 +512,129 @@ static void test_bunny_robust(void **state)
     assert_true(m->boundary_edges > 0);
     vx_voxelize_desc d = {.inside = VX_INSIDE_ROBUST};
     grid_res(m, 64, 1, &d.grid);
-    vx_bitgrid b;
+    vx_bitgrid b, par;
     vx_voxelize_stats st;
     run_peel(m, &d, &b, &st);
-    /* Sampled centres: the winding number decides (> 0.5 inside). */
-    const int samples = 1500;
-    size_t n = (size_t)d.grid.dims[0] * d.grid.dims[1] * d.grid.dims[2], agree = 0, inside = 0;
+    d.inside = VX_INSIDE_PARITY;
+    run_peel(m, &d, &par, &st);
+    /* 2000 uniform centres and 1000 where the robust grid changes along x
+     * (the boundary, where mistakes would be) */
+    enum { NU = 2000, NB = 1000 };
+    static int pts[NU + NB][3];
+    const int *dim = d.grid.dims;
     uint64_t s = 12345;
-    for (int q = 0; q < samples; q++) {
+    int nb = 0;
+    for (int q = 0; q < NU; q++) {
         s = s * 6364136223846793005ull + 1442695040888963407ull;
-        size_t i = (size_t)(s >> 33) % n;
-        int x = (int)(i % d.grid.dims[0]), y = (int)(i / d.grid.dims[0] % d.grid.dims[1]),
-            z = (int)(i / d.grid.dims[0] / d.grid.dims[1]);
-        double c[3] = {d.grid.origin[0] + (x + .5) * d.grid.h,
-                       d.grid.origin[1] + (y + .5) * d.grid.h,
-                       d.grid.origin[2] + (z + .5) * d.grid.h};
-        int w = ref_winding_number(m, c) > 0.5;
-        inside += w;
-        agree += w == vx_bitgrid_get(&b, x, y, z);
+        size_t i = (size_t)(s >> 33) % ((size_t)dim[0] * dim[1] * dim[2]);
+        pts[q][0] = (int)(i % dim[0]);
+        pts[q][1] = (int)(i / dim[0] % dim[1]);
+        pts[q][2] = (int)(i / dim[0] / dim[1]);
     }
-    printf("bunny robust 64^3: %zu/%d sampled centres agree with the winding number (%zu "
-           "inside), layers %d\n",
-           agree, samples, inside, st.layers);
-    assert_true(agree >= (size_t)(0.99 * samples));
+    for (int k = 0; k < dim[2] && nb < NB; k += 3)
+        for (int j = 0; j < dim[1] && nb < NB; j += 2)
+            for (int i = 0; i + 1 < dim[0] && nb < NB; i++)
+                if (vx_bitgrid_get(&b, i, j, k) != vx_bitgrid_get(&b, i + 1, j, k)) {
+                    int in = vx_bitgrid_get(&b, i, j, k);
+                    pts[NU + nb][0] = in ? i : i + 1;
+                    pts[NU + nb][1] = j;
+                    pts[NU + nb][2] = k;
+                    nb++;
+                }
+    /* open mesh, single rules: the same crossings counted from each centre
+     * towards +x as the reference does */
+    for (int rule = VX_INSIDE_NONZERO; rule <= VX_INSIDE_PARITY; rule++) {
+        vx_voxelize_desc d1 = {.grid = d.grid, .inside = (vx_inside)rule};
+        vx_bitgrid b1;
+        double iou;
+        run_peel(m, &d1, &b1, &st);
+        compare_ref(rule ? "bunny (open) parity" : "bunny (open) nonzero", m, &d.grid,
+                    (vx_inside)rule, &b1, &iou);
+        assert_true(iou >= 0.999);
+        vx_bitgrid_free(&b1);
+    }
+    size_t ru = winding_agree(m, &b, pts, NU), rb = winding_agree(m, &b, pts + NU, nb);
+    size_t pu = winding_agree(m, &par, pts, NU), pb = winding_agree(m, &par, pts + NU, nb);
+    printf("bunny 64^3 vs winding number: robust %zu/%d uniform, %zu/%d boundary; parity only "
+           "%zu/%d uniform, %zu/%d boundary; layers %d\n",
+           ru, NU, rb, nb, pu, NU, pb, nb, st.layers);
+    assert_true(ru >= (size_t)(0.995 * NU));
+    assert_true(rb >= (size_t)(0.97 * nb));
     vx_bitgrid_free(&b);
+    vx_bitgrid_free(&par);
     vx_mesh_free(m);
+}
+
+/* Midpoint subdivision 1 -> 4 of every `every`-th triangle (every = 1:
+ * all, with shared edge midpoints so the mesh stays watertight; otherwise
+ * T-junctions appear, which is fine for timing). */
+static vx_mesh *subdivide(const vx_mesh *m, int every)
+{
+    size_t nt = m->ntris, nsplit = (nt + every - 1) / every;
+    size_t nv = m->nverts + 3 * nsplit, nt2 = nt + 3 * nsplit;
+    double *p = malloc(nv * 3 * sizeof *p);
+    uint32_t *f = malloc(nt2 * 3 * sizeof *f);
+    memcpy(p, m->pos, m->nverts * 3 * sizeof *p);
+    size_t v = m->nverts, t2 = 0;
+    for (size_t t = 0; t < nt; t++) {
+        const uint32_t *a = m->tri + 3 * t;
+        if (t % every) {
+            memcpy(f + 3 * t2++, a, 3 * sizeof *f);
+            continue;
+        }
+        uint32_t mid[3];
+        for (int e = 0; e < 3; e++) {
+            for (int k = 0; k < 3; k++)
+                p[3 * v + k] = 0.5 * (m->pos[3 * a[e] + k] + m->pos[3 * a[(e + 1) % 3] + k]);
+            mid[e] = (uint32_t)v++;
+        }
+        uint32_t q[12] = {a[0],   mid[0], mid[2], mid[0], a[1],   mid[1],
+                          mid[2], mid[1], a[2],   mid[0], mid[1], mid[2]};
+        memcpy(f + 3 * t2, q, sizeof q);
+        t2 += 4;
+    }
+    vx_mesh *r = mesh_from(v, p, t2, f);
+    free(p);
+    free(f);
+    return r;
+}
+
+/* Where robust mode holds and where it fails (peel.c's header): a cube
+ * missing its top is still right (only the z rays leak); missing its top
+ * and its +x side, the z and x rays both leak inside and it comes out
+ * empty. */
+static void test_robust_limits(void **state)
+{
+    vx_mesh *cube = box((double[]){0, 0, 0}, (double[]){1, 1, 1});
+    /* triangles 2, 3: top (z = 1); 10, 11: +x side */
+    for (int open2 = 0; open2 < 2; open2++) {
+        uint32_t f[36];
+        size_t nt = 0;
+        for (size_t t = 0; t < 12; t++) {
+            if (t == 2 || t == 3 || (open2 && (t == 10 || t == 11))) continue;
+            memcpy(f + 3 * nt++, cube->tri + 3 * t, 3 * sizeof *f);
+        }
+        vx_mesh *m = mesh_from(8, cube->pos, nt, f);
+        vx_voxelize_desc d = {.inside = VX_INSIDE_ROBUST};
+        grid_res(m, 8, 1, &d.grid);
+        vx_bitgrid b;
+        vx_voxelize_stats st;
+        run_peel(m, &d, &b, &st);
+        uint64_t robust = vx_bitgrid_count(&b);
+        vx_bitgrid_free(&b);
+        d.inside = VX_INSIDE_PARITY;
+        run_peel(m, &d, &b, &st);
+        printf("cube missing %s: robust %llu voxels, parity along x %llu (solid: 512)\n",
+               open2 ? "top and +x side" : "top", (unsigned long long)robust,
+               (unsigned long long)vx_bitgrid_count(&b));
+        vx_bitgrid_free(&b);
+        if (open2)
+            assert_int_equal(robust, 0);
+        else
+            assert_int_equal(robust, 512);
+        vx_mesh_free(m);
+    }
+    vx_mesh_free(cube);
 }
 
 static void test_surface(void **state)
@@ -524,6 +721,20 @@ static void test_surface(void **state)
     printf("big triangle: %llu voxels, %zu sampled points missed\n",
            (unsigned long long)vx_bitgrid_count(&surf), missing);
     assert_int_equal(missing, 0);
+    /* split 1 -> 4 the parts go to the GPU: the same voxels (up to the
+     * rounding margin of the new midpoints) */
+    vx_mesh *split = subdivide(big, 1);
+    vx_bitgrid surf4;
+    run_peel(split, &db, &surf4, &st);
+    size_t words = surf.wx * 128 * 128, diff = 0;
+    for (size_t w = 0; w < words; w++)
+        diff += (size_t)__builtin_popcount(surf.bits[w] ^ surf4.bits[w]);
+    printf("big triangle on the CPU vs split on the GPU: %llu vs %llu voxels, %zu differ\n",
+           (unsigned long long)vx_bitgrid_count(&surf),
+           (unsigned long long)vx_bitgrid_count(&surf4), diff);
+    assert_true(diff <= vx_bitgrid_count(&surf) / 1000);
+    vx_bitgrid_free(&surf4);
+    vx_mesh_free(split);
     vx_bitgrid_free(&surf);
     vx_mesh_free(big);
 }
@@ -654,40 +865,6 @@ static void test_dispatcher(void **state)
     vx_mesh_free(m);
 }
 
-/* Midpoint subdivision 1 -> 4 of every `every`-th triangle (every = 1:
- * all, with shared edge midpoints so the mesh stays watertight; otherwise
- * T-junctions appear, which is fine for timing). */
-static vx_mesh *subdivide(const vx_mesh *m, int every)
-{
-    size_t nt = m->ntris, nsplit = (nt + every - 1) / every;
-    size_t nv = m->nverts + 3 * nsplit, nt2 = nt + 3 * nsplit;
-    double *p = malloc(nv * 3 * sizeof *p);
-    uint32_t *f = malloc(nt2 * 3 * sizeof *f);
-    memcpy(p, m->pos, m->nverts * 3 * sizeof *p);
-    size_t v = m->nverts, t2 = 0;
-    for (size_t t = 0; t < nt; t++) {
-        const uint32_t *a = m->tri + 3 * t;
-        if (t % every) {
-            memcpy(f + 3 * t2++, a, 3 * sizeof *f);
-            continue;
-        }
-        uint32_t mid[3];
-        for (int e = 0; e < 3; e++) {
-            for (int k = 0; k < 3; k++)
-                p[3 * v + k] = 0.5 * (m->pos[3 * a[e] + k] + m->pos[3 * a[(e + 1) % 3] + k]);
-            mid[e] = (uint32_t)v++;
-        }
-        uint32_t q[12] = {a[0],   mid[0], mid[2], mid[0], a[1],   mid[1],
-                          mid[2], mid[1], a[2],   mid[0], mid[1], mid[2]};
-        memcpy(f + 3 * t2, q, sizeof q);
-        t2 += 4;
-    }
-    vx_mesh *r = mesh_from(v, p, t2, f);
-    free(p);
-    free(f);
-    return r;
-}
-
 /* Timings for the report; runs only with VX_PEEL_BENCH=1. */
 static void test_bench(void **state)
 {
@@ -718,6 +895,10 @@ static void test_bench(void **state)
                            "chunks %d upload %.1f readback %.1f wall %.0f ms\n",
                            labels[i], ms[i]->ntris, res, st.gpu_peel_ms, st.gpu_fill_ms, st.layers,
                            st.chunks, st.upload_ms, st.readback_ms, 1e3 * (now_s() - t0));
+                if (rep && res == 256 && i < 3) {
+                    double iou;
+                    compare_ref(labels[i], ms[i], &d.grid, VX_INSIDE_NONZERO, &b, &iou);
+                }
                 vx_bitgrid_free(&b);
             }
         }
@@ -733,6 +914,22 @@ static void test_bench(void **state)
                "bunny", ms[1]->ntris, res, st.gpu_peel_ms, st.gpu_fill_ms, st.layers, st.chunks,
                st.upload_ms, st.readback_ms, 1e3 * (now_s() - t0), d.grid.dims[0], d.grid.dims[1],
                d.grid.dims[2]);
+        vx_bitgrid_free(&b);
+    }
+    for (int mode = 0; mode < 2; mode++) {
+        vx_voxelize_desc d = {0};
+        if (mode == 0)
+            d.inside = VX_INSIDE_ROBUST;
+        else
+            d.fill = VX_FILL_SURFACE;
+        grid_res(ms[1], 256, 0, &d.grid);
+        vx_bitgrid b;
+        vx_voxelize_stats st;
+        double t0 = now_s();
+        run_peel(ms[1], &d, &b, &st);
+        printf("BENCH bunny %s 256^3: peel %.1f ms fill %.2f ms layers %d wall %.0f ms\n",
+               mode ? "surface" : "robust", st.gpu_peel_ms, st.gpu_fill_ms, st.layers,
+               1e3 * (now_s() - t0));
         vx_bitgrid_free(&b);
     }
     for (int i = 0; i < 4; i++)
@@ -786,8 +983,11 @@ int main(void)
         cmocka_unit_test(test_torus),
         cmocka_unit_test(test_hollow_and_nested),
         cmocka_unit_test(test_overlapping_spheres),
+        cmocka_unit_test(test_coincident_faces),
+        cmocka_unit_test(test_grid_cuts_mesh),
         cmocka_unit_test(test_real_meshes_256),
         cmocka_unit_test(test_bunny_robust),
+        cmocka_unit_test(test_robust_limits),
         cmocka_unit_test(test_surface),
         cmocka_unit_test(test_slabs),
         cmocka_unit_test(test_limits_and_progress),
