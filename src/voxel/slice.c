@@ -64,13 +64,14 @@
 typedef struct objs {
     GLuint vbo, ibo[3], vao;
     GLuint fbo, tex_color, tex_depth;
-    GLuint ssbo_bits, ssbo_counts;
+    GLuint ssbo_bits, ssbo_counts, pbo;
 } objs;
 
 static void objs_free(objs *o)
 {
-    GLuint bufs[6] = {o->vbo, o->ibo[0], o->ibo[1], o->ibo[2], o->ssbo_bits, o->ssbo_counts};
-    glDeleteBuffers(6, bufs);
+    GLuint bufs[7] = {o->vbo,       o->ibo[0],      o->ibo[1], o->ibo[2],
+                      o->ssbo_bits, o->ssbo_counts, o->pbo};
+    glDeleteBuffers(7, bufs);
     glDeleteVertexArrays(1, &o->vao);
     glDeleteFramebuffers(1, &o->fbo);
     GLuint tex[2] = {o->tex_color, o->tex_depth};
@@ -126,11 +127,20 @@ static uint64_t u64min(uint64_t a, uint64_t b)
     return a < b ? a : b;
 }
 
+/* Colour (R8 for parity, R32F for nonzero) of `batch` slices. */
+static uint64_t target_color_bytes(const plan *p, int batch)
+{
+    /* rows padded to 4 bytes in the pixel-pack copy */
+    uint64_t px = ((uint64_t)p->tex_w + 3) / 4 * 4 * (uint64_t)p->tex_h;
+    return px * (p->parity ? 1 : 4) * (uint64_t)batch * (uint64_t)p->ss;
+}
+
+/* Colour + depth (D32F, parity only) + the pixel-pack copy of the colour. */
 static uint64_t target_bytes(const plan *p, int batch)
 {
     uint64_t px = (uint64_t)p->tex_w * (uint64_t)p->tex_h;
-    uint64_t per = p->parity ? 1 + 4 : 4; /* R8 + D32F, or R32F */
-    return px * per * (uint64_t)batch * (uint64_t)p->ss;
+    return 2 * target_color_bytes(p, batch) +
+           (p->parity ? px * 4 * (uint64_t)batch * (uint64_t)p->ss : 0);
 }
 
 /* Fills the sizes of the run and checks them against the GL limits and
@@ -309,6 +319,8 @@ static int targets(vx_gl *gl, const plan *p, objs *o, vx_err *err)
     glCreateBuffers(1, &o->ssbo_counts);
     glNamedBufferStorage(o->ssbo_counts, (GLsizeiptr)(counts ? (counts + 3) / 4 * 4 : 4), NULL,
                          GL_DYNAMIC_STORAGE_BIT | GL_MAP_READ_BIT);
+    glCreateBuffers(1, &o->pbo);
+    glNamedBufferStorage(o->pbo, (GLsizeiptr)target_color_bytes(p, p->batch), NULL, 0);
     return vx_gl_check(gl, "slice.storage", err);
 }
 
@@ -399,8 +411,26 @@ static int do_tile(run *r, int a, int k0, const int rect[4], int w0, int w1, vx_
         glBindVertexArray(0);
         glBindFramebuffer(GL_FRAMEBUFFER, 0);
 
+        /* The pack reads the images as plain memory (see the shader). */
+        int iw = rect[2] * p->ss, ih = rect[3] * p->ss, nl = nb * p->ss;
+        /* R8 rows padded to 4 bytes: the pack reads four pixels per load */
+        int stride = p->parity ? (iw + 3) / 4 * 4 : iw;
+        uint64_t img_bytes = (uint64_t)stride * (uint64_t)ih * (uint64_t)nl * (p->parity ? 1 : 4);
+        glBindBuffer(GL_PIXEL_PACK_BUFFER, r->o->pbo);
+        glPixelStorei(GL_PACK_ALIGNMENT, 4);
+        glPixelStorei(GL_PACK_ROW_LENGTH, 0);
+        glPixelStorei(GL_PACK_IMAGE_HEIGHT, 0);
+        glPixelStorei(GL_PACK_SKIP_PIXELS, 0);
+        glPixelStorei(GL_PACK_SKIP_ROWS, 0);
+        glPixelStorei(GL_PACK_SKIP_IMAGES, 0);
+        glGetTextureSubImage(r->o->tex_color, 0, 0, 0, 0, iw, ih, nl, GL_RED,
+                             p->parity ? GL_UNSIGNED_BYTE : GL_FLOAT, (GLsizei)img_bytes, NULL);
+        glBindBuffer(GL_PIXEL_PACK_BUFFER, 0);
+
         glUseProgram(r->pack_prog);
-        glBindTextureUnit(0, r->o->tex_color);
+        glBindBufferRange(GL_SHADER_STORAGE_BUFFER, 2, r->o->pbo, 0,
+                          (GLsizeiptr)((img_bytes + 3) / 4 * 4));
+        glProgramUniform2i(r->pack_prog, 10, stride, ih);
         glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 0, r->o->ssbo_bits);
         glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 1, r->o->ssbo_counts);
         int packx = pm[0] == 0;
@@ -420,7 +450,6 @@ static int do_tile(run *r, int a, int k0, const int rect[4], int w0, int w1, vx_
         /* 65535 groups per dimension (llvmpipe): 2-D dispatch. */
         uint64_t gx = groups < 65535 ? groups : 65535, gy = (groups + gx - 1) / gx;
         glDispatchCompute((GLuint)gx, (GLuint)gy, 1);
-        glBindTextureUnit(0, 0);
         glUseProgram(0);
         if (timing) r->st->gpu_slice_ms += vx_gl_timer_end_ms(&timer);
         if (vx_gl_check(r->gl, "slice.draw", err)) return -1;
@@ -624,6 +653,8 @@ fail:
     glBindTextureUnit(0, 0);
     glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 0, 0);
     glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 1, 0);
+    glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 2, 0);
+    glBindBuffer(GL_PIXEL_PACK_BUFFER, 0);
     glDisable(GL_BLEND);
     glDisable(GL_DEPTH_TEST);
     for (int a = 0; a < 3; a++) {
