@@ -6,10 +6,17 @@
  * nearest surface beyond the plane is a back face (blue). Here the plane
  * steps along z through the voxel centres (w = k + 1/2), so each slice is an
  * x-by-y image and its rows are the rows of voxel.h's x-fastest bit layout.
- * Instead of reading every slice back as the seed did, a compute pass
- * (shaders/voxel_slice_pack.comp) packs a batch of slices into bits in an
- * SSBO, read back once per chunk of z-layers (chunks keep each SSBO under
- * the 128 MiB binding limit of llvmpipe, ARCHITECTURE.md).
+ * The near plane is the fragment shader's test "w beyond the plane" rather
+ * than the GL near clip plane: clipping the triangles that cross the plane
+ * and interpolating across the clipped vertices misjudges some centres next
+ * to the plane, the fragment test does not (and gives the tie rule below).
+ *
+ * Instead of reading every slice back as the seed did, a batch of slices
+ * goes to the layers of an array texture, a pixel pack copies them into a
+ * buffer, and a compute pass (shaders/voxel_slice_pack.comp) packs them into
+ * bits (and counts) in an SSBO, read back once per chunk of z-layers (chunks
+ * keep each SSBO under the 128 MiB binding limit of llvmpipe,
+ * ARCHITECTURE.md).
  *
  * Inside rules (vx_inside):
  *   parity  - the seed's nearest-surface test, depth test on. For a closed
@@ -24,21 +31,32 @@
  *             per back face and -1 per front face beyond the plane into an
  *             R32F target; the sum is the winding number of the ray from the
  *             centre, inside when nonzero (the union of overlapping parts).
+ *             Computed incrementally: the first plane of a run sums every
+ *             surface beyond it, each later plane starts from a copy of the
+ *             previous plane's sum and subtracts the surfaces in the slab
+ *             between the two planes (triangles bucketed by slab). Each
+ *             triangle is drawn about once per slab it spans instead of
+ *             once per slice: O(T + slices x pixels), not O(T x slices).
+ *             The sums are small integers in R32F, exact; no clipping, so a
+ *             fragment falls in exactly one slab and nothing drifts.
  *   robust  - the parity test stepped along x, y and z; a voxel is inside
  *             when at least two of the three agree (with supersampling: the
  *             median of the three counts). It repairs a hole that only one
  *             axis's rays pass through; it fails where a hole (or an open
  *             part) is seen by two axes, e.g. an open box missing two faces
  *             perpendicular to different axes, or a missing face that rays
- *             along two axes cross after leaving the solid.
+ *             along two axes cross after leaving the solid. Slower: three
+ *             passes, and the x and y passes set bits with atomics.
  *
  * Tie rule: a centre exactly on a face counts as inside when the face is an
  * entry and outside when it is an exit, i.e. half-open [entry, exit) along
  * the stepping direction, like tests/support/ref_voxel (which uses +x): only
- * surfaces strictly beyond the plane count (the fragment shader discards
- * w == plane, which the GL near plane keeps). Ties on faces perpendicular to
- * x are resolved in the image plane by the rasterizer's edge rule instead;
- * grids whose cell boundaries carry the faces have no centre ties at all.
+ * surfaces strictly beyond the plane count (w - plane > 0, subtracted per
+ * vertex, so a face on the plane interpolates to exactly 0). Centres on
+ * faces parallel to the stepping axis lie on triangle edges in the image:
+ * the rasterizer's edge rule decides; on llvmpipe it is the same half-open
+ * rule (measured in test_slice), other drivers may differ. Grids whose cell
+ * boundaries carry the faces have no centre ties at all.
  *
  * Accuracy improvement (seed 003 §3.4, supersample 2): the images are drawn
  * at twice the resolution and two planes per voxel (w = k + 1/4, k + 3/4) go
