@@ -9,9 +9,12 @@
 // the voxel is set when at least u_threshold of them are inside.
 layout(local_size_x = 64) in;
 
-layout(binding = 0) uniform sampler2DArray u_img;
 layout(std430, binding = 0) buffer Bits { uint bits[]; };
 layout(std430, binding = 1) buffer Counts { uint counts[]; };
+// The batch's images, copied from the colour target by a pixel pack (plain
+// loads here are much cheaper than texelFetch on llvmpipe): R8 bytes (parity:
+// 255 = back face) with rows padded to 4 bytes, or R32F (nonzero: the sum).
+layout(std430, binding = 2) readonly buffer Img { uint img[]; };
 
 layout(location = 0) uniform ivec3 u_perm;   // grid axes of u, v, w
 layout(location = 1) uniform ivec4 u_rect;   // tile: u0, v0, width, height (voxels)
@@ -19,47 +22,113 @@ layout(location = 2) uniform ivec2 u_slices; // w of the batch's first slice, sl
 layout(location = 3) uniform ivec3 u_dims;   // grid nx, ny, nz
 layout(location = 4) uniform ivec2 u_chunk;  // k0 of the chunk (SSBO holds k >= k0), wx
 layout(location = 5) uniform int u_ss;       // 1 or 2
-layout(location = 6) uniform int u_mode;     // 0 parity (value 1 = back face), 1 nonzero
+layout(location = 6) uniform int u_mode;     // 0 parity (R8), 1 nonzero (R32F)
 layout(location = 7) uniform int u_threshold;
 layout(location = 8) uniform int u_counts;   // nonzero: write the counts buffer
 layout(location = 9) uniform int u_packx;    // u is grid x: one invocation per 32 voxels
+layout(location = 10) uniform ivec2 u_img;   // row stride in pixels, rows per layer
 
-bool inside_at(ivec3 p)
+uint pixel_index(int x, int y, int layer)
 {
-    float s = texelFetch(u_img, p, 0).r;
-    return u_mode == 0 ? s > 0.5 : abs(s) > 0.5;
+    return (uint(layer) * uint(u_img.y) + uint(y)) * uint(u_img.x) + uint(x);
 }
 
-int samples_at(int tu, int tv, int s)
+bool inside_at(int x, int y, int layer)
 {
-    if (u_ss == 1) return inside_at(ivec3(tu, tv, s)) ? 1 : 0;
+    uint i = pixel_index(x, y, layer);
+    if (u_mode == 0) return ((img[i >> 2] >> ((i & 3u) * 8u)) & 0xffu) != 0u;
+    return abs(uintBitsToFloat(img[i])) > 0.5;
+}
+
+// Inside bits of the n <= 32 pixels x0 .. x0 + n - 1 of one row; x0 is a
+// multiple of 4, so R8 pixels come four to a load.
+uint row_bits(int x0, int y, int layer, int n)
+{
+    uint i = pixel_index(x0, y, layer), r = 0u;
+    if (u_mode == 0) {
+        for (int q = 0; q < (n + 3) / 4; q++) {
+            uint v = img[(i >> 2) + uint(q)];
+            // the top bit of each byte (255 for a back face, 0 otherwise)
+            uint nib = ((v >> 7) & 1u) | ((v >> 14) & 2u) | ((v >> 21) & 4u) | ((v >> 28) & 8u);
+            r |= nib << (4 * q);
+        }
+    } else {
+        for (int q = 0; q < n; q++)
+            if (abs(uintBitsToFloat(img[i + uint(q)])) > 0.5) r |= 1u << q;
+    }
+    return n == 32 ? r : r & ((1u << n) - 1u);
+}
+
+void put_count(uint row, int x, int c)
+{
+    uint idx = row * uint(u_dims.x) + uint(x);
+    atomicOr(counts[idx >> 2], uint(c) << ((idx & 3u) * 8u));
+}
+
+// Any stepping axis: one voxel of the tile per invocation.
+void pack_voxel(int tu, int tv, int s)
+{
     int c = 0;
-    for (int l = 0; l < 2; l++)
-        for (int b = 0; b < 2; b++)
-            for (int a = 0; a < 2; a++)
-                c += inside_at(ivec3(2 * tu + a, 2 * tv + b, 2 * s + l)) ? 1 : 0;
-    return c;
-}
-
-// Voxel (tu, tv) of the tile on slice s: its count, and its bit if set.
-void store(int tu, int tv, int s, inout uint word)
-{
-    int c = samples_at(tu, tv, s);
+    if (u_ss == 1)
+        c = inside_at(tu, tv, s) ? 1 : 0;
+    else
+        for (int l = 0; l < 2; l++)
+            for (int b = 0; b < 2; b++)
+                for (int a = 0; a < 2; a++)
+                    c += inside_at(2 * tu + a, 2 * tv + b, 2 * s + l) ? 1 : 0;
     ivec3 g;
     g[u_perm.x] = u_rect.x + tu;
     g[u_perm.y] = u_rect.y + tv;
     g[u_perm.z] = u_slices.x + s;
     uint row = uint(g.z - u_chunk.x) * uint(u_dims.y) + uint(g.y);
-    if (u_counts != 0 && c > 0) {
-        uint idx = row * uint(u_dims.x) + uint(g.x);
-        atomicOr(counts[idx >> 2], uint(c) << ((idx & 3u) * 8u));
+    if (u_counts != 0 && c > 0) put_count(row, g.x, c);
+    if (c >= u_threshold) atomicOr(bits[row * uint(u_chunk.y) + uint(g.x >> 5)], 1u << (g.x & 31));
+}
+
+// Stepping along z: 32 voxels of one row (one output word) per invocation.
+void pack_word(int t, int tv, int s)
+{
+    int x0 = 32 * t, n = min(32, u_rect.z - x0);
+    int k = u_slices.x + s, y = u_rect.y + tv;
+    uint row = uint(k - u_chunk.x) * uint(u_dims.y) + uint(y);
+    uint word = 0u;
+    if (u_ss == 1) {
+        word = row_bits(x0, tv, s, n);
+    } else {
+        // 8 samples per voxel: per voxel q, pixels 2q and 2q + 1 of two
+        // rows in two layers.
+        uint cnt[8] = uint[8](0u, 0u, 0u, 0u, 0u, 0u, 0u, 0u); // 4 bits per voxel
+        for (int l = 0; l < 2; l++)
+            for (int b = 0; b < 2; b++) {
+                int y2 = 2 * tv + b, layer = 2 * s + l;
+                uint lo = row_bits(2 * x0, y2, layer, min(32, 2 * n));
+                uint hi = n > 16 ? row_bits(2 * x0 + 32, y2, layer, 2 * n - 32) : 0u;
+                // voxel q's two samples are bits 2q, 2q + 1: add them into
+                // nibble q (max 8 fits in 4 bits)
+                uint pl = (lo & 0x55555555u) + ((lo >> 1) & 0x55555555u);
+                uint ph = (hi & 0x55555555u) + ((hi >> 1) & 0x55555555u);
+                // pl: 2-bit sums of voxels 0..15; spread to nibbles
+                for (int q = 0; q < 8; q++) {
+                    cnt[q] += ((pl >> (4 * q)) & 3u) | (((pl >> (4 * q + 2)) & 3u) << 16);
+                }
+                for (int q = 0; q < 8; q++) {
+                    cnt[q] += (((ph >> (4 * q)) & 3u) << 8) | (((ph >> (4 * q + 2)) & 3u) << 24);
+                }
+            }
+        // cnt[q] bytes: voxel q (byte 0), q + 8 (byte 2 << ... ) -- unpacked below
+        for (int q = 0; q < n; q++) {
+            int c;
+            if (q < 16)
+                c = int((cnt[(q >> 1)] >> ((q & 1) * 16)) & 0xffu);
+            else
+                c = int((cnt[((q - 16) >> 1)] >> (8 + (q & 1) * 16)) & 0xffu);
+            if (c == 0) continue;
+            if (u_counts != 0) put_count(row, u_rect.x + x0 + q, c);
+            if (c >= u_threshold) word |= 1u << q;
+        }
     }
-    if (c >= u_threshold) {
-        if (u_packx != 0)
-            word |= 1u << (g.x & 31);
-        else
-            atomicOr(bits[row * uint(u_chunk.y) + uint(g.x >> 5)], 1u << (g.x & 31));
-    }
+    // u0 is a multiple of 32 here, so this invocation owns a whole word.
+    if (word != 0u) bits[row * uint(u_chunk.y) + uint((u_rect.x >> 5) + t)] = word;
 }
 
 void main()
@@ -70,21 +139,8 @@ void main()
     uint per_slice = per_row * uint(u_rect.w);
     if (n >= per_slice * uint(u_slices.y)) return;
     int s = int(n / per_slice), tv = int(n % per_slice / per_row), t = int(n % per_row);
-    if (u_packx == 0) {
-        uint unused = 0u;
-        store(t, tv, s, unused);
-        return;
-    }
-    // u0 is a multiple of 32 here, so this invocation owns a whole word.
-    uint word = 0u;
-    int end = min(32 * t + 32, u_rect.z);
-    for (int tu = 32 * t; tu < end; tu++)
-        store(tu, tv, s, word);
-    if (word != 0u) {
-        ivec3 g;
-        g[u_perm.y] = u_rect.y + tv;
-        g[u_perm.z] = u_slices.x + s;
-        uint row = uint(g.z - u_chunk.x) * uint(u_dims.y) + uint(g.y);
-        bits[row * uint(u_chunk.y) + uint((u_rect.x >> 5) + t)] = word;
-    }
+    if (u_packx != 0)
+        pack_word(t, tv, s);
+    else
+        pack_voxel(t, tv, s);
 }

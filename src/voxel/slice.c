@@ -6,10 +6,17 @@
  * nearest surface beyond the plane is a back face (blue). Here the plane
  * steps along z through the voxel centres (w = k + 1/2), so each slice is an
  * x-by-y image and its rows are the rows of voxel.h's x-fastest bit layout.
- * Instead of reading every slice back as the seed did, a compute pass
- * (shaders/voxel_slice_pack.comp) packs a batch of slices into bits in an
- * SSBO, read back once per chunk of z-layers (chunks keep each SSBO under
- * the 128 MiB binding limit of llvmpipe, ARCHITECTURE.md).
+ * The near plane is the fragment shader's test "w beyond the plane" rather
+ * than the GL near clip plane: clipping the triangles that cross the plane
+ * and interpolating across the clipped vertices misjudges some centres next
+ * to the plane, the fragment test does not (and gives the tie rule below).
+ *
+ * Instead of reading every slice back as the seed did, a batch of slices
+ * goes to the layers of an array texture, a pixel pack copies them into a
+ * buffer, and a compute pass (shaders/voxel_slice_pack.comp) packs them into
+ * bits (and counts) in an SSBO, read back once per chunk of z-layers (chunks
+ * keep each SSBO under the 128 MiB binding limit of llvmpipe,
+ * ARCHITECTURE.md).
  *
  * Inside rules (vx_inside):
  *   parity  - the seed's nearest-surface test, depth test on. For a closed
@@ -24,21 +31,32 @@
  *             per back face and -1 per front face beyond the plane into an
  *             R32F target; the sum is the winding number of the ray from the
  *             centre, inside when nonzero (the union of overlapping parts).
+ *             Computed incrementally: the first plane of a run sums every
+ *             surface beyond it, each later plane starts from a copy of the
+ *             previous plane's sum and subtracts the surfaces in the slab
+ *             between the two planes (triangles bucketed by slab). Each
+ *             triangle is drawn about once per slab it spans instead of
+ *             once per slice: O(T + slices x pixels), not O(T x slices).
+ *             The sums are small integers in R32F, exact; no clipping, so a
+ *             fragment falls in exactly one slab and nothing drifts.
  *   robust  - the parity test stepped along x, y and z; a voxel is inside
  *             when at least two of the three agree (with supersampling: the
  *             median of the three counts). It repairs a hole that only one
  *             axis's rays pass through; it fails where a hole (or an open
  *             part) is seen by two axes, e.g. an open box missing two faces
  *             perpendicular to different axes, or a missing face that rays
- *             along two axes cross after leaving the solid.
+ *             along two axes cross after leaving the solid. Slower: three
+ *             passes, and the x and y passes set bits with atomics.
  *
  * Tie rule: a centre exactly on a face counts as inside when the face is an
  * entry and outside when it is an exit, i.e. half-open [entry, exit) along
  * the stepping direction, like tests/support/ref_voxel (which uses +x): only
- * surfaces strictly beyond the plane count (the fragment shader discards
- * w == plane, which the GL near plane keeps). Ties on faces perpendicular to
- * x are resolved in the image plane by the rasterizer's edge rule instead;
- * grids whose cell boundaries carry the faces have no centre ties at all.
+ * surfaces strictly beyond the plane count (w - plane > 0, subtracted per
+ * vertex, so a face on the plane interpolates to exactly 0). Centres on
+ * faces parallel to the stepping axis lie on triangle edges in the image:
+ * the rasterizer's edge rule decides; on llvmpipe it is the same half-open
+ * rule (measured in test_slice), other drivers may differ. Grids whose cell
+ * boundaries carry the faces have no centre ties at all.
  *
  * Accuracy improvement (seed 003 §3.4, supersample 2): the images are drawn
  * at twice the resolution and two planes per voxel (w = k + 1/4, k + 3/4) go
@@ -64,13 +82,15 @@
 typedef struct objs {
     GLuint vbo, ibo[3], vao;
     GLuint fbo, tex_color, tex_depth;
-    GLuint ssbo_bits, ssbo_counts;
+    GLuint ssbo_bits, ssbo_counts, pbo;
+    GLuint slab_ibo; /* nonzero: triangles per slab between consecutive planes */
 } objs;
 
 static void objs_free(objs *o)
 {
-    GLuint bufs[6] = {o->vbo, o->ibo[0], o->ibo[1], o->ibo[2], o->ssbo_bits, o->ssbo_counts};
-    glDeleteBuffers(6, bufs);
+    GLuint bufs[7] = {o->vbo,       o->ibo[0],      o->ibo[1], o->ibo[2],
+                      o->ssbo_bits, o->ssbo_counts, o->pbo};
+    glDeleteBuffers(7, bufs);
     glDeleteVertexArrays(1, &o->vao);
     glDeleteFramebuffers(1, &o->fbo);
     GLuint tex[2] = {o->tex_color, o->tex_depth};
@@ -119,6 +139,7 @@ typedef struct plan {
     int batch;                         /* slices per batch (each has ss layers) */
     int nk;                            /* z-layers per chunk */
     uint64_t bits_layer, counts_layer; /* bytes of one z-layer in the SSBOs */
+    uint64_t slab_refs;                /* nonzero: triangle references over all slabs */
 } plan;
 
 static uint64_t u64min(uint64_t a, uint64_t b)
@@ -126,11 +147,54 @@ static uint64_t u64min(uint64_t a, uint64_t b)
     return a < b ? a : b;
 }
 
+/* Colour (R8 for parity, R32F for nonzero) of `batch` slices. */
+static uint64_t target_color_bytes(const plan *p, int batch)
+{
+    /* rows padded to 4 bytes in the pixel-pack copy */
+    uint64_t px = ((uint64_t)p->tex_w + 3) / 4 * 4 * (uint64_t)p->tex_h;
+    return px * (p->parity ? 1 : 4) * (uint64_t)batch * (uint64_t)p->ss;
+}
+
+/* Colour + depth (D32F, parity only) + the pixel-pack copy of the colour. */
 static uint64_t target_bytes(const plan *p, int batch)
 {
     uint64_t px = (uint64_t)p->tex_w * (uint64_t)p->tex_h;
-    uint64_t per = p->parity ? 1 + 4 : 4; /* R8 + D32F, or R32F */
-    return px * per * (uint64_t)batch * (uint64_t)p->ss;
+    return 2 * target_color_bytes(p, batch) +
+           (p->parity ? px * 4 * (uint64_t)batch * (uint64_t)p->ss : 0);
+}
+
+/* Grid-frame coordinate of vertex v along axis a, as uploaded. */
+static float grid_coord(const vx_mesh *m, const vx_grid *g, size_t v, int a)
+{
+    return (float)((m->pos[3 * v + a] - g->origin[a]) / g->h);
+}
+
+/* Incremental signed count (nonzero): plane j sits at w = (j + 1/2) / ss.
+ * Slab j >= 1 is (plane j-1, plane j]; a triangle goes into every slab its
+ * w range may reach. The margin only adds triangles (the fragment shader
+ * decides exactly), so interpolation rounding cannot drop a fragment. */
+static int slab_range(float wmin, float wmax, int ss, int nplanes, int *j0, int *j1)
+{
+    const double margin = 0.01;
+    double lo = ceil(ss * ((double)wmin - margin) - 0.5);
+    double hi = ceil(ss * ((double)wmax + margin) + 0.5) - 1;
+    if (lo < 1) lo = 1;
+    if (hi > nplanes - 1) hi = nplanes - 1;
+    if (lo > hi) return 0;
+    *j0 = (int)lo;
+    *j1 = (int)hi;
+    return 1;
+}
+
+static void tri_wrange(const vx_mesh *m, const vx_grid *g, size_t t, int a, float *lo, float *hi)
+{
+    *lo = INFINITY;
+    *hi = -INFINITY;
+    for (int v = 0; v < 3; v++) {
+        float w = grid_coord(m, g, m->tri[3 * t + v], a);
+        if (w < *lo) *lo = w;
+        if (w > *hi) *hi = w;
+    }
 }
 
 /* Fills the sizes of the run and checks them against the GL limits and
@@ -188,13 +252,24 @@ static int make_plan(const vx_mesh *m, const vx_voxelize_desc *d, plan *p, vx_er
     if (batch * p->ss > max_layers) batch = max_layers / p->ss;
     if (batch > p->dims[2] && p->naxes == 1) batch = p->dims[2];
 
+    if (!p->parity) {
+        int nplanes = p->dims[2] * p->ss, j0, j1;
+        for (size_t t = 0; t < m->ntris; t++) {
+            float lo, hi;
+            tri_wrange(m, &d->grid, t, 2, &lo, &hi);
+            if (slab_range(lo, hi, p->ss, nplanes, &j0, &j1))
+                p->slab_refs += (uint64_t)(j1 - j0 + 1);
+        }
+    }
+
     if (d->max_memory) {
         /* What does not shrink with the chunk: the output, the mesh on the
          * GPU (vertices, one sorted index buffer per axis), the sort keys,
          * one batch of one slice. */
         uint64_t fixed = vx_bitgrid_bytes(p->dims, p->ss) + (uint64_t)m->nverts * 12 +
                          (uint64_t)m->ntris * 12 * (uint64_t)p->naxes +
-                         (uint64_t)m->ntris * sizeof(tri_key) + target_bytes(p, 1);
+                         (uint64_t)m->ntris * sizeof(tri_key) + target_bytes(p, 1) +
+                         p->slab_refs * 12 * 2 + ((uint64_t)p->dims[2] * p->ss + 1) * 8;
         /* Per z-layer of a chunk: the SSBOs, and for robust the CPU copies
          * of the three axes' answers. */
         uint64_t per_k = (p->bits_layer + p->counts_layer) * (p->naxes == 3 ? 4 : 1);
@@ -217,11 +292,55 @@ static int make_plan(const vx_mesh *m, const vx_voxelize_desc *d, plan *p, vx_er
     return 0;
 }
 
+/* Bucket the triangles by slab (CSR: slab j's triangles are entries
+ * slab_start[j] .. slab_start[j+1] of the slab index buffer). */
+static int upload_slabs(vx_gl *gl, const vx_mesh *m, const vx_grid *g, const plan *p, objs *o,
+                        size_t **slab_start, vx_err *err)
+{
+    int nplanes = p->dims[2] * p->ss, j0, j1;
+    size_t *start = calloc((size_t)nplanes + 2, sizeof *start);
+    uint32_t *idx = malloc(p->slab_refs * 3 * sizeof *idx + 1);
+    if (!start || !idx) {
+        free(start);
+        free(idx);
+        return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for %llu slab entries",
+                          (unsigned long long)p->slab_refs);
+    }
+    for (size_t t = 0; t < m->ntris; t++) {
+        float lo, hi;
+        tri_wrange(m, g, t, 2, &lo, &hi);
+        if (slab_range(lo, hi, p->ss, nplanes, &j0, &j1))
+            for (int j = j0; j <= j1; j++)
+                start[j + 1]++;
+    }
+    for (int j = 0; j < nplanes; j++)
+        start[j + 1] += start[j];
+    for (size_t t = 0; t < m->ntris; t++) {
+        float lo, hi;
+        tri_wrange(m, g, t, 2, &lo, &hi);
+        if (slab_range(lo, hi, p->ss, nplanes, &j0, &j1))
+            for (int j = j0; j <= j1; j++)
+                memcpy(idx + 3 * start[j]++, m->tri + 3 * t, 12);
+    }
+    /* the fill advanced each start to the next one's: shift back */
+    for (int j = nplanes; j > 0; j--)
+        start[j] = start[j - 1];
+    start[0] = 0;
+    *slab_start = start;
+    glCreateBuffers(1, &o->slab_ibo);
+    glNamedBufferStorage(o->slab_ibo, (GLsizeiptr)(p->slab_refs * 12 + 12), NULL,
+                         GL_DYNAMIC_STORAGE_BIT);
+    if (p->slab_refs) glNamedBufferSubData(o->slab_ibo, 0, (GLsizeiptr)(p->slab_refs * 12), idx);
+    free(idx);
+    return vx_gl_check(gl, "slice.slab_buffer", err);
+}
+
 /* Normalises positions into the grid frame in double (origin 0, voxel edge
  * 1) and only then converts to float: a face on a cell boundary lands on an
  * exact integer, so no voxel centre (at +1/2) is ever in doubt for it. */
 static int upload(vx_gl *gl, const vx_mesh *m, const vx_grid *g, const plan *p, objs *o,
-                  float wmax_all[3], float **wmax_sorted, vx_err *err)
+                  float wmin_all[3], float wmax_all[3], float **wmax_sorted, size_t **slab_start,
+                  vx_err *err)
 {
     float *pos = malloc(m->nverts * 3 * sizeof *pos + 1);
     tri_key *keys = malloc(m->ntris * sizeof *keys + 1);
@@ -268,6 +387,8 @@ static int upload(vx_gl *gl, const vx_mesh *m, const vx_grid *g, const plan *p, 
         if (vx_gl_check(gl, "slice.index_buffer", err)) goto done;
     }
 
+    if (!p->parity && upload_slabs(gl, m, g, p, o, slab_start, err)) goto done;
+
     glCreateVertexArrays(1, &o->vao);
     glVertexArrayVertexBuffer(o->vao, 0, o->vbo, 0, 3 * sizeof(float));
     glVertexArrayAttribFormat(o->vao, 0, 3, GL_FLOAT, GL_FALSE, 0);
@@ -309,6 +430,8 @@ static int targets(vx_gl *gl, const plan *p, objs *o, vx_err *err)
     glCreateBuffers(1, &o->ssbo_counts);
     glNamedBufferStorage(o->ssbo_counts, (GLsizeiptr)(counts ? (counts + 3) / 4 * 4 : 4), NULL,
                          GL_DYNAMIC_STORAGE_BIT | GL_MAP_READ_BIT);
+    glCreateBuffers(1, &o->pbo);
+    glNamedBufferStorage(o->pbo, (GLsizeiptr)target_color_bytes(p, p->batch), NULL, 0);
     return vx_gl_check(gl, "slice.storage", err);
 }
 
@@ -326,12 +449,13 @@ static size_t first_beyond(const float *wmax, size_t n, float plane)
     return lo;
 }
 
-static void draw_suffix(size_t first, size_t ntris)
+/* Draws triangles [first, end) of the bound index buffer. */
+static void draw_range(size_t first, size_t end)
 {
     /* glDrawElements counts in GLsizei: split meshes beyond 2^31 indices. */
     const size_t step = (size_t)3 << 28;
-    for (size_t i = 3 * first; i < 3 * ntris; i += step) {
-        size_t count = 3 * ntris - i < step ? 3 * ntris - i : step;
+    for (size_t i = 3 * first; i < 3 * end; i += step) {
+        size_t count = 3 * end - i < step ? 3 * end - i : step;
         glDrawElements(GL_TRIANGLES, (GLsizei)count, GL_UNSIGNED_INT,
                        (const void *)(uintptr_t)(i * sizeof(uint32_t)));
     }
@@ -344,8 +468,9 @@ typedef struct run {
     const plan *p;
     objs *o;
     GLuint draw_prog, pack_prog;
-    float wmax_all[3];
+    float wmin_all[3], wmax_all[3];
     float *wmax_sorted[3];
+    size_t *slab_start; /* nonzero: CSR offsets into the slab index buffer */
     vx_voxelize_stats *st;
     double slices_total, slices_done;
 } run;
@@ -357,6 +482,22 @@ static int do_tile(run *r, int a, int k0, const int rect[4], int w0, int w1, vx_
     const plan *p = r->p;
     const int *pm = k_perm[p->axes[a]];
     const size_t ntris = r->m->ntris;
+    /* nonzero: the first plane of the run sums every surface beyond it;
+     * each later one updates the previous plane's sum by one slab. */
+    const int jfirst = w0 * p->ss;
+    int prev_layer = -1;
+    {
+        /* No clipping at all: the near plane of the seed is the fragment
+         * shader's test on w. A GL near plane on the slice plane would clip
+         * the triangles that cross it, and the interpolation across the
+         * clipped vertices then misjudges centres near the plane (56 of 2.4
+         * million voxels for spot at 256^3). Unclipped, every draw
+         * rasterizes a triangle identically, so in the incremental signed
+         * count each fragment falls in exactly one slab. */
+        float lo = r->wmin_all[p->axes[a]] - 1.0f, hi = r->wmax_all[p->axes[a]] + 1.0f;
+        if (!(hi > lo)) hi = lo + 1.0f;
+        glProgramUniform2f(r->draw_prog, 3, lo, 2.0f / (hi - lo));
+    }
     for (int b0 = w0; b0 < w1; b0 += p->batch) {
         int nb = w1 - b0 < p->batch ? w1 - b0 : p->batch;
         glBindFramebuffer(GL_FRAMEBUFFER, r->o->fbo);
@@ -371,15 +512,28 @@ static int do_tile(run *r, int a, int k0, const int rect[4], int w0, int w1, vx_
         int timing = 0;
         for (int s = 0; s < nb; s++)
             for (int l = 0; l < p->ss; l++) {
-                int layer = s * p->ss + l;
+                int layer = s * p->ss + l, j = (b0 + s) * p->ss + l;
+                /* Plane through the voxel centres, or (seed 003 §3.4) the
+                 * two planes a quarter voxel either side of them. */
+                float plane = ((float)j + 0.5f) / (float)p->ss;
                 glNamedFramebufferTextureLayer(r->o->fbo, GL_COLOR_ATTACHMENT0, r->o->tex_color, 0,
                                                layer);
                 if (p->parity)
                     glNamedFramebufferTextureLayer(r->o->fbo, GL_DEPTH_ATTACHMENT, r->o->tex_depth,
                                                    0, layer);
+                int incremental = !p->parity && j > jfirst;
                 const float zero[4] = {0, 0, 0, 0}, one = 1.0f;
-                glClearNamedFramebufferfv(r->o->fbo, GL_COLOR, 0, zero);
-                if (p->parity) glClearNamedFramebufferfv(r->o->fbo, GL_DEPTH, 0, &one);
+                if (incremental) {
+                    /* The sum beyond the previous plane, less the surfaces
+                     * in the slab between the two planes. */
+                    if (prev_layer != layer)
+                        glCopyImageSubData(r->o->tex_color, GL_TEXTURE_2D_ARRAY, 0, 0, 0,
+                                           prev_layer, r->o->tex_color, GL_TEXTURE_2D_ARRAY, 0, 0,
+                                           0, layer, rect[2] * p->ss, rect[3] * p->ss, 1);
+                } else {
+                    glClearNamedFramebufferfv(r->o->fbo, GL_COLOR, 0, zero);
+                    if (p->parity) glClearNamedFramebufferfv(r->o->fbo, GL_DEPTH, 0, &one);
+                }
                 if (!timing) {
                     /* Begun after the first clear: llvmpipe loses the start
                      * of a query begun before the first command on a newly
@@ -387,20 +541,47 @@ static int do_tile(run *r, int a, int k0, const int rect[4], int w0, int w1, vx_
                     vx_gl_timer_begin(&timer);
                     timing = 1;
                 }
-                /* Plane through the voxel centres, or (seed 003 §3.4) the
-                 * two planes a quarter voxel either side of it. */
-                float plane = (float)(b0 + s) + (p->ss == 1 ? 0.5f : (l ? 0.75f : 0.25f));
-                float depth = r->wmax_all[p->axes[a]] - plane;
-                if (!(depth > 0)) depth = 0;
-                glProgramUniform1f(r->draw_prog, 2, plane);
-                glProgramUniform1f(r->draw_prog, 3, depth + 1.0f);
-                draw_suffix(first_beyond(r->wmax_sorted[a], ntris, plane), ntris);
+                if (p->parity) {
+                    glProgramUniform2f(r->draw_prog, 2, plane, 0.0f);
+                    glProgramUniform1i(r->draw_prog, 4, 0);
+                    draw_range(first_beyond(r->wmax_sorted[a], ntris, plane), ntris);
+                } else if (!incremental) {
+                    glProgramUniform2f(r->draw_prog, 2, plane, 0.0f);
+                    glProgramUniform1i(r->draw_prog, 4, 1);
+                    glVertexArrayElementBuffer(r->o->vao, r->o->ibo[a]);
+                    draw_range(first_beyond(r->wmax_sorted[a], ntris, plane), ntris);
+                } else {
+                    float prev = ((float)j - 0.5f) / (float)p->ss;
+                    glProgramUniform2f(r->draw_prog, 2, prev, plane);
+                    glProgramUniform1i(r->draw_prog, 4, 2);
+                    glVertexArrayElementBuffer(r->o->vao, r->o->slab_ibo);
+                    draw_range(r->slab_start[j], r->slab_start[j + 1]);
+                }
+                prev_layer = layer;
             }
         glBindVertexArray(0);
         glBindFramebuffer(GL_FRAMEBUFFER, 0);
 
+        /* The pack reads the images as plain memory (see the shader). */
+        int iw = rect[2] * p->ss, ih = rect[3] * p->ss, nl = nb * p->ss;
+        /* R8 rows padded to 4 bytes: the pack reads four pixels per load */
+        int stride = p->parity ? (iw + 3) / 4 * 4 : iw;
+        uint64_t img_bytes = (uint64_t)stride * (uint64_t)ih * (uint64_t)nl * (p->parity ? 1 : 4);
+        glBindBuffer(GL_PIXEL_PACK_BUFFER, r->o->pbo);
+        glPixelStorei(GL_PACK_ALIGNMENT, 4);
+        glPixelStorei(GL_PACK_ROW_LENGTH, 0);
+        glPixelStorei(GL_PACK_IMAGE_HEIGHT, 0);
+        glPixelStorei(GL_PACK_SKIP_PIXELS, 0);
+        glPixelStorei(GL_PACK_SKIP_ROWS, 0);
+        glPixelStorei(GL_PACK_SKIP_IMAGES, 0);
+        glGetTextureSubImage(r->o->tex_color, 0, 0, 0, 0, iw, ih, nl, GL_RED,
+                             p->parity ? GL_UNSIGNED_BYTE : GL_FLOAT, (GLsizei)img_bytes, NULL);
+        glBindBuffer(GL_PIXEL_PACK_BUFFER, 0);
+
         glUseProgram(r->pack_prog);
-        glBindTextureUnit(0, r->o->tex_color);
+        glBindBufferRange(GL_SHADER_STORAGE_BUFFER, 2, r->o->pbo, 0,
+                          (GLsizeiptr)((img_bytes + 3) / 4 * 4));
+        glProgramUniform2i(r->pack_prog, 10, stride, ih);
         glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 0, r->o->ssbo_bits);
         glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 1, r->o->ssbo_counts);
         int packx = pm[0] == 0;
@@ -420,7 +601,6 @@ static int do_tile(run *r, int a, int k0, const int rect[4], int w0, int w1, vx_
         /* 65535 groups per dimension (llvmpipe): 2-D dispatch. */
         uint64_t gx = groups < 65535 ? groups : 65535, gy = (groups + gx - 1) / gx;
         glDispatchCompute((GLuint)gx, (GLuint)gy, 1);
-        glBindTextureUnit(0, 0);
         glUseProgram(0);
         if (timing) r->st->gpu_slice_ms += vx_gl_timer_end_ms(&timer);
         if (vx_gl_check(r->gl, "slice.draw", err)) return -1;
@@ -536,7 +716,9 @@ int vx_voxelize_slice(vx_gl *gl, const vx_mesh *m, const vx_voxelize_desc *d, vx
     uint8_t *tmp[3] = {NULL, NULL, NULL};
     int rc = -1;
     double t0 = now_ms();
-    if (m->ntris && upload(gl, m, g, &p, &o, r.wmax_all, r.wmax_sorted, err)) goto fail;
+    if (m->ntris &&
+        upload(gl, m, g, &p, &o, r.wmin_all, r.wmax_all, r.wmax_sorted, &r.slab_start, err))
+        goto fail;
     glFinish(); /* so upload_ms is the upload, not just its queueing */
     st->upload_ms = now_ms() - t0;
     if (!m->ntris) goto done; /* nothing is inside */
@@ -624,12 +806,15 @@ fail:
     glBindTextureUnit(0, 0);
     glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 0, 0);
     glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 1, 0);
+    glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 2, 0);
+    glBindBuffer(GL_PIXEL_PACK_BUFFER, 0);
     glDisable(GL_BLEND);
     glDisable(GL_DEPTH_TEST);
     for (int a = 0; a < 3; a++) {
         free(r.wmax_sorted[a]);
         free(tmp[a]);
     }
+    free(r.slab_start);
     objs_free(&o);
     if (rc) vx_bitgrid_free(out);
     return rc;
