@@ -595,8 +595,17 @@ static int do_tile(run *r, int a, int k0, const int rect[4], int w0, int w1, vx_
         glProgramUniform1i(r->pack_prog, 7, p->threshold);
         glProgramUniform1i(r->pack_prog, 8, p->ss == 2);
         glProgramUniform1i(r->pack_prog, 9, packx);
-        uint64_t per_row = packx ? (uint64_t)(rect[2] + 31) / 32 : (uint64_t)rect[2];
-        uint64_t n = per_row * (uint64_t)rect[3] * (uint64_t)nb;
+        uint64_t n;
+        if (packx) {
+            n = (uint64_t)(rect[2] + 31) / 32 * (uint64_t)rect[3] * (uint64_t)nb;
+        } else {
+            /* one invocation per output word: grid x runs along the slices
+             * (stepping along x) or the image rows (along y) */
+            int dx = pm[1] == 0 ? 1 : 2, ext[3] = {rect[2], rect[3], nb};
+            int x_lo = dx == 1 ? rect[1] : b0, x_hi = x_lo + ext[dx];
+            uint64_t nruns = (uint64_t)(((x_hi - 1) >> 5) - (x_lo >> 5) + 1);
+            n = nruns * (uint64_t)ext[0] * (uint64_t)ext[1] * (uint64_t)ext[2] / (uint64_t)ext[dx];
+        }
         uint64_t groups = (n + 63) / 64;
         /* 65535 groups per dimension (llvmpipe): 2-D dispatch. */
         uint64_t gx = groups < 65535 ? groups : 65535, gy = (groups + gx - 1) / gx;
