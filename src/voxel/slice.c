@@ -140,6 +140,7 @@ typedef struct plan {
     int nk;                            /* z-layers per chunk */
     uint64_t bits_layer, counts_layer; /* bytes of one z-layer in the SSBOs */
     uint64_t slab_refs;                /* nonzero: triangle references over all slabs */
+    int incremental;                   /* nonzero: slab updates (else every slice sums afresh) */
 } plan;
 
 static uint64_t u64min(uint64_t a, uint64_t b)
@@ -260,6 +261,12 @@ static int make_plan(const vx_mesh *m, const vx_voxelize_desc *d, plan *p, vx_er
             if (slab_range(lo, hi, p->ss, nplanes, &j0, &j1))
                 p->slab_refs += (uint64_t)(j1 - j0 + 1);
         }
+        /* Triangles that span many slabs (few large ones are fine, many
+         * are not) would make the slab lists huge: sum every slice afresh
+         * then, as the seed does. */
+        uint64_t cap = (uint64_t)m->ntris * 8 + ((uint64_t)64 << 20) / 12;
+        p->incremental = p->slab_refs <= cap;
+        if (!p->incremental) p->slab_refs = 0;
     }
 
     if (d->max_memory) {
@@ -387,7 +394,7 @@ static int upload(vx_gl *gl, const vx_mesh *m, const vx_grid *g, const plan *p, 
         if (vx_gl_check(gl, "slice.index_buffer", err)) goto done;
     }
 
-    if (!p->parity && upload_slabs(gl, m, g, p, o, slab_start, err)) goto done;
+    if (p->incremental && upload_slabs(gl, m, g, p, o, slab_start, err)) goto done;
 
     glCreateVertexArrays(1, &o->vao);
     glVertexArrayVertexBuffer(o->vao, 0, o->vbo, 0, 3 * sizeof(float));
@@ -521,7 +528,7 @@ static int do_tile(run *r, int a, int k0, const int rect[4], int w0, int w1, vx_
                 if (p->parity)
                     glNamedFramebufferTextureLayer(r->o->fbo, GL_DEPTH_ATTACHMENT, r->o->tex_depth,
                                                    0, layer);
-                int incremental = !p->parity && j > jfirst;
+                int incremental = p->incremental && j > jfirst;
                 const float zero[4] = {0, 0, 0, 0}, one = 1.0f;
                 if (incremental) {
                     /* The sum beyond the previous plane, less the surfaces
