@@ -76,6 +76,9 @@
 /* Colour + depth layers of one batch stay under this. */
 #define SLICE_BATCH_BYTES ((uint64_t)32 << 20)
 #define SLICE_BATCH_MAX 64
+/* Voxels by which a triangle's w range is widened when choosing which
+ * triangles a draw needs (far above float interpolation error). */
+#define SLAB_MARGIN 0.01f
 
 /* Every GL object one run creates, so that every exit path deletes the same
  * set (names of 0 are ignored by glDelete*). */
@@ -176,9 +179,8 @@ static float grid_coord(const vx_mesh *m, const vx_grid *g, size_t v, int a)
  * decides exactly), so interpolation rounding cannot drop a fragment. */
 static int slab_range(float wmin, float wmax, int ss, int nplanes, int *j0, int *j1)
 {
-    const double margin = 0.01;
-    double lo = ceil(ss * ((double)wmin - margin) - 0.5);
-    double hi = ceil(ss * ((double)wmax + margin) + 0.5) - 1;
+    double lo = ceil(ss * ((double)wmin - SLAB_MARGIN) - 0.5);
+    double hi = ceil(ss * ((double)wmax + SLAB_MARGIN) + 0.5) - 1;
     if (lo < 1) lo = 1;
     if (hi > nplanes - 1) hi = nplanes - 1;
     if (lo > hi) return 0;
@@ -556,7 +558,11 @@ static int do_tile(run *r, int a, int k0, const int rect[4], int w0, int w1, vx_
                     glProgramUniform2f(r->draw_prog, 2, plane, 0.0f);
                     glProgramUniform1i(r->draw_prog, 4, 1);
                     glVertexArrayElementBuffer(r->o->vao, r->o->ibo[a]);
-                    draw_range(first_beyond(r->wmax_sorted[a], ntris, plane), ntris);
+                    /* With the slab lists' margin: interpolation may round a
+                     * fragment of a triangle that ends on the plane to just
+                     * beyond it; a later slab would then subtract what this
+                     * sum never added, for the rest of the column. */
+                    draw_range(first_beyond(r->wmax_sorted[a], ntris, plane - SLAB_MARGIN), ntris);
                 } else {
                     float prev = ((float)j - 0.5f) / (float)p->ss;
                     glProgramUniform2f(r->draw_prog, 2, prev, plane);
