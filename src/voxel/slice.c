@@ -118,11 +118,14 @@ static const int k_perm[3][3] = {{1, 2, 0}, {2, 0, 1}, {0, 1, 2}};
  * and roughly front to back (cheaper depth tests). */
 typedef struct tri_key {
     float wmax;
-    uint32_t t;
+    uint32_t t; /* triangle index */
+    int back;   /* parity: faces away from the viewer (sorted after the front run) */
 } tri_key;
 
 static int cmp_key(const void *a, const void *b)
 {
+    int fa = ((const tri_key *)a)->back, fb = ((const tri_key *)b)->back;
+    if (fa != fb) return fa - fb;
     float x = ((const tri_key *)a)->wmax, y = ((const tri_key *)b)->wmax;
     if (x != y) return x < y ? -1 : 1;
     uint32_t s = ((const tri_key *)a)->t, t = ((const tri_key *)b)->t;
@@ -348,8 +351,8 @@ static int upload_slabs(vx_gl *gl, const vx_mesh *m, const vx_grid *g, const pla
  * 1) and only then converts to float: a face on a cell boundary lands on an
  * exact integer, so no voxel centre (at +1/2) is ever in doubt for it. */
 static int upload(vx_gl *gl, const vx_mesh *m, const vx_grid *g, const plan *p, objs *o,
-                  float wmin_all[3], float wmax_all[3], float **wmax_sorted, size_t **slab_start,
-                  vx_err *err)
+                  float wmin_all[3], float wmax_all[3], float **wmax_sorted, size_t nfront[3],
+                  size_t **slab_start, vx_err *err)
 {
     float *pos = malloc(m->nverts * 3 * sizeof *pos + 1);
     tri_key *keys = malloc(m->ntris * sizeof *keys + 1);
@@ -360,12 +363,15 @@ static int upload(vx_gl *gl, const vx_mesh *m, const vx_grid *g, const plan *p, 
                    m->nverts);
         goto done;
     }
-    for (int a = 0; a < 3; a++)
+    for (int a = 0; a < 3; a++) {
+        wmin_all[a] = INFINITY;
         wmax_all[a] = -INFINITY;
+    }
     for (size_t i = 0; i < m->nverts; i++)
         for (int a = 0; a < 3; a++) {
-            pos[3 * i + a] = (float)((m->pos[3 * i + a] - g->origin[a]) / g->h);
+            pos[3 * i + a] = grid_coord(m, g, i, a);
             if (pos[3 * i + a] > wmax_all[a]) wmax_all[a] = pos[3 * i + a];
+            if (pos[3 * i + a] < wmin_all[a]) wmin_all[a] = pos[3 * i + a];
         }
     glCreateBuffers(1, &o->vbo);
     glNamedBufferStorage(o->vbo, (GLsizeiptr)(m->nverts * 3 * sizeof *pos), pos, 0);
@@ -380,6 +386,16 @@ static int upload(vx_gl *gl, const vx_mesh *m, const vx_grid *g, const plan *p, 
             if (pos[3 * v[2] + w] > z) z = pos[3 * v[2] + w];
             keys[t].wmax = z;
             keys[t].t = (uint32_t)t;
+            keys[t].back = 0;
+            if (p->parity) {
+                /* w component of (b - a) x (c - a): > 0 faces along +w, away
+                 * from the viewer: a back face (exit) */
+                int u = (w + 1) % 3, q = (w + 2) % 3;
+                const float *A = pos + 3 * v[0], *B = pos + 3 * v[1], *C = pos + 3 * v[2];
+                double nw = ((double)B[u] - A[u]) * ((double)C[q] - A[q]) -
+                            ((double)B[q] - A[q]) * ((double)C[u] - A[u]);
+                keys[t].back = nw > 0;
+            }
         }
         qsort(keys, m->ntris, sizeof *keys, cmp_key);
         wmax_sorted[a] = malloc(m->ntris * sizeof(float) + 1);
@@ -387,9 +403,11 @@ static int upload(vx_gl *gl, const vx_mesh *m, const vx_grid *g, const plan *p, 
             vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for %zu triangles", m->ntris);
             goto done;
         }
+        nfront[a] = 0;
         for (size_t t = 0; t < m->ntris; t++) {
             memcpy(idx + 3 * t, m->tri + 3 * (size_t)keys[t].t, 3 * sizeof *idx);
             wmax_sorted[a][t] = keys[t].wmax;
+            nfront[a] += !keys[t].back;
         }
         glCreateBuffers(1, &o->ibo[a]);
         glNamedBufferStorage(o->ibo[a], (GLsizeiptr)(m->ntris * 3 * sizeof *idx), idx, 0);
@@ -479,6 +497,7 @@ typedef struct run {
     GLuint draw_prog, pack_prog;
     float wmin_all[3], wmax_all[3];
     float *wmax_sorted[3];
+    size_t nfront[3];   /* parity: the front faces come first in each index buffer */
     size_t *slab_start; /* nonzero: CSR offsets into the slab index buffer */
     vx_voxelize_stats *st;
     double slices_total, slices_done;
@@ -553,7 +572,15 @@ static int do_tile(run *r, int a, int k0, const int rect[4], int w0, int w1, vx_
                 if (p->parity) {
                     glProgramUniform2f(r->draw_prog, 2, plane, 0.0f);
                     glProgramUniform1i(r->draw_prog, 4, 0);
-                    draw_range(first_beyond(r->wmax_sorted[a], ntris, plane), ntris);
+                    /* Front faces first: with GL_LESS a depth tie goes to
+                     * the front face. A pixel centre exactly on a silhouette
+                     * edge (a front and a back triangle folding over, equal
+                     * depth there) is covered by both; the ray only grazes
+                     * the surface, so it must stay outside. */
+                    size_t nf = r->nfront[a];
+                    const float *ws = r->wmax_sorted[a];
+                    draw_range(first_beyond(ws, nf, plane - SLAB_MARGIN), nf);
+                    draw_range(nf + first_beyond(ws + nf, ntris - nf, plane - SLAB_MARGIN), ntris);
                 } else if (!incremental) {
                     glProgramUniform2f(r->draw_prog, 2, plane, 0.0f);
                     glProgramUniform1i(r->draw_prog, 4, 1);
@@ -738,8 +765,8 @@ int vx_voxelize_slice(vx_gl *gl, const vx_mesh *m, const vx_voxelize_desc *d, vx
     uint8_t *tmp[3] = {NULL, NULL, NULL};
     int rc = -1;
     double t0 = now_ms();
-    if (m->ntris &&
-        upload(gl, m, g, &p, &o, r.wmin_all, r.wmax_all, r.wmax_sorted, &r.slab_start, err))
+    if (m->ntris && upload(gl, m, g, &p, &o, r.wmin_all, r.wmax_all, r.wmax_sorted, r.nfront,
+                           &r.slab_start, err))
         goto fail;
     glFinish(); /* so upload_ms is the upload, not just its queueing */
     st->upload_ms = now_ms() - t0;
