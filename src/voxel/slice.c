@@ -572,11 +572,16 @@ static int do_tile(run *r, int a, int k0, const int rect[4], int w0, int w1, vx_
                 if (p->parity) {
                     glProgramUniform2f(r->draw_prog, 2, plane, 0.0f);
                     glProgramUniform1i(r->draw_prog, 4, 0);
-                    /* Front faces first: with GL_LESS a depth tie goes to
-                     * the front face. A pixel centre exactly on a silhouette
-                     * edge (a front and a back triangle folding over, equal
-                     * depth there) is covered by both; the ray only grazes
-                     * the surface, so it must stay outside. */
+                    /* Front faces first: with GL_LESS an exact depth tie
+                     * goes to the front face. Ties happen where a pixel
+                     * centre falls exactly on a fold edge (a front and a
+                     * back triangle meeting, seen edge-on: 1/256-pixel
+                     * vertex snapping makes that likelier than it sounds).
+                     * The ray only grazes there and the answer should come
+                     * from the next surface beyond the pair; the depth test
+                     * cannot do that, and interpolation rounding decides
+                     * near-ties either way: a known limit of the seed's
+                     * nearest-surface test (nonzero sums the pair to 0). */
                     size_t nf = r->nfront[a];
                     const float *ws = r->wmax_sorted[a];
                     draw_range(first_beyond(ws, nf, plane - SLAB_MARGIN), nf);
