@@ -33,13 +33,6 @@ uint pixel_index(int x, int y, int layer)
     return (uint(layer) * uint(u_img.y) + uint(y)) * uint(u_img.x) + uint(x);
 }
 
-bool inside_at(int x, int y, int layer)
-{
-    uint i = pixel_index(x, y, layer);
-    if (u_mode == 0) return ((img[i >> 2] >> ((i & 3u) * 8u)) & 0xffu) != 0u;
-    return abs(uintBitsToFloat(img[i])) > 0.5;
-}
-
 // Inside bits of the n <= 32 pixels x0 .. x0 + n - 1 of one row; x0 is a
 // multiple of 4, so R8 pixels come four to a load.
 uint row_bits(int x0, int y, int layer, int n)
@@ -65,24 +58,58 @@ void put_count(uint row, int x, int c)
     atomicOr(counts[idx >> 2], uint(c) << ((idx & 3u) * 8u));
 }
 
-// Any stepping axis: one voxel of the tile per invocation.
-void pack_voxel(int tu, int tv, int s)
+bool inside_index(uint i)
 {
-    int c = 0;
-    if (u_ss == 1)
-        c = inside_at(tu, tv, s) ? 1 : 0;
-    else
-        for (int l = 0; l < 2; l++)
-            for (int b = 0; b < 2; b++)
-                for (int a = 0; a < 2; a++)
-                    c += inside_at(2 * tu + a, 2 * tv + b, 2 * s + l) ? 1 : 0;
+    if (u_mode == 0) return ((img[i >> 2] >> ((i & 3u) * 8u)) & 0x80u) != 0u;
+    return abs(uintBitsToFloat(img[i])) > 0.5;
+}
+
+// Stepping along x or y: grid x runs along the batch's slices (dx = 2) or
+// the image's rows (dx = 1). One invocation gathers the voxels of one output
+// word, so a word costs one atomic (a word may straddle two batches). The
+// samples are walked with a running pixel index: no per-voxel index math.
+void pack_run(uint n)
+{
+    int dx = u_perm.x == 0 ? 0 : u_perm.y == 0 ? 1 : 2;
+    int d1 = dx == 0 ? 1 : 0, d2 = dx == 2 ? 1 : 2;
+    ivec3 ext = ivec3(u_rect.z, u_rect.w, u_slices.y);
+    ivec3 org = ivec3(u_rect.x, u_rect.y, u_slices.x);
+    int x_lo = org[dx], x_hi = org[dx] + ext[dx];
+    int nruns = ((x_hi - 1) >> 5) - (x_lo >> 5) + 1;
+    uint m = n / uint(nruns);
+    int wi = (x_lo >> 5) + int(n % uint(nruns));
+    ivec3 loc = ivec3(0);
+    loc[d1] = int(m % uint(ext[d1]));
+    loc[d2] = int(m / uint(ext[d1]));
+    if (loc[d2] >= ext[d2]) return;
     ivec3 g;
-    g[u_perm.x] = u_rect.x + tu;
-    g[u_perm.y] = u_rect.y + tv;
-    g[u_perm.z] = u_slices.x + s;
+    g[u_perm.x] = org.x + loc.x;
+    g[u_perm.y] = org.y + loc.y;
+    g[u_perm.z] = org.z + loc.z;
     uint row = uint(g.z - u_chunk.x) * uint(u_dims.y) + uint(g.y);
-    if (u_counts != 0 && c > 0) put_count(row, g.x, c);
-    if (c >= u_threshold) atomicOr(bits[row * uint(u_chunk.y) + uint(g.x >> 5)], 1u << (g.x & 31));
+    int xs = max(32 * wi, x_lo), xe = min(32 * wi + 32, x_hi);
+    loc[dx] = xs - org[dx];
+    uint rowpx = uint(u_img.x), layerpx = uint(u_img.x) * uint(u_img.y);
+    uint ss = uint(u_ss);
+    uint i = (uint(loc.z) * ss * uint(u_img.y) + uint(loc.y) * ss) * rowpx + uint(loc.x) * ss;
+    uint step = (dx == 0 ? 1u : dx == 1 ? rowpx : layerpx) * ss;
+    uint word = 0u;
+    for (int x = xs; x < xe; x++, i += step) {
+        int c;
+        if (u_ss == 1) {
+            c = inside_index(i) ? 1 : 0;
+        } else {
+            c = 0;
+            for (uint l = 0u; l < 2u; l++)
+                for (uint b = 0u; b < 2u; b++) {
+                    uint q = i + l * layerpx + b * rowpx;
+                    c += (inside_index(q) ? 1 : 0) + (inside_index(q + 1u) ? 1 : 0);
+                }
+        }
+        if (u_counts != 0 && c > 0) put_count(row, x, c);
+        if (c >= u_threshold) word |= 1u << (x & 31);
+    }
+    if (word != 0u) atomicOr(bits[row * uint(u_chunk.y) + uint(wi)], word);
 }
 
 // Stepping along z: 32 voxels of one row (one output word) per invocation.
@@ -135,12 +162,13 @@ void main()
 {
     uint n = gl_GlobalInvocationID.y * gl_NumWorkGroups.x * gl_WorkGroupSize.x +
              gl_GlobalInvocationID.x;
-    uint per_row = u_packx != 0 ? uint(u_rect.z + 31) / 32u : uint(u_rect.z);
+    if (u_packx == 0) {
+        pack_run(n);
+        return;
+    }
+    uint per_row = uint(u_rect.z + 31) / 32u;
     uint per_slice = per_row * uint(u_rect.w);
     if (n >= per_slice * uint(u_slices.y)) return;
     int s = int(n / per_slice), tv = int(n % per_slice / per_row), t = int(n % per_row);
-    if (u_packx != 0)
-        pack_word(t, tv, s);
-    else
-        pack_voxel(t, tv, s);
+    pack_word(t, tv, s);
 }

@@ -76,6 +76,9 @@
 /* Colour + depth layers of one batch stay under this. */
 #define SLICE_BATCH_BYTES ((uint64_t)32 << 20)
 #define SLICE_BATCH_MAX 64
+/* Voxels by which a triangle's w range is widened when choosing which
+ * triangles a draw needs (far above float interpolation error). */
+#define SLAB_MARGIN 0.01f
 
 /* Every GL object one run creates, so that every exit path deletes the same
  * set (names of 0 are ignored by glDelete*). */
@@ -115,11 +118,14 @@ static const int k_perm[3][3] = {{1, 2, 0}, {2, 0, 1}, {0, 1, 2}};
  * and roughly front to back (cheaper depth tests). */
 typedef struct tri_key {
     float wmax;
-    uint32_t t;
+    uint32_t t; /* triangle index */
+    int back;   /* parity: faces away from the viewer (sorted after the front run) */
 } tri_key;
 
 static int cmp_key(const void *a, const void *b)
 {
+    int fa = ((const tri_key *)a)->back, fb = ((const tri_key *)b)->back;
+    if (fa != fb) return fa - fb;
     float x = ((const tri_key *)a)->wmax, y = ((const tri_key *)b)->wmax;
     if (x != y) return x < y ? -1 : 1;
     uint32_t s = ((const tri_key *)a)->t, t = ((const tri_key *)b)->t;
@@ -140,6 +146,7 @@ typedef struct plan {
     int nk;                            /* z-layers per chunk */
     uint64_t bits_layer, counts_layer; /* bytes of one z-layer in the SSBOs */
     uint64_t slab_refs;                /* nonzero: triangle references over all slabs */
+    int incremental;                   /* nonzero: slab updates (else every slice sums afresh) */
 } plan;
 
 static uint64_t u64min(uint64_t a, uint64_t b)
@@ -175,9 +182,8 @@ static float grid_coord(const vx_mesh *m, const vx_grid *g, size_t v, int a)
  * decides exactly), so interpolation rounding cannot drop a fragment. */
 static int slab_range(float wmin, float wmax, int ss, int nplanes, int *j0, int *j1)
 {
-    const double margin = 0.01;
-    double lo = ceil(ss * ((double)wmin - margin) - 0.5);
-    double hi = ceil(ss * ((double)wmax + margin) + 0.5) - 1;
+    double lo = ceil(ss * ((double)wmin - SLAB_MARGIN) - 0.5);
+    double hi = ceil(ss * ((double)wmax + SLAB_MARGIN) + 0.5) - 1;
     if (lo < 1) lo = 1;
     if (hi > nplanes - 1) hi = nplanes - 1;
     if (lo > hi) return 0;
@@ -260,6 +266,12 @@ static int make_plan(const vx_mesh *m, const vx_voxelize_desc *d, plan *p, vx_er
             if (slab_range(lo, hi, p->ss, nplanes, &j0, &j1))
                 p->slab_refs += (uint64_t)(j1 - j0 + 1);
         }
+        /* Triangles that span many slabs (few large ones are fine, many
+         * are not) would make the slab lists huge: sum every slice afresh
+         * then, as the seed does. */
+        uint64_t cap = (uint64_t)m->ntris * 8 + ((uint64_t)64 << 20) / 12;
+        p->incremental = p->slab_refs <= cap;
+        if (!p->incremental) p->slab_refs = 0;
     }
 
     if (d->max_memory) {
@@ -339,8 +351,8 @@ static int upload_slabs(vx_gl *gl, const vx_mesh *m, const vx_grid *g, const pla
  * 1) and only then converts to float: a face on a cell boundary lands on an
  * exact integer, so no voxel centre (at +1/2) is ever in doubt for it. */
 static int upload(vx_gl *gl, const vx_mesh *m, const vx_grid *g, const plan *p, objs *o,
-                  float wmin_all[3], float wmax_all[3], float **wmax_sorted, size_t **slab_start,
-                  vx_err *err)
+                  float wmin_all[3], float wmax_all[3], float **wmax_sorted, size_t nfront[3],
+                  size_t **slab_start, vx_err *err)
 {
     float *pos = malloc(m->nverts * 3 * sizeof *pos + 1);
     tri_key *keys = malloc(m->ntris * sizeof *keys + 1);
@@ -351,12 +363,15 @@ static int upload(vx_gl *gl, const vx_mesh *m, const vx_grid *g, const plan *p, 
                    m->nverts);
         goto done;
     }
-    for (int a = 0; a < 3; a++)
+    for (int a = 0; a < 3; a++) {
+        wmin_all[a] = INFINITY;
         wmax_all[a] = -INFINITY;
+    }
     for (size_t i = 0; i < m->nverts; i++)
         for (int a = 0; a < 3; a++) {
-            pos[3 * i + a] = (float)((m->pos[3 * i + a] - g->origin[a]) / g->h);
+            pos[3 * i + a] = grid_coord(m, g, i, a);
             if (pos[3 * i + a] > wmax_all[a]) wmax_all[a] = pos[3 * i + a];
+            if (pos[3 * i + a] < wmin_all[a]) wmin_all[a] = pos[3 * i + a];
         }
     glCreateBuffers(1, &o->vbo);
     glNamedBufferStorage(o->vbo, (GLsizeiptr)(m->nverts * 3 * sizeof *pos), pos, 0);
@@ -371,6 +386,16 @@ static int upload(vx_gl *gl, const vx_mesh *m, const vx_grid *g, const plan *p, 
             if (pos[3 * v[2] + w] > z) z = pos[3 * v[2] + w];
             keys[t].wmax = z;
             keys[t].t = (uint32_t)t;
+            keys[t].back = 0;
+            if (p->parity) {
+                /* w component of (b - a) x (c - a): > 0 faces along +w, away
+                 * from the viewer: a back face (exit) */
+                int u = (w + 1) % 3, q = (w + 2) % 3;
+                const float *A = pos + 3 * v[0], *B = pos + 3 * v[1], *C = pos + 3 * v[2];
+                double nw = ((double)B[u] - A[u]) * ((double)C[q] - A[q]) -
+                            ((double)B[q] - A[q]) * ((double)C[u] - A[u]);
+                keys[t].back = nw > 0;
+            }
         }
         qsort(keys, m->ntris, sizeof *keys, cmp_key);
         wmax_sorted[a] = malloc(m->ntris * sizeof(float) + 1);
@@ -378,16 +403,18 @@ static int upload(vx_gl *gl, const vx_mesh *m, const vx_grid *g, const plan *p, 
             vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for %zu triangles", m->ntris);
             goto done;
         }
+        nfront[a] = 0;
         for (size_t t = 0; t < m->ntris; t++) {
             memcpy(idx + 3 * t, m->tri + 3 * (size_t)keys[t].t, 3 * sizeof *idx);
             wmax_sorted[a][t] = keys[t].wmax;
+            nfront[a] += !keys[t].back;
         }
         glCreateBuffers(1, &o->ibo[a]);
         glNamedBufferStorage(o->ibo[a], (GLsizeiptr)(m->ntris * 3 * sizeof *idx), idx, 0);
         if (vx_gl_check(gl, "slice.index_buffer", err)) goto done;
     }
 
-    if (!p->parity && upload_slabs(gl, m, g, p, o, slab_start, err)) goto done;
+    if (p->incremental && upload_slabs(gl, m, g, p, o, slab_start, err)) goto done;
 
     glCreateVertexArrays(1, &o->vao);
     glVertexArrayVertexBuffer(o->vao, 0, o->vbo, 0, 3 * sizeof(float));
@@ -470,6 +497,7 @@ typedef struct run {
     GLuint draw_prog, pack_prog;
     float wmin_all[3], wmax_all[3];
     float *wmax_sorted[3];
+    size_t nfront[3];   /* parity: the front faces come first in each index buffer */
     size_t *slab_start; /* nonzero: CSR offsets into the slab index buffer */
     vx_voxelize_stats *st;
     double slices_total, slices_done;
@@ -521,7 +549,7 @@ static int do_tile(run *r, int a, int k0, const int rect[4], int w0, int w1, vx_
                 if (p->parity)
                     glNamedFramebufferTextureLayer(r->o->fbo, GL_DEPTH_ATTACHMENT, r->o->tex_depth,
                                                    0, layer);
-                int incremental = !p->parity && j > jfirst;
+                int incremental = p->incremental && j > jfirst;
                 const float zero[4] = {0, 0, 0, 0}, one = 1.0f;
                 if (incremental) {
                     /* The sum beyond the previous plane, less the surfaces
@@ -544,12 +572,29 @@ static int do_tile(run *r, int a, int k0, const int rect[4], int w0, int w1, vx_
                 if (p->parity) {
                     glProgramUniform2f(r->draw_prog, 2, plane, 0.0f);
                     glProgramUniform1i(r->draw_prog, 4, 0);
-                    draw_range(first_beyond(r->wmax_sorted[a], ntris, plane), ntris);
+                    /* Front faces first: with GL_LESS an exact depth tie
+                     * goes to the front face. Ties happen where a pixel
+                     * centre falls exactly on a fold edge (a front and a
+                     * back triangle meeting, seen edge-on: 1/256-pixel
+                     * vertex snapping makes that likelier than it sounds).
+                     * The ray only grazes there and the answer should come
+                     * from the next surface beyond the pair; the depth test
+                     * cannot do that, and interpolation rounding decides
+                     * near-ties either way: a known limit of the seed's
+                     * nearest-surface test (nonzero sums the pair to 0). */
+                    size_t nf = r->nfront[a];
+                    const float *ws = r->wmax_sorted[a];
+                    draw_range(first_beyond(ws, nf, plane - SLAB_MARGIN), nf);
+                    draw_range(nf + first_beyond(ws + nf, ntris - nf, plane - SLAB_MARGIN), ntris);
                 } else if (!incremental) {
                     glProgramUniform2f(r->draw_prog, 2, plane, 0.0f);
                     glProgramUniform1i(r->draw_prog, 4, 1);
                     glVertexArrayElementBuffer(r->o->vao, r->o->ibo[a]);
-                    draw_range(first_beyond(r->wmax_sorted[a], ntris, plane), ntris);
+                    /* With the slab lists' margin: interpolation may round a
+                     * fragment of a triangle that ends on the plane to just
+                     * beyond it; a later slab would then subtract what this
+                     * sum never added, for the rest of the column. */
+                    draw_range(first_beyond(r->wmax_sorted[a], ntris, plane - SLAB_MARGIN), ntris);
                 } else {
                     float prev = ((float)j - 0.5f) / (float)p->ss;
                     glProgramUniform2f(r->draw_prog, 2, prev, plane);
@@ -595,8 +640,17 @@ static int do_tile(run *r, int a, int k0, const int rect[4], int w0, int w1, vx_
         glProgramUniform1i(r->pack_prog, 7, p->threshold);
         glProgramUniform1i(r->pack_prog, 8, p->ss == 2);
         glProgramUniform1i(r->pack_prog, 9, packx);
-        uint64_t per_row = packx ? (uint64_t)(rect[2] + 31) / 32 : (uint64_t)rect[2];
-        uint64_t n = per_row * (uint64_t)rect[3] * (uint64_t)nb;
+        uint64_t n;
+        if (packx) {
+            n = (uint64_t)(rect[2] + 31) / 32 * (uint64_t)rect[3] * (uint64_t)nb;
+        } else {
+            /* one invocation per output word: grid x runs along the slices
+             * (stepping along x) or the image rows (along y) */
+            int dx = pm[1] == 0 ? 1 : 2, ext[3] = {rect[2], rect[3], nb};
+            int x_lo = dx == 1 ? rect[1] : b0, x_hi = x_lo + ext[dx];
+            uint64_t nruns = (uint64_t)(((x_hi - 1) >> 5) - (x_lo >> 5) + 1);
+            n = nruns * (uint64_t)ext[0] * (uint64_t)ext[1] * (uint64_t)ext[2] / (uint64_t)ext[dx];
+        }
         uint64_t groups = (n + 63) / 64;
         /* 65535 groups per dimension (llvmpipe): 2-D dispatch. */
         uint64_t gx = groups < 65535 ? groups : 65535, gy = (groups + gx - 1) / gx;
@@ -716,8 +770,8 @@ int vx_voxelize_slice(vx_gl *gl, const vx_mesh *m, const vx_voxelize_desc *d, vx
     uint8_t *tmp[3] = {NULL, NULL, NULL};
     int rc = -1;
     double t0 = now_ms();
-    if (m->ntris &&
-        upload(gl, m, g, &p, &o, r.wmin_all, r.wmax_all, r.wmax_sorted, &r.slab_start, err))
+    if (m->ntris && upload(gl, m, g, &p, &o, r.wmin_all, r.wmax_all, r.wmax_sorted, r.nfront,
+                           &r.slab_start, err))
         goto fail;
     glFinish(); /* so upload_ms is the upload, not just its queueing */
     st->upload_ms = now_ms() - t0;

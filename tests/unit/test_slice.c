@@ -357,6 +357,25 @@ static void test_sphere(void **state)
     vx_mesh_free(m);
 }
 
+/* A grid that covers only part of the mesh: surfaces outside the grid (in
+ * front of it and beyond it along z) still decide the inside. */
+static void test_partial_grid(void **state)
+{
+    vx_mesh *m = sphere((double[]){0.05, -0.02, 0.03}, 1.0, 64, 128, 0);
+    const double h = 1.0 / 40;
+    /* x, y cover the middle, z from 0.3 to 0.8: both poles outside */
+    vx_grid g = {{-0.6, -0.7, 0.3}, h, {48, 56, 20}};
+    for (int rule = 0; rule < 3; rule++) {
+        vx_bitgrid b;
+        vx_voxelize_stats st;
+        voxelize(m, &g, (vx_inside)rule, 1, 0, &b, &st);
+        assert_true(compare("partial grid", m, &g, rule == 0 ? VX_INSIDE_NONZERO : VX_INSIDE_PARITY,
+                            &b) >= 0.999);
+        vx_bitgrid_free(&b);
+    }
+    vx_mesh_free(m);
+}
+
 static void test_torus(void **state)
 {
     vx_mesh *m = torus((double[]){0.1, 0.2, 0.3}, 1.0, 0.35, 128, 64);
@@ -841,6 +860,7 @@ int main(void)
         cmocka_unit_test(test_boxes_on_cell_boundaries),
         cmocka_unit_test(test_tie_rule),
         cmocka_unit_test(test_sphere),
+        cmocka_unit_test(test_partial_grid),
         cmocka_unit_test(test_torus),
         cmocka_unit_test(test_hollow_and_nested_balls),
         cmocka_unit_test(test_overlaps),
