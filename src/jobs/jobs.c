@@ -430,6 +430,7 @@ int vx_run_progress(vx_job_run *r, double fraction, vx_err *err)
 
 vx_gl *vx_run_gl(vx_job_run *r) { return r->gl; }
 const vx_limits *vx_run_limits(const vx_job_run *r) { return &r->jobs->desc.limits; }
+const char *vx_run_mesh_id(const vx_job_run *r) { return r->job->mesh; }
 cJSON *vx_run_stats(vx_job_run *r) { return r->stats; }
 
 const char *vx_run_output(vx_job_run *r, const char *name, const char *file_ext,

@@ -40,6 +40,8 @@ typedef struct vx_job_run vx_job_run;
 int vx_run_progress(vx_job_run *r, double fraction, vx_err *err);
 /* The GL context; only valid in run_gl. */
 vx_gl *vx_run_gl(vx_job_run *r);
+/* The id of the job's mesh (64 hex digits), for outputs that record it. */
+const char *vx_run_mesh_id(const vx_job_run *r);
 /* The limits in force. */
 const vx_limits *vx_run_limits(const vx_job_run *r);
 /* The stats object of the job (owned by the run): kinds add numbers to it. */

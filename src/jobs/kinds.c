@@ -4,9 +4,11 @@
 
 #include "jobs/kind.h"
 #include "preview/preview.h"
+#include "voxel/job.h"
 
 static const vx_kind *const table[] = {
     &vx_kind_preview,
+    &vx_kind_voxelize,
 };
 
 const vx_kind *vx_kind_find(const char *name)

@@ -38,14 +38,17 @@ typedef struct vx_voxelize_desc {
     vx_method method;
     vx_inside inside;
     vx_fill fill;
-    int supersample; /* 1 (default) or 2: 2x2 pixels x 2 planes per voxel (seed 003) */
-    int threshold;   /* with supersample 2: samples inside (1..8) to set a voxel; default 4 */
-    int max_layers;  /* peel: depth layers before giving up (0 = 256) */
+    int supersample;     /* 1 (default) or 2: 2x2 pixels x 2 planes per voxel (seed 003) */
+    int threshold;       /* with supersample 2: samples inside (1..8) to set a voxel; default 4 */
+    int max_layers;      /* peel: depth layers before giving up (0 = 256) */
     uint64_t max_memory; /* bytes of GPU + CPU memory this job may use (0 = no limit) */
     /* Called between passes with progress 0..1; nonzero return stops the job
      * (err filled by the callee). May be NULL. */
     int (*progress)(void *ud, double fraction, vx_err *err);
     void *ud;
+    /* Tests and benchmarks: at most this many z rows per GPU slab (0 = as
+     * many as the GPU limits and max_memory allow). */
+    int max_slab_rows;
 } vx_voxelize_desc;
 
 typedef struct vx_bitgrid {
@@ -56,12 +59,12 @@ typedef struct vx_bitgrid {
 } vx_bitgrid;
 
 typedef struct vx_voxelize_stats {
-    const char *method;     /* "peel" or "slice" as run */
+    const char *method; /* "peel" or "slice" as run */
     uint64_t voxels_inside;
-    int layers;             /* peel: depth layers peeled (max over axes for robust) */
-    int slices;             /* slice: slices drawn */
-    int chunks;             /* slabs the grid was split into to fit GPU limits */
-    double upload_ms;       /* CPU: normalise in double + upload */
+    int layers;       /* peel: depth layers peeled (max over axes for robust) */
+    int slices;       /* slice: slices drawn */
+    int chunks;       /* slabs the grid was split into to fit GPU limits */
+    double upload_ms; /* CPU: normalise in double + upload */
     double gpu_peel_ms, gpu_fill_ms, gpu_slice_ms; /* GPU timer per stage */
     double readback_ms;
 } vx_voxelize_stats;
@@ -79,13 +82,22 @@ uint64_t vx_bitgrid_count(const vx_bitgrid *g);
 
 /* Grid covering the mesh bbox: `resolution` cells along the longest axis,
  * the others proportional (at least 1), plus `padding` voxels each side. */
-int vx_grid_from_resolution(const vx_mesh *m, int resolution, int padding, vx_grid *out, vx_err *err);
+int vx_grid_from_resolution(const vx_mesh *m, int resolution, int padding, vx_grid *out,
+                            vx_err *err);
 /* Grid of voxel edge h covering the bbox plus padding. */
 int vx_grid_from_voxel_size(const vx_mesh *m, double h, int padding, vx_grid *out, vx_err *err);
 
-/* Voxelizes m into out (allocated here; free with vx_bitgrid_free). GL thread. */
+/* Voxelizes m into out (allocated here; free with vx_bitgrid_free). GL thread.
+ * Validates d (VX_EUNPROC invalid_params), then auto runs slice when
+ * supersample is 2 (peeling has no supersampling), else peel; st->method
+ * says which ran. */
 int vx_voxelize(vx_gl *gl, const vx_mesh *m, const vx_voxelize_desc *d, vx_bitgrid *out,
                 vx_voxelize_stats *st, vx_err *err);
+/* Depth peeling along x (src/voxel/peel.c); also runs fill=surface (GPU
+ * triangle/box tests). Takes d as given (vx_voxelize validates and fills
+ * defaults); supersample is ignored. Errors: VX_ETOOBIG job_memory_limit
+ * (max_memory), grid_too_large (GPU limits), VX_EUNPROC too_many_layers
+ * (max_layers), VX_EGPU, or the progress hook's own. */
 int vx_voxelize_peel(vx_gl *gl, const vx_mesh *m, const vx_voxelize_desc *d, vx_bitgrid *out,
                      vx_voxelize_stats *st, vx_err *err);
 int vx_voxelize_slice(vx_gl *gl, const vx_mesh *m, const vx_voxelize_desc *d, vx_bitgrid *out,

@@ -27,7 +27,8 @@ the response schema with $refs resolved in the whole spec; required response
 headers must be present (when the record has "headers") and match their
 schema. voxeld-specific extras: Job bodies are checked against the kind's
 entry in the top-level `x-kinds` extension (normalised params, stats, output
-URLs), Info.kinds against `x-kinds`, /metrics bodies against `x-metrics`.
+URLs; an output with `absent_when: {param: value}` is not expected when the
+job's params have that value), Info.kinds against `x-kinds`, /metrics bodies against `x-metrics`.
 
 Prints one line per failure and a summary line
   openapi: N responses checked, M failures, P/Q operations exercised
@@ -504,7 +505,12 @@ class Checker:
             for e in self.schemas.errors(ptr_join(base, "stats"), job.get("stats"))[:MAX_SCHEMA_ERRORS]:
                 self.fail(where, "body %s.stats (kind %s): %s" % (at, kind, e))
         if state == "succeeded":
-            want = [o.get("name") for o in k.get("outputs") or []]
+            # An output with `absent_when: {param: value}` is not written
+            # when the job's (normalised) params have that value.
+            params = job.get("params") if isinstance(job.get("params"), dict) else {}
+            want = [o.get("name") for o in k.get("outputs") or []
+                    if not (isinstance(o.get("absent_when"), dict) and o["absent_when"]
+                            and all(params.get(p) == v for p, v in o["absent_when"].items()))]
             outputs = job.get("outputs") or {}
             if sorted(outputs) != sorted(want):
                 self.fail(where, "body %s.outputs has %s, kind %s declares %s"

@@ -34,6 +34,16 @@ JOB_OK = {
               "gpu_ms": 0.4, "upload_ms": 0.1, "samples": 4, "run_ms": 3.2},
     "outputs": {"image": "/v1/jobs/%s/result/image" % JID},
 }
+VPARAMS = {"resolution": 8, "voxel_size": None, "grid": None, "padding": 0, "method": "auto",
+           "inside": "nonzero", "fill": "solid", "supersample": 1, "threshold": 4,
+           "format": "summary"}
+VSTATS = {"method": "peel", "dims": [8, 8, 8], "origin": [0, 0, 0], "voxel_size": 0.125,
+          "triangles": 12, "voxels_inside": 512, "volume": 1, "layers": 2, "slices": 0,
+          "chunks": 1, "upload_ms": 0.1, "gpu_peel_ms": 0.2, "gpu_fill_ms": 0.1,
+          "gpu_slice_ms": 0, "readback_ms": 0.1, "encode_ms": 0, "gl_ms": 1, "run_ms": 2}
+VJOB_SUMMARY = dict(JOB_OK, kind="voxelize", params=VPARAMS, stats=VSTATS, outputs={})
+VJOB_VDB = dict(VJOB_SUMMARY, params=dict(VPARAMS, format="vdb"),
+                outputs={"voxels": "/v1/jobs/%s/result/voxels" % JID})
 MESH_OK = {
     "id": MESH, "format": "obj", "bytes": 412, "vertices": 8, "triangles": 12,
     "faces": {"total": 6, "triangles": 0, "quads": 6, "ngons": 0},
@@ -89,6 +99,26 @@ CASES = [
     ("job params not normalised", dict(method="GET", path="/v1/jobs/" + JID, status=200,
                                        content_type="application/json"),
      dict(JOB_OK, params={"width": 64}), True),
+    ("voxelize summary job without outputs", dict(method="GET", path="/v1/jobs/" + JID,
+                                                  status=200, content_type="application/json"),
+     VJOB_SUMMARY, False),
+    ("voxelize vdb job with its output", dict(method="GET", path="/v1/jobs/" + JID, status=200,
+                                              content_type="application/json"), VJOB_VDB, False),
+    ("voxelize vdb job without its output", dict(method="GET", path="/v1/jobs/" + JID,
+                                                 status=200, content_type="application/json"),
+     dict(VJOB_VDB, outputs={}), True),
+    ("voxelize stats with a wrong method", dict(method="GET", path="/v1/jobs/" + JID, status=200,
+                                                content_type="application/json"),
+     dict(VJOB_SUMMARY, stats=dict(VSTATS, method="magic")), True),
+    ("job stats with an object value", dict(method="GET", path="/v1/jobs/" + JID, status=200,
+                                            content_type="application/json"),
+     dict(VJOB_SUMMARY, stats=dict(VSTATS, dims={"x": 8})), True),
+    ("voxel result", dict(method="GET", path="/v1/jobs/%s/result/voxels" % JID, status=200,
+                          content_type="application/x-binvox",
+                          headers={"etag": '"abc"', "content-length": "10",
+                                   "content-disposition":
+                                       'attachment; filename="%s-voxels.binvox"' % JID}),
+     b"#binvox 1\n", False),
     ("job list", dict(method="GET", path="/v1/jobs?limit=5&state=succeeded", status=200,
                       content_type="application/json"), {"items": [JOB_OK], "next": None}, False),
     ("result 304", dict(method="GET", path="/v1/jobs/%s/result" % JID, status=304,

@@ -1,0 +1,56 @@
+/* Writers for voxelize's outputs: raw8, raw1, binvox (io.c) and OpenVDB
+ * (vdb.cc, the only C++ file; OpenVDB's templates stay behind this C API).
+ *
+ * Layouts (n = nx * ny * nz, voxel (i,j,k) has linear index
+ * i + nx * (j + ny * k), that is x fastest, then y, then z):
+ *   raw8    n bytes, 0 or 1, in linear-index order; no header.
+ *   raw1    ceil(n / 8) bytes: voxel with linear index L is bit L % 8 (least
+ *           significant first) of byte L / 8, packed continuously (rows are
+ *           not padded); the unused high bits of the last byte are 0.
+ *   binvox  the binvox 1 format: ASCII header "#binvox 1", "dim d d d",
+ *           "translate x y z", "scale s", "data", then (value, count) byte
+ *           pairs (count 1..255) in binvox's order, where y runs fastest:
+ *           index = i * d * d + k * d + j with binvox (x, y, z) = grid
+ *           (i, j, k) (no axis swap). binvox grids are cubes: d is the
+ *           largest of nx, ny, nz and the other axes are padded with empty
+ *           voxels at their high end, so translate = origin and
+ *           scale = d * h keep voxel (i,j,k) where it is in the grid.
+ *   vdb     an OpenVDB file with one grid: BoolGrid "voxels" (active and
+ *           true = inside) or, for supersample 2, FloatGrid "coverage"
+ *           (samples inside / 8, active where > 0). Index (i,j,k) maps to
+ *           the voxel centre: transform = uniform scale h then translation
+ *           origin + h/2. Grid metadata carries the job parameters.
+ * All writers write to a temporary name beside path and rename, so a
+ * failed write leaves no partial file at path. */
+#ifndef VX_VOXEL_IO_H
+#define VX_VOXEL_IO_H
+
+#include "voxel/voxel.h"
+
+/* Progress/cancel hook for long writes: called with 0..1 between z slabs;
+ * a nonzero return stops the write (err filled by the callee). */
+typedef struct vx_voxel_io {
+    int (*progress)(void *ud, double fraction, vx_err *err);
+    void *ud;
+} vx_voxel_io;
+
+/* Parameters recorded as grid metadata in .vdb files (strings may be NULL). */
+typedef struct vx_vdb_meta {
+    const char *method, *inside, *fill, *mesh;
+    int supersample, threshold;
+} vx_vdb_meta;
+
+int vx_voxel_write_raw8(const vx_bitgrid *g, const char *path, const vx_voxel_io *io, vx_err *err);
+int vx_voxel_write_raw1(const vx_bitgrid *g, const char *path, const vx_voxel_io *io, vx_err *err);
+int vx_voxel_write_binvox(const vx_bitgrid *g, const char *path, const vx_voxel_io *io,
+                          vx_err *err);
+/* coverage: write the FloatGrid from g->counts (requires counts) instead of
+ * the BoolGrid from the bits. */
+int vx_voxel_write_vdb(const vx_bitgrid *g, int coverage, const vx_vdb_meta *meta, const char *path,
+                       const vx_voxel_io *io, vx_err *err);
+
+/* Bytes the vdb writer may hold in memory beyond the bit grid (OpenVDB's
+ * tree for a grid that is entirely active: the worst case). */
+uint64_t vx_voxel_vdb_bytes(const int dims[3], int coverage);
+
+#endif
