@@ -11,7 +11,7 @@ cmake -S . -B build -DVX_WERROR=ON
 cmake --build build -j"$jobs"
 ctest --test-dir build --output-on-failure -j2
 
-cmake -S . -B build-asan -DVX_WERROR=ON -DVX_SANITIZE=ON -DCMAKE_BUILD_TYPE=Debug
+cmake -S . -B build-asan -DVX_WERROR=ON -DVX_SANITIZE=ON -DVX_BENCH=OFF -DCMAKE_BUILD_TYPE=Debug
 cmake --build build-asan -j"$jobs"
 ASAN_OPTIONS=abort_on_error=0:detect_leaks=1 \
     ctest --test-dir build-asan --output-on-failure -j2 -L 'unit|integration'
