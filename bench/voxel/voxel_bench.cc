@@ -265,47 +265,59 @@ int main(int argc, char **argv)
                 vx_mesh_free(vm);
             }
     } else if (mode == "seed003") {
-        printf("| model | res | mean distance, no supersampling | supersample 2, threshold 4 | surface voxels |\n|---|---|---|---|---|\n");
+        printf("| model | res | mean distance, no supersampling | supersample 2, threshold 1 | threshold 2 | threshold 4 | surface voxels (no supersampling) |\n|---|---|---|---|---|---|---|\n");
         for (auto &spec : meshes) {
             Mesh m = load(spec);
             vx_mesh *vm = as_vx(m);
             vx_grid g;
             vx_grid_from_resolution(vm, res003, 1, &g, &err);
-            // Unsigned distance to the mesh (exact near the surface), in voxels.
+            // Unsigned distance to the mesh (exact near the surface), in world units.
             Adapter a{&m, g};
             auto udf = openvdb::tools::meshToVolume<openvdb::FloatGrid>(a, *xform(g), 3.0f, 3.0f,
                                                                          openvdb::tools::UNSIGNED_DISTANCE_FIELD);
             auto acc = udf->getConstAccessor();
-            double mean[2];
-            uint64_t nsurf = 0;
-            for (int ss = 1; ss <= 2; ss++) {
-                vx_bitgrid out{};
-                vx_voxelize_stats st{};
-                double ms;
-                if (!ours(gl, vm, g, VX_METHOD_SLICE, ss, &out, &st, &ms)) return 1;
-                const int *d = g.dims;
+            const int *d = g.dims;
+            // Mean distance from the centres of surface voxels (inside, with an
+            // outside 6-neighbour or on the grid border) to the mesh, in voxels.
+            auto mean = [&](auto inside, uint64_t *count) {
                 double sum = 0;
                 uint64_t n = 0;
                 for (int k = 0; k < d[2]; k++)
                     for (int j = 0; j < d[1]; j++)
                         for (int i = 0; i < d[0]; i++) {
-                            if (!vx_bitgrid_get(&out, i, j, k)) continue;
+                            if (!inside(i, j, k)) continue;
                             bool surf = i == 0 || j == 0 || k == 0 || i == d[0] - 1 || j == d[1] - 1 ||
-                                        k == d[2] - 1 || !vx_bitgrid_get(&out, i - 1, j, k) ||
-                                        !vx_bitgrid_get(&out, i + 1, j, k) || !vx_bitgrid_get(&out, i, j - 1, k) ||
-                                        !vx_bitgrid_get(&out, i, j + 1, k) || !vx_bitgrid_get(&out, i, j, k - 1) ||
-                                        !vx_bitgrid_get(&out, i, j, k + 1);
+                                        k == d[2] - 1 || !inside(i - 1, j, k) || !inside(i + 1, j, k) ||
+                                        !inside(i, j - 1, k) || !inside(i, j + 1, k) || !inside(i, j, k - 1) ||
+                                        !inside(i, j, k + 1);
                             if (!surf) continue;
                             sum += std::fabs(acc.getValue(openvdb::Coord(i, j, k))) / g.h;
                             n++;
                         }
-                mean[ss - 1] = n ? sum / n : 0;
-                if (ss == 1) nsurf = n;
-                vx_bitgrid_free(&out);
-            }
-            printf("| %s | %d^3 | %.3f | %.3f | %llu |\n", m.name.c_str(), res003, mean[0], mean[1],
-                   (unsigned long long)nsurf);
+                if (count) *count = n;
+                return n ? sum / n : 0.0;
+            };
+            vx_bitgrid plain{}, super{};
+            vx_voxelize_stats st{};
+            double ms;
+            if (!ours(gl, vm, g, VX_METHOD_SLICE, 1, &plain, &st, &ms) ||
+                !ours(gl, vm, g, VX_METHOD_SLICE, 2, &super, &st, &ms))
+                return 1;
+            uint64_t nsurf = 0;
+            double m0 = mean([&](int i, int j, int k) { return vx_bitgrid_get(&plain, i, j, k) != 0; }, &nsurf);
+            double mt[3];
+            const int thr[3] = {1, 2, 4};
+            for (int t = 0; t < 3; t++)
+                mt[t] = mean(
+                    [&](int i, int j, int k) {
+                        return super.counts[((size_t)k * d[1] + j) * d[0] + i] >= thr[t];
+                    },
+                    nullptr);
+            printf("| %s | %d^3 | %.3f | %.3f | %.3f | %.3f | %llu |\n", m.name.c_str(), res003, m0, mt[0], mt[1],
+                   mt[2], (unsigned long long)nsurf);
             fflush(stdout);
+            vx_bitgrid_free(&plain);
+            vx_bitgrid_free(&super);
             vx_mesh_free(vm);
         }
     }
