@@ -409,7 +409,7 @@ static void voxelize_free_state(void *state)
 const vx_kind vx_kind_voxelize = {
     .name = "voxelize",
     .summary =
-        "Solid voxelization on the GPU (depth peeling or slicing) to OpenVDB, binvox or raw bits",
+        "Solid voxelization on the GPU (depth peeling, slicing or crossing counts) to OpenVDB, binvox or raw bits",
     .parse = voxelize_parse,
     .run_gl = voxelize_run_gl,
     .run_cpu = NULL,
