@@ -19,6 +19,9 @@
 // Parity uses the same sums: a signed sum of crossings has the parity of
 // their number.
 //
+// Block bits: one bit per 32 slots (one output word) tells the sum pass
+// which blocks received a crossing; the others are one state throughout.
+//
 // Delta storage: two signed 16-bit fields per uint (slot 2q in the low half,
 // 2q+1 in the high half). atomicAdd adds s * 65536^half mod 2^32; carries and
 // borrows between the halves are harmless because the word is decoded as a
@@ -31,7 +34,9 @@ noperspective in float v_t;
 layout(std430, binding = 0) coherent buffer Delta { uint delta[]; };
 layout(std430, binding = 1) coherent buffer Tail { int tail[]; };
 layout(std430, binding = 2) coherent buffer Flag { uint overflow; };
-layout(location = 2) uniform ivec4 u_grid; // nx, image width (ny), uints per delta row, unused
+layout(std430, binding = 3) coherent buffer Blocks { uint blocks[]; };
+// nx, image width (ny), uints per delta row, uints per row of block bits
+layout(location = 2) uniform ivec4 u_grid;
 
 void main()
 {
@@ -40,7 +45,9 @@ void main()
     int s = gl_FrontFacing ? 1 : -1;
     // First centre i + 0.5 >= t: i = ceil(t - 0.5), exact for |t| < 2^22
     // (the same expression as voxel_peel_fill.comp).
-    int ib = int(ceil(clamp(v_t - 0.5, -1.0, float(n))));
+    precise float t = v_t;
+    precise float u = t - 0.5;
+    int ib = int(ceil(clamp(u, -1.0, float(n))));
     if (ib <= 0) return;
     if (ib >= n) {
         atomicAdd(tail[row], s);
@@ -51,4 +58,7 @@ void main()
     int d0 = (int(old << 16)) >> 16; // low field, sign-extended
     int d = sh == 0 ? d0 : int(old - uint(d0)) >> 16;
     if ((s > 0 && d == 32767) || (s < 0 && d == -32768)) atomicOr(overflow, 1u);
+    // One bit per 32 voxels (one word of the output) that holds a count:
+    // the sum pass reads only those blocks' counters.
+    atomicOr(blocks[row * u_grid.w + (slot >> 10)], 1u << ((slot >> 5) & 31));
 }

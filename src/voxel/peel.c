@@ -83,9 +83,10 @@ void vx_peel_objs_free(peel_objs *o)
 {
     layers_free(&o->ls[0]);
     layers_free(&o->ls[1]);
-    GLuint b[10] = {o->vbo,     o->ibo,         o->ssbo[0],     o->ssbo[1],    o->ssbo[2],
-                    o->list,    o->ibo_slab,    o->scan_buf[0], o->scan_buf[1], o->scan_buf[2]};
-    glDeleteBuffers(10, b);
+    GLuint b[11] = {o->vbo,         o->ibo,         o->ssbo[0],     o->ssbo[1],
+                    o->ssbo[2],     o->list,        o->ibo_slab,    o->scan_buf[0],
+                    o->scan_buf[1], o->scan_buf[2], o->scan_buf[3]};
+    glDeleteBuffers(11, b);
     glDeleteFramebuffers(1, &o->scan_fbo);
     glDeleteVertexArrays(1, &o->vao);
     glDeleteQueries(1, &o->query);

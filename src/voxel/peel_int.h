@@ -28,7 +28,7 @@ typedef struct peel_objs {
     GLuint ibo_slab; /* several slabs: triangles grouped by the slabs they reach */
     GLuint query;
     GLuint scan_fbo;      /* scan: the attachment-less framebuffer */
-    GLuint scan_buf[3];   /* scan: delta counters, per-row tails, overflow flag */
+    GLuint scan_buf[4];   /* scan: delta counters, row tails, overflow flag, block bits */
 } peel_objs;
 
 typedef struct peel_ctx {

@@ -17,7 +17,10 @@
  *      on open meshes and on grids that cut the mesh.
  *   2. sum (voxel_scan_sum.comp): one invocation per x row adds the slots
  *      from the row's end down and writes whole 32-bit words of bits in the
- *      voxel.h layout (nonzero: sum != 0; parity: sum odd; a signed sum has
+ *      voxel.h layout; the draw also sets one "block" bit per output word
+ *      that received a crossing, and words whose bit is clear are written
+ *      whole without reading their counters (O(words + crossings), like
+ *      peel's fill, instead of O(voxels)) (nonzero: sum != 0; parity: sum odd; a signed sum has
  *      the parity of the number of crossings, so one counter serves both),
  *      zeroing the counters behind it for the next slab.
  *   3. the slab's bits are read back into out->bits.
@@ -66,13 +69,25 @@ static uint64_t tail_bytes(const peel_ctx *c, int rows)
     return 4u * (uint64_t)c->dims[1] * (uint64_t)rows;
 }
 
+/* Block bits: one per output word (32 voxels), uints per row. */
+static uint64_t block_row_uints(const peel_ctx *c)
+{
+    return ((uint64_t)c->wx + 31) / 32;
+}
+
+static uint64_t block_bytes(const peel_ctx *c, int rows)
+{
+    return block_row_uints(c) * 4u * (uint64_t)c->dims[1] * (uint64_t)rows;
+}
+
 /* Memory a slab height needs: CPU grid, mesh buffers, bit slab, delta
  * counters and tails. */
 static uint64_t estimate(const peel_ctx *c, int rows)
 {
     uint64_t b = vx_bitgrid_bytes(c->dims, 1);
     b += (uint64_t)c->m->nverts * 12u + (uint64_t)c->m->ntris * 12u;
-    return b + vx_peel_slab_bytes(c, rows) + delta_bytes(c, rows) + tail_bytes(c, rows) + 4u;
+    return b + vx_peel_slab_bytes(c, rows) + delta_bytes(c, rows) + tail_bytes(c, rows) +
+           block_bytes(c, rows) + 4u;
 }
 
 static int plan(peel_ctx *c)
@@ -124,7 +139,7 @@ static int draw(peel_ctx *c, int k0, int rows)
     glProgramUniform3i(p, 0, 0, 1, 2);
     glProgramUniform4f(p, 1, (float)(2.0 / w), -1.0f, (float)(2.0 / h),
                        (float)(-1.0 - 2.0 * k0 / h));
-    glProgramUniform4i(p, 2, c->dims[0], w, (int)delta_row_uints(c), 0);
+    glProgramUniform4i(p, 2, c->dims[0], w, (int)delta_row_uints(c), (int)block_row_uints(c));
     glBindFramebuffer(GL_FRAMEBUFFER, o->scan_fbo);
     glViewport(0, 0, w, h);
     /* State other code may have left behind: no tests, no culling (both
@@ -141,7 +156,7 @@ static int draw(peel_ctx *c, int k0, int rows)
     glFrontFace(GL_CCW);
     glUseProgram(p);
     glBindVertexArray(o->vao);
-    for (GLuint b = 0; b < 3; b++)
+    for (GLuint b = 0; b < 4; b++)
         glBindBufferBase(GL_SHADER_STORAGE_BUFFER, b, o->scan_buf[b]);
     size_t first = 0, ntri = c->m->ntris;
     if (c->slab_first) {
@@ -157,6 +172,7 @@ static int draw(peel_ctx *c, int k0, int rows)
     glUseProgram(0);
     for (GLuint b = 0; b < 3; b++)
         glBindBufferBase(GL_SHADER_STORAGE_BUFFER, b, 0);
+    glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 3, 0);
     glBindFramebuffer(GL_FRAMEBUFFER, 0);
     return vx_gl_check(c->gl, "scan.draw", c->err);
 }
@@ -167,7 +183,8 @@ static int sum(peel_ctx *c, int rows, int mode)
     peel_objs *o = &c->o;
     GLuint p = c->prog_sum;
     glProgramUniform4i(p, 0, c->dims[0], c->dims[1], (int)c->wx, rows);
-    glProgramUniform2i(p, 1, (int)delta_row_uints(c), mode == VX_INSIDE_PARITY ? 1 : 0);
+    glProgramUniform3i(p, 1, (int)delta_row_uints(c), mode == VX_INSIDE_PARITY ? 1 : 0,
+                       (int)block_row_uints(c));
     /* The counters were written by fragment shader atomics. */
     glMemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT);
     vx_gl_timer t;
@@ -176,11 +193,12 @@ static int sum(peel_ctx *c, int rows, int mode)
     glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 0, o->scan_buf[0]);
     glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 1, o->scan_buf[1]);
     glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 2, o->ssbo[0]);
+    glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 3, o->scan_buf[3]);
     vx_peel_dispatch_2d((uint64_t)c->dims[1] * (uint64_t)rows);
     glMemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT | GL_BUFFER_UPDATE_BARRIER_BIT);
     c->st->gpu_fill_ms += vx_peel_timer_end_compute(&t);
     glUseProgram(0);
-    for (GLuint b = 0; b < 3; b++)
+    for (GLuint b = 0; b < 4; b++)
         glBindBufferBase(GL_SHADER_STORAGE_BUFFER, b, 0);
     return vx_gl_check(c->gl, "scan.sum", c->err);
 }
@@ -231,12 +249,13 @@ int vx_voxelize_scan(vx_gl *gl, const vx_mesh *m, const vx_voxelize_desc *d, vx_
     peel_objs *o = &c.o;
     glCreateBuffers(1, &o->ssbo[0]);
     glNamedBufferStorage(o->ssbo[0], (GLsizeiptr)vx_peel_slab_bytes(&c, c.rows), NULL, 0);
-    glCreateBuffers(3, o->scan_buf);
+    glCreateBuffers(4, o->scan_buf);
     glNamedBufferStorage(o->scan_buf[0], (GLsizeiptr)delta_bytes(&c, c.rows), NULL, 0);
     glNamedBufferStorage(o->scan_buf[1], (GLsizeiptr)tail_bytes(&c, c.rows), NULL, 0);
     glNamedBufferStorage(o->scan_buf[2], 4, NULL, 0);
+    glNamedBufferStorage(o->scan_buf[3], (GLsizeiptr)block_bytes(&c, c.rows), NULL, 0);
     /* Cleared once: the sum pass leaves the counters at zero behind it. */
-    for (int b = 0; b < 3; b++)
+    for (int b = 0; b < 4; b++)
         glClearNamedBufferData(o->scan_buf[b], GL_R32UI, GL_RED_INTEGER, GL_UNSIGNED_INT, NULL);
     glCreateFramebuffers(1, &o->scan_fbo);
     if (vx_gl_check(gl, "scan.buffers", err)) goto done;

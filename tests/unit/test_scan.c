@@ -555,6 +555,61 @@ static void test_dispatcher(void **state)
     vx_mesh_free(m);
 }
 
+/* Diagnostics (VX_SCAN_DIAG=mesh.obj:res): scan vs peel on a big grid;
+ * every differing voxel is checked against the reference on its row. */
+static void test_diag(void **state)
+{
+    const char *spec = getenv("VX_SCAN_DIAG");
+    if (!spec) skip();
+    char path[512];
+    int res = 1024;
+    snprintf(path, sizeof path, "%s", spec);
+    char *colon = strrchr(path, ':');
+    if (colon) *colon = 0, res = atoi(colon + 1);
+    vx_mesh *m = vx_obj_read_path(path, NULL, NULL);
+    assert_non_null(m);
+    vx_voxelize_desc d = {0};
+    grid_res(m, res, 0, &d.grid);
+    if (getenv("VX_SCAN_DIAG_ROWS")) d.max_slab_rows = atoi(getenv("VX_SCAN_DIAG_ROWS"));
+    vx_bitgrid b, p;
+    vx_voxelize_stats st, pst;
+    double t0 = now_s();
+    run_scan(m, &d, &b, &st);
+    double t1 = now_s();
+    vx_err err = {0};
+    assert_int_equal(vx_voxelize_peel(g_gl, m, &d, &p, &pst, &err), 0);
+    double t2 = now_s();
+    printf("scan %.0f ms (draw %.1f sums %.1f upload %.1f readback %.1f, %d chunks); peel %.0f ms "
+           "(peel %.1f fill %.1f, %d layers)\n",
+           1e3 * (t1 - t0), st.gpu_peel_ms, st.gpu_fill_ms, st.upload_ms, st.readback_ms, st.chunks,
+           1e3 * (t2 - t1), pst.gpu_peel_ms, pst.gpu_fill_ms, pst.layers);
+    int shown = 0;
+    for (int k = 0; k < d.grid.dims[2]; k++)
+        for (int j = 0; j < d.grid.dims[1]; j++) {
+            size_t w0 = ((size_t)k * d.grid.dims[1] + j) * b.wx;
+            int differ = 0;
+            for (size_t w = 0; w < b.wx; w++)
+                differ |= b.bits[w0 + w] != p.bits[w0 + w];
+            if (!differ || shown >= 20) continue;
+            vx_grid row = d.grid;
+            row.origin[1] += j * d.grid.h;
+            row.origin[2] += k * d.grid.h;
+            row.dims[1] = row.dims[2] = 1;
+            uint8_t *ref = malloc((size_t)row.dims[0]);
+            assert_int_equal(ref_voxelize(m, &row, VX_INSIDE_NONZERO, ref), 0);
+            for (int i = 0; i < d.grid.dims[0]; i++)
+                if (vx_bitgrid_get(&b, i, j, k) != vx_bitgrid_get(&p, i, j, k)) {
+                    printf("  (%d,%d,%d): scan %d peel %d ref %d\n", i, j, k,
+                           vx_bitgrid_get(&b, i, j, k), vx_bitgrid_get(&p, i, j, k), ref[i]);
+                    shown++;
+                }
+            free(ref);
+        }
+    vx_bitgrid_free(&b);
+    vx_bitgrid_free(&p);
+    vx_mesh_free(m);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -570,6 +625,7 @@ int main(void)
         cmocka_unit_test(test_limits_and_progress),
         cmocka_unit_test(test_overflow),
         cmocka_unit_test(test_dispatcher),
+        cmocka_unit_test(test_diag),
     };
     return cmocka_run_group_tests(tests, setup, teardown);
 }
