@@ -37,23 +37,30 @@ void main()
             bits[bbase + wi] = in_ ? (nb == 32 ? 0xffffffffu : (1u << nb) - 1u) : 0u;
             continue;
         }
+        // Touched: counters are visited from the top down; the voxels
+        // between two nonzero counters share one state and are set as a run.
         uint acc = 0u;
+        int top = nb; // bits [top, nb) are done
         for (int q = min((wi << 4) + 15, dx - 1); q >= (wi << 4); q--) {
             uint word = delta[base + q];
-            int d0 = 0, d1 = 0;
-            if (word != 0u) {
-                delta[base + q] = 0u;
-                d0 = (int(word << 16)) >> 16; // signed-digit decode (voxel_scan.frag)
-                d1 = int(word - uint(d0)) >> 16;
-            }
-            int i = 2 * q + 1;
-            if (i < n) {
+            if (word == 0u) continue;
+            delta[base + q] = 0u;
+            int d0 = (int(word << 16)) >> 16; // signed-digit decode (voxel_scan.frag)
+            int d1 = int(word - uint(d0)) >> 16;
+            int b = (2 * q) & 31; // the word's voxels are b and b + 1
+            // bits [b + 2, top) have the current state
+            if ((parity ? (w & 1) != 0 : w != 0) && b + 2 < top)
+                acc |= (top == 32 ? 0xffffffffu : (1u << top) - 1u) & ~((2u << (b + 1)) - 1u);
+            if (b + 1 < nb) {
                 w += d1;
-                if (parity ? (w & 1) != 0 : w != 0) acc |= 1u << (i & 31);
+                if (parity ? (w & 1) != 0 : w != 0) acc |= 2u << b;
             }
             w += d0;
-            if (parity ? (w & 1) != 0 : w != 0) acc |= 1u << ((2 * q) & 31);
+            if (parity ? (w & 1) != 0 : w != 0) acc |= 1u << b;
+            top = b;
         }
+        if ((parity ? (w & 1) != 0 : w != 0) && top > 0)
+            acc |= top == 32 ? 0xffffffffu : (1u << top) - 1u;
         bits[bbase + wi] = acc;
     }
 }
