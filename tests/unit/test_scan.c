@@ -366,6 +366,12 @@ static void test_real_meshes_256(void **state)
         double iou;
         compare_ref(names[n], m, &d.grid, VX_INSIDE_NONZERO, &b, &iou);
         assert_true(iou >= 0.999);
+        vx_bitgrid_free(&b);
+        /* Voxel for voxel with peel on the same slabs: a slab's window
+         * transform depends on its rows, so near-ties at voxel centres may
+         * fall either way with other slab heights (scan.c). */
+        d.max_slab_rows = 16;
+        run_scan(m, &d, &b, &st);
         same_as_peel(names[n], m, &d, &b);
         vx_bitgrid_free(&b);
         vx_mesh_free(m);
