@@ -2,7 +2,7 @@
 // meshToVolume (interior filled, then its interior mask) on the same mesh
 // and grid, in one run; plus the seed tables (000 Table 1, 003 Table 1).
 //
-//   voxel_bench compare MESH.obj[:SUBDIV] RES... [--method peel|slice|auto] [--runs N]
+//   voxel_bench compare MESH.obj[:SUBDIV] RES... [--method peel|slice|scan|auto] [--runs N]
 //   voxel_bench seed000 MESH.obj                     (peel/fill ms at 128, 256 for 1, 4, 16, 64x faces)
 //   voxel_bench seed003 MESH.obj... [--res 512]       (mean surface-voxel distance, supersample off/on)
 //
@@ -163,7 +163,10 @@ static double iou(const vx_bitgrid &ours, const openvdb::BoolGrid &mask, uint64_
 
 static vx_method parse_method(const char *s)
 {
-    return !strcmp(s, "peel") ? VX_METHOD_PEEL : !strcmp(s, "slice") ? VX_METHOD_SLICE : VX_METHOD_AUTO;
+    return !strcmp(s, "peel")    ? VX_METHOD_PEEL
+           : !strcmp(s, "slice") ? VX_METHOD_SLICE
+           : !strcmp(s, "scan")  ? VX_METHOD_SCAN
+                                 : VX_METHOD_AUTO;
 }
 
 static bool ours(vx_gl *gl, vx_mesh *vm, const vx_grid &g, vx_method method, int supersample,
@@ -213,7 +216,10 @@ int main(int argc, char **argv)
 
     if (mode == "compare") {
         printf("| mesh | triangles | grid | voxeld ms (%s) | OpenVDB ms | speed-up | IoU | inside voxeld | inside OpenVDB |\n|---|---|---|---|---|---|---|---|---|\n",
-               method == VX_METHOD_PEEL ? "peel" : method == VX_METHOD_SLICE ? "slice" : "auto");
+               method == VX_METHOD_PEEL    ? "peel"
+               : method == VX_METHOD_SLICE ? "slice"
+               : method == VX_METHOD_SCAN  ? "scan"
+                                           : "auto");
         for (auto &spec : meshes) {
             Mesh m = load(spec);
             vx_mesh *vm = as_vx(m);

@@ -13,7 +13,7 @@
 typedef enum grid_mode { GRID_RESOLUTION, GRID_VOXEL_SIZE, GRID_BOX } grid_mode;
 typedef enum vformat { F_VDB = 0, F_BINVOX, F_RAW8, F_RAW1, F_SUMMARY } vformat;
 
-static const char *const method_names[] = {"auto", "peel", "slice", NULL};
+static const char *const method_names[] = {"auto", "peel", "slice", "scan", NULL};
 static const char *const inside_names[] = {"nonzero", "parity", "robust", NULL};
 static const char *const fill_names[] = {"solid", "surface", NULL};
 static const char *const format_names[] = {"vdb", "binvox", "raw8", "raw1", "summary", NULL};
@@ -189,18 +189,19 @@ static int read_params(const cJSON *params, const vx_limits *lim, vparams *p, vx
     if (vs && !(p->voxel_size > 0))
         return vx_err_set(err, VX_EUNPROC, "invalid_params", "params.voxel_size must be > 0");
     /* the name arrays follow the enums' order */
-    p->method = method == 1 ? VX_METHOD_PEEL : method == 2 ? VX_METHOD_SLICE : VX_METHOD_AUTO;
+    p->method = (vx_method)method; /* auto, peel, slice, scan */
     p->inside = inside == 1 ? VX_INSIDE_PARITY : inside == 2 ? VX_INSIDE_ROBUST : VX_INSIDE_NONZERO;
     p->fill = fill == 1 ? VX_FILL_SURFACE : VX_FILL_SOLID;
     p->supersample = (int)ss;
     p->threshold = (int)thr;
     p->format = (vformat)format;
-    /* Peeling samples each voxel once, at its centre; only slicing
+    /* Peeling and scan sample each voxel once, at its centre; only slicing
      * supersamples (seed 003's accuracy improvement). */
-    if (p->supersample == 2 && p->method == VX_METHOD_PEEL)
+    if (p->supersample == 2 && (p->method == VX_METHOD_PEEL || p->method == VX_METHOD_SCAN))
         return vx_err_set(err, VX_EUNPROC, "invalid_params",
-                          "params.supersample 2 needs params.method slice or auto (peel samples "
-                          "voxel centres only)");
+                          "params.supersample 2 needs params.method slice or auto (%s samples "
+                          "voxel centres only)",
+                          p->method == VX_METHOD_PEEL ? "peel" : "scan");
     if (box) {
         if (p->padding)
             return vx_err_set(
@@ -255,9 +256,7 @@ static cJSON *voxelize_parse(const cJSON *params, const vx_limits *lim, vx_err *
     }
     ok = ok && cJSON_AddNumberToObject(o, "padding", (double)p.padding) &&
          cJSON_AddStringToObject(o, "method",
-                                 method_names[p.method == VX_METHOD_PEEL    ? 1
-                                              : p.method == VX_METHOD_SLICE ? 2
-                                                                            : 0]) &&
+                                 method_names[p.method]) &&
          cJSON_AddStringToObject(o, "inside",
                                  inside_names[p.inside == VX_INSIDE_PARITY   ? 1
                                               : p.inside == VX_INSIDE_ROBUST ? 2
@@ -410,7 +409,7 @@ static void voxelize_free_state(void *state)
 const vx_kind vx_kind_voxelize = {
     .name = "voxelize",
     .summary =
-        "Solid voxelization on the GPU (depth peeling or slicing) to OpenVDB, binvox or raw bits",
+        "Solid voxelization on the GPU (depth peeling, slicing or crossing counts) to OpenVDB, binvox or raw bits",
     .parse = voxelize_parse,
     .run_gl = voxelize_run_gl,
     .run_cpu = NULL,

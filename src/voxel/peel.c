@@ -52,6 +52,7 @@
 #include <time.h>
 
 #include "util/log.h"
+#include "voxel/peel_int.h"
 #include "voxel/voxel.h"
 
 #define PEEL_NONE 3.0e38f         /* cleared layer value: no crossing there */
@@ -60,47 +61,8 @@
 #define SURF_GPU_WORK 16384       /* voxel tests one GPU invocation may take */
 #define SURF_MARGIN 1e-4          /* grid units the boxes grow by: float rounding */
 
-/* A peel image: the pass target and the layer arrays. */
-typedef struct layer_set {
-    GLuint fbo, depth_rb, cur; /* the pass's target: R32F colour + 32F depth */
-    GLuint layers, counts;     /* R32F / R32UI arrays of cap layers */
-    int w, h, cap;
-} layer_set;
 
-/* Every GL object one call creates, so every exit path deletes the same set
- * (names of 0 are ignored by glDelete*). */
-typedef struct peel_objs {
-    GLuint vbo, ibo, vao;
-    layer_set ls[2]; /* x and y rays; z rays (robust: peeled once, filled per slab) */
-    GLuint ssbo[3];
-    GLuint list;     /* surface: the triangles the GPU takes */
-    GLuint ibo_slab; /* several slabs: triangles grouped by the slabs they reach */
-    GLuint query;
-} peel_objs;
-
-typedef struct peel_ctx {
-    vx_gl *gl;
-    const vx_mesh *m;
-    const vx_voxelize_desc *d;
-    vx_voxelize_stats *st;
-    vx_err *err;
-    vx_bitgrid *out;
-    GLuint prog_peel, prog_fill, prog_major, prog_surf;
-    int dims[3], max_layers, rows, nslabs, naxes;
-    size_t wx;
-    double tlo[3], thi[3]; /* mesh bbox in grid units */
-    uint64_t fixed_bytes;  /* everything but the layer arrays */
-    uint64_t first_layers; /* the layer arrays as first allocated */
-    uint64_t layers_now;   /* the layer arrays as allocated now */
-    uint64_t limit;        /* max_memory, or UINT64_MAX */
-    peel_objs o;
-    int slab, axis_i; /* for progress */
-    size_t ncpu_tris;
-    uint32_t *cpu_tris; /* surface: triangles too large for one invocation */
-    size_t *slab_first; /* with o.ibo_slab: first triangle of each slab, nslabs + 1 */
-} peel_ctx;
-
-static double now_ms(void)
+double vx_peel_now_ms(void)
 {
     struct timespec ts;
     clock_gettime(CLOCK_MONOTONIC, &ts);
@@ -117,18 +79,21 @@ static void layers_free(layer_set *o)
     o->w = o->h = o->cap = 0;
 }
 
-static void objs_free(peel_objs *o)
+void vx_peel_objs_free(peel_objs *o)
 {
     layers_free(&o->ls[0]);
     layers_free(&o->ls[1]);
-    GLuint b[7] = {o->vbo, o->ibo, o->ssbo[0], o->ssbo[1], o->ssbo[2], o->list, o->ibo_slab};
-    glDeleteBuffers(7, b);
+    GLuint b[11] = {o->vbo,         o->ibo,         o->ssbo[0],     o->ssbo[1],
+                    o->ssbo[2],     o->list,        o->ibo_slab,    o->scan_buf[0],
+                    o->scan_buf[1], o->scan_buf[2], o->scan_buf[3]};
+    glDeleteBuffers(11, b);
+    glDeleteFramebuffers(1, &o->scan_fbo);
     glDeleteVertexArrays(1, &o->vao);
     glDeleteQueries(1, &o->query);
     memset(o, 0, sizeof *o);
 }
 
-static int too_big(peel_ctx *c, uint64_t need)
+int vx_peel_too_big(peel_ctx *c, uint64_t need)
 {
     return vx_err_set(c->err, VX_ETOOBIG, "job_memory_limit",
                       "voxelizing %dx%dx%d needs %llu bytes of memory, the job may use %llu",
@@ -137,7 +102,7 @@ static int too_big(peel_ctx *c, uint64_t need)
 }
 
 /* Calls the caller's progress hook; a nonzero answer stops the job. */
-static int progress(peel_ctx *c, double within_slab)
+int vx_peel_progress(peel_ctx *c, double within_slab)
 {
     if (!c->d->progress) return 0;
     double f = ((double)c->slab + ((double)c->axis_i + within_slab) / c->naxes) / c->nslabs;
@@ -153,14 +118,14 @@ static int progress(peel_ctx *c, double within_slab)
  * dispatch of milliseconds; when the query says less than a thousandth of
  * the wall-clock time to glFinish, the wall-clock time (the dispatch ran on
  * the CPU) is the honest figure. */
-static double timer_end_compute(vx_gl_timer *t)
+double vx_peel_timer_end_compute(vx_gl_timer *t)
 {
     glFinish();
-    double wall = now_ms() - t->cpu_start_ms, gpu = vx_gl_timer_end_ms(t);
+    double wall = vx_peel_now_ms() - t->cpu_start_ms, gpu = vx_gl_timer_end_ms(t);
     return gpu > wall * 1e-3 ? gpu : wall;
 }
 
-static void dispatch_2d(uint64_t invocations)
+void vx_peel_dispatch_2d(uint64_t invocations)
 {
     uint64_t groups = (invocations + 63) / 64;
     if (groups == 0) return;
@@ -172,7 +137,7 @@ static void dispatch_2d(uint64_t invocations)
 /* Positions in grid units: (p - origin) / h in double, then float, so a
  * face on a cell boundary lands exactly on an integer (an axis-aligned cube
  * filling the grid gives exactly the full grid). Uploaded once. */
-static int upload(peel_ctx *c)
+int vx_peel_upload(peel_ctx *c)
 {
     const vx_mesh *m = c->m;
     const vx_grid *g = &c->d->grid;
@@ -249,7 +214,7 @@ static int grow(peel_ctx *c, layer_set *o, int need, int keep)
     if (cap > c->max_layers + 1) cap = c->max_layers + 1;
     uint64_t px = (uint64_t)o->w * (uint64_t)o->h;
     uint64_t total = c->fixed_bytes + c->layers_now + layer_bytes(px, cap);
-    if (total > c->limit) return too_big(c, total);
+    if (total > c->limit) return vx_peel_too_big(c, total);
     GLint max_layers = 0;
     glGetIntegerv(GL_MAX_ARRAY_TEXTURE_LAYERS, &max_layers);
     if (cap > max_layers) cap = max_layers;
@@ -301,7 +266,7 @@ static int targets(peel_ctx *c, layer_set *o, int w, int h)
 }
 
 /* Draws triangles [first, first + n) of the bound element buffer. */
-static void draw_tris(size_t first, size_t n)
+void vx_peel_draw_tris(size_t first, size_t n)
 {
     /* glDrawElements counts in GLsizei: split beyond 2^31 indices. */
     const size_t step = (size_t)1 << 28;
@@ -332,7 +297,7 @@ static void tri_zrange(const peel_ctx *c, size_t t, double *lo, double *hi)
  * reaching several slabs is repeated) saves drawing the whole mesh in every
  * pass of every slab. Skipped (whole mesh per slab) when the copies would
  * not fit max_memory. */
-static int slab_buckets(peel_ctx *c)
+int vx_peel_slab_buckets(peel_ctx *c)
 {
     if (c->nslabs < 2 || c->m->ntris == 0) return 0;
     size_t *first = calloc((size_t)c->nslabs + 1, sizeof *first);
@@ -447,7 +412,7 @@ static int peel(peel_ctx *c, layer_set *o, int axis, int k0, int rows, int *nlay
         glBindImageTexture(0, o->counts, 0, GL_TRUE, 0, GL_READ_WRITE, GL_R32UI);
         glProgramUniform1i(p, 2, L - 1);
         glBeginQuery(GL_ANY_SAMPLES_PASSED, po->query);
-        draw_tris(first, ntri);
+        vx_peel_draw_tris(first, ntri);
         glEndQuery(GL_ANY_SAMPLES_PASSED);
         GLuint passed = 0;
         glGetQueryObjectuiv(po->query, GL_QUERY_RESULT, &passed);
@@ -468,7 +433,7 @@ static int peel(peel_ctx *c, layer_set *o, int axis, int k0, int rows, int *nlay
                        c->max_layers, "xyz"[axis]);
             goto done;
         }
-        if (progress(c, 0.9 * (L + 1) / (L + 4.0))) goto done;
+        if (vx_peel_progress(c, 0.9 * (L + 1) / (L + 4.0))) goto done;
     }
     *nlayers = L;
     rc = 0;
@@ -501,9 +466,9 @@ static int fill(peel_ctx *c, const layer_set *o, int axis, int slot, int mode, i
     glBindTextureUnit(0, o->layers);
     glBindTextureUnit(1, o->counts);
     glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 0, c->o.ssbo[slot]);
-    dispatch_2d((uint64_t)o->w * (uint64_t)o->h);
+    vx_peel_dispatch_2d((uint64_t)o->w * (uint64_t)o->h);
     glMemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT | GL_BUFFER_UPDATE_BARRIER_BIT);
-    c->st->gpu_fill_ms += timer_end_compute(&t);
+    c->st->gpu_fill_ms += vx_peel_timer_end_compute(&t);
     glUseProgram(0);
     glBindTextureUnit(0, 0);
     glBindTextureUnit(1, 0);
@@ -673,9 +638,9 @@ static int surface_slab(peel_ctx *c, size_t ngpu, int k0, int rows)
     glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 1, o->vbo);
     glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 2, o->ibo);
     glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 3, o->list);
-    dispatch_2d(ngpu);
+    vx_peel_dispatch_2d(ngpu);
     glMemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT | GL_BUFFER_UPDATE_BARRIER_BIT);
-    c->st->gpu_fill_ms += timer_end_compute(&t);
+    c->st->gpu_fill_ms += vx_peel_timer_end_compute(&t);
     glUseProgram(0);
     for (GLuint b = 0; b < 4; b++)
         glBindBufferBase(GL_SHADER_STORAGE_BUFFER, b, 0);
@@ -684,7 +649,7 @@ static int surface_slab(peel_ctx *c, size_t ngpu, int k0, int rows)
 
 /* ---- sizing ---------------------------------------------------------- */
 
-static uint64_t slab_bytes(const peel_ctx *c, int rows)
+uint64_t vx_peel_slab_bytes(const peel_ctx *c, int rows)
 {
     return (uint64_t)c->wx * 4u * (uint64_t)c->dims[1] * (uint64_t)rows;
 }
@@ -718,8 +683,8 @@ static uint64_t estimate(const peel_ctx *c, int rows, int surface)
 {
     uint64_t b = vx_bitgrid_bytes(c->dims, 1);
     b += (uint64_t)c->m->nverts * 12u + (uint64_t)c->m->ntris * 12u;
-    if (surface) return b + (uint64_t)c->m->ntris * 8u + slab_bytes(c, rows);
-    b += slab_bytes(c, rows) * (uint64_t)c->naxes;
+    if (surface) return b + (uint64_t)c->m->ntris * 8u + vx_peel_slab_bytes(c, rows);
+    b += vx_peel_slab_bytes(c, rows) * (uint64_t)c->naxes;
     return b + (max_image(c, rows) + z_image(c)) * 8u + first_layers(c, rows);
 }
 
@@ -731,7 +696,7 @@ static int plan(peel_ctx *c, int surface)
     long side = in->max_texture_size;
     if (vp[0] < side) side = vp[0];
     if (vp[1] < side) side = vp[1];
-    uint64_t row_bytes = slab_bytes(c, 1);
+    uint64_t row_bytes = vx_peel_slab_bytes(c, 1);
     uint64_t rows = (uint64_t)in->max_ssbo_bytes / row_bytes;
     if (rows == 0)
         return vx_err_set(c->err, VX_ETOOBIG, "grid_too_large",
@@ -763,7 +728,7 @@ static int plan(peel_ctx *c, int surface)
     while (rows > 1 && estimate(c, (int)rows, surface) > c->limit)
         rows = (rows + 1) / 2;
     uint64_t need = estimate(c, (int)rows, surface);
-    if (need > c->limit) return too_big(c, need);
+    if (need > c->limit) return vx_peel_too_big(c, need);
     c->rows = (int)rows;
     c->nslabs = (int)(((uint64_t)c->dims[2] + rows - 1) / rows);
     c->first_layers = surface ? 0 : first_layers(c, c->rows);
@@ -828,8 +793,8 @@ int vx_voxelize_peel(vx_gl *gl, const vx_mesh *m, const vx_voxelize_desc *d, vx_
     int rc = -1;
     uint32_t *gpu_list = NULL;
     if (vx_bitgrid_alloc(out, g, 0, err)) return -1;
-    double t0 = now_ms();
-    if (upload(&c)) goto done;
+    double t0 = vx_peel_now_ms();
+    if (vx_peel_upload(&c)) goto done;
     if (surface) {
         size_t ngpu = 0;
         if (surface_lists(&c, &gpu_list, &ngpu)) goto done;
@@ -838,29 +803,29 @@ int vx_voxelize_peel(vx_gl *gl, const vx_mesh *m, const vx_voxelize_desc *d, vx_
         VX_FREE(gpu_list);
         if (vx_gl_check(gl, "peel.list", err)) goto done;
         glFinish();
-        st->upload_ms = now_ms() - t0;
+        st->upload_ms = vx_peel_now_ms() - t0;
         glCreateBuffers(1, &c.o.ssbo[0]);
-        glNamedBufferStorage(c.o.ssbo[0], (GLsizeiptr)slab_bytes(&c, c.rows), NULL, 0);
+        glNamedBufferStorage(c.o.ssbo[0], (GLsizeiptr)vx_peel_slab_bytes(&c, c.rows), NULL, 0);
         if (vx_gl_check(gl, "peel.ssbo", err)) goto done;
         for (c.slab = 0; c.slab < c.nslabs; c.slab++) {
             int k0 = c.slab * c.rows, rows = c.dims[2] - k0 < c.rows ? c.dims[2] - k0 : c.rows;
             if (surface_slab(&c, ngpu, k0, rows)) goto done;
-            double r0 = now_ms();
-            glGetNamedBufferSubData(c.o.ssbo[0], 0, (GLsizeiptr)slab_bytes(&c, rows),
+            double r0 = vx_peel_now_ms();
+            glGetNamedBufferSubData(c.o.ssbo[0], 0, (GLsizeiptr)vx_peel_slab_bytes(&c, rows),
                                     out->bits + (size_t)k0 * c.dims[1] * c.wx);
-            st->readback_ms += now_ms() - r0;
+            st->readback_ms += vx_peel_now_ms() - r0;
             if (vx_gl_check(gl, "peel.readback", err)) goto done;
             c.axis_i = 0;
-            if (progress(&c, 1.0)) goto done;
+            if (vx_peel_progress(&c, 1.0)) goto done;
         }
         surface_cpu(&c);
     } else {
-        if (slab_buckets(&c)) goto done;
+        if (vx_peel_slab_buckets(&c)) goto done;
         glFinish(); /* so upload_ms is the upload, not just its queueing */
-        st->upload_ms = now_ms() - t0;
+        st->upload_ms = vx_peel_now_ms() - t0;
         for (int s = 0; s < c.naxes; s++) {
             glCreateBuffers(1, &c.o.ssbo[s]);
-            glNamedBufferStorage(c.o.ssbo[s], (GLsizeiptr)slab_bytes(&c, c.rows), NULL,
+            glNamedBufferStorage(c.o.ssbo[s], (GLsizeiptr)vx_peel_slab_bytes(&c, c.rows), NULL,
                                  GL_DYNAMIC_STORAGE_BIT);
         }
         if (vx_gl_check(gl, "peel.ssbo", err)) goto done;
@@ -884,27 +849,27 @@ int vx_voxelize_peel(vx_gl *gl, const vx_mesh *m, const vx_voxelize_desc *d, vx_
                 if (fill(&c, ls, axis, axis, mode, k0, rows, nl[axis])) goto done;
             }
             if (c.naxes == 3) {
-                uint64_t words = slab_bytes(&c, rows) / 4;
+                uint64_t words = vx_peel_slab_bytes(&c, rows) / 4;
                 vx_gl_timer t;
                 vx_gl_timer_begin(&t);
                 glUseProgram(c.prog_major);
                 glProgramUniform1ui(c.prog_major, 0, (GLuint)words);
                 for (GLuint b = 0; b < 3; b++)
                     glBindBufferBase(GL_SHADER_STORAGE_BUFFER, b, c.o.ssbo[b]);
-                dispatch_2d(words);
+                vx_peel_dispatch_2d(words);
                 glMemoryBarrier(GL_BUFFER_UPDATE_BARRIER_BIT);
-                st->gpu_fill_ms += timer_end_compute(&t);
+                st->gpu_fill_ms += vx_peel_timer_end_compute(&t);
                 glUseProgram(0);
                 for (GLuint b = 0; b < 3; b++)
                     glBindBufferBase(GL_SHADER_STORAGE_BUFFER, b, 0);
             }
-            double r0 = now_ms();
-            glGetNamedBufferSubData(c.o.ssbo[0], 0, (GLsizeiptr)slab_bytes(&c, rows),
+            double r0 = vx_peel_now_ms();
+            glGetNamedBufferSubData(c.o.ssbo[0], 0, (GLsizeiptr)vx_peel_slab_bytes(&c, rows),
                                     out->bits + (size_t)k0 * c.dims[1] * c.wx);
-            st->readback_ms += now_ms() - r0;
+            st->readback_ms += vx_peel_now_ms() - r0;
             if (vx_gl_check(gl, "peel.readback", err)) goto done;
             c.axis_i = c.naxes - 1;
-            if (progress(&c, 1.0)) goto done;
+            if (vx_peel_progress(&c, 1.0)) goto done;
         }
     }
     st->voxels_inside = vx_bitgrid_count(out);
@@ -913,7 +878,7 @@ done:
     free(gpu_list);
     free(c.cpu_tris);
     free(c.slab_first);
-    objs_free(&c.o);
+    vx_peel_objs_free(&c.o);
     if (rc) vx_bitgrid_free(out);
     return rc;
 }

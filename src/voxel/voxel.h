@@ -8,7 +8,9 @@
  *
  * Methods: `peel` (seed 000, depth peeling along x, entry/exit pairing on
  * the GPU), `slice` (seed 003, a near plane stepped through the slices),
- * `auto` (the fastest correct one for the request). */
+ * `scan` (one draw per slab counting signed crossings into per-voxel
+ * counters, then a prefix sum along x; no peeling), `auto` (the fastest
+ * correct one for the request). */
 #ifndef VX_VOXEL_H
 #define VX_VOXEL_H
 
@@ -25,7 +27,12 @@ typedef struct vx_grid {
     int dims[3];
 } vx_grid;
 
-typedef enum vx_method { VX_METHOD_AUTO = 0, VX_METHOD_PEEL, VX_METHOD_SLICE } vx_method;
+typedef enum vx_method {
+    VX_METHOD_AUTO = 0,
+    VX_METHOD_PEEL,
+    VX_METHOD_SLICE,
+    VX_METHOD_SCAN,
+} vx_method;
 typedef enum vx_inside {
     VX_INSIDE_NONZERO = 0, /* signed crossings: front face +1, back face -1; union of parts */
     VX_INSIDE_PARITY,      /* entry/exit pairing as in the seeds */
@@ -59,13 +66,14 @@ typedef struct vx_bitgrid {
 } vx_bitgrid;
 
 typedef struct vx_voxelize_stats {
-    const char *method; /* "peel" or "slice" as run */
+    const char *method; /* "peel", "slice" or "scan" as run */
     uint64_t voxels_inside;
-    int layers;       /* peel: depth layers peeled (max over axes for robust) */
+    int layers;       /* peel: depth layers peeled (max over axes for robust); scan: 0 */
     int slices;       /* slice: slices drawn */
     int chunks;       /* slabs the grid was split into to fit GPU limits */
     double upload_ms; /* CPU: normalise in double + upload */
-    double gpu_peel_ms, gpu_fill_ms, gpu_slice_ms; /* GPU timer per stage */
+    /* GPU timer per stage; scan: gpu_peel_ms the draw, gpu_fill_ms the sums */
+    double gpu_peel_ms, gpu_fill_ms, gpu_slice_ms;
     double readback_ms;
 } vx_voxelize_stats;
 
@@ -89,8 +97,9 @@ int vx_grid_from_voxel_size(const vx_mesh *m, double h, int padding, vx_grid *ou
 
 /* Voxelizes m into out (allocated here; free with vx_bitgrid_free). GL thread.
  * Validates d (VX_EUNPROC invalid_params), then auto runs slice when
- * supersample is 2 (peeling has no supersampling), else peel; st->method
- * says which ran. */
+ * supersample is 2 (peeling and scan have no supersampling), scan for
+ * nonzero/parity solid fills (peel when scan fails with
+ * too_many_crossings), else peel; st->method says which ran. */
 int vx_voxelize(vx_gl *gl, const vx_mesh *m, const vx_voxelize_desc *d, vx_bitgrid *out,
                 vx_voxelize_stats *st, vx_err *err);
 /* Depth peeling along x (src/voxel/peel.c); also runs fill=surface (GPU
@@ -99,6 +108,13 @@ int vx_voxelize(vx_gl *gl, const vx_mesh *m, const vx_voxelize_desc *d, vx_bitgr
  * (max_memory), grid_too_large (GPU limits), VX_EUNPROC too_many_layers
  * (max_layers), VX_EGPU, or the progress hook's own. */
 int vx_voxelize_peel(vx_gl *gl, const vx_mesh *m, const vx_voxelize_desc *d, vx_bitgrid *out,
+                     vx_voxelize_stats *st, vx_err *err);
+/* Crossing counts (src/voxel/scan.c): one draw per slab, per-voxel
+ * counters, prefix sums along x. Same contract and errors as peel (no
+ * too_many_layers; VX_EUNPROC too_many_crossings when more than 32767 net
+ * crossings of one ray fall into one voxel). robust and fill=surface run
+ * vx_voxelize_peel (st->method "peel"). */
+int vx_voxelize_scan(vx_gl *gl, const vx_mesh *m, const vx_voxelize_desc *d, vx_bitgrid *out,
                      vx_voxelize_stats *st, vx_err *err);
 int vx_voxelize_slice(vx_gl *gl, const vx_mesh *m, const vx_voxelize_desc *d, vx_bitgrid *out,
                       vx_voxelize_stats *st, vx_err *err);

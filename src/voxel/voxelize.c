@@ -2,6 +2,7 @@
  * method that fits it. */
 #include <math.h>
 #include <stddef.h>
+#include <string.h>
 
 #include "voxel/voxel.h"
 
@@ -25,7 +26,7 @@ int vx_voxelize(vx_gl *gl, const vx_mesh *m, const vx_voxelize_desc *d, vx_bitgr
     if (d->threshold < 0 || d->threshold > 8)
         return vx_err_set(err, VX_EUNPROC, "invalid_params", "threshold must be 1..8, got %d",
                           d->threshold);
-    if (d->method < VX_METHOD_AUTO || d->method > VX_METHOD_SLICE)
+    if (d->method < VX_METHOD_AUTO || d->method > VX_METHOD_SCAN)
         return vx_err_set(err, VX_EUNPROC, "invalid_params", "unknown method %d", (int)d->method);
     if (d->inside < VX_INSIDE_NONZERO || d->inside > VX_INSIDE_ROBUST)
         return vx_err_set(err, VX_EUNPROC, "invalid_params", "unknown inside rule %d",
@@ -40,14 +41,31 @@ int vx_voxelize(vx_gl *gl, const vx_mesh *m, const vx_voxelize_desc *d, vx_bitgr
     if (dd.supersample == 0) dd.supersample = 1;
     if (dd.threshold == 0) dd.threshold = 4;
     vx_method method = dd.method;
-    /* Peeling samples each voxel once at its centre; only slicing
-     * supersamples (seed 003's accuracy improvement). */
-    if (method == VX_METHOD_AUTO) method = dd.supersample == 2 ? VX_METHOD_SLICE : VX_METHOD_PEEL;
-    if (method == VX_METHOD_PEEL) {
+    /* Peeling and scan sample each voxel once at its centre; only slicing
+     * supersamples (seed 003's accuracy improvement). Scan counts crossings
+     * along x only: robust (three axes) and the surface fill are peel's. */
+    int scan_fits = dd.supersample == 1 && dd.fill == VX_FILL_SOLID &&
+                    (dd.inside == VX_INSIDE_NONZERO || dd.inside == VX_INSIDE_PARITY);
+    if (method == VX_METHOD_AUTO)
+        method = dd.supersample == 2 ? VX_METHOD_SLICE
+                 : scan_fits         ? VX_METHOD_SCAN
+                                     : VX_METHOD_PEEL;
+    if (method == VX_METHOD_PEEL || method == VX_METHOD_SCAN) {
         if (dd.supersample == 2)
             return vx_err_set(err, VX_EUNPROC, "invalid_params",
-                              "method peel has no supersampling; use slice or auto");
-        return vx_voxelize_peel(gl, m, &dd, out, st, err);
+                              "method %s has no supersampling; use slice or auto",
+                              method == VX_METHOD_PEEL ? "peel" : "scan");
+        if (method == VX_METHOD_PEEL) return vx_voxelize_peel(gl, m, &dd, out, st, err);
+        vx_err tmp = {0};
+        if (!err) err = &tmp;
+        int rc = vx_voxelize_scan(gl, m, &dd, out, st, err);
+        /* A ray with more coincident crossings in one voxel than the
+         * counters hold: peel counts them per layer. */
+        if (rc && d->method == VX_METHOD_AUTO && !strcmp(err->code, "too_many_crossings")) {
+            memset(err, 0, sizeof *err);
+            rc = vx_voxelize_peel(gl, m, &dd, out, st, err);
+        }
+        return rc;
     }
     return vx_voxelize_slice(gl, m, &dd, out, st, err);
 }

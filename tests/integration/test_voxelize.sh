@@ -2,9 +2,9 @@
 # The `voxelize` kind through the API: analytic shapes made here (boxes with
 # faces on cell boundaries -> exact counts; spheres, a torus, a hollow ball,
 # a solid in its void, overlapping spheres, an open mesh -> volumes within a
-# stated tolerance of the mesh's own volume), through both methods where
+# stated tolerance of the mesh's own volume), through every method where
 # the engine has them, every output format read back independently, bricks
-# of a larger grid, peel vs slice voxel for voxel, and params errors.
+# of a larger grid, peel vs slice and peel vs scan voxel for voxel, and params errors.
 source "$(dirname "$0")/lib.sh"
 source "$(dirname "$0")/box.sh"
 # 256M: small enough that the memory checks trigger on modest requests.
@@ -64,8 +64,8 @@ M_long=$MESH_ID
 api GET /v1/info
 check "info lists voxelize" jq -e '[.kinds[].name] | index("voxelize") != null' "$BODY"
 
-# Which methods the engine has: peel always; slice once its branch is in.
-METHODS=(peel)
+# Which methods the engine has: peel and scan always; slice once its branch is in.
+METHODS=(peel scan)
 api POST "/v1/jobs?wait=60" -H "Content-Type: application/json" \
     -d "{\"mesh\":\"$M_cube\",\"kind\":\"voxelize\",\"params\":{\"resolution\":4,\"method\":\"slice\",\"format\":\"summary\"}}"
 if jq -e '.state == "succeeded"' "$BODY" >/dev/null; then
@@ -123,7 +123,7 @@ for m in "${METHODS[@]}"; do
     near "$m two spheres, nonzero = union" "$(st volume)" "$(vol two_union)" $TOL
     fetch "$TMP/$m-two.raw8"
     vox "$m two parity" "$M_two" "{\"resolution\":48,\"method\":\"$m\",\"inside\":\"parity\",\"format\":\"summary\"}"
-    if [[ $m == peel ]]; then
+    if [[ $m == peel || $m == scan ]]; then
         near "$m two spheres, parity = symmetric difference" "$(st volume)" "$(vol two_xor)" $TOL
     else
         # slice's parity is seed 003's nearest-surface test (slice.c): the
@@ -136,10 +136,21 @@ for m in "${METHODS[@]}"; do
 
     vox "$m open robust" "$M_open" "{\"resolution\":32,\"method\":\"$m\",\"inside\":\"robust\",\"format\":\"summary\"}"
     near "$m open mesh, robust ~ the closed sphere" "$(st volume)" "$(vol open_closed)" 0.04
+    if [[ $m == scan ]]; then
+        check "scan robust runs peel (stats say so)" test "$(st method)" = peel
+    fi
+done
+
+# --- scan and peel agree voxel for voxel on closed meshes (raw8 identical) ---
+for s in cube long tie sphere torus hollow nested two; do
+    mis=$(cmp -l "$TMP/peel-$s.raw8" "$TMP/scan-$s.raw8" 2>/dev/null | wc -l)
+    check "peel and scan raw8 both there for $s" test -s "$TMP/scan-$s.raw8" -a -s "$TMP/peel-$s.raw8"
+    echo "peel vs scan, $s: $mis voxels differ"
+    check "peel vs scan agree on $s ($mis differ)" cmp -s "$TMP/peel-$s.raw8" "$TMP/scan-$s.raw8"
 done
 
 # --- peel and slice agree voxel for voxel on closed meshes ---
-if [[ ${#METHODS[@]} -eq 2 ]]; then
+if [[ " ${METHODS[*]} " == *" slice "* ]]; then
     for s in cube long tie sphere torus hollow nested two; do
         mis=$(cmp -l "$TMP/peel-$s.raw8" "$TMP/slice-$s.raw8" 2>/dev/null | wc -l)
         echo "peel vs slice, $s: $mis voxels differ"
@@ -149,7 +160,7 @@ fi
 
 # --- every format, on the sphere ---
 vox "sphere vdb" "$M_sphere" '{"resolution":24}'
-check "default format is vdb" jq -e '.params.format == "vdb" and .params.method == "auto" and (.stats.method == "peel" or .stats.method == "slice")' "$TMP/job.json"
+check "default format is vdb" jq -e '.params.format == "vdb" and .params.method == "auto" and .stats.method == "scan"' "$TMP/job.json"
 N_IN=$(st voxels_inside)
 H=$(st voxel_size)
 fetch "$TMP/s.vdb"
@@ -240,6 +251,7 @@ bad "unknown inside" '{"inside":"odd"}' params.inside
 bad "threshold 9" '{"supersample":2,"threshold":9}' params.threshold
 bad "supersample 3" '{"supersample":3}' params.supersample
 bad "supersample 2 with peel" '{"supersample":2,"method":"peel"}' params.supersample
+bad "supersample 2 with scan" '{"supersample":2,"method":"scan"}' params.supersample
 bad "unknown format" '{"format":"stl"}' params.format
 bad "unknown field" '{"colour":"red"}' params.colour
 

@@ -13,6 +13,7 @@
 #include <cmocka.h>
 
 #include "ref_voxel.h"
+#include "shapes.h"
 #include "voxel/voxel.h"
 
 static vx_gl *g_gl;
@@ -33,137 +34,7 @@ static int teardown(void **state)
     return 0;
 }
 
-/* ---- meshes ------------------------------------------------------------ */
-
-static vx_mesh *mesh_from(size_t nv, const double *pos, size_t nt, const uint32_t *idx)
-{
-    vx_mesh *m = vx_mesh_new();
-    m->nverts = nv;
-    m->pos = malloc(nv * 3 * sizeof(double));
-    memcpy(m->pos, pos, nv * 3 * sizeof(double));
-    m->nfaces = nt;
-    m->face_idx = malloc(nt * 3 * sizeof(uint32_t));
-    memcpy(m->face_idx, idx, nt * 3 * sizeof(uint32_t));
-    assert_int_equal(vx_mesh_analyze(m, NULL), 0);
-    return m;
-}
-
-/* Axis-aligned box [lo, hi] as 12 outward-facing triangles. */
-static vx_mesh *box(const double lo[3], const double hi[3])
-{
-    double p[24];
-    for (int v = 0; v < 8; v++)
-        for (int a = 0; a < 3; a++)
-            p[3 * v + a] = (v >> a) & 1 ? hi[a] : lo[a];
-    static const uint32_t f[36] = {0, 2, 3, 0, 3, 1, 4, 5, 7, 4, 7, 6, 0, 1, 5, 0, 5, 4,
-                                   2, 6, 7, 2, 7, 3, 0, 4, 6, 0, 6, 2, 1, 3, 7, 1, 7, 5};
-    return mesh_from(8, p, 12, f);
-}
-
-static double signed_volume(const vx_mesh *m)
-{
-    double v = 0;
-    for (size_t t = 0; t < m->ntris; t++) {
-        const double *a = m->pos + 3 * m->tri[3 * t], *b = m->pos + 3 * m->tri[3 * t + 1],
-                     *c = m->pos + 3 * m->tri[3 * t + 2];
-        v += a[0] * (b[1] * c[2] - b[2] * c[1]) - a[1] * (b[0] * c[2] - b[2] * c[0]) +
-             a[2] * (b[0] * c[1] - b[1] * c[0]);
-    }
-    return v / 6;
-}
-
-static void flip(vx_mesh *m)
-{
-    for (size_t t = 0; t < m->ntris; t++) {
-        uint32_t x = m->tri[3 * t + 1];
-        m->tri[3 * t + 1] = m->tri[3 * t + 2];
-        m->tri[3 * t + 2] = x;
-    }
-}
-
-/* Closed surface from an (nu x nv) parameter grid, periodic in u; with
- * poles (sphere) v runs pole to pole, else (torus) periodic in v too.
- * Oriented outward (inward when `inward`). */
-static vx_mesh *param_mesh(int nu, int nv, int poles, int inward, double cx, double cy, double cz,
-                           double r1, double r2)
-{
-    size_t nvert = poles ? (size_t)nu * (nv - 1) + 2 : (size_t)nu * nv;
-    double *p = malloc(nvert * 3 * sizeof *p);
-    uint32_t *f = malloc((size_t)nu * nv * 6 * sizeof *f);
-    size_t q = 0, t = 0;
-#define VID(i, j)                                                                                  \
-    (poles ? 2 + (uint32_t)(((j)-1) * nu + ((i) % nu)) : (uint32_t)(((j) % nv) * nu + ((i) % nu)))
-    if (poles) {
-        double s[6] = {cx, cy, cz - r1, cx, cy, cz + r1};
-        memcpy(p, s, sizeof s);
-        q = 2;
-        for (int j = 1; j < nv; j++)
-            for (int i = 0; i < nu; i++) {
-                double th = M_PI * j / nv, ph = 2 * M_PI * i / nu;
-                p[3 * q] = cx + r1 * sin(th) * cos(ph);
-                p[3 * q + 1] = cy + r1 * sin(th) * sin(ph);
-                p[3 * q + 2] = cz - r1 * cos(th);
-                q++;
-            }
-        for (int i = 0; i < nu; i++) {
-            f[t++] = 0, f[t++] = VID(i + 1, 1), f[t++] = VID(i, 1);
-            f[t++] = 1, f[t++] = VID(i, nv - 1), f[t++] = VID(i + 1, nv - 1);
-        }
-        for (int j = 1; j < nv - 1; j++)
-            for (int i = 0; i < nu; i++) {
-                f[t++] = VID(i, j), f[t++] = VID(i + 1, j), f[t++] = VID(i + 1, j + 1);
-                f[t++] = VID(i, j), f[t++] = VID(i + 1, j + 1), f[t++] = VID(i, j + 1);
-            }
-    } else {
-        for (int j = 0; j < nv; j++)
-            for (int i = 0; i < nu; i++) {
-                double u = 2 * M_PI * i / nu, v = 2 * M_PI * j / nv;
-                p[3 * q] = cx + (r1 + r2 * cos(v)) * cos(u);
-                p[3 * q + 1] = cy + (r1 + r2 * cos(v)) * sin(u);
-                p[3 * q + 2] = cz + r2 * sin(v);
-                q++;
-            }
-        for (int j = 0; j < nv; j++)
-            for (int i = 0; i < nu; i++) {
-                f[t++] = VID(i, j), f[t++] = VID(i + 1, j), f[t++] = VID(i + 1, j + 1);
-                f[t++] = VID(i, j), f[t++] = VID(i + 1, j + 1), f[t++] = VID(i, j + 1);
-            }
-    }
-#undef VID
-    vx_mesh *m = mesh_from(q, p, t / 3, f);
-    free(p);
-    free(f);
-    assert_int_equal(m->boundary_edges, 0);
-    if ((signed_volume(m) < 0) != inward) flip(m);
-    return m;
-}
-
-static vx_mesh *sphere(double cx, double cy, double cz, double r, int inward)
-{
-    return param_mesh(128, 64, 1, inward, cx, cy, cz, r, 0);
-}
-
-/* Concatenation of meshes. */
-static vx_mesh *merge(vx_mesh **parts, int n)
-{
-    size_t nv = 0, nt = 0;
-    for (int i = 0; i < n; i++)
-        nv += parts[i]->nverts, nt += parts[i]->ntris;
-    double *p = malloc(nv * 3 * sizeof *p);
-    uint32_t *f = malloc(nt * 3 * sizeof *f);
-    size_t v0 = 0, t0 = 0;
-    for (int i = 0; i < n; i++) {
-        memcpy(p + 3 * v0, parts[i]->pos, parts[i]->nverts * 3 * sizeof *p);
-        for (size_t k = 0; k < 3 * parts[i]->ntris; k++)
-            f[3 * t0 + k] = parts[i]->tri[k] + (uint32_t)v0;
-        v0 += parts[i]->nverts;
-        t0 += parts[i]->ntris;
-    }
-    vx_mesh *m = mesh_from(nv, p, nt, f);
-    free(p);
-    free(f);
-    return m;
-}
+/* Meshes: tests/support/shapes.h (shared with test_scan). */
 
 /* ---- helpers ----------------------------------------------------------- */
 
@@ -215,7 +86,7 @@ static void grid_res(const vx_mesh *m, int res, int pad, vx_grid *g)
 
 static void test_cube_exact(void **state)
 {
-    vx_mesh *m = box((double[]){0, 0, 0}, (double[]){1, 1, 1});
+    vx_mesh *m = shape_box((double[]){0, 0, 0}, (double[]){1, 1, 1});
     for (int pad = 0; pad <= 2; pad += 2)
         for (int rule = VX_INSIDE_NONZERO; rule <= VX_INSIDE_ROBUST; rule++) {
             vx_voxelize_desc d = {.inside = (vx_inside)rule};
@@ -236,7 +107,7 @@ static void test_box_on_boundaries(void **state)
 {
     /* faces on cell boundaries (h = 0.25), odd grid sizes, a grid wider
      * than 32 voxels along x (several words per row) */
-    vx_mesh *m = box((double[]){0.5, 0.25, 0}, (double[]){10.25, 1.75, 1.5});
+    vx_mesh *m = shape_box((double[]){0.5, 0.25, 0}, (double[]){10.25, 1.75, 1.5});
     vx_voxelize_desc d = {.grid = {{0, 0, 0}, 0.25, {45, 11, 9}}};
     vx_bitgrid b;
     vx_voxelize_stats st;
@@ -250,7 +121,7 @@ static void test_box_on_boundaries(void **state)
     vx_bitgrid_free(&b);
     /* faces through voxel centres: the half-open [entry, exit) rule */
     vx_mesh_free(m);
-    m = box((double[]){0.125, 0.375, 0.625}, (double[]){1.125, 1.375, 1.625});
+    m = shape_box((double[]){0.125, 0.375, 0.625}, (double[]){1.125, 1.375, 1.625});
     double iou;
     run_peel(m, &d, &b, &st);
     assert_int_equal(compare_ref("box through centres", m, &d.grid, VX_INSIDE_NONZERO, &b, &iou),
@@ -261,7 +132,7 @@ static void test_box_on_boundaries(void **state)
 
 static void test_sphere(void **state)
 {
-    vx_mesh *m = sphere(0, 0, 0, 1, 0);
+    vx_mesh *m = shape_sphere(0, 0, 0, 1, 0);
     vx_voxelize_desc d = {0};
     grid_res(m, 64, 1, &d.grid);
     vx_bitgrid b;
@@ -269,7 +140,7 @@ static void test_sphere(void **state)
     run_peel(m, &d, &b, &st);
     double vol = (double)vx_bitgrid_count(&b) * pow(d.grid.h, 3), exact = 4.0 / 3 * M_PI;
     printf("sphere 64^3: volume %.5f analytic %.5f (%.3f%%), polyhedron %.5f\n", vol, exact,
-           100 * (vol / exact - 1), signed_volume(m));
+           100 * (vol / exact - 1), shape_signed_volume(m));
     assert_true(fabs(vol / exact - 1) < 0.01);
     double iou;
     compare_ref("sphere nonzero", m, &d.grid, VX_INSIDE_NONZERO, &b, &iou);
@@ -285,7 +156,7 @@ static void test_sphere(void **state)
 
 static void test_torus(void **state)
 {
-    vx_mesh *m = param_mesh(96, 48, 0, 0, 0.1, 0.2, 0.3, 1.0, 0.35);
+    vx_mesh *m = shape_param_mesh(96, 48, 0, 0, 0.1, 0.2, 0.3, 1.0, 0.35);
     vx_voxelize_desc d = {0};
     grid_res(m, 80, 2, &d.grid);
     vx_bitgrid b;
@@ -305,8 +176,8 @@ static void test_torus(void **state)
 
 static void test_hollow_and_nested(void **state)
 {
-    vx_mesh *parts[3] = {sphere(0, 0, 0, 1, 0), sphere(0, 0, 0, 0.6, 1), sphere(0, 0, 0, 0.3, 0)};
-    vx_mesh *hollow = merge(parts, 2), *nested = merge(parts, 3);
+    vx_mesh *parts[3] = {shape_sphere(0, 0, 0, 1, 0), shape_sphere(0, 0, 0, 0.6, 1), shape_sphere(0, 0, 0, 0.3, 0)};
+    vx_mesh *hollow = shape_merge(parts, 2), *nested = shape_merge(parts, 3);
     for (int rule = VX_INSIDE_NONZERO; rule <= VX_INSIDE_PARITY; rule++) {
         vx_voxelize_desc d = {.inside = (vx_inside)rule};
         grid_res(hollow, 64, 1, &d.grid);
@@ -356,8 +227,8 @@ static void test_hollow_and_nested(void **state)
 
 static void test_overlapping_spheres(void **state)
 {
-    vx_mesh *parts[2] = {sphere(0, 0, 0, 1, 0), sphere(0.7, 0.3, 0.1, 0.8, 0)};
-    vx_mesh *m = merge(parts, 2);
+    vx_mesh *parts[2] = {shape_sphere(0, 0, 0, 1, 0), shape_sphere(0.7, 0.3, 0.1, 0.8, 0)};
+    vx_mesh *m = shape_merge(parts, 2);
     vx_voxelize_desc d = {0};
     grid_res(m, 64, 1, &d.grid);
     vx_bitgrid b;
@@ -384,9 +255,9 @@ static void test_coincident_faces(void **state)
     /* Two boxes touching face to face: at x = 1 two crossings share one
      * depth. Peeling keeps one fragment per depth; the per-layer counts
      * must still see both, or the second box would come out empty. */
-    vx_mesh *parts[2] = {box((double[]){0, 0, 0}, (double[]){1, 1, 1}),
-                         box((double[]){1, 0, 0}, (double[]){2, 1, 1})};
-    vx_mesh *m = merge(parts, 2);
+    vx_mesh *parts[2] = {shape_box((double[]){0, 0, 0}, (double[]){1, 1, 1}),
+                         shape_box((double[]){1, 0, 0}, (double[]){2, 1, 1})};
+    vx_mesh *m = shape_merge(parts, 2);
     vx_voxelize_desc d = {.grid = {{0, 0, 0}, 0.125, {16, 8, 8}}};
     vx_bitgrid b;
     vx_voxelize_stats st;
@@ -400,8 +271,8 @@ static void test_coincident_faces(void **state)
     /* The same box twice: winding 2 inside (nonzero: solid), four crossings
      * per ray (parity: empty), as the reference says. */
     vx_mesh_free(parts[1]);
-    parts[1] = box((double[]){0, 0, 0}, (double[]){1, 1, 1});
-    m = merge(parts, 2);
+    parts[1] = shape_box((double[]){0, 0, 0}, (double[]){1, 1, 1});
+    m = shape_merge(parts, 2);
     d.grid.dims[0] = 8;
     d.inside = VX_INSIDE_NONZERO;
     run_peel(m, &d, &b, &st);
@@ -421,7 +292,7 @@ static void test_grid_cuts_mesh(void **state)
     /* A grid over part of a sphere (the mesh reaches outside it along every
      * axis, also below the grid along the rays): crossings outside the grid
      * still count. */
-    vx_mesh *m = sphere(0, 0, 0, 1, 0);
+    vx_mesh *m = shape_sphere(0, 0, 0, 1, 0);
     vx_voxelize_desc d = {.grid = {{-0.3, -0.75, -1.1}, 1.0 / 32, {40, 30, 50}}};
     for (int rule = VX_INSIDE_NONZERO; rule <= VX_INSIDE_PARITY; rule++) {
         d.inside = (vx_inside)rule;
@@ -593,7 +464,7 @@ static vx_mesh *subdivide(const vx_mesh *m, int every)
         memcpy(f + 3 * t2, q, sizeof q);
         t2 += 4;
     }
-    vx_mesh *r = mesh_from(v, p, t2, f);
+    vx_mesh *r = shape_mesh_from(v, p, t2, f);
     free(p);
     free(f);
     return r;
@@ -605,7 +476,7 @@ static vx_mesh *subdivide(const vx_mesh *m, int every)
  * empty. */
 static void test_robust_limits(void **state)
 {
-    vx_mesh *cube = box((double[]){0, 0, 0}, (double[]){1, 1, 1});
+    vx_mesh *cube = shape_box((double[]){0, 0, 0}, (double[]){1, 1, 1});
     /* triangles 2, 3: top (z = 1); 10, 11: +x side */
     for (int open2 = 0; open2 < 2; open2++) {
         uint32_t f[36];
@@ -614,7 +485,7 @@ static void test_robust_limits(void **state)
             if (t == 2 || t == 3 || (open2 && (t == 10 || t == 11))) continue;
             memcpy(f + 3 * nt++, cube->tri + 3 * t, 3 * sizeof *f);
         }
-        vx_mesh *m = mesh_from(8, cube->pos, nt, f);
+        vx_mesh *m = shape_mesh_from(8, cube->pos, nt, f);
         vx_voxelize_desc d = {.inside = VX_INSIDE_ROBUST};
         grid_res(m, 8, 1, &d.grid);
         vx_bitgrid b;
@@ -639,7 +510,7 @@ static void test_robust_limits(void **state)
 
 static void test_surface(void **state)
 {
-    vx_mesh *m = sphere(0, 0, 0, 1, 0);
+    vx_mesh *m = shape_sphere(0, 0, 0, 1, 0);
     vx_voxelize_desc d = {.fill = VX_FILL_SURFACE};
     grid_res(m, 48, 1, &d.grid);
     vx_bitgrid surf, solid;
@@ -687,7 +558,7 @@ static void test_surface(void **state)
     vx_bitgrid_free(&solid);
     vx_bitgrid_free(&surf);
     /* a plate thinner than a voxel vanishes in solid mode, not in surface */
-    vx_mesh *plate = box((double[]){0.15, 0.15, 0.42}, (double[]){0.85, 0.85, 0.44});
+    vx_mesh *plate = shape_box((double[]){0.15, 0.15, 0.42}, (double[]){0.85, 0.85, 0.44});
     vx_voxelize_desc dp = {.grid = {{0, 0, 0}, 0.1, {10, 10, 10}}};
     run_peel(plate, &dp, &solid, &st);
     assert_int_equal(vx_bitgrid_count(&solid), 0);
@@ -702,7 +573,7 @@ static void test_surface(void **state)
     /* spans most of a 128^3 grid: over SURF_GPU_WORK tests, so the CPU takes it */
     double tp[9] = {0.05, 0.1, 0.2, 100.0, 6.0, 80.0, 14.0, 110.0, 40.0};
     uint32_t ti[3] = {0, 1, 2};
-    vx_mesh *big = mesh_from(3, tp, 1, ti);
+    vx_mesh *big = shape_mesh_from(3, tp, 1, ti);
     vx_voxelize_desc db = {.grid = {{0, 0, 0}, 1.0, {128, 128, 128}}, .fill = VX_FILL_SURFACE};
     run_peel(big, &db, &surf, &st);
     /* brute force reference in the test */
@@ -784,7 +655,7 @@ static int count_calls(void *ud, double f, vx_err *err)
 
 static void test_limits_and_progress(void **state)
 {
-    vx_mesh *m = sphere(0, 0, 0, 1, 0);
+    vx_mesh *m = shape_sphere(0, 0, 0, 1, 0);
     vx_voxelize_desc d = {0};
     grid_res(m, 64, 1, &d.grid);
     vx_bitgrid b;
@@ -823,15 +694,23 @@ static void test_limits_and_progress(void **state)
 
 static void test_dispatcher(void **state)
 {
-    vx_mesh *m = box((double[]){0, 0, 0}, (double[]){1, 1, 1});
+    vx_mesh *m = shape_box((double[]){0, 0, 0}, (double[]){1, 1, 1});
     vx_voxelize_desc d = {0};
     grid_res(m, 8, 0, &d.grid);
     vx_bitgrid b;
     vx_voxelize_stats st;
     vx_err err = {0};
+    /* auto: scan for nonzero/parity solid fills (test_scan.c), peel for
+     * robust */
+    assert_int_equal(vx_voxelize(g_gl, m, &d, &b, &st, &err), 0);
+    assert_string_equal(st.method, "scan");
+    assert_int_equal(st.voxels_inside, 512);
+    vx_bitgrid_free(&b);
+    d.inside = VX_INSIDE_ROBUST;
     assert_int_equal(vx_voxelize(g_gl, m, &d, &b, &st, &err), 0);
     assert_string_equal(st.method, "peel");
     assert_int_equal(st.voxels_inside, 512);
+    d.inside = VX_INSIDE_NONZERO;
     vx_bitgrid_free(&b);
     struct {
         vx_voxelize_desc d;
@@ -942,7 +821,7 @@ static void test_bench(void **state)
 static void test_big(void **state)
 {
     if (!getenv("VX_PEEL_BIG")) skip();
-    vx_mesh *m = box((double[]){0, 0, 0}, (double[]){1, 1, 1});
+    vx_mesh *m = shape_box((double[]){0, 0, 0}, (double[]){1, 1, 1});
     for (int res = 1024; res <= 2048; res *= 2) {
         vx_voxelize_desc d = {0};
         grid_res(m, res, 0, &d.grid);
