@@ -12,27 +12,13 @@
 
 #include <cmocka.h>
 
+#include "gl_fixture.h"
+
 #include "ref_voxel.h"
 #include "shapes.h"
 #include "voxel/voxel.h"
 
-static vx_gl *g_gl;
 
-static int setup(void **state)
-{
-    vx_err err = {0};
-    vx_gl_desc d = {.device = -1};
-    g_gl = vx_gl_new(&d, &err);
-    if (!g_gl) fprintf(stderr, "vx_gl_new: %s: %s\n", err.code, err.message);
-    return g_gl ? 0 : -1;
-}
-
-static int teardown(void **state)
-{
-    vx_gl_free(g_gl);
-    g_gl = NULL;
-    return 0;
-}
 
 /* Meshes: tests/support/shapes.h (shared with test_scan). */
 
@@ -48,7 +34,7 @@ static double now_s(void)
 static void run_peel(const vx_mesh *m, vx_voxelize_desc *d, vx_bitgrid *out, vx_voxelize_stats *st)
 {
     vx_err err = {0};
-    int rc = vx_voxelize_peel(g_gl, m, d, out, st, &err);
+    int rc = vx_voxelize_peel(vx_test_gl, m, d, out, st, &err);
     if (rc) fprintf(stderr, "vx_voxelize_peel: %s: %s\n", err.code, err.message);
     assert_int_equal(rc, 0);
     assert_string_equal(st->method, "peel");
@@ -215,7 +201,7 @@ static void test_hollow_and_nested(void **state)
         /* max_layers below what the mesh needs fails clearly */
         d.max_layers = 5;
         vx_err err = {0};
-        assert_int_equal(vx_voxelize_peel(g_gl, nested, &d, &b, &st, &err), -1);
+        assert_int_equal(vx_voxelize_peel(vx_test_gl, nested, &d, &b, &st, &err), -1);
         assert_string_equal(err.code, "too_many_layers");
         assert_null(b.bits);
     }
@@ -662,7 +648,7 @@ static void test_limits_and_progress(void **state)
     vx_voxelize_stats st;
     vx_err err = {0};
     d.max_memory = 40000; /* less than the 66^3 bits themselves */
-    assert_int_equal(vx_voxelize_peel(g_gl, m, &d, &b, &st, &err), -1);
+    assert_int_equal(vx_voxelize_peel(vx_test_gl, m, &d, &b, &st, &err), -1);
     assert_int_equal(err.kind, VX_ETOOBIG);
     assert_string_equal(err.code, "job_memory_limit");
     assert_null(b.bits);
@@ -685,7 +671,7 @@ static void test_limits_and_progress(void **state)
     calls = 0;
     d.progress = stop_at;
     memset(&err, 0, sizeof err);
-    assert_int_equal(vx_voxelize_peel(g_gl, m, &d, &b, &st, &err), -1);
+    assert_int_equal(vx_voxelize_peel(vx_test_gl, m, &d, &b, &st, &err), -1);
     assert_string_equal(err.code, "stopped_by_test");
     assert_int_equal(calls, 3);
     assert_null(b.bits);
@@ -702,12 +688,12 @@ static void test_dispatcher(void **state)
     vx_err err = {0};
     /* auto: scan for nonzero/parity solid fills (test_scan.c), peel for
      * robust */
-    assert_int_equal(vx_voxelize(g_gl, m, &d, &b, &st, &err), 0);
+    assert_int_equal(vx_voxelize(vx_test_gl, m, &d, &b, &st, &err), 0);
     assert_string_equal(st.method, "scan");
     assert_int_equal(st.voxels_inside, 512);
     vx_bitgrid_free(&b);
     d.inside = VX_INSIDE_ROBUST;
-    assert_int_equal(vx_voxelize(g_gl, m, &d, &b, &st, &err), 0);
+    assert_int_equal(vx_voxelize(vx_test_gl, m, &d, &b, &st, &err), 0);
     assert_string_equal(st.method, "peel");
     assert_int_equal(st.voxels_inside, 512);
     d.inside = VX_INSIDE_NONZERO;
@@ -725,17 +711,17 @@ static void test_dispatcher(void **state)
     bad[5].d.fill = (vx_fill)2;
     for (int i = 0; i < 6; i++) {
         memset(&err, 0, sizeof err);
-        assert_int_equal(vx_voxelize(g_gl, m, &bad[i].d, &b, &st, &err), -1);
+        assert_int_equal(vx_voxelize(vx_test_gl, m, &bad[i].d, &b, &st, &err), -1);
         assert_int_equal(err.kind, VX_EUNPROC);
         assert_string_equal(err.code, "invalid_params");
     }
     /* peel has no supersampling; auto sends supersample 2 to slice */
     d.method = VX_METHOD_PEEL;
     d.supersample = 2;
-    assert_int_equal(vx_voxelize(g_gl, m, &d, &b, &st, &err), -1);
+    assert_int_equal(vx_voxelize(vx_test_gl, m, &d, &b, &st, &err), -1);
     d.method = VX_METHOD_AUTO;
     memset(&err, 0, sizeof err);
-    if (vx_voxelize(g_gl, m, &d, &b, &st, &err) == 0) {
+    if (vx_voxelize(vx_test_gl, m, &d, &b, &st, &err) == 0) {
         assert_string_equal(st.method, "slice");
         vx_bitgrid_free(&b);
     } else {
@@ -874,5 +860,5 @@ int main(void)
         cmocka_unit_test(test_bench),
         cmocka_unit_test(test_big),
     };
-    return cmocka_run_group_tests(tests, setup, teardown);
+    return cmocka_run_group_tests(tests, vx_test_gl_setup, vx_test_gl_teardown);
 }

@@ -13,27 +13,13 @@
 
 #include <cmocka.h>
 
+#include "gl_fixture.h"
+
 #include "ref_voxel.h"
 #include "shapes.h"
 #include "voxel/voxel.h"
 
-static vx_gl *g_gl;
 
-static int setup(void **state)
-{
-    vx_err err = {0};
-    vx_gl_desc d = {.device = -1};
-    g_gl = vx_gl_new(&d, &err);
-    if (!g_gl) fprintf(stderr, "vx_gl_new: %s: %s\n", err.code, err.message);
-    return g_gl ? 0 : -1;
-}
-
-static int teardown(void **state)
-{
-    vx_gl_free(g_gl);
-    g_gl = NULL;
-    return 0;
-}
 
 static double now_s(void)
 {
@@ -45,7 +31,7 @@ static double now_s(void)
 static void run_scan(const vx_mesh *m, vx_voxelize_desc *d, vx_bitgrid *out, vx_voxelize_stats *st)
 {
     vx_err err = {0};
-    int rc = vx_voxelize_scan(g_gl, m, d, out, st, &err);
+    int rc = vx_voxelize_scan(vx_test_gl, m, d, out, st, &err);
     if (rc) fprintf(stderr, "vx_voxelize_scan: %s: %s\n", err.code, err.message);
     assert_int_equal(rc, 0);
     assert_string_equal(st->method, "scan");
@@ -82,7 +68,7 @@ static void same_as_peel(const char *what, const vx_mesh *m, vx_voxelize_desc *d
     vx_bitgrid p;
     vx_voxelize_stats st;
     vx_err err = {0};
-    int rc = vx_voxelize_peel(g_gl, m, d, &p, &st, &err);
+    int rc = vx_voxelize_peel(vx_test_gl, m, d, &p, &st, &err);
     if (rc) fprintf(stderr, "vx_voxelize_peel: %s: %s\n", err.code, err.message);
     assert_int_equal(rc, 0);
     size_t words = b->wx * (size_t)d->grid.dims[1] * d->grid.dims[2], diff = 0;
@@ -430,7 +416,7 @@ static void test_limits_and_progress(void **state)
     vx_voxelize_stats st;
     vx_err err = {0};
     d.max_memory = 40000; /* less than the 66^3 bits themselves */
-    assert_int_equal(vx_voxelize_scan(g_gl, m, &d, &b, &st, &err), -1);
+    assert_int_equal(vx_voxelize_scan(vx_test_gl, m, &d, &b, &st, &err), -1);
     assert_int_equal(err.kind, VX_ETOOBIG);
     assert_string_equal(err.code, "job_memory_limit");
     assert_null(b.bits);
@@ -457,14 +443,14 @@ static void test_limits_and_progress(void **state)
     calls = 0;
     d.progress = stop_at;
     memset(&err, 0, sizeof err);
-    assert_int_equal(vx_voxelize_scan(g_gl, m, &d, &b, &st, &err), -1);
+    assert_int_equal(vx_voxelize_scan(vx_test_gl, m, &d, &b, &st, &err), -1);
     assert_string_equal(err.code, "stopped_by_test");
     assert_int_equal(calls, 3);
     assert_null(b.bits);
     /* the same through the dispatcher (auto runs scan) */
     calls = 0;
     memset(&err, 0, sizeof err);
-    assert_int_equal(vx_voxelize(g_gl, m, &d, &b, &st, &err), -1);
+    assert_int_equal(vx_voxelize(vx_test_gl, m, &d, &b, &st, &err), -1);
     assert_string_equal(err.code, "stopped_by_test");
     assert_null(b.bits);
     vx_mesh_free(m);
@@ -488,12 +474,12 @@ static void test_overflow(void **state)
     vx_bitgrid b;
     vx_voxelize_stats st;
     vx_err err = {0};
-    assert_int_equal(vx_voxelize_scan(g_gl, m, &d, &b, &st, &err), -1);
+    assert_int_equal(vx_voxelize_scan(vx_test_gl, m, &d, &b, &st, &err), -1);
     assert_string_equal(err.code, "too_many_crossings");
     assert_null(b.bits);
     memset(&err, 0, sizeof err);
     d.max_layers = 4;
-    int rc = vx_voxelize(g_gl, m, &d, &b, &st, &err);
+    int rc = vx_voxelize(vx_test_gl, m, &d, &b, &st, &err);
     if (rc) fprintf(stderr, "auto: %s: %s\n", err.code, err.message);
     assert_int_equal(rc, 0);
     assert_string_equal(st.method, "peel");
@@ -542,7 +528,7 @@ static void test_dispatcher(void **state)
         d.inside = cases[i].inside;
         d.fill = cases[i].fill;
         memset(&err, 0, sizeof err);
-        int rc = vx_voxelize(g_gl, m, &d, &b, &st, &err);
+        int rc = vx_voxelize(vx_test_gl, m, &d, &b, &st, &err);
         if (rc) fprintf(stderr, "case %zu: %s: %s\n", i, err.code, err.message);
         assert_int_equal(rc, 0);
         assert_string_equal(st.method, cases[i].ran);
@@ -556,7 +542,7 @@ static void test_dispatcher(void **state)
     d.fill = VX_FILL_SOLID;
     d.supersample = 2;
     memset(&err, 0, sizeof err);
-    assert_int_equal(vx_voxelize(g_gl, m, &d, &b, &st, &err), -1);
+    assert_int_equal(vx_voxelize(vx_test_gl, m, &d, &b, &st, &err), -1);
     assert_string_equal(err.code, "invalid_params");
     vx_mesh_free(m);
 }
@@ -583,7 +569,7 @@ static void test_diag(void **state)
     run_scan(m, &d, &b, &st);
     double t1 = now_s();
     vx_err err = {0};
-    assert_int_equal(vx_voxelize_peel(g_gl, m, &d, &p, &pst, &err), 0);
+    assert_int_equal(vx_voxelize_peel(vx_test_gl, m, &d, &p, &pst, &err), 0);
     double t2 = now_s();
     printf("scan %.0f ms (draw %.1f sums %.1f upload %.1f readback %.1f, %d chunks); peel %.0f ms "
            "(peel %.1f fill %.1f, %d layers)\n",
@@ -633,5 +619,5 @@ int main(void)
         cmocka_unit_test(test_dispatcher),
         cmocka_unit_test(test_diag),
     };
-    return cmocka_run_group_tests(tests, setup, teardown);
+    return cmocka_run_group_tests(tests, vx_test_gl_setup, vx_test_gl_teardown);
 }

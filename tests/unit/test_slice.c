@@ -12,10 +12,11 @@
 
 #include <cmocka.h>
 
+#include "gl_fixture.h"
+
 #include "ref_voxel.h"
 #include "voxel/voxel.h"
 
-static vx_gl *g_gl;
 
 /* ASan build: LeakSanitizer's tracer dies (SIGSEGV, "Tracer caught signal
  * 11") scanning a bogus dynamic-TLS range that the main thread's DTV holds
@@ -35,21 +36,6 @@ const char *__lsan_default_suppressions(void)
     return "leak:add_to_global_resize\n";
 }
 
-static int setup(void **state)
-{
-    vx_err err = {0};
-    vx_gl_desc d = {.device = -1};
-    g_gl = vx_gl_new(&d, &err);
-    if (!g_gl) fprintf(stderr, "vx_gl_new: %s: %s\n", err.code, err.message);
-    return g_gl ? 0 : -1;
-}
-
-static int teardown(void **state)
-{
-    vx_gl_free(g_gl);
-    g_gl = NULL;
-    return 0;
-}
 
 /* ---- meshes built here ---- */
 
@@ -175,7 +161,7 @@ static void voxelize(const vx_mesh *m, const vx_grid *g, vx_inside rule, int ss,
     vx_voxelize_desc d = {
         .grid = *g, .method = VX_METHOD_SLICE, .inside = rule, .supersample = ss, .threshold = thr};
     vx_err err = {0};
-    int rc = vx_voxelize_slice(g_gl, m, &d, out, st, &err);
+    int rc = vx_voxelize_slice(vx_test_gl, m, &d, out, st, &err);
     if (rc) fprintf(stderr, "vx_voxelize_slice: %s: %s\n", err.code, err.message);
     assert_int_equal(rc, 0);
     assert_string_equal(st->method, "slice");
@@ -329,7 +315,7 @@ static void test_tie_rule(void **state)
         assert_int_equal(hi[2], 5);
         /* llvmpipe's edge rule (left and bottom edges in) is the same
          * half-open rule; other drivers may pick the other edge */
-        if (strcmp(vx_gl_get_info(g_gl)->device_kind, "software") == 0)
+        if (strcmp(vx_gl_get_info(vx_test_gl)->device_kind, "software") == 0)
             assert_int_equal(mismatches(r, &b), 0);
         free(r);
         vx_bitgrid_free(&b);
@@ -759,7 +745,7 @@ static void test_memory_limit_and_chunks(void **state)
     vx_bitgrid b, c;
     vx_voxelize_stats st, st2;
     vx_err err = {0};
-    assert_int_equal(vx_voxelize_slice(g_gl, m, &d, &b, &st, &err), -1);
+    assert_int_equal(vx_voxelize_slice(vx_test_gl, m, &d, &b, &st, &err), -1);
     assert_int_equal(err.kind, VX_ETOOBIG);
     assert_string_equal(err.code, "job_memory_limit");
     assert_null(b.bits);
@@ -772,13 +758,13 @@ static void test_memory_limit_and_chunks(void **state)
             d.supersample = ss;
             d.max_memory = 0;
             d.progress = NULL;
-            assert_int_equal(vx_voxelize_slice(g_gl, m, &d, &b, &st, &err), 0);
+            assert_int_equal(vx_voxelize_slice(vx_test_gl, m, &d, &b, &st, &err), 0);
             assert_int_equal(st.chunks, 1);
             uint64_t lo = 1000, hi = 1 << 30;
             d.progress = cancel_now;
             while (hi - lo > 1) {
                 d.max_memory = lo + (hi - lo) / 2;
-                assert_int_equal(vx_voxelize_slice(g_gl, m, &d, &c, &st2, &err), -1);
+                assert_int_equal(vx_voxelize_slice(vx_test_gl, m, &d, &c, &st2, &err), -1);
                 if (err.kind == VX_ECANCELED)
                     hi = d.max_memory;
                 else {
@@ -788,7 +774,7 @@ static void test_memory_limit_and_chunks(void **state)
             }
             d.max_memory = hi;
             d.progress = NULL;
-            if (vx_voxelize_slice(g_gl, m, &d, &c, &st2, &err))
+            if (vx_voxelize_slice(vx_test_gl, m, &d, &c, &st2, &err))
                 fail_msg("%s: %s", err.code, err.message);
             printf("rule %d ss %d: smallest limit %llu bytes, %d chunks\n", rule, ss,
                    (unsigned long long)hi, st2.chunks);
@@ -828,7 +814,7 @@ static void test_progress_and_errors(void **state)
     vx_bitgrid b;
     vx_voxelize_stats st;
     vx_err err = {0};
-    assert_int_equal(vx_voxelize_slice(g_gl, m, &d, &b, &st, &err), -1);
+    assert_int_equal(vx_voxelize_slice(vx_test_gl, m, &d, &b, &st, &err), -1);
     assert_int_equal(err.kind, VX_ECANCELED);
     assert_string_equal(err.code, "canceled");
     assert_int_equal(calls, 2);
@@ -838,17 +824,17 @@ static void test_progress_and_errors(void **state)
     d.progress = count_calls;
     d.ud = &last;
     d.grid.dims[0] = d.grid.dims[1] = d.grid.dims[2] = 40;
-    assert_int_equal(vx_voxelize_slice(g_gl, m, &d, &b, &st, &err), 0);
+    assert_int_equal(vx_voxelize_slice(vx_test_gl, m, &d, &b, &st, &err), 0);
     assert_true(fabs(last - 1.0) < 1e-9);
     vx_bitgrid_free(&b);
     /* fill surface belongs to the other method */
     d.fill = VX_FILL_SURFACE;
-    assert_int_equal(vx_voxelize_slice(g_gl, m, &d, &b, &st, &err), -1);
+    assert_int_equal(vx_voxelize_slice(vx_test_gl, m, &d, &b, &st, &err), -1);
     assert_int_equal(err.kind, VX_EUNPROC);
     assert_string_equal(err.code, "unsupported");
     d.fill = VX_FILL_SOLID;
     d.supersample = 3;
-    assert_int_equal(vx_voxelize_slice(g_gl, m, &d, &b, &st, &err), -1);
+    assert_int_equal(vx_voxelize_slice(vx_test_gl, m, &d, &b, &st, &err), -1);
     assert_int_equal(err.kind, VX_EUNPROC);
     vx_mesh_free(m);
 }
@@ -870,5 +856,5 @@ int main(void)
         cmocka_unit_test(test_memory_limit_and_chunks),
         cmocka_unit_test(test_progress_and_errors),
     };
-    return cmocka_run_group_tests(tests, setup, teardown);
+    return cmocka_run_group_tests(tests, vx_test_gl_setup, vx_test_gl_teardown);
 }
