@@ -736,14 +736,8 @@ static int plan(peel_ctx *c, int surface)
     return 0;
 }
 
-int vx_voxelize_peel(vx_gl *gl, const vx_mesh *m, const vx_voxelize_desc *d, vx_bitgrid *out,
-                     vx_voxelize_stats *st, vx_err *err)
+int vx_peel_check_input(const vx_mesh *m, const vx_voxelize_desc *d, vx_err *err)
 {
-    vx_voxelize_stats dummy;
-    if (!st) st = &dummy;
-    memset(st, 0, sizeof *st);
-    st->method = "peel";
-    memset(out, 0, sizeof *out);
     const vx_grid *g = &d->grid;
     for (int a = 0; a < 3; a++)
         if (g->dims[a] < 1 || g->dims[a] > (1 << 20))
@@ -755,6 +749,19 @@ int vx_voxelize_peel(vx_gl *gl, const vx_mesh *m, const vx_voxelize_desc *d, vx_
         if (m->tri[i] >= m->nverts)
             return vx_err_set(err, VX_EINTERNAL, "mesh_invalid",
                               "triangle %zu uses vertex %u of %zu", i / 3, m->tri[i], m->nverts);
+    return 0;
+}
+
+int vx_voxelize_peel(vx_gl *gl, const vx_mesh *m, const vx_voxelize_desc *d, vx_bitgrid *out,
+                     vx_voxelize_stats *st, vx_err *err)
+{
+    vx_voxelize_stats dummy;
+    if (!st) st = &dummy;
+    memset(st, 0, sizeof *st);
+    st->method = "peel";
+    memset(out, 0, sizeof *out);
+    if (vx_peel_check_input(m, d, err)) return -1;
+    const vx_grid *g = &d->grid;
 
     peel_ctx c = {.gl = gl, .m = m, .d = d, .st = st, .err = err, .out = out};
     for (int a = 0; a < 3; a++)

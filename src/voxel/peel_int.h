@@ -77,4 +77,8 @@ int vx_peel_slab_buckets(peel_ctx *c);
 /* Bytes of one slab of `rows` z rows of bits. */
 uint64_t vx_peel_slab_bytes(const peel_ctx *c, int rows);
 
+/* Checks the grid and the mesh's indices before anything reaches the GPU
+ * (a bad index would make it read outside the vertex buffer). */
+int vx_peel_check_input(const vx_mesh *m, const vx_voxelize_desc *d, vx_err *err);
+
 #endif

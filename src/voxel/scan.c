@@ -231,17 +231,8 @@ int vx_voxelize_scan(vx_gl *gl, const vx_mesh *m, const vx_voxelize_desc *d, vx_
     memset(st, 0, sizeof *st);
     st->method = "scan";
     memset(out, 0, sizeof *out);
+    if (vx_peel_check_input(m, d, err)) return -1;
     const vx_grid *g = &d->grid;
-    for (int a = 0; a < 3; a++)
-        if (g->dims[a] < 1 || g->dims[a] > (1 << 20))
-            return vx_err_set(err, VX_EUNPROC, "invalid_params", "grid dims must be 1..2^20");
-    if (!(g->h > 0) || !isfinite(g->h))
-        return vx_err_set(err, VX_EUNPROC, "invalid_params", "voxel size must be positive");
-    /* A bad index would make the GPU read outside the vertex buffer. */
-    for (size_t i = 0; i < 3 * m->ntris; i++)
-        if (m->tri[i] >= m->nverts)
-            return vx_err_set(err, VX_EINTERNAL, "mesh_invalid",
-                              "triangle %zu uses vertex %u of %zu", i / 3, m->tri[i], m->nverts);
 
     peel_ctx c = {.gl = gl, .m = m, .d = d, .st = st, .err = err, .out = out, .naxes = 1};
     for (int a = 0; a < 3; a++)
