@@ -376,14 +376,7 @@ static int peel(peel_ctx *c, layer_set *o, int axis, int k0, int rows, int *nlay
     glViewport(0, 0, w, h);
     /* State other code may have left behind; cull nothing, both faces are
      * crossings. Depth clamp: no near/far clipping along the ray. */
-    glDisable(GL_CULL_FACE);
-    glDisable(GL_BLEND);
-    glDisable(GL_SCISSOR_TEST);
-    glDisable(GL_STENCIL_TEST);
-    glDisable(GL_POLYGON_OFFSET_FILL);
-    glDisable(GL_MULTISAMPLE);
-    glPolygonMode(GL_FRONT_AND_BACK, GL_FILL);
-    glFrontFace(GL_CCW);
+    vx_peel_raster_state();
     glEnable(GL_DEPTH_TEST);
     glEnable(GL_DEPTH_CLAMP);
     glDepthFunc(GL_LESS);
@@ -734,6 +727,19 @@ static int plan(peel_ctx *c, int surface)
     c->first_layers = surface ? 0 : first_layers(c, c->rows);
     c->fixed_bytes = need - c->first_layers;
     return 0;
+}
+
+void vx_peel_raster_state(void)
+{
+    glDisable(GL_CULL_FACE);
+    glDisable(GL_BLEND);
+    glDisable(GL_SCISSOR_TEST);
+    glDisable(GL_STENCIL_TEST);
+    glDisable(GL_POLYGON_OFFSET_FILL);
+    glDisable(GL_MULTISAMPLE);
+    glDisable(GL_RASTERIZER_DISCARD);
+    glPolygonMode(GL_FRONT_AND_BACK, GL_FILL);
+    glFrontFace(GL_CCW);
 }
 
 int vx_peel_check_input(const vx_mesh *m, const vx_voxelize_desc *d, vx_err *err)

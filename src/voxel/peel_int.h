@@ -81,4 +81,9 @@ uint64_t vx_peel_slab_bytes(const peel_ctx *c, int rows);
  * (a bad index would make it read outside the vertex buffer). */
 int vx_peel_check_input(const vx_mesh *m, const vx_voxelize_desc *d, vx_err *err);
 
+/* Resets the raster state other code may have left behind: no culling
+ * (both faces are crossings), no blending, scissor, stencil, offset or
+ * multisampling; filled polygons, counter-clockwise front faces. */
+void vx_peel_raster_state(void);
+
 #endif

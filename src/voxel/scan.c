@@ -162,15 +162,7 @@ static int draw(peel_ctx *c, int k0, int rows)
     /* State other code may have left behind: no tests, no culling (both
      * faces are crossings), every covered pixel centre one fragment. */
     glDisable(GL_DEPTH_TEST);
-    glDisable(GL_CULL_FACE);
-    glDisable(GL_BLEND);
-    glDisable(GL_SCISSOR_TEST);
-    glDisable(GL_STENCIL_TEST);
-    glDisable(GL_POLYGON_OFFSET_FILL);
-    glDisable(GL_MULTISAMPLE);
-    glDisable(GL_RASTERIZER_DISCARD);
-    glPolygonMode(GL_FRONT_AND_BACK, GL_FILL);
-    glFrontFace(GL_CCW);
+    vx_peel_raster_state();
     glUseProgram(p);
     glBindVertexArray(o->vao);
     for (GLuint b = 0; b < 4; b++)
