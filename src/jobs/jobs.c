@@ -431,6 +431,14 @@ int vx_run_progress(vx_job_run *r, double fraction, vx_err *err)
 vx_gl *vx_run_gl(vx_job_run *r) { return r->gl; }
 const vx_limits *vx_run_limits(const vx_job_run *r) { return &r->jobs->desc.limits; }
 const char *vx_run_mesh_id(const vx_job_run *r) { return r->job->mesh; }
+
+vx_mesh *vx_run_load_mesh(vx_job_run *r, const char *id, vx_err *err)
+{
+    char path[2300];
+    if (vx_store_mesh_path(r->jobs->desc.store, id, path, sizeof path, err)) return NULL;
+    vx_mesh_limits lim = {.max_triangles = r->jobs->desc.limits.max_triangles};
+    return vx_mesh_read_path(path, &lim, err);
+}
 cJSON *vx_run_stats(vx_job_run *r) { return r->stats; }
 
 const char *vx_run_output(vx_job_run *r, const char *name, const char *file_ext,
@@ -777,6 +785,18 @@ cJSON *vx_jobs_submit(vx_jobs *j, const char *mesh, const char *kind, const cJSO
     }
     cJSON *norm = k->parse(params, &j->desc.limits, err);
     if (!norm) return NULL;
+    if (k->mesh_refs) {
+        const char *ids[256];
+        size_t n = k->mesh_refs(norm, ids, sizeof ids / sizeof ids[0]);
+        for (size_t i = 0; i < n && i < sizeof ids / sizeof ids[0]; i++) {
+            cJSON *m = vx_store_mesh_meta(j->desc.store, ids[i], err);
+            if (!m) {
+                cJSON_Delete(norm);
+                return NULL;
+            }
+            cJSON_Delete(m);
+        }
+    }
     job *jb = calloc(1, sizeof *jb);
     if (!jb) {
         cJSON_Delete(norm);

@@ -42,6 +42,11 @@ int vx_run_progress(vx_job_run *r, double fraction, vx_err *err);
 vx_gl *vx_run_gl(vx_job_run *r);
 /* The id of the job's mesh (64 hex digits), for outputs that record it. */
 const char *vx_run_mesh_id(const vx_job_run *r);
+/* Loads another stored mesh that the params name (render's `meshes`,
+ * gregory's `frames`). Returns an owned mesh the caller frees, or NULL
+ * (VX_ENOTFOUND mesh_not_found when it was deleted since submission, or the
+ * reader's error). Callable from run_gl and run_cpu. */
+vx_mesh *vx_run_load_mesh(vx_job_run *r, const char *id, vx_err *err);
 /* The limits in force. */
 const vx_limits *vx_run_limits(const vx_job_run *r);
 /* The stats object of the job (owned by the run): kinds add numbers to it. */
@@ -62,6 +67,10 @@ typedef struct vx_kind {
     int (*run_cpu)(vx_job_run *r, const cJSON *params, void *state, vx_err *err);
     int (*encode)(vx_job_run *r, const cJSON *params, void *state, vx_err *err);
     void (*free_state)(void *state);
+    /* Optional: the further mesh ids the normalised params name. Writes at
+     * most max of them (pointers into params) and returns how many there
+     * are; submission answers 404 mesh_not_found when one is not stored. */
+    size_t (*mesh_refs)(const cJSON *params, const char **ids, size_t max);
 } vx_kind;
 
 /* The table (src/jobs/kinds.c); NULL when name is unknown. Any thread. */
@@ -78,6 +87,11 @@ int vx_param_number(const cJSON *params, const char *field, double def, double l
 int vx_param_int(const cJSON *params, const char *field, long def, long lo, long hi, long *out,
                  vx_err *err);
 int vx_param_bool(const cJSON *params, const char *field, int def, int *out, vx_err *err);
+/* Reads an optional array of mesh ids (64 lowercase hex digits each) of at
+ * most max entries; *out is the array (owned by params) or NULL when
+ * absent. */
+int vx_param_mesh_ids(const cJSON *params, const char *field, size_t max, const cJSON **out,
+                      vx_err *err);
 /* Fails (VX_EUNPROC) if params has a field not in the NULL-terminated list. */
 int vx_param_only(const cJSON *params, const char *const *known, vx_err *err);
 

@@ -3,6 +3,7 @@
 #include <string.h>
 
 #include "jobs/kind.h"
+#include "store/store.h"
 
 int vx_param_number(const cJSON *params, const char *field, double def, double lo, double hi,
                     double *out, vx_err *err)
@@ -57,5 +58,31 @@ int vx_param_only(const cJSON *params, const char *const *known, vx_err *err)
             return vx_err_set(err, VX_EUNPROC, "invalid_params", "unknown parameter params.%s",
                               it->string);
     }
+    return 0;
+}
+
+int vx_param_mesh_ids(const cJSON *params, const char *field, size_t max, const cJSON **out,
+                      vx_err *err)
+{
+    const cJSON *it = params ? cJSON_GetObjectItemCaseSensitive(params, field) : NULL;
+    *out = NULL;
+    if (!it || cJSON_IsNull(it)) return 0;
+    if (!cJSON_IsArray(it))
+        return vx_err_set(err, VX_EUNPROC, "invalid_params", "params.%s must be an array of mesh ids",
+                          field);
+    size_t n = (size_t)cJSON_GetArraySize(it);
+    if (n > max)
+        return vx_err_set(err, VX_EUNPROC, "invalid_params", "params.%s has %zu entries (at most %zu)",
+                          field, n, max);
+    const cJSON *e;
+    size_t i = 0;
+    cJSON_ArrayForEach(e, it)
+    {
+        if (!cJSON_IsString(e) || !vx_store_valid_mesh_id(e->valuestring))
+            return vx_err_set(err, VX_EUNPROC, "invalid_params",
+                              "params.%s[%zu] is not a mesh id (64 lowercase hex digits)", field, i);
+        i++;
+    }
+    *out = it;
     return 0;
 }

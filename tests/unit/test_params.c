@@ -3,6 +3,7 @@
 #include <stdarg.h>
 #include <stddef.h>
 #include <stdint.h>
+#include <stdio.h>
 #include <string.h>
 #include <cmocka.h>
 
@@ -107,11 +108,42 @@ static void test_preview_params(void **state)
     }
 }
 
+static void test_mesh_ids(void **state)
+{
+    (void)state;
+    char id[65];
+    memset(id, 'a', 64);
+    id[64] = 0;
+    char buf[512];
+    snprintf(buf, sizeof buf,
+             "{\"m\": [\"%s\", \"%s\"], \"bad\": [\"%.63s\"], \"upper\": [\"%.63sA\"],"
+             " \"s\": \"%s\", \"num\": [1]}",
+             id, id, id, id, id);
+    cJSON *p = cJSON_Parse(buf);
+    assert_non_null(p);
+    vx_err err;
+    const cJSON *out;
+    assert_int_equal(vx_param_mesh_ids(p, "m", 8, &out, &err), 0);
+    assert_int_equal(cJSON_GetArraySize(out), 2);
+    assert_int_equal(vx_param_mesh_ids(p, "absent", 8, &out, &err), 0);
+    assert_null(out);
+    assert_int_equal(vx_param_mesh_ids(p, "m", 1, &out, &err), -1);
+    assert_non_null(strstr(err.message, "at most 1"));
+    const char *bad[] = {"bad", "upper", "s", "num"};
+    for (size_t i = 0; i < 4; i++) {
+        assert_int_equal(vx_param_mesh_ids(p, bad[i], 8, &out, &err), -1);
+        assert_string_equal(err.code, "invalid_params");
+        assert_non_null(strstr(err.message, bad[i]));
+    }
+    cJSON_Delete(p);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_numbers),
         cmocka_unit_test(test_only_known),
+        cmocka_unit_test(test_mesh_ids),
         cmocka_unit_test(test_kind_table),
         cmocka_unit_test(test_preview_params),
     };
