@@ -1,0 +1,129 @@
+/* Gregory patch sets and their exact CPU evaluation (gregory.h). The GPU
+ * tessellator evaluates the same formulas in shaders/; this is the
+ * reference its tests and the constructions compare against. */
+#include <math.h>
+#include <stdlib.h>
+
+#include "gregory/gregory.h"
+
+vx_gpatch_set *vx_gpatch_set_new(size_t n)
+{
+    vx_gpatch_set *s = calloc(1, sizeof *s);
+    if (!s) return NULL;
+    s->npatches = n;
+    s->cp = calloc(n * VX_GPATCH_POINTS * 3 + 1, sizeof *s->cp);
+    s->corner_key = calloc(n * 4 + 1, sizeof *s->corner_key);
+    s->face = calloc(n + 1, sizeof *s->face);
+    if (!s->cp || !s->corner_key || !s->face) {
+        vx_gpatch_set_free(s);
+        return NULL;
+    }
+    return s;
+}
+
+void vx_gpatch_set_free(vx_gpatch_set *s)
+{
+    if (!s) return;
+    free(s->cp);
+    free(s->corner_key);
+    free(s->face);
+    free(s);
+}
+
+static void bernstein(double t, double b[4], double d[4])
+{
+    double s = 1 - t;
+    b[0] = s * s * s;
+    b[1] = 3 * t * s * s;
+    b[2] = 3 * t * t * s;
+    b[3] = t * t * t;
+    d[0] = -3 * s * s;
+    d[1] = 3 * s * s - 6 * t * s;
+    d[2] = 6 * t * s - 3 * t * t;
+    d[3] = 3 * t * t;
+}
+
+/* Slot of the k = 1 point of interior (i, j). */
+static int k1_slot(int i, int j) { return 16 + (i - 1) + 2 * (j - 1); }
+
+/* Q_ij(u, v) and its partial derivatives. */
+static void blend(const double *cp, int i, int j, double u, double v, double q[3], double qu[3],
+                  double qv[3])
+{
+    const double *p0 = cp + 3 * (4 * j + i);
+    int interior = i >= 1 && i <= 2 && j >= 1 && j <= 2;
+    if (!interior) {
+        for (int c = 0; c < 3; c++) {
+            q[c] = p0[c];
+            qu[c] = qv[c] = 0;
+        }
+        return;
+    }
+    const double *p1 = cp + 3 * k1_slot(i, j);
+    double wu = i == 1 ? u : 1 - u, dwu = i == 1 ? 1 : -1;
+    double wv = j == 1 ? v : 1 - v, dwv = j == 1 ? 1 : -1;
+    double s = wu + wv;
+    if (s <= 0) { /* the corner itself: its Bernstein weight is zero there */
+        for (int c = 0; c < 3; c++) {
+            q[c] = 0.5 * (p0[c] + p1[c]);
+            qu[c] = qv[c] = 0;
+        }
+        return;
+    }
+    for (int c = 0; c < 3; c++) {
+        q[c] = (wu * p0[c] + wv * p1[c]) / s;
+        qu[c] = dwu * wv * (p0[c] - p1[c]) / (s * s);
+        qv[c] = dwv * wu * (p1[c] - p0[c]) / (s * s);
+    }
+}
+
+static void eval_raw(const double *cp, double u, double v, double pos[3], double du[3],
+                     double dv[3])
+{
+    double bu[4], du_b[4], bv[4], dv_b[4];
+    bernstein(u, bu, du_b);
+    bernstein(v, bv, dv_b);
+    for (int c = 0; c < 3; c++) pos[c] = du[c] = dv[c] = 0;
+    for (int j = 0; j < 4; j++)
+        for (int i = 0; i < 4; i++) {
+            double q[3], qu[3], qv[3];
+            blend(cp, i, j, u, v, q, qu, qv);
+            double w = bu[i] * bv[j];
+            for (int c = 0; c < 3; c++) {
+                pos[c] += w * q[c];
+                du[c] += du_b[i] * bv[j] * q[c] + w * qu[c];
+                dv[c] += bu[i] * dv_b[j] * q[c] + w * qv[c];
+            }
+        }
+}
+
+static double cross_unit(const double a[3], const double b[3], double n[3])
+{
+    n[0] = a[1] * b[2] - a[2] * b[1];
+    n[1] = a[2] * b[0] - a[0] * b[2];
+    n[2] = a[0] * b[1] - a[1] * b[0];
+    double l = sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+    double da = sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2]);
+    double db = sqrt(b[0] * b[0] + b[1] * b[1] + b[2] * b[2]);
+    if (l > 0)
+        for (int c = 0; c < 3; c++) n[c] /= l;
+    return da > 0 && db > 0 ? l / (da * db) : 0; /* sine of the angle between them */
+}
+
+void vx_gpatch_eval(const double *cp, double u, double v, double pos[3], double nrm[3])
+{
+    double du[3], dv[3];
+    eval_raw(cp, u, v, pos, du, dv);
+    if (!nrm) return;
+    if (cross_unit(du, dv, nrm) > 1e-9) return;
+    /* A collapsed edge or corner (the teapot's lid): approach the point
+     * along the diagonal towards the patch centre until the tangents span a
+     * plane; the normal there converges to the limit. */
+    for (double t = 1e-7; t < 0.1; t *= 10) {
+        double p[3];
+        eval_raw(cp, u + (0.5 - u) * t, v + (0.5 - v) * t, p, du, dv);
+        if (cross_unit(du, dv, nrm) > 1e-6) return;
+    }
+    nrm[0] = nrm[1] = 0;
+    nrm[2] = 1; /* a patch collapsed to a curve or point has no normal */
+}
