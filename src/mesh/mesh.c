@@ -14,6 +14,7 @@ void vx_mesh_free(vx_mesh *m)
     free(m->face_idx);
     free(m->face_start);
     free(m->pos);
+    free(m->patch_idx);
     free(m);
 }
 

@@ -34,6 +34,13 @@ typedef struct vx_mesh {
     size_t ntris;
     uint32_t *tri; /* 3 * ntris; aliases face_idx when face_start == NULL */
 
+    /* Bicubic Bézier patches (.bpt uploads), else 0 / NULL: 16 indices into
+     * pos per patch, net point (i, j) at 4*j + i with i along u. The faces
+     * are then a tessellation of the patches, for the engines that draw
+     * triangles; the gregory kind uses the patches themselves. */
+    size_t npatches;
+    uint32_t *patch_idx;
+
     /* What load-time analysis found (vx_mesh_analyze). */
     double bbox_min[3], bbox_max[3];
     size_t faces_by_size[3];   /* triangles, quads, n-gons (n >= 5) */
