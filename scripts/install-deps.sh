@@ -15,7 +15,7 @@ pkgs=(
   libopenvdb-dev libopenvdb-tools libboost-dev libboost-iostreams-dev
   libtbb-dev libimath-dev libblosc-dev zlib1g-dev
   # FFT, images, tests, service
-  libfftw3-dev libpng-dev libcmocka-dev libsystemd-dev systemd nettle-dev
+  libfftw3-dev libosd-dev libpng-dev libcmocka-dev libsystemd-dev systemd nettle-dev
   # integration tests and benchmarks
   curl jq procps psmisc python3 python3-yaml python3-jsonschema
   # tests/deploy/test_systemd.sh: the system calls voxeld makes vs the unit's filter
