@@ -25,6 +25,7 @@
 #include <stdint.h>
 
 #include "util/err.h"
+#include "voxel/voxel.h"
 
 typedef struct vx_bl_filter {
     double d0; /* exponential filter H = exp(-(D/d0)^n), D = |k| in frequency-index units */
@@ -34,6 +35,17 @@ typedef struct vx_bl_filter {
 /* Fills plane (R*R floats, x fastest) with the density samples of z slab
  * k; returns 0 or -1 with err (e.g. canceled). */
 typedef int (*vx_bl_sample_fn)(void *ud, int k, float *plane, vx_err *err);
+
+/* A vx_bl_sample_fn over solids from the voxel engine: the density at a
+ * sample is the number of grids (all R^3, the sampling box) whose bit is
+ * set there. progress (may be NULL) is called every 32 slabs with k / R. */
+typedef struct vx_bl_bits {
+    const vx_bitgrid *grids;
+    int n;
+    int (*progress)(void *ud, double fraction, vx_err *err);
+    void *ud;
+} vx_bl_bits;
+int vx_bl_sample_bits(void *bits, int k, float *plane, vx_err *err);
 
 typedef struct vx_bl_lowpass_stats {
     uint64_t peak_bytes; /* largest sum of buffers held at once */
@@ -70,6 +82,7 @@ typedef struct vx_bl_volume {
     float *f;            /* M^3 */
     float *g[3];         /* gradient (world units) or NULL */
     float *bmax;         /* per 8^3 block: max of f over the block's closure (caster) */
+    float *blip;         /* per block: Lipschitz bound of the trilinear f in it (caster) */
     int nb;              /* blocks per axis */
 } vx_bl_volume;
 
@@ -87,7 +100,7 @@ int vx_bl_interp(const float *spec, int N, int M, const double x0[3], double P,
 double vx_bl_eval(const float *spec, int N, const double x0[3], double P, const double x[3],
                   double grad[3]);
 void vx_bl_volume_free(vx_bl_volume *v);
-/* Computes v->bmax (blocks of 8 cells) for the caster; 0 or -1. */
+/* Computes v->bmax and v->blip (blocks of 8 cells) for the caster; 0 or -1. */
 int vx_bl_volume_blocks(vx_bl_volume *v, vx_err *err);
 /* Trilinear value of f (and of g when grad != NULL and v->g is set) at
  * world point x, clamped to the grid. */
@@ -119,6 +132,9 @@ void vx_bl_hits_free(vx_bl_hits *h);
 /* Casts every pixel against the iso-surface f = iso of v: steps of one
  * grid spacing from the box entry (blocks below iso are skipped whole),
  * the first sample >= iso and the one before bracket the surface, refined
+ * (where the block's Lipschitz bound proves that no crossing can lie
+ * within (iso - f) / bound, the walk steps that far instead of one
+ * spacing, so the first crossing is the same),
  * to sub-sample accuracy on the trilinear field; normal = -gradient
  * (trilinear in v->g) when v->g is set, else left NaN for the screen-space
  * methods. Needs vx_bl_volume_blocks. nthreads CPU threads. */

@@ -26,6 +26,7 @@ void vx_bl_volume_free(vx_bl_volume *v)
     for (int a = 0; a < 3; a++)
         free(v->g[a]);
     free(v->bmax);
+    free(v->blip);
     memset(v, 0, sizeof *v);
 }
 
@@ -240,26 +241,40 @@ double vx_bl_eval(const float *spec, int N, const double x0[3], double P, const 
     return f;
 }
 
+/* Inside one cell the trilinear interpolant's partial derivative along an
+ * axis is a blend of that axis's four edge differences, so sqrt(3) times
+ * the largest |edge difference| / h over the block's cells bounds its
+ * gradient there. */
 int vx_bl_volume_blocks(vx_bl_volume *v, vx_err *err)
 {
     const int M = v->M, nb = (M - 1 + 7) / 8;
     free(v->bmax);
-    v->bmax = malloc(sizeof(float) * (size_t)nb * nb * nb);
-    if (!v->bmax) return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for blocks");
+    free(v->blip);
+    size_t nblk = (size_t)nb * nb * nb;
+    v->bmax = malloc(sizeof(float) * nblk);
+    v->blip = malloc(sizeof(float) * nblk);
+    if (!v->bmax || !v->blip)
+        return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for blocks");
     v->nb = nb;
     for (int bz = 0; bz < nb; bz++)
         for (int by = 0; by < nb; by++)
             for (int bx = 0; bx < nb; bx++) {
-                float mx = -INFINITY;
+                float mx = -INFINITY, md = 0;
                 int z1 = bz * 8 + 8 < M ? bz * 8 + 8 : M - 1, y1 = by * 8 + 8 < M ? by * 8 + 8 : M - 1,
                     x1 = bx * 8 + 8 < M ? bx * 8 + 8 : M - 1;
                 for (int z = bz * 8; z <= z1; z++)
                     for (int y = by * 8; y <= y1; y++) {
                         const float *row = v->f + ((size_t)z * M + y) * M;
-                        for (int x = bx * 8; x <= x1; x++)
+                        for (int x = bx * 8; x <= x1; x++) {
                             if (row[x] > mx) mx = row[x];
+                            if (x < x1) md = fmaxf(md, fabsf(row[x + 1] - row[x]));
+                            if (y < y1) md = fmaxf(md, fabsf(row[x + M] - row[x]));
+                            if (z < z1) md = fmaxf(md, fabsf(row[x + (size_t)M * M] - row[x]));
+                        }
                     }
-                v->bmax[((size_t)bz * nb + by) * nb + bx] = mx;
+                size_t b = ((size_t)bz * nb + by) * nb + bx;
+                v->bmax[b] = mx;
+                v->blip[b] = (float)(sqrt(3.0) * md / v->h);
             }
     return 0;
 }

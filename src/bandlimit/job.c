@@ -470,30 +470,9 @@ out:
     return rc;
 }
 
-typedef struct sampler {
-    const rstate *s;
-    vx_job_run *r;
-    int R;
-} sampler;
-
-/* Density of slab k: the number of solids containing each sample. */
-static int sample_slab(void *ud, int k, float *plane, vx_err *err)
+static int lowpass_progress(void *ud, double fraction, vx_err *err)
 {
-    const sampler *sm = ud;
-    const int R = sm->R;
-    memset(plane, 0, sizeof(float) * (size_t)R * R);
-    for (int m = 0; m < sm->s->nmeshes; m++) {
-        const vx_bitgrid *g = &sm->s->grids[m];
-        for (int y = 0; y < R; y++) {
-            const uint32_t *w = g->bits + ((size_t)k * R + y) * g->wx;
-            float *row = plane + (size_t)y * R;
-            for (size_t x = 0; x < g->wx; x++)
-                for (uint32_t b = w[x]; b; b &= b - 1)
-                    row[x * 32 + (size_t)__builtin_ctz(b)] += 1.0f;
-        }
-    }
-    if ((k & 31) == 0 && sm->r) return vx_run_progress(sm->r, 0.3 + 0.3 * k / R, err);
-    return 0;
+    return vx_run_progress(ud, 0.3 + 0.3 * fraction, err);
 }
 
 static int nthreads(void)
@@ -509,9 +488,9 @@ static int render_run_cpu(vx_job_run *r, const cJSON *params, void *state, vx_er
     if (read_params(params, vx_run_limits(r), &p, err)) return -1;
     const int N = (int)p.N, R = (int)p.R, M = (int)(p.L * p.N), nt = nthreads();
     vx_bl_filter flt = {p.d0, p.fn};
-    sampler sm = {s, r, R};
+    vx_bl_bits bits = {s->grids, s->nmeshes, lowpass_progress, r};
     vx_bl_lowpass_stats lst;
-    s->spec = vx_bl_lowpass(R, N, &flt, sample_slab, &sm, nt, &lst, err);
+    s->spec = vx_bl_lowpass(R, N, &flt, vx_bl_sample_bits, &bits, nt, &lst, err);
     if (!s->spec) return -1;
     s->sampling_ms += lst.sample_ms;
     s->lowpass_ms = lst.ms;

@@ -39,9 +39,9 @@ uint64_t vx_bl_lowpass_bytes(int R, int N)
 {
     uint64_t nh = (uint64_t)N / 2, r = (uint64_t)R;
     return r * N * nh * 8             /* Z: all slabs' kept values */
-           + r * r * 4                /* one slab of samples */
-           + r * (r / 2 + 1) * 8      /* its row spectra */
-           + r * nh * 8               /* kept columns */
+           + r * r * 4                /* one slab of samples (per worker) */
+           + (r / 2 + 1) * 8          /* a row spectrum */
+           + r * nh * 8               /* kept columns (per worker) */
            + (uint64_t)N * N * nh * 8; /* the result */
 }
 
@@ -73,56 +73,127 @@ static void keep(float *dst, const fftwf_complex src, int jz, int jy, int kx, in
 /* Source index in an R-point FFT of kept index j of N. */
 static int src_index(int j, int N, int R) { return j < N / 2 ? j : R - N + j; }
 
+/* One slab worker: samples slab k (sampling is serialised: the callback
+ * need not be reentrant), transforms its non-empty rows and the kept
+ * columns, and stores the kept values into Z[k]. Slabs are handed out in
+ * order; empty rows and slabs (the padding) cost no FFT. */
+typedef struct slab_ctx {
+    int R, N;
+    vx_bl_sample_fn sample;
+    void *ud;
+    fftwf_plan prow, pcol; /* one row (unaligned), the nh columns */
+    fftwf_complex *Z;
+    pthread_mutex_t mu;
+    int next, failed;
+    vx_err err;
+    double sample_ms;
+} slab_ctx;
+
+static void *slab_worker(void *arg)
+{
+    slab_ctx *c = arg;
+    const int R = c->R, N = c->N, nh = N / 2, rh = R / 2 + 1;
+    float *plane = fftwf_malloc(sizeof(float) * (size_t)R * R);
+    fftwf_complex *rows = fftwf_malloc(sizeof(fftwf_complex) * rh);
+    fftwf_complex *cols = fftwf_malloc(sizeof(fftwf_complex) * (size_t)R * nh);
+    for (;;) {
+        pthread_mutex_lock(&c->mu);
+        int k = c->failed ? R : c->next++;
+        if (k < R && (!plane || !rows || !cols)) {
+            c->failed = 1;
+            vx_err_set(&c->err, VX_EINTERNAL, "out_of_memory", "no memory for a slab");
+            k = R;
+        }
+        if (k < R) {
+            double t = vx_bl_now_ms();
+            if (c->sample(c->ud, k, plane, &c->err)) {
+                c->failed = 1;
+                k = R;
+            }
+            c->sample_ms += vx_bl_now_ms() - t;
+        }
+        pthread_mutex_unlock(&c->mu);
+        if (k >= R) break;
+        int any = 0;
+        for (int y = 0; y < R; y++) {
+            const float *row = plane + (size_t)y * R;
+            int nz = 0;
+            for (int x = 0; x < R && !nz; x++)
+                nz = row[x] != 0;
+            if (!nz) {
+                memset(cols + (size_t)y * nh, 0, sizeof(fftwf_complex) * nh);
+                continue;
+            }
+            any = 1;
+            fftwf_execute_dft_r2c(c->prow, (float *)row, rows);
+            memcpy(cols + (size_t)y * nh, rows, sizeof(fftwf_complex) * nh);
+        }
+        fftwf_complex *zk = c->Z + (size_t)k * N * nh;
+        if (!any) {
+            memset(zk, 0, sizeof(fftwf_complex) * (size_t)N * nh);
+            continue;
+        }
+        fftwf_execute_dft(c->pcol, cols, cols);
+        for (int jy = 0; jy < N; jy++)
+            memcpy(zk + (size_t)jy * nh, cols + (size_t)src_index(jy, N, R) * nh,
+                   sizeof(fftwf_complex) * nh);
+    }
+    fftwf_free(plane);
+    fftwf_free(rows);
+    fftwf_free(cols);
+    return NULL;
+}
+
 float *vx_bl_lowpass(int R, int N, const vx_bl_filter *flt, vx_bl_sample_fn sample, void *ud,
                      int nthreads, vx_bl_lowpass_stats *st, vx_err *err)
 {
     if (check_sizes(R, N, err)) return NULL;
-    const int nh = N / 2, rh = R / 2 + 1;
-    float *plane = fftwf_malloc(sizeof(float) * (size_t)R * R);
-    fftwf_complex *rows = fftwf_malloc(sizeof(fftwf_complex) * (size_t)R * rh);
+    const int nh = N / 2, rh = R / 2 + 1, howmany = N * nh;
+    const int nt = nthreads < 1 ? 1 : nthreads > 16 ? 16 : nthreads;
+    slab_ctx c = {.R = R, .N = N, .sample = sample, .ud = ud};
+    pthread_mutex_init(&c.mu, NULL);
+    /* scratch for planning only (workers bring their own) */
+    float *plane = fftwf_malloc(sizeof(float) * R);
+    fftwf_complex *rows = fftwf_malloc(sizeof(fftwf_complex) * rh);
     fftwf_complex *cols = fftwf_malloc(sizeof(fftwf_complex) * (size_t)R * nh);
-    fftwf_complex *Z = fftwf_malloc(sizeof(fftwf_complex) * (size_t)R * N * nh);
+    c.Z = fftwf_malloc(sizeof(fftwf_complex) * (size_t)R * howmany);
     float *out = fftwf_malloc(sizeof(float) * 2 * vx_bl_spectrum_len(N));
-    fftwf_plan prow = NULL, pcol = NULL, pz = NULL;
-    double t_sample = 0, t0 = vx_bl_now_ms();
-    if (!plane || !rows || !cols || !Z || !out) {
+    fftwf_plan pz = NULL;
+    double t0 = vx_bl_now_ms();
+    if (!plane || !rows || !cols || !c.Z || !out) {
         vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for the low-pass (R=%d, N=%d)", R,
                    N);
         goto fail;
     }
     vx_bl_plan_lock(1);
-    /* rows: R real FFTs of length R per slab */
-    prow = fftwf_plan_many_dft_r2c(1, &R, R, plane, NULL, 1, R, rows, NULL, 1, rh, FFTW_ESTIMATE);
-    /* columns: nh complex FFTs of length R (stride nh) */
-    pcol = fftwf_plan_many_dft(1, &R, nh, cols, NULL, nh, 1, cols, NULL, nh, 1, FFTW_FORWARD,
-                               FFTW_ESTIMATE);
+    /* rows start at any float of the plane: an unaligned plan */
+    c.prow = fftwf_plan_dft_r2c_1d(R, plane, rows, FFTW_ESTIMATE | FFTW_UNALIGNED);
+    c.pcol = fftwf_plan_many_dft(1, &R, nh, cols, NULL, nh, 1, cols, NULL, nh, 1, FFTW_FORWARD,
+                                 FFTW_ESTIMATE);
     vx_bl_plan_unlock();
-    vx_bl_plan_lock(nthreads);
+    vx_bl_plan_lock(nt);
     /* depth: N * nh complex FFTs of length R, in place over all slabs */
-    int howmany = N * nh;
-    pz = fftwf_plan_many_dft(1, &R, howmany, Z, NULL, howmany, 1, Z, NULL, howmany, 1, FFTW_FORWARD,
-                             FFTW_ESTIMATE);
+    pz = fftwf_plan_many_dft(1, &R, howmany, c.Z, NULL, howmany, 1, c.Z, NULL, howmany, 1,
+                             FFTW_FORWARD, FFTW_ESTIMATE);
     vx_bl_plan_unlock();
-    if (!prow || !pcol || !pz) {
+    if (!c.prow || !c.pcol || !pz) {
         vx_err_set(err, VX_EINTERNAL, "fft_plan", "FFTW could not plan the low-pass");
         goto fail;
     }
-    for (int k = 0; k < R; k++) {
-        double ts = vx_bl_now_ms();
-        if (sample(ud, k, plane, err)) goto fail;
-        t_sample += vx_bl_now_ms() - ts;
-        fftwf_execute(prow);
-        for (int y = 0; y < R; y++)
-            memcpy(cols + (size_t)y * nh, rows + (size_t)y * rh, sizeof(fftwf_complex) * nh);
-        fftwf_execute(pcol);
-        fftwf_complex *zk = Z + (size_t)k * howmany;
-        for (int jy = 0; jy < N; jy++)
-            memcpy(zk + (size_t)jy * nh, cols + (size_t)src_index(jy, N, R) * nh,
-                   sizeof(fftwf_complex) * nh);
+    pthread_t th[16];
+    int started = 0;
+    for (int i = 1; i < nt; i++)
+        if (pthread_create(&th[started], NULL, slab_worker, &c) == 0) started++;
+    slab_worker(&c);
+    for (int i = 0; i < started; i++)
+        pthread_join(th[i], NULL);
+    if (c.failed) {
+        if (err) *err = c.err;
+        goto fail;
     }
     fftwf_execute(pz);
     for (int jz = 0; jz < N; jz++) {
-        const fftwf_complex *zs = Z + (size_t)src_index(jz, N, R) * howmany;
+        const fftwf_complex *zs = c.Z + (size_t)src_index(jz, N, R) * howmany;
         for (int jy = 0; jy < N; jy++)
             for (int kx = 0; kx < nh; kx++) {
                 size_t o = ((size_t)jz * N + jy) * nh + kx;
@@ -130,27 +201,30 @@ float *vx_bl_lowpass(int R, int N, const vx_bl_filter *flt, vx_bl_sample_fn samp
             }
     }
     if (st) {
-        st->peak_bytes = vx_bl_lowpass_bytes(R, N);
-        st->sample_ms = t_sample;
-        st->ms = vx_bl_now_ms() - t0 - t_sample;
+        st->peak_bytes = vx_bl_lowpass_bytes(R, N) +
+                         (uint64_t)(nt - 1) * ((uint64_t)R * R * 4 + (uint64_t)R * nh * 8);
+        st->sample_ms = c.sample_ms;
+        st->ms = vx_bl_now_ms() - t0 - c.sample_ms;
     }
-    vx_bl_destroy_plan(prow);
-    vx_bl_destroy_plan(pcol);
+    vx_bl_destroy_plan(c.prow);
+    vx_bl_destroy_plan(c.pcol);
     vx_bl_destroy_plan(pz);
     fftwf_free(plane);
     fftwf_free(rows);
     fftwf_free(cols);
-    fftwf_free(Z);
+    fftwf_free(c.Z);
+    pthread_mutex_destroy(&c.mu);
     return out;
 fail:
-    vx_bl_destroy_plan(prow);
-    vx_bl_destroy_plan(pcol);
+    vx_bl_destroy_plan(c.prow);
+    vx_bl_destroy_plan(c.pcol);
     vx_bl_destroy_plan(pz);
     fftwf_free(plane);
     fftwf_free(rows);
     fftwf_free(cols);
-    fftwf_free(Z);
+    fftwf_free(c.Z);
     fftwf_free(out);
+    pthread_mutex_destroy(&c.mu);
     return NULL;
 }
 
@@ -205,4 +279,23 @@ fail:
     fftwf_free(F);
     fftwf_free(out);
     return NULL;
+}
+
+int vx_bl_sample_bits(void *bits, int k, float *plane, vx_err *err)
+{
+    const vx_bl_bits *b = bits;
+    const int R = b->grids[0].grid.dims[0];
+    memset(plane, 0, sizeof(float) * (size_t)R * R);
+    for (int m = 0; m < b->n; m++) {
+        const vx_bitgrid *g = &b->grids[m];
+        for (int y = 0; y < R; y++) {
+            const uint32_t *w = g->bits + ((size_t)k * R + y) * g->wx;
+            float *row = plane + (size_t)y * R;
+            for (size_t x = 0; x < g->wx; x++)
+                for (uint32_t v = w[x]; v; v &= v - 1)
+                    row[x * 32 + (size_t)__builtin_ctz(v)] += 1.0f;
+        }
+    }
+    if ((k & 31) == 0 && b->progress) return b->progress(b->ud, (double)k / R, err);
+    return 0;
 }

@@ -130,7 +130,20 @@ static double cast_ray(const vx_bl_volume *v, double iso, const double o[3], con
             if (f >= iso) return t; /* only on a block corner, within eps */
             continue;
         }
-        double tn = t + dt;
+        /* no crossing closer than (iso - f) / bound: step that far, up to
+         * just past the block's exit (the next block has its own bound) */
+        double tn = t + dt, lip = v->blip[((size_t)b[2] * nb + b[1]) * nb + b[0]];
+        double safe = lip > 0 ? (iso - f) / lip : INFINITY;
+        if (safe > dt) {
+            double te = INFINITY;
+            for (int a = 0; a < 3; a++) {
+                if (fabs(d[a]) < 1e-300) continue;
+                double edge = v->origin[a] + (d[a] > 0 ? b[a] * 8 + 8 : b[a] * 8) * v->h;
+                double ta = (edge - o[a]) / d[a];
+                if (ta < te) te = ta;
+            }
+            tn = t + fmin(safe, fmax(dt, te - t + eps));
+        }
         if (tn > t1) tn = t1;
         double fn = sample_at(v, o, d, tn);
         if (fn >= iso) {
