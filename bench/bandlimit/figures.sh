@@ -41,7 +41,7 @@ render() {
 CAM='"camera":{"type":"orbit","azimuth":30,"elevation":25,"fov":0}'
 for s in hyperboloid sphere cube; do
     id=M_$s
-    render "bandlimit_${s}_r64_n8" "${!id}" "{\"R\":64,\"N\":8,\"L\":8,\"width\":256,\"height\":256,$CAM}"
+    render "bandlimit_${s}_r64_n8" "${!id}" "{\"R\":64,\"N\":8,\"L\":8,\"filter\":{\"D0\":4},\"width\":256,\"height\":256,$CAM}"
 done
 for r in 16 32 64; do
     render "bandlimit_cube_n16_r$r" "$M_cube" "{\"R\":$r,\"N\":16,\"L\":4,\"width\":256,\"height\":256,$CAM}"
