@@ -116,7 +116,51 @@ static int clip_box(const double o[3], const double d[3], const double lo[3], co
 }
 
 /* The surface along one ray: t of the hit or NaN. */
-static double cast_ray(const vx_bl_volume *v, double iso, const double o[3], const double d[3])
+/* skip[b]: for a block below iso, its Chebyshev distance (in blocks, at
+ * most 255) to the nearest block that is not, so that the cube of blocks
+ * within skip - 1 of it is empty and can be crossed in one step; 0 for
+ * blocks that may hold the surface. Separable: distance along x, then
+ * min over y of max(|dy|, that), then the same over z. */
+static uint8_t *empty_distance(const vx_bl_volume *v, double iso)
+{
+    const int nb = v->nb;
+    size_t n = (size_t)nb * nb * nb;
+    uint8_t *a = malloc(n), *b = malloc(n);
+    if (!a || !b) {
+        free(a);
+        free(b);
+        return NULL;
+    }
+    for (size_t i = 0; i < n; i++)
+        a[i] = v->bmax[i] < iso ? 255 : 0;
+    /* pass 0 along x (1-D distance), then y and z (min-max) */
+    for (int axis = 0; axis < 3; axis++) {
+        size_t st = axis == 0 ? 1 : axis == 1 ? (size_t)nb : (size_t)nb * nb;
+        for (int p = 0; p < nb; p++)
+            for (int q = 0; q < nb; q++) {
+                size_t base = axis == 0   ? ((size_t)p * nb + q) * nb
+                              : axis == 1 ? (size_t)p * nb * nb + q
+                                          : (size_t)p * nb + q;
+                for (int i = 0; i < nb; i++) {
+                    int best = 255;
+                    for (int j = 0; j < nb; j++) {
+                        int dd = abs(i - j), val = a[base + j * st];
+                        int m = axis == 0 ? (val == 0 ? dd : 255) : (dd > val ? dd : val);
+                        if (m < best) best = m;
+                    }
+                    b[base + i * st] = (uint8_t)best;
+                }
+            }
+        uint8_t *t = a;
+        a = b;
+        b = t;
+    }
+    free(b);
+    return a;
+}
+
+static double cast_ray(const vx_bl_volume *v, const uint8_t *skip, double iso, const double o[3],
+                       const double d[3])
 {
     const int M = v->M, nb = v->nb;
     double lo[3], hi[3], t0, t1;
@@ -136,11 +180,12 @@ static double cast_ray(const vx_bl_volume *v, double iso, const double o[3], con
             int i = (int)floor(u / 8);
             b[a] = i < 0 ? 0 : i >= nb ? nb - 1 : i;
         }
-        if (v->bmax[((size_t)b[2] * nb + b[1]) * nb + b[0]] < iso) {
+        int r = skip[((size_t)b[2] * nb + b[1]) * nb + b[0]];
+        if (r > 0) {
             double te = INFINITY;
             for (int a = 0; a < 3; a++) {
                 if (fabs(d[a]) < 1e-300) continue;
-                double edge = v->origin[a] + (d[a] > 0 ? b[a] * 8 + 8 : b[a] * 8) * v->h;
+                double edge = v->origin[a] + (d[a] > 0 ? (b[a] + r) * 8 : (b[a] - r + 1) * 8) * v->h;
                 double ta = (edge - o[a]) / d[a];
                 if (ta < te) te = ta;
             }
@@ -189,65 +234,83 @@ static double cast_ray(const vx_bl_volume *v, double iso, const double o[3], con
     return NAN;
 }
 
+/* Pixels go out in 16x16 tiles (neighbouring rays touch the same cache
+ * lines of the grid), handed out in order to whichever thread is free. */
+#define TILE 16
 typedef struct cast_ctx {
     const vx_bl_volume *v;
     double iso;
     const vx_bl_camera *cam;
     vx_bl_hits *h;
-    int stride, first;
+    const uint8_t *skip;
+    int ntx, ntiles;
+    pthread_mutex_t mu;
+    int next;
 } cast_ctx;
 
-static void *cast_rows(void *arg)
+static void cast_pixel(const cast_ctx *c, int px, int py)
 {
-    const cast_ctx *c = arg;
     const vx_bl_hits *h = c->h;
-    for (int py = c->first; py < h->height; py += c->stride)
-        for (int px = 0; px < h->width; px++) {
-            size_t i = (size_t)py * h->width + px;
-            double o[3], d[3];
-            vx_bl_camera_ray(c->cam, h->width, h->height, px, py, o, d);
-            double t = cast_ray(c->v, c->iso, o, d);
-            for (int a = 0; a < 3; a++)
-                h->pos[3 * i + a] = h->nrm[3 * i + a] = NAN;
-            h->depth[i] = NAN;
-            if (isnan(t)) continue;
-            double p[3], g[3], dep = 0;
-            for (int a = 0; a < 3; a++) {
-                p[a] = o[a] + t * d[a];
-                h->pos[3 * i + a] = (float)p[a];
-                dep += (p[a] - c->cam->eye[a]) * c->cam->fwd[a];
-            }
-            h->depth[i] = (float)dep;
-            if (!c->v->g[0]) continue;
-            vx_bl_volume_sample(c->v, p, g);
-            double n = sqrt(g[0] * g[0] + g[1] * g[1] + g[2] * g[2]);
-            if (n > 0)
-                for (int a = 0; a < 3; a++)
-                    h->nrm[3 * i + a] = (float)(-g[a] / n);
-        }
+    size_t i = (size_t)py * h->width + px;
+    double o[3], d[3];
+    vx_bl_camera_ray(c->cam, h->width, h->height, px, py, o, d);
+    double t = cast_ray(c->v, c->skip, c->iso, o, d);
+    for (int a = 0; a < 3; a++)
+        h->pos[3 * i + a] = h->nrm[3 * i + a] = NAN;
+    h->depth[i] = NAN;
+    if (isnan(t)) return;
+    double p[3], g[3], dep = 0;
+    for (int a = 0; a < 3; a++) {
+        p[a] = o[a] + t * d[a];
+        h->pos[3 * i + a] = (float)p[a];
+        dep += (p[a] - c->cam->eye[a]) * c->cam->fwd[a];
+    }
+    h->depth[i] = (float)dep;
+    if (!c->v->g[0]) return;
+    vx_bl_volume_sample(c->v, p, g);
+    double n = sqrt(g[0] * g[0] + g[1] * g[1] + g[2] * g[2]);
+    if (n > 0)
+        for (int a = 0; a < 3; a++)
+            h->nrm[3 * i + a] = (float)(-g[a] / n);
+}
+
+static void *cast_tiles(void *arg)
+{
+    cast_ctx *c = arg;
+    for (;;) {
+        pthread_mutex_lock(&c->mu);
+        int k = c->next++;
+        pthread_mutex_unlock(&c->mu);
+        if (k >= c->ntiles) break;
+        int x0 = (k % c->ntx) * TILE, y0 = (k / c->ntx) * TILE;
+        for (int py = y0; py < y0 + TILE && py < c->h->height; py++)
+            for (int px = x0; px < x0 + TILE && px < c->h->width; px++)
+                cast_pixel(c, px, py);
+    }
     return NULL;
 }
 
 int vx_bl_cast(const vx_bl_volume *v, double iso, const vx_bl_camera *cam, int nthreads,
                vx_bl_hits *h, vx_err *err)
 {
-    if (!v->bmax || v->M < 2)
+    if (!v->bmax || !v->blip || v->M < 2)
         return vx_err_set(err, VX_EINTERNAL, "internal", "cast: volume without blocks");
     int nt = nthreads < 1 ? 1 : nthreads > 16 ? 16 : nthreads;
-    cast_ctx c[16];
+    cast_ctx c = {.v = v, .iso = iso, .cam = cam, .h = h, .ntx = (h->width + TILE - 1) / TILE};
+    c.ntiles = c.ntx * ((h->height + TILE - 1) / TILE);
+    uint8_t *skip = empty_distance(v, iso);
+    if (!skip) return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for the caster");
+    c.skip = skip;
+    pthread_mutex_init(&c.mu, NULL);
     pthread_t th[16];
-    int started[16] = {0};
-    for (int i = 0; i < nt; i++) {
-        c[i] = (cast_ctx){.v = v, .iso = iso, .cam = cam, .h = h, .stride = nt, .first = i};
-        if (i > 0) started[i] = pthread_create(&th[i], NULL, cast_rows, &c[i]) == 0;
-    }
-    cast_rows(&c[0]);
-    for (int i = 1; i < nt; i++) {
-        if (started[i])
-            pthread_join(th[i], NULL);
-        else
-            cast_rows(&c[i]);
-    }
+    int started = 0;
+    for (int i = 1; i < nt; i++)
+        if (pthread_create(&th[started], NULL, cast_tiles, &c) == 0) started++;
+    cast_tiles(&c);
+    for (int i = 0; i < started; i++)
+        pthread_join(th[i], NULL);
+    pthread_mutex_destroy(&c.mu);
+    free(skip);
     return 0;
 }
 
