@@ -90,7 +90,7 @@ static result run_child(int full, const vx_bitgrid *g, int R, int N)
         vx_bl_lowpass_stats st;
         vx_err err = {0};
         float *s = (full ? vx_bl_lowpass_full : vx_bl_lowpass)(R, N, &flt, vx_bl_sample_bits, &bits,
-                                                              2, &st, &err);
+                                                               2, &st, &err);
         if (!s) die("lowpass", &err);
         result r = {st.ms, st.sample_ms, status_kb("VmHWM:") - base, {0}};
         /* a few coefficients to compare the two */
@@ -169,7 +169,8 @@ static int render(const char *mesh, int N, int L, int W, int runs)
     /* orbit camera, azimuth 30, elevation 20, fov 30, fitting the box */
     vx_bl_camera cam = {.fov_deg = 30};
     double az = 30 * M_PI / 180, el = 20 * M_PI / 180,
-           dir[3] = {sin(az) * cos(el), sin(el), cos(az) * cos(el)}, dist = P / 1.4 * 0.9 / sin(M_PI / 12);
+           dir[3] = {sin(az) * cos(el), sin(el), cos(az) * cos(el)},
+           dist = P / 1.4 * 0.9 / sin(M_PI / 12);
     for (int a = 0; a < 3; a++) {
         cam.fwd[a] = -dir[a];
         cam.eye[a] = c[a] + dir[a] * dist;
@@ -178,7 +179,8 @@ static int render(const char *mesh, int N, int L, int W, int runs)
     cam.right[0] = cam.fwd[1] * up[2] - cam.fwd[2] * up[1];
     cam.right[1] = cam.fwd[2] * up[0] - cam.fwd[0] * up[2];
     cam.right[2] = cam.fwd[0] * up[1] - cam.fwd[1] * up[0];
-    double rn = sqrt(cam.right[0] * cam.right[0] + cam.right[1] * cam.right[1] + cam.right[2] * cam.right[2]);
+    double rn = sqrt(cam.right[0] * cam.right[0] + cam.right[1] * cam.right[1] +
+                     cam.right[2] * cam.right[2]);
     for (int a = 0; a < 3; a++)
         cam.right[a] /= rn;
     cam.up[0] = cam.right[1] * cam.fwd[2] - cam.right[2] * cam.fwd[1];
@@ -190,7 +192,10 @@ static int render(const char *mesh, int N, int L, int W, int runs)
     vx_bl_light light = {{0, 0, 1}, {0.85, 0.85, 0.85}};
     for (int a = 0; a < 3; a++)
         light.dir[a] = -cam.fwd[a];
-    vx_bl_shade_desc sd = {.lights = &light, .nlights = 1, .ambient = 0.15, .color = {0.8, 0.8, 0.85},
+    vx_bl_shade_desc sd = {.lights = &light,
+                           .nlights = 1,
+                           .ambient = 0.15,
+                           .color = {0.8, 0.8, 0.85},
                            .background = {1, 1, 1}};
     double best[2] = {1e30, 1e30};
     size_t hits = 0;
@@ -208,7 +213,8 @@ static int render(const char *mesh, int N, int L, int W, int runs)
             }
         }
     const char *name = strrchr(mesh, '/') ? strrchr(mesh, '/') + 1 : mesh;
-    printf("| mesh | N | M | image | interpolation ms | spectral render ms | central-difference render ms (same caster, N grid) | pixels hit |\n");
+    printf("| mesh | N | M | image | interpolation ms | spectral render ms | central-difference "
+           "render ms (same caster, N grid) | pixels hit |\n");
     printf("|---|---|---|---|---|---|---|---|\n");
     printf("| %s | %d | %d | %dx%d | %.0f | %.0f | %.0f | %zu |\n", name, N, M, W, W, interp_ms,
            best[0], best[1], hits);

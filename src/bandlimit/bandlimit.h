@@ -79,11 +79,11 @@ void vx_bl_free(void *p);
 typedef struct vx_bl_volume {
     int M;
     double origin[3], h;
-    float *f;            /* M^3 */
-    float *g[3];         /* gradient (world units) or NULL */
-    float *bmax;         /* per 8^3 block: max of f over the block's closure (caster) */
-    float *blip;         /* per block: Lipschitz bound of the trilinear f in it (caster) */
-    int nb;              /* blocks per axis */
+    float *f;    /* M^3 */
+    float *g[3]; /* gradient (world units) or NULL */
+    float *bmax; /* per 8^3 block: max of f over the block's closure (caster) */
+    float *blip; /* per block: Lipschitz bound of the trilinear f in it (caster) */
+    int nb;      /* blocks per axis */
 } vx_bl_volume;
 
 /* Bytes of a volume of M (with or without the gradient). */
@@ -93,8 +93,8 @@ uint64_t vx_bl_volume_bytes(int M, int with_grad);
  * spectrum times j 2 pi k / P (the exact gradient). x0 = the position of
  * sample 0 (box origin + P/(2R)), P the box edge; M >= N, even; v->origin
  * becomes x0. Fills v (owned arrays; vx_bl_volume_free). */
-int vx_bl_interp(const float *spec, int N, int M, const double x0[3], double P,
-                 int with_grad, int nthreads, vx_bl_volume *v, vx_err *err);
+int vx_bl_interp(const float *spec, int N, int M, const double x0[3], double P, int with_grad,
+                 int nthreads, vx_bl_volume *v, vx_err *err);
 /* Exact evaluation of the band-limited density and gradient at x (world),
  * O(N^3): the reference the tests and the 2% check use. */
 double vx_bl_eval(const float *spec, int N, const double x0[3], double P, const double x[3],
@@ -109,7 +109,7 @@ double vx_bl_volume_sample(const vx_bl_volume *v, const double x[3], double grad
 /* ---- the caster (render.c) ---- */
 
 typedef struct vx_bl_camera {
-    double eye[3];     /* perspective: the eye; orthographic: the image centre */
+    double eye[3];                  /* perspective: the eye; orthographic: the image centre */
     double fwd[3], right[3], up[3]; /* orthonormal */
     int ortho;
     double ortho_height; /* orthographic: world extent of the image height */
@@ -144,12 +144,12 @@ int vx_bl_cast(const vx_bl_volume *v, double iso, const vx_bl_camera *cam, int n
 /* ---- the older normal estimators for comparison (compare.c; seed 002 §2) ---- */
 
 typedef enum vx_bl_normals {
-    VX_BL_SPECTRAL = 0,    /* exact spectral gradient (the seed's method) */
-    VX_BL_DEPTH_ONLY,      /* (1) brightness from depth alone */
-    VX_BL_CENTRAL,         /* (2) central differences on the voxels, interpolated (Phong-style) */
-    VX_BL_CROSS_MASK,      /* (3) cross mask: depth-buffer neighbours left/right x up/down */
-    VX_BL_SOBEL2D,         /* (4) 2-D Sobel on the depth (position) buffer */
-    VX_BL_SOBEL3D,         /* (5) 3-D Sobel on the voxels, interpolated */
+    VX_BL_SPECTRAL = 0, /* exact spectral gradient (the seed's method) */
+    VX_BL_DEPTH_ONLY,   /* (1) brightness from depth alone */
+    VX_BL_CENTRAL,      /* (2) central differences on the voxels, interpolated (Phong-style) */
+    VX_BL_CROSS_MASK,   /* (3) cross mask: depth-buffer neighbours left/right x up/down */
+    VX_BL_SOBEL2D,      /* (4) 2-D Sobel on the depth (position) buffer */
+    VX_BL_SOBEL3D,      /* (5) 3-D Sobel on the voxels, interpolated */
     VX_BL_NORMALS_COUNT
 } vx_bl_normals;
 extern const char *const vx_bl_normals_names[VX_BL_NORMALS_COUNT + 1];
@@ -163,7 +163,7 @@ void vx_bl_screen_normals(vx_bl_hits *h, const vx_bl_camera *cam, vx_bl_normals 
 
 /* ---- shading ---- */
 typedef struct vx_bl_light {
-    double dir[3];   /* towards the light, world, unit */
+    double dir[3]; /* towards the light, world, unit */
     double color[3];
 } vx_bl_light;
 typedef struct vx_bl_shade_desc {

@@ -21,6 +21,9 @@ static inline double vx_bl_now_ms(void)
 }
 
 /* FFT-order index j of an n-point transform -> signed frequency. */
-static inline int vx_bl_freq(int j, int n) { return j < n / 2 ? j : j - n; }
+static inline int vx_bl_freq(int j, int n)
+{
+    return j < n / 2 ? j : j - n;
+}
 
 #endif

@@ -32,7 +32,7 @@ void vx_bl_volume_free(vx_bl_volume *v)
 
 typedef struct interp_ctx {
     int N, M, nh, mh, with_grad;
-    double w; /* 2 pi / P */
+    double w;                     /* 2 pi / P */
     const fftwf_complex *A, *Agz; /* [M][N][nh] after the z transform */
     fftwf_plan py, prow;
     vx_bl_volume *v;
@@ -129,8 +129,8 @@ int vx_bl_interp(const float *spec, int N, int M, const double x0[3], double P, 
                           "interpolation: need even N >= 2, even M >= N (N=%d, M=%d)", N, M);
     const int nh = N / 2, mh = M / 2 + 1, howmany = N * nh;
     size_t m3 = (size_t)M * M * M, acount = (size_t)M * howmany;
-    interp_ctx c = {.N = N, .M = M, .nh = nh, .mh = mh, .with_grad = with_grad, .w = 2 * M_PI / P,
-                    .v = v};
+    interp_ctx c = {
+        .N = N, .M = M, .nh = nh, .mh = mh, .with_grad = with_grad, .w = 2 * M_PI / P, .v = v};
     pthread_mutex_init(&c.mu, NULL);
     fftwf_complex *A = fftwf_malloc(sizeof(fftwf_complex) * acount);
     fftwf_complex *Agz = with_grad ? fftwf_malloc(sizeof(fftwf_complex) * acount) : NULL;
@@ -260,7 +260,8 @@ int vx_bl_volume_blocks(vx_bl_volume *v, vx_err *err)
         for (int by = 0; by < nb; by++)
             for (int bx = 0; bx < nb; bx++) {
                 float mx = -INFINITY, md = 0;
-                int z1 = bz * 8 + 8 < M ? bz * 8 + 8 : M - 1, y1 = by * 8 + 8 < M ? by * 8 + 8 : M - 1,
+                int z1 = bz * 8 + 8 < M ? bz * 8 + 8 : M - 1,
+                    y1 = by * 8 + 8 < M ? by * 8 + 8 : M - 1,
                     x1 = bx * 8 + 8 < M ? bx * 8 + 8 : M - 1;
                 for (int z = bz * 8; z <= z1; z++)
                     for (int y = by * 8; y <= y1; y++) {

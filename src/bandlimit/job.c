@@ -52,10 +52,10 @@ typedef struct rstate {
     uint64_t peak;
 } rstate;
 
-static const char *const known[] = {"N",      "R",       "filter",  "L",          "iso",
-                                    "meshes", "camera",  "width",   "height",     "lights",
-                                    "ambient", "color",  "background", "normals", "compare",
-                                    "bits",   "outputs", "frames",  NULL};
+static const char *const known[] = {"N",       "R",       "filter",     "L",       "iso",
+                                    "meshes",  "camera",  "width",      "height",  "lights",
+                                    "ambient", "color",   "background", "normals", "compare",
+                                    "bits",    "outputs", "frames",     NULL};
 
 static const cJSON *field(const cJSON *o, const char *name)
 {
@@ -286,7 +286,10 @@ static int read_params(const cJSON *params, const vx_limits *lim, rparams *p, vx
     return 0;
 }
 
-static cJSON *num_array(const double *v, int n) { return cJSON_CreateDoubleArray(v, n); }
+static cJSON *num_array(const double *v, int n)
+{
+    return cJSON_CreateDoubleArray(v, n);
+}
 
 static cJSON *render_parse(const cJSON *params, const vx_limits *lim, vx_err *err)
 {
@@ -315,11 +318,11 @@ static cJSON *render_parse(const cJSON *params, const vx_limits *lim, vx_err *er
         if (p.out[k]) ok = cJSON_AddItemToArray(outs, cJSON_CreateString(out_names[k]));
     if (ok) {
         ok = cJSON_AddNumberToObject(o, "N", (double)p.N) &&
-             cJSON_AddNumberToObject(o, "R", (double)p.R) && cJSON_AddItemToObject(o, "filter", flt);
+             cJSON_AddNumberToObject(o, "R", (double)p.R) &&
+             cJSON_AddItemToObject(o, "filter", flt);
         if (ok) flt = NULL;
         ok = ok && cJSON_AddNumberToObject(o, "L", (double)p.L) &&
-             cJSON_AddNumberToObject(o, "iso", p.iso) &&
-             cJSON_AddItemToObject(o, "meshes", meshes);
+             cJSON_AddNumberToObject(o, "iso", p.iso) && cJSON_AddItemToObject(o, "meshes", meshes);
         if (ok) meshes = NULL;
         ok = ok && cJSON_AddItemToObject(o, "camera", cam);
         if (ok) cam = NULL;
@@ -564,7 +567,8 @@ static void make_camera(const rparams *p, const rstate *s, int f, vx_bl_camera *
             worldup[2] = -sg; /* from +y: +z down the image */
         }
     } else {
-        double az = (p->azimuth + 360.0 * f / p->frames) * M_PI / 180, el = p->elevation * M_PI / 180;
+        double az = (p->azimuth + 360.0 * f / p->frames) * M_PI / 180,
+               el = p->elevation * M_PI / 180;
         dir[0] = sin(az) * cos(el);
         dir[1] = sin(el);
         dir[2] = cos(az) * cos(el);
@@ -581,9 +585,9 @@ static void make_camera(const rparams *p, const rstate *s, int f, vx_bl_camera *
     double ow = p->ortho_width > 0 ? p->ortho_width : fit;
     c->ortho_height = aspect >= 1 ? ow : ow / aspect;
     double dist = p->distance > 0 ? p->distance
-                  : c->ortho ? 2 * s->P
-                             : s->radius * 1.05 / sin(p->fov * M_PI / 360 *
-                                                      (aspect >= 1 ? 1 : aspect));
+                  : c->ortho
+                      ? 2 * s->P
+                      : s->radius * 1.05 / sin(p->fov * M_PI / 360 * (aspect >= 1 ? 1 : aspect));
     for (int a = 0; a < 3; a++)
         c->eye[a] = s->centre[a] + dir[a] * dist;
 }
@@ -634,8 +638,8 @@ static int write_png(const char *path, const float *rgb, int w, int h, int bits,
 }
 
 /* Output name NAME or NAME_fff for turntables. */
-static const char *output(vx_job_run *r, const rparams *p, const char *name, int f,
-                          const char *ext, const char *type, vx_err *err)
+static const char *output(vx_job_run *r, const rparams *p, const char *name, int f, const char *ext,
+                          const char *type, vx_err *err)
 {
     char nm[64];
     if (p->frames > 1)

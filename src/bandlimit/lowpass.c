@@ -14,7 +14,10 @@
 
 static pthread_mutex_t plan_mu = PTHREAD_MUTEX_INITIALIZER;
 static pthread_once_t threads_once = PTHREAD_ONCE_INIT;
-static void init_threads(void) { fftwf_init_threads(); }
+static void init_threads(void)
+{
+    fftwf_init_threads();
+}
 
 void vx_bl_plan_lock(int nthreads)
 {
@@ -22,7 +25,10 @@ void vx_bl_plan_lock(int nthreads)
     pthread_mutex_lock(&plan_mu);
     fftwf_plan_with_nthreads(nthreads < 1 ? 1 : nthreads);
 }
-void vx_bl_plan_unlock(void) { pthread_mutex_unlock(&plan_mu); }
+void vx_bl_plan_unlock(void)
+{
+    pthread_mutex_unlock(&plan_mu);
+}
 void vx_bl_destroy_plan(fftwf_plan p)
 {
     if (!p) return;
@@ -31,17 +37,23 @@ void vx_bl_destroy_plan(fftwf_plan p)
     pthread_mutex_unlock(&plan_mu);
 }
 
-void vx_bl_free(void *p) { fftwf_free(p); }
+void vx_bl_free(void *p)
+{
+    fftwf_free(p);
+}
 
-size_t vx_bl_spectrum_len(int N) { return (size_t)N * (size_t)N * (size_t)(N / 2); }
+size_t vx_bl_spectrum_len(int N)
+{
+    return (size_t)N * (size_t)N * (size_t)(N / 2);
+}
 
 uint64_t vx_bl_lowpass_bytes(int R, int N)
 {
     uint64_t nh = (uint64_t)N / 2, r = (uint64_t)R;
-    return r * N * nh * 8             /* Z: all slabs' kept values */
-           + r * r * 4                /* one slab of samples (per worker) */
-           + (r / 2 + 1) * 8          /* a row spectrum */
-           + r * nh * 8               /* kept columns (per worker) */
+    return r * N * nh * 8              /* Z: all slabs' kept values */
+           + r * r * 4                 /* one slab of samples (per worker) */
+           + (r / 2 + 1) * 8           /* a row spectrum */
+           + r * nh * 8                /* kept columns (per worker) */
            + (uint64_t)N * N * nh * 8; /* the result */
 }
 
@@ -71,7 +83,10 @@ static void keep(float *dst, const fftwf_complex src, int jz, int jy, int kx, in
 }
 
 /* Source index in an R-point FFT of kept index j of N. */
-static int src_index(int j, int N, int R) { return j < N / 2 ? j : R - N + j; }
+static int src_index(int j, int N, int R)
+{
+    return j < N / 2 ? j : R - N + j;
+}
 
 /* One slab worker: samples slab k (sampling is serialised: the callback
  * need not be reentrant), transforms its non-empty rows and the kept

@@ -185,7 +185,8 @@ static double cast_ray(const vx_bl_volume *v, const uint8_t *skip, double iso, c
             double te = INFINITY;
             for (int a = 0; a < 3; a++) {
                 if (fabs(d[a]) < 1e-300) continue;
-                double edge = v->origin[a] + (d[a] > 0 ? (b[a] + r) * 8 : (b[a] - r + 1) * 8) * v->h;
+                double edge =
+                    v->origin[a] + (d[a] > 0 ? (b[a] + r) * 8 : (b[a] - r + 1) * 8) * v->h;
                 double ta = (edge - o[a]) / d[a];
                 if (ta < te) te = ta;
             }

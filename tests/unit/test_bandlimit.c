@@ -179,7 +179,8 @@ static float *make_spec(int N, const wave *w, int nw)
 {
     float *s = calloc(2 * vx_bl_spectrum_len(N), sizeof(float));
     for (int i = 0; i < nw; i++) {
-        int jy = w[i].k[1] < 0 ? w[i].k[1] + N : w[i].k[1], jz = w[i].k[2] < 0 ? w[i].k[2] + N : w[i].k[2];
+        int jy = w[i].k[1] < 0 ? w[i].k[1] + N : w[i].k[1],
+            jz = w[i].k[2] < 0 ? w[i].k[2] + N : w[i].k[2];
         size_t o = ((size_t)jz * N + jy) * (N / 2) + w[i].k[0];
         s[2 * o] = (float)w[i].re;
         s[2 * o + 1] = (float)w[i].im;
@@ -209,7 +210,9 @@ static void test_interp_closed_form(void **st)
 {
     const int N = 8, M = 24;
     const double P = 3.0, x0[3] = {-1.2, 0.3, 2.0};
-    wave w[] = {{{0, 0, 0}, 0.25, 0}, {{1, 2, -3}, 0.1, -0.05}, {{3, -1, 0}, 0.02, 0.07},
+    wave w[] = {{{0, 0, 0}, 0.25, 0},
+                {{1, 2, -3}, 0.1, -0.05},
+                {{3, -1, 0}, 0.02, 0.07},
                 {{0, 3, 1}, -0.04, 0.01}};
     int nw = 4;
     /* kx = 0 entries need their conjugate partner to stay real */
@@ -231,7 +234,8 @@ static void test_interp_closed_form(void **st)
     for (int z = 0; z < M; z += 3)
         for (int y = 0; y < M; y += 2)
             for (int x = 0; x < M; x++) {
-                double p[3] = {x0[0] + x * P / M, x0[1] + y * P / M, x0[2] + z * P / M}, g[3], ge[3];
+                double p[3] = {x0[0] + x * P / M, x0[1] + y * P / M, x0[2] + z * P / M}, g[3],
+                       ge[3];
                 double f = wave_field(w2, 5, P, x0, p, g);
                 size_t i = ((size_t)z * M + y) * M + x;
                 maxf = fmax(maxf, fabs(f - v.f[i]));
@@ -343,15 +347,20 @@ static void test_cast_ball_and_methods(void **st)
     assert_int_equal(vx_bl_interp(spec, N, N, x0, 1.0, 0, 2, &vn, &err), 0);
     assert_int_equal(vx_bl_volume_blocks(&vn, &err), 0);
     assert_int_equal(vx_bl_voxel_gradient(&vn, VX_BL_CENTRAL, &err), 0);
-    vx_bl_camera cam = {.eye = {0.5, 0.5, 3}, .fwd = {0, 0, -1}, .right = {1, 0, 0},
-                        .up = {0, 1, 0}, .ortho = 1, .ortho_height = 0.8};
+    vx_bl_camera cam = {.eye = {0.5, 0.5, 3},
+                        .fwd = {0, 0, -1},
+                        .right = {1, 0, 0},
+                        .up = {0, 1, 0},
+                        .ortho = 1,
+                        .ortho_height = 0.8};
     vx_bl_hits h;
     assert_int_equal(vx_bl_hits_alloc(&h, W, W, &err), 0);
     assert_int_equal(vx_bl_cast(&vm, 0.5, &cam, 2, &h, &err), 0);
     double maxr, minr, spectral, cd, cross, sob2;
     size_t n;
     spectral = sphere_error(&h, s.c, &maxr, &minr, &n);
-    print_message("spectral: mean %.4f deg, r in [%.4f, %.4f], %zu hits\n", spectral, minr, maxr, n);
+    print_message("spectral: mean %.4f deg, r in [%.4f, %.4f], %zu hits\n", spectral, minr, maxr,
+                  n);
     /* the disc of radius 0.3 in a 0.8-wide view: pi 0.3^2 / 0.64 of the pixels */
     double want = M_PI * 0.09 / 0.64 * W * W;
     assert_true(fabs(n - want) < 0.03 * want);
