@@ -68,6 +68,7 @@ DISC=$(awk -v h="$HITS" 'BEGIN { print h / (3.14159265 * 65536 / (3.6373 * 3.637
 le "sphere: about the expected disc (lower)" 0.98 "$DISC"
 le "sphere: about the expected disc (upper)" "$DISC" 1.02
 S_MEAN=$(jq -r .mean_deg <<<"$SPEC")
+check "sphere: hits on the unit sphere (mean distance within 1%)" jq -e '.mean_dist > 0.99 and .mean_dist < 1.01' <<<"$SPEC"
 le "sphere: spectral mean normal error <= 0.06 deg" "$S_MEAN" 0.06
 check "depth PFM: 1 channel, misses NaN" jq -e ".channels == 1 and .width == 256 and .nan == $((65536 - HITS))" <<<"$("$RC" pfm "$TMP/d.pfm")"
 check "position PFM: 3 channels" jq -e '.channels == 3 and .height == 256' <<<"$("$RC" pfm "$TMP/p.pfm")"
@@ -104,6 +105,14 @@ T_CD=$("$RC" normals "$TMP/n.pfm" "$TMP/p.pfm" torus 1)
 echo "torus central-difference: $T_CD"
 le "torus: spectral at least 5x better than central differences" \
     "$(jq -r .mean_deg <<<"$T_SPEC" | awk '{ print 5 * $1 }')" "$(jq -r .mean_deg <<<"$T_CD")"
+
+# --- lights, ambient, background: a red light from +z, no ambient ---
+job "red light" "$M_icosphere" '{"N":16,"width":64,"height":64,"ambient":0,"background":[0,0,1],"lights":[{"direction":[0,0,1],"color":[1,0,0]}]}'
+get image "$TMP/red.png"
+PS=$("$VX_TOOLS/pngstat" "$TMP/red.png" --bg 0,0,255)
+check "red light: centre = colour red x 1 (204, 0, 0), corner = background" jq -e \
+    '.center_pixel[0] >= 200 and .center_pixel[0] <= 205 and .center_pixel[1] == 0 and .center_pixel[2] == 0 and .covered > 500' <<<"$PS"
+check "red light: normalised lights echoed" jq -e '.params.lights[0].color == [1,0,0] and .params.ambient == 0' "$TMP/job.json"
 
 # --- compare: six labelled panels of the same shape ---
 job "compare" "$M_icosphere" '{"N":32,"width":128,"height":128,"compare":true}'

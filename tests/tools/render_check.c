@@ -2,10 +2,11 @@
  *
  *   render_check normals NORMAL.pfm POSITION.pfm sphere CX CY CZ
  *   render_check normals NORMAL.pfm POSITION.pfm torus RMAJOR   (axis z, centre 0)
- *       {"hits":N,"mean_deg":A,"max_deg":B}: the angle between each hit's
- *       rendered normal and the analytic normal of the exact shape at the
- *       hit's direction (sphere: normalise(hit - centre); torus: from the
- *       nearest point of the core circle).
+ *       {"hits":N,"mean_deg":A,"max_deg":B,"mean_dist":D}: the angle between
+ *       each hit's rendered normal and the analytic normal of the exact
+ *       shape at the hit's direction (sphere: normalise(hit - centre);
+ *       torus: from the nearest point of the core circle), and the mean
+ *       distance of the hits from the centre (sphere) or core circle.
  *   render_check pfm FILE.pfm
  *       {"width":W,"height":H,"channels":C,"nan":N}
  *   render_check panels FILE.png COLS ROWS
@@ -58,7 +59,7 @@ static int normals(int argc, char **argv)
     else
         for (int a = 0; a < 3; a++)
             cen[a] = atof(argv[5 + a]);
-    double sum = 0, mx = 0;
+    double sum = 0, mx = 0, dist = 0;
     size_t hits = 0;
     for (size_t i = 0; i < (size_t)w * h; i++) {
         const float *q = p + 3 * i, *m = n + 3 * i;
@@ -80,11 +81,12 @@ static int normals(int argc, char **argv)
         }
         double ang = acos(fmax(-1, fmin(1, dot / (len * sqrt(ml))))) * 180 / M_PI;
         sum += ang;
+        dist += len;
         if (ang > mx) mx = ang;
         hits++;
     }
-    printf("{\"hits\":%zu,\"mean_deg\":%.6f,\"max_deg\":%.6f}\n", hits, hits ? sum / hits : 0.0,
-           mx);
+    printf("{\"hits\":%zu,\"mean_deg\":%.6f,\"max_deg\":%.6f,\"mean_dist\":%.6f}\n", hits,
+           hits ? sum / hits : 0.0, mx, hits ? dist / hits : 0.0);
     free(n);
     free(p);
     return 0;
