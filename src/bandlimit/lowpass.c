@@ -159,6 +159,54 @@ static void *slab_worker(void *arg)
     return NULL;
 }
 
+/* The depth pass: blocks of ZB columns (jy, kx) are gathered from Z into
+ * contiguous rows, transformed along z, and only their N kept outputs are
+ * filtered into the result (no R-long write-back, contiguous FFTs). */
+#define ZB 16
+typedef struct zpass_ctx {
+    int R, N;
+    const vx_bl_filter *flt;
+    const fftwf_complex *Z;
+    float *out;
+    fftwf_plan p; /* ZB contiguous FFTs of length R */
+    pthread_mutex_t mu;
+    int next, nblocks, failed;
+} zpass_ctx;
+
+static void *zpass_worker(void *arg)
+{
+    zpass_ctx *c = arg;
+    const int R = c->R, N = c->N, nh = N / 2, cols = N * nh;
+    fftwf_complex *buf = fftwf_malloc(sizeof(fftwf_complex) * (size_t)ZB * R);
+    for (;;) {
+        pthread_mutex_lock(&c->mu);
+        int blk = buf && !c->failed ? c->next++ : c->nblocks;
+        if (!buf) c->failed = 1;
+        pthread_mutex_unlock(&c->mu);
+        if (blk >= c->nblocks) break;
+        int c0 = blk * ZB, nb = cols - c0 < ZB ? cols - c0 : ZB;
+        memset(buf, 0, sizeof(fftwf_complex) * (size_t)ZB * R);
+        for (int k = 0; k < R; k++) {
+            const fftwf_complex *zr = c->Z + (size_t)k * cols + c0;
+            for (int b = 0; b < nb; b++) {
+                buf[(size_t)b * R + k][0] = zr[b][0];
+                buf[(size_t)b * R + k][1] = zr[b][1];
+            }
+        }
+        fftwf_execute_dft(c->p, buf, buf);
+        for (int b = 0; b < nb; b++) {
+            int col = c0 + b, jy = col / nh, kx = col % nh;
+            for (int jz = 0; jz < N; jz++) {
+                size_t o = ((size_t)jz * N + jy) * nh + kx;
+                keep(c->out + 2 * o, buf[(size_t)b * R + src_index(jz, N, R)], jz, jy, kx, N, R,
+                     c->flt);
+            }
+        }
+    }
+    fftwf_free(buf);
+    return NULL;
+}
+
 float *vx_bl_lowpass(int R, int N, const vx_bl_filter *flt, vx_bl_sample_fn sample, void *ud,
                      int nthreads, vx_bl_lowpass_stats *st, vx_err *err)
 {
@@ -174,6 +222,7 @@ float *vx_bl_lowpass(int R, int N, const vx_bl_filter *flt, vx_bl_sample_fn samp
     c.Z = fftwf_malloc(sizeof(fftwf_complex) * (size_t)R * howmany);
     float *out = fftwf_malloc(sizeof(float) * 2 * vx_bl_spectrum_len(N));
     fftwf_plan pz = NULL;
+    fftwf_complex *zbuf = NULL;
     double t0 = vx_bl_now_ms();
     if (!plane || !rows || !cols || !c.Z || !out) {
         vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for the low-pass (R=%d, N=%d)", R,
@@ -186,10 +235,12 @@ float *vx_bl_lowpass(int R, int N, const vx_bl_filter *flt, vx_bl_sample_fn samp
     c.pcol = fftwf_plan_many_dft(1, &R, nh, cols, NULL, nh, 1, cols, NULL, nh, 1, FFTW_FORWARD,
                                  FFTW_ESTIMATE);
     vx_bl_plan_unlock();
-    vx_bl_plan_lock(nt);
-    /* depth: N * nh complex FFTs of length R, in place over all slabs */
-    pz = fftwf_plan_many_dft(1, &R, howmany, c.Z, NULL, howmany, 1, c.Z, NULL, howmany, 1,
-                             FFTW_FORWARD, FFTW_ESTIMATE);
+    zbuf = fftwf_malloc(sizeof(fftwf_complex) * (size_t)ZB * R);
+    vx_bl_plan_lock(1);
+    /* depth: ZB contiguous complex FFTs of length R per block */
+    if (zbuf)
+        pz = fftwf_plan_many_dft(1, &R, ZB, zbuf, NULL, 1, R, zbuf, NULL, 1, R, FFTW_FORWARD,
+                                 FFTW_ESTIMATE);
     vx_bl_plan_unlock();
     if (!c.prow || !c.pcol || !pz) {
         vx_err_set(err, VX_EINTERNAL, "fft_plan", "FFTW could not plan the low-pass");
@@ -206,24 +257,36 @@ float *vx_bl_lowpass(int R, int N, const vx_bl_filter *flt, vx_bl_sample_fn samp
         if (err) *err = c.err;
         goto fail;
     }
-    fftwf_execute(pz);
-    for (int jz = 0; jz < N; jz++) {
-        const fftwf_complex *zs = c.Z + (size_t)src_index(jz, N, R) * howmany;
-        for (int jy = 0; jy < N; jy++)
-            for (int kx = 0; kx < nh; kx++) {
-                size_t o = ((size_t)jz * N + jy) * nh + kx;
-                keep(out + 2 * o, zs[(size_t)jy * nh + kx], jz, jy, kx, N, R, flt);
-            }
+    zpass_ctx zc = {.R = R,
+                    .N = N,
+                    .flt = flt,
+                    .Z = c.Z,
+                    .out = out,
+                    .p = pz,
+                    .nblocks = (howmany + ZB - 1) / ZB};
+    pthread_mutex_init(&zc.mu, NULL);
+    started = 0;
+    for (int i = 1; i < nt; i++)
+        if (pthread_create(&th[started], NULL, zpass_worker, &zc) == 0) started++;
+    zpass_worker(&zc);
+    for (int i = 0; i < started; i++)
+        pthread_join(th[i], NULL);
+    pthread_mutex_destroy(&zc.mu);
+    if (zc.failed) {
+        vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for the depth pass");
+        goto fail;
     }
     if (st) {
         st->peak_bytes = vx_bl_lowpass_bytes(R, N) +
-                         (uint64_t)(nt - 1) * ((uint64_t)R * R * 4 + (uint64_t)R * nh * 8);
+                         (uint64_t)(nt - 1) * ((uint64_t)R * R * 4 + (uint64_t)R * nh * 8) +
+                         (uint64_t)(nt + 1) * ZB * R * 8;
         st->sample_ms = c.sample_ms;
         st->ms = vx_bl_now_ms() - t0 - c.sample_ms;
     }
     vx_bl_destroy_plan(c.prow);
     vx_bl_destroy_plan(c.pcol);
     vx_bl_destroy_plan(pz);
+    fftwf_free(zbuf);
     fftwf_free(plane);
     fftwf_free(rows);
     fftwf_free(cols);
@@ -234,6 +297,7 @@ fail:
     vx_bl_destroy_plan(c.prow);
     vx_bl_destroy_plan(c.pcol);
     vx_bl_destroy_plan(pz);
+    fftwf_free(zbuf);
     fftwf_free(plane);
     fftwf_free(rows);
     fftwf_free(cols);
