@@ -370,9 +370,12 @@ int vx_bl_sample_bits(void *bits, int k, float *plane, vx_err *err)
         for (int y = 0; y < R; y++) {
             const uint32_t *w = g->bits + ((size_t)k * R + y) * g->wx;
             float *row = plane + (size_t)y * R;
-            for (size_t x = 0; x < g->wx; x++)
-                for (uint32_t v = w[x]; v; v &= v - 1)
+            for (size_t x = 0; x < g->wx; x++) {
+                uint32_t v = w[x];
+                if (x * 32 + 32 > (size_t)R) v &= (1u << (R - x * 32)) - 1; /* row padding */
+                for (; v; v &= v - 1)
                     row[x * 32 + (size_t)__builtin_ctz(v)] += 1.0f;
+            }
         }
     }
     if ((k & 31) == 0 && b->progress) return b->progress(b->ud, (double)k / R, err);

@@ -417,6 +417,32 @@ static void test_sobel3d_and_label(void **st)
     assert_string_equal(vx_bl_normals_names[VX_BL_SOBEL3D], "sobel3d");
 }
 
+/* Bit grids as samples: two solids sum; bits past R in a row's last word
+ * (padding) are ignored. */
+static void test_sample_bits(void **st)
+{
+    const int R = 40;
+    vx_grid gr = {.origin = {0, 0, 0}, .h = 1, .dims = {R, R, R}};
+    vx_bitgrid g[2];
+    vx_err err = {0};
+    for (int m = 0; m < 2; m++)
+        assert_int_equal(vx_bitgrid_alloc(&g[m], &gr, 0, &err), 0);
+    size_t words = g[0].wx * R * R;
+    for (size_t i = 0; i < words; i++) {
+        g[0].bits[i] = 0xffffffffu; /* padding bits set too */
+        g[1].bits[i] = (i % g[1].wx) == 0 ? 0x1u : 0;
+    }
+    vx_bl_bits bits = {g, 2, NULL, NULL};
+    float *plane = malloc(sizeof(float) * R * R);
+    assert_int_equal(vx_bl_sample_bits(&bits, 7, plane, &err), 0);
+    for (int y = 0; y < R; y++)
+        for (int x = 0; x < R; x++)
+            assert_float_equal(plane[y * R + x], x == 0 ? 2 : 1, 0);
+    free(plane);
+    for (int m = 0; m < 2; m++)
+        vx_bitgrid_free(&g[m]);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -428,6 +454,7 @@ int main(void)
         cmocka_unit_test(test_trilinear_l4_within_2_percent),
         cmocka_unit_test(test_cast_ball_and_methods),
         cmocka_unit_test(test_sobel3d_and_label),
+        cmocka_unit_test(test_sample_bits),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }
