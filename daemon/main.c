@@ -74,9 +74,12 @@ int main(int argc, char **argv)
         VX_ERROR("voxeld.fatal", "stage=store code=%s message=\"%s\"", err.code, err.message);
         return 1;
     }
-    vx_mkdirs(cfg.cache_dir, NULL);
+    vx_err cerr;
+    int have_cache = vx_mkdirs(cfg.cache_dir, &cerr) == 0;
+    if (!have_cache) VX_WARN("voxeld.no_cache_dir", "path=%s code=%s", cfg.cache_dir, cerr.code);
     vx_jobs_desc jd = {
         .store = store,
+        .cache_dir = have_cache ? cfg.cache_dir : NULL,
         .limits = {.max_upload_bytes = cfg.max_upload_bytes,
                    .max_triangles = cfg.max_triangles,
                    .max_image_pixels = cfg.max_image_pixels,

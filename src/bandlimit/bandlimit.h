@@ -64,9 +64,14 @@ uint64_t vx_bl_lowpass_bytes(int R, int N);
  * Any thread. */
 float *vx_bl_lowpass(int R, int N, const vx_bl_filter *flt, vx_bl_sample_fn sample, void *ud,
                      int nthreads, vx_bl_lowpass_stats *st, vx_err *err);
+/* Keeps FFTW wisdom in DIR/fftw3f.wisdom: loaded when DIR changes, plans
+ * then measured (FFTW_MEASURE: slower to make once, faster to run) and new
+ * wisdom written back after planning. NULL = none, plans estimated
+ * (FFTW_ESTIMATE), the default. Any thread. */
+void vx_bl_wisdom_dir(const char *dir);
 /* The reference: one full R^3 real-to-complex FFT of the samples, then the
  * same selection and filter (R^3 floats + R^2 (R/2+1) complex: tests and
- * the benchmark only). Any thread. */
+ * the benchmark only; always estimated, never measured). Any thread. */
 float *vx_bl_lowpass_full(int R, int N, const vx_bl_filter *flt, vx_bl_sample_fn sample, void *ud,
                           int nthreads, vx_bl_lowpass_stats *st, vx_err *err);
 /* Frees what the functions here allocate (fftwf_free); NULL is a no-op. */

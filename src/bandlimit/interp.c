@@ -150,6 +150,20 @@ int vx_bl_interp(const float *spec, int N, int M, const double x0[3], double P, 
         vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory to interpolate to M=%d", M);
         goto out;
     }
+    /* Planned before A is filled: measuring scribbles on it. */
+    vx_bl_plan_lock(nthreads);
+    pz = fftwf_plan_many_dft(1, &M, howmany, A, NULL, howmany, 1, A, NULL, howmany, 1,
+                             FFTW_BACKWARD, vx_bl_plan_flags());
+    vx_bl_plan_unlock();
+    vx_bl_plan_lock(1);
+    c.py = fftwf_plan_many_dft(1, &M, nh, Y, NULL, mh, 1, Y, NULL, mh, 1, FFTW_BACKWARD,
+                               vx_bl_plan_flags());
+    c.prow = fftwf_plan_many_dft_c2r(1, &M, M, Y, NULL, 1, mh, out, NULL, 1, M, vx_bl_plan_flags());
+    vx_bl_plan_unlock();
+    if (!pz || !c.py || !c.prow) {
+        vx_err_set(err, VX_EINTERNAL, "fft_plan", "FFTW could not plan the interpolation");
+        goto out;
+    }
     /* pad along z (and the z derivative) */
     memset(A, 0, sizeof(fftwf_complex) * acount);
     if (Agz) memset(Agz, 0, sizeof(fftwf_complex) * acount);
@@ -169,19 +183,6 @@ int vx_bl_interp(const float *spec, int N, int M, const double x0[3], double P, 
                 g[1] = (float)(s[0] * f);
             }
         }
-    }
-    vx_bl_plan_lock(nthreads);
-    pz = fftwf_plan_many_dft(1, &M, howmany, A, NULL, howmany, 1, A, NULL, howmany, 1,
-                             FFTW_BACKWARD, FFTW_ESTIMATE);
-    vx_bl_plan_unlock();
-    vx_bl_plan_lock(1);
-    c.py = fftwf_plan_many_dft(1, &M, nh, Y, NULL, mh, 1, Y, NULL, mh, 1, FFTW_BACKWARD,
-                               FFTW_ESTIMATE);
-    c.prow = fftwf_plan_many_dft_c2r(1, &M, M, Y, NULL, 1, mh, out, NULL, 1, M, FFTW_ESTIMATE);
-    vx_bl_plan_unlock();
-    if (!pz || !c.py || !c.prow) {
-        vx_err_set(err, VX_EINTERNAL, "fft_plan", "FFTW could not plan the interpolation");
-        goto out;
     }
     fftwf_execute_dft(pz, A, A);
     if (Agz) fftwf_execute_dft(pz, Agz, Agz);

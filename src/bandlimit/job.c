@@ -493,6 +493,7 @@ static int render_run_cpu(vx_job_run *r, const cJSON *params, void *state, vx_er
     vx_bl_filter flt = {p.d0, p.fn};
     vx_bl_bits bits = {s->grids, s->nmeshes, lowpass_progress, r};
     vx_bl_lowpass_stats lst;
+    vx_bl_wisdom_dir(vx_run_cache_dir(r)); /* measured plans, kept across restarts */
     s->spec = vx_bl_lowpass(R, N, &flt, vx_bl_sample_bits, &bits, nt, &lst, err);
     if (!s->spec) return -1;
     s->sampling_ms += lst.sample_ms;

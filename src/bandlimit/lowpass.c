@@ -6,17 +6,72 @@
  * (keep |kz| < N/2) and the filter. */
 #include <math.h>
 #include <pthread.h>
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <unistd.h>
 
 #include "bandlimit/bandlimit.h"
 #include "bandlimit/fft_int.h"
+#include "util/log.h"
 
 static pthread_mutex_t plan_mu = PTHREAD_MUTEX_INITIALIZER;
 static pthread_once_t threads_once = PTHREAD_ONCE_INIT;
 static void init_threads(void)
 {
     fftwf_init_threads();
+}
+
+/* Wisdom kept in a file (vx_bl_wisdom_dir); all under plan_mu. */
+static char wisdom_path[1100];
+static char *wisdom_saved; /* what the file holds, to save only news */
+
+void vx_bl_wisdom_dir(const char *dir)
+{
+    pthread_once(&threads_once, init_threads);
+    pthread_mutex_lock(&plan_mu);
+    char path[sizeof wisdom_path] = "";
+    if (dir && dir[0]) snprintf(path, sizeof path, "%s/fftw3f.wisdom", dir);
+    if (strcmp(path, wisdom_path) != 0) {
+        snprintf(wisdom_path, sizeof wisdom_path, "%s", path);
+        free(wisdom_saved);
+        wisdom_saved = NULL;
+        /* A missing or unreadable file is no wisdom yet; FFTW checks the
+         * rest (it rejects wisdom from another FFTW build). */
+        if (path[0] && fftwf_import_wisdom_from_filename(path)) wisdom_saved = fftwf_export_wisdom_to_string();
+    }
+    pthread_mutex_unlock(&plan_mu);
+}
+
+unsigned vx_bl_plan_flags(void)
+{
+    return wisdom_path[0] ? FFTW_MEASURE : FFTW_ESTIMATE;
+}
+
+/* Writes the wisdom when it changed: to a temporary file, renamed over the
+ * old one, so a crash leaves the old or the new file, never half of one. */
+static void save_wisdom(void)
+{
+    if (!wisdom_path[0]) return;
+    char *now = fftwf_export_wisdom_to_string();
+    if (!now || (wisdom_saved && strcmp(now, wisdom_saved) == 0)) {
+        free(now);
+        return;
+    }
+    char tmp[sizeof wisdom_path + 16];
+    snprintf(tmp, sizeof tmp, "%s.tmp", wisdom_path);
+    FILE *f = fopen(tmp, "w");
+    int ok = f && fputs(now, f) >= 0;
+    if (f && fclose(f)) ok = 0;
+    if (ok && rename(tmp, wisdom_path) == 0) {
+        free(wisdom_saved);
+        wisdom_saved = now;
+        VX_INFO("fftw.wisdom_saved", "path=%s bytes=%zu", wisdom_path, strlen(now));
+        return;
+    }
+    unlink(tmp);
+    VX_WARN("fftw.wisdom_not_saved", "path=%s", wisdom_path);
+    free(now);
 }
 
 void vx_bl_plan_lock(int nthreads)
@@ -27,6 +82,7 @@ void vx_bl_plan_lock(int nthreads)
 }
 void vx_bl_plan_unlock(void)
 {
+    save_wisdom();
     pthread_mutex_unlock(&plan_mu);
 }
 void vx_bl_destroy_plan(fftwf_plan p)
@@ -231,16 +287,16 @@ float *vx_bl_lowpass(int R, int N, const vx_bl_filter *flt, vx_bl_sample_fn samp
     }
     vx_bl_plan_lock(1);
     /* rows start at any float of the plane: an unaligned plan */
-    c.prow = fftwf_plan_dft_r2c_1d(R, plane, rows, FFTW_ESTIMATE | FFTW_UNALIGNED);
+    c.prow = fftwf_plan_dft_r2c_1d(R, plane, rows, vx_bl_plan_flags() | FFTW_UNALIGNED);
     c.pcol = fftwf_plan_many_dft(1, &R, nh, cols, NULL, nh, 1, cols, NULL, nh, 1, FFTW_FORWARD,
-                                 FFTW_ESTIMATE);
+                                 vx_bl_plan_flags());
     vx_bl_plan_unlock();
     zbuf = fftwf_malloc(sizeof(fftwf_complex) * (size_t)ZB * R);
     vx_bl_plan_lock(1);
     /* depth: ZB contiguous complex FFTs of length R per block */
     if (zbuf)
         pz = fftwf_plan_many_dft(1, &R, ZB, zbuf, NULL, 1, R, zbuf, NULL, 1, R, FFTW_FORWARD,
-                                 FFTW_ESTIMATE);
+                                 vx_bl_plan_flags());
     vx_bl_plan_unlock();
     if (!c.prow || !c.pcol || !pz) {
         vx_err_set(err, VX_EINTERNAL, "fft_plan", "FFTW could not plan the low-pass");

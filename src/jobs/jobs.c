@@ -430,6 +430,7 @@ int vx_run_progress(vx_job_run *r, double fraction, vx_err *err)
 
 vx_gl *vx_run_gl(vx_job_run *r) { return r->gl; }
 const vx_limits *vx_run_limits(const vx_job_run *r) { return &r->jobs->desc.limits; }
+const char *vx_run_cache_dir(const vx_job_run *r) { return r->jobs->desc.cache_dir; }
 const char *vx_run_mesh_id(const vx_job_run *r) { return r->job->mesh; }
 
 vx_mesh *vx_run_load_mesh(vx_job_run *r, const char *id, vx_err *err)

@@ -47,6 +47,9 @@ const char *vx_run_mesh_id(const vx_job_run *r);
  * (VX_ENOTFOUND mesh_not_found when it was deleted since submission, or the
  * reader's error). Callable from run_gl and run_cpu. */
 vx_mesh *vx_run_load_mesh(vx_job_run *r, const char *id, vx_err *err);
+/* The daemon's cache directory (kept across restarts, safe to delete: FFT
+ * wisdom and the like), or NULL when there is none. */
+const char *vx_run_cache_dir(const vx_job_run *r);
 /* The limits in force. */
 const vx_limits *vx_run_limits(const vx_job_run *r);
 /* The stats object of the job (owned by the run): kinds add numbers to it. */

@@ -53,6 +53,8 @@ check "sphere: outputs image, normal, position, depth" jq -e \
 check "sphere: stage timings" jq -e \
     '[.stats.sampling_ms, .stats.lowpass_ms, .stats.interp_ms, .stats.render_ms, .stats.encode_ms] | all(. > 0)' "$TMP/job.json"
 le "sphere: peak bytes under 400 MB" "$(st peak_bytes)" 400000000
+check "FFTW wisdom kept in the cache dir" test -s "$DATA/cache/fftw3f.wisdom"
+check "the wisdom file is FFTW's" grep -q 'fftw-3' "$DATA/cache/fftw3f.wisdom"
 get normal "$TMP/n.pfm"
 get position "$TMP/p.pfm"
 get depth "$TMP/d.pfm"
