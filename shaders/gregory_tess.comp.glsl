@@ -6,7 +6,10 @@
 // dS/du x dS/dv, with the corner blend limits and the diagonal approach at
 // degenerate points.
 layout(local_size_x = 64) in;
-layout(std430, binding = 0) readonly buffer CP { float cp[]; };     // 60 per patch
+// 64 floats per patch: the 20 points relative to the patch's first point
+// (float derivatives without the cancellation of large coordinates), then
+// that point relative to the output origin, then one pad.
+layout(std430, binding = 0) readonly buffer CP { float cp[]; };
 layout(std430, binding = 1) readonly buffer Info { uvec2 info[]; }; // N, first grid vertex
 layout(std430, binding = 2) writeonly buffer Out { float outv[]; }; // 6 per vertex
 
@@ -82,7 +85,7 @@ void main()
     uvec2 pi = info[pid];
     uint n = pi.x, w = n + 1u, k = gl_GlobalInvocationID.x;
     if (k >= w * w) return;
-    uint base = pid * 60u;
+    uint base = pid * 64u;
     float u = float(k % w) / float(n), v = float(k / w) / float(n);
     vec3 pos, du, dv, nrm;
     eval_raw(base, u, v, pos, du, dv);
@@ -97,6 +100,7 @@ void main()
         }
         if (!found) nrm = vec3(0.0, 0.0, 1.0);
     }
+    pos += vec3(cp[base + 60u], cp[base + 61u], cp[base + 62u]);
     uint o = 6u * (pi.y + k);
     outv[o] = pos.x;
     outv[o + 1u] = pos.y;

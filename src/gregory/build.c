@@ -21,6 +21,7 @@ enum { NONE = UINT32_MAX };
 
 /* Curve kinds: how a patch edge's curve is made from the input. */
 enum { C_EDGE = 0, C_HALF0, C_HALF1, C_INNER };
+enum { FAN_NONE = 0, FAN_CLOSED, FAN_OPEN };
 
 struct vx_gregory_topo {
     size_t nverts, nfaces, nedges, nnodes, ncurves, npatches;
@@ -29,7 +30,10 @@ struct vx_gregory_topo {
     uint32_t *edge_v;           /* 2 per input edge, a < b */
     uint32_t *edge_nf;          /* faces on the edge */
     uint32_t *fedge;            /* per face corner i: edge of (v_i, v_i+1) */
-    uint32_t *bnb;              /* 2 per vertex: boundary neighbours, NONE */
+    uint32_t *fan_off;          /* nverts + 1 offsets into fan_nb */
+    uint32_t *fan_nb;           /* neighbours counter-clockwise (open fans: corners + 1) */
+    uint8_t *fan_kind;          /* FAN_NONE, FAN_CLOSED, FAN_OPEN */
+    uint32_t *edge_slot;        /* 2 per edge: fan_nb index of the far end at a, at b */
     uint32_t *curve_node;       /* 2 per curve: its direction */
     uint8_t *curve_kind;
     uint32_t *curve_ref; /* input edge (C_EDGE, C_HALF*) or face (C_INNER) */
@@ -53,7 +57,10 @@ void vx_gregory_topo_free(vx_gregory_topo *t)
     free(t->edge_v);
     free(t->edge_nf);
     free(t->fedge);
-    free(t->bnb);
+    free(t->fan_off);
+    free(t->fan_nb);
+    free(t->fan_kind);
+    free(t->edge_slot);
     free(t->curve_node);
     free(t->curve_kind);
     free(t->curve_ref);
@@ -193,6 +200,95 @@ static int make_layout(vx_gregory_topo *t, vx_err *err)
     return 0;
 }
 
+/* Vertex fans: the neighbours of every vertex in counter-clockwise order
+ * about the outward normal (face order: at a corner the face runs from the
+ * next vertex to the previous one). Open at a boundary (starting at the
+ * boundary edge whose face follows it); FAN_NONE where the faces around a
+ * vertex are not one fan (non-manifold), which falls back to projected
+ * chords. */
+static int make_fans(vx_gregory_topo *t, vx_err *err)
+{
+    size_t nv = t->nverts, nc = t->fstart[t->nfaces];
+    uint32_t *voff = calloc(nv + 2, sizeof *voff), *vc = malloc((nc + 1) * sizeof *vc);
+    uint32_t *cface = malloc((nc + 1) * sizeof *cface);
+    t->fan_off = malloc((nv + 1) * sizeof *t->fan_off);
+    t->fan_nb = malloc((nc + nv + 1) * sizeof *t->fan_nb);
+    t->fan_kind = calloc(nv + 1, 1);
+    t->edge_slot = malloc((2 * t->nedges + 1) * sizeof *t->edge_slot);
+    uint8_t *seen = calloc(nc + 1, 1);
+    int rc = -1;
+    if (!voff || !vc || !cface || !t->fan_off || !t->fan_nb || !t->fan_kind || !t->edge_slot ||
+        !seen) {
+        oom(err);
+        goto done;
+    }
+    for (uint32_t f = 0; f < t->nfaces; f++)
+        for (uint32_t c = t->fstart[f]; c < t->fstart[f + 1]; c++) {
+            cface[c] = f;
+            voff[t->fidx[c] + 2]++;
+        }
+    for (size_t v = 0; v < nv; v++)
+        voff[v + 2] += voff[v + 1];
+    for (uint32_t c = 0; c < nc; c++)
+        vc[voff[t->fidx[c] + 1]++] = c;
+#define NX(c) t->fidx[(c) + 1 < t->fstart[cface[c] + 1] ? (c) + 1 : t->fstart[cface[c]]]
+#define PV(c) t->fidx[(c) > t->fstart[cface[c]] ? (c) - 1 : t->fstart[cface[c] + 1] - 1]
+    uint32_t out = 0;
+    for (size_t v = 0; v < nv; v++) {
+        const uint32_t *L = vc + voff[v];
+        uint32_t k = voff[v + 1] - voff[v], start = k ? L[0] : NONE;
+        for (uint32_t i = 0; i < k; i++)
+            if (t->edge_nf[t->fedge[L[i]]] == 1) start = L[i];
+        t->fan_off[v] = out;
+        if (!k) continue;
+        uint32_t cur = start, n = 0, kind = FAN_NONE;
+        for (;;) {
+            seen[cur] = 1;
+            t->fan_nb[out + n++] = NX(cur);
+            uint32_t p = PV(cur), next = NONE;
+            for (uint32_t i = 0; i < k; i++)
+                if (NX(L[i]) == p && (L[i] == start || !seen[L[i]])) next = L[i];
+            if (next == start) {
+                kind = n == k ? FAN_CLOSED : FAN_NONE;
+                break;
+            }
+            if (next == NONE) {
+                t->fan_nb[out + n] = p;
+                kind = n == k && t->edge_nf[t->fedge[start]] == 1 ? FAN_OPEN : FAN_NONE;
+                n++;
+                break;
+            }
+            cur = next;
+        }
+        for (uint32_t i = 0; i < k; i++)
+            seen[L[i]] = 0;
+        if (kind == FAN_NONE) continue;
+        t->fan_kind[v] = (uint8_t)kind;
+        out += n;
+    }
+    t->fan_off[nv] = out;
+#undef NX
+#undef PV
+    for (size_t e = 0; e < t->nedges; e++)
+        for (int s = 0; s < 2; s++) {
+            uint32_t a = t->edge_v[2 * e + s], b = t->edge_v[2 * e + 1 - s];
+            t->edge_slot[2 * e + s] = NONE;
+            if (t->fan_kind[a] == FAN_NONE) continue;
+            for (uint32_t i = t->fan_off[a]; i < t->fan_off[a + 1]; i++)
+                if (t->fan_nb[i] == b) {
+                    t->edge_slot[2 * e + s] = i;
+                    break;
+                }
+        }
+    rc = 0;
+done:
+    free(voff);
+    free(vc);
+    free(cface);
+    free(seen);
+    return rc;
+}
+
 vx_gregory_topo *vx_gregory_topo_new(const vx_mesh *m, vx_err *err)
 {
     if (m->nverts >= UINT32_MAX / 4 || m->nfaces == 0) {
@@ -247,8 +343,7 @@ vx_gregory_topo *vx_gregory_topo_new(const vx_mesh *m, vx_err *err)
     t->nedges = ne;
     t->edge_v = malloc(2 * ne * sizeof *t->edge_v);
     t->edge_nf = calloc(ne + 1, sizeof *t->edge_nf);
-    t->bnb = malloc(2 * m->nverts * sizeof *t->bnb + 1);
-    if (!t->edge_v || !t->edge_nf || !t->bnb) {
+    if (!t->edge_v || !t->edge_nf) {
         free(h);
         goto fail_oom;
     }
@@ -263,23 +358,10 @@ vx_gregory_topo *vx_gregory_topo_new(const vx_mesh *m, vx_err *err)
         t->fedge[h[i].corner] = (uint32_t)e;
     }
     free(h);
-    /* Boundary neighbours: the tangent of a boundary curve at a vertex with
-     * exactly two boundary edges runs from one neighbour to the other. */
-    uint32_t *bcount = calloc(m->nverts + 1, sizeof *bcount);
-    if (!bcount) goto fail_oom;
-    for (size_t v = 0; v < 2 * m->nverts; v++)
-        t->bnb[v] = NONE;
-    for (size_t k = 0; k < ne; k++) {
-        if (t->edge_nf[k] != 1) continue;
-        for (int s = 0; s < 2; s++) {
-            uint32_t v = t->edge_v[2 * k + s], o = t->edge_v[2 * k + 1 - s];
-            if (bcount[v] < 2) t->bnb[2 * v + bcount[v]] = o;
-            bcount[v]++;
-        }
+    if (make_fans(t, err)) {
+        vx_gregory_topo_free(t);
+        return NULL;
     }
-    for (size_t v = 0; v < m->nverts; v++)
-        if (bcount[v] != 2) t->bnb[2 * v] = t->bnb[2 * v + 1] = NONE;
-    free(bcount);
     t->nnodes = t->split ? m->nverts + ne + m->nfaces : m->nverts;
     if (t->nnodes >= UINT32_MAX) {
         vx_gregory_topo_free(t);
@@ -361,58 +443,108 @@ static void vertex_normals(const vx_gregory_topo *t, const double *pos, double *
         }
 }
 
-/* End tangent at a (towards the far end b of the curve): dir projected onto
- * the tangent plane of normal n, |b - a| / 3 long. */
-static void end_tangent(const double *a, const double *b, const double *dir, const double *n,
-                        double *out)
+/* Unit direction of dir projected onto the plane of unit normal n; zero
+ * when dir is along n. */
+static void project_dir(const double *dir, const double *n, double *out)
 {
-    double d[3], ab[3];
-    sub3(b, a, ab);
-    double len = norm3(ab) / 3;
-    double s = dot3(dir, n);
+    double d = dot3(dir, n);
     for (int c = 0; c < 3; c++)
-        d[c] = dir[c] - s * n[c];
-    if (unit3(d)) {
-        for (int c = 0; c < 3; c++)
-            out[c] = 0;
-        return;
-    }
-    for (int c = 0; c < 3; c++)
-        out[c] = d[c] * len;
+        out[c] = dir[c] - d * n[c];
+    if (unit3(out)) out[0] = out[1] = out[2] = 0;
 }
 
-/* The cubic through a and b with tangents in the planes of na and nb. */
-static void plane_curve(const double *a, const double *na, const double *b, const double *nb,
-                        const double *dir_a, const double *dir_b, double cv[12])
+/* Tangent directions at node p (unit normal n) towards its fan neighbours
+ * P + 3 ids[i] (counter-clockwise): the neighbours' angles about p, scaled to
+ * 2 pi (closed fan) or pi (open fan, the first and last neighbours on the
+ * boundary), laid out in the tangent plane from the first neighbour's
+ * projected direction (open: the direction from the last neighbour to the
+ * first, so the boundary curve is smooth through p). Unlike projecting
+ * every chord, this keeps the directions in the fan's cyclic order even
+ * where the mesh is crumpled around p, so neighbouring patches never fold
+ * over each other at p. Degenerate fans fall back to projected chords. */
+static void fan_dirs(const double *p, const double *n, const double *P, const uint32_t *ids,
+                     uint32_t m, int closed, double *dirs)
 {
-    double ta[3], tb[3];
-    end_tangent(a, b, dir_a, na, ta);
-    end_tangent(b, a, dir_b, nb, tb);
+    double total = 0, d0[3], e[3];
+    uint32_t nang = closed ? m : m - 1;
+    for (uint32_t i = 0; i < nang; i++) {
+        double a[3], b[3];
+        sub3(P + 3 * ids[i], p, a);
+        sub3(P + 3 * ids[(i + 1) % m], p, b);
+        double la = norm3(a), lb = norm3(b);
+        double cs = la > 0 && lb > 0 ? dot3(a, b) / (la * lb) : 1;
+        total += acos(cs < -1 ? -1 : cs > 1 ? 1 : cs);
+    }
+    double first[3];
+    if (closed)
+        sub3(P + 3 * ids[0], p, first);
+    else
+        sub3(P + 3 * ids[0], P + 3 * ids[m - 1], first);
+    project_dir(first, n, d0);
+    if (!(total > 1e-12) || norm3(d0) == 0 || m < 2) {
+        for (uint32_t i = 0; i < m; i++) {
+            double a[3];
+            sub3(P + 3 * ids[i], p, a);
+            project_dir(a, n, dirs + 3 * i);
+        }
+        return;
+    }
+    cross3(n, d0, e);
+    double scale = (closed ? 2 * M_PI : M_PI) / total, phi = 0;
+    for (uint32_t i = 0; i < m; i++) {
+        for (int c = 0; c < 3; c++)
+            dirs[3 * i + c] = cos(phi) * d0[c] + sin(phi) * e[c];
+        if (i < nang) {
+            double a[3], b[3];
+            sub3(P + 3 * ids[i], p, a);
+            sub3(P + 3 * ids[(i + 1) % m], p, b);
+            double la = norm3(a), lb = norm3(b);
+            double cs = la > 0 && lb > 0 ? dot3(a, b) / (la * lb) : 1;
+            phi += scale * acos(cs < -1 ? -1 : cs > 1 ? 1 : cs);
+        }
+    }
+}
+
+/* The cubic from a to b with unit end directions ta (at a, towards b) and
+ * tb (at b, towards a), each a third of the chord long. */
+static void dir_curve(const double *a, const double *ta, const double *b, const double *tb,
+                      double cv[12])
+{
+    double ab[3];
+    sub3(b, a, ab);
+    double len = norm3(ab) / 3;
     for (int c = 0; c < 3; c++) {
         cv[c] = a[c];
-        cv[3 + c] = a[c] + ta[c];
-        cv[6 + c] = b[c] + tb[c];
+        cv[3 + c] = a[c] + len * ta[c];
+        cv[6 + c] = b[c] + len * tb[c];
         cv[9 + c] = b[c];
     }
 }
 
-/* Curve of input edge e (a -> b, a < b): chord tangents, or along the
- * boundary from one boundary neighbour to the other. */
-static void edge_curve(const vx_gregory_topo *t, const double *pos, const double *vn, uint32_t e,
-                       double cv[12])
+/* Direction at end s (0: a, 1: b) of input edge e: its fan direction, or
+ * the projected chord where the vertex has no fan. */
+static void edge_end_dir(const vx_gregory_topo *t, const double *pos, const double *vn,
+                         const double *vdir, uint32_t e, int s, double *out)
 {
-    uint32_t a = t->edge_v[2 * e], b = t->edge_v[2 * e + 1];
-    const double *pa = pos + 3 * a, *pb = pos + 3 * b;
-    double da[3], db[3];
-    sub3(pb, pa, da);
-    sub3(pa, pb, db);
-    if (t->edge_nf[e] == 1) {
-        uint32_t pa_other = t->bnb[2 * a] == b ? t->bnb[2 * a + 1] : t->bnb[2 * a];
-        uint32_t pb_other = t->bnb[2 * b] == a ? t->bnb[2 * b + 1] : t->bnb[2 * b];
-        if (pa_other != NONE) sub3(pb, pos + 3 * pa_other, da);
-        if (pb_other != NONE) sub3(pa, pos + 3 * pb_other, db);
+    uint32_t slot = t->edge_slot[2 * e + s];
+    if (slot != NONE) {
+        memcpy(out, vdir + 3 * slot, 3 * sizeof *out);
+        return;
     }
-    plane_curve(pa, vn + 3 * a, pb, vn + 3 * b, da, db, cv);
+    uint32_t a = t->edge_v[2 * e + s], b = t->edge_v[2 * e + 1 - s];
+    double d[3];
+    sub3(pos + 3 * b, pos + 3 * a, d);
+    project_dir(d, vn + 3 * a, out);
+}
+
+/* Curve of input edge e (a -> b, a < b). */
+static void edge_curve(const vx_gregory_topo *t, const double *pos, const double *vn,
+                       const double *vdir, uint32_t e, double cv[12])
+{
+    double ta[3], tb[3];
+    edge_end_dir(t, pos, vn, vdir, e, 0, ta);
+    edge_end_dir(t, pos, vn, vdir, e, 1, tb);
+    dir_curve(pos + 3 * t->edge_v[2 * e], ta, pos + 3 * t->edge_v[2 * e + 1], tb, cv);
 }
 
 static void lerp3(const double *a, const double *b, double *o)
@@ -513,30 +645,41 @@ static void place_curve(const vx_gregory_topo *t, uint32_t c, const double cv[12
 
 void vx_gregory_build(const vx_gregory_topo *t, const double *pos, vx_gpatch_set *s)
 {
-    /* Node positions and normals (nnodes), curve control points. */
+    /* Node positions and normals, vertex fan directions, midpoint tangents,
+     * curve control points. */
+    size_t maxk = 0;
+    for (uint32_t f = 0; f < t->nfaces; f++)
+        if (t->fstart[f + 1] - t->fstart[f] > maxk) maxk = t->fstart[f + 1] - t->fstart[f];
     double *np = malloc(3 * t->nnodes * sizeof *np), *nn = malloc(3 * t->nnodes * sizeof *nn);
     double *cvs = malloc(12 * t->ncurves * sizeof *cvs);
-    if (!np || !nn || !cvs) { /* callers size-check first; keep the set defined */
-        free(np);
-        free(nn);
-        free(cvs);
+    double *vdir = malloc((3 * (size_t)t->fan_off[t->nverts] + 1) * sizeof *vdir);
+    double *mt = malloc((3 * t->nedges + 1) * sizeof *mt);
+    double *cdir = malloc((3 * maxk + 1) * sizeof *cdir);
+    uint32_t *ids = malloc((maxk + 1) * sizeof *ids);
+    if (!np || !nn || !cvs || !vdir || !mt || !cdir || !ids) {
+        /* callers size-check first; keep the set defined */
         memset(s->cp, 0, s->npatches * VX_GPATCH_POINTS * 3 * sizeof *s->cp);
-        return;
+        goto done;
     }
     memcpy(np, pos, 3 * t->nverts * sizeof *np);
     vertex_normals(t, pos, nn);
+    for (size_t v = 0; v < t->nverts; v++)
+        if (t->fan_kind[v] != FAN_NONE)
+            fan_dirs(pos + 3 * v, nn + 3 * v, pos, t->fan_nb + t->fan_off[v],
+                     t->fan_off[v + 1] - t->fan_off[v], t->fan_kind[v] == FAN_CLOSED,
+                     vdir + 3 * (size_t)t->fan_off[v]);
     for (uint32_t e = 0; e < t->nedges; e++) {
         if (!t->split) {
-            edge_curve(t, pos, nn, e, cvs + 12 * e);
+            edge_curve(t, pos, nn, vdir, e, cvs + 12 * e);
             continue;
         }
         double cv[12];
-        edge_curve(t, pos, nn, e, cv);
+        edge_curve(t, pos, nn, vdir, e, cv);
         split_curve(cv, cvs + 24 * e, cvs + 24 * e + 12);
         /* Midpoint node: on the curve; its plane holds the curve's tangent
          * there and is otherwise the mean of the end planes. */
         uint32_t m = mid_node(t, e), a = t->edge_v[2 * e], b = t->edge_v[2 * e + 1];
-        double tan[3], n[3];
+        double *tan = mt + 3 * e, n[3];
         memcpy(np + 3 * m, cvs + 24 * e + 9, 3 * sizeof *np);
         sub3(cvs + 24 * e + 15, cvs + 24 * e + 6, tan);
         lerp3(nn + 3 * a, nn + 3 * b, n);
@@ -556,30 +699,41 @@ void vx_gregory_build(const vx_gregory_topo *t, const double *pos, vx_gpatch_set
             uint32_t s0 = t->fstart[f], k = t->fstart[f + 1] - s0, cn = centre_node(t, f);
             double M[3] = {0, 0, 0}, V[3] = {0, 0, 0}, n[3] = {0, 0, 0};
             for (uint32_t i = 0; i < k; i++) {
-                const double *mp = np + 3 * mid_node(t, t->fedge[s0 + i]);
+                ids[i] = mid_node(t, t->fedge[s0 + i]);
                 const double *vp = pos + 3 * t->fidx[s0 + i];
                 for (int c = 0; c < 3; c++) {
-                    M[c] += mp[c] / k;
+                    M[c] += np[3 * ids[i] + c] / k;
                     V[c] += vp[c] / k;
                     n[c] += nn[3 * t->fidx[s0 + i] + c];
                 }
             }
+            double *cp = np + 3 * cn;
             for (int c = 0; c < 3; c++)
-                np[3 * cn + c] = M[c] + 0.5 * (M[c] - V[c]);
+                cp[c] = M[c] + 0.5 * (M[c] - V[c]);
             if (unit3(n)) {
                 face_normal(t, pos, f, n);
                 if (unit3(n)) n[0] = n[1] = 0, n[2] = 1;
             }
             memcpy(nn + 3 * cn, n, sizeof n);
+            /* Midpoint -> centre curves: at the midpoint square to the edge,
+             * towards the face's side (left of the face's direction along
+             * the edge); at the centre from the centre's fan. */
+            fan_dirs(cp, n, np, ids, k, 1, cdir);
+            for (uint32_t i = 0; i < k; i++) {
+                uint32_t e = t->fedge[s0 + i], m = ids[i], c = (uint32_t)(2 * t->nedges + s0 + i);
+                double tf[3], dm[3];
+                memcpy(tf, mt + 3 * e, sizeof tf);
+                if (t->fidx[s0 + i] != t->edge_v[2 * e])
+                    for (int d = 0; d < 3; d++)
+                        tf[d] = -tf[d];
+                cross3(nn + 3 * m, tf, dm);
+                if (unit3(dm)) {
+                    sub3(cp, np + 3 * m, dm);
+                    project_dir(dm, nn + 3 * m, dm);
+                }
+                dir_curve(np + 3 * m, dm, cp, cdir + 3 * i, cvs + 12 * c);
+            }
         }
-    for (uint32_t c = t->split ? (uint32_t)(2 * t->nedges) : (uint32_t)t->ncurves; c < t->ncurves;
-         c++) {
-        uint32_t a = t->curve_node[2 * c], b = t->curve_node[2 * c + 1];
-        double da[3], db[3];
-        sub3(np + 3 * b, np + 3 * a, da);
-        sub3(np + 3 * a, np + 3 * b, db);
-        plane_curve(np + 3 * a, nn + 3 * a, np + 3 * b, nn + 3 * b, da, db, cvs + 12 * c);
-    }
     for (uint32_t c = 0; c < t->ncurves; c++)
         place_curve(t, c, cvs + 12 * c, s);
     for (uint32_t c = 0; c < t->ncurves; c++)
@@ -589,9 +743,14 @@ void vx_gregory_build(const vx_gregory_topo *t, const double *pos, vx_gpatch_set
         memcpy(s->corner_key + 4 * p, t->pnode + 4 * p, 4 * sizeof *s->corner_key);
         s->face[p] = t->pface[p];
     }
+done:
     free(np);
     free(nn);
     free(cvs);
+    free(vdir);
+    free(mt);
+    free(cdir);
+    free(ids);
 }
 
 /* ---- Bézier input ---- */

@@ -7,6 +7,10 @@
 /* llvmpipe's SSBO limit (ARCHITECTURE.md); the driver's own value when lower. */
 #define SSBO_CAP ((uint64_t)128 << 20)
 
+/* Floats per patch in the shader's buffer: 20 points relative to the
+ * first, the first relative to the origin, a pad. */
+#define CP_FLOATS 64
+
 typedef struct chunk {
     size_t p0, p1;    /* patches [p0, p1) */
     GLuint buf[3];    /* control points, info, output */
@@ -54,7 +58,7 @@ int vx_gregory_tessellate(vx_gl *gl, const vx_gpatch_set *s, const vx_gtess_layo
     size_t maxp = 0;
     for (size_t c = 0; c < nchunks; c++)
         if (ch[c].p1 - ch[c].p0 > maxp) maxp = ch[c].p1 - ch[c].p0;
-    cpf = malloc(maxp * VX_GPATCH_POINTS * 3 * sizeof *cpf);
+    cpf = malloc(maxp * CP_FLOATS * sizeof *cpf);
     inf = malloc(maxp * 2 * sizeof *inf);
     if (!cpf || !inf) {
         vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for the patch upload");
@@ -70,16 +74,20 @@ int vx_gregory_tessellate(vx_gl *gl, const vx_gpatch_set *s, const vx_gtess_layo
         for (size_t i = 0; i < np; i++) {
             size_t p = k->p0 + i;
             const double *src = s->cp + p * VX_GPATCH_POINTS * 3;
+            float *dst = cpf + i * CP_FLOATS;
             for (int j = 0; j < VX_GPATCH_POINTS; j++)
                 for (int a = 0; a < 3; a++)
-                    cpf[(i * VX_GPATCH_POINTS + j) * 3 + a] = (float)(src[3 * j + a] - origin[a]);
+                    dst[3 * j + a] = (float)(src[3 * j + a] - src[a]);
+            for (int a = 0; a < 3; a++)
+                dst[60 + a] = (float)(src[a] - origin[a]);
+            dst[63] = 0;
             inf[2 * i] = l->ndiv[p];
             inf[2 * i + 1] = (uint32_t)(l->voff[p] - k->v0);
             uint32_t w = (l->ndiv[p] + 1) * (l->ndiv[p] + 1);
             if (w > maxw) maxw = w;
         }
         glCreateBuffers(3, k->buf);
-        glNamedBufferStorage(k->buf[0], (GLsizeiptr)(np * VX_GPATCH_POINTS * 3 * sizeof *cpf), cpf, 0);
+        glNamedBufferStorage(k->buf[0], (GLsizeiptr)(np * CP_FLOATS * sizeof *cpf), cpf, 0);
         glNamedBufferStorage(k->buf[1], (GLsizeiptr)(np * 2 * sizeof *inf), inf, 0);
         glNamedBufferStorage(k->buf[2], (GLsizeiptr)(k->nv * vbytes), NULL, 0);
         if (vx_gl_check(gl, "gregory.buffers", err)) goto done;
