@@ -28,7 +28,9 @@ headers must be present (when the record has "headers") and match their
 schema. voxeld-specific extras: Job bodies are checked against the kind's
 entry in the top-level `x-kinds` extension (normalised params, stats, output
 URLs; an output with `absent_when: {param: value}` is not expected when the
-job's params have that value), Info.kinds against `x-kinds`, /metrics bodies against `x-metrics`.
+job's params have that value; one with `per_item_of: P` is expected once per
+element of the array params.P, named by formatting its name with n = 1, 2,
+...), Info.kinds against `x-kinds`, /metrics bodies against `x-metrics`.
 
 Prints one line per failure and a summary line
   openapi: N responses checked, M failures, P/Q operations exercised
@@ -509,8 +511,15 @@ class Checker:
             # when the job's (normalised) params have that value.
             params = job.get("params") if isinstance(job.get("params"), dict) else {}
             want = [o.get("name") for o in k.get("outputs") or []
-                    if not (isinstance(o.get("absent_when"), dict) and o["absent_when"]
-                            and all(params.get(p) == v for p, v in o["absent_when"].items()))]
+                    if not o.get("per_item_of")
+                    and not (isinstance(o.get("absent_when"), dict) and o["absent_when"]
+                             and all(params.get(p) == v for p, v in o["absent_when"].items()))]
+            # An output with `per_item_of: P` is written once per element of
+            # the array params.P, its name formatted with n = 1, 2, ...
+            for o in k.get("outputs") or []:
+                items = params.get(o.get("per_item_of")) if o.get("per_item_of") else None
+                if isinstance(items, list):
+                    want += [o.get("name", "").format(n=i + 1) for i in range(len(items))]
             outputs = job.get("outputs") or {}
             if sorted(outputs) != sorted(want):
                 self.fail(where, "body %s.outputs has %s, kind %s declares %s"
