@@ -136,19 +136,14 @@ void main()
             int ii = 1 + (q & 1), jj = 1 + (q >> 1);
             float wu = ii == 1 ? u : 1.0 - u, dwu = ii == 1 ? 1.0 : -1.0;
             float wv = jj == 1 ? v : 1.0 - v, dwv = jj == 1 ? 1.0 : -1.0;
-            float s = wu + wv;
-            vec3 qq, qu, qv;
-            if (s <= 0.0) {
-                qq = 0.5 * (p0s[q] + p1s[q]);
-                qu = vec3(0.0);
-                qv = vec3(0.0);
-            } else {
-                float is = 1.0 / s;
-                qq = (wu * p0s[q] + wv * p1s[q]) * is;
-                vec3 d = (p0s[q] - p1s[q]) * (is * is);
-                qu = (dwu * wv) * d;
-                qv = -(dwv * wu) * d;
-            }
+            // s is 0 only at the patch corner this point belongs to, where
+            // its Bernstein weights (and their derivatives times them) are
+            // 0: clamping keeps the terms finite and 0 there, no branch.
+            float is = 1.0 / max(wu + wv, 1e-6);
+            vec3 qq = (wu * p0s[q] + wv * p1s[q]) * is;
+            vec3 d = (p0s[q] - p1s[q]) * (is * is);
+            vec3 qu = (dwu * wv) * d;
+            vec3 qv = -(dwv * wu) * d;
             float bi = ii == 1 ? bu.y : bu.z, dbi = ii == 1 ? dbu.y : dbu.z;
             float bj = jj == 1 ? bv.y : bv.z, dbj = jj == 1 ? dbv.y : dbv.z;
             pos += (bi * bj) * qq;
