@@ -298,6 +298,7 @@ static int greg_run_gl(vx_job_run *r, const vx_mesh *mesh, const cJSON *params, 
     if (read_params(params, lim, &p, err)) return -1;
     size_t nframes = 1 + (p.frames ? (size_t)cJSON_GetArraySize(p.frames) : 0);
     builder b = {.mesh = mesh, .construction = p.construction};
+    vx_gtess *tess = NULL;
     uint32_t *ndiv = NULL;
     float *grid = NULL;
     double *fbuf = NULL;
@@ -349,6 +350,8 @@ static int greg_run_gl(vx_job_run *r, const vx_mesh *mesh, const cJSON *params, 
     for (int c = 0; c < 3; c++)
         origin[c] = 0.5 * (mesh->bbox_min[c] + mesh->bbox_max[c]);
     double gpu_ms = 0, first_tess_ms = 0;
+    tess = vx_gtess_new(vx_run_gl(r), s->layout, err);
+    if (!tess) goto done;
     for (size_t k = 0; k < nframes; k++) {
         double f0 = now_ms();
         if (k > 0) {
@@ -360,8 +363,7 @@ static int greg_run_gl(vx_job_run *r, const vx_mesh *mesh, const cJSON *params, 
             if (bad) goto done;
         }
         double ms;
-        if (vx_gregory_tessellate(vx_run_gl(r), b.set, s->layout, origin, grid, &ms, err))
-            goto done;
+        if (vx_gtess_run(tess, b.set, origin, grid, &ms, err)) goto done;
         gpu_ms += ms;
         if (k == 0) first_tess_ms = ms;
         s->pos[k] = malloc((3 * s->layout->nverts + 1) * sizeof **s->pos);
@@ -401,6 +403,7 @@ static int greg_run_gl(vx_job_run *r, const vx_mesh *mesh, const cJSON *params, 
     }
     rc = 0;
 done:
+    vx_gtess_free(tess);
     cJSON_Delete(frame_ms);
     free(ndiv);
     free(grid);

@@ -54,12 +54,25 @@ vx_gtess_layout *vx_gregory_layout_new(const vx_gpatch_set *s, const uint32_t *n
                                        vx_err *err);
 void vx_gregory_layout_free(vx_gtess_layout *l);
 
+/* A tessellator for one layout: the GPU buffers (per-patch info, control
+ * points, outputs) made once, so that deformation frames only upload their
+ * control points and run the pass. Owned (free with vx_gtess_free); l must
+ * outlive it. NULL with err. GL thread. */
+typedef struct vx_gtess vx_gtess;
+vx_gtess *vx_gtess_new(vx_gl *gl, const vx_gtess_layout *l, vx_err *err);
+void vx_gtess_free(vx_gtess *t);
+/* One pass over s (the layout's patch count), as vx_gregory_tessellate.
+ * GL thread. */
+int vx_gtess_run(vx_gtess *t, const vx_gpatch_set *s, const double origin[3], float *grid,
+                 double *gpu_ms, vx_err *err);
+
 /* Evaluates every grid vertex of the layout on the GPU: grid gets 6 floats
  * per grid vertex (position - origin, unit normal), voff[npatches] of them.
- * One compute pass over all patches (2-D dispatch: vertex groups x patches,
- * chunks of at most 65535 patches and of output buffers under the SSBO
- * limit), one read-back. *gpu_ms = time of the pass (wall clock where the
- * driver's timer cannot see compute). GL thread. */
+ * One compute pass over all patches (one invocation per grid row, 2-D
+ * dispatch of at most 65535 groups per dimension; chunks of at most 65535
+ * patches and of output buffers under the SSBO limit), one read-back. *gpu_ms = time of the pass (wall clock where the
+ * driver's timer cannot see compute), buffer set-up and read-back not
+ * included. vx_gtess_new + run + free. GL thread. */
 int vx_gregory_tessellate(vx_gl *gl, const vx_gpatch_set *s, const vx_gtess_layout *l,
                           const double origin[3], float *grid, double *gpu_ms, vx_err *err);
 
