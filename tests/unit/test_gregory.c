@@ -268,6 +268,17 @@ static void test_g1_quads(void **state)
     vx_err err = {0};
     assert_int_equal(vx_mesh_analyze(m, &err), 0);
     check_g1(m, 6);
+    /* Quad mode: nodes are the vertices, patch edges the mesh edges. */
+    vx_gpatch_set *s = build(m, NULL);
+    for (int n = 1; n <= 6; n += 5) {
+        uint32_t *nd = vx_gregory_divisions(s, n, 0, &err);
+        vx_gtess_layout *w = vx_gregory_layout_new(s, nd, 1, &err);
+        assert_int_equal(w->nverts, 8 + 12 * (n - 1) + 6 * (n - 1) * (n - 1));
+        assert_int_equal(w->ntris, 12 * n * n);
+        vx_gregory_layout_free(w);
+        free(nd);
+    }
+    vx_gpatch_set_free(s);
     vx_mesh_free(m);
 }
 
@@ -334,7 +345,7 @@ static void test_counts_and_weld(void **state)
 
 /* GPU grid vertices against vx_gpatch_eval. */
 static void check_gpu(const vx_gpatch_set *s, const uint32_t *nd, double dg, double ptol,
-                      double ntol_deg)
+                      double ntol_deg, size_t stride)
 {
     vx_err err = {0};
     vx_gtess_layout *l = vx_gregory_layout_new(s, nd, 0, &err);
@@ -343,10 +354,13 @@ static void check_gpu(const vx_gpatch_set *s, const uint32_t *nd, double dg, dou
     double origin[3] = {0.25, -0.5, 0.125}, ms = 0;
     assert_int_equal(vx_gregory_tessellate(vx_test_gl, s, l, origin, grid, &ms, &err), 0);
     double worst_p = 0, worst_n = 0;
+    size_t seen = 0;
     for (size_t p = 0; p < s->npatches; p++) {
         uint32_t n = nd[p];
         for (uint32_t j = 0; j <= n; j++)
             for (uint32_t i = 0; i <= n; i++) {
+                /* every stride-th vertex, and every patch's first and last */
+                if (seen++ % stride && !(i == 0 && j == 0) && !(i == n && j == n)) continue;
                 const float *g = grid + 6 * (l->voff[p] + j * (n + 1) + i);
                 int cn = corner_of((double)i / n, (double)j / n);
                 int skip_n = cn >= 0 && corner_degenerate(s->cp + p * 60, cn);
@@ -376,6 +390,45 @@ static void check_gpu(const vx_gpatch_set *s, const uint32_t *nd, double dg, dou
     vx_gregory_layout_free(l);
 }
 
+/* Divisions that differ between patches (max_edge on suzanne's parts):
+ * the shader finds each row's patch by search instead of by division. */
+static void test_gpu_mixed_divisions(void **state)
+{
+    (void)state;
+    vx_mesh *m = load("suzanne.obj");
+    vx_gpatch_set *s = build(m, NULL);
+    vx_err err = {0};
+    uint32_t *nd = vx_gregory_divisions(s, 0, diag(m) / 40, &err);
+    uint32_t lo = 1000, hi = 0;
+    for (size_t p = 0; p < s->npatches; p++) {
+        if (nd[p] < lo) lo = nd[p];
+        if (nd[p] > hi) hi = nd[p];
+    }
+    assert_true(hi > lo);
+    check_gpu(s, nd, diag(m), 1e-5, 0.01, 1);
+    free(nd);
+    vx_gpatch_set_free(s);
+    vx_mesh_free(m);
+}
+
+/* Over 128 MiB of output: several chunks, each its own buffers; sampled
+ * vertices of every chunk against the CPU. */
+static void test_gpu_chunks(void **state)
+{
+    (void)state;
+    vx_mesh *m = load("spot_control_mesh.obj");
+    vx_gpatch_set *s = build(m, NULL);
+    vx_err err = {0};
+    uint32_t *nd = vx_gregory_divisions(s, 128, 0, &err);
+    uint64_t gv, nt;
+    vx_gregory_count(s->npatches, nd, &gv, &nt);
+    assert_true(gv * 24 > 2 * (128u << 20)); /* at least three chunks */
+    check_gpu(s, nd, diag(m), 1e-5, 0.01, 997);
+    free(nd);
+    vx_gpatch_set_free(s);
+    vx_mesh_free(m);
+}
+
 static void test_gpu_matches_cpu(void **state)
 {
     (void)state;
@@ -383,7 +436,7 @@ static void test_gpu_matches_cpu(void **state)
     vx_gpatch_set *s = build(m, NULL);
     vx_err err = {0};
     uint32_t *nd = vx_gregory_divisions(s, 7, 0, &err);
-    check_gpu(s, nd, diag(m), 1e-5, 0.01);
+    check_gpu(s, nd, diag(m), 1e-5, 0.01, 1);
     free(nd);
     vx_gpatch_set_free(s);
     vx_mesh_free(m);
@@ -672,6 +725,8 @@ int main(void)
     };
     const struct CMUnitTest gl[] = {
         cmocka_unit_test(test_gpu_matches_cpu),
+        cmocka_unit_test(test_gpu_mixed_divisions),
+        cmocka_unit_test(test_gpu_chunks),
         cmocka_unit_test(test_teapot_bezier),
     };
     int rc = cmocka_run_group_tests_name("gregory", cpu, NULL, NULL);
