@@ -156,12 +156,13 @@ static int weld_map(const vx_gpatch_set *s, vx_gtess_layout *l, uint32_t *id, vx
         uint32_t n = l->ndiv[e[q].pe / 4];
         if (q > 0 && same_edge(&e[q], &e[q - 1])) {
             if (n != l->ndiv[e[q - 1].pe / 4]) {
+                uint32_t pa = e[q].pe / 4, pb = e[q - 1].pe / 4;
                 free(corner_id);
                 free(edge_base);
                 free(e);
                 return vx_err_set(err, VX_EUNPROC, "gregory_divisions",
                                   "patches %u and %u share an edge but have %u and %u divisions",
-                                  e[q].pe / 4, e[q - 1].pe / 4, n, l->ndiv[e[q - 1].pe / 4]);
+                                  pa, pb, n, l->ndiv[pb]);
             }
             edge_base[e[q].pe] = edge_base[e[q - 1].pe];
             continue;
