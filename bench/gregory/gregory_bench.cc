@@ -71,7 +71,8 @@ struct V3 {
     }
 };
 
-static Far::TopologyRefiner *osd_refiner(const vx_mesh *m, std::vector<int> &nv, std::vector<int> &idx)
+static Far::TopologyRefiner *osd_refiner(const vx_mesh *m, std::vector<int> &nv,
+                                         std::vector<int> &idx)
 {
     nv.resize(m->nfaces);
     idx.clear();
@@ -144,7 +145,8 @@ static size_t osd_limit(const vx_mesh *m, int n, bool normals, double *ms, doubl
                                 dv[c] += wv[k] * q[c];
                             }
                         }
-                        float nx = du[1] * dv[2] - du[2] * dv[1], ny = du[2] * dv[0] - du[0] * dv[2],
+                        float nx = du[1] * dv[2] - du[2] * dv[1],
+                              ny = du[2] * dv[0] - du[0] * dv[2],
                               nz = du[0] * dv[1] - du[1] * dv[0];
                         float l = std::sqrt(nx * nx + ny * ny + nz * nz);
                         sink += l > 0 ? nx / l : 0;
@@ -254,7 +256,8 @@ static double greg_tess(vx_gl *gl, Greg &g, double *wall_ms)
         vx_err err;
         double ms;
         auto t0 = clk::now();
-        if (vx_gregory_tessellate(gl, g.set, g.layout, g.origin, g.grid.data(), &ms, &err)) die(err);
+        if (vx_gregory_tessellate(gl, g.set, g.layout, g.origin, g.grid.data(), &ms, &err))
+            die(err);
         best_wall = std::min(best_wall, ms_since(t0));
         best = std::min(best, ms);
     }
@@ -277,10 +280,11 @@ static int cmd_rate(vx_gl *gl, int argc, char **argv)
         double oms_n, oms_p, setup;
         size_t on = osd_limit(m, n, true, &oms_n, &setup);
         size_t op = osd_limit(m, n, false, &oms_p, &setup);
-        double ours = pts / ms / 1e3, osdn = (double)on / oms_n / 1e3, osdp = (double)op / oms_p / 1e3;
+        double ours = pts / ms / 1e3, osdn = (double)on / oms_n / 1e3,
+               osdp = (double)op / oms_p / 1e3;
         const char *name = strrchr(argv[0], '/') ? strrchr(argv[0], '/') + 1 : argv[0];
-        printf("| %s | %d | %.0f | %.1f (%.2f) | %.1f | %.1f | %.1f | %.2fx |\n", name, n, pts, ours,
-               ms, pts / wall / 1e3, osdn, osdp, ours / osdn);
+        printf("| %s | %d | %.0f | %.1f (%.2f) | %.1f | %.1f | %.1f | %.2fx |\n", name, n, pts,
+               ours, ms, pts / wall / 1e3, osdn, osdp, ours / osdn);
         fflush(stdout);
     }
     vx_mesh_free(m);
@@ -305,8 +309,8 @@ static vx_mesh *grid3(void)
     m->face_idx = (uint32_t *)malloc(36 * sizeof(uint32_t));
     for (int f = 0; f < 9; f++) {
         int i = f % 3, j = f / 3;
-        uint32_t q[4] = {(uint32_t)(4 * j + i), (uint32_t)(4 * j + i + 1), (uint32_t)(4 * j + i + 5),
-                         (uint32_t)(4 * j + i + 4)};
+        uint32_t q[4] = {(uint32_t)(4 * j + i), (uint32_t)(4 * j + i + 1),
+                         (uint32_t)(4 * j + i + 5), (uint32_t)(4 * j + i + 4)};
         memcpy(m->face_idx + 4 * f, q, sizeof q);
         m->face_start[f] = 4 * f;
     }
@@ -344,36 +348,36 @@ static int cmd_seed(vx_gl *gl)
         vx_gtess *tess = vx_gtess_new(gl, g.layout, &err0);
         if (!tess) die(err0);
         for (int run = 0; run < g_runs; run++) {
-        auto t0 = clk::now();
-        for (int k = -1; k < gens; k++) { /* k = -1: warm-up (shader build, caches) */
-            if (k == 0) t0 = clk::now();
-            vx_err err;
-            double ms;
-            vx_gregory_build(g.topo, m->pos, g.set);
-            if (vx_gtess_run(tess, g.set, g.origin, g.grid.data(), &ms, &err)) die(err);
-            vx_gregory_gather(g.layout, g.grid.data(), g.origin, pos.data(), nrm.data());
-        }
-        ours = std::min(ours, ms_since(t0));
+            auto t0 = clk::now();
+            for (int k = -1; k < gens; k++) { /* k = -1: warm-up (shader build, caches) */
+                if (k == 0) t0 = clk::now();
+                vx_err err;
+                double ms;
+                vx_gregory_build(g.topo, m->pos, g.set);
+                if (vx_gtess_run(tess, g.set, g.origin, g.grid.data(), &ms, &err)) die(err);
+                vx_gregory_gather(g.layout, g.grid.data(), g.origin, pos.data(), nrm.data());
+            }
+            ours = std::min(ours, ms_since(t0));
         }
         vx_gtess_free(tess);
         for (int run = 0; run < g_runs; run++) {
-        auto t1 = clk::now();
-        double sink = 0;
-        for (int k = 0; k < gens; k++) {
-            vx_gregory_build(g.topo, m->pos, g.set);
-            for (size_t p = 0; p < g.set->npatches; p++)
-                for (int j = 0; j <= n; j++)
-                    for (int i = 0; i <= n; i++) {
-                        double x[3], nn[3];
-                        vx_gpatch_eval(g.set->cp + p * 60, (double)i / n, (double)j / n, x, nn);
-                        sink += x[0] + nn[0];
-                    }
+            auto t1 = clk::now();
+            double sink = 0;
+            for (int k = 0; k < gens; k++) {
+                vx_gregory_build(g.topo, m->pos, g.set);
+                for (size_t p = 0; p < g.set->npatches; p++)
+                    for (int j = 0; j <= n; j++)
+                        for (int i = 0; i <= n; i++) {
+                            double x[3], nn[3];
+                            vx_gpatch_eval(g.set->cp + p * 60, (double)i / n, (double)j / n, x, nn);
+                            sink += x[0] + nn[0];
+                        }
+            }
+            cpu = std::min(cpu, ms_since(t1));
+            if (sink == 12345.678) printf(" ");
         }
-        cpu = std::min(cpu, ms_since(t1));
-        if (sink == 12345.678) printf(" ");
-        }
-        printf("| %dx%d | %zu (CC %zu) | %.2f ms | %.2f ms | %.2f ms | %.2f ms | %s ms | %s ms |\n", div,
-               div, g.layout->nverts, cc_verts, full, prim, ours, cpu, seed_cc[level - 1],
+        printf("| %dx%d | %zu (CC %zu) | %.2f ms | %.2f ms | %.2f ms | %.2f ms | %s ms | %s ms |\n",
+               div, div, g.layout->nverts, cc_verts, full, prim, ours, cpu, seed_cc[level - 1],
                seed_gr[level - 1]);
         fflush(stdout);
     }
@@ -417,8 +421,10 @@ static int cmd_frames(vx_gl *gl, const char *path, int n)
         }
     }
     int f = frames - 1;
-    printf("| mesh | N | patches | vertices | control points ms | GPU pass ms | tessellate call ms | "
-           "weld gather ms | frame ms (mean) | best frame ms |\n|---|---|---|---|---|---|---|---|---|---|\n");
+    printf(
+        "| mesh | N | patches | vertices | control points ms | GPU pass ms | tessellate call ms | "
+        "weld gather ms | frame ms (mean) | best frame ms "
+        "|\n|---|---|---|---|---|---|---|---|---|---|\n");
     const char *name = strrchr(path, '/') ? strrchr(path, '/') + 1 : path;
     printf("| %s | %d | %zu | %zu | %.3f | %.3f | %.3f | %.3f | %.3f | %.3f |\n", name, n,
            g.set->npatches, g.layout->nverts, build / f, gpu / f, tess_ms / f, gather / f,

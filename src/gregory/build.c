@@ -26,15 +26,15 @@ enum { FAN_NONE = 0, FAN_CLOSED, FAN_OPEN };
 struct vx_gregory_topo {
     size_t nverts, nfaces, nedges, nnodes, ncurves, npatches;
     int split;
-    uint32_t *fstart, *fidx;    /* face offsets and indices (copied) */
-    uint32_t *edge_v;           /* 2 per input edge, a < b */
-    uint32_t *edge_nf;          /* faces on the edge */
-    uint32_t *fedge;            /* per face corner i: edge of (v_i, v_i+1) */
-    uint32_t *fan_off;          /* nverts + 1 offsets into fan_nb */
-    uint32_t *fan_nb;           /* neighbours counter-clockwise (open fans: corners + 1) */
-    uint8_t *fan_kind;          /* FAN_NONE, FAN_CLOSED, FAN_OPEN */
-    uint32_t *edge_slot;        /* 2 per edge: fan_nb index of the far end at a, at b */
-    uint32_t *curve_node;       /* 2 per curve: its direction */
+    uint32_t *fstart, *fidx; /* face offsets and indices (copied) */
+    uint32_t *edge_v;        /* 2 per input edge, a < b */
+    uint32_t *edge_nf;       /* faces on the edge */
+    uint32_t *fedge;         /* per face corner i: edge of (v_i, v_i+1) */
+    uint32_t *fan_off;       /* nverts + 1 offsets into fan_nb */
+    uint32_t *fan_nb;        /* neighbours counter-clockwise (open fans: corners + 1) */
+    uint8_t *fan_kind;       /* FAN_NONE, FAN_CLOSED, FAN_OPEN */
+    uint32_t *edge_slot;     /* 2 per edge: fan_nb index of the far end at a, at b */
+    uint32_t *curve_node;    /* 2 per curve: its direction */
     uint8_t *curve_kind;
     uint32_t *curve_ref; /* input edge (C_EDGE, C_HALF*) or face (C_INNER) */
     uint32_t *curve_np;  /* patches on the curve */
@@ -46,8 +46,14 @@ struct vx_gregory_topo {
     uint32_t *pface;
 };
 
-size_t vx_gregory_topo_npatches(const vx_gregory_topo *t) { return t->npatches; }
-size_t vx_gregory_topo_nverts(const vx_gregory_topo *t) { return t->nverts; }
+size_t vx_gregory_topo_npatches(const vx_gregory_topo *t)
+{
+    return t->npatches;
+}
+size_t vx_gregory_topo_nverts(const vx_gregory_topo *t)
+{
+    return t->nverts;
+}
 
 void vx_gregory_topo_free(vx_gregory_topo *t)
 {
@@ -92,7 +98,10 @@ static const int bnd_slot[4][4] = {{0, 1, 2, 3}, {3, 7, 11, 15}, {15, 14, 13, 12
 static const int inn_slot[4][4] = {{4, 5, 6, 7}, {2, 17, 19, 14}, {11, 10, 9, 8}, {13, 18, 16, 1}};
 
 /* Node ids: input vertices, then edge midpoints, then face centres. */
-static uint32_t mid_node(const vx_gregory_topo *t, uint32_t e) { return (uint32_t)(t->nverts + e); }
+static uint32_t mid_node(const vx_gregory_topo *t, uint32_t e)
+{
+    return (uint32_t)(t->nverts + e);
+}
 static uint32_t centre_node(const vx_gregory_topo *t, uint32_t f)
 {
     return (uint32_t)(t->nverts + t->nedges + f);
@@ -232,7 +241,7 @@ static int make_fans(vx_gregory_topo *t, vx_err *err)
     for (uint32_t c = 0; c < nc; c++)
         vc[voff[t->fidx[c] + 1]++] = c;
 #define NX(c) t->fidx[(c) + 1 < t->fstart[cface[c] + 1] ? (c) + 1 : t->fstart[cface[c]]]
-#define PV(c) t->fidx[(c) > t->fstart[cface[c]] ? (c) - 1 : t->fstart[cface[c] + 1] - 1]
+#define PV(c) t->fidx[(c) > t->fstart[cface[c]] ? (c)-1 : t->fstart[cface[c] + 1] - 1]
     uint32_t out = 0;
     for (size_t v = 0; v < nv; v++) {
         const uint32_t *L = vc + voff[v];
@@ -385,14 +394,20 @@ static void sub3(const double *a, const double *b, double *o)
     for (int c = 0; c < 3; c++)
         o[c] = a[c] - b[c];
 }
-static double dot3(const double *a, const double *b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
+static double dot3(const double *a, const double *b)
+{
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+}
 static void cross3(const double *a, const double *b, double *o)
 {
     o[0] = a[1] * b[2] - a[2] * b[1];
     o[1] = a[2] * b[0] - a[0] * b[2];
     o[2] = a[0] * b[1] - a[1] * b[0];
 }
-static double norm3(const double *a) { return sqrt(dot3(a, a)); }
+static double norm3(const double *a)
+{
+    return sqrt(dot3(a, a));
+}
 static int unit3(double *a)
 {
     double l = norm3(a);

@@ -16,8 +16,8 @@ enum { FMT_OBJ = 0, FMT_PLY, FMT_DRC };
 static const char *const cons_names[] = {"interpolate", "approximate-cc", NULL};
 static const char *const fmt_names[] = {"obj", "ply", "drc", NULL};
 static const char *const fmt_types[] = {"model/obj", "application/x-ply", "model/x-draco"};
-static const char *const known[] = {"divisions", "max_edge", "construction", "weld",
-                                    "frames",    "format",   NULL};
+static const char *const known[] = {"divisions", "max_edge", "construction", "weld", "frames",
+                                    "format",    NULL};
 
 #define DEFAULT_DIVISIONS 8
 
@@ -25,7 +25,7 @@ typedef struct gparams {
     long divisions;  /* 0 when max_edge is used */
     double max_edge; /* 0 when divisions is used */
     int construction, weld, format;
-    const cJSON *frames;   /* NULL or the array */
+    const cJSON *frames; /* NULL or the array */
     int frames_are_ids;
 } gparams;
 
@@ -104,9 +104,10 @@ static int read_params(const cJSON *params, const vx_limits *lim, gparams *p, vx
     const cJSON *fr = field(params, "frames");
     if (!fr) return 0;
     if (!cJSON_IsArray(fr) || cJSON_GetArraySize(fr) > VX_GREGORY_MAX_FRAMES)
-        return vx_err_set(err, VX_EUNPROC, "invalid_params",
-                          "params.frames must be an array of at most %d position arrays or mesh ids",
-                          VX_GREGORY_MAX_FRAMES);
+        return vx_err_set(
+            err, VX_EUNPROC, "invalid_params",
+            "params.frames must be an array of at most %d position arrays or mesh ids",
+            VX_GREGORY_MAX_FRAMES);
     const cJSON *first = cJSON_GetArrayItem(fr, 0);
     if (first && cJSON_IsString(first)) {
         const cJSON *ids;
@@ -240,8 +241,8 @@ static int construct(builder *b, const double *pos, vx_err *err)
 }
 
 /* Positions of frame k >= 1 into buf (3 * nverts), or a loaded mesh. */
-static const double *frame_positions(vx_job_run *r, const vx_mesh *mesh, const gparams *p,
-                                     size_t k, double *buf, vx_mesh **loaded, vx_err *err)
+static const double *frame_positions(vx_job_run *r, const vx_mesh *mesh, const gparams *p, size_t k,
+                                     double *buf, vx_mesh **loaded, vx_err *err)
 {
     const cJSON *f = cJSON_GetArrayItem(p->frames, (int)(k - 1));
     if (p->frames_are_ids) {
@@ -258,7 +259,8 @@ static const double *frame_positions(vx_job_run *r, const vx_mesh *mesh, const g
             same = memcmp(m->face_idx, mesh->face_idx, nidx * sizeof *mesh->face_idx) == 0;
         }
         if (same && mesh->npatches)
-            same = memcmp(m->patch_idx, mesh->patch_idx, 16 * mesh->npatches * sizeof(uint32_t)) == 0;
+            same =
+                memcmp(m->patch_idx, mesh->patch_idx, 16 * mesh->npatches * sizeof(uint32_t)) == 0;
         if (!same) {
             vx_mesh_free(m);
             vx_err_set(err, VX_EUNPROC, "frame_topology",

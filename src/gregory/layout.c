@@ -36,7 +36,10 @@ static pedge *sorted_edges(const vx_gpatch_set *s)
     return e;
 }
 
-static int same_edge(const pedge *a, const pedge *b) { return a->lo == b->lo && a->hi == b->hi; }
+static int same_edge(const pedge *a, const pedge *b)
+{
+    return a->lo == b->lo && a->hi == b->hi;
+}
 
 static int oom(vx_err *err)
 {
@@ -77,8 +80,9 @@ uint32_t *vx_gregory_divisions(const vx_gpatch_set *s, int n, double max_edge, v
             if (len > longest) longest = len;
         }
         double need = ceil(longest / max_edge);
-        nd[p] = need < 1 ? 1 : need > VX_GREGORY_MAX_DIVISIONS ? VX_GREGORY_MAX_DIVISIONS
-                                                                 : (uint32_t)need;
+        nd[p] = need < 1                          ? 1
+                : need > VX_GREGORY_MAX_DIVISIONS ? VX_GREGORY_MAX_DIVISIONS
+                                                  : (uint32_t)need;
     }
     /* One N per connected component: the largest need in it. */
     uint32_t *par = malloc((s->npatches + 1) * sizeof *par);
@@ -187,10 +191,18 @@ static int weld_map(const vx_gpatch_set *s, vx_gtess_layout *l, uint32_t *id, vx
             for (uint32_t t = 1; t < n; t++) {
                 uint32_t i, j;
                 switch (ed) {
-                case 0: i = t, j = 0; break;
-                case 1: i = n, j = t; break;
-                case 2: i = n - t, j = n; break;
-                default: i = 0, j = n - t; break;
+                case 0:
+                    i = t, j = 0;
+                    break;
+                case 1:
+                    i = n, j = t;
+                    break;
+                case 2:
+                    i = n - t, j = n;
+                    break;
+                default:
+                    i = 0, j = n - t;
+                    break;
                 }
                 g[j * w + i] = ka == kb ? corner_id[ka] : ka < kb ? base + t - 1 : base + n - t - 1;
             }
@@ -198,7 +210,8 @@ static int weld_map(const vx_gpatch_set *s, vx_gtess_layout *l, uint32_t *id, vx
     }
     free(corner_id);
     free(edge_base);
-    if (next >= UINT32_MAX) return vx_err_set(err, VX_ETOOBIG, "too_many_vertices", "over 2^32 vertices");
+    if (next >= UINT32_MAX)
+        return vx_err_set(err, VX_ETOOBIG, "too_many_vertices", "over 2^32 vertices");
     l->nverts = (size_t)next;
     return 0;
 }

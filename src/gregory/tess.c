@@ -16,9 +16,9 @@
 #define VBYTES (6 * sizeof(float))
 
 typedef struct chunk {
-    size_t p0, p1;    /* patches [p0, p1) */
-    GLuint buf[3];    /* control points, info, output */
-    uint64_t v0, nv;  /* grid vertices */
+    size_t p0, p1;   /* patches [p0, p1) */
+    GLuint buf[3];   /* control points, info, output */
+    uint64_t v0, nv; /* grid vertices */
 } chunk;
 
 struct vx_gtess {
@@ -130,8 +130,8 @@ int vx_gtess_run(vx_gtess *t, const vx_gpatch_set *s, const double origin[3], fl
 {
     *gpu_ms = 0;
     if (s->npatches != t->l->npatches)
-        return vx_err_set(err, VX_EINTERNAL, "gregory_layout",
-                          "%zu patches for a layout of %zu", s->npatches, t->l->npatches);
+        return vx_err_set(err, VX_EINTERNAL, "gregory_layout", "%zu patches for a layout of %zu",
+                          s->npatches, t->l->npatches);
     for (size_t c = 0; c < t->nchunks; c++) {
         chunk *k = &t->ch[c];
         size_t np = k->p1 - k->p0;

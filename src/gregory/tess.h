@@ -22,13 +22,13 @@
 
 typedef struct vx_gtess_layout {
     size_t npatches;
-    uint32_t *ndiv;   /* per patch */
-    uint64_t *voff;   /* npatches + 1: first grid vertex of each patch */
+    uint32_t *ndiv; /* per patch */
+    uint64_t *voff; /* npatches + 1: first grid vertex of each patch */
     int weld;
-    size_t nverts;    /* output vertices */
-    uint64_t *rep;    /* nverts: the grid vertex an output vertex is taken from */
+    size_t nverts; /* output vertices */
+    uint64_t *rep; /* nverts: the grid vertex an output vertex is taken from */
     size_t ntris;
-    uint32_t *tri;    /* 3 * ntris output vertex ids, counter-clockwise seen from the normal */
+    uint32_t *tri;       /* 3 * ntris output vertex ids, counter-clockwise seen from the normal */
     uint32_t *tri_patch; /* ntris: the patch of each triangle */
 } vx_gtess_layout;
 
@@ -42,8 +42,7 @@ uint32_t *vx_gregory_divisions(const vx_gpatch_set *s, int n, double max_edge, v
 /* Counts for a given division array: grid vertices, and the output
  * vertices and triangles an unwelded tessellation makes (welding only
  * lowers the vertex count). For limit checks before anything is allocated. */
-void vx_gregory_count(size_t npatches, const uint32_t *ndiv, uint64_t *grid_verts,
-                      uint64_t *tris);
+void vx_gregory_count(size_t npatches, const uint32_t *ndiv, uint64_t *grid_verts, uint64_t *tris);
 
 /* Builds the layout: welded (weld != 0: one output vertex per corner key,
  * per shared edge position and per patch interior point; triangles that
@@ -70,8 +69,8 @@ int vx_gtess_run(vx_gtess *t, const vx_gpatch_set *s, const double origin[3], fl
  * per grid vertex (position - origin, unit normal), voff[npatches] of them.
  * One compute pass over all patches (one invocation per grid row, 2-D
  * dispatch of at most 65535 groups per dimension; chunks of at most 65535
- * patches and of output buffers under the SSBO limit), one read-back. *gpu_ms = time of the pass (wall clock where the
- * driver's timer cannot see compute), buffer set-up and read-back not
+ * patches and of output buffers under the SSBO limit), one read-back. *gpu_ms = time of the pass
+ * (wall clock where the driver's timer cannot see compute), buffer set-up and read-back not
  * included. vx_gtess_new + run + free. GL thread. */
 int vx_gregory_tessellate(vx_gl *gl, const vx_gpatch_set *s, const vx_gtess_layout *l,
                           const double origin[3], float *grid, double *gpu_ms, vx_err *err);

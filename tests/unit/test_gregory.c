@@ -85,10 +85,18 @@ static double diag(const vx_mesh *m)
 static void edge_uv(int e, double t, double *u, double *v)
 {
     switch (e) {
-    case 0: *u = t, *v = 0; break;
-    case 1: *u = 1, *v = t; break;
-    case 2: *u = 1 - t, *v = 1; break;
-    default: *u = 0, *v = 1 - t; break;
+    case 0:
+        *u = t, *v = 0;
+        break;
+    case 1:
+        *u = 1, *v = t;
+        break;
+    case 2:
+        *u = 1 - t, *v = 1;
+        break;
+    default:
+        *u = 0, *v = 1 - t;
+        break;
     }
 }
 
@@ -109,7 +117,8 @@ static int corner_degenerate(const double *cp, int c)
     x[0] = a[1] * b[2] - a[2] * b[1];
     x[1] = a[2] * b[0] - a[0] * b[2];
     x[2] = a[0] * b[1] - a[1] * b[0];
-    double la = sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2]), lb = sqrt(b[0] * b[0] + b[1] * b[1] + b[2] * b[2]);
+    double la = sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2]),
+           lb = sqrt(b[0] * b[0] + b[1] * b[1] + b[2] * b[2]);
     return sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2]) <= 1e-6 * la * lb;
 }
 
@@ -158,10 +167,14 @@ static double g1_max_angle(const vx_gpatch_set *s, double *max_gap, size_t *shar
                 double ang = acos(d > 1 ? 1 : d < -1 ? -1 : d) * 180 / M_PI;
                 if (ang > worst) worst = ang;
                 if (ang > 1 && getenv("G1_DEBUG"))
-                    fprintf(stderr, "p%zu e%zu / p%zu e%zu t=%g: %g deg na=(%g %g %g) nb=(%g %g %g) keys %u %u\n",
-                            a / 4, a % 4, b / 4, b % 4, t, ang, na[0], na[1], na[2], nb[0], nb[1], nb[2], a0, a1);
-                double gap = sqrt((pa[0] - pb[0]) * (pa[0] - pb[0]) + (pa[1] - pb[1]) * (pa[1] - pb[1]) +
-                                  (pa[2] - pb[2]) * (pa[2] - pb[2]));
+                    fprintf(stderr,
+                            "p%zu e%zu / p%zu e%zu t=%g: %g deg na=(%g %g %g) nb=(%g %g %g) keys "
+                            "%u %u\n",
+                            a / 4, a % 4, b / 4, b % 4, t, ang, na[0], na[1], na[2], nb[0], nb[1],
+                            nb[2], a0, a1);
+                double gap =
+                    sqrt((pa[0] - pb[0]) * (pa[0] - pb[0]) + (pa[1] - pb[1]) * (pa[1] - pb[1]) +
+                         (pa[2] - pb[2]) * (pa[2] - pb[2]));
                 if (gap > *max_gap) *max_gap = gap;
             }
         }
@@ -193,7 +206,8 @@ static void check_g1(const vx_mesh *m, size_t want_patches)
     size_t shared;
     g1_skipped = 0;
     double ang = g1_max_angle(s, &gap, &shared);
-    fprintf(stderr, "  %zu patches, %zu shared edges: max normal angle %.3g deg, gap %.3g "
+    fprintf(stderr,
+            "  %zu patches, %zu shared edges: max normal angle %.3g deg, gap %.3g "
             "(%zu degenerate corner points left out)\n",
             s->npatches, shared, ang, gap, g1_skipped);
     assert_true(g1_skipped * 100 < shared * 33); /* rare: of 33 points per edge */
@@ -206,7 +220,8 @@ static void check_g1(const vx_mesh *m, size_t want_patches)
         for (int c = 0; c < 4; c++)
             if (s->corner_key[4 * p + c] < m->nverts) {
                 static const int slot[4] = {0, 3, 15, 12};
-                const double *x = s->cp + p * 60 + 3 * slot[c], *y = m->pos + 3 * s->corner_key[4 * p + c];
+                const double *x = s->cp + p * 60 + 3 * slot[c],
+                             *y = m->pos + 3 * s->corner_key[4 * p + c];
                 assert_true(fabs(x[0] - y[0]) + fabs(x[1] - y[1]) + fabs(x[2] - y[2]) == 0);
             }
     vx_gpatch_set_free(s);
@@ -378,8 +393,8 @@ static void check_gpu(const vx_gpatch_set *s, const uint32_t *nd, double dg, dou
                 if (dp > worst_p) worst_p = dp;
                 if (a > worst_n && !skip_n) worst_n = a;
                 if (a > 0.01 && getenv("G1_DEBUG"))
-                    fprintf(stderr, "p%zu (%u,%u)/%u: %g deg gpu (%g %g %g) cpu (%g %g %g)\n", p, i, j, n, a,
-                            g[3], g[4], g[5], nn[0], nn[1], nn[2]);
+                    fprintf(stderr, "p%zu (%u,%u)/%u: %g deg gpu (%g %g %g) cpu (%g %g %g)\n", p, i,
+                            j, n, a, g[3], g[4], g[5], nn[0], nn[1], nn[2]);
             }
     }
     fprintf(stderr, "  GPU vs CPU: position %.3g of the diagonal, normal %.3g deg (%.2f ms)\n",
@@ -497,9 +512,9 @@ static vx_mesh *teapot(void)
     assert_int_equal(fscanf(f, "%zu", &m->nverts), 1);
     m->pos = malloc(3 * m->nverts * sizeof *m->pos);
     for (size_t i = 0; i < m->nverts; i++)
-        assert_int_equal(fscanf(f, " %lf , %lf , %lf", m->pos + 3 * i, m->pos + 3 * i + 1,
-                                m->pos + 3 * i + 2),
-                         3);
+        assert_int_equal(
+            fscanf(f, " %lf , %lf , %lf", m->pos + 3 * i, m->pos + 3 * i + 1, m->pos + 3 * i + 2),
+            3);
     fclose(f);
     for (int c = 0; c < 3; c++) {
         m->bbox_min[c] = INFINITY;
@@ -515,8 +530,10 @@ static vx_mesh *teapot(void)
 
 static void bezier(const vx_mesh *m, size_t p, double u, double v, double out[3])
 {
-    double bu[4] = {(1 - u) * (1 - u) * (1 - u), 3 * u * (1 - u) * (1 - u), 3 * u * u * (1 - u), u * u * u};
-    double bv[4] = {(1 - v) * (1 - v) * (1 - v), 3 * v * (1 - v) * (1 - v), 3 * v * v * (1 - v), v * v * v};
+    double bu[4] = {(1 - u) * (1 - u) * (1 - u), 3 * u * (1 - u) * (1 - u), 3 * u * u * (1 - u),
+                    u * u * u};
+    double bv[4] = {(1 - v) * (1 - v) * (1 - v), 3 * v * (1 - v) * (1 - v), 3 * v * v * (1 - v),
+                    v * v * v};
     out[0] = out[1] = out[2] = 0;
     for (int j = 0; j < 4; j++)
         for (int i = 0; i < 4; i++)
@@ -627,7 +644,8 @@ static void test_max_edge(void **state)
     vx_gpatch_set *s = build(m, NULL);
     vx_err err = {0};
     double d = diag(m);
-    uint32_t *a = vx_gregory_divisions(s, 0, d / 50, &err), *b = vx_gregory_divisions(s, 0, d / 200, &err);
+    uint32_t *a = vx_gregory_divisions(s, 0, d / 50, &err),
+             *b = vx_gregory_divisions(s, 0, d / 200, &err);
     uint32_t amin = 1000, amax = 0;
     for (size_t p = 0; p < s->npatches; p++) {
         assert_true(b[p] >= a[p]);
@@ -717,10 +735,14 @@ static void test_params(void **state)
 int main(void)
 {
     const struct CMUnitTest cpu[] = {
-        cmocka_unit_test(test_g1_spot),        cmocka_unit_test(test_g1_suzanne),
-        cmocka_unit_test(test_g1_ngon),        cmocka_unit_test(test_g1_quads),
-        cmocka_unit_test(test_counts_and_weld), cmocka_unit_test(test_frames_reuse_topology),
-        cmocka_unit_test(test_from_bezier_small), cmocka_unit_test(test_max_edge),
+        cmocka_unit_test(test_g1_spot),
+        cmocka_unit_test(test_g1_suzanne),
+        cmocka_unit_test(test_g1_ngon),
+        cmocka_unit_test(test_g1_quads),
+        cmocka_unit_test(test_counts_and_weld),
+        cmocka_unit_test(test_frames_reuse_topology),
+        cmocka_unit_test(test_from_bezier_small),
+        cmocka_unit_test(test_max_edge),
         cmocka_unit_test(test_params),
     };
     const struct CMUnitTest gl[] = {
@@ -730,5 +752,6 @@ int main(void)
         cmocka_unit_test(test_teapot_bezier),
     };
     int rc = cmocka_run_group_tests_name("gregory", cpu, NULL, NULL);
-    return rc | cmocka_run_group_tests_name("gregory_gl", gl, vx_test_gl_setup, vx_test_gl_teardown);
+    return rc |
+           cmocka_run_group_tests_name("gregory_gl", gl, vx_test_gl_setup, vx_test_gl_teardown);
 }
