@@ -11,7 +11,7 @@ layout(local_size_x = 64) in;
 // that point relative to the output origin, then one pad.
 layout(std430, binding = 0) readonly buffer CP { float cp[]; };
 layout(std430, binding = 1) readonly buffer Info { uvec4 info[]; }; // N, first row, first vertex, 0
-layout(std430, binding = 2) writeonly buffer Out { float outv[]; }; // 6 per vertex
+layout(std430, binding = 2) writeonly buffer Out { vec2 outv[]; }; // 6 floats per vertex, as 3 vec2 (fewer stores)
 layout(location = 0) uniform uint u_nrows;    // grid rows of the chunk
 layout(location = 1) uniform uint u_npatches;
 layout(location = 2) uniform uint u_n;        // divisions of every patch, or 0: they differ
@@ -124,8 +124,8 @@ void main()
         p1s[q] = P(base, 16 + q);
     }
     vec3 org = vec3(cp[base + 60u], cp[base + 61u], cp[base + 62u]);
-    uint o = 6u * (pi.z + j * w);
-    for (uint i = 0u; i <= n; i++, o += 6u) {
+    uint o = 3u * (pi.z + j * w);
+    for (uint i = 0u; i <= n; i++, o += 3u) {
         float u = float(i) / float(n);
         vec4 bu, dbu;
         bern(u, bu, dbu);
@@ -166,11 +166,8 @@ void main()
             if (!found) nrm = vec3(0.0, 0.0, 1.0);
         }
         pos += org;
-        outv[o] = pos.x;
-        outv[o + 1u] = pos.y;
-        outv[o + 2u] = pos.z;
-        outv[o + 3u] = nrm.x;
-        outv[o + 4u] = nrm.y;
-        outv[o + 5u] = nrm.z;
+        outv[o] = pos.xy;
+        outv[o + 1u] = vec2(pos.z, nrm.x);
+        outv[o + 2u] = nrm.yz;
     }
 }
