@@ -325,6 +325,53 @@ static int u64_cmp(const void *x, const void *y)
     return a < b ? -1 : a > b;
 }
 
+/* An open mesh of quads only (one patch per face, boundary fans): a bumpy
+ * 4 x 3 sheet. */
+static void test_g1_open_quads(void **state)
+{
+    (void)state;
+    vx_mesh *m = vx_mesh_new();
+    m->nverts = 20;
+    m->pos = malloc(60 * sizeof *m->pos);
+    for (int j = 0; j < 4; j++)
+        for (int i = 0; i < 5; i++) {
+            double *p = m->pos + 3 * (5 * j + i);
+            p[0] = i + 0.1 * j;
+            p[1] = j;
+            p[2] = 0.4 * sin(1.3 * i) * cos(0.9 * j);
+        }
+    m->nfaces = 12;
+    m->face_start = malloc(13 * sizeof *m->face_start);
+    m->face_idx = malloc(48 * sizeof *m->face_idx);
+    for (uint32_t f = 0; f < 12; f++) {
+        uint32_t i = f % 4, j = f / 4, a = 5 * j + i;
+        uint32_t q[4] = {a, a + 1, a + 6, a + 5};
+        memcpy(m->face_idx + 4 * f, q, sizeof q);
+        m->face_start[f] = 4 * f;
+    }
+    m->face_start[12] = 48;
+    vx_err err = {0};
+    assert_int_equal(vx_mesh_analyze(m, &err), 0);
+    assert_int_equal(m->boundary_edges, 14);
+    check_g1(m, 12);
+    /* Boundary curves run smoothly through boundary vertices: the two
+     * boundary patch edges meeting at a boundary vertex have opposite
+     * tangents there (vertex 2 on the j = 0 side: patches 1 and 2). */
+    vx_gpatch_set *s = build(m, NULL);
+    const double *c1 = s->cp + 60 * 1, *c2 = s->cp + 60 * 2;
+    double t1[3], t2[3];
+    for (int c = 0; c < 3; c++) {
+        t1[c] = c1[3 * 2 + c] - c1[3 * 3 + c]; /* patch 1, v = 0 row, towards its corner 1 */
+        t2[c] = c2[3 * 1 + c] - c2[3 * 0 + c]; /* patch 2, from its corner 0 */
+    }
+    double d = t1[0] * t2[0] + t1[1] * t2[1] + t1[2] * t2[2];
+    double l1 = sqrt(t1[0] * t1[0] + t1[1] * t1[1] + t1[2] * t1[2]);
+    double l2 = sqrt(t2[0] * t2[0] + t2[1] * t2[1] + t2[2] * t2[2]);
+    assert_true(d / (l1 * l2) < -1 + 1e-12);
+    vx_gpatch_set_free(s);
+    vx_mesh_free(m);
+}
+
 /* Edges of a triangle list used by exactly one triangle. */
 static size_t boundary_edges(const uint32_t *tri, size_t ntris, size_t nverts)
 {
@@ -771,6 +818,7 @@ int main(void)
         cmocka_unit_test(test_g1_spot),
         cmocka_unit_test(test_g1_suzanne),
         cmocka_unit_test(test_g1_ngon),
+        cmocka_unit_test(test_g1_open_quads),
         cmocka_unit_test(test_g1_quads),
         cmocka_unit_test(test_counts_and_weld),
         cmocka_unit_test(test_frames_reuse_topology),
