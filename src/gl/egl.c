@@ -706,3 +706,10 @@ double vx_gl_timer_end_ms(vx_gl_timer *t)
     }
     return gpu;
 }
+
+double vx_gl_timer_end_compute_ms(vx_gl_timer *t)
+{
+    glFinish();
+    double wall = wall_ms() - t->cpu_start_ms, gpu = vx_gl_timer_end_ms(t);
+    return gpu > wall * 1e-3 ? gpu : wall;
+}

@@ -83,5 +83,10 @@ void vx_gl_timer_begin(vx_gl_timer *t);
  * than the wall-clock time since begin is a driver bug (llvmpipe can report
  * the time since boot): the wall-clock time is returned instead. */
 double vx_gl_timer_end_ms(vx_gl_timer *t);
+/* The same for compute dispatches: llvmpipe runs them outside what its
+ * timer queries measure (~20 ns for milliseconds of work), so when the query
+ * says less than a thousandth of the wall-clock time to glFinish, the wall
+ * clock (the dispatch ran on the CPU) is returned. GL thread. */
+double vx_gl_timer_end_compute_ms(vx_gl_timer *t);
 
 #endif

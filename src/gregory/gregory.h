@@ -34,6 +34,7 @@
 #include <stddef.h>
 #include <stdint.h>
 
+#include "mesh/mesh.h"
 #include "util/err.h"
 
 #define VX_GPATCH_POINTS 20
@@ -55,5 +56,42 @@ void vx_gpatch_set_free(vx_gpatch_set *s);
  * NULL. The blend at a corner (u + v = 0 and the like) takes the limit: the
  * k point that the boundary through that corner uses. */
 void vx_gpatch_eval(const double *cp, double u, double v, double pos[3], double nrm[3]);
+
+/* ---- The interpolate construction (build.c) ----
+ *
+ * A mesh of quads only gives one patch per face. Any other mesh (a
+ * triangle or n-gon anywhere) has every face split into n quads around its
+ * centre (corners: vertex, edge midpoint, centre, previous edge midpoint),
+ * so that both sides of every edge split it at the same point (no
+ * T-junctions). Every patch corner ("node": input vertex, edge midpoint,
+ * face centre) has a position and a tangent plane; every patch edge is a
+ * cubic curve whose end tangents lie in those planes; the interior points
+ * come from the Chiyokura-Kimura correction of every patch edge on its own
+ * (seed 001 §2.1.4).
+ *
+ * vx_gregory_topo holds what depends only on the face structure (edges,
+ * boundary neighbours, nodes, curves, patch/curve incidences), so that a
+ * deformation frame redoes only the position-dependent part. */
+typedef struct vx_gregory_topo vx_gregory_topo;
+
+/* Builds the topology tables of a polygon mesh (faces of >= 3 vertices).
+ * Owned; NULL with err (VX_EUNPROC for an unusable mesh, VX_EINTERNAL for
+ * memory). Any thread. */
+vx_gregory_topo *vx_gregory_topo_new(const vx_mesh *m, vx_err *err);
+void vx_gregory_topo_free(vx_gregory_topo *t);
+/* Patches the construction makes (faces, or the sum of face sizes when split). */
+size_t vx_gregory_topo_npatches(const vx_gregory_topo *t);
+/* Input vertices the positions of vx_gregory_build must have. */
+size_t vx_gregory_topo_nverts(const vx_gregory_topo *t);
+
+/* Fills s (vx_gregory_topo_npatches patches, allocated by the caller) from
+ * the vertex positions pos (3 * nverts doubles). Any thread; t is only read. */
+void vx_gregory_build(const vx_gregory_topo *t, const double *pos, vx_gpatch_set *s);
+
+/* Bicubic Bézier input (m->npatches > 0): one Gregory patch per Bézier
+ * patch with equal interior pairs; positions from pos (3 * m->nverts
+ * doubles) or m->pos when NULL. corner_key = the corner's position index
+ * after merging bitwise-equal positions. Owned; NULL with err. */
+vx_gpatch_set *vx_gregory_from_bezier(const vx_mesh *m, const double *pos, vx_err *err);
 
 #endif

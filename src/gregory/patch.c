@@ -110,19 +110,35 @@ static double cross_unit(const double a[3], const double b[3], double n[3])
     return da > 0 && db > 0 ? l / (da * db) : 0; /* sine of the angle between them */
 }
 
+/* Whether the tangents span a plane: neither is rounding noise (a
+ * collapsed edge's derivative sums equal points with weights summing to 0,
+ * leaving ~1e-16 of the coordinates, in a random direction) and the sine
+ * of their angle exceeds min_sine. */
+static int spans(const double du[3], const double dv[3], double noise, double min_sine,
+                 double nrm[3])
+{
+    double su = fabs(du[0]) + fabs(du[1]) + fabs(du[2]);
+    double sv = fabs(dv[0]) + fabs(dv[1]) + fabs(dv[2]);
+    return cross_unit(du, dv, nrm) > min_sine && su > noise && sv > noise;
+}
+
 void vx_gpatch_eval(const double *cp, double u, double v, double pos[3], double nrm[3])
 {
     double du[3], dv[3];
     eval_raw(cp, u, v, pos, du, dv);
     if (!nrm) return;
-    if (cross_unit(du, dv, nrm) > 1e-9) return;
+    double scale = 0;
+    for (int k = 0; k < 3 * VX_GPATCH_POINTS; k++)
+        scale = fmax(scale, fabs(cp[k]));
+    const double noise = 1e-12 * scale;
+    if (spans(du, dv, noise, 1e-9, nrm)) return;
     /* A collapsed edge or corner (the teapot's lid): approach the point
      * along the diagonal towards the patch centre until the tangents span a
      * plane; the normal there converges to the limit. */
     for (double t = 1e-7; t < 0.1; t *= 10) {
         double p[3];
         eval_raw(cp, u + (0.5 - u) * t, v + (0.5 - v) * t, p, du, dv);
-        if (cross_unit(du, dv, nrm) > 1e-6) return;
+        if (spans(du, dv, noise, 1e-6, nrm)) return;
     }
     nrm[0] = nrm[1] = 0;
     nrm[2] = 1; /* a patch collapsed to a curve or point has no normal */

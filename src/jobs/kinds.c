@@ -3,6 +3,7 @@
 #include <string.h>
 
 #include "bandlimit/job.h"
+#include "gregory/job.h"
 #include "jobs/kind.h"
 #include "preview/preview.h"
 #include "voxel/job.h"
@@ -11,6 +12,7 @@ static const vx_kind *const table[] = {
     &vx_kind_preview,
     &vx_kind_voxelize,
     &vx_kind_render,
+    &vx_kind_gregory,
 };
 
 const vx_kind *vx_kind_find(const char *name)

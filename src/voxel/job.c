@@ -47,27 +47,6 @@ static const cJSON *field(const cJSON *params, const char *name)
     return it && !cJSON_IsNull(it) ? it : NULL;
 }
 
-/* Optional string from a NULL-terminated list; *out = its index. */
-static int param_enum(const cJSON *params, const char *name, const char *const *names, int def,
-                      int *out, vx_err *err)
-{
-    const cJSON *it = field(params, name);
-    if (!it) {
-        *out = def;
-        return 0;
-    }
-    if (cJSON_IsString(it))
-        for (int i = 0; names[i]; i++)
-            if (strcmp(names[i], it->valuestring) == 0) {
-                *out = i;
-                return 0;
-            }
-    char list[128] = "";
-    for (int i = 0; names[i]; i++)
-        snprintf(list + strlen(list), sizeof list - strlen(list), "%s%s", i ? ", " : "", names[i]);
-    return vx_err_set(err, VX_EUNPROC, "invalid_params", "params.%s must be one of %s", name, list);
-}
-
 /* params.grid: {"origin": [x,y,z], "voxel_size": h, "dims": [nx,ny,nz]}. */
 static int read_box(const cJSON *g, vx_grid *box, vx_err *err)
 {
@@ -179,12 +158,12 @@ static int read_params(const cJSON *params, const vx_limits *lim, vparams *p, vx
     if (vx_param_int(params, "resolution", 256, 1, 2048, &p->resolution, err) ||
         vx_param_number(params, "voxel_size", 1, 0, HUGE_VAL, &p->voxel_size, err) ||
         vx_param_int(params, "padding", 0, 0, 1024, &p->padding, err) ||
-        param_enum(params, "method", method_names, 0, &method, err) ||
-        param_enum(params, "inside", inside_names, 0, &inside, err) ||
-        param_enum(params, "fill", fill_names, 0, &fill, err) ||
+        vx_param_enum(params, "method", method_names, 0, &method, err) ||
+        vx_param_enum(params, "inside", inside_names, 0, &inside, err) ||
+        vx_param_enum(params, "fill", fill_names, 0, &fill, err) ||
         vx_param_int(params, "supersample", 1, 1, 2, &ss, err) ||
         vx_param_int(params, "threshold", 4, 1, 8, &thr, err) ||
-        param_enum(params, "format", format_names, 0, &format, err))
+        vx_param_enum(params, "format", format_names, 0, &format, err))
         return -1;
     if (vs && !(p->voxel_size > 0))
         return vx_err_set(err, VX_EUNPROC, "invalid_params", "params.voxel_size must be > 0");

@@ -28,9 +28,11 @@ headers must be present (when the record has "headers") and match their
 schema. voxeld-specific extras: Job bodies are checked against the kind's
 entry in the top-level `x-kinds` extension (normalised params, stats, output
 URLs (outputs with `requested_by: P` only when params[P] lists them; with
-`numbered_by: P`, NAME_000.. when params[P] > 1); an output with
-`absent_when: {param: value}` is not expected when the
-job's params have that value), Info.kinds against `x-kinds`, /metrics bodies against `x-metrics`.
+`numbered_by: P`, NAME_000.. when params[P] > 1; with `per_item_of: P`, once
+per element of the array params.P, named by formatting its name with n = 1,
+2, ...); an output with `absent_when: {param: value}` is not expected when
+the job's params have that value), Info.kinds against `x-kinds`, /metrics
+bodies against `x-metrics`.
 
 Prints one line per failure and a summary line
   openapi: N responses checked, M failures, P/Q operations exercised
@@ -514,6 +516,14 @@ class Checker:
             for o in k.get("outputs") or []:
                 if (isinstance(o.get("absent_when"), dict) and o["absent_when"]
                         and all(params.get(p) == v for p, v in o["absent_when"].items())):
+                    continue
+                # `per_item_of: P`: once per element of the array params[P],
+                # the name formatted with n = 1, 2, ...
+                pi = o.get("per_item_of")
+                if isinstance(pi, str):
+                    items = params.get(pi)
+                    if isinstance(items, list):
+                        want += [o.get("name", "").format(n=i + 1) for i in range(len(items))]
                     continue
                 # `requested_by: P`: written only when params[P] (a list) names it.
                 rb = o.get("requested_by")

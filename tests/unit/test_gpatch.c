@@ -118,12 +118,35 @@ static void test_collapsed_edge(void **state)
     assert_true(n[0] * nn[0] + n[1] * nn[1] + n[2] * nn[2] > 0.99);
 }
 
+/* The same with coordinates that are not exact in binary (the teapot's):
+ * the derivative along the collapsed edge is then rounding noise in a
+ * random direction, which must not be taken for a tangent. */
+static void test_collapsed_edge_inexact(void **state)
+{
+    (void)state;
+    double cp[60];
+    make_patch(cp, 1, 13);
+    for (int i = 0; i < 4; i++) {
+        cp[3 * (12 + i)] = 0.1;
+        cp[3 * (12 + i) + 1] = 0.7;
+        cp[3 * (12 + i) + 2] = 0.3;
+    }
+    for (int k = 0; k <= 10; k++) {
+        double p[3], n[3], pn[3], nn[3];
+        vx_gpatch_eval(cp, k / 10.0, 1.0, p, n);
+        vx_gpatch_eval(cp, 0.5 + (k / 10.0 - 0.5) * (1 - 1e-4), 1.0 - 1e-4, pn, nn);
+        assert_true(fabs(n[0] * n[0] + n[1] * n[1] + n[2] * n[2] - 1) < 1e-9);
+        assert_true(n[0] * nn[0] + n[1] * nn[1] + n[2] * nn[2] > 0.99);
+    }
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_bezier_case),
         cmocka_unit_test(test_boundaries_and_normals),
         cmocka_unit_test(test_collapsed_edge),
+        cmocka_unit_test(test_collapsed_edge_inexact),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

@@ -1,0 +1,460 @@
+/* The `gregory` job kind (job.h): polygon or Bézier mesh -> Gregory patches
+ * (build.c) -> GPU tessellation (tess.c) of frame 0 and of every deformation
+ * frame, reusing the topology tables and the output layout -> OBJ / PLY /
+ * Draco per frame. */
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+#include "gregory/job.h"
+#include "gregory/tess.h"
+
+enum { CONS_INTERPOLATE = 0, CONS_APPROX_CC };
+enum { FMT_OBJ = 0, FMT_PLY, FMT_DRC };
+static const char *const cons_names[] = {"interpolate", "approximate-cc", NULL};
+static const char *const fmt_names[] = {"obj", "ply", "drc", NULL};
+static const char *const fmt_types[] = {"model/obj", "application/x-ply", "model/x-draco"};
+static const char *const known[] = {"divisions", "max_edge", "construction", "weld", "frames",
+                                    "format",    NULL};
+
+#define DEFAULT_DIVISIONS 8
+
+typedef struct gparams {
+    long divisions;  /* 0 when max_edge is used */
+    double max_edge; /* 0 when divisions is used */
+    int construction, weld, format;
+    const cJSON *frames; /* NULL or the array */
+    int frames_are_ids;
+} gparams;
+
+static const cJSON *field(const cJSON *params, const char *name)
+{
+    const cJSON *it = params ? cJSON_GetObjectItemCaseSensitive(params, name) : NULL;
+    return it && !cJSON_IsNull(it) ? it : NULL;
+}
+
+/* One frame given as positions: [x0, y0, z0, x1, ...] or [[x, y, z], ...].
+ * Returns the number of vertices it holds, or -1 with err. */
+static long frame_count(const cJSON *f, size_t index, vx_err *err)
+{
+    long n = 0;
+    int nested = -1;
+    const cJSON *e;
+    cJSON_ArrayForEach(e, f)
+    {
+        int is_num = cJSON_IsNumber(e) && isfinite(e->valuedouble);
+        int is_triple = cJSON_IsArray(e) && cJSON_GetArraySize(e) == 3;
+        if (is_triple)
+            for (int c = 0; c < 3; c++) {
+                const cJSON *x = cJSON_GetArrayItem(e, c);
+                is_triple &= cJSON_IsNumber(x) && isfinite(x->valuedouble);
+            }
+        if (nested < 0) nested = is_triple;
+        if (nested ? !is_triple : !is_num)
+            return vx_err_set(err, VX_EUNPROC, "invalid_params",
+                              "params.frames[%zu][%ld] must be a finite number (flat x, y, z "
+                              "list) or an [x, y, z] array, the same form throughout",
+                              index, n);
+        n++;
+    }
+    if (nested) return n;
+    if (n % 3)
+        return vx_err_set(err, VX_EUNPROC, "invalid_params",
+                          "params.frames[%zu] has %ld numbers, not a multiple of 3", index, n);
+    return n / 3;
+}
+
+/* Reads and validates params; the one place that knows the fields. */
+static int read_params(const cJSON *params, const vx_limits *lim, gparams *p, vx_err *err)
+{
+    memset(p, 0, sizeof *p);
+    if (params && !cJSON_IsObject(params) && !cJSON_IsNull(params))
+        return vx_err_set(err, VX_EUNPROC, "invalid_params", "params must be an object");
+    if (params && cJSON_IsNull(params)) params = NULL;
+    if (params && vx_param_only(params, known, err)) return -1;
+    const cJSON *div = field(params, "divisions"), *me = field(params, "max_edge");
+    if (div && me)
+        return vx_err_set(err, VX_EUNPROC, "invalid_params",
+                          "params.divisions and params.max_edge exclude each other");
+    if (me) {
+        if (vx_param_number(params, "max_edge", 0, 0, 1e300, &p->max_edge, err)) return -1;
+        if (!(p->max_edge > 0))
+            return vx_err_set(err, VX_EUNPROC, "invalid_params", "params.max_edge must be > 0");
+    } else if (vx_param_int(params, "divisions", DEFAULT_DIVISIONS, 1, VX_GREGORY_MAX_DIVISIONS,
+                            &p->divisions, err))
+        return -1;
+    if (vx_param_enum(params, "construction", cons_names, CONS_INTERPOLATE, &p->construction,
+                      err) ||
+        vx_param_bool(params, "weld", 1, &p->weld, err) ||
+        vx_param_enum(params, "format", fmt_names, FMT_OBJ, &p->format, err))
+        return -1;
+    if (p->construction == CONS_APPROX_CC) /* the one place: see construct() */
+        return vx_err_set(err, VX_EUNPROC, "invalid_params",
+                          "params.construction: approximate-cc is not available in this build");
+    /* Known at submission: the smallest mesh has one patch. */
+    if (lim && lim->max_triangles && p->divisions &&
+        2 * (uint64_t)p->divisions * (uint64_t)p->divisions > lim->max_triangles)
+        return vx_err_set(err, VX_EUNPROC, "invalid_params",
+                          "params.divisions = %ld makes %llu triangles per patch, over the limit "
+                          "of %llu",
+                          p->divisions, 2ull * p->divisions * p->divisions,
+                          (unsigned long long)lim->max_triangles);
+    const cJSON *fr = field(params, "frames");
+    if (!fr) return 0;
+    if (!cJSON_IsArray(fr) || cJSON_GetArraySize(fr) > VX_GREGORY_MAX_FRAMES)
+        return vx_err_set(
+            err, VX_EUNPROC, "invalid_params",
+            "params.frames must be an array of at most %d position arrays or mesh ids",
+            VX_GREGORY_MAX_FRAMES);
+    const cJSON *first = cJSON_GetArrayItem(fr, 0);
+    if (first && cJSON_IsString(first)) {
+        const cJSON *ids;
+        if (vx_param_mesh_ids(params, "frames", VX_GREGORY_MAX_FRAMES, &ids, err)) return -1;
+        p->frames_are_ids = 1;
+    } else {
+        const cJSON *f;
+        size_t i = 0;
+        long n0 = -1;
+        cJSON_ArrayForEach(f, fr)
+        {
+            if (!cJSON_IsArray(f))
+                return vx_err_set(err, VX_EUNPROC, "invalid_params",
+                                  "params.frames[%zu] must be an array of positions (or every "
+                                  "entry a mesh id)",
+                                  i);
+            long n = frame_count(f, i, err);
+            if (n < 0) return -1;
+            if (n0 >= 0 && n != n0)
+                return vx_err_set(err, VX_EUNPROC, "invalid_params",
+                                  "params.frames[%zu] has %ld vertices, frames[0] %ld", i, n, n0);
+            n0 = n;
+            i++;
+        }
+    }
+    p->frames = fr;
+    return 0;
+}
+
+static cJSON *greg_parse(const cJSON *params, const vx_limits *lim, vx_err *err)
+{
+    gparams p;
+    if (read_params(params, lim, &p, err)) return NULL;
+    cJSON *o = cJSON_CreateObject();
+    cJSON *fr = p.frames ? cJSON_Duplicate(p.frames, 1) : cJSON_CreateNull();
+    if (!o || !fr ||
+        !(p.max_edge > 0 ? cJSON_AddNullToObject(o, "divisions")
+                         : cJSON_AddNumberToObject(o, "divisions", (double)p.divisions)) ||
+        !(p.max_edge > 0 ? cJSON_AddNumberToObject(o, "max_edge", p.max_edge)
+                         : cJSON_AddNullToObject(o, "max_edge")) ||
+        !cJSON_AddStringToObject(o, "construction", cons_names[p.construction]) ||
+        !cJSON_AddBoolToObject(o, "weld", p.weld) ||
+        !cJSON_AddStringToObject(o, "format", fmt_names[p.format]) ||
+        !cJSON_AddItemToObject(o, "frames", fr)) {
+        cJSON_Delete(o);
+        cJSON_Delete(fr);
+        vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for gregory params");
+        return NULL;
+    }
+    return o;
+}
+
+static size_t greg_mesh_refs(const cJSON *params, const char **ids, size_t max)
+{
+    const cJSON *fr = field(params, "frames");
+    const cJSON *first = fr ? cJSON_GetArrayItem(fr, 0) : NULL;
+    if (!first || !cJSON_IsString(first)) return 0;
+    size_t n = 0;
+    const cJSON *e;
+    cJSON_ArrayForEach(e, fr)
+    {
+        if (n < max && cJSON_IsString(e)) ids[n] = e->valuestring;
+        n++;
+    }
+    return n;
+}
+
+typedef struct greg_state {
+    vx_gtess_layout *layout;
+    size_t nframes;
+    double **pos; /* per frame: 3 * layout->nverts */
+    float **nrm;
+} greg_state;
+
+static void greg_free_state(void *state)
+{
+    greg_state *s = state;
+    if (!s) return;
+    for (size_t f = 0; f < s->nframes; f++) {
+        if (s->pos) free(s->pos[f]);
+        if (s->nrm) free(s->nrm[f]);
+    }
+    free(s->pos);
+    free(s->nrm);
+    vx_gregory_layout_free(s->layout);
+    free(s);
+}
+
+static double now_ms(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (double)ts.tv_sec * 1e3 + (double)ts.tv_nsec / 1e6;
+}
+
+/* The patch set of one frame. The topology tables (topo) are made for the
+ * first frame and reused; Bézier input rebuilds its (trivial) set. */
+typedef struct builder {
+    const vx_mesh *mesh;
+    int construction;
+    vx_gregory_topo *topo;
+    vx_gpatch_set *set;
+} builder;
+
+static int construct(builder *b, const double *pos, vx_err *err)
+{
+    if (b->mesh->npatches > 0) {
+        vx_gpatch_set *s = vx_gregory_from_bezier(b->mesh, pos, err);
+        if (!s) return -1;
+        vx_gpatch_set_free(b->set);
+        b->set = s;
+        return 0;
+    }
+    switch (b->construction) {
+    case CONS_APPROX_CC:
+        /* Merger: vx_gregory_build_approx_cc (osd.h) fills b->set here;
+         * read_params rejects it until then. */
+        return vx_err_set(err, VX_EUNPROC, "invalid_params",
+                          "params.construction: approximate-cc is not available in this build");
+    default:
+        if (!b->topo) {
+            b->topo = vx_gregory_topo_new(b->mesh, err);
+            if (!b->topo) return -1;
+            b->set = vx_gpatch_set_new(vx_gregory_topo_npatches(b->topo));
+            if (!b->set)
+                return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for patches");
+        }
+        vx_gregory_build(b->topo, pos, b->set);
+        return 0;
+    }
+}
+
+/* Positions of frame k >= 1 into buf (3 * nverts), or a loaded mesh. */
+static const double *frame_positions(vx_job_run *r, const vx_mesh *mesh, const gparams *p, size_t k,
+                                     double *buf, vx_mesh **loaded, vx_err *err)
+{
+    const cJSON *f = cJSON_GetArrayItem(p->frames, (int)(k - 1));
+    if (p->frames_are_ids) {
+        vx_mesh *m = vx_run_load_mesh(r, f->valuestring, err);
+        if (!m) return NULL;
+        int same = m->nverts == mesh->nverts && m->nfaces == mesh->nfaces &&
+                   (m->face_start == NULL) == (mesh->face_start == NULL) &&
+                   m->npatches == mesh->npatches;
+        if (same && mesh->face_start)
+            same = memcmp(m->face_start, mesh->face_start,
+                          (mesh->nfaces + 1) * sizeof *mesh->face_start) == 0;
+        if (same) {
+            size_t nidx = mesh->face_start ? mesh->face_start[mesh->nfaces] : 3 * mesh->nfaces;
+            same = memcmp(m->face_idx, mesh->face_idx, nidx * sizeof *mesh->face_idx) == 0;
+        }
+        if (same && mesh->npatches)
+            same =
+                memcmp(m->patch_idx, mesh->patch_idx, 16 * mesh->npatches * sizeof(uint32_t)) == 0;
+        if (!same) {
+            vx_mesh_free(m);
+            vx_err_set(err, VX_EUNPROC, "frame_topology",
+                       "frame %zu (mesh %s) does not have the topology of the job's mesh", k,
+                       f->valuestring);
+            return NULL;
+        }
+        *loaded = m;
+        return m->pos;
+    }
+    size_t n = (size_t)cJSON_GetArraySize(f);
+    const cJSON *first = cJSON_GetArrayItem(f, 0);
+    size_t nv = first && cJSON_IsArray(first) ? n : n / 3;
+    if (nv != mesh->nverts) {
+        vx_err_set(err, VX_EUNPROC, "frame_topology",
+                   "params.frames[%zu] has %zu vertices, the mesh %zu", k - 1, nv, mesh->nverts);
+        return NULL;
+    }
+    size_t i = 0;
+    const cJSON *e;
+    cJSON_ArrayForEach(e, f)
+    {
+        if (cJSON_IsArray(e))
+            for (int c = 0; c < 3; c++)
+                buf[i++] = cJSON_GetArrayItem(e, c)->valuedouble;
+        else
+            buf[i++] = e->valuedouble;
+    }
+    return buf;
+}
+
+static int greg_run_gl(vx_job_run *r, const vx_mesh *mesh, const cJSON *params, void **state,
+                       vx_err *err)
+{
+    gparams p;
+    const vx_limits *lim = vx_run_limits(r);
+    if (read_params(params, lim, &p, err)) return -1;
+    size_t nframes = 1 + (p.frames ? (size_t)cJSON_GetArraySize(p.frames) : 0);
+    builder b = {.mesh = mesh, .construction = p.construction};
+    vx_gtess *tess = NULL;
+    uint32_t *ndiv = NULL;
+    float *grid = NULL;
+    double *fbuf = NULL;
+    int rc = -1;
+    cJSON *frame_ms = cJSON_CreateArray();
+    double t0 = now_ms();
+    if (construct(&b, mesh->pos, err)) goto done;
+    double build_ms = now_ms() - t0;
+    ndiv = vx_gregory_divisions(b.set, (int)p.divisions, p.max_edge, err);
+    if (!ndiv) goto done;
+    uint64_t gv, nt;
+    vx_gregory_count(b.set->npatches, ndiv, &gv, &nt);
+    if (lim->max_triangles && nt > lim->max_triangles) {
+        vx_err_set(err, VX_ETOOBIG, "triangle_limit",
+                   "%zu patches at these divisions make %llu triangles, over the limit of %llu",
+                   b.set->npatches, (unsigned long long)nt, (unsigned long long)lim->max_triangles);
+        goto done;
+    }
+    /* Grid, per-frame outputs (at most one vertex per grid vertex), layout. */
+    uint64_t bytes = gv * (6 * sizeof(float) + sizeof(uint64_t) + sizeof(uint32_t)) +
+                     (uint64_t)nframes * gv * (3 * sizeof(double) + 3 * sizeof(float)) +
+                     nt * 4 * sizeof(uint32_t) + b.set->npatches * VX_GPATCH_POINTS * 3 * 8;
+    if (lim->max_job_memory && bytes > lim->max_job_memory) {
+        vx_err_set(err, VX_ETOOBIG, "job_memory_limit",
+                   "%zu frames of %llu vertices need about %llu bytes, over the job memory limit "
+                   "of %llu",
+                   nframes, (unsigned long long)gv, (unsigned long long)bytes,
+                   (unsigned long long)lim->max_job_memory);
+        goto done;
+    }
+    greg_state *s = calloc(1, sizeof *s);
+    if (!s) {
+        vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for the gregory state");
+        goto done;
+    }
+    *state = s; /* from here on the runner frees it through free_state */
+    s->pos = calloc(nframes, sizeof *s->pos);
+    s->nrm = calloc(nframes, sizeof *s->nrm);
+    grid = malloc((gv + 1) * 6 * sizeof *grid);
+    fbuf = p.frames && !p.frames_are_ids ? malloc((3 * mesh->nverts + 1) * sizeof *fbuf) : NULL;
+    if (!s->pos || !s->nrm || !grid || (p.frames && !p.frames_are_ids && !fbuf)) {
+        vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for the tessellation");
+        goto done;
+    }
+    s->nframes = nframes;
+    s->layout = vx_gregory_layout_new(b.set, ndiv, p.weld, err);
+    if (!s->layout) goto done;
+    double origin[3];
+    for (int c = 0; c < 3; c++)
+        origin[c] = 0.5 * (mesh->bbox_min[c] + mesh->bbox_max[c]);
+    double gpu_ms = 0, first_tess_ms = 0;
+    tess = vx_gtess_new(vx_run_gl(r), s->layout, err);
+    if (!tess) goto done;
+    for (size_t k = 0; k < nframes; k++) {
+        double f0 = now_ms();
+        if (k > 0) {
+            vx_mesh *loaded = NULL;
+            const double *pos = frame_positions(r, mesh, &p, k, fbuf, &loaded, err);
+            if (!pos) goto done;
+            int bad = construct(&b, pos, err);
+            vx_mesh_free(loaded);
+            if (bad) goto done;
+        }
+        double ms;
+        if (vx_gtess_run(tess, b.set, origin, grid, &ms, err)) goto done;
+        gpu_ms += ms;
+        if (k == 0) first_tess_ms = ms;
+        s->pos[k] = malloc((3 * s->layout->nverts + 1) * sizeof **s->pos);
+        s->nrm[k] = malloc((3 * s->layout->nverts + 1) * sizeof **s->nrm);
+        if (!s->pos[k] || !s->nrm[k]) {
+            vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for frame %zu", k);
+            goto done;
+        }
+        vx_gregory_gather(s->layout, grid, origin, s->pos[k], s->nrm[k]);
+        if (frame_ms) cJSON_AddItemToArray(frame_ms, cJSON_CreateNumber(now_ms() - f0));
+        if (vx_run_progress(r, 0.9 * (double)(k + 1) / (double)nframes, err)) goto done;
+    }
+    cJSON *stats = vx_run_stats(r);
+    if (stats) {
+        uint32_t nmin = UINT32_MAX, nmax = 0;
+        for (size_t i = 0; i < b.set->npatches; i++) {
+            if (ndiv[i] < nmin) nmin = ndiv[i];
+            if (ndiv[i] > nmax) nmax = ndiv[i];
+        }
+        cJSON_AddStringToObject(stats, "construction",
+                                mesh->npatches ? "bezier" : cons_names[p.construction]);
+        cJSON_AddNumberToObject(stats, "patches", (double)b.set->npatches);
+        cJSON_AddNumberToObject(stats, "vertices", (double)s->layout->nverts);
+        cJSON_AddNumberToObject(stats, "triangles", (double)s->layout->ntris);
+        cJSON_AddNumberToObject(stats, "divisions_min", b.set->npatches ? nmin : 0);
+        cJSON_AddNumberToObject(stats, "divisions_max", nmax);
+        cJSON_AddNumberToObject(stats, "frames", (double)nframes);
+        cJSON_AddNumberToObject(stats, "build_ms", build_ms);
+        cJSON_AddNumberToObject(stats, "gpu_ms", first_tess_ms);
+        cJSON_AddNumberToObject(stats, "gpu_total_ms", gpu_ms);
+        cJSON_AddNumberToObject(stats, "vertices_per_s",
+                                first_tess_ms > 0 ? (double)gv / (first_tess_ms / 1e3) : 0);
+        if (frame_ms) {
+            cJSON_AddItemToObject(stats, "frame_ms", frame_ms);
+            frame_ms = NULL;
+        }
+    }
+    rc = 0;
+done:
+    vx_gtess_free(tess);
+    cJSON_Delete(frame_ms);
+    free(ndiv);
+    free(grid);
+    free(fbuf);
+    vx_gpatch_set_free(b.set);
+    vx_gregory_topo_free(b.topo);
+    return rc;
+}
+
+static int greg_encode(vx_job_run *r, const cJSON *params, void *state, vx_err *err)
+{
+    greg_state *s = state;
+    gparams p;
+    if (read_params(params, NULL, &p, err)) return -1;
+    const vx_gtess_layout *l = s->layout;
+    for (size_t k = 0; k < s->nframes; k++) {
+        char name[32];
+        if (k == 0)
+            snprintf(name, sizeof name, "mesh");
+        else
+            snprintf(name, sizeof name, "frame_%03zu", k);
+        const char *path = vx_run_output(r, name, fmt_names[p.format], fmt_types[p.format], err);
+        if (!path) return -1;
+        vx_mesh m = {.nverts = l->nverts,
+                     .pos = s->pos[k],
+                     .nfaces = l->ntris,
+                     .face_idx = l->tri,
+                     .ntris = l->ntris,
+                     .tri = l->tri};
+        vx_mesh_write_opts o = {.normals = s->nrm[k],
+                                /* OBJ groups per patch only when each patch is its own part */
+                                .face_group = p.format == FMT_OBJ && p.weld ? NULL : l->tri_patch,
+                                .group_prefix = "patch"};
+        int rc = p.format == FMT_OBJ   ? vx_obj_write_path(&m, &o, path, err)
+                 : p.format == FMT_PLY ? vx_ply_write_path(&m, &o, path, err)
+                                       : vx_draco_write_path(&m, &o, path, err);
+        if (rc) return -1;
+        if (vx_run_progress(r, 0.9 + 0.1 * (double)(k + 1) / (double)s->nframes, err)) return -1;
+    }
+    return 0;
+}
+
+const vx_kind vx_kind_gregory = {
+    .name = "gregory",
+    .summary = "Smooth surface of bicubic Gregory patches (seed 001), tessellated on the GPU",
+    .parse = greg_parse,
+    .run_gl = greg_run_gl,
+    .run_cpu = NULL,
+    .encode = greg_encode,
+    .free_state = greg_free_state,
+    .mesh_refs = greg_mesh_refs,
+};

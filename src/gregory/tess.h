@@ -1,0 +1,83 @@
+/* Tessellation of Gregory patch sets: the output layout (divisions per
+ * patch, welding by corner keys, triangles) on the CPU, and the one-pass
+ * GPU evaluation of every grid vertex (seed 001 §3: each vertex of an N x N
+ * division is independent, so a compute shader evaluates them all at once).
+ *
+ * Patch p is evaluated on an (N_p + 1)^2 grid, vertex (i, j) at
+ * (u, v) = (i / N_p, j / N_p), stored at grid index voff[p] + j (N_p + 1) + i.
+ * Shared patch edges must have the same N on both sides (crack-free); the
+ * divisions helpers guarantee it by choosing one N per connected component.
+ * The layout depends only on the topology (corner keys) and the divisions,
+ * so deformation frames reuse it. */
+#ifndef VX_GREGORY_TESS_H
+#define VX_GREGORY_TESS_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#include "gl/gl.h"
+#include "gregory/gregory.h"
+
+#define VX_GREGORY_MAX_DIVISIONS 256
+
+typedef struct vx_gtess_layout {
+    size_t npatches;
+    uint32_t *ndiv; /* per patch */
+    uint64_t *voff; /* npatches + 1: first grid vertex of each patch */
+    int weld;
+    size_t nverts; /* output vertices */
+    uint64_t *rep; /* nverts: the grid vertex an output vertex is taken from */
+    size_t ntris;
+    uint32_t *tri;       /* 3 * ntris output vertex ids, counter-clockwise seen from the normal */
+    uint32_t *tri_patch; /* ntris: the patch of each triangle */
+} vx_gtess_layout;
+
+/* Divisions per patch: n for every patch (max_edge <= 0), or, for
+ * max_edge > 0, the N that brings every boundary control polygon of a patch
+ * under max_edge per segment, maximised over each connected component of
+ * patches (shared edges then match), clamped to 1..256. Owned array of
+ * npatches; NULL on allocation failure. Any thread. */
+uint32_t *vx_gregory_divisions(const vx_gpatch_set *s, int n, double max_edge, vx_err *err);
+
+/* Counts for a given division array: grid vertices, and the output
+ * vertices and triangles an unwelded tessellation makes (welding only
+ * lowers the vertex count). For limit checks before anything is allocated. */
+void vx_gregory_count(size_t npatches, const uint32_t *ndiv, uint64_t *grid_verts, uint64_t *tris);
+
+/* Builds the layout: welded (weld != 0: one output vertex per corner key,
+ * per shared edge position and per patch interior point; triangles that
+ * collapse onto a degenerate edge are dropped) or one vertex set per patch.
+ * ndiv is copied. Owned; NULL with err (VX_EUNPROC when two patches on one
+ * edge have different divisions). Any thread. */
+vx_gtess_layout *vx_gregory_layout_new(const vx_gpatch_set *s, const uint32_t *ndiv, int weld,
+                                       vx_err *err);
+void vx_gregory_layout_free(vx_gtess_layout *l);
+
+/* A tessellator for one layout: the GPU buffers (per-patch info, control
+ * points, outputs) made once, so that deformation frames only upload their
+ * control points and run the pass. Owned (free with vx_gtess_free); l must
+ * outlive it. NULL with err. GL thread. */
+typedef struct vx_gtess vx_gtess;
+vx_gtess *vx_gtess_new(vx_gl *gl, const vx_gtess_layout *l, vx_err *err);
+void vx_gtess_free(vx_gtess *t);
+/* One pass over s (the layout's patch count), as vx_gregory_tessellate.
+ * GL thread. */
+int vx_gtess_run(vx_gtess *t, const vx_gpatch_set *s, const double origin[3], float *grid,
+                 double *gpu_ms, vx_err *err);
+
+/* Evaluates every grid vertex of the layout on the GPU: grid gets 6 floats
+ * per grid vertex (position - origin, unit normal), voff[npatches] of them.
+ * One compute pass over all patches (one invocation per grid row, 2-D
+ * dispatch of at most 65535 groups per dimension; chunks of at most 65535
+ * patches and of output buffers under the SSBO limit), one read-back. *gpu_ms = time of the pass
+ * (wall clock where the driver's timer cannot see compute), buffer set-up and read-back not
+ * included. vx_gtess_new + run + free. GL thread. */
+int vx_gregory_tessellate(vx_gl *gl, const vx_gpatch_set *s, const vx_gtess_layout *l,
+                          const double origin[3], float *grid, double *gpu_ms, vx_err *err);
+
+/* Output vertex positions (3 doubles, origin added back) and normals
+ * (3 floats) from a grid the tessellator filled. Any thread. */
+void vx_gregory_gather(const vx_gtess_layout *l, const float *grid, const double origin[3],
+                       double *pos, float *nrm);
+
+#endif

@@ -1,0 +1,222 @@
+#!/usr/bin/env bash
+# The `gregory` kind through the API: spot's control mesh (quads, pentagons,
+# triangles; closed), suzanne (quads, triangles, boundaries, several parts)
+# and an n-gon prism made here; every format read back; predicted vertex and
+# triangle counts; welded closed input -> no boundary edges (the output is
+# uploaded back and the daemon's own mesh analysis counts them); frames as
+# position arrays and as mesh ids, compared with fresh jobs; max_edge; errors.
+source "$(dirname "$0")/lib.sh"
+# 100000 triangles: 2 * 256^2 per patch is then over the limit at submission.
+start_daemon --max-triangles 100000 || exit 1
+
+# A closed pentagonal prism, one side split into two triangles.
+prism() { # FILE TWIST LIFT
+    python3 - "$@" <<'EOF'
+import math, sys
+path, tw, lift = sys.argv[1], float(sys.argv[2]), float(sys.argv[3])
+with open(path, "w") as f:
+    for k in range(5):
+        for top in (0, 1):
+            a = 2 * math.pi * k / 5 + (tw if top else 0)
+            r = 0.8 if top else 1.0 + 0.1 * k
+            z = (1.2 + lift + 0.1 * math.sin(3 * a)) if top else 0.05 * k
+            f.write("v %.17g %.17g %.17g\n" % (r * math.cos(a), r * math.sin(a), z))
+    # vertex 2k+1 = bottom k, 2k+2 = top k (one-based)
+    b = lambda k: 2 * (k % 5) + 1
+    t = lambda k: 2 * (k % 5) + 2
+    f.write("f %s\n" % " ".join(str(b(k)) for k in (4, 3, 2, 1, 0)))
+    f.write("f %s\n" % " ".join(str(t(k)) for k in range(5)))
+    f.write("f %d %d %d\nf %d %d %d\n" % (b(0), b(1), t(1), b(0), t(1), t(0)))
+    for k in range(1, 5):
+        f.write("f %d %d %d %d\n" % (b(k), b(k + 1), t(k + 1), t(k)))
+EOF
+}
+prism "$TMP/prism.obj" 0.3 0
+prism "$TMP/prism2.obj" 0.5 0.4
+
+upload "$VX_MESH_DIR/spot_control_mesh.obj"
+expect_status "upload spot" 201
+M_spot=$MESH_ID
+upload "$VX_MESH_DIR/suzanne.obj"
+M_suz=$MESH_ID
+upload "$TMP/prism.obj"
+expect_status "upload prism" 201
+M_prism=$MESH_ID
+upload "$TMP/prism2.obj"
+M_prism2=$MESH_ID
+
+api GET /v1/info
+check "info lists gregory" jq -e '[.kinds[].name] | index("gregory") != null' "$BODY"
+
+# greg WHAT MESH PARAMS: a gregory job, waited for; body in $TMP/job.json.
+greg() {
+    local what=$1 mesh=$2 params=$3
+    api POST "/v1/jobs?wait=60" -H "Content-Type: application/json" \
+        -d "{\"mesh\":\"$mesh\",\"kind\":\"gregory\",\"params\":$params}"
+    GJ=$(jqb '.id // empty')
+    if [[ -n "$GJ" ]] && ! jq -e '.state == "succeeded" or .state == "failed"' "$BODY" >/dev/null; then
+        wait_job "$GJ" 120
+    fi
+    cp "$BODY" "$TMP/job.json"
+}
+ok() { check "$1: succeeded ($(jq -c '.error' "$TMP/job.json" 2>/dev/null))" jq -e '.state == "succeeded"' "$TMP/job.json"; }
+st() { jq -r ".stats.$1" "$TMP/job.json"; }
+# fetch NAME FILE: output NAME of job GJ.
+fetch() {
+    api GET "/v1/jobs/$GJ/result/$1"
+    check "result $1 of $GJ: 200" test "$STATUS" = 200
+    cp "$BODY" "$2"
+}
+# meta ID: the mesh's metadata into $TMP/meta.json.
+meta() { api GET "/v1/meshes/$1"; cp "$BODY" "$TMP/meta.json"; }
+mv_() { jq -r ".$1" "$TMP/meta.json"; }
+
+# --- counts, welded, closed input with n-gons: spot ---
+meta "$M_spot"
+V=$(mv_ vertices); F=$(mv_ faces.total); T=$(mv_ triangles)
+C=$((T + 2 * F)) # face corners (fan triangulation: n - 2 triangles per n-gon)
+for N in 1 3 8; do
+    greg "spot N=$N" "$M_spot" "{\"divisions\":$N}"
+    ok "spot N=$N"
+    check "spot N=$N: $C patches" test "$(st patches)" = "$C"
+    want_v=$((V + C / 2 + F + 2 * C * (N - 1) + C * (N - 1) * (N - 1)))
+    check "spot N=$N: $want_v vertices (got $(st vertices))" test "$(st vertices)" = "$want_v"
+    check "spot N=$N: $((2 * C * N * N)) triangles" test "$(st triangles)" = "$((2 * C * N * N))"
+    check "spot N=$N: primary output is mesh" jq -e '.outputs | keys == ["mesh"]' "$TMP/job.json"
+done
+fetch mesh "$TMP/spot.obj"
+check "spot obj: one vn per v" test "$(grep -c '^vn ' "$TMP/spot.obj")" = "$(grep -c '^v ' "$TMP/spot.obj")"
+check "spot obj: no groups when welded" test "$(grep -c '^g ' "$TMP/spot.obj")" = 0
+upload "$TMP/spot.obj"
+expect_status "upload the spot result" 201
+meta "$MESH_ID"
+check "welded spot: no boundary edges" test "$(mv_ boundary_edges)" = 0
+check "welded spot: no non-manifold edges" test "$(mv_ nonmanifold_edges)" = 0
+check "welded spot: vertices as reported" test "$(mv_ vertices)" = "$(jq -r .stats.vertices "$TMP/job.json")"
+
+# --- unwelded PLY: every patch its own vertices and a patch id per face ---
+greg "spot unwelded ply" "$M_spot" '{"divisions":4,"weld":false,"format":"ply"}'
+ok "spot unwelded ply"
+check "unwelded: C * 25 vertices" test "$(st vertices)" = "$((C * 25))"
+fetch mesh "$TMP/spot.ply"
+check "ply: binary little endian" grep -aq '^format binary_little_endian 1.0' "$TMP/spot.ply"
+check "ply: vertex count" grep -aq "^element vertex $((C * 25))\$" "$TMP/spot.ply"
+check "ply: face count" grep -aq "^element face $((32 * C))\$" "$TMP/spot.ply"
+check "ply: normals" grep -aq '^property float nx' "$TMP/spot.ply"
+check "ply: patch id per face" grep -aq '^property int patch' "$TMP/spot.ply"
+
+# --- suzanne: triangles, quads, boundaries; OBJ groups when unwelded; Draco ---
+greg "suzanne unwelded obj" "$M_suz" '{"divisions":2,"weld":false}'
+ok "suzanne unwelded obj"
+P=$(st patches)
+fetch mesh "$TMP/suz.obj"
+check "suzanne: one group per patch ($P)" test "$(grep -c '^g patch' "$TMP/suz.obj")" = "$P"
+greg "suzanne drc" "$M_suz" '{"divisions":3,"format":"drc"}'
+ok "suzanne drc"
+fetch mesh "$TMP/suz.drc"
+upload "$TMP/suz.drc" model/x-draco
+expect_status "upload the Draco result" 201
+meta "$MESH_ID"
+check "suzanne drc: triangles as reported" test "$(mv_ triangles)" = "$(jq -r .stats.triangles "$TMP/job.json")"
+check "suzanne: open input stays open" test "$(mv_ boundary_edges)" -gt 0
+
+# --- n-gon prism: closed, welded output closed ---
+greg "prism" "$M_prism" '{"divisions":6}'
+ok "prism"
+check "prism: 32 patches" test "$(st patches)" = 32
+fetch mesh "$TMP/prism_out.obj"
+upload "$TMP/prism_out.obj"
+meta "$MESH_ID"
+check "welded prism: no boundary edges" test "$(mv_ boundary_edges)" = 0
+
+# --- frames: positions array and mesh id vs fresh jobs ---
+FR=$(python3 -c '
+import sys
+print([[float(x) for x in l.split()[1:4]] for l in open(sys.argv[1]) if l.startswith("v ")])' "$TMP/prism2.obj")
+greg "prism frames (positions)" "$M_prism" "{\"divisions\":5,\"frames\":[$FR]}"
+ok "prism frames (positions)"
+check "frames: outputs mesh, frame_001" jq -e '.outputs | keys == ["frame_001", "mesh"]' "$TMP/job.json"
+fetch frame_001 "$TMP/f1.obj"
+greg "prism frames (ids)" "$M_prism" "{\"divisions\":5,\"frames\":[\"$M_prism2\",\"$M_prism\"]}"
+ok "prism frames (ids)"
+check "frames: outputs mesh, frame_001, frame_002" jq -e '.outputs | keys == ["frame_001", "frame_002", "mesh"]' "$TMP/job.json"
+check "frames: 3 frames, 3 frame times" jq -e '.stats.frames == 3 and (.stats.frame_ms | length) == 3' "$TMP/job.json"
+fetch mesh "$TMP/f0.obj"
+fetch frame_001 "$TMP/f2.obj"
+fetch frame_002 "$TMP/f3.obj"
+greg "prism2 fresh" "$M_prism2" '{"divisions":5}'
+ok "prism2 fresh"
+fetch mesh "$TMP/fresh2.obj"
+greg "prism fresh" "$M_prism" '{"divisions":5}'
+fetch mesh "$TMP/fresh0.obj"
+# maxdiff A B: largest coordinate difference of v and vn lines, relative to
+# A's bounding-box diagonal; "inf" when the structure differs.
+maxdiff() {
+    python3 - "$1" "$2" <<'EOF'
+import sys
+def read(p):
+    v, n, f = [], [], []
+    for l in open(p):
+        t = l.split()
+        if not t: continue
+        if t[0] == "v": v.append([float(x) for x in t[1:4]])
+        elif t[0] == "vn": n.append([float(x) for x in t[1:4]])
+        elif t[0] == "f": f.append(t[1:])
+    return v, n, f
+a, b = read(sys.argv[1]), read(sys.argv[2])
+if len(a[0]) != len(b[0]) or a[2] != b[2]: print("inf"); sys.exit()
+lo = [min(p[i] for p in a[0]) for i in range(3)]; hi = [max(p[i] for p in a[0]) for i in range(3)]
+d = sum((h - l) ** 2 for h, l in zip(hi, lo)) ** 0.5
+dv = max(abs(x - y) for p, q in zip(a[0], b[0]) for x, y in zip(p, q)) / d
+dn = max(abs(x - y) for p, q in zip(a[1], b[1]) for x, y in zip(p, q))
+print("%.3g %.3g" % (dv, dn))
+EOF
+}
+small() { awk -v s="$1" -v tv="$2" -v tn="$3" 'BEGIN { split(s, x, " "); exit !(x[1] != "inf" && x[1] <= tv && x[2] <= tn) }'; }
+D=$(maxdiff "$TMP/fresh2.obj" "$TMP/f2.obj")
+check "frame 2 (mesh id) = fresh job on that mesh ($D)" small "$D" 1e-6 1e-5
+D=$(maxdiff "$TMP/fresh2.obj" "$TMP/f1.obj")
+check "frame 1 (positions) = fresh job on those positions ($D)" small "$D" 1e-6 1e-5
+D=$(maxdiff "$TMP/fresh0.obj" "$TMP/f0.obj")
+check "frame 0 = fresh job on the mesh ($D)" small "$D" 0 0
+D=$(maxdiff "$TMP/fresh0.obj" "$TMP/f3.obj")
+check "frame 2 (the mesh itself) = frame 0 ($D)" small "$D" 0 0
+D=$(maxdiff "$TMP/fresh0.obj" "$TMP/f1.obj")
+check "frames differ from frame 0 ($D)" awk -v s="$D" 'BEGIN { split(s, x, " "); exit !(x[1] > 1e-3) }'
+
+# --- max_edge: one N per connected component ---
+greg "suzanne max_edge" "$M_suz" '{"max_edge":0.1}'
+ok "suzanne max_edge"
+check "max_edge: params normalised" jq -e '.params.divisions == null and .params.max_edge == 0.1' "$TMP/job.json"
+check "max_edge: components get different N" jq -e '.stats.divisions_max > .stats.divisions_min and .stats.divisions_min >= 1' "$TMP/job.json"
+fetch mesh "$TMP/suz_me.obj"
+upload "$TMP/suz_me.obj"
+meta "$MESH_ID"
+# Shared edges between patches of different N would be refused (the weld
+# needs equal divisions): no cracks. Only suzanne's own boundary stays open.
+check "max_edge: welded, open only where the input is" test "$(mv_ boundary_edges)" -gt 0
+check "max_edge: no non-manifold edges" test "$(mv_ nonmanifold_edges)" = 0
+
+# --- errors ---
+post() { api POST /v1/jobs -H "Content-Type: application/json" -d "$1"; }
+post "{\"mesh\":\"$M_spot\",\"kind\":\"gregory\",\"params\":{\"divisions\":4,\"max_edge\":1}}"
+expect_error "divisions and max_edge" 422 invalid_params
+post "{\"mesh\":\"$M_spot\",\"kind\":\"gregory\",\"params\":{\"construction\":\"approximate-cc\"}}"
+expect_error "approximate-cc not yet" 422 invalid_params
+post "{\"mesh\":\"$M_spot\",\"kind\":\"gregory\",\"params\":{\"divisions\":300}}"
+expect_error "divisions 300" 422 invalid_params
+post "{\"mesh\":\"$M_spot\",\"kind\":\"gregory\",\"params\":{\"divisions\":256}}"
+expect_error "divisions over the triangle limit" 422 invalid_params
+post "{\"mesh\":\"$M_spot\",\"kind\":\"gregory\",\"params\":{\"format\":\"stl\"}}"
+expect_error "format stl" 422 invalid_params
+post "{\"mesh\":\"$M_spot\",\"kind\":\"gregory\",\"params\":{\"frames\":[\"$(printf '%064d' 0)\"]}}"
+expect_error "unknown frame mesh" 404 mesh_not_found
+greg "spot over max_triangles" "$M_spot" '{"divisions":16}'
+check "triangle limit: job error" jq -e '.state == "failed" and .error.code == "triangle_limit"' "$TMP/job.json"
+greg "frame of another topology" "$M_prism" "{\"divisions\":2,\"frames\":[\"$M_spot\"]}"
+check "frame topology (mesh id): job error" jq -e '.state == "failed" and .error.code == "frame_topology"' "$TMP/job.json"
+greg "frame with too few vertices" "$M_prism" '{"divisions":2,"frames":[[0,0,0,1,1,1]]}'
+check "frame topology (positions): job error" jq -e '.state == "failed" and .error.code == "frame_topology"' "$TMP/job.json"
+
+stop_daemon
+finish

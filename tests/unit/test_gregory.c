@@ -1,0 +1,838 @@
+/* Gregory meshes (seed 001): G1 of the interpolate construction across
+ * every shared edge, predicted counts, welding, the GPU tessellator against
+ * the CPU evaluator, frames against fresh builds, the teapot's Bézier
+ * patches, max_edge divisions, and the job params. */
+#include <math.h>
+#include <setjmp.h>
+#include <stdarg.h>
+#include <stddef.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <cmocka.h>
+
+#include "gl_fixture.h"
+#include "gregory/gregory.h"
+#include "gregory/job.h"
+#include "gregory/tess.h"
+
+static vx_mesh *load(const char *name)
+{
+    char path[512];
+    snprintf(path, sizeof path, "%s/%s", VX_MESH_DIR, name);
+    vx_err err = {0};
+    vx_mesh *m = vx_obj_read_path(path, NULL, &err);
+    if (!m) fprintf(stderr, "%s: %s\n", path, err.message);
+    assert_non_null(m);
+    return m;
+}
+
+/* A closed pentagonal prism, one side split into two triangles, twisted
+ * and bent so that nothing is planar: pentagons, quads and triangles. */
+static vx_mesh *ngon_mesh(void)
+{
+    vx_mesh *m = vx_mesh_new();
+    assert_non_null(m);
+    m->nverts = 10;
+    m->pos = malloc(30 * sizeof *m->pos);
+    for (int k = 0; k < 5; k++)
+        for (int top = 0; top < 2; top++) {
+            double a = 2 * M_PI * k / 5 + (top ? 0.3 : 0), r = top ? 0.8 : 1.0 + 0.1 * k;
+            double *p = m->pos + 3 * (5 * top + k);
+            p[0] = r * cos(a);
+            p[1] = r * sin(a);
+            p[2] = top ? 1.2 + 0.1 * sin(3 * a) : 0.05 * k;
+        }
+    static const uint32_t idx[] = {4, 3, 2, 1, 0, 5, 6, 7, 8, 9, 0, 1, 6, 0, 6, 5,
+                                   1, 2, 7, 6, 2, 3, 8, 7, 3, 4, 9, 8, 4, 0, 5, 9};
+    static const uint32_t start[] = {0, 5, 10, 13, 16, 20, 24, 28, 32};
+    m->nfaces = 8;
+    m->face_idx = malloc(sizeof idx);
+    m->face_start = malloc(sizeof start);
+    memcpy(m->face_idx, idx, sizeof idx);
+    memcpy(m->face_start, start, sizeof start);
+    vx_err err = {0};
+    assert_int_equal(vx_mesh_analyze(m, &err), 0);
+    assert_int_equal(m->boundary_edges, 0);
+    return m;
+}
+
+static vx_gpatch_set *build(const vx_mesh *m, vx_gregory_topo **topo_out)
+{
+    vx_err err = {0};
+    vx_gregory_topo *t = vx_gregory_topo_new(m, &err);
+    assert_non_null(t);
+    vx_gpatch_set *s = vx_gpatch_set_new(vx_gregory_topo_npatches(t));
+    assert_non_null(s);
+    vx_gregory_build(t, m->pos, s);
+    if (topo_out)
+        *topo_out = t;
+    else
+        vx_gregory_topo_free(t);
+    return s;
+}
+
+static double diag(const vx_mesh *m)
+{
+    double d = 0;
+    for (int c = 0; c < 3; c++)
+        d += (m->bbox_max[c] - m->bbox_min[c]) * (m->bbox_max[c] - m->bbox_min[c]);
+    return sqrt(d);
+}
+
+/* (u, v) of parameter t along patch edge e (from corner e to corner e+1). */
+static void edge_uv(int e, double t, double *u, double *v)
+{
+    switch (e) {
+    case 0:
+        *u = t, *v = 0;
+        break;
+    case 1:
+        *u = 1, *v = t;
+        break;
+    case 2:
+        *u = 1 - t, *v = 1;
+        break;
+    default:
+        *u = 0, *v = 1 - t;
+        break;
+    }
+}
+
+/* Whether the two boundary tangents at corner c (0..3) of a patch are
+ * parallel: where fewer than three patches meet at a node (a vertex of
+ * valence 2), each patch's corner is a straight angle and its normal there
+ * is only a limit along the diagonal, which the construction does not make
+ * match across the edge. Such corner points are left out of the G1 and
+ * GPU-normal comparisons, and counted. */
+static int corner_degenerate(const double *cp, int c)
+{
+    static const int at[4] = {0, 3, 15, 12}, nu[4] = {1, 2, 14, 13}, nv[4] = {4, 7, 11, 8};
+    double a[3], b[3], x[3];
+    for (int d = 0; d < 3; d++) {
+        a[d] = cp[3 * nu[c] + d] - cp[3 * at[c] + d];
+        b[d] = cp[3 * nv[c] + d] - cp[3 * at[c] + d];
+    }
+    x[0] = a[1] * b[2] - a[2] * b[1];
+    x[1] = a[2] * b[0] - a[0] * b[2];
+    x[2] = a[0] * b[1] - a[1] * b[0];
+    double la = sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2]),
+           lb = sqrt(b[0] * b[0] + b[1] * b[1] + b[2] * b[2]);
+    return sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2]) <= 1e-6 * la * lb;
+}
+
+/* Corner index of (u, v) when it is a patch corner, else -1. */
+static int corner_of(double u, double v)
+{
+    if (u == 0 && v == 0) return 0;
+    if (u == 1 && v == 0) return 1;
+    if (u == 1 && v == 1) return 2;
+    if (u == 0 && v == 1) return 3;
+    return -1;
+}
+
+static size_t g1_skipped;
+
+/* Largest angle (degrees) between the normals of two patches at the same
+ * point of a shared edge, over every pair of patch edges with the same
+ * corner keys; also the largest position gap and the number of shared
+ * edges. */
+static double g1_max_angle(const vx_gpatch_set *s, double *max_gap, size_t *shared)
+{
+    double worst = 0;
+    *max_gap = 0;
+    *shared = 0;
+    for (size_t a = 0; a < 4 * s->npatches; a++) {
+        uint32_t a0 = s->corner_key[a], a1 = s->corner_key[4 * (a / 4) + (a % 4 + 1) % 4];
+        for (size_t b = a + 1; b < 4 * s->npatches; b++) {
+            if (b / 4 == a / 4) continue;
+            uint32_t b0 = s->corner_key[b], b1 = s->corner_key[4 * (b / 4) + (b % 4 + 1) % 4];
+            int same = a0 == b0 && a1 == b1, rev = a0 == b1 && a1 == b0;
+            if (!same && !rev) continue;
+            (*shared)++;
+            for (int k = 0; k <= 32; k++) {
+                double t = k / 32.0, ua, va, ub, vb, pa[3], pb[3], na[3], nb[3];
+                edge_uv((int)(a % 4), t, &ua, &va);
+                edge_uv((int)(b % 4), rev ? 1 - t : t, &ub, &vb);
+                vx_gpatch_eval(s->cp + (a / 4) * 60, ua, va, pa, na);
+                vx_gpatch_eval(s->cp + (b / 4) * 60, ub, vb, pb, nb);
+                int ca = corner_of(ua, va), cb = corner_of(ub, vb);
+                if ((ca >= 0 && corner_degenerate(s->cp + (a / 4) * 60, ca)) ||
+                    (cb >= 0 && corner_degenerate(s->cp + (b / 4) * 60, cb))) {
+                    g1_skipped++;
+                    continue;
+                }
+                double d = na[0] * nb[0] + na[1] * nb[1] + na[2] * nb[2];
+                double ang = acos(d > 1 ? 1 : d < -1 ? -1 : d) * 180 / M_PI;
+                if (ang > worst) worst = ang;
+                if (ang > 1 && getenv("G1_DEBUG"))
+                    fprintf(stderr,
+                            "p%zu e%zu / p%zu e%zu t=%g: %g deg na=(%g %g %g) nb=(%g %g %g) keys "
+                            "%u %u\n",
+                            a / 4, a % 4, b / 4, b % 4, t, ang, na[0], na[1], na[2], nb[0], nb[1],
+                            nb[2], a0, a1);
+                double gap =
+                    sqrt((pa[0] - pb[0]) * (pa[0] - pb[0]) + (pa[1] - pb[1]) * (pa[1] - pb[1]) +
+                         (pa[2] - pb[2]) * (pa[2] - pb[2]));
+                if (gap > *max_gap) *max_gap = gap;
+            }
+        }
+    }
+    return worst;
+}
+
+/* Largest angle between the two end normals of any patch edge: how curved
+ * the surface is (so that a G1 result is not the trivial one of a plane). */
+static double curvature_spread(const vx_gpatch_set *s)
+{
+    double worst = 0;
+    for (size_t p = 0; p < s->npatches; p++) {
+        double x[3], n0[3], n1[3];
+        vx_gpatch_eval(s->cp + p * 60, 0, 0, x, n0);
+        vx_gpatch_eval(s->cp + p * 60, 1, 1, x, n1);
+        double d = n0[0] * n1[0] + n0[1] * n1[1] + n0[2] * n1[2];
+        double a = acos(d > 1 ? 1 : d < -1 ? -1 : d) * 180 / M_PI;
+        if (a > worst) worst = a;
+    }
+    return worst;
+}
+
+static void check_g1(const vx_mesh *m, size_t want_patches)
+{
+    vx_gpatch_set *s = build(m, NULL);
+    assert_int_equal(s->npatches, want_patches);
+    double gap;
+    size_t shared;
+    g1_skipped = 0;
+    double ang = g1_max_angle(s, &gap, &shared);
+    fprintf(stderr,
+            "  %zu patches, %zu shared edges: max normal angle %.3g deg, gap %.3g "
+            "(%zu degenerate corner points left out)\n",
+            s->npatches, shared, ang, gap, g1_skipped);
+    assert_true(g1_skipped * 100 < shared * 33); /* rare: of 33 points per edge */
+    assert_true(shared > 0);
+    assert_true(ang <= 1e-3);
+    assert_true(gap <= 1e-12 * diag(m));
+    assert_true(curvature_spread(s) > 5); /* curved, not flat */
+    /* The surface faces the way the input faces do (triangles are wound
+     * along du x dv): the patch normal at its centre against its face's
+     * Newell normal. */
+    size_t along = 0;
+    for (size_t p = 0; p < s->npatches; p++) {
+        const uint32_t *fv = vx_mesh_face(m, s->face[p]);
+        uint32_t k = vx_mesh_face_size(m, s->face[p]);
+        double fn[3] = {0, 0, 0}, x[3], nn[3];
+        for (uint32_t i = 0; i < k; i++) {
+            const double *a = m->pos + 3 * fv[i], *b = m->pos + 3 * fv[(i + 1) % k];
+            fn[0] += (a[1] - b[1]) * (a[2] + b[2]);
+            fn[1] += (a[2] - b[2]) * (a[0] + b[0]);
+            fn[2] += (a[0] - b[0]) * (a[1] + b[1]);
+        }
+        vx_gpatch_eval(s->cp + p * 60, 0.5, 0.5, x, nn);
+        along += fn[0] * nn[0] + fn[1] * nn[1] + fn[2] * nn[2] > 0;
+    }
+    fprintf(stderr, "  %zu of %zu patch centres face along their face\n", along, s->npatches);
+    /* Not all: where a control cage is crumpled (spot's: faces whose
+     * normals point apart by more than 90 degrees around one vertex), the
+     * interpolating surface folds inside some patches (about 4 % on spot). */
+    assert_true(along * 100 >= s->npatches * 90);
+    /* Every patch corner sits on its node: input vertices are interpolated. */
+    for (size_t p = 0; p < s->npatches; p++)
+        for (int c = 0; c < 4; c++)
+            if (s->corner_key[4 * p + c] < m->nverts) {
+                static const int slot[4] = {0, 3, 15, 12};
+                const double *x = s->cp + p * 60 + 3 * slot[c],
+                             *y = m->pos + 3 * s->corner_key[4 * p + c];
+                assert_true(fabs(x[0] - y[0]) + fabs(x[1] - y[1]) + fabs(x[2] - y[2]) == 0);
+            }
+    vx_gpatch_set_free(s);
+}
+
+static size_t corners(const vx_mesh *m)
+{
+    size_t c = 0;
+    for (size_t f = 0; f < m->nfaces; f++)
+        c += vx_mesh_face_size(m, f);
+    return c;
+}
+
+static void test_g1_spot(void **state)
+{
+    (void)state;
+    vx_mesh *m = load("spot_control_mesh.obj");
+    check_g1(m, m->faces_by_size[1] == m->nfaces ? m->nfaces : corners(m));
+    vx_mesh_free(m);
+}
+
+static void test_g1_suzanne(void **state)
+{
+    (void)state;
+    vx_mesh *m = load("suzanne.obj");
+    assert_true(m->boundary_edges > 0 && m->faces_by_size[0] > 0);
+    check_g1(m, corners(m));
+    vx_mesh_free(m);
+}
+
+static void test_g1_ngon(void **state)
+{
+    (void)state;
+    vx_mesh *m = ngon_mesh();
+    check_g1(m, 32);
+    vx_mesh_free(m);
+}
+
+/* An all-quad mesh keeps one patch per face: a cube's six faces. */
+static void test_g1_quads(void **state)
+{
+    (void)state;
+    vx_mesh *m = vx_mesh_new();
+    m->nverts = 8;
+    m->pos = malloc(24 * sizeof *m->pos);
+    for (int i = 0; i < 8; i++) {
+        m->pos[3 * i] = (i & 1) ? 1 : -1;
+        m->pos[3 * i + 1] = (i & 2) ? 1 : -1;
+        m->pos[3 * i + 2] = (i & 4) ? 1.5 : -1;
+    }
+    static const uint32_t idx[] = {0, 2, 3, 1, 4, 5, 7, 6, 0, 1, 5, 4,
+                                   2, 6, 7, 3, 0, 4, 6, 2, 1, 3, 7, 5};
+    static const uint32_t start[] = {0, 4, 8, 12, 16, 20, 24};
+    m->nfaces = 6;
+    m->face_idx = malloc(sizeof idx);
+    m->face_start = malloc(sizeof start);
+    memcpy(m->face_idx, idx, sizeof idx);
+    memcpy(m->face_start, start, sizeof start);
+    vx_err err = {0};
+    assert_int_equal(vx_mesh_analyze(m, &err), 0);
+    check_g1(m, 6);
+    /* Quad mode: nodes are the vertices, patch edges the mesh edges. */
+    vx_gpatch_set *s = build(m, NULL);
+    for (int n = 1; n <= 6; n += 5) {
+        uint32_t *nd = vx_gregory_divisions(s, n, 0, &err);
+        vx_gtess_layout *w = vx_gregory_layout_new(s, nd, 1, &err);
+        assert_int_equal(w->nverts, 8 + 12 * (n - 1) + 6 * (n - 1) * (n - 1));
+        assert_int_equal(w->ntris, 12 * n * n);
+        vx_gregory_layout_free(w);
+        free(nd);
+    }
+    vx_gpatch_set_free(s);
+    vx_mesh_free(m);
+}
+
+static int u64_cmp(const void *x, const void *y)
+{
+    uint64_t a = *(const uint64_t *)x, b = *(const uint64_t *)y;
+    return a < b ? -1 : a > b;
+}
+
+/* An open mesh of quads only (one patch per face, boundary fans): a bumpy
+ * 4 x 3 sheet. */
+static void test_g1_open_quads(void **state)
+{
+    (void)state;
+    vx_mesh *m = vx_mesh_new();
+    m->nverts = 20;
+    m->pos = malloc(60 * sizeof *m->pos);
+    for (int j = 0; j < 4; j++)
+        for (int i = 0; i < 5; i++) {
+            double *p = m->pos + 3 * (5 * j + i);
+            p[0] = i + 0.1 * j;
+            p[1] = j;
+            p[2] = 0.4 * sin(1.3 * i) * cos(0.9 * j);
+        }
+    m->nfaces = 12;
+    m->face_start = malloc(13 * sizeof *m->face_start);
+    m->face_idx = malloc(48 * sizeof *m->face_idx);
+    for (uint32_t f = 0; f < 12; f++) {
+        uint32_t i = f % 4, j = f / 4, a = 5 * j + i;
+        uint32_t q[4] = {a, a + 1, a + 6, a + 5};
+        memcpy(m->face_idx + 4 * f, q, sizeof q);
+        m->face_start[f] = 4 * f;
+    }
+    m->face_start[12] = 48;
+    vx_err err = {0};
+    assert_int_equal(vx_mesh_analyze(m, &err), 0);
+    assert_int_equal(m->boundary_edges, 14);
+    check_g1(m, 12);
+    /* Boundary curves run smoothly through boundary vertices: the two
+     * boundary patch edges meeting at a boundary vertex have opposite
+     * tangents there (vertex 2 on the j = 0 side: patches 1 and 2). */
+    vx_gpatch_set *s = build(m, NULL);
+    const double *c1 = s->cp + 60 * 1, *c2 = s->cp + 60 * 2;
+    double t1[3], t2[3];
+    for (int c = 0; c < 3; c++) {
+        t1[c] = c1[3 * 2 + c] - c1[3 * 3 + c]; /* patch 1, v = 0 row, towards its corner 1 */
+        t2[c] = c2[3 * 1 + c] - c2[3 * 0 + c]; /* patch 2, from its corner 0 */
+    }
+    double d = t1[0] * t2[0] + t1[1] * t2[1] + t1[2] * t2[2];
+    double l1 = sqrt(t1[0] * t1[0] + t1[1] * t1[1] + t1[2] * t1[2]);
+    double l2 = sqrt(t2[0] * t2[0] + t2[1] * t2[1] + t2[2] * t2[2]);
+    assert_true(d / (l1 * l2) < -1 + 1e-12);
+    vx_gpatch_set_free(s);
+    vx_mesh_free(m);
+}
+
+/* Edges of a triangle list used by exactly one triangle. */
+static size_t boundary_edges(const uint32_t *tri, size_t ntris, size_t nverts)
+{
+    size_t n = 3 * ntris, once = 0;
+    uint64_t *k = malloc(n * sizeof *k);
+    for (size_t t = 0; t < ntris; t++)
+        for (int e = 0; e < 3; e++) {
+            uint64_t a = tri[3 * t + e], b = tri[3 * t + (e + 1) % 3];
+            k[3 * t + e] = a < b ? a * nverts + b : b * nverts + a;
+        }
+    qsort(k, n, sizeof *k, u64_cmp);
+    for (size_t i = 0; i < n;) {
+        size_t j = i;
+        while (j < n && k[j] == k[i])
+            j++;
+        once += j - i == 1;
+        i = j;
+    }
+    free(k);
+    return once;
+}
+
+static void test_counts_and_weld(void **state)
+{
+    (void)state;
+    vx_mesh *m = load("spot_control_mesh.obj");
+    assert_int_equal(m->boundary_edges, 0);
+    vx_gpatch_set *s = build(m, NULL);
+    size_t C = corners(m), E = C / 2, F = m->nfaces, V = m->nverts;
+    vx_err err = {0};
+    for (int n = 1; n <= 9; n += 4) {
+        uint32_t *nd = vx_gregory_divisions(s, n, 0, &err);
+        vx_gtess_layout *w = vx_gregory_layout_new(s, nd, 1, &err);
+        vx_gtess_layout *u = vx_gregory_layout_new(s, nd, 0, &err);
+        assert_non_null(w);
+        assert_non_null(u);
+        /* Nodes: vertices, edge midpoints, face centres; 2C patch edges. */
+        size_t want = V + E + F + 2 * C * (size_t)(n - 1) + C * (size_t)(n - 1) * (n - 1);
+        assert_int_equal(w->nverts, want);
+        assert_int_equal(w->ntris, 2 * C * (size_t)n * n);
+        assert_int_equal(u->nverts, C * (size_t)(n + 1) * (n + 1));
+        assert_int_equal(u->ntris, w->ntris);
+        assert_int_equal(boundary_edges(w->tri, w->ntris, w->nverts), 0);
+        /* Genus 0: V - E + F = 2 with E = 3T/2. */
+        assert_int_equal((long)w->nverts - (long)(3 * w->ntris / 2) + (long)w->ntris, 2);
+        /* Unwelded: every patch is open on its own. */
+        assert_int_equal(boundary_edges(u->tri, u->ntris, u->nverts), C * 4 * (size_t)n);
+        vx_gregory_layout_free(w);
+        vx_gregory_layout_free(u);
+        free(nd);
+    }
+    vx_gpatch_set_free(s);
+    vx_mesh_free(m);
+}
+
+/* GPU grid vertices against vx_gpatch_eval. */
+static void check_gpu(const vx_gpatch_set *s, const uint32_t *nd, double dg, double ptol,
+                      double ntol_deg, size_t stride)
+{
+    vx_err err = {0};
+    vx_gtess_layout *l = vx_gregory_layout_new(s, nd, 0, &err);
+    assert_non_null(l);
+    float *grid = malloc(6 * l->voff[s->npatches] * sizeof *grid);
+    double origin[3] = {0.25, -0.5, 0.125}, ms = 0;
+    assert_int_equal(vx_gregory_tessellate(vx_test_gl, s, l, origin, grid, &ms, &err), 0);
+    double worst_p = 0, worst_n = 0;
+    size_t seen = 0;
+    for (size_t p = 0; p < s->npatches; p++) {
+        uint32_t n = nd[p];
+        for (uint32_t j = 0; j <= n; j++)
+            for (uint32_t i = 0; i <= n; i++) {
+                /* every stride-th vertex, and every patch's first and last */
+                if (seen++ % stride && !(i == 0 && j == 0) && !(i == n && j == n)) continue;
+                const float *g = grid + 6 * (l->voff[p] + j * (n + 1) + i);
+                int cn = corner_of((double)i / n, (double)j / n);
+                int skip_n = cn >= 0 && corner_degenerate(s->cp + p * 60, cn);
+                double x[3], nn[3];
+                vx_gpatch_eval(s->cp + p * 60, (double)i / n, (double)j / n, x, nn);
+                double dp = 0, d = 0;
+                for (int c = 0; c < 3; c++) {
+                    dp += (g[c] + origin[c] - x[c]) * (g[c] + origin[c] - x[c]);
+                    d += (g[3 + c] - nn[c]) * (g[3 + c] - nn[c]);
+                }
+                dp = sqrt(dp) / dg;
+                /* the angle from the chord between the unit normals (acos
+                 * of a dot product near 1 loses half the digits) */
+                double a = 2 * asin(fmin(1, sqrt(d) / 2)) * 180 / M_PI;
+                if (dp > worst_p) worst_p = dp;
+                if (a > worst_n && !skip_n) worst_n = a;
+                if (a > 0.01 && getenv("G1_DEBUG"))
+                    fprintf(stderr, "p%zu (%u,%u)/%u: %g deg gpu (%g %g %g) cpu (%g %g %g)\n", p, i,
+                            j, n, a, g[3], g[4], g[5], nn[0], nn[1], nn[2]);
+            }
+    }
+    fprintf(stderr, "  GPU vs CPU: position %.3g of the diagonal, normal %.3g deg (%.2f ms)\n",
+            worst_p, worst_n, ms);
+    assert_true(worst_p <= ptol);
+    assert_true(worst_n <= ntol_deg);
+    free(grid);
+    vx_gregory_layout_free(l);
+}
+
+/* Divisions that differ between patches (max_edge on suzanne's parts):
+ * the shader finds each row's patch by search instead of by division. */
+static void test_gpu_mixed_divisions(void **state)
+{
+    (void)state;
+    vx_mesh *m = load("suzanne.obj");
+    vx_gpatch_set *s = build(m, NULL);
+    vx_err err = {0};
+    uint32_t *nd = vx_gregory_divisions(s, 0, diag(m) / 40, &err);
+    uint32_t lo = 1000, hi = 0;
+    for (size_t p = 0; p < s->npatches; p++) {
+        if (nd[p] < lo) lo = nd[p];
+        if (nd[p] > hi) hi = nd[p];
+    }
+    assert_true(hi > lo);
+    check_gpu(s, nd, diag(m), 1e-5, 0.01, 1);
+    free(nd);
+    vx_gpatch_set_free(s);
+    vx_mesh_free(m);
+}
+
+/* Over 128 MiB of output: several chunks, each its own buffers; sampled
+ * vertices of every chunk against the CPU. */
+static void test_gpu_chunks(void **state)
+{
+    (void)state;
+    vx_mesh *m = load("spot_control_mesh.obj");
+    vx_gpatch_set *s = build(m, NULL);
+    vx_err err = {0};
+    uint32_t *nd = vx_gregory_divisions(s, 128, 0, &err);
+    uint64_t gv, nt;
+    vx_gregory_count(s->npatches, nd, &gv, &nt);
+    assert_true(gv * 24 > 2 * (128u << 20)); /* at least three chunks */
+    check_gpu(s, nd, diag(m), 1e-5, 0.01, 997);
+    free(nd);
+    vx_gpatch_set_free(s);
+    vx_mesh_free(m);
+}
+
+static void test_gpu_matches_cpu(void **state)
+{
+    (void)state;
+    vx_mesh *m = load("spot_control_mesh.obj");
+    vx_gpatch_set *s = build(m, NULL);
+    vx_err err = {0};
+    uint32_t *nd = vx_gregory_divisions(s, 7, 0, &err);
+    check_gpu(s, nd, diag(m), 1e-5, 0.01, 1);
+    free(nd);
+    vx_gpatch_set_free(s);
+    vx_mesh_free(m);
+}
+
+/* Frame k through the reused topology equals a fresh build on its positions. */
+static void test_frames_reuse_topology(void **state)
+{
+    (void)state;
+    vx_mesh *m = load("suzanne.obj");
+    vx_gregory_topo *t;
+    vx_gpatch_set *s0 = build(m, &t);
+    double *moved = malloc(3 * m->nverts * sizeof *moved);
+    for (size_t v = 0; v < m->nverts; v++) {
+        const double *p = m->pos + 3 * v;
+        moved[3 * v] = p[0] + 0.2 * sin(3 * p[1]);
+        moved[3 * v + 1] = p[1] * 1.1;
+        moved[3 * v + 2] = p[2] + 0.1 * p[0] * p[0];
+    }
+    vx_gpatch_set *s1 = vx_gpatch_set_new(s0->npatches);
+    vx_gregory_build(t, moved, s1);
+    vx_mesh *m2 = load("suzanne.obj");
+    memcpy(m2->pos, moved, 3 * m->nverts * sizeof *moved);
+    vx_gpatch_set *fresh = build(m2, NULL);
+    assert_int_equal(fresh->npatches, s1->npatches);
+    assert_memory_equal(fresh->cp, s1->cp, s1->npatches * 60 * sizeof(double));
+    assert_memory_equal(fresh->corner_key, s1->corner_key, 4 * s1->npatches * sizeof(uint32_t));
+    assert_memory_not_equal(s0->cp, s1->cp, s1->npatches * 60 * sizeof(double));
+    /* The frame is G1 too. */
+    double gap;
+    size_t shared;
+    assert_true(g1_max_angle(s1, &gap, &shared) <= 1e-3);
+    vx_gpatch_set_free(s0);
+    vx_gpatch_set_free(s1);
+    vx_gpatch_set_free(fresh);
+    vx_gregory_topo_free(t);
+    free(moved);
+    vx_mesh_free(m);
+    vx_mesh_free(m2);
+}
+
+/* newell-teapot.bpt read here (the upload reader is elsewhere): patch
+ * count, 16 one-based indices per patch, point count, points. */
+static vx_mesh *teapot(void)
+{
+    char path[512];
+    snprintf(path, sizeof path, "%s/newell-teapot.bpt", VX_MESH_DIR);
+    FILE *f = fopen(path, "r");
+    assert_non_null(f);
+    vx_mesh *m = vx_mesh_new();
+    assert_int_equal(fscanf(f, "%zu", &m->npatches), 1);
+    m->patch_idx = malloc(16 * m->npatches * sizeof *m->patch_idx);
+    for (size_t i = 0; i < 16 * m->npatches; i++) {
+        unsigned x;
+        assert_int_equal(fscanf(f, " %u ,", &x), 1);
+        m->patch_idx[i] = x - 1;
+    }
+    assert_int_equal(fscanf(f, "%zu", &m->nverts), 1);
+    m->pos = malloc(3 * m->nverts * sizeof *m->pos);
+    for (size_t i = 0; i < m->nverts; i++)
+        assert_int_equal(
+            fscanf(f, " %lf , %lf , %lf", m->pos + 3 * i, m->pos + 3 * i + 1, m->pos + 3 * i + 2),
+            3);
+    fclose(f);
+    for (int c = 0; c < 3; c++) {
+        m->bbox_min[c] = INFINITY;
+        m->bbox_max[c] = -INFINITY;
+    }
+    for (size_t i = 0; i < m->nverts; i++)
+        for (int c = 0; c < 3; c++) {
+            if (m->pos[3 * i + c] < m->bbox_min[c]) m->bbox_min[c] = m->pos[3 * i + c];
+            if (m->pos[3 * i + c] > m->bbox_max[c]) m->bbox_max[c] = m->pos[3 * i + c];
+        }
+    return m;
+}
+
+static void bezier(const vx_mesh *m, size_t p, double u, double v, double out[3])
+{
+    double bu[4] = {(1 - u) * (1 - u) * (1 - u), 3 * u * (1 - u) * (1 - u), 3 * u * u * (1 - u),
+                    u * u * u};
+    double bv[4] = {(1 - v) * (1 - v) * (1 - v), 3 * v * (1 - v) * (1 - v), 3 * v * v * (1 - v),
+                    v * v * v};
+    out[0] = out[1] = out[2] = 0;
+    for (int j = 0; j < 4; j++)
+        for (int i = 0; i < 4; i++)
+            for (int c = 0; c < 3; c++)
+                out[c] += bu[i] * bv[j] * m->pos[3 * m->patch_idx[16 * p + 4 * j + i] + c];
+}
+
+static void test_teapot_bezier(void **state)
+{
+    (void)state;
+    vx_mesh *m = teapot();
+    assert_int_equal(m->npatches, 32);
+    vx_err err = {0};
+    vx_gpatch_set *s = vx_gregory_from_bezier(m, NULL, &err);
+    assert_non_null(s);
+    const uint32_t n = 16;
+    uint32_t *nd = vx_gregory_divisions(s, (int)n, 0, &err);
+    vx_gtess_layout *l = vx_gregory_layout_new(s, nd, 0, &err);
+    float *grid = malloc(6 * l->voff[s->npatches] * sizeof *grid);
+    double origin[3], ms, dg = diag(m), worst_gpu = 0, worst_cpu = 0, worst_n = 0;
+    for (int c = 0; c < 3; c++)
+        origin[c] = 0.5 * (m->bbox_min[c] + m->bbox_max[c]);
+    assert_int_equal(vx_gregory_tessellate(vx_test_gl, s, l, origin, grid, &ms, &err), 0);
+    for (size_t p = 0; p < s->npatches; p++)
+        for (uint32_t j = 0; j <= n; j++)
+            for (uint32_t i = 0; i <= n; i++) {
+                double b[3], x[3];
+                bezier(m, p, (double)i / n, (double)j / n, b);
+                double nn[3], dn = 0;
+                vx_gpatch_eval(s->cp + p * 60, (double)i / n, (double)j / n, x, nn);
+                const float *g = grid + 6 * (l->voff[p] + j * (n + 1) + i);
+                for (int c = 0; c < 3; c++)
+                    dn += (g[3 + c] - nn[c]) * (g[3 + c] - nn[c]);
+                double ang = 2 * asin(fmin(1, sqrt(dn) / 2)) * 180 / M_PI;
+                if (ang > worst_n) worst_n = ang;
+                if (ang > 0.1 && getenv("G1_DEBUG"))
+                    fprintf(stderr, "tp p%zu (%u,%u): %g deg gpu (%g %g %g) cpu (%g %g %g)\n", p, i,
+                            j, ang, g[3], g[4], g[5], nn[0], nn[1], nn[2]);
+                double dg2 = 0, dc2 = 0;
+                for (int c = 0; c < 3; c++) {
+                    dg2 += (g[c] + origin[c] - b[c]) * (g[c] + origin[c] - b[c]);
+                    dc2 += (x[c] - b[c]) * (x[c] - b[c]);
+                }
+                if (sqrt(dg2) / dg > worst_gpu) worst_gpu = sqrt(dg2) / dg;
+                if (sqrt(dc2) / dg > worst_cpu) worst_cpu = sqrt(dc2) / dg;
+            }
+    fprintf(stderr,
+            "  teapot: GPU %.3g, CPU %.3g of the diagonal from the Bezier patches; normals "
+            "GPU vs CPU %.3g deg (the poles' collapsed edges included)\n",
+            worst_gpu, worst_cpu, worst_n);
+    assert_true(worst_gpu <= 1e-6);
+    assert_true(worst_n <= 0.01);
+    assert_true(worst_cpu <= 1e-12);
+    /* Welded through the merged corner points: fewer vertices than the
+     * patches have on their own, and every triangle still there except
+     * those collapsed onto the lid's and bottom's poles. */
+    vx_gtess_layout *w = vx_gregory_layout_new(s, nd, 1, &err);
+    assert_non_null(w);
+    assert_true(w->nverts < l->nverts);
+    assert_true(w->ntris < l->ntris && w->ntris > l->ntris * 9 / 10);
+    vx_gregory_layout_free(w);
+    free(grid);
+    free(nd);
+    vx_gregory_layout_free(l);
+    vx_gpatch_set_free(s);
+    vx_mesh_free(m);
+}
+
+/* A hand-made Bézier mesh: the interior pairs are equal and the corner
+ * keys merge equal points. */
+static void test_from_bezier_small(void **state)
+{
+    (void)state;
+    vx_mesh *m = vx_mesh_new();
+    m->nverts = 32;
+    m->pos = calloc(3 * 32, sizeof *m->pos);
+    m->npatches = 2;
+    m->patch_idx = malloc(32 * sizeof *m->patch_idx);
+    for (int p = 0; p < 2; p++)
+        for (int j = 0; j < 4; j++)
+            for (int i = 0; i < 4; i++) {
+                int k = 16 * p + 4 * j + i;
+                m->patch_idx[k] = (uint32_t)k;
+                m->pos[3 * k] = i / 3.0 + p; /* patch 1's i = 0 column is patch 0's i = 3 */
+                m->pos[3 * k + 1] = j / 3.0;
+                m->pos[3 * k + 2] = 0.1 * ((i * 7 + j * 3) % 5);
+            }
+    for (int j = 0; j < 4; j++) /* make the shared column bitwise equal */
+        memcpy(m->pos + 3 * (16 + 4 * j), m->pos + 3 * (4 * j + 3), 3 * sizeof(double));
+    vx_err err = {0};
+    vx_gpatch_set *s = vx_gregory_from_bezier(m, NULL, &err);
+    assert_non_null(s);
+    static const int pairs[4][2] = {{5, 16}, {6, 17}, {9, 18}, {10, 19}};
+    for (int p = 0; p < 2; p++)
+        for (int k = 0; k < 4; k++)
+            assert_memory_equal(s->cp + 60 * p + 3 * pairs[k][0], s->cp + 60 * p + 3 * pairs[k][1],
+                                3 * sizeof(double));
+    assert_int_equal(s->corner_key[4 + 0], s->corner_key[1]); /* p1 (0,0) = p0 (1,0) */
+    assert_int_equal(s->corner_key[4 + 3], s->corner_key[2]); /* p1 (0,1) = p0 (1,1) */
+    assert_int_not_equal(s->corner_key[0], s->corner_key[1]);
+    uint32_t nd[2] = {4, 4};
+    vx_gtess_layout *w = vx_gregory_layout_new(s, nd, 1, &err);
+    assert_int_equal(w->nverts, 2 * 25 - 5);
+    vx_gregory_layout_free(w);
+    vx_gpatch_set_free(s);
+    /* No patches: refused. */
+    m->npatches = 0;
+    assert_null(vx_gregory_from_bezier(m, NULL, &err));
+    m->npatches = 2;
+    vx_mesh_free(m);
+}
+
+/* max_edge: one N per connected component, shared edges match, and a
+ * finer target gives more divisions. */
+static void test_max_edge(void **state)
+{
+    (void)state;
+    vx_mesh *m = load("suzanne.obj");
+    vx_gpatch_set *s = build(m, NULL);
+    vx_err err = {0};
+    double d = diag(m);
+    uint32_t *a = vx_gregory_divisions(s, 0, d / 50, &err),
+             *b = vx_gregory_divisions(s, 0, d / 200, &err);
+    uint32_t amin = 1000, amax = 0;
+    for (size_t p = 0; p < s->npatches; p++) {
+        assert_true(b[p] >= a[p]);
+        assert_true(a[p] >= 1 && b[p] <= VX_GREGORY_MAX_DIVISIONS);
+        if (a[p] < amin) amin = a[p];
+        if (a[p] > amax) amax = a[p];
+    }
+    assert_true(amax > amin); /* suzanne's parts (eyes) get their own N */
+    vx_gtess_layout *l = vx_gregory_layout_new(s, a, 1, &err);
+    assert_non_null(l);
+    /* Mismatched divisions across a shared edge are refused. */
+    a[0] += 1;
+    assert_null(vx_gregory_layout_new(s, a, 1, &err));
+    assert_string_equal(err.code, "gregory_divisions");
+    vx_gregory_layout_free(l);
+    free(a);
+    free(b);
+    vx_gpatch_set_free(s);
+    vx_mesh_free(m);
+}
+
+static cJSON *parse(const char *json, vx_err *err)
+{
+    cJSON *in = cJSON_Parse(json);
+    vx_limits lim = {.max_triangles = 1000000};
+    cJSON *out = vx_kind_gregory.parse(in, &lim, err);
+    cJSON_Delete(in);
+    return out;
+}
+
+static void test_params(void **state)
+{
+    (void)state;
+    vx_err err = {0};
+    cJSON *o = parse("{}", &err);
+    assert_non_null(o);
+    assert_int_equal(cJSON_GetObjectItem(o, "divisions")->valueint, 8);
+    assert_true(cJSON_IsNull(cJSON_GetObjectItem(o, "max_edge")));
+    assert_string_equal(cJSON_GetObjectItem(o, "construction")->valuestring, "interpolate");
+    assert_true(cJSON_IsTrue(cJSON_GetObjectItem(o, "weld")));
+    assert_string_equal(cJSON_GetObjectItem(o, "format")->valuestring, "obj");
+    cJSON_Delete(o);
+    o = parse("{\"max_edge\": 0.5, \"frames\": [[0,0,0,1,1,1], [[0,0,0],[1,1,2]]]}", &err);
+    assert_non_null(o);
+    assert_true(cJSON_IsNull(cJSON_GetObjectItem(o, "divisions")));
+    cJSON_Delete(o);
+    static const char *bad[][2] = {
+        {"{\"divisions\": 4, \"max_edge\": 1}", "max_edge"},
+        {"{\"divisions\": 0}", "divisions"},
+        {"{\"divisions\": 257}", "divisions"},
+        {"{\"max_edge\": -1}", "max_edge"},
+        {"{\"construction\": \"approximate-cc\"}", "construction"},
+        {"{\"construction\": \"loop\"}", "construction"},
+        {"{\"format\": \"stl\"}", "format"},
+        {"{\"weld\": 1}", "weld"},
+        {"{\"frames\": [[0,0]]}", "frames[0]"},
+        {"{\"frames\": [[0,0,0], [0,0,0,1,1,1]]}", "frames[1]"},
+        {"{\"frames\": [\"abc\"]}", "frames[0]"},
+        {"{\"frames\": 3}", "frames"},
+        {"{\"colour\": 3}", "colour"},
+    };
+    for (size_t i = 0; i < sizeof bad / sizeof bad[0]; i++) {
+        vx_err_clear(&err);
+        assert_null(parse(bad[i][0], &err));
+        assert_int_equal(err.kind, VX_EUNPROC);
+        if (!strstr(err.message, bad[i][1])) fprintf(stderr, "%s: %s\n", bad[i][0], err.message);
+        assert_non_null(strstr(err.message, bad[i][1]));
+    }
+    /* divisions over the triangle limit on one patch: 2 * 256^2 > 100000 */
+    cJSON *in = cJSON_Parse("{\"divisions\": 256}");
+    vx_limits lim = {.max_triangles = 100000};
+    assert_null(vx_kind_gregory.parse(in, &lim, &err));
+    assert_non_null(strstr(err.message, "divisions"));
+    cJSON_Delete(in);
+    /* mesh ids of frames are the kind's further meshes */
+    const char *id = "0123456789abcdef0123456789abcdef0123456789abcdef0123456789abcdef";
+    char json[256];
+    snprintf(json, sizeof json, "{\"frames\": [\"%s\", \"%s\"]}", id, id);
+    o = parse(json, &err);
+    assert_non_null(o);
+    const char *ids[4];
+    assert_int_equal(vx_kind_gregory.mesh_refs(o, ids, 4), 2);
+    assert_string_equal(ids[1], id);
+    cJSON_Delete(o);
+}
+
+int main(void)
+{
+    const struct CMUnitTest cpu[] = {
+        cmocka_unit_test(test_g1_spot),
+        cmocka_unit_test(test_g1_suzanne),
+        cmocka_unit_test(test_g1_ngon),
+        cmocka_unit_test(test_g1_open_quads),
+        cmocka_unit_test(test_g1_quads),
+        cmocka_unit_test(test_counts_and_weld),
+        cmocka_unit_test(test_frames_reuse_topology),
+        cmocka_unit_test(test_from_bezier_small),
+        cmocka_unit_test(test_max_edge),
+        cmocka_unit_test(test_params),
+    };
+    const struct CMUnitTest gl[] = {
+        cmocka_unit_test(test_gpu_matches_cpu),
+        cmocka_unit_test(test_gpu_mixed_divisions),
+        cmocka_unit_test(test_gpu_chunks),
+        cmocka_unit_test(test_teapot_bezier),
+    };
+    int rc = cmocka_run_group_tests_name("gregory", cpu, NULL, NULL);
+    return rc |
+           cmocka_run_group_tests_name("gregory_gl", gl, vx_test_gl_setup, vx_test_gl_teardown);
+}
