@@ -2,6 +2,7 @@
  * params schema in api/openapi.yaml. */
 #include <string.h>
 
+#include "gregory/catmull_clark.h"
 #include "jobs/kind.h"
 #include "preview/preview.h"
 #include "voxel/job.h"
@@ -9,6 +10,7 @@
 static const vx_kind *const table[] = {
     &vx_kind_preview,
     &vx_kind_voxelize,
+    &vx_kind_catmull_clark,
 };
 
 const vx_kind *vx_kind_find(const char *name)

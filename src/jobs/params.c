@@ -1,5 +1,6 @@
 /* Typed, range-checked reads of job parameters (kind.h). */
 #include <math.h>
+#include <stdio.h>
 #include <string.h>
 
 #include "jobs/kind.h"
@@ -85,4 +86,24 @@ int vx_param_mesh_ids(const cJSON *params, const char *field, size_t max, const 
     }
     *out = it;
     return 0;
+}
+
+int vx_param_enum(const cJSON *params, const char *field, const char *const *names, int def,
+                  int *out, vx_err *err)
+{
+    const cJSON *it = params ? cJSON_GetObjectItemCaseSensitive(params, field) : NULL;
+    if (!it || cJSON_IsNull(it)) {
+        *out = def;
+        return 0;
+    }
+    if (cJSON_IsString(it))
+        for (int i = 0; names[i]; i++)
+            if (strcmp(names[i], it->valuestring) == 0) {
+                *out = i;
+                return 0;
+            }
+    char list[160] = "";
+    for (int i = 0; names[i]; i++)
+        snprintf(list + strlen(list), sizeof list - strlen(list), "%s%s", i ? ", " : "", names[i]);
+    return vx_err_set(err, VX_EUNPROC, "invalid_params", "params.%s must be one of %s", field, list);
 }
