@@ -42,19 +42,24 @@ Far::TopologyRefiner *refiner_new(const vx_mesh *m, vx_err *err)
     std::vector<Far::Index> idx(n);
     for (size_t i = 0; i < n; i++)
         idx[i] = (Far::Index)m->face_idx[i];
+    return refiner_new((int)m->nverts, (int)m->nfaces, sizes.data(), idx.data(), err);
+}
 
+Far::TopologyRefiner *refiner_new(int nverts, int nfaces, const int *sizes, const int *idx,
+                                  vx_err *err)
+{
     Far::TopologyDescriptor d;
-    d.numVertices = (int)m->nverts;
-    d.numFaces = (int)m->nfaces;
-    d.numVertsPerFace = sizes.data();
-    d.vertIndicesPerFace = idx.data();
+    d.numVertices = nverts;
+    d.numFaces = nfaces;
+    d.numVertsPerFace = sizes;
+    d.vertIndicesPerFace = idx;
     Sdc::Options so;
     so.SetVtxBoundaryInterpolation(Sdc::Options::VTX_BOUNDARY_EDGE_ONLY);
     typedef Far::TopologyRefinerFactory<Far::TopologyDescriptor> Factory;
     Far::TopologyRefiner *r = Factory::Create(d, Factory::Options(Sdc::SCHEME_CATMARK, so));
     if (!r)
         vx_err_set(err, VX_EUNPROC, "osd_topology",
-                   "OpenSubdiv cannot take the mesh's topology (%zu faces)", m->nfaces);
+                   "OpenSubdiv cannot take the mesh's topology (%d faces)", nfaces);
     return r;
 }
 

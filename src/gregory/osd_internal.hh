@@ -30,6 +30,9 @@ struct Point {
 // see catmull_clark.h); owned by the caller, NULL with err on failure.
 // May throw std::bad_alloc.
 OpenSubdiv::Far::TopologyRefiner *refiner_new(const vx_mesh *m, vx_err *err);
+// The same from nfaces faces of sizes[f] vertices, indices face after face.
+OpenSubdiv::Far::TopologyRefiner *refiner_new(int nverts, int nfaces, const int *sizes,
+                                              const int *idx, vx_err *err);
 
 } // namespace vx_osd
 
