@@ -36,7 +36,8 @@ Far::TopologyRefiner *refiner_new(const vx_mesh *m, vx_err *err)
         n += (size_t)sizes[f];
     }
     if (n > (size_t)INT_MAX) {
-        vx_err_set(err, VX_ETOOBIG, "mesh_too_big", "%zu face corners is too many for OpenSubdiv", n);
+        vx_err_set(err, VX_ETOOBIG, "mesh_too_big", "%zu face corners is too many for OpenSubdiv",
+                   n);
         return nullptr;
     }
     std::vector<Far::Index> idx(n);

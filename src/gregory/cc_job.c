@@ -22,7 +22,7 @@ typedef struct cc_params {
 } cc_params;
 
 typedef struct cc_state {
-    vx_mesh *in;  /* the faces and positions, copied on the GL thread */
+    vx_mesh *in; /* the faces and positions, copied on the GL thread */
     vx_mesh *out;
     float *normals;
 } cc_state;
@@ -166,7 +166,8 @@ static void cc_free_state(void *state)
 
 const vx_kind vx_kind_catmull_clark = {
     .name = "catmull-clark",
-    .summary = "Uniform Catmull-Clark subdivision (OpenSubdiv) to OBJ, PLY or Draco, with limit normals",
+    .summary =
+        "Uniform Catmull-Clark subdivision (OpenSubdiv) to OBJ, PLY or Draco, with limit normals",
     .parse = cc_parse,
     .run_gl = cc_run_gl,
     .run_cpu = cc_run_cpu,

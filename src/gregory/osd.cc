@@ -35,8 +35,8 @@ struct QuadMesh {
 int quad_mesh(const vx_mesh *m, QuadMesh &q, vx_err *err)
 {
     if (m->nverts > (size_t)INT_MAX / 8 || m->nfaces > (size_t)INT_MAX / 8)
-        return vx_err_set(err, VX_ETOOBIG, "mesh_too_big", "%zu vertices is too many for OpenSubdiv",
-                          m->nverts);
+        return vx_err_set(err, VX_ETOOBIG, "mesh_too_big",
+                          "%zu vertices is too many for OpenSubdiv", m->nverts);
     bool quads = true;
     for (size_t f = 0; f < m->nfaces && quads; f++)
         quads = vx_mesh_face_size(m, f) == 4;
@@ -106,8 +106,8 @@ struct Patches {
 int make_patches(const QuadMesh &q, int isolation, Patches &pt, vx_err *err)
 {
     std::vector<int> sizes((size_t)q.nquads(), 4);
-    pt.refiner.reset(vx_osd::refiner_new((int)q.pos.size(), q.nquads(), sizes.data(), q.idx.data(),
-                                         err));
+    pt.refiner.reset(
+        vx_osd::refiner_new((int)q.pos.size(), q.nquads(), sizes.data(), q.idx.data(), err));
     if (!pt.refiner) return -1;
     Far::PatchTableFactory::Options po((unsigned)isolation);
     po.SetEndCapType(Far::PatchTableFactory::Options::ENDCAP_GREGORY_BASIS);
@@ -132,7 +132,7 @@ int make_patches(const QuadMesh &q, int isolation, Patches &pt, vx_err *err)
     }
     if (pt.table->GetNumLocalPoints())
         pt.table->GetLocalPointStencilTable<double>()->UpdateValues(pt.points.data(),
-                                                                   pt.points.data() + nref);
+                                                                    pt.points.data() + nref);
     pt.map.reset(new Far::PatchMap(*pt.table));
     return 0;
 }

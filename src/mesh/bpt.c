@@ -35,7 +35,10 @@ static int bpt_fail(bpt_reader *r, vx_err_kind kind, const char *code, const cha
     return -1;
 }
 
-static int is_blank(char c) { return c == ' ' || c == '\t' || c == '\r' || c == '\v' || c == '\f'; }
+static int is_blank(char c)
+{
+    return c == ' ' || c == '\t' || c == '\r' || c == '\v' || c == '\f';
+}
 
 /* Reads the next non-blank line into r->line (NUL-terminated, without the
  * newline). Returns 1 at the end of the file, 0 for a line, -1 on error. */
@@ -94,8 +97,7 @@ static int split(bpt_reader *r, char **fields, int n, const char *what)
             if (!*p) return bpt_fail(r, VX_EINVAL, "bpt_junk", "trailing comma in %s", what);
         }
     }
-    if (k != n)
-        return bpt_fail(r, VX_EINVAL, "bpt_junk", "%s needs %d fields, got %d", what, n, k);
+    if (k != n) return bpt_fail(r, VX_EINVAL, "bpt_junk", "%s needs %d fields, got %d", what, n, k);
     return 0;
 }
 
@@ -140,8 +142,8 @@ static void bernstein(double t, double b[4])
 typedef struct bpt_edge {
     uint32_t key[4]; /* canonical order (the smaller of it and its reverse) */
     uint32_t patch, side;
-    int reversed;    /* key is the patch's order reversed */
-    uint32_t base;   /* first of its VX_BPT_TESS - 1 vertices */
+    int reversed;  /* key is the patch's order reversed */
+    uint32_t base; /* first of its VX_BPT_TESS - 1 vertices */
 } bpt_edge;
 
 static int cmp4(const uint32_t *x, const uint32_t *y)
@@ -210,7 +212,8 @@ static int tessellate(vx_mesh *m, const vx_mesh_limits *lim, vx_err *err)
     qsort(sorted, ne, sizeof *sorted, cmp_edge);
     uint64_t nv = m->nverts;
     for (size_t i = 0; i < ne; i++) {
-        int collapsed = sorted[i].key[0] == sorted[i].key[1] && sorted[i].key[1] == sorted[i].key[2] &&
+        int collapsed = sorted[i].key[0] == sorted[i].key[1] &&
+                        sorted[i].key[1] == sorted[i].key[2] &&
                         sorted[i].key[2] == sorted[i].key[3];
         if (i > 0 && cmp_edge(&sorted[i], &sorted[i - 1]) == 0) {
             sorted[i].base = sorted[i - 1].base;
@@ -254,10 +257,14 @@ static int tessellate(vx_mesh *m, const vx_mesh_limits *lim, vx_err *err)
             for (uint32_t a = 0; a <= T; a++) {
                 int s = -1;
                 uint32_t t = 0; /* step along side s, in the side's own direction */
-                if (b == 0) s = 0, t = a;
-                else if (b == T) s = 2, t = a;
-                else if (a == 0) s = 3, t = b;
-                else if (a == T) s = 1, t = b;
+                if (b == 0)
+                    s = 0, t = a;
+                else if (b == T)
+                    s = 2, t = a;
+                else if (a == 0)
+                    s = 3, t = b;
+                else if (a == T)
+                    s = 1, t = b;
                 uint32_t vid;
                 if (s < 0) {
                     vid = (uint32_t)next++;

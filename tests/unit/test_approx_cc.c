@@ -114,12 +114,12 @@ static double seam_gap(const vx_gpatch_set *s)
                     if (s->corner_key[4 * p + a1] != s->corner_key[4 * q + b1]) continue;
                     for (int k = 1; k < 8; k++) {
                         double t = k / 8.0;
-                        vx_gpatch_eval(cp, corner_uv[a][0] + t * (corner_uv[a1][0] - corner_uv[a][0]),
-                                       corner_uv[a][1] + t * (corner_uv[a1][1] - corner_uv[a][1]), x,
-                                       NULL);
-                        vx_gpatch_eval(cq, corner_uv[b][0] + t * (corner_uv[b1][0] - corner_uv[b][0]),
-                                       corner_uv[b][1] + t * (corner_uv[b1][1] - corner_uv[b][1]), y,
-                                       NULL);
+                        vx_gpatch_eval(
+                            cp, corner_uv[a][0] + t * (corner_uv[a1][0] - corner_uv[a][0]),
+                            corner_uv[a][1] + t * (corner_uv[a1][1] - corner_uv[a][1]), x, NULL);
+                        vx_gpatch_eval(
+                            cq, corner_uv[b][0] + t * (corner_uv[b1][0] - corner_uv[b][0]),
+                            corner_uv[b][1] + t * (corner_uv[b1][1] - corner_uv[b][1]), y, NULL);
                         worst = fmax(worst, dist3(x, y));
                     }
                 }
@@ -146,9 +146,14 @@ static double check(const char *what, vx_mesh *m, size_t want_patches)
     assert_true(gap < 1e-12);
     /* faces: every input face gives as many patches as it has corners
      * (quads: one, when the whole mesh is quads) */
-    for (size_t p = 1; p < s->npatches; p++)
-        assert_true(s->face[p] >= s->face[p - 1]);
-    assert_true(s->face[s->npatches - 1] == m->nfaces - 1);
+    int quads = m->faces_by_size[1] == m->nfaces;
+    size_t p = 0;
+    for (size_t f = 0; f < m->nfaces; f++)
+        for (uint32_t k = 0; k < (quads ? 1 : vx_mesh_face_size(m, f)); k++, p++) {
+            assert_true(p < s->npatches);
+            assert_int_equal(s->face[p], f);
+        }
+    assert_int_equal(p, s->npatches);
     vx_gpatch_set_free(s);
     return d;
 }

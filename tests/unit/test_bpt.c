@@ -176,7 +176,8 @@ static const char *edit(int line, const char *with)
     for (int l = 1; *p; l++) {
         const char *nl = strchr(p, '\n');
         size_t len = nl ? (size_t)(nl - p + 1) : strlen(p);
-        if (l == line) o += sprintf(o, "%s", with);
+        if (l == line)
+            o += sprintf(o, "%s", with);
         else {
             memcpy(o, p, len);
             o += len;
