@@ -178,6 +178,43 @@ static void eval_patch(const vx_mesh *m, const uint32_t *idx, double u, double v
         }
 }
 
+static int cmp_point(const void *a, const void *b, void *pos)
+{
+    const double *x = (const double *)pos + 3 * (size_t)*(const uint32_t *)a,
+                 *y = (const double *)pos + 3 * (size_t)*(const uint32_t *)b;
+    for (int k = 0; k < 3; k++)
+        if (x[k] != y[k]) return x[k] < y[k] ? -1 : 1;
+    return *(const uint32_t *)a < *(const uint32_t *)b ? -1 : 1;
+}
+
+/* Points written twice in the file (the teapot has some on patch seams)
+ * are one point: patch_idx is remapped to the first of equal coordinates,
+ * so that the patches sharing them share edges and corner keys. */
+static int dedupe_points(vx_mesh *m, vx_err *err)
+{
+    uint32_t *order = malloc(m->nverts * sizeof *order + 1),
+             *canon = malloc(m->nverts * sizeof *canon + 1);
+    if (!order || !canon) {
+        free(order);
+        free(canon);
+        return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for the points");
+    }
+    for (size_t i = 0; i < m->nverts; i++)
+        order[i] = (uint32_t)i;
+    qsort_r(order, m->nverts, sizeof *order, cmp_point, m->pos);
+    for (size_t i = 0; i < m->nverts; i++) {
+        const double *a = m->pos + 3 * (size_t)order[i];
+        const double *b = i ? m->pos + 3 * (size_t)order[i - 1] : NULL;
+        canon[order[i]] = b && a[0] == b[0] && a[1] == b[1] && a[2] == b[2] ? canon[order[i - 1]]
+                                                                             : order[i];
+    }
+    for (size_t k = 0; k < 16 * m->npatches; k++)
+        m->patch_idx[k] = canon[m->patch_idx[k]];
+    free(order);
+    free(canon);
+    return 0;
+}
+
 /* Builds the tessellation (faces and new vertices) of m's patches. */
 static int tessellate(vx_mesh *m, const vx_mesh_limits *lim, vx_err *err)
 {
@@ -413,6 +450,7 @@ vx_mesh *vx_bpt_read_file(FILE *f, const vx_mesh_limits *lim, vx_err *err)
         }
     }
     m->nverts = (size_t)npts;
+    if (dedupe_points(m, err)) goto fail;
     int e = next_line(r);
     if (e < 0) goto fail;
     if (!e) {

@@ -97,7 +97,9 @@ vx_mesh *vx_draco_read_file(FILE *f, const vx_mesh_limits *lim, vx_err *err);
  * count; one "x,y,z" line per point), streaming it line by line. The file's
  * k-th index of a patch goes to slot k (i = k % 4 along u, j = k / 4 along
  * v): that order gives the teapot's normals dS/du x dS/dv pointing outward.
- * pos holds the points, then the tessellation's new vertices (Bézier
+ * Points the file writes twice (equal coordinates) are one point: patch_idx
+ * names the first of them (the duplicates stay in pos, unused). pos holds
+ * the points, then the tessellation's new vertices (Bézier
  * evaluated in double); faces are VX_BPT_TESS^2 quads per patch, sharing the
  * patch corners (the control points) and the vertices of a patch edge whose
  * four control-point indices another patch uses too (either direction);

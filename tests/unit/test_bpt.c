@@ -66,11 +66,11 @@ static void test_teapot(void **state)
     assert_int_equal(m->nonmanifold_edges, 0);
     assert_int_equal(m->degenerate_tris, 0);
 
-    /* Shared edges: with 8x8 per patch and 32 patches unshared edges would
-     * leave 32*4*8 = 1024 boundary edges; the teapot's open seams are only
-     * the rim of the body's top (lid sits separately), the handle and spout
-     * ends. */
-    assert_true(m->boundary_edges < 200);
+    /* Shared edges: unshared, the 32 patches would leave 32*4*8 = 1024
+     * boundary edges; sharing by control points (duplicates merged) leaves
+     * the teapot's open seams: the lid's and the rim's edges, the handle's
+     * and the spout's ends (16 patch sides). */
+    assert_true(m->boundary_edges <= 16 * VX_BPT_TESS);
 
     /* Every tessellation vertex lies on its patch's Bézier surface, and the
      * body's normals point away from the z axis. */
@@ -148,6 +148,34 @@ static void test_flat(void **state)
         assert_true(z > 0);
         assert_float_equal(fmod(a[0] * VX_BPT_TESS / 3 + 0.5, 1), 0.5, 1e-9);
     }
+    vx_mesh_free(m);
+}
+
+/* Two flat patches side by side, x in [0, 3] and [3, 6]; the second writes
+ * its own copies of the shared edge's points. */
+static void test_duplicate_points(void **state)
+{
+    (void)state;
+    char buf[2048], *p = buf;
+    p += sprintf(p, "2\n");
+    for (int k = 1; k <= 16; k++)
+        p += sprintf(p, "%d%s", k, k < 16 ? "," : "\n");
+    for (int k = 17; k <= 32; k++)
+        p += sprintf(p, "%d%s", k, k < 32 ? "," : "\n");
+    p += sprintf(p, "32\n");
+    for (int q = 0; q < 2; q++)
+        for (int k = 0; k < 16; k++)
+            p += sprintf(p, "%d,%d,0\n", 3 * q + k % 4, k / 4);
+    vx_err err = {0};
+    vx_mesh *m = read_str(buf, NULL, &err);
+    if (!m) print_error("%s: %s\n", err.code, err.message);
+    assert_non_null(m);
+    /* the second patch's first column is the first patch's last */
+    for (int j = 0; j < 4; j++)
+        assert_int_equal(m->patch_idx[16 + 4 * j], m->patch_idx[4 * j + 3]);
+    /* one shared edge: the outline is 6 patch sides of VX_BPT_TESS edges */
+    assert_int_equal(m->boundary_edges, 6 * VX_BPT_TESS);
+    assert_int_equal(m->nfaces, 2 * VX_BPT_TESS * VX_BPT_TESS);
     vx_mesh_free(m);
 }
 
@@ -229,6 +257,7 @@ int main(void)
         cmocka_unit_test(test_teapot),
         cmocka_unit_test(test_sniff),
         cmocka_unit_test(test_flat),
+        cmocka_unit_test(test_duplicate_points),
         cmocka_unit_test(test_errors),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
