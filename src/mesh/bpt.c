@@ -180,8 +180,8 @@ static void eval_patch(const vx_mesh *m, const uint32_t *idx, double u, double v
 
 static int cmp_point(const void *a, const void *b, void *pos)
 {
-    const double *x = (const double *)pos + 3 * (size_t)*(const uint32_t *)a,
-                 *y = (const double *)pos + 3 * (size_t)*(const uint32_t *)b;
+    const double *x = (const double *)pos + 3 * (size_t) * (const uint32_t *)a,
+                 *y = (const double *)pos + 3 * (size_t) * (const uint32_t *)b;
     for (int k = 0; k < 3; k++)
         if (x[k] != y[k]) return x[k] < y[k] ? -1 : 1;
     return *(const uint32_t *)a < *(const uint32_t *)b ? -1 : 1;
@@ -205,8 +205,8 @@ static int dedupe_points(vx_mesh *m, vx_err *err)
     for (size_t i = 0; i < m->nverts; i++) {
         const double *a = m->pos + 3 * (size_t)order[i];
         const double *b = i ? m->pos + 3 * (size_t)order[i - 1] : NULL;
-        canon[order[i]] = b && a[0] == b[0] && a[1] == b[1] && a[2] == b[2] ? canon[order[i - 1]]
-                                                                             : order[i];
+        canon[order[i]] =
+            b && a[0] == b[0] && a[1] == b[1] && a[2] == b[2] ? canon[order[i - 1]] : order[i];
     }
     for (size_t k = 0; k < 16 * m->npatches; k++)
         m->patch_idx[k] = canon[m->patch_idx[k]];
@@ -366,9 +366,11 @@ vx_mesh *vx_bpt_read_file(FILE *f, const vx_mesh_limits *lim, vx_err *err)
         goto fail;
     }
     /* Every patch becomes 2 * VX_BPT_TESS^2 triangles at most: refuse a
-     * count over the limit before allocating for it. */
+     * count over the limit before allocating for it (and any count whose
+     * face corners would not fit the uint32 offsets). */
     uint64_t tris = np * 2 * VX_BPT_TESS * VX_BPT_TESS;
-    if ((lim && lim->max_triangles && tris > lim->max_triangles) || np > UINT32_MAX / 16) {
+    if ((lim && lim->max_triangles && tris > lim->max_triangles) ||
+        np > UINT32_MAX / (4 * VX_BPT_TESS * VX_BPT_TESS)) {
         bpt_fail(r, VX_ETOOBIG, "mesh_too_big", "%llu patches make %llu triangles, over the limit",
                  (unsigned long long)np, (unsigned long long)tris);
         goto fail;
