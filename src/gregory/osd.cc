@@ -24,12 +24,29 @@ using vx_osd::Point;
 namespace
 {
 
-// The quad mesh the patches live on (osd.h).
+// The quad mesh the patches live on (osd.h): its topology, and the
+// refiner that makes it from the input when the input is not all quads.
 struct QuadMesh {
-    std::vector<Point> pos;
-    std::vector<int> idx;         // 4 per quad
-    std::vector<uint32_t> parent; // the input face of each quad
+    size_t nin = 0;                           // input vertices
+    int nverts = 0;                           // quad mesh vertices
+    std::unique_ptr<Far::TopologyRefiner> r1; // input refined once, or null
+    std::vector<int> idx;                     // 4 per quad
+    std::vector<uint32_t> parent;             // the input face of each quad
     int nquads() const { return (int)(idx.size() / 4); }
+
+    // The quad mesh's vertex positions from the input's (3 * nin doubles).
+    void positions(const double *in, std::vector<Point> &out) const
+    {
+        std::vector<Point> src(nin);
+        for (size_t i = 0; i < nin; i++)
+            memcpy(src[i].p, in + 3 * i, sizeof src[i].p);
+        if (!r1) {
+            out.swap(src);
+            return;
+        }
+        out.resize((size_t)nverts);
+        Far::PrimvarRefinerReal<double>(*r1).Interpolate(1, src, out);
+    }
 };
 
 int quad_mesh(const vx_mesh *m, QuadMesh &q, vx_err *err)
@@ -37,28 +54,23 @@ int quad_mesh(const vx_mesh *m, QuadMesh &q, vx_err *err)
     if (m->nverts > (size_t)INT_MAX / 8 || m->nfaces > (size_t)INT_MAX / 8)
         return vx_err_set(err, VX_ETOOBIG, "mesh_too_big",
                           "%zu vertices is too many for OpenSubdiv", m->nverts);
+    q.nin = m->nverts;
     bool quads = true;
     for (size_t f = 0; f < m->nfaces && quads; f++)
         quads = vx_mesh_face_size(m, f) == 4;
     if (quads) {
-        q.pos.resize(m->nverts);
-        for (size_t i = 0; i < m->nverts; i++)
-            memcpy(q.pos[i].p, m->pos + 3 * i, sizeof q.pos[i].p);
+        q.nverts = (int)m->nverts;
         q.idx.assign(m->face_idx, m->face_idx + 4 * m->nfaces);
         q.parent.resize(m->nfaces);
         for (size_t f = 0; f < m->nfaces; f++)
             q.parent[f] = (uint32_t)f;
         return 0;
     }
-    std::unique_ptr<Far::TopologyRefiner> r(vx_osd::refiner_new(m, err));
-    if (!r) return -1;
-    r->RefineUniform(Far::TopologyRefiner::UniformOptions(1));
-    const Far::TopologyLevel &l1 = r->GetLevel(1);
-    std::vector<Point> src(m->nverts);
-    for (size_t i = 0; i < m->nverts; i++)
-        memcpy(src[i].p, m->pos + 3 * i, sizeof src[i].p);
-    q.pos.resize((size_t)l1.GetNumVertices());
-    Far::PrimvarRefinerReal<double>(*r).Interpolate(1, src, q.pos);
+    q.r1.reset(vx_osd::refiner_new(m, err));
+    if (!q.r1) return -1;
+    q.r1->RefineUniform(Far::TopologyRefiner::UniformOptions(1));
+    const Far::TopologyLevel &l1 = q.r1->GetLevel(1);
+    q.nverts = l1.GetNumVertices();
     int nq = l1.GetNumFaces();
     q.idx.resize(4 * (size_t)nq);
     q.parent.resize((size_t)nq);
@@ -83,6 +95,23 @@ struct Patches {
     std::unique_ptr<Far::PatchMap> map;
     std::vector<Point> points;
 
+    // Sets the points from the quad mesh's vertex positions.
+    void positions(const std::vector<Point> &qpos)
+    {
+        int nref = refiner->GetNumVerticesTotal();
+        std::copy(qpos.begin(), qpos.end(), points.begin());
+        Far::PrimvarRefinerReal<double> pr(*refiner);
+        Point *src = points.data();
+        for (int l = 1; l <= refiner->GetMaxLevel(); l++) {
+            Point *dst = src + refiner->GetLevel(l - 1).GetNumVertices();
+            pr.Interpolate(l, src, dst);
+            src = dst;
+        }
+        if (table->GetNumLocalPoints())
+            table->GetLocalPointStencilTable<double>()->UpdateValues(points.data(),
+                                                                     points.data() + nref);
+    }
+
     // Position on the patch of quad f at (u, v) of the quad; false where
     // there is no patch.
     bool eval(int f, double u, double v, double out[3]) const
@@ -103,11 +132,11 @@ struct Patches {
     }
 };
 
+// The topology part: refiner, patch table, patch map (positions later).
 int make_patches(const QuadMesh &q, int isolation, Patches &pt, vx_err *err)
 {
     std::vector<int> sizes((size_t)q.nquads(), 4);
-    pt.refiner.reset(
-        vx_osd::refiner_new((int)q.pos.size(), q.nquads(), sizes.data(), q.idx.data(), err));
+    pt.refiner.reset(vx_osd::refiner_new(q.nverts, q.nquads(), sizes.data(), q.idx.data(), err));
     if (!pt.refiner) return -1;
     Far::PatchTableFactory::Options po((unsigned)isolation);
     po.SetEndCapType(Far::PatchTableFactory::Options::ENDCAP_GREGORY_BASIS);
@@ -120,19 +149,8 @@ int make_patches(const QuadMesh &q, int isolation, Patches &pt, vx_err *err)
     pt.table.reset(Far::PatchTableFactory::Create(*pt.refiner, po));
     if (!pt.table)
         return vx_err_set(err, VX_EUNPROC, "osd_patches", "OpenSubdiv made no patch table");
-    int nref = pt.refiner->GetNumVerticesTotal();
-    pt.points.resize((size_t)nref + (size_t)pt.table->GetNumLocalPoints());
-    std::copy(q.pos.begin(), q.pos.end(), pt.points.begin());
-    Far::PrimvarRefinerReal<double> pr(*pt.refiner);
-    Point *src = pt.points.data();
-    for (int l = 1; l <= pt.refiner->GetMaxLevel(); l++) {
-        Point *dst = src + pt.refiner->GetLevel(l - 1).GetNumVertices();
-        pr.Interpolate(l, src, dst);
-        src = dst;
-    }
-    if (pt.table->GetNumLocalPoints())
-        pt.table->GetLocalPointStencilTable<double>()->UpdateValues(pt.points.data(),
-                                                                    pt.points.data() + nref);
+    pt.points.resize((size_t)pt.refiner->GetNumVerticesTotal() +
+                     (size_t)pt.table->GetNumLocalPoints());
     pt.map.reset(new Far::PatchMap(*pt.table));
     return 0;
 }
@@ -182,70 +200,86 @@ void bernstein_inverse(double inv[4][4])
             inv[a][i] = m[a][4 + i];
 }
 
-int build(const vx_mesh *m, vx_gpatch_set **out, vx_err *err)
-{
+} // namespace
+
+// Everything about the patches that does not depend on the positions.
+struct vx_gregory_cc_plan {
     QuadMesh q;
-    if (quad_mesh(m, q, err)) return -1;
     Patches pt;
-    if (make_patches(q, 0, pt, err)) return -1;
-    int nq = q.nquads();
+    std::vector<int> arr, idx; // where each quad's patch is in the table
+    double inv[4][4];
+    std::vector<Point> qpos; // scratch
+};
+
+namespace
+{
+
+int plan_new(const vx_mesh *m, vx_gregory_cc_plan &p, vx_err *err)
+{
+    if (quad_mesh(m, p.q, err) || make_patches(p.q, 0, p.pt, err)) return -1;
+    int nq = p.q.nquads();
     // The patch of each quad (isolation 0: exactly one each).
-    std::vector<int> arr((size_t)nq, -1), idx((size_t)nq, -1);
-    const Far::PatchTable &t = *pt.table;
-    for (int a = 0; a < t.GetNumPatchArrays(); a++)
-        for (int p = 0; p < t.GetNumPatches(a); p++) {
-            int f = t.GetPatchParam(a, p).GetFaceId();
-            if (f < 0 || f >= nq || arr[(size_t)f] >= 0 || t.GetPatchParam(a, p).GetDepth() != 0)
+    p.arr.assign((size_t)nq, -1);
+    p.idx.assign((size_t)nq, -1);
+    const Far::PatchTable &t = *p.pt.table;
+    for (int a = 0; a < t.GetNumPatchArrays(); a++) {
+        Far::PatchDescriptor::Type type = t.GetPatchArrayDescriptor(a).GetType();
+        if (type != Far::PatchDescriptor::GREGORY_BASIS && type != Far::PatchDescriptor::REGULAR)
+            return vx_err_set(err, VX_EUNPROC, "osd_patches", "OpenSubdiv made patches of type %d",
+                              (int)type);
+        for (int i = 0; i < t.GetNumPatches(a); i++) {
+            int f = t.GetPatchParam(a, i).GetFaceId();
+            if (f < 0 || f >= nq || p.arr[(size_t)f] >= 0 || t.GetPatchParam(a, i).GetDepth() != 0)
                 return vx_err_set(err, VX_EUNPROC, "osd_patches",
                                   "OpenSubdiv did not make one patch for quad %d", f);
-            arr[(size_t)f] = a;
-            idx[(size_t)f] = p;
+            p.arr[(size_t)f] = a;
+            p.idx[(size_t)f] = i;
         }
+    }
     for (int f = 0; f < nq; f++)
-        if (arr[(size_t)f] < 0)
+        if (p.arr[(size_t)f] < 0)
             return vx_err_set(err, VX_EUNPROC, "osd_patches",
                               "no patch for quad %d (a non-manifold or isolated vertex?)", f);
-    vx_gpatch_set *s = vx_gpatch_set_new((size_t)nq);
-    if (!s) return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for %d patches", nq);
-    double inv[4][4];
-    bernstein_inverse(inv);
-    for (int f = 0; f < nq; f++) {
+    bernstein_inverse(p.inv);
+    return 0;
+}
+
+void plan_eval(vx_gregory_cc_plan &p, const double *pos, vx_gpatch_set *s)
+{
+    p.q.positions(pos, p.qpos);
+    p.pt.positions(p.qpos);
+    const Far::PatchTable &t = *p.pt.table;
+    for (int f = 0; f < p.q.nquads(); f++) {
         double *cp = s->cp + (size_t)f * VX_GPATCH_POINTS * 3;
-        Far::PatchDescriptor::Type type = t.GetPatchArrayDescriptor(arr[(size_t)f]).GetType();
-        if (type == Far::PatchDescriptor::GREGORY_BASIS) {
-            Far::ConstIndexArray cv = t.GetPatchVertices(arr[(size_t)f], idx[(size_t)f]);
+        int arr = p.arr[(size_t)f];
+        if (t.GetPatchArrayDescriptor(arr).GetType() == Far::PatchDescriptor::GREGORY_BASIS) {
+            Far::ConstIndexArray cv = t.GetPatchVertices(arr, p.idx[(size_t)f]);
             for (int k = 0; k < 20; k++)
-                memcpy(cp + 3 * gregory_slot[k], pt.points[(size_t)cv[k]].p, 3 * sizeof(double));
-        } else if (type == Far::PatchDescriptor::REGULAR) {
+                memcpy(cp + 3 * gregory_slot[k], p.pt.points[(size_t)cv[k]].p, 3 * sizeof(double));
+        } else {
             // A B-spline patch (boundary ones with folded phantom points) is a
             // bicubic polynomial: 16 samples give its Bézier net exactly.
             double smp[4][4][3];
             for (int b = 0; b < 4; b++)
                 for (int a = 0; a < 4; a++)
-                    pt.eval(f, a / 3.0, b / 3.0, smp[b][a]);
+                    p.pt.eval(f, a / 3.0, b / 3.0, smp[b][a]);
             for (int j = 0; j < 4; j++)
                 for (int i = 0; i < 4; i++)
                     for (int c = 0; c < 3; c++) {
                         double v = 0;
                         for (int b = 0; b < 4; b++)
                             for (int a = 0; a < 4; a++)
-                                v += inv[i][a] * inv[j][b] * smp[b][a][c];
+                                v += p.inv[i][a] * p.inv[j][b] * smp[b][a][c];
                         cp[3 * (4 * j + i) + c] = v;
                     }
             static const int inner[4][2] = {{5, 16}, {6, 17}, {9, 18}, {10, 19}};
             for (int k = 0; k < 4; k++)
                 memcpy(cp + 3 * inner[k][1], cp + 3 * inner[k][0], 3 * sizeof(double));
-        } else {
-            vx_gpatch_set_free(s);
-            return vx_err_set(err, VX_EUNPROC, "osd_patches",
-                              "OpenSubdiv made a patch of type %d for quad %d", (int)type, f);
         }
         for (int k = 0; k < 4; k++)
-            s->corner_key[4 * (size_t)f + (size_t)k] = (uint32_t)q.idx[4 * (size_t)f + (size_t)k];
-        s->face[f] = q.parent[(size_t)f];
+            s->corner_key[4 * (size_t)f + (size_t)k] = (uint32_t)p.q.idx[4 * (size_t)f + (size_t)k];
+        s->face[f] = p.q.parent[(size_t)f];
     }
-    *out = s;
-    return 0;
 }
 
 double distance(const vx_mesh *m, const vx_gpatch_set *s, int n, int isolation, vx_err *err)
@@ -260,6 +294,9 @@ double distance(const vx_mesh *m, const vx_gpatch_set *s, int n, int isolation, 
     }
     Patches pt;
     if (make_patches(q, isolation, pt, err)) return -1;
+    std::vector<Point> qpos;
+    q.positions(m->pos, qpos);
+    pt.positions(qpos);
     double diag = 0, worst = 0;
     for (int a = 0; a < 3; a++)
         diag += (m->bbox_max[a] - m->bbox_min[a]) * (m->bbox_max[a] - m->bbox_min[a]);
@@ -283,16 +320,62 @@ double distance(const vx_mesh *m, const vx_gpatch_set *s, int n, int isolation, 
 
 } // namespace
 
-extern "C" int vx_gregory_build_approx_cc(const vx_mesh *m, vx_gpatch_set **out, vx_err *err)
+extern "C" vx_gregory_cc_plan *vx_gregory_cc_plan_new(const vx_mesh *m, vx_err *err)
 {
-    *out = nullptr;
+    vx_gregory_cc_plan *p = nullptr;
     try {
-        return build(m, out, err);
+        p = new vx_gregory_cc_plan();
+        if (plan_new(m, *p, err) == 0) return p;
+    } catch (const std::bad_alloc &) {
+        vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for the patches");
+    } catch (...) {
+        vx_err_set(err, VX_EINTERNAL, "osd_failed", "OpenSubdiv failed");
+    }
+    delete p;
+    return nullptr;
+}
+
+extern "C" size_t vx_gregory_cc_plan_patches(const vx_gregory_cc_plan *p)
+{
+    return (size_t)p->q.nquads();
+}
+
+extern "C" int vx_gregory_cc_plan_eval(vx_gregory_cc_plan *p, const double *pos, vx_gpatch_set *s,
+                                       vx_err *err)
+{
+    if (s->npatches != (size_t)p->q.nquads())
+        return vx_err_set(err, VX_EINVAL, "patch_mismatch", "a set of %zu patches for %d quads",
+                          s->npatches, p->q.nquads());
+    try {
+        plan_eval(*p, pos, s);
+        return 0;
     } catch (const std::bad_alloc &) {
         return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for the patches");
     } catch (...) {
         return vx_err_set(err, VX_EINTERNAL, "osd_failed", "OpenSubdiv failed");
     }
+}
+
+extern "C" void vx_gregory_cc_plan_free(vx_gregory_cc_plan *p)
+{
+    delete p;
+}
+
+extern "C" int vx_gregory_build_approx_cc(const vx_mesh *m, vx_gpatch_set **out, vx_err *err)
+{
+    *out = nullptr;
+    vx_gregory_cc_plan *p = vx_gregory_cc_plan_new(m, err);
+    if (!p) return -1;
+    vx_gpatch_set *s = vx_gpatch_set_new(vx_gregory_cc_plan_patches(p));
+    int rc = s ? vx_gregory_cc_plan_eval(p, m->pos, s, err)
+               : vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for the patches");
+    vx_gregory_cc_plan_free(p);
+    if (rc) {
+        vx_gpatch_set_free(s);
+        return -1;
+    }
+    *out = s;
+    return 0;
 }
 
 static double guarded_distance(const vx_mesh *m, const vx_gpatch_set *s, int n, int isolation,

@@ -22,11 +22,30 @@
 #include "mesh/mesh.h"
 #include "util/err.h"
 
-/* Builds the patches of m (faces of any size; a manifold surface). Returns 0
+/* Builds the patches of m (faces of any size; a manifold surface; a plan
+ * used once). Returns 0
  * with *out an owned set, or -1 (VX_EUNPROC osd_topology or osd_patches
  * when OpenSubdiv cannot make one patch per quad, e.g. non-manifold
  * vertices; out_of_memory). Any thread. */
 int vx_gregory_build_approx_cc(const vx_mesh *m, vx_gpatch_set **out, vx_err *err);
+
+/* Frames (the same topology, new positions) only redo the positional work:
+ * a plan holds what depends on the topology alone (OpenSubdiv's refiners,
+ * patch table and patch map, where each quad's patch is). */
+typedef struct vx_gregory_cc_plan vx_gregory_cc_plan;
+
+/* The plan for m's topology (positions unused). Returns an owned plan or
+ * NULL (errors as vx_gregory_build_approx_cc). Any thread. */
+vx_gregory_cc_plan *vx_gregory_cc_plan_new(const vx_mesh *m, vx_err *err);
+/* Patches the plan makes (the size of the set plan_eval fills). */
+size_t vx_gregory_cc_plan_patches(const vx_gregory_cc_plan *p);
+/* Fills s (vx_gpatch_set_new(vx_gregory_cc_plan_patches(p))) from pos, 3
+ * doubles for each vertex of the plan's mesh. The plan keeps scratch
+ * buffers: one thread at a time per plan. Returns 0 or -1. */
+int vx_gregory_cc_plan_eval(vx_gregory_cc_plan *p, const double *pos, vx_gpatch_set *s,
+                            vx_err *err);
+/* NULL is a no-op. */
+void vx_gregory_cc_plan_free(vx_gregory_cc_plan *p);
 
 /* The largest distance, over samples_per_patch^2 points (u, v) of every
  * patch of s (built from m by vx_gregory_build_approx_cc), between s at

@@ -214,13 +214,80 @@ static void test_suzanne_boundaries(void **state)
     vx_mesh_free(m);
 }
 
+/* Max |a - b| over two sets' control points. */
+static double cp_diff(const vx_gpatch_set *a, const vx_gpatch_set *b)
+{
+    assert_int_equal(a->npatches, b->npatches);
+    double worst = 0;
+    for (size_t i = 0; i < a->npatches * VX_GPATCH_POINTS * 3; i++)
+        worst = fmax(worst, fabs(a->cp[i] - b->cp[i]));
+    assert_memory_equal(a->corner_key, b->corner_key, a->npatches * 4 * sizeof(uint32_t));
+    assert_memory_equal(a->face, b->face, a->npatches * sizeof(uint32_t));
+    return worst;
+}
+
+/* A plan re-evaluated on new positions (a deformation frame) gives what a
+ * fresh build on those positions gives, frame after frame. */
+static void test_frames(void **state)
+{
+    (void)state;
+    const char *names[] = {"spot_control_mesh.obj", "suzanne.obj"};
+    for (int n = 0; n < 2; n++) {
+        vx_mesh *m = load(names[n]);
+        vx_err err = {0};
+        vx_gregory_cc_plan *plan = vx_gregory_cc_plan_new(m, &err);
+        assert_non_null(plan);
+        vx_gpatch_set *s = vx_gpatch_set_new(vx_gregory_cc_plan_patches(plan));
+        vx_gpatch_set *first = NULL;
+        double *orig = malloc(3 * m->nverts * sizeof(double));
+        memcpy(orig, m->pos, 3 * m->nverts * sizeof(double));
+        for (int frame = 0; frame < 3; frame++) {
+            /* frame k: a twist about z and a bend, growing with k; the
+             * mesh's own positions become the frame's for the fresh build */
+            for (size_t i = 0; i < m->nverts; i++) {
+                double *q = m->pos + 3 * i, *o = orig + 3 * i, a = 0.3 * frame * o[2];
+                q[0] = o[0] * cos(a) - o[1] * sin(a);
+                q[1] = o[0] * sin(a) + o[1] * cos(a) + 0.1 * frame * o[0] * o[0];
+                q[2] = o[2];
+            }
+            assert_int_equal(vx_mesh_analyze(m, &err), 0);
+            assert_int_equal(vx_gregory_cc_plan_eval(plan, m->pos, s, &err), 0);
+            vx_gpatch_set *fresh = NULL;
+            assert_int_equal(vx_gregory_build_approx_cc(m, &fresh, &err), 0);
+            double d = cp_diff(s, fresh);
+            assert_true(d <= 1e-14 * diag(m));
+            if (frame == 0) {
+                first = vx_gpatch_set_new(s->npatches);
+                memcpy(first->cp, s->cp, s->npatches * VX_GPATCH_POINTS * 3 * sizeof(double));
+                memcpy(first->corner_key, s->corner_key, s->npatches * 4 * sizeof(uint32_t));
+                memcpy(first->face, s->face, s->npatches * sizeof(uint32_t));
+            } else {
+                /* the frame moved the patches, and they are still exactly
+                 * OpenSubdiv's patches of the moved mesh */
+                assert_true(cp_diff(s, first) > 1e-3 * diag(m));
+                assert_true(vx_gregory_cc_mismatch(m, s, 5, &err) < 1e-12);
+            }
+            vx_gpatch_set_free(fresh);
+        }
+        /* a set of the wrong size is refused */
+        vx_gpatch_set *wrong = vx_gpatch_set_new(3);
+        assert_int_equal(vx_gregory_cc_plan_eval(plan, m->pos, wrong, &err), -1);
+        assert_string_equal(err.code, "patch_mismatch");
+        vx_gpatch_set_free(wrong);
+        vx_gpatch_set_free(s);
+        vx_gpatch_set_free(first);
+        vx_gregory_cc_plan_free(plan);
+        free(orig);
+        vx_mesh_free(m);
+    }
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
-        cmocka_unit_test(test_torus_regular),
-        cmocka_unit_test(test_cube),
-        cmocka_unit_test(test_spot),
-        cmocka_unit_test(test_suzanne_boundaries),
+        cmocka_unit_test(test_torus_regular), cmocka_unit_test(test_cube),
+        cmocka_unit_test(test_spot),          cmocka_unit_test(test_suzanne_boundaries),
+        cmocka_unit_test(test_frames),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }
