@@ -207,7 +207,10 @@ struct vx_gregory_cc_plan {
     QuadMesh q;
     Patches pt;
     std::vector<int> arr, idx; // where each quad's patch is in the table
-    double inv[4][4];
+    // Regular patches: the Bézier net as weights of the patch's 16 points,
+    // 16 x 16 per patch, at bez[16 * 16 * bez_at[f]].
+    std::vector<double> bez;
+    std::vector<int> bez_at;
     std::vector<Point> qpos; // scratch
 };
 
@@ -240,7 +243,34 @@ int plan_new(const vx_mesh *m, vx_gregory_cc_plan &p, vx_err *err)
         if (p.arr[(size_t)f] < 0)
             return vx_err_set(err, VX_EUNPROC, "osd_patches",
                               "no patch for quad %d (a non-manifold or isolated vertex?)", f);
-    bernstein_inverse(p.inv);
+    // A B-spline patch (boundary ones with folded phantom points) is a
+    // bicubic polynomial: its values at 16 parameters give its Bézier net
+    // exactly, so the net is a fixed linear map of the patch's points.
+    double inv[4][4];
+    bernstein_inverse(inv);
+    p.bez_at.assign((size_t)nq, -1);
+    int nreg = 0;
+    for (int f = 0; f < nq; f++)
+        if (t.GetPatchArrayDescriptor(p.arr[(size_t)f]).GetType() == Far::PatchDescriptor::REGULAR)
+            p.bez_at[(size_t)f] = nreg++;
+    p.bez.assign((size_t)nreg * 256, 0.0);
+    for (int f = 0; f < nq; f++) {
+        if (p.bez_at[(size_t)f] < 0) continue;
+        double *w = &p.bez[256 * (size_t)p.bez_at[(size_t)f]];
+        for (int b = 0; b < 4; b++)
+            for (int a = 0; a < 4; a++) {
+                double u = a / 3.0, v = b / 3.0, ws[20];
+                const Far::PatchTable::PatchHandle *h = p.pt.map->FindPatch(f, u, v);
+                if (!h || t.GetPatchVertices(*h).size() != 16)
+                    return vx_err_set(err, VX_EUNPROC, "osd_patches",
+                                      "OpenSubdiv's patch of quad %d is not a 16-point one", f);
+                t.EvaluateBasis(*h, u, v, ws);
+                for (int j = 0; j < 4; j++)
+                    for (int i = 0; i < 4; i++)
+                        for (int c = 0; c < 16; c++)
+                            w[16 * (4 * j + i) + c] += inv[i][a] * inv[j][b] * ws[c];
+            }
+    }
     return 0;
 }
 
@@ -257,21 +287,18 @@ void plan_eval(vx_gregory_cc_plan &p, const double *pos, vx_gpatch_set *s)
             for (int k = 0; k < 20; k++)
                 memcpy(cp + 3 * gregory_slot[k], p.pt.points[(size_t)cv[k]].p, 3 * sizeof(double));
         } else {
-            // A B-spline patch (boundary ones with folded phantom points) is a
-            // bicubic polynomial: 16 samples give its Bézier net exactly.
-            double smp[4][4][3];
-            for (int b = 0; b < 4; b++)
-                for (int a = 0; a < 4; a++)
-                    p.pt.eval(f, a / 3.0, b / 3.0, smp[b][a]);
-            for (int j = 0; j < 4; j++)
-                for (int i = 0; i < 4; i++)
-                    for (int c = 0; c < 3; c++) {
-                        double v = 0;
-                        for (int b = 0; b < 4; b++)
-                            for (int a = 0; a < 4; a++)
-                                v += p.inv[i][a] * p.inv[j][b] * smp[b][a][c];
-                        cp[3 * (4 * j + i) + c] = v;
-                    }
+            Far::ConstIndexArray cv = t.GetPatchVertices(arr, p.idx[(size_t)f]);
+            const double *w = &p.bez[256 * (size_t)p.bez_at[(size_t)f]];
+            for (int k = 0; k < 16; k++) {
+                double *o = cp + 3 * k;
+                o[0] = o[1] = o[2] = 0;
+                for (int c = 0; c < 16; c++) {
+                    if (cv[c] < 0) continue; // a phantom point: its weight was folded
+                    const double *q = p.pt.points[(size_t)cv[c]].p;
+                    for (int a = 0; a < 3; a++)
+                        o[a] += w[16 * k + c] * q[a];
+                }
+            }
             static const int inner[4][2] = {{5, 16}, {6, 17}, {9, 18}, {10, 19}};
             for (int k = 0; k < 4; k++)
                 memcpy(cp + 3 * inner[k][1], cp + 3 * inner[k][0], 3 * sizeof(double));
