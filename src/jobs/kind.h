@@ -93,7 +93,7 @@ int vx_param_bool(const cJSON *params, const char *field, int def, int *out, vx_
 int vx_param_mesh_ids(const cJSON *params, const char *field, size_t max, const cJSON **out,
                       vx_err *err);
 /* Reads an optional string that must be one of the NULL-terminated names;
- * *out is its index (def when absent). */
+ * *out = its index (def when absent). */
 int vx_param_enum(const cJSON *params, const char *field, const char *const *names, int def,
                   int *out, vx_err *err);
 /* Fails (VX_EUNPROC) if params has a field not in the NULL-terminated list. */

@@ -102,7 +102,7 @@ int vx_param_enum(const cJSON *params, const char *field, const char *const *nam
                 *out = i;
                 return 0;
             }
-    char list[160] = "";
+    char list[256] = "";
     for (int i = 0; names[i]; i++)
         snprintf(list + strlen(list), sizeof list - strlen(list), "%s%s", i ? ", " : "", names[i]);
     return vx_err_set(err, VX_EUNPROC, "invalid_params", "params.%s must be one of %s", field, list);
