@@ -4,7 +4,9 @@
 //
 //   voxel_bench compare MESH.obj[:SUBDIV] RES... [--method peel|slice|scan|auto] [--runs N]
 //   voxel_bench seed000 MESH.obj                     (peel/fill ms at 128, 256 for 1, 4, 16, 64x faces)
-//   voxel_bench seed003 MESH.obj... [--res 512]       (mean surface-voxel distance, supersample off/on)
+//   voxel_bench seed003 MESH.obj... [--res 512] [--shifts N]
+//                                  (mean surface-voxel distance, supersample off/on; with
+//                                   --shifts, also on N grids shifted by sub-voxel offsets)
 //
 // MESH:SUBDIV splits every triangle into 4, SUBDIV times (to reach ~1M faces).
 #include <openvdb/openvdb.h>
@@ -185,6 +187,50 @@ static bool ours(vx_gl *gl, vx_mesh *vm, const vx_grid &g, vx_method method, int
     return rc == 0;
 }
 
+// Seed 003 Table 1 on grid g: mean distance from the centres of surface
+// voxels (inside, with an outside 6-neighbour or on the grid border) to the
+// mesh, in voxel edges: mt[0] without supersampling, mt[1..3] supersampled
+// with threshold 1, 2, 4. Returns nonzero when voxelizing fails.
+static int seed003_means(vx_gl *gl, Mesh &m, vx_mesh *vm, const vx_grid &g, double mt[4], uint64_t *nsurf)
+{
+    // Unsigned distance to the mesh (exact near the surface), in world units.
+    Adapter a{&m, g};
+    auto udf = openvdb::tools::meshToVolume<openvdb::FloatGrid>(a, *xform(g), 3.0f, 3.0f,
+                                                                 openvdb::tools::UNSIGNED_DISTANCE_FIELD);
+    auto acc = udf->getConstAccessor();
+    const int *d = g.dims;
+    auto mean = [&](auto inside, uint64_t *count) {
+        double sum = 0;
+        uint64_t n = 0;
+        for (int k = 0; k < d[2]; k++)
+            for (int j = 0; j < d[1]; j++)
+                for (int i = 0; i < d[0]; i++) {
+                    if (!inside(i, j, k)) continue;
+                    bool surf = i == 0 || j == 0 || k == 0 || i == d[0] - 1 || j == d[1] - 1 || k == d[2] - 1 ||
+                                !inside(i - 1, j, k) || !inside(i + 1, j, k) || !inside(i, j - 1, k) ||
+                                !inside(i, j + 1, k) || !inside(i, j, k - 1) || !inside(i, j, k + 1);
+                    if (!surf) continue;
+                    sum += std::fabs(acc.getValue(openvdb::Coord(i, j, k))) / g.h;
+                    n++;
+                }
+        if (count) *count = n;
+        return n ? sum / n : 0.0;
+    };
+    vx_bitgrid plain{}, super{};
+    vx_voxelize_stats st{};
+    double ms;
+    if (!ours(gl, vm, g, VX_METHOD_SLICE, 1, &plain, &st, &ms) || !ours(gl, vm, g, VX_METHOD_SLICE, 2, &super, &st, &ms))
+        return 1;
+    mt[0] = mean([&](int i, int j, int k) { return vx_bitgrid_get(&plain, i, j, k) != 0; }, nsurf);
+    const int thr[3] = {1, 2, 4};
+    for (int t = 0; t < 3; t++)
+        mt[t + 1] = mean([&](int i, int j, int k) { return super.counts[((size_t)k * d[1] + j) * d[0] + i] >= thr[t]; },
+                         nullptr);
+    vx_bitgrid_free(&plain);
+    vx_bitgrid_free(&super);
+    return 0;
+}
+
 int main(int argc, char **argv)
 {
     if (argc < 3) {
@@ -196,11 +242,12 @@ int main(int argc, char **argv)
     std::vector<std::string> meshes;
     std::vector<int> res;
     vx_method method = VX_METHOD_AUTO;
-    int runs = 3, res003 = 512;
+    int runs = 3, res003 = 512, shifts = 0;
     for (int i = 2; i < argc; i++) {
         if (!strcmp(argv[i], "--method") && i + 1 < argc) method = parse_method(argv[++i]);
         else if (!strcmp(argv[i], "--runs") && i + 1 < argc) runs = atoi(argv[++i]);
         else if (!strcmp(argv[i], "--res") && i + 1 < argc) res003 = atoi(argv[++i]);
+        else if (!strcmp(argv[i], "--shifts") && i + 1 < argc) shifts = atoi(argv[++i]);
         else if (isdigit((unsigned char)argv[i][0])) res.push_back(atoi(argv[i]));
         else meshes.push_back(argv[i]);
     }
@@ -271,59 +318,42 @@ int main(int argc, char **argv)
                 vx_mesh_free(vm);
             }
     } else if (mode == "seed003") {
-        printf("| model | res | mean distance, no supersampling | supersample 2, threshold 1 | threshold 2 | threshold 4 | surface voxels (no supersampling) |\n|---|---|---|---|---|---|---|\n");
+        printf("| model | res | grid shift (voxels) | mean distance, no supersampling | supersample 2, threshold 1 | threshold 2 | threshold 4 | surface voxels (no supersampling) |\n|---|---|---|---|---|---|---|---|\n");
         for (auto &spec : meshes) {
             Mesh m = load(spec);
             vx_mesh *vm = as_vx(m);
-            vx_grid g;
-            vx_grid_from_resolution(vm, res003, 1, &g, &err);
-            // Unsigned distance to the mesh (exact near the surface), in world units.
-            Adapter a{&m, g};
-            auto udf = openvdb::tools::meshToVolume<openvdb::FloatGrid>(a, *xform(g), 3.0f, 3.0f,
-                                                                         openvdb::tools::UNSIGNED_DISTANCE_FIELD);
-            auto acc = udf->getConstAccessor();
-            const int *d = g.dims;
-            // Mean distance from the centres of surface voxels (inside, with an
-            // outside 6-neighbour or on the grid border) to the mesh, in voxels.
-            auto mean = [&](auto inside, uint64_t *count) {
-                double sum = 0;
-                uint64_t n = 0;
-                for (int k = 0; k < d[2]; k++)
-                    for (int j = 0; j < d[1]; j++)
-                        for (int i = 0; i < d[0]; i++) {
-                            if (!inside(i, j, k)) continue;
-                            bool surf = i == 0 || j == 0 || k == 0 || i == d[0] - 1 || j == d[1] - 1 ||
-                                        k == d[2] - 1 || !inside(i - 1, j, k) || !inside(i + 1, j, k) ||
-                                        !inside(i, j - 1, k) || !inside(i, j + 1, k) || !inside(i, j, k - 1) ||
-                                        !inside(i, j, k + 1);
-                            if (!surf) continue;
-                            sum += std::fabs(acc.getValue(openvdb::Coord(i, j, k))) / g.h;
-                            n++;
-                        }
-                if (count) *count = n;
-                return n ? sum / n : 0.0;
-            };
-            vx_bitgrid plain{}, super{};
-            vx_voxelize_stats st{};
-            double ms;
-            if (!ours(gl, vm, g, VX_METHOD_SLICE, 1, &plain, &st, &ms) ||
-                !ours(gl, vm, g, VX_METHOD_SLICE, 2, &super, &st, &ms))
-                return 1;
-            uint64_t nsurf = 0;
-            double m0 = mean([&](int i, int j, int k) { return vx_bitgrid_get(&plain, i, j, k) != 0; }, &nsurf);
-            double mt[3];
-            const int thr[3] = {1, 2, 4};
-            for (int t = 0; t < 3; t++)
-                mt[t] = mean(
-                    [&](int i, int j, int k) {
-                        return super.counts[((size_t)k * d[1] + j) * d[0] + i] >= thr[t];
-                    },
-                    nullptr);
-            printf("| %s | %d^3 | %.3f | %.3f | %.3f | %.3f | %llu |\n", m.name.c_str(), res003, m0, mt[0], mt[1],
-                   mt[2], (unsigned long long)nsurf);
-            fflush(stdout);
-            vx_bitgrid_free(&plain);
-            vx_bitgrid_free(&super);
+            vx_grid g0;
+            vx_grid_from_resolution(vm, res003, 1, &g0, &err);
+            double avg[4] = {0, 0, 0, 0};
+            for (int sh = 0; sh <= shifts; sh++) {
+                // Shift 0: the API's grid (bbox faces on cell boundaries, which puts
+                // the flat faces of CAD models at the worst phase). Others: the grid
+                // moved by a sub-voxel offset per axis (golden-ratio sequence), one
+                // more voxel per axis so it still covers the mesh.
+                vx_grid g = g0;
+                double off[3] = {0, 0, 0};
+                if (sh) {
+                    for (int a = 0; a < 3; a++) {
+                        off[a] = std::fmod(0.5 + sh * (0.6180339887 + 0.1 * a), 1.0);
+                        g.origin[a] -= off[a] * g.h;
+                        g.dims[a] += 1;
+                    }
+                }
+                double mt[4];
+                uint64_t nsurf = 0;
+                if (seed003_means(gl, m, vm, g, mt, &nsurf)) return 1;
+                printf("| %s | %d^3 | %s | %.3f | %.3f | %.3f | %.3f | %llu |\n", m.name.c_str(), res003,
+                       sh ? (std::to_string(off[0]).substr(0, 4) + ", " + std::to_string(off[1]).substr(0, 4) + ", " +
+                             std::to_string(off[2]).substr(0, 4)).c_str()
+                          : "0 (API grid)",
+                       mt[0], mt[1], mt[2], mt[3], (unsigned long long)nsurf);
+                fflush(stdout);
+                if (sh)
+                    for (int t = 0; t < 4; t++) avg[t] += mt[t] / shifts;
+            }
+            if (shifts)
+                printf("| %s | %d^3 | mean of %d shifts | %.3f | %.3f | %.3f | %.3f | |\n", m.name.c_str(), res003, shifts,
+                       avg[0], avg[1], avg[2], avg[3]);
             vx_mesh_free(vm);
         }
     }

@@ -2,6 +2,7 @@
  * params schema in api/openapi.yaml. */
 #include <string.h>
 
+#include "bandlimit/job.h"
 #include "gregory/catmull_clark.h"
 #include "jobs/kind.h"
 #include "preview/preview.h"
@@ -10,6 +11,7 @@
 static const vx_kind *const table[] = {
     &vx_kind_preview,
     &vx_kind_voxelize,
+    &vx_kind_render,
     &vx_kind_catmull_clark,
 };
 

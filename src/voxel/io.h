@@ -49,6 +49,15 @@ int vx_voxel_write_binvox(const vx_bitgrid *g, const char *path, const vx_voxel_
 int vx_voxel_write_vdb(const vx_bitgrid *g, int coverage, const vx_vdb_meta *meta, const char *path,
                        const vx_voxel_io *io, vx_err *err);
 
+/* A dense float field as an OpenVDB FloatGrid named `name` (render's band-
+ * limited density): value (i,j,k) = v[i + d0 (j + d1 k)] at world point
+ * origin + (i,j,k) h (the transform is scale h, then translation origin);
+ * active where |value| >= 1e-4 (the band-limited density rings slightly
+ * everywhere; below that it is the background 0). mesh (may be NULL) goes
+ * into the metadata. Same temp-and-rename contract. Any thread. */
+int vx_voxel_write_vdb_float(const float *v, const int dims[3], const double origin[3], double h,
+                             const char *name, const char *mesh, const char *path, vx_err *err);
+
 /* Bytes the vdb writer may hold in memory beyond the bit grid (OpenVDB's
  * tree for a grid that is entirely active: the worst case). */
 uint64_t vx_voxel_vdb_bytes(const int dims[3], int coverage);

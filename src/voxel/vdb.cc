@@ -1,6 +1,7 @@
 // OpenVDB writer (io.h). The one C++ file of the library: OpenVDB's heavy
 // templates are instantiated here only, behind a C API that never lets an
 // exception cross into C.
+#include <cmath>
 #include <cstdio>
 #include <exception>
 #include <mutex>
@@ -115,6 +116,49 @@ extern "C" int vx_voxel_write_vdb(const vx_bitgrid *g, int coverage, const vx_vd
             return vx_err_set(err, VX_EIO, "io_error", "rename %s failed", tmp.c_str());
         }
         if (io && io->progress && io->progress(io->ud, 1.0, err)) return -1;
+        return 0;
+    } catch (const std::bad_alloc &) {
+        std::remove(tmp.c_str());
+        return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for the OpenVDB grid");
+    } catch (const std::exception &e) {
+        std::remove(tmp.c_str());
+        return vx_err_set(err, VX_EIO, "io_error", "OpenVDB: %s", e.what());
+    }
+}
+
+extern "C" int vx_voxel_write_vdb_float(const float *v, const int dims[3], const double origin[3],
+                                        double h, const char *name, const char *mesh,
+                                        const char *path, vx_err *err)
+{
+    std::string tmp = std::string(path) + ".tmp";
+    try {
+        std::call_once(init_once, [] { openvdb::initialize(); });
+        openvdb::FloatGrid::Ptr grid = openvdb::FloatGrid::create(0.0f);
+        grid->setName(name);
+        grid->setGridClass(openvdb::GRID_FOG_VOLUME);
+        auto acc = grid->getAccessor();
+        const int nx = dims[0], ny = dims[1], nz = dims[2];
+        for (int k = 0; k < nz; k++)
+            for (int j = 0; j < ny; j++) {
+                const float *row = v + ((size_t)k * ny + j) * nx;
+                for (int i = 0; i < nx; i++)
+                    if (std::fabs(row[i]) >= 1e-4f) acc.setValueOn(openvdb::Coord(i, j, k), row[i]);
+            }
+        if (mesh) grid->insertMeta("mesh", openvdb::StringMetadata(mesh));
+        grid->insertMeta("voxel_size", openvdb::DoubleMetadata(h));
+        grid->insertMeta("dims", openvdb::Vec3IMetadata(openvdb::Vec3i(nx, ny, nz)));
+        openvdb::math::Transform::Ptr xf = openvdb::math::Transform::createLinearTransform(h);
+        xf->postTranslate(openvdb::Vec3d(origin[0], origin[1], origin[2]));
+        grid->setTransform(xf);
+        openvdb::GridPtrVec grids;
+        grids.push_back(grid);
+        openvdb::io::File file(tmp);
+        file.write(grids);
+        file.close();
+        if (std::rename(tmp.c_str(), path) != 0) {
+            std::remove(tmp.c_str());
+            return vx_err_set(err, VX_EIO, "io_error", "rename %s failed", tmp.c_str());
+        }
         return 0;
     } catch (const std::bad_alloc &) {
         std::remove(tmp.c_str());

@@ -1,6 +1,7 @@
 #include "ref_voxel.h"
 
 #include <math.h>
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -147,4 +148,34 @@ double ref_iou(const uint8_t *ref, const vx_bitgrid *g)
                 uni += a | b;
             }
     return uni ? (double)inter / (double)uni : 1.0;
+}
+
+size_t ref_mismatches(const uint8_t *ref, const vx_bitgrid *g)
+{
+    size_t n = 0;
+    const int *dm = g->grid.dims;
+    for (int k = 0; k < dm[2]; k++)
+        for (int j = 0; j < dm[1]; j++)
+            for (int i = 0; i < dm[0]; i++)
+                n += ref[((size_t)k * dm[1] + j) * dm[0] + i] != vx_bitgrid_get(g, i, j, k);
+    return n;
+}
+
+size_t ref_compare(const char *what, const vx_mesh *m, const vx_grid *g, vx_inside rule,
+                   const vx_bitgrid *b, double *iou)
+{
+    size_t n = (size_t)g->dims[0] * g->dims[1] * g->dims[2], in = 0;
+    uint8_t *ref = malloc(n ? n : 1);
+    if (!ref || ref_voxelize(m, g, rule, ref)) {
+        free(ref);
+        return (size_t)-1;
+    }
+    for (size_t q = 0; q < n; q++)
+        in += ref[q];
+    size_t mis = ref_mismatches(ref, b);
+    *iou = ref_iou(ref, b);
+    printf("%-32s %dx%dx%d ref=%zu got=%llu mismatches=%zu IoU=%.6f\n", what, g->dims[0],
+           g->dims[1], g->dims[2], in, (unsigned long long)vx_bitgrid_count(b), mis, *iou);
+    free(ref);
+    return mis;
 }

@@ -7,6 +7,7 @@
 #ifndef VX_REF_VOXEL_H
 #define VX_REF_VOXEL_H
 
+#include <stddef.h>
 #include <stdint.h>
 
 #include "mesh/mesh.h"
@@ -21,5 +22,12 @@ int ref_voxelize(const vx_mesh *m, const vx_grid *g, vx_inside rule, uint8_t *ou
 double ref_winding_number(const vx_mesh *m, const double p[3]);
 /* Intersection over union of a reference byte grid and a bit grid. */
 double ref_iou(const uint8_t *ref, const vx_bitgrid *g);
+/* Voxels where a reference byte grid and a bit grid differ. */
+size_t ref_mismatches(const uint8_t *ref, const vx_bitgrid *g);
+/* Voxelizes m with the reference on g and compares b with it: prints one
+ * line (what, dims, counts, mismatches, IoU), stores the IoU in *iou and
+ * returns the number of differing voxels ((size_t)-1 when out of memory). */
+size_t ref_compare(const char *what, const vx_mesh *m, const vx_grid *g, vx_inside rule,
+                   const vx_bitgrid *b, double *iou);
 
 #endif

@@ -1,4 +1,4 @@
-/* Test meshes built in code (shared by test_peel and test_scan). */
+/* Test meshes built in code (shared by the voxel engine tests). */
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>

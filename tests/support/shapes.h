@@ -1,4 +1,4 @@
-/* Test meshes built in code (shared by test_peel and test_scan). Abort on
+/* Test meshes built in code (shared by the voxel engine tests). Abort on
  * failure (they are test fixtures). */
 #ifndef VX_TEST_SHAPES_H
 #define VX_TEST_SHAPES_H

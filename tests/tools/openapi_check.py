@@ -27,7 +27,9 @@ the response schema with $refs resolved in the whole spec; required response
 headers must be present (when the record has "headers") and match their
 schema. voxeld-specific extras: Job bodies are checked against the kind's
 entry in the top-level `x-kinds` extension (normalised params, stats, output
-URLs; an output with `absent_when: {param: value}` is not expected when the
+URLs (outputs with `requested_by: P` only when params[P] lists them; with
+`numbered_by: P`, NAME_000.. when params[P] > 1); an output with
+`absent_when: {param: value}` is not expected when the
 job's params have that value), Info.kinds against `x-kinds`, /metrics bodies against `x-metrics`.
 
 Prints one line per failure and a summary line
@@ -508,9 +510,22 @@ class Checker:
             # An output with `absent_when: {param: value}` is not written
             # when the job's (normalised) params have that value.
             params = job.get("params") if isinstance(job.get("params"), dict) else {}
-            want = [o.get("name") for o in k.get("outputs") or []
-                    if not (isinstance(o.get("absent_when"), dict) and o["absent_when"]
-                            and all(params.get(p) == v for p, v in o["absent_when"].items()))]
+            want = []
+            for o in k.get("outputs") or []:
+                if (isinstance(o.get("absent_when"), dict) and o["absent_when"]
+                        and all(params.get(p) == v for p, v in o["absent_when"].items())):
+                    continue
+                # `requested_by: P`: written only when params[P] (a list) names it.
+                rb = o.get("requested_by")
+                if isinstance(rb, str) and o.get("name") not in (params.get(rb) or []):
+                    continue
+                # `numbered_by: P`: NAME_000 .. when params[P] > 1, else NAME.
+                nb = o.get("numbered_by")
+                count = params.get(nb) if isinstance(nb, str) else None
+                if isinstance(count, int) and not isinstance(count, bool) and count > 1:
+                    want += ["%s_%03d" % (o.get("name"), i) for i in range(count)]
+                else:
+                    want.append(o.get("name"))
             outputs = job.get("outputs") or {}
             if sorted(outputs) != sorted(want):
                 self.fail(where, "body %s.outputs has %s, kind %s declares %s"

@@ -1,5 +1,6 @@
-/* The depth-peeling voxelizer (seed 000) and the dispatcher, on a real GL
- * context, against analytic answers and the CPU reference (ref_voxel.h). */
+/* What only the depth-peeling voxelizer (seed 000) does, on a real GL
+ * context: the robust inside rule, surface fill, big grids and the timing
+ * report. The cases it shares with scan are in test_solid.c. */
 #include <math.h>
 #include <setjmp.h>
 #include <stdarg.h>
@@ -20,7 +21,6 @@
 
 
 
-/* Meshes: tests/support/shapes.h (shared with test_scan). */
 
 /* ---- helpers ----------------------------------------------------------- */
 
@@ -40,311 +40,12 @@ static void run_peel(const vx_mesh *m, vx_voxelize_desc *d, vx_bitgrid *out, vx_
     assert_string_equal(st->method, "peel");
 }
 
-/* Compares with the reference; prints and returns the mismatch count. */
-static size_t compare_ref(const char *what, const vx_mesh *m, const vx_grid *g, vx_inside rule,
-                          const vx_bitgrid *b, double *iou)
-{
-    size_t n = (size_t)g->dims[0] * g->dims[1] * g->dims[2];
-    uint8_t *ref = malloc(n);
-    assert_non_null(ref);
-    assert_int_equal(ref_voxelize(m, g, rule, ref), 0);
-    size_t mis = 0, in = 0;
-    for (int k = 0; k < g->dims[2]; k++)
-        for (int j = 0; j < g->dims[1]; j++)
-            for (int i = 0; i < g->dims[0]; i++) {
-                size_t q = ((size_t)k * g->dims[1] + j) * g->dims[0] + i;
-                mis += ref[q] != vx_bitgrid_get(b, i, j, k);
-                in += ref[q];
-            }
-    *iou = ref_iou(ref, b);
-    printf("%-28s %dx%dx%d ref=%zu gpu=%llu mismatches=%zu IoU=%.6f\n", what, g->dims[0],
-           g->dims[1], g->dims[2], in, (unsigned long long)vx_bitgrid_count(b), mis, *iou);
-    free(ref);
-    return mis;
-}
-
 static void grid_res(const vx_mesh *m, int res, int pad, vx_grid *g)
 {
     assert_int_equal(vx_grid_from_resolution(m, res, pad, g, NULL), 0);
 }
 
 /* ---- tests ------------------------------------------------------------- */
-
-static void test_cube_exact(void **state)
-{
-    vx_mesh *m = shape_box((double[]){0, 0, 0}, (double[]){1, 1, 1});
-    for (int pad = 0; pad <= 2; pad += 2)
-        for (int rule = VX_INSIDE_NONZERO; rule <= VX_INSIDE_ROBUST; rule++) {
-            vx_voxelize_desc d = {.inside = (vx_inside)rule};
-            grid_res(m, 8, pad, &d.grid);
-            vx_bitgrid b;
-            vx_voxelize_stats st;
-            run_peel(m, &d, &b, &st);
-            assert_int_equal(vx_bitgrid_count(&b), 512);
-            assert_int_equal(st.voxels_inside, 512);
-            assert_int_equal(st.layers, 2);
-            assert_int_equal(st.chunks, 1);
-            vx_bitgrid_free(&b);
-        }
-    vx_mesh_free(m);
-}
-
-static void test_box_on_boundaries(void **state)
-{
-    /* faces on cell boundaries (h = 0.25), odd grid sizes, a grid wider
-     * than 32 voxels along x (several words per row) */
-    vx_mesh *m = shape_box((double[]){0.5, 0.25, 0}, (double[]){10.25, 1.75, 1.5});
-    vx_voxelize_desc d = {.grid = {{0, 0, 0}, 0.25, {45, 11, 9}}};
-    vx_bitgrid b;
-    vx_voxelize_stats st;
-    run_peel(m, &d, &b, &st);
-    assert_int_equal(vx_bitgrid_count(&b), 39 * 6 * 6);
-    for (int k = 0; k < 9; k++)
-        for (int j = 0; j < 11; j++)
-            for (int i = 0; i < 45; i++)
-                assert_int_equal(vx_bitgrid_get(&b, i, j, k),
-                                 i >= 2 && i < 41 && j >= 1 && j < 7 && k < 6);
-    vx_bitgrid_free(&b);
-    /* faces through voxel centres: the half-open [entry, exit) rule */
-    vx_mesh_free(m);
-    m = shape_box((double[]){0.125, 0.375, 0.625}, (double[]){1.125, 1.375, 1.625});
-    double iou;
-    run_peel(m, &d, &b, &st);
-    assert_int_equal(compare_ref("box through centres", m, &d.grid, VX_INSIDE_NONZERO, &b, &iou),
-                     0);
-    vx_bitgrid_free(&b);
-    vx_mesh_free(m);
-}
-
-static void test_sphere(void **state)
-{
-    vx_mesh *m = shape_sphere(0, 0, 0, 1, 0);
-    vx_voxelize_desc d = {0};
-    grid_res(m, 64, 1, &d.grid);
-    vx_bitgrid b;
-    vx_voxelize_stats st;
-    run_peel(m, &d, &b, &st);
-    double vol = (double)vx_bitgrid_count(&b) * pow(d.grid.h, 3), exact = 4.0 / 3 * M_PI;
-    printf("sphere 64^3: volume %.5f analytic %.5f (%.3f%%), polyhedron %.5f\n", vol, exact,
-           100 * (vol / exact - 1), shape_signed_volume(m));
-    assert_true(fabs(vol / exact - 1) < 0.01);
-    double iou;
-    compare_ref("sphere nonzero", m, &d.grid, VX_INSIDE_NONZERO, &b, &iou);
-    assert_true(iou >= 0.999);
-    vx_bitgrid_free(&b);
-    d.inside = VX_INSIDE_PARITY;
-    run_peel(m, &d, &b, &st);
-    compare_ref("sphere parity", m, &d.grid, VX_INSIDE_PARITY, &b, &iou);
-    assert_true(iou >= 0.999);
-    vx_bitgrid_free(&b);
-    vx_mesh_free(m);
-}
-
-static void test_torus(void **state)
-{
-    vx_mesh *m = shape_param_mesh(96, 48, 0, 0, 0.1, 0.2, 0.3, 1.0, 0.35);
-    vx_voxelize_desc d = {0};
-    grid_res(m, 80, 2, &d.grid);
-    vx_bitgrid b;
-    vx_voxelize_stats st;
-    run_peel(m, &d, &b, &st);
-    double iou;
-    compare_ref("torus", m, &d.grid, VX_INSIDE_NONZERO, &b, &iou);
-    assert_true(iou >= 0.999);
-    assert_int_equal(st.layers, 4);
-    double vol = (double)vx_bitgrid_count(&b) * pow(d.grid.h, 3),
-           exact = 2 * M_PI * M_PI * 1.0 * 0.35 * 0.35;
-    printf("torus volume %.5f analytic %.5f\n", vol, exact);
-    assert_true(fabs(vol / exact - 1) < 0.02);
-    vx_bitgrid_free(&b);
-    vx_mesh_free(m);
-}
-
-static void test_hollow_and_nested(void **state)
-{
-    vx_mesh *parts[3] = {shape_sphere(0, 0, 0, 1, 0), shape_sphere(0, 0, 0, 0.6, 1), shape_sphere(0, 0, 0, 0.3, 0)};
-    vx_mesh *hollow = shape_merge(parts, 2), *nested = shape_merge(parts, 3);
-    for (int rule = VX_INSIDE_NONZERO; rule <= VX_INSIDE_PARITY; rule++) {
-        vx_voxelize_desc d = {.inside = (vx_inside)rule};
-        grid_res(hollow, 64, 1, &d.grid);
-        vx_bitgrid b;
-        vx_voxelize_stats st;
-        run_peel(hollow, &d, &b, &st);
-        /* the void is empty: no centre within 0.58 of the centre is set */
-        size_t in_void = 0;
-        for (int k = 0; k < d.grid.dims[2]; k++)
-            for (int j = 0; j < d.grid.dims[1]; j++)
-                for (int i = 0; i < d.grid.dims[0]; i++) {
-                    double x = d.grid.origin[0] + (i + .5) * d.grid.h,
-                           y = d.grid.origin[1] + (j + .5) * d.grid.h,
-                           z = d.grid.origin[2] + (k + .5) * d.grid.h;
-                    if (sqrt(x * x + y * y + z * z) < 0.58) in_void += vx_bitgrid_get(&b, i, j, k);
-                }
-        assert_int_equal(in_void, 0);
-        double iou;
-        compare_ref(rule ? "hollow parity" : "hollow nonzero", hollow, &d.grid, (vx_inside)rule, &b,
-                    &iou);
-        assert_true(iou >= 0.999);
-        assert_int_equal(st.layers, 4);
-        vx_bitgrid_free(&b);
-
-        run_peel(nested, &d, &b, &st);
-        assert_int_equal(st.layers, 6);
-        compare_ref(rule ? "ball in hollow parity" : "ball in hollow nonzero", nested, &d.grid,
-                    (vx_inside)rule, &b, &iou);
-        assert_true(iou >= 0.999);
-        double vol = (double)vx_bitgrid_count(&b) * pow(d.grid.h, 3),
-               exact = 4.0 / 3 * M_PI * (1 - 0.216 + 0.027);
-        printf("ball in hollow: volume %.5f analytic %.5f\n", vol, exact);
-        assert_true(fabs(vol / exact - 1) < 0.02);
-        vx_bitgrid_free(&b);
-        /* max_layers below what the mesh needs fails clearly */
-        d.max_layers = 5;
-        vx_err err = {0};
-        assert_int_equal(vx_voxelize_peel(vx_test_gl, nested, &d, &b, &st, &err), -1);
-        assert_string_equal(err.code, "too_many_layers");
-        assert_null(b.bits);
-    }
-    for (int i = 0; i < 3; i++)
-        vx_mesh_free(parts[i]);
-    vx_mesh_free(hollow);
-    vx_mesh_free(nested);
-}
-
-static void test_overlapping_spheres(void **state)
-{
-    vx_mesh *parts[2] = {shape_sphere(0, 0, 0, 1, 0), shape_sphere(0.7, 0.3, 0.1, 0.8, 0)};
-    vx_mesh *m = shape_merge(parts, 2);
-    vx_voxelize_desc d = {0};
-    grid_res(m, 64, 1, &d.grid);
-    vx_bitgrid b;
-    vx_voxelize_stats st;
-    double iou;
-    run_peel(m, &d, &b, &st);
-    compare_ref("two spheres nonzero (union)", m, &d.grid, VX_INSIDE_NONZERO, &b, &iou);
-    assert_true(iou >= 0.999);
-    uint64_t uni = vx_bitgrid_count(&b);
-    vx_bitgrid_free(&b);
-    d.inside = VX_INSIDE_PARITY;
-    run_peel(m, &d, &b, &st);
-    compare_ref("two spheres parity (xor)", m, &d.grid, VX_INSIDE_PARITY, &b, &iou);
-    assert_true(iou >= 0.999);
-    assert_true(vx_bitgrid_count(&b) < uni);
-    vx_bitgrid_free(&b);
-    for (int i = 0; i < 2; i++)
-        vx_mesh_free(parts[i]);
-    vx_mesh_free(m);
-}
-
-static void test_coincident_faces(void **state)
-{
-    /* Two boxes touching face to face: at x = 1 two crossings share one
-     * depth. Peeling keeps one fragment per depth; the per-layer counts
-     * must still see both, or the second box would come out empty. */
-    vx_mesh *parts[2] = {shape_box((double[]){0, 0, 0}, (double[]){1, 1, 1}),
-                         shape_box((double[]){1, 0, 0}, (double[]){2, 1, 1})};
-    vx_mesh *m = shape_merge(parts, 2);
-    vx_voxelize_desc d = {.grid = {{0, 0, 0}, 0.125, {16, 8, 8}}};
-    vx_bitgrid b;
-    vx_voxelize_stats st;
-    for (int rule = VX_INSIDE_NONZERO; rule <= VX_INSIDE_ROBUST; rule++) {
-        d.inside = (vx_inside)rule;
-        run_peel(m, &d, &b, &st);
-        assert_int_equal(vx_bitgrid_count(&b), 1024);
-        vx_bitgrid_free(&b);
-    }
-    vx_mesh_free(m);
-    /* The same box twice: winding 2 inside (nonzero: solid), four crossings
-     * per ray (parity: empty), as the reference says. */
-    vx_mesh_free(parts[1]);
-    parts[1] = shape_box((double[]){0, 0, 0}, (double[]){1, 1, 1});
-    m = shape_merge(parts, 2);
-    d.grid.dims[0] = 8;
-    d.inside = VX_INSIDE_NONZERO;
-    run_peel(m, &d, &b, &st);
-    assert_int_equal(vx_bitgrid_count(&b), 512);
-    vx_bitgrid_free(&b);
-    d.inside = VX_INSIDE_PARITY;
-    run_peel(m, &d, &b, &st);
-    assert_int_equal(vx_bitgrid_count(&b), 0);
-    vx_bitgrid_free(&b);
-    vx_mesh_free(m);
-    for (int i = 0; i < 2; i++)
-        vx_mesh_free(parts[i]);
-}
-
-static void test_grid_cuts_mesh(void **state)
-{
-    /* A grid over part of a sphere (the mesh reaches outside it along every
-     * axis, also below the grid along the rays): crossings outside the grid
-     * still count. */
-    vx_mesh *m = shape_sphere(0, 0, 0, 1, 0);
-    vx_voxelize_desc d = {.grid = {{-0.3, -0.75, -1.1}, 1.0 / 32, {40, 30, 50}}};
-    for (int rule = VX_INSIDE_NONZERO; rule <= VX_INSIDE_PARITY; rule++) {
-        d.inside = (vx_inside)rule;
-        vx_bitgrid b;
-        vx_voxelize_stats st;
-        run_peel(m, &d, &b, &st);
-        double iou;
-        compare_ref(rule ? "cut sphere parity" : "cut sphere nonzero", m, &d.grid, (vx_inside)rule,
-                    &b, &iou);
-        assert_true(iou >= 0.999);
-        vx_bitgrid_free(&b);
-    }
-    /* degenerate grids: one voxel thick along each axis in turn */
-    for (int a = 0; a < 3; a++) {
-        vx_voxelize_desc d1 = {.grid = {{-0.9, -0.9, -0.9}, 1.0 / 16, {29, 29, 29}}};
-        d1.grid.dims[a] = 1;
-        d1.grid.origin[a] = -0.03;
-        for (int rule = VX_INSIDE_NONZERO; rule <= VX_INSIDE_ROBUST; rule++) {
-            d1.inside = (vx_inside)rule;
-            vx_bitgrid b;
-            vx_voxelize_stats st;
-            run_peel(m, &d1, &b, &st);
-            double iou;
-            compare_ref("one voxel thick", m, &d1.grid, VX_INSIDE_NONZERO, &b, &iou);
-            assert_true(iou >= 0.99);
-            vx_bitgrid_free(&b);
-        }
-    }
-    vx_mesh_free(m);
-    /* no triangles at all: an empty grid */
-    vx_mesh *e = vx_mesh_new();
-    vx_bitgrid b;
-    vx_voxelize_stats st;
-    run_peel(e, &d, &b, &st);
-    assert_int_equal(vx_bitgrid_count(&b), 0);
-    assert_int_equal(st.layers, 0);
-    vx_bitgrid_free(&b);
-    vx_mesh_free(e);
-}
-
-static void test_real_meshes_256(void **state)
-{
-    const char *names[] = {"spot_triangulated.obj", "fandisk.obj", "rocker-arm.obj"};
-    for (int n = 0; n < 3; n++) {
-        char path[512];
-        snprintf(path, sizeof path, "%s/%s", VX_MESH_DIR, names[n]);
-        vx_mesh *m = vx_obj_read_path(path, NULL, NULL);
-        assert_non_null(m);
-        vx_voxelize_desc d = {0};
-        grid_res(m, 256, 1, &d.grid);
-        vx_bitgrid b;
-        vx_voxelize_stats st;
-        double t0 = now_s();
-        run_peel(m, &d, &b, &st);
-        double t1 = now_s();
-        printf("%s: %.0f ms wall, peel %.1f ms, fill %.3f ms, layers %d, upload %.1f ms, "
-               "readback %.1f ms\n",
-               names[n], 1e3 * (t1 - t0), st.gpu_peel_ms, st.gpu_fill_ms, st.layers, st.upload_ms,
-               st.readback_ms);
-        double iou;
-        compare_ref(names[n], m, &d.grid, VX_INSIDE_NONZERO, &b, &iou);
-        assert_true(iou >= 0.999);
-        vx_bitgrid_free(&b);
-        vx_mesh_free(m);
-    }
-}
 
 /* Agreement of a bit grid with the winding number (> 0.5 inside) at the
  * sampled centres. */
@@ -405,7 +106,7 @@ static void test_bunny_robust(void **state)
         vx_bitgrid b1;
         double iou;
         run_peel(m, &d1, &b1, &st);
-        compare_ref(rule ? "bunny (open) parity" : "bunny (open) nonzero", m, &d.grid,
+        ref_compare(rule ? "bunny (open) parity" : "bunny (open) nonzero", m, &d.grid,
                     (vx_inside)rule, &b1, &iou);
         assert_true(iou >= 0.999);
         vx_bitgrid_free(&b1);
@@ -596,140 +297,6 @@ static void test_surface(void **state)
     vx_mesh_free(big);
 }
 
-static void test_slabs(void **state)
-{
-    vx_mesh *m = vx_obj_read_path(VX_MESH_DIR "/spot_triangulated.obj", NULL, NULL);
-    assert_non_null(m);
-    for (int mode = 0; mode < 4; mode++) {
-        vx_voxelize_desc d = {0};
-        if (mode < 3)
-            d.inside = (vx_inside)mode;
-        else
-            d.fill = VX_FILL_SURFACE;
-        grid_res(m, 70, 1, &d.grid);
-        vx_bitgrid one, many;
-        vx_voxelize_stats st;
-        run_peel(m, &d, &one, &st);
-        assert_int_equal(st.chunks, 1);
-        d.max_slab_rows = 7;
-        run_peel(m, &d, &many, &st);
-        assert_int_equal(st.chunks, (d.grid.dims[2] + 6) / 7);
-        size_t words = one.wx * d.grid.dims[1] * d.grid.dims[2];
-        assert_memory_equal(one.bits, many.bits, words * 4);
-        printf("slabs mode %d: %d chunks, %llu voxels, identical\n", mode, st.chunks,
-               (unsigned long long)vx_bitgrid_count(&one));
-        assert_true(vx_bitgrid_count(&one) > 1000);
-        vx_bitgrid_free(&one);
-        vx_bitgrid_free(&many);
-    }
-    vx_mesh_free(m);
-}
-
-static int stop_at(void *ud, double f, vx_err *err)
-{
-    int *calls = ud;
-    assert_true(f >= 0 && f <= 1);
-    if (++*calls == 3) return vx_err_set(err, VX_ECANCELED, "stopped_by_test", "stop");
-    return 0;
-}
-
-static int count_calls(void *ud, double f, vx_err *err)
-{
-    (*(int *)ud)++;
-    return 0;
-}
-
-static void test_limits_and_progress(void **state)
-{
-    vx_mesh *m = shape_sphere(0, 0, 0, 1, 0);
-    vx_voxelize_desc d = {0};
-    grid_res(m, 64, 1, &d.grid);
-    vx_bitgrid b;
-    vx_voxelize_stats st;
-    vx_err err = {0};
-    d.max_memory = 40000; /* less than the 66^3 bits themselves */
-    assert_int_equal(vx_voxelize_peel(vx_test_gl, m, &d, &b, &st, &err), -1);
-    assert_int_equal(err.kind, VX_ETOOBIG);
-    assert_string_equal(err.code, "job_memory_limit");
-    assert_null(b.bits);
-    /* enough for the grid but not for one slab: slabs shrink to fit */
-    d.max_memory = 400000;
-    run_peel(m, &d, &b, &st);
-    printf("max_memory 400000: %d chunks\n", st.chunks);
-    assert_true(st.chunks > 1);
-    vx_bitgrid_free(&b);
-    d.max_memory = 0;
-
-    int calls = 0;
-    d.progress = count_calls;
-    d.ud = &calls;
-    d.max_slab_rows = 20;
-    run_peel(m, &d, &b, &st);
-    printf("progress calls: %d for %d chunks and %d layers\n", calls, st.chunks, st.layers);
-    assert_true(calls >= st.chunks + st.layers);
-    vx_bitgrid_free(&b);
-    calls = 0;
-    d.progress = stop_at;
-    memset(&err, 0, sizeof err);
-    assert_int_equal(vx_voxelize_peel(vx_test_gl, m, &d, &b, &st, &err), -1);
-    assert_string_equal(err.code, "stopped_by_test");
-    assert_int_equal(calls, 3);
-    assert_null(b.bits);
-    vx_mesh_free(m);
-}
-
-static void test_dispatcher(void **state)
-{
-    vx_mesh *m = shape_box((double[]){0, 0, 0}, (double[]){1, 1, 1});
-    vx_voxelize_desc d = {0};
-    grid_res(m, 8, 0, &d.grid);
-    vx_bitgrid b;
-    vx_voxelize_stats st;
-    vx_err err = {0};
-    /* auto: scan for nonzero/parity solid fills (test_scan.c), peel for
-     * robust */
-    assert_int_equal(vx_voxelize(vx_test_gl, m, &d, &b, &st, &err), 0);
-    assert_string_equal(st.method, "scan");
-    assert_int_equal(st.voxels_inside, 512);
-    vx_bitgrid_free(&b);
-    d.inside = VX_INSIDE_ROBUST;
-    assert_int_equal(vx_voxelize(vx_test_gl, m, &d, &b, &st, &err), 0);
-    assert_string_equal(st.method, "peel");
-    assert_int_equal(st.voxels_inside, 512);
-    d.inside = VX_INSIDE_NONZERO;
-    vx_bitgrid_free(&b);
-    struct {
-        vx_voxelize_desc d;
-    } bad[6];
-    for (int i = 0; i < 6; i++)
-        bad[i].d = d;
-    bad[0].d.grid.dims[1] = 0;
-    bad[1].d.supersample = 3;
-    bad[2].d.threshold = 9;
-    bad[3].d.method = (vx_method)7;
-    bad[4].d.inside = (vx_inside)-1;
-    bad[5].d.fill = (vx_fill)2;
-    for (int i = 0; i < 6; i++) {
-        memset(&err, 0, sizeof err);
-        assert_int_equal(vx_voxelize(vx_test_gl, m, &bad[i].d, &b, &st, &err), -1);
-        assert_int_equal(err.kind, VX_EUNPROC);
-        assert_string_equal(err.code, "invalid_params");
-    }
-    /* peel has no supersampling; auto sends supersample 2 to slice */
-    d.method = VX_METHOD_PEEL;
-    d.supersample = 2;
-    assert_int_equal(vx_voxelize(vx_test_gl, m, &d, &b, &st, &err), -1);
-    d.method = VX_METHOD_AUTO;
-    memset(&err, 0, sizeof err);
-    if (vx_voxelize(vx_test_gl, m, &d, &b, &st, &err) == 0) {
-        assert_string_equal(st.method, "slice");
-        vx_bitgrid_free(&b);
-    } else {
-        assert_string_equal(err.code, "method_unavailable");
-    }
-    vx_mesh_free(m);
-}
-
 /* Timings for the report; runs only with VX_PEEL_BENCH=1. */
 static void test_bench(void **state)
 {
@@ -762,7 +329,7 @@ static void test_bench(void **state)
                            st.chunks, st.upload_ms, st.readback_ms, 1e3 * (now_s() - t0));
                 if (rep && res == 256 && i < 3) {
                     double iou;
-                    compare_ref(labels[i], ms[i], &d.grid, VX_INSIDE_NONZERO, &b, &iou);
+                    ref_compare(labels[i], ms[i], &d.grid, VX_INSIDE_NONZERO, &b, &iou);
                 }
                 vx_bitgrid_free(&b);
             }
@@ -842,21 +409,9 @@ static void test_big(void **state)
 int main(void)
 {
     const struct CMUnitTest tests[] = {
-        cmocka_unit_test(test_cube_exact),
-        cmocka_unit_test(test_box_on_boundaries),
-        cmocka_unit_test(test_sphere),
-        cmocka_unit_test(test_torus),
-        cmocka_unit_test(test_hollow_and_nested),
-        cmocka_unit_test(test_overlapping_spheres),
-        cmocka_unit_test(test_coincident_faces),
-        cmocka_unit_test(test_grid_cuts_mesh),
-        cmocka_unit_test(test_real_meshes_256),
         cmocka_unit_test(test_bunny_robust),
         cmocka_unit_test(test_robust_limits),
         cmocka_unit_test(test_surface),
-        cmocka_unit_test(test_slabs),
-        cmocka_unit_test(test_limits_and_progress),
-        cmocka_unit_test(test_dispatcher),
         cmocka_unit_test(test_bench),
         cmocka_unit_test(test_big),
     };

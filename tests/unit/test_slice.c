@@ -15,6 +15,7 @@
 #include "gl_fixture.h"
 
 #include "ref_voxel.h"
+#include "shapes.h"
 #include "voxel/voxel.h"
 
 
@@ -37,122 +38,6 @@ const char *__lsan_default_suppressions(void)
 }
 
 
-/* ---- meshes built here ---- */
-
-static vx_mesh *mesh_from(double *pos, size_t nv, uint32_t *idx, size_t nt)
-{
-    vx_mesh *m = vx_mesh_new();
-    m->nverts = nv;
-    m->pos = pos;
-    m->nfaces = nt;
-    m->face_idx = idx;
-    assert_int_equal(vx_mesh_analyze(m, NULL), 0);
-    return m;
-}
-
-/* Axis-aligned box [lo, hi] as 12 outward-facing triangles. */
-static vx_mesh *box(const double lo[3], const double hi[3])
-{
-    double *pos = malloc(24 * sizeof(double));
-    for (int v = 0; v < 8; v++)
-        for (int a = 0; a < 3; a++)
-            pos[3 * v + a] = (v >> a) & 1 ? hi[a] : lo[a];
-    static const uint32_t f[36] = {0, 2, 3, 0, 3, 1, 4, 5, 7, 4, 7, 6, 0, 1, 5, 0, 5, 4,
-                                   2, 6, 7, 2, 7, 3, 0, 4, 6, 0, 6, 2, 1, 3, 7, 1, 7, 5};
-    uint32_t *idx = malloc(sizeof f);
-    memcpy(idx, f, sizeof f);
-    return mesh_from(pos, 8, idx, 12);
-}
-
-/* UV sphere, outward facing (inward when flip). */
-static vx_mesh *sphere(const double c[3], double r, int nlat, int nlon, int flip)
-{
-    size_t nv = 2 + (size_t)(nlat - 1) * nlon, nt = 2 * (size_t)nlon * (nlat - 1);
-    double *pos = malloc(nv * 3 * sizeof(double));
-    uint32_t *idx = malloc(nt * 3 * sizeof(uint32_t));
-    pos[0] = c[0], pos[1] = c[1], pos[2] = c[2] - r;
-    pos[3] = c[0], pos[4] = c[1], pos[5] = c[2] + r;
-    for (int i = 1; i < nlat; i++)
-        for (int j = 0; j < nlon; j++) {
-            double th = M_PI * i / nlat, ph = 2 * M_PI * j / nlon;
-            double *p = pos + 3 * (2 + (size_t)(i - 1) * nlon + j);
-            p[0] = c[0] + r * sin(th) * cos(ph);
-            p[1] = c[1] + r * sin(th) * sin(ph);
-            p[2] = c[2] - r * cos(th);
-        }
-#define V(i, j) ((uint32_t)(2 + (size_t)((i)-1) * nlon + (size_t)((j) % nlon)))
-    size_t t = 0;
-    for (int j = 0; j < nlon; j++) {
-        uint32_t tri[2][3] = {{0, V(1, j + 1), V(1, j)}, {1, V(nlat - 1, j), V(nlat - 1, j + 1)}};
-        for (int q = 0; q < 2; q++, t++)
-            for (int k = 0; k < 3; k++)
-                idx[3 * t + k] = tri[q][k];
-    }
-    for (int i = 1; i < nlat - 1; i++)
-        for (int j = 0; j < nlon; j++) {
-            uint32_t a = V(i, j), b = V(i, j + 1), cc = V(i + 1, j + 1), d = V(i + 1, j);
-            uint32_t tri[2][3] = {{a, b, cc}, {a, cc, d}};
-            for (int q = 0; q < 2; q++, t++)
-                for (int k = 0; k < 3; k++)
-                    idx[3 * t + k] = tri[q][k];
-        }
-#undef V
-    assert_int_equal(t, nt);
-    if (flip)
-        for (size_t q = 0; q < nt; q++) {
-            uint32_t s = idx[3 * q + 1];
-            idx[3 * q + 1] = idx[3 * q + 2];
-            idx[3 * q + 2] = s;
-        }
-    return mesh_from(pos, nv, idx, nt);
-}
-
-static vx_mesh *torus(const double c[3], double R, double r, int nu, int nv)
-{
-    size_t n = (size_t)nu * nv;
-    double *pos = malloc(n * 3 * sizeof(double));
-    uint32_t *idx = malloc(n * 6 * sizeof(uint32_t));
-    for (int i = 0; i < nu; i++)
-        for (int j = 0; j < nv; j++) {
-            double u = 2 * M_PI * i / nu, v = 2 * M_PI * j / nv;
-            double *p = pos + 3 * ((size_t)i * nv + j);
-            p[0] = c[0] + (R + r * cos(v)) * cos(u);
-            p[1] = c[1] + (R + r * cos(v)) * sin(u);
-            p[2] = c[2] + r * sin(v);
-        }
-    size_t t = 0;
-    for (int i = 0; i < nu; i++)
-        for (int j = 0; j < nv; j++) {
-            uint32_t a = (uint32_t)(i * nv + j), b = (uint32_t)(((i + 1) % nu) * nv + j),
-                     cc = (uint32_t)(((i + 1) % nu) * nv + (j + 1) % nv),
-                     d = (uint32_t)(i * nv + (j + 1) % nv);
-            uint32_t tri[2][3] = {{a, b, cc}, {a, cc, d}};
-            for (int q = 0; q < 2; q++, t++)
-                for (int k = 0; k < 3; k++)
-                    idx[3 * t + k] = tri[q][k];
-        }
-    return mesh_from(pos, n, idx, 2 * n);
-}
-
-/* The union of several meshes as one (parts keep their orientation). */
-static vx_mesh *merge(vx_mesh **parts, int n)
-{
-    size_t nv = 0, nt = 0;
-    for (int i = 0; i < n; i++)
-        nv += parts[i]->nverts, nt += parts[i]->ntris;
-    double *pos = malloc(nv * 3 * sizeof(double));
-    uint32_t *idx = malloc(nt * 3 * sizeof(uint32_t));
-    size_t v0 = 0, t0 = 0;
-    for (int i = 0; i < n; i++) {
-        memcpy(pos + 3 * v0, parts[i]->pos, parts[i]->nverts * 3 * sizeof(double));
-        for (size_t k = 0; k < 3 * parts[i]->ntris; k++)
-            idx[3 * t0 + k] = parts[i]->tri[k] + (uint32_t)v0;
-        v0 += parts[i]->nverts, t0 += parts[i]->ntris;
-        vx_mesh_free(parts[i]);
-    }
-    return mesh_from(pos, nv, idx, nt);
-}
-
 /* ---- helpers ---- */
 
 static void voxelize(const vx_mesh *m, const vx_grid *g, vx_inside rule, int ss, int thr,
@@ -174,26 +59,12 @@ static uint8_t *reference(const vx_mesh *m, const vx_grid *g, vx_inside rule)
     return r;
 }
 
-static size_t mismatches(const uint8_t *ref, const vx_bitgrid *b)
-{
-    size_t n = 0;
-    const int *dm = b->grid.dims;
-    for (int k = 0; k < dm[2]; k++)
-        for (int j = 0; j < dm[1]; j++)
-            for (int i = 0; i < dm[0]; i++)
-                n += ref[((size_t)k * dm[1] + j) * dm[0] + i] != vx_bitgrid_get(b, i, j, k);
-    return n;
-}
-
-/* IoU against the reference; prints the mismatch count. */
+/* IoU against the reference (ref_compare prints the mismatch count). */
 static double compare(const char *what, const vx_mesh *m, const vx_grid *g, vx_inside rule,
                       const vx_bitgrid *b)
 {
-    uint8_t *r = reference(m, g, rule);
-    double iou = ref_iou(r, b);
-    printf("%s: %dx%dx%d inside=%llu mismatches=%zu iou=%.6f\n", what, g->dims[0], g->dims[1],
-           g->dims[2], (unsigned long long)vx_bitgrid_count(b), mismatches(r, b), iou);
-    free(r);
+    double iou;
+    assert_true(ref_compare(what, m, g, rule, b, &iou) != (size_t)-1);
     return iou;
 }
 
@@ -212,7 +83,7 @@ static vx_mesh *load(const char *name)
 
 static void test_cube_exact(void **state)
 {
-    vx_mesh *m = box((double[]){0, 0, 0}, (double[]){1, 1, 1});
+    vx_mesh *m = shape_box((double[]){0, 0, 0}, (double[]){1, 1, 1});
     vx_grid g;
     assert_int_equal(vx_grid_from_resolution(m, 8, 0, &g, NULL), 0);
     vx_bitgrid b;
@@ -257,7 +128,7 @@ static void test_boxes_on_cell_boundaries(void **state)
             lo[a] = off[a] + cases[c].lo[a] * h;
             hi[a] = off[a] + cases[c].hi[a] * h;
         }
-        vx_mesh *m = box(lo, hi);
+        vx_mesh *m = shape_box(lo, hi);
         vx_grid g = {
             {off[0], off[1], off[2]}, h, {cases[c].dims[0], cases[c].dims[1], cases[c].dims[2]}};
         uint64_t want = 1;
@@ -287,7 +158,7 @@ static void test_boxes_on_cell_boundaries(void **state)
  * measured here and printed. */
 static void test_tie_rule(void **state)
 {
-    vx_mesh *m = box((double[]){2.5, 3.5, 1.5}, (double[]){9.5, 7.5, 6.5});
+    vx_mesh *m = shape_box((double[]){2.5, 3.5, 1.5}, (double[]){9.5, 7.5, 6.5});
     vx_grid g = {{0, 0, 0}, 1.0, {12, 10, 8}};
     for (int rule = 0; rule < 3; rule++) {
         vx_bitgrid b;
@@ -308,7 +179,7 @@ static void test_tie_rule(void **state)
         printf(
             "tie box rule %d: inside=%llu ref=%zu mismatches=%zu, set i %d..%d j %d..%d k %d..%d "
             "(ref: i 2..8 j 3..6 k 1..5)\n",
-            rule, (unsigned long long)vx_bitgrid_count(&b), (size_t)(7 * 4 * 5), mismatches(r, &b),
+            rule, (unsigned long long)vx_bitgrid_count(&b), (size_t)(7 * 4 * 5), ref_mismatches(r, &b),
             lo[0], hi[0], lo[1], hi[1], lo[2], hi[2]);
         /* along z the half-open rule is exact */
         assert_int_equal(lo[2], 1);
@@ -316,7 +187,7 @@ static void test_tie_rule(void **state)
         /* llvmpipe's edge rule (left and bottom edges in) is the same
          * half-open rule; other drivers may pick the other edge */
         if (strcmp(vx_gl_get_info(vx_test_gl)->device_kind, "software") == 0)
-            assert_int_equal(mismatches(r, &b), 0);
+            assert_int_equal(ref_mismatches(r, &b), 0);
         free(r);
         vx_bitgrid_free(&b);
     }
@@ -326,7 +197,7 @@ static void test_tie_rule(void **state)
 static void test_sphere(void **state)
 {
     const double r = 1.0;
-    vx_mesh *m = sphere((double[]){0, 0, 0}, r, 96, 192, 0);
+    vx_mesh *m = shape_param_mesh(192, 96, 1, 0, 0, 0, 0, r, 0);
     vx_grid g;
     assert_int_equal(vx_grid_from_resolution(m, 64, 2, &g, NULL), 0);
     for (int rule = 0; rule < 2; rule++) {
@@ -347,7 +218,7 @@ static void test_sphere(void **state)
  * front of it and beyond it along z) still decide the inside. */
 static void test_partial_grid(void **state)
 {
-    vx_mesh *m = sphere((double[]){0.05, -0.02, 0.03}, 1.0, 64, 128, 0);
+    vx_mesh *m = shape_param_mesh(128, 64, 1, 0, 0.05, -0.02, 0.03, 1.0, 0);
     const double h = 1.0 / 40;
     /* x, y cover the middle, z from 0.3 to 0.8: both poles outside */
     vx_grid g = {{-0.6, -0.7, 0.3}, h, {48, 56, 20}};
@@ -364,7 +235,7 @@ static void test_partial_grid(void **state)
 
 static void test_torus(void **state)
 {
-    vx_mesh *m = torus((double[]){0.1, 0.2, 0.3}, 1.0, 0.35, 128, 64);
+    vx_mesh *m = shape_param_mesh(128, 64, 0, 0, 0.1, 0.2, 0.3, 1.0, 0.35);
     vx_grid g;
     assert_int_equal(vx_grid_from_resolution(m, 96, 1, &g, NULL), 0);
     for (int rule = 0; rule < 3; rule++) {
@@ -386,9 +257,10 @@ static void test_torus(void **state)
 static void test_hollow_and_nested_balls(void **state)
 {
     const double c[3] = {0, 0, 0};
-    vx_mesh *parts[3] = {sphere(c, 1.0, 48, 96, 0), sphere(c, 0.7, 48, 96, 1),
-                         sphere(c, 0.3, 32, 64, 0)};
-    vx_mesh *hollow = merge(parts, 2);
+    vx_mesh *parts[3] = {shape_param_mesh(96, 48, 1, 0, c[0], c[1], c[2], 1.0, 0),
+                         shape_param_mesh(96, 48, 1, 1, c[0], c[1], c[2], 0.7, 0),
+                         shape_param_mesh(64, 32, 1, 0, c[0], c[1], c[2], 0.3, 0)};
+    vx_mesh *hollow = shape_merge(parts, 2);
     vx_grid g;
     assert_int_equal(vx_grid_from_resolution(hollow, 64, 1, &g, NULL), 0);
     /* voxel index of the centre */
@@ -413,7 +285,10 @@ static void test_hollow_and_nested_balls(void **state)
     }
     /* a solid ball inside the void */
     vx_mesh *both[2] = {hollow, parts[2]};
-    vx_mesh *nested = merge(both, 2);
+    vx_mesh *nested = shape_merge(both, 2);
+    for (int i = 0; i < 3; i++)
+        vx_mesh_free(parts[i]);
+    vx_mesh_free(hollow);
     for (int rule = 0; rule < 3; rule++) {
         vx_bitgrid b;
         vx_voxelize_stats st;
@@ -434,9 +309,11 @@ static void test_overlaps(void **state)
      * the centre is an exit. A and B and their intersection are inside,
      * except A's part below B ([1,2]^2 x [0,1]): its ray enters B (a front
      * face at z = 1) before leaving A, so 1024 - 64 - 64. */
-    vx_mesh *parts[2] = {box((double[]){0, 0, 0}, (double[]){2, 2, 2}),
-                         box((double[]){1, 1, 1}, (double[]){3, 3, 3})};
-    vx_mesh *m = merge(parts, 2);
+    vx_mesh *parts[2] = {shape_box((double[]){0, 0, 0}, (double[]){2, 2, 2}),
+                         shape_box((double[]){1, 1, 1}, (double[]){3, 3, 3})};
+    vx_mesh *m = shape_merge(parts, 2);
+    for (int i = 0; i < 2; i++)
+        vx_mesh_free(parts[i]);
     vx_grid g = {{0, 0, 0}, 0.25, {12, 12, 12}};
     vx_bitgrid b;
     vx_voxelize_stats st;
@@ -455,9 +332,11 @@ static void test_overlaps(void **state)
 
     /* Two overlapping spheres: nonzero gives the union; the nearest-surface
      * test contains the intersection and stays within the union. */
-    vx_mesh *sp[2] = {sphere((double[]){0, 0, 0}, 1.0, 48, 96, 0),
-                      sphere((double[]){0.6, 0.3, 0.5}, 0.8, 48, 96, 0)};
-    m = merge(sp, 2);
+    vx_mesh *sp[2] = {shape_param_mesh(96, 48, 1, 0, 0, 0, 0, 1.0, 0),
+                      shape_param_mesh(96, 48, 1, 0, 0.6, 0.3, 0.5, 0.8, 0)};
+    m = shape_merge(sp, 2);
+    for (int i = 0; i < 2; i++)
+        vx_mesh_free(sp[i]);
     vx_grid_from_resolution(m, 64, 1, &g, NULL);
     voxelize(m, &g, VX_INSIDE_NONZERO, 1, 0, &b, &st);
     assert_true(compare("spheres nonzero (union)", m, &g, VX_INSIDE_NONZERO, &b) >= 0.999);
