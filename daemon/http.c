@@ -61,7 +61,10 @@ static const struct {
 };
 
 typedef enum body_kind { BODY_NONE, BODY_UPLOAD, BODY_JSON } body_kind;
-typedef enum media { MEDIA_SNIFF, MEDIA_OBJ, MEDIA_DRACO } media;
+/* Declared upload types: model/obj is OBJ; text/plain is text, OBJ or .bpt
+ * by content; model/x-bpt is .bpt; the Draco types are Draco; no type or
+ * application/octet-stream is told by content. */
+typedef enum media { MEDIA_SNIFF, MEDIA_OBJ, MEDIA_DRACO, MEDIA_TEXT, MEDIA_BPT } media;
 
 typedef struct req req;
 
@@ -501,6 +504,7 @@ static cJSON *mesh_meta(const char *id, const char *format, uint64_t bytes, cons
     cJSON_AddNumberToObject(o, "degenerate_triangles", (double)m->degenerate_tris);
     cJSON_AddNumberToObject(o, "texcoords", (double)m->ntexcoords);
     cJSON_AddNumberToObject(o, "normals", (double)m->nnormals);
+    cJSON_AddNumberToObject(o, "patches", (double)m->npatches);
     char t[32];
     vx_rfc3339(vx_now(), t);
     cJSON_AddStringToObject(o, "created", t);
@@ -524,25 +528,28 @@ static int h_upload_done(vx_http *h, struct MHD_Connection *c, req *r)
     size_t nhead;
     const unsigned char *head = vx_upload_head(r->up, &nhead);
     vx_mesh_format fmt = vx_mesh_sniff(head, nhead);
-    if (r->declared == MEDIA_OBJ && fmt == VX_MESH_DRACO)
+    if ((r->declared == MEDIA_OBJ || r->declared == MEDIA_TEXT) && fmt == VX_MESH_DRACO)
         return send_error(c, r, 415, "unsupported_media_type",
-                          "Content-Type says OBJ but the body is a Draco file");
+                          "Content-Type says text (OBJ or .bpt) but the body is a Draco file");
     if (r->declared == MEDIA_DRACO && fmt != VX_MESH_DRACO)
         return send_error(c, r, 415, "unsupported_media_type",
                           "Content-Type says Draco but the body does not start with DRACO");
+    if (r->declared == MEDIA_BPT && fmt != VX_MESH_BPT)
+        return send_error(c, r, 415, "unsupported_media_type",
+                          "Content-Type says .bpt but the first line is not a patch count");
     if (r->declared == MEDIA_SNIFF && fmt == 0)
         return send_error(c, r, 415, "unsupported_media_type",
-                          "the body is neither an OBJ (text) nor a Draco file");
+                          "the body is neither text (OBJ, .bpt) nor a Draco file");
     cJSON *meta = vx_store_mesh_meta(h->d.store, id, NULL);
     if (meta) {
         VX_INFO("mesh.uploaded", "mesh=%s new=0", id);
         return send_json(c, r, 200, meta, NULL, NULL);
     }
-    if (r->declared == MEDIA_OBJ) fmt = VX_MESH_OBJ;
+    if (r->declared == MEDIA_OBJ || (r->declared == MEDIA_TEXT && fmt != VX_MESH_BPT))
+        fmt = VX_MESH_OBJ;
     vx_mesh_limits lim = {.max_triangles = h->d.cfg->max_triangles};
     double t = vx_mono();
-    vx_mesh *m = fmt == VX_MESH_DRACO ? vx_draco_read_path(vx_upload_path(r->up), &lim, &err)
-                                      : vx_obj_read_path(vx_upload_path(r->up), &lim, &err);
+    vx_mesh *m = vx_mesh_read_as(vx_upload_path(r->up), fmt, &lim, &err);
     if (!m) {
         char q[600];
         VX_INFO("mesh.rejected", "code=%s message=%s", err.code, vx_log_quote(q, sizeof q, err.message));
@@ -553,7 +560,7 @@ static int h_upload_done(vx_http *h, struct MHD_Connection *c, req *r)
         vx_mesh_free(m);
         return send_error(c, r, 422, "degenerate_mesh", "every triangle of the mesh has zero area");
     }
-    const char *fname = fmt == VX_MESH_DRACO ? "draco" : "obj";
+    const char *fname = fmt == VX_MESH_DRACO ? "draco" : fmt == VX_MESH_BPT ? "bpt" : "obj";
     meta = mesh_meta(id, fname, vx_upload_bytes(r->up), m);
     VX_INFO("mesh.uploaded", "mesh=%s new=1 format=%s bytes=%llu vertices=%zu triangles=%zu parse_ms=%.1f",
             id, fname, (unsigned long long)vx_upload_bytes(r->up), m->nverts, m->ntris, parse_ms);
@@ -561,7 +568,7 @@ static int h_upload_done(vx_http *h, struct MHD_Connection *c, req *r)
     int existed = 0;
     vx_upload *up = r->up;
     r->up = NULL; /* commit frees it */
-    if (vx_store_mesh_commit(h->d.store, up, id, fmt == VX_MESH_DRACO ? "drc" : "obj", meta,
+    if (vx_store_mesh_commit(h->d.store, up, id, fmt == VX_MESH_DRACO ? "drc" : fname, meta,
                              &existed, &err)) {
         cJSON_Delete(meta);
         return send_err(c, r, &err);
@@ -731,12 +738,14 @@ static int first_call(vx_http *h, struct MHD_Connection *c, req *r)
     char mt[128];
     media_type(header(c, MHD_HTTP_HEADER_CONTENT_TYPE), mt, sizeof mt);
     if (r->route == R_MESHES) {
-        if (!strcmp(mt, "model/obj") || !strcmp(mt, "text/plain")) r->declared = MEDIA_OBJ;
+        if (!strcmp(mt, "model/obj")) r->declared = MEDIA_OBJ;
+        else if (!strcmp(mt, "text/plain")) r->declared = MEDIA_TEXT;
+        else if (!strcmp(mt, "model/x-bpt")) r->declared = MEDIA_BPT;
         else if (!strcmp(mt, "model/x-draco") || !strcmp(mt, "application/x-draco")) r->declared = MEDIA_DRACO;
         else if (!mt[0] || !strcmp(mt, "application/octet-stream")) r->declared = MEDIA_SNIFF;
         else {
             char msg[200];
-            snprintf(msg, sizeof msg, "cannot take '%.100s': send model/obj, model/x-draco or "
+            snprintf(msg, sizeof msg, "cannot take '%.100s': send model/obj, model/x-bpt, model/x-draco or "
                                       "application/octet-stream", mt);
             return send_error(c, r, 415, "unsupported_media_type", msg);
         }

@@ -1,7 +1,8 @@
 /* The `gregory` job kind (job.h): polygon or Bézier mesh -> Gregory patches
  * (build.c) -> GPU tessellation (tess.c) of frame 0 and of every deformation
- * frame, reusing the topology tables and the output layout -> OBJ / PLY /
- * Draco per frame. */
+ * frame, reusing the topology tables (interpolate) or OpenSubdiv's plan
+ * (approximate-cc, osd.h) and the output layout -> OBJ / PLY / Draco per
+ * frame. */
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -9,17 +10,20 @@
 #include <time.h>
 
 #include "gregory/job.h"
+#include "gregory/osd.h"
 #include "gregory/tess.h"
 
 enum { CONS_INTERPOLATE = 0, CONS_APPROX_CC };
 enum { FMT_OBJ = 0, FMT_PLY, FMT_DRC };
 static const char *const cons_names[] = {"interpolate", "approximate-cc", NULL};
 static const char *const fmt_names[] = {"obj", "ply", "drc", NULL};
-static const char *const fmt_types[] = {"model/obj", "application/x-ply", "model/x-draco"};
+static const char *const fmt_types[] = {"model/obj", "model/x-ply", "model/x-draco"};
 static const char *const known[] = {"divisions", "max_edge", "construction", "weld", "frames",
                                     "format",    NULL};
 
 #define DEFAULT_DIVISIONS 8
+/* approximate-cc's distance to the limit surface: samples per patch side. */
+#define CC_DISTANCE_SAMPLES 5
 
 typedef struct gparams {
     long divisions;  /* 0 when max_edge is used */
@@ -90,9 +94,6 @@ static int read_params(const cJSON *params, const vx_limits *lim, gparams *p, vx
         vx_param_bool(params, "weld", 1, &p->weld, err) ||
         vx_param_enum(params, "format", fmt_names, FMT_OBJ, &p->format, err))
         return -1;
-    if (p->construction == CONS_APPROX_CC) /* the one place: see construct() */
-        return vx_err_set(err, VX_EUNPROC, "invalid_params",
-                          "params.construction: approximate-cc is not available in this build");
     /* Known at submission: the smallest mesh has one patch. */
     if (lim && lim->max_triangles && p->divisions &&
         2 * (uint64_t)p->divisions * (uint64_t)p->divisions > lim->max_triangles)
@@ -208,7 +209,8 @@ static double now_ms(void)
 typedef struct builder {
     const vx_mesh *mesh;
     int construction;
-    vx_gregory_topo *topo;
+    vx_gregory_topo *topo;    /* interpolate */
+    vx_gregory_cc_plan *cc;   /* approximate-cc */
     vx_gpatch_set *set;
 } builder;
 
@@ -223,10 +225,14 @@ static int construct(builder *b, const double *pos, vx_err *err)
     }
     switch (b->construction) {
     case CONS_APPROX_CC:
-        /* Merger: vx_gregory_build_approx_cc (osd.h) fills b->set here;
-         * read_params rejects it until then. */
-        return vx_err_set(err, VX_EUNPROC, "invalid_params",
-                          "params.construction: approximate-cc is not available in this build");
+        if (!b->cc) {
+            b->cc = vx_gregory_cc_plan_new(b->mesh, err);
+            if (!b->cc) return -1;
+            b->set = vx_gpatch_set_new(vx_gregory_cc_plan_patches(b->cc));
+            if (!b->set)
+                return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for patches");
+        }
+        return vx_gregory_cc_plan_eval(b->cc, pos, b->set, err);
     default:
         if (!b->topo) {
             b->topo = vx_gregory_topo_new(b->mesh, err);
@@ -309,6 +315,12 @@ static int greg_run_gl(vx_job_run *r, const vx_mesh *mesh, const cJSON *params, 
     double t0 = now_ms();
     if (construct(&b, mesh->pos, err)) goto done;
     double build_ms = now_ms() - t0;
+    /* How far approximate-cc is from the true limit surface (frame 0). */
+    double cc_distance = -1;
+    if (p.construction == CONS_APPROX_CC && !mesh->npatches) {
+        cc_distance = vx_gregory_cc_distance(mesh, b.set, CC_DISTANCE_SAMPLES, err);
+        if (cc_distance < 0) goto done;
+    }
     ndiv = vx_gregory_divisions(b.set, (int)p.divisions, p.max_edge, err);
     if (!ndiv) goto done;
     uint64_t gv, nt;
@@ -394,6 +406,7 @@ static int greg_run_gl(vx_job_run *r, const vx_mesh *mesh, const cJSON *params, 
         cJSON_AddNumberToObject(stats, "divisions_max", nmax);
         cJSON_AddNumberToObject(stats, "frames", (double)nframes);
         cJSON_AddNumberToObject(stats, "build_ms", build_ms);
+        if (cc_distance >= 0) cJSON_AddNumberToObject(stats, "cc_distance", cc_distance);
         cJSON_AddNumberToObject(stats, "gpu_ms", first_tess_ms);
         cJSON_AddNumberToObject(stats, "gpu_total_ms", gpu_ms);
         cJSON_AddNumberToObject(stats, "vertices_per_s",
@@ -412,6 +425,7 @@ done:
     free(fbuf);
     vx_gpatch_set_free(b.set);
     vx_gregory_topo_free(b.topo);
+    vx_gregory_cc_plan_free(b.cc);
     return rc;
 }
 

@@ -4,6 +4,7 @@
 
 #include "bandlimit/job.h"
 #include "gregory/job.h"
+#include "gregory/catmull_clark.h"
 #include "jobs/kind.h"
 #include "preview/preview.h"
 #include "voxel/job.h"
@@ -13,6 +14,7 @@ static const vx_kind *const table[] = {
     &vx_kind_voxelize,
     &vx_kind_render,
     &vx_kind_gregory,
+    &vx_kind_catmull_clark,
 };
 
 const vx_kind *vx_kind_find(const char *name)

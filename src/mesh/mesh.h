@@ -21,6 +21,7 @@
 typedef enum vx_mesh_format {
     VX_MESH_OBJ = 1,
     VX_MESH_DRACO = 2,
+    VX_MESH_BPT = 3, /* Newell's Bézier patch text format (mesh/bpt.c) */
 } vx_mesh_format;
 
 typedef struct vx_mesh {
@@ -87,11 +88,37 @@ vx_mesh *vx_draco_read_path(const char *path, const vx_mesh_limits *lim, vx_err 
  * (vx_mesh_read_path hands over the file it sniffed). */
 vx_mesh *vx_draco_read_file(FILE *f, const vx_mesh_limits *lim, vx_err *err);
 
-/* Reads either format by looking at the first bytes ("DRACO" magic). */
-vx_mesh *vx_mesh_read_path(const char *path, const vx_mesh_limits *lim, vx_err *err);
+/* Quads per patch side in the tessellation a .bpt read makes (8 x 8 quads,
+ * 128 triangles per patch). */
+#define VX_BPT_TESS 8
 
-/* Sniffs the first bytes of a file: VX_MESH_DRACO for the "DRACO" magic,
- * VX_MESH_OBJ for text, 0 for binary junk. */
+/* Reads a .bpt file (Newell's teapot format: the patch count; one line of
+ * 16 one-based point indices per patch, comma- or blank-separated; the point
+ * count; one "x,y,z" line per point), streaming it line by line. The file's
+ * k-th index of a patch goes to slot k (i = k % 4 along u, j = k / 4 along
+ * v): that order gives the teapot's normals dS/du x dS/dv pointing outward.
+ * Points the file writes twice (equal coordinates) are one point: patch_idx
+ * names the first of them (the duplicates stay in pos, unused). pos holds
+ * the points, then the tessellation's new vertices (Bézier
+ * evaluated in double); faces are VX_BPT_TESS^2 quads per patch, sharing the
+ * patch corners (the control points) and the vertices of a patch edge whose
+ * four control-point indices another patch uses too (either direction);
+ * quads that a collapsed edge degenerates become triangles. Errors
+ * (VX_EINVAL, code bpt_*) name the line: bpt_count, bpt_index, bpt_nan,
+ * bpt_junk, bpt_line_too_long, bpt_truncated; a limit is VX_ETOOBIG
+ * mesh_too_big. Returns an owned analysed mesh or NULL. */
+vx_mesh *vx_bpt_read_file(FILE *f, const vx_mesh_limits *lim, vx_err *err);
+vx_mesh *vx_bpt_read_path(const char *path, const vx_mesh_limits *lim, vx_err *err);
+
+/* Reads any format, told by the first bytes (vx_mesh_sniff). */
+vx_mesh *vx_mesh_read_path(const char *path, const vx_mesh_limits *lim, vx_err *err);
+/* Reads path as the given format (no sniffing). */
+vx_mesh *vx_mesh_read_as(const char *path, vx_mesh_format fmt, const vx_mesh_limits *lim,
+                         vx_err *err);
+
+/* Sniffs the first bytes of a file: VX_MESH_DRACO for the "DRACO" magic;
+ * for text, VX_MESH_BPT when the first non-blank line is a single unsigned
+ * integer (never valid OBJ), else VX_MESH_OBJ; 0 for binary junk. */
 vx_mesh_format vx_mesh_sniff(const unsigned char *head, size_t n);
 
 /* Optional per-vertex normals and per-face groups for the writers. */

@@ -17,6 +17,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "mesh/text.h"
 #include "util/log.h"
 
 /* A line longer than this is an error, so one hostile line cannot make the
@@ -122,7 +123,7 @@ static const double pow10_exact[] = {1e0,  1e1,  1e2,  1e3,  1e4,  1e5,  1e6,  1
  * Fast path (Clinger): a mantissa below 2^53 and a power of ten up to 22 are
  * both exact doubles, so one multiplication or division rounds correctly.
  * Everything else (17+ significant digits, large exponents) goes to strtod_l. */
-static char *parse_double(char *p, double *out)
+char *vx_mesh_parse_double(char *p, double *out)
 {
     char *s = p;
     int neg = 0;
@@ -258,7 +259,7 @@ static int parse_numbers(obj_reader *r, const char *stmt, char *p, const char *e
         if (!*p) break;
         if (*n == max)
             return obj_fail(r, VX_EINVAL, "obj_junk", "too many numbers in a '%s' statement", stmt);
-        char *q = parse_double(p, &v[*n]);
+        char *q = vx_mesh_parse_double(p, &v[*n]);
         if (!q) return junk(r, stmt, p);
         (*n)++;
         p = q;
@@ -600,6 +601,22 @@ vx_mesh *vx_obj_read_path(const char *path, const vx_mesh_limits *lim, vx_err *e
     return m;
 }
 
+/* Whether the first non-blank line is one unsigned integer (a .bpt patch
+ * count). A line the window cuts after digits counts. */
+static int first_line_is_count(const unsigned char *head, size_t n)
+{
+    size_t i = 0;
+    if (n >= 3 && memcmp(head, "\xef\xbb\xbf", 3) == 0) i = 3;
+    while (i < n && (is_ws((char)head[i]) || head[i] == '\n'))
+        i++;
+    if (i == n || !is_digit((char)head[i])) return 0;
+    while (i < n && is_digit((char)head[i]))
+        i++;
+    while (i < n && is_ws((char)head[i]))
+        i++;
+    return i == n || head[i] == '\n';
+}
+
 vx_mesh_format vx_mesh_sniff(const unsigned char *head, size_t n)
 {
     if (n >= 5 && memcmp(head, "DRACO", 5) == 0) return VX_MESH_DRACO;
@@ -627,7 +644,33 @@ vx_mesh_format vx_mesh_sniff(const unsigned char *head, size_t n)
         }
         i += len;
     }
-    return VX_MESH_OBJ;
+    return first_line_is_count(head, n) ? VX_MESH_BPT : VX_MESH_OBJ;
+}
+
+vx_mesh *vx_mesh_read_as(const char *path, vx_mesh_format fmt, const vx_mesh_limits *lim,
+                         vx_err *err)
+{
+    FILE *f = fopen(path, "rb");
+    if (!f) {
+        vx_err_set(err, VX_EIO, "mesh_io", "cannot open %s: %s", path, strerror(errno));
+        return NULL;
+    }
+    vx_mesh *m = NULL;
+    switch (fmt) {
+    case VX_MESH_OBJ:
+        m = vx_obj_read_file(f, lim, err);
+        break;
+    case VX_MESH_DRACO:
+        m = vx_draco_read_file(f, lim, err);
+        break;
+    case VX_MESH_BPT:
+        m = vx_bpt_read_file(f, lim, err);
+        break;
+    default:
+        vx_err_set(err, VX_EINVAL, "mesh_format", "not an OBJ, .bpt or Draco file");
+    }
+    fclose(f);
+    return m;
 }
 
 vx_mesh *vx_mesh_read_path(const char *path, const vx_mesh_limits *lim, vx_err *err)
@@ -639,21 +682,11 @@ vx_mesh *vx_mesh_read_path(const char *path, const vx_mesh_limits *lim, vx_err *
     }
     unsigned char head[OBJ_SNIFF_BYTES];
     size_t n = fread(head, 1, sizeof head, f);
-    vx_mesh *m = NULL;
-    if (ferror(f) || fseek(f, 0, SEEK_SET)) {
-        vx_err_set(err, VX_EIO, "mesh_io", "cannot read %s: %s", path, strerror(errno));
-    } else {
-        switch (vx_mesh_sniff(head, n)) {
-        case VX_MESH_OBJ:
-            m = vx_obj_read_file(f, lim, err);
-            break;
-        case VX_MESH_DRACO:
-            m = vx_draco_read_file(f, lim, err);
-            break;
-        default:
-            vx_err_set(err, VX_EINVAL, "mesh_format", "not an OBJ or Draco file");
-        }
-    }
+    int bad = ferror(f);
     fclose(f);
-    return m;
+    if (bad) {
+        vx_err_set(err, VX_EIO, "mesh_io", "cannot read %s: %s", path, strerror(errno));
+        return NULL;
+    }
+    return vx_mesh_read_as(path, vx_mesh_sniff(head, n), lim, err);
 }

@@ -136,7 +136,9 @@ static void load_meshes(vx_store *s)
             cJSON_Delete(meta);
             continue;
         }
-        const char *ext = strcmp(fmt->valuestring, "draco") == 0 ? "drc" : "obj";
+        const char *ext = strcmp(fmt->valuestring, "draco") == 0 ? "drc"
+                          : strcmp(fmt->valuestring, "bpt") == 0 ? "bpt"
+                                                                  : "obj";
         char mpath[2300];
         snprintf(mpath, sizeof mpath, "%s/%s.%s", dir, id, ext);
         if (access(mpath, R_OK) != 0) {

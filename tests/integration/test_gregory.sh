@@ -184,6 +184,27 @@ check "frame 2 (the mesh itself) = frame 0 ($D)" small "$D" 0 0
 D=$(maxdiff "$TMP/fresh0.obj" "$TMP/f1.obj")
 check "frames differ from frame 0 ($D)" awk -v s="$D" 'BEGIN { split(s, x, " "); exit !(x[1] > 1e-3) }'
 
+# --- approximate-cc: one patch per quad of the (once refined) cage, close
+# to OpenSubdiv's limit surface, welded closed, frames as fresh jobs ---
+greg "spot approximate-cc" "$M_spot" '{"construction":"approximate-cc","divisions":4}'
+ok "spot approximate-cc"
+check "approximate-cc: one patch per quad of the refined cage ($C)" test "$(st patches)" = "$C"
+check "approximate-cc: construction and distance reported" jq -e \
+    '.stats.construction == "approximate-cc" and .stats.cc_distance > 0 and .stats.cc_distance < 0.006' "$TMP/job.json"
+fetch mesh "$TMP/spot_cc.obj"
+upload "$TMP/spot_cc.obj"
+meta "$MESH_ID"
+check "approximate-cc spot: welded, no boundary edges" test "$(mv_ boundary_edges)" = 0
+check "approximate-cc spot: no non-manifold edges" test "$(mv_ nonmanifold_edges)" = 0
+greg "prism approximate-cc frames" "$M_prism" '{"construction":"approximate-cc","divisions":5,"frames":["'"$M_prism2"'"]}'
+ok "prism approximate-cc frames"
+fetch frame_001 "$TMP/cc_f1.obj"
+greg "prism2 approximate-cc fresh" "$M_prism2" '{"construction":"approximate-cc","divisions":5}'
+ok "prism2 approximate-cc fresh"
+fetch mesh "$TMP/cc_fresh2.obj"
+D=$(maxdiff "$TMP/cc_fresh2.obj" "$TMP/cc_f1.obj")
+check "approximate-cc frame 1 = fresh job on that mesh ($D)" small "$D" 1e-6 1e-5
+
 # --- max_edge: one N per connected component ---
 greg "suzanne max_edge" "$M_suz" '{"max_edge":0.1}'
 ok "suzanne max_edge"
@@ -201,8 +222,8 @@ check "max_edge: no non-manifold edges" test "$(mv_ nonmanifold_edges)" = 0
 post() { api POST /v1/jobs -H "Content-Type: application/json" -d "$1"; }
 post "{\"mesh\":\"$M_spot\",\"kind\":\"gregory\",\"params\":{\"divisions\":4,\"max_edge\":1}}"
 expect_error "divisions and max_edge" 422 invalid_params
-post "{\"mesh\":\"$M_spot\",\"kind\":\"gregory\",\"params\":{\"construction\":\"approximate-cc\"}}"
-expect_error "approximate-cc not yet" 422 invalid_params
+post "{\"mesh\":\"$M_spot\",\"kind\":\"gregory\",\"params\":{\"construction\":\"loop\"}}"
+expect_error "unknown construction" 422 invalid_params
 post "{\"mesh\":\"$M_spot\",\"kind\":\"gregory\",\"params\":{\"divisions\":300}}"
 expect_error "divisions 300" 422 invalid_params
 post "{\"mesh\":\"$M_spot\",\"kind\":\"gregory\",\"params\":{\"divisions\":256}}"

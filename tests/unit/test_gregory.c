@@ -768,6 +768,10 @@ static void test_params(void **state)
     assert_true(cJSON_IsTrue(cJSON_GetObjectItem(o, "weld")));
     assert_string_equal(cJSON_GetObjectItem(o, "format")->valuestring, "obj");
     cJSON_Delete(o);
+    o = parse("{\"construction\": \"approximate-cc\"}", &err);
+    assert_non_null(o);
+    assert_string_equal(cJSON_GetObjectItem(o, "construction")->valuestring, "approximate-cc");
+    cJSON_Delete(o);
     o = parse("{\"max_edge\": 0.5, \"frames\": [[0,0,0,1,1,1], [[0,0,0],[1,1,2]]]}", &err);
     assert_non_null(o);
     assert_true(cJSON_IsNull(cJSON_GetObjectItem(o, "divisions")));
@@ -777,7 +781,6 @@ static void test_params(void **state)
         {"{\"divisions\": 0}", "divisions"},
         {"{\"divisions\": 257}", "divisions"},
         {"{\"max_edge\": -1}", "max_edge"},
-        {"{\"construction\": \"approximate-cc\"}", "construction"},
         {"{\"construction\": \"loop\"}", "construction"},
         {"{\"format\": \"stl\"}", "format"},
         {"{\"weld\": 1}", "weld"},

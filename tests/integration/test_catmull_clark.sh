@@ -1,0 +1,116 @@
+#!/usr/bin/env bash
+# The `catmull-clark` kind through the API: spot's control cage (closed,
+# quads and n-gons) and suzanne (open, several parts) at levels 1 and 2 in
+# every format; vertex, face and boundary counts predicted from the input
+# (V' = V + E + F, E' = 2E + corners, F' = corners) and checked in the
+# stats, in the files, and by uploading the outputs back; limit projection;
+# params errors and the triangle limit.
+source "$(dirname "$0")/lib.sh"
+# 20000 triangles: levels above 6 are 422, spot at level 4 is over the limit.
+start_daemon --max-triangles 20000 || exit 1
+
+# cc WHAT MESH PARAMS_JSON: a job, waited for; keeps it in $TMP/job.json.
+cc() {
+    api POST "/v1/jobs?wait=60" -H "Content-Type: application/json" \
+        -d "{\"mesh\":\"$2\",\"kind\":\"catmull-clark\",\"params\":$3}"
+    CJ=$(jqb '.id // empty')
+    if [[ -n "$CJ" ]] && ! jq -e '.state == "succeeded" or .state == "failed"' "$BODY" >/dev/null; then
+        wait_job "$CJ" 120
+    fi
+    cp "$BODY" "$TMP/job.json"
+}
+st() { jq -r ".stats.$1" "$TMP/job.json"; }
+
+for name in spot_control_mesh suzanne; do
+    src="$VX_MESH_DIR/$name.obj"
+    upload "$src"
+    check "upload $name" test -n "$MESH_ID"
+    M=$MESH_ID
+    V=$(jqb .vertices)
+    F=$(jqb .faces.total)
+    B=$(jqb .boundary_edges)
+    # corners: the sum of the face sizes, from the file itself
+    C=$(awk '$1 == "f" { c += NF - 1 } END { print c }' "$src")
+    E=$(((C + B) / 2))
+    for level in 1 2; do
+        V=$((V + E + F))
+        E=$((2 * E + C))
+        F=$C
+        C=$((4 * F))
+        B=$((2 * B))
+        for fmt in obj ply drc; do
+            what="$name level $level $fmt"
+            cc "$what" "$M" "{\"levels\":$level,\"format\":\"$fmt\"}"
+            check "$what: succeeded ($(jq -c .error "$TMP/job.json"))" jq -e '.state == "succeeded"' "$TMP/job.json"
+            check "$what: vertices $(st vertices) = $V" test "$(st vertices)" = "$V"
+            check "$what: faces $(st faces) = $F" test "$(st faces)" = "$F"
+            check "$what: triangles $(st triangles) = 2 * $F" test "$(st triangles)" = "$((2 * F))"
+            check "$what: boundary edges $(st boundary_edges) = $B" test "$(st boundary_edges)" = "$B"
+            check "$what: refine_ms" jq -e '.stats.refine_ms >= 0' "$TMP/job.json"
+            api GET "/v1/jobs/$CJ/result"
+            check "$what: result 200" test "$STATUS" = 200
+            out="$TMP/out.$fmt"
+            cp "$BODY" "$out"
+            case $fmt in
+            obj)
+                check "$what: content type $CTYPE" test "$CTYPE" = model/obj
+                check "$what: v lines" test "$(grep -c '^v ' "$out")" = "$V"
+                check "$what: vn lines" test "$(grep -c '^vn ' "$out")" = "$V"
+                check "$what: quads" test "$(awk '$1 == "f" && NF == 5' "$out" | wc -l)" = "$F"
+                upload "$out"
+                check "$what: back as quads" test "$(jqb .faces.quads)" = "$F"
+                check "$what: back, boundary edges" test "$(jqb .boundary_edges)" = "$B"
+                ;;
+            ply)
+                check "$what: content type $CTYPE" test "$CTYPE" = model/x-ply
+                check "$what: ply vertices" grep -aq "^element vertex $V\$" "$out"
+                check "$what: ply faces" grep -aq "^element face $F\$" "$out"
+                check "$what: ply normals" grep -aq "^property float nx\$" "$out"
+                ;;
+            drc)
+                check "$what: content type $CTYPE" test "$CTYPE" = model/x-draco
+                upload "$out" model/x-draco
+                check "$what: back from Draco, triangles" test "$(jqb .triangles)" = "$((2 * F))"
+                check "$what: back from Draco, normals" test "$(jqb .normals)" -ge 0
+                ;;
+            esac
+        done
+    done
+done
+
+# limit: the same counts, points moved onto the limit surface (inside the
+# refined points' convex hull: the bbox shrinks)
+upload "$VX_MESH_DIR/spot_control_mesh.obj"
+SPOT=$MESH_ID
+cc "spot level 2" "$SPOT" '{"levels":2}'
+api GET "/v1/jobs/$CJ/result"
+cp "$BODY" "$TMP/plain.obj"
+N2=$(st vertices)
+cc "spot level 2 limit" "$SPOT" '{"levels":2,"limit":true}'
+check "limit: succeeded" jq -e '.state == "succeeded" and .params.limit == true' "$TMP/job.json"
+check "limit: same vertex count" test "$(st vertices)" = "$N2"
+api GET "/v1/jobs/$CJ/result"
+cp "$BODY" "$TMP/limit.obj"
+upload "$TMP/plain.obj"
+PX=$(jqb '.bbox.max[0] - .bbox.min[0]')
+upload "$TMP/limit.obj"
+LX=$(jqb '.bbox.max[0] - .bbox.min[0]')
+check "limit: bbox x $LX < $PX" awk -v a="$LX" -v b="$PX" 'BEGIN { exit !(a < b && a > 0.9 * b) }'
+check "limit: files differ" bash -c "! cmp -s '$TMP/plain.obj' '$TMP/limit.obj'"
+
+# defaults are filled in
+cc "defaults" "$SPOT" '{}'
+check "defaults: levels 1, obj, no limit" jq -e '.params == {"levels":1,"format":"obj","limit":false}' "$TMP/job.json"
+
+# params errors: 422 invalid_params at submission
+for p in '{"levels":0}' '{"levels":7}' '{"levels":1.5}' '{"levels":"two"}' '{"format":"stl"}' \
+    '{"limit":"yes"}' '{"level":2}'; do
+    api POST /v1/jobs -H "Content-Type: application/json" \
+        -d "{\"mesh\":\"$SPOT\",\"kind\":\"catmull-clark\",\"params\":$p}"
+    expect_error "params $p" 422 invalid_params
+done
+# levels 4 on spot: 2 * 720 * 4^3 triangles, over the limit of 20000
+cc "too big" "$SPOT" '{"levels":4}'
+check "levels 4: failed output_too_big" jq -e '.state == "failed" and .error.code == "output_too_big"' "$TMP/job.json"
+
+finish
