@@ -68,28 +68,6 @@ static int bad(vx_err *err, const char *fmt, const char *what)
     return vx_err_set(err, VX_EUNPROC, "invalid_params", fmt, what);
 }
 
-/* Optional string among names; *out its index. */
-static int param_enum(const cJSON *o, const char *prefix, const char *name,
-                      const char *const *names, int def, int *out, vx_err *err)
-{
-    const cJSON *it = field(o, name);
-    if (!it) {
-        *out = def;
-        return 0;
-    }
-    if (cJSON_IsString(it))
-        for (int i = 0; names[i]; i++)
-            if (strcmp(names[i], it->valuestring) == 0) {
-                *out = i;
-                return 0;
-            }
-    char list[200] = "";
-    for (int i = 0; names[i]; i++)
-        snprintf(list + strlen(list), sizeof list - strlen(list), "%s%s", i ? ", " : "", names[i]);
-    return vx_err_set(err, VX_EUNPROC, "invalid_params", "params.%s%s must be one of %s", prefix,
-                      name, list);
-}
-
 /* Optional array of 3 numbers in [lo, hi]. */
 static int param_vec3(const cJSON *o, const char *what, double lo, double hi, const double *def,
                       double *out, vx_err *err)
@@ -109,21 +87,6 @@ static int param_vec3(const cJSON *o, const char *what, double lo, double hi, co
             return vx_err_set(err, VX_EUNPROC, "invalid_params",
                               "params.%s[%d] must be a number in [%g, %g]", what, a, lo, hi);
         out[a] = v->valuedouble;
-    }
-    return 0;
-}
-
-static int only(const cJSON *o, const char *what, const char *const *names, vx_err *err)
-{
-    const cJSON *it;
-    cJSON_ArrayForEach(it, o)
-    {
-        int ok = 0;
-        for (int i = 0; names[i]; i++)
-            ok |= strcmp(names[i], it->string) == 0;
-        if (!ok)
-            return vx_err_set(err, VX_EUNPROC, "invalid_params", "unknown parameter params.%s.%s",
-                              what, it->string);
     }
     return 0;
 }
@@ -179,8 +142,8 @@ static int read_params(const cJSON *params, const vx_limits *lim, rparams *p, vx
     static const char *const flt_types[] = {"exponential", NULL};
     int ftype;
     if (flt && !cJSON_IsObject(flt)) return bad(err, "params.%s must be an object", "filter");
-    if (flt && only(flt, "filter", flt_known, err)) return -1;
-    if (param_enum(flt, "filter.", "type", flt_types, 0, &ftype, err) ||
+    if (flt && vx_param_only_in(flt, "filter.", flt_known, err)) return -1;
+    if (vx_param_enum_in(flt, "filter.", "type", flt_types, 0, &ftype, err) ||
         vx_param_number(flt, "D0", p->N / 4.0, 1e-6, 1e6, &p->d0, err) ||
         vx_param_number(flt, "n", 2, 0.1, 64, &p->fn, err))
         return sub_err(err, "filter");
@@ -194,9 +157,9 @@ static int read_params(const cJSON *params, const vx_limits *lim, rparams *p, vx
     static const char *const cam_known[] = {"type",     "axis", "azimuth",     "elevation",
                                             "distance", "fov",  "ortho_width", NULL};
     if (cam && !cJSON_IsObject(cam)) return bad(err, "params.%s must be an object", "camera");
-    if (cam && only(cam, "camera", cam_known, err)) return -1;
-    if (param_enum(cam, "camera.", "type", cam_names, CAM_AXIS, &p->cam, err) ||
-        param_enum(cam, "camera.", "axis", axis_names, 4, &p->axis, err) ||
+    if (cam && vx_param_only_in(cam, "camera.", cam_known, err)) return -1;
+    if (vx_param_enum_in(cam, "camera.", "type", cam_names, CAM_AXIS, &p->cam, err) ||
+        vx_param_enum_in(cam, "camera.", "axis", axis_names, 4, &p->axis, err) ||
         vx_param_number(cam, "azimuth", 30, -360, 360, &p->azimuth, err) ||
         vx_param_number(cam, "elevation", 20, -89, 89, &p->elevation, err) ||
         vx_param_number(cam, "distance", 0, 0, 1e12, &p->distance, err) ||
@@ -212,7 +175,7 @@ static int read_params(const cJSON *params, const vx_limits *lim, rparams *p, vx
         vx_param_number(params, "ambient", 0.15, 0, 1, &p->ambient, err) ||
         param_vec3(field(params, "color"), "color", 0, 1, def_color, p->color, err) ||
         param_vec3(field(params, "background"), "background", 0, 1, def_bg, p->background, err) ||
-        param_enum(params, "", "normals", vx_bl_normals_names, 0, &p->normals, err) ||
+        vx_param_enum_in(params, "", "normals", vx_bl_normals_names, 0, &p->normals, err) ||
         vx_param_bool(params, "compare", 0, &p->compare, err) ||
         vx_param_int(params, "bits", 8, 8, 16, &p->bits, err) ||
         vx_param_int(params, "frames", 1, 1, VX_BL_MAX_FRAMES, &p->frames, err))
@@ -235,8 +198,8 @@ static int read_params(const cJSON *params, const vx_limits *lim, rparams *p, vx
             int i = p->nlights++;
             char what[48];
             if (!cJSON_IsObject(l)) return bad(err, "params.%s must be objects", "lights[]");
-            snprintf(what, sizeof what, "lights[%d]", i);
-            if (only(l, what, light_known, err)) return -1;
+            snprintf(what, sizeof what, "lights[%d].", i);
+            if (vx_param_only_in(l, what, light_known, err)) return -1;
             snprintf(what, sizeof what, "lights[%d].direction", i);
             const cJSON *d = field(l, "direction");
             if (!d) return bad(err, "params.%s is required", what);

@@ -101,5 +101,10 @@ int vx_param_enum(const cJSON *params, const char *field, const char *const *nam
                   int *out, vx_err *err);
 /* Fails (VX_EUNPROC) if params has a field not in the NULL-terminated list. */
 int vx_param_only(const cJSON *params, const char *const *known, vx_err *err);
+/* The same two for a nested object of params: prefix is its path with a
+ * trailing dot ("camera.", "lights[1].") for the messages. */
+int vx_param_enum_in(const cJSON *obj, const char *prefix, const char *field,
+                     const char *const *names, int def, int *out, vx_err *err);
+int vx_param_only_in(const cJSON *obj, const char *prefix, const char *const *known, vx_err *err);
 
 #endif

@@ -47,19 +47,24 @@ int vx_param_bool(const cJSON *params, const char *field, int def, int *out, vx_
     return 0;
 }
 
-int vx_param_only(const cJSON *params, const char *const *known, vx_err *err)
+int vx_param_only_in(const cJSON *obj, const char *prefix, const char *const *known, vx_err *err)
 {
     const cJSON *it;
-    cJSON_ArrayForEach(it, params)
+    cJSON_ArrayForEach(it, obj)
     {
         int ok = 0;
         for (size_t i = 0; known[i]; i++)
             if (strcmp(known[i], it->string) == 0) ok = 1;
         if (!ok)
-            return vx_err_set(err, VX_EUNPROC, "invalid_params", "unknown parameter params.%s",
-                              it->string);
+            return vx_err_set(err, VX_EUNPROC, "invalid_params", "unknown parameter params.%s%s",
+                              prefix, it->string);
     }
     return 0;
+}
+
+int vx_param_only(const cJSON *params, const char *const *known, vx_err *err)
+{
+    return vx_param_only_in(params, "", known, err);
 }
 
 int vx_param_mesh_ids(const cJSON *params, const char *field, size_t max, const cJSON **out,
@@ -88,10 +93,10 @@ int vx_param_mesh_ids(const cJSON *params, const char *field, size_t max, const 
     return 0;
 }
 
-int vx_param_enum(const cJSON *params, const char *field, const char *const *names, int def,
-                  int *out, vx_err *err)
+int vx_param_enum_in(const cJSON *obj, const char *prefix, const char *field,
+                     const char *const *names, int def, int *out, vx_err *err)
 {
-    const cJSON *it = params ? cJSON_GetObjectItemCaseSensitive(params, field) : NULL;
+    const cJSON *it = obj ? cJSON_GetObjectItemCaseSensitive(obj, field) : NULL;
     if (!it || cJSON_IsNull(it)) {
         *out = def;
         return 0;
@@ -105,5 +110,12 @@ int vx_param_enum(const cJSON *params, const char *field, const char *const *nam
     char list[256] = "";
     for (int i = 0; names[i]; i++)
         snprintf(list + strlen(list), sizeof list - strlen(list), "%s%s", i ? ", " : "", names[i]);
-    return vx_err_set(err, VX_EUNPROC, "invalid_params", "params.%s must be one of %s", field, list);
+    return vx_err_set(err, VX_EUNPROC, "invalid_params", "params.%s%s must be one of %s", prefix,
+                      field, list);
+}
+
+int vx_param_enum(const cJSON *params, const char *field, const char *const *names, int def,
+                  int *out, vx_err *err)
+{
+    return vx_param_enum_in(params, "", field, names, def, out, err);
 }

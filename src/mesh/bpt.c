@@ -25,19 +25,11 @@ static int bpt_fail(bpt_reader *r, vx_err_kind kind, const char *code, const cha
 
 static int bpt_fail(bpt_reader *r, vx_err_kind kind, const char *code, const char *fmt, ...)
 {
-    char msg[400];
     va_list ap;
     va_start(ap, fmt);
-    vsnprintf(msg, sizeof msg, fmt, ap);
+    vx_mesh_line_fail(r->err, r->lineno, "mesh.bpt_reject", kind, code, fmt, ap);
     va_end(ap);
-    vx_err_set(r->err, kind, code, "line %zu: %s", r->lineno, msg);
-    VX_DEBUG("mesh.bpt_reject", "code=%s line=%zu", code, r->lineno);
     return -1;
-}
-
-static int is_blank(char c)
-{
-    return c == ' ' || c == '\t' || c == '\r' || c == '\v' || c == '\f';
 }
 
 /* Reads the next non-blank line into r->line (NUL-terminated, without the
@@ -60,7 +52,7 @@ static int next_line(bpt_reader *r)
         r->line[len] = 0;
         char *p = r->line;
         if (r->lineno == 1 && len >= 3 && memcmp(p, "\xef\xbb\xbf", 3) == 0) p += 3;
-        while (is_blank(*p))
+        while (vx_mesh_is_blank(*p))
             p++;
         if (*p) {
             memmove(r->line, p, strlen(p) + 1);
@@ -77,22 +69,22 @@ static int split(bpt_reader *r, char **fields, int n, const char *what)
     char *p = r->line;
     int k = 0;
     for (;;) {
-        while (is_blank(*p))
+        while (vx_mesh_is_blank(*p))
             p++;
         if (!*p) break;
         if (*p == ',') return bpt_fail(r, VX_EINVAL, "bpt_junk", "empty field in %s", what);
         if (k == n) return bpt_fail(r, VX_EINVAL, "bpt_junk", "more than %d fields in %s", n, what);
         fields[k++] = p;
-        while (*p && *p != ',' && !is_blank(*p))
+        while (*p && *p != ',' && !vx_mesh_is_blank(*p))
             p++;
         char *end = p;
-        while (is_blank(*p))
+        while (vx_mesh_is_blank(*p))
             p++;
         int comma = *p == ',';
         if (comma) p++;
         *end = 0;
         if (comma) {
-            while (is_blank(*p))
+            while (vx_mesh_is_blank(*p))
                 p++;
             if (!*p) return bpt_fail(r, VX_EINVAL, "bpt_junk", "trailing comma in %s", what);
         }

@@ -44,23 +44,18 @@ typedef struct obj_reader {
 static int obj_fail(obj_reader *r, vx_err_kind kind, const char *code, const char *fmt, ...)
     __attribute__((format(printf, 4, 5)));
 
-/* Every error a line causes goes through here so that each message starts
- * with the line number the client needs to find the problem. */
 static int obj_fail(obj_reader *r, vx_err_kind kind, const char *code, const char *fmt, ...)
 {
-    char msg[400];
     va_list ap;
     va_start(ap, fmt);
-    vsnprintf(msg, sizeof msg, fmt, ap);
+    vx_mesh_line_fail(r->err, r->lineno, "mesh.obj_reject", kind, code, fmt, ap);
     va_end(ap);
-    vx_err_set(r->err, kind, code, "line %zu: %s", r->lineno, msg);
-    VX_DEBUG("mesh.obj_reject", "code=%s line=%zu", code, r->lineno);
     return -1;
 }
 
 static inline int is_ws(char c)
 {
-    return c == ' ' || c == '\t' || c == '\r' || c == '\v' || c == '\f';
+    return vx_mesh_is_blank(c);
 }
 static inline int is_end(char c)
 {
