@@ -9,6 +9,9 @@ import math
 import os
 import sys
 
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "tests", "integration"))
+from shapes import icosphere, write  # noqa: E402
+
 
 def hyperboloid(a=0.5, c=0.6, h=1.0, nu=96, nv=48):
     vs, fs = [], []
@@ -29,33 +32,6 @@ def hyperboloid(a=0.5, c=0.6, h=1.0, nu=96, nv=48):
         fs.append((bot, idx(i + 1, 0), idx(i, 0)))
         fs.append((top, idx(i, nv), idx(i + 1, nv)))
     return vs, fs
-
-
-def icosphere(level, r=1.0):
-    t = (1 + 5 ** 0.5) / 2
-    vs = [(-1, t, 0), (1, t, 0), (-1, -t, 0), (1, -t, 0), (0, -1, t), (0, 1, t), (0, -1, -t), (0, 1, -t),
-          (t, 0, -1), (t, 0, 1), (-t, 0, -1), (-t, 0, 1)]
-    vs = [tuple(x / math.sqrt(sum(y * y for y in v)) for x in v) for v in vs]
-    fs = [(0, 11, 5), (0, 5, 1), (0, 1, 7), (0, 7, 10), (0, 10, 11), (1, 5, 9), (5, 11, 4), (11, 10, 2),
-          (10, 7, 6), (7, 1, 8), (3, 9, 4), (3, 4, 2), (3, 2, 6), (3, 6, 8), (3, 8, 9), (4, 9, 5), (2, 4, 11),
-          (6, 2, 10), (8, 6, 7), (9, 8, 1)]
-    for _ in range(level):
-        mid, nf = {}, []
-
-        def m(p, q):
-            key = (min(p, q), max(p, q))
-            if key not in mid:
-                x = [(vs[p][i] + vs[q][i]) / 2 for i in range(3)]
-                n = math.sqrt(sum(y * y for y in x))
-                vs.append(tuple(y / n for y in x))
-                mid[key] = len(vs) - 1
-            return mid[key]
-
-        for p, q, s in fs:
-            pq, qs, sp = m(p, q), m(q, s), m(s, p)
-            nf += [(p, pq, sp), (q, qs, pq), (s, sp, qs), (pq, qs, sp)]
-        fs = nf
-    return [tuple(r * x for x in v) for v in vs], fs
 
 
 def cube(n=8):
@@ -82,14 +58,7 @@ def cube(n=8):
     return vs, fs
 
 
-def write(path, shape):
-    vs, fs = shape
-    with open(path, "w") as f:
-        f.writelines("v %.9f %.9f %.9f\n" % v for v in vs)
-        f.writelines("f %d %d %d\n" % (a + 1, b + 1, c + 1) for a, b, c in fs)
-
-
 d = sys.argv[1]
-write(os.path.join(d, "hyperboloid.obj"), hyperboloid())
-write(os.path.join(d, "sphere.obj"), icosphere(4))
-write(os.path.join(d, "cube.obj"), cube())
+write(os.path.join(d, "hyperboloid.obj"), *hyperboloid())
+write(os.path.join(d, "sphere.obj"), *icosphere(4))
+write(os.path.join(d, "cube.obj"), *cube())

@@ -1,6 +1,8 @@
 #!/usr/bin/env python3
 """Analytic test shapes as OBJ for test_voxelize.sh, each with its exact
 mesh volume (divergence theorem over the triangles) in DIR/volumes.json.
+The builders (sphere, icosphere, torus, merge, write) are shared with
+render_shapes.py and bench/bandlimit/seed_shapes.py.
 
 Usage: shapes.py DIR
 Shapes (outward-facing unless said): sphere (r 1), torus (R 1, r 0.4),
@@ -43,6 +45,34 @@ def sphere(c, r, nu=48, nv=24, inward=False, skip_cap=None):
     if inward:
         ts = [(t[0], t[2], t[1]) for t in ts]
     return vs, ts
+
+
+def icosphere(level, r=1.0, c=(0.0, 0.0, 0.0)):
+    t = (1 + 5 ** 0.5) / 2
+    vs = [(-1, t, 0), (1, t, 0), (-1, -t, 0), (1, -t, 0), (0, -1, t), (0, 1, t), (0, -1, -t), (0, 1, -t),
+          (t, 0, -1), (t, 0, 1), (-t, 0, -1), (-t, 0, 1)]
+    vs = [tuple(x / math.sqrt(sum(y * y for y in v)) for x in v) for v in vs]
+    fs = [(0, 11, 5), (0, 5, 1), (0, 1, 7), (0, 7, 10), (0, 10, 11), (1, 5, 9), (5, 11, 4), (11, 10, 2),
+          (10, 7, 6), (7, 1, 8), (3, 9, 4), (3, 4, 2), (3, 2, 6), (3, 6, 8), (3, 8, 9), (4, 9, 5), (2, 4, 11),
+          (6, 2, 10), (8, 6, 7), (9, 8, 1)]
+    for _ in range(level):
+        mid = {}
+
+        def m(a, b):
+            key = (min(a, b), max(a, b))
+            if key not in mid:
+                p = [(vs[a][i] + vs[b][i]) / 2 for i in range(3)]
+                n = math.sqrt(sum(x * x for x in p))
+                vs.append(tuple(x / n for x in p))
+                mid[key] = len(vs) - 1
+            return mid[key]
+
+        nf = []
+        for a, b, cc in fs:
+            ab, bc, ca = m(a, b), m(b, cc), m(cc, a)
+            nf += [(a, ab, ca), (b, bc, ab), (cc, ca, bc), (ab, bc, ca)]
+        fs = nf
+    return [tuple(c[i] + r * v[i] for i in range(3)) for v in vs], fs
 
 
 def torus(R, r, nu=64, nv=32):
