@@ -141,6 +141,24 @@ wait_job() {
     return 1
 }
 
+# run_job KIND MESH PARAMS_JSON [seconds]: submits a job and waits until it
+# has finished; JOB = its id, $TMP/job.json = its last body (the caller
+# checks the state: failures are sometimes what a test wants).
+run_job() {
+    local limit=${4:-120}
+    api POST "/v1/jobs?wait=60" -H "Content-Type: application/json" \
+        -d "{\"mesh\":\"$2\",\"kind\":\"$1\",\"params\":$3}"
+    JOB=$(jqb '.id // empty')
+    if [[ -n "$JOB" ]] && ! jq -e '.state == "succeeded" or .state == "failed"' "$BODY" >/dev/null; then
+        wait_job "$JOB" "$limit"
+    fi
+    cp "$BODY" "$TMP/job.json"
+}
+# job_ok WHAT: the job in $TMP/job.json succeeded.
+job_ok() { check "$1: succeeded ($(jq -c '.error' "$TMP/job.json" 2>/dev/null))" jq -e '.state == "succeeded"' "$TMP/job.json"; }
+# st NAME: stats.NAME of the job in $TMP/job.json.
+st() { jq -r ".stats.$1" "$TMP/job.json"; }
+
 finish() {
     echo "$(basename "$0"): $PASS passed, $FAIL failed"
     [[ $FAIL -eq 0 ]]

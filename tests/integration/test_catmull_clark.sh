@@ -11,15 +11,9 @@ start_daemon --max-triangles 20000 || exit 1
 
 # cc WHAT MESH PARAMS_JSON: a job, waited for; keeps it in $TMP/job.json.
 cc() {
-    api POST "/v1/jobs?wait=60" -H "Content-Type: application/json" \
-        -d "{\"mesh\":\"$2\",\"kind\":\"catmull-clark\",\"params\":$3}"
-    CJ=$(jqb '.id // empty')
-    if [[ -n "$CJ" ]] && ! jq -e '.state == "succeeded" or .state == "failed"' "$BODY" >/dev/null; then
-        wait_job "$CJ" 120
-    fi
-    cp "$BODY" "$TMP/job.json"
+    run_job catmull-clark "$2" "$3"
+    CJ=$JOB
 }
-st() { jq -r ".stats.$1" "$TMP/job.json"; }
 
 for name in spot_control_mesh suzanne; do
     src="$VX_MESH_DIR/$name.obj"

@@ -23,17 +23,10 @@ check "info lists render" jq -e '[.kinds[].name] | index("render") != null' "$BO
 
 # job WHAT MESH PARAMS: a render job, waited for; sets J, keeps the body.
 job() {
-    local what=$1 mesh=$2 params=$3
-    api POST "/v1/jobs?wait=120" -H "Content-Type: application/json" \
-        -d "{\"mesh\":\"$mesh\",\"kind\":\"render\",\"params\":$params}"
-    J=$(jqb '.id // empty')
-    if [[ -n "$J" ]] && ! jq -e '.state == "succeeded" or .state == "failed"' "$BODY" >/dev/null; then
-        wait_job "$J" 300
-    fi
-    cp "$BODY" "$TMP/job.json"
-    check "$what: succeeded ($(jq -c '.error' "$TMP/job.json" 2>/dev/null))" jq -e '.state == "succeeded"' "$TMP/job.json"
+    run_job render "$2" "$3" 300
+    J=$JOB
+    job_ok "$1"
 }
-st() { jq -r ".stats.$1" "$TMP/job.json"; }
 # get NAME FILE: output NAME of job J into FILE.
 get() {
     api GET "/v1/jobs/$J/result/$1"

@@ -20,17 +20,10 @@ TOL=0.03
 # vox WHAT MESH PARAMS_JSON: a voxelize job, waited for; sets VJ and keeps
 # the job body in $TMP/job.json.
 vox() {
-    local what=$1 mesh=$2 params=$3
-    api POST "/v1/jobs?wait=60" -H "Content-Type: application/json" \
-        -d "{\"mesh\":\"$mesh\",\"kind\":\"voxelize\",\"params\":$params}"
-    VJ=$(jqb '.id // empty')
-    if [[ -n "$VJ" ]] && ! jq -e '.state == "succeeded" or .state == "failed"' "$BODY" >/dev/null; then
-        wait_job "$VJ" 120
-    fi
-    cp "$BODY" "$TMP/job.json"
-    check "$what: succeeded ($(jq -c '.error' "$TMP/job.json" 2>/dev/null))" jq -e '.state == "succeeded"' "$TMP/job.json"
+    run_job voxelize "$2" "$3"
+    VJ=$JOB
+    job_ok "$1"
 }
-st() { jq -r ".stats.$1" "$TMP/job.json"; }
 # fetch FILE: the primary output of job VJ into FILE.
 fetch() {
     api GET "/v1/jobs/$VJ/result"
