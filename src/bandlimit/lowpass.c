@@ -279,6 +279,7 @@ float *vx_bl_lowpass(int R, int N, const vx_bl_filter *flt, vx_bl_sample_fn samp
     float *out = fftwf_malloc(sizeof(float) * 2 * vx_bl_spectrum_len(N));
     fftwf_plan pz = NULL;
     fftwf_complex *zbuf = NULL;
+    int ok = 0;
     double t0 = vx_bl_now_ms();
     if (!plane || !rows || !cols || !c.Z || !out) {
         vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for the low-pass (R=%d, N=%d)", R,
@@ -339,16 +340,7 @@ float *vx_bl_lowpass(int R, int N, const vx_bl_filter *flt, vx_bl_sample_fn samp
         st->sample_ms = c.sample_ms;
         st->ms = vx_bl_now_ms() - t0 - c.sample_ms;
     }
-    vx_bl_destroy_plan(c.prow);
-    vx_bl_destroy_plan(c.pcol);
-    vx_bl_destroy_plan(pz);
-    fftwf_free(zbuf);
-    fftwf_free(plane);
-    fftwf_free(rows);
-    fftwf_free(cols);
-    fftwf_free(c.Z);
-    pthread_mutex_destroy(&c.mu);
-    return out;
+    ok = 1;
 fail:
     vx_bl_destroy_plan(c.prow);
     vx_bl_destroy_plan(c.pcol);
@@ -358,9 +350,12 @@ fail:
     fftwf_free(rows);
     fftwf_free(cols);
     fftwf_free(c.Z);
-    fftwf_free(out);
+    if (!ok) {
+        fftwf_free(out);
+        out = NULL;
+    }
     pthread_mutex_destroy(&c.mu);
-    return NULL;
+    return out;
 }
 
 float *vx_bl_lowpass_full(int R, int N, const vx_bl_filter *flt, vx_bl_sample_fn sample, void *ud,

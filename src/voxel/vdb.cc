@@ -47,6 +47,33 @@ int progress(const vx_voxel_io *io, int k, int nz, vx_err *err)
     return io->progress(io->ud, 0.8 * k / nz, err) ? -1 : 0;
 }
 
+// Builds grids (build(grids) returns 0, or -1 with err set) and writes them
+// to path through path.tmp and a rename, inside one try: no exception
+// crosses into C, and a failed write leaves no file behind.
+template <typename Build> int write_grids(const char *path, vx_err *err, Build build)
+{
+    std::string tmp = std::string(path) + ".tmp";
+    try {
+        std::call_once(init_once, [] { openvdb::initialize(); });
+        openvdb::GridPtrVec grids;
+        if (build(grids)) return -1;
+        openvdb::io::File file(tmp);
+        file.write(grids);
+        file.close();
+        if (std::rename(tmp.c_str(), path) != 0) {
+            std::remove(tmp.c_str());
+            return vx_err_set(err, VX_EIO, "io_error", "rename %s failed", tmp.c_str());
+        }
+        return 0;
+    } catch (const std::bad_alloc &) {
+        std::remove(tmp.c_str());
+        return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for the OpenVDB grid");
+    } catch (const std::exception &e) {
+        std::remove(tmp.c_str());
+        return vx_err_set(err, VX_EIO, "io_error", "OpenVDB: %s", e.what());
+    }
+}
+
 } // namespace
 
 extern "C" uint64_t vx_voxel_vdb_bytes(const int dims[3], int coverage)
@@ -66,10 +93,7 @@ extern "C" int vx_voxel_write_vdb(const vx_bitgrid *g, int coverage, const vx_vd
     if (coverage && !g->counts)
         return vx_err_set(err, VX_EINTERNAL, "internal_error",
                           "coverage output without sample counts");
-    std::string tmp = std::string(path) + ".tmp";
-    try {
-        std::call_once(init_once, [] { openvdb::initialize(); });
-        openvdb::GridPtrVec grids;
+    int rc = write_grids(path, err, [&](openvdb::GridPtrVec &grids) {
         if (coverage) {
             openvdb::FloatGrid::Ptr grid = openvdb::FloatGrid::create(0.0f);
             grid->setName("coverage");
@@ -108,31 +132,18 @@ extern "C" int vx_voxel_write_vdb(const vx_bitgrid *g, int coverage, const vx_vd
             set_meta(*grid, g, meta);
             grids.push_back(grid);
         }
-        openvdb::io::File file(tmp);
-        file.write(grids);
-        file.close();
-        if (std::rename(tmp.c_str(), path) != 0) {
-            std::remove(tmp.c_str());
-            return vx_err_set(err, VX_EIO, "io_error", "rename %s failed", tmp.c_str());
-        }
-        if (io && io->progress && io->progress(io->ud, 1.0, err)) return -1;
         return 0;
-    } catch (const std::bad_alloc &) {
-        std::remove(tmp.c_str());
-        return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for the OpenVDB grid");
-    } catch (const std::exception &e) {
-        std::remove(tmp.c_str());
-        return vx_err_set(err, VX_EIO, "io_error", "OpenVDB: %s", e.what());
-    }
+    });
+    if (rc) return -1;
+    if (io && io->progress && io->progress(io->ud, 1.0, err)) return -1;
+    return 0;
 }
 
 extern "C" int vx_voxel_write_vdb_float(const float *v, const int dims[3], const double origin[3],
                                         double h, const char *name, const char *mesh,
                                         const char *path, vx_err *err)
 {
-    std::string tmp = std::string(path) + ".tmp";
-    try {
-        std::call_once(init_once, [] { openvdb::initialize(); });
+    return write_grids(path, err, [&](openvdb::GridPtrVec &grids) {
         openvdb::FloatGrid::Ptr grid = openvdb::FloatGrid::create(0.0f);
         grid->setName(name);
         grid->setGridClass(openvdb::GRID_FOG_VOLUME);
@@ -150,21 +161,7 @@ extern "C" int vx_voxel_write_vdb_float(const float *v, const int dims[3], const
         openvdb::math::Transform::Ptr xf = openvdb::math::Transform::createLinearTransform(h);
         xf->postTranslate(openvdb::Vec3d(origin[0], origin[1], origin[2]));
         grid->setTransform(xf);
-        openvdb::GridPtrVec grids;
         grids.push_back(grid);
-        openvdb::io::File file(tmp);
-        file.write(grids);
-        file.close();
-        if (std::rename(tmp.c_str(), path) != 0) {
-            std::remove(tmp.c_str());
-            return vx_err_set(err, VX_EIO, "io_error", "rename %s failed", tmp.c_str());
-        }
         return 0;
-    } catch (const std::bad_alloc &) {
-        std::remove(tmp.c_str());
-        return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for the OpenVDB grid");
-    } catch (const std::exception &e) {
-        std::remove(tmp.c_str());
-        return vx_err_set(err, VX_EIO, "io_error", "OpenVDB: %s", e.what());
-    }
+    });
 }
