@@ -21,7 +21,7 @@ RUN apt-get update -qq \
       libmicrohttpd-dev libcjson-dev libdraco-dev \
       libopenvdb-dev libboost-dev libboost-iostreams-dev libtbb-dev libimath-dev \
       libblosc-dev zlib1g-dev \
-      libfftw3-dev libpng-dev libsystemd-dev nettle-dev \
+      libfftw3-dev libosd-dev libpng-dev libsystemd-dev nettle-dev \
  && rm -rf /var/lib/apt/lists/*
 WORKDIR /src
 COPY . .
@@ -46,13 +46,13 @@ FROM ${BASE}
 ENV DEBIAN_FRONTEND=noninteractive
 COPY --from=build /build/runtime-packages /tmp/runtime-packages
 # libegl-mesa0 + libgl1-mesa-dri: Mesa's EGL and llvmpipe, the CPU fallback
-# (dlopened by libglvnd, so ldd does not see them). OpenVDB and FFTW are
-# listed even before the engines link them. curl: the HEALTHCHECK.
+# (dlopened by libglvnd, so ldd does not see them). OpenVDB, FFTW and
+# OpenSubdiv are listed as well as found by ldd. curl: the HEALTHCHECK.
 RUN apt-get update -qq \
  && apt-get install -y -qq --no-install-recommends \
       libmicrohttpd12 libcjson1 libdraco7 libpng16-16 libsystemd0 libnettle8 \
       libegl1 libopengl0 libgl1 libegl-mesa0 libgl1-mesa-dri \
-      libfftw3-single3 libfftw3-double3 libopenvdb10.0 \
+      libfftw3-single3 libfftw3-double3 libopenvdb10.0 libosdcpu3.5.0 \
       curl \
       $(cat /tmp/runtime-packages) \
  && rm -rf /var/lib/apt/lists/* /tmp/runtime-packages
