@@ -349,8 +349,11 @@ static uint32_t ring_id(const lctx *c, size_t p, uint32_t r)
 }
 
 /* A transition patch: inner grid, then the strip between the inner ring
- * and the outer loop, both walked by the perimeter parameter in [0, 4),
- * always advancing the loop whose next point comes first. */
+ * and the outer loop, both walked by the perimeter parameter in [0, 4)
+ * (edge e at fraction f is e + f on either loop), always advancing the loop
+ * whose next segment's midpoint comes first (so a side of the inner ring
+ * shares the outer points between its two ends; for N = 2 the ring is the
+ * centre, a fan). Counter-clockwise in (u, v), as the grid's triangles. */
 static void transition_tris(const lctx *c, size_t p)
 {
     uint32_t n = c->l->ndiv[p], m = n - 2, ring = 4 * m;
@@ -358,8 +361,8 @@ static void transition_tris(const lctx *c, size_t p)
     grid_tris(c, p, 1, n - 1);
     uint32_t a = 0, ed = 0, t = 0; /* inner steps; outer position */
     while (a < ring || ed < 4) {
-        double ti = a < ring ? (double)(a + 1) / m : INFINITY;
-        double to = ed < 4 ? ed + (double)(t + 1) / ne[ed] : INFINITY;
+        double ti = a < ring ? (a + 0.5) / m : INFINITY;
+        double to = ed < 4 ? ed + (t + 0.5) / ne[ed] : INFINITY;
         uint32_t o = loop_id(c, p, (int)(ed % 4), t);
         if (to <= ti) {
             emit(c->l, p, o, loop_id(c, p, (int)ed, t + 1), ring_id(c, p, a));
