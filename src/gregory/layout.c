@@ -348,16 +348,39 @@ static uint32_t ring_id(const lctx *c, size_t p, uint32_t r)
     }
 }
 
+/* A transition patch of 2: its centre fans to the outer loop, except at
+ * corners 1 and 3, which are cut off as ears, as the 2 x 2 grid's
+ * diagonals do. */
+static void transition_fan(const lctx *c, size_t p)
+{
+    const uint32_t *ne = c->ne + 4 * p;
+    uint32_t loop[4 * VX_GREGORY_MAX_DIVISIONS], n = 0, centre = grid_id(c, p, 1, 1);
+    for (int ed = 0; ed < 4; ed++)
+        for (uint32_t t = 0; t < ne[ed]; t++)
+            loop[n++] = loop_id(c, p, ed, t);
+    uint32_t k1 = ne[0], k3 = ne[0] + ne[1] + ne[2];
+    for (uint32_t b = 0; b < n; b++) {
+        uint32_t b1 = (b + 1) % n;
+        if (b1 == k1 || b1 == k3) {
+            emit(c->l, p, loop[b], loop[b1], loop[b1 + 1]);
+            emit(c->l, p, loop[b], loop[(b1 + 1) % n], centre);
+            b++;
+        } else
+            emit(c->l, p, loop[b], loop[b1], centre);
+    }
+}
+
 /* A transition patch: inner grid, then the strip between the inner ring
  * and the outer loop, both walked by the perimeter parameter in [0, 4)
  * (edge e at fraction f is e + f on either loop), always advancing the loop
  * whose next segment's midpoint comes first (so a side of the inner ring
- * shares the outer points between its two ends; for N = 2 the ring is the
- * centre, a fan). Counter-clockwise in (u, v), as the grid's triangles. */
+ * shares the outer points between its two ends). Counter-clockwise in
+ * (u, v), as the grid's triangles. */
 static void transition_tris(const lctx *c, size_t p)
 {
     uint32_t n = c->l->ndiv[p], m = n - 2, ring = 4 * m;
     const uint32_t *ne = c->ne + 4 * p;
+    if (m == 0) return transition_fan(c, p);
     grid_tris(c, p, 1, n - 1);
     uint32_t a = 0, ed = 0, t = 0; /* inner steps; outer position */
     while (a < ring || ed < 4) {

@@ -965,10 +965,9 @@ static void check_transitions(const vx_mesh *m, double max_edge, const char *wha
     /* No degenerate triangles. Triangles facing away from a vertex normal:
      * where a patch folds (the strip's ends, a few of suzanne's and spot's)
      * uniform grids have them too. Elsewhere only in transition patches of
-     * 2, which fan from their centre to all their edge points, corners
-     * included (a uniform grid of 2 does not join its centre to two of the
-     * corners): on a strongly curved patch a corner triangle can face away
-     * (suzanne has one such patch, spot three); at most 2% of them. */
+     * 2, which fan from their centre to every point of their finer edges:
+     * on a strongly curved patch one of those thin triangles can face away
+     * (suzanne has one such patch, spot two); at most 2% of them. */
     double dg = diag(m), min_area, min_dot;
     uint8_t *back = calloc(np, 1), *uback = calloc(np, 1);
     size_t nback = facing(w, pos, nrm, dg, &min_area, &min_dot, back), nuback = 0;
