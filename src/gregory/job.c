@@ -323,23 +323,23 @@ static int greg_run_gl(vx_job_run *r, const vx_mesh *mesh, const cJSON *params, 
     }
     ndiv = vx_gregory_divisions(b.set, (int)p.divisions, p.max_edge, err);
     if (!ndiv) goto done;
-    uint64_t gv, nt;
-    vx_gregory_count(b.set->npatches, ndiv, &gv, &nt);
+    uint64_t gv, nv, nt;
+    if (vx_gregory_count(b.set, ndiv, &gv, &nv, &nt, err)) goto done;
     if (lim->max_triangles && nt > lim->max_triangles) {
         vx_err_set(err, VX_ETOOBIG, "triangle_limit",
                    "%zu patches at these divisions make %llu triangles, over the limit of %llu",
                    b.set->npatches, (unsigned long long)nt, (unsigned long long)lim->max_triangles);
         goto done;
     }
-    /* Grid, per-frame outputs (at most one vertex per grid vertex), layout. */
-    uint64_t bytes = gv * (6 * sizeof(float) + sizeof(uint64_t) + sizeof(uint32_t)) +
-                     (uint64_t)nframes * gv * (3 * sizeof(double) + 3 * sizeof(float)) +
+    /* Grid, per-frame outputs, layout. */
+    uint64_t bytes = gv * 6 * sizeof(float) + nv * sizeof(uint64_t) +
+                     (uint64_t)nframes * nv * (3 * sizeof(double) + 3 * sizeof(float)) +
                      nt * 4 * sizeof(uint32_t) + b.set->npatches * VX_GPATCH_POINTS * 3 * 8;
     if (lim->max_job_memory && bytes > lim->max_job_memory) {
         vx_err_set(err, VX_ETOOBIG, "job_memory_limit",
                    "%zu frames of %llu vertices need about %llu bytes, over the job memory limit "
                    "of %llu",
-                   nframes, (unsigned long long)gv, (unsigned long long)bytes,
+                   nframes, (unsigned long long)nv, (unsigned long long)bytes,
                    (unsigned long long)lim->max_job_memory);
         goto done;
     }

@@ -84,11 +84,15 @@ uint32_t *vx_gregory_divisions(const vx_gpatch_set *s, int n, double max_edge, v
                 : need > VX_GREGORY_MAX_DIVISIONS ? VX_GREGORY_MAX_DIVISIONS
                                                   : (uint32_t)need;
     }
-    /* One N per connected component: the largest need in it. */
-    uint32_t *par = malloc((s->npatches + 1) * sizeof *par);
+    /* A patch of 1 division next to a finer one gets 2, so that it has an
+     * interior for the transition strip: every patch of 1 in a component
+     * (patches joined by shared edges) that has a finer patch. */
+    uint32_t *par = malloc((s->npatches + 1) * sizeof *par), *top = NULL;
     pedge *e = sorted_edges(s);
-    if (!par || !e) {
+    if (par) top = calloc(s->npatches + 1, sizeof *top);
+    if (!par || !top || !e) {
         free(par);
+        free(top);
         free(e);
         free(nd);
         oom(err);
@@ -97,31 +101,20 @@ uint32_t *vx_gregory_divisions(const vx_gpatch_set *s, int n, double max_edge, v
     for (size_t p = 0; p < s->npatches; p++)
         par[p] = (uint32_t)p;
     for (size_t q = 1; q < 4 * s->npatches; q++)
-        if (same_edge(&e[q], &e[q - 1])) {
+        if (same_edge(&e[q], &e[q - 1]) && e[q].lo != e[q].hi) {
             uint32_t a = uf_find(par, e[q].pe / 4), b = uf_find(par, e[q - 1].pe / 4);
             if (a != b) par[a] = b;
         }
     for (size_t p = 0; p < s->npatches; p++) {
         uint32_t r = uf_find(par, (uint32_t)p);
-        if (nd[p] > nd[r]) nd[r] = nd[p];
+        if (nd[p] > top[r]) top[r] = nd[p];
     }
     for (size_t p = 0; p < s->npatches; p++)
-        nd[p] = nd[uf_find(par, (uint32_t)p)];
+        if (nd[p] == 1 && top[uf_find(par, (uint32_t)p)] > 1) nd[p] = 2;
     free(par);
+    free(top);
     free(e);
     return nd;
-}
-
-void vx_gregory_count(size_t npatches, const uint32_t *ndiv, uint64_t *grid_verts, uint64_t *tris)
-{
-    uint64_t v = 0, t = 0;
-    for (size_t p = 0; p < npatches; p++) {
-        uint64_t n = ndiv[p];
-        v += (n + 1) * (n + 1);
-        t += 2 * n * n;
-    }
-    *grid_verts = v;
-    *tris = t;
 }
 
 void vx_gregory_layout_free(vx_gtess_layout *l)
@@ -135,159 +128,365 @@ void vx_gregory_layout_free(vx_gtess_layout *l)
     free(l);
 }
 
-/* Output id of every grid vertex (welded). */
-static int weld_map(const vx_gpatch_set *s, vx_gtess_layout *l, uint32_t *id, vx_err *err)
+/* Divisions of every patch edge, ne (the most of the patches on it; a
+ * collapsed edge keeps its patch's), and src, the patch edge whose grid
+ * gives its points (one of the patches with that many). Both 4 * npatches. */
+static int edge_divisions(const vx_gpatch_set *s, const uint32_t *ndiv, uint32_t *ne, uint32_t *src,
+                          vx_err *err)
 {
-    size_t np = s->npatches;
-    uint32_t maxkey = 0;
-    for (size_t q = 0; q < 4 * np; q++)
-        if (s->corner_key[q] > maxkey) maxkey = s->corner_key[q];
-    uint32_t *corner_id = malloc(((size_t)maxkey + 1) * sizeof *corner_id);
-    uint32_t *edge_base = malloc((4 * np + 1) * sizeof *edge_base); /* per patch edge */
     pedge *e = sorted_edges(s);
-    if (!corner_id || !edge_base || !e) {
-        free(corner_id);
-        free(edge_base);
-        free(e);
-        return oom(err);
-    }
-    for (size_t k = 0; k <= maxkey; k++)
-        corner_id[k] = NONE;
-    uint64_t next = 0;
-    for (size_t q = 0; q < 4 * np; q++)
-        if (corner_id[s->corner_key[q]] == NONE) corner_id[s->corner_key[q]] = (uint32_t)next++;
-    for (size_t q = 0; q < 4 * np; q++) {
-        uint32_t n = l->ndiv[e[q].pe / 4];
-        if (q > 0 && same_edge(&e[q], &e[q - 1])) {
-            if (n != l->ndiv[e[q - 1].pe / 4]) {
-                uint32_t pa = e[q].pe / 4, pb = e[q - 1].pe / 4;
-                free(corner_id);
-                free(edge_base);
-                free(e);
-                return vx_err_set(err, VX_EUNPROC, "gregory_divisions",
-                                  "patches %u and %u share an edge but have %u and %u divisions",
-                                  pa, pb, n, l->ndiv[pb]);
-            }
-            edge_base[e[q].pe] = edge_base[e[q - 1].pe];
-            continue;
+    if (!e) return oom(err);
+    size_t n = 4 * s->npatches;
+    for (size_t q = 0; q < n;) {
+        size_t r = q, best = q;
+        while (r < n && same_edge(&e[r], &e[q])) {
+            if (ndiv[e[r].pe / 4] > ndiv[e[best].pe / 4]) best = r;
+            r++;
         }
-        edge_base[e[q].pe] = (uint32_t)next;
-        if (e[q].lo != e[q].hi) next += n - 1; /* a collapsed edge is its corner */
+        for (size_t k = q; k < r; k++) {
+            int collapsed = e[k].lo == e[k].hi;
+            ne[e[k].pe] = ndiv[(collapsed ? e[k] : e[best]).pe / 4];
+            src[e[k].pe] = (collapsed ? e[k] : e[best]).pe;
+        }
+        q = r;
     }
     free(e);
+    return 0;
+}
+
+/* A patch with an edge finer than itself is a transition patch: inner grid
+ * plus a zipper strip to its outer loop. */
+static int is_transition(const uint32_t *ne, const uint32_t *ndiv, size_t p)
+{
+    for (int ed = 0; ed < 4; ed++)
+        if (ne[4 * p + ed] != ndiv[p]) return 1;
+    return 0;
+}
+
+/* Output vertices of patch p on its own (interior points, then its outer
+ * loop) and its triangles, before welding and before dropping collapsed
+ * ones. */
+static void patch_counts(const uint32_t *ne, const uint32_t *ndiv, size_t p, uint64_t *verts,
+                         uint64_t *tris)
+{
+    uint64_t n = ndiv[p], loop = 0;
+    for (int ed = 0; ed < 4; ed++)
+        loop += ne[4 * p + ed];
+    *verts = (n - 1) * (n - 1) + loop;
+    /* inner grid of (n - 2)^2 quads, and a strip of one triangle per step
+     * along the inner ring (4 (n - 2) points) and the outer loop (a patch
+     * of 1 with a finer edge is refused by the layout) */
+    *tris = n >= 2 && is_transition(ne, ndiv, p) ? 2 * (n - 2) * (n - 2) + 4 * (n - 2) + loop
+                                                 : 2 * n * n;
+}
+
+int vx_gregory_count(const vx_gpatch_set *s, const uint32_t *ndiv, uint64_t *grid_verts,
+                     uint64_t *verts, uint64_t *tris, vx_err *err)
+{
+    size_t np = s->npatches;
+    uint32_t *ne = malloc((4 * np + 1) * sizeof *ne), *src = malloc((4 * np + 1) * sizeof *src);
+    if (!ne || !src || edge_divisions(s, ndiv, ne, src, err)) {
+        if (!ne || !src) oom(err);
+        free(ne);
+        free(src);
+        return -1;
+    }
+    uint64_t g = 0, v = 0, t = 0;
     for (size_t p = 0; p < np; p++) {
-        uint32_t n = l->ndiv[p], w = n + 1;
-        const uint32_t *key = s->corner_key + 4 * p;
-        uint32_t *g = id + l->voff[p];
-        for (uint32_t j = 1; j < n; j++)
-            for (uint32_t i = 1; i < n; i++)
-                g[j * w + i] = (uint32_t)next++;
-        g[0] = corner_id[key[0]];
-        g[n] = corner_id[key[1]];
-        g[n * w + n] = corner_id[key[2]];
-        g[n * w] = corner_id[key[3]];
-        for (int ed = 0; ed < 4; ed++) {
-            uint32_t ka = key[ed], kb = key[(ed + 1) % 4], base = edge_base[4 * p + ed];
-            for (uint32_t t = 1; t < n; t++) {
-                uint32_t i, j;
-                switch (ed) {
-                case 0:
-                    i = t, j = 0;
-                    break;
-                case 1:
-                    i = n, j = t;
-                    break;
-                case 2:
-                    i = n - t, j = n;
-                    break;
-                default:
-                    i = 0, j = n - t;
-                    break;
-                }
-                g[j * w + i] = ka == kb ? corner_id[ka] : ka < kb ? base + t - 1 : base + n - t - 1;
-            }
+        uint64_t pv, pt, n = ndiv[p];
+        patch_counts(ne, ndiv, p, &pv, &pt);
+        g += (n + 1) * (n + 1);
+        v += pv;
+        t += pt;
+    }
+    free(ne);
+    free(src);
+    *grid_verts = g;
+    *verts = v;
+    *tris = t;
+    return 0;
+}
+
+typedef struct lctx {
+    const vx_gpatch_set *s;
+    vx_gtess_layout *l;
+    uint32_t *ne, *src;  /* edge_divisions */
+    uint32_t *corner_id; /* welded: per corner key */
+    uint32_t *edge_base; /* welded: first id of the inner points of an edge, at its src */
+    uint64_t *pbase;     /* first own (interior, then unwelded loop) id of each patch */
+} lctx;
+
+/* Grid index of point t (0..n) along edge ed of patch p's own grid, from
+ * corner ed to corner ed + 1. */
+static uint64_t edge_grid(const vx_gtess_layout *l, size_t p, int ed, uint32_t t)
+{
+    uint32_t n = l->ndiv[p], i, j;
+    switch (ed) {
+    case 0:
+        i = t, j = 0;
+        break;
+    case 1:
+        i = n, j = t;
+        break;
+    case 2:
+        i = n - t, j = n;
+        break;
+    default:
+        i = 0, j = n - t;
+        break;
+    }
+    return l->voff[p] + (uint64_t)j * (n + 1) + i;
+}
+
+/* The grid vertex that gives point t (0..ne) of patch edge (p, ed): the
+ * patch's own, or on an edge finer than the patch, its src neighbour's (the
+ * same boundary curve, maybe run the other way). */
+static uint64_t loop_grid(const lctx *c, size_t p, int ed, uint32_t t)
+{
+    uint32_t pe = (uint32_t)(4 * p + (size_t)ed), n = c->ne[pe], q = c->src[pe];
+    if (n == c->l->ndiv[p]) return edge_grid(c->l, p, ed, t);
+    int same = c->s->corner_key[pe] == c->s->corner_key[q];
+    return edge_grid(c->l, q / 4, (int)(q % 4), same ? t : n - t);
+}
+
+/* Output id of point t (0..ne) of patch edge (p, ed). */
+static uint32_t loop_id(const lctx *c, size_t p, int ed, uint32_t t)
+{
+    if (t == c->ne[4 * p + (size_t)ed]) ed = (ed + 1) % 4, t = 0; /* the next edge's corner */
+    uint32_t pe = (uint32_t)(4 * p + (size_t)ed), n = c->ne[pe], nd = c->l->ndiv[p];
+    if (!c->l->weld) {
+        uint64_t off = c->pbase[p] + (uint64_t)(nd - 1) * (nd - 1) + t;
+        for (int e = 0; e < ed; e++)
+            off += c->ne[4 * p + (size_t)e];
+        return (uint32_t)off;
+    }
+    const uint32_t *key = c->s->corner_key + 4 * p;
+    uint32_t ka = key[ed], kb = key[(ed + 1) % 4];
+    if (t == 0 || ka == kb) return c->corner_id[ka];
+    uint32_t base = c->edge_base[c->src[pe]];
+    return ka < kb ? base + t - 1 : base + n - t - 1;
+}
+
+/* Output id of grid vertex (i, j) of patch p where its edges have its own
+ * divisions (or (i, j) is interior). */
+static uint32_t grid_id(const lctx *c, size_t p, uint32_t i, uint32_t j)
+{
+    uint32_t n = c->l->ndiv[p];
+    if (i > 0 && i < n && j > 0 && j < n)
+        return (uint32_t)(c->pbase[p] + (uint64_t)(j - 1) * (n - 1) + (i - 1));
+    if (j == 0) return loop_id(c, p, 0, i);
+    if (i == n) return loop_id(c, p, 1, j);
+    if (j == n) return loop_id(c, p, 2, n - i);
+    return loop_id(c, p, 3, n - j);
+}
+
+/* Output ids: corners, edge points and interiors (welded), or each patch's
+ * own; the next free id. */
+static uint64_t assign_ids(lctx *c)
+{
+    const vx_gpatch_set *s = c->s;
+    size_t np = s->npatches;
+    uint64_t next = 0;
+    if (c->l->weld) {
+        for (size_t q = 0; q < 4 * np; q++)
+            if (c->corner_id[s->corner_key[q]] == NONE)
+                c->corner_id[s->corner_key[q]] = (uint32_t)next++;
+        for (size_t q = 0; q < 4 * np; q++) {
+            uint32_t ka = s->corner_key[q], kb = s->corner_key[4 * (q / 4) + (q % 4 + 1) % 4];
+            if (c->src[q] != q || ka == kb)
+                continue; /* one per edge; a collapsed edge is its corner */
+            c->edge_base[q] = (uint32_t)next;
+            next += c->ne[q] - 1;
         }
     }
-    free(corner_id);
-    free(edge_base);
-    if (next >= UINT32_MAX)
-        return vx_err_set(err, VX_ETOOBIG, "too_many_vertices", "over 2^32 vertices");
-    l->nverts = (size_t)next;
-    return 0;
+    for (size_t p = 0; p < np; p++) {
+        uint64_t pv, pt, n = c->l->ndiv[p];
+        c->pbase[p] = next;
+        patch_counts(c->ne, c->l->ndiv, p, &pv, &pt);
+        next += c->l->weld ? (n - 1) * (n - 1) : pv;
+    }
+    return next;
+}
+
+static void emit(vx_gtess_layout *l, size_t p, uint32_t a, uint32_t b, uint32_t d)
+{
+    if (a == b || b == d || a == d) return; /* collapsed onto a degenerate edge */
+    uint32_t *x = l->tri + 3 * l->ntris;
+    x[0] = a, x[1] = b, x[2] = d;
+    l->tri_patch[l->ntris++] = (uint32_t)p;
+}
+
+/* Quads (i, j)..(i + 1, j + 1) for i, j in lo..hi - 1, two triangles each. */
+static void grid_tris(const lctx *c, size_t p, uint32_t lo, uint32_t hi)
+{
+    for (uint32_t j = lo; j < hi; j++)
+        for (uint32_t i = lo; i < hi; i++) {
+            uint32_t a = grid_id(c, p, i, j), b = grid_id(c, p, i + 1, j),
+                     cc = grid_id(c, p, i + 1, j + 1), d = grid_id(c, p, i, j + 1);
+            emit(c->l, p, a, b, cc);
+            emit(c->l, p, a, cc, d);
+        }
+}
+
+/* Point r of the inner ring (the boundary of the grid 1..n-1, walked like
+ * the outer loop: m = n - 2 points per side). */
+static uint32_t ring_id(const lctx *c, size_t p, uint32_t r)
+{
+    uint32_t n = c->l->ndiv[p], m = n - 2;
+    if (m == 0) return grid_id(c, p, 1, 1);
+    r %= 4 * m;
+    uint32_t k = r % m;
+    switch (r / m) {
+    case 0:
+        return grid_id(c, p, 1 + k, 1);
+    case 1:
+        return grid_id(c, p, n - 1, 1 + k);
+    case 2:
+        return grid_id(c, p, n - 1 - k, n - 1);
+    default:
+        return grid_id(c, p, 1, n - 1 - k);
+    }
+}
+
+/* A transition patch of 2: its centre fans to the outer loop, except at
+ * corners 1 and 3, which are cut off as ears, as the 2 x 2 grid's
+ * diagonals do. */
+static void transition_fan(const lctx *c, size_t p)
+{
+    const uint32_t *ne = c->ne + 4 * p;
+    uint32_t loop[4 * VX_GREGORY_MAX_DIVISIONS], n = 0, centre = grid_id(c, p, 1, 1);
+    for (int ed = 0; ed < 4; ed++)
+        for (uint32_t t = 0; t < ne[ed]; t++)
+            loop[n++] = loop_id(c, p, ed, t);
+    uint32_t k1 = ne[0], k3 = ne[0] + ne[1] + ne[2];
+    for (uint32_t b = 0; b < n; b++) {
+        uint32_t b1 = (b + 1) % n;
+        if (b1 == k1 || b1 == k3) {
+            emit(c->l, p, loop[b], loop[b1], loop[b1 + 1]);
+            emit(c->l, p, loop[b], loop[(b1 + 1) % n], centre);
+            b++;
+        } else
+            emit(c->l, p, loop[b], loop[b1], centre);
+    }
+}
+
+/* A transition patch: inner grid, then the strip between the inner ring
+ * and the outer loop, both walked by the perimeter parameter in [0, 4)
+ * (edge e at fraction f is e + f on either loop), always advancing the loop
+ * whose next segment's midpoint comes first (so a side of the inner ring
+ * shares the outer points between its two ends). Counter-clockwise in
+ * (u, v), as the grid's triangles. */
+static void transition_tris(const lctx *c, size_t p)
+{
+    uint32_t n = c->l->ndiv[p], m = n - 2, ring = 4 * m;
+    const uint32_t *ne = c->ne + 4 * p;
+    if (m == 0) return transition_fan(c, p);
+    grid_tris(c, p, 1, n - 1);
+    uint32_t a = 0, ed = 0, t = 0; /* inner steps; outer position */
+    while (a < ring || ed < 4) {
+        double ti = a < ring ? (a + 0.5) / m : INFINITY;
+        double to = ed < 4 ? ed + (t + 0.5) / ne[ed] : INFINITY;
+        uint32_t o = loop_id(c, p, (int)(ed % 4), t);
+        if (to <= ti) {
+            emit(c->l, p, o, loop_id(c, p, (int)ed, t + 1), ring_id(c, p, a));
+            if (++t == ne[ed]) ed++, t = 0;
+        } else {
+            emit(c->l, p, o, ring_id(c, p, a + 1), ring_id(c, p, a));
+            a++;
+        }
+    }
 }
 
 vx_gtess_layout *vx_gregory_layout_new(const vx_gpatch_set *s, const uint32_t *ndiv, int weld,
                                        vx_err *err)
 {
     size_t np = s->npatches;
+    lctx c = {.s = s};
     vx_gtess_layout *l = calloc(1, sizeof *l);
     if (!l) {
         oom(err);
         return NULL;
     }
+    c.l = l;
     l->npatches = np;
     l->weld = weld;
     l->ndiv = malloc((np + 1) * sizeof *l->ndiv);
     l->voff = malloc((np + 1) * sizeof *l->voff);
-    if (!l->ndiv || !l->voff) goto fail_oom;
+    c.ne = malloc((4 * np + 1) * sizeof *c.ne);
+    c.src = malloc((4 * np + 1) * sizeof *c.src);
+    c.pbase = malloc((np + 1) * sizeof *c.pbase);
+    if (!l->ndiv || !l->voff || !c.ne || !c.src || !c.pbase) goto fail_oom;
     memcpy(l->ndiv, ndiv, np * sizeof *ndiv);
-    uint64_t gv, nt;
-    vx_gregory_count(np, ndiv, &gv, &nt);
-    if (gv >= UINT32_MAX) {
-        vx_gregory_layout_free(l);
-        vx_err_set(err, VX_ETOOBIG, "too_many_vertices", "over 2^32 vertices");
-        return NULL;
-    }
+    if (edge_divisions(s, ndiv, c.ne, c.src, err)) goto fail;
+    uint64_t gv = 0, nt = 0;
     l->voff[0] = 0;
-    for (size_t p = 0; p < np; p++)
+    for (size_t p = 0; p < np; p++) {
+        uint64_t pv, pt;
+        patch_counts(c.ne, ndiv, p, &pv, &pt);
+        nt += pt;
         l->voff[p + 1] = l->voff[p] + (uint64_t)(ndiv[p] + 1) * (ndiv[p] + 1);
-    uint32_t *id = malloc((gv + 1) * sizeof *id);
-    if (!id) goto fail_oom;
-    if (weld) {
-        if (weld_map(s, l, id, err)) {
-            free(id);
-            vx_gregory_layout_free(l);
-            return NULL;
+        if (ndiv[p] < 2 && is_transition(c.ne, ndiv, p)) {
+            vx_err_set(err, VX_EUNPROC, "gregory_divisions",
+                       "patch %zu has %u division next to a finer patch (a transition needs 2)", p,
+                       ndiv[p]);
+            goto fail;
         }
-    } else {
-        for (uint64_t g = 0; g < gv; g++)
-            id[g] = (uint32_t)g;
-        l->nverts = (size_t)gv;
     }
+    gv = l->voff[np];
+    if (gv >= UINT32_MAX) goto fail_big;
+    if (weld) {
+        uint32_t maxkey = 0;
+        for (size_t q = 0; q < 4 * np; q++)
+            if (s->corner_key[q] > maxkey) maxkey = s->corner_key[q];
+        c.corner_id = malloc(((size_t)maxkey + 1) * sizeof *c.corner_id);
+        c.edge_base = malloc((4 * np + 1) * sizeof *c.edge_base);
+        if (!c.corner_id || !c.edge_base) goto fail_oom;
+        for (size_t k = 0; k <= maxkey; k++)
+            c.corner_id[k] = NONE;
+    }
+    uint64_t nv = assign_ids(&c);
+    if (nv >= UINT32_MAX) goto fail_big;
+    l->nverts = (size_t)nv;
     l->rep = malloc((l->nverts + 1) * sizeof *l->rep);
     l->tri = malloc((3 * nt + 1) * sizeof *l->tri);
     l->tri_patch = malloc((nt + 1) * sizeof *l->tri_patch);
-    if (!l->rep || !l->tri || !l->tri_patch) {
-        free(id);
-        goto fail_oom;
-    }
+    if (!l->rep || !l->tri || !l->tri_patch) goto fail_oom;
     for (size_t v = 0; v < l->nverts; v++)
         l->rep[v] = UINT64_MAX;
-    for (uint64_t g = gv; g-- > 0;) /* the first patch that has a vertex gives it */
-        l->rep[id[g]] = g;
-    size_t t = 0;
-    for (size_t p = 0; p < np; p++) {
-        uint32_t n = ndiv[p], w = n + 1;
-        const uint32_t *g = id + l->voff[p];
-        for (uint32_t j = 0; j < n; j++)
-            for (uint32_t i = 0; i < n; i++) {
-                uint32_t a = g[j * w + i], b = g[j * w + i + 1], c = g[(j + 1) * w + i + 1],
-                         d = g[(j + 1) * w + i];
-                const uint32_t tr[2][3] = {{a, b, c}, {a, c, d}};
-                for (int k = 0; k < 2; k++) {
-                    const uint32_t *x = tr[k];
-                    if (x[0] == x[1] || x[1] == x[2] || x[0] == x[2]) continue;
-                    memcpy(l->tri + 3 * t, x, 3 * sizeof *x);
-                    l->tri_patch[t++] = (uint32_t)p;
-                }
+    for (size_t p = 0; p < np; p++) { /* the first patch that has a vertex gives it */
+        uint32_t n = ndiv[p];
+        for (uint32_t j = 1; j < n; j++)
+            for (uint32_t i = 1; i < n; i++)
+                l->rep[grid_id(&c, p, i, j)] = l->voff[p] + (uint64_t)j * (n + 1) + i;
+        for (int ed = 0; ed < 4; ed++)
+            for (uint32_t t = 0; t < c.ne[4 * p + (size_t)ed]; t++) {
+                uint32_t v = loop_id(&c, p, ed, t);
+                if (l->rep[v] == UINT64_MAX) l->rep[v] = loop_grid(&c, p, ed, t);
             }
     }
-    l->ntris = t;
-    free(id);
+    for (size_t p = 0; p < np; p++)
+        if (is_transition(c.ne, ndiv, p))
+            transition_tris(&c, p);
+        else
+            grid_tris(&c, p, 0, ndiv[p]);
+    free(c.ne);
+    free(c.src);
+    free(c.pbase);
+    free(c.corner_id);
+    free(c.edge_base);
     return l;
+fail_big:
+    vx_err_set(err, VX_ETOOBIG, "too_many_vertices", "over 2^32 vertices");
+    goto fail;
 fail_oom:
-    vx_gregory_layout_free(l);
     oom(err);
+fail:
+    free(c.ne);
+    free(c.src);
+    free(c.pbase);
+    free(c.corner_id);
+    free(c.edge_base);
+    vx_gregory_layout_free(l);
     return NULL;
 }
 

@@ -5,8 +5,13 @@
  *
  * Patch p is evaluated on an (N_p + 1)^2 grid, vertex (i, j) at
  * (u, v) = (i / N_p, j / N_p), stored at grid index voff[p] + j (N_p + 1) + i.
- * Shared patch edges must have the same N on both sides (crack-free); the
- * divisions helpers guarantee it by choosing one N per connected component.
+ * Every patch edge gets the most divisions of the patches on it, N_e. A
+ * patch whose edges all have N_e = N_p is triangulated as its grid; one
+ * with a finer edge (a transition patch, N_p >= 2) as its inner grid
+ * (1..N_p-1) plus a zipper strip from the inner ring to its outer loop,
+ * whose points on a finer edge are the finer neighbour's grid vertices (the
+ * same boundary curve): shared edges match exactly, no cracks, no
+ * T-junctions.
  * The layout depends only on the topology (corner keys) and the divisions,
  * so deformation frames reuse it. */
 #ifndef VX_GREGORY_TESS_H
@@ -26,29 +31,34 @@ typedef struct vx_gtess_layout {
     uint64_t *voff; /* npatches + 1: first grid vertex of each patch */
     int weld;
     size_t nverts; /* output vertices */
-    uint64_t *rep; /* nverts: the grid vertex an output vertex is taken from */
+    uint64_t *rep; /* nverts: the grid vertex an output vertex is taken from
+                      (another patch's on a transition edge) */
     size_t ntris;
     uint32_t *tri;       /* 3 * ntris output vertex ids, counter-clockwise seen from the normal */
     uint32_t *tri_patch; /* ntris: the patch of each triangle */
 } vx_gtess_layout;
 
 /* Divisions per patch: n for every patch (max_edge <= 0), or, for
- * max_edge > 0, the N that brings every boundary control polygon of a patch
- * under max_edge per segment, maximised over each connected component of
- * patches (shared edges then match), clamped to 1..256. Owned array of
- * npatches; NULL on allocation failure. Any thread. */
+ * max_edge > 0, each patch's own N: the one that brings every boundary
+ * control polygon of the patch under max_edge per segment, clamped to
+ * 1..256, and at least 2 where a patch of its connected component (patches
+ * joined by shared edges) has more (a transition patch needs an interior).
+ * Owned array of npatches; NULL on allocation failure. Any thread. */
 uint32_t *vx_gregory_divisions(const vx_gpatch_set *s, int n, double max_edge, vx_err *err);
 
 /* Counts for a given division array: grid vertices, and the output
  * vertices and triangles an unwelded tessellation makes (welding only
- * lowers the vertex count). For limit checks before anything is allocated. */
-void vx_gregory_count(size_t npatches, const uint32_t *ndiv, uint64_t *grid_verts, uint64_t *tris);
+ * lowers the vertex count, collapsed edges the triangle count). For limit
+ * checks before the layout is built. -1 with err on allocation failure. */
+int vx_gregory_count(const vx_gpatch_set *s, const uint32_t *ndiv, uint64_t *grid_verts,
+                     uint64_t *verts, uint64_t *tris, vx_err *err);
 
 /* Builds the layout: welded (weld != 0: one output vertex per corner key,
  * per shared edge position and per patch interior point; triangles that
  * collapse onto a degenerate edge are dropped) or one vertex set per patch.
- * ndiv is copied. Owned; NULL with err (VX_EUNPROC when two patches on one
- * edge have different divisions). Any thread. */
+ * ndiv is copied. Owned; NULL with err (VX_EUNPROC gregory_divisions when a
+ * patch of 1 division has a finer edge: vx_gregory_divisions never makes
+ * one). Any thread. */
 vx_gtess_layout *vx_gregory_layout_new(const vx_gpatch_set *s, const uint32_t *ndiv, int weld,
                                        vx_err *err);
 void vx_gregory_layout_free(vx_gtess_layout *l);

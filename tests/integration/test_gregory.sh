@@ -205,18 +205,29 @@ fetch mesh "$TMP/cc_fresh2.obj"
 D=$(maxdiff "$TMP/cc_fresh2.obj" "$TMP/cc_f1.obj")
 check "approximate-cc frame 1 = fresh job on that mesh ($D)" small "$D" 1e-6 1e-5
 
-# --- max_edge: one N per connected component ---
+# --- max_edge: N per patch, transition strips where neighbours differ ---
 greg "suzanne max_edge" "$M_suz" '{"max_edge":0.1}'
 ok "suzanne max_edge"
 check "max_edge: params normalised" jq -e '.params.divisions == null and .params.max_edge == 0.1' "$TMP/job.json"
-check "max_edge: components get different N" jq -e '.stats.divisions_max > .stats.divisions_min and .stats.divisions_min >= 1' "$TMP/job.json"
+check "max_edge: suzanne gets different N" jq -e '.stats.divisions_max > .stats.divisions_min and .stats.divisions_min >= 1' "$TMP/job.json"
 fetch mesh "$TMP/suz_me.obj"
 upload "$TMP/suz_me.obj"
 meta "$MESH_ID"
-# Shared edges between patches of different N would be refused (the weld
-# needs equal divisions): no cracks. Only suzanne's own boundary stays open.
-check "max_edge: welded, open only where the input is" test "$(mv_ boundary_edges)" -gt 0
-check "max_edge: no non-manifold edges" test "$(mv_ nonmanifold_edges)" = 0
+check "max_edge: suzanne open only where the input is" test "$(mv_ boundary_edges)" -gt 0
+check "max_edge: suzanne, no non-manifold edges" test "$(mv_ nonmanifold_edges)" = 0
+# spot is one closed component: different N inside it, and the welded
+# result is still closed and manifold (shared edges of patches with
+# different N match point for point: no cracks, no T-junctions).
+greg "spot max_edge" "$M_spot" '{"max_edge":0.09}'
+ok "spot max_edge"
+check "max_edge: different N inside one component" jq -e '.stats.divisions_max > .stats.divisions_min and .stats.divisions_min >= 2' "$TMP/job.json"
+jq -c '.stats | {divisions_min, divisions_max, vertices, triangles}' "$TMP/job.json"
+fetch mesh "$TMP/spot_me.obj"
+upload "$TMP/spot_me.obj"
+meta "$MESH_ID"
+check "max_edge: spot welded, 0 boundary edges" test "$(mv_ boundary_edges)" = 0
+check "max_edge: spot, no non-manifold edges" test "$(mv_ nonmanifold_edges)" = 0
+check "max_edge: spot, vertices and triangles as reported" test "$(mv_ vertices) $(mv_ triangles)" = "$(jq -r '"\(.stats.vertices) \(.stats.triangles)"' "$TMP/job.json")"
 
 # --- errors ---
 post() { api POST /v1/jobs -H "Content-Type: application/json" -d "$1"; }

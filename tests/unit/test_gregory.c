@@ -504,8 +504,8 @@ static void test_gpu_chunks(void **state)
     vx_gpatch_set *s = build(m, NULL);
     vx_err err = {0};
     uint32_t *nd = vx_gregory_divisions(s, 128, 0, &err);
-    uint64_t gv, nt;
-    vx_gregory_count(s->npatches, nd, &gv, &nt);
+    uint64_t gv, nv, nt;
+    assert_int_equal(vx_gregory_count(s, nd, &gv, &nv, &nt, &err), 0);
     assert_true(gv * 24 > 2 * (128u << 20)); /* at least three chunks */
     check_gpu(s, nd, diag(m), 1e-5, 0.01, 997);
     free(nd);
@@ -715,34 +715,413 @@ static void test_from_bezier_small(void **state)
     vx_mesh_free(m);
 }
 
-/* max_edge: one N per connected component, shared edges match, and a
- * finer target gives more divisions. */
+/* An open strip of five quads of very different widths (one patch each),
+ * bent out of the plane: max_edge gives neighbours different divisions. */
+static vx_mesh *strip_mesh(void)
+{
+    static const double x[6] = {0, 0.2, 1.2, 4.2, 4.7, 6.7};
+    vx_mesh *m = vx_mesh_new();
+    assert_non_null(m);
+    m->nverts = 12;
+    m->pos = malloc(36 * sizeof *m->pos);
+    for (int k = 0; k < 6; k++)
+        for (int top = 0; top < 2; top++) {
+            double *p = m->pos + 3 * (2 * k + top);
+            p[0] = x[k];
+            p[1] = top;
+            p[2] = 0.3 * sin(x[k]) + 0.2 * top * x[k] / 6.7;
+        }
+    m->nfaces = 5;
+    m->face_start = malloc(6 * sizeof *m->face_start);
+    m->face_idx = malloc(20 * sizeof *m->face_idx);
+    for (uint32_t f = 0; f < 5; f++) {
+        uint32_t q[4] = {2 * f, 2 * f + 2, 2 * f + 3, 2 * f + 1};
+        memcpy(m->face_idx + 4 * f, q, sizeof q);
+        m->face_start[f] = 4 * f;
+    }
+    m->face_start[5] = 20;
+    vx_err err = {0};
+    assert_int_equal(vx_mesh_analyze(m, &err), 0);
+    return m;
+}
+
+typedef struct kedge {
+    uint64_t k; /* corner keys lo << 32 | hi */
+    uint32_t pe;
+} kedge;
+
+static int kedge_cmp(const void *x, const void *y)
+{
+    const kedge *a = x, *b = y;
+    return (a->k > b->k) - (a->k < b->k);
+}
+
+static uint64_t edge_key(const vx_gpatch_set *s, size_t q)
+{
+    uint64_t a = s->corner_key[q], b = s->corner_key[4 * (q / 4) + (q % 4 + 1) % 4];
+    return a < b ? a << 32 | b : b << 32 | a;
+}
+
+/* Patch edges sorted by their corner keys. */
+static kedge *kedges(const vx_gpatch_set *s)
+{
+    kedge *e = malloc(4 * s->npatches * sizeof *e);
+    for (size_t q = 0; q < 4 * s->npatches; q++)
+        e[q] = (kedge){edge_key(s, q), (uint32_t)q};
+    qsort(e, 4 * s->npatches, sizeof *e, kedge_cmp);
+    return e;
+}
+
+/* The patch and grid (i, j) of grid vertex g. */
+static size_t grid_at(const vx_gtess_layout *l, uint64_t g, uint32_t *i, uint32_t *j)
+{
+    size_t lo = 0, hi = l->npatches; /* last p with voff[p] <= g */
+    while (hi - lo > 1) {
+        size_t mid = (lo + hi) / 2;
+        if (l->voff[mid] <= g)
+            lo = mid;
+        else
+            hi = mid;
+    }
+    uint32_t w = l->ndiv[lo] + 1;
+    *i = (uint32_t)((g - l->voff[lo]) % w);
+    *j = (uint32_t)((g - l->voff[lo]) / w);
+    return lo;
+}
+
+static int u64_has(const uint64_t *a, size_t n, uint64_t x)
+{
+    return bsearch(&x, a, n, sizeof x, u64_cmp) != NULL;
+}
+
+/* (u, v) in patch p of output vertex v, which lies in p's grid or, where
+ * another patch's grid gives it, on a corner or edge p shares with that
+ * patch (matched by corner keys; no collapsed edges). */
+static void uv_in(const vx_gpatch_set *s, const vx_gtess_layout *l, size_t p, uint32_t v,
+                  double uv[2])
+{
+    uint32_t i, j;
+    size_t r = grid_at(l, l->rep[v], &i, &j);
+    uint32_t n = l->ndiv[r];
+    uv[0] = (double)i / n, uv[1] = (double)j / n;
+    if (r == p) return;
+    const uint32_t *kr = s->corner_key + 4 * r, *kp = s->corner_key + 4 * p;
+    int ci = i == 0 || i == n, cj = j == 0 || j == n;
+    if (ci && cj) { /* a corner: p's corner of the same key */
+        int c = i == 0 ? (j == 0 ? 0 : 3) : (j == 0 ? 1 : 2);
+        for (int d = 0; d < 4; d++)
+            if (kp[d] == kr[c]) {
+                uv[0] = d == 1 || d == 2, uv[1] = d >= 2;
+                return;
+            }
+        fail_msg("vertex %u: corner not in patch %zu", v, p);
+    }
+    int er = j == 0 ? 0 : i == n ? 1 : j == n ? 2 : 3;
+    uint32_t t = er == 0 ? i : er == 1 ? j : er == 2 ? n - i : n - j;
+    for (int d = 0; d < 4; d++) {
+        uint32_t a = kp[d], b = kp[(d + 1) % 4];
+        if (a == kr[er] && b == kr[(er + 1) % 4]) return edge_uv(d, (double)t / n, uv, uv + 1);
+        if (b == kr[er] && a == kr[(er + 1) % 4]) return edge_uv(d, 1 - (double)t / n, uv, uv + 1);
+    }
+    fail_msg("vertex %u: edge not in patch %zu", v, p);
+}
+
+/* Triangles of layout l counter-clockwise in their patch's (u, v) domain,
+ * where the surface normal is du x dv; the smallest doubled area there. */
+static double min_uv_area(const vx_gpatch_set *s, const vx_gtess_layout *l)
+{
+    double worst = INFINITY;
+    for (size_t t = 0; t < l->ntris; t++) {
+        double a[2], b[2], c[2];
+        size_t p = l->tri_patch[t];
+        uv_in(s, l, p, l->tri[3 * t], a);
+        uv_in(s, l, p, l->tri[3 * t + 1], b);
+        uv_in(s, l, p, l->tri[3 * t + 2], c);
+        double x = (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0]);
+        if (x < worst) worst = x;
+    }
+    return worst;
+}
+
+/* CPU positions and normals of a layout's output vertices, at their grid
+ * points. */
+static void cpu_eval(const vx_gpatch_set *s, const vx_gtess_layout *l, double *pos, double *nrm)
+{
+    for (size_t v = 0; v < l->nverts; v++) {
+        uint32_t i, j;
+        size_t p = grid_at(l, l->rep[v], &i, &j);
+        vx_gpatch_eval(s->cp + p * 60, (double)i / l->ndiv[p], (double)j / l->ndiv[p], pos + 3 * v,
+                       nrm + 3 * v);
+    }
+}
+
+/* Triangles with a vertex normal on their back (marked per patch in back),
+ * the smallest doubled area (of dg^2) and the smallest cosine between a
+ * triangle's normal and its vertex normals. */
+static size_t facing(const vx_gtess_layout *l, const double *pos, const double *nrm, double dg,
+                     double *min_area, double *min_dot, uint8_t *back)
+{
+    size_t n = 0;
+    *min_area = *min_dot = INFINITY;
+    for (size_t t = 0; t < l->ntris; t++) {
+        const double *a = pos + 3 * l->tri[3 * t], *b = pos + 3 * l->tri[3 * t + 1],
+                     *c = pos + 3 * l->tri[3 * t + 2];
+        double x[3], y[3], z[3];
+        for (int d = 0; d < 3; d++)
+            x[d] = b[d] - a[d], y[d] = c[d] - a[d];
+        z[0] = x[1] * y[2] - x[2] * y[1];
+        z[1] = x[2] * y[0] - x[0] * y[2];
+        z[2] = x[0] * y[1] - x[1] * y[0];
+        double len = sqrt(z[0] * z[0] + z[1] * z[1] + z[2] * z[2]), worst = INFINITY;
+        if (len / (dg * dg) < *min_area) *min_area = len / (dg * dg);
+        for (int k = 0; k < 3; k++) {
+            const double *nn = nrm + 3 * l->tri[3 * t + k];
+            double dot = (z[0] * nn[0] + z[1] * nn[1] + z[2] * nn[2]) / len;
+            if (dot < worst) worst = dot;
+        }
+        if (worst < *min_dot) *min_dot = worst;
+        if (!(worst > 0)) {
+            n++;
+            back[l->tri_patch[t]] = 1;
+        }
+    }
+    return n;
+}
+
+/* max_edge with per-patch divisions on a mesh with no collapsed edges:
+ * neighbours differ, the welded output is closed wherever the input is (its
+ * only open edges are the segments of unshared patch edges), every vertex
+ * on a shared patch edge is used by all the patches on it (no T-junction),
+ * no triangle is degenerate (CPU evaluation at each output vertex's grid
+ * point) and all are counter-clockwise in their patch's domain, welded and
+ * unwelded. Facing against the vertex normals in space is only reported:
+ * where a patch folds (a few of suzanne's and spot's, the strip's ends) the
+ * uniform grid has the same backfacing triangles. */
+static void check_transitions(const vx_mesh *m, double max_edge, const char *what)
+{
+    vx_gpatch_set *s = build(m, NULL);
+    vx_err err = {0};
+    uint32_t *nd = vx_gregory_divisions(s, 0, max_edge, &err);
+    assert_non_null(nd);
+    size_t np = s->npatches, nshared = 0, ndiffer = 0, open = 0, ntrans = 0;
+    uint8_t *trans = calloc(np, 1);
+    kedge *e = kedges(s);
+    for (size_t q = 0; q < 4 * np;) {
+        size_t r = q;
+        while (r < 4 * np && e[r].k == e[q].k)
+            r++;
+        if (r - q == 1) open += nd[e[q].pe / 4];
+        for (size_t k = q + 1; k < r; k++) {
+            nshared++;
+            ndiffer += nd[e[k].pe / 4] != nd[e[q].pe / 4];
+        }
+        for (size_t k = q; k < r; k++)
+            for (size_t k2 = q; k2 < r; k2++)
+                if (nd[e[k2].pe / 4] > nd[e[k].pe / 4]) trans[e[k].pe / 4] = 1;
+        q = r;
+    }
+    for (size_t p = 0; p < np; p++)
+        assert_true(nd[p] >= 2 || ndiffer == 0);
+    assert_true(ndiffer > 0); /* neighbours with different divisions */
+    vx_gtess_layout *w = vx_gregory_layout_new(s, nd, 1, &err);
+    vx_gtess_layout *u = vx_gregory_layout_new(s, nd, 0, &err);
+    assert_non_null(w);
+    assert_non_null(u);
+    uint64_t gv, nv, nt;
+    assert_int_equal(vx_gregory_count(s, nd, &gv, &nv, &nt, &err), 0);
+    assert_int_equal(gv, w->voff[np]);
+    assert_int_equal(u->nverts, nv);
+    assert_int_equal(u->ntris, nt); /* nothing collapses here */
+    assert_int_equal(w->ntris, nt);
+    assert_true(w->nverts < u->nverts);
+    size_t bw = boundary_edges(w->tri, w->ntris, w->nverts);
+    assert_int_equal(bw, open);
+    double *pos = malloc(3 * w->nverts * sizeof *pos), *nrm = malloc(3 * w->nverts * sizeof *nrm);
+    cpu_eval(s, w, pos, nrm);
+    /* No T-junctions. */
+    uint64_t *uses = malloc(3 * w->ntris * sizeof *uses);
+    for (size_t t = 0; t < 3 * w->ntris; t++)
+        uses[t] = (uint64_t)w->tri[t] << 32 | w->tri_patch[t / 3];
+    qsort(uses, 3 * w->ntris, sizeof *uses, u64_cmp);
+    size_t on_edges = 0;
+    for (size_t v = 0; v < w->nverts; v++) {
+        uint32_t i, j;
+        size_t p = grid_at(w, w->rep[v], &i, &j);
+        uint32_t n = nd[p];
+        int ci = i == 0 || i == n, cj = j == 0 || j == n;
+        if (!(ci ^ cj)) continue; /* interior or corner */
+        int ed = j == 0 ? 0 : i == n ? 1 : j == n ? 2 : 3;
+        kedge key = {edge_key(s, 4 * p + (size_t)ed), 0};
+        kedge *k = bsearch(&key, e, 4 * np, sizeof *e, kedge_cmp);
+        assert_non_null(k);
+        while (k > e && k[-1].k == key.k)
+            k--;
+        for (; k < e + 4 * np && k->k == key.k; k++) {
+            assert_true(u64_has(uses, 3 * w->ntris, (uint64_t)v << 32 | (k->pe / 4)));
+            on_edges++;
+        }
+    }
+    assert_true(on_edges > 0);
+    /* No degenerate triangles. Triangles facing away from a vertex normal:
+     * where a patch folds (the strip's ends, a few of suzanne's and spot's)
+     * uniform grids have them too. Elsewhere only in transition patches of
+     * 2, which fan from their centre to every point of their finer edges:
+     * on a strongly curved patch one of those thin triangles can face away
+     * (suzanne has one such patch, spot two); at most 2% of them. */
+    double dg = diag(m), min_area, min_dot;
+    uint8_t *back = calloc(np, 1), *uback = calloc(np, 1);
+    size_t nback = facing(w, pos, nrm, dg, &min_area, &min_dot, back), nuback = 0;
+    uint32_t lo = UINT32_MAX, hi = 0;
+    for (size_t p = 0; p < np; p++) {
+        if (nd[p] < lo) lo = nd[p];
+        if (nd[p] > hi) hi = nd[p];
+    }
+    uint32_t *und = malloc(np * sizeof *und);
+    for (uint32_t n = lo; n <= hi; n++) {
+        for (size_t p = 0; p < np; p++)
+            und[p] = n;
+        vx_gtess_layout *g = vx_gregory_layout_new(s, und, 1, &err);
+        double *gp = malloc(3 * g->nverts * sizeof *gp), *gn = malloc(3 * g->nverts * sizeof *gn);
+        double ga, gd;
+        cpu_eval(s, g, gp, gn);
+        nuback += facing(g, gp, gn, dg, &ga, &gd, uback);
+        free(gp);
+        free(gn);
+        vx_gregory_layout_free(g);
+    }
+    size_t stray = 0;
+    for (size_t p = 0; p < np; p++) {
+        stray += back[p] && !uback[p];
+        if (back[p] && !uback[p]) assert_int_equal(nd[p], 2); /* a fan, see above */
+        ntrans += trans[p];
+    }
+    fprintf(stderr,
+            "  %s: N %u..%u, %zu of %zu shared edges differ; welded %zu vertices %zu triangles, "
+            "%zu open edges; smallest 2 area %.3g of diag^2; %zu triangles face away from a "
+            "vertex normal (uniform N = %u..%u: %zu), in %zu of %zu transition patches where no "
+            "uniform grid has them\n",
+            what, lo, hi, ndiffer, nshared, w->nverts, w->ntris, bw, min_area, nback, lo, hi,
+            nuback, stray, ntrans);
+    assert_true(min_area > 1e-12);
+    assert_true(50 * stray <= ntrans);
+    free(trans);
+    free(und);
+    free(back);
+    free(uback);
+    double uvw = min_uv_area(s, w), uvu = min_uv_area(s, u);
+    fprintf(stderr, "  %s: smallest doubled (u, v) area welded %.3g, unwelded %.3g\n", what, uvw,
+            uvu);
+    assert_true(uvw > 0 && uvu > 0);
+    free(uses);
+    free(pos);
+    free(nrm);
+    free(e);
+    vx_gregory_layout_free(w);
+    vx_gregory_layout_free(u);
+    free(nd);
+    vx_gpatch_set_free(s);
+}
+
+static void test_max_edge_strip(void **state)
+{
+    (void)state;
+    vx_mesh *m = strip_mesh();
+    check_transitions(m, 0.25, "strip");
+    vx_gpatch_set *s = build(m, NULL);
+    vx_err err = {0};
+    /* Needs of 1 next to needs of 2 become 2: a transition needs an interior. */
+    uint32_t *nd = vx_gregory_divisions(s, 0, 1.5, &err); /* patch 0 needs 1 */
+    uint32_t lo = 1000, hi = 0;
+    for (size_t p = 0; p < s->npatches; p++) {
+        if (nd[p] < lo) lo = nd[p];
+        if (nd[p] > hi) hi = nd[p];
+    }
+    assert_int_equal(lo, 2);
+    assert_true(hi > 2);
+    /* Such a patch left at 1 is refused. */
+    nd[0] = 1;
+    assert_null(vx_gregory_layout_new(s, nd, 1, &err));
+    assert_string_equal(err.code, "gregory_divisions");
+    free(nd);
+    vx_gpatch_set_free(s);
+    vx_mesh_free(m);
+}
+
+/* max_edge on suzanne and spot: several divisions inside one connected
+ * component, and a finer target gives more divisions. */
 static void test_max_edge(void **state)
 {
     (void)state;
     vx_mesh *m = load("suzanne.obj");
+    double d = diag(m);
+    check_transitions(m, d / 50, "suzanne");
     vx_gpatch_set *s = build(m, NULL);
     vx_err err = {0};
-    double d = diag(m);
     uint32_t *a = vx_gregory_divisions(s, 0, d / 50, &err),
              *b = vx_gregory_divisions(s, 0, d / 200, &err);
-    uint32_t amin = 1000, amax = 0;
     for (size_t p = 0; p < s->npatches; p++) {
         assert_true(b[p] >= a[p]);
         assert_true(a[p] >= 1 && b[p] <= VX_GREGORY_MAX_DIVISIONS);
-        if (a[p] < amin) amin = a[p];
-        if (a[p] > amax) amax = a[p];
     }
-    assert_true(amax > amin); /* suzanne's parts (eyes) get their own N */
-    vx_gtess_layout *l = vx_gregory_layout_new(s, a, 1, &err);
-    assert_non_null(l);
-    /* Mismatched divisions across a shared edge are refused. */
-    a[0] += 1;
-    assert_null(vx_gregory_layout_new(s, a, 1, &err));
-    assert_string_equal(err.code, "gregory_divisions");
-    vx_gregory_layout_free(l);
     free(a);
     free(b);
+    vx_gpatch_set_free(s);
+    vx_mesh_free(m);
+    m = load("spot_control_mesh.obj");
+    assert_int_equal(m->boundary_edges, 0);
+    check_transitions(m, diag(m) / 30, "spot");
+    vx_mesh_free(m);
+}
+
+/* Unwelded max_edge output on the GPU: the duplicated points of every
+ * shared edge (each patch's own copies, the finer neighbour's grid points)
+ * are at the same place in every patch. The unwelded and welded layouts
+ * list the same triangles, so each welded vertex names its copies. */
+static void test_gpu_transitions_unwelded(void **state)
+{
+    (void)state;
+    vx_mesh *m = load("spot_control_mesh.obj");
+    vx_gpatch_set *s = build(m, NULL);
+    vx_err err = {0};
+    double dg = diag(m);
+    uint32_t *nd = vx_gregory_divisions(s, 0, dg / 30, &err);
+    vx_gtess_layout *w = vx_gregory_layout_new(s, nd, 1, &err),
+                    *u = vx_gregory_layout_new(s, nd, 0, &err);
+    assert_int_equal(w->ntris, u->ntris);
+    float *grid = malloc(6 * u->voff[s->npatches] * sizeof *grid);
+    double origin[3] = {0, 0, 0}, ms;
+    assert_int_equal(vx_gregory_tessellate(vx_test_gl, s, u, origin, grid, &ms, &err), 0);
+    double *pos = malloc(3 * u->nverts * sizeof *pos);
+    vx_gregory_gather(u, grid, origin, pos, NULL);
+    uint32_t *first = malloc(w->nverts * sizeof *first);
+    for (size_t v = 0; v < w->nverts; v++)
+        first[v] = UINT32_MAX;
+    double worst = 0;
+    size_t copies = 0;
+    for (size_t k = 0; k < 3 * w->ntris; k++) {
+        uint32_t wv = w->tri[k], uv = u->tri[k];
+        if (first[wv] == UINT32_MAX) {
+            first[wv] = uv;
+            continue;
+        }
+        if (first[wv] == uv) continue;
+        copies++;
+        double d2 = 0;
+        for (int c = 0; c < 3; c++)
+            d2 += (pos[3 * uv + c] - pos[3 * first[wv] + c]) *
+                  (pos[3 * uv + c] - pos[3 * first[wv] + c]);
+        if (sqrt(d2) / dg > worst) worst = sqrt(d2) / dg;
+    }
+    fprintf(stderr, "  unwelded copies of shared points: %zu, apart at most %.3g of the diagonal\n",
+            copies, worst);
+    assert_true(copies > 0);
+    assert_true(worst <= 1e-6);
+    free(first);
+    free(pos);
+    free(grid);
+    vx_gregory_layout_free(w);
+    vx_gregory_layout_free(u);
+    free(nd);
     vx_gpatch_set_free(s);
     vx_mesh_free(m);
 }
@@ -827,12 +1206,12 @@ int main(void)
         cmocka_unit_test(test_frames_reuse_topology),
         cmocka_unit_test(test_from_bezier_small),
         cmocka_unit_test(test_max_edge),
+        cmocka_unit_test(test_max_edge_strip),
         cmocka_unit_test(test_params),
     };
     const struct CMUnitTest gl[] = {
-        cmocka_unit_test(test_gpu_matches_cpu),
-        cmocka_unit_test(test_gpu_mixed_divisions),
-        cmocka_unit_test(test_gpu_chunks),
+        cmocka_unit_test(test_gpu_matches_cpu), cmocka_unit_test(test_gpu_mixed_divisions),
+        cmocka_unit_test(test_gpu_chunks),      cmocka_unit_test(test_gpu_transitions_unwelded),
         cmocka_unit_test(test_teapot_bezier),
     };
     int rc = cmocka_run_group_tests_name("gregory", cpu, NULL, NULL);
