@@ -50,17 +50,9 @@ check "info lists gregory" jq -e '[.kinds[].name] | index("gregory") != null' "$
 
 # greg WHAT MESH PARAMS: a gregory job, waited for; body in $TMP/job.json.
 greg() {
-    local what=$1 mesh=$2 params=$3
-    api POST "/v1/jobs?wait=60" -H "Content-Type: application/json" \
-        -d "{\"mesh\":\"$mesh\",\"kind\":\"gregory\",\"params\":$params}"
-    GJ=$(jqb '.id // empty')
-    if [[ -n "$GJ" ]] && ! jq -e '.state == "succeeded" or .state == "failed"' "$BODY" >/dev/null; then
-        wait_job "$GJ" 120
-    fi
-    cp "$BODY" "$TMP/job.json"
+    run_job gregory "$2" "$3"
+    GJ=$JOB
 }
-ok() { check "$1: succeeded ($(jq -c '.error' "$TMP/job.json" 2>/dev/null))" jq -e '.state == "succeeded"' "$TMP/job.json"; }
-st() { jq -r ".stats.$1" "$TMP/job.json"; }
 # fetch NAME FILE: output NAME of job GJ.
 fetch() {
     api GET "/v1/jobs/$GJ/result/$1"
@@ -77,7 +69,7 @@ V=$(mv_ vertices); F=$(mv_ faces.total); T=$(mv_ triangles)
 C=$((T + 2 * F)) # face corners (fan triangulation: n - 2 triangles per n-gon)
 for N in 1 3 8; do
     greg "spot N=$N" "$M_spot" "{\"divisions\":$N}"
-    ok "spot N=$N"
+    job_ok "spot N=$N"
     check "spot N=$N: $C patches" test "$(st patches)" = "$C"
     want_v=$((V + C / 2 + F + 2 * C * (N - 1) + C * (N - 1) * (N - 1)))
     check "spot N=$N: $want_v vertices (got $(st vertices))" test "$(st vertices)" = "$want_v"
@@ -96,7 +88,7 @@ check "welded spot: vertices as reported" test "$(mv_ vertices)" = "$(jq -r .sta
 
 # --- unwelded PLY: every patch its own vertices and a patch id per face ---
 greg "spot unwelded ply" "$M_spot" '{"divisions":4,"weld":false,"format":"ply"}'
-ok "spot unwelded ply"
+job_ok "spot unwelded ply"
 check "unwelded: C * 25 vertices" test "$(st vertices)" = "$((C * 25))"
 fetch mesh "$TMP/spot.ply"
 check "ply: binary little endian" grep -aq '^format binary_little_endian 1.0' "$TMP/spot.ply"
@@ -107,12 +99,12 @@ check "ply: patch id per face" grep -aq '^property int patch' "$TMP/spot.ply"
 
 # --- suzanne: triangles, quads, boundaries; OBJ groups when unwelded; Draco ---
 greg "suzanne unwelded obj" "$M_suz" '{"divisions":2,"weld":false}'
-ok "suzanne unwelded obj"
+job_ok "suzanne unwelded obj"
 P=$(st patches)
 fetch mesh "$TMP/suz.obj"
 check "suzanne: one group per patch ($P)" test "$(grep -c '^g patch' "$TMP/suz.obj")" = "$P"
 greg "suzanne drc" "$M_suz" '{"divisions":3,"format":"drc"}'
-ok "suzanne drc"
+job_ok "suzanne drc"
 fetch mesh "$TMP/suz.drc"
 upload "$TMP/suz.drc" model/x-draco
 expect_status "upload the Draco result" 201
@@ -122,7 +114,7 @@ check "suzanne: open input stays open" test "$(mv_ boundary_edges)" -gt 0
 
 # --- n-gon prism: closed, welded output closed ---
 greg "prism" "$M_prism" '{"divisions":6}'
-ok "prism"
+job_ok "prism"
 check "prism: 32 patches" test "$(st patches)" = 32
 fetch mesh "$TMP/prism_out.obj"
 upload "$TMP/prism_out.obj"
@@ -134,18 +126,18 @@ FR=$(python3 -c '
 import sys
 print([[float(x) for x in l.split()[1:4]] for l in open(sys.argv[1]) if l.startswith("v ")])' "$TMP/prism2.obj")
 greg "prism frames (positions)" "$M_prism" "{\"divisions\":5,\"frames\":[$FR]}"
-ok "prism frames (positions)"
+job_ok "prism frames (positions)"
 check "frames: outputs mesh, frame_001" jq -e '.outputs | keys == ["frame_001", "mesh"]' "$TMP/job.json"
 fetch frame_001 "$TMP/f1.obj"
 greg "prism frames (ids)" "$M_prism" "{\"divisions\":5,\"frames\":[\"$M_prism2\",\"$M_prism\"]}"
-ok "prism frames (ids)"
+job_ok "prism frames (ids)"
 check "frames: outputs mesh, frame_001, frame_002" jq -e '.outputs | keys == ["frame_001", "frame_002", "mesh"]' "$TMP/job.json"
 check "frames: 3 frames, 3 frame times" jq -e '.stats.frames == 3 and (.stats.frame_ms | length) == 3' "$TMP/job.json"
 fetch mesh "$TMP/f0.obj"
 fetch frame_001 "$TMP/f2.obj"
 fetch frame_002 "$TMP/f3.obj"
 greg "prism2 fresh" "$M_prism2" '{"divisions":5}'
-ok "prism2 fresh"
+job_ok "prism2 fresh"
 fetch mesh "$TMP/fresh2.obj"
 greg "prism fresh" "$M_prism" '{"divisions":5}'
 fetch mesh "$TMP/fresh0.obj"
@@ -187,7 +179,7 @@ check "frames differ from frame 0 ($D)" awk -v s="$D" 'BEGIN { split(s, x, " ");
 # --- approximate-cc: one patch per quad of the (once refined) cage, close
 # to OpenSubdiv's limit surface, welded closed, frames as fresh jobs ---
 greg "spot approximate-cc" "$M_spot" '{"construction":"approximate-cc","divisions":4}'
-ok "spot approximate-cc"
+job_ok "spot approximate-cc"
 check "approximate-cc: one patch per quad of the refined cage ($C)" test "$(st patches)" = "$C"
 check "approximate-cc: construction and distance reported" jq -e \
     '.stats.construction == "approximate-cc" and .stats.cc_distance > 0 and .stats.cc_distance < 0.006' "$TMP/job.json"
@@ -197,17 +189,17 @@ meta "$MESH_ID"
 check "approximate-cc spot: welded, no boundary edges" test "$(mv_ boundary_edges)" = 0
 check "approximate-cc spot: no non-manifold edges" test "$(mv_ nonmanifold_edges)" = 0
 greg "prism approximate-cc frames" "$M_prism" '{"construction":"approximate-cc","divisions":5,"frames":["'"$M_prism2"'"]}'
-ok "prism approximate-cc frames"
+job_ok "prism approximate-cc frames"
 fetch frame_001 "$TMP/cc_f1.obj"
 greg "prism2 approximate-cc fresh" "$M_prism2" '{"construction":"approximate-cc","divisions":5}'
-ok "prism2 approximate-cc fresh"
+job_ok "prism2 approximate-cc fresh"
 fetch mesh "$TMP/cc_fresh2.obj"
 D=$(maxdiff "$TMP/cc_fresh2.obj" "$TMP/cc_f1.obj")
 check "approximate-cc frame 1 = fresh job on that mesh ($D)" small "$D" 1e-6 1e-5
 
 # --- max_edge: N per patch, transition strips where neighbours differ ---
 greg "suzanne max_edge" "$M_suz" '{"max_edge":0.1}'
-ok "suzanne max_edge"
+job_ok "suzanne max_edge"
 check "max_edge: params normalised" jq -e '.params.divisions == null and .params.max_edge == 0.1' "$TMP/job.json"
 check "max_edge: suzanne gets different N" jq -e '.stats.divisions_max > .stats.divisions_min and .stats.divisions_min >= 1' "$TMP/job.json"
 fetch mesh "$TMP/suz_me.obj"
@@ -219,7 +211,7 @@ check "max_edge: suzanne, no non-manifold edges" test "$(mv_ nonmanifold_edges)"
 # result is still closed and manifold (shared edges of patches with
 # different N match point for point: no cracks, no T-junctions).
 greg "spot max_edge" "$M_spot" '{"max_edge":0.09}'
-ok "spot max_edge"
+job_ok "spot max_edge"
 check "max_edge: different N inside one component" jq -e '.stats.divisions_max > .stats.divisions_min and .stats.divisions_min >= 2' "$TMP/job.json"
 jq -c '.stats | {divisions_min, divisions_max, vertices, triangles}' "$TMP/job.json"
 fetch mesh "$TMP/spot_me.obj"

@@ -1,5 +1,6 @@
-/* Test meshes built in code (shared by the voxel engine tests). */
+/* Test meshes built in code or loaded from the shared data (shapes.h). */
 #include <math.h>
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -133,4 +134,48 @@ vx_mesh *shape_merge(vx_mesh **parts, int n)
     free(p);
     free(f);
     return m;
+}
+
+vx_mesh *shape_poly_mesh(size_t nv, const double *pos, size_t nf, const uint32_t *sizes,
+                         const uint32_t *idx)
+{
+    vx_mesh *m = vx_mesh_new();
+    if (!m) abort();
+    m->nverts = nv;
+    m->pos = malloc(3 * nv * sizeof *m->pos + 1);
+    m->nfaces = nf;
+    m->face_start = malloc((nf + 1) * sizeof *m->face_start);
+    if (!m->pos || !m->face_start) abort();
+    memcpy(m->pos, pos, 3 * nv * sizeof *m->pos);
+    m->face_start[0] = 0;
+    for (size_t f = 0; f < nf; f++)
+        m->face_start[f + 1] = m->face_start[f] + (sizes ? sizes[f] : 4);
+    m->face_idx = malloc(m->face_start[nf] * sizeof *m->face_idx + 1);
+    if (!m->face_idx) abort();
+    memcpy(m->face_idx, idx, m->face_start[nf] * sizeof *m->face_idx);
+    if (vx_mesh_analyze(m, NULL)) abort();
+    return m;
+}
+
+vx_mesh *shape_load(const char *name)
+{
+    char path[1024];
+    snprintf(path, sizeof path, "%s/%s", VX_MESH_DIR, name);
+    vx_err err = {0};
+    vx_mesh *m = vx_mesh_read_path(path, NULL, &err);
+    if (!m) fprintf(stderr, "%s: %s: %s\n", path, err.code, err.message);
+    return m;
+}
+
+void shape_bezier_eval(const vx_mesh *m, size_t p, double u, double v, double out[3])
+{
+    double bu[4] = {(1 - u) * (1 - u) * (1 - u), 3 * u * (1 - u) * (1 - u), 3 * u * u * (1 - u),
+                    u * u * u};
+    double bv[4] = {(1 - v) * (1 - v) * (1 - v), 3 * v * (1 - v) * (1 - v), 3 * v * v * (1 - v),
+                    v * v * v};
+    out[0] = out[1] = out[2] = 0;
+    for (int j = 0; j < 4; j++)
+        for (int i = 0; i < 4; i++)
+            for (int c = 0; c < 3; c++)
+                out[c] += bu[i] * bv[j] * m->pos[3 * m->patch_idx[16 * p + 4 * j + i] + c];
 }

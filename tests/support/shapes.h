@@ -1,5 +1,6 @@
-/* Test meshes built in code (shared by the voxel engine tests). Abort on
- * failure (they are test fixtures). */
+/* Test meshes: built in code, or the shared meshes of ../shared/data
+ * (shared by the unit tests). The builders abort on failure (they are test
+ * fixtures). */
 #ifndef VX_TEST_SHAPES_H
 #define VX_TEST_SHAPES_H
 
@@ -20,5 +21,14 @@ vx_mesh *shape_param_mesh(int nu, int nv, int poles, int inward, double cx, doub
 vx_mesh *shape_sphere(double cx, double cy, double cz, double r, int inward);
 /* Concatenation of meshes. */
 vx_mesh *shape_merge(vx_mesh **parts, int n);
+/* Polygon mesh: face f has sizes[f] corners (sizes NULL: every face a
+ * quad), indices face after face; analysed. */
+vx_mesh *shape_poly_mesh(size_t nv, const double *pos, size_t nf, const uint32_t *sizes,
+                         const uint32_t *idx);
+/* The shared test mesh NAME (VX_MESH_DIR/NAME, any upload format, through
+ * the sniffer), or NULL with the reader's message on stderr. */
+vx_mesh *shape_load(const char *name);
+/* Point (u, v) of Bézier patch p of a .bpt mesh (its 4x4 net, patch_idx). */
+void shape_bezier_eval(const vx_mesh *m, size_t p, double u, double v, double out[3]);
 
 #endif

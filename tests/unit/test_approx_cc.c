@@ -14,33 +14,13 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "shapes.h"
 #include "gregory/osd.h"
 
 static vx_mesh *load(const char *name)
 {
-    char path[512];
-    snprintf(path, sizeof path, "%s/%s", VX_MESH_DIR, name);
-    vx_err err = {0};
-    vx_mesh *m = vx_mesh_read_path(path, NULL, &err);
-    if (!m) print_error("%s: %s\n", name, err.message);
+    vx_mesh *m = shape_load(name);
     assert_non_null(m);
-    return m;
-}
-
-static vx_mesh *make_quads(const double *pos, size_t nv, const uint32_t *idx, size_t nf)
-{
-    vx_mesh *m = vx_mesh_new();
-    m->nverts = nv;
-    m->pos = malloc(3 * nv * sizeof(double));
-    memcpy(m->pos, pos, 3 * nv * sizeof(double));
-    m->nfaces = nf;
-    m->face_start = malloc((nf + 1) * sizeof(uint32_t));
-    for (size_t f = 0; f <= nf; f++)
-        m->face_start[f] = (uint32_t)(4 * f);
-    m->face_idx = malloc(4 * nf * sizeof(uint32_t));
-    memcpy(m->face_idx, idx, 4 * nf * sizeof(uint32_t));
-    vx_err err;
-    assert_int_equal(vx_mesh_analyze(m, &err), 0);
     return m;
 }
 
@@ -50,7 +30,7 @@ static vx_mesh *cube(void)
                                -1, -1, 1,  1, -1, 1,  1, 1, 1,  -1, 1, 1};
     static const uint32_t f[] = {0, 3, 2, 1, 4, 5, 6, 7, 0, 1, 5, 4,
                                  1, 2, 6, 5, 2, 3, 7, 6, 3, 0, 4, 7};
-    return make_quads(p, 8, f, 6);
+    return shape_poly_mesh(8, p, 6, NULL, f);
 }
 
 /* A torus of nu x nv quads: every vertex has valence 4, so every patch is a
@@ -72,7 +52,7 @@ static vx_mesh *torus(int nu, int nv)
             g[2] = (uint32_t)(((j + 1) % nv) * nu + (i + 1) % nu);
             g[3] = (uint32_t)(((j + 1) % nv) * nu + i);
         }
-    vx_mesh *m = make_quads(p, (size_t)(nu * nv), f, (size_t)(nu * nv));
+    vx_mesh *m = shape_poly_mesh((size_t)(nu * nv), p, (size_t)(nu * nv), NULL, f);
     free(p);
     free(f);
     return m;

@@ -13,6 +13,7 @@
 #include <string.h>
 #include <unistd.h>
 
+#include "shapes.h"
 #include "mesh/mesh.h"
 
 #define TEAPOT VX_MESH_DIR "/newell-teapot.bpt"
@@ -28,19 +29,6 @@ static vx_mesh *read_str(const char *text, const vx_mesh_limits *lim, vx_err *er
     vx_mesh *m = vx_mesh_read_path(path, lim, err); /* through the sniffer */
     unlink(path);
     return m;
-}
-
-static void bezier(const vx_mesh *m, size_t p, double u, double v, double out[3])
-{
-    double bu[4] = {(1 - u) * (1 - u) * (1 - u), 3 * u * (1 - u) * (1 - u), 3 * u * u * (1 - u),
-                    u * u * u};
-    double bv[4] = {(1 - v) * (1 - v) * (1 - v), 3 * v * (1 - v) * (1 - v), 3 * v * v * (1 - v),
-                    v * v * v};
-    out[0] = out[1] = out[2] = 0;
-    for (int j = 0; j < 4; j++)
-        for (int i = 0; i < 4; i++)
-            for (int a = 0; a < 3; a++)
-                out[a] += bu[i] * bv[j] * m->pos[3 * m->patch_idx[16 * p + 4 * j + i] + a];
 }
 
 static void test_teapot(void **state)
@@ -76,13 +64,13 @@ static void test_teapot(void **state)
      * body's normals point away from the z axis. */
     for (size_t p = 0; p < m->npatches; p++) {
         double c[3], du[3], dv[3], h = 1e-6, a[3], b[3];
-        bezier(m, p, 0.5, 0.5, c);
-        bezier(m, p, 0.5 + h, 0.5, a);
-        bezier(m, p, 0.5 - h, 0.5, b);
+        shape_bezier_eval(m, p, 0.5, 0.5, c);
+        shape_bezier_eval(m, p, 0.5 + h, 0.5, a);
+        shape_bezier_eval(m, p, 0.5 - h, 0.5, b);
         for (int k = 0; k < 3; k++)
             du[k] = a[k] - b[k];
-        bezier(m, p, 0.5, 0.5 + h, a);
-        bezier(m, p, 0.5, 0.5 - h, b);
+        shape_bezier_eval(m, p, 0.5, 0.5 + h, a);
+        shape_bezier_eval(m, p, 0.5, 0.5 - h, b);
         for (int k = 0; k < 3; k++)
             dv[k] = a[k] - b[k];
         double n[3] = {du[1] * dv[2] - du[2] * dv[1], du[2] * dv[0] - du[0] * dv[2],

@@ -11,26 +11,8 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "shapes.h"
 #include "gregory/catmull_clark.h"
-
-static vx_mesh *make(const double *pos, size_t nv, const uint32_t *sizes, const uint32_t *idx,
-                     size_t nf)
-{
-    vx_mesh *m = vx_mesh_new();
-    m->nverts = nv;
-    m->pos = malloc(3 * nv * sizeof(double));
-    memcpy(m->pos, pos, 3 * nv * sizeof(double));
-    m->nfaces = nf;
-    m->face_start = malloc((nf + 1) * sizeof(uint32_t));
-    m->face_start[0] = 0;
-    for (size_t f = 0; f < nf; f++)
-        m->face_start[f + 1] = m->face_start[f] + sizes[f];
-    m->face_idx = malloc(m->face_start[nf] * sizeof(uint32_t));
-    memcpy(m->face_idx, idx, m->face_start[nf] * sizeof(uint32_t));
-    vx_err err;
-    assert_int_equal(vx_mesh_analyze(m, &err), 0);
-    return m;
-}
 
 static const double cube_pos[] = {-1, -1, -1, 1, -1, -1, 1, 1, -1, -1, 1, -1,
                                   -1, -1, 1,  1, -1, 1,  1, 1, 1,  -1, 1, 1};
@@ -89,7 +71,7 @@ static void check_counts(const vx_mesh *m, int maxlev)
 static void test_cube(void **state)
 {
     (void)state;
-    vx_mesh *m = make(cube_pos, 8, cube_sizes, cube_idx, 6);
+    vx_mesh *m = shape_poly_mesh(8, cube_pos, 6, cube_sizes, cube_idx);
     check_counts(m, 4);
     for (int l = 1; l <= 4; l++) {
         vx_mesh *o;
@@ -113,7 +95,7 @@ static void test_cube(void **state)
 static void test_limit(void **state)
 {
     (void)state;
-    vx_mesh *m = make(cube_pos, 8, cube_sizes, cube_idx, 6);
+    vx_mesh *m = shape_poly_mesh(8, cube_pos, 6, cube_sizes, cube_idx);
     vx_mesh *a, *b, *c;
     float *na, *nb, *nc;
     vx_err err = {0};
@@ -159,7 +141,7 @@ static void test_open_and_ngons(void **state)
     /* one quad: a boundary everywhere */
     static const double qp[] = {0, 0, 0, 1, 0, 0, 1, 1, 0, 0, 1, 0};
     static const uint32_t qs[] = {4}, qi[] = {0, 1, 2, 3};
-    vx_mesh *q = make(qp, 4, qs, qi, 1);
+    vx_mesh *q = shape_poly_mesh(4, qp, 1, qs, qi);
     assert_int_equal(q->boundary_edges, 4);
     check_counts(q, 3);
     vx_mesh_free(q);
@@ -167,13 +149,13 @@ static void test_open_and_ngons(void **state)
     static const double pp[] = {-1, -1, 0, 1, -1, 0, 1, 1, 0, -1, 1, 0, 0, 0, 1};
     static const uint32_t ps[] = {3, 3, 3, 3, 4},
                           pi[] = {0, 1, 4, 1, 2, 4, 2, 3, 4, 3, 0, 4, 0, 3, 2, 1};
-    vx_mesh *p = make(pp, 5, ps, pi, 5);
+    vx_mesh *p = shape_poly_mesh(5, pp, 5, ps, pi);
     assert_int_equal(p->boundary_edges, 0);
     check_counts(p, 3);
     /* a pentagon fan with an open rim: n-gon faces and a boundary */
     static const double gp[] = {0, 0, 0, 1, 0, 0, 2, 1, 0, 1, 2, 0, 0, 1, 0, 3, 0, 0, 3, 2, 0};
     static const uint32_t gs[] = {5, 4}, gi[] = {0, 1, 2, 3, 4, 1, 5, 6, 2};
-    vx_mesh *g = make(gp, 7, gs, gi, 2);
+    vx_mesh *g = shape_poly_mesh(7, gp, 2, gs, gi);
     assert_int_equal(g->faces_by_size[2], 1);
     check_counts(g, 3);
     vx_mesh_free(g);

@@ -13,17 +13,14 @@
 #include <cmocka.h>
 
 #include "gl_fixture.h"
+#include "shapes.h"
 #include "gregory/gregory.h"
 #include "gregory/job.h"
 #include "gregory/tess.h"
 
 static vx_mesh *load(const char *name)
 {
-    char path[512];
-    snprintf(path, sizeof path, "%s/%s", VX_MESH_DIR, name);
-    vx_err err = {0};
-    vx_mesh *m = vx_obj_read_path(path, NULL, &err);
-    if (!m) fprintf(stderr, "%s: %s\n", path, err.message);
+    vx_mesh *m = shape_load(name);
     assert_non_null(m);
     return m;
 }
@@ -562,58 +559,10 @@ static void test_frames_reuse_topology(void **state)
     vx_mesh_free(m2);
 }
 
-/* newell-teapot.bpt read here (the upload reader is elsewhere): patch
- * count, 16 one-based indices per patch, point count, points. */
-static vx_mesh *teapot(void)
-{
-    char path[512];
-    snprintf(path, sizeof path, "%s/newell-teapot.bpt", VX_MESH_DIR);
-    FILE *f = fopen(path, "r");
-    assert_non_null(f);
-    vx_mesh *m = vx_mesh_new();
-    assert_int_equal(fscanf(f, "%zu", &m->npatches), 1);
-    m->patch_idx = malloc(16 * m->npatches * sizeof *m->patch_idx);
-    for (size_t i = 0; i < 16 * m->npatches; i++) {
-        unsigned x;
-        assert_int_equal(fscanf(f, " %u ,", &x), 1);
-        m->patch_idx[i] = x - 1;
-    }
-    assert_int_equal(fscanf(f, "%zu", &m->nverts), 1);
-    m->pos = malloc(3 * m->nverts * sizeof *m->pos);
-    for (size_t i = 0; i < m->nverts; i++)
-        assert_int_equal(
-            fscanf(f, " %lf , %lf , %lf", m->pos + 3 * i, m->pos + 3 * i + 1, m->pos + 3 * i + 2),
-            3);
-    fclose(f);
-    for (int c = 0; c < 3; c++) {
-        m->bbox_min[c] = INFINITY;
-        m->bbox_max[c] = -INFINITY;
-    }
-    for (size_t i = 0; i < m->nverts; i++)
-        for (int c = 0; c < 3; c++) {
-            if (m->pos[3 * i + c] < m->bbox_min[c]) m->bbox_min[c] = m->pos[3 * i + c];
-            if (m->pos[3 * i + c] > m->bbox_max[c]) m->bbox_max[c] = m->pos[3 * i + c];
-        }
-    return m;
-}
-
-static void bezier(const vx_mesh *m, size_t p, double u, double v, double out[3])
-{
-    double bu[4] = {(1 - u) * (1 - u) * (1 - u), 3 * u * (1 - u) * (1 - u), 3 * u * u * (1 - u),
-                    u * u * u};
-    double bv[4] = {(1 - v) * (1 - v) * (1 - v), 3 * v * (1 - v) * (1 - v), 3 * v * v * (1 - v),
-                    v * v * v};
-    out[0] = out[1] = out[2] = 0;
-    for (int j = 0; j < 4; j++)
-        for (int i = 0; i < 4; i++)
-            for (int c = 0; c < 3; c++)
-                out[c] += bu[i] * bv[j] * m->pos[3 * m->patch_idx[16 * p + 4 * j + i] + c];
-}
-
 static void test_teapot_bezier(void **state)
 {
     (void)state;
-    vx_mesh *m = teapot();
+    vx_mesh *m = load("newell-teapot.bpt");
     assert_int_equal(m->npatches, 32);
     vx_err err = {0};
     vx_gpatch_set *s = vx_gregory_from_bezier(m, NULL, &err);
@@ -630,7 +579,7 @@ static void test_teapot_bezier(void **state)
         for (uint32_t j = 0; j <= n; j++)
             for (uint32_t i = 0; i <= n; i++) {
                 double b[3], x[3];
-                bezier(m, p, (double)i / n, (double)j / n, b);
+                shape_bezier_eval(m, p, (double)i / n, (double)j / n, b);
                 double nn[3], dn = 0;
                 vx_gpatch_eval(s->cp + p * 60, (double)i / n, (double)j / n, x, nn);
                 const float *g = grid + 6 * (l->voff[p] + j * (n + 1) + i);

@@ -70,11 +70,7 @@ static double compare(const char *what, const vx_mesh *m, const vx_grid *g, vx_i
 
 static vx_mesh *load(const char *name)
 {
-    char path[512];
-    snprintf(path, sizeof path, "%s/%s", VX_MESH_DIR, name);
-    vx_err err = {0};
-    vx_mesh *m = vx_obj_read_path(path, NULL, &err);
-    if (!m) fprintf(stderr, "%s: %s\n", path, err.message);
+    vx_mesh *m = shape_load(name);
     assert_non_null(m);
     return m;
 }
