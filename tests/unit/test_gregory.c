@@ -471,25 +471,40 @@ static void check_gpu(const vx_gpatch_set *s, const uint32_t *nd, double dg, dou
     vx_gregory_layout_free(l);
 }
 
+/* GPU against CPU on shared mesh NAME at n divisions per patch (n = 0:
+ * max_edge = bbox diagonal / edge_div), every stride-th grid vertex; the
+ * smallest and largest N and the grid vertex count for the caller. */
+static void gpu_vs_cpu(const char *name, int n, double edge_div, size_t stride, uint32_t *lo,
+                       uint32_t *hi, uint64_t *grid_verts)
+{
+    vx_mesh *m = load(name);
+    vx_gpatch_set *s = build(m, NULL);
+    vx_err err = {0};
+    uint32_t *nd = vx_gregory_divisions(s, n, n ? 0 : diag(m) / edge_div, &err);
+    assert_non_null(nd);
+    *lo = UINT32_MAX;
+    *hi = 0;
+    for (size_t p = 0; p < s->npatches; p++) {
+        if (nd[p] < *lo) *lo = nd[p];
+        if (nd[p] > *hi) *hi = nd[p];
+    }
+    uint64_t nv, nt;
+    assert_int_equal(vx_gregory_count(s, nd, grid_verts, &nv, &nt, &err), 0);
+    check_gpu(s, nd, diag(m), 1e-5, 0.01, stride);
+    free(nd);
+    vx_gpatch_set_free(s);
+    vx_mesh_free(m);
+}
+
 /* Divisions that differ between patches (max_edge on suzanne's parts):
  * the shader finds each row's patch by search instead of by division. */
 static void test_gpu_mixed_divisions(void **state)
 {
     (void)state;
-    vx_mesh *m = load("suzanne.obj");
-    vx_gpatch_set *s = build(m, NULL);
-    vx_err err = {0};
-    uint32_t *nd = vx_gregory_divisions(s, 0, diag(m) / 40, &err);
-    uint32_t lo = 1000, hi = 0;
-    for (size_t p = 0; p < s->npatches; p++) {
-        if (nd[p] < lo) lo = nd[p];
-        if (nd[p] > hi) hi = nd[p];
-    }
+    uint32_t lo, hi;
+    uint64_t gv;
+    gpu_vs_cpu("suzanne.obj", 0, 40, 1, &lo, &hi, &gv);
     assert_true(hi > lo);
-    check_gpu(s, nd, diag(m), 1e-5, 0.01, 1);
-    free(nd);
-    vx_gpatch_set_free(s);
-    vx_mesh_free(m);
 }
 
 /* Over 128 MiB of output: several chunks, each its own buffers; sampled
@@ -497,30 +512,19 @@ static void test_gpu_mixed_divisions(void **state)
 static void test_gpu_chunks(void **state)
 {
     (void)state;
-    vx_mesh *m = load("spot_control_mesh.obj");
-    vx_gpatch_set *s = build(m, NULL);
-    vx_err err = {0};
-    uint32_t *nd = vx_gregory_divisions(s, 128, 0, &err);
-    uint64_t gv, nv, nt;
-    assert_int_equal(vx_gregory_count(s, nd, &gv, &nv, &nt, &err), 0);
+    uint32_t lo, hi;
+    uint64_t gv;
+    gpu_vs_cpu("spot_control_mesh.obj", 128, 0, 997, &lo, &hi, &gv);
     assert_true(gv * 24 > 2 * (128u << 20)); /* at least three chunks */
-    check_gpu(s, nd, diag(m), 1e-5, 0.01, 997);
-    free(nd);
-    vx_gpatch_set_free(s);
-    vx_mesh_free(m);
 }
 
 static void test_gpu_matches_cpu(void **state)
 {
     (void)state;
-    vx_mesh *m = load("spot_control_mesh.obj");
-    vx_gpatch_set *s = build(m, NULL);
-    vx_err err = {0};
-    uint32_t *nd = vx_gregory_divisions(s, 7, 0, &err);
-    check_gpu(s, nd, diag(m), 1e-5, 0.01, 1);
-    free(nd);
-    vx_gpatch_set_free(s);
-    vx_mesh_free(m);
+    uint32_t lo, hi;
+    uint64_t gv;
+    gpu_vs_cpu("spot_control_mesh.obj", 7, 0, 1, &lo, &hi, &gv);
+    assert_true(lo == 7 && hi == 7);
 }
 
 /* Frame k through the reused topology equals a fresh build on its positions. */
