@@ -22,8 +22,11 @@ static const char *const known[] = {"divisions", "max_edge", "construction", "we
                                     "format",    NULL};
 
 #define DEFAULT_DIVISIONS 8
-/* approximate-cc's distance to the limit surface: samples per patch side. */
+/* approximate-cc's distance to the limit surface: samples per patch side,
+ * and the largest patch set it is measured on (OpenSubdiv's isolation-6
+ * reference grows with every extraordinary vertex). */
 #define CC_DISTANCE_SAMPLES 5
+#define CC_DISTANCE_MAX_PATCHES 20000
 
 typedef struct gparams {
     long divisions;  /* 0 when max_edge is used */
@@ -317,7 +320,8 @@ static int greg_run_gl(vx_job_run *r, const vx_mesh *mesh, const cJSON *params, 
     double build_ms = now_ms() - t0;
     /* How far approximate-cc is from the true limit surface (frame 0). */
     double cc_distance = -1;
-    if (p.construction == CONS_APPROX_CC && !mesh->npatches) {
+    if (p.construction == CONS_APPROX_CC && !mesh->npatches &&
+        b.set->npatches <= CC_DISTANCE_MAX_PATCHES) {
         cc_distance = vx_gregory_cc_distance(mesh, b.set, CC_DISTANCE_SAMPLES, err);
         if (cc_distance < 0) goto done;
     }
