@@ -64,8 +64,11 @@
  * a slab whose counters stay in the CPU caches between the draw and the
  * sums, and a small buffer to clear (first touch of a 128 MiB buffer costs
  * ~60 ms), are faster than few big slabs (spot 1024^3: 9 slabs of 128 MiB
- * 370 ms, 8 MiB slabs 265 ms). */
-#define SCAN_DELTA_CAP (8u << 20)
+ * 370 ms, 8 MiB slabs 265 ms); below ~16 MiB the per-slab round trips
+ * (draw, sums, read-back) take over on wide grids (bunny 1024^3: 4 MiB
+ * 520 ms, 8 MiB 334 ms, 16 and 32 MiB 281 ms; spot, ogre and the 828k-face
+ * fandisk are 5-15 % faster at 16 than at 8 MiB). */
+#define SCAN_DELTA_CAP (16u << 20)
 
 /* uints per delta row: two 16-bit slots each. */
 static uint64_t delta_row_uints(const peel_ctx *c)
