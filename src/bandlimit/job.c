@@ -128,10 +128,7 @@ static int sub_err(vx_err *err, const char *obj)
 static int read_params(const cJSON *params, const vx_limits *lim, rparams *p, vx_err *err)
 {
     memset(p, 0, sizeof *p);
-    if (params && !cJSON_IsObject(params) && !cJSON_IsNull(params))
-        return vx_err_set(err, VX_EUNPROC, "invalid_params", "params must be an object");
-    if (params && cJSON_IsNull(params)) params = NULL;
-    if (params && vx_param_only(params, known, err)) return -1;
+    if (vx_param_object(&params, known, err)) return -1;
     if (vx_param_int(params, "N", 64, 2, 512, &p->N, err)) return -1;
     if (p->N % 2) return bad(err, "params.%s must be even", "N");
     if (vx_param_int(params, "R", 8 * p->N, p->N, 2048, &p->R, err)) return -1;

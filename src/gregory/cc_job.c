@@ -42,10 +42,7 @@ static int max_levels(const vx_limits *lim)
 
 static int read_params(const cJSON *params, const vx_limits *lim, cc_params *p, vx_err *err)
 {
-    if (params && cJSON_IsNull(params)) params = NULL;
-    if (params && !cJSON_IsObject(params))
-        return vx_err_set(err, VX_EUNPROC, "invalid_params", "params must be an object");
-    if (params && vx_param_only(params, known, err)) return -1;
+    if (vx_param_object(&params, known, err)) return -1;
     long levels;
     int fmt;
     if (vx_param_int(params, "levels", 1, 1, max_levels(lim), &levels, err) ||

@@ -77,10 +77,7 @@ static long frame_count(const cJSON *f, size_t index, vx_err *err)
 static int read_params(const cJSON *params, const vx_limits *lim, gparams *p, vx_err *err)
 {
     memset(p, 0, sizeof *p);
-    if (params && !cJSON_IsObject(params) && !cJSON_IsNull(params))
-        return vx_err_set(err, VX_EUNPROC, "invalid_params", "params must be an object");
-    if (params && cJSON_IsNull(params)) params = NULL;
-    if (params && vx_param_only(params, known, err)) return -1;
+    if (vx_param_object(&params, known, err)) return -1;
     const cJSON *div = field(params, "divisions"), *me = field(params, "max_edge");
     if (div && me)
         return vx_err_set(err, VX_EUNPROC, "invalid_params",

@@ -99,6 +99,11 @@ int vx_param_mesh_ids(const cJSON *params, const char *field, size_t max, const 
  * *out = its index (def when absent). */
 int vx_param_enum(const cJSON *params, const char *field, const char *const *names, int def,
                   int *out, vx_err *err);
+/* The start of every kind's params reader: NULL or JSON null means no
+ * params (*params becomes NULL); anything else must be an object whose
+ * fields are all in the NULL-terminated known list (else VX_EUNPROC
+ * invalid_params). */
+int vx_param_object(const cJSON **params, const char *const *known, vx_err *err);
 /* Fails (VX_EUNPROC) if params has a field not in the NULL-terminated list. */
 int vx_param_only(const cJSON *params, const char *const *known, vx_err *err);
 /* The same two for a nested object of params: prefix is its path with a

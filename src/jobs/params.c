@@ -62,6 +62,15 @@ int vx_param_only_in(const cJSON *obj, const char *prefix, const char *const *kn
     return 0;
 }
 
+int vx_param_object(const cJSON **params, const char *const *known, vx_err *err)
+{
+    if (*params && cJSON_IsNull(*params)) *params = NULL;
+    if (!*params) return 0;
+    if (!cJSON_IsObject(*params))
+        return vx_err_set(err, VX_EUNPROC, "invalid_params", "params must be an object");
+    return vx_param_only(*params, known, err);
+}
+
 int vx_param_only(const cJSON *params, const char *const *known, vx_err *err)
 {
     return vx_param_only_in(params, "", known, err);

@@ -48,10 +48,7 @@ typedef struct exact {
 static int read_params(const cJSON *params, const vx_limits *lim, vx_preview_params *p, exact *x,
                        vx_err *err)
 {
-    if (params && !cJSON_IsObject(params) && !cJSON_IsNull(params))
-        return vx_err_set(err, VX_EUNPROC, "invalid_params", "params must be an object");
-    if (params && cJSON_IsNull(params)) params = NULL;
-    if (params && vx_param_only(params, known, err)) return -1;
+    if (vx_param_object(&params, known, err)) return -1;
     static const double def_color[3] = {0.8, 0.8, 0.85}, def_bg[4] = {1, 1, 1, 1};
     long w, h, samples;
     if (vx_param_number(params, "azimuth", 30, -360, 360, &p->azimuth_deg, err) ||

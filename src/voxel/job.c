@@ -141,10 +141,7 @@ static int check_grid(const int dims[3], const vparams *p, const vx_limits *lim,
 static int read_params(const cJSON *params, const vx_limits *lim, vparams *p, vx_err *err)
 {
     memset(p, 0, sizeof *p);
-    if (params && !cJSON_IsObject(params) && !cJSON_IsNull(params))
-        return vx_err_set(err, VX_EUNPROC, "invalid_params", "params must be an object");
-    if (params && cJSON_IsNull(params)) params = NULL;
-    if (params && vx_param_only(params, known, err)) return -1;
+    if (vx_param_object(&params, known, err)) return -1;
     const cJSON *res = field(params, "resolution"), *vs = field(params, "voxel_size"),
                 *box = field(params, "grid");
     if (res && vs)

@@ -138,12 +138,41 @@ static void test_mesh_ids(void **state)
     cJSON_Delete(p);
 }
 
+static void test_object(void **state)
+{
+    (void)state;
+    static const char *const known[] = {"a", NULL};
+    vx_err err;
+    const cJSON *p = NULL;
+    assert_int_equal(vx_param_object(&p, known, &err), 0);
+    assert_null(p);
+    cJSON *n = cJSON_CreateNull(), *arr = cJSON_Parse("[1]"), *ok = cJSON_Parse("{\"a\": 1}"),
+          *bad = cJSON_Parse("{\"b\": 1}");
+    p = n;
+    assert_int_equal(vx_param_object(&p, known, &err), 0);
+    assert_null(p); /* JSON null is no params */
+    p = ok;
+    assert_int_equal(vx_param_object(&p, known, &err), 0);
+    assert_ptr_equal(p, ok);
+    p = arr;
+    assert_int_equal(vx_param_object(&p, known, &err), -1);
+    assert_non_null(strstr(err.message, "must be an object"));
+    p = bad;
+    assert_int_equal(vx_param_object(&p, known, &err), -1);
+    assert_non_null(strstr(err.message, "params.b"));
+    cJSON_Delete(n);
+    cJSON_Delete(arr);
+    cJSON_Delete(ok);
+    cJSON_Delete(bad);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_numbers),
         cmocka_unit_test(test_only_known),
         cmocka_unit_test(test_mesh_ids),
+        cmocka_unit_test(test_object),
         cmocka_unit_test(test_kind_table),
         cmocka_unit_test(test_preview_params),
     };
