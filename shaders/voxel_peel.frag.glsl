@@ -1,32 +1,60 @@
 #version 450 core
-// Depth peeling (seed 000 §2.1), src/voxel/peel.c. Pass L keeps, per pixel,
-// the nearest crossing strictly beyond layer L-1. Fragments exactly at layer
-// L-1 are the crossings of that layer: each adds to the layer's count (and
-// to its count of +x-facing crossings), so coincident surfaces (two faces
-// at the same depth) are all counted instead of one being lost.
+// Depth peeling (seed 000 §2.1), src/voxel/peel.c, several layers per pass.
+//
+// A crossing's key is its depth's float bits shifted left by one with the
+// facing in bit 0: keys order like depths, and a front and a back face at
+// one depth are two keys. Pass P owns the key slots [base, base + k) of its
+// pixel. A fragment whose key is not beyond the last slot of the previous
+// pass was peeled before and is discarded; the others are inserted with an
+// atomic-min cascade: each slot keeps the smaller of what it held and what
+// arrives and hands the larger on. A key meeting itself is a coincident
+// crossing: it is dropped (the slots hold distinct keys, in increasing
+// order) and flagged so that a last pass counts every key's fragments. A
+// key handed on past slot k means the pixel has more layers than the pass
+// holds: that fragment is the only one not discarded, so the pass's
+// occlusion query reports a sample exactly when another pass is needed.
+//
+// Count pass (u_count = 1): each fragment finds its key among the pixel's
+// u_nslots slots (binary search) and adds one to that slot's count.
 noperspective in float v_t;
-layout(location = 0) out float o_t;
-layout(binding = 0) uniform sampler2DArray u_layers;
-layout(binding = 0, r32ui) uniform coherent uimage2DArray u_counts;
-layout(location = 2) uniform int u_prev;    // index of layer L-1, -1 in the first pass
+layout(binding = 0, r32ui) uniform coherent uimage2DArray u_keys;
+layout(binding = 1, r32ui) uniform coherent uimage2DArray u_counts;
+layout(std430, binding = 0) buffer Stat { uint coincident; };
+layout(location = 2) uniform ivec2 u_pass;  // first slot of this pass, slots in this pass
 layout(location = 3) uniform vec2 u_depth;  // depth = (t - u_depth.x) * u_depth.y, in [0,1]
+layout(location = 4) uniform int u_count;
+layout(location = 5) uniform int u_nslots;
+
+const uint EMPTY = 0xffffffffu;
 
 void main()
 {
-    if (u_prev >= 0) {
-        ivec3 p = ivec3(ivec2(gl_FragCoord.xy), u_prev);
-        float prev = texelFetch(u_layers, p, 0).r;
-        if (v_t < prev) discard;
-        if (v_t == prev) {
-            // Counted here rather than in pass L-1: there only the winner of
-            // the depth test would survive. Low 16 bits: crossings, high 16
-            // bits: crossings seen front-facing (CCW in the window).
-            imageAtomicAdd(u_counts, p, gl_FrontFacing ? 0x10001u : 1u);
+    ivec2 px = ivec2(gl_FragCoord.xy);
+    // u_depth.y is a power of two and u_depth.x an integer at or below the
+    // mesh: for a mesh inside the grid the mapping is exact, so distinct
+    // crossings never share a key. Depths are >= 0, so their bits order
+    // like their values and fit in 31 bits.
+    float depth = clamp((v_t - u_depth.x) * u_depth.y, 0.0, 1.0);
+    uint key = (floatBitsToUint(depth) << 1) | (gl_FrontFacing ? 1u : 0u);
+    if (u_count != 0) {
+        int lo = 0, hi = u_nslots - 1;
+        while (lo < hi) {
+            int mid = (lo + hi) >> 1;
+            if (imageLoad(u_keys, ivec3(px, mid)).r < key) lo = mid + 1;
+            else hi = mid;
+        }
+        imageAtomicAdd(u_counts, ivec3(px, lo), 1u);
+        discard;
+    }
+    if (u_pass.x > 0 && key <= imageLoad(u_keys, ivec3(px, u_pass.x - 1)).r) discard;
+    uint v = key;
+    for (int i = 0; i < u_pass.y; i++) {
+        uint old = imageAtomicMin(u_keys, ivec3(px, u_pass.x + i), v);
+        if (old == EMPTY) discard;
+        if (old == v) {
+            coincident = 1u;
             discard;
         }
+        v = max(old, v);
     }
-    o_t = v_t;
-    // u_depth.y is a power of two and u_depth.x an integer: for a mesh inside
-    // the grid the mapping is exact, so distinct crossings never tie.
-    gl_FragDepth = (v_t - u_depth.x) * u_depth.y;
 }

@@ -1,27 +1,39 @@
 #version 450 core
 // Fill (seed 000 §2.2, "voxelization as ray casting"), src/voxel/peel.c: one
 // invocation per pixel column walks the peeled layers front to back. No data
-// goes back to the CPU between peeling and this pass.
+// goes back to the CPU between peeling and this pass. A layer is a key
+// (voxel_peel.frag.glsl: depth bits << 1 | facing), in increasing order
+// until the first empty slot; its multiplicity is its count when coincident
+// crossings were counted, else 1.
 //
 // Crossings are counted from the centre towards +ray as the CPU reference
 // does (ray cast from each centre): the state at centre c is the total of
 // all layers minus the layers at depth <= c. A layer at exactly c therefore
 // already counts as passed, which is the half-open [entry, exit) tie rule.
-// Orientation: a crossing that is counter-clockwise in the window faces
-// +ray (the window axes are a cyclic permutation of the grid axes): it is
-// an exit, +1, so a closed outward mesh has winding +1 inside.
+// Orientation: a crossing that is counter-clockwise in the window (facing
+// bit 1) faces +ray (the window axes are a cyclic permutation of the grid
+// axes): it is an exit, +1, so a closed outward mesh has winding +1 inside.
 layout(local_size_x = 64) in;
-layout(binding = 0) uniform sampler2DArray u_layers;
+layout(binding = 0) uniform usampler2DArray u_keys;
 layout(binding = 1) uniform usampler2DArray u_counts;
 layout(std430, binding = 0) buffer Bits { uint bits[]; };
+layout(std430, binding = 1) buffer Stat { uint coincident; uint most_layers; };
 layout(location = 0) uniform ivec2 u_size;  // image width, height in pixels
 layout(location = 1) uniform int u_nlayers;
 layout(location = 2) uniform int u_mode;    // 0: nonzero, 1: parity
 layout(location = 3) uniform int u_axis;    // ray axis; 0 writes whole words, 1 and 2 atomicOr
 layout(location = 4) uniform ivec4 u_grid;  // nx, ny, words per row wx, slab rows
 layout(location = 5) uniform ivec2 u_ray;   // voxels along the ray n, first slab row k0 (axis 2)
+layout(location = 6) uniform vec2 u_depth;  // t = depth * u_depth.y + u_depth.x
+layout(location = 7) uniform int u_counted; // u_counts holds multiplicities
 
-const float NONE = 1.0e38; // a pixel no layer reached (cleared value 3e38)
+const uint EMPTY = 0xffffffffu;
+
+// Multiplicity of layer l (fragments with its key).
+int crossings(ivec2 p, int l)
+{
+    return u_counted != 0 ? int(texelFetch(u_counts, ivec3(p, l), 0).r) : 1;
+}
 
 int g_base, g_word;
 uint g_acc;
@@ -75,30 +87,30 @@ void main()
 
     int wtot = 0, ctot = 0, nl = 0;
     for (; nl < u_nlayers; nl++) {
-        float t = texelFetch(u_layers, ivec3(p, nl), 0).r;
-        if (t >= NONE) break;
-        uint c = texelFetch(u_counts, ivec3(p, nl), 0).r;
-        int cnt = int(c & 0xffffu), pos = int(c >> 16);
-        ctot += cnt;
-        wtot += 2 * pos - cnt;
+        uint k = texelFetch(u_keys, ivec3(p, nl), 0).r;
+        if (k == EMPTY) break;
+        int m = crossings(p, nl);
+        ctot += m;
+        wtot += (k & 1u) != 0u ? m : -m;
     }
+    if (nl > 0) atomicMax(most_layers, uint(nl));
 
     g_base = (p.y * u_grid.y + p.x) * u_grid.z;
     g_word = 0;
     g_acc = 0u;
     int w = wtot, par = ctot & 1, i0 = 0;
     for (int l = 0; l < nl && i0 < n; l++) {
-        float t = texelFetch(u_layers, ivec3(p, l), 0).r;
-        uint c = texelFetch(u_counts, ivec3(p, l), 0).r;
-        int cnt = int(c & 0xffffu), pos = int(c >> 16);
+        uint k = texelFetch(u_keys, ivec3(p, l), 0).r;
+        int m = crossings(p, l);
+        float t = uintBitsToFloat(k >> 1) * u_depth.y + u_depth.x;
         // First centre i + 0.5 >= t: i = ceil(t - 0.5), exact for |t| < 2^22.
         int ib = int(ceil(clamp(t - 0.5, -1.0, float(n))));
         ib = clamp(ib, i0, n);
         bool inside = u_mode == 1 ? par != 0 : w != 0;
         if (inside) set_range(p, i0, ib);
         i0 = ib;
-        w -= 2 * pos - cnt;
-        par ^= cnt & 1;
+        w -= (k & 1u) != 0u ? m : -m;
+        par ^= m & 1;
     }
     bool inside = u_mode == 1 ? par != 0 : w != 0;
     if (inside && i0 < n) set_range(p, i0, n);

@@ -320,6 +320,7 @@ static int voxelize_run_gl(vx_job_run *r, const vx_mesh *mesh, const cJSON *para
     stat_set(stats, "voxels_inside", cJSON_CreateNumber((double)st->voxels_inside));
     stat_set(stats, "volume", cJSON_CreateNumber((double)st->voxels_inside * g->h * g->h * g->h));
     stat_set(stats, "layers", cJSON_CreateNumber(st->layers));
+    stat_set(stats, "passes", cJSON_CreateNumber(st->passes));
     stat_set(stats, "slices", cJSON_CreateNumber(st->slices));
     stat_set(stats, "chunks", cJSON_CreateNumber(st->chunks));
     stat_set(stats, "upload_ms", cJSON_CreateNumber(st->upload_ms));

@@ -4,13 +4,19 @@
  * Pipeline per slab of z rows (rows k0..k0+rows-1):
  *   1. peel (seed 000 §2.1): the mesh, in grid units, is drawn orthographically
  *      along the ray axis into an image whose pixel centres are the voxel
- *      centres; pass L keeps, per pixel, the nearest crossing strictly beyond
- *      layer L-1 (depth test on a float depth written from the ray
- *      coordinate), until an occlusion query says no sample passed. Each
- *      layer's ray coordinate is copied into an R32F array texture; the pass
- *      after it counts every fragment exactly at that layer (and how many of
- *      them face +ray) into an R32UI array, so faces that coincide along a
- *      ray are all counted.
+ *      centres, until an occlusion query says no sample passed. The seed
+ *      keeps one layer per pass (the nearest crossing beyond the last one,
+ *      by a depth test); here a pass keeps the next k layers per pixel in an
+ *      R32UI array, sorted by an atomic-min cascade over k slots
+ *      (voxel_peel.frag.glsl), and only a crossing that finds all k slots
+ *      taken passes the query. k is 16 in the first pass and then the
+ *      number of slots so far (16, 16, 32, ...): llvmpipe pays a whole
+ *      vertex pass per pass, and one grazing ray can need 40 layers where
+ *      the rest of the mesh needs 10 (fandisk at 256^3). A layer's key is
+ *      its depth with the facing in the lowest bit; coincident crossings
+ *      (the same key twice) are flagged, and then one more pass counts
+ *      every key's fragments into a second R32UI array, so faces that
+ *      coincide along a ray are all counted.
  *   2. fill (seed 000 §2.2): a compute shader walks each pixel's layers and
  *      writes the bits straight into an SSBO in the voxel.h layout (x rays:
  *      whole 32-bit words per invocation, no atomics). No GPU->CPU transfer
@@ -55,9 +61,9 @@
 #include "voxel/peel_int.h"
 #include "voxel/voxel.h"
 
-#define PEEL_NONE 3.0e38f         /* cleared layer value: no crossing there */
+#define PEEL_EMPTY 0xffffffffu    /* cleared key slot: no crossing there */
 #define PEEL_PIXEL_CAP (4u << 20) /* pixels per peel image: bounds one layer to 32 MiB */
-#define PEEL_FIRST_CAP 8          /* layers allocated before growing by doubling */
+#define PEEL_FIRST_CAP 16         /* layer slots of the first pass (allocated up front) */
 #define SURF_GPU_WORK 16384       /* voxel tests one GPU invocation may take */
 #define SURF_MARGIN 1e-4          /* grid units the boxes grow by: float rounding */
 
@@ -71,11 +77,10 @@ double vx_peel_now_ms(void)
 
 static void layers_free(layer_set *o)
 {
-    GLuint t[3] = {o->cur, o->layers, o->counts};
-    glDeleteTextures(3, t);
+    GLuint t[2] = {o->keys, o->counts};
+    glDeleteTextures(2, t);
     glDeleteFramebuffers(1, &o->fbo);
-    glDeleteRenderbuffers(1, &o->depth_rb);
-    o->cur = o->layers = o->counts = o->fbo = o->depth_rb = 0;
+    o->keys = o->counts = o->fbo = 0;
     o->w = o->h = o->cap = 0;
 }
 
@@ -83,10 +88,10 @@ void vx_peel_objs_free(peel_objs *o)
 {
     layers_free(&o->ls[0]);
     layers_free(&o->ls[1]);
-    GLuint b[11] = {o->vbo,         o->ibo,         o->ssbo[0],     o->ssbo[1],
+    GLuint b[12] = {o->vbo,         o->ibo,         o->ssbo[0],     o->ssbo[1],
                     o->ssbo[2],     o->list,        o->ibo_slab,    o->scan_buf[0],
-                    o->scan_buf[1], o->scan_buf[2], o->scan_buf[3]};
-    glDeleteBuffers(11, b);
+                    o->scan_buf[1], o->scan_buf[2], o->scan_buf[3], o->peel_stat};
+    glDeleteBuffers(12, b);
     glDeleteFramebuffers(1, &o->scan_fbo);
     glDeleteVertexArrays(1, &o->vao);
     glDeleteQueries(1, &o->query);
@@ -193,7 +198,7 @@ static GLuint new_array(GLenum fmt, int w, int h, int layers)
 
 static int first_cap(const peel_ctx *c)
 {
-    return c->max_layers + 1 < PEEL_FIRST_CAP ? c->max_layers + 1 : PEEL_FIRST_CAP;
+    return c->max_layers < PEEL_FIRST_CAP ? c->max_layers : PEEL_FIRST_CAP;
 }
 
 static uint64_t layer_bytes(uint64_t pixels, int cap)
@@ -202,14 +207,15 @@ static uint64_t layer_bytes(uint64_t pixels, int cap)
 }
 
 /* Grows the layer arrays to hold at least `need` layers (doubling), keeping
- * the first `keep`. Checks max_memory first: old and new live together
- * while the old layers are copied. */
+ * the first `keep` keys (the counts are written after the last pass).
+ * Checks max_memory first: old and new live together while the old layers
+ * are copied. */
 static int grow(peel_ctx *c, layer_set *o, int need, int keep)
 {
     int cap = o->cap ? o->cap : first_cap(c);
     while (cap < need)
         cap *= 2;
-    if (cap > c->max_layers + 1) cap = c->max_layers + 1;
+    if (cap > c->max_layers) cap = c->max_layers;
     uint64_t px = (uint64_t)o->w * (uint64_t)o->h;
     uint64_t total = c->fixed_bytes + c->layers_now + layer_bytes(px, cap);
     if (total > c->limit) return vx_peel_too_big(c, total);
@@ -220,19 +226,18 @@ static int grow(peel_ctx *c, layer_set *o, int need, int keep)
         return vx_err_set(c->err, VX_EUNPROC, "too_many_layers",
                           "the mesh needs more than %d depth layers (GL_MAX_ARRAY_TEXTURE_LAYERS)",
                           max_layers);
-    GLuint nl = new_array(GL_R32F, o->w, o->h, cap), nc = new_array(GL_R32UI, o->w, o->h, cap);
-    glClearTexImage(nc, 0, GL_RED_INTEGER, GL_UNSIGNED_INT, NULL);
+    const GLuint empty = PEEL_EMPTY;
+    GLuint nk = new_array(GL_R32UI, o->w, o->h, cap), nc = new_array(GL_R32UI, o->w, o->h, cap);
+    glClearTexImage(nk, 0, GL_RED_INTEGER, GL_UNSIGNED_INT, &empty);
     if (keep > 0) {
         /* The last pass's image atomics must land before the copy. */
         glMemoryBarrier(GL_ALL_BARRIER_BITS);
-        glCopyImageSubData(o->layers, GL_TEXTURE_2D_ARRAY, 0, 0, 0, 0, nl, GL_TEXTURE_2D_ARRAY, 0,
-                           0, 0, 0, o->w, o->h, keep);
-        glCopyImageSubData(o->counts, GL_TEXTURE_2D_ARRAY, 0, 0, 0, 0, nc, GL_TEXTURE_2D_ARRAY, 0,
+        glCopyImageSubData(o->keys, GL_TEXTURE_2D_ARRAY, 0, 0, 0, 0, nk, GL_TEXTURE_2D_ARRAY, 0,
                            0, 0, 0, o->w, o->h, keep);
     }
-    GLuint old[2] = {o->layers, o->counts};
+    GLuint old[2] = {o->keys, o->counts};
     glDeleteTextures(2, old);
-    o->layers = nl;
+    o->keys = nk;
     o->counts = nc;
     c->layers_now += layer_bytes(px, cap) - layer_bytes(px, o->cap);
     o->cap = cap;
@@ -248,13 +253,10 @@ static int targets(peel_ctx *c, layer_set *o, int w, int h)
     layers_free(o);
     o->w = w;
     o->h = h;
-    glCreateTextures(GL_TEXTURE_2D, 1, &o->cur);
-    glTextureStorage2D(o->cur, 1, GL_R32F, w, h);
-    glCreateRenderbuffers(1, &o->depth_rb);
-    glNamedRenderbufferStorage(o->depth_rb, GL_DEPTH_COMPONENT32F, w, h);
+    /* The passes write no colour and no depth: only image atomics. */
     glCreateFramebuffers(1, &o->fbo);
-    glNamedFramebufferTexture(o->fbo, GL_COLOR_ATTACHMENT0, o->cur, 0);
-    glNamedFramebufferRenderbuffer(o->fbo, GL_DEPTH_ATTACHMENT, GL_RENDERBUFFER, o->depth_rb);
+    glNamedFramebufferParameteri(o->fbo, GL_FRAMEBUFFER_DEFAULT_WIDTH, w);
+    glNamedFramebufferParameteri(o->fbo, GL_FRAMEBUFFER_DEFAULT_HEIGHT, h);
     if (vx_gl_check(c->gl, "peel.framebuffer", c->err)) return -1;
     GLenum stt = glCheckNamedFramebufferStatus(o->fbo, GL_FRAMEBUFFER);
     if (stt != GL_FRAMEBUFFER_COMPLETE)
@@ -346,15 +348,31 @@ static int slab_ext(const peel_ctx *c, int a, int k0, int rows, int *off)
     return a == 2 ? rows : c->dims[a];
 }
 
-/* Peels the mesh along `axis` for the slab; returns the layer count. */
-static int peel(peel_ctx *c, layer_set *o, int axis, int k0, int rows, int *nlayers)
+/* Draws the slab's triangles once with the peel program bound. */
+static void draw_slab(peel_ctx *c, int axis)
+{
+    /* z rays cross every slab: they need the whole mesh */
+    size_t first = 0, ntri = c->m->ntris;
+    if (c->slab_first && axis != 2) {
+        first = c->slab_first[c->slab];
+        ntri = c->slab_first[c->slab + 1] - first;
+    }
+    glVertexArrayElementBuffer(c->o.vao, c->slab_first && axis != 2 ? c->o.ibo_slab : c->o.ibo);
+    vx_peel_draw_tris(first, ntri);
+}
+
+/* Peels the mesh along `axis` for the slab, several layers per pass (see
+ * the top of this file); sets *nslots to the key slots the fill walks. */
+static int peel(peel_ctx *c, layer_set *o, int axis, int k0, int rows, int *nslots)
 {
     peel_objs *po = &c->o;
     int ua = (axis + 1) % 3, va = (axis + 2) % 3, uoff, voff;
     int w = slab_ext(c, ua, k0, rows, &uoff), h = slab_ext(c, va, k0, rows, &voff);
-    *nlayers = 0;
+    *nslots = 0;
     if (targets(c, o, w, h)) return -1;
-    glClearTexImage(o->counts, 0, GL_RED_INTEGER, GL_UNSIGNED_INT, NULL);
+    const GLuint empty = PEEL_EMPTY, zero = 0;
+    glClearTexImage(o->keys, 0, GL_RED_INTEGER, GL_UNSIGNED_INT, &empty);
+    o->counted = 0;
     if (c->m->ntris == 0) return vx_gl_check(c->gl, "peel.clear", c->err);
 
     /* Depth = (t - lo) * 2^-e: lo an integer at or below the mesh, 2^e at
@@ -364,99 +382,109 @@ static int peel(peel_ctx *c, layer_set *o, int axis, int k0, int rows, int *nlay
     int e = 0;
     while (ldexp(1.0, e) < c->thi[axis] - lo + 1)
         e++;
+    o->lo = (float)lo;
+    o->scale = (float)ldexp(1.0, -e);
     GLuint p = c->prog_peel;
     glProgramUniform3i(p, 0, axis, ua, va);
     glProgramUniform4f(p, 1, (float)(2.0 / w), (float)(-1.0 - 2.0 * uoff / w), (float)(2.0 / h),
                        (float)(-1.0 - 2.0 * voff / h));
-    glProgramUniform2f(p, 3, (float)lo, (float)ldexp(1.0, -e));
+    glProgramUniform2f(p, 3, o->lo, o->scale);
+    glProgramUniform1i(p, 4, 0);
 
     glBindFramebuffer(GL_FRAMEBUFFER, o->fbo);
     glViewport(0, 0, w, h);
     /* State other code may have left behind; cull nothing, both faces are
-     * crossings. Depth clamp: no near/far clipping along the ray. */
+     * crossings; no depth test (the cascade orders the crossings). */
     vx_peel_raster_state();
-    glEnable(GL_DEPTH_TEST);
-    glEnable(GL_DEPTH_CLAMP);
-    glDepthFunc(GL_LESS);
-    glDepthMask(GL_TRUE);
-    glColorMask(GL_TRUE, GL_TRUE, GL_TRUE, GL_TRUE);
+    glDisable(GL_DEPTH_TEST);
     glUseProgram(p);
     glBindVertexArray(po->vao);
-    /* z rays cross every slab: they need the whole mesh */
-    size_t first = 0, ntri = c->m->ntris;
-    if (c->slab_first && axis != 2) {
-        first = c->slab_first[c->slab];
-        ntri = c->slab_first[c->slab + 1] - first;
-    }
-    glVertexArrayElementBuffer(po->vao, c->slab_first && axis != 2 ? po->ibo_slab : po->ibo);
+    glClearNamedBufferSubData(po->peel_stat, GL_R32UI, 0, 4, GL_RED_INTEGER, GL_UNSIGNED_INT,
+                              &zero);
+    glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 0, po->peel_stat);
 
-    int rc = -1, L;
-    /* GL_COLOR clears read four values even for a one-channel target. */
-    const float none[4] = {PEEL_NONE, PEEL_NONE, PEEL_NONE, PEEL_NONE}, one = 1.0f;
-    for (L = 0;; L++) {
-        glClearNamedFramebufferfv(o->fbo, GL_COLOR, 0, none);
-        glClearNamedFramebufferfv(o->fbo, GL_DEPTH, 0, &one);
-        /* Begun after the clear (see preview/render.c: llvmpipe's timer). */
+    int rc = -1, base = 0;
+    for (int pass = 0;; pass++) {
+        /* 16 slots, then as many as so far: passes grow geometrically. */
+        int k = pass == 0 ? first_cap(c) : base;
+        if (k > c->max_layers - base) k = c->max_layers - base;
+        if (base + k > o->cap && grow(c, o, base + k, base)) goto done;
         vx_gl_timer t;
         vx_gl_timer_begin(&t);
-        glBindTextureUnit(0, o->layers);
-        glBindImageTexture(0, o->counts, 0, GL_TRUE, 0, GL_READ_WRITE, GL_R32UI);
-        glProgramUniform1i(p, 2, L - 1);
+        glBindImageTexture(0, o->keys, 0, GL_TRUE, 0, GL_READ_WRITE, GL_R32UI);
+        glProgramUniform2i(p, 2, base, k);
         glBeginQuery(GL_ANY_SAMPLES_PASSED, po->query);
-        vx_peel_draw_tris(first, ntri);
+        draw_slab(c, axis);
         glEndQuery(GL_ANY_SAMPLES_PASSED);
+        /* The next pass reads this one's last slot. */
+        glMemoryBarrier(GL_SHADER_IMAGE_ACCESS_BARRIER_BIT);
         GLuint passed = 0;
         glGetQueryObjectuiv(po->query, GL_QUERY_RESULT, &passed);
-        if (passed && L < c->max_layers) {
-            if (L >= o->cap && grow(c, o, L + 1, L)) {
-                vx_gl_timer_end_ms(&t);
-                goto done;
-            }
-            glCopyImageSubData(o->cur, GL_TEXTURE_2D, 0, 0, 0, 0, o->layers, GL_TEXTURE_2D_ARRAY, 0,
-                               0, 0, L, w, h, 1);
-        }
         c->st->gpu_peel_ms += vx_gl_timer_end_ms(&t);
+        c->st->passes++;
         if (vx_gl_check(c->gl, "peel.pass", c->err)) goto done;
+        base += k;
         if (!passed) break;
-        if (L >= c->max_layers) {
+        if (base >= c->max_layers) {
             vx_err_set(c->err, VX_EUNPROC, "too_many_layers",
                        "the mesh has more than %d depth layers along %c (max_layers)",
                        c->max_layers, "xyz"[axis]);
             goto done;
         }
-        if (vx_peel_progress(c, 0.9 * (L + 1) / (L + 4.0))) goto done;
+        if (vx_peel_progress(c, 0.9 * (pass + 1) / (pass + 4.0))) goto done;
     }
-    *nlayers = L;
-    rc = 0;
+    *nslots = base;
+
+    /* Coincident crossings were dropped from the slots: one more pass
+     * counts every key's fragments. The flag is the only value read back
+     * between peeling and filling, besides the occlusion queries. */
+    GLuint coincident = 0;
+    glGetNamedBufferSubData(po->peel_stat, 0, 4, &coincident);
+    if (coincident) {
+        vx_gl_timer t;
+        vx_gl_timer_begin(&t);
+        glClearTexImage(o->counts, 0, GL_RED_INTEGER, GL_UNSIGNED_INT, NULL);
+        glBindImageTexture(1, o->counts, 0, GL_TRUE, 0, GL_READ_WRITE, GL_R32UI);
+        glProgramUniform1i(p, 4, 1);
+        glProgramUniform1i(p, 5, base);
+        draw_slab(c, axis);
+        c->st->gpu_peel_ms += vx_gl_timer_end_ms(&t);
+        c->st->passes++;
+        o->counted = 1;
+    }
+    rc = vx_gl_check(c->gl, "peel.count", c->err);
 done:
     glBindVertexArray(0);
     glUseProgram(0);
     glBindImageTexture(0, 0, 0, GL_FALSE, 0, GL_READ_WRITE, GL_R32UI);
-    glBindTextureUnit(0, 0);
-    glDisable(GL_DEPTH_CLAMP);
+    glBindImageTexture(1, 0, 0, GL_FALSE, 0, GL_READ_WRITE, GL_R32UI);
+    glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 0, 0);
     glBindFramebuffer(GL_FRAMEBUFFER, 0);
     return rc;
 }
 
 /* Fills the slab's bits for the layers peeled along `axis` into ssbo[slot]. */
 static int fill(peel_ctx *c, const layer_set *o, int axis, int slot, int mode, int k0, int rows,
-                int nlayers)
+                int nslots)
 {
     GLuint p = c->prog_fill;
     glProgramUniform2i(p, 0, o->w, o->h);
-    glProgramUniform1i(p, 1, nlayers);
+    glProgramUniform1i(p, 1, nslots);
     glProgramUniform1i(p, 2, mode == VX_INSIDE_PARITY ? 1 : 0);
     glProgramUniform1i(p, 3, axis);
     glProgramUniform4i(p, 4, c->dims[0], c->dims[1], (int)c->wx, rows);
     glProgramUniform2i(p, 5, c->dims[axis], k0);
-    /* The counts were written by image atomics in the peel passes. */
+    glProgramUniform2f(p, 6, o->lo, 1.0f / o->scale);
+    glProgramUniform1i(p, 7, o->counted);
+    /* The keys and counts were written by image atomics in the passes. */
     glMemoryBarrier(GL_TEXTURE_FETCH_BARRIER_BIT | GL_SHADER_IMAGE_ACCESS_BARRIER_BIT);
     vx_gl_timer t;
     vx_gl_timer_begin(&t);
     glUseProgram(p);
-    glBindTextureUnit(0, o->layers);
+    glBindTextureUnit(0, o->keys);
     glBindTextureUnit(1, o->counts);
     glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 0, c->o.ssbo[slot]);
+    glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 1, c->o.peel_stat);
     vx_peel_dispatch_2d((uint64_t)o->w * (uint64_t)o->h);
     glMemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT | GL_BUFFER_UPDATE_BARRIER_BIT);
     c->st->gpu_fill_ms += vx_peel_timer_end_compute(&t);
@@ -464,6 +492,7 @@ static int fill(peel_ctx *c, const layer_set *o, int axis, int slot, int mode, i
     glBindTextureUnit(0, 0);
     glBindTextureUnit(1, 0);
     glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 0, 0);
+    glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 1, 0);
     return vx_gl_check(c->gl, "peel.fill", c->err);
 }
 
@@ -668,15 +697,15 @@ static uint64_t first_layers(const peel_ctx *c, int rows)
     return layer_bytes(max_image(c, rows), first_cap(c)) + layer_bytes(z_image(c), first_cap(c));
 }
 
-/* Memory a slab height needs: CPU grid, mesh buffers, slab SSBOs, the pass
- * targets and the first layer arrays. */
+/* Memory a slab height needs: CPU grid, mesh buffers, slab SSBOs and the
+ * first layer arrays (the passes have no targets). */
 static uint64_t estimate(const peel_ctx *c, int rows, int surface)
 {
     uint64_t b = vx_bitgrid_bytes(c->dims, 1);
     b += (uint64_t)c->m->nverts * 12u + (uint64_t)c->m->ntris * 12u;
     if (surface) return b + (uint64_t)c->m->ntris * 8u + vx_peel_slab_bytes(c, rows);
     b += vx_peel_slab_bytes(c, rows) * (uint64_t)c->naxes;
-    return b + (max_image(c, rows) + z_image(c)) * 8u + first_layers(c, rows);
+    return b + first_layers(c, rows);
 }
 
 static int plan(peel_ctx *c, int surface)
@@ -839,6 +868,9 @@ int vx_voxelize_peel(vx_gl *gl, const vx_mesh *m, const vx_voxelize_desc *d, vx_
             glNamedBufferStorage(c.o.ssbo[s], (GLsizeiptr)vx_peel_slab_bytes(&c, c.rows), NULL,
                                  GL_DYNAMIC_STORAGE_BIT);
         }
+        /* [0] coincident crossings seen (per peel), [1] most layers of a pixel */
+        glCreateBuffers(1, &c.o.peel_stat);
+        glNamedBufferStorage(c.o.peel_stat, 8, (GLuint[2]){0, 0}, GL_DYNAMIC_STORAGE_BIT);
         if (vx_gl_check(gl, "peel.ssbo", err)) goto done;
         const int mode = c.naxes == 3 ? VX_INSIDE_PARITY : (int)d->inside;
         int nl[3] = {0, 0, 0};
@@ -855,7 +887,6 @@ int vx_voxelize_peel(vx_gl *gl, const vx_mesh *m, const vx_voxelize_desc *d, vx_
                 layer_set *ls = &c.o.ls[axis == 2];
                 if (axis < 2 || c.slab == 0) {
                     if (peel(&c, ls, axis, k0, rows, &nl[axis])) goto done;
-                    if (nl[axis] > st->layers) st->layers = nl[axis];
                 }
                 if (fill(&c, ls, axis, axis, mode, k0, rows, nl[axis])) goto done;
             }
@@ -882,6 +913,11 @@ int vx_voxelize_peel(vx_gl *gl, const vx_mesh *m, const vx_voxelize_desc *d, vx_
             c.axis_i = c.naxes - 1;
             if (vx_peel_progress(&c, 1.0)) goto done;
         }
+    }
+    if (!surface) {
+        GLuint most = 0;
+        glGetNamedBufferSubData(c.o.peel_stat, 4, 4, &most);
+        st->layers = (int)most;
     }
     st->voxels_inside = vx_bitgrid_count(out);
     rc = 0;

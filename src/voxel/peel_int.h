@@ -13,9 +13,11 @@
 
 /* A peel image: the pass target and the layer arrays. */
 typedef struct layer_set {
-    GLuint fbo, depth_rb, cur; /* the pass's target: R32F colour + 32F depth */
-    GLuint layers, counts;     /* R32F / R32UI arrays of cap layers */
+    GLuint fbo;            /* attachment-less w x h target of the passes */
+    GLuint keys, counts;   /* R32UI arrays of cap layers: sorted crossing keys, multiplicities */
     int w, h, cap;
+    float lo, scale;       /* key depth = (t - lo) * scale, scale a power of two */
+    int counted;           /* counts hold multiplicities (coincident crossings were seen) */
 } layer_set;
 
 /* Every GL object one call creates, so every exit path deletes the same set
@@ -27,6 +29,7 @@ typedef struct peel_objs {
     GLuint list;     /* surface: the triangles the GPU takes */
     GLuint ibo_slab; /* several slabs: triangles grouped by the slabs they reach */
     GLuint query;
+    GLuint peel_stat;     /* peel: [0] coincident crossings seen, [1] most layers of a pixel */
     GLuint scan_fbo;      /* scan: the attachment-less framebuffer */
     GLuint scan_buf[4];   /* scan: delta counters, row tails, overflow flag, block bits */
 } peel_objs;

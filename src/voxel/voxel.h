@@ -68,7 +68,8 @@ typedef struct vx_bitgrid {
 typedef struct vx_voxelize_stats {
     const char *method; /* "peel", "slice" or "scan" as run */
     uint64_t voxels_inside;
-    int layers;       /* peel: depth layers peeled (max over axes for robust); scan: 0 */
+    int layers;       /* peel: most depth layers of one ray (max over axes for robust); scan: 0 */
+    int passes;       /* peel: geometry passes drawn, over all slabs and axes; else 0 */
     int slices;       /* slice: slices drawn */
     int chunks;       /* slabs the grid was split into to fit GPU limits */
     double upload_ms; /* CPU: normalise in double + upload */

@@ -306,6 +306,63 @@ static void test_coincident_faces(void **state)
         vx_mesh_free(parts[i]);
 }
 
+static int count_calls(void *ud, double f, vx_err *err);
+
+/* Twelve boxes in a row along x: 24 layers per ray, more than peel's first
+ * pass keeps (16), so it takes a second pass; exact counts, the layer
+ * bound to the layer, progress between passes, and the same boxes twice
+ * (coincident crossings in both passes). */
+static void test_many_layers(void **state)
+{
+    const engine *e = *state;
+    vx_mesh *parts[24];
+    for (int i = 0; i < 12; i++)
+        parts[i] = parts[12 + i] =
+            shape_box((double[]){2.0 * i, 0, 0}, (double[]){2.0 * i + 1, 1, 1});
+    vx_voxelize_desc d = {.grid = {{0, 0, 0}, 0.25, {96, 4, 4}}};
+    vx_bitgrid b;
+    vx_voxelize_stats st;
+    for (int copies = 1; copies <= 2; copies++) {
+        vx_mesh *m = shape_merge(parts, 12 * copies);
+        for (int rule = VX_INSIDE_NONZERO; rule <= VX_INSIDE_PARITY; rule++) {
+            d.inside = (vx_inside)rule;
+            int calls = 0;
+            d.progress = count_calls;
+            d.ud = &calls;
+            run(e, m, &d, &b, &st);
+            d.progress = NULL;
+            printf("%s %d copies %s: %llu voxels, %d layers, %d passes, %d progress calls\n",
+                   e->name, copies, rule ? "parity" : "nonzero",
+                   (unsigned long long)st.voxels_inside, st.layers, st.passes, calls);
+            int empty = copies == 2 && rule == VX_INSIDE_PARITY;
+            assert_int_equal(vx_bitgrid_count(&b), empty ? 0 : 12 * 64);
+            if (e->peels) {
+                assert_int_equal(st.layers, 24);
+                /* 16 + 16 slots; the copies add a pass that counts them */
+                assert_int_equal(st.passes, 2 + (copies == 2));
+                assert_true(calls >= 2);
+            }
+            check(e, copies == 1 ? "12 boxes" : "12 boxes twice", m, &d, &b, 1.0);
+            vx_bitgrid_free(&b);
+        }
+        if (e->peels) { /* max_layers bounds the layers exactly */
+            vx_err err = {0};
+            d.max_layers = 23;
+            assert_int_equal(e->run(vx_test_gl, m, &d, &b, &st, &err), -1);
+            assert_string_equal(err.code, "too_many_layers");
+            assert_null(b.bits);
+            d.max_layers = 24;
+            run(e, m, &d, &b, &st);
+            assert_int_equal(st.passes, 2 + (copies == 2)); /* 16 + 8 slots */
+            vx_bitgrid_free(&b);
+            d.max_layers = 0;
+        }
+        vx_mesh_free(m);
+    }
+    for (int i = 0; i < 12; i++)
+        vx_mesh_free(parts[i]);
+}
+
 static void test_grid_cuts_mesh(void **state)
 {
     const engine *e = *state;
@@ -465,9 +522,10 @@ static void test_limits_and_progress(void **state)
     d.ud = &calls;
     d.max_slab_rows = 20;
     run(e, m, &d, &b, &st);
-    printf("%s progress calls: %d for %d chunks and %d layers\n", e->name, calls, st.chunks,
-           st.layers);
-    assert_true(calls >= st.chunks + st.layers);
+    printf("%s progress calls: %d for %d chunks and %d passes\n", e->name, calls, st.chunks,
+           st.passes);
+    /* peel: once between passes and once per slab; scan: once per slab */
+    assert_true(calls >= (e->peels ? st.passes : st.chunks));
     vx_bitgrid_free(&b);
     calls = 0;
     d.progress = stop_at;
@@ -696,6 +754,7 @@ int main(void)
         BOTH(test_hollow_and_nested),
         BOTH(test_overlapping_spheres),
         BOTH(test_coincident_faces),
+        BOTH(test_many_layers),
         BOTH(test_grid_cuts_mesh),
         BOTH(test_real_meshes_256),
         BOTH(test_slabs),
