@@ -172,13 +172,14 @@ static vx_method parse_method(const char *s)
 }
 
 static bool ours(vx_gl *gl, vx_mesh *vm, const vx_grid &g, vx_method method, int supersample,
-                 vx_bitgrid *out, vx_voxelize_stats *st, double *ms)
+                 vx_bitgrid *out, vx_voxelize_stats *st, double *ms, vx_samples samples = VX_SAMPLES_CUBE)
 {
     vx_voxelize_desc d{};
     d.grid = g;
     d.method = method;
     d.inside = VX_INSIDE_NONZERO;
     d.supersample = supersample;
+    d.samples = samples;
     vx_err err;
     auto t0 = clk::now();
     int rc = vx_voxelize(gl, vm, &d, out, st, &err);
@@ -190,8 +191,11 @@ static bool ours(vx_gl *gl, vx_mesh *vm, const vx_grid &g, vx_method method, int
 // Seed 003 Table 1 on grid g: mean distance from the centres of surface
 // voxels (inside, with an outside 6-neighbour or on the grid border) to the
 // mesh, in voxel edges: mt[0] without supersampling, mt[1..3] supersampled
-// with threshold 1, 2, 4. Returns nonzero when voxelizing fails.
-static int seed003_means(vx_gl *gl, Mesh &m, vx_mesh *vm, const vx_grid &g, double mt[4], uint64_t *nsurf)
+// (seed 003's 2x2x2 pattern, slice) with threshold 1, 2, 4, mt[4..5] the
+// faces pattern (centre + 6 face centres, scan) with threshold 1, 2.
+// Returns nonzero when voxelizing fails.
+enum { SEED003_COLS = 6 };
+static int seed003_means(vx_gl *gl, Mesh &m, vx_mesh *vm, const vx_grid &g, double mt[SEED003_COLS], uint64_t *nsurf)
 {
     // Unsigned distance to the mesh (exact near the surface), in world units.
     Adapter a{&m, g};
@@ -216,18 +220,22 @@ static int seed003_means(vx_gl *gl, Mesh &m, vx_mesh *vm, const vx_grid &g, doub
         if (count) *count = n;
         return n ? sum / n : 0.0;
     };
-    vx_bitgrid plain{}, super{};
+    vx_bitgrid plain{}, super{}, faces{};
     vx_voxelize_stats st{};
     double ms;
-    if (!ours(gl, vm, g, VX_METHOD_SLICE, 1, &plain, &st, &ms) || !ours(gl, vm, g, VX_METHOD_SLICE, 2, &super, &st, &ms))
+    if (!ours(gl, vm, g, VX_METHOD_SLICE, 1, &plain, &st, &ms) || !ours(gl, vm, g, VX_METHOD_SLICE, 2, &super, &st, &ms) ||
+        !ours(gl, vm, g, VX_METHOD_AUTO, 2, &faces, &st, &ms, VX_SAMPLES_FACES))
         return 1;
     mt[0] = mean([&](int i, int j, int k) { return vx_bitgrid_get(&plain, i, j, k) != 0; }, nsurf);
-    const int thr[3] = {1, 2, 4};
-    for (int t = 0; t < 3; t++)
-        mt[t + 1] = mean([&](int i, int j, int k) { return super.counts[((size_t)k * d[1] + j) * d[0] + i] >= thr[t]; },
+    const int thr[5] = {1, 2, 4, 1, 2};
+    for (int t = 0; t < 5; t++) {
+        const vx_bitgrid &c = t < 3 ? super : faces;
+        mt[t + 1] = mean([&](int i, int j, int k) { return c.counts[((size_t)k * d[1] + j) * d[0] + i] >= thr[t]; },
                          nullptr);
+    }
     vx_bitgrid_free(&plain);
     vx_bitgrid_free(&super);
+    vx_bitgrid_free(&faces);
     return 0;
 }
 
@@ -318,13 +326,13 @@ int main(int argc, char **argv)
                 vx_mesh_free(vm);
             }
     } else if (mode == "seed003") {
-        printf("| model | res | grid shift (voxels) | mean distance, no supersampling | supersample 2, threshold 1 | threshold 2 | threshold 4 | surface voxels (no supersampling) |\n|---|---|---|---|---|---|---|---|\n");
+        printf("| model | res | grid shift (voxels) | mean distance, no supersampling | 2x2x2 (seed), threshold 1 | threshold 2 | threshold 4 | faces, threshold 1 | faces, threshold 2 | surface voxels (no supersampling) |\n|---|---|---|---|---|---|---|---|---|---|\n");
         for (auto &spec : meshes) {
             Mesh m = load(spec);
             vx_mesh *vm = as_vx(m);
             vx_grid g0;
             vx_grid_from_resolution(vm, res003, 1, &g0, &err);
-            double avg[4] = {0, 0, 0, 0};
+            double avg[SEED003_COLS] = {0, 0, 0, 0, 0, 0};
             for (int sh = 0; sh <= shifts; sh++) {
                 // Shift 0: the API's grid (bbox faces on cell boundaries, which puts
                 // the flat faces of CAD models at the worst phase). Others: the grid
@@ -339,21 +347,21 @@ int main(int argc, char **argv)
                         g.dims[a] += 1;
                     }
                 }
-                double mt[4];
+                double mt[SEED003_COLS];
                 uint64_t nsurf = 0;
                 if (seed003_means(gl, m, vm, g, mt, &nsurf)) return 1;
-                printf("| %s | %d^3 | %s | %.3f | %.3f | %.3f | %.3f | %llu |\n", m.name.c_str(), res003,
+                printf("| %s | %d^3 | %s | %.3f | %.3f | %.3f | %.3f | %.3f | %.3f | %llu |\n", m.name.c_str(), res003,
                        sh ? (std::to_string(off[0]).substr(0, 4) + ", " + std::to_string(off[1]).substr(0, 4) + ", " +
                              std::to_string(off[2]).substr(0, 4)).c_str()
                           : "0 (API grid)",
-                       mt[0], mt[1], mt[2], mt[3], (unsigned long long)nsurf);
+                       mt[0], mt[1], mt[2], mt[3], mt[4], mt[5], (unsigned long long)nsurf);
                 fflush(stdout);
                 if (sh)
-                    for (int t = 0; t < 4; t++) avg[t] += mt[t] / shifts;
+                    for (int t = 0; t < SEED003_COLS; t++) avg[t] += mt[t] / shifts;
             }
             if (shifts)
-                printf("| %s | %d^3 | mean of %d shifts | %.3f | %.3f | %.3f | %.3f | |\n", m.name.c_str(), res003, shifts,
-                       avg[0], avg[1], avg[2], avg[3]);
+                printf("| %s | %d^3 | mean of %d shifts | %.3f | %.3f | %.3f | %.3f | %.3f | %.3f | |\n", m.name.c_str(),
+                       res003, shifts, avg[0], avg[1], avg[2], avg[3], avg[4], avg[5]);
             vx_mesh_free(vm);
         }
     }

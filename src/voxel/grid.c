@@ -22,6 +22,7 @@ int vx_bitgrid_alloc(vx_bitgrid *g, const vx_grid *grid, int with_counts, vx_err
     size_t rows = (size_t)grid->dims[1] * (size_t)grid->dims[2];
     g->bits = calloc(g->wx * rows + 1, sizeof *g->bits);
     if (with_counts) g->counts = calloc((size_t)grid->dims[0] * rows + 1, 1);
+    g->nsamples = with_counts ? 8 : 0;
     if (!g->bits || (with_counts && !g->counts)) {
         vx_bitgrid_free(g);
         return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for a %dx%dx%d grid",

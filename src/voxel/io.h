@@ -38,6 +38,7 @@ typedef struct vx_voxel_io {
 typedef struct vx_vdb_meta {
     const char *method, *inside, *fill, *mesh;
     int supersample, threshold;
+    const char *samples; /* "cube" or "faces"; NULL: not written */
 } vx_vdb_meta;
 
 int vx_voxel_write_raw8(const vx_bitgrid *g, const char *path, const vx_voxel_io *io, vx_err *err);

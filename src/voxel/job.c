@@ -16,6 +16,7 @@ typedef enum vformat { F_VDB = 0, F_BINVOX, F_RAW8, F_RAW1, F_SUMMARY } vformat;
 static const char *const method_names[] = {"auto", "peel", "slice", "scan", NULL};
 static const char *const inside_names[] = {"nonzero", "parity", "robust", NULL};
 static const char *const fill_names[] = {"solid", "surface", NULL};
+static const char *const samples_names[] = {"cube", "faces", NULL}; /* vx_samples order */
 static const char *const format_names[] = {"vdb", "binvox", "raw8", "raw1", "summary", NULL};
 
 typedef struct vparams {
@@ -28,6 +29,7 @@ typedef struct vparams {
     vx_inside inside;
     vx_fill fill;
     int supersample, threshold;
+    vx_samples samples;
     vformat format;
 } vparams;
 
@@ -39,7 +41,7 @@ typedef struct vstate {
 
 static const char *const known[] = {"resolution", "voxel_size", "grid", "padding",
                                     "method",     "inside",     "fill", "supersample",
-                                    "threshold",  "format",     NULL};
+                                    "samples",    "threshold",  "format", NULL};
 
 static const cJSON *field(const cJSON *params, const char *name)
 {
@@ -97,14 +99,24 @@ static int read_box(const cJSON *g, vx_grid *box, vx_err *err)
  * GPU's copy of it plus float render targets the size of the largest grid
  * face (per sample), and the writer's own buffers (OpenVDB's tree; the
  * other writers stream a row at a time). An estimate, but an upper one. */
-static uint64_t job_bytes(const int dims[3], int ss, vformat format)
+static uint64_t job_bytes(const int dims[3], int ss, vx_samples samples, vformat format)
 {
     uint64_t bits = vx_bitgrid_bytes(dims, ss);
+    if (ss == 2 && samples == VX_SAMPLES_FACES) {
+        /* four centre-sampled grids, three of them one voxel longer */
+        ss = 1;
+        for (int a = 0; a < 3; a++) {
+            int d1[3] = {dims[0], dims[1], dims[2]};
+            d1[a]++;
+            bits += vx_bitgrid_bytes(d1, 1);
+        }
+        bits += vx_bitgrid_bytes(dims, 1);
+    }
     uint64_t a = (uint64_t)dims[0] * dims[1], b = (uint64_t)dims[1] * dims[2],
              c = (uint64_t)dims[0] * dims[2];
     uint64_t face = a > b ? (a > c ? a : c) : (b > c ? b : c);
     uint64_t gpu = bits + face * 16 * (uint64_t)(ss * ss);
-    uint64_t enc = format == F_VDB ? vx_voxel_vdb_bytes(dims, ss == 2) : 0;
+    uint64_t enc = format == F_VDB ? vx_voxel_vdb_bytes(dims, ss == 2 || samples) : 0;
     return bits + gpu + enc;
 }
 
@@ -125,7 +137,7 @@ static int check_grid(const int dims[3], const vparams *p, const vx_limits *lim,
     if (n > VX_VOXELIZE_MAX_VOXELS)
         return vx_err_set(err, kind, code, "%s gives %dx%dx%d = %llu voxels, the limit is 2048^3",
                           what, dims[0], dims[1], dims[2], (unsigned long long)n);
-    uint64_t bytes = job_bytes(dims, p->supersample, p->format);
+    uint64_t bytes = job_bytes(dims, p->supersample, p->samples, p->format);
     if (lim && lim->max_job_memory && bytes > lim->max_job_memory)
         return vx_err_set(
             err, kind, code,
@@ -150,7 +162,7 @@ static int read_params(const cJSON *params, const vx_limits *lim, vparams *p, vx
     if (box && (res || vs))
         return vx_err_set(err, VX_EUNPROC, "invalid_params", "params.grid excludes params.%s",
                           res ? "resolution" : "voxel_size");
-    int method, inside, fill, format;
+    int method, inside, fill, format, samples;
     long ss, thr;
     if (vx_param_int(params, "resolution", 256, 1, 2048, &p->resolution, err) ||
         vx_param_number(params, "voxel_size", 1, 0, HUGE_VAL, &p->voxel_size, err) ||
@@ -159,6 +171,7 @@ static int read_params(const cJSON *params, const vx_limits *lim, vparams *p, vx
         vx_param_enum(params, "inside", inside_names, 0, &inside, err) ||
         vx_param_enum(params, "fill", fill_names, 0, &fill, err) ||
         vx_param_int(params, "supersample", 1, 1, 2, &ss, err) ||
+        vx_param_enum(params, "samples", samples_names, 0, &samples, err) ||
         vx_param_int(params, "threshold", 4, 1, 8, &thr, err) ||
         vx_param_enum(params, "format", format_names, 0, &format, err))
         return -1;
@@ -170,10 +183,26 @@ static int read_params(const cJSON *params, const vx_limits *lim, vparams *p, vx
     p->fill = fill == 1 ? VX_FILL_SURFACE : VX_FILL_SOLID;
     p->supersample = (int)ss;
     p->threshold = (int)thr;
+    p->samples = (vx_samples)samples;
     p->format = (vformat)format;
+    if (p->samples == VX_SAMPLES_FACES) {
+        if (p->supersample != 2)
+            return vx_err_set(err, VX_EUNPROC, "invalid_params",
+                              "params.samples \"faces\" needs params.supersample 2");
+        if (p->threshold > 7)
+            return vx_err_set(err, VX_EUNPROC, "invalid_params",
+                              "params.threshold must be 1..7 with params.samples \"faces\" (7 "
+                              "samples per voxel), got %d",
+                              p->threshold);
+        if (p->fill != VX_FILL_SOLID)
+            return vx_err_set(err, VX_EUNPROC, "invalid_params",
+                              "params.samples \"faces\" needs params.fill solid");
+    }
     /* Peeling and scan sample each voxel once, at its centre; only slicing
-     * supersamples (seed 003's accuracy improvement). */
-    if (p->supersample == 2 && (p->method == VX_METHOD_PEEL || p->method == VX_METHOD_SCAN))
+     * supersamples the seed's way (seed 003's accuracy improvement). The
+     * faces pattern runs any method on four grids. */
+    if (p->supersample == 2 && p->samples == VX_SAMPLES_CUBE &&
+        (p->method == VX_METHOD_PEEL || p->method == VX_METHOD_SCAN))
         return vx_err_set(err, VX_EUNPROC, "invalid_params",
                           "params.supersample 2 needs params.method slice or auto (%s samples "
                           "voxel centres only)",
@@ -239,6 +268,7 @@ static cJSON *voxelize_parse(const cJSON *params, const vx_limits *lim, vx_err *
                                                                              : 0]) &&
          cJSON_AddStringToObject(o, "fill", fill_names[p.fill == VX_FILL_SURFACE ? 1 : 0]) &&
          cJSON_AddNumberToObject(o, "supersample", p.supersample) &&
+         cJSON_AddStringToObject(o, "samples", samples_names[p.samples]) &&
          cJSON_AddNumberToObject(o, "threshold", p.threshold) &&
          cJSON_AddStringToObject(o, "format", format_names[p.format]);
     if (!ok) {
@@ -297,6 +327,7 @@ static int voxelize_run_gl(vx_job_run *r, const vx_mesh *mesh, const cJSON *para
     d.fill = p.fill;
     d.supersample = p.supersample;
     d.threshold = p.threshold;
+    d.samples = p.samples;
     d.max_memory = lim ? lim->max_job_memory : 0;
     d.progress = engine_progress;
     d.ud = r;
@@ -365,6 +396,7 @@ static int voxelize_encode(vx_job_run *r, const cJSON *params, void *state, vx_e
             .mesh = vx_run_mesh_id(r),
             .supersample = p.supersample,
             .threshold = p.threshold,
+            .samples = samples_names[p.samples],
         };
         rc = vx_voxel_write_vdb(&s->grid, p.supersample == 2, &m, path, &io, err);
         break;

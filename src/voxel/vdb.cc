@@ -28,6 +28,7 @@ template <typename GridT> void set_meta(GridT &grid, const vx_bitgrid *g, const 
         if (m->mesh) grid.insertMeta("mesh", openvdb::StringMetadata(m->mesh));
         grid.insertMeta("supersample", openvdb::Int32Metadata(m->supersample));
         grid.insertMeta("threshold", openvdb::Int32Metadata(m->threshold));
+        if (m->samples) grid.insertMeta("samples", openvdb::StringMetadata(m->samples));
     }
     grid.insertMeta("voxel_size", openvdb::DoubleMetadata(gr.h));
     grid.insertMeta(
@@ -104,7 +105,7 @@ extern "C" int vx_voxel_write_vdb(const vx_bitgrid *g, int coverage, const vx_vd
                 for (int j = 0; j < ny; j++) {
                     const uint8_t *c = g->counts + ((size_t)k * ny + j) * nx;
                     for (int i = 0; i < nx; i++)
-                        if (c[i]) acc.setValueOn(openvdb::Coord(i, j, k), c[i] / 8.0f);
+                        if (c[i]) acc.setValueOn(openvdb::Coord(i, j, k), c[i] / float(g->nsamples));
                 }
             }
             set_meta(*grid, g, meta);

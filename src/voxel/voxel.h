@@ -39,14 +39,21 @@ typedef enum vx_inside {
     VX_INSIDE_ROBUST,      /* for meshes with holes: majority of parity along x, y and z */
 } vx_inside;
 typedef enum vx_fill { VX_FILL_SOLID = 0, VX_FILL_SURFACE } vx_fill;
+/* Where supersample 2 samples a voxel (src/voxel/faces.c for FACES). */
+typedef enum vx_samples {
+    VX_SAMPLES_CUBE = 0, /* seed 003: 2 x 2 pixels x 2 planes, at +-1/4 voxel; 8 samples */
+    VX_SAMPLES_FACES,    /* the centre and the centres of the six faces; 7 samples */
+} vx_samples;
 
 typedef struct vx_voxelize_desc {
     vx_grid grid;
     vx_method method;
     vx_inside inside;
     vx_fill fill;
-    int supersample;     /* 1 (default) or 2: 2x2 pixels x 2 planes per voxel (seed 003) */
-    int threshold;       /* with supersample 2: samples inside (1..8) to set a voxel; default 4 */
+    int supersample;     /* 1 (default) or 2: several samples per voxel, see samples */
+    vx_samples samples;  /* with supersample 2: the sample pattern */
+    int threshold;       /* with supersample 2: samples inside (1..8, faces 1..7) to set a voxel;
+                            default 4 */
     int max_layers;      /* peel: depth layers before giving up (0 = 256) */
     uint64_t max_memory; /* bytes of GPU + CPU memory this job may use (0 = no limit) */
     /* Called between passes with progress 0..1; nonzero return stops the job
@@ -62,7 +69,8 @@ typedef struct vx_bitgrid {
     vx_grid grid;
     size_t wx;       /* 32-bit words per x row */
     uint32_t *bits;  /* wx * ny * nz words */
-    uint8_t *counts; /* supersample 2: samples inside per voxel (0..8), x fastest; else NULL */
+    uint8_t *counts; /* supersample 2: samples inside per voxel, x fastest; else NULL */
+    int nsamples;    /* with counts: samples per voxel (8 cube, 7 faces) */
 } vx_bitgrid;
 
 typedef struct vx_voxelize_stats {
@@ -118,6 +126,12 @@ int vx_voxelize_peel(vx_gl *gl, const vx_mesh *m, const vx_voxelize_desc *d, vx_
 int vx_voxelize_scan(vx_gl *gl, const vx_mesh *m, const vx_voxelize_desc *d, vx_bitgrid *out,
                      vx_voxelize_stats *st, vx_err *err);
 int vx_voxelize_slice(vx_gl *gl, const vx_mesh *m, const vx_voxelize_desc *d, vx_bitgrid *out,
+                      vx_voxelize_stats *st, vx_err *err);
+/* supersample 2 with VX_SAMPLES_FACES (src/voxel/faces.c): the voxel
+ * centres and the face centres, as four centre-sampled grids voxelized by
+ * d->method (auto: scan), counted per voxel into out->counts. d validated
+ * by vx_voxelize (fill solid). st sums the four runs. */
+int vx_voxelize_faces(vx_gl *gl, const vx_mesh *m, const vx_voxelize_desc *d, vx_bitgrid *out,
                       vx_voxelize_stats *st, vx_err *err);
 
 #endif

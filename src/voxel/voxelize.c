@@ -23,9 +23,17 @@ int vx_voxelize(vx_gl *gl, const vx_mesh *m, const vx_voxelize_desc *d, vx_bitgr
     if (d->supersample != 0 && d->supersample != 1 && d->supersample != 2)
         return vx_err_set(err, VX_EUNPROC, "invalid_params", "supersample must be 1 or 2, got %d",
                           d->supersample);
-    if (d->threshold < 0 || d->threshold > 8)
-        return vx_err_set(err, VX_EUNPROC, "invalid_params", "threshold must be 1..8, got %d",
-                          d->threshold);
+    if (d->samples != VX_SAMPLES_CUBE && d->samples != VX_SAMPLES_FACES)
+        return vx_err_set(err, VX_EUNPROC, "invalid_params", "unknown sample pattern %d",
+                          (int)d->samples);
+    const int faces = d->supersample == 2 && d->samples == VX_SAMPLES_FACES,
+              most = faces ? 7 : 8;
+    if (d->threshold < 0 || d->threshold > most)
+        return vx_err_set(err, VX_EUNPROC, "invalid_params", "threshold must be 1..%d, got %d",
+                          most, d->threshold);
+    if (faces && d->fill != VX_FILL_SOLID)
+        return vx_err_set(err, VX_EUNPROC, "invalid_params",
+                          "the faces sample pattern needs fill solid");
     if (d->method < VX_METHOD_AUTO || d->method > VX_METHOD_SCAN)
         return vx_err_set(err, VX_EUNPROC, "invalid_params", "unknown method %d", (int)d->method);
     if (d->inside < VX_INSIDE_NONZERO || d->inside > VX_INSIDE_ROBUST)
@@ -40,6 +48,7 @@ int vx_voxelize(vx_gl *gl, const vx_mesh *m, const vx_voxelize_desc *d, vx_bitgr
     vx_voxelize_desc dd = *d;
     if (dd.supersample == 0) dd.supersample = 1;
     if (dd.threshold == 0) dd.threshold = 4;
+    if (faces) return vx_voxelize_faces(gl, m, &dd, out, st, err);
     vx_method method = dd.method;
     /* Peeling and scan sample each voxel once at its centre; only slicing
      * supersamples (seed 003's accuracy improvement). Scan counts crossings

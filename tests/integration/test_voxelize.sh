@@ -180,6 +180,22 @@ if [[ ${#METHODS[@]} -eq 2 ]]; then
     near "supersample 2 volume" "$(st volume)" "$(vol sphere)" 0.05
 fi
 
+# The faces pattern: centre + six face centres, any method (auto: scan).
+vox "sphere vdb samples faces" "$M_sphere" '{"resolution":24,"supersample":2,"samples":"faces","threshold":1}'
+check "faces echoed, auto ran scan" jq -e '.params.samples == "faces" and .params.threshold == 1 and .stats.method == "scan"' "$TMP/job.json"
+fetch "$TMP/f.vdb"
+"$VX_TOOLS/vdbinfo" "$TMP/f.vdb" >"$TMP/f.vdb.json"
+check "faces vdb: coverage in sevenths, active = voxels_inside at threshold 1" jq -e --argjson n "$(st voxels_inside)" \
+    '.grids[0] | .name == "coverage" and .active_voxels == $n and .metadata.samples == "faces" and .metadata.threshold == 1' "$TMP/f.vdb.json"
+N_FACES1=$(st voxels_inside)
+vox "sphere samples faces threshold 4" "$M_sphere" '{"resolution":24,"supersample":2,"samples":"faces","threshold":4,"format":"summary"}'
+near "faces threshold 4 volume" "$(st volume)" "$(vol sphere)" 0.05
+N_FACES4=$(st voxels_inside)
+check "faces: threshold 1 sets more voxels than 4 ($N_FACES1 > $N_FACES4)" test "$N_FACES1" -gt "$N_FACES4"
+vox "sphere samples faces with peel" "$M_sphere" '{"resolution":24,"supersample":2,"samples":"faces","threshold":4,"method":"peel","format":"summary"}'
+check "faces with peel: peel ran on the four grids, same voxels as scan" jq -e --argjson n "$N_FACES4" \
+    '.stats.method == "peel" and .stats.passes >= 4 and .stats.voxels_inside == $n' "$TMP/job.json"
+
 vox "sphere binvox" "$M_sphere" '{"resolution":24,"format":"binvox"}'
 fetch "$TMP/s.binvox"
 check "binvox content type" test "$CTYPE" = application/x-binvox
@@ -245,6 +261,10 @@ bad "threshold 9" '{"supersample":2,"threshold":9}' params.threshold
 bad "supersample 3" '{"supersample":3}' params.supersample
 bad "supersample 2 with peel" '{"supersample":2,"method":"peel"}' params.supersample
 bad "supersample 2 with scan" '{"supersample":2,"method":"scan"}' params.supersample
+bad "faces without supersample 2" '{"samples":"faces"}' params.samples
+bad "faces threshold 8" '{"supersample":2,"samples":"faces","threshold":8}' params.threshold
+bad "faces with fill surface" '{"supersample":2,"samples":"faces","fill":"surface"}' params.fill
+bad "unknown samples" '{"supersample":2,"samples":"corners"}' params.samples
 bad "unknown format" '{"format":"stl"}' params.format
 bad "unknown field" '{"colour":"red"}' params.colour
 

@@ -35,7 +35,7 @@ JOB_OK = {
     "outputs": {"image": "/v1/jobs/%s/result/image" % JID},
 }
 VPARAMS = {"resolution": 8, "voxel_size": None, "grid": None, "padding": 0, "method": "auto",
-           "inside": "nonzero", "fill": "solid", "supersample": 1, "threshold": 4,
+           "inside": "nonzero", "fill": "solid", "supersample": 1, "samples": "cube", "threshold": 4,
            "format": "summary"}
 VSTATS = {"method": "peel", "dims": [8, 8, 8], "origin": [0, 0, 0], "voxel_size": 0.125,
           "triangles": 12, "voxels_inside": 512, "volume": 1, "layers": 2, "passes": 1, "slices": 0,

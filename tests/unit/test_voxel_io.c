@@ -193,7 +193,7 @@ static void test_vdb_bool(void **st)
     char p[256];
     path_of(p, sizeof p, "a.vdb");
     vx_err err;
-    vx_vdb_meta m = {"peel", "nonzero", "solid", "abc", 1, 4};
+    vx_vdb_meta m = {"peel", "nonzero", "solid", "abc", 1, 4, NULL};
     assert_int_equal(vx_voxel_write_vdb(&g, 0, &m, p, NULL, &err), 0);
     cJSON *root, *gr = vdbinfo(p, &root);
     assert_string_equal(cJSON_GetObjectItem(gr, "name")->valuestring, "voxels");
@@ -218,25 +218,31 @@ static void test_vdb_bool(void **st)
 
 static void test_vdb_coverage(void **st)
 {
-    vx_bitgrid g;
-    make_grid(&g, 13, 5, 3, 1);
-    char p[256];
-    path_of(p, sizeof p, "c.vdb");
-    vx_err err;
-    vx_vdb_meta m = {"slice", "parity", "solid", NULL, 2, 3};
-    assert_int_equal(vx_voxel_write_vdb(&g, 1, &m, p, NULL, &err), 0);
-    uint64_t active = 0, sum = 0;
-    for (size_t i = 0; i < 13 * 5 * 3; i++) {
-        active += g.counts[i] > 0;
-        sum += g.counts[i];
+    /* samples inside / samples per voxel: 8 (cube) or 7 (faces) */
+    for (int n = 8; n >= 7; n--) {
+        vx_bitgrid g;
+        make_grid(&g, 13, 5, 3, 1);
+        g.nsamples = n;
+        char p[256];
+        path_of(p, sizeof p, "c.vdb");
+        vx_err err;
+        vx_vdb_meta m = {"slice", "parity", "solid", NULL, 2, 3, n == 8 ? "cube" : "faces"};
+        assert_int_equal(vx_voxel_write_vdb(&g, 1, &m, p, NULL, &err), 0);
+        uint64_t active = 0, sum = 0;
+        for (size_t i = 0; i < 13 * 5 * 3; i++) {
+            active += g.counts[i] > 0;
+            sum += g.counts[i];
+        }
+        cJSON *root, *gr = vdbinfo(p, &root);
+        assert_string_equal(cJSON_GetObjectItem(gr, "name")->valuestring, "coverage");
+        assert_string_equal(cJSON_GetObjectItem(gr, "type")->valuestring, "float");
+        assert_int_equal((uint64_t)num_at(gr, "active_voxels", -1), active);
+        assert_true(fabs(num_at(gr, "value_sum", -1) - (double)sum / n) < 1e-4);
+        const cJSON *md = cJSON_GetObjectItem(gr, "metadata");
+        assert_string_equal(cJSON_GetObjectItem(md, "samples")->valuestring, m.samples);
+        cJSON_Delete(root);
+        vx_bitgrid_free(&g);
     }
-    cJSON *root, *gr = vdbinfo(p, &root);
-    assert_string_equal(cJSON_GetObjectItem(gr, "name")->valuestring, "coverage");
-    assert_string_equal(cJSON_GetObjectItem(gr, "type")->valuestring, "float");
-    assert_int_equal((uint64_t)num_at(gr, "active_voxels", -1), active);
-    assert_true(fabs(num_at(gr, "value_sum", -1) - sum / 8.0) < 1e-4);
-    cJSON_Delete(root);
-    vx_bitgrid_free(&g);
 }
 
 static void test_write_error(void **st)
@@ -302,7 +308,7 @@ static void test_params(void **st)
     assert_string_equal(
         s,
         "{\"resolution\":256,\"voxel_size\":null,\"grid\":null,\"padding\":0,\"method\":\"auto\","
-        "\"inside\":\"nonzero\",\"fill\":\"solid\",\"supersample\":1,\"threshold\":4,"
+        "\"inside\":\"nonzero\",\"fill\":\"solid\",\"supersample\":1,\"samples\":\"cube\",\"threshold\":4,"
         "\"format\":\"vdb\"}");
     /* normalised params parse to themselves */
     cJSON *again = vx_kind_voxelize.parse(o, NULL, &err);
