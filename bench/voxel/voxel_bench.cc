@@ -303,7 +303,7 @@ int main(int argc, char **argv)
             vx_mesh_free(vm);
         }
     } else if (mode == "seed000") {
-        printf("| faces | res | depth peeling ms (GPU) | fill ms (GPU) | total ms (wall) | layers |\n|---|---|---|---|---|---|\n");
+        printf("| faces | res | depth peeling ms (GPU) | fill ms (GPU) | total ms (wall) | layers | passes |\n|---|---|---|---|---|---|---|\n");
         for (auto &spec : meshes)
             for (int sub = 0; sub <= 3; sub++) {
                 Mesh m = load(spec + ":" + std::to_string(sub));
@@ -319,8 +319,8 @@ int main(int argc, char **argv)
                         if (k && ms < best) best = ms, bst = st;
                         vx_bitgrid_free(&out);
                     }
-                    printf("| %zu | %d^3 | %.1f | %.2f | %.1f | %d |\n", m.tri.size() / 3, r, bst.gpu_peel_ms,
-                           bst.gpu_fill_ms, best, bst.layers);
+                    printf("| %zu | %d^3 | %.1f | %.2f | %.1f | %d | %d |\n", m.tri.size() / 3, r, bst.gpu_peel_ms,
+                           bst.gpu_fill_ms, best, bst.layers, bst.passes);
                     fflush(stdout);
                 }
                 vx_mesh_free(vm);

@@ -51,7 +51,9 @@
  * Known limits: parts thinner than the voxel spacing between two centres
  * vanish (seed 000 §3; use fill=surface to catch them); a mesh that
  * extends below the grid along the ray has its crossings mapped to depth
- * with one rounding, so two crossings within one float ulp may merge there. */
+ * with one rounding, so two crossings within one float ulp may merge there
+ * and the fill sees each crossing within one ulp of where it is (inside
+ * the grid the key is the crossing exactly). */
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
