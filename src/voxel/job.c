@@ -102,6 +102,7 @@ static int read_box(const cJSON *g, vx_grid *box, vx_err *err)
 static uint64_t job_bytes(const int dims[3], int ss, vx_samples samples, vformat format)
 {
     uint64_t bits = vx_bitgrid_bytes(dims, ss);
+    const int coverage = ss == 2; /* the vdb writer's FloatGrid */
     if (ss == 2 && samples == VX_SAMPLES_FACES) {
         /* four centre-sampled grids, three of them one voxel longer */
         ss = 1;
@@ -116,7 +117,7 @@ static uint64_t job_bytes(const int dims[3], int ss, vx_samples samples, vformat
              c = (uint64_t)dims[0] * dims[2];
     uint64_t face = a > b ? (a > c ? a : c) : (b > c ? b : c);
     uint64_t gpu = bits + face * 16 * (uint64_t)(ss * ss);
-    uint64_t enc = format == F_VDB ? vx_voxel_vdb_bytes(dims, ss == 2 || samples) : 0;
+    uint64_t enc = format == F_VDB ? vx_voxel_vdb_bytes(dims, coverage) : 0;
     return bits + gpu + enc;
 }
 
