@@ -52,6 +52,8 @@ static const opt_def opts[] = {
      "results kept on disk before LRU eviction (default 10G; 0 = no limit)"},
     {"results-max-age", T_SECONDS, F(results_max_age_s), 0,
      "results unused this long are evicted, seconds (default 604800; 0 = never)"},
+    {"min-free-disk", T_SIZE, F(min_free_disk), 0,
+     "free space the data dir keeps: below it writes answer 507 (default 64M; 0 = only a full disk)"},
     {"job-history", T_SIZE, F(job_history), 0, "finished jobs remembered (default 10000)"},
 };
 #define NOPTS (sizeof opts / sizeof opts[0])
@@ -95,6 +97,7 @@ static void defaults(vx_config *c)
     c->results_max_bytes = 10ull << 30;
     c->results_max_age_s = 7 * 86400;
     c->job_history = 10000;
+    c->min_free_disk = 64ull << 20;
 }
 
 static int set_opt(vx_config *c, const opt_def *d, const char *val, const char *where)

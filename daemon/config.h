@@ -32,6 +32,7 @@ typedef struct vx_config {
     uint64_t max_image_pixels;
     uint64_t max_job_memory;
     uint64_t max_json_bytes;
+    uint64_t min_free_disk; /* writes answer 507 below this many free bytes in the data dir */
     uint64_t results_max_bytes;
     double results_max_age_s;
     uint64_t job_history;

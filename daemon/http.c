@@ -88,6 +88,7 @@ struct req {
     vx_upload *up;
     media declared;
     int too_big;
+    vx_err body_err; /* storing the body failed (full disk): answered at the end */
     /* JSON bodies */
     char *buf;
     size_t len, cap;
@@ -183,6 +184,7 @@ static unsigned err_status(const vx_err *e)
     case VX_EBUSY: return strcmp(e->code, "not_ready") == 0 ? 503 : 429;
     case VX_ECANCELED: return 409;
     case VX_ETIMEOUT: return 504;
+    case VX_ENOSPC: return 507;
     default: return 500;
     }
 }
@@ -192,6 +194,7 @@ static int send_err(struct MHD_Connection *c, req *r, const vx_err *e)
     unsigned st = err_status(e);
     if (st == 429) return send_error_h(c, r, st, e->code, e->message, MHD_HTTP_HEADER_RETRY_AFTER, "2");
     if (st == 503) return send_error_h(c, r, st, e->code, e->message, MHD_HTTP_HEADER_RETRY_AFTER, "5");
+    if (st == 507) return send_error(c, r, st, "insufficient_storage", e->message);
     return send_error(c, r, st, e->code, e->message);
 }
 
@@ -378,6 +381,24 @@ static int hold(vx_http *h, struct MHD_Connection *c, req *r, const char *jid, d
     return 1;
 }
 
+/* ---- disk space ---------------------------------------------------- */
+
+/* Free bytes of the data dir's file system (UINT64_MAX when unknown). */
+static uint64_t disk_free(vx_http *h)
+{
+    uint64_t b;
+    return vx_disk_free(vx_store_dir(h->d.store), &b) == 0 ? b : UINT64_MAX;
+}
+
+/* 1 when the data dir has room for writes: free space at or above the
+ * floor (with a floor of 0, any free byte). */
+static int disk_ok(vx_http *h, uint64_t *free_bytes)
+{
+    uint64_t b = disk_free(h);
+    if (free_bytes) *free_bytes = b;
+    return h->d.cfg->min_free_disk ? b >= h->d.cfg->min_free_disk : b > 0;
+}
+
 /* ---- handlers ------------------------------------------------------ */
 
 static int h_readyz(vx_http *h, struct MHD_Connection *c, req *r)
@@ -385,13 +406,15 @@ static int h_readyz(vx_http *h, struct MHD_Connection *c, req *r)
     int gl = vx_jobs_ready(h->d.jobs);
     int q = vx_jobs_queue_depth(h->d.jobs) < vx_jobs_queue_capacity(h->d.jobs);
     int dd = vx_store_writable(h->d.store);
-    int ok = gl && q && dd && !h->stopping;
+    int space = disk_ok(h, NULL);
+    int ok = gl && q && dd && space && !h->stopping;
     cJSON *doc = cJSON_CreateObject();
     cJSON_AddStringToObject(doc, "status", ok ? "ready" : "not_ready");
     cJSON *chk = cJSON_AddObjectToObject(doc, "checks");
     cJSON_AddBoolToObject(chk, "gl", gl);
     cJSON_AddBoolToObject(chk, "queue", q);
     cJSON_AddBoolToObject(chk, "data_dir", dd);
+    cJSON_AddBoolToObject(chk, "disk_space", space);
     return send_json(c, r, ok ? 200 : 503, doc, NULL, NULL);
 }
 
@@ -403,6 +426,8 @@ static int h_metrics(vx_http *h, struct MHD_Connection *c, req *r)
         .running = vx_jobs_running(h->d.jobs),
         .meshes = vx_store_mesh_count(h->d.store),
         .results_bytes = vx_store_results_bytes(h->d.store),
+        .disk_free_bytes = disk_free(h),
+        .min_free_disk = h->d.cfg->min_free_disk,
         .ready = vx_jobs_ready(h->d.jobs),
         .gl = vx_jobs_gl_info(h->d.jobs),
         .start_time = h->d.start_time,
@@ -439,6 +464,7 @@ static int h_info(vx_http *h, struct MHD_Connection *c, req *r)
     cJSON_AddNumberToObject(l, "max_image_pixels", (double)cfg->max_image_pixels);
     cJSON_AddNumberToObject(l, "max_job_memory_bytes", (double)cfg->max_job_memory);
     cJSON_AddNumberToObject(l, "max_json_bytes", (double)cfg->max_json_bytes);
+    cJSON_AddNumberToObject(l, "min_free_disk_bytes", (double)cfg->min_free_disk);
     cJSON_AddNumberToObject(l, "results_max_bytes", (double)cfg->results_max_bytes);
     cJSON_AddNumberToObject(l, "results_max_age_s", cfg->results_max_age_s);
     cJSON *kinds = cJSON_AddArrayToObject(doc, "kinds");
@@ -522,6 +548,7 @@ static int h_upload_done(vx_http *h, struct MHD_Connection *c, req *r)
                  (unsigned long long)h->d.cfg->max_upload_bytes);
         return send_error(c, r, 413, "too_large", msg);
     }
+    if (r->body_err.kind != VX_EOK) return send_err(c, r, &r->body_err);
     if (vx_upload_bytes(r->up) == 0) return send_error(c, r, 422, "obj_no_faces", "the body is empty: no faces");
     char id[65];
     if (vx_upload_finish(r->up, id, &err)) return send_err(c, r, &err);
@@ -735,6 +762,14 @@ static int first_call(vx_http *h, struct MHD_Connection *c, req *r)
     if (h->stopping || !vx_jobs_ready(h->d.jobs))
         return send_error_h(c, r, 503, "not_ready", "the daemon is not ready", MHD_HTTP_HEADER_RETRY_AFTER, "5");
 
+    uint64_t nfree;
+    if (!disk_ok(h, &nfree)) {
+        char msg[200];
+        snprintf(msg, sizeof msg, "the data dir is full: %llu bytes free, under the %llu-byte floor (--min-free-disk); "
+                 "reads still work", (unsigned long long)(nfree == UINT64_MAX ? 0 : nfree),
+                 (unsigned long long)h->d.cfg->min_free_disk);
+        return send_error(c, r, 507, "insufficient_storage", msg);
+    }
     char mt[128];
     media_type(header(c, MHD_HTTP_HEADER_CONTENT_TYPE), mt, sizeof mt);
     if (r->route == R_MESHES) {
@@ -784,7 +819,7 @@ static int take_body(vx_http *h, req *r, const char *data, size_t n)
 {
     r->bytes_in += n;
     if (r->body == BODY_UPLOAD) {
-        if (r->too_big) return 0;
+        if (r->too_big || r->body_err.kind != VX_EOK) return 0;
         if (r->bytes_in > h->d.cfg->max_upload_bytes) {
             /* Keep reading (and dropping) the rest, answer 413 at the end. */
             r->too_big = 1;
@@ -792,11 +827,12 @@ static int take_body(vx_http *h, req *r, const char *data, size_t n)
             r->up = NULL;
             return 0;
         }
-        vx_err err;
-        if (vx_upload_write(r->up, data, n, &err)) {
-            VX_ERROR("http.upload_failed", "code=%s", err.code);
-            r->too_big = 0;
-            return -1;
+        if (vx_upload_write(r->up, data, n, &r->body_err)) {
+            /* Keep reading (and dropping) the rest: the client gets the
+             * answer (507 on a full disk) at the end, not a dropped connection. */
+            VX_ERROR("http.upload_failed", "code=%s", r->body_err.code);
+            vx_upload_abort(r->up);
+            r->up = NULL;
         }
         return 0;
     }

@@ -199,11 +199,16 @@ char *vx_metrics_render(const vx_metrics_gauges *g)
               "# HELP voxeld_meshes Meshes in the store.\n# TYPE voxeld_meshes gauge\nvoxeld_meshes %zu\n"
               "# HELP voxeld_results_bytes Bytes of job results on disk.\n"
               "# TYPE voxeld_results_bytes gauge\nvoxeld_results_bytes %llu\n"
+              "# HELP voxeld_data_dir_free_bytes Bytes still free for the data dir.\n"
+              "# TYPE voxeld_data_dir_free_bytes gauge\nvoxeld_data_dir_free_bytes %llu\n"
+              "# HELP voxeld_data_dir_min_free_bytes Free-space floor: below it writes answer 507.\n"
+              "# TYPE voxeld_data_dir_min_free_bytes gauge\nvoxeld_data_dir_min_free_bytes %llu\n"
               "# HELP voxeld_up 1 when ready to run jobs.\n# TYPE voxeld_up gauge\nvoxeld_up %d\n"
               "# HELP process_start_time_seconds Start time of the process since the epoch.\n"
               "# TYPE process_start_time_seconds gauge\nprocess_start_time_seconds %.3f\n",
               g->queue_depth, g->queue_capacity, g->running, g->meshes,
-              (unsigned long long)g->results_bytes, g->ready, g->start_time);
+              (unsigned long long)g->results_bytes, (unsigned long long)g->disk_free_bytes,
+              (unsigned long long)g->min_free_disk, g->ready, g->start_time);
     sb_printf(&b,
               "# HELP voxeld_info Build and GL context information.\n# TYPE voxeld_info gauge\n"
               "voxeld_info{version=\"%s\",gl_vendor=\"%s\",gl_renderer=\"%s\",gl_version=\"%s\","

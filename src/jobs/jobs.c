@@ -396,8 +396,15 @@ vx_jobs *vx_jobs_open(const vx_jobs_desc *desc, vx_err *err)
     trim_history_locked(j, dropped, &nd, 256);
     for (size_t i = 0; i < nd; i++) vx_store_result_remove(desc->store, dropped[i]);
     if (compact_locked(j, err)) {
-        vx_jobs_free(j);
-        return NULL;
+        /* The journal as replayed is complete (replay cut any torn tail):
+         * on a full disk the daemon starts on it uncompacted and serves
+         * reads, and writes answer 507 until there is room again. */
+        if (err->kind != VX_ENOSPC) {
+            vx_jobs_free(j);
+            return NULL;
+        }
+        VX_WARN("journal.compact_skipped", "reason=disk_full");
+        vx_err_clear(err);
     }
     VX_INFO("jobs.replayed", "records=%ld jobs=%zu requeued=%zu", n, j->njobs, requeued);
     return j;

@@ -8,6 +8,7 @@
 #include <string.h>
 #include <sys/stat.h>
 #include <unistd.h>
+#include <zlib.h>
 
 #include "util/fsutil.h"
 #include "util/log.h"
@@ -15,8 +16,16 @@
 struct vx_journal {
     char path[2048];
     int fd;
+    off_t size; /* bytes of complete records: where the next one starts */
     pthread_mutex_t lock;
 };
+
+/* A record is one line: '#', the CRC-32 of the JSON as 8 hex digits, a
+ * space, the JSON, '\n'. Lines of journals written before the framing (bare
+ * JSON) are still read. */
+#define FRAME_HEAD 10 /* "#xxxxxxxx " */
+
+static uint32_t crc_of(const char *p, size_t n) { return (uint32_t)crc32(0L, (const Bytef *)p, (uInt)n); }
 
 vx_journal *vx_journal_open(const char *path, vx_err *err)
 {
@@ -28,10 +37,14 @@ vx_journal *vx_journal_open(const char *path, vx_err *err)
     snprintf(j->path, sizeof j->path, "%s", path);
     j->fd = open(path, O_RDWR | O_CREAT | O_APPEND | O_CLOEXEC, 0640);
     if (j->fd < 0) {
-        vx_err_set(err, VX_EIO, "journal_failed", "open %s: %s", path, strerror(errno));
+        int e = errno;
+        VX_ERROR("journal.open_failed", "path=%s error=%d", path, e);
+        vx_err_set(err, vx_err_io_kind(e), "journal_failed", "cannot open the journal: %s", strerror(e));
         free(j);
         return NULL;
     }
+    struct stat st;
+    j->size = fstat(j->fd, &st) == 0 ? st.st_size : 0;
     pthread_mutex_init(&j->lock, NULL);
     return j;
 }
@@ -47,22 +60,65 @@ void vx_journal_close(vx_journal *j)
     free(j);
 }
 
+/* A framed record at p (n bytes, no newline): the JSON, or NULL. */
+static cJSON *parse_framed(const char *p, size_t n)
+{
+    if (n < FRAME_HEAD + 2 || p[0] != '#' || p[FRAME_HEAD - 1] != ' ' || p[FRAME_HEAD] != '{') return NULL;
+    char hex[9];
+    memcpy(hex, p + 1, 8);
+    hex[8] = 0;
+    char *end;
+    unsigned long want = strtoul(hex, &end, 16);
+    if (*end || crc_of(p + FRAME_HEAD, n - FRAME_HEAD) != (uint32_t)want) return NULL;
+    return cJSON_ParseWithLength(p + FRAME_HEAD, n - FRAME_HEAD);
+}
+
+/* A line that is not one good record may be a fragment that a failed write
+ * left behind with a good record glued on after it (journals written before
+ * failed appends were truncated): the last frame (or, unframed, the first
+ * JSON suffix) that checks out is that record. */
+static cJSON *salvage(const char *line, size_t n)
+{
+    for (size_t i = n; i-- > 1;)
+        if (line[i] == '#') {
+            cJSON *rec = parse_framed(line + i, n - i);
+            if (rec) return rec;
+        }
+    static const char key[] = "{\"job\":";
+    for (const char *p = line + 1; (p = memmem(p, n - (size_t)(p - line), key, sizeof key - 1)); p++) {
+        cJSON *rec = cJSON_ParseWithLength(p, n - (size_t)(p - line));
+        if (rec) return rec;
+    }
+    return NULL;
+}
+
 long vx_journal_replay(vx_journal *j, void (*fn)(const cJSON *rec, void *ud), void *ud, vx_err *err)
 {
     FILE *f = fopen(j->path, "rbe");
-    if (!f) return vx_err_set(err, VX_EIO, "journal_failed", "open %s: %s", j->path, strerror(errno));
+    if (!f) {
+        int e = errno;
+        VX_ERROR("journal.open_failed", "path=%s error=%d", j->path, e);
+        return vx_err_set(err, VX_EIO, "journal_failed", "cannot read the journal: %s", strerror(e));
+    }
     char *line = NULL;
     size_t cap = 0;
     ssize_t n;
     long count = 0, lineno = 0;
+    off_t good = 0; /* end of the last complete line */
+    int torn = 0;
     while ((n = getline(&line, &cap, f)) > 0) {
         lineno++;
         if (line[n - 1] != '\n') {
             /* Torn tail: written partly before a crash, never acknowledged. */
             VX_WARN("journal.torn_tail", "path=%s line=%ld bytes=%zd", j->path, lineno, n);
+            torn = 1;
             break;
         }
-        cJSON *rec = cJSON_Parse(line);
+        good += n;
+        size_t len = (size_t)n - 1;
+        cJSON *rec = line[0] == '#' ? parse_framed(line, len) : cJSON_ParseWithLength(line, len);
+        if (!rec && (rec = salvage(line, len)))
+            VX_WARN("journal.salvaged", "path=%s line=%ld", j->path, lineno);
         if (!rec) {
             VX_WARN("journal.bad_record", "path=%s line=%ld", j->path, lineno);
             continue;
@@ -73,6 +129,15 @@ long vx_journal_replay(vx_journal *j, void (*fn)(const cJSON *rec, void *ud), vo
     }
     free(line);
     fclose(f);
+    pthread_mutex_lock(&j->lock);
+    if (torn) {
+        /* Cut the torn tail so the next record starts on a line of its own
+         * (compaction may not run: the disk can be full). */
+        if (ftruncate(j->fd, good) != 0 || fdatasync(j->fd) != 0)
+            VX_ERROR("journal.truncate_failed", "path=%s error=%d", j->path, errno);
+    }
+    j->size = good;
+    pthread_mutex_unlock(&j->lock);
     return count;
 }
 
@@ -81,6 +146,7 @@ static int write_all(int fd, const char *p, size_t n)
     while (n) {
         ssize_t w = write(fd, p, n);
         if (w < 0 && errno == EINTR) continue;
+        if (w == 0) errno = ENOSPC;
         if (w <= 0) return -1;
         p += w;
         n -= (size_t)w;
@@ -88,21 +154,46 @@ static int write_all(int fd, const char *p, size_t n)
     return 0;
 }
 
+/* The record as one framed line; owned, its length in *n. */
+static char *frame(const cJSON *rec, size_t *n)
+{
+    char *json = cJSON_PrintUnformatted(rec);
+    if (!json) return NULL;
+    size_t len = strlen(json);
+    char *line = malloc(len + FRAME_HEAD + 2);
+    if (line) {
+        snprintf(line, FRAME_HEAD + 1, "#%08x ", crc_of(json, len));
+        memcpy(line + FRAME_HEAD, json, len);
+        line[FRAME_HEAD + len] = '\n';
+        *n = FRAME_HEAD + len + 1;
+    }
+    free(json);
+    return line;
+}
+
 int vx_journal_append(vx_journal *j, const cJSON *rec, vx_err *err)
 {
-    char *text = cJSON_PrintUnformatted(rec);
+    size_t n;
+    char *text = frame(rec, &n);
     if (!text) return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory");
-    size_t n = strlen(text);
-    text[n] = '\n'; /* the NUL goes: we write n + 1 bytes exactly */
     pthread_mutex_lock(&j->lock);
-    int rc = write_all(j->fd, text, n + 1);
+    int rc = write_all(j->fd, text, n);
     if (rc == 0) rc = fdatasync(j->fd);
     int e = errno;
+    if (rc == 0) {
+        j->size += (off_t)n;
+    } else if (ftruncate(j->fd, j->size) != 0 || fdatasync(j->fd) != 0) {
+        /* A torn write (ENOSPC after part of the line) must not stay in the
+         * file: the next record would be glued onto it. Shrinking needs no
+         * space; if even that fails, replay salvages the glued record. */
+        VX_ERROR("journal.truncate_failed", "path=%s error=%d", j->path, errno);
+    }
     pthread_mutex_unlock(&j->lock);
     free(text);
     if (rc != 0) {
         VX_ERROR("journal.append_failed", "path=%s error=%d", j->path, e);
-        return vx_err_set(err, VX_EIO, "journal_failed", "journal write failed: %s", strerror(e));
+        return vx_err_set(err, vx_err_io_kind(e), e == ENOSPC || e == EDQUOT ? "insufficient_storage" : "journal_failed",
+                          "the job journal could not be written: %s", strerror(e));
     }
     return 0;
 }
@@ -112,24 +203,30 @@ int vx_journal_compact(vx_journal *j, cJSON *const *recs, size_t n, vx_err *err)
     char tmp[2100];
     snprintf(tmp, sizeof tmp, "%s.compact", j->path);
     int fd = open(tmp, O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0640);
-    if (fd < 0) return vx_err_set(err, VX_EIO, "journal_failed", "open %s: %s", tmp, strerror(errno));
-    int rc = 0;
+    if (fd < 0) {
+        int e = errno;
+        return vx_err_set(err, vx_err_io_kind(e), "journal_failed", "cannot compact the journal: %s", strerror(e));
+    }
+    int rc = 0, e = 0;
+    off_t size = 0;
     for (size_t i = 0; i < n && rc == 0; i++) {
-        char *text = cJSON_PrintUnformatted(recs[i]);
+        size_t len;
+        char *text = frame(recs[i], &len);
         if (!text) {
             rc = -1;
+            e = ENOMEM;
             break;
         }
-        size_t len = strlen(text);
-        text[len] = '\n';
-        rc = write_all(fd, text, len + 1);
+        rc = write_all(fd, text, len);
+        if (rc) e = errno;
+        size += (off_t)len;
         free(text);
     }
-    if (rc == 0) rc = fsync(fd);
+    if (rc == 0 && (rc = fsync(fd)) != 0) e = errno;
     close(fd);
     if (rc != 0) {
         unlink(tmp);
-        return vx_err_set(err, VX_EIO, "journal_failed", "compacting %s failed", j->path);
+        return vx_err_set(err, vx_err_io_kind(e), "journal_failed", "cannot compact the journal: %s", strerror(e));
     }
     pthread_mutex_lock(&j->lock);
     rc = rename(tmp, j->path);
@@ -138,12 +235,13 @@ int vx_journal_compact(vx_journal *j, cJSON *const *recs, size_t n, vx_err *err)
         if (nfd >= 0) {
             close(j->fd);
             j->fd = nfd;
+            j->size = size;
         } else {
             rc = -1;
         }
     }
     pthread_mutex_unlock(&j->lock);
-    if (rc != 0) return vx_err_set(err, VX_EIO, "journal_failed", "rename %s failed", tmp);
+    if (rc != 0) return vx_err_set(err, VX_EIO, "journal_failed", "cannot replace the journal: %s", strerror(errno));
     char dir[2048];
     snprintf(dir, sizeof dir, "%s", j->path);
     char *slash = strrchr(dir, '/');

@@ -1,8 +1,11 @@
-/* The job journal: an append-only file of JSON records, one per line, each
- * fsync'd before the state change it records is acknowledged. Replay reads
- * them back in order and ignores a torn last line (a crash mid-write: that
- * record was never acknowledged). Compaction rewrites the file with one
- * record per live job, atomically. Thread-safe. */
+/* The job journal: an append-only file of JSON records, one per line
+ * framed by its CRC-32 ("#crc32hex JSON"), each fsync'd before the state
+ * change it records is acknowledged. A write that fails part-way (ENOSPC)
+ * is cut off again, so it never takes the next record with it. Replay
+ * reads the records back in order, skips lines whose CRC fails, and cuts a
+ * torn last line (a crash mid-write: that record was never acknowledged).
+ * Compaction rewrites the file with one record per live job, atomically.
+ * Thread-safe. */
 #ifndef VX_JOURNAL_H
 #define VX_JOURNAL_H
 
@@ -18,9 +21,11 @@ typedef struct vx_journal vx_journal;
 vx_journal *vx_journal_open(const char *path, vx_err *err);
 void vx_journal_close(vx_journal *j);
 /* Calls fn for every complete record in file order. Returns the number of
- * records, or -1. Corrupt lines in the middle are logged and skipped. */
+ * records, or -1. Corrupt lines in the middle are logged and skipped; a torn
+ * tail is truncated away. */
 long vx_journal_replay(vx_journal *j, void (*fn)(const cJSON *rec, void *ud), void *ud, vx_err *err);
-/* Appends one record and makes it durable (fdatasync). */
+/* Appends one record and makes it durable (fdatasync); on failure the file
+ * is as before (VX_ENOSPC insufficient_storage when the disk is full). */
 int vx_journal_append(vx_journal *j, const cJSON *rec, vx_err *err);
 /* Replaces the whole journal with recs (temp file, fsync, rename). */
 int vx_journal_compact(vx_journal *j, cJSON *const *recs, size_t n, vx_err *err);

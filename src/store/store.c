@@ -9,6 +9,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/file.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
@@ -37,6 +38,7 @@ struct vx_store {
     size_t nresults, capresults;
     uint64_t results_bytes;
     unsigned long upload_seq;
+    int lock_fd; /* DATA/voxeld.lock, flock'd for the store's life */
 };
 
 struct vx_upload {
@@ -214,6 +216,40 @@ static void load_results(vx_store *s)
     closedir(d);
 }
 
+/* One daemon per data dir: an exclusive flock on DATA/voxeld.lock, held
+ * until vx_store_close (or the process dies: the kernel drops it, so a
+ * kill -9 never leaves a stale lock). The file holds the owner's pid, for
+ * the message a second daemon prints. */
+static int lock_dir(vx_store *s, vx_err *err)
+{
+    char p[2100];
+    snprintf(p, sizeof p, "%s/voxeld.lock", s->dir);
+    int fd = open(p, O_RDWR | O_CREAT | O_CLOEXEC, 0640);
+    if (fd < 0)
+        return vx_err_set(err, VX_EIO, "data_dir_lock", "cannot open the lock file %s: %s", p, strerror(errno));
+    if (flock(fd, LOCK_EX | LOCK_NB) != 0) {
+        int e = errno;
+        char pid[32] = "";
+        ssize_t n = pread(fd, pid, sizeof pid - 1, 0);
+        close(fd);
+        if (n > 0) pid[n] = 0;
+        pid[strcspn(pid, "\n")] = 0;
+        if (e == EWOULDBLOCK)
+            return vx_err_set(err, VX_EBUSY, "data_dir_locked",
+                              "the data dir %s is in use by another voxeld (pid %s): one daemon per data dir",
+                              s->dir, pid[0] ? pid : "unknown");
+        return vx_err_set(err, VX_EIO, "data_dir_lock", "cannot lock %s: %s", p, strerror(e));
+    }
+    char pid[32];
+    int n = snprintf(pid, sizeof pid, "%d\n", (int)getpid());
+    /* Best effort: the lock itself is what counts, and a full disk must not
+     * stop the daemon from starting (it then serves reads). */
+    if (ftruncate(fd, 0) != 0 || pwrite(fd, pid, (size_t)n, 0) != n)
+        VX_WARN("store.lock_pid_unwritten", "error=%d", errno);
+    s->lock_fd = fd;
+    return 0;
+}
+
 vx_store *vx_store_open(const char *data_dir, const vx_store_desc *desc, vx_err *err)
 {
     vx_store *s = calloc(1, sizeof *s);
@@ -227,12 +263,17 @@ vx_store *vx_store_open(const char *data_dir, const vx_store_desc *desc, vx_err 
         return NULL;
     }
     if (desc) s->desc = *desc;
+    s->lock_fd = -1;
     pthread_mutex_init(&s->lock, NULL);
     static const char *subs[] = {"", "/meshes", "/results", "/tmp"};
     for (size_t i = 0; i < 4; i++) {
         char p[2100];
         snprintf(p, sizeof p, "%s%s", s->dir, subs[i]);
         if (vx_mkdirs(p, err)) {
+            vx_store_close(s);
+            return NULL;
+        }
+        if (i == 0 && lock_dir(s, err)) { /* before anything in it is touched */
             vx_store_close(s);
             return NULL;
         }
@@ -258,6 +299,7 @@ void vx_store_close(vx_store *s)
     free(s->meshes);
     free(s->results);
     pthread_mutex_destroy(&s->lock);
+    if (s->lock_fd >= 0) close(s->lock_fd); /* drops the flock */
     free(s);
 }
 
@@ -291,7 +333,10 @@ vx_upload *vx_upload_begin(vx_store *s, vx_err *err)
     snprintf(u->path, sizeof u->path, "%s/tmp/upload-%lu-%lu", s->dir, (unsigned long)getpid(), seq);
     u->fd = open(u->path, O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0640);
     if (u->fd < 0) {
-        vx_err_set(err, VX_EIO, "upload_failed", "create %s: %s", u->path, strerror(errno));
+        int e = errno;
+        VX_ERROR("store.upload_create_failed", "path=%s error=%d", u->path, e);
+        vx_err_set(err, vx_err_io_kind(e), e == ENOSPC ? "insufficient_storage" : "upload_failed",
+                   "cannot store the upload: %s", strerror(e));
         free(u);
         return NULL;
     }
@@ -305,7 +350,11 @@ static int upload_flush(vx_upload *u, vx_err *err)
     while (off < u->nbuf) {
         ssize_t n = write(u->fd, u->buf + off, u->nbuf - off);
         if (n < 0 && errno == EINTR) continue;
-        if (n <= 0) return vx_err_set(err, VX_EIO, "upload_failed", "write: %s", strerror(errno));
+        if (n <= 0) {
+            int e = n == 0 ? ENOSPC : errno;
+            return vx_err_set(err, vx_err_io_kind(e), e == ENOSPC || e == EDQUOT ? "insufficient_storage" : "upload_failed",
+                              "cannot store the upload: %s", strerror(e));
+        }
         off += (size_t)n;
     }
     u->nbuf = 0;
@@ -347,7 +396,8 @@ int vx_upload_finish(vx_upload *u, char id[65], vx_err *err)
 {
     if (upload_flush(u, err)) return -1;
     if (fsync(u->fd) != 0)
-        return vx_err_set(err, VX_EIO, "upload_failed", "fsync: %s", strerror(errno));
+        return vx_err_set(err, vx_err_io_kind(errno), errno == ENOSPC ? "insufficient_storage" : "upload_failed",
+                          "cannot store the upload: %s", strerror(errno));
     uint8_t digest[SHA256_DIGEST_SIZE];
     sha256_digest(&u->sha, sizeof digest, digest);
     for (int i = 0; i < SHA256_DIGEST_SIZE; i++) sprintf(id + 2 * i, "%02x", digest[i]);
@@ -388,7 +438,9 @@ int vx_store_mesh_commit(vx_store *s, vx_upload *u, const char *id, const char *
     if (!text) {
         vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory");
     } else if (rename(u->path, path) != 0) {
-        vx_err_set(err, VX_EIO, "store_failed", "rename %s: %s", path, strerror(errno));
+        int e = errno;
+        VX_ERROR("store.rename_failed", "path=%s error=%d", path, e);
+        vx_err_set(err, vx_err_io_kind(e), "store_failed", "cannot store the mesh: %s", strerror(e));
     } else if (vx_fsync_dir(dir, err) == 0 && vx_write_atomic(mpath, text, strlen(text), err) == 0) {
         cJSON *copy = cJSON_Duplicate(meta, 1);
         if (copy && mesh_insert(s, id, ext, copy) == 0) rc = 0;

@@ -1,5 +1,6 @@
 #include "util/err.h"
 
+#include <errno.h>
 #include <stdio.h>
 #include <string.h>
 
@@ -29,12 +30,17 @@ void vx_err_clear(vx_err *err)
     err->message[0] = 0;
 }
 
+vx_err_kind vx_err_io_kind(int errnum)
+{
+    return errnum == ENOSPC || errnum == EDQUOT ? VX_ENOSPC : VX_EIO;
+}
+
 const char *vx_err_kind_name(vx_err_kind kind)
 {
     static const char *names[] = {"ok",       "invalid", "unprocessable", "too_big",
                                   "not_found", "conflict", "media",        "busy",
                                   "canceled", "timeout",  "gpu",          "io",
-                                  "internal"};
+                                  "internal", "no_space"};
     if ((unsigned)kind < sizeof names / sizeof names[0]) return names[kind];
     return "unknown";
 }

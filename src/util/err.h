@@ -24,6 +24,7 @@ typedef enum vx_err_kind {
     VX_EGPU,        /* GL error, out of GPU memory, context lost */
     VX_EIO,         /* file system error (500) */
     VX_EINTERNAL,   /* a bug or an allocation failure (500) */
+    VX_ENOSPC,      /* the data dir is full or under its free-space floor (507) */
 } vx_err_kind;
 
 typedef struct vx_err {
@@ -38,6 +39,8 @@ int vx_err_set(vx_err *err, vx_err_kind kind, const char *code, const char *fmt,
 int vx_err_setv(vx_err *err, vx_err_kind kind, const char *code, const char *fmt, va_list ap);
 /* Resets err to VX_EOK. */
 void vx_err_clear(vx_err *err);
+/* VX_ENOSPC for ENOSPC / EDQUOT, else VX_EIO: the kind of a failed write. */
+vx_err_kind vx_err_io_kind(int errnum);
 /* Short name of a kind, for logs. */
 const char *vx_err_kind_name(vx_err_kind kind);
 

@@ -8,33 +8,45 @@
 #include <string.h>
 #include <sys/stat.h>
 #include <time.h>
+#include <sys/statvfs.h>
 #include <unistd.h>
+
+#include "util/log.h"
+
+/* Logs the path (operators need it) and fills err without it (clients must
+ * not see server paths); the kind follows errno (ENOSPC: VX_ENOSPC). */
+static int io_fail(vx_err *err, const char *code, const char *op, const char *path)
+{
+    int e = errno;
+    char q[600];
+    VX_WARN("fs.failed", "op=%s path=%s error=%d", op, vx_log_quote(q, sizeof q, path), e);
+    return vx_err_set(err, vx_err_io_kind(e), code, "%s failed: %s", op, strerror(e));
+}
 
 int vx_mkdirs(const char *path, vx_err *err)
 {
     char buf[4096];
     if (snprintf(buf, sizeof buf, "%s", path) >= (int)sizeof buf)
-        return vx_err_set(err, VX_EIO, "path_too_long", "path too long: %s", path);
+        return vx_err_set(err, VX_EIO, "path_too_long", "a configured path is too long");
     for (char *p = buf + 1; *p; p++) {
         if (*p != '/') continue;
         *p = 0;
-        if (mkdir(buf, 0750) != 0 && errno != EEXIST)
-            return vx_err_set(err, VX_EIO, "mkdir_failed", "mkdir %s: %s", buf, strerror(errno));
+        if (mkdir(buf, 0750) != 0 && errno != EEXIST) return io_fail(err, "mkdir_failed", "mkdir", buf);
         *p = '/';
     }
-    if (mkdir(buf, 0750) != 0 && errno != EEXIST)
-        return vx_err_set(err, VX_EIO, "mkdir_failed", "mkdir %s: %s", buf, strerror(errno));
+    if (mkdir(buf, 0750) != 0 && errno != EEXIST) return io_fail(err, "mkdir_failed", "mkdir", buf);
     return 0;
 }
 
 int vx_fsync_dir(const char *dir, vx_err *err)
 {
     int fd = open(dir, O_RDONLY | O_DIRECTORY | O_CLOEXEC);
-    if (fd < 0) return vx_err_set(err, VX_EIO, "fsync_failed", "open %s: %s", dir, strerror(errno));
+    if (fd < 0) return io_fail(err, "fsync_failed", "open directory", dir);
     int rc = fsync(fd);
     int e = errno;
     close(fd);
-    if (rc != 0) return vx_err_set(err, VX_EIO, "fsync_failed", "fsync %s: %s", dir, strerror(e));
+    errno = e;
+    if (rc != 0) return io_fail(err, "fsync_failed", "fsync directory", dir);
     return 0;
 }
 
@@ -43,29 +55,33 @@ int vx_write_atomic(const char *path, const void *data, size_t len, vx_err *err)
     char tmp[4096], dir[4096];
     snprintf(tmp, sizeof tmp, "%s.tmp.%d", path, (int)gettid());
     int fd = open(tmp, O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0640);
-    if (fd < 0) return vx_err_set(err, VX_EIO, "write_failed", "open %s: %s", tmp, strerror(errno));
+    if (fd < 0) return io_fail(err, "write_failed", "create", tmp);
     const char *p = data;
     size_t left = len;
     while (left) {
         ssize_t n = write(fd, p, left);
         if (n < 0 && errno == EINTR) continue;
         if (n <= 0) {
-            int e = errno;
+            int e = n == 0 ? ENOSPC : errno;
             close(fd);
             unlink(tmp);
-            return vx_err_set(err, VX_EIO, "write_failed", "write %s: %s", tmp, strerror(e));
+            errno = e;
+            return io_fail(err, "write_failed", "write", tmp);
         }
         p += n;
         left -= (size_t)n;
     }
     if (fsync(fd) != 0 || close(fd) != 0) {
+        int e = errno;
         unlink(tmp);
-        return vx_err_set(err, VX_EIO, "write_failed", "fsync %s: %s", tmp, strerror(errno));
+        errno = e;
+        return io_fail(err, "write_failed", "fsync", tmp);
     }
     if (rename(tmp, path) != 0) {
         int e = errno;
         unlink(tmp);
-        return vx_err_set(err, VX_EIO, "write_failed", "rename %s: %s", path, strerror(e));
+        errno = e;
+        return io_fail(err, "write_failed", "rename", path);
     }
     snprintf(dir, sizeof dir, "%s", path);
     char *slash = strrchr(dir, '/');
@@ -77,7 +93,7 @@ char *vx_read_file(const char *path, size_t max, size_t *len, vx_err *err)
 {
     FILE *f = fopen(path, "rbe");
     if (!f) {
-        vx_err_set(err, errno == ENOENT ? VX_ENOTFOUND : VX_EIO, "read_failed", "open %s: %s", path,
+        vx_err_set(err, errno == ENOENT ? VX_ENOTFOUND : VX_EIO, "read_failed", "cannot open the file: %s",
                    strerror(errno));
         return NULL;
     }
@@ -88,7 +104,7 @@ char *vx_read_file(const char *path, size_t max, size_t *len, vx_err *err)
             if (cap > max) {
                 free(buf);
                 fclose(f);
-                vx_err_set(err, VX_ETOOBIG, "file_too_big", "%s is larger than %zu bytes", path, max);
+                vx_err_set(err, VX_ETOOBIG, "file_too_big", "the file is larger than %zu bytes", max);
                 return NULL;
             }
             char *nb = realloc(buf, cap * 2);
@@ -104,7 +120,7 @@ char *vx_read_file(const char *path, size_t max, size_t *len, vx_err *err)
     fclose(f);
     if (bad) {
         free(buf);
-        vx_err_set(err, VX_EIO, "read_failed", "read %s failed", path);
+        vx_err_set(err, VX_EIO, "read_failed", "reading the file failed");
         return NULL;
     }
     buf[n] = 0;
@@ -196,5 +212,13 @@ int vx_parse_size(const char *s, uint64_t *out)
     if (*end) return -1;
     if (v > UINT64_MAX / mul) return -1;
     *out = v * mul;
+    return 0;
+}
+
+int vx_disk_free(const char *dir, uint64_t *free_bytes)
+{
+    struct statvfs sv;
+    if (statvfs(dir, &sv) != 0) return -1;
+    *free_bytes = (uint64_t)sv.f_bavail * (uint64_t)sv.f_frsize;
     return 0;
 }

@@ -23,6 +23,8 @@ uint64_t vx_tree_bytes(const char *path);
 double vx_now(void);
 double vx_mono(void);
 void vx_rfc3339(double t, char out[32]);
+/* Bytes an unprivileged process may still write on dir's file system; 0 or -1. */
+int vx_disk_free(const char *dir, uint64_t *free_bytes);
 /* Parses a size with an optional K/M/G/T suffix (powers of 1024); 0 or -1. */
 int vx_parse_size(const char *s, uint64_t *out);
 

@@ -155,10 +155,10 @@ CASES = [
                           content_type="application/json"), None, False),
     ("readyz 503", dict(method="GET", path="/readyz", status=503,
                         content_type="application/json"),
-     {"status": "not_ready", "checks": {"gl": False, "queue": True, "data_dir": True}}, False),
+     {"status": "not_ready", "checks": {"gl": False, "queue": True, "data_dir": True, "disk_space": True}}, False),
     ("readyz 200 with a failed check", dict(method="GET", path="/readyz", status=200,
                                             content_type="application/json"),
-     {"status": "ready", "checks": {"gl": False, "queue": True, "data_dir": True}}, True),
+     {"status": "ready", "checks": {"gl": False, "queue": True, "data_dir": True, "disk_space": True}}, True),
 ]
 
 passed = failed = 0

@@ -1,4 +1,5 @@
-/* Journal: append + replay in order, torn tail ignored, compaction. */
+/* Journal: append + replay in order, torn tail cut, torn writes cut back,
+ * CRC framing, salvage of glued records, compaction. */
 #include <setjmp.h>
 #include <stdarg.h>
 #include <stddef.h>
@@ -6,6 +7,9 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <signal.h>
+#include <sys/resource.h>
+#include <sys/stat.h>
 #include <unistd.h>
 #include <cmocka.h>
 
@@ -20,7 +24,8 @@ typedef struct seen {
 static void collect(const cJSON *rec, void *ud)
 {
     seen *s = ud;
-    s->values[s->n++] = (int)cJSON_GetNumberValue(cJSON_GetObjectItem(rec, "v"));
+    const cJSON *v = cJSON_GetObjectItem(rec, "v");
+    s->values[s->n++] = cJSON_IsNumber(v) ? v->valueint : -1;
 }
 
 static char dir[256];
@@ -105,12 +110,139 @@ static void test_compact(void **state)
     vx_journal_close(j);
 }
 
+static long file_size(const char *path)
+{
+    struct stat st;
+    return stat(path, &st) == 0 ? (long)st.st_size : -1;
+}
+
+static void append_raw(const char *path, const char *text)
+{
+    FILE *f = fopen(path, "a");
+    fputs(text, f);
+    fclose(f);
+}
+
+/* A crash in the middle of a write leaves a torn last line: replay cuts it
+ * off, so the next record starts on a line of its own. */
+static void test_torn_tail_is_cut(void **state)
+{
+    char path[300];
+    snprintf(path, sizeof path, "%s/d.log", dir);
+    vx_err err;
+    vx_journal *j = vx_journal_open(path, &err);
+    append_v(j, 1);
+    append_v(j, 2);
+    vx_journal_close(j);
+    long good = file_size(path);
+    append_raw(path, "#0badf00d {\"v\":");
+    j = vx_journal_open(path, &err);
+    seen s = {0};
+    assert_int_equal(vx_journal_replay(j, collect, &s, &err), 2);
+    assert_int_equal(file_size(path), good);
+    append_v(j, 3);
+    vx_journal_close(j);
+    j = vx_journal_open(path, &err);
+    seen s2 = {0};
+    assert_int_equal(vx_journal_replay(j, collect, &s2, &err), 3);
+    assert_int_equal(s2.values[2], 3);
+    vx_journal_close(j);
+}
+
+/* A write that fails part-way (here the file-size limit, as ENOSPC would)
+ * leaves nothing behind: the record acknowledged after it survives. */
+static void test_failed_write_is_cut_back(void **state)
+{
+    char path[300];
+    snprintf(path, sizeof path, "%s/e.log", dir);
+    vx_err err;
+    vx_journal *j = vx_journal_open(path, &err);
+    append_v(j, 1);
+    long good = file_size(path);
+    struct rlimit old, lim;
+    getrlimit(RLIMIT_FSIZE, &old);
+    signal(SIGXFSZ, SIG_IGN);
+    lim = old;
+    lim.rlim_cur = (rlim_t)good + 8; /* room for 8 bytes of the next line */
+    assert_int_equal(setrlimit(RLIMIT_FSIZE, &lim), 0);
+    cJSON *r = cJSON_CreateObject();
+    cJSON_AddNumberToObject(r, "v", 2);
+    cJSON_AddStringToObject(r, "pad", "a record longer than the eight bytes that fit");
+    assert_int_equal(vx_journal_append(j, r, &err), -1);
+    cJSON_Delete(r);
+    assert_int_equal(setrlimit(RLIMIT_FSIZE, &old), 0);
+    assert_int_equal(file_size(path), good);
+    append_v(j, 3); /* acknowledged after the failure */
+    vx_journal_close(j);
+    j = vx_journal_open(path, &err);
+    seen s = {0};
+    assert_int_equal(vx_journal_replay(j, collect, &s, &err), 2);
+    assert_int_equal(s.values[0], 1);
+    assert_int_equal(s.values[1], 3);
+    vx_journal_close(j);
+}
+
+/* A record whose bytes changed fails its CRC and is skipped; its
+ * neighbours are read. */
+static void test_crc_mismatch_skipped(void **state)
+{
+    char path[300];
+    snprintf(path, sizeof path, "%s/f.log", dir);
+    vx_err err;
+    vx_journal *j = vx_journal_open(path, &err);
+    for (int i = 1; i <= 3; i++) append_v(j, i);
+    vx_journal_close(j);
+    char *text = vx_read_file(path, 1 << 20, NULL, &err);
+    assert_non_null(text);
+    char *two = strstr(text, "\"v\":2}");
+    assert_non_null(two);
+    two[4] = '5'; /* still valid JSON, wrong CRC */
+    FILE *f = fopen(path, "w");
+    fputs(text, f);
+    fclose(f);
+    free(text);
+    j = vx_journal_open(path, &err);
+    seen s = {0};
+    assert_int_equal(vx_journal_replay(j, collect, &s, &err), 2);
+    assert_int_equal(s.values[0], 1);
+    assert_int_equal(s.values[1], 3);
+    vx_journal_close(j);
+}
+
+/* Journals written before failed writes were cut back can hold a fragment
+ * with a good record glued on: replay salvages the record, framed or not. */
+static void test_glued_record_salvaged(void **state)
+{
+    char path[300];
+    snprintf(path, sizeof path, "%s/g.log", dir);
+    vx_err err;
+    vx_journal *j = vx_journal_open(path, &err);
+    append_v(j, 1);
+    vx_journal_close(j);
+    append_raw(path, "#1234abcd {\"v\":9,\"pad\":\"tor");
+    j = vx_journal_open(path, &err);
+    /* no replay: the fragment stays, the next append is glued onto it */
+    append_v(j, 2);
+    vx_journal_close(j);
+    append_raw(path, "{\"job\":{\"i\":\"tor{\"job\":{\"id\":\"x\"}}\n");
+    j = vx_journal_open(path, &err);
+    seen s = {0};
+    assert_int_equal(vx_journal_replay(j, collect, &s, &err), 3);
+    assert_int_equal(s.values[0], 1);
+    assert_int_equal(s.values[1], 2);
+    vx_journal_close(j);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_append_replay),
         cmocka_unit_test(test_torn_tail_and_garbage),
         cmocka_unit_test(test_compact),
+        cmocka_unit_test(test_torn_tail_is_cut),
+        cmocka_unit_test(test_failed_write_is_cut_back),
+        cmocka_unit_test(test_crc_mismatch_skipped),
+        cmocka_unit_test(test_glued_record_salvaged),
     };
     return cmocka_run_group_tests(tests, setup, teardown);
 }
