@@ -114,6 +114,10 @@ struct vx_http {
     int stopping;
 };
 
+/* The data dir, scrubbed from every error message (clients never see
+ * server paths); set once by vx_http_start. */
+static const char *g_data_dir;
+
 /* ---- responses ----------------------------------------------------- */
 
 static int queue(struct MHD_Connection *c, req *r, unsigned status, struct MHD_Response *resp,
@@ -157,10 +161,13 @@ static int send_json(struct MHD_Connection *c, req *r, unsigned status, cJSON *d
 static int send_error_h(struct MHD_Connection *c, req *r, unsigned status, const char *code,
                         const char *message, const char *h1, const char *v1)
 {
+    char scrubbed[600];
+    snprintf(scrubbed, sizeof scrubbed, "%s", message);
+    vx_scrub_path(scrubbed, g_data_dir);
     cJSON *doc = cJSON_CreateObject();
     cJSON *e = cJSON_AddObjectToObject(doc, "error");
     cJSON_AddStringToObject(e, "code", code);
-    cJSON_AddStringToObject(e, "message", message);
+    cJSON_AddStringToObject(e, "message", scrubbed);
     if (status >= 500) VX_ERROR("http.error", "status=%u code=%s", status, code);
     return send_json(c, r, status, doc, h1, v1);
 }
@@ -978,6 +985,7 @@ vx_http *vx_http_start(const vx_http_desc *desc, vx_err *err)
         return NULL;
     }
     h->d = *desc;
+    g_data_dir = vx_store_dir(desc->store);
     const vx_config *cfg = desc->cfg;
     if (cfg->token[0]) {
         struct sha256_ctx ctx;

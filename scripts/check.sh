@@ -1,7 +1,9 @@
 #!/usr/bin/env bash
-# Builds voxeld twice and runs every test on each build:
+# Builds voxeld three times and runs every test on each build:
 #   build/       warnings as errors, all tests (unit, integration, deploy)
 #   build-asan/  AddressSanitizer + UndefinedBehaviorSanitizer, unit + integration
+#   build-fuzz/  clang + libFuzzer + ASan/UBSan: every tests/fuzz target for
+#                FUZZ_SECONDS (default 60) each (scripts/fuzz.sh)
 # This is the README's test command and what CI (.ci/run) runs.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -15,3 +17,5 @@ cmake -S . -B build-asan -DVX_WERROR=ON -DVX_SANITIZE=ON -DVX_BENCH=OFF -DCMAKE_
 cmake --build build-asan -j"$jobs"
 ASAN_OPTIONS=abort_on_error=0:detect_leaks=1 \
     ctest --test-dir build-asan --output-on-failure -j2 -L 'unit|integration'
+
+scripts/fuzz.sh

@@ -530,6 +530,7 @@ static void run_finish(vx_jobs *j, vx_job_run *r, int ok, const vx_err *e)
         } else {
             jb->state = e->kind == VX_ECANCELED ? ST_CANCELED : ST_FAILED;
             jb->error = *e;
+            vx_scrub_path(jb->error.message, vx_store_dir(j->desc.store));
         }
         cJSON_AddNumberToObject(r->stats, "run_ms", ms_between(0, run_s));
         cJSON_Delete(jb->stats);

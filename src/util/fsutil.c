@@ -222,3 +222,15 @@ int vx_disk_free(const char *dir, uint64_t *free_bytes)
     *free_bytes = (uint64_t)sv.f_bavail * (uint64_t)sv.f_frsize;
     return 0;
 }
+
+void vx_scrub_path(char *msg, const char *dir)
+{
+    size_t n = dir ? strlen(dir) : 0;
+    while (n > 1 && dir[n - 1] == '/') n--;
+    if (n < 2) return;
+    for (char *p = msg; (p = strstr(p, dir));) {
+        size_t cut = n + (p[n] == '/');
+        if (strncmp(p, dir, n) != 0) break;
+        memmove(p, p + cut, strlen(p + cut) + 1);
+    }
+}

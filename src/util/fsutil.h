@@ -25,6 +25,9 @@ double vx_mono(void);
 void vx_rfc3339(double t, char out[32]);
 /* Bytes an unprivileged process may still write on dir's file system; 0 or -1. */
 int vx_disk_free(const char *dir, uint64_t *free_bytes);
+/* Removes every occurrence of dir (and the '/' after it) from msg, in
+ * place: messages that reach clients name no server paths. */
+void vx_scrub_path(char *msg, const char *dir);
 /* Parses a size with an optional K/M/G/T suffix (powers of 1024); 0 or -1. */
 int vx_parse_size(const char *s, uint64_t *out);
 
