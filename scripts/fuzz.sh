@@ -6,12 +6,17 @@
 # build-fuzz/fuzz-out/<target>/. Part of scripts/check.sh.
 #   scripts/fuzz.sh [TARGET...]      default: every tests/fuzz/fuzz_* target
 #   FUZZ_SECONDS=600 FUZZ_JOBS=1 scripts/fuzz.sh fuzz_obj
+#   FUZZ_RUNS=10000000 scripts/fuzz.sh   stop each target after N runs instead
+#                                        (FUZZ_SECONDS still caps the time)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 secs=${FUZZ_SECONDS:-60}
+runs=${FUZZ_RUNS:--1}
 par=${FUZZ_JOBS:-$(nproc)}
+launcher=()
+if command -v ccache >/dev/null; then launcher=(-DCMAKE_C_COMPILER_LAUNCHER=ccache -DCMAKE_CXX_COMPILER_LAUNCHER=ccache); fi
 CC=clang CXX=clang++ cmake -S . -B build-fuzz -DVX_FUZZ=ON -DVX_TESTS=OFF -DVX_BENCH=OFF \
-    -DCMAKE_BUILD_TYPE=RelWithDebInfo >/dev/null
+    -DCMAKE_BUILD_TYPE=RelWithDebInfo "${launcher[@]}" >/dev/null
 cmake --build build-fuzz -j"$(nproc)" --target fuzz_all
 
 targets=("$@")
@@ -33,7 +38,7 @@ run_one() {
   # count reaches them on a few bytes of input.
   ASAN_OPTIONS=detect_leaks=1:allocator_may_return_null=0 \
   LSAN_OPTIONS=suppressions=$PWD/tests/lsan.supp \
-  build-fuzz/fuzz/"$t" "${dict[@]}" -max_total_time="$secs" -rss_limit_mb=2048 -malloc_limit_mb=1024 \
+  build-fuzz/fuzz/"$t" "${dict[@]}" -max_total_time="$secs" -runs="$runs" -rss_limit_mb=2048 -malloc_limit_mb=1024 \
       -timeout=10 -print_final_stats=1 -artifact_prefix="$dir/" "$dir/corpus" >"$dir/log" 2>&1
   local rc=$?
   local execs; execs=$(grep -o 'stat::number_of_executed_units: *[0-9]*' "$dir/log" | grep -o '[0-9]*$' || echo 0)
@@ -45,9 +50,9 @@ run_one() {
     return 1
   fi
   echo ok >"$dir/status"
-  echo "fuzz: $t ok: $execs runs in ${secs} s, coverage $cov edges"
+  echo "fuzz: $t ok: $execs runs, coverage $cov edges, peak RSS $(grep -o 'stat::peak_rss_mb: *[0-9]*' "$dir/log" | grep -o '[0-9]*$') MB"
 }
-export -f run_one; export out secs
+export -f run_one; export out secs runs
 printf '%s\n' "${targets[@]}" | xargs -P "$par" -I{} bash -c 'run_one {}' || true
 npass=0; nfail=0
 for t in "${targets[@]}"; do
