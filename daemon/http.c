@@ -24,7 +24,9 @@
  *     response queued), so the two never write at once. The socket is then
  *     shut for writing, and for reading half a second later: libmicrohttpd
  *     reads EOF and closes it, and the client has had time to read the 408
- *     before the close resets the connection.
+ *     before the close resets the connection. Neither deadline is applied
+ *     while bytes wait unread in the kernel: then libmicrohttpd's thread is
+ *     busy (a handler parsing a large mesh), not the client slow.
  *   - keeps headroom: when the open connections reach 90% of
  *     --max-connections, it closes the oldest HEAD (with a 408) and IDLE
  *     connections until they are down to 80%. A client that sends its head
@@ -56,6 +58,7 @@
 #include <strings.h>
 #include <netinet/in.h>
 #include <netinet/tcp.h>
+#include <sys/ioctl.h>
 #include <sys/socket.h>
 #include <sys/stat.h>
 #include <unistd.h>
@@ -430,6 +433,15 @@ static void *on_uri(void *cls, const char *uri, struct MHD_Connection *c)
     return NULL;
 }
 
+/* 1 when bytes wait in the kernel that libmicrohttpd has not read yet: its
+ * thread is busy (a long handler), so a slow head or body is not the
+ * client's doing and is not held against it. */
+static int unread(const vconn *vc)
+{
+    int n = 0;
+    return ioctl(vc->fd, FIONREAD, &n) == 0 && n > 0;
+}
+
 static int by_phase_time(const void *a, const void *b)
 {
     double x = (*(vconn *const *)a)->t_phase, y = (*(vconn *const *)b)->t_phase;
@@ -464,7 +476,8 @@ static void sweep(vx_http *h, vconn **cand)
                 }
             }
         }
-        if (vc->phase == P_HEAD && cfg->header_timeout_s > 0 && now - vc->t_phase > cfg->header_timeout_s) {
+        if (vc->phase == P_HEAD && cfg->header_timeout_s > 0 && now - vc->t_phase > cfg->header_timeout_s &&
+            !unread(vc)) {
             char m[96];
             snprintf(m, sizeof m, "the request head did not arrive within %g s", cfg->header_timeout_s);
             size_t n = kill_conn(vc, 408, "request_timeout", m, 0);
@@ -478,7 +491,7 @@ static void sweep(vx_http *h, vconn **cand)
                 vc->win_bytes = vc->body_bytes;
             } else if (now - vc->win_t0 >= BODY_WINDOW_S) {
                 double rate = (double)(vc->body_bytes - vc->win_bytes) / (now - vc->win_t0);
-                if (rate < (double)cfg->min_body_rate) {
+                if (rate < (double)cfg->min_body_rate && !unread(vc)) {
                     char m[96];
                     snprintf(m, sizeof m, "the body arrived slower than %llu bytes/s",
                              (unsigned long long)cfg->min_body_rate);
@@ -497,8 +510,10 @@ static void sweep(vx_http *h, vconn **cand)
     size_t high = max >= 10 ? max - max / 10 : max, low = max >= 10 ? max - max / 5 : max - 1;
     if (live < high || !cand) return;
     qsort(cand, ncand, sizeof *cand, by_phase_time);
-    for (size_t i = 0; i < ncand && live > low; i++, live--) {
+    for (size_t i = 0; i < ncand && live > low; i++) {
         vconn *vc = cand[i];
+        if (unread(vc)) continue;
+        live--;
         if (vc->phase == P_HEAD) {
             size_t n = kill_conn(vc, 408, "request_timeout", "the server is busy and the request head was not complete", 1);
             note_head_kill(408, now - vc->t_phase, n, "evicted");
