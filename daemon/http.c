@@ -345,6 +345,7 @@ static int hold(vx_http *h, struct MHD_Connection *c, req *r, const char *jid, d
 #define BODY_WINDOW_S 2.0 /* then each window must carry min_body_rate * window */
 #define KILL_LINGER_S 0.5 /* between our answer and closing the read side */
 #define SWEEP_US 100000
+#define EVICT_MIN_AGE_S 0.25 /* a head or idle time this young is nobody's attack */
 
 static vconn *conn_of(struct MHD_Connection *c)
 {
@@ -512,7 +513,7 @@ static void sweep(vx_http *h, vconn **cand)
     qsort(cand, ncand, sizeof *cand, by_phase_time);
     for (size_t i = 0; i < ncand && live > low; i++) {
         vconn *vc = cand[i];
-        if (unread(vc)) continue;
+        if (now - vc->t_phase < EVICT_MIN_AGE_S || unread(vc)) continue;
         live--;
         if (vc->phase == P_HEAD) {
             size_t n = kill_conn(vc, 408, "request_timeout", "the server is busy and the request head was not complete", 1);
