@@ -46,6 +46,7 @@ static const opt_def opts[] = {
     {"min-body-rate", T_SIZE, F(min_body_rate), 0,
      "slowest request body, bytes/s over 2 s windows after a 2 s grace (default 1024; 0 = off)"},
     {"max-uri-bytes", T_SIZE, F(max_uri_bytes), 0, "longest request target, path and query (default 16K)"},
+    {"max-header-bytes", T_SIZE, F(max_header_bytes), 0, "largest request head, all header lines (default 64K)"},
     {"reuse-port", T_BOOL, F(reuse_port), 0,
      "share the port with other processes (SO_REUSEPORT): yes or no (default)"},
     {"max-connections", T_SIZE, F(max_connections), 0, "open connections in all (default 512)"},
@@ -97,6 +98,7 @@ static void defaults(vx_config *c)
     c->header_timeout_s = 10;
     c->min_body_rate = 1024;
     c->max_uri_bytes = 16 << 10;
+    c->max_header_bytes = 64 << 10;
     c->max_connections = 512;
     c->max_connections_per_ip = 64;
     c->max_image_pixels = 8192ull * 8192ull;

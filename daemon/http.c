@@ -35,7 +35,8 @@
  *     waits in the listen backlog, ahead of the victims' reconnections,
  *     for at most one sweep) and is served.
  * A request line longer than --max-uri-bytes gets a JSON 414 the same way
- * (from the URI log callback, in the connection's own thread). What
+ * (from the URI log callback, in the connection's own thread), and a head
+ * larger than --max-header-bytes a JSON 431 from the access handler. What
  * libmicrohttpd still answers itself, with its own HTML body, is listed in
  * the README (Limits) and api/openapi.yaml: a request line or head too long
  * for the connection's 256 KiB buffer (414, 431), a malformed header line
@@ -612,6 +613,7 @@ static int h_info(vx_http *h, struct MHD_Connection *c, req *r)
     cJSON_AddNumberToObject(l, "header_timeout_s", cfg->header_timeout_s);
     cJSON_AddNumberToObject(l, "min_body_rate", (double)cfg->min_body_rate);
     cJSON_AddNumberToObject(l, "max_uri_bytes", (double)cfg->max_uri_bytes);
+    cJSON_AddNumberToObject(l, "max_header_bytes", (double)cfg->max_header_bytes);
     cJSON_AddNumberToObject(l, "max_connections_per_ip", (double)cfg->max_connections_per_ip);
     cJSON_AddNumberToObject(l, "max_image_pixels", (double)cfg->max_image_pixels);
     cJSON_AddNumberToObject(l, "max_job_memory_bytes", (double)cfg->max_job_memory);
@@ -917,6 +919,9 @@ static int check_framing(struct MHD_Connection *c, req *r, const char *version)
 
 static int first_call(vx_http *h, struct MHD_Connection *c, req *r, const char *version)
 {
+    const union MHD_ConnectionInfo *ci = MHD_get_connection_info(c, MHD_CONNECTION_INFO_REQUEST_HEADER_SIZE);
+    if (ci && ci->header_size > h->d.cfg->max_header_bytes)
+        return send_error(c, r, 431, "header_too_large", "the request head is larger than max-header-bytes");
     int rc = check_framing(c, r, version);
     if (rc >= 0) return rc;
     if (r->route == VX_R_UNKNOWN) return send_error(c, r, 404, "not_found", "no such route");
