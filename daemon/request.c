@@ -200,8 +200,10 @@ int vx_req_query_add(vx_req_query *q, vx_route rt, const char *method, const cha
     if (p == Q_NONE) return 0;
     static const char *names[] = {"", "limit", "after", "state", "wait"};
     const char *name = names[p];
-    int *seen = p == Q_LIMIT ? &q->has_limit : p == Q_AFTER ? &q->has_after : p == Q_STATE ? &q->has_state
-                                                                                        : &q->has_wait;
+    int *seen = p == Q_LIMIT   ? &q->has_limit
+                : p == Q_AFTER ? &q->has_after
+                : p == Q_STATE ? &q->has_state
+                               : &q->has_wait;
     if (*seen) {
         snprintf(msg, msgn, "query parameter %s is given more than once", name);
         return -1;
