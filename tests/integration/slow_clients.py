@@ -43,14 +43,20 @@ def drip(port, seconds, out, addrs, per_addr):
                 conns.append([connect(port, a), a, time.time(), 0, b""])
             except OSError:
                 conns.append([None, a, time.time(), 0, b""])
+    next_byte = time.time()
     while time.time() < t_end:
+        # Answers are looked for every 50 ms, head bytes sent every 0.5 s.
+        send_now = time.time() >= next_byte
+        if send_now:
+            next_byte += 0.5
         for c in conns:
             s = c[0]
             if s is None:
-                try:
-                    c[0], c[2], c[3], c[4] = connect(port, c[1]), time.time(), 0, b""
-                except OSError:
-                    pass
+                if send_now:
+                    try:
+                        c[0], c[2], c[3], c[4] = connect(port, c[1]), time.time(), 0, b""
+                    except OSError:
+                        pass
                 continue
             closed = False
             try:
@@ -62,7 +68,7 @@ def drip(port, seconds, out, addrs, per_addr):
                 pass
             except OSError:
                 closed = True
-            if not closed and c[3] < len(HEAD):
+            if not closed and send_now and c[3] < len(HEAD):
                 try:
                     s.send(HEAD[c[3]:c[3] + 1])
                     c[3] += 1
@@ -76,7 +82,7 @@ def drip(port, seconds, out, addrs, per_addr):
                 done.append({"addr": c[1], "seconds": time.time() - c[2], "status_line": line, "body": body})
                 s.close()
                 c[0] = None
-        time.sleep(0.5)
+        time.sleep(0.05)
     for c in conns:
         if c[0] is not None:
             c[0].close()
@@ -113,7 +119,7 @@ def keepalive_drip(port, seconds):
     first = s.recv(4096)
     t0 = time.time()
     s.setblocking(False)
-    got, i = b"", 0
+    got, i, next_byte = b"", 0, t0
     while time.time() - t0 < seconds:
         try:
             b = s.recv(4096)
@@ -125,12 +131,14 @@ def keepalive_drip(port, seconds):
             pass
         except OSError:
             break
-        try:
-            s.send(HEAD[i:i + 1])
-            i += 1
-        except OSError:
-            break
-        time.sleep(0.5)
+        if time.time() >= next_byte:
+            next_byte += 0.5
+            try:
+                s.send(HEAD[i:i + 1])
+                i += 1
+            except OSError:
+                break
+        time.sleep(0.05)
     print(json.dumps({"first": first.decode("latin-1").split("\r\n")[0], "seconds": time.time() - t0,
                       "response": got.decode("latin-1")}))
 

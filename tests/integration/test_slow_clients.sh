@@ -25,8 +25,8 @@ check "dripped head: within 3 s" jq -e '.answered[0].seconds <= 3' "$TMP/one.jso
 # --- the same on a keep-alive connection, after a first answer ---
 $SLOW keepalive-drip "$PORT" 6 >"$TMP/ka.json"
 check "keep-alive: first answer 200" jq -e '.first | test("200")' "$TMP/ka.json"
-check "keep-alive: dripped second head gets 408 within 3.6 s ($(jq -c . "$TMP/ka.json" | head -c 200))" \
-    jq -e '(.response | test("^HTTP/1.1 408")) and .seconds <= 3.6' "$TMP/ka.json"
+check "keep-alive: dripped second head gets 408 within 3.5 s ($(jq -c . "$TMP/ka.json" | head -c 200))" \
+    jq -e '(.response | test("^HTTP/1.1 408")) and .seconds <= 3.5' "$TMP/ka.json"
 
 # --- a body that stops: 408 within the grace + one window (2 + 2 s) ---
 $SLOW stall "$PORT" 'POST /v1/jobs HTTP/1.1\r\nHost: x\r\nContent-Type: application/json\r\nContent-Length: 1000\r\n\r\n{"mesh":"' 8 >"$TMP/stall.json"
