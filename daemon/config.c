@@ -41,6 +41,14 @@ static const opt_def opts[] = {
      "longest a request is held by ?wait, seconds (default 60)"},
     {"connection-timeout", T_SECONDS, F(connection_timeout_s), 0,
      "idle connections are closed after this, seconds (default 30)"},
+    {"header-timeout", T_SECONDS, F(header_timeout_s), 0,
+     "the whole request head must arrive within this, seconds (default 10; 0 = off)"},
+    {"min-body-rate", T_SIZE, F(min_body_rate), 0,
+     "slowest request body, bytes/s over 2 s windows after a 2 s grace (default 1024; 0 = off)"},
+    {"max-uri-bytes", T_SIZE, F(max_uri_bytes), 0, "longest request target, path and query (default 16K)"},
+    {"max-header-bytes", T_SIZE, F(max_header_bytes), 0, "largest request head, all header lines (default 64K)"},
+    {"reuse-port", T_BOOL, F(reuse_port), 0,
+     "share the port with other processes (SO_REUSEPORT): yes or no (default)"},
     {"max-connections", T_SIZE, F(max_connections), 0, "open connections in all (default 512)"},
     {"max-connections-per-ip", T_SIZE, F(max_connections_per_ip), 0,
      "open connections from one IP (default 64)"},
@@ -89,6 +97,10 @@ static void defaults(vx_config *c)
     c->job_timeout_s = 600;
     c->request_timeout_s = 60;
     c->connection_timeout_s = 30;
+    c->header_timeout_s = 10;
+    c->min_body_rate = 1024;
+    c->max_uri_bytes = 16 << 10;
+    c->max_header_bytes = 64 << 10;
     c->max_connections = 512;
     c->max_connections_per_ip = 64;
     c->max_image_pixels = 8192ull * 8192ull;
@@ -281,6 +293,10 @@ int vx_config_load(vx_config *c, int argc, char **argv)
             fprintf(stderr, "voxeld: token file %s is empty\n", c->token_file);
             return -1;
         }
+    }
+    if (c->max_connections < 1 || c->max_connections > 1000000) {
+        fprintf(stderr, "voxeld: max-connections must be from 1 to 1000000\n");
+        return -1;
     }
     if (c->max_queued_jobs < 1) {
         fprintf(stderr, "voxeld: max-queued-jobs must be at least 1\n");

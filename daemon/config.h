@@ -27,6 +27,11 @@ typedef struct vx_config {
     double job_timeout_s;
     double request_timeout_s;    /* cap on how long ?wait holds a request */
     double connection_timeout_s; /* idle connections are closed after this */
+    double header_timeout_s; /* accept (or the previous answer) to the end of the head; 0 = off */
+    uint64_t min_body_rate;  /* bytes/s a request body must keep up; 0 = off */
+    uint64_t max_uri_bytes;  /* longest request target: a longer one gets 414 */
+    uint64_t max_header_bytes; /* largest request head: a larger one gets 431 */
+    int reuse_port;          /* SO_REUSEPORT on the listening socket */
     uint64_t max_connections;
     uint64_t max_connections_per_ip;
     uint64_t max_image_pixels;

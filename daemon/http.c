@@ -6,7 +6,42 @@
  * the error instead of sending the body. Body calls stream into the store or
  * a bounded buffer and always consume every chunk. The last call answers.
  * A ?wait request is suspended and resumed by the job hook or the timer
- * thread; the handler then answers as it would have without waiting. */
+ * thread; the handler then answers as it would have without waiting.
+ *
+ * Slow clients (issue #10). libmicrohttpd 0.9.75's connection timeout only
+ * measures inactivity, so a head sent a byte a second would hold its slot
+ * forever. Every connection is tracked from accept (NOTIFY_CONNECTION) in
+ * one of four phases: HEAD (the request head is arriving: from accept, or
+ * from the first byte after the previous answer), BODY (the access handler
+ * has the head and a body is arriving), BUSY (we are answering, or the
+ * request is held by ?wait) and IDLE (keep-alive, no byte since the last
+ * answer). A sweeper thread, every 100 ms:
+ *   - answers a HEAD older than --header-timeout, and a BODY whose rate over
+ *     a 2 s window (after a 2 s grace) is under --min-body-rate, with a
+ *     canned JSON 408 written straight to the socket. libmicrohttpd only
+ *     reads in those phases, and the handler's phase changes and the
+ *     sweeper's writes share one lock (a killed connection never gets a
+ *     response queued), so the two never write at once. The socket is then
+ *     shut for writing, and for reading half a second later: libmicrohttpd
+ *     reads EOF and closes it, and the client has had time to read the 408
+ *     before the close resets the connection. Neither deadline is applied
+ *     while bytes wait unread in the kernel: then libmicrohttpd's thread is
+ *     busy (a handler parsing a large mesh), not the client slow.
+ *   - keeps headroom: when the open connections reach 90% of
+ *     --max-connections, it closes the oldest HEAD (with a 408) and IDLE
+ *     connections until they are down to 80%. A client that sends its head
+ *     at once is BUSY within a millisecond and is never a victim, so
+ *     however many addresses drip heads, a fresh client finds a slot (or
+ *     waits in the listen backlog, ahead of the victims' reconnections,
+ *     for at most one sweep) and is served.
+ * A request line longer than --max-uri-bytes gets a JSON 414 the same way
+ * (from the URI log callback, in the connection's own thread), and a head
+ * larger than --max-header-bytes a JSON 431 from the access handler. What
+ * libmicrohttpd still answers itself, with its own HTML body, is listed in
+ * the README (Limits) and api/openapi.yaml: a request line or head too long
+ * for the connection's 256 KiB buffer (414, 431), a malformed header line
+ * or Content-Length (400), a chunk size over 64 bits (413), a bad chunk
+ * (400) and HTTP versions other than 1.x (505). */
 #include "http.h"
 
 #include <arpa/inet.h>
@@ -22,43 +57,17 @@
 #include <stdlib.h>
 #include <string.h>
 #include <strings.h>
+#include <netinet/in.h>
+#include <netinet/tcp.h>
+#include <sys/ioctl.h>
+#include <sys/socket.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
 #include "metrics.h"
+#include "request.h"
 #include "util/fsutil.h"
 #include "util/log.h"
-
-enum route {
-    R_UNKNOWN,
-    R_LIVEZ,
-    R_READYZ,
-    R_METRICS,
-    R_INFO,
-    R_MESHES,
-    R_MESH,
-    R_JOBS,
-    R_JOB,
-    R_RESULT,
-    R_RESULT_NAME,
-};
-
-static const struct {
-    const char *name; /* metrics label: the path template */
-    const char *allow;
-} routes[] = {
-    [R_UNKNOWN] = {"unmatched", ""},
-    [R_LIVEZ] = {"/livez", "GET, HEAD"},
-    [R_READYZ] = {"/readyz", "GET, HEAD"},
-    [R_METRICS] = {"/metrics", "GET, HEAD"},
-    [R_INFO] = {"/v1/info", "GET, HEAD"},
-    [R_MESHES] = {"/v1/meshes", "GET, HEAD, POST"},
-    [R_MESH] = {"/v1/meshes/{id}", "GET, HEAD, DELETE"},
-    [R_JOBS] = {"/v1/jobs", "GET, HEAD, POST"},
-    [R_JOB] = {"/v1/jobs/{id}", "GET, HEAD, DELETE"},
-    [R_RESULT] = {"/v1/jobs/{id}/result", "GET, HEAD"},
-    [R_RESULT_NAME] = {"/v1/jobs/{id}/result/{name}", "GET, HEAD"},
-};
 
 typedef enum body_kind { BODY_NONE, BODY_UPLOAD, BODY_JSON } body_kind;
 /* Declared upload types: model/obj is OBJ; text/plain is text, OBJ or .bpt
@@ -67,6 +76,25 @@ typedef enum body_kind { BODY_NONE, BODY_UPLOAD, BODY_JSON } body_kind;
 typedef enum media { MEDIA_SNIFF, MEDIA_OBJ, MEDIA_DRACO, MEDIA_TEXT, MEDIA_BPT } media;
 
 typedef struct req req;
+
+/* The phases of a connection (see the top of the file). */
+typedef enum cphase { P_HEAD, P_BODY, P_BUSY, P_IDLE } cphase;
+
+/* One open connection, from accept to close; all fields under vx_http.clock. */
+typedef struct vconn {
+    struct vconn *prev, *next;
+    int fd;
+    cphase phase;
+    double t_phase;       /* monotonic: when the phase began */
+    uint64_t body_bytes;  /* BODY: received so far */
+    int win_started;      /* BODY: the rate window is running */
+    double win_t0;
+    uint64_t win_bytes;
+    int killed;           /* answered (or closed) by us behind libmicrohttpd's back */
+    int kill_status;      /* the status we wrote, 0 for none */
+    int rd_closed;        /* shutdown(SHUT_RD) done */
+    double t_killed;
+} vconn;
 
 typedef struct waiter {
     req *r;
@@ -77,9 +105,12 @@ typedef struct waiter {
 } waiter;
 
 struct req {
-    enum route route;
+    vx_route route;
     char method[12];
-    char id[80], name[80];
+    char id[VX_REQ_ID_MAX], name[VX_REQ_ID_MAX];
+    vconn *vc;
+    vx_req_query q;
+    char qerr[160]; /* a bad query parameter, answered 400 */
     double t0;
     int status;
     uint64_t bytes_in, bytes_out;
@@ -112,6 +143,13 @@ struct vx_http {
     pthread_t timer;
     int timer_started;
     int stopping;
+    /* connections (vconn), the sweeper */
+    pthread_mutex_t clock;
+    vconn *conns;
+    size_t nconns;
+    pthread_t sweeper;
+    int sweeper_started;
+    int sweep_stop;
 };
 
 /* The data dir, scrubbed from every error message (clients never see
@@ -166,8 +204,11 @@ static int send_error_h(struct MHD_Connection *c, req *r, unsigned status, const
     vx_scrub_path(scrubbed, g_data_dir);
     cJSON *doc = cJSON_CreateObject();
     cJSON *e = cJSON_AddObjectToObject(doc, "error");
+    char clean[512];
     cJSON_AddStringToObject(e, "code", code);
-    cJSON_AddStringToObject(e, "message", scrubbed);
+    /* Messages may quote what the client sent: never echo bytes that are
+     * not UTF-8 (the body would not be valid JSON text). */
+    cJSON_AddStringToObject(e, "message", vx_req_utf8_sanitize(scrubbed, clean, sizeof clean));
     if (status >= 500) VX_ERROR("http.error", "status=%u code=%s", status, code);
     return send_json(c, r, status, doc, h1, v1);
 }
@@ -207,67 +248,9 @@ static int send_err(struct MHD_Connection *c, req *r, const vx_err *e)
 
 /* ---- helpers ------------------------------------------------------- */
 
-static enum route route_of(const char *url, char *id, size_t idn, char *name, size_t namen)
-{
-    id[0] = name[0] = 0;
-    if (!strcmp(url, "/livez")) return R_LIVEZ;
-    if (!strcmp(url, "/readyz")) return R_READYZ;
-    if (!strcmp(url, "/metrics")) return R_METRICS;
-    if (!strcmp(url, "/v1/info")) return R_INFO;
-    if (!strcmp(url, "/v1/meshes")) return R_MESHES;
-    if (!strcmp(url, "/v1/jobs")) return R_JOBS;
-    const char *rest;
-    if (!strncmp(url, "/v1/meshes/", 11)) {
-        rest = url + 11;
-        if (!*rest || strchr(rest, '/') || strlen(rest) >= idn) return R_UNKNOWN;
-        snprintf(id, idn, "%s", rest);
-        return R_MESH;
-    }
-    if (!strncmp(url, "/v1/jobs/", 9)) {
-        rest = url + 9;
-        const char *slash = strchr(rest, '/');
-        size_t n = slash ? (size_t)(slash - rest) : strlen(rest);
-        if (!n || n >= idn) return R_UNKNOWN;
-        memcpy(id, rest, n);
-        id[n] = 0;
-        if (!slash) return R_JOB;
-        if (!strcmp(slash, "/result")) return R_RESULT;
-        if (!strncmp(slash, "/result/", 8) && slash[8] && !strchr(slash + 8, '/') &&
-            strlen(slash + 8) < namen) {
-            snprintf(name, namen, "%s", slash + 8);
-            return R_RESULT_NAME;
-        }
-    }
-    return R_UNKNOWN;
-}
-
-static int method_allowed(enum route rt, const char *m)
-{
-    const char *allow = routes[rt].allow;
-    size_t n = strlen(m);
-    for (const char *p = allow; (p = strstr(p, m)); p += n)
-        if ((p == allow || p[-1] == ' ') && (p[n] == 0 || p[n] == ',')) return 1;
-    return 0;
-}
-
 static const char *header(struct MHD_Connection *c, const char *name)
 {
     return MHD_lookup_connection_value(c, MHD_HEADER_KIND, name);
-}
-
-static const char *query(struct MHD_Connection *c, const char *name)
-{
-    return MHD_lookup_connection_value(c, MHD_GET_ARGUMENT_KIND, name);
-}
-
-/* Media type without parameters, lower-cased. */
-static void media_type(const char *ct, char *out, size_t n)
-{
-    size_t o = 0;
-    if (ct)
-        for (; *ct && *ct != ';' && o + 1 < n; ct++)
-            if (*ct != ' ' && *ct != '\t') out[o++] = (char)(*ct >= 'A' && *ct <= 'Z' ? *ct + 32 : *ct);
-    out[o] = 0;
 }
 
 /* Constant-time: both sides are hashed so neither length nor content leaks. */
@@ -285,32 +268,11 @@ static int auth_ok(vx_http *h, struct MHD_Connection *c)
     return memeql_sec(d, h->token_digest, sizeof d);
 }
 
-/* Parses ?wait: -1 on a bad value, else seconds clamped to the request timeout. */
-static int parse_wait(vx_http *h, struct MHD_Connection *c, double *out)
+/* The ?wait of r in seconds, capped to the request timeout. */
+static double wait_seconds(vx_http *h, const req *r)
 {
-    const char *w = query(c, "wait");
-    *out = 0;
-    if (!w) return 0;
-    char *end;
-    errno = 0;
-    double v = strtod(w, &end);
-    if (errno || end == w || *end || !isfinite(v) || v < 0) return -1;
-    if (v > h->d.cfg->request_timeout_s) v = h->d.cfg->request_timeout_s;
-    *out = v;
-    return 0;
-}
-
-static int parse_limit(struct MHD_Connection *c, int *out)
-{
-    const char *l = query(c, "limit");
-    *out = 100;
-    if (!l) return 0;
-    char *end;
-    errno = 0;
-    long v = strtol(l, &end, 10);
-    if (errno || end == l || *end || v < 1 || v > 1000) return -1;
-    *out = (int)v;
-    return 0;
+    double v = (double)r->q.wait_us / 1e6;
+    return v > h->d.cfg->request_timeout_s ? h->d.cfg->request_timeout_s : v;
 }
 
 /* ---- waiting ------------------------------------------------------- */
@@ -406,6 +368,219 @@ static int disk_ok(vx_http *h, uint64_t *free_bytes)
     return h->d.cfg->min_free_disk ? b >= h->d.cfg->min_free_disk : b > 0;
 }
 
+/* ---- slow clients (see the top of the file) ------------------------- */
+
+#define BODY_GRACE_S 2.0  /* a body is not rated before this */
+#define BODY_WINDOW_S 2.0 /* then each window must carry min_body_rate * window */
+#define KILL_LINGER_S 0.5 /* between our answer and closing the read side */
+#define SWEEP_US 100000
+#define EVICT_MIN_AGE_S 0.25 /* a head or idle time this young is nobody's attack */
+
+static vconn *conn_of(struct MHD_Connection *c)
+{
+    const union MHD_ConnectionInfo *ci = MHD_get_connection_info(c, MHD_CONNECTION_INFO_SOCKET_CONTEXT);
+    return ci ? ci->socket_context : NULL;
+}
+
+/* Answers a connection behind libmicrohttpd's back: writes a canned JSON
+ * error (status 0: none), shuts the socket for writing, and for reading
+ * too when rd (else the sweeper does it after KILL_LINGER_S; libmicrohttpd
+ * then reads EOF and closes it). Only while libmicrohttpd is reading the
+ * socket, with h->clock held. Returns the bytes written. */
+static size_t kill_conn(vconn *vc, int status, const char *code, const char *message, int rd)
+{
+    char body[256], msg[512];
+    int n = 0;
+    if (status) {
+        int bn = snprintf(body, sizeof body, "{\"error\":{\"code\":\"%s\",\"message\":\"%s\"}}", code,
+                          message);
+        n = snprintf(msg, sizeof msg,
+                     "HTTP/1.1 %d %s\r\nContent-Type: application/json\r\nCache-Control: no-store\r\n"
+                     "Connection: close\r\nContent-Length: %d\r\n\r\n%s",
+                     status, status == 408 ? "Request Timeout" : "URI Too Long", bn, body);
+        if (send(vc->fd, msg, (size_t)n, MSG_NOSIGNAL | MSG_DONTWAIT) < 0) n = 0;
+    }
+    shutdown(vc->fd, rd ? SHUT_RDWR : SHUT_WR);
+    vc->killed = 1;
+    vc->kill_status = status;
+    vc->rd_closed = rd;
+    vc->t_killed = vx_mono();
+    return (size_t)n;
+}
+
+/* Logs and counts an answer given by kill_conn before the head was read
+ * (no request, so on_completed never sees it). */
+static void note_head_kill(int status, double dt, size_t bytes, const char *why)
+{
+    vx_metrics_request(vx_req_route_name(VX_R_UNKNOWN), "other", status, dt, 0, bytes);
+    VX_INFO("http.request", "method=- route=unmatched status=%d ms=%.2f bytes_in=0 bytes_out=%zu reason=%s",
+            status, dt * 1e3, bytes, why);
+}
+
+static void on_connection(void *cls, struct MHD_Connection *c, void **socket_context,
+                          enum MHD_ConnectionNotificationCode code)
+{
+    vx_http *h = cls;
+    if (code == MHD_CONNECTION_NOTIFY_STARTED) {
+        const union MHD_ConnectionInfo *ci = MHD_get_connection_info(c, MHD_CONNECTION_INFO_CONNECTION_FD);
+        vconn *vc = ci ? calloc(1, sizeof *vc) : NULL;
+        if (!vc) return; /* untracked: only libmicrohttpd's timeouts apply */
+        vc->fd = ci->connect_fd;
+        vc->phase = P_HEAD;
+        vc->t_phase = vx_mono();
+        pthread_mutex_lock(&h->clock);
+        vc->next = h->conns;
+        if (h->conns) h->conns->prev = vc;
+        h->conns = vc;
+        h->nconns++;
+        pthread_mutex_unlock(&h->clock);
+        *socket_context = vc;
+        return;
+    }
+    vconn *vc = *socket_context;
+    if (!vc) return;
+    pthread_mutex_lock(&h->clock);
+    if (vc->prev) vc->prev->next = vc->next;
+    else h->conns = vc->next;
+    if (vc->next) vc->next->prev = vc->prev;
+    h->nconns--;
+    pthread_mutex_unlock(&h->clock);
+    free(vc);
+    *socket_context = NULL;
+}
+
+/* URI log callback: runs when the request line is in, before the headers. */
+static void *on_uri(void *cls, const char *uri, struct MHD_Connection *c)
+{
+    vx_http *h = cls;
+    vconn *vc;
+    if (strlen(uri) <= h->d.cfg->max_uri_bytes || !(vc = conn_of(c))) return NULL;
+    pthread_mutex_lock(&h->clock);
+    size_t n = vc->killed ? 0 : kill_conn(vc, 414, "uri_too_long", "the request target is longer than max-uri-bytes", 0);
+    double dt = vx_mono() - vc->t_phase;
+    pthread_mutex_unlock(&h->clock);
+    if (n) note_head_kill(414, dt, n, "uri_too_long");
+    return NULL;
+}
+
+/* 1 when bytes wait in the kernel that libmicrohttpd has not read yet: its
+ * thread is busy (a long handler), so a slow head or body is not the
+ * client's doing and is not held against it. */
+static int unread(const vconn *vc)
+{
+    int n = 0;
+    return ioctl(vc->fd, FIONREAD, &n) == 0 && n > 0;
+}
+
+static int by_phase_time(const void *a, const void *b)
+{
+    double x = (*(vconn *const *)a)->t_phase, y = (*(vconn *const *)b)->t_phase;
+    return x < y ? -1 : x > y;
+}
+
+/* One pass of the sweeper, with h->clock held. */
+static void sweep(vx_http *h, vconn **cand)
+{
+    const vx_config *cfg = h->d.cfg;
+    double now = vx_mono();
+    size_t live = 0, ncand = 0;
+    for (vconn *vc = h->conns; vc; vc = vc->next) {
+        if (vc->killed) {
+            if (!vc->rd_closed && now - vc->t_killed >= KILL_LINGER_S) {
+                shutdown(vc->fd, SHUT_RD);
+                vc->rd_closed = 1;
+            }
+            continue;
+        }
+        if (vc->phase == P_IDLE) {
+            /* Has a byte of the next request come in since the answer? The
+             * kernel knows when data last arrived; libmicrohttpd has
+             * already read it into its buffer. */
+            struct tcp_info ti;
+            socklen_t tl = sizeof ti;
+            if (getsockopt(vc->fd, IPPROTO_TCP, TCP_INFO, &ti, &tl) == 0) {
+                double last = now - ti.tcpi_last_data_recv / 1000.0;
+                if (last > vc->t_phase + 0.02) {
+                    vc->phase = P_HEAD;
+                    vc->t_phase = last;
+                }
+            }
+        }
+        if (vc->phase == P_HEAD && cfg->header_timeout_s > 0 && now - vc->t_phase > cfg->header_timeout_s &&
+            !unread(vc)) {
+            char m[96];
+            snprintf(m, sizeof m, "the request head did not arrive within %g s", cfg->header_timeout_s);
+            size_t n = kill_conn(vc, 408, "request_timeout", m, 0);
+            note_head_kill(408, now - vc->t_phase, n, "header_timeout");
+            continue;
+        }
+        if (vc->phase == P_BODY && cfg->min_body_rate && now - vc->t_phase >= BODY_GRACE_S) {
+            if (!vc->win_started) {
+                vc->win_started = 1;
+                vc->win_t0 = now;
+                vc->win_bytes = vc->body_bytes;
+            } else if (now - vc->win_t0 >= BODY_WINDOW_S) {
+                double rate = (double)(vc->body_bytes - vc->win_bytes) / (now - vc->win_t0);
+                if (rate < (double)cfg->min_body_rate && !unread(vc)) {
+                    char m[96];
+                    snprintf(m, sizeof m, "the body arrived slower than %llu bytes/s",
+                             (unsigned long long)cfg->min_body_rate);
+                    kill_conn(vc, 408, "request_timeout", m, 0); /* on_completed logs it */
+                    continue;
+                }
+                vc->win_t0 = now;
+                vc->win_bytes = vc->body_bytes;
+            }
+        }
+        live++;
+        if ((vc->phase == P_HEAD || vc->phase == P_IDLE) && cand) cand[ncand++] = vc;
+    }
+    /* Headroom: from 90% of the connections down to 80%, oldest first. */
+    size_t max = (size_t)cfg->max_connections;
+    size_t high = max >= 10 ? max - max / 10 : max, low = max >= 10 ? max - max / 5 : max - 1;
+    if (live < high || !cand) return;
+    qsort(cand, ncand, sizeof *cand, by_phase_time);
+    for (size_t i = 0; i < ncand && live > low; i++) {
+        vconn *vc = cand[i];
+        if (now - vc->t_phase < EVICT_MIN_AGE_S || unread(vc)) continue;
+        live--;
+        if (vc->phase == P_HEAD) {
+            size_t n = kill_conn(vc, 408, "request_timeout", "the server is busy and the request head was not complete", 1);
+            note_head_kill(408, now - vc->t_phase, n, "evicted");
+        } else {
+            kill_conn(vc, 0, NULL, NULL, 1);
+        }
+    }
+    for (vconn *vc = h->conns; vc; vc = vc->next) /* free the victims' slots now */
+        if (vc->killed && !vc->rd_closed) {
+            shutdown(vc->fd, SHUT_RD);
+            vc->rd_closed = 1;
+        }
+}
+
+static void *sweeper_main(void *arg)
+{
+    vx_http *h = arg;
+    size_t cap = 0;
+    vconn **cand = NULL;
+    while (!__atomic_load_n(&h->sweep_stop, __ATOMIC_ACQUIRE)) {
+        usleep(SWEEP_US);
+        pthread_mutex_lock(&h->clock);
+        if (h->nconns > cap) {
+            size_t ncap = h->nconns * 2;
+            vconn **nc = realloc(cand, ncap * sizeof *nc);
+            if (nc) {
+                cand = nc;
+                cap = ncap;
+            }
+        }
+        sweep(h, h->nconns <= cap ? cand : NULL);
+        pthread_mutex_unlock(&h->clock);
+    }
+    free(cand);
+    return NULL;
+}
+
 /* ---- handlers ------------------------------------------------------ */
 
 static int h_readyz(vx_http *h, struct MHD_Connection *c, req *r)
@@ -467,6 +642,10 @@ static int h_info(vx_http *h, struct MHD_Connection *c, req *r)
     cJSON_AddNumberToObject(l, "max_wait_s", cfg->request_timeout_s);
     cJSON_AddNumberToObject(l, "request_timeout_s", cfg->request_timeout_s);
     cJSON_AddNumberToObject(l, "connection_timeout_s", cfg->connection_timeout_s);
+    cJSON_AddNumberToObject(l, "header_timeout_s", cfg->header_timeout_s);
+    cJSON_AddNumberToObject(l, "min_body_rate", (double)cfg->min_body_rate);
+    cJSON_AddNumberToObject(l, "max_uri_bytes", (double)cfg->max_uri_bytes);
+    cJSON_AddNumberToObject(l, "max_header_bytes", (double)cfg->max_header_bytes);
     cJSON_AddNumberToObject(l, "max_connections_per_ip", (double)cfg->max_connections_per_ip);
     cJSON_AddNumberToObject(l, "max_image_pixels", (double)cfg->max_image_pixels);
     cJSON_AddNumberToObject(l, "max_job_memory_bytes", (double)cfg->max_job_memory);
@@ -487,12 +666,8 @@ static int h_info(vx_http *h, struct MHD_Connection *c, req *r)
 
 static int h_mesh_list(vx_http *h, struct MHD_Connection *c, req *r)
 {
-    int limit;
-    const char *after = query(c, "after");
-    if (parse_limit(c, &limit))
-        return send_error(c, r, 400, "invalid_request", "limit must be an integer in [1, 1000]");
-    if (after && !vx_store_valid_mesh_id(after))
-        return send_error(c, r, 400, "invalid_request", "after must be a mesh id");
+    int limit = r->q.limit;
+    const char *after = r->q.has_after ? r->q.after : NULL;
     char next[65];
     cJSON *doc = cJSON_CreateObject();
     cJSON_AddItemToObject(doc, "items", vx_store_mesh_list(h->d.store, after, limit, next));
@@ -630,9 +805,10 @@ static int answer_job(vx_http *h, struct MHD_Connection *c, req *r, const char *
 static int h_job_post_done(vx_http *h, struct MHD_Connection *c, req *r)
 {
     if (r->too_big) return send_error(c, r, 413, "too_large", "the JSON body is larger than max-json-bytes");
-    double wait_s;
-    if (parse_wait(h, c, &wait_s))
-        return send_error(c, r, 400, "invalid_request", "wait must be a non-negative number of seconds");
+    double wait_s = wait_seconds(h, r);
+    char why[128];
+    if (vx_req_json_text_ok(r->buf ? r->buf : "", r->len, why, sizeof why))
+        return send_error(c, r, 400, "invalid_json", why);
     cJSON *doc = cJSON_ParseWithLength(r->buf ? r->buf : "", r->len);
     if (!doc) return send_error(c, r, 400, "invalid_json", "the body is not valid JSON");
     const char *msg = NULL;
@@ -680,18 +856,8 @@ static int h_job_post_done(vx_http *h, struct MHD_Connection *c, req *r)
 
 static int h_job_list(vx_http *h, struct MHD_Connection *c, req *r)
 {
-    int limit;
-    const char *after = query(c, "after"), *state = query(c, "state");
-    if (parse_limit(c, &limit))
-        return send_error(c, r, 400, "invalid_request", "limit must be an integer in [1, 1000]");
-    if (after && !vx_jobs_valid_id(after))
-        return send_error(c, r, 400, "invalid_request", "after must be a job id");
-    static const char *states[] = {"queued", "running", "succeeded", "failed", "canceled"};
-    if (state) {
-        int ok = 0;
-        for (int i = 0; i < 5; i++) ok |= !strcmp(state, states[i]);
-        if (!ok) return send_error(c, r, 400, "invalid_request", "unknown state filter");
-    }
+    int limit = r->q.limit;
+    const char *after = r->q.has_after ? r->q.after : NULL, *state = r->q.has_state ? r->q.state : NULL;
     char next[40];
     cJSON *doc = cJSON_CreateObject();
     cJSON_AddItemToObject(doc, "items", vx_jobs_list(h->d.jobs, after, limit, state, next));
@@ -709,9 +875,7 @@ static int h_job(vx_http *h, struct MHD_Connection *c, req *r)
         if (!doc) return send_err(c, r, &err);
         return send_json(c, r, running ? 202 : 200, doc, NULL, NULL);
     }
-    double wait_s;
-    if (parse_wait(h, c, &wait_s))
-        return send_error(c, r, 400, "invalid_request", "wait must be a non-negative number of seconds");
+    double wait_s = wait_seconds(h, r);
     if (wait_s > 0 && hold(h, c, r, r->id, wait_s)) return MHD_YES;
     return answer_job(h, c, r, r->id, 200);
 }
@@ -720,7 +884,7 @@ static int h_result(vx_http *h, struct MHD_Connection *c, req *r)
 {
     vx_err err;
     char path[2400], ctype[64], fname[128];
-    if (vx_jobs_output(h->d.jobs, r->id, r->route == R_RESULT_NAME ? r->name : NULL, path,
+    if (vx_jobs_output(h->d.jobs, r->id, r->route == VX_R_RESULT_NAME ? r->name : NULL, path,
                        sizeof path, ctype, fname, &err))
         return send_err(c, r, &err);
     char etag[160], disp[200];
@@ -753,21 +917,63 @@ static int h_result(vx_http *h, struct MHD_Connection *c, req *r)
 
 /* ---- dispatch ------------------------------------------------------ */
 
-static int first_call(vx_http *h, struct MHD_Connection *c, req *r)
+static enum MHD_Result count_host(void *cls, enum MHD_ValueKind kind, const char *key, const char *value)
 {
-    if (r->route == R_UNKNOWN) return send_error(c, r, 404, "not_found", "no such route");
-    if (!strncmp(routes[r->route].name, "/v1/", 4) && h->auth && !auth_ok(h, c))
+    if (key && !strcasecmp(key, MHD_HTTP_HEADER_HOST)) (*(int *)cls)++;
+    return MHD_YES;
+}
+
+static enum MHD_Result take_arg(void *cls, enum MHD_ValueKind kind, const char *key, size_t klen,
+                                const char *value, size_t vlen)
+{
+    req *r = cls;
+    if (!key) return MHD_YES;
+    return vx_req_query_add(&r->q, r->route, r->method, key, klen, value, vlen, r->qerr, sizeof r->qerr)
+               ? MHD_NO : MHD_YES;
+}
+
+/* Framing the access handler can still answer in JSON: Host, the transfer
+ * coding, both lengths at once. Returns a queued answer or -1. */
+static int check_framing(struct MHD_Connection *c, req *r, const char *version)
+{
+    int hosts = 0;
+    MHD_get_connection_values(c, MHD_HEADER_KIND, count_host, &hosts);
+    if (strcmp(version, MHD_HTTP_VERSION_1_0) != 0 && hosts != 1)
+        return send_error(c, r, 400, "invalid_request",
+                          hosts ? "more than one Host header" : "an HTTP/1.1 request needs a Host header");
+    const char *te = header(c, MHD_HTTP_HEADER_TRANSFER_ENCODING);
+    int coding = vx_req_transfer_encoding(te);
+    if (coding < 0)
+        return send_error(c, r, 501, "not_implemented",
+                          "the only transfer coding taken is chunked (no gzip, no lists)");
+    if (coding > 0 && header(c, MHD_HTTP_HEADER_CONTENT_LENGTH))
+        return send_error(c, r, 400, "invalid_request", "Content-Length and Transfer-Encoding together");
+    return -1;
+}
+
+static int first_call(vx_http *h, struct MHD_Connection *c, req *r, const char *version)
+{
+    const union MHD_ConnectionInfo *ci = MHD_get_connection_info(c, MHD_CONNECTION_INFO_REQUEST_HEADER_SIZE);
+    if (ci && ci->header_size > h->d.cfg->max_header_bytes)
+        return send_error(c, r, 431, "header_too_large", "the request head is larger than max-header-bytes");
+    int rc = check_framing(c, r, version);
+    if (rc >= 0) return rc;
+    if (r->route == VX_R_UNKNOWN) return send_error(c, r, 404, "not_found", "no such route");
+    if (!strncmp(vx_req_route_name(r->route), "/v1/", 4) && h->auth && !auth_ok(h, c))
         return send_error_h(c, r, 401, "unauthorized", "a valid bearer token is required",
                             MHD_HTTP_HEADER_WWW_AUTHENTICATE, "Bearer realm=\"voxeld\"");
-    if (!method_allowed(r->route, r->method)) {
+    if (!vx_req_method_allowed(r->route, r->method)) {
         char msg[96];
         snprintf(msg, sizeof msg, "method %s is not allowed here", r->method);
         return send_error_h(c, r, 405, "method_not_allowed", msg, MHD_HTTP_HEADER_ALLOW,
-                            routes[r->route].allow);
+                            vx_req_route_allow(r->route));
     }
+    vx_req_query_init(&r->q);
+    MHD_get_connection_values_n(c, MHD_GET_ARGUMENT_KIND, take_arg, r);
     if (strcmp(r->method, "POST") != 0) return -1; /* no body: answer in dispatch */
     if (h->stopping || !vx_jobs_ready(h->d.jobs))
         return send_error_h(c, r, 503, "not_ready", "the daemon is not ready", MHD_HTTP_HEADER_RETRY_AFTER, "5");
+    if (r->qerr[0]) return send_error(c, r, 400, "invalid_request", r->qerr);
 
     uint64_t nfree;
     if (!disk_ok(h, &nfree)) {
@@ -778,8 +984,8 @@ static int first_call(vx_http *h, struct MHD_Connection *c, req *r)
         return send_error(c, r, 507, "insufficient_storage", msg);
     }
     char mt[128];
-    media_type(header(c, MHD_HTTP_HEADER_CONTENT_TYPE), mt, sizeof mt);
-    if (r->route == R_MESHES) {
+    vx_req_media_type(header(c, MHD_HTTP_HEADER_CONTENT_TYPE), mt, sizeof mt);
+    if (r->route == VX_R_MESHES) {
         if (!strcmp(mt, "model/obj")) r->declared = MEDIA_OBJ;
         else if (!strcmp(mt, "text/plain")) r->declared = MEDIA_TEXT;
         else if (!strcmp(mt, "model/x-bpt")) r->declared = MEDIA_BPT;
@@ -799,18 +1005,16 @@ static int first_call(vx_http *h, struct MHD_Connection *c, req *r)
     }
     const char *cl = header(c, MHD_HTTP_HEADER_CONTENT_LENGTH);
     const char *te = header(c, MHD_HTTP_HEADER_TRANSFER_ENCODING);
-    uint64_t limit = r->route == R_MESHES ? h->d.cfg->max_upload_bytes : h->d.cfg->max_json_bytes;
-    if (r->route == R_MESHES && !cl && !(te && strcasestr(te, "chunked")))
+    uint64_t limit = r->route == VX_R_MESHES ? h->d.cfg->max_upload_bytes : h->d.cfg->max_json_bytes;
+    if (r->route == VX_R_MESHES && !cl && vx_req_transfer_encoding(te) != 1)
         return send_error(c, r, 411, "length_required", "Content-Length or chunked encoding is required");
     if (cl) {
-        char *end;
-        errno = 0;
-        unsigned long long n = strtoull(cl, &end, 10);
-        if (errno || *end || end == cl) return send_error(c, r, 400, "invalid_request", "bad Content-Length");
+        uint64_t n;
+        if (vx_req_parse_length(cl, &n)) return send_error(c, r, 400, "invalid_request", "bad Content-Length");
         if (n > limit) {
             char msg[128];
-            snprintf(msg, sizeof msg, "the body (%llu bytes) is larger than the %llu-byte limit", n,
-                     (unsigned long long)limit);
+            snprintf(msg, sizeof msg, "the body (%llu bytes) is larger than the %llu-byte limit",
+                     (unsigned long long)n, (unsigned long long)limit);
             return send_error(c, r, 413, "too_large", msg);
         }
     }
@@ -867,19 +1071,58 @@ static enum MHD_Result on_request(void *cls, struct MHD_Connection *c, const cha
     vx_http *h = cls;
     req *r = *con_cls;
     if (!r) {
+        /* The head is in: the connection leaves HEAD (unless the sweeper
+         * has already answered it, and then nothing may be queued). */
+        vconn *vc = conn_of(c);
+        if (vc) {
+            pthread_mutex_lock(&h->clock);
+            int dead = vc->killed;
+            vc->phase = P_BUSY;
+            vc->t_phase = vx_mono();
+            pthread_mutex_unlock(&h->clock);
+            if (dead) return MHD_NO;
+        }
         r = calloc(1, sizeof *r);
         if (!r) return MHD_NO;
         *con_cls = r;
+        r->vc = vc;
         r->t0 = vx_mono();
         snprintf(r->method, sizeof r->method, "%s", method);
-        r->route = route_of(url, r->id, sizeof r->id, r->name, sizeof r->name);
-        int rc = first_call(h, c, r);
+        vx_req_target t;
+        r->route = vx_req_route(url, strlen(url), &t);
+        memcpy(r->id, t.id, sizeof r->id);
+        memcpy(r->name, t.name, sizeof r->name);
+        int rc = first_call(h, c, r, version);
         if (rc >= 0) return rc;
+        if (vc && !strcmp(r->method, "POST")) { /* a body follows: rate it */
+            pthread_mutex_lock(&h->clock);
+            vc->phase = P_BODY;
+            vc->t_phase = vx_mono();
+            vc->body_bytes = 0;
+            vc->win_started = 0;
+            pthread_mutex_unlock(&h->clock);
+        }
         /* Answer on the next call even without a body: a response queued
          * in the first call makes libmicrohttpd 0.9.75 close the
          * connection (it cannot know yet that no body follows). */
         return MHD_YES;
-    } else if (r->answered) {
+    }
+    if (r->vc) {
+        pthread_mutex_lock(&h->clock);
+        int dead = r->vc->killed;
+        if (*data_size) r->vc->body_bytes += *data_size;
+        else if (r->vc->phase == P_BODY) {
+            r->vc->phase = P_BUSY;
+            r->vc->t_phase = vx_mono();
+        }
+        pthread_mutex_unlock(&h->clock);
+        if (dead) { /* answered by the sweeper: drain, never queue */
+            if (!*data_size) return MHD_NO;
+            *data_size = 0;
+            return MHD_YES;
+        }
+    }
+    if (r->answered) {
         *data_size = 0; /* an early answer was queued: drop what still arrives */
         return MHD_YES;
     } else if (*data_size) {
@@ -894,18 +1137,19 @@ static enum MHD_Result on_request(void *cls, struct MHD_Connection *c, const cha
         r->resumed = 0;
         return answer_job(h, c, r, r->id, r->post_job ? 202 : 200);
     }
+    if (r->qerr[0]) return send_error(c, r, 400, "invalid_request", r->qerr);
     int is_get = !strcmp(r->method, "GET") || !strcmp(r->method, "HEAD");
     switch (r->route) {
-    case R_LIVEZ: return send_text(c, r, 200, strdup("{\"status\":\"ok\"}"), "application/json", NULL, NULL);
-    case R_READYZ: return h_readyz(h, c, r);
-    case R_METRICS: return h_metrics(h, c, r);
-    case R_INFO: return h_info(h, c, r);
-    case R_MESHES: return is_get ? h_mesh_list(h, c, r) : h_upload_done(h, c, r);
-    case R_MESH: return h_mesh(h, c, r);
-    case R_JOBS: return is_get ? h_job_list(h, c, r) : h_job_post_done(h, c, r);
-    case R_JOB: return h_job(h, c, r);
-    case R_RESULT:
-    case R_RESULT_NAME: return h_result(h, c, r);
+    case VX_R_LIVEZ: return send_text(c, r, 200, strdup("{\"status\":\"ok\"}"), "application/json", NULL, NULL);
+    case VX_R_READYZ: return h_readyz(h, c, r);
+    case VX_R_METRICS: return h_metrics(h, c, r);
+    case VX_R_INFO: return h_info(h, c, r);
+    case VX_R_MESHES: return is_get ? h_mesh_list(h, c, r) : h_upload_done(h, c, r);
+    case VX_R_MESH: return h_mesh(h, c, r);
+    case VX_R_JOBS: return is_get ? h_job_list(h, c, r) : h_job_post_done(h, c, r);
+    case VX_R_JOB: return h_job(h, c, r);
+    case VX_R_RESULT:
+    case VX_R_RESULT_NAME: return h_result(h, c, r);
     default: return send_error(c, r, 404, "not_found", "no such route");
     }
 }
@@ -924,14 +1168,23 @@ static void on_completed(void *cls, struct MHD_Connection *c, void **con_cls,
         pthread_mutex_unlock(&h->wlock);
     }
     double dt = vx_mono() - r->t0;
-    const char *route = routes[r->route].name;
+    const char *route = vx_req_route_name(r->route);
     int status = r->status ? r->status : 499; /* closed before an answer */
+    if (r->vc) {
+        pthread_mutex_lock(&h->clock);
+        if (r->vc->killed && r->vc->kill_status) status = r->vc->kill_status;
+        else if (!r->vc->killed) { /* keep-alive: the next head starts with its first byte */
+            r->vc->phase = P_IDLE;
+            r->vc->t_phase = vx_mono();
+        }
+        pthread_mutex_unlock(&h->clock);
+    }
     static const char *known[] = {"GET", "HEAD", "POST", "PUT", "DELETE", "PATCH", "OPTIONS", NULL};
     const char *mlabel = "other";
     for (int i = 0; known[i]; i++)
         if (!strcmp(known[i], r->method)) mlabel = known[i];
     vx_metrics_request(route, mlabel, status, dt, r->bytes_in, r->bytes_out);
-    vx_log_level lvl = (r->route == R_LIVEZ || r->route == R_READYZ || r->route == R_METRICS) && status < 400
+    vx_log_level lvl = (r->route == VX_R_LIVEZ || r->route == VX_R_READYZ || r->route == VX_R_METRICS) && status < 400
                            ? VX_LOG_DEBUG : VX_LOG_INFO;
     vx_log(lvl, "http.request", "method=%s route=%s status=%d ms=%.2f bytes_in=%llu bytes_out=%llu%s",
            r->method, route, status, dt * 1e3, (unsigned long long)r->bytes_in,
@@ -995,6 +1248,7 @@ vx_http *vx_http_start(const vx_http_desc *desc, vx_err *err)
         h->auth = 1;
     }
     pthread_mutex_init(&h->wlock, NULL);
+    pthread_mutex_init(&h->clock, NULL);
     pthread_condattr_t ca;
     pthread_condattr_init(&ca);
     pthread_condattr_setclock(&ca, CLOCK_MONOTONIC);
@@ -1010,6 +1264,9 @@ vx_http *vx_http_start(const vx_http_desc *desc, vx_err *err)
     }
     unsigned flags = MHD_USE_INTERNAL_POLLING_THREAD | MHD_USE_EPOLL | MHD_ALLOW_SUSPEND_RESUME |
                      MHD_USE_ERROR_LOG | (v6 ? MHD_USE_IPv6 : 0);
+    /* Without --reuse-port libmicrohttpd sets only SO_REUSEADDR: a port
+     * another process listens on cannot be bound (EADDRINUSE). */
+    errno = 0;
     h->mhd = MHD_start_daemon(
         flags, 0, NULL, NULL, on_request, h, MHD_OPTION_EXTERNAL_LOGGER, mhd_log, NULL,
         MHD_OPTION_SOCK_ADDR, (struct sockaddr *)&ss,
@@ -1017,10 +1274,15 @@ vx_http *vx_http_start(const vx_http_desc *desc, vx_err *err)
         (unsigned)ceil(cfg->connection_timeout_s), MHD_OPTION_CONNECTION_LIMIT,
         (unsigned)cfg->max_connections, MHD_OPTION_PER_IP_CONNECTION_LIMIT,
         (unsigned)cfg->max_connections_per_ip, MHD_OPTION_CONNECTION_MEMORY_LIMIT, (size_t)(256 * 1024),
-        MHD_OPTION_NOTIFY_COMPLETED, on_completed, h,
-        MHD_OPTION_LISTENING_ADDRESS_REUSE, 1u, MHD_OPTION_END);
+        MHD_OPTION_NOTIFY_COMPLETED, on_completed, h, MHD_OPTION_NOTIFY_CONNECTION, on_connection, h,
+        MHD_OPTION_URI_LOG_CALLBACK, on_uri, h,
+        MHD_OPTION_LISTENING_ADDRESS_REUSE, cfg->reuse_port ? 1u : 0u, MHD_OPTION_END);
     if (!h->mhd) {
-        vx_err_set(err, VX_EIO, "listen_failed", "cannot listen on %s: %s", cfg->listen, strerror(errno));
+        int e = errno;
+        vx_err_set(err, VX_EIO, "listen_failed", "cannot listen on %s: %s", cfg->listen,
+                   e == EADDRINUSE ? "address in use (another process listens on this port)"
+                   : e ? strerror(e) : "libmicrohttpd could not start (see http.mhd)");
+        pthread_mutex_destroy(&h->clock);
         pthread_mutex_destroy(&h->wlock);
         pthread_cond_destroy(&h->wcond);
         free(h);
@@ -1029,6 +1291,7 @@ vx_http *vx_http_start(const vx_http_desc *desc, vx_err *err)
     const union MHD_DaemonInfo *di = MHD_get_daemon_info(h->mhd, MHD_DAEMON_INFO_BIND_PORT);
     h->port = di ? di->port : 0;
     if (pthread_create(&h->timer, NULL, timer_main, h) == 0) h->timer_started = 1;
+    if (pthread_create(&h->sweeper, NULL, sweeper_main, h) == 0) h->sweeper_started = 1;
     VX_INFO("http.listen", "listen=%s port=%d threads=%d auth=%d", cfg->listen, h->port,
             cfg->http_threads, h->auth);
     return h;
@@ -1059,7 +1322,10 @@ void vx_http_stop(vx_http *h, double grace_s)
         usleep(20000);
     }
     if (h->timer_started) pthread_join(h->timer, NULL);
+    __atomic_store_n(&h->sweep_stop, 1, __ATOMIC_RELEASE);
+    if (h->sweeper_started) pthread_join(h->sweeper, NULL);
     MHD_stop_daemon(h->mhd);
+    pthread_mutex_destroy(&h->clock);
     pthread_mutex_destroy(&h->wlock);
     pthread_cond_destroy(&h->wcond);
     free(h);

@@ -144,6 +144,115 @@ expect_error "unknown state filter" 400 invalid_request
 api GET "/v1/jobs/0123456789abcdef0123456789abcdef?wait=-1"
 expect_error "negative wait" 400 invalid_request
 
+# --- strict query parameters (issue #10): repeated, empty, not plain decimal ---
+api GET "/v1/meshes?limit=5&limit=abc"
+expect_error "limit given twice" 400 invalid_request
+check "message names limit" jq -e '.error.message | test("limit")' "$BODY"
+api GET "/v1/meshes?limit=5&limit=5"
+expect_error "limit given twice, same value" 400 invalid_request
+api GET "/v1/meshes?limit"
+expect_error "limit without a value" 400 invalid_request
+api GET "/v1/meshes?limit="
+expect_error "limit empty" 400 invalid_request
+api GET "/v1/meshes?limit=+5"
+expect_error "limit with a sign" 400 invalid_request
+api GET "/v1/meshes?limit=0x10"
+expect_error "limit in hex" 400 invalid_request
+api GET "/v1/meshes?limit=5%00x"
+expect_error "limit with a NUL" 400 invalid_request
+api GET "/v1/meshes?after="
+expect_error "after empty" 400 invalid_request
+api GET "/v1/jobs?state=queued&state=failed"
+expect_error "state given twice" 400 invalid_request
+api GET "/v1/meshes?limit=5&colour=blue&colour=red"
+expect_status "unknown parameters are ignored, even repeated" 200
+api GET "/v1/jobs/0123456789abcdef0123456789abcdef?wait=0x10"
+expect_error "wait in hex" 400 invalid_request
+api GET "/v1/jobs/0123456789abcdef0123456789abcdef?wait="
+expect_error "wait empty" 400 invalid_request
+api GET "/v1/jobs/0123456789abcdef0123456789abcdef?wait"
+expect_error "wait without a value" 400 invalid_request
+api GET "/v1/jobs/0123456789abcdef0123456789abcdef?wait=1e1"
+expect_error "wait with an exponent" 400 invalid_request
+api GET "/v1/jobs/0123456789abcdef0123456789abcdef?wait=1&wait=2"
+expect_error "wait given twice" 400 invalid_request
+api GET "/v1/jobs/0123456789abcdef0123456789abcdef?wait=0.25"
+expect_error "a good wait on an unknown job" 404 job_not_found
+api POST "/v1/jobs?wait=0x10" "${JSON[@]}" -d "{\"mesh\":\"$BOX\",\"kind\":\"preview\"}"
+expect_error "wait in hex on a submission" 400 invalid_request
+api POST "/v1/jobs?wait=" "${JSON[@]}" -d "{\"mesh\":\"$BOX\",\"kind\":\"preview\"}"
+expect_error "wait empty on a submission" 400 invalid_request
+
+# --- JSON text: UTF-8 only, no \u0000 (cJSON would cut the string there) ---
+printf '{"mesh":"%s","kind":"pre\xff\xfeview"}' "$BOX" >"$TMP/badutf8.json"
+api POST /v1/jobs "${JSON[@]}" --data-binary "@$TMP/badutf8.json"
+expect_error "kind not UTF-8" 400 invalid_json
+check "the answer is valid UTF-8" python3 -c 'import sys; open(sys.argv[1], "rb").read().decode("utf-8")' "$BODY"
+printf '{"mesh":"%s","kind":"preview","params":{"x\xc0\xaf":1}}' "$BOX" >"$TMP/overlong.json"
+api POST /v1/jobs "${JSON[@]}" --data-binary "@$TMP/overlong.json"
+expect_error "overlong UTF-8 in a params key" 400 invalid_json
+api POST /v1/jobs "${JSON[@]}" -d "{\"mesh\":\"$BOX\",\"kind\":\"preview\\u0000junk\"}"
+expect_error "kind with \\u0000" 400 invalid_json
+api POST /v1/jobs "${JSON[@]}" -d "{\"mesh\":\"$BOX\",\"kind\":\"preview\\\\u0000junk\"}"
+expect_error "an escaped backslash before u0000 is text: unknown kind" 422 unknown_kind
+api POST /v1/meshes -H $'Content-Type: model/\xff\xfeobj' --data-binary "@$TMP/box.obj"
+expect_error "a Content-Type that is not UTF-8" 415 unsupported_media_type
+check "415 answer is valid UTF-8" python3 -c 'import sys; open(sys.argv[1], "rb").read().decode("utf-8")' "$BODY"
+
+# --- framing, spoken raw (curl would fix these requests up) ---
+# raw_http NAME BYTES: sends BYTES (printf escapes), reads the answer
+# (closing the connection after 5 s at most) into $TMP/NAME.raw.
+raw_http() {
+    python3 - "$PORT" "$2" >"$TMP/$1.raw" <<'PY'
+import socket, sys
+s = socket.create_connection(("127.0.0.1", int(sys.argv[1])))
+s.sendall(sys.argv[2].encode().decode("unicode_escape").encode("latin-1"))
+s.settimeout(5)
+got = b""
+try:
+    while True:
+        b = s.recv(65536)
+        if not b:
+            break
+        got += b
+        if b"\r\n\r\n" in got:
+            head, body = got.split(b"\r\n\r\n", 1)
+            n = [int(l.split(b":")[1]) for l in head.split(b"\r\n") if l.lower().startswith(b"content-length:")]
+            if n and len(body) >= n[0]:
+                break
+except OSError:
+    pass
+sys.stdout.buffer.write(got)
+PY
+}
+# expect_raw NAME STATUS CODE: the answer's status line and JSON error code.
+expect_raw() {
+    local f=$TMP/$1.raw
+    check "$1: status $2 ($(head -c 60 "$f" | tr -d '\r' | head -n 1))" bash -c "head -n 1 '$f' | grep -q '^HTTP/1.1 $2 '"
+    check "$1: JSON content type" bash -c "tr -d '\r' <'$f' | sed '/^$/q' | grep -qi '^content-type: application/json'"
+    check "$1: error code $3" bash -c "tr -d '\r' <'$f' | sed '1,/^$/d' | jq -e '.error.code == \"$3\" and (.error|length) == 2'"
+}
+raw_http nohost 'GET /livez HTTP/1.1\r\n\r\n'
+expect_raw nohost 400 invalid_request
+raw_http twohosts 'GET /livez HTTP/1.1\r\nHost: a\r\nHost: b\r\n\r\n'
+expect_raw twohosts 400 invalid_request
+raw_http http10 'GET /livez HTTP/1.0\r\n\r\n'
+check "HTTP/1.0 needs no Host" bash -c "head -n 1 '$TMP/http10.raw' | grep -q '^HTTP/1.1 200 '"
+raw_http gzip 'POST /v1/jobs HTTP/1.1\r\nHost: x\r\nContent-Type: application/json\r\nTransfer-Encoding: gzip\r\n\r\n{}'
+expect_raw gzip 501 not_implemented
+raw_http telist 'POST /v1/meshes HTTP/1.1\r\nHost: x\r\nContent-Type: model/obj\r\nTransfer-Encoding: gzip, chunked\r\n\r\n0\r\n\r\n'
+expect_raw telist 501 not_implemented
+raw_http clte 'POST /v1/jobs HTTP/1.1\r\nHost: x\r\nContent-Type: application/json\r\nContent-Length: 2\r\nTransfer-Encoding: chunked\r\n\r\n2\r\n{}\r\n0\r\n\r\n'
+expect_raw clte 400 invalid_request
+long=$(printf 'a%.0s' {1..20000})
+raw_http longuri "GET /v1/meshes?x=$long HTTP/1.1\\r\\nHost: x\\r\\n\\r\\n"
+expect_raw longuri 414 uri_too_long
+big=$(printf 'b%.0s' {1..70000})
+raw_http bighead "GET /livez HTTP/1.1\\r\\nHost: x\\r\\nX-Big: $big\\r\\n\\r\\n"
+expect_raw bighead 431 header_too_large
+api GET /livez
+expect_status "serving after the raw requests" 200
+
 # Nothing was lost and the daemon still serves.
 api GET "/v1/meshes/$BOX"
 expect_status "the box is still there" 200

@@ -1,0 +1,357 @@
+/* Request parsing without libmicrohttpd (request.h). Everything here is
+ * strict on purpose: numbers are plain decimal, a declared query parameter
+ * must appear at most once with a value, and text that reaches a JSON
+ * answer is valid UTF-8. */
+#include "request.h"
+
+#include <stdio.h>
+#include <string.h>
+#include <strings.h>
+
+#include "jobs/jobs.h"
+#include "store/store.h"
+
+static const struct {
+    const char *name; /* metrics label: the path template */
+    const char *allow;
+} routes[VX_R_COUNT] = {
+    [VX_R_UNKNOWN] = {"unmatched", ""},
+    [VX_R_LIVEZ] = {"/livez", "GET, HEAD"},
+    [VX_R_READYZ] = {"/readyz", "GET, HEAD"},
+    [VX_R_METRICS] = {"/metrics", "GET, HEAD"},
+    [VX_R_INFO] = {"/v1/info", "GET, HEAD"},
+    [VX_R_MESHES] = {"/v1/meshes", "GET, HEAD, POST"},
+    [VX_R_MESH] = {"/v1/meshes/{id}", "GET, HEAD, DELETE"},
+    [VX_R_JOBS] = {"/v1/jobs", "GET, HEAD, POST"},
+    [VX_R_JOB] = {"/v1/jobs/{id}", "GET, HEAD, DELETE"},
+    [VX_R_RESULT] = {"/v1/jobs/{id}/result", "GET, HEAD"},
+    [VX_R_RESULT_NAME] = {"/v1/jobs/{id}/result/{name}", "GET, HEAD"},
+};
+
+static int is(const char *p, size_t len, const char *lit)
+{
+    size_t n = strlen(lit);
+    return len == n && !memcmp(p, lit, n);
+}
+
+static int starts(const char *p, size_t len, const char *lit)
+{
+    size_t n = strlen(lit);
+    return len >= n && !memcmp(p, lit, n);
+}
+
+/* A path segment: non-empty, no '/', no NUL, shorter than VX_REQ_ID_MAX. */
+static int segment(const char *p, size_t n, char *out)
+{
+    if (!n || n >= VX_REQ_ID_MAX || memchr(p, '/', n) || memchr(p, 0, n)) return 0;
+    memcpy(out, p, n);
+    out[n] = 0;
+    return 1;
+}
+
+vx_route vx_req_route(const char *path, size_t len, vx_req_target *t)
+{
+    t->id[0] = t->name[0] = 0;
+    t->route = VX_R_UNKNOWN;
+    if (is(path, len, "/livez")) t->route = VX_R_LIVEZ;
+    else if (is(path, len, "/readyz")) t->route = VX_R_READYZ;
+    else if (is(path, len, "/metrics")) t->route = VX_R_METRICS;
+    else if (is(path, len, "/v1/info")) t->route = VX_R_INFO;
+    else if (is(path, len, "/v1/meshes")) t->route = VX_R_MESHES;
+    else if (is(path, len, "/v1/jobs")) t->route = VX_R_JOBS;
+    else if (starts(path, len, "/v1/meshes/")) {
+        if (segment(path + 11, len - 11, t->id)) t->route = VX_R_MESH;
+    } else if (starts(path, len, "/v1/jobs/")) {
+        const char *rest = path + 9, *end = path + len;
+        const char *slash = memchr(rest, '/', (size_t)(end - rest));
+        size_t n = (size_t)((slash ? slash : end) - rest);
+        if (!segment(rest, n, t->id)) return t->route;
+        if (!slash) t->route = VX_R_JOB;
+        else if (is(slash, (size_t)(end - slash), "/result")) t->route = VX_R_RESULT;
+        else if (starts(slash, (size_t)(end - slash), "/result/") &&
+                 segment(slash + 8, (size_t)(end - slash - 8), t->name))
+            t->route = VX_R_RESULT_NAME;
+    }
+    if (t->route == VX_R_UNKNOWN) t->id[0] = 0;
+    return t->route;
+}
+
+const char *vx_req_route_name(vx_route rt)
+{
+    return (unsigned)rt < VX_R_COUNT ? routes[rt].name : routes[VX_R_UNKNOWN].name;
+}
+
+const char *vx_req_route_allow(vx_route rt)
+{
+    return (unsigned)rt < VX_R_COUNT ? routes[rt].allow : "";
+}
+
+int vx_req_method_allowed(vx_route rt, const char *m)
+{
+    const char *allow = vx_req_route_allow(rt);
+    size_t n = strlen(m);
+    if (!n) return 0;
+    for (const char *p = allow; (p = strstr(p, m)); p += n)
+        if ((p == allow || p[-1] == ' ') && (p[n] == 0 || p[n] == ',')) return 1;
+    return 0;
+}
+
+void vx_req_media_type(const char *ct, char *out, size_t n)
+{
+    size_t o = 0;
+    if (ct)
+        for (; *ct && *ct != ';' && o + 1 < n; ct++)
+            if (*ct != ' ' && *ct != '\t') out[o++] = (char)(*ct >= 'A' && *ct <= 'Z' ? *ct + 32 : *ct);
+    out[o] = 0;
+}
+
+int vx_req_transfer_encoding(const char *te)
+{
+    if (!te) return 0;
+    while (*te == ' ' || *te == '\t') te++;
+    size_t n = strlen(te);
+    while (n && (te[n - 1] == ' ' || te[n - 1] == '\t')) n--;
+    return n == 7 && !strncasecmp(te, "chunked", 7) ? 1 : -1;
+}
+
+int vx_req_parse_length(const char *s, uint64_t *out)
+{
+    size_t n = strlen(s);
+    if (!n || n > 19) return -1;
+    uint64_t v = 0;
+    for (size_t i = 0; i < n; i++) {
+        if (s[i] < '0' || s[i] > '9') return -1;
+        v = v * 10 + (uint64_t)(s[i] - '0');
+    }
+    *out = v;
+    return 0;
+}
+
+/* ---- query parameters ------------------------------------------------ */
+
+int vx_req_parse_limit(const char *s, size_t len, int *out)
+{
+    if (!len || len > 4) return -1; /* "1000" is the longest */
+    int v = 0;
+    for (size_t i = 0; i < len; i++) {
+        if (s[i] < '0' || s[i] > '9') return -1;
+        v = v * 10 + (s[i] - '0');
+    }
+    if (v < 1 || v > 1000) return -1;
+    *out = v;
+    return 0;
+}
+
+int vx_req_parse_seconds(const char *s, size_t len, uint64_t *us)
+{
+    const uint64_t max_s = VX_REQ_WAIT_MAX_US / 1000000;
+    uint64_t whole = 0, frac = 0;
+    size_t i = 0, nint = 0;
+    for (; i < len && s[i] >= '0' && s[i] <= '9'; i++, nint++)
+        if (whole <= max_s) whole = whole * 10 + (uint64_t)(s[i] - '0');
+    if (!nint) return -1;
+    if (i < len) {
+        if (s[i] != '.') return -1;
+        i++;
+        size_t nfrac = 0;
+        for (; i < len && s[i] >= '0' && s[i] <= '9'; i++, nfrac++)
+            if (nfrac < 6) frac = frac * 10 + (uint64_t)(s[i] - '0');
+        if (!nfrac || i < len) return -1;
+        for (; nfrac < 6; nfrac++) frac *= 10;
+    }
+    *us = whole >= max_s ? VX_REQ_WAIT_MAX_US : whole * 1000000 + frac;
+    return 0;
+}
+
+void vx_req_query_init(vx_req_query *q)
+{
+    memset(q, 0, sizeof *q);
+    q->limit = 100;
+}
+
+enum qparam { Q_NONE, Q_LIMIT, Q_AFTER, Q_STATE, Q_WAIT };
+
+/* Which parameters a route and method declare (api/openapi.yaml). */
+static enum qparam declared(vx_route rt, const char *method, const char *key, size_t klen)
+{
+    int get = !strcmp(method, "GET") || !strcmp(method, "HEAD");
+    int post = !strcmp(method, "POST");
+    if ((rt == VX_R_MESHES || rt == VX_R_JOBS) && get) {
+        if (is(key, klen, "limit")) return Q_LIMIT;
+        if (is(key, klen, "after")) return Q_AFTER;
+        if (rt == VX_R_JOBS && is(key, klen, "state")) return Q_STATE;
+    }
+    if (((rt == VX_R_JOBS && post) || (rt == VX_R_JOB && get)) && is(key, klen, "wait")) return Q_WAIT;
+    return Q_NONE;
+}
+
+static int job_state(const char *s)
+{
+    static const char *states[] = {"queued", "running", "succeeded", "failed", "canceled"};
+    for (size_t i = 0; i < sizeof states / sizeof states[0]; i++)
+        if (!strcmp(s, states[i])) return 1;
+    return 0;
+}
+
+int vx_req_query_add(vx_req_query *q, vx_route rt, const char *method, const char *key, size_t klen,
+                     const char *value, size_t vlen, char *msg, size_t msgn)
+{
+    enum qparam p = declared(rt, method, key, klen);
+    if (p == Q_NONE) return 0;
+    static const char *names[] = {"", "limit", "after", "state", "wait"};
+    const char *name = names[p];
+    int *seen = p == Q_LIMIT   ? &q->has_limit
+                : p == Q_AFTER ? &q->has_after
+                : p == Q_STATE ? &q->has_state
+                               : &q->has_wait;
+    if (*seen) {
+        snprintf(msg, msgn, "query parameter %s is given more than once", name);
+        return -1;
+    }
+    *seen = 1;
+    if (!value || !vlen) {
+        snprintf(msg, msgn, "query parameter %s needs a value", name);
+        return -1;
+    }
+    if (memchr(value, 0, vlen)) {
+        snprintf(msg, msgn, "query parameter %s holds a NUL byte", name);
+        return -1;
+    }
+    switch (p) {
+    case Q_LIMIT:
+        if (vx_req_parse_limit(value, vlen, &q->limit)) {
+            snprintf(msg, msgn, "query parameter limit must be a decimal integer from 1 to 1000");
+            return -1;
+        }
+        return 0;
+    case Q_AFTER:
+        if (vlen >= sizeof q->after) goto bad_after;
+        memcpy(q->after, value, vlen);
+        q->after[vlen] = 0;
+        if (rt == VX_R_MESHES ? !vx_store_valid_mesh_id(q->after) : !vx_jobs_valid_id(q->after))
+            goto bad_after;
+        return 0;
+    case Q_STATE:
+        if (vlen >= sizeof q->state) goto bad_state;
+        memcpy(q->state, value, vlen);
+        q->state[vlen] = 0;
+        if (!job_state(q->state)) goto bad_state;
+        return 0;
+    case Q_WAIT:
+        if (vx_req_parse_seconds(value, vlen, &q->wait_us)) {
+            snprintf(msg, msgn, "query parameter wait must be a non-negative decimal number of seconds");
+            return -1;
+        }
+        return 0;
+    default: return 0;
+    }
+bad_after:
+    q->after[0] = 0;
+    snprintf(msg, msgn, "query parameter after must be a %s id", rt == VX_R_MESHES ? "mesh" : "job");
+    return -1;
+bad_state:
+    q->state[0] = 0;
+    snprintf(msg, msgn, "query parameter state must be queued, running, succeeded, failed or canceled");
+    return -1;
+}
+
+int vx_req_query_format(const vx_req_query *q, char *out, size_t n)
+{
+    size_t o = 0;
+    int k;
+    out[0] = 0;
+#define PUT(...)                                                                                     \
+    do {                                                                                             \
+        k = snprintf(out + o, n - o, "%s", o ? "&" : "");                                            \
+        if (k < 0 || (size_t)k >= n - o) return -1;                                                  \
+        o += (size_t)k;                                                                              \
+        k = snprintf(out + o, n - o, __VA_ARGS__);                                                   \
+        if (k < 0 || (size_t)k >= n - o) return -1;                                                  \
+        o += (size_t)k;                                                                              \
+    } while (0)
+    if (q->has_limit) PUT("limit=%d", q->limit);
+    if (q->has_after) PUT("after=%s", q->after);
+    if (q->has_state) PUT("state=%s", q->state);
+    if (q->has_wait)
+        PUT("wait=%llu.%06llu", (unsigned long long)(q->wait_us / 1000000),
+            (unsigned long long)(q->wait_us % 1000000));
+#undef PUT
+    return (int)o;
+}
+
+/* ---- UTF-8 ------------------------------------------------------------ */
+
+/* Length of the valid UTF-8 sequence at s (n bytes left), or 0. */
+static size_t utf8_char(const unsigned char *s, size_t n)
+{
+    unsigned c = s[0];
+    if (c < 0x80) return 1;
+    size_t len;
+    unsigned cp, min;
+    if (c >= 0xc2 && c <= 0xdf) len = 2, cp = c & 0x1f, min = 0x80;
+    else if (c >= 0xe0 && c <= 0xef) len = 3, cp = c & 0x0f, min = 0x800;
+    else if (c >= 0xf0 && c <= 0xf4) len = 4, cp = c & 0x07, min = 0x10000;
+    else return 0;
+    if (n < len) return 0;
+    for (size_t i = 1; i < len; i++) {
+        if ((s[i] & 0xc0) != 0x80) return 0;
+        cp = cp << 6 | (s[i] & 0x3f);
+    }
+    if (cp < min || cp > 0x10ffff || (cp >= 0xd800 && cp <= 0xdfff)) return 0;
+    return len;
+}
+
+int vx_req_utf8_valid(const char *s, size_t len)
+{
+    const unsigned char *p = (const unsigned char *)s;
+    for (size_t i = 0; i < len;) {
+        size_t k = utf8_char(p + i, len - i);
+        if (!k) return 0;
+        i += k;
+    }
+    return 1;
+}
+
+char *vx_req_utf8_sanitize(const char *s, char *out, size_t n)
+{
+    const unsigned char *p = (const unsigned char *)s;
+    size_t len = strlen(s), o = 0;
+    for (size_t i = 0; i < len;) {
+        size_t k = utf8_char(p + i, len - i);
+        if (k <= 1) {
+            if (o + 1 >= n) break;
+            out[o++] = k == 1 && p[i] >= 0x20 && p[i] != 0x7f ? (char)p[i] : '?';
+            i++;
+            continue;
+        }
+        if (o + k >= n) break;
+        memcpy(out + o, p + i, k);
+        o += k;
+        i += k;
+    }
+    out[o] = 0;
+    return out;
+}
+
+int vx_req_json_text_ok(const char *body, size_t len, char *msg, size_t msgn)
+{
+    if (!vx_req_utf8_valid(body, len)) {
+        snprintf(msg, msgn, "the body is not valid UTF-8");
+        return -1;
+    }
+    /* Outside strings a backslash is invalid JSON anyway (the parser says
+     * so); inside, each escape is two characters, so "\\u0000" is text. */
+    for (size_t i = 0; i + 1 < len; i++) {
+        if (body[i] != '\\') continue;
+        if (body[i + 1] == 'u' && i + 5 < len && !memcmp(body + i + 2, "0000", 4)) {
+            snprintf(msg, msgn, "the body holds a \\u0000 escape (NUL is not allowed in strings)");
+            return -1;
+        }
+        i++;
+    }
+    if (memchr(body, 0, len)) {
+        snprintf(msg, msgn, "the body holds a NUL byte");
+        return -1;
+    }
+    return 0;
+}

@@ -1,0 +1,160 @@
+#!/usr/bin/env python3
+"""Slow HTTP clients for test_slow_clients.sh (loopback only, bounded in time).
+
+  slow_clients.py drip PORT SECONDS OUT.json [ADDR...]
+      From each ADDR (default 127.0.0.2..127.0.0.9) keeps N connections
+      (--per-addr, default 8) sending a request head one byte per 0.5 s,
+      reconnecting when one is closed, for SECONDS. Writes to OUT.json, per
+      connection that was answered or closed: seconds from connect to the
+      first byte of the answer (or the close) and the status line.
+  slow_clients.py stall PORT HEAD_HEX_OR_TEXT SECONDS
+      Sends the given request bytes (\\r\\n escapes allowed), then nothing,
+      and prints {"seconds": ..., "response": ...} when the server answers
+      or closes (or SECONDS pass).
+  slow_clients.py keepalive-drip PORT SECONDS
+      One full GET /livez, then the next head one byte per 0.5 s on the same
+      connection; prints what came back and when (seconds after the first
+      answer).
+"""
+import json
+import socket
+import sys
+import time
+
+HEAD = b"GET /livez HTTP/1.1\r\nHost: x\r\nX-Drip: " + b"a" * 200 + b"\r\n\r\n"
+
+
+def connect(port, addr):
+    s = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+    s.bind((addr, 0))
+    s.settimeout(2)
+    s.connect(("127.0.0.1", port))
+    s.setblocking(False)
+    return s
+
+
+def drip(port, seconds, out, addrs, per_addr):
+    conns = []  # [sock, addr, t_connect, offset, answer]
+    done = []
+    t_end = time.time() + seconds
+    for a in addrs:
+        for _ in range(per_addr):
+            try:
+                conns.append([connect(port, a), a, time.time(), 0, b""])
+            except OSError:
+                conns.append([None, a, time.time(), 0, b""])
+    next_byte = time.time()
+    while time.time() < t_end:
+        # Answers are looked for every 50 ms, head bytes sent every 0.5 s.
+        send_now = time.time() >= next_byte
+        if send_now:
+            next_byte += 0.5
+        for c in conns:
+            s = c[0]
+            if s is None:
+                if send_now:
+                    try:
+                        c[0], c[2], c[3], c[4] = connect(port, c[1]), time.time(), 0, b""
+                    except OSError:
+                        pass
+                continue
+            closed = False
+            try:
+                b = s.recv(4096)
+                if b:
+                    c[4] += b
+                closed = True  # an answer or EOF ends this connection
+            except BlockingIOError:
+                pass
+            except OSError:
+                closed = True
+            if not closed and send_now and c[3] < len(HEAD):
+                try:
+                    s.send(HEAD[c[3]:c[3] + 1])
+                    c[3] += 1
+                except BlockingIOError:
+                    pass
+                except OSError:
+                    closed = True
+            if closed:
+                line = c[4].split(b"\r\n", 1)[0].decode("latin-1")
+                body = c[4].split(b"\r\n\r\n", 1)[1].decode("latin-1") if b"\r\n\r\n" in c[4] else ""
+                done.append({"addr": c[1], "seconds": time.time() - c[2], "status_line": line, "body": body})
+                s.close()
+                c[0] = None
+        time.sleep(0.05)
+    for c in conns:
+        if c[0] is not None:
+            c[0].close()
+    with open(out, "w") as f:
+        json.dump({"answered": done, "open_at_end": sum(1 for c in conns if c[0] is not None)}, f)
+
+
+def stall(port, data, seconds):
+    s = socket.create_connection(("127.0.0.1", port))
+    t0 = time.time()
+    s.sendall(data)
+    s.settimeout(seconds)
+    got = b""
+    try:
+        while True:
+            b = s.recv(4096)
+            if not b:
+                break
+            got += b
+            if b"\r\n\r\n" in got:
+                head, body = got.split(b"\r\n\r\n", 1)
+                n = [int(l.split(b":")[1]) for l in head.split(b"\r\n") if l.lower().startswith(b"content-length:")]
+                if n and len(body) >= n[0]:
+                    break
+    except (socket.timeout, OSError):
+        pass
+    print(json.dumps({"seconds": time.time() - t0, "response": got.decode("latin-1")}))
+
+
+def keepalive_drip(port, seconds):
+    s = socket.create_connection(("127.0.0.1", port))
+    s.sendall(b"GET /livez HTTP/1.1\r\nHost: x\r\n\r\n")
+    s.settimeout(2)
+    first = s.recv(4096)
+    t0 = time.time()
+    s.setblocking(False)
+    got, i, next_byte = b"", 0, t0
+    while time.time() - t0 < seconds:
+        try:
+            b = s.recv(4096)
+            if not b:
+                break
+            got += b
+            break
+        except BlockingIOError:
+            pass
+        except OSError:
+            break
+        if time.time() >= next_byte:
+            next_byte += 0.5
+            try:
+                s.send(HEAD[i:i + 1])
+                i += 1
+            except OSError:
+                break
+        time.sleep(0.05)
+    print(json.dumps({"first": first.decode("latin-1").split("\r\n")[0], "seconds": time.time() - t0,
+                      "response": got.decode("latin-1")}))
+
+
+if __name__ == "__main__":
+    cmd, port = sys.argv[1], int(sys.argv[2])
+    if cmd == "drip":
+        args = sys.argv[3:]
+        per = 8
+        if "--per-addr" in args:
+            k = args.index("--per-addr")
+            per = int(args[k + 1])
+            del args[k:k + 2]
+        addrs = args[2:] or ["127.0.0.%d" % i for i in range(2, 10)]
+        drip(port, float(args[0]), args[1], addrs, per)
+    elif cmd == "stall":
+        stall(port, sys.argv[3].encode().decode("unicode_escape").encode("latin-1"), float(sys.argv[4]))
+    elif cmd == "keepalive-drip":
+        keepalive_drip(port, float(sys.argv[3]))

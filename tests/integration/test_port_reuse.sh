@@ -1,0 +1,49 @@
+#!/usr/bin/env bash
+# One daemon per port (issue #10, defect 1): a second voxeld on a port that
+# is taken exits non-zero and says the address is in use; sharing the port
+# (SO_REUSEPORT) happens only when both ask for it with --reuse-port yes.
+source "$(dirname "$0")/lib.sh"
+start_daemon || exit 1
+
+# second_daemon LOG [flags...]: runs a voxeld on $PORT with its own data dir
+# until it is ready (then stops it: rc 0) or exits (rc = its exit status).
+second_daemon() {
+    local log=$1 pid i
+    shift
+    "$VOXELD" --listen "127.0.0.1:$PORT" --data-dir "$TMP/data2" --workers 1 "$@" 2>"$log" &
+    pid=$!
+    for i in $(seq 1 600); do
+        if grep -aq 'event=voxeld.ready' "$log"; then
+            kill -TERM "$pid"
+            wait "$pid"
+            return 0
+        fi
+        if ! kill -0 "$pid" 2>/dev/null; then
+            wait "$pid"
+            return
+        fi
+        sleep 0.1
+    done
+    kill -KILL "$pid"
+    return 99
+}
+
+second_daemon "$TMP/second.log"
+rc=$?
+check "a second daemon on a taken port exits non-zero (got $rc)" test "$rc" -ne 0 -a "$rc" -ne 99
+check "its stderr says listen_failed" grep -aq 'code=listen_failed' "$TMP/second.log"
+check "its stderr says the address is in use" grep -aqi 'address in use' "$TMP/second.log"
+check "its message names no server path" bash -c "! grep -a 'listen_failed' '$TMP/second.log' | grep -q '$TMP'"
+api GET /livez
+expect_status "the first daemon still serves" 200
+stop_daemon
+
+# --reuse-port yes on both: the second one starts.
+start_daemon --reuse-port yes || exit 1
+second_daemon "$TMP/third.log" --reuse-port yes
+rc=$?
+check "with --reuse-port yes on both, a second daemon starts (got $rc)" test "$rc" -eq 0
+api GET /v1/info
+expect_status "info" 200
+stop_daemon
+finish

@@ -1,0 +1,74 @@
+#!/usr/bin/env bash
+# Slow clients (issue #10, defect 3): a request head must arrive within
+# --header-timeout and a body keep --min-body-rate, else a JSON 408; and
+# while 8 addresses drip heads on every connection they may hold, a fresh
+# client on another address is served within 1 s. All on loopback
+# (127.0.0.2..9 are loopback addresses on Linux).
+source "$(dirname "$0")/lib.sh"
+source "$(dirname "$0")/box.sh"
+SLOW="python3 $(dirname "$0")/slow_clients.py"
+start_daemon --max-connections 64 --max-connections-per-ip 8 --header-timeout 2 --min-body-rate 1024 || exit 1
+
+api GET /v1/info
+check "info lists header_timeout_s" jq -e '.limits.header_timeout_s == 2' "$BODY"
+check "info lists min_body_rate" jq -e '.limits.min_body_rate == 1024' "$BODY"
+
+# --- a dripped head: 408 JSON within header-timeout + 1 s ---
+$SLOW drip "$PORT" 4 "$TMP/one.json" 127.0.0.1 --per-addr 1
+check "a dripped head is answered" jq -e '.answered | length == 1' "$TMP/one.json"
+check "dripped head: 408 ($(jq -c '.answered[0]' "$TMP/one.json"))" \
+    jq -e '.answered[0].status_line | test("^HTTP/1.1 408")' "$TMP/one.json"
+check "dripped head: JSON request_timeout" \
+    jq -e '.answered[0].body | fromjson | .error.code == "request_timeout"' "$TMP/one.json"
+check "dripped head: within 3 s" jq -e '.answered[0].seconds <= 3' "$TMP/one.json"
+
+# --- the same on a keep-alive connection, after a first answer ---
+$SLOW keepalive-drip "$PORT" 6 >"$TMP/ka.json"
+check "keep-alive: first answer 200" jq -e '.first | test("200")' "$TMP/ka.json"
+check "keep-alive: dripped second head gets 408 within 3.5 s ($(jq -c . "$TMP/ka.json" | head -c 200))" \
+    jq -e '(.response | test("^HTTP/1.1 408")) and .seconds <= 3.5' "$TMP/ka.json"
+
+# --- a body that stops: 408 within the grace + one window (2 + 2 s) ---
+$SLOW stall "$PORT" 'POST /v1/jobs HTTP/1.1\r\nHost: x\r\nContent-Type: application/json\r\nContent-Length: 1000\r\n\r\n{"mesh":"' 8 >"$TMP/stall.json"
+check "stalled body: 408 ($(jq -c . "$TMP/stall.json" | head -c 200))" \
+    jq -e '.response | test("^HTTP/1.1 408")' "$TMP/stall.json"
+check "stalled body: JSON request_timeout" \
+    jq -e '.response | split("\r\n\r\n")[1] | fromjson | .error.code == "request_timeout"' "$TMP/stall.json"
+check "stalled body: within 5.5 s" jq -e '.seconds <= 5.5' "$TMP/stall.json"
+# A chunk size of 2^64-1 announces a body that never comes: the same 408.
+$SLOW stall "$PORT" 'POST /v1/jobs HTTP/1.1\r\nHost: x\r\nContent-Type: application/json\r\nTransfer-Encoding: chunked\r\n\r\nffffffffffffffff\r\n{}' 8 >"$TMP/chunk.json"
+check "endless chunk: 408 within 5.5 s ($(jq -c . "$TMP/chunk.json" | head -c 200))" \
+    jq -e '(.response | test("^HTTP/1.1 408")) and .seconds <= 5.5' "$TMP/chunk.json"
+
+# --- 8 addresses x 8 dripping connections fill --max-connections ---
+$SLOW drip "$PORT" 9 "$TMP/drip.json" &
+DRIP=$!
+sleep 2
+worst=0 ok=0
+for i in 1 2 3 4 5 6; do
+    out=$(curl -s -o /dev/null -w '%{http_code} %{time_total}' --max-time 1 "$BASE/livez")
+    [[ ${out%% *} == 200 ]] && ok=$((ok + 1))
+    t=${out#* }
+    worst=$(awk -v a="$worst" -v b="$t" 'BEGIN {print (b > a) ? b : a}')
+    sleep 0.7
+done
+wait "$DRIP"
+check "fresh client served within 1 s while 64 connections drip (6/6 got 200: $ok; slowest ${worst}s)" test "$ok" -eq 6
+check "drip clients were answered" jq -e '.answered | length >= 8' "$TMP/drip.json"
+check "every dripped head answered 408 or closed within 3 s ($(jq -c '[.answered[].seconds] | max' "$TMP/drip.json"))" \
+    jq -e '[.answered[] | select(.seconds > 3)] | length == 0' "$TMP/drip.json"
+check "answers are 408 JSON or a close" \
+    jq -e '[.answered[] | select(.status_line != "" and (.status_line | test("^HTTP/1.1 408") | not))] | length == 0' "$TMP/drip.json"
+
+# --- ordinary clients still work ---
+box_obj "$TMP/box.obj" 0 0 0 1 1 1
+upload "$TMP/box.obj"
+expect_status "a normal upload" 201
+yes '# padding to make the upload take a while' | head -n 7000 >"$TMP/pad.obj"
+cat "$TMP/box.obj" >>"$TMP/pad.obj"
+api POST /v1/meshes -H "Content-Type: model/obj" --limit-rate 200k --data-binary "@$TMP/pad.obj"
+expect_status "an upload at 200 KB/s (1.5 s)" 201
+api GET /livez
+expect_status "still serving" 200
+stop_daemon
+finish
