@@ -69,6 +69,11 @@ float *vx_bl_lowpass(int R, int N, const vx_bl_filter *flt, vx_bl_sample_fn samp
  * wisdom written back after planning. NULL = none, plans estimated
  * (FFTW_ESTIMATE), the default. Any thread. */
 void vx_bl_wisdom_dir(const char *dir);
+/* Bounds the time FFTW may take measuring each plan the calling thread
+ * makes (FFTW's own time limit: past it, the best plan found so far), so
+ * that a job's time limit is not overrun inside the planner. 0 = none,
+ * the default. */
+void vx_bl_plan_time_limit(double seconds);
 /* The reference: one full R^3 real-to-complex FFT of the samples, then the
  * same selection and filter (R^3 floats + R^2 (R/2+1) complex: tests and
  * the benchmark only; always estimated, never measured). Any thread. */
@@ -142,7 +147,9 @@ void vx_bl_hits_free(vx_bl_hits *h);
  * spacing, so the first crossing is the same),
  * to sub-sample accuracy on the trilinear field; normal = -gradient
  * (trilinear in v->g) when v->g is set, else left NaN for the screen-space
- * methods. Needs vx_bl_volume_blocks. nthreads CPU threads. */
+ * methods. Needs vx_bl_volume_blocks. nthreads CPU threads; the calling
+ * thread's stop hook (util/stop.h) is polled between tiles (-1 with its
+ * err). */
 int vx_bl_cast(const vx_bl_volume *v, double iso, const vx_bl_camera *cam, int nthreads,
                vx_bl_hits *h, vx_err *err);
 
@@ -177,8 +184,9 @@ typedef struct vx_bl_shade_desc {
     double ambient, color[3], background[3];
     int depth_only; /* brightness from depth instead of normals (method 1) */
 } vx_bl_shade_desc;
-/* Lambert + ambient into rgb (3 floats per pixel, 0..1, top row first). */
-void vx_bl_shade(const vx_bl_hits *h, const vx_bl_shade_desc *d, float *rgb);
+/* Lambert + ambient into rgb (3 floats per pixel, 0..1, top row first).
+ * 0, or -1 with err when the thread's stop hook (util/stop.h) says stop. */
+int vx_bl_shade(const vx_bl_hits *h, const vx_bl_shade_desc *d, float *rgb, vx_err *err);
 /* Draws text (lowercase letters, digits, '-') at (x, y) top-left, scale s,
  * into rgb (width w) in colour c. */
 void vx_bl_label(float *rgb, int w, int h, int x, int y, int s, const char *text, const float c[3]);

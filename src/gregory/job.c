@@ -12,6 +12,8 @@
 #include "gregory/job.h"
 #include "gregory/osd.h"
 #include "gregory/tess.h"
+#include "util/child.h"
+#include "util/stop.h"
 
 enum { CONS_INTERPOLATE = 0, CONS_APPROX_CC };
 enum { FMT_OBJ = 0, FMT_PLY, FMT_DRC };
@@ -27,6 +29,8 @@ static const char *const known[] = {"divisions", "max_edge", "construction", "we
  * reference grows with every extraordinary vertex). */
 #define CC_DISTANCE_SAMPLES 5
 #define CC_DISTANCE_MAX_PATCHES 20000
+/* How often the encoder checks the time limit while its child writes. */
+#define ENCODE_POLL_MS 20
 
 typedef struct gparams {
     long divisions;  /* 0 when max_edge is used */
@@ -298,8 +302,8 @@ static const double *frame_positions(vx_job_run *r, const vx_mesh *mesh, const g
     return buf;
 }
 
-static int greg_run_gl(vx_job_run *r, const vx_mesh *mesh, const cJSON *params, void **state,
-                       vx_err *err)
+static int run_gl(vx_job_run *r, const vx_mesh *mesh, const cJSON *params, void **state,
+                  vx_err *err)
 {
     gparams p;
     const vx_limits *lim = vx_run_limits(r);
@@ -387,7 +391,7 @@ static int greg_run_gl(vx_job_run *r, const vx_mesh *mesh, const cJSON *params, 
             vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for frame %zu", k);
             goto done;
         }
-        vx_gregory_gather(s->layout, grid, origin, s->pos[k], s->nrm[k]);
+        if (vx_gregory_gather(s->layout, grid, origin, s->pos[k], s->nrm[k], err)) goto done;
         if (frame_ms) cJSON_AddItemToArray(frame_ms, cJSON_CreateNumber(now_ms() - f0));
         if (vx_run_progress(r, 0.9 * (double)(k + 1) / (double)nframes, err)) goto done;
     }
@@ -430,6 +434,50 @@ done:
     return rc;
 }
 
+/* The layout, the tessellation and the gather poll the stop hook: the job's
+ * time limit and cancel reach into them. */
+static int stop_hook(void *ud, vx_err *err) { return vx_run_progress(ud, 0, err); }
+
+static int greg_run_gl(vx_job_run *r, const vx_mesh *mesh, const cJSON *params, void **state,
+                       vx_err *err)
+{
+    vx_stop_set(stop_hook, r);
+    int rc = run_gl(r, mesh, params, state, err);
+    vx_stop_set(NULL, NULL);
+    return rc;
+}
+
+/* One frame's file, written by a child process (util/child.h): the OBJ,
+ * PLY and Draco writers are single calls that take seconds on big outputs
+ * and cannot be stopped from inside; a child is killed at the time limit. */
+typedef struct frame_write {
+    const vx_mesh *m;
+    const vx_mesh_write_opts *o;
+    int format;
+    const char *path;
+} frame_write;
+
+static int write_frame(void *ud, void *out, size_t out_size, vx_err *err)
+{
+    const frame_write *w = ud;
+    (void)out;
+    (void)out_size;
+    return w->format == FMT_OBJ   ? vx_obj_write_path(w->m, w->o, w->path, err)
+           : w->format == FMT_PLY ? vx_ply_write_path(w->m, w->o, w->path, err)
+                                  : vx_draco_write_path(w->m, w->o, w->path, err);
+}
+
+typedef struct encode_poll {
+    vx_job_run *r;
+    double fraction;
+} encode_poll;
+
+static int poll_encode(void *ud, vx_err *err)
+{
+    encode_poll *e = ud;
+    return vx_run_progress(e->r, e->fraction, err);
+}
+
 static int greg_encode(vx_job_run *r, const cJSON *params, void *state, vx_err *err)
 {
     greg_state *s = state;
@@ -454,10 +502,10 @@ static int greg_encode(vx_job_run *r, const cJSON *params, void *state, vx_err *
                                 /* OBJ groups per patch only when each patch is its own part */
                                 .face_group = p.format == FMT_OBJ && p.weld ? NULL : l->tri_patch,
                                 .group_prefix = "patch"};
-        int rc = p.format == FMT_OBJ   ? vx_obj_write_path(&m, &o, path, err)
-                 : p.format == FMT_PLY ? vx_ply_write_path(&m, &o, path, err)
-                                       : vx_draco_write_path(&m, &o, path, err);
-        if (rc) return -1;
+        frame_write w = {&m, &o, p.format, path};
+        encode_poll ep = {r, 0.9 + 0.1 * (double)k / (double)s->nframes};
+        if (vx_child_call(write_frame, &w, NULL, 0, poll_encode, &ep, ENCODE_POLL_MS, err))
+            return -1;
         if (vx_run_progress(r, 0.9 + 0.1 * (double)(k + 1) / (double)s->nframes, err)) return -1;
     }
     return 0;

@@ -5,6 +5,7 @@
 #include <string.h>
 
 #include "gregory/tess.h"
+#include "util/stop.h"
 
 enum { NONE = UINT32_MAX };
 
@@ -453,8 +454,11 @@ vx_gtess_layout *vx_gregory_layout_new(const vx_gpatch_set *s, const uint32_t *n
     if (!l->rep || !l->tri || !l->tri_patch) goto fail_oom;
     for (size_t v = 0; v < l->nverts; v++)
         l->rep[v] = UINT64_MAX;
+    /* The loops below take about a second per 10^7 triangles on a CPU:
+     * they poll the stop hook (util/stop.h) as they go. */
     for (size_t p = 0; p < np; p++) { /* the first patch that has a vertex gives it */
         uint32_t n = ndiv[p];
+        if (vx_stop_poll(err)) goto fail;
         for (uint32_t j = 1; j < n; j++)
             for (uint32_t i = 1; i < n; i++)
                 l->rep[grid_id(&c, p, i, j)] = l->voff[p] + (uint64_t)j * (n + 1) + i;
@@ -464,11 +468,13 @@ vx_gtess_layout *vx_gregory_layout_new(const vx_gpatch_set *s, const uint32_t *n
                 if (l->rep[v] == UINT64_MAX) l->rep[v] = loop_grid(&c, p, ed, t);
             }
     }
-    for (size_t p = 0; p < np; p++)
+    for (size_t p = 0; p < np; p++) {
+        if (vx_stop_poll(err)) goto fail;
         if (is_transition(c.ne, ndiv, p))
             transition_tris(&c, p);
         else
             grid_tris(&c, p, 0, ndiv[p]);
+    }
     free(c.ne);
     free(c.src);
     free(c.pbase);
@@ -490,14 +496,16 @@ fail:
     return NULL;
 }
 
-void vx_gregory_gather(const vx_gtess_layout *l, const float *grid, const double origin[3],
-                       double *pos, float *nrm)
+int vx_gregory_gather(const vx_gtess_layout *l, const float *grid, const double origin[3],
+                      double *pos, float *nrm, vx_err *err)
 {
     for (size_t v = 0; v < l->nverts; v++) {
+        if ((v & 0xffff) == 0 && vx_stop_poll(err)) return -1;
         const float *g = grid + 6 * l->rep[v];
         for (int c = 0; c < 3; c++) {
             pos[3 * v + c] = origin[c] + (double)g[c];
             if (nrm) nrm[3 * v + c] = g[3 + c];
         }
     }
+    return 0;
 }
