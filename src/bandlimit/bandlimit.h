@@ -102,7 +102,8 @@ uint64_t vx_bl_volume_bytes(int M, int with_grad);
  * by slab (never an M^3 complex array); with_grad also fills g from the
  * spectrum times j 2 pi k / P (the exact gradient). x0 = the position of
  * sample 0 (box origin + P/(2R)), P the box edge; M >= N, even; v->origin
- * becomes x0. Fills v (owned arrays; vx_bl_volume_free). */
+ * becomes x0. Fills v (owned arrays; vx_bl_volume_free). The calling
+ * thread's stop hook (util/stop.h) is polled between planes. */
 int vx_bl_interp(const float *spec, int N, int M, const double x0[3], double P, int with_grad,
                  int nthreads, vx_bl_volume *v, vx_err *err);
 /* Exact evaluation of the band-limited density and gradient at x (world),
@@ -110,7 +111,8 @@ int vx_bl_interp(const float *spec, int N, int M, const double x0[3], double P, 
 double vx_bl_eval(const float *spec, int N, const double x0[3], double P, const double x[3],
                   double grad[3]);
 void vx_bl_volume_free(vx_bl_volume *v);
-/* Computes v->bmax and v->blip (blocks of 8 cells) for the caster; 0 or -1. */
+/* Computes v->bmax and v->blip (blocks of 8 cells) for the caster; 0 or -1
+ * (out of memory; the stop hook, polled per slab of blocks). */
 int vx_bl_volume_blocks(vx_bl_volume *v, vx_err *err);
 /* Trilinear value of f (and of g when grad != NULL and v->g is set) at
  * world point x, clamped to the grid. */
