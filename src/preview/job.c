@@ -1,6 +1,7 @@
 /* The `preview` row of the job table (kind.h). Kept apart from render.c so
  * that programs using only the renderer need not link the job runner. */
 #include <stdlib.h>
+#include <string.h>
 
 #include "image/png.h"
 #include "preview/preview.h"
@@ -48,6 +49,7 @@ typedef struct exact {
 static int read_params(const cJSON *params, const vx_limits *lim, vx_preview_params *p, exact *x,
                        vx_err *err)
 {
+    memset(p, 0, sizeof *p); /* the fields params do not set: no poll, automatic bands */
     if (vx_param_object(&params, known, err)) return -1;
     static const double def_color[3] = {0.8, 0.8, 0.85}, def_bg[4] = {1, 1, 1, 1};
     long w, h, samples;

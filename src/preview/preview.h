@@ -46,8 +46,9 @@ typedef struct vx_preview_stats {
 
 /* The render is cut so that each piece is a small fraction of a job's time
  * limit on a CPU rasteriser: bands of about this many samples (pixels x
- * MSAA samples), each drawn in draws of at most this many triangles. */
-#define VX_PREVIEW_BAND_SAMPLES (16 << 20)
+ * MSAA samples: ~0.1 s on a loaded llvmpipe), each drawn in draws of at
+ * most this many triangles. */
+#define VX_PREVIEW_BAND_SAMPLES (4 << 20)
 #define VX_PREVIEW_CHUNK_TRIS (1 << 20)
 
 /* Renders into rgba (width*height*4 bytes, top row first). GL thread. */

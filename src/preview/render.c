@@ -366,9 +366,12 @@ int vx_preview_render(vx_gl *gl, const vx_mesh *m, const vx_preview_params *p, u
             glBindVertexArray(0);
             glUseProgram(0);
         }
-        if (samples > 1)
+        if (samples > 1) {
+            glFinish(); /* the draw and the resolve are two pieces */
+            if (poll_render(p, 0.05 + 0.9 * (b + 0.5) / nbands, err)) goto done;
             glBlitNamedFramebuffer(o.fbo_ms, o.fbo, 0, 0, w, n, 0, 0, w, n, GL_COLOR_BUFFER_BIT,
                                    GL_NEAREST);
+        }
         st->gpu_ms += vx_gl_timer_end_ms(&timer); /* waits for the band */
         timing = 0;
         glBindFramebuffer(GL_FRAMEBUFFER, 0);
