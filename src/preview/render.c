@@ -356,7 +356,7 @@ int vx_preview_render(vx_gl *gl, const vx_mesh *m, const vx_preview_params *p, u
             for (size_t first = 0; first < nidx; first += step) {
                 if (first > 0) {
                     glFinish();
-                    double f = ((double)b + (double)first / (double)nidx) / nbands;
+                    double f = ((double)b + 0.5 * (double)first / (double)nidx) / nbands;
                     if (poll_render(p, 0.05 + 0.9 * f, err)) goto done;
                 }
                 size_t count = nidx - first < step ? nidx - first : step;
