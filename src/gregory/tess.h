@@ -66,7 +66,7 @@ void vx_gregory_layout_free(vx_gtess_layout *l);
 /* A tessellator for one layout: the GPU buffers (per-patch info, control
  * points, outputs) made once, so that deformation frames only upload their
  * control points and run the pass. Owned (free with vx_gtess_free); l must
- * outlive it. NULL with err. GL thread. */
+ * outlive it. NULL with err (also the stop hook's, util/stop.h). GL thread. */
 typedef struct vx_gtess vx_gtess;
 vx_gtess *vx_gtess_new(vx_gl *gl, const vx_gtess_layout *l, vx_err *err);
 void vx_gtess_free(vx_gtess *t);
