@@ -421,6 +421,7 @@ static int render_run_gl(vx_job_run *r, const vx_mesh *mesh, const cJSON *params
     d.fill = VX_FILL_SOLID;
     d.max_memory = lim ? lim->max_job_memory : 0;
     d.progress = voxel_progress;
+    d.max_slab_rows = vx_voxelize_slab_rows(d.grid.dims);
     for (int k = 0; k < nm; k++) {
         gl_progress gp = {r, k, nm};
         d.ud = &gp;
