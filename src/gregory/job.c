@@ -29,7 +29,8 @@ static const char *const known[] = {"divisions", "max_edge", "construction", "we
  * reference grows with every extraordinary vertex). */
 #define CC_DISTANCE_SAMPLES 5
 #define CC_DISTANCE_MAX_PATCHES 20000
-/* How often the encoder checks the time limit while its child writes. */
+/* How often the encoder (and the distance) check the time limit while a
+ * child process works. */
 #define ENCODE_POLL_MS 20
 
 typedef struct gparams {
@@ -302,6 +303,24 @@ static const double *frame_positions(vx_job_run *r, const vx_mesh *mesh, const g
     return buf;
 }
 
+typedef struct distance_work {
+    const vx_mesh *mesh;
+    const vx_gpatch_set *set;
+} distance_work;
+
+static int distance_child(void *ud, void *out, size_t out_size, vx_err *err)
+{
+    const distance_work *w = ud;
+    (void)out_size;
+    double d = vx_gregory_cc_distance(w->mesh, w->set, CC_DISTANCE_SAMPLES, err);
+    *(double *)out = d;
+    return d < 0 ? -1 : 0;
+}
+
+/* The layout, the tessellation and the gather poll the stop hook: the job's
+ * time limit and cancel reach into them. */
+static int stop_hook(void *ud, vx_err *err) { return vx_run_progress(ud, 0, err); }
+
 static int run_gl(vx_job_run *r, const vx_mesh *mesh, const cJSON *params, void **state,
                   vx_err *err)
 {
@@ -323,8 +342,12 @@ static int run_gl(vx_job_run *r, const vx_mesh *mesh, const cJSON *params, void 
     double cc_distance = -1;
     if (p.construction == CONS_APPROX_CC && !mesh->npatches &&
         b.set->npatches <= CC_DISTANCE_MAX_PATCHES) {
-        cc_distance = vx_gregory_cc_distance(mesh, b.set, CC_DISTANCE_SAMPLES, err);
-        if (cc_distance < 0) goto done;
+        /* OpenSubdiv's reference surface takes seconds on big sets: in a
+         * child process, killed at the time limit. */
+        distance_work w = {mesh, b.set};
+        if (vx_child_call(distance_child, &w, &cc_distance, sizeof cc_distance, stop_hook, r,
+                          ENCODE_POLL_MS, err))
+            goto done;
     }
     ndiv = vx_gregory_divisions(b.set, (int)p.divisions, p.max_edge, err);
     if (!ndiv) goto done;
@@ -433,10 +456,6 @@ done:
     vx_gregory_cc_plan_free(b.cc);
     return rc;
 }
-
-/* The layout, the tessellation and the gather poll the stop hook: the job's
- * time limit and cancel reach into them. */
-static int stop_hook(void *ud, vx_err *err) { return vx_run_progress(ud, 0, err); }
 
 static int greg_run_gl(vx_job_run *r, const vx_mesh *mesh, const cJSON *params, void **state,
                        vx_err *err)
