@@ -768,7 +768,10 @@ static int encode(vx_job_run *r, const cJSON *params, void *state, vx_err *err)
 
 /* The caster, the shader and the writers poll the stop hook: the job's time
  * limit and cancel reach into them. */
-static int stop_hook(void *ud, vx_err *err) { return vx_run_progress(ud, 0, err); }
+static int stop_hook(void *ud, vx_err *err)
+{
+    return vx_run_progress(ud, 0, err);
+}
 
 static int render_run_cpu(vx_job_run *r, const cJSON *params, void *state, vx_err *err)
 {

@@ -45,7 +45,10 @@ void vx_bl_wisdom_dir(const char *dir)
 
 static _Thread_local double plan_seconds; /* 0: no limit */
 
-void vx_bl_plan_time_limit(double seconds) { plan_seconds = seconds > 0 ? seconds : 0; }
+void vx_bl_plan_time_limit(double seconds)
+{
+    plan_seconds = seconds > 0 ? seconds : 0;
+}
 
 unsigned vx_bl_plan_flags(void)
 {

@@ -155,7 +155,10 @@ static int cc_child(void *ud, void *out, size_t out_size, vx_err *err)
     return rc;
 }
 
-static int cc_poll(void *ud, vx_err *err) { return vx_run_progress(ud, 0.1, err); }
+static int cc_poll(void *ud, vx_err *err)
+{
+    return vx_run_progress(ud, 0.1, err);
+}
 
 static int cc_run_cpu(vx_job_run *r, const cJSON *params, void *state, vx_err *err)
 {

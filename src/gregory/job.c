@@ -319,7 +319,10 @@ static int distance_child(void *ud, void *out, size_t out_size, vx_err *err)
 
 /* The layout, the tessellation and the gather poll the stop hook: the job's
  * time limit and cancel reach into them. */
-static int stop_hook(void *ud, vx_err *err) { return vx_run_progress(ud, 0, err); }
+static int stop_hook(void *ud, vx_err *err)
+{
+    return vx_run_progress(ud, 0, err);
+}
 
 static int run_gl(vx_job_run *r, const vx_mesh *mesh, const cJSON *params, void **state,
                   vx_err *err)

@@ -443,7 +443,6 @@ static void test_empty_and_bad(void **state)
     assert_int_equal(vx_gl_check(g_gl, "test.after_preview", &err), 0);
 }
 
-
 /* ---- pieces and stops (the job time limit) -------------------------------- */
 
 typedef struct poller {
@@ -490,7 +489,8 @@ static void test_bands_and_stop(void **state)
             }
     printf("  %zu of %zu pixels differ\n", differ, n);
     assert_true(differ <= n / 1000);
-    assert_true(llabs((long long)sa.pixels_covered - (long long)sb.pixels_covered) <= (long long)n / 1000);
+    assert_true(llabs((long long)sa.pixels_covered - (long long)sb.pixels_covered) <=
+                (long long)n / 1000);
 
     /* Stopped at the 8th poll: the poll's error, a clean GL state. */
     uint8_t *c = malloc(n * 4);
