@@ -428,12 +428,6 @@ int vx_run_progress(vx_job_run *r, double fraction, vx_err *err)
     return 0;
 }
 
-double vx_run_deadline(const vx_job_run *r)
-{
-    double limit = r->jobs->desc.limits.job_timeout_s;
-    return limit > 0 ? r->t0 + limit : VX_NO_DEADLINE;
-}
-
 vx_gl *vx_run_gl(vx_job_run *r) { return r->gl; }
 const vx_limits *vx_run_limits(const vx_job_run *r) { return &r->jobs->desc.limits; }
 const char *vx_run_cache_dir(const vx_job_run *r) { return r->jobs->desc.cache_dir; }

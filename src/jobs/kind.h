@@ -38,11 +38,6 @@ typedef struct vx_job_run vx_job_run;
  * (VX_ECANCELED / VX_ETIMEOUT) when the job must stop; the stage then
  * cleans up and returns -1 with that err. */
 int vx_run_progress(vx_job_run *r, double fraction, vx_err *err);
-/* The vx_mono() time at which the job's time limit passes (VX_NO_DEADLINE
- * when there is none), for work that cannot call vx_run_progress: helper
- * threads and child processes check it and stop. Any thread. */
-#define VX_NO_DEADLINE 1e300
-double vx_run_deadline(const vx_job_run *r);
 /* The GL context; only valid in run_gl. */
 vx_gl *vx_run_gl(vx_job_run *r);
 /* The id of the job's mesh (64 hex digits), for outputs that record it. */
