@@ -3,11 +3,14 @@
  * frame, reusing the topology tables (interpolate) or OpenSubdiv's plan
  * (approximate-cc, osd.h) and the output layout -> OBJ / PLY / Draco per
  * frame. */
+#include <errno.h>
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/mman.h>
 #include <time.h>
+#include <unistd.h>
 
 #include "gregory/job.h"
 #include "gregory/osd.h"
@@ -251,6 +254,90 @@ static int construct(builder *b, const double *pos, vx_err *err)
     }
 }
 
+static int write_all(int fd, const void *p, size_t n)
+{
+    const char *c = p;
+    while (n > 0) {
+        ssize_t k = write(fd, c, n);
+        if (k < 0 && errno == EINTR) continue;
+        if (k <= 0) return -1;
+        c += k;
+        n -= (size_t)k;
+    }
+    return 0;
+}
+
+static int read_all(int fd, off_t off, void *p, size_t n)
+{
+    char *c = p;
+    while (n > 0) {
+        ssize_t k = pread(fd, c, n, off);
+        if (k < 0 && errno == EINTR) continue;
+        if (k <= 0) return -1;
+        c += k;
+        off += k;
+        n -= (size_t)k;
+    }
+    return 0;
+}
+
+/* A job of one frame needs only the patch set, not the tables that
+ * deformation frames reuse: it is built in a child process (util/child.h),
+ * killed at the time limit (OpenSubdiv's patch table for approximate-cc is
+ * one call of seconds on big meshes), and comes back through a memfd:
+ * npatches as the answer, then cp, corner_key and face. */
+typedef struct build_work {
+    const vx_mesh *mesh;
+    int construction, fd;
+} build_work;
+
+static int build_child(void *ud, void *out, size_t out_size, vx_err *err)
+{
+    const build_work *w = ud;
+    (void)out_size;
+    builder b = {.mesh = w->mesh, .construction = w->construction};
+    int rc = construct(&b, w->mesh->pos, err);
+    if (rc == 0) {
+        const vx_gpatch_set *set = b.set;
+        *(uint64_t *)out = set->npatches;
+        if (write_all(w->fd, set->cp, set->npatches * VX_GPATCH_POINTS * 3 * sizeof *set->cp) ||
+            write_all(w->fd, set->corner_key, set->npatches * 4 * sizeof *set->corner_key) ||
+            write_all(w->fd, set->face, set->npatches * sizeof *set->face))
+            rc = vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for the patch set");
+    }
+    vx_gpatch_set_free(b.set);
+    vx_gregory_topo_free(b.topo);
+    vx_gregory_cc_plan_free(b.cc);
+    return rc;
+}
+
+static int stop_hook(void *ud, vx_err *err);
+
+static int construct_once(vx_job_run *r, builder *b, vx_err *err)
+{
+    if (b->mesh->npatches > 0) return construct(b, b->mesh->pos, err); /* Bézier: trivial */
+    int fd = memfd_create("voxeld-gregory", MFD_CLOEXEC);
+    if (fd < 0) return construct(b, b->mesh->pos, err);
+    build_work w = {b->mesh, b->construction, fd};
+    uint64_t np = 0;
+    int rc = vx_child_call(build_child, &w, &np, sizeof np, stop_hook, r, ENCODE_POLL_MS, err);
+    if (rc == 0) {
+        vx_gpatch_set *set = vx_gpatch_set_new((size_t)np);
+        size_t cpb = (size_t)np * VX_GPATCH_POINTS * 3 * sizeof *set->cp,
+               keyb = (size_t)np * 4 * sizeof *set->corner_key;
+        if (!set || read_all(fd, 0, set->cp, cpb) ||
+            read_all(fd, (off_t)cpb, set->corner_key, keyb) ||
+            read_all(fd, (off_t)(cpb + keyb), set->face, (size_t)np * sizeof *set->face)) {
+            vx_gpatch_set_free(set);
+            rc = vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for the patch set");
+        } else {
+            b->set = set;
+        }
+    }
+    close(fd);
+    return rc;
+}
+
 /* Positions of frame k >= 1 into buf (3 * nverts), or a loaded mesh. */
 static const double *frame_positions(vx_job_run *r, const vx_mesh *mesh, const gparams *p, size_t k,
                                      double *buf, vx_mesh **loaded, vx_err *err)
@@ -339,7 +426,7 @@ static int run_gl(vx_job_run *r, const vx_mesh *mesh, const cJSON *params, void 
     int rc = -1;
     cJSON *frame_ms = cJSON_CreateArray();
     double t0 = now_ms();
-    if (construct(&b, mesh->pos, err)) goto done;
+    if ((nframes == 1 ? construct_once(r, &b, err) : construct(&b, mesh->pos, err))) goto done;
     double build_ms = now_ms() - t0;
     /* How far approximate-cc is from the true limit surface (frame 0). */
     double cc_distance = -1;
