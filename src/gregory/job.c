@@ -267,11 +267,14 @@ static int write_all(int fd, const void *p, size_t n)
     return 0;
 }
 
-static int read_all(int fd, off_t off, void *p, size_t n)
+/* Reads n bytes at off, 16 MiB at a time with a poll of the stop hook
+ * between (-1 with its err, or on a short read without). */
+static int read_all(int fd, off_t off, void *p, size_t n, vx_err *err)
 {
     char *c = p;
     while (n > 0) {
-        ssize_t k = pread(fd, c, n, off);
+        if (vx_stop_poll(err)) return -1;
+        ssize_t k = pread(fd, c, n < ((size_t)16 << 20) ? n : (size_t)16 << 20, off);
         if (k < 0 && errno == EINTR) continue;
         if (k <= 0) return -1;
         c += k;
@@ -325,11 +328,14 @@ static int construct_once(vx_job_run *r, builder *b, vx_err *err)
         vx_gpatch_set *set = vx_gpatch_set_new((size_t)np);
         size_t cpb = (size_t)np * VX_GPATCH_POINTS * 3 * sizeof *set->cp,
                keyb = (size_t)np * 4 * sizeof *set->corner_key;
-        if (!set || read_all(fd, 0, set->cp, cpb) ||
-            read_all(fd, (off_t)cpb, set->corner_key, keyb) ||
-            read_all(fd, (off_t)(cpb + keyb), set->face, (size_t)np * sizeof *set->face)) {
+        vx_err_clear(err);
+        if (!set || read_all(fd, 0, set->cp, cpb, err) ||
+            read_all(fd, (off_t)cpb, set->corner_key, keyb, err) ||
+            read_all(fd, (off_t)(cpb + keyb), set->face, (size_t)np * sizeof *set->face, err)) {
             vx_gpatch_set_free(set);
-            rc = vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for the patch set");
+            if (!err || err->kind == VX_EOK)
+                vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for the patch set");
+            rc = -1;
         } else {
             b->set = set;
         }

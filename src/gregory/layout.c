@@ -137,6 +137,10 @@ static int edge_divisions(const vx_gpatch_set *s, const uint32_t *ndiv, uint32_t
 {
     pedge *e = sorted_edges(s);
     if (!e) return oom(err);
+    if (vx_stop_poll(err)) { /* the sort is the slow part: ~1 s per 10^6 patches */
+        free(e);
+        return -1;
+    }
     size_t n = 4 * s->npatches;
     for (size_t q = 0; q < n;) {
         size_t r = q, best = q;
@@ -194,6 +198,11 @@ int vx_gregory_count(const vx_gpatch_set *s, const uint32_t *ndiv, uint64_t *gri
     }
     uint64_t g = 0, v = 0, t = 0;
     for (size_t p = 0; p < np; p++) {
+        if ((p & 0xffff) == 0 && vx_stop_poll(err)) {
+            free(ne);
+            free(src);
+            return -1;
+        }
         uint64_t pv, pt, n = ndiv[p];
         patch_counts(ne, ndiv, p, &pv, &pt);
         g += (n + 1) * (n + 1);

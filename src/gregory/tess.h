@@ -49,7 +49,8 @@ uint32_t *vx_gregory_divisions(const vx_gpatch_set *s, int n, double max_edge, v
 /* Counts for a given division array: grid vertices, and the output
  * vertices and triangles an unwelded tessellation makes (welding only
  * lowers the vertex count, collapsed edges the triangle count). For limit
- * checks before the layout is built. -1 with err on allocation failure. */
+ * checks before the layout is built. -1 with err on allocation failure
+ * (or the stop hook's, util/stop.h). */
 int vx_gregory_count(const vx_gpatch_set *s, const uint32_t *ndiv, uint64_t *grid_verts,
                      uint64_t *verts, uint64_t *tris, vx_err *err);
 
