@@ -203,7 +203,7 @@ static int render(const char *mesh, int N, int L, int W, int runs)
         for (int k = 0; k < runs; k++) {
             t0 = vx_bl_now_ms();
             if (vx_bl_cast(v ? &vn : &vm, 0.5, &cam, 2, &h, &err)) die("cast", &err);
-            vx_bl_shade(&h, &sd, rgb);
+            vx_bl_shade(&h, &sd, rgb, NULL);
             double ms = vx_bl_now_ms() - t0;
             if (ms < best[v]) best[v] = ms;
             if (!v) {

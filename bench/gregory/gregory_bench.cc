@@ -370,7 +370,8 @@ static int cmd_seed(vx_gl *gl)
                 double ms;
                 vx_gregory_build(g.topo, m->pos, g.set);
                 if (vx_gtess_run(tess, g.set, g.origin, g.grid.data(), &ms, &err)) die(err);
-                vx_gregory_gather(g.layout, g.grid.data(), g.origin, pos.data(), nrm.data());
+                vx_gregory_gather(g.layout, g.grid.data(), g.origin, pos.data(), nrm.data(),
+                                  nullptr);
             }
             ours = std::min(ours, ms_since(t0));
         }
@@ -426,7 +427,7 @@ static int cmd_frames(vx_gl *gl, const char *path, int n)
         auto t1 = clk::now();
         if (vx_gtess_run(tess, g.set, g.origin, g.grid.data(), &ms, &err)) die(err);
         auto t2 = clk::now();
-        vx_gregory_gather(g.layout, g.grid.data(), g.origin, pos.data(), nrm.data());
+        vx_gregory_gather(g.layout, g.grid.data(), g.origin, pos.data(), nrm.data(), nullptr);
         if (k > 0) best_frame = std::min(best_frame, ms_since(t0));
         if (k > 0) { /* frame 0 warms the shader cache */
             build += std::chrono::duration<double, std::milli>(t1 - t0).count();

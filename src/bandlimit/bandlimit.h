@@ -69,6 +69,11 @@ float *vx_bl_lowpass(int R, int N, const vx_bl_filter *flt, vx_bl_sample_fn samp
  * wisdom written back after planning. NULL = none, plans estimated
  * (FFTW_ESTIMATE), the default. Any thread. */
 void vx_bl_wisdom_dir(const char *dir);
+/* Bounds the time FFTW may take measuring each plan the calling thread
+ * makes (FFTW's own time limit: past it, the best plan found so far), so
+ * that a job's time limit is not overrun inside the planner. 0 = none,
+ * the default. */
+void vx_bl_plan_time_limit(double seconds);
 /* The reference: one full R^3 real-to-complex FFT of the samples, then the
  * same selection and filter (R^3 floats + R^2 (R/2+1) complex: tests and
  * the benchmark only; always estimated, never measured). Any thread. */
@@ -97,7 +102,8 @@ uint64_t vx_bl_volume_bytes(int M, int with_grad);
  * by slab (never an M^3 complex array); with_grad also fills g from the
  * spectrum times j 2 pi k / P (the exact gradient). x0 = the position of
  * sample 0 (box origin + P/(2R)), P the box edge; M >= N, even; v->origin
- * becomes x0. Fills v (owned arrays; vx_bl_volume_free). */
+ * becomes x0. Fills v (owned arrays; vx_bl_volume_free). The calling
+ * thread's stop hook (util/stop.h) is polled between planes. */
 int vx_bl_interp(const float *spec, int N, int M, const double x0[3], double P, int with_grad,
                  int nthreads, vx_bl_volume *v, vx_err *err);
 /* Exact evaluation of the band-limited density and gradient at x (world),
@@ -105,7 +111,8 @@ int vx_bl_interp(const float *spec, int N, int M, const double x0[3], double P, 
 double vx_bl_eval(const float *spec, int N, const double x0[3], double P, const double x[3],
                   double grad[3]);
 void vx_bl_volume_free(vx_bl_volume *v);
-/* Computes v->bmax and v->blip (blocks of 8 cells) for the caster; 0 or -1. */
+/* Computes v->bmax and v->blip (blocks of 8 cells) for the caster; 0 or -1
+ * (out of memory; the stop hook, polled per slab of blocks). */
 int vx_bl_volume_blocks(vx_bl_volume *v, vx_err *err);
 /* Trilinear value of f (and of g when grad != NULL and v->g is set) at
  * world point x, clamped to the grid. */
@@ -142,7 +149,9 @@ void vx_bl_hits_free(vx_bl_hits *h);
  * spacing, so the first crossing is the same),
  * to sub-sample accuracy on the trilinear field; normal = -gradient
  * (trilinear in v->g) when v->g is set, else left NaN for the screen-space
- * methods. Needs vx_bl_volume_blocks. nthreads CPU threads. */
+ * methods. Needs vx_bl_volume_blocks. nthreads CPU threads; the calling
+ * thread's stop hook (util/stop.h) is polled between tiles (-1 with its
+ * err). */
 int vx_bl_cast(const vx_bl_volume *v, double iso, const vx_bl_camera *cam, int nthreads,
                vx_bl_hits *h, vx_err *err);
 
@@ -177,8 +186,9 @@ typedef struct vx_bl_shade_desc {
     double ambient, color[3], background[3];
     int depth_only; /* brightness from depth instead of normals (method 1) */
 } vx_bl_shade_desc;
-/* Lambert + ambient into rgb (3 floats per pixel, 0..1, top row first). */
-void vx_bl_shade(const vx_bl_hits *h, const vx_bl_shade_desc *d, float *rgb);
+/* Lambert + ambient into rgb (3 floats per pixel, 0..1, top row first).
+ * 0, or -1 with err when the thread's stop hook (util/stop.h) says stop. */
+int vx_bl_shade(const vx_bl_hits *h, const vx_bl_shade_desc *d, float *rgb, vx_err *err);
 /* Draws text (lowercase letters, digits, '-') at (x, y) top-left, scale s,
  * into rgb (width w) in colour c. */
 void vx_bl_label(float *rgb, int w, int h, int x, int y, int s, const char *text, const float c[3]);

@@ -10,6 +10,7 @@
 #include <string.h>
 
 #include "bandlimit/bandlimit.h"
+#include "util/stop.h"
 
 const char *const vx_bl_normals_names[VX_BL_NORMALS_COUNT + 1] = {
     "spectral", "depth-only", "central-difference", "cross-mask", "sobel2d", "sobel3d", NULL};
@@ -33,7 +34,8 @@ int vx_bl_voxel_gradient(vx_bl_volume *v, vx_bl_normals method, vx_err *err)
     if (!v->g[0] || !v->g[1] || !v->g[2])
         return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for voxel gradients");
     static const int sm[3] = {1, 2, 1};
-    for (int z = 0; z < M; z++)
+    for (int z = 0; z < M; z++) {
+        if (vx_stop_poll(err)) return -1;
         for (int y = 0; y < M; y++)
             for (int x = 0; x < M; x++) {
                 size_t i = ((size_t)z * M + y) * M + x;
@@ -69,6 +71,7 @@ int vx_bl_voxel_gradient(vx_bl_volume *v, vx_bl_normals method, vx_err *err)
                     v->g[a][i] = (float)s;
                 }
             }
+    }
     return 0;
 }
 

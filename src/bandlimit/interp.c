@@ -12,6 +12,7 @@
 
 #include "bandlimit/bandlimit.h"
 #include "bandlimit/fft_int.h"
+#include "util/stop.h"
 
 uint64_t vx_bl_volume_bytes(int M, int with_grad)
 {
@@ -39,6 +40,8 @@ typedef struct interp_ctx {
     int next; /* next plane to do (under mu) */
     pthread_mutex_t mu;
     int failed;
+    int stop; /* the calling thread's stop hook (util/stop.h) said stop */
+    vx_err err;
 } interp_ctx;
 
 /* Y (M x mh, zeroed) <- plane (N x nh) padded along y, times j w ky when
@@ -85,8 +88,15 @@ static void *interp_worker(void *arg)
         goto done;
     }
     for (;;) {
+        /* Only the calling thread has a hook; it stops the helpers too. */
+        vx_err e;
+        int stop = vx_stop_poll(&e);
         pthread_mutex_lock(&c->mu);
-        int m = c->failed ? c->M : c->next++;
+        if (stop && !c->stop) {
+            c->stop = 1;
+            c->err = e;
+        }
+        int m = c->failed || c->stop ? c->M : c->next++;
         pthread_mutex_unlock(&c->mu);
         if (m >= c->M) break;
         size_t pl = (size_t)c->N * c->nh;
@@ -200,6 +210,10 @@ int vx_bl_interp(const float *spec, int N, int M, const double x0[3], double P, 
         vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for interpolation planes");
         goto out;
     }
+    if (c.stop) {
+        if (err) *err = c.err;
+        goto out;
+    }
     rc = 0;
 out:
     vx_bl_destroy_plan(pz);
@@ -257,7 +271,8 @@ int vx_bl_volume_blocks(vx_bl_volume *v, vx_err *err)
     if (!v->bmax || !v->blip)
         return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for blocks");
     v->nb = nb;
-    for (int bz = 0; bz < nb; bz++)
+    for (int bz = 0; bz < nb; bz++) {
+        if (vx_stop_poll(err)) return -1;
         for (int by = 0; by < nb; by++)
             for (int bx = 0; bx < nb; bx++) {
                 float mx = -INFINITY, md = 0;
@@ -278,6 +293,7 @@ int vx_bl_volume_blocks(vx_bl_volume *v, vx_err *err)
                 v->bmax[b] = mx;
                 v->blip[b] = (float)(sqrt(3.0) * md / v->h);
             }
+    }
     return 0;
 }
 

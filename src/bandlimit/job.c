@@ -20,8 +20,12 @@
 #include "bandlimit/fft_int.h"
 #include "bandlimit/job.h"
 #include "image/png.h"
+#include "util/stop.h"
 #include "voxel/io.h"
 #include "voxel/voxel.h"
+
+/* The share of the job's time limit one FFTW plan may take measuring. */
+#define PLAN_SHARE 0.02
 
 enum { CAM_AXIS = 0, CAM_ORBIT };
 static const char *const cam_names[] = {"axis", "orbit", NULL};
@@ -417,6 +421,7 @@ static int render_run_gl(vx_job_run *r, const vx_mesh *mesh, const cJSON *params
     d.fill = VX_FILL_SOLID;
     d.max_memory = lim ? lim->max_job_memory : 0;
     d.progress = voxel_progress;
+    d.max_slab_rows = vx_voxelize_slab_rows(d.grid.dims);
     for (int k = 0; k < nm; k++) {
         gl_progress gp = {r, k, nm};
         d.ud = &gp;
@@ -444,7 +449,7 @@ static int nthreads(void)
     return n < 1 ? 1 : n > 16 ? 16 : (int)n;
 }
 
-static int render_run_cpu(vx_job_run *r, const cJSON *params, void *state, vx_err *err)
+static int run_cpu(vx_job_run *r, const cJSON *params, void *state, vx_err *err)
 {
     rparams p;
     rstate *s = state;
@@ -454,6 +459,10 @@ static int render_run_cpu(vx_job_run *r, const cJSON *params, void *state, vx_er
     vx_bl_bits bits = {s->grids, s->nmeshes, lowpass_progress, r};
     vx_bl_lowpass_stats lst;
     vx_bl_wisdom_dir(vx_run_cache_dir(r)); /* measured plans, kept across restarts */
+    /* Measuring a new size takes seconds: a few per cent of the time limit
+     * each (a plan is made between two polls). */
+    double limit = vx_run_limits(r)->job_timeout_s;
+    vx_bl_plan_time_limit(limit > 0 ? PLAN_SHARE * limit : 0);
     s->spec = vx_bl_lowpass(R, N, &flt, vx_bl_sample_bits, &bits, nt, &lst, err);
     if (!s->spec) return -1;
     s->sampling_ms += lst.sample_ms;
@@ -575,10 +584,22 @@ static int write_pfm(const char *path, const float *v, int w, int h, int ch, vx_
     FILE *f = fopen(path, "wb");
     if (!f) return vx_err_set(err, VX_EIO, "io_error", "cannot write %s", path);
     fprintf(f, "%s\n%d %d\n-1.0\n", ch == 3 ? "PF" : "Pf", w, h);
-    for (int y = h - 1; y >= 0; y--)
+    for (int y = h - 1; y >= 0; y--) {
+        if (vx_stop_poll(err)) {
+            fclose(f);
+            return -1;
+        }
         fwrite(v + (size_t)y * w * ch, sizeof(float), (size_t)w * ch, f);
+    }
     if (fclose(f)) return vx_err_set(err, VX_EIO, "io_error", "cannot write %s", path);
     return 0;
+}
+
+static int png_poll(void *ud, double fraction, vx_err *err)
+{
+    (void)ud;
+    (void)fraction;
+    return vx_stop_poll(err);
 }
 
 static int write_png(const char *path, const float *rgb, int w, int h, int bits, vx_err *err)
@@ -587,13 +608,18 @@ static int write_png(const char *path, const float *rgb, int w, int h, int bits,
     void *buf = malloc(n * (bits == 16 ? 2 : 1));
     if (!buf) return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for the PNG");
     for (size_t i = 0; i < n; i++) {
+        if ((i & 0xfffff) == 0 && vx_stop_poll(err)) {
+            free(buf);
+            return -1;
+        }
         double x = rgb[i] < 0 ? 0 : rgb[i] > 1 ? 1 : rgb[i];
         if (bits == 16)
             ((uint16_t *)buf)[i] = (uint16_t)lrint(x * 65535);
         else
             ((uint8_t *)buf)[i] = (uint8_t)lrint(x * 255);
     }
-    int rc = vx_png_write_path(path, buf, w, h, 3, bits, err);
+    vx_png_poll poll = {png_poll, NULL};
+    int rc = vx_png_write_path_poll(path, buf, w, h, 3, bits, &poll, err);
     free(buf);
     return rc;
 }
@@ -659,16 +685,18 @@ static int render_frame(vx_job_run *r, const rparams *p, const rstate *s, int f,
         int method = !p->compare ? p->normals : k;
         if (cast_method(s, p, &cam, method, &h, err)) goto out;
         sd.depth_only = method == VX_BL_DEPTH_ONLY;
-        vx_bl_shade(&h, &sd, rgb);
+        if (vx_bl_shade(&h, &sd, rgb, err)) goto out;
         if (p->compare) {
             float ink[3] = {0.1f, 0.1f, 0.1f};
             int sc = W >= 256 ? W / 128 : 1;
             vx_bl_label(rgb, W, H, 3 * sc, 3 * sc, sc, vx_bl_normals_names[method], ink);
         }
         int ox = (k % cols) * W, oy = (k / cols) * H;
-        for (int y = 0; y < H; y++)
+        for (int y = 0; y < H; y++) {
+            if (vx_stop_poll(err)) goto out;
             memcpy(img + 3 * ((size_t)(oy + y) * IW + ox), rgb + 3 * (size_t)y * W,
                    sizeof(float) * 3 * W);
+        }
         if (method == p->normals) {
             keep = h;
             if (vx_bl_hits_alloc(&h, W, H, err)) goto out;
@@ -700,7 +728,7 @@ out:
     return rc;
 }
 
-static int render_encode(vx_job_run *r, const cJSON *params, void *state, vx_err *err)
+static int encode(vx_job_run *r, const cJSON *params, void *state, vx_err *err)
 {
     rparams p;
     rstate *s = state;
@@ -736,6 +764,29 @@ static int render_encode(vx_job_run *r, const cJSON *params, void *state, vx_err
     stat_set(st, "encode_ms", encode_ms);
     stat_set(st, "peak_bytes", (double)s->peak);
     return 0;
+}
+
+/* The caster, the shader and the writers poll the stop hook: the job's time
+ * limit and cancel reach into them. */
+static int stop_hook(void *ud, vx_err *err)
+{
+    return vx_run_progress(ud, 0, err);
+}
+
+static int render_run_cpu(vx_job_run *r, const cJSON *params, void *state, vx_err *err)
+{
+    vx_stop_set(stop_hook, r);
+    int rc = run_cpu(r, params, state, err);
+    vx_stop_set(NULL, NULL);
+    return rc;
+}
+
+static int render_encode(vx_job_run *r, const cJSON *params, void *state, vx_err *err)
+{
+    vx_stop_set(stop_hook, r);
+    int rc = encode(r, params, state, err);
+    vx_stop_set(NULL, NULL);
+    return rc;
 }
 
 const vx_kind vx_kind_render = {

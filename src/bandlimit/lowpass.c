@@ -43,8 +43,16 @@ void vx_bl_wisdom_dir(const char *dir)
     pthread_mutex_unlock(&plan_mu);
 }
 
+static _Thread_local double plan_seconds; /* 0: no limit */
+
+void vx_bl_plan_time_limit(double seconds)
+{
+    plan_seconds = seconds > 0 ? seconds : 0;
+}
+
 unsigned vx_bl_plan_flags(void)
 {
+    fftwf_set_timelimit(plan_seconds > 0 ? plan_seconds : FFTW_NO_TIMELIMIT);
     return wisdom_path[0] ? FFTW_MEASURE : FFTW_ESTIMATE;
 }
 

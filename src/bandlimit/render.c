@@ -11,6 +11,7 @@
 #include <string.h>
 
 #include "bandlimit/bandlimit.h"
+#include "util/stop.h"
 
 void vx_bl_camera_ray(const vx_bl_camera *c, int width, int height, double px, double py,
                       double o[3], double d[3])
@@ -247,6 +248,8 @@ typedef struct cast_ctx {
     int ntx, ntiles;
     pthread_mutex_t mu;
     int next;
+    int stop; /* set when the caller's stop hook (util/stop.h) said stop */
+    vx_err err;
 } cast_ctx;
 
 static void cast_pixel(const cast_ctx *c, int px, int py)
@@ -275,12 +278,20 @@ static void cast_pixel(const cast_ctx *c, int px, int py)
             h->nrm[3 * i + a] = (float)(-g[a] / n);
 }
 
+/* The calling thread polls its stop hook between tiles (the helper threads
+ * have none: theirs always says go on) and stops them all. */
 static void *cast_tiles(void *arg)
 {
     cast_ctx *c = arg;
     for (;;) {
+        vx_err e;
+        int stop = vx_stop_poll(&e);
         pthread_mutex_lock(&c->mu);
-        int k = c->next++;
+        if (stop && !c->stop) {
+            c->stop = 1;
+            c->err = e;
+        }
+        int k = c->stop ? c->ntiles : c->next++;
         pthread_mutex_unlock(&c->mu);
         if (k >= c->ntiles) break;
         int x0 = (k % c->ntx) * TILE, y0 = (k / c->ntx) * TILE;
@@ -312,10 +323,14 @@ int vx_bl_cast(const vx_bl_volume *v, double iso, const vx_bl_camera *cam, int n
         pthread_join(th[i], NULL);
     pthread_mutex_destroy(&c.mu);
     free(skip);
+    if (c.stop) {
+        if (err) *err = c.err;
+        return -1;
+    }
     return 0;
 }
 
-void vx_bl_shade(const vx_bl_hits *h, const vx_bl_shade_desc *d, float *rgb)
+int vx_bl_shade(const vx_bl_hits *h, const vx_bl_shade_desc *d, float *rgb, vx_err *err)
 {
     size_t n = (size_t)h->width * h->height;
     double dmin = INFINITY, dmax = -INFINITY;
@@ -326,6 +341,7 @@ void vx_bl_shade(const vx_bl_hits *h, const vx_bl_shade_desc *d, float *rgb)
                 if (h->depth[i] > dmax) dmax = h->depth[i];
             }
     for (size_t i = 0; i < n; i++) {
+        if ((i & 0xffff) == 0 && vx_stop_poll(err)) return -1;
         float *o = rgb + 3 * i;
         if (isnan(h->depth[i])) {
             for (int a = 0; a < 3; a++)
@@ -352,4 +368,5 @@ void vx_bl_shade(const vx_bl_hits *h, const vx_bl_shade_desc *d, float *rgb)
             o[a] = (float)(x < 0 ? 0 : x > 1 ? 1 : x);
         }
     }
+    return 0;
 }

@@ -5,6 +5,7 @@
 #include <string.h>
 
 #include "gregory/catmull_clark.h"
+#include "util/child.h"
 #include "util/fsutil.h"
 
 typedef enum cc_format { CC_OBJ = 0, CC_PLY, CC_DRC } cc_format;
@@ -16,6 +17,8 @@ static const char *const known[] = {"levels", "format", "limit", NULL};
  * triangulated view); measured 500 at levels 5-6 on spot and suzanne,
  * checked against max_job_memory with some margin. */
 #define CC_BYTES_PER_QUAD 600
+/* How often run_cpu checks the time limit while the child works. */
+#define CC_POLL_MS 20
 
 typedef struct cc_params {
     int levels, limit;
@@ -24,8 +27,6 @@ typedef struct cc_params {
 
 typedef struct cc_state {
     vx_mesh *in; /* the faces and positions, copied on the GL thread */
-    vx_mesh *out;
-    float *normals;
 } cc_state;
 
 /* Most levels one face of four corners can take with 2 * 4^levels
@@ -114,41 +115,73 @@ static int cc_run_gl(vx_job_run *r, const vx_mesh *mesh, const cJSON *params, vo
     return 0;
 }
 
+/* What the child process (util/child.h) of run_cpu does and hands back:
+ * OpenSubdiv's refinement and the encoder are single library calls that
+ * run for seconds on big meshes and cannot be stopped from inside; in a
+ * child they are killed at the job's time limit. */
+typedef struct cc_work {
+    const vx_mesh *in;
+    cc_params p;
+    const char *path;
+} cc_work;
+
+typedef struct cc_result {
+    double refine_ms, encode_ms;
+    uint64_t vertices, faces, triangles, boundary_edges;
+} cc_result;
+
+static int cc_child(void *ud, void *out, size_t out_size, vx_err *err)
+{
+    const cc_work *w = ud;
+    cc_result *res = out;
+    (void)out_size;
+    vx_mesh *m = NULL;
+    float *normals = NULL;
+    double t0 = vx_mono();
+    if (vx_cc_refine(w->in, w->p.levels, w->p.limit, &m, &normals, err)) return -1;
+    double t1 = vx_mono();
+    vx_mesh_write_opts o = {.normals = normals};
+    int rc = w->p.format == CC_OBJ   ? vx_obj_write_path(m, &o, w->path, err)
+             : w->p.format == CC_PLY ? vx_ply_write_path(m, &o, w->path, err)
+                                     : vx_draco_write_path(m, &o, w->path, err);
+    res->refine_ms = (t1 - t0) * 1e3;
+    res->encode_ms = (vx_mono() - t1) * 1e3;
+    res->vertices = m->nverts;
+    res->faces = m->nfaces;
+    res->triangles = m->ntris;
+    res->boundary_edges = m->boundary_edges;
+    vx_mesh_free(m);
+    free(normals);
+    return rc;
+}
+
+static int cc_poll(void *ud, vx_err *err)
+{
+    return vx_run_progress(ud, 0.1, err);
+}
+
 static int cc_run_cpu(vx_job_run *r, const cJSON *params, void *state, vx_err *err)
 {
     cc_state *s = state;
     cc_params p;
     if (read_params(params, NULL, &p, err)) return -1;
-    double t0 = vx_mono();
-    if (vx_cc_refine(s->in, p.levels, p.limit, &s->out, &s->normals, err)) return -1;
-    double ms = (vx_mono() - t0) * 1e3;
+    static const char *const ctype[] = {"model/obj", "model/x-ply", "model/x-draco"};
+    const char *path = vx_run_output(r, "mesh", format_names[p.format], ctype[p.format], err);
+    if (!path) return -1;
+    cc_work w = {s->in, p, path};
+    cc_result res;
+    memset(&res, 0, sizeof res);
+    if (vx_child_call(cc_child, &w, &res, sizeof res, cc_poll, r, CC_POLL_MS, err)) return -1;
     vx_mesh_free(s->in);
     s->in = NULL;
     cJSON *st = vx_run_stats(r);
     cJSON_AddNumberToObject(st, "levels", p.levels);
-    cJSON_AddNumberToObject(st, "vertices", (double)s->out->nverts);
-    cJSON_AddNumberToObject(st, "faces", (double)s->out->nfaces);
-    cJSON_AddNumberToObject(st, "triangles", (double)s->out->ntris);
-    cJSON_AddNumberToObject(st, "boundary_edges", (double)s->out->boundary_edges);
-    cJSON_AddNumberToObject(st, "refine_ms", ms);
-    return vx_run_progress(r, 0.8, err);
-}
-
-static int cc_encode(vx_job_run *r, const cJSON *params, void *state, vx_err *err)
-{
-    cc_state *s = state;
-    cc_params p;
-    if (read_params(params, NULL, &p, err)) return -1;
-    static const char *const ctype[] = {"model/obj", "model/x-ply", "model/x-draco"};
-    double t0 = vx_mono();
-    const char *path = vx_run_output(r, "mesh", format_names[p.format], ctype[p.format], err);
-    if (!path) return -1;
-    vx_mesh_write_opts o = {.normals = s->normals};
-    int rc = p.format == CC_OBJ   ? vx_obj_write_path(s->out, &o, path, err)
-             : p.format == CC_PLY ? vx_ply_write_path(s->out, &o, path, err)
-                                  : vx_draco_write_path(s->out, &o, path, err);
-    if (rc) return -1;
-    cJSON_AddNumberToObject(vx_run_stats(r), "encode_ms", (vx_mono() - t0) * 1e3);
+    cJSON_AddNumberToObject(st, "vertices", (double)res.vertices);
+    cJSON_AddNumberToObject(st, "faces", (double)res.faces);
+    cJSON_AddNumberToObject(st, "triangles", (double)res.triangles);
+    cJSON_AddNumberToObject(st, "boundary_edges", (double)res.boundary_edges);
+    cJSON_AddNumberToObject(st, "refine_ms", res.refine_ms);
+    cJSON_AddNumberToObject(st, "encode_ms", res.encode_ms);
     return vx_run_progress(r, 1.0, err);
 }
 
@@ -157,8 +190,6 @@ static void cc_free_state(void *state)
     cc_state *s = state;
     if (!s) return;
     vx_mesh_free(s->in);
-    vx_mesh_free(s->out);
-    free(s->normals);
     free(s);
 }
 
@@ -169,6 +200,6 @@ const vx_kind vx_kind_catmull_clark = {
     .parse = cc_parse,
     .run_gl = cc_run_gl,
     .run_cpu = cc_run_cpu,
-    .encode = cc_encode,
+    .encode = NULL,
     .free_state = cc_free_state,
 };

@@ -3,15 +3,20 @@
  * frame, reusing the topology tables (interpolate) or OpenSubdiv's plan
  * (approximate-cc, osd.h) and the output layout -> OBJ / PLY / Draco per
  * frame. */
+#include <errno.h>
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/mman.h>
 #include <time.h>
+#include <unistd.h>
 
 #include "gregory/job.h"
 #include "gregory/osd.h"
 #include "gregory/tess.h"
+#include "util/child.h"
+#include "util/stop.h"
 
 enum { CONS_INTERPOLATE = 0, CONS_APPROX_CC };
 enum { FMT_OBJ = 0, FMT_PLY, FMT_DRC };
@@ -27,6 +32,9 @@ static const char *const known[] = {"divisions", "max_edge", "construction", "we
  * reference grows with every extraordinary vertex). */
 #define CC_DISTANCE_SAMPLES 5
 #define CC_DISTANCE_MAX_PATCHES 20000
+/* How often the encoder (and the distance) check the time limit while a
+ * child process works. */
+#define ENCODE_POLL_MS 20
 
 typedef struct gparams {
     long divisions;  /* 0 when max_edge is used */
@@ -246,6 +254,96 @@ static int construct(builder *b, const double *pos, vx_err *err)
     }
 }
 
+static int write_all(int fd, const void *p, size_t n)
+{
+    const char *c = p;
+    while (n > 0) {
+        ssize_t k = write(fd, c, n);
+        if (k < 0 && errno == EINTR) continue;
+        if (k <= 0) return -1;
+        c += k;
+        n -= (size_t)k;
+    }
+    return 0;
+}
+
+/* Reads n bytes at off, 16 MiB at a time with a poll of the stop hook
+ * between (-1 with its err, or on a short read without). */
+static int read_all(int fd, off_t off, void *p, size_t n, vx_err *err)
+{
+    char *c = p;
+    while (n > 0) {
+        if (vx_stop_poll(err)) return -1;
+        ssize_t k = pread(fd, c, n < ((size_t)16 << 20) ? n : (size_t)16 << 20, off);
+        if (k < 0 && errno == EINTR) continue;
+        if (k <= 0) return -1;
+        c += k;
+        off += k;
+        n -= (size_t)k;
+    }
+    return 0;
+}
+
+/* A job of one frame needs only the patch set, not the tables that
+ * deformation frames reuse: it is built in a child process (util/child.h),
+ * killed at the time limit (OpenSubdiv's patch table for approximate-cc is
+ * one call of seconds on big meshes), and comes back through a memfd:
+ * npatches as the answer, then cp, corner_key and face. */
+typedef struct build_work {
+    const vx_mesh *mesh;
+    int construction, fd;
+} build_work;
+
+static int build_child(void *ud, void *out, size_t out_size, vx_err *err)
+{
+    const build_work *w = ud;
+    (void)out_size;
+    builder b = {.mesh = w->mesh, .construction = w->construction};
+    int rc = construct(&b, w->mesh->pos, err);
+    if (rc == 0) {
+        const vx_gpatch_set *set = b.set;
+        *(uint64_t *)out = set->npatches;
+        if (write_all(w->fd, set->cp, set->npatches * VX_GPATCH_POINTS * 3 * sizeof *set->cp) ||
+            write_all(w->fd, set->corner_key, set->npatches * 4 * sizeof *set->corner_key) ||
+            write_all(w->fd, set->face, set->npatches * sizeof *set->face))
+            rc = vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for the patch set");
+    }
+    vx_gpatch_set_free(b.set);
+    vx_gregory_topo_free(b.topo);
+    vx_gregory_cc_plan_free(b.cc);
+    return rc;
+}
+
+static int stop_hook(void *ud, vx_err *err);
+
+static int construct_once(vx_job_run *r, builder *b, vx_err *err)
+{
+    if (b->mesh->npatches > 0) return construct(b, b->mesh->pos, err); /* Bézier: trivial */
+    int fd = memfd_create("voxeld-gregory", MFD_CLOEXEC);
+    if (fd < 0) return construct(b, b->mesh->pos, err);
+    build_work w = {b->mesh, b->construction, fd};
+    uint64_t np = 0;
+    int rc = vx_child_call(build_child, &w, &np, sizeof np, stop_hook, r, ENCODE_POLL_MS, err);
+    if (rc == 0) {
+        vx_gpatch_set *set = vx_gpatch_set_new((size_t)np);
+        size_t cpb = (size_t)np * VX_GPATCH_POINTS * 3 * sizeof *set->cp,
+               keyb = (size_t)np * 4 * sizeof *set->corner_key;
+        vx_err_clear(err);
+        if (!set || read_all(fd, 0, set->cp, cpb, err) ||
+            read_all(fd, (off_t)cpb, set->corner_key, keyb, err) ||
+            read_all(fd, (off_t)(cpb + keyb), set->face, (size_t)np * sizeof *set->face, err)) {
+            vx_gpatch_set_free(set);
+            if (!err || err->kind == VX_EOK)
+                vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for the patch set");
+            rc = -1;
+        } else {
+            b->set = set;
+        }
+    }
+    close(fd);
+    return rc;
+}
+
 /* Positions of frame k >= 1 into buf (3 * nverts), or a loaded mesh. */
 static const double *frame_positions(vx_job_run *r, const vx_mesh *mesh, const gparams *p, size_t k,
                                      double *buf, vx_mesh **loaded, vx_err *err)
@@ -298,8 +396,29 @@ static const double *frame_positions(vx_job_run *r, const vx_mesh *mesh, const g
     return buf;
 }
 
-static int greg_run_gl(vx_job_run *r, const vx_mesh *mesh, const cJSON *params, void **state,
-                       vx_err *err)
+typedef struct distance_work {
+    const vx_mesh *mesh;
+    const vx_gpatch_set *set;
+} distance_work;
+
+static int distance_child(void *ud, void *out, size_t out_size, vx_err *err)
+{
+    const distance_work *w = ud;
+    (void)out_size;
+    double d = vx_gregory_cc_distance(w->mesh, w->set, CC_DISTANCE_SAMPLES, err);
+    *(double *)out = d;
+    return d < 0 ? -1 : 0;
+}
+
+/* The layout, the tessellation and the gather poll the stop hook: the job's
+ * time limit and cancel reach into them. */
+static int stop_hook(void *ud, vx_err *err)
+{
+    return vx_run_progress(ud, 0, err);
+}
+
+static int run_gl(vx_job_run *r, const vx_mesh *mesh, const cJSON *params, void **state,
+                  vx_err *err)
 {
     gparams p;
     const vx_limits *lim = vx_run_limits(r);
@@ -313,14 +432,18 @@ static int greg_run_gl(vx_job_run *r, const vx_mesh *mesh, const cJSON *params, 
     int rc = -1;
     cJSON *frame_ms = cJSON_CreateArray();
     double t0 = now_ms();
-    if (construct(&b, mesh->pos, err)) goto done;
+    if ((nframes == 1 ? construct_once(r, &b, err) : construct(&b, mesh->pos, err))) goto done;
     double build_ms = now_ms() - t0;
     /* How far approximate-cc is from the true limit surface (frame 0). */
     double cc_distance = -1;
     if (p.construction == CONS_APPROX_CC && !mesh->npatches &&
         b.set->npatches <= CC_DISTANCE_MAX_PATCHES) {
-        cc_distance = vx_gregory_cc_distance(mesh, b.set, CC_DISTANCE_SAMPLES, err);
-        if (cc_distance < 0) goto done;
+        /* OpenSubdiv's reference surface takes seconds on big sets: in a
+         * child process, killed at the time limit. */
+        distance_work w = {mesh, b.set};
+        if (vx_child_call(distance_child, &w, &cc_distance, sizeof cc_distance, stop_hook, r,
+                          ENCODE_POLL_MS, err))
+            goto done;
     }
     ndiv = vx_gregory_divisions(b.set, (int)p.divisions, p.max_edge, err);
     if (!ndiv) goto done;
@@ -387,7 +510,7 @@ static int greg_run_gl(vx_job_run *r, const vx_mesh *mesh, const cJSON *params, 
             vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for frame %zu", k);
             goto done;
         }
-        vx_gregory_gather(s->layout, grid, origin, s->pos[k], s->nrm[k]);
+        if (vx_gregory_gather(s->layout, grid, origin, s->pos[k], s->nrm[k], err)) goto done;
         if (frame_ms) cJSON_AddItemToArray(frame_ms, cJSON_CreateNumber(now_ms() - f0));
         if (vx_run_progress(r, 0.9 * (double)(k + 1) / (double)nframes, err)) goto done;
     }
@@ -430,6 +553,46 @@ done:
     return rc;
 }
 
+static int greg_run_gl(vx_job_run *r, const vx_mesh *mesh, const cJSON *params, void **state,
+                       vx_err *err)
+{
+    vx_stop_set(stop_hook, r);
+    int rc = run_gl(r, mesh, params, state, err);
+    vx_stop_set(NULL, NULL);
+    return rc;
+}
+
+/* One frame's file, written by a child process (util/child.h): the OBJ,
+ * PLY and Draco writers are single calls that take seconds on big outputs
+ * and cannot be stopped from inside; a child is killed at the time limit. */
+typedef struct frame_write {
+    const vx_mesh *m;
+    const vx_mesh_write_opts *o;
+    int format;
+    const char *path;
+} frame_write;
+
+static int write_frame(void *ud, void *out, size_t out_size, vx_err *err)
+{
+    const frame_write *w = ud;
+    (void)out;
+    (void)out_size;
+    return w->format == FMT_OBJ   ? vx_obj_write_path(w->m, w->o, w->path, err)
+           : w->format == FMT_PLY ? vx_ply_write_path(w->m, w->o, w->path, err)
+                                  : vx_draco_write_path(w->m, w->o, w->path, err);
+}
+
+typedef struct encode_poll {
+    vx_job_run *r;
+    double fraction;
+} encode_poll;
+
+static int poll_encode(void *ud, vx_err *err)
+{
+    encode_poll *e = ud;
+    return vx_run_progress(e->r, e->fraction, err);
+}
+
 static int greg_encode(vx_job_run *r, const cJSON *params, void *state, vx_err *err)
 {
     greg_state *s = state;
@@ -454,10 +617,10 @@ static int greg_encode(vx_job_run *r, const cJSON *params, void *state, vx_err *
                                 /* OBJ groups per patch only when each patch is its own part */
                                 .face_group = p.format == FMT_OBJ && p.weld ? NULL : l->tri_patch,
                                 .group_prefix = "patch"};
-        int rc = p.format == FMT_OBJ   ? vx_obj_write_path(&m, &o, path, err)
-                 : p.format == FMT_PLY ? vx_ply_write_path(&m, &o, path, err)
-                                       : vx_draco_write_path(&m, &o, path, err);
-        if (rc) return -1;
+        frame_write w = {&m, &o, p.format, path};
+        encode_poll ep = {r, 0.9 + 0.1 * (double)k / (double)s->nframes};
+        if (vx_child_call(write_frame, &w, NULL, 0, poll_encode, &ep, ENCODE_POLL_MS, err))
+            return -1;
         if (vx_run_progress(r, 0.9 + 0.1 * (double)(k + 1) / (double)s->nframes, err)) return -1;
     }
     return 0;

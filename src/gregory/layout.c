@@ -5,6 +5,7 @@
 #include <string.h>
 
 #include "gregory/tess.h"
+#include "util/stop.h"
 
 enum { NONE = UINT32_MAX };
 
@@ -136,6 +137,10 @@ static int edge_divisions(const vx_gpatch_set *s, const uint32_t *ndiv, uint32_t
 {
     pedge *e = sorted_edges(s);
     if (!e) return oom(err);
+    if (vx_stop_poll(err)) { /* the sort is the slow part: ~1 s per 10^6 patches */
+        free(e);
+        return -1;
+    }
     size_t n = 4 * s->npatches;
     for (size_t q = 0; q < n;) {
         size_t r = q, best = q;
@@ -193,6 +198,11 @@ int vx_gregory_count(const vx_gpatch_set *s, const uint32_t *ndiv, uint64_t *gri
     }
     uint64_t g = 0, v = 0, t = 0;
     for (size_t p = 0; p < np; p++) {
+        if ((p & 0xffff) == 0 && vx_stop_poll(err)) {
+            free(ne);
+            free(src);
+            return -1;
+        }
         uint64_t pv, pt, n = ndiv[p];
         patch_counts(ne, ndiv, p, &pv, &pt);
         g += (n + 1) * (n + 1);
@@ -453,8 +463,11 @@ vx_gtess_layout *vx_gregory_layout_new(const vx_gpatch_set *s, const uint32_t *n
     if (!l->rep || !l->tri || !l->tri_patch) goto fail_oom;
     for (size_t v = 0; v < l->nverts; v++)
         l->rep[v] = UINT64_MAX;
+    /* The loops below take about a second per 10^7 triangles on a CPU:
+     * they poll the stop hook (util/stop.h) as they go. */
     for (size_t p = 0; p < np; p++) { /* the first patch that has a vertex gives it */
         uint32_t n = ndiv[p];
+        if (vx_stop_poll(err)) goto fail;
         for (uint32_t j = 1; j < n; j++)
             for (uint32_t i = 1; i < n; i++)
                 l->rep[grid_id(&c, p, i, j)] = l->voff[p] + (uint64_t)j * (n + 1) + i;
@@ -464,11 +477,13 @@ vx_gtess_layout *vx_gregory_layout_new(const vx_gpatch_set *s, const uint32_t *n
                 if (l->rep[v] == UINT64_MAX) l->rep[v] = loop_grid(&c, p, ed, t);
             }
     }
-    for (size_t p = 0; p < np; p++)
+    for (size_t p = 0; p < np; p++) {
+        if (vx_stop_poll(err)) goto fail;
         if (is_transition(c.ne, ndiv, p))
             transition_tris(&c, p);
         else
             grid_tris(&c, p, 0, ndiv[p]);
+    }
     free(c.ne);
     free(c.src);
     free(c.pbase);
@@ -490,14 +505,16 @@ fail:
     return NULL;
 }
 
-void vx_gregory_gather(const vx_gtess_layout *l, const float *grid, const double origin[3],
-                       double *pos, float *nrm)
+int vx_gregory_gather(const vx_gtess_layout *l, const float *grid, const double origin[3],
+                      double *pos, float *nrm, vx_err *err)
 {
     for (size_t v = 0; v < l->nverts; v++) {
+        if ((v & 0xffff) == 0 && vx_stop_poll(err)) return -1;
         const float *g = grid + 6 * l->rep[v];
         for (int c = 0; c < 3; c++) {
             pos[3 * v + c] = origin[c] + (double)g[c];
             if (nrm) nrm[3 * v + c] = g[3 + c];
         }
     }
+    return 0;
 }

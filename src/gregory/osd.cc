@@ -16,6 +16,7 @@
 
 extern "C" {
 #include "gregory/osd.h"
+#include "util/stop.h"
 }
 
 using namespace OpenSubdiv;
@@ -255,6 +256,8 @@ int plan_new(const vx_mesh *m, vx_gregory_cc_plan &p, vx_err *err)
             p.bez_at[(size_t)f] = nreg++;
     p.bez.assign((size_t)nreg * 256, 0.0);
     for (int f = 0; f < nq; f++) {
+        // ~4 us a quad: the job's time limit reaches in (util/stop.h)
+        if ((f & 1023) == 0 && vx_stop_poll(err)) return -1;
         if (p.bez_at[(size_t)f] < 0) continue;
         double *w = &p.bez[256 * (size_t)p.bez_at[(size_t)f]];
         for (int b = 0; b < 4; b++)

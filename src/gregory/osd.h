@@ -35,7 +35,8 @@ int vx_gregory_build_approx_cc(const vx_mesh *m, vx_gpatch_set **out, vx_err *er
 typedef struct vx_gregory_cc_plan vx_gregory_cc_plan;
 
 /* The plan for m's topology (positions unused). Returns an owned plan or
- * NULL (errors as vx_gregory_build_approx_cc). Any thread. */
+ * NULL (errors as vx_gregory_build_approx_cc; the stop hook's, util/stop.h,
+ * polled per 1024 quads after OpenSubdiv made its patches). Any thread. */
 vx_gregory_cc_plan *vx_gregory_cc_plan_new(const vx_mesh *m, vx_err *err);
 /* Patches the plan makes (the size of the set plan_eval fills). */
 size_t vx_gregory_cc_plan_patches(const vx_gregory_cc_plan *p);

@@ -3,6 +3,7 @@
 #include <stdlib.h>
 
 #include "gregory/tess.h"
+#include "util/stop.h"
 
 /* llvmpipe's SSBO limit (ARCHITECTURE.md); the driver's own value when lower. */
 #define SSBO_CAP ((uint64_t)128 << 20)
@@ -14,6 +15,9 @@
 #define GROUP 64
 /* Bytes per output vertex: position and normal. */
 #define VBYTES (6 * sizeof(float))
+/* Grid vertices per chunk: one dispatch, the piece of work between two
+ * polls of the stop hook (util/stop.h): ~0.05 s on a loaded llvmpipe. */
+#define CHUNK_VERTS ((uint64_t)1 << 19)
 
 typedef struct chunk {
     size_t p0, p1;   /* patches [p0, p1) */
@@ -72,7 +76,8 @@ vx_gtess *vx_gtess_new(vx_gl *gl, const vx_gtess_layout *l, vx_err *err)
     if (!t->ch) return oom_free(t, err);
     for (size_t p = 0; p < l->npatches;) {
         size_t q = p;
-        while (q < l->npatches && q - p < 65535 && (l->voff[q + 1] - l->voff[p]) * VBYTES <= cap)
+        while (q < l->npatches && q - p < 65535 && (l->voff[q + 1] - l->voff[p]) * VBYTES <= cap &&
+               l->voff[q + 1] - l->voff[p] <= CHUNK_VERTS)
             q++;
         if (q == p) q = p + 1; /* one patch is at most 257^2 vertices: far under any cap */
         if (t->nchunks == cap_chunks) {
@@ -111,6 +116,11 @@ vx_gtess *vx_gtess_new(vx_gl *gl, const vx_gtess_layout *l, vx_err *err)
         }
         t->rows[c] = rows;
         t->same[c] = same;
+        if (vx_stop_poll(err)) {
+            free(inf);
+            vx_gtess_free(t);
+            return NULL;
+        }
         glCreateBuffers(3, k->buf);
         glNamedBufferStorage(k->buf[0], (GLsizeiptr)(np * CP_FLOATS * sizeof(float)), NULL,
                              GL_DYNAMIC_STORAGE_BIT);
@@ -146,6 +156,7 @@ int vx_gtess_run(vx_gtess *t, const vx_gpatch_set *s, const double origin[3], fl
             dst[63] = 0;
         }
         glNamedBufferSubData(k->buf[0], 0, (GLsizeiptr)(np * CP_FLOATS * sizeof(float)), t->cpf);
+        if (vx_stop_poll(err)) return -1;
     }
     if (vx_gl_check(t->gl, "gregory.upload", err)) return -1;
     /* The timer sees the pass only (the buffers are made and filled). */
@@ -155,6 +166,14 @@ int vx_gtess_run(vx_gtess *t, const vx_gpatch_set *s, const double origin[3], fl
     vx_gl_timer_begin(&tm);
     for (size_t c = 0; c < t->nchunks; c++) {
         chunk *k = &t->ch[c];
+        if (c > 0) { /* a stop waits for the dispatch in flight only */
+            glFinish();
+            if (vx_stop_poll(err)) {
+                vx_gl_timer_end_ms(&tm);
+                glUseProgram(0);
+                return -1;
+            }
+        }
         for (GLuint b = 0; b < 3; b++)
             glBindBufferBase(GL_SHADER_STORAGE_BUFFER, b, k->buf[b]);
         glUniform1ui(0, t->rows[c]);
@@ -167,9 +186,11 @@ int vx_gtess_run(vx_gtess *t, const vx_gpatch_set *s, const double origin[3], fl
     glMemoryBarrier(GL_BUFFER_UPDATE_BARRIER_BIT);
     *gpu_ms = vx_gl_timer_end_compute_ms(&tm);
     if (vx_gl_check(t->gl, "gregory.dispatch", err)) return -1;
-    for (size_t c = 0; c < t->nchunks; c++)
+    for (size_t c = 0; c < t->nchunks; c++) {
+        if (vx_stop_poll(err)) return -1;
         glGetNamedBufferSubData(t->ch[c].buf[2], 0, (GLsizeiptr)(t->ch[c].nv * VBYTES),
                                 grid + 6 * t->ch[c].v0);
+    }
     return vx_gl_check(t->gl, "gregory.readback", err);
 }
 

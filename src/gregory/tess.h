@@ -49,7 +49,8 @@ uint32_t *vx_gregory_divisions(const vx_gpatch_set *s, int n, double max_edge, v
 /* Counts for a given division array: grid vertices, and the output
  * vertices and triangles an unwelded tessellation makes (welding only
  * lowers the vertex count, collapsed edges the triangle count). For limit
- * checks before the layout is built. -1 with err on allocation failure. */
+ * checks before the layout is built. -1 with err on allocation failure
+ * (or the stop hook's, util/stop.h). */
 int vx_gregory_count(const vx_gpatch_set *s, const uint32_t *ndiv, uint64_t *grid_verts,
                      uint64_t *verts, uint64_t *tris, vx_err *err);
 
@@ -58,7 +59,7 @@ int vx_gregory_count(const vx_gpatch_set *s, const uint32_t *ndiv, uint64_t *gri
  * collapse onto a degenerate edge are dropped) or one vertex set per patch.
  * ndiv is copied. Owned; NULL with err (VX_EUNPROC gregory_divisions when a
  * patch of 1 division has a finer edge: vx_gregory_divisions never makes
- * one). Any thread. */
+ * one; the stop hook's err, util/stop.h). Any thread. */
 vx_gtess_layout *vx_gregory_layout_new(const vx_gpatch_set *s, const uint32_t *ndiv, int weld,
                                        vx_err *err);
 void vx_gregory_layout_free(vx_gtess_layout *l);
@@ -66,12 +67,13 @@ void vx_gregory_layout_free(vx_gtess_layout *l);
 /* A tessellator for one layout: the GPU buffers (per-patch info, control
  * points, outputs) made once, so that deformation frames only upload their
  * control points and run the pass. Owned (free with vx_gtess_free); l must
- * outlive it. NULL with err. GL thread. */
+ * outlive it. NULL with err (also the stop hook's, util/stop.h). GL thread. */
 typedef struct vx_gtess vx_gtess;
 vx_gtess *vx_gtess_new(vx_gl *gl, const vx_gtess_layout *l, vx_err *err);
 void vx_gtess_free(vx_gtess *t);
-/* One pass over s (the layout's patch count), as vx_gregory_tessellate.
- * GL thread. */
+/* One pass over s (the layout's patch count), as vx_gregory_tessellate;
+ * between chunks (about 10^6 grid vertices each) it waits for the GPU and
+ * polls the thread's stop hook (util/stop.h): -1 with its err. GL thread. */
 int vx_gtess_run(vx_gtess *t, const vx_gpatch_set *s, const double origin[3], float *grid,
                  double *gpu_ms, vx_err *err);
 
@@ -86,8 +88,9 @@ int vx_gregory_tessellate(vx_gl *gl, const vx_gpatch_set *s, const vx_gtess_layo
                           const double origin[3], float *grid, double *gpu_ms, vx_err *err);
 
 /* Output vertex positions (3 doubles, origin added back) and normals
- * (3 floats) from a grid the tessellator filled. Any thread. */
-void vx_gregory_gather(const vx_gtess_layout *l, const float *grid, const double origin[3],
-                       double *pos, float *nrm);
+ * (3 floats) from a grid the tessellator filled. 0, or -1 with err when the
+ * thread's stop hook (util/stop.h) says stop. Any thread. */
+int vx_gregory_gather(const vx_gtess_layout *l, const float *grid, const double origin[3],
+                      double *pos, float *nrm, vx_err *err);
 
 #endif

@@ -33,6 +33,12 @@ static void on_warning(png_structp png, png_const_charp msg)
 int vx_png_write_path(const char *path, const void *pixels, int width, int height, int channels,
                       int bit_depth, vx_err *err)
 {
+    return vx_png_write_path_poll(path, pixels, width, height, channels, bit_depth, NULL, err);
+}
+
+int vx_png_write_path_poll(const char *path, const void *pixels, int width, int height,
+                           int channels, int bit_depth, const vx_png_poll *poll, vx_err *err)
+{
     if (width <= 0 || height <= 0 || channels < 1 || channels > 4 ||
         (bit_depth != 8 && bit_depth != 16))
         return vx_err_set(err, VX_EINTERNAL, "png_args",
@@ -77,8 +83,20 @@ int vx_png_write_path(const char *path, const void *pixels, int width, int heigh
         if (*(const uint8_t *)&probe == 1) png_set_swap(png);
     }
     const size_t stride = (size_t)width * (size_t)channels * (size_t)(bit_depth / 8);
-    for (int y = 0; y < height; y++)
+    size_t since = 0;
+    for (int y = 0; y < height; y++) {
         png_write_row(png, (png_const_bytep)pixels + (size_t)y * stride);
+        since += stride;
+        if (poll && poll->fn && since >= VX_PNG_POLL_BYTES) {
+            since = 0;
+            if (poll->fn(poll->ud, (double)(y + 1) / height, err)) {
+                png_destroy_write_struct(&png, &info);
+                fclose(f);
+                if (regular) unlink(path);
+                return -1;
+            }
+        }
+    }
     png_write_end(png, NULL);
     png_destroy_write_struct(&png, &info);
 

@@ -1,6 +1,7 @@
 /* The `preview` row of the job table (kind.h). Kept apart from render.c so
  * that programs using only the renderer need not link the job runner. */
 #include <stdlib.h>
+#include <string.h>
 
 #include "image/png.h"
 #include "preview/preview.h"
@@ -48,6 +49,7 @@ typedef struct exact {
 static int read_params(const cJSON *params, const vx_limits *lim, vx_preview_params *p, exact *x,
                        vx_err *err)
 {
+    memset(p, 0, sizeof *p); /* the fields params do not set: no poll, automatic bands */
     if (vx_param_object(&params, known, err)) return -1;
     static const double def_color[3] = {0.8, 0.8, 0.85}, def_bg[4] = {1, 1, 1, 1};
     long w, h, samples;
@@ -122,6 +124,17 @@ oom:
     return NULL;
 }
 
+/* The render's 0..1 is the job's 0..0.8; the PNG encoder has the rest. */
+static int render_poll(void *ud, double fraction, vx_err *err)
+{
+    return vx_run_progress(ud, 0.8 * fraction, err);
+}
+
+static int encode_poll(void *ud, double fraction, vx_err *err)
+{
+    return vx_run_progress(ud, 0.8 + 0.2 * fraction, err);
+}
+
 static int preview_run_gl(vx_job_run *r, const vx_mesh *mesh, const cJSON *params, void **state,
                           vx_err *err)
 {
@@ -147,8 +160,10 @@ static int preview_run_gl(vx_job_run *r, const vx_mesh *mesh, const cJSON *param
     *state = s; /* from here on the runner frees it through free_state */
 
     vx_preview_stats st;
+    p.poll = render_poll;
+    p.poll_ud = r;
     if (vx_preview_render(vx_run_gl(r), mesh, &p, s->rgba, &st, err)) return -1;
-    if (vx_run_progress(r, 0.9, err)) return -1;
+    if (vx_run_progress(r, 0.8, err)) return -1;
     cJSON *stats = vx_run_stats(r);
     if (stats) {
         cJSON_AddNumberToObject(stats, "triangles", (double)mesh->ntris);
@@ -167,7 +182,9 @@ static int preview_encode(vx_job_run *r, const cJSON *params, void *state, vx_er
     preview_state *s = state;
     const char *path = vx_run_output(r, "image", "png", "image/png", err);
     if (!path) return -1;
-    return vx_png_write_path(path, s->rgba, s->width, s->height, 4, 8, err);
+    vx_png_poll poll = {encode_poll, r};
+    if (vx_png_write_path_poll(path, s->rgba, s->width, s->height, 4, 8, &poll, err)) return -1;
+    return vx_run_progress(r, 1.0, err);
 }
 
 static void preview_free_state(void *state)

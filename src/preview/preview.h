@@ -17,6 +17,13 @@ typedef struct vx_preview_params {
     double fov_deg;       /* vertical field of view; 0 = orthographic */
     float color[3], background[4], ambient;
     int samples;          /* MSAA samples, 1 = none */
+    /* Optional: called between the pieces the render is cut into (bands
+     * of rows, draws of at most VX_PREVIEW_CHUNK_TRIS triangles) with the
+     * fraction done; returning -1 (err filled) stops the render, which
+     * then fails with that err and leaves the GL state clean. */
+    int (*poll)(void *ud, double fraction, vx_err *err);
+    void *poll_ud;
+    int band_rows;        /* rows per band; 0 = from VX_PREVIEW_BAND_SAMPLES */
 } vx_preview_params;
 
 typedef struct vx_preview_stats {
@@ -36,6 +43,13 @@ typedef struct vx_preview_stats {
 #define VX_PREVIEW_LIGHT_X (-0.25)
 #define VX_PREVIEW_LIGHT_Y 0.35
 #define VX_PREVIEW_LIGHT_Z 1.0
+
+/* The render is cut so that each piece is a small fraction of a job's time
+ * limit on a CPU rasteriser: bands of about this many samples (pixels x
+ * MSAA samples: ~0.1 s on a loaded llvmpipe), each drawn in draws of at
+ * most this many triangles. */
+#define VX_PREVIEW_BAND_SAMPLES (4 << 20)
+#define VX_PREVIEW_CHUNK_TRIS (1 << 20)
 
 /* Renders into rgba (width*height*4 bytes, top row first). GL thread. */
 int vx_preview_render(vx_gl *gl, const vx_mesh *m, const vx_preview_params *p, uint8_t *rgba,

@@ -1,4 +1,4 @@
-/* The preview renderer (preview.h): one MSAA draw of the whole mesh. */
+/* The preview renderer (preview.h): MSAA draws of the mesh, band by band. */
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
@@ -112,10 +112,15 @@ static void camera(const vx_preview_params *p, float view[16], float proj[16])
     view[15] = 1.0f;
 }
 
+static int poll_render(const vx_preview_params *p, double fraction, vx_err *err)
+{
+    return p->poll ? p->poll(p->poll_ud, fraction, err) : 0;
+}
+
 /* Centre the bbox at the origin and scale the bounding sphere to radius 1,
  * in double (coordinates far from the origin, like +1e6, would lose the
  * mesh's detail if shifted after conversion), then upload as floats. */
-static int upload(vx_gl *gl, const vx_mesh *m, objs *o, vx_err *err)
+static int upload(vx_gl *gl, const vx_mesh *m, const vx_preview_params *p, objs *o, vx_err *err)
 {
     double c[3], r2 = 0;
     for (int a = 0; a < 3; a++)
@@ -144,6 +149,10 @@ static int upload(vx_gl *gl, const vx_mesh *m, objs *o, vx_err *err)
                 tmp[3 * k + a] = (float)((m->pos[3 * (i0 + k) + a] - c[a]) * inv);
         glNamedBufferSubData(o->vbo, (GLintptr)(i0 * 3 * sizeof(float)),
                              (GLsizeiptr)(n * 3 * sizeof(float)), tmp);
+        if (((i0 / CHUNK) & 15) == 15 && poll_render(p, 0, err)) {
+            free(tmp);
+            return -1;
+        }
     }
     free(tmp);
     if (vx_gl_check(gl, "preview.vertex_upload", err)) return -1;
@@ -195,18 +204,20 @@ static int targets(vx_gl *gl, int w, int h, int samples, objs *o, vx_err *err)
     return 0;
 }
 
-/* Turns the resolved premultiplied coverage image into the final picture:
- * composite over the background (which may be translucent), count covered
- * pixels, and flip rows so the top row comes first. */
-static uint64_t finish(uint8_t *rgba, int w, int h, const float bg[4])
+/* Turns one band of the resolved premultiplied coverage image (rows y0..
+ * y0+n-1 counted from the bottom, as glReadPixels gives them) into the
+ * final picture: composite over the background (which may be
+ * translucent), count covered pixels, and store the rows top row first. */
+static uint64_t finish_band(uint8_t *band, int w, int h, int y0, int n, const float bg[4],
+                            uint8_t *rgba)
 {
     uint8_t bg8[4];
     for (int i = 0; i < 4; i++)
         bg8[i] = (uint8_t)lrint(255.0 * bg[i]);
     uint64_t covered = 0;
-    const size_t n = (size_t)w * (size_t)h;
-    for (size_t i = 0; i < n; i++) {
-        uint8_t *px = rgba + 4 * i;
+    const size_t npx = (size_t)w * (size_t)n;
+    for (size_t i = 0; i < npx; i++) {
+        uint8_t *px = band + 4 * i;
         if (px[3] == 0) {
             memcpy(px, bg8, 4);
             continue;
@@ -222,27 +233,19 @@ static uint64_t finish(uint8_t *rgba, int w, int h, const float bg[4])
         px[3] = (uint8_t)lrint(255.0 * oa);
     }
     const size_t stride = (size_t)w * 4;
-    uint8_t *tmp = malloc(stride);
-    if (tmp) {
-        for (int y = 0; y < h / 2; y++) {
-            uint8_t *a = rgba + (size_t)y * stride, *b = rgba + (size_t)(h - 1 - y) * stride;
-            memcpy(tmp, a, stride);
-            memcpy(a, b, stride);
-            memcpy(b, tmp, stride);
-        }
-        free(tmp);
-    } else {
-        /* No memory for one row: swap byte by byte instead. */
-        for (int y = 0; y < h / 2; y++) {
-            uint8_t *a = rgba + (size_t)y * stride, *b = rgba + (size_t)(h - 1 - y) * stride;
-            for (size_t k = 0; k < stride; k++) {
-                uint8_t t = a[k];
-                a[k] = b[k];
-                b[k] = t;
-            }
-        }
-    }
+    for (int k = 0; k < n; k++)
+        memcpy(rgba + (size_t)(h - 1 - (y0 + k)) * stride, band + (size_t)k * stride, stride);
     return covered;
+}
+
+/* Rows per band: about VX_PREVIEW_BAND_SAMPLES samples, at least 16 rows
+ * (llvmpipe bins in 64x64 tiles: thinner bands waste the vertex work). */
+static int band_rows(const vx_preview_params *p, int samples)
+{
+    if (p->band_rows > 0) return p->band_rows < p->height ? p->band_rows : p->height;
+    long rows = (long)VX_PREVIEW_BAND_SAMPLES / ((long)p->width * samples);
+    if (rows < 16) rows = 16;
+    return rows < p->height ? (int)rows : p->height;
 }
 
 int vx_preview_render(vx_gl *gl, const vx_mesh *m, const vx_preview_params *p, uint8_t *rgba,
@@ -287,13 +290,26 @@ int vx_preview_render(vx_gl *gl, const vx_mesh *m, const vx_preview_params *p, u
     }
 
     objs o = {0};
-    int rc = -1;
+    int rc = -1, timing = 0;
+    vx_gl_timer timer;
+    uint8_t *band = NULL;
     const int draw = m->ntris > 0 && m->nverts > 0;
     double t0 = now_ms();
-    if (draw && upload(gl, m, &o, err)) goto done;
+    if (draw && upload(gl, m, p, &o, err)) goto done;
     glFinish(); /* so upload_ms is the upload, not just its queueing */
     st->upload_ms = now_ms() - t0;
-    if (targets(gl, w, h, samples, &o, err)) goto done;
+    if (poll_render(p, 0.05, err)) goto done;
+    /* The image is drawn in bands of rows into band-sized targets: the
+     * viewport puts image row y0 at the band's row 0 (a whole-pixel shift,
+     * so every band rasterises as the whole image would), and a band is a
+     * piece of work the time limit can stop between. */
+    const int rows = band_rows(p, samples);
+    if (targets(gl, w, rows, samples, &o, err)) goto done;
+    band = malloc((size_t)w * (size_t)rows * 4);
+    if (!band) {
+        vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for a %dx%d band", w, rows);
+        goto done;
+    }
 
     float view[16], proj[16];
     camera(p, view, proj);
@@ -306,8 +322,6 @@ int vx_preview_render(vx_gl *gl, const vx_mesh *m, const vx_preview_params *p, u
     glProgramUniform3f(prog, 4, (float)l[0], (float)l[1], (float)l[2]);
 
     GLuint target = samples > 1 ? o.fbo_ms : o.fbo;
-    glBindFramebuffer(GL_FRAMEBUFFER, target);
-    glViewport(0, 0, w, h);
     /* State other code may have left behind. */
     glDisable(GL_CULL_FACE);
     glDisable(GL_BLEND);
@@ -317,48 +331,65 @@ int vx_preview_render(vx_gl *gl, const vx_mesh *m, const vx_preview_params *p, u
     glDepthFunc(GL_LESS);
     glDepthMask(GL_TRUE);
     glColorMask(GL_TRUE, GL_TRUE, GL_TRUE, GL_TRUE);
-    const float clear[4] = {0, 0, 0, 0}, one = 1.0f;
-    glClearNamedFramebufferfv(target, GL_COLOR, 0, clear);
-    glClearNamedFramebufferfv(target, GL_DEPTH, 0, &one);
-    /* Begun after the clear: llvmpipe (Mesa 22.3) loses the start of a time
-     * query begun before the first command on a newly bound framebuffer
-     * and then reports the time since boot. */
-    vx_gl_timer timer;
-    vx_gl_timer_begin(&timer);
-    if (draw) {
-        glUseProgram(prog);
-        glBindVertexArray(o.vao);
-        /* glDrawElements counts in GLsizei: split meshes beyond 2^31 indices. */
-        const size_t step = (size_t)3 << 28;
-        for (size_t first = 0; first < nidx; first += step) {
-            size_t count = nidx - first < step ? nidx - first : step;
-            glDrawElements(GL_TRIANGLES, (GLsizei)count, GL_UNSIGNED_INT,
-                           (const void *)(uintptr_t)(first * sizeof(uint32_t)));
-        }
-        glBindVertexArray(0);
-        glUseProgram(0);
-    }
-    if (samples > 1)
-        glBlitNamedFramebuffer(o.fbo_ms, o.fbo, 0, 0, w, h, 0, 0, w, h, GL_COLOR_BUFFER_BIT,
-                               GL_NEAREST);
-    st->gpu_ms = vx_gl_timer_end_ms(&timer);
-    glBindFramebuffer(GL_FRAMEBUFFER, 0);
-
     glBindBuffer(GL_PIXEL_PACK_BUFFER, 0);
     glPixelStorei(GL_PACK_ALIGNMENT, 1);
     glPixelStorei(GL_PACK_ROW_LENGTH, 0);
-    glBindFramebuffer(GL_READ_FRAMEBUFFER, o.fbo);
-    glReadBuffer(GL_COLOR_ATTACHMENT0);
-    glReadPixels(0, 0, w, h, GL_RGBA, GL_UNSIGNED_BYTE, rgba);
-    glBindFramebuffer(GL_READ_FRAMEBUFFER, 0);
-    if (vx_gl_check(gl, "preview.draw", err)) goto done;
-
-    st->pixels_covered = finish(rgba, w, h, p->background);
+    /* glDrawElements counts in GLsizei, and one draw is one piece of work:
+     * draws of at most VX_PREVIEW_CHUNK_TRIS triangles. */
+    const size_t step = (size_t)3 * VX_PREVIEW_CHUNK_TRIS;
+    const int nbands = (h + rows - 1) / rows;
+    for (int b = 0; b < nbands; b++) {
+        const int y0 = b * rows, n = h - y0 < rows ? h - y0 : rows;
+        glBindFramebuffer(GL_FRAMEBUFFER, target);
+        glViewport(0, -y0, w, h);
+        const float clear[4] = {0, 0, 0, 0}, one = 1.0f;
+        glClearNamedFramebufferfv(target, GL_COLOR, 0, clear);
+        glClearNamedFramebufferfv(target, GL_DEPTH, 0, &one);
+        /* Begun after the clear: llvmpipe (Mesa 22.3) loses the start of a
+         * time query begun before the first command on a newly bound
+         * framebuffer and then reports the time since boot. */
+        vx_gl_timer_begin(&timer);
+        timing = 1;
+        if (draw) {
+            glUseProgram(prog);
+            glBindVertexArray(o.vao);
+            for (size_t first = 0; first < nidx; first += step) {
+                if (first > 0) {
+                    glFinish();
+                    double f = ((double)b + 0.5 * (double)first / (double)nidx) / nbands;
+                    if (poll_render(p, 0.05 + 0.9 * f, err)) goto done;
+                }
+                size_t count = nidx - first < step ? nidx - first : step;
+                glDrawElements(GL_TRIANGLES, (GLsizei)count, GL_UNSIGNED_INT,
+                               (const void *)(uintptr_t)(first * sizeof(uint32_t)));
+            }
+            glBindVertexArray(0);
+            glUseProgram(0);
+        }
+        if (samples > 1) {
+            glFinish(); /* the draw and the resolve are two pieces */
+            if (poll_render(p, 0.05 + 0.9 * (b + 0.5) / nbands, err)) goto done;
+            glBlitNamedFramebuffer(o.fbo_ms, o.fbo, 0, 0, w, n, 0, 0, w, n, GL_COLOR_BUFFER_BIT,
+                                   GL_NEAREST);
+        }
+        st->gpu_ms += vx_gl_timer_end_ms(&timer); /* waits for the band */
+        timing = 0;
+        glBindFramebuffer(GL_FRAMEBUFFER, 0);
+        glBindFramebuffer(GL_READ_FRAMEBUFFER, o.fbo);
+        glReadBuffer(GL_COLOR_ATTACHMENT0);
+        glReadPixels(0, 0, w, n, GL_RGBA, GL_UNSIGNED_BYTE, band);
+        glBindFramebuffer(GL_READ_FRAMEBUFFER, 0);
+        if (vx_gl_check(gl, "preview.draw", err)) goto done;
+        st->pixels_covered += finish_band(band, w, h, y0, n, p->background, rgba);
+        if (poll_render(p, 0.05 + 0.9 * (b + 1) / nbands, err)) goto done;
+    }
     rc = 0;
 done:
+    if (timing) vx_gl_timer_end_ms(&timer); /* stopped inside a band */
     glBindFramebuffer(GL_FRAMEBUFFER, 0);
     glBindVertexArray(0);
     glUseProgram(0);
     objs_free(&o);
+    free(band);
     return rc;
 }

@@ -10,6 +10,15 @@
 static vx_log_level g_level = VX_LOG_INFO;
 static pthread_mutex_t g_lock = PTHREAD_MUTEX_INITIALIZER;
 
+/* A child forked while another thread logs (util/child.h) must not inherit
+ * the lock held: fork waits for the line in progress. */
+static void fork_prepare(void) { pthread_mutex_lock(&g_lock); }
+static void fork_done(void) { pthread_mutex_unlock(&g_lock); }
+__attribute__((constructor)) static void log_atfork(void)
+{
+    pthread_atfork(fork_prepare, fork_done, fork_done);
+}
+
 void vx_log_set_level(vx_log_level level) { g_level = level; }
 vx_log_level vx_log_get_level(void) { return g_level; }
 

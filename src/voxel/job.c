@@ -332,6 +332,7 @@ static int voxelize_run_gl(vx_job_run *r, const vx_mesh *mesh, const cJSON *para
     d.max_memory = lim ? lim->max_job_memory : 0;
     d.progress = engine_progress;
     d.ud = r;
+    d.max_slab_rows = vx_voxelize_slab_rows(d.grid.dims);
 
     vstate *s = calloc(1, sizeof *s);
     if (!s) return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for the job state");

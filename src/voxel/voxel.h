@@ -65,6 +65,14 @@ typedef struct vx_voxelize_desc {
     int max_slab_rows;
 } vx_voxelize_desc;
 
+/* Voxels per GPU slab the job kinds allow: a slab's passes are one piece
+ * of work between two progress reports (the job's time limit), ~0.1 s of
+ * llvmpipe at 2^26. */
+#define VX_VOXELIZE_SLAB_VOXELS ((uint64_t)1 << 26)
+/* max_slab_rows for slabs of at most VX_VOXELIZE_SLAB_VOXELS of a grid
+ * (at least 1 row). */
+int vx_voxelize_slab_rows(const int dims[3]);
+
 typedef struct vx_bitgrid {
     vx_grid grid;
     size_t wx;       /* 32-bit words per x row */

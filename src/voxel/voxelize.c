@@ -78,3 +78,10 @@ int vx_voxelize(vx_gl *gl, const vx_mesh *m, const vx_voxelize_desc *d, vx_bitgr
     }
     return vx_voxelize_slice(gl, m, &dd, out, st, err);
 }
+
+int vx_voxelize_slab_rows(const int dims[3])
+{
+    uint64_t layer = (uint64_t)(dims[0] > 0 ? dims[0] : 1) * (uint64_t)(dims[1] > 0 ? dims[1] : 1);
+    uint64_t rows = VX_VOXELIZE_SLAB_VOXELS / layer;
+    return rows < 1 ? 1 : rows > INT32_MAX ? INT32_MAX : (int)rows;
+}

@@ -1045,7 +1045,7 @@ static void test_gpu_transitions_unwelded(void **state)
     double origin[3] = {0, 0, 0}, ms;
     assert_int_equal(vx_gregory_tessellate(vx_test_gl, s, u, origin, grid, &ms, &err), 0);
     double *pos = malloc(3 * u->nverts * sizeof *pos);
-    vx_gregory_gather(u, grid, origin, pos, NULL);
+    vx_gregory_gather(u, grid, origin, pos, NULL, NULL);
     uint32_t *first = malloc(w->nverts * sizeof *first);
     for (size_t v = 0; v < w->nverts; v++)
         first[v] = UINT32_MAX;

@@ -443,6 +443,78 @@ static void test_empty_and_bad(void **state)
     assert_int_equal(vx_gl_check(g_gl, "test.after_preview", &err), 0);
 }
 
+/* ---- pieces and stops (the job time limit) -------------------------------- */
+
+typedef struct poller {
+    int calls, stop_at; /* stop_at 0 = never */
+    double last;
+} poller;
+
+static int count_polls(void *ud, double fraction, vx_err *err)
+{
+    poller *q = ud;
+    q->calls++;
+    assert_true(fraction >= q->last && fraction <= 1);
+    q->last = fraction;
+    if (q->stop_at && q->calls >= q->stop_at)
+        return vx_err_set(err, VX_ETIMEOUT, "job_timeout", "the job ran longer than 2 s");
+    return 0;
+}
+
+/* Bands of rows and draws of VX_PREVIEW_CHUNK_TRIS triangles give the
+ * picture one piece does; a poll that says stop ends the render cleanly
+ * and the next render is as before. */
+static void test_bands_and_stop(void **state)
+{
+    vx_mesh *m = grid(1000, 600); /* 1.2M triangles: two draws per band */
+    assert_true(m->ntris > VX_PREVIEW_CHUNK_TRIS);
+    vx_preview_params p = params(301, 203, 30, 20, 30);
+    p.band_rows = 203;
+    vx_preview_stats sa, sb;
+    uint8_t *a = render(m, &p, &sa);
+    poller q = {0};
+    p.band_rows = 16; /* 13 bands, the last of 11 rows */
+    p.poll = count_polls;
+    p.poll_ud = &q;
+    uint8_t *b = render(m, &p, &sb);
+    printf("  one band: %llu covered; 13 bands: %llu covered, %d polls\n",
+           (unsigned long long)sa.pixels_covered, (unsigned long long)sb.pixels_covered, q.calls);
+    assert_true(q.calls >= 13 * 3); /* per band: between the draws, before the resolve, after */
+    size_t differ = 0, n = (size_t)p.width * (size_t)p.height;
+    for (size_t i = 0; i < n; i++)
+        for (int k = 0; k < 4; k++)
+            if (abs((int)a[4 * i + k] - (int)b[4 * i + k]) > 2) {
+                differ++;
+                break;
+            }
+    printf("  %zu of %zu pixels differ\n", differ, n);
+    assert_true(differ <= n / 1000);
+    assert_true(llabs((long long)sa.pixels_covered - (long long)sb.pixels_covered) <=
+                (long long)n / 1000);
+
+    /* Stopped at the 8th poll: the poll's error, a clean GL state. */
+    uint8_t *c = malloc(n * 4);
+    assert_non_null(c);
+    poller stop = {.stop_at = 8};
+    p.poll_ud = &stop;
+    vx_err err = {0};
+    vx_preview_stats sc;
+    assert_int_equal(vx_preview_render(g_gl, m, &p, c, &sc, &err), -1);
+    assert_string_equal(err.code, "job_timeout");
+    assert_int_equal(stop.calls, 8);
+    assert_int_equal(vx_gl_check(g_gl, "test.after_stop", &err), 0);
+    /* The same render again gives the same picture. */
+    q = (poller){0};
+    p.poll_ud = &q;
+    assert_int_equal(vx_preview_render(g_gl, m, &p, c, &sc, &err), 0);
+    assert_memory_equal(b, c, n * 4);
+    assert_int_equal(sc.pixels_covered, sb.pixels_covered);
+    free(a);
+    free(b);
+    free(c);
+    vx_mesh_free(m);
+}
+
 static double now_ms(void)
 {
     struct timespec ts;
@@ -568,6 +640,7 @@ int main(void)
         cmocka_unit_test(test_aspect_and_background),
         cmocka_unit_test(test_empty_and_bad),
         cmocka_unit_test(test_million_triangles),
+        cmocka_unit_test(test_bands_and_stop),
         cmocka_unit_test(test_png_roundtrip),
     };
     return cmocka_run_group_tests(tests, setup, teardown);
