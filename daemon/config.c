@@ -53,6 +53,8 @@ static const opt_def opts[] = {
     {"results-max-age", T_SECONDS, F(results_max_age_s), 0,
      "results unused this long are evicted, seconds (default 604800; 0 = never)"},
     {"job-history", T_SIZE, F(job_history), 0, "finished jobs remembered (default 10000)"},
+    {"job-history-bytes", T_SIZE, F(job_history_bytes), 0,
+     "memory the finished jobs remembered may take (default 64M; 0 = no limit)"},
 };
 #define NOPTS (sizeof opts / sizeof opts[0])
 
@@ -95,6 +97,7 @@ static void defaults(vx_config *c)
     c->results_max_bytes = 10ull << 30;
     c->results_max_age_s = 7 * 86400;
     c->job_history = 10000;
+    c->job_history_bytes = 64ull << 20;
 }
 
 static int set_opt(vx_config *c, const opt_def *d, const char *val, const char *where)

@@ -463,6 +463,9 @@ static int greg_encode(vx_job_run *r, const cJSON *params, void *state, vx_err *
     return 0;
 }
 
+/* Frames as positions can be megabytes: kept as a blob while the job waits. */
+static const char *const blob_fields[] = {"frames", NULL};
+
 const vx_kind vx_kind_gregory = {
     .name = "gregory",
     .summary = "Smooth surface of bicubic Gregory patches (seed 001), tessellated on the GPU",
@@ -472,4 +475,5 @@ const vx_kind vx_kind_gregory = {
     .encode = greg_encode,
     .free_state = greg_free_state,
     .mesh_refs = greg_mesh_refs,
+    .blob_fields = blob_fields,
 };

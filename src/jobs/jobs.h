@@ -9,6 +9,7 @@
 #define VX_JOBS_H
 
 #include <stddef.h>
+#include <stdint.h>
 
 #include <cjson/cJSON.h>
 
@@ -33,6 +34,7 @@ typedef struct vx_jobs_desc {
     vx_limits limits;
     size_t max_queued;      /* queued jobs before 429; default 64 */
     size_t history;         /* finished jobs kept; default 10000 */
+    uint64_t history_bytes; /* and the memory they may take; 0 = no budget */
     int workers;            /* CPU workers; default 2 */
     vx_gl_desc gl;
     vx_jobs_hooks hooks;
