@@ -321,9 +321,11 @@ static size_t render_mesh_refs(const cJSON *params, const char **ids, size_t max
 {
     const cJSON *m = field(params, "meshes"), *e;
     size_t n = 0;
+    if (!cJSON_IsArray(m)) return 0;
     cJSON_ArrayForEach(e, m)
     {
-        if (n < max && cJSON_IsString(e)) ids[n] = e->valuestring;
+        if (!cJSON_IsString(e)) continue;
+        if (n < max) ids[n] = e->valuestring;
         n++;
     }
     return n;

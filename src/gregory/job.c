@@ -164,13 +164,14 @@ static cJSON *greg_parse(const cJSON *params, const vx_limits *lim, vx_err *err)
 static size_t greg_mesh_refs(const cJSON *params, const char **ids, size_t max)
 {
     const cJSON *fr = field(params, "frames");
-    const cJSON *first = fr ? cJSON_GetArrayItem(fr, 0) : NULL;
-    if (!first || !cJSON_IsString(first)) return 0;
+    const cJSON *first = cJSON_IsArray(fr) ? cJSON_GetArrayItem(fr, 0) : NULL;
+    if (!first || !cJSON_IsString(first)) return 0; /* positions, or their blob */
     size_t n = 0;
     const cJSON *e;
     cJSON_ArrayForEach(e, fr)
     {
-        if (n < max && cJSON_IsString(e)) ids[n] = e->valuestring;
+        if (!cJSON_IsString(e)) continue;
+        if (n < max) ids[n] = e->valuestring;
         n++;
     }
     return n;

@@ -3,6 +3,7 @@
 
 #include <errno.h>
 #include <fcntl.h>
+#include <malloc.h>
 #include <pthread.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -60,6 +61,7 @@ struct vx_job_run {
     char dir[2200];     /* result dir, made at the first output */
     char path[2400];    /* last path handed out */
     cJSON *params;      /* the job's params with its blobs back in place */
+    int big_params;     /* some came from blobs */
     void *state;
     int on_gl_thread;
 };
@@ -377,15 +379,15 @@ static const char *blob_ref(const cJSON *it)
 static int pin_job(vx_jobs *j, const char *mesh, const vx_kind *k, const cJSON *params, int replay,
                    pinset *ps, vx_err *err)
 {
-    const char *ids[257];
-    size_t n = 0;
-    ids[n++] = mesh;
+    const char *ids[257] = {mesh};
+    size_t n = 1;
     if (k->mesh_refs) {
         size_t m = k->mesh_refs(params, ids + 1, 256);
         n += m < 256 ? m : 256;
     }
     for (size_t i = 0; i < n; i++) {
         vx_err e;
+        if (!ids[i] || !vx_store_valid_mesh_id(ids[i])) continue;
         if (vx_store_mesh_pin(j->desc.store, ids[i], replay, &e) == 0) {
             if (pinset_add(&ps->mesh, &ps->nmesh, ids[i]) == 0) continue;
             vx_store_mesh_unpin(j->desc.store, ids[i]);
@@ -457,7 +459,8 @@ static int externalize(vx_jobs *j, const vx_kind *k, cJSON *params, pinset *ps, 
 }
 
 /* The params the stages get: an owned copy with every blob read back. */
-static cJSON *inline_params(vx_jobs *j, const vx_kind *k, const cJSON *params, vx_err *err)
+static cJSON *inline_params(vx_jobs *j, const vx_kind *k, const cJSON *params, int *big,
+                            vx_err *err)
 {
     cJSON *p = cJSON_Duplicate(params, 1);
     if (!p) {
@@ -467,6 +470,7 @@ static cJSON *inline_params(vx_jobs *j, const vx_kind *k, const cJSON *params, v
     for (size_t f = 0; k->blob_fields && k->blob_fields[f]; f++) {
         const char *id = blob_ref(cJSON_GetObjectItemCaseSensitive(p, k->blob_fields[f]));
         if (!id) continue;
+        if (big) *big = 1;
         size_t n = 0;
         char *text = vx_store_blob_read(j->desc.store, id, &n, err);
         cJSON *v = text ? cJSON_ParseWithLength(text, n) : NULL;
@@ -703,7 +707,9 @@ static void run_free(vx_job_run *r)
     cJSON_Delete(r->stats);
     cJSON_Delete(r->outputs);
     cJSON_Delete(r->params);
+    int big = r->big_params;
     free(r);
+    if (big) malloc_trim(0); /* as at submission */
 }
 
 static void sync_outputs(vx_job_run *r)
@@ -845,7 +851,7 @@ static void run_job_gl(vx_jobs *j, vx_gl *gl, mesh_cache *mc, job *jb)
     }
     r->gl = gl;
     r->on_gl_thread = 1;
-    r->params = inline_params(j, jb->kind, jb->params, &err);
+    r->params = inline_params(j, jb->kind, jb->params, &r->big_params, &err);
     const vx_mesh *m = r->params ? load_mesh(j, mc, jb->mesh, &err) : NULL;
     int ok = m != NULL;
     for (int attempt = 0; ok; attempt++) {
@@ -1038,6 +1044,7 @@ cJSON *vx_jobs_submit(vx_jobs *j, const char *mesh, const char *kind, const cJSO
         job_free(jb);
         return NULL;
     }
+    size_t jb_blobs = jb->pins.nblob;
     new_id(jb->id);
     snprintf(jb->mesh, sizeof jb->mesh, "%s", mesh);
     jb->kind = k;
@@ -1070,6 +1077,9 @@ cJSON *vx_jobs_submit(vx_jobs *j, const char *mesh, const char *kind, const cJSO
         return NULL;
     }
     VX_INFO("job.queued", "job=%s kind=%s mesh=%.12s", jb->id, kind, mesh);
+    /* Megabytes of params were parsed and printed here, in many small
+     * blocks: hand the pages back rather than keep each thread's peak. */
+    if (jb_blobs) malloc_trim(0);
     return out;
 }
 
