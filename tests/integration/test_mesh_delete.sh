@@ -33,7 +33,9 @@ unblock() {
     wait_job "$SLOW" 30
     check "the blocking job was canceled" jq -e '.state == "canceled"' "$BODY"
 }
-state() { api GET "/v1/jobs/$1"; jqb .state; }
+# queued JOB: the job is still queued (api in the shell itself: a $(...)
+# subshell would lose its request count and reuse a body file).
+queued() { api GET "/v1/jobs/$1"; jq -e '.state == "queued"' "$BODY"; }
 
 upload "$VX_MESH_DIR/ogre.obj"
 OGRE=$MESH_ID
@@ -55,8 +57,8 @@ Q2=$(jqb .id)
 api DELETE "/v1/meshes/$A"
 expect_status "delete A with jobs queued" 204
 check "A's file kept while jobs use it" test -f "$DATA/meshes/$A.obj"
-check "Q1 was still queued at the delete" test "$(state "$Q1")" = queued
-check "Q2 was still queued at the delete" test "$(state "$Q2")" = queued
+check "Q1 was still queued at the delete" queued "$Q1"
+check "Q2 was still queued at the delete" queued "$Q2"
 api GET "/v1/meshes/$A"
 expect_error "deleted A" 404 mesh_not_found
 api GET "/v1/meshes?limit=100"
@@ -68,7 +70,7 @@ expect_error "a new job naming A" 404 mesh_not_found
 api DELETE "/v1/meshes/$A"
 expect_error "delete A twice" 404 mesh_not_found
 check "A's file still kept" test -f "$DATA/meshes/$A.obj"
-check "Q1 still queued" test "$(state "$Q1")" = queued
+check "Q1 still queued" queued "$Q1"
 unblock
 wait_job "$Q1"
 check "Q1 on the deleted mesh succeeded ($(jqb -c .error))" jq -e '.state == "succeeded"' "$BODY"
@@ -89,7 +91,7 @@ post_job "$A" preview '{"width":64,"height":64}'
 Q3=$(jqb .id)
 api DELETE "/v1/meshes/$A"
 expect_status "delete A, Q3 queued" 204
-check "Q3 queued at the delete" test "$(state "$Q3")" = queued
+check "Q3 queued at the delete" queued "$Q3"
 kill9_daemon
 check "after kill -9: A's file still there" test -f "$DATA/meshes/$A.obj"
 start_daemon || exit 1
@@ -97,7 +99,7 @@ api GET "/v1/meshes/$A"
 expect_error "after restart: A is still deleted" 404 mesh_not_found
 post_job "$A" preview '{}'
 expect_error "after restart: a new job on A" 404 mesh_not_found
-check "after restart: Q3 queued behind the blocking job" test "$(state "$Q3")" = queued
+check "after restart: Q3 queued behind the blocking job" queued "$Q3"
 unblock
 wait_job "$Q3"
 check "after restart: Q3 succeeded ($(jqb -c .error))" jq -e '.state == "succeeded"' "$BODY"
@@ -115,7 +117,7 @@ api DELETE "/v1/meshes/$A"
 expect_status "delete A, Q4 queued" 204
 upload "$TMP/a.obj"
 expect_status "re-upload while Q4 holds the file" 201
-check "Q4 queued at the re-upload" test "$(state "$Q4")" = queued
+check "Q4 queued at the re-upload" queued "$Q4"
 unblock
 api GET "/v1/meshes?limit=100"
 check "A listed again" jq -e '[.items[].id] | index("'"$A"'") != null' "$BODY"
