@@ -44,8 +44,9 @@ vx_gl *vx_run_gl(vx_job_run *r);
 const char *vx_run_mesh_id(const vx_job_run *r);
 /* Loads another stored mesh that the params name (render's `meshes`,
  * gregory's `frames`). Returns an owned mesh the caller frees, or NULL
- * (VX_ENOTFOUND mesh_not_found when it was deleted since submission, or the
- * reader's error). Callable from run_gl and run_cpu. */
+ * (VX_ENOTFOUND mesh_not_found when its file is gone: a delete keeps the
+ * meshes of unfinished jobs; or the reader's error). Callable from run_gl
+ * and run_cpu. */
 vx_mesh *vx_run_load_mesh(vx_job_run *r, const char *id, vx_err *err);
 /* The daemon's cache directory (kept across restarts, safe to delete: FFT
  * wisdom and the like), or NULL when there is none. */

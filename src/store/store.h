@@ -57,7 +57,8 @@ int vx_store_mesh_commit(vx_store *s, vx_upload *u, const char *id, const char *
                          const cJSON *meta, int *existed, vx_err *err);
 /* Owned copy of a mesh's metadata, or NULL (VX_ENOTFOUND mesh_not_found). */
 cJSON *vx_store_mesh_meta(vx_store *s, const char *id, vx_err *err);
-/* Path of the mesh file into buf; -1 (VX_ENOTFOUND) when unknown. */
+/* Path of the mesh file into buf, also of a deleted mesh that pins still
+ * hold (the runner's); -1 (VX_ENOTFOUND) when unknown. */
 int vx_store_mesh_path(vx_store *s, const char *id, char *buf, size_t n, vx_err *err);
 /* Deletes a mesh: it disappears from meta, list and count at once (404 for
  * new jobs); its file stays while pins hold it (vx_store_mesh_path still
