@@ -48,7 +48,8 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
     vx_err_clear(&err);
     cJSON *norm = k->parse(in, lim, &err);
     if (!norm) {
-        if (err.kind == VX_EOK || !err.code[0]) fail("parse failed without saying why", k, NULL, &err);
+        if (err.kind == VX_EOK || !err.code[0])
+            fail("parse failed without saying why", k, NULL, &err);
         if (err.kind == VX_EUNPROC && strncmp(err.message, "params", 6) != 0 &&
             strncmp(err.message, "unknown parameter params", 24) != 0)
             fail("invalid params error does not name the field", k, NULL, &err);
@@ -76,7 +77,8 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
     cJSON *n3 = vx_params_normalize(k, in, lim, &err3);
     if ((n3 != NULL) != (norm != NULL)) fail("vx_params_normalize disagrees", k, NULL, &err3);
     if (n3 && !cJSON_Compare(n3, norm, 1)) fail("vx_params_normalize differs", k, NULL, NULL);
-    if (!n3 && strcmp(err3.code, err.code) != 0) fail("vx_params_normalize: other error", k, NULL, &err3);
+    if (!n3 && strcmp(err3.code, err.code) != 0)
+        fail("vx_params_normalize: other error", k, NULL, &err3);
     cJSON_Delete(n3);
     cJSON_Delete(norm);
     cJSON_Delete(in);
