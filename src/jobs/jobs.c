@@ -53,6 +53,7 @@ typedef struct job {
 struct vx_job_run {
     vx_jobs *jobs;
     job *job;
+    const vx_kind *kind;
     vx_gl *gl;
     double t0;          /* monotonic start of this attempt */
     double last_ping;   /* watchdog */
@@ -287,7 +288,7 @@ static int insert_job(vx_jobs *j, job *jb)
 }
 
 /* Drops the oldest finished jobs beyond the history limits, in count and
- * in bytes (and their results); the newest finished job stays. */
+ * in bytes (and their results); the byte budget leaves at least one. */
 static void trim_history_locked(vx_jobs *j, char (*dropped)[33], size_t *ndropped, size_t max)
 {
     size_t finished = 0;
@@ -694,6 +695,7 @@ static vx_job_run *run_new(vx_jobs *j, job *jb)
     if (!r) return NULL;
     r->jobs = j;
     r->job = jb;
+    r->kind = jb->kind;
     r->t0 = vx_mono();
     r->stats = cJSON_CreateObject();
     r->outputs = cJSON_CreateObject();
@@ -703,7 +705,9 @@ static vx_job_run *run_new(vx_jobs *j, job *jb)
 static void run_free(vx_job_run *r)
 {
     if (!r) return;
-    if (r->state && r->job->kind->free_state) r->job->kind->free_state(r->state);
+    /* r->kind, not r->job->kind: once finished, the job may already have
+     * left the history. */
+    if (r->state && r->kind->free_state) r->kind->free_state(r->state);
     cJSON_Delete(r->stats);
     cJSON_Delete(r->outputs);
     cJSON_Delete(r->params);
