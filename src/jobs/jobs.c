@@ -1074,13 +1074,15 @@ cJSON *vx_jobs_submit(vx_jobs *j, const char *mesh, const char *kind, const cJSO
         vx_queue_push(j->queue, jb, 1);
         out = job_json(jb, 1);
     }
+    char jid[33];
+    snprintf(jid, sizeof jid, "%s", jb->id); /* jb may be run and gone after the unlock */
     pthread_mutex_unlock(&j->lock);
     if (!out) {
         unpin_job(j, &jb->pins);
         job_free(jb);
         return NULL;
     }
-    VX_INFO("job.queued", "job=%s kind=%s mesh=%.12s", jb->id, kind, mesh);
+    VX_INFO("job.queued", "job=%s kind=%s mesh=%.12s", jid, kind, mesh);
     /* Megabytes of params were parsed and printed here, in many small
      * blocks: hand the pages back rather than keep each thread's peak. */
     if (jb_blobs) malloc_trim(0);
