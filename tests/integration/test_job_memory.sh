@@ -15,6 +15,13 @@ JOBS=${VX_MEMORY_JOBS:-25}
 start_daemon || exit 1
 
 rss_kb() { awk '/^VmRSS:/ {print $2}' "/proc/$PID/status"; }
+# Under AddressSanitizer freed memory sits in its quarantine (256 MB): RSS
+# says nothing there, the other checks still hold.
+ASAN=0
+if ldd "$VOXELD" 2>/dev/null | grep -q libasan; then ASAN=1; echo "ASan build: RSS not checked"; fi
+check_rss() { # WHAT KB LIMIT_KB
+    [[ $ASAN == 1 ]] || check "$1" test "$2" -lt "$3"
+}
 blobs() { find "$DATA/blobs" -type f 2>/dev/null | wc -l; }
 
 # A 17 x 17 vertex grid of quads (289 vertices), and a box (8 vertices).
@@ -102,8 +109,8 @@ RSS1=$(rss_kb)
 JSZ1=$(stat -c %s "$DATA/journal.log")
 echo "$JOBS jobs of 2 MB frames in $(($(date +%s) - t0)) s: RSS $((RSS0 / 1024)) -> $((RSS1 / 1024)) MiB, journal $JSZ0 -> $JSZ1 bytes"
 check "$JOBS jobs answered 202 and failed with frame_topology ($nfail did not)" test "$nfail" = 0
-check "$JOBS jobs of 2 MB frames add under $((JOBS / 2)) MB RSS ($((RSS0 / 1024)) -> $((RSS1 / 1024)) MiB)" \
-    test $((RSS1 - RSS0)) -lt $((JOBS * 512))
+check_rss "$JOBS jobs of 2 MB frames add under $((JOBS / 2)) MB RSS ($((RSS0 / 1024)) -> $((RSS1 / 1024)) MiB)" \
+    $((RSS1 - RSS0)) $((JOBS * 512))
 check "the journal grows by under 1 MB ($JSZ0 -> $JSZ1)" test $((JSZ1 - JSZ0)) -lt 1048576
 check "no blob left" test "$(blobs)" = 0
 api GET "/v1/jobs?limit=1000"
@@ -122,7 +129,7 @@ expect_status "after restart: frame_256" 200
 check "after restart: the same frame_256" cmp -s "$BODY" "$TMP/frame_256.obj"
 api GET "/v1/jobs/$LAST"
 check "after restart: the last failed job" jq -e '.state == "failed" and .params.frames.count == 256' "$BODY"
-check "after restart: RSS under the first run's + 50 MB ($(( $(rss_kb) / 1024 )) MiB)" test "$(rss_kb)" -lt $((RSS0 + 50 * 1024))
+check_rss "after restart: RSS under the first run's + 50 MB ($(( $(rss_kb) / 1024 )) MiB)" "$(rss_kb)" $((RSS0 + 50 * 1024))
 
 # kill -9 with a 2 MB frames job queued behind a slow one: its blob is
 # durable before the 202, kept at the restart, and the job runs.
