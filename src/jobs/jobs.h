@@ -53,9 +53,12 @@ void vx_jobs_free(vx_jobs *j);
  * larger than max_journal_bytes. */
 void vx_jobs_maintain(vx_jobs *j, long max_journal_bytes);
 
-/* Validates and queues a job; returns its API JSON (owned). Errors:
- * VX_ENOTFOUND mesh_not_found, VX_EUNPROC unknown_kind / invalid_params,
- * VX_EBUSY queue_full, VX_EIO journal. */
+/* Validates (vx_params_normalize: defaults included) and queues a job;
+ * before it is journaled the job pins its meshes (a delete then keeps
+ * their files until it ends) and stores its large inline params as blobs.
+ * Returns its API JSON (owned). Errors: VX_ENOTFOUND mesh_not_found,
+ * VX_EUNPROC unknown_kind / invalid_params, VX_EBUSY queue_full, VX_EIO
+ * journal or blob store. */
 cJSON *vx_jobs_submit(vx_jobs *j, const char *mesh, const char *kind, const cJSON *params,
                       vx_err *err);
 /* API JSON of a job (owned) or NULL (VX_ENOTFOUND job_not_found);
