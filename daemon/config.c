@@ -63,6 +63,8 @@ static const opt_def opts[] = {
     {"min-free-disk", T_SIZE, F(min_free_disk), 0,
      "free space the data dir keeps: below it writes answer 507 (default 64M; 0 = only a full disk)"},
     {"job-history", T_SIZE, F(job_history), 0, "finished jobs remembered (default 10000)"},
+    {"job-history-bytes", T_SIZE, F(job_history_bytes), 0,
+     "memory the finished jobs remembered may take (default 64M; 0 = no limit)"},
 };
 #define NOPTS (sizeof opts / sizeof opts[0])
 
@@ -110,6 +112,7 @@ static void defaults(vx_config *c)
     c->results_max_age_s = 7 * 86400;
     c->job_history = 10000;
     c->min_free_disk = 64ull << 20;
+    c->job_history_bytes = 64ull << 20;
 }
 
 static int set_opt(vx_config *c, const opt_def *d, const char *val, const char *where)

@@ -41,6 +41,7 @@ typedef struct vx_config {
     uint64_t results_max_bytes;
     double results_max_age_s;
     uint64_t job_history;
+    uint64_t job_history_bytes;
     int gl_debug;
     int list_devices; /* --list-egl-devices: print and exit */
 } vx_config;

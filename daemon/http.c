@@ -653,6 +653,8 @@ static int h_info(vx_http *h, struct MHD_Connection *c, req *r)
     cJSON_AddNumberToObject(l, "min_free_disk_bytes", (double)cfg->min_free_disk);
     cJSON_AddNumberToObject(l, "results_max_bytes", (double)cfg->results_max_bytes);
     cJSON_AddNumberToObject(l, "results_max_age_s", cfg->results_max_age_s);
+    cJSON_AddNumberToObject(l, "job_history", (double)cfg->job_history);
+    cJSON_AddNumberToObject(l, "job_history_bytes", (double)cfg->job_history_bytes);
     cJSON *kinds = cJSON_AddArrayToObject(doc, "kinds");
     for (size_t i = 0; i < vx_kind_count(); i++) {
         cJSON *k = cJSON_CreateObject();

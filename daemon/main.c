@@ -87,6 +87,7 @@ int main(int argc, char **argv)
                    .job_timeout_s = cfg.job_timeout_s},
         .max_queued = cfg.max_queued_jobs,
         .history = cfg.job_history,
+        .history_bytes = cfg.job_history_bytes,
         .workers = cfg.workers,
         .gl = {.device = cfg.egl_device, .debug = cfg.gl_debug, .robust = 1},
         .hooks = {.finished = on_job_finished, .changed = on_job_changed},

@@ -135,7 +135,10 @@ static int read_params(const cJSON *params, const vx_limits *lim, rparams *p, vx
     if (vx_param_object(&params, known, err)) return -1;
     if (vx_param_int(params, "N", 64, 2, 512, &p->N, err)) return -1;
     if (p->N % 2) return bad(err, "params.%s must be even", "N");
-    if (vx_param_int(params, "R", 8 * p->N, p->N, 2048, &p->R, err)) return -1;
+    /* 8 samples per kept frequency, as many as the sampler takes (2048)
+     * above N = 256 */
+    if (vx_param_int(params, "R", p->N <= 256 ? 8 * p->N : 2048, p->N, 2048, &p->R, err))
+        return -1;
     if (p->R % 2) return bad(err, "params.%s must be even", "R");
     /* filter */
     const cJSON *flt = field(params, "filter");
@@ -148,7 +151,8 @@ static int read_params(const cJSON *params, const vx_limits *lim, rparams *p, vx
         vx_param_number(flt, "D0", p->N / 4.0, 1e-6, 1e6, &p->d0, err) ||
         vx_param_number(flt, "n", 2, 0.1, 64, &p->fn, err))
         return sub_err(err, "filter");
-    if (vx_param_int(params, "L", 4, 1, 16, &p->L, err) ||
+    /* default 4, fewer where L N would pass 1024 */
+    if (vx_param_int(params, "L", p->N <= 256 ? 4 : 1024 / p->N, 1, 16, &p->L, err) ||
         vx_param_number(params, "iso", 0.5, -1e6, 1e6, &p->iso, err) ||
         vx_param_mesh_ids(params, "meshes", VX_BL_MAX_MESHES, &p->meshes, err))
         return -1;
@@ -321,9 +325,11 @@ static size_t render_mesh_refs(const cJSON *params, const char **ids, size_t max
 {
     const cJSON *m = field(params, "meshes"), *e;
     size_t n = 0;
+    if (!cJSON_IsArray(m)) return 0;
     cJSON_ArrayForEach(e, m)
     {
-        if (n < max && cJSON_IsString(e)) ids[n] = e->valuestring;
+        if (!cJSON_IsString(e)) continue;
+        if (n < max) ids[n] = e->valuestring;
         n++;
     }
     return n;

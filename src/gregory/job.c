@@ -172,13 +172,14 @@ static cJSON *greg_parse(const cJSON *params, const vx_limits *lim, vx_err *err)
 static size_t greg_mesh_refs(const cJSON *params, const char **ids, size_t max)
 {
     const cJSON *fr = field(params, "frames");
-    const cJSON *first = fr ? cJSON_GetArrayItem(fr, 0) : NULL;
-    if (!first || !cJSON_IsString(first)) return 0;
+    const cJSON *first = cJSON_IsArray(fr) ? cJSON_GetArrayItem(fr, 0) : NULL;
+    if (!first || !cJSON_IsString(first)) return 0; /* positions, or their blob */
     size_t n = 0;
     const cJSON *e;
     cJSON_ArrayForEach(e, fr)
     {
-        if (n < max && cJSON_IsString(e)) ids[n] = e->valuestring;
+        if (!cJSON_IsString(e)) continue;
+        if (n < max) ids[n] = e->valuestring;
         n++;
     }
     return n;
@@ -626,6 +627,9 @@ static int greg_encode(vx_job_run *r, const cJSON *params, void *state, vx_err *
     return 0;
 }
 
+/* Frames as positions can be megabytes: kept as a blob while the job waits. */
+static const char *const blob_fields[] = {"frames", NULL};
+
 const vx_kind vx_kind_gregory = {
     .name = "gregory",
     .summary = "Smooth surface of bicubic Gregory patches (seed 001), tessellated on the GPU",
@@ -635,4 +639,5 @@ const vx_kind vx_kind_gregory = {
     .encode = greg_encode,
     .free_state = greg_free_state,
     .mesh_refs = greg_mesh_refs,
+    .blob_fields = blob_fields,
 };

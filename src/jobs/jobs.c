@@ -3,6 +3,7 @@
 
 #include <errno.h>
 #include <fcntl.h>
+#include <malloc.h>
 #include <pthread.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -19,6 +20,15 @@
 typedef enum job_state { ST_QUEUED, ST_RUNNING, ST_SUCCEEDED, ST_FAILED, ST_CANCELED } job_state;
 static const char *state_names[] = {"queued", "running", "succeeded", "failed", "canceled"};
 
+/* What an unfinished job holds in the store (vx_store_mesh_pin,
+ * vx_store_blob_put/pin): released when it finishes. */
+typedef struct pinset {
+    char (*mesh)[65];
+    size_t nmesh;
+    char (*blob)[65];
+    size_t nblob;
+} pinset;
+
 typedef struct job {
     char id[33];
     char mesh[65];
@@ -33,11 +43,17 @@ typedef struct job {
     vx_err error;
     cJSON *stats;   /* object */
     cJSON *outputs; /* name -> {"file","content_type"}, in declaration order */
+    /* A finished job keeps params, stats and outputs only as this compact
+     * JSON text {"params","stats","outputs"} (the three trees are NULL). */
+    char *frozen;
+    size_t bytes; /* what a finished job costs the history budget */
+    pinset pins;
 } job;
 
 struct vx_job_run {
     vx_jobs *jobs;
     job *job;
+    const vx_kind *kind;
     vx_gl *gl;
     double t0;          /* monotonic start of this attempt */
     double last_ping;   /* watchdog */
@@ -45,6 +61,8 @@ struct vx_job_run {
     cJSON *outputs;
     char dir[2200];     /* result dir, made at the first output */
     char path[2400];    /* last path handed out */
+    cJSON *params;      /* the job's params with its blobs back in place */
+    int big_params;     /* some came from blobs */
     void *state;
     int on_gl_thread;
 };
@@ -57,6 +75,7 @@ struct vx_jobs {
     pthread_mutex_t lock;
     job **jobs; /* sorted by id = creation order */
     size_t njobs, capjobs;
+    uint64_t history_bytes; /* sum of bytes of the finished jobs */
     size_t running;
     pthread_t gl_thread;
     pthread_t *workers;
@@ -71,12 +90,23 @@ struct vx_jobs {
 
 /* ---- job objects ---------------------------------------------------- */
 
+static void pinset_free(pinset *ps)
+{
+    free(ps->mesh);
+    free(ps->blob);
+    memset(ps, 0, sizeof *ps);
+}
+
+/* Frees a job; its pins are released by whoever ends it, never here (a
+ * queued job freed at shutdown keeps its mesh for the next start). */
 static void job_free(job *jb)
 {
     if (!jb) return;
     cJSON_Delete(jb->params);
     cJSON_Delete(jb->stats);
     cJSON_Delete(jb->outputs);
+    free(jb->frozen);
+    pinset_free(&jb->pins);
     free(jb);
 }
 
@@ -115,14 +145,33 @@ static void add_time(cJSON *o, const char *name, double t)
 
 static double ms_between(double a, double b) { return (double)(long long)((b - a) * 1e6) / 1e3; }
 
+/* Owned copies of a job's params, stats and outputs (empty objects where
+ * there are none): from its trees, or from the text of a finished job. */
+static void job_parts(const job *jb, cJSON **params, cJSON **stats, cJSON **outputs)
+{
+    cJSON *f = jb->frozen ? cJSON_Parse(jb->frozen) : NULL;
+    const cJSON *src[3] = {jb->params, jb->stats, jb->outputs};
+    static const char *const names[3] = {"params", "stats", "outputs"};
+    cJSON **dst[3] = {params, stats, outputs};
+    for (int i = 0; i < 3; i++) {
+        if (!dst[i]) continue;
+        cJSON *v = f ? cJSON_DetachItemFromObjectCaseSensitive(f, names[i])
+                     : (src[i] ? cJSON_Duplicate(src[i], 1) : NULL);
+        *dst[i] = v ? v : cJSON_CreateObject();
+    }
+    cJSON_Delete(f);
+}
+
 /* api = 1: the API resource; api = 0: the journal snapshot. Caller holds the lock. */
 static cJSON *job_json(const job *jb, int api)
 {
+    cJSON *params, *stats, *outputs;
+    job_parts(jb, &params, &stats, &outputs);
     cJSON *o = cJSON_CreateObject();
     cJSON_AddStringToObject(o, "id", jb->id);
     cJSON_AddStringToObject(o, "kind", jb->kind->name);
     cJSON_AddStringToObject(o, "mesh", jb->mesh);
-    cJSON_AddItemToObject(o, "params", cJSON_Duplicate(jb->params, 1));
+    cJSON_AddItemToObject(o, "params", params);
     cJSON_AddStringToObject(o, "state", state_names[jb->state]);
     cJSON_AddNumberToObject(o, "progress", jb->progress);
     cJSON_AddBoolToObject(o, "cancel_requested", jb->cancel_requested);
@@ -153,21 +202,47 @@ static cJSON *job_json(const job *jb, int api)
     } else {
         cJSON_AddNumberToObject(o, "seq", (double)jb->seq);
     }
-    cJSON_AddItemToObject(o, "stats", jb->stats ? cJSON_Duplicate(jb->stats, 1) : cJSON_CreateObject());
+    cJSON_AddItemToObject(o, "stats", stats);
     if (api) {
         cJSON *outs = cJSON_AddObjectToObject(o, "outputs");
         const cJSON *it;
-        if (jb->state == ST_SUCCEEDED) cJSON_ArrayForEach(it, jb->outputs)
+        if (jb->state == ST_SUCCEEDED) cJSON_ArrayForEach(it, outputs)
             {
                 char url[256];
                 snprintf(url, sizeof url, "/v1/jobs/%s/result/%s", jb->id, it->string);
                 cJSON_AddStringToObject(outs, it->string, url);
             }
+        cJSON_Delete(outputs);
     } else {
-        cJSON_AddItemToObject(o, "outputs",
-                              jb->outputs ? cJSON_Duplicate(jb->outputs, 1) : cJSON_CreateObject());
+        cJSON_AddItemToObject(o, "outputs", outputs);
     }
     return o;
+}
+
+/* A job reached a finished state: its params, stats and outputs become one
+ * compact text (a tree costs several times its text), counted in the
+ * history budget. Caller holds the lock. */
+static void freeze_locked(vx_jobs *j, job *jb)
+{
+    if (jb->frozen || jb->bytes) return;
+    cJSON *o = cJSON_CreateObject();
+    char *text = NULL;
+    if (o && (!jb->params || cJSON_AddItemReferenceToObject(o, "params", jb->params)) &&
+        (!jb->stats || cJSON_AddItemReferenceToObject(o, "stats", jb->stats)) &&
+        (!jb->outputs || cJSON_AddItemReferenceToObject(o, "outputs", jb->outputs)))
+        text = cJSON_PrintUnformatted(o);
+    cJSON_Delete(o);
+    if (text) {
+        cJSON_Delete(jb->params);
+        cJSON_Delete(jb->stats);
+        cJSON_Delete(jb->outputs);
+        jb->params = jb->stats = jb->outputs = NULL;
+        jb->frozen = text;
+        jb->bytes = sizeof *jb + strlen(text) + 1;
+    } else {
+        jb->bytes = sizeof *jb + 16384; /* no memory to print it: a guess */
+    }
+    j->history_bytes += jb->bytes;
 }
 
 static size_t find_index(vx_jobs *j, const char *id, int *found)
@@ -212,7 +287,8 @@ static int insert_job(vx_jobs *j, job *jb)
     return 0;
 }
 
-/* Drops the oldest finished jobs beyond the history limit (and their results). */
+/* Drops the oldest finished jobs beyond the history limits, in count and
+ * in bytes (and their results); the byte budget leaves at least one. */
 static void trim_history_locked(vx_jobs *j, char (*dropped)[33], size_t *ndropped, size_t max)
 {
     size_t finished = 0;
@@ -221,8 +297,12 @@ static void trim_history_locked(vx_jobs *j, char (*dropped)[33], size_t *ndroppe
     *ndropped = 0;
     for (size_t i = 0; i < j->njobs; i++) {
         job *jb = j->jobs[i];
-        if (finished > j->desc.history && is_terminal(jb->state) && *ndropped < max) {
+        int over = finished > j->desc.history ||
+                   (j->desc.history_bytes && j->history_bytes > j->desc.history_bytes &&
+                    finished > 1);
+        if (over && is_terminal(jb->state) && *ndropped < max) {
             snprintf(dropped[(*ndropped)++], 33, "%s", jb->id);
+            j->history_bytes -= jb->bytes;
             job_free(jb);
             finished--;
             continue;
@@ -262,6 +342,151 @@ static int compact_locked(vx_jobs *j, vx_err *err)
     for (size_t i = 0; i < j->njobs; i++) cJSON_Delete(recs[i]);
     free(recs);
     return rc;
+}
+
+/* ---- pins and blobs ------------------------------------------------- */
+
+static int pinset_add(char (**arr)[65], size_t *n, const char *id)
+{
+    char(*a)[65] = realloc(*arr, (*n + 1) * sizeof *a);
+    if (!a) return -1;
+    snprintf(a[*n], 65, "%s", id);
+    *arr = a;
+    (*n)++;
+    return 0;
+}
+
+/* Releases what a job held: a deleted mesh or a blob may go now. */
+static void unpin_job(vx_jobs *j, pinset *ps)
+{
+    for (size_t i = 0; i < ps->nmesh; i++) vx_store_mesh_unpin(j->desc.store, ps->mesh[i]);
+    for (size_t i = 0; i < ps->nblob; i++) vx_store_blob_unpin(j->desc.store, ps->blob[i]);
+    pinset_free(ps);
+}
+
+/* A blob reference in normalised params: {"blob": SHA-256, ...}. */
+static const char *blob_ref(const cJSON *it)
+{
+    const char *id = cJSON_IsObject(it)
+                         ? cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(it, "blob"))
+                         : NULL;
+    return id && vx_store_valid_mesh_id(id) ? id : NULL;
+}
+
+/* Pins the job's mesh and those its params name, and (replay) the blobs its
+ * params reference. At submission (replay = 0) a mesh that is not there is
+ * 404 and nothing stays pinned; at replay a deleted mesh still counts, and
+ * what is gone is left out (the job fails when it runs). */
+static int pin_job(vx_jobs *j, const char *mesh, const vx_kind *k, const cJSON *params, int replay,
+                   pinset *ps, vx_err *err)
+{
+    const char *ids[257] = {mesh};
+    size_t n = 1;
+    if (k->mesh_refs) {
+        size_t m = k->mesh_refs(params, ids + 1, 256);
+        n += m < 256 ? m : 256;
+    }
+    for (size_t i = 0; i < n; i++) {
+        vx_err e;
+        if (!ids[i] || !vx_store_valid_mesh_id(ids[i])) continue;
+        if (vx_store_mesh_pin(j->desc.store, ids[i], replay, &e) == 0) {
+            if (pinset_add(&ps->mesh, &ps->nmesh, ids[i]) == 0) continue;
+            vx_store_mesh_unpin(j->desc.store, ids[i]);
+            vx_err_set(&e, VX_EINTERNAL, "out_of_memory", "no memory");
+        } else if (replay) {
+            VX_WARN("jobs.mesh_gone", "mesh=%s", ids[i]);
+            continue;
+        }
+        if (err) *err = e;
+        unpin_job(j, ps);
+        return -1;
+    }
+    for (size_t f = 0; replay && k->blob_fields && k->blob_fields[f]; f++) {
+        const char *id = blob_ref(cJSON_GetObjectItemCaseSensitive(params, k->blob_fields[f]));
+        vx_err e;
+        if (!id) continue;
+        if (vx_store_blob_pin(j->desc.store, id, &e) == 0) {
+            if (pinset_add(&ps->blob, &ps->nblob, id)) vx_store_blob_unpin(j->desc.store, id);
+        } else {
+            VX_WARN("jobs.blob_gone", "blob=%s", id);
+        }
+    }
+    return 0;
+}
+
+/* Moves the large inline fields of normalised params (kind->blob_fields)
+ * into blobs, stored and pinned (ps) before the job is acknowledged, and
+ * puts references in their place. */
+static int externalize(vx_jobs *j, const vx_kind *k, cJSON *params, pinset *ps, vx_err *err)
+{
+    for (size_t f = 0; k->blob_fields && k->blob_fields[f]; f++) {
+        const char *name = k->blob_fields[f];
+        cJSON *it = cJSON_GetObjectItemCaseSensitive(params, name);
+        if (!cJSON_IsArray(it) && !cJSON_IsObject(it)) continue;
+        if (k->mesh_refs) { /* mesh ids stay visible: pins and replay read them */
+            cJSON *probe = cJSON_CreateObject();
+            const char *ids[1];
+            size_t m = probe && cJSON_AddItemReferenceToObject(probe, name, it)
+                           ? k->mesh_refs(probe, ids, 1)
+                           : 1;
+            cJSON_Delete(probe);
+            if (m) continue;
+        }
+        char *text = cJSON_PrintUnformatted(it);
+        if (!text) return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory");
+        size_t len = strlen(text);
+        if (len < VX_BLOB_MIN_BYTES) {
+            free(text);
+            continue;
+        }
+        char id[65];
+        int rc = vx_store_blob_put(j->desc.store, text, len, id, err);
+        free(text);
+        if (rc) return -1;
+        if (pinset_add(&ps->blob, &ps->nblob, id)) {
+            vx_store_blob_unpin(j->desc.store, id);
+            return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory");
+        }
+        cJSON *ref = cJSON_CreateObject();
+        if (!ref || !cJSON_AddStringToObject(ref, "blob", id) ||
+            !cJSON_AddNumberToObject(ref, "bytes", (double)len) ||
+            !cJSON_AddNumberToObject(ref, "count", cJSON_GetArraySize(it)) ||
+            !cJSON_ReplaceItemInObjectCaseSensitive(params, name, ref)) {
+            cJSON_Delete(ref);
+            return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory");
+        }
+    }
+    return 0;
+}
+
+/* The params the stages get: an owned copy with every blob read back. */
+static cJSON *inline_params(vx_jobs *j, const vx_kind *k, const cJSON *params, int *big,
+                            vx_err *err)
+{
+    cJSON *p = cJSON_Duplicate(params, 1);
+    if (!p) {
+        vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for the params");
+        return NULL;
+    }
+    for (size_t f = 0; k->blob_fields && k->blob_fields[f]; f++) {
+        const char *id = blob_ref(cJSON_GetObjectItemCaseSensitive(p, k->blob_fields[f]));
+        if (!id) continue;
+        if (big) *big = 1;
+        size_t n = 0;
+        char *text = vx_store_blob_read(j->desc.store, id, &n, err);
+        cJSON *v = text ? cJSON_ParseWithLength(text, n) : NULL;
+        free(text);
+        if (!v || !cJSON_ReplaceItemInObjectCaseSensitive(p, k->blob_fields[f], v)) {
+            if (text && !v)
+                vx_err_set(err, VX_EINTERNAL, "blob_corrupt",
+                           "the job's inline data (params.%s) cannot be read back",
+                           k->blob_fields[f]);
+            cJSON_Delete(v);
+            cJSON_Delete(p);
+            return NULL;
+        }
+    }
+    return p;
 }
 
 /* ---- replay --------------------------------------------------------- */
@@ -390,11 +615,18 @@ vx_jobs *vx_jobs_open(const vx_jobs_desc *desc, vx_err *err)
         } else if (jb->state == ST_SUCCEEDED && !jb->outputs) {
             jb->outputs = cJSON_CreateObject();
         }
+        /* Unfinished jobs hold their meshes and blobs again; finished ones
+         * shrink to their text. */
+        if (is_terminal(jb->state)) freeze_locked(j, jb);
+        else pin_job(j, jb->mesh, jb->kind, jb->params, 1, &jb->pins, NULL);
     }
     char dropped[256][33];
     size_t nd;
     trim_history_locked(j, dropped, &nd, 256);
     for (size_t i = 0; i < nd; i++) vx_store_result_remove(desc->store, dropped[i]);
+    /* What no unfinished job holds: meshes deleted while jobs used them,
+     * blobs of jobs that finished or were never acknowledged. */
+    vx_store_collect(desc->store);
     if (compact_locked(j, err)) {
         /* The journal as replayed is complete (replay cut any torn tail):
          * on a full disk the daemon starts on it uncompacted and serves
@@ -470,6 +702,7 @@ static vx_job_run *run_new(vx_jobs *j, job *jb)
     if (!r) return NULL;
     r->jobs = j;
     r->job = jb;
+    r->kind = jb->kind;
     r->t0 = vx_mono();
     r->stats = cJSON_CreateObject();
     r->outputs = cJSON_CreateObject();
@@ -479,10 +712,15 @@ static vx_job_run *run_new(vx_jobs *j, job *jb)
 static void run_free(vx_job_run *r)
 {
     if (!r) return;
-    if (r->state && r->job->kind->free_state) r->job->kind->free_state(r->state);
+    /* r->kind, not r->job->kind: once finished, the job may already have
+     * left the history. */
+    if (r->state && r->kind->free_state) r->kind->free_state(r->state);
     cJSON_Delete(r->stats);
     cJSON_Delete(r->outputs);
+    cJSON_Delete(r->params);
+    int big = r->big_params;
     free(r);
+    if (big) malloc_trim(0); /* as at submission */
 }
 
 static void sync_outputs(vx_job_run *r)
@@ -546,8 +784,15 @@ static void run_finish(vx_jobs *j, vx_job_run *r, int ok, const vx_err *e)
     job_state st = jb->state;
     char dropped[16][33];
     size_t nd = 0;
-    if (!requeue) trim_history_locked(j, dropped, &nd, 16);
+    pinset pins = {0};
+    if (!requeue) {
+        pins = jb->pins; /* released once the lock is dropped */
+        memset(&jb->pins, 0, sizeof jb->pins);
+        freeze_locked(j, jb);
+        trim_history_locked(j, dropped, &nd, 16);
+    }
     pthread_mutex_unlock(&j->lock);
+    unpin_job(j, &pins);
     for (size_t i = 0; i < nd; i++) vx_store_result_remove(j->desc.store, dropped[i]);
     if (requeue) {
         VX_INFO("job.requeued", "job=%s kind=%s reason=shutdown", id, kind);
@@ -618,11 +863,12 @@ static void run_job_gl(vx_jobs *j, vx_gl *gl, mesh_cache *mc, job *jb)
     }
     r->gl = gl;
     r->on_gl_thread = 1;
-    const vx_mesh *m = load_mesh(j, mc, jb->mesh, &err);
+    r->params = inline_params(j, jb->kind, jb->params, &r->big_params, &err);
+    const vx_mesh *m = r->params ? load_mesh(j, mc, jb->mesh, &err) : NULL;
     int ok = m != NULL;
     for (int attempt = 0; ok; attempt++) {
         double t = vx_mono();
-        ok = jb->kind->run_gl(r, m, jb->params, &r->state, &err) == 0;
+        ok = jb->kind->run_gl(r, m, r->params, &r->state, &err) == 0;
         int lost = vx_gl_lost(gl);
         if (j->fake_context_loss > 0) {
             j->fake_context_loss--;
@@ -704,8 +950,8 @@ static void *worker_main(void *arg)
         vx_err_clear(&err);
         const vx_kind *k = r->job->kind;
         int ok = 1;
-        if (k->run_cpu) ok = k->run_cpu(r, r->job->params, r->state, &err) == 0;
-        if (ok && k->encode) ok = k->encode(r, r->job->params, r->state, &err) == 0;
+        if (k->run_cpu) ok = k->run_cpu(r, r->params, r->state, &err) == 0;
+        if (ok && k->encode) ok = k->encode(r, r->params, r->state, &err) == 0;
         run_finish(j, r, ok, &err);
     }
     return NULL;
@@ -792,30 +1038,28 @@ cJSON *vx_jobs_submit(vx_jobs *j, const char *mesh, const char *kind, const cJSO
         vx_err_set(err, VX_EUNPROC, "invalid_params", "params must be an object");
         return NULL;
     }
-    cJSON *norm = k->parse(params, &j->desc.limits, err);
+    cJSON *norm = vx_params_normalize(k, params, &j->desc.limits, err);
     if (!norm) return NULL;
-    if (k->mesh_refs) {
-        const char *ids[256];
-        size_t n = k->mesh_refs(norm, ids, sizeof ids / sizeof ids[0]);
-        for (size_t i = 0; i < n && i < sizeof ids / sizeof ids[0]; i++) {
-            cJSON *m = vx_store_mesh_meta(j->desc.store, ids[i], err);
-            if (!m) {
-                cJSON_Delete(norm);
-                return NULL;
-            }
-            cJSON_Delete(m);
-        }
-    }
     job *jb = calloc(1, sizeof *jb);
     if (!jb) {
         cJSON_Delete(norm);
         vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory");
         return NULL;
     }
+    jb->params = norm;
+    /* The job holds its meshes (a delete keeps their files until it ends)
+     * and its large inline inputs are stored as blobs, all before it is
+     * acknowledged. */
+    if (pin_job(j, mesh, k, norm, 0, &jb->pins, err) ||
+        externalize(j, k, norm, &jb->pins, err)) {
+        unpin_job(j, &jb->pins);
+        job_free(jb);
+        return NULL;
+    }
+    size_t jb_blobs = jb->pins.nblob;
     new_id(jb->id);
     snprintf(jb->mesh, sizeof jb->mesh, "%s", mesh);
     jb->kind = k;
-    jb->params = norm;
     jb->created = vx_now();
     jb->stats = cJSON_CreateObject();
     jb->outputs = cJSON_CreateObject();
@@ -838,12 +1082,18 @@ cJSON *vx_jobs_submit(vx_jobs *j, const char *mesh, const char *kind, const cJSO
         vx_queue_push(j->queue, jb, 1);
         out = job_json(jb, 1);
     }
+    char jid[33];
+    snprintf(jid, sizeof jid, "%s", jb->id); /* jb may be run and gone after the unlock */
     pthread_mutex_unlock(&j->lock);
     if (!out) {
+        unpin_job(j, &jb->pins);
         job_free(jb);
         return NULL;
     }
-    VX_INFO("job.queued", "job=%s kind=%s mesh=%.12s", jb->id, kind, mesh);
+    VX_INFO("job.queued", "job=%s kind=%s mesh=%.12s", jid, kind, mesh);
+    /* Megabytes of params were parsed and printed here, in many small
+     * blocks: hand the pages back rather than keep each thread's peak. */
+    if (jb_blobs) malloc_trim(0);
     return out;
 }
 
@@ -862,6 +1112,7 @@ cJSON *vx_jobs_cancel(vx_jobs *j, const char *jid, int *was_running, vx_err *err
 {
     *was_running = 0;
     char kind[64] = "";
+    pinset pins = {0};
     pthread_mutex_lock(&j->lock);
     job *jb = vx_jobs_valid_id(jid) ? find_job(j, jid) : NULL;
     cJSON *out = NULL;
@@ -877,6 +1128,9 @@ cJSON *vx_jobs_cancel(vx_jobs *j, const char *jid, int *was_running, vx_err *err
         jb->finished = vx_now();
         vx_err_set(&jb->error, VX_ECANCELED, "canceled", "canceled while queued");
         if (journal_locked(j, jb, err) == 0) out = job_json(jb, 1);
+        pins = jb->pins;
+        memset(&jb->pins, 0, sizeof jb->pins);
+        freeze_locked(j, jb);
         changed = 1;
     } else {
         jb->cancel_requested = 1;
@@ -884,6 +1138,7 @@ cJSON *vx_jobs_cancel(vx_jobs *j, const char *jid, int *was_running, vx_err *err
         out = job_json(jb, 1);
     }
     pthread_mutex_unlock(&j->lock);
+    unpin_job(j, &pins);
     if (changed) {
         VX_INFO("job.finished", "job=%s state=canceled run_ms=0", jid);
         if (j->desc.hooks.finished) j->desc.hooks.finished(j->desc.hooks.ud, jid, kind, "canceled", -1);
@@ -934,8 +1189,10 @@ int vx_jobs_output(vx_jobs *j, const char *jid, const char *name, char *path, si
     } else if (jb->state == ST_CANCELED) {
         vx_err_set(err, VX_ECONFLICT, "job_canceled", "job %s was canceled", jid);
     } else {
-        const cJSON *o = name ? cJSON_GetObjectItemCaseSensitive(jb->outputs, name)
-                              : (jb->outputs ? jb->outputs->child : NULL);
+        cJSON *outputs = NULL;
+        job_parts(jb, NULL, NULL, &outputs);
+        const cJSON *o = name ? cJSON_GetObjectItemCaseSensitive(outputs, name)
+                              : (outputs ? outputs->child : NULL);
         if (!o) {
             vx_err_set(err, VX_ENOTFOUND, "output_not_found", "job %s has no output '%.64s'", jid,
                        name ? name : "");
@@ -948,6 +1205,7 @@ int vx_jobs_output(vx_jobs *j, const char *jid, const char *name, char *path, si
             snprintf(id, sizeof id, "%s", jb->id);
             rc = 0;
         }
+        cJSON_Delete(outputs);
     }
     pthread_mutex_unlock(&j->lock);
     if (rc) return rc;

@@ -9,6 +9,7 @@
 #define VX_JOBS_H
 
 #include <stddef.h>
+#include <stdint.h>
 
 #include <cjson/cJSON.h>
 
@@ -33,6 +34,7 @@ typedef struct vx_jobs_desc {
     vx_limits limits;
     size_t max_queued;      /* queued jobs before 429; default 64 */
     size_t history;         /* finished jobs kept; default 10000 */
+    uint64_t history_bytes; /* and the memory they may take; 0 = no budget */
     int workers;            /* CPU workers; default 2 */
     vx_gl_desc gl;
     vx_jobs_hooks hooks;
@@ -51,9 +53,12 @@ void vx_jobs_free(vx_jobs *j);
  * larger than max_journal_bytes. */
 void vx_jobs_maintain(vx_jobs *j, long max_journal_bytes);
 
-/* Validates and queues a job; returns its API JSON (owned). Errors:
- * VX_ENOTFOUND mesh_not_found, VX_EUNPROC unknown_kind / invalid_params,
- * VX_EBUSY queue_full, VX_EIO journal. */
+/* Validates (vx_params_normalize: defaults included) and queues a job;
+ * before it is journaled the job pins its meshes (a delete then keeps
+ * their files until it ends) and stores its large inline params as blobs.
+ * Returns its API JSON (owned). Errors: VX_ENOTFOUND mesh_not_found,
+ * VX_EUNPROC unknown_kind / invalid_params, VX_EBUSY queue_full, VX_EIO
+ * journal or blob store. */
 cJSON *vx_jobs_submit(vx_jobs *j, const char *mesh, const char *kind, const cJSON *params,
                       vx_err *err);
 /* API JSON of a job (owned) or NULL (VX_ENOTFOUND job_not_found);

@@ -44,8 +44,9 @@ vx_gl *vx_run_gl(vx_job_run *r);
 const char *vx_run_mesh_id(const vx_job_run *r);
 /* Loads another stored mesh that the params name (render's `meshes`,
  * gregory's `frames`). Returns an owned mesh the caller frees, or NULL
- * (VX_ENOTFOUND mesh_not_found when it was deleted since submission, or the
- * reader's error). Callable from run_gl and run_cpu. */
+ * (VX_ENOTFOUND mesh_not_found when its file is gone: a delete keeps the
+ * meshes of unfinished jobs; or the reader's error). Callable from run_gl
+ * and run_cpu. */
 vx_mesh *vx_run_load_mesh(vx_job_run *r, const char *id, vx_err *err);
 /* The daemon's cache directory (kept across restarts, safe to delete: FFT
  * wisdom and the like), or NULL when there is none. */
@@ -74,13 +75,31 @@ typedef struct vx_kind {
      * most max of them (pointers into params) and returns how many there
      * are; submission answers 404 mesh_not_found when one is not stored. */
     size_t (*mesh_refs)(const cJSON *params, const char **ids, size_t max);
+    /* Optional, NULL-terminated: fields of the normalised params that can
+     * hold large inline data (gregory's frames as positions). The job keeps
+     * one over VX_BLOB_MIN_BYTES printed, naming no mesh, as a blob in the
+     * store and its params as {"blob": SHA-256, "bytes": n, "count": array
+     * length}; the stages get the params with the data back in place. */
+    const char *const *blob_fields;
 } vx_kind;
+
+/* Inline data smaller than this stays in the params (bytes of JSON). */
+#define VX_BLOB_MIN_BYTES 4096
 
 /* The table (src/jobs/kinds.c); NULL when name is unknown. Any thread. */
 const vx_kind *vx_kind_find(const char *name);
 /* Number of rows and row i, for listings (/v1/info). */
 size_t vx_kind_count(void);
 const vx_kind *vx_kind_at(size_t i);
+
+/* Validates and normalises params for kind k, as submission does: k->parse,
+ * then the check the runner and the journal replay rely on: the normalised
+ * params, printed and read back, are accepted again by k->parse with the
+ * same result (so a default or derived value out of range is refused now,
+ * not at run time). Returns owned normalised params, or NULL with err
+ * (VX_EUNPROC invalid_params naming the field). */
+cJSON *vx_params_normalize(const vx_kind *k, const cJSON *params, const vx_limits *lim,
+                           vx_err *err);
 
 /* Helpers for parse functions: read an optional number/int/bool field,
  * checking type and range; the default is used when absent. Return 0 or -1

@@ -1,6 +1,7 @@
 /* Typed, range-checked reads of job parameters (kind.h). */
 #include <math.h>
 #include <stdio.h>
+#include <stdlib.h>
 #include <string.h>
 
 #include "jobs/kind.h"
@@ -127,4 +128,44 @@ int vx_param_enum(const cJSON *params, const char *field, const char *const *nam
                   int *out, vx_err *err)
 {
     return vx_param_enum_in(params, "", field, names, def, out, err);
+}
+
+cJSON *vx_params_normalize(const vx_kind *k, const cJSON *params, const vx_limits *lim,
+                           vx_err *err)
+{
+    cJSON *norm = k->parse(params, lim, err);
+    if (!norm) return NULL;
+    /* What the journal keeps and the runner reads back. */
+    char *text = cJSON_PrintUnformatted(norm);
+    cJSON *back = text ? cJSON_Parse(text) : NULL;
+    free(text);
+    if (!back) {
+        cJSON_Delete(norm);
+        vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory to check the params");
+        return NULL;
+    }
+    vx_err e2;
+    vx_err_clear(&e2);
+    cJSON *again = k->parse(back, lim, &e2);
+    cJSON_Delete(back);
+    if (!again) {
+        cJSON_Delete(norm);
+        if (e2.kind == VX_EUNPROC) {
+            /* a default or a derived value is out of range: name it */
+            vx_err_set(err, VX_EUNPROC, "invalid_params", "%.400s (with the defaults filled in)",
+                       e2.message);
+        } else {
+            *err = e2;
+        }
+        return NULL;
+    }
+    int same = cJSON_Compare(norm, again, 1);
+    cJSON_Delete(again);
+    if (!same) {
+        cJSON_Delete(norm);
+        vx_err_set(err, VX_EUNPROC, "invalid_params",
+                   "params: the %s params do not read back the same once normalised", k->name);
+        return NULL;
+    }
+    return norm;
 }

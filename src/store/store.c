@@ -19,8 +19,15 @@
 typedef struct mesh_entry {
     char id[65];
     char ext[8];
-    cJSON *meta;
+    cJSON *meta; /* NULL once deleted */
+    int pins;    /* unfinished jobs using it */
+    int deleted; /* gone from the API; the file stays while pinned */
 } mesh_entry;
+
+typedef struct blob_entry {
+    char id[65];
+    int pins;
+} blob_entry;
 
 typedef struct result_entry {
     char jid[48];
@@ -34,6 +41,9 @@ struct vx_store {
     pthread_mutex_t lock;
     mesh_entry *meshes; /* sorted by id */
     size_t nmeshes, capmeshes;
+    size_t ndeleted; /* entries of meshes[] that are deleted */
+    blob_entry *blobs;
+    size_t nblobs, capblobs;
     result_entry *results;
     size_t nresults, capresults;
     uint64_t results_bytes;
@@ -88,7 +98,7 @@ static size_t mesh_find(vx_store *s, const char *id, int *found)
     return lo;
 }
 
-static int mesh_insert(vx_store *s, const char *id, const char *ext, cJSON *meta)
+static int mesh_insert(vx_store *s, const char *id, const char *ext, cJSON *meta, int deleted)
 {
     int found;
     size_t at = mesh_find(s, id, &found);
@@ -108,68 +118,116 @@ static int mesh_insert(vx_store *s, const char *id, const char *ext, cJSON *meta
     mesh_entry *e = &s->meshes[at];
     snprintf(e->id, sizeof e->id, "%s", id);
     snprintf(e->ext, sizeof e->ext, "%s", ext);
-    e->meta = meta;
+    e->meta = deleted ? NULL : meta;
+    e->pins = 0;
+    e->deleted = deleted;
+    if (deleted) {
+        cJSON_Delete(meta);
+        s->ndeleted++;
+    }
     s->nmeshes++;
     return 0;
+}
+
+/* Removes entry `at` and its files (data, metadata or tombstone). Caller
+ * holds the lock and fsyncs the meshes dir. */
+static void mesh_remove_locked(vx_store *s, size_t at)
+{
+    mesh_entry *e = &s->meshes[at];
+    char path[2300];
+    /* Metadata first: without it the mesh no longer exists, even if the
+     * process dies before the data file is gone (load_meshes cleans up). */
+    snprintf(path, sizeof path, "%s/meshes/%s.json", s->dir, e->id);
+    unlink(path);
+    snprintf(path, sizeof path, "%s/meshes/%s.deleted", s->dir, e->id);
+    unlink(path);
+    snprintf(path, sizeof path, "%s/meshes/%s.%s", s->dir, e->id, e->ext);
+    unlink(path);
+    VX_INFO("store.mesh_removed", "mesh=%s", e->id);
+    cJSON_Delete(e->meta);
+    if (e->deleted) s->ndeleted--;
+    memmove(s->meshes + at, s->meshes + at + 1, (s->nmeshes - at - 1) * sizeof *s->meshes);
+    s->nmeshes--;
+}
+
+static void fsync_meshes_dir(vx_store *s)
+{
+    char path[2100];
+    snprintf(path, sizeof path, "%s/meshes", s->dir);
+    vx_fsync_dir(path, NULL);
+}
+
+/* One metadata file, DATA/meshes/<id><suffix> (".json", or ".deleted" for a
+ * deleted mesh that jobs still held): the entry, when its data file is
+ * there. */
+static void load_one(vx_store *s, const char *dir, const char *id, const char *suffix)
+{
+    char path[2300];
+    snprintf(path, sizeof path, "%s/%s%s", dir, id, suffix);
+    int deleted = strcmp(suffix, ".deleted") == 0;
+    int found;
+    mesh_find(s, id, &found);
+    if (found) { /* a re-upload of a deleted mesh that was cut short */
+        if (deleted) unlink(path);
+        return;
+    }
+    char *text = vx_read_file(path, 1 << 20, NULL, NULL);
+    cJSON *meta = text ? cJSON_Parse(text) : NULL;
+    free(text);
+    const cJSON *fmt = cJSON_GetObjectItemCaseSensitive(meta, "format");
+    if (!cJSON_IsString(fmt)) {
+        VX_WARN("store.bad_metadata", "path=%s", path);
+        cJSON_Delete(meta);
+        return;
+    }
+    const char *ext = strcmp(fmt->valuestring, "draco") == 0 ? "drc"
+                      : strcmp(fmt->valuestring, "bpt") == 0 ? "bpt"
+                                                              : "obj";
+    char mpath[2300];
+    snprintf(mpath, sizeof mpath, "%s/%s.%s", dir, id, ext);
+    if (access(mpath, R_OK) != 0) {
+        VX_WARN("store.missing_mesh_file", "path=%s", mpath);
+        cJSON_Delete(meta);
+        if (deleted) unlink(path);
+        return;
+    }
+    mesh_insert(s, id, ext, meta, deleted);
 }
 
 static void load_meshes(vx_store *s)
 {
     char dir[2100];
     snprintf(dir, sizeof dir, "%s/meshes", s->dir);
-    DIR *d = opendir(dir);
-    if (!d) return;
-    struct dirent *e;
-    while ((e = readdir(d))) {
-        char id[65];
-        const char *dot = strchr(e->d_name, '.');
-        if (!dot || dot - e->d_name != 64) continue;
-        memcpy(id, e->d_name, 64);
-        id[64] = 0;
-        if (!vx_store_valid_mesh_id(id) || strcmp(dot, ".json") != 0) continue;
-        char path[2300];
-        snprintf(path, sizeof path, "%s/%s", dir, e->d_name);
-        char *text = vx_read_file(path, 1 << 20, NULL, NULL);
-        cJSON *meta = text ? cJSON_Parse(text) : NULL;
-        free(text);
-        const cJSON *fmt = cJSON_GetObjectItemCaseSensitive(meta, "format");
-        if (!cJSON_IsString(fmt)) {
-            VX_WARN("store.bad_metadata", "path=%s", path);
-            cJSON_Delete(meta);
-            continue;
+    /* Pass 0: metadata; 1: tombstones of deleted meshes (vx_store_collect
+     * removes those no unfinished job pins); 2: data files without either. */
+    for (int pass = 0; pass < 3; pass++) {
+        DIR *d = opendir(dir);
+        if (!d) return;
+        struct dirent *e;
+        while ((e = readdir(d))) {
+            char id[65];
+            const char *dot = strchr(e->d_name, '.');
+            if (!dot || dot - e->d_name != 64) continue;
+            memcpy(id, e->d_name, 64);
+            id[64] = 0;
+            if (!vx_store_valid_mesh_id(id)) continue;
+            int meta = strcmp(dot, ".json") == 0, tomb = strcmp(dot, ".deleted") == 0;
+            if (pass == 0 && meta) load_one(s, dir, id, dot);
+            if (pass == 1 && tomb) load_one(s, dir, id, dot);
+            if (pass == 2 && !meta && !tomb) {
+                /* A mesh file without metadata is a commit that never
+                 * finished: it was never acknowledged, so it can go. */
+                int found;
+                mesh_find(s, id, &found);
+                if (!found) {
+                    char path[2300];
+                    snprintf(path, sizeof path, "%s/%s", dir, e->d_name);
+                    unlink(path);
+                }
+            }
         }
-        const char *ext = strcmp(fmt->valuestring, "draco") == 0 ? "drc"
-                          : strcmp(fmt->valuestring, "bpt") == 0 ? "bpt"
-                                                                  : "obj";
-        char mpath[2300];
-        snprintf(mpath, sizeof mpath, "%s/%s.%s", dir, id, ext);
-        if (access(mpath, R_OK) != 0) {
-            VX_WARN("store.missing_mesh_file", "path=%s", mpath);
-            cJSON_Delete(meta);
-            continue;
-        }
-        mesh_insert(s, id, ext, meta);
+        closedir(d);
     }
-    closedir(d);
-    /* A mesh file without metadata is a commit that never finished: it was
-     * never acknowledged, so it can go. */
-    d = opendir(dir);
-    if (!d) return;
-    while ((e = readdir(d))) {
-        const char *dot = strchr(e->d_name, '.');
-        if (!dot || strcmp(dot, ".json") == 0 || dot - e->d_name != 64) continue;
-        char id[65];
-        memcpy(id, e->d_name, 64);
-        id[64] = 0;
-        int found;
-        mesh_find(s, id, &found);
-        if (!found) {
-            char path[2300];
-            snprintf(path, sizeof path, "%s/%s", dir, e->d_name);
-            unlink(path);
-        }
-    }
-    closedir(d);
 }
 
 static int result_add_locked(vx_store *s, const char *jid, uint64_t bytes, double t)
@@ -297,6 +355,7 @@ void vx_store_close(vx_store *s)
     if (!s) return;
     for (size_t i = 0; i < s->nmeshes; i++) cJSON_Delete(s->meshes[i].meta);
     free(s->meshes);
+    free(s->blobs);
     free(s->results);
     pthread_mutex_destroy(&s->lock);
     if (s->lock_fd >= 0) close(s->lock_fd); /* drops the flock */
@@ -414,6 +473,50 @@ void vx_upload_abort(vx_upload *u)
 
 /* --- meshes ------------------------------------------------------------- */
 
+/* Upload u has the bytes of deleted mesh `at`, whose file jobs still hold:
+ * it becomes a stored mesh again (metadata back, tombstone gone). Caller
+ * holds the lock and frees u. */
+static int mesh_revive_locked(vx_store *s, size_t at, vx_upload *u, const char *ext,
+                              const cJSON *meta, vx_err *err)
+{
+    mesh_entry *e = &s->meshes[at];
+    char dir[2100], path[2300], old[2300];
+    snprintf(dir, sizeof dir, "%s/meshes", s->dir);
+    close(u->fd);
+    u->fd = -1;
+    if (strcmp(e->ext, ext) != 0) { /* read as another format this time */
+        snprintf(old, sizeof old, "%s/%s.%s", dir, e->id, e->ext);
+        snprintf(path, sizeof path, "%s/%s.%s", dir, e->id, ext);
+        if (rename(u->path, path) != 0)
+            return vx_err_set(err, VX_EIO, "store_failed", "cannot store mesh %s: %s", e->id,
+                              strerror(errno));
+        unlink(old);
+        snprintf(e->ext, sizeof e->ext, "%s", ext);
+    }
+    char *text = cJSON_PrintUnformatted(meta);
+    cJSON *copy = cJSON_Duplicate(meta, 1);
+    snprintf(path, sizeof path, "%s/%s.json", dir, e->id);
+    int rc = -1;
+    if (!text || !copy) {
+        vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory");
+    } else if (vx_fsync_dir(dir, NULL) || vx_write_atomic(path, text, strlen(text), NULL)) {
+        vx_err_set(err, VX_EIO, "store_failed", "cannot store the metadata of mesh %s", e->id);
+    } else {
+        snprintf(path, sizeof path, "%s/%s.deleted", dir, e->id);
+        unlink(path);
+        vx_fsync_dir(dir, NULL);
+        e->meta = copy;
+        copy = NULL;
+        e->deleted = 0;
+        s->ndeleted--;
+        VX_INFO("store.mesh_revived", "mesh=%s pins=%d", e->id, e->pins);
+        rc = 0;
+    }
+    free(text);
+    cJSON_Delete(copy);
+    return rc;
+}
+
 int vx_store_mesh_commit(vx_store *s, vx_upload *u, const char *id, const char *ext,
                          const cJSON *meta, int *existed, vx_err *err)
 {
@@ -424,12 +527,18 @@ int vx_store_mesh_commit(vx_store *s, vx_upload *u, const char *id, const char *
     *existed = 0;
     pthread_mutex_lock(&s->lock);
     int found;
-    mesh_find(s, id, &found);
-    if (found) {
+    size_t at = mesh_find(s, id, &found);
+    if (found && !s->meshes[at].deleted) {
         pthread_mutex_unlock(&s->lock);
         *existed = 1;
         vx_upload_abort(u);
         return 0;
+    }
+    if (found) { /* deleted, its file kept for jobs: the same bytes again */
+        int rc = mesh_revive_locked(s, at, u, ext, meta, err);
+        pthread_mutex_unlock(&s->lock);
+        vx_upload_abort(u);
+        return rc;
     }
     close(u->fd);
     u->fd = -1;
@@ -443,7 +552,7 @@ int vx_store_mesh_commit(vx_store *s, vx_upload *u, const char *id, const char *
         vx_err_set(err, vx_err_io_kind(e), "store_failed", "cannot store the mesh: %s", strerror(e));
     } else if (vx_fsync_dir(dir, err) == 0 && vx_write_atomic(mpath, text, strlen(text), err) == 0) {
         cJSON *copy = cJSON_Duplicate(meta, 1);
-        if (copy && mesh_insert(s, id, ext, copy) == 0) rc = 0;
+        if (copy && mesh_insert(s, id, ext, copy, 0) == 0) rc = 0;
         else {
             cJSON_Delete(copy);
             vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory");
@@ -464,6 +573,7 @@ cJSON *vx_store_mesh_meta(vx_store *s, const char *id, vx_err *err)
     pthread_mutex_lock(&s->lock);
     int found;
     size_t at = mesh_find(s, id, &found);
+    if (found && s->meshes[at].deleted) found = 0;
     cJSON *copy = found ? cJSON_Duplicate(s->meshes[at].meta, 1) : NULL;
     pthread_mutex_unlock(&s->lock);
     if (!found) vx_err_set(err, VX_ENOTFOUND, "mesh_not_found", "no mesh with id %.80s", id);
@@ -486,23 +596,61 @@ int vx_store_mesh_delete(vx_store *s, const char *id, vx_err *err)
     pthread_mutex_lock(&s->lock);
     int found;
     size_t at = mesh_find(s, id, &found);
-    if (!found) {
+    if (!found || s->meshes[at].deleted) {
         pthread_mutex_unlock(&s->lock);
         return vx_err_set(err, VX_ENOTFOUND, "mesh_not_found", "no mesh with id %.80s", id);
     }
-    char path[2300];
-    /* Metadata first: without it the mesh no longer exists, even if the
-     * process dies before the data file is gone (load_meshes cleans up). */
-    snprintf(path, sizeof path, "%s/meshes/%s.json", s->dir, id);
-    unlink(path);
-    snprintf(path, sizeof path, "%s/meshes/%s.%s", s->dir, id, s->meshes[at].ext);
-    unlink(path);
-    cJSON_Delete(s->meshes[at].meta);
-    memmove(s->meshes + at, s->meshes + at + 1, (s->nmeshes - at - 1) * sizeof *s->meshes);
-    s->nmeshes--;
+    mesh_entry *e = &s->meshes[at];
+    if (e->pins == 0) {
+        mesh_remove_locked(s, at);
+    } else {
+        /* Jobs still use it: the metadata becomes a tombstone (the mesh is
+         * gone for the API, also after a restart) and the file stays until
+         * the last of them finishes. */
+        char from[2300], to[2300];
+        snprintf(from, sizeof from, "%s/meshes/%s.json", s->dir, id);
+        snprintf(to, sizeof to, "%s/meshes/%s.deleted", s->dir, id);
+        if (rename(from, to) != 0) {
+            int e2 = errno;
+            pthread_mutex_unlock(&s->lock);
+            return vx_err_set(err, VX_EIO, "store_failed", "cannot delete mesh %.80s: %s", id,
+                              strerror(e2));
+        }
+        VX_INFO("store.mesh_deleted", "mesh=%s kept_for_jobs=%d", id, e->pins);
+        cJSON_Delete(e->meta);
+        e->meta = NULL;
+        e->deleted = 1;
+        s->ndeleted++;
+    }
     pthread_mutex_unlock(&s->lock);
+    char path[2100];
     snprintf(path, sizeof path, "%s/meshes", s->dir);
     return vx_fsync_dir(path, err);
+}
+
+int vx_store_mesh_pin(vx_store *s, const char *id, int deleted_ok, vx_err *err)
+{
+    pthread_mutex_lock(&s->lock);
+    int found;
+    size_t at = mesh_find(s, id, &found);
+    if (found && (deleted_ok || !s->meshes[at].deleted)) s->meshes[at].pins++;
+    else found = 0;
+    pthread_mutex_unlock(&s->lock);
+    if (!found) return vx_err_set(err, VX_ENOTFOUND, "mesh_not_found", "no mesh with id %.80s", id);
+    return 0;
+}
+
+void vx_store_mesh_unpin(vx_store *s, const char *id)
+{
+    pthread_mutex_lock(&s->lock);
+    int found, removed = 0;
+    size_t at = mesh_find(s, id, &found);
+    if (found && s->meshes[at].pins > 0 && --s->meshes[at].pins == 0 && s->meshes[at].deleted) {
+        mesh_remove_locked(s, at);
+        removed = 1;
+    }
+    pthread_mutex_unlock(&s->lock);
+    if (removed) fsync_meshes_dir(s);
 }
 
 cJSON *vx_store_mesh_list(vx_store *s, const char *after, int limit, char next[65])
@@ -517,9 +665,17 @@ cJSON *vx_store_mesh_list(vx_store *s, const char *after, int limit, char next[6
         if (found) i++;
     }
     int n = 0;
-    for (; i < s->nmeshes && n < limit; i++, n++)
+    size_t last = 0;
+    for (; i < s->nmeshes; i++) {
+        if (s->meshes[i].deleted) continue;
+        if (n == limit) { /* another one after this page */
+            if (n > 0) snprintf(next, 65, "%s", s->meshes[last].id);
+            break;
+        }
         cJSON_AddItemToArray(arr, cJSON_Duplicate(s->meshes[i].meta, 1));
-    if (i < s->nmeshes && n > 0) snprintf(next, 65, "%s", s->meshes[i - 1].id);
+        last = i;
+        n++;
+    }
     pthread_mutex_unlock(&s->lock);
     return arr;
 }
@@ -527,9 +683,209 @@ cJSON *vx_store_mesh_list(vx_store *s, const char *after, int limit, char next[6
 size_t vx_store_mesh_count(vx_store *s)
 {
     pthread_mutex_lock(&s->lock);
-    size_t n = s->nmeshes;
+    size_t n = s->nmeshes - s->ndeleted;
     pthread_mutex_unlock(&s->lock);
     return n;
+}
+
+/* --- blobs -------------------------------------------------------------- */
+
+static blob_entry *blob_find_locked(vx_store *s, const char *id)
+{
+    for (size_t i = 0; i < s->nblobs; i++)
+        if (strcmp(s->blobs[i].id, id) == 0) return &s->blobs[i];
+    return NULL;
+}
+
+static blob_entry *blob_add_locked(vx_store *s, const char *id)
+{
+    if (s->nblobs == s->capblobs) {
+        size_t cap = s->capblobs ? 2 * s->capblobs : 16;
+        blob_entry *n = realloc(s->blobs, cap * sizeof *n);
+        if (!n) return NULL;
+        s->blobs = n;
+        s->capblobs = cap;
+    }
+    blob_entry *e = &s->blobs[s->nblobs++];
+    snprintf(e->id, sizeof e->id, "%s", id);
+    e->pins = 0;
+    return e;
+}
+
+static void blob_path(const vx_store *s, const char *id, char *buf, size_t n)
+{
+    snprintf(buf, n, "%s/blobs/%s.json", s->dir, id);
+}
+
+/* Writes and fsyncs a temp file in DATA/blobs; messages name no path. */
+static int blob_write_tmp(vx_store *s, const void *data, size_t n, char *tmp, size_t tmpn,
+                          vx_err *err)
+{
+    char dir[2100];
+    snprintf(dir, sizeof dir, "%s/blobs", s->dir);
+    if (vx_mkdirs(dir, NULL))
+        return vx_err_set(err, VX_EIO, "store_failed", "cannot make the blob store: %s",
+                          strerror(errno));
+    pthread_mutex_lock(&s->lock);
+    unsigned long seq = ++s->upload_seq;
+    pthread_mutex_unlock(&s->lock);
+    snprintf(tmp, tmpn, "%s/tmp-%lu-%lu", dir, (unsigned long)getpid(), seq);
+    int fd = open(tmp, O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0640);
+    if (fd < 0)
+        return vx_err_set(err, vx_err_io_kind(errno), "store_failed", "cannot store the job's inline data: %s",
+                          strerror(errno));
+    const char *p = data;
+    size_t left = n;
+    int e = 0;
+    while (left && !e) {
+        ssize_t w = write(fd, p, left);
+        if (w < 0 && errno == EINTR) continue;
+        if (w <= 0) e = w < 0 ? errno : ENOSPC;
+        else {
+            p += w;
+            left -= (size_t)w;
+        }
+    }
+    if (!e && fsync(fd) != 0) e = errno;
+    if (close(fd) != 0 && !e) e = errno;
+    if (e) {
+        unlink(tmp);
+        return vx_err_set(err, vx_err_io_kind(e), "store_failed", "cannot store the job's inline data: %s",
+                          strerror(e));
+    }
+    return 0;
+}
+
+int vx_store_blob_put(vx_store *s, const void *data, size_t n, char id[65], vx_err *err)
+{
+    struct sha256_ctx sha;
+    uint8_t digest[SHA256_DIGEST_SIZE];
+    sha256_init(&sha);
+    sha256_update(&sha, n, data);
+    sha256_digest(&sha, sizeof digest, digest);
+    for (int i = 0; i < SHA256_DIGEST_SIZE; i++) sprintf(id + 2 * i, "%02x", digest[i]);
+    pthread_mutex_lock(&s->lock);
+    blob_entry *e = blob_find_locked(s, id);
+    if (e) e->pins++;
+    pthread_mutex_unlock(&s->lock);
+    if (e) return 0;
+    /* Written outside the lock; renamed into place (or dropped, when a
+     * concurrent put of the same bytes won) under it, so that a blob is
+     * never removed between its rename and its pin. */
+    char tmp[2300], path[2300], dir[2100];
+    if (blob_write_tmp(s, data, n, tmp, sizeof tmp, err)) return -1;
+    blob_path(s, id, path, sizeof path);
+    snprintf(dir, sizeof dir, "%s/blobs", s->dir);
+    int rc = 0;
+    pthread_mutex_lock(&s->lock);
+    e = blob_find_locked(s, id);
+    if (e) {
+        e->pins++;
+        unlink(tmp);
+    } else if (!(e = blob_add_locked(s, id))) {
+        unlink(tmp);
+        rc = vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory");
+    } else if (rename(tmp, path) != 0 || vx_fsync_dir(dir, NULL) != 0) {
+        int e2 = errno;
+        unlink(tmp);
+        s->nblobs--;
+        rc = vx_err_set(err, vx_err_io_kind(e2), "store_failed", "cannot store the job's inline data: %s",
+                        strerror(e2));
+    } else {
+        e->pins = 1;
+    }
+    pthread_mutex_unlock(&s->lock);
+    return rc;
+}
+
+int vx_store_blob_pin(vx_store *s, const char *id, vx_err *err)
+{
+    char path[2300];
+    if (!vx_store_valid_mesh_id(id))
+        return vx_err_set(err, VX_ENOTFOUND, "blob_not_found", "no blob %.80s", id);
+    blob_path(s, id, path, sizeof path);
+    pthread_mutex_lock(&s->lock);
+    blob_entry *e = blob_find_locked(s, id);
+    if (!e && access(path, R_OK) == 0) e = blob_add_locked(s, id);
+    if (e) e->pins++;
+    pthread_mutex_unlock(&s->lock);
+    if (!e) return vx_err_set(err, VX_ENOTFOUND, "blob_not_found", "no blob %.80s", id);
+    return 0;
+}
+
+void vx_store_blob_unpin(vx_store *s, const char *id)
+{
+    pthread_mutex_lock(&s->lock);
+    blob_entry *e = blob_find_locked(s, id);
+    if (e && e->pins > 0 && --e->pins == 0) {
+        char path[2300];
+        blob_path(s, id, path, sizeof path);
+        unlink(path);
+        *e = s->blobs[--s->nblobs];
+    }
+    pthread_mutex_unlock(&s->lock);
+}
+
+char *vx_store_blob_read(vx_store *s, const char *id, size_t *n, vx_err *err)
+{
+    char path[2300];
+    if (!vx_store_valid_mesh_id(id)) {
+        vx_err_set(err, VX_ENOTFOUND, "blob_not_found", "no blob %.80s", id);
+        return NULL;
+    }
+    blob_path(s, id, path, sizeof path);
+    vx_err e;
+    vx_err_clear(&e);
+    char *text = vx_read_file(path, SIZE_MAX / 4, n, &e);
+    if (!text) {
+        if (e.kind == VX_ENOTFOUND)
+            vx_err_set(err, VX_ENOTFOUND, "blob_not_found", "the job's inline data (blob %s) is gone",
+                       id);
+        else
+            vx_err_set(err, VX_EIO, "read_failed", "cannot read the job's inline data (blob %s)", id);
+    }
+    return text;
+}
+
+size_t vx_store_blob_count(vx_store *s)
+{
+    pthread_mutex_lock(&s->lock);
+    size_t n = s->nblobs;
+    pthread_mutex_unlock(&s->lock);
+    return n;
+}
+
+void vx_store_collect(vx_store *s)
+{
+    size_t meshes = 0, blobs = 0;
+    pthread_mutex_lock(&s->lock);
+    for (size_t i = s->nmeshes; i-- > 0;)
+        if (s->meshes[i].deleted && s->meshes[i].pins == 0) {
+            mesh_remove_locked(s, i);
+            meshes++;
+        }
+    char dir[2100];
+    snprintf(dir, sizeof dir, "%s/blobs", s->dir);
+    DIR *d = opendir(dir);
+    struct dirent *e;
+    while (d && (e = readdir(d))) {
+        if (strcmp(e->d_name, ".") == 0 || strcmp(e->d_name, "..") == 0) continue;
+        char id[65] = "";
+        if (strlen(e->d_name) == 69 && strcmp(e->d_name + 64, ".json") == 0) {
+            memcpy(id, e->d_name, 64);
+            id[64] = 0;
+        }
+        const blob_entry *b = id[0] ? blob_find_locked(s, id) : NULL;
+        if (b && b->pins > 0) continue;
+        char path[2400];
+        snprintf(path, sizeof path, "%s/%s", dir, e->d_name);
+        unlink(path);
+        blobs++;
+    }
+    if (d) closedir(d);
+    pthread_mutex_unlock(&s->lock);
+    if (meshes) fsync_meshes_dir(s);
+    if (meshes || blobs) VX_INFO("store.collected", "meshes=%zu blobs=%zu", meshes, blobs);
 }
 
 /* --- results ------------------------------------------------------------ */

@@ -2,6 +2,9 @@
  *
  *   DATA/meshes/<sha256>.<obj|drc>   the uploaded bytes, as sent
  *   DATA/meshes/<sha256>.json        its metadata (the API's Mesh resource)
+ *   DATA/meshes/<sha256>.deleted     the metadata of a deleted mesh whose file
+ *                                    unfinished jobs still hold (see pins)
+ *   DATA/blobs/<sha256>.json         large inline job inputs (gregory frames)
  *   DATA/results/<job id>/<name>.<ext>
  *   DATA/tmp/                        uploads in flight (emptied at start)
  *   DATA/journal.log                 job journal (src/jobs/journal.c)
@@ -54,15 +57,44 @@ int vx_store_mesh_commit(vx_store *s, vx_upload *u, const char *id, const char *
                          const cJSON *meta, int *existed, vx_err *err);
 /* Owned copy of a mesh's metadata, or NULL (VX_ENOTFOUND mesh_not_found). */
 cJSON *vx_store_mesh_meta(vx_store *s, const char *id, vx_err *err);
-/* Path of the mesh file into buf; -1 (VX_ENOTFOUND) when unknown. */
+/* Path of the mesh file into buf, also of a deleted mesh that pins still
+ * hold (the runner's); -1 (VX_ENOTFOUND) when unknown. */
 int vx_store_mesh_path(vx_store *s, const char *id, char *buf, size_t n, vx_err *err);
+/* Deletes a mesh: it disappears from meta, list and count at once (404 for
+ * new jobs); its file stays while pins hold it (vx_store_mesh_path still
+ * answers), and goes with the last unpin. */
 int vx_store_mesh_delete(vx_store *s, const char *id, vx_err *err);
+/* Pins: an unfinished job holds its meshes and blobs so that a delete does
+ * not take them from under it. Pins live in memory only; the job journal
+ * rebuilds them at start (then vx_store_collect removes what no pin holds).
+ * Pins mesh id once more: -1 (VX_ENOTFOUND mesh_not_found) when it is not
+ * stored or, unless deleted_ok, deleted. */
+int vx_store_mesh_pin(vx_store *s, const char *id, int deleted_ok, vx_err *err);
+/* Drops one pin; the last one of a deleted mesh removes its files. */
+void vx_store_mesh_unpin(vx_store *s, const char *id);
+/* Removes the deleted meshes and the blobs that no pin holds. Called once,
+ * after the journal replay has pinned what unfinished jobs use. */
+void vx_store_collect(vx_store *s);
 /* Page of metadata sorted by id, starting after `after` (NULL = first).
  * Returns an owned array; next[0] = 0 when this is the last page. */
 cJSON *vx_store_mesh_list(vx_store *s, const char *after, int limit, char next[65]);
 size_t vx_store_mesh_count(vx_store *s);
 /* 1 when id is 64 lowercase hex digits. */
 int vx_store_valid_mesh_id(const char *id);
+
+/* Blobs: large inline job inputs, content-addressed (id = hex SHA-256 of
+ * the bytes), kept while a pin holds them. Stores data durably (written and
+ * fsync'd, unless it is there already), pins it and writes its id. */
+int vx_store_blob_put(vx_store *s, const void *data, size_t n, char id[65], vx_err *err);
+/* Pins a stored blob (journal replay); -1 (VX_ENOTFOUND blob_not_found). */
+int vx_store_blob_pin(vx_store *s, const char *id, vx_err *err);
+/* Drops one pin; the last one removes the blob. */
+void vx_store_blob_unpin(vx_store *s, const char *id);
+/* The bytes of a blob (owned, NUL-terminated, *n = length), or NULL
+ * (VX_ENOTFOUND blob_not_found, VX_EIO). */
+char *vx_store_blob_read(vx_store *s, const char *id, size_t *n, vx_err *err);
+/* Number of blobs held. */
+size_t vx_store_blob_count(vx_store *s);
 
 /* Creates DATA/results/<jid>/ (empty) and writes its path into buf. */
 int vx_store_result_dir(vx_store *s, const char *jid, char *buf, size_t n, vx_err *err);

@@ -29,7 +29,8 @@ schema. voxeld-specific extras: Job bodies are checked against the kind's
 entry in the top-level `x-kinds` extension (normalised params, stats, output
 URLs (outputs with `requested_by: P` only when params[P] lists them; with
 `numbered_by: P`, NAME_000.. when params[P] > 1; with `per_item_of: P`, once
-per element of the array params.P, named by formatting its name with n = 1,
+per element of the array params.P (or `count` times for a blob reference
+{"blob", "bytes", "count"}), named by formatting its name with n = 1,
 2, ...); an output with `absent_when: {param: value}` is not expected when
 the job's params have that value), Info.kinds against `x-kinds`, /metrics
 bodies against `x-metrics`.
@@ -522,6 +523,9 @@ class Checker:
                 pi = o.get("per_item_of")
                 if isinstance(pi, str):
                     items = params.get(pi)
+                    # a large array kept as a blob: {"blob", "bytes", "count"}
+                    if isinstance(items, dict) and isinstance(items.get("count"), int):
+                        items = [None] * items["count"]
                     if isinstance(items, list):
                         want += [o.get("name", "").format(n=i + 1) for i in range(len(items))]
                     continue

@@ -4,6 +4,7 @@
 #include <stddef.h>
 #include <stdint.h>
 #include <stdio.h>
+#include <stdlib.h>
 #include <string.h>
 #include <cmocka.h>
 
@@ -166,6 +167,147 @@ static void test_object(void **state)
     cJSON_Delete(bad);
 }
 
+/* The fuzz_params oracle on one input: parse accepts, the normalised
+ * params print, parse back and normalise to the same thing. */
+static void oracle(const vx_kind *k, const char *json, const vx_limits *lim)
+{
+    cJSON *in = cJSON_Parse(json);
+    assert_non_null(in);
+    vx_err err;
+    vx_err_clear(&err);
+    cJSON *norm = k->parse(in, lim, &err);
+    if (!norm) {
+        cJSON_Delete(in);
+        return; /* refused at submission: fine */
+    }
+    char *text = cJSON_PrintUnformatted(norm);
+    cJSON *back = cJSON_Parse(text);
+    cJSON *again = k->parse(back, lim, &err);
+    if (!again) fail_msg("%s %s: normalised params %s refused: %s", k->name, json, text, err.message);
+    assert_true(cJSON_Compare(norm, again, 1));
+    cJSON *n2 = vx_params_normalize(k, in, lim, &err);
+    assert_non_null(n2);
+    assert_true(cJSON_Compare(norm, n2, 1));
+    cJSON_Delete(n2);
+    cJSON_Delete(again);
+    cJSON_Delete(back);
+    free(text);
+    cJSON_Delete(norm);
+    cJSON_Delete(in);
+}
+
+/* Defect 7 of issue #10, found by fuzz_params: render with N above 256 and
+ * no R was accepted, with the default R = 8 N over its limit of 2048, and
+ * failed when it ran ("params.R must be in [258, 2048], got 2064"). Every
+ * even N now normalises to params that read back the same. */
+static void test_render_defaults(void **state)
+{
+    (void)state;
+    const vx_kind *k = vx_kind_find("render");
+    static const vx_limits none = {0};
+    oracle(k, "{\"N\": 258, \"L\": 2}", &none);
+    oracle(k, "{\"N\": 300}", &none);
+    oracle(k, "{\"N\": 512, \"L\": 1}", &none);
+    for (int n = 2; n <= 512; n += 2) {
+        char buf[64];
+        snprintf(buf, sizeof buf, "{\"N\": %d}", n);
+        oracle(k, buf, &none);
+        cJSON *in = cJSON_Parse(buf);
+        vx_err err;
+        cJSON *norm = vx_params_normalize(k, in, &none, &err);
+        assert_non_null(norm);
+        double R = cJSON_GetNumberValue(cJSON_GetObjectItem(norm, "R"));
+        double L = cJSON_GetNumberValue(cJSON_GetObjectItem(norm, "L"));
+        assert_true(R >= n && R <= 2048 && (long)R % 2 == 0);
+        assert_true(R == (n <= 256 ? 8 * n : 2048));
+        assert_true(L >= 1 && L * n <= 1024);
+        cJSON_Delete(norm);
+        cJSON_Delete(in);
+    }
+    /* With the daemon's limits N = 300 is too big: a 422 now, naming R. */
+    vx_limits lim = {.max_job_memory = 4ull << 30, .max_image_pixels = 8192 * 8192};
+    cJSON *in = cJSON_Parse("{\"N\": 300}");
+    vx_err err;
+    vx_err_clear(&err);
+    assert_null(vx_params_normalize(k, in, &lim, &err));
+    assert_int_equal(err.kind, VX_EUNPROC);
+    assert_string_equal(err.code, "invalid_params");
+    assert_non_null(strstr(err.message, "params.R"));
+    cJSON_Delete(in);
+}
+
+/* The seed corpus of fuzz_params (tests/fuzz/corpus/fuzz_params): valid
+ * params of every kind, through the oracle. */
+static void test_seeds(void **state)
+{
+    (void)state;
+    static const struct {
+        const char *kind, *json;
+    } seeds[] = {
+        {"preview", "{\"azimuth\":0,\"elevation\":0,\"fov\":0,\"width\":300,\"height\":200,\"samples\":1}"},
+        {"preview", "{\"color\":[1,0.5,0],\"background\":[0,0,0,0],\"ambient\":0.5,\"samples\":2}"},
+        {"voxelize", "{\"voxel_size\":0.01,\"padding\":2,\"inside\":\"parity\",\"format\":\"raw1\"}"},
+        {"voxelize", "{\"grid\":{\"origin\":[0,0,0],\"voxel_size\":0.5,\"dims\":[16,8,4]},\"format\":\"binvox\"}"},
+        {"voxelize", "{\"resolution\":24,\"supersample\":2,\"samples\":\"faces\",\"threshold\":4,\"method\":\"peel\"}"},
+        {"render", "{\"N\":16,\"width\":64,\"height\":48,\"camera\":{\"type\":\"orbit\"},\"frames\":3,\"bits\":16,\"outputs\":[\"depth\",\"voxels\"]}"},
+        {"render", "{\"N\":16,\"lights\":[{\"direction\":[0,0,1],\"color\":[1,0,0]}],\"background\":[0,0,1]}"},
+        {"render", "{\"N\":8,\"filter\":{\"type\":\"exponential\",\"D0\":2,\"n\":4},\"L\":8,\"normals\":\"sobel3d\"}"},
+        {"gregory", "{\"max_edge\":0.01,\"weld\":false,\"format\":\"ply\"}"},
+        {"gregory", "{\"divisions\":2,\"frames\":[[[0,0,0],[1,1,1]]]}"},
+        {"catmull-clark", "{\"levels\":3,\"limit\":true}"},
+    };
+    vx_limits lim = {.max_triangles = 20000000,
+                     .max_image_pixels = 8192 * 8192,
+                     .max_job_memory = 4ull << 30};
+    for (size_t i = 0; i < sizeof seeds / sizeof seeds[0]; i++)
+        oracle(vx_kind_find(seeds[i].kind), seeds[i].json, &lim);
+    for (size_t i = 0; i < vx_kind_count(); i++) oracle(vx_kind_at(i), "{}", &lim);
+}
+
+/* A kind whose default is out of its own range (x = 5, x in [0, 4]) and
+ * one whose params do not read back the same: vx_params_normalize refuses
+ * both with a 422 naming the params. */
+static cJSON *bad_default_parse(const cJSON *params, const vx_limits *lim, vx_err *err)
+{
+    double x;
+    if (vx_param_number(params, "x", 5, 0, 4, &x, err)) return NULL;
+    cJSON *o = cJSON_CreateObject();
+    cJSON_AddNumberToObject(o, "x", x);
+    return o;
+}
+
+static cJSON *drifting_parse(const cJSON *params, const vx_limits *lim, vx_err *err)
+{
+    double x;
+    if (vx_param_number(params, "x", 1, 0, 1e9, &x, err)) return NULL;
+    cJSON *o = cJSON_CreateObject();
+    cJSON_AddNumberToObject(o, "x", x + 1);
+    return o;
+}
+
+static void test_normalize_checks(void **state)
+{
+    (void)state;
+    vx_kind bad = {.name = "bad", .parse = bad_default_parse};
+    vx_kind drift = {.name = "drift", .parse = drifting_parse};
+    vx_err err;
+    vx_err_clear(&err);
+    assert_null(vx_params_normalize(&bad, NULL, &(vx_limits){0}, &err));
+    assert_int_equal(err.kind, VX_EUNPROC);
+    assert_string_equal(err.code, "invalid_params");
+    assert_non_null(strstr(err.message, "params.x must be in [0, 4], got 5"));
+    assert_non_null(strstr(err.message, "defaults"));
+    cJSON *in = cJSON_Parse("{\"x\": 3}");
+    cJSON *n = vx_params_normalize(&bad, in, &(vx_limits){0}, &err);
+    assert_non_null(n); /* given in range: fine */
+    cJSON_Delete(n);
+    vx_err_clear(&err);
+    assert_null(vx_params_normalize(&drift, in, &(vx_limits){0}, &err));
+    assert_string_equal(err.code, "invalid_params");
+    assert_non_null(strstr(err.message, "read back"));
+    cJSON_Delete(in);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -175,6 +317,9 @@ int main(void)
         cmocka_unit_test(test_object),
         cmocka_unit_test(test_kind_table),
         cmocka_unit_test(test_preview_params),
+        cmocka_unit_test(test_render_defaults),
+        cmocka_unit_test(test_seeds),
+        cmocka_unit_test(test_normalize_checks),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

@@ -194,6 +194,140 @@ static void test_upload_abort(void **state)
     vx_store_close(s);
 }
 
+/* A data dir of its own under dir, for tests that count what is in it. */
+static char sub[300];
+
+static int exists(const char *fmt, const char *id)
+{
+    char p[512];
+    snprintf(p, sizeof p, fmt, sub, id);
+    return access(p, F_OK) == 0;
+}
+
+/* A deleted mesh that jobs pin: gone from the API at once, its file kept
+ * (also across a reopen, as a tombstone) until the last unpin or, with no
+ * pin left at start, vx_store_collect. The same bytes revive it. */
+static void test_pins(void **state)
+{
+    vx_err err;
+    snprintf(sub, sizeof sub, "%s/pins", dir);
+    vx_store *s = vx_store_open(sub, NULL, &err);
+    assert_non_null(s);
+    char a[65], b[65];
+    int existed;
+    put(s, "v 0 0 0\n", a, &existed);
+    put(s, "v 1 1 1\n", b, &existed);
+    assert_int_equal(vx_store_mesh_pin(s, a, 0, &err), 0);
+    assert_int_equal(vx_store_mesh_pin(s, a, 0, &err), 0);
+    assert_int_equal(vx_store_mesh_delete(s, a, &err), 0);
+    assert_null(vx_store_mesh_meta(s, a, &err));
+    assert_string_equal(err.code, "mesh_not_found");
+    assert_int_equal(vx_store_mesh_count(s), 1);
+    char next[65];
+    cJSON *l = vx_store_mesh_list(s, NULL, 10, next);
+    assert_int_equal(cJSON_GetArraySize(l), 1);
+    cJSON_Delete(l);
+    assert_int_equal(vx_store_mesh_pin(s, a, 0, &err), -1); /* new jobs: 404 */
+    assert_int_equal(vx_store_mesh_delete(s, a, &err), -1);
+    char path[2400];
+    assert_int_equal(vx_store_mesh_path(s, a, path, sizeof path, &err), 0); /* runners still read it */
+    assert_true(exists("%s/meshes/%s.obj", a));
+    assert_true(exists("%s/meshes/%s.deleted", a));
+    assert_false(exists("%s/meshes/%s.json", a));
+    vx_store_mesh_unpin(s, a);
+    assert_true(exists("%s/meshes/%s.obj", a));
+    vx_store_close(s);
+
+    /* Reopen: still deleted, a replay pin (deleted_ok) keeps it; the last
+     * unpin removes it. */
+    s = vx_store_open(sub, NULL, &err);
+    assert_null(vx_store_mesh_meta(s, a, &err));
+    assert_int_equal(vx_store_mesh_count(s), 1);
+    assert_int_equal(vx_store_mesh_pin(s, a, 0, &err), -1);
+    assert_int_equal(vx_store_mesh_pin(s, a, 1, &err), 0);
+    vx_store_collect(s);
+    assert_true(exists("%s/meshes/%s.obj", a));
+    vx_store_mesh_unpin(s, a);
+    assert_false(exists("%s/meshes/%s.obj", a));
+    assert_false(exists("%s/meshes/%s.deleted", a));
+    assert_int_equal(vx_store_mesh_path(s, a, path, sizeof path, &err), -1);
+
+    /* Deleted while pinned, then uploaded again: a mesh again, kept after
+     * the unpin. */
+    put(s, "v 0 0 0\n", a, &existed);
+    assert_int_equal(existed, 0);
+    assert_int_equal(vx_store_mesh_pin(s, a, 0, &err), 0);
+    assert_int_equal(vx_store_mesh_delete(s, a, &err), 0);
+    put(s, "v 0 0 0\n", a, &existed);
+    assert_int_equal(existed, 0); /* 201 */
+    cJSON *m = vx_store_mesh_meta(s, a, &err);
+    assert_non_null(m);
+    cJSON_Delete(m);
+    assert_false(exists("%s/meshes/%s.deleted", a));
+    vx_store_mesh_unpin(s, a);
+    assert_true(exists("%s/meshes/%s.obj", a));
+    assert_int_equal(vx_store_mesh_count(s), 2);
+
+    /* Deleted while pinned, no pin after a reopen: collect removes it. */
+    assert_int_equal(vx_store_mesh_pin(s, b, 0, &err), 0);
+    assert_int_equal(vx_store_mesh_delete(s, b, &err), 0);
+    vx_store_close(s);
+    s = vx_store_open(sub, NULL, &err);
+    assert_true(exists("%s/meshes/%s.obj", b));
+    vx_store_collect(s);
+    assert_false(exists("%s/meshes/%s.obj", b));
+    assert_false(exists("%s/meshes/%s.deleted", b));
+    /* A delete without pins removes the files at once. */
+    assert_int_equal(vx_store_mesh_delete(s, a, &err), 0);
+    assert_false(exists("%s/meshes/%s.obj", a));
+    assert_false(exists("%s/meshes/%s.json", a));
+    assert_int_equal(vx_store_mesh_count(s), 0);
+    vx_store_close(s);
+}
+
+/* Blobs: content-addressed, durable, one pin per put, removed with the
+ * last unpin; after a reopen only what is pinned again survives collect. */
+static void test_blobs(void **state)
+{
+    vx_err err;
+    snprintf(sub, sizeof sub, "%s/blobs", dir);
+    vx_store *s = vx_store_open(sub, NULL, &err);
+    char id[65], id2[65], id3[65];
+    assert_int_equal(vx_store_blob_put(s, "abc", 3, id, &err), 0);
+    assert_string_equal(id, "ba7816bf8f01cfea414140de5dae2223b00361a396177a9cb410ff61f20015ad");
+    assert_int_equal(vx_store_blob_put(s, "abc", 3, id2, &err), 0);
+    assert_string_equal(id, id2);
+    assert_int_equal(vx_store_blob_count(s), 1);
+    assert_true(exists("%s/blobs/%s.json", id));
+    size_t n;
+    char *t = vx_store_blob_read(s, id, &n, &err);
+    assert_non_null(t);
+    assert_int_equal(n, 3);
+    assert_string_equal(t, "abc");
+    free(t);
+    vx_store_blob_unpin(s, id);
+    assert_true(exists("%s/blobs/%s.json", id));
+    vx_store_blob_unpin(s, id);
+    assert_false(exists("%s/blobs/%s.json", id));
+    assert_int_equal(vx_store_blob_count(s), 0);
+    assert_null(vx_store_blob_read(s, id, &n, &err));
+    assert_string_equal(err.code, "blob_not_found");
+    assert_null(strstr(err.message, sub)); /* no server path */
+    assert_int_equal(vx_store_blob_pin(s, id, &err), -1);
+
+    assert_int_equal(vx_store_blob_put(s, "kept", 4, id, &err), 0);
+    assert_int_equal(vx_store_blob_put(s, "dropped", 7, id3, &err), 0);
+    vx_store_close(s); /* pins are memory only */
+    s = vx_store_open(sub, NULL, &err);
+    assert_int_equal(vx_store_blob_pin(s, id, &err), 0);
+    vx_store_collect(s);
+    assert_true(exists("%s/blobs/%s.json", id));
+    assert_false(exists("%s/blobs/%s.json", id3));
+    vx_store_blob_unpin(s, id);
+    assert_false(exists("%s/blobs/%s.json", id));
+    vx_store_close(s);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -201,6 +335,8 @@ int main(void)
         cmocka_unit_test(test_list_pages),
         cmocka_unit_test(test_results_budget),
         cmocka_unit_test(test_upload_abort),
+        cmocka_unit_test(test_pins),
+        cmocka_unit_test(test_blobs),
     };
     return cmocka_run_group_tests(tests, setup, teardown);
 }
