@@ -1127,11 +1127,20 @@ cJSON *vx_jobs_cancel(vx_jobs *j, const char *jid, int *was_running, vx_err *err
         jb->state = ST_CANCELED;
         jb->finished = vx_now();
         vx_err_set(&jb->error, VX_ECANCELED, "canceled", "canceled while queued");
-        if (journal_locked(j, jb, err) == 0) out = job_json(jb, 1);
-        pins = jb->pins;
-        memset(&jb->pins, 0, sizeof jb->pins);
-        freeze_locked(j, jb);
-        changed = 1;
+        if (journal_locked(j, jb, err) == 0) {
+            out = job_json(jb, 1);
+            pins = jb->pins;
+            memset(&jb->pins, 0, sizeof jb->pins);
+            freeze_locked(j, jb);
+            changed = 1;
+        } else {
+            /* Not recorded (a full disk: 507), so not done: the job stays
+             * queued, as the journal and a restart would have it. */
+            jb->state = ST_QUEUED;
+            jb->finished = 0;
+            vx_err_clear(&jb->error);
+            vx_queue_push(j->queue, jb, 1);
+        }
     } else {
         jb->cancel_requested = 1;
         *was_running = 1;
