@@ -88,6 +88,31 @@ vx_mesh *vx_draco_read_path(const char *path, const vx_mesh_limits *lim, vx_err 
  * (vx_mesh_read_path hands over the file it sniffed). */
 vx_mesh *vx_draco_read_file(FILE *f, const vx_mesh_limits *lim, vx_err *err);
 
+/* What the header of a Draco file declares, before any data. */
+typedef struct vx_draco_header {
+    unsigned major, minor; /* bitstream version */
+    unsigned method;       /* 0 sequential, 1 edgebreaker */
+    uint64_t faces;        /* triangles */
+    uint64_t points;       /* vertices (edgebreaker: before attribute seams split them) */
+    uint64_t extra_points; /* edgebreaker: split and non-manifold vertices, temporary */
+} vx_draco_header;
+
+/* Checks the header of a Draco file of file_size bytes whose first n bytes
+ * are data (the whole file, or a window at its start) before libdraco sees
+ * it: libdraco sizes its tables from the declared counts (24 bytes per face
+ * for edgebreaker's corner table) before reading any data. Refuses unknown
+ * versions (1.0 to 2.2 are read), methods and traversals, metadata that
+ * does not parse, counts that contradict each other or that the bytes after
+ * the header cannot hold (sequential: 3 bytes per face; edgebreaker: 2048
+ * faces per byte, 50 times the densest encoding libdraco makes),
+ * all VX_EINVAL draco_corrupt; a point cloud is VX_EUNPROC
+ * draco_point_cloud; faces over lim->max_triangles or vertices over
+ * lim->max_vertices are VX_ETOOBIG mesh_too_big. Returns 0 and fills *h,
+ * -1 with err set, or 1 when the window ends before the counts (n <
+ * file_size only). */
+int vx_draco_check_header(const unsigned char *data, size_t n, uint64_t file_size,
+                          const vx_mesh_limits *lim, vx_draco_header *h, vx_err *err);
+
 /* Quads per patch side in the tessellation a .bpt read makes (8 x 8 quads,
  * 128 triangles per patch). */
 #define VX_BPT_TESS 8
