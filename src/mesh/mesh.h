@@ -146,6 +146,30 @@ vx_mesh *vx_mesh_read_as(const char *path, vx_mesh_format fmt, const vx_mesh_lim
  * integer (never valid OBJ), else VX_MESH_OBJ; 0 for binary junk. */
 vx_mesh_format vx_mesh_sniff(const unsigned char *head, size_t n);
 
+/* Worst-case peak memory, in bytes, of reading a `bytes`-byte file at path
+ * in format fmt under lim: what the daemon reserves from --max-parse-memory
+ * before it parses an upload. Measured peaks (RSS over the process before
+ * the read, 40 MB files) and the bounds used:
+ *   OBJ    8 x bytes + 16 MiB. Faces of nine one-digit indices are the worst
+ *          (8.0x: face indices, offsets, the fan triangulation and the edge
+ *          table); quads 6.4x, repeated triangles 3.7x, vertices only 3.4x,
+ *          a typical scanned mesh 1.1x.
+ *   .bpt   6.5 KiB a patch (its tessellation: 77 vertices, 64 quads, 128
+ *          triangles, edges; measured 5.1 to 6.1 KiB) for the patch count on
+ *          the first line, bounded by bytes / 32 (the shortest patch line)
+ *          and --max-triangles / 128; plus 40 bytes a point for bytes / 6
+ *          points (the shortest point line; measured 5.2x for a file of
+ *          points) + 16 MiB.
+ *   Draco  the file (read whole) + 64 bytes a declared face + 96 a declared
+ *          point (libdraco's corner table and attributes, then the mesh;
+ *          measured 70 bytes a face with its vertices), from the header that
+ *          vx_draco_check_header reads; bounded as it bounds the counts when
+ *          the header cannot be read, + 16 MiB.
+ * Returns the estimate; a file the reader will refuse early gets a small
+ * one. */
+uint64_t vx_mesh_parse_cost(const char *path, vx_mesh_format fmt, uint64_t bytes,
+                            const vx_mesh_limits *lim);
+
 /* Optional per-vertex normals and per-face groups for the writers. */
 typedef struct vx_mesh_write_opts {
     const float *normals;       /* 3 * nverts, or NULL */
