@@ -173,9 +173,11 @@ static uint64_t bpt_declared_patches(const char *path)
 
 static uint64_t draco_cost(const char *path, uint64_t bytes, const vx_mesh_limits *lim)
 {
-    uint64_t faces = 2048 * bytes + 64;
-    if (lim && lim->max_triangles && faces > lim->max_triangles) faces = lim->max_triangles;
-    uint64_t points = 3 * faces;
+    vx_draco_header h = {0};
+    h.faces = 2048 * bytes + 64;
+    if (lim && lim->max_triangles && h.faces > lim->max_triangles) h.faces = lim->max_triangles;
+    h.points = 3 * h.faces;
+    h.attribute_sets = 4;
     FILE *f = path ? fopen(path, "rb") : NULL;
     if (f) {
         /* The header and any metadata: a window at the start is enough but
@@ -183,18 +185,16 @@ static uint64_t draco_cost(const char *path, uint64_t bytes, const vx_mesh_limit
         static const size_t window = 64 * 1024;
         unsigned char *buf = malloc(window);
         size_t n = buf ? fread(buf, 1, window, f) : 0;
-        vx_draco_header h;
+        vx_draco_header d;
         vx_err err;
-        int rc = buf ? vx_draco_check_header(buf, n, bytes, lim, &h, &err) : 1;
+        int rc = buf ? vx_draco_check_header(buf, n, bytes, lim, &d, &err) : 1;
         free(buf);
         fclose(f);
         if (rc < 0) return bytes + COST_BASE; /* refused at the header */
-        if (rc == 0) {
-            faces = h.faces;
-            points = h.points + h.extra_points;
-        }
+        if (rc == 0) h = d;
     }
-    return bytes + 64 * faces + 96 * points + COST_BASE;
+    return bytes + vx_draco_decode_bound(&h, bytes) + 32 * (h.faces + h.points + h.extra_points) +
+           (UINT64_C(12) << 20);
 }
 
 uint64_t vx_mesh_parse_cost(const char *path, vx_mesh_format fmt, uint64_t bytes,

@@ -95,6 +95,7 @@ typedef struct vx_draco_header {
     uint64_t faces;        /* triangles */
     uint64_t points;       /* vertices (edgebreaker: before attribute seams split them) */
     uint64_t extra_points; /* edgebreaker: split and non-manifold vertices, temporary */
+    unsigned attribute_sets; /* edgebreaker: attributes with their own connectivity */
 } vx_draco_header;
 
 /* Checks the header of a Draco file of file_size bytes whose first n bytes
@@ -112,6 +113,15 @@ typedef struct vx_draco_header {
  * file_size only). */
 int vx_draco_check_header(const unsigned char *data, size_t n, uint64_t file_size,
                           const vx_mesh_limits *lim, vx_draco_header *h, vx_err *err);
+
+/* The most bytes libdraco may allocate through operator new to decode a
+ * file of file_size bytes with header h (2 file_size + (96 + 64 sets) a
+ * face + 96 a point + 4 MiB, about twice the measured peaks). The reader
+ * enforces it on the decoding thread: libdraco also sizes tables from
+ * counts deep in the data, past any header check (a texture-coordinate
+ * predictor's orientation count, up to 2^31); past the bound the decode
+ * stops with VX_EINVAL draco_corrupt. */
+uint64_t vx_draco_decode_bound(const vx_draco_header *h, uint64_t file_size);
 
 /* Quads per patch side in the tessellation a .bpt read makes (8 x 8 quads,
  * 128 triangles per patch). */
@@ -160,11 +170,12 @@ vx_mesh_format vx_mesh_sniff(const unsigned char *head, size_t n);
  *          and --max-triangles / 128; plus 40 bytes a point for bytes / 6
  *          points (the shortest point line; measured 5.2x for a file of
  *          points) + 16 MiB.
- *   Draco  the file (read whole) + 64 bytes a declared face + 96 a declared
- *          point (libdraco's corner table and attributes, then the mesh;
- *          measured 70 bytes a face with its vertices), from the header that
- *          vx_draco_check_header reads; bounded as it bounds the counts when
- *          the header cannot be read, + 16 MiB.
+ *   Draco  the file (read whole) + vx_draco_decode_bound (libdraco, held
+ *          to it) + 32 bytes a face and a point (the mesh and its analysis)
+ *          + 12 MiB, from the counts the header declares; when the header
+ *          cannot be read, the counts its check allows. Measured: 70 bytes
+ *          a face with its vertices for positions only, 150 with texture
+ *          coordinates and normals.
  * Returns the estimate; a file the reader will refuse early gets a small
  * one. */
 uint64_t vx_mesh_parse_cost(const char *path, vx_mesh_format fmt, uint64_t bytes,

@@ -17,6 +17,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include <sys/resource.h>
+#include <time.h>
 
 #include "mesh/mesh.h"
 
@@ -73,6 +74,16 @@ static void test_draco_reproducers(void **state)
     expect_draco("repro-seq-points-4e9.drc", NULL, VX_EINVAL, "draco_corrupt");
     /* metadata whose entry claims 4 GB */
     expect_draco("repro-metadata-4g.drc", NULL, VX_EINVAL, "draco_corrupt");
+    /* found by fuzz_draco: a texture-coordinate predictor's orientation
+     * count deep in the data (2^31 bits, then a loop of as many steps): 27 s
+     * and 200 MB before the decode was held to vx_draco_decode_bound */
+    struct timespec t0, t1;
+    clock_gettime(CLOCK_MONOTONIC, &t0);
+    expect_draco("repro-texcoord-orientations.drc", NULL, VX_EINVAL, "draco_corrupt");
+    clock_gettime(CLOCK_MONOTONIC, &t1);
+    double secs = (double)(t1.tv_sec - t0.tv_sec) + 1e-9 * (double)(t1.tv_nsec - t0.tv_nsec);
+    if (secs > 2) print_error("texcoord reproducer took %.1f s\n", secs);
+    assert_true(secs < 2);
     /* with the daemon's limit too: the impossible count is named first */
     vx_mesh_limits lim = {.max_triangles = 20000000};
     expect_draco("repro-eb-faces-1e8.drc", &lim, VX_EINVAL, "draco_corrupt");
