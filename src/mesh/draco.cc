@@ -375,6 +375,14 @@ vx_mesh *decode(const std::vector<char> &data, const vx_mesh_limits *lim, vx_err
                    "the Draco mesh has no three-component POSITION attribute");
         return nullptr;
     }
+    /* Numbers only: converting bools reads arbitrary bytes as bool (found
+     * by fuzz_draco; undefined behaviour). */
+    draco::DataType dt = pa->data_type();
+    if (dt <= draco::DT_INVALID || dt == draco::DT_BOOL || dt >= draco::DT_TYPES_COUNT) {
+        vx_err_set(err, VX_EUNPROC, "draco_no_positions",
+                   "the Draco mesh's POSITION attribute is not numeric (data type %d)", int(dt));
+        return nullptr;
+    }
     if (lim && lim->max_vertices && np > lim->max_vertices) {
         vx_err_set(err, VX_ETOOBIG, "mesh_too_big", "%zu vertices, more than %zu (the limit)", np,
                    lim->max_vertices);

@@ -84,6 +84,9 @@ static void test_draco_reproducers(void **state)
     double secs = (double)(t1.tv_sec - t0.tv_sec) + 1e-9 * (double)(t1.tv_nsec - t0.tv_nsec);
     if (secs > 2) print_error("texcoord reproducer took %.1f s\n", secs);
     assert_true(secs < 2);
+    /* found by fuzz_draco: a POSITION attribute of bools (reading its bytes
+     * as bool was undefined behaviour) */
+    expect_draco("repro-bool-positions.drc", NULL, VX_EUNPROC, "draco_no_positions");
     /* with the daemon's limit too: the impossible count is named first */
     vx_mesh_limits lim = {.max_triangles = 20000000};
     expect_draco("repro-eb-faces-1e8.drc", &lim, VX_EINVAL, "draco_corrupt");
