@@ -407,8 +407,8 @@ vx_mesh *vx_bpt_read_file(FILE *f, const vx_mesh_limits *lim, vx_err *err)
     uint64_t left = bytes_left(r);
     if (left != UINT64_MAX && np > left / BPT_MIN_PATCH_LINE) {
         bpt_fail(r, VX_EINVAL, "bpt_truncated",
-                 "%llu patches cannot fit in the %llu bytes that follow",
-                 (unsigned long long)np, (unsigned long long)left);
+                 "%llu patches cannot fit in the %llu bytes that follow", (unsigned long long)np,
+                 (unsigned long long)left);
         goto fail;
     }
     size_t cap = 0;
@@ -460,8 +460,8 @@ vx_mesh *vx_bpt_read_file(FILE *f, const vx_mesh_limits *lim, vx_err *err)
     /* (the last line may lack its newline) */
     if (left != UINT64_MAX && npts > (left + 1) / BPT_MIN_POINT_LINE) {
         bpt_fail(r, VX_EINVAL, "bpt_truncated",
-                 "%llu points cannot fit in the %llu bytes that follow",
-                 (unsigned long long)npts, (unsigned long long)left);
+                 "%llu points cannot fit in the %llu bytes that follow", (unsigned long long)npts,
+                 (unsigned long long)left);
         goto fail;
     }
     cap = 0;

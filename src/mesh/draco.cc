@@ -159,7 +159,10 @@ struct Cursor {
     }
 };
 
-constexpr unsigned version_of(unsigned major, unsigned minor) { return major << 8 | minor; }
+constexpr unsigned version_of(unsigned major, unsigned minor)
+{
+    return major << 8 | minor;
+}
 
 /* Walks one metadata block (entries, then named sub-blocks) without keeping
  * it. libdraco sizes an entry's buffer from its declared length before
@@ -228,7 +231,8 @@ extern "C" int vx_draco_check_header(const unsigned char *data, size_t n, uint64
     if (type == 0)
         return vx_err_set(err, VX_EUNPROC, "draco_point_cloud",
                           "the Draco file holds a point cloud, not a mesh");
-    if (type != 1) return vx_err_set(err, VX_EINVAL, "draco_corrupt", "unknown Draco geometry type %u", type);
+    if (type != 1)
+        return vx_err_set(err, VX_EINVAL, "draco_corrupt", "unknown Draco geometry type %u", type);
     /* Mesh bitstreams libdraco reads: 1.0 to 1.3 and 2.0 to 2.2. */
     unsigned v = version_of(major, minor);
     if (!((major == 1 && minor <= 3) || (major == 2 && minor <= 2)))
@@ -264,8 +268,8 @@ extern "C" int vx_draco_check_header(const unsigned char *data, size_t n, uint64
         uint64_t new_verts = 0, verts, symbols, splits;
         if (!c.u8(traversal)) return short_read("truncated connectivity header");
         if (traversal > 2)
-            return vx_err_set(err, VX_EINVAL, "draco_corrupt",
-                              "unknown edgebreaker traversal %u", traversal);
+            return vx_err_set(err, VX_EINVAL, "draco_corrupt", "unknown edgebreaker traversal %u",
+                              traversal);
         const unsigned since = version_of(2, 0);
         if (v < version_of(2, 2) && !c.count(v, since, new_verts))
             return short_read("truncated connectivity header");
@@ -597,13 +601,43 @@ void *throwing_new(std::size_t n)
 }
 } // namespace
 
-void *operator new(std::size_t n) { return throwing_new(n); }
-void *operator new[](std::size_t n) { return throwing_new(n); }
-void *operator new(std::size_t n, const std::nothrow_t &) noexcept { return counted_new(n); }
-void *operator new[](std::size_t n, const std::nothrow_t &) noexcept { return counted_new(n); }
-void operator delete(void *p) noexcept { counted_delete(p); }
-void operator delete[](void *p) noexcept { counted_delete(p); }
-void operator delete(void *p, std::size_t) noexcept { counted_delete(p); }
-void operator delete[](void *p, std::size_t) noexcept { counted_delete(p); }
-void operator delete(void *p, const std::nothrow_t &) noexcept { counted_delete(p); }
-void operator delete[](void *p, const std::nothrow_t &) noexcept { counted_delete(p); }
+void *operator new(std::size_t n)
+{
+    return throwing_new(n);
+}
+void *operator new[](std::size_t n)
+{
+    return throwing_new(n);
+}
+void *operator new(std::size_t n, const std::nothrow_t &) noexcept
+{
+    return counted_new(n);
+}
+void *operator new[](std::size_t n, const std::nothrow_t &) noexcept
+{
+    return counted_new(n);
+}
+void operator delete(void *p) noexcept
+{
+    counted_delete(p);
+}
+void operator delete[](void *p) noexcept
+{
+    counted_delete(p);
+}
+void operator delete(void *p, std::size_t) noexcept
+{
+    counted_delete(p);
+}
+void operator delete[](void *p, std::size_t) noexcept
+{
+    counted_delete(p);
+}
+void operator delete(void *p, const std::nothrow_t &) noexcept
+{
+    counted_delete(p);
+}
+void operator delete[](void *p, const std::nothrow_t &) noexcept
+{
+    counted_delete(p);
+}

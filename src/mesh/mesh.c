@@ -201,7 +201,8 @@ uint64_t vx_mesh_parse_cost(const char *path, vx_mesh_format fmt, uint64_t bytes
                             const vx_mesh_limits *lim)
 {
     switch (fmt) {
-    case VX_MESH_DRACO: return draco_cost(path, bytes, lim);
+    case VX_MESH_DRACO:
+        return draco_cost(path, bytes, lim);
     case VX_MESH_BPT: {
         uint64_t np = bytes / 32, declared = bpt_declared_patches(path);
         if (declared < np) np = declared;
@@ -209,6 +210,7 @@ uint64_t vx_mesh_parse_cost(const char *path, vx_mesh_format fmt, uint64_t bytes
             np = lim->max_triangles / 128;
         return np * 6656 + bytes / 6 * 40 + COST_BASE;
     }
-    default: return 8 * bytes + COST_BASE; /* OBJ, and what the sniffer could not tell */
+    default:
+        return 8 * bytes + COST_BASE; /* OBJ, and what the sniffer could not tell */
     }
 }

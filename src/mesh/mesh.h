@@ -90,11 +90,11 @@ vx_mesh *vx_draco_read_file(FILE *f, const vx_mesh_limits *lim, vx_err *err);
 
 /* What the header of a Draco file declares, before any data. */
 typedef struct vx_draco_header {
-    unsigned major, minor; /* bitstream version */
-    unsigned method;       /* 0 sequential, 1 edgebreaker */
-    uint64_t faces;        /* triangles */
-    uint64_t points;       /* vertices (edgebreaker: before attribute seams split them) */
-    uint64_t extra_points; /* edgebreaker: split and non-manifold vertices, temporary */
+    unsigned major, minor;   /* bitstream version */
+    unsigned method;         /* 0 sequential, 1 edgebreaker */
+    uint64_t faces;          /* triangles */
+    uint64_t points;         /* vertices (edgebreaker: before attribute seams split them) */
+    uint64_t extra_points;   /* edgebreaker: split and non-manifold vertices, temporary */
     unsigned attribute_sets; /* edgebreaker: attributes with their own connectivity */
 } vx_draco_header;
 

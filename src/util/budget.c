@@ -6,8 +6,10 @@ vx_budget_result vx_budget_reserve(vx_budget *b, uint64_t n, uint64_t limit)
     if (limit && n > limit) return VX_BUDGET_TOO_BIG;
     pthread_mutex_lock(&b->lock);
     vx_budget_result r = VX_BUDGET_OK;
-    if (limit && b->used + n > limit) r = VX_BUDGET_BUSY;
-    else b->used += n;
+    if (limit && b->used + n > limit)
+        r = VX_BUDGET_BUSY;
+    else
+        b->used += n;
     pthread_mutex_unlock(&b->lock);
     return r;
 }

@@ -13,12 +13,15 @@ typedef struct vx_budget {
     uint64_t used;
 } vx_budget;
 
-#define VX_BUDGET_INIT {PTHREAD_MUTEX_INITIALIZER, 0}
+#define VX_BUDGET_INIT                                                                             \
+    {                                                                                              \
+        PTHREAD_MUTEX_INITIALIZER, 0                                                               \
+    }
 
 typedef enum vx_budget_result {
-    VX_BUDGET_OK = 0,   /* reserved: release it later */
-    VX_BUDGET_BUSY,     /* does not fit now, would with fewer reservations */
-    VX_BUDGET_TOO_BIG,  /* more than the whole limit: never fits */
+    VX_BUDGET_OK = 0,  /* reserved: release it later */
+    VX_BUDGET_BUSY,    /* does not fit now, would with fewer reservations */
+    VX_BUDGET_TOO_BIG, /* more than the whole limit: never fits */
 } vx_budget_result;
 
 /* Reserves n against limit (0 = no limit: always reserved). */
