@@ -123,7 +123,7 @@ check "parse_too_big: not stored" test "$(curl -s -o /dev/null -w '%{http_code}'
 n503=0
 n201=0
 acked=()
-for round in 1 2 3 4 5; do
+for round in 1 2 3 4 5 6 7 8; do
     pids=()
     for k in 1 2 3 4 5 6 7 8; do
         f=$TMP/c$round-$k.obj
