@@ -56,6 +56,9 @@ static const opt_def opts[] = {
      "largest rendered image, width*height (default 67108864)"},
     {"max-job-memory", T_SIZE, F(max_job_memory), 0, "memory one job may use (default 4G)"},
     {"max-json-bytes", T_SIZE, F(max_json_bytes), 0, "largest JSON request body (default 16M)"},
+    {"max-parse-memory", T_SIZE, F(max_parse_memory), 0,
+     "worst-case memory of concurrent upload parses before 503 (default 8 x max-upload-bytes "
+     "+ 256M; 0 = no limit)"},
     {"results-max-bytes", T_SIZE, F(results_max_bytes), 0,
      "results kept on disk before LRU eviction (default 10G; 0 = no limit)"},
     {"results-max-age", T_SECONDS, F(results_max_age_s), 0,
@@ -108,6 +111,7 @@ static void defaults(vx_config *c)
     c->max_image_pixels = 8192ull * 8192ull;
     c->max_job_memory = 4ull << 30;
     c->max_json_bytes = 16ull << 20;
+    c->max_parse_memory = UINT64_MAX; /* 8 x max_upload_bytes + 256M, see vx_config_load */
     c->results_max_bytes = 10ull << 30;
     c->results_max_age_s = 7 * 86400;
     c->job_history = 10000;
@@ -282,6 +286,12 @@ int vx_config_load(vx_config *c, int argc, char **argv)
         return -1;
     }
     if (!c->cache_dir[0]) snprintf(c->cache_dir, sizeof c->cache_dir, "%s/cache", c->data_dir);
+    /* Enough for one upload of the largest size in the costliest format
+     * (vx_mesh_parse_cost: OBJ, 8 x the file). */
+    if (c->max_parse_memory == UINT64_MAX)
+        c->max_parse_memory = c->max_upload_bytes > (UINT64_MAX - (256ull << 20)) / 8
+                                  ? 0
+                                  : 8 * c->max_upload_bytes + (256ull << 20);
     if (c->token_file[0]) {
         vx_err err;
         size_t len;

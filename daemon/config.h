@@ -38,6 +38,8 @@ typedef struct vx_config {
     uint64_t max_job_memory;
     uint64_t max_json_bytes;
     uint64_t min_free_disk; /* writes answer 507 below this many free bytes in the data dir */
+    uint64_t max_parse_memory; /* reserved by concurrent upload parses; 0 = no limit,
+                                  UINT64_MAX = 8 x max_upload_bytes + 256M */
     uint64_t results_max_bytes;
     double results_max_age_s;
     uint64_t job_history;

@@ -66,6 +66,7 @@
 
 #include "metrics.h"
 #include "request.h"
+#include "util/budget.h"
 #include "util/fsutil.h"
 #include "util/log.h"
 
@@ -651,6 +652,7 @@ static int h_info(vx_http *h, struct MHD_Connection *c, req *r)
     cJSON_AddNumberToObject(l, "max_job_memory_bytes", (double)cfg->max_job_memory);
     cJSON_AddNumberToObject(l, "max_json_bytes", (double)cfg->max_json_bytes);
     cJSON_AddNumberToObject(l, "min_free_disk_bytes", (double)cfg->min_free_disk);
+    cJSON_AddNumberToObject(l, "max_parse_memory_bytes", (double)cfg->max_parse_memory);
     cJSON_AddNumberToObject(l, "results_max_bytes", (double)cfg->results_max_bytes);
     cJSON_AddNumberToObject(l, "results_max_age_s", cfg->results_max_age_s);
     cJSON_AddNumberToObject(l, "job_history", (double)cfg->job_history);
@@ -721,6 +723,9 @@ static cJSON *mesh_meta(const char *id, const char *format, uint64_t bytes, cons
     return o;
 }
 
+/* The worst-case memory of the upload parses running now (--max-parse-memory). */
+static vx_budget parse_budget = VX_BUDGET_INIT;
+
 /* The body has been streamed to a temp file: hash known, now validate. */
 static int h_upload_done(vx_http *h, struct MHD_Connection *c, req *r)
 {
@@ -759,9 +764,34 @@ static int h_upload_done(vx_http *h, struct MHD_Connection *c, req *r)
     if (r->declared == MEDIA_OBJ || (r->declared == MEDIA_TEXT && fmt != VX_MESH_BPT))
         fmt = VX_MESH_OBJ;
     vx_mesh_limits lim = {.max_triangles = h->d.cfg->max_triangles};
+    const char *fname = fmt == VX_MESH_DRACO ? "draco" : fmt == VX_MESH_BPT ? "bpt" : "obj";
+    /* Reserve the parse's worst-case memory first; the upload was not
+     * acknowledged, so a busy answer loses nothing. */
+    uint64_t cost = vx_mesh_parse_cost(vx_upload_path(r->up), fmt, vx_upload_bytes(r->up), &lim);
+    uint64_t budget = h->d.cfg->max_parse_memory;
+    vx_budget_result br = vx_budget_reserve(&parse_budget, cost, budget);
+    if (br != VX_BUDGET_OK) {
+        char msg[256];
+        VX_INFO("mesh.parse_budget", "format=%s bytes=%llu cost=%llu used=%llu limit=%llu", fname,
+                (unsigned long long)vx_upload_bytes(r->up), (unsigned long long)cost,
+                (unsigned long long)vx_budget_used(&parse_budget), (unsigned long long)budget);
+        if (br == VX_BUDGET_TOO_BIG) {
+            snprintf(msg, sizeof msg,
+                     "parsing this %s upload may take up to %llu bytes of memory, more than the "
+                     "max-parse-memory limit of %llu bytes",
+                     fname, (unsigned long long)cost, (unsigned long long)budget);
+            return send_error(c, r, 413, "parse_too_big", msg);
+        }
+        snprintf(msg, sizeof msg,
+                 "other uploads being parsed hold the memory this %s upload may need (%llu of "
+                 "max-parse-memory's %llu bytes); retry later",
+                 fname, (unsigned long long)cost, (unsigned long long)budget);
+        return send_error_h(c, r, 503, "busy_parsing", msg, MHD_HTTP_HEADER_RETRY_AFTER, "2");
+    }
     double t = vx_mono();
     vx_mesh *m = vx_mesh_read_as(vx_upload_path(r->up), fmt, &lim, &err);
     if (!m) {
+        vx_budget_release(&parse_budget, cost);
         char q[600];
         VX_INFO("mesh.rejected", "code=%s message=%s", err.code, vx_log_quote(q, sizeof q, err.message));
         return send_err(c, r, &err);
@@ -769,13 +799,14 @@ static int h_upload_done(vx_http *h, struct MHD_Connection *c, req *r)
     double parse_ms = (vx_mono() - t) * 1e3;
     if (m->degenerate_tris == m->ntris) {
         vx_mesh_free(m);
+        vx_budget_release(&parse_budget, cost);
         return send_error(c, r, 422, "degenerate_mesh", "every triangle of the mesh has zero area");
     }
-    const char *fname = fmt == VX_MESH_DRACO ? "draco" : fmt == VX_MESH_BPT ? "bpt" : "obj";
     meta = mesh_meta(id, fname, vx_upload_bytes(r->up), m);
     VX_INFO("mesh.uploaded", "mesh=%s new=1 format=%s bytes=%llu vertices=%zu triangles=%zu parse_ms=%.1f",
             id, fname, (unsigned long long)vx_upload_bytes(r->up), m->nverts, m->ntris, parse_ms);
     vx_mesh_free(m);
+    vx_budget_release(&parse_budget, cost);
     int existed = 0;
     vx_upload *up = r->up;
     r->up = NULL; /* commit frees it */

@@ -6,12 +6,17 @@
 #include <stdarg.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
 
 #include "mesh/mesh.h"
 #include "mesh/text.h"
 #include "util/log.h"
 
 #define BPT_MAX_LINE 4096
+/* The shortest lines the format allows: 16 one-digit indices with 15
+ * separators, and "x,y,z" with one-digit numbers, each with its newline. */
+#define BPT_MIN_PATCH_LINE 32
+#define BPT_MIN_POINT_LINE 6
 
 typedef struct bpt_reader {
     FILE *f;
@@ -107,6 +112,34 @@ static int parse_uint(bpt_reader *r, const char *s, const char *what, uint64_t *
         if (v < UINT64_C(1) << 40) v = v * 10 + (uint64_t)(*p - '0');
     }
     *out = v;
+    return 0;
+}
+
+/* Bytes of the file after the current position, or UINT64_MAX when the
+ * file's size is not known (a pipe, a memory stream). */
+static uint64_t bytes_left(bpt_reader *r)
+{
+    struct stat st;
+    off_t here = ftello(r->f);
+    int fd = fileno(r->f);
+    if (fd < 0 || here < 0 || fstat(fd, &st) || !S_ISREG(st.st_mode) || st.st_size < here)
+        return UINT64_MAX;
+    return (uint64_t)(st.st_size - here);
+}
+
+/* Room for `count` records of which `have` are stored: grows *p (elsize
+ * bytes a record) by half again, so that memory follows the data read and
+ * never a declared count; capped at `declared`. */
+static int grow_to(void **p, size_t *cap, size_t need, size_t declared, size_t elsize)
+{
+    if (need <= *cap) return 0;
+    size_t n = *cap + *cap / 2 + 1024;
+    if (n > declared) n = declared;
+    if (n < need) n = need;
+    void *q = realloc(*p, n * elsize);
+    if (!q) return -1;
+    *p = q;
+    *cap = n;
     return 0;
 }
 
@@ -367,23 +400,33 @@ vx_mesh *vx_bpt_read_file(FILE *f, const vx_mesh_limits *lim, vx_err *err)
                  (unsigned long long)np, (unsigned long long)tris);
         goto fail;
     }
-    m->patch_idx = malloc((size_t)np * 16 * sizeof(uint32_t));
-    if (!m->patch_idx) {
-        vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for %llu patches",
-                   (unsigned long long)np);
+    /* The counts are untrusted: storage grows as lines arrive. Where the
+     * file's size is known, a count the rest of the file cannot hold (a
+     * patch line takes BPT_MIN_PATCH_LINE bytes at least) ends the read at
+     * once, and the storage is sized for what can follow. */
+    uint64_t left = bytes_left(r);
+    if (left != UINT64_MAX && np > left / BPT_MIN_PATCH_LINE) {
+        bpt_fail(r, VX_EINVAL, "bpt_truncated",
+                 "%llu patches cannot fit in the %llu bytes that follow", (unsigned long long)np,
+                 (unsigned long long)left);
         goto fail;
     }
-    m->npatches = (size_t)np;
+    size_t cap = 0;
     uint64_t maxidx = 0;
     size_t maxline = 0;
-    for (size_t p = 0; p < m->npatches; p++) {
+    for (size_t p = 0; p < np; p++) {
         int e = next_line(r);
         if (e < 0) goto fail;
         if (e) {
-            bpt_fail(r, VX_EINVAL, "bpt_truncated", "the file ends after %zu of %zu patches", p,
-                     m->npatches);
+            bpt_fail(r, VX_EINVAL, "bpt_truncated", "the file ends after %zu of %llu patches", p,
+                     (unsigned long long)np);
             goto fail;
         }
+        if (grow_to((void **)&m->patch_idx, &cap, p + 1, (size_t)np, 16 * sizeof(uint32_t))) {
+            vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for %zu patches", p + 1);
+            goto fail;
+        }
+        m->npatches = p + 1;
         char *fl[16];
         if (split(r, fl, 16, "a patch line")) goto fail;
         for (int k = 0; k < 16; k++) {
@@ -413,12 +456,15 @@ vx_mesh *vx_bpt_read_file(FILE *f, const vx_mesh_limits *lim, vx_err *err)
                  (unsigned long long)maxidx, (unsigned long long)npts);
         goto fail;
     }
-    m->pos = malloc((size_t)npts * 3 * sizeof(double));
-    if (!m->pos) {
-        vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for %llu points",
-                   (unsigned long long)npts);
+    left = bytes_left(r);
+    /* (the last line may lack its newline) */
+    if (left != UINT64_MAX && npts > (left + 1) / BPT_MIN_POINT_LINE) {
+        bpt_fail(r, VX_EINVAL, "bpt_truncated",
+                 "%llu points cannot fit in the %llu bytes that follow", (unsigned long long)npts,
+                 (unsigned long long)left);
         goto fail;
     }
+    cap = 0;
     for (size_t i = 0; i < npts; i++) {
         int e = next_line(r);
         if (e < 0) goto fail;
@@ -427,6 +473,11 @@ vx_mesh *vx_bpt_read_file(FILE *f, const vx_mesh_limits *lim, vx_err *err)
                      (unsigned long long)npts);
             goto fail;
         }
+        if (grow_to((void **)&m->pos, &cap, i + 1, (size_t)npts, 3 * sizeof(double))) {
+            vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for %zu points", i + 1);
+            goto fail;
+        }
+        m->nverts = i + 1;
         char *fl[3];
         if (split(r, fl, 3, "a point line")) goto fail;
         for (int a = 0; a < 3; a++) {
@@ -443,7 +494,6 @@ vx_mesh *vx_bpt_read_file(FILE *f, const vx_mesh_limits *lim, vx_err *err)
             m->pos[3 * i + (size_t)a] = v;
         }
     }
-    m->nverts = (size_t)npts;
     if (dedupe_points(m, err)) goto fail;
     int e = next_line(r);
     if (e < 0) goto fail;

@@ -10,6 +10,7 @@
 #include <new>
 #include <vector>
 
+#include <malloc.h>
 #include <sys/stat.h>
 
 #include "draco/compression/decode.h"
@@ -51,7 +52,14 @@ size_t file_bound(const vx_mesh_limits *lim)
 int slurp(FILE *f, size_t bound, std::vector<char> &data, vx_err *err)
 {
     size_t used = 0;
-    data.resize(size_t(1) << 16);
+    /* A regular file's size is known: one allocation, no doubling copies
+     * (the peak would be 1.5 times the file). */
+    struct stat st;
+    off_t here = ftello(f);
+    size_t first = size_t(1) << 16;
+    if (fstat(fileno(f), &st) == 0 && S_ISREG(st.st_mode) && here >= 0 && st.st_size >= here)
+        first = std::min(size_t(st.st_size - here), bound) + 1;
+    data.resize(first);
     for (;;) {
         if (used == data.size()) {
             /* The buffer is one byte over the bound at most: enough to tell. */
@@ -75,8 +83,246 @@ int slurp(FILE *f, size_t bound, std::vector<char> &data, vx_err *err)
     return 0;
 }
 
+/* libdraco also sizes tables from counts deep in the data, where no header
+ * check reaches: a texture-coordinate predictor's orientation count (up to
+ * 2^31 bits, then read in a loop of as many steps: 27 s and 200 MB for a
+ * 2.7 KB file of 372 faces, found by fuzz_draco). While an AllocCap lives,
+ * its thread's operator new allocations are counted (malloc_usable_size,
+ * frees subtracted) and one that would pass the cap throws std::bad_alloc
+ * before anything is spent; the decode reports it as draco_corrupt. */
+thread_local uint64_t t_cap, t_used;
+thread_local bool t_active, t_tripped;
+
+class AllocCap
+{
+  public:
+    explicit AllocCap(uint64_t cap)
+    {
+        t_cap = cap;
+        t_used = 0;
+        t_tripped = false;
+        t_active = true;
+    }
+    ~AllocCap() { t_active = false; }
+    AllocCap(const AllocCap &) = delete;
+    AllocCap &operator=(const AllocCap &) = delete;
+    bool tripped() const { return t_tripped; }
+    uint64_t limit() const { return t_cap; }
+};
+
+/* A cursor over the header bytes: every read checks the bytes left. */
+struct Cursor {
+    const unsigned char *p, *end;
+    bool u8(unsigned &v)
+    {
+        if (p == end) return false;
+        v = *p++;
+        return true;
+    }
+    bool u16(unsigned &v)
+    {
+        if (end - p < 2) return false;
+        v = unsigned(p[0]) | unsigned(p[1]) << 8;
+        p += 2;
+        return true;
+    }
+    bool u32(uint64_t &v)
+    {
+        if (end - p < 4) return false;
+        v = uint64_t(p[0]) | uint64_t(p[1]) << 8 | uint64_t(p[2]) << 16 | uint64_t(p[3]) << 24;
+        p += 4;
+        return true;
+    }
+    /* libdraco's varint: 7 bits a byte, low bits first; a uint32 takes five
+     * bytes at most. */
+    bool varint(uint64_t &v)
+    {
+        v = 0;
+        for (int i = 0; i < 5; i++) {
+            if (p == end) return false;
+            unsigned b = *p++;
+            v |= uint64_t(b & 0x7f) << (7 * i);
+            if (!(b & 0x80)) return v <= UINT32_MAX;
+        }
+        return false;
+    }
+    /* A count: uint32 in the oldest bitstreams, varint from `since` on. */
+    bool count(unsigned version, unsigned since, uint64_t &v)
+    {
+        return version < since ? u32(v) : varint(v);
+    }
+    bool skip(uint64_t n)
+    {
+        if (uint64_t(end - p) < n) return false;
+        p += n;
+        return true;
+    }
+};
+
+constexpr unsigned version_of(unsigned major, unsigned minor)
+{
+    return major << 8 | minor;
+}
+
+/* Walks one metadata block (entries, then named sub-blocks) without keeping
+ * it. libdraco sizes an entry's buffer from its declared length before
+ * reading it and recurses once per level, so both are checked here first. */
+bool skip_metadata(Cursor &c, int depth)
+{
+    uint64_t n, len;
+    unsigned nlen;
+    if (depth > 16 || !c.varint(n)) return false;
+    for (uint64_t i = 0; i < n; i++)
+        if (!c.u8(nlen) || !c.skip(nlen) || !c.varint(len) || len == 0 || !c.skip(len))
+            return false;
+    if (!c.varint(n)) return false;
+    for (uint64_t i = 0; i < n; i++)
+        if (!c.u8(nlen) || !c.skip(nlen) || !skip_metadata(c, depth + 1)) return false;
+    return true;
+}
+
+int corrupt(vx_err *err, const char *what)
+{
+    return vx_err_set(err, VX_EINVAL, "draco_corrupt", "not a valid Draco mesh: %s", what);
+}
+
+} // namespace
+
+/* Edgebreaker entropy-codes its connectivity and the attributes; the
+ * densest encoding libdraco writes of a real mesh (a regular grid at
+ * -cl 10) carries about 40 faces per byte of the whole file. A declared
+ * face count beyond this many per byte left is not a real encoding. */
+#define DRACO_FACES_PER_BYTE 2048
+/* Non-position attributes with seams (texture coordinates, normals,
+ * colours...) that an edgebreaker mesh may carry. */
+#define DRACO_MAX_ATTRIBUTE_SETS 32
+
+/* libdraco's own peak, measured with AllocCap's counter: 78 bytes a face
+ * with its vertices for a mesh of positions (edgebreaker, 2 million faces),
+ * 152 with texture coordinates and normals; 2 bytes per file byte at most
+ * for the sequential method's entropy-coded buffers. About twice that. */
+extern "C" uint64_t vx_draco_decode_bound(const vx_draco_header *h, uint64_t file_size)
+{
+    return 2 * file_size + (96 + 64 * uint64_t(h->attribute_sets)) * h->faces +
+           96 * (h->points + h->extra_points) + (uint64_t(4) << 20);
+}
+
+extern "C" int vx_draco_check_header(const unsigned char *data, size_t n, uint64_t file_size,
+                                     const vx_mesh_limits *lim, vx_draco_header *h, vx_err *err)
+{
+    Cursor c{data, data + n};
+    *h = vx_draco_header{};
+    /* Bytes of the file after the cursor (the window may end earlier). */
+    auto left = [&]() { return file_size - uint64_t(c.p - data); };
+    /* A read that fails inside the window but before the end of the file
+     * needs more of it. */
+    auto short_read = [&](const char *what) {
+        if (n < file_size) return 1;
+        return corrupt(err, what);
+    };
+    unsigned major, minor, type, method, flags;
+    if (n < 5 || std::memcmp(data, "DRACO", 5)) return corrupt(err, "no DRACO magic");
+    c.p += 5;
+    if (!c.u8(major) || !c.u8(minor) || !c.u8(type) || !c.u8(method) || !c.u16(flags))
+        return short_read("truncated header");
+    h->major = major;
+    h->minor = minor;
+    h->method = method;
+    if (type == 0)
+        return vx_err_set(err, VX_EUNPROC, "draco_point_cloud",
+                          "the Draco file holds a point cloud, not a mesh");
+    if (type != 1)
+        return vx_err_set(err, VX_EINVAL, "draco_corrupt", "unknown Draco geometry type %u", type);
+    /* Mesh bitstreams libdraco reads: 1.0 to 1.3 and 2.0 to 2.2. */
+    unsigned v = version_of(major, minor);
+    if (!((major == 1 && minor <= 3) || (major == 2 && minor <= 2)))
+        return vx_err_set(err, VX_EINVAL, "draco_corrupt",
+                          "unsupported Draco bitstream version %u.%u (1.0 to 2.2 are read)", major,
+                          minor);
+    if (method > 1)
+        return vx_err_set(err, VX_EINVAL, "draco_corrupt", "unknown Draco encoding method %u",
+                          method);
+    if (v >= version_of(1, 3) && (flags & 0x8000)) {
+        uint64_t natt, id;
+        if (!c.varint(natt)) return short_read("truncated metadata");
+        for (uint64_t i = 0; i < natt; i++)
+            if (!c.varint(id) || !skip_metadata(c, 0)) return short_read("corrupt metadata");
+        if (!skip_metadata(c, 0)) return short_read("corrupt metadata");
+    }
+    uint64_t faces, points;
+    if (method == 0) { /* sequential */
+        if (!c.count(v, version_of(2, 2), faces) || !c.count(v, version_of(2, 2), points))
+            return short_read("truncated connectivity header");
+        /* At least one byte per face index, as libdraco checks too; every
+         * point is used by a face. */
+        if (faces > left() / 3)
+            return vx_err_set(err, VX_EINVAL, "draco_corrupt",
+                              "the header declares %llu faces, more than %llu bytes can hold",
+                              (unsigned long long)faces, (unsigned long long)left());
+        if (points > 3 * faces)
+            return vx_err_set(err, VX_EINVAL, "draco_corrupt",
+                              "the header declares %llu points for %llu faces",
+                              (unsigned long long)points, (unsigned long long)faces);
+    } else { /* edgebreaker */
+        unsigned traversal, natt;
+        uint64_t new_verts = 0, verts, symbols, splits;
+        if (!c.u8(traversal)) return short_read("truncated connectivity header");
+        if (traversal > 2)
+            return vx_err_set(err, VX_EINVAL, "draco_corrupt", "unknown edgebreaker traversal %u",
+                              traversal);
+        const unsigned since = version_of(2, 0);
+        if (v < version_of(2, 2) && !c.count(v, since, new_verts))
+            return short_read("truncated connectivity header");
+        if (!c.count(v, since, verts) || !c.count(v, since, faces) || !c.u8(natt) ||
+            !c.count(v, since, symbols) || !c.count(v, since, splits))
+            return short_read("truncated connectivity header");
+        uint64_t max_faces = DRACO_FACES_PER_BYTE * left() + 64;
+        if (faces > max_faces)
+            return vx_err_set(err, VX_EINVAL, "draco_corrupt",
+                              "the header declares %llu faces in %llu bytes of data: more than "
+                              "any encoding holds",
+                              (unsigned long long)faces, (unsigned long long)left());
+        /* A symbol makes one face; a split or a new vertex needs a face;
+         * every vertex is a corner of a face. */
+        if (symbols > faces || splits > faces || verts > 3 * faces || new_verts > 3 * faces)
+            return vx_err_set(err, VX_EINVAL, "draco_corrupt",
+                              "inconsistent counts in the header: %llu faces, %llu symbols, "
+                              "%llu vertices, %llu splits",
+                              (unsigned long long)faces, (unsigned long long)symbols,
+                              (unsigned long long)verts, (unsigned long long)splits);
+        /* Each set costs libdraco a corner table of its own. */
+        if (natt > DRACO_MAX_ATTRIBUTE_SETS)
+            return vx_err_set(err, VX_EINVAL, "draco_corrupt",
+                              "%u attribute connectivity sets, more than %d", natt,
+                              DRACO_MAX_ATTRIBUTE_SETS);
+        points = verts;
+        h->extra_points = splits + new_verts;
+        h->attribute_sets = natt;
+    }
+    h->faces = faces;
+    h->points = points;
+    if (lim && lim->max_triangles && faces > lim->max_triangles)
+        return vx_err_set(err, VX_ETOOBIG, "mesh_too_big",
+                          "the header declares %llu triangles, more than %zu (the limit)",
+                          (unsigned long long)faces, lim->max_triangles);
+    if (lim && lim->max_vertices && points > lim->max_vertices)
+        return vx_err_set(err, VX_ETOOBIG, "mesh_too_big",
+                          "the header declares %llu vertices, more than %zu (the limit)",
+                          (unsigned long long)points, lim->max_vertices);
+    return 0;
+}
+
+namespace
+{
+
 vx_mesh *decode(const std::vector<char> &data, const vx_mesh_limits *lim, vx_err *err)
 {
+    /* The declared counts decide what libdraco allocates before it reads
+     * any data: check them first. */
+    vx_draco_header hd;
+    if (vx_draco_check_header(reinterpret_cast<const unsigned char *>(data.data()), data.size(),
+                              data.size(), lim, &hd, err))
+        return nullptr;
     draco::DecoderBuffer buf;
     buf.Init(data.data(), data.size());
     /* Works on a copy of the buffer: the position stays at the start. */
@@ -97,13 +343,31 @@ vx_mesh *decode(const std::vector<char> &data, const vx_mesh_limits *lim, vx_err
         return nullptr;
     }
     draco::Decoder dec;
-    auto res = dec.DecodeMeshFromBuffer(&buf);
-    if (!res.ok()) {
+    std::unique_ptr<draco::Mesh> decoded;
+    draco::Status status;
+    {
+        AllocCap cap(vx_draco_decode_bound(&hd, data.size()));
+        try {
+            auto res = dec.DecodeMeshFromBuffer(&buf);
+            status = res.status();
+            if (res.ok()) decoded = std::move(res).value();
+        } catch (const std::bad_alloc &) {
+            if (!cap.tripped()) throw;
+        }
+        if (cap.tripped()) {
+            vx_err_set(err, VX_EINVAL, "draco_corrupt",
+                       "corrupt Draco mesh: decoding it would take more than %llu bytes of "
+                       "memory for %llu faces",
+                       (unsigned long long)cap.limit(), (unsigned long long)hd.faces);
+            return nullptr;
+        }
+    }
+    if (!status.ok() || !decoded) {
         vx_err_set(err, VX_EINVAL, "draco_corrupt", "corrupt or truncated Draco mesh: %s",
-                   res.status().error_msg());
+                   status.error_msg());
         return nullptr;
     }
-    const draco::Mesh &dm = *res.value();
+    const draco::Mesh &dm = *decoded;
     size_t np = dm.num_points(), nf = dm.num_faces();
     if (nf == 0) {
         vx_err_set(err, VX_EUNPROC, "draco_no_faces", "the Draco mesh has no faces");
@@ -113,6 +377,14 @@ vx_mesh *decode(const std::vector<char> &data, const vx_mesh_limits *lim, vx_err
     if (!pa || pa->num_components() < 3) {
         vx_err_set(err, VX_EUNPROC, "draco_no_positions",
                    "the Draco mesh has no three-component POSITION attribute");
+        return nullptr;
+    }
+    /* Numbers only: converting bools reads arbitrary bytes as bool (found
+     * by fuzz_draco; undefined behaviour). */
+    draco::DataType dt = pa->data_type();
+    if (dt <= draco::DT_INVALID || dt == draco::DT_BOOL || dt >= draco::DT_TYPES_COUNT) {
+        vx_err_set(err, VX_EUNPROC, "draco_no_positions",
+                   "the Draco mesh's POSITION attribute is not numeric (data type %d)", int(dt));
         return nullptr;
     }
     if (lim && lim->max_vertices && np > lim->max_vertices) {
@@ -288,4 +560,84 @@ extern "C" int vx_draco_write_path(const vx_mesh *m, const vx_mesh_write_opts *o
     } catch (...) {
         return vx_err_set(err, VX_EIO, "draco_encode", "libdraco failed unexpectedly");
     }
+}
+
+/* The replaceable global allocation functions, for AllocCap (above): the
+ * plain and array forms, with and without nothrow and size; the aligned
+ * forms keep the library's (aligned_alloc and free, never counted). */
+namespace
+{
+void *counted_new(std::size_t n)
+{
+    if (t_active) {
+        if (n > t_cap || t_used > t_cap - n) {
+            t_tripped = true;
+            return nullptr;
+        }
+    }
+    void *p = std::malloc(n ? n : 1);
+    if (p && t_active) t_used += malloc_usable_size(p);
+    return p;
+}
+
+void counted_delete(void *p) noexcept
+{
+    if (p && t_active) {
+        size_t n = malloc_usable_size(p);
+        t_used = n > t_used ? 0 : t_used - n;
+    }
+    std::free(p);
+}
+
+void *throwing_new(std::size_t n)
+{
+    for (;;) {
+        void *p = counted_new(n);
+        if (p) return p;
+        std::new_handler h = t_tripped ? nullptr : std::get_new_handler();
+        if (!h) throw std::bad_alloc();
+        h();
+    }
+}
+} // namespace
+
+void *operator new(std::size_t n)
+{
+    return throwing_new(n);
+}
+void *operator new[](std::size_t n)
+{
+    return throwing_new(n);
+}
+void *operator new(std::size_t n, const std::nothrow_t &) noexcept
+{
+    return counted_new(n);
+}
+void *operator new[](std::size_t n, const std::nothrow_t &) noexcept
+{
+    return counted_new(n);
+}
+void operator delete(void *p) noexcept
+{
+    counted_delete(p);
+}
+void operator delete[](void *p) noexcept
+{
+    counted_delete(p);
+}
+void operator delete(void *p, std::size_t) noexcept
+{
+    counted_delete(p);
+}
+void operator delete[](void *p, std::size_t) noexcept
+{
+    counted_delete(p);
+}
+void operator delete(void *p, const std::nothrow_t &) noexcept
+{
+    counted_delete(p);
+}
+void operator delete[](void *p, const std::nothrow_t &) noexcept
+{
+    counted_delete(p);
 }

@@ -2,6 +2,7 @@
 #include "mesh/mesh.h"
 
 #include <math.h>
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -144,4 +145,72 @@ int vx_mesh_analyze(vx_mesh *m, vx_err *err)
     }
 
     return count_edges(m, nedges, err);
+}
+
+#define COST_BASE (UINT64_C(16) << 20)
+
+/* The patch count on the first line of a .bpt file, or UINT64_MAX. */
+static uint64_t bpt_declared_patches(const char *path)
+{
+    FILE *f = path ? fopen(path, "rb") : NULL;
+    if (!f) return UINT64_MAX;
+    char line[64];
+    uint64_t n = UINT64_MAX;
+    if (fgets(line, sizeof line, f)) {
+        const char *p = line;
+        if (!strncmp(p, "\xef\xbb\xbf", 3)) p += 3;
+        while (*p == ' ' || *p == '\t' || *p == '\r' || *p == '\n')
+            p++;
+        if (*p >= '0' && *p <= '9') {
+            n = 0;
+            for (; *p >= '0' && *p <= '9'; p++)
+                if (n < UINT64_C(1) << 40) n = n * 10 + (uint64_t)(*p - '0');
+        }
+    }
+    fclose(f);
+    return n;
+}
+
+static uint64_t draco_cost(const char *path, uint64_t bytes, const vx_mesh_limits *lim)
+{
+    vx_draco_header h = {0};
+    h.faces = 2048 * bytes + 64;
+    if (lim && lim->max_triangles && h.faces > lim->max_triangles) h.faces = lim->max_triangles;
+    h.points = 3 * h.faces;
+    h.attribute_sets = 4;
+    FILE *f = path ? fopen(path, "rb") : NULL;
+    if (f) {
+        /* The header and any metadata: a window at the start is enough but
+         * for unusually large metadata, which falls back to the bound. */
+        static const size_t window = 64 * 1024;
+        unsigned char *buf = malloc(window);
+        size_t n = buf ? fread(buf, 1, window, f) : 0;
+        vx_draco_header d;
+        vx_err err;
+        int rc = buf ? vx_draco_check_header(buf, n, bytes, lim, &d, &err) : 1;
+        free(buf);
+        fclose(f);
+        if (rc < 0) return bytes + COST_BASE; /* refused at the header */
+        if (rc == 0) h = d;
+    }
+    return bytes + vx_draco_decode_bound(&h, bytes) + 32 * (h.faces + h.points + h.extra_points) +
+           (UINT64_C(12) << 20);
+}
+
+uint64_t vx_mesh_parse_cost(const char *path, vx_mesh_format fmt, uint64_t bytes,
+                            const vx_mesh_limits *lim)
+{
+    switch (fmt) {
+    case VX_MESH_DRACO:
+        return draco_cost(path, bytes, lim);
+    case VX_MESH_BPT: {
+        uint64_t np = bytes / 32, declared = bpt_declared_patches(path);
+        if (declared < np) np = declared;
+        if (lim && lim->max_triangles && np > lim->max_triangles / 128)
+            np = lim->max_triangles / 128;
+        return np * 6656 + bytes / 6 * 40 + COST_BASE;
+    }
+    default:
+        return 8 * bytes + COST_BASE; /* OBJ, and what the sniffer could not tell */
+    }
 }

@@ -88,6 +88,41 @@ vx_mesh *vx_draco_read_path(const char *path, const vx_mesh_limits *lim, vx_err 
  * (vx_mesh_read_path hands over the file it sniffed). */
 vx_mesh *vx_draco_read_file(FILE *f, const vx_mesh_limits *lim, vx_err *err);
 
+/* What the header of a Draco file declares, before any data. */
+typedef struct vx_draco_header {
+    unsigned major, minor;   /* bitstream version */
+    unsigned method;         /* 0 sequential, 1 edgebreaker */
+    uint64_t faces;          /* triangles */
+    uint64_t points;         /* vertices (edgebreaker: before attribute seams split them) */
+    uint64_t extra_points;   /* edgebreaker: split and non-manifold vertices, temporary */
+    unsigned attribute_sets; /* edgebreaker: attributes with their own connectivity */
+} vx_draco_header;
+
+/* Checks the header of a Draco file of file_size bytes whose first n bytes
+ * are data (the whole file, or a window at its start) before libdraco sees
+ * it: libdraco sizes its tables from the declared counts (24 bytes per face
+ * for edgebreaker's corner table) before reading any data. Refuses unknown
+ * versions (1.0 to 2.2 are read), methods and traversals, metadata that
+ * does not parse, counts that contradict each other or that the bytes after
+ * the header cannot hold (sequential: 3 bytes per face; edgebreaker: 2048
+ * faces per byte, 50 times the densest encoding libdraco makes),
+ * all VX_EINVAL draco_corrupt; a point cloud is VX_EUNPROC
+ * draco_point_cloud; faces over lim->max_triangles or vertices over
+ * lim->max_vertices are VX_ETOOBIG mesh_too_big. Returns 0 and fills *h,
+ * -1 with err set, or 1 when the window ends before the counts (n <
+ * file_size only). */
+int vx_draco_check_header(const unsigned char *data, size_t n, uint64_t file_size,
+                          const vx_mesh_limits *lim, vx_draco_header *h, vx_err *err);
+
+/* The most bytes libdraco may allocate through operator new to decode a
+ * file of file_size bytes with header h (2 file_size + (96 + 64 sets) a
+ * face + 96 a point + 4 MiB, about twice the measured peaks). The reader
+ * enforces it on the decoding thread: libdraco also sizes tables from
+ * counts deep in the data, past any header check (a texture-coordinate
+ * predictor's orientation count, up to 2^31); past the bound the decode
+ * stops with VX_EINVAL draco_corrupt. */
+uint64_t vx_draco_decode_bound(const vx_draco_header *h, uint64_t file_size);
+
 /* Quads per patch side in the tessellation a .bpt read makes (8 x 8 quads,
  * 128 triangles per patch). */
 #define VX_BPT_TESS 8
@@ -120,6 +155,31 @@ vx_mesh *vx_mesh_read_as(const char *path, vx_mesh_format fmt, const vx_mesh_lim
  * for text, VX_MESH_BPT when the first non-blank line is a single unsigned
  * integer (never valid OBJ), else VX_MESH_OBJ; 0 for binary junk. */
 vx_mesh_format vx_mesh_sniff(const unsigned char *head, size_t n);
+
+/* Worst-case peak memory, in bytes, of reading a `bytes`-byte file at path
+ * in format fmt under lim: what the daemon reserves from --max-parse-memory
+ * before it parses an upload. Measured peaks (RSS over the process before
+ * the read, 40 MB files) and the bounds used:
+ *   OBJ    8 x bytes + 16 MiB. Faces of nine one-digit indices are the worst
+ *          (8.0x: face indices, offsets, the fan triangulation and the edge
+ *          table); quads 6.4x, repeated triangles 3.7x, vertices only 3.4x,
+ *          a typical scanned mesh 1.1x.
+ *   .bpt   6.5 KiB a patch (its tessellation: 77 vertices, 64 quads, 128
+ *          triangles, edges; measured 5.1 to 6.1 KiB) for the patch count on
+ *          the first line, bounded by bytes / 32 (the shortest patch line)
+ *          and --max-triangles / 128; plus 40 bytes a point for bytes / 6
+ *          points (the shortest point line; measured 5.2x for a file of
+ *          points) + 16 MiB.
+ *   Draco  the file (read whole) + vx_draco_decode_bound (libdraco, held
+ *          to it) + 32 bytes a face and a point (the mesh and its analysis)
+ *          + 12 MiB, from the counts the header declares; when the header
+ *          cannot be read, the counts its check allows. Measured: 70 bytes
+ *          a face with its vertices for positions only, 150 with texture
+ *          coordinates and normals.
+ * Returns the estimate; a file the reader will refuse early gets a small
+ * one. */
+uint64_t vx_mesh_parse_cost(const char *path, vx_mesh_format fmt, uint64_t bytes,
+                            const vx_mesh_limits *lim);
 
 /* Optional per-vertex normals and per-face groups for the writers. */
 typedef struct vx_mesh_write_opts {

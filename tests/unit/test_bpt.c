@@ -222,7 +222,10 @@ static void test_errors(void **state)
     expect_fail(edit(7, "1.0, 2.0x, 3\n"), VX_EINVAL, "bpt_junk", 7);
     expect_fail(edit(19, "1,1,1\n1,1,1\n"), VX_EINVAL, "bpt_junk", 20);
     expect_fail(edit(19, ""), VX_EINVAL, "bpt_truncated", 19);
-    expect_fail("2\n1,2,3,4,5,6,7,8,9,10,11,12,13,14,15,16\n", VX_EINVAL, "bpt_truncated", 3);
+    /* the second patch line cannot fit in the bytes left: refused at the count */
+    expect_fail("2\n1,2,3,4,5,6,7,8,9,10,11,12,13,14,15,16\n", VX_EINVAL, "bpt_truncated", 1);
+    expect_fail("2\n1,2,3,4,5,6,7,8,9,10,11,12,13,14,15,16\n                               \n",
+                VX_EINVAL, "bpt_truncated", 4);
     /* a patch count over the triangle limit fails before any allocation */
     vx_err err = {0};
     vx_mesh_limits lim = {.max_triangles = 100};
