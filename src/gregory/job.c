@@ -15,6 +15,7 @@
 #include "gregory/job.h"
 #include "gregory/osd.h"
 #include "gregory/tess.h"
+#include "util/fsutil.h"
 #include "util/child.h"
 #include "util/stop.h"
 
@@ -255,19 +256,6 @@ static int construct(builder *b, const double *pos, vx_err *err)
     }
 }
 
-static int write_all(int fd, const void *p, size_t n)
-{
-    const char *c = p;
-    while (n > 0) {
-        ssize_t k = write(fd, c, n);
-        if (k < 0 && errno == EINTR) continue;
-        if (k <= 0) return -1;
-        c += k;
-        n -= (size_t)k;
-    }
-    return 0;
-}
-
 /* Reads n bytes at off, 16 MiB at a time with a poll of the stop hook
  * between (-1 with its err, or on a short read without). */
 static int read_all(int fd, off_t off, void *p, size_t n, vx_err *err)
@@ -304,9 +292,9 @@ static int build_child(void *ud, void *out, size_t out_size, vx_err *err)
     if (rc == 0) {
         const vx_gpatch_set *set = b.set;
         *(uint64_t *)out = set->npatches;
-        if (write_all(w->fd, set->cp, set->npatches * VX_GPATCH_POINTS * 3 * sizeof *set->cp) ||
-            write_all(w->fd, set->corner_key, set->npatches * 4 * sizeof *set->corner_key) ||
-            write_all(w->fd, set->face, set->npatches * sizeof *set->face))
+        if (vx_write_all(w->fd, set->cp, set->npatches * VX_GPATCH_POINTS * 3 * sizeof *set->cp) ||
+            vx_write_all(w->fd, set->corner_key, set->npatches * 4 * sizeof *set->corner_key) ||
+            vx_write_all(w->fd, set->face, set->npatches * sizeof *set->face))
             rc = vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for the patch set");
     }
     vx_gpatch_set_free(b.set);

@@ -141,19 +141,6 @@ long vx_journal_replay(vx_journal *j, void (*fn)(const cJSON *rec, void *ud), vo
     return count;
 }
 
-static int write_all(int fd, const char *p, size_t n)
-{
-    while (n) {
-        ssize_t w = write(fd, p, n);
-        if (w < 0 && errno == EINTR) continue;
-        if (w == 0) errno = ENOSPC;
-        if (w <= 0) return -1;
-        p += w;
-        n -= (size_t)w;
-    }
-    return 0;
-}
-
 /* The record as one framed line; owned, its length in *n. */
 static char *frame(const cJSON *rec, size_t *n)
 {
@@ -177,7 +164,7 @@ int vx_journal_append(vx_journal *j, const cJSON *rec, vx_err *err)
     char *text = frame(rec, &n);
     if (!text) return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory");
     pthread_mutex_lock(&j->lock);
-    int rc = write_all(j->fd, text, n);
+    int rc = vx_write_all(j->fd, text, n);
     if (rc == 0) rc = fdatasync(j->fd);
     int e = errno;
     if (rc == 0) {
@@ -217,7 +204,7 @@ int vx_journal_compact(vx_journal *j, cJSON *const *recs, size_t n, vx_err *err)
             e = ENOMEM;
             break;
         }
-        rc = write_all(fd, text, len);
+        rc = vx_write_all(fd, text, len);
         if (rc) e = errno;
         size += (off_t)len;
         free(text);

@@ -742,18 +742,7 @@ static int blob_write_tmp(vx_store *s, const void *data, size_t n, char *tmp, si
     if (fd < 0)
         return vx_err_set(err, vx_err_io_kind(errno), "store_failed", "cannot store the job's inline data: %s",
                           strerror(errno));
-    const char *p = data;
-    size_t left = n;
-    int e = 0;
-    while (left && !e) {
-        ssize_t w = write(fd, p, left);
-        if (w < 0 && errno == EINTR) continue;
-        if (w <= 0) e = w < 0 ? errno : ENOSPC;
-        else {
-            p += w;
-            left -= (size_t)w;
-        }
-    }
+    int e = vx_write_all(fd, data, n) ? errno : 0;
     if (!e && fsync(fd) != 0) e = errno;
     if (close(fd) != 0 && !e) e = errno;
     if (e) {

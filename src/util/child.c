@@ -13,24 +13,13 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include "util/fsutil.h"
+
 /* What the child sends back through the pipe, then out_size bytes. */
 typedef struct answer {
     int rc;
     vx_err err;
 } answer;
-
-static int write_all(int fd, const void *p, size_t n)
-{
-    const char *c = p;
-    while (n > 0) {
-        ssize_t k = write(fd, c, n);
-        if (k < 0 && errno == EINTR) continue;
-        if (k <= 0) return -1;
-        c += k;
-        n -= (size_t)k;
-    }
-    return 0;
-}
 
 static void reap(pid_t pid, int *status)
 {
@@ -74,7 +63,7 @@ static void child_main(int fd, pid_t parent, vx_child_fn fn, void *ud, void *out
     answer a;
     memset(&a, 0, sizeof a);
     a.rc = fn(ud, out, out_size, &a.err) == 0 ? 0 : -1;
-    if (write_all(fd, &a, sizeof a) || (a.rc == 0 && out_size && write_all(fd, out, out_size)))
+    if (vx_write_all(fd, &a, sizeof a) || (a.rc == 0 && out_size && vx_write_all(fd, out, out_size)))
         _exit(1);
     _exit(0);
 }

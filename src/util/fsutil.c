@@ -234,3 +234,17 @@ void vx_scrub_path(char *msg, const char *dir)
         memmove(p, p + cut, strlen(p + cut) + 1);
     }
 }
+
+int vx_write_all(int fd, const void *p, size_t n)
+{
+    const char *c = p;
+    while (n) {
+        ssize_t w = write(fd, c, n);
+        if (w < 0 && errno == EINTR) continue;
+        if (w == 0) errno = ENOSPC;
+        if (w <= 0) return -1;
+        c += w;
+        n -= (size_t)w;
+    }
+    return 0;
+}

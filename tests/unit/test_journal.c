@@ -110,6 +110,21 @@ static void test_compact(void **state)
     vx_journal_close(j);
 }
 
+/* Replays the journal at path afresh: n records, with these values of v. */
+static void expect_replay(const char *path, int n, ...)
+{
+    vx_err err;
+    vx_journal *j = vx_journal_open(path, &err);
+    assert_non_null(j);
+    seen s = {0};
+    assert_int_equal(vx_journal_replay(j, collect, &s, &err), n);
+    va_list ap;
+    va_start(ap, n);
+    for (int i = 0; i < n; i++) assert_int_equal(s.values[i], va_arg(ap, int));
+    va_end(ap);
+    vx_journal_close(j);
+}
+
 static long file_size(const char *path)
 {
     struct stat st;
@@ -142,11 +157,7 @@ static void test_torn_tail_is_cut(void **state)
     assert_int_equal(file_size(path), good);
     append_v(j, 3);
     vx_journal_close(j);
-    j = vx_journal_open(path, &err);
-    seen s2 = {0};
-    assert_int_equal(vx_journal_replay(j, collect, &s2, &err), 3);
-    assert_int_equal(s2.values[2], 3);
-    vx_journal_close(j);
+    expect_replay(path, 3, 1, 2, 3);
 }
 
 /* A write that fails part-way (here the file-size limit, as ENOSPC would)
@@ -174,12 +185,7 @@ static void test_failed_write_is_cut_back(void **state)
     assert_int_equal(file_size(path), good);
     append_v(j, 3); /* acknowledged after the failure */
     vx_journal_close(j);
-    j = vx_journal_open(path, &err);
-    seen s = {0};
-    assert_int_equal(vx_journal_replay(j, collect, &s, &err), 2);
-    assert_int_equal(s.values[0], 1);
-    assert_int_equal(s.values[1], 3);
-    vx_journal_close(j);
+    expect_replay(path, 2, 1, 3);
 }
 
 /* A record whose bytes changed fails its CRC and is skipped; its
@@ -201,12 +207,7 @@ static void test_crc_mismatch_skipped(void **state)
     fputs(text, f);
     fclose(f);
     free(text);
-    j = vx_journal_open(path, &err);
-    seen s = {0};
-    assert_int_equal(vx_journal_replay(j, collect, &s, &err), 2);
-    assert_int_equal(s.values[0], 1);
-    assert_int_equal(s.values[1], 3);
-    vx_journal_close(j);
+    expect_replay(path, 2, 1, 3);
 }
 
 /* Journals written before failed writes were cut back can hold a fragment
@@ -225,12 +226,7 @@ static void test_glued_record_salvaged(void **state)
     append_v(j, 2);
     vx_journal_close(j);
     append_raw(path, "{\"job\":{\"i\":\"tor{\"job\":{\"id\":\"x\"}}\n");
-    j = vx_journal_open(path, &err);
-    seen s = {0};
-    assert_int_equal(vx_journal_replay(j, collect, &s, &err), 3);
-    assert_int_equal(s.values[0], 1);
-    assert_int_equal(s.values[1], 2);
-    vx_journal_close(j);
+    expect_replay(path, 3, 1, 2, -1);
 }
 
 int main(void)

@@ -1,0 +1,41 @@
+/* The body the mesh-reader fuzz targets share: run a reader on the input
+ * from a memory stream (no file size: storage must grow with the data,
+ * never with a declared count). Oracle: no crash, no leak, no allocation
+ * beyond what the limits and the input allow (libFuzzer's -malloc_limit_mb),
+ * a failure that says why, and a mesh that comes back is consistent: the
+ * triangle limit kept, at least one triangle, every triangle and patch
+ * index in range. */
+#ifndef VX_FUZZ_READER_H
+#define VX_FUZZ_READER_H
+
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+
+#include "mesh/mesh.h"
+
+typedef vx_mesh *(*fuzz_reader_fn)(FILE *f, const vx_mesh_limits *lim, vx_err *err);
+
+static inline int fuzz_reader_run(const uint8_t *data, size_t size, fuzz_reader_fn read)
+{
+    FILE *f = fmemopen((void *)data, size, "rb");
+    if (!f) return 0;
+    vx_mesh_limits lim = {.max_triangles = 1u << 20};
+    vx_err err;
+    vx_err_clear(&err);
+    vx_mesh *m = read(f, &lim, &err);
+    fclose(f);
+    if (m) {
+        if (m->ntris > lim.max_triangles || !m->ntris) abort();
+        for (size_t t = 0; t < 3 * m->ntris; t++)
+            if (m->tri[t] >= m->nverts) abort();
+        for (size_t k = 0; k < 16 * m->npatches; k++)
+            if (m->patch_idx[k] >= m->nverts) abort();
+    } else if (err.kind == VX_EOK) {
+        abort();
+    }
+    vx_mesh_free(m);
+    return 0;
+}
+
+#endif
