@@ -45,8 +45,10 @@ static const opt_def opts[] = {
      "the whole request head must arrive within this, seconds (default 10; 0 = off)"},
     {"min-body-rate", T_SIZE, F(min_body_rate), 0,
      "slowest request body, bytes/s over 2 s windows after a 2 s grace (default 1024; 0 = off)"},
-    {"max-uri-bytes", T_SIZE, F(max_uri_bytes), 0, "longest request target, path and query (default 16K)"},
-    {"max-header-bytes", T_SIZE, F(max_header_bytes), 0, "largest request head, all header lines (default 64K)"},
+    {"max-uri-bytes", T_SIZE, F(max_uri_bytes), 0,
+     "longest request target, path and query (default 16K)"},
+    {"max-header-bytes", T_SIZE, F(max_header_bytes), 0,
+     "largest request head, all header lines (default 64K)"},
     {"reuse-port", T_BOOL, F(reuse_port), 0,
      "share the port with other processes (SO_REUSEPORT): yes or no (default)"},
     {"max-connections", T_SIZE, F(max_connections), 0, "open connections in all (default 512)"},
@@ -64,7 +66,8 @@ static const opt_def opts[] = {
     {"results-max-age", T_SECONDS, F(results_max_age_s), 0,
      "results unused this long are evicted, seconds (default 604800; 0 = never)"},
     {"min-free-disk", T_SIZE, F(min_free_disk), 0,
-     "free space the data dir keeps: below it writes answer 507 (default 64M; 0 = only a full disk)"},
+     "free space the data dir keeps: below it writes answer 507 (default 64M; 0 = only a full "
+     "disk)"},
     {"job-history", T_SIZE, F(job_history), 0, "finished jobs remembered (default 10000)"},
     {"job-history-bytes", T_SIZE, F(job_history_bytes), 0,
      "memory the finished jobs remembered may take (default 64M; 0 = no limit)"},
@@ -162,9 +165,12 @@ static int set_opt(vx_config *c, const opt_def *d, const char *val, const char *
         if (vx_log_parse_level(val, (vx_log_level *)(base + d->off))) goto bad;
         return 0;
     case T_BOOL:
-        if (!strcmp(val, "yes") || !strcmp(val, "true") || !strcmp(val, "1")) *(int *)(base + d->off) = 1;
-        else if (!strcmp(val, "no") || !strcmp(val, "false") || !strcmp(val, "0")) *(int *)(base + d->off) = 0;
-        else goto bad;
+        if (!strcmp(val, "yes") || !strcmp(val, "true") || !strcmp(val, "1"))
+            *(int *)(base + d->off) = 1;
+        else if (!strcmp(val, "no") || !strcmp(val, "false") || !strcmp(val, "0"))
+            *(int *)(base + d->off) = 0;
+        else
+            goto bad;
         return 0;
     }
 bad:
@@ -181,9 +187,11 @@ static const opt_def *find_opt(const char *name)
 
 static char *trim(char *s)
 {
-    while (isspace((unsigned char)*s)) s++;
+    while (isspace((unsigned char)*s))
+        s++;
     char *e = s + strlen(s);
-    while (e > s && isspace((unsigned char)e[-1])) *--e = 0;
+    while (e > s && isspace((unsigned char)e[-1]))
+        *--e = 0;
     return s;
 }
 
@@ -232,7 +240,9 @@ void vx_config_usage(FILE *out)
     for (size_t i = 0; i < NOPTS; i++) {
         char flag[64];
         snprintf(flag, sizeof flag, "--%s %s", opts[i].name,
-                 opts[i].type == T_BOOL ? "yes|no" : opts[i].type == T_STR ? "VALUE" : "N");
+                 opts[i].type == T_BOOL  ? "yes|no"
+                 : opts[i].type == T_STR ? "VALUE"
+                                         : "N");
         fprintf(out, "  %-29s %s\n", flag, opts[i].help);
     }
     fprintf(out, "  --list-egl-devices            list EGL devices in the order tried, and exit\n"

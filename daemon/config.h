@@ -16,8 +16,8 @@ typedef struct vx_config {
     char cache_dir[1024];
     char config_file[1024];
     char token_file[1024];
-    char token[512];         /* read from token_file; empty = no auth */
-    int egl_device;          /* -1 = auto */
+    char token[512]; /* read from token_file; empty = no auth */
+    int egl_device;  /* -1 = auto */
     vx_log_level log_level;
     int http_threads;
     int workers;
@@ -27,17 +27,17 @@ typedef struct vx_config {
     double job_timeout_s;
     double request_timeout_s;    /* cap on how long ?wait holds a request */
     double connection_timeout_s; /* idle connections are closed after this */
-    double header_timeout_s; /* accept (or the previous answer) to the end of the head; 0 = off */
-    uint64_t min_body_rate;  /* bytes/s a request body must keep up; 0 = off */
-    uint64_t max_uri_bytes;  /* longest request target: a longer one gets 414 */
+    double header_timeout_s;   /* accept (or the previous answer) to the end of the head; 0 = off */
+    uint64_t min_body_rate;    /* bytes/s a request body must keep up; 0 = off */
+    uint64_t max_uri_bytes;    /* longest request target: a longer one gets 414 */
     uint64_t max_header_bytes; /* largest request head: a larger one gets 431 */
-    int reuse_port;          /* SO_REUSEPORT on the listening socket */
+    int reuse_port;            /* SO_REUSEPORT on the listening socket */
     uint64_t max_connections;
     uint64_t max_connections_per_ip;
     uint64_t max_image_pixels;
     uint64_t max_job_memory;
     uint64_t max_json_bytes;
-    uint64_t min_free_disk; /* writes answer 507 below this many free bytes in the data dir */
+    uint64_t min_free_disk;    /* writes answer 507 below this many free bytes in the data dir */
     uint64_t max_parse_memory; /* reserved by concurrent upload parses; 0 = no limit,
                                   UINT64_MAX = 8 x max_upload_bytes + 256M */
     uint64_t results_max_bytes;

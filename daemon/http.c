@@ -86,14 +86,14 @@ typedef struct vconn {
     struct vconn *prev, *next;
     int fd;
     cphase phase;
-    double t_phase;       /* monotonic: when the phase began */
-    uint64_t body_bytes;  /* BODY: received so far */
-    int win_started;      /* BODY: the rate window is running */
+    double t_phase;      /* monotonic: when the phase began */
+    uint64_t body_bytes; /* BODY: received so far */
+    int win_started;     /* BODY: the rate window is running */
     double win_t0;
     uint64_t win_bytes;
-    int killed;           /* answered (or closed) by us behind libmicrohttpd's back */
-    int kill_status;      /* the status we wrote, 0 for none */
-    int rd_closed;        /* shutdown(SHUT_RD) done */
+    int killed;      /* answered (or closed) by us behind libmicrohttpd's back */
+    int kill_status; /* the status we wrote, 0 for none */
+    int rd_closed;   /* shutdown(SHUT_RD) done */
     double t_killed;
 } vconn;
 
@@ -126,7 +126,7 @@ struct req {
     size_t len, cap;
     /* ?wait */
     waiter w;
-    int waiting;  /* suspended, not yet resumed */
+    int waiting; /* suspended, not yet resumed */
     int resumed;
     int post_job; /* the held request was POST /v1/jobs */
     int answered;
@@ -175,8 +175,8 @@ static int send_text(struct MHD_Connection *c, req *r, unsigned status, char *te
                      const char *ctype, const char *h1, const char *v1)
 {
     size_t n = text ? strlen(text) : 0;
-    struct MHD_Response *resp =
-        MHD_create_response_from_buffer(n, text ? text : (void *)"", text ? MHD_RESPMEM_MUST_FREE : MHD_RESPMEM_PERSISTENT);
+    struct MHD_Response *resp = MHD_create_response_from_buffer(
+        n, text ? text : (void *)"", text ? MHD_RESPMEM_MUST_FREE : MHD_RESPMEM_PERSISTENT);
     if (!resp) {
         free(text);
         return MHD_NO;
@@ -224,25 +224,38 @@ static int send_error(struct MHD_Connection *c, req *r, unsigned status, const c
 static unsigned err_status(const vx_err *e)
 {
     switch (e->kind) {
-    case VX_EINVAL: return 400;
-    case VX_EUNPROC: return 422;
-    case VX_ETOOBIG: return 413;
-    case VX_ENOTFOUND: return strcmp(e->code, "result_evicted") == 0 ? 410 : 404;
-    case VX_ECONFLICT: return 409;
-    case VX_EMEDIA: return 415;
-    case VX_EBUSY: return strcmp(e->code, "not_ready") == 0 ? 503 : 429;
-    case VX_ECANCELED: return 409;
-    case VX_ETIMEOUT: return 504;
-    case VX_ENOSPC: return 507;
-    default: return 500;
+    case VX_EINVAL:
+        return 400;
+    case VX_EUNPROC:
+        return 422;
+    case VX_ETOOBIG:
+        return 413;
+    case VX_ENOTFOUND:
+        return strcmp(e->code, "result_evicted") == 0 ? 410 : 404;
+    case VX_ECONFLICT:
+        return 409;
+    case VX_EMEDIA:
+        return 415;
+    case VX_EBUSY:
+        return strcmp(e->code, "not_ready") == 0 ? 503 : 429;
+    case VX_ECANCELED:
+        return 409;
+    case VX_ETIMEOUT:
+        return 504;
+    case VX_ENOSPC:
+        return 507;
+    default:
+        return 500;
     }
 }
 
 static int send_err(struct MHD_Connection *c, req *r, const vx_err *e)
 {
     unsigned st = err_status(e);
-    if (st == 429) return send_error_h(c, r, st, e->code, e->message, MHD_HTTP_HEADER_RETRY_AFTER, "2");
-    if (st == 503) return send_error_h(c, r, st, e->code, e->message, MHD_HTTP_HEADER_RETRY_AFTER, "5");
+    if (st == 429)
+        return send_error_h(c, r, st, e->code, e->message, MHD_HTTP_HEADER_RETRY_AFTER, "2");
+    if (st == 503)
+        return send_error_h(c, r, st, e->code, e->message, MHD_HTTP_HEADER_RETRY_AFTER, "5");
     if (st == 507) return send_error(c, r, st, "insufficient_storage", e->message);
     return send_error(c, r, st, e->code, e->message);
 }
@@ -260,7 +273,8 @@ static int auth_ok(vx_http *h, struct MHD_Connection *c)
     const char *a = header(c, MHD_HTTP_HEADER_AUTHORIZATION);
     if (!a || strncasecmp(a, "Bearer ", 7) != 0) return 0;
     a += 7;
-    while (*a == ' ') a++;
+    while (*a == ' ')
+        a++;
     struct sha256_ctx ctx;
     unsigned char d[SHA256_DIGEST_SIZE];
     sha256_init(&ctx);
@@ -281,7 +295,8 @@ static double wait_seconds(vx_http *h, const req *r)
 static void resume_locked(vx_http *h, waiter *w)
 {
     waiter **pp = &h->waiters;
-    while (*pp && *pp != w) pp = &(*pp)->next;
+    while (*pp && *pp != w)
+        pp = &(*pp)->next;
     if (*pp) *pp = w->next;
     w->r->waiting = 0;
     w->r->resumed = 1;
@@ -307,8 +322,10 @@ static void *timer_main(void *arg)
         double now = vx_mono(), next = now + 0.25;
         for (waiter *w = h->waiters, *nx; w; w = nx) {
             nx = w->next;
-            if (w->deadline <= now) resume_locked(h, w);
-            else if (w->deadline < next) next = w->deadline;
+            if (w->deadline <= now)
+                resume_locked(h, w);
+            else if (w->deadline < next)
+                next = w->deadline;
         }
         struct timespec ts;
         clock_gettime(CLOCK_MONOTONIC, &ts);
@@ -379,7 +396,8 @@ static int disk_ok(vx_http *h, uint64_t *free_bytes)
 
 static vconn *conn_of(struct MHD_Connection *c)
 {
-    const union MHD_ConnectionInfo *ci = MHD_get_connection_info(c, MHD_CONNECTION_INFO_SOCKET_CONTEXT);
+    const union MHD_ConnectionInfo *ci =
+        MHD_get_connection_info(c, MHD_CONNECTION_INFO_SOCKET_CONTEXT);
     return ci ? ci->socket_context : NULL;
 }
 
@@ -393,12 +411,13 @@ static size_t kill_conn(vconn *vc, int status, const char *code, const char *mes
     char body[256], msg[512];
     int n = 0;
     if (status) {
-        int bn = snprintf(body, sizeof body, "{\"error\":{\"code\":\"%s\",\"message\":\"%s\"}}", code,
-                          message);
-        n = snprintf(msg, sizeof msg,
-                     "HTTP/1.1 %d %s\r\nContent-Type: application/json\r\nCache-Control: no-store\r\n"
-                     "Connection: close\r\nContent-Length: %d\r\n\r\n%s",
-                     status, status == 408 ? "Request Timeout" : "URI Too Long", bn, body);
+        int bn = snprintf(body, sizeof body, "{\"error\":{\"code\":\"%s\",\"message\":\"%s\"}}",
+                          code, message);
+        n = snprintf(
+            msg, sizeof msg,
+            "HTTP/1.1 %d %s\r\nContent-Type: application/json\r\nCache-Control: no-store\r\n"
+            "Connection: close\r\nContent-Length: %d\r\n\r\n%s",
+            status, status == 408 ? "Request Timeout" : "URI Too Long", bn, body);
         if (send(vc->fd, msg, (size_t)n, MSG_NOSIGNAL | MSG_DONTWAIT) < 0) n = 0;
     }
     shutdown(vc->fd, rd ? SHUT_RDWR : SHUT_WR);
@@ -414,8 +433,9 @@ static size_t kill_conn(vconn *vc, int status, const char *code, const char *mes
 static void note_head_kill(int status, double dt, size_t bytes, const char *why)
 {
     vx_metrics_request(vx_req_route_name(VX_R_UNKNOWN), "other", status, dt, 0, bytes);
-    VX_INFO("http.request", "method=- route=unmatched status=%d ms=%.2f bytes_in=0 bytes_out=%zu reason=%s",
-            status, dt * 1e3, bytes, why);
+    VX_INFO("http.request",
+            "method=- route=unmatched status=%d ms=%.2f bytes_in=0 bytes_out=%zu reason=%s", status,
+            dt * 1e3, bytes, why);
 }
 
 static void on_connection(void *cls, struct MHD_Connection *c, void **socket_context,
@@ -423,7 +443,8 @@ static void on_connection(void *cls, struct MHD_Connection *c, void **socket_con
 {
     vx_http *h = cls;
     if (code == MHD_CONNECTION_NOTIFY_STARTED) {
-        const union MHD_ConnectionInfo *ci = MHD_get_connection_info(c, MHD_CONNECTION_INFO_CONNECTION_FD);
+        const union MHD_ConnectionInfo *ci =
+            MHD_get_connection_info(c, MHD_CONNECTION_INFO_CONNECTION_FD);
         vconn *vc = ci ? calloc(1, sizeof *vc) : NULL;
         if (!vc) return; /* untracked: only libmicrohttpd's timeouts apply */
         vc->fd = ci->connect_fd;
@@ -441,8 +462,10 @@ static void on_connection(void *cls, struct MHD_Connection *c, void **socket_con
     vconn *vc = *socket_context;
     if (!vc) return;
     pthread_mutex_lock(&h->clock);
-    if (vc->prev) vc->prev->next = vc->next;
-    else h->conns = vc->next;
+    if (vc->prev)
+        vc->prev->next = vc->next;
+    else
+        h->conns = vc->next;
     if (vc->next) vc->next->prev = vc->prev;
     h->nconns--;
     pthread_mutex_unlock(&h->clock);
@@ -457,7 +480,9 @@ static void *on_uri(void *cls, const char *uri, struct MHD_Connection *c)
     vconn *vc;
     if (strlen(uri) <= h->d.cfg->max_uri_bytes || !(vc = conn_of(c))) return NULL;
     pthread_mutex_lock(&h->clock);
-    size_t n = vc->killed ? 0 : kill_conn(vc, 414, "uri_too_long", "the request target is longer than max-uri-bytes", 0);
+    size_t n = vc->killed ? 0
+                          : kill_conn(vc, 414, "uri_too_long",
+                                      "the request target is longer than max-uri-bytes", 0);
     double dt = vx_mono() - vc->t_phase;
     pthread_mutex_unlock(&h->clock);
     if (n) note_head_kill(414, dt, n, "uri_too_long");
@@ -507,10 +532,11 @@ static void sweep(vx_http *h, vconn **cand)
                 }
             }
         }
-        if (vc->phase == P_HEAD && cfg->header_timeout_s > 0 && now - vc->t_phase > cfg->header_timeout_s &&
-            !unread(vc)) {
+        if (vc->phase == P_HEAD && cfg->header_timeout_s > 0 &&
+            now - vc->t_phase > cfg->header_timeout_s && !unread(vc)) {
             char m[96];
-            snprintf(m, sizeof m, "the request head did not arrive within %g s", cfg->header_timeout_s);
+            snprintf(m, sizeof m, "the request head did not arrive within %g s",
+                     cfg->header_timeout_s);
             size_t n = kill_conn(vc, 408, "request_timeout", m, 0);
             note_head_kill(408, now - vc->t_phase, n, "header_timeout");
             continue;
@@ -546,7 +572,8 @@ static void sweep(vx_http *h, vconn **cand)
         if (now - vc->t_phase < EVICT_MIN_AGE_S || unread(vc)) continue;
         live--;
         if (vc->phase == P_HEAD) {
-            size_t n = kill_conn(vc, 408, "request_timeout", "the server is busy and the request head was not complete", 1);
+            size_t n = kill_conn(vc, 408, "request_timeout",
+                                 "the server is busy and the request head was not complete", 1);
             note_head_kill(408, now - vc->t_phase, n, "evicted");
         } else {
             kill_conn(vc, 0, NULL, NULL, 1);
@@ -675,8 +702,10 @@ static int h_mesh_list(vx_http *h, struct MHD_Connection *c, req *r)
     char next[65];
     cJSON *doc = cJSON_CreateObject();
     cJSON_AddItemToObject(doc, "items", vx_store_mesh_list(h->d.store, after, limit, next));
-    if (next[0]) cJSON_AddStringToObject(doc, "next", next);
-    else cJSON_AddNullToObject(doc, "next");
+    if (next[0])
+        cJSON_AddStringToObject(doc, "next", next);
+    else
+        cJSON_AddNullToObject(doc, "next");
     return send_json(c, r, 200, doc, NULL, NULL);
 }
 
@@ -684,7 +713,8 @@ static int h_mesh(vx_http *h, struct MHD_Connection *c, req *r)
 {
     vx_err err;
     if (!vx_store_valid_mesh_id(r->id))
-        return send_error(c, r, 404, "mesh_not_found", "no mesh with that id (ids are 64 hex digits)");
+        return send_error(c, r, 404, "mesh_not_found",
+                          "no mesh with that id (ids are 64 hex digits)");
     if (!strcmp(r->method, "DELETE")) {
         if (vx_store_mesh_delete(h->d.store, r->id, &err)) return send_err(c, r, &err);
         VX_INFO("mesh.deleted", "mesh=%s", r->id);
@@ -738,7 +768,8 @@ static int h_upload_done(vx_http *h, struct MHD_Connection *c, req *r)
         return send_error(c, r, 413, "too_large", msg);
     }
     if (r->body_err.kind != VX_EOK) return send_err(c, r, &r->body_err);
-    if (vx_upload_bytes(r->up) == 0) return send_error(c, r, 422, "obj_no_faces", "the body is empty: no faces");
+    if (vx_upload_bytes(r->up) == 0)
+        return send_error(c, r, 422, "obj_no_faces", "the body is empty: no faces");
     char id[65];
     if (vx_upload_finish(r->up, id, &err)) return send_err(c, r, &err);
     size_t nhead;
@@ -793,7 +824,8 @@ static int h_upload_done(vx_http *h, struct MHD_Connection *c, req *r)
     if (!m) {
         vx_budget_release(&parse_budget, cost);
         char q[600];
-        VX_INFO("mesh.rejected", "code=%s message=%s", err.code, vx_log_quote(q, sizeof q, err.message));
+        VX_INFO("mesh.rejected", "code=%s message=%s", err.code,
+                vx_log_quote(q, sizeof q, err.message));
         return send_err(c, r, &err);
     }
     double parse_ms = (vx_mono() - t) * 1e3;
@@ -803,8 +835,9 @@ static int h_upload_done(vx_http *h, struct MHD_Connection *c, req *r)
         return send_error(c, r, 422, "degenerate_mesh", "every triangle of the mesh has zero area");
     }
     meta = mesh_meta(id, fname, vx_upload_bytes(r->up), m);
-    VX_INFO("mesh.uploaded", "mesh=%s new=1 format=%s bytes=%llu vertices=%zu triangles=%zu parse_ms=%.1f",
-            id, fname, (unsigned long long)vx_upload_bytes(r->up), m->nverts, m->ntris, parse_ms);
+    VX_INFO("mesh.uploaded",
+            "mesh=%s new=1 format=%s bytes=%llu vertices=%zu triangles=%zu parse_ms=%.1f", id,
+            fname, (unsigned long long)vx_upload_bytes(r->up), m->nverts, m->ntris, parse_ms);
     vx_mesh_free(m);
     vx_budget_release(&parse_budget, cost);
     int existed = 0;
@@ -825,7 +858,8 @@ static int h_upload_done(vx_http *h, struct MHD_Connection *c, req *r)
     return send_json(c, r, 201, meta, MHD_HTTP_HEADER_LOCATION, loc);
 }
 
-static int answer_job(vx_http *h, struct MHD_Connection *c, req *r, const char *jid, unsigned status)
+static int answer_job(vx_http *h, struct MHD_Connection *c, req *r, const char *jid,
+                      unsigned status)
 {
     vx_err err;
     cJSON *doc = vx_jobs_get(h->d.jobs, jid, NULL, &err);
@@ -837,7 +871,8 @@ static int answer_job(vx_http *h, struct MHD_Connection *c, req *r, const char *
 
 static int h_job_post_done(vx_http *h, struct MHD_Connection *c, req *r)
 {
-    if (r->too_big) return send_error(c, r, 413, "too_large", "the JSON body is larger than max-json-bytes");
+    if (r->too_big)
+        return send_error(c, r, 413, "too_large", "the JSON body is larger than max-json-bytes");
     double wait_s = wait_seconds(h, r);
     char why[128];
     if (vx_req_json_text_ok(r->buf ? r->buf : "", r->len, why, sizeof why))
@@ -848,14 +883,19 @@ static int h_job_post_done(vx_http *h, struct MHD_Connection *c, req *r)
     const cJSON *mesh = cJSON_GetObjectItemCaseSensitive(doc, "mesh");
     const cJSON *kind = cJSON_GetObjectItemCaseSensitive(doc, "kind");
     const cJSON *params = cJSON_GetObjectItemCaseSensitive(doc, "params");
-    if (!cJSON_IsObject(doc)) msg = "the body must be a JSON object";
-    else if (!cJSON_IsString(mesh)) msg = "\"mesh\" (a mesh id string) is required";
-    else if (!cJSON_IsString(kind)) msg = "\"kind\" (a job kind string) is required";
-    else if (params && !cJSON_IsObject(params)) msg = "\"params\" must be an object";
+    if (!cJSON_IsObject(doc))
+        msg = "the body must be a JSON object";
+    else if (!cJSON_IsString(mesh))
+        msg = "\"mesh\" (a mesh id string) is required";
+    else if (!cJSON_IsString(kind))
+        msg = "\"kind\" (a job kind string) is required";
+    else if (params && !cJSON_IsObject(params))
+        msg = "\"params\" must be an object";
     else {
         const cJSON *it;
         cJSON_ArrayForEach(it, doc) if (strcmp(it->string, "mesh") && strcmp(it->string, "kind") &&
-                                        strcmp(it->string, "params")) msg = "unknown field in the job request";
+                                        strcmp(it->string, "params")) msg =
+            "unknown field in the job request";
     }
     if (msg) {
         cJSON_Delete(doc);
@@ -865,13 +905,15 @@ static int h_job_post_done(vx_http *h, struct MHD_Connection *c, req *r)
     vx_err_clear(&err);
     cJSON *job = NULL;
     if (!vx_store_valid_mesh_id(mesh->valuestring))
-        vx_err_set(&err, VX_EINVAL, "invalid_request", "\"mesh\" must be a mesh id (64 hex digits)");
+        vx_err_set(&err, VX_EINVAL, "invalid_request",
+                   "\"mesh\" must be a mesh id (64 hex digits)");
     else
         job = vx_jobs_submit(h->d.jobs, mesh->valuestring, kind->valuestring, params, &err);
     cJSON_Delete(doc);
     if (!job) return send_err(c, r, &err);
     char jid[33];
-    snprintf(jid, sizeof jid, "%s", cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(job, "id")));
+    snprintf(jid, sizeof jid, "%s",
+             cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(job, "id")));
     if (wait_s > 0) {
         r->post_job = 1;
         snprintf(r->id, sizeof r->id, "%s", jid);
@@ -890,12 +932,15 @@ static int h_job_post_done(vx_http *h, struct MHD_Connection *c, req *r)
 static int h_job_list(vx_http *h, struct MHD_Connection *c, req *r)
 {
     int limit = r->q.limit;
-    const char *after = r->q.has_after ? r->q.after : NULL, *state = r->q.has_state ? r->q.state : NULL;
+    const char *after = r->q.has_after ? r->q.after : NULL,
+               *state = r->q.has_state ? r->q.state : NULL;
     char next[40];
     cJSON *doc = cJSON_CreateObject();
     cJSON_AddItemToObject(doc, "items", vx_jobs_list(h->d.jobs, after, limit, state, next));
-    if (next[0]) cJSON_AddStringToObject(doc, "next", next);
-    else cJSON_AddNullToObject(doc, "next");
+    if (next[0])
+        cJSON_AddStringToObject(doc, "next", next);
+    else
+        cJSON_AddNullToObject(doc, "next");
     return send_json(c, r, 200, doc, NULL, NULL);
 }
 
@@ -925,7 +970,8 @@ static int h_result(vx_http *h, struct MHD_Connection *c, req *r)
     snprintf(disp, sizeof disp, "attachment; filename=\"%s\"", fname);
     const char *inm = header(c, MHD_HTTP_HEADER_IF_NONE_MATCH);
     if (inm && (strstr(inm, etag) || !strcmp(inm, "*"))) {
-        struct MHD_Response *resp = MHD_create_response_from_buffer(0, (void *)"", MHD_RESPMEM_PERSISTENT);
+        struct MHD_Response *resp =
+            MHD_create_response_from_buffer(0, (void *)"", MHD_RESPMEM_PERSISTENT);
         MHD_add_response_header(resp, MHD_HTTP_HEADER_ETAG, etag);
         return queue(c, r, 304, resp, 0);
     }
@@ -944,13 +990,15 @@ static int h_result(vx_http *h, struct MHD_Connection *c, req *r)
     MHD_add_response_header(resp, MHD_HTTP_HEADER_CONTENT_TYPE, ctype);
     MHD_add_response_header(resp, MHD_HTTP_HEADER_ETAG, etag);
     MHD_add_response_header(resp, "Content-Disposition", disp);
-    MHD_add_response_header(resp, MHD_HTTP_HEADER_CACHE_CONTROL, "private, max-age=86400, immutable");
+    MHD_add_response_header(resp, MHD_HTTP_HEADER_CACHE_CONTROL,
+                            "private, max-age=86400, immutable");
     return queue(c, r, 200, resp, (uint64_t)st.st_size);
 }
 
 /* ---- dispatch ------------------------------------------------------ */
 
-static enum MHD_Result count_host(void *cls, enum MHD_ValueKind kind, const char *key, const char *value)
+static enum MHD_Result count_host(void *cls, enum MHD_ValueKind kind, const char *key,
+                                  const char *value)
 {
     if (key && !strcasecmp(key, MHD_HTTP_HEADER_HOST)) (*(int *)cls)++;
     return MHD_YES;
@@ -961,8 +1009,10 @@ static enum MHD_Result take_arg(void *cls, enum MHD_ValueKind kind, const char *
 {
     req *r = cls;
     if (!key) return MHD_YES;
-    return vx_req_query_add(&r->q, r->route, r->method, key, klen, value, vlen, r->qerr, sizeof r->qerr)
-               ? MHD_NO : MHD_YES;
+    return vx_req_query_add(&r->q, r->route, r->method, key, klen, value, vlen, r->qerr,
+                            sizeof r->qerr)
+               ? MHD_NO
+               : MHD_YES;
 }
 
 /* Framing the access handler can still answer in JSON: Host, the transfer
@@ -973,22 +1023,26 @@ static int check_framing(struct MHD_Connection *c, req *r, const char *version)
     MHD_get_connection_values(c, MHD_HEADER_KIND, count_host, &hosts);
     if (strcmp(version, MHD_HTTP_VERSION_1_0) != 0 && hosts != 1)
         return send_error(c, r, 400, "invalid_request",
-                          hosts ? "more than one Host header" : "an HTTP/1.1 request needs a Host header");
+                          hosts ? "more than one Host header"
+                                : "an HTTP/1.1 request needs a Host header");
     const char *te = header(c, MHD_HTTP_HEADER_TRANSFER_ENCODING);
     int coding = vx_req_transfer_encoding(te);
     if (coding < 0)
         return send_error(c, r, 501, "not_implemented",
                           "the only transfer coding taken is chunked (no gzip, no lists)");
     if (coding > 0 && header(c, MHD_HTTP_HEADER_CONTENT_LENGTH))
-        return send_error(c, r, 400, "invalid_request", "Content-Length and Transfer-Encoding together");
+        return send_error(c, r, 400, "invalid_request",
+                          "Content-Length and Transfer-Encoding together");
     return -1;
 }
 
 static int first_call(vx_http *h, struct MHD_Connection *c, req *r, const char *version)
 {
-    const union MHD_ConnectionInfo *ci = MHD_get_connection_info(c, MHD_CONNECTION_INFO_REQUEST_HEADER_SIZE);
+    const union MHD_ConnectionInfo *ci =
+        MHD_get_connection_info(c, MHD_CONNECTION_INFO_REQUEST_HEADER_SIZE);
     if (ci && ci->header_size > h->d.cfg->max_header_bytes)
-        return send_error(c, r, 431, "header_too_large", "the request head is larger than max-header-bytes");
+        return send_error(c, r, 431, "header_too_large",
+                          "the request head is larger than max-header-bytes");
     int rc = check_framing(c, r, version);
     if (rc >= 0) return rc;
     if (r->route == VX_R_UNKNOWN) return send_error(c, r, 404, "not_found", "no such route");
@@ -1005,45 +1059,60 @@ static int first_call(vx_http *h, struct MHD_Connection *c, req *r, const char *
     MHD_get_connection_values_n(c, MHD_GET_ARGUMENT_KIND, take_arg, r);
     if (strcmp(r->method, "POST") != 0) return -1; /* no body: answer in dispatch */
     if (h->stopping || !vx_jobs_ready(h->d.jobs))
-        return send_error_h(c, r, 503, "not_ready", "the daemon is not ready", MHD_HTTP_HEADER_RETRY_AFTER, "5");
+        return send_error_h(c, r, 503, "not_ready", "the daemon is not ready",
+                            MHD_HTTP_HEADER_RETRY_AFTER, "5");
     if (r->qerr[0]) return send_error(c, r, 400, "invalid_request", r->qerr);
 
     uint64_t nfree;
     if (!disk_ok(h, &nfree)) {
         char msg[200];
-        snprintf(msg, sizeof msg, "the data dir is full: %llu bytes free, under the %llu-byte floor (--min-free-disk); "
-                 "reads still work", (unsigned long long)(nfree == UINT64_MAX ? 0 : nfree),
-                 (unsigned long long)h->d.cfg->min_free_disk);
+        snprintf(
+            msg, sizeof msg,
+            "the data dir is full: %llu bytes free, under the %llu-byte floor (--min-free-disk); "
+            "reads still work",
+            (unsigned long long)(nfree == UINT64_MAX ? 0 : nfree),
+            (unsigned long long)h->d.cfg->min_free_disk);
         return send_error(c, r, 507, "insufficient_storage", msg);
     }
     char mt[128];
     vx_req_media_type(header(c, MHD_HTTP_HEADER_CONTENT_TYPE), mt, sizeof mt);
     if (r->route == VX_R_MESHES) {
-        if (!strcmp(mt, "model/obj")) r->declared = MEDIA_OBJ;
-        else if (!strcmp(mt, "text/plain")) r->declared = MEDIA_TEXT;
-        else if (!strcmp(mt, "model/x-bpt")) r->declared = MEDIA_BPT;
-        else if (!strcmp(mt, "model/x-draco") || !strcmp(mt, "application/x-draco")) r->declared = MEDIA_DRACO;
-        else if (!mt[0] || !strcmp(mt, "application/octet-stream")) r->declared = MEDIA_SNIFF;
+        if (!strcmp(mt, "model/obj"))
+            r->declared = MEDIA_OBJ;
+        else if (!strcmp(mt, "text/plain"))
+            r->declared = MEDIA_TEXT;
+        else if (!strcmp(mt, "model/x-bpt"))
+            r->declared = MEDIA_BPT;
+        else if (!strcmp(mt, "model/x-draco") || !strcmp(mt, "application/x-draco"))
+            r->declared = MEDIA_DRACO;
+        else if (!mt[0] || !strcmp(mt, "application/octet-stream"))
+            r->declared = MEDIA_SNIFF;
         else {
             char msg[200];
-            snprintf(msg, sizeof msg, "cannot take '%.100s': send model/obj, model/x-bpt, model/x-draco or "
-                                      "application/octet-stream", mt);
+            snprintf(msg, sizeof msg,
+                     "cannot take '%.100s': send model/obj, model/x-bpt, model/x-draco or "
+                     "application/octet-stream",
+                     mt);
             return send_error(c, r, 415, "unsupported_media_type", msg);
         }
         r->body = BODY_UPLOAD;
     } else {
         if (strcmp(mt, "application/json") != 0)
-            return send_error(c, r, 415, "unsupported_media_type", "the body must be application/json");
+            return send_error(c, r, 415, "unsupported_media_type",
+                              "the body must be application/json");
         r->body = BODY_JSON;
     }
     const char *cl = header(c, MHD_HTTP_HEADER_CONTENT_LENGTH);
     const char *te = header(c, MHD_HTTP_HEADER_TRANSFER_ENCODING);
-    uint64_t limit = r->route == VX_R_MESHES ? h->d.cfg->max_upload_bytes : h->d.cfg->max_json_bytes;
+    uint64_t limit =
+        r->route == VX_R_MESHES ? h->d.cfg->max_upload_bytes : h->d.cfg->max_json_bytes;
     if (r->route == VX_R_MESHES && !cl && vx_req_transfer_encoding(te) != 1)
-        return send_error(c, r, 411, "length_required", "Content-Length or chunked encoding is required");
+        return send_error(c, r, 411, "length_required",
+                          "Content-Length or chunked encoding is required");
     if (cl) {
         uint64_t n;
-        if (vx_req_parse_length(cl, &n)) return send_error(c, r, 400, "invalid_request", "bad Content-Length");
+        if (vx_req_parse_length(cl, &n))
+            return send_error(c, r, 400, "invalid_request", "bad Content-Length");
         if (n > limit) {
             char msg[128];
             snprintf(msg, sizeof msg, "the body (%llu bytes) is larger than the %llu-byte limit",
@@ -1143,7 +1212,8 @@ static enum MHD_Result on_request(void *cls, struct MHD_Connection *c, const cha
     if (r->vc) {
         pthread_mutex_lock(&h->clock);
         int dead = r->vc->killed;
-        if (*data_size) r->vc->body_bytes += *data_size;
+        if (*data_size)
+            r->vc->body_bytes += *data_size;
         else if (r->vc->phase == P_BODY) {
             r->vc->phase = P_BUSY;
             r->vc->t_phase = vx_mono();
@@ -1173,17 +1243,27 @@ static enum MHD_Result on_request(void *cls, struct MHD_Connection *c, const cha
     if (r->qerr[0]) return send_error(c, r, 400, "invalid_request", r->qerr);
     int is_get = !strcmp(r->method, "GET") || !strcmp(r->method, "HEAD");
     switch (r->route) {
-    case VX_R_LIVEZ: return send_text(c, r, 200, strdup("{\"status\":\"ok\"}"), "application/json", NULL, NULL);
-    case VX_R_READYZ: return h_readyz(h, c, r);
-    case VX_R_METRICS: return h_metrics(h, c, r);
-    case VX_R_INFO: return h_info(h, c, r);
-    case VX_R_MESHES: return is_get ? h_mesh_list(h, c, r) : h_upload_done(h, c, r);
-    case VX_R_MESH: return h_mesh(h, c, r);
-    case VX_R_JOBS: return is_get ? h_job_list(h, c, r) : h_job_post_done(h, c, r);
-    case VX_R_JOB: return h_job(h, c, r);
+    case VX_R_LIVEZ:
+        return send_text(c, r, 200, strdup("{\"status\":\"ok\"}"), "application/json", NULL, NULL);
+    case VX_R_READYZ:
+        return h_readyz(h, c, r);
+    case VX_R_METRICS:
+        return h_metrics(h, c, r);
+    case VX_R_INFO:
+        return h_info(h, c, r);
+    case VX_R_MESHES:
+        return is_get ? h_mesh_list(h, c, r) : h_upload_done(h, c, r);
+    case VX_R_MESH:
+        return h_mesh(h, c, r);
+    case VX_R_JOBS:
+        return is_get ? h_job_list(h, c, r) : h_job_post_done(h, c, r);
+    case VX_R_JOB:
+        return h_job(h, c, r);
     case VX_R_RESULT:
-    case VX_R_RESULT_NAME: return h_result(h, c, r);
-    default: return send_error(c, r, 404, "not_found", "no such route");
+    case VX_R_RESULT_NAME:
+        return h_result(h, c, r);
+    default:
+        return send_error(c, r, 404, "not_found", "no such route");
     }
 }
 
@@ -1196,7 +1276,8 @@ static void on_completed(void *cls, struct MHD_Connection *c, void **con_cls,
     if (r->waiting) { /* the connection died while held */
         pthread_mutex_lock(&h->wlock);
         waiter **pp = &h->waiters;
-        while (*pp && *pp != &r->w) pp = &(*pp)->next;
+        while (*pp && *pp != &r->w)
+            pp = &(*pp)->next;
         if (*pp) *pp = r->w.next;
         pthread_mutex_unlock(&h->wlock);
     }
@@ -1205,7 +1286,8 @@ static void on_completed(void *cls, struct MHD_Connection *c, void **con_cls,
     int status = r->status ? r->status : 499; /* closed before an answer */
     if (r->vc) {
         pthread_mutex_lock(&h->clock);
-        if (r->vc->killed && r->vc->kill_status) status = r->vc->kill_status;
+        if (r->vc->killed && r->vc->kill_status)
+            status = r->vc->kill_status;
         else if (!r->vc->killed) { /* keep-alive: the next head starts with its first byte */
             r->vc->phase = P_IDLE;
             r->vc->t_phase = vx_mono();
@@ -1217,11 +1299,15 @@ static void on_completed(void *cls, struct MHD_Connection *c, void **con_cls,
     for (int i = 0; known[i]; i++)
         if (!strcmp(known[i], r->method)) mlabel = known[i];
     vx_metrics_request(route, mlabel, status, dt, r->bytes_in, r->bytes_out);
-    vx_log_level lvl = (r->route == VX_R_LIVEZ || r->route == VX_R_READYZ || r->route == VX_R_METRICS) && status < 400
-                           ? VX_LOG_DEBUG : VX_LOG_INFO;
-    vx_log(lvl, "http.request", "method=%s route=%s status=%d ms=%.2f bytes_in=%llu bytes_out=%llu%s",
-           r->method, route, status, dt * 1e3, (unsigned long long)r->bytes_in,
-           (unsigned long long)r->bytes_out, toe == MHD_REQUEST_TERMINATED_COMPLETED_OK ? "" : " aborted=1");
+    vx_log_level lvl =
+        (r->route == VX_R_LIVEZ || r->route == VX_R_READYZ || r->route == VX_R_METRICS) &&
+                status < 400
+            ? VX_LOG_DEBUG
+            : VX_LOG_INFO;
+    vx_log(lvl, "http.request",
+           "method=%s route=%s status=%d ms=%.2f bytes_in=%llu bytes_out=%llu%s", r->method, route,
+           status, dt * 1e3, (unsigned long long)r->bytes_in, (unsigned long long)r->bytes_out,
+           toe == MHD_REQUEST_TERMINATED_COMPLETED_OK ? "" : " aborted=1");
     vx_upload_abort(r->up);
     free(r->buf);
     free(r);
@@ -1237,7 +1323,8 @@ static void mhd_log(void *cls, const char *fmt, va_list ap)
 
 /* ---- lifecycle ----------------------------------------------------- */
 
-static int parse_listen(const char *s, struct sockaddr_storage *ss, socklen_t *len, int *v6, vx_err *err)
+static int parse_listen(const char *s, struct sockaddr_storage *ss, socklen_t *len, int *v6,
+                        vx_err *err)
 {
     char host[256], port[16];
     const char *colon;
@@ -1252,7 +1339,10 @@ static int parse_listen(const char *s, struct sockaddr_storage *ss, socklen_t *l
         snprintf(host, sizeof host, "%.*s", (int)(colon - s), s);
     }
     snprintf(port, sizeof port, "%s", colon + 1);
-    struct addrinfo hints = {.ai_family = AF_UNSPEC, .ai_socktype = SOCK_STREAM, .ai_flags = AI_PASSIVE}, *ai;
+    struct addrinfo hints = {.ai_family = AF_UNSPEC,
+                             .ai_socktype = SOCK_STREAM,
+                             .ai_flags = AI_PASSIVE},
+                    *ai;
     if (getaddrinfo(host[0] ? host : NULL, port, &hints, &ai) != 0) goto bad;
     memcpy(ss, ai->ai_addr, ai->ai_addrlen);
     *len = ai->ai_addrlen;
@@ -1260,7 +1350,8 @@ static int parse_listen(const char *s, struct sockaddr_storage *ss, socklen_t *l
     freeaddrinfo(ai);
     return 0;
 bad:
-    return vx_err_set(err, VX_EINVAL, "bad_listen", "cannot parse listen address '%s' (want ADDR:PORT)", s);
+    return vx_err_set(err, VX_EINVAL, "bad_listen",
+                      "cannot parse listen address '%s' (want ADDR:PORT)", s);
 }
 
 vx_http *vx_http_start(const vx_http_desc *desc, vx_err *err)
@@ -1302,19 +1393,20 @@ vx_http *vx_http_start(const vx_http_desc *desc, vx_err *err)
     errno = 0;
     h->mhd = MHD_start_daemon(
         flags, 0, NULL, NULL, on_request, h, MHD_OPTION_EXTERNAL_LOGGER, mhd_log, NULL,
-        MHD_OPTION_SOCK_ADDR, (struct sockaddr *)&ss,
-        MHD_OPTION_THREAD_POOL_SIZE, (unsigned)cfg->http_threads, MHD_OPTION_CONNECTION_TIMEOUT,
+        MHD_OPTION_SOCK_ADDR, (struct sockaddr *)&ss, MHD_OPTION_THREAD_POOL_SIZE,
+        (unsigned)cfg->http_threads, MHD_OPTION_CONNECTION_TIMEOUT,
         (unsigned)ceil(cfg->connection_timeout_s), MHD_OPTION_CONNECTION_LIMIT,
         (unsigned)cfg->max_connections, MHD_OPTION_PER_IP_CONNECTION_LIMIT,
-        (unsigned)cfg->max_connections_per_ip, MHD_OPTION_CONNECTION_MEMORY_LIMIT, (size_t)(256 * 1024),
-        MHD_OPTION_NOTIFY_COMPLETED, on_completed, h, MHD_OPTION_NOTIFY_CONNECTION, on_connection, h,
-        MHD_OPTION_URI_LOG_CALLBACK, on_uri, h,
+        (unsigned)cfg->max_connections_per_ip, MHD_OPTION_CONNECTION_MEMORY_LIMIT,
+        (size_t)(256 * 1024), MHD_OPTION_NOTIFY_COMPLETED, on_completed, h,
+        MHD_OPTION_NOTIFY_CONNECTION, on_connection, h, MHD_OPTION_URI_LOG_CALLBACK, on_uri, h,
         MHD_OPTION_LISTENING_ADDRESS_REUSE, cfg->reuse_port ? 1u : 0u, MHD_OPTION_END);
     if (!h->mhd) {
         int e = errno;
         vx_err_set(err, VX_EIO, "listen_failed", "cannot listen on %s: %s", cfg->listen,
                    e == EADDRINUSE ? "address in use (another process listens on this port)"
-                   : e ? strerror(e) : "libmicrohttpd could not start (see http.mhd)");
+                   : e             ? strerror(e)
+                                   : "libmicrohttpd could not start (see http.mhd)");
         pthread_mutex_destroy(&h->clock);
         pthread_mutex_destroy(&h->wlock);
         pthread_cond_destroy(&h->wcond);
@@ -1330,7 +1422,10 @@ vx_http *vx_http_start(const vx_http_desc *desc, vx_err *err)
     return h;
 }
 
-int vx_http_port(vx_http *h) { return h->port; }
+int vx_http_port(vx_http *h)
+{
+    return h->port;
+}
 
 void vx_http_quiesce(vx_http *h)
 {
@@ -1339,7 +1434,8 @@ void vx_http_quiesce(vx_http *h)
     if (fd != MHD_INVALID_SOCKET) close(fd);
     pthread_mutex_lock(&h->wlock);
     h->stopping = 1;
-    while (h->waiters) resume_locked(h, h->waiters);
+    while (h->waiters)
+        resume_locked(h, h->waiters);
     pthread_cond_broadcast(&h->wcond);
     pthread_mutex_unlock(&h->wlock);
 }
@@ -1350,7 +1446,8 @@ void vx_http_stop(vx_http *h, double grace_s)
     vx_http_quiesce(h);
     double until = vx_mono() + grace_s;
     while (vx_mono() < until) {
-        const union MHD_DaemonInfo *di = MHD_get_daemon_info(h->mhd, MHD_DAEMON_INFO_CURRENT_CONNECTIONS);
+        const union MHD_DaemonInfo *di =
+            MHD_get_daemon_info(h->mhd, MHD_DAEMON_INFO_CURRENT_CONNECTIONS);
         if (!di || di->num_connections == 0) break;
         usleep(20000);
     }

@@ -20,7 +20,8 @@
 /* The jobs hooks need the HTTP layer, which starts after the jobs. */
 static vx_http *g_http;
 
-static void on_job_finished(void *ud, const char *jid, const char *kind, const char *state, double run_s)
+static void on_job_finished(void *ud, const char *jid, const char *kind, const char *state,
+                            double run_s)
 {
     vx_metrics_job(kind, state, run_s);
 }
@@ -41,7 +42,8 @@ static int list_devices(void)
         return 1;
     }
     printf("%d EGL device(s), in the order --egl-device auto tries them:\n", n);
-    for (int i = 0; i < n; i++) printf("  %d  %-9s %s\n", devs[i].index, devs[i].kind, devs[i].name);
+    for (int i = 0; i < n; i++)
+        printf("  %d  %-9s %s\n", devs[i].index, devs[i].kind, devs[i].name);
     return 0;
 }
 
@@ -64,7 +66,8 @@ int main(int argc, char **argv)
     signal(SIGPIPE, SIG_IGN);
 
     double start = vx_now();
-    VX_INFO("voxeld.start", "version=%s pid=%d data_dir=%s", VX_VERSION, (int)getpid(), cfg.data_dir);
+    VX_INFO("voxeld.start", "version=%s pid=%d data_dir=%s", VX_VERSION, (int)getpid(),
+            cfg.data_dir);
     vx_err err;
     vx_err_clear(&err);
     vx_store_desc sd = {.results_max_bytes = cfg.results_max_bytes,
@@ -134,7 +137,7 @@ int main(int argc, char **argv)
             break;
         }
         if (sig == SIGHUP) VX_INFO("voxeld.signal", "signal=HUP action=none");
-        if (sig < 0 && errno == EAGAIN) { /* once a minute */
+        if (sig < 0 && errno == EAGAIN) {  /* once a minute */
             vx_store_results_evict(store); /* the age budget */
             vx_jobs_maintain(jobs, 16L << 20);
         }

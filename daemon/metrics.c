@@ -150,12 +150,13 @@ static void hist_render(sbuf *b, const char *name, const char *label, const hist
 {
     for (size_t i = 0; i < n; i++) {
         for (int k = 0; k < NBUCKETS; k++)
-            sb_printf(b, "%s_bucket{%s=\"%s\",le=\"%g\"} %llu\n", name, label, h[i].label, buckets[k],
-                      (unsigned long long)h[i].counts[k]);
+            sb_printf(b, "%s_bucket{%s=\"%s\",le=\"%g\"} %llu\n", name, label, h[i].label,
+                      buckets[k], (unsigned long long)h[i].counts[k]);
         sb_printf(b, "%s_bucket{%s=\"%s\",le=\"+Inf\"} %llu\n", name, label, h[i].label,
                   (unsigned long long)h[i].n);
         sb_printf(b, "%s_sum{%s=\"%s\"} %.6f\n", name, label, h[i].label, h[i].sum);
-        sb_printf(b, "%s_count{%s=\"%s\"} %llu\n", name, label, h[i].label, (unsigned long long)h[i].n);
+        sb_printf(b, "%s_count{%s=\"%s\"} %llu\n", name, label, h[i].label,
+                  (unsigned long long)h[i].n);
     }
 }
 
@@ -164,20 +165,25 @@ char *vx_metrics_render(const vx_metrics_gauges *g)
     sbuf b = {0};
     char e1[300], e2[300], e3[300];
     pthread_mutex_lock(&g_lock);
-    sb_printf(&b, "# HELP voxeld_http_requests_total HTTP requests answered, by route, method and status.\n"
-                  "# TYPE voxeld_http_requests_total counter\n");
+    sb_printf(
+        &b,
+        "# HELP voxeld_http_requests_total HTTP requests answered, by route, method and status.\n"
+        "# TYPE voxeld_http_requests_total counter\n");
     for (size_t i = 0; i < g_nreq; i++)
         sb_printf(&b, "voxeld_http_requests_total{route=\"%s\",method=\"%s\",status=\"%d\"} %llu\n",
                   g_req[i].route, g_req[i].method, g_req[i].status, (unsigned long long)g_req[i].n);
-    sb_printf(&b, "# HELP voxeld_http_request_duration_seconds Time from request headers to the end of the response.\n"
+    sb_printf(&b, "# HELP voxeld_http_request_duration_seconds Time from request headers to the "
+                  "end of the response.\n"
                   "# TYPE voxeld_http_request_duration_seconds histogram\n");
-    hist_render(&b, "voxeld_http_request_duration_seconds", "route", g_req_hist, g_nreq_hist, req_buckets);
-    sb_printf(&b, "# HELP voxeld_http_bytes_received_total Request body bytes received.\n"
-                  "# TYPE voxeld_http_bytes_received_total counter\n"
-                  "voxeld_http_bytes_received_total %llu\n"
-                  "# HELP voxeld_http_bytes_sent_total Response body bytes sent.\n"
-                  "# TYPE voxeld_http_bytes_sent_total counter\n"
-                  "voxeld_http_bytes_sent_total %llu\n",
+    hist_render(&b, "voxeld_http_request_duration_seconds", "route", g_req_hist, g_nreq_hist,
+                req_buckets);
+    sb_printf(&b,
+              "# HELP voxeld_http_bytes_received_total Request body bytes received.\n"
+              "# TYPE voxeld_http_bytes_received_total counter\n"
+              "voxeld_http_bytes_received_total %llu\n"
+              "# HELP voxeld_http_bytes_sent_total Response body bytes sent.\n"
+              "# TYPE voxeld_http_bytes_sent_total counter\n"
+              "voxeld_http_bytes_sent_total %llu\n",
               (unsigned long long)g_bytes_in, (unsigned long long)g_bytes_out);
     sb_printf(&b, "# HELP voxeld_jobs_total Jobs that reached a final state, by kind and state.\n"
                   "# TYPE voxeld_jobs_total counter\n");
@@ -189,26 +195,28 @@ char *vx_metrics_render(const vx_metrics_gauges *g)
     hist_render(&b, "voxeld_job_duration_seconds", "kind", g_job_hist, g_njob_hist, job_buckets);
     pthread_mutex_unlock(&g_lock);
 
-    sb_printf(&b,
-              "# HELP voxeld_queue_depth Jobs waiting for the GL thread.\n# TYPE voxeld_queue_depth gauge\n"
-              "voxeld_queue_depth %zu\n"
-              "# HELP voxeld_queue_capacity Jobs that may wait before requests get 429.\n"
-              "# TYPE voxeld_queue_capacity gauge\nvoxeld_queue_capacity %zu\n"
-              "# HELP voxeld_jobs_running Jobs running now.\n# TYPE voxeld_jobs_running gauge\n"
-              "voxeld_jobs_running %zu\n"
-              "# HELP voxeld_meshes Meshes in the store.\n# TYPE voxeld_meshes gauge\nvoxeld_meshes %zu\n"
-              "# HELP voxeld_results_bytes Bytes of job results on disk.\n"
-              "# TYPE voxeld_results_bytes gauge\nvoxeld_results_bytes %llu\n"
-              "# HELP voxeld_data_dir_free_bytes Bytes still free for the data dir.\n"
-              "# TYPE voxeld_data_dir_free_bytes gauge\nvoxeld_data_dir_free_bytes %llu\n"
-              "# HELP voxeld_data_dir_min_free_bytes Free-space floor: below it writes answer 507.\n"
-              "# TYPE voxeld_data_dir_min_free_bytes gauge\nvoxeld_data_dir_min_free_bytes %llu\n"
-              "# HELP voxeld_up 1 when ready to run jobs.\n# TYPE voxeld_up gauge\nvoxeld_up %d\n"
-              "# HELP process_start_time_seconds Start time of the process since the epoch.\n"
-              "# TYPE process_start_time_seconds gauge\nprocess_start_time_seconds %.3f\n",
-              g->queue_depth, g->queue_capacity, g->running, g->meshes,
-              (unsigned long long)g->results_bytes, (unsigned long long)g->disk_free_bytes,
-              (unsigned long long)g->min_free_disk, g->ready, g->start_time);
+    sb_printf(
+        &b,
+        "# HELP voxeld_queue_depth Jobs waiting for the GL thread.\n# TYPE voxeld_queue_depth "
+        "gauge\n"
+        "voxeld_queue_depth %zu\n"
+        "# HELP voxeld_queue_capacity Jobs that may wait before requests get 429.\n"
+        "# TYPE voxeld_queue_capacity gauge\nvoxeld_queue_capacity %zu\n"
+        "# HELP voxeld_jobs_running Jobs running now.\n# TYPE voxeld_jobs_running gauge\n"
+        "voxeld_jobs_running %zu\n"
+        "# HELP voxeld_meshes Meshes in the store.\n# TYPE voxeld_meshes gauge\nvoxeld_meshes %zu\n"
+        "# HELP voxeld_results_bytes Bytes of job results on disk.\n"
+        "# TYPE voxeld_results_bytes gauge\nvoxeld_results_bytes %llu\n"
+        "# HELP voxeld_data_dir_free_bytes Bytes still free for the data dir.\n"
+        "# TYPE voxeld_data_dir_free_bytes gauge\nvoxeld_data_dir_free_bytes %llu\n"
+        "# HELP voxeld_data_dir_min_free_bytes Free-space floor: below it writes answer 507.\n"
+        "# TYPE voxeld_data_dir_min_free_bytes gauge\nvoxeld_data_dir_min_free_bytes %llu\n"
+        "# HELP voxeld_up 1 when ready to run jobs.\n# TYPE voxeld_up gauge\nvoxeld_up %d\n"
+        "# HELP process_start_time_seconds Start time of the process since the epoch.\n"
+        "# TYPE process_start_time_seconds gauge\nprocess_start_time_seconds %.3f\n",
+        g->queue_depth, g->queue_capacity, g->running, g->meshes,
+        (unsigned long long)g->results_bytes, (unsigned long long)g->disk_free_bytes,
+        (unsigned long long)g->min_free_disk, g->ready, g->start_time);
     sb_printf(&b,
               "# HELP voxeld_info Build and GL context information.\n# TYPE voxeld_info gauge\n"
               "voxeld_info{version=\"%s\",gl_vendor=\"%s\",gl_renderer=\"%s\",gl_version=\"%s\","

@@ -53,12 +53,18 @@ vx_route vx_req_route(const char *path, size_t len, vx_req_target *t)
 {
     t->id[0] = t->name[0] = 0;
     t->route = VX_R_UNKNOWN;
-    if (is(path, len, "/livez")) t->route = VX_R_LIVEZ;
-    else if (is(path, len, "/readyz")) t->route = VX_R_READYZ;
-    else if (is(path, len, "/metrics")) t->route = VX_R_METRICS;
-    else if (is(path, len, "/v1/info")) t->route = VX_R_INFO;
-    else if (is(path, len, "/v1/meshes")) t->route = VX_R_MESHES;
-    else if (is(path, len, "/v1/jobs")) t->route = VX_R_JOBS;
+    if (is(path, len, "/livez"))
+        t->route = VX_R_LIVEZ;
+    else if (is(path, len, "/readyz"))
+        t->route = VX_R_READYZ;
+    else if (is(path, len, "/metrics"))
+        t->route = VX_R_METRICS;
+    else if (is(path, len, "/v1/info"))
+        t->route = VX_R_INFO;
+    else if (is(path, len, "/v1/meshes"))
+        t->route = VX_R_MESHES;
+    else if (is(path, len, "/v1/jobs"))
+        t->route = VX_R_JOBS;
     else if (starts(path, len, "/v1/meshes/")) {
         if (segment(path + 11, len - 11, t->id)) t->route = VX_R_MESH;
     } else if (starts(path, len, "/v1/jobs/")) {
@@ -66,8 +72,10 @@ vx_route vx_req_route(const char *path, size_t len, vx_req_target *t)
         const char *slash = memchr(rest, '/', (size_t)(end - rest));
         size_t n = (size_t)((slash ? slash : end) - rest);
         if (!segment(rest, n, t->id)) return t->route;
-        if (!slash) t->route = VX_R_JOB;
-        else if (is(slash, (size_t)(end - slash), "/result")) t->route = VX_R_RESULT;
+        if (!slash)
+            t->route = VX_R_JOB;
+        else if (is(slash, (size_t)(end - slash), "/result"))
+            t->route = VX_R_RESULT;
         else if (starts(slash, (size_t)(end - slash), "/result/") &&
                  segment(slash + 8, (size_t)(end - slash - 8), t->name))
             t->route = VX_R_RESULT_NAME;
@@ -101,16 +109,19 @@ void vx_req_media_type(const char *ct, char *out, size_t n)
     size_t o = 0;
     if (ct)
         for (; *ct && *ct != ';' && o + 1 < n; ct++)
-            if (*ct != ' ' && *ct != '\t') out[o++] = (char)(*ct >= 'A' && *ct <= 'Z' ? *ct + 32 : *ct);
+            if (*ct != ' ' && *ct != '\t')
+                out[o++] = (char)(*ct >= 'A' && *ct <= 'Z' ? *ct + 32 : *ct);
     out[o] = 0;
 }
 
 int vx_req_transfer_encoding(const char *te)
 {
     if (!te) return 0;
-    while (*te == ' ' || *te == '\t') te++;
+    while (*te == ' ' || *te == '\t')
+        te++;
     size_t n = strlen(te);
-    while (n && (te[n - 1] == ' ' || te[n - 1] == '\t')) n--;
+    while (n && (te[n - 1] == ' ' || te[n - 1] == '\t'))
+        n--;
     return n == 7 && !strncasecmp(te, "chunked", 7) ? 1 : -1;
 }
 
@@ -157,7 +168,8 @@ int vx_req_parse_seconds(const char *s, size_t len, uint64_t *us)
         for (; i < len && s[i] >= '0' && s[i] <= '9'; i++, nfrac++)
             if (nfrac < 6) frac = frac * 10 + (uint64_t)(s[i] - '0');
         if (!nfrac || i < len) return -1;
-        for (; nfrac < 6; nfrac++) frac *= 10;
+        for (; nfrac < 6; nfrac++)
+            frac *= 10;
     }
     *us = whole >= max_s ? VX_REQ_WAIT_MAX_US : whole * 1000000 + frac;
     return 0;
@@ -181,7 +193,8 @@ static enum qparam declared(vx_route rt, const char *method, const char *key, si
         if (is(key, klen, "after")) return Q_AFTER;
         if (rt == VX_R_JOBS && is(key, klen, "state")) return Q_STATE;
     }
-    if (((rt == VX_R_JOBS && post) || (rt == VX_R_JOB && get)) && is(key, klen, "wait")) return Q_WAIT;
+    if (((rt == VX_R_JOBS && post) || (rt == VX_R_JOB && get)) && is(key, klen, "wait"))
+        return Q_WAIT;
     return Q_NONE;
 }
 
@@ -239,19 +252,23 @@ int vx_req_query_add(vx_req_query *q, vx_route rt, const char *method, const cha
         return 0;
     case Q_WAIT:
         if (vx_req_parse_seconds(value, vlen, &q->wait_us)) {
-            snprintf(msg, msgn, "query parameter wait must be a non-negative decimal number of seconds");
+            snprintf(msg, msgn,
+                     "query parameter wait must be a non-negative decimal number of seconds");
             return -1;
         }
         return 0;
-    default: return 0;
+    default:
+        return 0;
     }
 bad_after:
     q->after[0] = 0;
-    snprintf(msg, msgn, "query parameter after must be a %s id", rt == VX_R_MESHES ? "mesh" : "job");
+    snprintf(msg, msgn, "query parameter after must be a %s id",
+             rt == VX_R_MESHES ? "mesh" : "job");
     return -1;
 bad_state:
     q->state[0] = 0;
-    snprintf(msg, msgn, "query parameter state must be queued, running, succeeded, failed or canceled");
+    snprintf(msg, msgn,
+             "query parameter state must be queued, running, succeeded, failed or canceled");
     return -1;
 }
 
@@ -260,14 +277,14 @@ int vx_req_query_format(const vx_req_query *q, char *out, size_t n)
     size_t o = 0;
     int k;
     out[0] = 0;
-#define PUT(...)                                                                                     \
-    do {                                                                                             \
-        k = snprintf(out + o, n - o, "%s", o ? "&" : "");                                            \
-        if (k < 0 || (size_t)k >= n - o) return -1;                                                  \
-        o += (size_t)k;                                                                              \
-        k = snprintf(out + o, n - o, __VA_ARGS__);                                                   \
-        if (k < 0 || (size_t)k >= n - o) return -1;                                                  \
-        o += (size_t)k;                                                                              \
+#define PUT(...)                                                                                   \
+    do {                                                                                           \
+        k = snprintf(out + o, n - o, "%s", o ? "&" : "");                                          \
+        if (k < 0 || (size_t)k >= n - o) return -1;                                                \
+        o += (size_t)k;                                                                            \
+        k = snprintf(out + o, n - o, __VA_ARGS__);                                                 \
+        if (k < 0 || (size_t)k >= n - o) return -1;                                                \
+        o += (size_t)k;                                                                            \
     } while (0)
     if (q->has_limit) PUT("limit=%d", q->limit);
     if (q->has_after) PUT("after=%s", q->after);
@@ -288,10 +305,14 @@ static size_t utf8_char(const unsigned char *s, size_t n)
     if (c < 0x80) return 1;
     size_t len;
     unsigned cp, min;
-    if (c >= 0xc2 && c <= 0xdf) len = 2, cp = c & 0x1f, min = 0x80;
-    else if (c >= 0xe0 && c <= 0xef) len = 3, cp = c & 0x0f, min = 0x800;
-    else if (c >= 0xf0 && c <= 0xf4) len = 4, cp = c & 0x07, min = 0x10000;
-    else return 0;
+    if (c >= 0xc2 && c <= 0xdf)
+        len = 2, cp = c & 0x1f, min = 0x80;
+    else if (c >= 0xe0 && c <= 0xef)
+        len = 3, cp = c & 0x0f, min = 0x800;
+    else if (c >= 0xf0 && c <= 0xf4)
+        len = 4, cp = c & 0x07, min = 0x10000;
+    else
+        return 0;
     if (n < len) return 0;
     for (size_t i = 1; i < len; i++) {
         if ((s[i] & 0xc0) != 0x80) return 0;

@@ -38,10 +38,10 @@ typedef struct vx_req_target {
 /* The declared query parameters of one request, after strict parsing. */
 typedef struct vx_req_query {
     int has_limit, has_after, has_state, has_wait;
-    int limit;                   /* 1..1000; 100 when absent */
-    char after[VX_REQ_ID_MAX];   /* a mesh or job id in form */
-    char state[16];              /* a job state */
-    uint64_t wait_us;            /* not yet capped to the request timeout */
+    int limit;                 /* 1..1000; 100 when absent */
+    char after[VX_REQ_ID_MAX]; /* a mesh or job id in form */
+    char state[16];            /* a job state */
+    uint64_t wait_us;          /* not yet capped to the request timeout */
 } vx_req_query;
 
 /* Matches path (the URL without its query string, exactly as sent: no

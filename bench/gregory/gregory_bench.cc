@@ -297,9 +297,10 @@ static int cmd_rate(vx_gl *gl, int argc, char **argv)
                osdp = (double)op / oms_p / 1e3;
         const char *name = strrchr(argv[0], '/') ? strrchr(argv[0], '/') + 1 : argv[0];
         double st = pts / steady / 1e3;
-        printf("| %s | %d | %.0f | %.1f (%.2f) | %.1f (%.2f) | %.1f | %.1f | %.1f | %.2fx / %.2fx |\n",
-               name, n, pts, ours, ms, st, steady, pts / wall / 1e3, osdn, osdp, ours / osdn,
-               st / osdn);
+        printf(
+            "| %s | %d | %.0f | %.1f (%.2f) | %.1f (%.2f) | %.1f | %.1f | %.1f | %.2fx / %.2fx |\n",
+            name, n, pts, ours, ms, st, steady, pts / wall / 1e3, osdn, osdp, ours / osdn,
+            st / osdn);
         fflush(stdout);
     }
     vx_mesh_free(m);

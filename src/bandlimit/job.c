@@ -137,8 +137,7 @@ static int read_params(const cJSON *params, const vx_limits *lim, rparams *p, vx
     if (p->N % 2) return bad(err, "params.%s must be even", "N");
     /* 8 samples per kept frequency, as many as the sampler takes (2048)
      * above N = 256 */
-    if (vx_param_int(params, "R", p->N <= 256 ? 8 * p->N : 2048, p->N, 2048, &p->R, err))
-        return -1;
+    if (vx_param_int(params, "R", p->N <= 256 ? 8 * p->N : 2048, p->N, 2048, &p->R, err)) return -1;
     if (p->R % 2) return bad(err, "params.%s must be even", "R");
     /* filter */
     const cJSON *flt = field(params, "filter");

@@ -38,7 +38,8 @@ void vx_bl_wisdom_dir(const char *dir)
         wisdom_saved = NULL;
         /* A missing or unreadable file is no wisdom yet; FFTW checks the
          * rest (it rejects wisdom from another FFTW build). */
-        if (path[0] && fftwf_import_wisdom_from_filename(path)) wisdom_saved = fftwf_export_wisdom_to_string();
+        if (path[0] && fftwf_import_wisdom_from_filename(path))
+            wisdom_saved = fftwf_export_wisdom_to_string();
     }
     pthread_mutex_unlock(&plan_mu);
 }

@@ -219,8 +219,8 @@ static double now_ms(void)
 typedef struct builder {
     const vx_mesh *mesh;
     int construction;
-    vx_gregory_topo *topo;    /* interpolate */
-    vx_gregory_cc_plan *cc;   /* approximate-cc */
+    vx_gregory_topo *topo;  /* interpolate */
+    vx_gregory_cc_plan *cc; /* approximate-cc */
     vx_gpatch_set *set;
 } builder;
 

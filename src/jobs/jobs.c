@@ -55,14 +55,14 @@ struct vx_job_run {
     job *job;
     const vx_kind *kind;
     vx_gl *gl;
-    double t0;          /* monotonic start of this attempt */
-    double last_ping;   /* watchdog */
+    double t0;        /* monotonic start of this attempt */
+    double last_ping; /* watchdog */
     cJSON *stats;
     cJSON *outputs;
-    char dir[2200];     /* result dir, made at the first output */
-    char path[2400];    /* last path handed out */
-    cJSON *params;      /* the job's params with its blobs back in place */
-    int big_params;     /* some came from blobs */
+    char dir[2200];  /* result dir, made at the first output */
+    char path[2400]; /* last path handed out */
+    cJSON *params;   /* the job's params with its blobs back in place */
+    int big_params;  /* some came from blobs */
     void *state;
     int on_gl_thread;
 };
@@ -110,7 +110,10 @@ static void job_free(job *jb)
     free(jb);
 }
 
-static int is_terminal(job_state s) { return s >= ST_SUCCEEDED; }
+static int is_terminal(job_state s)
+{
+    return s >= ST_SUCCEEDED;
+}
 
 int vx_jobs_valid_id(const char *s)
 {
@@ -125,11 +128,13 @@ static void new_id(char out[33])
 {
     unsigned char rnd[10] = {0};
     if (getrandom(rnd, sizeof rnd, 0) != (ssize_t)sizeof rnd) {
-        for (size_t i = 0; i < sizeof rnd; i++) rnd[i] = (unsigned char)rand();
+        for (size_t i = 0; i < sizeof rnd; i++)
+            rnd[i] = (unsigned char)rand();
     }
     unsigned long long ms = (unsigned long long)(vx_now() * 1000.0);
     snprintf(out, 33, "%012llx", ms & 0xffffffffffffULL);
-    for (int i = 0; i < 10; i++) snprintf(out + 12 + 2 * i, 3, "%02x", rnd[i]);
+    for (int i = 0; i < 10; i++)
+        snprintf(out + 12 + 2 * i, 3, "%02x", rnd[i]);
 }
 
 static void add_time(cJSON *o, const char *name, double t)
@@ -143,7 +148,10 @@ static void add_time(cJSON *o, const char *name, double t)
     }
 }
 
-static double ms_between(double a, double b) { return (double)(long long)((b - a) * 1e6) / 1e3; }
+static double ms_between(double a, double b)
+{
+    return (double)(long long)((b - a) * 1e6) / 1e3;
+}
 
 /* Owned copies of a job's params, stats and outputs (empty objects where
  * there are none): from its trees, or from the text of a finished job. */
@@ -197,8 +205,10 @@ static cJSON *job_json(const job *jb, int api)
                                     ms_between(jb->started, jb->finished > 0 ? jb->finished : now));
         else
             cJSON_AddNullToObject(t, "run_ms");
-        if (jb->finished > 0) cJSON_AddNumberToObject(t, "total_ms", ms_between(jb->created, jb->finished));
-        else cJSON_AddNullToObject(t, "total_ms");
+        if (jb->finished > 0)
+            cJSON_AddNumberToObject(t, "total_ms", ms_between(jb->created, jb->finished));
+        else
+            cJSON_AddNullToObject(t, "total_ms");
     } else {
         cJSON_AddNumberToObject(o, "seq", (double)jb->seq);
     }
@@ -255,8 +265,10 @@ static size_t find_index(vx_jobs *j, const char *id, int *found)
             *found = 1;
             return mid;
         }
-        if (c < 0) lo = mid + 1;
-        else hi = mid;
+        if (c < 0)
+            lo = mid + 1;
+        else
+            hi = mid;
     }
     *found = 0;
     return lo;
@@ -292,14 +304,15 @@ static int insert_job(vx_jobs *j, job *jb)
 static void trim_history_locked(vx_jobs *j, char (*dropped)[33], size_t *ndropped, size_t max)
 {
     size_t finished = 0;
-    for (size_t i = 0; i < j->njobs; i++) finished += is_terminal(j->jobs[i]->state);
+    for (size_t i = 0; i < j->njobs; i++)
+        finished += is_terminal(j->jobs[i]->state);
     size_t w = 0;
     *ndropped = 0;
     for (size_t i = 0; i < j->njobs; i++) {
         job *jb = j->jobs[i];
-        int over = finished > j->desc.history ||
-                   (j->desc.history_bytes && j->history_bytes > j->desc.history_bytes &&
-                    finished > 1);
+        int over =
+            finished > j->desc.history ||
+            (j->desc.history_bytes && j->history_bytes > j->desc.history_bytes && finished > 1);
         if (over && is_terminal(jb->state) && *ndropped < max) {
             snprintf(dropped[(*ndropped)++], 33, "%s", jb->id);
             j->history_bytes -= jb->bytes;
@@ -339,7 +352,8 @@ static int compact_locked(vx_jobs *j, vx_err *err)
         cJSON_AddItemToObject(recs[i], "job", job_json(j->jobs[i], 0));
     }
     int rc = vx_journal_compact(j->journal, recs, j->njobs, err);
-    for (size_t i = 0; i < j->njobs; i++) cJSON_Delete(recs[i]);
+    for (size_t i = 0; i < j->njobs; i++)
+        cJSON_Delete(recs[i]);
     free(recs);
     return rc;
 }
@@ -359,8 +373,10 @@ static int pinset_add(char (**arr)[65], size_t *n, const char *id)
 /* Releases what a job held: a deleted mesh or a blob may go now. */
 static void unpin_job(vx_jobs *j, pinset *ps)
 {
-    for (size_t i = 0; i < ps->nmesh; i++) vx_store_mesh_unpin(j->desc.store, ps->mesh[i]);
-    for (size_t i = 0; i < ps->nblob; i++) vx_store_blob_unpin(j->desc.store, ps->blob[i]);
+    for (size_t i = 0; i < ps->nmesh; i++)
+        vx_store_mesh_unpin(j->desc.store, ps->mesh[i]);
+    for (size_t i = 0; i < ps->nblob; i++)
+        vx_store_blob_unpin(j->desc.store, ps->blob[i]);
     pinset_free(ps);
 }
 
@@ -557,7 +573,8 @@ static void replay_one(const cJSON *rec, void *ud)
     vx_err_clear(&jb->error);
     const cJSON *e = cJSON_GetObjectItemCaseSensitive(o, "error");
     if (cJSON_IsObject(e)) {
-        jb->error.kind = (vx_err_kind)cJSON_GetNumberValue(cJSON_GetObjectItemCaseSensitive(e, "kind"));
+        jb->error.kind =
+            (vx_err_kind)cJSON_GetNumberValue(cJSON_GetObjectItemCaseSensitive(e, "kind"));
         if (jb->error.kind == VX_EOK) jb->error.kind = VX_EINTERNAL;
         snprintf(jb->error.code, sizeof jb->error.code, "%s",
                  cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(e, "code")) ?: "unknown");
@@ -617,13 +634,16 @@ vx_jobs *vx_jobs_open(const vx_jobs_desc *desc, vx_err *err)
         }
         /* Unfinished jobs hold their meshes and blobs again; finished ones
          * shrink to their text. */
-        if (is_terminal(jb->state)) freeze_locked(j, jb);
-        else pin_job(j, jb->mesh, jb->kind, jb->params, 1, &jb->pins, NULL);
+        if (is_terminal(jb->state))
+            freeze_locked(j, jb);
+        else
+            pin_job(j, jb->mesh, jb->kind, jb->params, 1, &jb->pins, NULL);
     }
     char dropped[256][33];
     size_t nd;
     trim_history_locked(j, dropped, &nd, 256);
-    for (size_t i = 0; i < nd; i++) vx_store_result_remove(desc->store, dropped[i]);
+    for (size_t i = 0; i < nd; i++)
+        vx_store_result_remove(desc->store, dropped[i]);
     /* What no unfinished job holds: meshes deleted while jobs used them,
      * blobs of jobs that finished or were never acknowledged. */
     vx_store_collect(desc->store);
@@ -667,10 +687,22 @@ int vx_run_progress(vx_job_run *r, double fraction, vx_err *err)
     return 0;
 }
 
-vx_gl *vx_run_gl(vx_job_run *r) { return r->gl; }
-const vx_limits *vx_run_limits(const vx_job_run *r) { return &r->jobs->desc.limits; }
-const char *vx_run_cache_dir(const vx_job_run *r) { return r->jobs->desc.cache_dir; }
-const char *vx_run_mesh_id(const vx_job_run *r) { return r->job->mesh; }
+vx_gl *vx_run_gl(vx_job_run *r)
+{
+    return r->gl;
+}
+const vx_limits *vx_run_limits(const vx_job_run *r)
+{
+    return &r->jobs->desc.limits;
+}
+const char *vx_run_cache_dir(const vx_job_run *r)
+{
+    return r->jobs->desc.cache_dir;
+}
+const char *vx_run_mesh_id(const vx_job_run *r)
+{
+    return r->job->mesh;
+}
 
 vx_mesh *vx_run_load_mesh(vx_job_run *r, const char *id, vx_err *err)
 {
@@ -679,12 +711,16 @@ vx_mesh *vx_run_load_mesh(vx_job_run *r, const char *id, vx_err *err)
     vx_mesh_limits lim = {.max_triangles = r->jobs->desc.limits.max_triangles};
     return vx_mesh_read_path(path, &lim, err);
 }
-cJSON *vx_run_stats(vx_job_run *r) { return r->stats; }
+cJSON *vx_run_stats(vx_job_run *r)
+{
+    return r->stats;
+}
 
 const char *vx_run_output(vx_job_run *r, const char *name, const char *file_ext,
                           const char *content_type, vx_err *err)
 {
-    if (!r->dir[0] && vx_store_result_dir(r->jobs->desc.store, r->job->id, r->dir, sizeof r->dir, err))
+    if (!r->dir[0] &&
+        vx_store_result_dir(r->jobs->desc.store, r->job->id, r->dir, sizeof r->dir, err))
         return NULL;
     char file[160];
     snprintf(file, sizeof file, "%s.%s", name, file_ext);
@@ -793,7 +829,8 @@ static void run_finish(vx_jobs *j, vx_job_run *r, int ok, const vx_err *e)
     }
     pthread_mutex_unlock(&j->lock);
     unpin_job(j, &pins);
-    for (size_t i = 0; i < nd; i++) vx_store_result_remove(j->desc.store, dropped[i]);
+    for (size_t i = 0; i < nd; i++)
+        vx_store_result_remove(j->desc.store, dropped[i]);
     if (requeue) {
         VX_INFO("job.requeued", "job=%s kind=%s reason=shutdown", id, kind);
     } else {
@@ -801,7 +838,8 @@ static void run_finish(vx_jobs *j, vx_job_run *r, int ok, const vx_err *e)
         VX_INFO("job.finished", "job=%s kind=%s state=%s run_ms=%.1f code=%s message=%s", id, kind,
                 state_names[st], run_s * 1e3, ok ? "-" : e->code,
                 vx_log_quote(qm, sizeof qm, ok ? "-" : e->message));
-        if (j->desc.hooks.finished) j->desc.hooks.finished(j->desc.hooks.ud, id, kind, state_names[st], run_s);
+        if (j->desc.hooks.finished)
+            j->desc.hooks.finished(j->desc.hooks.ud, id, kind, state_names[st], run_s);
     }
     notify(j, id, !requeue);
     run_free(r);
@@ -843,7 +881,8 @@ static void run_job_gl(vx_jobs *j, vx_gl *gl, mesh_cache *mc, job *jb)
     j->running++;
     vx_err err;
     vx_err_clear(&err);
-    if (journal_locked(j, jb, &err)) VX_ERROR("jobs.journal_failed", "job=%s code=%s", jb->id, err.code);
+    if (journal_locked(j, jb, &err))
+        VX_ERROR("jobs.journal_failed", "job=%s code=%s", jb->id, err.code);
     pthread_mutex_unlock(&j->lock);
     notify(j, jb->id, 0);
     VX_INFO("job.started", "job=%s kind=%s mesh=%.12s attempt=%d", jb->id, jb->kind->name, jb->mesh,
@@ -891,7 +930,8 @@ static void run_job_gl(vx_jobs *j, vx_gl *gl, mesh_cache *mc, job *jb)
         cJSON_DeleteItemFromObjectCaseSensitive(r->stats, "context_rebuilds");
         cJSON_AddNumberToObject(r->stats, "context_rebuilds", attempt + 1);
         if (attempt >= 1) {
-            vx_err_set(&err, VX_EGPU, "context_lost", "the GL context was lost twice running this job");
+            vx_err_set(&err, VX_EGPU, "context_lost",
+                       "the GL context was lost twice running this job");
             ok = 0;
             break;
         }
@@ -962,7 +1002,8 @@ int vx_jobs_start(vx_jobs *j, vx_err *err)
     if (pthread_create(&j->gl_thread, NULL, gl_main, j))
         return vx_err_set(err, VX_EINTERNAL, "thread_failed", "cannot start the GL thread");
     pthread_mutex_lock(&j->lock);
-    while (j->gl_state == 0) pthread_cond_wait(&j->gl_cond, &j->lock);
+    while (j->gl_state == 0)
+        pthread_cond_wait(&j->gl_cond, &j->lock);
     int state = j->gl_state;
     if (state < 0 && err) *err = j->gl_err;
     pthread_mutex_unlock(&j->lock);
@@ -985,7 +1026,8 @@ void vx_jobs_stop(vx_jobs *j)
     /* The GL thread has handed over everything it ran: workers finish those
      * (encoding is short) and exit when the queue is empty. */
     vx_queue_close(j->cpu);
-    for (int i = 0; i < j->nworkers; i++) pthread_join(j->workers[i], NULL);
+    for (int i = 0; i < j->nworkers; i++)
+        pthread_join(j->workers[i], NULL);
     free(j->workers);
     j->workers = NULL;
     j->started = 0;
@@ -1003,15 +1045,18 @@ void vx_jobs_maintain(vx_jobs *j, long max_journal_bytes)
     pthread_mutex_lock(&j->lock);
     int rc = compact_locked(j, &err);
     pthread_mutex_unlock(&j->lock);
-    if (rc) VX_ERROR("journal.compact_failed", "code=%s", err.code);
-    else VX_INFO("journal.compacted", "bytes=%ld", vx_journal_size(j->journal));
+    if (rc)
+        VX_ERROR("journal.compact_failed", "code=%s", err.code);
+    else
+        VX_INFO("journal.compacted", "bytes=%ld", vx_journal_size(j->journal));
 }
 
 void vx_jobs_free(vx_jobs *j)
 {
     if (!j) return;
     vx_jobs_stop(j);
-    for (size_t i = 0; i < j->njobs; i++) job_free(j->jobs[i]);
+    for (size_t i = 0; i < j->njobs; i++)
+        job_free(j->jobs[i]);
     free(j->jobs);
     vx_queue_free(j->queue);
     vx_queue_free(j->cpu);
@@ -1050,8 +1095,7 @@ cJSON *vx_jobs_submit(vx_jobs *j, const char *mesh, const char *kind, const cJSO
     /* The job holds its meshes (a delete keeps their files until it ends)
      * and its large inline inputs are stored as blobs, all before it is
      * acknowledged. */
-    if (pin_job(j, mesh, k, norm, 0, &jb->pins, err) ||
-        externalize(j, k, norm, &jb->pins, err)) {
+    if (pin_job(j, mesh, k, norm, 0, &jb->pins, err) || externalize(j, k, norm, &jb->pins, err)) {
         unpin_job(j, &jb->pins);
         job_free(jb);
         return NULL;
@@ -1120,7 +1164,8 @@ cJSON *vx_jobs_cancel(vx_jobs *j, const char *jid, int *was_running, vx_err *err
     if (!jb) {
         vx_err_set(err, VX_ENOTFOUND, "job_not_found", "no job with id %.64s", jid);
     } else if (is_terminal(jb->state)) {
-        vx_err_set(err, VX_ECONFLICT, "job_finished", "job %s already %s", jid, state_names[jb->state]);
+        vx_err_set(err, VX_ECONFLICT, "job_finished", "job %s already %s", jid,
+                   state_names[jb->state]);
     } else if (jb->state == ST_QUEUED) {
         snprintf(kind, sizeof kind, "%s", jb->kind->name);
         vx_queue_remove(j->queue, jb);
@@ -1150,7 +1195,8 @@ cJSON *vx_jobs_cancel(vx_jobs *j, const char *jid, int *was_running, vx_err *err
     unpin_job(j, &pins);
     if (changed) {
         VX_INFO("job.finished", "job=%s state=canceled run_ms=0", jid);
-        if (j->desc.hooks.finished) j->desc.hooks.finished(j->desc.hooks.ud, jid, kind, "canceled", -1);
+        if (j->desc.hooks.finished)
+            j->desc.hooks.finished(j->desc.hooks.ud, jid, kind, "canceled", -1);
         notify(j, jid, 1);
     }
     return out;
@@ -1192,7 +1238,8 @@ int vx_jobs_output(vx_jobs *j, const char *jid, const char *name, char *path, si
     if (!jb) {
         vx_err_set(err, VX_ENOTFOUND, "job_not_found", "no job with id %.64s", jid);
     } else if (jb->state == ST_QUEUED || jb->state == ST_RUNNING) {
-        vx_err_set(err, VX_ECONFLICT, "job_not_finished", "job %s is %s", jid, state_names[jb->state]);
+        vx_err_set(err, VX_ECONFLICT, "job_not_finished", "job %s is %s", jid,
+                   state_names[jb->state]);
     } else if (jb->state == ST_FAILED) {
         vx_err_set(err, VX_ECONFLICT, "job_failed", "job %s failed: %s", jid, jb->error.message);
     } else if (jb->state == ST_CANCELED) {
@@ -1209,7 +1256,8 @@ int vx_jobs_output(vx_jobs *j, const char *jid, const char *name, char *path, si
             snprintf(file, sizeof file, "%s",
                      cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(o, "file")) ?: "");
             snprintf(ctype, 64, "%s",
-                     cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(o, "content_type")) ?: "application/octet-stream");
+                     cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(o, "content_type"))
+                         ?: "application/octet-stream");
             snprintf(fname, 128, "%s-%s", jb->id, file);
             snprintf(id, sizeof id, "%s", jb->id);
             rc = 0;
@@ -1237,8 +1285,14 @@ vx_gl_info vx_jobs_gl_info(vx_jobs *j)
     return i;
 }
 
-size_t vx_jobs_queue_depth(vx_jobs *j) { return vx_queue_depth(j->queue); }
-size_t vx_jobs_queue_capacity(vx_jobs *j) { return vx_queue_capacity(j->queue); }
+size_t vx_jobs_queue_depth(vx_jobs *j)
+{
+    return vx_queue_depth(j->queue);
+}
+size_t vx_jobs_queue_capacity(vx_jobs *j)
+{
+    return vx_queue_capacity(j->queue);
+}
 
 size_t vx_jobs_running(vx_jobs *j)
 {

@@ -28,9 +28,9 @@ typedef struct vx_jobs_hooks {
 } vx_jobs_hooks;
 
 typedef struct vx_jobs_desc {
-    vx_store *store;        /* required; not owned */
-    const char *journal;    /* journal path, default DATA/journal.log */
-    const char *cache_dir;  /* handed to kinds (vx_run_cache_dir); NULL = none */
+    vx_store *store;       /* required; not owned */
+    const char *journal;   /* journal path, default DATA/journal.log */
+    const char *cache_dir; /* handed to kinds (vx_run_cache_dir); NULL = none */
     vx_limits limits;
     size_t max_queued;      /* queued jobs before 429; default 64 */
     size_t history;         /* finished jobs kept; default 10000 */

@@ -25,7 +25,10 @@ struct vx_journal {
  * JSON) are still read. */
 #define FRAME_HEAD 10 /* "#xxxxxxxx " */
 
-static uint32_t crc_of(const char *p, size_t n) { return (uint32_t)crc32(0L, (const Bytef *)p, (uInt)n); }
+static uint32_t crc_of(const char *p, size_t n)
+{
+    return (uint32_t)crc32(0L, (const Bytef *)p, (uInt)n);
+}
 
 vx_journal *vx_journal_open(const char *path, vx_err *err)
 {
@@ -39,7 +42,8 @@ vx_journal *vx_journal_open(const char *path, vx_err *err)
     if (j->fd < 0) {
         int e = errno;
         VX_ERROR("journal.open_failed", "path=%s error=%d", path, e);
-        vx_err_set(err, vx_err_io_kind(e), "journal_failed", "cannot open the journal: %s", strerror(e));
+        vx_err_set(err, vx_err_io_kind(e), "journal_failed", "cannot open the journal: %s",
+                   strerror(e));
         free(j);
         return NULL;
     }
@@ -63,7 +67,8 @@ void vx_journal_close(vx_journal *j)
 /* A framed record at p (n bytes, no newline): the JSON, or NULL. */
 static cJSON *parse_framed(const char *p, size_t n)
 {
-    if (n < FRAME_HEAD + 2 || p[0] != '#' || p[FRAME_HEAD - 1] != ' ' || p[FRAME_HEAD] != '{') return NULL;
+    if (n < FRAME_HEAD + 2 || p[0] != '#' || p[FRAME_HEAD - 1] != ' ' || p[FRAME_HEAD] != '{')
+        return NULL;
     char hex[9];
     memcpy(hex, p + 1, 8);
     hex[8] = 0;
@@ -85,7 +90,8 @@ static cJSON *salvage(const char *line, size_t n)
             if (rec) return rec;
         }
     static const char key[] = "{\"job\":";
-    for (const char *p = line + 1; (p = memmem(p, n - (size_t)(p - line), key, sizeof key - 1)); p++) {
+    for (const char *p = line + 1; (p = memmem(p, n - (size_t)(p - line), key, sizeof key - 1));
+         p++) {
         cJSON *rec = cJSON_ParseWithLength(p, n - (size_t)(p - line));
         if (rec) return rec;
     }
@@ -98,7 +104,8 @@ long vx_journal_replay(vx_journal *j, void (*fn)(const cJSON *rec, void *ud), vo
     if (!f) {
         int e = errno;
         VX_ERROR("journal.open_failed", "path=%s error=%d", j->path, e);
-        return vx_err_set(err, VX_EIO, "journal_failed", "cannot read the journal: %s", strerror(e));
+        return vx_err_set(err, VX_EIO, "journal_failed", "cannot read the journal: %s",
+                          strerror(e));
     }
     char *line = NULL;
     size_t cap = 0;
@@ -179,7 +186,8 @@ int vx_journal_append(vx_journal *j, const cJSON *rec, vx_err *err)
     free(text);
     if (rc != 0) {
         VX_ERROR("journal.append_failed", "path=%s error=%d", j->path, e);
-        return vx_err_set(err, vx_err_io_kind(e), e == ENOSPC || e == EDQUOT ? "insufficient_storage" : "journal_failed",
+        return vx_err_set(err, vx_err_io_kind(e),
+                          e == ENOSPC || e == EDQUOT ? "insufficient_storage" : "journal_failed",
                           "the job journal could not be written: %s", strerror(e));
     }
     return 0;
@@ -192,7 +200,8 @@ int vx_journal_compact(vx_journal *j, cJSON *const *recs, size_t n, vx_err *err)
     int fd = open(tmp, O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0640);
     if (fd < 0) {
         int e = errno;
-        return vx_err_set(err, vx_err_io_kind(e), "journal_failed", "cannot compact the journal: %s", strerror(e));
+        return vx_err_set(err, vx_err_io_kind(e), "journal_failed",
+                          "cannot compact the journal: %s", strerror(e));
     }
     int rc = 0, e = 0;
     off_t size = 0;
@@ -213,7 +222,8 @@ int vx_journal_compact(vx_journal *j, cJSON *const *recs, size_t n, vx_err *err)
     close(fd);
     if (rc != 0) {
         unlink(tmp);
-        return vx_err_set(err, vx_err_io_kind(e), "journal_failed", "cannot compact the journal: %s", strerror(e));
+        return vx_err_set(err, vx_err_io_kind(e), "journal_failed",
+                          "cannot compact the journal: %s", strerror(e));
     }
     pthread_mutex_lock(&j->lock);
     rc = rename(tmp, j->path);
@@ -228,7 +238,9 @@ int vx_journal_compact(vx_journal *j, cJSON *const *recs, size_t n, vx_err *err)
         }
     }
     pthread_mutex_unlock(&j->lock);
-    if (rc != 0) return vx_err_set(err, VX_EIO, "journal_failed", "cannot replace the journal: %s", strerror(errno));
+    if (rc != 0)
+        return vx_err_set(err, VX_EIO, "journal_failed", "cannot replace the journal: %s",
+                          strerror(errno));
     char dir[2048];
     snprintf(dir, sizeof dir, "%s", j->path);
     char *slash = strrchr(dir, '/');

@@ -23,7 +23,8 @@ void vx_journal_close(vx_journal *j);
 /* Calls fn for every complete record in file order. Returns the number of
  * records, or -1. Corrupt lines in the middle are logged and skipped; a torn
  * tail is truncated away. */
-long vx_journal_replay(vx_journal *j, void (*fn)(const cJSON *rec, void *ud), void *ud, vx_err *err);
+long vx_journal_replay(vx_journal *j, void (*fn)(const cJSON *rec, void *ud), void *ud,
+                       vx_err *err);
 /* Appends one record and makes it durable (fdatasync); on failure the file
  * is as before (VX_ENOSPC insufficient_storage when the disk is full). */
 int vx_journal_append(vx_journal *j, const cJSON *rec, vx_err *err);

@@ -25,8 +25,8 @@ typedef struct vx_gl vx_gl;
 typedef struct vx_limits {
     uint64_t max_upload_bytes;
     uint64_t max_triangles;
-    uint64_t max_image_pixels;  /* width * height of any rendered image */
-    uint64_t max_job_memory;    /* bytes an engine may allocate for one job */
+    uint64_t max_image_pixels; /* width * height of any rendered image */
+    uint64_t max_job_memory;   /* bytes an engine may allocate for one job */
     double job_timeout_s;
 } vx_limits;
 

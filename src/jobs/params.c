@@ -18,8 +18,8 @@ int vx_param_number(const cJSON *params, const char *field, double def, double l
     if (!cJSON_IsNumber(it) || !isfinite(it->valuedouble))
         return vx_err_set(err, VX_EUNPROC, "invalid_params", "params.%s must be a number", field);
     if (it->valuedouble < lo || it->valuedouble > hi)
-        return vx_err_set(err, VX_EUNPROC, "invalid_params", "params.%s must be in [%g, %g], got %g",
-                          field, lo, hi, it->valuedouble);
+        return vx_err_set(err, VX_EUNPROC, "invalid_params",
+                          "params.%s must be in [%g, %g], got %g", field, lo, hi, it->valuedouble);
     *out = it->valuedouble;
     return 0;
 }
@@ -43,7 +43,8 @@ int vx_param_bool(const cJSON *params, const char *field, int def, int *out, vx_
         return 0;
     }
     if (!cJSON_IsBool(it))
-        return vx_err_set(err, VX_EUNPROC, "invalid_params", "params.%s must be true or false", field);
+        return vx_err_set(err, VX_EUNPROC, "invalid_params", "params.%s must be true or false",
+                          field);
     *out = cJSON_IsTrue(it);
     return 0;
 }
@@ -84,19 +85,20 @@ int vx_param_mesh_ids(const cJSON *params, const char *field, size_t max, const 
     *out = NULL;
     if (!it || cJSON_IsNull(it)) return 0;
     if (!cJSON_IsArray(it))
-        return vx_err_set(err, VX_EUNPROC, "invalid_params", "params.%s must be an array of mesh ids",
-                          field);
+        return vx_err_set(err, VX_EUNPROC, "invalid_params",
+                          "params.%s must be an array of mesh ids", field);
     size_t n = (size_t)cJSON_GetArraySize(it);
     if (n > max)
-        return vx_err_set(err, VX_EUNPROC, "invalid_params", "params.%s has %zu entries (at most %zu)",
-                          field, n, max);
+        return vx_err_set(err, VX_EUNPROC, "invalid_params",
+                          "params.%s has %zu entries (at most %zu)", field, n, max);
     const cJSON *e;
     size_t i = 0;
     cJSON_ArrayForEach(e, it)
     {
         if (!cJSON_IsString(e) || !vx_store_valid_mesh_id(e->valuestring))
             return vx_err_set(err, VX_EUNPROC, "invalid_params",
-                              "params.%s[%zu] is not a mesh id (64 lowercase hex digits)", field, i);
+                              "params.%s[%zu] is not a mesh id (64 lowercase hex digits)", field,
+                              i);
         i++;
     }
     *out = it;
@@ -130,8 +132,7 @@ int vx_param_enum(const cJSON *params, const char *field, const char *const *nam
     return vx_param_enum_in(params, "", field, names, def, out, err);
 }
 
-cJSON *vx_params_normalize(const vx_kind *k, const cJSON *params, const vx_limits *lim,
-                           vx_err *err)
+cJSON *vx_params_normalize(const vx_kind *k, const cJSON *params, const vx_limits *lim, vx_err *err)
 {
     cJSON *norm = k->parse(params, lim, err);
     if (!norm) return NULL;

@@ -6,7 +6,10 @@
 #include <stdlib.h>
 #include <string.h>
 
-vx_mesh *vx_mesh_new(void) { return calloc(1, sizeof(vx_mesh)); }
+vx_mesh *vx_mesh_new(void)
+{
+    return calloc(1, sizeof(vx_mesh));
+}
 
 void vx_mesh_free(vx_mesh *m)
 {
@@ -59,7 +62,8 @@ static int count_edges(vx_mesh *m, size_t nedges, vx_err *err)
             start[a < b ? a : b]++;
         }
     }
-    for (size_t i = 1; i <= m->nverts; i++) start[i] += start[i - 1];
+    for (size_t i = 1; i <= m->nverts; i++)
+        start[i] += start[i - 1];
     start[m->nverts] = (uint32_t)nedges;
     /* start[v] holds the end of v's bucket; filling backwards leaves it at
      * the bucket's beginning. */
@@ -68,8 +72,10 @@ static int count_edges(vx_mesh *m, size_t nedges, vx_err *err)
         uint32_t n = vx_mesh_face_size(m, f);
         for (uint32_t k = 0; k < n; k++) {
             uint32_t a = v[k], b = v[(k + 1) % n];
-            if (a < b) nbr[--start[a]] = b;
-            else nbr[--start[b]] = a;
+            if (a < b)
+                nbr[--start[a]] = b;
+            else
+                nbr[--start[b]] = a;
         }
     }
     for (size_t v = 0; v < m->nverts; v++) {
@@ -78,9 +84,12 @@ static int count_edges(vx_mesh *m, size_t nedges, vx_err *err)
         if (n > 1) qsort(e, n, sizeof *e, cmp_u32);
         for (size_t i = 0; i < n;) {
             size_t j = i;
-            while (j < n && e[j] == e[i]) j++;
-            if (j - i == 1) m->boundary_edges++;
-            else if (j - i > 2) m->nonmanifold_edges++;
+            while (j < n && e[j] == e[i])
+                j++;
+            if (j - i == 1)
+                m->boundary_edges++;
+            else if (j - i > 2)
+                m->nonmanifold_edges++;
             i = j;
         }
     }
@@ -94,9 +103,12 @@ int vx_mesh_analyze(vx_mesh *m, vx_err *err)
     /* Triangulated view: a fan per face. */
     if (m->face_start && !m->tri) {
         size_t nt = 0;
-        for (size_t f = 0; f < m->nfaces; f++) nt += vx_mesh_face_size(m, f) - 2;
+        for (size_t f = 0; f < m->nfaces; f++)
+            nt += vx_mesh_face_size(m, f) - 2;
         m->tri = malloc(3 * nt * sizeof(uint32_t) + 1);
-        if (!m->tri) return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for %zu triangles", nt);
+        if (!m->tri)
+            return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for %zu triangles",
+                              nt);
         size_t t = 0;
         for (size_t f = 0; f < m->nfaces; f++) {
             const uint32_t *v = vx_mesh_face(m, f);

@@ -44,10 +44,10 @@ typedef struct vx_mesh {
 
     /* What load-time analysis found (vx_mesh_analyze). */
     double bbox_min[3], bbox_max[3];
-    size_t faces_by_size[3];   /* triangles, quads, n-gons (n >= 5) */
-    size_t boundary_edges;     /* undirected edges used by exactly one face; 0 = closed */
-    size_t nonmanifold_edges;  /* undirected edges used by three or more faces */
-    size_t degenerate_tris;    /* triangles of zero area (kept, reported) */
+    size_t faces_by_size[3];     /* triangles, quads, n-gons (n >= 5) */
+    size_t boundary_edges;       /* undirected edges used by exactly one face; 0 = closed */
+    size_t nonmanifold_edges;    /* undirected edges used by three or more faces */
+    size_t degenerate_tris;      /* triangles of zero area (kept, reported) */
     size_t ntexcoords, nnormals; /* vt / vn records seen (not kept) */
 } vx_mesh;
 
@@ -183,9 +183,9 @@ uint64_t vx_mesh_parse_cost(const char *path, vx_mesh_format fmt, uint64_t bytes
 
 /* Optional per-vertex normals and per-face groups for the writers. */
 typedef struct vx_mesh_write_opts {
-    const float *normals;       /* 3 * nverts, or NULL */
-    const uint32_t *face_group; /* nfaces group ids (patch ids), or NULL */
-    const char *group_prefix;   /* OBJ group name prefix, default "patch" */
+    const float *normals;        /* 3 * nverts, or NULL */
+    const uint32_t *face_group;  /* nfaces group ids (patch ids), or NULL */
+    const char *group_prefix;    /* OBJ group name prefix, default "patch" */
     int draco_quantization_bits; /* position quantisation, 0 = 16 */
 } vx_mesh_write_opts;
 

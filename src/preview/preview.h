@@ -14,23 +14,23 @@ typedef struct vx_preview_params {
     double azimuth_deg;   /* around +Y (up), 0 = looking along -Z from +Z */
     double elevation_deg; /* above the XZ plane, -89..89 */
     int width, height;
-    double fov_deg;       /* vertical field of view; 0 = orthographic */
+    double fov_deg; /* vertical field of view; 0 = orthographic */
     float color[3], background[4], ambient;
-    int samples;          /* MSAA samples, 1 = none */
+    int samples; /* MSAA samples, 1 = none */
     /* Optional: called between the pieces the render is cut into (bands
      * of rows, draws of at most VX_PREVIEW_CHUNK_TRIS triangles) with the
      * fraction done; returning -1 (err filled) stops the render, which
      * then fails with that err and leaves the GL state clean. */
     int (*poll)(void *ud, double fraction, vx_err *err);
     void *poll_ud;
-    int band_rows;        /* rows per band; 0 = from VX_PREVIEW_BAND_SAMPLES */
+    int band_rows; /* rows per band; 0 = from VX_PREVIEW_BAND_SAMPLES */
 } vx_preview_params;
 
 typedef struct vx_preview_stats {
-    double gpu_ms;          /* draw + resolve, GPU timer */
+    double gpu_ms; /* draw + resolve, GPU timer */
     double upload_ms;
     uint64_t pixels_covered;
-    int samples;            /* MSAA samples used (p->samples clamped to GL_MAX_SAMPLES) */
+    int samples; /* MSAA samples used (p->samples clamped to GL_MAX_SAMPLES) */
 } vx_preview_stats;
 
 /* Framing: the mesh is scaled so that its bounding sphere (centred on the

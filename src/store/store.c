@@ -19,8 +19,8 @@
 typedef struct mesh_entry {
     char id[65];
     char ext[8];
-    char *meta;  /* the metadata as compact JSON text (a fifth of a cJSON tree); NULL once deleted */
-    int pins;    /* unfinished jobs using it */
+    char *meta; /* the metadata as compact JSON text (a fifth of a cJSON tree); NULL once deleted */
+    int pins;   /* unfinished jobs using it */
     int deleted; /* gone from the API; the file stays while pinned */
 } mesh_entry;
 
@@ -91,8 +91,10 @@ static size_t mesh_find(vx_store *s, const char *id, int *found)
             *found = 1;
             return mid;
         }
-        if (c < 0) lo = mid + 1;
-        else hi = mid;
+        if (c < 0)
+            lo = mid + 1;
+        else
+            hi = mid;
     }
     *found = 0;
     return lo;
@@ -189,7 +191,7 @@ static void load_one(vx_store *s, const char *dir, const char *id, const char *s
     }
     const char *ext = strcmp(fmt->valuestring, "draco") == 0 ? "drc"
                       : strcmp(fmt->valuestring, "bpt") == 0 ? "bpt"
-                                                              : "obj";
+                                                             : "obj";
     char mpath[2300];
     snprintf(mpath, sizeof mpath, "%s/%s.%s", dir, id, ext);
     if (access(mpath, R_OK) != 0) {
@@ -291,7 +293,8 @@ static int lock_dir(vx_store *s, vx_err *err)
     snprintf(p, sizeof p, "%s/voxeld.lock", s->dir);
     int fd = open(p, O_RDWR | O_CREAT | O_CLOEXEC, 0640);
     if (fd < 0)
-        return vx_err_set(err, VX_EIO, "data_dir_lock", "cannot open the lock file %s: %s", p, strerror(errno));
+        return vx_err_set(err, VX_EIO, "data_dir_lock", "cannot open the lock file %s: %s", p,
+                          strerror(errno));
     if (flock(fd, LOCK_EX | LOCK_NB) != 0) {
         int e = errno;
         char pid[32] = "";
@@ -300,9 +303,10 @@ static int lock_dir(vx_store *s, vx_err *err)
         if (n > 0) pid[n] = 0;
         pid[strcspn(pid, "\n")] = 0;
         if (e == EWOULDBLOCK)
-            return vx_err_set(err, VX_EBUSY, "data_dir_locked",
-                              "the data dir %s is in use by another voxeld (pid %s): one daemon per data dir",
-                              s->dir, pid[0] ? pid : "unknown");
+            return vx_err_set(
+                err, VX_EBUSY, "data_dir_locked",
+                "the data dir %s is in use by another voxeld (pid %s): one daemon per data dir",
+                s->dir, pid[0] ? pid : "unknown");
         return vx_err_set(err, VX_EIO, "data_dir_lock", "cannot lock %s: %s", p, strerror(e));
     }
     char pid[32];
@@ -360,7 +364,8 @@ vx_store *vx_store_open(const char *data_dir, const vx_store_desc *desc, vx_err 
 void vx_store_close(vx_store *s)
 {
     if (!s) return;
-    for (size_t i = 0; i < s->nmeshes; i++) free(s->meshes[i].meta);
+    for (size_t i = 0; i < s->nmeshes; i++)
+        free(s->meshes[i].meta);
     free(s->meshes);
     free(s->blobs);
     free(s->results);
@@ -369,7 +374,10 @@ void vx_store_close(vx_store *s)
     free(s);
 }
 
-const char *vx_store_dir(const vx_store *s) { return s->dir; }
+const char *vx_store_dir(const vx_store *s)
+{
+    return s->dir;
+}
 
 int vx_store_writable(vx_store *s)
 {
@@ -396,7 +404,8 @@ vx_upload *vx_upload_begin(vx_store *s, vx_err *err)
     unsigned long seq = ++s->upload_seq;
     pthread_mutex_unlock(&s->lock);
     u->s = s;
-    snprintf(u->path, sizeof u->path, "%s/tmp/upload-%lu-%lu", s->dir, (unsigned long)getpid(), seq);
+    snprintf(u->path, sizeof u->path, "%s/tmp/upload-%lu-%lu", s->dir, (unsigned long)getpid(),
+             seq);
     u->fd = open(u->path, O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0640);
     if (u->fd < 0) {
         int e = errno;
@@ -418,7 +427,8 @@ static int upload_flush(vx_upload *u, vx_err *err)
         if (n < 0 && errno == EINTR) continue;
         if (n <= 0) {
             int e = n == 0 ? ENOSPC : errno;
-            return vx_err_set(err, vx_err_io_kind(e), e == ENOSPC || e == EDQUOT ? "insufficient_storage" : "upload_failed",
+            return vx_err_set(err, vx_err_io_kind(e),
+                              e == ENOSPC || e == EDQUOT ? "insufficient_storage" : "upload_failed",
                               "cannot store the upload: %s", strerror(e));
         }
         off += (size_t)n;
@@ -448,7 +458,10 @@ int vx_upload_write(vx_upload *u, const void *data, size_t n, vx_err *err)
     return 0;
 }
 
-uint64_t vx_upload_bytes(const vx_upload *u) { return u->bytes; }
+uint64_t vx_upload_bytes(const vx_upload *u)
+{
+    return u->bytes;
+}
 
 const unsigned char *vx_upload_head(const vx_upload *u, size_t *n)
 {
@@ -456,17 +469,22 @@ const unsigned char *vx_upload_head(const vx_upload *u, size_t *n)
     return u->head;
 }
 
-const char *vx_upload_path(const vx_upload *u) { return u->path; }
+const char *vx_upload_path(const vx_upload *u)
+{
+    return u->path;
+}
 
 int vx_upload_finish(vx_upload *u, char id[65], vx_err *err)
 {
     if (upload_flush(u, err)) return -1;
     if (fsync(u->fd) != 0)
-        return vx_err_set(err, vx_err_io_kind(errno), errno == ENOSPC ? "insufficient_storage" : "upload_failed",
+        return vx_err_set(err, vx_err_io_kind(errno),
+                          errno == ENOSPC ? "insufficient_storage" : "upload_failed",
                           "cannot store the upload: %s", strerror(errno));
     uint8_t digest[SHA256_DIGEST_SIZE];
     sha256_digest(&u->sha, sizeof digest, digest);
-    for (int i = 0; i < SHA256_DIGEST_SIZE; i++) sprintf(id + 2 * i, "%02x", digest[i]);
+    for (int i = 0; i < SHA256_DIGEST_SIZE; i++)
+        sprintf(id + 2 * i, "%02x", digest[i]);
     return 0;
 }
 
@@ -556,10 +574,13 @@ int vx_store_mesh_commit(vx_store *s, vx_upload *u, const char *id, const char *
     } else if (rename(u->path, path) != 0) {
         int e = errno;
         VX_ERROR("store.rename_failed", "path=%s error=%d", path, e);
-        vx_err_set(err, vx_err_io_kind(e), "store_failed", "cannot store the mesh: %s", strerror(e));
-    } else if (vx_fsync_dir(dir, err) == 0 && vx_write_atomic(mpath, text, strlen(text), err) == 0) {
+        vx_err_set(err, vx_err_io_kind(e), "store_failed", "cannot store the mesh: %s",
+                   strerror(e));
+    } else if (vx_fsync_dir(dir, err) == 0 &&
+               vx_write_atomic(mpath, text, strlen(text), err) == 0) {
         cJSON *copy = cJSON_Duplicate(meta, 1);
-        if (copy && mesh_insert(s, id, ext, copy, 0) == 0) rc = 0;
+        if (copy && mesh_insert(s, id, ext, copy, 0) == 0)
+            rc = 0;
         else {
             cJSON_Delete(copy);
             vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory");
@@ -640,8 +661,10 @@ int vx_store_mesh_pin(vx_store *s, const char *id, int deleted_ok, vx_err *err)
     pthread_mutex_lock(&s->lock);
     int found;
     size_t at = mesh_find(s, id, &found);
-    if (found && (deleted_ok || !s->meshes[at].deleted)) s->meshes[at].pins++;
-    else found = 0;
+    if (found && (deleted_ok || !s->meshes[at].deleted))
+        s->meshes[at].pins++;
+    else
+        found = 0;
     pthread_mutex_unlock(&s->lock);
     if (!found) return vx_err_set(err, VX_ENOTFOUND, "mesh_not_found", "no mesh with id %.80s", id);
     return 0;
@@ -740,15 +763,15 @@ static int blob_write_tmp(vx_store *s, const void *data, size_t n, char *tmp, si
     snprintf(tmp, tmpn, "%s/tmp-%lu-%lu", dir, (unsigned long)getpid(), seq);
     int fd = open(tmp, O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0640);
     if (fd < 0)
-        return vx_err_set(err, vx_err_io_kind(errno), "store_failed", "cannot store the job's inline data: %s",
-                          strerror(errno));
+        return vx_err_set(err, vx_err_io_kind(errno), "store_failed",
+                          "cannot store the job's inline data: %s", strerror(errno));
     int e = vx_write_all(fd, data, n) ? errno : 0;
     if (!e && fsync(fd) != 0) e = errno;
     if (close(fd) != 0 && !e) e = errno;
     if (e) {
         unlink(tmp);
-        return vx_err_set(err, vx_err_io_kind(e), "store_failed", "cannot store the job's inline data: %s",
-                          strerror(e));
+        return vx_err_set(err, vx_err_io_kind(e), "store_failed",
+                          "cannot store the job's inline data: %s", strerror(e));
     }
     return 0;
 }
@@ -760,7 +783,8 @@ int vx_store_blob_put(vx_store *s, const void *data, size_t n, char id[65], vx_e
     sha256_init(&sha);
     sha256_update(&sha, n, data);
     sha256_digest(&sha, sizeof digest, digest);
-    for (int i = 0; i < SHA256_DIGEST_SIZE; i++) sprintf(id + 2 * i, "%02x", digest[i]);
+    for (int i = 0; i < SHA256_DIGEST_SIZE; i++)
+        sprintf(id + 2 * i, "%02x", digest[i]);
     pthread_mutex_lock(&s->lock);
     blob_entry *e = blob_find_locked(s, id);
     if (e) e->pins++;
@@ -786,8 +810,8 @@ int vx_store_blob_put(vx_store *s, const void *data, size_t n, char id[65], vx_e
         int e2 = errno;
         unlink(tmp);
         s->nblobs--;
-        rc = vx_err_set(err, vx_err_io_kind(e2), "store_failed", "cannot store the job's inline data: %s",
-                        strerror(e2));
+        rc = vx_err_set(err, vx_err_io_kind(e2), "store_failed",
+                        "cannot store the job's inline data: %s", strerror(e2));
     } else {
         e->pins = 1;
     }
@@ -836,10 +860,11 @@ char *vx_store_blob_read(vx_store *s, const char *id, size_t *n, vx_err *err)
     char *text = vx_read_file(path, SIZE_MAX / 4, n, &e);
     if (!text) {
         if (e.kind == VX_ENOTFOUND)
-            vx_err_set(err, VX_ENOTFOUND, "blob_not_found", "the job's inline data (blob %s) is gone",
-                       id);
+            vx_err_set(err, VX_ENOTFOUND, "blob_not_found",
+                       "the job's inline data (blob %s) is gone", id);
         else
-            vx_err_set(err, VX_EIO, "read_failed", "cannot read the job's inline data (blob %s)", id);
+            vx_err_set(err, VX_EIO, "read_failed", "cannot read the job's inline data (blob %s)",
+                       id);
     }
     return text;
 }
@@ -964,10 +989,12 @@ int vx_store_results_evict(vx_store *s)
             if (oldest == (size_t)-1 || s->results[i].last_access < s->results[oldest].last_access)
                 oldest = i;
         if (oldest != (size_t)-1) {
-            int over_bytes = s->desc.results_max_bytes && s->results_bytes > s->desc.results_max_bytes;
+            int over_bytes =
+                s->desc.results_max_bytes && s->results_bytes > s->desc.results_max_bytes;
             int too_old = s->desc.results_max_age_s > 0 &&
                           now - s->results[oldest].last_access > s->desc.results_max_age_s;
-            if (over_bytes || too_old) snprintf(victim, sizeof victim, "%s", s->results[oldest].jid);
+            if (over_bytes || too_old)
+                snprintf(victim, sizeof victim, "%s", s->results[oldest].jid);
         }
         pthread_mutex_unlock(&s->lock);
         if (!victim[0]) break;

@@ -63,7 +63,8 @@ static void child_main(int fd, pid_t parent, vx_child_fn fn, void *ud, void *out
     answer a;
     memset(&a, 0, sizeof a);
     a.rc = fn(ud, out, out_size, &a.err) == 0 ? 0 : -1;
-    if (vx_write_all(fd, &a, sizeof a) || (a.rc == 0 && out_size && vx_write_all(fd, out, out_size)))
+    if (vx_write_all(fd, &a, sizeof a) ||
+        (a.rc == 0 && out_size && vx_write_all(fd, out, out_size)))
         _exit(1);
     _exit(0);
 }

@@ -37,10 +37,9 @@ vx_err_kind vx_err_io_kind(int errnum)
 
 const char *vx_err_kind_name(vx_err_kind kind)
 {
-    static const char *names[] = {"ok",       "invalid", "unprocessable", "too_big",
-                                  "not_found", "conflict", "media",        "busy",
-                                  "canceled", "timeout",  "gpu",          "io",
-                                  "internal", "no_space"};
+    static const char *names[] = {"ok",       "invalid", "unprocessable", "too_big",  "not_found",
+                                  "conflict", "media",   "busy",          "canceled", "timeout",
+                                  "gpu",      "io",      "internal",      "no_space"};
     if ((unsigned)kind < sizeof names / sizeof names[0]) return names[kind];
     return "unknown";
 }

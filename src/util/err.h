@@ -12,19 +12,19 @@
 
 typedef enum vx_err_kind {
     VX_EOK = 0,
-    VX_EINVAL,      /* malformed input: bad syntax, truncated data (400) */
-    VX_EUNPROC,     /* well-formed but unusable: bad params, no faces (422) */
-    VX_ETOOBIG,     /* a configured limit was exceeded (413 for bodies, 422 for params) */
-    VX_ENOTFOUND,   /* unknown id (404) */
-    VX_ECONFLICT,   /* state does not allow the operation (409) */
-    VX_EMEDIA,      /* unsupported content type (415) */
-    VX_EBUSY,       /* queue full (429) */
-    VX_ECANCELED,   /* job canceled */
-    VX_ETIMEOUT,    /* job ran past its time limit */
-    VX_EGPU,        /* GL error, out of GPU memory, context lost */
-    VX_EIO,         /* file system error (500) */
-    VX_EINTERNAL,   /* a bug or an allocation failure (500) */
-    VX_ENOSPC,      /* the data dir is full or under its free-space floor (507) */
+    VX_EINVAL,    /* malformed input: bad syntax, truncated data (400) */
+    VX_EUNPROC,   /* well-formed but unusable: bad params, no faces (422) */
+    VX_ETOOBIG,   /* a configured limit was exceeded (413 for bodies, 422 for params) */
+    VX_ENOTFOUND, /* unknown id (404) */
+    VX_ECONFLICT, /* state does not allow the operation (409) */
+    VX_EMEDIA,    /* unsupported content type (415) */
+    VX_EBUSY,     /* queue full (429) */
+    VX_ECANCELED, /* job canceled */
+    VX_ETIMEOUT,  /* job ran past its time limit */
+    VX_EGPU,      /* GL error, out of GPU memory, context lost */
+    VX_EIO,       /* file system error (500) */
+    VX_EINTERNAL, /* a bug or an allocation failure (500) */
+    VX_ENOSPC,    /* the data dir is full or under its free-space floor (507) */
 } vx_err_kind;
 
 typedef struct vx_err {

@@ -31,7 +31,8 @@ int vx_mkdirs(const char *path, vx_err *err)
     for (char *p = buf + 1; *p; p++) {
         if (*p != '/') continue;
         *p = 0;
-        if (mkdir(buf, 0750) != 0 && errno != EEXIST) return io_fail(err, "mkdir_failed", "mkdir", buf);
+        if (mkdir(buf, 0750) != 0 && errno != EEXIST)
+            return io_fail(err, "mkdir_failed", "mkdir", buf);
         *p = '/';
     }
     if (mkdir(buf, 0750) != 0 && errno != EEXIST) return io_fail(err, "mkdir_failed", "mkdir", buf);
@@ -93,8 +94,8 @@ char *vx_read_file(const char *path, size_t max, size_t *len, vx_err *err)
 {
     FILE *f = fopen(path, "rbe");
     if (!f) {
-        vx_err_set(err, errno == ENOENT ? VX_ENOTFOUND : VX_EIO, "read_failed", "cannot open the file: %s",
-                   strerror(errno));
+        vx_err_set(err, errno == ENOENT ? VX_ENOTFOUND : VX_EIO, "read_failed",
+                   "cannot open the file: %s", strerror(errno));
         return NULL;
     }
     size_t cap = 4096, n = 0;
@@ -104,7 +105,8 @@ char *vx_read_file(const char *path, size_t max, size_t *len, vx_err *err)
             if (cap > max) {
                 free(buf);
                 fclose(f);
-                vx_err_set(err, VX_ETOOBIG, "file_too_big", "the file is larger than %zu bytes", max);
+                vx_err_set(err, VX_ETOOBIG, "file_too_big", "the file is larger than %zu bytes",
+                           max);
                 return NULL;
             }
             char *nb = realloc(buf, cap * 2);
@@ -138,8 +140,10 @@ int vx_remove_tree(const char *path)
         if (!strcmp(e->d_name, ".") || !strcmp(e->d_name, "..")) continue;
         char sub[4096];
         snprintf(sub, sizeof sub, "%s/%s", path, e->d_name);
-        if (e->d_type == DT_DIR) rc |= vx_remove_tree(sub);
-        else if (unlink(sub) != 0) rc = -1;
+        if (e->d_type == DT_DIR)
+            rc |= vx_remove_tree(sub);
+        else if (unlink(sub) != 0)
+            rc = -1;
     }
     closedir(d);
     if (rmdir(path) != 0) rc = -1;
@@ -158,8 +162,10 @@ uint64_t vx_tree_bytes(const char *path)
         struct stat st;
         snprintf(sub, sizeof sub, "%s/%s", path, e->d_name);
         if (lstat(sub, &st) != 0) continue;
-        if (S_ISDIR(st.st_mode)) total += vx_tree_bytes(sub);
-        else if (S_ISREG(st.st_mode)) total += (uint64_t)st.st_size;
+        if (S_ISDIR(st.st_mode))
+            total += vx_tree_bytes(sub);
+        else if (S_ISREG(st.st_mode))
+            total += (uint64_t)st.st_size;
     }
     closedir(d);
     return total;
@@ -200,12 +206,30 @@ int vx_parse_size(const char *s, uint64_t *out)
     if (errno || end == s) return -1;
     uint64_t mul = 1;
     switch (*end) {
-    case 0: break;
-    case 'k': case 'K': mul = 1ull << 10; end++; break;
-    case 'm': case 'M': mul = 1ull << 20; end++; break;
-    case 'g': case 'G': mul = 1ull << 30; end++; break;
-    case 't': case 'T': mul = 1ull << 40; end++; break;
-    default: return -1;
+    case 0:
+        break;
+    case 'k':
+    case 'K':
+        mul = 1ull << 10;
+        end++;
+        break;
+    case 'm':
+    case 'M':
+        mul = 1ull << 20;
+        end++;
+        break;
+    case 'g':
+    case 'G':
+        mul = 1ull << 30;
+        end++;
+        break;
+    case 't':
+    case 'T':
+        mul = 1ull << 40;
+        end++;
+        break;
+    default:
+        return -1;
     }
     if (*end == 'i' || *end == 'B') end++;
     if (*end == 'B') end++;
@@ -226,7 +250,8 @@ int vx_disk_free(const char *dir, uint64_t *free_bytes)
 void vx_scrub_path(char *msg, const char *dir)
 {
     size_t n = dir ? strlen(dir) : 0;
-    while (n > 1 && dir[n - 1] == '/') n--;
+    while (n > 1 && dir[n - 1] == '/')
+        n--;
     if (n < 2) return;
     for (char *p = msg; (p = strstr(p, dir));) {
         size_t cut = n + (p[n] == '/');

@@ -12,23 +12,38 @@ static pthread_mutex_t g_lock = PTHREAD_MUTEX_INITIALIZER;
 
 /* A child forked while another thread logs (util/child.h) must not inherit
  * the lock held: fork waits for the line in progress. */
-static void fork_prepare(void) { pthread_mutex_lock(&g_lock); }
-static void fork_done(void) { pthread_mutex_unlock(&g_lock); }
+static void fork_prepare(void)
+{
+    pthread_mutex_lock(&g_lock);
+}
+static void fork_done(void)
+{
+    pthread_mutex_unlock(&g_lock);
+}
 __attribute__((constructor)) static void log_atfork(void)
 {
     pthread_atfork(fork_prepare, fork_done, fork_done);
 }
 
-void vx_log_set_level(vx_log_level level) { g_level = level; }
-vx_log_level vx_log_get_level(void) { return g_level; }
+void vx_log_set_level(vx_log_level level)
+{
+    g_level = level;
+}
+vx_log_level vx_log_get_level(void)
+{
+    return g_level;
+}
 
 int vx_log_parse_level(const char *s, vx_log_level *out)
 {
     static const struct {
         const char *name;
         vx_log_level level;
-    } map[] = {{"error", VX_LOG_ERR}, {"warn", VX_LOG_WARN}, {"warning", VX_LOG_WARN},
-               {"info", VX_LOG_INFO}, {"debug", VX_LOG_DEBUG}};
+    } map[] = {{"error", VX_LOG_ERR},
+               {"warn", VX_LOG_WARN},
+               {"warning", VX_LOG_WARN},
+               {"info", VX_LOG_INFO},
+               {"debug", VX_LOG_DEBUG}};
     for (size_t i = 0; i < sizeof map / sizeof map[0]; i++) {
         if (strcasecmp(s, map[i].name) == 0) {
             *out = map[i].level;
@@ -41,10 +56,14 @@ int vx_log_parse_level(const char *s, vx_log_level *out)
 static const char *level_name(vx_log_level l)
 {
     switch (l) {
-    case VX_LOG_ERR: return "error";
-    case VX_LOG_WARN: return "warn";
-    case VX_LOG_INFO: return "info";
-    default: return "debug";
+    case VX_LOG_ERR:
+        return "error";
+    case VX_LOG_WARN:
+        return "warn";
+    case VX_LOG_INFO:
+        return "info";
+    default:
+        return "debug";
     }
 }
 
@@ -56,9 +75,10 @@ void vx_log(vx_log_level level, const char *event, const char *fmt, ...)
     struct tm tm;
     clock_gettime(CLOCK_REALTIME, &ts);
     gmtime_r(&ts.tv_sec, &tm);
-    int n = snprintf(line, sizeof line, "<%d>ts=%04d-%02d-%02dT%02d:%02d:%02d.%03ldZ level=%s event=%s",
-                     (int)level, tm.tm_year + 1900, tm.tm_mon + 1, tm.tm_mday, tm.tm_hour,
-                     tm.tm_min, tm.tm_sec, ts.tv_nsec / 1000000, level_name(level), event);
+    int n =
+        snprintf(line, sizeof line, "<%d>ts=%04d-%02d-%02dT%02d:%02d:%02d.%03ldZ level=%s event=%s",
+                 (int)level, tm.tm_year + 1900, tm.tm_mon + 1, tm.tm_mday, tm.tm_hour, tm.tm_min,
+                 tm.tm_sec, ts.tv_nsec / 1000000, level_name(level), event);
     if (n < 0) return;
     if (fmt && fmt[0] && (size_t)n < sizeof line - 2) {
         line[n++] = ' ';

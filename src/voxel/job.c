@@ -39,8 +39,8 @@ typedef struct vstate {
     int have_grid;
 } vstate;
 
-static const char *const known[] = {"resolution", "voxel_size", "grid", "padding",
-                                    "method",     "inside",     "fill", "supersample",
+static const char *const known[] = {"resolution", "voxel_size", "grid",   "padding",
+                                    "method",     "inside",     "fill",   "supersample",
                                     "samples",    "threshold",  "format", NULL};
 
 static const cJSON *field(const cJSON *params, const char *name)
@@ -261,8 +261,7 @@ static cJSON *voxelize_parse(const cJSON *params, const vx_limits *lim, vx_err *
         ok = cJSON_AddNullToObject(o, "grid") != NULL;
     }
     ok = ok && cJSON_AddNumberToObject(o, "padding", (double)p.padding) &&
-         cJSON_AddStringToObject(o, "method",
-                                 method_names[p.method]) &&
+         cJSON_AddStringToObject(o, "method", method_names[p.method]) &&
          cJSON_AddStringToObject(o, "inside",
                                  inside_names[p.inside == VX_INSIDE_PARITY   ? 1
                                               : p.inside == VX_INSIDE_ROBUST ? 2
@@ -419,8 +418,8 @@ static void voxelize_free_state(void *state)
 
 const vx_kind vx_kind_voxelize = {
     .name = "voxelize",
-    .summary =
-        "Solid voxelization on the GPU (depth peeling, slicing or crossing counts) to OpenVDB, binvox or raw bits",
+    .summary = "Solid voxelization on the GPU (depth peeling, slicing or crossing counts) to "
+               "OpenVDB, binvox or raw bits",
     .parse = voxelize_parse,
     .run_gl = voxelize_run_gl,
     .run_cpu = NULL,

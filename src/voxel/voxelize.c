@@ -26,8 +26,7 @@ int vx_voxelize(vx_gl *gl, const vx_mesh *m, const vx_voxelize_desc *d, vx_bitgr
     if (d->samples != VX_SAMPLES_CUBE && d->samples != VX_SAMPLES_FACES)
         return vx_err_set(err, VX_EUNPROC, "invalid_params", "unknown sample pattern %d",
                           (int)d->samples);
-    const int faces = d->supersample == 2 && d->samples == VX_SAMPLES_FACES,
-              most = faces ? 7 : 8;
+    const int faces = d->supersample == 2 && d->samples == VX_SAMPLES_FACES, most = faces ? 7 : 8;
     if (d->threshold < 0 || d->threshold > most)
         return vx_err_set(err, VX_EUNPROC, "invalid_params", "threshold must be 1..%d, got %d",
                           most, d->threshold);

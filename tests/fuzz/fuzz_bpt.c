@@ -9,4 +9,7 @@ static vx_mesh *read_bpt(FILE *f, const vx_mesh_limits *lim, vx_err *err)
     return m;
 }
 
-int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size) { return fuzz_reader_run(data, size, read_bpt); }
+int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
+{
+    return fuzz_reader_run(data, size, read_bpt);
+}

@@ -93,8 +93,10 @@ static void check_route(const char *path, size_t len)
     size_t o = 0;
     for (const char *p = tpl; *p; p++) {
         const char *sub = NULL;
-        if (!strncmp(p, "{id}", 4)) sub = t.id, p += 3;
-        else if (!strncmp(p, "{name}", 6)) sub = t.name, p += 5;
+        if (!strncmp(p, "{id}", 4))
+            sub = t.id, p += 3;
+        else if (!strncmp(p, "{name}", 6))
+            sub = t.name, p += 5;
         if (sub) {
             if (!*sub) abort();
             o += (size_t)snprintf(back + o, sizeof back - o, "%s", sub);
@@ -116,7 +118,8 @@ static void check_query(vx_route rt, const char *method, const char *s, size_t n
     if (q.limit < 1 || q.limit > 1000) abort();
     if (!q.has_limit && q.limit != 100) abort();
     if (q.wait_us > VX_REQ_WAIT_MAX_US) abort();
-    if (q.has_after && !(rt == VX_R_MESHES ? vx_store_valid_mesh_id(q.after) : vx_jobs_valid_id(q.after)))
+    if (q.has_after &&
+        !(rt == VX_R_MESHES ? vx_store_valid_mesh_id(q.after) : vx_jobs_valid_id(q.after)))
         abort();
     if (q.has_state && !q.state[0]) abort();
     char back[512];
@@ -152,7 +155,8 @@ static void check_text(const char *s, size_t n)
         char b[48];
         int k = snprintf(b, sizeof b, "%llu.%06llu", (unsigned long long)(us / 1000000),
                          (unsigned long long)(us % 1000000));
-        if (us > VX_REQ_WAIT_MAX_US || vx_req_parse_seconds(b, (size_t)k, &us2) || us2 != us) abort();
+        if (us > VX_REQ_WAIT_MAX_US || vx_req_parse_seconds(b, (size_t)k, &us2) || us2 != us)
+            abort();
     }
     int lim;
     if (!vx_req_parse_limit(s, n, &lim) && (lim < 1 || lim > 1000)) abort();

@@ -245,10 +245,8 @@ static void test_errors(void **state)
 int main(void)
 {
     const struct CMUnitTest tests[] = {
-        cmocka_unit_test(test_teapot),
-        cmocka_unit_test(test_sniff),
-        cmocka_unit_test(test_flat),
-        cmocka_unit_test(test_duplicate_points),
+        cmocka_unit_test(test_teapot), cmocka_unit_test(test_sniff),
+        cmocka_unit_test(test_flat),   cmocka_unit_test(test_duplicate_points),
         cmocka_unit_test(test_errors),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);

@@ -58,12 +58,14 @@ static void test_append_replay(void **state)
     vx_err err;
     vx_journal *j = vx_journal_open(path, &err);
     assert_non_null(j);
-    for (int i = 0; i < 10; i++) append_v(j, i);
+    for (int i = 0; i < 10; i++)
+        append_v(j, i);
     vx_journal_close(j);
     j = vx_journal_open(path, &err);
     seen s = {0};
     assert_int_equal(vx_journal_replay(j, collect, &s, &err), 10);
-    for (int i = 0; i < 10; i++) assert_int_equal(s.values[i], i);
+    for (int i = 0; i < 10; i++)
+        assert_int_equal(s.values[i], i);
     vx_journal_close(j);
 }
 
@@ -89,7 +91,8 @@ static void test_compact(void **state)
     snprintf(path, sizeof path, "%s/c.log", dir);
     vx_err err;
     vx_journal *j = vx_journal_open(path, &err);
-    for (int i = 0; i < 20; i++) append_v(j, i);
+    for (int i = 0; i < 20; i++)
+        append_v(j, i);
     long before = vx_journal_size(j);
     cJSON *recs[2];
     for (int i = 0; i < 2; i++) {
@@ -99,7 +102,8 @@ static void test_compact(void **state)
     assert_int_equal(vx_journal_compact(j, recs, 2, &err), 0);
     assert_true(vx_journal_size(j) < before);
     append_v(j, 7); /* appends go to the new file */
-    for (int i = 0; i < 2; i++) cJSON_Delete(recs[i]);
+    for (int i = 0; i < 2; i++)
+        cJSON_Delete(recs[i]);
     vx_journal_close(j);
     j = vx_journal_open(path, &err);
     seen s = {0};
@@ -120,7 +124,8 @@ static void expect_replay(const char *path, int n, ...)
     assert_int_equal(vx_journal_replay(j, collect, &s, &err), n);
     va_list ap;
     va_start(ap, n);
-    for (int i = 0; i < n; i++) assert_int_equal(s.values[i], va_arg(ap, int));
+    for (int i = 0; i < n; i++)
+        assert_int_equal(s.values[i], va_arg(ap, int));
     va_end(ap);
     vx_journal_close(j);
 }
@@ -196,7 +201,8 @@ static void test_crc_mismatch_skipped(void **state)
     snprintf(path, sizeof path, "%s/f.log", dir);
     vx_err err;
     vx_journal *j = vx_journal_open(path, &err);
-    for (int i = 1; i <= 3; i++) append_v(j, i);
+    for (int i = 1; i <= 3; i++)
+        append_v(j, i);
     vx_journal_close(j);
     char *text = vx_read_file(path, 1 << 20, NULL, &err);
     assert_non_null(text);

@@ -12,7 +12,8 @@
 
 static void test_numbers(void **state)
 {
-    cJSON *p = cJSON_Parse("{\"a\": 2.5, \"s\": \"x\", \"n\": null, \"i\": 7, \"f\": 7.5, \"b\": true}");
+    cJSON *p =
+        cJSON_Parse("{\"a\": 2.5, \"s\": \"x\", \"n\": null, \"i\": 7, \"f\": 7.5, \"b\": true}");
     vx_err err;
     double d;
     long l;
@@ -183,7 +184,8 @@ static void oracle(const vx_kind *k, const char *json, const vx_limits *lim)
     char *text = cJSON_PrintUnformatted(norm);
     cJSON *back = cJSON_Parse(text);
     cJSON *again = k->parse(back, lim, &err);
-    if (!again) fail_msg("%s %s: normalised params %s refused: %s", k->name, json, text, err.message);
+    if (!again)
+        fail_msg("%s %s: normalised params %s refused: %s", k->name, json, text, err.message);
     assert_true(cJSON_Compare(norm, again, 1));
     cJSON *n2 = vx_params_normalize(k, in, lim, &err);
     assert_non_null(n2);
@@ -244,24 +246,31 @@ static void test_seeds(void **state)
     static const struct {
         const char *kind, *json;
     } seeds[] = {
-        {"preview", "{\"azimuth\":0,\"elevation\":0,\"fov\":0,\"width\":300,\"height\":200,\"samples\":1}"},
+        {"preview",
+         "{\"azimuth\":0,\"elevation\":0,\"fov\":0,\"width\":300,\"height\":200,\"samples\":1}"},
         {"preview", "{\"color\":[1,0.5,0],\"background\":[0,0,0,0],\"ambient\":0.5,\"samples\":2}"},
-        {"voxelize", "{\"voxel_size\":0.01,\"padding\":2,\"inside\":\"parity\",\"format\":\"raw1\"}"},
-        {"voxelize", "{\"grid\":{\"origin\":[0,0,0],\"voxel_size\":0.5,\"dims\":[16,8,4]},\"format\":\"binvox\"}"},
-        {"voxelize", "{\"resolution\":24,\"supersample\":2,\"samples\":\"faces\",\"threshold\":4,\"method\":\"peel\"}"},
-        {"render", "{\"N\":16,\"width\":64,\"height\":48,\"camera\":{\"type\":\"orbit\"},\"frames\":3,\"bits\":16,\"outputs\":[\"depth\",\"voxels\"]}"},
-        {"render", "{\"N\":16,\"lights\":[{\"direction\":[0,0,1],\"color\":[1,0,0]}],\"background\":[0,0,1]}"},
-        {"render", "{\"N\":8,\"filter\":{\"type\":\"exponential\",\"D0\":2,\"n\":4},\"L\":8,\"normals\":\"sobel3d\"}"},
+        {"voxelize",
+         "{\"voxel_size\":0.01,\"padding\":2,\"inside\":\"parity\",\"format\":\"raw1\"}"},
+        {"voxelize", "{\"grid\":{\"origin\":[0,0,0],\"voxel_size\":0.5,\"dims\":[16,8,4]},"
+                     "\"format\":\"binvox\"}"},
+        {"voxelize", "{\"resolution\":24,\"supersample\":2,\"samples\":\"faces\",\"threshold\":4,"
+                     "\"method\":\"peel\"}"},
+        {"render", "{\"N\":16,\"width\":64,\"height\":48,\"camera\":{\"type\":\"orbit\"},"
+                   "\"frames\":3,\"bits\":16,\"outputs\":[\"depth\",\"voxels\"]}"},
+        {"render", "{\"N\":16,\"lights\":[{\"direction\":[0,0,1],\"color\":[1,0,0]}],"
+                   "\"background\":[0,0,1]}"},
+        {"render", "{\"N\":8,\"filter\":{\"type\":\"exponential\",\"D0\":2,\"n\":4},\"L\":8,"
+                   "\"normals\":\"sobel3d\"}"},
         {"gregory", "{\"max_edge\":0.01,\"weld\":false,\"format\":\"ply\"}"},
         {"gregory", "{\"divisions\":2,\"frames\":[[[0,0,0],[1,1,1]]]}"},
         {"catmull-clark", "{\"levels\":3,\"limit\":true}"},
     };
-    vx_limits lim = {.max_triangles = 20000000,
-                     .max_image_pixels = 8192 * 8192,
-                     .max_job_memory = 4ull << 30};
+    vx_limits lim = {
+        .max_triangles = 20000000, .max_image_pixels = 8192 * 8192, .max_job_memory = 4ull << 30};
     for (size_t i = 0; i < sizeof seeds / sizeof seeds[0]; i++)
         oracle(vx_kind_find(seeds[i].kind), seeds[i].json, &lim);
-    for (size_t i = 0; i < vx_kind_count(); i++) oracle(vx_kind_at(i), "{}", &lim);
+    for (size_t i = 0; i < vx_kind_count(); i++)
+        oracle(vx_kind_at(i), "{}", &lim);
 }
 
 /* A kind whose default is out of its own range (x = 5, x in [0, 4]) and
@@ -311,14 +320,10 @@ static void test_normalize_checks(void **state)
 int main(void)
 {
     const struct CMUnitTest tests[] = {
-        cmocka_unit_test(test_numbers),
-        cmocka_unit_test(test_only_known),
-        cmocka_unit_test(test_mesh_ids),
-        cmocka_unit_test(test_object),
-        cmocka_unit_test(test_kind_table),
-        cmocka_unit_test(test_preview_params),
-        cmocka_unit_test(test_render_defaults),
-        cmocka_unit_test(test_seeds),
+        cmocka_unit_test(test_numbers),          cmocka_unit_test(test_only_known),
+        cmocka_unit_test(test_mesh_ids),         cmocka_unit_test(test_object),
+        cmocka_unit_test(test_kind_table),       cmocka_unit_test(test_preview_params),
+        cmocka_unit_test(test_render_defaults),  cmocka_unit_test(test_seeds),
         cmocka_unit_test(test_normalize_checks),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);

@@ -13,7 +13,10 @@
 
 #define JID "0123456789abcdef0123456789abcdef"
 
-static vx_route route(const char *p, vx_req_target *t) { return vx_req_route(p, strlen(p), t); }
+static vx_route route(const char *p, vx_req_target *t)
+{
+    return vx_req_route(p, strlen(p), t);
+}
 
 static void test_routes(void **state)
 {
@@ -39,12 +42,13 @@ static void test_routes(void **state)
 }
 
 /* Adds "k=v" pairs (v NULL: no '='); returns the first failure's index or -1. */
-static int add_all(vx_req_query *q, vx_route rt, const char *m, const char *const *kv, size_t n, char *msg)
+static int add_all(vx_req_query *q, vx_route rt, const char *m, const char *const *kv, size_t n,
+                   char *msg)
 {
     vx_req_query_init(q);
     for (size_t i = 0; i < n; i += 2)
-        if (vx_req_query_add(q, rt, m, kv[i], strlen(kv[i]), kv[i + 1], kv[i + 1] ? strlen(kv[i + 1]) : 0,
-                             msg, 160))
+        if (vx_req_query_add(q, rt, m, kv[i], strlen(kv[i]), kv[i + 1],
+                             kv[i + 1] ? strlen(kv[i + 1]) : 0, msg, 160))
             return (int)i / 2;
     return -1;
 }
@@ -53,7 +57,8 @@ static void test_query(void **state)
 {
     vx_req_query q;
     char msg[160];
-    const char *ok[] = {"limit", "5", "after", JID, "state", "failed", "colour", NULL, "colour", "x"};
+    const char *ok[] = {"limit",  "5",      "after", JID,      "state",
+                        "failed", "colour", NULL,    "colour", "x"};
     assert_int_equal(add_all(&q, VX_R_JOBS, "GET", ok, 10, msg), -1);
     assert_int_equal(q.limit, 5);
     assert_string_equal(q.after, JID);
@@ -79,7 +84,8 @@ static void test_query(void **state)
     const char *mesh_after[] = {"after", JID};
     assert_int_equal(add_all(&q, VX_R_MESHES, "GET", mesh_after, 2, msg), 0);
     vx_req_query_init(&q);
-    assert_int_equal(vx_req_query_add(&q, VX_R_MESHES, "GET", "limit", 5, "5\0", 2, msg, sizeof msg), -1);
+    assert_int_equal(
+        vx_req_query_add(&q, VX_R_MESHES, "GET", "limit", 5, "5\0", 2, msg, sizeof msg), -1);
 }
 
 static void test_numbers(void **state)
@@ -124,7 +130,10 @@ static void test_utf8(void **state)
     assert_false(vx_req_utf8_valid("\xf4\x90\x80\x80", 4)); /* above U+10FFFF */
     assert_false(vx_req_utf8_valid("\xe2\x82", 2));         /* cut short */
     char out[16];
-    assert_string_equal(vx_req_utf8_sanitize("a\xff" "b\xc3\xa9\n", out, sizeof out), "a?b\xc3\xa9?");
+    assert_string_equal(vx_req_utf8_sanitize("a\xff"
+                                             "b\xc3\xa9\n",
+                                             out, sizeof out),
+                        "a?b\xc3\xa9?");
     assert_string_equal(vx_req_utf8_sanitize("\xe2\x82\xac\xe2\x82\xac", out, 5), "\xe2\x82\xac");
     char msg[128];
     const char *nul = "{\"kind\":\"preview\\u0000junk\"}";

@@ -230,7 +230,8 @@ static void test_pins(void **state)
     assert_int_equal(vx_store_mesh_pin(s, a, 0, &err), -1); /* new jobs: 404 */
     assert_int_equal(vx_store_mesh_delete(s, a, &err), -1);
     char path[2400];
-    assert_int_equal(vx_store_mesh_path(s, a, path, sizeof path, &err), 0); /* runners still read it */
+    assert_int_equal(vx_store_mesh_path(s, a, path, sizeof path, &err),
+                     0); /* runners still read it */
     assert_true(exists("%s/meshes/%s.obj", a));
     assert_true(exists("%s/meshes/%s.deleted", a));
     assert_false(exists("%s/meshes/%s.json", a));
