@@ -14,6 +14,7 @@
 #include <unistd.h>
 
 #include "util/fsutil.h"
+#include "util/stop.h"
 
 /* What the child sends back through the pipe, then out_size bytes. */
 typedef struct answer {
@@ -60,6 +61,10 @@ static void child_main(int fd, pid_t parent, vx_child_fn fn, void *ud, void *out
     sigprocmask(SIG_SETMASK, &none, NULL);
     prctl(PR_SET_PDEATHSIG, SIGKILL);
     if (getppid() != parent) _exit(1); /* the parent died before prctl */
+    /* The calling thread's stop hook reads the parent's job state under
+     * its locks, which another thread may have held at the fork: in the
+     * child it would wait forever. The parent polls and kills the child. */
+    vx_stop_set(NULL, NULL);
     answer a;
     memset(&a, 0, sizeof a);
     a.rc = fn(ud, out, out_size, &a.err) == 0 ? 0 : -1;

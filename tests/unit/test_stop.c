@@ -9,6 +9,7 @@
 #include <setjmp.h>
 #include <cmocka.h>
 
+#include <pthread.h>
 #include <signal.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -200,12 +201,55 @@ static void test_png_poll(void **state)
     free(px);
 }
 
+/* A stop hook that takes a lock of the parent's, as the job runner's does
+ * (it reads the job's state under the registry mutex). */
+static pthread_mutex_t g_state_lock = PTHREAD_MUTEX_INITIALIZER;
+static int locking_hook(void *ud, vx_err *err)
+{
+    pthread_mutex_lock(&g_state_lock);
+    pthread_mutex_unlock(&g_state_lock);
+    return 0;
+}
+/* Polls the stop hook for 200 ms, as an engine loop in a child does. */
+static int polling_work(void *ud, void *out, size_t out_size, vx_err *err)
+{
+    double end = vx_mono() + 0.2;
+    while (vx_mono() < end)
+        if (vx_stop_poll(err)) return -1;
+    return 0;
+}
+static void *hold_lock(void *arg)
+{
+    pthread_mutex_lock(&g_state_lock);
+    usleep(600 * 1000);
+    pthread_mutex_unlock(&g_state_lock);
+    return NULL;
+}
+
+/* The child does not call the hook it inherited: another thread held the
+ * hook's lock at the fork, so in the child it is locked forever (before
+ * the fix, a gregory job under load waited for its 600 s limit). */
+static void test_child_drops_hook(void **state)
+{
+    pthread_t t;
+    assert_int_equal(pthread_create(&t, NULL, hold_lock, NULL), 0);
+    usleep(100 * 1000); /* the other thread holds the lock */
+    vx_stop_set(locking_hook, NULL);
+    double limit = vx_mono() + 5;
+    vx_err err = {0};
+    int rc = vx_child_call(polling_work, NULL, NULL, 0, until, &limit, 20, &err);
+    vx_stop_set(NULL, NULL);
+    pthread_join(t, NULL);
+    assert_int_equal(rc, 0);
+    assert_true(vx_mono() < limit);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_child_answers), cmocka_unit_test(test_child_stopped),
         cmocka_unit_test(test_child_dies),    cmocka_unit_test(test_stop_hook),
-        cmocka_unit_test(test_png_poll),
+        cmocka_unit_test(test_png_poll),      cmocka_unit_test(test_child_drops_hook),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }
