@@ -23,9 +23,12 @@
  * - Ordering: ops on one key take effect in call order; across keys the
  *   only ordering is the one sync gives (the store puts a mesh's data, syncs,
  *   and only then puts its metadata: metadata present = mesh complete).
- * - Threads: any thread (HTTP handlers, job workers, the GL thread); the
- *   ops keep no shared mutable state except through the file system, and the
- *   store serialises the calls whose order matters under its own lock.
+ * - Threads: any thread, concurrently (HTTP handlers commit meshes, job
+ *   workers and the GL thread put blobs and results, the eviction timer
+ *   removes them); a backend locks what it shares itself (local: nothing but
+ *   an atomic counter). The store serialises the calls whose order matters
+ *   (put then pin, unpin then remove) under its own lock, so ops may block
+ *   on I/O but must never call back into the store.
  * - Serving: path gives a local file path for a key, for the engines (which
  *   read and write local files) and for HTTP responses; a remote backend
  *   keeps a local cache dir and answers with the cached copy. */
