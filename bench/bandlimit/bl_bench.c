@@ -22,6 +22,7 @@
 #include "bandlimit/bandlimit.h"
 #include "bandlimit/fft_int.h"
 #include "gl/gl.h"
+#include "util/clock.h"
 #include "voxel/voxel.h"
 
 static long status_kb(const char *key)
@@ -62,9 +63,9 @@ static void solid(const char *path, int R, vx_bitgrid *g, double *P, double *ms)
     }
     d.grid.h = *P / R;
     vx_voxelize_stats st;
-    double t0 = vx_bl_now_ms();
+    double t0 = vx_mono_ms();
     if (vx_voxelize(gl, m, &d, g, &st, &err)) die("voxelize", &err);
-    *ms = vx_bl_now_ms() - t0;
+    *ms = vx_mono_ms() - t0;
     vx_gl_free(gl);
     vx_mesh_free(m);
 }
@@ -159,10 +160,10 @@ static int render(const char *mesh, int N, int L, int W, int runs)
         c[a] = g.grid.origin[a] + P / 2;
     }
     vx_bl_volume vm, vn;
-    double t0 = vx_bl_now_ms();
+    double t0 = vx_mono_ms();
     if (vx_bl_interp(spec, N, M, x0, P, 1, 2, &vm, &err) || vx_bl_volume_blocks(&vm, &err))
         die("interp", &err);
-    double interp_ms = vx_bl_now_ms() - t0;
+    double interp_ms = vx_mono_ms() - t0;
     if (vx_bl_interp(spec, N, N, x0, P, 0, 2, &vn, &err) || vx_bl_volume_blocks(&vn, &err) ||
         vx_bl_voxel_gradient(&vn, VX_BL_CENTRAL, &err))
         die("interp N", &err);
@@ -201,10 +202,10 @@ static int render(const char *mesh, int N, int L, int W, int runs)
     size_t hits = 0;
     for (int v = 0; v < 2; v++)
         for (int k = 0; k < runs; k++) {
-            t0 = vx_bl_now_ms();
+            t0 = vx_mono_ms();
             if (vx_bl_cast(v ? &vn : &vm, 0.5, &cam, 2, &h, &err)) die("cast", &err);
             vx_bl_shade(&h, &sd, rgb, NULL);
-            double ms = vx_bl_now_ms() - t0;
+            double ms = vx_mono_ms() - t0;
             if (ms < best[v]) best[v] = ms;
             if (!v) {
                 hits = 0;

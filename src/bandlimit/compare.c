@@ -11,6 +11,7 @@
 
 #include "bandlimit/bandlimit.h"
 #include "util/stop.h"
+#include "util/vec3.h"
 
 const char *const vx_bl_normals_names[VX_BL_NORMALS_COUNT + 1] = {
     "spectral", "depth-only", "central-difference", "cross-mask", "sobel2d", "sobel3d", NULL};
@@ -113,15 +114,15 @@ void vx_bl_screen_normals(vx_bl_hits *h, const vx_bl_camera *cam, vx_bl_normals 
                 for (int a = 0; a < 3; a++)
                     ty[a] += w * (p1[a] - p0[a]);
             }
-            double c[3] = {tx[1] * ty[2] - tx[2] * ty[1], tx[2] * ty[0] - tx[0] * ty[2],
-                           tx[0] * ty[1] - tx[1] * ty[0]};
-            double len = sqrt(c[0] * c[0] + c[1] * c[1] + c[2] * c[2]);
+            double c[3];
+            vx_v3_cross(tx, ty, c);
+            double len = vx_v3_norm(c);
             if (!(len > 0)) {
                 for (int a = 0; a < 3; a++)
                     n[a] = (float)-cam->fwd[a];
                 continue;
             }
-            double s = c[0] * cam->fwd[0] + c[1] * cam->fwd[1] + c[2] * cam->fwd[2] > 0 ? -1 : 1;
+            double s = vx_v3_dot(c, cam->fwd) > 0 ? -1 : 1;
             for (int a = 0; a < 3; a++)
                 n[a] = (float)(s * c[a] / len);
         }

@@ -10,6 +10,8 @@
 #include <fftw3.h>
 #include <time.h>
 
+#include "util/clock.h"
+
 void vx_bl_plan_lock(int nthreads);
 /* Saves new wisdom, if any was made while the lock was held. */
 void vx_bl_plan_unlock(void);
@@ -17,11 +19,10 @@ void vx_bl_plan_unlock(void);
 unsigned vx_bl_plan_flags(void);
 void vx_bl_destroy_plan(fftwf_plan p);
 
+/* Old name of vx_mono_ms (util/clock.h), kept for job.c until it converts. */
 static inline double vx_bl_now_ms(void)
 {
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return ts.tv_sec * 1e3 + ts.tv_nsec / 1e6;
+    return vx_mono_ms();
 }
 
 /* FFT-order index j of an n-point transform -> signed frequency. */

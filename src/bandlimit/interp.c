@@ -12,6 +12,7 @@
 
 #include "bandlimit/bandlimit.h"
 #include "bandlimit/fft_int.h"
+#include "util/par.h"
 #include "util/stop.h"
 
 uint64_t vx_bl_volume_bytes(int M, int with_grad)
@@ -198,14 +199,7 @@ int vx_bl_interp(const float *spec, int N, int M, const double x0[3], double P, 
     if (Agz) fftwf_execute_dft(pz, Agz, Agz);
     c.A = A;
     c.Agz = Agz;
-    int nt = nthreads < 1 ? 1 : nthreads > 16 ? 16 : nthreads;
-    pthread_t th[16];
-    int started = 0;
-    for (int i = 1; i < nt; i++)
-        if (pthread_create(&th[started], NULL, interp_worker, &c) == 0) started++;
-    interp_worker(&c);
-    for (int i = 0; i < started; i++)
-        pthread_join(th[i], NULL);
+    vx_par_run(nthreads, interp_worker, &c);
     if (c.failed) {
         vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for interpolation planes");
         goto out;

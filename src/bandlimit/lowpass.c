@@ -13,7 +13,9 @@
 
 #include "bandlimit/bandlimit.h"
 #include "bandlimit/fft_int.h"
+#include "util/clock.h"
 #include "util/log.h"
+#include "util/par.h"
 
 static pthread_mutex_t plan_mu = PTHREAD_MUTEX_INITIALIZER;
 static pthread_once_t threads_once = PTHREAD_ONCE_INIT;
@@ -185,12 +187,12 @@ static void *slab_worker(void *arg)
             k = R;
         }
         if (k < R) {
-            double t = vx_bl_now_ms();
+            double t = vx_mono_ms();
             if (c->sample(c->ud, k, plane, &c->err)) {
                 c->failed = 1;
                 k = R;
             }
-            c->sample_ms += vx_bl_now_ms() - t;
+            c->sample_ms += vx_mono_ms() - t;
         }
         pthread_mutex_unlock(&c->mu);
         if (k >= R) break;
@@ -289,7 +291,7 @@ float *vx_bl_lowpass(int R, int N, const vx_bl_filter *flt, vx_bl_sample_fn samp
     fftwf_plan pz = NULL;
     fftwf_complex *zbuf = NULL;
     int ok = 0;
-    double t0 = vx_bl_now_ms();
+    double t0 = vx_mono_ms();
     if (!plane || !rows || !cols || !c.Z || !out) {
         vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for the low-pass (R=%d, N=%d)", R,
                    N);
@@ -312,13 +314,7 @@ float *vx_bl_lowpass(int R, int N, const vx_bl_filter *flt, vx_bl_sample_fn samp
         vx_err_set(err, VX_EINTERNAL, "fft_plan", "FFTW could not plan the low-pass");
         goto fail;
     }
-    pthread_t th[16];
-    int started = 0;
-    for (int i = 1; i < nt; i++)
-        if (pthread_create(&th[started], NULL, slab_worker, &c) == 0) started++;
-    slab_worker(&c);
-    for (int i = 0; i < started; i++)
-        pthread_join(th[i], NULL);
+    vx_par_run(nt, slab_worker, &c);
     if (c.failed) {
         if (err) *err = c.err;
         goto fail;
@@ -331,12 +327,7 @@ float *vx_bl_lowpass(int R, int N, const vx_bl_filter *flt, vx_bl_sample_fn samp
                     .p = pz,
                     .nblocks = (howmany + ZB - 1) / ZB};
     pthread_mutex_init(&zc.mu, NULL);
-    started = 0;
-    for (int i = 1; i < nt; i++)
-        if (pthread_create(&th[started], NULL, zpass_worker, &zc) == 0) started++;
-    zpass_worker(&zc);
-    for (int i = 0; i < started; i++)
-        pthread_join(th[i], NULL);
+    vx_par_run(nt, zpass_worker, &zc);
     pthread_mutex_destroy(&zc.mu);
     if (zc.failed) {
         vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for the depth pass");
@@ -347,7 +338,7 @@ float *vx_bl_lowpass(int R, int N, const vx_bl_filter *flt, vx_bl_sample_fn samp
                          (uint64_t)(nt - 1) * ((uint64_t)R * R * 4 + (uint64_t)R * nh * 8) +
                          (uint64_t)(nt + 1) * ZB * R * 8;
         st->sample_ms = c.sample_ms;
-        st->ms = vx_bl_now_ms() - t0 - c.sample_ms;
+        st->ms = vx_mono_ms() - t0 - c.sample_ms;
     }
     ok = 1;
 fail:
@@ -377,7 +368,7 @@ float *vx_bl_lowpass_full(int R, int N, const vx_bl_filter *flt, vx_bl_sample_fn
     fftwf_complex *F = fftwf_malloc(sizeof(fftwf_complex) * rr * rh);
     float *out = fftwf_malloc(sizeof(float) * 2 * vx_bl_spectrum_len(N));
     fftwf_plan p = NULL;
-    double t_sample = 0, t0 = vx_bl_now_ms();
+    double t_sample = 0, t0 = vx_mono_ms();
     if (!vol || !F || !out) {
         vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for the full FFT (R=%d)", R);
         goto fail;
@@ -390,9 +381,9 @@ float *vx_bl_lowpass_full(int R, int N, const vx_bl_filter *flt, vx_bl_sample_fn
         goto fail;
     }
     for (int k = 0; k < R; k++) {
-        double ts = vx_bl_now_ms();
+        double ts = vx_mono_ms();
         if (sample(ud, k, vol + (size_t)k * rr, err)) goto fail;
-        t_sample += vx_bl_now_ms() - ts;
+        t_sample += vx_mono_ms() - ts;
     }
     fftwf_execute(p);
     for (int jz = 0; jz < N; jz++)
@@ -406,7 +397,7 @@ float *vx_bl_lowpass_full(int R, int N, const vx_bl_filter *flt, vx_bl_sample_fn
         st->peak_bytes = sizeof(float) * rr * R + sizeof(fftwf_complex) * rr * rh +
                          sizeof(float) * 2 * vx_bl_spectrum_len(N);
         st->sample_ms = t_sample;
-        st->ms = vx_bl_now_ms() - t0 - t_sample;
+        st->ms = vx_mono_ms() - t0 - t_sample;
     }
     vx_bl_destroy_plan(p);
     fftwf_free(vol);

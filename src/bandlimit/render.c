@@ -6,12 +6,13 @@
  * crossed in one step. Shading is Lambert + ambient. CPU, nthreads
  * threads over interleaved rows. */
 #include <math.h>
-#include <pthread.h>
 #include <stdlib.h>
 #include <string.h>
 
 #include "bandlimit/bandlimit.h"
+#include "util/par.h"
 #include "util/stop.h"
+#include "util/vec3.h"
 
 void vx_bl_camera_ray(const vx_bl_camera *c, int width, int height, double px, double py,
                       double o[3], double d[3])
@@ -246,8 +247,6 @@ typedef struct cast_ctx {
     vx_bl_hits *h;
     const uint8_t *skip;
     int ntx, ntiles;
-    pthread_mutex_t mu;
-    int next;
     int stop; /* set when the caller's stop hook (util/stop.h) said stop */
     vx_err err;
 } cast_ctx;
@@ -272,34 +271,29 @@ static void cast_pixel(const cast_ctx *c, int px, int py)
     h->depth[i] = (float)dep;
     if (!c->v->g[0]) return;
     vx_bl_volume_sample(c->v, p, g);
-    double n = sqrt(g[0] * g[0] + g[1] * g[1] + g[2] * g[2]);
+    double n = vx_v3_norm(g);
     if (n > 0)
         for (int a = 0; a < 3; a++)
             h->nrm[3 * i + a] = (float)(-g[a] / n);
 }
 
-/* The calling thread polls its stop hook between tiles (the helper threads
- * have none: theirs always says go on) and stops them all. */
-static void *cast_tiles(void *arg)
+/* Tile k (vx_par_for). The calling thread (t = 0) polls its stop hook
+ * before each tile (the helper threads have none: theirs always says go
+ * on) and stops them all. */
+static int cast_tile(int k, int t, void *arg)
 {
     cast_ctx *c = arg;
-    for (;;) {
-        vx_err e;
-        int stop = vx_stop_poll(&e);
-        pthread_mutex_lock(&c->mu);
-        if (stop && !c->stop) {
-            c->stop = 1;
-            c->err = e;
-        }
-        int k = c->stop ? c->ntiles : c->next++;
-        pthread_mutex_unlock(&c->mu);
-        if (k >= c->ntiles) break;
-        int x0 = (k % c->ntx) * TILE, y0 = (k / c->ntx) * TILE;
-        for (int py = y0; py < y0 + TILE && py < c->h->height; py++)
-            for (int px = x0; px < x0 + TILE && px < c->h->width; px++)
-                cast_pixel(c, px, py);
+    vx_err e;
+    if (t == 0 && vx_stop_poll(&e)) {
+        c->stop = 1;
+        c->err = e;
+        return 1;
     }
-    return NULL;
+    int x0 = (k % c->ntx) * TILE, y0 = (k / c->ntx) * TILE;
+    for (int py = y0; py < y0 + TILE && py < c->h->height; py++)
+        for (int px = x0; px < x0 + TILE && px < c->h->width; px++)
+            cast_pixel(c, px, py);
+    return 0;
 }
 
 int vx_bl_cast(const vx_bl_volume *v, double iso, const vx_bl_camera *cam, int nthreads,
@@ -307,21 +301,12 @@ int vx_bl_cast(const vx_bl_volume *v, double iso, const vx_bl_camera *cam, int n
 {
     if (!v->bmax || !v->blip || v->M < 2)
         return vx_err_set(err, VX_EINTERNAL, "internal", "cast: volume without blocks");
-    int nt = nthreads < 1 ? 1 : nthreads > 16 ? 16 : nthreads;
     cast_ctx c = {.v = v, .iso = iso, .cam = cam, .h = h, .ntx = (h->width + TILE - 1) / TILE};
     c.ntiles = c.ntx * ((h->height + TILE - 1) / TILE);
     uint8_t *skip = empty_distance(v, iso);
     if (!skip) return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for the caster");
     c.skip = skip;
-    pthread_mutex_init(&c.mu, NULL);
-    pthread_t th[16];
-    int started = 0;
-    for (int i = 1; i < nt; i++)
-        if (pthread_create(&th[started], NULL, cast_tiles, &c) == 0) started++;
-    cast_tiles(&c);
-    for (int i = 0; i < started; i++)
-        pthread_join(th[i], NULL);
-    pthread_mutex_destroy(&c.mu);
+    vx_par_for(c.ntiles, nthreads, cast_tile, &c);
     free(skip);
     if (c.stop) {
         if (err) *err = c.err;

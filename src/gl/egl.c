@@ -13,6 +13,7 @@
 #include <string.h>
 #include <time.h>
 
+#include "util/clock.h"
 #include "util/log.h"
 
 struct vx_gl {
@@ -674,17 +675,10 @@ int vx_gl_check(vx_gl *gl, const char *where, vx_err *err)
     return vx_err_set(err, VX_EGPU, "gl_error", "OpenGL error at %s: %s", where, names);
 }
 
-static double wall_ms(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return (double)ts.tv_sec * 1e3 + (double)ts.tv_nsec / 1e6;
-}
-
 void vx_gl_timer_begin(vx_gl_timer *t)
 {
     t->q = 0;
-    t->cpu_start_ms = wall_ms();
+    t->cpu_start_ms = vx_mono_ms();
     glGenQueries(1, &t->q);
     glBeginQuery(GL_TIME_ELAPSED, t->q);
 }
@@ -697,7 +691,7 @@ double vx_gl_timer_end_ms(vx_gl_timer *t)
     glGetQueryObjectui64v(t->q, GL_QUERY_RESULT, &ns);
     glDeleteQueries(1, &t->q);
     t->q = 0;
-    double gpu = (double)ns / 1e6, wall = wall_ms() - t->cpu_start_ms;
+    double gpu = (double)ns / 1e6, wall = vx_mono_ms() - t->cpu_start_ms;
     if (gpu > wall + 1.0) {
         static int warned; /* GL thread only */
         if (!warned) VX_WARN("gl.timer_bogus", "gpu_ms=%.3f wall_ms=%.3f", gpu, wall);
@@ -710,6 +704,6 @@ double vx_gl_timer_end_ms(vx_gl_timer *t)
 double vx_gl_timer_end_compute_ms(vx_gl_timer *t)
 {
     glFinish();
-    double wall = wall_ms() - t->cpu_start_ms, gpu = vx_gl_timer_end_ms(t);
+    double wall = vx_mono_ms() - t->cpu_start_ms, gpu = vx_gl_timer_end_ms(t);
     return gpu > wall * 1e-3 ? gpu : wall;
 }

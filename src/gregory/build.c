@@ -16,6 +16,7 @@
 #include <string.h>
 
 #include "gregory/gregory.h"
+#include "util/vec3.h"
 
 enum { NONE = UINT32_MAX };
 
@@ -388,35 +389,6 @@ fail_oom:
     return NULL;
 }
 
-/* ---- small vector helpers ---- */
-static void sub3(const double *a, const double *b, double *o)
-{
-    for (int c = 0; c < 3; c++)
-        o[c] = a[c] - b[c];
-}
-static double dot3(const double *a, const double *b)
-{
-    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
-}
-static void cross3(const double *a, const double *b, double *o)
-{
-    o[0] = a[1] * b[2] - a[2] * b[1];
-    o[1] = a[2] * b[0] - a[0] * b[2];
-    o[2] = a[0] * b[1] - a[1] * b[0];
-}
-static double norm3(const double *a)
-{
-    return sqrt(dot3(a, a));
-}
-static int unit3(double *a)
-{
-    double l = norm3(a);
-    if (!(l > 0)) return -1;
-    for (int c = 0; c < 3; c++)
-        a[c] /= l;
-    return 0;
-}
-
 /* Newell normal of face f (not normalised: its length is twice the area). */
 static void face_normal(const vx_gregory_topo *t, const double *pos, uint32_t f, double n[3])
 {
@@ -437,22 +409,22 @@ static void vertex_normals(const vx_gregory_topo *t, const double *pos, double *
     for (uint32_t f = 0; f < t->nfaces; f++) {
         double fn[3];
         face_normal(t, pos, f, fn);
-        if (unit3(fn)) continue;
+        if (vx_v3_unit(fn)) continue;
         uint32_t s = t->fstart[f], k = t->fstart[f + 1] - s;
         for (uint32_t i = 0; i < k; i++) {
             uint32_t v = t->fidx[s + i];
             double a[3], b[3];
-            sub3(pos + 3 * t->fidx[s + (i + 1) % k], pos + 3 * v, a);
-            sub3(pos + 3 * t->fidx[s + (i + k - 1) % k], pos + 3 * v, b);
-            double la = norm3(a), lb = norm3(b);
-            double cs = la > 0 && lb > 0 ? dot3(a, b) / (la * lb) : 1;
+            vx_v3_sub(pos + 3 * t->fidx[s + (i + 1) % k], pos + 3 * v, a);
+            vx_v3_sub(pos + 3 * t->fidx[s + (i + k - 1) % k], pos + 3 * v, b);
+            double la = vx_v3_norm(a), lb = vx_v3_norm(b);
+            double cs = la > 0 && lb > 0 ? vx_v3_dot(a, b) / (la * lb) : 1;
             double w = acos(cs < -1 ? -1 : cs > 1 ? 1 : cs);
             for (int c = 0; c < 3; c++)
                 vn[3 * v + c] += w * fn[c];
         }
     }
     for (size_t v = 0; v < t->nverts; v++)
-        if (unit3(vn + 3 * v)) {
+        if (vx_v3_unit(vn + 3 * v)) {
             vn[3 * v] = vn[3 * v + 1] = 0;
             vn[3 * v + 2] = 1; /* an isolated or flat-degenerate vertex */
         }
@@ -462,10 +434,10 @@ static void vertex_normals(const vx_gregory_topo *t, const double *pos, double *
  * when dir is along n. */
 static void project_dir(const double *dir, const double *n, double *out)
 {
-    double d = dot3(dir, n);
+    double d = vx_v3_dot(dir, n);
     for (int c = 0; c < 3; c++)
         out[c] = dir[c] - d * n[c];
-    if (unit3(out)) out[0] = out[1] = out[2] = 0;
+    if (vx_v3_unit(out)) out[0] = out[1] = out[2] = 0;
 }
 
 /* Tangent directions at node p (unit normal n) towards its fan neighbours
@@ -484,37 +456,37 @@ static void fan_dirs(const double *p, const double *n, const double *P, const ui
     uint32_t nang = closed ? m : m - 1;
     for (uint32_t i = 0; i < nang; i++) {
         double a[3], b[3];
-        sub3(P + 3 * ids[i], p, a);
-        sub3(P + 3 * ids[(i + 1) % m], p, b);
-        double la = norm3(a), lb = norm3(b);
-        double cs = la > 0 && lb > 0 ? dot3(a, b) / (la * lb) : 1;
+        vx_v3_sub(P + 3 * ids[i], p, a);
+        vx_v3_sub(P + 3 * ids[(i + 1) % m], p, b);
+        double la = vx_v3_norm(a), lb = vx_v3_norm(b);
+        double cs = la > 0 && lb > 0 ? vx_v3_dot(a, b) / (la * lb) : 1;
         total += acos(cs < -1 ? -1 : cs > 1 ? 1 : cs);
     }
     double first[3];
     if (closed)
-        sub3(P + 3 * ids[0], p, first);
+        vx_v3_sub(P + 3 * ids[0], p, first);
     else
-        sub3(P + 3 * ids[0], P + 3 * ids[m - 1], first);
+        vx_v3_sub(P + 3 * ids[0], P + 3 * ids[m - 1], first);
     project_dir(first, n, d0);
-    if (!(total > 1e-12) || norm3(d0) == 0 || m < 2) {
+    if (!(total > 1e-12) || vx_v3_norm(d0) == 0 || m < 2) {
         for (uint32_t i = 0; i < m; i++) {
             double a[3];
-            sub3(P + 3 * ids[i], p, a);
+            vx_v3_sub(P + 3 * ids[i], p, a);
             project_dir(a, n, dirs + 3 * i);
         }
         return;
     }
-    cross3(n, d0, e);
+    vx_v3_cross(n, d0, e);
     double scale = (closed ? 2 * M_PI : M_PI) / total, phi = 0;
     for (uint32_t i = 0; i < m; i++) {
         for (int c = 0; c < 3; c++)
             dirs[3 * i + c] = cos(phi) * d0[c] + sin(phi) * e[c];
         if (i < nang) {
             double a[3], b[3];
-            sub3(P + 3 * ids[i], p, a);
-            sub3(P + 3 * ids[(i + 1) % m], p, b);
-            double la = norm3(a), lb = norm3(b);
-            double cs = la > 0 && lb > 0 ? dot3(a, b) / (la * lb) : 1;
+            vx_v3_sub(P + 3 * ids[i], p, a);
+            vx_v3_sub(P + 3 * ids[(i + 1) % m], p, b);
+            double la = vx_v3_norm(a), lb = vx_v3_norm(b);
+            double cs = la > 0 && lb > 0 ? vx_v3_dot(a, b) / (la * lb) : 1;
             phi += scale * acos(cs < -1 ? -1 : cs > 1 ? 1 : cs);
         }
     }
@@ -526,8 +498,8 @@ static void dir_curve(const double *a, const double *ta, const double *b, const 
                       double cv[12])
 {
     double ab[3];
-    sub3(b, a, ab);
-    double len = norm3(ab) / 3;
+    vx_v3_sub(b, a, ab);
+    double len = vx_v3_norm(ab) / 3;
     for (int c = 0; c < 3; c++) {
         cv[c] = a[c];
         cv[3 + c] = a[c] + len * ta[c];
@@ -548,7 +520,7 @@ static void edge_end_dir(const vx_gregory_topo *t, const double *pos, const doub
     }
     uint32_t a = t->edge_v[2 * e + s], b = t->edge_v[2 * e + 1 - s];
     double d[3];
-    sub3(pos + 3 * b, pos + 3 * a, d);
+    vx_v3_sub(pos + 3 * b, pos + 3 * a, d);
     project_dir(d, vn + 3 * a, out);
 }
 
@@ -562,22 +534,16 @@ static void edge_curve(const vx_gregory_topo *t, const double *pos, const double
     dir_curve(pos + 3 * t->edge_v[2 * e], ta, pos + 3 * t->edge_v[2 * e + 1], tb, cv);
 }
 
-static void lerp3(const double *a, const double *b, double *o)
-{
-    for (int c = 0; c < 3; c++)
-        o[c] = 0.5 * (a[c] + b[c]);
-}
-
 /* de Casteljau at 1/2: the halves and the tangent direction there. */
 static void split_curve(const double cv[12], double h0[12], double h1[12])
 {
     double p01[3], p12[3], p23[3], q0[3], q1[3], m[3];
-    lerp3(cv, cv + 3, p01);
-    lerp3(cv + 3, cv + 6, p12);
-    lerp3(cv + 6, cv + 9, p23);
-    lerp3(p01, p12, q0);
-    lerp3(p12, p23, q1);
-    lerp3(q0, q1, m);
+    vx_v3_mid(cv, cv + 3, p01);
+    vx_v3_mid(cv + 3, cv + 6, p12);
+    vx_v3_mid(cv + 6, cv + 9, p23);
+    vx_v3_mid(p01, p12, q0);
+    vx_v3_mid(p12, p23, q1);
+    vx_v3_mid(q0, q1, m);
     memcpy(h0, cv, 3 * sizeof *h0);
     memcpy(h0 + 3, p01, sizeof p01);
     memcpy(h0 + 6, q0, sizeof q0);
@@ -591,8 +557,8 @@ static void split_curve(const double cv[12], double h0[12], double h1[12])
 /* Least-squares k, h of x = k g + h c (2x2 normal equations). */
 static void solve_kh(const double *x, const double *g, const double *c, double *k, double *h)
 {
-    double gg = dot3(g, g), gc = dot3(g, c), cc = dot3(c, c);
-    double xg = dot3(x, g), xc = dot3(x, c), det = gg * cc - gc * gc;
+    double gg = vx_v3_dot(g, g), gc = vx_v3_dot(g, c), cc = vx_v3_dot(c, c);
+    double xg = vx_v3_dot(x, g), xc = vx_v3_dot(x, c), det = gg * cc - gc * gc;
     if (fabs(det) <= 1e-30 * (gg * cc + 1e-300)) {
         *k = gg > 0 ? xg / gg : 0;
         *h = 0;
@@ -608,10 +574,10 @@ static void correct_curve(const vx_gregory_topo *t, uint32_t c, const double cv[
 {
     double C[3][3], G0[3], G3[3];
     for (int i = 0; i < 3; i++)
-        sub3(cv + 3 * (i + 1), cv + 3 * i, C[i]);
-    cross3(na, C[0], G0);
-    cross3(nb, C[2], G3);
-    int usable = norm3(G0) > 0 && norm3(G3) > 0;
+        vx_v3_sub(cv + 3 * (i + 1), cv + 3 * i, C[i]);
+    vx_v3_cross(na, C[0], G0);
+    vx_v3_cross(nb, C[2], G3);
+    int usable = vx_v3_norm(G0) > 0 && vx_v3_norm(G3) > 0;
     for (uint32_t q = t->curve_off[c]; q < t->curve_off[c + 1]; q++) {
         uint32_t pe = t->curve_pe[q], p = pe / 4, e = pe % 4;
         double *cp = s->cp + (size_t)p * VX_GPATCH_POINTS * 3;
@@ -622,8 +588,8 @@ static void correct_curve(const vx_gregory_topo *t, uint32_t c, const double cv[
             is[i] = inn_slot[e][j];
         }
         double X0[3], X3[3], X1[3], X2[3];
-        sub3(cp + 3 * is[0], cp + 3 * bs[0], X0);
-        sub3(cp + 3 * is[3], cp + 3 * bs[3], X3);
+        vx_v3_sub(cp + 3 * is[0], cp + 3 * bs[0], X0);
+        vx_v3_sub(cp + 3 * is[3], cp + 3 * bs[3], X3);
         if (usable) {
             double k0, h0, k1, h1;
             solve_kh(X0, G0, C[0], &k0, &h0);
@@ -696,14 +662,14 @@ void vx_gregory_build(const vx_gregory_topo *t, const double *pos, vx_gpatch_set
         uint32_t m = mid_node(t, e), a = t->edge_v[2 * e], b = t->edge_v[2 * e + 1];
         double *tan = mt + 3 * e, n[3];
         memcpy(np + 3 * m, cvs + 24 * e + 9, 3 * sizeof *np);
-        sub3(cvs + 24 * e + 15, cvs + 24 * e + 6, tan);
-        lerp3(nn + 3 * a, nn + 3 * b, n);
-        if (unit3(tan) == 0) {
-            double d = dot3(n, tan);
+        vx_v3_sub(cvs + 24 * e + 15, cvs + 24 * e + 6, tan);
+        vx_v3_mid(nn + 3 * a, nn + 3 * b, n);
+        if (vx_v3_unit(tan) == 0) {
+            double d = vx_v3_dot(n, tan);
             for (int c = 0; c < 3; c++)
                 n[c] -= d * tan[c];
         }
-        if (unit3(n)) memcpy(n, nn + 3 * a, sizeof n);
+        if (vx_v3_unit(n)) memcpy(n, nn + 3 * a, sizeof n);
         memcpy(nn + 3 * m, n, sizeof n);
     }
     if (t->split)
@@ -725,9 +691,9 @@ void vx_gregory_build(const vx_gregory_topo *t, const double *pos, vx_gpatch_set
             double *cp = np + 3 * cn;
             for (int c = 0; c < 3; c++)
                 cp[c] = M[c] + 0.5 * (M[c] - V[c]);
-            if (unit3(n)) {
+            if (vx_v3_unit(n)) {
                 face_normal(t, pos, f, n);
-                if (unit3(n)) n[0] = n[1] = 0, n[2] = 1;
+                if (vx_v3_unit(n)) n[0] = n[1] = 0, n[2] = 1;
             }
             memcpy(nn + 3 * cn, n, sizeof n);
             /* Midpoint -> centre curves: at the midpoint square to the edge,
@@ -741,9 +707,9 @@ void vx_gregory_build(const vx_gregory_topo *t, const double *pos, vx_gpatch_set
                 if (t->fidx[s0 + i] != t->edge_v[2 * e])
                     for (int d = 0; d < 3; d++)
                         tf[d] = -tf[d];
-                cross3(nn + 3 * m, tf, dm);
-                if (unit3(dm)) {
-                    sub3(cp, np + 3 * m, dm);
+                vx_v3_cross(nn + 3 * m, tf, dm);
+                if (vx_v3_unit(dm)) {
+                    vx_v3_sub(cp, np + 3 * m, dm);
                     project_dir(dm, nn + 3 * m, dm);
                 }
                 dir_curve(np + 3 * m, dm, cp, cdir + 3 * i, cvs + 12 * c);

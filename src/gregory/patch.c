@@ -5,6 +5,7 @@
 #include <stdlib.h>
 
 #include "gregory/gregory.h"
+#include "util/vec3.h"
 
 vx_gpatch_set *vx_gpatch_set_new(size_t n)
 {
@@ -44,7 +45,10 @@ static void bernstein(double t, double b[4], double d[4])
 }
 
 /* Slot of the k = 1 point of interior (i, j). */
-static int k1_slot(int i, int j) { return 16 + (i - 1) + 2 * (j - 1); }
+static int k1_slot(int i, int j)
+{
+    return 16 + (i - 1) + 2 * (j - 1);
+}
 
 /* Q_ij(u, v) and its partial derivatives. */
 static void blend(const double *cp, int i, int j, double u, double v, double q[3], double qu[3],
@@ -83,7 +87,8 @@ static void eval_raw(const double *cp, double u, double v, double pos[3], double
     double bu[4], du_b[4], bv[4], dv_b[4];
     bernstein(u, bu, du_b);
     bernstein(v, bv, dv_b);
-    for (int c = 0; c < 3; c++) pos[c] = du[c] = dv[c] = 0;
+    for (int c = 0; c < 3; c++)
+        pos[c] = du[c] = dv[c] = 0;
     for (int j = 0; j < 4; j++)
         for (int i = 0; i < 4; i++) {
             double q[3], qu[3], qv[3];
@@ -99,14 +104,11 @@ static void eval_raw(const double *cp, double u, double v, double pos[3], double
 
 static double cross_unit(const double a[3], const double b[3], double n[3])
 {
-    n[0] = a[1] * b[2] - a[2] * b[1];
-    n[1] = a[2] * b[0] - a[0] * b[2];
-    n[2] = a[0] * b[1] - a[1] * b[0];
-    double l = sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
-    double da = sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2]);
-    double db = sqrt(b[0] * b[0] + b[1] * b[1] + b[2] * b[2]);
+    vx_v3_cross(a, b, n);
+    double l = vx_v3_norm(n), da = vx_v3_norm(a), db = vx_v3_norm(b);
     if (l > 0)
-        for (int c = 0; c < 3; c++) n[c] /= l;
+        for (int c = 0; c < 3; c++)
+            n[c] /= l;
     return da > 0 && db > 0 ? l / (da * db) : 0; /* sine of the angle between them */
 }
 

@@ -6,6 +6,8 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "util/vec3.h"
+
 vx_mesh *vx_mesh_new(void)
 {
     return calloc(1, sizeof(vx_mesh));
@@ -149,11 +151,11 @@ int vx_mesh_analyze(vx_mesh *m, vx_err *err)
     for (size_t t = 0; t < m->ntris; t++) {
         const double *a = m->pos + 3 * m->tri[3 * t], *b = m->pos + 3 * m->tri[3 * t + 1],
                      *c = m->pos + 3 * m->tri[3 * t + 2];
-        double u[3] = {b[0] - a[0], b[1] - a[1], b[2] - a[2]};
-        double v[3] = {c[0] - a[0], c[1] - a[1], c[2] - a[2]};
-        double x = u[1] * v[2] - u[2] * v[1], y = u[2] * v[0] - u[0] * v[2],
-               z = u[0] * v[1] - u[1] * v[0];
-        if (x == 0 && y == 0 && z == 0) m->degenerate_tris++;
+        double u[3], v[3], n[3];
+        vx_v3_sub(b, a, u);
+        vx_v3_sub(c, a, v);
+        vx_v3_cross(u, v, n);
+        if (n[0] == 0 && n[1] == 0 && n[2] == 0) m->degenerate_tris++;
     }
 
     return count_edges(m, nedges, err);

@@ -5,7 +5,9 @@
 #include <time.h>
 
 #include "preview/preview.h"
+#include "util/clock.h"
 #include "util/log.h"
+#include "util/vec3.h"
 
 /* Every GL object one render creates, so that every exit path deletes the
  * same set (names of 0 are ignored by glDelete*). */
@@ -25,33 +27,6 @@ static void objs_free(objs *o)
     GLuint rbs[4] = {o->rb_color, o->rb_depth, o->rb_ms_color, o->rb_ms_depth};
     glDeleteRenderbuffers(4, rbs);
     memset(o, 0, sizeof *o);
-}
-
-static double now_ms(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return (double)ts.tv_sec * 1e3 + (double)ts.tv_nsec / 1e6;
-}
-
-static void normalize3(double v[3])
-{
-    double l = sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
-    if (l > 0)
-        for (int i = 0; i < 3; i++)
-            v[i] /= l;
-}
-
-static void cross3(const double a[3], const double b[3], double out[3])
-{
-    out[0] = a[1] * b[2] - a[2] * b[1];
-    out[1] = a[2] * b[0] - a[0] * b[2];
-    out[2] = a[0] * b[1] - a[1] * b[0];
-}
-
-static double dot3(const double a[3], const double b[3])
-{
-    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
 }
 
 /* Column-major view and projection for the orbit camera around the origin
@@ -97,18 +72,18 @@ static void camera(const vx_preview_params *p, float view[16], float proj[16])
 
     double eye[3] = {dist * e[0], dist * e[1], dist * e[2]};
     double f[3] = {-e[0], -e[1], -e[2]}, up[3] = {0, 1, 0}, s[3], u[3];
-    cross3(f, up, s);
-    normalize3(s);
-    cross3(s, f, u);
+    vx_v3_cross(f, up, s);
+    vx_v3_unit(s);
+    vx_v3_cross(s, f, u);
     memset(view, 0, 16 * sizeof *view);
     for (int i = 0; i < 3; i++) {
         view[4 * i + 0] = (float)s[i];
         view[4 * i + 1] = (float)u[i];
         view[4 * i + 2] = (float)-f[i];
     }
-    view[12] = (float)-dot3(s, eye);
-    view[13] = (float)-dot3(u, eye);
-    view[14] = (float)dot3(f, eye);
+    view[12] = (float)-vx_v3_dot(s, eye);
+    view[13] = (float)-vx_v3_dot(u, eye);
+    view[14] = (float)vx_v3_dot(f, eye);
     view[15] = 1.0f;
 }
 
@@ -294,10 +269,10 @@ int vx_preview_render(vx_gl *gl, const vx_mesh *m, const vx_preview_params *p, u
     vx_gl_timer timer;
     uint8_t *band = NULL;
     const int draw = m->ntris > 0 && m->nverts > 0;
-    double t0 = now_ms();
+    double t0 = vx_mono_ms();
     if (draw && upload(gl, m, p, &o, err)) goto done;
     glFinish(); /* so upload_ms is the upload, not just its queueing */
-    st->upload_ms = now_ms() - t0;
+    st->upload_ms = vx_mono_ms() - t0;
     if (poll_render(p, 0.05, err)) goto done;
     /* The image is drawn in bands of rows into band-sized targets: the
      * viewport puts image row y0 at the band's row 0 (a whole-pixel shift,
@@ -314,7 +289,7 @@ int vx_preview_render(vx_gl *gl, const vx_mesh *m, const vx_preview_params *p, u
     float view[16], proj[16];
     camera(p, view, proj);
     double l[3] = {VX_PREVIEW_LIGHT_X, VX_PREVIEW_LIGHT_Y, VX_PREVIEW_LIGHT_Z};
-    normalize3(l);
+    vx_v3_unit(l);
     glProgramUniformMatrix4fv(prog, 0, 1, GL_FALSE, view);
     glProgramUniformMatrix4fv(prog, 1, 1, GL_FALSE, proj);
     glProgramUniform3f(prog, 2, p->color[0], p->color[1], p->color[2]);

@@ -12,7 +12,10 @@
  * A mesh is acknowledged only after its file and metadata are fsync'd and
  * renamed into place (file first, metadata last: metadata present = mesh
  * complete). Results live under a byte/idle-age budget, least recently used
- * evicted first. All functions are thread-safe. */
+ * evicted first. All functions are thread-safe. The bytes of meshes, blobs
+ * and results go through a byte-store backend (store/blob.h); the layout
+ * above is the local one's. Source: store_open.c (life), store_upload.c,
+ * store.c (meshes), store_blob.c, store_result.c; store_int.h (state). */
 #ifndef VX_STORE_H
 #define VX_STORE_H
 
@@ -25,9 +28,14 @@
 
 typedef struct vx_store vx_store;
 
+struct vx_blob_ops;
+
 typedef struct vx_store_desc {
     uint64_t results_max_bytes; /* 0 = no byte budget */
     double results_max_age_s;   /* since last access; 0 = no age limit */
+    /* Where the bytes live (store/blob.h); NULL = the data dir itself
+     * (vx_blob_local). Index, pins and budget stay in this process. */
+    const struct vx_blob_ops *blob_ops;
 } vx_store_desc;
 
 /* Opens (creating) the data dir. Owned; close with vx_store_close. */

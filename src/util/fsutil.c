@@ -25,7 +25,7 @@ static int io_fail(vx_err *err, const char *code, const char *op, const char *pa
 
 int vx_mkdirs(const char *path, vx_err *err)
 {
-    char buf[4096];
+    char buf[VX_PATH_MAX];
     if (snprintf(buf, sizeof buf, "%s", path) >= (int)sizeof buf)
         return vx_err_set(err, VX_EIO, "path_too_long", "a configured path is too long");
     for (char *p = buf + 1; *p; p++) {
@@ -53,7 +53,7 @@ int vx_fsync_dir(const char *dir, vx_err *err)
 
 int vx_write_atomic(const char *path, const void *data, size_t len, vx_err *err)
 {
-    char tmp[4096], dir[4096];
+    char tmp[VX_PATH_MAX], dir[VX_PATH_MAX];
     snprintf(tmp, sizeof tmp, "%s.tmp.%d", path, (int)gettid());
     int fd = open(tmp, O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0640);
     if (fd < 0) return io_fail(err, "write_failed", "create", tmp);
@@ -138,7 +138,7 @@ int vx_remove_tree(const char *path)
     int rc = 0;
     while ((e = readdir(d))) {
         if (!strcmp(e->d_name, ".") || !strcmp(e->d_name, "..")) continue;
-        char sub[4096];
+        char sub[VX_PATH_MAX];
         snprintf(sub, sizeof sub, "%s/%s", path, e->d_name);
         if (e->d_type == DT_DIR)
             rc |= vx_remove_tree(sub);
@@ -158,7 +158,7 @@ uint64_t vx_tree_bytes(const char *path)
     struct dirent *e;
     while ((e = readdir(d))) {
         if (!strcmp(e->d_name, ".") || !strcmp(e->d_name, "..")) continue;
-        char sub[4096];
+        char sub[VX_PATH_MAX];
         struct stat st;
         snprintf(sub, sizeof sub, "%s/%s", path, e->d_name);
         if (lstat(sub, &st) != 0) continue;
@@ -169,20 +169,6 @@ uint64_t vx_tree_bytes(const char *path)
     }
     closedir(d);
     return total;
-}
-
-double vx_now(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_REALTIME, &ts);
-    return (double)ts.tv_sec + ts.tv_nsec * 1e-9;
-}
-
-double vx_mono(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return (double)ts.tv_sec + ts.tv_nsec * 1e-9;
 }
 
 void vx_rfc3339(double t, char out[32])

@@ -5,7 +5,9 @@
 #include <stddef.h>
 #include <stdint.h>
 
+#include "util/clock.h" /* vx_now, vx_mono: their callers include this header */
 #include "util/err.h"
+#include "util/path.h"
 
 /* mkdir -p with mode 0750; 0 or -1 (VX_EIO). */
 int vx_mkdirs(const char *path, vx_err *err);
@@ -19,9 +21,7 @@ char *vx_read_file(const char *path, size_t max, size_t *len, vx_err *err);
 int vx_remove_tree(const char *path);
 /* Total bytes of the regular files under a directory tree. */
 uint64_t vx_tree_bytes(const char *path);
-/* Wall clock as seconds since the epoch, and RFC 3339 UTC with milliseconds. */
-double vx_now(void);
-double vx_mono(void);
+/* A wall-clock time (vx_now) as RFC 3339 UTC with milliseconds. */
 void vx_rfc3339(double t, char out[32]);
 /* Writes all n bytes (retrying short writes and EINTR); 0, or -1 with errno
  * set (a write that makes no progress is ENOSPC). */

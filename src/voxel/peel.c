@@ -59,7 +59,9 @@
 #include <string.h>
 #include <time.h>
 
+#include "util/clock.h"
 #include "util/log.h"
+#include "util/vec3.h"
 #include "voxel/peel_int.h"
 #include "voxel/voxel.h"
 
@@ -68,14 +70,6 @@
 #define PEEL_FIRST_CAP 16         /* layer slots of the first pass (allocated up front) */
 #define SURF_GPU_WORK 16384       /* voxel tests one GPU invocation may take */
 #define SURF_MARGIN 1e-4          /* grid units the boxes grow by: float rounding */
-
-
-double vx_peel_now_ms(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return (double)ts.tv_sec * 1e3 + (double)ts.tv_nsec / 1e6;
-}
 
 static void layers_free(layer_set *o)
 {
@@ -234,8 +228,8 @@ static int grow(peel_ctx *c, layer_set *o, int need, int keep)
     if (keep > 0) {
         /* The last pass's image atomics must land before the copy. */
         glMemoryBarrier(GL_ALL_BARRIER_BITS);
-        glCopyImageSubData(o->keys, GL_TEXTURE_2D_ARRAY, 0, 0, 0, 0, nk, GL_TEXTURE_2D_ARRAY, 0,
-                           0, 0, 0, o->w, o->h, keep);
+        glCopyImageSubData(o->keys, GL_TEXTURE_2D_ARRAY, 0, 0, 0, 0, nk, GL_TEXTURE_2D_ARRAY, 0, 0,
+                           0, 0, o->w, o->h, keep);
     }
     GLuint old[2] = {o->keys, o->counts};
     glDeleteTextures(2, old);
@@ -543,13 +537,9 @@ static int tri_setup(const peel_ctx *c, size_t t, double v[3][3], double n[3], i
             v[i][a] =
                 (float)((c->m->pos[3 * (size_t)c->m->tri[3 * t + i] + a] - g->origin[a]) / g->h);
     double e0[3], e1[3];
-    for (int a = 0; a < 3; a++) {
-        e0[a] = v[1][a] - v[0][a];
-        e1[a] = v[2][a] - v[1][a];
-    }
-    n[0] = e0[1] * e1[2] - e0[2] * e1[1];
-    n[1] = e0[2] * e1[0] - e0[0] * e1[2];
-    n[2] = e0[0] * e1[1] - e0[1] * e1[0];
+    vx_v3_sub(v[1], v[0], e0);
+    vx_v3_sub(v[2], v[1], e1);
+    vx_v3_cross(e0, e1, n);
     for (int a = 0; a < 3; a++) {
         double mn = fmin(v[0][a], fmin(v[1][a], v[2][a])) - SURF_MARGIN,
                mx = fmax(v[0][a], fmax(v[1][a], v[2][a])) + SURF_MARGIN;
@@ -835,7 +825,7 @@ int vx_voxelize_peel(vx_gl *gl, const vx_mesh *m, const vx_voxelize_desc *d, vx_
     int rc = -1;
     uint32_t *gpu_list = NULL;
     if (vx_bitgrid_alloc(out, g, 0, err)) return -1;
-    double t0 = vx_peel_now_ms();
+    double t0 = vx_mono_ms();
     if (vx_peel_upload(&c)) goto done;
     if (surface) {
         size_t ngpu = 0;
@@ -845,17 +835,17 @@ int vx_voxelize_peel(vx_gl *gl, const vx_mesh *m, const vx_voxelize_desc *d, vx_
         VX_FREE(gpu_list);
         if (vx_gl_check(gl, "peel.list", err)) goto done;
         glFinish();
-        st->upload_ms = vx_peel_now_ms() - t0;
+        st->upload_ms = vx_mono_ms() - t0;
         glCreateBuffers(1, &c.o.ssbo[0]);
         glNamedBufferStorage(c.o.ssbo[0], (GLsizeiptr)vx_peel_slab_bytes(&c, c.rows), NULL, 0);
         if (vx_gl_check(gl, "peel.ssbo", err)) goto done;
         for (c.slab = 0; c.slab < c.nslabs; c.slab++) {
             int k0 = c.slab * c.rows, rows = c.dims[2] - k0 < c.rows ? c.dims[2] - k0 : c.rows;
             if (surface_slab(&c, ngpu, k0, rows)) goto done;
-            double r0 = vx_peel_now_ms();
+            double r0 = vx_mono_ms();
             glGetNamedBufferSubData(c.o.ssbo[0], 0, (GLsizeiptr)vx_peel_slab_bytes(&c, rows),
                                     out->bits + (size_t)k0 * c.dims[1] * c.wx);
-            st->readback_ms += vx_peel_now_ms() - r0;
+            st->readback_ms += vx_mono_ms() - r0;
             if (vx_gl_check(gl, "peel.readback", err)) goto done;
             c.axis_i = 0;
             if (vx_peel_progress(&c, 1.0)) goto done;
@@ -864,7 +854,7 @@ int vx_voxelize_peel(vx_gl *gl, const vx_mesh *m, const vx_voxelize_desc *d, vx_
     } else {
         if (vx_peel_slab_buckets(&c)) goto done;
         glFinish(); /* so upload_ms is the upload, not just its queueing */
-        st->upload_ms = vx_peel_now_ms() - t0;
+        st->upload_ms = vx_mono_ms() - t0;
         for (int s = 0; s < c.naxes; s++) {
             glCreateBuffers(1, &c.o.ssbo[s]);
             glNamedBufferStorage(c.o.ssbo[s], (GLsizeiptr)vx_peel_slab_bytes(&c, c.rows), NULL,
@@ -907,10 +897,10 @@ int vx_voxelize_peel(vx_gl *gl, const vx_mesh *m, const vx_voxelize_desc *d, vx_
                 for (GLuint b = 0; b < 3; b++)
                     glBindBufferBase(GL_SHADER_STORAGE_BUFFER, b, 0);
             }
-            double r0 = vx_peel_now_ms();
+            double r0 = vx_mono_ms();
             glGetNamedBufferSubData(c.o.ssbo[0], 0, (GLsizeiptr)vx_peel_slab_bytes(&c, rows),
                                     out->bits + (size_t)k0 * c.dims[1] * c.wx);
-            st->readback_ms += vx_peel_now_ms() - r0;
+            st->readback_ms += vx_mono_ms() - r0;
             if (vx_gl_check(gl, "peel.readback", err)) goto done;
             c.axis_i = c.naxes - 1;
             if (vx_peel_progress(&c, 1.0)) goto done;

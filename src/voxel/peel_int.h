@@ -13,11 +13,11 @@
 
 /* A peel image: the pass target and the layer arrays. */
 typedef struct layer_set {
-    GLuint fbo;            /* attachment-less w x h target of the passes */
-    GLuint keys, counts;   /* R32UI arrays of cap layers: sorted crossing keys, multiplicities */
+    GLuint fbo;          /* attachment-less w x h target of the passes */
+    GLuint keys, counts; /* R32UI arrays of cap layers: sorted crossing keys, multiplicities */
     int w, h, cap;
-    float lo, scale;       /* key depth = (t - lo) * scale, scale a power of two */
-    int counted;           /* counts hold multiplicities (coincident crossings were seen) */
+    float lo, scale; /* key depth = (t - lo) * scale, scale a power of two */
+    int counted;     /* counts hold multiplicities (coincident crossings were seen) */
 } layer_set;
 
 /* Every GL object one call creates, so every exit path deletes the same set
@@ -29,9 +29,9 @@ typedef struct peel_objs {
     GLuint list;     /* surface: the triangles the GPU takes */
     GLuint ibo_slab; /* several slabs: triangles grouped by the slabs they reach */
     GLuint query;
-    GLuint peel_stat;     /* peel: [0] coincident crossings seen, [1] most layers of a pixel */
-    GLuint scan_fbo;      /* scan: the attachment-less framebuffer */
-    GLuint scan_buf[4];   /* scan: delta counters, row tails, overflow flag, block bits */
+    GLuint peel_stat;   /* peel: [0] coincident crossings seen, [1] most layers of a pixel */
+    GLuint scan_fbo;    /* scan: the attachment-less framebuffer */
+    GLuint scan_buf[4]; /* scan: delta counters, row tails, overflow flag, block bits */
 } peel_objs;
 
 typedef struct peel_ctx {
@@ -56,7 +56,6 @@ typedef struct peel_ctx {
     size_t *slab_first; /* with o.ibo_slab: first triangle of each slab, nslabs + 1 */
 } peel_ctx;
 
-double vx_peel_now_ms(void);
 /* Deletes every GL object in o (names of 0 are ignored) and zeroes it. */
 void vx_peel_objs_free(peel_objs *o);
 /* VX_ETOOBIG job_memory_limit: `need` bytes against c->limit. */

@@ -57,6 +57,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "util/clock.h"
 #include "voxel/peel_int.h"
 #include "voxel/voxel.h"
 
@@ -246,7 +247,7 @@ int vx_voxelize_scan(vx_gl *gl, const vx_mesh *m, const vx_voxelize_desc *d, vx_
 
     int rc = -1;
     if (vx_bitgrid_alloc(out, g, 0, err)) return -1;
-    double t0 = vx_peel_now_ms();
+    double t0 = vx_mono_ms();
     if (vx_peel_upload(&c)) goto done;
     if (vx_peel_slab_buckets(&c)) goto done;
     peel_objs *o = &c.o;
@@ -263,17 +264,17 @@ int vx_voxelize_scan(vx_gl *gl, const vx_mesh *m, const vx_voxelize_desc *d, vx_
     glCreateFramebuffers(1, &o->scan_fbo);
     if (vx_gl_check(gl, "scan.buffers", err)) goto done;
     glFinish(); /* so upload_ms is the upload, not just its queueing */
-    st->upload_ms = vx_peel_now_ms() - t0;
+    st->upload_ms = vx_mono_ms() - t0;
 
     for (c.slab = 0; c.slab < c.nslabs; c.slab++) {
         int k0 = c.slab * c.rows, rows = c.dims[2] - k0 < c.rows ? c.dims[2] - k0 : c.rows;
         if (draw(&c, k0, rows)) goto done;
         if (vx_peel_progress(&c, 0.5)) goto done;
         if (sum(&c, rows, (int)d->inside)) goto done;
-        double r0 = vx_peel_now_ms();
+        double r0 = vx_mono_ms();
         glGetNamedBufferSubData(o->ssbo[0], 0, (GLsizeiptr)vx_peel_slab_bytes(&c, rows),
                                 out->bits + (size_t)k0 * c.dims[1] * c.wx);
-        st->readback_ms += vx_peel_now_ms() - r0;
+        st->readback_ms += vx_mono_ms() - r0;
         if (vx_gl_check(gl, "scan.readback", err)) goto done;
         if (vx_peel_progress(&c, 1.0)) goto done;
     }

@@ -67,6 +67,7 @@
 #include <string.h>
 #include <time.h>
 
+#include "util/clock.h"
 #include "util/log.h"
 #include "voxel/voxel.h"
 
@@ -99,13 +100,6 @@ static void objs_free(objs *o)
     GLuint tex[2] = {o->tex_color, o->tex_depth};
     glDeleteTextures(2, tex);
     memset(o, 0, sizeof *o);
-}
-
-static double now_ms(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return (double)ts.tv_sec * 1e3 + (double)ts.tv_nsec / 1e6;
 }
 
 /* The plane steps along grid axis w; the image is (u, v) = the next two axes
@@ -695,10 +689,10 @@ static int do_axis(run *r, int a, int k0, int k1, vx_err *err)
 static int readback(vx_gl *gl, GLuint buf, void *dst, uint64_t bytes, vx_voxelize_stats *st,
                     vx_err *err)
 {
-    double t0 = now_ms();
+    double t0 = vx_mono_ms();
     glMemoryBarrier(GL_BUFFER_UPDATE_BARRIER_BIT);
     glGetNamedBufferSubData(buf, 0, (GLsizeiptr)bytes, dst);
-    st->readback_ms += now_ms() - t0;
+    st->readback_ms += vx_mono_ms() - t0;
     return vx_gl_check(gl, "slice.readback", err);
 }
 
@@ -769,12 +763,12 @@ int vx_voxelize_slice(vx_gl *gl, const vx_mesh *m, const vx_voxelize_desc *d, vx
              .st = st};
     uint8_t *tmp[3] = {NULL, NULL, NULL};
     int rc = -1;
-    double t0 = now_ms();
+    double t0 = vx_mono_ms();
     if (m->ntris && upload(gl, m, g, &p, &o, r.wmin_all, r.wmax_all, r.wmax_sorted, r.nfront,
                            &r.slab_start, err))
         goto fail;
     glFinish(); /* so upload_ms is the upload, not just its queueing */
-    st->upload_ms = now_ms() - t0;
+    st->upload_ms = vx_mono_ms() - t0;
     if (!m->ntris) goto done; /* nothing is inside */
     if (targets(gl, &p, &o, err)) goto fail;
     uint64_t chunk_bits = (uint64_t)p.nk * p.bits_layer,

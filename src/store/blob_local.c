@@ -1,0 +1,197 @@
+/* The local byte store: keys are paths under the data dir (blob.h). */
+#include "store/blob.h"
+
+#include <dirent.h>
+#include <errno.h>
+#include <fcntl.h>
+#include <stdatomic.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include "util/fsutil.h"
+#include "util/path.h"
+
+struct vx_blob {
+    char dir[VX_PATH_MAX];
+    atomic_ulong seq; /* staged names */
+};
+
+static vx_blob *local_open(const char *where, vx_err *err)
+{
+    vx_blob *b = calloc(1, sizeof *b);
+    if (!b) {
+        vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory");
+        return NULL;
+    }
+    if (snprintf(b->dir, sizeof b->dir, "%s", where) >= (int)sizeof b->dir) {
+        free(b);
+        vx_err_set(err, VX_EIO, "path_too_long", "data dir path too long");
+        return NULL;
+    }
+    return b;
+}
+
+static void local_close(vx_blob *b)
+{
+    free(b);
+}
+
+static int local_path(vx_blob *b, const char *key, char *buf, size_t n)
+{
+    if (snprintf(buf, n, "%s/%s", b->dir, key) >= (int)n) {
+        errno = ENAMETOOLONG;
+        return -1;
+    }
+    return 0;
+}
+
+/* DATA/<ns>/tmp-<pid>-<seq>, written and fsync'd. */
+static int local_stage(vx_blob *b, const char *ns, const void *data, size_t n, char *tmp,
+                       size_t tmpn)
+{
+    char dir[VX_PATH_MAX];
+    if (local_path(b, ns, dir, sizeof dir)) return -1;
+    unsigned long seq = atomic_fetch_add(&b->seq, 1) + 1;
+    snprintf(tmp, tmpn, "%s/tmp-%lu-%lu", dir, (unsigned long)getpid(), seq);
+    int fd = open(tmp, O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0640);
+    if (fd < 0) return -1;
+    int e = vx_write_all(fd, data, n) ? errno : 0;
+    if (!e && fsync(fd) != 0) e = errno;
+    if (close(fd) != 0 && !e) e = errno;
+    if (e) {
+        unlink(tmp);
+        errno = e;
+        return -1;
+    }
+    return 0;
+}
+
+static void local_discard(vx_blob *b, const char *tmp)
+{
+    (void)b;
+    unlink(tmp);
+}
+
+static int local_put_file(vx_blob *b, const char *src, const char *key)
+{
+    char path[VX_PATH_MAX];
+    if (local_path(b, key, path, sizeof path)) return -1;
+    return rename(src, path) == 0 ? 0 : -1;
+}
+
+static int local_put_bytes(vx_blob *b, const char *key, const void *data, size_t n, vx_err *err)
+{
+    char path[VX_PATH_MAX];
+    if (local_path(b, key, path, sizeof path))
+        return vx_err_set(err, VX_EIO, "path_too_long", "a path is too long");
+    return vx_write_atomic(path, data, n, err);
+}
+
+static char *local_read(vx_blob *b, const char *key, size_t max, size_t *n, vx_err *err)
+{
+    char path[VX_PATH_MAX];
+    if (local_path(b, key, path, sizeof path)) {
+        vx_err_set(err, VX_EIO, "path_too_long", "a path is too long");
+        return NULL;
+    }
+    return vx_read_file(path, max, n, err);
+}
+
+static int local_stat(vx_blob *b, const char *key, uint64_t *bytes, double *mtime)
+{
+    char path[VX_PATH_MAX];
+    struct stat st;
+    if (local_path(b, key, path, sizeof path) || stat(path, &st) != 0) return -1;
+    int prefix = S_ISDIR(st.st_mode);
+    if (prefix) {
+        if (bytes) *bytes = vx_tree_bytes(path);
+    } else if (access(path, R_OK) != 0) {
+        return -1;
+    } else if (bytes) {
+        *bytes = (uint64_t)st.st_size;
+    }
+    if (mtime) *mtime = (double)st.st_mtim.tv_sec + st.st_mtim.tv_nsec * 1e-9;
+    return prefix;
+}
+
+static int local_touch(vx_blob *b, const char *key)
+{
+    char path[VX_PATH_MAX];
+    if (local_path(b, key, path, sizeof path)) return -1;
+    return utimensat(AT_FDCWD, path, NULL, 0) == 0 ? 0 : -1;
+}
+
+static int local_move(vx_blob *b, const char *from, const char *to)
+{
+    char f[VX_PATH_MAX], t[VX_PATH_MAX];
+    if (local_path(b, from, f, sizeof f) || local_path(b, to, t, sizeof t)) return -1;
+    return rename(f, t) == 0 ? 0 : -1;
+}
+
+static int local_remove(vx_blob *b, const char *key)
+{
+    char path[VX_PATH_MAX];
+    if (local_path(b, key, path, sizeof path)) return -1;
+    return unlink(path) == 0 || errno == ENOENT ? 0 : -1;
+}
+
+static int local_remove_prefix(vx_blob *b, const char *prefix)
+{
+    char path[VX_PATH_MAX];
+    if (local_path(b, prefix, path, sizeof path)) return -1;
+    return vx_remove_tree(path);
+}
+
+static int local_make_prefix(vx_blob *b, const char *prefix, vx_err *err)
+{
+    char path[VX_PATH_MAX];
+    if (local_path(b, prefix, path, sizeof path))
+        return vx_err_set(err, VX_EIO, "path_too_long", "a configured path is too long");
+    return vx_mkdirs(path, err);
+}
+
+static int local_sync(vx_blob *b, const char *ns, vx_err *err)
+{
+    char path[VX_PATH_MAX];
+    if (local_path(b, ns, path, sizeof path))
+        return vx_err_set(err, VX_EIO, "path_too_long", "a path is too long");
+    return vx_fsync_dir(path, err);
+}
+
+static int local_list(vx_blob *b, const char *ns, int (*fn)(const char *name, void *ud), void *ud)
+{
+    char path[VX_PATH_MAX];
+    if (local_path(b, ns, path, sizeof path)) return -1;
+    DIR *d = opendir(path);
+    if (!d) return -1;
+    struct dirent *e;
+    while ((e = readdir(d))) {
+        if (strcmp(e->d_name, ".") == 0 || strcmp(e->d_name, "..") == 0) continue;
+        if (fn(e->d_name, ud)) break;
+    }
+    closedir(d);
+    return 0;
+}
+
+const vx_blob_ops vx_blob_local = {
+    .name = "local",
+    .open = local_open,
+    .close = local_close,
+    .stage = local_stage,
+    .discard = local_discard,
+    .put_file = local_put_file,
+    .put_bytes = local_put_bytes,
+    .read = local_read,
+    .stat = local_stat,
+    .touch = local_touch,
+    .move = local_move,
+    .remove = local_remove,
+    .remove_prefix = local_remove_prefix,
+    .make_prefix = local_make_prefix,
+    .sync = local_sync,
+    .list = local_list,
+    .path = local_path,
+};

@@ -1,0 +1,117 @@
+/* The store's life: open (lock, load the index), close, probes (store.h). */
+#include <errno.h>
+#include <fcntl.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/file.h>
+#include <unistd.h>
+
+#include "store/store_int.h"
+#include "util/fsutil.h"
+#include "util/log.h"
+
+/* One daemon per data dir: an exclusive flock on DATA/voxeld.lock, held
+ * until vx_store_close (or the process dies: the kernel drops it, so a
+ * kill -9 never leaves a stale lock). The file holds the owner's pid, for
+ * the message a second daemon prints. */
+static int lock_dir(vx_store *s, vx_err *err)
+{
+    char p[VX_PATH_MAX];
+    snprintf(p, sizeof p, "%s/voxeld.lock", s->dir);
+    int fd = open(p, O_RDWR | O_CREAT | O_CLOEXEC, 0640);
+    if (fd < 0)
+        return vx_err_set(err, VX_EIO, "data_dir_lock", "cannot open the lock file %s: %s", p,
+                          strerror(errno));
+    if (flock(fd, LOCK_EX | LOCK_NB) != 0) {
+        int e = errno;
+        char pid[32] = "";
+        ssize_t n = pread(fd, pid, sizeof pid - 1, 0);
+        close(fd);
+        if (n > 0) pid[n] = 0;
+        pid[strcspn(pid, "\n")] = 0;
+        if (e == EWOULDBLOCK)
+            return vx_err_set(
+                err, VX_EBUSY, "data_dir_locked",
+                "the data dir %s is in use by another voxeld (pid %s): one daemon per data dir",
+                s->dir, pid[0] ? pid : "unknown");
+        return vx_err_set(err, VX_EIO, "data_dir_lock", "cannot lock %s: %s", p, strerror(e));
+    }
+    char pid[32];
+    int n = snprintf(pid, sizeof pid, "%d\n", (int)getpid());
+    /* Best effort: the lock itself is what counts, and a full disk must not
+     * stop the daemon from starting (it then serves reads). */
+    if (ftruncate(fd, 0) != 0 || pwrite(fd, pid, (size_t)n, 0) != n)
+        VX_WARN("store.lock_pid_unwritten", "error=%d", errno);
+    s->lock_fd = fd;
+    return 0;
+}
+
+vx_store *vx_store_open(const char *data_dir, const vx_store_desc *desc, vx_err *err)
+{
+    vx_store *s = calloc(1, sizeof *s);
+    if (!s) {
+        vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory");
+        return NULL;
+    }
+    if (snprintf(s->dir, sizeof s->dir, "%s", data_dir) >= (int)sizeof s->dir / 2) {
+        free(s);
+        vx_err_set(err, VX_EIO, "path_too_long", "data dir path too long");
+        return NULL;
+    }
+    if (desc) s->desc = *desc;
+    s->ops = s->desc.blob_ops ? s->desc.blob_ops : &vx_blob_local;
+    s->lock_fd = -1;
+    pthread_mutex_init(&s->lock, NULL);
+    /* The dir and its lock before anything in it is touched; then the byte
+     * store's namespaces, and DATA/tmp (uploads in flight, always local). */
+    if (vx_mkdirs(s->dir, err) || lock_dir(s, err) || !(s->blob = s->ops->open(s->dir, err)) ||
+        s->ops->make_prefix(s->blob, "meshes", err) ||
+        s->ops->make_prefix(s->blob, "results", err)) {
+        vx_store_close(s);
+        return NULL;
+    }
+    char tmp[VX_PATH_MAX];
+    snprintf(tmp, sizeof tmp, "%s/tmp", s->dir);
+    vx_remove_tree(tmp);
+    if (vx_mkdirs(tmp, err)) {
+        vx_store_close(s);
+        return NULL;
+    }
+    vx_store_load_meshes(s);
+    vx_store_load_results(s);
+    VX_INFO("store.open", "dir=%s meshes=%zu results=%zu results_bytes=%llu", s->dir, s->nmeshes,
+            s->nresults, (unsigned long long)s->results_bytes);
+    return s;
+}
+
+void vx_store_close(vx_store *s)
+{
+    if (!s) return;
+    for (size_t i = 0; i < s->nmeshes; i++)
+        free(s->meshes[i].meta);
+    free(s->meshes);
+    free(s->blobs);
+    free(s->results);
+    if (s->blob) s->ops->close(s->blob);
+    pthread_mutex_destroy(&s->lock);
+    if (s->lock_fd >= 0) close(s->lock_fd); /* drops the flock */
+    free(s);
+}
+
+const char *vx_store_dir(const vx_store *s)
+{
+    return s->dir;
+}
+
+int vx_store_writable(vx_store *s)
+{
+    char p[VX_PATH_MAX];
+    snprintf(p, sizeof p, "%s/tmp/.probe.%d", s->dir, (int)gettid());
+    int fd = open(p, O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0600);
+    if (fd < 0) return 0;
+    int ok = write(fd, "x", 1) == 1;
+    close(fd);
+    unlink(p);
+    return ok;
+}

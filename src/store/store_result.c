@@ -1,0 +1,172 @@
+/* Results: per-job output dirs under a byte/idle-age budget (store.h). */
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "store/store_int.h"
+#include "util/fsutil.h"
+#include "util/log.h"
+
+static int valid_jid(const char *s)
+{
+    size_t n = strlen(s);
+    if (n == 0 || n >= sizeof(((result_entry *)0)->jid)) return 0;
+    for (size_t i = 0; i < n; i++)
+        if (!((s[i] >= '0' && s[i] <= '9') || (s[i] >= 'a' && s[i] <= 'f'))) return 0;
+    return 1;
+}
+
+/* The key of job jid's result prefix. */
+static void result_key(const char *jid, char *buf, size_t n)
+{
+    snprintf(buf, n, "results/%s", jid);
+}
+
+static int result_add_locked(vx_store *s, const char *jid, uint64_t bytes, double t)
+{
+    for (size_t i = 0; i < s->nresults; i++)
+        if (strcmp(s->results[i].jid, jid) == 0) {
+            s->results_bytes -= s->results[i].bytes;
+            s->results[i].bytes = bytes;
+            s->results[i].last_access = t;
+            s->results_bytes += bytes;
+            return 0;
+        }
+    if (s->nresults == s->capresults) {
+        size_t cap = s->capresults ? 2 * s->capresults : 64;
+        result_entry *n = realloc(s->results, cap * sizeof *n);
+        if (!n) return -1;
+        s->results = n;
+        s->capresults = cap;
+    }
+    result_entry *e = &s->results[s->nresults++];
+    snprintf(e->jid, sizeof e->jid, "%s", jid);
+    e->bytes = bytes;
+    e->last_access = t;
+    s->results_bytes += bytes;
+    return 0;
+}
+
+static int load_result(const char *name, void *ud)
+{
+    vx_store *s = ud;
+    if (name[0] == '.' || !valid_jid(name)) return 0;
+    char key[128];
+    result_key(name, key, sizeof key);
+    uint64_t bytes;
+    double t;
+    if (s->ops->stat(s->blob, key, &bytes, &t) == 1) result_add_locked(s, name, bytes, t);
+    return 0;
+}
+
+void vx_store_load_results(vx_store *s)
+{
+    s->ops->list(s->blob, "results", load_result, s);
+}
+
+/* Drops jid's entry from the budget; caller holds the lock. */
+static void result_forget_locked(vx_store *s, const char *jid)
+{
+    for (size_t i = 0; i < s->nresults; i++)
+        if (strcmp(s->results[i].jid, jid) == 0) {
+            s->results_bytes -= s->results[i].bytes;
+            s->results[i] = s->results[--s->nresults];
+            break;
+        }
+}
+
+int vx_store_result_dir(vx_store *s, const char *jid, char *buf, size_t n, vx_err *err)
+{
+    if (!valid_jid(jid)) return vx_err_set(err, VX_EINTERNAL, "bad_job_id", "bad job id");
+    char key[128];
+    result_key(jid, key, sizeof key);
+    s->ops->path(s->blob, key, buf, n);
+    s->ops->remove_prefix(s->blob, key); /* left over from an interrupted earlier attempt */
+    pthread_mutex_lock(&s->lock);
+    result_forget_locked(s, jid);
+    pthread_mutex_unlock(&s->lock);
+    return s->ops->make_prefix(s->blob, key, err);
+}
+
+void vx_store_result_added(vx_store *s, const char *jid)
+{
+    char key[128];
+    result_key(jid, key, sizeof key);
+    uint64_t bytes = 0;
+    s->ops->stat(s->blob, key, &bytes, NULL);
+    s->ops->sync(s->blob, key, NULL);
+    pthread_mutex_lock(&s->lock);
+    result_add_locked(s, jid, bytes, vx_now());
+    pthread_mutex_unlock(&s->lock);
+}
+
+int vx_store_result_file(vx_store *s, const char *jid, const char *file, char *buf, size_t n,
+                         vx_err *err)
+{
+    char key[128];
+    result_key(jid, key, sizeof key);
+    pthread_mutex_lock(&s->lock);
+    int found = 0;
+    for (size_t i = 0; i < s->nresults; i++)
+        if (strcmp(s->results[i].jid, jid) == 0) {
+            s->results[i].last_access = vx_now();
+            found = 1;
+            break;
+        }
+    pthread_mutex_unlock(&s->lock);
+    if (!found || s->ops->stat(s->blob, key, NULL, NULL) < 0)
+        return vx_err_set(err, VX_ENOTFOUND, "result_evicted",
+                          "the results of job %s were removed by the results budget", jid);
+    /* The mtime of the dir carries the LRU order across restarts. */
+    s->ops->touch(s->blob, key);
+    char dir[VX_PATH_MAX];
+    s->ops->path(s->blob, key, dir, sizeof dir);
+    snprintf(buf, n, "%s/%s", dir, file);
+    return 0;
+}
+
+void vx_store_result_remove(vx_store *s, const char *jid)
+{
+    char key[128];
+    result_key(jid, key, sizeof key);
+    pthread_mutex_lock(&s->lock);
+    result_forget_locked(s, jid);
+    pthread_mutex_unlock(&s->lock);
+    s->ops->remove_prefix(s->blob, key);
+}
+
+int vx_store_results_evict(vx_store *s)
+{
+    int removed = 0;
+    for (;;) {
+        char victim[48] = {0};
+        double now = vx_now();
+        pthread_mutex_lock(&s->lock);
+        size_t oldest = (size_t)-1;
+        for (size_t i = 0; i < s->nresults; i++)
+            if (oldest == (size_t)-1 || s->results[i].last_access < s->results[oldest].last_access)
+                oldest = i;
+        if (oldest != (size_t)-1) {
+            int over_bytes =
+                s->desc.results_max_bytes && s->results_bytes > s->desc.results_max_bytes;
+            int too_old = s->desc.results_max_age_s > 0 &&
+                          now - s->results[oldest].last_access > s->desc.results_max_age_s;
+            if (over_bytes || too_old)
+                snprintf(victim, sizeof victim, "%s", s->results[oldest].jid);
+        }
+        pthread_mutex_unlock(&s->lock);
+        if (!victim[0]) break;
+        VX_INFO("store.evict", "job=%s", victim);
+        vx_store_result_remove(s, victim);
+        removed++;
+    }
+    return removed;
+}
+
+uint64_t vx_store_results_bytes(vx_store *s)
+{
+    pthread_mutex_lock(&s->lock);
+    uint64_t b = s->results_bytes;
+    pthread_mutex_unlock(&s->lock);
+    return b;
+}
