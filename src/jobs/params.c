@@ -132,9 +132,40 @@ int vx_param_enum(const cJSON *params, const char *field, const char *const *nam
     return vx_param_enum_in(params, "", field, names, def, out, err);
 }
 
+void *vx_kind_read(const vx_kind *k, const cJSON *params, const vx_limits *lim, vx_err *err)
+{
+    void *p = calloc(1, k->params_size ? k->params_size : 1);
+    if (!p) {
+        vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for %s params", k->name);
+        return NULL;
+    }
+    if (vx_spec_read(k->spec, params, lim, p, err) || (k->check && k->check(p, lim, err))) {
+        vx_kind_params_free(k, p);
+        return NULL;
+    }
+    return p;
+}
+
+void vx_kind_params_free(const vx_kind *k, void *params)
+{
+    if (!params) return;
+    vx_spec_free(k->spec, params);
+    free(params);
+}
+
+cJSON *vx_kind_parse(const vx_kind *k, const cJSON *params, const vx_limits *lim, vx_err *err)
+{
+    void *p = vx_kind_read(k, params, lim, err);
+    if (!p) return NULL;
+    cJSON *o = vx_spec_write(k->spec, p);
+    vx_kind_params_free(k, p);
+    if (!o) vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for %s params", k->name);
+    return o;
+}
+
 cJSON *vx_params_normalize(const vx_kind *k, const cJSON *params, const vx_limits *lim, vx_err *err)
 {
-    cJSON *norm = k->parse(params, lim, err);
+    cJSON *norm = vx_kind_parse(k, params, lim, err);
     if (!norm) return NULL;
     /* What the journal keeps and the runner reads back. */
     char *text = cJSON_PrintUnformatted(norm);
@@ -147,7 +178,7 @@ cJSON *vx_params_normalize(const vx_kind *k, const cJSON *params, const vx_limit
     }
     vx_err e2;
     vx_err_clear(&e2);
-    cJSON *again = k->parse(back, lim, &e2);
+    cJSON *again = vx_kind_parse(k, back, lim, &e2);
     cJSON_Delete(back);
     if (!again) {
         cJSON_Delete(norm);
