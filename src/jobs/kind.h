@@ -121,34 +121,4 @@ cJSON *vx_kind_parse(const vx_kind *k, const cJSON *params, const vx_limits *lim
 cJSON *vx_params_normalize(const vx_kind *k, const cJSON *params, const vx_limits *lim,
                            vx_err *err);
 
-/* Helpers for parse functions: read an optional number/int/bool field,
- * checking type and range; the default is used when absent. Return 0 or -1
- * with err naming the field. */
-int vx_param_number(const cJSON *params, const char *field, double def, double lo, double hi,
-                    double *out, vx_err *err);
-int vx_param_int(const cJSON *params, const char *field, long def, long lo, long hi, long *out,
-                 vx_err *err);
-int vx_param_bool(const cJSON *params, const char *field, int def, int *out, vx_err *err);
-/* Reads an optional array of mesh ids (64 lowercase hex digits each) of at
- * most max entries; *out is the array (owned by params) or NULL when
- * absent. */
-int vx_param_mesh_ids(const cJSON *params, const char *field, size_t max, const cJSON **out,
-                      vx_err *err);
-/* Reads an optional string that must be one of the NULL-terminated names;
- * *out = its index (def when absent). */
-int vx_param_enum(const cJSON *params, const char *field, const char *const *names, int def,
-                  int *out, vx_err *err);
-/* The start of every kind's params reader: NULL or JSON null means no
- * params (*params becomes NULL); anything else must be an object whose
- * fields are all in the NULL-terminated known list (else VX_EUNPROC
- * invalid_params). */
-int vx_param_object(const cJSON **params, const char *const *known, vx_err *err);
-/* Fails (VX_EUNPROC) if params has a field not in the NULL-terminated list. */
-int vx_param_only(const cJSON *params, const char *const *known, vx_err *err);
-/* The same two for a nested object of params: prefix is its path with a
- * trailing dot ("camera.", "lights[1].") for the messages. */
-int vx_param_enum_in(const cJSON *obj, const char *prefix, const char *field,
-                     const char *const *names, int def, int *out, vx_err *err);
-int vx_param_only_in(const cJSON *obj, const char *prefix, const char *const *known, vx_err *err);
-
 #endif

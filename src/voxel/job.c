@@ -1,6 +1,6 @@
 /* The `voxelize` row of the job table (kind.h; api/openapi.yaml has the
- * params and stats schemas). Structure as in preview/job.c: read_params is
- * the one place that knows the fields, used by parse and run_gl. */
+ * params and stats schemas). The params are declared once, in spec (spec.h);
+ * voxelize_check keeps the rules across fields and the grid limits. */
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>

@@ -11,50 +11,6 @@
 
 #include "jobs/kind.h"
 
-static void test_numbers(void **state)
-{
-    cJSON *p =
-        cJSON_Parse("{\"a\": 2.5, \"s\": \"x\", \"n\": null, \"i\": 7, \"f\": 7.5, \"b\": true}");
-    vx_err err;
-    double d;
-    long l;
-    int b;
-    assert_int_equal(vx_param_number(p, "a", 0, 0, 10, &d, &err), 0);
-    assert_true(d == 2.5);
-    assert_int_equal(vx_param_number(p, "missing", 3, 0, 10, &d, &err), 0);
-    assert_true(d == 3);
-    assert_int_equal(vx_param_number(p, "n", 4, 0, 10, &d, &err), 0); /* null = default */
-    assert_true(d == 4);
-    assert_int_equal(vx_param_number(NULL, "a", 5, 0, 10, &d, &err), 0);
-    assert_true(d == 5);
-    assert_int_equal(vx_param_number(p, "s", 0, 0, 10, &d, &err), -1);
-    assert_int_equal(err.kind, VX_EUNPROC);
-    assert_string_equal(err.code, "invalid_params");
-    assert_non_null(strstr(err.message, "params.s"));
-    assert_int_equal(vx_param_number(p, "a", 0, 3, 10, &d, &err), -1);
-    assert_non_null(strstr(err.message, "[3, 10]"));
-    assert_int_equal(vx_param_int(p, "i", 0, 0, 10, &l, &err), 0);
-    assert_int_equal(l, 7);
-    assert_int_equal(vx_param_int(p, "f", 0, 0, 10, &l, &err), -1);
-    assert_non_null(strstr(err.message, "integer"));
-    assert_int_equal(vx_param_bool(p, "b", 0, &b, &err), 0);
-    assert_int_equal(b, 1);
-    assert_int_equal(vx_param_bool(p, "i", 0, &b, &err), -1);
-    cJSON_Delete(p);
-}
-
-static void test_only_known(void **state)
-{
-    cJSON *p = cJSON_Parse("{\"width\": 1, \"zoom\": 2}");
-    vx_err err;
-    static const char *const known[] = {"width", "height", NULL};
-    assert_int_equal(vx_param_only(p, known, &err), -1);
-    assert_non_null(strstr(err.message, "zoom"));
-    cJSON_DeleteItemFromObject(p, "zoom");
-    assert_int_equal(vx_param_only(p, known, &err), 0);
-    cJSON_Delete(p);
-}
-
 static void test_kind_table(void **state)
 {
     assert_non_null(vx_kind_find("preview"));
@@ -111,62 +67,62 @@ static void test_preview_params(void **state)
     }
 }
 
+/* An array of mesh ids (render's meshes). */
+typedef struct t_ids {
+    char m[2][VX_MESH_ID_SIZE];
+    int n;
+} t_ids;
+
+static const vx_pspec t_id_item = {.type = VX_PT_MESH_ID};
+static const vx_pspec t_ids_spec[] = {
+    {.name = "m",
+     .type = VX_PT_ARRAY,
+     .off = offsetof(t_ids, m),
+     .sub = &t_id_item,
+     .item_size = VX_MESH_ID_SIZE,
+     .max_items = 2,
+     .flags = VX_PF_COUNT,
+     .count_off = offsetof(t_ids, n)},
+    VX_P_END,
+};
+
+static int ids_read(const char *fmt, const char *id, t_ids *out, vx_err *err)
+{
+    char buf[512];
+    snprintf(buf, sizeof buf, fmt, id, id, id);
+    cJSON *p = cJSON_Parse(buf);
+    assert_non_null(p);
+    memset(out, 0, sizeof *out);
+    vx_err_clear(err);
+    int rc = vx_spec_read(t_ids_spec, p, NULL, out, err);
+    cJSON_Delete(p);
+    return rc;
+}
+
 static void test_mesh_ids(void **state)
 {
     (void)state;
     char id[65];
     memset(id, 'a', 64);
     id[64] = 0;
-    char buf[512];
-    snprintf(buf, sizeof buf,
-             "{\"m\": [\"%s\", \"%s\"], \"bad\": [\"%.63s\"], \"upper\": [\"%.63sA\"],"
-             " \"s\": \"%s\", \"num\": [1]}",
-             id, id, id, id, id);
-    cJSON *p = cJSON_Parse(buf);
-    assert_non_null(p);
     vx_err err;
-    const cJSON *out;
-    assert_int_equal(vx_param_mesh_ids(p, "m", 8, &out, &err), 0);
-    assert_int_equal(cJSON_GetArraySize(out), 2);
-    assert_int_equal(vx_param_mesh_ids(p, "absent", 8, &out, &err), 0);
-    assert_null(out);
-    assert_int_equal(vx_param_mesh_ids(p, "m", 1, &out, &err), -1);
-    assert_non_null(strstr(err.message, "at most 1"));
-    const char *bad[] = {"bad", "upper", "s", "num"};
-    for (size_t i = 0; i < 4; i++) {
-        assert_int_equal(vx_param_mesh_ids(p, bad[i], 8, &out, &err), -1);
+    t_ids t;
+    assert_int_equal(ids_read("{\"m\": [\"%s\", \"%s\"]}", id, &t, &err), 0);
+    assert_int_equal(t.n, 2);
+    assert_string_equal(t.m[1], id);
+    assert_int_equal(ids_read("{}", id, &t, &err), 0);
+    assert_int_equal(t.n, 0);
+    assert_int_equal(ids_read("{\"m\": [\"%s\", \"%s\", \"%s\"]}", id, &t, &err), -1);
+    assert_string_equal(err.message, "params.m has 3 entries (at most 2)");
+    static const char *const bad[] = {"{\"m\": [\"%.63s\"]}", "{\"m\": [\"%.63sA\"]}",
+                                      "{\"m\": [1]}"};
+    for (size_t i = 0; i < 3; i++) {
+        assert_int_equal(ids_read(bad[i], id, &t, &err), -1);
         assert_string_equal(err.code, "invalid_params");
-        assert_non_null(strstr(err.message, bad[i]));
+        assert_string_equal(err.message, "params.m[0] is not a mesh id (64 lowercase hex digits)");
     }
-    cJSON_Delete(p);
-}
-
-static void test_object(void **state)
-{
-    (void)state;
-    static const char *const known[] = {"a", NULL};
-    vx_err err;
-    const cJSON *p = NULL;
-    assert_int_equal(vx_param_object(&p, known, &err), 0);
-    assert_null(p);
-    cJSON *n = cJSON_CreateNull(), *arr = cJSON_Parse("[1]"), *ok = cJSON_Parse("{\"a\": 1}"),
-          *bad = cJSON_Parse("{\"b\": 1}");
-    p = n;
-    assert_int_equal(vx_param_object(&p, known, &err), 0);
-    assert_null(p); /* JSON null is no params */
-    p = ok;
-    assert_int_equal(vx_param_object(&p, known, &err), 0);
-    assert_ptr_equal(p, ok);
-    p = arr;
-    assert_int_equal(vx_param_object(&p, known, &err), -1);
-    assert_non_null(strstr(err.message, "must be an object"));
-    p = bad;
-    assert_int_equal(vx_param_object(&p, known, &err), -1);
-    assert_non_null(strstr(err.message, "params.b"));
-    cJSON_Delete(n);
-    cJSON_Delete(arr);
-    cJSON_Delete(ok);
-    cJSON_Delete(bad);
+    assert_int_equal(ids_read("{\"m\": \"%s\"}", id, &t, &err), -1);
+    assert_string_equal(err.message, "params.m must be an array of mesh ids");
 }
 
 /* The fuzz_params oracle on one input: parse accepts, the normalised
@@ -527,13 +483,11 @@ static void test_spec_describe(void **state)
 int main(void)
 {
     const struct CMUnitTest tests[] = {
-        cmocka_unit_test(test_numbers),          cmocka_unit_test(test_only_known),
-        cmocka_unit_test(test_mesh_ids),         cmocka_unit_test(test_object),
-        cmocka_unit_test(test_kind_table),       cmocka_unit_test(test_preview_params),
-        cmocka_unit_test(test_render_defaults),  cmocka_unit_test(test_seeds),
-        cmocka_unit_test(test_normalize_checks), cmocka_unit_test(test_spec_defaults),
-        cmocka_unit_test(test_spec_values),      cmocka_unit_test(test_spec_errors),
-        cmocka_unit_test(test_spec_describe),
+        cmocka_unit_test(test_mesh_ids),       cmocka_unit_test(test_kind_table),
+        cmocka_unit_test(test_preview_params), cmocka_unit_test(test_render_defaults),
+        cmocka_unit_test(test_seeds),          cmocka_unit_test(test_normalize_checks),
+        cmocka_unit_test(test_spec_defaults),  cmocka_unit_test(test_spec_values),
+        cmocka_unit_test(test_spec_errors),    cmocka_unit_test(test_spec_describe),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }
