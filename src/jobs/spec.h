@@ -2,7 +2,13 @@
  * VIPS_ARG_*), with its type, default, range and doc line, straight into
  * the kind's C params struct. One generic reader validates params JSON into
  * the struct; one generic writer prints the normalised params that are
- * journaled, fields in spec order. Null is the same as absent everywhere. */
+ * journaled, fields in spec order. Null is the same as absent everywhere.
+ *
+ * Adding a parameter to a kind: a member of its params struct named as the
+ * JSON field, one entry in its spec[] (where it goes in the normalised
+ * JSON), a rule in its check() only if it spans fields, and the field in
+ * the kind's params schema in api/openapi.yaml (unit.params_openapi fails
+ * until the two agree). The stages read the member. */
 #ifndef VX_JOBS_SPEC_H
 #define VX_JOBS_SPEC_H
 
