@@ -33,15 +33,37 @@ static const char *const axis_names[] = {"+x", "-x", "+y", "-y", "+z", "-z", NUL
 enum { OUT_NORMAL = 0, OUT_POSITION, OUT_DEPTH, OUT_VOXELS, OUT_COUNT };
 static const char *const out_names[] = {"normal", "position", "depth", "voxels", NULL};
 
-typedef struct rparams {
-    long N, R, L, width, height, bits, frames;
-    double d0, fn, iso, ambient, color[3], background[3];
-    const cJSON *meshes;
-    int cam, axis;
+typedef struct rfilter {
+    int type;
+    double D0, n;
+    int D0_set;
+} rfilter;
+
+typedef struct rcamera {
+    int type, axis;
     double azimuth, elevation, distance, fov, ortho_width;
-    int nlights;
-    double light_dir[VX_BL_MAX_LIGHTS][3], light_color[VX_BL_MAX_LIGHTS][3];
-    int normals, compare, out[OUT_COUNT];
+    int fov_set;
+} rcamera;
+
+typedef struct rlight {
+    double direction[3], color[3];
+} rlight;
+
+typedef struct rparams {
+    long N, R;
+    rfilter filter;
+    long L;
+    double iso;
+    char meshes[VX_BL_MAX_MESHES][VX_MESH_ID_SIZE];
+    rcamera camera;
+    long width, height;
+    rlight lights[VX_BL_MAX_LIGHTS];
+    double ambient, color[3], background[3];
+    int normals, compare;
+    long bits;
+    int outputs[OUT_COUNT];
+    long frames;
+    int nmeshes, nlights, R_set, L_set;
 } rparams;
 
 typedef struct rstate {
@@ -56,43 +78,10 @@ typedef struct rstate {
     uint64_t peak;
 } rstate;
 
-static const char *const known[] = {"N",       "R",       "filter",     "L",       "iso",
-                                    "meshes",  "camera",  "width",      "height",  "lights",
-                                    "ambient", "color",   "background", "normals", "compare",
-                                    "bits",    "outputs", "frames",     NULL};
-
 static const cJSON *field(const cJSON *o, const char *name)
 {
     const cJSON *it = o ? cJSON_GetObjectItemCaseSensitive(o, name) : NULL;
     return it && !cJSON_IsNull(it) ? it : NULL;
-}
-
-static int bad(vx_err *err, const char *fmt, const char *what)
-{
-    return vx_err_set(err, VX_EUNPROC, "invalid_params", fmt, what);
-}
-
-/* Optional array of 3 numbers in [lo, hi]. */
-static int param_vec3(const cJSON *o, const char *what, double lo, double hi, const double *def,
-                      double *out, vx_err *err)
-{
-    const cJSON *it = o;
-    if (!it || cJSON_IsNull(it)) {
-        for (int a = 0; a < 3; a++)
-            out[a] = def[a];
-        return 0;
-    }
-    if (!cJSON_IsArray(it) || cJSON_GetArraySize(it) != 3)
-        return vx_err_set(err, VX_EUNPROC, "invalid_params",
-                          "params.%s must be an array of 3 numbers in [%g, %g]", what, lo, hi);
-    for (int a = 0; a < 3; a++) {
-        const cJSON *v = cJSON_GetArrayItem(it, a);
-        if (!cJSON_IsNumber(v) || !(v->valuedouble >= lo && v->valuedouble <= hi))
-            return vx_err_set(err, VX_EUNPROC, "invalid_params",
-                              "params.%s[%d] must be a number in [%g, %g]", what, a, lo, hi);
-        out[a] = v->valuedouble;
-    }
-    return 0;
 }
 
 /* Bytes one job needs, by stage (the largest stage counts): bit grids
@@ -101,10 +90,10 @@ static uint64_t job_bytes(const rparams *p)
 {
     uint64_t R = (uint64_t)p->R, N = (uint64_t)p->N, M = (uint64_t)(p->L * p->N);
     int dims[3] = {(int)R, (int)R, (int)R};
-    uint64_t grids = vx_bitgrid_bytes(dims, 1) * (1 + (uint64_t)cJSON_GetArraySize(p->meshes));
+    uint64_t grids = vx_bitgrid_bytes(dims, 1) * (1 + (uint64_t)p->nmeshes);
     uint64_t spec = vx_bl_spectrum_len((int)N) * 8;
     int need_m = p->compare || p->normals == VX_BL_SPECTRAL;
-    int need_n = p->compare || p->normals != VX_BL_SPECTRAL || p->out[OUT_VOXELS];
+    int need_n = p->compare || p->normals != VX_BL_SPECTRAL || p->outputs[OUT_VOXELS];
     uint64_t vols = (need_m ? vx_bl_volume_bytes((int)M, 1) + M * N * N / 2 * 16 : 0) +
                     (need_n ? N * N * N * 4 * 7 : 0);
     uint64_t panels = p->compare ? 6 : 1;
@@ -115,125 +104,129 @@ static uint64_t job_bytes(const rparams *p)
     return grids + spec + a + frame;
 }
 
-/* The vx_param_* helpers name fields params.X; a nested object's field is
- * params.OBJ.X. Returns -1. */
-static int sub_err(vx_err *err, const char *obj)
+static const char *const flt_types[] = {"exponential", NULL};
+static const vx_pspec flt_spec[] = {
+    VX_P_ENUM(rfilter, type, flt_types, 0, "the low-pass filter"),
+    VX_P_NUM(rfilter, D0, 0, 1e-6, 1e6, "cut-off frequency (default N / 4)",
+             .flags = VX_PF_DERIVED | VX_PF_SET, .set_off = offsetof(rfilter, D0_set)),
+    VX_P_NUM(rfilter, n, 2, 0.1, 64, "filter order"),
+    VX_P_END,
+};
+
+static const vx_pspec cam_spec[] = {
+    VX_P_ENUM(rcamera, type, cam_names, CAM_AXIS, "axis (orthographic) or orbit"),
+    VX_P_ENUM(rcamera, axis, axis_names, 4, "the axis camera's view direction"),
+    VX_P_NUM(rcamera, azimuth, 30, -360, 360, "orbit azimuth in degrees"),
+    VX_P_NUM(rcamera, elevation, 20, -89, 89, "orbit elevation in degrees"),
+    VX_P_NUM(rcamera, distance, 0, 0, 1e12, "eye distance, 0 = fit"),
+    VX_P_NUM(rcamera, fov, 0, 0, 120,
+             "field of view in degrees, 0 = orthographic (default 30 for orbit)",
+             .flags = VX_PF_DERIVED | VX_PF_SET, .set_off = offsetof(rcamera, fov_set)),
+    VX_P_NUM(rcamera, ortho_width, 0, 0, 1e12, "orthographic view width, 0 = fit"),
+    VX_P_END,
+};
+
+static const double white[3] = {1, 1, 1}, def_color[3] = {0.8, 0.8, 0.85};
+static const vx_pspec dir_item = VX_P_ITEM_NUM(-1e6, 1e6), light_item = VX_P_ITEM_NUM(0, 16),
+                      unit_item = VX_P_ITEM_NUM(0, 1);
+static const vx_pspec light_spec[] = {
+    VX_P_VEC(rlight, direction, 3, NULL, &dir_item, "towards the light (not zero)",
+             .flags = VX_PF_REQUIRED),
+    VX_P_VEC(rlight, color, 3, white, &light_item, "light colour"),
+    VX_P_END,
+};
+static const vx_pspec light_obj = {.type = VX_PT_OBJECT, .sub = light_spec};
+static const vx_pspec mesh_item = {.type = VX_PT_MESH_ID};
+
+#define P(f) offsetof(rparams, f)
+static const vx_pspec spec[] = {
+    VX_P_INT(rparams, N, 64, 2, 512, "kept frequencies per axis (even)"),
+    VX_P_INT(rparams, R, 0, 2, 2048, "samples per axis (even, >= N; default min(8 N, 2048))",
+             .lo_field = "N", .flags = VX_PF_DERIVED | VX_PF_SET, .set_off = P(R_set)),
+    {.name = "filter",
+     .type = VX_PT_OBJECT,
+     .off = P(filter),
+     .sub = flt_spec,
+     .doc = "the low-pass filter"},
+    VX_P_INT(rparams, L, 0, 1, 16, "upsampling factor, L N <= 1024 (default 4, fewer above N 256)",
+             .flags = VX_PF_DERIVED | VX_PF_SET, .set_off = P(L_set)),
+    VX_P_NUM(rparams, iso, 0.5, -1e6, 1e6, "iso level of the density"),
+    {.name = "meshes",
+     .type = VX_PT_ARRAY,
+     .off = P(meshes),
+     .sub = &mesh_item,
+     .item_size = VX_MESH_ID_SIZE,
+     .max_items = VX_BL_MAX_MESHES,
+     .flags = VX_PF_COUNT,
+     .count_off = P(nmeshes),
+     .doc = "further stored meshes in the same scene"},
+    {.name = "camera",
+     .type = VX_PT_OBJECT,
+     .off = P(camera),
+     .sub = cam_spec,
+     .doc = "the camera"},
+    VX_P_INT(rparams, width, 512, 8, 8192, "image width in pixels"),
+    VX_P_INT(rparams, height, 512, 8, 8192, "image height in pixels"),
+    {.name = "lights",
+     .type = VX_PT_ARRAY,
+     .off = P(lights),
+     .sub = &light_obj,
+     .item_size = sizeof(rlight),
+     .max_items = VX_BL_MAX_LIGHTS,
+     .flags = VX_PF_COUNT,
+     .count_off = P(nlights),
+     .doc = "directional lights (default: a key light)"},
+    VX_P_NUM(rparams, ambient, 0.15, 0, 1, "ambient light"),
+    VX_P_VEC(rparams, color, 3, def_color, &unit_item, "surface colour"),
+    VX_P_VEC(rparams, background, 3, white, &unit_item, "background colour"),
+    VX_P_ENUM(rparams, normals, vx_bl_normals_names, 0, "how normals are made"),
+    VX_P_BOOL(rparams, compare, 0, "render every normals method side by side"),
+    VX_P_INT(rparams, bits, 8, 8, 16, "PNG bits per channel: 8 or 16"),
+    {.name = "outputs",
+     .type = VX_PT_ENUM_SET,
+     .off = P(outputs),
+     .names = out_names,
+     .doc = "further outputs"},
+    VX_P_INT(rparams, frames, 1, 1, VX_BL_MAX_FRAMES, "turntable frames (orbit camera)"),
+    VX_P_END,
+};
+#undef P
+
+static int bad(vx_err *err, const char *fmt, const char *what)
 {
-    size_t n = strlen(obj);
-    if (strncmp(err->message, "params.", 7) == 0 &&
-        !(strncmp(err->message + 7, obj, n) == 0 && err->message[7 + n] == '.')) {
-        char m[sizeof err->message];
-        snprintf(m, sizeof m, "params.%s.%s", obj, err->message + 7);
-        snprintf(err->message, sizeof err->message, "%s", m);
-    }
-    return -1;
+    return vx_err_set(err, VX_EUNPROC, "invalid_params", fmt, what);
 }
 
-static int read_params(const cJSON *params, const vx_limits *lim, rparams *p, vx_err *err)
+/* The defaults that depend on other fields. */
+static void derive(rparams *p)
 {
-    memset(p, 0, sizeof *p);
-    if (vx_param_object(&params, known, err)) return -1;
-    if (vx_param_int(params, "N", 64, 2, 512, &p->N, err)) return -1;
-    if (p->N % 2) return bad(err, "params.%s must be even", "N");
     /* 8 samples per kept frequency, as many as the sampler takes (2048)
      * above N = 256 */
-    if (vx_param_int(params, "R", p->N <= 256 ? 8 * p->N : 2048, p->N, 2048, &p->R, err)) return -1;
-    if (p->R % 2) return bad(err, "params.%s must be even", "R");
-    /* filter */
-    const cJSON *flt = field(params, "filter");
-    static const char *const flt_known[] = {"type", "D0", "n", NULL};
-    static const char *const flt_types[] = {"exponential", NULL};
-    int ftype;
-    if (flt && !cJSON_IsObject(flt)) return bad(err, "params.%s must be an object", "filter");
-    if (flt && vx_param_only_in(flt, "filter.", flt_known, err)) return -1;
-    if (vx_param_enum_in(flt, "filter.", "type", flt_types, 0, &ftype, err) ||
-        vx_param_number(flt, "D0", p->N / 4.0, 1e-6, 1e6, &p->d0, err) ||
-        vx_param_number(flt, "n", 2, 0.1, 64, &p->fn, err))
-        return sub_err(err, "filter");
+    if (!p->R_set) p->R = p->N <= 256 ? 8 * p->N : 2048;
+    if (!p->filter.D0_set) p->filter.D0 = p->N / 4.0;
     /* default 4, fewer where L N would pass 1024 */
-    if (vx_param_int(params, "L", p->N <= 256 ? 4 : 1024 / p->N, 1, 16, &p->L, err) ||
-        vx_param_number(params, "iso", 0.5, -1e6, 1e6, &p->iso, err) ||
-        vx_param_mesh_ids(params, "meshes", VX_BL_MAX_MESHES, &p->meshes, err))
-        return -1;
+    if (!p->L_set) p->L = p->N <= 256 ? 4 : 1024 / p->N;
+    if (!p->camera.fov_set) p->camera.fov = p->camera.type == CAM_ORBIT ? 30 : 0;
+    p->R_set = p->L_set = p->filter.D0_set = p->camera.fov_set = 1;
+}
+
+static int render_check(void *params, const vx_limits *lim, vx_err *err)
+{
+    rparams *p = params;
+    if (p->N % 2) return bad(err, "params.%s must be even", "N");
+    derive(p);
+    if (p->R % 2) return bad(err, "params.%s must be even", "R");
     if (p->L * p->N > 1024) return bad(err, "params.%s: L * N must be at most 1024", "L");
-    /* camera */
-    const cJSON *cam = field(params, "camera");
-    static const char *const cam_known[] = {"type",     "axis", "azimuth",     "elevation",
-                                            "distance", "fov",  "ortho_width", NULL};
-    if (cam && !cJSON_IsObject(cam)) return bad(err, "params.%s must be an object", "camera");
-    if (cam && vx_param_only_in(cam, "camera.", cam_known, err)) return -1;
-    if (vx_param_enum_in(cam, "camera.", "type", cam_names, CAM_AXIS, &p->cam, err) ||
-        vx_param_enum_in(cam, "camera.", "axis", axis_names, 4, &p->axis, err) ||
-        vx_param_number(cam, "azimuth", 30, -360, 360, &p->azimuth, err) ||
-        vx_param_number(cam, "elevation", 20, -89, 89, &p->elevation, err) ||
-        vx_param_number(cam, "distance", 0, 0, 1e12, &p->distance, err) ||
-        vx_param_number(cam, "fov", p->cam == CAM_ORBIT ? 30 : 0, 0, 120, &p->fov, err) ||
-        vx_param_number(cam, "ortho_width", 0, 0, 1e12, &p->ortho_width, err))
-        return sub_err(err, "camera");
-    if (p->cam == CAM_AXIS && p->fov != 0)
+    if (p->camera.type == CAM_AXIS && p->camera.fov != 0)
         return bad(err, "params.%s: the axis camera is orthographic (fov must be 0)", "camera.fov");
-    /* image */
-    static const double def_color[3] = {0.8, 0.8, 0.85}, def_bg[3] = {1, 1, 1};
-    if (vx_param_int(params, "width", 512, 8, 8192, &p->width, err) ||
-        vx_param_int(params, "height", 512, 8, 8192, &p->height, err) ||
-        vx_param_number(params, "ambient", 0.15, 0, 1, &p->ambient, err) ||
-        param_vec3(field(params, "color"), "color", 0, 1, def_color, p->color, err) ||
-        param_vec3(field(params, "background"), "background", 0, 1, def_bg, p->background, err) ||
-        vx_param_enum_in(params, "", "normals", vx_bl_normals_names, 0, &p->normals, err) ||
-        vx_param_bool(params, "compare", 0, &p->compare, err) ||
-        vx_param_int(params, "bits", 8, 8, 16, &p->bits, err) ||
-        vx_param_int(params, "frames", 1, 1, VX_BL_MAX_FRAMES, &p->frames, err))
-        return -1;
     if (p->bits != 8 && p->bits != 16) return bad(err, "params.%s must be 8 or 16", "bits");
-    if (p->frames > 1 && p->cam != CAM_ORBIT)
+    if (p->frames > 1 && p->camera.type != CAM_ORBIT)
         return bad(err, "params.%s > 1 (a turntable) needs params.camera.type orbit", "frames");
-    /* lights */
-    const cJSON *lights = field(params, "lights");
-    if (lights) {
-        if (!cJSON_IsArray(lights) || cJSON_GetArraySize(lights) > VX_BL_MAX_LIGHTS)
+    for (int i = 0; i < p->nlights; i++) {
+        const double *d = p->lights[i].direction;
+        if (!(sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]) > 0))
             return vx_err_set(err, VX_EUNPROC, "invalid_params",
-                              "params.lights must be an array of at most %d {direction, color}",
-                              VX_BL_MAX_LIGHTS);
-        static const char *const light_known[] = {"direction", "color", NULL};
-        static const double white[3] = {1, 1, 1};
-        const cJSON *l;
-        cJSON_ArrayForEach(l, lights)
-        {
-            int i = p->nlights++;
-            char what[48];
-            if (!cJSON_IsObject(l)) return bad(err, "params.%s must be objects", "lights[]");
-            snprintf(what, sizeof what, "lights[%d].", i);
-            if (vx_param_only_in(l, what, light_known, err)) return -1;
-            snprintf(what, sizeof what, "lights[%d].direction", i);
-            const cJSON *d = field(l, "direction");
-            if (!d) return bad(err, "params.%s is required", what);
-            if (param_vec3(d, what, -1e6, 1e6, white, p->light_dir[i], err)) return -1;
-            double n = sqrt(p->light_dir[i][0] * p->light_dir[i][0] +
-                            p->light_dir[i][1] * p->light_dir[i][1] +
-                            p->light_dir[i][2] * p->light_dir[i][2]);
-            if (!(n > 0)) return bad(err, "params.%s must not be zero", what);
-            snprintf(what, sizeof what, "lights[%d].color", i);
-            if (param_vec3(field(l, "color"), what, 0, 16, white, p->light_color[i], err))
-                return -1;
-        }
-    }
-    /* outputs */
-    const cJSON *outs = field(params, "outputs");
-    if (outs) {
-        if (!cJSON_IsArray(outs))
-            return bad(err, "params.%s must be an array of normal, position, depth, voxels",
-                       "outputs");
-        const cJSON *o;
-        cJSON_ArrayForEach(o, outs)
-        {
-            int k = -1;
-            for (int i = 0; cJSON_IsString(o) && out_names[i]; i++)
-                if (strcmp(out_names[i], o->valuestring) == 0) k = i;
-            if (k < 0)
-                return bad(err, "params.%s entries must be normal, position, depth or voxels",
-                           "outputs");
-            p->out[k] = 1;
-        }
+                              "params.lights[%d].direction must not be zero", i);
     }
     /* sizes */
     uint64_t panels = p->compare ? 6 : 1;
@@ -251,73 +244,6 @@ static int read_params(const cJSON *params, const vx_limits *lim, rparams *p, vx
                           p->R, p->N, p->L * p->N, (unsigned long long)bytes,
                           (unsigned long long)lim->max_job_memory);
     return 0;
-}
-
-static cJSON *num_array(const double *v, int n)
-{
-    return cJSON_CreateDoubleArray(v, n);
-}
-
-static cJSON *render_parse(const cJSON *params, const vx_limits *lim, vx_err *err)
-{
-    rparams p;
-    if (read_params(params, lim, &p, err)) return NULL;
-    cJSON *o = cJSON_CreateObject(), *flt = cJSON_CreateObject(), *cam = cJSON_CreateObject(),
-          *lights = cJSON_CreateArray(), *outs = cJSON_CreateArray(),
-          *meshes = p.meshes ? cJSON_Duplicate(p.meshes, 1) : cJSON_CreateArray();
-    int ok = o && flt && cam && lights && outs && meshes;
-    ok = ok && cJSON_AddStringToObject(flt, "type", "exponential") &&
-         cJSON_AddNumberToObject(flt, "D0", p.d0) && cJSON_AddNumberToObject(flt, "n", p.fn);
-    ok = ok && cJSON_AddStringToObject(cam, "type", cam_names[p.cam]) &&
-         cJSON_AddStringToObject(cam, "axis", axis_names[p.axis]) &&
-         cJSON_AddNumberToObject(cam, "azimuth", p.azimuth) &&
-         cJSON_AddNumberToObject(cam, "elevation", p.elevation) &&
-         cJSON_AddNumberToObject(cam, "distance", p.distance) &&
-         cJSON_AddNumberToObject(cam, "fov", p.fov) &&
-         cJSON_AddNumberToObject(cam, "ortho_width", p.ortho_width);
-    for (int i = 0; ok && i < p.nlights; i++) {
-        cJSON *l = cJSON_CreateObject();
-        ok = l && cJSON_AddItemToArray(lights, l) &&
-             cJSON_AddItemToObject(l, "direction", num_array(p.light_dir[i], 3)) &&
-             cJSON_AddItemToObject(l, "color", num_array(p.light_color[i], 3));
-    }
-    for (int k = 0; ok && k < OUT_COUNT; k++)
-        if (p.out[k]) ok = cJSON_AddItemToArray(outs, cJSON_CreateString(out_names[k]));
-    if (ok) {
-        ok = cJSON_AddNumberToObject(o, "N", (double)p.N) &&
-             cJSON_AddNumberToObject(o, "R", (double)p.R) &&
-             cJSON_AddItemToObject(o, "filter", flt);
-        if (ok) flt = NULL;
-        ok = ok && cJSON_AddNumberToObject(o, "L", (double)p.L) &&
-             cJSON_AddNumberToObject(o, "iso", p.iso) && cJSON_AddItemToObject(o, "meshes", meshes);
-        if (ok) meshes = NULL;
-        ok = ok && cJSON_AddItemToObject(o, "camera", cam);
-        if (ok) cam = NULL;
-        ok = ok && cJSON_AddNumberToObject(o, "width", (double)p.width) &&
-             cJSON_AddNumberToObject(o, "height", (double)p.height) &&
-             cJSON_AddItemToObject(o, "lights", lights);
-        if (ok) lights = NULL;
-        ok = ok && cJSON_AddNumberToObject(o, "ambient", p.ambient) &&
-             cJSON_AddItemToObject(o, "color", num_array(p.color, 3)) &&
-             cJSON_AddItemToObject(o, "background", num_array(p.background, 3)) &&
-             cJSON_AddStringToObject(o, "normals", vx_bl_normals_names[p.normals]) &&
-             cJSON_AddBoolToObject(o, "compare", p.compare) &&
-             cJSON_AddNumberToObject(o, "bits", (double)p.bits) &&
-             cJSON_AddItemToObject(o, "outputs", outs);
-        if (ok) outs = NULL;
-        ok = ok && cJSON_AddNumberToObject(o, "frames", (double)p.frames);
-    }
-    cJSON_Delete(flt);
-    cJSON_Delete(cam);
-    cJSON_Delete(lights);
-    cJSON_Delete(outs);
-    cJSON_Delete(meshes);
-    if (!ok) {
-        cJSON_Delete(o);
-        vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for render params");
-        return NULL;
-    }
-    return o;
 }
 
 static size_t render_mesh_refs(const cJSON *params, const char **ids, size_t max)
@@ -367,15 +293,14 @@ static int voxel_progress(void *ud, double fraction, vx_err *err)
     return vx_run_progress(g->r, 0.3 * (g->i + fraction) / g->n, err);
 }
 
-static int render_run_gl(vx_job_run *r, const vx_mesh *mesh, const cJSON *params, void **state,
+static int render_run_gl(vx_job_run *r, const vx_mesh *mesh, const void *params, void **state,
                          vx_err *err)
 {
-    rparams p;
+    const rparams *pp = params, p = *pp;
     const vx_limits *lim = vx_run_limits(r);
-    if (read_params(params, lim, &p, err)) return -1;
     double t0 = vx_bl_now_ms();
     rstate *s = calloc(1, sizeof *s);
-    int nm = 1 + cJSON_GetArraySize(p.meshes);
+    int nm = 1 + p.nmeshes;
     if (s) s->grids = calloc((size_t)nm, sizeof *s->grids);
     if (!s || !s->grids) {
         free(s);
@@ -385,13 +310,9 @@ static int render_run_gl(vx_job_run *r, const vx_mesh *mesh, const cJSON *params
     /* load the further meshes; the union bbox frames the sampling box */
     vx_mesh **extra = calloc((size_t)nm, sizeof *extra);
     if (!extra) return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for meshes");
-    int rc = -1, i = 0;
-    const cJSON *e;
-    cJSON_ArrayForEach(e, p.meshes)
-    {
-        extra[++i] = vx_run_load_mesh(r, e->valuestring, err);
-        if (!extra[i]) goto out;
-    }
+    int rc = -1;
+    for (int i = 1; i < nm; i++)
+        if (!(extra[i] = vx_run_load_mesh(r, pp->meshes[i - 1], err))) goto out;
     double lo[3], hi[3];
     for (int a = 0; a < 3; a++) {
         lo[a] = mesh->bbox_min[a];
@@ -454,13 +375,12 @@ static int nthreads(void)
     return n < 1 ? 1 : n > 16 ? 16 : (int)n;
 }
 
-static int run_cpu(vx_job_run *r, const cJSON *params, void *state, vx_err *err)
+static int run_cpu(vx_job_run *r, const rparams *pp, void *state, vx_err *err)
 {
-    rparams p;
+    const rparams p = *pp;
     rstate *s = state;
-    if (read_params(params, vx_run_limits(r), &p, err)) return -1;
     const int N = (int)p.N, R = (int)p.R, M = (int)(p.L * p.N), nt = nthreads();
-    vx_bl_filter flt = {p.d0, p.fn};
+    vx_bl_filter flt = {p.filter.D0, p.filter.n};
     vx_bl_bits bits = {s->grids, s->nmeshes, lowpass_progress, r};
     vx_bl_lowpass_stats lst;
     vx_bl_wisdom_dir(vx_run_cache_dir(r)); /* measured plans, kept across restarts */
@@ -489,7 +409,7 @@ static int run_cpu(vx_job_run *r, const cJSON *params, void *state, vx_err *err)
             return -1;
         vbytes += vx_bl_volume_bytes(M, 1) + (uint64_t)M * N * N / 2 * 16;
     }
-    if (p.compare || p.normals != VX_BL_SPECTRAL || p.out[OUT_VOXELS]) {
+    if (p.compare || p.normals != VX_BL_SPECTRAL || p.outputs[OUT_VOXELS]) {
         if (vx_bl_interp(s->spec, N, N, x0, s->P, 0, nt, &s->vn, err) ||
             vx_bl_volume_blocks(&s->vn, err))
             return -1;
@@ -532,9 +452,9 @@ static void make_camera(const rparams *p, const rstate *s, int f, vx_bl_camera *
 {
     memset(c, 0, sizeof *c);
     double dir[3], worldup[3] = {0, 1, 0};
-    if (p->cam == CAM_AXIS) {
-        int ax = p->axis / 2;
-        double sg = p->axis % 2 ? -1 : 1;
+    if (p->camera.type == CAM_AXIS) {
+        int ax = p->camera.axis / 2;
+        double sg = p->camera.axis % 2 ? -1 : 1;
         for (int a = 0; a < 3; a++)
             dir[a] = a == ax ? sg : 0;
         if (ax == 1) {
@@ -542,8 +462,8 @@ static void make_camera(const rparams *p, const rstate *s, int f, vx_bl_camera *
             worldup[2] = -sg; /* from +y: +z down the image */
         }
     } else {
-        double az = (p->azimuth + 360.0 * f / p->frames) * M_PI / 180,
-               el = p->elevation * M_PI / 180;
+        double az = (p->camera.azimuth + 360.0 * f / p->frames) * M_PI / 180,
+               el = p->camera.elevation * M_PI / 180;
         dir[0] = sin(az) * cos(el);
         dir[1] = sin(el);
         dir[2] = cos(az) * cos(el);
@@ -554,15 +474,15 @@ static void make_camera(const rparams *p, const rstate *s, int f, vx_bl_camera *
     normalize3(c->right);
     cross3(c->right, c->fwd, c->up);
     double fit = 2 * s->radius * 1.05;
-    c->ortho = p->fov == 0;
-    c->fov_deg = p->fov;
+    c->ortho = p->camera.fov == 0;
+    c->fov_deg = p->camera.fov;
     double aspect = (double)p->width / p->height;
-    double ow = p->ortho_width > 0 ? p->ortho_width : fit;
+    double ow = p->camera.ortho_width > 0 ? p->camera.ortho_width : fit;
     c->ortho_height = aspect >= 1 ? ow : ow / aspect;
-    double dist = p->distance > 0 ? p->distance
-                  : c->ortho
-                      ? 2 * s->P
-                      : s->radius * 1.05 / sin(p->fov * M_PI / 360 * (aspect >= 1 ? 1 : aspect));
+    double dist = p->camera.distance > 0 ? p->camera.distance
+                  : c->ortho             ? 2 * s->P
+                                         : s->radius * 1.05 /
+                                   sin(p->camera.fov * M_PI / 360 * (aspect >= 1 ? 1 : aspect));
     for (int a = 0; a < 3; a++)
         c->eye[a] = s->centre[a] + dir[a] * dist;
 }
@@ -660,11 +580,12 @@ static int render_frame(vx_job_run *r, const rparams *p, const rstate *s, int f,
         }
     }
     for (int i = 0; i < p->nlights; i++) {
-        double d[3] = {p->light_dir[i][0], p->light_dir[i][1], p->light_dir[i][2]};
+        double d[3] = {p->lights[i].direction[0], p->lights[i].direction[1],
+                       p->lights[i].direction[2]};
         normalize3(d);
         for (int a = 0; a < 3; a++) {
             lights[i].dir[a] = d[a];
-            lights[i].color[a] = p->light_color[i][a];
+            lights[i].color[a] = p->lights[i].color[a];
         }
     }
     vx_bl_shade_desc sd = {.lights = lights, .nlights = nl, .ambient = p->ambient};
@@ -714,14 +635,14 @@ static int render_frame(vx_job_run *r, const rparams *p, const rstate *s, int f,
     const char *path = output(r, p, "image", f, "png", "image/png", err);
     if (!path || write_png(path, img, IW, IH, (int)p->bits, err)) goto out;
     static const char *pfm = "image/x-portable-floatmap";
-    if (p->out[OUT_NORMAL] && (!(path = output(r, p, "normal", f, "pfm", pfm, err)) ||
-                               write_pfm(path, keep.nrm, W, H, 3, err)))
+    if (p->outputs[OUT_NORMAL] && (!(path = output(r, p, "normal", f, "pfm", pfm, err)) ||
+                                   write_pfm(path, keep.nrm, W, H, 3, err)))
         goto out;
-    if (p->out[OUT_POSITION] && (!(path = output(r, p, "position", f, "pfm", pfm, err)) ||
-                                 write_pfm(path, keep.pos, W, H, 3, err)))
+    if (p->outputs[OUT_POSITION] && (!(path = output(r, p, "position", f, "pfm", pfm, err)) ||
+                                     write_pfm(path, keep.pos, W, H, 3, err)))
         goto out;
-    if (p->out[OUT_DEPTH] && (!(path = output(r, p, "depth", f, "pfm", pfm, err)) ||
-                              write_pfm(path, keep.depth, W, H, 1, err)))
+    if (p->outputs[OUT_DEPTH] && (!(path = output(r, p, "depth", f, "pfm", pfm, err)) ||
+                                  write_pfm(path, keep.depth, W, H, 1, err)))
         goto out;
     *encode_ms += vx_bl_now_ms() - t0;
     rc = 0;
@@ -733,18 +654,17 @@ out:
     return rc;
 }
 
-static int encode(vx_job_run *r, const cJSON *params, void *state, vx_err *err)
+static int encode(vx_job_run *r, const rparams *pp, void *state, vx_err *err)
 {
-    rparams p;
+    const rparams p = *pp;
     rstate *s = state;
-    if (read_params(params, vx_run_limits(r), &p, err)) return -1;
     double render_ms = 0, encode_ms = 0;
     uint64_t covered = 0;
     for (int f = 0; f < p.frames; f++) {
         if (render_frame(r, &p, s, f, &render_ms, &encode_ms, &covered, err)) return -1;
         if (vx_run_progress(r, 0.75 + 0.2 * (f + 1) / p.frames, err)) return -1;
     }
-    if (p.out[OUT_VOXELS]) {
+    if (p.outputs[OUT_VOXELS]) {
         double t0 = vx_bl_now_ms();
         const char *path = vx_run_output(r, "voxels", "vdb", "application/x-openvdb", err);
         int dims[3] = {(int)p.N, (int)p.N, (int)p.N};
@@ -758,7 +678,7 @@ static int encode(vx_job_run *r, const cJSON *params, void *state, vx_err *err)
     stat_set(st, "R", (double)p.R);
     stat_set(st, "M", (double)(p.L * p.N));
     stat_set(st, "iso", p.iso);
-    stat_set(st, "meshes", 1 + cJSON_GetArraySize(p.meshes));
+    stat_set(st, "meshes", 1 + p.nmeshes);
     stat_set(st, "box_size", s->P);
     stat_set(st, "mean_density", s->spec[0]);
     stat_set(st, "pixels_covered", (double)covered);
@@ -778,7 +698,7 @@ static int stop_hook(void *ud, vx_err *err)
     return vx_run_progress(ud, 0, err);
 }
 
-static int render_run_cpu(vx_job_run *r, const cJSON *params, void *state, vx_err *err)
+static int render_run_cpu(vx_job_run *r, const void *params, void *state, vx_err *err)
 {
     vx_stop_set(stop_hook, r);
     int rc = run_cpu(r, params, state, err);
@@ -786,7 +706,7 @@ static int render_run_cpu(vx_job_run *r, const cJSON *params, void *state, vx_er
     return rc;
 }
 
-static int render_encode(vx_job_run *r, const cJSON *params, void *state, vx_err *err)
+static int render_encode(vx_job_run *r, const void *params, void *state, vx_err *err)
 {
     vx_stop_set(stop_hook, r);
     int rc = encode(r, params, state, err);
@@ -798,7 +718,9 @@ const vx_kind vx_kind_render = {
     .name = "render",
     .summary = "Band-limited iso-surface render of one or more meshes (seed 002): Algorithm I "
                "low-pass, zero-padded interpolation, spectral normals; PNG, PFM and VDB outputs",
-    .parse = render_parse,
+    .spec = spec,
+    .params_size = sizeof(rparams),
+    .check = render_check,
     .run_gl = render_run_gl,
     .run_cpu = render_run_cpu,
     .encode = render_encode,

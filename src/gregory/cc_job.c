@@ -10,7 +10,6 @@
 
 typedef enum cc_format { CC_OBJ = 0, CC_PLY, CC_DRC } cc_format;
 static const char *const format_names[] = {"obj", "ply", "drc", NULL};
-static const char *const known[] = {"levels", "format", "limit", NULL};
 
 /* Bytes one output quad costs while refining (OpenSubdiv's topology of
  * every level, the double primvars, limit tangents, the output mesh and its
@@ -20,10 +19,24 @@ static const char *const known[] = {"levels", "format", "limit", NULL};
 /* How often run_cpu checks the time limit while the child works. */
 #define CC_POLL_MS 20
 
+static int max_levels(const vx_limits *lim);
+static double levels_hi(const vx_limits *lim)
+{
+    return max_levels(lim);
+}
+
 typedef struct cc_params {
-    int levels, limit;
-    cc_format format;
+    long levels;
+    int format, limit; /* format: cc_format */
 } cc_params;
+
+static const vx_pspec spec[] = {
+    VX_P_INT(cc_params, levels, 1, 1, VX_CC_MAX_LEVELS,
+             "subdivision levels (fewer where max_triangles is lower)", .hi_of = levels_hi),
+    VX_P_ENUM(cc_params, format, format_names, CC_OBJ, "output mesh format"),
+    VX_P_BOOL(cc_params, limit, 0, "push the vertices to the limit surface, with limit normals"),
+    VX_P_END,
+};
 
 typedef struct cc_state {
     vx_mesh *in; /* the faces and positions, copied on the GL thread */
@@ -39,35 +52,6 @@ static int max_levels(const vx_limits *lim)
         while (l > 1 && (UINT64_C(2) << (2 * l)) > lim->max_triangles)
             l--;
     return l;
-}
-
-static int read_params(const cJSON *params, const vx_limits *lim, cc_params *p, vx_err *err)
-{
-    if (vx_param_object(&params, known, err)) return -1;
-    long levels;
-    int fmt;
-    if (vx_param_int(params, "levels", 1, 1, max_levels(lim), &levels, err) ||
-        vx_param_enum(params, "format", format_names, CC_OBJ, &fmt, err) ||
-        vx_param_bool(params, "limit", 0, &p->limit, err))
-        return -1;
-    p->levels = (int)levels;
-    p->format = (cc_format)fmt;
-    return 0;
-}
-
-static cJSON *cc_parse(const cJSON *params, const vx_limits *lim, vx_err *err)
-{
-    cc_params p;
-    if (read_params(params, lim, &p, err)) return NULL;
-    cJSON *o = cJSON_CreateObject();
-    if (!o || !cJSON_AddNumberToObject(o, "levels", p.levels) ||
-        !cJSON_AddStringToObject(o, "format", format_names[p.format]) ||
-        !cJSON_AddBoolToObject(o, "limit", p.limit)) {
-        cJSON_Delete(o);
-        vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for catmull-clark params");
-        return NULL;
-    }
-    return o;
 }
 
 /* A copy of what refinement needs: positions and faces. */
@@ -91,21 +75,20 @@ static vx_mesh *copy_faces(const vx_mesh *m)
     return c;
 }
 
-static int cc_run_gl(vx_job_run *r, const vx_mesh *mesh, const cJSON *params, void **state,
+static int cc_run_gl(vx_job_run *r, const vx_mesh *mesh, const void *params, void **state,
                      vx_err *err)
 {
-    cc_params p;
+    const cc_params p = *(const cc_params *)params;
     const vx_limits *lim = vx_run_limits(r);
-    if (read_params(params, lim, &p, err)) return -1;
     uint64_t quads = vx_cc_quads(mesh, p.levels);
     if (lim && lim->max_triangles && 2 * quads > lim->max_triangles)
         return vx_err_set(err, VX_ETOOBIG, "output_too_big",
-                          "params.levels = %d gives %llu triangles, over max_triangles (%llu)",
+                          "params.levels = %ld gives %llu triangles, over max_triangles (%llu)",
                           p.levels, (unsigned long long)(2 * quads),
                           (unsigned long long)lim->max_triangles);
     if (lim && lim->max_job_memory && quads * CC_BYTES_PER_QUAD > lim->max_job_memory)
         return vx_err_set(err, VX_ETOOBIG, "job_memory_limit",
-                          "params.levels = %d needs about %llu bytes, over the job memory limit",
+                          "params.levels = %ld needs about %llu bytes, over the job memory limit",
                           p.levels, (unsigned long long)(quads * CC_BYTES_PER_QUAD));
     cc_state *s = calloc(1, sizeof *s);
     if (!s) return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for the job state");
@@ -138,7 +121,7 @@ static int cc_child(void *ud, void *out, size_t out_size, vx_err *err)
     vx_mesh *m = NULL;
     float *normals = NULL;
     double t0 = vx_mono();
-    if (vx_cc_refine(w->in, w->p.levels, w->p.limit, &m, &normals, err)) return -1;
+    if (vx_cc_refine(w->in, (int)w->p.levels, w->p.limit, &m, &normals, err)) return -1;
     double t1 = vx_mono();
     vx_mesh_write_opts o = {.normals = normals};
     int rc = w->p.format == CC_OBJ   ? vx_obj_write_path(m, &o, w->path, err)
@@ -160,11 +143,10 @@ static int cc_poll(void *ud, vx_err *err)
     return vx_run_progress(ud, 0.1, err);
 }
 
-static int cc_run_cpu(vx_job_run *r, const cJSON *params, void *state, vx_err *err)
+static int cc_run_cpu(vx_job_run *r, const void *params, void *state, vx_err *err)
 {
     cc_state *s = state;
-    cc_params p;
-    if (read_params(params, NULL, &p, err)) return -1;
+    const cc_params p = *(const cc_params *)params;
     static const char *const ctype[] = {"model/obj", "model/x-ply", "model/x-draco"};
     const char *path = vx_run_output(r, "mesh", format_names[p.format], ctype[p.format], err);
     if (!path) return -1;
@@ -175,7 +157,7 @@ static int cc_run_cpu(vx_job_run *r, const cJSON *params, void *state, vx_err *e
     vx_mesh_free(s->in);
     s->in = NULL;
     cJSON *st = vx_run_stats(r);
-    cJSON_AddNumberToObject(st, "levels", p.levels);
+    cJSON_AddNumberToObject(st, "levels", (double)p.levels);
     cJSON_AddNumberToObject(st, "vertices", (double)res.vertices);
     cJSON_AddNumberToObject(st, "faces", (double)res.faces);
     cJSON_AddNumberToObject(st, "triangles", (double)res.triangles);
@@ -197,7 +179,8 @@ const vx_kind vx_kind_catmull_clark = {
     .name = "catmull-clark",
     .summary =
         "Uniform Catmull-Clark subdivision (OpenSubdiv) to OBJ, PLY or Draco, with limit normals",
-    .parse = cc_parse,
+    .spec = spec,
+    .params_size = sizeof(cc_params),
     .run_gl = cc_run_gl,
     .run_cpu = cc_run_cpu,
     .encode = NULL,

@@ -15,6 +15,7 @@
 #include "gregory/job.h"
 #include "gregory/osd.h"
 #include "gregory/tess.h"
+#include "store/store.h"
 #include "util/fsutil.h"
 #include "util/child.h"
 #include "util/stop.h"
@@ -24,8 +25,6 @@ enum { FMT_OBJ = 0, FMT_PLY, FMT_DRC };
 static const char *const cons_names[] = {"interpolate", "approximate-cc", NULL};
 static const char *const fmt_names[] = {"obj", "ply", "drc", NULL};
 static const char *const fmt_types[] = {"model/obj", "model/x-ply", "model/x-draco"};
-static const char *const known[] = {"divisions", "max_edge", "construction", "weld", "frames",
-                                    "format",    NULL};
 
 #define DEFAULT_DIVISIONS 8
 /* approximate-cc's distance to the limit surface: samples per patch side,
@@ -37,19 +36,23 @@ static const char *const known[] = {"divisions", "max_edge", "construction", "we
  * child process works. */
 #define ENCODE_POLL_MS 20
 
-typedef struct gparams {
-    long divisions;  /* 0 when max_edge is used */
-    double max_edge; /* 0 when divisions is used */
-    int construction, weld, format;
-    const cJSON *frames; /* NULL or the array */
-    int frames_are_ids;
-} gparams;
+/* params.frames: further frames as mesh ids or as positions. */
+typedef struct gframes {
+    int n;   /* frames after frame 0 */
+    int ids; /* id[] holds them, else pos[] */
+    long nv; /* vertices per frame (positions) */
+    char (*id)[VX_MESH_ID_SIZE];
+    double *pos;                                 /* n * nv * 3 */
+    unsigned char nested[VX_GREGORY_MAX_FRAMES]; /* given as [[x, y, z], ...] */
+} gframes;
 
-static const cJSON *field(const cJSON *params, const char *name)
-{
-    const cJSON *it = params ? cJSON_GetObjectItemCaseSensitive(params, name) : NULL;
-    return it && !cJSON_IsNull(it) ? it : NULL;
-}
+typedef struct gparams {
+    long divisions;  /* used when max_edge is not */
+    double max_edge; /* used when set */
+    int divisions_set, max_edge_set, frames_set;
+    int construction, weld, format;
+    gframes frames;
+} gparams;
 
 /* One frame given as positions: [x0, y0, z0, x1, ...] or [[x, y, z], ...].
  * Returns the number of vertices it holds, or -1 with err. */
@@ -82,97 +85,164 @@ static long frame_count(const cJSON *f, size_t index, vx_err *err)
     return n / 3;
 }
 
-/* Reads and validates params; the one place that knows the fields. */
-static int read_params(const cJSON *params, const vx_limits *lim, gparams *p, vx_err *err)
+static void frames_free(void *field)
 {
-    memset(p, 0, sizeof *p);
-    if (vx_param_object(&params, known, err)) return -1;
-    const cJSON *div = field(params, "divisions"), *me = field(params, "max_edge");
-    if (div && me)
-        return vx_err_set(err, VX_EUNPROC, "invalid_params",
-                          "params.divisions and params.max_edge exclude each other");
-    if (me) {
-        if (vx_param_number(params, "max_edge", 0, 0, 1e300, &p->max_edge, err)) return -1;
-        if (!(p->max_edge > 0))
-            return vx_err_set(err, VX_EUNPROC, "invalid_params", "params.max_edge must be > 0");
-    } else if (vx_param_int(params, "divisions", DEFAULT_DIVISIONS, 1, VX_GREGORY_MAX_DIVISIONS,
-                            &p->divisions, err))
-        return -1;
-    if (vx_param_enum(params, "construction", cons_names, CONS_INTERPOLATE, &p->construction,
-                      err) ||
-        vx_param_bool(params, "weld", 1, &p->weld, err) ||
-        vx_param_enum(params, "format", fmt_names, FMT_OBJ, &p->format, err))
-        return -1;
+    gframes *g = field;
+    free(g->id);
+    free(g->pos);
+    g->id = NULL;
+    g->pos = NULL;
+}
+
+/* The positions of frame f (its JSON array) into out (3 * nv). */
+static void frame_read(const cJSON *f, double *out)
+{
+    size_t i = 0;
+    const cJSON *e;
+    cJSON_ArrayForEach(e, f)
+    {
+        if (cJSON_IsArray(e))
+            for (int c = 0; c < 3; c++)
+                out[i++] = cJSON_GetArrayItem(e, c)->valuedouble;
+        else
+            out[i++] = e->valuedouble;
+    }
+}
+
+static int frames_read(const cJSON *fr, void *field, const char *path, vx_err *err)
+{
+    gframes *g = field;
+    if (!cJSON_IsArray(fr) || cJSON_GetArraySize(fr) > VX_GREGORY_MAX_FRAMES)
+        return vx_err_set(
+            err, VX_EUNPROC, "invalid_params",
+            "params.frames must be an array of at most %d position arrays or mesh ids",
+            VX_GREGORY_MAX_FRAMES);
+    int n = cJSON_GetArraySize(fr);
+    const cJSON *first = cJSON_GetArrayItem(fr, 0), *f;
+    g->ids = first && cJSON_IsString(first);
+    size_t i = 0;
+    if (g->ids) {
+        if (!(g->id = calloc((size_t)n, sizeof *g->id)))
+            return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for the frames");
+        cJSON_ArrayForEach(f, fr)
+        {
+            if (!cJSON_IsString(f) || !vx_store_valid_mesh_id(f->valuestring))
+                return vx_err_set(err, VX_EUNPROC, "invalid_params",
+                                  "params.frames[%zu] is not a mesh id (64 lowercase hex digits)",
+                                  i);
+            snprintf(g->id[i++], VX_MESH_ID_SIZE, "%s", f->valuestring);
+        }
+        g->n = n;
+        return 0;
+    }
+    long n0 = -1;
+    cJSON_ArrayForEach(f, fr)
+    {
+        if (!cJSON_IsArray(f))
+            return vx_err_set(err, VX_EUNPROC, "invalid_params",
+                              "params.frames[%zu] must be an array of positions (or every "
+                              "entry a mesh id)",
+                              i);
+        long nv = frame_count(f, i, err);
+        if (nv < 0) return -1;
+        if (n0 >= 0 && nv != n0)
+            return vx_err_set(err, VX_EUNPROC, "invalid_params",
+                              "params.frames[%zu] has %ld vertices, frames[0] %ld", i, nv, n0);
+        n0 = nv;
+        const cJSON *e0 = cJSON_GetArrayItem(f, 0);
+        g->nested[i] = e0 && cJSON_IsArray(e0);
+        i++;
+    }
+    g->nv = n0 < 0 ? 0 : n0;
+    if (!(g->pos = malloc((size_t)n * (size_t)g->nv * 3 * sizeof *g->pos + 1)))
+        return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for the frames");
+    i = 0;
+    cJSON_ArrayForEach(f, fr)
+    {
+        frame_read(f, g->pos + i * (size_t)g->nv * 3);
+        i++;
+    }
+    g->n = n;
+    return 0;
+}
+
+/* Frame f as it was given: flat or as [x, y, z] triples. */
+static cJSON *frame_json(const gframes *g, int f)
+{
+    const double *v = g->pos + (size_t)f * (size_t)g->nv * 3;
+    if (!g->nested[f]) return cJSON_CreateDoubleArray(v, (int)(3 * g->nv));
+    cJSON *a = cJSON_CreateArray();
+    for (long k = 0; a && k < g->nv; k++) {
+        cJSON *t = cJSON_CreateDoubleArray(v + 3 * k, 3);
+        if (!t || !cJSON_AddItemToArray(a, t)) {
+            cJSON_Delete(t);
+            cJSON_Delete(a);
+            return NULL;
+        }
+    }
+    return a;
+}
+
+static cJSON *frames_write(const void *field)
+{
+    const gframes *g = field;
+    cJSON *a = cJSON_CreateArray();
+    for (int f = 0; a && f < g->n; f++) {
+        cJSON *e = g->ids ? cJSON_CreateString(g->id[f]) : frame_json(g, f);
+        if (!e || !cJSON_AddItemToArray(a, e)) {
+            cJSON_Delete(e);
+            cJSON_Delete(a);
+            return NULL;
+        }
+    }
+    return a;
+}
+
+static const vx_pcustom frames_type = {
+    frames_read, frames_write, frames_free,
+    "{\"type\": \"array\", \"maxItems\": 256, \"nullable\": true}"};
+
+#define SET(f) .set_off = offsetof(gparams, f##_set)
+static const char *const not_max_edge[] = {"max_edge", NULL};
+static const vx_pspec spec[] = {
+    VX_P_INT(gparams, divisions, DEFAULT_DIVISIONS, 1, VX_GREGORY_MAX_DIVISIONS,
+             "uniform divisions per patch side", .flags = VX_PF_NULLABLE, SET(divisions),
+             .excludes = not_max_edge),
+    VX_P_NUM(gparams, max_edge, 0, 0, 1e300, "adaptive: the longest tessellated edge",
+             .flags = VX_PF_NULLABLE | VX_PF_GT_LO, SET(max_edge)),
+    VX_P_ENUM(gparams, construction, cons_names, CONS_INTERPOLATE, "how patches are made"),
+    VX_P_BOOL(gparams, weld, 1, "weld the patches' shared edges"),
+    VX_P_ENUM(gparams, format, fmt_names, FMT_OBJ, "output mesh format"),
+    {.name = "frames",
+     .type = VX_PT_CUSTOM,
+     .off = offsetof(gparams, frames),
+     .custom = &frames_type,
+     .flags = VX_PF_NULLABLE,
+     SET(frames),
+     .doc = "deformation frames: mesh ids, or position arrays"},
+    VX_P_END,
+};
+#undef SET
+
+static int greg_check(void *params, const vx_limits *lim, vx_err *err)
+{
+    gparams *p = params;
+    if (p->max_edge_set) return 0;
+    p->divisions_set = 1; /* given or the default */
     /* Known at submission: the smallest mesh has one patch. */
-    if (lim && lim->max_triangles && p->divisions &&
+    if (lim && lim->max_triangles &&
         2 * (uint64_t)p->divisions * (uint64_t)p->divisions > lim->max_triangles)
         return vx_err_set(err, VX_EUNPROC, "invalid_params",
                           "params.divisions = %ld makes %llu triangles per patch, over the limit "
                           "of %llu",
                           p->divisions, 2ull * p->divisions * p->divisions,
                           (unsigned long long)lim->max_triangles);
-    const cJSON *fr = field(params, "frames");
-    if (!fr) return 0;
-    if (!cJSON_IsArray(fr) || cJSON_GetArraySize(fr) > VX_GREGORY_MAX_FRAMES)
-        return vx_err_set(
-            err, VX_EUNPROC, "invalid_params",
-            "params.frames must be an array of at most %d position arrays or mesh ids",
-            VX_GREGORY_MAX_FRAMES);
-    const cJSON *first = cJSON_GetArrayItem(fr, 0);
-    if (first && cJSON_IsString(first)) {
-        const cJSON *ids;
-        if (vx_param_mesh_ids(params, "frames", VX_GREGORY_MAX_FRAMES, &ids, err)) return -1;
-        p->frames_are_ids = 1;
-    } else {
-        const cJSON *f;
-        size_t i = 0;
-        long n0 = -1;
-        cJSON_ArrayForEach(f, fr)
-        {
-            if (!cJSON_IsArray(f))
-                return vx_err_set(err, VX_EUNPROC, "invalid_params",
-                                  "params.frames[%zu] must be an array of positions (or every "
-                                  "entry a mesh id)",
-                                  i);
-            long n = frame_count(f, i, err);
-            if (n < 0) return -1;
-            if (n0 >= 0 && n != n0)
-                return vx_err_set(err, VX_EUNPROC, "invalid_params",
-                                  "params.frames[%zu] has %ld vertices, frames[0] %ld", i, n, n0);
-            n0 = n;
-            i++;
-        }
-    }
-    p->frames = fr;
     return 0;
-}
-
-static cJSON *greg_parse(const cJSON *params, const vx_limits *lim, vx_err *err)
-{
-    gparams p;
-    if (read_params(params, lim, &p, err)) return NULL;
-    cJSON *o = cJSON_CreateObject();
-    cJSON *fr = p.frames ? cJSON_Duplicate(p.frames, 1) : cJSON_CreateNull();
-    if (!o || !fr ||
-        !(p.max_edge > 0 ? cJSON_AddNullToObject(o, "divisions")
-                         : cJSON_AddNumberToObject(o, "divisions", (double)p.divisions)) ||
-        !(p.max_edge > 0 ? cJSON_AddNumberToObject(o, "max_edge", p.max_edge)
-                         : cJSON_AddNullToObject(o, "max_edge")) ||
-        !cJSON_AddStringToObject(o, "construction", cons_names[p.construction]) ||
-        !cJSON_AddBoolToObject(o, "weld", p.weld) ||
-        !cJSON_AddStringToObject(o, "format", fmt_names[p.format]) ||
-        !cJSON_AddItemToObject(o, "frames", fr)) {
-        cJSON_Delete(o);
-        cJSON_Delete(fr);
-        vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for gregory params");
-        return NULL;
-    }
-    return o;
 }
 
 static size_t greg_mesh_refs(const cJSON *params, const char **ids, size_t max)
 {
-    const cJSON *fr = field(params, "frames");
+    const cJSON *fr = cJSON_GetObjectItemCaseSensitive(params, "frames");
     const cJSON *first = cJSON_IsArray(fr) ? cJSON_GetArrayItem(fr, 0) : NULL;
     if (!first || !cJSON_IsString(first)) return 0; /* positions, or their blob */
     size_t n = 0;
@@ -333,13 +403,14 @@ static int construct_once(vx_job_run *r, builder *b, vx_err *err)
     return rc;
 }
 
-/* Positions of frame k >= 1 into buf (3 * nverts), or a loaded mesh. */
+/* Positions of frame k >= 1: from the params, or a loaded mesh. */
 static const double *frame_positions(vx_job_run *r, const vx_mesh *mesh, const gparams *p, size_t k,
-                                     double *buf, vx_mesh **loaded, vx_err *err)
+                                     vx_mesh **loaded, vx_err *err)
 {
-    const cJSON *f = cJSON_GetArrayItem(p->frames, (int)(k - 1));
-    if (p->frames_are_ids) {
-        vx_mesh *m = vx_run_load_mesh(r, f->valuestring, err);
+    const gframes *g = &p->frames;
+    if (g->ids) {
+        const char *id = g->id[k - 1];
+        vx_mesh *m = vx_run_load_mesh(r, id, err);
         if (!m) return NULL;
         int same = m->nverts == mesh->nverts && m->nfaces == mesh->nfaces &&
                    (m->face_start == NULL) == (mesh->face_start == NULL) &&
@@ -357,32 +428,19 @@ static const double *frame_positions(vx_job_run *r, const vx_mesh *mesh, const g
         if (!same) {
             vx_mesh_free(m);
             vx_err_set(err, VX_EUNPROC, "frame_topology",
-                       "frame %zu (mesh %s) does not have the topology of the job's mesh", k,
-                       f->valuestring);
+                       "frame %zu (mesh %s) does not have the topology of the job's mesh", k, id);
             return NULL;
         }
         *loaded = m;
         return m->pos;
     }
-    size_t n = (size_t)cJSON_GetArraySize(f);
-    const cJSON *first = cJSON_GetArrayItem(f, 0);
-    size_t nv = first && cJSON_IsArray(first) ? n : n / 3;
+    size_t nv = (size_t)g->nv;
     if (nv != mesh->nverts) {
         vx_err_set(err, VX_EUNPROC, "frame_topology",
                    "params.frames[%zu] has %zu vertices, the mesh %zu", k - 1, nv, mesh->nverts);
         return NULL;
     }
-    size_t i = 0;
-    const cJSON *e;
-    cJSON_ArrayForEach(e, f)
-    {
-        if (cJSON_IsArray(e))
-            for (int c = 0; c < 3; c++)
-                buf[i++] = cJSON_GetArrayItem(e, c)->valuedouble;
-        else
-            buf[i++] = e->valuedouble;
-    }
-    return buf;
+    return g->pos + (k - 1) * nv * 3;
 }
 
 typedef struct distance_work {
@@ -406,18 +464,15 @@ static int stop_hook(void *ud, vx_err *err)
     return vx_run_progress(ud, 0, err);
 }
 
-static int run_gl(vx_job_run *r, const vx_mesh *mesh, const cJSON *params, void **state,
-                  vx_err *err)
+static int run_gl(vx_job_run *r, const vx_mesh *mesh, const gparams *pp, void **state, vx_err *err)
 {
-    gparams p;
+    const gparams p = *pp;
     const vx_limits *lim = vx_run_limits(r);
-    if (read_params(params, lim, &p, err)) return -1;
-    size_t nframes = 1 + (p.frames ? (size_t)cJSON_GetArraySize(p.frames) : 0);
+    size_t nframes = 1 + (size_t)p.frames.n;
     builder b = {.mesh = mesh, .construction = p.construction};
     vx_gtess *tess = NULL;
     uint32_t *ndiv = NULL;
     float *grid = NULL;
-    double *fbuf = NULL;
     int rc = -1;
     cJSON *frame_ms = cJSON_CreateArray();
     double t0 = now_ms();
@@ -434,7 +489,8 @@ static int run_gl(vx_job_run *r, const vx_mesh *mesh, const cJSON *params, void 
                           ENCODE_POLL_MS, err))
             goto done;
     }
-    ndiv = vx_gregory_divisions(b.set, (int)p.divisions, p.max_edge, err);
+    ndiv = vx_gregory_divisions(b.set, p.max_edge_set ? 0 : (int)p.divisions,
+                                p.max_edge_set ? p.max_edge : 0, err);
     if (!ndiv) goto done;
     uint64_t gv, nv, nt;
     if (vx_gregory_count(b.set, ndiv, &gv, &nv, &nt, err)) goto done;
@@ -465,8 +521,7 @@ static int run_gl(vx_job_run *r, const vx_mesh *mesh, const cJSON *params, void 
     s->pos = calloc(nframes, sizeof *s->pos);
     s->nrm = calloc(nframes, sizeof *s->nrm);
     grid = malloc((gv + 1) * 6 * sizeof *grid);
-    fbuf = p.frames && !p.frames_are_ids ? malloc((3 * mesh->nverts + 1) * sizeof *fbuf) : NULL;
-    if (!s->pos || !s->nrm || !grid || (p.frames && !p.frames_are_ids && !fbuf)) {
+    if (!s->pos || !s->nrm || !grid) {
         vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for the tessellation");
         goto done;
     }
@@ -483,7 +538,7 @@ static int run_gl(vx_job_run *r, const vx_mesh *mesh, const cJSON *params, void 
         double f0 = now_ms();
         if (k > 0) {
             vx_mesh *loaded = NULL;
-            const double *pos = frame_positions(r, mesh, &p, k, fbuf, &loaded, err);
+            const double *pos = frame_positions(r, mesh, &p, k, &loaded, err);
             if (!pos) goto done;
             int bad = construct(&b, pos, err);
             vx_mesh_free(loaded);
@@ -535,14 +590,13 @@ done:
     cJSON_Delete(frame_ms);
     free(ndiv);
     free(grid);
-    free(fbuf);
     vx_gpatch_set_free(b.set);
     vx_gregory_topo_free(b.topo);
     vx_gregory_cc_plan_free(b.cc);
     return rc;
 }
 
-static int greg_run_gl(vx_job_run *r, const vx_mesh *mesh, const cJSON *params, void **state,
+static int greg_run_gl(vx_job_run *r, const vx_mesh *mesh, const void *params, void **state,
                        vx_err *err)
 {
     vx_stop_set(stop_hook, r);
@@ -582,11 +636,10 @@ static int poll_encode(void *ud, vx_err *err)
     return vx_run_progress(e->r, e->fraction, err);
 }
 
-static int greg_encode(vx_job_run *r, const cJSON *params, void *state, vx_err *err)
+static int greg_encode(vx_job_run *r, const void *params, void *state, vx_err *err)
 {
     greg_state *s = state;
-    gparams p;
-    if (read_params(params, NULL, &p, err)) return -1;
+    const gparams p = *(const gparams *)params;
     const vx_gtess_layout *l = s->layout;
     for (size_t k = 0; k < s->nframes; k++) {
         char name[32];
@@ -621,7 +674,9 @@ static const char *const blob_fields[] = {"frames", NULL};
 const vx_kind vx_kind_gregory = {
     .name = "gregory",
     .summary = "Smooth surface of bicubic Gregory patches (seed 001), tessellated on the GPU",
-    .parse = greg_parse,
+    .spec = spec,
+    .params_size = sizeof(gparams),
+    .check = greg_check,
     .run_gl = greg_run_gl,
     .run_cpu = NULL,
     .encode = greg_encode,

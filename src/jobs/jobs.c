@@ -63,6 +63,7 @@ struct vx_job_run {
     char path[2400]; /* last path handed out */
     cJSON *params;   /* the job's params with its blobs back in place */
     int big_params;  /* some came from blobs */
+    void *typed;     /* the params as the kind's struct, read once per run */
     void *state;
     int on_gl_thread;
 };
@@ -754,6 +755,7 @@ static void run_free(vx_job_run *r)
     cJSON_Delete(r->stats);
     cJSON_Delete(r->outputs);
     cJSON_Delete(r->params);
+    vx_kind_params_free(r->kind, r->typed);
     int big = r->big_params;
     free(r);
     if (big) malloc_trim(0); /* as at submission */
@@ -903,11 +905,12 @@ static void run_job_gl(vx_jobs *j, vx_gl *gl, mesh_cache *mc, job *jb)
     r->gl = gl;
     r->on_gl_thread = 1;
     r->params = inline_params(j, jb->kind, jb->params, &r->big_params, &err);
-    const vx_mesh *m = r->params ? load_mesh(j, mc, jb->mesh, &err) : NULL;
+    if (r->params) r->typed = vx_kind_read(jb->kind, r->params, &j->desc.limits, &err);
+    const vx_mesh *m = r->typed ? load_mesh(j, mc, jb->mesh, &err) : NULL;
     int ok = m != NULL;
     for (int attempt = 0; ok; attempt++) {
         double t = vx_mono();
-        ok = jb->kind->run_gl(r, m, r->params, &r->state, &err) == 0;
+        ok = jb->kind->run_gl(r, m, r->typed, &r->state, &err) == 0;
         int lost = vx_gl_lost(gl);
         if (j->fake_context_loss > 0) {
             j->fake_context_loss--;
@@ -990,8 +993,8 @@ static void *worker_main(void *arg)
         vx_err_clear(&err);
         const vx_kind *k = r->job->kind;
         int ok = 1;
-        if (k->run_cpu) ok = k->run_cpu(r, r->params, r->state, &err) == 0;
-        if (ok && k->encode) ok = k->encode(r, r->params, r->state, &err) == 0;
+        if (k->run_cpu) ok = k->run_cpu(r, r->typed, r->state, &err) == 0;
+        if (ok && k->encode) ok = k->encode(r, r->typed, r->state, &err) == 0;
         run_finish(j, r, ok, &err);
     }
     return NULL;

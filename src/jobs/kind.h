@@ -1,7 +1,8 @@
 /* The job table: one row per job kind (libvips operations, Redis commands).
  *
  * A job runs in stages on fixed threads:
- *   parse   HTTP thread   validate + normalise params (defaults filled in)
+ *   parse   HTTP thread   params JSON -> the typed struct (spec, check) ->
+ *                         normalised JSON (vx_kind_parse)
  *   run_gl  GL thread     the GL part; the only stage that may call GL
  *   run_cpu CPU worker    heavy CPU work (FFT, meshing), may be NULL
  *   encode  CPU worker    write the outputs, may be NULL
@@ -16,6 +17,7 @@
 
 #include <cjson/cJSON.h>
 
+#include "jobs/spec.h"
 #include "mesh/mesh.h"
 #include "util/err.h"
 
@@ -63,13 +65,20 @@ const char *vx_run_output(vx_job_run *r, const char *name, const char *file_ext,
 typedef struct vx_kind {
     const char *name;
     const char *summary;
-    /* Returns an owned normalised copy of params (NULL input = {}), or NULL
-     * with err (VX_EUNPROC, code "invalid_params", message naming the field). */
-    cJSON *(*parse)(const cJSON *params, const vx_limits *lim, vx_err *err);
-    int (*run_gl)(vx_job_run *r, const vx_mesh *mesh, const cJSON *params, void **state,
+    /* The params, declared once (spec.h): the fields of a params_size
+     * struct, in the order the normalised JSON lists them. */
+    const vx_pspec *spec;
+    size_t params_size;
+    /* Optional: the rules that span fields (exclusions, defaults derived
+     * from other fields, limits). Runs after the spec's reader on its
+     * struct; may fill in VX_PF_DERIVED fields and set flags. Returns 0, or
+     * -1 with err (VX_EUNPROC invalid_params naming the field). */
+    int (*check)(void *params, const vx_limits *lim, vx_err *err);
+    /* The stages get the typed struct, read once when the run starts. */
+    int (*run_gl)(vx_job_run *r, const vx_mesh *mesh, const void *params, void **state,
                   vx_err *err);
-    int (*run_cpu)(vx_job_run *r, const cJSON *params, void *state, vx_err *err);
-    int (*encode)(vx_job_run *r, const cJSON *params, void *state, vx_err *err);
+    int (*run_cpu)(vx_job_run *r, const void *params, void *state, vx_err *err);
+    int (*encode)(vx_job_run *r, const void *params, void *state, vx_err *err);
     void (*free_state)(void *state);
     /* Optional: the further mesh ids the normalised params name. Writes at
      * most max of them (pointers into params) and returns how many there
@@ -92,43 +101,24 @@ const vx_kind *vx_kind_find(const char *name);
 size_t vx_kind_count(void);
 const vx_kind *vx_kind_at(size_t i);
 
-/* Validates and normalises params for kind k, as submission does: k->parse,
- * then the check the runner and the journal replay rely on: the normalised
- * params, printed and read back, are accepted again by k->parse with the
+/* Reads params (NULL or null = {}) into an owned struct of k->params_size:
+ * k->spec's reader, then k->check. Returns it (free it with
+ * vx_kind_params_free), or NULL with err (VX_EUNPROC invalid_params naming
+ * the field, VX_EINTERNAL out_of_memory). */
+void *vx_kind_read(const vx_kind *k, const cJSON *params, const vx_limits *lim, vx_err *err);
+/* Frees what vx_kind_read returned (NULL is fine). */
+void vx_kind_params_free(const vx_kind *k, void *params);
+/* Returns an owned normalised copy of params (vx_kind_read, then the spec's
+ * writer), or NULL with err as vx_kind_read. */
+cJSON *vx_kind_parse(const vx_kind *k, const cJSON *params, const vx_limits *lim, vx_err *err);
+
+/* Validates and normalises params for kind k, as submission does:
+ * vx_kind_parse, then the check the runner and the journal replay rely on:
+ * the normalised params, printed and read back, are accepted again with the
  * same result (so a default or derived value out of range is refused now,
  * not at run time). Returns owned normalised params, or NULL with err
  * (VX_EUNPROC invalid_params naming the field). */
 cJSON *vx_params_normalize(const vx_kind *k, const cJSON *params, const vx_limits *lim,
                            vx_err *err);
-
-/* Helpers for parse functions: read an optional number/int/bool field,
- * checking type and range; the default is used when absent. Return 0 or -1
- * with err naming the field. */
-int vx_param_number(const cJSON *params, const char *field, double def, double lo, double hi,
-                    double *out, vx_err *err);
-int vx_param_int(const cJSON *params, const char *field, long def, long lo, long hi, long *out,
-                 vx_err *err);
-int vx_param_bool(const cJSON *params, const char *field, int def, int *out, vx_err *err);
-/* Reads an optional array of mesh ids (64 lowercase hex digits each) of at
- * most max entries; *out is the array (owned by params) or NULL when
- * absent. */
-int vx_param_mesh_ids(const cJSON *params, const char *field, size_t max, const cJSON **out,
-                      vx_err *err);
-/* Reads an optional string that must be one of the NULL-terminated names;
- * *out = its index (def when absent). */
-int vx_param_enum(const cJSON *params, const char *field, const char *const *names, int def,
-                  int *out, vx_err *err);
-/* The start of every kind's params reader: NULL or JSON null means no
- * params (*params becomes NULL); anything else must be an object whose
- * fields are all in the NULL-terminated known list (else VX_EUNPROC
- * invalid_params). */
-int vx_param_object(const cJSON **params, const char *const *known, vx_err *err);
-/* Fails (VX_EUNPROC) if params has a field not in the NULL-terminated list. */
-int vx_param_only(const cJSON *params, const char *const *known, vx_err *err);
-/* The same two for a nested object of params: prefix is its path with a
- * trailing dot ("camera.", "lights[1].") for the messages. */
-int vx_param_enum_in(const cJSON *obj, const char *prefix, const char *field,
-                     const char *const *names, int def, int *out, vx_err *err);
-int vx_param_only_in(const cJSON *obj, const char *prefix, const char *const *known, vx_err *err);
 
 #endif

@@ -12,116 +12,60 @@ typedef struct preview_state {
     uint8_t *rgba;
 } preview_state;
 
-static const char *const known[] = {"azimuth", "elevation",  "width",   "height",  "fov",
-                                    "color",   "background", "ambient", "samples", NULL};
+/* The params as given, in double: the normalised JSON echoes these rather
+ * than their float conversions (0.85, not 0.85000002384185791). */
+typedef struct pv_params {
+    double azimuth, elevation;
+    long width, height;
+    double fov, color[3], background[4], ambient;
+    long samples;
+} pv_params;
 
-/* Optional [r,g,b] / [r,g,b,a] array of numbers in 0..1. */
-static int param_rgba(const cJSON *params, const char *field, int n, const double *def, double *out,
-                      vx_err *err)
+static const double def_color[3] = {0.8, 0.8, 0.85}, def_bg[4] = {1, 1, 1, 1};
+static const vx_pspec unit_item = VX_P_ITEM_NUM(0, 1);
+
+static const vx_pspec spec[] = {
+    VX_P_NUM(pv_params, azimuth, 30, -360, 360, "orbit camera azimuth in degrees"),
+    VX_P_NUM(pv_params, elevation, 20, -89, 89, "orbit camera elevation in degrees"),
+    VX_P_INT(pv_params, width, 512, 16, 8192, "image width in pixels"),
+    VX_P_INT(pv_params, height, 512, 16, 8192, "image height in pixels"),
+    VX_P_NUM(pv_params, fov, 30, 0, 120, "vertical field of view in degrees, 0 = orthographic"),
+    VX_P_VEC(pv_params, color, 3, def_color, &unit_item, "surface colour, linear RGB"),
+    VX_P_VEC(pv_params, background, 4, def_bg, &unit_item, "background RGBA"),
+    VX_P_NUM(pv_params, ambient, 0.2, 0, 1, "ambient light share"),
+    VX_P_INT(pv_params, samples, 4, 1, 8, "MSAA samples: 1, 2, 4 or 8"),
+    VX_P_END,
+};
+
+static int preview_check(void *params, const vx_limits *lim, vx_err *err)
 {
-    const cJSON *it = params ? cJSON_GetObjectItemCaseSensitive(params, field) : NULL;
-    if (!it || cJSON_IsNull(it)) {
-        for (int i = 0; i < n; i++)
-            out[i] = def[i];
-        return 0;
-    }
-    if (!cJSON_IsArray(it) || cJSON_GetArraySize(it) != n)
+    const pv_params *x = params;
+    if (x->samples != 1 && x->samples != 2 && x->samples != 4 && x->samples != 8)
         return vx_err_set(err, VX_EUNPROC, "invalid_params",
-                          "params.%s must be an array of %d numbers in [0, 1]", field, n);
-    for (int i = 0; i < n; i++) {
-        const cJSON *v = cJSON_GetArrayItem(it, i);
-        if (!cJSON_IsNumber(v) || !(v->valuedouble >= 0 && v->valuedouble <= 1))
-            return vx_err_set(err, VX_EUNPROC, "invalid_params",
-                              "params.%s[%d] must be a number in [0, 1]", field, i);
-        out[i] = v->valuedouble;
-    }
+                          "params.samples must be 1, 2, 4 or 8, got %ld", x->samples);
+    if (lim && lim->max_image_pixels &&
+        (uint64_t)x->width * (uint64_t)x->height > lim->max_image_pixels)
+        return vx_err_set(err, VX_EUNPROC, "invalid_params",
+                          "params.width * params.height = %ld exceeds the limit of %llu pixels",
+                          x->width * x->height, (unsigned long long)lim->max_image_pixels);
     return 0;
 }
 
-/* The params as given, in double: the normalised JSON echoes these rather
- * than their float conversions (0.85, not 0.85000002384185791). */
-typedef struct exact {
-    double color[3], background[4], ambient;
-} exact;
-
-/* Reads and validates params into p (and x); the one place that knows the
- * fields, their ranges and defaults (parse and run_gl both use it). */
-static int read_params(const cJSON *params, const vx_limits *lim, vx_preview_params *p, exact *x,
-                       vx_err *err)
+/* The renderer's params (float) from the job's. */
+static void to_render(const pv_params *x, vx_preview_params *p)
 {
     memset(p, 0, sizeof *p); /* the fields params do not set: no poll, automatic bands */
-    if (vx_param_object(&params, known, err)) return -1;
-    static const double def_color[3] = {0.8, 0.8, 0.85}, def_bg[4] = {1, 1, 1, 1};
-    long w, h, samples;
-    if (vx_param_number(params, "azimuth", 30, -360, 360, &p->azimuth_deg, err) ||
-        vx_param_number(params, "elevation", 20, -89, 89, &p->elevation_deg, err) ||
-        vx_param_int(params, "width", 512, 16, 8192, &w, err) ||
-        vx_param_int(params, "height", 512, 16, 8192, &h, err) ||
-        vx_param_number(params, "fov", 30, 0, 120, &p->fov_deg, err) ||
-        param_rgba(params, "color", 3, def_color, x->color, err) ||
-        param_rgba(params, "background", 4, def_bg, x->background, err) ||
-        vx_param_number(params, "ambient", 0.2, 0, 1, &x->ambient, err) ||
-        vx_param_int(params, "samples", 4, 1, 8, &samples, err))
-        return -1;
-    if (samples != 1 && samples != 2 && samples != 4 && samples != 8)
-        return vx_err_set(err, VX_EUNPROC, "invalid_params",
-                          "params.samples must be 1, 2, 4 or 8, got %ld", samples);
-    if (lim && lim->max_image_pixels && (uint64_t)w * (uint64_t)h > lim->max_image_pixels)
-        return vx_err_set(err, VX_EUNPROC, "invalid_params",
-                          "params.width * params.height = %ld exceeds the limit of %llu pixels",
-                          w * h, (unsigned long long)lim->max_image_pixels);
-    p->width = (int)w;
-    p->height = (int)h;
+    p->azimuth_deg = x->azimuth;
+    p->elevation_deg = x->elevation;
+    p->fov_deg = x->fov;
+    p->width = (int)x->width;
+    p->height = (int)x->height;
     for (int i = 0; i < 3; i++)
         p->color[i] = (float)x->color[i];
     for (int i = 0; i < 4; i++)
         p->background[i] = (float)x->background[i];
     p->ambient = (float)x->ambient;
-    p->samples = (int)samples;
-    return 0;
-}
-
-static cJSON *rgba_array(const double *v, int n)
-{
-    cJSON *a = cJSON_CreateArray();
-    for (int i = 0; a && i < n; i++) {
-        cJSON *x = cJSON_CreateNumber(v[i]);
-        if (!x || !cJSON_AddItemToArray(a, x)) {
-            cJSON_Delete(x);
-            cJSON_Delete(a);
-            return NULL;
-        }
-    }
-    return a;
-}
-
-static cJSON *preview_parse(const cJSON *params, const vx_limits *lim, vx_err *err)
-{
-    vx_preview_params p;
-    exact x;
-    if (read_params(params, lim, &p, &x, err)) return NULL;
-    cJSON *o = cJSON_CreateObject();
-    cJSON *color = rgba_array(x.color, 3), *bg = rgba_array(x.background, 4);
-    if (!o || !color || !bg || !cJSON_AddNumberToObject(o, "azimuth", p.azimuth_deg) ||
-        !cJSON_AddNumberToObject(o, "elevation", p.elevation_deg) ||
-        !cJSON_AddNumberToObject(o, "width", p.width) ||
-        !cJSON_AddNumberToObject(o, "height", p.height) ||
-        !cJSON_AddNumberToObject(o, "fov", p.fov_deg) ||
-        !cJSON_AddItemToObject(o, "color", color)) {
-        cJSON_Delete(color);
-        goto oom;
-    }
-    if (!cJSON_AddItemToObject(o, "background", bg)) goto oom;
-    bg = NULL;
-    if (!cJSON_AddNumberToObject(o, "ambient", x.ambient) ||
-        !cJSON_AddNumberToObject(o, "samples", p.samples))
-        goto oom;
-    return o;
-oom:
-    cJSON_Delete(bg);
-    cJSON_Delete(o);
-    vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for preview params");
-    return NULL;
+    p->samples = (int)x->samples;
 }
 
 /* The render's 0..1 is the job's 0..0.8; the PNG encoder has the rest. */
@@ -135,12 +79,11 @@ static int encode_poll(void *ud, double fraction, vx_err *err)
     return vx_run_progress(ud, 0.8 + 0.2 * fraction, err);
 }
 
-static int preview_run_gl(vx_job_run *r, const vx_mesh *mesh, const cJSON *params, void **state,
+static int preview_run_gl(vx_job_run *r, const vx_mesh *mesh, const void *params, void **state,
                           vx_err *err)
 {
     vx_preview_params p;
-    exact x;
-    if (read_params(params, vx_run_limits(r), &p, &x, err)) return -1;
+    to_render(params, &p);
     const vx_limits *lim = vx_run_limits(r);
     uint64_t bytes = (uint64_t)p.width * (uint64_t)p.height * 4;
     if (lim && lim->max_job_memory && bytes > lim->max_job_memory)
@@ -177,7 +120,7 @@ static int preview_run_gl(vx_job_run *r, const vx_mesh *mesh, const cJSON *param
     return 0;
 }
 
-static int preview_encode(vx_job_run *r, const cJSON *params, void *state, vx_err *err)
+static int preview_encode(vx_job_run *r, const void *params, void *state, vx_err *err)
 {
     preview_state *s = state;
     const char *path = vx_run_output(r, "image", "png", "image/png", err);
@@ -198,7 +141,9 @@ static void preview_free_state(void *state)
 const vx_kind vx_kind_preview = {
     .name = "preview",
     .summary = "Shaded PNG of the mesh from an orbit camera (Lambert + ambient, MSAA)",
-    .parse = preview_parse,
+    .spec = spec,
+    .params_size = sizeof(pv_params),
+    .check = preview_check,
     .run_gl = preview_run_gl,
     .run_cpu = NULL,
     .encode = preview_encode,

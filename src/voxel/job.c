@@ -1,6 +1,6 @@
 /* The `voxelize` row of the job table (kind.h; api/openapi.yaml has the
- * params and stats schemas). Structure as in preview/job.c: read_params is
- * the one place that knows the fields, used by parse and run_gl. */
+ * params and stats schemas). The params are declared once, in spec (spec.h);
+ * voxelize_check keeps the rules across fields and the grid limits. */
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
@@ -10,7 +10,6 @@
 #include "voxel/job.h"
 #include "voxel/voxel.h"
 
-typedef enum grid_mode { GRID_RESOLUTION, GRID_VOXEL_SIZE, GRID_BOX } grid_mode;
 typedef enum vformat { F_VDB = 0, F_BINVOX, F_RAW8, F_RAW1, F_SUMMARY } vformat;
 
 static const char *const method_names[] = {"auto", "peel", "slice", "scan", NULL};
@@ -19,81 +18,89 @@ static const char *const fill_names[] = {"solid", "surface", NULL};
 static const char *const samples_names[] = {"cube", "faces", NULL}; /* vx_samples order */
 static const char *const format_names[] = {"vdb", "binvox", "raw8", "raw1", "summary", NULL};
 
+/* params.grid: an explicit box. */
+typedef struct vbox {
+    double origin[3], voxel_size;
+    long dims[3];
+} vbox;
+
 typedef struct vparams {
-    grid_mode mode;
     long resolution;
     double voxel_size;
-    vx_grid box; /* GRID_BOX */
+    vbox grid;
+    int resolution_set, voxel_size_set, grid_set; /* which of the three makes the grid */
     long padding;
-    vx_method method;
-    vx_inside inside;
-    vx_fill fill;
-    int supersample, threshold;
-    vx_samples samples;
-    vformat format;
+    int method, inside, fill; /* indices into the name arrays */
+    long supersample;
+    int samples; /* vx_samples */
+    long threshold;
+    int format; /* vformat */
 } vparams;
+
+static const vx_pspec origin_item = VX_P_ITEM_NUM(-HUGE_VAL, HUGE_VAL);
+static const vx_pspec dims_item = VX_P_ITEM_INT(1, VX_VOXELIZE_MAX_DIM);
+static const vx_pspec box_spec[] = {
+    VX_P_VEC(vbox, origin, 3, NULL, &origin_item, "the corner of voxel (0, 0, 0)",
+             .flags = VX_PF_NEEDED),
+    VX_P_NUM(vbox, voxel_size, 0, 0, HUGE_VAL, "the edge of a voxel",
+             .flags = VX_PF_NEEDED | VX_PF_GT_LO | VX_PF_TERSE),
+    {.name = "dims",
+     .type = VX_PT_ARRAY,
+     .off = offsetof(vbox, dims),
+     .sub = &dims_item,
+     .item_size = sizeof(long),
+     .min_items = 3,
+     .max_items = 3,
+     .flags = VX_PF_NEEDED,
+     .doc = "voxels along x, y, z"},
+    VX_P_END,
+};
+
+#define SET(f) .set_off = offsetof(vparams, f##_set)
+static const char *const not_vs[] = {"voxel_size", NULL}, *const not_res_vs[] = {
+                                                              "resolution", "voxel_size", NULL};
+static const vx_pspec spec[] = {
+    VX_P_INT(vparams, resolution, 256, 1, 2048, "voxels along the longest bbox side",
+             .flags = VX_PF_NULLABLE, SET(resolution), .excludes = not_vs),
+    VX_P_NUM(vparams, voxel_size, 1, 0, HUGE_VAL, "voxel edge (instead of resolution)",
+             .flags = VX_PF_NULLABLE | VX_PF_GT_LO, SET(voxel_size)),
+    {.name = "grid",
+     .type = VX_PT_OBJECT,
+     .off = offsetof(vparams, grid),
+     .sub = box_spec,
+     .flags = VX_PF_NULLABLE | VX_PF_LIST_FIELDS,
+     SET(grid),
+     .excludes = not_res_vs,
+     .doc = "an explicit grid box {origin, voxel_size, dims}"},
+    VX_P_INT(vparams, padding, 0, 0, 1024, "empty voxels around the bbox"),
+    VX_P_ENUM(vparams, method, method_names, 0, "voxelization method"),
+    VX_P_ENUM(vparams, inside, inside_names, 0, "inside rule"),
+    VX_P_ENUM(vparams, fill, fill_names, 0, "solid or surface shell"),
+    VX_P_INT(vparams, supersample, 1, 1, 2, "samples per voxel edge"),
+    VX_P_ENUM(vparams, samples, samples_names, 0, "the sample pattern of supersample 2"),
+    VX_P_INT(vparams, threshold, 4, 1, 8, "inside samples that make a voxel inside"),
+    VX_P_ENUM(vparams, format, format_names, 0, "output format"),
+    VX_P_END,
+};
+#undef SET
+
+static vx_inside inside_of(const vparams *p)
+{
+    return p->inside == 1   ? VX_INSIDE_PARITY
+           : p->inside == 2 ? VX_INSIDE_ROBUST
+                            : VX_INSIDE_NONZERO;
+}
+
+static vx_fill fill_of(const vparams *p)
+{
+    return p->fill == 1 ? VX_FILL_SURFACE : VX_FILL_SOLID;
+}
 
 typedef struct vstate {
     vx_bitgrid grid;
     vx_voxelize_stats st;
     int have_grid;
 } vstate;
-
-static const char *const known[] = {"resolution", "voxel_size", "grid",   "padding",
-                                    "method",     "inside",     "fill",   "supersample",
-                                    "samples",    "threshold",  "format", NULL};
-
-static const cJSON *field(const cJSON *params, const char *name)
-{
-    const cJSON *it = params ? cJSON_GetObjectItemCaseSensitive(params, name) : NULL;
-    return it && !cJSON_IsNull(it) ? it : NULL;
-}
-
-/* params.grid: {"origin": [x,y,z], "voxel_size": h, "dims": [nx,ny,nz]}. */
-static int read_box(const cJSON *g, vx_grid *box, vx_err *err)
-{
-    static const char *const box_known[] = {"origin", "voxel_size", "dims", NULL};
-    if (!cJSON_IsObject(g))
-        return vx_err_set(err, VX_EUNPROC, "invalid_params",
-                          "params.grid must be an object {origin, voxel_size, dims}");
-    const cJSON *it;
-    cJSON_ArrayForEach(it, g)
-    {
-        int ok = 0;
-        for (int i = 0; box_known[i]; i++)
-            ok |= strcmp(box_known[i], it->string) == 0;
-        if (!ok)
-            return vx_err_set(err, VX_EUNPROC, "invalid_params", "unknown parameter params.grid.%s",
-                              it->string);
-    }
-    const cJSON *o = cJSON_GetObjectItemCaseSensitive(g, "origin");
-    const cJSON *h = cJSON_GetObjectItemCaseSensitive(g, "voxel_size");
-    const cJSON *d = cJSON_GetObjectItemCaseSensitive(g, "dims");
-    if (!cJSON_IsArray(o) || cJSON_GetArraySize(o) != 3)
-        return vx_err_set(err, VX_EUNPROC, "invalid_params",
-                          "params.grid.origin must be an array of 3 numbers");
-    if (!cJSON_IsArray(d) || cJSON_GetArraySize(d) != 3)
-        return vx_err_set(err, VX_EUNPROC, "invalid_params",
-                          "params.grid.dims must be an array of 3 integers");
-    if (!cJSON_IsNumber(h) || !isfinite(h->valuedouble) || !(h->valuedouble > 0))
-        return vx_err_set(err, VX_EUNPROC, "invalid_params",
-                          "params.grid.voxel_size must be a number > 0");
-    box->h = h->valuedouble;
-    for (int a = 0; a < 3; a++) {
-        const cJSON *x = cJSON_GetArrayItem(o, a), *n = cJSON_GetArrayItem(d, a);
-        if (!cJSON_IsNumber(x) || !isfinite(x->valuedouble))
-            return vx_err_set(err, VX_EUNPROC, "invalid_params",
-                              "params.grid.origin[%d] must be a number", a);
-        if (!cJSON_IsNumber(n) || n->valuedouble != floor(n->valuedouble) || n->valuedouble < 1 ||
-            n->valuedouble > VX_VOXELIZE_MAX_DIM)
-            return vx_err_set(err, VX_EUNPROC, "invalid_params",
-                              "params.grid.dims[%d] must be an integer in [1, %d]", a,
-                              VX_VOXELIZE_MAX_DIM);
-        box->origin[a] = x->valuedouble;
-        box->dims[a] = (int)n->valuedouble;
-    }
-    return 0;
-}
 
 /* Memory one job needs for a grid: the bit grid (and sample counts), the
  * GPU's copy of it plus float render targets the size of the largest grid
@@ -138,7 +145,8 @@ static int check_grid(const int dims[3], const vparams *p, const vx_limits *lim,
     if (n > VX_VOXELIZE_MAX_VOXELS)
         return vx_err_set(err, kind, code, "%s gives %dx%dx%d = %llu voxels, the limit is 2048^3",
                           what, dims[0], dims[1], dims[2], (unsigned long long)n);
-    uint64_t bytes = job_bytes(dims, p->supersample, p->samples, p->format);
+    uint64_t bytes =
+        job_bytes(dims, (int)p->supersample, (vx_samples)p->samples, (vformat)p->format);
     if (lim && lim->max_job_memory && bytes > lim->max_job_memory)
         return vx_err_set(
             err, kind, code,
@@ -149,43 +157,10 @@ static int check_grid(const int dims[3], const vparams *p, const vx_limits *lim,
     return 0;
 }
 
-/* Reads and validates params into p; the one place that knows the fields,
- * their ranges and defaults (parse and run_gl both use it). */
-static int read_params(const cJSON *params, const vx_limits *lim, vparams *p, vx_err *err)
+/* The rules between fields; the grid and memory limits. */
+static int voxelize_check(void *params, const vx_limits *lim, vx_err *err)
 {
-    memset(p, 0, sizeof *p);
-    if (vx_param_object(&params, known, err)) return -1;
-    const cJSON *res = field(params, "resolution"), *vs = field(params, "voxel_size"),
-                *box = field(params, "grid");
-    if (res && vs)
-        return vx_err_set(err, VX_EUNPROC, "invalid_params",
-                          "params.resolution and params.voxel_size exclude each other");
-    if (box && (res || vs))
-        return vx_err_set(err, VX_EUNPROC, "invalid_params", "params.grid excludes params.%s",
-                          res ? "resolution" : "voxel_size");
-    int method, inside, fill, format, samples;
-    long ss, thr;
-    if (vx_param_int(params, "resolution", 256, 1, 2048, &p->resolution, err) ||
-        vx_param_number(params, "voxel_size", 1, 0, HUGE_VAL, &p->voxel_size, err) ||
-        vx_param_int(params, "padding", 0, 0, 1024, &p->padding, err) ||
-        vx_param_enum(params, "method", method_names, 0, &method, err) ||
-        vx_param_enum(params, "inside", inside_names, 0, &inside, err) ||
-        vx_param_enum(params, "fill", fill_names, 0, &fill, err) ||
-        vx_param_int(params, "supersample", 1, 1, 2, &ss, err) ||
-        vx_param_enum(params, "samples", samples_names, 0, &samples, err) ||
-        vx_param_int(params, "threshold", 4, 1, 8, &thr, err) ||
-        vx_param_enum(params, "format", format_names, 0, &format, err))
-        return -1;
-    if (vs && !(p->voxel_size > 0))
-        return vx_err_set(err, VX_EUNPROC, "invalid_params", "params.voxel_size must be > 0");
-    /* the name arrays follow the enums' order */
-    p->method = (vx_method)method; /* auto, peel, slice, scan */
-    p->inside = inside == 1 ? VX_INSIDE_PARITY : inside == 2 ? VX_INSIDE_ROBUST : VX_INSIDE_NONZERO;
-    p->fill = fill == 1 ? VX_FILL_SURFACE : VX_FILL_SOLID;
-    p->supersample = (int)ss;
-    p->threshold = (int)thr;
-    p->samples = (vx_samples)samples;
-    p->format = (vformat)format;
+    vparams *p = params;
     if (p->samples == VX_SAMPLES_FACES) {
         if (p->supersample != 2)
             return vx_err_set(err, VX_EUNPROC, "invalid_params",
@@ -193,9 +168,9 @@ static int read_params(const cJSON *params, const vx_limits *lim, vparams *p, vx
         if (p->threshold > 7)
             return vx_err_set(err, VX_EUNPROC, "invalid_params",
                               "params.threshold must be 1..7 with params.samples \"faces\" (7 "
-                              "samples per voxel), got %d",
+                              "samples per voxel), got %ld",
                               p->threshold);
-        if (p->fill != VX_FILL_SOLID)
+        if (fill_of(p) != VX_FILL_SOLID)
             return vx_err_set(err, VX_EUNPROC, "invalid_params",
                               "params.samples \"faces\" needs params.fill solid");
     }
@@ -208,20 +183,16 @@ static int read_params(const cJSON *params, const vx_limits *lim, vparams *p, vx
                           "params.supersample 2 needs params.method slice or auto (%s samples "
                           "voxel centres only)",
                           p->method == VX_METHOD_PEEL ? "peel" : "scan");
-    if (box) {
+    if (p->grid_set) {
         if (p->padding)
             return vx_err_set(
                 err, VX_EUNPROC, "invalid_params",
                 "params.padding is not allowed with params.grid (make the box larger)");
-        p->mode = GRID_BOX;
-        if (read_box(box, &p->box, err)) return -1;
-        return check_grid(p->box.dims, p, lim, "params.grid", VX_EUNPROC, err);
+        int dims[3] = {(int)p->grid.dims[0], (int)p->grid.dims[1], (int)p->grid.dims[2]};
+        return check_grid(dims, p, lim, "params.grid", VX_EUNPROC, err);
     }
-    if (vs) {
-        p->mode = GRID_VOXEL_SIZE;
-        return 0; /* the dims depend on the mesh: checked in run_gl */
-    }
-    p->mode = GRID_RESOLUTION;
+    if (p->voxel_size_set) return 0; /* the dims depend on the mesh: checked in run_gl */
+    p->resolution_set = 1;           /* the default */
     /* The dims depend on the mesh's bbox; check the largest grid the
      * resolution can give (a cubic bbox), so that a job never fails for a
      * limit its params already broke. */
@@ -232,51 +203,6 @@ static int read_params(const cJSON *params, const vx_limits *lim, vparams *p, vx
 static cJSON *array3(const double *v)
 {
     return cJSON_CreateDoubleArray(v, 3);
-}
-
-static cJSON *voxelize_parse(const cJSON *params, const vx_limits *lim, vx_err *err)
-{
-    vparams p;
-    if (read_params(params, lim, &p, err)) return NULL;
-    cJSON *o = cJSON_CreateObject();
-    int ok = o != NULL;
-    if (ok && p.mode == GRID_RESOLUTION)
-        ok = cJSON_AddNumberToObject(o, "resolution", (double)p.resolution) != NULL;
-    else if (ok)
-        ok = cJSON_AddNullToObject(o, "resolution") != NULL;
-    if (ok && p.mode == GRID_VOXEL_SIZE)
-        ok = cJSON_AddNumberToObject(o, "voxel_size", p.voxel_size) != NULL;
-    else if (ok)
-        ok = cJSON_AddNullToObject(o, "voxel_size") != NULL;
-    if (ok && p.mode == GRID_BOX) {
-        cJSON *g = cJSON_AddObjectToObject(o, "grid");
-        double dims[3] = {p.box.dims[0], p.box.dims[1], p.box.dims[2]};
-        cJSON * or = array3(p.box.origin), *di = array3(dims);
-        ok = g && or &&di && cJSON_AddItemToObject(g, "origin", or);
-        if (!ok) cJSON_Delete(or);
-        ok = ok && cJSON_AddNumberToObject(g, "voxel_size", p.box.h) &&
-             cJSON_AddItemToObject(g, "dims", di);
-        if (!ok) cJSON_Delete(di);
-    } else if (ok) {
-        ok = cJSON_AddNullToObject(o, "grid") != NULL;
-    }
-    ok = ok && cJSON_AddNumberToObject(o, "padding", (double)p.padding) &&
-         cJSON_AddStringToObject(o, "method", method_names[p.method]) &&
-         cJSON_AddStringToObject(o, "inside",
-                                 inside_names[p.inside == VX_INSIDE_PARITY   ? 1
-                                              : p.inside == VX_INSIDE_ROBUST ? 2
-                                                                             : 0]) &&
-         cJSON_AddStringToObject(o, "fill", fill_names[p.fill == VX_FILL_SURFACE ? 1 : 0]) &&
-         cJSON_AddNumberToObject(o, "supersample", p.supersample) &&
-         cJSON_AddStringToObject(o, "samples", samples_names[p.samples]) &&
-         cJSON_AddNumberToObject(o, "threshold", p.threshold) &&
-         cJSON_AddStringToObject(o, "format", format_names[p.format]);
-    if (!ok) {
-        cJSON_Delete(o);
-        vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for voxelize params");
-        return NULL;
-    }
-    return o;
 }
 
 /* The engine's 0..1 becomes the job's 0..0.9; encoding has the rest. */
@@ -302,32 +228,35 @@ static void stat_set(cJSON *stats, const char *name, cJSON *v)
     if (!cJSON_AddItemToObject(stats, name, v)) cJSON_Delete(v);
 }
 
-static int voxelize_run_gl(vx_job_run *r, const vx_mesh *mesh, const cJSON *params, void **state,
+static int voxelize_run_gl(vx_job_run *r, const vx_mesh *mesh, const void *params, void **state,
                            vx_err *err)
 {
-    vparams p;
+    const vparams p = *(const vparams *)params;
     const vx_limits *lim = vx_run_limits(r);
-    if (read_params(params, lim, &p, err)) return -1;
     vx_voxelize_desc d = {0};
-    if (p.mode == GRID_BOX) {
-        d.grid = p.box;
+    if (p.grid_set) {
+        d.grid.h = p.grid.voxel_size;
+        for (int a = 0; a < 3; a++) {
+            d.grid.origin[a] = p.grid.origin[a];
+            d.grid.dims[a] = (int)p.grid.dims[a];
+        }
     } else {
         int rc =
-            p.mode == GRID_RESOLUTION
+            p.resolution_set
                 ? vx_grid_from_resolution(mesh, (int)p.resolution, (int)p.padding, &d.grid, err)
                 : vx_grid_from_voxel_size(mesh, p.voxel_size, (int)p.padding, &d.grid, err);
         if (rc) return -1;
         if (check_grid(d.grid.dims, &p, lim,
-                       p.mode == GRID_RESOLUTION ? "params.resolution" : "params.voxel_size",
-                       VX_ETOOBIG, err))
+                       p.resolution_set ? "params.resolution" : "params.voxel_size", VX_ETOOBIG,
+                       err))
             return -1;
     }
-    d.method = p.method;
-    d.inside = p.inside;
-    d.fill = p.fill;
-    d.supersample = p.supersample;
-    d.threshold = p.threshold;
-    d.samples = p.samples;
+    d.method = (vx_method)p.method; /* the name arrays follow the enums' order */
+    d.inside = inside_of(&p);
+    d.fill = fill_of(&p);
+    d.supersample = (int)p.supersample;
+    d.threshold = (int)p.threshold;
+    d.samples = (vx_samples)p.samples;
     d.max_memory = lim ? lim->max_job_memory : 0;
     d.progress = engine_progress;
     d.ud = r;
@@ -363,16 +292,15 @@ static int voxelize_run_gl(vx_job_run *r, const vx_mesh *mesh, const cJSON *para
     return 0;
 }
 
-static int voxelize_encode(vx_job_run *r, const cJSON *params, void *state, vx_err *err)
+static int voxelize_encode(vx_job_run *r, const void *params, void *state, vx_err *err)
 {
     vstate *s = state;
-    vparams p;
-    if (read_params(params, NULL, &p, err)) return -1;
+    const vparams p = *(const vparams *)params;
     double t0 = vx_mono();
     vx_voxel_io io = {encode_progress, r};
     int rc = 0;
     const char *path = NULL;
-    switch (p.format) {
+    switch ((vformat)p.format) {
     case F_SUMMARY:
         break;
     case F_RAW8:
@@ -392,11 +320,11 @@ static int voxelize_encode(vx_job_run *r, const cJSON *params, void *state, vx_e
         if (!path) return -1;
         vx_vdb_meta m = {
             .method = s->st.method,
-            .inside = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(params, "inside")),
-            .fill = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(params, "fill")),
+            .inside = inside_names[p.inside],
+            .fill = fill_names[p.fill],
             .mesh = vx_run_mesh_id(r),
-            .supersample = p.supersample,
-            .threshold = p.threshold,
+            .supersample = (int)p.supersample,
+            .threshold = (int)p.threshold,
             .samples = samples_names[p.samples],
         };
         rc = vx_voxel_write_vdb(&s->grid, p.supersample == 2, &m, path, &io, err);
@@ -420,7 +348,9 @@ const vx_kind vx_kind_voxelize = {
     .name = "voxelize",
     .summary = "Solid voxelization on the GPU (depth peeling, slicing or crossing counts) to "
                "OpenVDB, binvox or raw bits",
-    .parse = voxelize_parse,
+    .spec = spec,
+    .params_size = sizeof(vparams),
+    .check = voxelize_check,
     .run_gl = voxelize_run_gl,
     .run_cpu = NULL,
     .encode = voxelize_encode,

@@ -46,7 +46,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
     if (!in && size > 1) return 0; /* not JSON: the HTTP layer answers 400 */
     vx_err err;
     vx_err_clear(&err);
-    cJSON *norm = k->parse(in, lim, &err);
+    cJSON *norm = vx_kind_parse(k, in, lim, &err);
     if (!norm) {
         if (err.kind == VX_EOK || !err.code[0])
             fail("parse failed without saying why", k, NULL, &err);
@@ -60,7 +60,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
         if (!back) fail("printed params do not parse back", k, text, NULL);
         vx_err err2;
         vx_err_clear(&err2);
-        cJSON *again = k->parse(back, lim, &err2);
+        cJSON *again = vx_kind_parse(k, back, lim, &err2);
         if (!again) fail("normalised params are refused", k, text, &err2);
         if (!cJSON_Compare(norm, again, 1)) {
             char *t2 = cJSON_PrintUnformatted(again);

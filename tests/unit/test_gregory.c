@@ -1083,7 +1083,7 @@ static cJSON *parse(const char *json, vx_err *err)
 {
     cJSON *in = cJSON_Parse(json);
     vx_limits lim = {.max_triangles = 1000000};
-    cJSON *out = vx_kind_gregory.parse(in, &lim, err);
+    cJSON *out = vx_kind_parse(&vx_kind_gregory, in, &lim, err);
     cJSON_Delete(in);
     return out;
 }
@@ -1132,7 +1132,7 @@ static void test_params(void **state)
     /* divisions over the triangle limit on one patch: 2 * 256^2 > 100000 */
     cJSON *in = cJSON_Parse("{\"divisions\": 256}");
     vx_limits lim = {.max_triangles = 100000};
-    assert_null(vx_kind_gregory.parse(in, &lim, &err));
+    assert_null(vx_kind_parse(&vx_kind_gregory, in, &lim, &err));
     assert_non_null(strstr(err.message, "divisions"));
     cJSON_Delete(in);
     /* mesh ids of frames are the kind's further meshes */

@@ -69,7 +69,7 @@ static cJSON *parse_str(const char *json, const vx_limits *lim, vx_err *err)
 {
     cJSON *in = json ? cJSON_Parse(json) : NULL;
     if (json) assert_non_null(in);
-    cJSON *out = K->parse(in, lim, err);
+    cJSON *out = vx_kind_parse(K, in, lim, err);
     cJSON_Delete(in);
     return out;
 }
@@ -100,7 +100,7 @@ static void test_row(void **state)
 {
     assert_string_equal(K->name, "preview");
     assert_non_null(K->summary);
-    assert_non_null(K->parse);
+    assert_non_null(K->spec);
     assert_non_null(K->run_gl);
     assert_null(K->run_cpu);
     assert_non_null(K->encode);
@@ -145,7 +145,7 @@ static void test_values_kept(void **state)
     assert_int_equal(cJSON_GetArraySize(c), 3);
     assert_true(cJSON_GetArrayItem(c, 1)->valuedouble == 0.5);
     /* Parsing the normalised copy again gives the same object. */
-    cJSON *again = K->parse(o, &lim, &err);
+    cJSON *again = vx_kind_parse(K, o, &lim, &err);
     assert_non_null(again);
     assert_true(cJSON_Compare(o, again, 1));
     cJSON_Delete(again);
@@ -219,9 +219,11 @@ static void test_run(void **state)
                               "\"background\":[0,0,0,1]}",
                               &r.lim, &err);
     assert_non_null(params);
+    void *tp = vx_kind_read(K, params, &r.lim, &err); /* as the runner does, once */
+    assert_non_null(tp);
     vx_mesh *m = cube();
     void *st = NULL;
-    assert_int_equal(K->run_gl(&r, m, params, &st, &err), 0);
+    assert_int_equal(K->run_gl(&r, m, tp, &st, &err), 0);
     assert_non_null(st);
     /* The render polls as it goes (upload, bands); it ends at 0.8, the
      * encoder has the rest. */
@@ -236,7 +238,7 @@ static void test_run(void **state)
     assert_true(num(r.stats, "pixels_covered") > 0);
     assert_true(num(r.stats, "gpu_ms") >= 0);
     assert_true(num(r.stats, "upload_ms") >= 0);
-    assert_int_equal(K->encode(&r, params, st, &err), 0);
+    assert_int_equal(K->encode(&r, tp, st, &err), 0);
     assert_true(r.progress == 1.0);
     assert_string_equal(r.output_name, "image");
     assert_string_equal(r.content_type, "image/png");
@@ -263,7 +265,7 @@ static void test_run(void **state)
      * state is still handed over for free_state. */
     r.cancel = 1;
     st = NULL;
-    assert_int_equal(K->run_gl(&r, m, params, &st, &err), -1);
+    assert_int_equal(K->run_gl(&r, m, tp, &st, &err), -1);
     assert_int_equal(err.kind, VX_ECANCELED);
     K->free_state(st);
 
@@ -271,10 +273,11 @@ static void test_run(void **state)
     r.cancel = 0;
     r.lim.max_job_memory = 1000;
     st = NULL;
-    assert_int_equal(K->run_gl(&r, m, params, &st, &err), -1);
+    assert_int_equal(K->run_gl(&r, m, tp, &st, &err), -1);
     assert_int_equal(err.kind, VX_ETOOBIG);
     assert_null(st);
 
+    vx_kind_params_free(K, tp);
     cJSON_Delete(params);
     cJSON_Delete(r.stats);
     vx_mesh_free(m);

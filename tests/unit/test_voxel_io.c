@@ -282,7 +282,7 @@ static cJSON *parse(const char *json, const vx_limits *lim, vx_err *err)
 {
     cJSON *in = cJSON_Parse(json);
     assert_non_null(in);
-    cJSON *out = vx_kind_voxelize.parse(in, lim, err);
+    cJSON *out = vx_kind_parse(&vx_kind_voxelize, in, lim, err);
     cJSON_Delete(in);
     return out;
 }
@@ -311,7 +311,7 @@ static void test_params(void **st)
         "\"inside\":\"nonzero\",\"fill\":\"solid\",\"supersample\":1,\"samples\":\"cube\",\"threshold\":4,"
         "\"format\":\"vdb\"}");
     /* normalised params parse to themselves */
-    cJSON *again = vx_kind_voxelize.parse(o, NULL, &err);
+    cJSON *again = vx_kind_parse(&vx_kind_voxelize, o, NULL, &err);
     char *s2 = cJSON_PrintUnformatted(again);
     assert_string_equal(s, s2);
     free(s);
