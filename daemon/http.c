@@ -64,6 +64,7 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include "mesh/intake.h"
 #include "metrics.h"
 #include "request.h"
 #include "util/budget.h"
@@ -71,10 +72,6 @@
 #include "util/log.h"
 
 typedef enum body_kind { BODY_NONE, BODY_UPLOAD, BODY_JSON } body_kind;
-/* Declared upload types: model/obj is OBJ; text/plain is text, OBJ or .bpt
- * by content; model/x-bpt is .bpt; the Draco types are Draco; no type or
- * application/octet-stream is told by content. */
-typedef enum media { MEDIA_SNIFF, MEDIA_OBJ, MEDIA_DRACO, MEDIA_TEXT, MEDIA_BPT } media;
 
 typedef struct req req;
 
@@ -118,7 +115,7 @@ struct req {
     body_kind body;
     /* uploads */
     vx_upload *up;
-    media declared;
+    vx_intake_media declared;
     int too_big;
     vx_err body_err; /* storing the body failed (full disk): answered at the end */
     /* JSON bodies */
@@ -725,34 +722,6 @@ static int h_mesh(vx_http *h, struct MHD_Connection *c, req *r)
     return send_json(c, r, 200, meta, NULL, NULL);
 }
 
-static cJSON *mesh_meta(const char *id, const char *format, uint64_t bytes, const vx_mesh *m)
-{
-    cJSON *o = cJSON_CreateObject();
-    cJSON_AddStringToObject(o, "id", id);
-    cJSON_AddStringToObject(o, "format", format);
-    cJSON_AddNumberToObject(o, "bytes", (double)bytes);
-    cJSON_AddNumberToObject(o, "vertices", (double)m->nverts);
-    cJSON_AddNumberToObject(o, "triangles", (double)m->ntris);
-    cJSON *f = cJSON_AddObjectToObject(o, "faces");
-    cJSON_AddNumberToObject(f, "total", (double)m->nfaces);
-    cJSON_AddNumberToObject(f, "triangles", (double)m->faces_by_size[0]);
-    cJSON_AddNumberToObject(f, "quads", (double)m->faces_by_size[1]);
-    cJSON_AddNumberToObject(f, "ngons", (double)m->faces_by_size[2]);
-    cJSON *bb = cJSON_AddObjectToObject(o, "bbox");
-    cJSON_AddItemToObject(bb, "min", cJSON_CreateDoubleArray(m->bbox_min, 3));
-    cJSON_AddItemToObject(bb, "max", cJSON_CreateDoubleArray(m->bbox_max, 3));
-    cJSON_AddNumberToObject(o, "boundary_edges", (double)m->boundary_edges);
-    cJSON_AddNumberToObject(o, "nonmanifold_edges", (double)m->nonmanifold_edges);
-    cJSON_AddNumberToObject(o, "degenerate_triangles", (double)m->degenerate_tris);
-    cJSON_AddNumberToObject(o, "texcoords", (double)m->ntexcoords);
-    cJSON_AddNumberToObject(o, "normals", (double)m->nnormals);
-    cJSON_AddNumberToObject(o, "patches", (double)m->npatches);
-    char t[32];
-    vx_rfc3339(vx_now(), t);
-    cJSON_AddStringToObject(o, "created", t);
-    return o;
-}
-
 /* The worst-case memory of the upload parses running now (--max-parse-memory). */
 static vx_budget parse_budget = VX_BUDGET_INIT;
 
@@ -774,28 +743,15 @@ static int h_upload_done(vx_http *h, struct MHD_Connection *c, req *r)
     if (vx_upload_finish(r->up, id, &err)) return send_err(c, r, &err);
     size_t nhead;
     const unsigned char *head = vx_upload_head(r->up, &nhead);
-    vx_mesh_format fmt = vx_mesh_sniff(head, nhead);
-    if ((r->declared == MEDIA_OBJ || r->declared == MEDIA_TEXT) && fmt == VX_MESH_DRACO)
-        return send_error(c, r, 415, "unsupported_media_type",
-                          "Content-Type says text (OBJ or .bpt) but the body is a Draco file");
-    if (r->declared == MEDIA_DRACO && fmt != VX_MESH_DRACO)
-        return send_error(c, r, 415, "unsupported_media_type",
-                          "Content-Type says Draco but the body does not start with DRACO");
-    if (r->declared == MEDIA_BPT && fmt != VX_MESH_BPT)
-        return send_error(c, r, 415, "unsupported_media_type",
-                          "Content-Type says .bpt but the first line is not a patch count");
-    if (r->declared == MEDIA_SNIFF && fmt == 0)
-        return send_error(c, r, 415, "unsupported_media_type",
-                          "the body is neither text (OBJ, .bpt) nor a Draco file");
+    vx_mesh_format fmt;
+    if (vx_intake_resolve(r->declared, head, nhead, &fmt, &err)) return send_err(c, r, &err);
     cJSON *meta = vx_store_mesh_meta(h->d.store, id, NULL);
     if (meta) {
         VX_INFO("mesh.uploaded", "mesh=%s new=0", id);
         return send_json(c, r, 200, meta, NULL, NULL);
     }
-    if (r->declared == MEDIA_OBJ || (r->declared == MEDIA_TEXT && fmt != VX_MESH_BPT))
-        fmt = VX_MESH_OBJ;
     vx_mesh_limits lim = {.max_triangles = h->d.cfg->max_triangles};
-    const char *fname = fmt == VX_MESH_DRACO ? "draco" : fmt == VX_MESH_BPT ? "bpt" : "obj";
+    const char *fname = vx_intake_format_name(fmt);
     /* Reserve the parse's worst-case memory first; the upload was not
      * acknowledged, so a busy answer loses nothing. */
     uint64_t cost = vx_mesh_parse_cost(vx_upload_path(r->up), fmt, vx_upload_bytes(r->up), &lim);
@@ -829,12 +785,12 @@ static int h_upload_done(vx_http *h, struct MHD_Connection *c, req *r)
         return send_err(c, r, &err);
     }
     double parse_ms = (vx_mono() - t) * 1e3;
-    if (m->degenerate_tris == m->ntris) {
+    if (vx_intake_check(m, &err)) {
         vx_mesh_free(m);
         vx_budget_release(&parse_budget, cost);
-        return send_error(c, r, 422, "degenerate_mesh", "every triangle of the mesh has zero area");
+        return send_err(c, r, &err);
     }
-    meta = mesh_meta(id, fname, vx_upload_bytes(r->up), m);
+    meta = vx_intake_meta(id, fmt, vx_upload_bytes(r->up), m);
     VX_INFO("mesh.uploaded",
             "mesh=%s new=1 format=%s bytes=%llu vertices=%zu triangles=%zu parse_ms=%.1f", id,
             fname, (unsigned long long)vx_upload_bytes(r->up), m->nverts, m->ntris, parse_ms);
@@ -843,8 +799,7 @@ static int h_upload_done(vx_http *h, struct MHD_Connection *c, req *r)
     int existed = 0;
     vx_upload *up = r->up;
     r->up = NULL; /* commit frees it */
-    if (vx_store_mesh_commit(h->d.store, up, id, fmt == VX_MESH_DRACO ? "drc" : fname, meta,
-                             &existed, &err)) {
+    if (vx_store_mesh_commit(h->d.store, up, id, vx_intake_format_ext(fmt), meta, &existed, &err)) {
         cJSON_Delete(meta);
         return send_err(c, r, &err);
     }
@@ -1077,24 +1032,8 @@ static int first_call(vx_http *h, struct MHD_Connection *c, req *r, const char *
     char mt[128];
     vx_req_media_type(header(c, MHD_HTTP_HEADER_CONTENT_TYPE), mt, sizeof mt);
     if (r->route == VX_R_MESHES) {
-        if (!strcmp(mt, "model/obj"))
-            r->declared = MEDIA_OBJ;
-        else if (!strcmp(mt, "text/plain"))
-            r->declared = MEDIA_TEXT;
-        else if (!strcmp(mt, "model/x-bpt"))
-            r->declared = MEDIA_BPT;
-        else if (!strcmp(mt, "model/x-draco") || !strcmp(mt, "application/x-draco"))
-            r->declared = MEDIA_DRACO;
-        else if (!mt[0] || !strcmp(mt, "application/octet-stream"))
-            r->declared = MEDIA_SNIFF;
-        else {
-            char msg[200];
-            snprintf(msg, sizeof msg,
-                     "cannot take '%.100s': send model/obj, model/x-bpt, model/x-draco or "
-                     "application/octet-stream",
-                     mt);
-            return send_error(c, r, 415, "unsupported_media_type", msg);
-        }
+        vx_err err;
+        if (vx_intake_media_of(mt, &r->declared, &err)) return send_err(c, r, &err);
         r->body = BODY_UPLOAD;
     } else {
         if (strcmp(mt, "application/json") != 0)

@@ -13,6 +13,7 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include "mesh/intake.h"
 #include "util/fsutil.h"
 #include "util/log.h"
 
@@ -189,9 +190,7 @@ static void load_one(vx_store *s, const char *dir, const char *id, const char *s
         cJSON_Delete(meta);
         return;
     }
-    const char *ext = strcmp(fmt->valuestring, "draco") == 0 ? "drc"
-                      : strcmp(fmt->valuestring, "bpt") == 0 ? "bpt"
-                                                             : "obj";
+    const char *ext = vx_intake_ext_of_name(fmt->valuestring);
     char mpath[2300];
     snprintf(mpath, sizeof mpath, "%s/%s.%s", dir, id, ext);
     if (access(mpath, R_OK) != 0) {
