@@ -50,8 +50,6 @@
 #include <math.h>
 #include <microhttpd.h>
 #include <netdb.h>
-#include <nettle/memops.h>
-#include <nettle/sha2.h>
 #include <pthread.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -64,9 +62,11 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include "auth.h"
 #include "mesh/intake.h"
 #include "metrics.h"
 #include "request.h"
+#include "wait.h"
 #include "util/budget.h"
 #include "util/fsutil.h"
 #include "util/log.h"
@@ -94,14 +94,6 @@ typedef struct vconn {
     double t_killed;
 } vconn;
 
-typedef struct waiter {
-    req *r;
-    struct MHD_Connection *conn;
-    char jid[33];
-    double deadline; /* monotonic */
-    struct waiter *next;
-} waiter;
-
 struct req {
     vx_route route;
     char method[12];
@@ -122,9 +114,7 @@ struct req {
     char *buf;
     size_t len, cap;
     /* ?wait */
-    waiter w;
-    int waiting; /* suspended, not yet resumed */
-    int resumed;
+    vx_waiter w;
     int post_job; /* the held request was POST /v1/jobs */
     int answered;
 };
@@ -133,13 +123,8 @@ struct vx_http {
     vx_http_desc d;
     struct MHD_Daemon *mhd;
     int port;
-    unsigned char token_digest[SHA256_DIGEST_SIZE];
-    int auth;
-    pthread_mutex_t wlock;
-    pthread_cond_t wcond;
-    waiter *waiters;
-    pthread_t timer;
-    int timer_started;
+    vx_auth auth;
+    vx_wait *wait;
     int stopping;
     /* connections (vconn), the sweeper */
     pthread_mutex_t clock;
@@ -264,22 +249,6 @@ static const char *header(struct MHD_Connection *c, const char *name)
     return MHD_lookup_connection_value(c, MHD_HEADER_KIND, name);
 }
 
-/* Constant-time: both sides are hashed so neither length nor content leaks. */
-static int auth_ok(vx_http *h, struct MHD_Connection *c)
-{
-    const char *a = header(c, MHD_HTTP_HEADER_AUTHORIZATION);
-    if (!a || strncasecmp(a, "Bearer ", 7) != 0) return 0;
-    a += 7;
-    while (*a == ' ')
-        a++;
-    struct sha256_ctx ctx;
-    unsigned char d[SHA256_DIGEST_SIZE];
-    sha256_init(&ctx);
-    sha256_update(&ctx, strlen(a), (const uint8_t *)a);
-    sha256_digest(&ctx, sizeof d, d);
-    return memeql_sec(d, h->token_digest, sizeof d);
-}
-
 /* The ?wait of r in seconds, capped to the request timeout. */
 static double wait_seconds(vx_http *h, const req *r)
 {
@@ -287,82 +256,10 @@ static double wait_seconds(vx_http *h, const req *r)
     return v > h->d.cfg->request_timeout_s ? h->d.cfg->request_timeout_s : v;
 }
 
-/* ---- waiting ------------------------------------------------------- */
-
-static void resume_locked(vx_http *h, waiter *w)
-{
-    waiter **pp = &h->waiters;
-    while (*pp && *pp != w)
-        pp = &(*pp)->next;
-    if (*pp) *pp = w->next;
-    w->r->waiting = 0;
-    w->r->resumed = 1;
-    MHD_resume_connection(w->conn);
-}
-
 void vx_http_job_changed(vx_http *h, const char *jid, int terminal)
 {
     if (!h || !terminal) return;
-    pthread_mutex_lock(&h->wlock);
-    for (waiter *w = h->waiters, *next; w; w = next) {
-        next = w->next;
-        if (!strcmp(w->jid, jid)) resume_locked(h, w);
-    }
-    pthread_mutex_unlock(&h->wlock);
-}
-
-static void *timer_main(void *arg)
-{
-    vx_http *h = arg;
-    pthread_mutex_lock(&h->wlock);
-    while (!h->stopping) {
-        double now = vx_mono(), next = now + 0.25;
-        for (waiter *w = h->waiters, *nx; w; w = nx) {
-            nx = w->next;
-            if (w->deadline <= now)
-                resume_locked(h, w);
-            else if (w->deadline < next)
-                next = w->deadline;
-        }
-        struct timespec ts;
-        clock_gettime(CLOCK_MONOTONIC, &ts);
-        double dt = next - now;
-        ts.tv_sec += (time_t)dt;
-        ts.tv_nsec += (long)((dt - floor(dt)) * 1e9);
-        if (ts.tv_nsec >= 1000000000L) {
-            ts.tv_sec++;
-            ts.tv_nsec -= 1000000000L;
-        }
-        pthread_cond_timedwait(&h->wcond, &h->wlock, &ts);
-    }
-    pthread_mutex_unlock(&h->wlock);
-    return NULL;
-}
-
-/* Holds the request until jid finishes or wait_s passes. Returns 1 when
- * suspended, 0 when the job has already finished (answer now). */
-static int hold(vx_http *h, struct MHD_Connection *c, req *r, const char *jid, double wait_s)
-{
-    pthread_mutex_lock(&h->wlock);
-    int terminal = 0;
-    vx_err err;
-    cJSON *doc = vx_jobs_get(h->d.jobs, jid, &terminal, &err);
-    cJSON_Delete(doc);
-    if (!doc || terminal || h->stopping) {
-        pthread_mutex_unlock(&h->wlock);
-        return 0;
-    }
-    r->w.r = r;
-    r->w.conn = c;
-    snprintf(r->w.jid, sizeof r->w.jid, "%s", jid);
-    r->w.deadline = vx_mono() + wait_s;
-    MHD_suspend_connection(c);
-    r->waiting = 1;
-    r->w.next = h->waiters;
-    h->waiters = &r->w;
-    pthread_cond_signal(&h->wcond);
-    pthread_mutex_unlock(&h->wlock);
-    return 1;
+    vx_wait_job_changed(h->wait, jid);
 }
 
 /* ---- disk space ---------------------------------------------------- */
@@ -688,7 +585,7 @@ static int h_info(vx_http *h, struct MHD_Connection *c, req *r)
         cJSON_AddStringToObject(k, "summary", vx_kind_at(i)->summary);
         cJSON_AddItemToArray(kinds, k);
     }
-    cJSON_AddBoolToObject(doc, "auth", h->auth);
+    cJSON_AddBoolToObject(doc, "auth", h->auth.on);
     return send_json(c, r, 200, doc, NULL, NULL);
 }
 
@@ -872,7 +769,7 @@ static int h_job_post_done(vx_http *h, struct MHD_Connection *c, req *r)
     if (wait_s > 0) {
         r->post_job = 1;
         snprintf(r->id, sizeof r->id, "%s", jid);
-        if (hold(h, c, r, jid, wait_s)) {
+        if (vx_wait_hold(h->wait, &r->w, c, jid, wait_s)) {
             cJSON_Delete(job);
             return MHD_YES;
         }
@@ -909,7 +806,7 @@ static int h_job(vx_http *h, struct MHD_Connection *c, req *r)
         return send_json(c, r, running ? 202 : 200, doc, NULL, NULL);
     }
     double wait_s = wait_seconds(h, r);
-    if (wait_s > 0 && hold(h, c, r, r->id, wait_s)) return MHD_YES;
+    if (wait_s > 0 && vx_wait_hold(h->wait, &r->w, c, r->id, wait_s)) return MHD_YES;
     return answer_job(h, c, r, r->id, 200);
 }
 
@@ -1001,7 +898,8 @@ static int first_call(vx_http *h, struct MHD_Connection *c, req *r, const char *
     int rc = check_framing(c, r, version);
     if (rc >= 0) return rc;
     if (r->route == VX_R_UNKNOWN) return send_error(c, r, 404, "not_found", "no such route");
-    if (!strncmp(vx_req_route_name(r->route), "/v1/", 4) && h->auth && !auth_ok(h, c))
+    if (!strncmp(vx_req_route_name(r->route), "/v1/", 4) && h->auth.on &&
+        !vx_auth_ok(&h->auth, header(c, MHD_HTTP_HEADER_AUTHORIZATION)))
         return send_error_h(c, r, 401, "unauthorized", "a valid bearer token is required",
                             MHD_HTTP_HEADER_WWW_AUTHENTICATE, "Bearer realm=\"voxeld\"");
     if (!vx_req_method_allowed(r->route, r->method)) {
@@ -1175,10 +1073,7 @@ static enum MHD_Result on_request(void *cls, struct MHD_Connection *c, const cha
         *data_size = 0;
         return MHD_YES;
     }
-    if (r->resumed) {
-        r->resumed = 0;
-        return answer_job(h, c, r, r->id, r->post_job ? 202 : 200);
-    }
+    if (vx_waiter_resumed(&r->w)) return answer_job(h, c, r, r->id, r->post_job ? 202 : 200);
     if (r->qerr[0]) return send_error(c, r, 400, "invalid_request", r->qerr);
     int is_get = !strcmp(r->method, "GET") || !strcmp(r->method, "HEAD");
     switch (r->route) {
@@ -1212,14 +1107,7 @@ static void on_completed(void *cls, struct MHD_Connection *c, void **con_cls,
     vx_http *h = cls;
     req *r = *con_cls;
     if (!r) return;
-    if (r->waiting) { /* the connection died while held */
-        pthread_mutex_lock(&h->wlock);
-        waiter **pp = &h->waiters;
-        while (*pp && *pp != &r->w)
-            pp = &(*pp)->next;
-        if (*pp) *pp = r->w.next;
-        pthread_mutex_unlock(&h->wlock);
-    }
+    vx_wait_forget(h->wait, &r->w); /* the connection died while held */
     double dt = vx_mono() - r->t0;
     const char *route = vx_req_route_name(r->route);
     int status = r->status ? r->status : 499; /* closed before an answer */
@@ -1303,25 +1191,20 @@ vx_http *vx_http_start(const vx_http_desc *desc, vx_err *err)
     h->d = *desc;
     g_data_dir = vx_store_dir(desc->store);
     const vx_config *cfg = desc->cfg;
-    if (cfg->token[0]) {
-        struct sha256_ctx ctx;
-        sha256_init(&ctx);
-        sha256_update(&ctx, strlen(cfg->token), (const uint8_t *)cfg->token);
-        sha256_digest(&ctx, sizeof h->token_digest, h->token_digest);
-        h->auth = 1;
-    }
-    pthread_mutex_init(&h->wlock, NULL);
+    vx_auth_init(&h->auth, cfg->token);
     pthread_mutex_init(&h->clock, NULL);
-    pthread_condattr_t ca;
-    pthread_condattr_init(&ca);
-    pthread_condattr_setclock(&ca, CLOCK_MONOTONIC);
-    pthread_cond_init(&h->wcond, &ca);
-    pthread_condattr_destroy(&ca);
 
     struct sockaddr_storage ss;
     socklen_t sslen;
     int v6 = 0;
     if (parse_listen(cfg->listen, &ss, &sslen, &v6, err)) {
+        pthread_mutex_destroy(&h->clock);
+        free(h);
+        return NULL;
+    }
+    if (!(h->wait = vx_wait_start(desc->jobs))) {
+        vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory");
+        pthread_mutex_destroy(&h->clock);
         free(h);
         return NULL;
     }
@@ -1346,18 +1229,16 @@ vx_http *vx_http_start(const vx_http_desc *desc, vx_err *err)
                    e == EADDRINUSE ? "address in use (another process listens on this port)"
                    : e             ? strerror(e)
                                    : "libmicrohttpd could not start (see http.mhd)");
+        vx_wait_free(h->wait);
         pthread_mutex_destroy(&h->clock);
-        pthread_mutex_destroy(&h->wlock);
-        pthread_cond_destroy(&h->wcond);
         free(h);
         return NULL;
     }
     const union MHD_DaemonInfo *di = MHD_get_daemon_info(h->mhd, MHD_DAEMON_INFO_BIND_PORT);
     h->port = di ? di->port : 0;
-    if (pthread_create(&h->timer, NULL, timer_main, h) == 0) h->timer_started = 1;
     if (pthread_create(&h->sweeper, NULL, sweeper_main, h) == 0) h->sweeper_started = 1;
     VX_INFO("http.listen", "listen=%s port=%d threads=%d auth=%d", cfg->listen, h->port,
-            cfg->http_threads, h->auth);
+            cfg->http_threads, h->auth.on);
     return h;
 }
 
@@ -1371,12 +1252,8 @@ void vx_http_quiesce(vx_http *h)
     if (!h) return;
     MHD_socket fd = MHD_quiesce_daemon(h->mhd);
     if (fd != MHD_INVALID_SOCKET) close(fd);
-    pthread_mutex_lock(&h->wlock);
     h->stopping = 1;
-    while (h->waiters)
-        resume_locked(h, h->waiters);
-    pthread_cond_broadcast(&h->wcond);
-    pthread_mutex_unlock(&h->wlock);
+    vx_wait_quiesce(h->wait);
 }
 
 void vx_http_stop(vx_http *h, double grace_s)
@@ -1390,12 +1267,10 @@ void vx_http_stop(vx_http *h, double grace_s)
         if (!di || di->num_connections == 0) break;
         usleep(20000);
     }
-    if (h->timer_started) pthread_join(h->timer, NULL);
     __atomic_store_n(&h->sweep_stop, 1, __ATOMIC_RELEASE);
     if (h->sweeper_started) pthread_join(h->sweeper, NULL);
     MHD_stop_daemon(h->mhd);
+    vx_wait_free(h->wait);
     pthread_mutex_destroy(&h->clock);
-    pthread_mutex_destroy(&h->wlock);
-    pthread_cond_destroy(&h->wcond);
     free(h);
 }
