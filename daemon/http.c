@@ -179,67 +179,77 @@ static int send_json(struct MHD_Connection *c, req *r, unsigned status, cJSON *d
     return send_text(c, r, status, text, "application/json", h1, v1);
 }
 
-static int send_error_h(struct MHD_Connection *c, req *r, unsigned status, const char *code,
-                        const char *message, const char *h1, const char *v1)
+/* How an error is answered: the status, at most one extra header (value
+ * NULL: the request's Allow) and the code the body carries instead of the
+ * error's own (NULL: its own). */
+typedef struct answer {
+    unsigned status;
+    const char *header, *value, *code;
+} answer;
+
+/* The one mapping from error kinds to HTTP answers. */
+static answer err_answer(const vx_err *e)
 {
-    char scrubbed[600];
-    snprintf(scrubbed, sizeof scrubbed, "%s", message);
-    vx_scrub_path(scrubbed, g_data_dir);
-    cJSON *doc = cJSON_CreateObject();
-    cJSON *e = cJSON_AddObjectToObject(doc, "error");
-    char clean[512];
-    cJSON_AddStringToObject(e, "code", code);
-    /* Messages may quote what the client sent: never echo bytes that are
-     * not UTF-8 (the body would not be valid JSON text). */
-    cJSON_AddStringToObject(e, "message", vx_req_utf8_sanitize(scrubbed, clean, sizeof clean));
-    if (status >= 500) VX_ERROR("http.error", "status=%u code=%s", status, code);
-    return send_json(c, r, status, doc, h1, v1);
+    static const answer by_kind[VX_EKIND_COUNT] = {
+        [VX_EOK] = {500},
+        [VX_EINVAL] = {400},
+        [VX_EUNPROC] = {422},
+        [VX_ETOOBIG] = {413},
+        [VX_ENOTFOUND] = {404},
+        [VX_ECONFLICT] = {409},
+        [VX_EMEDIA] = {415},
+        [VX_EBUSY] = {429, MHD_HTTP_HEADER_RETRY_AFTER, "2"},
+        [VX_ECANCELED] = {409},
+        [VX_ETIMEOUT] = {504},
+        [VX_EGPU] = {500},
+        [VX_EIO] = {500},
+        [VX_EINTERNAL] = {500},
+        [VX_ENOSPC] = {507, NULL, NULL, "insufficient_storage"},
+        [VX_EGONE] = {410},
+        [VX_EUNAVAIL] = {503, MHD_HTTP_HEADER_RETRY_AFTER, "5"},
+        [VX_EOVERLOAD] = {503, MHD_HTTP_HEADER_RETRY_AFTER, "2"},
+        [VX_EAUTH] = {401, MHD_HTTP_HEADER_WWW_AUTHENTICATE, "Bearer realm=\"voxeld\""},
+        [VX_EMETHOD] = {405, MHD_HTTP_HEADER_ALLOW, NULL},
+        [VX_ELENGTH] = {411},
+        [VX_EHEADER] = {431},
+        [VX_ENOTIMPL] = {501},
+    };
+    if ((unsigned)e->kind < VX_EKIND_COUNT) return by_kind[e->kind];
+    return by_kind[VX_EOK];
 }
 
-static int send_error(struct MHD_Connection *c, req *r, unsigned status, const char *code,
-                      const char *message)
-{
-    return send_error_h(c, r, status, code, message, NULL, NULL);
-}
-
-/* The one place that maps error kinds to HTTP statuses. */
-static unsigned err_status(const vx_err *e)
-{
-    switch (e->kind) {
-    case VX_EINVAL:
-        return 400;
-    case VX_EUNPROC:
-        return 422;
-    case VX_ETOOBIG:
-        return 413;
-    case VX_ENOTFOUND:
-        return strcmp(e->code, "result_evicted") == 0 ? 410 : 404;
-    case VX_ECONFLICT:
-        return 409;
-    case VX_EMEDIA:
-        return 415;
-    case VX_EBUSY:
-        return strcmp(e->code, "not_ready") == 0 ? 503 : 429;
-    case VX_ECANCELED:
-        return 409;
-    case VX_ETIMEOUT:
-        return 504;
-    case VX_ENOSPC:
-        return 507;
-    default:
-        return 500;
-    }
-}
-
+/* Answers e as a JSON error body: {"error":{"code","message"}}. */
 static int send_err(struct MHD_Connection *c, req *r, const vx_err *e)
 {
-    unsigned st = err_status(e);
-    if (st == 429)
-        return send_error_h(c, r, st, e->code, e->message, MHD_HTTP_HEADER_RETRY_AFTER, "2");
-    if (st == 503)
-        return send_error_h(c, r, st, e->code, e->message, MHD_HTTP_HEADER_RETRY_AFTER, "5");
-    if (st == 507) return send_error(c, r, st, "insufficient_storage", e->message);
-    return send_error(c, r, st, e->code, e->message);
+    answer a = err_answer(e);
+    const char *code = a.code ? a.code : e->code;
+    char scrubbed[600];
+    snprintf(scrubbed, sizeof scrubbed, "%s", e->message);
+    vx_scrub_path(scrubbed, g_data_dir);
+    cJSON *doc = cJSON_CreateObject();
+    cJSON *o = cJSON_AddObjectToObject(doc, "error");
+    char clean[512];
+    cJSON_AddStringToObject(o, "code", code);
+    /* Messages may quote what the client sent: never echo bytes that are
+     * not UTF-8 (the body would not be valid JSON text). */
+    cJSON_AddStringToObject(o, "message", vx_req_utf8_sanitize(scrubbed, clean, sizeof clean));
+    if (a.status >= 500) VX_ERROR("http.error", "status=%u code=%s", a.status, code);
+    return send_json(c, r, a.status, doc, a.header,
+                     a.header && !a.value ? vx_req_route_allow(r->route) : a.value);
+}
+
+/* Answers an error of kind made here (see send_err). */
+static int send_fail(struct MHD_Connection *c, req *r, vx_err_kind kind, const char *code,
+                     const char *fmt, ...) __attribute__((format(printf, 5, 6)));
+static int send_fail(struct MHD_Connection *c, req *r, vx_err_kind kind, const char *code,
+                     const char *fmt, ...)
+{
+    vx_err e;
+    va_list ap;
+    va_start(ap, fmt);
+    vx_err_setv(&e, kind, code, fmt, ap);
+    va_end(ap);
+    return send_err(c, r, &e);
 }
 
 /* ---- helpers ------------------------------------------------------- */
@@ -607,8 +617,8 @@ static int h_mesh(vx_http *h, struct MHD_Connection *c, req *r)
 {
     vx_err err;
     if (!vx_store_valid_mesh_id(r->id))
-        return send_error(c, r, 404, "mesh_not_found",
-                          "no mesh with that id (ids are 64 hex digits)");
+        return send_fail(c, r, VX_ENOTFOUND, "mesh_not_found",
+                         "no mesh with that id (ids are 64 hex digits)");
     if (!strcmp(r->method, "DELETE")) {
         if (vx_store_mesh_delete(h->d.store, r->id, &err)) return send_err(c, r, &err);
         VX_INFO("mesh.deleted", "mesh=%s", r->id);
@@ -627,15 +637,13 @@ static int h_upload_done(vx_http *h, struct MHD_Connection *c, req *r)
 {
     vx_err err;
     vx_err_clear(&err);
-    if (r->too_big) {
-        char msg[128];
-        snprintf(msg, sizeof msg, "the body is larger than the %llu-byte upload limit",
-                 (unsigned long long)h->d.cfg->max_upload_bytes);
-        return send_error(c, r, 413, "too_large", msg);
-    }
+    if (r->too_big)
+        return send_fail(c, r, VX_ETOOBIG, "too_large",
+                         "the body is larger than the %llu-byte upload limit",
+                         (unsigned long long)h->d.cfg->max_upload_bytes);
     if (r->body_err.kind != VX_EOK) return send_err(c, r, &r->body_err);
     if (vx_upload_bytes(r->up) == 0)
-        return send_error(c, r, 422, "obj_no_faces", "the body is empty: no faces");
+        return send_fail(c, r, VX_EUNPROC, "obj_no_faces", "the body is empty: no faces");
     char id[65];
     if (vx_upload_finish(r->up, id, &err)) return send_err(c, r, &err);
     size_t nhead;
@@ -655,22 +663,18 @@ static int h_upload_done(vx_http *h, struct MHD_Connection *c, req *r)
     uint64_t budget = h->d.cfg->max_parse_memory;
     vx_budget_result br = vx_budget_reserve(&parse_budget, cost, budget);
     if (br != VX_BUDGET_OK) {
-        char msg[256];
         VX_INFO("mesh.parse_budget", "format=%s bytes=%llu cost=%llu used=%llu limit=%llu", fname,
                 (unsigned long long)vx_upload_bytes(r->up), (unsigned long long)cost,
                 (unsigned long long)vx_budget_used(&parse_budget), (unsigned long long)budget);
-        if (br == VX_BUDGET_TOO_BIG) {
-            snprintf(msg, sizeof msg,
-                     "parsing this %s upload may take up to %llu bytes of memory, more than the "
-                     "max-parse-memory limit of %llu bytes",
-                     fname, (unsigned long long)cost, (unsigned long long)budget);
-            return send_error(c, r, 413, "parse_too_big", msg);
-        }
-        snprintf(msg, sizeof msg,
-                 "other uploads being parsed hold the memory this %s upload may need (%llu of "
-                 "max-parse-memory's %llu bytes); retry later",
-                 fname, (unsigned long long)cost, (unsigned long long)budget);
-        return send_error_h(c, r, 503, "busy_parsing", msg, MHD_HTTP_HEADER_RETRY_AFTER, "2");
+        if (br == VX_BUDGET_TOO_BIG)
+            return send_fail(c, r, VX_ETOOBIG, "parse_too_big",
+                             "parsing this %s upload may take up to %llu bytes of memory, more "
+                             "than the max-parse-memory limit of %llu bytes",
+                             fname, (unsigned long long)cost, (unsigned long long)budget);
+        return send_fail(c, r, VX_EOVERLOAD, "busy_parsing",
+                         "other uploads being parsed hold the memory this %s upload may need "
+                         "(%llu of max-parse-memory's %llu bytes); retry later",
+                         fname, (unsigned long long)cost, (unsigned long long)budget);
     }
     double t = vx_mono();
     vx_mesh *m = vx_mesh_read_as(vx_upload_path(r->up), fmt, &lim, &err);
@@ -724,13 +728,14 @@ static int answer_job(vx_http *h, struct MHD_Connection *c, req *r, const char *
 static int h_job_post_done(vx_http *h, struct MHD_Connection *c, req *r)
 {
     if (r->too_big)
-        return send_error(c, r, 413, "too_large", "the JSON body is larger than max-json-bytes");
+        return send_fail(c, r, VX_ETOOBIG, "too_large",
+                         "the JSON body is larger than max-json-bytes");
     double wait_s = wait_seconds(h, r);
     char why[128];
     if (vx_req_json_text_ok(r->buf ? r->buf : "", r->len, why, sizeof why))
-        return send_error(c, r, 400, "invalid_json", why);
+        return send_fail(c, r, VX_EINVAL, "invalid_json", "%s", why);
     cJSON *doc = cJSON_ParseWithLength(r->buf ? r->buf : "", r->len);
-    if (!doc) return send_error(c, r, 400, "invalid_json", "the body is not valid JSON");
+    if (!doc) return send_fail(c, r, VX_EINVAL, "invalid_json", "the body is not valid JSON");
     const char *msg = NULL;
     const cJSON *mesh = cJSON_GetObjectItemCaseSensitive(doc, "mesh");
     const cJSON *kind = cJSON_GetObjectItemCaseSensitive(doc, "kind");
@@ -751,7 +756,7 @@ static int h_job_post_done(vx_http *h, struct MHD_Connection *c, req *r)
     }
     if (msg) {
         cJSON_Delete(doc);
-        return send_error(c, r, 400, "invalid_request", msg);
+        return send_fail(c, r, VX_EINVAL, "invalid_request", "%s", msg);
     }
     vx_err err;
     vx_err_clear(&err);
@@ -831,7 +836,7 @@ static int h_result(vx_http *h, struct MHD_Connection *c, req *r)
     struct stat st;
     if (fd < 0 || fstat(fd, &st) != 0) {
         if (fd >= 0) close(fd);
-        return send_error(c, r, 410, "result_evicted", "the result file is gone");
+        return send_fail(c, r, VX_EGONE, "result_evicted", "the result file is gone");
     }
     /* from_fd lets MHD use sendfile(2); it closes fd with the response. */
     struct MHD_Response *resp = MHD_create_response_from_fd64((uint64_t)st.st_size, fd);
@@ -874,17 +879,17 @@ static int check_framing(struct MHD_Connection *c, req *r, const char *version)
     int hosts = 0;
     MHD_get_connection_values(c, MHD_HEADER_KIND, count_host, &hosts);
     if (strcmp(version, MHD_HTTP_VERSION_1_0) != 0 && hosts != 1)
-        return send_error(c, r, 400, "invalid_request",
-                          hosts ? "more than one Host header"
-                                : "an HTTP/1.1 request needs a Host header");
+        return send_fail(c, r, VX_EINVAL, "invalid_request",
+                         hosts ? "more than one Host header"
+                               : "an HTTP/1.1 request needs a Host header");
     const char *te = header(c, MHD_HTTP_HEADER_TRANSFER_ENCODING);
     int coding = vx_req_transfer_encoding(te);
     if (coding < 0)
-        return send_error(c, r, 501, "not_implemented",
-                          "the only transfer coding taken is chunked (no gzip, no lists)");
+        return send_fail(c, r, VX_ENOTIMPL, "not_implemented",
+                         "the only transfer coding taken is chunked (no gzip, no lists)");
     if (coding > 0 && header(c, MHD_HTTP_HEADER_CONTENT_LENGTH))
-        return send_error(c, r, 400, "invalid_request",
-                          "Content-Length and Transfer-Encoding together");
+        return send_fail(c, r, VX_EINVAL, "invalid_request",
+                         "Content-Length and Transfer-Encoding together");
     return -1;
 }
 
@@ -893,40 +898,33 @@ static int first_call(vx_http *h, struct MHD_Connection *c, req *r, const char *
     const union MHD_ConnectionInfo *ci =
         MHD_get_connection_info(c, MHD_CONNECTION_INFO_REQUEST_HEADER_SIZE);
     if (ci && ci->header_size > h->d.cfg->max_header_bytes)
-        return send_error(c, r, 431, "header_too_large",
-                          "the request head is larger than max-header-bytes");
+        return send_fail(c, r, VX_EHEADER, "header_too_large",
+                         "the request head is larger than max-header-bytes");
     int rc = check_framing(c, r, version);
     if (rc >= 0) return rc;
-    if (r->route == VX_R_UNKNOWN) return send_error(c, r, 404, "not_found", "no such route");
+    if (r->route == VX_R_UNKNOWN)
+        return send_fail(c, r, VX_ENOTFOUND, "not_found", "no such route");
     if (!strncmp(vx_req_route_name(r->route), "/v1/", 4) && h->auth.on &&
         !vx_auth_ok(&h->auth, header(c, MHD_HTTP_HEADER_AUTHORIZATION)))
-        return send_error_h(c, r, 401, "unauthorized", "a valid bearer token is required",
-                            MHD_HTTP_HEADER_WWW_AUTHENTICATE, "Bearer realm=\"voxeld\"");
-    if (!vx_req_method_allowed(r->route, r->method)) {
-        char msg[96];
-        snprintf(msg, sizeof msg, "method %s is not allowed here", r->method);
-        return send_error_h(c, r, 405, "method_not_allowed", msg, MHD_HTTP_HEADER_ALLOW,
-                            vx_req_route_allow(r->route));
-    }
+        return send_fail(c, r, VX_EAUTH, "unauthorized", "a valid bearer token is required");
+    if (!vx_req_method_allowed(r->route, r->method))
+        return send_fail(c, r, VX_EMETHOD, "method_not_allowed", "method %s is not allowed here",
+                         r->method);
     vx_req_query_init(&r->q);
     MHD_get_connection_values_n(c, MHD_GET_ARGUMENT_KIND, take_arg, r);
     if (strcmp(r->method, "POST") != 0) return -1; /* no body: answer in dispatch */
     if (h->stopping || !vx_jobs_ready(h->d.jobs))
-        return send_error_h(c, r, 503, "not_ready", "the daemon is not ready",
-                            MHD_HTTP_HEADER_RETRY_AFTER, "5");
-    if (r->qerr[0]) return send_error(c, r, 400, "invalid_request", r->qerr);
+        return send_fail(c, r, VX_EUNAVAIL, "not_ready", "the daemon is not ready");
+    if (r->qerr[0]) return send_fail(c, r, VX_EINVAL, "invalid_request", "%s", r->qerr);
 
     uint64_t nfree;
-    if (!disk_ok(h, &nfree)) {
-        char msg[200];
-        snprintf(
-            msg, sizeof msg,
+    if (!disk_ok(h, &nfree))
+        return send_fail(
+            c, r, VX_ENOSPC, "insufficient_storage",
             "the data dir is full: %llu bytes free, under the %llu-byte floor (--min-free-disk); "
             "reads still work",
             (unsigned long long)(nfree == UINT64_MAX ? 0 : nfree),
             (unsigned long long)h->d.cfg->min_free_disk);
-        return send_error(c, r, 507, "insufficient_storage", msg);
-    }
     char mt[128];
     vx_req_media_type(header(c, MHD_HTTP_HEADER_CONTENT_TYPE), mt, sizeof mt);
     if (r->route == VX_R_MESHES) {
@@ -935,8 +933,8 @@ static int first_call(vx_http *h, struct MHD_Connection *c, req *r, const char *
         r->body = BODY_UPLOAD;
     } else {
         if (strcmp(mt, "application/json") != 0)
-            return send_error(c, r, 415, "unsupported_media_type",
-                              "the body must be application/json");
+            return send_fail(c, r, VX_EMEDIA, "unsupported_media_type",
+                             "the body must be application/json");
         r->body = BODY_JSON;
     }
     const char *cl = header(c, MHD_HTTP_HEADER_CONTENT_LENGTH);
@@ -944,18 +942,16 @@ static int first_call(vx_http *h, struct MHD_Connection *c, req *r, const char *
     uint64_t limit =
         r->route == VX_R_MESHES ? h->d.cfg->max_upload_bytes : h->d.cfg->max_json_bytes;
     if (r->route == VX_R_MESHES && !cl && vx_req_transfer_encoding(te) != 1)
-        return send_error(c, r, 411, "length_required",
-                          "Content-Length or chunked encoding is required");
+        return send_fail(c, r, VX_ELENGTH, "length_required",
+                         "Content-Length or chunked encoding is required");
     if (cl) {
         uint64_t n;
         if (vx_req_parse_length(cl, &n))
-            return send_error(c, r, 400, "invalid_request", "bad Content-Length");
-        if (n > limit) {
-            char msg[128];
-            snprintf(msg, sizeof msg, "the body (%llu bytes) is larger than the %llu-byte limit",
-                     (unsigned long long)n, (unsigned long long)limit);
-            return send_error(c, r, 413, "too_large", msg);
-        }
+            return send_fail(c, r, VX_EINVAL, "invalid_request", "bad Content-Length");
+        if (n > limit)
+            return send_fail(c, r, VX_ETOOBIG, "too_large",
+                             "the body (%llu bytes) is larger than the %llu-byte limit",
+                             (unsigned long long)n, (unsigned long long)limit);
     }
     if (r->body == BODY_UPLOAD) {
         vx_err err;
@@ -1068,13 +1064,13 @@ static enum MHD_Result on_request(void *cls, struct MHD_Connection *c, const cha
     } else if (*data_size) {
         if (take_body(h, r, data, *data_size)) {
             *data_size = 0;
-            return send_error(c, r, 500, "upload_failed", "could not store the body");
+            return send_fail(c, r, VX_EINTERNAL, "upload_failed", "could not store the body");
         }
         *data_size = 0;
         return MHD_YES;
     }
     if (vx_waiter_resumed(&r->w)) return answer_job(h, c, r, r->id, r->post_job ? 202 : 200);
-    if (r->qerr[0]) return send_error(c, r, 400, "invalid_request", r->qerr);
+    if (r->qerr[0]) return send_fail(c, r, VX_EINVAL, "invalid_request", "%s", r->qerr);
     int is_get = !strcmp(r->method, "GET") || !strcmp(r->method, "HEAD");
     switch (r->route) {
     case VX_R_LIVEZ:
@@ -1097,7 +1093,7 @@ static enum MHD_Result on_request(void *cls, struct MHD_Connection *c, const cha
     case VX_R_RESULT_NAME:
         return h_result(h, c, r);
     default:
-        return send_error(c, r, 404, "not_found", "no such route");
+        return send_fail(c, r, VX_ENOTFOUND, "not_found", "no such route");
     }
 }
 
