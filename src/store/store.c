@@ -5,6 +5,7 @@
 #include <string.h>
 #include <unistd.h>
 
+#include "mesh/intake.h"
 #include "store/store_int.h"
 #include "util/fsutil.h"
 #include "util/log.h"
@@ -136,9 +137,7 @@ static void load_one(vx_store *s, const char *id, const char *suffix)
         cJSON_Delete(meta);
         return;
     }
-    const char *ext = strcmp(fmt->valuestring, "draco") == 0 ? "drc"
-                      : strcmp(fmt->valuestring, "bpt") == 0 ? "bpt"
-                                                             : "obj";
+    const char *ext = vx_intake_ext_of_name(fmt->valuestring);
     char mkey[128], mpath[VX_PATH_MAX];
     mesh_data_key(mkey, sizeof mkey, id, ext);
     if (s->ops->stat(s->blob, mkey, NULL, NULL) < 0) {

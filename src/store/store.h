@@ -108,7 +108,7 @@ size_t vx_store_blob_count(vx_store *s);
 int vx_store_result_dir(vx_store *s, const char *jid, char *buf, size_t n, vx_err *err);
 /* Records a finished result dir in the budget (after its files are written). */
 void vx_store_result_added(vx_store *s, const char *jid);
-/* Path of an output file; marks the result used (LRU). -1 with VX_ENOTFOUND
+/* Path of an output file; marks the result used (LRU). -1 with VX_EGONE
  * code result_evicted when the result dir is gone. */
 int vx_store_result_file(vx_store *s, const char *jid, const char *file, char *buf, size_t n,
                          vx_err *err);

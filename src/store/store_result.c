@@ -115,7 +115,7 @@ int vx_store_result_file(vx_store *s, const char *jid, const char *file, char *b
         }
     pthread_mutex_unlock(&s->lock);
     if (!found || s->ops->stat(s->blob, key, NULL, NULL) < 0)
-        return vx_err_set(err, VX_ENOTFOUND, "result_evicted",
+        return vx_err_set(err, VX_EGONE, "result_evicted",
                           "the results of job %s were removed by the results budget", jid);
     /* The mtime of the dir carries the LRU order across restarts. */
     s->ops->touch(s->blob, key);

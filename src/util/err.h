@@ -2,9 +2,10 @@
  *
  * Every fallible function returns 0 / -1 (or a pointer / NULL) and fills a
  * caller-supplied vx_err. The code is a stable machine-readable string that
- * ends up in the HTTP error body; the kind decides the HTTP status, which
- * only daemon/http maps. Functions log where an error is detected; callers
- * propagate silently. */
+ * ends up in the HTTP error body; the kind alone decides the HTTP status,
+ * which only daemon/respond.c maps, and flags refine a kind for callers'
+ * control flow. Neither is ever told from the code. Functions log where an
+ * error is detected; callers propagate silently. */
 #ifndef VX_ERR_H
 #define VX_ERR_H
 
@@ -25,10 +26,31 @@ typedef enum vx_err_kind {
     VX_EIO,       /* file system error (500) */
     VX_EINTERNAL, /* a bug or an allocation failure (500) */
     VX_ENOSPC,    /* the data dir is full or under its free-space floor (507) */
+    /* Appended: job errors are journaled by number. */
+    VX_EGONE,     /* it existed and was removed (410) */
+    VX_EUNAVAIL,  /* the daemon is starting or stopping: retry in seconds (503) */
+    VX_EOVERLOAD, /* a shared budget is spent for now: retry soon (503) */
+    VX_EAUTH,     /* no valid credentials (401) */
+    VX_EMETHOD,   /* the resource does not take the method (405) */
+    VX_ELENGTH,   /* a body whose length is not declared (411) */
+    VX_EHEADER,   /* the request head is over its limit (431) */
+    VX_ENOTIMPL,  /* a protocol feature that is not implemented (501) */
+    VX_EKIND_COUNT
 } vx_err_kind;
+
+/* Flags refine a kind for the caller's control flow; never the status. */
+enum {
+    /* VX_ECANCELED by the daemon's shutdown, not by a client: the job goes
+     * back to the queue. */
+    VX_EF_SHUTDOWN = 1u << 0,
+    /* The method chosen cannot handle this input and another may (scan's
+     * crossing counters overflowed: peel counts per layer). */
+    VX_EF_OTHER_METHOD = 1u << 1,
+};
 
 typedef struct vx_err {
     vx_err_kind kind;
+    unsigned flags;    /* VX_EF_*, 0 unless the setter says */
     char code[48];     /* e.g. "obj_index_out_of_range" */
     char message[512]; /* human readable, names the line/parameter */
 } vx_err;
@@ -36,7 +58,12 @@ typedef struct vx_err {
 /* Fills err (may be NULL) and returns -1, so callers can `return vx_err_set(...)`. */
 int vx_err_set(vx_err *err, vx_err_kind kind, const char *code, const char *fmt, ...)
     __attribute__((format(printf, 4, 5)));
+/* vx_err_set with flags (VX_EF_*). */
+int vx_err_set_flagged(vx_err *err, vx_err_kind kind, unsigned flags, const char *code,
+                       const char *fmt, ...) __attribute__((format(printf, 5, 6)));
 int vx_err_setv(vx_err *err, vx_err_kind kind, const char *code, const char *fmt, va_list ap);
+/* 1 when err (may be NULL) carries every flag of flags. */
+int vx_err_has(const vx_err *err, unsigned flags);
 /* Resets err to VX_EOK. */
 void vx_err_clear(vx_err *err);
 /* VX_ENOSPC for ENOSPC / EDQUOT, else VX_EIO: the kind of a failed write. */

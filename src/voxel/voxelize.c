@@ -69,7 +69,7 @@ int vx_voxelize(vx_gl *gl, const vx_mesh *m, const vx_voxelize_desc *d, vx_bitgr
         int rc = vx_voxelize_scan(gl, m, &dd, out, st, err);
         /* A ray with more coincident crossings in one voxel than the
          * counters hold: peel counts them per layer. */
-        if (rc && d->method == VX_METHOD_AUTO && !strcmp(err->code, "too_many_crossings")) {
+        if (rc && d->method == VX_METHOD_AUTO && vx_err_has(err, VX_EF_OTHER_METHOD)) {
             memset(err, 0, sizeof *err);
             rc = vx_voxelize_peel(gl, m, &dd, out, st, err);
         }

@@ -565,6 +565,7 @@ static void test_overflow(void **state)
     vx_err err = {0};
     assert_int_equal(vx_voxelize_scan(vx_test_gl, m, &d, &b, &st, &err), -1);
     assert_string_equal(err.code, "too_many_crossings");
+    assert_true(vx_err_has(&err, VX_EF_OTHER_METHOD)); /* what auto falls back on */
     assert_null(b.bits);
     memset(&err, 0, sizeof err);
     d.max_layers = 4;

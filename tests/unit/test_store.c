@@ -159,6 +159,7 @@ static void test_results_budget(void **state)
     assert_int_equal(vx_store_results_bytes(s), 2000);
     assert_int_equal(vx_store_result_file(s, "bbbb", "out.bin", p, sizeof p, &err), -1);
     assert_string_equal(err.code, "result_evicted");
+    assert_int_equal(err.kind, VX_EGONE); /* 410, not 404 */
     assert_int_equal(vx_store_result_file(s, "aaaa", "out.bin", p, sizeof p, &err), 0);
     assert_int_equal(vx_store_result_file(s, "cccc", "out.bin", p, sizeof p, &err), 0);
     vx_store_close(s);

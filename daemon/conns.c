@@ -1,0 +1,378 @@
+/* Slow clients (issue #10): every connection, from accept to close.
+ *
+ * libmicrohttpd 0.9.75's connection timeout only measures inactivity, so a
+ * head sent a byte a second would hold its slot forever. Every connection is tracked from accept
+ * (NOTIFY_CONNECTION) in one of four phases: HEAD (the request head is arriving: from accept, or
+ * from the first byte after the previous answer), BODY (the access handler
+ * has the head and a body is arriving), BUSY (we are answering, or the
+ * request is held by ?wait) and IDLE (keep-alive, no byte since the last
+ * answer). A sweeper thread, every 100 ms:
+ *   - answers a HEAD older than --header-timeout, and a BODY whose rate over
+ *     a 2 s window (after a 2 s grace) is under --min-body-rate, with a
+ *     canned JSON 408 written straight to the socket. libmicrohttpd only
+ *     reads in those phases, and the handler's phase changes and the
+ *     sweeper's writes share one lock (a killed connection never gets a
+ *     response queued), so the two never write at once. The socket is then
+ *     shut for writing, and for reading half a second later: libmicrohttpd
+ *     reads EOF and closes it, and the client has had time to read the 408
+ *     before the close resets the connection. Neither deadline is applied
+ *     while bytes wait unread in the kernel: then libmicrohttpd's thread is
+ *     busy (a handler parsing a large mesh), not the client slow.
+ *   - keeps headroom: when the open connections reach 90% of
+ *     --max-connections, it closes the oldest HEAD (with a 408) and IDLE
+ *     connections until they are down to 80%. A client that sends its head
+ *     at once is BUSY within a millisecond and is never a victim, so
+ *     however many addresses drip heads, a fresh client finds a slot (or
+ *     waits in the listen backlog, ahead of the victims' reconnections,
+ *     for at most one sweep) and is served.
+ * A request line longer than --max-uri-bytes gets a JSON 414 the same way
+ * (from the URI log callback, in the connection's own thread), and a head
+ * larger than --max-header-bytes a JSON 431 from the access handler. What
+ * libmicrohttpd still answers itself, with its own HTML body, is listed in
+ * the README (Limits) and api/openapi.yaml: a request line or head too long
+ * for the connection's 256 KiB buffer (414, 431), a malformed header line
+ * or Content-Length (400), a chunk size over 64 bits (413), a bad chunk
+ * (400) and HTTP versions other than 1.x (505). */
+#include "conns.h"
+
+#include <netinet/in.h>
+#include <netinet/tcp.h>
+#include <pthread.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/ioctl.h>
+#include <sys/socket.h>
+#include <unistd.h>
+
+#include "metrics.h"
+#include "request.h"
+#include "util/fsutil.h"
+#include "util/log.h"
+
+/* The phases of a connection (see the top of the file). */
+typedef enum cphase { P_HEAD, P_BODY, P_BUSY, P_IDLE } cphase;
+
+/* One open connection, from accept to close; all fields under vx_conns.lock. */
+struct vx_conn {
+    struct vx_conn *prev, *next;
+    int fd;
+    cphase phase;
+    double t_phase;      /* monotonic: when the phase began */
+    uint64_t body_bytes; /* BODY: received so far */
+    int win_started;     /* BODY: the rate window is running */
+    double win_t0;
+    uint64_t win_bytes;
+    int killed;      /* answered (or closed) by us behind libmicrohttpd's back */
+    int kill_status; /* the status we wrote, 0 for none */
+    int rd_closed;   /* shutdown(SHUT_RD) done */
+    double t_killed;
+};
+
+struct vx_conns {
+    const vx_config *cfg;
+    pthread_mutex_t lock;
+    vx_conn *list;
+    size_t n;
+    pthread_t sweeper;
+    int sweeper_started;
+    int stop;
+};
+
+#define BODY_GRACE_S 2.0  /* a body is not rated before this */
+#define BODY_WINDOW_S 2.0 /* then each window must carry min_body_rate * window */
+#define KILL_LINGER_S 0.5 /* between our answer and closing the read side */
+#define SWEEP_US 100000
+#define EVICT_MIN_AGE_S 0.25 /* a head or idle time this young is nobody's attack */
+
+vx_conn *vx_conns_of(struct MHD_Connection *c)
+{
+    const union MHD_ConnectionInfo *ci =
+        MHD_get_connection_info(c, MHD_CONNECTION_INFO_SOCKET_CONTEXT);
+    return ci ? ci->socket_context : NULL;
+}
+
+/* Answers a connection behind libmicrohttpd's back: writes a canned JSON
+ * error (status 0: none), shuts the socket for writing, and for reading
+ * too when rd (else the sweeper does it after KILL_LINGER_S; libmicrohttpd
+ * then reads EOF and closes it). Only while libmicrohttpd is reading the
+ * socket, with s->lock held. Returns the bytes written. */
+static size_t kill_conn(vx_conn *vc, int status, const char *code, const char *message, int rd)
+{
+    char body[256], msg[512];
+    int n = 0;
+    if (status) {
+        int bn = snprintf(body, sizeof body, "{\"error\":{\"code\":\"%s\",\"message\":\"%s\"}}",
+                          code, message);
+        n = snprintf(
+            msg, sizeof msg,
+            "HTTP/1.1 %d %s\r\nContent-Type: application/json\r\nCache-Control: no-store\r\n"
+            "Connection: close\r\nContent-Length: %d\r\n\r\n%s",
+            status, status == 408 ? "Request Timeout" : "URI Too Long", bn, body);
+        if (send(vc->fd, msg, (size_t)n, MSG_NOSIGNAL | MSG_DONTWAIT) < 0) n = 0;
+    }
+    shutdown(vc->fd, rd ? SHUT_RDWR : SHUT_WR);
+    vc->killed = 1;
+    vc->kill_status = status;
+    vc->rd_closed = rd;
+    vc->t_killed = vx_mono();
+    return (size_t)n;
+}
+
+/* Logs and counts an answer given by kill_conn before the head was read
+ * (no request, so on_completed never sees it). */
+static void note_head_kill(int status, double dt, size_t bytes, const char *why)
+{
+    vx_metrics_request(vx_req_route_name(VX_R_UNKNOWN), "other", status, dt, 0, bytes);
+    VX_INFO("http.request",
+            "method=- route=unmatched status=%d ms=%.2f bytes_in=0 bytes_out=%zu reason=%s", status,
+            dt * 1e3, bytes, why);
+}
+
+void vx_conns_notify(void *cls, struct MHD_Connection *c, void **socket_context,
+                     enum MHD_ConnectionNotificationCode code)
+{
+    vx_conns *s = cls;
+    if (code == MHD_CONNECTION_NOTIFY_STARTED) {
+        const union MHD_ConnectionInfo *ci =
+            MHD_get_connection_info(c, MHD_CONNECTION_INFO_CONNECTION_FD);
+        vx_conn *vc = ci ? calloc(1, sizeof *vc) : NULL;
+        if (!vc) return; /* untracked: only libmicrohttpd's timeouts apply */
+        vc->fd = ci->connect_fd;
+        vc->phase = P_HEAD;
+        vc->t_phase = vx_mono();
+        pthread_mutex_lock(&s->lock);
+        vc->next = s->list;
+        if (s->list) s->list->prev = vc;
+        s->list = vc;
+        s->n++;
+        pthread_mutex_unlock(&s->lock);
+        *socket_context = vc;
+        return;
+    }
+    vx_conn *vc = *socket_context;
+    if (!vc) return;
+    pthread_mutex_lock(&s->lock);
+    if (vc->prev)
+        vc->prev->next = vc->next;
+    else
+        s->list = vc->next;
+    if (vc->next) vc->next->prev = vc->prev;
+    s->n--;
+    pthread_mutex_unlock(&s->lock);
+    free(vc);
+    *socket_context = NULL;
+}
+
+/* URI log callback: runs when the request line is in, before the headers. */
+void *vx_conns_on_uri(void *cls, const char *uri, struct MHD_Connection *c)
+{
+    vx_conns *s = cls;
+    vx_conn *vc;
+    if (strlen(uri) <= s->cfg->max_uri_bytes || !(vc = vx_conns_of(c))) return NULL;
+    pthread_mutex_lock(&s->lock);
+    size_t n = vc->killed ? 0
+                          : kill_conn(vc, 414, "uri_too_long",
+                                      "the request target is longer than max-uri-bytes", 0);
+    double dt = vx_mono() - vc->t_phase;
+    pthread_mutex_unlock(&s->lock);
+    if (n) note_head_kill(414, dt, n, "uri_too_long");
+    return NULL;
+}
+
+/* 1 when bytes wait in the kernel that libmicrohttpd has not read yet: its
+ * thread is busy (a long handler), so a slow head or body is not the
+ * client's doing and is not held against it. */
+static int unread(const vx_conn *vc)
+{
+    int n = 0;
+    return ioctl(vc->fd, FIONREAD, &n) == 0 && n > 0;
+}
+
+static int by_phase_time(const void *a, const void *b)
+{
+    double x = (*(vx_conn *const *)a)->t_phase, y = (*(vx_conn *const *)b)->t_phase;
+    return x < y ? -1 : x > y;
+}
+
+/* One pass of the sweeper, with s->lock held. */
+static void sweep(vx_conns *s, vx_conn **cand)
+{
+    const vx_config *cfg = s->cfg;
+    double now = vx_mono();
+    size_t live = 0, ncand = 0;
+    for (vx_conn *vc = s->list; vc; vc = vc->next) {
+        if (vc->killed) {
+            if (!vc->rd_closed && now - vc->t_killed >= KILL_LINGER_S) {
+                shutdown(vc->fd, SHUT_RD);
+                vc->rd_closed = 1;
+            }
+            continue;
+        }
+        if (vc->phase == P_IDLE) {
+            /* Has a byte of the next request come in since the answer? The
+             * kernel knows when data last arrived; libmicrohttpd has
+             * already read it into its buffer. */
+            struct tcp_info ti;
+            socklen_t tl = sizeof ti;
+            if (getsockopt(vc->fd, IPPROTO_TCP, TCP_INFO, &ti, &tl) == 0) {
+                double last = now - ti.tcpi_last_data_recv / 1000.0;
+                if (last > vc->t_phase + 0.02) {
+                    vc->phase = P_HEAD;
+                    vc->t_phase = last;
+                }
+            }
+        }
+        if (vc->phase == P_HEAD && cfg->header_timeout_s > 0 &&
+            now - vc->t_phase > cfg->header_timeout_s && !unread(vc)) {
+            char m[96];
+            snprintf(m, sizeof m, "the request head did not arrive within %g s",
+                     cfg->header_timeout_s);
+            size_t n = kill_conn(vc, 408, "request_timeout", m, 0);
+            note_head_kill(408, now - vc->t_phase, n, "header_timeout");
+            continue;
+        }
+        if (vc->phase == P_BODY && cfg->min_body_rate && now - vc->t_phase >= BODY_GRACE_S) {
+            if (!vc->win_started) {
+                vc->win_started = 1;
+                vc->win_t0 = now;
+                vc->win_bytes = vc->body_bytes;
+            } else if (now - vc->win_t0 >= BODY_WINDOW_S) {
+                double rate = (double)(vc->body_bytes - vc->win_bytes) / (now - vc->win_t0);
+                if (rate < (double)cfg->min_body_rate && !unread(vc)) {
+                    char m[96];
+                    snprintf(m, sizeof m, "the body arrived slower than %llu bytes/s",
+                             (unsigned long long)cfg->min_body_rate);
+                    kill_conn(vc, 408, "request_timeout", m, 0); /* on_completed logs it */
+                    continue;
+                }
+                vc->win_t0 = now;
+                vc->win_bytes = vc->body_bytes;
+            }
+        }
+        live++;
+        if ((vc->phase == P_HEAD || vc->phase == P_IDLE) && cand) cand[ncand++] = vc;
+    }
+    /* Headroom: from 90% of the connections down to 80%, oldest first. */
+    size_t max = (size_t)cfg->max_connections;
+    size_t high = max >= 10 ? max - max / 10 : max, low = max >= 10 ? max - max / 5 : max - 1;
+    if (live < high || !cand) return;
+    qsort(cand, ncand, sizeof *cand, by_phase_time);
+    for (size_t i = 0; i < ncand && live > low; i++) {
+        vx_conn *vc = cand[i];
+        if (now - vc->t_phase < EVICT_MIN_AGE_S || unread(vc)) continue;
+        live--;
+        if (vc->phase == P_HEAD) {
+            size_t n = kill_conn(vc, 408, "request_timeout",
+                                 "the server is busy and the request head was not complete", 1);
+            note_head_kill(408, now - vc->t_phase, n, "evicted");
+        } else {
+            kill_conn(vc, 0, NULL, NULL, 1);
+        }
+    }
+    for (vx_conn *vc = s->list; vc; vc = vc->next) /* free the victims' slots now */
+        if (vc->killed && !vc->rd_closed) {
+            shutdown(vc->fd, SHUT_RD);
+            vc->rd_closed = 1;
+        }
+}
+
+static void *sweeper_main(void *arg)
+{
+    vx_conns *s = arg;
+    size_t cap = 0;
+    vx_conn **cand = NULL;
+    while (!__atomic_load_n(&s->stop, __ATOMIC_ACQUIRE)) {
+        usleep(SWEEP_US);
+        pthread_mutex_lock(&s->lock);
+        if (s->n > cap) {
+            size_t ncap = s->n * 2;
+            vx_conn **nc = realloc(cand, ncap * sizeof *nc);
+            if (nc) {
+                cand = nc;
+                cap = ncap;
+            }
+        }
+        sweep(s, s->n <= cap ? cand : NULL);
+        pthread_mutex_unlock(&s->lock);
+    }
+    free(cand);
+    return NULL;
+}
+
+vx_conns *vx_conns_start(const vx_config *cfg)
+{
+    vx_conns *s = calloc(1, sizeof *s);
+    if (!s) return NULL;
+    s->cfg = cfg;
+    pthread_mutex_init(&s->lock, NULL);
+    if (pthread_create(&s->sweeper, NULL, sweeper_main, s) == 0) s->sweeper_started = 1;
+    return s;
+}
+
+void vx_conns_stop(vx_conns *s)
+{
+    __atomic_store_n(&s->stop, 1, __ATOMIC_RELEASE);
+    if (s->sweeper_started) pthread_join(s->sweeper, NULL);
+    s->sweeper_started = 0;
+}
+
+void vx_conns_free(vx_conns *s)
+{
+    if (!s) return;
+    vx_conns_stop(s);
+    pthread_mutex_destroy(&s->lock);
+    free(s);
+}
+
+int vx_conns_head_in(vx_conns *s, vx_conn *vc)
+{
+    if (!vc) return 0;
+    pthread_mutex_lock(&s->lock);
+    int dead = vc->killed;
+    vc->phase = P_BUSY;
+    vc->t_phase = vx_mono();
+    pthread_mutex_unlock(&s->lock);
+    return dead;
+}
+
+void vx_conns_body_begins(vx_conns *s, vx_conn *vc)
+{
+    if (!vc) return;
+    pthread_mutex_lock(&s->lock);
+    vc->phase = P_BODY;
+    vc->t_phase = vx_mono();
+    vc->body_bytes = 0;
+    vc->win_started = 0;
+    pthread_mutex_unlock(&s->lock);
+}
+
+int vx_conns_body(vx_conns *s, vx_conn *vc, size_t n)
+{
+    if (!vc) return 0;
+    pthread_mutex_lock(&s->lock);
+    int dead = vc->killed;
+    if (n)
+        vc->body_bytes += n;
+    else if (vc->phase == P_BODY) {
+        vc->phase = P_BUSY;
+        vc->t_phase = vx_mono();
+    }
+    pthread_mutex_unlock(&s->lock);
+    return dead;
+}
+
+int vx_conns_done(vx_conns *s, vx_conn *vc)
+{
+    if (!vc) return 0;
+    int status = 0;
+    pthread_mutex_lock(&s->lock);
+    if (vc->killed)
+        status = vc->kill_status;
+    else { /* keep-alive: the next head starts with its first byte */
+        vc->phase = P_IDLE;
+        vc->t_phase = vx_mono();
+    }
+    pthread_mutex_unlock(&s->lock);
+    return status;
+}

@@ -1,0 +1,48 @@
+/* Connection tracking against slow clients (conns.c, at the top, has the
+ * whole story): every connection from accept to close in one of four
+ * phases (head arriving, body arriving, busy, idle keep-alive) and a
+ * sweeper thread that answers heads and bodies that arrive too slowly with
+ * a JSON 408, and evicts the oldest idle or head-sending connections when
+ * the connection limit comes near. */
+#ifndef VX_CONNS_H
+#define VX_CONNS_H
+
+#include <microhttpd.h>
+#include <stddef.h>
+
+#include "config.h"
+
+typedef struct vx_conns vx_conns;
+typedef struct vx_conn vx_conn;
+
+/* Starts the sweeper for the limits of cfg (kept). Owned; NULL without memory. */
+vx_conns *vx_conns_start(const vx_config *cfg);
+/* Stops the sweeper (before libmicrohttpd stops: it writes to sockets). */
+void vx_conns_stop(vx_conns *s);
+/* Stops the sweeper if running and frees s (after libmicrohttpd has
+ * stopped: its close notifications use s). */
+void vx_conns_free(vx_conns *s);
+/* MHD_OPTION_NOTIFY_CONNECTION callback (cls: the vx_conns): tracks a
+ * connection from accept, forgets it at close. */
+void vx_conns_notify(void *cls, struct MHD_Connection *c, void **socket_context,
+                     enum MHD_ConnectionNotificationCode code);
+/* MHD_OPTION_URI_LOG_CALLBACK (cls: the vx_conns): a request target over
+ * max_uri_bytes gets a JSON 414. Returns NULL (no request context). */
+void *vx_conns_on_uri(void *cls, const char *uri, struct MHD_Connection *c);
+/* The tracked connection of c, or NULL when untracked. */
+vx_conn *vx_conns_of(struct MHD_Connection *c);
+
+/* The functions below take vc NULL (untracked) as a no-op. */
+/* The head is in: vc is busy. 1 when the sweeper has already answered it
+ * (then nothing may be queued on it). */
+int vx_conns_head_in(vx_conns *s, vx_conn *vc);
+/* A body follows: its arrival rate is watched from now. */
+void vx_conns_body_begins(vx_conns *s, vx_conn *vc);
+/* n bytes of the body came (n 0: the body is complete, vc is busy). 1 when
+ * the sweeper has answered vc (drain, never queue). */
+int vx_conns_body(vx_conns *s, vx_conn *vc, size_t n);
+/* The request is over: vc idles until the next head. Returns the status the
+ * sweeper answered vc with, 0 when it did not. */
+int vx_conns_done(vx_conns *s, vx_conn *vc);
+
+#endif

@@ -1,0 +1,122 @@
+/* What the files of the HTTP layer share (private to daemon/): the request
+ * and server state, the responses (respond.c) and the route handlers
+ * (routes_*.c). http.c has the libmicrohttpd plumbing and the request
+ * lifecycle. Each handler answers one request: it queues a response and
+ * returns the MHD result, or holds the request (?wait) and returns MHD_YES. */
+#ifndef VX_HTTP_INT_H
+#define VX_HTTP_INT_H
+
+#include <microhttpd.h>
+#include <stdint.h>
+
+#include "auth.h"
+#include "conns.h"
+#include "http.h"
+#include "mesh/intake.h"
+#include "request.h"
+#include "wait.h"
+
+typedef enum body_kind { BODY_NONE, BODY_UPLOAD, BODY_JSON } body_kind;
+
+/* One request, from its head to its completion. */
+typedef struct req {
+    vx_route route;
+    char method[12];
+    char id[VX_REQ_ID_MAX], name[VX_REQ_ID_MAX];
+    vx_conn *vc;
+    vx_req_query q;
+    char qerr[160]; /* a bad query parameter, answered 400 */
+    double t0;
+    int status;
+    uint64_t bytes_in, bytes_out;
+    body_kind body;
+    /* uploads */
+    vx_upload *up;
+    vx_intake_media declared;
+    int too_big;
+    vx_err body_err; /* storing the body failed (full disk): answered at the end */
+    /* JSON bodies */
+    char *buf;
+    size_t len, cap;
+    /* ?wait */
+    vx_waiter w;
+    int post_job; /* the held request was POST /v1/jobs */
+    int answered;
+} req;
+
+struct vx_http {
+    vx_http_desc d;
+    struct MHD_Daemon *mhd;
+    int port;
+    vx_auth auth;
+    vx_wait *wait;
+    vx_conns *conns;
+    int stopping;
+};
+
+/* ---- respond.c ---- */
+/* How an error is answered: the status, at most one extra header (value
+ * NULL: the request route's Allow) and the code the body carries instead of
+ * the error's own (NULL: its own). */
+typedef struct vx_resp_answer {
+    unsigned status;
+    const char *header, *value, *code;
+} vx_resp_answer;
+
+/* The data dir, scrubbed from every error message (clients never see
+ * server paths). Called once, before serving. */
+void vx_resp_init(const char *data_dir);
+/* The one mapping from error kinds to HTTP answers. */
+vx_resp_answer vx_resp_answer_of(const vx_err *e);
+/* Value of request header name, or NULL. */
+const char *vx_resp_header(struct MHD_Connection *c, const char *name);
+/* Queues resp (taken, may be NULL: MHD_NO) as r's answer. */
+int vx_resp_queue(struct MHD_Connection *c, req *r, unsigned status, struct MHD_Response *resp,
+                  uint64_t body_bytes);
+/* Answers text (owned, NULL: empty) as ctype, no-store, with one optional
+ * header h1: v1. */
+int vx_resp_text(struct MHD_Connection *c, req *r, unsigned status, char *text, const char *ctype,
+                 const char *h1, const char *v1);
+/* Answers a JSON document (owned). */
+int vx_resp_json(struct MHD_Connection *c, req *r, unsigned status, cJSON *doc, const char *h1,
+                 const char *v1);
+/* Answers e as {"error":{"code","message"}} through vx_resp_answer_of. */
+int vx_resp_err(struct MHD_Connection *c, req *r, const vx_err *e);
+/* Answers an error made here: vx_err_set + vx_resp_err. */
+int vx_resp_fail(struct MHD_Connection *c, req *r, vx_err_kind kind, const char *code,
+                 const char *fmt, ...) __attribute__((format(printf, 5, 6)));
+
+/* ---- routes_misc.c: probes, metrics, info, disk space ---- */
+/* Free bytes of the data dir's file system (UINT64_MAX when unknown). */
+uint64_t vx_route_disk_free(vx_http *h);
+/* 1 when the data dir has room for writes: free space at or above the
+ * floor (with a floor of 0, any free byte); the free bytes in *free_bytes. */
+int vx_route_disk_ok(vx_http *h, uint64_t *free_bytes);
+/* GET /livez, /readyz, /metrics, /v1/info. */
+int vx_route_livez(vx_http *h, struct MHD_Connection *c, req *r);
+int vx_route_readyz(vx_http *h, struct MHD_Connection *c, req *r);
+int vx_route_metrics(vx_http *h, struct MHD_Connection *c, req *r);
+int vx_route_info(vx_http *h, struct MHD_Connection *c, req *r);
+
+/* ---- routes_meshes.c ---- */
+/* GET /v1/meshes. */
+int vx_route_mesh_list(vx_http *h, struct MHD_Connection *c, req *r);
+/* GET, DELETE /v1/meshes/{id}. */
+int vx_route_mesh(vx_http *h, struct MHD_Connection *c, req *r);
+/* POST /v1/meshes once the body is streamed to the store: validate, parse
+ * under the parse-memory budget, store. */
+int vx_route_upload(vx_http *h, struct MHD_Connection *c, req *r);
+
+/* ---- routes_jobs.c ---- */
+/* POST /v1/jobs once the JSON body is in (may hold it for ?wait). */
+int vx_route_job_post(vx_http *h, struct MHD_Connection *c, req *r);
+/* GET /v1/jobs. */
+int vx_route_job_list(vx_http *h, struct MHD_Connection *c, req *r);
+/* GET (may hold it for ?wait), DELETE /v1/jobs/{id}. */
+int vx_route_job(vx_http *h, struct MHD_Connection *c, req *r);
+/* A held request, resumed: answers the job as it is now. */
+int vx_route_job_resumed(vx_http *h, struct MHD_Connection *c, req *r);
+/* GET /v1/jobs/{id}/result[/{name}]. */
+int vx_route_result(vx_http *h, struct MHD_Connection *c, req *r);
+
+#endif

@@ -1,0 +1,121 @@
+/* Responses: JSON and text bodies, and the one mapping from error kinds to
+ * HTTP answers (status, header, code), so that every error body is made
+ * the same way: {"error":{"code","message"}}, its message scrubbed of the
+ * data dir and sanitized to UTF-8. */
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "http_int.h"
+#include "util/fsutil.h"
+#include "util/log.h"
+
+static const char *g_data_dir;
+
+void vx_resp_init(const char *data_dir)
+{
+    g_data_dir = data_dir;
+}
+
+const char *vx_resp_header(struct MHD_Connection *c, const char *name)
+{
+    return MHD_lookup_connection_value(c, MHD_HEADER_KIND, name);
+}
+
+int vx_resp_queue(struct MHD_Connection *c, req *r, unsigned status, struct MHD_Response *resp,
+                  uint64_t body_bytes)
+{
+    if (!resp) return MHD_NO;
+    r->status = (int)status;
+    r->bytes_out = body_bytes;
+    r->answered = 1;
+    int rc = MHD_queue_response(c, status, resp);
+    MHD_destroy_response(resp);
+    return rc;
+}
+
+int vx_resp_text(struct MHD_Connection *c, req *r, unsigned status, char *text, const char *ctype,
+                 const char *h1, const char *v1)
+{
+    size_t n = text ? strlen(text) : 0;
+    struct MHD_Response *resp = MHD_create_response_from_buffer(
+        n, text ? text : (void *)"", text ? MHD_RESPMEM_MUST_FREE : MHD_RESPMEM_PERSISTENT);
+    if (!resp) {
+        free(text);
+        return MHD_NO;
+    }
+    MHD_add_response_header(resp, MHD_HTTP_HEADER_CONTENT_TYPE, ctype);
+    MHD_add_response_header(resp, MHD_HTTP_HEADER_CACHE_CONTROL, "no-store");
+    if (h1 && v1) MHD_add_response_header(resp, h1, v1);
+    return vx_resp_queue(c, r, status, resp, n);
+}
+
+int vx_resp_json(struct MHD_Connection *c, req *r, unsigned status, cJSON *doc, const char *h1,
+                 const char *v1)
+{
+    char *text = doc ? cJSON_PrintUnformatted(doc) : NULL;
+    cJSON_Delete(doc);
+    if (!text) text = strdup("{\"error\":{\"code\":\"internal\",\"message\":\"out of memory\"}}");
+    return vx_resp_text(c, r, status, text, "application/json", h1, v1);
+}
+
+vx_resp_answer vx_resp_answer_of(const vx_err *e)
+{
+    static const vx_resp_answer by_kind[VX_EKIND_COUNT] = {
+        [VX_EOK] = {500},
+        [VX_EINVAL] = {400},
+        [VX_EUNPROC] = {422},
+        [VX_ETOOBIG] = {413},
+        [VX_ENOTFOUND] = {404},
+        [VX_ECONFLICT] = {409},
+        [VX_EMEDIA] = {415},
+        [VX_EBUSY] = {429, MHD_HTTP_HEADER_RETRY_AFTER, "2"},
+        [VX_ECANCELED] = {409},
+        [VX_ETIMEOUT] = {504},
+        [VX_EGPU] = {500},
+        [VX_EIO] = {500},
+        [VX_EINTERNAL] = {500},
+        [VX_ENOSPC] = {507, NULL, NULL, "insufficient_storage"},
+        [VX_EGONE] = {410},
+        [VX_EUNAVAIL] = {503, MHD_HTTP_HEADER_RETRY_AFTER, "5"},
+        [VX_EOVERLOAD] = {503, MHD_HTTP_HEADER_RETRY_AFTER, "2"},
+        [VX_EAUTH] = {401, MHD_HTTP_HEADER_WWW_AUTHENTICATE, "Bearer realm=\"voxeld\""},
+        [VX_EMETHOD] = {405, MHD_HTTP_HEADER_ALLOW, NULL},
+        [VX_ELENGTH] = {411},
+        [VX_EHEADER] = {431},
+        [VX_ENOTIMPL] = {501},
+    };
+    if ((unsigned)e->kind < VX_EKIND_COUNT) return by_kind[e->kind];
+    return by_kind[VX_EOK];
+}
+
+int vx_resp_err(struct MHD_Connection *c, req *r, const vx_err *e)
+{
+    vx_resp_answer a = vx_resp_answer_of(e);
+    const char *code = a.code ? a.code : e->code;
+    char scrubbed[600];
+    snprintf(scrubbed, sizeof scrubbed, "%s", e->message);
+    vx_scrub_path(scrubbed, g_data_dir);
+    cJSON *doc = cJSON_CreateObject();
+    cJSON *o = cJSON_AddObjectToObject(doc, "error");
+    char clean[512];
+    cJSON_AddStringToObject(o, "code", code);
+    /* Messages may quote what the client sent: never echo bytes that are
+     * not UTF-8 (the body would not be valid JSON text). */
+    cJSON_AddStringToObject(o, "message", vx_req_utf8_sanitize(scrubbed, clean, sizeof clean));
+    if (a.status >= 500) VX_ERROR("http.error", "status=%u code=%s", a.status, code);
+    return vx_resp_json(c, r, a.status, doc, a.header,
+                        a.header && !a.value ? vx_req_route_allow(r->route) : a.value);
+}
+
+int vx_resp_fail(struct MHD_Connection *c, req *r, vx_err_kind kind, const char *code,
+                 const char *fmt, ...)
+{
+    vx_err e;
+    va_list ap;
+    va_start(ap, fmt);
+    vx_err_setv(&e, kind, code, fmt, ap);
+    va_end(ap);
+    return vx_resp_err(c, r, &e);
+}

@@ -1,0 +1,112 @@
+/* Probes (/livez, /readyz), /metrics, /v1/info and the data dir's free
+ * space that /readyz and every write check. */
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "http_int.h"
+#include "metrics.h"
+#include "util/fsutil.h"
+
+uint64_t vx_route_disk_free(vx_http *h)
+{
+    uint64_t b;
+    return vx_disk_free(vx_store_dir(h->d.store), &b) == 0 ? b : UINT64_MAX;
+}
+
+int vx_route_disk_ok(vx_http *h, uint64_t *free_bytes)
+{
+    uint64_t b = vx_route_disk_free(h);
+    if (free_bytes) *free_bytes = b;
+    return h->d.cfg->min_free_disk ? b >= h->d.cfg->min_free_disk : b > 0;
+}
+
+int vx_route_livez(vx_http *h, struct MHD_Connection *c, req *r)
+{
+    (void)h;
+    return vx_resp_text(c, r, 200, strdup("{\"status\":\"ok\"}"), "application/json", NULL, NULL);
+}
+
+int vx_route_readyz(vx_http *h, struct MHD_Connection *c, req *r)
+{
+    int gl = vx_jobs_ready(h->d.jobs);
+    int q = vx_jobs_queue_depth(h->d.jobs) < vx_jobs_queue_capacity(h->d.jobs);
+    int dd = vx_store_writable(h->d.store);
+    int space = vx_route_disk_ok(h, NULL);
+    int ok = gl && q && dd && space && !h->stopping;
+    cJSON *doc = cJSON_CreateObject();
+    cJSON_AddStringToObject(doc, "status", ok ? "ready" : "not_ready");
+    cJSON *chk = cJSON_AddObjectToObject(doc, "checks");
+    cJSON_AddBoolToObject(chk, "gl", gl);
+    cJSON_AddBoolToObject(chk, "queue", q);
+    cJSON_AddBoolToObject(chk, "data_dir", dd);
+    cJSON_AddBoolToObject(chk, "disk_space", space);
+    return vx_resp_json(c, r, ok ? 200 : 503, doc, NULL, NULL);
+}
+
+int vx_route_metrics(vx_http *h, struct MHD_Connection *c, req *r)
+{
+    vx_metrics_gauges g = {
+        .queue_depth = vx_jobs_queue_depth(h->d.jobs),
+        .queue_capacity = vx_jobs_queue_capacity(h->d.jobs),
+        .running = vx_jobs_running(h->d.jobs),
+        .meshes = vx_store_mesh_count(h->d.store),
+        .results_bytes = vx_store_results_bytes(h->d.store),
+        .disk_free_bytes = vx_route_disk_free(h),
+        .min_free_disk = h->d.cfg->min_free_disk,
+        .ready = vx_jobs_ready(h->d.jobs),
+        .gl = vx_jobs_gl_info(h->d.jobs),
+        .start_time = h->d.start_time,
+    };
+    return vx_resp_text(c, r, 200, vx_metrics_render(&g),
+                        "text/plain; version=0.0.4; charset=utf-8", NULL, NULL);
+}
+
+int vx_route_info(vx_http *h, struct MHD_Connection *c, req *r)
+{
+    const vx_config *cfg = h->d.cfg;
+    vx_gl_info gi = vx_jobs_gl_info(h->d.jobs);
+    cJSON *doc = cJSON_CreateObject();
+    cJSON_AddStringToObject(doc, "name", "voxeld");
+    cJSON_AddStringToObject(doc, "version", VX_VERSION);
+    cJSON_AddNumberToObject(doc, "uptime_s", floor((vx_now() - h->d.start_time) * 1000) / 1000);
+    cJSON *gl = cJSON_AddObjectToObject(doc, "gl");
+    cJSON_AddStringToObject(gl, "vendor", gi.vendor);
+    cJSON_AddStringToObject(gl, "renderer", gi.renderer);
+    cJSON_AddStringToObject(gl, "version", gi.version);
+    cJSON_AddStringToObject(gl, "glsl", gi.glsl);
+    cJSON_AddStringToObject(gl, "device_kind", gi.device_kind[0] ? gi.device_kind : "surfaceless");
+    cJSON_AddNumberToObject(gl, "device_index", gi.device_index);
+    cJSON_AddBoolToObject(gl, "robust", gi.robust);
+    cJSON *l = cJSON_AddObjectToObject(doc, "limits");
+    cJSON_AddNumberToObject(l, "max_upload_bytes", (double)cfg->max_upload_bytes);
+    cJSON_AddNumberToObject(l, "max_triangles", (double)cfg->max_triangles);
+    cJSON_AddNumberToObject(l, "max_queued_jobs", (double)cfg->max_queued_jobs);
+    cJSON_AddNumberToObject(l, "job_timeout_s", cfg->job_timeout_s);
+    cJSON_AddNumberToObject(l, "max_wait_s", cfg->request_timeout_s);
+    cJSON_AddNumberToObject(l, "request_timeout_s", cfg->request_timeout_s);
+    cJSON_AddNumberToObject(l, "connection_timeout_s", cfg->connection_timeout_s);
+    cJSON_AddNumberToObject(l, "header_timeout_s", cfg->header_timeout_s);
+    cJSON_AddNumberToObject(l, "min_body_rate", (double)cfg->min_body_rate);
+    cJSON_AddNumberToObject(l, "max_uri_bytes", (double)cfg->max_uri_bytes);
+    cJSON_AddNumberToObject(l, "max_header_bytes", (double)cfg->max_header_bytes);
+    cJSON_AddNumberToObject(l, "max_connections_per_ip", (double)cfg->max_connections_per_ip);
+    cJSON_AddNumberToObject(l, "max_image_pixels", (double)cfg->max_image_pixels);
+    cJSON_AddNumberToObject(l, "max_job_memory_bytes", (double)cfg->max_job_memory);
+    cJSON_AddNumberToObject(l, "max_json_bytes", (double)cfg->max_json_bytes);
+    cJSON_AddNumberToObject(l, "min_free_disk_bytes", (double)cfg->min_free_disk);
+    cJSON_AddNumberToObject(l, "max_parse_memory_bytes", (double)cfg->max_parse_memory);
+    cJSON_AddNumberToObject(l, "results_max_bytes", (double)cfg->results_max_bytes);
+    cJSON_AddNumberToObject(l, "results_max_age_s", cfg->results_max_age_s);
+    cJSON_AddNumberToObject(l, "job_history", (double)cfg->job_history);
+    cJSON_AddNumberToObject(l, "job_history_bytes", (double)cfg->job_history_bytes);
+    cJSON *kinds = cJSON_AddArrayToObject(doc, "kinds");
+    for (size_t i = 0; i < vx_kind_count(); i++) {
+        cJSON *k = cJSON_CreateObject();
+        cJSON_AddStringToObject(k, "name", vx_kind_at(i)->name);
+        cJSON_AddStringToObject(k, "summary", vx_kind_at(i)->summary);
+        cJSON_AddItemToArray(kinds, k);
+    }
+    cJSON_AddBoolToObject(doc, "auth", h->auth.on);
+    return vx_resp_json(c, r, 200, doc, NULL, NULL);
+}
