@@ -19,8 +19,9 @@ For each record the path (query stripped) is matched to one path template of
 the spec (a {param} matches one non-empty segment; literal segments win over
 templated ones), the method to an operation and the status to a response
 (exact code, then "NXX", then "default"). 405 is accepted for any method a
-known path does not have (checked against components.responses.MethodNotAllowed);
-unknown paths must answer 404 with an Error body. Then: the Content-Type must
+known path does not have (checked against the 405 of the top-level extension
+`x-general-responses`, the answers no operation lists); unknown paths must
+answer 404, checked against its 404 (an Error body when it has none). Then: the Content-Type must
 be one the response declares (media type only); a response without content
 must have an empty body; a JSON body is validated (JSON Schema 2020-12) against
 the response schema with $refs resolved in the whole spec; required response
@@ -362,7 +363,11 @@ class Checker:
             if status != 404:
                 self.fail(where, "unknown path answered %d, expected 404" % status)
                 return
-            self.check_error_body(where, method, ct, body)
+            gen = self.general_response(404)
+            if gen is None or method == "HEAD" or body is None:
+                self.check_error_body(where, method, ct, body)
+            else:
+                self.check_response(where, method, None, gen[0], gen[1], ct, headers, body, {})
             return
         template, params = m
         item, item_ptr = deref(self.spec, self.paths[template], ptr_join("/paths", template))
@@ -377,12 +382,11 @@ class Checker:
                 self.fail(where, "%s is not an operation of %s (only 405 is allowed), got %d"
                           % (method, template, status))
                 return
-            resp_ptr = "/components/responses/MethodNotAllowed"
-            try:
-                resp, resp_ptr = deref(self.spec, ptr_get(self.spec, resp_ptr), resp_ptr)
-            except KeyError:
+            gen = self.general_response(405)
+            if gen is None:
                 self.check_error_body(where, method, ct, body)
                 return
+            resp, resp_ptr = gen
             self.check_response(where, method, None, resp, resp_ptr, ct, headers, body, params)
             if headers is not None and "allow" in headers:
                 allowed = {a.strip().upper() for a in headers["allow"].split(",") if a.strip()}
@@ -408,6 +412,14 @@ class Checker:
         resp_ptr = ptr_join(op_ptr, "responses", key)
         resp, resp_ptr = deref(self.spec, responses[key], resp_ptr)
         self.check_response(where, method, op, resp, resp_ptr, ct, headers, body, params)
+
+    def general_response(self, status):
+        """(response, pointer) of x-general-responses[status], or None."""
+        ptr = ptr_join("/x-general-responses", str(status))
+        try:
+            return deref(self.spec, ptr_get(self.spec, ptr), ptr)
+        except KeyError:
+            return None
 
     def check_error_body(self, where, method, ct, body):
         if method == "HEAD" or body is None:
@@ -818,8 +830,24 @@ def lint(spec_path):
         for mt, media in (r.get("content") or {}).items():
             check_media(media, ptr_join("/components/responses", name, "content", mt),
                         "response %s %s" % (name, mt), mt)
-    if "MethodNotAllowed" not in (comps.get("responses") or {}):
-        problem("components.responses.MethodNotAllowed is missing (the checker uses it for 405)")
+    general = spec.get("x-general-responses")
+    if not isinstance(general, dict):
+        problem("x-general-responses is missing (the checker uses its 404 and 405)")
+        general = {}
+    for code in ("404", "405"):
+        if code not in general:
+            problem("x-general-responses.%s is missing (the checker uses it)" % code)
+    for code, r in general.items():
+        where = "x-general-responses.%s" % code
+        r, r_ptr = deref(spec, r, ptr_join("/x-general-responses", code))
+        if not isinstance(r, dict) or not r.get("description"):
+            problem("%s: no description" % where)
+            continue
+        for mt, media in (r.get("content") or {}).items():
+            check_media(media, ptr_join(r_ptr, "content", mt), "%s %s" % (where, mt), mt)
+        for hn, h in (r.get("headers") or {}).items():
+            h, h_ptr = deref(spec, h, ptr_join(r_ptr, "headers", hn))
+            check_param_or_header(h, h_ptr, "%s header %s" % (where, hn))
 
     # voxeld extensions.
     kinds = spec.get("x-kinds")
