@@ -12,8 +12,10 @@ LOG.jsonl has one JSON object per line, one per request the tests made:
    "status": 200,                      response status
    "content_type": "application/json", response Content-Type ("" or absent: none)
    "headers": {"location": "..."},     optional: response headers, lower-case names
-   "body_file": "/tmp/x/123.body"}     optional: file holding the response body;
+   "body_file": "/tmp/x/123.body",     optional: file holding the response body;
                                        relative paths are relative to the log
+   "request_body_file": "...",         optional: file holding the request body
+   "request_content_type": "..."}      and its Content-Type
 
 For each record the path (query stripped) is matched to one path template of
 the spec (a {param} matches one non-empty segment; literal segments win over
@@ -26,7 +28,13 @@ be one the response declares (media type only); a response without content
 must have an empty body; a JSON body is validated (JSON Schema 2020-12) against
 the response schema with $refs resolved in the whole spec; required response
 headers must be present (when the record has "headers") and match their
-schema. voxeld-specific extras: Job bodies are checked against the kind's
+schema. A request the daemon accepted (2xx) whose record has a JSON request
+body must fit the operation's requestBody schema. A oneOf/anyOf with an
+OpenAPI `discriminator` (JobRequest, Job: on `kind`) is reported as the
+errors of the branch the discriminator value picks; --lint checks that each
+discriminator maps every branch, that each branch fixes the property to its
+value, and that a discriminator on `kind` maps exactly the x-kinds, each to
+a branch with that kind's params (and stats) schema. voxeld-specific extras: Job bodies are checked against the kind's
 entry in the top-level `x-kinds` extension (normalised params, stats, output
 URLs (outputs with `requested_by: P` only when params[P] lists them; with
 `numbered_by: P`, NAME_000.. when params[P] > 1; with `per_item_of: P`, once
@@ -201,21 +209,79 @@ class Schemas:
         return v
 
     def errors(self, ptr, instance):
-        """Human-readable schema errors (list of strings)."""
+        """Human-readable schema errors (list of strings). A oneOf/anyOf with
+        an OpenAPI `discriminator` is reported as the errors of the branch
+        the discriminator picks (or as a bad discriminator value), not as
+        "valid under none of the given schemas"."""
+        found = sorted(self.flat_errors(self.validator(ptr).iter_errors(instance), []),
+                       key=lambda pm: (len(pm[0]), list(map(str, pm[0]))))
         out = []
-        errs = sorted(self.validator(ptr).iter_errors(instance),
-                      key=lambda e: (len(e.absolute_path), list(map(str, e.absolute_path))))
-        for e in errs:
+        for path, msg in found:
             where = "$" + "".join("[%s]" % json.dumps(p) if isinstance(p, str) else "[%d]" % p
-                                  for p in e.absolute_path)
-            msg = e.message
-            if e.context:  # anyOf/oneOf: say what the closest branch wanted
-                best = jsonschema.exceptions.best_match(e.context)
-                msg += " (%s)" % best.message
+                                  for p in path)
             if len(msg) > 300:
                 msg = msg[:300] + "..."
             out.append("%s: %s" % (where, msg))
         return out
+
+    def flat_errors(self, errs, base):
+        """(path, message) of each error; paths are prefixed by `base`."""
+        for e in errs:
+            path = base + list(e.absolute_path)
+            picked = self.discriminated(e)
+            if picked is not None:
+                branch_ptr, problem = picked
+                if problem is not None:
+                    yield path + problem[0], problem[1]
+                    continue
+                sub = list(self.flat_errors(self.validator(branch_ptr).iter_errors(e.instance),
+                                            path))
+                if sub:
+                    yield from sub
+                    continue
+                # The picked branch fits: the oneOf failed otherwise (the
+                # instance fits several branches); say so below.
+            msg = e.message
+            if e.context:  # anyOf/oneOf: say what the closest branch wanted
+                best = jsonschema.exceptions.best_match(e.context)
+                msg += " (%s)" % best.message
+            yield path, msg
+
+    def discriminated(self, e):
+        """For a failed oneOf/anyOf whose schema has a `discriminator`:
+        (pointer of the branch it picks, None), or (None, (path, message))
+        when the instance has no usable discriminator value. Else None."""
+        schema = e.schema if isinstance(e.schema, dict) else {}
+        d = schema.get("discriminator")
+        if e.validator not in ("oneOf", "anyOf") or not isinstance(d, dict):
+            return None
+        prop = d.get("propertyName")
+        if not isinstance(prop, str) or not isinstance(e.instance, dict):
+            return None
+        mapping = discriminator_mapping(schema)
+        if prop not in e.instance:
+            return None, ([], "%r is required (the discriminator)" % prop)
+        value = e.instance[prop]
+        ref = mapping.get(value) if isinstance(value, str) else None
+        target = ref_to_ptr(ref)
+        if target is None:
+            return None, ([prop], "%s is not a value of the discriminator %s (%s)"
+                          % (json.dumps(value), prop, ", ".join(sorted(mapping))))
+        return target, None
+
+
+def discriminator_mapping(schema):
+    """value -> $ref of a schema's discriminator: its `mapping`, and for the
+    oneOf/anyOf $refs it does not name, the last segment of the ref (the
+    OpenAPI implicit mapping)."""
+    d = schema.get("discriminator") or {}
+    mapping = {k: v for k, v in (d.get("mapping") or {}).items() if isinstance(v, str)}
+    named = set(mapping.values())
+    for sub in (schema.get("oneOf") or schema.get("anyOf") or []):
+        ref = sub.get("$ref") if isinstance(sub, dict) else None
+        if isinstance(ref, str) and ref not in named:
+            mapping.setdefault(ref.rsplit("/", 1)[-1], ref)
+    return mapping
 
 
 def schema_refs(schema):
@@ -412,6 +478,45 @@ class Checker:
         resp_ptr = ptr_join(op_ptr, "responses", key)
         resp, resp_ptr = deref(self.spec, responses[key], resp_ptr)
         self.check_response(where, method, op, resp, resp_ptr, ct, headers, body, params)
+        if 200 <= status < 300:
+            self.check_request(where, rec, op, op_ptr)
+
+    def check_request(self, where, rec, op, op_ptr):
+        """A request the daemon accepted (2xx) must fit the operation's
+        requestBody: its JSON body (record fields request_body_file and
+        request_content_type) against the schema, e.g. a job request
+        against the JobRequest branch its `kind` picks."""
+        bf = rec.get("request_body_file")
+        if not bf or not isinstance(op.get("requestBody"), dict):
+            return
+        rb, rb_ptr = deref(self.spec, op["requestBody"], ptr_join(op_ptr, "requestBody"))
+        rct = media_type(rec.get("request_content_type") or "")
+        if not is_json_media(rct):
+            return
+        content = rb.get("content") or {}
+        mt = next((d for d in content if media_matches(d, rct)), None)
+        if mt is None:
+            self.fail(where, "accepted a request body of type %s, not declared (declared: %s)"
+                      % (rct, ", ".join(content)))
+            return
+        if "schema" not in (content[mt] or {}):
+            return
+        if not os.path.isabs(bf):
+            bf = os.path.join(self.log_dir, bf)
+        try:
+            with open(bf, "rb") as f:
+                data = f.read()
+            doc = json.loads(data.decode("utf-8"))
+        except OSError:
+            self.bodies_missing += 1
+            return
+        except (UnicodeDecodeError, ValueError) as e:
+            self.fail(where, "accepted a request body that is not JSON: %s" % e)
+            return
+        sptr = ptr_join(rb_ptr, "content", mt, "schema")
+        errs = self.schemas.errors(sptr, doc)
+        for e in errs[:MAX_SCHEMA_ERRORS]:
+            self.fail(where, "accepted request body %s" % e)
 
     def general_response(self, status):
         """(response, pointer) of x-general-responses[status], or None."""
@@ -809,6 +914,14 @@ def lint(spec_path):
         for i, ex in enumerate(comps["schemas"][name].get("examples") or []):
             check_example(ex, sptr, "schema %s examples[%d]" % (name, i))
 
+    # Discriminators: every branch is mapped and fixes the property to its
+    # value; a discriminator on `kind` maps exactly the x-kinds, each to a
+    # branch whose params (and stats) are that kind's.
+    xk = spec.get("x-kinds") if isinstance(spec.get("x-kinds"), dict) else {}
+    for name, sch in (comps.get("schemas") or {}).items():
+        if isinstance(sch, dict) and "discriminator" in sch:
+            check_discriminator(spec, name, sch, xk, problem)
+
     # Defaults inside schemas must be valid for their schema.
     def walk_defaults(node, ptr):
         if isinstance(node, dict):
@@ -874,6 +987,75 @@ def lint(spec_path):
                                                           ("name", "content_type", "extension")):
                         problem("%s.outputs[%d]: needs name, content_type, extension" % (where, i))
     return report_lint(problems, nops, len(comps.get("schemas") or {}))
+
+
+def fixed_value(schema):
+    """The one value a property schema allows (const or a one-item enum)."""
+    if "const" in schema:
+        return schema["const"]
+    if isinstance(schema.get("enum"), list) and len(schema["enum"]) == 1:
+        return schema["enum"][0]
+    return None
+
+
+def branch_ref(node, key):
+    """The $ref of properties.KEY of a branch (or of its if/then), if any."""
+    for holder in (node, (node.get("then") or {}) if isinstance(node, dict) else {}):
+        prop = ((holder.get("properties") or {}).get(key)) if isinstance(holder, dict) else None
+        if isinstance(prop, dict) and isinstance(prop.get("$ref"), str):
+            return prop["$ref"]
+    return None
+
+
+def check_discriminator(spec, name, sch, kinds, problem):
+    where = "schema %s discriminator" % name
+    d = sch["discriminator"]
+    prop = d.get("propertyName") if isinstance(d, dict) else None
+    if not isinstance(prop, str) or not prop:
+        problem("%s: no propertyName" % where)
+        return
+    branches = sch.get("oneOf") or sch.get("anyOf")
+    if not isinstance(branches, list) or not branches:
+        problem("%s: needs oneOf or anyOf" % where)
+        return
+    refs = [b.get("$ref") for b in branches if isinstance(b, dict)]
+    if None in refs or len(refs) != len(branches):
+        problem("%s: every oneOf/anyOf branch must be a $ref" % where)
+        return
+    for v, ref in ((d.get("mapping") or {}).items()):
+        if ref not in refs:
+            problem("%s: mapping %s -> %s is not a oneOf/anyOf branch" % (where, v, ref))
+    mapping = discriminator_mapping(sch)
+    for v, ref in mapping.items():
+        try:
+            node, _ = deref(spec, {"$ref": ref}, name)
+        except KeyError:
+            continue  # reported as an unresolved $ref
+        reqd = set(node.get("required") or [])
+        pschema = (node.get("properties") or {}).get(prop)
+        if prop not in reqd or not isinstance(pschema, dict):
+            problem("%s: branch %s must require and declare %s" % (where, ref, prop))
+        elif fixed_value(pschema) != v:
+            problem("%s: branch %s does not fix %s to %s" % (where, ref, prop, json.dumps(v)))
+    if prop != "kind" or not kinds:
+        return
+    if sorted(mapping) != sorted(kinds):
+        problem("%s: maps the kinds %s, x-kinds has %s" % (where, sorted(mapping), sorted(kinds)))
+    for v, ref in mapping.items():
+        k = kinds.get(v)
+        try:
+            node, _ = deref(spec, {"$ref": ref}, name)
+        except KeyError:
+            continue
+        if not isinstance(k, dict):
+            continue
+        for key in ("params", "stats"):
+            got, want = branch_ref(node, key), (k.get(key) or {}).get("$ref")
+            if got is not None and got != want:
+                problem("%s: branch %s has %s %s, x-kinds.%s.%s is %s"
+                        % (where, ref, key, got, v, key, want))
+        if branch_ref(node, "params") is None:
+            problem("%s: branch %s does not $ref its params schema" % (where, ref))
 
 
 def report_lint(problems, nops, nschemas=0):
