@@ -79,7 +79,8 @@ api() {
     HDRS=$BODIES/r$NREQ.headers
     local auth=()
     if [[ -n "$TOKEN" ]]; then auth=(-H "Authorization: Bearer $TOKEN"); fi
-    # A JSON request body (-d/--data*, or @FILE) is kept for the contract check.
+    # A JSON request body (-d/--data*, or @FILE) is kept for the contract check
+    # (up to 256 KiB: it checks no larger ones).
     local reqf= reqct= reqv= a prev=
     for a in "$@"; do
         case "$prev" in
@@ -91,6 +92,7 @@ api() {
     if [[ -n "$reqv" && "${reqct,,}" == application/json* ]]; then
         reqf=$BODIES/r$NREQ.request
         if [[ "$reqv" == @?* ]]; then cp "${reqv#@}" "$reqf" 2>/dev/null || reqf=; else printf '%s' "$reqv" >"$reqf"; fi
+        if [[ -n "$reqf" && $(stat -c %s "$reqf") -gt 262144 ]]; then rm -f "$reqf"; reqf=; fi
     fi
     local out
     if [[ "$method" == HEAD ]]; then
