@@ -23,6 +23,11 @@ pkgs=(
   # the container image test (tests/deploy): podman builds the Dockerfile
   podman buildah debootstrap
 )
+# unit.openapi_redocly_lint runs Node: Debian's nodejs + npm unless a Node
+# (CI: Node 20, with its own npm) is installed already.
+if ! command -v npm >/dev/null; then
+  pkgs+=(nodejs npm)
+fi
 if [[ "${1:-}" == "--bench" ]]; then
   pkgs+=(wrk nginx-light)
 fi
@@ -32,3 +37,7 @@ if [[ $(id -u) -ne 0 ]]; then SUDO="sudo"; fi
 export DEBIAN_FRONTEND=noninteractive
 $SUDO apt-get update -qq
 $SUDO apt-get install -y -qq --no-install-recommends "${pkgs[@]}"
+
+# The OpenAPI linter at the version package-lock.json pins, into
+# tools/redocly/node_modules (git-ignored), not globally.
+npm ci --prefix "$(dirname "$0")/../tools/redocly" --no-audit --no-fund --loglevel=error

@@ -79,6 +79,21 @@ api() {
     HDRS=$BODIES/r$NREQ.headers
     local auth=()
     if [[ -n "$TOKEN" ]]; then auth=(-H "Authorization: Bearer $TOKEN"); fi
+    # A JSON request body (-d/--data*, or @FILE) is kept for the contract check
+    # (up to 256 KiB: it checks no larger ones).
+    local reqf= reqct= reqv= a prev=
+    for a in "$@"; do
+        case "$prev" in
+        -H) if [[ "${a,,}" == content-type:* ]]; then reqct=${a#*:} && reqct=${reqct# }; fi ;;
+        -d | --data | --data-raw | --data-binary) reqv=$a ;;
+        esac
+        prev=$a
+    done
+    if [[ -n "$reqv" && "${reqct,,}" == application/json* ]]; then
+        reqf=$BODIES/r$NREQ.request
+        if [[ "$reqv" == @?* ]]; then cp "${reqv#@}" "$reqf" 2>/dev/null || reqf=; else printf '%s' "$reqv" >"$reqf"; fi
+        if [[ -n "$reqf" && $(stat -c %s "$reqf") -gt 262144 ]]; then rm -f "$reqf"; reqf=; fi
+    fi
     local out
     if [[ "$method" == HEAD ]]; then
         out=$(curl -sS -I -o /dev/null -D "$HDRS" -w '%{http_code} %{content_type}' "${auth[@]}" "$@" "$BASE$path")
@@ -93,8 +108,9 @@ api() {
     headers=$(tr -d '\r' <"$HDRS" | awk -F': ' 'NF>=2 && $1 !~ /^HTTP/ {printf "%s\t%s\n", tolower($1), substr($0, length($1)+3)}' |
         jq -R -s 'split("\n") | map(select(length>0) | split("\t") | {(.[0]): .[1]}) | add // {}')
     jq -cn --arg m "$method" --arg p "$path" --argjson s "${STATUS:-0}" --arg ct "$CTYPE" \
-        --argjson h "$headers" --arg b "$BODY" \
-        '{method:$m, path:$p, status:$s, content_type:$ct, headers:$h, body_file:$b}' >>"$VX_API_LOG"
+        --argjson h "$headers" --arg b "$BODY" --arg rf "$reqf" --arg rct "$reqct" \
+        '{method:$m, path:$p, status:$s, content_type:$ct, headers:$h, body_file:$b}
+         + if $rf == "" then {} else {request_body_file:$rf, request_content_type:$rct} end' >>"$VX_API_LOG"
 }
 
 # jqb FILTER: jq on the last body.

@@ -12,20 +12,30 @@ LOG.jsonl has one JSON object per line, one per request the tests made:
    "status": 200,                      response status
    "content_type": "application/json", response Content-Type ("" or absent: none)
    "headers": {"location": "..."},     optional: response headers, lower-case names
-   "body_file": "/tmp/x/123.body"}     optional: file holding the response body;
+   "body_file": "/tmp/x/123.body",     optional: file holding the response body;
                                        relative paths are relative to the log
+   "request_body_file": "...",         optional: file holding the request body
+   "request_content_type": "..."}      and its Content-Type
 
 For each record the path (query stripped) is matched to one path template of
 the spec (a {param} matches one non-empty segment; literal segments win over
 templated ones), the method to an operation and the status to a response
 (exact code, then "NXX", then "default"). 405 is accepted for any method a
-known path does not have (checked against components.responses.MethodNotAllowed);
-unknown paths must answer 404 with an Error body. Then: the Content-Type must
+known path does not have (checked against the 405 of the top-level extension
+`x-general-responses`, the answers no operation lists); unknown paths must
+answer 404, checked against its 404 (an Error body when it has none). Then: the Content-Type must
 be one the response declares (media type only); a response without content
 must have an empty body; a JSON body is validated (JSON Schema 2020-12) against
 the response schema with $refs resolved in the whole spec; required response
 headers must be present (when the record has "headers") and match their
-schema. voxeld-specific extras: Job bodies are checked against the kind's
+schema. A request the daemon accepted (2xx) whose record has a JSON request
+body must fit the operation's requestBody schema (bodies over 256 KiB are
+not checked: too slow). A oneOf/anyOf with an
+OpenAPI `discriminator` (JobRequest, Job: on `kind`) is reported as the
+errors of the branch the discriminator value picks; --lint checks that each
+discriminator maps every branch, that each branch fixes the property to its
+value, and that a discriminator on `kind` maps exactly the x-kinds, each to
+a branch with that kind's params (and stats) schema. voxeld-specific extras: Job bodies are checked against the kind's
 entry in the top-level `x-kinds` extension (normalised params, stats, output
 URLs (outputs with `requested_by: P` only when params[P] lists them; with
 `numbered_by: P`, NAME_000.. when params[P] > 1; with `per_item_of: P`, once
@@ -60,6 +70,9 @@ warnings.simplefilter("ignore", DeprecationWarning)
 HTTP_METHODS = ("get", "put", "post", "delete", "options", "head", "patch", "trace")
 BASE_URI = "https://voxeld.invalid/openapi.yaml"
 MAX_SCHEMA_ERRORS = 5
+# Request bodies larger than this are not schema-checked (a 2 MB gregory
+# `frames` array takes jsonschema seconds; test_timeouts sends dozens).
+MAX_REQUEST_CHECK_BYTES = 256 * 1024
 RFC3339 = re.compile(
     r"^\d{4}-\d{2}-\d{2}[Tt]\d{2}:\d{2}:\d{2}(\.\d+)?([Zz]|[+-]\d{2}:\d{2})$")
 
@@ -200,21 +213,79 @@ class Schemas:
         return v
 
     def errors(self, ptr, instance):
-        """Human-readable schema errors (list of strings)."""
+        """Human-readable schema errors (list of strings). A oneOf/anyOf with
+        an OpenAPI `discriminator` is reported as the errors of the branch
+        the discriminator picks (or as a bad discriminator value), not as
+        "valid under none of the given schemas"."""
+        found = sorted(self.flat_errors(self.validator(ptr).iter_errors(instance), []),
+                       key=lambda pm: (len(pm[0]), list(map(str, pm[0]))))
         out = []
-        errs = sorted(self.validator(ptr).iter_errors(instance),
-                      key=lambda e: (len(e.absolute_path), list(map(str, e.absolute_path))))
-        for e in errs:
+        for path, msg in found:
             where = "$" + "".join("[%s]" % json.dumps(p) if isinstance(p, str) else "[%d]" % p
-                                  for p in e.absolute_path)
-            msg = e.message
-            if e.context:  # anyOf/oneOf: say what the closest branch wanted
-                best = jsonschema.exceptions.best_match(e.context)
-                msg += " (%s)" % best.message
+                                  for p in path)
             if len(msg) > 300:
                 msg = msg[:300] + "..."
             out.append("%s: %s" % (where, msg))
         return out
+
+    def flat_errors(self, errs, base):
+        """(path, message) of each error; paths are prefixed by `base`."""
+        for e in errs:
+            path = base + list(e.absolute_path)
+            picked = self.discriminated(e)
+            if picked is not None:
+                branch_ptr, problem = picked
+                if problem is not None:
+                    yield path + problem[0], problem[1]
+                    continue
+                sub = list(self.flat_errors(self.validator(branch_ptr).iter_errors(e.instance),
+                                            path))
+                if sub:
+                    yield from sub
+                    continue
+                # The picked branch fits: the oneOf failed otherwise (the
+                # instance fits several branches); say so below.
+            msg = e.message
+            if e.context:  # anyOf/oneOf: say what the closest branch wanted
+                best = jsonschema.exceptions.best_match(e.context)
+                msg += " (%s)" % best.message
+            yield path, msg
+
+    def discriminated(self, e):
+        """For a failed oneOf/anyOf whose schema has a `discriminator`:
+        (pointer of the branch it picks, None), or (None, (path, message))
+        when the instance has no usable discriminator value. Else None."""
+        schema = e.schema if isinstance(e.schema, dict) else {}
+        d = schema.get("discriminator")
+        if e.validator not in ("oneOf", "anyOf") or not isinstance(d, dict):
+            return None
+        prop = d.get("propertyName")
+        if not isinstance(prop, str) or not isinstance(e.instance, dict):
+            return None
+        mapping = discriminator_mapping(schema)
+        if prop not in e.instance:
+            return None, ([], "%r is required (the discriminator)" % prop)
+        value = e.instance[prop]
+        ref = mapping.get(value) if isinstance(value, str) else None
+        target = ref_to_ptr(ref)
+        if target is None:
+            return None, ([prop], "%s is not a value of the discriminator %s (%s)"
+                          % (json.dumps(value), prop, ", ".join(sorted(mapping))))
+        return target, None
+
+
+def discriminator_mapping(schema):
+    """value -> $ref of a schema's discriminator: its `mapping`, and for the
+    oneOf/anyOf $refs it does not name, the last segment of the ref (the
+    OpenAPI implicit mapping)."""
+    d = schema.get("discriminator") or {}
+    mapping = {k: v for k, v in (d.get("mapping") or {}).items() if isinstance(v, str)}
+    named = set(mapping.values())
+    for sub in (schema.get("oneOf") or schema.get("anyOf") or []):
+        ref = sub.get("$ref") if isinstance(sub, dict) else None
+        if isinstance(ref, str) and ref not in named:
+            mapping.setdefault(ref.rsplit("/", 1)[-1], ref)
+    return mapping
 
 
 def schema_refs(schema):
@@ -287,6 +358,7 @@ class Checker:
         self.failures = 0
         self.checked = 0
         self.bodies_missing = 0
+        self.requests_skipped = 0
         self.exercised = set()
         self.kinds = spec.get("x-kinds") or {}
 
@@ -362,7 +434,11 @@ class Checker:
             if status != 404:
                 self.fail(where, "unknown path answered %d, expected 404" % status)
                 return
-            self.check_error_body(where, method, ct, body)
+            gen = self.general_response(404)
+            if gen is None or method == "HEAD" or body is None:
+                self.check_error_body(where, method, ct, body)
+            else:
+                self.check_response(where, method, None, gen[0], gen[1], ct, headers, body, {})
             return
         template, params = m
         item, item_ptr = deref(self.spec, self.paths[template], ptr_join("/paths", template))
@@ -377,12 +453,11 @@ class Checker:
                 self.fail(where, "%s is not an operation of %s (only 405 is allowed), got %d"
                           % (method, template, status))
                 return
-            resp_ptr = "/components/responses/MethodNotAllowed"
-            try:
-                resp, resp_ptr = deref(self.spec, ptr_get(self.spec, resp_ptr), resp_ptr)
-            except KeyError:
+            gen = self.general_response(405)
+            if gen is None:
                 self.check_error_body(where, method, ct, body)
                 return
+            resp, resp_ptr = gen
             self.check_response(where, method, None, resp, resp_ptr, ct, headers, body, params)
             if headers is not None and "allow" in headers:
                 allowed = {a.strip().upper() for a in headers["allow"].split(",") if a.strip()}
@@ -408,6 +483,56 @@ class Checker:
         resp_ptr = ptr_join(op_ptr, "responses", key)
         resp, resp_ptr = deref(self.spec, responses[key], resp_ptr)
         self.check_response(where, method, op, resp, resp_ptr, ct, headers, body, params)
+        if 200 <= status < 300:
+            self.check_request(where, rec, op, op_ptr)
+
+    def check_request(self, where, rec, op, op_ptr):
+        """A request the daemon accepted (2xx) must fit the operation's
+        requestBody: its JSON body (record fields request_body_file and
+        request_content_type) against the schema, e.g. a job request
+        against the JobRequest branch its `kind` picks."""
+        bf = rec.get("request_body_file")
+        if not bf or not isinstance(op.get("requestBody"), dict):
+            return
+        rb, rb_ptr = deref(self.spec, op["requestBody"], ptr_join(op_ptr, "requestBody"))
+        rct = media_type(rec.get("request_content_type") or "")
+        if not is_json_media(rct):
+            return
+        content = rb.get("content") or {}
+        mt = next((d for d in content if media_matches(d, rct)), None)
+        if mt is None:
+            self.fail(where, "accepted a request body of type %s, not declared (declared: %s)"
+                      % (rct, ", ".join(content)))
+            return
+        if "schema" not in (content[mt] or {}):
+            return
+        if not os.path.isabs(bf):
+            bf = os.path.join(self.log_dir, bf)
+        try:
+            if os.path.getsize(bf) > MAX_REQUEST_CHECK_BYTES:
+                self.requests_skipped += 1
+                return
+            with open(bf, "rb") as f:
+                data = f.read()
+            doc = json.loads(data.decode("utf-8"))
+        except OSError:
+            self.bodies_missing += 1
+            return
+        except (UnicodeDecodeError, ValueError) as e:
+            self.fail(where, "accepted a request body that is not JSON: %s" % e)
+            return
+        sptr = ptr_join(rb_ptr, "content", mt, "schema")
+        errs = self.schemas.errors(sptr, doc)
+        for e in errs[:MAX_SCHEMA_ERRORS]:
+            self.fail(where, "accepted request body %s" % e)
+
+    def general_response(self, status):
+        """(response, pointer) of x-general-responses[status], or None."""
+        ptr = ptr_join("/x-general-responses", str(status))
+        try:
+            return deref(self.spec, ptr_get(self.spec, ptr), ptr)
+        except KeyError:
+            return None
 
     def check_error_body(self, where, method, ct, body):
         if method == "HEAD" or body is None:
@@ -797,6 +922,14 @@ def lint(spec_path):
         for i, ex in enumerate(comps["schemas"][name].get("examples") or []):
             check_example(ex, sptr, "schema %s examples[%d]" % (name, i))
 
+    # Discriminators: every branch is mapped and fixes the property to its
+    # value; a discriminator on `kind` maps exactly the x-kinds, each to a
+    # branch whose params (and stats) are that kind's.
+    xk = spec.get("x-kinds") if isinstance(spec.get("x-kinds"), dict) else {}
+    for name, sch in (comps.get("schemas") or {}).items():
+        if isinstance(sch, dict) and "discriminator" in sch:
+            check_discriminator(spec, name, sch, xk, problem)
+
     # Defaults inside schemas must be valid for their schema.
     def walk_defaults(node, ptr):
         if isinstance(node, dict):
@@ -818,8 +951,24 @@ def lint(spec_path):
         for mt, media in (r.get("content") or {}).items():
             check_media(media, ptr_join("/components/responses", name, "content", mt),
                         "response %s %s" % (name, mt), mt)
-    if "MethodNotAllowed" not in (comps.get("responses") or {}):
-        problem("components.responses.MethodNotAllowed is missing (the checker uses it for 405)")
+    general = spec.get("x-general-responses")
+    if not isinstance(general, dict):
+        problem("x-general-responses is missing (the checker uses its 404 and 405)")
+        general = {}
+    for code in ("404", "405"):
+        if code not in general:
+            problem("x-general-responses.%s is missing (the checker uses it)" % code)
+    for code, r in general.items():
+        where = "x-general-responses.%s" % code
+        r, r_ptr = deref(spec, r, ptr_join("/x-general-responses", code))
+        if not isinstance(r, dict) or not r.get("description"):
+            problem("%s: no description" % where)
+            continue
+        for mt, media in (r.get("content") or {}).items():
+            check_media(media, ptr_join(r_ptr, "content", mt), "%s %s" % (where, mt), mt)
+        for hn, h in (r.get("headers") or {}).items():
+            h, h_ptr = deref(spec, h, ptr_join(r_ptr, "headers", hn))
+            check_param_or_header(h, h_ptr, "%s header %s" % (where, hn))
 
     # voxeld extensions.
     kinds = spec.get("x-kinds")
@@ -846,6 +995,75 @@ def lint(spec_path):
                                                           ("name", "content_type", "extension")):
                         problem("%s.outputs[%d]: needs name, content_type, extension" % (where, i))
     return report_lint(problems, nops, len(comps.get("schemas") or {}))
+
+
+def fixed_value(schema):
+    """The one value a property schema allows (const or a one-item enum)."""
+    if "const" in schema:
+        return schema["const"]
+    if isinstance(schema.get("enum"), list) and len(schema["enum"]) == 1:
+        return schema["enum"][0]
+    return None
+
+
+def branch_ref(node, key):
+    """The $ref of properties.KEY of a branch (or of its if/then), if any."""
+    for holder in (node, (node.get("then") or {}) if isinstance(node, dict) else {}):
+        prop = ((holder.get("properties") or {}).get(key)) if isinstance(holder, dict) else None
+        if isinstance(prop, dict) and isinstance(prop.get("$ref"), str):
+            return prop["$ref"]
+    return None
+
+
+def check_discriminator(spec, name, sch, kinds, problem):
+    where = "schema %s discriminator" % name
+    d = sch["discriminator"]
+    prop = d.get("propertyName") if isinstance(d, dict) else None
+    if not isinstance(prop, str) or not prop:
+        problem("%s: no propertyName" % where)
+        return
+    branches = sch.get("oneOf") or sch.get("anyOf")
+    if not isinstance(branches, list) or not branches:
+        problem("%s: needs oneOf or anyOf" % where)
+        return
+    refs = [b.get("$ref") for b in branches if isinstance(b, dict)]
+    if None in refs or len(refs) != len(branches):
+        problem("%s: every oneOf/anyOf branch must be a $ref" % where)
+        return
+    for v, ref in ((d.get("mapping") or {}).items()):
+        if ref not in refs:
+            problem("%s: mapping %s -> %s is not a oneOf/anyOf branch" % (where, v, ref))
+    mapping = discriminator_mapping(sch)
+    for v, ref in mapping.items():
+        try:
+            node, _ = deref(spec, {"$ref": ref}, name)
+        except KeyError:
+            continue  # reported as an unresolved $ref
+        reqd = set(node.get("required") or [])
+        pschema = (node.get("properties") or {}).get(prop)
+        if prop not in reqd or not isinstance(pschema, dict):
+            problem("%s: branch %s must require and declare %s" % (where, ref, prop))
+        elif fixed_value(pschema) != v:
+            problem("%s: branch %s does not fix %s to %s" % (where, ref, prop, json.dumps(v)))
+    if prop != "kind" or not kinds:
+        return
+    if sorted(mapping) != sorted(kinds):
+        problem("%s: maps the kinds %s, x-kinds has %s" % (where, sorted(mapping), sorted(kinds)))
+    for v, ref in mapping.items():
+        k = kinds.get(v)
+        try:
+            node, _ = deref(spec, {"$ref": ref}, name)
+        except KeyError:
+            continue
+        if not isinstance(k, dict):
+            continue
+        for key in ("params", "stats"):
+            got, want = branch_ref(node, key), (k.get(key) or {}).get("$ref")
+            if got is not None and got != want:
+                problem("%s: branch %s has %s %s, x-kinds.%s.%s is %s"
+                        % (where, ref, key, got, v, key, want))
+        if branch_ref(node, "params") is None:
+            problem("%s: branch %s does not $ref its params schema" % (where, ref))
 
 
 def report_lint(problems, nops, nschemas=0):
@@ -892,6 +1110,9 @@ def main(argv=None):
         for t, m in ops:
             if (t, m) not in c.exercised:
                 c.fail("openapi", "operation %s %s was never exercised" % (m.upper(), t))
+    if c.requests_skipped:
+        print("openapi: note: %d request bodies over %d bytes were not checked"
+              % (c.requests_skipped, MAX_REQUEST_CHECK_BYTES))
     if c.bodies_missing:
         print("openapi: note: %d body files were missing (bodies not checked)" % c.bodies_missing)
     print("openapi: %d responses checked, %d failures, %d/%d operations exercised"

@@ -67,6 +67,16 @@ def err(code, message="x"):
     return {"error": {"code": code, "message": message}}
 
 
+def job_post(status, request, body, headers=None):
+    """A POST /v1/jobs record whose request body is `request` (JSON)."""
+    return dict(method="POST", path="/v1/jobs?wait=5", status=status,
+                content_type="application/json", _request=request,
+                headers=headers if headers is not None else {}), body
+
+
+JOB_LOC = {"location": "/v1/jobs/" + JID}
+
+
 # (name, record, body, should_fail). body: dict/list -> JSON, str/bytes -> raw,
 # None -> no body_file.
 CASES = [
@@ -156,6 +166,25 @@ CASES = [
     ("readyz 503", dict(method="GET", path="/readyz", status=503,
                         content_type="application/json"),
      {"status": "not_ready", "checks": {"gl": False, "queue": True, "data_dir": True, "disk_space": True}}, False),
+    ("accepted preview request", *job_post(202, {"mesh": MESH, "kind": "preview",
+                                                 "params": {"width": 64}}, JOB_OK, JOB_LOC),
+     False),
+    ("accepted request without params", *job_post(202, {"mesh": MESH, "kind": "preview"},
+                                                  JOB_OK, JOB_LOC), False),
+    ("accepted preview request with voxelize params",
+     *job_post(202, {"mesh": MESH, "kind": "preview", "params": {"resolution": 128}}, JOB_OK,
+               JOB_LOC), True),
+    ("accepted request of an unknown kind",
+     *job_post(202, {"mesh": MESH, "kind": "teleport"}, JOB_OK, JOB_LOC), True),
+    ("rejected request with wrong-kind params",
+     *job_post(422, {"mesh": MESH, "kind": "preview", "params": {"resolution": 128}},
+               err("invalid_params")), False),
+    ("voxelize job with preview params", dict(method="GET", path="/v1/jobs/" + JID, status=200,
+                                              content_type="application/json"),
+     dict(VJOB_SUMMARY, params=PARAMS), True),
+    ("unknown path 404 with another code", dict(method="GET", path="/v2/x", status=404,
+                                                content_type="application/json"),
+     err("mesh_not_found"), True),
     ("readyz 200 with a failed check", dict(method="GET", path="/readyz", status=200,
                                             content_type="application/json"),
      {"status": "ready", "checks": {"gl": False, "queue": True, "data_dir": True, "disk_space": True}}, True),
@@ -178,6 +207,12 @@ def write_log(tmp, name, cases):
     with open(log, "w") as f:
         for i, (_, rec, body, _) in enumerate(cases):
             rec = dict(rec)
+            if "_request" in rec:  # a JSON request body
+                rf = os.path.join(tmp, "%s.%d.request" % (name, i))
+                with open(rf, "w") as r:
+                    json.dump(rec.pop("_request"), r)
+                rec["request_body_file"] = rf
+                rec["request_content_type"] = "application/json; charset=utf-8"
             if body is not None:
                 bf = os.path.join(tmp, "%s.%d.body" % (name, i))
                 data = body if isinstance(body, bytes) else \
@@ -204,6 +239,20 @@ def main():
             expect("%s is %s" % (name, "flagged" if bad else "accepted"),
                    (i in flagged) == bad,
                    "\n".join(l for l in out.splitlines() if ":%d: " % i in l))
+        def said(case, text):
+            i = next(n for n, c in enumerate(CASES, 1) if c[0] == case)
+            return any(":%d: " % i in l and text in l for l in out.splitlines())
+
+        expect("a wrong-kind request names the field the kind's branch rejects",
+               said("accepted preview request with voxelize params",
+                    "accepted request body $[\"params\"]: Additional properties are not allowed "
+                    "('resolution' was unexpected)"), out)
+        expect("an unknown kind is named as a bad discriminator value",
+               said("accepted request of an unknown kind",
+                    '$["kind"]: "teleport" is not a value of the discriminator kind'), out)
+        expect("a job's wrong-kind params are named by the kind's branch",
+               said("voxelize job with preview params", 'body $["params"]: Additional properties'),
+               out)
         nbad = sum(1 for c in CASES if c[3])
         expect("mixed log exits 1", rc == 1, "rc=%d" % rc)
         m = re.search(r"^openapi: (\d+) responses checked, (\d+) failures, (\d+)/(\d+) "
@@ -256,6 +305,23 @@ def main():
         expect("lint reports a duplicate operationId", "operationId getJob is also used" in out,
                out)
         expect("lint reports an undeclared path parameter", "{nom} is not declared" in out, out)
+
+        # 5. Lint: request examples are checked against the branch their kind
+        # picks; JobRequest's discriminator must map exactly the x-kinds.
+        wrong = text.replace("params: {resolution: 128, format: vdb}", "params: {width: 128}", 1)
+        expect("the spec has the voxelize request example", wrong != text)
+        wrong = wrong.replace("          catmull-clark: '#/components/schemas/CatmullClarkJobRequest'\n",
+                              "", 1)
+        expect("the spec maps catmull-clark in JobRequest", "CatmullClarkJobRequest'\n" in text)
+        with open(bspec, "w") as f:
+            f.write(wrong)
+        rc, out = run(bspec, "--lint")
+        expect("lint of a spec with a wrong-kind example fails", rc == 1, out)
+        expect("lint names the example's field the kind rejects",
+               "examples.voxelize: example does not match its schema: $[\"params\"]: "
+               "Additional properties are not allowed ('width' was unexpected)" in out, out)
+        expect("lint reports a kind missing from the discriminator mapping",
+               "schema JobRequest discriminator: maps the kinds" in out, out)
 
     print("openapi selftest: %d passed, %d failed" % (passed, failed))
     return 0 if failed == 0 else 1
