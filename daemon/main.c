@@ -92,7 +92,10 @@ int main(int argc, char **argv)
         .history = cfg.job_history,
         .history_bytes = cfg.job_history_bytes,
         .workers = cfg.workers,
-        .gl = {.device = cfg.egl_device, .debug = cfg.gl_debug, .robust = 1},
+        .gl = {.pick_device = cfg.egl_device >= 0,
+               .device = cfg.egl_device,
+               .debug = cfg.gl_debug,
+               .robust = 1},
         .hooks = {.finished = on_job_finished, .changed = on_job_changed},
     };
     vx_jobs *jobs = vx_jobs_open(&jd, &err);

@@ -59,10 +59,10 @@ struct vx_job_run {
     double last_ping; /* watchdog */
     cJSON *stats;
     cJSON *outputs;
-    char dir[2200];  /* result dir, made at the first output */
-    char path[2400]; /* last path handed out */
-    cJSON *params;   /* the job's params with its blobs back in place */
-    int big_params;  /* some came from blobs */
+    char dir[2200]; /* result dir, made at the first output */
+    cJSON *paths;   /* strings: every path handed out, valid until the run ends */
+    cJSON *params;  /* the job's params with its blobs back in place */
+    int big_params; /* some came from blobs */
     void *state;
     int on_gl_thread;
 };
@@ -728,8 +728,15 @@ const char *vx_run_output(vx_job_run *r, const char *name, const char *file_ext,
     cJSON *o = cJSON_AddObjectToObject(r->outputs, name);
     cJSON_AddStringToObject(o, "file", file);
     cJSON_AddStringToObject(o, "content_type", content_type);
-    snprintf(r->path, sizeof r->path, "%s/%s", r->dir, file);
-    return r->path;
+    char path[2400];
+    snprintf(path, sizeof path, "%s/%s", r->dir, file);
+    cJSON *s = cJSON_CreateString(path);
+    if (!s || !cJSON_AddItemToArray(r->paths, s)) {
+        cJSON_Delete(s);
+        vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory");
+        return NULL;
+    }
+    return s->valuestring;
 }
 
 static vx_job_run *run_new(vx_jobs *j, job *jb)
@@ -742,6 +749,7 @@ static vx_job_run *run_new(vx_jobs *j, job *jb)
     r->t0 = vx_mono();
     r->stats = cJSON_CreateObject();
     r->outputs = cJSON_CreateObject();
+    r->paths = cJSON_CreateArray();
     return r;
 }
 
@@ -753,6 +761,7 @@ static void run_free(vx_job_run *r)
     if (r->state && r->kind->free_state) r->kind->free_state(r->state);
     cJSON_Delete(r->stats);
     cJSON_Delete(r->outputs);
+    cJSON_Delete(r->paths);
     cJSON_Delete(r->params);
     int big = r->big_params;
     free(r);
@@ -889,7 +898,7 @@ static void run_job_gl(vx_jobs *j, vx_gl *gl, mesh_cache *mc, job *jb)
             jb->attempts);
 
     vx_job_run *r = run_new(j, jb);
-    if (!r || !r->stats || !r->outputs) {
+    if (!r || !r->stats || !r->outputs || !r->paths) {
         /* Out of memory for a few bytes: the job goes back to the queue
          * rather than failing for a reason that is not its own. */
         run_free(r);
@@ -920,9 +929,11 @@ static void run_job_gl(vx_jobs *j, vx_gl *gl, mesh_cache *mc, job *jb)
         VX_WARN("gl.context_lost", "job=%s attempt=%d", jb->id, attempt + 1);
         if (r->state && jb->kind->free_state) jb->kind->free_state(r->state);
         r->state = NULL;
+        /* The retry starts over: what the lost attempt added goes. */
+        while (r->stats->child)
+            cJSON_DeleteItemFromArray(r->stats, 0);
         vx_err rerr;
-        if (vx_gl_rebuild(gl, &rerr)) {
-            VX_ERROR("gl.rebuild_failed", "code=%s", rerr.code);
+        if (vx_gl_rebuild(gl, &rerr)) { /* logged by the GL layer */
             err = rerr;
             ok = 0;
             break;
