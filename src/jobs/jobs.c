@@ -16,6 +16,7 @@
 #include "jobs/queue.h"
 #include "util/fsutil.h"
 #include "util/log.h"
+#include "util/sorted.h"
 
 typedef enum job_state { ST_QUEUED, ST_RUNNING, ST_SUCCEEDED, ST_FAILED, ST_CANCELED } job_state;
 static const char *state_names[] = {"queued", "running", "succeeded", "failed", "canceled"};
@@ -73,8 +74,7 @@ struct vx_jobs {
     vx_queue *queue; /* queued jobs, for the GL thread */
     vx_queue *cpu;   /* runs that finished their GL stage */
     pthread_mutex_t lock;
-    job **jobs; /* sorted by id = creation order */
-    size_t njobs, capjobs;
+    vx_sorted jobs;         /* job *, sorted by id = creation order */
     uint64_t history_bytes; /* sum of bytes of the finished jobs */
     size_t running;
     pthread_t gl_thread;
@@ -255,48 +255,19 @@ static void freeze_locked(vx_jobs *j, job *jb)
     j->history_bytes += jb->bytes;
 }
 
-static size_t find_index(vx_jobs *j, const char *id, int *found)
+static const char *job_key(const void *item)
 {
-    size_t lo = 0, hi = j->njobs;
-    while (lo < hi) {
-        size_t mid = (lo + hi) / 2;
-        int c = strcmp(j->jobs[mid]->id, id);
-        if (c == 0) {
-            *found = 1;
-            return mid;
-        }
-        if (c < 0)
-            lo = mid + 1;
-        else
-            hi = mid;
-    }
-    *found = 0;
-    return lo;
+    return ((const job *)item)->id;
+}
+
+static job *job_at(const vx_jobs *j, size_t i)
+{
+    return j->jobs.items[i];
 }
 
 static job *find_job(vx_jobs *j, const char *id)
 {
-    int found;
-    size_t at = find_index(j, id, &found);
-    return found ? j->jobs[at] : NULL;
-}
-
-static int insert_job(vx_jobs *j, job *jb)
-{
-    int found;
-    size_t at = find_index(j, jb->id, &found);
-    if (found) return -1;
-    if (j->njobs == j->capjobs) {
-        size_t cap = j->capjobs ? 2 * j->capjobs : 256;
-        job **n = realloc(j->jobs, cap * sizeof *n);
-        if (!n) return -1;
-        j->jobs = n;
-        j->capjobs = cap;
-    }
-    memmove(j->jobs + at + 1, j->jobs + at, (j->njobs - at) * sizeof *j->jobs);
-    j->jobs[at] = jb;
-    j->njobs++;
-    return 0;
+    return vx_sorted_get(&j->jobs, id);
 }
 
 /* Drops the oldest finished jobs beyond the history limits, in count and
@@ -304,12 +275,12 @@ static int insert_job(vx_jobs *j, job *jb)
 static void trim_history_locked(vx_jobs *j, char (*dropped)[33], size_t *ndropped, size_t max)
 {
     size_t finished = 0;
-    for (size_t i = 0; i < j->njobs; i++)
-        finished += is_terminal(j->jobs[i]->state);
+    for (size_t i = 0; i < j->jobs.n; i++)
+        finished += is_terminal(job_at(j, i)->state);
     size_t w = 0;
     *ndropped = 0;
-    for (size_t i = 0; i < j->njobs; i++) {
-        job *jb = j->jobs[i];
+    for (size_t i = 0; i < j->jobs.n; i++) {
+        job *jb = job_at(j, i);
         int over =
             finished > j->desc.history ||
             (j->desc.history_bytes && j->history_bytes > j->desc.history_bytes && finished > 1);
@@ -320,9 +291,9 @@ static void trim_history_locked(vx_jobs *j, char (*dropped)[33], size_t *ndroppe
             finished--;
             continue;
         }
-        j->jobs[w++] = jb;
+        j->jobs.items[w++] = jb;
     }
-    j->njobs = w;
+    j->jobs.n = w;
 }
 
 /* Journals a snapshot; caller holds the lock (so seq and file order agree). */
@@ -345,14 +316,14 @@ static void notify(vx_jobs *j, const char *jid, int terminal)
  * runs before any thread starts). */
 static int compact_locked(vx_jobs *j, vx_err *err)
 {
-    cJSON **recs = calloc(j->njobs + 1, sizeof *recs);
+    cJSON **recs = calloc(j->jobs.n + 1, sizeof *recs);
     if (!recs) return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory");
-    for (size_t i = 0; i < j->njobs; i++) {
+    for (size_t i = 0; i < j->jobs.n; i++) {
         recs[i] = cJSON_CreateObject();
-        cJSON_AddItemToObject(recs[i], "job", job_json(j->jobs[i], 0));
+        cJSON_AddItemToObject(recs[i], "job", job_json(job_at(j, i), 0));
     }
-    int rc = vx_journal_compact(j->journal, recs, j->njobs, err);
-    for (size_t i = 0; i < j->njobs; i++)
+    int rc = vx_journal_compact(j->journal, recs, j->jobs.n, err);
+    for (size_t i = 0; i < j->jobs.n; i++)
         cJSON_Delete(recs[i]);
     free(recs);
     return rc;
@@ -531,7 +502,7 @@ static void replay_one(const cJSON *rec, void *ud)
         jb = calloc(1, sizeof *jb);
         if (!jb) return;
         snprintf(jb->id, sizeof jb->id, "%s", id);
-        if (insert_job(j, jb)) {
+        if (vx_sorted_insert(&j->jobs, jb)) {
             free(jb);
             return;
         }
@@ -594,6 +565,7 @@ vx_jobs *vx_jobs_open(const vx_jobs_desc *desc, vx_err *err)
     if (!j->desc.max_queued) j->desc.max_queued = 64;
     if (!j->desc.history) j->desc.history = 10000;
     if (j->desc.workers <= 0) j->desc.workers = 2;
+    vx_sorted_init(&j->jobs, job_key);
     pthread_mutex_init(&j->lock, NULL);
     pthread_cond_init(&j->gl_cond, NULL);
     j->queue = vx_queue_new(j->desc.max_queued);
@@ -621,8 +593,8 @@ vx_jobs *vx_jobs_open(const vx_jobs_desc *desc, vx_err *err)
     /* Jobs that never finished run again, oldest first, whatever the
      * queue limit: they were acknowledged. */
     size_t requeued = 0;
-    for (size_t i = 0; i < j->njobs; i++) {
-        job *jb = j->jobs[i];
+    for (size_t i = 0; i < j->jobs.n; i++) {
+        job *jb = job_at(j, i);
         if (jb->state == ST_QUEUED || jb->state == ST_RUNNING) {
             jb->state = ST_QUEUED;
             jb->progress = 0;
@@ -658,7 +630,7 @@ vx_jobs *vx_jobs_open(const vx_jobs_desc *desc, vx_err *err)
         VX_WARN("journal.compact_skipped", "reason=disk_full");
         vx_err_clear(err);
     }
-    VX_INFO("jobs.replayed", "records=%ld jobs=%zu requeued=%zu", n, j->njobs, requeued);
+    VX_INFO("jobs.replayed", "records=%ld jobs=%zu requeued=%zu", n, j->jobs.n, requeued);
     return j;
 }
 
@@ -1046,7 +1018,7 @@ void vx_jobs_stop(vx_jobs *j)
     vx_err err;
     compact_locked(j, &err);
     pthread_mutex_unlock(&j->lock);
-    VX_INFO("jobs.stopped", "jobs=%zu queued=%zu", j->njobs, vx_queue_depth(j->queue));
+    VX_INFO("jobs.stopped", "jobs=%zu queued=%zu", j->jobs.n, vx_queue_depth(j->queue));
 }
 
 void vx_jobs_maintain(vx_jobs *j, long max_journal_bytes)
@@ -1066,9 +1038,9 @@ void vx_jobs_free(vx_jobs *j)
 {
     if (!j) return;
     vx_jobs_stop(j);
-    for (size_t i = 0; i < j->njobs; i++)
-        job_free(j->jobs[i]);
-    free(j->jobs);
+    for (size_t i = 0; i < j->jobs.n; i++)
+        job_free(job_at(j, i));
+    vx_sorted_free(&j->jobs);
     vx_queue_free(j->queue);
     vx_queue_free(j->cpu);
     vx_journal_close(j->journal);
@@ -1125,13 +1097,11 @@ cJSON *vx_jobs_submit(vx_jobs *j, const char *mesh, const char *kind, const cJSO
     } else if (vx_queue_depth(j->queue) >= vx_queue_capacity(j->queue)) {
         vx_err_set(err, VX_EBUSY, "queue_full", "the job queue is full (%zu queued)",
                    vx_queue_capacity(j->queue));
-    } else if (insert_job(j, jb)) {
+    } else if (vx_sorted_insert(&j->jobs, jb)) {
         vx_err_set(err, VX_EINTERNAL, "id_collision", "job id collision");
     } else if (journal_locked(j, jb, err)) {
         int found;
-        size_t at = find_index(j, jb->id, &found);
-        memmove(j->jobs + at, j->jobs + at + 1, (j->njobs - at - 1) * sizeof *j->jobs);
-        j->njobs--;
+        vx_sorted_remove_at(&j->jobs, vx_sorted_find(&j->jobs, jb->id, &found));
     } else {
         /* Pushed under the lock, so capacity was checked atomically. */
         vx_queue_push(j->queue, jb, 1);
@@ -1218,18 +1188,13 @@ cJSON *vx_jobs_list(vx_jobs *j, const char *after, int limit, const char *state,
     cJSON *arr = cJSON_CreateArray();
     next[0] = 0;
     pthread_mutex_lock(&j->lock);
-    size_t i = 0;
-    if (after && *after) {
-        int found;
-        i = find_index(j, after, &found);
-        if (found) i++;
-    }
+    size_t i = vx_sorted_after(&j->jobs, after);
     int n = 0;
-    for (; i < j->njobs; i++) {
-        job *jb = j->jobs[i];
+    for (; i < j->jobs.n; i++) {
+        job *jb = job_at(j, i);
         if (state && strcmp(state, state_names[jb->state]) != 0) continue;
         if (n == limit) {
-            snprintf(next, 40, "%s", j->jobs[i - 1]->id);
+            snprintf(next, 40, "%s", job_at(j, i - 1)->id);
             break;
         }
         cJSON_AddItemToArray(arr, job_json(jb, 1));
