@@ -32,6 +32,24 @@ static void on_job_changed(void *ud, const char *jid, int terminal)
     vx_http_job_changed(h, jid, terminal);
 }
 
+/* The GL thread pings the systemd watchdog through the jobs' alive hook. */
+static void on_jobs_alive(void *ud)
+{
+    sd_notify(0, "WATCHDOG=1");
+}
+
+/* VOXELD_TEST_LOSE_CONTEXT=N (tests only): the next N GL stages run as if
+ * the context had been lost, since a real reset cannot be provoked on
+ * llvmpipe. Read once at start; GL thread afterwards. */
+static int g_lose_context;
+
+static int on_lose_context(void *ud)
+{
+    if (g_lose_context <= 0) return 0;
+    g_lose_context--;
+    return 1;
+}
+
 static int list_devices(void)
 {
     vx_gl_device devs[32];
@@ -96,8 +114,13 @@ int main(int argc, char **argv)
                .device = cfg.egl_device,
                .debug = cfg.gl_debug,
                .robust = 1},
-        .hooks = {.finished = on_job_finished, .changed = on_job_changed},
+        .hooks = {.finished = on_job_finished,
+                  .changed = on_job_changed,
+                  .alive = on_jobs_alive,
+                  .lose_context = on_lose_context},
     };
+    const char *lose = getenv("VOXELD_TEST_LOSE_CONTEXT");
+    g_lose_context = lose && atoi(lose) > 0 ? atoi(lose) : 0;
     vx_jobs *jobs = vx_jobs_open(&jd, &err);
     if (!jobs) {
         VX_ERROR("voxeld.fatal", "stage=journal code=%s message=\"%s\"", err.code, err.message);

@@ -24,6 +24,13 @@ typedef struct vx_jobs_hooks {
     void (*finished)(void *ud, const char *jid, const char *kind, const char *state, double run_s);
     /* A job changed state; terminal = it has finished (wakes ?wait). */
     void (*changed)(void *ud, const char *jid, int terminal);
+    /* The GL thread is alive: called from it about once a second, and from
+     * a long GL stage's progress checks (the daemon pings the systemd
+     * watchdog). NULL = nothing. */
+    void (*alive)(void *ud);
+    /* Test hook, GL thread, after each GL stage: nonzero = handle the
+     * context as lost (exercises the retry). NULL = never. */
+    int (*lose_context)(void *ud);
     void *ud;
 } vx_jobs_hooks;
 

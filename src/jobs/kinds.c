@@ -10,11 +10,7 @@
 #include "voxel/job.h"
 
 static const vx_kind *const table[] = {
-    &vx_kind_preview,
-    &vx_kind_voxelize,
-    &vx_kind_render,
-    &vx_kind_gregory,
-    &vx_kind_catmull_clark,
+    &vx_kind_preview, &vx_kind_voxelize, &vx_kind_render, &vx_kind_gregory, &vx_kind_catmull_clark,
 };
 
 const vx_kind *vx_kind_find(const char *name)
@@ -24,5 +20,11 @@ const vx_kind *vx_kind_find(const char *name)
     return NULL;
 }
 
-size_t vx_kind_count(void) { return sizeof table / sizeof table[0]; }
-const vx_kind *vx_kind_at(size_t i) { return i < vx_kind_count() ? table[i] : NULL; }
+size_t vx_kind_count(void)
+{
+    return sizeof table / sizeof table[0];
+}
+const vx_kind *vx_kind_at(size_t i)
+{
+    return i < vx_kind_count() ? table[i] : NULL;
+}
