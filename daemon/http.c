@@ -43,6 +43,7 @@
  * or Content-Length (400), a chunk size over 64 bits (413), a bad chunk
  * (400) and HTTP versions other than 1.x (505). */
 #include "http.h"
+#include "kinds.h"
 
 #include <arpa/inet.h>
 #include <errno.h>

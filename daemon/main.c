@@ -11,6 +11,7 @@
 
 #include "config.h"
 #include "http.h"
+#include "kinds.h"
 #include "jobs/jobs.h"
 #include "metrics.h"
 #include "store/store.h"
@@ -100,6 +101,7 @@ int main(int argc, char **argv)
     if (!have_cache) VX_WARN("voxeld.no_cache_dir", "path=%s code=%s", cfg.cache_dir, cerr.code);
     vx_jobs_desc jd = {
         .store = store,
+        .kinds = &vx_daemon_kinds,
         .cache_dir = have_cache ? cfg.cache_dir : NULL,
         .limits = {.max_upload_bytes = cfg.max_upload_bytes,
                    .max_triangles = cfg.max_triangles,

@@ -36,6 +36,7 @@ typedef struct vx_jobs_hooks {
 
 typedef struct vx_jobs_desc {
     vx_store *store;       /* required; not owned */
+    const vx_kinds *kinds; /* required: the kinds it runs (daemon/kinds.c); not owned */
     const char *journal;   /* journal path, default DATA/journal.log */
     const char *cache_dir; /* handed to kinds (vx_run_cache_dir); NULL = none */
     vx_limits limits;

@@ -231,7 +231,7 @@ void notify(vx_jobs *j, const char *jid, int terminal)
 cJSON *vx_jobs_submit(vx_jobs *j, const char *mesh, const char *kind, const cJSON *params,
                       vx_err *err)
 {
-    const vx_kind *k = vx_kind_find(kind);
+    const vx_kind *k = vx_kinds_find(j->desc.kinds, kind);
     if (!k) {
         vx_err_set(err, VX_EUNPROC, "unknown_kind", "unknown job kind '%.64s'", kind);
         return NULL;

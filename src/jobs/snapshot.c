@@ -50,7 +50,7 @@ static void replay_one(const cJSON *rec, void *ud)
         VX_WARN("journal.bad_job", "reason=missing_fields");
         return;
     }
-    const vx_kind *k = vx_kind_find(kind);
+    const vx_kind *k = vx_kinds_find(j->desc.kinds, kind);
     if (!k) {
         VX_WARN("journal.unknown_kind", "job=%s kind=%s", id, kind);
         return;

@@ -9,6 +9,7 @@
 #include <cmocka.h>
 
 #include "jobs/kind.h"
+#include "kinds.h"
 
 static void test_numbers(void **state)
 {
