@@ -15,6 +15,7 @@
 
 #include "gl/gl.h"
 #include "jobs/kind.h"
+#include "jobs/state.h"
 #include "store/store.h"
 
 typedef struct vx_jobs vx_jobs;
@@ -35,10 +36,12 @@ typedef struct vx_jobs_hooks {
 } vx_jobs_hooks;
 
 typedef struct vx_jobs_desc {
-    vx_store *store;       /* required; not owned */
-    const vx_kinds *kinds; /* required: the kinds it runs (daemon/kinds.c); not owned */
-    const char *journal;   /* journal path, default DATA/journal.log */
-    const char *cache_dir; /* handed to kinds (vx_run_cache_dir); NULL = none */
+    vx_store *store;              /* required; not owned */
+    const vx_kinds *kinds;        /* required: the kinds it runs (daemon/kinds.c); not owned */
+    const char *journal;          /* where the job state is: for the local journal a path,
+                                     default DATA/journal.log */
+    const vx_jobstate_ops *state; /* the job state's backend; NULL = the local journal */
+    const char *cache_dir;        /* handed to kinds (vx_run_cache_dir); NULL = none */
     vx_limits limits;
     size_t max_queued;      /* queued jobs before 429; default 64 */
     size_t history;         /* finished jobs kept; default 10000 */

@@ -10,7 +10,7 @@
 #include <stdint.h>
 
 #include "jobs/jobs.h"
-#include "jobs/journal.h"
+#include "jobs/state.h"
 #include "jobs/queue.h"
 #include "util/sorted.h"
 
@@ -66,9 +66,10 @@ struct vx_job_run {
 
 struct vx_jobs {
     vx_jobs_desc desc;
-    vx_journal *journal;
-    vx_queue *queue; /* queued jobs, for the GL thread */
-    vx_queue *cpu;   /* runs that finished their GL stage */
+    const vx_jobstate_ops *st_ops; /* the job state's backend (state.h) */
+    void *st;                      /* its handle */
+    vx_queue *queue;               /* queued jobs, for the GL thread */
+    vx_queue *cpu;                 /* runs that finished their GL stage */
     pthread_mutex_t lock;
     vx_sorted jobs;         /* job *, sorted by id = creation order */
     uint64_t history_bytes; /* sum of bytes of the finished jobs */

@@ -16,7 +16,7 @@ int journal_locked(vx_jobs *j, job *jb, vx_err *err)
     jb->seq++;
     cJSON *rec = cJSON_CreateObject();
     cJSON_AddItemToObject(rec, "job", job_json(jb, 0));
-    int rc = vx_journal_append(j->journal, rec, err);
+    int rc = j->st_ops->append(j->st, rec, err);
     cJSON_Delete(rec);
     return rc;
 }
@@ -31,7 +31,7 @@ int compact_locked(vx_jobs *j, vx_err *err)
         recs[i] = cJSON_CreateObject();
         cJSON_AddItemToObject(recs[i], "job", job_json(job_at(j, i), 0));
     }
-    int rc = vx_journal_compact(j->journal, recs, j->jobs.n, err);
+    int rc = j->st_ops->compact(j->st, recs, j->jobs.n, err);
     for (size_t i = 0; i < j->jobs.n; i++)
         cJSON_Delete(recs[i]);
     free(recs);
@@ -135,15 +135,16 @@ vx_jobs *vx_jobs_open(const vx_jobs_desc *desc, vx_err *err)
         snprintf(path, sizeof path, "%s/journal.log", vx_store_dir(desc->store));
         j->desc.journal = path;
     }
-    j->journal = vx_journal_open(j->desc.journal, err);
-    if (!j->journal || !j->queue || !j->cpu) {
-        if (j->journal || err->kind == VX_EOK)
+    j->st_ops = j->desc.state ? j->desc.state : &vx_jobstate_local;
+    j->st = j->st_ops->open(j->desc.journal, err);
+    if (!j->st || !j->queue || !j->cpu) {
+        if (j->st || err->kind == VX_EOK)
             vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory");
         vx_jobs_free(j);
         return NULL;
     }
     j->desc.journal = NULL; /* path was on our stack */
-    long n = vx_journal_replay(j->journal, replay_one, j, err);
+    long n = j->st_ops->replay(j->st, replay_one, j, err);
     if (n < 0) {
         vx_jobs_free(j);
         return NULL;
@@ -194,7 +195,8 @@ vx_jobs *vx_jobs_open(const vx_jobs_desc *desc, vx_err *err)
 
 void vx_jobs_maintain(vx_jobs *j, long max_journal_bytes)
 {
-    if (vx_journal_size(j->journal) <= max_journal_bytes) return;
+    long size = j->st_ops->size(j->st);
+    if (size < 0 || size <= max_journal_bytes) return;
     vx_err err;
     pthread_mutex_lock(&j->lock);
     int rc = compact_locked(j, &err);
@@ -202,7 +204,7 @@ void vx_jobs_maintain(vx_jobs *j, long max_journal_bytes)
     if (rc)
         VX_ERROR("journal.compact_failed", "code=%s", err.code);
     else
-        VX_INFO("journal.compacted", "bytes=%ld", vx_journal_size(j->journal));
+        VX_INFO("journal.compacted", "bytes=%ld", j->st_ops->size(j->st));
 }
 
 void vx_jobs_free(vx_jobs *j)
@@ -214,7 +216,7 @@ void vx_jobs_free(vx_jobs *j)
     vx_sorted_free(&j->jobs);
     vx_queue_free(j->queue);
     vx_queue_free(j->cpu);
-    vx_journal_close(j->journal);
+    if (j->st) j->st_ops->close(j->st);
     pthread_mutex_destroy(&j->lock);
     pthread_cond_destroy(&j->gl_cond);
     free(j);

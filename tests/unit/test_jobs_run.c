@@ -14,7 +14,10 @@
 
 #include <cmocka.h>
 
+#include <sys/stat.h>
+
 #include "jobs/jobs.h"
+#include "jobs/state.h"
 #include "store/store.h"
 
 static cJSON *t_parse(const cJSON *params, const vx_limits *lim, vx_err *err)
@@ -67,6 +70,70 @@ typedef struct fixture {
     char mesh[65];
 } fixture;
 
+/* ---- an in-memory job state backend (state.h) ---- */
+
+typedef struct mem_state {
+    char *rec[256];
+    size_t n;
+    int opened, appends, compacts;
+} mem_state;
+static mem_state g_mem;
+static const vx_jobstate_ops *g_state; /* NULL = the local journal */
+
+static void *mem_open(const char *where, vx_err *err)
+{
+    g_mem.opened++;
+    return &g_mem;
+}
+static void mem_close(void *st) {}
+static long mem_replay(void *st, void (*fn)(const cJSON *rec, void *ud), void *ud, vx_err *err)
+{
+    mem_state *m = st;
+    for (size_t i = 0; i < m->n; i++) {
+        cJSON *rec = cJSON_Parse(m->rec[i]);
+        fn(rec, ud);
+        cJSON_Delete(rec);
+    }
+    return (long)m->n;
+}
+static int mem_append(void *st, const cJSON *rec, vx_err *err)
+{
+    mem_state *m = st;
+    if (m->n == 256) return vx_err_set(err, VX_ENOSPC, "insufficient_storage", "full");
+    m->rec[m->n++] = cJSON_PrintUnformatted(rec);
+    m->appends++;
+    return 0;
+}
+static int mem_compact(void *st, cJSON *const *recs, size_t n, vx_err *err)
+{
+    mem_state *m = st;
+    for (size_t i = 0; i < m->n; i++)
+        free(m->rec[i]);
+    m->n = 0;
+    for (size_t i = 0; i < n && i < 256; i++)
+        m->rec[m->n++] = cJSON_PrintUnformatted(recs[i]);
+    m->compacts++;
+    return 0;
+}
+static long mem_size(void *st)
+{
+    return -1;
+}
+static const vx_jobstate_ops mem_ops = {"memory",   mem_open,    mem_close, mem_replay,
+                                        mem_append, mem_compact, mem_size};
+
+static void open_jobs(fixture *fx)
+{
+    vx_err err = {0};
+    vx_jobs_desc jd = {.store = fx->store,
+                       .kinds = &table,
+                       .state = g_state,
+                       .hooks = {.lose_context = lose_context, .alive = alive}};
+    fx->jobs = vx_jobs_open(&jd, &err);
+    if (!fx->jobs) fail_msg("vx_jobs_open: %s: %s", err.code, err.message);
+    if (vx_jobs_start(fx->jobs, &err)) fail_msg("vx_jobs_start: %s: %s", err.code, err.message);
+}
+
 static void open_all(fixture *fx)
 {
     vx_err err = {0};
@@ -84,12 +151,7 @@ static void open_all(fixture *fx)
     int existed = 0;
     assert_int_equal(vx_store_mesh_commit(fx->store, u, fx->mesh, "obj", meta, &existed, &err), 0);
     cJSON_Delete(meta);
-    vx_jobs_desc jd = {.store = fx->store,
-                       .kinds = &table,
-                       .hooks = {.lose_context = lose_context, .alive = alive}};
-    fx->jobs = vx_jobs_open(&jd, &err);
-    assert_non_null(fx->jobs);
-    if (vx_jobs_start(fx->jobs, &err)) fail_msg("vx_jobs_start: %s: %s", err.code, err.message);
+    open_jobs(fx);
 }
 
 static void close_all(fixture *fx)
@@ -170,11 +232,45 @@ static void test_retry_stats_once(void **state)
     close_all(&fx);
 }
 
+/* The job state goes through the backend in the desc: every change is
+ * appended there (none to a local journal), stop compacts, and a reopen
+ * replays the finished job from it. */
+static void test_state_backend(void **state)
+{
+    fixture fx;
+    g_state = &mem_ops;
+    open_all(&fx);
+    assert_int_equal(g_mem.opened, 1);
+    cJSON *j = run(&fx);
+    char id[33];
+    snprintf(id, sizeof id, "%s", cJSON_GetStringValue(cJSON_GetObjectItem(j, "id")));
+    cJSON_Delete(j);
+    assert_true(g_mem.appends >= 3); /* queued, running, succeeded */
+    char path[128];
+    struct stat sb;
+    snprintf(path, sizeof path, "%s/journal.log", fx.dir);
+    assert_int_equal(stat(path, &sb), -1);
+    vx_jobs_free(fx.jobs);
+    assert_true(g_mem.compacts >= 1);
+    open_jobs(&fx);
+    int terminal = 0;
+    vx_err err = {0};
+    j = vx_jobs_get(fx.jobs, id, &terminal, &err);
+    assert_non_null(j);
+    assert_int_equal(terminal, 1);
+    assert_string_equal(cJSON_GetStringValue(cJSON_GetObjectItem(j, "state")), "succeeded");
+    cJSON_Delete(j);
+    close_all(&fx);
+    mem_compact(&g_mem, NULL, 0, &err);
+    g_state = NULL;
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_two_paths_valid_together),
         cmocka_unit_test(test_retry_stats_once),
+        cmocka_unit_test(test_state_backend),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }
