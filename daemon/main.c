@@ -11,6 +11,7 @@
 
 #include "config.h"
 #include "http.h"
+#include "kinds.h"
 #include "jobs/jobs.h"
 #include "metrics.h"
 #include "store/store.h"
@@ -30,6 +31,24 @@ static void on_job_changed(void *ud, const char *jid, int terminal)
 {
     vx_http *h = __atomic_load_n(&g_http, __ATOMIC_ACQUIRE);
     vx_http_job_changed(h, jid, terminal);
+}
+
+/* The GL thread pings the systemd watchdog through the jobs' alive hook. */
+static void on_jobs_alive(void *ud)
+{
+    sd_notify(0, "WATCHDOG=1");
+}
+
+/* VOXELD_TEST_LOSE_CONTEXT=N (tests only): the next N GL stages run as if
+ * the context had been lost, since a real reset cannot be provoked on
+ * llvmpipe. Read once at start; GL thread afterwards. */
+static int g_lose_context;
+
+static int on_lose_context(void *ud)
+{
+    if (g_lose_context <= 0) return 0;
+    g_lose_context--;
+    return 1;
 }
 
 static int list_devices(void)
@@ -82,6 +101,7 @@ int main(int argc, char **argv)
     if (!have_cache) VX_WARN("voxeld.no_cache_dir", "path=%s code=%s", cfg.cache_dir, cerr.code);
     vx_jobs_desc jd = {
         .store = store,
+        .kinds = &vx_daemon_kinds,
         .cache_dir = have_cache ? cfg.cache_dir : NULL,
         .limits = {.max_upload_bytes = cfg.max_upload_bytes,
                    .max_triangles = cfg.max_triangles,
@@ -92,9 +112,17 @@ int main(int argc, char **argv)
         .history = cfg.job_history,
         .history_bytes = cfg.job_history_bytes,
         .workers = cfg.workers,
-        .gl = {.device = cfg.egl_device, .debug = cfg.gl_debug, .robust = 1},
-        .hooks = {.finished = on_job_finished, .changed = on_job_changed},
+        .gl = {.pick_device = cfg.egl_device >= 0,
+               .device = cfg.egl_device,
+               .debug = cfg.gl_debug,
+               .robust = 1},
+        .hooks = {.finished = on_job_finished,
+                  .changed = on_job_changed,
+                  .alive = on_jobs_alive,
+                  .lose_context = on_lose_context},
     };
+    const char *lose = getenv("VOXELD_TEST_LOSE_CONTEXT");
+    g_lose_context = lose && atoi(lose) > 0 ? atoi(lose) : 0;
     vx_jobs *jobs = vx_jobs_open(&jd, &err);
     if (!jobs) {
         VX_ERROR("voxeld.fatal", "stage=journal code=%s message=\"%s\"", err.code, err.message);

@@ -5,6 +5,7 @@
 #include <string.h>
 
 #include "http_int.h"
+#include "kinds.h"
 #include "metrics.h"
 #include "util/fsutil.h"
 

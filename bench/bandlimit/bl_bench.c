@@ -49,7 +49,7 @@ static void solid(const char *path, int R, vx_bitgrid *g, double *P, double *ms)
     vx_err err = {0};
     vx_mesh *m = vx_mesh_read_path(path, NULL, &err);
     if (!m) die(path, &err);
-    vx_gl_desc gd = {.device = -1};
+    vx_gl_desc gd = {0};
     vx_gl *gl = vx_gl_new(&gd, &err);
     if (!gl) die("gl", &err);
     double ext = 0;

@@ -466,7 +466,6 @@ int main(int argc, char **argv)
     }
     vx_err err;
     vx_gl_desc d = {};
-    d.device = -1;
     vx_gl *gl = vx_gl_new(&d, &err);
     if (!gl) die(err);
     const vx_gl_info *info = vx_gl_get_info(gl);

@@ -260,7 +260,7 @@ int main(int argc, char **argv)
         else meshes.push_back(argv[i]);
     }
     vx_err err;
-    vx_gl_desc gd{-1, 0, 0};
+    vx_gl_desc gd{}; // zero = automatic device order
     vx_gl *gl = vx_gl_new(&gd, &err);
     if (!gl) {
         fprintf(stderr, "GL: %s\n", err.message);

@@ -535,6 +535,11 @@ fail:
     return -1;
 }
 
+int vx_gl_desc_device(const vx_gl_desc *desc)
+{
+    return desc && desc->pick_device && desc->device >= 0 ? desc->device : -1;
+}
+
 vx_gl *vx_gl_new(const vx_gl_desc *desc, vx_err *err)
 {
     vx_gl *gl = calloc(1, sizeof *gl);
@@ -542,8 +547,8 @@ vx_gl *vx_gl_new(const vx_gl_desc *desc, vx_err *err)
         vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for the GL context");
         return NULL;
     }
-    gl->desc.device = -1;
     if (desc) gl->desc = *desc;
+    int want = vx_gl_desc_device(desc);
     gl->dpy = EGL_NO_DISPLAY;
     gl->surf = EGL_NO_SURFACE;
     gl->ctx = EGL_NO_CONTEXT;
@@ -552,19 +557,19 @@ vx_gl *vx_gl_new(const vx_gl_desc *desc, vx_err *err)
     int n = enum_devices(&devs, err);
     if (n < 0) goto fail;
 
-    if (gl->desc.device >= 0) {
+    if (want >= 0) {
         /* An explicit choice is exact: no silent fallback to another GPU. */
         egl_dev *pick = NULL;
         for (int i = 0; i < n; i++)
-            if (devs[i].d.index == gl->desc.device) pick = &devs[i];
+            if (devs[i].d.index == want) pick = &devs[i];
         if (!pick) {
             if (n > 0)
                 vx_err_set(err, VX_EGPU, "gl_no_device",
                            "EGL device %d does not exist: %d EGL device%s found (indices 0..%d)",
-                           gl->desc.device, n, n == 1 ? "" : "s", n - 1);
+                           want, n, n == 1 ? "" : "s", n - 1);
             else
                 vx_err_set(err, VX_EGPU, "gl_no_device",
-                           "EGL device %d does not exist: no EGL devices found", gl->desc.device);
+                           "EGL device %d does not exist: no EGL devices found", want);
             goto fail;
         }
         EGLDisplay dpy = eglGetPlatformDisplay(EGL_PLATFORM_DEVICE_EXT, pick->dev, NULL);
@@ -600,7 +605,7 @@ vx_gl *vx_gl_new(const vx_gl_desc *desc, vx_err *err)
     free(devs);
     return gl;
 fail:
-    if (err) VX_ERROR("gl.init_failed", "code=%s device=%d", err->code, gl->desc.device);
+    if (err) VX_ERROR("gl.init_failed", "code=%s device=%d", err->code, want);
     free(devs);
     free(gl);
     return NULL;
@@ -638,8 +643,9 @@ int vx_gl_rebuild(vx_gl *gl, vx_err *err)
 {
     destroy_context(gl);
     if (gl->dpy == EGL_NO_DISPLAY)
-        return vx_err_set(err, VX_EGPU, "gl_no_device", "no EGL display to rebuild on");
-    if (create_context(gl, err)) {
+        vx_err_set(err, VX_EGPU, "gl_no_device", "no EGL display to rebuild on");
+    if (gl->dpy == EGL_NO_DISPLAY || create_context(gl, err)) {
+        /* The one log line of a failed rebuild: callers do not log it. */
         VX_ERROR("gl.rebuild_failed", "device=%d code=%s", gl->info.device_index,
                  err ? err->code : "?");
         return -1;

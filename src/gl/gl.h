@@ -17,10 +17,13 @@
 
 typedef struct vx_gl vx_gl;
 
+/* Zero-initialised = the defaults: automatic device order, no debug
+ * output, no robustness. */
 typedef struct vx_gl_desc {
-    int device;    /* EGL device index to use, or -1 = automatic order */
-    int debug;     /* nonzero: KHR_debug messages go to the log */
-    int robust;    /* nonzero: ask for a robust context (reset notification) */
+    int pick_device; /* nonzero: exactly EGL device `device`; 0 = automatic order */
+    int device;      /* EGL device index (0 included), used when pick_device */
+    int debug;       /* nonzero: KHR_debug messages go to the log */
+    int robust;      /* nonzero: ask for a robust context (reset notification) */
 } vx_gl_desc;
 
 typedef struct vx_gl_info {
@@ -28,16 +31,16 @@ typedef struct vx_gl_info {
     char device_kind[16]; /* "nvidia", "hardware", "other", "software", "surfaceless" */
     int device_index;     /* EGL device index, -1 for surfaceless */
     char egl_vendor[64], egl_version[64];
-    int robust;           /* the context has reset notification */
+    int robust; /* the context has reset notification */
     long max_compute_groups[3], max_compute_invocations, max_ssbo_bytes, max_texture_size,
         max_3d_texture_size, max_samples;
 } vx_gl_info;
 
 typedef struct vx_gl_device {
     int index;
-    char kind[16];       /* as in vx_gl_info; "other" = an EGL device that is neither
-                            NVIDIA, nor has a DRM node, nor is Mesa's software one */
-    char name[128];      /* DRM node ("cuda=N node" for NVIDIA) or extension summary */
+    char kind[16];  /* as in vx_gl_info; "other" = an EGL device that is neither
+                       NVIDIA, nor has a DRM node, nor is Mesa's software one */
+    char name[128]; /* DRM node ("cuda=N node" for NVIDIA) or extension summary */
 } vx_gl_device;
 
 /* Lists EGL devices in the order automatic choice tries them; returns count

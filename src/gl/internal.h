@@ -25,4 +25,8 @@ vx_gl_prog_entry **vx_gl_prog_slots(vx_gl *gl, size_t **n, size_t **cap);
 GLuint vx_gl_program_from_source(const char *label, const char *vs, const char *fs, const char *cs,
                                  vx_err *err);
 
+/* The EGL device index a desc asks for exactly, or -1 for the automatic
+ * order (a zero-initialised desc). */
+int vx_gl_desc_device(const vx_gl_desc *desc);
+
 #endif

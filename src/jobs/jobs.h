@@ -15,6 +15,7 @@
 
 #include "gl/gl.h"
 #include "jobs/kind.h"
+#include "jobs/state.h"
 #include "store/store.h"
 
 typedef struct vx_jobs vx_jobs;
@@ -24,13 +25,23 @@ typedef struct vx_jobs_hooks {
     void (*finished)(void *ud, const char *jid, const char *kind, const char *state, double run_s);
     /* A job changed state; terminal = it has finished (wakes ?wait). */
     void (*changed)(void *ud, const char *jid, int terminal);
+    /* The GL thread is alive: called from it about once a second, and from
+     * a long GL stage's progress checks (the daemon pings the systemd
+     * watchdog). NULL = nothing. */
+    void (*alive)(void *ud);
+    /* Test hook, GL thread, after each GL stage: nonzero = handle the
+     * context as lost (exercises the retry). NULL = never. */
+    int (*lose_context)(void *ud);
     void *ud;
 } vx_jobs_hooks;
 
 typedef struct vx_jobs_desc {
-    vx_store *store;       /* required; not owned */
-    const char *journal;   /* journal path, default DATA/journal.log */
-    const char *cache_dir; /* handed to kinds (vx_run_cache_dir); NULL = none */
+    vx_store *store;              /* required; not owned */
+    const vx_kinds *kinds;        /* required: the kinds it runs (daemon/kinds.c); not owned */
+    const char *journal;          /* where the job state is: for the local journal a path,
+                                     default DATA/journal.log */
+    const vx_jobstate_ops *state; /* the job state's backend; NULL = the local journal */
+    const char *cache_dir;        /* handed to kinds (vx_run_cache_dir); NULL = none */
     vx_limits limits;
     size_t max_queued;      /* queued jobs before 429; default 64 */
     size_t history;         /* finished jobs kept; default 10000 */
@@ -72,7 +83,7 @@ cJSON *vx_jobs_list(vx_jobs *j, const char *after, int limit, const char *state,
 /* Where an output of a finished job is: path, content type and the file name
  * for Content-Disposition. name NULL = the primary output. Errors:
  * job_not_found, job_not_finished / job_failed / job_canceled (VX_ECONFLICT),
- * output_not_found, result_evicted (VX_ENOTFOUND). */
+ * output_not_found, result_evicted (VX_EGONE). */
 int vx_jobs_output(vx_jobs *j, const char *jid, const char *name, char *path, size_t pathn,
                    char ctype[64], char fname[128], vx_err *err);
 

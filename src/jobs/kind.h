@@ -95,11 +95,16 @@ typedef struct vx_kind {
 /* Inline data smaller than this stays in the params (bytes of JSON). */
 #define VX_BLOB_MIN_BYTES 4096
 
-/* The table (src/jobs/kinds.c); NULL when name is unknown. Any thread. */
-const vx_kind *vx_kind_find(const char *name);
-/* Number of rows and row i, for listings (/v1/info). */
-size_t vx_kind_count(void);
-const vx_kind *vx_kind_at(size_t i);
+/* A table of kinds. The daemon's (daemon/kinds.c) reaches the job runner
+ * through vx_jobs_desc.kinds, so that src/jobs names no engine. */
+typedef struct vx_kinds {
+    const vx_kind *const *rows;
+    size_t n;
+} vx_kinds;
+
+/* The row of t named name; NULL when there is none (or t is NULL). Any
+ * thread. */
+const vx_kind *vx_kinds_find(const vx_kinds *t, const char *name);
 
 /* Reads params (NULL or null = {}) into an owned struct of k->params_size:
  * k->spec's reader, then k->check. Returns it (free it with

@@ -74,3 +74,10 @@ cJSON *vx_params_normalize(const vx_kind *k, const cJSON *params, const vx_limit
     }
     return norm;
 }
+
+const vx_kind *vx_kinds_find(const vx_kinds *t, const char *name)
+{
+    for (size_t i = 0; t && name && i < t->n; i++)
+        if (strcmp(t->rows[i]->name, name) == 0) return t->rows[i];
+    return NULL;
+}

@@ -48,7 +48,8 @@ static int grow(vx_queue *q)
     size_t ncap = q->cap * 2;
     void **n = malloc(ncap * sizeof *n);
     if (!n) return -1;
-    for (size_t i = 0; i < q->count; i++) n[i] = q->items[(q->head + i) % q->cap];
+    for (size_t i = 0; i < q->count; i++)
+        n[i] = q->items[(q->head + i) % q->cap];
     free(q->items);
     q->items = n;
     q->cap = ncap;
@@ -124,7 +125,10 @@ size_t vx_queue_depth(vx_queue *q)
     return n;
 }
 
-size_t vx_queue_capacity(vx_queue *q) { return q->capacity; }
+size_t vx_queue_capacity(vx_queue *q)
+{
+    return q->capacity;
+}
 
 void vx_queue_close(vx_queue *q)
 {

@@ -11,6 +11,7 @@
 #include <string.h>
 
 #include "jobs/kind.h"
+#include "kinds.h"
 
 static const vx_limits presets[] = {
     /* the daemon's defaults (daemon/config.c) */

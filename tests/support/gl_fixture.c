@@ -8,7 +8,7 @@ int vx_test_gl_setup(void **state)
 {
     (void)state;
     vx_err err = {0};
-    vx_gl_desc d = {.device = -1};
+    vx_gl_desc d = {0};
     vx_test_gl = vx_gl_new(&d, &err);
     if (!vx_test_gl) fprintf(stderr, "vx_gl_new: %s: %s\n", err.code, err.message);
     return vx_test_gl ? 0 : -1;

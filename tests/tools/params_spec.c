@@ -5,6 +5,7 @@
 #include <stdlib.h>
 
 #include "jobs/kind.h"
+#include "kinds.h"
 
 int main(void)
 {

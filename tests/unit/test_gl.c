@@ -5,7 +5,9 @@
 #include <stddef.h>
 #include <stdint.h>
 #include <stdio.h>
+#include <stdlib.h>
 #include <string.h>
+#include <unistd.h>
 
 #include <cmocka.h>
 
@@ -17,7 +19,7 @@ static vx_gl *g_gl;
 static int setup(void **state)
 {
     vx_err err = {0};
-    vx_gl_desc d = {.device = -1, .debug = 1, .robust = 1};
+    vx_gl_desc d = {.debug = 1, .robust = 1};
     g_gl = vx_gl_new(&d, &err);
     if (!g_gl) fprintf(stderr, "vx_gl_new: %s: %s\n", err.code, err.message);
     return g_gl ? 0 : -1;
@@ -233,7 +235,7 @@ static void test_device_out_of_range(void **state)
     vx_err err = {0};
     int n = vx_gl_list_devices(d, 16, &err);
     assert_true(n >= 1);
-    vx_gl_desc desc = {.device = n + 5};
+    vx_gl_desc desc = {.pick_device = 1, .device = n + 5};
     assert_null(vx_gl_new(&desc, &err));
     printf("out of range: %s: %s\n", err.code, err.message);
     assert_int_equal(err.kind, VX_EGPU);
@@ -254,7 +256,7 @@ static void test_explicit_device(void **state)
     vx_err err = {0};
     int n = vx_gl_list_devices(d, 16, &err);
     assert_true(n >= 1);
-    vx_gl_desc desc = {.device = d[0].index};
+    vx_gl_desc desc = {.pick_device = 1, .device = d[0].index};
     vx_gl *gl = vx_gl_new(&desc, &err);
     if (!gl) fprintf(stderr, "%s: %s\n", err.code, err.message);
     assert_non_null(gl);
@@ -266,6 +268,68 @@ static void test_explicit_device(void **state)
     assert_true(p != 0);
     vx_gl_free(gl);
     vx_gl_free(NULL);
+}
+
+/* A zero-initialised desc means the automatic order (issue #11: it used to
+ * force device 0); device 0 itself stays reachable explicitly. */
+static void test_zero_desc_is_automatic(void **state)
+{
+    vx_gl_desc zero = {0};
+    assert_int_equal(vx_gl_desc_device(&zero), -1);
+    assert_int_equal(vx_gl_desc_device(NULL), -1);
+    vx_gl_desc dev0 = {.pick_device = 1, .device = 0};
+    assert_int_equal(vx_gl_desc_device(&dev0), 0);
+    vx_gl_desc dev3 = {.pick_device = 1, .device = 3};
+    assert_int_equal(vx_gl_desc_device(&dev3), 3);
+    /* A device index alone, without pick_device, does not choose. */
+    vx_gl_desc idx_only = {.device = 3};
+    assert_int_equal(vx_gl_desc_device(&idx_only), -1);
+    vx_gl_device d[16];
+    vx_err err = {0};
+    assert_true(vx_gl_list_devices(d, 16, &err) >= 1);
+    vx_gl *gl = vx_gl_new(&zero, &err);
+    if (!gl) fprintf(stderr, "%s: %s\n", err.code, err.message);
+    assert_non_null(gl);
+    /* The first device of the automatic order that works: here the first. */
+    assert_int_equal(vx_gl_get_info(gl)->device_index, d[0].index);
+    vx_gl_free(gl);
+}
+
+/* Counts lines of stderr holding `needle` while fn runs. */
+static int count_logged(const char *needle, void (*fn)(void))
+{
+    char path[] = "/tmp/vx_test_gl_log.XXXXXX";
+    int fd = mkstemp(path);
+    assert_true(fd >= 0);
+    fflush(stderr);
+    int saved = dup(2);
+    dup2(fd, 2);
+    fn();
+    fflush(stderr);
+    dup2(saved, 2);
+    close(saved);
+    FILE *f = fdopen(fd, "r");
+    rewind(f);
+    char line[1024];
+    int n = 0;
+    while (fgets(line, sizeof line, f))
+        n += strstr(line, needle) != NULL;
+    fclose(f);
+    unlink(path);
+    return n;
+}
+
+static void bad_device(void)
+{
+    vx_err err = {0};
+    vx_gl_desc desc = {.pick_device = 1, .device = 1000};
+    assert_null(vx_gl_new(&desc, &err));
+}
+
+/* A failed init is logged once, by the GL layer. */
+static void test_init_failed_logged_once(void **state)
+{
+    assert_int_equal(count_logged("event=gl.init_failed", bad_device), 1);
 }
 
 int main(void)
@@ -282,9 +346,11 @@ int main(void)
         cmocka_unit_test(test_timer),
         cmocka_unit_test(test_rebuild),
         cmocka_unit_test(test_device_out_of_range),
+        cmocka_unit_test(test_init_failed_logged_once),
     };
     const struct CMUnitTest alone[] = {
         cmocka_unit_test(test_explicit_device),
+        cmocka_unit_test(test_zero_desc_is_automatic),
     };
     int failed = cmocka_run_group_tests(tests, setup, teardown);
     failed += cmocka_run_group_tests(alone, NULL, NULL);

@@ -10,6 +10,7 @@
 #include <cmocka.h>
 
 #include "jobs/kind.h"
+#include "kinds.h"
 
 static void test_kind_table(void **state)
 {

@@ -24,7 +24,7 @@ static vx_gl *g_gl;
 static int setup(void **state)
 {
     vx_err err = {0};
-    vx_gl_desc d = {.device = -1};
+    vx_gl_desc d = {0};
     g_gl = vx_gl_new(&d, &err);
     if (!g_gl) fprintf(stderr, "vx_gl_new: %s: %s\n", err.code, err.message);
     return g_gl ? 0 : -1;

@@ -1,0 +1,116 @@
+/* Private to src/jobs: the job table, a run, and the functions the
+ * registry (registry.c, pins.c), the snapshots (snapshot.c), the runner
+ * (runner.c) and the run service (run.c) share. Locking: "_locked" functions
+ * and the fields of vx_jobs marked so need vx_jobs.lock held. */
+#ifndef VX_JOBS_INT_H
+#define VX_JOBS_INT_H
+
+#include <pthread.h>
+#include <stddef.h>
+#include <stdint.h>
+
+#include "jobs/jobs.h"
+#include "jobs/state.h"
+#include "jobs/queue.h"
+#include "util/sorted.h"
+
+typedef enum job_state { ST_QUEUED, ST_RUNNING, ST_SUCCEEDED, ST_FAILED, ST_CANCELED } job_state;
+extern const char *const state_names[5];
+
+/* What an unfinished job holds in the store (vx_store_mesh_pin,
+ * vx_store_blob_put/pin): released when it finishes. */
+typedef struct pinset {
+    char (*mesh)[65];
+    size_t nmesh;
+    char (*blob)[65];
+    size_t nblob;
+} pinset;
+
+typedef struct job {
+    char id[33];
+    char mesh[65];
+    const vx_kind *kind;
+    cJSON *params;
+    job_state state;
+    double progress;
+    int cancel_requested;
+    int attempts;
+    double created, started, finished; /* wall clock; 0 = not yet */
+    long seq;                          /* journal order of this job's snapshots */
+    vx_err error;
+    cJSON *stats;   /* object */
+    cJSON *outputs; /* name -> {"file","content_type"}, in declaration order */
+    /* A finished job keeps params, stats and outputs only as this compact
+     * JSON text {"params","stats","outputs"} (the three trees are NULL). */
+    char *frozen;
+    size_t bytes; /* what a finished job costs the history budget */
+    pinset pins;
+} job;
+
+struct vx_job_run {
+    vx_jobs *jobs;
+    job *job;
+    const vx_kind *kind;
+    vx_gl *gl;
+    double t0;        /* monotonic start of this attempt */
+    double last_ping; /* watchdog */
+    cJSON *stats;
+    cJSON *outputs;
+    char dir[2200]; /* result dir, made at the first output */
+    cJSON *paths;   /* strings: every path handed out, valid until the run ends */
+    cJSON *params;  /* the job's params with its blobs back in place */
+    int big_params; /* some came from blobs */
+    void *typed;    /* the params as the kind's struct, read once per run */
+    void *state;
+    int on_gl_thread;
+};
+
+struct vx_jobs {
+    vx_jobs_desc desc;
+    const vx_jobstate_ops *st_ops; /* the job state's backend (state.h) */
+    void *st;                      /* its handle */
+    vx_queue *queue;               /* queued jobs, for the GL thread */
+    vx_queue *cpu;                 /* runs that finished their GL stage */
+    pthread_mutex_t lock;
+    vx_sorted jobs;         /* job *, sorted by id = creation order */
+    uint64_t history_bytes; /* sum of bytes of the finished jobs */
+    size_t running;
+    pthread_t gl_thread;
+    pthread_t *workers;
+    int nworkers, started;
+    volatile int stopping;
+    int gl_state; /* 0 starting, 1 up, -1 failed */
+    pthread_cond_t gl_cond;
+    vx_err gl_err;
+    vx_gl_info gl_info;
+};
+
+/* registry.c */
+void pinset_free(pinset *ps);
+void job_free(job *jb);
+int is_terminal(job_state s);
+double ms_between(double a, double b);
+cJSON *job_json(const job *jb, int api);
+void freeze_locked(vx_jobs *j, job *jb);
+const char *job_key(const void *item);
+job *job_at(const vx_jobs *j, size_t i);
+job *find_job(vx_jobs *j, const char *id);
+void trim_history_locked(vx_jobs *j, char (*dropped)[33], size_t *ndropped, size_t max);
+void notify(vx_jobs *j, const char *jid, int terminal);
+
+/* pins.c */
+void unpin_job(vx_jobs *j, pinset *ps);
+int pin_job(vx_jobs *j, const char *mesh, const vx_kind *k, const cJSON *params, int replay,
+            pinset *ps, vx_err *err);
+int externalize(vx_jobs *j, const vx_kind *k, cJSON *params, pinset *ps, vx_err *err);
+cJSON *inline_params(vx_jobs *j, const vx_kind *k, const cJSON *params, int *big, vx_err *err);
+
+/* runner.c */
+/* Calls the desc's alive hook (the daemon's watchdog ping). */
+void jobs_alive(vx_jobs *j);
+
+/* snapshot.c */
+int journal_locked(vx_jobs *j, job *jb, vx_err *err);
+int compact_locked(vx_jobs *j, vx_err *err);
+
+#endif

@@ -1,0 +1,457 @@
+/* The job registry: job objects, their JSON, the history budget, and the
+ * API over the table (submit, get, cancel, list, outputs). jobs_int.h. */
+#include "jobs/jobs_int.h"
+
+#include <malloc.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/random.h>
+
+#include "util/fsutil.h"
+#include "util/log.h"
+
+const char *const state_names[5] = {"queued", "running", "succeeded", "failed", "canceled"};
+
+/* ---- job objects ------------------------------------------------------- */
+
+void pinset_free(pinset *ps)
+{
+    free(ps->mesh);
+    free(ps->blob);
+    memset(ps, 0, sizeof *ps);
+}
+
+/* Frees a job; its pins are released by whoever ends it, never here (a
+ * queued job freed at shutdown keeps its mesh for the next start). */
+void job_free(job *jb)
+{
+    if (!jb) return;
+    cJSON_Delete(jb->params);
+    cJSON_Delete(jb->stats);
+    cJSON_Delete(jb->outputs);
+    free(jb->frozen);
+    pinset_free(&jb->pins);
+    free(jb);
+}
+
+int is_terminal(job_state s)
+{
+    return s >= ST_SUCCEEDED;
+}
+
+int vx_jobs_valid_id(const char *s)
+{
+    if (!s || strlen(s) != 32) return 0;
+    for (int i = 0; i < 32; i++)
+        if (!((s[i] >= '0' && s[i] <= '9') || (s[i] >= 'a' && s[i] <= 'f'))) return 0;
+    return 1;
+}
+
+/* Time-ordered ids: 48 bits of milliseconds, then 80 random bits. */
+static void new_id(char out[33])
+{
+    unsigned char rnd[10] = {0};
+    if (getrandom(rnd, sizeof rnd, 0) != (ssize_t)sizeof rnd) {
+        for (size_t i = 0; i < sizeof rnd; i++)
+            rnd[i] = (unsigned char)rand();
+    }
+    unsigned long long ms = (unsigned long long)(vx_now() * 1000.0);
+    snprintf(out, 33, "%012llx", ms & 0xffffffffffffULL);
+    for (int i = 0; i < 10; i++)
+        snprintf(out + 12 + 2 * i, 3, "%02x", rnd[i]);
+}
+
+static void add_time(cJSON *o, const char *name, double t)
+{
+    if (t > 0) {
+        char buf[32];
+        vx_rfc3339(t, buf);
+        cJSON_AddStringToObject(o, name, buf);
+    } else {
+        cJSON_AddNullToObject(o, name);
+    }
+}
+
+double ms_between(double a, double b)
+{
+    return (double)(long long)((b - a) * 1e6) / 1e3;
+}
+
+/* Owned copies of a job's params, stats and outputs (empty objects where
+ * there are none): from its trees, or from the text of a finished job. */
+static void job_parts(const job *jb, cJSON **params, cJSON **stats, cJSON **outputs)
+{
+    cJSON *f = jb->frozen ? cJSON_Parse(jb->frozen) : NULL;
+    const cJSON *src[3] = {jb->params, jb->stats, jb->outputs};
+    static const char *const names[3] = {"params", "stats", "outputs"};
+    cJSON **dst[3] = {params, stats, outputs};
+    for (int i = 0; i < 3; i++) {
+        if (!dst[i]) continue;
+        cJSON *v = f ? cJSON_DetachItemFromObjectCaseSensitive(f, names[i])
+                     : (src[i] ? cJSON_Duplicate(src[i], 1) : NULL);
+        *dst[i] = v ? v : cJSON_CreateObject();
+    }
+    cJSON_Delete(f);
+}
+
+/* api = 1: the API resource; api = 0: the journal snapshot. Caller holds the lock. */
+cJSON *job_json(const job *jb, int api)
+{
+    cJSON *params, *stats, *outputs;
+    job_parts(jb, &params, &stats, &outputs);
+    cJSON *o = cJSON_CreateObject();
+    cJSON_AddStringToObject(o, "id", jb->id);
+    cJSON_AddStringToObject(o, "kind", jb->kind->name);
+    cJSON_AddStringToObject(o, "mesh", jb->mesh);
+    cJSON_AddItemToObject(o, "params", params);
+    cJSON_AddStringToObject(o, "state", state_names[jb->state]);
+    cJSON_AddNumberToObject(o, "progress", jb->progress);
+    cJSON_AddBoolToObject(o, "cancel_requested", jb->cancel_requested);
+    cJSON_AddNumberToObject(o, "attempts", jb->attempts);
+    add_time(o, "created", jb->created);
+    add_time(o, "started", jb->started);
+    add_time(o, "finished", jb->finished);
+    if (jb->error.kind != VX_EOK) {
+        cJSON *e = cJSON_AddObjectToObject(o, "error");
+        cJSON_AddStringToObject(e, "code", jb->error.code);
+        cJSON_AddStringToObject(e, "message", jb->error.message);
+        if (!api) cJSON_AddNumberToObject(e, "kind", jb->error.kind);
+    } else {
+        cJSON_AddNullToObject(o, "error");
+    }
+    if (api) {
+        cJSON *t = cJSON_AddObjectToObject(o, "timings");
+        double now = vx_now();
+        double qend = jb->started > 0 ? jb->started : (is_terminal(jb->state) ? jb->finished : now);
+        cJSON_AddNumberToObject(t, "queue_ms", ms_between(jb->created, qend));
+        if (jb->started > 0)
+            cJSON_AddNumberToObject(t, "run_ms",
+                                    ms_between(jb->started, jb->finished > 0 ? jb->finished : now));
+        else
+            cJSON_AddNullToObject(t, "run_ms");
+        if (jb->finished > 0)
+            cJSON_AddNumberToObject(t, "total_ms", ms_between(jb->created, jb->finished));
+        else
+            cJSON_AddNullToObject(t, "total_ms");
+    } else {
+        cJSON_AddNumberToObject(o, "seq", (double)jb->seq);
+    }
+    cJSON_AddItemToObject(o, "stats", stats);
+    if (api) {
+        cJSON *outs = cJSON_AddObjectToObject(o, "outputs");
+        const cJSON *it;
+        if (jb->state == ST_SUCCEEDED) cJSON_ArrayForEach(it, outputs)
+            {
+                char url[256];
+                snprintf(url, sizeof url, "/v1/jobs/%s/result/%s", jb->id, it->string);
+                cJSON_AddStringToObject(outs, it->string, url);
+            }
+        cJSON_Delete(outputs);
+    } else {
+        cJSON_AddItemToObject(o, "outputs", outputs);
+    }
+    return o;
+}
+
+/* A job reached a finished state: its params, stats and outputs become one
+ * compact text (a tree costs several times its text), counted in the
+ * history budget. Caller holds the lock. */
+void freeze_locked(vx_jobs *j, job *jb)
+{
+    if (jb->frozen || jb->bytes) return;
+    cJSON *o = cJSON_CreateObject();
+    char *text = NULL;
+    if (o && (!jb->params || cJSON_AddItemReferenceToObject(o, "params", jb->params)) &&
+        (!jb->stats || cJSON_AddItemReferenceToObject(o, "stats", jb->stats)) &&
+        (!jb->outputs || cJSON_AddItemReferenceToObject(o, "outputs", jb->outputs)))
+        text = cJSON_PrintUnformatted(o);
+    cJSON_Delete(o);
+    if (text) {
+        cJSON_Delete(jb->params);
+        cJSON_Delete(jb->stats);
+        cJSON_Delete(jb->outputs);
+        jb->params = jb->stats = jb->outputs = NULL;
+        jb->frozen = text;
+        jb->bytes = sizeof *jb + strlen(text) + 1;
+    } else {
+        jb->bytes = sizeof *jb + 16384; /* no memory to print it: a guess */
+    }
+    j->history_bytes += jb->bytes;
+}
+
+const char *job_key(const void *item)
+{
+    return ((const job *)item)->id;
+}
+
+job *job_at(const vx_jobs *j, size_t i)
+{
+    return j->jobs.items[i];
+}
+
+job *find_job(vx_jobs *j, const char *id)
+{
+    return vx_sorted_get(&j->jobs, id);
+}
+
+/* Drops the oldest finished jobs beyond the history limits, in count and
+ * in bytes (and their results); the byte budget leaves at least one. */
+void trim_history_locked(vx_jobs *j, char (*dropped)[33], size_t *ndropped, size_t max)
+{
+    size_t finished = 0;
+    for (size_t i = 0; i < j->jobs.n; i++)
+        finished += is_terminal(job_at(j, i)->state);
+    size_t w = 0;
+    *ndropped = 0;
+    for (size_t i = 0; i < j->jobs.n; i++) {
+        job *jb = job_at(j, i);
+        int over =
+            finished > j->desc.history ||
+            (j->desc.history_bytes && j->history_bytes > j->desc.history_bytes && finished > 1);
+        if (over && is_terminal(jb->state) && *ndropped < max) {
+            snprintf(dropped[(*ndropped)++], 33, "%s", jb->id);
+            j->history_bytes -= jb->bytes;
+            job_free(jb);
+            finished--;
+            continue;
+        }
+        j->jobs.items[w++] = jb;
+    }
+    j->jobs.n = w;
+}
+
+void notify(vx_jobs *j, const char *jid, int terminal)
+{
+    if (j->desc.hooks.changed) j->desc.hooks.changed(j->desc.hooks.ud, jid, terminal);
+}
+
+/* ---- API --------------------------------------------------------------- */
+
+cJSON *vx_jobs_submit(vx_jobs *j, const char *mesh, const char *kind, const cJSON *params,
+                      vx_err *err)
+{
+    const vx_kind *k = vx_kinds_find(j->desc.kinds, kind);
+    if (!k) {
+        vx_err_set(err, VX_EUNPROC, "unknown_kind", "unknown job kind '%.64s'", kind);
+        return NULL;
+    }
+    cJSON *meta = vx_store_mesh_meta(j->desc.store, mesh, err);
+    if (!meta) return NULL;
+    cJSON_Delete(meta);
+    if (params && !cJSON_IsObject(params)) {
+        vx_err_set(err, VX_EUNPROC, "invalid_params", "params must be an object");
+        return NULL;
+    }
+    cJSON *norm = vx_params_normalize(k, params, &j->desc.limits, err);
+    if (!norm) return NULL;
+    job *jb = calloc(1, sizeof *jb);
+    if (!jb) {
+        cJSON_Delete(norm);
+        vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory");
+        return NULL;
+    }
+    jb->params = norm;
+    /* The job holds its meshes (a delete keeps their files until it ends)
+     * and its large inline inputs are stored as blobs, all before it is
+     * acknowledged. */
+    if (pin_job(j, mesh, k, norm, 0, &jb->pins, err) || externalize(j, k, norm, &jb->pins, err)) {
+        unpin_job(j, &jb->pins);
+        job_free(jb);
+        return NULL;
+    }
+    size_t jb_blobs = jb->pins.nblob;
+    new_id(jb->id);
+    snprintf(jb->mesh, sizeof jb->mesh, "%s", mesh);
+    jb->kind = k;
+    jb->created = vx_now();
+    jb->stats = cJSON_CreateObject();
+    jb->outputs = cJSON_CreateObject();
+    pthread_mutex_lock(&j->lock);
+    cJSON *out = NULL;
+    if (j->stopping) {
+        vx_err_set(err, VX_EUNAVAIL, "not_ready", "the daemon is shutting down");
+    } else if (vx_queue_depth(j->queue) >= vx_queue_capacity(j->queue)) {
+        vx_err_set(err, VX_EBUSY, "queue_full", "the job queue is full (%zu queued)",
+                   vx_queue_capacity(j->queue));
+    } else if (vx_sorted_insert(&j->jobs, jb)) {
+        vx_err_set(err, VX_EINTERNAL, "id_collision", "job id collision");
+    } else if (journal_locked(j, jb, err)) {
+        int found;
+        vx_sorted_remove_at(&j->jobs, vx_sorted_find(&j->jobs, jb->id, &found));
+    } else {
+        /* Pushed under the lock, so capacity was checked atomically. */
+        vx_queue_push(j->queue, jb, 1);
+        out = job_json(jb, 1);
+    }
+    char jid[33];
+    snprintf(jid, sizeof jid, "%s", jb->id); /* jb may be run and gone after the unlock */
+    pthread_mutex_unlock(&j->lock);
+    if (!out) {
+        unpin_job(j, &jb->pins);
+        job_free(jb);
+        return NULL;
+    }
+    VX_INFO("job.queued", "job=%s kind=%s mesh=%.12s", jid, kind, mesh);
+    /* Megabytes of params were parsed and printed here, in many small
+     * blocks: hand the pages back rather than keep each thread's peak. */
+    if (jb_blobs) malloc_trim(0);
+    return out;
+}
+
+cJSON *vx_jobs_get(vx_jobs *j, const char *jid, int *terminal, vx_err *err)
+{
+    pthread_mutex_lock(&j->lock);
+    job *jb = vx_jobs_valid_id(jid) ? find_job(j, jid) : NULL;
+    cJSON *out = jb ? job_json(jb, 1) : NULL;
+    if (jb && terminal) *terminal = is_terminal(jb->state);
+    pthread_mutex_unlock(&j->lock);
+    if (!jb) vx_err_set(err, VX_ENOTFOUND, "job_not_found", "no job with id %.64s", jid);
+    return out;
+}
+
+cJSON *vx_jobs_cancel(vx_jobs *j, const char *jid, int *was_running, vx_err *err)
+{
+    *was_running = 0;
+    char kind[64] = "";
+    pinset pins = {0};
+    pthread_mutex_lock(&j->lock);
+    job *jb = vx_jobs_valid_id(jid) ? find_job(j, jid) : NULL;
+    cJSON *out = NULL;
+    int changed = 0;
+    if (!jb) {
+        vx_err_set(err, VX_ENOTFOUND, "job_not_found", "no job with id %.64s", jid);
+    } else if (is_terminal(jb->state)) {
+        vx_err_set(err, VX_ECONFLICT, "job_finished", "job %s already %s", jid,
+                   state_names[jb->state]);
+    } else if (jb->state == ST_QUEUED) {
+        snprintf(kind, sizeof kind, "%s", jb->kind->name);
+        vx_queue_remove(j->queue, jb);
+        jb->state = ST_CANCELED;
+        jb->finished = vx_now();
+        vx_err_set(&jb->error, VX_ECANCELED, "canceled", "canceled while queued");
+        if (journal_locked(j, jb, err) == 0) {
+            out = job_json(jb, 1);
+            pins = jb->pins;
+            memset(&jb->pins, 0, sizeof jb->pins);
+            freeze_locked(j, jb);
+            changed = 1;
+        } else {
+            /* Not recorded (a full disk: 507), so not done: the job stays
+             * queued, as the journal and a restart would have it. */
+            jb->state = ST_QUEUED;
+            jb->finished = 0;
+            vx_err_clear(&jb->error);
+            vx_queue_push(j->queue, jb, 1);
+        }
+    } else {
+        jb->cancel_requested = 1;
+        *was_running = 1;
+        out = job_json(jb, 1);
+    }
+    pthread_mutex_unlock(&j->lock);
+    unpin_job(j, &pins);
+    if (changed) {
+        VX_INFO("job.finished", "job=%s state=canceled run_ms=0", jid);
+        if (j->desc.hooks.finished)
+            j->desc.hooks.finished(j->desc.hooks.ud, jid, kind, "canceled", -1);
+        notify(j, jid, 1);
+    }
+    return out;
+}
+
+cJSON *vx_jobs_list(vx_jobs *j, const char *after, int limit, const char *state, char next[40])
+{
+    cJSON *arr = cJSON_CreateArray();
+    next[0] = 0;
+    pthread_mutex_lock(&j->lock);
+    size_t i = vx_sorted_after(&j->jobs, after);
+    int n = 0;
+    for (; i < j->jobs.n; i++) {
+        job *jb = job_at(j, i);
+        if (state && strcmp(state, state_names[jb->state]) != 0) continue;
+        if (n == limit) {
+            snprintf(next, 40, "%s", job_at(j, i - 1)->id);
+            break;
+        }
+        cJSON_AddItemToArray(arr, job_json(jb, 1));
+        n++;
+    }
+    pthread_mutex_unlock(&j->lock);
+    return arr;
+}
+
+int vx_jobs_output(vx_jobs *j, const char *jid, const char *name, char *path, size_t pathn,
+                   char ctype[64], char fname[128], vx_err *err)
+{
+    char file[160] = {0}, id[33];
+    pthread_mutex_lock(&j->lock);
+    job *jb = vx_jobs_valid_id(jid) ? find_job(j, jid) : NULL;
+    int rc = -1;
+    if (!jb) {
+        vx_err_set(err, VX_ENOTFOUND, "job_not_found", "no job with id %.64s", jid);
+    } else if (jb->state == ST_QUEUED || jb->state == ST_RUNNING) {
+        vx_err_set(err, VX_ECONFLICT, "job_not_finished", "job %s is %s", jid,
+                   state_names[jb->state]);
+    } else if (jb->state == ST_FAILED) {
+        vx_err_set(err, VX_ECONFLICT, "job_failed", "job %s failed: %s", jid, jb->error.message);
+    } else if (jb->state == ST_CANCELED) {
+        vx_err_set(err, VX_ECONFLICT, "job_canceled", "job %s was canceled", jid);
+    } else {
+        cJSON *outputs = NULL;
+        job_parts(jb, NULL, NULL, &outputs);
+        const cJSON *o = name ? cJSON_GetObjectItemCaseSensitive(outputs, name)
+                              : (outputs ? outputs->child : NULL);
+        if (!o) {
+            vx_err_set(err, VX_ENOTFOUND, "output_not_found", "job %s has no output '%.64s'", jid,
+                       name ? name : "");
+        } else {
+            snprintf(file, sizeof file, "%s",
+                     cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(o, "file")) ?: "");
+            snprintf(ctype, 64, "%s",
+                     cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(o, "content_type"))
+                         ?: "application/octet-stream");
+            snprintf(fname, 128, "%s-%s", jb->id, file);
+            snprintf(id, sizeof id, "%s", jb->id);
+            rc = 0;
+        }
+        cJSON_Delete(outputs);
+    }
+    pthread_mutex_unlock(&j->lock);
+    if (rc) return rc;
+    return vx_store_result_file(j->desc.store, id, file, path, pathn, err);
+}
+
+int vx_jobs_ready(vx_jobs *j)
+{
+    pthread_mutex_lock(&j->lock);
+    int up = j->gl_state == 1 && !j->stopping;
+    pthread_mutex_unlock(&j->lock);
+    return up;
+}
+
+vx_gl_info vx_jobs_gl_info(vx_jobs *j)
+{
+    pthread_mutex_lock(&j->lock);
+    vx_gl_info i = j->gl_info;
+    pthread_mutex_unlock(&j->lock);
+    return i;
+}
+
+size_t vx_jobs_queue_depth(vx_jobs *j)
+{
+    return vx_queue_depth(j->queue);
+}
+
+size_t vx_jobs_queue_capacity(vx_jobs *j)
+{
+    return vx_queue_capacity(j->queue);
+}
+
+size_t vx_jobs_running(vx_jobs *j)
+{
+    pthread_mutex_lock(&j->lock);
+    size_t n = j->running;
+    pthread_mutex_unlock(&j->lock);
+    return n;
+}

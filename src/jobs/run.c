@@ -1,0 +1,86 @@
+/* The vx_run_* service the kinds call from their stages (kind.h). */
+#include "jobs/jobs_int.h"
+
+#include <pthread.h>
+#include <stdio.h>
+
+#include "util/fsutil.h"
+
+int vx_run_progress(vx_job_run *r, double fraction, vx_err *err)
+{
+    vx_jobs *j = r->jobs;
+    if (fraction < 0) fraction = 0;
+    if (fraction > 1) fraction = 1;
+    pthread_mutex_lock(&j->lock);
+    if (fraction > r->job->progress) r->job->progress = fraction;
+    int cancel = r->job->cancel_requested;
+    pthread_mutex_unlock(&j->lock);
+    double now = vx_mono();
+    if (r->on_gl_thread && now - r->last_ping > 1.0) {
+        jobs_alive(j);
+        r->last_ping = now;
+    }
+    if (cancel) return vx_err_set(err, VX_ECANCELED, "canceled", "the job was canceled");
+    if (j->stopping)
+        return vx_err_set_flagged(err, VX_ECANCELED, VX_EF_SHUTDOWN, "shutdown", "the daemon is shutting down");
+    double limit = j->desc.limits.job_timeout_s;
+    if (limit > 0 && now - r->t0 > limit)
+        return vx_err_set(err, VX_ETIMEOUT, "job_timeout", "the job ran longer than %g s", limit);
+    return 0;
+}
+
+vx_gl *vx_run_gl(vx_job_run *r)
+{
+    return r->gl;
+}
+
+const vx_limits *vx_run_limits(const vx_job_run *r)
+{
+    return &r->jobs->desc.limits;
+}
+
+const char *vx_run_cache_dir(const vx_job_run *r)
+{
+    return r->jobs->desc.cache_dir;
+}
+
+const char *vx_run_mesh_id(const vx_job_run *r)
+{
+    return r->job->mesh;
+}
+
+vx_mesh *vx_run_load_mesh(vx_job_run *r, const char *id, vx_err *err)
+{
+    char path[2300];
+    if (vx_store_mesh_path(r->jobs->desc.store, id, path, sizeof path, err)) return NULL;
+    vx_mesh_limits lim = {.max_triangles = r->jobs->desc.limits.max_triangles};
+    return vx_mesh_read_path(path, &lim, err);
+}
+
+cJSON *vx_run_stats(vx_job_run *r)
+{
+    return r->stats;
+}
+
+const char *vx_run_output(vx_job_run *r, const char *name, const char *file_ext,
+                          const char *content_type, vx_err *err)
+{
+    if (!r->dir[0] &&
+        vx_store_result_dir(r->jobs->desc.store, r->job->id, r->dir, sizeof r->dir, err))
+        return NULL;
+    char file[160];
+    snprintf(file, sizeof file, "%s.%s", name, file_ext);
+    cJSON_DeleteItemFromObjectCaseSensitive(r->outputs, name);
+    cJSON *o = cJSON_AddObjectToObject(r->outputs, name);
+    cJSON_AddStringToObject(o, "file", file);
+    cJSON_AddStringToObject(o, "content_type", content_type);
+    char path[2400];
+    snprintf(path, sizeof path, "%s/%s", r->dir, file);
+    cJSON *s = cJSON_CreateString(path);
+    if (!s || !cJSON_AddItemToArray(r->paths, s)) {
+        cJSON_Delete(s);
+        vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory");
+        return NULL;
+    }
+    return s->valuestring;
+}

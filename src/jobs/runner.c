@@ -1,0 +1,328 @@
+/* The runner: the GL thread (the only one with the EGL context), the CPU
+ * workers, the retry after a context loss, the mesh cache. jobs_int.h. */
+#include "jobs/jobs_int.h"
+
+#include <fcntl.h>
+#include <malloc.h>
+#include <pthread.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <unistd.h>
+
+#include "util/fsutil.h"
+#include "util/log.h"
+
+static vx_job_run *run_new(vx_jobs *j, job *jb)
+{
+    vx_job_run *r = calloc(1, sizeof *r);
+    if (!r) return NULL;
+    r->jobs = j;
+    r->job = jb;
+    r->kind = jb->kind;
+    r->t0 = vx_mono();
+    r->stats = cJSON_CreateObject();
+    r->outputs = cJSON_CreateObject();
+    r->paths = cJSON_CreateArray();
+    return r;
+}
+
+static void run_free(vx_job_run *r)
+{
+    if (!r) return;
+    /* r->kind, not r->job->kind: once finished, the job may already have
+     * left the history. */
+    if (r->state && r->kind->free_state) r->kind->free_state(r->state);
+    cJSON_Delete(r->stats);
+    cJSON_Delete(r->outputs);
+    cJSON_Delete(r->paths);
+    cJSON_Delete(r->params);
+    vx_kind_params_free(r->kind, r->typed);
+    int big = r->big_params;
+    free(r);
+    if (big) malloc_trim(0); /* as at submission */
+}
+
+static void sync_outputs(vx_job_run *r)
+{
+    const cJSON *it;
+    cJSON_ArrayForEach(it, r->outputs)
+    {
+        char p[2400];
+        snprintf(p, sizeof p, "%s/%s", r->dir,
+                 cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(it, "file")));
+        int fd = open(p, O_RDONLY | O_CLOEXEC);
+        if (fd >= 0) {
+            fsync(fd);
+            close(fd);
+        }
+    }
+}
+
+/* Ends a run: success, failure, cancel, or back to the queue on shutdown. */
+static void run_finish(vx_jobs *j, vx_job_run *r, int ok, const vx_err *e)
+{
+    job *jb = r->job;
+    int requeue = !ok && e->kind == VX_ECANCELED && vx_err_has(e, VX_EF_SHUTDOWN);
+    if (ok) {
+        sync_outputs(r);
+        vx_store_result_added(j->desc.store, jb->id);
+    } else if (r->dir[0] || requeue) {
+        vx_store_result_remove(j->desc.store, jb->id);
+    }
+    pthread_mutex_lock(&j->lock);
+    j->running--;
+    double run_s = vx_mono() - r->t0;
+    if (requeue) {
+        jb->state = ST_QUEUED;
+        jb->progress = 0;
+        jb->started = 0;
+    } else {
+        jb->finished = vx_now();
+        if (ok) {
+            jb->state = ST_SUCCEEDED;
+            jb->progress = 1;
+            cJSON_Delete(jb->outputs);
+            jb->outputs = r->outputs;
+            r->outputs = NULL;
+        } else {
+            jb->state = e->kind == VX_ECANCELED ? ST_CANCELED : ST_FAILED;
+            jb->error = *e;
+            vx_scrub_path(jb->error.message, vx_store_dir(j->desc.store));
+        }
+        cJSON_AddNumberToObject(r->stats, "run_ms", ms_between(0, run_s));
+        cJSON_Delete(jb->stats);
+        jb->stats = r->stats;
+        r->stats = NULL;
+    }
+    vx_err jerr;
+    if (journal_locked(j, jb, &jerr))
+        VX_ERROR("jobs.journal_failed", "job=%s code=%s", jb->id, jerr.code);
+    char kind[64], id[33];
+    snprintf(kind, sizeof kind, "%s", jb->kind->name);
+    snprintf(id, sizeof id, "%s", jb->id);
+    job_state st = jb->state;
+    char dropped[16][33];
+    size_t nd = 0;
+    pinset pins = {0};
+    if (!requeue) {
+        pins = jb->pins; /* released once the lock is dropped */
+        memset(&jb->pins, 0, sizeof jb->pins);
+        freeze_locked(j, jb);
+        trim_history_locked(j, dropped, &nd, 16);
+    }
+    pthread_mutex_unlock(&j->lock);
+    unpin_job(j, &pins);
+    for (size_t i = 0; i < nd; i++)
+        vx_store_result_remove(j->desc.store, dropped[i]);
+    if (requeue) {
+        VX_INFO("job.requeued", "job=%s kind=%s reason=shutdown", id, kind);
+    } else {
+        char qm[600];
+        VX_INFO("job.finished", "job=%s kind=%s state=%s run_ms=%.1f code=%s message=%s", id, kind,
+                state_names[st], run_s * 1e3, ok ? "-" : e->code,
+                vx_log_quote(qm, sizeof qm, ok ? "-" : e->message));
+        if (j->desc.hooks.finished)
+            j->desc.hooks.finished(j->desc.hooks.ud, id, kind, state_names[st], run_s);
+    }
+    notify(j, id, !requeue);
+    run_free(r);
+    if (ok) vx_store_results_evict(j->desc.store);
+}
+
+/* The mesh of the previous job stays loaded: jobs on one mesh often come
+ * in a row. GL thread only. */
+typedef struct mesh_cache {
+    char id[65];
+    vx_mesh *mesh;
+} mesh_cache;
+
+static const vx_mesh *load_mesh(vx_jobs *j, mesh_cache *mc, const char *id, vx_err *err)
+{
+    if (mc->mesh && strcmp(mc->id, id) == 0) return mc->mesh;
+    vx_mesh_free(mc->mesh);
+    mc->mesh = NULL;
+    mc->id[0] = 0;
+    char path[2300];
+    if (vx_store_mesh_path(j->desc.store, id, path, sizeof path, err)) return NULL;
+    vx_mesh_limits lim = {.max_triangles = j->desc.limits.max_triangles};
+    mc->mesh = vx_mesh_read_path(path, &lim, err);
+    if (mc->mesh) snprintf(mc->id, sizeof mc->id, "%s", id);
+    return mc->mesh;
+}
+
+static void run_job_gl(vx_jobs *j, vx_gl *gl, mesh_cache *mc, job *jb)
+{
+    pthread_mutex_lock(&j->lock);
+    if (jb->state != ST_QUEUED) { /* canceled while queued */
+        pthread_mutex_unlock(&j->lock);
+        return;
+    }
+    jb->state = ST_RUNNING;
+    jb->started = vx_now();
+    jb->progress = 0;
+    jb->attempts++;
+    j->running++;
+    vx_err err;
+    vx_err_clear(&err);
+    if (journal_locked(j, jb, &err))
+        VX_ERROR("jobs.journal_failed", "job=%s code=%s", jb->id, err.code);
+    pthread_mutex_unlock(&j->lock);
+    notify(j, jb->id, 0);
+    VX_INFO("job.started", "job=%s kind=%s mesh=%.12s attempt=%d", jb->id, jb->kind->name, jb->mesh,
+            jb->attempts);
+
+    vx_job_run *r = run_new(j, jb);
+    if (!r || !r->stats || !r->outputs || !r->paths) {
+        /* Out of memory for a few bytes: the job goes back to the queue
+         * rather than failing for a reason that is not its own. */
+        run_free(r);
+        pthread_mutex_lock(&j->lock);
+        j->running--;
+        jb->state = ST_QUEUED;
+        pthread_mutex_unlock(&j->lock);
+        vx_queue_push(j->queue, jb, 1);
+        return;
+    }
+    r->gl = gl;
+    r->on_gl_thread = 1;
+    r->params = inline_params(j, jb->kind, jb->params, &r->big_params, &err);
+    if (r->params) r->typed = vx_kind_read(jb->kind, r->params, &j->desc.limits, &err);
+    const vx_mesh *m = r->typed ? load_mesh(j, mc, jb->mesh, &err) : NULL;
+    int ok = m != NULL;
+    for (int attempt = 0; ok; attempt++) {
+        double t = vx_mono();
+        ok = jb->kind->run_gl(r, m, r->typed, &r->state, &err) == 0;
+        int lost = vx_gl_lost(gl);
+        if (j->desc.hooks.lose_context && j->desc.hooks.lose_context(j->desc.hooks.ud)) lost = 1;
+        if (!lost) {
+            cJSON_AddNumberToObject(r->stats, "gl_ms", ms_between(0, vx_mono() - t));
+            break;
+        }
+        VX_WARN("gl.context_lost", "job=%s attempt=%d", jb->id, attempt + 1);
+        if (r->state && jb->kind->free_state) jb->kind->free_state(r->state);
+        r->state = NULL;
+        /* The retry starts over: what the lost attempt added goes. */
+        while (r->stats->child)
+            cJSON_DeleteItemFromArray(r->stats, 0);
+        vx_err rerr;
+        if (vx_gl_rebuild(gl, &rerr)) { /* logged by the GL layer */
+            err = rerr;
+            ok = 0;
+            break;
+        }
+        cJSON_DeleteItemFromObjectCaseSensitive(r->stats, "context_rebuilds");
+        cJSON_AddNumberToObject(r->stats, "context_rebuilds", attempt + 1);
+        if (attempt >= 1) {
+            vx_err_set(&err, VX_EGPU, "context_lost",
+                       "the GL context was lost twice running this job");
+            ok = 0;
+            break;
+        }
+        ok = 1; /* retry once on the new context */
+    }
+    if (!ok) {
+        run_finish(j, r, 0, &err);
+        return;
+    }
+    vx_queue_push(j->cpu, r, 1);
+}
+
+void jobs_alive(vx_jobs *j)
+{
+    if (j->desc.hooks.alive) j->desc.hooks.alive(j->desc.hooks.ud);
+}
+
+static void *gl_main(void *arg)
+{
+    vx_jobs *j = arg;
+    vx_err err;
+    vx_err_clear(&err);
+    vx_gl *gl = vx_gl_new(&j->desc.gl, &err);
+    pthread_mutex_lock(&j->lock);
+    if (gl) {
+        j->gl_info = *vx_gl_get_info(gl);
+        j->gl_state = 1;
+    } else {
+        j->gl_err = err;
+        j->gl_state = -1;
+    }
+    pthread_cond_broadcast(&j->gl_cond);
+    pthread_mutex_unlock(&j->lock);
+    if (!gl) return NULL;
+    mesh_cache mc = {{0}, NULL};
+    double last_ping = 0;
+    while (!j->stopping) {
+        double now = vx_mono();
+        if (now - last_ping > 1.0) {
+            jobs_alive(j);
+            last_ping = now;
+        }
+        job *jb = vx_queue_pop(j->queue, 0.5);
+        if (!jb) continue;
+        if (j->stopping) { /* popped but not started: stays queued in the journal */
+            break;
+        }
+        run_job_gl(j, gl, &mc, jb);
+    }
+    vx_mesh_free(mc.mesh);
+    vx_gl_free(gl);
+    return NULL;
+}
+
+static void *worker_main(void *arg)
+{
+    vx_jobs *j = arg;
+    vx_job_run *r;
+    while ((r = vx_queue_pop(j->cpu, -1))) {
+        vx_err err;
+        vx_err_clear(&err);
+        const vx_kind *k = r->job->kind;
+        int ok = 1;
+        if (k->run_cpu) ok = k->run_cpu(r, r->typed, r->state, &err) == 0;
+        if (ok && k->encode) ok = k->encode(r, r->typed, r->state, &err) == 0;
+        run_finish(j, r, ok, &err);
+    }
+    return NULL;
+}
+
+int vx_jobs_start(vx_jobs *j, vx_err *err)
+{
+    if (pthread_create(&j->gl_thread, NULL, gl_main, j))
+        return vx_err_set(err, VX_EINTERNAL, "thread_failed", "cannot start the GL thread");
+    pthread_mutex_lock(&j->lock);
+    while (j->gl_state == 0)
+        pthread_cond_wait(&j->gl_cond, &j->lock);
+    int state = j->gl_state;
+    if (state < 0 && err) *err = j->gl_err;
+    pthread_mutex_unlock(&j->lock);
+    if (state < 0) {
+        pthread_join(j->gl_thread, NULL);
+        return -1;
+    }
+    j->workers = calloc((size_t)j->desc.workers, sizeof *j->workers);
+    for (int i = 0; j->workers && i < j->desc.workers; i++)
+        if (pthread_create(&j->workers[i], NULL, worker_main, j) == 0) j->nworkers++;
+    j->started = 1;
+    return 0;
+}
+
+void vx_jobs_stop(vx_jobs *j)
+{
+    if (!j || !j->started) return;
+    j->stopping = 1;
+    pthread_join(j->gl_thread, NULL);
+    /* The GL thread has handed over everything it ran: workers finish those
+     * (encoding is short) and exit when the queue is empty. */
+    vx_queue_close(j->cpu);
+    for (int i = 0; i < j->nworkers; i++)
+        pthread_join(j->workers[i], NULL);
+    free(j->workers);
+    j->workers = NULL;
+    j->started = 0;
+    pthread_mutex_lock(&j->lock);
+    vx_err err;
+    compact_locked(j, &err);
+    pthread_mutex_unlock(&j->lock);
+    VX_INFO("jobs.stopped", "jobs=%zu queued=%zu", j->jobs.n, vx_queue_depth(j->queue));
+}
