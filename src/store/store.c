@@ -8,6 +8,7 @@
 #include "mesh/intake.h"
 #include "store/store_int.h"
 #include "util/fsutil.h"
+#include "util/sorted.h"
 #include "util/log.h"
 
 int vx_store_valid_mesh_id(const char *id)
@@ -29,24 +30,16 @@ static void mesh_data_key(char *key, size_t n, const char *id, const char *ext)
 {
     snprintf(key, n, "meshes/%s.%s", id, ext);
 }
-/* Binary search: index of id, or the insertion point with *found = 0. */
+/* The index's entry i. */
+static mesh_entry *mesh_at(vx_store *s, size_t i)
+{
+    return s->meshes.items[i];
+}
+
+/* Index of id in the sorted index, or its insertion point (*found = 0). */
 static size_t mesh_find(vx_store *s, const char *id, int *found)
 {
-    size_t lo = 0, hi = s->nmeshes;
-    while (lo < hi) {
-        size_t mid = (lo + hi) / 2;
-        int c = strcmp(s->meshes[mid].id, id);
-        if (c == 0) {
-            *found = 1;
-            return mid;
-        }
-        if (c < 0)
-            lo = mid + 1;
-        else
-            hi = mid;
-    }
-    *found = 0;
-    return lo;
+    return vx_sorted_find(&s->meshes, id, found);
 }
 
 /* Takes meta on success (0), not on failure (-1). The index keeps each
@@ -59,31 +52,27 @@ static int mesh_insert(vx_store *s, const char *id, const char *ext, cJSON *meta
     int found;
     size_t at = mesh_find(s, id, &found);
     if (found) {
-        free(s->meshes[at].meta);
-        s->meshes[at].meta = text;
+        free(mesh_at(s, at)->meta);
+        mesh_at(s, at)->meta = text;
         cJSON_Delete(meta);
         return 0;
     }
-    if (s->nmeshes == s->capmeshes) {
-        size_t cap = s->capmeshes ? 2 * s->capmeshes : 64;
-        mesh_entry *n = realloc(s->meshes, cap * sizeof *n);
-        if (!n) {
-            free(text);
-            return -1;
-        }
-        s->meshes = n;
-        s->capmeshes = cap;
+    mesh_entry *e = calloc(1, sizeof *e);
+    if (!e) {
+        free(text);
+        return -1;
     }
-    memmove(s->meshes + at + 1, s->meshes + at, (s->nmeshes - at) * sizeof *s->meshes);
-    mesh_entry *e = &s->meshes[at];
     snprintf(e->id, sizeof e->id, "%s", id);
     snprintf(e->ext, sizeof e->ext, "%s", ext);
     e->meta = text;
-    e->pins = 0;
     e->deleted = deleted;
+    if (vx_sorted_insert(&s->meshes, e)) {
+        free(text);
+        free(e);
+        return -1;
+    }
     cJSON_Delete(meta);
     if (deleted) s->ndeleted++;
-    s->nmeshes++;
     return 0;
 }
 
@@ -91,7 +80,7 @@ static int mesh_insert(vx_store *s, const char *id, const char *ext, cJSON *meta
  * holds the lock and syncs the meshes namespace. */
 static void mesh_remove_locked(vx_store *s, size_t at)
 {
-    mesh_entry *e = &s->meshes[at];
+    mesh_entry *e = mesh_at(s, at);
     char key[128];
     /* Metadata first: without it the mesh no longer exists, even if the
      * process dies before the data file is gone (load_meshes cleans up). */
@@ -104,8 +93,7 @@ static void mesh_remove_locked(vx_store *s, size_t at)
     VX_INFO("store.mesh_removed", "mesh=%s", e->id);
     free(e->meta);
     if (e->deleted) s->ndeleted--;
-    memmove(s->meshes + at, s->meshes + at + 1, (s->nmeshes - at - 1) * sizeof *s->meshes);
-    s->nmeshes--;
+    free(vx_sorted_remove_at(&s->meshes, at));
 }
 
 static void fsync_meshes_dir(vx_store *s)
@@ -197,7 +185,7 @@ void vx_store_load_meshes(vx_store *s)
 static int mesh_revive_locked(vx_store *s, size_t at, vx_upload *u, const char *ext,
                               const cJSON *meta, vx_err *err)
 {
-    mesh_entry *e = &s->meshes[at];
+    mesh_entry *e = mesh_at(s, at);
     char key[128], old[128];
     close(u->fd);
     u->fd = -1;
@@ -277,7 +265,7 @@ int vx_store_mesh_commit(vx_store *s, vx_upload *u, const char *id, const char *
     pthread_mutex_lock(&s->lock);
     int found;
     size_t at = mesh_find(s, id, &found);
-    if (found && !s->meshes[at].deleted) {
+    if (found && !mesh_at(s, at)->deleted) {
         pthread_mutex_unlock(&s->lock);
         *existed = 1;
         vx_upload_abort(u);
@@ -303,8 +291,8 @@ cJSON *vx_store_mesh_meta(vx_store *s, const char *id, vx_err *err)
     pthread_mutex_lock(&s->lock);
     int found;
     size_t at = mesh_find(s, id, &found);
-    if (found && s->meshes[at].deleted) found = 0;
-    cJSON *copy = found && s->meshes[at].meta ? cJSON_Parse(s->meshes[at].meta) : NULL;
+    if (found && mesh_at(s, at)->deleted) found = 0;
+    cJSON *copy = found && mesh_at(s, at)->meta ? cJSON_Parse(mesh_at(s, at)->meta) : NULL;
     pthread_mutex_unlock(&s->lock);
     if (!found) vx_err_set(err, VX_ENOTFOUND, "mesh_not_found", "no mesh with id %.80s", id);
     return copy;
@@ -317,7 +305,7 @@ int vx_store_mesh_path(vx_store *s, const char *id, char *buf, size_t n, vx_err 
     size_t at = mesh_find(s, id, &found);
     if (found) {
         char key[128];
-        mesh_data_key(key, sizeof key, id, s->meshes[at].ext);
+        mesh_data_key(key, sizeof key, id, mesh_at(s, at)->ext);
         s->ops->path(s->blob, key, buf, n);
     }
     pthread_mutex_unlock(&s->lock);
@@ -330,11 +318,11 @@ int vx_store_mesh_delete(vx_store *s, const char *id, vx_err *err)
     pthread_mutex_lock(&s->lock);
     int found;
     size_t at = mesh_find(s, id, &found);
-    if (!found || s->meshes[at].deleted) {
+    if (!found || mesh_at(s, at)->deleted) {
         pthread_mutex_unlock(&s->lock);
         return vx_err_set(err, VX_ENOTFOUND, "mesh_not_found", "no mesh with id %.80s", id);
     }
-    mesh_entry *e = &s->meshes[at];
+    mesh_entry *e = mesh_at(s, at);
     if (e->pins == 0) {
         mesh_remove_locked(s, at);
     } else {
@@ -365,8 +353,8 @@ int vx_store_mesh_pin(vx_store *s, const char *id, int deleted_ok, vx_err *err)
     pthread_mutex_lock(&s->lock);
     int found;
     size_t at = mesh_find(s, id, &found);
-    if (found && (deleted_ok || !s->meshes[at].deleted))
-        s->meshes[at].pins++;
+    if (found && (deleted_ok || !mesh_at(s, at)->deleted))
+        mesh_at(s, at)->pins++;
     else
         found = 0;
     pthread_mutex_unlock(&s->lock);
@@ -379,7 +367,8 @@ void vx_store_mesh_unpin(vx_store *s, const char *id)
     pthread_mutex_lock(&s->lock);
     int found, removed = 0;
     size_t at = mesh_find(s, id, &found);
-    if (found && s->meshes[at].pins > 0 && --s->meshes[at].pins == 0 && s->meshes[at].deleted) {
+    if (found && mesh_at(s, at)->pins > 0 && --mesh_at(s, at)->pins == 0 &&
+        mesh_at(s, at)->deleted) {
         mesh_remove_locked(s, at);
         removed = 1;
     }
@@ -392,21 +381,16 @@ cJSON *vx_store_mesh_list(vx_store *s, const char *after, int limit, char next[6
     cJSON *arr = cJSON_CreateArray();
     next[0] = 0;
     pthread_mutex_lock(&s->lock);
-    size_t i = 0;
-    if (after && *after) {
-        int found;
-        i = mesh_find(s, after, &found);
-        if (found) i++;
-    }
+    size_t i = vx_sorted_after(&s->meshes, after);
     int n = 0;
     size_t last = 0;
-    for (; i < s->nmeshes; i++) {
-        if (s->meshes[i].deleted) continue;
+    for (; i < s->meshes.n; i++) {
+        if (mesh_at(s, i)->deleted) continue;
         if (n == limit) { /* another one after this page */
-            if (n > 0) snprintf(next, 65, "%s", s->meshes[last].id);
+            if (n > 0) snprintf(next, 65, "%s", mesh_at(s, last)->id);
             break;
         }
-        cJSON *m = cJSON_Parse(s->meshes[i].meta);
+        cJSON *m = cJSON_Parse(mesh_at(s, i)->meta);
         if (m) cJSON_AddItemToArray(arr, m);
         last = i;
         n++;
@@ -418,7 +402,7 @@ cJSON *vx_store_mesh_list(vx_store *s, const char *after, int limit, char next[6
 size_t vx_store_mesh_count(vx_store *s)
 {
     pthread_mutex_lock(&s->lock);
-    size_t n = s->nmeshes - s->ndeleted;
+    size_t n = s->meshes.n - s->ndeleted;
     pthread_mutex_unlock(&s->lock);
     return n;
 }
@@ -426,8 +410,8 @@ size_t vx_store_mesh_count(vx_store *s)
 size_t vx_store_collect_meshes_locked(vx_store *s)
 {
     size_t meshes = 0;
-    for (size_t i = s->nmeshes; i-- > 0;)
-        if (s->meshes[i].deleted && s->meshes[i].pins == 0) {
+    for (size_t i = s->meshes.n; i-- > 0;)
+        if (mesh_at(s, i)->deleted && mesh_at(s, i)->pins == 0) {
             mesh_remove_locked(s, i);
             meshes++;
         }

@@ -9,6 +9,7 @@
 #include "store/blob.h"
 #include "store/store.h"
 #include "util/path.h"
+#include "util/sorted.h"
 
 typedef struct mesh_entry {
     char id[65];
@@ -17,6 +18,12 @@ typedef struct mesh_entry {
     int pins;   /* unfinished jobs using it */
     int deleted; /* gone from the API; the file stays while pinned */
 } mesh_entry;
+
+/* The index's key: a mesh entry's id. */
+static inline const char *vx_store_entry_id(const void *e)
+{
+    return ((const mesh_entry *)e)->id;
+}
 
 typedef struct blob_entry {
     char id[65];
@@ -35,9 +42,8 @@ struct vx_store {
     const vx_blob_ops *ops; /* desc.blob_ops, or vx_blob_local */
     vx_blob *blob;
     pthread_mutex_t lock;
-    mesh_entry *meshes; /* sorted by id */
-    size_t nmeshes, capmeshes;
-    size_t ndeleted; /* entries of meshes[] that are deleted */
+    vx_sorted meshes; /* of mesh_entry *, by id */
+    size_t ndeleted;  /* entries of meshes[] that are deleted */
     blob_entry *blobs;
     size_t nblobs, capblobs;
     result_entry *results;

@@ -54,6 +54,7 @@ vx_store *vx_store_open(const char *data_dir, const vx_store_desc *desc, vx_err 
         vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory");
         return NULL;
     }
+    vx_sorted_init(&s->meshes, vx_store_entry_id);
     if (snprintf(s->dir, sizeof s->dir, "%s", data_dir) >= (int)sizeof s->dir / 2) {
         free(s);
         vx_err_set(err, VX_EIO, "path_too_long", "data dir path too long");
@@ -80,7 +81,7 @@ vx_store *vx_store_open(const char *data_dir, const vx_store_desc *desc, vx_err 
     }
     vx_store_load_meshes(s);
     vx_store_load_results(s);
-    VX_INFO("store.open", "dir=%s meshes=%zu results=%zu results_bytes=%llu", s->dir, s->nmeshes,
+    VX_INFO("store.open", "dir=%s meshes=%zu results=%zu results_bytes=%llu", s->dir, s->meshes.n,
             s->nresults, (unsigned long long)s->results_bytes);
     return s;
 }
@@ -88,9 +89,12 @@ vx_store *vx_store_open(const char *data_dir, const vx_store_desc *desc, vx_err 
 void vx_store_close(vx_store *s)
 {
     if (!s) return;
-    for (size_t i = 0; i < s->nmeshes; i++)
-        free(s->meshes[i].meta);
-    free(s->meshes);
+    for (size_t i = 0; i < s->meshes.n; i++) {
+        mesh_entry *e = s->meshes.items[i];
+        free(e->meta);
+        free(e);
+    }
+    vx_sorted_free(&s->meshes);
     free(s->blobs);
     free(s->results);
     if (s->blob) s->ops->close(s->blob);
