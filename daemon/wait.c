@@ -1,6 +1,5 @@
 #include "wait.h"
 
-#include <math.h>
 #include <pthread.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -47,14 +46,7 @@ static void *timer_main(void *arg)
                 next = wt->deadline;
         }
         struct timespec ts;
-        clock_gettime(CLOCK_MONOTONIC, &ts);
-        double dt = next - now;
-        ts.tv_sec += (time_t)dt;
-        ts.tv_nsec += (long)((dt - floor(dt)) * 1e9);
-        if (ts.tv_nsec >= 1000000000L) {
-            ts.tv_sec++;
-            ts.tv_nsec -= 1000000000L;
-        }
+        vx_mono_deadline(next - now, &ts);
         pthread_cond_timedwait(&w->cond, &w->lock, &ts);
     }
     pthread_mutex_unlock(&w->lock);

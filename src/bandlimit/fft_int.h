@@ -19,12 +19,6 @@ void vx_bl_plan_unlock(void);
 unsigned vx_bl_plan_flags(void);
 void vx_bl_destroy_plan(fftwf_plan p);
 
-/* Old name of vx_mono_ms (util/clock.h), kept for job.c until it converts. */
-static inline double vx_bl_now_ms(void)
-{
-    return vx_mono_ms();
-}
-
 /* FFT-order index j of an n-point transform -> signed frequency. */
 static inline int vx_bl_freq(int j, int n)
 {

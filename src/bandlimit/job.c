@@ -20,6 +20,7 @@
 #include "bandlimit/fft_int.h"
 #include "bandlimit/job.h"
 #include "image/png.h"
+#include "util/vec3.h"
 #include "util/stop.h"
 #include "voxel/io.h"
 #include "voxel/voxel.h"
@@ -298,7 +299,7 @@ static int render_run_gl(vx_job_run *r, const vx_mesh *mesh, const void *params,
 {
     const rparams *pp = params, p = *pp;
     const vx_limits *lim = vx_run_limits(r);
-    double t0 = vx_bl_now_ms();
+    double t0 = vx_mono_ms();
     rstate *s = calloc(1, sizeof *s);
     int nm = 1 + p.nmeshes;
     if (s) s->grids = calloc((size_t)nm, sizeof *s->grids);
@@ -355,7 +356,7 @@ static int render_run_gl(vx_job_run *r, const vx_mesh *mesh, const void *params,
         if (vx_voxelize(vx_run_gl(r), k ? extra[k] : mesh, &d, &s->grids[k], &vst, err)) goto out;
         s->nmeshes = k + 1;
     }
-    s->sampling_ms = vx_bl_now_ms() - t0;
+    s->sampling_ms = vx_mono_ms() - t0;
     rc = 0;
 out:
     for (int k = 1; k < nm; k++)
@@ -399,7 +400,7 @@ static int run_cpu(vx_job_run *r, const rparams *pp, void *state, vx_err *err)
         vx_bitgrid_free(&s->grids[i]);
     s->nmeshes = 0;
     if (vx_run_progress(r, 0.6, err)) return -1;
-    double t0 = vx_bl_now_ms(), x0[3];
+    double t0 = vx_mono_ms(), x0[3];
     for (int a = 0; a < 3; a++)
         x0[a] = s->box_origin[a] + 0.5 * s->P / R;
     uint64_t vbytes = 0;
@@ -428,23 +429,8 @@ static int run_cpu(vx_job_run *r, const rparams *pp, void *state, vx_err *err)
         vbytes += (uint64_t)N * N * N * 4 * 7;
     }
     if (vbytes > s->peak) s->peak = vbytes;
-    s->interp_ms = vx_bl_now_ms() - t0;
+    s->interp_ms = vx_mono_ms() - t0;
     return vx_run_progress(r, 0.75, err);
-}
-
-static void normalize3(double *v)
-{
-    double n = sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
-    if (n > 0)
-        for (int a = 0; a < 3; a++)
-            v[a] /= n;
-}
-
-static void cross3(const double *a, const double *b, double *o)
-{
-    o[0] = a[1] * b[2] - a[2] * b[1];
-    o[1] = a[2] * b[0] - a[0] * b[2];
-    o[2] = a[0] * b[1] - a[1] * b[0];
 }
 
 /* The camera of frame f (turntable: azimuth + 360 f / frames). */
@@ -470,9 +456,9 @@ static void make_camera(const rparams *p, const rstate *s, int f, vx_bl_camera *
     }
     for (int a = 0; a < 3; a++)
         c->fwd[a] = -dir[a];
-    cross3(c->fwd, worldup, c->right);
-    normalize3(c->right);
-    cross3(c->right, c->fwd, c->up);
+    vx_v3_cross(c->fwd, worldup, c->right);
+    vx_v3_unit(c->right);
+    vx_v3_cross(c->right, c->fwd, c->up);
     double fit = 2 * s->radius * 1.05;
     c->ortho = p->camera.fov == 0;
     c->fov_deg = p->camera.fov;
@@ -573,7 +559,7 @@ static int render_frame(vx_job_run *r, const rparams *p, const rstate *s, int f,
     if (nl == 0) { /* a key light from the camera's upper left */
         nl = 1;
         double v[3] = {-0.25, 0.35, 1};
-        normalize3(v);
+        vx_v3_unit(v);
         for (int a = 0; a < 3; a++) {
             lights[0].dir[a] = cam.right[a] * v[0] + cam.up[a] * v[1] - cam.fwd[a] * v[2];
             lights[0].color[a] = 1 - p->ambient;
@@ -582,7 +568,7 @@ static int render_frame(vx_job_run *r, const rparams *p, const rstate *s, int f,
     for (int i = 0; i < p->nlights; i++) {
         double d[3] = {p->lights[i].direction[0], p->lights[i].direction[1],
                        p->lights[i].direction[2]};
-        normalize3(d);
+        vx_v3_unit(d);
         for (int a = 0; a < 3; a++) {
             lights[i].dir[a] = d[a];
             lights[i].color[a] = p->lights[i].color[a];
@@ -605,7 +591,7 @@ static int render_frame(vx_job_run *r, const rparams *p, const rstate *s, int f,
         vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for the image");
         goto out;
     }
-    double t0 = vx_bl_now_ms();
+    double t0 = vx_mono_ms();
     for (int k = 0; k < panels; k++) {
         /* the selected method first: its hits are the float outputs */
         int method = !p->compare ? p->normals : k;
@@ -628,8 +614,8 @@ static int render_frame(vx_job_run *r, const rparams *p, const rstate *s, int f,
             if (vx_bl_hits_alloc(&h, W, H, err)) goto out;
         }
     }
-    *render_ms += vx_bl_now_ms() - t0;
-    t0 = vx_bl_now_ms();
+    *render_ms += vx_mono_ms() - t0;
+    t0 = vx_mono_ms();
     for (size_t i = 0; i < (size_t)W * H; i++)
         *covered += !isnan(keep.depth[i]);
     const char *path = output(r, p, "image", f, "png", "image/png", err);
@@ -644,7 +630,7 @@ static int render_frame(vx_job_run *r, const rparams *p, const rstate *s, int f,
     if (p->outputs[OUT_DEPTH] && (!(path = output(r, p, "depth", f, "pfm", pfm, err)) ||
                                   write_pfm(path, keep.depth, W, H, 1, err)))
         goto out;
-    *encode_ms += vx_bl_now_ms() - t0;
+    *encode_ms += vx_mono_ms() - t0;
     rc = 0;
 out:
     vx_bl_hits_free(&h);
@@ -665,13 +651,13 @@ static int encode(vx_job_run *r, const rparams *pp, void *state, vx_err *err)
         if (vx_run_progress(r, 0.75 + 0.2 * (f + 1) / p.frames, err)) return -1;
     }
     if (p.outputs[OUT_VOXELS]) {
-        double t0 = vx_bl_now_ms();
+        double t0 = vx_mono_ms();
         const char *path = vx_run_output(r, "voxels", "vdb", "application/x-openvdb", err);
         int dims[3] = {(int)p.N, (int)p.N, (int)p.N};
         if (!path || vx_voxel_write_vdb_float(s->vn.f, dims, s->vn.origin, s->vn.h, "density",
                                               vx_run_mesh_id(r), path, err))
             return -1;
-        encode_ms += vx_bl_now_ms() - t0;
+        encode_ms += vx_mono_ms() - t0;
     }
     cJSON *st = vx_run_stats(r);
     stat_set(st, "N", (double)p.N);

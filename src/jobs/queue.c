@@ -6,6 +6,8 @@
 #include <string.h>
 #include <time.h>
 
+#include "util/clock.h"
+
 struct vx_queue {
     pthread_mutex_t lock;
     pthread_cond_t cond;
@@ -75,16 +77,7 @@ int vx_queue_push(vx_queue *q, void *item, int force)
 void *vx_queue_pop(vx_queue *q, double timeout_s)
 {
     struct timespec dl;
-    clock_gettime(CLOCK_MONOTONIC, &dl);
-    if (timeout_s > 0) {
-        time_t whole = (time_t)timeout_s;
-        dl.tv_sec += whole;
-        dl.tv_nsec += (long)((timeout_s - (double)whole) * 1e9);
-        if (dl.tv_nsec >= 1000000000L) {
-            dl.tv_sec++;
-            dl.tv_nsec -= 1000000000L;
-        }
-    }
+    vx_mono_deadline(timeout_s, &dl);
     pthread_mutex_lock(&q->lock);
     while (q->count == 0 && !q->closed && timeout_s != 0) {
         int rc = timeout_s < 0 ? pthread_cond_wait(&q->cond, &q->lock)

@@ -23,3 +23,16 @@ double vx_mono_ms(void)
     clock_gettime(CLOCK_MONOTONIC, &ts);
     return (double)ts.tv_sec * 1e3 + (double)ts.tv_nsec / 1e6;
 }
+
+void vx_mono_deadline(double s, struct timespec *ts)
+{
+    clock_gettime(CLOCK_MONOTONIC, ts);
+    if (!(s > 0)) return;
+    time_t whole = (time_t)s;
+    ts->tv_sec += whole;
+    ts->tv_nsec += (long)((s - (double)whole) * 1e9);
+    if (ts->tv_nsec >= 1000000000L) {
+        ts->tv_sec++;
+        ts->tv_nsec -= 1000000000L;
+    }
+}

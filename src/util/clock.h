@@ -9,5 +9,9 @@ double vx_now(void);
 double vx_mono(void);
 /* Monotonic milliseconds (CLOCK_MONOTONIC): the engines' stage timings. */
 double vx_mono_ms(void);
+/* *ts = the CLOCK_MONOTONIC time s seconds from now (s >= 0), for
+ * pthread_cond_timedwait on a condition variable set to that clock. */
+struct timespec;
+void vx_mono_deadline(double s, struct timespec *ts);
 
 #endif
