@@ -7,6 +7,8 @@ set -euo pipefail
 pkgs=(
   # toolchain; clang + its runtime for the libFuzzer targets (tests/fuzz)
   build-essential cmake pkg-config git ca-certificates clang libclang-rt-14-dev
+  # scripts/check.sh checks the formatting of every C/C++ file (.clang-format)
+  clang-format
   # GL through EGL: glvnd loaders + headers, Mesa's EGL and DRI drivers (llvmpipe)
   libegl-dev libgl-dev libopengl-dev libegl1 libegl-mesa0 libgl1-mesa-dri
   # HTTP, JSON, meshes
