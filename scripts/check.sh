@@ -1,5 +1,7 @@
 #!/usr/bin/env bash
-# Builds voxeld three times and runs every test on each build:
+# Checks the formatting (scripts/format.sh --check: every C/C++ file as
+# .clang-format says), then builds voxeld three times and runs every test
+# on each build:
 #   build/       warnings as errors, all tests (unit, integration, deploy)
 #   build-asan/  AddressSanitizer + UndefinedBehaviorSanitizer, unit + integration
 #   build-fuzz/  clang + libFuzzer + ASan/UBSan: every tests/fuzz target for
@@ -8,6 +10,8 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 jobs=$(nproc)
+
+scripts/format.sh --check
 
 cmake -S . -B build -DVX_WERROR=ON
 cmake --build build -j"$jobs"
