@@ -9,13 +9,14 @@
 #include <stdio.h>
 
 #include "util/log.h"
+#include "util/path.h"
 
 typedef struct vx_config {
     char listen[256];
-    char data_dir[1024];
-    char cache_dir[1024];
-    char config_file[1024];
-    char token_file[1024];
+    char data_dir[VX_PATH_MAX / 2];
+    char cache_dir[VX_PATH_MAX / 2];
+    char config_file[VX_PATH_MAX / 2];
+    char token_file[VX_PATH_MAX / 2];
     char token[512]; /* read from token_file; empty = no auth */
     int egl_device;  /* -1 = auto */
     vx_log_level log_level;

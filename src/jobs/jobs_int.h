@@ -10,8 +10,9 @@
 #include <stdint.h>
 
 #include "jobs/jobs.h"
-#include "jobs/state.h"
 #include "jobs/queue.h"
+#include "jobs/state.h"
+#include "util/path.h"
 #include "util/sorted.h"
 
 typedef enum job_state { ST_QUEUED, ST_RUNNING, ST_SUCCEEDED, ST_FAILED, ST_CANCELED } job_state;
@@ -56,7 +57,7 @@ struct vx_job_run {
     double last_ping; /* watchdog */
     cJSON *stats;
     cJSON *outputs;
-    char dir[2200]; /* result dir, made at the first output */
+    char dir[VX_PATH_MAX]; /* result dir, made at the first output */
     cJSON *paths;   /* strings: every path handed out, valid until the run ends */
     cJSON *params;  /* the job's params with its blobs back in place */
     int big_params; /* some came from blobs */

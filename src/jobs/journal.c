@@ -14,7 +14,7 @@
 #include "util/log.h"
 
 struct vx_journal {
-    char path[2048];
+    char path[VX_PATH_MAX];
     int fd;
     off_t size; /* bytes of complete records: where the next one starts */
     pthread_mutex_t lock;
@@ -241,7 +241,7 @@ int vx_journal_compact(vx_journal *j, cJSON *const *recs, size_t n, vx_err *err)
     if (rc != 0)
         return vx_err_set(err, VX_EIO, "journal_failed", "cannot replace the journal: %s",
                           strerror(errno));
-    char dir[2048];
+    char dir[VX_PATH_MAX];
     snprintf(dir, sizeof dir, "%s", j->path);
     char *slash = strrchr(dir, '/');
     if (slash) *slash = 0;

@@ -51,7 +51,7 @@ const char *vx_run_mesh_id(const vx_job_run *r)
 
 vx_mesh *vx_run_load_mesh(vx_job_run *r, const char *id, vx_err *err)
 {
-    char path[2300];
+    char path[VX_PATH_MAX];
     if (vx_store_mesh_path(r->jobs->desc.store, id, path, sizeof path, err)) return NULL;
     vx_mesh_limits lim = {.max_triangles = r->jobs->desc.limits.max_triangles};
     return vx_mesh_read_path(path, &lim, err);
@@ -74,7 +74,7 @@ const char *vx_run_output(vx_job_run *r, const char *name, const char *file_ext,
     cJSON *o = cJSON_AddObjectToObject(r->outputs, name);
     cJSON_AddStringToObject(o, "file", file);
     cJSON_AddStringToObject(o, "content_type", content_type);
-    char path[2400];
+    char path[VX_PATH_MAX];
     snprintf(path, sizeof path, "%s/%s", r->dir, file);
     cJSON *s = cJSON_CreateString(path);
     if (!s || !cJSON_AddItemToArray(r->paths, s)) {

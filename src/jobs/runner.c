@@ -48,7 +48,7 @@ static void sync_outputs(vx_job_run *r)
     const cJSON *it;
     cJSON_ArrayForEach(it, r->outputs)
     {
-        char p[2400];
+        char p[VX_PATH_MAX];
         snprintf(p, sizeof p, "%s/%s", r->dir,
                  cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(it, "file")));
         int fd = open(p, O_RDONLY | O_CLOEXEC);
@@ -143,7 +143,7 @@ static const vx_mesh *load_mesh(vx_jobs *j, mesh_cache *mc, const char *id, vx_e
     vx_mesh_free(mc->mesh);
     mc->mesh = NULL;
     mc->id[0] = 0;
-    char path[2300];
+    char path[VX_PATH_MAX];
     if (vx_store_mesh_path(j->desc.store, id, path, sizeof path, err)) return NULL;
     vx_mesh_limits lim = {.max_triangles = j->desc.limits.max_triangles};
     mc->mesh = vx_mesh_read_path(path, &lim, err);

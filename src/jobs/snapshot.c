@@ -130,7 +130,7 @@ vx_jobs *vx_jobs_open(const vx_jobs_desc *desc, vx_err *err)
     pthread_cond_init(&j->gl_cond, NULL);
     j->queue = vx_queue_new(j->desc.max_queued);
     j->cpu = vx_queue_new(0);
-    char path[2300];
+    char path[VX_PATH_MAX];
     if (!j->desc.journal) {
         snprintf(path, sizeof path, "%s/journal.log", vx_store_dir(desc->store));
         j->desc.journal = path;
