@@ -2,6 +2,7 @@
 #include "mesh/mesh.h"
 
 #include <math.h>
+#include <errno.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -227,4 +228,11 @@ uint64_t vx_mesh_parse_cost(const char *path, vx_mesh_format fmt, uint64_t bytes
     default:
         return 8 * bytes + COST_BASE; /* OBJ, and what the sniffer could not tell */
     }
+}
+
+FILE *vx_mesh_open(const char *path, vx_err *err)
+{
+    FILE *f = fopen(path, "rb");
+    if (!f) vx_err_set(err, VX_EIO, "mesh_io", "cannot open %s: %s", path, strerror(errno));
+    return f;
 }

@@ -71,6 +71,8 @@ const uint32_t *vx_mesh_face(const vx_mesh *m, size_t f);
  * code that builds a mesh by hand calls it before use. */
 int vx_mesh_analyze(vx_mesh *m, vx_err *err);
 
+/* Opens path to read a mesh from, or NULL with VX_EIO mesh_io naming it. */
+FILE *vx_mesh_open(const char *path, vx_err *err);
 /* Reads an OBJ file, streaming it line by line (memory: the mesh plus one
  * line). Keeps v and f; validates vt, vn and every f index form (v, v/t,
  * v//n, v/t/n, negative indices). Errors (VX_EINVAL, code obj_*) name the

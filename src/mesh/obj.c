@@ -586,11 +586,8 @@ fail:
 
 vx_mesh *vx_obj_read_path(const char *path, const vx_mesh_limits *lim, vx_err *err)
 {
-    FILE *f = fopen(path, "rb");
-    if (!f) {
-        vx_err_set(err, VX_EIO, "mesh_io", "cannot open %s: %s", path, strerror(errno));
-        return NULL;
-    }
+    FILE *f = vx_mesh_open(path, err);
+    if (!f) return NULL;
     vx_mesh *m = vx_obj_read_file(f, lim, err);
     fclose(f);
     return m;
@@ -645,11 +642,8 @@ vx_mesh_format vx_mesh_sniff(const unsigned char *head, size_t n)
 vx_mesh *vx_mesh_read_as(const char *path, vx_mesh_format fmt, const vx_mesh_limits *lim,
                          vx_err *err)
 {
-    FILE *f = fopen(path, "rb");
-    if (!f) {
-        vx_err_set(err, VX_EIO, "mesh_io", "cannot open %s: %s", path, strerror(errno));
-        return NULL;
-    }
+    FILE *f = vx_mesh_open(path, err);
+    if (!f) return NULL;
     vx_mesh *m = NULL;
     switch (fmt) {
     case VX_MESH_OBJ:
@@ -670,11 +664,8 @@ vx_mesh *vx_mesh_read_as(const char *path, vx_mesh_format fmt, const vx_mesh_lim
 
 vx_mesh *vx_mesh_read_path(const char *path, const vx_mesh_limits *lim, vx_err *err)
 {
-    FILE *f = fopen(path, "rb");
-    if (!f) {
-        vx_err_set(err, VX_EIO, "mesh_io", "cannot open %s: %s", path, strerror(errno));
-        return NULL;
-    }
+    FILE *f = vx_mesh_open(path, err);
+    if (!f) return NULL;
     unsigned char head[OBJ_SNIFF_BYTES];
     size_t n = fread(head, 1, sizeof head, f);
     int bad = ferror(f);
