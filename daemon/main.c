@@ -66,6 +66,90 @@ static int list_devices(void)
     return 0;
 }
 
+/* Blocks the signals the main thread takes synchronously, into *sigs. */
+static void block_signals(sigset_t *sigs)
+{
+    /* Signals are taken synchronously by the main thread: block them
+     * before any thread starts so every thread inherits the mask. */
+    sigemptyset(sigs);
+    sigaddset(sigs, SIGTERM);
+    sigaddset(sigs, SIGINT);
+    sigaddset(sigs, SIGHUP);
+    pthread_sigmask(SIG_BLOCK, sigs, NULL);
+    signal(SIGPIPE, SIG_IGN);
+}
+
+/* Builds the job runner's desc from the configuration. */
+static vx_jobs_desc make_jobs_desc(const vx_config *cfg, vx_store *store, int have_cache)
+{
+    vx_jobs_desc jd = {
+        .store = store,
+        .kinds = &vx_daemon_kinds,
+        .cache_dir = have_cache ? cfg->cache_dir : NULL,
+        .limits = {.max_upload_bytes = cfg->max_upload_bytes,
+                   .max_triangles = cfg->max_triangles,
+                   .max_image_pixels = cfg->max_image_pixels,
+                   .max_job_memory = cfg->max_job_memory,
+                   .job_timeout_s = cfg->job_timeout_s},
+        .max_queued = cfg->max_queued_jobs,
+        .history = cfg->job_history,
+        .history_bytes = cfg->job_history_bytes,
+        .workers = cfg->workers,
+        .gl = {.pick_device = cfg->egl_device >= 0,
+               .device = cfg->egl_device,
+               .debug = cfg->gl_debug,
+               .robust = 1},
+        .hooks = {.finished = on_job_finished,
+                  .changed = on_job_changed,
+                  .alive = on_jobs_alive,
+                  .lose_context = on_lose_context},
+    };
+    return jd;
+}
+
+/* Opens the job runner and starts its GL thread; NULL (logged) on failure. */
+static vx_jobs *open_jobs(const vx_config *cfg, vx_store *store, vx_err *err)
+{
+    vx_err cerr;
+    int have_cache = vx_mkdirs(cfg->cache_dir, &cerr) == 0;
+    if (!have_cache) VX_WARN("voxeld.no_cache_dir", "path=%s code=%s", cfg->cache_dir, cerr.code);
+    vx_jobs_desc jd = make_jobs_desc(cfg, store, have_cache);
+    const char *lose = getenv("VOXELD_TEST_LOSE_CONTEXT");
+    g_lose_context = lose && atoi(lose) > 0 ? atoi(lose) : 0;
+    vx_jobs *jobs = vx_jobs_open(&jd, err);
+    if (!jobs) {
+        VX_ERROR("voxeld.fatal", "stage=journal code=%s message=\"%s\"", err->code, err->message);
+        return NULL;
+    }
+    if (vx_jobs_start(jobs, err)) {
+        char q[600];
+        VX_ERROR("voxeld.fatal", "stage=gl code=%s message=%s", err->code,
+                 vx_log_quote(q, sizeof q, err->message));
+        fprintf(stderr, "voxeld: cannot create the OpenGL context: %s\n", err->message);
+        vx_jobs_free(jobs);
+        return NULL;
+    }
+    return jobs;
+}
+
+/* Waits for SIGTERM/SIGINT, running the once-a-minute maintenance meanwhile. */
+static void serve_until_signal(const sigset_t *sigs, vx_store *store, vx_jobs *jobs)
+{
+    for (;;) {
+        struct timespec ts = {.tv_sec = 60};
+        int sig = sigtimedwait(sigs, NULL, &ts);
+        if (sig == SIGTERM || sig == SIGINT) {
+            VX_INFO("voxeld.signal", "signal=%s", sig == SIGTERM ? "TERM" : "INT");
+            break;
+        }
+        if (sig == SIGHUP) VX_INFO("voxeld.signal", "signal=HUP action=none");
+        if (sig < 0 && errno == EAGAIN) {  /* once a minute */
+            vx_store_results_evict(store); /* the age budget */
+            vx_jobs_maintain(jobs, 16L << 20);
+        }
+    }
+}
+
 int main(int argc, char **argv)
 {
     vx_config cfg;
@@ -74,15 +158,8 @@ int main(int argc, char **argv)
     vx_log_set_level(cfg.log_level);
     if (cfg.list_devices) return list_devices();
 
-    /* Signals are taken synchronously by the main thread: block them
-     * before any thread starts so every thread inherits the mask. */
     sigset_t sigs;
-    sigemptyset(&sigs);
-    sigaddset(&sigs, SIGTERM);
-    sigaddset(&sigs, SIGINT);
-    sigaddset(&sigs, SIGHUP);
-    pthread_sigmask(SIG_BLOCK, &sigs, NULL);
-    signal(SIGPIPE, SIG_IGN);
+    block_signals(&sigs);
 
     double start = vx_now();
     VX_INFO("voxeld.start", "version=%s pid=%d data_dir=%s", VX_VERSION, (int)getpid(),
@@ -96,45 +173,8 @@ int main(int argc, char **argv)
         VX_ERROR("voxeld.fatal", "stage=store code=%s message=\"%s\"", err.code, err.message);
         return 1;
     }
-    vx_err cerr;
-    int have_cache = vx_mkdirs(cfg.cache_dir, &cerr) == 0;
-    if (!have_cache) VX_WARN("voxeld.no_cache_dir", "path=%s code=%s", cfg.cache_dir, cerr.code);
-    vx_jobs_desc jd = {
-        .store = store,
-        .kinds = &vx_daemon_kinds,
-        .cache_dir = have_cache ? cfg.cache_dir : NULL,
-        .limits = {.max_upload_bytes = cfg.max_upload_bytes,
-                   .max_triangles = cfg.max_triangles,
-                   .max_image_pixels = cfg.max_image_pixels,
-                   .max_job_memory = cfg.max_job_memory,
-                   .job_timeout_s = cfg.job_timeout_s},
-        .max_queued = cfg.max_queued_jobs,
-        .history = cfg.job_history,
-        .history_bytes = cfg.job_history_bytes,
-        .workers = cfg.workers,
-        .gl = {.pick_device = cfg.egl_device >= 0,
-               .device = cfg.egl_device,
-               .debug = cfg.gl_debug,
-               .robust = 1},
-        .hooks = {.finished = on_job_finished,
-                  .changed = on_job_changed,
-                  .alive = on_jobs_alive,
-                  .lose_context = on_lose_context},
-    };
-    const char *lose = getenv("VOXELD_TEST_LOSE_CONTEXT");
-    g_lose_context = lose && atoi(lose) > 0 ? atoi(lose) : 0;
-    vx_jobs *jobs = vx_jobs_open(&jd, &err);
+    vx_jobs *jobs = open_jobs(&cfg, store, &err);
     if (!jobs) {
-        VX_ERROR("voxeld.fatal", "stage=journal code=%s message=\"%s\"", err.code, err.message);
-        vx_store_close(store);
-        return 1;
-    }
-    if (vx_jobs_start(jobs, &err)) {
-        char q[600];
-        VX_ERROR("voxeld.fatal", "stage=gl code=%s message=%s", err.code,
-                 vx_log_quote(q, sizeof q, err.message));
-        fprintf(stderr, "voxeld: cannot create the OpenGL context: %s\n", err.message);
-        vx_jobs_free(jobs);
         vx_store_close(store);
         return 1;
     }
@@ -157,19 +197,7 @@ int main(int argc, char **argv)
                gi.renderer);
     VX_INFO("voxeld.ready", "port=%d", vx_http_port(http));
 
-    for (;;) {
-        struct timespec ts = {.tv_sec = 60};
-        int sig = sigtimedwait(&sigs, NULL, &ts);
-        if (sig == SIGTERM || sig == SIGINT) {
-            VX_INFO("voxeld.signal", "signal=%s", sig == SIGTERM ? "TERM" : "INT");
-            break;
-        }
-        if (sig == SIGHUP) VX_INFO("voxeld.signal", "signal=HUP action=none");
-        if (sig < 0 && errno == EAGAIN) {  /* once a minute */
-            vx_store_results_evict(store); /* the age budget */
-            vx_jobs_maintain(jobs, 16L << 20);
-        }
-    }
+    serve_until_signal(&sigs, store, jobs);
 
     sd_notify(0, "STOPPING=1");
     /* Order (issue #2): stop accepting, answer every held request, let the

@@ -624,6 +624,74 @@ static void place_curve(const vx_gregory_topo *t, uint32_t c, const double cv[12
     }
 }
 
+/* Places edge e's midpoint node on its split curve (cvs + 24 * e), with
+ * its plane in nn and the curve's tangent there in mt. */
+static void mid_node_frame(const vx_gregory_topo *t, uint32_t e, const double *cvs, double *np,
+                           double *nn, double *mt)
+{
+    /* Midpoint node: on the curve; its plane holds the curve's tangent
+     * there and is otherwise the mean of the end planes. */
+    uint32_t m = mid_node(t, e), a = t->edge_v[2 * e], b = t->edge_v[2 * e + 1];
+    double *tan = mt + 3 * e, n[3];
+    memcpy(np + 3 * m, cvs + 24 * e + 9, 3 * sizeof *np);
+    vx_v3_sub(cvs + 24 * e + 15, cvs + 24 * e + 6, tan);
+    vx_v3_mid(nn + 3 * a, nn + 3 * b, n);
+    if (vx_v3_unit(tan) == 0) {
+        double d = vx_v3_dot(n, tan);
+        for (int c = 0; c < 3; c++)
+            n[c] -= d * tan[c];
+    }
+    if (vx_v3_unit(n)) memcpy(n, nn + 3 * a, sizeof n);
+    memcpy(nn + 3 * m, n, sizeof n);
+}
+
+/* Places face f's centre node and plane and builds its midpoint -> centre
+ * curves into cvs; cdir and ids are scratch for the face's corners. */
+static void face_centre(const vx_gregory_topo *t, const double *pos, uint32_t f, double *np,
+                        double *nn, const double *mt, double *cdir, uint32_t *ids, double *cvs)
+{
+    /* Centre: the PN-triangle rule M + (M - V) / 2 over the edge
+     * midpoints M and the vertices V (exact for a plane, lifted
+     * towards the surface otherwise); plane: mean vertex plane. */
+    uint32_t s0 = t->fstart[f], k = t->fstart[f + 1] - s0, cn = centre_node(t, f);
+    double M[3] = {0, 0, 0}, V[3] = {0, 0, 0}, n[3] = {0, 0, 0};
+    for (uint32_t i = 0; i < k; i++) {
+        ids[i] = mid_node(t, t->fedge[s0 + i]);
+        const double *vp = pos + 3 * t->fidx[s0 + i];
+        for (int c = 0; c < 3; c++) {
+            M[c] += np[3 * ids[i] + c] / k;
+            V[c] += vp[c] / k;
+            n[c] += nn[3 * t->fidx[s0 + i] + c];
+        }
+    }
+    double *cp = np + 3 * cn;
+    for (int c = 0; c < 3; c++)
+        cp[c] = M[c] + 0.5 * (M[c] - V[c]);
+    if (vx_v3_unit(n)) {
+        face_normal(t, pos, f, n);
+        if (vx_v3_unit(n)) n[0] = n[1] = 0, n[2] = 1;
+    }
+    memcpy(nn + 3 * cn, n, sizeof n);
+    /* Midpoint -> centre curves: at the midpoint square to the edge,
+     * towards the face's side (left of the face's direction along
+     * the edge); at the centre from the centre's fan. */
+    fan_dirs(cp, n, np, ids, k, 1, cdir);
+    for (uint32_t i = 0; i < k; i++) {
+        uint32_t e = t->fedge[s0 + i], m = ids[i], c = (uint32_t)(2 * t->nedges + s0 + i);
+        double tf[3], dm[3];
+        memcpy(tf, mt + 3 * e, sizeof tf);
+        if (t->fidx[s0 + i] != t->edge_v[2 * e])
+            for (int d = 0; d < 3; d++)
+                tf[d] = -tf[d];
+        vx_v3_cross(nn + 3 * m, tf, dm);
+        if (vx_v3_unit(dm)) {
+            vx_v3_sub(cp, np + 3 * m, dm);
+            project_dir(dm, nn + 3 * m, dm);
+        }
+        dir_curve(np + 3 * m, dm, cp, cdir + 3 * i, cvs + 12 * c);
+    }
+}
+
 void vx_gregory_build(const vx_gregory_topo *t, const double *pos, vx_gpatch_set *s)
 {
     /* Node positions and normals, vertex fan directions, midpoint tangents,
@@ -657,64 +725,11 @@ void vx_gregory_build(const vx_gregory_topo *t, const double *pos, vx_gpatch_set
         double cv[12];
         edge_curve(t, pos, nn, vdir, e, cv);
         split_curve(cv, cvs + 24 * e, cvs + 24 * e + 12);
-        /* Midpoint node: on the curve; its plane holds the curve's tangent
-         * there and is otherwise the mean of the end planes. */
-        uint32_t m = mid_node(t, e), a = t->edge_v[2 * e], b = t->edge_v[2 * e + 1];
-        double *tan = mt + 3 * e, n[3];
-        memcpy(np + 3 * m, cvs + 24 * e + 9, 3 * sizeof *np);
-        vx_v3_sub(cvs + 24 * e + 15, cvs + 24 * e + 6, tan);
-        vx_v3_mid(nn + 3 * a, nn + 3 * b, n);
-        if (vx_v3_unit(tan) == 0) {
-            double d = vx_v3_dot(n, tan);
-            for (int c = 0; c < 3; c++)
-                n[c] -= d * tan[c];
-        }
-        if (vx_v3_unit(n)) memcpy(n, nn + 3 * a, sizeof n);
-        memcpy(nn + 3 * m, n, sizeof n);
+        mid_node_frame(t, e, cvs, np, nn, mt);
     }
     if (t->split)
-        for (uint32_t f = 0; f < t->nfaces; f++) {
-            /* Centre: the PN-triangle rule M + (M - V) / 2 over the edge
-             * midpoints M and the vertices V (exact for a plane, lifted
-             * towards the surface otherwise); plane: mean vertex plane. */
-            uint32_t s0 = t->fstart[f], k = t->fstart[f + 1] - s0, cn = centre_node(t, f);
-            double M[3] = {0, 0, 0}, V[3] = {0, 0, 0}, n[3] = {0, 0, 0};
-            for (uint32_t i = 0; i < k; i++) {
-                ids[i] = mid_node(t, t->fedge[s0 + i]);
-                const double *vp = pos + 3 * t->fidx[s0 + i];
-                for (int c = 0; c < 3; c++) {
-                    M[c] += np[3 * ids[i] + c] / k;
-                    V[c] += vp[c] / k;
-                    n[c] += nn[3 * t->fidx[s0 + i] + c];
-                }
-            }
-            double *cp = np + 3 * cn;
-            for (int c = 0; c < 3; c++)
-                cp[c] = M[c] + 0.5 * (M[c] - V[c]);
-            if (vx_v3_unit(n)) {
-                face_normal(t, pos, f, n);
-                if (vx_v3_unit(n)) n[0] = n[1] = 0, n[2] = 1;
-            }
-            memcpy(nn + 3 * cn, n, sizeof n);
-            /* Midpoint -> centre curves: at the midpoint square to the edge,
-             * towards the face's side (left of the face's direction along
-             * the edge); at the centre from the centre's fan. */
-            fan_dirs(cp, n, np, ids, k, 1, cdir);
-            for (uint32_t i = 0; i < k; i++) {
-                uint32_t e = t->fedge[s0 + i], m = ids[i], c = (uint32_t)(2 * t->nedges + s0 + i);
-                double tf[3], dm[3];
-                memcpy(tf, mt + 3 * e, sizeof tf);
-                if (t->fidx[s0 + i] != t->edge_v[2 * e])
-                    for (int d = 0; d < 3; d++)
-                        tf[d] = -tf[d];
-                vx_v3_cross(nn + 3 * m, tf, dm);
-                if (vx_v3_unit(dm)) {
-                    vx_v3_sub(cp, np + 3 * m, dm);
-                    project_dir(dm, nn + 3 * m, dm);
-                }
-                dir_curve(np + 3 * m, dm, cp, cdir + 3 * i, cvs + 12 * c);
-            }
-        }
+        for (uint32_t f = 0; f < t->nfaces; f++)
+            face_centre(t, pos, f, np, nn, mt, cdir, ids, cvs);
     for (uint32_t c = 0; c < t->ncurves; c++)
         place_curve(t, c, cvs + 12 * c, s);
     for (uint32_t c = 0; c < t->ncurves; c++)

@@ -464,6 +464,106 @@ static int stop_hook(void *ud, vx_err *err)
     return vx_run_progress(ud, 0, err);
 }
 
+/* Counts the tessellation and checks it against the triangle and memory
+ * limits; *gv gets the grid vertex count. */
+static int check_size(const vx_limits *lim, const vx_gpatch_set *set, const uint32_t *ndiv,
+                      size_t nframes, uint64_t *gv, vx_err *err)
+{
+    uint64_t nv, nt;
+    if (vx_gregory_count(set, ndiv, gv, &nv, &nt, err)) return -1;
+    if (lim->max_triangles && nt > lim->max_triangles) {
+        vx_err_set(err, VX_ETOOBIG, "triangle_limit",
+                   "%zu patches at these divisions make %llu triangles, over the limit of %llu",
+                   set->npatches, (unsigned long long)nt, (unsigned long long)lim->max_triangles);
+        return -1;
+    }
+    /* Grid, per-frame outputs, layout. */
+    uint64_t bytes = *gv * 6 * sizeof(float) + nv * sizeof(uint64_t) +
+                     (uint64_t)nframes * nv * (3 * sizeof(double) + 3 * sizeof(float)) +
+                     nt * 4 * sizeof(uint32_t) + set->npatches * VX_GPATCH_POINTS * 3 * 8;
+    if (lim->max_job_memory && bytes > lim->max_job_memory) {
+        vx_err_set(err, VX_ETOOBIG, "job_memory_limit",
+                   "%zu frames of %llu vertices need about %llu bytes, over the job memory limit "
+                   "of %llu",
+                   nframes, (unsigned long long)nv, (unsigned long long)bytes,
+                   (unsigned long long)lim->max_job_memory);
+        return -1;
+    }
+    return 0;
+}
+
+/* GPU timings of the frame loop. */
+typedef struct tess_times {
+    double gpu_ms, first_tess_ms;
+} tess_times;
+
+/* Tessellates every frame on the GPU and gathers its positions and normals
+ * into s; appends each frame's time to frame_ms when it is not NULL. */
+static int tessellate_frames(vx_job_run *r, const vx_mesh *mesh, const gparams *p, builder *b,
+                             greg_state *s, vx_gtess *tess, float *grid, const double origin[3],
+                             cJSON *frame_ms, tess_times *t, vx_err *err)
+{
+    size_t nframes = s->nframes;
+    for (size_t k = 0; k < nframes; k++) {
+        double f0 = now_ms();
+        if (k > 0) {
+            vx_mesh *loaded = NULL;
+            const double *pos = frame_positions(r, mesh, p, k, &loaded, err);
+            if (!pos) return -1;
+            int bad = construct(b, pos, err);
+            vx_mesh_free(loaded);
+            if (bad) return -1;
+        }
+        double ms;
+        if (vx_gtess_run(tess, b->set, origin, grid, &ms, err)) return -1;
+        t->gpu_ms += ms;
+        if (k == 0) t->first_tess_ms = ms;
+        s->pos[k] = malloc((3 * s->layout->nverts + 1) * sizeof **s->pos);
+        s->nrm[k] = malloc((3 * s->layout->nverts + 1) * sizeof **s->nrm);
+        if (!s->pos[k] || !s->nrm[k]) {
+            vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for frame %zu", k);
+            return -1;
+        }
+        if (vx_gregory_gather(s->layout, grid, origin, s->pos[k], s->nrm[k], err)) return -1;
+        if (frame_ms) cJSON_AddItemToArray(frame_ms, cJSON_CreateNumber(now_ms() - f0));
+        if (vx_run_progress(r, 0.9 * (double)(k + 1) / (double)nframes, err)) return -1;
+    }
+    return 0;
+}
+
+/* Adds the gregory stats to the run's stats; takes *frame_ms over (sets it
+ * to NULL) when there are stats. */
+static void add_stats(vx_job_run *r, const vx_mesh *mesh, const gparams *p, const builder *b,
+                      const uint32_t *ndiv, const greg_state *s, uint64_t gv, double build_ms,
+                      double cc_distance, const tess_times *t, cJSON **frame_ms)
+{
+    cJSON *stats = vx_run_stats(r);
+    if (!stats) return;
+    uint32_t nmin = UINT32_MAX, nmax = 0;
+    for (size_t i = 0; i < b->set->npatches; i++) {
+        if (ndiv[i] < nmin) nmin = ndiv[i];
+        if (ndiv[i] > nmax) nmax = ndiv[i];
+    }
+    cJSON_AddStringToObject(stats, "construction",
+                            mesh->npatches ? "bezier" : cons_names[p->construction]);
+    cJSON_AddNumberToObject(stats, "patches", (double)b->set->npatches);
+    cJSON_AddNumberToObject(stats, "vertices", (double)s->layout->nverts);
+    cJSON_AddNumberToObject(stats, "triangles", (double)s->layout->ntris);
+    cJSON_AddNumberToObject(stats, "divisions_min", b->set->npatches ? nmin : 0);
+    cJSON_AddNumberToObject(stats, "divisions_max", nmax);
+    cJSON_AddNumberToObject(stats, "frames", (double)s->nframes);
+    cJSON_AddNumberToObject(stats, "build_ms", build_ms);
+    if (cc_distance >= 0) cJSON_AddNumberToObject(stats, "cc_distance", cc_distance);
+    cJSON_AddNumberToObject(stats, "gpu_ms", t->first_tess_ms);
+    cJSON_AddNumberToObject(stats, "gpu_total_ms", t->gpu_ms);
+    cJSON_AddNumberToObject(stats, "vertices_per_s",
+                            t->first_tess_ms > 0 ? (double)gv / (t->first_tess_ms / 1e3) : 0);
+    if (*frame_ms) {
+        cJSON_AddItemToObject(stats, "frame_ms", *frame_ms);
+        *frame_ms = NULL;
+    }
+}
+
 static int run_gl(vx_job_run *r, const vx_mesh *mesh, const gparams *pp, void **state, vx_err *err)
 {
     const gparams p = *pp;
@@ -492,26 +592,8 @@ static int run_gl(vx_job_run *r, const vx_mesh *mesh, const gparams *pp, void **
     ndiv = vx_gregory_divisions(b.set, p.max_edge_set ? 0 : (int)p.divisions,
                                 p.max_edge_set ? p.max_edge : 0, err);
     if (!ndiv) goto done;
-    uint64_t gv, nv, nt;
-    if (vx_gregory_count(b.set, ndiv, &gv, &nv, &nt, err)) goto done;
-    if (lim->max_triangles && nt > lim->max_triangles) {
-        vx_err_set(err, VX_ETOOBIG, "triangle_limit",
-                   "%zu patches at these divisions make %llu triangles, over the limit of %llu",
-                   b.set->npatches, (unsigned long long)nt, (unsigned long long)lim->max_triangles);
-        goto done;
-    }
-    /* Grid, per-frame outputs, layout. */
-    uint64_t bytes = gv * 6 * sizeof(float) + nv * sizeof(uint64_t) +
-                     (uint64_t)nframes * nv * (3 * sizeof(double) + 3 * sizeof(float)) +
-                     nt * 4 * sizeof(uint32_t) + b.set->npatches * VX_GPATCH_POINTS * 3 * 8;
-    if (lim->max_job_memory && bytes > lim->max_job_memory) {
-        vx_err_set(err, VX_ETOOBIG, "job_memory_limit",
-                   "%zu frames of %llu vertices need about %llu bytes, over the job memory limit "
-                   "of %llu",
-                   nframes, (unsigned long long)nv, (unsigned long long)bytes,
-                   (unsigned long long)lim->max_job_memory);
-        goto done;
-    }
+    uint64_t gv;
+    if (check_size(lim, b.set, ndiv, nframes, &gv, err)) goto done;
     greg_state *s = calloc(1, sizeof *s);
     if (!s) {
         vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for the gregory state");
@@ -531,59 +613,11 @@ static int run_gl(vx_job_run *r, const vx_mesh *mesh, const gparams *pp, void **
     double origin[3];
     for (int c = 0; c < 3; c++)
         origin[c] = 0.5 * (mesh->bbox_min[c] + mesh->bbox_max[c]);
-    double gpu_ms = 0, first_tess_ms = 0;
+    tess_times t = {0, 0};
     tess = vx_gtess_new(vx_run_gl(r), s->layout, err);
     if (!tess) goto done;
-    for (size_t k = 0; k < nframes; k++) {
-        double f0 = now_ms();
-        if (k > 0) {
-            vx_mesh *loaded = NULL;
-            const double *pos = frame_positions(r, mesh, &p, k, &loaded, err);
-            if (!pos) goto done;
-            int bad = construct(&b, pos, err);
-            vx_mesh_free(loaded);
-            if (bad) goto done;
-        }
-        double ms;
-        if (vx_gtess_run(tess, b.set, origin, grid, &ms, err)) goto done;
-        gpu_ms += ms;
-        if (k == 0) first_tess_ms = ms;
-        s->pos[k] = malloc((3 * s->layout->nverts + 1) * sizeof **s->pos);
-        s->nrm[k] = malloc((3 * s->layout->nverts + 1) * sizeof **s->nrm);
-        if (!s->pos[k] || !s->nrm[k]) {
-            vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for frame %zu", k);
-            goto done;
-        }
-        if (vx_gregory_gather(s->layout, grid, origin, s->pos[k], s->nrm[k], err)) goto done;
-        if (frame_ms) cJSON_AddItemToArray(frame_ms, cJSON_CreateNumber(now_ms() - f0));
-        if (vx_run_progress(r, 0.9 * (double)(k + 1) / (double)nframes, err)) goto done;
-    }
-    cJSON *stats = vx_run_stats(r);
-    if (stats) {
-        uint32_t nmin = UINT32_MAX, nmax = 0;
-        for (size_t i = 0; i < b.set->npatches; i++) {
-            if (ndiv[i] < nmin) nmin = ndiv[i];
-            if (ndiv[i] > nmax) nmax = ndiv[i];
-        }
-        cJSON_AddStringToObject(stats, "construction",
-                                mesh->npatches ? "bezier" : cons_names[p.construction]);
-        cJSON_AddNumberToObject(stats, "patches", (double)b.set->npatches);
-        cJSON_AddNumberToObject(stats, "vertices", (double)s->layout->nverts);
-        cJSON_AddNumberToObject(stats, "triangles", (double)s->layout->ntris);
-        cJSON_AddNumberToObject(stats, "divisions_min", b.set->npatches ? nmin : 0);
-        cJSON_AddNumberToObject(stats, "divisions_max", nmax);
-        cJSON_AddNumberToObject(stats, "frames", (double)nframes);
-        cJSON_AddNumberToObject(stats, "build_ms", build_ms);
-        if (cc_distance >= 0) cJSON_AddNumberToObject(stats, "cc_distance", cc_distance);
-        cJSON_AddNumberToObject(stats, "gpu_ms", first_tess_ms);
-        cJSON_AddNumberToObject(stats, "gpu_total_ms", gpu_ms);
-        cJSON_AddNumberToObject(stats, "vertices_per_s",
-                                first_tess_ms > 0 ? (double)gv / (first_tess_ms / 1e3) : 0);
-        if (frame_ms) {
-            cJSON_AddItemToObject(stats, "frame_ms", frame_ms);
-            frame_ms = NULL;
-        }
-    }
+    if (tessellate_frames(r, mesh, &p, &b, s, tess, grid, origin, frame_ms, &t, err)) goto done;
+    add_stats(r, mesh, &p, &b, ndiv, s, gv, build_ms, cc_distance, &t, &frame_ms);
     rc = 0;
 done:
     vx_gtess_free(tess);

@@ -240,13 +240,9 @@ static int dedupe_points(vx_mesh *m, vx_err *err)
     return 0;
 }
 
-/* Builds the tessellation (faces and new vertices) of m's patches. */
-static int tessellate(vx_mesh *m, const vx_mesh_limits *lim, vx_err *err)
+/* Fills e[4 * p + s] with side s of patch p, keyed canonically. */
+static void patch_edges(const vx_mesh *m, bpt_edge *e)
 {
-    const uint32_t T = VX_BPT_TESS;
-    size_t ne = 4 * m->npatches;
-    bpt_edge *e = malloc(ne * sizeof *e + 1);
-    if (!e) return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for patch edges");
     for (size_t p = 0; p < m->npatches; p++)
         for (int s = 0; s < 4; s++) {
             bpt_edge *x = &e[4 * p + (size_t)s];
@@ -260,19 +256,14 @@ static int tessellate(vx_mesh *m, const vx_mesh_limits *lim, vx_err *err)
             x->patch = (uint32_t)p;
             x->side = (uint32_t)s;
         }
-    /* A unique vertex block per distinct edge; collapsed edges (one point
-     * four times) need none. */
-    bpt_edge **byp = malloc(ne * sizeof *byp + 1);
-    bpt_edge *sorted = malloc(ne * sizeof *sorted + 1);
-    if (!byp || !sorted) {
-        free(e);
-        free(byp);
-        free(sorted);
-        return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for patch edges");
-    }
-    memcpy(sorted, e, ne * sizeof *e);
-    qsort(sorted, ne, sizeof *sorted, cmp_edge);
-    uint64_t nv = m->nverts;
+}
+
+/* Gives each distinct edge of the sorted edges its vertex block (numbered
+ * from nv on) and points byp[4 * patch + side] at it; returns the vertex
+ * count after the blocks. */
+static uint64_t edge_blocks(bpt_edge *sorted, size_t ne, bpt_edge **byp, uint64_t nv)
+{
+    const uint32_t T = VX_BPT_TESS;
     for (size_t i = 0; i < ne; i++) {
         int collapsed = sorted[i].key[0] == sorted[i].key[1] &&
                         sorted[i].key[1] == sorted[i].key[2] &&
@@ -287,6 +278,89 @@ static int tessellate(vx_mesh *m, const vx_mesh_limits *lim, vx_err *err)
         }
         byp[4 * sorted[i].patch + sorted[i].side] = &sorted[i];
     }
+    return nv;
+}
+
+/* Fills grid[(T+1)*b + a] with the vertex of patch p at (u, v) = (a/T, b/T),
+ * evaluating new interior vertices from *next on and shared edge vertices. */
+static void patch_grid(vx_mesh *m, size_t p, bpt_edge *const *byp, uint32_t *grid, size_t *next)
+{
+    const uint32_t T = VX_BPT_TESS;
+    const uint32_t *idx = m->patch_idx + 16 * p;
+    for (uint32_t b = 0; b <= T; b++)
+        for (uint32_t a = 0; a <= T; a++) {
+            int s = -1;
+            uint32_t t = 0; /* step along side s, in the side's own direction */
+            if (b == 0)
+                s = 0, t = a;
+            else if (b == T)
+                s = 2, t = a;
+            else if (a == 0)
+                s = 3, t = b;
+            else if (a == T)
+                s = 1, t = b;
+            uint32_t vid;
+            if (s < 0) {
+                vid = (uint32_t)(*next)++;
+                eval_patch(m, idx, (double)a / T, (double)b / T, m->pos + 3 * (size_t)vid);
+            } else if (t == 0 || t == T) {
+                vid = idx[side_slots[s][t ? 3 : 0]]; /* a corner is its control point */
+            } else {
+                const bpt_edge *x = byp[4 * p + (size_t)s];
+                if (x->base == UINT32_MAX) {
+                    vid = x->key[0];
+                } else {
+                    vid = x->base + (x->reversed ? T - t : t) - 1;
+                    /* The first patch to reach a shared vertex computes it;
+                     * the reverse evaluation is the same point. */
+                    eval_patch(m, idx, (double)a / T, (double)b / T, m->pos + 3 * (size_t)vid);
+                }
+            }
+            grid[(T + 1) * b + a] = vid;
+        }
+}
+
+/* Appends the faces of one patch's vertex grid to m, dropping the quads
+ * that collapse to an edge or a point; *nidx counts the face corners. */
+static void grid_faces(vx_mesh *m, const uint32_t *grid, size_t *nidx)
+{
+    const uint32_t T = VX_BPT_TESS;
+    for (uint32_t b = 0; b < T; b++)
+        for (uint32_t a = 0; a < T; a++) {
+            uint32_t q[4] = {grid[(T + 1) * b + a], grid[(T + 1) * b + a + 1],
+                             grid[(T + 1) * (b + 1) + a + 1], grid[(T + 1) * (b + 1) + a]};
+            uint32_t f[4];
+            int n = 0;
+            for (int k = 0; k < 4; k++)
+                if (q[k] != q[(k + 3) % 4]) f[n++] = q[k];
+            if (n < 3) continue; /* collapsed to an edge or a point */
+            memcpy(m->face_idx + *nidx, f, (size_t)n * sizeof *f);
+            *nidx += (size_t)n;
+            m->face_start[++m->nfaces] = (uint32_t)*nidx;
+        }
+}
+
+/* Builds the tessellation (faces and new vertices) of m's patches. */
+static int tessellate(vx_mesh *m, const vx_mesh_limits *lim, vx_err *err)
+{
+    const uint32_t T = VX_BPT_TESS;
+    size_t ne = 4 * m->npatches;
+    bpt_edge *e = malloc(ne * sizeof *e + 1);
+    if (!e) return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for patch edges");
+    patch_edges(m, e);
+    /* A unique vertex block per distinct edge; collapsed edges (one point
+     * four times) need none. */
+    bpt_edge **byp = malloc(ne * sizeof *byp + 1);
+    bpt_edge *sorted = malloc(ne * sizeof *sorted + 1);
+    if (!byp || !sorted) {
+        free(e);
+        free(byp);
+        free(sorted);
+        return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for patch edges");
+    }
+    memcpy(sorted, e, ne * sizeof *e);
+    qsort(sorted, ne, sizeof *sorted, cmp_edge);
+    uint64_t nv = edge_blocks(sorted, ne, byp, m->nverts);
     free(e);
     uint64_t interior = (uint64_t)m->npatches * (T - 1) * (T - 1);
     uint64_t total = nv + interior;
@@ -313,52 +387,8 @@ static int tessellate(vx_mesh *m, const vx_mesh_limits *lim, vx_err *err)
     m->nfaces = 0;
     m->face_start[0] = 0;
     for (size_t p = 0; p < m->npatches; p++) {
-        const uint32_t *idx = m->patch_idx + 16 * p;
-        /* grid[(T+1)*b + a]: the vertex at (u, v) = (a/T, b/T) */
-        for (uint32_t b = 0; b <= T; b++)
-            for (uint32_t a = 0; a <= T; a++) {
-                int s = -1;
-                uint32_t t = 0; /* step along side s, in the side's own direction */
-                if (b == 0)
-                    s = 0, t = a;
-                else if (b == T)
-                    s = 2, t = a;
-                else if (a == 0)
-                    s = 3, t = b;
-                else if (a == T)
-                    s = 1, t = b;
-                uint32_t vid;
-                if (s < 0) {
-                    vid = (uint32_t)next++;
-                    eval_patch(m, idx, (double)a / T, (double)b / T, m->pos + 3 * (size_t)vid);
-                } else if (t == 0 || t == T) {
-                    vid = idx[side_slots[s][t ? 3 : 0]]; /* a corner is its control point */
-                } else {
-                    const bpt_edge *x = byp[4 * p + (size_t)s];
-                    if (x->base == UINT32_MAX) {
-                        vid = x->key[0];
-                    } else {
-                        vid = x->base + (x->reversed ? T - t : t) - 1;
-                        /* The first patch to reach a shared vertex computes it;
-                         * the reverse evaluation is the same point. */
-                        eval_patch(m, idx, (double)a / T, (double)b / T, m->pos + 3 * (size_t)vid);
-                    }
-                }
-                grid[(T + 1) * b + a] = vid;
-            }
-        for (uint32_t b = 0; b < T; b++)
-            for (uint32_t a = 0; a < T; a++) {
-                uint32_t q[4] = {grid[(T + 1) * b + a], grid[(T + 1) * b + a + 1],
-                                 grid[(T + 1) * (b + 1) + a + 1], grid[(T + 1) * (b + 1) + a]};
-                uint32_t f[4];
-                int n = 0;
-                for (int k = 0; k < 4; k++)
-                    if (q[k] != q[(k + 3) % 4]) f[n++] = q[k];
-                if (n < 3) continue; /* collapsed to an edge or a point */
-                memcpy(m->face_idx + nidx, f, (size_t)n * sizeof *f);
-                nidx += (size_t)n;
-                m->face_start[++m->nfaces] = (uint32_t)nidx;
-            }
+        patch_grid(m, p, byp, grid, &next);
+        grid_faces(m, grid, &nidx);
     }
     free(grid);
     free(byp);
@@ -374,6 +404,119 @@ static int tessellate(vx_mesh *m, const vx_mesh_limits *lim, vx_err *err)
     return 0;
 }
 
+/* Refuses a patch count of 0, over the triangle limit, or too big for the
+ * rest of the file. */
+static int check_patch_count(bpt_reader *r, uint64_t np, const vx_mesh_limits *lim)
+{
+    if (np == 0) return bpt_fail(r, VX_EINVAL, "bpt_count", "the patch count is 0");
+    /* Every patch becomes 2 * VX_BPT_TESS^2 triangles at most: refuse a
+     * count over the limit before allocating for it (and any count whose
+     * face corners would not fit the uint32 offsets). */
+    uint64_t tris = np * 2 * VX_BPT_TESS * VX_BPT_TESS;
+    if ((lim && lim->max_triangles && tris > lim->max_triangles) ||
+        np > UINT32_MAX / (4 * VX_BPT_TESS * VX_BPT_TESS))
+        return bpt_fail(r, VX_ETOOBIG, "mesh_too_big",
+                        "%llu patches make %llu triangles, over the limit", (unsigned long long)np,
+                        (unsigned long long)tris);
+    /* The counts are untrusted: storage grows as lines arrive. Where the
+     * file's size is known, a count the rest of the file cannot hold (a
+     * patch line takes BPT_MIN_PATCH_LINE bytes at least) ends the read at
+     * once, and the storage is sized for what can follow. */
+    uint64_t left = bytes_left(r);
+    if (left != UINT64_MAX && np > left / BPT_MIN_PATCH_LINE)
+        return bpt_fail(r, VX_EINVAL, "bpt_truncated",
+                        "%llu patches cannot fit in the %llu bytes that follow",
+                        (unsigned long long)np, (unsigned long long)left);
+    return 0;
+}
+
+/* Reads np patch lines into m; *maxidx gets the largest (1-based) index and
+ * *maxline the line it is on. */
+static int read_patches(bpt_reader *r, vx_mesh *m, uint64_t np, uint64_t *maxidx, size_t *maxline)
+{
+    size_t cap = 0;
+    for (size_t p = 0; p < np; p++) {
+        int e = next_line(r);
+        if (e < 0) return -1;
+        if (e)
+            return bpt_fail(r, VX_EINVAL, "bpt_truncated",
+                            "the file ends after %zu of %llu patches", p, (unsigned long long)np);
+        if (grow_to((void **)&m->patch_idx, &cap, p + 1, (size_t)np, 16 * sizeof(uint32_t)))
+            return vx_err_set(r->err, VX_EINTERNAL, "out_of_memory", "no memory for %zu patches",
+                              p + 1);
+        m->npatches = p + 1;
+        char *fl[16];
+        if (split(r, fl, 16, "a patch line")) return -1;
+        for (int k = 0; k < 16; k++) {
+            uint64_t v;
+            if (parse_uint(r, fl[k], "patch index", &v)) return -1;
+            if (v == 0)
+                return bpt_fail(r, VX_EINVAL, "bpt_index",
+                                "index 0 is invalid (indices start at 1)");
+            if (v > UINT32_MAX) v = UINT32_MAX;
+            m->patch_idx[16 * p + (size_t)k] = (uint32_t)(v - 1);
+            if (v > *maxidx) {
+                *maxidx = v;
+                *maxline = r->lineno;
+            }
+        }
+    }
+    return 0;
+}
+
+/* Refuses a point count of 0, over the limit, below the largest index or
+ * too big for the rest of the file. */
+static int check_point_count(bpt_reader *r, uint64_t npts, const vx_mesh_limits *lim,
+                             uint64_t maxidx, size_t maxline)
+{
+    if (npts == 0 || (lim && lim->max_vertices && npts > lim->max_vertices) || npts >= UINT32_MAX)
+        return bpt_fail(r, npts ? VX_ETOOBIG : VX_EINVAL, npts ? "mesh_too_big" : "bpt_count",
+                        "point count %llu is %s", (unsigned long long)npts,
+                        npts ? "over the limit" : "0");
+    if (maxidx > npts) {
+        r->lineno = maxline;
+        return bpt_fail(r, VX_EINVAL, "bpt_index",
+                        "index %llu out of range: the file has %llu points",
+                        (unsigned long long)maxidx, (unsigned long long)npts);
+    }
+    uint64_t left = bytes_left(r);
+    /* (the last line may lack its newline) */
+    if (left != UINT64_MAX && npts > (left + 1) / BPT_MIN_POINT_LINE)
+        return bpt_fail(r, VX_EINVAL, "bpt_truncated",
+                        "%llu points cannot fit in the %llu bytes that follow",
+                        (unsigned long long)npts, (unsigned long long)left);
+    return 0;
+}
+
+/* Reads npts point lines into m->pos. */
+static int read_points(bpt_reader *r, vx_mesh *m, uint64_t npts)
+{
+    size_t cap = 0;
+    for (size_t i = 0; i < npts; i++) {
+        int e = next_line(r);
+        if (e < 0) return -1;
+        if (e)
+            return bpt_fail(r, VX_EINVAL, "bpt_truncated", "the file ends after %zu of %llu points",
+                            i, (unsigned long long)npts);
+        if (grow_to((void **)&m->pos, &cap, i + 1, (size_t)npts, 3 * sizeof(double)))
+            return vx_err_set(r->err, VX_EINTERNAL, "out_of_memory", "no memory for %zu points",
+                              i + 1);
+        m->nverts = i + 1;
+        char *fl[3];
+        if (split(r, fl, 3, "a point line")) return -1;
+        for (int a = 0; a < 3; a++) {
+            double v;
+            char *end = vx_mesh_parse_double(fl[a], &v);
+            if (!end || *end)
+                return bpt_fail(r, VX_EINVAL, "bpt_junk", "'%.40s' is not a number", fl[a]);
+            if (!isfinite(v))
+                return bpt_fail(r, VX_EINVAL, "bpt_nan", "NaN or infinite coordinate");
+            m->pos[3 * i + (size_t)a] = v;
+        }
+    }
+    return 0;
+}
+
 vx_mesh *vx_bpt_read_file(FILE *f, const vx_mesh_limits *lim, vx_err *err)
 {
     bpt_reader *r = calloc(1, sizeof *r);
@@ -384,116 +527,13 @@ vx_mesh *vx_bpt_read_file(FILE *f, const vx_mesh_limits *lim, vx_err *err)
     }
     r->f = f;
     r->err = err;
-    uint64_t np, npts;
-    if (read_count(r, "patch count", &np)) goto fail;
-    if (np == 0) {
-        bpt_fail(r, VX_EINVAL, "bpt_count", "the patch count is 0");
-        goto fail;
-    }
-    /* Every patch becomes 2 * VX_BPT_TESS^2 triangles at most: refuse a
-     * count over the limit before allocating for it (and any count whose
-     * face corners would not fit the uint32 offsets). */
-    uint64_t tris = np * 2 * VX_BPT_TESS * VX_BPT_TESS;
-    if ((lim && lim->max_triangles && tris > lim->max_triangles) ||
-        np > UINT32_MAX / (4 * VX_BPT_TESS * VX_BPT_TESS)) {
-        bpt_fail(r, VX_ETOOBIG, "mesh_too_big", "%llu patches make %llu triangles, over the limit",
-                 (unsigned long long)np, (unsigned long long)tris);
-        goto fail;
-    }
-    /* The counts are untrusted: storage grows as lines arrive. Where the
-     * file's size is known, a count the rest of the file cannot hold (a
-     * patch line takes BPT_MIN_PATCH_LINE bytes at least) ends the read at
-     * once, and the storage is sized for what can follow. */
-    uint64_t left = bytes_left(r);
-    if (left != UINT64_MAX && np > left / BPT_MIN_PATCH_LINE) {
-        bpt_fail(r, VX_EINVAL, "bpt_truncated",
-                 "%llu patches cannot fit in the %llu bytes that follow", (unsigned long long)np,
-                 (unsigned long long)left);
-        goto fail;
-    }
-    size_t cap = 0;
-    uint64_t maxidx = 0;
+    uint64_t np, npts, maxidx = 0;
     size_t maxline = 0;
-    for (size_t p = 0; p < np; p++) {
-        int e = next_line(r);
-        if (e < 0) goto fail;
-        if (e) {
-            bpt_fail(r, VX_EINVAL, "bpt_truncated", "the file ends after %zu of %llu patches", p,
-                     (unsigned long long)np);
-            goto fail;
-        }
-        if (grow_to((void **)&m->patch_idx, &cap, p + 1, (size_t)np, 16 * sizeof(uint32_t))) {
-            vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for %zu patches", p + 1);
-            goto fail;
-        }
-        m->npatches = p + 1;
-        char *fl[16];
-        if (split(r, fl, 16, "a patch line")) goto fail;
-        for (int k = 0; k < 16; k++) {
-            uint64_t v;
-            if (parse_uint(r, fl[k], "patch index", &v)) goto fail;
-            if (v == 0) {
-                bpt_fail(r, VX_EINVAL, "bpt_index", "index 0 is invalid (indices start at 1)");
-                goto fail;
-            }
-            if (v > UINT32_MAX) v = UINT32_MAX;
-            m->patch_idx[16 * p + (size_t)k] = (uint32_t)(v - 1);
-            if (v > maxidx) {
-                maxidx = v;
-                maxline = r->lineno;
-            }
-        }
-    }
-    if (read_count(r, "point count", &npts)) goto fail;
-    if (npts == 0 || (lim && lim->max_vertices && npts > lim->max_vertices) || npts >= UINT32_MAX) {
-        bpt_fail(r, npts ? VX_ETOOBIG : VX_EINVAL, npts ? "mesh_too_big" : "bpt_count",
-                 "point count %llu is %s", (unsigned long long)npts, npts ? "over the limit" : "0");
+    if (read_count(r, "patch count", &np) || check_patch_count(r, np, lim)) goto fail;
+    if (read_patches(r, m, np, &maxidx, &maxline)) goto fail;
+    if (read_count(r, "point count", &npts) || check_point_count(r, npts, lim, maxidx, maxline))
         goto fail;
-    }
-    if (maxidx > npts) {
-        r->lineno = maxline;
-        bpt_fail(r, VX_EINVAL, "bpt_index", "index %llu out of range: the file has %llu points",
-                 (unsigned long long)maxidx, (unsigned long long)npts);
-        goto fail;
-    }
-    left = bytes_left(r);
-    /* (the last line may lack its newline) */
-    if (left != UINT64_MAX && npts > (left + 1) / BPT_MIN_POINT_LINE) {
-        bpt_fail(r, VX_EINVAL, "bpt_truncated",
-                 "%llu points cannot fit in the %llu bytes that follow", (unsigned long long)npts,
-                 (unsigned long long)left);
-        goto fail;
-    }
-    cap = 0;
-    for (size_t i = 0; i < npts; i++) {
-        int e = next_line(r);
-        if (e < 0) goto fail;
-        if (e) {
-            bpt_fail(r, VX_EINVAL, "bpt_truncated", "the file ends after %zu of %llu points", i,
-                     (unsigned long long)npts);
-            goto fail;
-        }
-        if (grow_to((void **)&m->pos, &cap, i + 1, (size_t)npts, 3 * sizeof(double))) {
-            vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for %zu points", i + 1);
-            goto fail;
-        }
-        m->nverts = i + 1;
-        char *fl[3];
-        if (split(r, fl, 3, "a point line")) goto fail;
-        for (int a = 0; a < 3; a++) {
-            double v;
-            char *end = vx_mesh_parse_double(fl[a], &v);
-            if (!end || *end) {
-                bpt_fail(r, VX_EINVAL, "bpt_junk", "'%.40s' is not a number", fl[a]);
-                goto fail;
-            }
-            if (!isfinite(v)) {
-                bpt_fail(r, VX_EINVAL, "bpt_nan", "NaN or infinite coordinate");
-                goto fail;
-            }
-            m->pos[3 * i + (size_t)a] = v;
-        }
-    }
+    if (read_points(r, m, npts)) goto fail;
     if (dedupe_points(m, err)) goto fail;
     int e = next_line(r);
     if (e < 0) goto fail;

@@ -186,6 +186,32 @@ int corrupt(vx_err *err, const char *what)
     return vx_err_set(err, VX_EINVAL, "draco_corrupt", "not a valid Draco mesh: %s", what);
 }
 
+/* Skips the file's metadata (per-attribute blocks, then the geometry's);
+ * nullptr when done, else what is wrong. */
+const char *skip_file_metadata(Cursor &c)
+{
+    uint64_t natt, id;
+    if (!c.varint(natt)) return "truncated metadata";
+    for (uint64_t i = 0; i < natt; i++)
+        if (!c.varint(id) || !skip_metadata(c, 0)) return "corrupt metadata";
+    if (!skip_metadata(c, 0)) return "corrupt metadata";
+    return nullptr;
+}
+
+/* Refuses declared counts over the mesh limits. */
+int check_limits(uint64_t faces, uint64_t points, const vx_mesh_limits *lim, vx_err *err)
+{
+    if (lim && lim->max_triangles && faces > lim->max_triangles)
+        return vx_err_set(err, VX_ETOOBIG, "mesh_too_big",
+                          "the header declares %llu triangles, more than %zu (the limit)",
+                          (unsigned long long)faces, lim->max_triangles);
+    if (lim && lim->max_vertices && points > lim->max_vertices)
+        return vx_err_set(err, VX_ETOOBIG, "mesh_too_big",
+                          "the header declares %llu vertices, more than %zu (the limit)",
+                          (unsigned long long)points, lim->max_vertices);
+    return 0;
+}
+
 } // namespace
 
 /* Edgebreaker entropy-codes its connectivity and the attributes; the
@@ -243,11 +269,8 @@ extern "C" int vx_draco_check_header(const unsigned char *data, size_t n, uint64
         return vx_err_set(err, VX_EINVAL, "draco_corrupt", "unknown Draco encoding method %u",
                           method);
     if (v >= version_of(1, 3) && (flags & 0x8000)) {
-        uint64_t natt, id;
-        if (!c.varint(natt)) return short_read("truncated metadata");
-        for (uint64_t i = 0; i < natt; i++)
-            if (!c.varint(id) || !skip_metadata(c, 0)) return short_read("corrupt metadata");
-        if (!skip_metadata(c, 0)) return short_read("corrupt metadata");
+        const char *bad = skip_file_metadata(c);
+        if (bad) return short_read(bad);
     }
     uint64_t faces, points;
     if (method == 0) { /* sequential */
@@ -301,73 +324,56 @@ extern "C" int vx_draco_check_header(const unsigned char *data, size_t n, uint64
     }
     h->faces = faces;
     h->points = points;
-    if (lim && lim->max_triangles && faces > lim->max_triangles)
-        return vx_err_set(err, VX_ETOOBIG, "mesh_too_big",
-                          "the header declares %llu triangles, more than %zu (the limit)",
-                          (unsigned long long)faces, lim->max_triangles);
-    if (lim && lim->max_vertices && points > lim->max_vertices)
-        return vx_err_set(err, VX_ETOOBIG, "mesh_too_big",
-                          "the header declares %llu vertices, more than %zu (the limit)",
-                          (unsigned long long)points, lim->max_vertices);
-    return 0;
+    return check_limits(faces, points, lim, err);
 }
 
 namespace
 {
 
-vx_mesh *decode(const std::vector<char> &data, const vx_mesh_limits *lim, vx_err *err)
+/* Checks that buf holds a triangular mesh (not a point cloud). */
+int check_geometry_type(draco::DecoderBuffer &buf, vx_err *err)
 {
-    /* The declared counts decide what libdraco allocates before it reads
-     * any data: check them first. */
-    vx_draco_header hd;
-    if (vx_draco_check_header(reinterpret_cast<const unsigned char *>(data.data()), data.size(),
-                              data.size(), lim, &hd, err))
-        return nullptr;
-    draco::DecoderBuffer buf;
-    buf.Init(data.data(), data.size());
     /* Works on a copy of the buffer: the position stays at the start. */
     auto type = draco::Decoder::GetEncodedGeometryType(&buf);
-    if (!type.ok()) {
-        vx_err_set(err, VX_EINVAL, "draco_corrupt", "not a valid Draco file: %s",
-                   type.status().error_msg());
-        return nullptr;
-    }
-    if (type.value() == draco::POINT_CLOUD) {
-        vx_err_set(err, VX_EUNPROC, "draco_point_cloud",
-                   "the Draco file holds a point cloud, not a mesh");
-        return nullptr;
-    }
-    if (type.value() != draco::TRIANGULAR_MESH) {
-        vx_err_set(err, VX_EINVAL, "draco_corrupt", "unknown Draco geometry type %d",
-                   int(type.value()));
-        return nullptr;
-    }
+    if (!type.ok())
+        return vx_err_set(err, VX_EINVAL, "draco_corrupt", "not a valid Draco file: %s",
+                          type.status().error_msg());
+    if (type.value() == draco::POINT_CLOUD)
+        return vx_err_set(err, VX_EUNPROC, "draco_point_cloud",
+                          "the Draco file holds a point cloud, not a mesh");
+    if (type.value() != draco::TRIANGULAR_MESH)
+        return vx_err_set(err, VX_EINVAL, "draco_corrupt", "unknown Draco geometry type %d",
+                          int(type.value()));
+    return 0;
+}
+
+/* Decodes buf under an AllocCap sized from the header; fails when the cap
+ * trips, else leaves the outcome in decoded and status. */
+int decode_capped(draco::DecoderBuffer &buf, const vx_draco_header &hd, size_t size,
+                  std::unique_ptr<draco::Mesh> &decoded, draco::Status &status, vx_err *err)
+{
     draco::Decoder dec;
-    std::unique_ptr<draco::Mesh> decoded;
-    draco::Status status;
-    {
-        AllocCap cap(vx_draco_decode_bound(&hd, data.size()));
-        try {
-            auto res = dec.DecodeMeshFromBuffer(&buf);
-            status = res.status();
-            if (res.ok()) decoded = std::move(res).value();
-        } catch (const std::bad_alloc &) {
-            if (!cap.tripped()) throw;
-        }
-        if (cap.tripped()) {
-            vx_err_set(err, VX_EINVAL, "draco_corrupt",
-                       "corrupt Draco mesh: decoding it would take more than %llu bytes of "
-                       "memory for %llu faces",
-                       (unsigned long long)cap.limit(), (unsigned long long)hd.faces);
-            return nullptr;
-        }
+    AllocCap cap(vx_draco_decode_bound(&hd, size));
+    try {
+        auto res = dec.DecodeMeshFromBuffer(&buf);
+        status = res.status();
+        if (res.ok()) decoded = std::move(res).value();
+    } catch (const std::bad_alloc &) {
+        if (!cap.tripped()) throw;
     }
-    if (!status.ok() || !decoded) {
-        vx_err_set(err, VX_EINVAL, "draco_corrupt", "corrupt or truncated Draco mesh: %s",
-                   status.error_msg());
-        return nullptr;
-    }
-    const draco::Mesh &dm = *decoded;
+    if (cap.tripped())
+        return vx_err_set(err, VX_EINVAL, "draco_corrupt",
+                          "corrupt Draco mesh: decoding it would take more than %llu bytes of "
+                          "memory for %llu faces",
+                          (unsigned long long)cap.limit(), (unsigned long long)hd.faces);
+    return 0;
+}
+
+/* The decoded mesh's numeric three-component POSITION attribute, with the
+ * counts checked against the limits; nullptr on error. */
+const draco::PointAttribute *check_decoded(const draco::Mesh &dm, const vx_mesh_limits *lim,
+                                           vx_err *err)
+{
     size_t np = dm.num_points(), nf = dm.num_faces();
     if (nf == 0) {
         vx_err_set(err, VX_EUNPROC, "draco_no_faces", "the Draco mesh has no faces");
@@ -401,9 +407,14 @@ vx_mesh *decode(const std::vector<char> &data, const vx_mesh_limits *lim, vx_err
         vx_err_set(err, VX_ETOOBIG, "mesh_too_big", "%zu triangles", nf);
         return nullptr;
     }
+    return pa;
+}
 
-    MeshPtr m(vx_mesh_new());
-    if (!m) throw std::bad_alloc();
+/* Copies the positions and faces of dm into m (allocated), checking every
+ * position and point index. */
+int copy_mesh(const draco::Mesh &dm, const draco::PointAttribute *pa, vx_mesh *m, vx_err *err)
+{
+    size_t np = dm.num_points(), nf = dm.num_faces();
     m->pos = static_cast<double *>(std::malloc(3 * np * sizeof(double) + 1));
     m->face_idx = static_cast<uint32_t *>(std::malloc(3 * nf * sizeof(uint32_t)));
     if (!m->pos || !m->face_idx) throw std::bad_alloc();
@@ -412,30 +423,53 @@ vx_mesh *decode(const std::vector<char> &data, const vx_mesh_limits *lim, vx_err
         double *v = m->pos + 3 * i;
         /* The decoder validated the mapping; checked again because a bad
          * index here would read out of bounds, not just give a wrong mesh. */
-        if (avi.value() >= pa->size() || !pa->ConvertValue<double>(avi, 3, v)) {
-            vx_err_set(err, VX_EINVAL, "draco_corrupt", "vertex %zu has no position", i);
-            return nullptr;
-        }
-        if (!std::isfinite(v[0]) || !std::isfinite(v[1]) || !std::isfinite(v[2])) {
-            vx_err_set(err, VX_EINVAL, "draco_nan", "vertex %zu has a NaN or infinite coordinate",
-                       i);
-            return nullptr;
-        }
+        if (avi.value() >= pa->size() || !pa->ConvertValue<double>(avi, 3, v))
+            return vx_err_set(err, VX_EINVAL, "draco_corrupt", "vertex %zu has no position", i);
+        if (!std::isfinite(v[0]) || !std::isfinite(v[1]) || !std::isfinite(v[2]))
+            return vx_err_set(err, VX_EINVAL, "draco_nan",
+                              "vertex %zu has a NaN or infinite coordinate", i);
     }
     for (size_t f = 0; f < nf; f++) {
         const draco::Mesh::Face &face = dm.face(draco::FaceIndex(uint32_t(f)));
         for (int k = 0; k < 3; k++) {
             uint32_t p = face[k].value();
-            if (p >= np) {
-                vx_err_set(err, VX_EINVAL, "draco_corrupt", "face %zu uses point %u of %zu", f, p,
-                           np);
-                return nullptr;
-            }
+            if (p >= np)
+                return vx_err_set(err, VX_EINVAL, "draco_corrupt", "face %zu uses point %u of %zu",
+                                  f, p, np);
             m->face_idx[3 * f + k] = p;
         }
     }
     m->nverts = np;
     m->nfaces = nf;
+    return 0;
+}
+
+vx_mesh *decode(const std::vector<char> &data, const vx_mesh_limits *lim, vx_err *err)
+{
+    /* The declared counts decide what libdraco allocates before it reads
+     * any data: check them first. */
+    vx_draco_header hd;
+    if (vx_draco_check_header(reinterpret_cast<const unsigned char *>(data.data()), data.size(),
+                              data.size(), lim, &hd, err))
+        return nullptr;
+    draco::DecoderBuffer buf;
+    buf.Init(data.data(), data.size());
+    if (check_geometry_type(buf, err)) return nullptr;
+    std::unique_ptr<draco::Mesh> decoded;
+    draco::Status status;
+    if (decode_capped(buf, hd, data.size(), decoded, status, err)) return nullptr;
+    if (!status.ok() || !decoded) {
+        vx_err_set(err, VX_EINVAL, "draco_corrupt", "corrupt or truncated Draco mesh: %s",
+                   status.error_msg());
+        return nullptr;
+    }
+    const draco::Mesh &dm = *decoded;
+    const draco::PointAttribute *pa = check_decoded(dm, lim, err);
+    if (!pa) return nullptr;
+
+    MeshPtr m(vx_mesh_new());
+    if (!m) throw std::bad_alloc();
+    if (copy_mesh(dm, pa, m.get(), err)) return nullptr;
     if (vx_mesh_analyze(m.get(), err)) return nullptr;
     return m.release();
 }

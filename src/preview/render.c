@@ -213,22 +213,10 @@ static uint64_t finish_band(uint8_t *band, int w, int h, int y0, int n, const fl
     return covered;
 }
 
-/* Rows per band: about VX_PREVIEW_BAND_SAMPLES samples, at least 16 rows
- * (llvmpipe bins in 64x64 tiles: thinner bands waste the vertex work). */
-static int band_rows(const vx_preview_params *p, int samples)
+/* Checks the image size against the GPU and every triangle index against
+ * the vertex count. */
+static int check_inputs(const vx_mesh *m, const vx_preview_params *p, vx_err *err)
 {
-    if (p->band_rows > 0) return p->band_rows < p->height ? p->band_rows : p->height;
-    long rows = (long)VX_PREVIEW_BAND_SAMPLES / ((long)p->width * samples);
-    if (rows < 16) rows = 16;
-    return rows < p->height ? (int)rows : p->height;
-}
-
-int vx_preview_render(vx_gl *gl, const vx_mesh *m, const vx_preview_params *p, uint8_t *rgba,
-                      vx_preview_stats *st, vx_err *err)
-{
-    vx_preview_stats dummy;
-    if (!st) st = &dummy;
-    memset(st, 0, sizeof *st);
     const int w = p->width, h = p->height;
     if (w <= 0 || h <= 0)
         return vx_err_set(err, VX_EUNPROC, "invalid_params", "preview size %dx%d is not positive",
@@ -246,13 +234,105 @@ int vx_preview_render(vx_gl *gl, const vx_mesh *m, const vx_preview_params *p, u
         if (m->tri[i] >= m->nverts)
             return vx_err_set(err, VX_EINTERNAL, "mesh_invalid",
                               "triangle %zu uses vertex %u of %zu", i / 3, m->tri[i], m->nverts);
+    return 0;
+}
 
+/* The sample count asked for, clamped to 1..the GPU's maximum. */
+static int pick_samples(vx_gl *gl, const vx_preview_params *p)
+{
     int samples = p->samples < 1 ? 1 : p->samples;
     long max_samples = vx_gl_get_info(gl)->max_samples;
     if (samples > max_samples) {
         VX_INFO("preview.samples_clamped", "asked=%d max=%ld", samples, max_samples);
         samples = max_samples < 1 ? 1 : (int)max_samples;
     }
+    return samples;
+}
+
+/* Sets the camera, colour and light uniforms of the preview program. */
+static void set_uniforms(GLuint prog, const vx_preview_params *p)
+{
+    float view[16], proj[16];
+    camera(p, view, proj);
+    double l[3] = {VX_PREVIEW_LIGHT_X, VX_PREVIEW_LIGHT_Y, VX_PREVIEW_LIGHT_Z};
+    vx_v3_unit(l);
+    glProgramUniformMatrix4fv(prog, 0, 1, GL_FALSE, view);
+    glProgramUniformMatrix4fv(prog, 1, 1, GL_FALSE, proj);
+    glProgramUniform3f(prog, 2, p->color[0], p->color[1], p->color[2]);
+    glProgramUniform1f(prog, 3, p->ambient);
+    glProgramUniform3f(prog, 4, (float)l[0], (float)l[1], (float)l[2]);
+}
+
+/* Resets the GL state other code may have left behind. */
+static void reset_state(void)
+{
+    glDisable(GL_CULL_FACE);
+    glDisable(GL_BLEND);
+    glDisable(GL_SCISSOR_TEST);
+    glEnable(GL_MULTISAMPLE);
+    glEnable(GL_DEPTH_TEST);
+    glDepthFunc(GL_LESS);
+    glDepthMask(GL_TRUE);
+    glColorMask(GL_TRUE, GL_TRUE, GL_TRUE, GL_TRUE);
+    glBindBuffer(GL_PIXEL_PACK_BUFFER, 0);
+    glPixelStorei(GL_PACK_ALIGNMENT, 1);
+    glPixelStorei(GL_PACK_ROW_LENGTH, 0);
+}
+
+/* Draws the mesh into band b of nbands in chunks, polling between them. */
+static int draw_chunks(GLuint prog, GLuint vao, size_t nidx, int b, int nbands,
+                       const vx_preview_params *p, vx_err *err)
+{
+    /* glDrawElements counts in GLsizei, and one draw is one piece of work:
+     * draws of at most VX_PREVIEW_CHUNK_TRIS triangles. */
+    const size_t step = (size_t)3 * VX_PREVIEW_CHUNK_TRIS;
+    glUseProgram(prog);
+    glBindVertexArray(vao);
+    for (size_t first = 0; first < nidx; first += step) {
+        if (first > 0) {
+            glFinish();
+            double f = ((double)b + 0.5 * (double)first / (double)nidx) / nbands;
+            if (poll_render(p, 0.05 + 0.9 * f, err)) return -1;
+        }
+        size_t count = nidx - first < step ? nidx - first : step;
+        glDrawElements(GL_TRIANGLES, (GLsizei)count, GL_UNSIGNED_INT,
+                       (const void *)(uintptr_t)(first * sizeof(uint32_t)));
+    }
+    glBindVertexArray(0);
+    glUseProgram(0);
+    return 0;
+}
+
+/* Reads the first n rows of the resolved framebuffer into band. */
+static void read_band(GLuint fbo, int w, int n, uint8_t *band)
+{
+    glBindFramebuffer(GL_FRAMEBUFFER, 0);
+    glBindFramebuffer(GL_READ_FRAMEBUFFER, fbo);
+    glReadBuffer(GL_COLOR_ATTACHMENT0);
+    glReadPixels(0, 0, w, n, GL_RGBA, GL_UNSIGNED_BYTE, band);
+    glBindFramebuffer(GL_READ_FRAMEBUFFER, 0);
+}
+
+/* Rows per band: about VX_PREVIEW_BAND_SAMPLES samples, at least 16 rows
+ * (llvmpipe bins in 64x64 tiles: thinner bands waste the vertex work). */
+static int band_rows(const vx_preview_params *p, int samples)
+{
+    if (p->band_rows > 0) return p->band_rows < p->height ? p->band_rows : p->height;
+    long rows = (long)VX_PREVIEW_BAND_SAMPLES / ((long)p->width * samples);
+    if (rows < 16) rows = 16;
+    return rows < p->height ? (int)rows : p->height;
+}
+
+int vx_preview_render(vx_gl *gl, const vx_mesh *m, const vx_preview_params *p, uint8_t *rgba,
+                      vx_preview_stats *st, vx_err *err)
+{
+    vx_preview_stats dummy;
+    if (!st) st = &dummy;
+    memset(st, 0, sizeof *st);
+    const int w = p->width, h = p->height;
+    if (check_inputs(m, p, err)) return -1;
+    const size_t nidx = 3 * m->ntris;
+    int samples = pick_samples(gl, p);
     st->samples = samples;
 
     GLuint prog = vx_gl_program(gl, "preview.vert", "preview.frag", err);
@@ -286,32 +366,9 @@ int vx_preview_render(vx_gl *gl, const vx_mesh *m, const vx_preview_params *p, u
         goto done;
     }
 
-    float view[16], proj[16];
-    camera(p, view, proj);
-    double l[3] = {VX_PREVIEW_LIGHT_X, VX_PREVIEW_LIGHT_Y, VX_PREVIEW_LIGHT_Z};
-    vx_v3_unit(l);
-    glProgramUniformMatrix4fv(prog, 0, 1, GL_FALSE, view);
-    glProgramUniformMatrix4fv(prog, 1, 1, GL_FALSE, proj);
-    glProgramUniform3f(prog, 2, p->color[0], p->color[1], p->color[2]);
-    glProgramUniform1f(prog, 3, p->ambient);
-    glProgramUniform3f(prog, 4, (float)l[0], (float)l[1], (float)l[2]);
-
+    set_uniforms(prog, p);
     GLuint target = samples > 1 ? o.fbo_ms : o.fbo;
-    /* State other code may have left behind. */
-    glDisable(GL_CULL_FACE);
-    glDisable(GL_BLEND);
-    glDisable(GL_SCISSOR_TEST);
-    glEnable(GL_MULTISAMPLE);
-    glEnable(GL_DEPTH_TEST);
-    glDepthFunc(GL_LESS);
-    glDepthMask(GL_TRUE);
-    glColorMask(GL_TRUE, GL_TRUE, GL_TRUE, GL_TRUE);
-    glBindBuffer(GL_PIXEL_PACK_BUFFER, 0);
-    glPixelStorei(GL_PACK_ALIGNMENT, 1);
-    glPixelStorei(GL_PACK_ROW_LENGTH, 0);
-    /* glDrawElements counts in GLsizei, and one draw is one piece of work:
-     * draws of at most VX_PREVIEW_CHUNK_TRIS triangles. */
-    const size_t step = (size_t)3 * VX_PREVIEW_CHUNK_TRIS;
+    reset_state();
     const int nbands = (h + rows - 1) / rows;
     for (int b = 0; b < nbands; b++) {
         const int y0 = b * rows, n = h - y0 < rows ? h - y0 : rows;
@@ -325,22 +382,7 @@ int vx_preview_render(vx_gl *gl, const vx_mesh *m, const vx_preview_params *p, u
          * framebuffer and then reports the time since boot. */
         vx_gl_timer_begin(&timer);
         timing = 1;
-        if (draw) {
-            glUseProgram(prog);
-            glBindVertexArray(o.vao);
-            for (size_t first = 0; first < nidx; first += step) {
-                if (first > 0) {
-                    glFinish();
-                    double f = ((double)b + 0.5 * (double)first / (double)nidx) / nbands;
-                    if (poll_render(p, 0.05 + 0.9 * f, err)) goto done;
-                }
-                size_t count = nidx - first < step ? nidx - first : step;
-                glDrawElements(GL_TRIANGLES, (GLsizei)count, GL_UNSIGNED_INT,
-                               (const void *)(uintptr_t)(first * sizeof(uint32_t)));
-            }
-            glBindVertexArray(0);
-            glUseProgram(0);
-        }
+        if (draw && draw_chunks(prog, o.vao, nidx, b, nbands, p, err)) goto done;
         if (samples > 1) {
             glFinish(); /* the draw and the resolve are two pieces */
             if (poll_render(p, 0.05 + 0.9 * (b + 0.5) / nbands, err)) goto done;
@@ -349,11 +391,7 @@ int vx_preview_render(vx_gl *gl, const vx_mesh *m, const vx_preview_params *p, u
         }
         st->gpu_ms += vx_gl_timer_end_ms(&timer); /* waits for the band */
         timing = 0;
-        glBindFramebuffer(GL_FRAMEBUFFER, 0);
-        glBindFramebuffer(GL_READ_FRAMEBUFFER, o.fbo);
-        glReadBuffer(GL_COLOR_ATTACHMENT0);
-        glReadPixels(0, 0, w, n, GL_RGBA, GL_UNSIGNED_BYTE, band);
-        glBindFramebuffer(GL_READ_FRAMEBUFFER, 0);
+        read_band(o.fbo, w, n, band);
         if (vx_gl_check(gl, "preview.draw", err)) goto done;
         st->pixels_covered += finish_band(band, w, h, y0, n, p->background, rgba);
         if (poll_render(p, 0.05 + 0.9 * (b + 1) / nbands, err)) goto done;

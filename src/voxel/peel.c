@@ -777,6 +777,139 @@ int vx_peel_check_input(const vx_mesh *m, const vx_voxelize_desc *d, vx_err *err
     return 0;
 }
 
+/* Compiles the programs the fill mode needs; for fill=surface also checks
+ * the mesh buffers against the GPU's storage block size. */
+static int load_programs(peel_ctx *c, int surface)
+{
+    vx_gl *gl = c->gl;
+    const vx_mesh *m = c->m;
+    vx_err *err = c->err;
+    if (surface) {
+        c->prog_surf = vx_gl_compute_program(gl, "voxel_surface.comp", err);
+        if (!c->prog_surf) return -1;
+        const long max_ssbo = vx_gl_get_info(gl)->max_ssbo_bytes;
+        if ((uint64_t)m->nverts * 12u > (uint64_t)max_ssbo ||
+            (uint64_t)m->ntris * 12u > (uint64_t)max_ssbo)
+            return vx_err_set(err, VX_ETOOBIG, "mesh_too_large",
+                              "the mesh's vertex or index buffer exceeds this GPU's storage "
+                              "block size (%ld bytes) for fill=surface",
+                              max_ssbo);
+    } else {
+        c->prog_peel = vx_gl_program(gl, "voxel_peel.vert", "voxel_peel.frag", err);
+        if (!c->prog_peel) return -1;
+        c->prog_fill = vx_gl_compute_program(gl, "voxel_peel_fill.comp", err);
+        if (!c->prog_fill) return -1;
+        if (c->naxes == 3 &&
+            !(c->prog_major = vx_gl_compute_program(gl, "voxel_peel_major.comp", err)))
+            return -1;
+    }
+    return 0;
+}
+
+/* Reads slab ssbo[0] (rows rows from k0) back into the output grid and
+ * reports the slab's progress at axis c->axis_i. */
+static int readback_slab(peel_ctx *c, int k0, int rows)
+{
+    double r0 = vx_mono_ms();
+    glGetNamedBufferSubData(c->o.ssbo[0], 0, (GLsizeiptr)vx_peel_slab_bytes(c, rows),
+                            c->out->bits + (size_t)k0 * c->dims[1] * c->wx);
+    c->st->readback_ms += vx_mono_ms() - r0;
+    if (vx_gl_check(c->gl, "peel.readback", c->err)) return -1;
+    return vx_peel_progress(c, 1.0);
+}
+
+/* fill=surface: uploads the triangle lists, then voxelizes and reads back
+ * slab by slab; t0 is when the upload began. */
+static int run_surface(peel_ctx *c, double t0)
+{
+    uint32_t *gpu_list = NULL;
+    size_t ngpu = 0;
+    if (surface_lists(c, &gpu_list, &ngpu)) {
+        free(gpu_list);
+        return -1;
+    }
+    glCreateBuffers(1, &c->o.list);
+    glNamedBufferStorage(c->o.list, (GLsizeiptr)(ngpu * 4 + 4), gpu_list, 0);
+    VX_FREE(gpu_list);
+    if (vx_gl_check(c->gl, "peel.list", c->err)) return -1;
+    glFinish();
+    c->st->upload_ms = vx_mono_ms() - t0;
+    glCreateBuffers(1, &c->o.ssbo[0]);
+    glNamedBufferStorage(c->o.ssbo[0], (GLsizeiptr)vx_peel_slab_bytes(c, c->rows), NULL, 0);
+    if (vx_gl_check(c->gl, "peel.ssbo", c->err)) return -1;
+    for (c->slab = 0; c->slab < c->nslabs; c->slab++) {
+        int k0 = c->slab * c->rows, rows = c->dims[2] - k0 < c->rows ? c->dims[2] - k0 : c->rows;
+        if (surface_slab(c, ngpu, k0, rows)) return -1;
+        c->axis_i = 0;
+        if (readback_slab(c, k0, rows)) return -1;
+    }
+    surface_cpu(c);
+    return 0;
+}
+
+/* Robust inside test: combines the three axes' slabs (rows words) into
+ * ssbo[0] by majority. */
+static void major_pass(peel_ctx *c, int rows)
+{
+    uint64_t words = vx_peel_slab_bytes(c, rows) / 4;
+    vx_gl_timer t;
+    vx_gl_timer_begin(&t);
+    glUseProgram(c->prog_major);
+    glProgramUniform1ui(c->prog_major, 0, (GLuint)words);
+    for (GLuint b = 0; b < 3; b++)
+        glBindBufferBase(GL_SHADER_STORAGE_BUFFER, b, c->o.ssbo[b]);
+    vx_peel_dispatch_2d(words);
+    glMemoryBarrier(GL_BUFFER_UPDATE_BARRIER_BIT);
+    c->st->gpu_fill_ms += vx_peel_timer_end_compute(&t);
+    glUseProgram(0);
+    for (GLuint b = 0; b < 3; b++)
+        glBindBufferBase(GL_SHADER_STORAGE_BUFFER, b, 0);
+}
+
+/* Solid fills: peels and fills each slab along every axis, then reads it
+ * back; t0 is when the upload began. */
+static int run_solid(peel_ctx *c, double t0)
+{
+    if (vx_peel_slab_buckets(c)) return -1;
+    glFinish(); /* so upload_ms is the upload, not just its queueing */
+    c->st->upload_ms = vx_mono_ms() - t0;
+    for (int s = 0; s < c->naxes; s++) {
+        glCreateBuffers(1, &c->o.ssbo[s]);
+        glNamedBufferStorage(c->o.ssbo[s], (GLsizeiptr)vx_peel_slab_bytes(c, c->rows), NULL,
+                             GL_DYNAMIC_STORAGE_BIT);
+    }
+    /* [0] coincident crossings seen (per peel), [1] most layers of a pixel */
+    glCreateBuffers(1, &c->o.peel_stat);
+    glNamedBufferStorage(c->o.peel_stat, 8, (GLuint[2]){0, 0}, GL_DYNAMIC_STORAGE_BIT);
+    if (vx_gl_check(c->gl, "peel.ssbo", c->err)) return -1;
+    const int mode = c->naxes == 3 ? VX_INSIDE_PARITY : (int)c->d->inside;
+    int nl[3] = {0, 0, 0};
+    for (c->slab = 0; c->slab < c->nslabs; c->slab++) {
+        int k0 = c->slab * c->rows, rows = c->dims[2] - k0 < c->rows ? c->dims[2] - k0 : c->rows;
+        for (c->axis_i = 0; c->axis_i < c->naxes; c->axis_i++) {
+            int axis = c->axis_i;
+            /* x rays write whole words; y and z rays OR single bits. */
+            if (axis > 0)
+                glClearNamedBufferData(c->o.ssbo[axis], GL_R32UI, GL_RED_INTEGER, GL_UNSIGNED_INT,
+                                       NULL);
+            /* z rays cross every slab: peeled once, their layers kept
+             * (set 1) and filled slab by slab. */
+            layer_set *ls = &c->o.ls[axis == 2];
+            if (axis < 2 || c->slab == 0) {
+                if (peel(c, ls, axis, k0, rows, &nl[axis])) return -1;
+            }
+            if (fill(c, ls, axis, axis, mode, k0, rows, nl[axis])) return -1;
+        }
+        if (c->naxes == 3) major_pass(c, rows);
+        c->axis_i = c->naxes - 1;
+        if (readback_slab(c, k0, rows)) return -1;
+    }
+    GLuint most = 0;
+    glGetNamedBufferSubData(c->o.peel_stat, 4, 4, &most);
+    c->st->layers = (int)most;
+    return 0;
+}
+
 int vx_voxelize_peel(vx_gl *gl, const vx_mesh *m, const vx_voxelize_desc *d, vx_bitgrid *out,
                      vx_voxelize_stats *st, vx_err *err)
 {
@@ -798,123 +931,19 @@ int vx_voxelize_peel(vx_gl *gl, const vx_mesh *m, const vx_voxelize_desc *d, vx_
     c.naxes = !surface && d->inside == VX_INSIDE_ROBUST ? 3 : 1;
     if (plan(&c, surface)) return -1;
     st->chunks = c.nslabs;
-
-    if (surface) {
-        c.prog_surf = vx_gl_compute_program(gl, "voxel_surface.comp", err);
-        if (!c.prog_surf) return -1;
-        const long max_ssbo = vx_gl_get_info(gl)->max_ssbo_bytes;
-        if ((uint64_t)m->nverts * 12u > (uint64_t)max_ssbo ||
-            (uint64_t)m->ntris * 12u > (uint64_t)max_ssbo)
-            return vx_err_set(err, VX_ETOOBIG, "mesh_too_large",
-                              "the mesh's vertex or index buffer exceeds this GPU's storage "
-                              "block size (%ld bytes) for fill=surface",
-                              max_ssbo);
-    } else {
-        c.prog_peel = vx_gl_program(gl, "voxel_peel.vert", "voxel_peel.frag", err);
-        if (!c.prog_peel) return -1;
-        c.prog_fill = vx_gl_compute_program(gl, "voxel_peel_fill.comp", err);
-        if (!c.prog_fill) return -1;
-        if (c.naxes == 3 &&
-            !(c.prog_major = vx_gl_compute_program(gl, "voxel_peel_major.comp", err)))
-            return -1;
-    }
+    if (load_programs(&c, surface)) return -1;
     /* Errors left by earlier work must not be blamed on this job. */
     while (glGetError() != GL_NO_ERROR) {
     }
 
     int rc = -1;
-    uint32_t *gpu_list = NULL;
     if (vx_bitgrid_alloc(out, g, 0, err)) return -1;
     double t0 = vx_mono_ms();
     if (vx_peel_upload(&c)) goto done;
-    if (surface) {
-        size_t ngpu = 0;
-        if (surface_lists(&c, &gpu_list, &ngpu)) goto done;
-        glCreateBuffers(1, &c.o.list);
-        glNamedBufferStorage(c.o.list, (GLsizeiptr)(ngpu * 4 + 4), gpu_list, 0);
-        VX_FREE(gpu_list);
-        if (vx_gl_check(gl, "peel.list", err)) goto done;
-        glFinish();
-        st->upload_ms = vx_mono_ms() - t0;
-        glCreateBuffers(1, &c.o.ssbo[0]);
-        glNamedBufferStorage(c.o.ssbo[0], (GLsizeiptr)vx_peel_slab_bytes(&c, c.rows), NULL, 0);
-        if (vx_gl_check(gl, "peel.ssbo", err)) goto done;
-        for (c.slab = 0; c.slab < c.nslabs; c.slab++) {
-            int k0 = c.slab * c.rows, rows = c.dims[2] - k0 < c.rows ? c.dims[2] - k0 : c.rows;
-            if (surface_slab(&c, ngpu, k0, rows)) goto done;
-            double r0 = vx_mono_ms();
-            glGetNamedBufferSubData(c.o.ssbo[0], 0, (GLsizeiptr)vx_peel_slab_bytes(&c, rows),
-                                    out->bits + (size_t)k0 * c.dims[1] * c.wx);
-            st->readback_ms += vx_mono_ms() - r0;
-            if (vx_gl_check(gl, "peel.readback", err)) goto done;
-            c.axis_i = 0;
-            if (vx_peel_progress(&c, 1.0)) goto done;
-        }
-        surface_cpu(&c);
-    } else {
-        if (vx_peel_slab_buckets(&c)) goto done;
-        glFinish(); /* so upload_ms is the upload, not just its queueing */
-        st->upload_ms = vx_mono_ms() - t0;
-        for (int s = 0; s < c.naxes; s++) {
-            glCreateBuffers(1, &c.o.ssbo[s]);
-            glNamedBufferStorage(c.o.ssbo[s], (GLsizeiptr)vx_peel_slab_bytes(&c, c.rows), NULL,
-                                 GL_DYNAMIC_STORAGE_BIT);
-        }
-        /* [0] coincident crossings seen (per peel), [1] most layers of a pixel */
-        glCreateBuffers(1, &c.o.peel_stat);
-        glNamedBufferStorage(c.o.peel_stat, 8, (GLuint[2]){0, 0}, GL_DYNAMIC_STORAGE_BIT);
-        if (vx_gl_check(gl, "peel.ssbo", err)) goto done;
-        const int mode = c.naxes == 3 ? VX_INSIDE_PARITY : (int)d->inside;
-        int nl[3] = {0, 0, 0};
-        for (c.slab = 0; c.slab < c.nslabs; c.slab++) {
-            int k0 = c.slab * c.rows, rows = c.dims[2] - k0 < c.rows ? c.dims[2] - k0 : c.rows;
-            for (c.axis_i = 0; c.axis_i < c.naxes; c.axis_i++) {
-                int axis = c.axis_i;
-                /* x rays write whole words; y and z rays OR single bits. */
-                if (axis > 0)
-                    glClearNamedBufferData(c.o.ssbo[axis], GL_R32UI, GL_RED_INTEGER,
-                                           GL_UNSIGNED_INT, NULL);
-                /* z rays cross every slab: peeled once, their layers kept
-                 * (set 1) and filled slab by slab. */
-                layer_set *ls = &c.o.ls[axis == 2];
-                if (axis < 2 || c.slab == 0) {
-                    if (peel(&c, ls, axis, k0, rows, &nl[axis])) goto done;
-                }
-                if (fill(&c, ls, axis, axis, mode, k0, rows, nl[axis])) goto done;
-            }
-            if (c.naxes == 3) {
-                uint64_t words = vx_peel_slab_bytes(&c, rows) / 4;
-                vx_gl_timer t;
-                vx_gl_timer_begin(&t);
-                glUseProgram(c.prog_major);
-                glProgramUniform1ui(c.prog_major, 0, (GLuint)words);
-                for (GLuint b = 0; b < 3; b++)
-                    glBindBufferBase(GL_SHADER_STORAGE_BUFFER, b, c.o.ssbo[b]);
-                vx_peel_dispatch_2d(words);
-                glMemoryBarrier(GL_BUFFER_UPDATE_BARRIER_BIT);
-                st->gpu_fill_ms += vx_peel_timer_end_compute(&t);
-                glUseProgram(0);
-                for (GLuint b = 0; b < 3; b++)
-                    glBindBufferBase(GL_SHADER_STORAGE_BUFFER, b, 0);
-            }
-            double r0 = vx_mono_ms();
-            glGetNamedBufferSubData(c.o.ssbo[0], 0, (GLsizeiptr)vx_peel_slab_bytes(&c, rows),
-                                    out->bits + (size_t)k0 * c.dims[1] * c.wx);
-            st->readback_ms += vx_mono_ms() - r0;
-            if (vx_gl_check(gl, "peel.readback", err)) goto done;
-            c.axis_i = c.naxes - 1;
-            if (vx_peel_progress(&c, 1.0)) goto done;
-        }
-    }
-    if (!surface) {
-        GLuint most = 0;
-        glGetNamedBufferSubData(c.o.peel_stat, 4, 4, &most);
-        st->layers = (int)most;
-    }
+    if (surface ? run_surface(&c, t0) : run_solid(&c, t0)) goto done;
     st->voxels_inside = vx_bitgrid_count(out);
     rc = 0;
 done:
-    free(gpu_list);
     free(c.cpu_tris);
     free(c.slab_first);
     vx_peel_objs_free(&c.o);

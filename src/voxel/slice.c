@@ -497,29 +497,148 @@ typedef struct run {
     double slices_total, slices_done;
 } run;
 
+/* Sets the draw program's w range, for axis index a, to the whole mesh's. */
+static void set_w_range(run *r, int a)
+{
+    const plan *p = r->p;
+    /* No clipping at all: the near plane of the seed is the fragment
+     * shader's test on w. A GL near plane on the slice plane would clip
+     * the triangles that cross it, and the interpolation across the
+     * clipped vertices then misjudges centres near the plane (56 of 2.4
+     * million voxels for spot at 256^3). Unclipped, every draw
+     * rasterizes a triangle identically, so in the incremental signed
+     * count each fragment falls in exactly one slab. */
+    float lo = r->wmin_all[p->axes[a]] - 1.0f, hi = r->wmax_all[p->axes[a]] + 1.0f;
+    if (!(hi > lo)) hi = lo + 1.0f;
+    glProgramUniform2f(r->draw_prog, 3, lo, 2.0f / (hi - lo));
+}
+
+/* Draws the surfaces for slice plane j (at w = plane) of axis index a: the
+ * nearest beyond it (parity), every one beyond it, or (incremental) those
+ * in the slab since the previous plane. */
+static void draw_plane(run *r, int a, int j, float plane, int incremental)
+{
+    const plan *p = r->p;
+    const size_t ntris = r->m->ntris;
+    if (p->parity) {
+        glProgramUniform2f(r->draw_prog, 2, plane, 0.0f);
+        glProgramUniform1i(r->draw_prog, 4, 0);
+        /* Front faces first: with GL_LESS an exact depth tie
+         * goes to the front face. Ties happen where a pixel
+         * centre falls exactly on a fold edge (a front and a
+         * back triangle meeting, seen edge-on: 1/256-pixel
+         * vertex snapping makes that likelier than it sounds).
+         * The ray only grazes there and the answer should come
+         * from the next surface beyond the pair; the depth test
+         * cannot do that, and interpolation rounding decides
+         * near-ties either way: a known limit of the seed's
+         * nearest-surface test (nonzero sums the pair to 0). */
+        size_t nf = r->nfront[a];
+        const float *ws = r->wmax_sorted[a];
+        draw_range(first_beyond(ws, nf, plane - SLAB_MARGIN), nf);
+        draw_range(nf + first_beyond(ws + nf, ntris - nf, plane - SLAB_MARGIN), ntris);
+    } else if (!incremental) {
+        glProgramUniform2f(r->draw_prog, 2, plane, 0.0f);
+        glProgramUniform1i(r->draw_prog, 4, 1);
+        glVertexArrayElementBuffer(r->o->vao, r->o->ibo[a]);
+        /* With the slab lists' margin: interpolation may round a
+         * fragment of a triangle that ends on the plane to just
+         * beyond it; a later slab would then subtract what this
+         * sum never added, for the rest of the column. */
+        draw_range(first_beyond(r->wmax_sorted[a], ntris, plane - SLAB_MARGIN), ntris);
+    } else {
+        float prev = ((float)j - 0.5f) / (float)p->ss;
+        glProgramUniform2f(r->draw_prog, 2, prev, plane);
+        glProgramUniform1i(r->draw_prog, 4, 2);
+        glVertexArrayElementBuffer(r->o->vao, r->o->slab_ibo);
+        draw_range(r->slab_start[j], r->slab_start[j + 1]);
+    }
+}
+
+/* Reads the batch's nb slices from b0 into the pixel buffer and packs
+ * them into the chunk's SSBOs (from z-layer k0) on the GPU. */
+static void pack_batch(run *r, const int *pm, int k0, const int rect[4], int b0, int nb)
+{
+    const plan *p = r->p;
+    /* The pack reads the images as plain memory (see the shader). */
+    int iw = rect[2] * p->ss, ih = rect[3] * p->ss, nl = nb * p->ss;
+    /* R8 rows padded to 4 bytes: the pack reads four pixels per load */
+    int stride = p->parity ? (iw + 3) / 4 * 4 : iw;
+    uint64_t img_bytes = (uint64_t)stride * (uint64_t)ih * (uint64_t)nl * (p->parity ? 1 : 4);
+    glBindBuffer(GL_PIXEL_PACK_BUFFER, r->o->pbo);
+    glPixelStorei(GL_PACK_ALIGNMENT, 4);
+    glPixelStorei(GL_PACK_ROW_LENGTH, 0);
+    glPixelStorei(GL_PACK_IMAGE_HEIGHT, 0);
+    glPixelStorei(GL_PACK_SKIP_PIXELS, 0);
+    glPixelStorei(GL_PACK_SKIP_ROWS, 0);
+    glPixelStorei(GL_PACK_SKIP_IMAGES, 0);
+    glGetTextureSubImage(r->o->tex_color, 0, 0, 0, 0, iw, ih, nl, GL_RED,
+                         p->parity ? GL_UNSIGNED_BYTE : GL_FLOAT, (GLsizei)img_bytes, NULL);
+    glBindBuffer(GL_PIXEL_PACK_BUFFER, 0);
+
+    glUseProgram(r->pack_prog);
+    glBindBufferRange(GL_SHADER_STORAGE_BUFFER, 2, r->o->pbo, 0,
+                      (GLsizeiptr)((img_bytes + 3) / 4 * 4));
+    glProgramUniform2i(r->pack_prog, 10, stride, ih);
+    glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 0, r->o->ssbo_bits);
+    glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 1, r->o->ssbo_counts);
+    int packx = pm[0] == 0;
+    glProgramUniform3i(r->pack_prog, 0, pm[0], pm[1], pm[2]);
+    glProgramUniform4i(r->pack_prog, 1, rect[0], rect[1], rect[2], rect[3]);
+    glProgramUniform2i(r->pack_prog, 2, b0, nb);
+    glProgramUniform3i(r->pack_prog, 3, p->dims[0], p->dims[1], p->dims[2]);
+    glProgramUniform2i(r->pack_prog, 4, k0, (int)p->wx);
+    glProgramUniform1i(r->pack_prog, 5, p->ss);
+    glProgramUniform1i(r->pack_prog, 6, p->parity ? 0 : 1);
+    glProgramUniform1i(r->pack_prog, 7, p->threshold);
+    glProgramUniform1i(r->pack_prog, 8, p->ss == 2);
+    glProgramUniform1i(r->pack_prog, 9, packx);
+    uint64_t n;
+    if (packx) {
+        n = (uint64_t)(rect[2] + 31) / 32 * (uint64_t)rect[3] * (uint64_t)nb;
+    } else {
+        /* one invocation per output word: grid x runs along the slices
+         * (stepping along x) or the image rows (along y) */
+        int dx = pm[1] == 0 ? 1 : 2, ext[3] = {rect[2], rect[3], nb};
+        int x_lo = dx == 1 ? rect[1] : b0, x_hi = x_lo + ext[dx];
+        uint64_t nruns = (uint64_t)(((x_hi - 1) >> 5) - (x_lo >> 5) + 1);
+        n = nruns * (uint64_t)ext[0] * (uint64_t)ext[1] * (uint64_t)ext[2] / (uint64_t)ext[dx];
+    }
+    uint64_t groups = (n + 63) / 64;
+    /* 65535 groups per dimension (llvmpipe): 2-D dispatch. */
+    uint64_t gx = groups < 65535 ? groups : 65535, gy = (groups + gx - 1) / gx;
+    glDispatchCompute((GLuint)gx, (GLuint)gy, 1);
+    glUseProgram(0);
+}
+
+/* Counts nb more slices done and reports the progress; nonzero when the
+ * caller's hook stops the run. */
+static int slices_done(run *r, int nb, vx_err *err)
+{
+    r->st->slices += nb;
+    r->slices_done += nb;
+    if (r->d->progress) {
+        vx_err_clear(err);
+        if (r->d->progress(r->d->ud, r->slices_done / r->slices_total, err)) {
+            if (err && err->kind == VX_EOK)
+                vx_err_set(err, VX_ECANCELED, "canceled", "voxelization stopped");
+            return -1;
+        }
+    }
+    return 0;
+}
+
 /* Draws and packs the slices w in [w0, w1) of one image tile along axis
  * index a into the chunk's SSBOs. */
 static int do_tile(run *r, int a, int k0, const int rect[4], int w0, int w1, vx_err *err)
 {
     const plan *p = r->p;
     const int *pm = k_perm[p->axes[a]];
-    const size_t ntris = r->m->ntris;
     /* nonzero: the first plane of the run sums every surface beyond it;
      * each later one updates the previous plane's sum by one slab. */
     const int jfirst = w0 * p->ss;
     int prev_layer = -1;
-    {
-        /* No clipping at all: the near plane of the seed is the fragment
-         * shader's test on w. A GL near plane on the slice plane would clip
-         * the triangles that cross it, and the interpolation across the
-         * clipped vertices then misjudges centres near the plane (56 of 2.4
-         * million voxels for spot at 256^3). Unclipped, every draw
-         * rasterizes a triangle identically, so in the incremental signed
-         * count each fragment falls in exactly one slab. */
-        float lo = r->wmin_all[p->axes[a]] - 1.0f, hi = r->wmax_all[p->axes[a]] + 1.0f;
-        if (!(hi > lo)) hi = lo + 1.0f;
-        glProgramUniform2f(r->draw_prog, 3, lo, 2.0f / (hi - lo));
-    }
+    set_w_range(r, a);
     for (int b0 = w0; b0 < w1; b0 += p->batch) {
         int nb = w1 - b0 < p->batch ? w1 - b0 : p->batch;
         glBindFramebuffer(GL_FRAMEBUFFER, r->o->fbo);
@@ -563,105 +682,16 @@ static int do_tile(run *r, int a, int k0, const int rect[4], int w0, int w1, vx_
                     vx_gl_timer_begin(&timer);
                     timing = 1;
                 }
-                if (p->parity) {
-                    glProgramUniform2f(r->draw_prog, 2, plane, 0.0f);
-                    glProgramUniform1i(r->draw_prog, 4, 0);
-                    /* Front faces first: with GL_LESS an exact depth tie
-                     * goes to the front face. Ties happen where a pixel
-                     * centre falls exactly on a fold edge (a front and a
-                     * back triangle meeting, seen edge-on: 1/256-pixel
-                     * vertex snapping makes that likelier than it sounds).
-                     * The ray only grazes there and the answer should come
-                     * from the next surface beyond the pair; the depth test
-                     * cannot do that, and interpolation rounding decides
-                     * near-ties either way: a known limit of the seed's
-                     * nearest-surface test (nonzero sums the pair to 0). */
-                    size_t nf = r->nfront[a];
-                    const float *ws = r->wmax_sorted[a];
-                    draw_range(first_beyond(ws, nf, plane - SLAB_MARGIN), nf);
-                    draw_range(nf + first_beyond(ws + nf, ntris - nf, plane - SLAB_MARGIN), ntris);
-                } else if (!incremental) {
-                    glProgramUniform2f(r->draw_prog, 2, plane, 0.0f);
-                    glProgramUniform1i(r->draw_prog, 4, 1);
-                    glVertexArrayElementBuffer(r->o->vao, r->o->ibo[a]);
-                    /* With the slab lists' margin: interpolation may round a
-                     * fragment of a triangle that ends on the plane to just
-                     * beyond it; a later slab would then subtract what this
-                     * sum never added, for the rest of the column. */
-                    draw_range(first_beyond(r->wmax_sorted[a], ntris, plane - SLAB_MARGIN), ntris);
-                } else {
-                    float prev = ((float)j - 0.5f) / (float)p->ss;
-                    glProgramUniform2f(r->draw_prog, 2, prev, plane);
-                    glProgramUniform1i(r->draw_prog, 4, 2);
-                    glVertexArrayElementBuffer(r->o->vao, r->o->slab_ibo);
-                    draw_range(r->slab_start[j], r->slab_start[j + 1]);
-                }
+                draw_plane(r, a, j, plane, incremental);
                 prev_layer = layer;
             }
         glBindVertexArray(0);
         glBindFramebuffer(GL_FRAMEBUFFER, 0);
 
-        /* The pack reads the images as plain memory (see the shader). */
-        int iw = rect[2] * p->ss, ih = rect[3] * p->ss, nl = nb * p->ss;
-        /* R8 rows padded to 4 bytes: the pack reads four pixels per load */
-        int stride = p->parity ? (iw + 3) / 4 * 4 : iw;
-        uint64_t img_bytes = (uint64_t)stride * (uint64_t)ih * (uint64_t)nl * (p->parity ? 1 : 4);
-        glBindBuffer(GL_PIXEL_PACK_BUFFER, r->o->pbo);
-        glPixelStorei(GL_PACK_ALIGNMENT, 4);
-        glPixelStorei(GL_PACK_ROW_LENGTH, 0);
-        glPixelStorei(GL_PACK_IMAGE_HEIGHT, 0);
-        glPixelStorei(GL_PACK_SKIP_PIXELS, 0);
-        glPixelStorei(GL_PACK_SKIP_ROWS, 0);
-        glPixelStorei(GL_PACK_SKIP_IMAGES, 0);
-        glGetTextureSubImage(r->o->tex_color, 0, 0, 0, 0, iw, ih, nl, GL_RED,
-                             p->parity ? GL_UNSIGNED_BYTE : GL_FLOAT, (GLsizei)img_bytes, NULL);
-        glBindBuffer(GL_PIXEL_PACK_BUFFER, 0);
-
-        glUseProgram(r->pack_prog);
-        glBindBufferRange(GL_SHADER_STORAGE_BUFFER, 2, r->o->pbo, 0,
-                          (GLsizeiptr)((img_bytes + 3) / 4 * 4));
-        glProgramUniform2i(r->pack_prog, 10, stride, ih);
-        glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 0, r->o->ssbo_bits);
-        glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 1, r->o->ssbo_counts);
-        int packx = pm[0] == 0;
-        glProgramUniform3i(r->pack_prog, 0, pm[0], pm[1], pm[2]);
-        glProgramUniform4i(r->pack_prog, 1, rect[0], rect[1], rect[2], rect[3]);
-        glProgramUniform2i(r->pack_prog, 2, b0, nb);
-        glProgramUniform3i(r->pack_prog, 3, p->dims[0], p->dims[1], p->dims[2]);
-        glProgramUniform2i(r->pack_prog, 4, k0, (int)p->wx);
-        glProgramUniform1i(r->pack_prog, 5, p->ss);
-        glProgramUniform1i(r->pack_prog, 6, p->parity ? 0 : 1);
-        glProgramUniform1i(r->pack_prog, 7, p->threshold);
-        glProgramUniform1i(r->pack_prog, 8, p->ss == 2);
-        glProgramUniform1i(r->pack_prog, 9, packx);
-        uint64_t n;
-        if (packx) {
-            n = (uint64_t)(rect[2] + 31) / 32 * (uint64_t)rect[3] * (uint64_t)nb;
-        } else {
-            /* one invocation per output word: grid x runs along the slices
-             * (stepping along x) or the image rows (along y) */
-            int dx = pm[1] == 0 ? 1 : 2, ext[3] = {rect[2], rect[3], nb};
-            int x_lo = dx == 1 ? rect[1] : b0, x_hi = x_lo + ext[dx];
-            uint64_t nruns = (uint64_t)(((x_hi - 1) >> 5) - (x_lo >> 5) + 1);
-            n = nruns * (uint64_t)ext[0] * (uint64_t)ext[1] * (uint64_t)ext[2] / (uint64_t)ext[dx];
-        }
-        uint64_t groups = (n + 63) / 64;
-        /* 65535 groups per dimension (llvmpipe): 2-D dispatch. */
-        uint64_t gx = groups < 65535 ? groups : 65535, gy = (groups + gx - 1) / gx;
-        glDispatchCompute((GLuint)gx, (GLuint)gy, 1);
-        glUseProgram(0);
+        pack_batch(r, pm, k0, rect, b0, nb);
         if (timing) r->st->gpu_slice_ms += vx_gl_timer_end_ms(&timer);
         if (vx_gl_check(r->gl, "slice.draw", err)) return -1;
-        r->st->slices += nb;
-        r->slices_done += nb;
-        if (r->d->progress) {
-            vx_err_clear(err);
-            if (r->d->progress(r->d->ud, r->slices_done / r->slices_total, err)) {
-                if (err && err->kind == VX_EOK)
-                    vx_err_set(err, VX_ECANCELED, "canceled", "voxelization stopped");
-                return -1;
-            }
-        }
+        if (slices_done(r, nb, err)) return -1;
     }
     return 0;
 }
@@ -706,14 +736,9 @@ static int median3(int a, int b, int c)
     return c < a ? a : c > b ? b : c;
 }
 
-int vx_voxelize_slice(vx_gl *gl, const vx_mesh *m, const vx_voxelize_desc *d, vx_bitgrid *out,
-                      vx_voxelize_stats *st, vx_err *err)
+/* Refuses what method slice cannot do and invalid params, grids or meshes. */
+static int check_slice_input(const vx_mesh *m, const vx_voxelize_desc *d, vx_err *err)
 {
-    vx_voxelize_stats dummy;
-    if (!st) st = &dummy;
-    memset(st, 0, sizeof *st);
-    st->method = "slice";
-    memset(out, 0, sizeof *out);
     if (d->fill == VX_FILL_SURFACE)
         return vx_err_set(err, VX_EUNPROC, "unsupported",
                           "method slice fills solids only; fill surface is not supported");
@@ -737,6 +762,95 @@ int vx_voxelize_slice(vx_gl *gl, const vx_mesh *m, const vx_voxelize_desc *d, vx
         if (m->tri[i] >= m->nverts)
             return vx_err_set(err, VX_EINTERNAL, "mesh_invalid",
                               "triangle %zu uses vertex %u of %zu", i / 3, m->tri[i], m->nverts);
+    return 0;
+}
+
+/* Sets the GL state fixed for the whole run (other code may have left any). */
+static void set_fixed_state(const plan *p, GLuint draw_prog)
+{
+    glDisable(GL_CULL_FACE);
+    glDisable(GL_SCISSOR_TEST);
+    glDisable(GL_STENCIL_TEST);
+    glDisable(GL_POLYGON_OFFSET_FILL);
+    glDisable(GL_DEPTH_CLAMP);
+    glDisable(GL_RASTERIZER_DISCARD);
+    glDisable(GL_COLOR_LOGIC_OP);
+    glDisable(GL_MULTISAMPLE);
+    glClipControl(GL_LOWER_LEFT, GL_NEGATIVE_ONE_TO_ONE);
+    glFrontFace(GL_CCW); /* the shaders' facing rule depends on it */
+    glPolygonMode(GL_FRONT_AND_BACK, GL_FILL);
+    glColorMask(GL_TRUE, GL_TRUE, GL_TRUE, GL_TRUE);
+    glDepthRange(0.0, 1.0);
+    glProgramUniform1i(draw_prog, 4, p->parity ? 0 : 1);
+    if (p->parity) {
+        glDisable(GL_BLEND);
+        glEnable(GL_DEPTH_TEST);
+        glDepthFunc(GL_LESS);
+        glDepthMask(GL_TRUE);
+    } else {
+        glDisable(GL_DEPTH_TEST);
+        glEnable(GL_BLEND);
+        glBlendEquation(GL_FUNC_ADD);
+        glBlendFunc(GL_ONE, GL_ONE);
+    }
+}
+
+/* Robust inside test: combines the three axes' results of a chunk of nk
+ * z-layers (tmp[a]: bits, then nbits on the counts) by majority, or by the
+ * median count with supersampling. */
+static void combine_axes(const plan *p, uint8_t *const tmp[3], uint64_t nbits, int nk,
+                         uint32_t *bits_dst, uint8_t *counts_dst)
+{
+    if (p->naxes == 3 && p->ss == 1) {
+        /* Majority of the three axes, 32 voxels at a time. */
+        const uint32_t *x = (const uint32_t *)tmp[0], *y = (const uint32_t *)tmp[1],
+                       *z = (const uint32_t *)tmp[2];
+        for (size_t i = 0; i < nbits / 4; i++)
+            bits_dst[i] = (x[i] & y[i]) | (y[i] & z[i]) | (x[i] & z[i]);
+    } else if (p->naxes == 3) {
+        /* Median of the three counts: the majority rule generalised. */
+        int nx = p->dims[0];
+        for (size_t row = 0; row < (size_t)nk * (size_t)p->dims[1]; row++)
+            for (int i = 0; i < nx; i++) {
+                size_t q = row * (size_t)nx + (size_t)i;
+                int med = median3(tmp[0][nbits + q], tmp[1][nbits + q], tmp[2][nbits + q]);
+                counts_dst[q] = (uint8_t)med;
+                if (med >= p->threshold) bits_dst[row * p->wx + (size_t)(i >> 5)] |= 1u << (i & 31);
+            }
+    }
+}
+
+/* Voxelizes chunk c (its z-layers) along every axis into out; tmp holds
+ * the three axes' results for the robust inside test. */
+static int do_chunk(run *r, int c, uint8_t *const tmp[3], vx_bitgrid *out, vx_err *err)
+{
+    const plan *p = r->p;
+    int k0 = c * p->nk, k1 = k0 + p->nk < p->dims[2] ? k0 + p->nk : p->dims[2];
+    uint64_t nbits = (uint64_t)(k1 - k0) * p->bits_layer;
+    uint64_t ncounts = (uint64_t)(k1 - k0) * p->counts_layer;
+    uint32_t *bits_dst = out->bits + (size_t)k0 * p->bits_layer / 4;
+    uint8_t *counts_dst = out->counts ? out->counts + (size_t)k0 * p->counts_layer : NULL;
+    for (int a = 0; a < p->naxes; a++) {
+        if (do_axis(r, a, k0, k1, err)) return -1;
+        void *bdst = p->naxes == 3 ? (void *)tmp[a] : (void *)bits_dst;
+        uint8_t *cdst = p->naxes == 3 ? tmp[a] + nbits : counts_dst;
+        if (readback(r->gl, r->o->ssbo_bits, bdst, nbits, r->st, err)) return -1;
+        if (ncounts && readback(r->gl, r->o->ssbo_counts, cdst, ncounts, r->st, err)) return -1;
+    }
+    if (p->naxes == 3) combine_axes(p, tmp, nbits, k1 - k0, bits_dst, counts_dst);
+    return 0;
+}
+
+int vx_voxelize_slice(vx_gl *gl, const vx_mesh *m, const vx_voxelize_desc *d, vx_bitgrid *out,
+                      vx_voxelize_stats *st, vx_err *err)
+{
+    vx_voxelize_stats dummy;
+    if (!st) st = &dummy;
+    memset(st, 0, sizeof *st);
+    st->method = "slice";
+    memset(out, 0, sizeof *out);
+    if (check_slice_input(m, d, err)) return -1;
+    const vx_grid *g = &d->grid;
 
     plan p;
     if (make_plan(m, d, &p, err)) return -1;
@@ -780,70 +894,15 @@ int vx_voxelize_slice(vx_gl *gl, const vx_mesh *m, const vx_voxelize_desc *d, vx
                 goto fail;
             }
 
-    /* Fixed state for the whole run (other code may have left any). */
-    glDisable(GL_CULL_FACE);
-    glDisable(GL_SCISSOR_TEST);
-    glDisable(GL_STENCIL_TEST);
-    glDisable(GL_POLYGON_OFFSET_FILL);
-    glDisable(GL_DEPTH_CLAMP);
-    glDisable(GL_RASTERIZER_DISCARD);
-    glDisable(GL_COLOR_LOGIC_OP);
-    glDisable(GL_MULTISAMPLE);
-    glClipControl(GL_LOWER_LEFT, GL_NEGATIVE_ONE_TO_ONE);
-    glFrontFace(GL_CCW); /* the shaders' facing rule depends on it */
-    glPolygonMode(GL_FRONT_AND_BACK, GL_FILL);
-    glColorMask(GL_TRUE, GL_TRUE, GL_TRUE, GL_TRUE);
-    glDepthRange(0.0, 1.0);
-    glProgramUniform1i(draw_prog, 4, p.parity ? 0 : 1);
-    if (p.parity) {
-        glDisable(GL_BLEND);
-        glEnable(GL_DEPTH_TEST);
-        glDepthFunc(GL_LESS);
-        glDepthMask(GL_TRUE);
-    } else {
-        glDisable(GL_DEPTH_TEST);
-        glEnable(GL_BLEND);
-        glBlendEquation(GL_FUNC_ADD);
-        glBlendFunc(GL_ONE, GL_ONE);
-    }
+    set_fixed_state(&p, draw_prog);
 
     int nchunks = (p.dims[2] + p.nk - 1) / p.nk;
     st->chunks = nchunks;
     r.slices_total = 0;
     for (int a = 0; a < p.naxes; a++)
         r.slices_total += p.axes[a] == 2 ? p.dims[2] : (double)p.dims[p.axes[a]] * nchunks;
-    for (int c = 0; c < nchunks; c++) {
-        int k0 = c * p.nk, k1 = k0 + p.nk < p.dims[2] ? k0 + p.nk : p.dims[2];
-        uint64_t nbits = (uint64_t)(k1 - k0) * p.bits_layer;
-        uint64_t ncounts = (uint64_t)(k1 - k0) * p.counts_layer;
-        uint32_t *bits_dst = out->bits + (size_t)k0 * p.bits_layer / 4;
-        uint8_t *counts_dst = out->counts ? out->counts + (size_t)k0 * p.counts_layer : NULL;
-        for (int a = 0; a < p.naxes; a++) {
-            if (do_axis(&r, a, k0, k1, err)) goto fail;
-            void *bdst = p.naxes == 3 ? (void *)tmp[a] : (void *)bits_dst;
-            uint8_t *cdst = p.naxes == 3 ? tmp[a] + nbits : counts_dst;
-            if (readback(gl, o.ssbo_bits, bdst, nbits, st, err)) goto fail;
-            if (ncounts && readback(gl, o.ssbo_counts, cdst, ncounts, st, err)) goto fail;
-        }
-        if (p.naxes == 3 && p.ss == 1) {
-            /* Majority of the three axes, 32 voxels at a time. */
-            const uint32_t *x = (const uint32_t *)tmp[0], *y = (const uint32_t *)tmp[1],
-                           *z = (const uint32_t *)tmp[2];
-            for (size_t i = 0; i < nbits / 4; i++)
-                bits_dst[i] = (x[i] & y[i]) | (y[i] & z[i]) | (x[i] & z[i]);
-        } else if (p.naxes == 3) {
-            /* Median of the three counts: the majority rule generalised. */
-            int nx = p.dims[0];
-            for (size_t row = 0; row < (size_t)(k1 - k0) * (size_t)p.dims[1]; row++)
-                for (int i = 0; i < nx; i++) {
-                    size_t q = row * (size_t)nx + (size_t)i;
-                    int med = median3(tmp[0][nbits + q], tmp[1][nbits + q], tmp[2][nbits + q]);
-                    counts_dst[q] = (uint8_t)med;
-                    if (med >= p.threshold)
-                        bits_dst[row * p.wx + (size_t)(i >> 5)] |= 1u << (i & 31);
-                }
-        }
-    }
+    for (int c = 0; c < nchunks; c++)
+        if (do_chunk(&r, c, tmp, out, err)) goto fail;
 done:
     st->voxels_inside = vx_bitgrid_count(out);
     rc = 0;
