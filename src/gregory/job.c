@@ -277,13 +277,6 @@ static void greg_free_state(void *state)
     free(s);
 }
 
-static double now_ms(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return (double)ts.tv_sec * 1e3 + (double)ts.tv_nsec / 1e6;
-}
-
 /* The patch set of one frame. The topology tables (topo) are made for the
  * first frame and reused; Bézier input rebuilds its (trivial) set. */
 typedef struct builder {
@@ -505,7 +498,7 @@ static int tessellate_frames(vx_job_run *r, const vx_mesh *mesh, const gparams *
 {
     size_t nframes = s->nframes;
     for (size_t k = 0; k < nframes; k++) {
-        double f0 = now_ms();
+        double f0 = vx_mono_ms();
         if (k > 0) {
             vx_mesh *loaded = NULL;
             const double *pos = frame_positions(r, mesh, p, k, &loaded, err);
@@ -525,7 +518,7 @@ static int tessellate_frames(vx_job_run *r, const vx_mesh *mesh, const gparams *
             return -1;
         }
         if (vx_gregory_gather(s->layout, grid, origin, s->pos[k], s->nrm[k], err)) return -1;
-        if (frame_ms) cJSON_AddItemToArray(frame_ms, cJSON_CreateNumber(now_ms() - f0));
+        if (frame_ms) cJSON_AddItemToArray(frame_ms, cJSON_CreateNumber(vx_mono_ms() - f0));
         if (vx_run_progress(r, 0.9 * (double)(k + 1) / (double)nframes, err)) return -1;
     }
     return 0;
@@ -575,9 +568,9 @@ static int run_gl(vx_job_run *r, const vx_mesh *mesh, const gparams *pp, void **
     float *grid = NULL;
     int rc = -1;
     cJSON *frame_ms = cJSON_CreateArray();
-    double t0 = now_ms();
+    double t0 = vx_mono_ms();
     if ((nframes == 1 ? construct_once(r, &b, err) : construct(&b, mesh->pos, err))) goto done;
-    double build_ms = now_ms() - t0;
+    double build_ms = vx_mono_ms() - t0;
     /* How far approximate-cc is from the true limit surface (frame 0). */
     double cc_distance = -1;
     if (p.construction == CONS_APPROX_CC && !mesh->npatches &&

@@ -552,11 +552,8 @@ fail:
 
 vx_mesh *vx_bpt_read_path(const char *path, const vx_mesh_limits *lim, vx_err *err)
 {
-    FILE *f = fopen(path, "rb");
-    if (!f) {
-        vx_err_set(err, VX_EIO, "mesh_io", "cannot open %s: %s", path, strerror(errno));
-        return NULL;
-    }
+    FILE *f = vx_mesh_open(path, err);
+    if (!f) return NULL;
     vx_mesh *m = vx_bpt_read_file(f, lim, err);
     fclose(f);
     return m;

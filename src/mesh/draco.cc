@@ -574,11 +574,8 @@ extern "C" vx_mesh *vx_draco_read_file(FILE *f, const vx_mesh_limits *lim, vx_er
 
 extern "C" vx_mesh *vx_draco_read_path(const char *path, const vx_mesh_limits *lim, vx_err *err)
 {
-    FILE *f = std::fopen(path, "rb");
-    if (!f) {
-        vx_err_set(err, VX_EIO, "mesh_io", "cannot open %s: %s", path, std::strerror(errno));
-        return nullptr;
-    }
+    FILE *f = vx_mesh_open(path, err);
+    if (!f) return nullptr;
     vx_mesh *m = read_file(f, lim, err);
     std::fclose(f);
     return m;
