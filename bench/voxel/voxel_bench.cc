@@ -3,8 +3,8 @@
 // and grid, in one run; plus the seed tables (000 Table 1, 003 Table 1).
 //
 //   voxel_bench compare MESH.obj[:SUBDIV] RES... [--method peel|slice|scan|auto] [--runs N]
-//   voxel_bench seed000 MESH.obj                     (peel/fill ms at 128, 256 for 1, 4, 16, 64x faces)
-//   voxel_bench seed003 MESH.obj... [--res 512] [--shifts N]
+//   voxel_bench seed000 MESH.obj                     (peel/fill ms at 128, 256 for 1, 4, 16, 64x
+//   faces) voxel_bench seed003 MESH.obj... [--res 512] [--shifts N]
 //                                  (mean surface-voxel distance, supersample off/on; with
 //                                   --shifts, also on N grids shifted by sub-voxel offsets)
 //
@@ -38,8 +38,8 @@ static double ms_since(clk::time_point t)
 }
 
 struct Mesh {
-    std::vector<double> pos;     // 3 per vertex
-    std::vector<uint32_t> tri;   // 3 per triangle
+    std::vector<double> pos;   // 3 per vertex
+    std::vector<uint32_t> tri; // 3 per triangle
     std::string name;
 };
 
@@ -48,7 +48,8 @@ static Mesh load(const std::string &spec)
     std::string path = spec;
     int subdiv = 0;
     size_t colon = spec.rfind(':');
-    if (colon != std::string::npos && colon + 1 < spec.size() && isdigit((unsigned char)spec[colon + 1])) {
+    if (colon != std::string::npos && colon + 1 < spec.size() &&
+        isdigit((unsigned char)spec[colon + 1])) {
         path = spec.substr(0, colon);
         subdiv = atoi(spec.c_str() + colon + 1);
     }
@@ -71,7 +72,8 @@ static Mesh load(const std::string &spec)
             auto it = mid.find(key);
             if (it != mid.end()) return it->second;
             uint32_t id = (uint32_t)(out.pos.size() / 3);
-            for (int k = 0; k < 3; k++) out.pos.push_back(0.5 * (out.pos[3 * a + k] + out.pos[3 * b + k]));
+            for (int k = 0; k < 3; k++)
+                out.pos.push_back(0.5 * (out.pos[3 * a + k] + out.pos[3 * b + k]));
             mid[key] = id;
             return id;
         };
@@ -84,7 +86,8 @@ static Mesh load(const std::string &spec)
         out.tri.swap(nt);
     }
     const char *base = strrchr(path.c_str(), '/');
-    out.name = (base ? base + 1 : path.c_str()) + (subdiv ? std::string("x") + std::to_string(1 << (2 * subdiv)) : "");
+    out.name = (base ? base + 1 : path.c_str()) +
+               (subdiv ? std::string("x") + std::to_string(1 << (2 * subdiv)) : "");
     return out;
 }
 
@@ -114,14 +117,16 @@ struct Adapter {
     void getIndexSpacePoint(size_t n, size_t v, openvdb::Vec3d &p) const
     {
         const double *q = &m->pos[3 * m->tri[3 * n + v]];
-        for (int k = 0; k < 3; k++) p[k] = (q[k] - g.origin[k]) / g.h - 0.5;
+        for (int k = 0; k < 3; k++)
+            p[k] = (q[k] - g.origin[k]) / g.h - 0.5;
     }
 };
 
 static openvdb::math::Transform::Ptr xform(const vx_grid &g)
 {
     auto t = openvdb::math::Transform::createLinearTransform(g.h);
-    t->postTranslate(openvdb::Vec3d(g.origin[0] + 0.5 * g.h, g.origin[1] + 0.5 * g.h, g.origin[2] + 0.5 * g.h));
+    t->postTranslate(
+        openvdb::Vec3d(g.origin[0] + 0.5 * g.h, g.origin[1] + 0.5 * g.h, g.origin[2] + 0.5 * g.h));
     return t;
 }
 
@@ -135,7 +140,7 @@ static VdbResult vdb_interior(const Mesh &m, const vx_grid &g)
     Adapter a{&m, g};
     auto t0 = clk::now();
     auto sdf = openvdb::tools::meshToVolume<openvdb::FloatGrid>(a, *xform(g), 1.0f,
-                                                                 std::numeric_limits<float>::max());
+                                                                std::numeric_limits<float>::max());
     auto mask = openvdb::tools::sdfInteriorMask(*sdf, 0.0f);
     return {ms_since(t0), mask};
 }
@@ -172,7 +177,8 @@ static vx_method parse_method(const char *s)
 }
 
 static bool ours(vx_gl *gl, vx_mesh *vm, const vx_grid &g, vx_method method, int supersample,
-                 vx_bitgrid *out, vx_voxelize_stats *st, double *ms, vx_samples samples = VX_SAMPLES_CUBE)
+                 vx_bitgrid *out, vx_voxelize_stats *st, double *ms,
+                 vx_samples samples = VX_SAMPLES_CUBE)
 {
     vx_voxelize_desc d{};
     d.grid = g;
@@ -195,12 +201,13 @@ static bool ours(vx_gl *gl, vx_mesh *vm, const vx_grid &g, vx_method method, int
 // faces pattern (centre + 6 face centres, scan) with threshold 1, 2.
 // Returns nonzero when voxelizing fails.
 enum { SEED003_COLS = 6 };
-static int seed003_means(vx_gl *gl, Mesh &m, vx_mesh *vm, const vx_grid &g, double mt[SEED003_COLS], uint64_t *nsurf)
+static int seed003_means(vx_gl *gl, Mesh &m, vx_mesh *vm, const vx_grid &g, double mt[SEED003_COLS],
+                         uint64_t *nsurf)
 {
     // Unsigned distance to the mesh (exact near the surface), in world units.
     Adapter a{&m, g};
-    auto udf = openvdb::tools::meshToVolume<openvdb::FloatGrid>(a, *xform(g), 3.0f, 3.0f,
-                                                                 openvdb::tools::UNSIGNED_DISTANCE_FIELD);
+    auto udf = openvdb::tools::meshToVolume<openvdb::FloatGrid>(
+        a, *xform(g), 3.0f, 3.0f, openvdb::tools::UNSIGNED_DISTANCE_FIELD);
     auto acc = udf->getConstAccessor();
     const int *d = g.dims;
     auto mean = [&](auto inside, uint64_t *count) {
@@ -210,9 +217,10 @@ static int seed003_means(vx_gl *gl, Mesh &m, vx_mesh *vm, const vx_grid &g, doub
             for (int j = 0; j < d[1]; j++)
                 for (int i = 0; i < d[0]; i++) {
                     if (!inside(i, j, k)) continue;
-                    bool surf = i == 0 || j == 0 || k == 0 || i == d[0] - 1 || j == d[1] - 1 || k == d[2] - 1 ||
-                                !inside(i - 1, j, k) || !inside(i + 1, j, k) || !inside(i, j - 1, k) ||
-                                !inside(i, j + 1, k) || !inside(i, j, k - 1) || !inside(i, j, k + 1);
+                    bool surf = i == 0 || j == 0 || k == 0 || i == d[0] - 1 || j == d[1] - 1 ||
+                                k == d[2] - 1 || !inside(i - 1, j, k) || !inside(i + 1, j, k) ||
+                                !inside(i, j - 1, k) || !inside(i, j + 1, k) ||
+                                !inside(i, j, k - 1) || !inside(i, j, k + 1);
                     if (!surf) continue;
                     sum += std::fabs(acc.getValue(openvdb::Coord(i, j, k))) / g.h;
                     n++;
@@ -223,15 +231,18 @@ static int seed003_means(vx_gl *gl, Mesh &m, vx_mesh *vm, const vx_grid &g, doub
     vx_bitgrid plain{}, super{}, faces{};
     vx_voxelize_stats st{};
     double ms;
-    if (!ours(gl, vm, g, VX_METHOD_SLICE, 1, &plain, &st, &ms) || !ours(gl, vm, g, VX_METHOD_SLICE, 2, &super, &st, &ms) ||
+    if (!ours(gl, vm, g, VX_METHOD_SLICE, 1, &plain, &st, &ms) ||
+        !ours(gl, vm, g, VX_METHOD_SLICE, 2, &super, &st, &ms) ||
         !ours(gl, vm, g, VX_METHOD_AUTO, 2, &faces, &st, &ms, VX_SAMPLES_FACES))
         return 1;
     mt[0] = mean([&](int i, int j, int k) { return vx_bitgrid_get(&plain, i, j, k) != 0; }, nsurf);
     const int thr[5] = {1, 2, 4, 1, 2};
     for (int t = 0; t < 5; t++) {
         const vx_bitgrid &c = t < 3 ? super : faces;
-        mt[t + 1] = mean([&](int i, int j, int k) { return c.counts[((size_t)k * d[1] + j) * d[0] + i] >= thr[t]; },
-                         nullptr);
+        mt[t + 1] =
+            mean([&](int i, int j,
+                     int k) { return c.counts[((size_t)k * d[1] + j) * d[0] + i] >= thr[t]; },
+                 nullptr);
     }
     vx_bitgrid_free(&plain);
     vx_bitgrid_free(&super);
@@ -252,12 +263,18 @@ int main(int argc, char **argv)
     vx_method method = VX_METHOD_AUTO;
     int runs = 3, res003 = 512, shifts = 0;
     for (int i = 2; i < argc; i++) {
-        if (!strcmp(argv[i], "--method") && i + 1 < argc) method = parse_method(argv[++i]);
-        else if (!strcmp(argv[i], "--runs") && i + 1 < argc) runs = atoi(argv[++i]);
-        else if (!strcmp(argv[i], "--res") && i + 1 < argc) res003 = atoi(argv[++i]);
-        else if (!strcmp(argv[i], "--shifts") && i + 1 < argc) shifts = atoi(argv[++i]);
-        else if (isdigit((unsigned char)argv[i][0])) res.push_back(atoi(argv[i]));
-        else meshes.push_back(argv[i]);
+        if (!strcmp(argv[i], "--method") && i + 1 < argc)
+            method = parse_method(argv[++i]);
+        else if (!strcmp(argv[i], "--runs") && i + 1 < argc)
+            runs = atoi(argv[++i]);
+        else if (!strcmp(argv[i], "--res") && i + 1 < argc)
+            res003 = atoi(argv[++i]);
+        else if (!strcmp(argv[i], "--shifts") && i + 1 < argc)
+            shifts = atoi(argv[++i]);
+        else if (isdigit((unsigned char)argv[i][0]))
+            res.push_back(atoi(argv[i]));
+        else
+            meshes.push_back(argv[i]);
     }
     vx_err err;
     vx_gl_desc gd{}; // zero = automatic device order
@@ -266,11 +283,13 @@ int main(int argc, char **argv)
         fprintf(stderr, "GL: %s\n", err.message);
         return 1;
     }
-    printf("GL: %s; OpenVDB %s; %d CPUs\n", vx_gl_get_info(gl)->renderer, openvdb::getLibraryVersionString(),
+    printf("GL: %s; OpenVDB %s; %d CPUs\n", vx_gl_get_info(gl)->renderer,
+           openvdb::getLibraryVersionString(),
            (int)std::max(1u, std::thread::hardware_concurrency()));
 
     if (mode == "compare") {
-        printf("| mesh | triangles | grid | voxeld ms (%s) | OpenVDB ms | speed-up | IoU | inside voxeld | inside OpenVDB |\n|---|---|---|---|---|---|---|---|---|\n",
+        printf("| mesh | triangles | grid | voxeld ms (%s) | OpenVDB ms | speed-up | IoU | inside "
+               "voxeld | inside OpenVDB |\n|---|---|---|---|---|---|---|---|---|\n",
                method == VX_METHOD_PEEL    ? "peel"
                : method == VX_METHOD_SLICE ? "slice"
                : method == VX_METHOD_SCAN  ? "scan"
@@ -294,16 +313,18 @@ int main(int argc, char **argv)
                 VdbResult v = vdb_interior(m, g);
                 uint64_t nv = 0;
                 double u = iou(out, *v.mask, &nv);
-                printf("| %s | %zu | %dx%dx%d | %.1f | %.1f | %.1fx | %.5f | %llu | %llu |\n", m.name.c_str(),
-                       m.tri.size() / 3, g.dims[0], g.dims[1], g.dims[2], best, v.ms, v.ms / best, u,
-                       (unsigned long long)vx_bitgrid_count(&out), (unsigned long long)nv);
+                printf("| %s | %zu | %dx%dx%d | %.1f | %.1f | %.1fx | %.5f | %llu | %llu |\n",
+                       m.name.c_str(), m.tri.size() / 3, g.dims[0], g.dims[1], g.dims[2], best,
+                       v.ms, v.ms / best, u, (unsigned long long)vx_bitgrid_count(&out),
+                       (unsigned long long)nv);
                 fflush(stdout);
                 vx_bitgrid_free(&out);
             }
             vx_mesh_free(vm);
         }
     } else if (mode == "seed000") {
-        printf("| faces | res | depth peeling ms (GPU) | fill ms (GPU) | total ms (wall) | layers | passes |\n|---|---|---|---|---|---|---|\n");
+        printf("| faces | res | depth peeling ms (GPU) | fill ms (GPU) | total ms (wall) | layers "
+               "| passes |\n|---|---|---|---|---|---|---|\n");
         for (auto &spec : meshes)
             for (int sub = 0; sub <= 3; sub++) {
                 Mesh m = load(spec + ":" + std::to_string(sub));
@@ -319,14 +340,17 @@ int main(int argc, char **argv)
                         if (k && ms < best) best = ms, bst = st;
                         vx_bitgrid_free(&out);
                     }
-                    printf("| %zu | %d^3 | %.1f | %.2f | %.1f | %d | %d |\n", m.tri.size() / 3, r, bst.gpu_peel_ms,
-                           bst.gpu_fill_ms, best, bst.layers, bst.passes);
+                    printf("| %zu | %d^3 | %.1f | %.2f | %.1f | %d | %d |\n", m.tri.size() / 3, r,
+                           bst.gpu_peel_ms, bst.gpu_fill_ms, best, bst.layers, bst.passes);
                     fflush(stdout);
                 }
                 vx_mesh_free(vm);
             }
     } else if (mode == "seed003") {
-        printf("| model | res | grid shift (voxels) | mean distance, no supersampling | 2x2x2 (seed), threshold 1 | threshold 2 | threshold 4 | faces, threshold 1 | faces, threshold 2 | surface voxels (no supersampling) |\n|---|---|---|---|---|---|---|---|---|---|\n");
+        printf(
+            "| model | res | grid shift (voxels) | mean distance, no supersampling | 2x2x2 (seed), "
+            "threshold 1 | threshold 2 | threshold 4 | faces, threshold 1 | faces, threshold 2 | "
+            "surface voxels (no supersampling) |\n|---|---|---|---|---|---|---|---|---|---|\n");
         for (auto &spec : meshes) {
             Mesh m = load(spec);
             vx_mesh *vm = as_vx(m);
@@ -350,18 +374,24 @@ int main(int argc, char **argv)
                 double mt[SEED003_COLS];
                 uint64_t nsurf = 0;
                 if (seed003_means(gl, m, vm, g, mt, &nsurf)) return 1;
-                printf("| %s | %d^3 | %s | %.3f | %.3f | %.3f | %.3f | %.3f | %.3f | %llu |\n", m.name.c_str(), res003,
-                       sh ? (std::to_string(off[0]).substr(0, 4) + ", " + std::to_string(off[1]).substr(0, 4) + ", " +
-                             std::to_string(off[2]).substr(0, 4)).c_str()
+                printf("| %s | %d^3 | %s | %.3f | %.3f | %.3f | %.3f | %.3f | %.3f | %llu |\n",
+                       m.name.c_str(), res003,
+                       sh ? (std::to_string(off[0]).substr(0, 4) + ", " +
+                             std::to_string(off[1]).substr(0, 4) + ", " +
+                             std::to_string(off[2]).substr(0, 4))
+                                .c_str()
                           : "0 (API grid)",
                        mt[0], mt[1], mt[2], mt[3], mt[4], mt[5], (unsigned long long)nsurf);
                 fflush(stdout);
                 if (sh)
-                    for (int t = 0; t < SEED003_COLS; t++) avg[t] += mt[t] / shifts;
+                    for (int t = 0; t < SEED003_COLS; t++)
+                        avg[t] += mt[t] / shifts;
             }
             if (shifts)
-                printf("| %s | %d^3 | mean of %d shifts | %.3f | %.3f | %.3f | %.3f | %.3f | %.3f | |\n", m.name.c_str(),
-                       res003, shifts, avg[0], avg[1], avg[2], avg[3], avg[4], avg[5]);
+                printf("| %s | %d^3 | mean of %d shifts | %.3f | %.3f | %.3f | %.3f | %.3f | %.3f "
+                       "| |\n",
+                       m.name.c_str(), res003, shifts, avg[0], avg[1], avg[2], avg[3], avg[4],
+                       avg[5]);
             vx_mesh_free(vm);
         }
     }

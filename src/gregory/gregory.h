@@ -41,9 +41,9 @@
 
 typedef struct vx_gpatch_set {
     size_t npatches;
-    double *cp;          /* npatches * VX_GPATCH_POINTS * 3 */
+    double *cp;           /* npatches * VX_GPATCH_POINTS * 3 */
     uint32_t *corner_key; /* npatches * 4 */
-    uint32_t *face;      /* npatches: the input face (or Bézier patch) it came from */
+    uint32_t *face;       /* npatches: the input face (or Bézier patch) it came from */
 } vx_gpatch_set;
 
 /* Allocates a set of n patches (arrays zeroed); NULL on allocation failure. */

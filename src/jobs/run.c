@@ -22,7 +22,8 @@ int vx_run_progress(vx_job_run *r, double fraction, vx_err *err)
     }
     if (cancel) return vx_err_set(err, VX_ECANCELED, "canceled", "the job was canceled");
     if (j->stopping)
-        return vx_err_set_flagged(err, VX_ECANCELED, VX_EF_SHUTDOWN, "shutdown", "the daemon is shutting down");
+        return vx_err_set_flagged(err, VX_ECANCELED, VX_EF_SHUTDOWN, "shutdown",
+                                  "the daemon is shutting down");
     double limit = j->desc.limits.job_timeout_s;
     if (limit > 0 && now - r->t0 > limit)
         return vx_err_set(err, VX_ETIMEOUT, "job_timeout", "the job ran longer than %g s", limit);

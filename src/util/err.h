@@ -15,7 +15,8 @@ typedef enum vx_err_kind {
     VX_EOK = 0,
     VX_EINVAL,    /* malformed input: bad syntax, truncated data (400) */
     VX_EUNPROC,   /* well-formed but unusable: bad params, no faces (422) */
-    VX_ETOOBIG,   /* a configured limit was exceeded (413; a params value over a limit is VX_EUNPROC from check()) */
+    VX_ETOOBIG,   /* a configured limit was exceeded (413; a params value over a limit is VX_EUNPROC
+                     from check()) */
     VX_ENOTFOUND, /* unknown id (404) */
     VX_ECONFLICT, /* state does not allow the operation (409) */
     VX_EMEDIA,    /* unsupported content type (415) */

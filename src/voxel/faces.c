@@ -74,8 +74,8 @@ static void combine(const vx_bitgrid g[4], int threshold, vx_bitgrid *out)
             for (size_t w = 0; w < out->wx; w++) {
                 /* the centre, then the lower and upper face along x, y, z */
                 uint32_t x0 = word(&g[1], j, k, w), xn = word(&g[1], j, k, w + 1);
-                uint32_t s[7] = {word(&g[0], j, k, w), x0,
-                                 (x0 >> 1) | (xn << 31), word(&g[2], j, k, w),
+                uint32_t s[7] = {word(&g[0], j, k, w),     x0,
+                                 (x0 >> 1) | (xn << 31),   word(&g[2], j, k, w),
                                  word(&g[2], j + 1, k, w), word(&g[3], j, k, w),
                                  word(&g[3], j, k + 1, w)};
                 int n = nx - (int)(32 * w) < 32 ? nx - (int)(32 * w) : 32;

@@ -44,14 +44,16 @@ uint64_t vx_bitgrid_count(const vx_bitgrid *g)
 {
     size_t n = g->wx * (size_t)g->grid.dims[1] * (size_t)g->grid.dims[2];
     uint64_t c = 0;
-    for (size_t i = 0; i < n; i++) c += (uint64_t)__builtin_popcount(g->bits[i]);
+    for (size_t i = 0; i < n; i++)
+        c += (uint64_t)__builtin_popcount(g->bits[i]);
     return c;
 }
 
 int vx_grid_from_voxel_size(const vx_mesh *m, double h, int padding, vx_grid *out, vx_err *err)
 {
     if (!(h > 0) || !isfinite(h))
-        return vx_err_set(err, VX_EUNPROC, "invalid_params", "voxel_size must be a positive number");
+        return vx_err_set(err, VX_EUNPROC, "invalid_params",
+                          "voxel_size must be a positive number");
     if (padding < 0) return vx_err_set(err, VX_EUNPROC, "invalid_params", "padding must be >= 0");
     for (int a = 0; a < 3; a++) {
         double ext = m->bbox_max[a] - m->bbox_min[a];
@@ -68,11 +70,15 @@ int vx_grid_from_voxel_size(const vx_mesh *m, double h, int padding, vx_grid *ou
     return 0;
 }
 
-int vx_grid_from_resolution(const vx_mesh *m, int resolution, int padding, vx_grid *out, vx_err *err)
+int vx_grid_from_resolution(const vx_mesh *m, int resolution, int padding, vx_grid *out,
+                            vx_err *err)
 {
-    if (resolution < 1) return vx_err_set(err, VX_EUNPROC, "invalid_params", "resolution must be >= 1");
+    if (resolution < 1)
+        return vx_err_set(err, VX_EUNPROC, "invalid_params", "resolution must be >= 1");
     double ext = 0;
-    for (int a = 0; a < 3; a++) ext = fmax(ext, m->bbox_max[a] - m->bbox_min[a]);
-    if (!(ext > 0)) return vx_err_set(err, VX_EUNPROC, "degenerate_mesh", "the mesh has an empty bbox");
+    for (int a = 0; a < 3; a++)
+        ext = fmax(ext, m->bbox_max[a] - m->bbox_min[a]);
+    if (!(ext > 0))
+        return vx_err_set(err, VX_EUNPROC, "degenerate_mesh", "the mesh has an empty bbox");
     return vx_grid_from_voxel_size(m, ext / resolution, padding, out, err);
 }

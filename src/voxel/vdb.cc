@@ -105,7 +105,8 @@ extern "C" int vx_voxel_write_vdb(const vx_bitgrid *g, int coverage, const vx_vd
                 for (int j = 0; j < ny; j++) {
                     const uint8_t *c = g->counts + ((size_t)k * ny + j) * nx;
                     for (int i = 0; i < nx; i++)
-                        if (c[i]) acc.setValueOn(openvdb::Coord(i, j, k), c[i] / float(g->nsamples));
+                        if (c[i])
+                            acc.setValueOn(openvdb::Coord(i, j, k), c[i] / float(g->nsamples));
                 }
             }
             set_meta(*grid, g, meta);

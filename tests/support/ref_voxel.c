@@ -55,9 +55,11 @@ int ref_voxelize(const vx_mesh *m, const vx_grid *g, vx_inside rule, uint8_t *ou
         r[2] = (int)fmax(0, ceil((lo[1] - g->origin[2]) / g->h - 0.5) - 1);
         r[3] = (int)fmin(nz - 1, floor((hi[1] - g->origin[2]) / g->h - 0.5) + 1);
         for (int k = r[2]; k <= r[3]; k++)
-            for (int j = r[0]; j <= r[1]; j++) cnt[(size_t)k * ny + j + 1]++;
+            for (int j = r[0]; j <= r[1]; j++)
+                cnt[(size_t)k * ny + j + 1]++;
     }
-    for (size_t i = 0; i < nrows; i++) cnt[i + 1] += cnt[i];
+    for (size_t i = 0; i < nrows; i++)
+        cnt[i + 1] += cnt[i];
     uint32_t *ids = malloc((size_t)cnt[nrows] * sizeof *ids + 1);
     uint32_t *fill = malloc(nrows * sizeof *fill + 1);
     hit *hits = malloc(m->ntris * sizeof *hits + 1);
@@ -69,7 +71,8 @@ int ref_voxelize(const vx_mesh *m, const vx_grid *g, vx_inside rule, uint8_t *ou
     for (size_t t = 0; t < m->ntris; t++) {
         int *r = range + 4 * t;
         for (int k = r[2]; k <= r[3]; k++)
-            for (int j = r[0]; j <= r[1]; j++) ids[fill[(size_t)k * ny + j]++] = (uint32_t)t;
+            for (int j = r[0]; j <= r[1]; j++)
+                ids[fill[(size_t)k * ny + j]++] = (uint32_t)t;
     }
     for (int k = 0; k < nz; k++)
         for (int j = 0; j < ny; j++) {
@@ -78,7 +81,8 @@ int ref_voxelize(const vx_mesh *m, const vx_grid *g, vx_inside rule, uint8_t *ou
             size_t nh = 0;
             for (uint32_t q = cnt[row]; q < cnt[row + 1]; q++) {
                 const uint32_t *tv = m->tri + 3 * (size_t)ids[q];
-                const double *a = m->pos + 3 * tv[0], *b = m->pos + 3 * tv[1], *c = m->pos + 3 * tv[2];
+                const double *a = m->pos + 3 * tv[0], *b = m->pos + 3 * tv[1],
+                             *c = m->pos + 3 * tv[2];
                 double nxc = (b[1] - a[1]) * (c[2] - a[2]) - (b[2] - a[2]) * (c[1] - a[1]);
                 if (nxc == 0) continue; /* parallel to the ray */
                 int s0 = side(a, b, py, pz), s1 = side(b, c, py, pz), s2 = side(c, a, py, pz);
@@ -120,7 +124,8 @@ double ref_winding_number(const vx_mesh *m, const double p[3])
         double v[3][3], l[3];
         for (int i = 0; i < 3; i++) {
             const double *q = m->pos + 3 * m->tri[3 * t + i];
-            for (int a = 0; a < 3; a++) v[i][a] = q[a] - p[a];
+            for (int a = 0; a < 3; a++)
+                v[i][a] = q[a] - p[a];
             l[i] = sqrt(v[i][0] * v[i][0] + v[i][1] * v[i][1] + v[i][2] * v[i][2]);
         }
         /* Van Oosterom & Strackee: tan(omega/2) = det / denominator */

@@ -56,7 +56,7 @@ void shape_flip(vx_mesh *m)
  * poles (sphere) v runs pole to pole, else (torus) periodic in v too.
  * Oriented outward (inward when `inward`). */
 vx_mesh *shape_param_mesh(int nu, int nv, int poles, int inward, double cx, double cy, double cz,
-                           double r1, double r2)
+                          double r1, double r2)
 {
     size_t nvert = poles ? (size_t)nu * (nv - 1) + 2 : (size_t)nu * nv;
     double *p = malloc(nvert * 3 * sizeof *p);

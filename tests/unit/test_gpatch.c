@@ -34,12 +34,15 @@ static void make_patch(double cp[60], int bezier, unsigned seed)
 
 static void bezier(const double cp[60], double u, double v, double p[3])
 {
-    double bu[4] = {(1 - u) * (1 - u) * (1 - u), 3 * u * (1 - u) * (1 - u), 3 * u * u * (1 - u), u * u * u};
-    double bv[4] = {(1 - v) * (1 - v) * (1 - v), 3 * v * (1 - v) * (1 - v), 3 * v * v * (1 - v), v * v * v};
+    double bu[4] = {(1 - u) * (1 - u) * (1 - u), 3 * u * (1 - u) * (1 - u), 3 * u * u * (1 - u),
+                    u * u * u};
+    double bv[4] = {(1 - v) * (1 - v) * (1 - v), 3 * v * (1 - v) * (1 - v), 3 * v * v * (1 - v),
+                    v * v * v};
     p[0] = p[1] = p[2] = 0;
     for (int j = 0; j < 4; j++)
         for (int i = 0; i < 4; i++)
-            for (int c = 0; c < 3; c++) p[c] += bu[i] * bv[j] * cp[3 * (4 * j + i) + c];
+            for (int c = 0; c < 3; c++)
+                p[c] += bu[i] * bv[j] * cp[3 * (4 * j + i) + c];
 }
 
 static void test_bezier_case(void **state)
@@ -52,7 +55,8 @@ static void test_bezier_case(void **state)
             double p[3], q[3], n[3];
             vx_gpatch_eval(cp, a / 10.0, b / 10.0, p, n);
             bezier(cp, a / 10.0, b / 10.0, q);
-            for (int c = 0; c < 3; c++) assert_true(fabs(p[c] - q[c]) < 1e-14);
+            for (int c = 0; c < 3; c++)
+                assert_true(fabs(p[c] - q[c]) < 1e-14);
             assert_true(fabs(n[0] * n[0] + n[1] * n[1] + n[2] * n[2] - 1) < 1e-12);
             assert_true(n[2] > 0); /* the net faces +z */
         }
@@ -71,7 +75,8 @@ static void test_boundaries_and_normals(void **state)
         for (int e = 0; e < 4; e++) {
             vx_gpatch_eval(g, uv[e][0], uv[e][1], p, NULL);
             bezier(b, uv[e][0], uv[e][1], q);
-            for (int c = 0; c < 3; c++) assert_true(fabs(p[c] - q[c]) < 1e-14);
+            for (int c = 0; c < 3; c++)
+                assert_true(fabs(p[c] - q[c]) < 1e-14);
         }
     }
     /* Interior differs from the Bézier patch of the k = 0 points. */
@@ -98,7 +103,8 @@ static void test_boundaries_and_normals(void **state)
             m[1] = du[2] * dv[0] - du[0] * dv[2];
             m[2] = du[0] * dv[1] - du[1] * dv[0];
             double l = sqrt(m[0] * m[0] + m[1] * m[1] + m[2] * m[2]);
-            for (int k = 0; k < 3; k++) assert_true(fabs(m[k] / l - n[k]) < 1e-6);
+            for (int k = 0; k < 3; k++)
+                assert_true(fabs(m[k] / l - n[k]) < 1e-6);
         }
 }
 
@@ -110,7 +116,8 @@ static void test_collapsed_edge(void **state)
     double cp[60];
     make_patch(cp, 1, 11);
     for (int i = 0; i < 4; i++)
-        for (int c = 0; c < 3; c++) cp[3 * (12 + i) + c] = (c == 2) ? 0.5 : 0.5;
+        for (int c = 0; c < 3; c++)
+            cp[3 * (12 + i) + c] = (c == 2) ? 0.5 : 0.5;
     double p[3], n[3], pn[3], nn[3];
     vx_gpatch_eval(cp, 0.5, 1.0, p, n);
     vx_gpatch_eval(cp, 0.5, 1.0 - 1e-4, pn, nn);

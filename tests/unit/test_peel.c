@@ -19,9 +19,6 @@
 #include "shapes.h"
 #include "voxel/voxel.h"
 
-
-
-
 /* ---- helpers ----------------------------------------------------------- */
 
 static double now_s(void)
@@ -409,10 +406,8 @@ static void test_big(void **state)
 int main(void)
 {
     const struct CMUnitTest tests[] = {
-        cmocka_unit_test(test_bunny_robust),
-        cmocka_unit_test(test_robust_limits),
-        cmocka_unit_test(test_surface),
-        cmocka_unit_test(test_bench),
+        cmocka_unit_test(test_bunny_robust), cmocka_unit_test(test_robust_limits),
+        cmocka_unit_test(test_surface),      cmocka_unit_test(test_bench),
         cmocka_unit_test(test_big),
     };
     return cmocka_run_group_tests(tests, vx_test_gl_setup, vx_test_gl_teardown);

@@ -31,7 +31,8 @@ static void test_grow_and_remove(void **state)
 {
     vx_queue *q = vx_queue_new(0);
     int v[100];
-    for (int i = 0; i < 100; i++) assert_int_equal(vx_queue_push(q, &v[i], 0), 0);
+    for (int i = 0; i < 100; i++)
+        assert_int_equal(vx_queue_push(q, &v[i], 0), 0);
     assert_int_equal(vx_queue_remove(q, &v[50]), 1);
     assert_int_equal(vx_queue_remove(q, &v[50]), 0);
     for (int i = 0; i < 100; i++) {

@@ -16,12 +16,14 @@ static vx_mesh *box(const double lo[3], const double hi[3])
     m->nverts = 8;
     m->pos = malloc(24 * sizeof(double));
     for (int v = 0; v < 8; v++)
-        for (int a = 0; a < 3; a++) m->pos[3 * v + a] = (v >> a) & 1 ? hi[a] : lo[a];
+        for (int a = 0; a < 3; a++)
+            m->pos[3 * v + a] = (v >> a) & 1 ? hi[a] : lo[a];
     static const uint32_t f[36] = {0, 2, 3, 0, 3, 1, 4, 5, 7, 4, 7, 6, 0, 1, 5, 0, 5, 4,
                                    2, 6, 7, 2, 7, 3, 0, 4, 6, 0, 6, 2, 1, 3, 7, 1, 7, 5};
     m->nfaces = 12;
     m->face_idx = malloc(sizeof f);
-    for (int i = 0; i < 36; i++) m->face_idx[i] = f[i];
+    for (int i = 0; i < 36; i++)
+        m->face_idx[i] = f[i];
     vx_mesh_analyze(m, NULL);
     return m;
 }
@@ -29,7 +31,8 @@ static vx_mesh *box(const double lo[3], const double hi[3])
 static size_t count(const uint8_t *v, size_t n)
 {
     size_t c = 0;
-    for (size_t i = 0; i < n; i++) c += v[i];
+    for (size_t i = 0; i < n; i++)
+        c += v[i];
     return c;
 }
 
@@ -66,10 +69,12 @@ static void test_two_boxes(void **state)
     vx_mesh *m = vx_mesh_new();
     m->nverts = 16;
     m->pos = malloc(48 * sizeof(double));
-    for (int i = 0; i < 24; i++) m->pos[i] = a->pos[i], m->pos[24 + i] = b->pos[i];
+    for (int i = 0; i < 24; i++)
+        m->pos[i] = a->pos[i], m->pos[24 + i] = b->pos[i];
     m->nfaces = 24;
     m->face_idx = malloc(72 * sizeof(uint32_t));
-    for (int i = 0; i < 36; i++) m->face_idx[i] = a->face_idx[i], m->face_idx[36 + i] = b->face_idx[i] + 8;
+    for (int i = 0; i < 36; i++)
+        m->face_idx[i] = a->face_idx[i], m->face_idx[36 + i] = b->face_idx[i] + 8;
     vx_mesh_analyze(m, NULL);
     vx_grid g = {{0, 0, 0}, 0.25, {12, 12, 12}};
     uint8_t *out = malloc(1728);
@@ -94,7 +99,8 @@ static void test_real_mesh_volume(void **state)
     ref_voxelize(m, &g, VX_INSIDE_PARITY, p);
     ref_voxelize(m, &g, VX_INSIDE_NONZERO, w);
     size_t diff = 0;
-    for (size_t i = 0; i < n; i++) diff += p[i] != w[i];
+    for (size_t i = 0; i < n; i++)
+        diff += p[i] != w[i];
     assert_int_equal(diff, 0);
     assert_true(count(p, n) > n / 20);
     for (size_t s = 0; s < 200; s++) {

@@ -18,7 +18,6 @@
 #include "shapes.h"
 #include "voxel/voxel.h"
 
-
 /* ASan build: LeakSanitizer's tracer dies (SIGSEGV, "Tracer caught signal
  * 11") scanning a bogus dynamic-TLS range that the main thread's DTV holds
  * after this file's GL work (glibc 2.36 + Mesa 22.3 llvmpipe; the range
@@ -36,7 +35,6 @@ const char *__lsan_default_suppressions(void)
 {
     return "leak:add_to_global_resize\n";
 }
-
 
 /* ---- helpers ---- */
 
@@ -175,8 +173,8 @@ static void test_tie_rule(void **state)
         printf(
             "tie box rule %d: inside=%llu ref=%zu mismatches=%zu, set i %d..%d j %d..%d k %d..%d "
             "(ref: i 2..8 j 3..6 k 1..5)\n",
-            rule, (unsigned long long)vx_bitgrid_count(&b), (size_t)(7 * 4 * 5), ref_mismatches(r, &b),
-            lo[0], hi[0], lo[1], hi[1], lo[2], hi[2]);
+            rule, (unsigned long long)vx_bitgrid_count(&b), (size_t)(7 * 4 * 5),
+            ref_mismatches(r, &b), lo[0], hi[0], lo[1], hi[1], lo[2], hi[2]);
         /* along z the half-open rule is exact */
         assert_int_equal(lo[2], 1);
         assert_int_equal(hi[2], 5);

@@ -470,7 +470,8 @@ static void test_slabs(void **state)
         }
         assert_true(vx_bitgrid_count(&one) > 1000);
         d.max_slab_rows = 0;
-        if (d.fill == VX_FILL_SOLID && mode <= VX_INSIDE_PARITY) same_as_peel(e, "spot 70", m, &d, &one);
+        if (d.fill == VX_FILL_SOLID && mode <= VX_INSIDE_PARITY)
+            same_as_peel(e, "spot 70", m, &d, &one);
         vx_bitgrid_free(&one);
     }
     vx_mesh_free(m);
@@ -606,11 +607,11 @@ static void test_faces_pattern(void **state)
 {
     (void)state;
     static const int off[7][3] = {{0, 0, 0}, {-1, 0, 0}, {1, 0, 0}, {0, -1, 0},
-                                  {0, 1, 0},  {0, 0, -1}, {0, 0, 1}};
+                                  {0, 1, 0}, {0, 0, -1}, {0, 0, 1}};
     const double lo[3] = {1.3, 2.2, 0.7}, hi[3] = {5.8, 6.4, 3.1};
     vx_mesh *box = shape_box(lo, hi), *ball = shape_sphere(0.1, -0.05, 0.03, 1, 0);
-    vx_voxelize_desc d = {.grid = {{0, 0, 0}, 1, {8, 8, 5}}, .supersample = 2,
-                          .samples = VX_SAMPLES_FACES};
+    vx_voxelize_desc d = {
+        .grid = {{0, 0, 0}, 1, {8, 8, 5}}, .supersample = 2, .samples = VX_SAMPLES_FACES};
     const vx_method methods[3] = {VX_METHOD_AUTO, VX_METHOD_PEEL, VX_METHOD_SLICE};
     const char *expect[3] = {"scan", "peel", "slice"};
     vx_bitgrid b;
@@ -723,8 +724,10 @@ static void test_dispatcher_routes(void **state)
         if (rc) fprintf(stderr, "case %zu: %s: %s\n", i, err.code, err.message);
         assert_int_equal(rc, 0);
         assert_string_equal(st.method, cases[i].ran);
-        if (d.fill == VX_FILL_SOLID) assert_int_equal(st.voxels_inside, 512);
-        else assert_true(st.voxels_inside > 0);
+        if (d.fill == VX_FILL_SOLID)
+            assert_int_equal(st.voxels_inside, 512);
+        else
+            assert_true(st.voxels_inside > 0);
         vx_bitgrid_free(&b);
     }
     /* no supersampling with scan */
@@ -845,7 +848,8 @@ static void test_diag(void **state)
     vx_mesh_free(m);
 }
 
-#define BOTH(f) cmocka_unit_test_prestate(f, (void *)&peel), cmocka_unit_test_prestate(f, (void *)&scan)
+#define BOTH(f)                                                                                    \
+    cmocka_unit_test_prestate(f, (void *)&peel), cmocka_unit_test_prestate(f, (void *)&scan)
 
 int main(void)
 {

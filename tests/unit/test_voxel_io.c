@@ -308,7 +308,8 @@ static void test_params(void **st)
     assert_string_equal(
         s,
         "{\"resolution\":256,\"voxel_size\":null,\"grid\":null,\"padding\":0,\"method\":\"auto\","
-        "\"inside\":\"nonzero\",\"fill\":\"solid\",\"supersample\":1,\"samples\":\"cube\",\"threshold\":4,"
+        "\"inside\":\"nonzero\",\"fill\":\"solid\",\"supersample\":1,\"samples\":\"cube\","
+        "\"threshold\":4,"
         "\"format\":\"vdb\"}");
     /* normalised params parse to themselves */
     cJSON *again = vx_kind_parse(&vx_kind_voxelize, o, NULL, &err);
