@@ -72,6 +72,10 @@ int vx_gl_check(vx_gl *gl, const char *where, vx_err *err);
 GLuint vx_gl_program(vx_gl *gl, const char *vs, const char *fs, vx_err *err);
 GLuint vx_gl_compute_program(vx_gl *gl, const char *cs, vx_err *err);
 
+/* A new vertex array whose attribute 0 is the vec3 float positions of vbo
+ * (tightly packed), with ibo as its element buffer (0 = none). GL thread. */
+GLuint vx_gl_position_vao(GLuint vbo, GLuint ibo);
+
 /* The embedded text of shaders/NAME, or NULL. Any thread. */
 const char *vx_shader_source(const char *name);
 

@@ -199,3 +199,15 @@ void vx_gl_programs_clear(vx_gl *gl)
     }
     *n = 0;
 }
+
+GLuint vx_gl_position_vao(GLuint vbo, GLuint ibo)
+{
+    GLuint vao = 0;
+    glCreateVertexArrays(1, &vao);
+    glVertexArrayVertexBuffer(vao, 0, vbo, 0, 3 * sizeof(float));
+    glVertexArrayAttribFormat(vao, 0, 3, GL_FLOAT, GL_FALSE, 0);
+    glVertexArrayAttribBinding(vao, 0, 0);
+    glEnableVertexArrayAttrib(vao, 0);
+    if (ibo) glVertexArrayElementBuffer(vao, ibo);
+    return vao;
+}

@@ -136,12 +136,7 @@ static int upload(vx_gl *gl, const vx_mesh *m, const vx_preview_params *p, objs 
     glNamedBufferStorage(o->ibo, ibytes, m->tri, 0);
     if (vx_gl_check(gl, "preview.index_buffer", err)) return -1;
 
-    glCreateVertexArrays(1, &o->vao);
-    glVertexArrayVertexBuffer(o->vao, 0, o->vbo, 0, 3 * sizeof(float));
-    glVertexArrayAttribFormat(o->vao, 0, 3, GL_FLOAT, GL_FALSE, 0);
-    glVertexArrayAttribBinding(o->vao, 0, 0);
-    glEnableVertexArrayAttrib(o->vao, 0);
-    glVertexArrayElementBuffer(o->vao, o->ibo);
+    o->vao = vx_gl_position_vao(o->vbo, o->ibo);
     return vx_gl_check(gl, "preview.vertex_array", err);
 }
 

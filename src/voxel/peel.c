@@ -171,12 +171,7 @@ int vx_peel_upload(peel_ctx *c)
                          GL_DYNAMIC_STORAGE_BIT);
     if (m->ntris)
         glNamedBufferSubData(o->ibo, 0, (GLsizeiptr)(m->ntris * 3 * sizeof(uint32_t)), m->tri);
-    glCreateVertexArrays(1, &o->vao);
-    glVertexArrayVertexBuffer(o->vao, 0, o->vbo, 0, 3 * sizeof(float));
-    glVertexArrayAttribFormat(o->vao, 0, 3, GL_FLOAT, GL_FALSE, 0);
-    glVertexArrayAttribBinding(o->vao, 0, 0);
-    glEnableVertexArrayAttrib(o->vao, 0);
-    glVertexArrayElementBuffer(o->vao, o->ibo);
+    o->vao = vx_gl_position_vao(o->vbo, o->ibo);
     glCreateQueries(GL_ANY_SAMPLES_PASSED, 1, &o->query);
     return vx_gl_check(c->gl, "peel.index_buffer", c->err);
 }

@@ -410,11 +410,7 @@ static int upload(vx_gl *gl, const vx_mesh *m, const vx_grid *g, const plan *p, 
 
     if (p->incremental && upload_slabs(gl, m, g, p, o, slab_start, err)) goto done;
 
-    glCreateVertexArrays(1, &o->vao);
-    glVertexArrayVertexBuffer(o->vao, 0, o->vbo, 0, 3 * sizeof(float));
-    glVertexArrayAttribFormat(o->vao, 0, 3, GL_FLOAT, GL_FALSE, 0);
-    glVertexArrayAttribBinding(o->vao, 0, 0);
-    glEnableVertexArrayAttrib(o->vao, 0);
+    o->vao = vx_gl_position_vao(o->vbo, 0);
     rc = vx_gl_check(gl, "slice.vertex_array", err);
 done:
     free(pos);
