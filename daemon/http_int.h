@@ -80,6 +80,8 @@ int vx_resp_text(struct MHD_Connection *c, req *r, unsigned status, char *text, 
 /* Answers a JSON document (owned). */
 int vx_resp_json(struct MHD_Connection *c, req *r, unsigned status, cJSON *doc, const char *h1,
                  const char *v1);
+/* Answers 200 {"items": items (owned), "next": next or null}: a list page. */
+int vx_resp_page(struct MHD_Connection *c, req *r, cJSON *items, const char *next);
 /* Answers e as {"error":{"code","message"}} through vx_resp_answer_of. */
 int vx_resp_err(struct MHD_Connection *c, req *r, const vx_err *e);
 /* Answers an error made here: vx_err_set + vx_resp_err. */

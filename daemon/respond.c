@@ -60,6 +60,17 @@ int vx_resp_json(struct MHD_Connection *c, req *r, unsigned status, cJSON *doc, 
     return vx_resp_text(c, r, status, text, "application/json", h1, v1);
 }
 
+int vx_resp_page(struct MHD_Connection *c, req *r, cJSON *items, const char *next)
+{
+    cJSON *doc = cJSON_CreateObject();
+    cJSON_AddItemToObject(doc, "items", items);
+    if (next[0])
+        cJSON_AddStringToObject(doc, "next", next);
+    else
+        cJSON_AddNullToObject(doc, "next");
+    return vx_resp_json(c, r, 200, doc, NULL, NULL);
+}
+
 vx_resp_answer vx_resp_answer_of(const vx_err *e)
 {
     static const vx_resp_answer by_kind[VX_EKIND_COUNT] = {

@@ -100,13 +100,8 @@ int vx_route_job_list(vx_http *h, struct MHD_Connection *c, req *r)
     const char *after = r->q.has_after ? r->q.after : NULL,
                *state = r->q.has_state ? r->q.state : NULL;
     char next[40];
-    cJSON *doc = cJSON_CreateObject();
-    cJSON_AddItemToObject(doc, "items", vx_jobs_list(h->d.jobs, after, limit, state, next));
-    if (next[0])
-        cJSON_AddStringToObject(doc, "next", next);
-    else
-        cJSON_AddNullToObject(doc, "next");
-    return vx_resp_json(c, r, 200, doc, NULL, NULL);
+    cJSON *items = vx_jobs_list(h->d.jobs, after, limit, state, next);
+    return vx_resp_page(c, r, items, next);
 }
 
 int vx_route_job(vx_http *h, struct MHD_Connection *c, req *r)

@@ -14,13 +14,8 @@ int vx_route_mesh_list(vx_http *h, struct MHD_Connection *c, req *r)
     int limit = r->q.limit;
     const char *after = r->q.has_after ? r->q.after : NULL;
     char next[65];
-    cJSON *doc = cJSON_CreateObject();
-    cJSON_AddItemToObject(doc, "items", vx_store_mesh_list(h->d.store, after, limit, next));
-    if (next[0])
-        cJSON_AddStringToObject(doc, "next", next);
-    else
-        cJSON_AddNullToObject(doc, "next");
-    return vx_resp_json(c, r, 200, doc, NULL, NULL);
+    cJSON *items = vx_store_mesh_list(h->d.store, after, limit, next);
+    return vx_resp_page(c, r, items, next);
 }
 
 int vx_route_mesh(vx_http *h, struct MHD_Connection *c, req *r)

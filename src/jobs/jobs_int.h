@@ -59,8 +59,7 @@ struct vx_job_run {
     cJSON *outputs;
     char dir[VX_PATH_MAX]; /* result dir, made at the first output */
     cJSON *paths;          /* strings: every path handed out, valid until the run ends */
-    cJSON *params;         /* the job's params with its blobs back in place */
-    int big_params;        /* some came from blobs */
+    int big_params;        /* its params came from blobs */
     void *typed;           /* the params as the kind's struct, read once per run */
     void *state;
     int on_gl_thread;

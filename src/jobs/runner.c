@@ -36,7 +36,6 @@ static void run_free(vx_job_run *r)
     cJSON_Delete(r->stats);
     cJSON_Delete(r->outputs);
     cJSON_Delete(r->paths);
-    cJSON_Delete(r->params);
     vx_kind_params_free(r->kind, r->typed);
     int big = r->big_params;
     free(r);
@@ -186,8 +185,12 @@ static void run_job_gl(vx_jobs *j, vx_gl *gl, mesh_cache *mc, job *jb)
     }
     r->gl = gl;
     r->on_gl_thread = 1;
-    r->params = inline_params(j, jb->kind, jb->params, &r->big_params, &err);
-    if (r->params) r->typed = vx_kind_read(jb->kind, r->params, &j->desc.limits, &err);
+    /* The params JSON (with its blobs back in place: 2 MB of frames are
+     * 14 MB of cJSON) lives only until the kind's struct is read. */
+    cJSON *params = inline_params(j, jb->kind, jb->params, &r->big_params, &err);
+    if (params) r->typed = vx_kind_read(jb->kind, params, &j->desc.limits, &err);
+    cJSON_Delete(params);
+    if (r->big_params) malloc_trim(0);
     const vx_mesh *m = r->typed ? load_mesh(j, mc, jb->mesh, &err) : NULL;
     int ok = m != NULL;
     for (int attempt = 0; ok; attempt++) {
