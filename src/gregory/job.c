@@ -285,6 +285,7 @@ typedef struct builder {
     vx_gregory_topo *topo;  /* interpolate */
     vx_gregory_cc_plan *cc; /* approximate-cc */
     vx_gpatch_set *set;
+    int fd; /* the child's memfd of every frame's patches (construct_all), or -1 */
 } builder;
 
 static int construct(builder *b, const double *pos, vx_err *err)
@@ -336,14 +337,18 @@ static int read_all(int fd, off_t off, void *p, size_t n, vx_err *err)
     return 0;
 }
 
-/* A job of one frame needs only the patch set, not the tables that
- * deformation frames reuse: it is built in a child process (util/child.h),
- * killed at the time limit (OpenSubdiv's patch table for approximate-cc is
- * one call of seconds on big meshes), and comes back through a memfd:
- * npatches as the answer, then cp, corner_key and face. */
+/* The patch sets are built in a child process (util/child.h), killed at the
+ * time limit: OpenSubdiv's patch table for approximate-cc is one call of
+ * seconds on big meshes, and so are the topology tables of interpolate. The
+ * child builds the tables once and evaluates every frame with them; the
+ * sets come back through a memfd: npatches as the answer, then corner_key
+ * and face (the same for every frame), then cp of frame 0, 1, ... */
 typedef struct build_work {
     const vx_mesh *mesh;
     int construction, fd;
+    size_t nframes;
+    const double *const *pos; /* per frame */
+    uint64_t max_bytes;       /* the memfd's budget (the job memory limit), 0 = none */
 } build_work;
 
 static int build_child(void *ud, void *out, size_t out_size, vx_err *err)
@@ -351,13 +356,28 @@ static int build_child(void *ud, void *out, size_t out_size, vx_err *err)
     const build_work *w = ud;
     (void)out_size;
     builder b = {.mesh = w->mesh, .construction = w->construction};
-    int rc = construct(&b, w->mesh->pos, err);
-    if (rc == 0) {
+    int rc = 0;
+    for (size_t k = 0; k < w->nframes && rc == 0; k++) {
+        rc = construct(&b, w->pos[k], err);
+        if (rc) break;
         const vx_gpatch_set *set = b.set;
-        *(uint64_t *)out = set->npatches;
-        if (vx_write_all(w->fd, set->cp, set->npatches * VX_GPATCH_POINTS * 3 * sizeof *set->cp) ||
-            vx_write_all(w->fd, set->corner_key, set->npatches * 4 * sizeof *set->corner_key) ||
-            vx_write_all(w->fd, set->face, set->npatches * sizeof *set->face))
+        size_t cpb = set->npatches * VX_GPATCH_POINTS * 3 * sizeof *set->cp;
+        if (k == 0) {
+            *(uint64_t *)out = set->npatches;
+            uint64_t bytes = (uint64_t)w->nframes * cpb;
+            if (w->max_bytes && bytes > w->max_bytes) {
+                rc = vx_err_set(err, VX_ETOOBIG, "job_memory_limit",
+                                "%zu frames of %zu patches need about %llu bytes of patches, over "
+                                "the job memory limit of %llu",
+                                w->nframes, set->npatches, (unsigned long long)bytes,
+                                (unsigned long long)w->max_bytes);
+                break;
+            }
+            if (vx_write_all(w->fd, set->corner_key, set->npatches * 4 * sizeof *set->corner_key) ||
+                vx_write_all(w->fd, set->face, set->npatches * sizeof *set->face))
+                rc = vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for the patch set");
+        }
+        if (rc == 0 && vx_write_all(w->fd, set->cp, cpb))
             rc = vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for the patch set");
     }
     vx_gpatch_set_free(b.set);
@@ -368,30 +388,48 @@ static int build_child(void *ud, void *out, size_t out_size, vx_err *err)
 
 static int stop_hook(void *ud, vx_err *err);
 
-static int construct_once(vx_job_run *r, builder *b, vx_err *err)
+/* Frame k's control points from the child's memfd into b->set. */
+static int load_frame(builder *b, size_t k, vx_err *err)
 {
-    if (b->mesh->npatches > 0) return construct(b, b->mesh->pos, err); /* Bézier: trivial */
+    vx_gpatch_set *set = b->set;
+    size_t cpb = set->npatches * VX_GPATCH_POINTS * 3 * sizeof *set->cp;
+    off_t off =
+        (off_t)(set->npatches * (4 * sizeof *set->corner_key + sizeof *set->face) + k * cpb);
+    if (read_all(b->fd, off, set->cp, cpb, err) == 0) return 0;
+    if (!err || err->kind == VX_EOK)
+        vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for the patch set");
+    return -1;
+}
+
+/* Builds the patch sets of all nframes frames (positions pos[k]) in a child
+ * and loads frame 0's into b->set; b->fd keeps the others for load_frame. */
+static int construct_all(vx_job_run *r, builder *b, const double *const *pos, size_t nframes,
+                         vx_err *err)
+{
+    if (b->mesh->npatches > 0) return construct(b, pos[0], err); /* Bézier: trivial */
     int fd = memfd_create("voxeld-gregory", MFD_CLOEXEC);
-    if (fd < 0) return construct(b, b->mesh->pos, err);
-    build_work w = {b->mesh, b->construction, fd};
+    if (fd < 0) return construct(b, pos[0], err);
+    build_work w = {b->mesh, b->construction, fd, nframes, pos, vx_run_limits(r)->max_job_memory};
     uint64_t np = 0;
     int rc = vx_child_call(build_child, &w, &np, sizeof np, stop_hook, r, ENCODE_POLL_MS, err);
     if (rc == 0) {
         vx_gpatch_set *set = vx_gpatch_set_new((size_t)np);
-        size_t cpb = (size_t)np * VX_GPATCH_POINTS * 3 * sizeof *set->cp,
-               keyb = (size_t)np * 4 * sizeof *set->corner_key;
+        size_t keyb = (size_t)np * 4 * sizeof *set->corner_key;
         vx_err_clear(err);
-        if (!set || read_all(fd, 0, set->cp, cpb, err) ||
-            read_all(fd, (off_t)cpb, set->corner_key, keyb, err) ||
-            read_all(fd, (off_t)(cpb + keyb), set->face, (size_t)np * sizeof *set->face, err)) {
+        if (!set || read_all(fd, 0, set->corner_key, keyb, err) ||
+            read_all(fd, (off_t)keyb, set->face, (size_t)np * sizeof *set->face, err)) {
             vx_gpatch_set_free(set);
             if (!err || err->kind == VX_EOK)
                 vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for the patch set");
             rc = -1;
         } else {
             b->set = set;
+            b->fd = fd;
+            rc = load_frame(b, 0, err);
+            if (rc == 0) return 0;
         }
     }
+    b->fd = -1;
     close(fd);
     return rc;
 }
@@ -434,6 +472,41 @@ static const double *frame_positions(vx_job_run *r, const vx_mesh *mesh, const g
         return NULL;
     }
     return g->pos + (k - 1) * nv * 3;
+}
+
+/* The positions of every frame into pos[0 .. nframes-1]: the mesh's, the
+ * params' and copies of the frame meshes' (held in *copies, one block). */
+static int gather_positions(vx_job_run *r, const vx_mesh *mesh, const gparams *p, size_t nframes,
+                            const double **pos, double **copies, vx_err *err)
+{
+    pos[0] = mesh->pos;
+    *copies = NULL;
+    size_t per = 3 * mesh->nverts;
+    if (p->frames.ids) {
+        uint64_t bytes = (uint64_t)(nframes - 1) * per * sizeof **copies;
+        uint64_t lim = vx_run_limits(r)->max_job_memory;
+        if (lim && bytes > lim)
+            return vx_err_set(err, VX_ETOOBIG, "job_memory_limit",
+                              "%zu frames of %zu vertices need about %llu bytes, over the job "
+                              "memory limit of %llu",
+                              nframes, mesh->nverts, (unsigned long long)bytes,
+                              (unsigned long long)lim);
+        *copies = malloc(bytes + 1);
+        if (!*copies) return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for frames");
+    }
+    for (size_t k = 1; k < nframes; k++) {
+        vx_mesh *loaded = NULL;
+        const double *q = frame_positions(r, mesh, p, k, &loaded, err);
+        if (!q) return -1;
+        if (loaded) {
+            memcpy(*copies + (k - 1) * per, q, per * sizeof *q);
+            vx_mesh_free(loaded);
+            q = *copies + (k - 1) * per;
+        }
+        pos[k] = q;
+        if (vx_run_progress(r, 0, err)) return -1;
+    }
+    return 0;
 }
 
 typedef struct distance_work {
@@ -490,23 +563,16 @@ typedef struct tess_times {
     double gpu_ms, first_tess_ms;
 } tess_times;
 
-/* Tessellates every frame on the GPU and gathers its positions and normals
- * into s; appends each frame's time to frame_ms when it is not NULL. */
-static int tessellate_frames(vx_job_run *r, const vx_mesh *mesh, const gparams *p, builder *b,
-                             greg_state *s, vx_gtess *tess, float *grid, const double origin[3],
-                             cJSON *frame_ms, tess_times *t, vx_err *err)
+/* Tessellates every frame (positions pos[k]) on the GPU and gathers its
+ * positions and normals into s; appends each frame's time to frame_ms when it is not NULL. */
+static int tessellate_frames(vx_job_run *r, builder *b, const double *const *pos, greg_state *s,
+                             vx_gtess *tess, float *grid, const double origin[3], cJSON *frame_ms,
+                             tess_times *t, vx_err *err)
 {
     size_t nframes = s->nframes;
     for (size_t k = 0; k < nframes; k++) {
         double f0 = vx_mono_ms();
-        if (k > 0) {
-            vx_mesh *loaded = NULL;
-            const double *pos = frame_positions(r, mesh, p, k, &loaded, err);
-            if (!pos) return -1;
-            int bad = construct(b, pos, err);
-            vx_mesh_free(loaded);
-            if (bad) return -1;
-        }
+        if (k > 0 && (b->fd >= 0 ? load_frame(b, k, err) : construct(b, pos[k], err))) return -1;
         double ms;
         if (vx_gtess_run(tess, b->set, origin, grid, &ms, err)) return -1;
         t->gpu_ms += ms;
@@ -562,14 +628,18 @@ static int run_gl(vx_job_run *r, const vx_mesh *mesh, const gparams *pp, void **
     const gparams p = *pp;
     const vx_limits *lim = vx_run_limits(r);
     size_t nframes = 1 + (size_t)p.frames.n;
-    builder b = {.mesh = mesh, .construction = p.construction};
+    builder b = {.mesh = mesh, .construction = p.construction, .fd = -1};
+    const double *pos[VX_GREGORY_MAX_FRAMES + 1];
+    double *copies = NULL;
     vx_gtess *tess = NULL;
     uint32_t *ndiv = NULL;
     float *grid = NULL;
     int rc = -1;
     cJSON *frame_ms = cJSON_CreateArray();
     double t0 = vx_mono_ms();
-    if ((nframes == 1 ? construct_once(r, &b, err) : construct(&b, mesh->pos, err))) goto done;
+    if (gather_positions(r, mesh, &p, nframes, pos, &copies, err) ||
+        construct_all(r, &b, pos, nframes, err))
+        goto done;
     double build_ms = vx_mono_ms() - t0;
     /* How far approximate-cc is from the true limit surface (frame 0). */
     double cc_distance = -1;
@@ -609,7 +679,7 @@ static int run_gl(vx_job_run *r, const vx_mesh *mesh, const gparams *pp, void **
     tess_times t = {0, 0};
     tess = vx_gtess_new(vx_run_gl(r), s->layout, err);
     if (!tess) goto done;
-    if (tessellate_frames(r, mesh, &p, &b, s, tess, grid, origin, frame_ms, &t, err)) goto done;
+    if (tessellate_frames(r, &b, pos, s, tess, grid, origin, frame_ms, &t, err)) goto done;
     add_stats(r, mesh, &p, &b, ndiv, s, gv, build_ms, cc_distance, &t, &frame_ms);
     rc = 0;
 done:
@@ -620,6 +690,8 @@ done:
     vx_gpatch_set_free(b.set);
     vx_gregory_topo_free(b.topo);
     vx_gregory_cc_plan_free(b.cc);
+    if (b.fd >= 0) close(b.fd);
+    free(copies);
     return rc;
 }
 
