@@ -31,15 +31,19 @@ int vx_route_livez(vx_http *h, struct MHD_Connection *c, req *r)
 int vx_route_readyz(vx_http *h, struct MHD_Connection *c, req *r)
 {
     int gl = vx_jobs_ready(h->d.jobs);
-    int q = vx_jobs_queue_depth(h->d.jobs) < vx_jobs_queue_capacity(h->d.jobs);
+    size_t depth = vx_jobs_queue_depth(h->d.jobs), cap = vx_jobs_queue_capacity(h->d.jobs);
     int dd = vx_store_writable(h->d.store);
     int space = vx_route_disk_ok(h, NULL);
-    int ok = gl && q && dd && space && !h->stopping;
+    /* A full queue is backpressure (429 + Retry-After), not unreadiness. */
+    int ok = gl && dd && space && !h->stopping;
     cJSON *doc = cJSON_CreateObject();
     cJSON_AddStringToObject(doc, "status", ok ? "ready" : "not_ready");
+    cJSON *q = cJSON_AddObjectToObject(doc, "queue");
+    cJSON_AddNumberToObject(q, "depth", (double)depth);
+    cJSON_AddNumberToObject(q, "capacity", (double)cap);
+    cJSON_AddBoolToObject(q, "full", depth >= cap);
     cJSON *chk = cJSON_AddObjectToObject(doc, "checks");
     cJSON_AddBoolToObject(chk, "gl", gl);
-    cJSON_AddBoolToObject(chk, "queue", q);
     cJSON_AddBoolToObject(chk, "data_dir", dd);
     cJSON_AddBoolToObject(chk, "disk_space", space);
     return vx_resp_json(c, r, ok ? 200 : 503, doc, NULL, NULL);

@@ -165,7 +165,8 @@ CASES = [
                           content_type="application/json"), None, False),
     ("readyz 503", dict(method="GET", path="/readyz", status=503,
                         content_type="application/json"),
-     {"status": "not_ready", "checks": {"gl": False, "queue": True, "data_dir": True, "disk_space": True}}, False),
+     {"status": "not_ready", "queue": {"depth": 0, "capacity": 64, "full": False},
+      "checks": {"gl": False, "data_dir": True, "disk_space": True}}, False),
     ("accepted preview request", *job_post(202, {"mesh": MESH, "kind": "preview",
                                                  "params": {"width": 64}}, JOB_OK, JOB_LOC),
      False),
@@ -187,7 +188,8 @@ CASES = [
      err("mesh_not_found"), True),
     ("readyz 200 with a failed check", dict(method="GET", path="/readyz", status=200,
                                             content_type="application/json"),
-     {"status": "ready", "checks": {"gl": False, "queue": True, "data_dir": True, "disk_space": True}}, True),
+     {"status": "ready", "queue": {"depth": 0, "capacity": 64, "full": False},
+      "checks": {"gl": False, "data_dir": True, "disk_space": True}}, True),
 ]
 
 passed = failed = 0
