@@ -1,0 +1,120 @@
+// Drives the viewer (viewer/, served at /) in Debian's chromium through
+// playwright-core (tools/viewer/package-lock.json): the token field, an
+// upload through the file control and one by a synthetic drop, a voxelize
+// and a gregory job from the generated form, and each 3D result read back
+// from the canvas (pixels that differ from the background), plus the /docs
+// page. Run by tests/integration/test_viewer.sh:
+//   node viewer.cjs BASE TOKEN SPOT_OBJ CONTROL_OBJ OUT_DIR
+// Prints one line per check; exits 1 when one fails.
+const fs = require('fs');
+const path = require('path');
+const { chromium } = require('playwright-core');
+
+const [base, token, spotObj, controlObj, outDir] = process.argv.slice(2);
+const chromiumPath = process.env.VX_CHROMIUM || '/usr/bin/chromium';
+let failed = 0;
+function check(what, ok, detail = '') {
+  console.log(`${ok ? 'ok' : 'FAIL'}: ${what}${detail ? ` (${detail})` : ''}`);
+  if (!ok) failed++;
+}
+
+// Pixels of the 3D view that are not its background (viewer/view3d.js
+// BACKGROUND 0x20242a), and the total.
+async function drawnPixels(page) {
+  return page.evaluate(() => {
+    const c = document.getElementById('view3d');
+    const o = document.createElement('canvas');
+    o.width = c.width;
+    o.height = c.height;
+    const g = o.getContext('2d');
+    g.drawImage(c, 0, 0);
+    const d = g.getImageData(0, 0, o.width, o.height).data;
+    let n = 0;
+    for (let i = 0; i < d.length; i += 4)
+      if (Math.abs(d[i] - 0x20) + Math.abs(d[i + 1] - 0x24) + Math.abs(d[i + 2] - 0x2a) > 30) n++;
+    return { n, total: o.width * o.height };
+  });
+}
+
+// Chooses kind, sets the given form fields, submits, and waits until the
+// page shows the result (body[data-result-shown]) or the job failed.
+async function runJob(page, kind, fields, shown) {
+  await page.selectOption('#kind', kind);
+  for (const [name, value] of Object.entries(fields)) {
+    const f = page.locator(`#params [data-field="${name}"] :is(input, select, textarea)`);
+    if ((await f.evaluate(e => e.tagName)) === 'SELECT') await f.selectOption(JSON.stringify(value));
+    else await f.fill(String(value));
+  }
+  await page.click('#submit');
+  await page.waitForFunction(
+    want => document.body.dataset.resultShown === want || ['failed', 'canceled'].includes(document.body.dataset.jobState),
+    shown, { timeout: 60000 });
+  const state = await page.textContent('#state');
+  check(`${kind}: the job succeeded`, /succeeded/.test(state), `${state} ${await page.textContent('#job-error')}`);
+  const params = JSON.parse(await page.textContent('#job-json')).params;
+  for (const [name, value] of Object.entries(fields))
+    check(`${kind}: params.${name} from the form`, params[name] === value, JSON.stringify(params[name]));
+}
+
+(async () => {
+  fs.mkdirSync(outDir, { recursive: true });
+  const browser = await chromium.launch({
+    executablePath: chromiumPath,
+    // WebGL without a GPU: ANGLE on SwiftShader (chromium's software Vulkan).
+    args: ['--no-sandbox', '--use-angle=swiftshader', '--enable-unsafe-swiftshader'],
+  });
+  const page = await browser.newPage({ viewport: { width: 1280, height: 800 } });
+  const errors = [];
+  page.on('pageerror', e => errors.push(e.message));
+  await page.goto(`${base}/`);
+  await page.waitForFunction(() => document.body.dataset.ready === '1', null, { timeout: 20000 });
+  check('the form lists every kind of x-kinds', (await page.locator('#kind option').count()) >= 5);
+  if (token) {
+    check('without a token the page asks for one', /token/.test(await page.textContent('#notice')));
+    await page.fill('#token', token);
+    await page.dispatchEvent('#token', 'change');
+    await page.waitForFunction(() => document.getElementById('notice').hidden, null, { timeout: 10000 });
+  }
+
+  // Upload by the file control.
+  await page.setInputFiles('#file', spotObj);
+  const spotName = path.basename(spotObj);
+  await page.waitForFunction(n => document.getElementById('upload-status').textContent.startsWith(`${n}: mesh`), spotName, { timeout: 20000 });
+  check('upload by the file control', (await page.locator('#meshes li').count()) === 1);
+  await runJob(page, 'voxelize', { resolution: 32, format: 'binvox' }, 'voxels');
+  let px = await drawnPixels(page);
+  check('voxelize: the 3D view draws the grid', px.n > 0.02 * px.total && px.n < px.total, `${px.n} of ${px.total} pixels`);
+  await page.locator('#right').screenshot({ path: path.join(outDir, 'viewer-voxelize.png') });
+
+  // Upload by a synthetic drop of the control cage.
+  const text = fs.readFileSync(controlObj, 'utf8');
+  const dt = await page.evaluateHandle(([t, n]) => {
+    const d = new DataTransfer();
+    d.items.add(new File([t], n, { type: '' }));
+    return d;
+  }, [text, path.basename(controlObj)]);
+  await page.dispatchEvent('#drop', 'drop', { dataTransfer: dt });
+  await page.waitForFunction(n => document.getElementById('upload-status').textContent.startsWith(`${n}: mesh`), path.basename(controlObj), { timeout: 20000 });
+  check('upload by drag and drop', (await page.locator('#meshes li').count()) === 2);
+  await runJob(page, 'gregory', { divisions: 3 }, 'mesh');
+  px = await drawnPixels(page);
+  check('gregory: the 3D view draws the mesh', px.n > 0.02 * px.total && px.n < px.total, `${px.n} of ${px.total} pixels`);
+  await page.screenshot({ path: path.join(outDir, 'viewer.png') });
+  await page.locator('#right').screenshot({ path: path.join(outDir, 'viewer-gregory.png') });
+  await page.click('#refresh');
+  await page.waitForFunction(() => document.querySelectorAll('#jobs li').length === 2, null, { timeout: 10000 });
+  const first = await page.textContent('#jobs li:first-child b');
+  check('jobs are listed newest first', first === 'gregory', first);
+
+  // The reference page.
+  await page.goto(`${base}/docs`);
+  await page.waitForFunction(() => document.body.dataset.ready === '1', null, { timeout: 20000 });
+  const ops = await page.locator('.doc .op h3 .method').count();
+  check('/docs renders every operation', ops >= 10, `${ops} operations`);
+  check('no script errors', errors.length === 0, errors.join('; '));
+  await browser.close();
+  process.exit(failed ? 1 : 0);
+})().catch(e => {
+  console.log(`FAIL: ${e.message}`);
+  process.exit(1);
+});
