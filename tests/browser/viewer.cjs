@@ -1,9 +1,10 @@
 // Drives the viewer (viewer/, served at /) in Debian's chromium through
 // playwright-core (tools/viewer/package-lock.json): the token field, an
 // upload through the file control and one by a synthetic drop, a voxelize
-// and a gregory job from the generated form, and each 3D result read back
-// from the canvas (pixels that differ from the background), plus the /docs
-// page. Run by tests/integration/test_viewer.sh:
+// and a gregory job from the generated form, each 3D result read back from
+// the canvas (pixels that differ from the background), live progress from
+// an event stream, a render turntable playing, and the /docs page. Run by
+// tests/integration/test_viewer.sh:
 //   node viewer.cjs BASE TOKEN SPOT_OBJ CONTROL_OBJ OUT_DIR
 // Prints one line per check; exits 1 when one fails.
 const fs = require('fs');
@@ -43,7 +44,7 @@ async function runJob(page, kind, fields, shown) {
   for (const [name, value] of Object.entries(fields)) {
     const f = page.locator(`#params [data-field="${name}"] :is(input, select, textarea)`);
     if ((await f.evaluate(e => e.tagName)) === 'SELECT') await f.selectOption(JSON.stringify(value));
-    else await f.fill(String(value));
+    else await f.fill(typeof value === 'object' ? JSON.stringify(value) : String(value));
   }
   await page.click('#submit');
   await page.waitForFunction(
@@ -52,8 +53,10 @@ async function runJob(page, kind, fields, shown) {
   const state = await page.textContent('#state');
   check(`${kind}: the job succeeded`, /succeeded/.test(state), `${state} ${await page.textContent('#job-error')}`);
   const params = JSON.parse(await page.textContent('#job-json')).params;
-  for (const [name, value] of Object.entries(fields))
-    check(`${kind}: params.${name} from the form`, params[name] === value, JSON.stringify(params[name]));
+  for (const [name, value] of Object.entries(fields)) {
+    const got = typeof value === 'object' ? Object.fromEntries(Object.keys(value).map(k => [k, params[name]?.[k]])) : params[name];
+    check(`${kind}: params.${name} from the form`, JSON.stringify(got) === JSON.stringify(value), JSON.stringify(params[name]));
+  }
 }
 
 (async () => {
@@ -96,7 +99,28 @@ async function runJob(page, kind, fields, shown) {
   await page.dispatchEvent('#drop', 'drop', { dataTransfer: dt });
   await page.waitForFunction(n => document.getElementById('upload-status').textContent.startsWith(`${n}: mesh`), path.basename(controlObj), { timeout: 20000 });
   check('upload by drag and drop', (await page.locator('#meshes li').count()) === 2);
+  // Live progress by Server-Sent Events: the server's own stream where it
+  // has one (passed through), else one made of the job's real states (what
+  // GET /v1/jobs/{id}/events sends: "event: job" + "data: <Job>"), so that
+  // the page's stream reader is what follows this job, not polling.
+  let streamed = 0;
+  const polls = [];
+  const onRequest = r => { if (/\/v1\/jobs\/[0-9a-f]+\?wait=/.test(r.url())) polls.push(r.url()); };
+  page.on('request', onRequest);
+  await page.route(/\/v1\/jobs\/[0-9a-f]+\/events$/, async route => {
+    const url = route.request().url(), jid = url.match(/jobs\/([0-9a-f]+)\/events/)[1];
+    const real = await route.fetch();
+    if (real.status() !== 404) return route.fulfill({ response: real });
+    const done = await (await route.fetch({ url: `${base}/v1/jobs/${jid}?wait=50` })).json();
+    const ev = j => `event: job\ndata: ${JSON.stringify(j)}\n\n`;
+    streamed++;
+    return route.fulfill({ status: 200, headers: { 'Content-Type': 'text/event-stream' },
+      body: `: voxeld\n\n${ev({ ...done, state: 'running', progress: 0.5, finished: null, outputs: {} })}${ev(done)}` });
+  });
   await runJob(page, 'gregory', { divisions: 3 }, 'mesh');
+  check('gregory: followed by its event stream, not by polling', streamed === 1 && polls.length === 0, `${streamed} streams, ${polls.length} polls`);
+  page.off('request', onRequest);
+  await page.unroute(/\/v1\/jobs\/[0-9a-f]+\/events$/);
   px = await drawnPixels(page);
   check('gregory: the 3D view draws the mesh', px.n > 0.02 * px.total && px.n < px.total, `${px.n} of ${px.total} pixels`);
   await page.screenshot({ path: path.join(outDir, 'viewer.png') });
@@ -105,6 +129,17 @@ async function runJob(page, kind, fields, shown) {
   await page.waitForFunction(() => document.querySelectorAll('#jobs li').length === 2, null, { timeout: 10000 });
   const first = await page.textContent('#jobs li:first-child b');
   check('jobs are listed newest first', first === 'gregory', first);
+
+  // A render turntable on spot: its frames play in turn.
+  await page.selectOption('#mesh', { label: await page.locator('#mesh option', { hasText: '5856 tris' }).textContent() });
+  await runJob(page, 'render', { N: 16, width: 64, height: 48, frames: 3, camera: { type: 'orbit' } }, 'image');
+  const srcs = new Set();
+  for (let i = 0; i < 12; i++) {
+    srcs.add(await page.getAttribute('#images img', 'src'));
+    await page.waitForTimeout(40);
+  }
+  check('render: the turntable plays its frames', srcs.size >= 2, `${srcs.size} frames seen`);
+  await page.locator('#right').screenshot({ path: path.join(outDir, 'viewer-render.png') });
 
   // The reference page.
   await page.goto(`${base}/docs`);
