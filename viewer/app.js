@@ -356,11 +356,32 @@ async function showMesh(job) {
   const v = await get3D();
   $('view-wrap').hidden = false;
   v.resize();
-  const names = Object.keys(job.outputs).filter(n => n === 'mesh' || /^frame_\d+$/.test(n));
-  const data = await fetchOutput(job.outputs.mesh, fmt === 'ply' ? 'buffer' : 'text');
-  const tris = v.showMesh(data, fmt);
-  $('view-note').textContent = `${job.kind}: ${tris} triangles${names.length > 1 ? ` (${names.length - 1} more frames below)` : ''}; drag to orbit, wheel to zoom`;
+  const names = Object.keys(job.outputs).filter(n => n === 'mesh' || /^frame_\d+$/.test(n)).sort();
+  const as = fmt === 'ply' ? 'buffer' : 'text';
+  const tris = v.showMesh(await fetchOutput(job.outputs.mesh, as), fmt);
+  $('view-note').textContent = `${job.kind}: ${tris} triangles; drag to orbit, wheel to zoom`;
   document.body.dataset.resultShown = 'mesh';
+  if (names.length > 1) await playFrames(job, names.slice(0, 65), fmt, as, v);
+}
+
+// Deformation frames (gregory's frame_001, ...): loaded, then played in
+// turn with the camera kept; a button stops and starts them.
+async function playFrames(job, names, fmt, as, v) {
+  const seq = followSeq, objects = [v.object];
+  for (const n of names.slice(1)) {
+    const data = await fetchOutput(job.outputs[n], as);
+    if (seq !== followSeq) return;
+    objects.push(v.parseMesh(data, fmt));
+  }
+  let f = 0;
+  const step = () => { f = (f + 1) % objects.length; v.swap(objects[f]); };
+  const button = Object.assign(document.createElement('button'), { type: 'button', textContent: `pause (${objects.length} frames)` });
+  button.onclick = () => {
+    if (turntable) { clearInterval(turntable); turntable = null; button.textContent = `play (${objects.length} frames)`; }
+    else { turntable = setInterval(step, 1000 / 8); button.textContent = `pause (${objects.length} frames)`; }
+  };
+  $('images').append(button);
+  turntable = setInterval(step, 1000 / 8);
 }
 
 async function showVoxels(job) {

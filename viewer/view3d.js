@@ -41,16 +41,26 @@ export class View3D {
   render() { this.renderer.render(this.scene, this.camera); }
 
   clear() {
-    if (this.object) {
-      this.scene.remove(this.object);
-      this.object.traverse(o => { o.geometry?.dispose(); o.material?.dispose?.(); });
-    }
+    if (this.object) this.scene.remove(this.object);
+    for (const obj of this.owned || []) obj.traverse(o => { o.geometry?.dispose(); o.material?.dispose?.(); });
+    this.owned = [];
     this.object = null;
+    this.render();
+  }
+
+  // Shows object in place of the one shown, keeping the camera (a frame of
+  // the same mesh); show() must have been called with the first one.
+  swap(object) {
+    if (this.object) this.scene.remove(this.object);
+    if (!this.owned.includes(object)) this.owned.push(object);
+    this.object = object;
+    this.scene.add(object);
     this.render();
   }
 
   show(object) {
     this.clear();
+    this.owned = [object];
     this.object = object;
     this.scene.add(object);
     const box = new THREE.Box3().setFromObject(object);
@@ -66,8 +76,15 @@ export class View3D {
     this.render();
   }
 
-  // format: "obj" (text) or "ply" (ArrayBuffer).
+  // format: "obj" (text) or "ply" (ArrayBuffer). Returns the triangles.
   showMesh(data, format) {
+    const object = this.parseMesh(data, format);
+    this.show(object);
+    return countTriangles(object);
+  }
+
+  // A mesh file as a three.js object, not shown.
+  parseMesh(data, format) {
     const material = new THREE.MeshStandardMaterial({ color: 0xc8b48c, roughness: 0.6, metalness: 0.05, side: THREE.DoubleSide });
     let object;
     if (format === 'ply') {
@@ -82,8 +99,7 @@ export class View3D {
         o.material = material;
       });
     }
-    this.show(object);
-    return countTriangles(object);
+    return object;
   }
 
   // grid: {dims: [nx, ny, nz], at(i, j, k) -> bool, origin: [x, y, z], h}.
