@@ -43,5 +43,10 @@ int vx_route_web(vx_http *h, struct MHD_Connection *c, req *r)
     if (fresh) return vx_resp_queue(c, r, 304, resp, 0);
     MHD_add_response_header(resp, MHD_HTTP_HEADER_CONTENT_TYPE, f->ctype);
     MHD_add_response_header(resp, "X-Content-Type-Options", "nosniff");
+    if (!strncmp(f->ctype, "text/html", 9)) /* inline: only the import map */
+        MHD_add_response_header(resp, "Content-Security-Policy",
+                                "default-src 'self'; script-src 'self' 'unsafe-inline'; "
+                                "img-src 'self' blob: data:; object-src 'none'; base-uri 'none'; "
+                                "frame-ancestors 'none'");
     return vx_resp_queue(c, r, 200, resp, f->len);
 }

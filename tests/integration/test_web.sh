@@ -22,6 +22,10 @@ api GET / -H "If-None-Match: \"0000000000000000\", W/$etag"
 expect_status "/ with its ETag in a list" 304
 api GET / -H 'If-None-Match: "0000000000000000"'
 expect_status "/ with another ETag" 200
+csp=$(header Content-Security-Policy)
+has() { [[ "$1" == *"$2"* ]]; }
+check "/ loads from its own origin only ($csp)" has "$csp" "default-src 'self'; script-src 'self' 'unsafe-inline';"
+check "/ is not framed" has "$csp" "frame-ancestors 'none'"
 api HEAD /
 expect_status "HEAD /" 200
 
