@@ -10,6 +10,7 @@
 const fs = require('fs');
 const path = require('path');
 const { chromium } = require('playwright-core');
+const yaml = require('js-yaml');
 
 const [base, token, spotObj, controlObj, outDir] = process.argv.slice(2);
 const chromiumPath = process.env.VX_CHROMIUM || '/usr/bin/chromium';
@@ -71,7 +72,17 @@ async function runJob(page, kind, fields, shown) {
   page.on('pageerror', e => errors.push(e.message));
   await page.goto(`${base}/`);
   await page.waitForFunction(() => document.body.dataset.ready === '1', null, { timeout: 20000 });
-  check('the form lists every kind of x-kinds', (await page.locator('#kind option').count()) >= 5);
+  // One field per property of each kind's params schema in the contract.
+  const spec = yaml.load(await (await fetch(`${base}/openapi.yaml`)).text());
+  const kinds = await page.locator('#kind option').evaluateAll(os => os.map(o => o.value));
+  check('the form lists every kind of x-kinds', JSON.stringify(kinds) === JSON.stringify(Object.keys(spec['x-kinds'])), kinds.join(' '));
+  for (const k of kinds) {
+    await page.selectOption('#kind', k);
+    const fields = await page.locator('#params .field').evaluateAll(fs => fs.map(f => f.dataset.field));
+    const ref = spec['x-kinds'][k].params.$ref.split('/').pop();
+    const want = Object.keys(spec.components.schemas[ref].properties);
+    check(`the ${k} form has a field per params property`, JSON.stringify(fields) === JSON.stringify(want), fields.join(' '));
+  }
   if (token) {
     check('without a token the page asks for one', /token/.test(await page.textContent('#notice')));
     await page.fill('#token', token);
