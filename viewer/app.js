@@ -142,14 +142,16 @@ async function upload(file) {
   } catch (e) { showError(e, 'upload-status'); }
 }
 
+// A file dropped anywhere on the page is uploaded (and the browser does not
+// open it instead); the drop zone lights up while one is dragged over.
 function setupDrop() {
   const drop = $('drop');
-  drop.addEventListener('dragover', e => { e.preventDefault(); drop.classList.add('over'); });
-  drop.addEventListener('dragleave', () => drop.classList.remove('over'));
-  drop.addEventListener('drop', e => {
+  document.addEventListener('dragover', e => { e.preventDefault(); drop.classList.add('over'); });
+  document.addEventListener('dragleave', e => { if (!e.relatedTarget) drop.classList.remove('over'); });
+  document.addEventListener('drop', e => {
     e.preventDefault();
     drop.classList.remove('over');
-    for (const f of e.dataTransfer.files) upload(f);
+    for (const f of e.dataTransfer?.files || []) upload(f);
   });
   $('file').addEventListener('change', e => { for (const f of e.target.files) upload(f); e.target.value = ''; });
 }
