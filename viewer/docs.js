@@ -74,7 +74,7 @@ function operation(spec, path, method, op, shared) {
   for (const [code, r0] of Object.entries(op.responses || {})) {
     const r = deref(spec, r0);
     const types = Object.entries(r.content || {}).map(([t, c]) => `<code>${esc(t)}</code> ${schemaLink(c.schema)}`).join(', ');
-    h += `<tr><td><b>${esc(code)}</b></td><td>${inline(String(r.description || '').split('\n')[0])}</td><td>${types}</td></tr>`;
+    h += `<tr><td><b>${esc(code)}</b></td><td>${inline(String(r.description || '').split(/\n\s*\n/)[0])}</td><td>${types}</td></tr>`;
   }
   return h + '</table></div>';
 }
@@ -103,7 +103,12 @@ async function main() {
   for (const [path, m, op] of ops) h += `<li><a href="#op-${esc(op.operationId || m + path)}"><span class="method">${m}</span> ${esc(path)}</a> ${inline(op.summary || '')}</li>`;
   h += '</ul>';
   for (const [path, m, op, shared] of ops) h += operation(spec, path, m, op, shared);
-  h += '<h2>Schemas</h2>';
+  h += '<h2>Job kinds</h2><table><tr><th>kind</th><th>params</th><th>stats</th><th>outputs</th><th></th></tr>';
+  for (const [k, d] of Object.entries(spec['x-kinds'] || {})) {
+    const outs = (d.outputs || []).map(o => `<code>${esc(o.name)}</code>`).join(', ');
+    h += `<tr><td><code>${esc(k)}</code></td><td>${schemaLink(d.params)}</td><td>${schemaLink(d.stats)}</td><td>${outs}</td><td>${inline(d.summary || '')}</td></tr>`;
+  }
+  h += '</table><h2>Schemas</h2>';
   for (const [name, s] of Object.entries(spec.components?.schemas || {})) {
     h += `<div class="op" id="schema-${esc(name)}"><h3>${esc(name)}</h3>${markdown(s.description)}`;
     h += `<details><summary>schema</summary><pre>${esc(window.yamlDump(s, { lineWidth: 100 }))}</pre></details></div>`;
