@@ -19,7 +19,7 @@ fi
 printf 'viewer-token\n' >"$TMP/token"
 start_daemon --token-file "$TMP/token" || exit 1
 api GET /ui/three.core.min.js
-check "the build embeds three.js (else: npm ci --prefix tools/viewer, then re-run cmake)" test "$STATUS" = 200
+check "the build embeds three.js (else: npm ci --prefix tools/viewer, then build again)" test "$STATUS" = 200
 
 ART=$(dirname "$VOXELD")/test-artifacts
 NODE_PATH=$NPM VX_CHROMIUM=$CHROMIUM timeout 120 node "$VX_SOURCE_DIR/tests/browser/viewer.cjs" \
