@@ -40,15 +40,18 @@ async function apiJSON(path, opts) {
   return body;
 }
 
-// Every page of a list (at most `pages` of 1000), newest first whatever the
-// server's order (?order=desc is asked for; servers that lack it list by id).
+// A list, newest first whatever the server's order: ?order=desc is asked
+// for; a server that lists by id instead (meshes; jobs on servers without
+// order) is read to its end (at most `pages` of 1000) and sorted here.
 async function listAll(path, pages = 10) {
   let items = [], after = null;
   for (let i = 0; i < pages; i++) {
     const q = `limit=1000&order=desc${after ? `&after=${encodeURIComponent(after)}` : ''}`;
     const page = await apiJSON(`${path}?${q}`);
     items = items.concat(page.items);
-    if (!page.next) break;
+    const n = page.items.length;
+    const newestFirst = n > 1 && page.items[0].created > page.items[n - 1].created;
+    if (!page.next || (newestFirst && path === '/v1/jobs')) break;
     after = page.next;
   }
   return items.sort((a, b) => (a.created < b.created ? 1 : a.created > b.created ? -1 : 0));
@@ -98,7 +101,7 @@ async function refreshMeshes() {
 }
 
 async function refreshJobs() {
-  const jobs = (await listAll('/v1/jobs', 2)).slice(0, 200);
+  const jobs = (await listAll('/v1/jobs', 10)).slice(0, 200);
   const ul = $('jobs');
   ul.replaceChildren();
   for (const j of jobs) {
