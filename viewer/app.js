@@ -393,7 +393,19 @@ async function showVoxels(job) {
   const fmt = job.params?.format || 'vdb';
   if (!['binvox', 'raw8', 'raw1'].includes(fmt)) {
     $('view-note').textContent = fmt === 'summary' ? 'format summary: no voxels, only the stats.'
-      : `format ${fmt}: the 3D view reads binvox, raw8 and raw1 (submit with one of them to see the grid).`;
+      : `format ${fmt}: the 3D view reads binvox, raw8 and raw1.`;
+    if (fmt !== 'summary') { // the same job as binvox (its normalised params are valid input)
+      const again = Object.assign(document.createElement('button'), { type: 'button', textContent: 'run it again as binvox to see it' });
+      again.onclick = async () => {
+        try {
+          const j = await apiJSON('/v1/jobs', { method: 'POST', headers: { 'Content-Type': 'application/json' },
+            body: JSON.stringify({ mesh: job.mesh, kind: job.kind, params: { ...job.params, format: 'binvox' } }) });
+          openJob(j.id, j);
+          refreshJobs().catch(() => {});
+        } catch (e) { showError(e, 'view-note'); }
+      };
+      $('images').append(again);
+    }
     return;
   }
   const v = await get3D();
