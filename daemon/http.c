@@ -239,6 +239,11 @@ static int dispatch(vx_http *h, struct MHD_Connection *c, req *r)
     case VX_R_RESULT:
     case VX_R_RESULT_NAME:
         return vx_route_result(h, c, r);
+    case VX_R_WEB_INDEX:
+    case VX_R_WEB_DOCS:
+    case VX_R_WEB_SPEC:
+    case VX_R_WEB_ASSET:
+        return vx_route_web(h, c, r);
     default:
         return vx_resp_fail(c, r, VX_ENOTFOUND, "not_found", "no such route");
     }

@@ -121,4 +121,9 @@ int vx_route_job_resumed(vx_http *h, struct MHD_Connection *c, req *r);
 /* GET /v1/jobs/{id}/result[/{name}]. */
 int vx_route_result(vx_http *h, struct MHD_Connection *c, req *r);
 
+/* ---- routes_web.c: the viewer, /openapi.yaml, /docs (public) ---- */
+/* GET /, /docs, /openapi.yaml, /ui/{name}: a file built into the binary,
+ * with its Content-Type and an ETag (304 on If-None-Match). */
+int vx_route_web(vx_http *h, struct MHD_Connection *c, req *r);
+
 #endif

@@ -26,6 +26,10 @@ static const struct {
     [VX_R_JOB] = {"/v1/jobs/{id}", "GET, HEAD, DELETE"},
     [VX_R_RESULT] = {"/v1/jobs/{id}/result", "GET, HEAD"},
     [VX_R_RESULT_NAME] = {"/v1/jobs/{id}/result/{name}", "GET, HEAD"},
+    [VX_R_WEB_INDEX] = {"/", "GET, HEAD"},
+    [VX_R_WEB_DOCS] = {"/docs", "GET, HEAD"},
+    [VX_R_WEB_SPEC] = {"/openapi.yaml", "GET, HEAD"},
+    [VX_R_WEB_ASSET] = {"/ui/{name}", "GET, HEAD"},
 };
 
 static int is(const char *p, size_t len, const char *lit)
@@ -65,7 +69,15 @@ vx_route vx_req_route(const char *path, size_t len, vx_req_target *t)
         t->route = VX_R_MESHES;
     else if (is(path, len, "/v1/jobs"))
         t->route = VX_R_JOBS;
-    else if (starts(path, len, "/v1/meshes/")) {
+    else if (is(path, len, "/"))
+        t->route = VX_R_WEB_INDEX;
+    else if (is(path, len, "/docs"))
+        t->route = VX_R_WEB_DOCS;
+    else if (is(path, len, "/openapi.yaml"))
+        t->route = VX_R_WEB_SPEC;
+    else if (starts(path, len, "/ui/")) {
+        if (segment(path + 4, len - 4, t->name)) t->route = VX_R_WEB_ASSET;
+    } else if (starts(path, len, "/v1/meshes/")) {
         if (segment(path + 11, len - 11, t->id)) t->route = VX_R_MESH;
     } else if (starts(path, len, "/v1/jobs/")) {
         const char *rest = path + 9, *end = path + len;
@@ -80,7 +92,7 @@ vx_route vx_req_route(const char *path, size_t len, vx_req_target *t)
                  segment(slash + 8, (size_t)(end - slash - 8), t->name))
             t->route = VX_R_RESULT_NAME;
     }
-    if (t->route == VX_R_UNKNOWN) t->id[0] = 0;
+    if (t->route == VX_R_UNKNOWN) t->id[0] = t->name[0] = 0;
     return t->route;
 }
 

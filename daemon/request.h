@@ -20,6 +20,10 @@ typedef enum vx_route {
     VX_R_JOB,
     VX_R_RESULT,
     VX_R_RESULT_NAME,
+    VX_R_WEB_INDEX, /* the viewer (routes_web.c) */
+    VX_R_WEB_DOCS,
+    VX_R_WEB_SPEC,
+    VX_R_WEB_ASSET,
     VX_R_COUNT
 } vx_route;
 
@@ -29,7 +33,7 @@ typedef enum vx_route {
 typedef struct vx_req_target {
     vx_route route;
     char id[VX_REQ_ID_MAX];   /* {id} / {jid}, or empty */
-    char name[VX_REQ_ID_MAX]; /* {name} of a result, or empty */
+    char name[VX_REQ_ID_MAX]; /* {name} of a result or a viewer file, or empty */
 } vx_req_target;
 
 /* Longest ?wait accepted before capping, in microseconds (10^12 s). */

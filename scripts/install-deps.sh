@@ -20,6 +20,8 @@ pkgs=(
   libfftw3-dev libosd-dev libpng-dev libcmocka-dev libsystemd-dev systemd nettle-dev
   # integration tests and benchmarks
   curl jq procps psmisc python3 python3-yaml python3-jsonschema
+  # tests/integration/test_viewer.sh: the viewer in a real browser
+  chromium
   # tests/deploy/test_systemd.sh: the system calls voxeld makes vs the unit's filter
   strace
   # the container image test (tests/deploy): podman builds the Dockerfile
@@ -43,3 +45,7 @@ $SUDO apt-get install -y -qq --no-install-recommends "${pkgs[@]}"
 # The OpenAPI linter at the version package-lock.json pins, into
 # tools/redocly/node_modules (git-ignored), not globally.
 npm ci --prefix "$(dirname "$0")/../tools/redocly" --no-audit --no-fund --loglevel=error
+# The viewer's browser libraries (three.js, js-yaml: embedded into voxeld at
+# build time) and its test's browser driver (playwright-core), at the
+# versions tools/viewer/package-lock.json pins, into tools/viewer/node_modules.
+npm ci --prefix "$(dirname "$0")/../tools/viewer" --no-audit --no-fund --loglevel=error

@@ -41,6 +41,25 @@ static void test_routes(void **state)
     assert_string_equal(vx_req_route_name(VX_R_JOB), "/v1/jobs/{id}");
 }
 
+/* The viewer's routes (routes_web.c): exact pages, one-segment files. */
+static void test_web_routes(void **state)
+{
+    vx_req_target t;
+    assert_int_equal(route("/", &t), VX_R_WEB_INDEX);
+    assert_int_equal(route("", &t), VX_R_UNKNOWN);
+    assert_int_equal(route("/docs", &t), VX_R_WEB_DOCS);
+    assert_int_equal(route("/docs/", &t), VX_R_UNKNOWN);
+    assert_int_equal(route("/openapi.yaml", &t), VX_R_WEB_SPEC);
+    assert_int_equal(route("/ui/app.js", &t), VX_R_WEB_ASSET);
+    assert_string_equal(t.name, "app.js");
+    assert_int_equal(route("/ui/", &t), VX_R_UNKNOWN);
+    assert_int_equal(route("/ui/a/b.js", &t), VX_R_UNKNOWN);
+    assert_string_equal(t.name, "");
+    assert_true(vx_req_method_allowed(VX_R_WEB_ASSET, "HEAD"));
+    assert_false(vx_req_method_allowed(VX_R_WEB_INDEX, "POST"));
+    assert_string_equal(vx_req_route_name(VX_R_WEB_ASSET), "/ui/{name}");
+}
+
 /* Adds "k=v" pairs (v NULL: no '='); returns the first failure's index or -1. */
 static int add_all(vx_req_query *q, vx_route rt, const char *m, const char *const *kv, size_t n,
                    char *msg)
@@ -147,9 +166,8 @@ static void test_utf8(void **state)
 int main(void)
 {
     const struct CMUnitTest tests[] = {
-        cmocka_unit_test(test_routes),
-        cmocka_unit_test(test_query),
-        cmocka_unit_test(test_numbers),
+        cmocka_unit_test(test_routes), cmocka_unit_test(test_web_routes),
+        cmocka_unit_test(test_query),  cmocka_unit_test(test_numbers),
         cmocka_unit_test(test_utf8),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);

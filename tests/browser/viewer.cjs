@@ -1,0 +1,166 @@
+// Drives the viewer (viewer/, served at /) in Debian's chromium through
+// playwright-core (tools/viewer/package-lock.json): the token field, an
+// upload through the file control and one by a synthetic drop, a voxelize
+// and a gregory job from the generated form, each 3D result read back from
+// the canvas (pixels that differ from the background), live progress from
+// an event stream, a render turntable playing, and the /docs page. Run by
+// tests/integration/test_viewer.sh:
+//   node viewer.cjs BASE TOKEN SPOT_OBJ CONTROL_OBJ OUT_DIR
+// Prints one line per check; exits 1 when one fails.
+const fs = require('fs');
+const path = require('path');
+const { chromium } = require('playwright-core');
+const yaml = require('js-yaml');
+
+const [base, token, spotObj, controlObj, outDir] = process.argv.slice(2);
+const chromiumPath = process.env.VX_CHROMIUM || '/usr/bin/chromium';
+let failed = 0;
+function check(what, ok, detail = '') {
+  console.log(`${ok ? 'ok' : 'FAIL'}: ${what}${detail ? ` (${detail})` : ''}`);
+  if (!ok) failed++;
+}
+
+// Pixels of the 3D view that are not its background (viewer/view3d.js
+// BACKGROUND 0x20242a), and the total.
+async function drawnPixels(page) {
+  return page.evaluate(() => {
+    const c = document.getElementById('view3d');
+    const o = document.createElement('canvas');
+    o.width = c.width;
+    o.height = c.height;
+    const g = o.getContext('2d');
+    g.drawImage(c, 0, 0);
+    const d = g.getImageData(0, 0, o.width, o.height).data;
+    let n = 0;
+    for (let i = 0; i < d.length; i += 4)
+      if (Math.abs(d[i] - 0x20) + Math.abs(d[i + 1] - 0x24) + Math.abs(d[i + 2] - 0x2a) > 30) n++;
+    return { n, total: o.width * o.height };
+  });
+}
+
+// Chooses kind, sets the given form fields, submits, and waits until the
+// page shows the result (body[data-result-shown]) or the job failed.
+async function runJob(page, kind, fields, shown) {
+  await page.selectOption('#kind', kind);
+  for (const [name, value] of Object.entries(fields)) {
+    const f = page.locator(`#params [data-field="${name}"] :is(input, select, textarea)`);
+    if ((await f.evaluate(e => e.tagName)) === 'SELECT') await f.selectOption(JSON.stringify(value));
+    else await f.fill(typeof value === 'object' ? JSON.stringify(value) : String(value));
+  }
+  await page.click('#submit');
+  await page.waitForFunction(
+    want => document.body.dataset.resultShown === want || ['failed', 'canceled'].includes(document.body.dataset.jobState),
+    shown, { timeout: 60000 });
+  const state = await page.textContent('#state');
+  check(`${kind}: the job succeeded`, /succeeded/.test(state), `${state} ${await page.textContent('#job-error')}`);
+  const params = JSON.parse(await page.textContent('#job-json')).params;
+  for (const [name, value] of Object.entries(fields)) {
+    const got = typeof value === 'object' ? Object.fromEntries(Object.keys(value).map(k => [k, params[name]?.[k]])) : params[name];
+    check(`${kind}: params.${name} from the form`, JSON.stringify(got) === JSON.stringify(value), JSON.stringify(params[name]));
+  }
+}
+
+(async () => {
+  fs.mkdirSync(outDir, { recursive: true });
+  const browser = await chromium.launch({
+    executablePath: chromiumPath,
+    // WebGL without a GPU: ANGLE on SwiftShader (chromium's software Vulkan).
+    args: ['--no-sandbox', '--use-angle=swiftshader', '--enable-unsafe-swiftshader'],
+  });
+  const page = await browser.newPage({ viewport: { width: 1280, height: 800 } });
+  const errors = [];
+  page.on('pageerror', e => errors.push(e.message));
+  await page.goto(`${base}/`);
+  await page.waitForFunction(() => document.body.dataset.ready === '1', null, { timeout: 20000 });
+  // One field per property of each kind's params schema in the contract.
+  const spec = yaml.load(await (await fetch(`${base}/openapi.yaml`)).text());
+  const kinds = await page.locator('#kind option').evaluateAll(os => os.map(o => o.value));
+  check('the form lists every kind of x-kinds', JSON.stringify(kinds) === JSON.stringify(Object.keys(spec['x-kinds'])), kinds.join(' '));
+  for (const k of kinds) {
+    await page.selectOption('#kind', k);
+    const fields = await page.locator('#params .field').evaluateAll(fs => fs.map(f => f.dataset.field));
+    const ref = spec['x-kinds'][k].params.$ref.split('/').pop();
+    const want = Object.keys(spec.components.schemas[ref].properties);
+    check(`the ${k} form has a field per params property`, JSON.stringify(fields) === JSON.stringify(want), fields.join(' '));
+  }
+  if (token) {
+    check('without a token the page asks for one', /token/.test(await page.textContent('#notice')));
+    await page.fill('#token', token);
+    await page.dispatchEvent('#token', 'change');
+    await page.waitForFunction(() => document.getElementById('notice').hidden, null, { timeout: 10000 });
+  }
+
+  // Upload by the file control.
+  await page.setInputFiles('#file', spotObj);
+  const spotName = path.basename(spotObj);
+  await page.waitForFunction(n => document.getElementById('upload-status').textContent.startsWith(`${n}: mesh`), spotName, { timeout: 20000 });
+  check('upload by the file control', (await page.locator('#meshes li').count()) === 1);
+  await runJob(page, 'voxelize', { resolution: 32, format: 'binvox' }, 'voxels');
+  let px = await drawnPixels(page);
+  check('voxelize: the 3D view draws the grid', px.n > 0.02 * px.total && px.n < px.total, `${px.n} of ${px.total} pixels`);
+  await page.locator('#right').screenshot({ path: path.join(outDir, 'viewer-voxelize.png') });
+
+  // Upload by a synthetic drop of the control cage.
+  const text = fs.readFileSync(controlObj, 'utf8');
+  const dt = await page.evaluateHandle(([t, n]) => {
+    const d = new DataTransfer();
+    d.items.add(new File([t], n, { type: '' }));
+    return d;
+  }, [text, path.basename(controlObj)]);
+  await page.dispatchEvent('#drop', 'drop', { dataTransfer: dt });
+  await page.waitForFunction(n => document.getElementById('upload-status').textContent.startsWith(`${n}: mesh`), path.basename(controlObj), { timeout: 20000 });
+  check('upload by drag and drop', (await page.locator('#meshes li').count()) === 2);
+  // Live progress by Server-Sent Events: the server's own stream where it
+  // has one (passed through), else one made of the job's real states (what
+  // GET /v1/jobs/{id}/events sends: "event: job" + "data: <Job>"), so that
+  // the page's stream reader is what follows this job, not polling.
+  let streamed = 0;
+  const polls = [];
+  const onRequest = r => { if (/\/v1\/jobs\/[0-9a-f]+\?wait=/.test(r.url())) polls.push(r.url()); };
+  page.on('request', onRequest);
+  await page.route(/\/v1\/jobs\/[0-9a-f]+\/events$/, async route => {
+    const url = route.request().url(), jid = url.match(/jobs\/([0-9a-f]+)\/events/)[1];
+    const real = await route.fetch();
+    if (real.status() !== 404) return route.fulfill({ response: real });
+    const done = await (await route.fetch({ url: `${base}/v1/jobs/${jid}?wait=50` })).json();
+    const ev = j => `event: job\ndata: ${JSON.stringify(j)}\n\n`;
+    streamed++;
+    return route.fulfill({ status: 200, headers: { 'Content-Type': 'text/event-stream' },
+      body: `: voxeld\n\n${ev({ ...done, state: 'running', progress: 0.5, finished: null, outputs: {} })}${ev(done)}` });
+  });
+  await runJob(page, 'gregory', { divisions: 3 }, 'mesh');
+  check('gregory: followed by its event stream, not by polling', streamed === 1 && polls.length === 0, `${streamed} streams, ${polls.length} polls`);
+  page.off('request', onRequest);
+  await page.unroute(/\/v1\/jobs\/[0-9a-f]+\/events$/);
+  px = await drawnPixels(page);
+  check('gregory: the 3D view draws the mesh', px.n > 0.02 * px.total && px.n < px.total, `${px.n} of ${px.total} pixels`);
+  await page.screenshot({ path: path.join(outDir, 'viewer.png') });
+  await page.locator('#right').screenshot({ path: path.join(outDir, 'viewer-gregory.png') });
+  await page.click('#refresh');
+  await page.waitForFunction(() => document.querySelectorAll('#jobs li').length === 2, null, { timeout: 10000 });
+  const first = await page.textContent('#jobs li:first-child b');
+  check('jobs are listed newest first', first === 'gregory', first);
+
+  // A render turntable on spot: its frames play in turn.
+  await page.selectOption('#mesh', { label: await page.locator('#mesh option', { hasText: '5856 tris' }).textContent() });
+  await runJob(page, 'render', { N: 16, width: 64, height: 48, frames: 3, camera: { type: 'orbit' } }, 'image');
+  const srcs = new Set();
+  for (let i = 0; i < 12; i++) {
+    srcs.add(await page.getAttribute('#images img', 'src'));
+    await page.waitForTimeout(40);
+  }
+  check('render: the turntable plays its frames', srcs.size >= 2, `${srcs.size} frames seen`);
+  await page.locator('#right').screenshot({ path: path.join(outDir, 'viewer-render.png') });
+
+  // The reference page.
+  await page.goto(`${base}/docs`);
+  await page.waitForFunction(() => document.body.dataset.ready === '1', null, { timeout: 20000 });
+  const ops = await page.locator('.doc .op h3 .method').count();
+  check('/docs renders every operation', ops >= 10, `${ops} operations`);
+  check('no script errors', errors.length === 0, errors.join('; '));
+  await browser.close();
+  process.exit(failed ? 1 : 0);
+})().catch(e => {
+  console.log(`FAIL: ${e.message}`);
+  process.exit(1);
+});

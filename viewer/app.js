@@ -1,0 +1,456 @@
+// The voxeld viewer (README "Viewer"). Served by the daemon at / from files
+// built into it; talks to the API on the same origin. The page itself is
+// public; with --token the API calls carry the token entered at the top
+// (kept in this browser's localStorage).
+import { buildForm, deref } from '/ui/forms.js';
+
+const $ = id => document.getElementById(id);
+const TERMINAL = new Set(['succeeded', 'failed', 'canceled']);
+const TOKEN_KEY = 'voxeld.token';
+let spec = null, view = null, viewLib = null, readParams = null;
+let current = null; // the job shown: {id, follow: a number bumped to stop following}
+let followSeq = 0;
+
+// ---- the API -------------------------------------------------------------
+
+class ApiError extends Error {
+  constructor(status, body) {
+    super(body?.error ? `${status} ${body.error.code}: ${body.error.message}` : `HTTP ${status}`);
+    this.status = status;
+    this.body = body;
+  }
+}
+
+function authHeaders(extra = {}) {
+  const h = new Headers(extra);
+  const t = localStorage.getItem(TOKEN_KEY) || '';
+  if (t) h.set('Authorization', `Bearer ${t}`);
+  return h;
+}
+
+export async function api(path, opts = {}) {
+  return fetch(path, { ...opts, headers: authHeaders(opts.headers || {}) });
+}
+
+async function apiJSON(path, opts) {
+  const res = await api(path, opts);
+  let body = null;
+  try { body = await res.json(); } catch { /* not JSON */ }
+  if (!res.ok) throw new ApiError(res.status, body);
+  return body;
+}
+
+// A list, newest first whatever the server's order: ?order=desc is asked
+// for; a server that lists by id instead (meshes; jobs on servers without
+// order) is read to its end (at most `pages` of 1000) and sorted here.
+async function listAll(path, pages = 10) {
+  let items = [], after = null;
+  for (let i = 0; i < pages; i++) {
+    const q = `limit=1000&order=desc${after ? `&after=${encodeURIComponent(after)}` : ''}`;
+    const page = await apiJSON(`${path}?${q}`);
+    items = items.concat(page.items);
+    const n = page.items.length;
+    const newestFirst = n > 1 && page.items[0].created > page.items[n - 1].created;
+    if (!page.next || (newestFirst && path === '/v1/jobs')) break;
+    after = page.next;
+  }
+  return items.sort((a, b) => (a.created < b.created ? 1 : a.created > b.created ? -1 : 0));
+}
+
+function notice(text) {
+  const n = $('notice');
+  n.hidden = !text;
+  n.textContent = text || '';
+}
+
+function showError(e, where) {
+  const msg = e instanceof ApiError && e.status === 401
+    ? 'The server wants a bearer token: enter it at the top.'
+    : String(e.message || e);
+  (where ? $(where) : $('notice')).textContent = msg;
+  if (!where) $('notice').hidden = false;
+}
+
+// ---- lists ------------------------------------------------------------------
+
+const short = id => id.slice(0, 12);
+const when = ts => (ts ? ts.replace('T', ' ').replace(/\.\d+Z$/, 'Z') : '');
+
+async function refreshMeshes() {
+  const meshes = await listAll('/v1/meshes');
+  const ul = $('meshes'), sel = $('mesh'), keep = sel.value;
+  ul.replaceChildren();
+  sel.replaceChildren();
+  for (const m of meshes) {
+    const label = m.name || short(m.id);
+    const li = document.createElement('li');
+    li.dataset.id = m.id;
+    li.innerHTML = `<b></b> <span class="id"></span><br><small></small>`;
+    li.querySelector('b').textContent = label;
+    li.querySelector('.id').textContent = m.name ? short(m.id) : '';
+    li.querySelector('small').textContent = `${m.format}, ${m.triangles} triangles, ${when(m.created)}`;
+    li.onclick = () => { sel.value = m.id; };
+    ul.append(li);
+    const o = document.createElement('option');
+    o.value = m.id;
+    o.textContent = `${label} (${m.triangles} tris)`;
+    sel.append(o);
+  }
+  if (keep && meshes.some(m => m.id === keep)) sel.value = keep;
+  return meshes;
+}
+
+async function refreshJobs() {
+  const jobs = (await listAll('/v1/jobs', 10)).slice(0, 200);
+  const ul = $('jobs');
+  ul.replaceChildren();
+  for (const j of jobs) {
+    const li = document.createElement('li');
+    li.dataset.id = j.id;
+    if (current?.id === j.id) li.classList.add('sel');
+    li.innerHTML = `<b></b> <span></span> <span class="id"></span><br><small></small>`;
+    li.querySelector('b').textContent = j.kind;
+    const st = li.querySelector('span');
+    st.textContent = j.state === 'running' ? `running ${Math.round(100 * j.progress)}%` : j.state;
+    st.className = `state-${j.state}`;
+    li.querySelector('.id').textContent = short(j.id);
+    li.querySelector('small').textContent = `on ${short(j.mesh)}, ${when(j.created)}`;
+    li.onclick = () => openJob(j.id);
+    ul.append(li);
+  }
+}
+
+async function refreshAll() {
+  try {
+    await Promise.all([refreshMeshes(), refreshJobs()]);
+    if (!$('notice').dataset.sticky) notice('');
+  } catch (e) { showError(e); }
+}
+
+// ---- upload -----------------------------------------------------------------
+
+const MEDIA = { obj: 'model/obj', drc: 'model/x-draco', bpt: 'model/x-bpt' };
+
+async function upload(file) {
+  const ext = (file.name.split('.').pop() || '').toLowerCase();
+  // Formats the daemon does not name by type are sent for sniffing.
+  const type = MEDIA[ext] || 'application/octet-stream';
+  $('upload-status').textContent = `uploading ${file.name} (${file.size} bytes)...`;
+  try {
+    const m = await apiJSON(`/v1/meshes?name=${encodeURIComponent(file.name)}`,
+      { method: 'POST', headers: { 'Content-Type': type }, body: file });
+    $('upload-status').textContent = `${file.name}: mesh ${short(m.id)}, ${m.triangles} triangles`;
+    await refreshMeshes();
+    $('mesh').value = m.id;
+  } catch (e) { showError(e, 'upload-status'); }
+}
+
+// A file dropped anywhere on the page is uploaded (and the browser does not
+// open it instead); the drop zone lights up while one is dragged over.
+function setupDrop() {
+  const drop = $('drop');
+  document.addEventListener('dragover', e => { e.preventDefault(); drop.classList.add('over'); });
+  document.addEventListener('dragleave', e => { if (!e.relatedTarget) drop.classList.remove('over'); });
+  document.addEventListener('drop', e => {
+    e.preventDefault();
+    drop.classList.remove('over');
+    for (const f of e.dataTransfer?.files || []) upload(f);
+  });
+  $('file').addEventListener('change', e => { for (const f of e.target.files) upload(f); e.target.value = ''; });
+}
+
+// ---- the job form -----------------------------------------------------------
+
+function setupForm() {
+  const kinds = spec['x-kinds'] || {};
+  const sel = $('kind');
+  for (const k of Object.keys(kinds)) {
+    const o = document.createElement('option');
+    o.value = o.textContent = k;
+    sel.append(o);
+  }
+  const build = () => {
+    const k = kinds[sel.value];
+    const fs = $('params');
+    fs.replaceChildren(Object.assign(document.createElement('legend'), { textContent: `params (${deref(spec, k.params).title || sel.value})` }));
+    $('kind-summary').textContent = k.summary || '';
+    readParams = buildForm(spec, k.params, fs);
+  };
+  sel.onchange = build;
+  build();
+  $('job-form').onsubmit = async e => {
+    e.preventDefault();
+    $('submit-status').textContent = '';
+    let params;
+    try { params = readParams(); } catch (err) { $('submit-status').textContent = err.message; return; }
+    if (!$('mesh').value) { $('submit-status').textContent = 'upload a mesh first'; return; }
+    try {
+      const job = await apiJSON('/v1/jobs', { method: 'POST', headers: { 'Content-Type': 'application/json' },
+        body: JSON.stringify({ mesh: $('mesh').value, kind: sel.value, params }) });
+      $('submit-status').textContent = `job ${short(job.id)} submitted`;
+      openJob(job.id, job);
+      refreshJobs().catch(() => {});
+    } catch (err) { showError(err, 'submit-status'); }
+  };
+}
+
+// ---- following a job: Server-Sent Events, else polling ----------------------
+
+// Reads GET /v1/jobs/{id}/events (text/event-stream: "event: job" +
+// "data: <Job JSON>" per change) through fetch, which, unlike EventSource,
+// can send the bearer token and see a 404. Returns false when the server
+// has no events route (then the caller polls), true when the stream ended.
+async function followEvents(jid, seq, onJob) {
+  let res;
+  try {
+    res = await api(`/v1/jobs/${jid}/events`, { headers: { Accept: 'text/event-stream' } });
+  } catch { return false; }
+  if (!res.ok || !(res.headers.get('Content-Type') || '').startsWith('text/event-stream')) return false;
+  const reader = res.body.getReader(), dec = new TextDecoder();
+  let buf = '', terminal = false;
+  for (;;) {
+    const { value, done } = await reader.read();
+    if (done || seq !== followSeq) break;
+    buf += dec.decode(value, { stream: true }).replace(/\r\n?/g, '\n');
+    let cut;
+    while ((cut = buf.indexOf('\n\n')) >= 0) {
+      const block = buf.slice(0, cut);
+      buf = buf.slice(cut + 2);
+      let event = 'message', data = [];
+      for (const l of block.split('\n')) {
+        if (l.startsWith(':')) continue;
+        const [k, ...rest] = l.split(':');
+        const v = rest.join(':').replace(/^ /, '');
+        if (k === 'event') event = v; else if (k === 'data') data.push(v);
+      }
+      if (event === 'job' && data.length) {
+        const job = JSON.parse(data.join('\n'));
+        onJob(job);
+        terminal = TERMINAL.has(job.state);
+      }
+    }
+  }
+  reader.cancel().catch(() => {});
+  return terminal || seq !== followSeq;
+}
+
+async function followPoll(jid, seq, onJob) {
+  while (seq === followSeq) {
+    const job = await apiJSON(`/v1/jobs/${jid}?wait=1`);
+    onJob(job);
+    if (TERMINAL.has(job.state)) return;
+  }
+}
+
+async function openJob(jid, first) {
+  const seq = ++followSeq;
+  current = { id: jid };
+  for (const li of $('jobs').children) li.classList.toggle('sel', li.dataset.id === jid);
+  clearResult();
+  $('job-title').textContent = short(jid);
+  let shown = null;
+  const onJob = job => {
+    if (seq !== followSeq) return;
+    showState(job);
+    if (TERMINAL.has(job.state) && shown !== job.state) {
+      shown = job.state;
+      showResult(job, seq).catch(e => showError(e, 'view-note'));
+      refreshJobs().catch(() => {});
+    }
+  };
+  try {
+    onJob(first || await apiJSON(`/v1/jobs/${jid}`));
+    if (shown) return;
+    if (!(await followEvents(jid, seq, onJob))) await followPoll(jid, seq, onJob);
+    else if (!shown && seq === followSeq) await followPoll(jid, seq, onJob); // the stream broke off
+  } catch (e) { showError(e, 'job-error'); }
+}
+
+function showState(job) {
+  $('progress').value = job.progress;
+  const pct = `${Math.round(100 * job.progress)}%`;
+  $('state').textContent = `${job.kind} on ${short(job.mesh)}: ${job.state}${job.state === 'running' ? ` ${pct}` : ''}`;
+  $('state').className = `state-${job.state}`;
+  $('job-error').textContent = job.error && job.state !== 'succeeded' ? `${job.error.code}: ${job.error.message || ''}` : '';
+  $('job-json').textContent = JSON.stringify(job, null, 2);
+  document.body.dataset.jobState = job.state; // for scripts driving the page
+}
+
+// ---- results -------------------------------------------------------------------
+
+let turntable = null;
+const blobUrls = [];
+
+function clearResult() {
+  if (turntable) clearInterval(turntable);
+  turntable = null;
+  while (blobUrls.length) URL.revokeObjectURL(blobUrls.pop());
+  $('images').replaceChildren();
+  $('outputs').replaceChildren();
+  $('view-note').textContent = '';
+  $('job-error').textContent = '';
+  $('view-wrap').hidden = true;
+  delete document.body.dataset.resultShown;
+  view?.clear();
+}
+
+async function fetchOutput(url, as) {
+  const res = await api(url);
+  if (!res.ok) {
+    let body = null;
+    try { body = await res.json(); } catch { /* */ }
+    throw new ApiError(res.status, body);
+  }
+  return as === 'text' ? res.text() : as === 'blob' ? res.blob() : res.arrayBuffer();
+}
+
+function listOutputs(job) {
+  for (const [name, url] of Object.entries(job.outputs || {})) {
+    const li = document.createElement('li'), a = document.createElement('a');
+    a.textContent = name;
+    a.href = '#';
+    a.onclick = async e => {
+      e.preventDefault();
+      try {
+        const blob = await fetchOutput(url, 'blob'), u = URL.createObjectURL(blob);
+        const d = Object.assign(document.createElement('a'), { href: u, download: `${short(job.id)}-${name}` });
+        d.click();
+        setTimeout(() => URL.revokeObjectURL(u), 10000);
+      } catch (err) { showError(err, 'job-error'); }
+    };
+    li.append(a);
+    $('outputs').append(li);
+  }
+}
+
+async function get3D() {
+  if (view) return view;
+  try {
+    viewLib = await import('/ui/view3d.js');
+  } catch (e) {
+    throw new Error(`the 3D view is not available in this build (${e.message}): build voxeld after npm ci --prefix tools/viewer`);
+  }
+  view = new viewLib.View3D($('view3d'));
+  return view;
+}
+
+async function showImages(job) {
+  const names = Object.keys(job.outputs).filter(n => /^image(_\d+)?$/.test(n)).sort();
+  const urls = [];
+  for (const n of names) {
+    const u = URL.createObjectURL(await fetchOutput(job.outputs[n], 'blob'));
+    blobUrls.push(u);
+    urls.push(u);
+  }
+  if (!urls.length) return;
+  const img = document.createElement('img');
+  img.src = urls[0];
+  img.alt = `${job.kind} ${names[0]}`;
+  $('images').append(img);
+  if (urls.length > 1) { // a turntable: play the frames
+    let f = 0;
+    img.title = `turntable, ${urls.length} frames`;
+    turntable = setInterval(() => { f = (f + 1) % urls.length; img.src = urls[f]; }, 1000 / 12);
+  }
+  document.body.dataset.resultShown = 'image';
+}
+
+async function showMesh(job) {
+  const fmt = job.params?.format || 'obj';
+  if (fmt === 'drc') { $('view-note').textContent = 'Draco output: download it below (the 3D view reads OBJ and PLY).'; return; }
+  const v = await get3D();
+  $('view-wrap').hidden = false;
+  v.resize();
+  const names = Object.keys(job.outputs).filter(n => n === 'mesh' || /^frame_\d+$/.test(n)).sort();
+  const as = fmt === 'ply' ? 'buffer' : 'text';
+  const tris = v.showMesh(await fetchOutput(job.outputs.mesh, as), fmt);
+  $('view-note').textContent = `${job.kind}: ${tris} triangles; drag to orbit, wheel to zoom`;
+  document.body.dataset.resultShown = 'mesh';
+  if (names.length > 1) await playFrames(job, names.slice(0, 65), fmt, as, v);
+}
+
+// Deformation frames (gregory's frame_001, ...): loaded, then played in
+// turn with the camera kept; a button stops and starts them.
+async function playFrames(job, names, fmt, as, v) {
+  const seq = followSeq, objects = [v.object];
+  for (const n of names.slice(1)) {
+    const data = await fetchOutput(job.outputs[n], as);
+    if (seq !== followSeq) return;
+    objects.push(v.parseMesh(data, fmt));
+  }
+  let f = 0;
+  const step = () => { f = (f + 1) % objects.length; v.swap(objects[f]); };
+  const button = Object.assign(document.createElement('button'), { type: 'button', textContent: `pause (${objects.length} frames)` });
+  button.onclick = () => {
+    if (turntable) { clearInterval(turntable); turntable = null; button.textContent = `play (${objects.length} frames)`; }
+    else { turntable = setInterval(step, 1000 / 8); button.textContent = `pause (${objects.length} frames)`; }
+  };
+  $('images').append(button);
+  turntable = setInterval(step, 1000 / 8);
+}
+
+async function showVoxels(job) {
+  const fmt = job.params?.format || 'vdb';
+  if (!['binvox', 'raw8', 'raw1'].includes(fmt)) {
+    $('view-note').textContent = fmt === 'summary' ? 'format summary: no voxels, only the stats.'
+      : `format ${fmt}: the 3D view reads binvox, raw8 and raw1.`;
+    if (fmt !== 'summary') { // the same job as binvox (its normalised params are valid input)
+      const again = Object.assign(document.createElement('button'), { type: 'button', textContent: 'run it again as binvox to see it' });
+      again.onclick = async () => {
+        try {
+          const j = await apiJSON('/v1/jobs', { method: 'POST', headers: { 'Content-Type': 'application/json' },
+            body: JSON.stringify({ mesh: job.mesh, kind: job.kind, params: { ...job.params, format: 'binvox' } }) });
+          openJob(j.id, j);
+          refreshJobs().catch(() => {});
+        } catch (e) { showError(e, 'view-note'); }
+      };
+      $('images').append(again);
+    }
+    return;
+  }
+  const v = await get3D();
+  $('view-wrap').hidden = false;
+  v.resize();
+  const buf = await fetchOutput(job.outputs.voxels, 'buffer');
+  const grid = fmt === 'binvox' ? viewLib.parseBinvox(buf) : viewLib.parseRaw(buf, fmt === 'raw1', job.stats);
+  const r = v.showVoxels(grid);
+  $('view-note').textContent = `voxels ${grid.dims.join(' x ')}: ${r.inside} inside, ${r.surface} on the surface, ${r.drawn} cubes drawn`;
+  document.body.dataset.resultShown = 'voxels';
+}
+
+async function showResult(job, seq) {
+  clearResult();
+  $('job-title').textContent = short(job.id);
+  showState(job);
+  listOutputs(job);
+  if (job.state !== 'succeeded' || seq !== followSeq) return;
+  if (job.kind === 'voxelize') await showVoxels(job);
+  else if (job.kind === 'gregory' || job.kind === 'catmull-clark') await showMesh(job);
+  else await showImages(job);
+}
+
+// ---- start ---------------------------------------------------------------------
+
+async function main() {
+  const tok = $('token');
+  tok.value = localStorage.getItem(TOKEN_KEY) || '';
+  tok.onchange = () => { localStorage.setItem(TOKEN_KEY, tok.value.trim()); refreshAll(); };
+  $('refresh').onclick = () => refreshAll();
+  setupDrop();
+  try {
+    const info = await (await fetch('/v1/info', { headers: authHeaders() })).json();
+    if (info.version) $('server-info').textContent = `v${info.version}`;
+  } catch { /* shown by the lists */ }
+  try {
+    const { load } = await import('/ui/js-yaml.mjs');
+    spec = load(await (await fetch('/openapi.yaml')).text());
+    setupForm();
+  } catch (e) {
+    $('notice').dataset.sticky = '1';
+    notice(`The job form needs js-yaml, which this build lacks (${e.message}): build voxeld after npm ci --prefix tools/viewer.`);
+  }
+  await refreshAll();
+  document.body.dataset.ready = '1';
+}
+
+main();
