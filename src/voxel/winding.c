@@ -67,106 +67,168 @@ static void tri_of(const wctx *c, size_t t, double v[9])
 
 /* ---- the boundary and its cone ---------------------------------------- */
 
-typedef struct vkey {
-    double p[3];
-    uint32_t i;
-} vkey;
-
-static int vkey_cmp(const void *a, const void *b)
-{
-    const vkey *x = a, *y = b;
-    for (int k = 0; k < 3; k++)
-        if (x->p[k] != y->p[k]) return x->p[k] < y->p[k] ? -1 : 1;
-    return x->i < y->i ? -1 : x->i > y->i;
-}
-
 typedef struct dedge {
     uint32_t lo, hi;
     int s;
 } dedge;
 
-static int dedge_cmp(const void *a, const void *b)
+/* Union-find root of v (paths halved). */
+static uint32_t root(uint32_t *up, uint32_t v)
 {
-    const dedge *x = a, *y = b;
-    if (x->lo != y->lo) return x->lo < y->lo ? -1 : 1;
-    return x->hi < y->hi ? -1 : x->hi > y->hi;
+    while (up[v] != v) {
+        up[v] = up[up[v]];
+        v = up[v];
+    }
+    return v;
 }
 
-/* canon[v]: the first vertex at v's position (vertices welded by position). */
+static uint64_t mix(uint64_t x)
+{
+    x ^= x >> 33;
+    x *= 0xff51afd7ed558ccdull;
+    x ^= x >> 33;
+    x *= 0xc4ceb9fe1a85ec53ull;
+    return x ^ (x >> 33);
+}
+
+static size_t pow2_at_least(size_t n)
+{
+    size_t p = 16;
+    while (p < n)
+        p <<= 1;
+    return p;
+}
+
+/* canon[v]: the first vertex at v's position (vertices welded by position;
+ * a hash of the coordinates' bits). */
 static uint32_t *weld(const vx_mesh *m)
 {
-    vkey *ord = malloc(m->nverts * sizeof *ord + 1);
-    uint32_t *canon = malloc(m->nverts * sizeof *canon + 1);
-    if (!ord || !canon) {
-        free(ord);
+    size_t cap = pow2_at_least(2 * m->nverts);
+    uint32_t *slot = malloc(cap * sizeof *slot), *canon = malloc(m->nverts * sizeof *canon + 1);
+    if (!slot || !canon) {
+        free(slot);
         free(canon);
         return NULL;
     }
-    for (size_t i = 0; i < m->nverts; i++) {
-        memcpy(ord[i].p, m->pos + 3 * i, sizeof ord[i].p);
-        ord[i].i = (uint32_t)i;
+    memset(slot, 0xff, cap * sizeof *slot);
+    for (size_t v = 0; v < m->nverts; v++) {
+        const double *p = m->pos + 3 * v;
+        uint64_t b[3];
+        memcpy(b, p, sizeof b);
+        size_t at = (size_t)(mix(b[0] ^ mix(b[1] ^ mix(b[2])))) & (cap - 1);
+        for (;; at = (at + 1) & (cap - 1)) {
+            if (slot[at] == UINT32_MAX) {
+                slot[at] = (uint32_t)v;
+                canon[v] = (uint32_t)v;
+                break;
+            }
+            if (!memcmp(m->pos + 3 * (size_t)slot[at], p, 3 * sizeof *p)) {
+                canon[v] = slot[at];
+                break;
+            }
+        }
     }
-    qsort(ord, m->nverts, sizeof *ord, vkey_cmp);
-    for (size_t i = 0, r = 0; i < m->nverts; i++) {
-        if (i && memcmp(ord[i].p, ord[r].p, sizeof ord[i].p)) r = i;
-        canon[ord[i].i] = ord[r].i;
-    }
-    free(ord);
+    free(slot);
     return canon;
 }
 
-/* The cone over the mesh's boundary (c->cone, c->ncone): for each boundary
- * edge a -> b (net of its opposite uses), the triangle (b, a, apex), apex
- * the mean of the boundary's end points. */
-static int build_cone(wctx *c, vx_err *err)
+/* The directed edges that do not cancel (net use s != 0, lo -> hi when
+ * positive) into *out; returns their number, or (size_t)-1 without memory. */
+static size_t net_edges(const vx_mesh *m, const uint32_t *canon, dedge **out)
 {
-    const vx_mesh *m = c->m;
-    uint32_t *canon = weld(m);
-    dedge *e = malloc(3 * m->ntris * sizeof *e + 1);
-    size_t ne = 0, nb = 0;
-    if (!canon || !e) goto oom;
+    size_t cap = pow2_at_least(3 * m->ntris + 3 * m->ntris / 2 + 1), w = 0;
+    uint64_t *key = calloc(cap, sizeof *key);
+    int *net = calloc(cap, sizeof *net);
+    if (!key || !net) {
+        free(key);
+        free(net);
+        return (size_t)-1;
+    }
     for (size_t t = 0; t < m->ntris; t++)
         for (int q = 0; q < 3; q++) {
             uint32_t a = canon[m->tri[3 * t + q]], b = canon[m->tri[3 * t + (q + 1) % 3]];
             if (a == b) continue;
-            e[ne++] = a < b ? (dedge){a, b, 1} : (dedge){b, a, -1};
+            uint64_t k = ((uint64_t)(a < b ? a : b) << 32 | (a < b ? b : a)) + 1;
+            size_t at = (size_t)mix(k) & (cap - 1);
+            while (key[at] && key[at] != k)
+                at = (at + 1) & (cap - 1);
+            key[at] = k;
+            net[at] += a < b ? 1 : -1;
         }
-    qsort(e, ne, sizeof *e, dedge_cmp);
-    size_t w = 0; /* runs summed into e[0..w) */
-    for (size_t i = 0; i < ne;) {
-        size_t j = i;
-        int s = 0;
-        while (j < ne && e[j].lo == e[i].lo && e[j].hi == e[i].hi)
-            s += e[j++].s;
-        if (s) {
-            e[w] = e[i];
-            e[w++].s = s;
-            nb += (size_t)abs(s);
-        }
-        i = j;
+    for (size_t i = 0; i < cap; i++)
+        w += key[i] && net[i];
+    dedge *e = malloc(w * sizeof *e + 1);
+    if (e) {
+        w = 0;
+        for (size_t i = 0; i < cap; i++)
+            if (key[i] && net[i])
+                e[w++] = (dedge){(uint32_t)((key[i] - 1) >> 32), (uint32_t)(key[i] - 1), net[i]};
     }
+    free(key);
+    free(net);
+    *out = e;
+    return e ? w : (size_t)-1;
+}
+
+/* The cone over the mesh's boundary (c->cone, c->ncone): for each boundary
+ * edge a -> b (net of its opposite uses), the triangle (b, a, apex), apex
+ * the mean of the end points of the edges of its connected part of the
+ * boundary, so that each hole gets its own small cone. */
+static int build_cone(wctx *c, vx_err *err)
+{
+    const vx_mesh *m = c->m;
+    uint32_t *canon = weld(m);
+    dedge *e = NULL;
+    size_t nb = 0, w = canon ? net_edges(m, canon, &e) : (size_t)-1;
+    if (w == (size_t)-1) goto oom;
+    for (size_t i = 0; i < w; i++)
+        nb += (size_t)abs(e[i].s);
     free(canon);
     canon = NULL;
     if (!nb) {
         free(e);
         return 0;
     }
-    double apex[3] = {0, 0, 0};
+    /* one apex per connected part of the boundary (a hole): the mean of
+     * its edges' end points */
+    uint32_t *up = malloc(m->nverts * sizeof *up + 1);
+    double *apex = calloc(4 * m->nverts + 1, sizeof *apex);
+    if (!up || !apex) {
+        free(up);
+        free(apex);
+        goto oom;
+    }
     for (size_t i = 0; i < w; i++)
+        up[e[i].lo] = e[i].lo, up[e[i].hi] = e[i].hi;
+    for (size_t i = 0; i < w; i++) {
+        uint32_t a = root(up, e[i].lo), b = root(up, e[i].hi);
+        if (a != b) up[a] = b;
+    }
+    for (size_t i = 0; i < w; i++) {
+        double *x = apex + 4 * (size_t)root(up, e[i].lo);
         for (int k = 0; k < 3; k++)
-            apex[k] += (m->pos[3 * (size_t)e[i].lo + k] + m->pos[3 * (size_t)e[i].hi + k]) *
-                       abs(e[i].s) / (2.0 * (double)nb);
+            x[k] += m->pos[3 * (size_t)e[i].lo + k] + m->pos[3 * (size_t)e[i].hi + k];
+        x[3] += 2;
+    }
     c->cone = malloc(9 * nb * sizeof *c->cone);
-    if (!c->cone) goto oom;
+    if (!c->cone) {
+        free(up);
+        free(apex);
+        goto oom;
+    }
     for (size_t i = 0; i < w; i++)
         for (int r = 0; r < abs(e[i].s); r++) {
             /* edge a -> b is closed by (b, a, apex) */
             uint32_t a = e[i].s > 0 ? e[i].lo : e[i].hi, b = e[i].s > 0 ? e[i].hi : e[i].lo;
+            const double *x = apex + 4 * (size_t)root(up, a);
             double *v = c->cone + 9 * c->ncone++;
             memcpy(v, m->pos + 3 * (size_t)b, 3 * sizeof *v);
             memcpy(v + 3, m->pos + 3 * (size_t)a, 3 * sizeof *v);
-            memcpy(v + 6, apex, 3 * sizeof *v);
+            for (int k = 0; k < 3; k++)
+                v[6 + k] = x[k] / x[3];
         }
+    free(up);
+    free(apex);
     free(e);
     return 0;
 oom:
@@ -345,6 +407,17 @@ static int inside_at(const wctx *c, int i, int j, int k, int n)
     return n - vx_wtree_eval(&c->tree, q) >= 0.5;
 }
 
+/* 1 when the cone's |w| stays under |n - 1/2| on centres ka..kb of column
+ * (i, j): there w >= 1/2 exactly where n >= 1, with nothing evaluated. */
+static int far_run(const wctx *c, int i, int j, int ka, int kb, int n)
+{
+    double a[3] = {c->o[0] + (i + 0.5) * c->h, c->o[1] + (j + 0.5) * c->h,
+                   c->o[2] + (ka + 0.5) * c->h};
+    double b[3] = {a[0], a[1], c->o[2] + (kb + 0.5) * c->h};
+    double limit = fabs(n - 0.5);
+    return vx_wtree_bound(&c->tree, a, b, limit) < limit;
+}
+
 /* Centres ka..kb of one run between crossings: ends known (da, db). */
 static void fill_run(wctx *c, int i, int j, int ka, int kb, int da, int db, int n)
 {
@@ -417,12 +490,12 @@ static void column(wctx *c, int i, int j)
         int ka = lo < c->lo[2] ? c->lo[2] : (int)fmin(lo, INT32_MAX / 2);
         int kb = hi > c->hi[2] ? c->hi[2] : (int)fmax(hi, -1.0);
         if (ka <= kb) {
-            if (!c->open) {
+            if (!c->open || far_run(c, i, j, ka, kb, cnt)) {
                 fill_run(c, i, j, ka, kb, cnt >= 1, cnt >= 1, cnt);
             } else {
                 int da = inside_at(c, i, j, ka, cnt),
                     db = ka == kb ? da : inside_at(c, i, j, kb, cnt);
-                if (kb - ka >= 2 && da == db) {
+                if (kb - ka >= 8 && da == db) {
                     int km = ka + (kb - ka) / 2, dm = inside_at(c, i, j, km, cnt);
                     if (dm != da) {
                         fill_run(c, i, j, ka, km, da, dm, cnt);

@@ -15,6 +15,8 @@ typedef struct vx_wtree_node {
     double a[3];  /* sum of the vector areas (half cross products) */
     double m[9];  /* sum of (centroid - p) (x) vector area, row-major */
     double far2;  /* (beta * radius)^2: farther query points use the expansion */
+    double r;     /* radius: every vertex lies within r of p */
+    double area;  /* sum of the triangles' areas */
     int kid[2];   /* children, or -1 for a leaf */
     int first, n; /* leaf: triangles first..first+n-1 (tree order) */
 } vx_wtree_node;
@@ -36,6 +38,11 @@ int vx_wtree_build(vx_wtree *t, size_t ntris, const double *tv, vx_err *err);
  * over 4 pi (positive where q sees a triangle's back, the inside of an
  * outward-oriented closed surface). Read-only: any number of threads. */
 double vx_wtree_eval(const vx_wtree *t, const double q[3]);
+/* An upper bound of |winding number| of the triangles at every point of
+ * the segment a-b (each triangle's solid angle is at most its area over
+ * its squared distance), or a value >= limit once it reaches limit.
+ * Any number of threads. */
+double vx_wtree_bound(const vx_wtree *t, const double a[3], const double b[3], double limit);
 /* The exact winding number at q of one triangle (v: 9 doubles). */
 double vx_wtree_tri(const double *v, const double q[3]);
 void vx_wtree_free(vx_wtree *t);
