@@ -3,15 +3,18 @@
  *
  * The winding number w of the mesh S at q is split in two. The boundary
  * of S (its directed edges not cancelled by an opposite twin, vertices
- * welded by position) is closed by a cone K of triangles to one apex, so
- * that S + K has no boundary. Then w_S(q) = w_{S+K}(q) - w_K(q), where
- * w_{S+K}(q) is an integer: the signed crossings of S + K along the z ray
- * above q (front +1 where the surface faces +z). That integer is counted
- * exactly per voxel column by a CPU rasterizer with watertight edge tests.
- * w_K is smooth between K's crossings and is evaluated with a tree over K
- * (wtree.c, Barill et al. 2018) only at a few centres per run between two
- * crossings: both ends and the middle; where they disagree about w >= 1/2
- * the run is halved until the change is found. A closed mesh has no cone:
+ * welded by position) is closed by cones K of triangles, one apex per
+ * connected part of the boundary (a hole), so that S + K has no boundary.
+ * Then w_S(q) = w_{S+K}(q) - w_K(q), where w_{S+K}(q) is an integer: the
+ * signed crossings of S + K along the z ray above q (front +1 where the
+ * surface faces +z), counted exactly per voxel column by a CPU rasterizer
+ * with watertight edge tests. w_K is smooth between K's crossings. On a
+ * run of centres between two crossings, when a bound of |w_K| (area over
+ * squared distance per tree node) stays under the crossing count's margin
+ * to 1/2, the count decides alone; else w_K is evaluated with a tree over
+ * K (wtree.c, Barill et al. 2018) at both ends of the run (and its middle
+ * when it is over 8 voxels), and where they disagree about w >= 1/2 the
+ * run is halved until the change is found. A closed mesh has no cone:
  * then w is the crossing count and nothing is evaluated. Centres outside
  * the mesh's bounding box are outside (|w| < 1/2 outside its convex hull).
  *

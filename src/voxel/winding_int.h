@@ -29,7 +29,7 @@ typedef struct vx_wtree {
 } vx_wtree;
 
 /* Distance factor beta of the far-field test (|q - p| > beta * radius). */
-#define VX_WTREE_BETA 3.0
+#define VX_WTREE_BETA 2.0
 
 /* Builds t over ntris triangles given as 9 doubles each (copied). 0, or -1
  * with VX_EINTERNAL out_of_memory. Any thread. */
