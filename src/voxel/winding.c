@@ -247,9 +247,19 @@ oom:
 static void col_range(double a, double b, double o, double h, int n, int *lo, int *hi)
 {
     double fa = floor((a - o) / h - 0.5), fb = ceil((b - o) / h - 0.5);
-    *lo = fa < 0 ? 0 : fa > n ? n : (int)fa;
-    *hi = fb < -1 ? -1 : fb > n - 1 ? n - 1 : (int)fb;
+    int l = fa < 0 ? 0 : fa > n ? n : (int)fa, u = fb < -1 ? -1 : fb > n - 1 ? n - 1 : (int)fb;
+    /* then exactly the centres in [a, b], computed as the tests compute them
+     * (one outside cannot be in the triangle, even perturbed) */
+    while (l <= u && o + (l + 0.5) * h < a)
+        l++;
+    while (u >= l && o + (u + 0.5) * h > b)
+        u--;
+    *lo = l;
+    *hi = u;
 }
+
+#define MIN3(a, b, c) ((a) < (b) ? ((a) < (c) ? (a) : (c)) : ((b) < (c) ? (b) : (c)))
+#define MAX3(a, b, c) ((a) > (b) ? ((a) > (c) ? (a) : (c)) : ((b) > (c) ? (b) : (c)))
 
 /* One edge of a triangle, evaluated identically for both triangles that
  * share it: from its lexicographically smaller end point, with a
@@ -303,8 +313,8 @@ static void raster_tri(wctx *c, size_t t, int j0, int j1)
 {
     double v[9];
     tri_of(c, t, v);
-    double x0 = fmin(v[0], fmin(v[3], v[6])), x1 = fmax(v[0], fmax(v[3], v[6]));
-    double y0 = fmin(v[1], fmin(v[4], v[7])), y1 = fmax(v[1], fmax(v[4], v[7]));
+    double x0 = MIN3(v[0], v[3], v[6]), x1 = MAX3(v[0], v[3], v[6]);
+    double y0 = MIN3(v[1], v[4], v[7]), y1 = MAX3(v[1], v[4], v[7]);
     int ilo, ihi, jlo, jhi;
     col_range(x0, x1, c->o[0], c->h, c->nx, &ilo, &ihi);
     col_range(y0, y1, c->o[1], c->h, c->ny, &jlo, &jhi);
@@ -367,10 +377,10 @@ static int bin_tris(wctx *c, vx_err *err)
             double v[9];
             tri_of(c, t, v);
             int lo, hi, ilo, ihi;
-            col_range(fmin(v[1], fmin(v[4], v[7])), fmax(v[1], fmax(v[4], v[7])), c->o[1], c->h,
-                      c->ny, &lo, &hi);
-            col_range(fmin(v[0], fmin(v[3], v[6])), fmax(v[0], fmax(v[3], v[6])), c->o[0], c->h,
-                      c->nx, &ilo, &ihi);
+            col_range(MIN3(v[1], v[4], v[7]), MAX3(v[1], v[4], v[7]), c->o[1], c->h, c->ny, &lo,
+                      &hi);
+            col_range(MIN3(v[0], v[3], v[6]), MAX3(v[0], v[3], v[6]), c->o[0], c->h, c->nx, &ilo,
+                      &ihi);
             if (lo > hi || ilo > ihi) continue;
             for (int b = lo / BAND; b <= hi / BAND; b++) {
                 if (pass == 0)
