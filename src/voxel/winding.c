@@ -135,42 +135,71 @@ static uint32_t *weld(const vx_mesh *m)
     return canon;
 }
 
+/* Occurrences of b in list[0..n). */
+static uint32_t occurs(const uint32_t *list, uint32_t n, uint32_t b)
+{
+    uint32_t c = 0;
+    for (uint32_t k = 0; k < n; k++)
+        c += list[k] == b;
+    return c;
+}
+
+/* The directed edges a -> b of vertex a's out-list `to[off[a]..off[a+1])`
+ * that b's list does not cancel, written into e (when not NULL); returns
+ * their number. Each is written once, from the side that has more. */
+static size_t emit_net(const uint32_t *off, const uint32_t *to, size_t nv, dedge *e)
+{
+    size_t w = 0;
+    for (uint32_t a = 0; a < nv; a++) {
+        const uint32_t *la = to + off[a], na = off[a + 1] - off[a];
+        for (uint32_t k = 0; k < na; k++) {
+            uint32_t b = la[k];
+            if (occurs(la, k, b)) continue; /* counted at its first occurrence */
+            uint32_t nab = occurs(la + k, na - k, b),
+                     nba = occurs(to + off[b], off[b + 1] - off[b], a);
+            if (nab <= nba) continue;
+            int n = (int)(nab - nba);
+            if (e) e[w] = a < b ? (dedge){a, b, n} : (dedge){b, a, -n};
+            w++;
+        }
+    }
+    return w;
+}
+
 /* The directed edges that do not cancel (net use s != 0, lo -> hi when
- * positive) into *out; returns their number, or (size_t)-1 without memory. */
+ * positive) into *out, from per-vertex out-lists (counting sort by the
+ * welded start vertex); returns their number, or (size_t)-1 without
+ * memory. */
 static size_t net_edges(const vx_mesh *m, const uint32_t *canon, dedge **out)
 {
-    size_t cap = pow2_at_least(3 * m->ntris + 3 * m->ntris / 2 + 1), w = 0;
-    uint64_t *key = calloc(cap, sizeof *key);
-    int *net = calloc(cap, sizeof *net);
-    if (!key || !net) {
-        free(key);
-        free(net);
-        return (size_t)-1;
-    }
+    size_t nv = m->nverts, w = (size_t)-1;
+    *out = NULL;
+    if (3 * m->ntris >= UINT32_MAX) return w;
+    uint32_t *off = calloc(nv + 2, sizeof *off), *to = malloc(3 * m->ntris * sizeof *to + 1);
+    if (!off || !to) goto done;
     for (size_t t = 0; t < m->ntris; t++)
         for (int q = 0; q < 3; q++) {
             uint32_t a = canon[m->tri[3 * t + q]], b = canon[m->tri[3 * t + (q + 1) % 3]];
-            if (a == b) continue;
-            uint64_t k = ((uint64_t)(a < b ? a : b) << 32 | (a < b ? b : a)) + 1;
-            size_t at = (size_t)mix(k) & (cap - 1);
-            while (key[at] && key[at] != k)
-                at = (at + 1) & (cap - 1);
-            key[at] = k;
-            net[at] += a < b ? 1 : -1;
+            if (a != b) off[a + 2]++;
         }
-    for (size_t i = 0; i < cap; i++)
-        w += key[i] && net[i];
-    dedge *e = malloc(w * sizeof *e + 1);
-    if (e) {
-        w = 0;
-        for (size_t i = 0; i < cap; i++)
-            if (key[i] && net[i])
-                e[w++] = (dedge){(uint32_t)((key[i] - 1) >> 32), (uint32_t)(key[i] - 1), net[i]};
+    for (size_t v = 2; v < nv + 2; v++)
+        off[v] += off[v - 1];
+    for (size_t t = 0; t < m->ntris; t++) /* off[a + 1] is a's cursor */
+        for (int q = 0; q < 3; q++) {
+            uint32_t a = canon[m->tri[3 * t + q]], b = canon[m->tri[3 * t + (q + 1) % 3]];
+            if (a != b) to[off[a + 1]++] = b;
+        }
+    w = emit_net(off, to, nv, NULL);
+    *out = malloc(w * sizeof **out + 1);
+    if (!*out) {
+        w = (size_t)-1;
+        goto done;
     }
-    free(key);
-    free(net);
-    *out = e;
-    return e ? w : (size_t)-1;
+    emit_net(off, to, nv, *out);
+done:
+    free(off);
+    free(to);
+    return w;
 }
 
 /* The cone over the mesh's boundary (c->cone, c->ncone): for each boundary
