@@ -8,6 +8,7 @@
 
 #include <stddef.h>
 
+#include "mesh/mesh.h"
 #include "util/err.h"
 
 typedef struct vx_wtree_node {
@@ -46,5 +47,14 @@ double vx_wtree_bound(const vx_wtree *t, const double a[3], const double b[3], d
 /* The exact winding number at q of one triangle (v: 9 doubles). */
 double vx_wtree_tri(const double *v, const double q[3]);
 void vx_wtree_free(vx_wtree *t);
+
+/* The cone over m's boundary (wcone.c): for each boundary edge a -> b (its
+ * uses net of the opposite ones, vertices welded by position) the triangle
+ * (b, a, apex) into *cone (9 doubles each, owned by the caller; NULL and
+ * *ncone 0 for a closed mesh), apex the mean of the end points of the
+ * edges of its connected part of the boundary, so that each hole gets its
+ * own cone and m plus the cones has no boundary. 0, or -1 with
+ * VX_EINTERNAL out_of_memory. Any thread. */
+int vx_wcone_build(const vx_mesh *m, double **cone, size_t *ncone, vx_err *err);
 
 #endif
