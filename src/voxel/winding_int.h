@@ -1,4 +1,5 @@
-/* Private to the winding-number voxelizer (winding.c, wtree.c): a tree of
+/* Private to the winding-number voxelizer (winding.c, wtree.c, wcone.c):
+ * the cones that close a mesh's boundary, and a tree of
  * triangles for the fast evaluation of their generalized winding number
  * (Barill et al. 2018): near nodes are summed exactly (the solid angle of
  * each triangle, Van Oosterom & Strackee), far ones by a second-order
