@@ -13,7 +13,8 @@
 typedef enum vformat { F_VDB = 0, F_BINVOX, F_RAW8, F_RAW1, F_SUMMARY } vformat;
 
 static const char *const method_names[] = {"auto", "peel", "slice", "scan", NULL};
-static const char *const inside_names[] = {"nonzero", "parity", "robust", NULL};
+static const char *const inside_names[] = {"nonzero", "parity", "robust", "winding",
+                                           NULL}; /* vx_inside order */
 static const char *const fill_names[] = {"solid", "surface", NULL};
 static const char *const samples_names[] = {"cube", "faces", NULL}; /* vx_samples order */
 static const char *const format_names[] = {"vdb", "binvox", "raw8", "raw1", "summary", NULL};
@@ -29,6 +30,7 @@ typedef struct vparams {
     double voxel_size;
     vbox grid;
     int resolution_set, voxel_size_set, grid_set; /* which of the three makes the grid */
+    int inside_set;                               /* null: winding on open meshes, else nonzero */
     long padding;
     int method, inside, fill; /* indices into the name arrays */
     long supersample;
@@ -74,7 +76,8 @@ static const vx_pspec spec[] = {
      .doc = "an explicit grid box {origin, voxel_size, dims}"},
     VX_P_INT(vparams, padding, 0, 0, 1024, "empty voxels around the bbox"),
     VX_P_ENUM(vparams, method, method_names, 0, "voxelization method"),
-    VX_P_ENUM(vparams, inside, inside_names, 0, "inside rule"),
+    VX_P_ENUM(vparams, inside, inside_names, 0, "inside rule", .flags = VX_PF_NULLABLE,
+              SET(inside)),
     VX_P_ENUM(vparams, fill, fill_names, 0, "solid or surface shell"),
     VX_P_INT(vparams, supersample, 1, 1, 2, "samples per voxel edge"),
     VX_P_ENUM(vparams, samples, samples_names, 0, "the sample pattern of supersample 2"),
@@ -86,9 +89,7 @@ static const vx_pspec spec[] = {
 
 static vx_inside inside_of(const vparams *p)
 {
-    return p->inside == 1   ? VX_INSIDE_PARITY
-           : p->inside == 2 ? VX_INSIDE_ROBUST
-                            : VX_INSIDE_NONZERO;
+    return (vx_inside)p->inside; /* the names follow the enum's order */
 }
 
 static vx_fill fill_of(const vparams *p)
@@ -100,6 +101,7 @@ typedef struct vstate {
     vx_bitgrid grid;
     vx_voxelize_stats st;
     int have_grid;
+    vx_inside inside; /* as run */
 } vstate;
 
 /* Memory one job needs for a grid: the bit grid (and sample counts), the
@@ -183,6 +185,16 @@ static int voxelize_check(void *params, const vx_limits *lim, vx_err *err)
                           "params.supersample 2 needs params.method slice or auto (%s samples "
                           "voxel centres only)",
                           p->method == VX_METHOD_PEEL ? "peel" : "scan");
+    if (p->inside_set && p->inside == VX_INSIDE_WINDING) {
+        if (p->method != VX_METHOD_AUTO)
+            return vx_err_set(err, VX_EUNPROC, "invalid_params",
+                              "params.inside \"winding\" runs its own CPU method: params.method "
+                              "must be auto");
+        if (p->supersample == 2 && p->samples == VX_SAMPLES_CUBE)
+            return vx_err_set(err, VX_EUNPROC, "invalid_params",
+                              "params.inside \"winding\" samples voxel centres: params.supersample "
+                              "2 needs params.samples \"faces\"");
+    }
     if (p->grid_set) {
         if (p->padding)
             return vx_err_set(
@@ -252,11 +264,11 @@ static int voxelize_run_gl(vx_job_run *r, const vx_mesh *mesh, const void *param
             return -1;
     }
     d.method = (vx_method)p.method; /* the name arrays follow the enums' order */
-    d.inside = inside_of(&p);
     d.fill = fill_of(&p);
     d.supersample = (int)p.supersample;
     d.threshold = (int)p.threshold;
     d.samples = (vx_samples)p.samples;
+    d.inside = p.inside_set ? inside_of(&p) : vx_voxelize_default_inside(mesh, &d);
     d.max_memory = lim ? lim->max_job_memory : 0;
     d.progress = engine_progress;
     d.ud = r;
@@ -265,6 +277,7 @@ static int voxelize_run_gl(vx_job_run *r, const vx_mesh *mesh, const void *param
     vstate *s = calloc(1, sizeof *s);
     if (!s) return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for the job state");
     *state = s; /* from here on the runner frees it through free_state */
+    s->inside = d.inside;
     if (vx_voxelize(vx_run_gl(r), mesh, &d, &s->grid, &s->st, err)) return -1;
     s->have_grid = 1;
     if (vx_run_progress(r, 0.9, err)) return -1;
@@ -274,6 +287,8 @@ static int voxelize_run_gl(vx_job_run *r, const vx_mesh *mesh, const void *param
     double dims[3] = {g->dims[0], g->dims[1], g->dims[2]};
     cJSON *stats = vx_run_stats(r);
     stat_set(stats, "method", cJSON_CreateString(st->method ? st->method : "unknown"));
+    stat_set(stats, "inside", cJSON_CreateString(inside_names[s->inside]));
+    stat_set(stats, "boundary_edges", cJSON_CreateNumber((double)mesh->boundary_edges));
     stat_set(stats, "dims", array3(dims));
     stat_set(stats, "origin", array3(g->origin));
     stat_set(stats, "voxel_size", cJSON_CreateNumber(g->h));
@@ -320,7 +335,7 @@ static int voxelize_encode(vx_job_run *r, const void *params, void *state, vx_er
         if (!path) return -1;
         vx_vdb_meta m = {
             .method = s->st.method,
-            .inside = inside_names[p.inside],
+            .inside = inside_names[s->inside],
             .fill = fill_names[p.fill],
             .mesh = vx_run_mesh_id(r),
             .supersample = (int)p.supersample,

@@ -37,6 +37,7 @@ typedef enum vx_inside {
     VX_INSIDE_NONZERO = 0, /* signed crossings: front face +1, back face -1; union of parts */
     VX_INSIDE_PARITY,      /* entry/exit pairing as in the seeds */
     VX_INSIDE_ROBUST,      /* for meshes with holes: majority of parity along x, y and z */
+    VX_INSIDE_WINDING,     /* generalized winding number >= 1/2 (winding.c, on the CPU) */
 } vx_inside;
 typedef enum vx_fill { VX_FILL_SOLID = 0, VX_FILL_SURFACE } vx_fill;
 /* Where supersample 2 samples a voxel (src/voxel/faces.c for FACES). */
@@ -141,5 +142,18 @@ int vx_voxelize_slice(vx_gl *gl, const vx_mesh *m, const vx_voxelize_desc *d, vx
  * by vx_voxelize (fill solid). st sums the four runs. */
 int vx_voxelize_faces(vx_gl *gl, const vx_mesh *m, const vx_voxelize_desc *d, vx_bitgrid *out,
                       vx_voxelize_stats *st, vx_err *err);
+/* inside winding (src/voxel/winding.c): the centres where the mesh's
+ * generalized winding number is >= 1/2, on the CPU threads (crossings per
+ * z column, winding numbers between them). d validated by vx_voxelize
+ * (fill solid, supersample 1; method and max_slab_rows are ignored);
+ * progress runs on the calling thread. Errors: VX_ETOOBIG
+ * job_memory_limit (max_memory, the crossings counted), VX_EINTERNAL
+ * out_of_memory, or the progress hook's own. st->method "winding". */
+int vx_voxelize_winding(const vx_mesh *m, const vx_voxelize_desc *d, vx_bitgrid *out,
+                        vx_voxelize_stats *st, vx_err *err);
+/* The inside rule when the request names none: winding for a mesh with
+ * boundary edges when d could run it (method auto, fill solid, no cube
+ * supersampling), else nonzero. */
+vx_inside vx_voxelize_default_inside(const vx_mesh *m, const vx_voxelize_desc *d);
 
 #endif

@@ -35,7 +35,7 @@ int vx_voxelize(vx_gl *gl, const vx_mesh *m, const vx_voxelize_desc *d, vx_bitgr
                           "the faces sample pattern needs fill solid");
     if (d->method < VX_METHOD_AUTO || d->method > VX_METHOD_SCAN)
         return vx_err_set(err, VX_EUNPROC, "invalid_params", "unknown method %d", (int)d->method);
-    if (d->inside < VX_INSIDE_NONZERO || d->inside > VX_INSIDE_ROBUST)
+    if (d->inside < VX_INSIDE_NONZERO || d->inside > VX_INSIDE_WINDING)
         return vx_err_set(err, VX_EUNPROC, "invalid_params", "unknown inside rule %d",
                           (int)d->inside);
     if (d->fill < VX_FILL_SOLID || d->fill > VX_FILL_SURFACE)
@@ -48,6 +48,14 @@ int vx_voxelize(vx_gl *gl, const vx_mesh *m, const vx_voxelize_desc *d, vx_bitgr
     if (dd.supersample == 0) dd.supersample = 1;
     if (dd.threshold == 0) dd.threshold = 4;
     if (faces) return vx_voxelize_faces(gl, m, &dd, out, st, err);
+    if (dd.inside == VX_INSIDE_WINDING && dd.fill == VX_FILL_SOLID) {
+        if (dd.supersample == 2)
+            return vx_err_set(err, VX_EUNPROC, "invalid_params",
+                              "inside winding samples voxel centres: supersample 2 needs samples "
+                              "faces");
+        return vx_voxelize_winding(m, &dd, out, st, err);
+    }
+    if (dd.inside == VX_INSIDE_WINDING) dd.inside = VX_INSIDE_NONZERO; /* surface: no inside */
     vx_method method = dd.method;
     /* Peeling and scan sample each voxel once at its centre; only slicing
      * supersamples (seed 003's accuracy improvement). Scan counts crossings

@@ -73,7 +73,7 @@ for m in "${METHODS[@]}"; do
     check "$m cube: 512 voxels, dims 8^3, volume 1" jq -e \
         '.stats.voxels_inside == 512 and .stats.dims == [8,8,8] and .stats.volume == 1 and .stats.voxel_size == 0.125 and .stats.origin == [0,0,0]' "$TMP/job.json"
     check "$m cube: method as run" test "$(st method)" = "$m"
-    check "$m cube: normalised params" jq -e '.params.resolution == 8 and .params.voxel_size == null and .params.grid == null and .params.inside == "nonzero" and .params.format == "summary"' "$TMP/job.json"
+    check "$m cube: normalised params" jq -e '.params.resolution == 8 and .params.voxel_size == null and .params.grid == null and .params.inside == null and .params.format == "summary"' "$TMP/job.json"
     check "$m cube: summary has no outputs" jq -e '.outputs == {}' "$TMP/job.json"
     api GET "/v1/jobs/$VJ/result"
     expect_error "$m summary result" 404 output_not_found

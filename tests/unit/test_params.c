@@ -213,6 +213,8 @@ static void test_seeds(void **state)
                      "\"format\":\"binvox\"}"},
         {"voxelize", "{\"resolution\":24,\"supersample\":2,\"samples\":\"faces\",\"threshold\":4,"
                      "\"method\":\"peel\"}"},
+        {"voxelize", "{\"inside\":\"winding\",\"supersample\":2,\"samples\":\"faces\"}"},
+        {"voxelize", "{\"inside\":null,\"padding\":4}"},
         {"render", "{\"N\":16,\"width\":64,\"height\":48,\"camera\":{\"type\":\"orbit\"},"
                    "\"frames\":3,\"bits\":16,\"outputs\":[\"depth\",\"voxels\"]}"},
         {"render", "{\"N\":16,\"lights\":[{\"direction\":[0,0,1],\"color\":[1,0,0]}],"

@@ -1,0 +1,274 @@
+/* The winding-number tree (winding_int.h): a bounding-volume hierarchy of
+ * triangles split at the median centroid along the widest axis, each node
+ * carrying the first two moments of its dipole field. */
+#include <math.h>
+#include <stdint.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "voxel/winding_int.h"
+
+#define LEAF 8
+#define STACK 128
+
+/* atan2 to about 1e-5 radians (Abramowitz & Stegun 4.4.47 on [0, 1],
+ * then the octant), a few times faster than libm's. */
+static double atan2_fast(double y, double x)
+{
+    double ax = fabs(x), ay = fabs(y), mx = ax > ay ? ax : ay, mn = ax > ay ? ay : ax;
+    if (mx == 0) return 0;
+    double a = mn / mx, s = a * a;
+    double r =
+        a * (0.9998660 + s * (-0.3302995 + s * (0.1801410 + s * (-0.0851330 + s * 0.0208351))));
+    if (ay > ax) r = M_PI_2 - r;
+    if (x < 0) r = M_PI - r;
+    return y < 0 ? -r : r;
+}
+
+double vx_wtree_tri(const double *v, const double q[3])
+{
+    double a[3], b[3], c[3];
+    for (int k = 0; k < 3; k++) {
+        a[k] = v[k] - q[k];
+        b[k] = v[3 + k] - q[k];
+        c[k] = v[6 + k] - q[k];
+    }
+    double la = sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2]);
+    double lb = sqrt(b[0] * b[0] + b[1] * b[1] + b[2] * b[2]);
+    double lc = sqrt(c[0] * c[0] + c[1] * c[1] + c[2] * c[2]);
+    double det = a[0] * (b[1] * c[2] - b[2] * c[1]) - a[1] * (b[0] * c[2] - b[2] * c[0]) +
+                 a[2] * (b[0] * c[1] - b[1] * c[0]);
+    double ab = a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+    double bc = b[0] * c[0] + b[1] * c[1] + b[2] * c[2];
+    double ca = c[0] * a[0] + c[1] * a[1] + c[2] * a[2];
+    double den = la * lb * lc + ab * lc + bc * la + ca * lb;
+    /* tan(omega / 2) = det / den; w = omega / (4 pi) */
+    return atan2_fast(det, den) / (2 * M_PI);
+}
+
+typedef struct build {
+    vx_wtree *t;
+    const double *src; /* input triangles */
+    int *idx;          /* triangle order, permuted in place */
+    double *cen;       /* 3 per input triangle */
+    int cap;
+} build;
+
+/* Moves the idx[lo..hi) with the k-th smallest centroid coordinate along
+ * axis to position k, smaller ones before it (quickselect). */
+static void select_k(build *b, int lo, int hi, int k, int axis)
+{
+    while (hi - lo > 1) {
+        int mid = lo + (hi - lo) / 2;
+        double pv = b->cen[3 * b->idx[mid] + axis];
+        int i = lo, j = hi - 1;
+        while (i <= j) {
+            while (b->cen[3 * b->idx[i] + axis] < pv)
+                i++;
+            while (b->cen[3 * b->idx[j] + axis] > pv)
+                j--;
+            if (i <= j) {
+                int s = b->idx[i];
+                b->idx[i++] = b->idx[j];
+                b->idx[j--] = s;
+            }
+        }
+        if (k <= j)
+            hi = j + 1;
+        else if (k >= i)
+            lo = i;
+        else
+            return;
+    }
+}
+
+/* The node's moments and radius from its triangles idx[lo..hi). */
+static void moments(build *b, vx_wtree_node *nd, int lo, int hi)
+{
+    double area = 0, p[3] = {0, 0, 0};
+    memset(nd->a, 0, sizeof nd->a);
+    memset(nd->m, 0, sizeof nd->m);
+    for (int i = lo; i < hi; i++) {
+        const double *v = b->src + 9 * (size_t)b->idx[i], *c = b->cen + 3 * b->idx[i];
+        double e1[3] = {v[3] - v[0], v[4] - v[1], v[5] - v[2]};
+        double e2[3] = {v[6] - v[0], v[7] - v[1], v[8] - v[2]};
+        double n[3] = {.5 * (e1[1] * e2[2] - e1[2] * e2[1]), .5 * (e1[2] * e2[0] - e1[0] * e2[2]),
+                       .5 * (e1[0] * e2[1] - e1[1] * e2[0])};
+        double s = sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+        area += s;
+        for (int k = 0; k < 3; k++) {
+            p[k] += s * c[k];
+            nd->a[k] += n[k];
+        }
+    }
+    for (int k = 0; k < 3; k++)
+        nd->p[k] = area > 0 ? p[k] / area : b->cen[3 * b->idx[lo] + k];
+    double r2 = 0;
+    for (int i = lo; i < hi; i++) {
+        const double *v = b->src + 9 * (size_t)b->idx[i], *c = b->cen + 3 * b->idx[i];
+        double e1[3] = {v[3] - v[0], v[4] - v[1], v[5] - v[2]};
+        double e2[3] = {v[6] - v[0], v[7] - v[1], v[8] - v[2]};
+        double n[3] = {.5 * (e1[1] * e2[2] - e1[2] * e2[1]), .5 * (e1[2] * e2[0] - e1[0] * e2[2]),
+                       .5 * (e1[0] * e2[1] - e1[1] * e2[0])};
+        for (int r = 0; r < 3; r++)
+            for (int s = 0; s < 3; s++)
+                nd->m[3 * r + s] += (c[r] - nd->p[r]) * n[s];
+        for (int q = 0; q < 3; q++) {
+            double d2 = 0;
+            for (int k = 0; k < 3; k++)
+                d2 += (v[3 * q + k] - nd->p[k]) * (v[3 * q + k] - nd->p[k]);
+            if (d2 > r2) r2 = d2;
+        }
+    }
+    nd->far2 = VX_WTREE_BETA * VX_WTREE_BETA * r2;
+    nd->r = sqrt(r2);
+    nd->area = area;
+}
+
+/* Node over idx[lo..hi); returns its index. The tree has at most
+ * 2 * ntris / LEAF * 2 + 1 nodes (cap, allocated up front). */
+static int node_build(build *b, int lo, int hi, int depth)
+{
+    vx_wtree *t = b->t;
+    int id = t->nnodes++;
+    vx_wtree_node *nd = &t->node[id];
+    moments(b, nd, lo, hi);
+    nd->kid[0] = nd->kid[1] = -1;
+    nd->first = lo;
+    nd->n = hi - lo;
+    if (hi - lo <= LEAF || depth >= STACK / 2 - 2 || t->nnodes + 2 > b->cap) return id;
+    double mn[3] = {HUGE_VAL, HUGE_VAL, HUGE_VAL}, mx[3] = {-HUGE_VAL, -HUGE_VAL, -HUGE_VAL};
+    for (int i = lo; i < hi; i++)
+        for (int k = 0; k < 3; k++) {
+            double c = b->cen[3 * b->idx[i] + k];
+            mn[k] = c < mn[k] ? c : mn[k];
+            mx[k] = c > mx[k] ? c : mx[k];
+        }
+    int axis = 0;
+    for (int k = 1; k < 3; k++)
+        if (mx[k] - mn[k] > mx[axis] - mn[axis]) axis = k;
+    int mid = lo + (hi - lo) / 2;
+    select_k(b, lo, hi, mid, axis);
+    int l = node_build(b, lo, mid, depth + 1);
+    int r = node_build(b, mid, hi, depth + 1);
+    t->node[id].kid[0] = l;
+    t->node[id].kid[1] = r;
+    return id;
+}
+
+int vx_wtree_build(vx_wtree *t, size_t ntris, const double *tv, vx_err *err)
+{
+    memset(t, 0, sizeof *t);
+    if (ntris == 0) return 0;
+    if (ntris > (size_t)INT32_MAX / 4)
+        return vx_err_set(err, VX_ETOOBIG, "job_memory_limit", "too many boundary triangles");
+    build b = {.t = t, .src = tv, .cap = (int)(4 * (ntris / LEAF + 1) + 1)};
+    b.idx = malloc(ntris * sizeof *b.idx);
+    b.cen = malloc(3 * ntris * sizeof *b.cen);
+    t->tv = malloc(9 * ntris * sizeof *t->tv);
+    t->node = malloc((size_t)b.cap * sizeof *t->node);
+    if (!b.idx || !b.cen || !t->tv || !t->node) {
+        free(b.idx);
+        free(b.cen);
+        vx_wtree_free(t);
+        return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for the winding tree");
+    }
+    for (size_t i = 0; i < ntris; i++) {
+        b.idx[i] = (int)i;
+        for (int k = 0; k < 3; k++)
+            b.cen[3 * i + k] = (tv[9 * i + k] + tv[9 * i + 3 + k] + tv[9 * i + 6 + k]) / 3;
+    }
+    node_build(&b, 0, (int)ntris, 0);
+    for (size_t i = 0; i < ntris; i++)
+        memcpy(t->tv + 9 * i, tv + 9 * (size_t)b.idx[i], 9 * sizeof *tv);
+    t->ntris = ntris;
+    free(b.idx);
+    free(b.cen);
+    return 0;
+}
+
+/* The expansion of a far node's field at q (times 4 pi). */
+static double far_field(const vx_wtree_node *nd, const double q[3])
+{
+    double r[3] = {nd->p[0] - q[0], nd->p[1] - q[1], nd->p[2] - q[2]};
+    double r2 = r[0] * r[0] + r[1] * r[1] + r[2] * r[2];
+    double inv = 1 / sqrt(r2), inv3 = inv * inv * inv, inv5 = inv3 * inv * inv;
+    double first = (r[0] * nd->a[0] + r[1] * nd->a[1] + r[2] * nd->a[2]) * inv3;
+    const double *m = nd->m;
+    double tr = m[0] + m[4] + m[8], rmr = 0;
+    for (int i = 0; i < 3; i++)
+        rmr += r[i] * (m[3 * i] * r[0] + m[3 * i + 1] * r[1] + m[3 * i + 2] * r[2]);
+    return first + tr * inv3 - 3 * rmr * inv5;
+}
+
+double vx_wtree_eval(const vx_wtree *t, const double q[3])
+{
+    if (!t->nnodes) return 0;
+    int stack[STACK], sp = 0;
+    double w = 0, far = 0;
+    stack[sp++] = 0;
+    while (sp) {
+        const vx_wtree_node *nd = &t->node[stack[--sp]];
+        double d2 = 0;
+        for (int k = 0; k < 3; k++)
+            d2 += (q[k] - nd->p[k]) * (q[k] - nd->p[k]);
+        if (d2 > nd->far2 && nd->far2 > 0) {
+            far += far_field(nd, q);
+        } else if (nd->kid[0] < 0) {
+            for (int i = nd->first; i < nd->first + nd->n; i++)
+                w += vx_wtree_tri(t->tv + 9 * (size_t)i, q);
+        } else {
+            stack[sp++] = nd->kid[0];
+            stack[sp++] = nd->kid[1];
+        }
+    }
+    return w + far / (4 * M_PI);
+}
+
+/* Distance from p to the segment a-b. */
+static double seg_dist(const double a[3], const double b[3], const double p[3])
+{
+    double ab[3], ap[3], l2 = 0, d = 0;
+    for (int k = 0; k < 3; k++) {
+        ab[k] = b[k] - a[k];
+        ap[k] = p[k] - a[k];
+        l2 += ab[k] * ab[k];
+        d += ab[k] * ap[k];
+    }
+    double u = l2 > 0 ? d / l2 : 0, r2 = 0;
+    u = u < 0 ? 0 : u > 1 ? 1 : u;
+    for (int k = 0; k < 3; k++)
+        r2 += (ap[k] - u * ab[k]) * (ap[k] - u * ab[k]);
+    return sqrt(r2);
+}
+
+double vx_wtree_bound(const vx_wtree *t, const double a[3], const double b[3], double limit)
+{
+    if (!t->nnodes) return 0;
+    int stack[STACK], sp = 0;
+    double sum = 0;
+    stack[sp++] = 0;
+    while (sp) {
+        const vx_wtree_node *nd = &t->node[stack[--sp]];
+        double g = seg_dist(a, b, nd->p) - nd->r;
+        double part = g > 0 ? nd->area / (4 * M_PI * g * g) : HUGE_VAL;
+        if (sum + part < limit) {
+            sum += part;
+        } else if (nd->kid[0] < 0) {
+            return HUGE_VAL; /* a leaf too near: no useful bound */
+        } else {
+            stack[sp++] = nd->kid[0];
+            stack[sp++] = nd->kid[1];
+        }
+        if (sum >= limit) return sum;
+    }
+    return sum;
+}
+
+void vx_wtree_free(vx_wtree *t)
+{
+    if (!t) return;
+    free(t->tv);
+    free(t->node);
+    memset(t, 0, sizeof *t);
+}

@@ -1,0 +1,333 @@
+/* inside "winding" (src/voxel/winding.c): generated shapes with known
+ * volumes (open, overlapping, nested), closed meshes against the exact CPU
+ * reference, the tree against the direct sum, the default rule, and the
+ * stop hook. Runs on the CPU: no GL context. */
+#include <math.h>
+#include <setjmp.h>
+#include <stdarg.h>
+#include <stddef.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <cmocka.h>
+
+#include "ref_voxel.h"
+#include "shapes.h"
+#include "voxel/voxel.h"
+#include "voxel/winding_int.h"
+
+/* m without the triangles whose three vertices lie above z = c (a cap
+ * hole at the top); *top = the highest z left (the hole's rim). */
+static vx_mesh *cut_above(vx_mesh *m, double c, double *top)
+{
+    uint32_t *idx = malloc(3 * m->ntris * sizeof *idx);
+    size_t nt = 0;
+    *top = -HUGE_VAL;
+    for (size_t t = 0; t < m->ntris; t++) {
+        int above = 1;
+        for (int q = 0; q < 3; q++)
+            above &= m->pos[3 * (size_t)m->tri[3 * t + q] + 2] > c;
+        if (above) continue;
+        for (int q = 0; q < 3; q++) {
+            idx[3 * nt + q] = m->tri[3 * t + q];
+            double z = m->pos[3 * (size_t)m->tri[3 * t + q] + 2];
+            if (z > *top) *top = z;
+        }
+        nt++;
+    }
+    vx_mesh *o = shape_mesh_from(m->nverts, m->pos, nt, idx);
+    free(idx);
+    vx_mesh_free(m);
+    return o;
+}
+
+static double ball(double r)
+{
+    return 4.0 / 3.0 * M_PI * r * r * r;
+}
+
+/* The segment of a ball of radius r beyond a plane at height t from its top. */
+static double segment(double r, double t)
+{
+    return M_PI * t * t * (3 * r - t) / 3;
+}
+
+/* The lens two balls of radii a, b share at centre distance d. */
+static double lens(double a, double b, double d)
+{
+    return M_PI * (a + b - d) * (a + b - d) * (d * d + 2 * d * (a + b) - 3 * (a - b) * (a - b)) /
+           (12 * d);
+}
+
+/* Voxelizes m at resolution res; with plane finite, the grid moved along
+ * z so that a cell boundary lies on z = plane (a flat hole there is then
+ * not rounded by up to half a voxel one way). Returns the volume. */
+static double run_at(const vx_mesh *m, vx_inside rule, int res, double plane, vx_bitgrid *b,
+                     vx_voxelize_stats *st)
+{
+    vx_voxelize_desc d = {.inside = rule};
+    assert_int_equal(vx_grid_from_resolution(m, res, 2, &d.grid, NULL), 0);
+    if (isfinite(plane))
+        d.grid.origin[2] = plane - ceil((plane - d.grid.origin[2]) / d.grid.h) * d.grid.h;
+    vx_err err = {0};
+    int rc = vx_voxelize(NULL, m, &d, b, st, &err);
+    if (rc) printf("voxelize: %s\n", err.message);
+    assert_int_equal(rc, 0);
+    return (double)st->voxels_inside * d.grid.h * d.grid.h * d.grid.h;
+}
+
+static double run(const vx_mesh *m, vx_inside rule, int res, vx_bitgrid *b, vx_voxelize_stats *st)
+{
+    return run_at(m, rule, res, NAN, b, st);
+}
+
+static void near(const char *what, double got, double want, double tol)
+{
+    printf("%s: %.5f, analytic %.5f (%+.3f%%)\n", what, got, want, 100 * (got / want - 1));
+    assert_true(fabs(got / want - 1) <= tol);
+}
+
+/* Two overlapping balls, the second with a hole on its far side: the union
+ * minus the second's segment beyond the hole. */
+static void test_overlap_open(void **state)
+{
+    (void)state;
+    const double r1 = 1, r2 = 0.8, d = 1.1;
+    double top;
+    vx_mesh *a = shape_sphere(0.013, 0.007, 0.003, r1, 0);
+    vx_mesh *b = shape_param_mesh(128, 64, 1, 0, 0.013, 0.007, 0.003 + d, r2, 0);
+    b = cut_above(b, 0.003 + d + 0.6 * r2, &top);
+    assert_true(b->boundary_edges > 0);
+    vx_mesh *parts[2] = {a, b};
+    vx_mesh *m = shape_merge(parts, 2);
+    double t = 0.003 + d + r2 - top;
+    double want = ball(r1) + ball(r2) - lens(r1, r2, d) - segment(r2, t);
+    vx_bitgrid g;
+    vx_voxelize_stats st;
+    near("two balls, one open", run_at(m, VX_INSIDE_WINDING, 160, top, &g, &st), want, 0.005);
+    assert_string_equal(st.method, "winding");
+    vx_bitgrid_free(&g);
+    /* nonzero counts the open ball's crossings along x: not the union */
+    vx_mesh_free(a);
+    vx_mesh_free(b);
+    vx_mesh_free(m);
+}
+
+/* Nested closed shells: an inward inner shell keeps its void, an outward
+ * one (winding number 2 inside it) is part of the union. */
+static void test_nested(void **state)
+{
+    (void)state;
+    vx_mesh *out = shape_sphere(0.011, 0.002, 0.005, 1, 0);
+    vx_mesh *in = shape_sphere(0.011, 0.002, 0.005, 0.5, 1);
+    vx_mesh *parts[2] = {out, in};
+    vx_mesh *m = shape_merge(parts, 2);
+    vx_bitgrid g;
+    vx_voxelize_stats st;
+    double outer = fabs(shape_signed_volume(out)), inner = fabs(shape_signed_volume(in));
+    near("nested, void inward", run(m, VX_INSIDE_WINDING, 128, &g, &st), outer - inner, 0.005);
+    /* the void is empty at the centre */
+    assert_int_equal(vx_bitgrid_get(&g, g.grid.dims[0] / 2, g.grid.dims[1] / 2, g.grid.dims[2] / 2),
+                     0);
+    vx_bitgrid_free(&g);
+    vx_mesh_free(m);
+    shape_flip(in);
+    parts[1] = in;
+    m = shape_merge(parts, 2);
+    near("nested, both outward", run(m, VX_INSIDE_WINDING, 128, &g, &st), outer, 0.005);
+    vx_bitgrid_free(&g);
+    vx_mesh_free(m);
+    vx_mesh_free(out);
+    vx_mesh_free(in);
+}
+
+/* Open shells: a bowl (the lower hemisphere) is the half ball; a ball
+ * with a large cap hole is the ball less the segment beyond the hole. */
+static void test_open_shells(void **state)
+{
+    (void)state;
+    double top;
+    vx_mesh *bowl = cut_above(shape_sphere(0.004, 0.009, 0.002, 1, 0), 0.002 + 1e-9, &top);
+    vx_bitgrid g;
+    vx_voxelize_stats st;
+    double t = 1 - (top - 0.002);
+    near("bowl", run_at(bowl, VX_INSIDE_WINDING, 128, top, &g, &st), ball(1) - segment(1, t),
+         0.005);
+    /* nothing above the rim */
+    for (int k = 0; k < g.grid.dims[2]; k++) {
+        double z = g.grid.origin[2] + (k + .5) * g.grid.h;
+        if (z > top + g.grid.h)
+            for (int j = 0; j < g.grid.dims[1]; j++)
+                for (int i = 0; i < g.grid.dims[0]; i++)
+                    assert_int_equal(vx_bitgrid_get(&g, i, j, k), 0);
+    }
+    vx_bitgrid_free(&g);
+    vx_mesh_free(bowl);
+    vx_mesh *cup = cut_above(shape_sphere(0.004, 0.009, 0.002, 1, 0), 0.002 + 0.3, &top);
+    t = 1 - (top - 0.002);
+    near("ball with a cap hole", run_at(cup, VX_INSIDE_WINDING, 128, top, &g, &st),
+         ball(1) - segment(1, t), 0.005);
+    vx_bitgrid_free(&g);
+    vx_mesh_free(cup);
+}
+
+/* Closed meshes: winding >= 1/2 is the crossing count, the same voxels as
+ * the exact nonzero reference. */
+static void test_closed_exact(void **state)
+{
+    (void)state;
+    const char *names[] = {"spot_triangulated.obj", "rocker-arm.obj", "fandisk.obj"};
+    for (int n = 0; n < 3; n++) {
+        vx_mesh *m = shape_load(names[n]);
+        assert_non_null(m);
+        assert_int_equal(m->boundary_edges, 0);
+        vx_bitgrid g;
+        vx_voxelize_stats st;
+        run(m, VX_INSIDE_WINDING, 96, &g, &st);
+        double iou;
+        size_t bad = ref_compare(names[n], m, &g.grid, VX_INSIDE_NONZERO, &g, &iou);
+        assert_int_equal(bad, 0);
+        vx_bitgrid_free(&g);
+        vx_mesh_free(m);
+    }
+    /* and the generated torus with a box through it (overlapping parts) */
+    vx_mesh *parts[2] = {shape_param_mesh(64, 32, 0, 0, 0.01, 0.02, 0.03, 1, 0.4),
+                         shape_box((double[]){-0.3, -1.7, -0.2}, (double[]){0.35, 1.6, 0.25})};
+    vx_mesh *m = shape_merge(parts, 2);
+    vx_bitgrid g;
+    vx_voxelize_stats st;
+    run(m, VX_INSIDE_WINDING, 100, &g, &st);
+    double iou;
+    assert_int_equal(ref_compare("torus + box", m, &g.grid, VX_INSIDE_NONZERO, &g, &iou), 0);
+    vx_bitgrid_free(&g);
+    vx_mesh_free(m);
+    vx_mesh_free(parts[0]);
+    vx_mesh_free(parts[1]);
+}
+
+/* The open bunny: every voxel agrees with the direct winding number at
+ * sampled centres, and none is set outside the mesh's bounding box. */
+static void test_bunny(void **state)
+{
+    (void)state;
+    vx_mesh *m = shape_load("stanford-bunny.obj");
+    assert_non_null(m);
+    assert_true(m->boundary_edges > 0);
+    vx_bitgrid g;
+    vx_voxelize_stats st;
+    run(m, VX_INSIDE_WINDING, 64, &g, &st);
+    const vx_grid *gr = &g.grid;
+    size_t agree = 0, n = 0, outside = 0;
+    uint64_t s = 99;
+    for (int k = 0; k < gr->dims[2]; k++)
+        for (int j = 0; j < gr->dims[1]; j++)
+            for (int i = 0; i < gr->dims[0]; i++) {
+                double c[3] = {gr->origin[0] + (i + .5) * gr->h, gr->origin[1] + (j + .5) * gr->h,
+                               gr->origin[2] + (k + .5) * gr->h};
+                int in = vx_bitgrid_get(&g, i, j, k);
+                for (int a = 0; a < 3; a++)
+                    if (in && (c[a] < m->bbox_min[a] || c[a] > m->bbox_max[a])) outside++;
+                s = s * 6364136223846793005ull + 1442695040888963407ull;
+                if ((s >> 40) % 128) continue;
+                n++;
+                agree += (ref_winding_number(m, c) >= 0.5) == in;
+            }
+    printf("bunny 64: %llu inside, %zu/%zu sampled centres agree with the direct sum\n",
+           (unsigned long long)st.voxels_inside, agree, n);
+    assert_int_equal(outside, 0);
+    assert_true(agree >= n - n / 1000);
+    vx_bitgrid_free(&g);
+    vx_mesh_free(m);
+}
+
+/* The tree against the direct sum over the bunny's own triangles. */
+static void test_tree(void **state)
+{
+    (void)state;
+    vx_mesh *m = shape_load("stanford-bunny.obj");
+    assert_non_null(m);
+    double *tv = malloc(9 * m->ntris * sizeof *tv);
+    for (size_t t = 0; t < m->ntris; t++)
+        for (int q = 0; q < 3; q++)
+            memcpy(tv + 9 * t + 3 * q, m->pos + 3 * (size_t)m->tri[3 * t + q], 3 * sizeof *tv);
+    vx_wtree tree;
+    assert_int_equal(vx_wtree_build(&tree, m->ntris, tv, NULL), 0);
+    double worst = 0;
+    uint64_t s = 7;
+    for (int n = 0; n < 100; n++) {
+        double q[3];
+        for (int a = 0; a < 3; a++) {
+            s = s * 6364136223846793005ull + 1442695040888963407ull;
+            double u = (double)(s >> 11) / 9007199254740992.0;
+            double lo = m->bbox_min[a], hi = m->bbox_max[a];
+            q[a] = lo - 0.2 * (hi - lo) + 1.4 * (hi - lo) * u;
+        }
+        double e = fabs(vx_wtree_eval(&tree, q) - ref_winding_number(m, q));
+        if (e > worst) worst = e;
+    }
+    printf("tree vs direct sum, 100 points: worst error %.2e\n", worst);
+    assert_true(worst < 0.05); /* beta 2: about 4e-2 on the bunny's own surface */
+    vx_wtree_free(&tree);
+    free(tv);
+    vx_mesh_free(m);
+}
+
+static int stop_now(void *ud, double f, vx_err *err)
+{
+    (void)f;
+    (*(int *)ud)++;
+    return vx_err_set(err, VX_ETIMEOUT, "job_timeout", "stop");
+}
+
+/* The default rule and the stop hook. */
+static void test_default_and_stop(void **state)
+{
+    (void)state;
+    double top;
+    vx_mesh *bowl = cut_above(shape_sphere(0, 0, 0, 1, 0), 1e-9, &top);
+    vx_mesh *ball_m = shape_sphere(0, 0, 0, 1, 0);
+    vx_voxelize_desc d = {.supersample = 1};
+    assert_int_equal(vx_voxelize_default_inside(bowl, &d), VX_INSIDE_WINDING);
+    assert_int_equal(vx_voxelize_default_inside(ball_m, &d), VX_INSIDE_NONZERO);
+    d.method = VX_METHOD_PEEL;
+    assert_int_equal(vx_voxelize_default_inside(bowl, &d), VX_INSIDE_NONZERO);
+    d.method = VX_METHOD_AUTO;
+    d.supersample = 2;
+    assert_int_equal(vx_voxelize_default_inside(bowl, &d), VX_INSIDE_NONZERO);
+    d.samples = VX_SAMPLES_FACES;
+    assert_int_equal(vx_voxelize_default_inside(bowl, &d), VX_INSIDE_WINDING);
+
+    int calls = 0;
+    vx_voxelize_desc s = {.inside = VX_INSIDE_WINDING, .progress = stop_now, .ud = &calls};
+    assert_int_equal(vx_grid_from_resolution(bowl, 256, 0, &s.grid, NULL), 0);
+    vx_bitgrid g;
+    vx_voxelize_stats st;
+    vx_err err = {0};
+    assert_int_equal(vx_voxelize(NULL, bowl, &s, &g, &st, &err), -1);
+    assert_int_equal(err.kind, VX_ETIMEOUT);
+    assert_true(calls >= 1);
+    assert_null(g.bits);
+    /* supersample 2 with the cube samples is refused */
+    s.progress = NULL;
+    s.supersample = 2;
+    assert_int_equal(vx_voxelize(NULL, bowl, &s, &g, &st, &err), -1);
+    assert_int_equal(err.kind, VX_EUNPROC);
+    vx_mesh_free(bowl);
+    vx_mesh_free(ball_m);
+}
+
+int main(int argc, char **argv)
+{
+    if (argc > 1) cmocka_set_test_filter(argv[1]); /* e.g. test_tree */
+    const struct CMUnitTest tests[] = {
+        cmocka_unit_test(test_overlap_open),
+        cmocka_unit_test(test_nested),
+        cmocka_unit_test(test_open_shells),
+        cmocka_unit_test(test_closed_exact),
+        cmocka_unit_test(test_bunny),
+        cmocka_unit_test(test_tree),
+        cmocka_unit_test(test_default_and_stop),
+    };
+    return cmocka_run_group_tests(tests, NULL, NULL);
+}
