@@ -264,7 +264,8 @@ static int load_env(vx_config *c)
 
 void vx_config_usage(FILE *out)
 {
-    fprintf(out, "usage: voxeld [--listen ADDR:PORT] [--data-dir DIR] [options]\n\n"
+    fprintf(out, "usage: voxeld [--listen ADDR:PORT] [--data-dir DIR] [options]\n"
+                 "       voxeld run KIND FILE [voxelctl options]   (one job, no server)\n\n"
                  "Serves mesh jobs (voxel grids, renders, Gregory meshes) over HTTP/JSON on one\n"
                  "headless OpenGL context. Runs in the foreground and logs to stderr.\n\n"
                  "  --config FILE                 read options from FILE (key = value lines)\n");
