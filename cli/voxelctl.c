@@ -1,4 +1,5 @@
 /* voxelctl: command line (see usage() and docs/man/voxelctl.1). */
+#include <curl/curl.h>
 #include <getopt.h>
 #include <stdlib.h>
 #include <string.h>
@@ -244,5 +245,6 @@ int main(int argc, char **argv)
     int rc = run(&c, &a, argc - optind, argv + optind);
     if (a.local) ctl_local_stop();
     cJSON_Delete(a.params);
+    curl_global_cleanup();
     return rc;
 }
