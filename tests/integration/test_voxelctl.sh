@@ -18,6 +18,13 @@ check "voxelize: 64 voxels along the longest side" awk '/^dim/ { exit !($2 == 64
 check "voxelize: progress lines end with succeeded 100%" grep -Eq '^[0-9a-f]{32} succeeded 100%$' ctl.err
 check "voxelize: says where the result went" grep -q 'wrote out.binvox' ctl.err
 
+# On a terminal (script(1) gives it one): a progress bar redrawn with \r.
+if command -v script >/dev/null; then
+    script -qec "'$CTL' voxelize '$MESH' -r 96 -o tty.vdb" /dev/null >tty.out 2>&1
+    check "terminal: a progress bar redrawn in place" grep -aq $'\rsucceeded \[#\{30\}\] 100%' tty.out
+    check "terminal: the result" test -s tty.vdb
+fi
+
 # --json: the finished Job on stdout.
 "$CTL" --json voxelize "$MESH" -r 32 -f raw8 -p padding=1 -o out.raw >job.json 2>/dev/null
 check "--json: exit 0" test $? -eq 0
