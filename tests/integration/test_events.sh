@@ -6,7 +6,13 @@ source "$(dirname "$0")/lib.sh"
 SSE="python3 $VX_SOURCE_DIR/tests/integration/sse.py"
 
 # One HTTP thread: if a stream held it, nothing else would be answered.
-start_daemon --http-threads 1 --max-event-streams 3 --event-keepalive 0.5 || exit 1
+# The keepalive comes from the environment (VOXELD_*), the limit from a flag
+# that wins over its variable.
+VOXELD_EVENT_KEEPALIVE=0.5 VOXELD_MAX_EVENT_STREAMS=50 \
+    start_daemon --http-threads 1 --max-event-streams 3 || exit 1
+api GET /v1/info
+check "info: the limits from the environment and the flag" \
+    jq -e '.limits.event_keepalive_s == 0.5 and .limits.max_event_streams == 3' "$BODY"
 upload "$VX_MESH_DIR/stanford-bunny.obj"
 expect_status "upload" 201
 submit() { # submit RESOLUTION: JOB = the new voxelize job
