@@ -71,6 +71,10 @@ static const opt_def opts[] = {
     {"job-history", T_SIZE, F(job_history), 0, "finished jobs remembered (default 10000)"},
     {"job-history-bytes", T_SIZE, F(job_history_bytes), 0,
      "memory the finished jobs remembered may take (default 64M; 0 = no limit)"},
+    {"max-event-streams", T_SIZE, F(max_event_streams), 0,
+     "open GET /v1/jobs/{id}/events streams before 503 (default 64)"},
+    {"event-keepalive", T_SECONDS, F(event_keepalive_s), 0,
+     "idle time before an event stream gets a keepalive comment, seconds (default 15)"},
 };
 #define NOPTS (sizeof opts / sizeof opts[0])
 
@@ -120,6 +124,8 @@ static void defaults(vx_config *c)
     c->job_history = 10000;
     c->min_free_disk = 64ull << 20;
     c->job_history_bytes = 64ull << 20;
+    c->max_event_streams = 64;
+    c->event_keepalive_s = 15;
 }
 
 static int set_opt(vx_config *c, const opt_def *d, const char *val, const char *where)
@@ -231,9 +237,35 @@ static int load_file(vx_config *c, const char *path)
     return rc;
 }
 
+/* The environment variable of a flag: VOXELD_ and the name upper-cased,
+ * '-' as '_' (max-upload-bytes: VOXELD_MAX_UPLOAD_BYTES). */
+static void env_name(const char *flag, char *out, size_t n)
+{
+    size_t o = (size_t)snprintf(out, n, "VOXELD_");
+    for (; *flag && o + 1 < n; flag++)
+        out[o++] = *flag == '-' ? '_' : (char)toupper((unsigned char)*flag);
+    out[o] = 0;
+}
+
+/* Every flag set in the environment (VOXELD_*), over the config file. */
+static int load_env(vx_config *c)
+{
+    int rc = 0;
+    for (size_t i = 0; i < NOPTS; i++) {
+        char name[80], where[100];
+        env_name(opts[i].name, name, sizeof name);
+        const char *v = getenv(name);
+        if (!v) continue;
+        snprintf(where, sizeof where, "environment %s", name);
+        if (set_opt(c, &opts[i], v, where)) rc = -1;
+    }
+    return rc;
+}
+
 void vx_config_usage(FILE *out)
 {
-    fprintf(out, "usage: voxeld [--listen ADDR:PORT] [--data-dir DIR] [options]\n\n"
+    fprintf(out, "usage: voxeld [--listen ADDR:PORT] [--data-dir DIR] [options]\n"
+                 "       voxeld run KIND FILE [voxelctl options]   (one job, no server)\n\n"
                  "Serves mesh jobs (voxel grids, renders, Gregory meshes) over HTTP/JSON on one\n"
                  "headless OpenGL context. Runs in the foreground and logs to stderr.\n\n"
                  "  --config FILE                 read options from FILE (key = value lines)\n");
@@ -248,7 +280,10 @@ void vx_config_usage(FILE *out)
     fprintf(out, "  --list-egl-devices            list EGL devices in the order tried, and exit\n"
                  "  --help                        this text\n"
                  "  --version                     print the version and exit\n\n"
-                 "Sizes take K, M, G, T suffixes (powers of 1024).\n");
+                 "Sizes take K, M, G, T suffixes (powers of 1024).\n"
+                 "Every option can also be set in the environment: VOXELD_ and its name in\n"
+                 "capitals with '_' for '-' (VOXELD_MAX_UPLOAD_BYTES=2G, VOXELD_CONFIG=FILE).\n"
+                 "Flags win over the environment, which wins over the config file.\n");
 }
 
 int vx_config_load(vx_config *c, int argc, char **argv)
@@ -264,6 +299,9 @@ int vx_config_load(vx_config *c, int argc, char **argv)
     lopts[NOPTS + 4] = (struct option){0, 0, 0, 0};
 
     /* Pass 1: --config, --help, --version (the file comes before the flags). */
+    const char *env_config = getenv("VOXELD_CONFIG");
+    if (env_config && *env_config)
+        snprintf(c->config_file, sizeof c->config_file, "%s", env_config);
     opterr = 0;
     optind = 1;
     int ch;
@@ -279,8 +317,9 @@ int vx_config_load(vx_config *c, int argc, char **argv)
         if (ch == 'c') snprintf(c->config_file, sizeof c->config_file, "%s", optarg);
     }
     if (c->config_file[0] && load_file(c, c->config_file)) return -1;
+    if (load_env(c)) return -1;
 
-    /* Pass 2: flags override the file. */
+    /* Pass 2: flags override the environment and the file. */
     opterr = 1;
     optind = 1;
     while ((ch = getopt_long(argc, argv, "", lopts, NULL)) != -1) {

@@ -1,5 +1,7 @@
-/* Daemon configuration: defaults, then the config file (--config), then
- * command-line flags, each overriding the one before. The config file has
+/* Daemon configuration: defaults, then the config file (--config or
+ * $VOXELD_CONFIG), then VOXELD_* environment variables (one per flag, named
+ * from the flag table), then command-line flags, each overriding the one
+ * before. The config file has
  * one `key = value` per line, the keys being the long flag names without
  * the dashes; `#` starts a comment. */
 #ifndef VX_CONFIG_H
@@ -45,6 +47,8 @@ typedef struct vx_config {
     double results_max_age_s;
     uint64_t job_history;
     uint64_t job_history_bytes;
+    uint64_t max_event_streams; /* open SSE streams before 503 too_many_streams */
+    double event_keepalive_s;   /* idle time before a ": keepalive" comment */
     int gl_debug;
     int list_devices; /* --list-egl-devices: print and exit */
 } vx_config;

@@ -10,7 +10,8 @@
  *
  * The files of the layer (http_int.h): respond.c makes every response and
  * maps errors to statuses; routes_misc.c, routes_meshes.c and
- * routes_jobs.c are the handlers; wait.c holds ?wait requests; conns.c
+ * routes_jobs.c are the handlers; wait.c holds ?wait requests; events.c
+ * streams job events (Server-Sent Events); conns.c
  * tracks connections against slow clients (issue #10) and answers those
  * with a JSON 408 or 414; auth.c checks bearer tokens. This file is the
  * libmicrohttpd plumbing: the access handler, framing and head checks,
@@ -33,8 +34,9 @@
 
 void vx_http_job_changed(vx_http *h, const char *jid, int terminal)
 {
-    if (!h || !terminal) return;
-    vx_wait_job_changed(h->wait, jid);
+    if (!h) return;
+    vx_events_job_changed(h->events, jid);
+    if (terminal) vx_wait_job_changed(h->wait, jid);
 }
 
 /* ---- dispatch ------------------------------------------------------ */
@@ -244,6 +246,8 @@ static int dispatch(vx_http *h, struct MHD_Connection *c, req *r)
     case VX_R_WEB_SPEC:
     case VX_R_WEB_ASSET:
         return vx_route_web(h, c, r);
+    case VX_R_EVENTS:
+        return vx_route_events(h, c, r);
     default:
         return vx_resp_fail(c, r, VX_ENOTFOUND, "not_found", "no such route");
     }
@@ -369,8 +373,10 @@ vx_http *vx_http_start(const vx_http_desc *desc, vx_err *err)
     }
     h->wait = vx_wait_start(desc->jobs);
     h->conns = vx_conns_start(cfg);
-    if (!h->wait || !h->conns) {
+    h->events = vx_events_start(desc->jobs, cfg->max_event_streams, cfg->event_keepalive_s);
+    if (!h->wait || !h->conns || !h->events) {
         vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory");
+        vx_events_free(h->events);
         vx_wait_free(h->wait);
         vx_conns_free(h->conns);
         free(h);
@@ -398,6 +404,7 @@ vx_http *vx_http_start(const vx_http_desc *desc, vx_err *err)
                    e == EADDRINUSE ? "address in use (another process listens on this port)"
                    : e             ? strerror(e)
                                    : "libmicrohttpd could not start (see http.mhd)");
+        vx_events_free(h->events);
         vx_wait_free(h->wait);
         vx_conns_free(h->conns);
         free(h);
@@ -422,6 +429,7 @@ void vx_http_quiesce(vx_http *h)
     if (fd != MHD_INVALID_SOCKET) close(fd);
     h->stopping = 1;
     vx_wait_quiesce(h->wait);
+    vx_events_quiesce(h->events);
 }
 
 void vx_http_stop(vx_http *h, double grace_s)
@@ -437,6 +445,7 @@ void vx_http_stop(vx_http *h, double grace_s)
     }
     vx_conns_stop(h->conns);
     MHD_stop_daemon(h->mhd);
+    vx_events_free(h->events);
     vx_wait_free(h->wait);
     vx_conns_free(h->conns);
     free(h);

@@ -11,6 +11,7 @@
 
 #include "auth.h"
 #include "conns.h"
+#include "events.h"
 #include "http.h"
 #include "mesh/intake.h"
 #include "request.h"
@@ -51,6 +52,7 @@ struct vx_http {
     vx_auth auth;
     vx_wait *wait;
     vx_conns *conns;
+    vx_events *events;
     int stopping;
 };
 
@@ -125,5 +127,8 @@ int vx_route_result(vx_http *h, struct MHD_Connection *c, req *r);
 /* GET /, /docs, /openapi.yaml, /ui/{name}: a file built into the binary,
  * with its Content-Type and an ETag (304 on If-None-Match). */
 int vx_route_web(vx_http *h, struct MHD_Connection *c, req *r);
+/* ---- events.c ---- */
+/* GET /v1/jobs/{id}/events: the job's Server-Sent Events stream. */
+int vx_route_events(vx_http *h, struct MHD_Connection *c, req *r);
 
 #endif

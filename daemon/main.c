@@ -150,8 +150,32 @@ static void serve_until_signal(const sigset_t *sigs, vx_store *store, vx_jobs *j
     }
 }
 
+/* `voxeld run KIND FILE [voxelctl options]`: one job without a server, as
+ * `voxelctl --local KIND FILE ...` (the voxelctl installed beside voxeld,
+ * else on PATH). Returns only if it cannot be started. */
+static int run_one_job(int argc, char **argv)
+{
+    char self[4096], ctl[4200];
+    ssize_t k = readlink("/proc/self/exe", self, sizeof self - 1);
+    char *slash = k > 0 ? (self[k] = 0, strrchr(self, '/')) : NULL;
+    if (slash) *slash = 0;
+    snprintf(ctl, sizeof ctl, "%s/voxelctl", slash ? self : ".");
+    if (!slash || access(ctl, X_OK) != 0) snprintf(ctl, sizeof ctl, "voxelctl");
+    char **av = calloc((size_t)argc + 1, sizeof *av);
+    if (!av) return 1;
+    av[0] = ctl;
+    av[1] = "--local";
+    for (int i = 2; i < argc; i++)
+        av[i] = argv[i];
+    execvp(ctl, av);
+    fprintf(stderr, "voxeld: run needs voxelctl (%s): %s\n", ctl, strerror(errno));
+    free(av);
+    return 1;
+}
+
 int main(int argc, char **argv)
 {
+    if (argc > 1 && !strcmp(argv[1], "run")) return run_one_job(argc, argv);
     vx_config cfg;
     int rc = vx_config_load(&cfg, argc, argv);
     if (rc) return rc > 0 ? 0 : 2;

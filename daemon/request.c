@@ -30,6 +30,7 @@ static const struct {
     [VX_R_WEB_DOCS] = {"/docs", "GET, HEAD"},
     [VX_R_WEB_SPEC] = {"/openapi.yaml", "GET, HEAD"},
     [VX_R_WEB_ASSET] = {"/ui/{name}", "GET, HEAD"},
+    [VX_R_EVENTS] = {"/v1/jobs/{id}/events", "GET, HEAD"},
 };
 
 static int is(const char *p, size_t len, const char *lit)
@@ -88,6 +89,8 @@ vx_route vx_req_route(const char *path, size_t len, vx_req_target *t)
             t->route = VX_R_JOB;
         else if (is(slash, (size_t)(end - slash), "/result"))
             t->route = VX_R_RESULT;
+        else if (is(slash, (size_t)(end - slash), "/events"))
+            t->route = VX_R_EVENTS;
         else if (starts(slash, (size_t)(end - slash), "/result/") &&
                  segment(slash + 8, (size_t)(end - slash - 8), t->name))
             t->route = VX_R_RESULT_NAME;
@@ -193,7 +196,7 @@ void vx_req_query_init(vx_req_query *q)
     q->limit = 100;
 }
 
-enum qparam { Q_NONE, Q_LIMIT, Q_AFTER, Q_STATE, Q_WAIT };
+enum qparam { Q_NONE, Q_LIMIT, Q_AFTER, Q_STATE, Q_WAIT, Q_PROGRESS };
 
 /* Which parameters a route and method declare (api/openapi.yaml). */
 static enum qparam declared(vx_route rt, const char *method, const char *key, size_t klen)
@@ -207,6 +210,7 @@ static enum qparam declared(vx_route rt, const char *method, const char *key, si
     }
     if (((rt == VX_R_JOBS && post) || (rt == VX_R_JOB && get)) && is(key, klen, "wait"))
         return Q_WAIT;
+    if (rt == VX_R_JOB && get && is(key, klen, "progress")) return Q_PROGRESS;
     return Q_NONE;
 }
 
@@ -223,12 +227,13 @@ int vx_req_query_add(vx_req_query *q, vx_route rt, const char *method, const cha
 {
     enum qparam p = declared(rt, method, key, klen);
     if (p == Q_NONE) return 0;
-    static const char *names[] = {"", "limit", "after", "state", "wait"};
+    static const char *names[] = {"", "limit", "after", "state", "wait", "progress"};
     const char *name = names[p];
     int *seen = p == Q_LIMIT   ? &q->has_limit
                 : p == Q_AFTER ? &q->has_after
                 : p == Q_STATE ? &q->has_state
-                               : &q->has_wait;
+                : p == Q_WAIT  ? &q->has_wait
+                               : &q->has_progress;
     if (*seen) {
         snprintf(msg, msgn, "query parameter %s is given more than once", name);
         return -1;
@@ -269,6 +274,15 @@ int vx_req_query_add(vx_req_query *q, vx_route rt, const char *method, const cha
             return -1;
         }
         return 0;
+    case Q_PROGRESS: {
+        uint64_t ppm;
+        if (vx_req_parse_seconds(value, vlen, &ppm) || ppm > 1000000) {
+            snprintf(msg, msgn, "query parameter progress must be a decimal number from 0 to 1");
+            return -1;
+        }
+        q->progress_ppm = (uint32_t)ppm;
+        return 0;
+    }
     default:
         return 0;
     }
@@ -304,6 +318,9 @@ int vx_req_query_format(const vx_req_query *q, char *out, size_t n)
     if (q->has_wait)
         PUT("wait=%llu.%06llu", (unsigned long long)(q->wait_us / 1000000),
             (unsigned long long)(q->wait_us % 1000000));
+    if (q->has_progress)
+        PUT("progress=%u.%06u", (unsigned)(q->progress_ppm / 1000000),
+            (unsigned)(q->progress_ppm % 1000000));
 #undef PUT
     return (int)o;
 }

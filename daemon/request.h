@@ -24,6 +24,7 @@ typedef enum vx_route {
     VX_R_WEB_DOCS,
     VX_R_WEB_SPEC,
     VX_R_WEB_ASSET,
+    VX_R_EVENTS,
     VX_R_COUNT
 } vx_route;
 
@@ -39,13 +40,15 @@ typedef struct vx_req_target {
 /* Longest ?wait accepted before capping, in microseconds (10^12 s). */
 #define VX_REQ_WAIT_MAX_US 1000000000000000000ull
 
-/* The declared query parameters of one request, after strict parsing. */
+/* The declared query parameters of one request, after strict parsing.
+ * progress (GET /v1/jobs/{id} only) is a fraction from 0 to 1. */
 typedef struct vx_req_query {
-    int has_limit, has_after, has_state, has_wait;
+    int has_limit, has_after, has_state, has_wait, has_progress;
     int limit;                 /* 1..1000; 100 when absent */
     char after[VX_REQ_ID_MAX]; /* a mesh or job id in form */
     char state[16];            /* a job state */
     uint64_t wait_us;          /* not yet capped to the request timeout */
+    uint32_t progress_ppm;     /* ?progress: wake a ?wait at this progress, in 1e-6 (0..1e6) */
 } vx_req_query;
 
 /* Matches path (the URL without its query string, exactly as sent: no

@@ -114,6 +114,8 @@ int vx_route_job(vx_http *h, struct MHD_Connection *c, req *r)
         return vx_resp_json(c, r, running ? 202 : 200, doc, NULL, NULL);
     }
     double wait_s = wait_seconds(h, r);
+    r->w.by_progress = r->q.has_progress; /* ?progress: wake there too */
+    r->w.wake_progress = r->q.progress_ppm / 1e6;
     if (wait_s > 0 && vx_wait_hold(h->wait, &r->w, c, r->id, wait_s)) return MHD_YES;
     return answer_job(h, c, r, r->id, 200);
 }

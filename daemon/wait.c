@@ -30,8 +30,20 @@ static void resume_locked(vx_wait *w, vx_waiter *wt)
     MHD_resume_connection(wt->conn);
 }
 
-/* Resumes waiters whose deadline has passed; sleeps until the next one
- * (at most 250 ms) or a change of the list. */
+/* 1 when the job of a by_progress waiter has reached its progress (or is
+ * gone); w->lock held (the order is w->lock, then the registry's). */
+static int progress_reached(vx_wait *w, const vx_waiter *wt)
+{
+    vx_err err;
+    cJSON *doc = vx_jobs_get(w->jobs, wt->jid, NULL, &err);
+    double p = cJSON_GetNumberValue(cJSON_GetObjectItemCaseSensitive(doc, "progress"));
+    cJSON_Delete(doc);
+    return !doc || p >= wt->wake_progress;
+}
+
+/* Resumes waiters whose deadline has passed (or whose progress is reached);
+ * sleeps until the next one (at most 250 ms, 100 ms with a by_progress
+ * waiter) or a change of the list. */
 static void *timer_main(void *arg)
 {
     vx_wait *w = arg;
@@ -40,10 +52,12 @@ static void *timer_main(void *arg)
         double now = vx_mono(), next = now + 0.25;
         for (vx_waiter *wt = w->list, *nx; wt; wt = nx) {
             nx = wt->next;
-            if (wt->deadline <= now)
+            if (wt->deadline <= now || (wt->by_progress && progress_reached(w, wt))) {
                 resume_locked(w, wt);
-            else if (wt->deadline < next)
-                next = wt->deadline;
+                continue;
+            }
+            if (wt->deadline < next) next = wt->deadline;
+            if (wt->by_progress && now + 0.1 < next) next = now + 0.1;
         }
         struct timespec ts;
         vx_mono_deadline(next - now, &ts);
@@ -79,8 +93,9 @@ int vx_wait_hold(vx_wait *w, vx_waiter *wt, struct MHD_Connection *c, const char
     int terminal = 0;
     vx_err err;
     cJSON *doc = vx_jobs_get(w->jobs, jid, &terminal, &err);
+    double progress = cJSON_GetNumberValue(cJSON_GetObjectItemCaseSensitive(doc, "progress"));
     cJSON_Delete(doc);
-    if (!doc || terminal || w->stopping) {
+    if (!doc || terminal || w->stopping || (wt->by_progress && progress >= wt->wake_progress)) {
         pthread_mutex_unlock(&w->lock);
         return 0;
     }

@@ -4,7 +4,9 @@
  * list; it is resumed by the job hook (vx_wait_job_changed, any thread) when
  * its job finishes, by a timer thread when its deadline passes, or by
  * vx_wait_quiesce at shutdown. The access handler is then called again and
- * answers as it would have without waiting (vx_waiter_resumed). All list
+ * answers as it would have without waiting (vx_waiter_resumed). A waiter
+ * with by_progress set (?progress=) is also resumed once its job's progress
+ * reaches wake_progress: the timer reads those jobs every 100 ms. All list
  * changes are under one lock. */
 #ifndef VX_WAIT_H
 #define VX_WAIT_H
@@ -22,15 +24,18 @@ typedef struct vx_waiter {
     double deadline; /* monotonic */
     int waiting;     /* suspended, not yet resumed */
     int resumed;     /* resumed, the handler has not answered yet */
+    int by_progress; /* set before vx_wait_hold: also wake at wake_progress */
+    double wake_progress;
     struct vx_waiter *next;
 } vx_waiter;
 
 /* Starts the timer thread; jobs is asked whether a job has finished.
  * Owned; free with vx_wait_free. NULL without memory. */
 vx_wait *vx_wait_start(vx_jobs *jobs);
-/* Suspends c and holds it in w until job jid finishes or wait_s passes.
- * Returns 1 when held, 0 when jid is unknown or finished or the daemon is
- * stopping (answer now). */
+/* Suspends c and holds it in w until job jid finishes or wait_s passes (or
+ * its progress reaches wt->wake_progress, with wt->by_progress).
+ * Returns 1 when held, 0 when jid is unknown or finished (or far enough
+ * along) or the daemon is stopping (answer now). */
 int vx_wait_hold(vx_wait *w, vx_waiter *wt, struct MHD_Connection *c, const char *jid,
                  double wait_s);
 /* Resumes every request held on jid (the job hook: jid has finished). */

@@ -1,51 +1,79 @@
 #!/usr/bin/env bash
-# Installs every build, test and benchmark dependency of voxeld from Debian 12
-# packages. Used by the README and by .ci/run; safe to run again.
-#   --bench   also what bench/ compares against (wrk, nginx as the HTTP peer)
+# Installs voxeld's dependencies from Debian 12 packages. Used by the README
+# and by .ci/run; safe to run again.
+#   (no option)  everything to build, run and test (--run and --test)
+#   --run        only what building and running voxeld and voxelctl needs
+#                (the README's first command: no tests, no benchmarks)
+#   --test       --run, plus what the test suite needs (scripts/check.sh)
+#   --bench      --test, plus what bench/ compares against (wrk, nginx)
+# apt waits up to 10 minutes for the dpkg lock (another apt running, e.g.
+# unattended-upgrades on a fresh machine) instead of failing at once.
 set -euo pipefail
 
-pkgs=(
-  # toolchain; clang + its runtime for the libFuzzer targets (tests/fuzz)
-  build-essential cmake pkg-config git ca-certificates clang libclang-rt-14-dev
-  # scripts/check.sh checks the formatting of every C/C++ file (.clang-format)
-  clang-format
+mode=${1:---test}
+case "$mode" in
+--run | --test | --bench) ;;
+*)
+    echo "usage: $0 [--run | --test | --bench]" >&2
+    exit 2
+    ;;
+esac
+
+run_pkgs=(
+  # toolchain
+  build-essential cmake pkg-config git ca-certificates
   # GL through EGL: glvnd loaders + headers, Mesa's EGL and DRI drivers (llvmpipe)
   libegl-dev libgl-dev libopengl-dev libegl1 libegl-mesa0 libgl1-mesa-dri
-  # HTTP, JSON, meshes
-  libmicrohttpd-dev libcjson-dev libdraco-dev draco
+  # HTTP, JSON, meshes; libcurl: voxelctl
+  libmicrohttpd-dev libcjson-dev libdraco-dev libcurl4-openssl-dev
   # OpenVDB and what its headers need
-  libopenvdb-dev libopenvdb-tools libboost-dev libboost-iostreams-dev
-  libtbb-dev libimath-dev libblosc-dev zlib1g-dev
-  # FFT, images, tests, service
-  libfftw3-dev libosd-dev libpng-dev libcmocka-dev libsystemd-dev systemd nettle-dev
-  # integration tests and benchmarks
-  curl jq procps psmisc python3 python3-yaml python3-jsonschema
-  # tests/integration/test_viewer.sh: the viewer in a real browser
-  chromium
+  libopenvdb-dev libboost-dev libboost-iostreams-dev libtbb-dev libimath-dev libblosc-dev
+  zlib1g-dev
+  # FFT, images, systemd notify, SHA-256
+  libfftw3-dev libosd-dev libpng-dev libsystemd-dev nettle-dev
+)
+test_pkgs=(
+  # clang + its runtime for the libFuzzer targets (tests/fuzz); scripts/check.sh
+  # checks the formatting of every C/C++ file (.clang-format)
+  clang libclang-rt-14-dev clang-format
+  # unit tests; reference tools (draco_decoder, vdb_print)
+  libcmocka-dev draco libopenvdb-tools systemd
+  # integration tests
+  curl jq procps psmisc python3 python3-yaml python3-jsonschema man-db
   # tests/deploy/test_systemd.sh: the system calls voxeld makes vs the unit's filter
   strace
   # the container image test (tests/deploy): podman builds the Dockerfile
   podman buildah debootstrap
+  # tests/integration/test_viewer.sh: the viewer in a real browser
+  chromium
 )
-# unit.openapi_redocly_lint runs Node: Debian's nodejs + npm unless a Node
-# (CI: Node 20, with its own npm) is installed already.
+pkgs=("${run_pkgs[@]}")
+# The viewer's libraries come from npm at build time (and the test suite's
+# linter and browser driver): Debian's nodejs + npm unless a Node (CI: Node
+# 20, with its own npm) is installed already.
 if ! command -v npm >/dev/null; then
   pkgs+=(nodejs npm)
 fi
-if [[ "${1:-}" == "--bench" ]]; then
+if [[ "$mode" != --run ]]; then
+  pkgs+=("${test_pkgs[@]}")
+fi
+if [[ "$mode" == --bench ]]; then
   pkgs+=(wrk nginx-light)
 fi
 
 SUDO=""
 if [[ $(id -u) -ne 0 ]]; then SUDO="sudo"; fi
 export DEBIAN_FRONTEND=noninteractive
-$SUDO apt-get update -qq
-$SUDO apt-get install -y -qq --no-install-recommends "${pkgs[@]}"
+APT=(apt-get -o DPkg::Lock::Timeout=600)
+$SUDO "${APT[@]}" update -qq
+$SUDO "${APT[@]}" install -y -qq --no-install-recommends "${pkgs[@]}"
 
-# The OpenAPI linter at the version package-lock.json pins, into
-# tools/redocly/node_modules (git-ignored), not globally.
-npm ci --prefix "$(dirname "$0")/../tools/redocly" --no-audit --no-fund --loglevel=error
 # The viewer's browser libraries (three.js, js-yaml: embedded into voxeld at
 # build time) and its test's browser driver (playwright-core), at the
 # versions tools/viewer/package-lock.json pins, into tools/viewer/node_modules.
 npm ci --prefix "$(dirname "$0")/../tools/viewer" --no-audit --no-fund --loglevel=error
+if [[ "$mode" != --run ]]; then
+  # The OpenAPI linter at the version package-lock.json pins, into
+  # tools/redocly/node_modules (git-ignored), not globally.
+  npm ci --prefix "$(dirname "$0")/../tools/redocly" --no-audit --no-fund --loglevel=error
+fi

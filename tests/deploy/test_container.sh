@@ -106,9 +106,12 @@ check "Volumes /var/lib/voxeld" cfg '.[0].Config.Volumes | has("/var/lib/voxeld"
 check "NVIDIA_DRIVER_CAPABILITIES=graphics,compute,utility" \
     cfg '.[0].Config.Env | index("NVIDIA_DRIVER_CAPABILITIES=graphics,compute,utility") != null'
 check "NVIDIA_VISIBLE_DEVICES=all" cfg '.[0].Config.Env | index("NVIDIA_VISIBLE_DEVICES=all") != null'
-check "Entrypoint [voxeld]" cfg '.[0].Config.Entrypoint == ["voxeld"]'
-check "Cmd listens on 0.0.0.0:8080 with /var/lib/voxeld" \
-    cfg '.[0].Config.Cmd == ["--listen","0.0.0.0:8080","--data-dir","/var/lib/voxeld"]'
+check "Entrypoint listens on 0.0.0.0:8080 with /var/lib/voxeld" \
+    cfg '.[0].Config.Entrypoint == ["voxeld","--listen","0.0.0.0:8080","--data-dir","/var/lib/voxeld"]'
+check "Cmd adds nothing (arguments to the image add to the Entrypoint)" \
+    cfg '(.[0].Config.Cmd // []) == []'
+check "OCI labels (title, version, licenses)" \
+    cfg '.[0].Config.Labels | .["org.opencontainers.image.title"] == "voxeld" and has("org.opencontainers.image.version") and has("org.opencontainers.image.licenses")'
 step "image size $(jq -r '.[0].Size / 1048576 | floor' "$TMP/inspect.json") MiB"
 
 # ---- a container from it ---------------------------------------------------------
@@ -125,10 +128,12 @@ check "runs as uid/gid 10001 ($(cat "$TMP/id.txt"))" grep -q '^uid=10001(voxeld)
 check "in groups video and render" bash -c "grep -q '(video)' '$TMP/id.txt' && grep -q '(render)' '$TMP/id.txt'"
 brun voxeld --version >"$TMP/version.txt" 2>&1
 check "voxeld --version in the image" grep -q '^voxeld ' "$TMP/version.txt"
+brun voxelctl --version >"$TMP/ctl-version.txt" 2>&1
+check "voxelctl --version in the image" grep -q '^voxelctl ' "$TMP/ctl-version.txt"
 brun sh -c 'test -d /var/lib/voxeld && test -w /var/lib/voxeld' >/dev/null 2>&1
 check "/var/lib/voxeld is writable by the image's user" test $? -eq 0
 # Every shared library resolves (the runtime packages are complete).
-brun sh -c 'ldd /usr/bin/voxeld' >"$TMP/ldd.txt" 2>&1
+brun sh -c 'ldd /usr/bin/voxeld /usr/bin/voxelctl' >"$TMP/ldd.txt" 2>&1
 check "no missing shared library: $(grep 'not found' "$TMP/ldd.txt" | tr -s ' \t\n' ' ')" bash -c "! grep -q 'not found' '$TMP/ldd.txt'"
 brun voxeld --list-egl-devices >"$TMP/devices.txt" 2>&1
 check "an EGL device in the image (llvmpipe)" grep -qi 'EGL device' "$TMP/devices.txt"
@@ -136,8 +141,12 @@ check "an EGL device in the image (llvmpipe)" grep -qi 'EGL device' "$TMP/device
 PORT=$(python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1",0)); print(s.getsockname()[1])')
 BASE=http://127.0.0.1:$PORT
 step "buildah run voxeld on port $PORT"
+# The image's own Entrypoint plus arguments, as `docker run IMAGE ARGS`
+# runs it: the arguments add to the defaults (--data-dir stays), and a flag
+# given again (--listen) wins.
+mapfile -t ENTRY < <(jq -r '.[0].Config.Entrypoint[]' "$TMP/inspect.json")
 buildah run --isolation chroot --network host "$CTR" -- \
-    voxeld --listen "127.0.0.1:$PORT" --data-dir /var/lib/voxeld --workers 2 --http-threads 4 \
+    "${ENTRY[@]}" --listen "127.0.0.1:$PORT" --workers 2 --http-threads 4 \
     >"$TMP/daemon.out" 2>"$TMP/daemon.log" &
 BPID=$!
 UP=0
@@ -151,6 +160,7 @@ check "voxeld in the container answers /livez" test "$UP" -eq 1
 # The voxeld process (a descendant of buildah run) gets the SIGTERM.
 PID=$(sed -n 's/.*event=voxeld.start.* pid=\([0-9]*\).*/\1/p' "$TMP/daemon.log" | head -n 1)
 check "voxeld pid from its start line" test -n "$PID"
+check "the Entrypoint's --data-dir is kept beside the arguments" grep -q 'event=voxeld.start.* data_dir=/var/lib/voxeld' "$TMP/daemon.log"
 if [[ -n "$PID" ]] && [[ "$(cat "/proc/$PID/comm" 2>/dev/null)" != voxeld ]]; then
     # Not in this pid namespace (a runtime with its own): signal buildah instead.
     PID=

@@ -118,6 +118,7 @@ static void check_query(vx_route rt, const char *method, const char *s, size_t n
     if (q.limit < 1 || q.limit > 1000) abort();
     if (!q.has_limit && q.limit != 100) abort();
     if (q.wait_us > VX_REQ_WAIT_MAX_US) abort();
+    if (q.progress_ppm > 1000000 || (!q.has_progress && q.progress_ppm)) abort();
     if (q.has_after &&
         !(rt == VX_R_MESHES ? vx_store_valid_mesh_id(q.after) : vx_jobs_valid_id(q.after)))
         abort();

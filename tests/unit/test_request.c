@@ -33,6 +33,11 @@ static void test_routes(void **state)
     assert_int_equal(route("/v1/jobs/" JID "/result", &t), VX_R_RESULT);
     assert_int_equal(route("/v1/jobs/" JID "/result/", &t), VX_R_UNKNOWN);
     assert_int_equal(route("/v1/jobs//result", &t), VX_R_UNKNOWN);
+    assert_int_equal(route("/v1/jobs/" JID "/events", &t), VX_R_EVENTS);
+    assert_string_equal(t.id, JID);
+    assert_int_equal(route("/v1/jobs/" JID "/events/", &t), VX_R_UNKNOWN);
+    assert_true(vx_req_method_allowed(VX_R_EVENTS, "HEAD"));
+    assert_false(vx_req_method_allowed(VX_R_EVENTS, "POST"));
     assert_int_equal(vx_req_route("/livez\0x", 8, &t), VX_R_UNKNOWN);
     assert_true(vx_req_method_allowed(VX_R_MESH, "DELETE"));
     assert_false(vx_req_method_allowed(VX_R_MESH, "POST"));
@@ -100,6 +105,22 @@ static void test_query(void **state)
     assert_int_equal(add_all(&q, VX_R_JOBS, "POST", hex, 2, msg), 0);
     /* wait is not declared on GET /v1/jobs: ignored */
     assert_int_equal(add_all(&q, VX_R_JOBS, "GET", hex, 2, msg), -1);
+    /* progress: a fraction 0..1 on GET /v1/jobs/{id}, written back exactly */
+    const char *prog[] = {"wait", "5", "progress", "0.25"};
+    assert_int_equal(add_all(&q, VX_R_JOB, "GET", prog, 4, msg), -1);
+    assert_int_equal(q.progress_ppm, 250000);
+    assert_true(vx_req_query_format(&q, back, sizeof back) > 0);
+    assert_string_equal(back, "wait=5.000000&progress=0.250000");
+    const char *one[] = {"progress", "1"};
+    assert_int_equal(add_all(&q, VX_R_JOB, "GET", one, 2, msg), -1);
+    assert_int_equal(q.progress_ppm, 1000000);
+    const char *over[] = {"progress", "1.000001"};
+    assert_int_equal(add_all(&q, VX_R_JOB, "GET", over, 2, msg), 0);
+    assert_non_null(strstr(msg, "progress"));
+    const char *neg[] = {"progress", "-0.5"};
+    assert_int_equal(add_all(&q, VX_R_JOB, "GET", neg, 2, msg), 0);
+    /* not declared on the list: ignored */
+    assert_int_equal(add_all(&q, VX_R_JOBS, "GET", over, 2, msg), -1);
     const char *mesh_after[] = {"after", JID};
     assert_int_equal(add_all(&q, VX_R_MESHES, "GET", mesh_after, 2, msg), 0);
     vx_req_query_init(&q);

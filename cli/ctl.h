@@ -1,0 +1,68 @@
+/* voxelctl: the command-line client of voxeld (docs/man/voxelctl.1).
+ *
+ * ctl_http.c talks HTTP through libcurl (requests, uploads, downloads and
+ * the job event stream), ctl_local.c starts a private voxeld for --local,
+ * ctl_cmds.c has the commands and voxelctl.c reads the command line. */
+#ifndef VX_CTL_H
+#define VX_CTL_H
+
+#include <cjson/cJSON.h>
+#include <stddef.h>
+#include <stdio.h>
+
+typedef struct ctl {
+    char server[512]; /* base URL without a trailing slash */
+    char token[512];  /* empty: no Authorization header */
+    int json;         /* --json: machine-readable output on stdout */
+    int quiet;        /* --quiet: no progress */
+    int progress_tty; /* stderr is a terminal: a progress bar */
+} ctl;
+
+/* A growing response body. */
+typedef struct ctl_buf {
+    char *p;
+    size_t n, cap;
+} ctl_buf;
+
+/* ---- ctl_http.c ---- */
+/* Sets up libcurl once; 0 or -1 (message printed). */
+int ctl_http_init(void);
+/* One request to c->server + path. The body is data (may be NULL) or the
+ * file at upload (NULL: none), sent as ctype. The answer goes to resp
+ * (NUL-terminated, caller frees resp->p) or, for a 2xx, to the file out
+ * when out is not NULL. disp, if not NULL, gets the filename of the
+ * Content-Disposition header ("" when none). Returns the HTTP status, or
+ * -1 when no answer came (message printed). */
+long ctl_http(const ctl *c, const char *method, const char *path, const char *ctype,
+              const char *data, const char *upload, ctl_buf *resp, FILE *out, char *disp,
+              size_t dispn);
+/* Prints the server's error of a >= 400 answer (its JSON message and code)
+ * to stderr, after what ("upload", "submit", ...). Returns 1. */
+int ctl_http_fail(const char *what, long status, const ctl_buf *resp);
+/* Follows GET /v1/jobs/{jid}/events, calling on_job with each event's Job
+ * (borrowed) until the stream ends. Returns the last Job (owned) or NULL
+ * when the stream could not be read (status in *status: 0 = transport). */
+cJSON *ctl_http_events(const ctl *c, const char *jid, void (*on_job)(void *, const cJSON *),
+                       void *ud, long *status);
+
+/* ---- ctl_local.c ---- */
+/* Starts a private voxeld (next to this program, $VOXELD_BIN or on PATH)
+ * on 127.0.0.1 with a temporary data dir and points c at it. 0 or -1. */
+int ctl_local_start(ctl *c);
+/* Stops it and removes its data dir. */
+void ctl_local_stop(void);
+
+/* ---- ctl_cmds.c ---- */
+/* A job command: KIND on the mesh file (or mesh id) src with params (owned),
+ * the primary result written to out (NULL: the server's file name), or
+ * the job only submitted with no_wait. Returns the exit status. */
+int ctl_cmd_job(ctl *c, const char *kind, const char *src, cJSON *params, const char *out,
+                int no_wait);
+/* `jobs`, `meshes`, `get`, `cancel`, `upload`. Return the exit status. */
+int ctl_cmd_jobs(ctl *c, const char *state, int limit);
+int ctl_cmd_meshes(ctl *c, int limit);
+int ctl_cmd_get(ctl *c, const char *jid, const char *name, const char *out);
+int ctl_cmd_cancel(ctl *c, const char *jid);
+int ctl_cmd_upload(ctl *c, const char *file);
+
+#endif

@@ -1,0 +1,323 @@
+/* voxelctl's commands (ctl.h): upload, submit, follow, download; lists,
+ * get and cancel. Human output goes to stderr (progress) and stdout
+ * (tables); --json prints the server's JSON on stdout instead. */
+#include <ctype.h>
+#include <stdlib.h>
+#include <string.h>
+#include <strings.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include "ctl.h"
+
+static const char *str(const cJSON *o, const char *k)
+{
+    const char *s = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(o, k));
+    return s ? s : "";
+}
+
+static double num(const cJSON *o, const char *k)
+{
+    const cJSON *v = cJSON_GetObjectItemCaseSensitive(o, k);
+    return cJSON_IsNumber(v) ? v->valuedouble : 0;
+}
+
+static int terminal(const char *state)
+{
+    return !strcmp(state, "succeeded") || !strcmp(state, "failed") || !strcmp(state, "canceled");
+}
+
+static void print_json(const cJSON *doc)
+{
+    char *t = cJSON_PrintUnformatted(doc);
+    if (t) printf("%s\n", t);
+    free(t);
+}
+
+/* The Content-Type of a mesh file, from its extension. */
+static const char *mesh_type(const char *path)
+{
+    static const struct {
+        const char *ext, *type;
+    } types[] = {
+        {"obj", "model/obj"},        {"bpt", "model/x-bpt"}, {"drc", "model/x-draco"},
+        {"stl", "model/stl"},        {"ply", "model/x-ply"}, {"glb", "model/gltf-binary"},
+        {"gltf", "model/gltf+json"}, {"off", "model/x-off"},
+    };
+    const char *dot = strrchr(path, '.');
+    if (dot && !strchr(dot, '/'))
+        for (size_t i = 0; i < sizeof types / sizeof types[0]; i++)
+            if (!strcasecmp(dot + 1, types[i].ext)) return types[i].type;
+    return "application/octet-stream";
+}
+
+static int is_mesh_id(const char *s)
+{
+    size_t n = strlen(s);
+    for (size_t i = 0; i < n; i++)
+        if (!isxdigit((unsigned char)s[i])) return 0;
+    return n == 64;
+}
+
+/* Uploads file; the mesh id into id[65]. 0 or the exit status. */
+static int upload(ctl *c, const char *file, char *id)
+{
+    ctl_buf b = {0};
+    long st = ctl_http(c, "POST", "/v1/meshes", mesh_type(file), NULL, file, &b, NULL, NULL, 0);
+    int rc = 0;
+    cJSON *doc = st == 200 || st == 201 ? cJSON_Parse(b.p) : NULL;
+    if (!doc)
+        rc = ctl_http_fail("upload", st, &b);
+    else
+        snprintf(id, 65, "%s", str(doc, "id"));
+    cJSON_Delete(doc);
+    free(b.p);
+    return rc;
+}
+
+/* ---- progress ----------------------------------------------------------- */
+
+typedef struct follow {
+    ctl *c;
+    char state[16];
+    int tenth; /* the last tenth of progress reported (plain lines) */
+} follow;
+
+static void on_job(void *ud, const cJSON *job)
+{
+    follow *f = ud;
+    if (f->c->quiet) return;
+    const char *state = str(job, "state");
+    double p = num(job, "progress");
+    if (f->c->progress_tty) {
+        int w = 30, k = (int)(p * w + 0.5);
+        fprintf(stderr, "\r%-9s [%.*s%*s] %3d%%", state, k, "##############################", w - k,
+                "", (int)(p * 100 + 0.5));
+        if (terminal(state)) fputc('\n', stderr);
+        fflush(stderr);
+    } else if (strcmp(state, f->state) || (int)(p * 10) > f->tenth) {
+        fprintf(stderr, "%s %s %d%%\n", str(job, "id"), state, (int)(p * 100 + 0.5));
+    }
+    snprintf(f->state, sizeof f->state, "%s", state);
+    f->tenth = (int)(p * 10);
+}
+
+/* Follows job jid to its end: the event stream, or ?wait polling when the
+ * server has no stream. The last Job (owned), or NULL (printed). */
+static cJSON *follow_job(ctl *c, const char *jid)
+{
+    follow f = {.c = c, .tenth = -1};
+    long st;
+    cJSON *job = ctl_http_events(c, jid, on_job, &f, &st);
+    if (job && terminal(str(job, "state"))) return job;
+    cJSON_Delete(job);
+    char path[160];
+    snprintf(path, sizeof path, "/v1/jobs/%s?wait=30", jid);
+    for (;;) {
+        ctl_buf b = {0};
+        st = ctl_http(c, "GET", path, NULL, NULL, NULL, &b, NULL, NULL, 0);
+        job = st == 200 ? cJSON_Parse(b.p) : NULL;
+        if (!job) {
+            ctl_http_fail("job", st, &b);
+            free(b.p);
+            return NULL;
+        }
+        free(b.p);
+        on_job(&f, job);
+        if (terminal(str(job, "state"))) return job;
+        cJSON_Delete(job);
+    }
+}
+
+/* Downloads the primary result (name NULL) or output name of jid to out
+ * (NULL: the server's file name). 0 or the exit status. */
+static int download(ctl *c, const char *jid, const char *name, const char *out)
+{
+    char path[256], disp[256], tmp[4200];
+    snprintf(path, sizeof path, "/v1/jobs/%s/result%s%s", jid, name ? "/" : "", name ? name : "");
+    const char *dest = out && strcmp(out, "-") ? out : NULL;
+    snprintf(tmp, sizeof tmp, "%s.part", dest ? dest : ".voxelctl-download");
+    FILE *f = out && !strcmp(out, "-") ? stdout : fopen(tmp, "wb");
+    if (!f) {
+        fprintf(stderr, "voxelctl: cannot write %s\n", tmp);
+        return 1;
+    }
+    ctl_buf b = {0};
+    long st = ctl_http(c, "GET", path, NULL, NULL, NULL, &b, f, disp, sizeof disp);
+    int rc = 0;
+    if (f == stdout) {
+        fflush(stdout);
+        if (st != 200) rc = ctl_http_fail("download", st, &b);
+        free(b.p);
+        return rc;
+    }
+    if (fclose(f) != 0) st = -1;
+    if (st != 200) {
+        rc = ctl_http_fail("download", st, &b);
+        unlink(tmp);
+    } else {
+        char final[4200];
+        snprintf(final, sizeof final, "%s", dest ? dest : disp[0] ? disp : "result");
+        if (rename(tmp, final) != 0) {
+            fprintf(stderr, "voxelctl: cannot write %s\n", final);
+            rc = 1;
+        } else if (!c->json) {
+            struct stat sb;
+            stat(final, &sb);
+            fprintf(stderr, "wrote %s (%lld bytes)\n", final, (long long)sb.st_size);
+        }
+    }
+    free(b.p);
+    return rc;
+}
+
+int ctl_cmd_job(ctl *c, const char *kind, const char *src, cJSON *params, const char *out,
+                int no_wait)
+{
+    char mesh[65];
+    struct stat sb;
+    int rc = 0;
+    if (is_mesh_id(src) && stat(src, &sb) != 0)
+        snprintf(mesh, sizeof mesh, "%s", src);
+    else if ((rc = upload(c, src, mesh)))
+        goto done;
+    cJSON *req = cJSON_CreateObject();
+    cJSON_AddStringToObject(req, "mesh", mesh);
+    cJSON_AddStringToObject(req, "kind", kind);
+    cJSON_AddItemToObject(req, "params", params);
+    params = NULL;
+    char *body = cJSON_PrintUnformatted(req);
+    cJSON_Delete(req);
+    ctl_buf b = {0};
+    long st = ctl_http(c, "POST", "/v1/jobs", "application/json", body, NULL, &b, NULL, NULL, 0);
+    free(body);
+    cJSON *job = st == 202 ? cJSON_Parse(b.p) : NULL;
+    if (!job) rc = ctl_http_fail("submit", st, &b);
+    free(b.p);
+    if (!job) goto done;
+    char jid[40];
+    snprintf(jid, sizeof jid, "%s", str(job, "id"));
+    if (no_wait) {
+        if (c->json)
+            print_json(job);
+        else
+            printf("%s\n", jid);
+        cJSON_Delete(job);
+        goto done;
+    }
+    cJSON_Delete(job);
+    job = follow_job(c, jid);
+    if (!job) {
+        rc = 1;
+        goto done;
+    }
+    const char *state = str(job, "state");
+    if (strcmp(state, "succeeded") != 0) {
+        const cJSON *e = cJSON_GetObjectItemCaseSensitive(job, "error");
+        fprintf(stderr, "voxelctl: job %s %s: %s (%s)\n", jid, state, str(e, "message"),
+                str(e, "code"));
+        rc = 1;
+    } else if (cJSON_GetArraySize(cJSON_GetObjectItemCaseSensitive(job, "outputs")) > 0) {
+        rc = download(c, jid, NULL, out);
+    }
+    if (c->json) print_json(job);
+    cJSON_Delete(job);
+done:
+    cJSON_Delete(params);
+    return rc;
+}
+
+/* GET path; prints the answer as JSON (--json) or through row() for each
+ * item of a list page. The exit status. */
+static int list(ctl *c, const char *path, void (*row)(const cJSON *))
+{
+    ctl_buf b = {0};
+    long st = ctl_http(c, "GET", path, NULL, NULL, NULL, &b, NULL, NULL, 0);
+    cJSON *doc = st == 200 ? cJSON_Parse(b.p) : NULL;
+    int rc = doc ? 0 : ctl_http_fail(path, st, &b);
+    free(b.p);
+    if (!doc) return rc;
+    if (c->json) {
+        print_json(doc);
+    } else {
+        const cJSON *it, *items = cJSON_GetObjectItemCaseSensitive(doc, "items");
+        if (cJSON_IsArray(items)) {
+            cJSON_ArrayForEach(it, items) row(it);
+        } else {
+            row(doc);
+        }
+    }
+    cJSON_Delete(doc);
+    return rc;
+}
+
+static void job_row(const cJSON *j)
+{
+    if (!cJSON_IsObject(j)) return;
+    const cJSON *e = cJSON_GetObjectItemCaseSensitive(j, "error");
+    printf("%s  %-13s %-9s %3.0f%%  %s  %s\n", str(j, "id"), str(j, "kind"), str(j, "state"),
+           num(j, "progress") * 100, str(j, "created"), cJSON_IsObject(e) ? str(e, "code") : "");
+}
+
+static void mesh_row(const cJSON *m)
+{
+    if (!cJSON_IsObject(m)) return;
+    printf("%s  %-6s %10.0f triangles  %s\n", str(m, "id"), str(m, "format"), num(m, "triangles"),
+           str(m, "name"));
+}
+
+int ctl_cmd_jobs(ctl *c, const char *state, int limit)
+{
+    char path[200];
+    snprintf(path, sizeof path, "/v1/jobs?limit=%d%s%s", limit, state ? "&state=" : "",
+             state ? state : "");
+    return list(c, path, job_row);
+}
+
+int ctl_cmd_meshes(ctl *c, int limit)
+{
+    char path[100];
+    snprintf(path, sizeof path, "/v1/meshes?limit=%d", limit);
+    return list(c, path, mesh_row);
+}
+
+static void job_show(const cJSON *j)
+{
+    if (!cJSON_IsObject(j) || !cJSON_GetObjectItemCaseSensitive(j, "state")) return;
+    job_row(j);
+    const cJSON *o, *outs = cJSON_GetObjectItemCaseSensitive(j, "outputs");
+    cJSON_ArrayForEach(o, outs) printf("  output %-10s %s\n", o->string ? o->string : "",
+                                       cJSON_GetStringValue(o) ? o->valuestring : "");
+}
+
+int ctl_cmd_get(ctl *c, const char *jid, const char *name, const char *out)
+{
+    if (out || name) return download(c, jid, name, out);
+    char path[160];
+    snprintf(path, sizeof path, "/v1/jobs/%s", jid);
+    return list(c, path, job_show);
+}
+
+int ctl_cmd_cancel(ctl *c, const char *jid)
+{
+    char path[160];
+    snprintf(path, sizeof path, "/v1/jobs/%s", jid);
+    ctl_buf b = {0};
+    long st = ctl_http(c, "DELETE", path, NULL, NULL, NULL, &b, NULL, NULL, 0);
+    cJSON *doc = st == 200 || st == 202 ? cJSON_Parse(b.p) : NULL;
+    int rc = doc ? 0 : ctl_http_fail("cancel", st, &b);
+    if (doc && c->json) print_json(doc);
+    if (doc && !c->json)
+        printf("%s %s\n", jid, st == 202 ? "cancel requested (running)" : str(doc, "state"));
+    cJSON_Delete(doc);
+    free(b.p);
+    return rc;
+}
+
+int ctl_cmd_upload(ctl *c, const char *file)
+{
+    char id[65];
+    int rc = upload(c, file, id);
+    if (!rc) printf("%s\n", id);
+    return rc;
+}

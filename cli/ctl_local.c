@@ -1,0 +1,123 @@
+/* --local: a private voxeld for one command (ctl.h). It runs on
+ * 127.0.0.1, port 0 (any free one), with a temporary data dir; its log is
+ * read until the ready line gives the port, then drained by a thread (and
+ * its last lines shown if it fails to start). */
+#include <errno.h>
+#include <ftw.h>
+#include <limits.h>
+#include <pthread.h>
+#include <signal.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/prctl.h>
+#include <sys/stat.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include "ctl.h"
+
+static pid_t g_pid;
+static char g_dir[PATH_MAX];
+static FILE *g_log;
+static pthread_t g_drain;
+static int g_draining;
+
+/* The voxeld to start: $VOXELD_BIN, the one next to this program, or PATH. */
+static void find_voxeld(char *out, size_t n)
+{
+    const char *env = getenv("VOXELD_BIN");
+    if (env && *env) {
+        snprintf(out, n, "%s", env);
+        return;
+    }
+    char self[PATH_MAX];
+    ssize_t k = readlink("/proc/self/exe", self, sizeof self - 1);
+    if (k > 0) {
+        self[k] = 0;
+        char *slash = strrchr(self, '/');
+        if (slash) {
+            *slash = 0;
+            snprintf(out, n, "%s/voxeld", self);
+            if (access(out, X_OK) == 0) return;
+        }
+    }
+    snprintf(out, n, "voxeld");
+}
+
+static void *drain_main(void *arg)
+{
+    char line[4096];
+    while (fgets(line, sizeof line, g_log))
+        ;
+    return NULL;
+}
+
+static int rm_entry(const char *path, const struct stat *st, int flag, struct FTW *ftw)
+{
+    remove(path);
+    return 0;
+}
+
+int ctl_local_start(ctl *c)
+{
+    const char *tmp = getenv("TMPDIR");
+    snprintf(g_dir, sizeof g_dir, "%s/voxelctl.XXXXXX", tmp && *tmp ? tmp : "/tmp");
+    if (!mkdtemp(g_dir)) {
+        fprintf(stderr, "voxelctl: cannot make a temporary directory: %s\n", strerror(errno));
+        return -1;
+    }
+    char bin[PATH_MAX], data[PATH_MAX + 8];
+    find_voxeld(bin, sizeof bin);
+    snprintf(data, sizeof data, "%s/data", g_dir);
+    int fds[2];
+    if (pipe(fds)) return -1;
+    g_pid = fork();
+    if (g_pid < 0) return -1;
+    if (g_pid == 0) {
+        prctl(PR_SET_PDEATHSIG, SIGTERM); /* voxelctl killed: so is its voxeld */
+        dup2(fds[1], 2);
+        close(fds[0]);
+        close(fds[1]);
+        execlp(bin, bin, "--listen", "127.0.0.1:0", "--data-dir", data, "--log-level", "info",
+               (char *)NULL);
+        fprintf(stderr, "voxelctl: cannot run %s: %s\n", bin, strerror(errno));
+        _exit(127);
+    }
+    close(fds[1]);
+    g_log = fdopen(fds[0], "r");
+    char line[4096], last[8][512];
+    int nlast = 0, port = 0;
+    while (!port && fgets(line, sizeof line, g_log)) {
+        snprintf(last[nlast++ % 8], sizeof last[0], "%s", line);
+        const char *p = strstr(line, "event=voxeld.ready");
+        if (p && (p = strstr(p, "port="))) port = atoi(p + 5);
+    }
+    if (!port) {
+        fprintf(stderr, "voxelctl: the local voxeld (%s) did not start:\n", bin);
+        for (int i = nlast > 8 ? nlast - 8 : 0; i < nlast; i++)
+            fprintf(stderr, "  %s", last[i % 8]);
+        ctl_local_stop();
+        return -1;
+    }
+    g_draining = pthread_create(&g_drain, NULL, drain_main, NULL) == 0;
+    snprintf(c->server, sizeof c->server, "http://127.0.0.1:%d", port);
+    c->token[0] = 0;
+    return 0;
+}
+
+void ctl_local_stop(void)
+{
+    if (g_pid > 0) {
+        kill(g_pid, SIGTERM);
+        int st;
+        while (waitpid(g_pid, &st, 0) < 0 && errno == EINTR)
+            ;
+        g_pid = 0;
+    }
+    if (g_draining) pthread_join(g_drain, NULL); /* EOF once voxeld is gone */
+    g_draining = 0;
+    if (g_log) fclose(g_log);
+    g_log = NULL;
+    if (g_dir[0]) nftw(g_dir, rm_entry, 16, FTW_DEPTH | FTW_PHYS);
+    g_dir[0] = 0;
+}

@@ -1,0 +1,250 @@
+/* voxelctl: command line (see usage() and docs/man/voxelctl.1). */
+#include <curl/curl.h>
+#include <getopt.h>
+#include <stdlib.h>
+#include <string.h>
+#include <unistd.h>
+
+#include "ctl.h"
+
+static void usage(FILE *out)
+{
+    fprintf(
+        out,
+        "usage: voxelctl [--server URL] [--token T] [--local] [--json] [--quiet] COMMAND ...\n"
+        "\n"
+        "Jobs (upload FILE, or use a mesh id; follow the job; download its result):\n"
+        "  voxelize FILE [-r N] [-f vdb|binvox|raw8|raw1|summary] [-o OUT]\n"
+        "  render FILE [-r N] [-o OUT]        gregory FILE [-f FORMAT] [-o OUT]\n"
+        "  catmull-clark FILE [-f FORMAT] [-o OUT]   preview FILE [-o OUT]\n"
+        "    -p, --param KEY=VALUE   a job parameter (VALUE as JSON if it parses, else a\n"
+        "                            string; KEY.SUB for nested objects); repeatable\n"
+        "    --params JSON           all parameters as one JSON object\n"
+        "    -o, --output FILE       where the primary result goes (- = stdout;\n"
+        "                            default: the server's file name)\n"
+        "    --no-wait               print the job id and exit\n"
+        "Other commands:\n"
+        "  upload FILE               store a mesh, print its id\n"
+        "  jobs [--state S] [--limit N]    meshes [--limit N]\n"
+        "  get JOB [-o FILE] [--name OUTPUT]  show a job, or download an output\n"
+        "  cancel JOB\n"
+        "Options:\n"
+        "  --server URL   the voxeld to talk to (default $VOXELD_URL or http://127.0.0.1:8080)\n"
+        "  --token T      bearer token (default $VOXELD_TOKEN)\n"
+        "  --local        start a private voxeld for this command (no server needed)\n"
+        "  --json         print the server's JSON on stdout\n"
+        "  --quiet        no progress on stderr\n"
+        "Exit status: 0 done, 1 the server or the job failed, 2 bad usage.\n");
+}
+
+/* Sets params[key] (dots: nested objects) to value as JSON, else a string. */
+static int set_param(cJSON *params, const char *kv)
+{
+    const char *eq = strchr(kv, '=');
+    if (!eq || eq == kv) return -1;
+    char key[256];
+    snprintf(key, sizeof key, "%.*s", (int)(eq - kv), kv);
+    cJSON *v = cJSON_Parse(eq + 1);
+    if (!v) v = cJSON_CreateString(eq + 1);
+    cJSON *o = params;
+    char *k = key, *dot;
+    while ((dot = strchr(k, '.'))) {
+        *dot = 0;
+        cJSON *sub = cJSON_GetObjectItemCaseSensitive(o, k);
+        if (!cJSON_IsObject(sub)) {
+            cJSON_DeleteItemFromObjectCaseSensitive(o, k);
+            sub = cJSON_AddObjectToObject(o, k);
+        }
+        o = sub;
+        k = dot + 1;
+    }
+    cJSON_DeleteItemFromObjectCaseSensitive(o, k);
+    cJSON_AddItemToObject(o, k, v);
+    return 0;
+}
+
+static int is_job_kind(const char *s)
+{
+    static const char *kinds[] = {"voxelize", "render", "gregory", "catmull-clark", "preview"};
+    for (size_t i = 0; i < sizeof kinds / sizeof kinds[0]; i++)
+        if (!strcmp(s, kinds[i])) return 1;
+    return 0;
+}
+
+typedef struct args {
+    const char *out, *name, *state, *resolution, *format;
+    int limit, no_wait, local;
+    cJSON *params;
+} args;
+
+/* Reads the options (anywhere on the line); the rest stay in argv[optind..]. */
+static int read_options(ctl *c, args *a, int argc, char **argv)
+{
+    enum {
+        O_SERVER = 256,
+        O_TOKEN,
+        O_LOCAL,
+        O_JSON,
+        O_QUIET,
+        O_PARAMS,
+        O_NAME,
+        O_STATE,
+        O_LIMIT,
+        O_NOWAIT,
+        O_VERSION
+    };
+    static const struct option opts[] = {{"server", required_argument, 0, O_SERVER},
+                                         {"token", required_argument, 0, O_TOKEN},
+                                         {"local", no_argument, 0, O_LOCAL},
+                                         {"json", no_argument, 0, O_JSON},
+                                         {"quiet", no_argument, 0, O_QUIET},
+                                         {"param", required_argument, 0, 'p'},
+                                         {"params", required_argument, 0, O_PARAMS},
+                                         {"output", required_argument, 0, 'o'},
+                                         {"resolution", required_argument, 0, 'r'},
+                                         {"format", required_argument, 0, 'f'},
+                                         {"name", required_argument, 0, O_NAME},
+                                         {"state", required_argument, 0, O_STATE},
+                                         {"limit", required_argument, 0, O_LIMIT},
+                                         {"no-wait", no_argument, 0, O_NOWAIT},
+                                         {"help", no_argument, 0, 'h'},
+                                         {"version", no_argument, 0, O_VERSION},
+                                         {0, 0, 0, 0}};
+    int ch;
+    while ((ch = getopt_long(argc, argv, "p:o:r:f:hq", opts, NULL)) != -1) {
+        switch (ch) {
+        case O_SERVER:
+            snprintf(c->server, sizeof c->server, "%s", optarg);
+            break;
+        case O_TOKEN:
+            snprintf(c->token, sizeof c->token, "%s", optarg);
+            break;
+        case O_LOCAL:
+            a->local = 1;
+            break;
+        case O_JSON:
+            c->json = 1;
+            break;
+        case 'q':
+        case O_QUIET:
+            c->quiet = 1;
+            break;
+        case 'p':
+            if (set_param(a->params, optarg)) {
+                fprintf(stderr, "voxelctl: -p wants KEY=VALUE, not '%s'\n", optarg);
+                return -1;
+            }
+            break;
+        case O_PARAMS: {
+            cJSON *p = cJSON_Parse(optarg), *it;
+            if (!cJSON_IsObject(p)) {
+                fprintf(stderr, "voxelctl: --params wants a JSON object\n");
+                cJSON_Delete(p);
+                return -1;
+            }
+            while ((it = p->child)) {
+                cJSON_DetachItemViaPointer(p, it);
+                cJSON_DeleteItemFromObjectCaseSensitive(a->params, it->string);
+                cJSON_AddItemToObject(a->params, it->string, it);
+            }
+            cJSON_Delete(p);
+            break;
+        }
+        case 'o':
+            a->out = optarg;
+            break;
+        case 'r':
+            a->resolution = optarg;
+            break;
+        case 'f':
+            a->format = optarg;
+            break;
+        case O_NAME:
+            a->name = optarg;
+            break;
+        case O_STATE:
+            a->state = optarg;
+            break;
+        case O_LIMIT:
+            a->limit = atoi(optarg);
+            break;
+        case O_NOWAIT:
+            a->no_wait = 1;
+            break;
+        case 'h':
+            usage(stdout);
+            exit(0);
+        case O_VERSION:
+            printf("voxelctl %s\n", VX_VERSION);
+            exit(0);
+        default:
+            return -1;
+        }
+    }
+    return 0;
+}
+
+/* -r and -f as the kind's own parameters. */
+static void shortcuts(const char *kind, args *a)
+{
+    char kv[300];
+    if (a->resolution) {
+        snprintf(kv, sizeof kv, "%s=%s", !strcmp(kind, "render") ? "N" : "resolution",
+                 a->resolution);
+        set_param(a->params, kv);
+    }
+    if (a->format) {
+        snprintf(kv, sizeof kv, "format=\"%s\"", a->format);
+        set_param(a->params, kv);
+    }
+}
+
+static int run(ctl *c, args *a, int n, char **pos)
+{
+    const char *cmd = pos[0];
+    if (is_job_kind(cmd) && n == 2) {
+        shortcuts(cmd, a);
+        cJSON *p = a->params;
+        a->params = NULL;
+        return ctl_cmd_job(c, cmd, pos[1], p, a->out, a->no_wait);
+    }
+    if (!strcmp(cmd, "upload") && n == 2) return ctl_cmd_upload(c, pos[1]);
+    if (!strcmp(cmd, "jobs") && n == 1) return ctl_cmd_jobs(c, a->state, a->limit);
+    if (!strcmp(cmd, "meshes") && n == 1) return ctl_cmd_meshes(c, a->limit);
+    if (!strcmp(cmd, "get") && n == 2) return ctl_cmd_get(c, pos[1], a->name, a->out);
+    if (!strcmp(cmd, "cancel") && n == 2) return ctl_cmd_cancel(c, pos[1]);
+    fprintf(stderr, "voxelctl: bad command line (see voxelctl --help)\n");
+    return 2;
+}
+
+int main(int argc, char **argv)
+{
+    ctl c = {0};
+    const char *url = getenv("VOXELD_URL"), *tok = getenv("VOXELD_TOKEN");
+    snprintf(c.server, sizeof c.server, "%s", url && *url ? url : "http://127.0.0.1:8080");
+    if (tok) snprintf(c.token, sizeof c.token, "%s", tok);
+    args a = {.limit = 100, .params = cJSON_CreateObject()};
+    if (read_options(&c, &a, argc, argv)) {
+        cJSON_Delete(a.params);
+        return 2;
+    }
+    if (optind >= argc) {
+        usage(stderr);
+        cJSON_Delete(a.params);
+        return 2;
+    }
+    size_t sl = strlen(c.server);
+    while (sl && c.server[sl - 1] == '/')
+        c.server[--sl] = 0;
+    c.progress_tty = isatty(2);
+    if (ctl_http_init()) return 1;
+    if (a.local && ctl_local_start(&c)) {
+        cJSON_Delete(a.params);
+        return 1;
+    }
+    int rc = run(&c, &a, argc - optind, argv + optind);
+    if (a.local) ctl_local_stop();
+    cJSON_Delete(a.params);
+    curl_global_cleanup();
+    return rc;
+}

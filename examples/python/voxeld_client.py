@@ -1,0 +1,177 @@
+#!/usr/bin/env python3
+"""A small voxeld client using only the Python standard library.
+
+As a module:
+
+    from voxeld_client import Client
+    c = Client("http://127.0.0.1:8080", token=None)
+    mesh = c.upload("bunny.obj")["id"]
+    job = c.submit(mesh, "voxelize", {"resolution": 128, "format": "binvox"})
+    for event in c.events(job["id"]):          # Server-Sent Events
+        print(event["state"], event["progress"])
+    c.download(job["id"], "bunny.binvox")
+
+As a program:
+
+    voxeld_client.py [--server URL] [--token T] KIND FILE [-p KEY=VALUE ...] [-o OUT]
+
+The server and token default to $VOXELD_URL and $VOXELD_TOKEN. Errors from
+the server raise VoxeldError with its code and message.
+"""
+import argparse
+import json
+import os
+import sys
+import urllib.error
+import urllib.request
+
+MESH_TYPES = {".obj": "model/obj", ".bpt": "model/x-bpt", ".drc": "model/x-draco",
+              ".stl": "model/stl", ".ply": "model/x-ply", ".glb": "model/gltf-binary",
+              ".gltf": "model/gltf+json", ".off": "model/x-off"}
+TERMINAL = ("succeeded", "failed", "canceled")
+
+
+class VoxeldError(Exception):
+    """An error answer: status, code and message from {"error": {...}}."""
+
+    def __init__(self, status, code, message):
+        super().__init__("%s (%s, HTTP %d)" % (message, code, status))
+        self.status, self.code, self.message = status, code, message
+
+
+class Client:
+    def __init__(self, server=None, token=None, timeout=120):
+        self.server = (server or os.environ.get("VOXELD_URL") or "http://127.0.0.1:8080").rstrip("/")
+        self.token = token if token is not None else os.environ.get("VOXELD_TOKEN")
+        self.timeout = timeout
+
+    def _open(self, method, path, body=None, ctype=None, accept=None):
+        req = urllib.request.Request(self.server + path, data=body, method=method)
+        if ctype:
+            req.add_header("Content-Type", ctype)
+        if accept:
+            req.add_header("Accept", accept)
+        if self.token:
+            req.add_header("Authorization", "Bearer " + self.token)
+        try:
+            return urllib.request.urlopen(req, timeout=self.timeout)
+        except urllib.error.HTTPError as e:
+            raw = e.read()
+            try:
+                err = json.loads(raw)["error"]
+                raise VoxeldError(e.code, err["code"], err["message"]) from None
+            except (ValueError, KeyError, TypeError):
+                raise VoxeldError(e.code, "http_error", raw[:200].decode("utf-8", "replace")) from None
+
+    def _json(self, method, path, doc=None):
+        body = json.dumps(doc).encode() if doc is not None else None
+        with self._open(method, path, body, "application/json" if body else None) as r:
+            return json.load(r)
+
+    def upload(self, path):
+        """Stores a mesh file; returns the Mesh (its "id" names it in jobs)."""
+        ctype = MESH_TYPES.get(os.path.splitext(path)[1].lower(), "application/octet-stream")
+        with open(path, "rb") as f:
+            data = f.read()
+        with self._open("POST", "/v1/meshes", data, ctype) as r:
+            return json.load(r)
+
+    def submit(self, mesh, kind, params=None):
+        """Queues a job; returns the Job."""
+        return self._json("POST", "/v1/jobs", {"mesh": mesh, "kind": kind, "params": params or {}})
+
+    def job(self, jid, wait=0, progress=None):
+        """The Job; wait > 0 holds until it ends (or reaches progress)."""
+        q = "?wait=%g" % wait if wait else ""
+        if wait and progress is not None:
+            q += "&progress=%g" % progress
+        return self._json("GET", "/v1/jobs/" + jid + q)
+
+    def jobs(self, state=None, limit=100):
+        q = "?limit=%d" % limit + ("&state=" + state if state else "")
+        return self._json("GET", "/v1/jobs" + q)["items"]
+
+    def meshes(self, limit=100):
+        return self._json("GET", "/v1/meshes?limit=%d" % limit)["items"]
+
+    def cancel(self, jid):
+        return self._json("DELETE", "/v1/jobs/" + jid)
+
+    def events(self, jid):
+        """Yields the Job at each event of GET /v1/jobs/{jid}/events, until it ends."""
+        with self._open("GET", "/v1/jobs/%s/events" % jid, accept="text/event-stream") as r:
+            data = []
+            for raw in r:
+                line = raw.decode("utf-8").rstrip("\r\n")
+                if not line:
+                    if data:
+                        yield json.loads("\n".join(data))
+                    data = []
+                elif line.startswith("data:"):
+                    data.append(line[5:].lstrip(" "))
+
+    def wait(self, jid, on_event=None):
+        """Follows the job to its end; returns the last Job."""
+        last = None
+        for job in self.events(jid):
+            last = job
+            if on_event:
+                on_event(job)
+        if last is None or last["state"] not in TERMINAL:
+            last = self.job(jid)
+            while last["state"] not in TERMINAL:
+                last = self.job(jid, wait=30)
+        return last
+
+    def download(self, jid, out, name=None):
+        """Writes the primary result (or output name) to the file out."""
+        path = "/v1/jobs/%s/result" % jid + ("/" + name if name else "")
+        with self._open("GET", path) as r, open(out, "wb") as f:
+            while True:
+                chunk = r.read(1 << 16)
+                if not chunk:
+                    break
+                f.write(chunk)
+        return out
+
+
+def _param(kv):
+    key, sep, value = kv.partition("=")
+    if not sep or not key:
+        raise argparse.ArgumentTypeError("want KEY=VALUE, not %r" % kv)
+    try:
+        return key, json.loads(value)
+    except ValueError:
+        return key, value
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description="Run one voxeld job on a mesh file.")
+    ap.add_argument("--server")
+    ap.add_argument("--token")
+    ap.add_argument("kind")
+    ap.add_argument("file")
+    ap.add_argument("-p", "--param", type=_param, action="append", default=[])
+    ap.add_argument("-o", "--output")
+    a = ap.parse_args(argv)
+    c = Client(a.server, a.token)
+    try:
+        mesh = c.upload(a.file)["id"]
+        job = c.submit(mesh, a.kind, dict(a.param))
+        job = c.wait(job["id"], lambda j: print("%s %s %3.0f%%" % (j["id"], j["state"], 100 * j["progress"]),
+                                               file=sys.stderr))
+        if job["state"] != "succeeded":
+            print("job %s: %s" % (job["state"], (job.get("error") or {}).get("message")), file=sys.stderr)
+            return 1
+        if a.output and job.get("outputs"):
+            c.download(job["id"], a.output)
+            print("wrote " + a.output, file=sys.stderr)
+        print(json.dumps(job))
+        return 0
+    except VoxeldError as e:
+        print("voxeld: %s" % e, file=sys.stderr)
+        return 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,54 @@
+#!/usr/bin/env bash
+# examples/python/voxeld_client.py (standard library only) against the daemon:
+# as a program and as a module (events, errors, download, cancel).
+source "$(dirname "$0")/lib.sh"
+PYC=$VX_SOURCE_DIR/examples/python/voxeld_client.py
+echo "py-token" >"$TMP/token"
+start_daemon --token-file "$TMP/token" || exit 1
+cd "$TMP"
+MESH=$VX_MESH_DIR/suzanne.obj
+
+VOXELD_URL=$BASE VOXELD_TOKEN=py-token python3 "$PYC" voxelize "$MESH" -p resolution=48 -p format=binvox -o py.binvox >job.json 2>py.err
+check "program: exit 0 ($(tail -n 1 py.err))" test $? -eq 0
+check "program: the succeeded job" jq -e '.state == "succeeded" and .params.resolution == 48' job.json
+check "program: a binvox file" test "$(head -n 1 py.binvox)" = "#binvox 1"
+check "program: progress lines" grep -q 'succeeded 100%' py.err
+python3 "$PYC" --server "$BASE" --token nope voxelize "$MESH" 2>py.err
+check "program: a wrong token exits 1 with the server's message" sh -c "test $? -eq 1 && grep -q 'unauthorized, HTTP 401' py.err"
+
+PYTHONPATH=$(dirname "$PYC") python3 - "$BASE" "$MESH" >module.out 2>&1 <<'PY'
+import sys
+from voxeld_client import Client, VoxeldError
+base, mesh_file = sys.argv[1], sys.argv[2]
+c = Client(base, token="py-token")
+mesh = c.upload(mesh_file)
+assert len(mesh["id"]) == 64, mesh
+job = c.submit(mesh["id"], "voxelize", {"resolution": 96})
+events = list(c.events(job["id"]))
+assert events, "no events"
+assert all(e["id"] == job["id"] for e in events)
+p = [e["progress"] for e in events]
+assert p == sorted(p), p
+assert events[-1]["state"] == "succeeded", events[-1]
+assert [e["state"] for e in events[:-1] if e["state"] in ("succeeded", "failed", "canceled")] == []
+assert c.wait(job["id"])["state"] == "succeeded"
+c.download(job["id"], "m.vdb")
+assert open("m.vdb", "rb").read(8)[:4] == b"\x20\x42\x44\x56", "not a .vdb"
+assert job["id"] in [j["id"] for j in c.jobs(state="succeeded")]
+assert mesh["id"] in [m["id"] for m in c.meshes()]
+try:
+    c.submit(mesh["id"], "voxelize", {"resolution": -1})
+    raise SystemExit("no error for a bad param")
+except VoxeldError as e:
+    assert e.status == 422 and e.code == "invalid_params", e
+try:
+    c.cancel(job["id"])
+    raise SystemExit("canceled a finished job")
+except VoxeldError as e:
+    assert e.status == 409 and e.code == "job_finished", e
+print("module ok", len(events), "events")
+PY
+check "module: events, wait, download, lists and errors ($(tail -n 1 module.out))" grep -q '^module ok' module.out
+
+stop_daemon
+finish

@@ -1,0 +1,90 @@
+#!/usr/bin/env bash
+# voxelctl against a real daemon (token from the flag and from VOXELD_*),
+# its errors and exit codes, and --local / `voxeld run` without a server.
+source "$(dirname "$0")/lib.sh"
+CTL=$(dirname "$VOXELD")/voxelctl
+if [[ ! -x "$CTL" ]]; then echo "no voxelctl next to $VOXELD"; exit 1; fi
+MESH=$VX_MESH_DIR/suzanne.obj
+echo "s3cret-token" >"$TMP/token"
+start_daemon --token-file "$TMP/token" || exit 1
+export VOXELD_URL=$BASE VOXELD_TOKEN=s3cret-token
+cd "$TMP"
+
+# voxelize: upload, follow (plain lines: stderr is not a terminal), download.
+"$CTL" voxelize "$MESH" -r 64 -f binvox -o out.binvox >ctl.out 2>ctl.err
+check "voxelize: exit 0 ($(tail -n 2 ctl.err))" test $? -eq 0
+check "voxelize: a binvox file" test "$(head -n 1 out.binvox)" = "#binvox 1"
+check "voxelize: 64 voxels along the longest side" awk '/^dim/ { exit !($2 == 64 || $3 == 64 || $4 == 64) }' out.binvox
+check "voxelize: progress lines end with succeeded 100%" grep -Eq '^[0-9a-f]{32} succeeded 100%$' ctl.err
+check "voxelize: says where the result went" grep -q 'wrote out.binvox' ctl.err
+
+# On a terminal (script(1) gives it one): a progress bar redrawn with \r.
+if command -v script >/dev/null; then
+    script -qec "'$CTL' voxelize '$MESH' -r 96 -o tty.vdb" /dev/null >tty.out 2>&1
+    check "terminal: a progress bar redrawn in place" grep -aq $'\rsucceeded \[#\{30\}\] 100%' tty.out
+    check "terminal: the result" test -s tty.vdb
+fi
+
+# --json: the finished Job on stdout.
+"$CTL" --json voxelize "$MESH" -r 32 -f raw8 -p padding=1 -o out.raw >job.json 2>/dev/null
+check "--json: exit 0" test $? -eq 0
+check "--json: the succeeded job with the params given" jq -e '.state == "succeeded" and .params.resolution == 32 and .params.padding == 1 and .params.format == "raw8"' job.json
+JID=$(jq -r .id job.json)
+MID=$(jq -r .mesh job.json)
+"$CTL" get "$JID" --name voxels -o again.raw 2>/dev/null
+check "get --name -o: the same bytes as the job's download" cmp -s out.raw again.raw
+"$CTL" --json get "$JID" >get.json
+check "get --json: the job" jq -e --arg j "$JID" '.id == $j' get.json
+check "get: a table row" sh -c "'$CTL' get '$JID' | grep -q '^$JID  voxelize'"
+check "jobs: lists the job" sh -c "'$CTL' jobs | grep -q '^$JID'"
+check "jobs --json --state succeeded: the job among them" sh -c "'$CTL' --json jobs --state succeeded | jq -e --arg j '$JID' '[.items[].id] | index(\$j) != null'"
+check "meshes: lists the mesh" sh -c "'$CTL' meshes | grep -q '^$MID'"
+
+# A mesh id instead of a file; the token from --token over the environment.
+VOXELD_TOKEN=wrong "$CTL" --token s3cret-token --quiet preview "$MID" -p width=64 -p height=48 -o p.png 2>ctl.err
+check "preview by mesh id: exit 0 ($(cat ctl.err))" test $? -eq 0
+check "preview: a PNG" sh -c "head -c 8 p.png | od -An -c | grep -q 'P   N   G'"
+check "--quiet: no progress lines" sh -c "! grep -q '%' ctl.err"
+
+# Failures: the server's message, exit 1; bad usage, exit 2.
+VOXELD_TOKEN=wrong "$CTL" jobs >/dev/null 2>ctl.err
+check "wrong token: exit 1" test $? -eq 1
+check "wrong token: the server's error" grep -q 'unauthorized.*HTTP 401' ctl.err
+"$CTL" voxelize "$MESH" -r 99999 -o x.binvox 2>ctl.err
+check "bad param: exit 1" test $? -eq 1
+check "bad param: names it" grep -q 'params.resolution.*invalid_params' ctl.err
+check "bad param: no file written" test ! -e x.binvox
+"$CTL" cancel "$JID" 2>ctl.err
+check "cancel a finished job: exit 1, job_finished" sh -c "test $? -eq 1 && grep -q job_finished ctl.err"
+"$CTL" get 0123456789abcdef0123456789abcdef 2>ctl.err
+check "get an unknown job: exit 1, job_not_found" sh -c "test $? -eq 1 && grep -q job_not_found ctl.err"
+"$CTL" voxelize /nonexistent.obj 2>ctl.err
+check "a missing file: exit 1" test $? -eq 1
+"$CTL" frobnicate x 2>/dev/null
+check "an unknown command: exit 2" test $? -eq 2
+"$CTL" --server http://127.0.0.1:1 jobs 2>ctl.err
+check "no server: exit 1 with curl's reason" sh -c "test $? -eq 1 && grep -qi 'connect' ctl.err"
+
+# --no-wait prints the id; cancel takes it.
+NJ=$("$CTL" --no-wait voxelize "$MID" -r 512 2>/dev/null)
+check "--no-wait: a job id ($NJ)" grep -Eq '^[0-9a-f]{32}$' <<<"$NJ"
+"$CTL" cancel "$NJ" >cancel.out 2>&1
+check "cancel: exit 0 ($(cat cancel.out))" test $? -eq 0
+
+# One-shot, no server: --local and voxeld run give the server's bytes.
+"$CTL" voxelize "$MESH" -r 64 -f binvox -o local.binvox >/dev/null 2>&1 # via the daemon
+unset VOXELD_URL VOXELD_TOKEN
+mkdir -p "$TMP/ltmp"
+export TMPDIR=$TMP/ltmp # where --local makes its data dir
+"$CTL" --local --quiet voxelize "$MESH" -r 64 -f binvox -o local2.binvox 2>ctl.err
+check "--local: exit 0 ($(cat ctl.err))" test $? -eq 0
+check "--local: the same grid as the daemon's" cmp -s local.binvox local2.binvox
+"$VOXELD" run voxelize "$MESH" -r 64 -f binvox -o run.binvox --quiet 2>ctl.err
+check "voxeld run: exit 0 ($(cat ctl.err))" test $? -eq 0
+check "voxeld run: the same grid" cmp -s local.binvox run.binvox
+"$CTL" --local voxelize "$MESH" -r 99999 2>ctl.err
+check "--local: a bad param still exits 1 with the message" sh -c "test $? -eq 1 && grep -q invalid_params ctl.err"
+check "--local: its temporary data dirs are removed" test -z "$(ls -A "$TMP/ltmp")"
+
+stop_daemon
+finish

@@ -1,0 +1,98 @@
+/* daemon/config.c: every flag can be set from a VOXELD_* variable named
+ * from the flag table; the file < the environment < the flags. */
+#include <stdarg.h>
+#include <stddef.h>
+#include <stdint.h>
+#include <setjmp.h>
+#include <cmocka.h>
+
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <unistd.h>
+
+#include "config.h"
+
+static int load(vx_config *c, int argc, char **argv)
+{
+    return vx_config_load(c, argc, argv);
+}
+
+static void test_env_sets_every_kind(void **state)
+{
+    setenv("VOXELD_LISTEN", "0.0.0.0:9000", 1);
+    setenv("VOXELD_MAX_UPLOAD_BYTES", "2M", 1);
+    setenv("VOXELD_JOB_TIMEOUT", "12.5", 1);
+    setenv("VOXELD_HTTP_THREADS", "3", 1);
+    setenv("VOXELD_GL_DEBUG", "no", 1);
+    setenv("VOXELD_LOG_LEVEL", "debug", 1);
+    setenv("VOXELD_MAX_EVENT_STREAMS", "7", 1);
+    vx_config c;
+    char *argv[] = {"voxeld", NULL};
+    assert_int_equal(load(&c, 1, argv), 0);
+    assert_string_equal(c.listen, "0.0.0.0:9000");
+    assert_int_equal(c.max_upload_bytes, 2u << 20);
+    assert_true(c.job_timeout_s == 12.5);
+    assert_int_equal(c.http_threads, 3);
+    assert_int_equal(c.gl_debug, 0);
+    assert_int_equal(c.log_level, VX_LOG_DEBUG);
+    assert_int_equal(c.max_event_streams, 7);
+    /* A flag wins over its variable. */
+    char *argv2[] = {"voxeld", "--listen", "127.0.0.1:0", "--max-event-streams", "9", NULL};
+    assert_int_equal(load(&c, 5, argv2), 0);
+    assert_string_equal(c.listen, "127.0.0.1:0");
+    assert_int_equal(c.max_event_streams, 9);
+    assert_int_equal(c.max_upload_bytes, 2u << 20);
+    unsetenv("VOXELD_LISTEN");
+    unsetenv("VOXELD_MAX_UPLOAD_BYTES");
+    unsetenv("VOXELD_JOB_TIMEOUT");
+    unsetenv("VOXELD_HTTP_THREADS");
+    unsetenv("VOXELD_GL_DEBUG");
+    unsetenv("VOXELD_LOG_LEVEL");
+    unsetenv("VOXELD_MAX_EVENT_STREAMS");
+    assert_int_equal(load(&c, 1, argv), 0);
+    assert_string_equal(c.listen, "127.0.0.1:8080");
+    assert_int_equal(c.max_event_streams, 64);
+}
+
+static void test_env_bad_value(void **state)
+{
+    setenv("VOXELD_MAX_CONNECTIONS", "lots", 1);
+    vx_config c;
+    char *argv[] = {"voxeld", NULL};
+    assert_int_equal(load(&c, 1, argv), -1);
+    unsetenv("VOXELD_MAX_CONNECTIONS");
+}
+
+static void test_env_over_file(void **state)
+{
+    char path[] = "/tmp/vx-config-XXXXXX";
+    int fd = mkstemp(path);
+    assert_true(fd >= 0);
+    FILE *f = fdopen(fd, "w");
+    fprintf(f, "workers = 5\nmax-queued-jobs = 11\n");
+    fclose(f);
+    setenv("VOXELD_CONFIG", path, 1);
+    setenv("VOXELD_WORKERS", "6", 1);
+    vx_config c;
+    char *argv[] = {"voxeld", NULL};
+    assert_int_equal(load(&c, 1, argv), 0);
+    assert_int_equal(c.workers, 6);          /* the variable over the file */
+    assert_int_equal(c.max_queued_jobs, 11); /* the file, from VOXELD_CONFIG */
+    char *argv2[] = {"voxeld", "--workers", "4", NULL};
+    assert_int_equal(load(&c, 3, argv2), 0);
+    assert_int_equal(c.workers, 4);
+    unsetenv("VOXELD_CONFIG");
+    unsetenv("VOXELD_WORKERS");
+    unlink(path);
+}
+
+int main(void)
+{
+    const struct CMUnitTest tests[] = {
+        cmocka_unit_test(test_env_sets_every_kind),
+        cmocka_unit_test(test_env_bad_value),
+        cmocka_unit_test(test_env_over_file),
+    };
+    return cmocka_run_group_tests(tests, NULL, NULL);
+}
