@@ -45,6 +45,8 @@ typedef struct vx_config {
     double results_max_age_s;
     uint64_t job_history;
     uint64_t job_history_bytes;
+    char cors_origin[1024]; /* comma list of origins a browser may call from ("*" = any); empty = no
+                               CORS */
     int gl_debug;
     int list_devices; /* --list-egl-devices: print and exit */
 } vx_config;

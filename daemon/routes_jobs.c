@@ -1,10 +1,7 @@
-/* /v1/jobs: submission (with ?wait), listing, state (with ?wait), cancel
- * and results (sendfile, ETag). */
-#include <fcntl.h>
+/* /v1/jobs: submission (with ?wait), listing, state (with ?wait) and
+ * cancel; results are in routes_results.c. */
 #include <stdio.h>
 #include <string.h>
-#include <sys/stat.h>
-#include <unistd.h>
 
 #include "http_int.h"
 
@@ -116,43 +113,6 @@ int vx_route_job(vx_http *h, struct MHD_Connection *c, req *r)
     double wait_s = wait_seconds(h, r);
     if (wait_s > 0 && vx_wait_hold(h->wait, &r->w, c, r->id, wait_s)) return MHD_YES;
     return answer_job(h, c, r, r->id, 200);
-}
-
-int vx_route_result(vx_http *h, struct MHD_Connection *c, req *r)
-{
-    vx_err err;
-    char path[2400], ctype[64], fname[128];
-    if (vx_jobs_output(h->d.jobs, r->id, r->route == VX_R_RESULT_NAME ? r->name : NULL, path,
-                       sizeof path, ctype, fname, &err))
-        return vx_resp_err(c, r, &err);
-    char etag[160], disp[200];
-    snprintf(etag, sizeof etag, "\"%s\"", fname);
-    snprintf(disp, sizeof disp, "attachment; filename=\"%s\"", fname);
-    const char *inm = vx_resp_header(c, MHD_HTTP_HEADER_IF_NONE_MATCH);
-    if (inm && (strstr(inm, etag) || !strcmp(inm, "*"))) {
-        struct MHD_Response *resp =
-            MHD_create_response_from_buffer(0, (void *)"", MHD_RESPMEM_PERSISTENT);
-        MHD_add_response_header(resp, MHD_HTTP_HEADER_ETAG, etag);
-        return vx_resp_queue(c, r, 304, resp, 0);
-    }
-    int fd = open(path, O_RDONLY | O_CLOEXEC);
-    struct stat st;
-    if (fd < 0 || fstat(fd, &st) != 0) {
-        if (fd >= 0) close(fd);
-        return vx_resp_fail(c, r, VX_EGONE, "result_evicted", "the result file is gone");
-    }
-    /* from_fd lets MHD use sendfile(2); it closes fd with the response. */
-    struct MHD_Response *resp = MHD_create_response_from_fd64((uint64_t)st.st_size, fd);
-    if (!resp) {
-        close(fd);
-        return MHD_NO;
-    }
-    MHD_add_response_header(resp, MHD_HTTP_HEADER_CONTENT_TYPE, ctype);
-    MHD_add_response_header(resp, MHD_HTTP_HEADER_ETAG, etag);
-    MHD_add_response_header(resp, "Content-Disposition", disp);
-    MHD_add_response_header(resp, MHD_HTTP_HEADER_CACHE_CONTROL,
-                            "private, max-age=86400, immutable");
-    return vx_resp_queue(c, r, 200, resp, (uint64_t)st.st_size);
 }
 
 int vx_route_job_resumed(vx_http *h, struct MHD_Connection *c, req *r)

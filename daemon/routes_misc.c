@@ -111,3 +111,24 @@ int vx_route_info(vx_http *h, struct MHD_Connection *c, req *r)
     cJSON_AddBoolToObject(doc, "auth", h->auth.on);
     return vx_resp_json(c, r, 200, doc, NULL, NULL);
 }
+
+int vx_route_options(vx_http *h, struct MHD_Connection *c, req *r)
+{
+    (void)h;
+    struct MHD_Response *resp =
+        MHD_create_response_from_buffer(0, (void *)"", MHD_RESPMEM_PERSISTENT);
+    if (!resp) return MHD_NO;
+    const char *allow = vx_req_route_allow(r->route);
+    MHD_add_response_header(resp, MHD_HTTP_HEADER_ALLOW, allow);
+    if (vx_resp_cors_origin(c) &&
+        vx_resp_header(c, MHD_HTTP_HEADER_ACCESS_CONTROL_REQUEST_METHOD)) {
+        /* Allow-Origin and Vary come with every answer (vx_resp_queue). */
+        MHD_add_response_header(resp, MHD_HTTP_HEADER_ACCESS_CONTROL_ALLOW_METHODS, allow);
+        MHD_add_response_header(resp, MHD_HTTP_HEADER_ACCESS_CONTROL_ALLOW_HEADERS,
+                                "Authorization, Content-Type, Idempotency-Key, X-Request-Id, "
+                                "Range, If-Range, If-None-Match");
+        MHD_add_response_header(resp, MHD_HTTP_HEADER_ACCESS_CONTROL_MAX_AGE, "600");
+    }
+    MHD_add_response_header(resp, MHD_HTTP_HEADER_CACHE_CONTROL, "no-store");
+    return vx_resp_queue(c, r, 204, resp, 0);
+}

@@ -36,6 +36,7 @@ typedef enum vx_err_kind {
     VX_ELENGTH,   /* a body whose length is not declared (411) */
     VX_EHEADER,   /* the request head is over its limit (431) */
     VX_ENOTIMPL,  /* a protocol feature that is not implemented (501) */
+    VX_ERANGE,    /* a byte range outside the representation (416) */
     VX_EKIND_COUNT
 } vx_err_kind;
 
