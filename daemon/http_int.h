@@ -40,7 +40,8 @@ typedef struct req {
     size_t len, cap;
     /* ?wait */
     vx_waiter w;
-    int post_job; /* the held request was POST /v1/jobs */
+    int post_job;      /* the held request was POST /v1/jobs */
+    int post_existing; /* ... answered with a job that was there already (200) */
     int answered;
     char rid[72];    /* X-Request-Id: the client's when sane, else made here */
     char path[256];  /* the concrete path (cut), for the log */

@@ -135,6 +135,16 @@ void vx_store_result_remove(vx_store *s, const char *jid)
     s->ops->remove_prefix(s->blob, key);
 }
 
+int vx_store_result_exists(vx_store *s, const char *jid)
+{
+    pthread_mutex_lock(&s->lock);
+    int found = 0;
+    for (size_t i = 0; i < s->nresults && !found; i++)
+        found = strcmp(s->results[i].jid, jid) == 0;
+    pthread_mutex_unlock(&s->lock);
+    return found;
+}
+
 int vx_store_results_evict(vx_store *s)
 {
     int removed = 0;
