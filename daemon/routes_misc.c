@@ -58,6 +58,8 @@ int vx_route_metrics(vx_http *h, struct MHD_Connection *c, req *r)
         .ready = vx_jobs_ready(h->d.jobs),
         .gl = vx_jobs_gl_info(h->d.jobs),
         .start_time = h->d.start_time,
+        .evictions = vx_store_results_evicted(h->d.store),
+        .gl_context_loss = vx_jobs_gl_losses(h->d.jobs),
     };
     return vx_resp_text(c, r, 200, vx_metrics_render(&g),
                         "text/plain; version=0.0.4; charset=utf-8", NULL, NULL);

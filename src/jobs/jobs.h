@@ -125,6 +125,8 @@ vx_gl_info vx_jobs_gl_info(vx_jobs *j);
 size_t vx_jobs_queue_depth(vx_jobs *j);
 size_t vx_jobs_queue_capacity(vx_jobs *j);
 size_t vx_jobs_running(vx_jobs *j);
+/* GL contexts lost during jobs since the table was opened. */
+uint64_t vx_jobs_gl_losses(vx_jobs *j);
 /* 1 when s is a well-formed job id. */
 int vx_jobs_valid_id(const char *s);
 

@@ -85,6 +85,7 @@ struct vx_jobs {
     pthread_cond_t gl_cond;
     vx_err gl_err;
     vx_gl_info gl_info;
+    uint64_t gl_losses; /* contexts lost (atomic) */
 };
 
 /* registry.c */

@@ -533,6 +533,11 @@ size_t vx_jobs_queue_capacity(vx_jobs *j)
     return vx_queue_capacity(j->queue);
 }
 
+uint64_t vx_jobs_gl_losses(vx_jobs *j)
+{
+    return __atomic_load_n(&j->gl_losses, __ATOMIC_RELAXED);
+}
+
 size_t vx_jobs_running(vx_jobs *j)
 {
     pthread_mutex_lock(&j->lock);

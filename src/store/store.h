@@ -119,5 +119,7 @@ int vx_store_result_exists(vx_store *s, const char *jid);
  * many were removed. Called after each job and periodically. */
 int vx_store_results_evict(vx_store *s);
 uint64_t vx_store_results_bytes(vx_store *s);
+/* Results the budget has evicted since the store was opened. */
+uint64_t vx_store_results_evicted(vx_store *s);
 
 #endif

@@ -168,9 +168,15 @@ int vx_store_results_evict(vx_store *s)
         if (!victim[0]) break;
         VX_INFO("store.evict", "job=%s", victim);
         vx_store_result_remove(s, victim);
+        __atomic_add_fetch(&s->evicted, 1, __ATOMIC_RELAXED);
         removed++;
     }
     return removed;
+}
+
+uint64_t vx_store_results_evicted(vx_store *s)
+{
+    return __atomic_load_n(&s->evicted, __ATOMIC_RELAXED);
 }
 
 uint64_t vx_store_results_bytes(vx_store *s)

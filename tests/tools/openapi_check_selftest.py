@@ -58,8 +58,13 @@ METRICS = "".join("# HELP %s x\n# TYPE %s %s\n" % (n, n, t) for n, t in [
     ("voxeld_queue_depth", "gauge"), ("voxeld_queue_capacity", "gauge"),
     ("voxeld_jobs_running", "gauge"), ("voxeld_http_bytes_received_total", "counter"),
     ("voxeld_http_bytes_sent_total", "counter"), ("voxeld_meshes", "gauge"),
-    ("voxeld_results_bytes", "gauge"), ("voxeld_info", "gauge"), ("voxeld_up", "gauge"),
-    ("process_start_time_seconds", "gauge")]) + "voxeld_up 1\n"
+    ("voxeld_results_bytes", "gauge"), ("voxeld_info", "gauge"), ("voxeld_ready", "gauge"),
+    ("voxeld_jobs_failed_total", "counter"), ("voxeld_job_queue_wait_seconds", "histogram"),
+    ("voxeld_results_evicted_total", "counter"), ("voxeld_gl_context_losses_total", "counter"),
+    ("process_cpu_seconds_total", "counter"), ("process_resident_memory_bytes", "gauge"),
+    ("process_virtual_memory_bytes", "gauge"), ("process_open_fds", "gauge"),
+    ("process_max_fds", "gauge"),
+    ("process_start_time_seconds", "gauge")]) + "voxeld_ready 1\n"
 PNG = b"\x89PNG\r\n\x1a\n" + b"\0" * 32
 
 
@@ -160,7 +165,7 @@ CASES = [
                      content_type="text/plain; version=0.0.4; charset=utf-8"), METRICS, False),
     ("metrics missing a family", dict(method="GET", path="/metrics", status=200,
                                       content_type="text/plain; version=0.0.4"),
-     METRICS.replace("voxeld_up", "voxeld_down"), True),
+     METRICS.replace("voxeld_ready", "voxeld_down"), True),
     ("wrong content type", dict(method="GET", path="/v1/meshes?limit=5", status=200,
                                 content_type="text/html"), "<html></html>", True),
     ("body on 204", dict(method="DELETE", path="/v1/meshes/" + MESH, status=204,
