@@ -12,6 +12,7 @@
 #include <zlib.h>
 #include <zstd.h>
 
+#include "metrics.h"
 #include "util/log.h"
 
 #define CHUNK (256 * 1024)
@@ -26,6 +27,7 @@ typedef struct zsrc {
     size_t ilen, ipos; /* input not yet taken by the encoder */
     size_t olen, opos; /* output not yet handed out */
     int eof, done;
+    uint64_t sent; /* compressed bytes handed out */
 } zsrc;
 
 const char *vx_compress_token(vx_req_coding coding)
@@ -89,6 +91,7 @@ static ssize_t reader(void *cls, uint64_t pos, char *buf, size_t max)
     size_t n = s->olen - s->opos < max ? s->olen - s->opos : max;
     memcpy(buf, s->out + s->opos, n);
     s->opos += n;
+    s->sent += n;
     return (ssize_t)n;
 }
 
@@ -96,6 +99,7 @@ static void src_free(void *cls)
 {
     zsrc *s = cls;
     if (!s) return;
+    vx_metrics_bytes_sent(s->sent); /* the request counted 0 (unknown then) */
     ZSTD_freeCCtx(s->zc);
     if (s->gz_on) deflateEnd(&s->gz);
     if (s->fd >= 0) close(s->fd);
