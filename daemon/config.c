@@ -10,7 +10,16 @@
 
 #include "util/fsutil.h"
 
-typedef enum opt_type { T_STR, T_SIZE, T_COUNT, T_SECONDS, T_DEVICE, T_LEVEL, T_BOOL } opt_type;
+typedef enum opt_type {
+    T_STR,
+    T_SIZE,
+    T_COUNT,
+    T_SECONDS,
+    T_DEVICE,
+    T_LEVEL,
+    T_BOOL,
+    T_LIST /* a string; each further use appends ",VALUE" */
+} opt_type;
 
 typedef struct opt_def {
     const char *name;
@@ -68,6 +77,8 @@ static const opt_def opts[] = {
     {"min-free-disk", T_SIZE, F(min_free_disk), 0,
      "free space the data dir keeps: below it writes answer 507 (default 64M; 0 = only a full "
      "disk)"},
+    {"cors-origin", T_LIST, S(cors_origin),
+     "origin a browser may call the API from (repeat, or a comma list; * = any; default none)"},
     {"job-history", T_SIZE, F(job_history), 0, "finished jobs remembered (default 10000)"},
     {"job-history-bytes", T_SIZE, F(job_history_bytes), 0,
      "memory the finished jobs remembered may take (default 64M; 0 = no limit)"},
@@ -138,6 +149,13 @@ static int set_opt(vx_config *c, const opt_def *d, const char *val, const char *
         if (strlen(val) >= d->len) goto bad;
         snprintf(base + d->off, d->len, "%s", val);
         return 0;
+    case T_LIST: {
+        char *s = base + d->off;
+        size_t n = strlen(s);
+        if (n + 1 + strlen(val) >= d->len) goto bad;
+        snprintf(s + n, d->len - n, "%s%s", n ? "," : "", val);
+        return 0;
+    }
     case T_SIZE:
         if (vx_parse_size(val, &u)) goto bad;
         *(uint64_t *)(base + d->off) = u;
@@ -272,9 +290,9 @@ void vx_config_usage(FILE *out)
     for (size_t i = 0; i < NOPTS; i++) {
         char flag[64];
         snprintf(flag, sizeof flag, "--%s %s", opts[i].name,
-                 opts[i].type == T_BOOL  ? "yes|no"
-                 : opts[i].type == T_STR ? "VALUE"
-                                         : "N");
+                 opts[i].type == T_BOOL                            ? "yes|no"
+                 : opts[i].type == T_STR || opts[i].type == T_LIST ? "VALUE"
+                                                                   : "N");
         fprintf(out, "  %-29s %s\n", flag, opts[i].help);
     }
     fprintf(out, "  --list-egl-devices            list EGL devices in the order tried, and exit\n"

@@ -49,6 +49,8 @@ typedef struct vx_config {
     uint64_t job_history_bytes;
     uint64_t max_event_streams; /* open SSE streams before 503 too_many_streams */
     double event_keepalive_s;   /* idle time before a ": keepalive" comment */
+    char cors_origin[1024]; /* comma list of origins a browser may call from ("*" = any); empty = no
+                               CORS */
     int gl_debug;
     int list_devices; /* --list-egl-devices: print and exit */
 } vx_config;

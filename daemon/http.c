@@ -25,6 +25,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include <strings.h>
+#include <sys/random.h>
 #include <sys/socket.h>
 #include <unistd.h>
 
@@ -91,6 +92,8 @@ static int first_call(vx_http *h, struct MHD_Connection *c, req *r, const char *
     if (rc >= 0) return rc;
     if (r->route == VX_R_UNKNOWN)
         return vx_resp_fail(c, r, VX_ENOTFOUND, "not_found", "no such route");
+    /* A CORS preflight carries no credentials: answered before auth. */
+    if (!strcmp(r->method, "OPTIONS")) return -1;
     if (!strncmp(vx_req_route_name(r->route), "/v1/", 4) && h->auth.on &&
         !vx_auth_ok(&h->auth, vx_resp_header(c, MHD_HTTP_HEADER_AUTHORIZATION)))
         return vx_resp_fail(c, r, VX_EAUTH, "unauthorized", "a valid bearer token is required");
@@ -186,6 +189,36 @@ static int take_body(vx_http *h, req *r, const char *data, size_t n)
     return 0;
 }
 
+/* The request's id (the client's X-Request-Id when sane, else a new one),
+ * its path and the client's address, for the answer and the log. */
+static void identify(struct MHD_Connection *c, req *r, const char *url)
+{
+    const char *rid = vx_resp_header(c, "X-Request-Id");
+    if (vx_req_id_ok(rid)) {
+        snprintf(r->rid, sizeof r->rid, "%s", rid);
+    } else {
+        unsigned char rnd[8] = {0};
+        if (getrandom(rnd, sizeof rnd, GRND_NONBLOCK) != (ssize_t)sizeof rnd) {
+            static unsigned long long seq;
+            unsigned long long v = __atomic_add_fetch(&seq, 1, __ATOMIC_RELAXED) ^
+                                   (unsigned long long)(vx_mono() * 1e9);
+            memcpy(rnd, &v, sizeof rnd);
+        }
+        for (int i = 0; i < 8; i++)
+            snprintf(r->rid + 2 * i, 3, "%02x", rnd[i]);
+    }
+    vx_log_quote(r->path, sizeof r->path, url);
+    const union MHD_ConnectionInfo *ci =
+        MHD_get_connection_info(c, MHD_CONNECTION_INFO_CLIENT_ADDRESS);
+    snprintf(r->client, sizeof r->client, "-");
+    if (ci && ci->client_addr) {
+        const struct sockaddr *sa = ci->client_addr;
+        socklen_t len =
+            sa->sa_family == AF_INET6 ? sizeof(struct sockaddr_in6) : sizeof(struct sockaddr_in);
+        getnameinfo(sa, len, r->client, sizeof r->client, NULL, 0, NI_NUMERICHOST);
+    }
+}
+
 /* The first call: the head is in. Allocates r, routes it and answers what
  * the head alone decides (first_call). */
 static enum MHD_Result on_head(vx_http *h, struct MHD_Connection *c, const char *url,
@@ -201,6 +234,7 @@ static enum MHD_Result on_head(vx_http *h, struct MHD_Connection *c, const char 
     r->vc = vc;
     r->t0 = vx_mono();
     snprintf(r->method, sizeof r->method, "%s", method);
+    identify(c, r, url);
     vx_req_target t;
     r->route = vx_req_route(url, strlen(url), &t);
     memcpy(r->id, t.id, sizeof r->id);
@@ -219,6 +253,7 @@ static enum MHD_Result on_head(vx_http *h, struct MHD_Connection *c, const char 
 static int dispatch(vx_http *h, struct MHD_Connection *c, req *r)
 {
     if (vx_waiter_resumed(&r->w)) return vx_route_job_resumed(h, c, r);
+    if (!strcmp(r->method, "OPTIONS")) return vx_route_options(h, c, r);
     if (r->qerr[0]) return vx_resp_fail(c, r, VX_EINVAL, "invalid_request", "%s", r->qerr);
     int is_get = !strcmp(r->method, "GET") || !strcmp(r->method, "HEAD");
     switch (r->route) {
@@ -303,8 +338,10 @@ static void on_completed(void *cls, struct MHD_Connection *c, void **con_cls,
             ? VX_LOG_DEBUG
             : VX_LOG_INFO;
     vx_log(lvl, "http.request",
-           "method=%s route=%s status=%d ms=%.2f bytes_in=%llu bytes_out=%llu%s", r->method, route,
-           status, dt * 1e3, (unsigned long long)r->bytes_in, (unsigned long long)r->bytes_out,
+           "request_id=%s method=%s route=%s path=%s client=%s status=%d ms=%.2f bytes_in=%llu "
+           "bytes_out=%llu%s",
+           r->rid, r->method, route, r->path, r->client, status, dt * 1e3,
+           (unsigned long long)r->bytes_in, (unsigned long long)r->bytes_out,
            toe == MHD_REQUEST_TERMINATED_COMPLETED_OK ? "" : " aborted=1");
     vx_upload_abort(r->up);
     free(r->buf);
@@ -360,7 +397,7 @@ vx_http *vx_http_start(const vx_http_desc *desc, vx_err *err)
         return NULL;
     }
     h->d = *desc;
-    vx_resp_init(vx_store_dir(desc->store));
+    vx_resp_init(vx_store_dir(desc->store), desc->cfg->cors_origin);
     const vx_config *cfg = desc->cfg;
     vx_auth_init(&h->auth, cfg->token);
 

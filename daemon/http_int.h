@@ -41,8 +41,12 @@ typedef struct req {
     size_t len, cap;
     /* ?wait */
     vx_waiter w;
-    int post_job; /* the held request was POST /v1/jobs */
+    int post_job;      /* the held request was POST /v1/jobs */
+    int post_existing; /* ... answered with a job that was there already (200) */
     int answered;
+    char rid[72];    /* X-Request-Id: the client's when sane, else made here */
+    char path[256];  /* the concrete path (cut), for the log */
+    char client[64]; /* the client's address, for the log */
 } req;
 
 struct vx_http {
@@ -66,8 +70,13 @@ typedef struct vx_resp_answer {
 } vx_resp_answer;
 
 /* The data dir, scrubbed from every error message (clients never see
- * server paths). Called once, before serving. */
-void vx_resp_init(const char *data_dir);
+ * server paths), and the origins CORS allows (--cors-origin: a comma
+ * list, "*" = any, "" = none). Called once, before serving; both strings
+ * must outlive the server. */
+void vx_resp_init(const char *data_dir, const char *cors_origins);
+/* The origin of c's request when CORS allows it (the Origin header's
+ * value), else NULL. */
+const char *vx_resp_cors_origin(struct MHD_Connection *c);
 /* The one mapping from error kinds to HTTP answers. */
 vx_resp_answer vx_resp_answer_of(const vx_err *e);
 /* Value of request header name, or NULL. */
@@ -86,6 +95,10 @@ int vx_resp_json(struct MHD_Connection *c, req *r, unsigned status, cJSON *doc, 
 int vx_resp_page(struct MHD_Connection *c, req *r, cJSON *items, const char *next);
 /* Answers e as {"error":{"code","message"}} through vx_resp_answer_of. */
 int vx_resp_err(struct MHD_Connection *c, req *r, const vx_err *e);
+/* vx_resp_err with one more header h: v (used where the kind's answer has
+ * none, e.g. Content-Range on a 416). */
+int vx_resp_err_with(struct MHD_Connection *c, req *r, const vx_err *e, const char *h,
+                     const char *v);
 /* Answers an error made here: vx_err_set + vx_resp_err. */
 int vx_resp_fail(struct MHD_Connection *c, req *r, vx_err_kind kind, const char *code,
                  const char *fmt, ...) __attribute__((format(printf, 5, 6)));
@@ -96,6 +109,9 @@ uint64_t vx_route_disk_free(vx_http *h);
 /* 1 when the data dir has room for writes: free space at or above the
  * floor (with a floor of 0, any free byte); the free bytes in *free_bytes. */
 int vx_route_disk_ok(vx_http *h, uint64_t *free_bytes);
+/* OPTIONS on any route: 204 with Allow, and the CORS preflight answer
+ * (Access-Control-Allow-*) for an allowed origin. */
+int vx_route_options(vx_http *h, struct MHD_Connection *c, req *r);
 /* GET /livez, /readyz, /metrics, /v1/info. */
 int vx_route_livez(vx_http *h, struct MHD_Connection *c, req *r);
 int vx_route_readyz(vx_http *h, struct MHD_Connection *c, req *r);

@@ -18,13 +18,27 @@
 #include "util/fsutil.h"
 #include "util/log.h"
 
-/* The jobs hooks need the HTTP layer, which starts after the jobs. */
+/* The jobs hooks need the HTTP layer, which starts after the jobs, and the
+ * job table, which exists before any job runs. */
 static vx_http *g_http;
+static vx_jobs *g_jobs;
 
 static void on_job_finished(void *ud, const char *jid, const char *kind, const char *state,
                             double run_s)
 {
-    vx_metrics_job(kind, state, run_s);
+    /* Called without the registry lock: the job's error code and queue
+     * wait come from its JSON (gone when the history dropped it at once). */
+    vx_jobs *jobs = __atomic_load_n(&g_jobs, __ATOMIC_ACQUIRE);
+    vx_err e;
+    cJSON *doc = jobs ? vx_jobs_get(jobs, jid, NULL, &e) : NULL;
+    const cJSON *code =
+        cJSON_GetObjectItemCaseSensitive(cJSON_GetObjectItemCaseSensitive(doc, "error"), "code");
+    const cJSON *qms = cJSON_GetObjectItemCaseSensitive(
+        cJSON_GetObjectItemCaseSensitive(doc, "timings"), "queue_ms");
+    double queue_s = run_s >= 0 && cJSON_IsNumber(qms) ? qms->valuedouble / 1e3 : -1;
+    const char *c = !strcmp(state, "failed") ? (cJSON_GetStringValue(code) ?: "unknown") : NULL;
+    vx_metrics_job(kind, state, run_s, queue_s, c);
+    cJSON_Delete(doc);
 }
 
 static void on_job_changed(void *ud, const char *jid, int terminal)
@@ -117,6 +131,7 @@ static vx_jobs *open_jobs(const vx_config *cfg, vx_store *store, vx_err *err)
     const char *lose = getenv("VOXELD_TEST_LOSE_CONTEXT");
     g_lose_context = lose && atoi(lose) > 0 ? atoi(lose) : 0;
     vx_jobs *jobs = vx_jobs_open(&jd, err);
+    __atomic_store_n(&g_jobs, jobs, __ATOMIC_RELEASE);
     if (!jobs) {
         VX_ERROR("voxeld.fatal", "stage=journal code=%s message=\"%s\"", err->code, err->message);
         return NULL;
@@ -126,6 +141,7 @@ static vx_jobs *open_jobs(const vx_config *cfg, vx_store *store, vx_err *err)
         VX_ERROR("voxeld.fatal", "stage=gl code=%s message=%s", err->code,
                  vx_log_quote(q, sizeof q, err->message));
         fprintf(stderr, "voxeld: cannot create the OpenGL context: %s\n", err->message);
+        __atomic_store_n(&g_jobs, NULL, __ATOMIC_RELEASE);
         vx_jobs_free(jobs);
         return NULL;
     }
@@ -180,6 +196,7 @@ int main(int argc, char **argv)
     int rc = vx_config_load(&cfg, argc, argv);
     if (rc) return rc > 0 ? 0 : 2;
     vx_log_set_level(cfg.log_level);
+    vx_metrics_init(cfg.job_timeout_s);
     if (cfg.list_devices) return list_devices();
 
     sigset_t sigs;
@@ -230,6 +247,7 @@ int main(int argc, char **argv)
     vx_jobs_stop(jobs);
     vx_http_stop(http, 2.0);
     __atomic_store_n(&g_http, NULL, __ATOMIC_RELEASE);
+    __atomic_store_n(&g_jobs, NULL, __ATOMIC_RELEASE);
     vx_jobs_free(jobs);
     vx_store_close(store);
     VX_INFO("voxeld.exit", "status=0");

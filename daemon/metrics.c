@@ -5,12 +5,23 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/resource.h>
+#include <unistd.h>
+#include <dirent.h>
 
-#define NBUCKETS 12
-static const double req_buckets[NBUCKETS] = {0.001, 0.0025, 0.005, 0.01, 0.025, 0.05,
-                                             0.1,   0.25,   0.5,   1,    2.5,   10};
-static const double job_buckets[NBUCKETS] = {0.01, 0.025, 0.05, 0.1, 0.25, 0.5,
-                                             1,    2.5,   5,    10,  30,   120};
+#define NBUCKETS 16
+typedef struct buckets {
+    int n;
+    double le[NBUCKETS];
+} buckets;
+static const buckets req_buckets = {
+    14, {0.001, 0.005, 0.01, 0.025, 0.05, 0.1, 0.25, 0.5, 1, 2.5, 5, 10, 30, 60}};
+/* Job durations: these, cut at the job timeout, which is the last bucket. */
+static const double job_le[] = {0.01, 0.05, 0.1, 0.25, 0.5, 1,   2.5, 5,
+                                10,   30,   60,  120,  300, 600, 1800};
+static buckets job_buckets;
+static const buckets wait_buckets = {
+    14, {0.001, 0.005, 0.01, 0.05, 0.1, 0.25, 0.5, 1, 2.5, 5, 10, 30, 60, 300}};
 
 typedef struct hist {
     char label[64];
@@ -42,6 +53,25 @@ static hist g_job_hist[32];
 static size_t g_njob_hist;
 static uint64_t g_bytes_in, g_bytes_out;
 
+typedef struct fail_counter {
+    char kind[32], code[48];
+    uint64_t n;
+} fail_counter;
+static fail_counter g_fail[64];
+static size_t g_nfail;
+static hist g_wait[1];
+static size_t g_nwait;
+
+void vx_metrics_init(double job_timeout_s)
+{
+    double t = job_timeout_s > 0 ? job_timeout_s : 600;
+    int n = 0;
+    for (size_t i = 0; i < sizeof job_le / sizeof job_le[0] && n < NBUCKETS - 1; i++)
+        if (job_le[i] < t) job_buckets.le[n++] = job_le[i];
+    job_buckets.le[n++] = t;
+    job_buckets.n = n;
+}
+
 static hist *hist_get(hist *h, size_t *n, size_t max, const char *label)
 {
     for (size_t i = 0; i < *n; i++)
@@ -53,11 +83,11 @@ static hist *hist_get(hist *h, size_t *n, size_t max, const char *label)
     return x;
 }
 
-static void hist_add(hist *h, const double *buckets, double v)
+static void hist_add(hist *h, const buckets *b, double v)
 {
     if (!h) return;
-    for (int i = 0; i < NBUCKETS; i++)
-        if (v <= buckets[i]) h->counts[i]++;
+    for (int i = 0; i < b->n; i++)
+        if (v <= b->le[i]) h->counts[i]++;
     h->n++;
     h->sum += v;
 }
@@ -79,15 +109,37 @@ void vx_metrics_request(const char *route, const char *method, int status, doubl
         g_nreq++;
     }
     if (i < g_nreq) g_req[i].n++;
-    hist_add(hist_get(g_req_hist, &g_nreq_hist, 32, route), req_buckets, seconds);
+    hist_add(hist_get(g_req_hist, &g_nreq_hist, 32, route), &req_buckets, seconds);
     g_bytes_in += bytes_in;
     g_bytes_out += bytes_out;
     pthread_mutex_unlock(&g_lock);
 }
 
-void vx_metrics_job(const char *kind, const char *state, double run_s)
+void vx_metrics_bytes_sent(uint64_t bytes)
 {
     pthread_mutex_lock(&g_lock);
+    g_bytes_out += bytes;
+    pthread_mutex_unlock(&g_lock);
+}
+
+void vx_metrics_job(const char *kind, const char *state, double run_s, double queue_s,
+                    const char *code)
+{
+    if (!job_buckets.n) vx_metrics_init(0);
+    pthread_mutex_lock(&g_lock);
+    if (code) {
+        size_t k;
+        for (k = 0; k < g_nfail; k++)
+            if (!strcmp(g_fail[k].kind, kind) && !strcmp(g_fail[k].code, code)) break;
+        if (k == g_nfail && g_nfail < 64) {
+            snprintf(g_fail[k].kind, sizeof g_fail[k].kind, "%s", kind);
+            snprintf(g_fail[k].code, sizeof g_fail[k].code, "%s", code);
+            g_fail[k].n = 0;
+            g_nfail++;
+        }
+        if (k < g_nfail) g_fail[k].n++;
+    }
+    if (queue_s >= 0) hist_add(hist_get(g_wait, &g_nwait, 1, "all"), &wait_buckets, queue_s);
     size_t i;
     for (i = 0; i < g_njob; i++)
         if (!strcmp(g_job[i].kind, kind) && !strcmp(g_job[i].state, state)) break;
@@ -98,7 +150,7 @@ void vx_metrics_job(const char *kind, const char *state, double run_s)
         g_njob++;
     }
     if (i < g_njob) g_job[i].n++;
-    if (run_s >= 0) hist_add(hist_get(g_job_hist, &g_njob_hist, 32, kind), job_buckets, run_s);
+    if (run_s >= 0) hist_add(hist_get(g_job_hist, &g_njob_hist, 32, kind), &job_buckets, run_s);
     pthread_mutex_unlock(&g_lock);
 }
 
@@ -146,18 +198,63 @@ static const char *esc(char *buf, size_t n, const char *s)
 }
 
 static void hist_render(sbuf *b, const char *name, const char *label, const hist *h, size_t n,
-                        const double *buckets)
+                        const buckets *bk)
 {
     for (size_t i = 0; i < n; i++) {
-        for (int k = 0; k < NBUCKETS; k++)
+        for (int k = 0; k < bk->n; k++)
             sb_printf(b, "%s_bucket{%s=\"%s\",le=\"%g\"} %llu\n", name, label, h[i].label,
-                      buckets[k], (unsigned long long)h[i].counts[k]);
+                      bk->le[k], (unsigned long long)h[i].counts[k]);
         sb_printf(b, "%s_bucket{%s=\"%s\",le=\"+Inf\"} %llu\n", name, label, h[i].label,
                   (unsigned long long)h[i].n);
         sb_printf(b, "%s_sum{%s=\"%s\"} %.6f\n", name, label, h[i].label, h[i].sum);
         sb_printf(b, "%s_count{%s=\"%s\"} %llu\n", name, label, h[i].label,
                   (unsigned long long)h[i].n);
     }
+}
+
+/* The standard process_* family, from /proc/self and the rlimits. */
+static void process_render(sbuf *b, double start_time)
+{
+    long page = sysconf(_SC_PAGESIZE);
+    unsigned long long vsz = 0, rss = 0;
+    FILE *f = fopen("/proc/self/statm", "r");
+    if (f) {
+        if (fscanf(f, "%llu %llu", &vsz, &rss) != 2) vsz = rss = 0;
+        fclose(f);
+    }
+    struct rusage ru;
+    double cpu = 0;
+    if (getrusage(RUSAGE_SELF, &ru) == 0)
+        cpu = (double)ru.ru_utime.tv_sec + ru.ru_utime.tv_usec / 1e6 + (double)ru.ru_stime.tv_sec +
+              ru.ru_stime.tv_usec / 1e6;
+    long fds = 0;
+    DIR *d = opendir("/proc/self/fd");
+    if (d) {
+        struct dirent *e;
+        while ((e = readdir(d)))
+            fds += e->d_name[0] != '.';
+        closedir(d);
+        fds--; /* the directory's own fd */
+    }
+    struct rlimit rl;
+    double maxfds = getrlimit(RLIMIT_NOFILE, &rl) == 0 && rl.rlim_cur != RLIM_INFINITY
+                        ? (double)rl.rlim_cur
+                        : -1;
+    sb_printf(b,
+              "# HELP process_cpu_seconds_total User and system CPU time spent, in seconds.\n"
+              "# TYPE process_cpu_seconds_total counter\nprocess_cpu_seconds_total %.3f\n"
+              "# HELP process_resident_memory_bytes Resident memory size in bytes.\n"
+              "# TYPE process_resident_memory_bytes gauge\nprocess_resident_memory_bytes %llu\n"
+              "# HELP process_virtual_memory_bytes Virtual memory size in bytes.\n"
+              "# TYPE process_virtual_memory_bytes gauge\nprocess_virtual_memory_bytes %llu\n"
+              "# HELP process_open_fds Open file descriptors.\n"
+              "# TYPE process_open_fds gauge\nprocess_open_fds %ld\n"
+              "# HELP process_max_fds Most open file descriptors allowed (RLIMIT_NOFILE).\n"
+              "# TYPE process_max_fds gauge\nprocess_max_fds %.0f\n"
+              "# HELP process_start_time_seconds Start time of the process since the epoch.\n"
+              "# TYPE process_start_time_seconds gauge\nprocess_start_time_seconds %.3f\n",
+              cpu, rss * (unsigned long long)page, vsz * (unsigned long long)page, fds, maxfds,
+              start_time);
 }
 
 char *vx_metrics_render(const vx_metrics_gauges *g)
@@ -176,7 +273,7 @@ char *vx_metrics_render(const vx_metrics_gauges *g)
                   "end of the response.\n"
                   "# TYPE voxeld_http_request_duration_seconds histogram\n");
     hist_render(&b, "voxeld_http_request_duration_seconds", "route", g_req_hist, g_nreq_hist,
-                req_buckets);
+                &req_buckets);
     sb_printf(&b,
               "# HELP voxeld_http_bytes_received_total Request body bytes received.\n"
               "# TYPE voxeld_http_bytes_received_total counter\n"
@@ -192,7 +289,28 @@ char *vx_metrics_render(const vx_metrics_gauges *g)
                   g_job[i].state, (unsigned long long)g_job[i].n);
     sb_printf(&b, "# HELP voxeld_job_duration_seconds Run time of jobs that ran, by kind.\n"
                   "# TYPE voxeld_job_duration_seconds histogram\n");
-    hist_render(&b, "voxeld_job_duration_seconds", "kind", g_job_hist, g_njob_hist, job_buckets);
+    if (!job_buckets.n) vx_metrics_init(0);
+    hist_render(&b, "voxeld_job_duration_seconds", "kind", g_job_hist, g_njob_hist, &job_buckets);
+    sb_printf(&b, "# HELP voxeld_jobs_failed_total Failed jobs, by kind and error code.\n"
+                  "# TYPE voxeld_jobs_failed_total counter\n");
+    for (size_t i = 0; i < g_nfail; i++)
+        sb_printf(&b, "voxeld_jobs_failed_total{kind=\"%s\",code=\"%s\"} %llu\n", g_fail[i].kind,
+                  g_fail[i].code, (unsigned long long)g_fail[i].n);
+    sb_printf(&b, "# HELP voxeld_job_queue_wait_seconds Time jobs that ran waited in the queue "
+                  "(created to started).\n"
+                  "# TYPE voxeld_job_queue_wait_seconds histogram\n");
+    if (g_nwait) {
+        /* One series, no label. */
+        const hist *w = &g_wait[0];
+        for (int k = 0; k < wait_buckets.n; k++)
+            sb_printf(&b, "voxeld_job_queue_wait_seconds_bucket{le=\"%g\"} %llu\n",
+                      wait_buckets.le[k], (unsigned long long)w->counts[k]);
+        sb_printf(&b,
+                  "voxeld_job_queue_wait_seconds_bucket{le=\"+Inf\"} %llu\n"
+                  "voxeld_job_queue_wait_seconds_sum %.6f\n"
+                  "voxeld_job_queue_wait_seconds_count %llu\n",
+                  (unsigned long long)w->n, w->sum, (unsigned long long)w->n);
+    }
     pthread_mutex_unlock(&g_lock);
 
     sb_printf(
@@ -211,12 +329,17 @@ char *vx_metrics_render(const vx_metrics_gauges *g)
         "# TYPE voxeld_data_dir_free_bytes gauge\nvoxeld_data_dir_free_bytes %llu\n"
         "# HELP voxeld_data_dir_min_free_bytes Free-space floor: below it writes answer 507.\n"
         "# TYPE voxeld_data_dir_min_free_bytes gauge\nvoxeld_data_dir_min_free_bytes %llu\n"
-        "# HELP voxeld_up 1 when ready to run jobs.\n# TYPE voxeld_up gauge\nvoxeld_up %d\n"
-        "# HELP process_start_time_seconds Start time of the process since the epoch.\n"
-        "# TYPE process_start_time_seconds gauge\nprocess_start_time_seconds %.3f\n",
+        "# HELP voxeld_ready 1 when ready to run jobs.\n# TYPE voxeld_ready gauge\n"
+        "voxeld_ready %d\n"
+        "# HELP voxeld_results_evicted_total Job results removed by the results budget.\n"
+        "# TYPE voxeld_results_evicted_total counter\nvoxeld_results_evicted_total %llu\n"
+        "# HELP voxeld_gl_context_losses_total GL contexts lost during a job.\n"
+        "# TYPE voxeld_gl_context_losses_total counter\nvoxeld_gl_context_losses_total %llu\n",
         g->queue_depth, g->queue_capacity, g->running, g->meshes,
         (unsigned long long)g->results_bytes, (unsigned long long)g->disk_free_bytes,
-        (unsigned long long)g->min_free_disk, g->ready, g->start_time);
+        (unsigned long long)g->min_free_disk, g->ready, (unsigned long long)g->evictions,
+        (unsigned long long)g->gl_context_loss);
+    process_render(&b, g->start_time);
     sb_printf(&b,
               "# HELP voxeld_info Build and GL context information.\n# TYPE voxeld_info gauge\n"
               "voxeld_info{version=\"%s\",gl_vendor=\"%s\",gl_renderer=\"%s\",gl_version=\"%s\","

@@ -16,11 +16,22 @@ typedef struct vx_metrics_gauges {
     int ready;
     vx_gl_info gl;
     double start_time;
+    uint64_t evictions;       /* results removed by the results budget */
+    uint64_t gl_context_loss; /* GL contexts lost (and rebuilt or not) */
 } vx_metrics_gauges;
 
+/* Sets the job-duration buckets to end at the job timeout (seconds; 0 =
+ * the default 600). Called once, before serving. */
+void vx_metrics_init(double job_timeout_s);
 void vx_metrics_request(const char *route, const char *method, int status, double seconds,
                         uint64_t bytes_in, uint64_t bytes_out);
-void vx_metrics_job(const char *kind, const char *state, double run_s);
+/* Adds body bytes sent outside a request's own count (compressed
+ * downloads, whose size is known only once they are sent). */
+void vx_metrics_bytes_sent(uint64_t bytes);
+/* A job finished: run_s and queue_s < 0 when it never ran; code = its
+ * error code when it failed (NULL otherwise). */
+void vx_metrics_job(const char *kind, const char *state, double run_s, double queue_s,
+                    const char *code);
 /* Owned text of every family. */
 char *vx_metrics_render(const vx_metrics_gauges *g);
 

@@ -196,7 +196,7 @@ void vx_req_query_init(vx_req_query *q)
     q->limit = 100;
 }
 
-enum qparam { Q_NONE, Q_LIMIT, Q_AFTER, Q_STATE, Q_WAIT, Q_PROGRESS };
+enum qparam { Q_NONE, Q_LIMIT, Q_AFTER, Q_STATE, Q_WAIT, Q_PROGRESS, Q_ORDER, Q_KIND, Q_MESH };
 
 /* Which parameters a route and method declare (api/openapi.yaml). */
 static enum qparam declared(vx_route rt, const char *method, const char *key, size_t klen)
@@ -207,11 +207,23 @@ static enum qparam declared(vx_route rt, const char *method, const char *key, si
         if (is(key, klen, "limit")) return Q_LIMIT;
         if (is(key, klen, "after")) return Q_AFTER;
         if (rt == VX_R_JOBS && is(key, klen, "state")) return Q_STATE;
+        if (rt == VX_R_JOBS && is(key, klen, "order")) return Q_ORDER;
+        if (rt == VX_R_JOBS && is(key, klen, "kind")) return Q_KIND;
+        if (rt == VX_R_JOBS && is(key, klen, "mesh")) return Q_MESH;
     }
     if (((rt == VX_R_JOBS && post) || (rt == VX_R_JOB && get)) && is(key, klen, "wait"))
         return Q_WAIT;
     if (rt == VX_R_JOB && get && is(key, klen, "progress")) return Q_PROGRESS;
     return Q_NONE;
+}
+
+/* A kind's name in form: lower-case letters, digits and '-'. */
+static int kind_name(const char *s, size_t n)
+{
+    for (size_t i = 0; i < n; i++)
+        if (!((s[i] >= 'a' && s[i] <= 'z') || (s[i] >= '0' && s[i] <= '9') || s[i] == '-'))
+            return 0;
+    return n > 0;
 }
 
 static int job_state(const char *s)
@@ -227,12 +239,16 @@ int vx_req_query_add(vx_req_query *q, vx_route rt, const char *method, const cha
 {
     enum qparam p = declared(rt, method, key, klen);
     if (p == Q_NONE) return 0;
-    static const char *names[] = {"", "limit", "after", "state", "wait", "progress"};
+    static const char *names[] = {"",     "limit", "after", "state", "wait",
+                                  "progress", "order", "kind",  "mesh"};
     const char *name = names[p];
     int *seen = p == Q_LIMIT   ? &q->has_limit
                 : p == Q_AFTER ? &q->has_after
                 : p == Q_STATE ? &q->has_state
                 : p == Q_WAIT  ? &q->has_wait
+                : p == Q_ORDER ? &q->has_order
+                : p == Q_KIND  ? &q->has_kind
+                : p == Q_MESH  ? &q->has_mesh
                                : &q->has_progress;
     if (*seen) {
         snprintf(msg, msgn, "query parameter %s is given more than once", name);
@@ -267,6 +283,27 @@ int vx_req_query_add(vx_req_query *q, vx_route rt, const char *method, const cha
         q->state[vlen] = 0;
         if (!job_state(q->state)) goto bad_state;
         return 0;
+    case Q_ORDER:
+        if (!is(value, vlen, "asc") && !is(value, vlen, "desc")) {
+            snprintf(msg, msgn, "query parameter order must be asc or desc");
+            return -1;
+        }
+        q->desc = is(value, vlen, "desc");
+        return 0;
+    case Q_KIND:
+        if (vlen >= sizeof q->kind || !kind_name(value, vlen)) {
+            snprintf(msg, msgn, "query parameter kind must be a job kind's name");
+            return -1;
+        }
+        memcpy(q->kind, value, vlen);
+        q->kind[vlen] = 0;
+        return 0;
+    case Q_MESH:
+        if (vlen >= sizeof q->mesh) goto bad_mesh;
+        memcpy(q->mesh, value, vlen);
+        q->mesh[vlen] = 0;
+        if (!vx_store_valid_mesh_id(q->mesh)) goto bad_mesh;
+        return 0;
     case Q_WAIT:
         if (vx_req_parse_seconds(value, vlen, &q->wait_us)) {
             snprintf(msg, msgn,
@@ -290,6 +327,10 @@ bad_after:
     q->after[0] = 0;
     snprintf(msg, msgn, "query parameter after must be a %s id",
              rt == VX_R_MESHES ? "mesh" : "job");
+    return -1;
+bad_mesh:
+    q->mesh[0] = 0;
+    snprintf(msg, msgn, "query parameter mesh must be a mesh id (64 hex digits)");
     return -1;
 bad_state:
     q->state[0] = 0;
@@ -315,6 +356,9 @@ int vx_req_query_format(const vx_req_query *q, char *out, size_t n)
     if (q->has_limit) PUT("limit=%d", q->limit);
     if (q->has_after) PUT("after=%s", q->after);
     if (q->has_state) PUT("state=%s", q->state);
+    if (q->has_order) PUT("order=%s", q->desc ? "desc" : "asc");
+    if (q->has_kind) PUT("kind=%s", q->kind);
+    if (q->has_mesh) PUT("mesh=%s", q->mesh);
     if (q->has_wait)
         PUT("wait=%llu.%06llu", (unsigned long long)(q->wait_us / 1000000),
             (unsigned long long)(q->wait_us % 1000000));
@@ -404,4 +448,147 @@ int vx_req_json_text_ok(const char *body, size_t len, char *msg, size_t msgn)
         return -1;
     }
     return 0;
+}
+
+/* ---- content negotiation, ranges, validators ------------------------ */
+
+/* The q of one Accept-Encoding element's parameters (p after the coding,
+ * at ';' or the element's end): 1 when absent, -1 when malformed. */
+static double coding_q(const char *p, const char *end)
+{
+    while (p < end && (*p == ' ' || *p == '\t' || *p == ';'))
+        p++;
+    if (p == end) return 1;
+    if (end - p < 2 || (p[0] != 'q' && p[0] != 'Q') || p[1] != '=') return -1;
+    p += 2;
+    double q = 0, scale = 1;
+    if (p == end || (*p != '0' && *p != '1')) return -1;
+    q = *p++ - '0';
+    if (p < end && *p == '.')
+        for (p++; p < end && *p >= '0' && *p <= '9'; p++) {
+            scale /= 10;
+            q += (*p - '0') * scale;
+        }
+    while (p < end && (*p == ' ' || *p == '\t'))
+        p++;
+    return p == end && q <= 1 ? q : -1;
+}
+
+vx_req_coding vx_req_accept_coding(const char *ae)
+{
+    if (!ae) return VX_CODING_IDENTITY;
+    double qz = -1, qg = -1, qstar = -1;
+    for (const char *p = ae; *p;) {
+        const char *end = strchr(p, ',');
+        if (!end) end = p + strlen(p);
+        while (p < end && (*p == ' ' || *p == '\t'))
+            p++;
+        const char *t = p;
+        while (t < end && *t != ';' && *t != ' ' && *t != '\t')
+            t++;
+        size_t n = (size_t)(t - p);
+        double q = coding_q(t, end);
+        if (q >= 0) {
+            if (n == 4 && !strncasecmp(p, "zstd", 4)) qz = q;
+            if ((n == 4 && !strncasecmp(p, "gzip", 4)) || (n == 6 && !strncasecmp(p, "x-gzip", 6)))
+                qg = q;
+            if (n == 1 && *p == '*') qstar = q;
+        }
+        p = *end ? end + 1 : end;
+    }
+    if (qz < 0) qz = qstar;
+    if (qg < 0) qg = qstar;
+    if (qz > 0 && qz >= qg) return VX_CODING_ZSTD;
+    if (qg > 0) return VX_CODING_GZIP;
+    return VX_CODING_IDENTITY;
+}
+
+/* Parses digits at *p (at most 19), advancing it. 0 or -1. */
+static int range_num(const char **p, uint64_t *v)
+{
+    const char *s = *p;
+    uint64_t x = 0;
+    int n = 0;
+    for (; *s >= '0' && *s <= '9'; s++, n++) {
+        if (n == 19) return -1;
+        x = x * 10 + (uint64_t)(*s - '0');
+    }
+    if (!n) return -1;
+    *p = s;
+    *v = x;
+    return 0;
+}
+
+int vx_req_range(const char *v, uint64_t size, uint64_t *first, uint64_t *last)
+{
+    if (!v) return 0;
+    while (*v == ' ' || *v == '\t')
+        v++;
+    if (strncasecmp(v, "bytes=", 6)) return 0;
+    const char *p = v + 6;
+    while (*p == ' ')
+        p++;
+    if (strchr(p, ',')) return 0; /* several ranges: the whole body */
+    uint64_t a = 0, b = UINT64_MAX;
+    if (*p == '-') { /* a suffix: the last b bytes */
+        p++;
+        if (range_num(&p, &b)) return 0;
+        while (*p == ' ' || *p == '\t')
+            p++;
+        if (*p) return 0;
+        if (b == 0 || size == 0) return -1;
+        *first = b >= size ? 0 : size - b;
+        *last = size - 1;
+        return 1;
+    }
+    if (range_num(&p, &a) || *p++ != '-') return 0;
+    if (*p >= '0' && *p <= '9' && range_num(&p, &b)) return 0;
+    while (*p == ' ' || *p == '\t')
+        p++;
+    if (*p || b < a) return 0;
+    if (a >= size) return -1;
+    *first = a;
+    *last = b >= size ? size - 1 : b;
+    return 1;
+}
+
+int vx_req_etag_match(const char *list, const char *etag, int weak_ok, int star_ok)
+{
+    if (!list) return 0;
+    size_t n = strlen(etag);
+    for (const char *p = list; *p;) {
+        while (*p == ' ' || *p == '\t' || *p == ',')
+            p++;
+        if (!*p) break;
+        if (*p == '*') {
+            if (star_ok) return 1;
+            p++;
+            continue;
+        }
+        int weak = p[0] == 'W' && p[1] == '/';
+        if (weak) p += 2;
+        if (*p != '"') { /* not a tag (an If-Range date): no match */
+            while (*p && *p != ',')
+                p++;
+            continue;
+        }
+        const char *q = strchr(p + 1, '"');
+        if (!q) return 0;
+        if ((!weak || weak_ok) && (size_t)(q + 1 - p) == n && !memcmp(p, etag, n)) return 1;
+        p = q + 1;
+    }
+    return 0;
+}
+
+int vx_req_id_ok(const char *s)
+{
+    size_t n = s ? strlen(s) : 0;
+    if (!n || n > 64) return 0;
+    for (size_t i = 0; i < n; i++) {
+        char c = s[i];
+        if (!((c >= 'a' && c <= 'z') || (c >= 'A' && c <= 'Z') || (c >= '0' && c <= '9') ||
+              c == '.' || c == '_' || c == ':' || c == '-'))
+            return 0;
+    }
+    return 1;
 }

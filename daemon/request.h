@@ -44,11 +44,15 @@ typedef struct vx_req_target {
  * progress (GET /v1/jobs/{id} only) is a fraction from 0 to 1. */
 typedef struct vx_req_query {
     int has_limit, has_after, has_state, has_wait, has_progress;
+    int has_limit, has_after, has_state, has_wait, has_order, has_kind, has_mesh;
     int limit;                 /* 1..1000; 100 when absent */
     char after[VX_REQ_ID_MAX]; /* a mesh or job id in form */
     char state[16];            /* a job state */
     uint64_t wait_us;          /* not yet capped to the request timeout */
     uint32_t progress_ppm;     /* ?progress: wake a ?wait at this progress, in 1e-6 (0..1e6) */
+    int desc;                  /* order=desc: newest first */
+    char kind[32];             /* a job kind's name in form (the route checks it is known) */
+    char mesh[VX_REQ_ID_MAX];  /* a mesh id */
 } vx_req_query;
 
 /* Matches path (the URL without its query string, exactly as sent: no
@@ -84,6 +88,25 @@ int vx_req_query_add(vx_req_query *q, vx_route rt, const char *method, const cha
  * vx_req_query_add parses to the same q. Returns its length, or -1 when it
  * does not fit in n. */
 int vx_req_query_format(const vx_req_query *q, char *out, size_t n);
+
+/* A content coding of a response body. */
+typedef enum vx_req_coding { VX_CODING_IDENTITY, VX_CODING_ZSTD, VX_CODING_GZIP } vx_req_coding;
+/* The coding to send for an Accept-Encoding value (NULL = none sent):
+ * zstd or gzip when the client gives it a q above 0 (by name or by "*"),
+ * the higher q winning and zstd on a tie; identity otherwise. */
+vx_req_coding vx_req_accept_coding(const char *ae);
+/* Reads a Range value against a representation of size bytes: 1 and the
+ * inclusive [*first, *last] for one satisfiable byte range; 0 when the
+ * value is to be ignored (NULL, not a bytes range, several ranges,
+ * malformed: the whole body is sent); -1 when it is unsatisfiable (416). */
+int vx_req_range(const char *v, uint64_t size, uint64_t *first, uint64_t *last);
+/* 1 when etag (a quoted strong tag) appears in an If-None-Match or
+ * If-Range style list (W/ prefixes compared weakly when weak_ok), or the
+ * list is "*" (only when star_ok). */
+int vx_req_etag_match(const char *list, const char *etag, int weak_ok, int star_ok);
+/* 1 when a client's X-Request-Id can be echoed: 1 to 64 characters of
+ * [A-Za-z0-9._:-]. */
+int vx_req_id_ok(const char *s);
 
 /* Parses a page size: a plain decimal integer in [1, 1000]. 0 or -1. */
 int vx_req_parse_limit(const char *s, size_t len, int *out);

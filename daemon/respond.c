@@ -6,16 +6,42 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <strings.h>
 
 #include "http_int.h"
 #include "util/fsutil.h"
 #include "util/log.h"
 
-static const char *g_data_dir;
+static const char *g_data_dir, *g_cors;
 
-void vx_resp_init(const char *data_dir)
+/* What a browser script on an allowed origin may read of an answer. */
+#define CORS_EXPOSE                                                                                \
+    "Location, ETag, Retry-After, X-Request-Id, Content-Range, Content-Encoding, "                 \
+    "Content-Disposition, Accept-Ranges, WWW-Authenticate, Allow"
+
+void vx_resp_init(const char *data_dir, const char *cors_origins)
 {
     g_data_dir = data_dir;
+    g_cors = cors_origins ? cors_origins : "";
+}
+
+const char *vx_resp_cors_origin(struct MHD_Connection *c)
+{
+    const char *origin = vx_resp_header(c, "Origin");
+    if (!origin || !origin[0] || !g_cors || !g_cors[0]) return NULL;
+    size_t n = strlen(origin);
+    for (const char *p = g_cors; *p;) {
+        while (*p == ' ' || *p == ',')
+            p++;
+        const char *end = strchr(p, ',');
+        if (!end) end = p + strlen(p);
+        size_t k = (size_t)(end - p);
+        while (k && p[k - 1] == ' ')
+            k--;
+        if ((k == 1 && *p == '*') || (k == n && !strncasecmp(p, origin, n))) return origin;
+        p = end;
+    }
+    return NULL;
 }
 
 const char *vx_resp_header(struct MHD_Connection *c, const char *name)
@@ -27,6 +53,14 @@ int vx_resp_queue(struct MHD_Connection *c, req *r, unsigned status, struct MHD_
                   uint64_t body_bytes)
 {
     if (!resp) return MHD_NO;
+    if (r->rid[0]) MHD_add_response_header(resp, "X-Request-Id", r->rid);
+    const char *origin = vx_resp_cors_origin(c);
+    if (origin) {
+        /* The origin itself, not "*": the answer then varies by Origin. */
+        MHD_add_response_header(resp, MHD_HTTP_HEADER_ACCESS_CONTROL_ALLOW_ORIGIN, origin);
+        MHD_add_response_header(resp, "Access-Control-Expose-Headers", CORS_EXPOSE);
+        MHD_add_response_header(resp, MHD_HTTP_HEADER_VARY, "Origin");
+    }
     r->status = (int)status;
     r->bytes_out = body_bytes;
     r->answered = 1;
@@ -96,12 +130,19 @@ vx_resp_answer vx_resp_answer_of(const vx_err *e)
         [VX_ELENGTH] = {411},
         [VX_EHEADER] = {431},
         [VX_ENOTIMPL] = {501},
+        [VX_ERANGE] = {416},
     };
     if ((unsigned)e->kind < VX_EKIND_COUNT) return by_kind[e->kind];
     return by_kind[VX_EOK];
 }
 
 int vx_resp_err(struct MHD_Connection *c, req *r, const vx_err *e)
+{
+    return vx_resp_err_with(c, r, e, NULL, NULL);
+}
+
+int vx_resp_err_with(struct MHD_Connection *c, req *r, const vx_err *e, const char *h,
+                     const char *v)
 {
     vx_resp_answer a = vx_resp_answer_of(e);
     const char *code = a.code ? a.code : e->code;
@@ -116,6 +157,7 @@ int vx_resp_err(struct MHD_Connection *c, req *r, const vx_err *e)
      * not UTF-8 (the body would not be valid JSON text). */
     cJSON_AddStringToObject(o, "message", vx_req_utf8_sanitize(scrubbed, clean, sizeof clean));
     if (a.status >= 500) VX_ERROR("http.error", "status=%u code=%s", a.status, code);
+    if (!a.header) return vx_resp_json(c, r, a.status, doc, h, v);
     return vx_resp_json(c, r, a.status, doc, a.header,
                         a.header && !a.value ? vx_req_route_allow(r->route) : a.value);
 }

@@ -1,10 +1,7 @@
-/* /v1/jobs: submission (with ?wait), listing, state (with ?wait), cancel
- * and results (sendfile, ETag). */
-#include <fcntl.h>
+/* /v1/jobs: submission (with ?wait), listing, state (with ?wait) and
+ * cancel; results are in routes_results.c. */
 #include <stdio.h>
 #include <string.h>
-#include <sys/stat.h>
-#include <unistd.h>
 
 #include "http_int.h"
 
@@ -23,10 +20,12 @@ static int answer_job(vx_http *h, struct MHD_Connection *c, req *r, const char *
     if (!doc) return vx_resp_err(c, r, &err);
     char loc[128];
     snprintf(loc, sizeof loc, "/v1/jobs/%s", jid);
-    return vx_resp_json(c, r, status, doc, status == 202 ? MHD_HTTP_HEADER_LOCATION : NULL, loc);
+    return vx_resp_json(c, r, status, doc,
+                        status == 202 || r->post_job ? MHD_HTTP_HEADER_LOCATION : NULL, loc);
 }
 
-/* Why doc is not a job request ({"mesh", "kind", "params"?}), or NULL. */
+/* Why doc is not a job request ({"mesh", "kind", "params"?, "reuse"?}),
+ * or NULL. */
 static const char *job_request_error(const cJSON *doc)
 {
     const cJSON *mesh = cJSON_GetObjectItemCaseSensitive(doc, "mesh");
@@ -36,12 +35,14 @@ static const char *job_request_error(const cJSON *doc)
     if (!cJSON_IsString(mesh)) return "\"mesh\" (a mesh id string) is required";
     if (!cJSON_IsString(kind)) return "\"kind\" (a job kind string) is required";
     if (params && !cJSON_IsObject(params)) return "\"params\" must be an object";
+    const cJSON *reuse = cJSON_GetObjectItemCaseSensitive(doc, "reuse");
+    if (reuse && !cJSON_IsBool(reuse)) return "\"reuse\" must be true or false";
     const char *msg = NULL;
     const cJSON *it;
     cJSON_ArrayForEach(it, doc)
     {
         if (strcmp(it->string, "mesh") && strcmp(it->string, "kind") &&
-            strcmp(it->string, "params"))
+            strcmp(it->string, "params") && strcmp(it->string, "reuse"))
             msg = "unknown field in the job request";
     }
     return msg;
@@ -69,38 +70,55 @@ int vx_route_job_post(vx_http *h, struct MHD_Connection *c, req *r)
     vx_err err;
     vx_err_clear(&err);
     cJSON *job = NULL;
+    const char *key = vx_resp_header(c, "Idempotency-Key");
+    vx_jobs_submit_opts opts = {.idempotency_key = key,
+                                .reuse =
+                                    cJSON_IsTrue(cJSON_GetObjectItemCaseSensitive(doc, "reuse"))};
+    int existing = 0;
     if (!vx_store_valid_mesh_id(mesh->valuestring))
         vx_err_set(&err, VX_EINVAL, "invalid_request",
                    "\"mesh\" must be a mesh id (64 hex digits)");
+    else if (key && !vx_jobs_valid_idem_key(key))
+        vx_err_set(&err, VX_EINVAL, "invalid_request",
+                   "Idempotency-Key must be 1 to 200 visible ASCII characters");
     else
-        job = vx_jobs_submit(h->d.jobs, mesh->valuestring, kind->valuestring, params, &err);
+        job = vx_jobs_submit_with(h->d.jobs, mesh->valuestring, kind->valuestring, params, &opts,
+                                  &existing, &err);
     cJSON_Delete(doc);
     if (!job) return vx_resp_err(c, r, &err);
+    unsigned status = existing ? 200 : 202; /* an existing job: nothing new was accepted */
     char jid[33];
     snprintf(jid, sizeof jid, "%s",
              cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(job, "id")));
     if (wait_s > 0) {
         r->post_job = 1;
         snprintf(r->id, sizeof r->id, "%s", jid);
+        r->post_existing = existing;
         if (vx_wait_hold(h->wait, &r->w, c, jid, wait_s)) {
             cJSON_Delete(job);
             return MHD_YES;
         }
         cJSON_Delete(job);
-        return answer_job(h, c, r, jid, 202);
+        return answer_job(h, c, r, jid, status);
     }
     char loc[128];
     snprintf(loc, sizeof loc, "/v1/jobs/%s", jid);
-    return vx_resp_json(c, r, 202, job, MHD_HTTP_HEADER_LOCATION, loc);
+    return vx_resp_json(c, r, status, job, MHD_HTTP_HEADER_LOCATION, loc);
 }
 
 int vx_route_job_list(vx_http *h, struct MHD_Connection *c, req *r)
 {
     int limit = r->q.limit;
-    const char *after = r->q.has_after ? r->q.after : NULL,
-               *state = r->q.has_state ? r->q.state : NULL;
+    const char *after = r->q.has_after ? r->q.after : NULL;
+    if (r->q.has_kind && !vx_jobs_has_kind(h->d.jobs, r->q.kind))
+        return vx_resp_fail(c, r, VX_EINVAL, "invalid_request",
+                            "query parameter kind must be a job kind (see /v1/info)");
+    vx_jobs_filter f = {.state = r->q.has_state ? r->q.state : NULL,
+                        .kind = r->q.has_kind ? r->q.kind : NULL,
+                        .mesh = r->q.has_mesh ? r->q.mesh : NULL,
+                        .desc = r->q.desc};
     char next[40];
-    cJSON *items = vx_jobs_list(h->d.jobs, after, limit, state, next);
+    cJSON *items = vx_jobs_list(h->d.jobs, after, limit, &f, next);
     return vx_resp_page(c, r, items, next);
 }
 
@@ -110,6 +128,10 @@ int vx_route_job(vx_http *h, struct MHD_Connection *c, req *r)
     if (!strcmp(r->method, "DELETE")) {
         int running;
         cJSON *doc = vx_jobs_cancel(h->d.jobs, r->id, &running, &err);
+        if (!doc && err.kind == VX_ECONFLICT) { /* finished: delete it and its results */
+            if (vx_jobs_delete(h->d.jobs, r->id, &err)) return vx_resp_err(c, r, &err);
+            return vx_resp_text(c, r, 204, NULL, "application/json", NULL, NULL);
+        }
         if (!doc) return vx_resp_err(c, r, &err);
         return vx_resp_json(c, r, running ? 202 : 200, doc, NULL, NULL);
     }
@@ -120,44 +142,7 @@ int vx_route_job(vx_http *h, struct MHD_Connection *c, req *r)
     return answer_job(h, c, r, r->id, 200);
 }
 
-int vx_route_result(vx_http *h, struct MHD_Connection *c, req *r)
-{
-    vx_err err;
-    char path[2400], ctype[64], fname[128];
-    if (vx_jobs_output(h->d.jobs, r->id, r->route == VX_R_RESULT_NAME ? r->name : NULL, path,
-                       sizeof path, ctype, fname, &err))
-        return vx_resp_err(c, r, &err);
-    char etag[160], disp[200];
-    snprintf(etag, sizeof etag, "\"%s\"", fname);
-    snprintf(disp, sizeof disp, "attachment; filename=\"%s\"", fname);
-    const char *inm = vx_resp_header(c, MHD_HTTP_HEADER_IF_NONE_MATCH);
-    if (inm && (strstr(inm, etag) || !strcmp(inm, "*"))) {
-        struct MHD_Response *resp =
-            MHD_create_response_from_buffer(0, (void *)"", MHD_RESPMEM_PERSISTENT);
-        MHD_add_response_header(resp, MHD_HTTP_HEADER_ETAG, etag);
-        return vx_resp_queue(c, r, 304, resp, 0);
-    }
-    int fd = open(path, O_RDONLY | O_CLOEXEC);
-    struct stat st;
-    if (fd < 0 || fstat(fd, &st) != 0) {
-        if (fd >= 0) close(fd);
-        return vx_resp_fail(c, r, VX_EGONE, "result_evicted", "the result file is gone");
-    }
-    /* from_fd lets MHD use sendfile(2); it closes fd with the response. */
-    struct MHD_Response *resp = MHD_create_response_from_fd64((uint64_t)st.st_size, fd);
-    if (!resp) {
-        close(fd);
-        return MHD_NO;
-    }
-    MHD_add_response_header(resp, MHD_HTTP_HEADER_CONTENT_TYPE, ctype);
-    MHD_add_response_header(resp, MHD_HTTP_HEADER_ETAG, etag);
-    MHD_add_response_header(resp, "Content-Disposition", disp);
-    MHD_add_response_header(resp, MHD_HTTP_HEADER_CACHE_CONTROL,
-                            "private, max-age=86400, immutable");
-    return vx_resp_queue(c, r, 200, resp, (uint64_t)st.st_size);
-}
-
 int vx_route_job_resumed(vx_http *h, struct MHD_Connection *c, req *r)
 {
-    return answer_job(h, c, r, r->id, r->post_job ? 202 : 200);
+    return answer_job(h, c, r, r->id, r->post_job && !r->post_existing ? 202 : 200);
 }

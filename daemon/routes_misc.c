@@ -62,6 +62,8 @@ int vx_route_metrics(vx_http *h, struct MHD_Connection *c, req *r)
         .ready = vx_jobs_ready(h->d.jobs),
         .gl = vx_jobs_gl_info(h->d.jobs),
         .start_time = h->d.start_time,
+        .evictions = vx_store_results_evicted(h->d.store),
+        .gl_context_loss = vx_jobs_gl_losses(h->d.jobs),
     };
     return vx_resp_text(c, r, 200, vx_metrics_render(&g),
                         "text/plain; version=0.0.4; charset=utf-8", NULL, NULL);
@@ -116,4 +118,25 @@ int vx_route_info(vx_http *h, struct MHD_Connection *c, req *r)
     }
     cJSON_AddBoolToObject(doc, "auth", h->auth.on);
     return vx_resp_json(c, r, 200, doc, NULL, NULL);
+}
+
+int vx_route_options(vx_http *h, struct MHD_Connection *c, req *r)
+{
+    (void)h;
+    struct MHD_Response *resp =
+        MHD_create_response_from_buffer(0, (void *)"", MHD_RESPMEM_PERSISTENT);
+    if (!resp) return MHD_NO;
+    const char *allow = vx_req_route_allow(r->route);
+    MHD_add_response_header(resp, MHD_HTTP_HEADER_ALLOW, allow);
+    if (vx_resp_cors_origin(c) &&
+        vx_resp_header(c, MHD_HTTP_HEADER_ACCESS_CONTROL_REQUEST_METHOD)) {
+        /* Allow-Origin and Vary come with every answer (vx_resp_queue). */
+        MHD_add_response_header(resp, MHD_HTTP_HEADER_ACCESS_CONTROL_ALLOW_METHODS, allow);
+        MHD_add_response_header(resp, MHD_HTTP_HEADER_ACCESS_CONTROL_ALLOW_HEADERS,
+                                "Authorization, Content-Type, Idempotency-Key, X-Request-Id, "
+                                "Range, If-Range, If-None-Match");
+        MHD_add_response_header(resp, MHD_HTTP_HEADER_ACCESS_CONTROL_MAX_AGE, "600");
+    }
+    MHD_add_response_header(resp, MHD_HTTP_HEADER_CACHE_CONTROL, "no-store");
+    return vx_resp_queue(c, r, 204, resp, 0);
 }

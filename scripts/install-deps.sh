@@ -26,6 +26,8 @@ run_pkgs=(
   libegl-dev libgl-dev libopengl-dev libegl1 libegl-mesa0 libgl1-mesa-dri
   # HTTP, JSON, meshes; libcurl: voxelctl
   libmicrohttpd-dev libcjson-dev libdraco-dev libcurl4-openssl-dev
+  # compressed result downloads (Content-Encoding zstd; gzip is zlib)
+  libzstd-dev
   # OpenVDB and what its headers need
   libopenvdb-dev libboost-dev libboost-iostreams-dev libtbb-dev libimath-dev libblosc-dev
   zlib1g-dev
@@ -38,6 +40,8 @@ test_pkgs=(
   clang libclang-rt-14-dev clang-format
   # unit tests; reference tools (draco_decoder, vdb_print)
   libcmocka-dev draco libopenvdb-tools systemd
+  # the tests read compressed downloads back
+  zstd
   # integration tests
   curl jq procps psmisc python3 python3-yaml python3-jsonschema man-db
   # tests/deploy/test_systemd.sh: the system calls voxeld makes vs the unit's filter

@@ -31,8 +31,9 @@
 enum { CAM_AXIS = 0, CAM_ORBIT };
 static const char *const cam_names[] = {"axis", "orbit", NULL};
 static const char *const axis_names[] = {"+x", "-x", "+y", "-y", "+z", "-z", NULL};
-enum { OUT_NORMAL = 0, OUT_POSITION, OUT_DEPTH, OUT_VOXELS, OUT_COUNT };
-static const char *const out_names[] = {"normal", "position", "depth", "voxels", NULL};
+/* "image" is taken and dropped (check): the image is always made. */
+enum { OUT_NORMAL = 0, OUT_POSITION, OUT_DEPTH, OUT_VOXELS, OUT_IMAGE, OUT_COUNT };
+static const char *const out_names[] = {"normal", "position", "depth", "voxels", "image", NULL};
 
 typedef struct rfilter {
     int type;
@@ -214,6 +215,7 @@ static void derive(rparams *p)
 static int render_check(void *params, const vx_limits *lim, vx_err *err)
 {
     rparams *p = params;
+    p->outputs[OUT_IMAGE] = 0; /* always made: the normalised params do not list it */
     if (p->N % 2) return bad(err, "params.%s must be even", "N");
     derive(p);
     if (p->R % 2) return bad(err, "params.%s must be even", "R");

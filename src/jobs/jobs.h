@@ -72,14 +72,46 @@ void vx_jobs_maintain(vx_jobs *j, long max_journal_bytes);
  * journal or blob store. */
 cJSON *vx_jobs_submit(vx_jobs *j, const char *mesh, const char *kind, const cJSON *params,
                       vx_err *err);
+/* How a submission may be answered with a job that exists already. */
+typedef struct vx_jobs_submit_opts {
+    /* An Idempotency-Key (NULL = none; vx_jobs_valid_idem_key): the job
+     * submitted with this key and the same request (mesh, kind and
+     * normalised params) is answered instead of a new one, as long as it
+     * is in the history; the same key with another request is VX_EUNPROC
+     * idempotency_key_reused. The key is journaled with the job. */
+    const char *idempotency_key;
+    /* 1: a succeeded job with the same request whose results are still
+     * there is answered instead of a new one. */
+    int reuse;
+} vx_jobs_submit_opts;
+/* vx_jobs_submit with options; *existing = 1 when the answer is a job that
+ * was there already (nothing was queued). */
+cJSON *vx_jobs_submit_with(vx_jobs *j, const char *mesh, const char *kind, const cJSON *params,
+                           const vx_jobs_submit_opts *opts, int *existing, vx_err *err);
+/* 1 when s can be an Idempotency-Key: 1 to 200 visible ASCII characters. */
+int vx_jobs_valid_idem_key(const char *s);
+/* Deletes a finished job: it leaves the table (404 from then on; a
+ * tombstone is journaled) and its results are removed from disk.
+ * VX_ENOTFOUND job_not_found; VX_ECONFLICT job_not_finished is never given
+ * (an unfinished job is canceled by vx_jobs_cancel instead). 0 or -1. */
+int vx_jobs_delete(vx_jobs *j, const char *jid, vx_err *err);
 /* API JSON of a job (owned) or NULL (VX_ENOTFOUND job_not_found);
  * *terminal = 1 when it has finished. */
 cJSON *vx_jobs_get(vx_jobs *j, const char *jid, int *terminal, vx_err *err);
 /* Cancels: a queued job at once (*was_running = 0), a running one at its
  * next progress check (*was_running = 1). VX_ECONFLICT job_finished. */
 cJSON *vx_jobs_cancel(vx_jobs *j, const char *jid, int *was_running, vx_err *err);
-/* Page of jobs by id (= creation order) after `after`, optional state filter. */
-cJSON *vx_jobs_list(vx_jobs *j, const char *after, int limit, const char *state, char next[40]);
+/* What a job list keeps: NULL fields keep every job. */
+typedef struct vx_jobs_filter {
+    const char *state, *kind, *mesh;
+    int desc; /* newest first: `after` then means older than it */
+} vx_jobs_filter;
+/* Page of jobs by id (= creation order) after `after` (in f's order), the
+ * jobs f keeps (f may be NULL); next = the last id when more follow. */
+cJSON *vx_jobs_list(vx_jobs *j, const char *after, int limit, const vx_jobs_filter *f,
+                    char next[40]);
+/* 1 when a kind of this name runs here. */
+int vx_jobs_has_kind(vx_jobs *j, const char *kind);
 /* Where an output of a finished job is: path, content type and the file name
  * for Content-Disposition. name NULL = the primary output. Errors:
  * job_not_found, job_not_finished / job_failed / job_canceled (VX_ECONFLICT),
@@ -93,6 +125,8 @@ vx_gl_info vx_jobs_gl_info(vx_jobs *j);
 size_t vx_jobs_queue_depth(vx_jobs *j);
 size_t vx_jobs_queue_capacity(vx_jobs *j);
 size_t vx_jobs_running(vx_jobs *j);
+/* GL contexts lost during jobs since the table was opened. */
+uint64_t vx_jobs_gl_losses(vx_jobs *j);
 /* 1 when s is a well-formed job id. */
 int vx_jobs_valid_id(const char *s);
 

@@ -46,6 +46,8 @@ typedef struct job {
     char *frozen;
     size_t bytes; /* what a finished job costs the history budget */
     pinset pins;
+    uint64_t fp; /* fingerprint of kind, mesh and normalised params (dedup.c) */
+    char *idem;  /* its Idempotency-Key (owned), or NULL */
 } job;
 
 struct vx_job_run {
@@ -83,6 +85,7 @@ struct vx_jobs {
     pthread_cond_t gl_cond;
     vx_err gl_err;
     vx_gl_info gl_info;
+    uint64_t gl_losses; /* contexts lost (atomic) */
 };
 
 /* registry.c */
@@ -109,7 +112,17 @@ cJSON *inline_params(vx_jobs *j, const vx_kind *k, const cJSON *params, int *big
 /* Calls the desc's alive hook (the daemon's watchdog ping). */
 void jobs_alive(vx_jobs *j);
 
+/* dedup.c */
+/* The fingerprint of a request: kind, mesh and its params as journaled. */
+uint64_t request_fp(const char *kind, const char *mesh, const cJSON *params);
+/* The job that answers a submission instead of jb (fp, idem and params
+ * filled), or NULL; VX_EUNPROC idempotency_key_reused in err (and NULL) for
+ * a key of another request. Caller holds the lock. */
+job *find_existing_locked(vx_jobs *j, const job *jb, int reuse, vx_err *err);
+
 /* snapshot.c */
+/* Journals that jb is deleted (a record replay drops it on). */
+int journal_delete_locked(vx_jobs *j, job *jb, vx_err *err);
 int journal_locked(vx_jobs *j, job *jb, vx_err *err);
 int compact_locked(vx_jobs *j, vx_err *err);
 

@@ -31,6 +31,7 @@ void job_free(job *jb)
     cJSON_Delete(jb->stats);
     cJSON_Delete(jb->outputs);
     free(jb->frozen);
+    free(jb->idem);
     pinset_free(&jb->pins);
     free(jb);
 }
@@ -136,6 +137,7 @@ cJSON *job_json(const job *jb, int api)
             cJSON_AddNullToObject(t, "total_ms");
     } else {
         cJSON_AddNumberToObject(o, "seq", (double)jb->seq);
+        if (jb->idem) cJSON_AddStringToObject(o, "idempotency_key", jb->idem);
     }
     cJSON_AddItemToObject(o, "stats", stats);
     if (api) {
@@ -231,6 +233,13 @@ void notify(vx_jobs *j, const char *jid, int terminal)
 cJSON *vx_jobs_submit(vx_jobs *j, const char *mesh, const char *kind, const cJSON *params,
                       vx_err *err)
 {
+    return vx_jobs_submit_with(j, mesh, kind, params, NULL, NULL, err);
+}
+
+cJSON *vx_jobs_submit_with(vx_jobs *j, const char *mesh, const char *kind, const cJSON *params,
+                           const vx_jobs_submit_opts *opts, int *existing, vx_err *err)
+{
+    if (existing) *existing = 0;
     const vx_kind *k = vx_kinds_find(j->desc.kinds, kind);
     if (!k) {
         vx_err_set(err, VX_EUNPROC, "unknown_kind", "unknown job kind '%.64s'", kind);
@@ -267,8 +276,28 @@ cJSON *vx_jobs_submit(vx_jobs *j, const char *mesh, const char *kind, const cJSO
     jb->created = vx_now();
     jb->stats = cJSON_CreateObject();
     jb->outputs = cJSON_CreateObject();
+    jb->fp = request_fp(k->name, mesh, norm);
+    if (opts && opts->idempotency_key && !(jb->idem = strdup(opts->idempotency_key))) {
+        unpin_job(j, &jb->pins);
+        job_free(jb);
+        vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory");
+        return NULL;
+    }
     pthread_mutex_lock(&j->lock);
     cJSON *out = NULL;
+    vx_err_clear(err);
+    job *prior = (jb->idem || (opts && opts->reuse))
+                     ? find_existing_locked(j, jb, opts && opts->reuse, err)
+                     : NULL;
+    if (prior || err->kind != VX_EOK) {
+        /* An answer from the table: the new job was never acknowledged. */
+        cJSON *doc = prior ? job_json(prior, 1) : NULL;
+        pthread_mutex_unlock(&j->lock);
+        unpin_job(j, &jb->pins);
+        job_free(jb);
+        if (doc && existing) *existing = 1;
+        return doc;
+    }
     if (j->stopping) {
         vx_err_set(err, VX_EUNAVAIL, "not_ready", "the daemon is shutting down");
     } else if (vx_queue_depth(j->queue) >= vx_queue_capacity(j->queue)) {
@@ -360,25 +389,81 @@ cJSON *vx_jobs_cancel(vx_jobs *j, const char *jid, int *was_running, vx_err *err
     return out;
 }
 
-cJSON *vx_jobs_list(vx_jobs *j, const char *after, int limit, const char *state, char next[40])
+/* 1 when f keeps jb. */
+static int kept(const vx_jobs_filter *f, const job *jb)
+{
+    return !f || ((!f->state || !strcmp(f->state, state_names[jb->state])) &&
+                  (!f->kind || !strcmp(f->kind, jb->kind->name)) &&
+                  (!f->mesh || !strcmp(f->mesh, jb->mesh)));
+}
+
+cJSON *vx_jobs_list(vx_jobs *j, const char *after, int limit, const vx_jobs_filter *f,
+                    char next[40])
 {
     cJSON *arr = cJSON_CreateArray();
     next[0] = 0;
+    int desc = f && f->desc;
     pthread_mutex_lock(&j->lock);
-    size_t i = vx_sorted_after(&j->jobs, after);
+    /* Ascending: from the first id above `after`. Descending: from the
+     * last id below it (i counts down from n, one past the item). */
+    size_t i;
+    if (!desc) {
+        i = vx_sorted_after(&j->jobs, after);
+    } else if (after && *after) {
+        int found;
+        i = vx_sorted_find(&j->jobs, after, &found);
+    } else {
+        i = j->jobs.n;
+    }
     int n = 0;
-    for (; i < j->jobs.n; i++) {
-        job *jb = job_at(j, i);
-        if (state && strcmp(state, state_names[jb->state]) != 0) continue;
+    const job *last = NULL;
+    while (desc ? i > 0 : i < j->jobs.n) {
+        job *jb = job_at(j, desc ? i - 1 : i);
+        desc ? i-- : i++;
+        if (!kept(f, jb)) continue;
         if (n == limit) {
-            snprintf(next, 40, "%s", job_at(j, i - 1)->id);
+            snprintf(next, 40, "%s", last->id);
             break;
         }
         cJSON_AddItemToArray(arr, job_json(jb, 1));
+        last = jb;
         n++;
     }
     pthread_mutex_unlock(&j->lock);
     return arr;
+}
+
+int vx_jobs_has_kind(vx_jobs *j, const char *kind)
+{
+    return vx_kinds_find(j->desc.kinds, kind) != NULL;
+}
+
+int vx_jobs_delete(vx_jobs *j, const char *jid, vx_err *err)
+{
+    pthread_mutex_lock(&j->lock);
+    int found = 0;
+    size_t at = vx_jobs_valid_id(jid) ? vx_sorted_find(&j->jobs, jid, &found) : 0;
+    job *jb = found ? job_at(j, at) : NULL;
+    int rc = -1;
+    if (!jb) {
+        vx_err_set(err, VX_ENOTFOUND, "job_not_found", "no job with id %.64s", jid);
+    } else if (!is_terminal(jb->state)) {
+        vx_err_set(err, VX_ECONFLICT, "job_not_finished", "job %s is %s", jid,
+                   state_names[jb->state]);
+    } else if (journal_delete_locked(j, jb, err) == 0) {
+        vx_sorted_remove_at(&j->jobs, at);
+        j->history_bytes -= jb->bytes;
+        job_free(jb);
+        rc = 0;
+    }
+    pthread_mutex_unlock(&j->lock);
+    /* After the tombstone: a crash in between leaves files no job names,
+     * which the results budget and the next start clean up. */
+    if (rc == 0) {
+        vx_store_result_remove(j->desc.store, jid);
+        VX_INFO("job.deleted", "job=%s", jid);
+    }
+    return rc;
 }
 
 int vx_jobs_output(vx_jobs *j, const char *jid, const char *name, char *path, size_t pathn,
@@ -446,6 +531,11 @@ size_t vx_jobs_queue_depth(vx_jobs *j)
 size_t vx_jobs_queue_capacity(vx_jobs *j)
 {
     return vx_queue_capacity(j->queue);
+}
+
+uint64_t vx_jobs_gl_losses(vx_jobs *j)
+{
+    return __atomic_load_n(&j->gl_losses, __ATOMIC_RELAXED);
 }
 
 size_t vx_jobs_running(vx_jobs *j)

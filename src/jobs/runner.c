@@ -118,9 +118,10 @@ static void run_finish(vx_jobs *j, vx_job_run *r, int ok, const vx_err *e)
         VX_INFO("job.requeued", "job=%s kind=%s reason=shutdown", id, kind);
     } else {
         char qm[600];
-        VX_INFO("job.finished", "job=%s kind=%s state=%s run_ms=%.1f code=%s message=%s", id, kind,
-                state_names[st], run_s * 1e3, ok ? "-" : e->code,
-                vx_log_quote(qm, sizeof qm, ok ? "-" : e->message));
+        /* A failed job is worth an operator's look: warn, not info. */
+        vx_log(st == ST_FAILED ? VX_LOG_WARN : VX_LOG_INFO, "job.finished",
+               "job=%s kind=%s state=%s run_ms=%.1f code=%s message=%s", id, kind, state_names[st],
+               run_s * 1e3, ok ? "-" : e->code, vx_log_quote(qm, sizeof qm, ok ? "-" : e->message));
         if (j->desc.hooks.finished)
             j->desc.hooks.finished(j->desc.hooks.ud, id, kind, state_names[st], run_s);
     }
@@ -203,6 +204,7 @@ static void run_job_gl(vx_jobs *j, vx_gl *gl, mesh_cache *mc, job *jb)
             break;
         }
         VX_WARN("gl.context_lost", "job=%s attempt=%d", jb->id, attempt + 1);
+        __atomic_add_fetch(&j->gl_losses, 1, __ATOMIC_RELAXED);
         if (r->state && jb->kind->free_state) jb->kind->free_state(r->state);
         r->state = NULL;
         /* The retry starts over: what the lost attempt added goes. */

@@ -21,6 +21,20 @@ int journal_locked(vx_jobs *j, job *jb, vx_err *err)
     return rc;
 }
 
+int journal_delete_locked(vx_jobs *j, job *jb, vx_err *err)
+{
+    jb->seq++;
+    cJSON *rec = cJSON_CreateObject();
+    cJSON *o = cJSON_AddObjectToObject(rec, "job");
+    cJSON_AddStringToObject(o, "id", jb->id);
+    cJSON_AddNumberToObject(o, "seq", (double)jb->seq);
+    cJSON_AddBoolToObject(o, "deleted", 1);
+    int rc = j->st_ops->append(j->st, rec, err);
+    cJSON_Delete(rec);
+    if (rc) jb->seq--;
+    return rc;
+}
+
 /* Rewrites the journal as one snapshot per job. Caller holds the lock (or
  * runs before any thread starts). */
 int compact_locked(vx_jobs *j, vx_err *err)
@@ -46,6 +60,12 @@ static void replay_one(const cJSON *rec, void *ud)
     const char *kind = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(o, "kind"));
     const char *mesh = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(o, "mesh"));
     const char *state = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(o, "state"));
+    if (vx_jobs_valid_id(id) && cJSON_IsTrue(cJSON_GetObjectItemCaseSensitive(o, "deleted"))) {
+        int found;
+        size_t at = vx_sorted_find(&j->jobs, id, &found);
+        if (found) job_free(vx_sorted_remove_at(&j->jobs, at));
+        return;
+    }
     if (!vx_jobs_valid_id(id) || !kind || !mesh || !state) {
         VX_WARN("journal.bad_job", "reason=missing_fields");
         return;
@@ -101,6 +121,10 @@ static void replay_one(const cJSON *rec, void *ud)
     jb->stats = cJSON_Duplicate(cJSON_GetObjectItemCaseSensitive(o, "stats"), 1);
     jb->outputs = cJSON_Duplicate(cJSON_GetObjectItemCaseSensitive(o, "outputs"), 1);
     if (!jb->params) jb->params = cJSON_CreateObject();
+    jb->fp = request_fp(k->name, jb->mesh, jb->params);
+    const char *idem = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(o, "idempotency_key"));
+    free(jb->idem);
+    jb->idem = vx_jobs_valid_idem_key(idem) ? strdup(idem) : NULL;
     vx_err_clear(&jb->error);
     const cJSON *e = cJSON_GetObjectItemCaseSensitive(o, "error");
     if (cJSON_IsObject(e)) {

@@ -113,9 +113,13 @@ void vx_store_result_added(vx_store *s, const char *jid);
 int vx_store_result_file(vx_store *s, const char *jid, const char *file, char *buf, size_t n,
                          vx_err *err);
 void vx_store_result_remove(vx_store *s, const char *jid);
+/* 1 when job jid's results are in the store (not evicted or removed). */
+int vx_store_result_exists(vx_store *s, const char *jid);
 /* Evicts least recently used results until the budget holds; returns how
  * many were removed. Called after each job and periodically. */
 int vx_store_results_evict(vx_store *s);
 uint64_t vx_store_results_bytes(vx_store *s);
+/* Results the budget has evicted since the store was opened. */
+uint64_t vx_store_results_evicted(vx_store *s);
 
 #endif

@@ -49,6 +49,7 @@ struct vx_store {
     result_entry *results;
     size_t nresults, capresults;
     uint64_t results_bytes;
+    uint64_t evicted; /* results the budget removed (atomic) */
     unsigned long upload_seq;
     int lock_fd; /* DATA/voxeld.lock, flock'd for the store's life */
 };

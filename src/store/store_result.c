@@ -135,6 +135,16 @@ void vx_store_result_remove(vx_store *s, const char *jid)
     s->ops->remove_prefix(s->blob, key);
 }
 
+int vx_store_result_exists(vx_store *s, const char *jid)
+{
+    pthread_mutex_lock(&s->lock);
+    int found = 0;
+    for (size_t i = 0; i < s->nresults && !found; i++)
+        found = strcmp(s->results[i].jid, jid) == 0;
+    pthread_mutex_unlock(&s->lock);
+    return found;
+}
+
 int vx_store_results_evict(vx_store *s)
 {
     int removed = 0;
@@ -158,9 +168,15 @@ int vx_store_results_evict(vx_store *s)
         if (!victim[0]) break;
         VX_INFO("store.evict", "job=%s", victim);
         vx_store_result_remove(s, victim);
+        __atomic_add_fetch(&s->evicted, 1, __ATOMIC_RELAXED);
         removed++;
     }
     return removed;
+}
+
+uint64_t vx_store_results_evicted(vx_store *s)
+{
+    return __atomic_load_n(&s->evicted, __ATOMIC_RELAXED);
 }
 
 uint64_t vx_store_results_bytes(vx_store *s)

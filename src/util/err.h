@@ -36,6 +36,7 @@ typedef enum vx_err_kind {
     VX_ELENGTH,   /* a body whose length is not declared (411) */
     VX_EHEADER,   /* the request head is over its limit (431) */
     VX_ENOTIMPL,  /* a protocol feature that is not implemented (501) */
+    VX_ERANGE,    /* a byte range outside the representation (416) */
     VX_EKIND_COUNT
 } vx_err_kind;
 
@@ -63,6 +64,10 @@ int vx_err_set(vx_err *err, vx_err_kind kind, const char *code, const char *fmt,
 int vx_err_set_flagged(vx_err *err, vx_err_kind kind, unsigned flags, const char *code,
                        const char *fmt, ...) __attribute__((format(printf, 5, 6)));
 int vx_err_setv(vx_err *err, vx_err_kind kind, const char *code, const char *fmt, va_list ap);
+/* Replaces, in place, every byte of s that is not part of well-formed
+ * UTF-8, and every control character, with '?'. Every message set through
+ * vx_err_set* has been through it. */
+void vx_err_utf8_clean(char *s);
 /* 1 when err (may be NULL) carries every flag of flags. */
 int vx_err_has(const vx_err *err, unsigned flags);
 /* Resets err to VX_EOK. */

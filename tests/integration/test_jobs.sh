@@ -103,10 +103,12 @@ check "readyz shows the full queue" jq -e '.status == "ready" and .queue.full ==
 api DELETE "/v1/jobs/${Q[2]}"
 expect_status "cancel queued job" 200
 check "canceled at once" jq -e '.state == "canceled" and .error.code == "canceled"' "$BODY"
-api DELETE "/v1/jobs/${Q[2]}"
-expect_error "cancel twice" 409 job_finished
 api GET "/v1/jobs/${Q[2]}/result"
 expect_error "result of canceled job" 409 job_canceled
+api DELETE "/v1/jobs/${Q[2]}"
+expect_status "delete a canceled job" 204
+api GET "/v1/jobs/${Q[2]}"
+expect_error "a deleted job" 404 job_not_found
 api GET "/v1/jobs/${Q[1]}/result"
 expect_error "result of queued job" 409 job_not_finished
 api GET "/v1/jobs?state=queued&limit=10"

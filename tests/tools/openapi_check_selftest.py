@@ -58,8 +58,13 @@ METRICS = "".join("# HELP %s x\n# TYPE %s %s\n" % (n, n, t) for n, t in [
     ("voxeld_queue_depth", "gauge"), ("voxeld_queue_capacity", "gauge"),
     ("voxeld_jobs_running", "gauge"), ("voxeld_http_bytes_received_total", "counter"),
     ("voxeld_http_bytes_sent_total", "counter"), ("voxeld_meshes", "gauge"),
-    ("voxeld_results_bytes", "gauge"), ("voxeld_info", "gauge"), ("voxeld_up", "gauge"),
-    ("process_start_time_seconds", "gauge")]) + "voxeld_up 1\n"
+    ("voxeld_results_bytes", "gauge"), ("voxeld_info", "gauge"), ("voxeld_ready", "gauge"),
+    ("voxeld_jobs_failed_total", "counter"), ("voxeld_job_queue_wait_seconds", "histogram"),
+    ("voxeld_results_evicted_total", "counter"), ("voxeld_gl_context_losses_total", "counter"),
+    ("process_cpu_seconds_total", "counter"), ("process_resident_memory_bytes", "gauge"),
+    ("process_virtual_memory_bytes", "gauge"), ("process_open_fds", "gauge"),
+    ("process_max_fds", "gauge"),
+    ("process_start_time_seconds", "gauge")]) + "voxeld_ready 1\n"
 PNG = b"\x89PNG\r\n\x1a\n" + b"\0" * 32
 
 
@@ -126,16 +131,22 @@ CASES = [
     ("voxel result", dict(method="GET", path="/v1/jobs/%s/result/voxels" % JID, status=200,
                           content_type="application/x-binvox",
                           headers={"etag": '"abc"', "content-length": "10",
+                                   "cache-control": "private, max-age=86400, immutable",
+                                   "accept-ranges": "bytes",
                                    "content-disposition":
                                        'attachment; filename="%s-voxels.binvox"' % JID}),
      b"#binvox 1\n", False),
     ("job list", dict(method="GET", path="/v1/jobs?limit=5&state=succeeded", status=200,
                       content_type="application/json"), {"items": [JOB_OK], "next": None}, False),
     ("result 304", dict(method="GET", path="/v1/jobs/%s/result" % JID, status=304,
-                        content_type="", headers={"etag": '"abc"'}), b"", False),
+                        content_type="", headers={"etag": '"abc"',
+                                                  "cache-control": "private, immutable"}),
+     b"", False),
     ("result png", dict(method="GET", path="/v1/jobs/%s/result/image" % JID, status=200,
                         content_type="image/png",
                         headers={"etag": '"abc"', "content-length": str(len(PNG)),
+                                 "cache-control": "private, max-age=86400, immutable",
+                                 "accept-ranges": "bytes",
                                  "content-disposition":
                                      'attachment; filename="%s-image.png"' % JID}), PNG, False),
     ("result without ETag", dict(method="GET", path="/v1/jobs/%s/result" % JID, status=200,
@@ -154,7 +165,7 @@ CASES = [
                      content_type="text/plain; version=0.0.4; charset=utf-8"), METRICS, False),
     ("metrics missing a family", dict(method="GET", path="/metrics", status=200,
                                       content_type="text/plain; version=0.0.4"),
-     METRICS.replace("voxeld_up", "voxeld_down"), True),
+     METRICS.replace("voxeld_ready", "voxeld_down"), True),
     ("wrong content type", dict(method="GET", path="/v1/meshes?limit=5", status=200,
                                 content_type="text/html"), "<html></html>", True),
     ("body on 204", dict(method="DELETE", path="/v1/meshes/" + MESH, status=204,

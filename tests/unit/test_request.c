@@ -184,12 +184,97 @@ static void test_utf8(void **state)
     assert_int_equal(vx_req_json_text_ok("{}\0", 3, msg, sizeof msg), -1);
 }
 
+#define MID "4f3c4172a4fe308cebc840da665171f534849b1fca101eaf635d68fb453393db"
+
+/* GET /v1/jobs: order, kind and mesh (issue #13), strict like the rest. */
+static void test_job_filters(void **state)
+{
+    (void)state;
+    vx_req_query q;
+    char msg[160], back[300];
+    const char *ok[] = {"order", "desc", "kind", "catmull-clark", "mesh", MID};
+    assert_int_equal(add_all(&q, VX_R_JOBS, "GET", ok, 6, msg), -1);
+    assert_true(q.desc);
+    assert_string_equal(q.kind, "catmull-clark");
+    assert_string_equal(q.mesh, MID);
+    assert_true(vx_req_query_format(&q, back, sizeof back) > 0);
+    assert_string_equal(back, "order=desc&kind=catmull-clark&mesh=" MID);
+    const char *asc[] = {"order", "asc"};
+    assert_int_equal(add_all(&q, VX_R_JOBS, "GET", asc, 2, msg), -1);
+    assert_false(q.desc);
+    const char *bad[][2] = {{"order", "newest"}, {"kind", "Preview"}, {"kind", "a b"},
+                            {"mesh", "abc"},     {"mesh", JID},       {"order", ""}};
+    for (size_t i = 0; i < sizeof bad / sizeof bad[0]; i++)
+        assert_int_equal(add_all(&q, VX_R_JOBS, "GET", bad[i], 2, msg), 0);
+    /* Only GET /v1/jobs declares them. */
+    const char *elsewhere[] = {"order", "newest"};
+    assert_int_equal(add_all(&q, VX_R_MESHES, "GET", elsewhere, 2, msg), -1);
+}
+
+static void test_negotiation(void **state)
+{
+    (void)state;
+    assert_int_equal(vx_req_accept_coding(NULL), VX_CODING_IDENTITY);
+    assert_int_equal(vx_req_accept_coding("gzip, deflate, br"), VX_CODING_GZIP);
+    assert_int_equal(vx_req_accept_coding("zstd"), VX_CODING_ZSTD);
+    assert_int_equal(vx_req_accept_coding("gzip, zstd"), VX_CODING_ZSTD); /* a tie: zstd */
+    assert_int_equal(vx_req_accept_coding("gzip;q=0.9, zstd;q=0.5"), VX_CODING_GZIP);
+    assert_int_equal(vx_req_accept_coding("zstd;q=0, gzip"), VX_CODING_GZIP);
+    assert_int_equal(vx_req_accept_coding("ZSTD ; Q=1"), VX_CODING_ZSTD); /* case-insensitive */
+    assert_int_equal(vx_req_accept_coding("*"), VX_CODING_ZSTD);
+    assert_int_equal(vx_req_accept_coding("*;q=0"), VX_CODING_IDENTITY);
+    assert_int_equal(vx_req_accept_coding("*;q=0.1, zstd;q=0"), VX_CODING_GZIP);
+    assert_int_equal(vx_req_accept_coding("identity"), VX_CODING_IDENTITY);
+    assert_int_equal(vx_req_accept_coding("x-gzip"), VX_CODING_GZIP);
+    assert_int_equal(vx_req_accept_coding("zstd;q=2"), VX_CODING_IDENTITY); /* malformed q */
+
+    uint64_t a, b;
+    assert_int_equal(vx_req_range("bytes=0-99", 1000, &a, &b), 1);
+    assert_true(a == 0 && b == 99);
+    assert_int_equal(vx_req_range("bytes=900-", 1000, &a, &b), 1);
+    assert_true(a == 900 && b == 999);
+    assert_int_equal(vx_req_range("bytes=990-5000", 1000, &a, &b), 1);
+    assert_true(a == 990 && b == 999);
+    assert_int_equal(vx_req_range("bytes=-10", 1000, &a, &b), 1);
+    assert_true(a == 990 && b == 999);
+    assert_int_equal(vx_req_range("bytes=-5000", 1000, &a, &b), 1);
+    assert_true(a == 0 && b == 999);
+    assert_int_equal(vx_req_range("bytes=1000-", 1000, &a, &b), -1);
+    assert_int_equal(vx_req_range("bytes=-0", 1000, &a, &b), -1);
+    assert_int_equal(vx_req_range("bytes=0-", 0, &a, &b), -1);
+    assert_int_equal(vx_req_range(NULL, 1000, &a, &b), 0);
+    assert_int_equal(vx_req_range("items=0-1", 1000, &a, &b), 0);
+    assert_int_equal(vx_req_range("bytes=5-1", 1000, &a, &b), 0);
+    assert_int_equal(vx_req_range("bytes=0-1,5-9", 1000, &a, &b), 0);
+    assert_int_equal(vx_req_range("bytes=x-", 1000, &a, &b), 0);
+    assert_int_equal(vx_req_range("bytes=99999999999999999999-", 1000, &a, &b), 0);
+
+    assert_true(vx_req_etag_match("\"a\", \"b\"", "\"b\"", 1, 1));
+    assert_false(vx_req_etag_match("\"ab\"", "\"a\"", 1, 1));
+    assert_true(vx_req_etag_match("W/\"a\"", "\"a\"", 1, 1));
+    assert_false(vx_req_etag_match("W/\"a\"", "\"a\"", 0, 0)); /* If-Range: strong only */
+    assert_true(vx_req_etag_match("*", "\"a\"", 1, 1));
+    assert_false(vx_req_etag_match("*", "\"a\"", 0, 0));
+    assert_false(vx_req_etag_match("Tue, 01 Dec 2026 10:00:00 GMT", "\"a\"", 0, 0));
+    assert_false(vx_req_etag_match(NULL, "\"a\"", 1, 1));
+
+    assert_true(vx_req_id_ok("abc-123_x.y:z"));
+    assert_false(vx_req_id_ok(""));
+    assert_false(vx_req_id_ok("a b"));
+    assert_false(vx_req_id_ok("a\nb"));
+    char long_id[80];
+    memset(long_id, 'a', sizeof long_id - 1);
+    long_id[sizeof long_id - 1] = 0;
+    assert_false(vx_req_id_ok(long_id));
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_routes), cmocka_unit_test(test_web_routes),
-        cmocka_unit_test(test_query),  cmocka_unit_test(test_numbers),
-        cmocka_unit_test(test_utf8),
+        cmocka_unit_test(test_query), cmocka_unit_test(test_numbers),
+        cmocka_unit_test(test_utf8), cmocka_unit_test(test_job_filters),
+        cmocka_unit_test(test_negotiation),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

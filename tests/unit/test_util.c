@@ -11,9 +11,35 @@
 #include <time.h>
 
 #include "util/clock.h"
+#include "util/err.h"
 #include "util/fsutil.h"
 #include "util/par.h"
 #include "util/vec3.h"
+
+/* Error messages are UTF-8 whatever they quote (issue #13: a UTF-16 OBJ
+ * echoed 0xFE 0xFF into the JSON body). */
+static void test_err_utf8(void **state)
+{
+    (void)state;
+    vx_err e;
+    vx_err_set(&e, VX_EINVAL, "obj_junk", "line 1: unknown statement '%s'", "\xfe\xff\x00v");
+    assert_string_equal(e.message, "line 1: unknown statement '?\?'");
+    vx_err_set(&e, VX_EINVAL, "x", "%s", "caf\xc3\xa9 \xe2\x82\xac ok\tx\xc0\xafy\xed\xa0\x80z");
+    assert_string_equal(e.message, "caf\xc3\xa9 \xe2\x82\xac ok?x??y???z");
+    /* A character cut by the buffer's end is replaced, never half kept. */
+    char big[600];
+    memset(big, 'a', sizeof big);
+    for (size_t i = 500; i + 1 < sizeof big; i += 2)
+        big[i] = '\xc3', big[i + 1] = '\xa9';
+    big[sizeof big - 1] = 0;
+    vx_err_set(&e, VX_EINVAL, "x", "%s", big);
+    size_t n = strlen(e.message);
+    assert_int_equal(n, sizeof e.message - 1);
+    assert_true(e.message[n - 1] == '?' || (unsigned char)e.message[n - 1] == 0xa9);
+    for (size_t i = 0; i < n; i++)
+        if ((unsigned char)e.message[i] == 0xc3)
+            assert_true((unsigned char)e.message[i + 1] == 0xa9);
+}
 
 static void test_clock(void **state)
 {
@@ -122,9 +148,8 @@ static void test_vec3(void **state)
 int main(void)
 {
     const struct CMUnitTest tests[] = {
-        cmocka_unit_test(test_clock),
-        cmocka_unit_test(test_par_for),
-        cmocka_unit_test(test_par_run),
+        cmocka_unit_test(test_err_utf8), cmocka_unit_test(test_clock),
+        cmocka_unit_test(test_par_for),  cmocka_unit_test(test_par_run),
         cmocka_unit_test(test_vec3),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);

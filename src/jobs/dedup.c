@@ -1,0 +1,78 @@
+/* Answering a submission with a job that exists already (jobs_int.h):
+ * the request fingerprint, Idempotency-Key and `reuse`. The fingerprint
+ * is a 64-bit FNV-1a of the kind, the mesh and the params as journaled
+ * (normalised, large fields as their blob references), so replayed jobs get
+ * the same one; a match is confirmed by comparing the params themselves. */
+#include "jobs/jobs_int.h"
+
+#include <stdlib.h>
+#include <string.h>
+
+static uint64_t fnv(uint64_t h, const char *s, size_t n)
+{
+    for (size_t i = 0; i < n; i++) {
+        h ^= (unsigned char)s[i];
+        h *= 1099511628211ull;
+    }
+    return h;
+}
+
+uint64_t request_fp(const char *kind, const char *mesh, const cJSON *params)
+{
+    uint64_t h = 14695981039346656037ull;
+    h = fnv(h, kind, strlen(kind) + 1);
+    h = fnv(h, mesh, strlen(mesh) + 1);
+    char *text = params ? cJSON_PrintUnformatted(params) : NULL;
+    if (text) h = fnv(h, text, strlen(text));
+    free(text);
+    return h;
+}
+
+int vx_jobs_valid_idem_key(const char *s)
+{
+    size_t n = s ? strlen(s) : 0;
+    if (!n || n > 200) return 0;
+    for (size_t i = 0; i < n; i++)
+        if ((unsigned char)s[i] < 0x21 || (unsigned char)s[i] > 0x7e) return 0;
+    return 1;
+}
+
+/* 1 when old is the same request as jb: kind, mesh and params. */
+static int same_request(const job *old, const job *jb)
+{
+    if (old->fp != jb->fp || old->kind != jb->kind || strcmp(old->mesh, jb->mesh)) return 0;
+    if (old->params) return cJSON_Compare(old->params, jb->params, 1);
+    cJSON *f = old->frozen ? cJSON_Parse(old->frozen) : NULL;
+    int same = f && cJSON_Compare(cJSON_GetObjectItemCaseSensitive(f, "params"), jb->params, 1);
+    cJSON_Delete(f);
+    return same;
+}
+
+/* 1 when old succeeded and its results can still be downloaded. */
+static int reusable(vx_jobs *j, const job *old)
+{
+    if (old->state != ST_SUCCEEDED) return 0;
+    int has_outputs = old->outputs ? old->outputs->child != NULL
+                                   : (old->frozen && !strstr(old->frozen, "\"outputs\":{}"));
+    return !has_outputs || vx_store_result_exists(j->desc.store, old->id);
+}
+
+job *find_existing_locked(vx_jobs *j, const job *jb, int reuse, vx_err *err)
+{
+    if (jb->idem) {
+        for (size_t i = j->jobs.n; i-- > 0;) {
+            job *old = job_at(j, i);
+            if (!old->idem || strcmp(old->idem, jb->idem)) continue;
+            if (same_request(old, jb)) return old;
+            vx_err_set(err, VX_EUNPROC, "idempotency_key_reused",
+                       "the Idempotency-Key was used for another request (job %s)", old->id);
+            return NULL;
+        }
+    }
+    if (reuse)
+        for (size_t i = j->jobs.n; i-- > 0;) {
+            job *old = job_at(j, i);
+            if (old->fp == jb->fp && reusable(j, old) && same_request(old, jb)) return old;
+        }
+    return NULL;
+}

@@ -1,0 +1,70 @@
+#!/usr/bin/env bash
+# A browser on another origin can reach the API (--cors-origin: preflight
+# OPTIONS answered, Access-Control-* on answers to allowed origins only),
+# and every request has an X-Request-Id that the request log line carries
+# with the concrete path and the client's address (issue #13).
+source "$(dirname "$0")/lib.sh"
+TOKEN=secret-token
+printf '%s\n' "$TOKEN" >"$TMP/token"
+start_daemon --token-file "$TMP/token" --cors-origin http://viewer.example \
+    --cors-origin "http://b.example:8000, http://c.example" || exit 1
+
+# Preflight: no credentials, answered 204 with what the browser asks about.
+# (Raw curl: OPTIONS is outside the contract's operations.)
+pre() { curl -sS -o "$TMP/pre.body" -D "$TMP/pre.h" -w '%{http_code}' -X OPTIONS "$@"; }
+ph() { tr -d '\r' <"$TMP/pre.h" | awk -F': ' -v n="${1,,}" 'tolower($1)==n {print substr($0, length($1)+3)}' | tail -n 1; }
+st=$(pre -H "Origin: http://viewer.example" -H "Access-Control-Request-Method: POST" \
+    -H "Access-Control-Request-Headers: authorization, content-type" "$BASE/v1/jobs")
+check "preflight: 204 (got $st)" test "$st" = 204
+check "preflight: Allow-Origin is the origin" test "$(ph Access-Control-Allow-Origin)" = http://viewer.example
+check "preflight: the route's methods" test "$(ph Access-Control-Allow-Methods)" = "GET, HEAD, POST"
+check "preflight: Authorization may be sent" bash -c "grep -qi '^access-control-allow-headers:.*Authorization' '$TMP/pre.h'"
+check "preflight: Content-Type may be sent" bash -c "grep -qi '^access-control-allow-headers:.*Content-Type' '$TMP/pre.h'"
+check "preflight: Max-Age" test -n "$(ph Access-Control-Max-Age)"
+check "preflight: Vary: Origin" bash -c "grep -qi '^vary: Origin' '$TMP/pre.h'"
+check "preflight: no body" test ! -s "$TMP/pre.body"
+st=$(pre -H "Origin: http://b.example:8000" -H "Access-Control-Request-Method: GET" "$BASE/v1/jobs/01a200443ae27c41d09b5e3fa2c86d14/result")
+check "preflight from a comma-listed origin: 204 (got $st)" test "$st" = 204
+check "preflight from a comma-listed origin: allowed" test "$(ph Access-Control-Allow-Origin)" = http://b.example:8000
+st=$(pre -H "Origin: http://evil.example" -H "Access-Control-Request-Method: POST" "$BASE/v1/jobs")
+check "preflight from another origin: 204 (got $st)" test "$st" = 204
+check "another origin gets no CORS headers" bash -c "! grep -qi '^access-control-' '$TMP/pre.h'"
+st=$(pre "$BASE/v1/nowhere")
+check "OPTIONS on an unknown path: 404 (got $st)" test "$st" = 404
+
+# Normal answers carry Allow-Origin and Expose-Headers for allowed origins.
+api GET /v1/info -H "Origin: http://c.example"
+expect_status "info from an allowed origin" 200
+check "answer: Allow-Origin" test "$(header Access-Control-Allow-Origin)" = http://c.example
+check "answer: Expose-Headers names Location and X-Request-Id" bash -c "grep -qi '^access-control-expose-headers:.*Location.*X-Request-Id' '$HDRS'"
+api GET /v1/info -H "Origin: http://evil.example"
+check "answer to another origin: no CORS headers" bash -c "! grep -qi '^access-control-' '$HDRS'"
+api GET /v1/info
+check "answer without Origin: no CORS headers" bash -c "! grep -qi '^access-control-' '$HDRS'"
+SAVED=$TOKEN
+TOKEN=
+api GET /v1/meshes -H "Origin: http://viewer.example"
+expect_error "401 from an allowed origin" 401 unauthorized
+check "a 401 is readable by the page (Allow-Origin)" test "$(header Access-Control-Allow-Origin)" = http://viewer.example
+TOKEN=$SAVED
+
+# Request ids: made when absent, echoed when sane, replaced when not.
+api GET /v1/meshes
+RID=$(header X-Request-Id)
+check "a request id is made ($RID)" bash -c "[[ '$RID' =~ ^[0-9a-f]{16}$ ]]"
+api GET /v1/meshes
+check "each request its own id" test "$(header X-Request-Id)" != "$RID"
+api GET "/v1/jobs/01a200443ae27c41d09b5e3fa2c86d14" -H "X-Request-Id: client-abc.123"
+expect_error "unknown job" 404 job_not_found
+check "the client's id is echoed" test "$(header X-Request-Id)" = client-abc.123
+api GET /v1/meshes -H "X-Request-Id: bad id with spaces"
+check "an unsafe id is replaced" bash -c "[[ '$(header X-Request-Id)' =~ ^[0-9a-f]{16}$ ]]"
+sleep 0.3
+LINE=$(grep -a 'event=http.request' "$TMP/daemon.log" | grep -a 'request_id=client-abc.123' | tail -n 1)
+check "the log line has the request id" test -n "$LINE"
+check "the log line has the concrete path" bash -c "grep -q 'path=/v1/jobs/01a200443ae27c41d09b5e3fa2c86d14 ' <<<'$LINE'"
+check "the log line has the template route" bash -c "grep -q 'route=/v1/jobs/{id} ' <<<'$LINE'"
+check "the log line has the client address" bash -c "grep -q 'client=127.0.0.1 ' <<<'$LINE'"
+
+stop_daemon
+finish

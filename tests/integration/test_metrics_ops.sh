@@ -1,0 +1,55 @@
+#!/usr/bin/env bash
+# Operators' metrics and logs (issue #13): the process_* family, failed jobs
+# by error code (and logged at warn), the queue-wait histogram, job-duration
+# buckets up to the job timeout, evictions, GL context losses, voxeld_ready.
+source "$(dirname "$0")/lib.sh"
+source "$(dirname "$0")/box.sh"
+# Three lost contexts: the first job loses two (fails context_lost), the
+# second loses one and succeeds on the retry. A 1-byte results budget
+# evicts every result once its job has finished.
+VOXELD_TEST_LOSE_CONTEXT=3 start_daemon --job-timeout 90 --results-max-bytes 1 || exit 1
+metric() { awk -v n="$1" '$1 == n {print $2}' "$BODY"; }
+
+box_obj "$TMP/box.obj" 0 0 0 1 1 1
+upload "$TMP/box.obj"
+run_job voxelize "$MESH_ID" '{"resolution":16,"format":"raw8"}'
+check "job 1 fails: context_lost" jq -e '.state == "failed" and .error.code == "context_lost"' "$TMP/job.json"
+J1=$JOB
+run_job voxelize "$MESH_ID" '{"resolution":16,"format":"raw8"}'
+job_ok "job 2 (retried once)"
+J2=$JOB
+api GET "/v1/jobs/$J2/result"
+expect_error "job 2's result was evicted by the budget" 410 result_evicted
+
+sleep 0.3
+LINE=$(grep -a 'event=job.finished' "$TMP/daemon.log" | grep -a "job=$J1" | tail -n 1)
+check "the failed job is logged at warn" bash -c "grep -q 'level=warn' <<<'$LINE'"
+LINE=$(grep -a 'event=job.finished' "$TMP/daemon.log" | grep -a "job=$J2" | tail -n 1)
+check "a succeeded job is logged at info" bash -c "grep -q 'level=info' <<<'$LINE'"
+
+api GET /metrics
+expect_status "metrics" 200
+check "voxeld_ready 1" test "$(metric voxeld_ready)" = 1
+check "voxeld_up is gone" bash -c "! grep -q '^voxeld_up' '$BODY'"
+check "failed by code" test "$(metric 'voxeld_jobs_failed_total{kind="voxelize",code="context_lost"}')" = 1
+check "GL context losses" test "$(metric voxeld_gl_context_losses_total)" = 3
+check "evictions" test "$(metric voxeld_results_evicted_total)" -ge 1
+check "queue wait: both jobs that ran" test "$(metric voxeld_job_queue_wait_seconds_count)" = 2
+check "queue wait +Inf bucket" test "$(metric 'voxeld_job_queue_wait_seconds_bucket{le="+Inf"}')" = 2
+check "job duration: the job timeout is the last bucket" \
+    grep -q '^voxeld_job_duration_seconds_bucket{kind="voxelize",le="90"} 2$' "$BODY"
+check "job duration: no bucket past the timeout" \
+    bash -c "! grep -q 'voxeld_job_duration_seconds_bucket{kind=\"voxelize\",le=\"120\"}' '$BODY'"
+RSS=$(metric process_resident_memory_bytes)
+check "resident memory ($RSS) above 4 MB" test "${RSS:-0}" -gt 4000000
+check "resident memory = /proc's VmRSS, within 25%" \
+    awk -v m="$RSS" -v k="$(awk '/VmRSS/ {print $2}' /proc/$PID/status)" 'BEGIN {exit !(m > 0.75 * k * 1024 && m < 1.25 * k * 1024)}'
+FDS=$(metric process_open_fds)
+check "open fds ($FDS)" test "${FDS:-0}" -gt 3
+check "max fds at least the open ones" awk -v a="$(metric process_max_fds)" -v b="$FDS" 'BEGIN {exit !(a >= b)}'
+check "cpu seconds counted" awk -v a="$(metric process_cpu_seconds_total)" 'BEGIN {exit !(a > 0)}'
+check "start time in the past" awk -v a="$(metric process_start_time_seconds)" -v now="$(date +%s)" 'BEGIN {exit !(a > 0 && a <= now)}'
+check "HELP and TYPE for the new families" bash -c "for f in voxeld_jobs_failed_total voxeld_job_queue_wait_seconds voxeld_results_evicted_total voxeld_gl_context_losses_total process_open_fds process_max_fds process_cpu_seconds_total process_resident_memory_bytes; do grep -q \"^# TYPE \$f \" '$BODY' || exit 1; done"
+
+stop_daemon
+finish
