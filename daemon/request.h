@@ -43,8 +43,7 @@ typedef struct vx_req_target {
 /* The declared query parameters of one request, after strict parsing.
  * progress (GET /v1/jobs/{id} only) is a fraction from 0 to 1. */
 typedef struct vx_req_query {
-    int has_limit, has_after, has_state, has_wait, has_progress;
-    int has_limit, has_after, has_state, has_wait, has_order, has_kind, has_mesh;
+    int has_limit, has_after, has_state, has_wait, has_progress, has_order, has_kind, has_mesh;
     int limit;                 /* 1..1000; 100 when absent */
     char after[VX_REQ_ID_MAX]; /* a mesh or job id in form */
     char state[16];            /* a job state */
