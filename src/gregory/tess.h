@@ -30,9 +30,12 @@ typedef struct vx_gtess_layout {
     uint32_t *ndiv; /* per patch */
     uint64_t *voff; /* npatches + 1: first grid vertex of each patch */
     int weld;
-    size_t nverts; /* output vertices */
-    uint64_t *rep; /* nverts: the grid vertex an output vertex is taken from
-                      (another patch's on a transition edge) */
+    size_t nverts;   /* output vertices */
+    uint64_t *rep;   /* nverts: the grid vertex an output vertex is taken from
+                        (another patch's on a transition edge) */
+    uint64_t *share; /* unwelded only (else NULL), nverts: the one grid vertex
+                        that gives a point several patches share (UINT64_MAX:
+                        a patch interior point) */
     size_t ntris;
     uint32_t *tri;       /* 3 * ntris output vertex ids, counter-clockwise seen from the normal */
     uint32_t *tri_patch; /* ntris: the patch of each triangle */
@@ -88,7 +91,10 @@ int vx_gregory_tessellate(vx_gl *gl, const vx_gpatch_set *s, const vx_gtess_layo
                           const double origin[3], float *grid, double *gpu_ms, vx_err *err);
 
 /* Output vertex positions (3 doubles, origin added back) and normals
- * (3 floats) from a grid the tessellator filled. 0, or -1 with err when the
+ * (3 floats) from a grid the tessellator filled. Unwelded, every copy of a
+ * point that patches share gets the position one evaluation gave, and its
+ * normal too unless the patches meet at a crease there (normals over 1°
+ * apart): float evaluation in each patch would part them by ~1e-3°. 0, or -1 with err when the
  * thread's stop hook (util/stop.h) says stop. Any thread. */
 int vx_gregory_gather(const vx_gtess_layout *l, const float *grid, const double origin[3],
                       double *pos, float *nrm, vx_err *err);
