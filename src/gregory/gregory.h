@@ -57,6 +57,11 @@ void vx_gpatch_set_free(vx_gpatch_set *s);
  * k point that the boundary through that corner uses. */
 void vx_gpatch_eval(const double *cp, double u, double v, double pos[3], double nrm[3]);
 
+/* Patches whose normal at their centre turns against their face (the input
+ * face they came from, Newell normal; for Bézier input the patch's corner
+ * quad): folds, where a construction bends a patch over. Any thread. */
+size_t vx_gpatch_folded(const vx_gpatch_set *s, const vx_mesh *m);
+
 /* ---- The interpolate construction (build.c) ----
  *
  * A mesh of quads only gives one patch per face. Any other mesh (a

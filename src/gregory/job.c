@@ -570,6 +570,7 @@ static int run_gl(vx_job_run *r, const vx_mesh *mesh, const gparams *pp, void **
     cJSON *frame_ms = cJSON_CreateArray();
     double t0 = vx_mono_ms();
     if ((nframes == 1 ? construct_once(r, &b, err) : construct(&b, mesh->pos, err))) goto done;
+    size_t folded = vx_gpatch_folded(b.set, mesh); /* of the mesh itself (frame 0) */
     double build_ms = vx_mono_ms() - t0;
     /* How far approximate-cc is from the true limit surface (frame 0). */
     double cc_distance = -1;
@@ -611,6 +612,7 @@ static int run_gl(vx_job_run *r, const vx_mesh *mesh, const gparams *pp, void **
     if (!tess) goto done;
     if (tessellate_frames(r, mesh, &p, &b, s, tess, grid, origin, frame_ms, &t, err)) goto done;
     add_stats(r, mesh, &p, &b, ndiv, s, gv, build_ms, cc_distance, &t, &frame_ms);
+    if (vx_run_stats(r)) cJSON_AddNumberToObject(vx_run_stats(r), "folded_patches", (double)folded);
     rc = 0;
 done:
     vx_gtess_free(tess);

@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Topology and normal checks of a gregory job's OBJ output (pure Python).
 
-gregory_check.py FILE.obj [--closed] [--g1]
+gregory_check.py FILE.obj [--g1 [--crease DEG]]
 Prints one JSON object:
   edges_over_2   edges used by more than two triangles
   edges_once     edges used by one triangle (boundary)
@@ -13,6 +13,11 @@ Prints one JSON object:
                  one point (points on patch boundaries matched within 1e-7
                  of the bounding box diagonal)
   g1_points      how many such shared points were compared
+  g1_creases     (--crease DEG) points where the normals differ by more
+                 than DEG: surfaces that only touch there (the teapot's
+                 handle and spout on its body), left out of g1_max_deg
+  back_facing_transition  (--g1) back-facing triangles in transition
+                 patches (a group that is not a regular (N+1)^2 grid)
 """
 import json
 import math
@@ -59,7 +64,7 @@ def angle(a, b):
     return math.degrees(math.acos(max(-1.0, min(1.0, c))))
 
 
-def g1(v, n, faces, groups, diag):
+def g1(v, n, faces, groups, diag, crease):
     """Largest normal angle between patches at their shared boundary points."""
     own = {}  # (group, a, b) edge count within a patch
     for (t, tn), g in zip(faces, groups):
@@ -79,7 +84,7 @@ def g1(v, n, faces, groups, diag):
     for vi, (g, ni) in bnd.items():
         p = v[vi]
         cells.setdefault((math.floor(p[0] / h), math.floor(p[1] / h), math.floor(p[2] / h)), []).append(vi)
-    worst, count = 0.0, 0
+    worst, count, creases = 0.0, 0, 0
     for (cx, cy, cz), here in cells.items():
         near = []
         for dx in (-1, 0, 1):
@@ -92,9 +97,31 @@ def g1(v, n, faces, groups, diag):
                     continue
                 if dot(sub(v[a], v[b]), sub(v[a], v[b])) > h * h:
                     continue
+                d = angle(n[bnd[a][1]], n[bnd[b][1]])
+                if d > crease:
+                    creases += 1
+                    continue
                 count += 1
-                worst = max(worst, angle(n[bnd[a][1]], n[bnd[b][1]]))
-    return worst, count
+                worst = max(worst, d)
+    return worst, count, creases
+
+
+def transition_back(v, n, faces, groups, diag):
+    """Back-facing triangles of the patches that are not a regular grid."""
+    verts, tris = {}, {}
+    for (t, tn), g in zip(faces, groups):
+        verts.setdefault(g, set()).update(t)
+        tris[g] = tris.get(g, 0) + 1
+    bad = 0
+    for (t, tn), g in zip(faces, groups):
+        r = int(round(math.sqrt(len(verts[g])))) - 1
+        if (r + 1) ** 2 == len(verts[g]) and tris[g] == 2 * r * r:
+            continue
+        gn = cross(sub(v[t[1]], v[t[0]]), sub(v[t[2]], v[t[0]]))
+        m = [n[tn[0]][i] + n[tn[1]][i] + n[tn[2]][i] for i in range(3)]
+        if dot(gn, gn) > (1e-12 * diag * diag) ** 2 and dot(gn, m) < 0:
+            bad += 1
+    return bad
 
 
 def main():
@@ -125,7 +152,10 @@ def main():
         "back_facing": back,
     }
     if "--g1" in sys.argv[2:]:
-        out["g1_max_deg"], out["g1_points"] = g1(v, n, faces, groups, diag)
+        args = sys.argv[2:]
+        crease = float(args[args.index("--crease") + 1]) if "--crease" in args else 180.0
+        out["g1_max_deg"], out["g1_points"], out["g1_creases"] = g1(v, n, faces, groups, diag, crease)
+        out["back_facing_transition"] = transition_back(v, n, faces, groups, diag)
     print(json.dumps(out))
 
 
