@@ -27,7 +27,10 @@
  * corner_key says which corners are the same point of the surface: the
  * input vertex id for mesh constructions, the de-duplicated control point
  * for Bézier input. Two patches share an edge when they share both corner
- * keys of it; welding goes by these keys, never by comparing floats. */
+ * keys of it and its boundary curve: two different curves can join the
+ * same two corners (the halves of a tube's cross-section), so the layout
+ * (layout.c) also compares the curves' inner control points, to 1e-6 of
+ * the curve's control polygon. Corners weld by keys alone. */
 #ifndef VX_GREGORY_H
 #define VX_GREGORY_H
 

@@ -171,8 +171,8 @@ uint32_t *vx_gregory_divisions(const vx_gpatch_set *s, int n, double max_edge, v
     /* Graded: no patch under half of a neighbour's N, so that the zipper
      * strip of a transition patch never fans one inner point out to many
      * points of a much finer edge (thin triangles that turn over on a
-     * strongly curved patch). Each pass at least halves the largest ratio
-     * left: at most 9 passes for N <= 256. */
+     * strongly curved patch). N only rises, to at most the largest N, so
+     * the passes end; each carries the grading across many patches. */
     for (int changed = 1; changed;) {
         changed = 0;
         for (size_t q = 1; q < 4 * s->npatches; q++) {

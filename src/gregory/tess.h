@@ -1,5 +1,5 @@
 /* Tessellation of Gregory patch sets: the output layout (divisions per
- * patch, welding by corner keys, triangles) on the CPU, and the one-pass
+ * patch, welding by corner keys and boundary curves, triangles) on the CPU, and the one-pass
  * GPU evaluation of every grid vertex (seed 001 §3: each vertex of an N x N
  * division is independent, so a compute shader evaluates them all at once).
  *
@@ -12,7 +12,8 @@
  * whose points on a finer edge are the finer neighbour's grid vertices (the
  * same boundary curve): shared edges match exactly, no cracks, no
  * T-junctions.
- * The layout depends only on the topology (corner keys) and the divisions,
+ * The layout depends only on the topology (corner keys, which boundary
+ * curves are one: from the first frame's control points) and the divisions,
  * so deformation frames reuse it. */
 #ifndef VX_GREGORY_TESS_H
 #define VX_GREGORY_TESS_H
@@ -44,8 +45,10 @@ typedef struct vx_gtess_layout {
 /* Divisions per patch: n for every patch (max_edge <= 0), or, for
  * max_edge > 0, each patch's own N: the one that brings every boundary
  * control polygon of the patch under max_edge per segment, clamped to
- * 1..256, and at least 2 where a patch of its connected component (patches
- * joined by shared edges) has more (a transition patch needs an interior).
+ * 1..256, raised to at least half (rounded up) of each neighbour's N
+ * (graded: no zipper strip fans out to a much finer edge), and at least 2
+ * where a patch of its connected component (patches joined by shared
+ * edges) has more (a transition patch needs an interior).
  * Owned array of npatches; NULL on allocation failure. Any thread. */
 uint32_t *vx_gregory_divisions(const vx_gpatch_set *s, int n, double max_edge, vx_err *err);
 

@@ -60,4 +60,9 @@ check "stats: the teapot's Bézier patches fold none ($(st folded_patches))" tes
 # there): points over 1 degree apart are counted as creases, not compared
 g1 teapot "$MESH_ID" '{"divisions":8,"weld":false}' "" --crease 1
 g1 teapot "$MESH_ID" '{"max_edge":0.1,"weld":false}' "" --crease 1
+# N = 3 next to edges of 10 on the strongly curved spout and handle: the
+# ungraded divisions and the corner ears of the transition strips made 7
+# back-facing triangles here (defect 5)
+g1 teapot "$MESH_ID" '{"max_edge":0.4,"weld":false}' "" --crease 1
+check "teapot max_edge 0.4: graded divisions (at least half of 10)" test "$(st divisions_min)" -ge 5
 finish
