@@ -470,8 +470,9 @@ static int check_size(const vx_limits *lim, const vx_gpatch_set *set, const uint
                    set->npatches, (unsigned long long)nt, (unsigned long long)lim->max_triangles);
         return -1;
     }
-    /* Grid, per-frame outputs, layout. */
-    uint64_t bytes = *gv * 6 * sizeof(float) + nv * sizeof(uint64_t) +
+    /* Grid, per-frame outputs, layout (rep, and share when unwelded: nv
+     * counts the unwelded vertices, an upper bound either way). */
+    uint64_t bytes = *gv * 6 * sizeof(float) + 2 * nv * sizeof(uint64_t) +
                      (uint64_t)nframes * nv * (3 * sizeof(double) + 3 * sizeof(float)) +
                      nt * 4 * sizeof(uint32_t) + set->npatches * VX_GPATCH_POINTS * 3 * 8;
     if (lim->max_job_memory && bytes > lim->max_job_memory) {

@@ -517,6 +517,51 @@ static void transition_tris(const lctx *c, size_t p)
     }
 }
 
+/* Per corner key: its welded id (NONE until assign_ids) and its valence;
+ * the edge bases. -1 on allocation failure. */
+static int key_tables(lctx *c)
+{
+    const vx_gpatch_set *s = c->s;
+    size_t np = s->npatches;
+    uint32_t maxkey = 0;
+    for (size_t q = 0; q < 4 * np; q++)
+        if (s->corner_key[q] > maxkey) maxkey = s->corner_key[q];
+    c->corner_id = malloc(((size_t)maxkey + 1) * sizeof *c->corner_id);
+    c->edge_base = malloc((4 * np + 1) * sizeof *c->edge_base);
+    c->valence = calloc((size_t)maxkey + 1, 1);
+    if (!c->corner_id || !c->edge_base || !c->valence) return -1;
+    for (size_t k = 0; k <= maxkey; k++)
+        c->corner_id[k] = NONE;
+    for (size_t q = 0; q < 4 * np; q++)
+        if (c->valence[s->corner_key[q]] < 255) c->valence[s->corner_key[q]]++;
+    return 0;
+}
+
+/* The grid vertex of every output vertex (the first patch that has it
+ * gives it) and, unwelded, of every shared point. -1 with the stop hook's
+ * err. */
+static int fill_reps(lctx *c, vx_err *err)
+{
+    vx_gtess_layout *l = c->l;
+    for (size_t p = 0; p < l->npatches; p++) {
+        uint32_t n = l->ndiv[p];
+        if (vx_stop_poll(err)) return -1;
+        for (uint32_t j = 1; j < n; j++)
+            for (uint32_t i = 1; i < n; i++)
+                l->rep[grid_id(c, p, i, j)] = l->voff[p] + (uint64_t)j * (n + 1) + i;
+        for (int ed = 0; ed < 4; ed++)
+            for (uint32_t t = 0; t < c->ne[4 * p + (size_t)ed]; t++) {
+                uint32_t v = loop_id(c, p, ed, t);
+                if (l->rep[v] == UINT64_MAX) l->rep[v] = loop_grid(c, p, ed, t);
+                if (l->weld) continue;
+                uint32_t w = shared_id(c, p, ed, t);
+                if (c->wrep[w] == UINT64_MAX) c->wrep[w] = l->rep[v];
+                l->share[v] = c->wrep[w];
+            }
+    }
+    return 0;
+}
+
 vx_gtess_layout *vx_gregory_layout_new(const vx_gpatch_set *s, const uint32_t *ndiv, int weld,
                                        vx_err *err)
 {
@@ -554,17 +599,7 @@ vx_gtess_layout *vx_gregory_layout_new(const vx_gpatch_set *s, const uint32_t *n
     }
     gv = l->voff[np];
     if (gv >= UINT32_MAX) goto fail_big;
-    uint32_t maxkey = 0;
-    for (size_t q = 0; q < 4 * np; q++)
-        if (s->corner_key[q] > maxkey) maxkey = s->corner_key[q];
-    c.corner_id = malloc(((size_t)maxkey + 1) * sizeof *c.corner_id);
-    c.edge_base = malloc((4 * np + 1) * sizeof *c.edge_base);
-    c.valence = calloc((size_t)maxkey + 1, 1);
-    if (!c.corner_id || !c.edge_base || !c.valence) goto fail_oom;
-    for (size_t k = 0; k <= maxkey; k++)
-        c.corner_id[k] = NONE;
-    for (size_t q = 0; q < 4 * np; q++)
-        if (c.valence[s->corner_key[q]] < 255) c.valence[s->corner_key[q]]++;
+    if (key_tables(&c)) goto fail_oom;
     uint64_t nshared, nv = assign_ids(&c, &nshared);
     if (nv >= UINT32_MAX || nshared >= UINT32_MAX) goto fail_big;
     l->nverts = (size_t)nv;
@@ -585,22 +620,7 @@ vx_gtess_layout *vx_gregory_layout_new(const vx_gpatch_set *s, const uint32_t *n
         l->rep[v] = UINT64_MAX;
     /* The loops below take about a second per 10^7 triangles on a CPU:
      * they poll the stop hook (util/stop.h) as they go. */
-    for (size_t p = 0; p < np; p++) { /* the first patch that has a vertex gives it */
-        uint32_t n = ndiv[p];
-        if (vx_stop_poll(err)) goto fail;
-        for (uint32_t j = 1; j < n; j++)
-            for (uint32_t i = 1; i < n; i++)
-                l->rep[grid_id(&c, p, i, j)] = l->voff[p] + (uint64_t)j * (n + 1) + i;
-        for (int ed = 0; ed < 4; ed++)
-            for (uint32_t t = 0; t < c.ne[4 * p + (size_t)ed]; t++) {
-                uint32_t v = loop_id(&c, p, ed, t);
-                if (l->rep[v] == UINT64_MAX) l->rep[v] = loop_grid(&c, p, ed, t);
-                if (weld) continue;
-                uint32_t w = shared_id(&c, p, ed, t);
-                if (c.wrep[w] == UINT64_MAX) c.wrep[w] = l->rep[v];
-                l->share[v] = c.wrep[w];
-            }
-    }
+    if (fill_reps(&c, err)) goto fail;
     for (size_t p = 0; p < np; p++) {
         if (vx_stop_poll(err)) goto fail;
         if (is_transition(c.ne, ndiv, p))
