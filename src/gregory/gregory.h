@@ -27,7 +27,10 @@
  * corner_key says which corners are the same point of the surface: the
  * input vertex id for mesh constructions, the de-duplicated control point
  * for Bézier input. Two patches share an edge when they share both corner
- * keys of it; welding goes by these keys, never by comparing floats. */
+ * keys of it and its boundary curve: two different curves can join the
+ * same two corners (the halves of a tube's cross-section), so the layout
+ * (layout.c) also compares the curves' inner control points, to 1e-6 of
+ * the curve's control polygon. Corners weld by keys alone. */
 #ifndef VX_GREGORY_H
 #define VX_GREGORY_H
 
@@ -56,6 +59,11 @@ void vx_gpatch_set_free(vx_gpatch_set *s);
  * NULL. The blend at a corner (u + v = 0 and the like) takes the limit: the
  * k point that the boundary through that corner uses. */
 void vx_gpatch_eval(const double *cp, double u, double v, double pos[3], double nrm[3]);
+
+/* Patches whose normal at their centre turns against their face (the input
+ * face they came from, Newell normal; for Bézier input the patch's corner
+ * quad): folds, where a construction bends a patch over. Any thread. */
+size_t vx_gpatch_folded(const vx_gpatch_set *s, const vx_mesh *m);
 
 /* ---- The interpolate construction (build.c) ----
  *

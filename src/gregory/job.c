@@ -543,8 +543,9 @@ static int check_size(const vx_limits *lim, const vx_gpatch_set *set, const uint
                    set->npatches, (unsigned long long)nt, (unsigned long long)lim->max_triangles);
         return -1;
     }
-    /* Grid, per-frame outputs, layout. */
-    uint64_t bytes = *gv * 6 * sizeof(float) + nv * sizeof(uint64_t) +
+    /* Grid, per-frame outputs, layout (rep, and share when unwelded: nv
+     * counts the unwelded vertices, an upper bound either way). */
+    uint64_t bytes = *gv * 6 * sizeof(float) + 2 * nv * sizeof(uint64_t) +
                      (uint64_t)nframes * nv * (3 * sizeof(double) + 3 * sizeof(float)) +
                      nt * 4 * sizeof(uint32_t) + set->npatches * VX_GPATCH_POINTS * 3 * 8;
     if (lim->max_job_memory && bytes > lim->max_job_memory) {
@@ -640,6 +641,7 @@ static int run_gl(vx_job_run *r, const vx_mesh *mesh, const gparams *pp, void **
     if (gather_positions(r, mesh, &p, nframes, pos, &copies, err) ||
         construct_all(r, &b, pos, nframes, err))
         goto done;
+    size_t folded = vx_gpatch_folded(b.set, mesh); /* of the mesh itself (frame 0) */
     double build_ms = vx_mono_ms() - t0;
     /* How far approximate-cc is from the true limit surface (frame 0). */
     double cc_distance = -1;
@@ -681,6 +683,7 @@ static int run_gl(vx_job_run *r, const vx_mesh *mesh, const gparams *pp, void **
     if (!tess) goto done;
     if (tessellate_frames(r, &b, pos, s, tess, grid, origin, frame_ms, &t, err)) goto done;
     add_stats(r, mesh, &p, &b, ndiv, s, gv, build_ms, cc_distance, &t, &frame_ms);
+    if (vx_run_stats(r)) cJSON_AddNumberToObject(vx_run_stats(r), "folded_patches", (double)folded);
     rc = 0;
 done:
     vx_gtess_free(tess);

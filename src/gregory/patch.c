@@ -145,3 +145,39 @@ void vx_gpatch_eval(const double *cp, double u, double v, double pos[3], double 
     nrm[0] = nrm[1] = 0;
     nrm[2] = 1; /* a patch collapsed to a curve or point has no normal */
 }
+
+/* The Newell normal of input face f (unnormalised), frame-0 positions. */
+static void face_normal(const vx_mesh *m, size_t f, double n[3])
+{
+    size_t a = m->face_start ? m->face_start[f] : 3 * f;
+    size_t b = m->face_start ? m->face_start[f + 1] : 3 * f + 3;
+    n[0] = n[1] = n[2] = 0;
+    for (size_t k = a; k < b; k++) {
+        const double *p = m->pos + 3 * (size_t)m->face_idx[k];
+        const double *q = m->pos + 3 * (size_t)m->face_idx[k + 1 < b ? k + 1 : a];
+        n[0] += (p[1] - q[1]) * (p[2] + q[2]);
+        n[1] += (p[2] - q[2]) * (p[0] + q[0]);
+        n[2] += (p[0] - q[0]) * (p[1] + q[1]);
+    }
+}
+
+size_t vx_gpatch_folded(const vx_gpatch_set *s, const vx_mesh *m)
+{
+    size_t folded = 0;
+    for (size_t p = 0; p < s->npatches; p++) {
+        const double *cp = s->cp + p * VX_GPATCH_POINTS * 3;
+        double pos[3], nrm[3], fn[3];
+        if (m->npatches || s->face[p] >= m->nfaces) { /* a Bézier patch: its corner quad */
+            const double *c0 = cp, *c1 = cp + 9, *c2 = cp + 45, *c3 = cp + 36;
+            double d[3] = {c2[0] - c0[0], c2[1] - c0[1], c2[2] - c0[2]},
+                   e[3] = {c3[0] - c1[0], c3[1] - c1[1], c3[2] - c1[2]};
+            fn[0] = d[1] * e[2] - d[2] * e[1];
+            fn[1] = d[2] * e[0] - d[0] * e[2];
+            fn[2] = d[0] * e[1] - d[1] * e[0];
+        } else
+            face_normal(m, s->face[p], fn);
+        vx_gpatch_eval(cp, 0.5, 0.5, pos, nrm);
+        if (nrm[0] * fn[0] + nrm[1] * fn[1] + nrm[2] * fn[2] < 0) folded++;
+    }
+    return folded;
+}

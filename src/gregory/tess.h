@@ -1,5 +1,5 @@
 /* Tessellation of Gregory patch sets: the output layout (divisions per
- * patch, welding by corner keys, triangles) on the CPU, and the one-pass
+ * patch, welding by corner keys and boundary curves, triangles) on the CPU, and the one-pass
  * GPU evaluation of every grid vertex (seed 001 §3: each vertex of an N x N
  * division is independent, so a compute shader evaluates them all at once).
  *
@@ -12,7 +12,8 @@
  * whose points on a finer edge are the finer neighbour's grid vertices (the
  * same boundary curve): shared edges match exactly, no cracks, no
  * T-junctions.
- * The layout depends only on the topology (corner keys) and the divisions,
+ * The layout depends only on the topology (corner keys, which boundary
+ * curves are one: from the first frame's control points) and the divisions,
  * so deformation frames reuse it. */
 #ifndef VX_GREGORY_TESS_H
 #define VX_GREGORY_TESS_H
@@ -30,9 +31,12 @@ typedef struct vx_gtess_layout {
     uint32_t *ndiv; /* per patch */
     uint64_t *voff; /* npatches + 1: first grid vertex of each patch */
     int weld;
-    size_t nverts; /* output vertices */
-    uint64_t *rep; /* nverts: the grid vertex an output vertex is taken from
-                      (another patch's on a transition edge) */
+    size_t nverts;   /* output vertices */
+    uint64_t *rep;   /* nverts: the grid vertex an output vertex is taken from
+                        (another patch's on a transition edge) */
+    uint64_t *share; /* unwelded only (else NULL), nverts: the one grid vertex
+                        that gives a point several patches share (UINT64_MAX:
+                        a patch interior point) */
     size_t ntris;
     uint32_t *tri;       /* 3 * ntris output vertex ids, counter-clockwise seen from the normal */
     uint32_t *tri_patch; /* ntris: the patch of each triangle */
@@ -41,8 +45,10 @@ typedef struct vx_gtess_layout {
 /* Divisions per patch: n for every patch (max_edge <= 0), or, for
  * max_edge > 0, each patch's own N: the one that brings every boundary
  * control polygon of the patch under max_edge per segment, clamped to
- * 1..256, and at least 2 where a patch of its connected component (patches
- * joined by shared edges) has more (a transition patch needs an interior).
+ * 1..256, raised to at least half (rounded up) of each neighbour's N
+ * (graded: no zipper strip fans out to a much finer edge), and at least 2
+ * where a patch of its connected component (patches joined by shared
+ * edges) has more (a transition patch needs an interior).
  * Owned array of npatches; NULL on allocation failure. Any thread. */
 uint32_t *vx_gregory_divisions(const vx_gpatch_set *s, int n, double max_edge, vx_err *err);
 
@@ -88,7 +94,10 @@ int vx_gregory_tessellate(vx_gl *gl, const vx_gpatch_set *s, const vx_gtess_layo
                           const double origin[3], float *grid, double *gpu_ms, vx_err *err);
 
 /* Output vertex positions (3 doubles, origin added back) and normals
- * (3 floats) from a grid the tessellator filled. 0, or -1 with err when the
+ * (3 floats) from a grid the tessellator filled. Unwelded, every copy of a
+ * point that patches share gets the position one evaluation gave, and its
+ * normal too unless the patches meet at a crease there (normals over 1°
+ * apart): float evaluation in each patch would part them by ~1e-3°. 0, or -1 with err when the
  * thread's stop hook (util/stop.h) says stop. Any thread. */
 int vx_gregory_gather(const vx_gtess_layout *l, const float *grid, const double origin[3],
                       double *pos, float *nrm, vx_err *err);
