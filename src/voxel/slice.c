@@ -165,7 +165,7 @@ static uint64_t target_bytes(const plan *p, int batch)
 /* Grid-frame coordinate of vertex v along axis a, as uploaded. */
 static float grid_coord(const vx_mesh *m, const vx_grid *g, size_t v, int a)
 {
-    return (float)((m->pos[3 * v + a] - g->origin[a]) / g->h);
+    return (float)vx_grid_coord(g, a, m->pos[3 * v + a]);
 }
 
 /* Incremental signed count (nonzero): plane j sits at w = (j + 1/2) / ss.

@@ -123,8 +123,10 @@ static void test_boxes_on_cell_boundaries(void **state)
             hi[a] = off[a] + cases[c].hi[a] * h;
         }
         vx_mesh *m = shape_box(lo, hi);
-        vx_grid g = {
-            {off[0], off[1], off[2]}, h, {cases[c].dims[0], cases[c].dims[1], cases[c].dims[2]}};
+        vx_grid g = {{off[0], off[1], off[2]},
+                     h,
+                     {cases[c].dims[0], cases[c].dims[1], cases[c].dims[2]},
+                     {0, 0, 0}};
         uint64_t want = 1;
         for (int a = 0; a < 3; a++)
             want *= (uint64_t)(cases[c].hi[a] - cases[c].lo[a]);
@@ -153,7 +155,7 @@ static void test_boxes_on_cell_boundaries(void **state)
 static void test_tie_rule(void **state)
 {
     vx_mesh *m = shape_box((double[]){2.5, 3.5, 1.5}, (double[]){9.5, 7.5, 6.5});
-    vx_grid g = {{0, 0, 0}, 1.0, {12, 10, 8}};
+    vx_grid g = {{0, 0, 0}, 1.0, {12, 10, 8}, {0, 0, 0}};
     for (int rule = 0; rule < 3; rule++) {
         vx_bitgrid b;
         vx_voxelize_stats st;
@@ -215,7 +217,7 @@ static void test_partial_grid(void **state)
     vx_mesh *m = shape_param_mesh(128, 64, 1, 0, 0.05, -0.02, 0.03, 1.0, 0);
     const double h = 1.0 / 40;
     /* x, y cover the middle, z from 0.3 to 0.8: both poles outside */
-    vx_grid g = {{-0.6, -0.7, 0.3}, h, {48, 56, 20}};
+    vx_grid g = {{-0.6, -0.7, 0.3}, h, {48, 56, 20}, {0, 0, 0}};
     for (int rule = 0; rule < 3; rule++) {
         vx_bitgrid b;
         vx_voxelize_stats st;
@@ -309,7 +311,7 @@ static void test_overlaps(void **state)
     vx_mesh *m = shape_merge(parts, 2);
     for (int i = 0; i < 2; i++)
         vx_mesh_free(parts[i]);
-    vx_grid g = {{0, 0, 0}, 0.25, {12, 12, 12}};
+    vx_grid g = {{0, 0, 0}, 0.25, {12, 12, 12}, {0, 0, 0}};
     vx_bitgrid b;
     vx_voxelize_stats st;
     voxelize(m, &g, VX_INSIDE_NONZERO, 1, 0, &b, &st);
