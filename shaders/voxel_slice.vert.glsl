@@ -8,19 +8,16 @@ layout(location = 0) in vec3 a_pos;
 
 layout(location = 0) uniform ivec3 u_perm;  // grid axes that become u, v, w
 layout(location = 1) uniform vec4 u_rect;   // image region: u0, v0, width, height (voxels)
-layout(location = 2) uniform vec2 u_planes; // w of two planes: v_d0 = w - x, v_d1 = w - y
 layout(location = 3) uniform vec2 u_zmap;   // depth: z_ndc = (w - x) * y - 1
 
-// Signed distances to the planes, subtracted per vertex before
-// interpolation: a face lying exactly on a plane interpolates to exactly 0,
-// and the same plane always gives the same value for the same fragment.
-out float v_d0, v_d1;
+// w itself, interpolated once per fragment; the fragment shader clamps it
+// to the triangle's own w range and compares it with the planes.
+out float v_w;
 
 void main()
 {
     float u = a_pos[u_perm.x], v = a_pos[u_perm.y], w = a_pos[u_perm.z];
-    v_d0 = w - u_planes.x;
-    v_d1 = w - u_planes.y;
+    v_w = w;
     // The map covers the whole mesh: nothing is clipped; the seed's near
     // plane is the fragment shader's test on v_d0.
     gl_Position = vec4(2.0 * (u - u_rect.x) / u_rect.z - 1.0, 2.0 * (v - u_rect.y) / u_rect.w - 1.0,

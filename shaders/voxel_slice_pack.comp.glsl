@@ -22,33 +22,31 @@ layout(location = 2) uniform ivec2 u_slices; // w of the batch's first slice, sl
 layout(location = 3) uniform ivec3 u_dims;   // grid nx, ny, nz
 layout(location = 4) uniform ivec2 u_chunk;  // k0 of the chunk (SSBO holds k >= k0), wx
 layout(location = 5) uniform int u_ss;       // 1 or 2
-layout(location = 6) uniform int u_mode;     // 0 parity (R8), 1 nonzero (R32F)
+layout(location = 6) uniform int u_mode;     // 1 nonzero (sum != 0), 2 parity (count odd)
 layout(location = 7) uniform int u_threshold;
 layout(location = 8) uniform int u_counts;   // nonzero: write the counts buffer
 layout(location = 9) uniform int u_packx;    // u is grid x: one invocation per 32 voxels
 layout(location = 10) uniform ivec2 u_img;   // row stride in pixels, rows per layer
+
+// A pixel's sum: the winding number beyond it (nonzero), or the number of
+// surfaces beyond it (parity: inside when odd). Small integers, exact in
+// float.
+bool inside_sum(float s)
+{
+    return u_mode == 2 ? (int(round(s)) & 1) != 0 : abs(s) > 0.5;
+}
 
 uint pixel_index(int x, int y, int layer)
 {
     return (uint(layer) * uint(u_img.y) + uint(y)) * uint(u_img.x) + uint(x);
 }
 
-// Inside bits of the n <= 32 pixels x0 .. x0 + n - 1 of one row; x0 is a
-// multiple of 4, so R8 pixels come four to a load.
+// Inside bits of the n <= 32 pixels x0 .. x0 + n - 1 of one row.
 uint row_bits(int x0, int y, int layer, int n)
 {
     uint i = pixel_index(x0, y, layer), r = 0u;
-    if (u_mode == 0) {
-        for (int q = 0; q < (n + 3) / 4; q++) {
-            uint v = img[(i >> 2) + uint(q)];
-            // the top bit of each byte (255 for a back face, 0 otherwise)
-            uint nib = ((v >> 7) & 1u) | ((v >> 14) & 2u) | ((v >> 21) & 4u) | ((v >> 28) & 8u);
-            r |= nib << (4 * q);
-        }
-    } else {
-        for (int q = 0; q < n; q++)
-            if (abs(uintBitsToFloat(img[i + uint(q)])) > 0.5) r |= 1u << q;
-    }
+    for (int q = 0; q < n; q++)
+        if (inside_sum(uintBitsToFloat(img[i + uint(q)]))) r |= 1u << q;
     return n == 32 ? r : r & ((1u << n) - 1u);
 }
 
@@ -60,8 +58,7 @@ void put_count(uint row, int x, int c)
 
 bool inside_index(uint i)
 {
-    if (u_mode == 0) return ((img[i >> 2] >> ((i & 3u) * 8u)) & 0x80u) != 0u;
-    return abs(uintBitsToFloat(img[i])) > 0.5;
+    return inside_sum(uintBitsToFloat(img[i]));
 }
 
 // Stepping along x or y: grid x runs along the batch's slices (dx = 2) or

@@ -63,6 +63,7 @@ int vx_grid_from_voxel_size(const vx_mesh *m, double h, int padding, vx_grid *ou
             return vx_err_set(err, VX_EUNPROC, "invalid_params",
                               "voxel_size %g gives %.0f cells along an axis", h, n);
         out->dims[a] = (int)n + 2 * padding;
+        out->index[a] = 0; /* the grid is its own lattice */
         /* centre the grid on the bbox: the leftover of ceil splits evenly */
         out->origin[a] = m->bbox_min[a] - (n * h - ext) / 2 - padding * h;
     }

@@ -23,6 +23,7 @@ static const char *const format_names[] = {"vdb", "binvox", "raw8", "raw1", "sum
 typedef struct vbox {
     double origin[3], voxel_size;
     long dims[3];
+    long index_offset[3]; /* the box's first voxel in the lattice of origin, voxel_size */
 } vbox;
 
 typedef struct vparams {
@@ -41,6 +42,8 @@ typedef struct vparams {
 
 static const vx_pspec origin_item = VX_P_ITEM_NUM(-HUGE_VAL, HUGE_VAL);
 static const vx_pspec dims_item = VX_P_ITEM_INT(1, VX_VOXELIZE_MAX_DIM);
+static const vx_pspec index_item =
+    VX_P_ITEM_INT(-(double)VX_GRID_INDEX_MAX, (double)VX_GRID_INDEX_MAX);
 static const vx_pspec box_spec[] = {
     VX_P_VEC(vbox, origin, 3, NULL, &origin_item, "the corner of voxel (0, 0, 0)",
              .flags = VX_PF_NEEDED),
@@ -55,6 +58,14 @@ static const vx_pspec box_spec[] = {
      .max_items = 3,
      .flags = VX_PF_NEEDED,
      .doc = "voxels along x, y, z"},
+    {.name = "index_offset",
+     .type = VX_PT_ARRAY,
+     .off = offsetof(vbox, index_offset),
+     .sub = &index_item,
+     .item_size = sizeof(long),
+     .min_items = 3,
+     .max_items = 3,
+     .doc = "the lattice index of voxel (0, 0, 0): a brick of a larger grid"},
     VX_P_END,
 };
 
@@ -195,6 +206,16 @@ static int voxelize_check(void *params, const vx_limits *lim, vx_err *err)
                               "params.inside \"winding\" samples voxel centres: params.supersample "
                               "2 needs params.samples \"faces\"");
     }
+    /* Slicing fills solids only; auto slices whenever it supersamples
+     * (cube pattern). Refused here, not when the job runs (issue 14). */
+    if (fill_of(p) == VX_FILL_SURFACE && p->method == VX_METHOD_SLICE)
+        return vx_err_set(err, VX_EUNPROC, "invalid_params",
+                          "params.fill \"surface\" needs params.method peel or auto (slice fills "
+                          "solids only)");
+    if (fill_of(p) == VX_FILL_SURFACE && p->method == VX_METHOD_AUTO && p->supersample == 2)
+        return vx_err_set(err, VX_EUNPROC, "invalid_params",
+                          "params.fill \"surface\" cannot be supersampled: with "
+                          "params.supersample 2, auto runs slice, which fills solids only");
     if (p->grid_set) {
         if (p->padding)
             return vx_err_set(
@@ -251,6 +272,7 @@ static int voxelize_run_gl(vx_job_run *r, const vx_mesh *mesh, const void *param
         for (int a = 0; a < 3; a++) {
             d.grid.origin[a] = p.grid.origin[a];
             d.grid.dims[a] = (int)p.grid.dims[a];
+            d.grid.index[a] = p.grid.index_offset[a];
         }
     } else {
         int rc =
@@ -291,6 +313,8 @@ static int voxelize_run_gl(vx_job_run *r, const vx_mesh *mesh, const void *param
     stat_set(stats, "boundary_edges", cJSON_CreateNumber((double)mesh->boundary_edges));
     stat_set(stats, "dims", array3(dims));
     stat_set(stats, "origin", array3(g->origin));
+    double index[3] = {(double)g->index[0], (double)g->index[1], (double)g->index[2]};
+    stat_set(stats, "index_offset", array3(index));
     stat_set(stats, "voxel_size", cJSON_CreateNumber(g->h));
     stat_set(stats, "triangles", cJSON_CreateNumber((double)mesh->ntris));
     stat_set(stats, "voxels_inside", cJSON_CreateNumber((double)st->voxels_inside));
@@ -312,6 +336,13 @@ static int voxelize_encode(vx_job_run *r, const void *params, void *state, vx_er
     vstate *s = state;
     const vparams p = *(const vparams *)params;
     double t0 = vx_mono();
+    /* The writers place voxel (0,0,0) at grid.origin: a brick's own corner,
+     * origin + index_offset * h (the voxels themselves were decided in the
+     * lattice's frame). */
+    for (int a = 0; a < 3; a++) {
+        s->grid.grid.origin[a] += (double)s->grid.grid.index[a] * s->grid.grid.h;
+        s->grid.grid.index[a] = 0;
+    }
     vx_voxel_io io = {encode_progress, r};
     int rc = 0;
     const char *path = NULL;

@@ -102,11 +102,24 @@ int vx_peel_too_big(peel_ctx *c, uint64_t need)
                       (unsigned long long)c->limit);
 }
 
-/* Calls the caller's progress hook; a nonzero answer stops the job. */
+/* Calls the caller's progress hook; a nonzero answer stops the job.
+ * Progress follows the work: a slab's x and y rays are one unit each; with
+ * three axes (robust) the z rays cross every slab and are peeled once, in
+ * slab 0, which weighs as much as all the slabs' x rays (issue 14: the bar
+ * sat at 0.0675 for most of a robust job), and later slabs' z fills weigh
+ * nothing. */
 int vx_peel_progress(peel_ctx *c, double within_slab)
 {
     if (!c->d->progress) return 0;
-    double f = ((double)c->slab + ((double)c->axis_i + within_slab) / c->naxes) / c->nslabs;
+    double f;
+    if (c->naxes == 3) {
+        double ns = c->nslabs, a = c->axis_i, s = c->slab;
+        double before = 2 * s + (s > 0 ? ns : 0) + (a < 2 ? a : 2);
+        double weight = a < 2 ? 1 : c->slab == 0 ? ns : 0;
+        f = (before + within_slab * weight) / (3 * ns);
+    } else {
+        f = ((double)c->slab + ((double)c->axis_i + within_slab) / c->naxes) / c->nslabs;
+    }
     if (f > 1) f = 1;
     if (c->d->progress(c->d->ud, f, c->err) == 0) return 0;
     if (c->err && c->err->kind == VX_EOK)
@@ -156,7 +169,7 @@ int vx_peel_upload(peel_ctx *c)
         size_t n = m->nverts - i0 < CHUNK ? m->nverts - i0 : CHUNK;
         for (size_t k = 0; k < n; k++)
             for (int a = 0; a < 3; a++) {
-                float t = (float)((m->pos[3 * (i0 + k) + a] - g->origin[a]) / g->h);
+                float t = (float)vx_grid_coord(g, a, m->pos[3 * (i0 + k) + a]);
                 tmp[3 * k + a] = t;
                 if (t < c->tlo[a]) c->tlo[a] = t;
                 if (t > c->thi[a]) c->thi[a] = t;
@@ -275,7 +288,7 @@ static void tri_zrange(const peel_ctx *c, size_t t, double *lo, double *hi)
     *lo = INFINITY;
     *hi = -INFINITY;
     for (int v = 0; v < 3; v++) {
-        double z = (c->m->pos[3 * (size_t)c->m->tri[3 * t + v] + 2] - g->origin[2]) / g->h;
+        double z = vx_grid_coord(g, 2, c->m->pos[3 * (size_t)c->m->tri[3 * t + v] + 2]);
         *lo = fmin(*lo, z);
         *hi = fmax(*hi, z);
     }
@@ -529,8 +542,7 @@ static int tri_setup(const peel_ctx *c, size_t t, double v[3][3], double n[3], i
     const vx_grid *g = &c->d->grid;
     for (int i = 0; i < 3; i++)
         for (int a = 0; a < 3; a++)
-            v[i][a] =
-                (float)((c->m->pos[3 * (size_t)c->m->tri[3 * t + i] + a] - g->origin[a]) / g->h);
+            v[i][a] = (float)vx_grid_coord(g, a, c->m->pos[3 * (size_t)c->m->tri[3 * t + i] + a]);
     double e0[3], e1[3];
     vx_v3_sub(v[1], v[0], e0);
     vx_v3_sub(v[2], v[1], e1);
@@ -894,6 +906,7 @@ static int run_solid(peel_ctx *c, double t0)
                 if (peel(c, ls, axis, k0, rows, &nl[axis])) return -1;
             }
             if (fill(c, ls, axis, axis, mode, k0, rows, nl[axis])) return -1;
+            if (c->naxes == 3 && c->axis_i < 2 && vx_peel_progress(c, 1.0)) return -1;
         }
         if (c->naxes == 3) major_pass(c, rows);
         c->axis_i = c->naxes - 1;

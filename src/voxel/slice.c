@@ -19,14 +19,14 @@
  * ARCHITECTURE.md).
  *
  * Inside rules (vx_inside):
- *   parity  - the seed's nearest-surface test, depth test on. For a closed
- *             mesh without overlapping parts it equals entry/exit parity.
- *             With overlapping closed parts it answers "the first surface
- *             along +z beyond the centre is an exit": inside every part's
- *             intersection, but outside where the ray from a point of one
- *             part enters another part before it leaves the first (it is
- *             neither the union nor the symmetric difference; the tests
- *             check it on two boxes).
+ *   parity  - the number of surfaces beyond the plane, counted like nonzero
+ *             below (+1 for every face), inside when odd: entry/exit
+ *             parity, the symmetric difference of overlapping parts, as
+ *             peel and scan. (The seed's nearest-surface test, with the
+ *             depth test, was used until issue 14: it set streaks down a
+ *             column where the column grazes a fold, since the depth order
+ *             of two nearly coincident crossings is rounding, and it
+ *             differed from peel and scan on overlapping parts.)
  *   nonzero - the signed-count form: no depth test, additive blending of +1
  *             per back face and -1 per front face beyond the plane into an
  *             R32F target; the sum is the winding number of the ray from the
@@ -39,7 +39,8 @@
  *             once per slice: O(T + slices x pixels), not O(T x slices).
  *             The sums are small integers in R32F, exact; no clipping, so a
  *             fragment falls in exactly one slab and nothing drifts.
- *   robust  - the parity test stepped along x, y and z; a voxel is inside
+ *   robust  - the parity count stepped along x, y and z (only z runs
+ *             incrementally: the slab lists are along z); a voxel is inside
  *             when at least two of the three agree (with supersampling: the
  *             median of the three counts). It repairs a hole that only one
  *             axis's rays pass through; it fails where a hole (or an open
@@ -51,8 +52,9 @@
  * Tie rule: a centre exactly on a face counts as inside when the face is an
  * entry and outside when it is an exit, i.e. half-open [entry, exit) along
  * the stepping direction, like tests/support/ref_voxel (which uses +x): only
- * surfaces strictly beyond the plane count (w - plane > 0, subtracted per
- * vertex, so a face on the plane interpolates to exactly 0). Centres on
+ * surfaces strictly beyond the plane count (w - plane > 0, with the
+ * fragment's w clamped to its triangle's w range, so a face on the plane
+ * keeps exactly the plane's w; see shaders/voxel_slice.frag). Centres on
  * faces parallel to the stepping axis lie on triangle edges in the image:
  * the rasterizer's edge rule decides; on llvmpipe it is the same half-open
  * rule (measured in test_slice), other drivers may differ. Grids whose cell
@@ -85,9 +87,10 @@
  * set (names of 0 are ignored by glDelete*). */
 typedef struct objs {
     GLuint vbo, ibo[3], vao;
-    GLuint fbo, tex_color, tex_depth;
+    GLuint fbo, tex_color;
     GLuint ssbo_bits, ssbo_counts, pbo;
-    GLuint slab_ibo; /* nonzero: triangles per slab between consecutive planes */
+    GLuint slab_ibo;       /* nonzero: triangles per slab between consecutive planes */
+    GLuint wr[3], slab_wr; /* each index buffer's triangles' w ranges (the shader clamps to) */
 } objs;
 
 static void objs_free(objs *o)
@@ -95,10 +98,11 @@ static void objs_free(objs *o)
     GLuint bufs[7] = {o->vbo,       o->ibo[0],      o->ibo[1], o->ibo[2],
                       o->ssbo_bits, o->ssbo_counts, o->pbo};
     glDeleteBuffers(7, bufs);
+    GLuint wbufs[5] = {o->slab_ibo, o->wr[0], o->wr[1], o->wr[2], o->slab_wr};
+    glDeleteBuffers(5, wbufs);
     glDeleteVertexArrays(1, &o->vao);
     glDeleteFramebuffers(1, &o->fbo);
-    GLuint tex[2] = {o->tex_color, o->tex_depth};
-    glDeleteTextures(2, tex);
+    glDeleteTextures(1, &o->tex_color);
     memset(o, 0, sizeof *o);
 }
 
@@ -108,18 +112,14 @@ static void objs_free(objs *o)
 static const int k_perm[3][3] = {{1, 2, 0}, {2, 0, 1}, {0, 1, 2}};
 
 /* Sort keys: triangles ascending by their largest w, so that the ones a
- * slice needs (largest w beyond the plane) are a suffix of the index buffer
- * and roughly front to back (cheaper depth tests). */
+ * slice needs (largest w beyond the plane) are a suffix of the index buffer. */
 typedef struct tri_key {
     float wmax;
     uint32_t t; /* triangle index */
-    int back;   /* parity: faces away from the viewer (sorted after the front run) */
 } tri_key;
 
 static int cmp_key(const void *a, const void *b)
 {
-    int fa = ((const tri_key *)a)->back, fb = ((const tri_key *)b)->back;
-    if (fa != fb) return fa - fb;
     float x = ((const tri_key *)a)->wmax, y = ((const tri_key *)b)->wmax;
     if (x != y) return x < y ? -1 : 1;
     uint32_t s = ((const tri_key *)a)->t, t = ((const tri_key *)b)->t;
@@ -133,7 +133,7 @@ typedef struct plan {
     int threshold;                     /* samples inside to set a voxel */
     int naxes;                         /* 1, or 3 for robust */
     int axes[3];                       /* grid axes the plane steps along */
-    int parity;                        /* depth-tested nearest surface (parity, robust) */
+    int count;                         /* parity, robust: count surfaces, inside when odd */
     int tile;                          /* largest tile side in voxels (multiple of 32) */
     int tex_w, tex_h;                  /* target size in pixels (largest tile over the axes) */
     int batch;                         /* slices per batch (each has ss layers) */
@@ -148,26 +148,24 @@ static uint64_t u64min(uint64_t a, uint64_t b)
     return a < b ? a : b;
 }
 
-/* Colour (R8 for parity, R32F for nonzero) of `batch` slices. */
+/* Colour (R32F sums) of `batch` slices. */
 static uint64_t target_color_bytes(const plan *p, int batch)
 {
     /* rows padded to 4 bytes in the pixel-pack copy */
     uint64_t px = ((uint64_t)p->tex_w + 3) / 4 * 4 * (uint64_t)p->tex_h;
-    return px * (p->parity ? 1 : 4) * (uint64_t)batch * (uint64_t)p->ss;
+    return px * 4 * (uint64_t)batch * (uint64_t)p->ss;
 }
 
-/* Colour + depth (D32F, parity only) + the pixel-pack copy of the colour. */
+/* Colour + the pixel-pack copy of it. */
 static uint64_t target_bytes(const plan *p, int batch)
 {
-    uint64_t px = (uint64_t)p->tex_w * (uint64_t)p->tex_h;
-    return 2 * target_color_bytes(p, batch) +
-           (p->parity ? px * 4 * (uint64_t)batch * (uint64_t)p->ss : 0);
+    return 2 * target_color_bytes(p, batch);
 }
 
 /* Grid-frame coordinate of vertex v along axis a, as uploaded. */
 static float grid_coord(const vx_mesh *m, const vx_grid *g, size_t v, int a)
 {
-    return (float)((m->pos[3 * v + a] - g->origin[a]) / g->h);
+    return (float)vx_grid_coord(g, a, m->pos[3 * v + a]);
 }
 
 /* Incremental signed count (nonzero): plane j sits at w = (j + 1/2) / ss.
@@ -206,7 +204,7 @@ static int make_plan(const vx_mesh *m, const vx_voxelize_desc *d, plan *p, vx_er
     p->wx = ((size_t)p->dims[0] + 31) / 32;
     p->ss = d->supersample == 2 ? 2 : 1;
     p->threshold = p->ss == 2 ? (d->threshold ? d->threshold : 4) : 1;
-    p->parity = d->inside != VX_INSIDE_NONZERO;
+    p->count = d->inside != VX_INSIDE_NONZERO;
     p->naxes = d->inside == VX_INSIDE_ROBUST ? 3 : 1;
     for (int a = 0; a < p->naxes; a++)
         p->axes[a] = p->naxes == 1 ? 2 : (a + 2) % 3;
@@ -252,7 +250,7 @@ static int make_plan(const vx_mesh *m, const vx_voxelize_desc *d, plan *p, vx_er
     if (batch * p->ss > max_layers) batch = max_layers / p->ss;
     if (batch > p->dims[2] && p->naxes == 1) batch = p->dims[2];
 
-    if (!p->parity) {
+    {
         int nplanes = p->dims[2] * p->ss, j0, j1;
         for (size_t t = 0; t < m->ntris; t++) {
             float lo, hi;
@@ -273,9 +271,9 @@ static int make_plan(const vx_mesh *m, const vx_voxelize_desc *d, plan *p, vx_er
          * GPU (vertices, one sorted index buffer per axis), the sort keys,
          * one batch of one slice. */
         uint64_t fixed = vx_bitgrid_bytes(p->dims, p->ss) + (uint64_t)m->nverts * 12 +
-                         (uint64_t)m->ntris * 12 * (uint64_t)p->naxes +
+                         (uint64_t)m->ntris * 20 * (uint64_t)p->naxes +
                          (uint64_t)m->ntris * sizeof(tri_key) + target_bytes(p, 1) +
-                         p->slab_refs * 12 * 2 + ((uint64_t)p->dims[2] * p->ss + 1) * 8;
+                         p->slab_refs * 20 * 2 + ((uint64_t)p->dims[2] * p->ss + 1) * 8;
         /* Per z-layer of a chunk: the SSBOs, and for robust the CPU copies
          * of the three axes' answers. */
         uint64_t per_k = (p->bits_layer + p->counts_layer) * (p->naxes == 3 ? 4 : 1);
@@ -306,9 +304,11 @@ static int upload_slabs(vx_gl *gl, const vx_mesh *m, const vx_grid *g, const pla
     int nplanes = p->dims[2] * p->ss, j0, j1;
     size_t *start = calloc((size_t)nplanes + 2, sizeof *start);
     uint32_t *idx = malloc(p->slab_refs * 3 * sizeof *idx + 1);
-    if (!start || !idx) {
+    float *wr = malloc(p->slab_refs * 2 * sizeof *wr + 1);
+    if (!start || !idx || !wr) {
         free(start);
         free(idx);
+        free(wr);
         return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for %llu slab entries",
                           (unsigned long long)p->slab_refs);
     }
@@ -325,8 +325,11 @@ static int upload_slabs(vx_gl *gl, const vx_mesh *m, const vx_grid *g, const pla
         float lo, hi;
         tri_wrange(m, g, t, 2, &lo, &hi);
         if (slab_range(lo, hi, p->ss, nplanes, &j0, &j1))
-            for (int j = j0; j <= j1; j++)
+            for (int j = j0; j <= j1; j++) {
+                wr[2 * start[j]] = lo;
+                wr[2 * start[j] + 1] = hi;
                 memcpy(idx + 3 * start[j]++, m->tri + 3 * t, 12);
+            }
     }
     /* the fill advanced each start to the next one's: shift back */
     for (int j = nplanes; j > 0; j--)
@@ -337,7 +340,12 @@ static int upload_slabs(vx_gl *gl, const vx_mesh *m, const vx_grid *g, const pla
     glNamedBufferStorage(o->slab_ibo, (GLsizeiptr)(p->slab_refs * 12 + 12), NULL,
                          GL_DYNAMIC_STORAGE_BIT);
     if (p->slab_refs) glNamedBufferSubData(o->slab_ibo, 0, (GLsizeiptr)(p->slab_refs * 12), idx);
+    glCreateBuffers(1, &o->slab_wr);
+    glNamedBufferStorage(o->slab_wr, (GLsizeiptr)(p->slab_refs * 8 + 8), NULL,
+                         GL_DYNAMIC_STORAGE_BIT);
+    if (p->slab_refs) glNamedBufferSubData(o->slab_wr, 0, (GLsizeiptr)(p->slab_refs * 8), wr);
     free(idx);
+    free(wr);
     return vx_gl_check(gl, "slice.slab_buffer", err);
 }
 
@@ -345,14 +353,15 @@ static int upload_slabs(vx_gl *gl, const vx_mesh *m, const vx_grid *g, const pla
  * 1) and only then converts to float: a face on a cell boundary lands on an
  * exact integer, so no voxel centre (at +1/2) is ever in doubt for it. */
 static int upload(vx_gl *gl, const vx_mesh *m, const vx_grid *g, const plan *p, objs *o,
-                  float wmin_all[3], float wmax_all[3], float **wmax_sorted, size_t nfront[3],
-                  size_t **slab_start, vx_err *err)
+                  float wmin_all[3], float wmax_all[3], float **wmax_sorted, size_t **slab_start,
+                  vx_err *err)
 {
     float *pos = malloc(m->nverts * 3 * sizeof *pos + 1);
     tri_key *keys = malloc(m->ntris * sizeof *keys + 1);
     uint32_t *idx = malloc(m->ntris * 3 * sizeof *idx + 1);
+    float *wr = malloc(m->ntris * 2 * sizeof *wr + 1);
     int rc = -1;
-    if (!pos || !keys || !idx) {
+    if (!pos || !keys || !idx || !wr) {
         vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory to upload %zu vertices",
                    m->nverts);
         goto done;
@@ -380,16 +389,6 @@ static int upload(vx_gl *gl, const vx_mesh *m, const vx_grid *g, const plan *p, 
             if (pos[3 * v[2] + w] > z) z = pos[3 * v[2] + w];
             keys[t].wmax = z;
             keys[t].t = (uint32_t)t;
-            keys[t].back = 0;
-            if (p->parity) {
-                /* w component of (b - a) x (c - a): > 0 faces along +w, away
-                 * from the viewer: a back face (exit) */
-                int u = (w + 1) % 3, q = (w + 2) % 3;
-                const float *A = pos + 3 * v[0], *B = pos + 3 * v[1], *C = pos + 3 * v[2];
-                double nw = ((double)B[u] - A[u]) * ((double)C[q] - A[q]) -
-                            ((double)B[q] - A[q]) * ((double)C[u] - A[u]);
-                keys[t].back = nw > 0;
-            }
         }
         qsort(keys, m->ntris, sizeof *keys, cmp_key);
         wmax_sorted[a] = malloc(m->ntris * sizeof(float) + 1);
@@ -397,14 +396,17 @@ static int upload(vx_gl *gl, const vx_mesh *m, const vx_grid *g, const plan *p, 
             vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for %zu triangles", m->ntris);
             goto done;
         }
-        nfront[a] = 0;
         for (size_t t = 0; t < m->ntris; t++) {
-            memcpy(idx + 3 * t, m->tri + 3 * (size_t)keys[t].t, 3 * sizeof *idx);
+            const uint32_t *v = m->tri + 3 * (size_t)keys[t].t;
+            memcpy(idx + 3 * t, v, 3 * sizeof *idx);
             wmax_sorted[a][t] = keys[t].wmax;
-            nfront[a] += !keys[t].back;
+            wr[2 * t] = fminf(pos[3 * v[0] + w], fminf(pos[3 * v[1] + w], pos[3 * v[2] + w]));
+            wr[2 * t + 1] = keys[t].wmax;
         }
         glCreateBuffers(1, &o->ibo[a]);
         glNamedBufferStorage(o->ibo[a], (GLsizeiptr)(m->ntris * 3 * sizeof *idx), idx, 0);
+        glCreateBuffers(1, &o->wr[a]);
+        glNamedBufferStorage(o->wr[a], (GLsizeiptr)(m->ntris * 2 * sizeof *wr), wr, 0);
         if (vx_gl_check(gl, "slice.index_buffer", err)) goto done;
     }
 
@@ -416,6 +418,7 @@ done:
     free(pos);
     free(keys);
     free(idx);
+    free(wr);
     return rc;
 }
 
@@ -423,16 +426,11 @@ static int targets(vx_gl *gl, const plan *p, objs *o, vx_err *err)
 {
     int layers = p->batch * p->ss;
     glCreateTextures(GL_TEXTURE_2D_ARRAY, 1, &o->tex_color);
-    glTextureStorage3D(o->tex_color, 1, p->parity ? GL_R8 : GL_R32F, p->tex_w, p->tex_h, layers);
+    glTextureStorage3D(o->tex_color, 1, GL_R32F, p->tex_w, p->tex_h, layers);
     glTextureParameteri(o->tex_color, GL_TEXTURE_MIN_FILTER, GL_NEAREST);
     glTextureParameteri(o->tex_color, GL_TEXTURE_MAG_FILTER, GL_NEAREST);
-    if (p->parity) {
-        glCreateTextures(GL_TEXTURE_2D_ARRAY, 1, &o->tex_depth);
-        glTextureStorage3D(o->tex_depth, 1, GL_DEPTH_COMPONENT32F, p->tex_w, p->tex_h, layers);
-    }
     glCreateFramebuffers(1, &o->fbo);
     glNamedFramebufferTextureLayer(o->fbo, GL_COLOR_ATTACHMENT0, o->tex_color, 0, 0);
-    if (p->parity) glNamedFramebufferTextureLayer(o->fbo, GL_DEPTH_ATTACHMENT, o->tex_depth, 0, 0);
     if (vx_gl_check(gl, "slice.targets", err)) return -1;
     GLenum st = glCheckNamedFramebufferStatus(o->fbo, GL_FRAMEBUFFER);
     if (st != GL_FRAMEBUFFER_COMPLETE) {
@@ -466,13 +464,16 @@ static size_t first_beyond(const float *wmax, size_t n, float plane)
     return lo;
 }
 
-/* Draws triangles [first, end) of the bound index buffer. */
-static void draw_range(size_t first, size_t end)
+/* Draws triangles [first, end) of the bound index buffer; wr holds their w
+ * ranges in the same order (the draw program's u_base: the first one's). */
+static void draw_range(GLuint prog, GLuint wr, size_t first, size_t end)
 {
+    glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 3, wr);
     /* glDrawElements counts in GLsizei: split meshes beyond 2^31 indices. */
     const size_t step = (size_t)3 << 28;
     for (size_t i = 3 * first; i < 3 * end; i += step) {
         size_t count = 3 * end - i < step ? 3 * end - i : step;
+        glProgramUniform1ui(prog, 5, (GLuint)(i / 3));
         glDrawElements(GL_TRIANGLES, (GLsizei)count, GL_UNSIGNED_INT,
                        (const void *)(uintptr_t)(i * sizeof(uint32_t)));
     }
@@ -487,7 +488,6 @@ typedef struct run {
     GLuint draw_prog, pack_prog;
     float wmin_all[3], wmax_all[3];
     float *wmax_sorted[3];
-    size_t nfront[3];   /* parity: the front faces come first in each index buffer */
     size_t *slab_start; /* nonzero: CSR offsets into the slab index buffer */
     vx_voxelize_stats *st;
     double slices_total, slices_done;
@@ -509,31 +509,14 @@ static void set_w_range(run *r, int a)
     glProgramUniform2f(r->draw_prog, 3, lo, 2.0f / (hi - lo));
 }
 
-/* Draws the surfaces for slice plane j (at w = plane) of axis index a: the
- * nearest beyond it (parity), every one beyond it, or (incremental) those
- * in the slab since the previous plane. */
+/* Draws the surfaces for slice plane j (at w = plane) of axis index a:
+ * every one beyond it, or (incremental) those in the slab since the
+ * previous plane. */
 static void draw_plane(run *r, int a, int j, float plane, int incremental)
 {
     const plan *p = r->p;
     const size_t ntris = r->m->ntris;
-    if (p->parity) {
-        glProgramUniform2f(r->draw_prog, 2, plane, 0.0f);
-        glProgramUniform1i(r->draw_prog, 4, 0);
-        /* Front faces first: with GL_LESS an exact depth tie
-         * goes to the front face. Ties happen where a pixel
-         * centre falls exactly on a fold edge (a front and a
-         * back triangle meeting, seen edge-on: 1/256-pixel
-         * vertex snapping makes that likelier than it sounds).
-         * The ray only grazes there and the answer should come
-         * from the next surface beyond the pair; the depth test
-         * cannot do that, and interpolation rounding decides
-         * near-ties either way: a known limit of the seed's
-         * nearest-surface test (nonzero sums the pair to 0). */
-        size_t nf = r->nfront[a];
-        const float *ws = r->wmax_sorted[a];
-        draw_range(first_beyond(ws, nf, plane - SLAB_MARGIN), nf);
-        draw_range(nf + first_beyond(ws + nf, ntris - nf, plane - SLAB_MARGIN), ntris);
-    } else if (!incremental) {
+    if (!incremental) {
         glProgramUniform2f(r->draw_prog, 2, plane, 0.0f);
         glProgramUniform1i(r->draw_prog, 4, 1);
         glVertexArrayElementBuffer(r->o->vao, r->o->ibo[a]);
@@ -541,13 +524,14 @@ static void draw_plane(run *r, int a, int j, float plane, int incremental)
          * fragment of a triangle that ends on the plane to just
          * beyond it; a later slab would then subtract what this
          * sum never added, for the rest of the column. */
-        draw_range(first_beyond(r->wmax_sorted[a], ntris, plane - SLAB_MARGIN), ntris);
+        draw_range(r->draw_prog, r->o->wr[a],
+                   first_beyond(r->wmax_sorted[a], ntris, plane - SLAB_MARGIN), ntris);
     } else {
         float prev = ((float)j - 0.5f) / (float)p->ss;
         glProgramUniform2f(r->draw_prog, 2, prev, plane);
         glProgramUniform1i(r->draw_prog, 4, 2);
         glVertexArrayElementBuffer(r->o->vao, r->o->slab_ibo);
-        draw_range(r->slab_start[j], r->slab_start[j + 1]);
+        draw_range(r->draw_prog, r->o->slab_wr, r->slab_start[j], r->slab_start[j + 1]);
     }
 }
 
@@ -559,8 +543,8 @@ static void pack_batch(run *r, const int *pm, int k0, const int rect[4], int b0,
     /* The pack reads the images as plain memory (see the shader). */
     int iw = rect[2] * p->ss, ih = rect[3] * p->ss, nl = nb * p->ss;
     /* R8 rows padded to 4 bytes: the pack reads four pixels per load */
-    int stride = p->parity ? (iw + 3) / 4 * 4 : iw;
-    uint64_t img_bytes = (uint64_t)stride * (uint64_t)ih * (uint64_t)nl * (p->parity ? 1 : 4);
+    int stride = iw;
+    uint64_t img_bytes = (uint64_t)stride * (uint64_t)ih * (uint64_t)nl * 4;
     glBindBuffer(GL_PIXEL_PACK_BUFFER, r->o->pbo);
     glPixelStorei(GL_PACK_ALIGNMENT, 4);
     glPixelStorei(GL_PACK_ROW_LENGTH, 0);
@@ -568,8 +552,8 @@ static void pack_batch(run *r, const int *pm, int k0, const int rect[4], int b0,
     glPixelStorei(GL_PACK_SKIP_PIXELS, 0);
     glPixelStorei(GL_PACK_SKIP_ROWS, 0);
     glPixelStorei(GL_PACK_SKIP_IMAGES, 0);
-    glGetTextureSubImage(r->o->tex_color, 0, 0, 0, 0, iw, ih, nl, GL_RED,
-                         p->parity ? GL_UNSIGNED_BYTE : GL_FLOAT, (GLsizei)img_bytes, NULL);
+    glGetTextureSubImage(r->o->tex_color, 0, 0, 0, 0, iw, ih, nl, GL_RED, GL_FLOAT,
+                         (GLsizei)img_bytes, NULL);
     glBindBuffer(GL_PIXEL_PACK_BUFFER, 0);
 
     glUseProgram(r->pack_prog);
@@ -585,7 +569,7 @@ static void pack_batch(run *r, const int *pm, int k0, const int rect[4], int b0,
     glProgramUniform3i(r->pack_prog, 3, p->dims[0], p->dims[1], p->dims[2]);
     glProgramUniform2i(r->pack_prog, 4, k0, (int)p->wx);
     glProgramUniform1i(r->pack_prog, 5, p->ss);
-    glProgramUniform1i(r->pack_prog, 6, p->parity ? 0 : 1);
+    glProgramUniform1i(r->pack_prog, 6, p->count ? 2 : 1);
     glProgramUniform1i(r->pack_prog, 7, p->threshold);
     glProgramUniform1i(r->pack_prog, 8, p->ss == 2);
     glProgramUniform1i(r->pack_prog, 9, packx);
@@ -655,11 +639,9 @@ static int do_tile(run *r, int a, int k0, const int rect[4], int w0, int w1, vx_
                 float plane = ((float)j + 0.5f) / (float)p->ss;
                 glNamedFramebufferTextureLayer(r->o->fbo, GL_COLOR_ATTACHMENT0, r->o->tex_color, 0,
                                                layer);
-                if (p->parity)
-                    glNamedFramebufferTextureLayer(r->o->fbo, GL_DEPTH_ATTACHMENT, r->o->tex_depth,
-                                                   0, layer);
-                int incremental = p->incremental && j > jfirst;
-                const float zero[4] = {0, 0, 0, 0}, one = 1.0f;
+                /* the slab lists are along z */
+                int incremental = p->incremental && p->axes[a] == 2 && j > jfirst;
+                const float zero[4] = {0, 0, 0, 0};
                 if (incremental) {
                     /* The sum beyond the previous plane, less the surfaces
                      * in the slab between the two planes. */
@@ -669,7 +651,6 @@ static int do_tile(run *r, int a, int k0, const int rect[4], int w0, int w1, vx_
                                            0, layer, rect[2] * p->ss, rect[3] * p->ss, 1);
                 } else {
                     glClearNamedFramebufferfv(r->o->fbo, GL_COLOR, 0, zero);
-                    if (p->parity) glClearNamedFramebufferfv(r->o->fbo, GL_DEPTH, 0, &one);
                 }
                 if (!timing) {
                     /* Begun after the first clear: llvmpipe loses the start
@@ -777,18 +758,12 @@ static void set_fixed_state(const plan *p, GLuint draw_prog)
     glPolygonMode(GL_FRONT_AND_BACK, GL_FILL);
     glColorMask(GL_TRUE, GL_TRUE, GL_TRUE, GL_TRUE);
     glDepthRange(0.0, 1.0);
-    glProgramUniform1i(draw_prog, 4, p->parity ? 0 : 1);
-    if (p->parity) {
-        glDisable(GL_BLEND);
-        glEnable(GL_DEPTH_TEST);
-        glDepthFunc(GL_LESS);
-        glDepthMask(GL_TRUE);
-    } else {
-        glDisable(GL_DEPTH_TEST);
-        glEnable(GL_BLEND);
-        glBlendEquation(GL_FUNC_ADD);
-        glBlendFunc(GL_ONE, GL_ONE);
-    }
+    glProgramUniform1i(draw_prog, 4, 1);
+    glProgramUniform1i(draw_prog, 6, p->count);
+    glDisable(GL_DEPTH_TEST);
+    glEnable(GL_BLEND);
+    glBlendEquation(GL_FUNC_ADD);
+    glBlendFunc(GL_ONE, GL_ONE);
 }
 
 /* Robust inside test: combines the three axes' results of a chunk of nk
@@ -874,8 +849,8 @@ int vx_voxelize_slice(vx_gl *gl, const vx_mesh *m, const vx_voxelize_desc *d, vx
     uint8_t *tmp[3] = {NULL, NULL, NULL};
     int rc = -1;
     double t0 = vx_mono_ms();
-    if (m->ntris && upload(gl, m, g, &p, &o, r.wmin_all, r.wmax_all, r.wmax_sorted, r.nfront,
-                           &r.slab_start, err))
+    if (m->ntris &&
+        upload(gl, m, g, &p, &o, r.wmin_all, r.wmax_all, r.wmax_sorted, &r.slab_start, err))
         goto fail;
     glFinish(); /* so upload_ms is the upload, not just its queueing */
     st->upload_ms = vx_mono_ms() - t0;
@@ -910,6 +885,7 @@ fail:
     glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 0, 0);
     glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 1, 0);
     glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 2, 0);
+    glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 3, 0);
     glBindBuffer(GL_PIXEL_PACK_BUFFER, 0);
     glDisable(GL_BLEND);
     glDisable(GL_DEPTH_TEST);

@@ -25,7 +25,23 @@ typedef struct vx_grid {
     double origin[3];
     double h; /* voxel edge */
     int dims[3];
+    /* Lattice index of voxel (0,0,0) (a brick of a larger grid; 0 = the
+     * grid is the lattice's own): voxel (i,j,k)'s centre is origin +
+     * (index + (i,j,k) + 1/2) h, whatever brick it falls in. */
+    int64_t index[3];
 } vx_grid;
+
+/* The most |index| along an axis (exact in double with room to spare). */
+#define VX_GRID_INDEX_MAX ((int64_t)1 << 40)
+
+/* Position p along axis a in the grid's frame, in double: voxel (0,0,0)
+ * spans [0,1), so centres sit at integers + 1/2. (p - origin) / h is the
+ * same number for every brick of one lattice; the integer index then
+ * shifts it exactly. */
+static inline double vx_grid_coord(const vx_grid *g, int a, double p)
+{
+    return (p - g->origin[a]) / g->h - (double)g->index[a];
+}
 
 typedef enum vx_method {
     VX_METHOD_AUTO = 0,

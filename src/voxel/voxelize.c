@@ -20,6 +20,10 @@ int vx_voxelize(vx_gl *gl, const vx_mesh *m, const vx_voxelize_desc *d, vx_bitgr
     for (int a = 0; a < 3; a++)
         if (!isfinite(g->origin[a]))
             return vx_err_set(err, VX_EUNPROC, "invalid_params", "grid origin must be finite");
+    for (int a = 0; a < 3; a++)
+        if (g->index[a] > VX_GRID_INDEX_MAX || g->index[a] < -VX_GRID_INDEX_MAX)
+            return vx_err_set(err, VX_EUNPROC, "invalid_params",
+                              "grid index offset must be within +-2^40");
     if (d->supersample != 0 && d->supersample != 1 && d->supersample != 2)
         return vx_err_set(err, VX_EUNPROC, "invalid_params", "supersample must be 1 or 2, got %d",
                           d->supersample);

@@ -42,6 +42,7 @@ typedef struct wctx {
     size_t ncone, ntot;
     int nx, ny, nz, nbands;
     double o[3], h;
+    double ix[3]; /* grid.index_offset: centre i of axis a is o + (ix + i + 1/2) h */
     size_t *bin_off; /* nbands + 1 */
     uint32_t *bin;   /* triangle ids per band */
     uint32_t *cnt;   /* crossings per column (pass 1), then fill cursor */
@@ -72,15 +73,15 @@ static void tri_of(const wctx *c, size_t t, double v[9])
 
 /* Column range [*lo, *hi] whose centres o + (i + 1/2) h may fall in
  * [a, b] (one more each side against rounding; the exact test decides). */
-static void col_range(double a, double b, double o, double h, int n, int *lo, int *hi)
+static void col_range(double a, double b, double o, double ix, double h, int n, int *lo, int *hi)
 {
-    double fa = floor((a - o) / h - 0.5), fb = ceil((b - o) / h - 0.5);
+    double fa = floor((a - o) / h - ix - 0.5), fb = ceil((b - o) / h - ix - 0.5);
     int l = fa < 0 ? 0 : fa > n ? n : (int)fa, u = fb < -1 ? -1 : fb > n - 1 ? n - 1 : (int)fb;
     /* then exactly the centres in [a, b], computed as the tests compute them
      * (one outside cannot be in the triangle, even perturbed) */
-    while (l <= u && o + (l + 0.5) * h < a)
+    while (l <= u && o + (ix + l + 0.5) * h < a)
         l++;
-    while (u >= l && o + (u + 0.5) * h > b)
+    while (u >= l && o + (ix + u + 0.5) * h > b)
         u--;
     *lo = l;
     *hi = u;
@@ -132,7 +133,7 @@ static void add_crossing(wctx *c, size_t col, double z, int s)
         return;
     }
     size_t at = c->off[col] + c->cnt[col]++;
-    c->z[at] = (z - c->o[2]) / c->h - 0.5;
+    c->z[at] = (z - c->o[2]) / c->h - c->ix[2] - 0.5;
     c->sg[at] = (int8_t)s;
 }
 
@@ -144,17 +145,17 @@ static void raster_tri(wctx *c, size_t t, int j0, int j1)
     double x0 = MIN3(v[0], v[3], v[6]), x1 = MAX3(v[0], v[3], v[6]);
     double y0 = MIN3(v[1], v[4], v[7]), y1 = MAX3(v[1], v[4], v[7]);
     int ilo, ihi, jlo, jhi;
-    col_range(x0, x1, c->o[0], c->h, c->nx, &ilo, &ihi);
-    col_range(y0, y1, c->o[1], c->h, c->ny, &jlo, &jhi);
+    col_range(x0, x1, c->o[0], c->ix[0], c->h, c->nx, &ilo, &ihi);
+    col_range(y0, y1, c->o[1], c->ix[1], c->h, c->ny, &jlo, &jhi);
     if (jlo < j0) jlo = j0;
     if (jhi > j1 - 1) jhi = j1 - 1;
     edge e[3]; /* e[q] is the edge opposite vertex q */
     for (int q = 0; q < 3; q++)
         edge_set(&e[q], v + 3 * ((q + 1) % 3), v + 3 * ((q + 2) % 3));
     for (int j = jlo; j <= jhi; j++) {
-        double qy = c->o[1] + (j + 0.5) * c->h;
+        double qy = c->o[1] + (c->ix[1] + j + 0.5) * c->h;
         for (int i = ilo; i <= ihi; i++) {
-            double qx = c->o[0] + (i + 0.5) * c->h, f[3];
+            double qx = c->o[0] + (c->ix[0] + i + 0.5) * c->h, f[3];
             int s[3];
             for (int q = 0; q < 3; q++)
                 f[q] = edge_eval(&e[q], qx, qy, &s[q]);
@@ -205,9 +206,9 @@ static int bin_tris(wctx *c, vx_err *err)
             double v[9];
             tri_of(c, t, v);
             int lo, hi, ilo, ihi;
-            col_range(MIN3(v[1], v[4], v[7]), MAX3(v[1], v[4], v[7]), c->o[1], c->h, c->ny, &lo,
+            col_range(MIN3(v[1], v[4], v[7]), MAX3(v[1], v[4], v[7]), c->o[1], c->ix[1], c->h, c->ny, &lo,
                       &hi);
-            col_range(MIN3(v[0], v[3], v[6]), MAX3(v[0], v[3], v[6]), c->o[0], c->h, c->nx, &ilo,
+            col_range(MIN3(v[0], v[3], v[6]), MAX3(v[0], v[3], v[6]), c->o[0], c->ix[0], c->h, c->nx, &ilo,
                       &ihi);
             if (lo > hi || ilo > ihi) continue;
             for (int b = lo / BAND; b <= hi / BAND; b++) {
@@ -243,8 +244,8 @@ static void set_bit(wctx *c, int i, int j, int k)
 /* w >= 1/2 at centre k of column (i, j), whose crossing count above is n. */
 static int inside_at(const wctx *c, int i, int j, int k, int n)
 {
-    double q[3] = {c->o[0] + (i + 0.5) * c->h, c->o[1] + (j + 0.5) * c->h,
-                   c->o[2] + (k + 0.5) * c->h};
+    double q[3] = {c->o[0] + (c->ix[0] + i + 0.5) * c->h, c->o[1] + (c->ix[1] + j + 0.5) * c->h,
+                   c->o[2] + (c->ix[2] + k + 0.5) * c->h};
     return n - vx_wtree_eval(&c->tree, q) >= 0.5;
 }
 
@@ -252,9 +253,9 @@ static int inside_at(const wctx *c, int i, int j, int k, int n)
  * (i, j): there w >= 1/2 exactly where n >= 1, with nothing evaluated. */
 static int far_run(const wctx *c, int i, int j, int ka, int kb, int n)
 {
-    double a[3] = {c->o[0] + (i + 0.5) * c->h, c->o[1] + (j + 0.5) * c->h,
-                   c->o[2] + (ka + 0.5) * c->h};
-    double b[3] = {a[0], a[1], c->o[2] + (kb + 0.5) * c->h};
+    double a[3] = {c->o[0] + (c->ix[0] + i + 0.5) * c->h, c->o[1] + (c->ix[1] + j + 0.5) * c->h,
+                   c->o[2] + (c->ix[2] + ka + 0.5) * c->h};
+    double b[3] = {a[0], a[1], c->o[2] + (c->ix[2] + kb + 0.5) * c->h};
     double limit = fabs(n - 0.5);
     return vx_wtree_bound(&c->tree, a, b, limit) < limit;
 }
@@ -426,8 +427,8 @@ static void inside_range(wctx *c)
         c->lo[a] = 0;
         c->hi[a] = n[a] - 1;
         if (!c->open) continue;
-        double lo = ceil((c->m->bbox_min[a] - c->o[a]) / c->h - 0.5),
-               hi = floor((c->m->bbox_max[a] - c->o[a]) / c->h - 0.5);
+        double lo = ceil((c->m->bbox_min[a] - c->o[a]) / c->h - c->ix[a] - 0.5),
+               hi = floor((c->m->bbox_max[a] - c->o[a]) / c->h - c->ix[a] - 0.5);
         if (lo > c->lo[a]) c->lo[a] = lo > n[a] ? n[a] : (int)lo;
         if (hi < c->hi[a]) c->hi[a] = hi < -1 ? -1 : (int)hi;
     }
@@ -449,6 +450,8 @@ int vx_voxelize_winding(const vx_mesh *m, const vx_voxelize_desc *d, vx_bitgrid 
     c->nz = d->grid.dims[2];
     c->nbands = (c->ny + BAND - 1) / BAND;
     memcpy(c->o, d->grid.origin, sizeof c->o);
+    for (int a = 0; a < 3; a++)
+        c->ix[a] = (double)d->grid.index[a];
     c->h = d->grid.h;
     c->out = out;
     int rc = -1;

@@ -50,10 +50,10 @@ int ref_voxelize(const vx_mesh *m, const vx_grid *g, vx_inside rule, uint8_t *ou
             }
         int *r = range + 4 * t;
         /* centre c = origin + (j + 0.5) h within [lo, hi] */
-        r[0] = (int)fmax(0, ceil((lo[0] - g->origin[1]) / g->h - 0.5) - 1);
-        r[1] = (int)fmin(ny - 1, floor((hi[0] - g->origin[1]) / g->h - 0.5) + 1);
-        r[2] = (int)fmax(0, ceil((lo[1] - g->origin[2]) / g->h - 0.5) - 1);
-        r[3] = (int)fmin(nz - 1, floor((hi[1] - g->origin[2]) / g->h - 0.5) + 1);
+        r[0] = (int)fmax(0, ceil(vx_grid_coord(g, 1, lo[0]) - 0.5) - 1);
+        r[1] = (int)fmin(ny - 1, floor(vx_grid_coord(g, 1, hi[0]) - 0.5) + 1);
+        r[2] = (int)fmax(0, ceil(vx_grid_coord(g, 2, lo[1]) - 0.5) - 1);
+        r[3] = (int)fmin(nz - 1, floor(vx_grid_coord(g, 2, hi[1]) - 0.5) + 1);
         for (int k = r[2]; k <= r[3]; k++)
             for (int j = r[0]; j <= r[1]; j++)
                 cnt[(size_t)k * ny + j + 1]++;
@@ -77,7 +77,9 @@ int ref_voxelize(const vx_mesh *m, const vx_grid *g, vx_inside rule, uint8_t *ou
     for (int k = 0; k < nz; k++)
         for (int j = 0; j < ny; j++) {
             size_t row = (size_t)k * ny + j;
-            double py = g->origin[1] + (j + 0.5) * g->h, pz = g->origin[2] + (k + 0.5) * g->h;
+            /* centres in the lattice: origin + (index + j + 1/2) h */
+            double py = g->origin[1] + ((double)g->index[1] + j + 0.5) * g->h,
+                   pz = g->origin[2] + ((double)g->index[2] + k + 0.5) * g->h;
             size_t nh = 0;
             for (uint32_t q = cnt[row]; q < cnt[row + 1]; q++) {
                 const uint32_t *tv = m->tri + 3 * (size_t)ids[q];
@@ -104,7 +106,7 @@ int ref_voxelize(const vx_mesh *m, const vx_grid *g, vx_inside rule, uint8_t *ou
             size_t q = 0;
             uint8_t *o = out + row * (size_t)nx;
             for (int i = 0; i < nx; i++) {
-                double xc = g->origin[0] + (i + 0.5) * g->h;
+                double xc = g->origin[0] + ((double)g->index[0] + i + 0.5) * g->h;
                 while (q < nh && hits[q].x <= xc) {
                     w -= hits[q].s;
                     par ^= 1;

@@ -402,13 +402,73 @@ static void test_big(void **state)
     vx_bitgrid_free(&b);
     vx_mesh_free(m);
 }
+/* ---- progress follows the work (issue 14 #6) ---- */
+
+typedef struct prog_log {
+    double t0;
+    int n;
+    double t[4096], f[4096];
+} prog_log;
+
+static int log_progress(void *ud, double f, vx_err *err)
+{
+    (void)err;
+    prog_log *l = ud;
+    if (l->n < 4096) {
+        l->t[l->n] = now_s() - l->t0;
+        l->f[l->n++] = f;
+    }
+    return 0;
+}
+
+/* Robust over many slabs: the z rays, peeled once in slab 0, were a third
+ * of the work but a third of one slab's share of the bar (0.0675 of the
+ * job for most of it). Now the reports are proportional to the work: when
+ * half the time has passed the bar is past a fifth, and it moves every
+ * pass. */
+static void test_robust_progress(void **state)
+{
+    (void)state;
+    char path[512];
+    snprintf(path, sizeof path, "%s/stanford-bunny.obj", VX_MESH_DIR);
+    vx_mesh *m = vx_obj_read_path(path, NULL, NULL);
+    assert_non_null(m);
+    vx_voxelize_desc d = {.inside = VX_INSIDE_ROBUST, .max_slab_rows = 16};
+    grid_res(m, 160, 1, &d.grid);
+    static prog_log l;
+    memset(&l, 0, sizeof l);
+    d.progress = log_progress;
+    d.ud = &l;
+    vx_bitgrid b;
+    vx_voxelize_stats st;
+    l.t0 = now_s();
+    run_peel(m, &d, &b, &st);
+    double total = now_s() - l.t0, z_done = 0, z_time = 0;
+    int distinct = 0;
+    for (int i = 0; i < l.n; i++) {
+        assert_true(i == 0 || l.f[i] >= l.f[i - 1]); /* never backwards */
+        distinct += i == 0 || l.f[i] > l.f[i - 1];
+        if (i == 2) z_done = l.f[i], z_time = l.t[i]; /* slab 0: x, y, then z */
+    }
+    printf("robust %d slabs, %.2f s: %d reports (%d distinct); after slab 0's z rays %.3f at "
+           "%.0f%% of the time\n",
+           st.chunks, total, l.n, distinct, z_done, 100 * z_time / total);
+    assert_true(st.chunks >= 8);
+    /* x and y of every slab and slab 0's z rays move the bar (later z
+     * fills weigh nothing); slab 0's z rays are a third of the job's work
+     * (were 1 / (3 * slabs)) */
+    assert_true(distinct >= 2 * st.chunks + 1);
+    assert_true(z_done >= 1.0 / 3);
+    vx_bitgrid_free(&b);
+    vx_mesh_free(m);
+}
 
 int main(void)
 {
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_bunny_robust), cmocka_unit_test(test_robust_limits),
         cmocka_unit_test(test_surface),      cmocka_unit_test(test_bench),
-        cmocka_unit_test(test_big),
+        cmocka_unit_test(test_big),          cmocka_unit_test(test_robust_progress),
     };
     return cmocka_run_group_tests(tests, vx_test_gl_setup, vx_test_gl_teardown);
 }

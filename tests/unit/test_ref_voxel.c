@@ -76,7 +76,7 @@ static void test_two_boxes(void **state)
     for (int i = 0; i < 36; i++)
         m->face_idx[i] = a->face_idx[i], m->face_idx[36 + i] = b->face_idx[i] + 8;
     vx_mesh_analyze(m, NULL);
-    vx_grid g = {{0, 0, 0}, 0.25, {12, 12, 12}};
+    vx_grid g = {{0, 0, 0}, 0.25, {12, 12, 12}, {0, 0, 0}};
     uint8_t *out = malloc(1728);
     ref_voxelize(m, &g, VX_INSIDE_NONZERO, out);
     assert_int_equal(count(out, 1728), 2 * 512 - 64);

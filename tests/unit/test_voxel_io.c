@@ -30,7 +30,7 @@ static int pattern(int i, int j, int k)
 
 static void make_grid(vx_bitgrid *g, int nx, int ny, int nz, int counts)
 {
-    vx_grid gr = {{-1.5, 2.0, 0.25}, 0.5, {nx, ny, nz}};
+    vx_grid gr = {{-1.5, 2.0, 0.25}, 0.5, {nx, ny, nz}, {0, 0, 0}};
     assert_int_equal(vx_bitgrid_alloc(g, &gr, counts, NULL), 0);
     for (int k = 0; k < nz; k++)
         for (int j = 0; j < ny; j++)
