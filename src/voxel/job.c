@@ -10,13 +10,24 @@
 #include "voxel/job.h"
 #include "voxel/voxel.h"
 
-typedef enum vformat { F_VDB = 0, F_BINVOX, F_RAW8, F_RAW1, F_SUMMARY } vformat;
+typedef enum vformat {
+    F_VDB = 0,
+    F_BINVOX,
+    F_RAW8,
+    F_RAW1,
+    F_SUMMARY,
+    F_VOX,
+    F_NRRD,
+    F_NPY
+} vformat;
 
 static const char *const method_names[] = {"auto", "peel", "slice", "scan", NULL};
 static const char *const inside_names[] = {"nonzero", "parity", "robust", NULL};
 static const char *const fill_names[] = {"solid", "surface", NULL};
 static const char *const samples_names[] = {"cube", "faces", NULL}; /* vx_samples order */
-static const char *const format_names[] = {"vdb", "binvox", "raw8", "raw1", "summary", NULL};
+static const char *const format_names[] = {"vdb", "binvox", "raw8", "raw1", "summary",
+                                           "vox", "nrrd",   "npy",  NULL};
+static const char *const vdb_grid_names[] = {"level_set", "fog", "bool", NULL}; /* vx_vdb_class */
 
 /* params.grid: an explicit box. */
 typedef struct vbox {
@@ -34,7 +45,8 @@ typedef struct vparams {
     long supersample;
     int samples; /* vx_samples */
     long threshold;
-    int format; /* vformat */
+    int format;   /* vformat */
+    int vdb_grid; /* vx_vdb_class */
 } vparams;
 
 static const vx_pspec origin_item = VX_P_ITEM_NUM(-HUGE_VAL, HUGE_VAL);
@@ -80,6 +92,7 @@ static const vx_pspec spec[] = {
     VX_P_ENUM(vparams, samples, samples_names, 0, "the sample pattern of supersample 2"),
     VX_P_INT(vparams, threshold, 4, 1, 8, "inside samples that make a voxel inside"),
     VX_P_ENUM(vparams, format, format_names, 0, "output format"),
+    VX_P_ENUM(vparams, vdb_grid, vdb_grid_names, 0, "the grid a vdb output holds"),
     VX_P_END,
 };
 #undef SET
@@ -106,7 +119,8 @@ typedef struct vstate {
  * GPU's copy of it plus float render targets the size of the largest grid
  * face (per sample), and the writer's own buffers (OpenVDB's tree; the
  * other writers stream a row at a time). An estimate, but an upper one. */
-static uint64_t job_bytes(const int dims[3], int ss, vx_samples samples, vformat format)
+static uint64_t job_bytes(const int dims[3], int ss, vx_samples samples, vformat format,
+                          vx_vdb_class cls)
 {
     uint64_t bits = vx_bitgrid_bytes(dims, ss);
     const int coverage = ss == 2; /* the vdb writer's FloatGrid */
@@ -124,7 +138,7 @@ static uint64_t job_bytes(const int dims[3], int ss, vx_samples samples, vformat
              c = (uint64_t)dims[0] * dims[2];
     uint64_t face = a > b ? (a > c ? a : c) : (b > c ? b : c);
     uint64_t gpu = bits + face * 16 * (uint64_t)(ss * ss);
-    uint64_t enc = format == F_VDB ? vx_voxel_vdb_bytes(dims, coverage) : 0;
+    uint64_t enc = format == F_VDB ? vx_voxel_vdb_bytes(dims, cls, coverage) : 0;
     return bits + gpu + enc;
 }
 
@@ -145,8 +159,8 @@ static int check_grid(const int dims[3], const vparams *p, const vx_limits *lim,
     if (n > VX_VOXELIZE_MAX_VOXELS)
         return vx_err_set(err, kind, code, "%s gives %dx%dx%d = %llu voxels, the limit is 2048^3",
                           what, dims[0], dims[1], dims[2], (unsigned long long)n);
-    uint64_t bytes =
-        job_bytes(dims, (int)p->supersample, (vx_samples)p->samples, (vformat)p->format);
+    uint64_t bytes = job_bytes(dims, (int)p->supersample, (vx_samples)p->samples,
+                               (vformat)p->format, (vx_vdb_class)p->vdb_grid);
     if (lim && lim->max_job_memory && bytes > lim->max_job_memory)
         return vx_err_set(
             err, kind, code,
@@ -315,6 +329,18 @@ static int voxelize_encode(vx_job_run *r, const void *params, void *state, vx_er
         if (!path) return -1;
         rc = vx_voxel_write_binvox(&s->grid, path, &io, err);
         break;
+    case F_VOX:
+    case F_NRRD:
+    case F_NPY: {
+        static const char *const ext[] = {"vox", "nrrd", "npy"};
+        const int f = (int)p.format - F_VOX;
+        path = vx_run_output(r, "voxels", ext[f], "application/octet-stream", err);
+        if (!path) return -1;
+        rc = f == 0   ? vx_voxel_write_vox(&s->grid, path, &io, err)
+             : f == 1 ? vx_voxel_write_nrrd(&s->grid, path, &io, err)
+                      : vx_voxel_write_npy(&s->grid, path, &io, err);
+        break;
+    }
     case F_VDB: {
         path = vx_run_output(r, "voxels", "vdb", "application/x-openvdb", err);
         if (!path) return -1;
@@ -327,7 +353,7 @@ static int voxelize_encode(vx_job_run *r, const void *params, void *state, vx_er
             .threshold = (int)p.threshold,
             .samples = samples_names[p.samples],
         };
-        rc = vx_voxel_write_vdb(&s->grid, p.supersample == 2, &m, path, &io, err);
+        rc = vx_voxel_write_vdb(&s->grid, (vx_vdb_class)p.vdb_grid, &m, path, &io, err);
         break;
     }
     }
