@@ -20,6 +20,8 @@ pkgs=(
   libfftw3-dev libosd-dev libpng-dev libcmocka-dev libsystemd-dev systemd nettle-dev
   # integration tests and benchmarks
   curl jq procps psmisc python3 python3-yaml python3-jsonschema
+  # test_voxel_formats.sh reads the npy and vox outputs with NumPy
+  python3-numpy
   # tests/deploy/test_systemd.sh: the system calls voxeld makes vs the unit's filter
   strace
   # the container image test (tests/deploy): podman builds the Dockerfile

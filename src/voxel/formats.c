@@ -136,8 +136,7 @@ static int32_t node_shp(vx_out *o, int id, int model)
  * t + v - floor(size / 2), so t = brick origin + floor(size / 2). */
 static void brick_t(const vox_brick *b, char *t, size_t n)
 {
-    snprintf(t, n, "%d %d %d", b->o[0] + b->s[0] / 2, b->o[1] + b->s[1] / 2,
-             b->o[2] + b->s[2] / 2);
+    snprintf(t, n, "%d %d %d", b->o[0] + b->s[0] / 2, b->o[1] + b->s[1] / 2, b->o[2] + b->s[2] / 2);
 }
 
 int vx_voxel_write_vox(const vx_bitgrid *g, const char *path, const vx_voxel_io *io, vx_err *err)

@@ -72,7 +72,9 @@ int main(int argc, char **argv)
         fprintf(stderr, "vdbcheck: raw files are not %zu bytes\n", n);
         return 1;
     }
-    auto at = [&](const openvdb::Coord &c) { return (size_t)c.x() + nx * ((size_t)c.y() + ny * c.z()); };
+    auto at = [&](const openvdb::Coord &c) {
+        return (size_t)c.x() + nx * ((size_t)c.y() + ny * c.z());
+    };
     try {
         openvdb::io::File file(argv[1]);
         file.open();
@@ -129,8 +131,10 @@ int main(int argc, char **argv)
                         return fail("sign is not the voxel's", i, j, k);
                 }
         for (auto it = want->cbeginValueOn(); it; ++it)
-            if (!facc.isValueOn(it.getCoord()) || std::fabs(facc.getValue(it.getCoord()) - *it) > 1e-6f)
-                return fail("band differs", it.getCoord().x(), it.getCoord().y(), it.getCoord().z());
+            if (!facc.isValueOn(it.getCoord()) ||
+                std::fabs(facc.getValue(it.getCoord()) - *it) > 1e-6f)
+                return fail("band differs", it.getCoord().x(), it.getCoord().y(),
+                            it.getCoord().z());
         if (f->activeVoxelCount() != want->activeVoxelCount())
             return fprintf(stderr, "vdbcheck: band of %llu voxels, want %llu\n",
                            (unsigned long long)f->activeVoxelCount(),

@@ -52,7 +52,8 @@ static void random_grid(vx_bitgrid *g, int nx, int ny, int nz, int kind, int cou
                 if (v) g->bits[((size_t)k * ny + j) * g->wx + (size_t)(i >> 5)] |= 1u << (i & 31);
                 if (counts) {
                     size_t L = ((size_t)k * ny + j) * nx + i;
-                    g->counts[L] = (uint8_t)(v ? (kind == 3 && (rnd() & 1) ? 8 : 1 + rnd() % 8) : 0);
+                    g->counts[L] =
+                        (uint8_t)(v ? (kind == 3 && (rnd() & 1) ? 8 : 1 + rnd() % 8) : 0);
                 }
             }
 }
@@ -91,8 +92,8 @@ static void ref_binvox(const vx_bitgrid *g, const char *p)
     const int *n = g->grid.dims;
     int d = n[0] > n[1] ? n[0] : n[1];
     if (n[2] > d) d = n[2];
-    fprintf(f, "#binvox 1\ndim %d %d %d\ntranslate %.17g %.17g %.17g\nscale %.17g\ndata\n", d, d,
-            d, g->grid.origin[0], g->grid.origin[1], g->grid.origin[2], d * g->grid.h);
+    fprintf(f, "#binvox 1\ndim %d %d %d\ntranslate %.17g %.17g %.17g\nscale %.17g\ndata\n", d, d, d,
+            g->grid.origin[0], g->grid.origin[1], g->grid.origin[2], d * g->grid.h);
     int cur = -1, run = 0;
     for (int i = 0; i < d; i++)
         for (int k = 0; k < d; k++)
@@ -117,8 +118,8 @@ static int same_file(const char *a, const char *b)
     return system(cmd) == 0;
 }
 
-static const int sizes[][3] = {{1, 1, 1},   {13, 5, 3},  {32, 32, 32}, {33, 70, 9},
-                               {64, 8, 129}, {100, 37, 61}, {7, 300, 2}, {260, 3, 40}};
+static const int sizes[][3] = {{1, 1, 1},    {13, 5, 3},    {32, 32, 32}, {33, 70, 9},
+                               {64, 8, 129}, {100, 37, 61}, {7, 300, 2},  {260, 3, 40}};
 
 static void test_raw_binvox(void **st)
 {
