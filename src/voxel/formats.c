@@ -64,21 +64,29 @@ static uint64_t brick_scan(const vx_bitgrid *g, const vox_brick *b, vx_out *o)
 {
     const int ny = g->grid.dims[1];
     uint64_t n = 0;
-    const size_t x0 = (size_t)b->o[0] / 32, x1 = ((size_t)b->o[0] + b->s[0] + 31) / 32;
+    const int i0 = b->o[0], i1 = b->o[0] + b->s[0];
+    const size_t x0 = (size_t)i0 / 32, x1 = ((size_t)i1 + 31) / 32;
     for (int k = b->o[2]; k < b->o[2] + b->s[2]; k++)
         for (int j = b->o[1]; j < b->o[1] + b->s[1]; j++) {
             const uint32_t *row = g->bits + ((size_t)k * ny + j) * g->wx;
-            for (size_t x = x0; x < x1; x++)
-                for (uint32_t w = vx_row_word(g, row, x); w; w &= w - 1) {
-                    int i = (int)(32 * x) + __builtin_ctz(w);
-                    if (i < b->o[0] || i >= b->o[0] + b->s[0]) continue;
-                    n++;
-                    if (o) {
-                        uint8_t v[4] = {(uint8_t)(i - b->o[0]), (uint8_t)(j - b->o[1]),
-                                        (uint8_t)(k - b->o[2]), 1};
-                        if (vx_out_write(o, v, 4)) return n;
-                    }
+            for (size_t x = x0; x < x1; x++) {
+                uint32_t w = vx_row_word(g, row, x);
+                /* bricks start on multiples of 256: only the grid's end cuts a word */
+                if (32 * x + 32 > (size_t)i1) w &= (1u << (i1 - 32 * (int)x)) - 1u;
+                if (!o) {
+                    n += (uint64_t)__builtin_popcount(w);
+                    continue;
                 }
+                if (o->n + 4 * 32 > VX_OUT_BUF && vx_out_flush(o)) return n;
+                uint8_t *p = o->buf + o->n;
+                for (; w; w &= w - 1, n++, p += 4) {
+                    p[0] = (uint8_t)(32 * x + (size_t)__builtin_ctz(w) - (size_t)i0);
+                    p[1] = (uint8_t)(j - b->o[1]);
+                    p[2] = (uint8_t)(k - b->o[2]);
+                    p[3] = 1;
+                }
+                o->n = (size_t)(p - o->buf);
+            }
         }
     return n;
 }

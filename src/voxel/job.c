@@ -92,7 +92,7 @@ static const vx_pspec spec[] = {
     VX_P_ENUM(vparams, samples, samples_names, 0, "the sample pattern of supersample 2"),
     VX_P_INT(vparams, threshold, 4, 1, 8, "inside samples that make a voxel inside"),
     VX_P_ENUM(vparams, format, format_names, 0, "output format"),
-    VX_P_ENUM(vparams, vdb_grid, vdb_grid_names, 0, "the grid a vdb output holds"),
+    VX_P_ENUM(vparams, vdb_grid, vdb_grid_names, 1, "the grid a vdb output holds"),
     VX_P_END,
 };
 #undef SET

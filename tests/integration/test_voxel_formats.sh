@@ -38,9 +38,9 @@ fetch() {
 
 # --- vdb: each grid class in OpenVDB's tools ---
 vox "default vdb" '{"resolution":32}'
-check "default vdb_grid is level_set" jq -e '.params.vdb_grid == "level_set" and .params.format == "vdb"' "$TMP/job.json"
-fetch "$TMP/level_set.vdb"
-for c in fog bool; do
+check "default vdb_grid is fog" jq -e '.params.vdb_grid == "fog" and .params.format == "vdb"' "$TMP/job.json"
+fetch "$TMP/fog.vdb"
+for c in level_set bool; do
     vox "vdb $c" "{\"resolution\":32,\"vdb_grid\":\"$c\"}"
     fetch "$TMP/$c.vdb"
 done

@@ -311,7 +311,7 @@ static void test_params(void **st)
         "{\"resolution\":256,\"voxel_size\":null,\"grid\":null,\"padding\":0,\"method\":\"auto\","
         "\"inside\":\"nonzero\",\"fill\":\"solid\",\"supersample\":1,\"samples\":\"cube\","
         "\"threshold\":4,"
-        "\"format\":\"vdb\",\"vdb_grid\":\"level_set\"}");
+        "\"format\":\"vdb\",\"vdb_grid\":\"fog\"}");
     /* normalised params parse to themselves */
     cJSON *again = vx_kind_parse(&vx_kind_voxelize, o, NULL, &err);
     char *s2 = cJSON_PrintUnformatted(again);
