@@ -188,6 +188,56 @@ static void test_vdb(void **st)
         }
 }
 
+/* The progress hook: fractions seen, in order. */
+typedef struct seen {
+    double f[4096];
+    int n;
+} seen;
+
+static int record(void *ud, double f, vx_err *err)
+{
+    seen *s = ud;
+    if (s->n < 4096) s->f[s->n++] = f;
+    return 0;
+}
+
+/* Every writer moves the progress while it writes (the job's bar follows
+ * it): at least two distinct fractions strictly between 0 and 1, never
+ * going back, and 1 at most. */
+static void test_progress(void **st)
+{
+    vx_bitgrid g;
+    random_grid(&g, 300, 70, 64, 3, 0);
+    static const char *const names[] = {"raw8", "raw1",     "binvox",  "nrrd",         "npy",
+                                        "vox",  "vdb bool", "vdb fog", "vdb level_set"};
+    int (*const fns[])(const vx_bitgrid *, const char *, const vx_voxel_io *,
+                       vx_err *) = {vx_voxel_write_raw8, vx_voxel_write_raw1, vx_voxel_write_binvox,
+                                    vx_voxel_write_nrrd, vx_voxel_write_npy,  vx_voxel_write_vox};
+    char p[256];
+    snprintf(p, sizeof p, "%s/progress.out", dir);
+    for (int w = 0; w < 9; w++) {
+        static seen s;
+        s.n = 0;
+        vx_voxel_io io = {record, &s};
+        vx_err err;
+        int rc = w < 6 ? fns[w](&g, p, &io, &err)
+                       : vx_voxel_write_vdb(&g,
+                                            w == 6   ? VX_VDB_BOOL
+                                            : w == 7 ? VX_VDB_FOG
+                                                     : VX_VDB_LEVEL_SET,
+                                            NULL, p, &io, &err);
+        assert_int_equal(rc, 0);
+        int inner = 0;
+        for (int i = 0; i < s.n; i++) {
+            if (i && s.f[i] < s.f[i - 1]) fail_msg("%s: progress went back", names[w]);
+            if (s.f[i] > 1.0) fail_msg("%s: progress past 1", names[w]);
+            inner += s.f[i] > 0 && s.f[i] < 1 && (!i || s.f[i] != s.f[i - 1]);
+        }
+        if (inner < 2) fail_msg("%s: %d distinct fractions inside (0, 1)", names[w], inner);
+    }
+    vx_bitgrid_free(&g);
+}
+
 static int setup(void **st)
 {
     return mkdtemp(dir) ? 0 : -1;
@@ -205,6 +255,7 @@ int main(void)
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_raw_binvox),
         cmocka_unit_test(test_vdb),
+        cmocka_unit_test(test_progress),
     };
     return cmocka_run_group_tests(tests, setup, teardown);
 }
