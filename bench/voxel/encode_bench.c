@@ -127,8 +127,8 @@ int main(int argc, char **argv)
             long long bytes = file_bytes(path);
             unlink(path);
             if (rc) {
-                printf("| %s | %s | %.1f | %s | failed: %s | | | | |\n", base, grid, best, ws[w].name,
-                       err.message);
+                printf("| %s | %s | %.1f | %s | failed: %s | | | | |\n", base, grid, best,
+                       ws[w].name, err.message);
                 continue;
             }
             printf("| %s | %s | %.1f | %s | %.1f | %.2f | %.1f | %lld | %.0f |\n", base, grid, best,
