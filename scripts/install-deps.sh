@@ -42,6 +42,8 @@ test_pkgs=(
   libcmocka-dev draco libopenvdb-tools systemd
   # the tests read compressed downloads back
   zstd
+  # test_voxel_formats.sh reads the npy and vox outputs with NumPy
+  python3-numpy
   # integration tests
   curl jq procps psmisc python3 python3-yaml python3-jsonschema man-db
   # tests/deploy/test_systemd.sh: the system calls voxeld makes vs the unit's filter

@@ -15,11 +15,29 @@
  *           largest of nx, ny, nz and the other axes are padded with empty
  *           voxels at their high end, so translate = origin and
  *           scale = d * h keep voxel (i,j,k) where it is in the grid.
- *   vdb     an OpenVDB file with one grid: BoolGrid "voxels" (active and
- *           true = inside) or, for supersample 2, FloatGrid "coverage"
- *           (samples inside / 8, active where > 0). Index (i,j,k) maps to
- *           the voxel centre: transform = uniform scale h then translation
- *           origin + h/2. Grid metadata carries the job parameters.
+ *   vdb     an OpenVDB file with one grid, by vx_vdb_class: a level set
+ *           FloatGrid "surface" (grid class level set: the narrow-band
+ *           signed distance, 3 voxels each side, to the boundary between set
+ *           and unset voxels, by OpenVDB's topologyToLevelSet; negative
+ *           inside, background 3 h), a fog FloatGrid "density" (1 inside,
+ *           active, background 0) or, with sample counts, "coverage"
+ *           (samples inside / samples per voxel, active where > 0), or a
+ *           BoolGrid "voxels" (active and true = inside). Index (i,j,k) maps
+ *           to the voxel centre: transform = uniform scale h then
+ *           translation origin + h/2. Grid metadata carries the job
+ *           parameters. Fully set 8^3 leaves are stored as tiles.
+ *   nrrd    an NRRD 0004 header (type uint8, sizes nx ny nz, space
+ *           directions h along each axis, space origin = voxel (0,0,0)'s
+ *           centre, encoding raw), a blank line, then the raw8 body.
+ *   npy     NumPy's .npy 1.0: dtype |u1, shape (nx, ny, nz), Fortran order
+ *           (so a[i, j, k] is voxel (i,j,k)), then the raw8 body.
+ *   vox     MagicaVoxel 150: the grid in bricks of 256^3 (the format's
+ *           model limit), one SIZE + XYZI model (colour index 1) per brick
+ *           that holds voxels, and a scene graph (nTRN 0 -> nGRP 1 -> per
+ *           model nTRN -> nSHP) whose translation t = brick origin +
+ *           floor(size / 2) puts model voxel v at grid index
+ *           t + v - floor(size / 2). VX_ETOOBIG vox_too_large past 2^31
+ *           bytes (the format's 32-bit chunk sizes).
  * All writers write to a temporary name beside path and rename, so a
  * failed write leaves no partial file at path. */
 #ifndef VX_VOXEL_IO_H
@@ -45,10 +63,16 @@ int vx_voxel_write_raw8(const vx_bitgrid *g, const char *path, const vx_voxel_io
 int vx_voxel_write_raw1(const vx_bitgrid *g, const char *path, const vx_voxel_io *io, vx_err *err);
 int vx_voxel_write_binvox(const vx_bitgrid *g, const char *path, const vx_voxel_io *io,
                           vx_err *err);
-/* coverage: write the FloatGrid from g->counts (requires counts) instead of
- * the BoolGrid from the bits. */
-int vx_voxel_write_vdb(const vx_bitgrid *g, int coverage, const vx_vdb_meta *meta, const char *path,
-                       const vx_voxel_io *io, vx_err *err);
+int vx_voxel_write_nrrd(const vx_bitgrid *g, const char *path, const vx_voxel_io *io, vx_err *err);
+int vx_voxel_write_npy(const vx_bitgrid *g, const char *path, const vx_voxel_io *io, vx_err *err);
+int vx_voxel_write_vox(const vx_bitgrid *g, const char *path, const vx_voxel_io *io, vx_err *err);
+/* The grid a .vdb holds (voxelize's vdb_grid; the names' order). */
+typedef enum vx_vdb_class { VX_VDB_LEVEL_SET = 0, VX_VDB_FOG, VX_VDB_BOOL } vx_vdb_class;
+/* Writes the grid of class cls; VX_VDB_FOG takes its values from g->counts
+ * when the grid has them (coverage), else 1 inside. Builds the tree a leaf
+ * at a time on OpenVDB's thread pool. */
+int vx_voxel_write_vdb(const vx_bitgrid *g, vx_vdb_class cls, const vx_vdb_meta *meta,
+                       const char *path, const vx_voxel_io *io, vx_err *err);
 
 /* A dense float field as an OpenVDB FloatGrid named `name` (render's band-
  * limited density): value (i,j,k) = v[i + d0 (j + d1 k)] at world point
@@ -60,7 +84,8 @@ int vx_voxel_write_vdb_float(const float *v, const int dims[3], const double ori
                              const char *name, const char *mesh, const char *path, vx_err *err);
 
 /* Bytes the vdb writer may hold in memory beyond the bit grid (OpenVDB's
- * tree for a grid that is entirely active: the worst case). */
-uint64_t vx_voxel_vdb_bytes(const int dims[3], int coverage);
+ * trees for a grid whose every leaf is partial: the worst case); coverage:
+ * the grid has sample counts. */
+uint64_t vx_voxel_vdb_bytes(const int dims[3], vx_vdb_class cls, int coverage);
 
 #endif

@@ -1,13 +1,25 @@
 // OpenVDB writer (io.h). The one C++ file of the library: OpenVDB's heavy
 // templates are instantiated here only, behind a C API that never lets an
 // exception cross into C.
+//
+// The tree is built a leaf at a time from the bit grid, in parallel: an
+// OpenVDB leaf is 8^3 voxels whose masks are 8 words of 64 bits, word x
+// holding bit 8 y + z of the leaf's (x, y, z). Each leaf gathers its 64
+// bytes (one per (y, z) row, bits x) from the grid and transposes them;
+// a full leaf becomes an active tile, an empty one is left out.
+#include <atomic>
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <exception>
 #include <mutex>
 #include <string>
+#include <vector>
 
 #include <openvdb/openvdb.h>
+#include <openvdb/tools/Prune.h>
+#include <openvdb/tools/TopologyToLevelSet.h>
+#include <tbb/parallel_for.h>
 
 extern "C" {
 #include "voxel/io.h"
@@ -35,17 +47,15 @@ template <typename GridT> void set_meta(GridT &grid, const vx_bitgrid *g, const 
         "origin", openvdb::Vec3DMetadata(openvdb::Vec3d(gr.origin[0], gr.origin[1], gr.origin[2])));
     grid.insertMeta("dims",
                     openvdb::Vec3IMetadata(openvdb::Vec3i(gr.dims[0], gr.dims[1], gr.dims[2])));
-    // Index (i,j,k) is the voxel centre origin + (i + 1/2, j + 1/2, k + 1/2) h.
+}
+
+// Index (i,j,k) is the voxel centre origin + (i + 1/2, j + 1/2, k + 1/2) h.
+openvdb::math::Transform::Ptr transform_of(const vx_grid &gr)
+{
     openvdb::math::Transform::Ptr xf = openvdb::math::Transform::createLinearTransform(gr.h);
     xf->postTranslate(openvdb::Vec3d(gr.origin[0] + 0.5 * gr.h, gr.origin[1] + 0.5 * gr.h,
                                      gr.origin[2] + 0.5 * gr.h));
-    grid.setTransform(xf);
-}
-
-int progress(const vx_voxel_io *io, int k, int nz, vx_err *err)
-{
-    if (!io || !io->progress || (k & 7)) return 0;
-    return io->progress(io->ud, 0.8 * k / nz, err) ? -1 : 0;
+    return xf;
 }
 
 // Builds grids (build(grids) returns 0, or -1 with err set) and writes them
@@ -75,65 +85,239 @@ template <typename Build> int write_grids(const char *path, vx_err *err, Build b
     }
 }
 
+enum { LEAF_EMPTY = 0, LEAF_PART = 1, LEAF_FULL = 2 };
+
+// The 512 bits of the leaf at (X, Y, Z) (multiples of 8) in NodeMask order:
+// w[x] bit 8 y + z = voxel (X + x, Y + y, Z + z); voxels outside the grid
+// are 0. Returns LEAF_EMPTY, LEAF_PART or LEAF_FULL.
+int gather_leaf(const vx_bitgrid *g, int X, int Y, int Z, uint64_t w[8])
+{
+    const int nx = g->grid.dims[0], ny = g->grid.dims[1], nz = g->grid.dims[2];
+    const unsigned xmask = nx - X >= 8 ? 0xffu : (1u << (nx - X)) - 1u;
+    uint8_t b[64]; // b[8 y + z]: bit x
+    uint64_t any = 0, all = ~0ull;
+    for (int y = 0; y < 8; y++)
+        for (int z = 0; z < 8; z++) {
+            const int j = Y + y, k = Z + z;
+            uint8_t v = 0;
+            if (j < ny && k < nz) {
+                const uint8_t *row = (const uint8_t *)(g->bits + ((size_t)k * ny + j) * g->wx);
+                v = (uint8_t)(row[X >> 3] & xmask);
+            }
+            b[8 * y + z] = v;
+        }
+    for (int q = 0; q < 8; q++) {
+        uint64_t v;
+        memcpy(&v, b + 8 * q, 8); // byte n = row (y = q, z = n)
+        any |= v;
+        all &= v;
+    }
+    if (!any) return LEAF_EMPTY;
+    if (all == ~0ull) return LEAF_FULL;
+    for (int x = 0; x < 8; x++) {
+        uint64_t word = 0;
+        for (int q = 0; q < 8; q++) {
+            uint64_t v;
+            memcpy(&v, b + 8 * q, 8);
+            // bit x of each of the 8 bytes, gathered into one byte (bit n = byte n)
+            uint64_t t = (((v >> x) & 0x0101010101010101ull) * 0x0102040810204080ull) >> 56;
+            word |= t << (8 * q);
+        }
+        w[x] = word;
+    }
+    return LEAF_PART;
+}
+
+// Counts-based fog leaf: value count / nsamples, active where count > 0.
+template <typename LeafT> int coverage_leaf(const vx_bitgrid *g, int X, int Y, int Z, LeafT *&out)
+{
+    const int nx = g->grid.dims[0], ny = g->grid.dims[1], nz = g->grid.dims[2];
+    int on = 0, full = 0;
+    float vals[512];
+    bool act[512];
+    for (int x = 0; x < 8; x++)
+        for (int y = 0; y < 8; y++)
+            for (int z = 0; z < 8; z++) {
+                const int i = X + x, j = Y + y, k = Z + z, n = 64 * x + 8 * y + z;
+                int c = i < nx && j < ny && k < nz ? g->counts[((size_t)k * ny + j) * nx + i] : 0;
+                vals[n] = c ? (float)c / (float)g->nsamples : 0.0f;
+                act[n] = c > 0;
+                on += c > 0;
+                full += c == g->nsamples;
+            }
+    if (!on) return LEAF_EMPTY;
+    if (full == 512) return LEAF_FULL;
+    out = new LeafT(openvdb::Coord(X, Y, Z), 0.0f, false);
+    float *d = out->buffer().data();
+    for (int n = 0; n < 512; n++) {
+        d[n] = vals[n];
+        if (act[n]) out->getValueMask().setOn((openvdb::Index)n);
+    }
+    return LEAF_PART;
+}
+
+// One z slab of leaves (Z fixed), built in parallel over (X, Y): parts[n]
+// the partial leaves, fulls the origins of full ones.
+template <typename LeafT> struct Slab {
+    std::vector<LeafT *> leaves;
+    std::vector<openvdb::Coord> fulls;
+};
+
+template <typename TreeT, typename MakeLeaf>
+int build_tree(const vx_bitgrid *g, TreeT &tree, const typename TreeT::ValueType &on,
+               const vx_voxel_io *io, double span, vx_err *err, MakeLeaf make)
+{
+    using LeafT = typename TreeT::LeafNodeType;
+    const int nx = g->grid.dims[0], ny = g->grid.dims[1], nz = g->grid.dims[2];
+    const int lx = (nx + 7) / 8, ly = (ny + 7) / 8, lz = (nz + 7) / 8;
+    std::vector<Slab<LeafT>> rows((size_t)ly);
+    for (int zl = 0; zl < lz; zl++) {
+        if (io && io->progress && io->progress(io->ud, span * zl / lz, err)) return -1;
+        tbb::parallel_for(tbb::blocked_range<int>(0, ly), [&](const tbb::blocked_range<int> &r) {
+            for (int yl = r.begin(); yl < r.end(); yl++) {
+                Slab<LeafT> &s = rows[(size_t)yl];
+                for (int xl = 0; xl < lx; xl++) {
+                    LeafT *leaf = nullptr;
+                    int kind = make(8 * xl, 8 * yl, 8 * zl, leaf);
+                    if (kind == LEAF_PART) s.leaves.push_back(leaf);
+                    if (kind == LEAF_FULL)
+                        s.fulls.push_back(openvdb::Coord(8 * xl, 8 * yl, 8 * zl));
+                }
+            }
+        });
+        for (Slab<LeafT> &s : rows) {
+            for (LeafT *leaf : s.leaves)
+                tree.addLeaf(leaf);
+            for (const openvdb::Coord &c : s.fulls)
+                tree.addTile(1, c, on, true);
+            s.leaves.clear();
+            s.fulls.clear();
+        }
+    }
+    // Full leaves' tiles that fill a whole internal node merge into one.
+    openvdb::tools::prune(tree);
+    return 0;
+}
+
+openvdb::BoolGrid::Ptr bool_grid(const vx_bitgrid *g, const vx_voxel_io *io, double span,
+                                 vx_err *err)
+{
+    openvdb::BoolGrid::Ptr grid = openvdb::BoolGrid::create(false);
+    using LeafT = openvdb::BoolGrid::TreeType::LeafNodeType;
+    int rc =
+        build_tree(g, grid->tree(), true, io, span, err, [g](int X, int Y, int Z, LeafT *&out) {
+            uint64_t w[8];
+            int kind = gather_leaf(g, X, Y, Z, w);
+            if (kind != LEAF_PART) return kind;
+            out = new LeafT(openvdb::Coord(X, Y, Z), false, false);
+            uint64_t *buf = out->buffer().data();
+            for (int x = 0; x < 8; x++) {
+                out->getValueMask().template getWord<uint64_t>(x) = w[x];
+                buf[x] = w[x];
+            }
+            return kind;
+        });
+    if (rc) return nullptr;
+    grid->setTransform(transform_of(g->grid));
+    return grid;
+}
+
+openvdb::FloatGrid::Ptr fog_grid(const vx_bitgrid *g, const vx_voxel_io *io, double span,
+                                 vx_err *err)
+{
+    openvdb::FloatGrid::Ptr grid = openvdb::FloatGrid::create(0.0f);
+    using LeafT = openvdb::FloatGrid::TreeType::LeafNodeType;
+    int rc;
+    if (g->counts)
+        rc =
+            build_tree(g, grid->tree(), 1.0f, io, span, err, [g](int X, int Y, int Z, LeafT *&out) {
+                return coverage_leaf(g, X, Y, Z, out);
+            });
+    else
+        rc =
+            build_tree(g, grid->tree(), 1.0f, io, span, err, [g](int X, int Y, int Z, LeafT *&out) {
+                uint64_t w[8];
+                int kind = gather_leaf(g, X, Y, Z, w);
+                if (kind != LEAF_PART) return kind;
+                out = new LeafT(openvdb::Coord(X, Y, Z), 0.0f, false);
+                float *d = out->buffer().data();
+                for (int x = 0; x < 8; x++) {
+                    out->getValueMask().template getWord<uint64_t>(x) = w[x];
+                    for (int n = 0; n < 64; n++)
+                        d[64 * x + n] = (float)((w[x] >> n) & 1u);
+                }
+                return kind;
+            });
+    if (rc) return nullptr;
+    grid->setTransform(transform_of(g->grid));
+    grid->setGridClass(openvdb::GRID_FOG_VOLUME);
+    return grid;
+}
+
+// Forwards OpenVDB's interrupter polls to the progress hook (which may
+// cancel); the fraction stays where it was.
+struct Interrupter {
+    const vx_voxel_io *io;
+    vx_err *err;
+    double at;
+    bool stopped = false;
+    void start(const char * = nullptr) {}
+    void end() {}
+    bool wasInterrupted(int = -1)
+    {
+        if (!stopped && io && io->progress && io->progress(io->ud, at, err)) stopped = true;
+        return stopped;
+    }
+};
+
 } // namespace
 
-extern "C" uint64_t vx_voxel_vdb_bytes(const int dims[3], int coverage)
+extern "C" uint64_t vx_voxel_vdb_bytes(const int dims[3], vx_vdb_class cls, int coverage)
 {
     // A leaf holds 512 voxels: a value mask (64 B) plus a bool mask (64 B)
     // or 512 floats (2 KiB), ~100 B of node overhead; the file buffer is
-    // about the same again (compression works per leaf).
+    // about the same again (compression works per leaf). A level set holds
+    // the bool tree and its float band (dilated: up to 3 leaves a leaf).
     uint64_t n = (uint64_t)dims[0] * (uint64_t)dims[1] * (uint64_t)dims[2];
     uint64_t leaves = n / 512 + 1;
-    return leaves * (coverage ? 2300 : 240) * 2;
+    uint64_t per = cls == VX_VDB_BOOL ? 240 : cls == VX_VDB_FOG || coverage ? 2300 : 240 + 3 * 2300;
+    return leaves * per * 2;
 }
 
-extern "C" int vx_voxel_write_vdb(const vx_bitgrid *g, int coverage, const vx_vdb_meta *meta,
+extern "C" int vx_voxel_write_vdb(const vx_bitgrid *g, vx_vdb_class cls, const vx_vdb_meta *meta,
                                   const char *path, const vx_voxel_io *io, vx_err *err)
 {
-    const int nx = g->grid.dims[0], ny = g->grid.dims[1], nz = g->grid.dims[2];
-    if (coverage && !g->counts)
-        return vx_err_set(err, VX_EINTERNAL, "internal_error",
-                          "coverage output without sample counts");
-    int rc = write_grids(path, err, [&](openvdb::GridPtrVec &grids) {
-        if (coverage) {
-            openvdb::FloatGrid::Ptr grid = openvdb::FloatGrid::create(0.0f);
-            grid->setName("coverage");
-            grid->setGridClass(openvdb::GRID_FOG_VOLUME);
-            auto acc = grid->getAccessor();
-            for (int k = 0; k < nz; k++) {
-                if (progress(io, k, nz, err)) return -1;
-                for (int j = 0; j < ny; j++) {
-                    const uint8_t *c = g->counts + ((size_t)k * ny + j) * nx;
-                    for (int i = 0; i < nx; i++)
-                        if (c[i])
-                            acc.setValueOn(openvdb::Coord(i, j, k), c[i] / float(g->nsamples));
-                }
-            }
-            set_meta(*grid, g, meta);
-            grids.push_back(grid);
+    int rc = write_grids(path, err, [&](openvdb::GridPtrVec &grids) -> int {
+        openvdb::GridBase::Ptr out;
+        if (cls == VX_VDB_BOOL) {
+            openvdb::BoolGrid::Ptr b = bool_grid(g, io, 0.8, err);
+            if (!b) return -1;
+            b->setName("voxels");
+            set_meta(*b, g, meta);
+            out = b;
+        } else if (cls == VX_VDB_FOG) {
+            openvdb::FloatGrid::Ptr f = fog_grid(g, io, 0.8, err);
+            if (!f) return -1;
+            f->setName(g->counts ? "coverage" : "density");
+            set_meta(*f, g, meta);
+            out = f;
         } else {
-            openvdb::BoolGrid::Ptr grid = openvdb::BoolGrid::create(false);
-            grid->setName("voxels");
-            auto acc = grid->getAccessor();
-            for (int k = 0; k < nz; k++) {
-                if (progress(io, k, nz, err)) return -1;
-                for (int j = 0; j < ny; j++) {
-                    const uint32_t *w = g->bits + ((size_t)k * ny + j) * g->wx;
-                    for (size_t x = 0; x < g->wx; x++) {
-                        // skip empty words: most of a grid is outside or
-                        // runs of inside, and setValueOn is the cost here
-                        for (uint32_t b = w[x]; b; b &= b - 1) {
-                            int i = (int)(x * 32) + __builtin_ctz(b);
-                            acc.setValueOn(openvdb::Coord(i, j, k), true);
-                        }
-                    }
-                }
-            }
-            // Interior leaves that are entirely on become tiles: smaller files.
-            grid->tree().prune();
-            set_meta(*grid, g, meta);
-            grids.push_back(grid);
+            openvdb::BoolGrid::Ptr b = bool_grid(g, io, 0.3, err);
+            if (!b) return -1;
+            // The narrow band (3 voxels each side) of the signed distance to
+            // the boundary between set and unset voxels, by OpenVDB's own
+            // tool; no closing, so the topology is the grid's.
+            Interrupter intr{io, err, 0.3};
+            openvdb::FloatGrid::Ptr ls = openvdb::tools::topologyToLevelSet(*b, 3, 0, 0, 0, &intr);
+            if (intr.stopped) return -1;
+            b.reset();
+            ls->setName("surface");
+            ls->setGridClass(openvdb::GRID_LEVEL_SET);
+            set_meta(*ls, g, meta);
+            out = ls;
         }
+        if (io && io->progress && io->progress(io->ud, 0.85, err)) return -1;
+        grids.push_back(out);
         return 0;
     });
     if (rc) return -1;

@@ -144,7 +144,7 @@ if [[ " ${METHODS[*]} " == *" slice "* ]]; then
 fi
 
 # --- every format, on the sphere ---
-vox "sphere vdb" "$M_sphere" '{"resolution":24}'
+vox "sphere vdb" "$M_sphere" '{"resolution":24,"vdb_grid":"bool"}'
 check "default format is vdb" jq -e '.params.format == "vdb" and .params.method == "auto" and .stats.method == "scan"' "$TMP/job.json"
 N_IN=$(st voxels_inside)
 H=$(st voxel_size)
@@ -163,7 +163,7 @@ check "vdb: metadata" jq -e --slurpfile j "$TMP/job.json" \
 
 # Supersampling is slicing's (auto picks slice for it).
 if [[ ${#METHODS[@]} -eq 2 ]]; then
-    vox "sphere vdb supersample 2" "$M_sphere" '{"resolution":24,"supersample":2,"threshold":4}'
+    vox "sphere vdb supersample 2" "$M_sphere" '{"resolution":24,"supersample":2,"threshold":4,"vdb_grid":"fog"}'
     check "supersample 2 ran slice" test "$(st method)" = slice
     fetch "$TMP/c.vdb"
     "$VX_TOOLS/vdbinfo" "$TMP/c.vdb" >"$TMP/c.vdb.json"
@@ -173,7 +173,7 @@ if [[ ${#METHODS[@]} -eq 2 ]]; then
 fi
 
 # The faces pattern: centre + six face centres, any method (auto: scan).
-vox "sphere vdb samples faces" "$M_sphere" '{"resolution":24,"supersample":2,"samples":"faces","threshold":1}'
+vox "sphere vdb samples faces" "$M_sphere" '{"resolution":24,"supersample":2,"samples":"faces","threshold":1,"vdb_grid":"fog"}'
 check "faces echoed, auto ran scan" jq -e '.params.samples == "faces" and .params.threshold == 1 and .stats.method == "scan"' "$TMP/job.json"
 fetch "$TMP/f.vdb"
 "$VX_TOOLS/vdbinfo" "$TMP/f.vdb" >"$TMP/f.vdb.json"

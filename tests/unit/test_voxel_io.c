@@ -194,7 +194,7 @@ static void test_vdb_bool(void **st)
     path_of(p, sizeof p, "a.vdb");
     vx_err err;
     vx_vdb_meta m = {"peel", "nonzero", "solid", "abc", 1, 4, NULL};
-    assert_int_equal(vx_voxel_write_vdb(&g, 0, &m, p, NULL, &err), 0);
+    assert_int_equal(vx_voxel_write_vdb(&g, VX_VDB_BOOL, &m, p, NULL, &err), 0);
     cJSON *root, *gr = vdbinfo(p, &root);
     assert_string_equal(cJSON_GetObjectItem(gr, "name")->valuestring, "voxels");
     assert_string_equal(cJSON_GetObjectItem(gr, "type")->valuestring, "bool");
@@ -227,7 +227,7 @@ static void test_vdb_coverage(void **st)
         path_of(p, sizeof p, "c.vdb");
         vx_err err;
         vx_vdb_meta m = {"slice", "parity", "solid", NULL, 2, 3, n == 8 ? "cube" : "faces"};
-        assert_int_equal(vx_voxel_write_vdb(&g, 1, &m, p, NULL, &err), 0);
+        assert_int_equal(vx_voxel_write_vdb(&g, VX_VDB_FOG, &m, p, NULL, &err), 0);
         uint64_t active = 0, sum = 0;
         for (size_t i = 0; i < 13 * 5 * 3; i++) {
             active += g.counts[i] > 0;
@@ -252,7 +252,8 @@ static void test_write_error(void **st)
     vx_err err;
     assert_int_equal(vx_voxel_write_raw8(&g, "/nonexistent-dir/x.raw", NULL, &err), -1);
     assert_int_equal(err.kind, VX_EIO);
-    assert_int_equal(vx_voxel_write_vdb(&g, 0, NULL, "/nonexistent-dir/x.vdb", NULL, &err), -1);
+    assert_int_equal(
+        vx_voxel_write_vdb(&g, VX_VDB_BOOL, NULL, "/nonexistent-dir/x.vdb", NULL, &err), -1);
     assert_int_equal(err.kind, VX_EIO);
     vx_bitgrid_free(&g);
 }
@@ -310,7 +311,7 @@ static void test_params(void **st)
         "{\"resolution\":256,\"voxel_size\":null,\"grid\":null,\"padding\":0,\"method\":\"auto\","
         "\"inside\":\"nonzero\",\"fill\":\"solid\",\"supersample\":1,\"samples\":\"cube\","
         "\"threshold\":4,"
-        "\"format\":\"vdb\"}");
+        "\"format\":\"vdb\",\"vdb_grid\":\"fog\"}");
     /* normalised params parse to themselves */
     cJSON *again = vx_kind_parse(&vx_kind_voxelize, o, NULL, &err);
     char *s2 = cJSON_PrintUnformatted(again);
@@ -351,6 +352,7 @@ static void test_params(void **st)
     expect_invalid("{\"supersample\":3}", "params.supersample");
     expect_invalid("{\"supersample\":2,\"method\":\"peel\"}", "params.supersample");
     expect_invalid("{\"format\":\"stl\"}", "params.format");
+    expect_invalid("{\"vdb_grid\":\"points\"}", "params.vdb_grid");
     expect_invalid("{\"colour\":1}", "params.colour");
     /* 2048^3 bits is 1 GiB: twice that (CPU + GPU) is over a 1 GiB limit */
     expect_invalid("{\"resolution\":2048}", "job memory limit");

@@ -1,0 +1,37 @@
+/* What the writers of io.c and formats.c share: a buffered output file
+ * written to a temporary name and renamed on success. */
+#ifndef VX_VOXEL_IO_INT_H
+#define VX_VOXEL_IO_INT_H
+
+#include <stdio.h>
+
+#include "voxel/io.h"
+
+#define VX_OUT_BUF ((size_t)1 << 20)
+
+typedef struct vx_out {
+    FILE *f;
+    uint8_t *buf;
+    size_t n;
+    int failed; /* errno of a failed write */
+    char tmp[4200];
+    const char *path;
+} vx_out;
+
+/* Opens path.tmp for writing (err set on failure). */
+int vx_out_open(vx_out *o, const char *path, vx_err *err);
+/* Appends n bytes; -1 once a write has failed. */
+int vx_out_write(vx_out *o, const void *p, size_t n);
+/* Writes out the buffer; -1 once a write has failed. */
+int vx_out_flush(vx_out *o);
+/* Closes and renames on success (ok); removes the temporary file otherwise
+ * or when a write failed (err set). */
+int vx_out_close(vx_out *o, int ok, vx_err *err);
+/* The progress hook at k of n, every 8th k; -1 when it stops the write. */
+int vx_out_progress(const vx_voxel_io *io, int k, int n, vx_err *err);
+/* The raw8 body (io.h) of g into o (err set when the hook stops it). */
+int vx_out_raw8(vx_out *o, const vx_bitgrid *g, const vx_voxel_io *io, vx_err *err);
+/* Word x of a row, the padding bits past nx cleared. */
+uint32_t vx_row_word(const vx_bitgrid *g, const uint32_t *row, size_t x);
+
+#endif

@@ -1,0 +1,261 @@
+/* The fast writers (voxel/io.h: word-at-a-time raw8, raw1 and binvox, the
+ * leaf-at-a-time OpenVDB tree) against simple references on random grids:
+ * raw8, raw1 and binvox byte for byte against voxel-by-voxel encoders
+ * written here; .vdb (every grid class) through the vdbcheck tool, which
+ * builds its reference tree voxel by voxel through OpenVDB's accessor. */
+#include <setjmp.h>
+#include <stdarg.h>
+#include <stddef.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include <cmocka.h>
+
+#include "voxel/io.h"
+#include "voxel/voxel.h"
+
+static char dir[] = "/tmp/vx-voxel-enc-XXXXXX";
+static uint64_t rng = 88172645463325252ull;
+
+static uint32_t rnd(void)
+{
+    rng ^= rng << 13;
+    rng ^= rng >> 7;
+    rng ^= rng << 17;
+    return (uint32_t)(rng >> 16);
+}
+
+/* kind 0 empty, 1 full, 2 noise, 3 a few balls with noise on their rims
+ * (full leaves, runs over 255 and partial leaves together). */
+static void random_grid(vx_bitgrid *g, int nx, int ny, int nz, int kind, int counts)
+{
+    vx_grid gr = {{0.25, -3.0, 1.5}, 0.125, {nx, ny, nz}};
+    assert_int_equal(vx_bitgrid_alloc(g, &gr, counts, NULL), 0);
+    double c[3][4];
+    for (int b = 0; b < 3; b++) {
+        c[b][0] = rnd() % (unsigned)nx, c[b][1] = rnd() % (unsigned)ny;
+        c[b][2] = rnd() % (unsigned)nz;
+        c[b][3] = 2 + rnd() % (unsigned)(nx / 2 + 2);
+    }
+    g->nsamples = 8;
+    for (int k = 0; k < nz; k++)
+        for (int j = 0; j < ny; j++)
+            for (int i = 0; i < nx; i++) {
+                int v = kind == 1 || (kind == 2 && (rnd() & 1));
+                for (int b = 0; kind == 3 && b < 3; b++) {
+                    double dx = i - c[b][0], dy = j - c[b][1], dz = k - c[b][2];
+                    double r2 = dx * dx + dy * dy + dz * dz, r = c[b][3];
+                    v |= r2 < (r - 1) * (r - 1) || (r2 < (r + 1) * (r + 1) && (rnd() & 1));
+                }
+                if (v) g->bits[((size_t)k * ny + j) * g->wx + (size_t)(i >> 5)] |= 1u << (i & 31);
+                if (counts) {
+                    size_t L = ((size_t)k * ny + j) * nx + i;
+                    g->counts[L] =
+                        (uint8_t)(v ? (kind == 3 && (rnd() & 1) ? 8 : 1 + rnd() % 8) : 0);
+                }
+            }
+}
+
+/* ---- the references: one voxel at a time ---- */
+
+static void ref_raw8(const vx_bitgrid *g, const char *p)
+{
+    FILE *f = fopen(p, "wb");
+    const int *n = g->grid.dims;
+    for (int k = 0; k < n[2]; k++)
+        for (int j = 0; j < n[1]; j++)
+            for (int i = 0; i < n[0]; i++)
+                putc(vx_bitgrid_get(g, i, j, k), f);
+    fclose(f);
+}
+
+static void ref_raw1(const vx_bitgrid *g, const char *p)
+{
+    FILE *f = fopen(p, "wb");
+    const int *n = g->grid.dims;
+    unsigned acc = 0, nacc = 0;
+    for (int k = 0; k < n[2]; k++)
+        for (int j = 0; j < n[1]; j++)
+            for (int i = 0; i < n[0]; i++) {
+                acc |= (unsigned)vx_bitgrid_get(g, i, j, k) << nacc;
+                if (++nacc == 8) putc((int)acc, f), acc = 0, nacc = 0;
+            }
+    if (nacc) putc((int)acc, f);
+    fclose(f);
+}
+
+static void ref_binvox(const vx_bitgrid *g, const char *p)
+{
+    FILE *f = fopen(p, "wb");
+    const int *n = g->grid.dims;
+    int d = n[0] > n[1] ? n[0] : n[1];
+    if (n[2] > d) d = n[2];
+    fprintf(f, "#binvox 1\ndim %d %d %d\ntranslate %.17g %.17g %.17g\nscale %.17g\ndata\n", d, d, d,
+            g->grid.origin[0], g->grid.origin[1], g->grid.origin[2], d * g->grid.h);
+    int cur = -1, run = 0;
+    for (int i = 0; i < d; i++)
+        for (int k = 0; k < d; k++)
+            for (int j = 0; j < d; j++) {
+                int v = i < n[0] && j < n[1] && k < n[2] ? vx_bitgrid_get(g, i, j, k) : 0;
+                if (v == cur && run < 255) {
+                    run++;
+                    continue;
+                }
+                if (run) putc(cur, f), putc(run, f);
+                cur = v;
+                run = 1;
+            }
+    if (run) putc(cur, f), putc(run, f);
+    fclose(f);
+}
+
+static int same_file(const char *a, const char *b)
+{
+    char cmd[600];
+    snprintf(cmd, sizeof cmd, "cmp -s %s %s", a, b);
+    return system(cmd) == 0;
+}
+
+static const int sizes[][3] = {{1, 1, 1},    {13, 5, 3},    {32, 32, 32}, {33, 70, 9},
+                               {64, 8, 129}, {100, 37, 61}, {7, 300, 2},  {260, 3, 40}};
+
+static void test_raw_binvox(void **st)
+{
+    char a[256], b[256];
+    for (size_t s = 0; s < sizeof sizes / sizeof *sizes; s++)
+        for (int kind = 0; kind < 4; kind++) {
+            vx_bitgrid g;
+            random_grid(&g, sizes[s][0], sizes[s][1], sizes[s][2], kind, 0);
+            vx_err err;
+            struct {
+                const char *name;
+                int (*fast)(const vx_bitgrid *, const char *, const vx_voxel_io *, vx_err *);
+                void (*ref)(const vx_bitgrid *, const char *);
+            } enc[] = {{"raw8", vx_voxel_write_raw8, ref_raw8},
+                       {"raw1", vx_voxel_write_raw1, ref_raw1},
+                       {"binvox", vx_voxel_write_binvox, ref_binvox}};
+            for (int e = 0; e < 3; e++) {
+                snprintf(a, sizeof a, "%s/fast.%s", dir, enc[e].name);
+                snprintf(b, sizeof b, "%s/ref.%s", dir, enc[e].name);
+                assert_int_equal(enc[e].fast(&g, a, NULL, &err), 0);
+                enc[e].ref(&g, b);
+                if (!same_file(a, b))
+                    fail_msg("%s differs from the reference on %dx%dx%d kind %d", enc[e].name,
+                             sizes[s][0], sizes[s][1], sizes[s][2], kind);
+            }
+            vx_bitgrid_free(&g);
+        }
+}
+
+static void vdbcheck(const vx_bitgrid *g, vx_vdb_class cls, int coverage)
+{
+    char vdb[256], raw[256], cnt[256], cmd[1200];
+    snprintf(vdb, sizeof vdb, "%s/x.vdb", dir);
+    snprintf(raw, sizeof raw, "%s/x.raw8", dir);
+    snprintf(cnt, sizeof cnt, "%s/x.counts", dir);
+    vx_err err;
+    ref_raw8(g, raw);
+    vx_bitgrid gg = *g;
+    if (!coverage) gg.counts = NULL;
+    assert_int_equal(vx_voxel_write_vdb(&gg, cls, NULL, vdb, NULL, &err), 0);
+    const int *n = g->grid.dims;
+    int len = snprintf(cmd, sizeof cmd, "%s/vdbcheck %s %s %d %d %d", VX_TOOLS_DIR, vdb, raw, n[0],
+                       n[1], n[2]);
+    if (coverage) {
+        FILE *f = fopen(cnt, "wb");
+        fwrite(g->counts, 1, (size_t)n[0] * n[1] * n[2], f);
+        fclose(f);
+        snprintf(cmd + len, sizeof cmd - (size_t)len, " %s %d", cnt, g->nsamples);
+    }
+    if (system(cmd) != 0)
+        fail_msg("vdbcheck failed: class %d coverage %d on %dx%dx%d", cls, coverage, n[0], n[1],
+                 n[2]);
+}
+
+static void test_vdb(void **st)
+{
+    for (size_t s = 0; s < sizeof sizes / sizeof *sizes; s++)
+        for (int kind = 0; kind < 4; kind++) {
+            vx_bitgrid g;
+            random_grid(&g, sizes[s][0], sizes[s][1], sizes[s][2], kind, 1);
+            vdbcheck(&g, VX_VDB_BOOL, 0);
+            vdbcheck(&g, VX_VDB_FOG, 0);
+            vdbcheck(&g, VX_VDB_FOG, 1);
+            if (kind != 2) vdbcheck(&g, VX_VDB_LEVEL_SET, 0); /* noise: a band everywhere, slow */
+            vx_bitgrid_free(&g);
+        }
+}
+
+/* The progress hook: fractions seen, in order. */
+typedef struct seen {
+    double f[4096];
+    int n;
+} seen;
+
+static int record(void *ud, double f, vx_err *err)
+{
+    seen *s = ud;
+    if (s->n < 4096) s->f[s->n++] = f;
+    return 0;
+}
+
+/* Every writer moves the progress while it writes (the job's bar follows
+ * it): at least two distinct fractions strictly between 0 and 1, never
+ * going back, and 1 at most. */
+static void test_progress(void **st)
+{
+    vx_bitgrid g;
+    random_grid(&g, 300, 70, 64, 3, 0);
+    static const char *const names[] = {"raw8", "raw1",     "binvox",  "nrrd",         "npy",
+                                        "vox",  "vdb bool", "vdb fog", "vdb level_set"};
+    int (*const fns[])(const vx_bitgrid *, const char *, const vx_voxel_io *,
+                       vx_err *) = {vx_voxel_write_raw8, vx_voxel_write_raw1, vx_voxel_write_binvox,
+                                    vx_voxel_write_nrrd, vx_voxel_write_npy,  vx_voxel_write_vox};
+    char p[256];
+    snprintf(p, sizeof p, "%s/progress.out", dir);
+    for (int w = 0; w < 9; w++) {
+        static seen s;
+        s.n = 0;
+        vx_voxel_io io = {record, &s};
+        vx_err err;
+        int rc = w < 6 ? fns[w](&g, p, &io, &err)
+                       : vx_voxel_write_vdb(&g,
+                                            w == 6   ? VX_VDB_BOOL
+                                            : w == 7 ? VX_VDB_FOG
+                                                     : VX_VDB_LEVEL_SET,
+                                            NULL, p, &io, &err);
+        assert_int_equal(rc, 0);
+        int inner = 0;
+        for (int i = 0; i < s.n; i++) {
+            if (i && s.f[i] < s.f[i - 1]) fail_msg("%s: progress went back", names[w]);
+            if (s.f[i] > 1.0) fail_msg("%s: progress past 1", names[w]);
+            inner += s.f[i] > 0 && s.f[i] < 1 && (!i || s.f[i] != s.f[i - 1]);
+        }
+        if (inner < 2) fail_msg("%s: %d distinct fractions inside (0, 1)", names[w], inner);
+    }
+    vx_bitgrid_free(&g);
+}
+
+static int setup(void **st)
+{
+    return mkdtemp(dir) ? 0 : -1;
+}
+
+static int teardown(void **st)
+{
+    char cmd[128];
+    snprintf(cmd, sizeof cmd, "rm -rf %s", dir);
+    return system(cmd) == 0 ? 0 : -1;
+}
+
+int main(void)
+{
+    const struct CMUnitTest tests[] = {
+        cmocka_unit_test(test_raw_binvox),
+        cmocka_unit_test(test_vdb),
+        cmocka_unit_test(test_progress),
+    };
+    return cmocka_run_group_tests(tests, setup, teardown);
+}
