@@ -31,7 +31,7 @@ static uint32_t rnd(void)
  * (full leaves, runs over 255 and partial leaves together). */
 static void random_grid(vx_bitgrid *g, int nx, int ny, int nz, int kind, int counts)
 {
-    vx_grid gr = {{0.25, -3.0, 1.5}, 0.125, {nx, ny, nz}};
+    vx_grid gr = {{0.25, -3.0, 1.5}, 0.125, {nx, ny, nz}, {0, 0, 0}};
     assert_int_equal(vx_bitgrid_alloc(g, &gr, counts, NULL), 0);
     double c[3][4];
     for (int b = 0; b < 3; b++) {
