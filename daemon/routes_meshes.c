@@ -100,7 +100,8 @@ int vx_route_upload(vx_http *h, struct MHD_Connection *c, req *r)
     size_t nhead;
     const unsigned char *head = vx_upload_head(r->up, &nhead);
     vx_mesh_format fmt;
-    if (vx_intake_resolve(r->declared, head, nhead, &fmt, &err)) return vx_resp_err(c, r, &err);
+    if (vx_intake_resolve(r->declared, head, nhead, vx_upload_bytes(r->up), &fmt, &err))
+        return vx_resp_err(c, r, &err);
     cJSON *meta = vx_store_mesh_meta(h->d.store, id, NULL);
     if (meta) {
         VX_INFO("mesh.uploaded", "mesh=%s new=0", id);

@@ -12,7 +12,7 @@ pkgs=(
   # GL through EGL: glvnd loaders + headers, Mesa's EGL and DRI drivers (llvmpipe)
   libegl-dev libgl-dev libopengl-dev libegl1 libegl-mesa0 libgl1-mesa-dri
   # HTTP, JSON, meshes
-  libmicrohttpd-dev libcjson-dev libdraco-dev draco
+  libmicrohttpd-dev libcjson-dev libdraco-dev draco libassimp-dev
   # OpenVDB and what its headers need
   libopenvdb-dev libopenvdb-tools libboost-dev libboost-iostreams-dev
   libtbb-dev libimath-dev libblosc-dev zlib1g-dev

@@ -10,7 +10,6 @@
 #include <new>
 #include <vector>
 
-#include <malloc.h>
 #include <sys/stat.h>
 
 #include "draco/compression/decode.h"
@@ -18,6 +17,7 @@
 #include "draco/core/decoder_buffer.h"
 #include "draco/core/encoder_buffer.h"
 #include "draco/mesh/mesh.h"
+#include "mesh/alloc_cap.h"
 
 extern "C" {
 #include "mesh/mesh.h"
@@ -86,29 +86,9 @@ int slurp(FILE *f, size_t bound, std::vector<char> &data, vx_err *err)
 /* libdraco also sizes tables from counts deep in the data, where no header
  * check reaches: a texture-coordinate predictor's orientation count (up to
  * 2^31 bits, then read in a loop of as many steps: 27 s and 200 MB for a
- * 2.7 KB file of 372 faces, found by fuzz_draco). While an AllocCap lives,
- * its thread's operator new allocations are counted (malloc_usable_size,
- * frees subtracted) and one that would pass the cap throws std::bad_alloc
- * before anything is spent; the decode reports it as draco_corrupt. */
-thread_local uint64_t t_cap, t_used;
-thread_local bool t_active, t_tripped;
-
-class AllocCap
-{
-  public:
-    explicit AllocCap(uint64_t cap)
-    {
-        t_cap = cap;
-        t_used = 0;
-        t_tripped = false;
-        t_active = true;
-    }
-    ~AllocCap() { t_active = false; }
-    AllocCap(const AllocCap &) = delete;
-    AllocCap &operator=(const AllocCap &) = delete;
-    bool tripped() const { return t_tripped; }
-    uint64_t limit() const { return t_cap; }
-};
+ * 2.7 KB file of 372 faces, found by fuzz_draco). The decode runs under a
+ * vx::AllocCap (alloc_cap.h) and reports a trip as draco_corrupt. */
+using vx::AllocCap;
 
 /* A cursor over the header bytes: every read checks the bytes left. */
 struct Cursor {
@@ -591,84 +571,4 @@ extern "C" int vx_draco_write_path(const vx_mesh *m, const vx_mesh_write_opts *o
     } catch (...) {
         return vx_err_set(err, VX_EIO, "draco_encode", "libdraco failed unexpectedly");
     }
-}
-
-/* The replaceable global allocation functions, for AllocCap (above): the
- * plain and array forms, with and without nothrow and size; the aligned
- * forms keep the library's (aligned_alloc and free, never counted). */
-namespace
-{
-void *counted_new(std::size_t n)
-{
-    if (t_active) {
-        if (n > t_cap || t_used > t_cap - n) {
-            t_tripped = true;
-            return nullptr;
-        }
-    }
-    void *p = std::malloc(n ? n : 1);
-    if (p && t_active) t_used += malloc_usable_size(p);
-    return p;
-}
-
-void counted_delete(void *p) noexcept
-{
-    if (p && t_active) {
-        size_t n = malloc_usable_size(p);
-        t_used = n > t_used ? 0 : t_used - n;
-    }
-    std::free(p);
-}
-
-void *throwing_new(std::size_t n)
-{
-    for (;;) {
-        void *p = counted_new(n);
-        if (p) return p;
-        std::new_handler h = t_tripped ? nullptr : std::get_new_handler();
-        if (!h) throw std::bad_alloc();
-        h();
-    }
-}
-} // namespace
-
-void *operator new(std::size_t n)
-{
-    return throwing_new(n);
-}
-void *operator new[](std::size_t n)
-{
-    return throwing_new(n);
-}
-void *operator new(std::size_t n, const std::nothrow_t &) noexcept
-{
-    return counted_new(n);
-}
-void *operator new[](std::size_t n, const std::nothrow_t &) noexcept
-{
-    return counted_new(n);
-}
-void operator delete(void *p) noexcept
-{
-    counted_delete(p);
-}
-void operator delete[](void *p) noexcept
-{
-    counted_delete(p);
-}
-void operator delete(void *p, std::size_t) noexcept
-{
-    counted_delete(p);
-}
-void operator delete[](void *p, std::size_t) noexcept
-{
-    counted_delete(p);
-}
-void operator delete(void *p, const std::nothrow_t &) noexcept
-{
-    counted_delete(p);
-}
-void operator delete[](void *p, const std::nothrow_t &) noexcept
-{
-    counted_delete(p);
 }
