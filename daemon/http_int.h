@@ -84,6 +84,12 @@ int vx_resp_json(struct MHD_Connection *c, req *r, unsigned status, cJSON *doc, 
 int vx_resp_page(struct MHD_Connection *c, req *r, cJSON *items, const char *next);
 /* Answers e as {"error":{"code","message"}} through vx_resp_answer_of. */
 int vx_resp_err(struct MHD_Connection *c, req *r, const vx_err *e);
+/* A Content-Disposition attachment value into out: the file name is
+ * "<stem>-<file>" where stem is name without its extension, or (file NULL)
+ * name itself, or "<fallback>.<ext>" without a name; as ASCII in
+ * filename= (other bytes '_') and as UTF-8 in filename*=. */
+void vx_resp_disposition(char *out, size_t n, const char *name, const char *file,
+                         const char *fallback, const char *ext);
 /* Answers an error made here: vx_err_set + vx_resp_err. */
 int vx_resp_fail(struct MHD_Connection *c, req *r, vx_err_kind kind, const char *code,
                  const char *fmt, ...) __attribute__((format(printf, 5, 6)));
@@ -105,6 +111,8 @@ int vx_route_info(vx_http *h, struct MHD_Connection *c, req *r);
 int vx_route_mesh_list(vx_http *h, struct MHD_Connection *c, req *r);
 /* GET, DELETE /v1/meshes/{id}. */
 int vx_route_mesh(vx_http *h, struct MHD_Connection *c, req *r);
+/* GET /v1/meshes/{id}/file: the uploaded bytes, as the format's media type. */
+int vx_route_mesh_file(vx_http *h, struct MHD_Connection *c, req *r);
 /* POST /v1/meshes once the body is streamed to the store: validate, parse
  * under the parse-memory budget, store. */
 int vx_route_upload(vx_http *h, struct MHD_Connection *c, req *r);

@@ -16,6 +16,7 @@ typedef enum vx_route {
     VX_R_INFO,
     VX_R_MESHES,
     VX_R_MESH,
+    VX_R_MESH_FILE,
     VX_R_JOBS,
     VX_R_JOB,
     VX_R_RESULT,
@@ -35,13 +36,17 @@ typedef struct vx_req_target {
 /* Longest ?wait accepted before capping, in microseconds (10^12 s). */
 #define VX_REQ_WAIT_MAX_US 1000000000000000000ull
 
+/* Longest mesh name, in bytes (?name=, a Content-Disposition filename). */
+#define VX_REQ_NAME_MAX 100
+
 /* The declared query parameters of one request, after strict parsing. */
 typedef struct vx_req_query {
-    int has_limit, has_after, has_state, has_wait;
-    int limit;                 /* 1..1000; 100 when absent */
-    char after[VX_REQ_ID_MAX]; /* a mesh or job id in form */
-    char state[16];            /* a job state */
-    uint64_t wait_us;          /* not yet capped to the request timeout */
+    int has_limit, has_after, has_state, has_wait, has_name;
+    int limit;                      /* 1..1000; 100 when absent */
+    char after[VX_REQ_ID_MAX];      /* a mesh or job id in form */
+    char state[16];                 /* a job state */
+    uint64_t wait_us;               /* not yet capped to the request timeout */
+    char name[VX_REQ_NAME_MAX + 1]; /* POST /v1/meshes: the mesh's name */
 } vx_req_query;
 
 /* Matches path (the URL without its query string, exactly as sent: no
@@ -77,6 +82,15 @@ int vx_req_query_add(vx_req_query *q, vx_route rt, const char *method, const cha
  * vx_req_query_add parses to the same q. Returns its length, or -1 when it
  * does not fit in n. */
 int vx_req_query_format(const vx_req_query *q, char *out, size_t n);
+
+/* 1 when s[0..len) is a mesh name: 1 to VX_REQ_NAME_MAX bytes of valid
+ * UTF-8 without control characters, '/', '\\' or '"'; else 0. */
+int vx_req_name_ok(const char *s, size_t len);
+/* The file name a Content-Disposition value (NULL: none) gives, its
+ * directories dropped, into out (n > VX_REQ_NAME_MAX): 1 when there is a
+ * valid name (vx_req_name_ok), 0 when there is no filename parameter, -1
+ * when there is one that is not a valid name. */
+int vx_req_disposition_name(const char *cd, char *out, size_t n);
 
 /* Parses a page size: a plain decimal integer in [1, 1000]. 0 or -1. */
 int vx_req_parse_limit(const char *s, size_t len, int *out);

@@ -125,9 +125,19 @@ int vx_route_result(vx_http *h, struct MHD_Connection *c, req *r)
     if (vx_jobs_output(h->d.jobs, r->id, r->route == VX_R_RESULT_NAME ? r->name : NULL, path,
                        sizeof path, ctype, fname, &err))
         return vx_resp_err(c, r, &err);
-    char etag[160], disp[200];
+    char etag[160], disp[600];
     snprintf(etag, sizeof etag, "\"%s\"", fname);
-    snprintf(disp, sizeof disp, "attachment; filename=\"%s\"", fname);
+    /* Named after the job's mesh when the upload gave it a name. */
+    cJSON *job = vx_jobs_get(h->d.jobs, r->id, NULL, NULL), *meta = NULL;
+    const cJSON *mj = cJSON_GetObjectItemCaseSensitive(job, "mesh");
+    if (cJSON_IsString(mj)) meta = vx_store_mesh_meta(h->d.store, mj->valuestring, NULL);
+    const cJSON *nj = cJSON_GetObjectItemCaseSensitive(meta, "name");
+    if (cJSON_IsString(nj))
+        vx_resp_disposition(disp, sizeof disp, nj->valuestring, fname, NULL, NULL);
+    else
+        snprintf(disp, sizeof disp, "attachment; filename=\"%s\"", fname);
+    cJSON_Delete(meta);
+    cJSON_Delete(job);
     const char *inm = vx_resp_header(c, MHD_HTTP_HEADER_IF_NONE_MATCH);
     if (inm && (strstr(inm, etag) || !strcmp(inm, "*"))) {
         struct MHD_Response *resp =

@@ -13,6 +13,8 @@ pkgs=(
   libegl-dev libgl-dev libopengl-dev libegl1 libegl-mesa0 libgl1-mesa-dri
   # HTTP, JSON, meshes
   libmicrohttpd-dev libcjson-dev libdraco-dev draco libassimp-dev
+  # libdraco's glTF encoder header (the glb writer) includes Eigen
+  libeigen3-dev
   # OpenVDB and what its headers need
   libopenvdb-dev libopenvdb-tools libboost-dev libboost-iostreams-dev
   libtbb-dev libimath-dev libblosc-dev zlib1g-dev

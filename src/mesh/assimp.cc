@@ -92,7 +92,8 @@ struct Gather {
 
 int too_big(Gather &g, const char *what, size_t n, size_t limit)
 {
-    return vx_err_set(g.err, VX_ETOOBIG, "mesh_too_big", "the %s file has more than %zu %s (the "
+    return vx_err_set(g.err, VX_ETOOBIG, "mesh_too_big",
+                      "the %s file has more than %zu %s (the "
                       "limit), at least %zu",
                       g.fi->name, limit, what, n);
 }
@@ -163,8 +164,8 @@ void weld(Gather &g)
     std::vector<char> keep(nv, 0);
     for (size_t i = 0; i < nv;) {
         size_t j = i;
-        while (j < nv && !std::memcmp(p + 3 * size_t(order[i]), p + 3 * size_t(order[j]),
-                                      3 * sizeof(double)))
+        while (j < nv &&
+               !std::memcmp(p + 3 * size_t(order[i]), p + 3 * size_t(order[j]), 3 * sizeof(double)))
             j++;
         for (size_t k = i; k < j; k++)
             remap[order[k]] = order[i];

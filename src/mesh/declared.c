@@ -140,10 +140,10 @@ static int ply_type_size(const char *t, size_t len)
     static const struct {
         const char *name;
         int size;
-    } types[] = {{"char", 1},   {"int8", 1},   {"uchar", 1},  {"uint8", 1},   {"short", 2},
-                 {"int16", 2},  {"ushort", 2}, {"uint16", 2}, {"int", 4},     {"int32", 4},
-                 {"uint", 4},   {"uint32", 4}, {"float", 4},  {"float32", 4}, {"double", 8},
-                 {"float64", 8}};
+    } types[] = {{"char", 1},  {"int8", 1},    {"uchar", 1},  {"uint8", 1},
+                 {"short", 2}, {"int16", 2},   {"ushort", 2}, {"uint16", 2},
+                 {"int", 4},   {"int32", 4},   {"uint", 4},   {"uint32", 4},
+                 {"float", 4}, {"float32", 4}, {"double", 8}, {"float64", 8}};
     for (size_t i = 0; i < sizeof types / sizeof types[0]; i++)
         if (strlen(types[i].name) == len && !memcmp(types[i].name, t, len)) return types[i].size;
     return 0;
@@ -485,8 +485,8 @@ static int gltf_accessors(gltf_ctx *g)
             if (st > 0) stride = st;
         }
         if (!fits(g, vi, off, stride, count, elem))
-            return gl_fail(g, "%s %d declares more elements than its bufferView holds",
-                           "accessor", i);
+            return gl_fail(g, "%s %d declares more elements than its bufferView holds", "accessor",
+                           i);
         const cJSON *sp = cJSON_GetObjectItemCaseSensitive(a, "sparse");
         if (sp) {
             double sc = num(sp, "count", -1);
@@ -579,8 +579,9 @@ static int check_gltf(vx_mesh_format fmt, const unsigned char *p, size_t n, uint
             return corrupt(err, VX_MESH_GLTF, "no glb version 2 header");
         uint64_t total = le32(p + 8), clen = le32(p + 12);
         if (total != size || le32(p + 16) != 0x4E4F534Au || 20 + clen > size)
-            return corrupt(err, VX_MESH_GLTF, "the glb header and chunk lengths do not match the "
-                                              "file");
+            return corrupt(err, VX_MESH_GLTF,
+                           "the glb header and chunk lengths do not match the "
+                           "file");
         if (20 + clen > n) return 1;
         json = (const char *)p + 20;
         jlen = clen;

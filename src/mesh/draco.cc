@@ -16,6 +16,7 @@
 #include "draco/compression/encode.h"
 #include "draco/core/decoder_buffer.h"
 #include "draco/core/encoder_buffer.h"
+#include "draco/io/gltf_encoder.h"
 #include "draco/mesh/mesh.h"
 #include "mesh/alloc_cap.h"
 
@@ -507,12 +508,9 @@ int write_file(const char *path, const char *data, size_t size, vx_err *err)
                       std::strerror(e ? e : EIO));
 }
 
-int write_path(const vx_mesh *m, const vx_mesh_write_opts *o, const char *path, vx_err *err)
+/* Fills dm with m's triangulated view, positions and optional normals. */
+int build_mesh(const vx_mesh *m, const vx_mesh_write_opts *o, draco::Mesh &dm, vx_err *err)
 {
-    int bits = o && o->draco_quantization_bits ? o->draco_quantization_bits : 16;
-    if (bits < 1 || bits > 30)
-        return vx_err_set(err, VX_EUNPROC, "invalid_params",
-                          "Draco quantisation must be 1 to 30 bits, got %d", bits);
     /* The triangulated view; a mesh of triangles not yet analysed has it
      * in face_idx already. */
     const uint32_t *tri = m->tri ? m->tri : m->face_start ? nullptr : m->face_idx;
@@ -520,8 +518,6 @@ int write_path(const vx_mesh *m, const vx_mesh_write_opts *o, const char *path, 
     if (!tri && m->nfaces)
         return vx_err_set(err, VX_EINTERNAL, "mesh_not_analyzed",
                           "the mesh has no triangulated view (vx_mesh_analyze)");
-
-    draco::Mesh dm;
     dm.set_num_points(uint32_t(m->nverts));
     add_float3(dm, draco::GeometryAttribute::POSITION, m->nverts, m->pos, nullptr);
     if (o && o->normals)
@@ -533,6 +529,17 @@ int write_path(const vx_mesh *m, const vx_mesh_write_opts *o, const char *path, 
             face[k] = draco::PointIndex(tri[3 * t + k]);
         dm.SetFace(draco::FaceIndex(uint32_t(t)), face);
     }
+    return 0;
+}
+
+int write_path(const vx_mesh *m, const vx_mesh_write_opts *o, const char *path, vx_err *err)
+{
+    int bits = o && o->draco_quantization_bits ? o->draco_quantization_bits : 16;
+    if (bits < 1 || bits > 30)
+        return vx_err_set(err, VX_EUNPROC, "invalid_params",
+                          "Draco quantisation must be 1 to 30 bits, got %d", bits);
+    draco::Mesh dm;
+    if (build_mesh(m, o, dm, err)) return -1;
 
     draco::Encoder enc;
     enc.SetAttributeQuantization(draco::GeometryAttribute::POSITION, bits);
@@ -542,6 +549,20 @@ int write_path(const vx_mesh *m, const vx_mesh_write_opts *o, const char *path, 
     draco::Status st = enc.EncodeMeshToBuffer(dm, &out);
     if (!st.ok())
         return vx_err_set(err, VX_EIO, "draco_encode", "Draco encoding failed: %s", st.error_msg());
+    return write_file(path, out.data(), out.size(), err);
+}
+
+/* glb through libdraco's glTF encoder (uncompressed: plain accessors that
+ * every glTF reader takes; positions as float32). */
+int write_glb(const vx_mesh *m, const vx_mesh_write_opts *o, const char *path, vx_err *err)
+{
+    draco::Mesh dm;
+    if (build_mesh(m, o, dm, err)) return -1;
+    draco::GltfEncoder enc;
+    draco::EncoderBuffer out;
+    draco::Status st = enc.EncodeToBuffer(dm, &out);
+    if (!st.ok())
+        return vx_err_set(err, VX_EIO, "glb_encode", "glb encoding failed: %s", st.error_msg());
     return write_file(path, out.data(), out.size(), err);
 }
 
@@ -570,5 +591,17 @@ extern "C" int vx_draco_write_path(const vx_mesh *m, const vx_mesh_write_opts *o
         return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory to encode the Draco mesh");
     } catch (...) {
         return vx_err_set(err, VX_EIO, "draco_encode", "libdraco failed unexpectedly");
+    }
+}
+
+extern "C" int vx_glb_write_path(const vx_mesh *m, const vx_mesh_write_opts *o, const char *path,
+                                 vx_err *err)
+{
+    try {
+        return write_glb(m, o, path, err);
+    } catch (const std::bad_alloc &) {
+        return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory to encode the glb");
+    } catch (...) {
+        return vx_err_set(err, VX_EIO, "glb_encode", "libdraco's glTF encoder failed");
     }
 }

@@ -256,5 +256,9 @@ int vx_obj_write_path(const vx_mesh *m, const vx_mesh_write_opts *o, const char 
 int vx_ply_write_path(const vx_mesh *m, const vx_mesh_write_opts *o, const char *path, vx_err *err);
 int vx_draco_write_path(const vx_mesh *m, const vx_mesh_write_opts *o, const char *path,
                         vx_err *err);
+/* glb (binary glTF 2.0) of the triangulated view through libdraco's glTF
+ * encoder, uncompressed: one mesh, one node, float positions (and normals
+ * when given), 32-bit indices. 0 or -1 (VX_EIO). */
+int vx_glb_write_path(const vx_mesh *m, const vx_mesh_write_opts *o, const char *path, vx_err *err);
 
 #endif
