@@ -1,5 +1,5 @@
-/* STL, PLY, glTF 2.0 and OFF readers: a C++ shim over assimp behind the C
- * API of mesh.h (vx_assimp_read_*).
+/* STL, PLY and glTF 2.0 readers: a C++ shim over assimp behind the C API
+ * of mesh.h (vx_assimp_read_*; OFF goes to mesh/off.c from here).
  *
  * libdraco 1.5.5 (Debian 12) has STL, PLY and glTF decoders, but its STL
  * decoder reads binary files only (and refuses the many binary files whose
@@ -276,6 +276,8 @@ vx_mesh *import(const unsigned char *data, size_t n, const FormatInfo *fi, vx_me
 extern "C" vx_mesh *vx_assimp_read_mem(const unsigned char *data, size_t n, vx_mesh_format fmt,
                                        const vx_mesh_limits *lim, vx_err *err)
 {
+    /* assimp's OFF importer crashed on fuzzed files: mesh/off.c reads OFF. */
+    if (fmt == VX_MESH_OFF) return vx_off_read_mem(data, n, lim, err);
     const FormatInfo *fi = info(fmt);
     if (!fi) {
         vx_err_set(err, VX_EINTERNAL, "mesh_format", "format %d is not read by assimp", int(fmt));

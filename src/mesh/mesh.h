@@ -198,7 +198,13 @@ vx_mesh_format vx_mesh_sniff_sized(const unsigned char *head, size_t n, uint64_t
  * or NULL. */
 vx_mesh *vx_assimp_read_path(const char *path, vx_mesh_format fmt, const vx_mesh_limits *lim,
                              vx_err *err);
-/* The same from memory (the fuzz targets). */
+/* Reads an OFF file from memory (mesh/off.c, not assimp: its OFF importer
+ * crashed on fuzzed input): header counts checked first, polygons kept,
+ * errors VX_EINVAL off_corrupt naming the line, VX_EUNPROC off_no_faces,
+ * VX_ETOOBIG mesh_too_big. Owned analysed mesh or NULL. */
+vx_mesh *vx_off_read_mem(const unsigned char *data, size_t n, const vx_mesh_limits *lim,
+                         vx_err *err);
+/* The same from memory (the fuzz targets); OFF goes to vx_off_read_mem. */
 vx_mesh *vx_assimp_read_mem(const unsigned char *data, size_t n, vx_mesh_format fmt,
                             const vx_mesh_limits *lim, vx_err *err);
 
