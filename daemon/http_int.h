@@ -84,10 +84,11 @@ int vx_resp_json(struct MHD_Connection *c, req *r, unsigned status, cJSON *doc, 
 int vx_resp_page(struct MHD_Connection *c, req *r, cJSON *items, const char *next);
 /* Answers e as {"error":{"code","message"}} through vx_resp_answer_of. */
 int vx_resp_err(struct MHD_Connection *c, req *r, const vx_err *e);
-/* A Content-Disposition attachment value into out: the file name is
+/* A Content-Disposition attachment value into out. The name is
  * "<stem>-<file>" where stem is name without its extension, or (file NULL)
- * name itself, or "<fallback>.<ext>" without a name; as ASCII in
- * filename= (other bytes '_') and as UTF-8 in filename*=. */
+ * name itself, or "<fallback>.<ext>" without a name; it goes as UTF-8 in
+ * filename*=, and filename= (ASCII, other bytes '_') carries fallback when
+ * file is given (a result's own name), else the name. */
 void vx_resp_disposition(char *out, size_t n, const char *name, const char *file,
                          const char *fallback, const char *ext);
 /* Answers an error made here: vx_err_set + vx_resp_err. */

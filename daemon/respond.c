@@ -144,10 +144,14 @@ void vx_resp_disposition(char *out, size_t n, const char *name, const char *file
         snprintf(fn, sizeof fn, "%s", name);
     else
         snprintf(fn, sizeof fn, "%s.%s", fallback, ext);
+    /* filename=: the fallback (a result's own file name) when there is a
+     * file, else fn as ASCII; filename*=: fn as UTF-8. */
+    const char *plain = file ? fallback : fn;
     char ascii[sizeof fn], enc[3 * sizeof fn];
     size_t a = 0, e = 0;
-    for (const unsigned char *c = (const unsigned char *)fn; *c; c++) {
+    for (const unsigned char *c = (const unsigned char *)plain; *c && a + 1 < sizeof ascii; c++)
         ascii[a++] = *c >= 0x20 && *c < 0x7f && *c != '"' && *c != '\\' ? (char)*c : '_';
+    for (const unsigned char *c = (const unsigned char *)fn; *c; c++) {
         if ((*c >= 'a' && *c <= 'z') || (*c >= 'A' && *c <= 'Z') || (*c >= '0' && *c <= '9') ||
             *c == '-' || *c == '.' || *c == '_')
             enc[e++] = (char)*c;

@@ -133,7 +133,7 @@ int vx_route_result(vx_http *h, struct MHD_Connection *c, req *r)
     if (cJSON_IsString(mj)) meta = vx_store_mesh_meta(h->d.store, mj->valuestring, NULL);
     const cJSON *nj = cJSON_GetObjectItemCaseSensitive(meta, "name");
     if (cJSON_IsString(nj))
-        vx_resp_disposition(disp, sizeof disp, nj->valuestring, fname, NULL, NULL);
+        vx_resp_disposition(disp, sizeof disp, nj->valuestring, fname, fname, NULL);
     else
         snprintf(disp, sizeof disp, "attachment; filename=\"%s\"", fname);
     cJSON_Delete(meta);

@@ -160,7 +160,7 @@ check "the catmull-clark glb uploads: 48 triangles, closed" jq -e '.triangles ==
 run_job catmull-clark "$BOX" '{"levels":1,"format":"glb"}'
 api GET "/v1/jobs/$JOB/result"
 DISP=$(header Content-Disposition)
-check "the result is named after the mesh ($DISP)" grep -qE 'filename="box-[0-9a-f]+-mesh.glb"' <<<"$DISP"
+check "the result is named after the mesh ($DISP)" grep -qE "filename=\"$JOB-mesh.glb\"; filename\*=UTF-8''box-$JOB-mesh.glb$" <<<"$DISP"
 run_job gregory "$OFF_ID" '{"divisions":4,"format":"glb"}'
 job_ok "gregory to glb"
 api GET "/v1/jobs/$JOB/result"
