@@ -51,7 +51,8 @@ static int fail(vx_err *err, off_in *in, const char *what)
 static int read_uint(char **s, unsigned long long *v)
 {
     char *e;
-    while (**s == ' ' || **s == '\t' || **s == '\r') (*s)++;
+    while (**s == ' ' || **s == '\t' || **s == '\r')
+        (*s)++;
     if (**s < '0' || **s > '9') return -1;
     *v = strtoull(*s, &e, 10);
     *s = e;
@@ -62,15 +63,18 @@ static int read_header(off_in *in, unsigned long long c[2], vx_err *err)
 {
     if (next_line(in) <= 0) return fail(err, in, "no header");
     char *s = in->line;
-    while (*s == ' ' || *s == '\t') s++;
+    while (*s == ' ' || *s == '\t')
+        s++;
     char *w = s;
-    while (*s && *s != ' ' && *s != '\t' && *s != '\r') s++;
+    while (*s && *s != ' ' && *s != '\t' && *s != '\r')
+        s++;
     size_t wl = (size_t)(s - w);
     if (wl < 3 || strncmp(s - 3, "OFF", 3)) return fail(err, in, "the first word is not OFF");
     if (memchr(w, '4', wl - 3) || memchr(w, 'n', wl - 3))
         return fail(err, in, "4OFF and nOFF (other dimensions) are not read");
     for (int k = 0; k < 2; k++) {
-        while (*s == ' ' || *s == '\t' || *s == '\r') s++;
+        while (*s == ' ' || *s == '\t' || *s == '\r')
+            s++;
         if (!*s) {
             if (next_line(in) <= 0) return fail(err, in, "no vertex and face counts");
             s = in->line;
