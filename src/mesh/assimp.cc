@@ -240,6 +240,9 @@ vx_mesh *import(const unsigned char *data, size_t n, const FormatInfo *fi, vx_me
                 rc = walk(g, sc, sc->mRootNode, aiMatrix4x4(), 0);
             else
                 ascii_only(imp.GetErrorString(), why, sizeof why);
+            /* assimp may fail without saying why (found by fuzz_gltf). */
+            if ((!sc || !sc->mRootNode) && !why[0])
+                std::snprintf(why, sizeof why, "assimp made no scene of it");
         } catch (const std::bad_alloc &) {
             if (!cap.tripped()) throw;
         }
