@@ -269,6 +269,8 @@ static int dispatch(vx_http *h, struct MHD_Connection *c, req *r)
         return is_get ? vx_route_mesh_list(h, c, r) : vx_route_upload(h, c, r);
     case VX_R_MESH:
         return vx_route_mesh(h, c, r);
+    case VX_R_MESH_FILE:
+        return vx_route_mesh_file(h, c, r);
     case VX_R_JOBS:
         return is_get ? vx_route_job_list(h, c, r) : vx_route_job_post(h, c, r);
     case VX_R_JOB:

@@ -99,6 +99,13 @@ int vx_resp_err(struct MHD_Connection *c, req *r, const vx_err *e);
  * none, e.g. Content-Range on a 416). */
 int vx_resp_err_with(struct MHD_Connection *c, req *r, const vx_err *e, const char *h,
                      const char *v);
+/* A Content-Disposition attachment value into out. The name is
+ * "<stem>-<file>" where stem is name without its extension, or (file NULL)
+ * name itself, or "<fallback>.<ext>" without a name; it goes as UTF-8 in
+ * filename*=, and filename= (ASCII, other bytes '_') carries fallback when
+ * file is given (a result's own name), else the name. */
+void vx_resp_disposition(char *out, size_t n, const char *name, const char *file,
+                         const char *fallback, const char *ext);
 /* Answers an error made here: vx_err_set + vx_resp_err. */
 int vx_resp_fail(struct MHD_Connection *c, req *r, vx_err_kind kind, const char *code,
                  const char *fmt, ...) __attribute__((format(printf, 5, 6)));
@@ -123,6 +130,8 @@ int vx_route_info(vx_http *h, struct MHD_Connection *c, req *r);
 int vx_route_mesh_list(vx_http *h, struct MHD_Connection *c, req *r);
 /* GET, DELETE /v1/meshes/{id}. */
 int vx_route_mesh(vx_http *h, struct MHD_Connection *c, req *r);
+/* GET /v1/meshes/{id}/file: the uploaded bytes, as the format's media type. */
+int vx_route_mesh_file(vx_http *h, struct MHD_Connection *c, req *r);
 /* POST /v1/meshes once the body is streamed to the store: validate, parse
  * under the parse-memory budget, store. */
 int vx_route_upload(vx_http *h, struct MHD_Connection *c, req *r);

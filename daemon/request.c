@@ -22,6 +22,7 @@ static const struct {
     [VX_R_INFO] = {"/v1/info", "GET, HEAD"},
     [VX_R_MESHES] = {"/v1/meshes", "GET, HEAD, POST"},
     [VX_R_MESH] = {"/v1/meshes/{id}", "GET, HEAD, DELETE"},
+    [VX_R_MESH_FILE] = {"/v1/meshes/{id}/file", "GET, HEAD"},
     [VX_R_JOBS] = {"/v1/jobs", "GET, HEAD, POST"},
     [VX_R_JOB] = {"/v1/jobs/{id}", "GET, HEAD, DELETE"},
     [VX_R_RESULT] = {"/v1/jobs/{id}/result", "GET, HEAD"},
@@ -79,7 +80,13 @@ vx_route vx_req_route(const char *path, size_t len, vx_req_target *t)
     else if (starts(path, len, "/ui/")) {
         if (segment(path + 4, len - 4, t->name)) t->route = VX_R_WEB_ASSET;
     } else if (starts(path, len, "/v1/meshes/")) {
-        if (segment(path + 11, len - 11, t->id)) t->route = VX_R_MESH;
+        const char *rest = path + 11, *end = path + len;
+        const char *slash = memchr(rest, '/', (size_t)(end - rest));
+        if (!slash && segment(rest, len - 11, t->id))
+            t->route = VX_R_MESH;
+        else if (slash && is(slash, (size_t)(end - slash), "/file") &&
+                 segment(rest, (size_t)(slash - rest), t->id))
+            t->route = VX_R_MESH_FILE;
     } else if (starts(path, len, "/v1/jobs/")) {
         const char *rest = path + 9, *end = path + len;
         const char *slash = memchr(rest, '/', (size_t)(end - rest));
@@ -196,7 +203,7 @@ void vx_req_query_init(vx_req_query *q)
     q->limit = 100;
 }
 
-enum qparam { Q_NONE, Q_LIMIT, Q_AFTER, Q_STATE, Q_WAIT, Q_PROGRESS, Q_ORDER, Q_KIND, Q_MESH };
+enum qparam { Q_NONE, Q_LIMIT, Q_AFTER, Q_STATE, Q_WAIT, Q_PROGRESS, Q_ORDER, Q_KIND, Q_MESH, Q_NAME };
 
 /* Which parameters a route and method declare (api/openapi.yaml). */
 static enum qparam declared(vx_route rt, const char *method, const char *key, size_t klen)
@@ -214,6 +221,7 @@ static enum qparam declared(vx_route rt, const char *method, const char *key, si
     if (((rt == VX_R_JOBS && post) || (rt == VX_R_JOB && get)) && is(key, klen, "wait"))
         return Q_WAIT;
     if (rt == VX_R_JOB && get && is(key, klen, "progress")) return Q_PROGRESS;
+    if (rt == VX_R_MESHES && post && is(key, klen, "name")) return Q_NAME;
     return Q_NONE;
 }
 
@@ -239,8 +247,8 @@ int vx_req_query_add(vx_req_query *q, vx_route rt, const char *method, const cha
 {
     enum qparam p = declared(rt, method, key, klen);
     if (p == Q_NONE) return 0;
-    static const char *names[] = {"",     "limit", "after", "state", "wait",
-                                  "progress", "order", "kind",  "mesh"};
+    static const char *names[] = {"",         "limit", "after", "state", "wait",
+                                  "progress", "order", "kind",  "mesh",  "name"};
     const char *name = names[p];
     int *seen = p == Q_LIMIT   ? &q->has_limit
                 : p == Q_AFTER ? &q->has_after
@@ -249,6 +257,7 @@ int vx_req_query_add(vx_req_query *q, vx_route rt, const char *method, const cha
                 : p == Q_ORDER ? &q->has_order
                 : p == Q_KIND  ? &q->has_kind
                 : p == Q_MESH  ? &q->has_mesh
+                : p == Q_NAME  ? &q->has_name
                                : &q->has_progress;
     if (*seen) {
         snprintf(msg, msgn, "query parameter %s is given more than once", name);
@@ -303,6 +312,17 @@ int vx_req_query_add(vx_req_query *q, vx_route rt, const char *method, const cha
         memcpy(q->mesh, value, vlen);
         q->mesh[vlen] = 0;
         if (!vx_store_valid_mesh_id(q->mesh)) goto bad_mesh;
+        return 0;
+    case Q_NAME:
+        if (!vx_req_name_ok(value, vlen)) {
+            snprintf(msg, msgn,
+                     "query parameter name must be 1 to %d bytes of UTF-8 without control "
+                     "characters, '/', '\\' or '\"'",
+                     VX_REQ_NAME_MAX);
+            return -1;
+        }
+        memcpy(q->name, value, vlen);
+        q->name[vlen] = 0;
         return 0;
     case Q_WAIT:
         if (vx_req_parse_seconds(value, vlen, &q->wait_us)) {
@@ -365,8 +385,69 @@ int vx_req_query_format(const vx_req_query *q, char *out, size_t n)
     if (q->has_progress)
         PUT("progress=%u.%06u", (unsigned)(q->progress_ppm / 1000000),
             (unsigned)(q->progress_ppm % 1000000));
+    if (q->has_name) {
+        /* Percent-encoded but for unreserved characters. */
+        char enc[3 * VX_REQ_NAME_MAX + 1];
+        size_t e = 0;
+        for (const unsigned char *c = (const unsigned char *)q->name; *c; c++) {
+            if ((*c >= 'a' && *c <= 'z') || (*c >= 'A' && *c <= 'Z') || (*c >= '0' && *c <= '9') ||
+                *c == '-' || *c == '.' || *c == '_' || *c == '~')
+                enc[e++] = (char)*c;
+            else
+                e += (size_t)snprintf(enc + e, sizeof enc - e, "%%%02X", *c);
+        }
+        enc[e] = 0;
+        PUT("name=%s", enc);
+    }
 #undef PUT
     return (int)o;
+}
+
+/* ---- mesh names --------------------------------------------------------- */
+
+int vx_req_name_ok(const char *s, size_t len)
+{
+    if (!len || len > VX_REQ_NAME_MAX || !vx_req_utf8_valid(s, len)) return 0;
+    for (size_t i = 0; i < len; i++) {
+        unsigned char c = (unsigned char)s[i];
+        if (c < 0x20 || c == 0x7f || c == '/' || c == '\\' || c == '"') return 0;
+    }
+    return 1;
+}
+
+int vx_req_disposition_name(const char *cd, char *out, size_t n)
+{
+    out[0] = 0;
+    const char *p = cd;
+    /* filename=, not filename*= (RFC 6266 ext-value: not read). */
+    while (p && (p = strcasestr(p, "filename")) && p[8] != '=')
+        p += 8;
+    if (!p) return 0;
+    p += 9;
+    char buf[4 * VX_REQ_NAME_MAX];
+    size_t k = 0;
+    if (*p == '"') {
+        for (p++; *p && *p != '"'; p++) {
+            if (*p == '\\' && p[1]) p++;
+            if (k + 1 >= sizeof buf) return -1;
+            buf[k++] = *p;
+        }
+        if (*p != '"') return -1;
+    } else {
+        for (; *p && *p != ';' && *p != ' ' && *p != '\t'; p++) {
+            if (k + 1 >= sizeof buf) return -1;
+            buf[k++] = *p;
+        }
+    }
+    buf[k] = 0;
+    /* The client's directories are no part of the name. */
+    const char *base = buf;
+    for (const char *q = buf; *q; q++)
+        if (*q == '/' || *q == '\\') base = q + 1;
+    size_t len = strlen(base);
+    if (!vx_req_name_ok(base, len) || len >= n) return -1;
+    memcpy(out, base, len + 1);
+    return 1;
 }
 
 /* ---- UTF-8 ------------------------------------------------------------ */

@@ -16,6 +16,7 @@ typedef enum vx_route {
     VX_R_INFO,
     VX_R_MESHES,
     VX_R_MESH,
+    VX_R_MESH_FILE,
     VX_R_JOBS,
     VX_R_JOB,
     VX_R_RESULT,
@@ -40,10 +41,14 @@ typedef struct vx_req_target {
 /* Longest ?wait accepted before capping, in microseconds (10^12 s). */
 #define VX_REQ_WAIT_MAX_US 1000000000000000000ull
 
+/* Longest mesh name, in bytes (?name=, a Content-Disposition filename). */
+#define VX_REQ_NAME_MAX 100
+
 /* The declared query parameters of one request, after strict parsing.
  * progress (GET /v1/jobs/{id} only) is a fraction from 0 to 1. */
 typedef struct vx_req_query {
     int has_limit, has_after, has_state, has_wait, has_progress, has_order, has_kind, has_mesh;
+    int has_name;
     int limit;                 /* 1..1000; 100 when absent */
     char after[VX_REQ_ID_MAX]; /* a mesh or job id in form */
     char state[16];            /* a job state */
@@ -52,6 +57,7 @@ typedef struct vx_req_query {
     int desc;                  /* order=desc: newest first */
     char kind[32];             /* a job kind's name in form (the route checks it is known) */
     char mesh[VX_REQ_ID_MAX];  /* a mesh id */
+    char name[VX_REQ_NAME_MAX + 1]; /* POST /v1/meshes: the mesh's name */
 } vx_req_query;
 
 /* Matches path (the URL without its query string, exactly as sent: no
@@ -106,6 +112,14 @@ int vx_req_etag_match(const char *list, const char *etag, int weak_ok, int star_
 /* 1 when a client's X-Request-Id can be echoed: 1 to 64 characters of
  * [A-Za-z0-9._:-]. */
 int vx_req_id_ok(const char *s);
+/* 1 when s[0..len) is a mesh name: 1 to VX_REQ_NAME_MAX bytes of valid
+ * UTF-8 without control characters, '/', '\\' or '"'; else 0. */
+int vx_req_name_ok(const char *s, size_t len);
+/* The file name a Content-Disposition value (NULL: none) gives, its
+ * directories dropped, into out (n > VX_REQ_NAME_MAX): 1 when there is a
+ * valid name (vx_req_name_ok), 0 when there is no filename parameter, -1
+ * when there is one that is not a valid name. */
+int vx_req_disposition_name(const char *cd, char *out, size_t n);
 
 /* Parses a page size: a plain decimal integer in [1, 1000]. 0 or -1. */
 int vx_req_parse_limit(const char *s, size_t len, int *out);

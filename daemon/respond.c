@@ -172,3 +172,34 @@ int vx_resp_fail(struct MHD_Connection *c, req *r, vx_err_kind kind, const char 
     va_end(ap);
     return vx_resp_err(c, r, &e);
 }
+
+void vx_resp_disposition(char *out, size_t n, const char *name, const char *file,
+                         const char *fallback, const char *ext)
+{
+    char fn[3 * 128], stem[128];
+    snprintf(stem, sizeof stem, "%s", name ? name : fallback);
+    char *dot = strrchr(stem, '.');
+    if (name && dot && dot != stem) *dot = 0;
+    if (file)
+        snprintf(fn, sizeof fn, "%s-%s", stem, file);
+    else if (name)
+        snprintf(fn, sizeof fn, "%s", name);
+    else
+        snprintf(fn, sizeof fn, "%s.%s", fallback, ext);
+    /* filename=: the fallback (a result's own file name) when there is a
+     * file, else fn as ASCII; filename*=: fn as UTF-8. */
+    const char *plain = file ? fallback : fn;
+    char ascii[sizeof fn], enc[3 * sizeof fn];
+    size_t a = 0, e = 0;
+    for (const unsigned char *c = (const unsigned char *)plain; *c && a + 1 < sizeof ascii; c++)
+        ascii[a++] = *c >= 0x20 && *c < 0x7f && *c != '"' && *c != '\\' ? (char)*c : '_';
+    for (const unsigned char *c = (const unsigned char *)fn; *c; c++) {
+        if ((*c >= 'a' && *c <= 'z') || (*c >= 'A' && *c <= 'Z') || (*c >= '0' && *c <= '9') ||
+            *c == '-' || *c == '.' || *c == '_')
+            enc[e++] = (char)*c;
+        else
+            e += (size_t)snprintf(enc + e, sizeof enc - e, "%%%02X", *c);
+    }
+    ascii[a] = enc[e] = 0;
+    snprintf(out, n, "attachment; filename=\"%s\"; filename*=UTF-8''%s", ascii, enc);
+}

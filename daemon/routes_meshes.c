@@ -1,8 +1,11 @@
 /* /v1/meshes: listing, metadata, delete and the end of an upload (the body
  * has been streamed to a temp file by http.c): what it is (mesh/intake.c),
  * a parse under the --max-parse-memory budget, the store. */
+#include <fcntl.h>
 #include <stdio.h>
 #include <string.h>
+#include <sys/stat.h>
+#include <unistd.h>
 
 #include "http_int.h"
 #include "util/budget.h"
@@ -32,6 +35,70 @@ int vx_route_mesh(vx_http *h, struct MHD_Connection *c, req *r)
     cJSON *meta = vx_store_mesh_meta(h->d.store, r->id, &err);
     if (!meta) return vx_resp_err(c, r, &err);
     return vx_resp_json(c, r, 200, meta, NULL, NULL);
+}
+
+int vx_route_mesh_file(vx_http *h, struct MHD_Connection *c, req *r)
+{
+    vx_err err;
+    if (!vx_store_valid_mesh_id(r->id))
+        return vx_resp_fail(c, r, VX_ENOTFOUND, "mesh_not_found",
+                            "no mesh with that id (ids are 64 hex digits)");
+    cJSON *meta = vx_store_mesh_meta(h->d.store, r->id, &err);
+    if (!meta) return vx_resp_err(c, r, &err);
+    const cJSON *fj = cJSON_GetObjectItemCaseSensitive(meta, "format");
+    const cJSON *nj = cJSON_GetObjectItemCaseSensitive(meta, "name");
+    vx_mesh_format fmt = vx_intake_format_by_name(cJSON_IsString(fj) ? fj->valuestring : NULL);
+    char etag[80], disp[400], path[VX_PATH_MAX];
+    /* The id is the SHA-256 of the bytes: a strong validator. */
+    snprintf(etag, sizeof etag, "\"%s\"", r->id);
+    vx_resp_disposition(disp, sizeof disp, cJSON_IsString(nj) ? nj->valuestring : NULL, NULL, r->id,
+                        vx_intake_format_ext(fmt ? fmt : VX_MESH_OBJ));
+    cJSON_Delete(meta);
+    const char *inm = vx_resp_header(c, MHD_HTTP_HEADER_IF_NONE_MATCH);
+    if (inm && (strstr(inm, etag) || !strcmp(inm, "*"))) {
+        struct MHD_Response *resp =
+            MHD_create_response_from_buffer(0, (void *)"", MHD_RESPMEM_PERSISTENT);
+        MHD_add_response_header(resp, MHD_HTTP_HEADER_ETAG, etag);
+        return vx_resp_queue(c, r, 304, resp, 0);
+    }
+    int fd = -1;
+    struct stat st;
+    if (vx_store_mesh_path(h->d.store, r->id, path, sizeof path, &err) == 0)
+        fd = open(path, O_RDONLY | O_CLOEXEC);
+    if (fd < 0 || fstat(fd, &st) != 0) {
+        if (fd >= 0) close(fd);
+        return vx_resp_fail(c, r, VX_ENOTFOUND, "mesh_not_found", "the mesh was deleted");
+    }
+    struct MHD_Response *resp = MHD_create_response_from_fd64((uint64_t)st.st_size, fd);
+    if (!resp) {
+        close(fd);
+        return MHD_NO;
+    }
+    MHD_add_response_header(resp, MHD_HTTP_HEADER_CONTENT_TYPE,
+                            vx_intake_format_media(fmt ? fmt : VX_MESH_OBJ));
+    MHD_add_response_header(resp, MHD_HTTP_HEADER_ETAG, etag);
+    MHD_add_response_header(resp, "Content-Disposition", disp);
+    MHD_add_response_header(resp, MHD_HTTP_HEADER_CACHE_CONTROL,
+                            "private, max-age=86400, immutable");
+    return vx_resp_queue(c, r, 200, resp, (uint64_t)st.st_size);
+}
+
+/* The name an upload gives its mesh: ?name=, else a Content-Disposition
+ * filename. 0 with name set ("" for none), or -1 with err (400). */
+static int upload_name(struct MHD_Connection *c, req *r, char *name, size_t n, vx_err *err)
+{
+    name[0] = 0;
+    if (r->q.has_name) {
+        snprintf(name, n, "%s", r->q.name);
+        return 0;
+    }
+    int rc = vx_req_disposition_name(vx_resp_header(c, "Content-Disposition"), name, n);
+    if (rc < 0)
+        return vx_err_set(err, VX_EINVAL, "invalid_request",
+                          "the Content-Disposition filename must be 1 to %d bytes of UTF-8 "
+                          "without control characters, '\\' or '\"'",
+                          VX_REQ_NAME_MAX);
+    return 0;
 }
 
 /* The worst-case memory of the upload parses running now (--max-parse-memory). */
@@ -95,18 +162,21 @@ int vx_route_upload(vx_http *h, struct MHD_Connection *c, req *r)
     if (r->body_err.kind != VX_EOK) return vx_resp_err(c, r, &r->body_err);
     if (vx_upload_bytes(r->up) == 0)
         return vx_resp_fail(c, r, VX_EUNPROC, "obj_no_faces", "the body is empty: no faces");
-    char id[65];
+    char id[65], name[VX_REQ_NAME_MAX + 1];
+    if (upload_name(c, r, name, sizeof name, &err)) return vx_resp_err(c, r, &err);
     if (vx_upload_finish(r->up, id, &err)) return vx_resp_err(c, r, &err);
     size_t nhead;
     const unsigned char *head = vx_upload_head(r->up, &nhead);
     vx_mesh_format fmt;
-    if (vx_intake_resolve(r->declared, head, nhead, &fmt, &err)) return vx_resp_err(c, r, &err);
+    if (vx_intake_resolve(r->declared, head, nhead, vx_upload_bytes(r->up), &fmt, &err))
+        return vx_resp_err(c, r, &err);
     cJSON *meta = vx_store_mesh_meta(h->d.store, id, NULL);
     if (meta) {
         VX_INFO("mesh.uploaded", "mesh=%s new=0", id);
         return vx_resp_json(c, r, 200, meta, NULL, NULL);
     }
     if (!(meta = parse_upload(h, r, id, fmt, &err))) return vx_resp_err(c, r, &err);
+    if (name[0]) cJSON_AddStringToObject(meta, "name", name);
     int existed = 0;
     vx_upload *up = r->up;
     r->up = NULL; /* commit frees it */

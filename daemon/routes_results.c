@@ -57,6 +57,23 @@ static int compressible(const char *ctype)
     return strncmp(ctype, "image/", 6) != 0;
 }
 
+/* The Content-Disposition of a result: named after the job's mesh too when
+ * its upload gave it a name. */
+static void result_disposition(vx_http *h, const char *jid, const char *fname, char *disp,
+                               size_t n)
+{
+    cJSON *job = vx_jobs_get(h->d.jobs, jid, NULL, NULL), *meta = NULL;
+    const cJSON *mj = cJSON_GetObjectItemCaseSensitive(job, "mesh");
+    if (cJSON_IsString(mj)) meta = vx_store_mesh_meta(h->d.store, mj->valuestring, NULL);
+    const cJSON *nj = cJSON_GetObjectItemCaseSensitive(meta, "name");
+    if (cJSON_IsString(nj))
+        vx_resp_disposition(disp, n, nj->valuestring, fname, fname, NULL);
+    else
+        snprintf(disp, n, "attachment; filename=\"%s\"", fname);
+    cJSON_Delete(meta);
+    cJSON_Delete(job);
+}
+
 int vx_route_result(vx_http *h, struct MHD_Connection *c, req *r)
 {
     vx_err err;
@@ -71,9 +88,9 @@ int vx_route_result(vx_http *h, struct MHD_Connection *c, req *r)
         return vx_resp_fail(c, r, VX_EGONE, "result_evicted", "the result file is gone");
     }
     uint64_t size = (uint64_t)st.st_size;
-    char id_etag[160], etag[176], disp[200];
+    char id_etag[160], etag[176], disp[600];
     snprintf(id_etag, sizeof id_etag, "\"%s\"", fname);
-    snprintf(disp, sizeof disp, "attachment; filename=\"%s\"", fname);
+    result_disposition(h, r->id, fname, disp, sizeof disp);
 
     uint64_t first = 0, last = 0;
     const char *range = vx_resp_header(c, MHD_HTTP_HEADER_RANGE);

@@ -8,8 +8,8 @@
 #include "util/child.h"
 #include "util/fsutil.h"
 
-typedef enum cc_format { CC_OBJ = 0, CC_PLY, CC_DRC } cc_format;
-static const char *const format_names[] = {"obj", "ply", "drc", NULL};
+typedef enum cc_format { CC_OBJ = 0, CC_PLY, CC_DRC, CC_GLB } cc_format;
+static const char *const format_names[] = {"obj", "ply", "drc", "glb", NULL};
 
 /* Bytes one output quad costs while refining (OpenSubdiv's topology of
  * every level, the double primvars, limit tangents, the output mesh and its
@@ -126,6 +126,7 @@ static int cc_child(void *ud, void *out, size_t out_size, vx_err *err)
     vx_mesh_write_opts o = {.normals = normals};
     int rc = w->p.format == CC_OBJ   ? vx_obj_write_path(m, &o, w->path, err)
              : w->p.format == CC_PLY ? vx_ply_write_path(m, &o, w->path, err)
+             : w->p.format == CC_GLB ? vx_glb_write_path(m, &o, w->path, err)
                                      : vx_draco_write_path(m, &o, w->path, err);
     res->refine_ms = (t1 - t0) * 1e3;
     res->encode_ms = (vx_mono() - t1) * 1e3;
@@ -147,7 +148,8 @@ static int cc_run_cpu(vx_job_run *r, const void *params, void *state, vx_err *er
 {
     cc_state *s = state;
     const cc_params p = *(const cc_params *)params;
-    static const char *const ctype[] = {"model/obj", "model/x-ply", "model/x-draco"};
+    static const char *const ctype[] = {"model/obj", "model/x-ply", "model/x-draco",
+                                        "model/gltf-binary"};
     const char *path = vx_run_output(r, "mesh", format_names[p.format], ctype[p.format], err);
     if (!path) return -1;
     cc_work w = {s->in, p, path};

@@ -21,10 +21,11 @@
 #include "util/stop.h"
 
 enum { CONS_INTERPOLATE = 0, CONS_APPROX_CC };
-enum { FMT_OBJ = 0, FMT_PLY, FMT_DRC };
+enum { FMT_OBJ = 0, FMT_PLY, FMT_DRC, FMT_GLB };
 static const char *const cons_names[] = {"interpolate", "approximate-cc", NULL};
-static const char *const fmt_names[] = {"obj", "ply", "drc", NULL};
-static const char *const fmt_types[] = {"model/obj", "model/x-ply", "model/x-draco"};
+static const char *const fmt_names[] = {"obj", "ply", "drc", "glb", NULL};
+static const char *const fmt_types[] = {"model/obj", "model/x-ply", "model/x-draco",
+                                        "model/gltf-binary"};
 
 #define DEFAULT_DIVISIONS 8
 /* approximate-cc's distance to the limit surface: samples per patch side,
@@ -724,6 +725,7 @@ static int write_frame(void *ud, void *out, size_t out_size, vx_err *err)
     (void)out_size;
     return w->format == FMT_OBJ   ? vx_obj_write_path(w->m, w->o, w->path, err)
            : w->format == FMT_PLY ? vx_ply_write_path(w->m, w->o, w->path, err)
+           : w->format == FMT_GLB ? vx_glb_write_path(w->m, w->o, w->path, err)
                                   : vx_draco_write_path(w->m, w->o, w->path, err);
 }
 

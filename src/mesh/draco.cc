@@ -10,14 +10,15 @@
 #include <new>
 #include <vector>
 
-#include <malloc.h>
 #include <sys/stat.h>
 
 #include "draco/compression/decode.h"
 #include "draco/compression/encode.h"
 #include "draco/core/decoder_buffer.h"
 #include "draco/core/encoder_buffer.h"
+#include "draco/io/gltf_encoder.h"
 #include "draco/mesh/mesh.h"
+#include "mesh/alloc_cap.h"
 
 extern "C" {
 #include "mesh/mesh.h"
@@ -86,29 +87,9 @@ int slurp(FILE *f, size_t bound, std::vector<char> &data, vx_err *err)
 /* libdraco also sizes tables from counts deep in the data, where no header
  * check reaches: a texture-coordinate predictor's orientation count (up to
  * 2^31 bits, then read in a loop of as many steps: 27 s and 200 MB for a
- * 2.7 KB file of 372 faces, found by fuzz_draco). While an AllocCap lives,
- * its thread's operator new allocations are counted (malloc_usable_size,
- * frees subtracted) and one that would pass the cap throws std::bad_alloc
- * before anything is spent; the decode reports it as draco_corrupt. */
-thread_local uint64_t t_cap, t_used;
-thread_local bool t_active, t_tripped;
-
-class AllocCap
-{
-  public:
-    explicit AllocCap(uint64_t cap)
-    {
-        t_cap = cap;
-        t_used = 0;
-        t_tripped = false;
-        t_active = true;
-    }
-    ~AllocCap() { t_active = false; }
-    AllocCap(const AllocCap &) = delete;
-    AllocCap &operator=(const AllocCap &) = delete;
-    bool tripped() const { return t_tripped; }
-    uint64_t limit() const { return t_cap; }
-};
+ * 2.7 KB file of 372 faces, found by fuzz_draco). The decode runs under a
+ * vx::AllocCap (alloc_cap.h) and reports a trip as draco_corrupt. */
+using vx::AllocCap;
 
 /* A cursor over the header bytes: every read checks the bytes left. */
 struct Cursor {
@@ -527,12 +508,9 @@ int write_file(const char *path, const char *data, size_t size, vx_err *err)
                       std::strerror(e ? e : EIO));
 }
 
-int write_path(const vx_mesh *m, const vx_mesh_write_opts *o, const char *path, vx_err *err)
+/* Fills dm with m's triangulated view, positions and optional normals. */
+int build_mesh(const vx_mesh *m, const vx_mesh_write_opts *o, draco::Mesh &dm, vx_err *err)
 {
-    int bits = o && o->draco_quantization_bits ? o->draco_quantization_bits : 16;
-    if (bits < 1 || bits > 30)
-        return vx_err_set(err, VX_EUNPROC, "invalid_params",
-                          "Draco quantisation must be 1 to 30 bits, got %d", bits);
     /* The triangulated view; a mesh of triangles not yet analysed has it
      * in face_idx already. */
     const uint32_t *tri = m->tri ? m->tri : m->face_start ? nullptr : m->face_idx;
@@ -540,8 +518,6 @@ int write_path(const vx_mesh *m, const vx_mesh_write_opts *o, const char *path, 
     if (!tri && m->nfaces)
         return vx_err_set(err, VX_EINTERNAL, "mesh_not_analyzed",
                           "the mesh has no triangulated view (vx_mesh_analyze)");
-
-    draco::Mesh dm;
     dm.set_num_points(uint32_t(m->nverts));
     add_float3(dm, draco::GeometryAttribute::POSITION, m->nverts, m->pos, nullptr);
     if (o && o->normals)
@@ -553,6 +529,17 @@ int write_path(const vx_mesh *m, const vx_mesh_write_opts *o, const char *path, 
             face[k] = draco::PointIndex(tri[3 * t + k]);
         dm.SetFace(draco::FaceIndex(uint32_t(t)), face);
     }
+    return 0;
+}
+
+int write_path(const vx_mesh *m, const vx_mesh_write_opts *o, const char *path, vx_err *err)
+{
+    int bits = o && o->draco_quantization_bits ? o->draco_quantization_bits : 16;
+    if (bits < 1 || bits > 30)
+        return vx_err_set(err, VX_EUNPROC, "invalid_params",
+                          "Draco quantisation must be 1 to 30 bits, got %d", bits);
+    draco::Mesh dm;
+    if (build_mesh(m, o, dm, err)) return -1;
 
     draco::Encoder enc;
     enc.SetAttributeQuantization(draco::GeometryAttribute::POSITION, bits);
@@ -562,6 +549,20 @@ int write_path(const vx_mesh *m, const vx_mesh_write_opts *o, const char *path, 
     draco::Status st = enc.EncodeMeshToBuffer(dm, &out);
     if (!st.ok())
         return vx_err_set(err, VX_EIO, "draco_encode", "Draco encoding failed: %s", st.error_msg());
+    return write_file(path, out.data(), out.size(), err);
+}
+
+/* glb through libdraco's glTF encoder (uncompressed: plain accessors that
+ * every glTF reader takes; positions as float32). */
+int write_glb(const vx_mesh *m, const vx_mesh_write_opts *o, const char *path, vx_err *err)
+{
+    draco::Mesh dm;
+    if (build_mesh(m, o, dm, err)) return -1;
+    draco::GltfEncoder enc;
+    draco::EncoderBuffer out;
+    draco::Status st = enc.EncodeToBuffer(dm, &out);
+    if (!st.ok())
+        return vx_err_set(err, VX_EIO, "glb_encode", "glb encoding failed: %s", st.error_msg());
     return write_file(path, out.data(), out.size(), err);
 }
 
@@ -593,82 +594,14 @@ extern "C" int vx_draco_write_path(const vx_mesh *m, const vx_mesh_write_opts *o
     }
 }
 
-/* The replaceable global allocation functions, for AllocCap (above): the
- * plain and array forms, with and without nothrow and size; the aligned
- * forms keep the library's (aligned_alloc and free, never counted). */
-namespace
+extern "C" int vx_glb_write_path(const vx_mesh *m, const vx_mesh_write_opts *o, const char *path,
+                                 vx_err *err)
 {
-void *counted_new(std::size_t n)
-{
-    if (t_active) {
-        if (n > t_cap || t_used > t_cap - n) {
-            t_tripped = true;
-            return nullptr;
-        }
+    try {
+        return write_glb(m, o, path, err);
+    } catch (const std::bad_alloc &) {
+        return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory to encode the glb");
+    } catch (...) {
+        return vx_err_set(err, VX_EIO, "glb_encode", "libdraco's glTF encoder failed");
     }
-    void *p = std::malloc(n ? n : 1);
-    if (p && t_active) t_used += malloc_usable_size(p);
-    return p;
-}
-
-void counted_delete(void *p) noexcept
-{
-    if (p && t_active) {
-        size_t n = malloc_usable_size(p);
-        t_used = n > t_used ? 0 : t_used - n;
-    }
-    std::free(p);
-}
-
-void *throwing_new(std::size_t n)
-{
-    for (;;) {
-        void *p = counted_new(n);
-        if (p) return p;
-        std::new_handler h = t_tripped ? nullptr : std::get_new_handler();
-        if (!h) throw std::bad_alloc();
-        h();
-    }
-}
-} // namespace
-
-void *operator new(std::size_t n)
-{
-    return throwing_new(n);
-}
-void *operator new[](std::size_t n)
-{
-    return throwing_new(n);
-}
-void *operator new(std::size_t n, const std::nothrow_t &) noexcept
-{
-    return counted_new(n);
-}
-void *operator new[](std::size_t n, const std::nothrow_t &) noexcept
-{
-    return counted_new(n);
-}
-void operator delete(void *p) noexcept
-{
-    counted_delete(p);
-}
-void operator delete[](void *p) noexcept
-{
-    counted_delete(p);
-}
-void operator delete(void *p, std::size_t) noexcept
-{
-    counted_delete(p);
-}
-void operator delete[](void *p, std::size_t) noexcept
-{
-    counted_delete(p);
-}
-void operator delete(void *p, const std::nothrow_t &) noexcept
-{
-    counted_delete(p);
-}
-void operator delete[](void *p, const std::nothrow_t &) noexcept
-{
-    counted_delete(p);
 }

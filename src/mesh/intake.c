@@ -5,15 +5,23 @@
 
 #include "util/fsutil.h"
 
-/* The stored formats: name in the Mesh JSON, file extension. The first row
- * is what an unknown format falls back to. */
+/* The stored formats: name in the Mesh JSON, file extension, the media
+ * type GET /v1/meshes/{id}/file answers with, and the name error messages
+ * use. The first row is what an unknown format falls back to. The declared
+ * types an upload may send are media_types below; the bytes are told
+ * apart by vx_mesh_sniff_sized (mesh/declared.c, mesh/obj.c). */
 static const struct {
     vx_mesh_format fmt;
-    const char *name, *ext;
+    const char *name, *ext, *media, *label;
 } formats[] = {
-    {VX_MESH_OBJ, "obj", "obj"},
-    {VX_MESH_DRACO, "draco", "drc"},
-    {VX_MESH_BPT, "bpt", "bpt"},
+    {VX_MESH_OBJ, "obj", "obj", "model/obj", "OBJ"},
+    {VX_MESH_DRACO, "draco", "drc", "model/x-draco", "Draco"},
+    {VX_MESH_BPT, "bpt", "bpt", "model/x-bpt", ".bpt"},
+    {VX_MESH_STL, "stl", "stl", "model/stl", "STL"},
+    {VX_MESH_PLY, "ply", "ply", "model/x-ply", "PLY"},
+    {VX_MESH_GLTF, "gltf", "gltf", "model/gltf+json", "glTF"},
+    {VX_MESH_GLB, "glb", "glb", "model/gltf-binary", "glb"},
+    {VX_MESH_OFF, "off", "off", "model/x-off", "OFF"},
 };
 #define NFORMATS (sizeof formats / sizeof formats[0])
 
@@ -27,8 +35,21 @@ static const struct {
     {"model/x-bpt", VX_INTAKE_BPT},
     {"model/x-draco", VX_INTAKE_DRACO},
     {"application/x-draco", VX_INTAKE_DRACO},
+    {"model/stl", VX_INTAKE_STL},
+    {"model/x.stl-binary", VX_INTAKE_STL},
+    {"model/x.stl-ascii", VX_INTAKE_STL},
+    {"application/sla", VX_INTAKE_STL},
+    {"model/x-ply", VX_INTAKE_PLY},
+    {"model/ply", VX_INTAKE_PLY},
+    {"application/ply", VX_INTAKE_PLY},
+    {"model/gltf+json", VX_INTAKE_GLTF},
+    {"model/gltf-binary", VX_INTAKE_GLB},
+    {"model/x-off", VX_INTAKE_OFF},
+    {"application/off", VX_INTAKE_OFF},
     {"", VX_INTAKE_SNIFF},
     {"application/octet-stream", VX_INTAKE_SNIFF},
+    /* What curl --data-binary sends unless told otherwise. */
+    {"application/x-www-form-urlencoded", VX_INTAKE_SNIFF},
 };
 
 int vx_intake_media_of(const char *mt, vx_intake_media *out, vx_err *err)
@@ -39,23 +60,68 @@ int vx_intake_media_of(const char *mt, vx_intake_media *out, vx_err *err)
             return 0;
         }
     return vx_err_set(err, VX_EMEDIA, "unsupported_media_type",
-                      "cannot take '%.100s': send model/obj, model/x-bpt, model/x-draco or "
-                      "application/octet-stream",
+                      "cannot take '%.100s': send model/obj, model/stl, model/x-ply, "
+                      "model/gltf+json, model/gltf-binary, model/x-off, model/x-bpt, "
+                      "model/x-draco or application/octet-stream",
                       mt);
 }
 
-int vx_intake_resolve(vx_intake_media declared, const unsigned char *head, size_t n,
+static size_t format_row(vx_mesh_format fmt);
+
+/* The format a declared type names (0 for none, or text). */
+static vx_mesh_format declared_format(vx_intake_media d)
+{
+    switch (d) {
+    case VX_INTAKE_STL:
+        return VX_MESH_STL;
+    case VX_INTAKE_PLY:
+        return VX_MESH_PLY;
+    case VX_INTAKE_GLTF:
+        return VX_MESH_GLTF;
+    case VX_INTAKE_GLB:
+        return VX_MESH_GLB;
+    case VX_INTAKE_OFF:
+        return VX_MESH_OFF;
+    default:
+        return 0;
+    }
+}
+
+int vx_intake_resolve(vx_intake_media declared, const unsigned char *head, size_t n, uint64_t size,
                       vx_mesh_format *fmt, vx_err *err)
 {
-    vx_mesh_format sniffed = vx_mesh_sniff(head, n);
+    vx_mesh_format sniffed = vx_mesh_sniff_sized(head, n, size);
+    vx_mesh_format named = declared_format(declared);
     const char *why = NULL;
+    char msg[160];
+    if (named) {
+        /* Trusted unless the bytes are another format for certain; a
+         * malformed file then fails in its reader, naming the format. */
+        *fmt = named;
+        int other = sniffed && sniffed != named && sniffed != VX_MESH_OBJ &&
+                    !(named == VX_MESH_GLTF && sniffed == VX_MESH_GLB) &&
+                    !(named == VX_MESH_GLB && sniffed == VX_MESH_GLTF);
+        if (other) {
+            snprintf(msg, sizeof msg, "Content-Type says %s but the body is a %s file",
+                     formats[format_row(named)].label, formats[format_row(sniffed)].label);
+            why = msg;
+        }
+        return why ? vx_err_set(err, VX_EMEDIA, "unsupported_media_type", "%s", why) : 0;
+    }
     switch (declared) {
     case VX_INTAKE_OBJ:
-    case VX_INTAKE_TEXT:
-        /* Text is OBJ unless text/plain holds a .bpt. */
         if (sniffed == VX_MESH_DRACO)
             why = "Content-Type says text (OBJ or .bpt) but the body is a Draco file";
-        *fmt = declared == VX_INTAKE_TEXT && sniffed == VX_MESH_BPT ? VX_MESH_BPT : VX_MESH_OBJ;
+        *fmt = VX_MESH_OBJ;
+        break;
+    case VX_INTAKE_TEXT:
+        /* Text is OBJ unless text/plain holds another text format. */
+        if (sniffed == VX_MESH_DRACO)
+            why = "Content-Type says text (OBJ or .bpt) but the body is a Draco file";
+        *fmt = sniffed == VX_MESH_BPT || sniffed == VX_MESH_STL || sniffed == VX_MESH_PLY ||
+                       sniffed == VX_MESH_OFF || sniffed == VX_MESH_GLTF
+                   ? sniffed
+                   : VX_MESH_OBJ;
         break;
     case VX_INTAKE_DRACO:
         if (sniffed != VX_MESH_DRACO)
@@ -68,7 +134,9 @@ int vx_intake_resolve(vx_intake_media declared, const unsigned char *head, size_
         *fmt = VX_MESH_BPT;
         break;
     default:
-        if (!sniffed) why = "the body is neither text (OBJ, .bpt) nor a Draco file";
+        if (!sniffed)
+            why = "the body is no mesh format that voxeld reads (OBJ, STL, PLY, glTF, glb, OFF, "
+                  "Draco, .bpt)";
         *fmt = sniffed;
         break;
     }
@@ -90,6 +158,11 @@ const char *vx_intake_format_name(vx_mesh_format fmt)
 const char *vx_intake_format_ext(vx_mesh_format fmt)
 {
     return formats[format_row(fmt)].ext;
+}
+
+const char *vx_intake_format_media(vx_mesh_format fmt)
+{
+    return formats[format_row(fmt)].media;
 }
 
 vx_mesh_format vx_intake_format_by_name(const char *name)

@@ -23,21 +23,32 @@ typedef enum vx_intake_media {
     VX_INTAKE_DRACO, /* model/x-draco, application/x-draco */
     VX_INTAKE_TEXT,  /* text/plain: OBJ or .bpt, told by content */
     VX_INTAKE_BPT,   /* model/x-bpt */
+    VX_INTAKE_STL,   /* model/stl, model/x.stl-binary, model/x.stl-ascii, application/sla */
+    VX_INTAKE_PLY,   /* model/x-ply, model/ply, application/ply */
+    VX_INTAKE_GLTF,  /* model/gltf+json */
+    VX_INTAKE_GLB,   /* model/gltf-binary */
+    VX_INTAKE_OFF,   /* model/x-off, application/off */
 } vx_intake_media;
 
 /* Reads a media type (lower case, no parameters; "" for no Content-Type)
  * into *out. -1 (VX_EMEDIA unsupported_media_type) for a type not taken. */
 int vx_intake_media_of(const char *mt, vx_intake_media *out, vx_err *err);
-/* The format an upload declared as `declared` whose first n bytes are head
- * is parsed as, into *fmt. -1 (VX_EMEDIA unsupported_media_type) when the
- * bytes contradict the declared type, or are no mesh format at all. */
-int vx_intake_resolve(vx_intake_media declared, const unsigned char *head, size_t n,
+/* The format an upload of size bytes declared as `declared` whose first n
+ * bytes are head is parsed as, into *fmt. -1 (VX_EMEDIA
+ * unsupported_media_type) when the bytes contradict the declared type, or
+ * are no mesh format at all (no type, application/octet-stream, or
+ * application/x-www-form-urlencoded: told by content). */
+int vx_intake_resolve(vx_intake_media declared, const unsigned char *head, size_t n, uint64_t size,
                       vx_mesh_format *fmt, vx_err *err);
 
-/* Name of a format in the Mesh JSON ("obj", "draco", "bpt"); "obj" for 0. */
+/* Name of a format in the Mesh JSON ("obj", "draco", "bpt", "stl", "ply",
+ * "gltf", "glb", "off"); "obj" for 0. */
 const char *vx_intake_format_name(vx_mesh_format fmt);
 /* File extension a format is stored under ("obj", "drc", "bpt"); "obj" for 0. */
 const char *vx_intake_format_ext(vx_mesh_format fmt);
+/* The media type a stored mesh of format fmt is served as ("model/obj",
+ * "model/stl", ...); "model/obj" for 0. */
+const char *vx_intake_format_media(vx_mesh_format fmt);
 /* The format of a Mesh JSON name; 0 for a name not in the table. */
 vx_mesh_format vx_intake_format_by_name(const char *name);
 /* File extension of the format a Mesh JSON names; "obj" for unknown names. */

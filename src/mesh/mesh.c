@@ -212,10 +212,47 @@ static uint64_t draco_cost(const char *path, uint64_t bytes, const vx_mesh_limit
            (UINT64_C(12) << 20);
 }
 
+/* The assimp formats: the file, the decode bound (assimp, held to it), and
+ * the vx_mesh made from it with its analysis, from the declared counts of
+ * a window at the start of the file (glTF: of the whole JSON). */
+static uint64_t assimp_cost(const char *path, vx_mesh_format fmt, uint64_t bytes,
+                            const vx_mesh_limits *lim)
+{
+    vx_mesh_declared d = {0};
+    size_t window = fmt == VX_MESH_GLTF ? (size_t)bytes : 64 * 1024;
+    if (fmt == VX_MESH_GLB) window = 1 << 20;
+    if (window > bytes) window = (size_t)bytes;
+    FILE *f = path ? fopen(path, "rb") : NULL;
+    unsigned char *buf = f ? malloc(window + 1) : NULL;
+    size_t n = buf ? fread(buf, 1, window, f) : 0;
+    vx_err err;
+    int rc = buf ? vx_declared_check(fmt, buf, n, bytes, lim, &d, &err) : 1;
+    free(buf);
+    if (f) fclose(f);
+    if (rc < 0) return bytes + COST_BASE; /* refused at the header */
+    if (rc > 0) { /* the header runs past the window: what the bytes allow */
+        uint64_t t = bytes / 2;
+        if (lim && lim->max_triangles && t > lim->max_triangles) t = lim->max_triangles;
+        d.vertices = d.indices = 3 * t;
+        d.faces = d.triangles = t;
+    }
+    /* glTF: cJSON's tree of the JSON in the header check (up to 40 bytes a
+     * JSON byte); the mesh: positions, faces, the fan and the edge table. */
+    uint64_t json = fmt == VX_MESH_GLTF ? 40 * bytes : fmt == VX_MESH_GLB ? 40 * (uint64_t)n : 0;
+    return bytes + json + vx_declared_decode_bound(fmt, bytes, &d) + 32 * d.vertices +
+           8 * d.indices + 8 * d.faces + 48 * d.triangles + COST_BASE;
+}
+
 uint64_t vx_mesh_parse_cost(const char *path, vx_mesh_format fmt, uint64_t bytes,
                             const vx_mesh_limits *lim)
 {
     switch (fmt) {
+    case VX_MESH_STL:
+    case VX_MESH_PLY:
+    case VX_MESH_GLTF:
+    case VX_MESH_GLB:
+    case VX_MESH_OFF:
+        return assimp_cost(path, fmt, bytes, lim);
     case VX_MESH_DRACO:
         return draco_cost(path, bytes, lim);
     case VX_MESH_BPT: {

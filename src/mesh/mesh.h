@@ -7,8 +7,9 @@
  * `face_idx` (no copy). Positions are doubles: engines normalise in double
  * before converting to float for upload.
  *
- * Readers (OBJ, Draco) and writers (OBJ, binary PLY, Draco) live beside this
- * file. Any thread may call these functions on meshes it owns. */
+ * Readers (OBJ, Draco, .bpt; STL, PLY, glTF and OFF through assimp) and
+ * writers (OBJ, binary PLY, Draco, glb) live beside this file. Any thread may call these functions
+ * on meshes it owns. */
 #ifndef VX_MESH_H
 #define VX_MESH_H
 
@@ -21,7 +22,12 @@
 typedef enum vx_mesh_format {
     VX_MESH_OBJ = 1,
     VX_MESH_DRACO = 2,
-    VX_MESH_BPT = 3, /* Newell's Bézier patch text format (mesh/bpt.c) */
+    VX_MESH_BPT = 3,  /* Newell's Bézier patch text format (mesh/bpt.c) */
+    VX_MESH_STL = 4,  /* binary or ASCII (mesh/assimp.cc, from here on) */
+    VX_MESH_PLY = 5,  /* ASCII, binary little or big endian */
+    VX_MESH_GLTF = 6, /* glTF 2.0 JSON with data: URI buffers */
+    VX_MESH_GLB = 7,  /* binary glTF 2.0 */
+    VX_MESH_OFF = 8,  /* Object File Format (OFF, COFF, NOFF, ...) */
 } vx_mesh_format;
 
 typedef struct vx_mesh {
@@ -147,7 +153,64 @@ uint64_t vx_draco_decode_bound(const vx_draco_header *h, uint64_t file_size);
 vx_mesh *vx_bpt_read_file(FILE *f, const vx_mesh_limits *lim, vx_err *err);
 vx_mesh *vx_bpt_read_path(const char *path, const vx_mesh_limits *lim, vx_err *err);
 
-/* Reads any format, told by the first bytes (vx_mesh_sniff). */
+/* What the header of an STL, PLY, OFF or glTF file declares, checked
+ * against the bytes that follow it (mesh/declared.c). Every count is an
+ * upper bound on what a reader can make of the file, so the memory of the
+ * decode can be bounded before it starts. */
+typedef struct vx_mesh_declared {
+    uint64_t vertices;  /* positions (glTF: over every node instance) */
+    uint64_t faces;     /* polygons */
+    uint64_t indices;   /* face corners */
+    uint64_t triangles; /* of the fan triangulation */
+    int exact;          /* triangles is the count the file holds (binary STL, glTF) */
+} vx_mesh_declared;
+
+/* Checks the header counts of a file of format fmt (STL, PLY, OFF, glTF,
+ * glb) whose first n bytes are data (the whole file, or for parse-cost
+ * estimates a window at its start) and that is size bytes long. Counts
+ * that the bytes cannot hold, a malformed header, a glTF buffer that is
+ * not embedded (only data: URIs and the glb BIN chunk are read), accessors
+ * or buffer views out of their buffer's bounds, and glTF node graphs with
+ * cycles are VX_EINVAL <fmt>_corrupt (stl_corrupt, ply_corrupt, ...) with
+ * the format's name in the message; declared counts over lim are
+ * VX_ETOOBIG mesh_too_big. Returns 0 and fills *d, -1 with err set, or 1
+ * when the window ends before the header does (n < size only). */
+int vx_declared_check(vx_mesh_format fmt, const unsigned char *data, size_t n, uint64_t size,
+                      const vx_mesh_limits *lim, vx_mesh_declared *d, vx_err *err);
+/* The most bytes that decoding a size-byte file of format fmt with header
+ * counts d may allocate through operator new (the assimp decode runs held
+ * to it, see mesh/assimp.cc). */
+uint64_t vx_declared_decode_bound(vx_mesh_format fmt, uint64_t size, const vx_mesh_declared *d);
+/* Tells the formats of mesh/declared.c by their first n bytes and their
+ * size: glb ("glTF" magic), PLY ("ply" line), binary STL (80-byte header
+ * and a triangle count that gives exactly size bytes), glTF JSON (a '{'
+ * first), OFF (a first word ending in OFF), ASCII STL ("solid" and then
+ * "facet" or "endsolid"); else vx_mesh_sniff. */
+vx_mesh_format vx_mesh_sniff_sized(const unsigned char *head, size_t n, uint64_t size);
+
+/* Reads an STL, PLY, glTF, glb or OFF file through assimp: the file is
+ * checked by vx_declared_check first, and assimp runs under
+ * vx_declared_decode_bound (past it: VX_EINVAL <fmt>_corrupt). Node
+ * transforms are applied (glTF); STL and glTF vertices with equal
+ * positions are merged into one. Polygons are kept (quads stay quads).
+ * Errors: VX_EINVAL <fmt>_corrupt naming the format, VX_EUNPROC
+ * <fmt>_no_faces, VX_ETOOBIG mesh_too_big. Returns an owned analysed mesh
+ * or NULL. */
+vx_mesh *vx_assimp_read_path(const char *path, vx_mesh_format fmt, const vx_mesh_limits *lim,
+                             vx_err *err);
+/* Reads an OFF file from memory (mesh/off.c, not assimp: its OFF importer
+ * crashed on fuzzed input): header counts checked first, polygons kept,
+ * errors VX_EINVAL off_corrupt naming the line, VX_EUNPROC off_no_faces,
+ * VX_ETOOBIG mesh_too_big. Owned analysed mesh or NULL. */
+vx_mesh *vx_off_read_mem(const unsigned char *data, size_t n, const vx_mesh_limits *lim,
+                         vx_err *err);
+/* The same from memory (the fuzz targets); OFF goes to vx_off_read_mem. */
+vx_mesh *vx_assimp_read_mem(const unsigned char *data, size_t n, vx_mesh_format fmt,
+                            const vx_mesh_limits *lim, vx_err *err);
+
+/* Reads any format: STL, PLY, glTF, glb and OFF by the path's extension
+ * (how the store names them), the rest told by the first bytes
+ * (vx_mesh_sniff). */
 vx_mesh *vx_mesh_read_path(const char *path, const vx_mesh_limits *lim, vx_err *err);
 /* Reads path as the given format (no sniffing). */
 vx_mesh *vx_mesh_read_as(const char *path, vx_mesh_format fmt, const vx_mesh_limits *lim,
@@ -199,5 +262,9 @@ int vx_obj_write_path(const vx_mesh *m, const vx_mesh_write_opts *o, const char 
 int vx_ply_write_path(const vx_mesh *m, const vx_mesh_write_opts *o, const char *path, vx_err *err);
 int vx_draco_write_path(const vx_mesh *m, const vx_mesh_write_opts *o, const char *path,
                         vx_err *err);
+/* glb (binary glTF 2.0) of the triangulated view through libdraco's glTF
+ * encoder, uncompressed: one mesh, one node, float positions (and normals
+ * when given), 32-bit indices. 0 or -1 (VX_EIO). */
+int vx_glb_write_path(const vx_mesh *m, const vx_mesh_write_opts *o, const char *path, vx_err *err);
 
 #endif

@@ -655,15 +655,45 @@ vx_mesh *vx_mesh_read_as(const char *path, vx_mesh_format fmt, const vx_mesh_lim
     case VX_MESH_BPT:
         m = vx_bpt_read_file(f, lim, err);
         break;
+    case VX_MESH_STL:
+    case VX_MESH_PLY:
+    case VX_MESH_GLTF:
+    case VX_MESH_GLB:
+    case VX_MESH_OFF:
+        fclose(f);
+        return vx_assimp_read_path(path, fmt, lim, err);
     default:
-        vx_err_set(err, VX_EINVAL, "mesh_format", "not an OBJ, .bpt or Draco file");
+        vx_err_set(err, VX_EINVAL, "mesh_format",
+                   "not an OBJ, .bpt, Draco, STL, PLY, glTF or OFF file");
     }
     fclose(f);
     return m;
 }
 
+/* The format the store's extension for it names (mesh/intake.c's table;
+ * the formats that the first bytes cannot always tell), or 0. */
+static vx_mesh_format format_of_ext(const char *path)
+{
+    static const struct {
+        const char *ext;
+        vx_mesh_format fmt;
+    } exts[] = {{".stl", VX_MESH_STL},
+                {".ply", VX_MESH_PLY},
+                {".gltf", VX_MESH_GLTF},
+                {".glb", VX_MESH_GLB},
+                {".off", VX_MESH_OFF}};
+    size_t n = strlen(path);
+    for (size_t i = 0; i < sizeof exts / sizeof exts[0]; i++) {
+        size_t k = strlen(exts[i].ext);
+        if (n > k && !strcmp(path + n - k, exts[i].ext)) return exts[i].fmt;
+    }
+    return 0;
+}
+
 vx_mesh *vx_mesh_read_path(const char *path, const vx_mesh_limits *lim, vx_err *err)
 {
+    vx_mesh_format by_ext = format_of_ext(path);
+    if (by_ext) return vx_mesh_read_as(path, by_ext, lim, err);
     FILE *f = vx_mesh_open(path, err);
     if (!f) return NULL;
     unsigned char head[OBJ_SNIFF_BYTES];

@@ -60,7 +60,7 @@ struct vx_upload {
     char path[VX_PATH_MAX];
     struct sha256_ctx sha;
     uint64_t bytes;
-    unsigned char head[64];
+    unsigned char head[512]; /* the first bytes, for sniffing (binary STL: 84) */
     size_t nhead;
     char buf[1 << 16]; /* write coalescing: network chunks are small */
     size_t nbuf;

@@ -20,9 +20,11 @@ static const unsigned char JUNK_HEAD[] = "\x89PNG\r\n\x1a\n";
 static void test_format_table(void **state)
 {
     (void)state;
-    const vx_mesh_format all[] = {VX_MESH_OBJ, VX_MESH_DRACO, VX_MESH_BPT};
-    const char *names[] = {"obj", "draco", "bpt"}, *exts[] = {"obj", "drc", "bpt"};
-    for (int i = 0; i < 3; i++) {
+    const vx_mesh_format all[] = {VX_MESH_OBJ, VX_MESH_DRACO, VX_MESH_BPT, VX_MESH_STL,
+                                  VX_MESH_PLY, VX_MESH_GLTF,  VX_MESH_GLB, VX_MESH_OFF};
+    const char *names[] = {"obj", "draco", "bpt", "stl", "ply", "gltf", "glb", "off"};
+    const char *exts[] = {"obj", "drc", "bpt", "stl", "ply", "gltf", "glb", "off"};
+    for (int i = 0; i < 8; i++) {
         assert_string_equal(vx_intake_format_name(all[i]), names[i]);
         assert_string_equal(vx_intake_format_ext(all[i]), exts[i]);
         /* Both directions agree: name -> format -> name, name -> extension. */
@@ -30,10 +32,11 @@ static void test_format_table(void **state)
         assert_string_equal(vx_intake_ext_of_name(names[i]), exts[i]);
     }
     /* Metadata naming no known format is stored as OBJ (the store's rule). */
-    assert_int_equal(vx_intake_format_by_name("ply"), 0);
+    assert_int_equal(vx_intake_format_by_name("fbx"), 0);
     assert_int_equal(vx_intake_format_by_name("drc"), 0);
     assert_int_equal(vx_intake_format_by_name(NULL), 0);
-    assert_string_equal(vx_intake_ext_of_name("ply"), "obj");
+    assert_string_equal(vx_intake_ext_of_name("fbx"), "obj");
+    assert_string_equal(vx_intake_format_media(VX_MESH_GLB), "model/gltf-binary");
     assert_string_equal(vx_intake_format_name(0), "obj");
 }
 
@@ -51,6 +54,13 @@ static void test_media_types(void **state)
         {"application/x-draco", VX_INTAKE_DRACO},
         {"", VX_INTAKE_SNIFF},
         {"application/octet-stream", VX_INTAKE_SNIFF},
+        {"application/x-www-form-urlencoded", VX_INTAKE_SNIFF},
+        {"model/stl", VX_INTAKE_STL},
+        {"model/x-ply", VX_INTAKE_PLY},
+        {"application/ply", VX_INTAKE_PLY},
+        {"model/gltf+json", VX_INTAKE_GLTF},
+        {"model/gltf-binary", VX_INTAKE_GLB},
+        {"model/x-off", VX_INTAKE_OFF},
     };
     for (size_t i = 0; i < sizeof ok / sizeof ok[0]; i++) {
         vx_intake_media m = (vx_intake_media)-1;
@@ -63,15 +73,17 @@ static void test_media_types(void **state)
     assert_int_equal(vx_intake_media_of("image/png", &m, &err), -1);
     assert_int_equal(err.kind, VX_EMEDIA);
     assert_string_equal(err.code, "unsupported_media_type");
-    assert_string_equal(err.message, "cannot take 'image/png': send model/obj, model/x-bpt, "
-                                     "model/x-draco or application/octet-stream");
+    assert_string_equal(err.message, "cannot take 'image/png': send model/obj, model/stl, "
+                                     "model/x-ply, model/gltf+json, model/gltf-binary, "
+                                     "model/x-off, model/x-bpt, model/x-draco or "
+                                     "application/octet-stream");
     /* The quoted type is cut at 100 bytes. */
     char big[300];
     memset(big, 'a', sizeof big - 1);
     big[sizeof big - 1] = 0;
     assert_int_equal(vx_intake_media_of(big, &m, &err), -1);
     assert_non_null(strstr(err.message, "'aaaa"));
-    assert_true(strlen(err.message) < 200);
+    assert_true(strlen(err.message) < 300);
     /* Matching is exact: callers lower-case and drop parameters first. */
     assert_int_equal(vx_intake_media_of("Model/OBJ", &m, &err), -1);
 }
@@ -81,7 +93,7 @@ static vx_mesh_format resolve(vx_intake_media d, const unsigned char *head, size
 {
     vx_mesh_format f = (vx_mesh_format)-1;
     vx_err_clear(err);
-    if (vx_intake_resolve(d, head, n, &f, err)) {
+    if (vx_intake_resolve(d, head, n, n, &f, err)) {
         assert_int_equal(err->kind, VX_EMEDIA);
         assert_string_equal(err->code, "unsupported_media_type");
         return 0;
@@ -89,7 +101,7 @@ static vx_mesh_format resolve(vx_intake_media d, const unsigned char *head, size
     return f;
 }
 
-#define HEAD(x) x, sizeof x - 1
+#define HEAD(x) (const unsigned char *)(x), sizeof(x) - 1
 
 static void test_resolve(void **state)
 {
@@ -100,7 +112,8 @@ static void test_resolve(void **state)
     assert_int_equal(resolve(VX_INTAKE_SNIFF, HEAD(BPT_HEAD), &e), VX_MESH_BPT);
     assert_int_equal(resolve(VX_INTAKE_SNIFF, HEAD(DRACO_HEAD), &e), VX_MESH_DRACO);
     assert_int_equal(resolve(VX_INTAKE_SNIFF, HEAD(JUNK_HEAD), &e), 0);
-    assert_string_equal(e.message, "the body is neither text (OBJ, .bpt) nor a Draco file");
+    assert_string_equal(e.message, "the body is no mesh format that voxeld reads (OBJ, STL, PLY, "
+                                   "glTF, glb, OFF, Draco, .bpt)");
     /* model/obj is OBJ whatever the text (a bad one fails in the parser). */
     assert_int_equal(resolve(VX_INTAKE_OBJ, HEAD(OBJ_HEAD), &e), VX_MESH_OBJ);
     assert_int_equal(resolve(VX_INTAKE_OBJ, HEAD(BPT_HEAD), &e), VX_MESH_OBJ);
@@ -123,6 +136,34 @@ static void test_resolve(void **state)
     assert_string_equal(e.message,
                         "Content-Type says .bpt but the first line is not a patch count");
     assert_int_equal(resolve(VX_INTAKE_BPT, HEAD(DRACO_HEAD), &e), 0);
+    /* The new formats, told by content... */
+    assert_int_equal(resolve(VX_INTAKE_SNIFF, HEAD("ply\nformat ascii 1.0\n"), &e), VX_MESH_PLY);
+    assert_int_equal(resolve(VX_INTAKE_SNIFF, HEAD("glTF\x02\0\0\0\x10\0\0\0"), &e), VX_MESH_GLB);
+    assert_int_equal(resolve(VX_INTAKE_SNIFF, HEAD(" {\"asset\":{}}"), &e), VX_MESH_GLTF);
+    assert_int_equal(resolve(VX_INTAKE_SNIFF, HEAD("OFF\n3 1 0\n"), &e), VX_MESH_OFF);
+    assert_int_equal(resolve(VX_INTAKE_SNIFF, HEAD("solid x\n facet normal 0 0 1\n"), &e),
+                     VX_MESH_STL);
+    /* ...a binary STL by its count and size, "solid" header or not... */
+    unsigned char stl[134] = "solid but binary";
+    stl[80] = 1;
+    vx_mesh_format f = 0;
+    assert_int_equal(vx_intake_resolve(VX_INTAKE_SNIFF, stl, sizeof stl, 134, &f, &e), 0);
+    assert_int_equal(f, VX_MESH_STL);
+    memcpy(stl, "\x01\x02", 2);
+    assert_int_equal(vx_intake_resolve(VX_INTAKE_SNIFF, stl, sizeof stl, 134, &f, &e), 0);
+    assert_int_equal(f, VX_MESH_STL);
+    assert_int_equal(vx_intake_resolve(VX_INTAKE_SNIFF, stl, sizeof stl, 184, &f, &e), -1);
+    /* ...and by Content-Type: trusted unless the bytes are another format. */
+    assert_int_equal(resolve(VX_INTAKE_STL, HEAD(JUNK_HEAD), &e), VX_MESH_STL);
+    assert_int_equal(resolve(VX_INTAKE_PLY, HEAD(OBJ_HEAD), &e), VX_MESH_PLY);
+    assert_int_equal(resolve(VX_INTAKE_GLTF, HEAD("glTF\x02\0\0\0\x10\0\0\0"), &e), VX_MESH_GLTF);
+    assert_int_equal(resolve(VX_INTAKE_STL, HEAD(DRACO_HEAD), &e), 0);
+    assert_string_equal(e.message, "Content-Type says STL but the body is a Draco file");
+    assert_int_equal(resolve(VX_INTAKE_OFF, HEAD("ply\nformat ascii 1.0\n"), &e), 0);
+    assert_string_equal(e.message, "Content-Type says OFF but the body is a PLY file");
+    /* text/plain holding an ASCII STL is an STL. */
+    assert_int_equal(resolve(VX_INTAKE_TEXT, HEAD("solid x\n facet normal 0 0 1\n"), &e),
+                     VX_MESH_STL);
 }
 
 static void test_check_and_meta(void **state)

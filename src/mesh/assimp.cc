@@ -1,0 +1,328 @@
+/* STL, PLY and glTF 2.0 readers: a C++ shim over assimp behind the C API
+ * of mesh.h (vx_assimp_read_*; OFF goes to mesh/off.c from here).
+ *
+ * libdraco 1.5.5 (Debian 12) has STL, PLY and glTF decoders, but its STL
+ * decoder reads binary files only (and refuses the many binary files whose
+ * header starts with "solid "), its PLY reader copies past the end of the
+ * buffer for truncated binary data and has no big-endian, and its glTF
+ * decoder reads .gltf only from a path, opening external URIs itself. So
+ * assimp reads these, from memory, with an I/O system that opens nothing
+ * (no external buffer or image can be read), after vx_declared_check has
+ * checked the declared counts, and under a vx::AllocCap of
+ * vx_declared_decode_bound. */
+#include <algorithm>
+#include <cerrno>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <memory>
+#include <new>
+#include <vector>
+
+#include <sys/stat.h>
+
+#include <assimp/IOStream.hpp>
+#include <assimp/IOSystem.hpp>
+#include <assimp/Importer.hpp>
+#include <assimp/scene.h>
+
+#include "mesh/alloc_cap.h"
+
+extern "C" {
+#include "mesh/mesh.h"
+#include "util/log.h"
+}
+
+namespace
+{
+
+/* Opens nothing: assimp reads the file from memory (its own MemoryIOSystem
+ * serves that name) and any other name it asks for is refused. */
+class NoFiles : public Assimp::IOSystem
+{
+  public:
+    bool Exists(const char *) const override { return false; }
+    char getOsSeparator() const override { return '/'; }
+    Assimp::IOStream *Open(const char *, const char *) override { return nullptr; }
+    void Close(Assimp::IOStream *s) override { delete s; }
+};
+
+struct FormatInfo {
+    const char *name, *hint, *corrupt, *no_faces;
+    bool weld;
+};
+
+const FormatInfo *info(vx_mesh_format fmt)
+{
+    static const FormatInfo stl{"STL", "stl", "stl_corrupt", "stl_no_faces", true};
+    static const FormatInfo ply{"PLY", "ply", "ply_corrupt", "ply_no_faces", false};
+    static const FormatInfo gltf{"glTF", "gltf", "gltf_corrupt", "gltf_no_faces", true};
+    static const FormatInfo glb{"glTF", "glb", "gltf_corrupt", "gltf_no_faces", true};
+    static const FormatInfo off{"OFF", "off", "off_corrupt", "off_no_faces", false};
+    switch (fmt) {
+    case VX_MESH_STL:
+        return &stl;
+    case VX_MESH_PLY:
+        return &ply;
+    case VX_MESH_GLTF:
+        return &gltf;
+    case VX_MESH_GLB:
+        return &glb;
+    case VX_MESH_OFF:
+        return &off;
+    default:
+        return nullptr;
+    }
+}
+
+struct MeshDeleter {
+    void operator()(vx_mesh *m) const { vx_mesh_free(m); }
+};
+using MeshPtr = std::unique_ptr<vx_mesh, MeshDeleter>;
+
+/* What the node walk gathers: positions and polygons, all in one mesh. */
+struct Gather {
+    std::vector<double> pos;
+    std::vector<uint32_t> idx, start;
+    size_t ntris = 0;
+    const vx_mesh_limits *lim;
+    const FormatInfo *fi;
+    vx_err *err;
+};
+
+int too_big(Gather &g, const char *what, size_t n, size_t limit)
+{
+    return vx_err_set(g.err, VX_ETOOBIG, "mesh_too_big",
+                      "the %s file has more than %zu %s (the "
+                      "limit), at least %zu",
+                      g.fi->name, limit, what, n);
+}
+
+int add_mesh(Gather &g, const aiMesh *am, const aiMatrix4x4 &t)
+{
+    size_t base = g.pos.size() / 3;
+    if (base + am->mNumVertices > UINT32_MAX)
+        return too_big(g, "vertices", base + am->mNumVertices, UINT32_MAX);
+    if (g.lim && g.lim->max_vertices && base + am->mNumVertices > g.lim->max_vertices)
+        return too_big(g, "vertices", base + am->mNumVertices, g.lim->max_vertices);
+    for (unsigned v = 0; v < am->mNumVertices; v++) {
+        aiVector3D p = t * am->mVertices[v];
+        if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z))
+            return vx_err_set(g.err, VX_EINVAL, g.fi->corrupt,
+                              "not a valid %s file: vertex %u has a NaN or infinite coordinate",
+                              g.fi->name, v);
+        g.pos.insert(g.pos.end(), {double(p.x), double(p.y), double(p.z)});
+    }
+    for (unsigned f = 0; f < am->mNumFaces; f++) {
+        const aiFace &face = am->mFaces[f];
+        if (face.mNumIndices < 3) continue; /* points and lines */
+        g.start.push_back(uint32_t(g.idx.size()));
+        for (unsigned k = 0; k < face.mNumIndices; k++) {
+            if (face.mIndices[k] >= am->mNumVertices)
+                return vx_err_set(g.err, VX_EINVAL, g.fi->corrupt,
+                                  "not a valid %s file: face %u uses vertex %u of %u", g.fi->name,
+                                  f, face.mIndices[k], am->mNumVertices);
+            g.idx.push_back(uint32_t(base + face.mIndices[k]));
+        }
+        g.ntris += face.mNumIndices - 2;
+        if (g.lim && g.lim->max_triangles && g.ntris > g.lim->max_triangles)
+            return too_big(g, "triangles", g.ntris, g.lim->max_triangles);
+        if (g.idx.size() > UINT32_MAX / 2) return too_big(g, "face corners", g.idx.size(), 0);
+    }
+    return 0;
+}
+
+int walk(Gather &g, const aiScene *sc, const aiNode *n, const aiMatrix4x4 &parent, int depth)
+{
+    if (depth > 256)
+        return vx_err_set(g.err, VX_EINVAL, g.fi->corrupt,
+                          "not a valid %s file: nodes nested too deep", g.fi->name);
+    aiMatrix4x4 t = parent * n->mTransformation;
+    for (unsigned i = 0; i < n->mNumMeshes; i++)
+        if (n->mMeshes[i] < sc->mNumMeshes && add_mesh(g, sc->mMeshes[n->mMeshes[i]], t)) return -1;
+    for (unsigned i = 0; i < n->mNumChildren; i++)
+        if (walk(g, sc, n->mChildren[i], t, depth + 1)) return -1;
+    return 0;
+}
+
+/* Merges vertices with equal positions (a triangle soup's corners). */
+void weld(Gather &g)
+{
+    size_t nv = g.pos.size() / 3;
+    std::vector<uint32_t> order(nv), remap(nv);
+    for (size_t i = 0; i < nv; i++)
+        order[i] = uint32_t(i);
+    const double *p = g.pos.data();
+    std::sort(order.begin(), order.end(), [p](uint32_t a, uint32_t b) {
+        const double *x = p + 3 * size_t(a), *y = p + 3 * size_t(b);
+        if (x[0] != y[0]) return x[0] < y[0];
+        if (x[1] != y[1]) return x[1] < y[1];
+        if (x[2] != y[2]) return x[2] < y[2];
+        return a < b;
+    });
+    /* Each run of equal positions maps to its lowest index. */
+    std::vector<char> keep(nv, 0);
+    for (size_t i = 0; i < nv;) {
+        size_t j = i;
+        while (j < nv &&
+               !std::memcmp(p + 3 * size_t(order[i]), p + 3 * size_t(order[j]), 3 * sizeof(double)))
+            j++;
+        for (size_t k = i; k < j; k++)
+            remap[order[k]] = order[i];
+        keep[order[i]] = 1;
+        i = j;
+    }
+    std::vector<uint32_t> newid(nv);
+    size_t out = 0;
+    for (size_t i = 0; i < nv; i++)
+        if (keep[i]) {
+            newid[i] = uint32_t(out);
+            std::memmove(g.pos.data() + 3 * out, p + 3 * i, 3 * sizeof(double));
+            out++;
+        }
+    g.pos.resize(3 * out);
+    for (auto &v : g.idx)
+        v = newid[remap[v]];
+}
+
+/* Moves what g gathered into a new vx_mesh (malloc'd arrays). */
+vx_mesh *to_mesh(Gather &g)
+{
+    MeshPtr m(vx_mesh_new());
+    if (!m) throw std::bad_alloc();
+    size_t nv = g.pos.size() / 3, nf = g.start.size();
+    bool all_tris = g.idx.size() == 3 * nf;
+    m->pos = static_cast<double *>(std::malloc(g.pos.size() * sizeof(double) + 1));
+    m->face_idx = static_cast<uint32_t *>(std::malloc(g.idx.size() * sizeof(uint32_t) + 1));
+    if (!m->pos || !m->face_idx) throw std::bad_alloc();
+    std::memcpy(m->pos, g.pos.data(), g.pos.size() * sizeof(double));
+    std::memcpy(m->face_idx, g.idx.data(), g.idx.size() * sizeof(uint32_t));
+    if (!all_tris) {
+        m->face_start = static_cast<uint32_t *>(std::malloc((nf + 1) * sizeof(uint32_t)));
+        if (!m->face_start) throw std::bad_alloc();
+        std::memcpy(m->face_start, g.start.data(), nf * sizeof(uint32_t));
+        m->face_start[nf] = uint32_t(g.idx.size());
+    }
+    m->nverts = nv;
+    m->nfaces = nf;
+    return m.release();
+}
+
+/* An assimp message as ASCII without controls, so that it can go into a
+ * JSON answer whatever bytes the file put into it. */
+void ascii_only(const char *in, char *out, size_t n)
+{
+    size_t o = 0;
+    for (; in && *in && o + 1 < n; in++)
+        out[o++] = *in >= 0x20 && *in < 0x7f ? *in : '?';
+    out[o] = 0;
+}
+
+vx_mesh *import(const unsigned char *data, size_t n, const FormatInfo *fi, vx_mesh_format fmt,
+                const vx_mesh_limits *lim, vx_err *err)
+{
+    vx_mesh_declared d;
+    if (vx_declared_check(fmt, data, n, n, lim, &d, err)) return nullptr;
+    Assimp::Importer imp;
+    imp.SetIOHandler(new NoFiles);
+    Gather g;
+    g.lim = lim;
+    g.fi = fi;
+    g.err = err;
+    int rc = -1;
+    char why[120] = "";
+    uint64_t peak = 0;
+    {
+        vx::AllocCap cap(vx_declared_decode_bound(fmt, n, &d));
+        try {
+            const aiScene *sc = imp.ReadFileFromMemory(data, n, 0, fi->hint);
+            if (sc && sc->mRootNode)
+                rc = walk(g, sc, sc->mRootNode, aiMatrix4x4(), 0);
+            else
+                ascii_only(imp.GetErrorString(), why, sizeof why);
+            /* assimp may fail without saying why (found by fuzz_gltf). */
+            if ((!sc || !sc->mRootNode) && !why[0])
+                std::snprintf(why, sizeof why, "assimp made no scene of it");
+        } catch (const std::bad_alloc &) {
+            if (!cap.tripped()) throw;
+        }
+        peak = cap.peak();
+        if (cap.tripped()) {
+            imp.FreeScene();
+            vx_err_set(err, VX_EINVAL, fi->corrupt,
+                       "not a valid %s file: decoding it would take more than %llu bytes of "
+                       "memory for %llu declared faces",
+                       fi->name, (unsigned long long)cap.limit(), (unsigned long long)d.faces);
+            return nullptr;
+        }
+        imp.FreeScene();
+    }
+    VX_DEBUG("mesh.assimp_peak", "format=%s bytes=%zu peak=%llu", fi->hint, n,
+             (unsigned long long)peak);
+    if (rc && !why[0]) return nullptr; /* err set by the walk */
+    if (why[0]) {
+        vx_err_set(err, VX_EINVAL, fi->corrupt, "not a valid %s file: %s", fi->name, why);
+        return nullptr;
+    }
+    if (g.start.empty()) {
+        vx_err_set(err, VX_EUNPROC, fi->no_faces, "the %s file has no faces", fi->name);
+        return nullptr;
+    }
+    if (fi->weld) weld(g);
+    MeshPtr m(to_mesh(g));
+    if (vx_mesh_analyze(m.get(), err)) return nullptr;
+    return m.release();
+}
+
+} // namespace
+
+extern "C" vx_mesh *vx_assimp_read_mem(const unsigned char *data, size_t n, vx_mesh_format fmt,
+                                       const vx_mesh_limits *lim, vx_err *err)
+{
+    /* assimp's OFF importer crashed on fuzzed files: mesh/off.c reads OFF. */
+    if (fmt == VX_MESH_OFF) return vx_off_read_mem(data, n, lim, err);
+    const FormatInfo *fi = info(fmt);
+    if (!fi) {
+        vx_err_set(err, VX_EINTERNAL, "mesh_format", "format %d is not read by assimp", int(fmt));
+        return nullptr;
+    }
+    try {
+        return import(data, n, fi, fmt, lim, err);
+    } catch (const std::bad_alloc &) {
+        vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory to read the %s file", fi->name);
+    } catch (...) {
+        vx_err_set(err, VX_EINVAL, fi->corrupt, "not a valid %s file: assimp failed", fi->name);
+    }
+    return nullptr;
+}
+
+extern "C" vx_mesh *vx_assimp_read_path(const char *path, vx_mesh_format fmt,
+                                        const vx_mesh_limits *lim, vx_err *err)
+{
+    FILE *f = vx_mesh_open(path, err);
+    if (!f) return nullptr;
+    struct stat st;
+    if (fstat(fileno(f), &st) || !S_ISREG(st.st_mode) || st.st_size < 0) {
+        std::fclose(f);
+        vx_err_set(err, VX_EIO, "mesh_io", "cannot read %s: not a regular file", path);
+        return nullptr;
+    }
+    size_t n = size_t(st.st_size);
+    unsigned char *data = static_cast<unsigned char *>(std::malloc(n + 1));
+    if (!data) {
+        std::fclose(f);
+        vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for a %zu-byte file", n);
+        return nullptr;
+    }
+    size_t got = std::fread(data, 1, n, f);
+    int e = std::ferror(f) ? errno : 0;
+    std::fclose(f);
+    vx_mesh *m = nullptr;
+    if (got != n)
+        vx_err_set(err, VX_EIO, "mesh_io", "cannot read %s: %s", path,
+                   e ? std::strerror(e) : "short read");
+    else
+        m = vx_assimp_read_mem(data, n, fmt, lim, err);
+    std::free(data);
+    return m;
+}

@@ -1,0 +1,687 @@
+/* What STL, PLY, OFF and glTF headers declare, checked against the bytes
+ * that follow before any library decodes the file, and the sniffing of
+ * these formats (mesh.h: vx_declared_check, vx_mesh_sniff_sized).
+ *
+ * assimp sizes arrays from declared counts (PLY's element counts, OFF's
+ * vertex and face counts, glTF accessor counts) before reading the data;
+ * a count is accepted here only when the rest of the file can hold it at
+ * the format's densest encoding. */
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include <cjson/cJSON.h>
+
+#include "mesh/mesh.h"
+
+static int corrupt(vx_err *err, vx_mesh_format fmt, const char *fmtstr, ...)
+    __attribute__((format(printf, 3, 4)));
+
+static const char *fmt_name(vx_mesh_format fmt)
+{
+    switch (fmt) {
+    case VX_MESH_STL:
+        return "STL";
+    case VX_MESH_PLY:
+        return "PLY";
+    case VX_MESH_OFF:
+        return "OFF";
+    default:
+        return "glTF";
+    }
+}
+
+static const char *fmt_code(vx_mesh_format fmt)
+{
+    switch (fmt) {
+    case VX_MESH_STL:
+        return "stl_corrupt";
+    case VX_MESH_PLY:
+        return "ply_corrupt";
+    case VX_MESH_OFF:
+        return "off_corrupt";
+    default:
+        return "gltf_corrupt";
+    }
+}
+
+static int corrupt(vx_err *err, vx_mesh_format fmt, const char *fmtstr, ...)
+{
+    char msg[200];
+    va_list ap;
+    va_start(ap, fmtstr);
+    vsnprintf(msg, sizeof msg, fmtstr, ap);
+    va_end(ap);
+    return vx_err_set(err, VX_EINVAL, fmt_code(fmt), "not a valid %s file: %s", fmt_name(fmt), msg);
+}
+
+static int over_limits(const vx_mesh_declared *d, const vx_mesh_limits *lim, vx_mesh_format fmt,
+                       vx_err *err)
+{
+    /* Every face makes a triangle at least. */
+    uint64_t tris = d->exact ? d->triangles : d->faces;
+    if (lim && lim->max_triangles && tris > lim->max_triangles)
+        return vx_err_set(err, VX_ETOOBIG, "mesh_too_big",
+                          "the %s file declares %llu triangles, more than %zu (the limit)",
+                          fmt_name(fmt), (unsigned long long)tris, lim->max_triangles);
+    if (lim && lim->max_vertices && d->vertices > lim->max_vertices)
+        return vx_err_set(err, VX_ETOOBIG, "mesh_too_big",
+                          "the %s file declares %llu vertices, more than %zu (the limit)",
+                          fmt_name(fmt), (unsigned long long)d->vertices, lim->max_vertices);
+    return 0;
+}
+
+static uint32_t le32(const unsigned char *p)
+{
+    return (uint32_t)p[0] | (uint32_t)p[1] << 8 | (uint32_t)p[2] << 16 | (uint32_t)p[3] << 24;
+}
+
+static int blank(unsigned char c)
+{
+    return c == ' ' || c == '\t' || c == '\r' || c == '\n' || c == '\f' || c == '\v';
+}
+
+/* ---- STL ------------------------------------------------------------- */
+
+/* The shortest ASCII facet assimp reads ("facet vertex 0 0 0 ..."). */
+#define STL_ASCII_MIN_FACET 32
+
+/* "solid" first (binary headers often start so too). */
+static int solid_first(const unsigned char *p, size_t n)
+{
+    size_t i = 0;
+    while (i < n && blank(p[i]))
+        i++;
+    return n - i >= 5 && !memcmp(p + i, "solid", 5);
+}
+
+/* ASCII STL: "solid" first and no NUL in the first 512 bytes (binary
+ * triangle data holds zero bytes: the attribute word, zero coordinates). */
+static int ascii_stl(const unsigned char *p, size_t n)
+{
+    return solid_first(p, n) && !memchr(p, 0, n < 512 ? n : 512);
+}
+
+static int check_stl(const unsigned char *p, size_t n, uint64_t size, vx_mesh_declared *d,
+                     vx_err *err)
+{
+    if (n >= 84) {
+        uint64_t count = le32(p + 80);
+        if (84 + 50 * count == size) {
+            d->triangles = d->faces = count;
+            d->vertices = d->indices = 3 * count;
+            d->exact = 1;
+            return 0;
+        }
+        if (!ascii_stl(p, n))
+            return corrupt(err, VX_MESH_STL,
+                           "the binary header declares %llu triangles (%llu bytes) but the file "
+                           "has %llu bytes",
+                           (unsigned long long)count, (unsigned long long)(84 + 50 * count),
+                           (unsigned long long)size);
+    } else if (!ascii_stl(p, n)) {
+        return corrupt(err, VX_MESH_STL,
+                       "%llu bytes, shorter than a binary header, and no ASCII \"solid\"",
+                       (unsigned long long)size);
+    }
+    d->triangles = d->faces = size / STL_ASCII_MIN_FACET;
+    d->vertices = d->indices = 3 * d->triangles;
+    return 0;
+}
+
+/* ---- PLY ------------------------------------------------------------- */
+
+#define PLY_MAX_HEADER (64 * 1024)
+#define PLY_MAX_ELEMENTS 64
+
+static int ply_type_size(const char *t, size_t len)
+{
+    static const struct {
+        const char *name;
+        int size;
+    } types[] = {{"char", 1},  {"int8", 1},    {"uchar", 1},  {"uint8", 1},
+                 {"short", 2}, {"int16", 2},   {"ushort", 2}, {"uint16", 2},
+                 {"int", 4},   {"int32", 4},   {"uint", 4},   {"uint32", 4},
+                 {"float", 4}, {"float32", 4}, {"double", 8}, {"float64", 8}};
+    for (size_t i = 0; i < sizeof types / sizeof types[0]; i++)
+        if (strlen(types[i].name) == len && !memcmp(types[i].name, t, len)) return types[i].size;
+    return 0;
+}
+
+/* Splits line [p, end) into at most max words; returns the count. */
+static int words(const char *p, const char *end, const char **w, size_t *wl, int max)
+{
+    int k = 0;
+    while (p < end && k < max) {
+        while (p < end && blank((unsigned char)*p))
+            p++;
+        if (p == end) break;
+        w[k] = p;
+        while (p < end && !blank((unsigned char)*p))
+            p++;
+        wl[k] = (size_t)(p - w[k]);
+        k++;
+    }
+    return k;
+}
+
+static int parse_u64(const char *s, size_t len, uint64_t *out)
+{
+    if (!len || len > 12) return -1;
+    uint64_t v = 0;
+    for (size_t i = 0; i < len; i++) {
+        if (s[i] < '0' || s[i] > '9') return -1;
+        v = v * 10 + (uint64_t)(s[i] - '0');
+    }
+    *out = v;
+    return 0;
+}
+
+typedef struct ply_elem {
+    char name[16];
+    uint64_t count;
+    uint64_t min_bytes; /* an entry's shortest encoding, lists empty */
+    int list_size;      /* the index size of the face list (binary), or 0 */
+} ply_elem;
+
+static int check_ply(const unsigned char *p, size_t n, uint64_t size, vx_mesh_declared *d,
+                     vx_err *err)
+{
+    const vx_mesh_format F = VX_MESH_PLY;
+    const char *s = (const char *)p, *end = s + (n < PLY_MAX_HEADER ? n : PLY_MAX_HEADER);
+    ply_elem el[PLY_MAX_ELEMENTS];
+    int nel = 0, ascii = -1, line = 0;
+    const char *at = s;
+    for (;;) {
+        const char *nl = memchr(at, '\n', (size_t)(end - at));
+        if (!nl) {
+            if (n < size && n < PLY_MAX_HEADER) return 1;
+            return corrupt(err, F, "no end_header in the first %d bytes", PLY_MAX_HEADER);
+        }
+        const char *w[6];
+        size_t wl[6];
+        int k = words(at, nl, w, wl, 6);
+        at = nl + 1;
+        line++;
+        if (line == 1) {
+            if (k != 1 || wl[0] != 3 || memcmp(w[0], "ply", 3))
+                return corrupt(err, F, "the first line is not \"ply\"");
+            continue;
+        }
+        if (!k) continue;
+#define IS(i, lit) (wl[i] == strlen(lit) && !memcmp(w[i], lit, wl[i]))
+        if (IS(0, "comment") || IS(0, "obj_info")) continue;
+        if (IS(0, "end_header")) break;
+        if (IS(0, "format")) {
+            if (k < 3 || !IS(2, "1.0")) return corrupt(err, F, "line %d: bad format line", line);
+            if (IS(1, "ascii"))
+                ascii = 1;
+            else if (IS(1, "binary_little_endian") || IS(1, "binary_big_endian"))
+                ascii = 0;
+            else
+                return corrupt(err, F, "line %d: unknown format", line);
+        } else if (IS(0, "element")) {
+            if (k != 3 || nel == PLY_MAX_ELEMENTS)
+                return corrupt(err, F, "line %d: bad element line", line);
+            ply_elem *e = &el[nel++];
+            memset(e, 0, sizeof *e);
+            snprintf(e->name, sizeof e->name, "%.*s", (int)(wl[1] < 15 ? wl[1] : 15), w[1]);
+            if (parse_u64(w[2], wl[2], &e->count))
+                return corrupt(err, F, "line %d: bad element count", line);
+        } else if (IS(0, "property")) {
+            if (!nel) return corrupt(err, F, "line %d: a property before any element", line);
+            ply_elem *e = &el[nel - 1];
+            if (k >= 2 && IS(1, "list")) {
+                int cs = k == 5 ? ply_type_size(w[2], wl[2]) : 0;
+                int is = k == 5 ? ply_type_size(w[3], wl[3]) : 0;
+                if (!cs || !is) return corrupt(err, F, "line %d: bad list property", line);
+                e->min_bytes += ascii == 1 ? 2 : (uint64_t)cs;
+                if (!strcmp(e->name, "face")) e->list_size = ascii == 1 ? 2 : is;
+            } else {
+                int ts = k == 3 ? ply_type_size(w[1], wl[1]) : 0;
+                if (!ts) return corrupt(err, F, "line %d: bad property", line);
+                e->min_bytes += ascii == 1 ? 2 : (uint64_t)ts;
+            }
+        } else {
+            return corrupt(err, F, "line %d: unknown header keyword", line);
+        }
+#undef IS
+    }
+    if (ascii < 0) return corrupt(err, F, "no format line");
+    uint64_t left = size - (uint64_t)(at - s), need = 0;
+    /* ASCII: the last number may end the file without a separator. */
+    if (ascii) left += 1;
+    for (int i = 0; i < nel; i++) {
+        ply_elem *e = &el[i];
+        uint64_t minb = e->min_bytes ? e->min_bytes : 1;
+        if (e->count > left / minb || need + e->count * minb > left)
+            return corrupt(err, F,
+                           "element '%s' declares %llu entries, more than the %llu bytes after "
+                           "the header can hold",
+                           e->name, (unsigned long long)e->count, (unsigned long long)left);
+        need += e->count * minb;
+        if (!strcmp(e->name, "vertex")) d->vertices = e->count;
+        if (!strcmp(e->name, "face")) d->faces = e->count;
+    }
+    int isz = 1;
+    for (int i = 0; i < nel; i++)
+        if (!strcmp(el[i].name, "face") && el[i].list_size) isz = el[i].list_size;
+    d->indices = (left - need) / (uint64_t)isz;
+    d->triangles = d->indices;
+    return 0;
+}
+
+/* ---- OFF ------------------------------------------------------------- */
+
+/* Skips blanks and # comments. */
+static size_t off_skip(const unsigned char *p, size_t n, size_t i)
+{
+    for (;;) {
+        while (i < n && blank(p[i]))
+            i++;
+        if (i < n && p[i] == '#') {
+            while (i < n && p[i] != '\n')
+                i++;
+            continue;
+        }
+        return i;
+    }
+}
+
+static size_t off_word(const unsigned char *p, size_t n, size_t i)
+{
+    while (i < n && !blank(p[i]) && p[i] != '#')
+        i++;
+    return i;
+}
+
+static int check_off(const unsigned char *p, size_t n, uint64_t size, vx_mesh_declared *d,
+                     vx_err *err)
+{
+    const vx_mesh_format F = VX_MESH_OFF;
+    size_t i = off_skip(p, n, 0), j = off_word(p, n, i);
+    if (j - i < 3 || memcmp(p + j - 3, "OFF", 3)) {
+        if (j == n && n < size) return 1;
+        return corrupt(err, F, "the first word is not OFF");
+    }
+    uint64_t c[2];
+    for (int k = 0; k < 2; k++) {
+        i = off_skip(p, n, j);
+        j = off_word(p, n, i);
+        if (j == n && n < size) return 1;
+        if (parse_u64((const char *)p + i, j - i, &c[k]))
+            return corrupt(err, F, "the header has no vertex and face counts");
+    }
+    /* The edge count is optional for assimp: not read here. */
+    uint64_t left = size - j + 1;
+    /* A vertex takes three numbers and their separators; a face at least
+     * its size and a separator. */
+    if (c[0] > left / 6 || c[1] > (left - 6 * c[0]) / 2)
+        return corrupt(err, F,
+                       "the header declares %llu vertices and %llu faces, more than the %llu "
+                       "bytes after it can hold",
+                       (unsigned long long)c[0], (unsigned long long)c[1],
+                       (unsigned long long)left);
+    d->vertices = c[0];
+    d->faces = c[1];
+    d->indices = (left - 6 * c[0]) / 2;
+    d->triangles = d->indices;
+    return 0;
+}
+
+/* ---- glTF ------------------------------------------------------------ */
+
+#define GLTF_MAX_DEPTH 64
+
+typedef struct gltf_ctx {
+    cJSON *root;
+    uint64_t bin_len; /* glb BIN chunk, or UINT64_MAX: none */
+    uint64_t *buf_len, *view_len;
+    int nbuf, nview;
+    unsigned char *seen; /* nodes visited */
+    int nnodes;
+    uint64_t tris, verts;
+    vx_err *err;
+} gltf_ctx;
+
+static int gl_fail(gltf_ctx *g, const char *fmtstr, const char *what, int idx)
+{
+    return corrupt(g->err, VX_MESH_GLTF, fmtstr, what, idx);
+}
+
+/* A non-negative integer member, or def when absent; -1 when not one. */
+static double num(const cJSON *o, const char *key, double def)
+{
+    const cJSON *v = cJSON_GetObjectItemCaseSensitive(o, key);
+    if (!v) return def;
+    if (!cJSON_IsNumber(v) || v->valuedouble < 0 || v->valuedouble > 9e15 ||
+        v->valuedouble != floor(v->valuedouble))
+        return -1;
+    return v->valuedouble;
+}
+
+static cJSON *arr(const cJSON *root, const char *key)
+{
+    cJSON *a = cJSON_GetObjectItemCaseSensitive(root, key);
+    return cJSON_IsArray(a) ? a : NULL;
+}
+
+/* Decoded length of a base64 data URI, or -1 when it is not one. */
+static double data_uri_len(const char *uri)
+{
+    if (strncmp(uri, "data:", 5)) return -1;
+    const char *b = strstr(uri, ";base64,");
+    if (!b) return -1;
+    b += 8;
+    size_t len = strlen(b);
+    while (len && b[len - 1] == '=')
+        len--;
+    return (double)(len / 4 * 3 + (len % 4 ? len % 4 - 1 : 0));
+}
+
+static int gltf_buffers(gltf_ctx *g)
+{
+    cJSON *bufs = arr(g->root, "buffers"), *b;
+    g->nbuf = bufs ? cJSON_GetArraySize(bufs) : 0;
+    g->buf_len = calloc((size_t)g->nbuf + 1, sizeof *g->buf_len);
+    if (!g->buf_len) return vx_err_set(g->err, VX_EINTERNAL, "out_of_memory", "no memory");
+    int i = 0;
+    cJSON_ArrayForEach(b, bufs)
+    {
+        double len = num(b, "byteLength", -1), have;
+        const cJSON *uri = cJSON_GetObjectItemCaseSensitive(b, "uri");
+        if (len < 0) return gl_fail(g, "%s %d has no byteLength", "buffer", i);
+        if (uri) {
+            if (!cJSON_IsString(uri) || (have = data_uri_len(uri->valuestring)) < 0)
+                return gl_fail(g,
+                               "%s %d refers to an external file (only data: URIs and the glb "
+                               "BIN chunk are read)",
+                               "buffer", i);
+        } else {
+            if (i != 0 || g->bin_len == UINT64_MAX)
+                return gl_fail(g, "%s %d has no uri and there is no glb BIN chunk", "buffer", i);
+            have = (double)g->bin_len;
+        }
+        if (len > have) return gl_fail(g, "%s %d is longer than its data", "buffer", i);
+        g->buf_len[i++] = (uint64_t)len;
+    }
+    return 0;
+}
+
+static int gltf_views(gltf_ctx *g)
+{
+    cJSON *views = arr(g->root, "bufferViews"), *v;
+    g->nview = views ? cJSON_GetArraySize(views) : 0;
+    g->view_len = calloc((size_t)g->nview + 1, sizeof *g->view_len);
+    if (!g->view_len) return vx_err_set(g->err, VX_EINTERNAL, "out_of_memory", "no memory");
+    int i = 0;
+    cJSON_ArrayForEach(v, views)
+    {
+        double b = num(v, "buffer", -1), off = num(v, "byteOffset", 0),
+               len = num(v, "byteLength", -1);
+        if (b < 0 || b >= g->nbuf || off < 0 || len < 0 || off + len > (double)g->buf_len[(int)b])
+            return gl_fail(g, "%s %d is out of its buffer's bounds", "bufferView", i);
+        g->view_len[i++] = (uint64_t)len;
+    }
+    return 0;
+}
+
+static int comp_size(int ct)
+{
+    switch (ct) {
+    case 5120:
+    case 5121:
+        return 1;
+    case 5122:
+    case 5123:
+        return 2;
+    case 5125:
+    case 5126:
+        return 4;
+    default:
+        return 0;
+    }
+}
+
+static int type_comps(const cJSON *t)
+{
+    static const struct {
+        const char *name;
+        int n;
+    } types[] = {{"SCALAR", 1}, {"VEC2", 2}, {"VEC3", 3}, {"VEC4", 4},
+                 {"MAT2", 4},   {"MAT3", 9}, {"MAT4", 16}};
+    if (!cJSON_IsString(t)) return 0;
+    for (size_t i = 0; i < sizeof types / sizeof types[0]; i++)
+        if (!strcmp(t->valuestring, types[i].name)) return types[i].n;
+    return 0;
+}
+
+/* Whether count elements of elem bytes at off with stride fit view vi. */
+static int fits(gltf_ctx *g, double vi, double off, double stride, double count, double elem)
+{
+    if (vi < 0 || vi >= g->nview || off < 0) return 0;
+    if (count == 0) return 1;
+    return off + stride * (count - 1) + elem <= (double)g->view_len[(int)vi];
+}
+
+/* Checks every accessor; *count of accessor i is what it declares. */
+static int gltf_accessors(gltf_ctx *g)
+{
+    cJSON *accs = arr(g->root, "accessors"), *a;
+    cJSON *views = arr(g->root, "bufferViews");
+    int i = 0;
+    cJSON_ArrayForEach(a, accs)
+    {
+        int cs = comp_size((int)num(a, "componentType", -1));
+        int nc = type_comps(cJSON_GetObjectItemCaseSensitive(a, "type"));
+        double count = num(a, "count", -1), vi = num(a, "bufferView", -1),
+               off = num(a, "byteOffset", 0);
+        if (!cs || !nc || count < 1) return gl_fail(g, "%s %d is malformed", "accessor", i);
+        if (vi < 0) return gl_fail(g, "%s %d has no bufferView", "accessor", i);
+        double elem = (double)cs * nc, stride = elem;
+        if (vi < g->nview) {
+            double st = num(cJSON_GetArrayItem(views, (int)vi), "byteStride", 0);
+            if (st > 0) stride = st;
+        }
+        if (!fits(g, vi, off, stride, count, elem))
+            return gl_fail(g, "%s %d declares more elements than its bufferView holds", "accessor",
+                           i);
+        const cJSON *sp = cJSON_GetObjectItemCaseSensitive(a, "sparse");
+        if (sp) {
+            double sc = num(sp, "count", -1);
+            const cJSON *ix = cJSON_GetObjectItemCaseSensitive(sp, "indices");
+            const cJSON *vs = cJSON_GetObjectItemCaseSensitive(sp, "values");
+            int ics = comp_size((int)num(ix, "componentType", -1));
+            if (sc < 1 || sc > count || !ics ||
+                !fits(g, num(ix, "bufferView", -1), num(ix, "byteOffset", 0), ics, sc, ics) ||
+                !fits(g, num(vs, "bufferView", -1), num(vs, "byteOffset", 0), elem, sc, elem))
+                return gl_fail(g, "%s %d has a malformed sparse part", "accessor", i);
+        }
+        i++;
+    }
+    return 0;
+}
+
+static double acc_count(gltf_ctx *g, double ai)
+{
+    cJSON *accs = arr(g->root, "accessors");
+    if (ai < 0 || !accs || ai >= cJSON_GetArraySize(accs)) return -1;
+    return num(cJSON_GetArrayItem(accs, (int)ai), "count", -1);
+}
+
+/* Adds mesh mi's triangles and vertices (one instance) to g. */
+static int gltf_mesh(gltf_ctx *g, double mi)
+{
+    cJSON *meshes = arr(g->root, "meshes");
+    if (mi < 0 || !meshes || mi >= cJSON_GetArraySize(meshes))
+        return gl_fail(g, "%s %d names no mesh", "node mesh", (int)mi);
+    cJSON *prims = arr(cJSON_GetArrayItem(meshes, (int)mi), "primitives"), *p;
+    cJSON_ArrayForEach(p, prims)
+    {
+        const cJSON *at = cJSON_GetObjectItemCaseSensitive(p, "attributes");
+        double pc = acc_count(g, num(at, "POSITION", -1));
+        if (pc < 0) return gl_fail(g, "%s %d has a primitive without POSITION", "mesh", (int)mi);
+        double ic = cJSON_GetObjectItemCaseSensitive(p, "indices")
+                        ? acc_count(g, num(p, "indices", -1))
+                        : pc;
+        if (ic < 0) return gl_fail(g, "%s %d has a primitive with bad indices", "mesh", (int)mi);
+        double mode = num(p, "mode", 4);
+        double t = mode == 4 ? floor(ic / 3) : (mode == 5 || mode == 6) && ic >= 3 ? ic - 2 : 0;
+        g->tris += (uint64_t)t;
+        g->verts += (uint64_t)pc;
+    }
+    return 0;
+}
+
+static int gltf_node(gltf_ctx *g, double ni, int depth)
+{
+    cJSON *nodes = arr(g->root, "nodes");
+    if (ni < 0 || ni >= g->nnodes) return gl_fail(g, "%s %d does not exist", "node", (int)ni);
+    if (g->seen[(int)ni])
+        return gl_fail(g, "%s %d is reached twice (a cycle, or two parents)", "node", (int)ni);
+    if (depth > GLTF_MAX_DEPTH)
+        return gl_fail(g, "%s %d is nested more than %d deep", "node", GLTF_MAX_DEPTH);
+    g->seen[(int)ni] = 1;
+    cJSON *n = cJSON_GetArrayItem(nodes, (int)ni), *c;
+    if (cJSON_GetObjectItemCaseSensitive(n, "mesh") && gltf_mesh(g, num(n, "mesh", -1))) return -1;
+    cJSON_ArrayForEach(c, arr(n, "children"))
+    {
+        if (gltf_node(g, cJSON_IsNumber(c) ? c->valuedouble : -1, depth + 1)) return -1;
+    }
+    return 0;
+}
+
+static int gltf_scene(gltf_ctx *g)
+{
+    cJSON *nodes = arr(g->root, "nodes"), *scenes = arr(g->root, "scenes"), *r;
+    g->nnodes = nodes ? cJSON_GetArraySize(nodes) : 0;
+    g->seen = calloc((size_t)g->nnodes + 1, 1);
+    if (!g->seen) return vx_err_set(g->err, VX_EINTERNAL, "out_of_memory", "no memory");
+    double si = num(g->root, "scene", 0);
+    if (!scenes || si < 0 || si >= cJSON_GetArraySize(scenes)) return 0;
+    cJSON_ArrayForEach(r, arr(cJSON_GetArrayItem(scenes, (int)si), "nodes"))
+    {
+        if (gltf_node(g, cJSON_IsNumber(r) ? r->valuedouble : -1, 0)) return -1;
+    }
+    return 0;
+}
+
+static int check_gltf(vx_mesh_format fmt, const unsigned char *p, size_t n, uint64_t size,
+                      vx_mesh_declared *d, vx_err *err)
+{
+    const char *json = (const char *)p;
+    size_t jlen = n;
+    gltf_ctx g = {.bin_len = UINT64_MAX, .err = err};
+    if (fmt == VX_MESH_GLB) {
+        if (n < 20) return n < size ? 1 : corrupt(err, VX_MESH_GLTF, "a glb shorter than 20 bytes");
+        if (memcmp(p, "glTF", 4) || le32(p + 4) != 2)
+            return corrupt(err, VX_MESH_GLTF, "no glb version 2 header");
+        uint64_t total = le32(p + 8), clen = le32(p + 12);
+        if (total != size || le32(p + 16) != 0x4E4F534Au || 20 + clen > size)
+            return corrupt(err, VX_MESH_GLTF,
+                           "the glb header and chunk lengths do not match the "
+                           "file");
+        if (20 + clen > n) return 1;
+        json = (const char *)p + 20;
+        jlen = clen;
+        uint64_t at = (20 + clen + 3) & ~UINT64_C(3);
+        if (at + 8 <= size) {
+            if (at + 8 > n) return 1;
+            uint64_t blen = le32(p + at);
+            if (le32(p + at + 4) != 0x004E4942u || at + 8 + blen > size)
+                return corrupt(err, VX_MESH_GLTF, "the glb BIN chunk is out of the file's bounds");
+            g.bin_len = blen;
+        }
+    } else if (n < size) {
+        return 1;
+    }
+    g.root = cJSON_ParseWithLength(json, jlen);
+    int rc = -1;
+    if (!g.root || !cJSON_IsObject(g.root)) {
+        corrupt(err, VX_MESH_GLTF, "the JSON does not parse");
+        goto out;
+    }
+    const cJSON *asset = cJSON_GetObjectItemCaseSensitive(g.root, "asset");
+    const cJSON *ver = cJSON_GetObjectItemCaseSensitive(asset, "version");
+    if (!cJSON_IsString(ver) || strncmp(ver->valuestring, "2.", 2)) {
+        corrupt(err, VX_MESH_GLTF, "asset.version is not 2.x (glTF 2.0 is read)");
+        goto out;
+    }
+    if (gltf_buffers(&g) || gltf_views(&g) || gltf_accessors(&g) || gltf_scene(&g)) goto out;
+    d->triangles = d->faces = g.tris;
+    d->indices = 3 * g.tris;
+    d->vertices = g.verts;
+    d->exact = 1;
+    rc = 0;
+out:
+    cJSON_Delete(g.root);
+    free(g.buf_len);
+    free(g.view_len);
+    free(g.seen);
+    return rc;
+}
+
+/* ---- entry points ----------------------------------------------------- */
+
+int vx_declared_check(vx_mesh_format fmt, const unsigned char *data, size_t n, uint64_t size,
+                      const vx_mesh_limits *lim, vx_mesh_declared *d, vx_err *err)
+{
+    memset(d, 0, sizeof *d);
+    int rc;
+    switch (fmt) {
+    case VX_MESH_STL:
+        rc = check_stl(data, n, size, d, err);
+        break;
+    case VX_MESH_PLY:
+        rc = check_ply(data, n, size, d, err);
+        break;
+    case VX_MESH_OFF:
+        rc = check_off(data, n, size, d, err);
+        break;
+    case VX_MESH_GLTF:
+    case VX_MESH_GLB:
+        rc = check_gltf(fmt, data, n, size, d, err);
+        break;
+    default:
+        return vx_err_set(err, VX_EINTERNAL, "mesh_format", "no header check for format %d",
+                          (int)fmt);
+    }
+    return rc ? rc : over_limits(d, lim, fmt, err);
+}
+
+uint64_t vx_declared_decode_bound(vx_mesh_format fmt, uint64_t size, const vx_mesh_declared *d)
+{
+    /* assimp's own copy of the file and its parse state (glTF: the JSON
+     * DOM and the decoded data: URIs), then per element what its scene
+     * holds: a face is an aiFace and its index array, a vertex a position
+     * and what else the file carries (normals, colours, coordinates). */
+    uint64_t per_byte = fmt == VX_MESH_GLTF || fmt == VX_MESH_GLB ? 16 : 4;
+    return per_byte * size + 48 * d->faces + 8 * d->indices + 64 * d->vertices +
+           (UINT64_C(16) << 20);
+}
+
+vx_mesh_format vx_mesh_sniff_sized(const unsigned char *p, size_t n, uint64_t size)
+{
+    if (n >= 12 && !memcmp(p, "glTF", 4)) return VX_MESH_GLB;
+    if (n >= 4 && !memcmp(p, "ply", 3) && (p[3] == '\n' || p[3] == '\r')) return VX_MESH_PLY;
+    if (n >= 84 && 84 + 50 * (uint64_t)le32(p + 80) == size) return VX_MESH_STL;
+    size_t i = 0;
+    if (n >= 3 && !memcmp(p, "\xef\xbb\xbf", 3)) i = 3;
+    while (i < n && blank(p[i]))
+        i++;
+    if (i < n && p[i] == '{') return VX_MESH_GLTF;
+    size_t j = off_word(p, n, i);
+    if (j - i >= 3 && j - i <= 8 && !memcmp(p + j - 3, "OFF", 3) && (j < n || n == size))
+        return VX_MESH_OFF;
+    /* A binary STL whose header starts with "solid" but whose size does
+     * not match its count: the reader says what is wrong. */
+    if (solid_first(p, n) && n >= 84 && !ascii_stl(p, n)) return VX_MESH_STL;
+    if (ascii_stl(p, n)) {
+        /* "solid" alone could start other text: look for a facet. */
+        const char *s = (const char *)p;
+        for (size_t k = i; k + 8 <= n; k++)
+            if (!memcmp(s + k, "facet", 5) || !memcmp(s + k, "endsolid", 8)) return VX_MESH_STL;
+    }
+    return vx_mesh_sniff(p, n);
+}

@@ -1,0 +1,169 @@
+/* OFF reader (vx_off_read_mem, mesh.h), from memory.
+ *
+ * assimp 5.2's OFF importer crashed (SEGV) on files that fuzz_off made of
+ * a valid header and garbage face lines, so OFF is read here: line by
+ * line, '#' comments dropped, the header word (OFF, COFF, NOFF, CNOFF,
+ * STOFF, ...; 4OFF and nOFF are refused), the vertex and face counts
+ * (checked against the size first, vx_declared_check), then per vertex
+ * line its first three numbers and per face line its size and indices
+ * (colours after them are ignored). Polygons are kept. */
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "mesh/mesh.h"
+
+typedef struct off_in {
+    const char *p, *end;
+    char line[4096];
+    size_t lineno;
+} off_in;
+
+/* The next line with something on it but comments, NUL-terminated in
+ * in->line; 0 at the end, -1 when it is too long. */
+static int next_line(off_in *in)
+{
+    while (in->p < in->end) {
+        const char *nl = memchr(in->p, '\n', (size_t)(in->end - in->p));
+        const char *e = nl ? nl : in->end;
+        size_t len = (size_t)(e - in->p);
+        in->lineno++;
+        if (len >= sizeof in->line) return -1;
+        memcpy(in->line, in->p, len);
+        in->line[len] = 0;
+        in->p = nl ? nl + 1 : in->end;
+        char *hash = strchr(in->line, '#');
+        if (hash) *hash = 0;
+        if (strlen(in->line) != len && !hash) return -1; /* a NUL byte */
+        for (char *c = in->line; *c; c++)
+            if (*c != ' ' && *c != '\t' && *c != '\r' && *c != '\f' && *c != '\v') return 1;
+    }
+    return 0;
+}
+
+static int fail(vx_err *err, off_in *in, const char *what)
+{
+    return vx_err_set(err, VX_EINVAL, "off_corrupt", "not a valid OFF file: line %zu: %s",
+                      in->lineno, what);
+}
+
+/* Reads an unsigned integer token at *s. */
+static int read_uint(char **s, unsigned long long *v)
+{
+    char *e;
+    while (**s == ' ' || **s == '\t' || **s == '\r')
+        (*s)++;
+    if (**s < '0' || **s > '9') return -1;
+    *v = strtoull(*s, &e, 10);
+    *s = e;
+    return 0;
+}
+
+static int read_header(off_in *in, unsigned long long c[2], vx_err *err)
+{
+    if (next_line(in) <= 0) return fail(err, in, "no header");
+    char *s = in->line;
+    while (*s == ' ' || *s == '\t')
+        s++;
+    char *w = s;
+    while (*s && *s != ' ' && *s != '\t' && *s != '\r')
+        s++;
+    size_t wl = (size_t)(s - w);
+    if (wl < 3 || strncmp(s - 3, "OFF", 3)) return fail(err, in, "the first word is not OFF");
+    if (memchr(w, '4', wl - 3) || memchr(w, 'n', wl - 3))
+        return fail(err, in, "4OFF and nOFF (other dimensions) are not read");
+    for (int k = 0; k < 2; k++) {
+        while (*s == ' ' || *s == '\t' || *s == '\r')
+            s++;
+        if (!*s) {
+            if (next_line(in) <= 0) return fail(err, in, "no vertex and face counts");
+            s = in->line;
+        }
+        if (read_uint(&s, &c[k])) return fail(err, in, "bad vertex or face count");
+    }
+    return 0;
+}
+
+vx_mesh *vx_off_read_mem(const unsigned char *data, size_t n, const vx_mesh_limits *lim,
+                         vx_err *err)
+{
+    vx_mesh_declared d;
+    if (vx_declared_check(VX_MESH_OFF, data, n, n, lim, &d, err)) return NULL;
+    off_in in = {.p = (const char *)data, .end = (const char *)data + n};
+    unsigned long long c[2];
+    if (read_header(&in, c, err)) return NULL;
+    vx_mesh *m = vx_mesh_new();
+    if (!m) goto oom;
+    size_t nv = (size_t)c[0], nf = (size_t)c[1], cap = 3 * nf + 16, used = 0, ntris = 0;
+    m->pos = malloc(3 * nv * sizeof(double) + 1);
+    m->face_start = malloc((nf + 1) * sizeof(uint32_t));
+    m->face_idx = malloc(cap * sizeof(uint32_t));
+    if (!m->pos || !m->face_start || !m->face_idx) goto oom;
+    for (size_t v = 0; v < nv; v++) {
+        if (next_line(&in) <= 0) goto bad_v;
+        char *s = in.line;
+        for (int a = 0; a < 3; a++) {
+            char *e;
+            double x = strtod(s, &e);
+            if (e == s) goto bad_v;
+            if (!isfinite(x)) {
+                fail(err, &in, "a NaN or infinite coordinate");
+                goto out;
+            }
+            m->pos[3 * v + a] = x;
+            s = e;
+        }
+    }
+    size_t kept = 0;
+    for (size_t f = 0; f < nf; f++) {
+        unsigned long long k, idx;
+        if (next_line(&in) <= 0) goto bad_f;
+        char *s = in.line;
+        if (read_uint(&s, &k) || k > 4096) goto bad_f;
+        if (used + k > cap) {
+            cap = 2 * cap + k;
+            if (cap > (size_t)n) cap = (size_t)n; /* a corner takes 2 bytes of the file */
+            if (used + k > cap) goto bad_f;
+            uint32_t *g = realloc(m->face_idx, cap * sizeof(uint32_t));
+            if (!g) goto oom;
+            m->face_idx = g;
+        }
+        for (unsigned long long i = 0; i < k; i++) {
+            if (read_uint(&s, &idx)) goto bad_f;
+            if (idx >= nv) {
+                fail(err, &in, "a face index out of range");
+                goto out;
+            }
+            m->face_idx[used + i] = (uint32_t)idx;
+        }
+        if (k < 3) continue; /* points and edges */
+        m->face_start[kept++] = (uint32_t)used;
+        used += k;
+        ntris += k - 2;
+        if (lim && lim->max_triangles && ntris > lim->max_triangles) {
+            vx_err_set(err, VX_ETOOBIG, "mesh_too_big",
+                       "the OFF file has more than %zu triangles (the limit)", lim->max_triangles);
+            goto out;
+        }
+    }
+    if (!kept) {
+        vx_err_set(err, VX_EUNPROC, "off_no_faces", "the OFF file has no faces");
+        goto out;
+    }
+    m->face_start[kept] = (uint32_t)used;
+    m->nverts = nv;
+    m->nfaces = kept;
+    if (vx_mesh_analyze(m, err)) goto out;
+    return m;
+bad_v:
+    fail(err, &in, "a vertex line without three numbers");
+    goto out;
+bad_f:
+    fail(err, &in, "a face line without its size and indices");
+    goto out;
+oom:
+    vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory to read the OFF file");
+out:
+    vx_mesh_free(m);
+    return NULL;
+}

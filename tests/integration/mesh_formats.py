@@ -1,0 +1,144 @@
+#!/usr/bin/env python3
+"""Writes a unit cube (8 vertices, 12 triangles, [0,1]^3) in the formats the
+readers take, plus malformed and lying-count variants of each, into DIR.
+
+    mesh_formats.py DIR
+
+Files: cube_bin.stl (header starting with "solid "), cube_ascii.stl,
+cube_bin.ply (little endian), cube_be.ply, cube_ascii.ply (quads: 6 faces),
+cube.gltf (embedded data: URI buffer), cube.glb (a node translating by
+(10, 20, 30) and scaling by 2), cube.off (quads), and bad_* / lie_* files.
+Standard library only."""
+import base64
+import json
+import os
+import struct
+import sys
+
+V = [(x, y, z) for z in (0, 1) for y in (0, 1) for x in (0, 1)]
+# Quads, outward: -z, +z, -y, +y, -x, +x
+Q = [(0, 2, 3, 1), (4, 5, 7, 6), (0, 1, 5, 4), (2, 6, 7, 3), (0, 4, 6, 2), (1, 3, 7, 5)]
+T = [t for a, b, c, d in Q for t in ((a, b, c), (a, c, d))]
+
+
+def stl_binary(header=b"solid cube (binary)"):
+    out = header.ljust(80, b" ") + struct.pack("<I", len(T))
+    for t in T:
+        out += struct.pack("<3f", 0, 0, 0)
+        for i in t:
+            out += struct.pack("<3f", *V[i])
+        out += b"\0\0"
+    return out
+
+
+def stl_ascii():
+    s = "solid cube\n"
+    for t in T:
+        s += " facet normal 0 0 0\n  outer loop\n"
+        for i in t:
+            s += "   vertex %g %g %g\n" % V[i]
+        s += "  endloop\n endfacet\n"
+    return (s + "endsolid cube\n").encode()
+
+
+def ply(fmt, faces, nverts=None, nfaces=None):
+    head = "ply\nformat %s 1.0\ncomment cube\nelement vertex %d\n" % (fmt, nverts or len(V))
+    head += "property float x\nproperty float y\nproperty float z\n"
+    head += "element face %d\nproperty list uchar int vertex_indices\nend_header\n" % (
+        nfaces or len(faces))
+    if fmt == "ascii":
+        body = "".join("%g %g %g\n" % v for v in V)
+        body += "".join("%d %s\n" % (len(f), " ".join(map(str, f))) for f in faces)
+        return (head + body).encode()
+    e = "<" if fmt == "binary_little_endian" else ">"
+    body = b"".join(struct.pack(e + "3f", *v) for v in V)
+    for f in faces:
+        body += struct.pack(e + "B%di" % len(f), len(f), *f)
+    return head.encode() + body
+
+
+def off(nv=None, nf=None):
+    s = "OFF\n# a cube\n%d %d 0\n" % (nv or len(V), nf or len(Q))
+    s += "".join("%g %g %g\n" % v for v in V)
+    s += "".join("4 %d %d %d %d\n" % f for f in Q)
+    return s.encode()
+
+
+def gltf_parts(count=None, node=None):
+    pos = b"".join(struct.pack("<3f", *v) for v in V)
+    idx = b"".join(struct.pack("<H", i) for t in T for i in t)
+    binary = idx + pos  # idx is 72 bytes: pos stays 4-aligned
+    doc = {
+        "asset": {"version": "2.0"},
+        "scene": 0,
+        "scenes": [{"nodes": [0]}],
+        "nodes": [node or {"mesh": 0}],
+        "meshes": [{"primitives": [{"attributes": {"POSITION": 1}, "indices": 0}]}],
+        "buffers": [{"byteLength": len(binary)}],
+        "bufferViews": [
+            {"buffer": 0, "byteOffset": 0, "byteLength": len(idx), "target": 34963},
+            {"buffer": 0, "byteOffset": len(idx), "byteLength": len(pos), "target": 34962},
+        ],
+        "accessors": [
+            {"bufferView": 0, "componentType": 5123, "count": count or len(idx) // 2,
+             "type": "SCALAR"},
+            {"bufferView": 1, "componentType": 5126, "count": len(V), "type": "VEC3",
+             "min": [0, 0, 0], "max": [1, 1, 1]},
+        ],
+    }
+    return doc, binary
+
+
+def gltf(count=None, uri=None):
+    doc, binary = gltf_parts(count)
+    doc["buffers"][0]["uri"] = uri or (
+        "data:application/octet-stream;base64," + base64.b64encode(binary).decode())
+    return json.dumps(doc).encode()
+
+
+def glb(count=None, node=None):
+    doc, binary = gltf_parts(count, node)
+    j = json.dumps(doc).encode()
+    j += b" " * (-len(j) % 4)
+    binary += b"\0" * (-len(binary) % 4)
+    total = 12 + 8 + len(j) + 8 + len(binary)
+    return (b"glTF" + struct.pack("<II", 2, total) + struct.pack("<I", len(j)) + b"JSON" + j +
+            struct.pack("<I", len(binary)) + b"BIN\0" + binary)
+
+
+def main():
+    d = sys.argv[1]
+    os.makedirs(d, exist_ok=True)
+    moved = {"mesh": 0, "translation": [10, 20, 30], "scale": [2, 2, 2]}
+    files = {
+        "cube_bin.stl": stl_binary(b"solid cube, a binary STL whose header starts with solid"),
+        "cube_ascii.stl": stl_ascii(),
+        "cube_bin.ply": ply("binary_little_endian", T),
+        "cube_be.ply": ply("binary_big_endian", T),
+        "cube_ascii.ply": ply("ascii", Q),
+        "cube.gltf": gltf(),
+        "cube.glb": glb(node=moved),
+        "cube.off": off(),
+        # malformed
+        "bad.stl": stl_ascii().replace(b"vertex 1 1 1", b"vertex 1 x 1"),
+        "bad.ply": ply("ascii", Q).replace(b"property float y", b"property quux y"),
+        "bad.gltf": b'{"asset": {"version": "2.0"}, "buffers": [',
+        "bad.glb": glb()[:40],
+        "bad.off": b"OFF\n8 6 0\n0 0 0\n1 0 0\nzz\n",
+        # declared counts that lie
+        "lie.stl": stl_binary()[:80] + struct.pack("<I", 4000000000) + stl_binary()[84:],
+        "lie.ply": ply("binary_little_endian", T, nverts=2000000000),
+        "lie_faces.ply": ply("ascii", Q, nfaces=3000000000),
+        "lie.gltf": gltf(count=1000000000),
+        "lie.glb": glb(count=1000000000),
+        "lie.off": off(nv=8, nf=2000000000),
+        "external.gltf": gltf(uri="../../../etc/passwd"),
+        "cycle.glb": glb(node={"mesh": 0, "children": [0]}),
+    }
+    for name, data in files.items():
+        with open(os.path.join(d, name), "wb") as f:
+            f.write(data)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,171 @@
+#!/usr/bin/env bash
+# STL (binary, ASCII), PLY (binary LE/BE, ASCII), glTF (embedded), glb (a
+# node transform) and OFF uploads: content types and sniffing (curl's
+# default form type too), the Mesh JSON's counts and bbox, a voxelization,
+# and 400s naming the format for malformed files and for declared counts
+# that the file cannot hold (never an allocation sized by them).
+source "$(dirname "$0")/lib.sh"
+start_daemon --max-triangles 100000 || exit 1
+
+F=$TMP/formats
+python3 "$(dirname "$0")/mesh_formats.py" "$F" || exit 1
+
+# cube FILE CONTENT_TYPE FORMAT QUADS [BBOX_MIN BBOX_MAX]: a unit cube upload.
+cube() {
+    local what="$(basename "$1") as ${2:-curl default type}"
+    if [[ -n "$2" ]]; then
+        api POST /v1/meshes -H "Content-Type: $2" --data-binary "@$1"
+    else
+        api POST /v1/meshes --data-binary "@$1" # application/x-www-form-urlencoded
+    fi
+    MESH_ID=$(jqb '.id // empty')
+    check "$what: 201 or 200 (got $STATUS: $(jqb -c .error))" test "$STATUS" = 201 -o "$STATUS" = 200
+    check "$what: format $3" test "$(jqb .format)" = "$3"
+    check "$what: 8 vertices, 12 triangles, closed" \
+        jq -e '.vertices == 8 and .triangles == 12 and .boundary_edges == 0 and .nonmanifold_edges == 0' "$BODY"
+    check "$what: $4 quads" jq -e ".faces.quads == $4" "$BODY"
+    check "$what: bbox ${5:-[0,0,0]} ${6:-[1,1,1]}" \
+        jq -e ".bbox.min == ${5:-[0,0,0]} and .bbox.max == ${6:-[1,1,1]}" "$BODY"
+}
+
+# Declared and sniffed.
+cube "$F/cube_bin.stl" model/stl stl 0
+cube "$F/cube_bin.stl" "" stl 0
+cube "$F/cube_ascii.stl" model/stl stl 0
+cube "$F/cube_ascii.stl" application/octet-stream stl 0
+cube "$F/cube_bin.ply" model/x-ply ply 0
+cube "$F/cube_be.ply" application/ply ply 0
+cube "$F/cube_ascii.ply" "" ply 6
+cube "$F/cube.gltf" model/gltf+json gltf 0
+cube "$F/cube.gltf" "" gltf 0
+cube "$F/cube.glb" model/gltf-binary glb 0 '[10,20,30]' '[12,22,32]'
+cube "$F/cube.glb" "" glb 0 '[10,20,30]' '[12,22,32]'
+cube "$F/cube.off" model/x-off off 6
+cube "$F/cube.off" "" off 6
+OFF_ID=$MESH_ID
+upload "$F/cube_bin.stl" model/x-draco
+expect_error "STL declared as Draco" 415 unsupported_media_type
+upload "$F/cube_bin.ply" model/stl
+expect_error "PLY declared as STL" 415 unsupported_media_type
+check "the message names both" jq -e '.error.message == "Content-Type says STL but the body is a PLY file"' "$BODY"
+
+# Malformed files and lying counts: 400 naming the format.
+bad() { # FILE CONTENT_TYPE CODE NAME
+    upload "$F/$1" "$2"
+    expect_error "$1" 400 "$3"
+    check "$1: the message names $4 ($(jqb .error.message))" jq -e --arg n "$4" '.error.message | contains($n)' "$BODY"
+}
+bad bad.stl model/stl stl_corrupt STL
+bad bad.ply model/x-ply ply_corrupt PLY
+bad bad.gltf model/gltf+json gltf_corrupt glTF
+bad bad.glb model/gltf-binary gltf_corrupt glTF
+bad bad.off model/x-off off_corrupt OFF
+bad lie.stl model/stl stl_corrupt STL
+bad lie.stl application/octet-stream stl_corrupt STL
+bad lie.ply model/x-ply ply_corrupt PLY
+bad lie_faces.ply application/octet-stream ply_corrupt PLY
+bad lie.gltf model/gltf+json gltf_corrupt glTF
+bad lie.glb application/x-www-form-urlencoded gltf_corrupt glTF
+bad lie.off model/x-off off_corrupt OFF
+bad external.gltf model/gltf+json gltf_corrupt "external file"
+bad cycle.glb model/gltf-binary gltf_corrupt "reached twice"
+# A count the bytes could hold but the limit does not: 413 before decoding.
+python3 - "$F/big.stl" <<'EOF'
+import struct, sys
+n = 100001
+open(sys.argv[1], "wb").write(b"big".ljust(80) + struct.pack("<I", n) + bytes(50 * n))
+EOF
+upload "$F/big.stl" model/stl
+expect_error "100001 triangles over --max-triangles 100000" 413 mesh_too_big
+grep -a 'event=mesh.rejected' "$TMP/daemon.log" | tail -n 3 >/dev/null
+
+# The daemon is fine, and an OFF cube voxelizes like the OBJ one.
+api GET /readyz
+expect_status "ready after the bad uploads" 200
+run_job voxelize "$OFF_ID" '{"resolution":8,"method":"slice","format":"summary"}'
+job_ok "voxelize the OFF cube"
+check "OFF cube: 512 voxels in 8^3" jq -e '.stats.voxels_inside == 512 and .stats.dims == [8,8,8]' "$TMP/job.json"
+
+# GET /v1/meshes/{id}/file: the uploaded bytes, typed, with a strong ETag.
+for f in cube_bin.stl:model/stl cube.glb:model/gltf-binary cube_ascii.ply:model/x-ply cube.off:model/x-off; do
+    file=${f%%:*} type=${f#*:}
+    upload "$F/$file" application/octet-stream
+    id=$MESH_ID
+    api GET "/v1/meshes/$id/file"
+    expect_status "file of $file" 200
+    check "file of $file: the same bytes" cmp -s "$BODY" "$F/$file"
+    check "file of $file: Content-Type $type (got $CTYPE)" test "$CTYPE" = "$type"
+    check "file of $file: ETag is the id" test "$(header ETag)" = "\"$id\""
+    api GET "/v1/meshes/$id/file" -H "If-None-Match: \"$id\""
+    expect_status "file of $file, If-None-Match" 304
+done
+api GET "/v1/meshes/$(printf 'f%.0s' $(seq 64))/file"
+expect_error "file of an unknown mesh" 404 mesh_not_found
+
+# A name from ?name= or a Content-Disposition filename: kept, listed, in
+# the result's file name. (Bytes stored before keep the name they got.)
+{ cat "$F/cube.off"; echo "# named"; } >"$F/named.off"
+sed 's/solid cube/solid box/' "$F/cube_ascii.stl" >"$F/box.stl"
+api POST "/v1/meshes?name=Cube%20%C3%A9t%C3%A9.off" -H "Content-Type: model/x-off" \
+    --data-binary "@$F/named.off"
+check "?name= is kept ($(jqb .name))" test "$(jqb .name)" = "Cube été.off"
+api POST /v1/meshes -H "Content-Type: model/stl" \
+    -H 'Content-Disposition: attachment; filename="C:\\models\\box.stl"' --data-binary "@$F/box.stl"
+check "Content-Disposition filename, directories dropped ($(jqb .name))" test "$(jqb .name)" = box.stl
+BOX=$(jqb .id)
+api GET "/v1/meshes/$BOX"
+check "the name in the mesh" test "$(jqb .name)" = box.stl
+api GET "/v1/meshes?limit=1000"
+check "the name in the list" jq -e --arg id "$BOX" '.items[] | select(.id == $id) | .name == "box.stl"' "$BODY"
+api POST "/v1/meshes?name=a/b" -H "Content-Type: model/stl" --data-binary "@$F/cube_ascii.stl"
+expect_error "a name with a slash" 400 invalid_request
+api POST "/v1/meshes?name=$(printf 'x%.0s' $(seq 101))" -H "Content-Type: model/stl" --data-binary "@$F/cube_ascii.stl"
+expect_error "a name of 101 bytes" 400 invalid_request
+
+# glb results: catmull-clark and gregory, parsed here (JSON chunk, counts,
+# the buffer holding what the accessors say).
+glb_check() { # FILE WHAT
+    python3 - "$1" >"$TMP/glb.txt" 2>&1 <<'EOF'
+import json, struct, sys
+d = open(sys.argv[1], "rb").read()
+magic, ver, total = struct.unpack_from("<4sII", d, 0)
+assert magic == b"glTF" and ver == 2 and total == len(d), (magic, ver, total, len(d))
+jlen, jtype = struct.unpack_from("<I4s", d, 12)
+assert jtype == b"JSON"
+g = json.loads(d[20:20 + jlen])
+at = 20 + jlen
+blen, btype = struct.unpack_from("<I4s", d, at)
+assert btype == b"BIN\0" and at + 8 + blen <= len(d)
+assert g["buffers"][0]["byteLength"] <= blen
+prim = g["meshes"][0]["primitives"][0]
+pos = g["accessors"][prim["attributes"]["POSITION"]]
+idx = g["accessors"][prim["indices"]]
+for a in (pos, idx):
+    v = g["bufferViews"][a["bufferView"]]
+    assert v.get("byteOffset", 0) + v["byteLength"] <= blen
+print(pos["count"], idx["count"] // 3)
+EOF
+    check "$2: the glb parses ($(tr '\n' ' ' <"$TMP/glb.txt"))" test "$(wc -w <"$TMP/glb.txt")" = 2
+}
+run_job catmull-clark "$OFF_ID" '{"levels":1,"format":"glb"}'
+job_ok "catmull-clark to glb"
+api GET "/v1/jobs/$JOB/result"
+check "catmull-clark glb: model/gltf-binary" test "$CTYPE" = model/gltf-binary
+cp "$BODY" "$TMP/cc.glb"
+glb_check "$TMP/cc.glb" "catmull-clark"
+check "catmull-clark glb: 26 vertices, 48 triangles (24 quads) (got $(cat "$TMP/glb.txt"))" test "$(cat "$TMP/glb.txt")" = "26 48"
+# The glb goes back in as an upload (assimp reads what libdraco wrote).
+upload "$TMP/cc.glb" model/gltf-binary
+check "the catmull-clark glb uploads: 48 triangles, closed" jq -e '.triangles == 48 and .boundary_edges == 0' "$BODY"
+run_job catmull-clark "$BOX" '{"levels":1,"format":"glb"}'
+api GET "/v1/jobs/$JOB/result"
+DISP=$(header Content-Disposition)
+check "the result is named after the mesh ($DISP)" grep -qE "filename=\"$JOB-mesh.glb\"; filename\*=UTF-8''box-$JOB-mesh.glb$" <<<"$DISP"
+run_job gregory "$OFF_ID" '{"divisions":4,"format":"glb"}'
+job_ok "gregory to glb"
+api GET "/v1/jobs/$JOB/result"
+check "gregory glb: model/gltf-binary" test "$CTYPE" = model/gltf-binary
+cp "$BODY" "$TMP/g.glb"
+glb_check "$TMP/g.glb" "gregory"
+
+finish
