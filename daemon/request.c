@@ -452,35 +452,12 @@ int vx_req_disposition_name(const char *cd, char *out, size_t n)
 
 /* ---- UTF-8 ------------------------------------------------------------ */
 
-/* Length of the valid UTF-8 sequence at s (n bytes left), or 0. */
-static size_t utf8_char(const unsigned char *s, size_t n)
-{
-    unsigned c = s[0];
-    if (c < 0x80) return 1;
-    size_t len;
-    unsigned cp, min;
-    if (c >= 0xc2 && c <= 0xdf)
-        len = 2, cp = c & 0x1f, min = 0x80;
-    else if (c >= 0xe0 && c <= 0xef)
-        len = 3, cp = c & 0x0f, min = 0x800;
-    else if (c >= 0xf0 && c <= 0xf4)
-        len = 4, cp = c & 0x07, min = 0x10000;
-    else
-        return 0;
-    if (n < len) return 0;
-    for (size_t i = 1; i < len; i++) {
-        if ((s[i] & 0xc0) != 0x80) return 0;
-        cp = cp << 6 | (s[i] & 0x3f);
-    }
-    if (cp < min || cp > 0x10ffff || (cp >= 0xd800 && cp <= 0xdfff)) return 0;
-    return len;
-}
 
 int vx_req_utf8_valid(const char *s, size_t len)
 {
     const unsigned char *p = (const unsigned char *)s;
     for (size_t i = 0; i < len;) {
-        size_t k = utf8_char(p + i, len - i);
+        size_t k = vx_err_utf8_len(p + i, len - i);
         if (!k) return 0;
         i += k;
     }
@@ -492,7 +469,7 @@ char *vx_req_utf8_sanitize(const char *s, char *out, size_t n)
     const unsigned char *p = (const unsigned char *)s;
     size_t len = strlen(s), o = 0;
     for (size_t i = 0; i < len;) {
-        size_t k = utf8_char(p + i, len - i);
+        size_t k = vx_err_utf8_len(p + i, len - i);
         if (k <= 1) {
             if (o + 1 >= n) break;
             out[o++] = k == 1 && p[i] >= 0x20 && p[i] != 0x7f ? (char)p[i] : '?';

@@ -4,9 +4,7 @@
 #include <stdio.h>
 #include <string.h>
 
-/* Length of the well-formed UTF-8 sequence at s (n bytes left), or 0:
- * no overlongs, surrogates or code points above U+10FFFF. */
-static size_t utf8_len(const unsigned char *s, size_t n)
+size_t vx_err_utf8_len(const unsigned char *s, size_t n)
 {
     unsigned c = s[0], cp, min;
     size_t len;
@@ -32,7 +30,7 @@ void vx_err_utf8_clean(char *s)
     unsigned char *p = (unsigned char *)s;
     size_t n = strlen(s);
     for (size_t i = 0; i < n;) {
-        size_t k = utf8_len(p + i, n - i);
+        size_t k = vx_err_utf8_len(p + i, n - i);
         if (!k) {
             p[i++] = '?';
             continue;

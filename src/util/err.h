@@ -10,6 +10,7 @@
 #define VX_ERR_H
 
 #include <stdarg.h>
+#include <stddef.h>
 
 typedef enum vx_err_kind {
     VX_EOK = 0,
@@ -64,6 +65,9 @@ int vx_err_set(vx_err *err, vx_err_kind kind, const char *code, const char *fmt,
 int vx_err_set_flagged(vx_err *err, vx_err_kind kind, unsigned flags, const char *code,
                        const char *fmt, ...) __attribute__((format(printf, 5, 6)));
 int vx_err_setv(vx_err *err, vx_err_kind kind, const char *code, const char *fmt, va_list ap);
+/* Length of the well-formed UTF-8 sequence at s (n >= 1 bytes left), or 0:
+ * no overlongs, surrogates or code points above U+10FFFF. Any thread. */
+size_t vx_err_utf8_len(const unsigned char *s, size_t n);
 /* Replaces, in place, every byte of s that is not part of well-formed
  * UTF-8, and every control character, with '?'. Every message set through
  * vx_err_set* has been through it. */
