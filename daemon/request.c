@@ -203,7 +203,18 @@ void vx_req_query_init(vx_req_query *q)
     q->limit = 100;
 }
 
-enum qparam { Q_NONE, Q_LIMIT, Q_AFTER, Q_STATE, Q_WAIT, Q_PROGRESS, Q_ORDER, Q_KIND, Q_MESH, Q_NAME };
+enum qparam {
+    Q_NONE,
+    Q_LIMIT,
+    Q_AFTER,
+    Q_STATE,
+    Q_WAIT,
+    Q_PROGRESS,
+    Q_ORDER,
+    Q_KIND,
+    Q_MESH,
+    Q_NAME
+};
 
 /* Which parameters a route and method declare (api/openapi.yaml). */
 static enum qparam declared(vx_route rt, const char *method, const char *key, size_t klen)
@@ -451,7 +462,6 @@ int vx_req_disposition_name(const char *cd, char *out, size_t n)
 }
 
 /* ---- UTF-8 ------------------------------------------------------------ */
-
 
 int vx_req_utf8_valid(const char *s, size_t len)
 {

@@ -49,14 +49,14 @@ typedef struct vx_req_target {
 typedef struct vx_req_query {
     int has_limit, has_after, has_state, has_wait, has_progress, has_order, has_kind, has_mesh;
     int has_name;
-    int limit;                 /* 1..1000; 100 when absent */
-    char after[VX_REQ_ID_MAX]; /* a mesh or job id in form */
-    char state[16];            /* a job state */
-    uint64_t wait_us;          /* not yet capped to the request timeout */
-    uint32_t progress_ppm;     /* ?progress: wake a ?wait at this progress, in 1e-6 (0..1e6) */
-    int desc;                  /* order=desc: newest first */
-    char kind[32];             /* a job kind's name in form (the route checks it is known) */
-    char mesh[VX_REQ_ID_MAX];  /* a mesh id */
+    int limit;                      /* 1..1000; 100 when absent */
+    char after[VX_REQ_ID_MAX];      /* a mesh or job id in form */
+    char state[16];                 /* a job state */
+    uint64_t wait_us;               /* not yet capped to the request timeout */
+    uint32_t progress_ppm;          /* ?progress: wake a ?wait at this progress, in 1e-6 (0..1e6) */
+    int desc;                       /* order=desc: newest first */
+    char kind[32];                  /* a job kind's name in form (the route checks it is known) */
+    char mesh[VX_REQ_ID_MAX];       /* a mesh id */
     char name[VX_REQ_NAME_MAX + 1]; /* POST /v1/meshes: the mesh's name */
 } vx_req_query;
 

@@ -59,8 +59,7 @@ static int compressible(const char *ctype)
 
 /* The Content-Disposition of a result: named after the job's mesh too when
  * its upload gave it a name. */
-static void result_disposition(vx_http *h, const char *jid, const char *fname, char *disp,
-                               size_t n)
+static void result_disposition(vx_http *h, const char *jid, const char *fname, char *disp, size_t n)
 {
     cJSON *job = vx_jobs_get(h->d.jobs, jid, NULL, NULL), *meta = NULL;
     const cJSON *mj = cJSON_GetObjectItemCaseSensitive(job, "mesh");

@@ -42,7 +42,7 @@ typedef struct wctx {
     size_t ncone, ntot;
     int nx, ny, nz, nbands;
     double o[3], h;
-    double ix[3]; /* grid.index_offset: centre i of axis a is o + (ix + i + 1/2) h */
+    double ix[3];    /* grid.index_offset: centre i of axis a is o + (ix + i + 1/2) h */
     size_t *bin_off; /* nbands + 1 */
     uint32_t *bin;   /* triangle ids per band */
     uint32_t *cnt;   /* crossings per column (pass 1), then fill cursor */
@@ -206,10 +206,10 @@ static int bin_tris(wctx *c, vx_err *err)
             double v[9];
             tri_of(c, t, v);
             int lo, hi, ilo, ihi;
-            col_range(MIN3(v[1], v[4], v[7]), MAX3(v[1], v[4], v[7]), c->o[1], c->ix[1], c->h, c->ny, &lo,
-                      &hi);
-            col_range(MIN3(v[0], v[3], v[6]), MAX3(v[0], v[3], v[6]), c->o[0], c->ix[0], c->h, c->nx, &ilo,
-                      &ihi);
+            col_range(MIN3(v[1], v[4], v[7]), MAX3(v[1], v[4], v[7]), c->o[1], c->ix[1], c->h,
+                      c->ny, &lo, &hi);
+            col_range(MIN3(v[0], v[3], v[6]), MAX3(v[0], v[3], v[6]), c->o[0], c->ix[0], c->h,
+                      c->nx, &ilo, &ihi);
             if (lo > hi || ilo > ihi) continue;
             for (int b = lo / BAND; b <= hi / BAND; b++) {
                 if (pass == 0)

@@ -271,9 +271,9 @@ static void test_negotiation(void **state)
 int main(void)
 {
     const struct CMUnitTest tests[] = {
-        cmocka_unit_test(test_routes), cmocka_unit_test(test_web_routes),
-        cmocka_unit_test(test_query), cmocka_unit_test(test_numbers),
-        cmocka_unit_test(test_utf8), cmocka_unit_test(test_job_filters),
+        cmocka_unit_test(test_routes),      cmocka_unit_test(test_web_routes),
+        cmocka_unit_test(test_query),       cmocka_unit_test(test_numbers),
+        cmocka_unit_test(test_utf8),        cmocka_unit_test(test_job_filters),
         cmocka_unit_test(test_negotiation),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
