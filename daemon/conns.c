@@ -67,6 +67,7 @@ struct vx_conn {
     int kill_status; /* the status we wrote, 0 for none */
     int rd_closed;   /* shutdown(SHUT_RD) done */
     double t_killed;
+    char rid[72]; /* BODY: the request's id; else the id of the answer written here */
 };
 
 struct vx_conns {
@@ -99,16 +100,19 @@ vx_conn *vx_conns_of(struct MHD_Connection *c)
  * socket, with s->lock held. Returns the bytes written. */
 static size_t kill_conn(vx_conn *vc, int status, const char *code, const char *message, int rd)
 {
-    char body[256], msg[512];
+    char body[256], msg[600];
     int n = 0;
     if (status) {
         int bn = snprintf(body, sizeof body, "{\"error\":{\"code\":\"%s\",\"message\":\"%s\"}}",
                           code, message);
+        /* A body's request has its id; before the head is read there is
+         * no client id to echo: a new one. */
+        if (vc->phase != P_BODY || !vc->rid[0]) vx_req_new_id(vc->rid);
         n = snprintf(
             msg, sizeof msg,
             "HTTP/1.1 %d %s\r\nContent-Type: application/json\r\nCache-Control: no-store\r\n"
-            "Connection: close\r\nContent-Length: %d\r\n\r\n%s",
-            status, status == 408 ? "Request Timeout" : "URI Too Long", bn, body);
+            "X-Request-Id: %s\r\nConnection: close\r\nContent-Length: %d\r\n\r\n%s",
+            status, status == 408 ? "Request Timeout" : "URI Too Long", vc->rid, bn, body);
         if (send(vc->fd, msg, (size_t)n, MSG_NOSIGNAL | MSG_DONTWAIT) < 0) n = 0;
     }
     shutdown(vc->fd, rd ? SHUT_RDWR : SHUT_WR);
@@ -121,12 +125,13 @@ static size_t kill_conn(vx_conn *vc, int status, const char *code, const char *m
 
 /* Logs and counts an answer given by kill_conn before the head was read
  * (no request, so on_completed never sees it). */
-static void note_head_kill(int status, double dt, size_t bytes, const char *why)
+static void note_head_kill(const vx_conn *vc, int status, double dt, size_t bytes, const char *why)
 {
     vx_metrics_request(vx_req_route_name(VX_R_UNKNOWN), "other", status, dt, 0, bytes);
     VX_INFO("http.request",
-            "method=- route=unmatched status=%d ms=%.2f bytes_in=0 bytes_out=%zu reason=%s", status,
-            dt * 1e3, bytes, why);
+            "request_id=%s method=- route=unmatched status=%d ms=%.2f bytes_in=0 bytes_out=%zu "
+            "reason=%s",
+            vc->rid, status, dt * 1e3, bytes, why);
 }
 
 void vx_conns_notify(void *cls, struct MHD_Connection *c, void **socket_context,
@@ -176,7 +181,7 @@ void *vx_conns_on_uri(void *cls, const char *uri, struct MHD_Connection *c)
                                       "the request target is longer than max-uri-bytes", 0);
     double dt = vx_mono() - vc->t_phase;
     pthread_mutex_unlock(&s->lock);
-    if (n) note_head_kill(414, dt, n, "uri_too_long");
+    if (n) note_head_kill(vc, 414, dt, n, "uri_too_long");
     return NULL;
 }
 
@@ -229,7 +234,7 @@ static void sweep(vx_conns *s, vx_conn **cand)
             snprintf(m, sizeof m, "the request head did not arrive within %g s",
                      cfg->header_timeout_s);
             size_t n = kill_conn(vc, 408, "request_timeout", m, 0);
-            note_head_kill(408, now - vc->t_phase, n, "header_timeout");
+            note_head_kill(vc, 408, now - vc->t_phase, n, "header_timeout");
             continue;
         }
         if (vc->phase == P_BODY && cfg->min_body_rate && now - vc->t_phase >= BODY_GRACE_S) {
@@ -265,7 +270,7 @@ static void sweep(vx_conns *s, vx_conn **cand)
         if (vc->phase == P_HEAD) {
             size_t n = kill_conn(vc, 408, "request_timeout",
                                  "the server is busy and the request head was not complete", 1);
-            note_head_kill(408, now - vc->t_phase, n, "evicted");
+            note_head_kill(vc, 408, now - vc->t_phase, n, "evicted");
         } else {
             kill_conn(vc, 0, NULL, NULL, 1);
         }
@@ -336,10 +341,11 @@ int vx_conns_head_in(vx_conns *s, vx_conn *vc)
     return dead;
 }
 
-void vx_conns_body_begins(vx_conns *s, vx_conn *vc)
+void vx_conns_body_begins(vx_conns *s, vx_conn *vc, const char *rid)
 {
     if (!vc) return;
     pthread_mutex_lock(&s->lock);
+    snprintf(vc->rid, sizeof vc->rid, "%s", rid);
     vc->phase = P_BODY;
     vc->t_phase = vx_mono();
     vc->body_bytes = 0;

@@ -36,8 +36,9 @@ vx_conn *vx_conns_of(struct MHD_Connection *c);
 /* The head is in: vc is busy. 1 when the sweeper has already answered it
  * (then nothing may be queued on it). */
 int vx_conns_head_in(vx_conns *s, vx_conn *vc);
-/* A body follows: its arrival rate is watched from now. */
-void vx_conns_body_begins(vx_conns *s, vx_conn *vc);
+/* A body follows: its arrival rate is watched from now; a 408 for it
+ * carries the request's id rid. */
+void vx_conns_body_begins(vx_conns *s, vx_conn *vc, const char *rid);
 /* n bytes of the body came (n 0: the body is complete, vc is busy). 1 when
  * the sweeper has answered vc (drain, never queue). */
 int vx_conns_body(vx_conns *s, vx_conn *vc, size_t n);

@@ -194,19 +194,10 @@ static int take_body(vx_http *h, req *r, const char *data, size_t n)
 static void identify(struct MHD_Connection *c, req *r, const char *url)
 {
     const char *rid = vx_resp_header(c, "X-Request-Id");
-    if (vx_req_id_ok(rid)) {
+    if (vx_req_id_ok(rid))
         snprintf(r->rid, sizeof r->rid, "%s", rid);
-    } else {
-        unsigned char rnd[8] = {0};
-        if (getrandom(rnd, sizeof rnd, GRND_NONBLOCK) != (ssize_t)sizeof rnd) {
-            static unsigned long long seq;
-            unsigned long long v = __atomic_add_fetch(&seq, 1, __ATOMIC_RELAXED) ^
-                                   (unsigned long long)(vx_mono() * 1e9);
-            memcpy(rnd, &v, sizeof rnd);
-        }
-        for (int i = 0; i < 8; i++)
-            snprintf(r->rid + 2 * i, 3, "%02x", rnd[i]);
-    }
+    else
+        vx_req_new_id(r->rid);
     vx_log_quote(r->path, sizeof r->path, url);
     const union MHD_ConnectionInfo *ci =
         MHD_get_connection_info(c, MHD_CONNECTION_INFO_CLIENT_ADDRESS);
@@ -242,7 +233,7 @@ static enum MHD_Result on_head(vx_http *h, struct MHD_Connection *c, const char 
     int rc = first_call(h, c, r, version);
     if (rc >= 0) return rc;
     if (!strcmp(r->method, "POST")) /* a body follows: rate it */
-        vx_conns_body_begins(h->conns, vc);
+        vx_conns_body_begins(h->conns, vc, r->rid);
     /* Answer on the next call even without a body: a response queued in
      * the first call makes libmicrohttpd 0.9.75 close the connection (it
      * cannot know yet that no body follows). */

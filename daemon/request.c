@@ -7,6 +7,8 @@
 #include <stdio.h>
 #include <string.h>
 #include <strings.h>
+#include <sys/random.h>
+#include <time.h>
 
 #include "jobs/jobs.h"
 #include "store/store.h"
@@ -646,6 +648,22 @@ int vx_req_etag_match(const char *list, const char *etag, int weak_ok, int star_
         p = q + 1;
     }
     return 0;
+}
+
+void vx_req_new_id(char out[17])
+{
+    unsigned char rnd[8] = {0};
+    if (getrandom(rnd, sizeof rnd, GRND_NONBLOCK) != (ssize_t)sizeof rnd) {
+        static unsigned long long seq;
+        struct timespec ts;
+        clock_gettime(CLOCK_MONOTONIC, &ts);
+        unsigned long long v =
+            __atomic_add_fetch(&seq, 1, __ATOMIC_RELAXED) ^
+            ((unsigned long long)ts.tv_sec * 1000000000ull + (unsigned long long)ts.tv_nsec);
+        memcpy(rnd, &v, sizeof rnd);
+    }
+    for (int i = 0; i < 8; i++)
+        snprintf(out + 2 * i, 3, "%02x", rnd[i]);
 }
 
 int vx_req_id_ok(const char *s)

@@ -112,6 +112,9 @@ int vx_req_etag_match(const char *list, const char *etag, int weak_ok, int star_
 /* 1 when a client's X-Request-Id can be echoed: 1 to 64 characters of
  * [A-Za-z0-9._:-]. */
 int vx_req_id_ok(const char *s);
+/* A new request id into out: 16 lower-case hex digits (getrandom, else a
+ * counter and the clock). Any thread. */
+void vx_req_new_id(char out[17]);
 /* 1 when s[0..len) is a mesh name: 1 to VX_REQ_NAME_MAX bytes of valid
  * UTF-8 without control characters, '/', '\\' or '"'; else 0. */
 int vx_req_name_ok(const char *s, size_t len);

@@ -247,6 +247,7 @@ expect_raw clte 400 invalid_request
 long=$(printf 'a%.0s' {1..20000})
 raw_http longuri "GET /v1/meshes?x=$long HTTP/1.1\\r\\nHost: x\\r\\n\\r\\n"
 expect_raw longuri 414 uri_too_long
+check "longuri: the 414 has a request id" bash -c "tr -d '\r' <'$TMP/longuri.raw' | sed '/^$/q' | grep -Eq '^X-Request-Id: [0-9a-f]{16}$'"
 big=$(printf 'b%.0s' {1..70000})
 raw_http bighead "GET /livez HTTP/1.1\\r\\nHost: x\\r\\nX-Big: $big\\r\\n\\r\\n"
 expect_raw bighead 431 header_too_large

@@ -27,11 +27,13 @@ $SLOW keepalive-drip "$PORT" 6 >"$TMP/ka.json"
 check "keep-alive: first answer 200" jq -e '.first | test("200")' "$TMP/ka.json"
 check "keep-alive: dripped second head gets 408 within 3.5 s ($(jq -c . "$TMP/ka.json" | head -c 200))" \
     jq -e '(.response | test("^HTTP/1.1 408")) and .seconds <= 3.5' "$TMP/ka.json"
+check "keep-alive: the 408 has a request id" jq -e '.response | test("\r\nX-Request-Id: [0-9a-f]{16}\r\n")' "$TMP/ka.json"
 
 # --- a body that stops: 408 within the grace + one window (2 + 2 s) ---
 $SLOW stall "$PORT" 'POST /v1/jobs HTTP/1.1\r\nHost: x\r\nContent-Type: application/json\r\nContent-Length: 1000\r\n\r\n{"mesh":"' 8 >"$TMP/stall.json"
 check "stalled body: 408 ($(jq -c . "$TMP/stall.json" | head -c 200))" \
     jq -e '.response | test("^HTTP/1.1 408")' "$TMP/stall.json"
+check "stalled body: the 408 has a request id" jq -e '.response | test("\r\nX-Request-Id: [0-9a-f]{16}\r\n")' "$TMP/stall.json"
 check "stalled body: JSON request_timeout" \
     jq -e '.response | split("\r\n\r\n")[1] | fromjson | .error.code == "request_timeout"' "$TMP/stall.json"
 check "stalled body: within 5.5 s" jq -e '.seconds <= 5.5' "$TMP/stall.json"
