@@ -63,6 +63,8 @@ int ctl_cmd_jobs(ctl *c, const char *state, int limit);
 int ctl_cmd_meshes(ctl *c, int limit);
 int ctl_cmd_get(ctl *c, const char *jid, const char *name, const char *out);
 int ctl_cmd_cancel(ctl *c, const char *jid);
+/* Deletes a job: cancels it when unfinished, else removes it and its results. */
+int ctl_cmd_delete(ctl *c, const char *jid);
 int ctl_cmd_upload(ctl *c, const char *file);
 
 #endif

@@ -298,20 +298,55 @@ int ctl_cmd_get(ctl *c, const char *jid, const char *name, const char *out)
     return list(c, path, job_show);
 }
 
-int ctl_cmd_cancel(ctl *c, const char *jid)
+/* DELETE /v1/jobs/{jid}: cancels a queued or running job, and deletes a
+ * finished one with its results. cancel first checks that the job has not
+ * finished, so that it never deletes results (a job that ends between the
+ * check and the DELETE is deleted: said so). */
+static int delete_job(ctl *c, const char *jid, int cancel_only)
 {
     char path[160];
     snprintf(path, sizeof path, "/v1/jobs/%s", jid);
     ctl_buf b = {0};
-    long st = ctl_http(c, "DELETE", path, NULL, NULL, NULL, &b, NULL, NULL, 0);
+    long st;
+    if (cancel_only) {
+        st = ctl_http(c, "GET", path, NULL, NULL, NULL, &b, NULL, NULL, 0);
+        cJSON *job = st == 200 ? cJSON_Parse(b.p) : NULL;
+        int fin = job && terminal(str(job, "state"));
+        cJSON_Delete(job);
+        if (st != 200 || fin) {
+            int rc = st != 200 ? ctl_http_fail("cancel", st, &b) : 1;
+            if (fin)
+                fprintf(stderr,
+                        "voxelctl: cancel: job_finished: job %s has already finished "
+                        "(voxelctl delete removes it and its results)\n",
+                        jid);
+            free(b.p);
+            return rc;
+        }
+        free(b.p);
+        b = (ctl_buf){0};
+    }
+    st = ctl_http(c, "DELETE", path, NULL, NULL, NULL, &b, NULL, NULL, 0);
     cJSON *doc = st == 200 || st == 202 ? cJSON_Parse(b.p) : NULL;
-    int rc = doc ? 0 : ctl_http_fail("cancel", st, &b);
+    int rc = doc || st == 204 ? 0 : ctl_http_fail(cancel_only ? "cancel" : "delete", st, &b);
     if (doc && c->json) print_json(doc);
     if (doc && !c->json)
         printf("%s %s\n", jid, st == 202 ? "cancel requested (running)" : str(doc, "state"));
+    if (st == 204 && c->json) printf("{\"id\":\"%s\",\"deleted\":true}\n", jid);
+    if (st == 204 && !c->json) printf("%s deleted\n", jid);
     cJSON_Delete(doc);
     free(b.p);
     return rc;
+}
+
+int ctl_cmd_cancel(ctl *c, const char *jid)
+{
+    return delete_job(c, jid, 1);
+}
+
+int ctl_cmd_delete(ctl *c, const char *jid)
+{
+    return delete_job(c, jid, 0);
 }
 
 int ctl_cmd_upload(ctl *c, const char *file)

@@ -27,7 +27,8 @@ static void usage(FILE *out)
         "  upload FILE               store a mesh, print its id\n"
         "  jobs [--state S] [--limit N]    meshes [--limit N]\n"
         "  get JOB [-o FILE] [--name OUTPUT]  show a job, or download an output\n"
-        "  cancel JOB\n"
+        "  cancel JOB                cancel a queued or running job (a finished one: error)\n"
+        "  delete JOB                delete a finished job and its results (or cancel it)\n"
         "Options:\n"
         "  --server URL   the voxeld to talk to (default $VOXELD_URL or http://127.0.0.1:8080)\n"
         "  --token T      bearer token (default $VOXELD_TOKEN)\n"
@@ -213,6 +214,7 @@ static int run(ctl *c, args *a, int n, char **pos)
     if (!strcmp(cmd, "meshes") && n == 1) return ctl_cmd_meshes(c, a->limit);
     if (!strcmp(cmd, "get") && n == 2) return ctl_cmd_get(c, pos[1], a->name, a->out);
     if (!strcmp(cmd, "cancel") && n == 2) return ctl_cmd_cancel(c, pos[1]);
+    if (!strcmp(cmd, "delete") && n == 2) return ctl_cmd_delete(c, pos[1]);
     fprintf(stderr, "voxelctl: bad command line (see voxelctl --help)\n");
     return 2;
 }

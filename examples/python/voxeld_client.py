@@ -95,7 +95,20 @@ class Client:
         return self._json("GET", "/v1/meshes?limit=%d" % limit)["items"]
 
     def cancel(self, jid):
-        return self._json("DELETE", "/v1/jobs/" + jid)
+        """Cancels a queued or running job; a finished one is an error
+        (job_finished: cancel never deletes results, delete does)."""
+        job = self.job(jid)
+        if job["state"] in ("succeeded", "failed", "canceled"):
+            raise VoxeldError(409, "job_finished", "job %s has already finished" % jid)
+        with self._open("DELETE", "/v1/jobs/" + jid) as r:
+            raw = r.read()
+            return json.loads(raw) if raw else None  # 204: it finished meanwhile, deleted
+
+    def delete(self, jid):
+        """Deletes a finished job and its results (cancels an unfinished one)."""
+        with self._open("DELETE", "/v1/jobs/" + jid) as r:
+            raw = r.read()
+            return json.loads(raw) if raw else None
 
     def events(self, jid):
         """Yields the Job at each event of GET /v1/jobs/{jid}/events, until it ends."""

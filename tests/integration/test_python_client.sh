@@ -46,6 +46,13 @@ try:
     raise SystemExit("canceled a finished job")
 except VoxeldError as e:
     assert e.status == 409 and e.code == "job_finished", e
+assert c.job(job["id"])["state"] == "succeeded"  # cancel deleted nothing
+assert c.delete(job["id"]) is None  # 204
+try:
+    c.job(job["id"])
+    raise SystemExit("a deleted job is still there")
+except VoxeldError as e:
+    assert e.status == 404 and e.code == "job_not_found", e
 print("module ok", len(events), "events")
 PY
 check "module: events, wait, download, lists and errors ($(tail -n 1 module.out))" grep -q '^module ok' module.out

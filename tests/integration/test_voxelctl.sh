@@ -56,6 +56,12 @@ check "bad param: names it" grep -q 'params.resolution.*invalid_params' ctl.err
 check "bad param: no file written" test ! -e x.binvox
 "$CTL" cancel "$JID" 2>ctl.err
 check "cancel a finished job: exit 1, job_finished" sh -c "test $? -eq 1 && grep -q job_finished ctl.err"
+"$CTL" get "$JID" >ctl.out 2>ctl.err
+check "cancel deleted nothing" test $? -eq 0
+"$CTL" delete "$JID" >ctl.out 2>ctl.err
+check "delete a finished job: exit 0, deleted" sh -c "test $? -eq 0 && grep -q deleted ctl.out"
+"$CTL" get "$JID" 2>ctl.err
+check "a deleted job: exit 1, job_not_found" sh -c "test $? -eq 1 && grep -q job_not_found ctl.err"
 "$CTL" get 0123456789abcdef0123456789abcdef 2>ctl.err
 check "get an unknown job: exit 1, job_not_found" sh -c "test $? -eq 1 && grep -q job_not_found ctl.err"
 "$CTL" voxelize /nonexistent.obj 2>ctl.err
