@@ -427,6 +427,15 @@ static int voxelize_encode(vx_job_run *r, const void *params, void *state, vx_er
             .threshold = (int)p.threshold,
             .samples = samples_names[p.samples],
         };
+        /* A fog grid's float leaves are known only now: within the limit? */
+        uint64_t lim = vx_run_limits(r)->max_job_memory;
+        uint64_t need = lim ? vx_voxel_vdb_grid_bytes(&s->grid, (vx_vdb_class)p.vdb_grid) : 0;
+        if (lim && need + vx_bitgrid_bytes(s->grid.grid.dims, s->grid.counts ? 2 : 1) > lim)
+            return vx_err_set(err, VX_ETOOBIG, "job_memory_limit",
+                              "the OpenVDB grid of these voxels needs about %llu bytes, over the "
+                              "job memory limit of %llu (vdb_grid \"bool\" or another format "
+                              "needs less)",
+                              (unsigned long long)need, (unsigned long long)lim);
         rc = vx_voxel_write_vdb(&s->grid, (vx_vdb_class)p.vdb_grid, &m, path, &io, err);
         break;
     }

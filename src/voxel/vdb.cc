@@ -272,16 +272,49 @@ struct Interrupter {
 
 } // namespace
 
+// A leaf holds 512 voxels: a value mask (64 B) plus a bool mask (64 B) or
+// 512 floats (2 KiB), ~100 B of node overhead; the file buffer is about the
+// same again (compression works per leaf). A level set holds the bool tree
+// and its float band (dilated: up to 3 leaves a leaf).
+static uint64_t leaf_bytes(vx_vdb_class cls, int coverage)
+{
+    return cls == VX_VDB_BOOL ? 240 : cls == VX_VDB_FOG || coverage ? 2300 : 240 + 3 * 2300;
+}
+
 extern "C" uint64_t vx_voxel_vdb_bytes(const int dims[3], vx_vdb_class cls, int coverage)
 {
-    // A leaf holds 512 voxels: a value mask (64 B) plus a bool mask (64 B)
-    // or 512 floats (2 KiB), ~100 B of node overhead; the file buffer is
-    // about the same again (compression works per leaf). A level set holds
-    // the bool tree and its float band (dilated: up to 3 leaves a leaf).
     uint64_t n = (uint64_t)dims[0] * (uint64_t)dims[1] * (uint64_t)dims[2];
     uint64_t leaves = n / 512 + 1;
-    uint64_t per = cls == VX_VDB_BOOL ? 240 : cls == VX_VDB_FOG || coverage ? 2300 : 240 + 3 * 2300;
-    return leaves * per * 2;
+    // A 0/1 fog grid's float leaves are only the partial ones, known from
+    // the grid (vx_voxel_vdb_grid_bytes checks them before the writer runs):
+    // here the topology, as for bool.
+    if (cls == VX_VDB_FOG && !coverage) cls = VX_VDB_BOOL;
+    return leaves * leaf_bytes(cls, coverage) * 2;
+}
+
+extern "C" uint64_t vx_voxel_vdb_grid_bytes(const vx_bitgrid *g, vx_vdb_class cls)
+{
+    if (g->counts || cls != VX_VDB_FOG)
+        return vx_voxel_vdb_bytes(g->grid.dims, cls, g->counts != 0);
+    const int lx = (g->grid.dims[0] + 7) / 8, ly = (g->grid.dims[1] + 7) / 8,
+              lz = (g->grid.dims[2] + 7) / 8;
+    std::atomic<uint64_t> partial{0}, full{0};
+    tbb::parallel_for(tbb::blocked_range<int>(0, lz), [&](const tbb::blocked_range<int> &r) {
+        uint64_t p = 0, f = 0, w[8];
+        for (int zl = r.begin(); zl < r.end(); zl++)
+            for (int yl = 0; yl < ly; yl++)
+                for (int xl = 0; xl < lx; xl++) {
+                    int kind = gather_leaf(g, 8 * xl, 8 * yl, 8 * zl, w);
+                    p += kind == LEAF_PART;
+                    f += kind == LEAF_FULL;
+                }
+        partial += p;
+        full += f;
+    });
+    // Partial leaves as floats, full ones as tiles, and the internal nodes
+    // (one of 16^3 children per 128^3 voxels, ~64 KiB each).
+    uint64_t nodes = (uint64_t)lx * ly * lz / 4096 + 1;
+    return (partial * leaf_bytes(VX_VDB_FOG, 0) + full * 64 + nodes * 65536) * 2;
 }
 
 extern "C" int vx_voxel_write_vdb(const vx_bitgrid *g, vx_vdb_class cls, const vx_vdb_meta *meta,

@@ -121,10 +121,10 @@ async function runJob(page, kind, fields, shown) {
   await page.route(/\/v1\/jobs\/[0-9a-f]+\/events$/, async route => {
     const url = route.request().url(), jid = url.match(/jobs\/([0-9a-f]+)\/events/)[1];
     const real = await route.fetch();
+    streamed++;
     if (real.status() !== 404) return route.fulfill({ response: real });
     const done = await (await route.fetch({ url: `${base}/v1/jobs/${jid}?wait=50` })).json();
     const ev = j => `event: job\ndata: ${JSON.stringify(j)}\n\n`;
-    streamed++;
     return route.fulfill({ status: 200, headers: { 'Content-Type': 'text/event-stream' },
       body: `: voxeld\n\n${ev({ ...done, state: 'running', progress: 0.5, finished: null, outputs: {} })}${ev(done)}` });
   });

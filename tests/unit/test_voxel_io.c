@@ -309,7 +309,7 @@ static void test_params(void **st)
     assert_string_equal(
         s,
         "{\"resolution\":256,\"voxel_size\":null,\"grid\":null,\"padding\":0,\"method\":\"auto\","
-        "\"inside\":\"nonzero\",\"fill\":\"solid\",\"supersample\":1,\"samples\":\"cube\","
+        "\"inside\":null,\"fill\":\"solid\",\"supersample\":1,\"samples\":\"cube\","
         "\"threshold\":4,"
         "\"format\":\"vdb\",\"vdb_grid\":\"fog\"}");
     /* normalised params parse to themselves */
