@@ -15,18 +15,20 @@ check "info: the limits from the environment and the flag" \
     jq -e '.limits.event_keepalive_s == 0.5 and .limits.max_event_streams == 3' "$BODY"
 upload "$VX_MESH_DIR/stanford-bunny.obj"
 expect_status "upload" 201
-submit() { # submit RESOLUTION: JOB = the new voxelize job
+submit() { # submit RESOLUTION [MORE PARAMS]: JOB = the new voxelize job
     api POST /v1/jobs -H "Content-Type: application/json" \
-        -d "{\"mesh\":\"$MESH_ID\",\"kind\":\"voxelize\",\"params\":{\"resolution\":$1}}"
+        -d "{\"mesh\":\"$MESH_ID\",\"kind\":\"voxelize\",\"params\":{\"resolution\":$1${2:+,$2}}}"
     JOB=$(jqb .id)
 }
+# B and B2 take seconds even on a fast machine: peel with three-axis voting.
+SLOW='"method":"peel","inside":"robust"'
 
 # --- streams of a running and a queued job ----------------------------
 # B runs (and is canceled later); Q waits behind it and B2, so its streams see
 # queued (and keepalives), then running with rising progress, then succeeded.
-submit 1024
+submit 1024 "$SLOW"
 B=$JOB
-submit 1024 # keeps the GL thread busy after B's GL stage
+submit 1024 "$SLOW" # keeps the GL thread busy after B's GL stage
 B2=$JOB
 submit 512
 Q=$JOB
