@@ -83,6 +83,16 @@ static void select_k(build *b, int lo, int hi, int k, int axis)
 }
 
 /* The node's moments and radius from its triangles idx[lo..hi). */
+/* Triangle v (9 doubles)'s area vector: half the cross product of its edges. */
+static void area_vector(const double *v, double n[3])
+{
+    double e1[3] = {v[3] - v[0], v[4] - v[1], v[5] - v[2]};
+    double e2[3] = {v[6] - v[0], v[7] - v[1], v[8] - v[2]};
+    n[0] = .5 * (e1[1] * e2[2] - e1[2] * e2[1]);
+    n[1] = .5 * (e1[2] * e2[0] - e1[0] * e2[2]);
+    n[2] = .5 * (e1[0] * e2[1] - e1[1] * e2[0]);
+}
+
 static void moments(build *b, vx_wtree_node *nd, int lo, int hi)
 {
     double area = 0, p[3] = {0, 0, 0};
@@ -90,10 +100,8 @@ static void moments(build *b, vx_wtree_node *nd, int lo, int hi)
     memset(nd->m, 0, sizeof nd->m);
     for (int i = lo; i < hi; i++) {
         const double *v = b->src + 9 * (size_t)b->idx[i], *c = b->cen + 3 * b->idx[i];
-        double e1[3] = {v[3] - v[0], v[4] - v[1], v[5] - v[2]};
-        double e2[3] = {v[6] - v[0], v[7] - v[1], v[8] - v[2]};
-        double n[3] = {.5 * (e1[1] * e2[2] - e1[2] * e2[1]), .5 * (e1[2] * e2[0] - e1[0] * e2[2]),
-                       .5 * (e1[0] * e2[1] - e1[1] * e2[0])};
+        double n[3];
+        area_vector(v, n);
         double s = sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
         area += s;
         for (int k = 0; k < 3; k++) {
@@ -106,10 +114,8 @@ static void moments(build *b, vx_wtree_node *nd, int lo, int hi)
     double r2 = 0;
     for (int i = lo; i < hi; i++) {
         const double *v = b->src + 9 * (size_t)b->idx[i], *c = b->cen + 3 * b->idx[i];
-        double e1[3] = {v[3] - v[0], v[4] - v[1], v[5] - v[2]};
-        double e2[3] = {v[6] - v[0], v[7] - v[1], v[8] - v[2]};
-        double n[3] = {.5 * (e1[1] * e2[2] - e1[2] * e2[1]), .5 * (e1[2] * e2[0] - e1[0] * e2[2]),
-                       .5 * (e1[0] * e2[1] - e1[1] * e2[0])};
+        double n[3];
+        area_vector(v, n);
         for (int r = 0; r < 3; r++)
             for (int s = 0; s < 3; s++)
                 nd->m[3 * r + s] += (c[r] - nd->p[r]) * n[s];
