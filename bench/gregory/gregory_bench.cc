@@ -96,34 +96,56 @@ static Far::TopologyRefiner *osd_refiner(const vx_mesh *m, std::vector<int> &nv,
         d, Far::TopologyRefinerFactory<Far::TopologyDescriptor>::Options(Sdc::SCHEME_CATMARK, o));
 }
 
+// What both limit evaluations start from: the adaptive refinement (level
+// 3, Gregory basis end caps), its patch table, the refined and local
+// points, and the ptex face count.
+struct LimitSetup {
+    Far::TopologyRefiner *r = nullptr;
+    Far::PatchTable *pt = nullptr;
+    std::vector<V3> verts;
+    int nptex = 0;
+    explicit LimitSetup(const vx_mesh *m)
+    {
+        std::vector<int> nv, idx;
+        r = osd_refiner(m, nv, idx);
+        const int level = 3;
+        r->RefineAdaptive(Far::TopologyRefiner::AdaptiveOptions(level));
+        Far::PatchTableFactory::Options po(level);
+        po.endCapType = Far::PatchTableFactory::Options::ENDCAP_GREGORY_BASIS;
+        pt = Far::PatchTableFactory::Create(*r, po);
+        int nref = r->GetNumVerticesTotal(), nloc = pt->GetNumLocalPoints();
+        verts.resize((size_t)(nref + nloc));
+        for (size_t i = 0; i < m->nverts; i++)
+            for (int c = 0; c < 3; c++)
+                verts[i].p[c] = (float)m->pos[3 * i + c];
+        Far::PrimvarRefiner pr(*r);
+        V3 *src = verts.data();
+        for (int l = 1; l <= r->GetMaxLevel(); l++) {
+            V3 *dst = src + r->GetLevel(l - 1).GetNumVertices();
+            pr.Interpolate(l, src, dst);
+            src = dst;
+        }
+        if (nloc) pt->ComputeLocalPointValues(verts.data(), verts.data() + nref);
+        nptex = Far::PtexIndices(*r).GetNumFaces();
+    }
+    ~LimitSetup()
+    {
+        delete pt;
+        delete r;
+    }
+};
+
 // Limit positions (and normals when `normals`) at (n+1)^2 points of every
 // ptex face; returns points evaluated and the time of the evaluation loop
 // (the patch table and refined points are built before, outside it).
 static size_t osd_limit(const vx_mesh *m, int n, bool normals, double *ms, double *setup_ms)
 {
-    std::vector<int> nv, idx;
     auto t0 = clk::now();
-    Far::TopologyRefiner *r = osd_refiner(m, nv, idx);
-    const int level = 3;
-    r->RefineAdaptive(Far::TopologyRefiner::AdaptiveOptions(level));
-    Far::PatchTableFactory::Options po(level);
-    po.endCapType = Far::PatchTableFactory::Options::ENDCAP_GREGORY_BASIS;
-    Far::PatchTable *pt = Far::PatchTableFactory::Create(*r, po);
-    int nref = r->GetNumVerticesTotal(), nloc = pt->GetNumLocalPoints();
-    std::vector<V3> verts(nref + nloc);
-    for (size_t i = 0; i < m->nverts; i++)
-        for (int c = 0; c < 3; c++)
-            verts[i].p[c] = (float)m->pos[3 * i + c];
-    Far::PrimvarRefiner pr(*r);
-    V3 *src = verts.data();
-    for (int l = 1; l <= r->GetMaxLevel(); l++) {
-        V3 *dst = src + r->GetLevel(l - 1).GetNumVertices();
-        pr.Interpolate(l, src, dst);
-        src = dst;
-    }
-    if (nloc) pt->ComputeLocalPointValues(verts.data(), verts.data() + nref);
+    LimitSetup L(m);
+    Far::PatchTable *pt = L.pt;
+    const std::vector<V3> &verts = L.verts;
     Far::PatchMap pm(*pt);
-    int nptex = Far::PtexIndices(*r).GetNumFaces();
+    int nptex = L.nptex;
     *setup_ms = ms_since(t0);
     double best = 1e300, sink = 0;
     size_t count = 0;
@@ -167,8 +189,6 @@ static size_t osd_limit(const vx_mesh *m, int n, bool normals, double *ms, doubl
     }
     if (sink == 12345.678) printf(" ");
     *ms = best;
-    delete pt;
-    delete r;
     return count;
 }
 
@@ -180,28 +200,11 @@ static size_t osd_limit(const vx_mesh *m, int n, bool normals, double *ms, doubl
 // derivatives on the same threads. Returns points; *ms the best run.
 static size_t osd_omp(const vx_mesh *m, int n, int threads, double *ms)
 {
-    std::vector<int> nv, idx;
-    Far::TopologyRefiner *r = osd_refiner(m, nv, idx);
-    const int level = 3;
-    r->RefineAdaptive(Far::TopologyRefiner::AdaptiveOptions(level));
-    Far::PatchTableFactory::Options po(level);
-    po.endCapType = Far::PatchTableFactory::Options::ENDCAP_GREGORY_BASIS;
-    Far::PatchTable *pt = Far::PatchTableFactory::Create(*r, po);
-    int nref = r->GetNumVerticesTotal(), nloc = pt->GetNumLocalPoints();
-    std::vector<V3> verts(nref + nloc);
-    for (size_t i = 0; i < m->nverts; i++)
-        for (int c = 0; c < 3; c++)
-            verts[i].p[c] = (float)m->pos[3 * i + c];
-    Far::PrimvarRefiner pr(*r);
-    V3 *src = verts.data();
-    for (int l = 1; l <= r->GetMaxLevel(); l++) {
-        V3 *dst = src + r->GetLevel(l - 1).GetNumVertices();
-        pr.Interpolate(l, src, dst);
-        src = dst;
-    }
-    if (nloc) pt->ComputeLocalPointValues(verts.data(), verts.data() + nref);
+    LimitSetup L(m);
+    Far::PatchTable *pt = L.pt;
+    const std::vector<V3> &verts = L.verts;
     Far::PatchMap pm(*pt);
-    int nptex = Far::PtexIndices(*r).GetNumFaces();
+    int nptex = L.nptex;
     std::vector<Osd::PatchCoord> pc;
     pc.reserve((size_t)nptex * (n + 1) * (n + 1));
     for (int f = 0; f < nptex; f++)
@@ -235,8 +238,6 @@ static size_t osd_omp(const vx_mesh *m, int n, int threads, double *ms)
     if (N[0] == 12345.678f) printf(" ");
     *ms = best;
     delete cpt;
-    delete pt;
-    delete r;
     return np;
 }
 
