@@ -1,5 +1,6 @@
-/* STL, PLY and glTF 2.0 readers: a C++ shim over assimp behind the C API
- * of mesh.h (vx_assimp_read_*; OFF goes to mesh/off.c from here).
+/* STL and glTF 2.0 readers: a C++ shim over assimp behind the C API of
+ * mesh.h (vx_assimp_read_*; OFF and PLY go to mesh/off.c and mesh/ply.c
+ * from here: assimp's importers for them crashed on fuzzed files).
  *
  * libdraco 1.5.5 (Debian 12) has STL, PLY and glTF decoders, but its STL
  * decoder reads binary files only (and refuses the many binary files whose
@@ -55,21 +56,15 @@ struct FormatInfo {
 const FormatInfo *info(vx_mesh_format fmt)
 {
     static const FormatInfo stl{"STL", "stl", "stl_corrupt", "stl_no_faces", true};
-    static const FormatInfo ply{"PLY", "ply", "ply_corrupt", "ply_no_faces", false};
     static const FormatInfo gltf{"glTF", "gltf", "gltf_corrupt", "gltf_no_faces", true};
     static const FormatInfo glb{"glTF", "glb", "gltf_corrupt", "gltf_no_faces", true};
-    static const FormatInfo off{"OFF", "off", "off_corrupt", "off_no_faces", false};
     switch (fmt) {
     case VX_MESH_STL:
         return &stl;
-    case VX_MESH_PLY:
-        return &ply;
     case VX_MESH_GLTF:
         return &gltf;
     case VX_MESH_GLB:
         return &glb;
-    case VX_MESH_OFF:
-        return &off;
     default:
         return nullptr;
     }
@@ -279,8 +274,9 @@ vx_mesh *import(const unsigned char *data, size_t n, const FormatInfo *fi, vx_me
 extern "C" vx_mesh *vx_assimp_read_mem(const unsigned char *data, size_t n, vx_mesh_format fmt,
                                        const vx_mesh_limits *lim, vx_err *err)
 {
-    /* assimp's OFF importer crashed on fuzzed files: mesh/off.c reads OFF. */
+    /* assimp's OFF and PLY importers crashed on fuzzed files. */
     if (fmt == VX_MESH_OFF) return vx_off_read_mem(data, n, lim, err);
+    if (fmt == VX_MESH_PLY) return vx_ply_read_mem(data, n, lim, err);
     const FormatInfo *fi = info(fmt);
     if (!fi) {
         vx_err_set(err, VX_EINTERNAL, "mesh_format", "format %d is not read by assimp", int(fmt));

@@ -14,6 +14,7 @@
 #include <cjson/cJSON.h>
 
 #include "mesh/mesh.h"
+#include "mesh/ply.h"
 
 static int corrupt(vx_err *err, vx_mesh_format fmt, const char *fmtstr, ...)
     __attribute__((format(printf, 3, 4)));
@@ -46,14 +47,20 @@ static const char *fmt_code(vx_mesh_format fmt)
     }
 }
 
-static int corrupt(vx_err *err, vx_mesh_format fmt, const char *fmtstr, ...)
+static int vcorrupt(vx_err *err, vx_mesh_format fmt, const char *fmtstr, va_list ap)
 {
     char msg[200];
+    vsnprintf(msg, sizeof msg, fmtstr, ap);
+    return vx_err_set(err, VX_EINVAL, fmt_code(fmt), "not a valid %s file: %s", fmt_name(fmt), msg);
+}
+
+static int corrupt(vx_err *err, vx_mesh_format fmt, const char *fmtstr, ...)
+{
     va_list ap;
     va_start(ap, fmtstr);
-    vsnprintf(msg, sizeof msg, fmtstr, ap);
+    int rc = vcorrupt(err, fmt, fmtstr, ap);
     va_end(ap);
-    return vx_err_set(err, VX_EINVAL, fmt_code(fmt), "not a valid %s file: %s", fmt_name(fmt), msg);
+    return rc;
 }
 
 static int over_limits(const vx_mesh_declared *d, const vx_mesh_limits *lim, vx_mesh_format fmt,
@@ -132,39 +139,54 @@ static int check_stl(const unsigned char *p, size_t n, uint64_t size, vx_mesh_de
 
 /* ---- PLY ------------------------------------------------------------- */
 
-#define PLY_MAX_HEADER (64 * 1024)
-#define PLY_MAX_ELEMENTS 64
-
-static int ply_type_size(const char *t, size_t len)
+static int check_ply(const unsigned char *p, size_t n, uint64_t size, vx_mesh_declared *d,
+                     vx_err *err)
 {
-    static const struct {
-        const char *name;
-        int size;
-    } types[] = {{"char", 1},  {"int8", 1},    {"uchar", 1},  {"uint8", 1},
-                 {"short", 2}, {"int16", 2},   {"ushort", 2}, {"uint16", 2},
-                 {"int", 4},   {"int32", 4},   {"uint", 4},   {"uint32", 4},
-                 {"float", 4}, {"float32", 4}, {"double", 8}, {"float64", 8}};
-    for (size_t i = 0; i < sizeof types / sizeof types[0]; i++)
-        if (strlen(types[i].name) == len && !memcmp(types[i].name, t, len)) return types[i].size;
+    vx_ply_header *h = malloc(sizeof *h);
+    if (!h) return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for a PLY header");
+    int rc = vx_ply_header_parse(p, n, size, h, err);
+    if (rc) {
+        free(h);
+        return rc;
+    }
+    const int ascii = h->format == VX_PLY_ASCII;
+    uint64_t left = size - (uint64_t)h->body, need = 0;
+    /* ASCII: the last number may end the file without a separator. */
+    if (ascii) left += 1;
+    int isz = 1;
+    for (int i = 0; i < h->nelems; i++) {
+        const vx_ply_elem *e = &h->elems[i];
+        /* An entry's shortest encoding, lists empty: a digit and a blank
+         * per ASCII value or count, the type's size in binary. */
+        uint64_t minb = 0;
+        for (int j = e->first_prop; j < e->first_prop + e->nprops; j++) {
+            const vx_ply_prop *pr = &h->props[j];
+            minb += ascii ? 2
+                          : (uint64_t)vx_ply_type_size(pr->count_type ? (vx_ply_type)pr->count_type
+                                                                      : (vx_ply_type)pr->type);
+            if (pr->count_type && !strcmp(e->name, "face"))
+                isz = ascii ? 2 : vx_ply_type_size((vx_ply_type)pr->type);
+        }
+        if (!minb) minb = 1;
+        if (e->count > left / minb || need + e->count * minb > left) {
+            rc = corrupt(err, VX_MESH_PLY,
+                         "element '%s' declares %llu entries, more than the %llu bytes after "
+                         "the header can hold",
+                         e->name, (unsigned long long)e->count, (unsigned long long)left);
+            break;
+        }
+        need += e->count * minb;
+        if (!strcmp(e->name, "vertex")) d->vertices = e->count;
+        if (!strcmp(e->name, "face")) d->faces = e->count;
+    }
+    free(h);
+    if (rc) return rc;
+    d->indices = (left - need) / (uint64_t)isz;
+    d->triangles = d->indices;
     return 0;
 }
 
-/* Splits line [p, end) into at most max words; returns the count. */
-static int words(const char *p, const char *end, const char **w, size_t *wl, int max)
-{
-    int k = 0;
-    while (p < end && k < max) {
-        while (p < end && blank((unsigned char)*p))
-            p++;
-        if (p == end) break;
-        w[k] = p;
-        while (p < end && !blank((unsigned char)*p))
-            p++;
-        wl[k] = (size_t)(p - w[k]);
-        k++;
-    }
-    return k;
-}
+/* ---- OFF ------------------------------------------------------------- */
 
 static int parse_u64(const char *s, size_t len, uint64_t *out)
 {
@@ -177,102 +199,6 @@ static int parse_u64(const char *s, size_t len, uint64_t *out)
     *out = v;
     return 0;
 }
-
-typedef struct ply_elem {
-    char name[16];
-    uint64_t count;
-    uint64_t min_bytes; /* an entry's shortest encoding, lists empty */
-    int list_size;      /* the index size of the face list (binary), or 0 */
-} ply_elem;
-
-static int check_ply(const unsigned char *p, size_t n, uint64_t size, vx_mesh_declared *d,
-                     vx_err *err)
-{
-    const vx_mesh_format F = VX_MESH_PLY;
-    const char *s = (const char *)p, *end = s + (n < PLY_MAX_HEADER ? n : PLY_MAX_HEADER);
-    ply_elem el[PLY_MAX_ELEMENTS];
-    int nel = 0, ascii = -1, line = 0;
-    const char *at = s;
-    for (;;) {
-        const char *nl = memchr(at, '\n', (size_t)(end - at));
-        if (!nl) {
-            if (n < size && n < PLY_MAX_HEADER) return 1;
-            return corrupt(err, F, "no end_header in the first %d bytes", PLY_MAX_HEADER);
-        }
-        const char *w[6];
-        size_t wl[6];
-        int k = words(at, nl, w, wl, 6);
-        at = nl + 1;
-        line++;
-        if (line == 1) {
-            if (k != 1 || wl[0] != 3 || memcmp(w[0], "ply", 3))
-                return corrupt(err, F, "the first line is not \"ply\"");
-            continue;
-        }
-        if (!k) continue;
-#define IS(i, lit) (wl[i] == strlen(lit) && !memcmp(w[i], lit, wl[i]))
-        if (IS(0, "comment") || IS(0, "obj_info")) continue;
-        if (IS(0, "end_header")) break;
-        if (IS(0, "format")) {
-            if (k < 3 || !IS(2, "1.0")) return corrupt(err, F, "line %d: bad format line", line);
-            if (IS(1, "ascii"))
-                ascii = 1;
-            else if (IS(1, "binary_little_endian") || IS(1, "binary_big_endian"))
-                ascii = 0;
-            else
-                return corrupt(err, F, "line %d: unknown format", line);
-        } else if (IS(0, "element")) {
-            if (k != 3 || nel == PLY_MAX_ELEMENTS)
-                return corrupt(err, F, "line %d: bad element line", line);
-            ply_elem *e = &el[nel++];
-            memset(e, 0, sizeof *e);
-            snprintf(e->name, sizeof e->name, "%.*s", (int)(wl[1] < 15 ? wl[1] : 15), w[1]);
-            if (parse_u64(w[2], wl[2], &e->count))
-                return corrupt(err, F, "line %d: bad element count", line);
-        } else if (IS(0, "property")) {
-            if (!nel) return corrupt(err, F, "line %d: a property before any element", line);
-            ply_elem *e = &el[nel - 1];
-            if (k >= 2 && IS(1, "list")) {
-                int cs = k == 5 ? ply_type_size(w[2], wl[2]) : 0;
-                int is = k == 5 ? ply_type_size(w[3], wl[3]) : 0;
-                if (!cs || !is) return corrupt(err, F, "line %d: bad list property", line);
-                e->min_bytes += ascii == 1 ? 2 : (uint64_t)cs;
-                if (!strcmp(e->name, "face")) e->list_size = ascii == 1 ? 2 : is;
-            } else {
-                int ts = k == 3 ? ply_type_size(w[1], wl[1]) : 0;
-                if (!ts) return corrupt(err, F, "line %d: bad property", line);
-                e->min_bytes += ascii == 1 ? 2 : (uint64_t)ts;
-            }
-        } else {
-            return corrupt(err, F, "line %d: unknown header keyword", line);
-        }
-#undef IS
-    }
-    if (ascii < 0) return corrupt(err, F, "no format line");
-    uint64_t left = size - (uint64_t)(at - s), need = 0;
-    /* ASCII: the last number may end the file without a separator. */
-    if (ascii) left += 1;
-    for (int i = 0; i < nel; i++) {
-        ply_elem *e = &el[i];
-        uint64_t minb = e->min_bytes ? e->min_bytes : 1;
-        if (e->count > left / minb || need + e->count * minb > left)
-            return corrupt(err, F,
-                           "element '%s' declares %llu entries, more than the %llu bytes after "
-                           "the header can hold",
-                           e->name, (unsigned long long)e->count, (unsigned long long)left);
-        need += e->count * minb;
-        if (!strcmp(e->name, "vertex")) d->vertices = e->count;
-        if (!strcmp(e->name, "face")) d->faces = e->count;
-    }
-    int isz = 1;
-    for (int i = 0; i < nel; i++)
-        if (!strcmp(el[i].name, "face") && el[i].list_size) isz = el[i].list_size;
-    d->indices = (left - need) / (uint64_t)isz;
-    d->triangles = d->indices;
-    return 0;
-}
-
-/* ---- OFF ------------------------------------------------------------- */
 
 /* Skips blanks and # comments. */
 static size_t off_skip(const unsigned char *p, size_t n, size_t i)
@@ -345,9 +271,14 @@ typedef struct gltf_ctx {
     vx_err *err;
 } gltf_ctx;
 
-static int gl_fail(gltf_ctx *g, const char *fmtstr, const char *what, int idx)
+static int gl_fail(gltf_ctx *g, const char *fmtstr, ...) __attribute__((format(printf, 2, 3)));
+static int gl_fail(gltf_ctx *g, const char *fmtstr, ...)
 {
-    return corrupt(g->err, VX_MESH_GLTF, fmtstr, what, idx);
+    va_list ap;
+    va_start(ap, fmtstr);
+    int rc = vcorrupt(g->err, VX_MESH_GLTF, fmtstr, ap);
+    va_end(ap);
+    return rc;
 }
 
 /* A non-negative integer member, or def when absent; -1 when not one. */
@@ -427,9 +358,10 @@ static int gltf_views(gltf_ctx *g)
     return 0;
 }
 
-static int comp_size(int ct)
+static int comp_size(double ct)
 {
-    switch (ct) {
+    if (!(ct >= 0 && ct < 65536)) return 0;
+    switch ((int)ct) {
     case 5120:
     case 5121:
         return 1;
@@ -473,7 +405,7 @@ static int gltf_accessors(gltf_ctx *g)
     int i = 0;
     cJSON_ArrayForEach(a, accs)
     {
-        int cs = comp_size((int)num(a, "componentType", -1));
+        int cs = comp_size(num(a, "componentType", -1));
         int nc = type_comps(cJSON_GetObjectItemCaseSensitive(a, "type"));
         double count = num(a, "count", -1), vi = num(a, "bufferView", -1),
                off = num(a, "byteOffset", 0);
@@ -492,7 +424,7 @@ static int gltf_accessors(gltf_ctx *g)
             double sc = num(sp, "count", -1);
             const cJSON *ix = cJSON_GetObjectItemCaseSensitive(sp, "indices");
             const cJSON *vs = cJSON_GetObjectItemCaseSensitive(sp, "values");
-            int ics = comp_size((int)num(ix, "componentType", -1));
+            int ics = comp_size(num(ix, "componentType", -1));
             if (sc < 1 || sc > count || !ics ||
                 !fits(g, num(ix, "bufferView", -1), num(ix, "byteOffset", 0), ics, sc, ics) ||
                 !fits(g, num(vs, "bufferView", -1), num(vs, "byteOffset", 0), elem, sc, elem))
@@ -515,17 +447,17 @@ static int gltf_mesh(gltf_ctx *g, double mi)
 {
     cJSON *meshes = arr(g->root, "meshes");
     if (mi < 0 || !meshes || mi >= cJSON_GetArraySize(meshes))
-        return gl_fail(g, "%s %d names no mesh", "node mesh", (int)mi);
+        return gl_fail(g, "%s %.0f names no mesh", "node mesh", mi);
     cJSON *prims = arr(cJSON_GetArrayItem(meshes, (int)mi), "primitives"), *p;
     cJSON_ArrayForEach(p, prims)
     {
         const cJSON *at = cJSON_GetObjectItemCaseSensitive(p, "attributes");
         double pc = acc_count(g, num(at, "POSITION", -1));
-        if (pc < 0) return gl_fail(g, "%s %d has a primitive without POSITION", "mesh", (int)mi);
+        if (pc < 0) return gl_fail(g, "%s %.0f has a primitive without POSITION", "mesh", mi);
         double ic = cJSON_GetObjectItemCaseSensitive(p, "indices")
                         ? acc_count(g, num(p, "indices", -1))
                         : pc;
-        if (ic < 0) return gl_fail(g, "%s %d has a primitive with bad indices", "mesh", (int)mi);
+        if (ic < 0) return gl_fail(g, "%s %.0f has a primitive with bad indices", "mesh", mi);
         double mode = num(p, "mode", 4);
         double t = mode == 4 ? floor(ic / 3) : (mode == 5 || mode == 6) && ic >= 3 ? ic - 2 : 0;
         g->tris += (uint64_t)t;
@@ -537,11 +469,12 @@ static int gltf_mesh(gltf_ctx *g, double mi)
 static int gltf_node(gltf_ctx *g, double ni, int depth)
 {
     cJSON *nodes = arr(g->root, "nodes");
-    if (ni < 0 || ni >= g->nnodes) return gl_fail(g, "%s %d does not exist", "node", (int)ni);
+    /* ni may be any number a file holds (found by fuzz_gltf): printed, not cast. */
+    if (!(ni >= 0 && ni < g->nnodes)) return gl_fail(g, "%s %.0f does not exist", "node", ni);
     if (g->seen[(int)ni])
-        return gl_fail(g, "%s %d is reached twice (a cycle, or two parents)", "node", (int)ni);
+        return gl_fail(g, "node %.0f is reached twice (a cycle, or two parents)", ni);
     if (depth > GLTF_MAX_DEPTH)
-        return gl_fail(g, "%s %d is nested more than %d deep", "node", GLTF_MAX_DEPTH);
+        return gl_fail(g, "node %.0f is nested more than %d deep", ni, GLTF_MAX_DEPTH);
     g->seen[(int)ni] = 1;
     cJSON *n = cJSON_GetArrayItem(nodes, (int)ni), *c;
     if (cJSON_GetObjectItemCaseSensitive(n, "mesh") && gltf_mesh(g, num(n, "mesh", -1))) return -1;

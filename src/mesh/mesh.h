@@ -188,7 +188,8 @@ uint64_t vx_declared_decode_bound(vx_mesh_format fmt, uint64_t size, const vx_me
  * "facet" or "endsolid"); else vx_mesh_sniff. */
 vx_mesh_format vx_mesh_sniff_sized(const unsigned char *head, size_t n, uint64_t size);
 
-/* Reads an STL, PLY, glTF, glb or OFF file through assimp: the file is
+/* Reads an STL, PLY, glTF, glb or OFF file (PLY and OFF by vx_ply_read_mem
+ * and vx_off_read_mem, the rest through assimp): the file is
  * checked by vx_declared_check first, and assimp runs under
  * vx_declared_decode_bound (past it: VX_EINVAL <fmt>_corrupt). Node
  * transforms are applied (glTF); STL and glTF vertices with equal
@@ -204,7 +205,17 @@ vx_mesh *vx_assimp_read_path(const char *path, vx_mesh_format fmt, const vx_mesh
  * VX_ETOOBIG mesh_too_big. Owned analysed mesh or NULL. */
 vx_mesh *vx_off_read_mem(const unsigned char *data, size_t n, const vx_mesh_limits *lim,
                          vx_err *err);
-/* The same from memory (the fuzz targets); OFF goes to vx_off_read_mem. */
+/* Reads a PLY file from memory (mesh/ply.c, not assimp: its PLY importer
+ * read past its buffer on fuzzed input): ASCII, binary little or big
+ * endian; the vertex element's x, y, z and the face element's
+ * vertex_indices (or vertex_index) list, every other element and property
+ * skipped; header counts checked first, polygons kept. Errors VX_EINVAL
+ * ply_corrupt, VX_EUNPROC ply_no_faces, VX_ETOOBIG mesh_too_big. Owned
+ * analysed mesh or NULL. */
+vx_mesh *vx_ply_read_mem(const unsigned char *data, size_t n, const vx_mesh_limits *lim,
+                         vx_err *err);
+/* The same from memory (the fuzz targets); OFF and PLY go to
+ * vx_off_read_mem and vx_ply_read_mem. */
 vx_mesh *vx_assimp_read_mem(const unsigned char *data, size_t n, vx_mesh_format fmt,
                             const vx_mesh_limits *lim, vx_err *err);
 
