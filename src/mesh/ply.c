@@ -34,10 +34,10 @@ static const struct {
     const char *name;
     vx_ply_type type;
 } ply_types[] = {
-    {"char", VX_PLY_I8},     {"int8", VX_PLY_I8},     {"uchar", VX_PLY_U8},  {"uint8", VX_PLY_U8},
-    {"short", VX_PLY_I16},   {"int16", VX_PLY_I16},   {"ushort", VX_PLY_U16}, {"uint16", VX_PLY_U16},
-    {"int", VX_PLY_I32},     {"int32", VX_PLY_I32},   {"uint", VX_PLY_U32},  {"uint32", VX_PLY_U32},
-    {"float", VX_PLY_F32},   {"float32", VX_PLY_F32}, {"double", VX_PLY_F64}, {"float64", VX_PLY_F64},
+    {"char", VX_PLY_I8},   {"int8", VX_PLY_I8},     {"uchar", VX_PLY_U8},   {"uint8", VX_PLY_U8},
+    {"short", VX_PLY_I16}, {"int16", VX_PLY_I16},   {"ushort", VX_PLY_U16}, {"uint16", VX_PLY_U16},
+    {"int", VX_PLY_I32},   {"int32", VX_PLY_I32},   {"uint", VX_PLY_U32},   {"uint32", VX_PLY_U32},
+    {"float", VX_PLY_F32}, {"float32", VX_PLY_F32}, {"double", VX_PLY_F64}, {"float64", VX_PLY_F64},
 };
 
 int vx_ply_type_size(vx_ply_type t)
@@ -243,9 +243,10 @@ static int read_count(ply_in *in, vx_ply_type ct, vx_ply_type t, uint64_t *k)
     if (read_value(in, ct, &c)) return -1;
     /* The shortest item: one byte of binary, a digit and a blank of ASCII. */
     double most = in->format == VX_PLY_ASCII ? (double)(in->end - in->p) / 2 + 1
-                                              : (double)(in->end - in->p) / vx_ply_type_size(t);
+                                             : (double)(in->end - in->p) / vx_ply_type_size(t);
     if (!(c >= 0) || c != floor(c) || c > most)
-        return fail(in->err, "element '%s' entry %llu: a list of %g items, more than the file holds",
+        return fail(in->err,
+                    "element '%s' entry %llu: a list of %g items, more than the file holds",
                     in->elem, (unsigned long long)in->entry, c);
     *k = (uint64_t)c;
     return 0;
@@ -283,7 +284,9 @@ static int read_face(ply_in *in, ply_out *o, vx_ply_type t, uint64_t k, size_t n
         if (cap > n + 16) cap = n + 16; /* a corner takes a byte of the file at least */
         if (o->used + k > cap) return short_body(in);
         uint32_t *g = realloc(o->m->face_idx, cap * sizeof(uint32_t));
-        if (!g) return vx_err_set(in->err, VX_EINTERNAL, "out_of_memory", "no memory to read the PLY file");
+        if (!g)
+            return vx_err_set(in->err, VX_EINTERNAL, "out_of_memory",
+                              "no memory to read the PLY file");
         o->m->face_idx = g;
         o->cap = cap;
     }

@@ -365,6 +365,36 @@ static void draw_slab(peel_ctx *c, int axis)
     vx_peel_draw_tris(first, ntri);
 }
 
+/* Draws the slab in `bands` bands of its h rows (the scissor keeps a
+ * band's fragments; every ray is independent), with a stop check between
+ * bands; *passed (if not NULL) is whether any fragment passed. */
+static int draw_banded(peel_ctx *c, int axis, int w, int h, int bands, double within,
+                       GLuint *passed)
+{
+    peel_objs *po = &c->o;
+    int rc = 0;
+    for (int b = 0; b < bands && !rc; b++) {
+        if (bands > 1) {
+            int y0 = (int)((long long)h * b / bands), y1 = (int)((long long)h * (b + 1) / bands);
+            glEnable(GL_SCISSOR_TEST);
+            glScissor(0, y0, w, y1 - y0);
+        }
+        GLuint any = 0;
+        if (passed) glBeginQuery(GL_ANY_SAMPLES_PASSED, po->query);
+        draw_slab(c, axis);
+        if (passed) {
+            glEndQuery(GL_ANY_SAMPLES_PASSED);
+            glGetQueryObjectuiv(po->query, GL_QUERY_RESULT, &any);
+            *passed |= any;
+        } else if (bands > 1) {
+            glFinish();
+        }
+        if (b + 1 < bands) rc = vx_peel_progress(c, within);
+    }
+    glDisable(GL_SCISSOR_TEST);
+    return rc;
+}
+
 /* Peels the mesh along `axis` for the slab, several layers per pass (see
  * the top of this file); sets *nslots to the key slots the fill walks. */
 static int peel(peel_ctx *c, layer_set *o, int axis, int k0, int rows, int *nslots)
@@ -407,24 +437,36 @@ static int peel(peel_ctx *c, layer_set *o, int axis, int k0, int rows, int *nslo
                               &zero);
     glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 0, po->peel_stat);
 
-    int rc = -1, base = 0;
+    /* A pass over a whole robust z slab (1024^2 rays of the whole mesh)
+     * takes about a second on llvmpipe: once a pass takes longer than
+     * PEEL_BAND_MS, the later ones (and the count pass) are drawn in bands,
+     * so a job's timeout or cancel is seen within about PEEL_BAND_MS after
+     * the first pass. */
+    enum { PEEL_BAND_MS = 100, PEEL_MAX_BANDS = 64 };
+    int rc = -1, base = 0, bands = 1;
     for (int pass = 0;; pass++) {
         /* 16 slots, then as many as so far: passes grow geometrically. */
         int k = pass == 0 ? first_cap(c) : base;
         if (k > c->max_layers - base) k = c->max_layers - base;
         if (base + k > o->cap && grow(c, o, base + k, base)) goto done;
+        const double within = 0.9 * (pass + 1) / (pass + 4.0);
+        const double t0 = vx_mono_ms();
         vx_gl_timer t;
         vx_gl_timer_begin(&t);
         glBindImageTexture(0, o->keys, 0, GL_TRUE, 0, GL_READ_WRITE, GL_R32UI);
         glProgramUniform2i(p, 2, base, k);
-        glBeginQuery(GL_ANY_SAMPLES_PASSED, po->query);
-        draw_slab(c, axis);
-        glEndQuery(GL_ANY_SAMPLES_PASSED);
+        GLuint passed = 0;
+        int stopped = draw_banded(c, axis, w, h, bands, within, &passed);
         /* The next pass reads this one's last slot. */
         glMemoryBarrier(GL_SHADER_IMAGE_ACCESS_BARRIER_BIT);
-        GLuint passed = 0;
-        glGetQueryObjectuiv(po->query, GL_QUERY_RESULT, &passed);
-        c->st->gpu_peel_ms += vx_gl_timer_end_ms(&t);
+        c->st->gpu_peel_ms += vx_gl_timer_end_ms(&t); /* ended even when stopped */
+        if (stopped) goto done;
+        double ms = vx_mono_ms() - t0;
+        if (ms > PEEL_BAND_MS * bands && bands < PEEL_MAX_BANDS) {
+            bands = (int)ceil(ms / PEEL_BAND_MS);
+            if (bands > PEEL_MAX_BANDS) bands = PEEL_MAX_BANDS;
+            if (bands > h) bands = h;
+        }
         c->st->passes++;
         if (vx_gl_check(c->gl, "peel.pass", c->err)) goto done;
         base += k;
@@ -435,7 +477,7 @@ static int peel(peel_ctx *c, layer_set *o, int axis, int k0, int rows, int *nslo
                        c->max_layers, "xyz"[axis]);
             goto done;
         }
-        if (vx_peel_progress(c, 0.9 * (pass + 1) / (pass + 4.0))) goto done;
+        if (vx_peel_progress(c, within)) goto done;
     }
     *nslots = base;
 
@@ -451,8 +493,9 @@ static int peel(peel_ctx *c, layer_set *o, int axis, int k0, int rows, int *nslo
         glBindImageTexture(1, o->counts, 0, GL_TRUE, 0, GL_READ_WRITE, GL_R32UI);
         glProgramUniform1i(p, 4, 1);
         glProgramUniform1i(p, 5, base);
-        draw_slab(c, axis);
+        int stopped = draw_banded(c, axis, w, h, bands, 0.9, NULL);
         c->st->gpu_peel_ms += vx_gl_timer_end_ms(&t);
+        if (stopped) goto done;
         c->st->passes++;
         o->counted = 1;
     }

@@ -83,6 +83,11 @@ small "after render"
 
 # voxelize: a 2048^3 bit grid (the largest resolution), raw.
 big "voxelize ogre 2048 raw1" voxelize "$OGRE" '{"resolution":2048,"format":"raw1"}'
+# voxelize robust: the z rays of the whole mesh are peeled in one slab, ~1 s
+# a pass at 1024^2 on llvmpipe, so later passes are drawn in bands of rows
+# with a stop check between them.
+big "voxelize ogre 1024 peel robust" voxelize "$OGRE" \
+    '{"resolution":1024,"method":"peel","inside":"robust","format":"raw1"}'
 # gregory: 13.5M triangles, welded, Draco (the encoder runs in a child).
 big "gregory spot divisions 96 drc" gregory "$SPOT" '{"divisions":96,"format":"drc"}'
 big "gregory spot divisions 96 obj" gregory "$SPOT" '{"divisions":96,"format":"obj"}'

@@ -47,7 +47,7 @@ static void putf(buf *b, const char *fmt, ...)
     put(b, s, (size_t)k);
 }
 
-static const char *type_name[] = {"", "char", "uchar", "short", "ushort",
+static const char *type_name[] = {"",    "char", "uchar", "short", "ushort",
                                   "int", "uint", "float", "double"};
 
 static uint64_t rnd_state = 88172645463325252ull;
@@ -229,7 +229,7 @@ static void test_round_trip(void **state)
 {
     (void)state;
     static const vx_ply_type coords[] = {VX_PLY_F32, VX_PLY_F64};
-    static const vx_ply_type counts[] = {VX_PLY_U8, VX_PLY_I8, VX_PLY_U16,
+    static const vx_ply_type counts[] = {VX_PLY_U8,  VX_PLY_I8,  VX_PLY_U16,
                                          VX_PLY_I16, VX_PLY_I32, VX_PLY_U32};
     static const vx_ply_type indices[] = {VX_PLY_I32, VX_PLY_U32, VX_PLY_U16,
                                           VX_PLY_I16, VX_PLY_U8,  VX_PLY_I8};
@@ -268,8 +268,11 @@ static void test_truncations(void **state)
 {
     (void)state;
     for (int f = 0; f < 3; f++) {
-        spec s = {.format = (vx_ply_format)f, .coord = VX_PLY_F32, .count = VX_PLY_U8,
-                  .index = VX_PLY_I32, .extra = 1};
+        spec s = {.format = (vx_ply_format)f,
+                  .coord = VX_PLY_F32,
+                  .count = VX_PLY_U8,
+                  .index = VX_PLY_I32,
+                  .extra = 1};
         mesh_in m = random_mesh(12, 9, s.index);
         buf b = write_ply(&s, &m);
         size_t ok = 0;
@@ -410,9 +413,8 @@ static void test_header_prefix(void **state)
     assert_int_equal(h->props[h->elems[1].first_prop].type, VX_PLY_I32);
     /* The whole file without an end_header line is refused, not retried. */
     const char *cut = "ply\nformat ascii 1.0\nelement vertex 0\n";
-    assert_int_equal(vx_ply_header_parse((const unsigned char *)cut, strlen(cut), strlen(cut), h,
-                                         &err),
-                     -1);
+    assert_int_equal(
+        vx_ply_header_parse((const unsigned char *)cut, strlen(cut), strlen(cut), h, &err), -1);
     assert_string_equal(err.code, "ply_corrupt");
     free(h);
 }
@@ -446,8 +448,8 @@ static void test_own_writer(void **state)
 int main(void)
 {
     const struct CMUnitTest tests[] = {
-        cmocka_unit_test(test_round_trip),    cmocka_unit_test(test_truncations),
-        cmocka_unit_test(test_hostile),       cmocka_unit_test(test_header_prefix),
+        cmocka_unit_test(test_round_trip), cmocka_unit_test(test_truncations),
+        cmocka_unit_test(test_hostile),    cmocka_unit_test(test_header_prefix),
         cmocka_unit_test(test_own_writer),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
