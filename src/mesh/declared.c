@@ -447,17 +447,17 @@ static int gltf_mesh(gltf_ctx *g, double mi)
 {
     cJSON *meshes = arr(g->root, "meshes");
     if (mi < 0 || !meshes || mi >= cJSON_GetArraySize(meshes))
-        return gl_fail(g, "%s %.0f names no mesh", "node mesh", mi);
+        return gl_fail(g, "%s %.15g names no mesh", "node mesh", mi);
     cJSON *prims = arr(cJSON_GetArrayItem(meshes, (int)mi), "primitives"), *p;
     cJSON_ArrayForEach(p, prims)
     {
         const cJSON *at = cJSON_GetObjectItemCaseSensitive(p, "attributes");
         double pc = acc_count(g, num(at, "POSITION", -1));
-        if (pc < 0) return gl_fail(g, "%s %.0f has a primitive without POSITION", "mesh", mi);
+        if (pc < 0) return gl_fail(g, "%s %.15g has a primitive without POSITION", "mesh", mi);
         double ic = cJSON_GetObjectItemCaseSensitive(p, "indices")
                         ? acc_count(g, num(p, "indices", -1))
                         : pc;
-        if (ic < 0) return gl_fail(g, "%s %.0f has a primitive with bad indices", "mesh", mi);
+        if (ic < 0) return gl_fail(g, "%s %.15g has a primitive with bad indices", "mesh", mi);
         double mode = num(p, "mode", 4);
         double t = mode == 4 ? floor(ic / 3) : (mode == 5 || mode == 6) && ic >= 3 ? ic - 2 : 0;
         g->tris += (uint64_t)t;
@@ -470,11 +470,11 @@ static int gltf_node(gltf_ctx *g, double ni, int depth)
 {
     cJSON *nodes = arr(g->root, "nodes");
     /* ni may be any number a file holds (found by fuzz_gltf): printed, not cast. */
-    if (!(ni >= 0 && ni < g->nnodes)) return gl_fail(g, "%s %.0f does not exist", "node", ni);
+    if (!(ni >= 0 && ni < g->nnodes)) return gl_fail(g, "%s %.15g does not exist", "node", ni);
     if (g->seen[(int)ni])
-        return gl_fail(g, "node %.0f is reached twice (a cycle, or two parents)", ni);
+        return gl_fail(g, "node %.15g is reached twice (a cycle, or two parents)", ni);
     if (depth > GLTF_MAX_DEPTH)
-        return gl_fail(g, "node %.0f is nested more than %d deep", ni, GLTF_MAX_DEPTH);
+        return gl_fail(g, "node %.15g is nested more than %d deep", ni, GLTF_MAX_DEPTH);
     g->seen[(int)ni] = 1;
     cJSON *n = cJSON_GetArrayItem(nodes, (int)ni), *c;
     if (cJSON_GetObjectItemCaseSensitive(n, "mesh") && gltf_mesh(g, num(n, "mesh", -1))) return -1;
