@@ -33,7 +33,10 @@ struct vx_pg {
  * applied in the transaction that records it in vx_schema. */
 static const char *const migrations[] = {
     /* 1: jobs (with bricks' parents), the results index, mesh metadata, the
-     * NOTIFY trigger. */
+     * NOTIFY trigger. Claims notify nobody: a NOTIFY serializes commits (a
+     * global lock at commit), which halved the claim rate with 4 claimers
+     * (bench/RESULTS.md); who waits wants a job queued, finished or
+     * canceled. */
     "CREATE TABLE vx_jobs ("
     " id text COLLATE \"C\" PRIMARY KEY,"
     " kind text NOT NULL,"
@@ -76,9 +79,10 @@ static const char *const migrations[] = {
     " meta jsonb NOT NULL DEFAULT '{}',"
     " created timestamptz NOT NULL DEFAULT now());"
     "CREATE FUNCTION vx_jobs_notify() RETURNS trigger LANGUAGE plpgsql AS $$ BEGIN"
-    " IF TG_OP = 'INSERT' OR NEW.state IS DISTINCT FROM OLD.state"
-    "  OR NEW.cancel_requested IS DISTINCT FROM OLD.cancel_requested THEN"
-    "  PERFORM pg_notify('" VX_PG_CHANNEL "', NEW.state || ' ' || NEW.id || ' ' || NEW.kind);"
+    " IF TG_OP = 'INSERT' OR (NEW.state <> OLD.state AND NEW.state <> 'running')"
+    "  OR (NEW.cancel_requested AND NOT OLD.cancel_requested) THEN"
+    "  PERFORM pg_notify('" VX_PG_CHANNEL "', CASE WHEN NEW.state = 'running' THEN 'cancel'"
+    "   ELSE NEW.state END || ' ' || NEW.id || ' ' || NEW.kind);"
     " END IF; RETURN NULL; END $$;"
     "CREATE TRIGGER vx_jobs_notify AFTER INSERT OR UPDATE ON vx_jobs"
     " FOR EACH ROW EXECUTE FUNCTION vx_jobs_notify();",

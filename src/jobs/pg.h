@@ -9,8 +9,10 @@
  * lease while it runs and finishes the row with the attempt it claimed as
  * fencing token, so a replica that lost its lease changes nothing. Any
  * replica re-queues rows whose lease expired, with backoff, and fails them
- * after max_attempts. Every state change sends NOTIFY on channel vx_jobs
- * (a trigger), payload "STATE ID KIND".
+ * after max_attempts. A job queued (submitted or re-queued), finished or
+ * asked to cancel sends NOTIFY on channel vx_jobs (a trigger), payload
+ * "STATE ID KIND" ("cancel ID KIND" for a running job asked to cancel); a
+ * claim sends nothing.
  *
  * Threads: a vx_pg is one connection; its calls are serialized by a mutex,
  * so any thread may call, one at a time. vx_pg_wait holds the connection

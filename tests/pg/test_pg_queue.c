@@ -452,7 +452,7 @@ static void test_max_attempts(void **state)
 
 static void test_cancel(void **state)
 {
-    vx_pg *pg = open_as("rc", 30);
+    vx_pg *pg = open_as("rc", 30), *lis = open_as("rcl", 0);
     vx_err err = {0};
     char q[33], r[33], missing[33];
     make_id(q, 500);
@@ -471,11 +471,16 @@ static void test_cancel(void **state)
     /* Running: renew reports the request; the run then fails as canceled. */
     assert_int_equal(vx_pg_claim(pg, "c2", &jb, &err), 1);
     vx_pg_job_clear(&jb);
+    assert_int_equal(vx_pg_listen(lis, &err), 0);
     int cancel = 1;
     assert_int_equal(vx_pg_renew(pg, r, 1, &cancel, &err), 0);
     assert_int_equal(cancel, 0);
     assert_int_equal(vx_pg_cancel(pg, r, &was, &err), 0);
     assert_int_equal(was, 1);
+    char note[128], want[100];
+    assert_int_equal(vx_pg_wait(lis, 5, note, sizeof note, &err), 1);
+    snprintf(want, sizeof want, "cancel %s c2", r);
+    assert_string_equal(note, want);
     assert_int_equal(vx_pg_renew(pg, r, 1, &cancel, &err), 0);
     assert_int_equal(cancel, 1);
     vx_err why = {0};
@@ -487,6 +492,7 @@ static void test_cancel(void **state)
     assert_string_equal(err.code, "job_finished");
     assert_int_equal(vx_pg_cancel(pg, missing, &was, &err), -1);
     assert_string_equal(err.code, "job_not_found");
+    vx_pg_close(lis);
     vx_pg_close(pg);
 }
 
@@ -531,12 +537,16 @@ static void test_notify(void **state)
     snprintf(want, sizeof want, "queued %s voxelize", id);
     assert_string_equal(w.payload, want);
     assert_true(w.waited < 5);
-    /* And a claim sends "running". */
+    /* A claim sends nothing (the hot path); the completion wakes waiters. */
     vx_pg_job jb;
     assert_int_equal(vx_pg_claim(pg, "voxelize", &jb, &err), 1);
+    assert_int_equal(vx_pg_wait(lis, 0.3, buf, sizeof buf, &err), 0);
+    cJSON *res = cJSON_CreateObject();
+    assert_int_equal(vx_pg_complete(pg, id, jb.attempt, res, &err), 0);
+    cJSON_Delete(res);
     vx_pg_job_clear(&jb);
     assert_int_equal(vx_pg_wait(lis, 5, buf, sizeof buf, &err), 1);
-    snprintf(want, sizeof want, "running %s voxelize", id);
+    snprintf(want, sizeof want, "succeeded %s voxelize", id);
     assert_string_equal(buf, want);
     vx_pg_close(lis);
     vx_pg_close(pg);
