@@ -291,6 +291,8 @@ void vx_pg_close(vx_pg *pg)
 
 int vx_pg_retry_after(vx_pg *pg)
 {
+    /* Read without the lock (a waiter may hold it for seconds): a stale
+     * value only shifts the hint by one backoff step. */
     double left = pg->next_try - vx_mono();
     return left > 1 ? (int)(left + 0.999) : 1;
 }

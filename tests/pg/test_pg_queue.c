@@ -121,6 +121,10 @@ static void test_submit_get_list(void **state)
         make_id(ids[i], 100 + i);
         submit(pg, ids[i], i % 2 ? "render" : "voxelize", 0);
     }
+    /* Acknowledged = committed: another connection sees every row. */
+    char qs[160];
+    snprintf(qs, sizeof qs, "SELECT count(*) FROM vx_jobs WHERE id IN ('%s','%s')", ids[0], ids[4]);
+    assert_int_equal(sql_long(qs), 2);
     vx_pg_job jb;
     assert_int_equal(vx_pg_get(pg, ids[1], &jb, &err), 0);
     assert_string_equal(jb.id, ids[1]);
@@ -178,6 +182,9 @@ static void test_submit_get_list(void **state)
                            {.id = b1, .kind = "voxelize", .parent = parent},
                            {.id = b2, .kind = "voxelize", .parent = parent}};
     assert_int_equal(vx_pg_submit(pg, fam, 3, &err), 0);
+    snprintf(qs, sizeof qs, "SELECT count(*) FROM vx_jobs WHERE id = '%s' OR parent_id = '%s'",
+             parent, parent);
+    assert_int_equal(sql_long(qs), 3);
     vx_pg_filter kids = {.parent = parent};
     assert_int_equal(vx_pg_list(pg, &kids, NULL, 10, &page, &n, next, &err), 0);
     assert_int_equal(n, 2);
