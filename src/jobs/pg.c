@@ -531,6 +531,11 @@ int vx_pg_renew(vx_pg *pg, const char *id, int attempt, int *cancel, vx_err *err
     return held ? 0 : 1;
 }
 
+double vx_pg_renew_interval(const vx_pg *pg)
+{
+    return pg->desc.lease_s / 3;
+}
+
 int vx_pg_complete(vx_pg *pg, const char *id, int attempt, const cJSON *result, vx_err *err)
 {
     if (!cJSON_IsObject(result))

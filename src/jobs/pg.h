@@ -133,6 +133,9 @@ int vx_pg_claim(vx_pg *pg, const char *kinds, vx_pg_job *out, vx_err *err);
  * (the row moved on: re-queued, finished or claimed again: stop the run),
  * -1 with err (the lease may still be held: try again). */
 int vx_pg_renew(vx_pg *pg, const char *id, int attempt, int *cancel, vx_err *err);
+/* Seconds between the renewals a runner should make: a third of the TTL
+ * (10 s of the default 30 s), so that two can fail before the lease goes. */
+double vx_pg_renew_interval(const vx_pg *pg);
 /* Marks (id, attempt) of this replica succeeded with its result manifest
  * (an object; members of its "outputs" object, {"location", "bytes",
  * "content_type"}, are indexed in vx_results) in one statement. Returns 0

@@ -293,6 +293,8 @@ static void test_lease_expiry_and_fencing(void **state)
     assert_int_equal(ja.attempt, 1);
     assert_string_equal(ja.replica, "replica-a");
     assert_true(ja.lease_expires > ja.started + 0.5 && ja.lease_expires < ja.started + 1.5);
+    assert_true(vx_pg_renew_interval(a) > 0.3 && vx_pg_renew_interval(a) < 0.4);
+    assert_true(vx_pg_renew_interval(b) == 10);
     int cancel = 1;
     assert_int_equal(vx_pg_renew(a, id, 1, &cancel, &err), 0);
     assert_int_equal(cancel, 0);

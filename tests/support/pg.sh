@@ -59,6 +59,7 @@ url) url "$2" ;;
 run)
     shift
     dir=$(mktemp -d /tmp/vxpg.XXXXXX)
+    # shellcheck disable=SC2317 # called by the EXIT trap
     cleanup() {
         as_owner "$bin/pg_ctl" -D "$dir/data" -m immediate stop >/dev/null 2>&1 || true
         rm -rf "$dir"
@@ -66,7 +67,8 @@ run)
     trap cleanup EXIT
     trap 'exit 130' INT TERM
     VX_PG_URL=$(start "$dir")
-    export VX_PG_URL VX_PG_DIR=$dir VX_PG_SH=$(readlink -f "$0")
+    VX_PG_SH=$(readlink -f "$0")
+    export VX_PG_URL VX_PG_DIR=$dir VX_PG_SH
     set +e
     "$@"
     rc=$?
