@@ -35,6 +35,8 @@ run_pkgs=(
   zlib1g-dev
   # FFT, images, systemd notify, SHA-256
   libfftw3-dev libosd-dev libpng-dev libsystemd-dev nettle-dev
+  # --database: the PostgreSQL job queue's client (src/jobs/pg.c)
+  libpq-dev
 )
 test_pkgs=(
   # clang + its runtime for the libFuzzer targets (tests/fuzz); scripts/check.sh
@@ -48,6 +50,8 @@ test_pkgs=(
   python3-numpy
   # integration tests
   curl jq procps psmisc python3 python3-yaml python3-jsonschema man-db
+  # unit.test_pg_queue and bench/cluster: a throw-away server (tests/support/pg.sh)
+  postgresql-15
   # tests/deploy/test_systemd.sh: the system calls voxeld makes vs the unit's filter
   strace
   # the container image test (tests/deploy): podman builds the Dockerfile
