@@ -197,21 +197,17 @@ run_pod_options() {
     local envs=() args=()
     mapfile -t envs < <(jq -r "$CENV | to_entries[] | \"\(.key)=\(.value)\"" "$TMP/$o.json")
     mapfile -t args < <(jq -r "$CTR | .args // [] | .[]" "$TMP/$o.json")
-    env "${envs[@]}" VOXELD_LISTEN=127.0.0.1:0 VOXELD_DATA_DIR="$dir/data" VOXELD_CACHE_DIR="$dir/cache" \
-        VOXELD_TOKEN_FILE="$dir/token" VOXELD_WORKERS=2 MESA_SHADER_CACHE_DIR="$dir/cache/mesa" \
-        "$VOXELD" "${args[@]}" 2>"$dir/log" &
-    PID=$!
-    local i
-    PORT=
-    for i in $(seq 1 300); do
-        PORT=$(grep -a 'event=voxeld.ready' "$dir/log" | sed -n 's/.*port=\([0-9]*\).*/\1/p')
-        [[ -n "$PORT" ]] && break
-        kill -0 "$PID" 2>/dev/null || break
-        sleep 0.1
-    done
-    check "$o: voxeld starts with the pod's options ($(tail -n 2 "$dir/log" | head -c 300))" test -n "$PORT"
-    [[ -n "$PORT" ]] || { PID=; return; }
-    BASE=http://127.0.0.1:$PORT
+    # The pod's variables for this one start (start_daemon's own --listen,
+    # --data-dir, --workers and --http-threads flags win over them).
+    local kv ok=0
+    for kv in "${envs[@]}"; do export "${kv?}"; done
+    export VOXELD_CACHE_DIR="$dir/cache" VOXELD_TOKEN_FILE="$dir/token" MESA_SHADER_CACHE_DIR="$dir/cache/mesa"
+    DATA=$dir/data
+    start_daemon "${args[@]}" && ok=1
+    for kv in "${envs[@]}"; do unset "${kv%%=*}"; done
+    unset VOXELD_CACHE_DIR VOXELD_TOKEN_FILE MESA_SHADER_CACHE_DIR
+    check "$o: voxeld starts with the pod's options" test "$ok" -eq 1
+    [[ $ok -eq 1 ]] || return
     TOKEN=$(cat "$dir/token")
 }
 run_pod_options cpu
@@ -222,7 +218,9 @@ if [[ -n "$PID" ]]; then
     expect_status "cpu: the pod's /livez" 200
     api GET /v1/info
     expect_status "cpu: /v1/info with the Secret's token" 200
-    check "cpu: the job timeout the grace period was checked against" jq -e '.limits.job_timeout_s == 600' "$BODY"
+    CPU_TIMEOUT=$(jq -r "$CENV | .VOXELD_JOB_TIMEOUT // \"600\"" "$TMP/cpu.json")
+    check "cpu: the daemon's job timeout is the ConfigMap's ($CPU_TIMEOUT s, which the grace period covers)" \
+        jq -e --argjson t "$CPU_TIMEOUT" '.limits.job_timeout_s == $t' "$BODY"
     check "cpu: auth is on" jq -e '.auth == true' "$BODY"
     TOKEN=
     api GET /v1/info
