@@ -99,7 +99,10 @@ for o in "${OVERLAYS[@]}"; do
     done
     check "$o: one Deployment with one container" q "$o" "([.[] | select(.kind == \"Deployment\")] | length) == 1 and ($DEPLOY | .spec.template.spec.containers | length) == 1"
 
-    # Probes on the daemon's routes, on the port it listens on.
+    # Probes on the daemon's routes, on the port it listens on: the
+    # ConfigMap's VOXELD_LISTEN, as the image's ENTRYPOINT flags are replaced.
+    check "$o: the command is voxeld alone (no ENTRYPOINT --listen/--data-dir over the ConfigMap)" \
+        q "$o" "$CTR | .command == [\"voxeld\"] and ((.args // []) | all(test(\"^--(listen|data-dir)\") | not))"
     PORT=$(jq -r "$CENV | .VOXELD_LISTEN // \"\" | capture(\":(?<p>[0-9]+)\$\").p" "$TMP/$o.json" 2>/dev/null)
     check "$o: VOXELD_LISTEN listens on all addresses (got $(jq -r "$CENV | .VOXELD_LISTEN" "$TMP/$o.json"))" \
         q "$o" "$CENV | .VOXELD_LISTEN | test(\"^(0\\\\.0\\\\.0\\\\.0|\\\\[::\\\\]):[0-9]+\$\")"
