@@ -40,6 +40,9 @@ static const opt_def opts[] = {
     {"egl-device", T_DEVICE, F(egl_device), 0, "EGL device index, or auto (default)"},
     {"log-level", T_LEVEL, F(log_level), 0, "error, warn, info (default) or debug"},
     {"gl-debug", T_BOOL, F(gl_debug), 0, "KHR_debug messages to the log: yes (default) or no"},
+    {"require-gpu", T_BOOL, F(require_gpu), 0,
+     "a software GL renderer (llvmpipe, softpipe, swrast) runs no job and /readyz answers 503: "
+     "yes or no (default)"},
     {"http-threads", T_COUNT, F(http_threads), 0, "HTTP thread pool size (default 4)"},
     {"workers", T_COUNT, F(workers), 0, "CPU worker threads (default: number of CPUs)"},
     {"max-upload-bytes", T_SIZE, F(max_upload_bytes), 0, "largest mesh upload (default 1G)"},

@@ -52,6 +52,7 @@ typedef struct vx_config {
     char cors_origin[1024]; /* comma list of origins a browser may call from ("*" = any); empty = no
                                CORS */
     int gl_debug;
+    int require_gpu;  /* a software GL renderer makes the daemon unready, and runs no job */
     int list_devices; /* --list-egl-devices: print and exit */
 } vx_config;
 

@@ -103,8 +103,11 @@ static int first_call(vx_http *h, struct MHD_Connection *c, req *r, const char *
     vx_req_query_init(&r->q);
     MHD_get_connection_values_n(c, MHD_GET_ARGUMENT_KIND, take_arg, r);
     if (strcmp(r->method, "POST") != 0) return -1; /* no body: answer in dispatch */
-    if (h->stopping || !vx_jobs_ready(h->d.jobs))
-        return vx_resp_fail(c, r, VX_EUNAVAIL, "not_ready", "the daemon is not ready");
+    if (h->stopping || !vx_jobs_ready(h->d.jobs)) {
+        char why[600];
+        vx_route_not_ready_reason(h, why, sizeof why);
+        return vx_resp_fail(c, r, VX_EUNAVAIL, "not_ready", "%s", why);
+    }
     if (r->qerr[0]) return vx_resp_fail(c, r, VX_EINVAL, "invalid_request", "%s", r->qerr);
 
     uint64_t nfree;

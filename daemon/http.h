@@ -15,6 +15,9 @@ typedef struct vx_http_desc {
     vx_store *store;
     vx_jobs *jobs;
     double start_time;
+    /* Non-NULL: --require-gpu found this software renderer, the job runner
+     * was not started, /readyz answers 503 naming it. Not owned. */
+    const vx_gl_info *gpu_refused;
 } vx_http_desc;
 
 /* Binds and starts serving. Owned; stop with vx_http_stop. */

@@ -116,6 +116,9 @@ uint64_t vx_route_disk_free(vx_http *h);
 /* 1 when the data dir has room for writes: free space at or above the
  * floor (with a floor of 0, any free byte); the free bytes in *free_bytes. */
 int vx_route_disk_ok(vx_http *h, uint64_t *free_bytes);
+/* Why the daemon takes no work (--require-gpu's refused renderer, shutting
+ * down, no GL context), for /readyz and the 503 not_ready messages. */
+void vx_route_not_ready_reason(vx_http *h, char *out, size_t n);
 /* OPTIONS on any route: 204 with Allow, and the CORS preflight answer
  * (Access-Control-Allow-*) for an allowed origin. */
 int vx_route_options(vx_http *h, struct MHD_Connection *c, req *r);

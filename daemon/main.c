@@ -121,8 +121,24 @@ static vx_jobs_desc make_jobs_desc(const vx_config *cfg, vx_store *store, int ha
     return jd;
 }
 
-/* Opens the job runner and starts its GL thread; NULL (logged) on failure. */
-static vx_jobs *open_jobs(const vx_config *cfg, vx_store *store, vx_err *err)
+/* --require-gpu: the renderer a context on the configured device gets,
+ * asked before the job runner starts (it would at once run the jobs the
+ * journal queued again). 1 = a software one (*out filled), 0 = hardware,
+ * -1 = no context at all (the runner's own start then says why). */
+static int probe_software_gl(const vx_config *cfg, vx_gl_info *out)
+{
+    vx_jobs_desc jd = make_jobs_desc(cfg, NULL, 0);
+    vx_err err;
+    vx_gl *gl = vx_gl_new(&jd.gl, &err);
+    if (!gl) return -1;
+    *out = *vx_gl_get_info(gl);
+    vx_gl_free(gl);
+    return vx_gl_info_software(out);
+}
+
+/* Opens the job runner and, when start, starts its GL thread; NULL (logged)
+ * on failure. Not started, it keeps its queue and runs nothing. */
+static vx_jobs *open_jobs(const vx_config *cfg, vx_store *store, int start, vx_err *err)
 {
     vx_err cerr;
     int have_cache = vx_mkdirs(cfg->cache_dir, &cerr) == 0;
@@ -136,7 +152,7 @@ static vx_jobs *open_jobs(const vx_config *cfg, vx_store *store, vx_err *err)
         VX_ERROR("voxeld.fatal", "stage=journal code=%s message=\"%s\"", err->code, err->message);
         return NULL;
     }
-    if (vx_jobs_start(jobs, err)) {
+    if (start && vx_jobs_start(jobs, err)) {
         char q[600];
         VX_ERROR("voxeld.fatal", "stage=gl code=%s message=%s", err->code,
                  vx_log_quote(q, sizeof q, err->message));
@@ -214,18 +230,37 @@ int main(int argc, char **argv)
         VX_ERROR("voxeld.fatal", "stage=store code=%s message=\"%s\"", err.code, err.message);
         return 1;
     }
-    vx_jobs *jobs = open_jobs(&cfg, store, &err);
+    vx_gl_info refused;
+    int soft = cfg.require_gpu && probe_software_gl(&cfg, &refused) == 1;
+    vx_jobs *jobs = open_jobs(&cfg, store, !soft, &err);
     if (!jobs) {
         vx_store_close(store);
         return 1;
     }
-    vx_gl_info gi = vx_jobs_gl_info(jobs);
+    vx_gl_info gi = soft ? refused : vx_jobs_gl_info(jobs);
     char qr[300], qv[200];
-    VX_INFO("gl.ready", "device_kind=%s device_index=%d renderer=%s version=%s robust=%d",
-            gi.device_kind, gi.device_index, vx_log_quote(qr, sizeof qr, gi.renderer),
-            vx_log_quote(qv, sizeof qv, gi.version), gi.robust);
+    vx_log_quote(qr, sizeof qr, gi.renderer);
+    vx_log_quote(qv, sizeof qv, gi.version);
+    if (soft) {
+        VX_ERROR("voxeld.gpu_required",
+                 "device_kind=%s device_index=%d renderer=%s version=%s action=\"no job runs, "
+                 "/readyz answers 503\"",
+                 gi.device_kind[0] ? gi.device_kind : "surfaceless", gi.device_index, qr, qv);
+        fprintf(stderr,
+                "voxeld: --require-gpu: the GL renderer \"%s\" is a software one, so no job will "
+                "run and /readyz answers 503 (is the GPU visible to EGL? NVIDIA needs "
+                "NVIDIA_DRIVER_CAPABILITIES to include graphics; voxeld --list-egl-devices)\n",
+                gi.renderer);
+    } else {
+        VX_INFO("gl.ready", "device_kind=%s device_index=%d renderer=%s version=%s robust=%d",
+                gi.device_kind, gi.device_index, qr, qv, gi.robust);
+    }
 
-    vx_http_desc hd = {.cfg = &cfg, .store = store, .jobs = jobs, .start_time = start};
+    vx_http_desc hd = {.cfg = &cfg,
+                       .store = store,
+                       .jobs = jobs,
+                       .start_time = start,
+                       .gpu_refused = soft ? &refused : NULL};
     vx_http *http = vx_http_start(&hd, &err);
     if (!http) {
         VX_ERROR("voxeld.fatal", "stage=http code=%s message=\"%s\"", err.code, err.message);
@@ -234,8 +269,9 @@ int main(int argc, char **argv)
         return 1;
     }
     __atomic_store_n(&g_http, http, __ATOMIC_RELEASE);
-    sd_notifyf(0, "READY=1\nSTATUS=serving on %s (port %d), GL: %s", cfg.listen, vx_http_port(http),
-               gi.renderer);
+    sd_notifyf(0, "READY=1\nSTATUS=serving on %s (port %d), GL: %s%s", cfg.listen,
+               vx_http_port(http), gi.renderer,
+               soft ? " (software: --require-gpu refuses it, no job runs)" : "");
     VX_INFO("voxeld.ready", "port=%d", vx_http_port(http));
 
     serve_until_signal(&sigs, store, jobs);

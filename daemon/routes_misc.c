@@ -1,6 +1,7 @@
 /* Probes (/livez, /readyz), /metrics, /v1/info and the data dir's free
  * space that /readyz and every write check. */
 #include <math.h>
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -28,22 +29,57 @@ int vx_route_livez(vx_http *h, struct MHD_Connection *c, req *r)
     return vx_resp_text(c, r, 200, strdup("{\"status\":\"ok\"}"), "application/json", NULL, NULL);
 }
 
+/* The GL info /v1/info and /metrics show: the refused software renderer's
+ * under --require-gpu (the runner never started), else the runner's. */
+static vx_gl_info shown_gl_info(vx_http *h)
+{
+    return h->d.gpu_refused ? *h->d.gpu_refused : vx_jobs_gl_info(h->d.jobs);
+}
+
+void vx_route_not_ready_reason(vx_http *h, char *out, size_t n)
+{
+    if (h->d.gpu_refused)
+        snprintf(out, n,
+                 "--require-gpu is set and the GL renderer \"%s\" is a software one: no job runs "
+                 "here (is the GPU visible to EGL? NVIDIA needs NVIDIA_DRIVER_CAPABILITIES to "
+                 "include graphics)",
+                 h->d.gpu_refused->renderer);
+    else if (h->stopping)
+        snprintf(out, n, "the daemon is shutting down");
+    else if (!vx_jobs_ready(h->d.jobs))
+        snprintf(out, n, "the GL context is not up (starting, stopping or being rebuilt)");
+    else
+        snprintf(out, n, "the daemon is not ready");
+}
+
 int vx_route_readyz(vx_http *h, struct MHD_Connection *c, req *r)
 {
     int gl = vx_jobs_ready(h->d.jobs);
+    int gpu = !h->d.gpu_refused;
     size_t depth = vx_jobs_queue_depth(h->d.jobs), cap = vx_jobs_queue_capacity(h->d.jobs);
     int dd = vx_store_writable(h->d.store);
     int space = vx_route_disk_ok(h, NULL);
     /* A full queue is backpressure (429 + Retry-After), not unreadiness. */
-    int ok = gl && dd && space && !h->stopping;
+    int ok = gl && gpu && dd && space && !h->stopping;
     cJSON *doc = cJSON_CreateObject();
     cJSON_AddStringToObject(doc, "status", ok ? "ready" : "not_ready");
+    if (!ok) {
+        char why[600];
+        if (gl && gpu && !h->stopping)
+            snprintf(why, sizeof why, "%s",
+                     !dd ? "the data directory is not writable"
+                         : "the data directory has less free space than --min-free-disk");
+        else
+            vx_route_not_ready_reason(h, why, sizeof why);
+        cJSON_AddStringToObject(doc, "reason", why);
+    }
     cJSON *q = cJSON_AddObjectToObject(doc, "queue");
     cJSON_AddNumberToObject(q, "depth", (double)depth);
     cJSON_AddNumberToObject(q, "capacity", (double)cap);
     cJSON_AddBoolToObject(q, "full", depth >= cap);
     cJSON *chk = cJSON_AddObjectToObject(doc, "checks");
     cJSON_AddBoolToObject(chk, "gl", gl);
+    cJSON_AddBoolToObject(chk, "gpu", gpu);
     cJSON_AddBoolToObject(chk, "data_dir", dd);
     cJSON_AddBoolToObject(chk, "disk_space", space);
     return vx_resp_json(c, r, ok ? 200 : 503, doc, NULL, NULL);
@@ -60,7 +96,7 @@ int vx_route_metrics(vx_http *h, struct MHD_Connection *c, req *r)
         .disk_free_bytes = vx_route_disk_free(h),
         .min_free_disk = h->d.cfg->min_free_disk,
         .ready = vx_jobs_ready(h->d.jobs),
-        .gl = vx_jobs_gl_info(h->d.jobs),
+        .gl = shown_gl_info(h),
         .start_time = h->d.start_time,
         .evictions = vx_store_results_evicted(h->d.store),
         .gl_context_loss = vx_jobs_gl_losses(h->d.jobs),
@@ -72,7 +108,7 @@ int vx_route_metrics(vx_http *h, struct MHD_Connection *c, req *r)
 int vx_route_info(vx_http *h, struct MHD_Connection *c, req *r)
 {
     const vx_config *cfg = h->d.cfg;
-    vx_gl_info gi = vx_jobs_gl_info(h->d.jobs);
+    vx_gl_info gi = shown_gl_info(h);
     cJSON *doc = cJSON_CreateObject();
     cJSON_AddStringToObject(doc, "name", "voxeld");
     cJSON_AddStringToObject(doc, "version", VX_VERSION);

@@ -88,4 +88,10 @@ if [[ "$mode" != --run ]]; then
   # The OpenAPI linter at the version package-lock.json pins, into
   # tools/redocly/node_modules (git-ignored), not globally.
   npm ci --prefix "$(dirname "$0")/../tools/redocly" --no-audit --no-fund --loglevel=error
+  # tests/deploy/test_kubernetes.sh: the Kubernetes and KEDA schemas the
+  # rendered deploy/kubernetes overlays are checked against, offline. The
+  # rendering needs kubectl with Kustomize v4+ (or a standalone kustomize),
+  # which Debian 12 does not package (its kubernetes-client 1.20 has
+  # Kustomize v2): without one the test is skipped.
+  npm ci --prefix "$(dirname "$0")/../tools/k8s-validate" --no-audit --no-fund --loglevel=error
 fi

@@ -628,6 +628,15 @@ void vx_gl_free(vx_gl *gl)
     free(gl);
 }
 
+int vx_gl_info_software(const vx_gl_info *info)
+{
+    static const char *const soft[] = {"llvmpipe", "softpipe", "swrast"};
+    if (!strcmp(info->device_kind, "software")) return 1;
+    for (size_t i = 0; i < sizeof soft / sizeof soft[0]; i++)
+        if (strcasestr(info->renderer, soft[i])) return 1;
+    return 0;
+}
+
 const vx_gl_info *vx_gl_get_info(const vx_gl *gl)
 {
     return &gl->info;

@@ -55,6 +55,10 @@ vx_gl *vx_gl_new(const vx_gl_desc *desc, vx_err *err);
  * (it is shared per device and process; a later vx_gl_new reuses it). */
 void vx_gl_free(vx_gl *gl);
 const vx_gl_info *vx_gl_get_info(const vx_gl *gl);
+/* Nonzero when the context renders on the CPU: Mesa's software EGL device,
+ * or a GL_RENDERER naming a software rasterizer (llvmpipe, softpipe,
+ * swrast; the surfaceless platform falls back to them). Any thread. */
+int vx_gl_info_software(const vx_gl_info *info);
 
 /* 1 when the context was lost (glGetGraphicsResetStatus), else 0. */
 int vx_gl_lost(vx_gl *gl);

@@ -27,6 +27,7 @@ static void test_env_sets_every_kind(void **state)
     setenv("VOXELD_GL_DEBUG", "no", 1);
     setenv("VOXELD_LOG_LEVEL", "debug", 1);
     setenv("VOXELD_MAX_EVENT_STREAMS", "7", 1);
+    setenv("VOXELD_REQUIRE_GPU", "yes", 1);
     vx_config c;
     char *argv[] = {"voxeld", NULL};
     assert_int_equal(load(&c, 1, argv), 0);
@@ -37,11 +38,14 @@ static void test_env_sets_every_kind(void **state)
     assert_int_equal(c.gl_debug, 0);
     assert_int_equal(c.log_level, VX_LOG_DEBUG);
     assert_int_equal(c.max_event_streams, 7);
+    assert_int_equal(c.require_gpu, 1);
     /* A flag wins over its variable. */
-    char *argv2[] = {"voxeld", "--listen", "127.0.0.1:0", "--max-event-streams", "9", NULL};
-    assert_int_equal(load(&c, 5, argv2), 0);
+    char *argv2[] = {"voxeld", "--listen",      "127.0.0.1:0", "--max-event-streams",
+                     "9",      "--require-gpu", "no",          NULL};
+    assert_int_equal(load(&c, 7, argv2), 0);
     assert_string_equal(c.listen, "127.0.0.1:0");
     assert_int_equal(c.max_event_streams, 9);
+    assert_int_equal(c.require_gpu, 0);
     assert_int_equal(c.max_upload_bytes, 2u << 20);
     unsetenv("VOXELD_LISTEN");
     unsetenv("VOXELD_MAX_UPLOAD_BYTES");
@@ -50,8 +54,10 @@ static void test_env_sets_every_kind(void **state)
     unsetenv("VOXELD_GL_DEBUG");
     unsetenv("VOXELD_LOG_LEVEL");
     unsetenv("VOXELD_MAX_EVENT_STREAMS");
+    unsetenv("VOXELD_REQUIRE_GPU");
     assert_int_equal(load(&c, 1, argv), 0);
     assert_string_equal(c.listen, "127.0.0.1:8080");
+    assert_int_equal(c.require_gpu, 0); /* off by default */
     assert_int_equal(c.max_event_streams, 64);
 }
 

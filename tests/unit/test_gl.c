@@ -79,6 +79,40 @@ static void test_info(void **state)
     assert_int_equal(vx_gl_lost(g_gl), 0);
 }
 
+/* --require-gpu's test: Mesa's software rasterizers by name (any case) or
+ * the software EGL device; GPU renderers and the surfaceless platform on
+ * a GPU are not software. */
+static void test_info_software(void **state)
+{
+    static const struct {
+        const char *kind, *renderer;
+        int soft;
+    } cases[] = {
+        {"software", "llvmpipe (LLVM 15.0.6, 256 bits)", 1},
+        {"software", "", 1},
+        {"surfaceless", "llvmpipe (LLVM 15.0.6, 256 bits)", 1},
+        {"", "Gallium 0.4 on softpipe", 1},
+        {"hardware", "Mesa X11 SWRAST", 1},
+        {"other", "LLVMPIPE", 1},
+        {"nvidia", "NVIDIA H100 80GB HBM3/PCIe/SSE2", 0},
+        {"hardware", "AMD Radeon RX 7900 XTX (radeonsi, navi31, LLVM 15.0.6)", 0},
+        {"surfaceless", "Mesa Intel(R) UHD Graphics 630 (CFL GT2)", 0},
+        {"", "", 0},
+    };
+    for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
+        vx_gl_info in;
+        memset(&in, 0, sizeof in);
+        snprintf(in.device_kind, sizeof in.device_kind, "%s", cases[i].kind);
+        snprintf(in.renderer, sizeof in.renderer, "%s", cases[i].renderer);
+        assert_int_equal(vx_gl_info_software(&in), cases[i].soft);
+    }
+    /* The context this file made: software exactly when its device is
+     * Mesa's software one or its renderer is llvmpipe. */
+    const vx_gl_info *cur = vx_gl_get_info(g_gl);
+    int expect = !strcmp(cur->device_kind, "software") || strstr(cur->renderer, "llvmpipe");
+    assert_int_equal(vx_gl_info_software(cur), expect);
+}
+
 /* Runs shaders/test_fill.comp with a 2-D dispatch and checks every value. */
 static void run_fill(GLuint prog)
 {
@@ -337,6 +371,7 @@ int main(void)
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_list_devices),
         cmocka_unit_test(test_info),
+        cmocka_unit_test(test_info_software),
         cmocka_unit_test(test_compute),
         cmocka_unit_test(test_preview_program_builds),
         cmocka_unit_test(test_missing_shader),
