@@ -169,7 +169,7 @@ for o in "${OVERLAYS[@]}"; do
         check "$o: it scales the Deployment" q "$o" \
             "($DEPLOY | .metadata.name) as \$d | $SO | .spec.scaleTargetRef | .name == \$d and .kind == \"Deployment\""
         check "$o: one postgresql trigger counting queued + running jobs" q "$o" \
-            "$SO | .spec.triggers | length == 1 and .[0].type == \"postgresql\" and (.[0].metadata.query | test(\"FROM jobs\") and test(\"state\") and test(\"'queued'\") and test(\"'running'\")) and (.[0].metadata.targetQueryValue | tonumber > 0)"
+            "$SO | .spec.triggers | length == 1 and .[0].type == \"postgresql\" and (.[0].metadata.query | test(\"FROM vx_jobs \") and test(\"state\") and test(\"'queued'\") and test(\"'running'\")) and (.[0].metadata.targetQueryValue | tonumber > 0)"
         check "$o: the trigger's connectionFromEnv comes from a Secret the container reads" q "$o" \
             ". as \$all | ($SO | .spec.triggers[0].metadata.connectionFromEnv) as \$e | $CTR | [.envFrom[]?.secretRef.name // empty] | any(. as \$n | \$all[] | select(.kind == \"Secret\" and .metadata.name == \$n) | .data[\$e] != null)"
         for k in VOXELD_DATABASE AWS_ACCESS_KEY_ID AWS_SECRET_ACCESS_KEY; do
