@@ -84,4 +84,7 @@ if [[ "$mode" != --run ]]; then
   # The OpenAPI linter at the version package-lock.json pins, into
   # tools/redocly/node_modules (git-ignored), not globally.
   npm ci --prefix "$(dirname "$0")/../tools/redocly" --no-audit --no-fund --loglevel=error
+  # The S3 server tests/integration/test_blob_s3.sh starts (s3rver), pinned
+  # by tools/s3rver/package-lock.json, into tools/s3rver/node_modules.
+  npm ci --prefix "$(dirname "$0")/../tools/s3rver" --no-audit --no-fund --loglevel=error
 fi

@@ -66,7 +66,8 @@ vx_store *vx_store_open(const char *data_dir, const vx_store_desc *desc, vx_err 
     pthread_mutex_init(&s->lock, NULL);
     /* The dir and its lock before anything in it is touched; then the byte
      * store's namespaces, and DATA/tmp (uploads in flight, always local). */
-    if (vx_mkdirs(s->dir, err) || lock_dir(s, err) || !(s->blob = s->ops->open(s->dir, err)) ||
+    if (vx_mkdirs(s->dir, err) || lock_dir(s, err) ||
+        !(s->blob = s->ops->open(s->dir, s->desc.blob_conf, err)) ||
         s->ops->make_prefix(s->blob, "meshes", err) ||
         s->ops->make_prefix(s->blob, "results", err)) {
         vx_store_close(s);
@@ -101,6 +102,16 @@ void vx_store_close(vx_store *s)
     pthread_mutex_destroy(&s->lock);
     if (s->lock_fd >= 0) close(s->lock_fd); /* drops the flock */
     free(s);
+}
+
+const char *vx_store_backend(const vx_store *s)
+{
+    return s->ops->name;
+}
+
+int vx_store_reachable(vx_store *s)
+{
+    return !s->ops->ping || s->ops->ping(s->blob);
 }
 
 const char *vx_store_dir(const vx_store *s)

@@ -54,7 +54,7 @@ static void test_local_contract(void **state)
 {
     vx_err err;
     const vx_blob_ops *o = &vx_blob_local;
-    vx_blob *b = o->open(dir, &err);
+    vx_blob *b = o->open(dir, NULL, &err);
     assert_non_null(b);
     assert_int_equal(o->make_prefix(b, "ns", &err), 0);
     /* stage: durable but under no key; put_file names it */
@@ -108,12 +108,12 @@ static void test_local_contract(void **state)
 }
 
 /* The local backend rooted at <where>/alt: a stand-in for a remote one. */
-static vx_blob *alt_open(const char *where, vx_err *err)
+static vx_blob *alt_open(const char *where, const vx_blob_conf *conf, vx_err *err)
 {
     char p[4096];
     snprintf(p, sizeof p, "%s/alt", where);
     if (vx_mkdirs(p, err)) return NULL;
-    return vx_blob_local.open(p, err);
+    return vx_blob_local.open(p, conf, err);
 }
 
 static void test_store_uses_backend(void **state)
