@@ -301,8 +301,8 @@ static int s3_do(vx_blob *b, s3_req *r)
     curl_easy_setopt(h, CURLOPT_AWS_SIGV4, b->sigv4);
     curl_easy_setopt(h, CURLOPT_USERPWD, b->userpwd);
     curl_easy_setopt(h, CURLOPT_NOSIGNAL, 1L);
-    curl_easy_setopt(h, CURLOPT_CONNECTTIMEOUT_MS, r->once && b->timeout_ms > 2000 ? 2000L
-                                                                                     : b->timeout_ms);
+    curl_easy_setopt(h, CURLOPT_CONNECTTIMEOUT_MS,
+                     r->once && b->timeout_ms > 2000 ? 2000L : b->timeout_ms);
     /* No overall limit (a big object takes its time), but no stall longer
      * than the timeout. */
     curl_easy_setopt(h, CURLOPT_LOW_SPEED_LIMIT, 1L);
@@ -345,8 +345,8 @@ static int s3_do(vx_blob *b, s3_req *r)
         e = s3_errno(rc, status);
         if (e != EAGAIN || attempt >= tries) {
             if (e)
-                VX_WARN("blob.s3_failed", "method=%s key=%s status=%ld curl=%d tries=%d",
-                        r->method, r->key ? r->key : "", status, (int)rc, attempt + 1);
+                VX_WARN("blob.s3_failed", "method=%s key=%s status=%ld curl=%d tries=%d", r->method,
+                        r->key ? r->key : "", status, (int)rc, attempt + 1);
             break;
         }
         long ms = 100L << (attempt < 5 ? attempt : 5);
@@ -454,7 +454,8 @@ static void set_dirty(vx_blob *b, const char *prefix, int on)
                 b->capdirty = cap;
             }
         }
-        if (b->ndirty < b->capdirty) snprintf(b->dirty[b->ndirty++], sizeof b->dirty[0], "%s", prefix);
+        if (b->ndirty < b->capdirty)
+            snprintf(b->dirty[b->ndirty++], sizeof b->dirty[0], "%s", prefix);
     } else if (!on && i >= 0) {
         memcpy(b->dirty[i], b->dirty[--b->ndirty], sizeof b->dirty[0]);
     }
@@ -603,8 +604,9 @@ static int s3_list(vx_blob *b, const char *prefix, int delim, list_fn fn, void *
     size_t skip = strlen(b->prefix), plen = strlen(full);
     for (;;) {
         uri_encode(token, tenc, sizeof tenc);
-        snprintf(q, sizeof q, "%s%s%s%slist-type=2&prefix=%s", token[0] ? "continuation-token=" : "",
-                 token[0] ? tenc : "", token[0] ? "&" : "", delim ? "delimiter=%2F&" : "", enc);
+        snprintf(q, sizeof q, "%s%s%s%slist-type=2&prefix=%s",
+                 token[0] ? "continuation-token=" : "", token[0] ? tenc : "", token[0] ? "&" : "",
+                 delim ? "delimiter=%2F&" : "", enc);
         s3_req r = {.method = "GET", .key = NULL, .query = q, .in_fd = -1, .out_fd = -1};
         if (s3_do(b, &r)) {
             free(r.mem);
@@ -788,7 +790,8 @@ static int upload_fd(vx_blob *b, const char *key, int fd, uint64_t size)
         snprintf(doc + o, cap - o, "</CompleteMultipartUpload>");
         char q[3200];
         snprintf(q, sizeof q, "uploadId=%s", enc);
-        s3_req r = {.method = "POST", .key = key, .query = q, .post = doc, .in_fd = -1, .out_fd = -1};
+        s3_req r = {
+            .method = "POST", .key = key, .query = q, .post = doc, .in_fd = -1, .out_fd = -1};
         rc = s3_do(b, &r);
         e = errno;
         /* S3 may answer 200 with an error document. */
@@ -799,7 +802,8 @@ static int upload_fd(vx_blob *b, const char *key, int fd, uint64_t size)
     if (rc) {
         char q[3200];
         snprintf(q, sizeof q, "uploadId=%s", enc);
-        s3_req r = {.method = "DELETE", .key = key, .query = q, .in_fd = -1, .out_fd = -1, .once = 1};
+        s3_req r = {
+            .method = "DELETE", .key = key, .query = q, .in_fd = -1, .out_fd = -1, .once = 1};
         s3_do(b, &r);
         free(r.mem);
         errno = e;

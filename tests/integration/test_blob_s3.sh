@@ -95,10 +95,15 @@ check "answered within 20 s ($((t1 - t0)) s)" test $((t1 - t0)) -lt 20
 api GET /readyz
 expect_status "readyz while the bucket is down" 503
 check "readyz says the blob store is not ok" jq -e '.blob_store.ok == false' "$BODY"
+api GET "/v1/jobs/$JOB/result"
+expect_status "result download while the bucket is down" 503
+check "its 503 has Retry-After" test -n "$(header Retry-After)"
 check "daemon still alive" kill -0 "$PID"
 start_s3 || exit 1
 api GET /readyz
 expect_status "readyz after the bucket is back" 200
+api GET "/v1/jobs/$JOB/result"
+check "result served again after the outage" cmp -s "$BODY" "$TMP/result1"
 upload "$TMP/box2.obj"
 expect_status "upload after the bucket is back" 201
 
