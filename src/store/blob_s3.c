@@ -292,7 +292,8 @@ static int s3_do(vx_blob *b, s3_req *r)
     }
     struct curl_slist *hd = NULL;
     hd = curl_slist_append(hd, "x-amz-content-sha256: UNSIGNED-PAYLOAD");
-    hd = curl_slist_append(hd, "Expect:");
+    /* No header may be blanked here ("Expect:"): curl 7.88 signs every
+     * header of this list, also one that it then does not send. */
     if (b->token_hdr[0]) hd = curl_slist_append(hd, b->token_hdr);
     if (r->hdr) hd = curl_slist_append(hd, r->hdr);
     if (r->post) hd = curl_slist_append(hd, "Content-Type: application/xml");

@@ -170,14 +170,15 @@ static int load_name(const char *name, void *ud)
     return 0;
 }
 
-void vx_store_load_meshes(vx_store *s)
+int vx_store_load_meshes(vx_store *s)
 {
     /* Pass 0: metadata; 1: tombstones of deleted meshes (vx_store_collect
      * removes those no unfinished job pins); 2: data files without either. */
     for (int pass = 0; pass < 3; pass++) {
         load_pass lp = {s, pass};
-        if (s->ops->list(s->blob, "meshes", load_name, &lp)) return;
+        if (s->ops->list(s->blob, "meshes", load_name, &lp)) return -1;
     }
+    return 0;
 }
 
 /* Upload u has the bytes of deleted mesh `at`, whose file jobs still hold:

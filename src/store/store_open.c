@@ -80,8 +80,16 @@ vx_store *vx_store_open(const char *data_dir, const vx_store_desc *desc, vx_err 
         vx_store_close(s);
         return NULL;
     }
-    vx_store_load_meshes(s);
-    vx_store_load_results(s);
+    /* A shared store that cannot be listed would leave this daemon with an
+     * empty index it never reloads: refuse to start instead (a supervisor
+     * retries). The data dir has always been listable. */
+    if ((vx_store_load_meshes(s) || vx_store_load_results(s)) && s->ops->shared) {
+        int e = errno;
+        vx_err_set(err, vx_err_io_kind(e), "blob_store_unreachable",
+                   "cannot list the %s blob store: %s", s->ops->name, strerror(e));
+        vx_store_close(s);
+        return NULL;
+    }
     VX_INFO("store.open", "dir=%s meshes=%zu results=%zu results_bytes=%llu", s->dir, s->meshes.n,
             s->nresults, (unsigned long long)s->results_bytes);
     return s;

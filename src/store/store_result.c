@@ -60,9 +60,9 @@ static int load_result(const char *name, void *ud)
     return 0;
 }
 
-void vx_store_load_results(vx_store *s)
+int vx_store_load_results(vx_store *s)
 {
-    s->ops->list(s->blob, "results", load_result, s);
+    return s->ops->list(s->blob, "results", load_result, s);
 }
 
 /* Drops jid's entry from the budget; caller holds the lock. */

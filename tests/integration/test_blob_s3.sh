@@ -126,4 +126,18 @@ OBJ=$(find "$S3DIR/vx-bucket/voxeld/a/meshes" -name "$BIG.obj*" -type f -size +1
 if [[ -z "$OBJ" ]]; then OBJ=$(find "$S3DIR/vx-bucket/voxeld/a/meshes" -path "*$BIG.obj*" -type f -size +1M | head -n 1); fi
 check "s3rver's stored object equals the input" cmp -s "$OBJ" "$TMP/big.obj"
 stop_daemon
+
+# The credentials reach the server: an unknown access key is refused, and
+# a daemon that cannot list the bucket does not start (an empty index it
+# would never reload). (s3rver checks a V4 request's access key, not its
+# signature: test_sigv4 checks the signing against AWS's vectors.)
+sed -i 's/^aws_access_key_id = .*/aws_access_key_id = NOBODY/' "$TMP/creds"
+"$VOXELD" --listen 127.0.0.1:0 --data-dir "$TMP/data3" "${FLAGS[@]}" 2>"$TMP/bad.log"
+check "a daemon that cannot list the bucket exits ($?)" test $? -ne 0
+check "saying why" grep -q 'blob_store_unreachable' "$TMP/bad.log"
+check "the server refused the key" grep -q 'event=blob.s3_failed.*status=403' "$TMP/bad.log"
+stop_s3
+sed -i 's/^aws_access_key_id = .*/aws_access_key_id = S3RVER/' "$TMP/creds"
+"$VOXELD" --listen 127.0.0.1:0 --data-dir "$TMP/data3" "${FLAGS[@]}" 2>"$TMP/down.log"
+check "nor with the bucket down ($?)" test $? -ne 0
 finish
