@@ -476,8 +476,11 @@ typedef struct walk {
     uint64_t total;
 } walk;
 
+/* Copies used this recently stay (path() has just handed them out). */
+#define S3_CACHE_GRACE_S 5.0
+
 /* Collects the evictable copies under dir (rel: its key): not staged
- * objects, not dirty result prefixes. */
+ * objects, not dirty result prefixes, not copies used in the grace time. */
 static void walk_dir(walk *w, const char *dir, const char *rel)
 {
     if (rel[0] && dirty_find_locked(w->b, rel) >= 0) return;
@@ -503,11 +506,13 @@ static void walk_dir(walk *w, const char *dir, const char *rel)
             w->v = m;
             w->cap = cap;
         }
+        double mt = (double)st.st_mtim.tv_sec + st.st_mtim.tv_nsec * 1e-9;
+        w->total += (uint64_t)st.st_size;
+        if (vx_now() - mt < S3_CACHE_GRACE_S) continue;
         cached *c = &w->v[w->n];
         if (!(c->path = strdup(p))) break;
-        c->mtime = (double)st.st_mtim.tv_sec + st.st_mtim.tv_nsec * 1e-9;
+        c->mtime = mt;
         c->bytes = (uint64_t)st.st_size;
-        w->total += c->bytes;
         w->n++;
     }
     closedir(d);

@@ -127,6 +127,24 @@ if [[ -z "$OBJ" ]]; then OBJ=$(find "$S3DIR/vx-bucket/voxeld/a/meshes" -path "*$
 check "s3rver's stored object equals the input" cmp -s "$OBJ" "$TMP/big.obj"
 stop_daemon
 
+# A cache budget of 1 byte: copies older than the grace time (5 s) are
+# evicted when another one comes in; an evicted mesh is fetched again.
+DATA=$TMP/data4
+start_daemon "${FLAGS[@]}" --blob-cache-max-bytes 1 || exit 1
+api GET "/v1/meshes/$BOX/file"
+check "mesh served with a tiny cache" cmp -s "$BODY" "$TMP/box.obj"
+CACHED=$(find "$DATA/blobcache" -name "$BOX.obj")
+check "and cached" test -n "$CACHED"
+sleep 6
+box_obj "$TMP/box4.obj" 0 0 0 4 4 1
+upload "$TMP/box4.obj"
+expect_status "upload with a tiny cache" 201
+check "the older copy was evicted" test ! -e "$CACHED"
+check "the eviction was logged" grep -q 'event=blob.cache_evicted' "$TMP/daemon.log"
+api GET "/v1/meshes/$BOX/file"
+check "an evicted mesh is fetched again" cmp -s "$BODY" "$TMP/box.obj"
+stop_daemon
+
 # The credentials reach the server: an unknown access key is refused, and
 # a daemon that cannot list the bucket does not start (an empty index it
 # would never reload). (s3rver checks a V4 request's access key, not its

@@ -124,7 +124,7 @@ static void signed_request(const char *method, const char *target, char *auth, s
 }
 
 #define SUITE_PREFIX                                                                               \
-    "AWS4-HMAC-SHA256 Credential=AKIDEXAMPLE/20150830/us-east-1/service/aws4_request, "           \
+    "AWS4-HMAC-SHA256 Credential=AKIDEXAMPLE/20150830/us-east-1/service/aws4_request, "            \
     "SignedHeaders=host;x-amz-date, Signature="
 
 /* get-vanilla: GET / */
