@@ -50,12 +50,13 @@ static int add_name(const char *name, void *ud)
     return 0;
 }
 
-static void test_local_contract(void **state)
+/* The contract on backend o opened as conf says; keys land under root. */
+static void contract(const vx_blob_ops *o, const vx_blob_conf *conf)
 {
     vx_err err;
-    const vx_blob_ops *o = &vx_blob_local;
-    vx_blob *b = o->open(dir, NULL, &err);
+    vx_blob *b = o->open(dir, conf, &err);
     assert_non_null(b);
+    assert_int_equal(o->ping(b), 0); /* no meshes namespace yet */
     assert_int_equal(o->make_prefix(b, "ns", &err), 0);
     /* stage: durable but under no key; put_file names it */
     char tmp[4096];
@@ -104,7 +105,89 @@ static void test_local_contract(void **state)
     assert_int_equal(access(path, R_OK), 0);
     assert_int_equal(o->remove_prefix(b, "ns/p"), 0);
     assert_int_equal(o->stat(b, "ns/p", NULL, NULL), -1);
+    assert_int_equal(o->make_prefix(b, "meshes", &err), 0);
+    assert_int_equal(o->ping(b), 1);
     o->close(b);
+}
+
+static void test_local_contract(void **state)
+{
+    contract(&vx_blob_local, NULL);
+    assert_true(exists("%s", "ns"));
+}
+
+/* file:///DIR: the same contract rooted at DIR, the data dir untouched; a
+ * file from another dir is copied in when rename cannot (EXDEV). */
+static void test_file_contract(void **state)
+{
+    char url[600];
+    snprintf(url, sizeof url, "file://%s/shared", dir);
+    vx_blob_conf conf = {.url = url};
+    contract(&vx_blob_file, &conf);
+    assert_true(exists("%s", "shared/ns"));
+    assert_false(exists("%s", "ns"));
+    assert_int_equal(vx_blob_file.shared, 1);
+    assert_int_equal(vx_blob_local.shared, 0);
+    vx_err err;
+    /* An upload on another file system (tmpfs here, where it is another
+     * one): copied in and fsync'd, the source gone. */
+    char src[] = "/dev/shm/vx-blob-src-XXXXXX";
+    int fd = mkstemp(src);
+    if (fd >= 0) {
+        assert_int_equal(write(fd, "xyz", 3), 3);
+        close(fd);
+        vx_blob *b = vx_blob_file.open(dir, &conf, &err);
+        assert_non_null(b);
+        assert_int_equal(vx_blob_file.make_prefix(b, "meshes", &err), 0);
+        assert_int_equal(vx_blob_file.put_file(b, src, "meshes/m"), 0);
+        assert_int_equal(access(src, F_OK), -1);
+        size_t n = 0;
+        char *t = vx_blob_file.read(b, "meshes/m", 100, &n, &err);
+        assert_non_null(t);
+        assert_string_equal(t, "xyz");
+        free(t);
+        vx_blob_file.close(b);
+    }
+    vx_blob_conf rel = {.url = "file://relative"};
+    assert_null(vx_blob_file.open(dir, &rel, &err));
+    assert_string_equal(err.code, "bad_blob_store");
+}
+
+static void test_backend_of_url(void **state)
+{
+    vx_err err;
+    assert_ptr_equal(vx_blob_backend(NULL, &err), &vx_blob_local);
+    assert_ptr_equal(vx_blob_backend("", &err), &vx_blob_local);
+    assert_ptr_equal(vx_blob_backend("file:///x", &err), &vx_blob_file);
+    assert_ptr_equal(vx_blob_backend("s3://b/p", &err), &vx_blob_s3);
+    assert_null(vx_blob_backend("ftp://x", &err));
+    assert_string_equal(err.code, "bad_blob_store");
+    /* s3 refuses bad URLs and missing credentials before any request. */
+    unsetenv("AWS_ACCESS_KEY_ID");
+    unsetenv("AWS_SECRET_ACCESS_KEY");
+    vx_blob_conf c = {.url = "s3://bucket/p?endpoint=http://127.0.0.1:9"};
+    assert_null(vx_blob_s3.open(dir, &c, &err));
+    assert_string_equal(err.code, "bad_blob_credentials");
+    setenv("AWS_ACCESS_KEY_ID", "AK", 1);
+    setenv("AWS_SECRET_ACCESS_KEY", "SK", 1);
+    vx_blob_conf bad = {.url = "s3://b?endpoint=http://127.0.0.1:9"};
+    assert_null(vx_blob_s3.open(dir, &bad, &err)); /* a bucket name of 1 letter */
+    assert_string_equal(err.code, "bad_blob_store");
+    vx_blob_conf ftp = {.url = "s3://bucket?endpoint=ftp://x"};
+    assert_null(vx_blob_s3.open(dir, &ftp, &err));
+    vx_blob_conf small = {.url = "s3://bucket?endpoint=http://127.0.0.1:9", .part_size = 1 << 20};
+    assert_null(vx_blob_s3.open(dir, &small, &err));
+    /* Nothing listens on port 9: opening works (no request yet), the ping
+     * fails at once, and an op fails with EAGAIN, not a hang. */
+    vx_blob_conf ok = {.url = "s3://bucket/p?endpoint=http://127.0.0.1:9", .retries = -1};
+    vx_blob *b = vx_blob_s3.open(dir, &ok, &err);
+    assert_non_null(b);
+    assert_int_equal(vx_blob_s3.ping(b), 0);
+    assert_int_equal(vx_blob_s3.stat(b, "meshes/x", NULL, NULL), -1);
+    assert_int_equal(errno, EAGAIN);
+    vx_blob_s3.close(b);
+    unsetenv("AWS_ACCESS_KEY_ID");
+    unsetenv("AWS_SECRET_ACCESS_KEY");
 }
 
 /* The local backend rooted at <where>/alt: a stand-in for a remote one. */
@@ -180,6 +263,8 @@ int main(void)
 {
     const struct CMUnitTest tests[] = {
         cmocka_unit_test_setup_teardown(test_local_contract, setup, teardown),
+        cmocka_unit_test_setup_teardown(test_file_contract, setup, teardown),
+        cmocka_unit_test_setup_teardown(test_backend_of_url, setup, teardown),
         cmocka_unit_test_setup_teardown(test_store_uses_backend, setup, teardown),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
