@@ -127,9 +127,9 @@ static int s3_config(vx_blob *b, const vx_blob_conf *conf, vx_err *err)
         size_t n = plen - blen - 1;
         while (n && slash[n] == '/')
             n--;
-        if (n + 2 >= sizeof b->prefix || strstr(slash + 1, ".."))
+        if (n + 2 >= sizeof b->prefix || strstr(slash + 1, "..") || memmem(slash, n + 1, "//", 2))
             return vx_err_set(err, VX_EINVAL, "bad_blob_store", "s3:// prefix too long or bad");
-        snprintf(b->prefix, sizeof b->prefix, "%.*s/", (int)n, slash + 1);
+        if (n) snprintf(b->prefix, sizeof b->prefix, "%.*s/", (int)n, slash + 1);
     }
     char endpoint[512] = "", region[64] = "";
     if (query_param(q ? q + 1 : NULL, "endpoint", endpoint, sizeof endpoint) < 0 ||
@@ -699,12 +699,12 @@ static vx_blob *s3_open(const char *data_dir, const vx_blob_conf *conf, vx_err *
         return NULL;
     }
     pthread_mutex_init(&b->lock, NULL);
-    if (!conf || !conf->url || strncmp(conf->url, "s3://", 5) || s3_config(b, conf, err)) {
-        if (conf && conf->url && !strncmp(conf->url, "s3://", 5)) {
-            s3_close(b);
-            return NULL;
-        }
+    if (!conf || !conf->url || strncmp(conf->url, "s3://", 5)) {
         vx_err_set(err, VX_EINVAL, "bad_blob_store", "--blob-store s3:// needs a bucket");
+        s3_close(b);
+        return NULL;
+    }
+    if (s3_config(b, conf, err)) {
         s3_close(b);
         return NULL;
     }

@@ -59,7 +59,9 @@ stop_daemon
 # A fresh data dir over the existing DIR after both stopped: everything is
 # read back, including the results budget.
 DATA=$TMP/data3
-start_daemon --blob-store "file://$SHARED" || exit 1
+export VOXELD_BLOB_STORE="file://$SHARED" # the flag's environment variable
+start_daemon || exit 1
+unset VOXELD_BLOB_STORE
 api GET "/v1/meshes?limit=10"
 check "both meshes listed from DIR" jq -e '[.items[].id] | length == 2' "$BODY"
 api GET /metrics

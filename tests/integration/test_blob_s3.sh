@@ -78,8 +78,7 @@ run_job voxelize "$BOX" '{"resolution":16,"format":"binvox"}'
 job_ok "voxelize of a mesh fetched from the bucket"
 api GET "/v1/jobs/$JOB/result"
 check "same voxelization from the fetched mesh" cmp -s "$BODY" "$TMP/result1"
-check "the mesh was fetched into the cache" test -f "$DATA/blobcache/voxeld/a/meshes/$BOX.obj" -o \
-    -f "$DATA/blobcache/meshes/$BOX.obj"
+check "the mesh was fetched into the cache" test -f "$DATA/blobcache/meshes/$BOX.obj"
 
 # The bucket goes away: writes answer 503 with Retry-After, /readyz turns
 # 503, nothing hangs or crashes; then it comes back and so does the daemon.

@@ -2,7 +2,10 @@
  * signs with) against AWS's published test suite vectors: the Authorization
  * header curl sends is captured by a listener on a free local port and
  * compared with the suite's expected value. Each vector fixes the time with
- * an X-Amz-Date header, which curl signs instead of its clock. */
+ * an X-Amz-Date header, which curl signs instead of its clock. Then the
+ * requests the s3 backend makes (x-amz-content-sha256: UNSIGNED-PAYLOAD, a
+ * sorted encoded query, a streamed PUT body) against a signature computed
+ * here from the specification with nettle, as S3 would check it. */
 #include <setjmp.h>
 #include <stdarg.h>
 #include <stddef.h>
@@ -11,6 +14,8 @@
 
 #include <arpa/inet.h>
 #include <curl/curl.h>
+#include <nettle/hmac.h>
+#include <nettle/sha2.h>
 #include <netinet/in.h>
 #include <pthread.h>
 #include <stdio.h>
@@ -80,7 +85,22 @@ static int header_of(const char *head, const char *name, char *out, size_t n)
 /* Sends method target to example.amazonaws.com (connected to the
  * listener), signed for us-east-1 / "service" with the suite's key pair at
  * the suite's time; returns the Authorization header it carried. */
-static void signed_request(const char *method, const char *target, char *auth, size_t n)
+typedef struct body {
+    const char *p;
+    size_t n, at;
+} body;
+
+static size_t read_body(char *buf, size_t size, size_t nitems, void *ud)
+{
+    body *b = ud;
+    size_t k = size * nitems < b->n - b->at ? size * nitems : b->n - b->at;
+    memcpy(buf, b->p + b->at, k);
+    b->at += k;
+    return k;
+}
+
+static void request(const char *method, const char *target, const char *service, const char *hdr,
+                    const char *upload, char *auth, size_t n)
 {
     listener l;
     listen_any(&l);
@@ -95,15 +115,26 @@ static void signed_request(const char *method, const char *target, char *auth, s
     /* The suite's requests carry only Host and X-Amz-Date (curl's own
      * Accept is not signed; a header named here would be, even empty). */
     struct curl_slist *hd = curl_slist_append(NULL, "X-Amz-Date: 20150830T123600Z");
+    if (hdr) hd = curl_slist_append(hd, hdr);
+    char sigv4[64];
+    snprintf(sigv4, sizeof sigv4, "aws:amz:us-east-1:%s", service);
     curl_easy_setopt(h, CURLOPT_URL, url);
     curl_easy_setopt(h, CURLOPT_CONNECT_TO, to);
     curl_easy_setopt(h, CURLOPT_HTTPHEADER, hd);
-    curl_easy_setopt(h, CURLOPT_AWS_SIGV4, "aws:amz:us-east-1:service");
+    curl_easy_setopt(h, CURLOPT_AWS_SIGV4, sigv4);
     curl_easy_setopt(h, CURLOPT_USERPWD, "AKIDEXAMPLE:wJalrXUtnFEMI/K7MDENG+bPxRfiCYEXAMPLEKEY");
     curl_easy_setopt(h, CURLOPT_NOSIGNAL, 1L);
     curl_easy_setopt(h, CURLOPT_TIMEOUT, 20L);
-    /* No body and no Content-Type, as in the suite's POSTs. */
-    if (strcmp(method, "GET")) curl_easy_setopt(h, CURLOPT_CUSTOMREQUEST, method);
+    body up = {upload, upload ? strlen(upload) : 0, 0};
+    if (upload) { /* streamed, as the backend sends files */
+        curl_easy_setopt(h, CURLOPT_UPLOAD, 1L);
+        curl_easy_setopt(h, CURLOPT_READFUNCTION, read_body);
+        curl_easy_setopt(h, CURLOPT_READDATA, &up);
+        curl_easy_setopt(h, CURLOPT_INFILESIZE_LARGE, (curl_off_t)up.n);
+    } else if (strcmp(method, "GET")) {
+        /* No body and no Content-Type, as in the suite's POSTs. */
+        curl_easy_setopt(h, CURLOPT_CUSTOMREQUEST, method);
+    }
     CURLcode rc = curl_easy_perform(h);
     long status = 0;
     curl_easy_getinfo(h, CURLINFO_RESPONSE_CODE, &status);
@@ -121,6 +152,11 @@ static void signed_request(const char *method, const char *target, char *auth, s
     assert_int_equal(header_of(l.head, "X-Amz-Date", date, sizeof date), 0);
     assert_string_equal(date, "20150830T123600Z");
     assert_int_equal(header_of(l.head, "Authorization", auth, n), 0);
+}
+
+static void signed_request(const char *method, const char *target, char *auth, size_t n)
+{
+    request(method, target, "service", NULL, NULL, auth, n);
 }
 
 #define SUITE_PREFIX                                                                               \
@@ -167,14 +203,84 @@ static void test_post_query(void **state)
                         "28038455d6de14eafc1f9222cf5aa6f1a96197d7deb8263271d420d138af7f11");
 }
 
+static void hex(const uint8_t *d, size_t n, char *out)
+{
+    for (size_t i = 0; i < n; i++)
+        sprintf(out + 2 * i, "%02x", d[i]);
+}
+
+static void hmac(const uint8_t *key, size_t kn, const char *msg, uint8_t out[32])
+{
+    struct hmac_sha256_ctx c;
+    hmac_sha256_set_key(&c, kn, key);
+    hmac_sha256_update(&c, strlen(msg), (const uint8_t *)msg);
+    hmac_sha256_digest(&c, 32, out);
+}
+
+/* The Authorization header for an S3 request whose only signed headers are
+ * host, x-amz-content-sha256 (UNSIGNED-PAYLOAD) and x-amz-date, computed
+ * from the Signature V4 specification. */
+static void expected_s3(const char *method, const char *path, const char *query, char *out,
+                        size_t n)
+{
+    char creq[2048], sts[512], h[65];
+    snprintf(creq, sizeof creq,
+             "%s\n%s\n%s\nhost:example.amazonaws.com\nx-amz-content-sha256:UNSIGNED-PAYLOAD\n"
+             "x-amz-date:20150830T123600Z\n\nhost;x-amz-content-sha256;x-amz-date\n"
+             "UNSIGNED-PAYLOAD",
+             method, path, query);
+    uint8_t d[32];
+    struct sha256_ctx c;
+    sha256_init(&c);
+    sha256_update(&c, strlen(creq), (const uint8_t *)creq);
+    sha256_digest(&c, 32, d);
+    hex(d, 32, h);
+    snprintf(sts, sizeof sts,
+             "AWS4-HMAC-SHA256\n20150830T123600Z\n20150830/us-east-1/s3/aws4_request\n%s", h);
+    const char *secret = "AWS4wJalrXUtnFEMI/K7MDENG+bPxRfiCYEXAMPLEKEY";
+    uint8_t k1[32], k2[32], k3[32], k4[32], sig[32];
+    hmac((const uint8_t *)secret, strlen(secret), "20150830", k1);
+    hmac(k1, 32, "us-east-1", k2);
+    hmac(k2, 32, "s3", k3);
+    hmac(k3, 32, "aws4_request", k4);
+    hmac(k4, 32, sts, sig);
+    hex(sig, 32, h);
+    snprintf(out, n,
+             "AWS4-HMAC-SHA256 Credential=AKIDEXAMPLE/20150830/us-east-1/s3/aws4_request, "
+             "SignedHeaders=host;x-amz-content-sha256;x-amz-date, Signature=%s",
+             h);
+}
+
+/* The backend's requests: curl signs the given payload hash header, not a
+ * hash of the (streamed) body, and the query as given. */
+static void test_s3_requests(void **state)
+{
+    (void)state;
+    const char *payload = "x-amz-content-sha256: UNSIGNED-PAYLOAD";
+    char auth[1024], want[1024];
+    request("GET", "/bucket?delimiter=%2F&list-type=2&prefix=voxeld%2Fmeshes%2F", "s3", payload,
+            NULL, auth, sizeof auth);
+    expected_s3("GET", "/bucket", "delimiter=%2F&list-type=2&prefix=voxeld%2Fmeshes%2F", want,
+                sizeof want);
+    assert_string_equal(auth, want);
+    request("PUT", "/bucket/voxeld/meshes/a.obj?partNumber=2&uploadId=x%2By", "s3", payload,
+            "v 0 0 0\nv 1 0 0\n", auth, sizeof auth);
+    expected_s3("PUT", "/bucket/voxeld/meshes/a.obj", "partNumber=2&uploadId=x%2By", want,
+                sizeof want);
+    assert_string_equal(auth, want);
+    /* The check can fail: another path signs differently. */
+    expected_s3("PUT", "/bucket/voxeld/meshes/b.obj", "partNumber=2&uploadId=x%2By", want,
+                sizeof want);
+    assert_string_not_equal(auth, want);
+}
+
 int main(void)
 {
     curl_global_init(CURL_GLOBAL_DEFAULT);
     const struct CMUnitTest tests[] = {
-        cmocka_unit_test(test_get_vanilla),
-        cmocka_unit_test(test_post_vanilla),
-        cmocka_unit_test(test_get_query),
-        cmocka_unit_test(test_post_query),
+        cmocka_unit_test(test_get_vanilla), cmocka_unit_test(test_post_vanilla),
+        cmocka_unit_test(test_get_query),   cmocka_unit_test(test_post_query),
+        cmocka_unit_test(test_s3_requests),
     };
     int rc = cmocka_run_group_tests(tests, NULL, NULL);
     curl_global_cleanup();
