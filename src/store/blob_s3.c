@@ -308,6 +308,7 @@ static int s3_do(vx_blob *b, s3_req *r)
      * than the timeout. */
     curl_easy_setopt(h, CURLOPT_LOW_SPEED_LIMIT, 1L);
     curl_easy_setopt(h, CURLOPT_LOW_SPEED_TIME, (b->timeout_ms + 999) / 1000);
+    if (r->once) curl_easy_setopt(h, CURLOPT_TIMEOUT_MS, 3000L); /* a probe answers quickly */
     curl_easy_setopt(h, CURLOPT_WRITEFUNCTION, on_write);
     curl_easy_setopt(h, CURLOPT_WRITEDATA, r);
     curl_easy_setopt(h, CURLOPT_HEADERFUNCTION, on_header);
@@ -345,7 +346,10 @@ static int s3_do(vx_blob *b, s3_req *r)
         curl_easy_getinfo(h, CURLINFO_RESPONSE_CODE, &status);
         e = s3_errno(rc, status);
         if (e != EAGAIN || attempt >= tries) {
-            if (e)
+            /* A 404 is an answer (stat of a missing key), not a failure. */
+            if (e == ENOENT)
+                VX_DEBUG("blob.s3_not_found", "method=%s key=%s", r->method, r->key ? r->key : "");
+            else if (e)
                 VX_WARN("blob.s3_failed", "method=%s key=%s status=%ld curl=%d tries=%d", r->method,
                         r->key ? r->key : "", status, (int)rc, attempt + 1);
             break;
@@ -823,7 +827,7 @@ static int upload_path(vx_blob *b, const char *key, const char *src, uint64_t *b
 {
     int fd = open(src, O_RDONLY | O_CLOEXEC);
     if (fd < 0) return -1;
-    struct stat st;
+    struct stat st = {0};
     int rc = fstat(fd, &st) == 0 ? upload_fd(b, key, fd, (uint64_t)st.st_size) : -1;
     int e = errno;
     close(fd);

@@ -105,6 +105,11 @@ api GET "/v1/jobs/$JOB/result"
 check "result served again after the outage" cmp -s "$BODY" "$TMP/result1"
 upload "$TMP/box2.obj"
 expect_status "upload after the bucket is back" 201
+BOX2=$MESH_ID
+check "its object is in the bucket" test -n "$(find "$S3DIR/vx-bucket/voxeld/a/meshes" -name "$BOX2.obj*")"
+api DELETE "/v1/meshes/$BOX2"
+expect_status "delete a mesh on s3" 204
+check "its objects left the bucket" test -z "$(find "$S3DIR/vx-bucket/voxeld/a/meshes" -name "$BOX2.*")"
 
 # Over the part size (5M here): a multipart upload; s3rver's stored object
 # equals the input.
