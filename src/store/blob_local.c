@@ -87,17 +87,7 @@ static int local_stage(vx_blob *b, const char *ns, const void *data, size_t n, c
     if (local_path(b, ns, dir, sizeof dir)) return -1;
     unsigned long seq = atomic_fetch_add(&b->seq, 1) + 1;
     snprintf(tmp, tmpn, "%s/tmp-%s-%lu", dir, b->tag, seq);
-    int fd = open(tmp, O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0640);
-    if (fd < 0) return -1;
-    int e = vx_write_all(fd, data, n) ? errno : 0;
-    if (!e && fsync(fd) != 0) e = errno;
-    if (close(fd) != 0 && !e) e = errno;
-    if (e) {
-        unlink(tmp);
-        errno = e;
-        return -1;
-    }
-    return 0;
+    return vx_write_new(tmp, data, n);
 }
 
 static void local_discard(vx_blob *b, const char *tmp)

@@ -733,17 +733,7 @@ static int s3_stage(vx_blob *b, const char *ns, const void *data, size_t n, char
     if (cache_path(b, ns, dir, sizeof dir) || vx_mkdirs(dir, NULL)) return -1;
     unsigned long seq = atomic_fetch_add(&b->seq, 1) + 1;
     snprintf(tmp, tmpn, "%s/tmp-%lu-%lu", dir, (unsigned long)getpid(), seq);
-    int fd = open(tmp, O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0640);
-    if (fd < 0) return -1;
-    int e = vx_write_all(fd, data, n) ? errno : 0;
-    if (!e && fsync(fd) != 0) e = errno;
-    if (close(fd) != 0 && !e) e = errno;
-    if (e) {
-        unlink(tmp);
-        errno = e;
-        return -1;
-    }
-    return 0;
+    return vx_write_new(tmp, data, n);
 }
 
 static void s3_discard(vx_blob *b, const char *tmp)

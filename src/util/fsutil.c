@@ -293,3 +293,18 @@ int vx_copy_file(const char *src, const char *dst)
     }
     return 0;
 }
+
+int vx_write_new(const char *path, const void *data, size_t n)
+{
+    int fd = open(path, O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0640);
+    if (fd < 0) return -1;
+    int e = vx_write_all(fd, data, n) ? errno : 0;
+    if (!e && fsync(fd) != 0) e = errno;
+    if (close(fd) != 0 && !e) e = errno;
+    if (e) {
+        unlink(path);
+        errno = e;
+        return -1;
+    }
+    return 0;
+}
