@@ -77,6 +77,20 @@ static const opt_def opts[] = {
      "results kept on disk before LRU eviction (default 10G; 0 = no limit)"},
     {"results-max-age", T_SECONDS, F(results_max_age_s), 0,
      "results unused this long are evicted, seconds (default 604800; 0 = never)"},
+    {"blob-store", T_STR, S(blob_store),
+     "where meshes, blobs and results live: file:///DIR (a shared dir) or "
+     "s3://BUCKET/PREFIX?endpoint=URL&region=R (default: the data dir)"},
+    {"blob-credentials", T_STR, S(blob_credentials),
+     "s3: file with aws_access_key_id, aws_secret_access_key[, aws_session_token] "
+     "(default: AWS_* environment)"},
+    {"blob-cache-max-bytes", T_SIZE, F(blob_cache_max_bytes), 0,
+     "s3: local copies kept in DATA/blobcache before LRU eviction (default 10G; 0 = no limit)"},
+    {"blob-part-size", T_SIZE, F(blob_part_size), 0,
+     "s3: objects over this go up in parts of it (default 64M; at least 5M)"},
+    {"blob-timeout", T_SECONDS, F(blob_timeout_s), 0,
+     "s3: connect timeout and longest stall of a transfer, seconds (default 30)"},
+    {"blob-retries", T_SIZE, F(blob_retries), 0,
+     "s3: retries, with backoff, of a request that met a 5xx or connection error (default 3)"},
     {"min-free-disk", T_SIZE, F(min_free_disk), 0,
      "free space the data dir keeps: below it writes answer 507 (default 64M; 0 = only a full "
      "disk)"},
@@ -135,6 +149,10 @@ static void defaults(vx_config *c)
     c->max_parse_memory = UINT64_MAX; /* 8 x max_upload_bytes + 256M, see vx_config_load */
     c->results_max_bytes = 10ull << 30;
     c->results_max_age_s = 7 * 86400;
+    c->blob_cache_max_bytes = 10ull << 30;
+    c->blob_part_size = 64ull << 20;
+    c->blob_timeout_s = 30;
+    c->blob_retries = 3;
     c->job_history = 10000;
     c->min_free_disk = 64ull << 20;
     c->job_history_bytes = 64ull << 20;

@@ -44,6 +44,12 @@ typedef struct vx_config {
     uint64_t max_parse_memory; /* reserved by concurrent upload parses; 0 = no limit,
                                   UINT64_MAX = 8 x max_upload_bytes + 256M */
     uint64_t results_max_bytes;
+    char blob_store[1024]; /* --blob-store URL; empty = the data dir (local) */
+    char blob_credentials[VX_PATH_MAX / 2];
+    uint64_t blob_cache_max_bytes; /* s3: local copies kept; 0 = no limit */
+    uint64_t blob_part_size;       /* s3: multipart above this */
+    double blob_timeout_s;         /* s3: connect timeout and longest stall */
+    uint64_t blob_retries;         /* s3: retries of 5xx/connection errors */
     double results_max_age_s;
     uint64_t job_history;
     uint64_t job_history_bytes;

@@ -14,6 +14,7 @@
 #include "kinds.h"
 #include "jobs/jobs.h"
 #include "metrics.h"
+#include "store/blob.h"
 #include "store/store.h"
 #include "util/fsutil.h"
 #include "util/log.h"
@@ -223,8 +224,22 @@ int main(int argc, char **argv)
             cfg.data_dir);
     vx_err err;
     vx_err_clear(&err);
+    vx_blob_conf bc = {
+        .url = cfg.blob_store,
+        .credentials_file = cfg.blob_credentials,
+        .cache_max_bytes = cfg.blob_cache_max_bytes,
+        .part_size = cfg.blob_part_size,
+        .timeout_s = cfg.blob_timeout_s,
+        .retries = cfg.blob_retries ? (int)(cfg.blob_retries > 100 ? 100 : cfg.blob_retries) : -1};
+    const vx_blob_ops *bo = vx_blob_backend(cfg.blob_store, &err);
+    if (!bo) {
+        VX_ERROR("voxeld.fatal", "stage=store code=%s message=\"%s\"", err.code, err.message);
+        return 1;
+    }
     vx_store_desc sd = {.results_max_bytes = cfg.results_max_bytes,
-                        .results_max_age_s = cfg.results_max_age_s};
+                        .results_max_age_s = cfg.results_max_age_s,
+                        .blob_ops = bo,
+                        .blob_conf = &bc};
     vx_store *store = vx_store_open(cfg.data_dir, &sd, &err);
     if (!store) {
         VX_ERROR("voxeld.fatal", "stage=store code=%s message=\"%s\"", err.code, err.message);

@@ -59,16 +59,18 @@ int vx_route_readyz(vx_http *h, struct MHD_Connection *c, req *r)
     size_t depth = vx_jobs_queue_depth(h->d.jobs), cap = vx_jobs_queue_capacity(h->d.jobs);
     int dd = vx_store_writable(h->d.store);
     int space = vx_route_disk_ok(h, NULL);
+    int blob = vx_store_reachable(h->d.store);
     /* A full queue is backpressure (429 + Retry-After), not unreadiness. */
-    int ok = gl && gpu && dd && space && !h->stopping;
+    int ok = gl && gpu && dd && space && blob && !h->stopping;
     cJSON *doc = cJSON_CreateObject();
     cJSON_AddStringToObject(doc, "status", ok ? "ready" : "not_ready");
     if (!ok) {
         char why[600];
         if (gl && gpu && !h->stopping)
             snprintf(why, sizeof why, "%s",
-                     !dd ? "the data directory is not writable"
-                         : "the data directory has less free space than --min-free-disk");
+                     !dd      ? "the data directory is not writable"
+                     : !space ? "the data directory has less free space than --min-free-disk"
+                              : "the blob store (--blob-store) cannot be reached");
         else
             vx_route_not_ready_reason(h, why, sizeof why);
         cJSON_AddStringToObject(doc, "reason", why);
@@ -82,6 +84,9 @@ int vx_route_readyz(vx_http *h, struct MHD_Connection *c, req *r)
     cJSON_AddBoolToObject(chk, "gpu", gpu);
     cJSON_AddBoolToObject(chk, "data_dir", dd);
     cJSON_AddBoolToObject(chk, "disk_space", space);
+    cJSON *bs = cJSON_AddObjectToObject(doc, "blob_store");
+    cJSON_AddStringToObject(bs, "backend", vx_store_backend(h->d.store));
+    cJSON_AddBoolToObject(bs, "ok", blob);
     return vx_resp_json(c, r, ok ? 200 : 503, doc, NULL, NULL);
 }
 

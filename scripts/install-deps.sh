@@ -94,4 +94,7 @@ if [[ "$mode" != --run ]]; then
   # which Debian 12 does not package (its kubernetes-client 1.20 has
   # Kustomize v2): without one the test is skipped.
   npm ci --prefix "$(dirname "$0")/../tools/k8s-validate" --no-audit --no-fund --loglevel=error
+  # The S3 server tests/integration/test_blob_s3.sh starts (s3rver), pinned
+  # by tools/s3rver/package-lock.json, into tools/s3rver/node_modules.
+  npm ci --prefix "$(dirname "$0")/../tools/s3rver" --no-audit --no-fund --loglevel=error
 fi

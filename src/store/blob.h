@@ -1,4 +1,6 @@
-/* Byte storage under the store: the seam for another backend (S3 later).
+/* Byte storage under the store: the seam between the store and its
+ * backends (local: the data dir; file: a shared POSIX dir; s3: an
+ * S3-compatible object store).
  *
  * A backend holds named byte objects under keys, relative paths such as
  * "meshes/<sha256>.obj", "blobs/<sha256>.json" or "results/<job id>/a.png".
@@ -10,8 +12,10 @@
  *
  * Contract, for every backend:
  * - Errors: each op returns 0, or -1 with errno set (ENOENT: no such key;
- *   ENOSPC/EDQUOT: out of space, which the store reports as VX_ENOSPC; EIO
- *   and others: VX_EIO). Ops that take a vx_err fill it as well (messages
+ *   ENOSPC/EDQUOT: out of space, which the store reports as VX_ENOSPC;
+ *   EAGAIN: a remote backend is unreachable for now (connection errors,
+ *   timeouts and 5xx answers after its retries), VX_EUNAVAIL (503 with
+ *   Retry-After); EIO and others: VX_EIO). Ops that take a vx_err fill it as well (messages
  *   name no server path; paths go to the log only).
  * - Atomicity: a key is either absent or has its complete bytes; put_file,
  *   put_bytes and move replace a key atomically (never a partial object).
@@ -42,10 +46,28 @@
 
 typedef struct vx_blob vx_blob;
 
+/* Where a backend keeps the bytes and how it reaches them; zero fields mean
+ * the default. The local backend reads none of it. */
+typedef struct vx_blob_conf {
+    const char *url;              /* file:///DIR or s3://BUCKET/PREFIX?endpoint=URL&region=R */
+    const char *credentials_file; /* s3: NULL = AWS_ACCESS_KEY_ID & co from the environment */
+    uint64_t cache_max_bytes;     /* s3: local copies kept (LRU); 0 = no limit */
+    uint64_t part_size;           /* s3: multipart above this, in parts of it; 0 = 64 MiB */
+    double timeout_s;             /* s3: connect timeout, and the longest stall; 0 = 30 */
+    int retries;                  /* s3: tries after the first on 5xx/connection errors; 0 = 3,
+                                     -1 = none */
+} vx_blob_conf;
+
 typedef struct vx_blob_ops {
-    const char *name; /* "local" */
-    /* Opens the backend rooted at where (local: the data dir, which exists). */
-    vx_blob *(*open)(const char *where, vx_err *err);
+    const char *name; /* "local", "file", "s3" */
+    /* 1 when other daemons may share the bytes (file, s3): the store then
+     * removes only what it indexed itself (no startup clean-up of objects
+     * it does not know, no removal of content-addressed blobs). */
+    int shared;
+    /* Opens the backend for the data dir (which exists; local: the bytes'
+     * root, others: their local state and cache) as conf says (NULL: all
+     * defaults). */
+    vx_blob *(*open)(const char *data_dir, const vx_blob_conf *conf, vx_err *err);
     void (*close)(vx_blob *b);
     /* Writes n bytes to a fresh staged object of namespace ns (made with
      * make_prefix before), durably, and
@@ -85,11 +107,24 @@ typedef struct vx_blob_ops {
      * no particular order, "." names skipped); fn returns nonzero to stop.
      * Keys may be removed from inside fn. 0, or -1 when ns is unreadable. */
     int (*list)(vx_blob *b, const char *ns, int (*fn)(const char *name, void *ud), void *ud);
-    /* A local file path for key into buf (the key need not exist). */
+    /* A local file path for key into buf (the key need not exist; a
+     * remote backend fetches the object, or every object under the prefix,
+     * into its cache first: -1 with errno when that fails). */
     int (*path)(vx_blob *b, const char *key, char *buf, size_t n);
+    /* 1 when the bytes are reachable now (for /readyz; quick: one try). */
+    int (*ping)(vx_blob *b);
 } vx_blob_ops;
 
-/* Today's backend: the data dir itself (src/store/blob_local.c). */
+/* The default backend: the data dir itself (src/store/blob_local.c). */
 extern const vx_blob_ops vx_blob_local;
+/* file:///DIR: the local layout rooted at a shared DIR (blob_local.c). */
+extern const vx_blob_ops vx_blob_file;
+/* s3://BUCKET/PREFIX: an S3-compatible store through libcurl, signed with
+ * AWS Signature V4, with a local cache (src/store/blob_s3.c). */
+extern const vx_blob_ops vx_blob_s3;
+
+/* The backend a --blob-store URL names (NULL or "" = local), or NULL with
+ * err set (VX_EINVAL) for an unknown scheme. */
+const vx_blob_ops *vx_blob_backend(const char *url, vx_err *err);
 
 #endif

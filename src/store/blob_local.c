@@ -1,4 +1,5 @@
-/* The local byte store: keys are paths under the data dir (blob.h). */
+/* The POSIX byte stores (blob.h): keys are paths under a root dir, the
+ * data dir (local) or a shared dir that other daemons may use too (file). */
 #include "store/blob.h"
 
 #include <dirent.h>
@@ -8,6 +9,8 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/random.h>
+#include <time.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
@@ -16,22 +19,50 @@
 
 struct vx_blob {
     char dir[VX_PATH_MAX];
+    char tag[40];     /* staged names: the pid, and on a shared dir a random tag */
     atomic_ulong seq; /* staged names */
 };
 
-static vx_blob *local_open(const char *where, vx_err *err)
+static vx_blob *root_open(const char *root, int shared, vx_err *err)
 {
     vx_blob *b = calloc(1, sizeof *b);
     if (!b) {
         vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory");
         return NULL;
     }
-    if (snprintf(b->dir, sizeof b->dir, "%s", where) >= (int)sizeof b->dir) {
+    if (snprintf(b->dir, sizeof b->dir, "%s", root) >= (int)sizeof b->dir / 2) {
         free(b);
-        vx_err_set(err, VX_EIO, "path_too_long", "data dir path too long");
+        vx_err_set(err, VX_EIO, "path_too_long", "blob store path too long");
         return NULL;
     }
+    /* Two hosts may run daemons with the same pid on one shared dir. */
+    uint64_t r = 0;
+    if (shared && getrandom(&r, sizeof r, 0) != (ssize_t)sizeof r) r = (uint64_t)time(NULL);
+    if (shared)
+        snprintf(b->tag, sizeof b->tag, "%lu-%016llx", (unsigned long)getpid(),
+                 (unsigned long long)r);
+    else
+        snprintf(b->tag, sizeof b->tag, "%lu", (unsigned long)getpid());
     return b;
+}
+
+static vx_blob *local_open(const char *data_dir, const vx_blob_conf *conf, vx_err *err)
+{
+    (void)conf;
+    return root_open(data_dir, 0, err);
+}
+
+/* file:///DIR: DIR must be absolute; it is made when missing. */
+static vx_blob *file_open(const char *data_dir, const vx_blob_conf *conf, vx_err *err)
+{
+    (void)data_dir;
+    const char *url = conf ? conf->url : NULL;
+    if (!url || strncmp(url, "file://", 7) != 0 || url[7] != '/') {
+        vx_err_set(err, VX_EINVAL, "bad_blob_store", "--blob-store file:// needs an absolute dir");
+        return NULL;
+    }
+    if (vx_mkdirs(url + 7, err)) return NULL;
+    return root_open(url + 7, 1, err);
 }
 
 static void local_close(vx_blob *b)
@@ -55,18 +86,8 @@ static int local_stage(vx_blob *b, const char *ns, const void *data, size_t n, c
     char dir[VX_PATH_MAX];
     if (local_path(b, ns, dir, sizeof dir)) return -1;
     unsigned long seq = atomic_fetch_add(&b->seq, 1) + 1;
-    snprintf(tmp, tmpn, "%s/tmp-%lu-%lu", dir, (unsigned long)getpid(), seq);
-    int fd = open(tmp, O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0640);
-    if (fd < 0) return -1;
-    int e = vx_write_all(fd, data, n) ? errno : 0;
-    if (!e && fsync(fd) != 0) e = errno;
-    if (close(fd) != 0 && !e) e = errno;
-    if (e) {
-        unlink(tmp);
-        errno = e;
-        return -1;
-    }
-    return 0;
+    snprintf(tmp, tmpn, "%s/tmp-%s-%lu", dir, b->tag, seq);
+    return vx_write_new(tmp, data, n);
 }
 
 static void local_discard(vx_blob *b, const char *tmp)
@@ -75,11 +96,35 @@ static void local_discard(vx_blob *b, const char *tmp)
     unlink(tmp);
 }
 
+/* src copied into a staged object beside key (another file system than
+ * the data dir's: a shared mount), fsync'd, renamed onto key; src goes. */
+static int copy_put(vx_blob *b, const char *src, const char *path)
+{
+    char tmp[VX_PATH_MAX];
+    unsigned long seq = atomic_fetch_add(&b->seq, 1) + 1;
+    const char *slash = strrchr(path, '/');
+    if (snprintf(tmp, sizeof tmp, "%.*s/tmp-%s-%lu", (int)(slash - path), path, b->tag, seq) >=
+        (int)sizeof tmp) {
+        errno = ENAMETOOLONG;
+        return -1;
+    }
+    if (vx_copy_file(src, tmp)) return -1;
+    if (rename(tmp, path) != 0) {
+        int e = errno;
+        unlink(tmp);
+        errno = e;
+        return -1;
+    }
+    unlink(src);
+    return 0;
+}
+
 static int local_put_file(vx_blob *b, const char *src, const char *key)
 {
     char path[VX_PATH_MAX];
     if (local_path(b, key, path, sizeof path)) return -1;
-    return rename(src, path) == 0 ? 0 : -1;
+    if (rename(src, path) == 0) return 0;
+    return errno == EXDEV ? copy_put(b, src, path) : -1;
 }
 
 static int local_put_bytes(vx_blob *b, const char *key, const void *data, size_t n, vx_err *err)
@@ -176,22 +221,28 @@ static int local_list(vx_blob *b, const char *ns, int (*fn)(const char *name, vo
     return 0;
 }
 
-const vx_blob_ops vx_blob_local = {
-    .name = "local",
-    .open = local_open,
-    .close = local_close,
-    .stage = local_stage,
-    .discard = local_discard,
-    .put_file = local_put_file,
-    .put_bytes = local_put_bytes,
-    .read = local_read,
-    .stat = local_stat,
-    .touch = local_touch,
-    .move = local_move,
-    .remove = local_remove,
-    .remove_prefix = local_remove_prefix,
-    .make_prefix = local_make_prefix,
-    .sync = local_sync,
-    .list = local_list,
-    .path = local_path,
-};
+static int local_ping(vx_blob *b)
+{
+    char path[VX_PATH_MAX];
+    return local_path(b, "meshes", path, sizeof path) == 0 && access(path, W_OK | X_OK) == 0;
+}
+
+#define VX_POSIX_OPS                                                                               \
+    .close = local_close, .stage = local_stage, .discard = local_discard,                          \
+    .put_file = local_put_file, .put_bytes = local_put_bytes, .read = local_read,                  \
+    .stat = local_stat, .touch = local_touch, .move = local_move, .remove = local_remove,          \
+    .remove_prefix = local_remove_prefix, .make_prefix = local_make_prefix, .sync = local_sync,    \
+    .list = local_list, .path = local_path, .ping = local_ping
+
+const vx_blob_ops vx_blob_local = {.name = "local", .open = local_open, VX_POSIX_OPS};
+const vx_blob_ops vx_blob_file = {.name = "file", .shared = 1, .open = file_open, VX_POSIX_OPS};
+
+const vx_blob_ops *vx_blob_backend(const char *url, vx_err *err)
+{
+    if (!url || !*url) return &vx_blob_local;
+    if (strncmp(url, "file://", 7) == 0) return &vx_blob_file;
+    if (strncmp(url, "s3://", 5) == 0) return &vx_blob_s3;
+    vx_err_set(err, VX_EINVAL, "bad_blob_store",
+               "--blob-store takes file:///DIR or s3://BUCKET/PREFIX?endpoint=URL&region=R");
+    return NULL;
+}

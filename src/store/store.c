@@ -160,7 +160,8 @@ static int load_name(const char *name, void *ud)
          * finished: it was never acknowledged, so it can go. */
         int found;
         mesh_find(lp->s, id, &found);
-        if (!found) {
+        /* On a shared store it may be another daemon's commit in flight. */
+        if (!found && !lp->s->ops->shared) {
             char key[128];
             snprintf(key, sizeof key, "meshes/%s", name);
             lp->s->ops->remove(lp->s->blob, key);
@@ -169,14 +170,15 @@ static int load_name(const char *name, void *ud)
     return 0;
 }
 
-void vx_store_load_meshes(vx_store *s)
+int vx_store_load_meshes(vx_store *s)
 {
     /* Pass 0: metadata; 1: tombstones of deleted meshes (vx_store_collect
      * removes those no unfinished job pins); 2: data files without either. */
     for (int pass = 0; pass < 3; pass++) {
         load_pass lp = {s, pass};
-        if (s->ops->list(s->blob, "meshes", load_name, &lp)) return;
+        if (s->ops->list(s->blob, "meshes", load_name, &lp)) return -1;
     }
+    return 0;
 }
 
 /* Upload u has the bytes of deleted mesh `at`, whose file jobs still hold:
@@ -303,13 +305,14 @@ int vx_store_mesh_path(vx_store *s, const char *id, char *buf, size_t n, vx_err 
     pthread_mutex_lock(&s->lock);
     int found;
     size_t at = mesh_find(s, id, &found);
-    if (found) {
-        char key[128];
-        mesh_data_key(key, sizeof key, id, mesh_at(s, at)->ext);
-        s->ops->path(s->blob, key, buf, n);
-    }
+    char key[128];
+    if (found) mesh_data_key(key, sizeof key, id, mesh_at(s, at)->ext);
     pthread_mutex_unlock(&s->lock);
     if (!found) return vx_err_set(err, VX_ENOTFOUND, "mesh_not_found", "no mesh with id %.80s", id);
+    /* A remote backend fetches its copy here (outside the lock). */
+    if (s->ops->path(s->blob, key, buf, n))
+        return vx_err_set(err, vx_err_io_kind(errno), "store_failed",
+                          "cannot read mesh %.80s from the blob store: %s", id, strerror(errno));
     return 0;
 }
 

@@ -36,6 +36,7 @@ typedef struct vx_store_desc {
     /* Where the bytes live (store/blob.h); NULL = the data dir itself
      * (vx_blob_local). Index, pins and budget stay in this process. */
     const struct vx_blob_ops *blob_ops;
+    const struct vx_blob_conf *blob_conf; /* its configuration; NULL = defaults */
 } vx_store_desc;
 
 /* Opens (creating) the data dir. Owned; close with vx_store_close. */
@@ -44,6 +45,10 @@ void vx_store_close(vx_store *s);
 const char *vx_store_dir(const vx_store *s);
 /* 1 when a file can be created in the data dir now. */
 int vx_store_writable(vx_store *s);
+/* The byte store's backend name ("local", "file", "s3"), and 1 when it is
+ * reachable now (one quick try: /readyz). */
+const char *vx_store_backend(const vx_store *s);
+int vx_store_reachable(vx_store *s);
 
 /* An upload streamed to a temp file and hashed as it arrives. */
 typedef struct vx_upload vx_upload;

@@ -111,7 +111,9 @@ void vx_store_blob_unpin(vx_store *s, const char *id)
     if (e && e->pins > 0 && --e->pins == 0) {
         char key[128];
         blob_key(id, key, sizeof key);
-        s->ops->remove(s->blob, key);
+        /* Content-addressed: on a shared store another daemon's job may
+         * hold the same bytes, so they stay. */
+        if (!s->ops->shared) s->ops->remove(s->blob, key);
         *e = s->blobs[--s->nblobs];
     }
     pthread_mutex_unlock(&s->lock);
@@ -163,6 +165,7 @@ static int collect_blob(const char *name, void *ud)
     }
     const blob_entry *b = id[0] ? blob_find_locked(c->s, id) : NULL;
     if (b && b->pins > 0) return 0;
+    if (c->s->ops->shared) return 0; /* other daemons' jobs may hold it */
     char key[VX_PATH_MAX];
     snprintf(key, sizeof key, "blobs/%s", name);
     c->s->ops->remove(c->s->blob, key);

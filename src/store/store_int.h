@@ -66,10 +66,12 @@ struct vx_upload {
     size_t nbuf;
 };
 
-/* Loads the mesh index from the byte store (vx_store_open). */
-void vx_store_load_meshes(vx_store *s);
-/* Loads the results budget from the byte store (vx_store_open). */
-void vx_store_load_results(vx_store *s);
+/* Loads the mesh index from the byte store (vx_store_open); -1 (errno)
+ * when the meshes namespace cannot be listed. */
+int vx_store_load_meshes(vx_store *s);
+/* Loads the results budget from the byte store (vx_store_open); -1 (errno)
+ * when the results namespace cannot be listed. */
+int vx_store_load_results(vx_store *s);
 /* Removes the deleted meshes that no pin holds; caller holds the lock.
  * Returns how many went (their namespace then needs a sync). */
 size_t vx_store_collect_meshes_locked(vx_store *s);

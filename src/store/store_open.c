@@ -66,7 +66,8 @@ vx_store *vx_store_open(const char *data_dir, const vx_store_desc *desc, vx_err 
     pthread_mutex_init(&s->lock, NULL);
     /* The dir and its lock before anything in it is touched; then the byte
      * store's namespaces, and DATA/tmp (uploads in flight, always local). */
-    if (vx_mkdirs(s->dir, err) || lock_dir(s, err) || !(s->blob = s->ops->open(s->dir, err)) ||
+    if (vx_mkdirs(s->dir, err) || lock_dir(s, err) ||
+        !(s->blob = s->ops->open(s->dir, s->desc.blob_conf, err)) ||
         s->ops->make_prefix(s->blob, "meshes", err) ||
         s->ops->make_prefix(s->blob, "results", err)) {
         vx_store_close(s);
@@ -79,8 +80,16 @@ vx_store *vx_store_open(const char *data_dir, const vx_store_desc *desc, vx_err 
         vx_store_close(s);
         return NULL;
     }
-    vx_store_load_meshes(s);
-    vx_store_load_results(s);
+    /* A shared store that cannot be listed would leave this daemon with an
+     * empty index it never reloads: refuse to start instead (a supervisor
+     * retries). The data dir has always been listable. */
+    if ((vx_store_load_meshes(s) || vx_store_load_results(s)) && s->ops->shared) {
+        int e = errno;
+        vx_err_set(err, vx_err_io_kind(e), "blob_store_unreachable",
+                   "cannot list the %s blob store: %s", s->ops->name, strerror(e));
+        vx_store_close(s);
+        return NULL;
+    }
     VX_INFO("store.open", "dir=%s meshes=%zu results=%zu results_bytes=%llu", s->dir, s->meshes.n,
             s->nresults, (unsigned long long)s->results_bytes);
     return s;
@@ -101,6 +110,16 @@ void vx_store_close(vx_store *s)
     pthread_mutex_destroy(&s->lock);
     if (s->lock_fd >= 0) close(s->lock_fd); /* drops the flock */
     free(s);
+}
+
+const char *vx_store_backend(const vx_store *s)
+{
+    return s->ops->name;
+}
+
+int vx_store_reachable(vx_store *s)
+{
+    return !s->ops->ping || s->ops->ping(s->blob);
 }
 
 const char *vx_store_dir(const vx_store *s)

@@ -1,4 +1,5 @@
 /* Results: per-job output dirs under a byte/idle-age budget (store.h). */
+#include <errno.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -59,9 +60,9 @@ static int load_result(const char *name, void *ud)
     return 0;
 }
 
-void vx_store_load_results(vx_store *s)
+int vx_store_load_results(vx_store *s)
 {
-    s->ops->list(s->blob, "results", load_result, s);
+    return s->ops->list(s->blob, "results", load_result, s);
 }
 
 /* Drops jid's entry from the budget; caller holds the lock. */
@@ -94,7 +95,9 @@ void vx_store_result_added(vx_store *s, const char *jid)
     result_key(jid, key, sizeof key);
     uint64_t bytes = 0;
     s->ops->stat(s->blob, key, &bytes, NULL);
-    s->ops->sync(s->blob, key, NULL);
+    vx_err e;
+    if (s->ops->sync(s->blob, key, &e))
+        VX_ERROR("store.result_unsynced", "job=%s code=%s message=\"%s\"", jid, e.code, e.message);
     pthread_mutex_lock(&s->lock);
     result_add_locked(s, jid, bytes, vx_now());
     pthread_mutex_unlock(&s->lock);
@@ -114,13 +117,19 @@ int vx_store_result_file(vx_store *s, const char *jid, const char *file, char *b
             break;
         }
     pthread_mutex_unlock(&s->lock);
-    if (!found || s->ops->stat(s->blob, key, NULL, NULL) < 0)
+    int st = found ? s->ops->stat(s->blob, key, NULL, NULL) : -1;
+    if (found && st < 0 && errno != ENOENT)
+        return vx_err_set(err, vx_err_io_kind(errno), "store_failed",
+                          "cannot reach the results of job %s: %s", jid, strerror(errno));
+    if (st < 0)
         return vx_err_set(err, VX_EGONE, "result_evicted",
                           "the results of job %s were removed by the results budget", jid);
     /* The mtime of the dir carries the LRU order across restarts. */
     s->ops->touch(s->blob, key);
     char dir[VX_PATH_MAX];
-    s->ops->path(s->blob, key, dir, sizeof dir);
+    if (s->ops->path(s->blob, key, dir, sizeof dir))
+        return vx_err_set(err, vx_err_io_kind(errno), "store_failed",
+                          "cannot fetch the results of job %s: %s", jid, strerror(errno));
     snprintf(buf, n, "%s/%s", dir, file);
     return 0;
 }

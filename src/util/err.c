@@ -90,6 +90,7 @@ void vx_err_clear(vx_err *err)
 
 vx_err_kind vx_err_io_kind(int errnum)
 {
+    if (errnum == EAGAIN) return VX_EUNAVAIL; /* a remote byte store, unreachable for now */
     return errnum == ENOSPC || errnum == EDQUOT ? VX_ENOSPC : VX_EIO;
 }
 

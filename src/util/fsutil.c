@@ -259,3 +259,52 @@ int vx_write_all(int fd, const void *p, size_t n)
     }
     return 0;
 }
+
+int vx_copy_file(const char *src, const char *dst)
+{
+    int in = open(src, O_RDONLY | O_CLOEXEC);
+    if (in < 0) return -1;
+    int out = open(dst, O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0640);
+    if (out < 0) {
+        int e = errno;
+        close(in);
+        errno = e;
+        return -1;
+    }
+    char buf[1 << 16];
+    int e = 0;
+    for (;;) {
+        ssize_t n = read(in, buf, sizeof buf);
+        if (n < 0 && errno == EINTR) continue;
+        if (n < 0) e = errno;
+        if (n <= 0) break;
+        if (vx_write_all(out, buf, (size_t)n)) {
+            e = errno;
+            break;
+        }
+    }
+    if (!e && fsync(out) != 0) e = errno;
+    if (close(out) != 0 && !e) e = errno;
+    close(in);
+    if (e) {
+        unlink(dst);
+        errno = e;
+        return -1;
+    }
+    return 0;
+}
+
+int vx_write_new(const char *path, const void *data, size_t n)
+{
+    int fd = open(path, O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0640);
+    if (fd < 0) return -1;
+    int e = vx_write_all(fd, data, n) ? errno : 0;
+    if (!e && fsync(fd) != 0) e = errno;
+    if (close(fd) != 0 && !e) e = errno;
+    if (e) {
+        unlink(path);
+        errno = e;
+        return -1;
+    }
+    return 0;
+}

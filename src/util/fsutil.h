@@ -26,6 +26,12 @@ void vx_rfc3339(double t, char out[32]);
 /* Writes all n bytes (retrying short writes and EINTR); 0, or -1 with errno
  * set (a write that makes no progress is ENOSPC). */
 int vx_write_all(int fd, const void *p, size_t n);
+/* Writes n bytes to a new file path (O_EXCL, mode 0640) and fsyncs it; 0,
+ * or -1 with errno set (path is then removed). */
+int vx_write_new(const char *path, const void *data, size_t n);
+/* Copies src to a new file dst (O_EXCL) and fsyncs it; 0, or -1 with errno
+ * set (dst is then removed). */
+int vx_copy_file(const char *src, const char *dst);
 /* Bytes an unprivileged process may still write on dir's file system; 0 or -1. */
 int vx_disk_free(const char *dir, uint64_t *free_bytes);
 /* Removes every occurrence of dir (and the '/' after it) from msg, in

@@ -64,8 +64,22 @@ def angle(a, b):
     return math.degrees(math.acos(max(-1.0, min(1.0, c))))
 
 
-def g1(v, n, faces, groups, diag, crease):
-    """Largest normal angle between patches at their shared boundary points."""
+def input_seams(path):
+    """Positions the input OBJ gives two or more of its vertices: there the
+    patches meet without sharing topology (ogre has 9), so their normals
+    need not agree."""
+    count = {}
+    with open(path) as f:
+        for line in f:
+            if line.startswith("v "):
+                p = tuple(float(x) for x in line.split()[1:4])
+                count[p] = count.get(p, 0) + 1
+    return [p for p, c in count.items() if c > 1]
+
+
+def g1(v, n, faces, groups, diag, crease, seams=()):
+    """Largest normal angle between patches at their shared boundary points
+    (points within 1e-7 of the diagonal of a seam are left out)."""
     own = {}  # (group, a, b) edge count within a patch
     for (t, tn), g in zip(faces, groups):
         for k in range(3):
@@ -84,8 +98,17 @@ def g1(v, n, faces, groups, diag, crease):
     for vi, (g, ni) in bnd.items():
         p = v[vi]
         cells.setdefault((math.floor(p[0] / h), math.floor(p[1] / h), math.floor(p[2] / h)), []).append(vi)
+    skip = set()
+    for p in seams:
+        c = tuple(math.floor(p[i] / h) for i in range(3))
+        for dx in (-1, 0, 1):
+            for dy in (-1, 0, 1):
+                for dz in (-1, 0, 1):
+                    skip.add((c[0] + dx, c[1] + dy, c[2] + dz))
     worst, count, creases = 0.0, 0, 0
     for (cx, cy, cz), here in cells.items():
+        if (cx, cy, cz) in skip:
+            continue
         near = []
         for dx in (-1, 0, 1):
             for dy in (-1, 0, 1):
@@ -154,7 +177,9 @@ def main():
     if "--g1" in sys.argv[2:]:
         args = sys.argv[2:]
         crease = float(args[args.index("--crease") + 1]) if "--crease" in args else 180.0
-        out["g1_max_deg"], out["g1_points"], out["g1_creases"] = g1(v, n, faces, groups, diag, crease)
+        seams = input_seams(args[args.index("--seams") + 1]) if "--seams" in args else []
+        out["g1_seams"] = len(seams)
+        out["g1_max_deg"], out["g1_points"], out["g1_creases"] = g1(v, n, faces, groups, diag, crease, seams)
         out["back_facing_transition"] = transition_back(v, n, faces, groups, diag)
     print(json.dumps(out))
 

@@ -10,6 +10,7 @@ check "livez body" jq -e '.status == "ok"' "$BODY"
 api GET /readyz
 expect_status readyz 200
 check "readyz checks" jq -e '.status == "ready" and .checks.gl and .checks.data_dir and .queue.full == false and .queue.capacity > 0' "$BODY"
+check "readyz: the default blob store is the data dir" jq -e '.blob_store == {"backend":"local","ok":true}' "$BODY"
 api GET /v1/info
 expect_status info 200
 check "info renderer" jq -e '(.gl.renderer|length) > 0 and (.gl.version|test("4\\.[5-9]|[5-9]\\."))' "$BODY"
