@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Topology and normal checks of a gregory job's OBJ output (pure Python).
 
-gregory_check.py FILE.obj [--g1 [--crease DEG]]
+gregory_check.py FILE.obj [--g1 [--crease DEG] [--input MESH.obj]]
 Prints one JSON object:
   edges_over_2   edges used by more than two triangles
   edges_once     edges used by one triangle (boundary)
@@ -16,6 +16,9 @@ Prints one JSON object:
   g1_creases     (--crease DEG) points where the normals differ by more
                  than DEG: surfaces that only touch there (the teapot's
                  handle and spout on its body), left out of g1_max_deg
+  g1_excluded    (--input MESH.obj, the job's input) points left out of
+                 g1_max_deg: where the input holds two vertices at one
+                 position, and the corners of its zero-area triangles
   back_facing_transition  (--g1) back-facing triangles in transition
                  patches (a group that is not a regular (N+1)^2 grid)
 """
@@ -64,22 +67,37 @@ def angle(a, b):
     return math.degrees(math.acos(max(-1.0, min(1.0, c))))
 
 
-def input_seams(path):
-    """Positions the input OBJ gives two or more of its vertices: there the
-    patches meet without sharing topology (ogre has 9), so their normals
-    need not agree."""
-    count = {}
+def input_exclusions(path):
+    """Points of the input OBJ where patches need not agree: positions two
+    or more of its vertices hold (the patches meet there without sharing
+    topology; ogre has 9) and the corners of its zero-area triangles (no
+    normal to agree on; ogre has 2, each three collinear points)."""
+    verts, count, out = [], {}, set()
     with open(path) as f:
         for line in f:
-            if line.startswith("v "):
-                p = tuple(float(x) for x in line.split()[1:4])
+            w = line.split()
+            if not w:
+                continue
+            if w[0] == "v":
+                p = tuple(float(x) for x in w[1:4])
+                verts.append(p)
                 count[p] = count.get(p, 0) + 1
-    return [p for p, c in count.items() if c > 1]
+            elif w[0] == "f":
+                idx = [int(x.split("/")[0]) for x in w[1:]]
+                c = [verts[i - 1 if i > 0 else len(verts) + i] for i in idx]
+                for k in range(1, len(c) - 1):
+                    a, b = sub(c[k], c[0]), sub(c[k + 1], c[0])
+                    e = max(dot(a, a), dot(b, b))
+                    g = cross(a, b)
+                    if dot(g, g) <= (1e-9 * e) ** 2:
+                        out.update(c)
+    out.update(p for p, k in count.items() if k > 1)
+    return sorted(out)
 
 
 def g1(v, n, faces, groups, diag, crease, seams=()):
     """Largest normal angle between patches at their shared boundary points
-    (points within 1e-7 of the diagonal of a seam are left out)."""
+    (points within 1e-7 of the diagonal of one of seams are left out)."""
     own = {}  # (group, a, b) edge count within a patch
     for (t, tn), g in zip(faces, groups):
         for k in range(3):
@@ -177,8 +195,8 @@ def main():
     if "--g1" in sys.argv[2:]:
         args = sys.argv[2:]
         crease = float(args[args.index("--crease") + 1]) if "--crease" in args else 180.0
-        seams = input_seams(args[args.index("--seams") + 1]) if "--seams" in args else []
-        out["g1_seams"] = len(seams)
+        seams = input_exclusions(args[args.index("--input") + 1]) if "--input" in args else []
+        out["g1_excluded"] = len(seams)
         out["g1_max_deg"], out["g1_points"], out["g1_creases"] = g1(v, n, faces, groups, diag, crease, seams)
         out["back_facing_transition"] = transition_back(v, n, faces, groups, diag)
     print(json.dumps(out))

@@ -4,7 +4,7 @@
 # by gregory_check.py --g1: at every point two patches share, their normals
 # agree to 1e-3 degrees (each shared point is evaluated once and every
 # patch takes that evaluation), for uniform divisions and for max_edge,
-# with both constructions and Bézier input; and no triangle of a max_edge
+# with both constructions, Bézier input and every shared mesh; and no triangle of a max_edge
 # transition patch faces against its interpolated vertex normals.
 source "$(dirname "$0")/lib.sh"
 start_daemon --max-triangles 4000000 || exit 1
@@ -53,6 +53,23 @@ upload "$VX_MESH_DIR/spot_quadrangulated.obj"
 g1 spot_quad "$MESH_ID" '{"max_edge":0.01,"weld":false}'
 upload "$VX_MESH_DIR/fandisk.obj"
 g1 fandisk "$MESH_ID" '{"divisions":1,"weld":false}'
+# The triangle meshes (a triangle makes three quad patches): every shared
+# point of the bunny (1.4M), spot's triangles, rocker-arm and ogre (2.4M)
+# compared. ogre's
+# input holds 9 positions with two vertices each (the patches meet there
+# without sharing topology) and zero-area triangles (three collinear
+# points: no normal), where its patches part by up to 162 degrees: the
+# checker leaves those points out (--input).
+upload "$VX_MESH_DIR/stanford-bunny.obj"
+g1 bunny "$MESH_ID" '{"divisions":1,"weld":false}'
+upload "$VX_MESH_DIR/spot_triangulated.obj"
+g1 spot_tri "$MESH_ID" '{"construction":"approximate-cc","divisions":2,"weld":false}'
+upload "$VX_MESH_DIR/rocker-arm.obj"
+g1 rocker-arm "$MESH_ID" '{"construction":"approximate-cc","max_edge":0.5,"weld":false}'
+upload "$VX_MESH_DIR/ogre.obj"
+g1 ogre "$MESH_ID" '{"divisions":1,"weld":false}' "" --input "$VX_MESH_DIR/ogre.obj"
+check "ogre: the checker left out only its seams and degenerate corners ($(jq .g1_excluded "$TMP/c.json"))" \
+    jq -e '.g1_excluded > 0 and .g1_excluded < 40' "$TMP/c.json"
 upload "$VX_MESH_DIR/newell-teapot.bpt" model/x-bpt
 run_job gregory "$MESH_ID" '{"divisions":1}'
 check "stats: the teapot's Bézier patches fold none ($(st folded_patches))" test "$(st folded_patches)" = 0
