@@ -221,6 +221,11 @@ static int check_grid(const int dims[3], const vparams *p, const vx_limits *lim,
         int bd[3];
         for (int a = 0; a < 3; a++)
             bd[a] = dims[a] < S ? dims[a] : S;
+        if ((uint64_t)bd[0] * (uint64_t)bd[1] * (uint64_t)bd[2] > VX_VOXELIZE_MAX_VOXELS)
+            return vx_err_set(err, kind, code,
+                              "%s: a %dx%dx%d brick is over one job's 2048^3 voxels (smaller "
+                              "params.bricks.size)",
+                              what, bd[0], bd[1], bd[2]);
         uint64_t bytes =
             job_bytes(bd, (int)p->supersample, (vx_samples)p->samples, F_VDB,
                       p->vdb_grid == VX_VDB_LEVEL_SET ? VX_VDB_BOOL : (vx_vdb_class)p->vdb_grid);

@@ -146,6 +146,7 @@ bad() {
 bad "size not a multiple of 8" '{"bricks":{"size":12}}' "multiple of 8"
 bad "negative size" '{"bricks":{"size":-8}}' "params.bricks.size"
 bad "size too large" '{"bricks":{"size":16392}}' "params.bricks.size"
+bad "brick over one job" '{"grid":{"origin":[0,0,0],"voxel_size":1,"dims":[4096,4096,4096]},"bricks":{"size":4096}}' "over one job"
 bad "size not a number" '{"bricks":{"size":"big"}}' "params.bricks.size"
 bad "bricks not an object" '{"bricks":64}' "params.bricks"
 bad "unknown brick field" '{"bricks":{"edge":64}}' "edge"
