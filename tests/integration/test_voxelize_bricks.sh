@@ -103,6 +103,8 @@ for t in 0 1 2; do
     check "torus $t: index_offset echoed" jq -e ".stats.index_offset == [$ix,$iy,$iz] and .stats.bricks[0].index_offset == [$ix,$iy,$iz]" "$TMP/job.json"
 done
 
+api GET /v1/info
+check "info: limits.brick_threshold_cells is the flag's" jq -e '.limits.brick_threshold_cells == 200000' "$BODY"
 # --brick-threshold: a .vdb over 200000 cells bricks by default (512^3
 # bricks), a raw8 does not.
 run_job voxelize "$B" '{"resolution":64,"format":"vdb","vdb_grid":"bool"}'
