@@ -63,7 +63,8 @@ typedef struct vparams {
 } vparams;
 
 /* The brick edge of grids bricked by --brick-threshold: a multiple of
- * OpenVDB's 128^3 internal nodes; a 512^3 brick's job needs ~0.5 GB. */
+ * OpenVDB's 128^3 internal nodes; job_bytes puts a 512^3 brick's job at about
+ * 160 MB (bool or 0/1 fog), the dense whole grid never being held. */
 #define BRICK_DEFAULT 512
 
 static const vx_pspec origin_item = VX_P_ITEM_NUM(-HUGE_VAL, HUGE_VAL);
