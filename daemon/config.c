@@ -69,6 +69,8 @@ static const opt_def opts[] = {
     {"max-image-pixels", T_SIZE, F(max_image_pixels), 0,
      "largest rendered image, width*height (default 67108864)"},
     {"max-job-memory", T_SIZE, F(max_job_memory), 0, "memory one job may use (default 4G)"},
+    {"brick-threshold", T_SIZE, F(brick_threshold), 0,
+     "voxelize grids of more cells run as bricks (vdb; default 1G = 1024^3)"},
     {"max-json-bytes", T_SIZE, F(max_json_bytes), 0, "largest JSON request body (default 16M)"},
     {"max-parse-memory", T_SIZE, F(max_parse_memory), 0,
      "worst-case memory of concurrent upload parses before 503 (default 8 x max-upload-bytes "
@@ -145,6 +147,7 @@ static void defaults(vx_config *c)
     c->max_connections_per_ip = 64;
     c->max_image_pixels = 8192ull * 8192ull;
     c->max_job_memory = 4ull << 30;
+    c->brick_threshold = 1ull << 30;
     c->max_json_bytes = 16ull << 20;
     c->max_parse_memory = UINT64_MAX; /* 8 x max_upload_bytes + 256M, see vx_config_load */
     c->results_max_bytes = 10ull << 30;

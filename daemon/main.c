@@ -105,6 +105,7 @@ static vx_jobs_desc make_jobs_desc(const vx_config *cfg, vx_store *store, int ha
                    .max_triangles = cfg->max_triangles,
                    .max_image_pixels = cfg->max_image_pixels,
                    .max_job_memory = cfg->max_job_memory,
+                   .brick_threshold = cfg->brick_threshold,
                    .job_timeout_s = cfg->job_timeout_s},
         .max_queued = cfg->max_queued_jobs,
         .history = cfg->job_history,

@@ -29,6 +29,7 @@ typedef struct vx_limits {
     uint64_t max_triangles;
     uint64_t max_image_pixels; /* width * height of any rendered image */
     uint64_t max_job_memory;   /* bytes an engine may allocate for one job */
+    uint64_t brick_threshold;  /* voxelize: grids of more cells run as bricks (0 = 1024^3) */
     double job_timeout_s;
 } vx_limits;
 
@@ -44,6 +45,8 @@ int vx_run_progress(vx_job_run *r, double fraction, vx_err *err);
 vx_gl *vx_run_gl(vx_job_run *r);
 /* The id of the job's mesh (64 hex digits), for outputs that record it. */
 const char *vx_run_mesh_id(const vx_job_run *r);
+/* The job's id, for outputs that name the job's result URLs. */
+const char *vx_run_job_id(const vx_job_run *r);
 /* Loads another stored mesh that the params name (render's `meshes`,
  * gregory's `frames`). Returns an owned mesh the caller frees, or NULL
  * (VX_ENOTFOUND mesh_not_found when its file is gone: a delete keeps the

@@ -50,6 +50,11 @@ const char *vx_run_mesh_id(const vx_job_run *r)
     return r->job->mesh;
 }
 
+const char *vx_run_job_id(const vx_job_run *r)
+{
+    return r->job->id;
+}
+
 vx_mesh *vx_run_load_mesh(vx_job_run *r, const char *id, vx_err *err)
 {
     char path[VX_PATH_MAX];

@@ -74,6 +74,39 @@ typedef enum vx_vdb_class { VX_VDB_LEVEL_SET = 0, VX_VDB_FOG, VX_VDB_BOOL } vx_v
 int vx_voxel_write_vdb(const vx_bitgrid *g, vx_vdb_class cls, const vx_vdb_meta *meta,
                        const char *path, const vx_voxel_io *io, vx_err *err);
 
+/* vx_voxel_write_vdb with voxel (0,0,0) at index `at` of the file's index
+ * space (multiples of 8, leaf-aligned): a brick of a larger grid whose
+ * corner g->grid.origin is the whole grid's (index_offset already folded
+ * in), `at` recorded as metadata "brick_offset". NULL at: not a brick. */
+int vx_voxel_write_vdb_at(const vx_bitgrid *g, const int at[3], vx_vdb_class cls,
+                          const vx_vdb_meta *meta, const char *path, const vx_voxel_io *io,
+                          vx_err *err);
+
+/* The merge of brick .vdb files (vx_voxel_write_vdb_at, disjoint, one index
+ * space) into one sparse grid by OpenVDB's Tree::merge, pruned when
+ * written: memory is the merged tree plus the brick being read. */
+typedef struct vx_vdb_merge vx_vdb_merge;
+/* A new empty merge, or NULL (VX_EINTERNAL out_of_memory). */
+vx_vdb_merge *vx_vdb_merge_new(vx_err *err);
+/* Frees m (NULL is fine). */
+void vx_vdb_merge_free(vx_vdb_merge *m);
+/* Reads the one grid of the brick file at path into m. Errors: VX_EIO
+ * io_error (unreadable), VX_EINTERNAL (a grid type unlike the others',
+ * out_of_memory). */
+int vx_vdb_merge_add(vx_vdb_merge *m, const char *path, vx_err *err);
+/* Bytes the merged tree holds now. */
+uint64_t vx_vdb_merge_bytes(const vx_vdb_merge *m);
+/* Bytes the level set of the merged bool tree would add (its band). */
+uint64_t vx_vdb_merge_level_set_bytes(const vx_vdb_merge *m);
+/* Prunes the merged tree and writes it to path as the one grid of a
+ * voxelize .vdb of the whole grid `grid` (index 0 = its voxel (0,0,0)):
+ * bool bricks as "voxels", or with cls VX_VDB_LEVEL_SET as the level set
+ * "surface" of their topology; float bricks as they are named. Same
+ * temp-and-rename contract as the writers. */
+int vx_vdb_merge_write(vx_vdb_merge *m, vx_vdb_class cls, const vx_grid *grid,
+                       const vx_vdb_meta *meta, const char *path, const vx_voxel_io *io,
+                       vx_err *err);
+
 /* A dense float field as an OpenVDB FloatGrid named `name` (render's band-
  * limited density): value (i,j,k) = v[i + d0 (j + d1 k)] at world point
  * origin + (i,j,k) h (the transform is scale h, then translation origin);

@@ -2,10 +2,12 @@
  * params and stats schemas). The params are declared once, in spec (spec.h);
  * voxelize_check keeps the rules across fields and the grid limits. */
 #include <math.h>
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
 #include "util/fsutil.h"
+#include "util/path.h"
 #include "voxel/io.h"
 #include "voxel/job.h"
 #include "voxel/voxel.h"
@@ -37,6 +39,11 @@ typedef struct vbox {
     long index_offset[3]; /* the box's first voxel in the lattice of origin, voxel_size */
 } vbox;
 
+/* params.bricks. */
+typedef struct vbricks {
+    long size; /* cells per brick axis, a multiple of 8; 0 = one job */
+} vbricks;
+
 typedef struct vparams {
     long resolution;
     double voxel_size;
@@ -50,7 +57,15 @@ typedef struct vparams {
     long threshold;
     int format;   /* vformat */
     int vdb_grid; /* vx_vdb_class */
+    vbricks bricks;
+    int bricks_set; /* null: bricks of BRICK_DEFAULT past --brick-threshold (vdb only) */
+    int merge;      /* bricks: one merged .vdb, else a manifest of the brick files */
 } vparams;
+
+/* The brick edge of grids bricked by --brick-threshold: a multiple of
+ * OpenVDB's 128^3 internal nodes; job_bytes puts a 512^3 brick's job at about
+ * 160 MB (bool or 0/1 fog), the dense whole grid never being held. */
+#define BRICK_DEFAULT 512
 
 static const vx_pspec origin_item = VX_P_ITEM_NUM(-HUGE_VAL, HUGE_VAL);
 static const vx_pspec dims_item = VX_P_ITEM_INT(1, VX_VOXELIZE_MAX_DIM);
@@ -81,11 +96,17 @@ static const vx_pspec box_spec[] = {
     VX_P_END,
 };
 
+static const vx_pspec bricks_spec[] = {
+    VX_P_INT(vbricks, size, BRICK_DEFAULT, 0, VX_VOXELIZE_MAX_DIM,
+             "cells per brick axis, a multiple of 8 (0 = one job, never bricked)"),
+    VX_P_END,
+};
+
 #define SET(f) .set_off = offsetof(vparams, f##_set)
 static const char *const not_vs[] = {"voxel_size", NULL}, *const not_res_vs[] = {
                                                               "resolution", "voxel_size", NULL};
 static const vx_pspec spec[] = {
-    VX_P_INT(vparams, resolution, 256, 1, 2048, "voxels along the longest bbox side",
+    VX_P_INT(vparams, resolution, 256, 1, VX_VOXELIZE_MAX_DIM, "voxels along the longest bbox side",
              .flags = VX_PF_NULLABLE, SET(resolution), .excludes = not_vs),
     VX_P_NUM(vparams, voxel_size, 1, 0, HUGE_VAL, "voxel edge (instead of resolution)",
              .flags = VX_PF_NULLABLE | VX_PF_GT_LO, SET(voxel_size)),
@@ -107,6 +128,14 @@ static const vx_pspec spec[] = {
     VX_P_INT(vparams, threshold, 4, 1, 8, "inside samples that make a voxel inside"),
     VX_P_ENUM(vparams, format, format_names, 0, "output format"),
     VX_P_ENUM(vparams, vdb_grid, vdb_grid_names, 1, "the grid a vdb output holds"),
+    {.name = "bricks",
+     .type = VX_PT_OBJECT,
+     .off = offsetof(vparams, bricks),
+     .sub = bricks_spec,
+     .flags = VX_PF_NULLABLE,
+     SET(bricks),
+     .doc = "run the grid as bricks {size} merged into one .vdb (null: past --brick-threshold)"},
+    VX_P_BOOL(vparams, merge, 1, "bricks: one merged .vdb, or false: a manifest of brick files"),
     VX_P_END,
 };
 #undef SET
@@ -126,6 +155,12 @@ typedef struct vstate {
     vx_voxelize_stats st;
     int have_grid;
     vx_inside inside; /* as run */
+    /* bricked: the whole grid, brick edge, and the n brick files (owned
+     * copies of their paths; with merge their voxel offsets for the log) */
+    vx_grid whole;
+    int brick_size, nbricks, merge;
+    char **brick_paths;
+    char *out_path; /* the primary output: the merged .vdb or the manifest */
 } vstate;
 
 /* Memory one job needs for a grid: the bit grid (and sample counts), the
@@ -158,6 +193,17 @@ static uint64_t job_bytes(const int dims[3], int ss, vx_samples samples, vformat
 /* Checks the grid bounds and the memory limit. `what` names the params
  * that made the grid; kind is VX_EUNPROC at parse time (422) and
  * VX_ETOOBIG when the mesh decided the dims (the job fails). */
+/* The brick edge a grid of dims runs with (0 = one job): params.bricks,
+ * else BRICK_DEFAULT for a .vdb of more cells than --brick-threshold. */
+static int brick_size_of(const vparams *p, const int dims[3], const vx_limits *lim)
+{
+    if (p->bricks_set) return (int)p->bricks.size;
+    if (p->format != F_VDB) return 0;
+    uint64_t n = (uint64_t)dims[0] * (uint64_t)dims[1] * (uint64_t)dims[2];
+    uint64_t t = lim && lim->brick_threshold ? lim->brick_threshold : (uint64_t)1 << 30;
+    return n > t ? BRICK_DEFAULT : 0;
+}
+
 static int check_grid(const int dims[3], const vparams *p, const vx_limits *lim, const char *what,
                       vx_err_kind kind, vx_err *err)
 {
@@ -169,8 +215,33 @@ static int check_grid(const int dims[3], const vparams *p, const vx_limits *lim,
                               what, dims[a], a, VX_VOXELIZE_MAX_DIM);
         n *= (uint64_t)dims[a];
     }
+    const int S = brick_size_of(p, dims, lim);
+    if (S) {
+        /* Bricked: one brick's job at a time (the merged sparse tree is
+         * checked against the limit as it grows, in voxelize_encode). */
+        int bd[3];
+        for (int a = 0; a < 3; a++)
+            bd[a] = dims[a] < S ? dims[a] : S;
+        if ((uint64_t)bd[0] * (uint64_t)bd[1] * (uint64_t)bd[2] > VX_VOXELIZE_MAX_VOXELS)
+            return vx_err_set(err, kind, code,
+                              "%s: a %dx%dx%d brick is over one job's 2048^3 voxels (smaller "
+                              "params.bricks.size)",
+                              what, bd[0], bd[1], bd[2]);
+        uint64_t bytes =
+            job_bytes(bd, (int)p->supersample, (vx_samples)p->samples, F_VDB,
+                      p->vdb_grid == VX_VDB_LEVEL_SET ? VX_VDB_BOOL : (vx_vdb_class)p->vdb_grid);
+        if (lim && lim->max_job_memory && bytes > lim->max_job_memory)
+            return vx_err_set(err, kind, code,
+                              "%s: a %dx%dx%d brick needs about %llu bytes, over the job memory "
+                              "limit of %llu (job_memory_limit; smaller params.bricks.size)",
+                              what, bd[0], bd[1], bd[2], (unsigned long long)bytes,
+                              (unsigned long long)lim->max_job_memory);
+        return 0;
+    }
     if (n > VX_VOXELIZE_MAX_VOXELS)
-        return vx_err_set(err, kind, code, "%s gives %dx%dx%d = %llu voxels, the limit is 2048^3",
+        return vx_err_set(err, kind, code,
+                          "%s gives %dx%dx%d = %llu voxels, the limit is 2048^3 for one job "
+                          "(format vdb runs larger grids as params.bricks)",
                           what, dims[0], dims[1], dims[2], (unsigned long long)n);
     uint64_t bytes = job_bytes(dims, (int)p->supersample, (vx_samples)p->samples,
                                (vformat)p->format, (vx_vdb_class)p->vdb_grid);
@@ -230,6 +301,26 @@ static int voxelize_check(void *params, const vx_limits *lim, vx_err *err)
         return vx_err_set(err, VX_EUNPROC, "invalid_params",
                           "params.fill \"surface\" cannot be supersampled: with "
                           "params.supersample 2, auto runs slice, which fills solids only");
+    if (p->bricks_set && p->bricks.size % 8)
+        return vx_err_set(err, VX_EUNPROC, "invalid_params",
+                          "params.bricks.size must be a multiple of 8 (OpenVDB's leaf edge), or 0 "
+                          "for one job; got %ld",
+                          p->bricks.size);
+    if (p->bricks_set && p->bricks.size && p->format != F_VDB)
+        return vx_err_set(err, VX_EUNPROC, "invalid_params",
+                          "params.bricks needs params.format \"vdb\" (one merged sparse grid, or "
+                          "with merge false a manifest of brick .vdb files); %s is a dense format, "
+                          "run as one job",
+                          format_names[p->format]);
+    if (!p->merge) {
+        if (!p->bricks_set || !p->bricks.size)
+            return vx_err_set(err, VX_EUNPROC, "invalid_params",
+                              "params.merge false needs params.bricks {\"size\": S}");
+        if (p->vdb_grid == VX_VDB_LEVEL_SET)
+            return vx_err_set(err, VX_EUNPROC, "invalid_params",
+                              "params.merge false needs params.vdb_grid fog or bool (a level set "
+                              "of each brick alone would have a false surface at its faces)");
+    }
     if (p->grid_set) {
         if (p->padding)
             return vx_err_set(
@@ -301,65 +392,47 @@ static void stat_set(cJSON *stats, const char *name, cJSON *v)
     if (!cJSON_AddItemToObject(stats, name, v)) cJSON_Delete(v);
 }
 
-static int voxelize_run_gl(vx_job_run *r, const vx_mesh *mesh, const void *params, void **state,
-                           vx_err *err)
+/* The grid of p (explicit, or from the mesh and checked: VX_ETOOBIG). */
+static int grid_of(const vparams *p, const vx_mesh *mesh, const vx_limits *lim, vx_grid *g,
+                   vx_err *err)
 {
-    const vparams p = *(const vparams *)params;
-    const vx_limits *lim = vx_run_limits(r);
-    vx_voxelize_desc d = {0};
-    if (p.grid_set) {
-        d.grid.h = p.grid.voxel_size;
+    memset(g, 0, sizeof *g);
+    if (p->grid_set) {
+        g->h = p->grid.voxel_size;
         for (int a = 0; a < 3; a++) {
-            d.grid.origin[a] = p.grid.origin[a];
-            d.grid.dims[a] = (int)p.grid.dims[a];
-            d.grid.index[a] = p.grid.index_offset[a];
+            g->origin[a] = p->grid.origin[a];
+            g->dims[a] = (int)p->grid.dims[a];
+            g->index[a] = p->grid.index_offset[a];
         }
-    } else {
-        int rc =
-            p.resolution_set
-                ? vx_grid_from_resolution(mesh, (int)p.resolution, (int)p.padding, &d.grid, err)
-                : vx_grid_from_voxel_size(mesh, p.voxel_size, (int)p.padding, &d.grid, err);
-        if (rc) return -1;
-        if (check_grid(d.grid.dims, &p, lim,
-                       p.resolution_set ? "params.resolution" : "params.voxel_size", VX_ETOOBIG,
-                       err))
-            return -1;
+        return 0;
     }
-    d.method = (vx_method)p.method; /* the name arrays follow the enums' order */
-    d.fill = fill_of(&p);
-    d.supersample = (int)p.supersample;
-    d.threshold = (int)p.threshold;
-    d.samples = (vx_samples)p.samples;
-    d.inside = p.inside_set ? inside_of(&p) : vx_voxelize_default_inside(mesh, &d);
-    d.max_memory = lim ? lim->max_job_memory : 0;
-    vprog prog = {r, encode_share(&p)};
-    d.progress = engine_progress;
-    d.ud = &prog;
-    d.max_slab_rows = vx_voxelize_slab_rows(d.grid.dims);
+    int rc = p->resolution_set
+                 ? vx_grid_from_resolution(mesh, (int)p->resolution, (int)p->padding, g, err)
+                 : vx_grid_from_voxel_size(mesh, p->voxel_size, (int)p->padding, g, err);
+    if (rc) return -1;
+    return check_grid(g->dims, p, lim,
+                      p->resolution_set ? "params.resolution" : "params.voxel_size", VX_ETOOBIG,
+                      err);
+}
 
-    vstate *s = calloc(1, sizeof *s);
-    if (!s) return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for the job state");
-    *state = s; /* from here on the runner frees it through free_state */
-    s->inside = d.inside;
-    if (vx_voxelize(vx_run_gl(r), mesh, &d, &s->grid, &s->st, err)) return -1;
-    s->have_grid = 1;
-    if (vx_run_progress(r, 1.0 - prog.share, err)) return -1;
+/* The engine's desc for p on grid g (no progress hook yet). */
+static void desc_of(const vparams *p, const vx_mesh *mesh, const vx_limits *lim, const vx_grid *g,
+                    vx_voxelize_desc *d)
+{
+    memset(d, 0, sizeof *d);
+    d->grid = *g;
+    d->method = (vx_method)p->method; /* the name arrays follow the enums' order */
+    d->fill = fill_of(p);
+    d->supersample = (int)p->supersample;
+    d->threshold = (int)p->threshold;
+    d->samples = (vx_samples)p->samples;
+    d->inside = p->inside_set ? inside_of(p) : vx_voxelize_default_inside(mesh, d);
+    d->max_memory = lim ? lim->max_job_memory : 0;
+    d->max_slab_rows = vx_voxelize_slab_rows(d->grid.dims);
+}
 
-    const vx_grid *g = &s->grid.grid;
-    const vx_voxelize_stats *st = &s->st;
-    double dims[3] = {g->dims[0], g->dims[1], g->dims[2]};
-    cJSON *stats = vx_run_stats(r);
-    stat_set(stats, "method", cJSON_CreateString(st->method ? st->method : "unknown"));
-    stat_set(stats, "inside", cJSON_CreateString(inside_names[s->inside]));
-    stat_set(stats, "boundary_edges", cJSON_CreateNumber((double)mesh->boundary_edges));
-    stat_set(stats, "dims", array3(dims));
-    stat_set(stats, "origin", array3(g->origin));
-    double index[3] = {(double)g->index[0], (double)g->index[1], (double)g->index[2]};
-    stat_set(stats, "index_offset", array3(index));
-    stat_set(stats, "voxel_size", cJSON_CreateNumber(g->h));
-    stat_set(stats, "triangles", cJSON_CreateNumber((double)mesh->ntris));
-    stat_set(stats, "voxels_inside", cJSON_CreateNumber((double)st->voxels_inside));
-    stat_set(stats, "volume", cJSON_CreateNumber((double)st->voxels_inside * g->h * g->h * g->h));
+static void stats_engine(cJSON *stats, const vx_voxelize_stats *st)
+{
     stat_set(stats, "layers", cJSON_CreateNumber(st->layers));
     stat_set(stats, "passes", cJSON_CreateNumber(st->passes));
     stat_set(stats, "slices", cJSON_CreateNumber(st->slices));
@@ -369,7 +442,344 @@ static int voxelize_run_gl(vx_job_run *r, const vx_mesh *mesh, const void *param
     stat_set(stats, "gpu_fill_ms", cJSON_CreateNumber(st->gpu_fill_ms));
     stat_set(stats, "gpu_slice_ms", cJSON_CreateNumber(st->gpu_slice_ms));
     stat_set(stats, "readback_ms", cJSON_CreateNumber(st->readback_ms));
+}
+
+/* The stats both paths give: the grid as a whole and the mesh. */
+static void stats_grid(cJSON *stats, const vx_grid *g, const vx_mesh *mesh, const char *method,
+                       vx_inside inside, uint64_t voxels_inside)
+{
+    double dims[3] = {g->dims[0], g->dims[1], g->dims[2]};
+    stat_set(stats, "method", cJSON_CreateString(method ? method : "unknown"));
+    stat_set(stats, "inside", cJSON_CreateString(inside_names[inside]));
+    stat_set(stats, "boundary_edges", cJSON_CreateNumber((double)mesh->boundary_edges));
+    stat_set(stats, "dims", array3(dims));
+    stat_set(stats, "origin", array3(g->origin));
+    double index[3] = {(double)g->index[0], (double)g->index[1], (double)g->index[2]};
+    stat_set(stats, "index_offset", array3(index));
+    stat_set(stats, "voxel_size", cJSON_CreateNumber(g->h));
+    stat_set(stats, "triangles", cJSON_CreateNumber((double)mesh->ntris));
+    stat_set(stats, "voxels_inside", cJSON_CreateNumber((double)voxels_inside));
+    stat_set(stats, "volume", cJSON_CreateNumber((double)voxels_inside * g->h * g->h * g->h));
+}
+
+/* The grid's corner for the writers: origin + index_offset * h, index 0
+ * (the voxels themselves were decided in the lattice's frame). */
+static vx_grid corner_of(const vx_grid *g)
+{
+    vx_grid c = *g;
+    for (int a = 0; a < 3; a++) {
+        c.origin[a] += (double)c.index[a] * c.h;
+        c.index[a] = 0;
+    }
+    return c;
+}
+
+/* The params of one brick of a bricked voxelize, a job spec of its own:
+ * an explicit-box voxelize on the whole grid's lattice (grid.origin and
+ * voxel_size the whole grid's, grid.index_offset the brick's first voxel
+ * in that lattice: whole index + at), the inside rule as decided for the
+ * whole mesh, format vdb of class cls, never bricked again. Owned JSON,
+ * NULL on OOM. The brick's result goes to index `at` of the whole grid's
+ * .vdb index space (vx_voxel_write_vdb_at). */
+static cJSON *brick_params(const vparams *p, const vx_grid *whole, const int at[3],
+                           const int dims[3], vx_inside inside, vx_vdb_class cls)
+{
+    cJSON *o = cJSON_CreateObject(), *g = cJSON_AddObjectToObject(o, "grid");
+    double idx[3], d[3];
+    for (int a = 0; a < 3; a++) {
+        idx[a] = (double)(whole->index[a] + at[a]);
+        d[a] = dims[a];
+    }
+    cJSON_AddItemToObject(g, "origin", array3(whole->origin));
+    cJSON_AddNumberToObject(g, "voxel_size", whole->h);
+    cJSON_AddItemToObject(g, "dims", array3(d));
+    cJSON_AddItemToObject(g, "index_offset", array3(idx));
+    cJSON_AddStringToObject(o, "method", method_names[p->method]);
+    cJSON_AddStringToObject(o, "inside", inside_names[inside]);
+    cJSON_AddStringToObject(o, "fill", fill_names[p->fill]);
+    cJSON_AddNumberToObject(o, "supersample", (double)p->supersample);
+    cJSON_AddStringToObject(o, "samples", samples_names[p->samples]);
+    cJSON_AddNumberToObject(o, "threshold", (double)p->threshold);
+    cJSON_AddStringToObject(o, "format", "vdb");
+    cJSON_AddStringToObject(o, "vdb_grid", vdb_grid_names[cls]);
+    cJSON_AddNumberToObject(cJSON_AddObjectToObject(o, "bricks"), "size", 0);
+    return o;
+}
+
+static vx_vdb_meta meta_of(const vparams *p, vx_job_run *r, const char *method, vx_inside inside)
+{
+    vx_vdb_meta m = {
+        .method = method,
+        .inside = inside_names[inside],
+        .fill = fill_names[p->fill],
+        .mesh = vx_run_mesh_id(r),
+        .supersample = (int)p->supersample,
+        .threshold = (int)p->threshold,
+        .samples = samples_names[p->samples],
+    };
+    return m;
+}
+
+/* Progress of brick b of n: its engine's 0..1 within the run's share. */
+typedef struct bprog {
+    vprog *prog;
+    int b, n;
+} bprog;
+
+static int brick_progress(void *ud, double fraction, vx_err *err)
+{
+    const bprog *q = ud;
+    return engine_progress(q->prog, (q->b + fraction) / q->n, err);
+}
+
+/* Runs one brick from its spec (brick_params, printed and read back as a
+ * job's params are, so that the spec alone decides it) and writes its
+ * .vdb to path at index `at`. GL thread. */
+static int run_brick(vx_job_run *r, const vx_mesh *mesh, const cJSON *bspec, const int at[3],
+                     bprog *q, const char *path, vx_voxelize_stats *st, vx_err *err)
+{
+    const vx_limits *lim = vx_run_limits(r);
+    char *text = cJSON_PrintUnformatted(bspec);
+    cJSON *back = text ? cJSON_Parse(text) : NULL;
+    free(text);
+    vparams *bp = back ? vx_kind_read(&vx_kind_voxelize, back, lim, err) : NULL;
+    cJSON_Delete(back);
+    if (!bp) return text ? -1 : vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory");
+    vx_grid g;
+    vx_voxelize_desc d;
+    vx_bitgrid bits = {0};
+    int rc = grid_of(bp, mesh, lim, &g, err);
+    if (!rc) {
+        desc_of(bp, mesh, lim, &g, &d);
+        d.progress = brick_progress;
+        d.ud = q;
+        rc = vx_voxelize(vx_run_gl(r), mesh, &d, &bits, st, err);
+    }
+    if (!rc) {
+        /* the whole grid's corner, computed as one job computes it */
+        for (int a = 0; a < 3; a++) {
+            bits.grid.origin[a] += (double)(bits.grid.index[a] - at[a]) * bits.grid.h;
+            bits.grid.index[a] = 0;
+        }
+        vx_vdb_meta m = meta_of(bp, r, st->method, inside_of(bp));
+        rc = vx_voxel_write_vdb_at(&bits, at, (vx_vdb_class)bp->vdb_grid, &m, path, NULL, err);
+    }
+    vx_bitgrid_free(&bits);
+    vx_kind_params_free(&vx_kind_voxelize, bp);
+    return rc;
+}
+
+/* A bricked run: the grid d->grid in bricks of S^3 from its voxel
+ * (0,0,0), one after another on this thread (each an independent spec,
+ * brick_params), each written as a brick .vdb; voxelize_encode merges them
+ * or lists them. Peak memory: one brick. */
+static int run_bricks(vx_job_run *r, const vx_mesh *mesh, const vparams *p,
+                      const vx_voxelize_desc *d, int S, vprog *prog, vstate *s, vx_err *err)
+{
+    const vx_grid *w = &d->grid;
+    int nb[3];
+    for (int a = 0; a < 3; a++)
+        nb[a] = (w->dims[a] + S - 1) / S;
+    const int n = nb[0] * nb[1] * nb[2];
+    s->whole = *w;
+    s->brick_size = S;
+    s->inside = d->inside;
+    s->brick_paths = calloc((size_t)n, sizeof *s->brick_paths);
+    if (!s->brick_paths)
+        return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for the brick list");
+    /* The primary output first: the merged grid or the manifest. */
+    const char *first = p->merge ? vx_run_output(r, "voxels", "vdb", "application/x-openvdb", err)
+                                 : vx_run_output(r, "manifest", "json", "application/json", err);
+    if (!first || !(s->out_path = strdup(first)))
+        return first ? vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory") : -1;
+    s->merge = p->merge;
+    const vx_vdb_class cls =
+        p->vdb_grid == VX_VDB_LEVEL_SET ? VX_VDB_BOOL : (vx_vdb_class)p->vdb_grid;
+    cJSON *list = cJSON_CreateArray();
+    vx_voxelize_stats sum = {0};
+    uint64_t inside = 0;
+    int rc = list ? 0 : vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory");
+    for (int b = 0; !rc && b < n; b++) {
+        const int bi[3] = {b % nb[0], b / nb[0] % nb[1], b / (nb[0] * nb[1])};
+        int at[3], bd[3];
+        for (int a = 0; a < 3; a++) {
+            at[a] = bi[a] * S;
+            bd[a] = w->dims[a] - at[a] < S ? w->dims[a] - at[a] : S;
+        }
+        char path[VX_PATH_MAX];
+        if (p->merge) {
+            snprintf(path, sizeof path, "%s.brick-%d", first, b);
+        } else {
+            char name[64];
+            snprintf(name, sizeof name, "brick_%d_%d_%d", bi[0], bi[1], bi[2]);
+            const char *o = vx_run_output(r, name, "vdb", "application/x-openvdb", err);
+            if (!o) {
+                rc = -1;
+                break;
+            }
+            snprintf(path, sizeof path, "%s", o);
+        }
+        s->brick_paths[b] = strdup(path);
+        s->nbricks = b + 1;
+        cJSON *bspec = brick_params(p, w, at, bd, d->inside, cls);
+        if (!s->brick_paths[b] || !bspec) {
+            cJSON_Delete(bspec);
+            rc = vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory");
+            break;
+        }
+        bprog q = {prog, b, n};
+        vx_voxelize_stats st = {0};
+        double t0 = vx_mono();
+        rc = run_brick(r, mesh, bspec, at, &q, path, &st, err);
+        cJSON_Delete(bspec);
+        if (rc) break;
+        inside += st.voxels_inside;
+        sum.method = st.method;
+        sum.layers = st.layers > sum.layers ? st.layers : sum.layers;
+        sum.passes += st.passes;
+        sum.slices += st.slices;
+        sum.chunks += st.chunks;
+        sum.upload_ms += st.upload_ms;
+        sum.gpu_peel_ms += st.gpu_peel_ms;
+        sum.gpu_fill_ms += st.gpu_fill_ms;
+        sum.gpu_slice_ms += st.gpu_slice_ms;
+        sum.readback_ms += st.readback_ms;
+        double off[3] = {at[0], at[1], at[2]}, dd[3] = {bd[0], bd[1], bd[2]}, idx[3];
+        for (int a = 0; a < 3; a++)
+            idx[a] = (double)(w->index[a] + at[a]);
+        cJSON *e = cJSON_CreateObject();
+        cJSON_AddItemToObject(e, "offset", array3(off));
+        cJSON_AddItemToObject(e, "index_offset", array3(idx));
+        cJSON_AddItemToObject(e, "dims", array3(dd));
+        cJSON_AddNumberToObject(e, "voxels_inside", (double)st.voxels_inside);
+        cJSON_AddNumberToObject(e, "ms", (vx_mono() - t0) * 1e3);
+        if (!cJSON_AddItemToArray(list, e)) cJSON_Delete(e);
+        stat_set(vx_run_stats(r), "bricks_done", cJSON_CreateNumber(b + 1));
+    }
+    cJSON *stats = vx_run_stats(r);
+    stat_set(stats, "bricks", list);
+    if (rc) return -1;
+    double nbd[3] = {nb[0], nb[1], nb[2]};
+    stat_set(stats, "brick_size", cJSON_CreateNumber(S));
+    stat_set(stats, "brick_grid", array3(nbd));
+    stats_grid(stats, w, mesh, sum.method, d->inside, inside);
+    stats_engine(stats, &sum);
+    return vx_run_progress(r, 1.0 - prog->share, err);
+}
+
+static int voxelize_run_gl(vx_job_run *r, const vx_mesh *mesh, const void *params, void **state,
+                           vx_err *err)
+{
+    const vparams p = *(const vparams *)params;
+    const vx_limits *lim = vx_run_limits(r);
+    vx_grid grid;
+    if (grid_of(&p, mesh, lim, &grid, err)) return -1;
+    vx_voxelize_desc d;
+    desc_of(&p, mesh, lim, &grid, &d);
+    vprog prog = {r, encode_share(&p)};
+    d.progress = engine_progress;
+    d.ud = &prog;
+
+    vstate *s = calloc(1, sizeof *s);
+    if (!s) return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for the job state");
+    *state = s; /* from here on the runner frees it through free_state */
+    s->inside = d.inside;
+    const int S = brick_size_of(&p, d.grid.dims, lim);
+    if (S) return run_bricks(r, mesh, &p, &d, S, &prog, s, err);
+    if (vx_voxelize(vx_run_gl(r), mesh, &d, &s->grid, &s->st, err)) return -1;
+    s->have_grid = 1;
+    if (vx_run_progress(r, 1.0 - prog.share, err)) return -1;
+
+    cJSON *stats = vx_run_stats(r);
+    stats_grid(stats, &s->grid.grid, mesh, s->st.method, s->inside, s->st.voxels_inside);
+    stats_engine(stats, &s->st);
     return 0;
+}
+
+/* Merges the brick files into the job's .vdb (their memory checked as the
+ * tree grows) and removes them; or writes the manifest that lists them. */
+static int encode_bricks(vx_job_run *r, const vparams *p, vstate *s, vprog *prog, vx_err *err)
+{
+    const vx_grid corner = corner_of(&s->whole);
+    const uint64_t lim = vx_run_limits(r)->max_job_memory;
+    if (!p->merge) {
+        const char *path = s->out_path;
+        cJSON *m = cJSON_CreateObject(), *stats = vx_run_stats(r);
+        cJSON *g = cJSON_AddObjectToObject(m, "grid");
+        double dims[3] = {s->whole.dims[0], s->whole.dims[1], s->whole.dims[2]};
+        double idx[3] = {(double)s->whole.index[0], (double)s->whole.index[1],
+                         (double)s->whole.index[2]};
+        cJSON_AddItemToObject(g, "origin", array3(s->whole.origin));
+        cJSON_AddNumberToObject(g, "voxel_size", s->whole.h);
+        cJSON_AddItemToObject(g, "dims", array3(dims));
+        cJSON_AddItemToObject(g, "index_offset", array3(idx));
+        cJSON_AddNumberToObject(m, "brick_size", s->brick_size);
+        cJSON_AddStringToObject(m, "vdb_grid", vdb_grid_names[p->vdb_grid]);
+        cJSON *list = cJSON_AddArrayToObject(m, "bricks");
+        const cJSON *e = cJSON_GetObjectItemCaseSensitive(stats, "bricks"), *it;
+        int b = 0;
+        cJSON_ArrayForEach(it, e)
+        {
+            cJSON *o = cJSON_Duplicate(it, 1);
+            const char *slash = strrchr(s->brick_paths[b], '/');
+            char name[64], url[160];
+            snprintf(name, sizeof name, "%s", slash ? slash + 1 : s->brick_paths[b]);
+            char *dot = strrchr(name, '.');
+            if (dot) *dot = 0;
+            snprintf(url, sizeof url, "/v1/jobs/%s/result/%s", vx_run_job_id(r), name);
+            cJSON_AddStringToObject(o, "name", name);
+            cJSON_AddStringToObject(o, "url", url);
+            if (!cJSON_AddItemToArray(list, o)) cJSON_Delete(o);
+            b++;
+        }
+        char *text = cJSON_Print(m);
+        cJSON_Delete(m);
+        if (!text) return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory");
+        int rc = vx_write_atomic(path, text, strlen(text), err);
+        free(text);
+        return rc;
+    }
+    const char *path = s->out_path;
+    vx_vdb_merge *m = vx_vdb_merge_new(err);
+    if (!m) return -1;
+    int rc = 0;
+    const int S = s->brick_size;
+    const int brick[3] = {S, S, S};
+    const vx_vdb_class bcls =
+        p->vdb_grid == VX_VDB_LEVEL_SET ? VX_VDB_BOOL : (vx_vdb_class)p->vdb_grid;
+    const uint64_t one = vx_voxel_vdb_bytes(brick, bcls, p->supersample == 2);
+    for (int b = 0; !rc && b < s->nbricks; b++) {
+        rc = vx_run_progress(r, 1.0 - prog->share + prog->share * 0.7 * b / s->nbricks, err);
+        if (!rc) rc = vx_vdb_merge_add(m, s->brick_paths[b], err);
+        if (!rc) remove(s->brick_paths[b]);
+        if (!rc && lim && vx_vdb_merge_bytes(m) + one > lim)
+            rc = vx_err_set(err, VX_ETOOBIG, "job_memory_limit",
+                            "the merged OpenVDB tree of %d of %d bricks holds %llu bytes, "
+                            "near the job memory limit of %llu (vdb_grid \" bool\" needs less)",
+                            b + 1, s->nbricks, (unsigned long long)vx_vdb_merge_bytes(m),
+                            (unsigned long long)lim);
+    }
+    if (!rc && p->vdb_grid == VX_VDB_LEVEL_SET && lim &&
+        vx_vdb_merge_bytes(m) + vx_vdb_merge_level_set_bytes(m) > lim)
+        rc = vx_err_set(
+            err, VX_ETOOBIG, "job_memory_limit",
+            "the level set of the merged grid needs about %llu bytes, over the job "
+            "memory limit of %llu (vdb_grid \" fog\" or \" bool\" needs less)",
+            (unsigned long long)(vx_vdb_merge_bytes(m) + vx_vdb_merge_level_set_bytes(m)),
+            (unsigned long long)lim);
+    if (!rc) {
+        stat_set(vx_run_stats(r), "merged_tree_bytes",
+                 cJSON_CreateNumber((double)vx_vdb_merge_bytes(m)));
+        const char *method = NULL;
+        const cJSON *mt = cJSON_GetObjectItemCaseSensitive(vx_run_stats(r), "method");
+        if (cJSON_IsString(mt)) method = mt->valuestring;
+        vx_vdb_meta meta = meta_of(p, r, method, s->inside);
+        vprog tail = {r, prog->share * 0.3};
+        vx_voxel_io io = {encode_progress, &tail};
+        rc = vx_vdb_merge_write(m, (vx_vdb_class)p->vdb_grid, &corner, &meta, path, &io, err);
+    }
+    vx_vdb_merge_free(m);
+    return rc;
 }
 
 static int voxelize_encode(vx_job_run *r, const void *params, void *state, vx_err *err)
@@ -377,14 +787,15 @@ static int voxelize_encode(vx_job_run *r, const void *params, void *state, vx_er
     vstate *s = state;
     const vparams p = *(const vparams *)params;
     double t0 = vx_mono();
-    /* The writers place voxel (0,0,0) at grid.origin: a brick's own corner,
-     * origin + index_offset * h (the voxels themselves were decided in the
-     * lattice's frame). */
-    for (int a = 0; a < 3; a++) {
-        s->grid.grid.origin[a] += (double)s->grid.grid.index[a] * s->grid.grid.h;
-        s->grid.grid.index[a] = 0;
-    }
     vprog prog = {r, encode_share(&p)};
+    if (s->brick_paths) {
+        if (encode_bricks(r, &p, s, &prog, err)) return -1;
+        stat_set(vx_run_stats(r), "encode_ms", cJSON_CreateNumber((vx_mono() - t0) * 1e3));
+        return vx_run_progress(r, 1.0, err);
+    }
+    /* The writers place voxel (0,0,0) at grid.origin: a brick's own corner,
+     * origin + index_offset * h. */
+    s->grid.grid = corner_of(&s->grid.grid);
     vx_voxel_io io = {encode_progress, &prog};
     int rc = 0;
     const char *path = NULL;
@@ -418,15 +829,7 @@ static int voxelize_encode(vx_job_run *r, const void *params, void *state, vx_er
     case F_VDB: {
         path = vx_run_output(r, "voxels", "vdb", "application/x-openvdb", err);
         if (!path) return -1;
-        vx_vdb_meta m = {
-            .method = s->st.method,
-            .inside = inside_names[s->inside],
-            .fill = fill_names[p.fill],
-            .mesh = vx_run_mesh_id(r),
-            .supersample = (int)p.supersample,
-            .threshold = (int)p.threshold,
-            .samples = samples_names[p.samples],
-        };
+        vx_vdb_meta m = meta_of(&p, r, s->st.method, s->inside);
         /* A fog grid's float leaves are known only now: within the limit? */
         uint64_t lim = vx_run_limits(r)->max_job_memory;
         uint64_t need = lim ? vx_voxel_vdb_grid_bytes(&s->grid, (vx_vdb_class)p.vdb_grid) : 0;
@@ -450,6 +853,12 @@ static void voxelize_free_state(void *state)
     vstate *s = state;
     if (!s) return;
     vx_bitgrid_free(&s->grid);
+    for (int b = 0; b < s->nbricks; b++) {
+        if (s->merge && s->brick_paths[b]) remove(s->brick_paths[b]); /* a failed merge's */
+        free(s->brick_paths[b]);
+    }
+    free(s->brick_paths);
+    free(s->out_path);
     free(s);
 }
 

@@ -17,6 +17,7 @@
 #include <vector>
 
 #include <openvdb/openvdb.h>
+#include <openvdb/tools/Count.h>
 #include <openvdb/tools/Prune.h>
 #include <openvdb/tools/TopologyToLevelSet.h>
 #include <tbb/parallel_for.h>
@@ -163,9 +164,11 @@ template <typename LeafT> struct Slab {
     std::vector<openvdb::Coord> fulls;
 };
 
+// at: the index of voxel (0,0,0) in the tree (multiples of 8: a brick).
 template <typename TreeT, typename MakeLeaf>
 int build_tree(const vx_bitgrid *g, TreeT &tree, const typename TreeT::ValueType &on,
-               const vx_voxel_io *io, double span, vx_err *err, MakeLeaf make)
+               const openvdb::Coord &at, const vx_voxel_io *io, double span, vx_err *err,
+               MakeLeaf make)
 {
     using LeafT = typename TreeT::LeafNodeType;
     const int nx = g->grid.dims[0], ny = g->grid.dims[1], nz = g->grid.dims[2];
@@ -186,10 +189,12 @@ int build_tree(const vx_bitgrid *g, TreeT &tree, const typename TreeT::ValueType
             }
         });
         for (Slab<LeafT> &s : rows) {
-            for (LeafT *leaf : s.leaves)
+            for (LeafT *leaf : s.leaves) {
+                leaf->setOrigin(leaf->origin() + at);
                 tree.addLeaf(leaf);
+            }
             for (const openvdb::Coord &c : s.fulls)
-                tree.addTile(1, c, on, true);
+                tree.addTile(1, c + at, on, true);
             s.leaves.clear();
             s.fulls.clear();
         }
@@ -199,13 +204,13 @@ int build_tree(const vx_bitgrid *g, TreeT &tree, const typename TreeT::ValueType
     return 0;
 }
 
-openvdb::BoolGrid::Ptr bool_grid(const vx_bitgrid *g, const vx_voxel_io *io, double span,
-                                 vx_err *err)
+openvdb::BoolGrid::Ptr bool_grid(const vx_bitgrid *g, const openvdb::Coord &at,
+                                 const vx_voxel_io *io, double span, vx_err *err)
 {
     openvdb::BoolGrid::Ptr grid = openvdb::BoolGrid::create(false);
     using LeafT = openvdb::BoolGrid::TreeType::LeafNodeType;
     int rc =
-        build_tree(g, grid->tree(), true, io, span, err, [g](int X, int Y, int Z, LeafT *&out) {
+        build_tree(g, grid->tree(), true, at, io, span, err, [g](int X, int Y, int Z, LeafT *&out) {
             uint64_t w[8];
             int kind = gather_leaf(g, X, Y, Z, w);
             if (kind != LEAF_PART) return kind;
@@ -222,32 +227,31 @@ openvdb::BoolGrid::Ptr bool_grid(const vx_bitgrid *g, const vx_voxel_io *io, dou
     return grid;
 }
 
-openvdb::FloatGrid::Ptr fog_grid(const vx_bitgrid *g, const vx_voxel_io *io, double span,
-                                 vx_err *err)
+openvdb::FloatGrid::Ptr fog_grid(const vx_bitgrid *g, const openvdb::Coord &at,
+                                 const vx_voxel_io *io, double span, vx_err *err)
 {
     openvdb::FloatGrid::Ptr grid = openvdb::FloatGrid::create(0.0f);
     using LeafT = openvdb::FloatGrid::TreeType::LeafNodeType;
     int rc;
     if (g->counts)
-        rc =
-            build_tree(g, grid->tree(), 1.0f, io, span, err, [g](int X, int Y, int Z, LeafT *&out) {
-                return coverage_leaf(g, X, Y, Z, out);
-            });
+        rc = build_tree(
+            g, grid->tree(), 1.0f, at, io, span, err,
+            [g](int X, int Y, int Z, LeafT *&out) { return coverage_leaf(g, X, Y, Z, out); });
     else
-        rc =
-            build_tree(g, grid->tree(), 1.0f, io, span, err, [g](int X, int Y, int Z, LeafT *&out) {
-                uint64_t w[8];
-                int kind = gather_leaf(g, X, Y, Z, w);
-                if (kind != LEAF_PART) return kind;
-                out = new LeafT(openvdb::Coord(X, Y, Z), 0.0f, false);
-                float *d = out->buffer().data();
-                for (int x = 0; x < 8; x++) {
-                    out->getValueMask().template getWord<uint64_t>(x) = w[x];
-                    for (int n = 0; n < 64; n++)
-                        d[64 * x + n] = (float)((w[x] >> n) & 1u);
-                }
-                return kind;
-            });
+        rc = build_tree(g, grid->tree(), 1.0f, at, io, span, err,
+                        [g](int X, int Y, int Z, LeafT *&out) {
+                            uint64_t w[8];
+                            int kind = gather_leaf(g, X, Y, Z, w);
+                            if (kind != LEAF_PART) return kind;
+                            out = new LeafT(openvdb::Coord(X, Y, Z), 0.0f, false);
+                            float *d = out->buffer().data();
+                            for (int x = 0; x < 8; x++) {
+                                out->getValueMask().template getWord<uint64_t>(x) = w[x];
+                                for (int n = 0; n < 64; n++)
+                                    d[64 * x + n] = (float)((w[x] >> n) & 1u);
+                            }
+                            return kind;
+                        });
     if (rc) return nullptr;
     grid->setTransform(transform_of(g->grid));
     grid->setGridClass(openvdb::GRID_FOG_VOLUME);
@@ -320,22 +324,30 @@ extern "C" uint64_t vx_voxel_vdb_grid_bytes(const vx_bitgrid *g, vx_vdb_class cl
 extern "C" int vx_voxel_write_vdb(const vx_bitgrid *g, vx_vdb_class cls, const vx_vdb_meta *meta,
                                   const char *path, const vx_voxel_io *io, vx_err *err)
 {
+    return vx_voxel_write_vdb_at(g, nullptr, cls, meta, path, io, err);
+}
+
+extern "C" int vx_voxel_write_vdb_at(const vx_bitgrid *g, const int at_[3], vx_vdb_class cls,
+                                     const vx_vdb_meta *meta, const char *path,
+                                     const vx_voxel_io *io, vx_err *err)
+{
+    const openvdb::Coord at = at_ ? openvdb::Coord(at_[0], at_[1], at_[2]) : openvdb::Coord(0);
     int rc = write_grids(path, err, [&](openvdb::GridPtrVec &grids) -> int {
         openvdb::GridBase::Ptr out;
         if (cls == VX_VDB_BOOL) {
-            openvdb::BoolGrid::Ptr b = bool_grid(g, io, 0.8, err);
+            openvdb::BoolGrid::Ptr b = bool_grid(g, at, io, 0.8, err);
             if (!b) return -1;
             b->setName("voxels");
             set_meta(*b, g, meta);
             out = b;
         } else if (cls == VX_VDB_FOG) {
-            openvdb::FloatGrid::Ptr f = fog_grid(g, io, 0.8, err);
+            openvdb::FloatGrid::Ptr f = fog_grid(g, at, io, 0.8, err);
             if (!f) return -1;
             f->setName(g->counts ? "coverage" : "density");
             set_meta(*f, g, meta);
             out = f;
         } else {
-            openvdb::BoolGrid::Ptr b = bool_grid(g, io, 0.3, err);
+            openvdb::BoolGrid::Ptr b = bool_grid(g, at, io, 0.3, err);
             if (!b) return -1;
             // The narrow band (3 voxels each side) of the signed distance to
             // the boundary between set and unset voxels, by OpenVDB's own
@@ -349,6 +361,7 @@ extern "C" int vx_voxel_write_vdb(const vx_bitgrid *g, vx_vdb_class cls, const v
             set_meta(*ls, g, meta);
             out = ls;
         }
+        if (at_) out->insertMeta("brick_offset", openvdb::Vec3IMetadata(openvdb::Vec3i(at_)));
         if (io && io->progress && io->progress(io->ud, 0.85, err)) return -1;
         grids.push_back(out);
         return 0;
@@ -381,6 +394,120 @@ extern "C" int vx_voxel_write_vdb_float(const float *v, const int dims[3], const
         xf->postTranslate(openvdb::Vec3d(origin[0], origin[1], origin[2]));
         grid->setTransform(xf);
         grids.push_back(grid);
+        return 0;
+    });
+}
+
+// The merge of brick files (io.h): one grid, bool or float as the first
+// brick's, whose tree takes each brick's nodes by OpenVDB's own Tree::merge
+// (the bricks are disjoint, so nodes move over, nothing is combined); the
+// final prune turns uniform interior into tiles.
+struct vx_vdb_merge {
+    openvdb::GridBase::Ptr grid;
+    uint64_t leaves = 0;
+};
+
+extern "C" vx_vdb_merge *vx_vdb_merge_new(vx_err *err)
+{
+    try {
+        std::call_once(init_once, [] { openvdb::initialize(); });
+        return new vx_vdb_merge;
+    } catch (const std::exception &) {
+        vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for the merge");
+        return nullptr;
+    }
+}
+
+extern "C" void vx_vdb_merge_free(vx_vdb_merge *m)
+{
+    delete m;
+}
+
+extern "C" uint64_t vx_vdb_merge_bytes(const vx_vdb_merge *m)
+{
+    return m->grid ? (uint64_t)m->grid->memUsage() : 0;
+}
+
+extern "C" int vx_vdb_merge_add(vx_vdb_merge *m, const char *path, vx_err *err)
+{
+    try {
+        openvdb::io::File file(path);
+        file.open(false);
+        openvdb::GridPtrVecPtr grids = file.getGrids();
+        file.close();
+        if (!grids || grids->size() != 1)
+            return vx_err_set(err, VX_EIO, "io_error", "%s: not one grid", path);
+        openvdb::GridBase::Ptr g = grids->front();
+        if (!m->grid) {
+            m->grid = g;
+            return 0;
+        }
+        if (g->type() != m->grid->type())
+            return vx_err_set(err, VX_EINTERNAL, "internal", "%s: a %s brick among %s ones", path,
+                              g->type().c_str(), m->grid->type().c_str());
+        if (auto b = openvdb::GridBase::grid<openvdb::BoolGrid>(m->grid))
+            b->tree().merge(openvdb::gridPtrCast<openvdb::BoolGrid>(g)->tree(),
+                            openvdb::MERGE_ACTIVE_STATES);
+        else if (auto f = openvdb::GridBase::grid<openvdb::FloatGrid>(m->grid))
+            f->tree().merge(openvdb::gridPtrCast<openvdb::FloatGrid>(g)->tree(),
+                            openvdb::MERGE_ACTIVE_STATES);
+        else
+            return vx_err_set(err, VX_EINTERNAL, "internal", "%s: grid type %s", path,
+                              g->type().c_str());
+        return 0;
+    } catch (const std::bad_alloc &) {
+        return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for the merged grid");
+    } catch (const std::exception &e) {
+        return vx_err_set(err, VX_EIO, "io_error", "OpenVDB: %s: %s", path, e.what());
+    }
+}
+
+extern "C" uint64_t vx_vdb_merge_level_set_bytes(const vx_vdb_merge *m)
+{
+    auto b = m->grid ? openvdb::GridBase::grid<openvdb::BoolGrid>(m->grid) : nullptr;
+    return b ? (uint64_t)b->tree().leafCount() * 3 * leaf_bytes(VX_VDB_FOG, 0) : 0;
+}
+
+extern "C" int vx_vdb_merge_write(vx_vdb_merge *m, vx_vdb_class cls, const vx_grid *grid,
+                                  const vx_vdb_meta *meta, const char *path, const vx_voxel_io *io,
+                                  vx_err *err)
+{
+    if (!m->grid) return vx_err_set(err, VX_EINTERNAL, "internal", "no bricks to merge");
+    vx_bitgrid whole_ = {};
+    whole_.grid = *grid;
+    const vx_bitgrid *whole = &whole_;
+    return write_grids(path, err, [&](openvdb::GridPtrVec &grids) -> int {
+        openvdb::GridBase::Ptr out;
+        if (auto b = openvdb::GridBase::grid<openvdb::BoolGrid>(m->grid)) {
+            openvdb::tools::prune(b->tree());
+            if (cls == VX_VDB_LEVEL_SET) {
+                Interrupter intr{io, err, 0.2};
+                openvdb::FloatGrid::Ptr ls =
+                    openvdb::tools::topologyToLevelSet(*b, 3, 0, 0, 0, &intr);
+                if (intr.stopped) return -1;
+                m->grid.reset();
+                ls->setName("surface");
+                ls->setGridClass(openvdb::GRID_LEVEL_SET);
+                set_meta(*ls, whole, meta);
+                out = ls;
+            } else {
+                b->setName("voxels");
+                set_meta(*b, whole, meta);
+                out = b;
+            }
+        } else {
+            auto f = openvdb::gridPtrCast<openvdb::FloatGrid>(m->grid);
+            openvdb::tools::prune(f->tree());
+            f->setName(m->grid->getName()); // the bricks' "coverage" or "density"
+            f->setGridClass(openvdb::GRID_FOG_VOLUME);
+            set_meta(*f, whole, meta);
+            out = f;
+        }
+        out->setTransform(transform_of(whole->grid));
+        // The bricks' own metadata (the last brick's offset) is not the grid's.
+        out->removeMeta("brick_offset");
+        if (io && io->progress && io->progress(io->ud, 0.85, err)) return -1;
+        grids.push_back(out);
         return 0;
     });
 }

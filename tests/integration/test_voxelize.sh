@@ -244,9 +244,11 @@ bad "resolution and voxel_size" '{"resolution":8,"voxel_size":0.1}' params.voxel
 bad "grid and resolution" '{"resolution":8,"grid":{"origin":[0,0,0],"voxel_size":1,"dims":[2,2,2]}}' params.grid
 bad "grid with padding" '{"grid":{"origin":[0,0,0],"voxel_size":1,"dims":[2,2,2]},"padding":1}' params.padding
 bad "grid dims 0" '{"grid":{"origin":[0,0,0],"voxel_size":1,"dims":[2,0,2]}}' 'params.grid.dims[1]'
-bad "grid too many voxels" '{"grid":{"origin":[0,0,0],"voxel_size":1,"dims":[4096,4096,4096]}}' 2048^3
-bad "grid over memory" '{"grid":{"origin":[0,0,0],"voxel_size":1,"dims":[2048,2048,512]}}' "job memory limit"
-bad "resolution over memory" '{"resolution":2048}' "job memory limit"
+# one job (bricks size 0, or a dense format: a .vdb past --brick-threshold
+# runs as bricks, test_voxelize_bricks.sh)
+bad "grid too many voxels" '{"grid":{"origin":[0,0,0],"voxel_size":1,"dims":[4096,4096,4096]},"bricks":{"size":0}}' 2048^3
+bad "grid over memory" '{"grid":{"origin":[0,0,0],"voxel_size":1,"dims":[2048,2048,512]},"format":"raw1"}' "job memory limit"
+bad "resolution over memory" '{"resolution":2048,"bricks":{"size":0}}' "job memory limit"
 bad "unknown method" '{"method":"magic"}' params.method
 bad "unknown inside" '{"inside":"odd"}' params.inside
 bad "threshold 9" '{"supersample":2,"threshold":9}' params.threshold

@@ -41,7 +41,9 @@ URLs (outputs with `requested_by: P` only when params[P] lists them; with
 `numbered_by: P`, NAME_000.. when params[P] > 1; with `per_item_of: P`, once
 per element of the array params.P (or `count` times for a blob reference
 {"blob", "bytes", "count"}), named by formatting its name with n = 1,
-2, ...); an output with `absent_when: {param: value}` is not expected when
+2, ...; with `pattern: REGEX`, every output named like it, at least one;
+with `present_when: {param: value}`, only when the params have it); an
+output with `absent_when: {param: value}` (or a list of them, any) is not expected when
 the job's params have that value), Info.kinds against `x-kinds`, /metrics
 bodies against `x-metrics`.
 
@@ -638,10 +640,27 @@ class Checker:
             # An output with `absent_when: {param: value}` is not written
             # when the job's (normalised) params have that value.
             params = job.get("params") if isinstance(job.get("params"), dict) else {}
+            outputs = job.get("outputs") or {}
+
+            def holds(cond):
+                return (isinstance(cond, dict) and bool(cond)
+                        and all(params.get(p) == v for p, v in cond.items()))
             want = []
             for o in k.get("outputs") or []:
-                if (isinstance(o.get("absent_when"), dict) and o["absent_when"]
-                        and all(params.get(p) == v for p, v in o["absent_when"].items())):
+                # `absent_when`: one {param: value} condition or a list of
+                # them (any); `present_when`: written only when it holds.
+                aw = o.get("absent_when")
+                if any(holds(c) for c in (aw if isinstance(aw, list) else [aw])):
+                    continue
+                if "present_when" in o and not holds(o["present_when"]):
+                    continue
+                # `pattern: REGEX`: the outputs whose names match it (bricks).
+                pat = o.get("pattern")
+                if isinstance(pat, str):
+                    matched = [n for n in outputs if re.fullmatch(pat, n)]
+                    if not matched:
+                        self.fail(where, "body %s.outputs has none named like %s" % (at, pat))
+                    want += matched
                     continue
                 # `per_item_of: P`: once per element of the array params[P],
                 # the name formatted with n = 1, 2, ...
@@ -665,7 +684,6 @@ class Checker:
                     want += ["%s_%03d" % (o.get("name"), i) for i in range(count)]
                 else:
                     want.append(o.get("name"))
-            outputs = job.get("outputs") or {}
             if sorted(outputs) != sorted(want):
                 self.fail(where, "body %s.outputs has %s, kind %s declares %s"
                           % (at, sorted(outputs), kind, sorted(want)))

@@ -36,7 +36,7 @@ JOB_OK = {
 }
 VPARAMS = {"resolution": 8, "voxel_size": None, "grid": None, "padding": 0, "method": "auto",
            "inside": "nonzero", "fill": "solid", "supersample": 1, "samples": "cube", "threshold": 4,
-           "format": "summary", "vdb_grid": "fog"}
+           "format": "summary", "vdb_grid": "fog", "bricks": None, "merge": True}
 VSTATS = {"method": "peel", "inside": "nonzero", "boundary_edges": 0, "dims": [8, 8, 8], "origin": [0, 0, 0], "voxel_size": 0.125,
           "triangles": 12, "voxels_inside": 512, "volume": 1, "layers": 2, "passes": 1, "slices": 0,
           "chunks": 1, "upload_ms": 0.1, "gpu_peel_ms": 0.2, "gpu_fill_ms": 0.1,
@@ -44,6 +44,14 @@ VSTATS = {"method": "peel", "inside": "nonzero", "boundary_edges": 0, "dims": [8
 VJOB_SUMMARY = dict(JOB_OK, kind="voxelize", params=VPARAMS, stats=VSTATS, outputs={})
 VJOB_VDB = dict(VJOB_SUMMARY, params=dict(VPARAMS, format="vdb"),
                 outputs={"voxels": "/v1/jobs/%s/result/voxels" % JID})
+# merge false: a manifest and one .vdb per brick, no voxels
+BRICK = {"offset": [0, 0, 0], "index_offset": [0, 0, 0], "dims": [8, 8, 8], "voxels_inside": 512,
+         "ms": 1.5}
+VJOB_MANIFEST = dict(VJOB_VDB, params=dict(VPARAMS, format="vdb", bricks={"size": 8}, merge=False),
+                     stats=dict(VSTATS, brick_size=8, brick_grid=[1, 1, 1], bricks=[BRICK],
+                                bricks_done=1),
+                     outputs={n: "/v1/jobs/%s/result/%s" % (JID, n)
+                              for n in ("manifest", "brick_0_0_0")})
 MESH_OK = {
     "id": MESH, "format": "obj", "bytes": 412, "vertices": 8, "triangles": 12,
     "faces": {"total": 6, "triangles": 0, "quads": 6, "ngons": 0},
@@ -122,6 +130,24 @@ CASES = [
     ("voxelize vdb job without its output", dict(method="GET", path="/v1/jobs/" + JID,
                                                  status=200, content_type="application/json"),
      dict(VJOB_VDB, outputs={}), True),
+    ("voxelize manifest job with its bricks", dict(method="GET", path="/v1/jobs/" + JID,
+                                                   status=200, content_type="application/json"),
+     VJOB_MANIFEST, False),
+    ("voxelize manifest job with voxels too", dict(method="GET", path="/v1/jobs/" + JID,
+                                                   status=200, content_type="application/json"),
+     dict(VJOB_MANIFEST, outputs=dict(VJOB_MANIFEST["outputs"],
+                                      voxels="/v1/jobs/%s/result/voxels" % JID)), True),
+    ("voxelize manifest job without bricks", dict(method="GET", path="/v1/jobs/" + JID,
+                                                  status=200, content_type="application/json"),
+     dict(VJOB_MANIFEST, outputs={"manifest": "/v1/jobs/%s/result/manifest" % JID}), True),
+    ("voxelize merged job with a brick output", dict(method="GET", path="/v1/jobs/" + JID,
+                                                     status=200, content_type="application/json"),
+     dict(VJOB_VDB, outputs=dict(VJOB_VDB["outputs"],
+                                 brick_0_0_0="/v1/jobs/%s/result/brick_0_0_0" % JID)), True),
+    ("voxelize brick stats without dims", dict(method="GET", path="/v1/jobs/" + JID, status=200,
+                                               content_type="application/json"),
+     dict(VJOB_MANIFEST, stats=dict(VJOB_MANIFEST["stats"], bricks=[{"offset": [0, 0, 0]}])),
+     True),
     ("voxelize stats with a wrong method", dict(method="GET", path="/v1/jobs/" + JID, status=200,
                                                 content_type="application/json"),
      dict(VJOB_SUMMARY, stats=dict(VSTATS, method="magic")), True),

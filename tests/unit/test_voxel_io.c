@@ -311,7 +311,7 @@ static void test_params(void **st)
         "{\"resolution\":256,\"voxel_size\":null,\"grid\":null,\"padding\":0,\"method\":\"auto\","
         "\"inside\":null,\"fill\":\"solid\",\"supersample\":1,\"samples\":\"cube\","
         "\"threshold\":4,"
-        "\"format\":\"vdb\",\"vdb_grid\":\"fog\"}");
+        "\"format\":\"vdb\",\"vdb_grid\":\"fog\",\"bricks\":null,\"merge\":true}");
     /* normalised params parse to themselves */
     cJSON *again = vx_kind_parse(&vx_kind_voxelize, o, NULL, &err);
     char *s2 = cJSON_PrintUnformatted(again);
@@ -340,7 +340,8 @@ static void test_params(void **st)
         "params.padding");
     expect_invalid("{\"grid\":{\"origin\":[0,0,0],\"voxel_size\":1,\"dims\":[0,2,2]}}",
                    "params.grid.dims[0]");
-    expect_invalid("{\"grid\":{\"origin\":[0,0,0],\"voxel_size\":1,\"dims\":[4096,4096,4096]}}",
+    expect_invalid("{\"grid\":{\"origin\":[0,0,0],\"voxel_size\":1,\"dims\":[4096,4096,4096]},"
+                   "\"format\":\"raw8\"}",
                    "2048^3");
     expect_invalid("{\"grid\":{\"origin\":[0,0],\"voxel_size\":1,\"dims\":[2,2,2]}}",
                    "params.grid.origin");
@@ -355,7 +356,16 @@ static void test_params(void **st)
     expect_invalid("{\"vdb_grid\":\"points\"}", "params.vdb_grid");
     expect_invalid("{\"colour\":1}", "params.colour");
     /* 2048^3 bits is 1 GiB: twice that (CPU + GPU) is over a 1 GiB limit */
-    expect_invalid("{\"resolution\":2048}", "job memory limit");
+    expect_invalid("{\"resolution\":2048,\"bricks\":{\"size\":0}}", "job memory limit");
+    /* as bricks (a .vdb past the 1024^3 default threshold) only one
+     * brick's job counts: accepted under the same 1 GiB */
+    vx_limits lim = {.max_job_memory = 1ull << 30};
+    o = parse("{\"resolution\":2048}", &lim, &err);
+    assert_non_null(o);
+    cJSON_Delete(o);
+    expect_invalid("{\"bricks\":{\"size\":20}}", "multiple of 8");
+    expect_invalid("{\"bricks\":{\"size\":64},\"format\":\"binvox\"}", "params.bricks");
+    expect_invalid("{\"merge\":false}", "params.merge");
 }
 
 static int setup(void **st)
