@@ -17,15 +17,9 @@ cls=${4:-bool}
 mesh=$root/../shared/data/meshes/stanford-bunny.obj
 tmp=$(mktemp -d)
 trap 'kill $vpid 2>/dev/null; wait $vpid 2>/dev/null; rm -rf "$tmp"' EXIT
-"$build/voxeld" --listen 127.0.0.1:0 --data-dir "$tmp/data" --workers 2 \
-    --max-job-memory "${VX_BENCH_MEMORY:-16G}" --job-timeout 86400 2>"$tmp/voxeld.log" &
-vpid=$!
-for i in $(seq 300); do
-    port=$(sed -n 's/.*event=voxeld.ready port=\([0-9]*\).*/\1/p' "$tmp/voxeld.log")
-    [[ -n "$port" ]] && break
-    sleep 0.1
-done
-base=http://127.0.0.1:$port
+source "$root/bench/lib.sh"
+bench_voxeld "$tmp/voxeld.log" --data-dir "$tmp/data" --workers 2 \
+    --max-job-memory "${VX_BENCH_MEMORY:-16G}" --job-timeout 86400
 hwm() { awk '/VmHWM/ {print $2 * 1024}' "/proc/$vpid/status"; }
 id=$(curl -s -H 'Content-Type: model/obj' --data-binary "@$mesh" "$base/v1/meshes" | jq -r .id)
 before=$(hwm)

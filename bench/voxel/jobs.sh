@@ -16,15 +16,8 @@ M=$root/../shared/data/meshes
 meshes=(${VX_BENCH_MESHES:-$M/spot_triangulated.obj $M/stanford-bunny.obj})
 tmp=$(mktemp -d)
 trap 'kill $vpid 2>/dev/null; wait $vpid 2>/dev/null; rm -rf "$tmp"' EXIT
-"$build/voxeld" --listen 127.0.0.1:0 --data-dir "$tmp/data" --max-job-memory 16G \
-    2>"$tmp/voxeld.log" &
-vpid=$!
-for i in $(seq 300); do
-    port=$(sed -n 's/.*event=voxeld.ready port=\([0-9]*\).*/\1/p' "$tmp/voxeld.log")
-    [[ -n "$port" ]] && break
-    sleep 0.1
-done
-base=http://127.0.0.1:$port
+source "$root/bench/lib.sh"
+bench_voxeld "$tmp/voxeld.log" --data-dir "$tmp/data" --max-job-memory 16G
 # job MESH PARAMS -> the finished job's JSON on stdout
 job() {
     local id body
