@@ -139,9 +139,10 @@ async function upload(file) {
   try {
     const m = await apiJSON(`/v1/meshes?name=${encodeURIComponent(file.name)}`,
       { method: 'POST', headers: { 'Content-Type': type }, body: file });
-    $('upload-status').textContent = `${file.name}: mesh ${short(m.id)}, ${m.triangles} triangles`;
     await refreshMeshes();
     $('mesh').value = m.id;
+    // Said once the list shows the mesh (the browser test waits for it).
+    $('upload-status').textContent = `${file.name}: mesh ${short(m.id)}, ${m.triangles} triangles`;
   } catch (e) { showError(e, 'upload-status'); }
 }
 
