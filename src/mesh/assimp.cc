@@ -1,6 +1,8 @@
-/* STL and glTF 2.0 readers: a C++ shim over assimp behind the C API of
- * mesh.h (vx_assimp_read_*; OFF and PLY go to mesh/off.c and mesh/ply.c
- * from here: assimp's importers for them crashed on fuzzed files).
+/* STL and glTF 2.0 readers behind the C API of mesh.h (vx_assimp_read_*):
+ * glTF through assimp, STL read here sharing the gather and weld (assimp's
+ * STL importer leaked on malformed files); OFF and PLY go to mesh/off.c
+ * and mesh/ply.c from here (assimp's importers for them crashed on fuzzed
+ * files).
  *
  * libdraco 1.5.5 (Debian 12) has STL, PLY and glTF decoders, but its STL
  * decoder reads binary files only (and refuses the many binary files whose
@@ -13,6 +15,7 @@
  * vx_declared_decode_bound. */
 #include <algorithm>
 #include <cerrno>
+#include <cctype>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
@@ -203,6 +206,170 @@ vx_mesh *to_mesh(Gather &g)
     return m.release();
 }
 
+/* ---- STL, without assimp ---------------------------------------------
+ * assimp 5.2's STL importer leaks the mesh and node it allocated (2.4 KB)
+ * whenever it throws on a malformed ASCII file, so every bad upload grew
+ * the daemon (and fuzz_stl ran a leak scan per input: 100 inputs/s). STL
+ * is read here: binary (the 84-byte header, then 50 bytes a triangle: a
+ * normal, three vertices, an attribute word; vx_declared_check holds the
+ * count to the size) or ASCII (`solid` NAME, then per facet `facet normal
+ * x y z` `outer loop` three `vertex x y z` `endloop` `endfacet`, ended by
+ * `endsolid` (or the end of the file); several solids may follow each
+ * other). Normals are ignored;
+ * corners are welded by position (weld). */
+
+/* A whitespace-separated token reader over the file. */
+struct Tokens {
+    const char *p, *end;
+    size_t line = 1; /* of the last token read */
+    /* The next token into [*s, *s + *len); false at the end. */
+    bool next(const char **s, size_t *len)
+    {
+        while (p < end && std::isspace(static_cast<unsigned char>(*p))) {
+            if (*p == '\n') line++;
+            p++;
+        }
+        if (p == end) return false;
+        *s = p;
+        while (p < end && !std::isspace(static_cast<unsigned char>(*p)))
+            p++;
+        *len = size_t(p - *s);
+        return true;
+    }
+    bool is(const char *word)
+    {
+        const char *s;
+        size_t len;
+        return next(&s, &len) && len == std::strlen(word) && !std::memcmp(s, word, len);
+    }
+    bool number(double *v)
+    {
+        const char *s;
+        size_t len;
+        char buf[64];
+        if (!next(&s, &len) || len >= sizeof buf) return false;
+        std::memcpy(buf, s, len);
+        buf[len] = 0;
+        char *e;
+        *v = std::strtod(buf, &e);
+        return *e == 0;
+    }
+    void skip_line()
+    {
+        while (p < end && *p != '\n')
+            p++;
+    }
+};
+
+int stl_fail(Gather &g, const char *what, size_t line)
+{
+    return vx_err_set(g.err, VX_EINVAL, "stl_corrupt", "not a valid STL file: line %zu: %s", line,
+                      what);
+}
+
+/* Adds one triangle's corners; checks them and the limits. */
+int stl_triangle(Gather &g, const double c[9])
+{
+    for (int k = 0; k < 9; k++)
+        if (!std::isfinite(c[k]))
+            return vx_err_set(g.err, VX_EINVAL, "stl_corrupt",
+                              "not a valid STL file: triangle %zu has a NaN or infinite "
+                              "coordinate",
+                              g.start.size());
+    if (g.lim && g.lim->max_triangles && g.start.size() + 1 > g.lim->max_triangles)
+        return too_big(g, "triangles", g.start.size() + 1, g.lim->max_triangles);
+    uint32_t base = uint32_t(g.pos.size() / 3);
+    g.pos.insert(g.pos.end(), c, c + 9);
+    g.start.push_back(uint32_t(g.idx.size()));
+    g.idx.insert(g.idx.end(), {base, base + 1, base + 2});
+    return 0;
+}
+
+int stl_binary(Gather &g, const unsigned char *data, size_t n)
+{
+    uint32_t count = uint32_t(data[80]) | uint32_t(data[81]) << 8 | uint32_t(data[82]) << 16 |
+                     uint32_t(data[83]) << 24;
+    if (84 + 50 * uint64_t(count) != n)
+        return stl_fail(g, "the triangle count does not match the size", 1);
+    g.pos.reserve(9 * size_t(count));
+    for (uint32_t t = 0; t < count; t++) {
+        const unsigned char *q = data + 84 + 50 * size_t(t) + 12; /* past the normal */
+        double c[9];
+        for (int k = 0; k < 9; k++) {
+            const unsigned char *b = q + 4 * k;
+            uint32_t u =
+                uint32_t(b[0]) | uint32_t(b[1]) << 8 | uint32_t(b[2]) << 16 | uint32_t(b[3]) << 24;
+            float f;
+            std::memcpy(&f, &u, 4);
+            c[k] = f;
+        }
+        if (stl_triangle(g, c)) return -1;
+    }
+    return 0;
+}
+
+int stl_ascii(Gather &g, const unsigned char *data, size_t n)
+{
+    Tokens t{reinterpret_cast<const char *>(data), reinterpret_cast<const char *>(data) + n};
+    const char *s;
+    size_t len;
+    bool any = false;
+    while (t.next(&s, &len)) {
+        if (!(len == 5 && !std::memcmp(s, "solid", 5)))
+            return stl_fail(g, any ? "text after endsolid that is not a solid" : "no \"solid\"",
+                            t.line);
+        any = true;
+        t.skip_line(); /* the solid's name */
+        for (;;) {
+            if (!t.next(&s, &len)) return 0; /* a missing endsolid is forgiven */
+            size_t at = t.line;
+            if (len == 8 && !std::memcmp(s, "endsolid", 8)) {
+                t.skip_line();
+                break;
+            }
+            if (!(len == 5 && !std::memcmp(s, "facet", 5)))
+                return stl_fail(g, "expected facet or endsolid", at);
+            double nrm[3], c[9];
+            if (!t.is("normal") || !t.number(&nrm[0]) || !t.number(&nrm[1]) || !t.number(&nrm[2]) ||
+                !t.is("outer") || !t.is("loop"))
+                return stl_fail(g, "a facet without its normal and outer loop", at);
+            for (int v = 0; v < 3; v++)
+                if (!t.is("vertex") || !t.number(&c[3 * v]) || !t.number(&c[3 * v + 1]) ||
+                    !t.number(&c[3 * v + 2]))
+                    return stl_fail(g, "a facet without three vertices of three numbers", at);
+            if (!t.is("endloop") || !t.is("endfacet"))
+                return stl_fail(g, "a facet without endloop and endfacet after three vertices", at);
+            if (stl_triangle(g, c)) return -1;
+        }
+    }
+    return any ? 0 : stl_fail(g, "no \"solid\"", 1);
+}
+
+vx_mesh *read_stl(const unsigned char *data, size_t n, const FormatInfo *fi,
+                  const vx_mesh_limits *lim, vx_err *err)
+{
+    vx_mesh_declared d;
+    if (vx_declared_check(VX_MESH_STL, data, n, n, lim, &d, err)) return nullptr;
+    Gather g;
+    g.lim = lim;
+    g.fi = fi;
+    g.err = err;
+    /* The declared check told the two apart: an exact binary size wins. */
+    if (d.exact ? stl_binary(g, data, n) : stl_ascii(g, data, n)) return nullptr;
+    if (g.start.empty()) {
+        vx_err_set(err, VX_EUNPROC, fi->no_faces, "the %s file has no faces", fi->name);
+        return nullptr;
+    }
+    weld(g);
+    if (lim && lim->max_vertices && g.pos.size() / 3 > lim->max_vertices) {
+        too_big(g, "vertices", g.pos.size() / 3, lim->max_vertices);
+        return nullptr;
+    }
+    MeshPtr m(to_mesh(g));
+    if (vx_mesh_analyze(m.get(), err)) return nullptr;
+    return m.release();
+}
+
 /* An assimp message as ASCII without controls, so that it can go into a
  * JSON answer whatever bytes the file put into it. */
 void ascii_only(const char *in, char *out, size_t n)
@@ -283,6 +450,7 @@ extern "C" vx_mesh *vx_assimp_read_mem(const unsigned char *data, size_t n, vx_m
         return nullptr;
     }
     try {
+        if (fmt == VX_MESH_STL) return read_stl(data, n, fi, lim, err);
         return import(data, n, fi, fmt, lim, err);
     } catch (const std::bad_alloc &) {
         vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory to read the %s file", fi->name);

@@ -7,7 +7,7 @@
  * `face_idx` (no copy). Positions are doubles: engines normalise in double
  * before converting to float for upload.
  *
- * Readers (OBJ, Draco, .bpt; STL, PLY, glTF and OFF through assimp) and
+ * Readers (OBJ, Draco, .bpt, STL, PLY, OFF; glTF through assimp) and
  * writers (OBJ, binary PLY, Draco, glb) live beside this file. Any thread may call these functions
  * on meshes it owns. */
 #ifndef VX_MESH_H
@@ -189,9 +189,10 @@ uint64_t vx_declared_decode_bound(vx_mesh_format fmt, uint64_t size, const vx_me
 vx_mesh_format vx_mesh_sniff_sized(const unsigned char *head, size_t n, uint64_t size);
 
 /* Reads an STL, PLY, glTF, glb or OFF file (PLY and OFF by vx_ply_read_mem
- * and vx_off_read_mem, the rest through assimp): the file is
- * checked by vx_declared_check first, and assimp runs under
- * vx_declared_decode_bound (past it: VX_EINVAL <fmt>_corrupt). Node
+ * and vx_off_read_mem, STL by its own parser in mesh/assimp.cc, glTF
+ * through assimp): the file is checked by vx_declared_check first, and
+ * assimp runs under vx_declared_decode_bound (past it: VX_EINVAL
+ * gltf_corrupt). Node
  * transforms are applied (glTF); STL and glTF vertices with equal
  * positions are merged into one. Polygons are kept (quads stay quads).
  * Errors: VX_EINVAL <fmt>_corrupt naming the format, VX_EUNPROC
