@@ -16,42 +16,12 @@
 #include <string.h>
 
 #include "mesh/mesh.h"
-
-typedef struct buf {
-    char *p;
-    size_t n, cap;
-} buf;
-
-static void put(buf *b, const void *d, size_t n)
-{
-    if (b->n + n + 1 > b->cap) {
-        b->cap = 2 * (b->n + n) + 64;
-        b->p = realloc(b->p, b->cap);
-        assert_non_null(b->p);
-    }
-    memcpy(b->p + b->n, d, n);
-    b->n += n;
-    b->p[b->n] = 0;
-}
-
-static void putf(buf *b, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
-static void putf(buf *b, const char *fmt, ...)
-{
-    char s[256];
-    va_list ap;
-    va_start(ap, fmt);
-    int k = vsnprintf(s, sizeof s, fmt, ap);
-    va_end(ap);
-    put(b, s, (size_t)k);
-}
+#include "text_buf.h"
 
 static uint64_t rnd_state = 0x9E3779B97F4A7C15ull;
 static uint64_t rnd(void)
 {
-    rnd_state ^= rnd_state << 13;
-    rnd_state ^= rnd_state >> 7;
-    rnd_state ^= rnd_state << 17;
-    return rnd_state;
+    return test_rand(&rnd_state);
 }
 
 /* ntri triangles over a pool of npool positions (so corners repeat and
@@ -76,20 +46,20 @@ static float *random_soup(size_t ntri, size_t npool, float **pool_out)
     return c;
 }
 
-static void put_le32(buf *b, uint32_t u)
+static void put_le32(tbuf *b, uint32_t u)
 {
     unsigned char o[4] = {(unsigned char)u, (unsigned char)(u >> 8), (unsigned char)(u >> 16),
                           (unsigned char)(u >> 24)};
-    put(b, o, 4);
+    tbuf_put(b, o, 4);
 }
 
-static buf write_binary(const float *c, size_t ntri, int solid_header)
+static tbuf write_binary(const float *c, size_t ntri, int solid_header)
 {
-    buf b = {0};
+    tbuf b = {0};
     char head[80];
     memset(head, ' ', sizeof head);
     if (solid_header) memcpy(head, "solid exported by a CAD tool", 28);
-    put(&b, head, 80);
+    tbuf_put(&b, head, 80);
     put_le32(&b, (uint32_t)ntri);
     for (size_t t = 0; t < ntri; t++) {
         for (int k = 0; k < 3; k++)
@@ -99,28 +69,29 @@ static buf write_binary(const float *c, size_t ntri, int solid_header)
             memcpy(&u, &c[9 * t + k], 4);
             put_le32(&b, u);
         }
-        put(&b, "\0\0", 2);
+        tbuf_put(&b, "\0\0", 2);
     }
     return b;
 }
 
-static buf write_ascii(const float *c, size_t ntri, int style)
+static tbuf write_ascii(const float *c, size_t ntri, int style)
 {
     const char *nl = style & 1 ? "\r\n" : "\n", *in = style & 2 ? "\t" : "  ";
-    buf b = {0};
+    tbuf b = {0};
     size_t split = style & 4 ? ntri / 2 : ntri; /* two solids */
     for (int s = 0; s < 2; s++) {
         size_t t0 = s ? split : 0, t1 = s ? ntri : split;
         if (s && t0 == t1) break;
-        putf(&b, "solid part %d of a model%s", s, nl);
+        tbuf_printf(&b, "solid part %d of a model%s", s, nl);
         for (size_t t = t0; t < t1; t++) {
-            putf(&b, "%sfacet normal 0 0 1%s%s%souter loop%s", in, nl, in, in, nl);
+            tbuf_printf(&b, "%sfacet normal 0 0 1%s%s%souter loop%s", in, nl, in, in, nl);
             for (int v = 0; v < 3; v++)
-                putf(&b, "%s%s%svertex %.17g %.17g %.17g%s", in, in, in, (double)c[9 * t + 3 * v],
-                     (double)c[9 * t + 3 * v + 1], (double)c[9 * t + 3 * v + 2], nl);
-            putf(&b, "%s%sendloop%s%sendfacet%s", in, in, nl, in, nl);
+                tbuf_printf(&b, "%s%s%svertex %.17g %.17g %.17g%s", in, in, in,
+                            (double)c[9 * t + 3 * v], (double)c[9 * t + 3 * v + 1],
+                            (double)c[9 * t + 3 * v + 2], nl);
+            tbuf_printf(&b, "%s%sendloop%s%sendfacet%s", in, in, nl, in, nl);
         }
-        if (!(style & 8) || s == 0) putf(&b, "endsolid part %d%s", s, nl);
+        if (!(style & 8) || s == 0) tbuf_printf(&b, "endsolid part %d%s", s, nl);
     }
     return b;
 }
@@ -149,7 +120,7 @@ static void check_soup(const vx_mesh *m, const float *c, size_t ntri)
             assert_false(!memcmp(m->pos + 3 * i, m->pos + 3 * j, 3 * sizeof(double)));
 }
 
-static vx_mesh *read_buf(const buf *b, vx_err *err)
+static vx_mesh *read_buf(const tbuf *b, vx_err *err)
 {
     memset(err, 0, sizeof *err);
     return vx_assimp_read_mem((const unsigned char *)b->p, b->n, VX_MESH_STL, NULL, err);
@@ -161,8 +132,8 @@ static void test_round_trip(void **state)
     for (int round = 0; round < 40; round++) {
         size_t ntri = 1 + rnd() % 300, npool = 3 + rnd() % 200;
         float *pool, *c = random_soup(ntri, npool, &pool);
-        buf b = round % 2 ? write_ascii(c, ntri, round / 2 % 16)
-                          : write_binary(c, ntri, round % 4 == 0);
+        tbuf b = round % 2 ? write_ascii(c, ntri, round / 2 % 16)
+                           : write_binary(c, ntri, round % 4 == 0);
         vx_err err;
         vx_mesh *m = read_buf(&b, &err);
         if (!m) fail_msg("round %d: %s", round, err.message);
@@ -178,7 +149,7 @@ static void test_truncations(void **state)
 {
     (void)state;
     float *pool, *c = random_soup(6, 5, &pool);
-    buf b = write_binary(c, 6, 1);
+    tbuf b = write_binary(c, 6, 1);
     for (size_t n = 0; n < b.n; n++) {
         vx_err err = {0};
         unsigned char *copy = malloc(n + 1);
@@ -198,8 +169,8 @@ static void test_truncations(void **state)
 
 static void expect(const char *text, const char *code, const char *in_message)
 {
-    buf b = {0};
-    put(&b, text, strlen(text));
+    tbuf b = {0};
+    tbuf_put(&b, text, strlen(text));
     vx_err err;
     vx_mesh *m = read_buf(&b, &err);
     if (m) fail_msg("read, expected %s: %s", code, text);
@@ -229,9 +200,9 @@ static void test_hostile(void **state)
     expect("solid x\nloop\n", "stl_corrupt", "facet or endsolid");
     expect("solid x\nendsolid x\n", "stl_no_faces", NULL);
     /* A missing endsolid is forgiven. */
-    buf b = {0};
+    tbuf b = {0};
     const char *ok = "solid x\n" F1 "endfacet\n";
-    put(&b, ok, strlen(ok));
+    tbuf_put(&b, ok, strlen(ok));
     vx_err err;
     vx_mesh *m = read_buf(&b, &err);
     assert_non_null(m);
