@@ -2,14 +2,15 @@
 // Fill (seed 000 §2.2, "voxelization as ray casting"), src/voxel/peel.c: one
 // invocation per pixel column walks the peeled layers front to back. No data
 // goes back to the CPU between peeling and this pass. A layer is a key
-// (voxel_peel.frag.glsl: depth bits << 1 | facing), in increasing order
-// until the first empty slot; its multiplicity is its count when coincident
+// (voxel_peel.frag.glsl: the first voxel centre at or beyond the crossing,
+// ib, from bit u_shift up; the facing in bit 0), in increasing order until
+// the first empty slot; its multiplicity is its count when coincident
 // crossings were counted, else 1.
 //
 // Crossings are counted from the centre towards +ray as the CPU reference
-// does (ray cast from each centre): the state at centre c is the total of
-// all layers minus the layers at depth <= c. A layer at exactly c therefore
-// already counts as passed, which is the half-open [entry, exit) tie rule.
+// does (ray cast from each centre): the state at centre i is the total of
+// all layers minus the layers with ib <= i (a layer at exactly the centre
+// has ib = i and counts as passed: the half-open [entry, exit) tie rule).
 // Orientation: a crossing that is counter-clockwise in the window (facing
 // bit 1) faces +ray (the window axes are a cyclic permutation of the grid
 // axes): it is an exit, +1, so a closed outward mesh has winding +1 inside.
@@ -24,7 +25,7 @@ layout(location = 2) uniform int u_mode;    // 0: nonzero, 1: parity
 layout(location = 3) uniform int u_axis;    // ray axis; 0 writes whole words, 1 and 2 atomicOr
 layout(location = 4) uniform ivec4 u_grid;  // nx, ny, words per row wx, slab rows
 layout(location = 5) uniform ivec2 u_ray;   // voxels along the ray n, first slab row k0 (axis 2)
-layout(location = 6) uniform vec2 u_depth;  // t = depth * u_depth.y + u_depth.x
+layout(location = 6) uniform int u_shift;   // a key's ib = key >> u_shift
 layout(location = 7) uniform int u_counted; // u_counts holds multiplicities
 
 const uint EMPTY = 0xffffffffu;
@@ -102,10 +103,7 @@ void main()
     for (int l = 0; l < nl && i0 < n; l++) {
         uint k = texelFetch(u_keys, ivec3(p, l), 0).r;
         int m = crossings(p, l);
-        float t = uintBitsToFloat(k >> 1) * u_depth.y + u_depth.x;
-        // First centre i + 0.5 >= t: i = ceil(t - 0.5), exact for |t| < 2^22.
-        int ib = int(ceil(clamp(t - 0.5, -1.0, float(n))));
-        ib = clamp(ib, i0, n);
+        int ib = clamp(int(k >> uint(u_shift)), i0, n);
         bool inside = u_mode == 1 ? par != 0 : w != 0;
         if (inside) set_range(p, i0, ib);
         i0 = ib;

@@ -1,15 +1,16 @@
 #version 450 core
 // Crossing counts (src/voxel/scan.c): one draw of every triangle of the slab,
 // orthographic along x as peel's first pass (voxel_peel.vert: pixel centres
-// are voxel centres, v_t the crossing's x in grid units, bit-identical to
-// peel's), no depth test, no culling, no colour output. Each fragment is one
-// crossing of the pixel's ray; it adds its sign to a per-voxel delta counter.
+// are voxel centres), no depth test, no culling, no colour output. Each
+// fragment is one crossing of the pixel's ray, found by xing()
+// (voxel_xing.glsl: the same in every brick of a lattice); it adds its sign
+// to a per-voxel delta counter.
 //
 // As in voxel_peel_fill.comp and the CPU reference, crossings are counted
 // from each centre towards +x: voxel i sees the crossings with t > i + 0.5,
 // the half-open [entry, exit) tie rule (a crossing exactly at a centre is
 // already passed). A crossing at t counts for voxels i < ib, ib = ceil(t -
-// 0.5): it goes to slot ib - 1 (the last voxel it counts for), to the row's
+// 0.5) (xing()): it goes to slot ib - 1 (the last voxel it counts for), to the row's
 // tail counter when it counts for the whole row (ib >= n: beyond the grid
 // end), and nowhere when ib <= 0 (before the first centre). The sum pass
 // adds the slots from the row's end down: w(i) = tail + sum_{j >= i} d[j].
@@ -30,24 +31,24 @@
 // here from the old value (fields move by one per crossing, in the order the
 // atomics are applied) and raises the overflow flag: the host then reports
 // too_many_crossings (auto falls back to peel).
-noperspective in float v_t;
+#include "voxel_xing"
+
 layout(std430, binding = 0) coherent buffer Delta { uint delta[]; };
 layout(std430, binding = 1) coherent buffer Tail { int tail[]; };
 layout(std430, binding = 2) coherent buffer Flag { uint overflow; };
 layout(std430, binding = 3) coherent buffer Blocks { uint blocks[]; };
 // nx, image width (ny), uints per delta row, uints per row of block bits
 layout(location = 2) uniform ivec4 u_grid;
+layout(location = 3) uniform int u_k0; // the slab's first z row (window y = z - u_k0)
 
 void main()
 {
     ivec2 p = ivec2(gl_FragCoord.xy);
     int row = p.y * u_grid.y + p.x, n = u_grid.x;
     int s = gl_FrontFacing ? 1 : -1;
-    // First centre i + 0.5 >= t: i = ceil(t - 0.5), exact for |t| < 2^22
-    // (the same expression as voxel_peel_fill.comp).
-    precise float t = v_t;
-    precise float u = t - 0.5;
-    int ib = int(ceil(clamp(u, -1.0, float(n))));
+    float frac;
+    int ib = xing(ivec3(0, 1, 2), double(gl_FragCoord.x), double(gl_FragCoord.y) + double(u_k0),
+                  1.0lf, frac);
     if (ib <= 0) return;
     if (ib >= n) {
         atomicAdd(tail[row], s);

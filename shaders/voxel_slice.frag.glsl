@@ -12,32 +12,33 @@
 // along +w, away from the viewer: GL calls it front-facing (glFrontFace
 // GL_CCW), the seed calls it a back face (the ray leaves the solid there).
 //
-// The fragment's w is the interpolated one clamped to its triangle's w range
-// (wr[], in the order of the index buffer drawn; u_base = the draw's first
-// triangle there). A triangle seen nearly edge-on projects to a sliver whose
-// interpolation plane is ill-conditioned: unclamped, a pixel it covers may
-// get any w, far outside the triangle, and then stands beyond planes it
-// never reaches (a streak down the rest of the column; issue 14). Clamped,
-// the error stays within the triangle, a face with one w (on a plane) keeps
-// that w exactly, and each fragment has one w for every plane, so the
-// incremental sum adds and subtracts it consistently.
-layout(location = 2) uniform vec2 u_planes; // w of the two planes
-layout(location = 4) uniform int u_mode;
-layout(location = 5) uniform uint u_base;
-layout(location = 6) uniform int u_count; // parity: every surface counts +1
-layout(std430, binding = 3) readonly buffer WRange { vec2 wr[]; };
+// Where the fragment's ray crosses its triangle is xing()'s answer
+// (voxel_xing.glsl: computed from the triangle's vertices, the same in
+// every brick of a lattice; a triangle seen nearly edge-on keeps its
+// crossing within its own w range) as the first plane at or beyond the
+// crossing, ib, in the frame scaled by ss where plane j sits at j + 1/2:
+// beyond plane j exactly when ib > j, so each fragment has one answer for
+// every plane and the incremental sum adds and subtracts it consistently.
+// Tie rule [entry, exit): a surface exactly on a plane is not beyond it
+// (the GL near plane would keep it).
+#include "voxel_xing"
 
-in float v_w;
+layout(location = 0) uniform ivec3 u_perm;  // grid axes that become u, v, w
+layout(location = 2) uniform ivec2 u_planes; // mode 1: plane x; mode 2: planes x < y
+layout(location = 4) uniform int u_mode;
+layout(location = 6) uniform int u_count;   // parity: every surface counts +1
+layout(location = 7) uniform ivec2 u_off;   // scaled grid units of window (0, 0)
+layout(location = 8) uniform int u_ss;
+
 layout(location = 0) out float o_val;
 
 void main()
 {
-    vec2 r = wr[u_base + uint(gl_PrimitiveID)];
-    float w = clamp(v_w, r.x, r.y);
-    // Tie rule [entry, exit): a surface exactly on a plane is not beyond it
-    // (the GL near plane would keep it).
-    if (w - u_planes.x <= 0.0) discard;
-    if (u_mode == 2 && w - u_planes.y > 0.0) discard;
+    float frac;
+    int ib = xing(ivec3(u_perm.z, u_perm.x, u_perm.y), double(gl_FragCoord.x) + double(u_off.x),
+                  double(gl_FragCoord.y) + double(u_off.y), double(u_ss), frac);
+    if (ib <= u_planes.x) discard;
+    if (u_mode == 2 && ib > u_planes.y) discard;
     bool leaves = gl_FrontFacing;
     float sgn = leaves || u_count != 0 ? 1.0 : -1.0;
     o_val = u_mode == 1 ? sgn : -sgn;

@@ -119,6 +119,59 @@ GLuint vx_gl_program_from_source(const char *label, const char *vs, const char *
     return prog;
 }
 
+/* The embedded source `name` with each line `#include "other"` replaced by
+ * the embedded source `other` (one level; the included text has no
+ * #version) and a #line that puts the log's line numbers back on the
+ * including file's. malloc'd; NULL when a name is unknown (copied into
+ * missing) or out of memory (missing empty). */
+static char *expand(const char *name, char missing[64])
+{
+    const char *src = vx_shader_source(name);
+    snprintf(missing, 64, "%s", name);
+    if (!src) return NULL;
+    missing[0] = 0;
+    size_t cap = strlen(src) + 1, len = 0;
+    char *out = malloc(cap);
+    if (!out) return NULL;
+    int line = 1;
+    for (const char *p = src; *p;) {
+        const char *eol = strchr(p, '\n');
+        size_t n = eol ? (size_t)(eol - p) + 1 : strlen(p);
+        char inc[64];
+        const char *add = p;
+        size_t addn = n;
+        char tail[32] = "";
+        if (sscanf(p, "#include \"%63[^\"]\"", inc) == 1) {
+            if (!(add = vx_shader_source(inc))) {
+                snprintf(missing, 64, "%s", inc);
+                free(out);
+                return NULL;
+            }
+            addn = strlen(add);
+            snprintf(tail, sizeof tail, "\n#line %d\n", line + 1);
+        }
+        size_t need = len + addn + strlen(tail) + 1;
+        if (need > cap) {
+            while (cap < need)
+                cap *= 2;
+            char *q = realloc(out, cap);
+            if (!q) {
+                free(out);
+                return NULL;
+            }
+            out = q;
+        }
+        memcpy(out + len, add, addn);
+        len += addn;
+        memcpy(out + len, tail, strlen(tail));
+        len += strlen(tail);
+        p += n;
+        line++;
+    }
+    out[len] = 0;
+    return out;
+}
+
 static GLuint cached(vx_gl *gl, const char *a, const char *b, vx_err *err)
 {
     size_t *n, *cap;
@@ -129,9 +182,15 @@ static GLuint cached(vx_gl *gl, const char *a, const char *b, vx_err *err)
             return e->prog;
     }
 
-    const char *sa = vx_shader_source(a), *sb = b ? vx_shader_source(b) : NULL;
+    char missing[64];
+    char *sa = expand(a, missing), *sb = NULL;
+    if (sa && b) sb = expand(b, missing);
     if (!sa || (b && !sb)) {
-        const char *missing = !sa ? a : b;
+        free(sa);
+        if (!missing[0]) {
+            vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for shader %s", a);
+            return 0;
+        }
         VX_ERROR("gl.shader_missing", "shader=%s", missing);
         vx_err_set(err, VX_EGPU, "shader_missing", "no embedded shader named %s (shaders/%s.glsl)",
                    missing, missing);
@@ -144,6 +203,8 @@ static GLuint cached(vx_gl *gl, const char *a, const char *b, vx_err *err)
         snprintf(label, sizeof label, "%s", a);
     GLuint prog = b ? vx_gl_program_from_source(label, sa, sb, NULL, err)
                     : vx_gl_program_from_source(label, NULL, NULL, sa, err);
+    free(sa);
+    free(sb);
     if (!prog) return 0;
 
     if (*n == *cap) {

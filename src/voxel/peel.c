@@ -13,10 +13,11 @@
  *      number of slots so far (16, 16, 32, ...): llvmpipe pays a whole
  *      vertex pass per pass, and one grazing ray can need 40 layers where
  *      the rest of the mesh needs 10 (fandisk at 256^3). A layer's key is
- *      its depth with the facing in the lowest bit; coincident crossings
- *      (the same key twice) are flagged, and then one more pass counts
- *      every key's fragments into a second R32UI array, so faces that
- *      coincide along a ray are all counted.
+ *      the first voxel centre beyond the crossing, then where it lies
+ *      between centres, then its facing (voxel_peel.frag.glsl); coincident
+ *      crossings (the same key twice) are flagged, and then one more pass
+ *      counts every key's fragments into a second R32UI array, so faces
+ *      that coincide along a ray are all counted.
  *   2. fill (seed 000 §2.2): a compute shader walks each pixel's layers and
  *      writes the bits straight into an SSBO in the voxel.h layout (x rays:
  *      whole 32-bit words per invocation, no atomics). No GPU->CPU transfer
@@ -48,12 +49,12 @@
  * once over the whole grid and their layers kept for the fill of each
  * slab.
  *
+ * Crossings are decided by xing() (shaders/voxel_xing.glsl, xing.h) from
+ * the lattice's own numbers: every brick and slab height of a lattice
+ * gives the same voxels, bit for bit, and scan (the same x rays) agrees.
+ *
  * Known limits: parts thinner than the voxel spacing between two centres
- * vanish (seed 000 §3; use fill=surface to catch them); a mesh that
- * extends below the grid along the ray has its crossings mapped to depth
- * with one rounding, so two crossings within one float ulp may merge there
- * and the fill sees each crossing within one ulp of where it is (inside
- * the grid the key is the crossing exactly). */
+ * vanish (seed 000 §3; use fill=surface to catch them). */
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
@@ -88,6 +89,7 @@ void vx_peel_objs_free(peel_objs *o)
                     o->ssbo[2],     o->list,        o->ibo_slab,    o->scan_buf[0],
                     o->scan_buf[1], o->scan_buf[2], o->scan_buf[3], o->peel_stat};
     glDeleteBuffers(12, b);
+    vx_xing_free(&o->xing);
     glDeleteFramebuffers(1, &o->scan_fbo);
     glDeleteVertexArrays(1, &o->vao);
     glDeleteQueries(1, &o->query);
@@ -146,9 +148,10 @@ void vx_peel_dispatch_2d(uint64_t invocations)
     glDispatchCompute((GLuint)gx, (GLuint)gy, 1);
 }
 
-/* Positions in grid units: (p - origin) / h in double, then float, so a
- * face on a cell boundary lands exactly on an integer (an axis-aligned cube
- * filling the grid gives exactly the full grid). Uploaded once. */
+/* Positions in grid units, snapped (vx_grid_unit): a face on a cell
+ * boundary lands exactly on an integer (an axis-aligned cube filling the
+ * grid gives exactly the full grid), and every brick of a lattice sees the
+ * same exact floats shifted by integers (xing.h). Uploaded once. */
 int vx_peel_upload(peel_ctx *c)
 {
     const vx_mesh *m = c->m;
@@ -169,7 +172,7 @@ int vx_peel_upload(peel_ctx *c)
         size_t n = m->nverts - i0 < CHUNK ? m->nverts - i0 : CHUNK;
         for (size_t k = 0; k < n; k++)
             for (int a = 0; a < 3; a++) {
-                float t = (float)vx_grid_coord(g, a, m->pos[3 * (i0 + k) + a]);
+                float t = vx_grid_unit(g, a, m->pos[3 * (i0 + k) + a]);
                 tmp[3 * k + a] = t;
                 if (t < c->tlo[a]) c->tlo[a] = t;
                 if (t > c->thi[a]) c->thi[a] = t;
@@ -185,6 +188,7 @@ int vx_peel_upload(peel_ctx *c)
     if (m->ntris)
         glNamedBufferSubData(o->ibo, 0, (GLsizeiptr)(m->ntris * 3 * sizeof(uint32_t)), m->tri);
     o->vao = vx_gl_position_vao(o->vbo, o->ibo);
+    if (vx_xing_init(&o->xing, c->gl, m, g, c->err)) return -1;
     glCreateQueries(GL_ANY_SAMPLES_PASSED, 1, &o->query);
     return vx_gl_check(c->gl, "peel.index_buffer", c->err);
 }
@@ -269,16 +273,18 @@ static int targets(peel_ctx *c, layer_set *o, int w, int h)
     return grow(c, o, 1, 0);
 }
 
-/* Draws triangles [first, first + n) of the bound element buffer. */
-void vx_peel_draw_tris(size_t first, size_t n)
+void vx_peel_draw_slab(peel_ctx *c, GLuint prog, int bucketed)
 {
-    /* glDrawElements counts in GLsizei: split beyond 2^31 indices. */
-    const size_t step = (size_t)1 << 28;
-    for (size_t t = 0; t < n; t += step) {
-        size_t count = n - t < step ? n - t : step;
-        glDrawElements(GL_TRIANGLES, (GLsizei)(3 * count), GL_UNSIGNED_INT,
-                       (const void *)(uintptr_t)((first + t) * 3 * sizeof(uint32_t)));
+    size_t first = 0, ntri = c->m->ntris;
+    GLuint ibo = c->o.ibo;
+    if (c->slab_first && bucketed) {
+        first = c->slab_first[c->slab];
+        ntri = c->slab_first[c->slab + 1] - first;
+        ibo = c->o.ibo_slab;
     }
+    glVertexArrayElementBuffer(c->o.vao, ibo);
+    vx_xing_bind(&c->o.xing, prog, ibo);
+    if (ntri) vx_xing_draw(prog, first, ntri);
 }
 
 /* Triangle t's voxel rows along z in grid units, widened by one. */
@@ -352,17 +358,11 @@ static int slab_ext(const peel_ctx *c, int a, int k0, int rows, int *off)
     return a == 2 ? rows : c->dims[a];
 }
 
-/* Draws the slab's triangles once with the peel program bound. */
+/* Draws the slab's triangles once with the peel program bound; z rays
+ * cross every slab and need the whole mesh. */
 static void draw_slab(peel_ctx *c, int axis)
 {
-    /* z rays cross every slab: they need the whole mesh */
-    size_t first = 0, ntri = c->m->ntris;
-    if (c->slab_first && axis != 2) {
-        first = c->slab_first[c->slab];
-        ntri = c->slab_first[c->slab + 1] - first;
-    }
-    glVertexArrayElementBuffer(c->o.vao, c->slab_first && axis != 2 ? c->o.ibo_slab : c->o.ibo);
-    vx_peel_draw_tris(first, ntri);
+    vx_peel_draw_slab(c, c->prog_peel, axis != 2);
 }
 
 /* Draws the slab in `bands` bands of its h rows (the scissor keeps a
@@ -409,24 +409,24 @@ static int peel(peel_ctx *c, layer_set *o, int axis, int k0, int rows, int *nslo
     o->counted = 0;
     if (c->m->ntris == 0) return vx_gl_check(c->gl, "peel.clear", c->err);
 
-    /* Depth = (t - lo) * 2^-e: lo an integer at or below the mesh, 2^e at
-     * least its extent, so for a mesh inside the grid the depth is the ray
-     * coordinate scaled by a power of two, exact and injective. */
-    double lo = floor(c->tlo[axis]);
-    int e = 0;
-    while (ldexp(1.0, e) < c->thi[axis] - lo + 1)
-        e++;
-    o->lo = (float)lo;
-    o->scale = (float)ldexp(1.0, -e);
+    /* Keys (voxel_peel.frag): ib in [0, n] from bit o->shift, n < 2^(32 -
+     * shift) - 1 so that no key is PEEL_EMPTY. */
+    int n = c->dims[axis], ibbits = 1;
+    while (((int64_t)1 << ibbits) - 2 < n)
+        ibbits++;
+    o->shift = 32 - ibbits;
+    /* power-of-two viewports (xing.h) over the w x h image */
+    const int vw = vx_xing_pow2(w), vh = vx_xing_pow2(h);
     GLuint p = c->prog_peel;
     glProgramUniform3i(p, 0, axis, ua, va);
-    glProgramUniform4f(p, 1, (float)(2.0 / w), (float)(-1.0 - 2.0 * uoff / w), (float)(2.0 / h),
-                       (float)(-1.0 - 2.0 * voff / h));
-    glProgramUniform2f(p, 3, o->lo, o->scale);
+    glProgramUniform4f(p, 1, (float)(2.0 / vw), (float)(-1.0 - 2.0 * uoff / vw), (float)(2.0 / vh),
+                       (float)(-1.0 - 2.0 * voff / vh));
+    glProgramUniform2i(p, 3, o->shift, n);
     glProgramUniform1i(p, 4, 0);
+    glProgramUniform2i(p, 6, uoff, voff);
 
     glBindFramebuffer(GL_FRAMEBUFFER, o->fbo);
-    glViewport(0, 0, w, h);
+    glViewport(0, 0, vw, vh);
     /* State other code may have left behind; cull nothing, both faces are
      * crossings; no depth test (the cascade orders the crossings). */
     vx_peel_raster_state();
@@ -501,6 +501,7 @@ static int peel(peel_ctx *c, layer_set *o, int axis, int k0, int rows, int *nslo
     }
     rc = vx_gl_check(c->gl, "peel.count", c->err);
 done:
+    vx_xing_unbind();
     glBindVertexArray(0);
     glUseProgram(0);
     glBindImageTexture(0, 0, 0, GL_FALSE, 0, GL_READ_WRITE, GL_R32UI);
@@ -521,7 +522,7 @@ static int fill(peel_ctx *c, const layer_set *o, int axis, int slot, int mode, i
     glProgramUniform1i(p, 3, axis);
     glProgramUniform4i(p, 4, c->dims[0], c->dims[1], (int)c->wx, rows);
     glProgramUniform2i(p, 5, c->dims[axis], k0);
-    glProgramUniform2f(p, 6, o->lo, 1.0f / o->scale);
+    glProgramUniform1i(p, 6, o->shift);
     glProgramUniform1i(p, 7, o->counted);
     /* The keys and counts were written by image atomics in the passes. */
     glMemoryBarrier(GL_TEXTURE_FETCH_BARRIER_BIT | GL_SHADER_IMAGE_ACCESS_BARRIER_BIT);
@@ -585,7 +586,7 @@ static int tri_setup(const peel_ctx *c, size_t t, double v[3][3], double n[3], i
     const vx_grid *g = &c->d->grid;
     for (int i = 0; i < 3; i++)
         for (int a = 0; a < 3; a++)
-            v[i][a] = (float)vx_grid_coord(g, a, c->m->pos[3 * (size_t)c->m->tri[3 * t + i] + a]);
+            v[i][a] = vx_grid_unit(g, a, c->m->pos[3 * (size_t)c->m->tri[3 * t + i] + a]);
     double e0[3], e1[3];
     vx_v3_sub(v[1], v[0], e0);
     vx_v3_sub(v[2], v[1], e1);
@@ -634,7 +635,9 @@ static void plane_range(const double v0[3], const double n[3], double hs, int d,
 /* Splits the triangles: the GPU takes those whose tests fit one invocation
  * (SURF_GPU_WORK), the CPU the rest (a huge triangle on a big grid would
  * otherwise keep one invocation busy for seconds; the CPU walks the same
- * rows as the shader). */
+ * rows as the shader). The split follows the triangle's own size, not the
+ * part of it in the grid, so a triangle takes the same path (and the same
+ * arithmetic) in every brick of a lattice. */
 static int surface_lists(peel_ctx *c, uint32_t **gpu, size_t *ngpu)
 {
     const vx_mesh *m = c->m;
@@ -649,8 +652,12 @@ static int surface_lists(peel_ctx *c, uint32_t **gpu, size_t *ngpu)
         int lo[3], hi[3];
         if (!tri_setup(c, t, v, n, lo, hi)) continue;
         int d = dominant(n), a1 = (d + 1) % 3, a2 = (d + 2) % 3;
-        double rows = (double)(hi[a1] - lo[a1] + 1) * (hi[a2] - lo[a2] + 1);
-        double along = n[d] != 0 ? fmin(hi[d] - lo[d] + 1, 6) : hi[d] - lo[d] + 1;
+        double ext[3];
+        for (int a = 0; a < 3; a++)
+            ext[a] = ceil(fmax(v[0][a], fmax(v[1][a], v[2][a])) -
+                          fmin(v[0][a], fmin(v[1][a], v[2][a]))) +
+                     2;
+        double rows = ext[a1] * ext[a2], along = n[d] != 0 ? fmin(ext[d], 6) : ext[d];
         if (rows * along <= SURF_GPU_WORK)
             (*gpu)[(*ngpu)++] = (uint32_t)t;
         else
@@ -744,7 +751,7 @@ static uint64_t first_layers(const peel_ctx *c, int rows)
 static uint64_t estimate(const peel_ctx *c, int rows, int surface)
 {
     uint64_t b = vx_bitgrid_bytes(c->dims, 1);
-    b += (uint64_t)c->m->nverts * 12u + (uint64_t)c->m->ntris * 12u;
+    b += (uint64_t)c->m->nverts * 12u + (uint64_t)c->m->ntris * 12u + vx_xing_bytes(c->m);
     if (surface) return b + (uint64_t)c->m->ntris * 8u + vx_peel_slab_bytes(c, rows);
     b += vx_peel_slab_bytes(c, rows) * (uint64_t)c->naxes;
     return b + first_layers(c, rows);
@@ -758,6 +765,9 @@ static int plan(peel_ctx *c, int surface)
     long side = in->max_texture_size;
     if (vp[0] < side) side = vp[0];
     if (vp[1] < side) side = vp[1];
+    /* images fit power-of-two viewports (xing.h) */
+    while (vx_xing_pow2((int)side) > side)
+        side = vx_xing_pow2((int)side) / 2;
     uint64_t row_bytes = vx_peel_slab_bytes(c, 1);
     uint64_t rows = (uint64_t)in->max_ssbo_bytes / row_bytes;
     if (rows == 0)

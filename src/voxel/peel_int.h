@@ -10,14 +10,15 @@
 
 #include "gl/gl.h"
 #include "voxel/voxel.h"
+#include "voxel/xing.h"
 
 /* A peel image: the pass target and the layer arrays. */
 typedef struct layer_set {
     GLuint fbo;          /* attachment-less w x h target of the passes */
     GLuint keys, counts; /* R32UI arrays of cap layers: sorted crossing keys, multiplicities */
     int w, h, cap;
-    float lo, scale; /* key depth = (t - lo) * scale, scale a power of two */
-    int counted;     /* counts hold multiplicities (coincident crossings were seen) */
+    int shift;   /* a key's ib (voxel_peel.frag) = key >> shift */
+    int counted; /* counts hold multiplicities (coincident crossings were seen) */
 } layer_set;
 
 /* Every GL object one call creates, so every exit path deletes the same set
@@ -32,6 +33,7 @@ typedef struct peel_objs {
     GLuint peel_stat;   /* peel: [0] coincident crossings seen, [1] most layers of a pixel */
     GLuint scan_fbo;    /* scan: the attachment-less framebuffer */
     GLuint scan_buf[4]; /* scan: delta counters, row tails, overflow flag, block bits */
+    vx_xing xing;       /* the triangles as the fragment shaders read them */
 } peel_objs;
 
 typedef struct peel_ctx {
@@ -67,11 +69,13 @@ int vx_peel_progress(peel_ctx *c, double within_slab);
 double vx_peel_timer_end_compute(vx_gl_timer *t);
 /* Dispatches ceil(invocations / 64) groups of 64 over x and y. */
 void vx_peel_dispatch_2d(uint64_t invocations);
-/* Uploads the mesh in grid units into o.vbo / o.ibo / o.vao and sets
- * c->tlo, c->thi; also creates o.query. */
+/* Uploads the mesh in grid units (vx_grid_unit) into o.vbo / o.ibo /
+ * o.vao and o.xing and sets c->tlo, c->thi; also creates o.query. */
 int vx_peel_upload(peel_ctx *c);
-/* Draws triangles [first, first + n) of the VAO's element buffer. */
-void vx_peel_draw_tris(size_t first, size_t n);
+/* Binds the element buffer of the slab's draw (o.ibo_slab when the
+ * triangles were bucketed by slab and `bucketed`, else o.ibo) to the VAO
+ * and to o.xing, and draws its triangles with program prog (in use). */
+void vx_peel_draw_slab(peel_ctx *c, GLuint prog, int bucketed);
 /* With c->nslabs > 1: o.ibo_slab and c->slab_first, the triangles grouped
  * by the z slabs of c->rows rows they reach (skipped when they would not
  * fit c->limit; needs c->fixed_bytes and c->first_layers). */

@@ -5,9 +5,9 @@
  * layer arrays; here every crossing is counted in one draw:
  *   1. draw (voxel_peel.vert + voxel_scan.frag): all the triangles that
  *      reach the slab, orthographic along x exactly as peel's first pass
- *      (viewport ny x rows, pixel centre = voxel centre in y, z), depth test
+ *      (an ny x rows image, pixel centre = voxel centre in y, z), depth test
  *      off, no culling, no attachments. Each fragment is a crossing at x = t
- *      (grid units, the same bit-exact value peel sees) and adds its sign
+ *      (grid units, xing(): the same value peel sees) and adds its sign
  *      (+1 facing +x, -1 facing -x, as peel's nonzero) to a per-voxel delta
  *      counter: the slot of the last voxel whose centre lies before t (the
  *      [entry, exit) tie rule), or the row's tail counter when t is beyond
@@ -41,13 +41,9 @@
  * the job's max_memory and SCAN_DELTA_CAP, and each slab draws only the
  * triangles that reach it (peel's slab buckets).
  *
- * Float limits (as peel): the window transform of a slab depends on its
- * first row and height, so a crossing within float rounding of a voxel
- * centre may land on either side depending on how the grid is cut into
- * slabs. With the same slabs scan and peel agree voxel for voxel (spot at
- * 1024^3, 64-row slabs: identical); with their own slab heights a few
- * voxels per million differ at 1024^3 (neither side systematically closer
- * to the double-precision reference).
+ * Crossings are decided by xing() (shaders/voxel_xing.glsl, xing.h) from
+ * the lattice's own numbers, so scan, peel (the same x rays) and every
+ * brick or slab height of a lattice give the same voxels, bit for bit.
  *
  * robust (majority of parity along x, y, z) and fill=surface run peel
  * (vx_voxelize_peel; st->method says "peel"). supersample 2 is not
@@ -104,7 +100,7 @@ static uint64_t block_bytes(const peel_ctx *c, int rows)
 static uint64_t estimate(const peel_ctx *c, int rows)
 {
     uint64_t b = vx_bitgrid_bytes(c->dims, 1);
-    b += (uint64_t)c->m->nverts * 12u + (uint64_t)c->m->ntris * 12u;
+    b += (uint64_t)c->m->nverts * 12u + (uint64_t)c->m->ntris * 12u + vx_xing_bytes(c->m);
     return b + vx_peel_slab_bytes(c, rows) + delta_bytes(c, rows) + tail_bytes(c, rows) +
            block_bytes(c, rows) + 4u;
 }
@@ -117,7 +113,10 @@ static int plan(peel_ctx *c)
     glGetIntegerv(GL_MAX_FRAMEBUFFER_WIDTH, &fw);
     glGetIntegerv(GL_MAX_FRAMEBUFFER_HEIGHT, &fh);
     long wmax = vp[0] < fw ? vp[0] : fw, hmax = vp[1] < fh ? vp[1] : fh;
-    if (c->dims[1] > wmax)
+    /* power-of-two viewports (xing.h) no larger than the GPU allows */
+    while (hmax > 1 && vx_xing_pow2((int)hmax) > vp[1])
+        hmax /= 2;
+    if (vx_xing_pow2(c->dims[1]) > wmax || vx_xing_pow2(c->dims[1]) > vp[0])
         return vx_err_set(c->err, VX_ETOOBIG, "grid_too_large",
                           "a %dx%dx%d grid needs scan images wider than this GPU's %ld pixels",
                           c->dims[0], c->dims[1], c->dims[2], wmax);
@@ -156,13 +155,16 @@ static int draw(peel_ctx *c, int k0, int rows)
     glNamedFramebufferParameteri(o->scan_fbo, GL_FRAMEBUFFER_DEFAULT_WIDTH, w);
     glNamedFramebufferParameteri(o->scan_fbo, GL_FRAMEBUFFER_DEFAULT_HEIGHT, h);
     GLuint p = c->prog_scan;
-    /* voxel_peel.vert: ray x, window (y, z - k0) */
+    /* voxel_peel.vert: ray x, window (y, z - k0); a power-of-two viewport
+     * (xing.h) over the w x h image, which bounds the fragments */
+    const int vw = vx_xing_pow2(w), vh = vx_xing_pow2(h);
     glProgramUniform3i(p, 0, 0, 1, 2);
-    glProgramUniform4f(p, 1, (float)(2.0 / w), -1.0f, (float)(2.0 / h),
-                       (float)(-1.0 - 2.0 * k0 / h));
+    glProgramUniform4f(p, 1, (float)(2.0 / vw), -1.0f, (float)(2.0 / vh),
+                       (float)(-1.0 - 2.0 * k0 / vh));
     glProgramUniform4i(p, 2, c->dims[0], w, (int)delta_row_uints(c), (int)block_row_uints(c));
+    glProgramUniform1i(p, 3, k0);
     glBindFramebuffer(GL_FRAMEBUFFER, o->scan_fbo);
-    glViewport(0, 0, w, h);
+    glViewport(0, 0, vw, vh);
     /* State other code may have left behind: no tests, no culling (both
      * faces are crossings), every covered pixel centre one fragment. */
     glDisable(GL_DEPTH_TEST);
@@ -171,21 +173,15 @@ static int draw(peel_ctx *c, int k0, int rows)
     glBindVertexArray(o->vao);
     for (GLuint b = 0; b < 4; b++)
         glBindBufferBase(GL_SHADER_STORAGE_BUFFER, b, o->scan_buf[b]);
-    size_t first = 0, ntri = c->m->ntris;
-    if (c->slab_first) {
-        first = c->slab_first[c->slab];
-        ntri = c->slab_first[c->slab + 1] - first;
-    }
-    glVertexArrayElementBuffer(o->vao, c->slab_first ? o->ibo_slab : o->ibo);
     vx_gl_timer t;
     vx_gl_timer_begin(&t);
-    if (ntri) vx_peel_draw_tris(first, ntri);
+    vx_peel_draw_slab(c, p, 1);
     c->st->gpu_peel_ms += vx_gl_timer_end_ms(&t);
+    vx_xing_unbind();
     glBindVertexArray(0);
     glUseProgram(0);
-    for (GLuint b = 0; b < 3; b++)
+    for (GLuint b = 0; b < 4; b++)
         glBindBufferBase(GL_SHADER_STORAGE_BUFFER, b, 0);
-    glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 3, 0);
     glBindFramebuffer(GL_FRAMEBUFFER, 0);
     return vx_gl_check(c->gl, "scan.draw", c->err);
 }

@@ -72,6 +72,7 @@
 #include "util/clock.h"
 #include "util/log.h"
 #include "voxel/voxel.h"
+#include "voxel/xing.h"
 
 /* One SSBO binding may not exceed this (llvmpipe's limit; NVIDIA allows
  * more, but chunks of 128 MiB cost nothing measurable). */
@@ -89,8 +90,8 @@ typedef struct objs {
     GLuint vbo, ibo[3], vao;
     GLuint fbo, tex_color;
     GLuint ssbo_bits, ssbo_counts, pbo;
-    GLuint slab_ibo;       /* nonzero: triangles per slab between consecutive planes */
-    GLuint wr[3], slab_wr; /* each index buffer's triangles' w ranges (the shader clamps to) */
+    GLuint slab_ibo; /* nonzero: triangles per slab between consecutive planes */
+    vx_xing xing;    /* the triangles as the fragment shader reads them */
 } objs;
 
 static void objs_free(objs *o)
@@ -98,8 +99,8 @@ static void objs_free(objs *o)
     GLuint bufs[7] = {o->vbo,       o->ibo[0],      o->ibo[1], o->ibo[2],
                       o->ssbo_bits, o->ssbo_counts, o->pbo};
     glDeleteBuffers(7, bufs);
-    GLuint wbufs[5] = {o->slab_ibo, o->wr[0], o->wr[1], o->wr[2], o->slab_wr};
-    glDeleteBuffers(5, wbufs);
+    glDeleteBuffers(1, &o->slab_ibo);
+    vx_xing_free(&o->xing);
     glDeleteVertexArrays(1, &o->vao);
     glDeleteFramebuffers(1, &o->fbo);
     glDeleteTextures(1, &o->tex_color);
@@ -162,10 +163,11 @@ static uint64_t target_bytes(const plan *p, int batch)
     return 2 * target_color_bytes(p, batch);
 }
 
-/* Grid-frame coordinate of vertex v along axis a, as uploaded. */
+/* Grid-frame coordinate of vertex v along axis a, as uploaded (snapped,
+ * xing.h). */
 static float grid_coord(const vx_mesh *m, const vx_grid *g, size_t v, int a)
 {
-    return (float)vx_grid_coord(g, a, m->pos[3 * v + a]);
+    return vx_grid_unit(g, a, m->pos[3 * v + a]);
 }
 
 /* Incremental signed count (nonzero): plane j sits at w = (j + 1/2) / ss.
@@ -219,6 +221,9 @@ static int make_plan(const vx_mesh *m, const vx_voxelize_desc *d, plan *p, vx_er
     if (max_rb < lim) lim = max_rb;
     if (max_vp[0] < lim) lim = max_vp[0];
     if (max_vp[1] < lim) lim = max_vp[1];
+    /* power-of-two viewports (xing.h) */
+    while (vx_xing_pow2(lim) > lim)
+        lim = vx_xing_pow2(lim) / 2;
     /* Tiles start on word boundaries so the z pass owns whole words. */
     p->tile = (lim / p->ss) / 32 * 32;
     if (p->tile < 32)
@@ -271,7 +276,7 @@ static int make_plan(const vx_mesh *m, const vx_voxelize_desc *d, plan *p, vx_er
          * GPU (vertices, one sorted index buffer per axis), the sort keys,
          * one batch of one slice. */
         uint64_t fixed = vx_bitgrid_bytes(p->dims, p->ss) + (uint64_t)m->nverts * 12 +
-                         (uint64_t)m->ntris * 20 * (uint64_t)p->naxes +
+                         vx_xing_bytes(m) + (uint64_t)m->ntris * 20 * (uint64_t)p->naxes +
                          (uint64_t)m->ntris * sizeof(tri_key) + target_bytes(p, 1) +
                          p->slab_refs * 20 * 2 + ((uint64_t)p->dims[2] * p->ss + 1) * 8;
         /* Per z-layer of a chunk: the SSBOs, and for robust the CPU copies
@@ -304,11 +309,9 @@ static int upload_slabs(vx_gl *gl, const vx_mesh *m, const vx_grid *g, const pla
     int nplanes = p->dims[2] * p->ss, j0, j1;
     size_t *start = calloc((size_t)nplanes + 2, sizeof *start);
     uint32_t *idx = malloc(p->slab_refs * 3 * sizeof *idx + 1);
-    float *wr = malloc(p->slab_refs * 2 * sizeof *wr + 1);
-    if (!start || !idx || !wr) {
+    if (!start || !idx) {
         free(start);
         free(idx);
-        free(wr);
         return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for %llu slab entries",
                           (unsigned long long)p->slab_refs);
     }
@@ -325,11 +328,8 @@ static int upload_slabs(vx_gl *gl, const vx_mesh *m, const vx_grid *g, const pla
         float lo, hi;
         tri_wrange(m, g, t, 2, &lo, &hi);
         if (slab_range(lo, hi, p->ss, nplanes, &j0, &j1))
-            for (int j = j0; j <= j1; j++) {
-                wr[2 * start[j]] = lo;
-                wr[2 * start[j] + 1] = hi;
+            for (int j = j0; j <= j1; j++)
                 memcpy(idx + 3 * start[j]++, m->tri + 3 * t, 12);
-            }
     }
     /* the fill advanced each start to the next one's: shift back */
     for (int j = nplanes; j > 0; j--)
@@ -340,18 +340,14 @@ static int upload_slabs(vx_gl *gl, const vx_mesh *m, const vx_grid *g, const pla
     glNamedBufferStorage(o->slab_ibo, (GLsizeiptr)(p->slab_refs * 12 + 12), NULL,
                          GL_DYNAMIC_STORAGE_BIT);
     if (p->slab_refs) glNamedBufferSubData(o->slab_ibo, 0, (GLsizeiptr)(p->slab_refs * 12), idx);
-    glCreateBuffers(1, &o->slab_wr);
-    glNamedBufferStorage(o->slab_wr, (GLsizeiptr)(p->slab_refs * 8 + 8), NULL,
-                         GL_DYNAMIC_STORAGE_BIT);
-    if (p->slab_refs) glNamedBufferSubData(o->slab_wr, 0, (GLsizeiptr)(p->slab_refs * 8), wr);
     free(idx);
-    free(wr);
     return vx_gl_check(gl, "slice.slab_buffer", err);
 }
 
 /* Normalises positions into the grid frame in double (origin 0, voxel edge
- * 1) and only then converts to float: a face on a cell boundary lands on an
- * exact integer, so no voxel centre (at +1/2) is ever in doubt for it. */
+ * 1, snapped: vx_grid_unit) and only then converts to float: a face on a
+ * cell boundary lands on an exact integer, so no voxel centre (at +1/2) is
+ * ever in doubt for it. */
 static int upload(vx_gl *gl, const vx_mesh *m, const vx_grid *g, const plan *p, objs *o,
                   float wmin_all[3], float wmax_all[3], float **wmax_sorted, size_t **slab_start,
                   vx_err *err)
@@ -359,9 +355,8 @@ static int upload(vx_gl *gl, const vx_mesh *m, const vx_grid *g, const plan *p, 
     float *pos = malloc(m->nverts * 3 * sizeof *pos + 1);
     tri_key *keys = malloc(m->ntris * sizeof *keys + 1);
     uint32_t *idx = malloc(m->ntris * 3 * sizeof *idx + 1);
-    float *wr = malloc(m->ntris * 2 * sizeof *wr + 1);
     int rc = -1;
-    if (!pos || !keys || !idx || !wr) {
+    if (!pos || !keys || !idx) {
         vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory to upload %zu vertices",
                    m->nverts);
         goto done;
@@ -400,25 +395,21 @@ static int upload(vx_gl *gl, const vx_mesh *m, const vx_grid *g, const plan *p, 
             const uint32_t *v = m->tri + 3 * (size_t)keys[t].t;
             memcpy(idx + 3 * t, v, 3 * sizeof *idx);
             wmax_sorted[a][t] = keys[t].wmax;
-            wr[2 * t] = fminf(pos[3 * v[0] + w], fminf(pos[3 * v[1] + w], pos[3 * v[2] + w]));
-            wr[2 * t + 1] = keys[t].wmax;
         }
         glCreateBuffers(1, &o->ibo[a]);
         glNamedBufferStorage(o->ibo[a], (GLsizeiptr)(m->ntris * 3 * sizeof *idx), idx, 0);
-        glCreateBuffers(1, &o->wr[a]);
-        glNamedBufferStorage(o->wr[a], (GLsizeiptr)(m->ntris * 2 * sizeof *wr), wr, 0);
         if (vx_gl_check(gl, "slice.index_buffer", err)) goto done;
     }
 
     if (p->incremental && upload_slabs(gl, m, g, p, o, slab_start, err)) goto done;
 
     o->vao = vx_gl_position_vao(o->vbo, 0);
+    if (vx_xing_init(&o->xing, gl, m, g, err)) goto done;
     rc = vx_gl_check(gl, "slice.vertex_array", err);
 done:
     free(pos);
     free(keys);
     free(idx);
-    free(wr);
     return rc;
 }
 
@@ -464,21 +455,6 @@ static size_t first_beyond(const float *wmax, size_t n, float plane)
     return lo;
 }
 
-/* Draws triangles [first, end) of the bound index buffer; wr holds their w
- * ranges in the same order (the draw program's u_base: the first one's). */
-static void draw_range(GLuint prog, GLuint wr, size_t first, size_t end)
-{
-    glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 3, wr);
-    /* glDrawElements counts in GLsizei: split meshes beyond 2^31 indices. */
-    const size_t step = (size_t)3 << 28;
-    for (size_t i = 3 * first; i < 3 * end; i += step) {
-        size_t count = 3 * end - i < step ? 3 * end - i : step;
-        glProgramUniform1ui(prog, 5, (GLuint)(i / 3));
-        glDrawElements(GL_TRIANGLES, (GLsizei)count, GL_UNSIGNED_INT,
-                       (const void *)(uintptr_t)(i * sizeof(uint32_t)));
-    }
-}
-
 typedef struct run {
     vx_gl *gl;
     const vx_mesh *m;
@@ -492,6 +468,14 @@ typedef struct run {
     vx_voxelize_stats *st;
     double slices_total, slices_done;
 } run;
+
+/* Draws triangles [first, end) of element buffer ibo. */
+static void draw_range(run *r, GLuint ibo, size_t first, size_t end)
+{
+    glVertexArrayElementBuffer(r->o->vao, ibo);
+    vx_xing_bind(&r->o->xing, r->draw_prog, ibo);
+    if (end > first) vx_xing_draw(r->draw_prog, first, end - first);
+}
 
 /* Sets the draw program's w range, for axis index a, to the whole mesh's. */
 static void set_w_range(run *r, int a)
@@ -509,29 +493,24 @@ static void set_w_range(run *r, int a)
     glProgramUniform2f(r->draw_prog, 3, lo, 2.0f / (hi - lo));
 }
 
-/* Draws the surfaces for slice plane j (at w = plane) of axis index a:
- * every one beyond it, or (incremental) those in the slab since the
- * previous plane. */
-static void draw_plane(run *r, int a, int j, float plane, int incremental)
+/* Draws the surfaces for slice plane j (at w = (j + 1/2) / ss) of axis
+ * index a: every one beyond it, or (incremental) those in the slab since
+ * the previous plane. The fragment shader decides exactly (xing()); the
+ * triangle lists only need to hold every triangle it could keep. */
+static void draw_plane(run *r, int a, int j, int incremental)
 {
     const plan *p = r->p;
     const size_t ntris = r->m->ntris;
     if (!incremental) {
-        glProgramUniform2f(r->draw_prog, 2, plane, 0.0f);
+        float plane = ((float)j + 0.5f) / (float)p->ss;
+        glProgramUniform2i(r->draw_prog, 2, j, 0);
         glProgramUniform1i(r->draw_prog, 4, 1);
-        glVertexArrayElementBuffer(r->o->vao, r->o->ibo[a]);
-        /* With the slab lists' margin: interpolation may round a
-         * fragment of a triangle that ends on the plane to just
-         * beyond it; a later slab would then subtract what this
-         * sum never added, for the rest of the column. */
-        draw_range(r->draw_prog, r->o->wr[a],
-                   first_beyond(r->wmax_sorted[a], ntris, plane - SLAB_MARGIN), ntris);
+        draw_range(r, r->o->ibo[a], first_beyond(r->wmax_sorted[a], ntris, plane - SLAB_MARGIN),
+                   ntris);
     } else {
-        float prev = ((float)j - 0.5f) / (float)p->ss;
-        glProgramUniform2f(r->draw_prog, 2, prev, plane);
+        glProgramUniform2i(r->draw_prog, 2, j - 1, j);
         glProgramUniform1i(r->draw_prog, 4, 2);
-        glVertexArrayElementBuffer(r->o->vao, r->o->slab_ibo);
-        draw_range(r->draw_prog, r->o->slab_wr, r->slab_start[j], r->slab_start[j + 1]);
+        draw_range(r, r->o->slab_ibo, r->slab_start[j], r->slab_start[j + 1]);
     }
 }
 
@@ -622,21 +601,27 @@ static int do_tile(run *r, int a, int k0, const int rect[4], int w0, int w1, vx_
     for (int b0 = w0; b0 < w1; b0 += p->batch) {
         int nb = w1 - b0 < p->batch ? w1 - b0 : p->batch;
         glBindFramebuffer(GL_FRAMEBUFFER, r->o->fbo);
-        glViewport(0, 0, rect[2] * p->ss, rect[3] * p->ss);
+        /* A power-of-two viewport (xing.h) scissored to the tile's image:
+         * window = (grid units - tile corner) * ss, exactly. */
+        int iw = rect[2] * p->ss, ih = rect[3] * p->ss;
+        int vw = vx_xing_pow2(iw), vh = vx_xing_pow2(ih);
+        glViewport(0, 0, vw, vh);
+        glEnable(GL_SCISSOR_TEST);
+        glScissor(0, 0, iw, ih);
         glUseProgram(r->draw_prog);
         glBindVertexArray(r->o->vao);
-        glVertexArrayElementBuffer(r->o->vao, r->o->ibo[a]);
         glProgramUniform3i(r->draw_prog, 0, pm[0], pm[1], pm[2]);
-        glProgramUniform4f(r->draw_prog, 1, (float)rect[0], (float)rect[1], (float)rect[2],
-                           (float)rect[3]);
+        glProgramUniform4f(r->draw_prog, 1, (float)(2.0 * p->ss / vw),
+                           (float)(-1.0 - 2.0 * p->ss * rect[0] / vw), (float)(2.0 * p->ss / vh),
+                           (float)(-1.0 - 2.0 * p->ss * rect[1] / vh));
+        glProgramUniform2i(r->draw_prog, 7, rect[0] * p->ss, rect[1] * p->ss);
         vx_gl_timer timer = {0};
         int timing = 0;
         for (int s = 0; s < nb; s++)
             for (int l = 0; l < p->ss; l++) {
-                int layer = s * p->ss + l, j = (b0 + s) * p->ss + l;
                 /* Plane through the voxel centres, or (seed 003 §3.4) the
                  * two planes a quarter voxel either side of them. */
-                float plane = ((float)j + 0.5f) / (float)p->ss;
+                int layer = s * p->ss + l, j = (b0 + s) * p->ss + l;
                 glNamedFramebufferTextureLayer(r->o->fbo, GL_COLOR_ATTACHMENT0, r->o->tex_color, 0,
                                                layer);
                 /* the slab lists are along z */
@@ -659,10 +644,12 @@ static int do_tile(run *r, int a, int k0, const int rect[4], int w0, int w1, vx_
                     vx_gl_timer_begin(&timer);
                     timing = 1;
                 }
-                draw_plane(r, a, j, plane, incremental);
+                draw_plane(r, a, j, incremental);
                 prev_layer = layer;
             }
         glBindVertexArray(0);
+        glDisable(GL_SCISSOR_TEST);
+        vx_xing_unbind();
         glBindFramebuffer(GL_FRAMEBUFFER, 0);
 
         pack_batch(r, pm, k0, rect, b0, nb);
@@ -760,6 +747,7 @@ static void set_fixed_state(const plan *p, GLuint draw_prog)
     glDepthRange(0.0, 1.0);
     glProgramUniform1i(draw_prog, 4, 1);
     glProgramUniform1i(draw_prog, 6, p->count);
+    glProgramUniform1i(draw_prog, 8, p->ss);
     glDisable(GL_DEPTH_TEST);
     glEnable(GL_BLEND);
     glBlendEquation(GL_FUNC_ADD);

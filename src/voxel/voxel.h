@@ -14,6 +14,7 @@
 #ifndef VX_VOXEL_H
 #define VX_VOXEL_H
 
+#include <math.h>
 #include <stddef.h>
 #include <stdint.h>
 
@@ -41,6 +42,21 @@ typedef struct vx_grid {
 static inline double vx_grid_coord(const vx_grid *g, int a, double p)
 {
     return (p - g->origin[a]) / g->h - (double)g->index[a];
+}
+
+/* Steps per voxel the GPU methods snap positions to: what GPU rasterizers
+ * snap window coordinates to anyway (8 subpixel bits). */
+#define VX_GRID_SNAP 256.0
+
+/* Position p along axis a as the GPU methods upload it (xing.h): the
+ * lattice's units (p - origin) / h snapped to 1/VX_GRID_SNAP, the same
+ * number for every brick, less the brick's integer index. Exact as a float
+ * within 2^16 voxels of the brick, so every brick of a lattice sees the
+ * same triangles shifted by exact integers. */
+static inline float vx_grid_unit(const vx_grid *g, int a, double p)
+{
+    double u = nearbyint((p - g->origin[a]) / g->h * VX_GRID_SNAP) / VX_GRID_SNAP;
+    return (float)(u - (double)g->index[a]);
 }
 
 typedef enum vx_method {

@@ -254,8 +254,10 @@ static void test_surface(void **state)
     /* a huge triangle (CPU path) gives the same voxels as when small */
     vx_mesh_free(plate);
     vx_mesh_free(m);
-    /* spans most of a 128^3 grid: over SURF_GPU_WORK tests, so the CPU takes it */
-    double tp[9] = {0.05, 0.1, 0.2, 100.0, 6.0, 80.0, 14.0, 110.0, 40.0};
+    /* spans most of a 128^3 grid: over SURF_GPU_WORK tests, so the CPU takes
+     * it; corners on 1/128 so that the split below puts the midpoints on
+     * the 1/256 the GPU methods snap to (vx_grid_unit), in the plane */
+    double tp[9] = {0.0625, 0.125, 0.25, 100.0, 6.0, 80.0, 14.0, 110.0, 40.0};
     uint32_t ti[3] = {0, 1, 2};
     vx_mesh *big = shape_mesh_from(3, tp, 1, ti);
     vx_voxelize_desc db = {.grid = {{0, 0, 0}, 1.0, {128, 128, 128}}, .fill = VX_FILL_SURFACE};

@@ -171,6 +171,7 @@ static void random_grid(const vx_mesh *m, int n, vx_grid *g)
         ext = fmax(ext, m->bbox_max[a] - m->bbox_min[a]);
     /* a scale from 0.95 to 1.25 of the bbox and an offset of up to a few
      * voxels, neither a binary fraction */
+    memset(g, 0, sizeof *g);
     g->h = ext * (0.95 + 0.3 * drand48()) / n;
     for (int a = 0; a < 3; a++) {
         double e = m->bbox_max[a] - m->bbox_min[a];
