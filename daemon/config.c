@@ -93,6 +93,19 @@ static const opt_def opts[] = {
      "s3: connect timeout and longest stall of a transfer, seconds (default 30)"},
     {"blob-retries", T_SIZE, F(blob_retries), 0,
      "s3: retries, with backoff, of a request that met a 5xx or connection error (default 3)"},
+    {"database", T_STR, S(database),
+     "postgresql://USER@HOST/DB: the job state and queue in PostgreSQL, shared by every replica "
+     "given the same URL (cluster mode; default none: the local journal)"},
+    {"replica-name", T_STR, S(replica_name),
+     "this replica's name in job resources and claims (default host name:port)"},
+    {"lease-ttl", T_SECONDS, F(lease_ttl_s), 0,
+     "cluster mode: a running job's lease, renewed every third of it; a replica silent this "
+     "long loses its job to another (default 30)"},
+    {"max-attempts", T_COUNT, F(max_attempts), 0,
+     "cluster mode: attempts a job gets before it fails (default 3)"},
+    {"retry-backoff", T_SECONDS, F(retry_backoff_s), 0,
+     "cluster mode: wait before a failed job's next attempt, doubled each attempt up to 60 s "
+     "(default 1)"},
     {"min-free-disk", T_SIZE, F(min_free_disk), 0,
      "free space the data dir keeps: below it writes answer 507 (default 64M; 0 = only a full "
      "disk)"},
@@ -135,6 +148,9 @@ static void defaults(vx_config *c)
     c->workers = ncpu > 0 ? (int)ncpu : 2;
     c->max_upload_bytes = 1ull << 30;
     c->max_triangles = 20000000;
+    c->lease_ttl_s = 30;
+    c->max_attempts = 3;
+    c->retry_backoff_s = 1;
     c->max_queued_jobs = 64;
     c->job_timeout_s = 600;
     c->request_timeout_s = 60;

@@ -51,6 +51,11 @@ typedef struct vx_config {
     uint64_t blob_part_size;       /* s3: multipart above this */
     double blob_timeout_s;         /* s3: connect timeout and longest stall */
     uint64_t blob_retries;         /* s3: retries of 5xx/connection errors */
+    char database[1024];           /* --database postgresql://…; empty = the local journal */
+    char replica_name[128];        /* this replica's name; empty = host name:port */
+    double lease_ttl_s;            /* cluster mode: lease of a running job */
+    int max_attempts;              /* cluster mode: attempts a job gets */
+    double retry_backoff_s;        /* cluster mode: wait before attempt 2, doubled per attempt */
     double results_max_age_s;
     uint64_t job_history;
     uint64_t job_history_bytes;

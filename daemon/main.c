@@ -138,6 +138,23 @@ static int probe_software_gl(const vx_config *cfg, vx_gl_info *out)
     return vx_gl_info_software(out);
 }
 
+/* The replica name: --replica-name, else host name:port. */
+static void replica_name(const vx_config *cfg, char out[128])
+{
+    if (cfg->replica_name[0]) {
+        snprintf(out, 128, "%s", cfg->replica_name);
+        return;
+    }
+    char host[64] = "voxeld";
+    gethostname(host, sizeof host - 1);
+    const char *colon = strrchr(cfg->listen, ':');
+    int port = colon ? atoi(colon + 1) : 0;
+    if (port > 0)
+        snprintf(out, 128, "%s:%d", host, port);
+    else
+        snprintf(out, 128, "%s:pid%d", host, (int)getpid());
+}
+
 /* Opens the job runner and, when start, starts its GL thread; NULL (logged)
  * on failure. Not started, it keeps its queue and runs nothing. */
 static vx_jobs *open_jobs(const vx_config *cfg, vx_store *store, int start, vx_err *err)
@@ -146,12 +163,23 @@ static vx_jobs *open_jobs(const vx_config *cfg, vx_store *store, int start, vx_e
     int have_cache = vx_mkdirs(cfg->cache_dir, &cerr) == 0;
     if (!have_cache) VX_WARN("voxeld.no_cache_dir", "path=%s code=%s", cfg->cache_dir, cerr.code);
     vx_jobs_desc jd = make_jobs_desc(cfg, store, have_cache);
+    char replica[128];
+    replica_name(cfg, replica);
+    jd.replica = replica;
+    vx_pg_desc pd = {.url = cfg->database,
+                     .replica = replica,
+                     .lease_s = cfg->lease_ttl_s,
+                     .max_attempts = cfg->max_attempts,
+                     .backoff_s = cfg->retry_backoff_s};
+    if (cfg->database[0]) jd.database = &pd;
     const char *lose = getenv("VOXELD_TEST_LOSE_CONTEXT");
     g_lose_context = lose && atoi(lose) > 0 ? atoi(lose) : 0;
     vx_jobs *jobs = vx_jobs_open(&jd, err);
     __atomic_store_n(&g_jobs, jobs, __ATOMIC_RELEASE);
     if (!jobs) {
-        VX_ERROR("voxeld.fatal", "stage=journal code=%s message=\"%s\"", err->code, err->message);
+        VX_ERROR("voxeld.fatal", "stage=%s code=%s message=\"%s\"",
+                 cfg->database[0] ? "database" : "journal", err->code, err->message);
+        if (cfg->database[0]) fprintf(stderr, "voxeld: --database: %s\n", err->message);
         return NULL;
     }
     if (start && vx_jobs_start(jobs, err)) {

@@ -339,6 +339,36 @@ char *vx_metrics_render(const vx_metrics_gauges *g)
         (unsigned long long)g->results_bytes, (unsigned long long)g->disk_free_bytes,
         (unsigned long long)g->min_free_disk, g->ready, (unsigned long long)g->evictions,
         (unsigned long long)g->gl_context_loss);
+    if (g->cluster) {
+        sb_printf(&b, "# HELP voxeld_cluster_jobs Jobs in the shared database by state and kind "
+                      "(every replica's: the autoscaler's view).\n"
+                      "# TYPE voxeld_cluster_jobs gauge\n");
+        for (size_t i = 0; i < g->ncounts; i++)
+            sb_printf(&b, "voxeld_cluster_jobs{state=\"%s\",kind=\"%s\"} %ld\n", g->counts[i].state,
+                      g->counts[i].kind, g->counts[i].n);
+        sb_printf(
+            &b,
+            "# HELP voxeld_cluster_claims_total Jobs this replica claimed.\n"
+            "# TYPE voxeld_cluster_claims_total counter\nvoxeld_cluster_claims_total %llu\n"
+            "# HELP voxeld_cluster_lease_losses_total Runs stopped here because their lease "
+            "moved on.\n"
+            "# TYPE voxeld_cluster_lease_losses_total counter\n"
+            "voxeld_cluster_lease_losses_total %llu\n"
+            "# HELP voxeld_cluster_stale_completions_total Results of this replica another "
+            "attempt had already won.\n"
+            "# TYPE voxeld_cluster_stale_completions_total counter\n"
+            "voxeld_cluster_stale_completions_total %llu\n"
+            "# HELP voxeld_cluster_retries_total Failed attempts here handed back for another "
+            "try.\n"
+            "# TYPE voxeld_cluster_retries_total counter\nvoxeld_cluster_retries_total %llu\n"
+            "# HELP voxeld_cluster_requeued_expired_total Expired leases (any replica's) this "
+            "replica re-queued.\n"
+            "# TYPE voxeld_cluster_requeued_expired_total counter\n"
+            "voxeld_cluster_requeued_expired_total %llu\n",
+            (unsigned long long)g->cs.claims, (unsigned long long)g->cs.lease_losses,
+            (unsigned long long)g->cs.stale_completions, (unsigned long long)g->cs.retries,
+            (unsigned long long)g->cs.requeued_expired);
+    }
     process_render(&b, g->start_time);
     sb_printf(&b,
               "# HELP voxeld_info Build and GL context information.\n# TYPE voxeld_info gauge\n"

@@ -8,6 +8,7 @@
 #include <stdint.h>
 
 #include "gl/gl.h"
+#include "jobs/jobs.h"
 
 typedef struct vx_metrics_gauges {
     size_t queue_depth, queue_capacity, running, meshes;
@@ -18,6 +19,12 @@ typedef struct vx_metrics_gauges {
     double start_time;
     uint64_t evictions;       /* results removed by the results budget */
     uint64_t gl_context_loss; /* GL contexts lost (and rebuilt or not) */
+    /* Cluster mode (--database): this replica's counters, and jobs per
+     * (state, kind) in the whole database (ncounts 0 when it did not answer). */
+    int cluster;
+    vx_jobs_cluster_stats cs;
+    const vx_pg_count *counts;
+    size_t ncounts;
 } vx_metrics_gauges;
 
 /* Sets the job-duration buckets to end at the job timeout (seconds; 0 =

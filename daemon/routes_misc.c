@@ -60,8 +60,12 @@ int vx_route_readyz(vx_http *h, struct MHD_Connection *c, req *r)
     int dd = vx_store_writable(h->d.store);
     int space = vx_route_disk_ok(h, NULL);
     int blob = vx_store_reachable(h->d.store);
+    vx_err dberr;
+    vx_err_clear(&dberr);
+    int cluster = vx_jobs_cluster(h->d.jobs, NULL);
+    int db = vx_jobs_database_ok(h->d.jobs, &dberr);
     /* A full queue is backpressure (429 + Retry-After), not unreadiness. */
-    int ok = gl && gpu && dd && space && blob && !h->stopping;
+    int ok = gl && gpu && dd && space && blob && db && !h->stopping;
     cJSON *doc = cJSON_CreateObject();
     cJSON_AddStringToObject(doc, "status", ok ? "ready" : "not_ready");
     if (!ok) {
@@ -70,7 +74,8 @@ int vx_route_readyz(vx_http *h, struct MHD_Connection *c, req *r)
             snprintf(why, sizeof why, "%s",
                      !dd      ? "the data directory is not writable"
                      : !space ? "the data directory has less free space than --min-free-disk"
-                              : "the blob store (--blob-store) cannot be reached");
+                     : !blob  ? "the blob store (--blob-store) cannot be reached"
+                              : "the database (--database) cannot be reached");
         else
             vx_route_not_ready_reason(h, why, sizeof why);
         cJSON_AddStringToObject(doc, "reason", why);
@@ -87,6 +92,11 @@ int vx_route_readyz(vx_http *h, struct MHD_Connection *c, req *r)
     cJSON *bs = cJSON_AddObjectToObject(doc, "blob_store");
     cJSON_AddStringToObject(bs, "backend", vx_store_backend(h->d.store));
     cJSON_AddBoolToObject(bs, "ok", blob);
+    if (cluster) {
+        cJSON *dbo = cJSON_AddObjectToObject(doc, "database");
+        cJSON_AddBoolToObject(dbo, "ok", db);
+        cJSON_AddStringToObject(dbo, "replica", vx_jobs_replica(h->d.jobs));
+    }
     return vx_resp_json(c, r, ok ? 200 : 503, doc, NULL, NULL);
 }
 
@@ -106,8 +116,15 @@ int vx_route_metrics(vx_http *h, struct MHD_Connection *c, req *r)
         .evictions = vx_store_results_evicted(h->d.store),
         .gl_context_loss = vx_jobs_gl_losses(h->d.jobs),
     };
-    return vx_resp_text(c, r, 200, vx_metrics_render(&g),
-                        "text/plain; version=0.0.4; charset=utf-8", NULL, NULL);
+    vx_pg_count *counts = NULL;
+    if ((g.cluster = vx_jobs_cluster(h->d.jobs, &g.cs))) {
+        vx_err err;
+        if (vx_jobs_cluster_counts(h->d.jobs, &counts, &g.ncounts, &err)) g.ncounts = 0;
+        g.counts = counts;
+    }
+    char *text = vx_metrics_render(&g);
+    free(counts);
+    return vx_resp_text(c, r, 200, text, "text/plain; version=0.0.4; charset=utf-8", NULL, NULL);
 }
 
 int vx_route_info(vx_http *h, struct MHD_Connection *c, req *r)

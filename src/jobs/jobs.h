@@ -15,6 +15,7 @@
 
 #include "gl/gl.h"
 #include "jobs/kind.h"
+#include "jobs/pg.h"
 #include "jobs/state.h"
 #include "store/store.h"
 
@@ -49,6 +50,14 @@ typedef struct vx_jobs_desc {
     int workers;            /* CPU workers; default 2 */
     vx_gl_desc gl;
     vx_jobs_hooks hooks;
+    /* Cluster mode (issue 15; src/jobs/cluster.c): the job state and queue
+     * in PostgreSQL, shared by every replica: jobs are submitted there,
+     * claimed one at a time when the GL thread is free, leased, completed
+     * with their attempt as fencing token; results go to the store under
+     * results/JOB/ATTEMPT. NULL = the local journal (`journal`, `state`).
+     * Its replica name names this daemon in either mode. */
+    const vx_pg_desc *database;
+    const char *replica; /* this daemon's name in job resources; NULL = host name */
 } vx_jobs_desc;
 
 /* Opens the journal and replays it. Owned. Does not start threads. */
@@ -129,5 +138,24 @@ size_t vx_jobs_running(vx_jobs *j);
 uint64_t vx_jobs_gl_losses(vx_jobs *j);
 /* 1 when s is a well-formed job id. */
 int vx_jobs_valid_id(const char *s);
+
+/* Cluster mode. Counters of this replica since it started. */
+typedef struct vx_jobs_cluster_stats {
+    uint64_t claims;            /* jobs claimed */
+    uint64_t lease_losses;      /* runs stopped because their lease moved on */
+    uint64_t stale_completions; /* results another attempt had already won */
+    uint64_t retries;           /* failed attempts handed back for another try */
+    uint64_t requeued_expired;  /* other replicas' expired leases re-queued here */
+} vx_jobs_cluster_stats;
+/* 1 in cluster mode (and *out filled when not NULL), 0 otherwise. */
+int vx_jobs_cluster(vx_jobs *j, vx_jobs_cluster_stats *out);
+/* Cluster mode: 1 when the database answers now, 0 when not (err says
+ * why); 1 in local mode. */
+int vx_jobs_database_ok(vx_jobs *j, vx_err *err);
+/* Cluster mode: jobs per (state, kind) in the whole database (owned
+ * array, free()); -1 with err, or in local mode (VX_ENOTIMPL). */
+int vx_jobs_cluster_counts(vx_jobs *j, vx_pg_count **out, size_t *n, vx_err *err);
+/* This daemon's replica name. */
+const char *vx_jobs_replica(vx_jobs *j);
 
 #endif

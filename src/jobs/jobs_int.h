@@ -46,8 +46,9 @@ typedef struct job {
     char *frozen;
     size_t bytes; /* what a finished job costs the history budget */
     pinset pins;
-    uint64_t fp; /* fingerprint of kind, mesh and normalised params (dedup.c) */
-    char *idem;  /* its Idempotency-Key (owned), or NULL */
+    uint64_t fp;    /* fingerprint of kind, mesh and normalised params (dedup.c) */
+    char *idem;     /* its Idempotency-Key (owned), or NULL */
+    int lease_lost; /* cluster mode: the attempt is no longer ours (renewal said so) */
 } job;
 
 struct vx_job_run {
@@ -59,6 +60,7 @@ struct vx_job_run {
     double last_ping; /* watchdog */
     cJSON *stats;
     cJSON *outputs;
+    char rid[48];          /* result id: the job id, or (cluster mode) "ID/ATTEMPT" */
     char dir[VX_PATH_MAX]; /* result dir, made at the first output */
     cJSON *paths;          /* strings: every path handed out, valid until the run ends */
     int big_params;        /* its params came from blobs */
@@ -85,7 +87,10 @@ struct vx_jobs {
     pthread_cond_t gl_cond;
     vx_err gl_err;
     vx_gl_info gl_info;
-    uint64_t gl_losses; /* contexts lost (atomic) */
+    uint64_t gl_losses;    /* contexts lost (atomic) */
+    int in_gl;             /* a job is in its GL stage (lock held) */
+    char replica[128];     /* desc.replica, or the host name */
+    struct vx_cluster *cl; /* cluster mode (desc.database), else NULL */
 };
 
 /* registry.c */
@@ -93,7 +98,11 @@ void pinset_free(pinset *ps);
 void job_free(job *jb);
 int is_terminal(job_state s);
 double ms_between(double a, double b);
-cJSON *job_json(const job *jb, int api);
+/* api = 1: the API resource (with the replica's name); api = 0: the
+ * journal snapshot. Caller holds the lock. */
+cJSON *job_json(const vx_jobs *j, const job *jb, int api);
+/* A new time-ordered job id: 48 bits of milliseconds, then 80 random bits. */
+void jobs_new_id(char out[33]);
 void freeze_locked(vx_jobs *j, job *jb);
 const char *job_key(const void *item);
 job *job_at(const vx_jobs *j, size_t i);
@@ -119,6 +128,42 @@ uint64_t request_fp(const char *kind, const char *mesh, const cJSON *params);
  * filled), or NULL; VX_EUNPROC idempotency_key_reused in err (and NULL) for
  * a key of another request. Caller holds the lock. */
 job *find_existing_locked(vx_jobs *j, const job *jb, int reuse, vx_err *err);
+
+/* cluster.c: cluster mode (desc.database). */
+/* The job state in cluster mode: keeps nothing (the database does). */
+extern const vx_jobstate_ops cluster_state;
+/* Connects (three connections), migrates the schema, and replaces the
+ * local journal by a state that keeps nothing: called by vx_jobs_open
+ * before the replay. */
+int cluster_open(vx_jobs *j, vx_err *err);
+/* Starts the claimer, the lease renewer and the listener (after the GL
+ * thread is up). */
+int cluster_start(vx_jobs *j, vx_err *err);
+/* Stops claiming, then (after the GL thread has stopped) hands back what
+ * was claimed but not run. */
+void cluster_stop_claims(vx_jobs *j);
+void cluster_release_queued(vx_jobs *j);
+void cluster_free(vx_jobs *j);
+/* The table's API in cluster mode (registry.c hands over). params are the
+ * normalised ones, pins what the submission holds (released here). */
+cJSON *cluster_submit(vx_jobs *j, const char *mesh, const vx_kind *k, cJSON *params, uint64_t fp,
+                      const vx_jobs_submit_opts *opts, int *existing, vx_err *err);
+cJSON *cluster_get(vx_jobs *j, const char *jid, int *terminal, vx_err *err);
+cJSON *cluster_cancel(vx_jobs *j, const char *jid, int *was_running, vx_err *err);
+cJSON *cluster_list(vx_jobs *j, const char *after, int limit, const vx_jobs_filter *f,
+                    char next[40]);
+int cluster_delete(vx_jobs *j, const char *jid, vx_err *err);
+int cluster_output(vx_jobs *j, const char *jid, const char *name, char *path, size_t pathn,
+                   char ctype[64], char fname[128], vx_err *err);
+/* Reports how run r of jb ended to the database (with retries while it is
+ * unreachable and the lease may still hold): ok = succeeded (its outputs
+ * are in the store under r->rid), requeue = shutdown (handed back),
+ * else failed or canceled by e. Writes the state the job is in now into
+ * state ("" when the attempt was no longer ours: nothing changed). */
+void cluster_report(vx_jobs *j, job *jb, vx_job_run *r, int ok, const vx_err *e, int requeue,
+                    char state[16]);
+/* Wakes the claimer (a job finished: the GL thread is free). */
+void cluster_wake(vx_jobs *j);
 
 /* snapshot.c */
 /* Journals that jb is deleted (a record replay drops it on). */

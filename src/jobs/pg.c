@@ -86,6 +86,18 @@ static const char *const migrations[] = {
     " END IF; RETURN NULL; END $$;"
     "CREATE TRIGGER vx_jobs_notify AFTER INSERT OR UPDATE ON vx_jobs"
     " FOR EACH ROW EXECUTE FUNCTION vx_jobs_notify();",
+    /* 2: what the daemon's job resource needs: progress (written with each
+     * lease renewal), the Idempotency-Key and the request's fingerprint
+     * (reuse of a succeeded job), and lists by mesh. */
+    "ALTER TABLE vx_jobs ADD COLUMN progress double precision NOT NULL DEFAULT 0,"
+    " ADD COLUMN idem_key text, ADD COLUMN fp text,"
+    /* json keeps the text as sent: params in their spec's order, outputs
+     * in declaration order (the first is the primary one). */
+    " ALTER COLUMN params TYPE json USING params::json,"
+    " ALTER COLUMN params SET DEFAULT '{}', ALTER COLUMN result TYPE json USING result::json;"
+    "CREATE UNIQUE INDEX vx_jobs_idem ON vx_jobs (idem_key) WHERE idem_key IS NOT NULL;"
+    "CREATE INDEX vx_jobs_fp ON vx_jobs (fp, id) WHERE state = 'succeeded';"
+    "CREATE INDEX vx_jobs_mesh ON vx_jobs (mesh, id);",
 };
 _Static_assert(sizeof migrations / sizeof migrations[0] == VX_PG_SCHEMA_VERSION,
                "one migration per schema version");
@@ -96,7 +108,8 @@ _Static_assert(sizeof migrations / sizeof migrations[0] == VX_PG_SCHEMA_VERSION,
     " attempt, max_attempts, cancel_requested, extract(epoch from created),"                       \
     " coalesce(extract(epoch from started), 0), coalesce(extract(epoch from finished), 0),"        \
     " coalesce(extract(epoch from lease_expires), 0), extract(epoch from not_before),"             \
-    " params::text, result::text, errors::text"
+    " params::text, result::text, errors::text, progress, coalesce(idem_key, ''),"                 \
+    " coalesce(fp, '')"
 
 /* The backoff before attempt + 1, from the desc's base ($B) and ceiling ($M). */
 #define BACKOFF(B, M)                                                                              \
@@ -380,6 +393,9 @@ static void read_row(const PGresult *r, int i, vx_pg_job *jb)
     jb->params = cJSON_Parse(PQgetvalue(r, i, 14));
     jb->result = PQgetisnull(r, i, 15) ? NULL : cJSON_Parse(PQgetvalue(r, i, 15));
     jb->errors = cJSON_Parse(PQgetvalue(r, i, 16));
+    jb->progress = strtod(PQgetvalue(r, i, 17), NULL);
+    snprintf(jb->idem, sizeof jb->idem, "%s", PQgetvalue(r, i, 18));
+    snprintf(jb->fp, sizeof jb->fp, "%s", PQgetvalue(r, i, 19));
 }
 
 int vx_pg_submit(vx_pg *pg, const vx_pg_new_job *jobs, size_t n, vx_err *err)
@@ -401,12 +417,13 @@ int vx_pg_submit(vx_pg *pg, const vx_pg_new_job *jobs, size_t n, vx_err *err)
         snprintf(maxa, sizeof maxa, "%d",
                  jobs[i].max_attempts > 0 ? jobs[i].max_attempts : pg->desc.max_attempts);
         const char *vals[] = {jobs[i].id,     jobs[i].kind,           jobs[i].mesh,
-                              jobs[i].parent, params ? params : "{}", maxa};
-        int bad =
-            exec_locked(pg, 0,
-                        "INSERT INTO vx_jobs (id, kind, mesh, parent_id, params, max_attempts)"
-                        " VALUES ($1, $2, $3, $4, $5::jsonb, $6::integer)",
-                        6, vals, err);
+                              jobs[i].parent, params ? params : "{}", maxa,
+                              jobs[i].fp};
+        int bad = exec_locked(pg, 0,
+                              "INSERT INTO vx_jobs (id, kind, mesh, parent_id, params,"
+                              " max_attempts, fp) VALUES ($1, $2, $3, $4, $5::json, $6::integer,"
+                              " $7)",
+                              7, vals, err);
         cJSON_free(params);
         if (bad) {
             if (tx && pg->conn) exec_locked(pg, 0, "ROLLBACK", 0, NULL, NULL);
@@ -439,6 +456,109 @@ int vx_pg_get(vx_pg *pg, const char *id, vx_pg_job *out, vx_err *err)
     return rc;
 }
 
+int vx_pg_submit_idem(vx_pg *pg, const vx_pg_new_job *job, vx_pg_job *existing, vx_err *err)
+{
+    memset(existing, 0, sizeof *existing);
+    if (!job->idem || !*job->idem) return vx_pg_submit(pg, job, 1, err);
+    if (!vx_jobs_valid_id(job->id) || !job->kind || !*job->kind)
+        return vx_err_set(err, VX_EUNPROC, "invalid_params", "a job needs a valid id and kind");
+    char *params = job->params ? cJSON_PrintUnformatted(job->params) : NULL;
+    char maxa[16];
+    snprintf(maxa, sizeof maxa, "%d",
+             job->max_attempts > 0 ? job->max_attempts : pg->desc.max_attempts);
+    const char *vals[] = {job->id, job->kind, job->mesh, params ? params : "{}",
+                          maxa,    job->fp,   job->idem};
+    pthread_mutex_lock(&pg->lock);
+    /* One statement: inserted, or the row that holds the key (a key's
+     * first job wins; a concurrent insert of the same key waits for it). */
+    PGresult *r = run_locked(
+        pg, 0,
+        "WITH ins AS (INSERT INTO vx_jobs (id, kind, mesh, params, max_attempts, fp, idem_key)"
+        "  VALUES ($1, $2, $3, $4::json, $5::integer, $6, $7)"
+        "  ON CONFLICT (idem_key) WHERE idem_key IS NOT NULL DO NOTHING RETURNING id)"
+        " SELECT " JOB_COLS " FROM vx_jobs WHERE idem_key = $7 AND NOT EXISTS (SELECT 1 FROM ins)",
+        7, vals, err);
+    pthread_mutex_unlock(&pg->lock);
+    cJSON_free(params);
+    if (!r) return -1;
+    int rc = 0;
+    if (PQntuples(r) == 1) {
+        read_row(r, 0, existing);
+        if (strcmp(existing->fp, job->fp ? job->fp : "")) {
+            vx_pg_job_clear(existing);
+            rc = vx_err_set(err, VX_EUNPROC, "idempotency_key_reused",
+                            "the Idempotency-Key was used for another request");
+        } else {
+            rc = 1;
+        }
+    }
+    PQclear(r);
+    return rc;
+}
+
+int vx_pg_find_done(vx_pg *pg, const char *fp, vx_pg_job *out, vx_err *err)
+{
+    memset(out, 0, sizeof *out);
+    const char *vals[] = {fp};
+    pthread_mutex_lock(&pg->lock);
+    PGresult *r = run_locked(pg, 1,
+                             "SELECT " JOB_COLS " FROM vx_jobs WHERE fp = $1 AND state ="
+                             " 'succeeded' ORDER BY id DESC LIMIT 1",
+                             1, vals, err);
+    pthread_mutex_unlock(&pg->lock);
+    if (!r) return -1;
+    int got = PQntuples(r) == 1;
+    if (got) read_row(r, 0, out);
+    PQclear(r);
+    return got;
+}
+
+int vx_pg_delete(vx_pg *pg, const char *id, vx_err *err)
+{
+    if (!vx_jobs_valid_id(id))
+        return vx_err_set(err, VX_ENOTFOUND, "job_not_found", "no job %.40s", id ? id : "");
+    const char *vals[] = {id};
+    pthread_mutex_lock(&pg->lock);
+    PGresult *r = run_locked(pg, 0,
+                             "WITH del AS (DELETE FROM vx_jobs WHERE id = $1 AND state IN"
+                             " ('succeeded', 'failed', 'canceled') RETURNING id)"
+                             " SELECT (SELECT count(*) FROM del),"
+                             " (SELECT state FROM vx_jobs WHERE id = $1)",
+                             1, vals, err);
+    pthread_mutex_unlock(&pg->lock);
+    if (!r) return -1;
+    int rc = 0;
+    if (atoi(PQgetvalue(r, 0, 0)) != 1) {
+        if (PQgetisnull(r, 0, 1))
+            rc = vx_err_set(err, VX_ENOTFOUND, "job_not_found", "no job with id %s", id);
+        else
+            rc = vx_err_set(err, VX_ECONFLICT, "job_not_finished", "job %s is %s", id,
+                            PQgetvalue(r, 0, 1));
+    }
+    PQclear(r);
+    return rc;
+}
+
+long vx_pg_queued(vx_pg *pg, vx_err *err)
+{
+    pthread_mutex_lock(&pg->lock);
+    PGresult *r =
+        run_locked(pg, 1, "SELECT count(*) FROM vx_jobs WHERE state = 'queued'", 0, NULL, err);
+    pthread_mutex_unlock(&pg->lock);
+    if (!r) return -1;
+    long n = atol(PQgetvalue(r, 0, 0));
+    PQclear(r);
+    return n;
+}
+
+int vx_pg_ping(vx_pg *pg, vx_err *err)
+{
+    pthread_mutex_lock(&pg->lock);
+    int rc = exec_locked(pg, 1, "SELECT 1", 0, NULL, err);
+    pthread_mutex_unlock(&pg->lock);
+    return rc;
+}
+
 int vx_pg_list(vx_pg *pg, const vx_pg_filter *f, const char *after, int limit, vx_pg_job **out,
                size_t *n, char next[33], vx_err *err)
 {
@@ -453,17 +573,19 @@ int vx_pg_list(vx_pg *pg, const vx_pg_filter *f, const char *after, int limit, v
     if (!f) f = &none;
     char lim[16];
     snprintf(lim, sizeof lim, "%d", limit + 1);
-    const char *vals[] = {f->state, f->kind, f->parent, from[0] ? from : NULL, lim};
+    const char *vals[] = {f->state, f->kind, f->parent, from[0] ? from : NULL, lim, f->mesh};
     const char *asc =
         "SELECT " JOB_COLS " FROM vx_jobs WHERE ($1::text IS NULL OR state = $1)"
         " AND ($2::text IS NULL OR kind = $2) AND ($3::text IS NULL OR parent_id = $3)"
+        " AND ($6::text IS NULL OR mesh = $6)"
         " AND ($4::text IS NULL OR id > $4) ORDER BY id LIMIT $5::integer";
     const char *desc =
         "SELECT " JOB_COLS " FROM vx_jobs WHERE ($1::text IS NULL OR state = $1)"
         " AND ($2::text IS NULL OR kind = $2) AND ($3::text IS NULL OR parent_id = $3)"
+        " AND ($6::text IS NULL OR mesh = $6)"
         " AND ($4::text IS NULL OR id < $4) ORDER BY id DESC LIMIT $5::integer";
     pthread_mutex_lock(&pg->lock);
-    PGresult *r = run_locked(pg, 1, f->desc ? desc : asc, 5, vals, err);
+    PGresult *r = run_locked(pg, 1, f->desc ? desc : asc, 6, vals, err);
     pthread_mutex_unlock(&pg->lock);
     if (!r) return -1;
     int rows = PQntuples(r);
@@ -494,7 +616,7 @@ int vx_pg_claim(vx_pg *pg, const char *kinds, vx_pg_job *out, vx_err *err)
         pg, 0,
         "UPDATE vx_jobs SET state = 'running', replica = $1, attempt = attempt + 1,"
         " lease_expires = now() + make_interval(secs => $2::float8), started = now(),"
-        " updated = now()"
+        " progress = 0, updated = now()"
         " WHERE id = (SELECT id FROM vx_jobs WHERE state = 'queued' AND not_before <= now()"
         "  AND ($3::text IS NULL OR kind = ANY (string_to_array($3, ',')))"
         "  ORDER BY id LIMIT 1 FOR UPDATE SKIP LOCKED)"
@@ -508,20 +630,22 @@ int vx_pg_claim(vx_pg *pg, const char *kinds, vx_pg_job *out, vx_err *err)
     return got;
 }
 
-int vx_pg_renew(vx_pg *pg, const char *id, int attempt, int *cancel, vx_err *err)
+int vx_pg_renew(vx_pg *pg, const char *id, int attempt, double progress, int *cancel, vx_err *err)
 {
-    char att[16], lease[32];
+    char att[16], lease[32], prog[32];
     snprintf(att, sizeof att, "%d", attempt);
     snprintf(lease, sizeof lease, "%.3f", pg->desc.lease_s);
-    const char *vals[] = {id, att, pg->replica, lease};
+    snprintf(prog, sizeof prog, "%.6f", progress < 0 ? 0 : progress > 1 ? 1 : progress);
+    const char *vals[] = {id, att, pg->replica, lease, prog};
     *cancel = 0;
     pthread_mutex_lock(&pg->lock);
     /* Idempotent: re-run on a new connection after a lost one. */
     PGresult *r = run_locked(pg, 1,
                              "UPDATE vx_jobs SET lease_expires = now() + make_interval(secs =>"
-                             " $4::float8) WHERE id = $1 AND attempt = $2::integer AND replica = $3"
-                             " AND state = 'running' RETURNING cancel_requested",
-                             4, vals, err);
+                             " $4::float8), progress = $5::float8 WHERE id = $1 AND attempt ="
+                             " $2::integer AND replica = $3 AND state = 'running'"
+                             " RETURNING cancel_requested",
+                             5, vals, err);
     pthread_mutex_unlock(&pg->lock);
     if (!r) return -1;
     int held = PQntuples(r) == 1;
@@ -549,8 +673,8 @@ int vx_pg_complete(vx_pg *pg, const char *id, int attempt, const cJSON *result, 
     /* One statement: the fenced update and the results index of its outputs. */
     PGresult *r = run_locked(
         pg, 0,
-        "WITH done AS (UPDATE vx_jobs SET state = 'succeeded', result = $4::jsonb,"
-        "  finished = now(), lease_expires = NULL, updated = now()"
+        "WITH done AS (UPDATE vx_jobs SET state = 'succeeded', result = $4::json,"
+        "  finished = now(), lease_expires = NULL, progress = 1, updated = now()"
         "  WHERE id = $1 AND attempt = $2::integer AND replica = $3 AND state = 'running'"
         "  RETURNING id, attempt),"
         " idx AS (INSERT INTO vx_results (job_id, attempt, name, location, bytes, content_type)"

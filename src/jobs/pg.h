@@ -1,7 +1,6 @@
 /* PostgreSQL job state and queue (libpq): the tables several voxeld
- * replicas share when --database is given (issue #15). Not wired into the
- * daemon yet: the job layer (registry.c, runner.c) still uses the local
- * journal only; this module is the library it will call.
+ * replicas share when --database is given (issue #15); the job layer's
+ * cluster mode (src/jobs/cluster.c) calls it.
  *
  * Model: one row per job in vx_jobs (docs/scaling.md has the schema). A
  * replica claims a queued row (FOR UPDATE SKIP LOCKED), which sets
@@ -35,7 +34,7 @@
 #include "util/err.h"
 
 /* The schema version this binary creates and understands. */
-#define VX_PG_SCHEMA_VERSION 1
+#define VX_PG_SCHEMA_VERSION 2
 /* The NOTIFY channel every state change is sent on. */
 #define VX_PG_CHANNEL "vx_jobs"
 
@@ -64,9 +63,12 @@ typedef struct vx_pg_job {
     int max_attempts;
     int cancel_requested;
     double created, started, finished, lease_expires, not_before;
-    cJSON *params; /* object (owned) */
-    cJSON *result; /* the result manifest (owned), NULL until succeeded */
-    cJSON *errors; /* array of {attempt, replica, kind, code, message, at} (owned) */
+    double progress; /* 0..1, as the running replica last renewed it */
+    char idem[201];  /* its Idempotency-Key; "" = none */
+    char fp[17];     /* the request's fingerprint (hex); "" = none */
+    cJSON *params;   /* object (owned) */
+    cJSON *result;   /* the result manifest (owned), NULL until succeeded */
+    cJSON *errors;   /* array of {attempt, replica, kind, code, message, at} (owned) */
 } vx_pg_job;
 
 /* What a submission creates. */
@@ -77,11 +79,13 @@ typedef struct vx_pg_new_job {
     const char *parent;  /* NULL = none (a brick names its parent) */
     const cJSON *params; /* NULL = {} */
     int max_attempts;    /* 0 = the desc's */
+    const char *fp;      /* the request's fingerprint (reuse); NULL = none */
+    const char *idem;    /* vx_pg_submit_idem: its Idempotency-Key; NULL = none */
 } vx_pg_new_job;
 
 /* What a list keeps: NULL fields keep every job. */
 typedef struct vx_pg_filter {
-    const char *state, *kind, *parent;
+    const char *state, *kind, *parent, *mesh;
     int desc; /* newest first: `after` then means older than it */
 } vx_pg_filter;
 
@@ -111,6 +115,22 @@ const char *vx_pg_replica(const vx_pg *pg);
  * returns 0 only once it is committed. VX_ECONFLICT job_exists for a taken
  * id, VX_ENOTFOUND parent_not_found, VX_EUNPROC invalid_params for a bad id. */
 int vx_pg_submit(vx_pg *pg, const vx_pg_new_job *jobs, size_t n, vx_err *err);
+/* Inserts one queued job with an Idempotency-Key (job->idem; none: as
+ * vx_pg_submit): 0 when inserted (committed), 1 when the key's job was
+ * there already with the same fingerprint (*existing filled: clear it),
+ * -1 with VX_EUNPROC idempotency_key_reused (another fingerprint) or the
+ * database's error. */
+int vx_pg_submit_idem(vx_pg *pg, const vx_pg_new_job *job, vx_pg_job *existing, vx_err *err);
+/* The newest succeeded job of fingerprint fp into *out: 1 found, 0 none,
+ * -1 err. */
+int vx_pg_find_done(vx_pg *pg, const char *fp, vx_pg_job *out, vx_err *err);
+/* Deletes a finished job (its results index rows go with it).
+ * VX_ENOTFOUND job_not_found, VX_ECONFLICT job_not_finished. */
+int vx_pg_delete(vx_pg *pg, const char *id, vx_err *err);
+/* Queued jobs in the whole table, or -1 with err. */
+long vx_pg_queued(vx_pg *pg, vx_err *err);
+/* One round trip (SELECT 1), reconnecting first when needed: /readyz. */
+int vx_pg_ping(vx_pg *pg, vx_err *err);
 /* Reads a job into *out (vx_pg_job_clear it). VX_ENOTFOUND job_not_found. */
 int vx_pg_get(vx_pg *pg, const char *id, vx_pg_job *out, vx_err *err);
 /* Frees what a vx_pg_job owns and zeroes it. */
@@ -129,10 +149,11 @@ void vx_pg_jobs_free(vx_pg_job *jobs, size_t n);
  * none, -1 with err. */
 int vx_pg_claim(vx_pg *pg, const char *kinds, vx_pg_job *out, vx_err *err);
 /* Extends the lease of (id, attempt) held by this replica to now() +
- * lease_s. Returns 0 held (*cancel = 1 when a cancel was requested), 1 lost
- * (the row moved on: re-queued, finished or claimed again: stop the run),
- * -1 with err (the lease may still be held: try again). */
-int vx_pg_renew(vx_pg *pg, const char *id, int attempt, int *cancel, vx_err *err);
+ * lease_s and records the run's progress (0..1). Returns 0 held (*cancel =
+ * 1 when a cancel was requested), 1 lost (the row moved on: re-queued,
+ * finished or claimed again: stop the run), -1 with err (the lease may
+ * still be held: try again). */
+int vx_pg_renew(vx_pg *pg, const char *id, int attempt, double progress, int *cancel, vx_err *err);
 /* Seconds between the renewals a runner should make: a third of the TTL
  * (10 s of the default 30 s), so that two can fail before the lease goes. */
 double vx_pg_renew_interval(const vx_pg *pg);

@@ -49,8 +49,7 @@ int vx_jobs_valid_id(const char *s)
     return 1;
 }
 
-/* Time-ordered ids: 48 bits of milliseconds, then 80 random bits. */
-static void new_id(char out[33])
+void jobs_new_id(char out[33])
 {
     unsigned char rnd[10] = {0};
     if (getrandom(rnd, sizeof rnd, 0) != (ssize_t)sizeof rnd) {
@@ -96,8 +95,7 @@ static void job_parts(const job *jb, cJSON **params, cJSON **stats, cJSON **outp
     cJSON_Delete(f);
 }
 
-/* api = 1: the API resource; api = 0: the journal snapshot. Caller holds the lock. */
-cJSON *job_json(const job *jb, int api)
+cJSON *job_json(const vx_jobs *j, const job *jb, int api)
 {
     cJSON *params, *stats, *outputs;
     job_parts(jb, &params, &stats, &outputs);
@@ -110,6 +108,13 @@ cJSON *job_json(const job *jb, int api)
     cJSON_AddNumberToObject(o, "progress", jb->progress);
     cJSON_AddBoolToObject(o, "cancel_requested", jb->cancel_requested);
     cJSON_AddNumberToObject(o, "attempts", jb->attempts);
+    if (api) {
+        cJSON_AddNumberToObject(o, "attempt", jb->attempts);
+        if (jb->attempts > 0)
+            cJSON_AddStringToObject(o, "replica", j->replica);
+        else
+            cJSON_AddNullToObject(o, "replica");
+    }
     add_time(o, "created", jb->created);
     add_time(o, "started", jb->started);
     add_time(o, "finished", jb->finished);
@@ -270,7 +275,19 @@ cJSON *vx_jobs_submit_with(vx_jobs *j, const char *mesh, const char *kind, const
         return NULL;
     }
     size_t jb_blobs = jb->pins.nblob;
-    new_id(jb->id);
+    if (j->cl) {
+        /* Cluster mode: the database queues it; the mesh pins were only
+         * its check (the replica that claims it pins it there), the blob
+         * pins stay (a blob is read by whichever replica runs the job). */
+        for (size_t i = 0; i < jb->pins.nmesh; i++)
+            vx_store_mesh_unpin(j->desc.store, jb->pins.mesh[i]);
+        int dummy = 0;
+        cJSON *out = cluster_submit(j, mesh, k, norm, request_fp(k->name, mesh, norm), opts,
+                                    existing ? existing : &dummy, err);
+        job_free(jb);
+        return out;
+    }
+    jobs_new_id(jb->id);
     snprintf(jb->mesh, sizeof jb->mesh, "%s", mesh);
     jb->kind = k;
     jb->created = vx_now();
@@ -291,7 +308,7 @@ cJSON *vx_jobs_submit_with(vx_jobs *j, const char *mesh, const char *kind, const
                      : NULL;
     if (prior || err->kind != VX_EOK) {
         /* An answer from the table: the new job was never acknowledged. */
-        cJSON *doc = prior ? job_json(prior, 1) : NULL;
+        cJSON *doc = prior ? job_json(j, prior, 1) : NULL;
         pthread_mutex_unlock(&j->lock);
         unpin_job(j, &jb->pins);
         job_free(jb);
@@ -311,7 +328,7 @@ cJSON *vx_jobs_submit_with(vx_jobs *j, const char *mesh, const char *kind, const
     } else {
         /* Pushed under the lock, so capacity was checked atomically. */
         vx_queue_push(j->queue, jb, 1);
-        out = job_json(jb, 1);
+        out = job_json(j, jb, 1);
     }
     char jid[33];
     snprintf(jid, sizeof jid, "%s", jb->id); /* jb may be run and gone after the unlock */
@@ -330,9 +347,10 @@ cJSON *vx_jobs_submit_with(vx_jobs *j, const char *mesh, const char *kind, const
 
 cJSON *vx_jobs_get(vx_jobs *j, const char *jid, int *terminal, vx_err *err)
 {
+    if (j->cl) return cluster_get(j, jid, terminal, err);
     pthread_mutex_lock(&j->lock);
     job *jb = vx_jobs_valid_id(jid) ? find_job(j, jid) : NULL;
-    cJSON *out = jb ? job_json(jb, 1) : NULL;
+    cJSON *out = jb ? job_json(j, jb, 1) : NULL;
     if (jb && terminal) *terminal = is_terminal(jb->state);
     pthread_mutex_unlock(&j->lock);
     if (!jb) vx_err_set(err, VX_ENOTFOUND, "job_not_found", "no job with id %.64s", jid);
@@ -342,6 +360,7 @@ cJSON *vx_jobs_get(vx_jobs *j, const char *jid, int *terminal, vx_err *err)
 cJSON *vx_jobs_cancel(vx_jobs *j, const char *jid, int *was_running, vx_err *err)
 {
     *was_running = 0;
+    if (j->cl) return cluster_cancel(j, jid, was_running, err);
     char kind[64] = "";
     pinset pins = {0};
     pthread_mutex_lock(&j->lock);
@@ -360,7 +379,7 @@ cJSON *vx_jobs_cancel(vx_jobs *j, const char *jid, int *was_running, vx_err *err
         jb->finished = vx_now();
         vx_err_set(&jb->error, VX_ECANCELED, "canceled", "canceled while queued");
         if (journal_locked(j, jb, err) == 0) {
-            out = job_json(jb, 1);
+            out = job_json(j, jb, 1);
             pins = jb->pins;
             memset(&jb->pins, 0, sizeof jb->pins);
             freeze_locked(j, jb);
@@ -376,7 +395,7 @@ cJSON *vx_jobs_cancel(vx_jobs *j, const char *jid, int *was_running, vx_err *err
     } else {
         jb->cancel_requested = 1;
         *was_running = 1;
-        out = job_json(jb, 1);
+        out = job_json(j, jb, 1);
     }
     pthread_mutex_unlock(&j->lock);
     unpin_job(j, &pins);
@@ -400,6 +419,7 @@ static int kept(const vx_jobs_filter *f, const job *jb)
 cJSON *vx_jobs_list(vx_jobs *j, const char *after, int limit, const vx_jobs_filter *f,
                     char next[40])
 {
+    if (j->cl) return cluster_list(j, after, limit, f, next);
     cJSON *arr = cJSON_CreateArray();
     next[0] = 0;
     int desc = f && f->desc;
@@ -425,7 +445,7 @@ cJSON *vx_jobs_list(vx_jobs *j, const char *after, int limit, const vx_jobs_filt
             snprintf(next, 40, "%s", last->id);
             break;
         }
-        cJSON_AddItemToArray(arr, job_json(jb, 1));
+        cJSON_AddItemToArray(arr, job_json(j, jb, 1));
         last = jb;
         n++;
     }
@@ -440,6 +460,7 @@ int vx_jobs_has_kind(vx_jobs *j, const char *kind)
 
 int vx_jobs_delete(vx_jobs *j, const char *jid, vx_err *err)
 {
+    if (j->cl) return cluster_delete(j, jid, err);
     pthread_mutex_lock(&j->lock);
     int found = 0;
     size_t at = vx_jobs_valid_id(jid) ? vx_sorted_find(&j->jobs, jid, &found) : 0;
@@ -469,6 +490,7 @@ int vx_jobs_delete(vx_jobs *j, const char *jid, vx_err *err)
 int vx_jobs_output(vx_jobs *j, const char *jid, const char *name, char *path, size_t pathn,
                    char ctype[64], char fname[128], vx_err *err)
 {
+    if (j->cl) return cluster_output(j, jid, name, path, pathn, ctype, fname, err);
     char file[160] = {0}, id[33];
     pthread_mutex_lock(&j->lock);
     job *jb = vx_jobs_valid_id(jid) ? find_job(j, jid) : NULL;

@@ -71,8 +71,7 @@ cJSON *vx_run_stats(vx_job_run *r)
 const char *vx_run_output(vx_job_run *r, const char *name, const char *file_ext,
                           const char *content_type, vx_err *err)
 {
-    if (!r->dir[0] &&
-        vx_store_result_dir(r->jobs->desc.store, r->job->id, r->dir, sizeof r->dir, err))
+    if (!r->dir[0] && vx_store_result_dir(r->jobs->desc.store, r->rid, r->dir, sizeof r->dir, err))
         return NULL;
     char file[160];
     snprintf(file, sizeof file, "%s.%s", name, file_ext);

@@ -20,6 +20,12 @@ static vx_job_run *run_new(vx_jobs *j, job *jb)
     r->jobs = j;
     r->job = jb;
     r->kind = jb->kind;
+    /* Cluster mode: each attempt its own results (a stale one never
+     * writes over the winner's). */
+    if (j->cl)
+        snprintf(r->rid, sizeof r->rid, "%s/%d", jb->id, jb->attempts);
+    else
+        snprintf(r->rid, sizeof r->rid, "%s", jb->id);
     r->t0 = vx_mono();
     r->stats = cJSON_CreateObject();
     r->outputs = cJSON_CreateObject();
@@ -58,9 +64,51 @@ static void sync_outputs(vx_job_run *r)
     }
 }
 
+/* Cluster mode's run_finish: the database hears how the attempt ended
+ * (cluster_report), then the job leaves this replica's table. */
+static void run_finish_cluster(vx_jobs *j, vx_job_run *r, int ok, const vx_err *e)
+{
+    job *jb = r->job;
+    int requeue = !ok && e->kind == VX_ECANCELED && vx_err_has(e, VX_EF_SHUTDOWN);
+    if (ok) sync_outputs(r);
+    double run_s = vx_mono() - r->t0;
+    cJSON_AddNumberToObject(r->stats, "run_ms", ms_between(0, run_s));
+    char state[16];
+    cluster_report(j, jb, r, ok, e, requeue, state);
+    char kind[64], id[33];
+    snprintf(kind, sizeof kind, "%s", jb->kind->name);
+    snprintf(id, sizeof id, "%s", jb->id);
+    pthread_mutex_lock(&j->lock);
+    j->running--;
+    int found;
+    size_t at = vx_sorted_find(&j->jobs, jb->id, &found);
+    if (found && job_at(j, at) == jb) vx_sorted_remove_at(&j->jobs, at);
+    pinset pins = jb->pins;
+    memset(&jb->pins, 0, sizeof jb->pins);
+    pthread_mutex_unlock(&j->lock);
+    unpin_job(j, &pins);
+    int terminal = state[0] && strcmp(state, "queued") != 0;
+    char qm[600];
+    vx_log(!strcmp(state, "failed") ? VX_LOG_WARN : VX_LOG_INFO, "job.finished",
+           "job=%s kind=%s state=%s attempt=%d run_ms=%.1f code=%s message=%s", id, kind,
+           state[0] ? state : "not_ours", jb->attempts, run_s * 1e3, ok ? "-" : e->code,
+           vx_log_quote(qm, sizeof qm, ok ? "-" : e->message));
+    if (terminal && j->desc.hooks.finished)
+        j->desc.hooks.finished(j->desc.hooks.ud, id, kind, state, run_s);
+    job_free(jb);
+    run_free(r);
+    notify(j, id, terminal);
+    cluster_wake(j);
+    if (ok) vx_store_results_evict(j->desc.store);
+}
+
 /* Ends a run: success, failure, cancel, or back to the queue on shutdown. */
 static void run_finish(vx_jobs *j, vx_job_run *r, int ok, const vx_err *e)
 {
+    if (j->cl) {
+        run_finish_cluster(j, r, ok, e);
+        return;
+    }
     job *jb = r->job;
     int requeue = !ok && e->kind == VX_ECANCELED && vx_err_has(e, VX_EF_SHUTDOWN);
     if (ok) {
@@ -161,8 +209,9 @@ static void run_job_gl(vx_jobs *j, vx_gl *gl, mesh_cache *mc, job *jb)
     jb->state = ST_RUNNING;
     jb->started = vx_now();
     jb->progress = 0;
-    jb->attempts++;
+    if (!j->cl) jb->attempts++; /* cluster mode: the claim's attempt */
     j->running++;
+    j->in_gl = 1;
     vx_err err;
     vx_err_clear(&err);
     if (journal_locked(j, jb, &err))
@@ -179,6 +228,7 @@ static void run_job_gl(vx_jobs *j, vx_gl *gl, mesh_cache *mc, job *jb)
         run_free(r);
         pthread_mutex_lock(&j->lock);
         j->running--;
+        j->in_gl = 0;
         jb->state = ST_QUEUED;
         pthread_mutex_unlock(&j->lock);
         vx_queue_push(j->queue, jb, 1);
@@ -186,6 +236,15 @@ static void run_job_gl(vx_jobs *j, vx_gl *gl, mesh_cache *mc, job *jb)
     }
     r->gl = gl;
     r->on_gl_thread = 1;
+    if (jb->cancel_requested) {
+        /* Canceled (or its lease lost) while it waited for this thread. */
+        pthread_mutex_lock(&j->lock);
+        j->in_gl = 0;
+        pthread_mutex_unlock(&j->lock);
+        vx_err_set(&err, VX_ECANCELED, "canceled", "the job was canceled");
+        run_finish(j, r, 0, &err);
+        return;
+    }
     /* The params JSON (with its blobs back in place: 2 MB of frames are
      * 14 MB of cJSON) lives only until the kind's struct is read. */
     cJSON *params = inline_params(j, jb->kind, jb->params, &r->big_params, &err);
@@ -226,6 +285,9 @@ static void run_job_gl(vx_jobs *j, vx_gl *gl, mesh_cache *mc, job *jb)
         }
         ok = 1; /* retry once on the new context */
     }
+    pthread_mutex_lock(&j->lock);
+    j->in_gl = 0;
+    pthread_mutex_unlock(&j->lock);
     if (!ok) {
         run_finish(j, r, 0, &err);
         return;
@@ -309,12 +371,14 @@ int vx_jobs_start(vx_jobs *j, vx_err *err)
     for (int i = 0; j->workers && i < j->desc.workers; i++)
         if (pthread_create(&j->workers[i], NULL, worker_main, j) == 0) j->nworkers++;
     j->started = 1;
+    if (j->cl && cluster_start(j, err)) return -1;
     return 0;
 }
 
 void vx_jobs_stop(vx_jobs *j)
 {
     if (!j || !j->started) return;
+    cluster_stop_claims(j); /* cluster mode: nothing new is claimed */
     j->stopping = 1;
     pthread_join(j->gl_thread, NULL);
     /* The GL thread has handed over everything it ran: workers finish those
@@ -325,6 +389,7 @@ void vx_jobs_stop(vx_jobs *j)
     free(j->workers);
     j->workers = NULL;
     j->started = 0;
+    cluster_release_queued(j); /* claimed here, never started: back to the queue */
     pthread_mutex_lock(&j->lock);
     vx_err err;
     compact_locked(j, &err);

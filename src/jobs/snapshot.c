@@ -7,6 +7,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include <time.h>
+#include <unistd.h>
 
 #include "util/log.h"
 
@@ -15,7 +16,7 @@ int journal_locked(vx_jobs *j, job *jb, vx_err *err)
 {
     jb->seq++;
     cJSON *rec = cJSON_CreateObject();
-    cJSON_AddItemToObject(rec, "job", job_json(jb, 0));
+    cJSON_AddItemToObject(rec, "job", job_json(j, jb, 0));
     int rc = j->st_ops->append(j->st, rec, err);
     cJSON_Delete(rec);
     return rc;
@@ -43,7 +44,7 @@ int compact_locked(vx_jobs *j, vx_err *err)
     if (!recs) return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory");
     for (size_t i = 0; i < j->jobs.n; i++) {
         recs[i] = cJSON_CreateObject();
-        cJSON_AddItemToObject(recs[i], "job", job_json(job_at(j, i), 0));
+        cJSON_AddItemToObject(recs[i], "job", job_json(j, job_at(j, i), 0));
     }
     int rc = j->st_ops->compact(j->st, recs, j->jobs.n, err);
     for (size_t i = 0; i < j->jobs.n; i++)
@@ -159,7 +160,19 @@ vx_jobs *vx_jobs_open(const vx_jobs_desc *desc, vx_err *err)
         snprintf(path, sizeof path, "%s/journal.log", vx_store_dir(desc->store));
         j->desc.journal = path;
     }
-    j->st_ops = j->desc.state ? j->desc.state : &vx_jobstate_local;
+    if (j->desc.replica && *j->desc.replica)
+        snprintf(j->replica, sizeof j->replica, "%s", j->desc.replica);
+    else if (gethostname(j->replica, sizeof j->replica - 1) != 0)
+        snprintf(j->replica, sizeof j->replica, "voxeld");
+    j->desc.replica = NULL; /* the caller's string */
+    j->st_ops = j->desc.database ? &cluster_state
+                : j->desc.state  ? j->desc.state
+                                 : &vx_jobstate_local;
+    if (j->desc.database && cluster_open(j, err)) {
+        vx_jobs_free(j);
+        return NULL;
+    }
+    j->desc.database = NULL; /* the caller's; cluster_open took what it needs */
     j->st = j->st_ops->open(j->desc.journal, err);
     if (!j->st || !j->queue || !j->cpu) {
         if (j->st || err->kind == VX_EOK)
@@ -241,6 +254,7 @@ void vx_jobs_free(vx_jobs *j)
     vx_queue_free(j->queue);
     vx_queue_free(j->cpu);
     if (j->st) j->st_ops->close(j->st);
+    cluster_free(j);
     pthread_mutex_destroy(&j->lock);
     pthread_cond_destroy(&j->gl_cond);
     free(j);

@@ -288,8 +288,43 @@ int vx_store_mesh_commit(vx_store *s, vx_upload *u, const char *id, const char *
     }
     return rc;
 }
+/* On a shared store (file://, s3://) a mesh another daemon committed after
+ * this one loaded its index: its metadata is read from the store (outside
+ * the lock) and indexed when its data file is there. 1 when id is indexed
+ * now (it may have been before), 0 when the store has no such mesh. */
+static int mesh_fetch_shared(vx_store *s, const char *id)
+{
+    if (!s->ops->shared || !vx_store_valid_mesh_id(id)) return 0;
+    pthread_mutex_lock(&s->lock);
+    int found;
+    mesh_find(s, id, &found);
+    pthread_mutex_unlock(&s->lock);
+    if (found) return 1;
+    char key[128];
+    mesh_key(key, sizeof key, id, ".json");
+    char *text = s->ops->read(s->blob, key, 1 << 20, NULL, NULL);
+    cJSON *meta = text ? cJSON_Parse(text) : NULL;
+    free(text);
+    const cJSON *fmt = cJSON_GetObjectItemCaseSensitive(meta, "format");
+    const char *ext = cJSON_IsString(fmt) ? vx_intake_ext_of_name(fmt->valuestring) : NULL;
+    char mkey[128];
+    if (ext) mesh_data_key(mkey, sizeof mkey, id, ext);
+    if (!ext || s->ops->stat(s->blob, mkey, NULL, NULL) < 0) {
+        cJSON_Delete(meta);
+        return 0;
+    }
+    pthread_mutex_lock(&s->lock);
+    mesh_find(s, id, &found);
+    int ok = found || mesh_insert(s, id, ext, meta, 0) == 0;
+    pthread_mutex_unlock(&s->lock);
+    if (found || !ok) cJSON_Delete(meta);
+    if (ok && !found) VX_INFO("store.mesh_fetched", "mesh=%s", id);
+    return ok;
+}
+
 cJSON *vx_store_mesh_meta(vx_store *s, const char *id, vx_err *err)
 {
+    mesh_fetch_shared(s, id);
     pthread_mutex_lock(&s->lock);
     int found;
     size_t at = mesh_find(s, id, &found);
@@ -302,6 +337,7 @@ cJSON *vx_store_mesh_meta(vx_store *s, const char *id, vx_err *err)
 
 int vx_store_mesh_path(vx_store *s, const char *id, char *buf, size_t n, vx_err *err)
 {
+    mesh_fetch_shared(s, id);
     pthread_mutex_lock(&s->lock);
     int found;
     size_t at = mesh_find(s, id, &found);
@@ -353,6 +389,7 @@ int vx_store_mesh_delete(vx_store *s, const char *id, vx_err *err)
 
 int vx_store_mesh_pin(vx_store *s, const char *id, int deleted_ok, vx_err *err)
 {
+    mesh_fetch_shared(s, id);
     pthread_mutex_lock(&s->lock);
     int found;
     size_t at = mesh_find(s, id, &found);

@@ -8,12 +8,20 @@
 #include "util/fsutil.h"
 #include "util/log.h"
 
+/* A result id: a job id (hex), or in cluster mode a job id and its attempt
+ * ("<hex>/<digits>": results/JOB/ATTEMPT, so that a stale attempt never
+ * writes over the winner's). */
 static int valid_jid(const char *s)
 {
-    size_t n = strlen(s);
+    size_t n = strlen(s), i = 0;
     if (n == 0 || n >= sizeof(((result_entry *)0)->jid)) return 0;
-    for (size_t i = 0; i < n; i++)
-        if (!((s[i] >= '0' && s[i] <= '9') || (s[i] >= 'a' && s[i] <= 'f'))) return 0;
+    while (i < n && ((s[i] >= '0' && s[i] <= '9') || (s[i] >= 'a' && s[i] <= 'f')))
+        i++;
+    if (i == 0) return 0;
+    if (i == n) return 1;
+    if (s[i++] != '/' || i == n) return 0;
+    for (; i < n; i++)
+        if (s[i] < '0' || s[i] > '9') return 0;
     return 1;
 }
 
@@ -117,7 +125,16 @@ int vx_store_result_file(vx_store *s, const char *jid, const char *file, char *b
             break;
         }
     pthread_mutex_unlock(&s->lock);
-    int st = found ? s->ops->stat(s->blob, key, NULL, NULL) : -1;
+    /* On a shared store another daemon may have written it (cluster mode:
+     * the replica that ran the job): indexed once seen. */
+    uint64_t bytes = 0;
+    int st = found || s->ops->shared ? s->ops->stat(s->blob, key, &bytes, NULL) : -1;
+    if (!found && st >= 0 && valid_jid(jid)) {
+        pthread_mutex_lock(&s->lock);
+        result_add_locked(s, jid, bytes, vx_now());
+        pthread_mutex_unlock(&s->lock);
+        found = 1;
+    }
     if (found && st < 0 && errno != ENOENT)
         return vx_err_set(err, vx_err_io_kind(errno), "store_failed",
                           "cannot reach the results of job %s: %s", jid, strerror(errno));

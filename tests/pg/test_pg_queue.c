@@ -296,7 +296,7 @@ static void test_lease_expiry_and_fencing(void **state)
     assert_true(vx_pg_renew_interval(a) > 0.3 && vx_pg_renew_interval(a) < 0.4);
     assert_true(vx_pg_renew_interval(b) == 10);
     int cancel = 1;
-    assert_int_equal(vx_pg_renew(a, id, 1, &cancel, &err), 0);
+    assert_int_equal(vx_pg_renew(a, id, 1, 0.5, &cancel, &err), 0);
     assert_int_equal(cancel, 0);
     /* Nothing has expired yet: nothing moves, b finds no work. */
     assert_int_equal(vx_pg_requeue_expired(b, 0, NULL, NULL, &err), 0);
@@ -326,7 +326,7 @@ static void test_lease_expiry_and_fencing(void **state)
     assert_int_equal(jb.attempt, 2);
     assert_string_equal(jb.replica, "replica-b");
     /* a comes back: its renewal and completion are fenced off. */
-    assert_int_equal(vx_pg_renew(a, id, 1, &cancel, &err), 1);
+    assert_int_equal(vx_pg_renew(a, id, 1, 0.5, &cancel, &err), 1);
     cJSON *stale = cJSON_Parse("{\"outputs\":{\"grid\":{\"location\":\"results/x/1/grid.vdb\","
                                "\"bytes\":1}},\"by\":\"a\"}");
     assert_int_equal(vx_pg_complete(a, id, 1, stale, &err), 1);
@@ -370,7 +370,7 @@ static void test_lease_expiry_and_fencing(void **state)
         if (!got) nap(0.05);
     }
     assert_int_equal(ja.attempt, 2);
-    assert_int_equal(vx_pg_renew(a, id2, 1, &cancel, &err), 1);
+    assert_int_equal(vx_pg_renew(a, id2, 1, 0.5, &cancel, &err), 1);
     assert_int_equal(vx_pg_complete(a, id2, 1, stale, &err), 1);
     assert_int_equal(vx_pg_complete(a, id2, 2, win, &err), 0);
     assert_int_equal(vx_pg_get(a, id2, &q, &err), 0);
@@ -482,7 +482,7 @@ static void test_cancel(void **state)
     vx_pg_job_clear(&jb);
     assert_int_equal(vx_pg_listen(lis, &err), 0);
     int cancel = 1;
-    assert_int_equal(vx_pg_renew(pg, r, 1, &cancel, &err), 0);
+    assert_int_equal(vx_pg_renew(pg, r, 1, 0.5, &cancel, &err), 0);
     assert_int_equal(cancel, 0);
     assert_int_equal(vx_pg_cancel(pg, r, &was, &err), 0);
     assert_int_equal(was, 1);
@@ -490,7 +490,7 @@ static void test_cancel(void **state)
     assert_int_equal(vx_pg_wait(lis, 5, note, sizeof note, &err), 1);
     snprintf(want, sizeof want, "cancel %s c2", r);
     assert_string_equal(note, want);
-    assert_int_equal(vx_pg_renew(pg, r, 1, &cancel, &err), 0);
+    assert_int_equal(vx_pg_renew(pg, r, 1, 0.5, &cancel, &err), 0);
     assert_int_equal(cancel, 1);
     vx_err why = {0};
     char st[16];

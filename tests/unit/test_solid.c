@@ -511,8 +511,7 @@ static void test_limits_and_progress(void **state)
      * the answer stays the same */
     d.max_memory = 400000 + vx_xing_bytes(m); /* + the positions the shaders read */
     run(e, m, &d, &b, &st);
-    printf("%s max_memory %llu: %d chunks\n", e->name, (unsigned long long)d.max_memory,
-           st.chunks);
+    printf("%s max_memory %llu: %d chunks\n", e->name, (unsigned long long)d.max_memory, st.chunks);
     assert_true(st.chunks > 1);
     vx_bitgrid full;
     d.max_memory = 0;

@@ -1,0 +1,869 @@
+/* Cluster mode (jobs.h, desc.database): the job table and its queue live in
+ * PostgreSQL (pg.h), shared by every replica; this replica's own table
+ * holds only the jobs it has claimed and not yet finished.
+ *
+ *   submit    normalised as in local mode, then INSERTed: acknowledged only
+ *             once PostgreSQL has committed it (vx_pg_submit);
+ *   claim     the claimer thread takes the oldest runnable job of a kind
+ *             this replica runs (FOR UPDATE SKIP LOCKED) whenever the GL
+ *             thread is free, one at a time, and queues it locally;
+ *   lease     the renewer thread (its own connection, never the GL thread)
+ *             renews every claimed job's lease every third of its TTL,
+ *             writing its progress; a lease that moved on (this replica
+ *             stalled past it) stops the run, a cancel request cancels it;
+ *             it also re-queues any replica's expired leases;
+ *   finish    the runner reports through cluster_report: results in the
+ *             store under results/JOB/ATTEMPT, then one fenced UPDATE (a
+ *             stale attempt changes nothing and its results are removed);
+ *   wake      the listener thread LISTENs on the jobs channel: a queued job
+ *             wakes the claimer, a state change wakes ?wait and event
+ *             streams (jobs hooks.changed), a cancel reaches the run; every
+ *             wait also times out (1 s), the polling fallback.
+ * The API reads (get, list) come from the database; a job running here
+ * shows its live progress. Connections: api (HTTP threads), work (claims,
+ * reports), lease (renewals), listen. */
+#include "jobs/jobs_int.h"
+
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+#include <time.h>
+#include <unistd.h>
+
+#include "util/clock.h"
+#include "util/fsutil.h"
+#include "util/log.h"
+
+typedef struct vx_cluster vx_cluster;
+
+struct vx_cluster {
+    vx_pg *api, *work, *lease, *listen;
+    pthread_t claimer, renewer, listener;
+    int nthreads;
+    pthread_mutex_t lock; /* after j->lock, never before */
+    pthread_cond_t cond;  /* on CLOCK_MONOTONIC: wakes the claimer and the renewer */
+    int wake;
+    int stopping;
+    char kinds[1024]; /* comma-separated: what the claimer asks for */
+    double renew_s;
+    vx_jobs_cluster_stats stats; /* atomics */
+};
+
+/* ---- a job state that keeps nothing: the database is the state ---------- */
+
+static void *none_open(const char *where, vx_err *err)
+{
+    (void)where;
+    (void)err;
+    static int handle;
+    return &handle;
+}
+
+static void none_close(void *st)
+{
+    (void)st;
+}
+
+static long none_replay(void *st, void (*fn)(const cJSON *rec, void *ud), void *ud, vx_err *err)
+{
+    (void)st, (void)fn, (void)ud, (void)err;
+    return 0;
+}
+
+static int none_append(void *st, const cJSON *rec, vx_err *err)
+{
+    (void)st, (void)rec, (void)err;
+    return 0;
+}
+
+static int none_compact(void *st, cJSON *const *recs, size_t n, vx_err *err)
+{
+    (void)st, (void)recs, (void)n, (void)err;
+    return 0;
+}
+
+static long none_size(void *st)
+{
+    (void)st;
+    return -1;
+}
+
+const vx_jobstate_ops cluster_state = {"database", none_open,    none_close, none_replay,
+                                       none_append, none_compact, none_size};
+
+/* ---- life --------------------------------------------------------------- */
+
+static void nap(double s)
+{
+    struct timespec ts = {(time_t)s, (long)((s - (double)(time_t)s) * 1e9)};
+    nanosleep(&ts, NULL);
+}
+
+/* Waits on c->cond up to s seconds or until woken; c->lock held. */
+static void wait_locked(vx_cluster *c, double s)
+{
+    if (!c->wake && !c->stopping) {
+        struct timespec ts;
+        vx_mono_deadline(s, &ts);
+        pthread_cond_timedwait(&c->cond, &c->lock, &ts);
+    }
+    c->wake = 0;
+}
+
+void cluster_wake(vx_jobs *j)
+{
+    vx_cluster *c = j->cl;
+    if (!c) return;
+    pthread_mutex_lock(&c->lock);
+    c->wake = 1;
+    pthread_cond_broadcast(&c->cond);
+    pthread_mutex_unlock(&c->lock);
+}
+
+int cluster_open(vx_jobs *j, vx_err *err)
+{
+    vx_cluster *c = calloc(1, sizeof *c);
+    if (!c) return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory");
+    pthread_mutex_init(&c->lock, NULL);
+    pthread_condattr_t ca;
+    pthread_condattr_init(&ca);
+    pthread_condattr_setclock(&ca, CLOCK_MONOTONIC);
+    pthread_cond_init(&c->cond, &ca);
+    pthread_condattr_destroy(&ca);
+    j->cl = c;
+    vx_pg_desc d = *j->desc.database;
+    d.replica = j->replica;
+    /* A database that is not up yet (replicas and PostgreSQL starting
+     * together): wait for it a while, then give up (the service manager
+     * restarts the daemon). */
+    double give_up = vx_mono() + (d.connect_timeout_s > 0 ? 6 * d.connect_timeout_s : 30);
+    for (;;) {
+        vx_err_clear(err);
+        c->api = vx_pg_open(&d, err);
+        if (c->api && vx_pg_migrate(c->api, err) >= 0) break;
+        vx_pg_close(c->api);
+        c->api = NULL;
+        if (err->kind != VX_EUNAVAIL || vx_mono() > give_up) return -1;
+        VX_WARN("cluster.database_wait", "code=%s", err->code);
+        nap(1);
+    }
+    if (!(c->work = vx_pg_open(&d, err)) || !(c->lease = vx_pg_open(&d, err)) ||
+        !(c->listen = vx_pg_open(&d, err)) || vx_pg_listen(c->listen, err))
+        return -1;
+    size_t n = 0;
+    for (size_t i = 0; i < j->desc.kinds->n && n + 1 < sizeof c->kinds; i++)
+        n += (size_t)snprintf(c->kinds + n, sizeof c->kinds - n, "%s%s", n ? "," : "",
+                              j->desc.kinds->rows[i]->name);
+    c->renew_s = vx_pg_renew_interval(c->lease);
+    VX_INFO("cluster.open", "replica=%s kinds=%s renew_s=%.1f", j->replica, c->kinds, c->renew_s);
+    return 0;
+}
+
+static void *claimer_main(void *arg);
+static void *renewer_main(void *arg);
+static void *listener_main(void *arg);
+
+int cluster_start(vx_jobs *j, vx_err *err)
+{
+    vx_cluster *c = j->cl;
+    pthread_t *t[3] = {&c->claimer, &c->renewer, &c->listener};
+    void *(*fn[3])(void *) = {claimer_main, renewer_main, listener_main};
+    for (int i = 0; i < 3; i++) {
+        if (pthread_create(t[i], NULL, fn[i], j))
+            return vx_err_set(err, VX_EINTERNAL, "thread_failed", "cannot start cluster threads");
+        c->nthreads = i + 1;
+    }
+    return 0;
+}
+
+void cluster_stop_claims(vx_jobs *j)
+{
+    vx_cluster *c = j->cl;
+    if (!c || !c->nthreads) return;
+    pthread_mutex_lock(&c->lock);
+    c->stopping = 1;
+    pthread_cond_broadcast(&c->cond);
+    pthread_mutex_unlock(&c->lock);
+    /* The claimer first: nothing new is claimed while the runs end. */
+    pthread_join(c->claimer, NULL);
+}
+
+/* A claimed job that never started goes back to the queue as it was. */
+static void release_one(vx_jobs *j, job *jb)
+{
+    vx_err err;
+    if (vx_pg_release(j->cl->work, jb->id, jb->attempts, &err) < 0)
+        VX_WARN("cluster.release_failed", "job=%s code=%s", jb->id, err.code);
+    else
+        VX_INFO("job.requeued", "job=%s kind=%s reason=shutdown", jb->id, jb->kind->name);
+}
+
+void cluster_release_queued(vx_jobs *j)
+{
+    vx_cluster *c = j->cl;
+    if (!c) return;
+    pthread_mutex_lock(&j->lock);
+    size_t w = 0;
+    for (size_t i = 0; i < j->jobs.n; i++) {
+        job *jb = job_at(j, i);
+        if (jb->state == ST_QUEUED) {
+            vx_queue_remove(j->queue, jb);
+            release_one(j, jb);
+            unpin_job(j, &jb->pins);
+            job_free(jb);
+            continue;
+        }
+        j->jobs.items[w++] = jb;
+    }
+    j->jobs.n = w;
+    pthread_mutex_unlock(&j->lock);
+    /* The runs have ended: the renewer and the listener go too. */
+    if (c->nthreads >= 2) pthread_join(c->renewer, NULL);
+    if (c->nthreads >= 3) pthread_join(c->listener, NULL);
+    c->nthreads = 0;
+}
+
+void cluster_free(vx_jobs *j)
+{
+    vx_cluster *c = j->cl;
+    if (!c) return;
+    vx_pg_close(c->api);
+    vx_pg_close(c->work);
+    vx_pg_close(c->lease);
+    vx_pg_close(c->listen);
+    pthread_mutex_destroy(&c->lock);
+    pthread_cond_destroy(&c->cond);
+    free(c);
+    j->cl = NULL;
+}
+
+/* ---- job resources from rows ---------------------------------------------- */
+
+static void add_time(cJSON *o, const char *name, double t)
+{
+    if (t > 0) {
+        char buf[32];
+        vx_rfc3339(t, buf);
+        cJSON_AddStringToObject(o, name, buf);
+    } else {
+        cJSON_AddNullToObject(o, name);
+    }
+}
+
+static int row_terminal(const vx_pg_job *row)
+{
+    return !strcmp(row->state, "succeeded") || !strcmp(row->state, "failed") ||
+           !strcmp(row->state, "canceled");
+}
+
+/* The API resource of a row (the shape job_json gives in local mode, with
+ * attempt and replica); a job running here shows its live progress. */
+static cJSON *row_json(vx_jobs *j, const vx_pg_job *row)
+{
+    double progress = row->progress;
+    if (!strcmp(row->state, "running")) {
+        pthread_mutex_lock(&j->lock);
+        job *jb = find_job(j, row->id);
+        if (jb && jb->attempts == row->attempt && jb->progress > progress) progress = jb->progress;
+        pthread_mutex_unlock(&j->lock);
+    }
+    cJSON *o = cJSON_CreateObject();
+    cJSON_AddStringToObject(o, "id", row->id);
+    cJSON_AddStringToObject(o, "kind", row->kind);
+    cJSON_AddStringToObject(o, "mesh", row->mesh);
+    cJSON_AddItemToObject(o, "params",
+                          row->params ? cJSON_Duplicate(row->params, 1) : cJSON_CreateObject());
+    cJSON_AddStringToObject(o, "state", row->state);
+    cJSON_AddNumberToObject(o, "progress", progress);
+    cJSON_AddBoolToObject(o, "cancel_requested", row->cancel_requested);
+    cJSON_AddNumberToObject(o, "attempts", row->attempt);
+    cJSON_AddNumberToObject(o, "attempt", row->attempt);
+    if (row->replica[0])
+        cJSON_AddStringToObject(o, "replica", row->replica);
+    else
+        cJSON_AddNullToObject(o, "replica");
+    add_time(o, "created", row->created);
+    add_time(o, "started", row->started);
+    add_time(o, "finished", row->finished);
+    /* The last attempt's error, for a job that ended without success. */
+    const cJSON *last = NULL, *it;
+    cJSON_ArrayForEach(it, row->errors) last = it;
+    if (!strcmp(row->state, "failed") || !strcmp(row->state, "canceled")) {
+        cJSON *e = cJSON_AddObjectToObject(o, "error");
+        const char *code = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(last, "code"));
+        const char *msg = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(last, "message"));
+        int canceled = !strcmp(row->state, "canceled");
+        if (canceled && (!code || strcmp(code, "canceled"))) {
+            code = "canceled";
+            msg = row->started > 0 ? "canceled while running" : "canceled while queued";
+        }
+        cJSON_AddStringToObject(e, "code", code ? code : "failed");
+        cJSON_AddStringToObject(e, "message", msg ? msg : "");
+    } else {
+        cJSON_AddNullToObject(o, "error");
+    }
+    if (row->errors && cJSON_GetArraySize(row->errors) > 0)
+        cJSON_AddItemToObject(o, "attempt_errors", cJSON_Duplicate(row->errors, 1));
+    cJSON *t = cJSON_AddObjectToObject(o, "timings");
+    double now = vx_now(), end = row->finished > 0 ? row->finished : now;
+    cJSON_AddNumberToObject(t, "queue_ms",
+                            ms_between(row->created, row->started > 0 ? row->started : end));
+    if (row->started > 0)
+        cJSON_AddNumberToObject(t, "run_ms", ms_between(row->started, end));
+    else
+        cJSON_AddNullToObject(t, "run_ms");
+    if (row->finished > 0)
+        cJSON_AddNumberToObject(t, "total_ms", ms_between(row->created, row->finished));
+    else
+        cJSON_AddNullToObject(t, "total_ms");
+    const cJSON *stats = cJSON_GetObjectItemCaseSensitive(row->result, "stats");
+    cJSON_AddItemToObject(o, "stats",
+                          cJSON_IsObject(stats) ? cJSON_Duplicate(stats, 1) : cJSON_CreateObject());
+    cJSON *outs = cJSON_AddObjectToObject(o, "outputs");
+    const cJSON *outputs = cJSON_GetObjectItemCaseSensitive(row->result, "outputs");
+    if (!strcmp(row->state, "succeeded")) cJSON_ArrayForEach(it, outputs)
+        {
+            char url[256];
+            snprintf(url, sizeof url, "/v1/jobs/%s/result/%s", row->id, it->string);
+            cJSON_AddStringToObject(outs, it->string, url);
+        }
+    return o;
+}
+
+/* ---- the API ---------------------------------------------------------------- */
+
+cJSON *cluster_submit(vx_jobs *j, const char *mesh, const vx_kind *k, cJSON *params,
+                      uint64_t fp, const vx_jobs_submit_opts *opts, int *existing, vx_err *err)
+{
+    vx_cluster *c = j->cl;
+    char fps[17];
+    snprintf(fps, sizeof fps, "%016llx", (unsigned long long)fp);
+    vx_pg_job row;
+    memset(&row, 0, sizeof row);
+    cJSON *out = NULL;
+    int got = 0;
+    if (opts && opts->reuse && !(opts->idempotency_key && *opts->idempotency_key)) {
+        got = vx_pg_find_done(c->api, fps, &row, err);
+        if (got < 0) return NULL;
+        if (got) {
+            *existing = 1;
+            out = row_json(j, &row);
+            vx_pg_job_clear(&row);
+            return out;
+        }
+    }
+    if (j->stopping) {
+        vx_err_set(err, VX_EUNAVAIL, "not_ready", "the daemon is shutting down");
+        return NULL;
+    }
+    long queued = vx_pg_queued(c->api, err);
+    if (queued < 0) return NULL;
+    if ((size_t)queued >= vx_queue_capacity(j->queue)) {
+        vx_err_set(err, VX_EBUSY, "queue_full", "the job queue is full (%ld queued)", queued);
+        return NULL;
+    }
+    char id[33];
+    jobs_new_id(id);
+    vx_pg_new_job nj = {.id = id,
+                        .kind = k->name,
+                        .mesh = mesh,
+                        .params = params,
+                        .fp = fps,
+                        .idem = opts ? opts->idempotency_key : NULL};
+    got = vx_pg_submit_idem(c->api, &nj, &row, err);
+    if (got < 0) return NULL;
+    if (got == 1) {
+        *existing = 1;
+    } else if (vx_pg_get(c->api, id, &row, err)) {
+        /* Committed, but not read back: answer from what was sent. */
+        snprintf(row.id, sizeof row.id, "%s", id);
+        snprintf(row.kind, sizeof row.kind, "%s", k->name);
+        snprintf(row.mesh, sizeof row.mesh, "%s", mesh);
+        snprintf(row.state, sizeof row.state, "queued");
+        row.created = vx_now();
+        row.params = cJSON_Duplicate(params, 1);
+        vx_err_clear(err);
+    }
+    out = row_json(j, &row);
+    vx_pg_job_clear(&row);
+    if (!*existing) VX_INFO("job.queued", "job=%s kind=%s mesh=%.12s", id, k->name, mesh);
+    return out;
+}
+
+cJSON *cluster_get(vx_jobs *j, const char *jid, int *terminal, vx_err *err)
+{
+    vx_pg_job row;
+    if (vx_pg_get(j->cl->api, jid, &row, err)) return NULL;
+    if (terminal) *terminal = row_terminal(&row);
+    cJSON *o = row_json(j, &row);
+    vx_pg_job_clear(&row);
+    return o;
+}
+
+/* A claimed job's local cancel: running, it stops at its next progress
+ * check; still queued here, it ends now. */
+static void cancel_local(vx_jobs *j, const char *jid);
+
+cJSON *cluster_cancel(vx_jobs *j, const char *jid, int *was_running, vx_err *err)
+{
+    if (vx_pg_cancel(j->cl->api, jid, was_running, err)) return NULL;
+    if (*was_running) cancel_local(j, jid);
+    return cluster_get(j, jid, NULL, err);
+}
+
+cJSON *cluster_list(vx_jobs *j, const char *after, int limit, const vx_jobs_filter *f,
+                    char next[40])
+{
+    vx_pg_filter pf = {0};
+    if (f) {
+        pf.state = f->state;
+        pf.kind = f->kind;
+        pf.mesh = f->mesh;
+        pf.desc = f->desc;
+    }
+    vx_pg_job *rows = NULL;
+    size_t n = 0;
+    char nx[33];
+    vx_err err;
+    next[0] = 0;
+    cJSON *arr = cJSON_CreateArray();
+    if (vx_pg_list(j->cl->api, &pf, after, limit, &rows, &n, nx, &err)) {
+        /* The list has no error answer: an empty page, logged. */
+        VX_WARN("cluster.list_failed", "code=%s", err.code);
+        return arr;
+    }
+    for (size_t i = 0; i < n; i++)
+        cJSON_AddItemToArray(arr, row_json(j, &rows[i]));
+    snprintf(next, 40, "%s", nx);
+    vx_pg_jobs_free(rows, n);
+    return arr;
+}
+
+int cluster_delete(vx_jobs *j, const char *jid, vx_err *err)
+{
+    vx_pg_job row;
+    if (vx_pg_get(j->cl->api, jid, &row, err)) return -1;
+    int attempt = row.attempt;
+    vx_pg_job_clear(&row);
+    if (vx_pg_delete(j->cl->api, jid, err)) return -1;
+    char rid[48];
+    snprintf(rid, sizeof rid, "%s/%d", jid, attempt);
+    vx_store_result_remove(j->desc.store, rid);
+    VX_INFO("job.deleted", "job=%s", jid);
+    return 0;
+}
+
+int cluster_output(vx_jobs *j, const char *jid, const char *name, char *path, size_t pathn,
+                   char ctype[64], char fname[128], vx_err *err)
+{
+    vx_pg_job row;
+    if (vx_pg_get(j->cl->api, jid, &row, err)) return -1;
+    int rc = -1;
+    char file[160] = "", rid[48];
+    if (!strcmp(row.state, "queued") || !strcmp(row.state, "running")) {
+        vx_err_set(err, VX_ECONFLICT, "job_not_finished", "job %s is %s", jid, row.state);
+    } else if (!strcmp(row.state, "failed")) {
+        const cJSON *last = NULL, *it;
+        cJSON_ArrayForEach(it, row.errors) last = it;
+        vx_err_set(err, VX_ECONFLICT, "job_failed", "job %s failed: %s", jid,
+                   cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(last, "message"))
+                       ?: "unknown error");
+    } else if (!strcmp(row.state, "canceled")) {
+        vx_err_set(err, VX_ECONFLICT, "job_canceled", "job %s was canceled", jid);
+    } else {
+        const cJSON *outs = cJSON_GetObjectItemCaseSensitive(row.result, "outputs");
+        const cJSON *o =
+            name ? cJSON_GetObjectItemCaseSensitive(outs, name) : (outs ? outs->child : NULL);
+        if (!o) {
+            vx_err_set(err, VX_ENOTFOUND, "output_not_found", "job %s has no output '%.64s'", jid,
+                       name ? name : "");
+        } else {
+            snprintf(file, sizeof file, "%s",
+                     cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(o, "file")) ?: "");
+            snprintf(ctype, 64, "%s",
+                     cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(o, "content_type"))
+                         ?: "application/octet-stream");
+            snprintf(fname, 128, "%s-%s", jid, file);
+            snprintf(rid, sizeof rid, "%s/%d", jid, row.attempt);
+            rc = 0;
+        }
+    }
+    vx_pg_job_clear(&row);
+    if (rc) return rc;
+    return vx_store_result_file(j->desc.store, rid, file, path, pathn, err);
+}
+
+/* ---- claims ------------------------------------------------------------------- */
+
+/* 1 when the GL thread has nothing to start: no claimed job waits here and
+ * none is in its GL stage (a job encoding on a CPU worker leaves the GL
+ * thread free for the next). */
+static int gl_free(vx_jobs *j)
+{
+    pthread_mutex_lock(&j->lock);
+    int busy = j->in_gl;
+    for (size_t i = 0; i < j->jobs.n && !busy; i++)
+        busy = job_at(j, i)->state == ST_QUEUED;
+    pthread_mutex_unlock(&j->lock);
+    return !busy;
+}
+
+/* Makes a claimed row a local job and queues it for the GL thread; what
+ * cannot run here is reported failed at once. */
+static void adopt(vx_jobs *j, vx_pg_job *row)
+{
+    vx_cluster *c = j->cl;
+    vx_err err;
+    vx_err_clear(&err);
+    const vx_kind *k = vx_kinds_find(j->desc.kinds, row->kind);
+    job *jb = k ? calloc(1, sizeof *jb) : NULL;
+    int retry = 0;
+    if (!k) {
+        vx_err_set(&err, VX_EUNPROC, "unknown_kind", "replica %s does not run kind %s", j->replica,
+                   row->kind);
+    } else if (!jb) {
+        vx_err_set(&err, VX_EINTERNAL, "out_of_memory", "no memory");
+        retry = 1;
+    } else {
+        snprintf(jb->id, sizeof jb->id, "%s", row->id);
+        snprintf(jb->mesh, sizeof jb->mesh, "%s", row->mesh);
+        jb->kind = k;
+        jb->params = row->params ? cJSON_Duplicate(row->params, 1) : cJSON_CreateObject();
+        jb->stats = cJSON_CreateObject();
+        jb->outputs = cJSON_CreateObject();
+        jb->attempts = row->attempt;
+        jb->created = row->created;
+        jb->state = ST_QUEUED;
+        /* The job holds its meshes (and blobs) here while it runs; one
+         * that is gone from the store fails when it runs. */
+        pin_job(j, jb->mesh, k, jb->params, 1, &jb->pins, NULL);
+        pthread_mutex_lock(&j->lock);
+        int taken = find_job(j, jb->id) != NULL || vx_sorted_insert(&j->jobs, jb) != 0;
+        if (!taken) vx_queue_push(j->queue, jb, 1);
+        pthread_mutex_unlock(&j->lock);
+        if (!taken) {
+            __atomic_add_fetch(&c->stats.claims, 1, __ATOMIC_RELAXED);
+            VX_INFO("job.claimed", "job=%s kind=%s attempt=%d replica=%s", row->id, row->kind,
+                    row->attempt, j->replica);
+            notify(j, row->id, 0);
+            return;
+        }
+        /* An earlier attempt of it still ends here (its lease moved on):
+         * this attempt goes back for another replica. */
+        unpin_job(j, &jb->pins);
+        job_free(jb);
+        jb = NULL;
+        vx_err_set(&err, VX_EBUSY, "replica_busy", "replica %s still holds an earlier attempt",
+                   j->replica);
+        retry = 1;
+    }
+    free(jb);
+    char state[16] = "";
+    if (vx_pg_fail(c->work, row->id, row->attempt, &err, retry, state, NULL) == 0)
+        notify(j, row->id, strcmp(state, "queued") != 0);
+}
+
+static void *claimer_main(void *arg)
+{
+    vx_jobs *j = arg;
+    vx_cluster *c = j->cl;
+    double quiet_until = 0;
+    pthread_mutex_lock(&c->lock);
+    while (!c->stopping) {
+        pthread_mutex_unlock(&c->lock);
+        int claimed = 0;
+        if (!j->stopping && gl_free(j)) {
+            vx_pg_job row;
+            vx_err err;
+            int got = vx_pg_claim(c->work, c->kinds, &row, &err);
+            if (got == 1) {
+                adopt(j, &row);
+                vx_pg_job_clear(&row);
+                claimed = 1;
+            } else if (got < 0 && vx_mono() > quiet_until) {
+                VX_WARN("cluster.claim_failed", "code=%s", err.code);
+                quiet_until = vx_mono() + 10;
+            }
+        }
+        pthread_mutex_lock(&c->lock);
+        /* Claimed: straight on once the GL thread takes it; else until a
+         * job is queued or one here finishes, at most a second (polling
+         * fallback for lost notifications). */
+        if (!claimed) wait_locked(c, 1.0);
+    }
+    pthread_mutex_unlock(&c->lock);
+    return NULL;
+}
+
+/* ---- leases ------------------------------------------------------------------- */
+
+static void cancel_local(vx_jobs *j, const char *jid)
+{
+    pthread_mutex_lock(&j->lock);
+    job *jb = find_job(j, jid);
+    if (jb) jb->cancel_requested = 1;
+    pthread_mutex_unlock(&j->lock);
+    /* A claimed job still waiting for the GL thread: the GL thread finds
+     * cancel_requested when it takes it and reports it canceled. */
+}
+
+/* The attempt is no longer ours: stop it without reporting. */
+static void lose(vx_jobs *j, const char *jid, int attempt)
+{
+    vx_cluster *c = j->cl;
+    pthread_mutex_lock(&j->lock);
+    job *jb = find_job(j, jid);
+    int hit = jb && jb->attempts == attempt && !jb->lease_lost;
+    if (hit) {
+        jb->lease_lost = 1;
+        jb->cancel_requested = 1;
+    }
+    pthread_mutex_unlock(&j->lock);
+    if (hit) {
+        __atomic_add_fetch(&c->stats.lease_losses, 1, __ATOMIC_RELAXED);
+        VX_WARN("job.lease_lost", "job=%s attempt=%d replica=%s", jid, attempt, j->replica);
+    }
+}
+
+typedef struct held {
+    char id[33];
+    int attempt;
+    double progress;
+} held;
+
+static void renew_all(vx_jobs *j)
+{
+    vx_cluster *c = j->cl;
+    held h[64];
+    size_t n = 0;
+    pthread_mutex_lock(&j->lock);
+    for (size_t i = 0; i < j->jobs.n && n < 64; i++) {
+        job *jb = job_at(j, i);
+        if (jb->lease_lost || is_terminal(jb->state)) continue;
+        snprintf(h[n].id, sizeof h[n].id, "%s", jb->id);
+        h[n].attempt = jb->attempts;
+        h[n].progress = jb->progress;
+        n++;
+    }
+    pthread_mutex_unlock(&j->lock);
+    for (size_t i = 0; i < n; i++) {
+        int cancel = 0;
+        vx_err err;
+        int rc = vx_pg_renew(c->lease, h[i].id, h[i].attempt, h[i].progress, &cancel, &err);
+        if (rc == 1)
+            lose(j, h[i].id, h[i].attempt);
+        else if (rc == 0 && cancel)
+            cancel_local(j, h[i].id);
+        else if (rc < 0)
+            VX_WARN("cluster.renew_failed", "job=%s code=%s", h[i].id, err.code);
+    }
+}
+
+static void *renewer_main(void *arg)
+{
+    vx_jobs *j = arg;
+    vx_cluster *c = j->cl;
+    double next_requeue = 0;
+    pthread_mutex_lock(&c->lock);
+    while (!c->stopping || j->running > 0) {
+        pthread_mutex_unlock(&c->lock);
+        renew_all(j);
+        if (vx_mono() >= next_requeue && !c->stopping) {
+            /* Any replica re-queues the leases that expired (a replica that
+             * died or stalled): the one whose claim is oldest goes first. */
+            int requeued = 0, failed = 0;
+            vx_err err;
+            int moved = vx_pg_requeue_expired(c->lease, 100, &requeued, &failed, &err);
+            if (moved > 0)
+                __atomic_add_fetch(&c->stats.requeued_expired, (uint64_t)moved, __ATOMIC_RELAXED);
+            if (requeued > 0) cluster_wake(j);
+            next_requeue = vx_mono() + c->renew_s;
+        }
+        pthread_mutex_lock(&c->lock);
+        struct timespec ts;
+        vx_mono_deadline(c->stopping ? 0.2 : c->renew_s, &ts);
+        pthread_cond_timedwait(&c->cond, &c->lock, &ts);
+    }
+    pthread_mutex_unlock(&c->lock);
+    return NULL;
+}
+
+/* ---- notifications ------------------------------------------------------------- */
+
+static void *listener_main(void *arg)
+{
+    vx_jobs *j = arg;
+    vx_cluster *c = j->cl;
+    for (;;) {
+        pthread_mutex_lock(&c->lock);
+        int stop = c->stopping;
+        pthread_mutex_unlock(&c->lock);
+        if (stop && !j->running) break;
+        char payload[160];
+        vx_err err;
+        int rc = vx_pg_wait(c->listen, 1.0, payload, sizeof payload, &err);
+        if (rc != 1) continue;
+        /* "STATE ID KIND", "cancel ID KIND", or "" (notifications were lost
+         * while reconnecting: whoever waits re-reads). */
+        char state[16] = "", id[40] = "";
+        if (sscanf(payload, "%15s %39s", state, id) != 2) {
+            cluster_wake(j);
+            continue;
+        }
+        if (!strcmp(state, "queued")) {
+            cluster_wake(j);
+        } else if (!strcmp(state, "cancel")) {
+            cancel_local(j, id);
+        }
+        int terminal =
+            !strcmp(state, "succeeded") || !strcmp(state, "failed") || !strcmp(state, "canceled");
+        if (terminal) cluster_wake(j);
+        notify(j, id, terminal);
+    }
+    return NULL;
+}
+
+/* ---- reports ------------------------------------------------------------------- */
+
+/* 1 when an attempt that failed this way may succeed on another try (on
+ * this or another replica): the GPU, the store or the database, not the
+ * request. */
+static int retryable(const vx_err *e)
+{
+    switch (e->kind) {
+    case VX_EGPU:
+    case VX_EIO:
+    case VX_EUNAVAIL:
+    case VX_EOVERLOAD:
+    case VX_ENOSPC:
+    case VX_EBUSY:
+        return 1;
+    default:
+        return !strcmp(e->code, "out_of_memory");
+    }
+}
+
+/* The result manifest: the run's outputs with their place in the store
+ * and size, and its stats. */
+static cJSON *manifest(vx_jobs *j, vx_job_run *r)
+{
+    cJSON *m = cJSON_CreateObject();
+    cJSON *outs = cJSON_AddObjectToObject(m, "outputs");
+    const cJSON *it;
+    cJSON_ArrayForEach(it, r->outputs)
+    {
+        const char *file = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(it, "file"));
+        cJSON *o = cJSON_AddObjectToObject(outs, it->string);
+        cJSON_AddStringToObject(o, "file", file ? file : "");
+        cJSON_AddStringToObject(
+            o, "content_type",
+            cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(it, "content_type")) ?: "");
+        char loc[256], path[VX_PATH_MAX];
+        snprintf(loc, sizeof loc, "results/%s/%s", r->rid, file ? file : "");
+        cJSON_AddStringToObject(o, "location", loc);
+        snprintf(path, sizeof path, "%s/%s", r->dir, file ? file : "");
+        struct stat st;
+        cJSON_AddNumberToObject(o, "bytes", stat(path, &st) == 0 ? (double)st.st_size : 0);
+    }
+    (void)j;
+    cJSON_AddItemReferenceToObject(m, "stats", r->stats);
+    return m;
+}
+
+void cluster_report(vx_jobs *j, job *jb, vx_job_run *r, int ok, const vx_err *e, int requeue,
+                    char state[16])
+{
+    vx_cluster *c = j->cl;
+    state[0] = 0;
+    pthread_mutex_lock(&j->lock);
+    int lost = jb->lease_lost;
+    pthread_mutex_unlock(&j->lock);
+    if (lost) {
+        /* Another attempt owns the job now: nothing to say. */
+        if (r->dir[0]) vx_store_result_remove(j->desc.store, r->rid);
+        return;
+    }
+    if (ok) vx_store_result_added(j->desc.store, r->rid);
+    cJSON *m = ok ? manifest(j, r) : NULL;
+    /* While the database is unreachable the lease may still hold: keep
+     * trying for one lease period (the renewer keeps it alive meanwhile). */
+    double give_up = vx_mono() + 3 * c->renew_s;
+    int rc;
+    for (;;) {
+        vx_err err;
+        if (ok) {
+            rc = vx_pg_complete(c->work, jb->id, jb->attempts, m, &err);
+            if (rc == 0) snprintf(state, 16, "succeeded");
+        } else if (requeue) {
+            rc = vx_pg_release(c->work, jb->id, jb->attempts, &err);
+            if (rc == 0) snprintf(state, 16, "queued");
+        } else {
+            int retry = retryable(e);
+            rc = vx_pg_fail(c->work, jb->id, jb->attempts, e, retry, state, &err);
+            if (rc == 0 && !strcmp(state, "queued"))
+                __atomic_add_fetch(&c->stats.retries, 1, __ATOMIC_RELAXED);
+        }
+        if (rc >= 0) break;
+        if (err.kind != VX_EUNAVAIL || vx_mono() > give_up) {
+            VX_ERROR("cluster.report_failed", "job=%s attempt=%d code=%s", jb->id, jb->attempts,
+                     err.code);
+            break;
+        }
+        nap(0.5);
+        pthread_mutex_lock(&j->lock);
+        lost = jb->lease_lost;
+        pthread_mutex_unlock(&j->lock);
+        if (lost) break;
+    }
+    cJSON_Delete(m);
+    if (rc != 0) {
+        /* Stale (another attempt won), or never recorded: this attempt's
+         * results are nobody's. */
+        if (rc == 1) {
+            __atomic_add_fetch(&c->stats.stale_completions, 1, __ATOMIC_RELAXED);
+            VX_WARN("job.stale_attempt", "job=%s attempt=%d", jb->id, jb->attempts);
+        }
+        if (r->dir[0] || ok) vx_store_result_remove(j->desc.store, r->rid);
+        state[0] = 0;
+    } else if (!ok && r->dir[0]) {
+        vx_store_result_remove(j->desc.store, r->rid);
+    }
+}
+
+/* ---- status --------------------------------------------------------------------- */
+
+int vx_jobs_cluster(vx_jobs *j, vx_jobs_cluster_stats *out)
+{
+    if (!j->cl) return 0;
+    if (out) {
+        vx_jobs_cluster_stats *s = &j->cl->stats;
+        out->claims = __atomic_load_n(&s->claims, __ATOMIC_RELAXED);
+        out->lease_losses = __atomic_load_n(&s->lease_losses, __ATOMIC_RELAXED);
+        out->stale_completions = __atomic_load_n(&s->stale_completions, __ATOMIC_RELAXED);
+        out->retries = __atomic_load_n(&s->retries, __ATOMIC_RELAXED);
+        out->requeued_expired = __atomic_load_n(&s->requeued_expired, __ATOMIC_RELAXED);
+    }
+    return 1;
+}
+
+int vx_jobs_database_ok(vx_jobs *j, vx_err *err)
+{
+    if (!j->cl) return 1;
+    return vx_pg_ping(j->cl->api, err) == 0;
+}
+
+int vx_jobs_cluster_counts(vx_jobs *j, vx_pg_count **out, size_t *n, vx_err *err)
+{
+    if (!j->cl) {
+        *out = NULL;
+        *n = 0;
+        return vx_err_set(err, VX_ENOTIMPL, "not_clustered", "no --database");
+    }
+    return vx_pg_counts(j->cl->api, out, n, err);
+}
+
+const char *vx_jobs_replica(vx_jobs *j)
+{
+    return j->replica;
+}
