@@ -118,7 +118,9 @@ int vx_route_job_list(vx_http *h, struct MHD_Connection *c, req *r)
                         .mesh = r->q.has_mesh ? r->q.mesh : NULL,
                         .desc = r->q.desc};
     char next[40];
-    cJSON *items = vx_jobs_list(h->d.jobs, after, limit, &f, next);
+    vx_err err;
+    cJSON *items = vx_jobs_list(h->d.jobs, after, limit, &f, next, &err);
+    if (!items) return vx_resp_err(c, r, &err);
     return vx_resp_page(c, r, items, next);
 }
 

@@ -89,7 +89,7 @@ static long none_size(void *st)
     return -1;
 }
 
-const vx_jobstate_ops cluster_state = {"database", none_open,    none_close, none_replay,
+const vx_jobstate_ops cluster_state = {"database",  none_open,    none_close, none_replay,
                                        none_append, none_compact, none_size};
 
 /* ---- life --------------------------------------------------------------- */
@@ -333,8 +333,8 @@ static cJSON *row_json(vx_jobs *j, const vx_pg_job *row)
 
 /* ---- the API ---------------------------------------------------------------- */
 
-cJSON *cluster_submit(vx_jobs *j, const char *mesh, const vx_kind *k, cJSON *params,
-                      uint64_t fp, const vx_jobs_submit_opts *opts, int *existing, vx_err *err)
+cJSON *cluster_submit(vx_jobs *j, const char *mesh, const vx_kind *k, cJSON *params, uint64_t fp,
+                      const vx_jobs_submit_opts *opts, int *existing, vx_err *err)
 {
     vx_cluster *c = j->cl;
     char fps[17];
@@ -413,7 +413,7 @@ cJSON *cluster_cancel(vx_jobs *j, const char *jid, int *was_running, vx_err *err
 }
 
 cJSON *cluster_list(vx_jobs *j, const char *after, int limit, const vx_jobs_filter *f,
-                    char next[40])
+                    char next[40], vx_err *err)
 {
     vx_pg_filter pf = {0};
     if (f) {
@@ -425,14 +425,9 @@ cJSON *cluster_list(vx_jobs *j, const char *after, int limit, const vx_jobs_filt
     vx_pg_job *rows = NULL;
     size_t n = 0;
     char nx[33];
-    vx_err err;
     next[0] = 0;
+    if (vx_pg_list(j->cl->api, &pf, after, limit, &rows, &n, nx, err)) return NULL;
     cJSON *arr = cJSON_CreateArray();
-    if (vx_pg_list(j->cl->api, &pf, after, limit, &rows, &n, nx, &err)) {
-        /* The list has no error answer: an empty page, logged. */
-        VX_WARN("cluster.list_failed", "code=%s", err.code);
-        return arr;
-    }
     for (size_t i = 0; i < n; i++)
         cJSON_AddItemToArray(arr, row_json(j, &rows[i]));
     snprintf(next, 40, "%s", nx);
@@ -614,7 +609,7 @@ static void lose(vx_jobs *j, const char *jid, int attempt)
     vx_cluster *c = j->cl;
     pthread_mutex_lock(&j->lock);
     job *jb = find_job(j, jid);
-    int hit = jb && jb->attempts == attempt && !jb->lease_lost;
+    int hit = jb && jb->attempts == attempt && !jb->lease_lost && !jb->reporting;
     if (hit) {
         jb->lease_lost = 1;
         jb->cancel_requested = 1;
@@ -640,7 +635,7 @@ static void renew_all(vx_jobs *j)
     pthread_mutex_lock(&j->lock);
     for (size_t i = 0; i < j->jobs.n && n < 64; i++) {
         job *jb = job_at(j, i);
-        if (jb->lease_lost || is_terminal(jb->state)) continue;
+        if (jb->lease_lost || jb->reporting || is_terminal(jb->state)) continue;
         snprintf(h[n].id, sizeof h[n].id, "%s", jb->id);
         h[n].attempt = jb->attempts;
         h[n].progress = jb->progress;
@@ -778,6 +773,7 @@ void cluster_report(vx_jobs *j, job *jb, vx_job_run *r, int ok, const vx_err *e,
     state[0] = 0;
     pthread_mutex_lock(&j->lock);
     int lost = jb->lease_lost;
+    jb->reporting = 1; /* the renewer lets it be: its end is told below */
     pthread_mutex_unlock(&j->lock);
     if (lost) {
         /* Another attempt owns the job now: nothing to say. */

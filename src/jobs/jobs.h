@@ -116,9 +116,10 @@ typedef struct vx_jobs_filter {
     int desc; /* newest first: `after` then means older than it */
 } vx_jobs_filter;
 /* Page of jobs by id (= creation order) after `after` (in f's order), the
- * jobs f keeps (f may be NULL); next = the last id when more follow. */
+ * jobs f keeps (f may be NULL); next = the last id when more follow. NULL
+ * with err only in cluster mode (the database unreachable). */
 cJSON *vx_jobs_list(vx_jobs *j, const char *after, int limit, const vx_jobs_filter *f,
-                    char next[40]);
+                    char next[40], vx_err *err);
 /* 1 when a kind of this name runs here. */
 int vx_jobs_has_kind(vx_jobs *j, const char *kind);
 /* Where an output of a finished job is: path, content type and the file name

@@ -49,6 +49,7 @@ typedef struct job {
     uint64_t fp;    /* fingerprint of kind, mesh and normalised params (dedup.c) */
     char *idem;     /* its Idempotency-Key (owned), or NULL */
     int lease_lost; /* cluster mode: the attempt is no longer ours (renewal said so) */
+    int reporting;  /* cluster mode: its end is being reported (no more renewals) */
 } job;
 
 struct vx_job_run {
@@ -151,7 +152,7 @@ cJSON *cluster_submit(vx_jobs *j, const char *mesh, const vx_kind *k, cJSON *par
 cJSON *cluster_get(vx_jobs *j, const char *jid, int *terminal, vx_err *err);
 cJSON *cluster_cancel(vx_jobs *j, const char *jid, int *was_running, vx_err *err);
 cJSON *cluster_list(vx_jobs *j, const char *after, int limit, const vx_jobs_filter *f,
-                    char next[40]);
+                    char next[40], vx_err *err);
 int cluster_delete(vx_jobs *j, const char *jid, vx_err *err);
 int cluster_output(vx_jobs *j, const char *jid, const char *name, char *path, size_t pathn,
                    char ctype[64], char fname[128], vx_err *err);

@@ -417,9 +417,9 @@ static int kept(const vx_jobs_filter *f, const job *jb)
 }
 
 cJSON *vx_jobs_list(vx_jobs *j, const char *after, int limit, const vx_jobs_filter *f,
-                    char next[40])
+                    char next[40], vx_err *err)
 {
-    if (j->cl) return cluster_list(j, after, limit, f, next);
+    if (j->cl) return cluster_list(j, after, limit, f, next, err);
     cJSON *arr = cJSON_CreateArray();
     next[0] = 0;
     int desc = f && f->desc;

@@ -192,8 +192,10 @@ done
 # ---- the options of the single-replica overlays, given to the real voxeld -----------------
 # The pod's environment (ConfigMap + env) and args, with the paths and the
 # port moved into this test's temp dir; the token decoded from the Secret.
+POD_OVERRIDES=()
 run_pod_options() {
-    local o=$1 dir=$TMP/pod-$o
+    local o=$1
+    local dir=$TMP/pod-$o
     mkdir -p "$dir"
     jq -r ". as \$all | ($DEPLOY | .spec.template.spec) as \$s | \$s.volumes[] | select(.secret) | .secret.secretName as \$n | \$all[] | select(.kind == \"Secret\" and .metadata.name == \$n) | .data.token" \
         "$TMP/$o.json" | tr -d '\n' | base64 -d >"$dir/token"
@@ -203,11 +205,11 @@ run_pod_options() {
     # The pod's variables for this one start (start_daemon's own --listen,
     # --data-dir, --workers and --http-threads flags win over them).
     local kv ok=0
-    for kv in "${envs[@]}"; do export "${kv?}"; done
+    for kv in "${envs[@]}" "${POD_OVERRIDES[@]}"; do export "${kv?}"; done
     export VOXELD_CACHE_DIR="$dir/cache" VOXELD_TOKEN_FILE="$dir/token" MESA_SHADER_CACHE_DIR="$dir/cache/mesa"
     DATA=$dir/data
     start_daemon "${args[@]}" && ok=1
-    for kv in "${envs[@]}"; do unset "${kv%%=*}"; done
+    for kv in "${envs[@]}" "${POD_OVERRIDES[@]}"; do unset "${kv%%=*}"; done
     unset VOXELD_CACHE_DIR VOXELD_TOKEN_FILE MESA_SHADER_CACHE_DIR
     check "$o: voxeld starts with the pod's options" test "$ok" -eq 1
     [[ $ok -eq 1 ]] || return
@@ -229,6 +231,34 @@ if [[ -n "$PID" ]]; then
     api GET /v1/info
     expect_status "cpu: /v1/info without the token" 401
     stop_daemon
+fi
+# The cpu-cluster pod's options, its Secret's placeholders (the database, the
+# bucket) pointed at a PostgreSQL started here and a shared dir: the pod is
+# ready with the database.
+PGSH="$VX_SOURCE_DIR/tests/support/pg.sh"
+if [[ -x /usr/lib/postgresql/15/bin/initdb ]]; then
+    PGDIR=$(mktemp -d /tmp/vxpg.XXXXXX)
+    if PGURL=$(bash "$PGSH" start "$PGDIR"); then
+        check "cpu-cluster: the Secret holds VOXELD_DATABASE" q cpu-cluster \
+            '. as $all | [$all[] | select(.kind == "Secret") | .data.VOXELD_DATABASE // empty] | length == 1'
+        POD_OVERRIDES=("VOXELD_DATABASE=$PGURL" "VOXELD_BLOB_STORE=file://$TMP/pod-shared")
+        mkdir -p "$TMP/pod-shared"
+        run_pod_options cpu-cluster
+        POD_OVERRIDES=()
+        if [[ -n "$PID" ]]; then
+            api GET /readyz
+            expect_status "cpu-cluster: the pod's /readyz with the database" 200
+            check "cpu-cluster: readyz names the database and the file store" \
+                jq -e '.database.ok == true and .blob_store.backend == "file"' "$BODY"
+            stop_daemon
+        fi
+        bash "$PGSH" stop "$PGDIR" >/dev/null 2>&1
+    else
+        check "PostgreSQL for the cpu-cluster pod starts" false
+    fi
+    rm -rf "$PGDIR"
+else
+    echo "note: no PostgreSQL server: the cpu-cluster pod's options are not run"
 fi
 # On a machine whose EGL has only Mesa's software device (this one), the
 # nvidia pod's options must make it unready; with a GPU that part is skipped.

@@ -629,6 +629,104 @@ static void test_restart(void **state)
     vx_pg_close(pg);
 }
 
+/* Schema 2: params keep their key order (json), an Idempotency-Key answers
+ * its first job (and refuses another request), a succeeded job is found by
+ * its fingerprint, progress is written by renewals, lists filter by mesh,
+ * delete takes finished jobs only, queued counts, ping. */
+static void test_v2(void **state)
+{
+    (void)state;
+    vx_pg *pg = open_as("v2", 30);
+    vx_err err = {0};
+    char a[33], b[33], c[33];
+    make_id(a, 9001);
+    make_id(b, 9002);
+    make_id(c, 9003);
+    cJSON *p = cJSON_Parse("{\"zeta\":1,\"alpha\":2,\"mid\":{\"y\":1,\"x\":2}}");
+    const char *mesh = "aaaa000000000000000000000000000000000000000000000000000000000001";
+    vx_pg_new_job nj = {.id = a,
+                        .kind = "voxelize",
+                        .mesh = mesh,
+                        .params = p,
+                        .fp = "00000000000000aa",
+                        .idem = "key-1"};
+    vx_pg_job ex;
+    assert_int_equal(vx_pg_submit_idem(pg, &nj, &ex, &err), 0);
+    /* The same key and request: the first job, not a new one. */
+    nj.id = b;
+    assert_int_equal(vx_pg_submit_idem(pg, &nj, &ex, &err), 1);
+    assert_string_equal(ex.id, a);
+    assert_string_equal(ex.idem, "key-1");
+    vx_pg_job_clear(&ex);
+    /* The same key, another request. */
+    nj.fp = "00000000000000bb";
+    assert_int_equal(vx_pg_submit_idem(pg, &nj, &ex, &err), -1);
+    assert_string_equal(err.code, "idempotency_key_reused");
+    assert_int_equal(sql_long("SELECT count(*) FROM vx_jobs WHERE idem_key = 'key-1'"), 1);
+    /* Key order as sent. */
+    vx_pg_job got;
+    assert_int_equal(vx_pg_get(pg, a, &got, &err), 0);
+    char *text = cJSON_PrintUnformatted(got.params);
+    assert_string_equal(text, "{\"zeta\":1,\"alpha\":2,\"mid\":{\"y\":1,\"x\":2}}");
+    cJSON_free(text);
+    assert_string_equal(got.fp, "00000000000000aa");
+    vx_pg_job_clear(&got);
+    assert_int_equal(vx_pg_queued(pg, &err), 1);
+    assert_int_equal(vx_pg_ping(pg, &err), 0);
+    /* Not finished: no delete, not found by fingerprint. */
+    assert_int_equal(vx_pg_delete(pg, a, &err), -1);
+    assert_string_equal(err.code, "job_not_finished");
+    assert_int_equal(vx_pg_find_done(pg, "00000000000000aa", &got, &err), 0);
+    /* Claimed, renewed with progress, completed with ordered outputs. */
+    vx_pg_job cl;
+    assert_int_equal(vx_pg_claim(pg, "voxelize", &cl, &err), 1);
+    assert_string_equal(cl.id, a);
+    assert_true(cl.progress == 0);
+    int cancel = 0;
+    assert_int_equal(vx_pg_renew(pg, a, cl.attempt, 0.25, &cancel, &err), 0);
+    assert_int_equal(vx_pg_get(pg, a, &got, &err), 0);
+    assert_true(got.progress == 0.25);
+    vx_pg_job_clear(&got);
+    cJSON *res = cJSON_Parse("{\"outputs\":{\"voxels\":{\"location\":\"results/x/1/voxels.raw\","
+                             "\"bytes\":8},\"a_second\":{\"location\":\"y\",\"bytes\":1}}}");
+    assert_int_equal(vx_pg_complete(pg, a, cl.attempt, res, &err), 0);
+    cJSON_Delete(res);
+    char q0[160];
+    snprintf(q0, sizeof q0, "SELECT count(*) FROM vx_results WHERE job_id = '%s'", a);
+    assert_int_equal(sql_long(q0), 2); /* the results index of both outputs */
+    vx_pg_job_clear(&cl);
+    assert_int_equal(vx_pg_get(pg, a, &got, &err), 0);
+    assert_true(got.progress == 1);
+    const cJSON *outs = cJSON_GetObjectItemCaseSensitive(got.result, "outputs");
+    assert_string_equal(outs->child->string, "voxels"); /* the primary one stays first */
+    vx_pg_job_clear(&got);
+    assert_int_equal(vx_pg_find_done(pg, "00000000000000aa", &got, &err), 1);
+    assert_string_equal(got.id, a);
+    vx_pg_job_clear(&got);
+    /* Lists by mesh. */
+    nj = (vx_pg_new_job){.id = c, .kind = "preview", .mesh = "bbbb", .params = p};
+    assert_int_equal(vx_pg_submit(pg, &nj, 1, &err), 0);
+    vx_pg_filter f = {.mesh = mesh};
+    vx_pg_job *rows = NULL;
+    size_t n = 0;
+    char next[33];
+    assert_int_equal(vx_pg_list(pg, &f, NULL, 10, &rows, &n, next, &err), 0);
+    assert_int_equal(n, 1);
+    assert_string_equal(rows[0].id, a);
+    vx_pg_jobs_free(rows, n);
+    /* Finished: deleted, with its results index. */
+    assert_int_equal(vx_pg_delete(pg, a, &err), 0);
+    assert_int_equal(vx_pg_get(pg, a, &got, &err), -1);
+    assert_string_equal(err.code, "job_not_found");
+    assert_int_equal(vx_pg_delete(pg, a, &err), -1);
+    assert_string_equal(err.code, "job_not_found");
+    char q[160];
+    snprintf(q, sizeof q, "SELECT count(*) FROM vx_results WHERE job_id = '%s'", a);
+    assert_int_equal(sql_long(q), 0);
+    cJSON_Delete(p);
+    vx_pg_close(pg);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -640,6 +738,7 @@ int main(void)
         cmocka_unit_test_setup(test_cancel, setup),
         cmocka_unit_test_setup(test_notify, setup),
         cmocka_unit_test_setup(test_restart, setup),
+        cmocka_unit_test_setup(test_v2, setup),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

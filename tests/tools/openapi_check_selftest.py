@@ -26,7 +26,7 @@ PARAMS = {"azimuth": 30, "elevation": 20, "width": 64, "height": 48, "fov": 30,
           "samples": 4}
 JOB_OK = {
     "id": JID, "kind": "preview", "mesh": MESH, "params": PARAMS, "state": "succeeded",
-    "progress": 1, "cancel_requested": False, "attempts": 1,
+    "progress": 1, "cancel_requested": False, "attempts": 1, "attempt": 1, "replica": "node-1:8080",
     "created": "2026-11-21T22:40:01.250Z", "started": "2026-11-21T22:40:01.254Z",
     "finished": "2026-11-21T22:40:01.291Z", "error": None,
     "timings": {"queue_ms": 4.1, "run_ms": 36.9, "total_ms": 41.0},

@@ -1,0 +1,287 @@
+#!/usr/bin/env bash
+# Cluster mode (issue 15): three replicas on llvmpipe sharing one
+# PostgreSQL (started here by tests/support/pg.sh, as nobody when root) and
+# one file:// blob store, each with its own data dir:
+# - upload on r1, submit on r2, download from r3 (byte for byte as from r1);
+#   ?wait on one replica wakes when another finishes the job;
+# - an Idempotency-Key answers the same job on any replica, and 422 for
+#   another request;
+# - a cancel on one replica reaches the job running on another;
+# - kill -9 of the replica running a job: it finishes on another as attempt
+#   2, the first attempt's lease_expired recorded;
+# - SIGSTOP of the replica running a job past its lease, then SIGCONT: the
+#   job finishes as attempt 2 elsewhere, the stopped replica's attempt is
+#   fenced off (its lease loss or stale completion counted);
+# - SIGTERM of the replica running a job hands it back: it finishes
+#   elsewhere and the replica exits 0;
+# - PostgreSQL stopped: the API answers 503 database_unavailable with
+#   Retry-After and /readyz names the database; started again, the replicas
+#   recover by themselves and run what was queued;
+# - 12 jobs while replicas are killed and restarted at random: every job
+#   ends succeeded exactly once, within max_attempts;
+# - /metrics: the database's counts by state and kind, claims.
+source "$(dirname "$0")/lib.sh"
+
+PGSH="$VX_SOURCE_DIR/tests/support/pg.sh"
+if ! bash "$PGSH" url /nonexistent >/dev/null 2>&1 || [[ ! -x /usr/lib/postgresql/15/bin/initdb ]]; then
+    echo "skip: no PostgreSQL server (apt-get install postgresql-15)"
+    exit 77
+fi
+BUNNY="$VX_MESH_DIR/stanford-bunny.obj"
+[[ -f "$BUNNY" ]] || { echo "skip: $BUNNY missing"; exit 77; }
+# PostgreSQL's dir outside $TMP (mode 700, root's): the server runs as nobody.
+PGDIR=$(mktemp -d /tmp/vxpg.XXXXXX)
+SHARED=$TMP/shared
+mkdir -p "$SHARED"
+declare -a RPID RBASE RDATA
+stop_all() {
+    for i in 1 2 3; do
+        [[ -n "${RPID[$i]:-}" ]] && kill -KILL "${RPID[$i]}" 2>/dev/null
+    done
+    bash "$PGSH" stop "$PGDIR" >/dev/null 2>&1
+    rm -rf "$PGDIR"
+}
+trap 'stop_all; cleanup' EXIT
+URL=$(bash "$PGSH" start "$PGDIR") || { echo "cannot start PostgreSQL"; exit 1; }
+
+# start_replica I: replica rI on a free port, lease 3 s (renewed every 1 s).
+start_replica() {
+    local i=$1 log=$TMP/r$1.log
+    RDATA[$i]=$TMP/data$i
+    touch "$log"
+    local from
+    from=$(($(wc -l <"$log") + 1))
+    "$VOXELD" --listen 127.0.0.1:0 --data-dir "${RDATA[$i]}" --workers 2 --http-threads 4 \
+        --blob-store "file://$SHARED" --database "$URL" --replica-name "r$i" --lease-ttl 3 \
+        --retry-backoff 0.2 --max-attempts 4 2>>"$log" &
+    RPID[$i]=$!
+    local t port
+    for t in $(seq 1 600); do
+        port=$(tail -n +"$from" "$log" | grep -a 'event=voxeld.ready' | sed -n 's/.*port=\([0-9]*\).*/\1/p')
+        if [[ -n "$port" ]]; then
+            RBASE[$i]="http://127.0.0.1:$port"
+            return 0
+        fi
+        if ! kill -0 "${RPID[$i]}" 2>/dev/null; then
+            echo "replica r$i exited during start:"; tail -n 20 "$log"; RPID[$i]=; return 1
+        fi
+        sleep 0.1
+    done
+    echo "replica r$i did not become ready"; return 1
+}
+on() { BASE=${RBASE[$1]}; }
+# rnum NAME: the replica number of "rN".
+rnum() { echo "${1#r}"; }
+submit() { # submit I KIND MESH PARAMS [curl args]: JOB = its id
+    on "$1"
+    api POST /v1/jobs -H "Content-Type: application/json" "${@:5}" \
+        -d "{\"mesh\":\"$3\",\"kind\":\"$2\",\"params\":$4}"
+    JOB=$(jqb '.id // empty')
+}
+# wait_running JID: until it runs (up to 30 s); RUNS_ON = its replica number.
+wait_running() {
+    local t
+    for t in $(seq 1 300); do
+        api GET "/v1/jobs/$1"
+        if [[ $(jqb .state) == running ]]; then
+            RUNS_ON=$(rnum "$(jqb .replica)")
+            return 0
+        fi
+        sleep 0.1
+    done
+    return 1
+}
+# wait_final I JID SECONDS: polls replica I until the job has finished.
+wait_final() {
+    on "$1"
+    local t=0
+    while ((t < $3)); do
+        api GET "/v1/jobs/$2?wait=5"
+        case "$(jqb .state)" in succeeded | failed | canceled) return 0 ;; esac
+        t=$((t + 5))
+    done
+    return 1
+}
+other() { echo $(($1 % 3 + 1)); } # a replica that is not I
+
+for i in 1 2 3; do start_replica "$i" || exit 1; done
+for i in 1 2 3; do
+    on "$i"
+    api GET /readyz
+    expect_status "r$i ready" 200
+    check "r$i readyz: database ok, its name" jq -e ".database == {\"ok\":true,\"replica\":\"r$i\"}" "$BODY"
+done
+
+# Upload on r1, submit on r2, download from r3.
+on 1
+upload "$BUNNY"
+expect_status "upload on r1" 201
+B=$MESH_ID
+submit 2 voxelize "$B" '{"resolution":40,"format":"raw8"}'
+expect_status "submit on r2" 202
+J=$JOB
+check "queued in the database, no replica yet" jq -e '.state == "queued" and .attempt == 0 and .replica == null' "$BODY"
+wait_final 3 "$J" 60
+check "r3 sees it succeeded, attempt 1, run by a replica" jq -e '.state == "succeeded" and .attempt == 1 and (.replica | test("^r[123]$")) and .progress == 1 and .stats.voxels_inside > 0' "$BODY"
+on 3
+api GET "/v1/jobs/$J/result"
+expect_status "download from r3" 200
+cp "$BODY" "$TMP/from3"
+on 1
+api GET "/v1/jobs/$J/result"
+expect_status "download from r1" 200
+check "the same bytes from r1 and r3" cmp "$TMP/from3" "$BODY"
+check "the result is under results/JOB/ATTEMPT in the shared store" test -d "$SHARED/results/$J/1"
+on 2
+api GET "/v1/jobs?limit=5&kind=voxelize&mesh=$B"
+check "r2 lists it (filter by mesh)" jq -e --arg j "$J" '[.items[].id] | index($j) != null' "$BODY"
+
+# ?wait on r1 wakes when another replica finishes (NOTIFY, not the deadline).
+submit 3 preview "$B" '{"width":256,"height":256}'
+J=$JOB
+on 1
+t0=$(date +%s.%N)
+api GET "/v1/jobs/$J?wait=30"
+t1=$(date +%s.%N)
+check "?wait on r1 answered when the job finished (in $(echo "$t1 - $t0" | bc) s)" bash -c "jq -e '.state == \"succeeded\"' '$BODY' && test \$(echo '$t1 - $t0 < 20' | bc) = 1"
+
+# Idempotency-Key across replicas.
+submit 1 voxelize "$B" '{"resolution":24,"format":"summary"}' -H "Idempotency-Key: cluster-k1"
+expect_status "keyed submit on r1" 202
+K1=$JOB
+submit 3 voxelize "$B" '{"resolution":24,"format":"summary"}' -H "Idempotency-Key: cluster-k1"
+expect_status "the same key on r3: the existing job" 200
+check "the same job" test "$JOB" = "$K1"
+submit 2 voxelize "$B" '{"resolution":25,"format":"summary"}' -H "Idempotency-Key: cluster-k1"
+expect_error "the key with another request" 422 idempotency_key_reused
+
+# A long job: slice with the robust vote, ~5 s on llvmpipe.
+LONG='{"resolution":320,"method":"slice","inside":"robust","format":"summary"}'
+
+# Cancel on one replica reaches the run on another.
+submit 1 voxelize "$B" "$LONG"
+J=$JOB
+wait_running "$J"
+check "the long job runs" test -n "${RUNS_ON:-}"
+on "$(other "$RUNS_ON")"
+api DELETE "/v1/jobs/$J"
+check "cancel from another replica: 202, cancel requested" bash -c "test '$STATUS' = 202 && jq -e '.cancel_requested == true' '$BODY'"
+t0=$(date +%s)
+wait_final "$(other "$RUNS_ON")" "$J" 30
+check "canceled within a lease period ($(($(date +%s) - t0)) s)" bash -c "jq -e '.state == \"canceled\" and .error.code == \"canceled\"' '$BODY' && test $(($(date +%s) - t0)) -le 6"
+
+# kill -9 the replica running a job: attempt 2 elsewhere.
+submit 2 voxelize "$B" "$LONG"
+J=$JOB
+wait_running "$J"
+K=$RUNS_ON
+kill -KILL "${RPID[$K]}"
+wait "${RPID[$K]}" 2>/dev/null
+RPID[$K]=
+wait_final "$(other "$K")" "$J" 90
+check "after kill -9 of r$K: succeeded as attempt 2 on another replica" jq -e --arg r "r$K" '.state == "succeeded" and .attempt == 2 and .replica != $r' "$BODY"
+check "attempt 1's lease_expired recorded" jq -e --arg r "r$K" '.attempt_errors[0] | .attempt == 1 and .code == "lease_expired" and .replica == $r' "$BODY"
+start_replica "$K" || exit 1
+
+# SIGSTOP past the lease, then SIGCONT: the stopped attempt is fenced off.
+submit 3 voxelize "$B" "$LONG"
+J=$JOB
+wait_running "$J"
+S=$RUNS_ON
+kill -STOP "${RPID[$S]}"
+wait_final "$(other "$S")" "$J" 90
+check "r$S stopped: succeeded as attempt 2 elsewhere" jq -e --arg r "r$S" '.state == "succeeded" and .attempt == 2 and .replica != $r' "$BODY"
+WINNER=$(jqb .replica)
+kill -CONT "${RPID[$S]}"
+fenced=0
+for t in $(seq 1 150); do
+    on "$S"
+    api GET /metrics
+    if grep -Eq '^voxeld_cluster_(lease_losses|stale_completions)_total [1-9]' "$BODY"; then fenced=1; break; fi
+    sleep 0.1
+done
+check "r$S, continued, counts its attempt fenced off" test $fenced = 1
+on "$(other "$S")"
+api GET "/v1/jobs/$J"
+check "the job stays the winner's ($WINNER, attempt 2)" jq -e --arg w "$WINNER" '.state == "succeeded" and .attempt == 2 and .replica == $w' "$BODY"
+
+# SIGTERM of the replica running a job: handed back, finished elsewhere.
+submit 1 voxelize "$B" "$LONG"
+J=$JOB
+wait_running "$J"
+T=$RUNS_ON
+kill -TERM "${RPID[$T]}"
+rc=0
+wait "${RPID[$T]}" || rc=$?
+RPID[$T]=
+check "r$T exits 0 on SIGTERM with a job running (got $rc)" test $rc -eq 0
+wait_final "$(other "$T")" "$J" 90
+check "handed back on SIGTERM: succeeded on another replica" jq -e --arg r "r$T" '.state == "succeeded" and .replica != $r' "$BODY"
+start_replica "$T" || exit 1
+
+# PostgreSQL down: 503 + Retry-After; up again: the replicas recover.
+submit 2 voxelize "$B" '{"resolution":24,"format":"summary"}'
+Q=$JOB
+wait_final 2 "$Q" 30
+bash "$PGSH" stop "$PGDIR"
+on 1
+api GET "/v1/jobs/$Q"
+expect_error "get with the database down" 503 database_unavailable
+check "Retry-After on the 503" test -n "$(header Retry-After)"
+api GET "/v1/jobs?limit=5"
+expect_error "list with the database down" 503 database_unavailable
+api DELETE "/v1/jobs/$Q"
+expect_error "delete with the database down" 503 database_unavailable
+submit 1 voxelize "$B" '{"resolution":24,"format":"summary"}'
+expect_error "submit with the database down (not acknowledged)" 503 database_unavailable
+api GET /readyz
+check "readyz 503, database not ok" bash -c "test '$STATUS' = 503 && jq -e '.database.ok == false and (.reason | test(\"database\"))' '$BODY'"
+bash "$PGSH" start "$PGDIR" >/dev/null
+ok=0
+for t in $(seq 1 100); do
+    api GET /readyz
+    if [[ $STATUS == 200 ]]; then ok=1; break; fi
+    sleep 0.2
+done
+check "r1 ready again by itself" test $ok = 1
+submit 3 voxelize "$B" '{"resolution":26,"format":"summary"}'
+expect_status "submit after the restart" 202
+wait_final 1 "$JOB" 60
+check "runs after the restart" jq -e '.state == "succeeded"' "$BODY"
+
+# 12 jobs while replicas are killed and restarted at random.
+RANDOM=${VX_SEED:-$RANDOM}
+ids=()
+for n in $(seq 1 12); do
+    submit $((n % 3 + 1)) voxelize "$B" "{\"resolution\":$((40 + n)),\"method\":\"slice\",\"format\":\"summary\"}"
+    ids+=("$JOB")
+    if ((n % 4 == 0)); then
+        v=$((RANDOM % 3 + 1))
+        kill -KILL "${RPID[$v]}"
+        wait "${RPID[$v]}" 2>/dev/null
+        RPID[$v]=
+        start_replica "$v" || exit 1
+    fi
+done
+bad=0
+for id in "${ids[@]}"; do
+    wait_final 1 "$id" 120 || bad=$((bad + 1))
+    jq -e '.state == "succeeded" and .attempt >= 1 and .attempt <= 4' "$BODY" >/dev/null || { bad=$((bad + 1)); echo "  job $id: $(jq -c '{state, attempt, error}' "$BODY")"; }
+done
+check "12 jobs under restarts: all succeeded within max_attempts ($bad bad)" test $bad -eq 0
+on 2
+api GET "/v1/jobs?limit=100&state=succeeded&kind=voxelize"
+check "each listed once" bash -c "jq -e '[.items[].id] | length == (unique | length)' '$BODY'"
+
+api GET /metrics
+check "metrics: the database's counts by state and kind" grep -Eq '^voxeld_cluster_jobs\{state="succeeded",kind="voxelize"\} [0-9]+' "$BODY"
+check "metrics: claims counted" grep -Eq '^voxeld_cluster_claims_total [0-9]+' "$BODY"
+
+for i in 1 2 3; do
+    kill -TERM "${RPID[$i]}"
+    rc=0
+    wait "${RPID[$i]}" || rc=$?
+    RPID[$i]=
+    check "r$i exits 0" test $rc -eq 0
+done
+finish
