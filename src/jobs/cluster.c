@@ -780,7 +780,16 @@ void cluster_report(vx_jobs *j, job *jb, vx_job_run *r, int ok, const vx_err *e,
         if (r->dir[0]) vx_store_result_remove(j->desc.store, r->rid);
         return;
     }
-    if (ok) vx_store_result_added(j->desc.store, r->rid);
+    /* Results another replica cannot read are not results: an attempt
+     * whose outputs did not reach the shared store failed (retryable). */
+    vx_err serr;
+    vx_err_clear(&serr);
+    if (ok && r->dir[0] && vx_store_result_commit(j->desc.store, r->rid, &serr)) {
+        ok = 0;
+        vx_err_set(&serr, serr.kind == VX_EUNAVAIL ? VX_EUNAVAIL : VX_EIO, "store_failed",
+                   "the results could not be stored: %s", serr.message);
+        e = &serr;
+    }
     cJSON *m = ok ? manifest(j, r) : NULL;
     /* While the database is unreachable the lease may still hold: keep
      * trying for one lease period (the renewer keeps it alive meanwhile). */

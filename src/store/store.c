@@ -291,8 +291,9 @@ int vx_store_mesh_commit(vx_store *s, vx_upload *u, const char *id, const char *
 /* On a shared store (file://, s3://) a mesh another daemon committed after
  * this one loaded its index: its metadata is read from the store (outside
  * the lock) and indexed when its data file is there. 1 when id is indexed
- * now (it may have been before), 0 when the store has no such mesh. */
-static int mesh_fetch_shared(vx_store *s, const char *id)
+ * now (it may have been before), 0 when the store has no such mesh, -1
+ * with err (VX_EUNAVAIL, VX_EIO store_failed) when the store cannot say. */
+static int mesh_fetch_shared(vx_store *s, const char *id, vx_err *err)
 {
     if (!s->ops->shared || !vx_store_valid_mesh_id(id)) return 0;
     pthread_mutex_lock(&s->lock);
@@ -302,7 +303,12 @@ static int mesh_fetch_shared(vx_store *s, const char *id)
     if (found) return 1;
     char key[128];
     mesh_key(key, sizeof key, id, ".json");
-    char *text = s->ops->read(s->blob, key, 1 << 20, NULL, NULL);
+    vx_err rerr;
+    vx_err_clear(&rerr);
+    char *text = s->ops->read(s->blob, key, 1 << 20, NULL, &rerr);
+    if (!text && rerr.kind != VX_ENOTFOUND)
+        return vx_err_set(err, rerr.kind == VX_EUNAVAIL ? VX_EUNAVAIL : VX_EIO, "store_failed",
+                          "cannot reach mesh %s in the blob store", id);
     cJSON *meta = text ? cJSON_Parse(text) : NULL;
     free(text);
     const cJSON *fmt = cJSON_GetObjectItemCaseSensitive(meta, "format");
@@ -310,7 +316,11 @@ static int mesh_fetch_shared(vx_store *s, const char *id)
     char mkey[128];
     if (ext) mesh_data_key(mkey, sizeof mkey, id, ext);
     if (!ext || s->ops->stat(s->blob, mkey, NULL, NULL) < 0) {
+        int e = errno;
         cJSON_Delete(meta);
+        if (ext && e != ENOENT)
+            return vx_err_set(err, vx_err_io_kind(e), "store_failed",
+                              "cannot reach mesh %s in the blob store: %s", id, strerror(e));
         return 0;
     }
     pthread_mutex_lock(&s->lock);
@@ -324,7 +334,7 @@ static int mesh_fetch_shared(vx_store *s, const char *id)
 
 cJSON *vx_store_mesh_meta(vx_store *s, const char *id, vx_err *err)
 {
-    mesh_fetch_shared(s, id);
+    if (mesh_fetch_shared(s, id, err) < 0) return NULL;
     pthread_mutex_lock(&s->lock);
     int found;
     size_t at = mesh_find(s, id, &found);
@@ -337,7 +347,7 @@ cJSON *vx_store_mesh_meta(vx_store *s, const char *id, vx_err *err)
 
 int vx_store_mesh_path(vx_store *s, const char *id, char *buf, size_t n, vx_err *err)
 {
-    mesh_fetch_shared(s, id);
+    if (mesh_fetch_shared(s, id, err) < 0) return -1;
     pthread_mutex_lock(&s->lock);
     int found;
     size_t at = mesh_find(s, id, &found);
@@ -389,7 +399,7 @@ int vx_store_mesh_delete(vx_store *s, const char *id, vx_err *err)
 
 int vx_store_mesh_pin(vx_store *s, const char *id, int deleted_ok, vx_err *err)
 {
-    mesh_fetch_shared(s, id);
+    if (mesh_fetch_shared(s, id, err) < 0) return -1;
     pthread_mutex_lock(&s->lock);
     int found;
     size_t at = mesh_find(s, id, &found);

@@ -111,7 +111,11 @@ size_t vx_store_blob_count(vx_store *s);
 
 /* Creates DATA/results/<jid>/ (empty) and writes its path into buf. */
 int vx_store_result_dir(vx_store *s, const char *jid, char *buf, size_t n, vx_err *err);
-/* Records a finished result dir in the budget (after its files are written). */
+/* Records a finished result dir in the budget (after its files are written):
+ * makes it durable in the store (a remote one: uploads it) and indexes it.
+ * -1 with err when it could not be made durable (the local copy stays
+ * indexed). vx_store_result_added ignores (logs) that. */
+int vx_store_result_commit(vx_store *s, const char *jid, vx_err *err);
 void vx_store_result_added(vx_store *s, const char *jid);
 /* Path of an output file; marks the result used (LRU). -1 with VX_EGONE
  * code result_evicted when the result dir is gone. */

@@ -97,18 +97,28 @@ int vx_store_result_dir(vx_store *s, const char *jid, char *buf, size_t n, vx_er
     return s->ops->make_prefix(s->blob, key, err);
 }
 
-void vx_store_result_added(vx_store *s, const char *jid)
+int vx_store_result_commit(vx_store *s, const char *jid, vx_err *err)
 {
     char key[128];
     result_key(jid, key, sizeof key);
     uint64_t bytes = 0;
     s->ops->stat(s->blob, key, &bytes, NULL);
     vx_err e;
-    if (s->ops->sync(s->blob, key, &e))
+    vx_err_clear(&e);
+    int rc = s->ops->sync(s->blob, key, &e);
+    if (rc) {
         VX_ERROR("store.result_unsynced", "job=%s code=%s message=\"%s\"", jid, e.code, e.message);
+        if (err) *err = e;
+    }
     pthread_mutex_lock(&s->lock);
     result_add_locked(s, jid, bytes, vx_now());
     pthread_mutex_unlock(&s->lock);
+    return rc ? -1 : 0;
+}
+
+void vx_store_result_added(vx_store *s, const char *jid)
+{
+    vx_store_result_commit(s, jid, NULL);
 }
 
 int vx_store_result_file(vx_store *s, const char *jid, const char *file, char *buf, size_t n,
