@@ -58,8 +58,10 @@ typedef struct vparams {
     int format;   /* vformat */
     int vdb_grid; /* vx_vdb_class */
     vbricks bricks;
-    int bricks_set; /* null: bricks of BRICK_DEFAULT past --brick-threshold (vdb only) */
-    int merge;      /* bricks: one merged .vdb, else a manifest of the brick files */
+    int bricks_set;         /* null: bricks of BRICK_DEFAULT past --brick-threshold (vdb only) */
+    int merge;              /* bricks: one merged .vdb, else a manifest of the brick files */
+    long vdb_index_base[3]; /* the lattice index at .vdb index 0 (a brick of a larger grid) */
+    int vdb_index_base_set;
 } vparams;
 
 /* The brick edge of grids bricked by --brick-threshold: a multiple of
@@ -136,6 +138,16 @@ static const vx_pspec spec[] = {
      SET(bricks),
      .doc = "run the grid as bricks {size} merged into one .vdb (null: past --brick-threshold)"},
     VX_P_BOOL(vparams, merge, 1, "bricks: one merged .vdb, or false: a manifest of brick files"),
+    {.name = "vdb_index_base",
+     .type = VX_PT_ARRAY,
+     .off = offsetof(vparams, vdb_index_base),
+     .sub = &index_item,
+     .item_size = sizeof(long),
+     .min_items = 3,
+     .max_items = 3,
+     .flags = VX_PF_NULLABLE,
+     SET(vdb_index_base),
+     .doc = "vdb: the lattice index written as index 0 (bricks of one grid in one index space)"},
     VX_P_END,
 };
 #undef SET
@@ -320,6 +332,20 @@ static int voxelize_check(void *params, const vx_limits *lim, vx_err *err)
             return vx_err_set(err, VX_EUNPROC, "invalid_params",
                               "params.merge false needs params.vdb_grid fog or bool (a level set "
                               "of each brick alone would have a false surface at its faces)");
+    }
+    if (p->vdb_index_base_set) {
+        if (p->format != F_VDB)
+            return vx_err_set(err, VX_EUNPROC, "invalid_params",
+                              "params.vdb_index_base needs params.format \"vdb\"");
+        if (!p->grid_set || (p->bricks_set && p->bricks.size) || !p->bricks_set)
+            return vx_err_set(err, VX_EUNPROC, "invalid_params",
+                              "params.vdb_index_base needs params.grid (the box's index_offset "
+                              "says where it lies) and params.bricks {\"size\": 0}");
+        for (int a = 0; a < 3; a++)
+            if ((p->grid.index_offset[a] - p->vdb_index_base[a]) % 8)
+                return vx_err_set(err, VX_EUNPROC, "invalid_params",
+                                  "params.grid.index_offset - params.vdb_index_base must be a "
+                                  "multiple of 8 on every axis (OpenVDB's leaf edge)");
     }
     if (p->grid_set) {
         if (p->padding)
@@ -794,7 +820,15 @@ static int voxelize_encode(vx_job_run *r, const void *params, void *state, vx_er
         return vx_run_progress(r, 1.0, err);
     }
     /* The writers place voxel (0,0,0) at grid.origin: a brick's own corner,
-     * origin + index_offset * h. */
+     * origin + index_offset * h; with vdb_index_base B the file's index 0 is
+     * lattice voxel B (corner origin + B h) and the box goes to
+     * index_offset - B. */
+    int at[3] = {0, 0, 0};
+    if (p.vdb_index_base_set)
+        for (int a = 0; a < 3; a++) {
+            at[a] = (int)(s->grid.grid.index[a] - p.vdb_index_base[a]);
+            s->grid.grid.index[a] = p.vdb_index_base[a];
+        }
     s->grid.grid = corner_of(&s->grid.grid);
     vx_voxel_io io = {encode_progress, &prog};
     int rc = 0;
@@ -839,7 +873,9 @@ static int voxelize_encode(vx_job_run *r, const void *params, void *state, vx_er
                               "job memory limit of %llu (vdb_grid \"bool\" or another format "
                               "needs less)",
                               (unsigned long long)need, (unsigned long long)lim);
-        rc = vx_voxel_write_vdb(&s->grid, (vx_vdb_class)p.vdb_grid, &m, path, &io, err);
+        rc = p.vdb_index_base_set
+                 ? vx_voxel_write_vdb_at(&s->grid, at, (vx_vdb_class)p.vdb_grid, &m, path, &io, err)
+                 : vx_voxel_write_vdb(&s->grid, (vx_vdb_class)p.vdb_grid, &m, path, &io, err);
         break;
     }
     }

@@ -139,6 +139,22 @@ done < <(jq -r '.bricks[] | [.url, .offset[], .dims[]] | map(tostring) | join(" 
 check "manifest: every brick file downloads and holds its voxels in its box ($bad bad)" test "$bad" -eq 0
 check "manifest: the bricks hold the one job's voxels ($total)" test "$total" = "$WHOLE_INSIDE"
 
+# vdb_index_base: one brick of the grid above as its own job, written in the
+# whole grid's index space (the manifest's brick files' layout).
+read -r bx by bz < <(jq -r '.bricks[1].index_offset | map(tostring) | join(" ")' "$TMP/manifest.json")
+read -r dx dy dz < <(jq -r '.bricks[1].dims | map(tostring) | join(" ")' "$TMP/manifest.json")
+G=$(jq -c '.grid' "$TMP/manifest.json")
+run_job voxelize "$B" "$(jq -nc --argjson g "$G" --argjson o "[$bx,$by,$bz]" --argjson d "[$dx,$dy,$dz]" \
+    '{grid: {origin: $g.origin, voxel_size: $g.voxel_size, dims: $d, index_offset: $o}, format: "vdb",
+      vdb_grid: "bool", bricks: {size: 0}, vdb_index_base: $g.index_offset}')"
+job_ok "one brick with vdb_index_base"
+get_result "" "$TMP/based.vdb"
+"$VX_TOOLS/vdbinfo" "$TMP/based.vdb" >"$TMP/based.json"
+api GET "$(jq -r '.bricks[1].url' "$TMP/manifest.json")"
+"$VX_TOOLS/vdbinfo" "$BODY" >"$TMP/b1.json"
+check "vdb_index_base: the brick's voxels at its place in the grid's index space, as the manifest's brick file" \
+    bash -c "jq -e --slurpfile m '$TMP/b1.json' '.grids[0] | .active_voxels == \$m[0].grids[0].active_voxels and .bbox == \$m[0].grids[0].bbox and .transform == \$m[0].grids[0].transform' '$TMP/based.json'"
+
 # Errors.
 bad() {
     api POST /v1/jobs -H "Content-Type: application/json" -d "{\"mesh\":\"$B\",\"kind\":\"voxelize\",\"params\":$2}"
@@ -156,6 +172,9 @@ bad "bricks of a dense format" '{"bricks":{"size":64},"format":"raw8"}' 'params.
 bad "merge false without bricks" '{"merge":false}' "params.merge false needs params.bricks"
 bad "manifest of level sets" '{"bricks":{"size":64},"merge":false,"vdb_grid":"level_set"}' "fog or bool"
 bad "dense format past one job" '{"resolution":4096,"format":"raw1"}' "2048^3 for one job"
+bad "vdb_index_base off the leaf grid" '{"grid":{"origin":[0,0,0],"voxel_size":0.1,"dims":[8,8,8],"index_offset":[4,0,0]},"bricks":{"size":0},"vdb_index_base":[0,0,0]}' "multiple of 8"
+bad "vdb_index_base with a dense format" '{"grid":{"origin":[0,0,0],"voxel_size":0.1,"dims":[8,8,8]},"bricks":{"size":0},"format":"raw8","vdb_index_base":[0,0,0]}' 'params.format "vdb"'
+bad "vdb_index_base without a grid" '{"resolution":32,"bricks":{"size":0},"vdb_index_base":[0,0,0]}' "params.grid"
 stop_daemon
 
 # Admission follows one brick: under 64M a 1024^3 box is refused as one

@@ -36,7 +36,8 @@ JOB_OK = {
 }
 VPARAMS = {"resolution": 8, "voxel_size": None, "grid": None, "padding": 0, "method": "auto",
            "inside": "nonzero", "fill": "solid", "supersample": 1, "samples": "cube", "threshold": 4,
-           "format": "summary", "vdb_grid": "fog", "bricks": None, "merge": True}
+           "format": "summary", "vdb_grid": "fog", "bricks": None, "merge": True,
+           "vdb_index_base": None}
 VSTATS = {"method": "peel", "inside": "nonzero", "boundary_edges": 0, "dims": [8, 8, 8], "origin": [0, 0, 0], "voxel_size": 0.125,
           "triangles": 12, "voxels_inside": 512, "volume": 1, "layers": 2, "passes": 1, "slices": 0,
           "chunks": 1, "upload_ms": 0.1, "gpu_peel_ms": 0.2, "gpu_fill_ms": 0.1,
