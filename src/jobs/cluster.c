@@ -259,9 +259,17 @@ static int row_terminal(const vx_pg_job *row)
 
 /* The API resource of a row (the shape job_json gives in local mode, with
  * attempt and replica); a job running here shows its live progress. */
-static cJSON *row_json(vx_jobs *j, const vx_pg_job *row)
+static cJSON *row_json(vx_jobs *j, const vx_pg_job *row, int live)
 {
     double progress = row->progress;
+    if (live && row->children > 0 && !strcmp(row->state, "queued")) {
+        /* waiting for its child jobs: their share of the work (the merge
+         * comes after) */
+        int done = 0, total = 0;
+        vx_err e;
+        if (vx_pg_child_counts(j->cl->api, row->id, &done, &total, &e) == 0 && total > 0)
+            progress = 0.9 * done / total;
+    }
     if (!strcmp(row->state, "running")) {
         pthread_mutex_lock(&j->lock);
         job *jb = find_job(j, row->id);
@@ -279,6 +287,8 @@ static cJSON *row_json(vx_jobs *j, const vx_pg_job *row)
     cJSON_AddBoolToObject(o, "cancel_requested", row->cancel_requested);
     cJSON_AddNumberToObject(o, "attempts", row->attempt);
     cJSON_AddNumberToObject(o, "attempt", row->attempt);
+    if (row->children > 0) cJSON_AddNumberToObject(o, "child_jobs", row->children);
+    if (row->parent[0]) cJSON_AddStringToObject(o, "parent", row->parent);
     if (row->replica[0])
         cJSON_AddStringToObject(o, "replica", row->replica);
     else
@@ -333,6 +343,85 @@ static cJSON *row_json(vx_jobs *j, const vx_pg_job *row)
 
 /* ---- the API ---------------------------------------------------------------- */
 
+/* The kind's split of a submission (kind.h): *kids = the child jobs'
+ * normalised params, or NULL when it runs as one. */
+static int split(vx_jobs *j, const char *mesh, const vx_kind *k, const cJSON *params, cJSON **kids,
+                 vx_err *err)
+{
+    *kids = NULL;
+    void *typed = vx_kind_read(k, params, &j->desc.limits, err);
+    if (!typed) return -1;
+    cJSON *meta = vx_store_mesh_meta(j->desc.store, mesh, err);
+    vx_err_clear(err);
+    cJSON *raw = meta ? k->split(typed, meta, &j->desc.limits, err) : NULL;
+    cJSON_Delete(meta);
+    vx_kind_params_free(k, typed);
+    if (!raw) return err->kind == VX_EOK ? 0 : -1;
+    cJSON *norm = cJSON_CreateArray(), *it;
+    cJSON_ArrayForEach(it, raw)
+    {
+        cJSON *n = vx_params_normalize(k, it, &j->desc.limits, err);
+        if (!n || !cJSON_AddItemToArray(norm, n)) {
+            cJSON_Delete(n);
+            cJSON_Delete(norm);
+            cJSON_Delete(raw);
+            if (err->kind == VX_EOK) vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory");
+            return -1;
+        }
+    }
+    cJSON_Delete(raw);
+    *kids = norm;
+    return 0;
+}
+
+/* Submits parent (children set here) and its child jobs in one transaction:
+ * 0 committed; 1 the parent's Idempotency-Key was taken by the same request
+ * (*existing filled); -1 with err. */
+static int submit_split(vx_jobs *j, vx_pg_new_job *parent, const cJSON *kids, vx_pg_job *existing,
+                        vx_err *err)
+{
+    vx_cluster *c = j->cl;
+    size_t n = (size_t)cJSON_GetArraySize(kids);
+    vx_pg_new_job *all = calloc(n + 1, sizeof *all);
+    char(*ids)[33] = calloc(n + 1, sizeof *ids);
+    char(*fps)[17] = calloc(n + 1, sizeof *fps);
+    if (!all || !ids || !fps) {
+        free(all), free(ids), free(fps);
+        return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory");
+    }
+    all[0] = *parent;
+    all[0].children = (int)n;
+    size_t i = 1;
+    const cJSON *it;
+    cJSON_ArrayForEach(it, kids)
+    {
+        jobs_new_id(ids[i]);
+        snprintf(fps[i], sizeof fps[i], "%016llx",
+                 (unsigned long long)request_fp(parent->kind, parent->mesh, it));
+        all[i] = (vx_pg_new_job){.id = ids[i],
+                                 .kind = parent->kind,
+                                 .mesh = parent->mesh,
+                                 .parent = parent->id,
+                                 .params = it,
+                                 .fp = fps[i]};
+        i++;
+    }
+    int rc = vx_pg_submit(c->api, all, n + 1, err);
+    free(all), free(ids), free(fps);
+    if (rc == 0) return 0;
+    if (err->kind != VX_ECONFLICT || !parent->idem) return -1;
+    /* The key was taken: by the same request, or by another. */
+    vx_err_clear(err);
+    int got = vx_pg_find_idem(c->api, parent->idem, existing, err);
+    if (got <= 0) return got < 0 ? -1 : vx_err_set(err, VX_ECONFLICT, "job_exists", "id taken");
+    if (strcmp(existing->fp, parent->fp ? parent->fp : "")) {
+        vx_pg_job_clear(existing);
+        return vx_err_set(err, VX_EUNPROC, "idempotency_key_reused",
+                          "the Idempotency-Key was used for another request");
+    }
+    return 1;
+}
+
 cJSON *cluster_submit(vx_jobs *j, const char *mesh, const vx_kind *k, cJSON *params, uint64_t fp,
                       const vx_jobs_submit_opts *opts, int *existing, vx_err *err)
 {
@@ -348,7 +437,7 @@ cJSON *cluster_submit(vx_jobs *j, const char *mesh, const vx_kind *k, cJSON *par
         if (got < 0) return NULL;
         if (got) {
             *existing = 1;
-            out = row_json(j, &row);
+            out = row_json(j, &row, 1);
             vx_pg_job_clear(&row);
             return out;
         }
@@ -371,7 +460,14 @@ cJSON *cluster_submit(vx_jobs *j, const char *mesh, const vx_kind *k, cJSON *par
                         .params = params,
                         .fp = fps,
                         .idem = opts ? opts->idempotency_key : NULL};
-    got = vx_pg_submit_idem(c->api, &nj, &row, err);
+    cJSON *kids = NULL;
+    if (k->split && split(j, mesh, k, params, &kids, err)) return NULL;
+    if (kids) {
+        got = submit_split(j, &nj, kids, &row, err);
+        cJSON_Delete(kids);
+    } else {
+        got = vx_pg_submit_idem(c->api, &nj, &row, err);
+    }
     if (got < 0) return NULL;
     if (got == 1) {
         *existing = 1;
@@ -385,7 +481,7 @@ cJSON *cluster_submit(vx_jobs *j, const char *mesh, const vx_kind *k, cJSON *par
         row.params = cJSON_Duplicate(params, 1);
         vx_err_clear(err);
     }
-    out = row_json(j, &row);
+    out = row_json(j, &row, 1);
     vx_pg_job_clear(&row);
     if (!*existing) VX_INFO("job.queued", "job=%s kind=%s mesh=%.12s", id, k->name, mesh);
     return out;
@@ -396,7 +492,7 @@ cJSON *cluster_get(vx_jobs *j, const char *jid, int *terminal, vx_err *err)
     vx_pg_job row;
     if (vx_pg_get(j->cl->api, jid, &row, err)) return NULL;
     if (terminal) *terminal = row_terminal(&row);
-    cJSON *o = row_json(j, &row);
+    cJSON *o = row_json(j, &row, 1);
     vx_pg_job_clear(&row);
     return o;
 }
@@ -429,23 +525,48 @@ cJSON *cluster_list(vx_jobs *j, const char *after, int limit, const vx_jobs_filt
     if (vx_pg_list(j->cl->api, &pf, after, limit, &rows, &n, nx, err)) return NULL;
     cJSON *arr = cJSON_CreateArray();
     for (size_t i = 0; i < n; i++)
-        cJSON_AddItemToArray(arr, row_json(j, &rows[i]));
+        cJSON_AddItemToArray(arr, row_json(j, &rows[i], 0));
     snprintf(next, 40, "%s", nx);
     vx_pg_jobs_free(rows, n);
     return arr;
 }
 
+static cJSON *children_of(vx_jobs *j, vx_pg *pg, const char *id, vx_err *err);
+
 int cluster_delete(vx_jobs *j, const char *jid, vx_err *err)
 {
     vx_pg_job row;
     if (vx_pg_get(j->cl->api, jid, &row, err)) return -1;
-    int attempt = row.attempt;
+    int attempt = row.attempt, children = row.children;
+    char parent[33];
+    snprintf(parent, sizeof parent, "%s", row.parent);
     vx_pg_job_clear(&row);
-    if (vx_pg_delete(j->cl->api, jid, err)) return -1;
+    if (parent[0] && !vx_pg_get(j->cl->api, parent, &row, NULL)) {
+        /* its files are its parent's outputs (a brick of a bricked voxelize) */
+        vx_pg_job_clear(&row);
+        return vx_err_set(err, VX_ECONFLICT, "job_has_parent",
+                          "job %s is a part of job %s: deleting that deletes it", jid, parent);
+    }
+    /* the rows of its children go with it (ON DELETE CASCADE), their files here */
+    cJSON *kids = children > 0 ? children_of(j, j->cl->api, jid, err) : NULL;
+    if (children > 0 && !kids) return -1;
+    if (vx_pg_delete(j->cl->api, jid, err)) {
+        cJSON_Delete(kids);
+        return -1;
+    }
     char rid[48];
     snprintf(rid, sizeof rid, "%s/%d", jid, attempt);
     vx_store_result_remove(j->desc.store, rid);
-    VX_INFO("job.deleted", "job=%s", jid);
+    const cJSON *it;
+    cJSON_ArrayForEach(it, kids)
+    {
+        snprintf(rid, sizeof rid, "%s/%d",
+                 cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(it, "id")),
+                 (int)cJSON_GetNumberValue(cJSON_GetObjectItemCaseSensitive(it, "attempt")));
+        vx_store_result_remove(j->desc.store, rid);
+    }
+    cJSON_Delete(kids);
+    VX_INFO("job.deleted", "job=%s children=%d", jid, children > 0 ? children : 0);
     return 0;
 }
 
@@ -479,8 +600,15 @@ int cluster_output(vx_jobs *j, const char *jid, const char *name, char *path, si
             snprintf(ctype, 64, "%s",
                      cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(o, "content_type"))
                          ?: "application/octet-stream");
-            snprintf(fname, 128, "%s-%s", jid, file);
-            snprintf(rid, sizeof rid, "%s/%d", jid, row.attempt);
+            const char *of = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(o, "rid"));
+            if (of) { /* a child job's output, under this job's name for it */
+                const char *ext = strrchr(file, '.');
+                snprintf(fname, 128, "%s-%s%s", jid, o->string, ext ? ext : "");
+                snprintf(rid, sizeof rid, "%s", of);
+            } else {
+                snprintf(fname, 128, "%s-%s", jid, file);
+                snprintf(rid, sizeof rid, "%s/%d", jid, row.attempt);
+            }
             rc = 0;
         }
     }
@@ -502,6 +630,36 @@ static int gl_free(vx_jobs *j)
         busy = job_at(j, i)->state == ST_QUEUED;
     pthread_mutex_unlock(&j->lock);
     return !busy;
+}
+
+/* The child jobs of a claimed parent, as vx_run_child reads them:
+ * [{id, attempt, params, result}], or NULL with err. */
+static cJSON *children_of(vx_jobs *j, vx_pg *pg, const char *id, vx_err *err)
+{
+    cJSON *arr = cJSON_CreateArray();
+    vx_pg_filter f = {.parent = id};
+    char after[33] = "", next[33];
+    do {
+        vx_pg_job *rows = NULL;
+        size_t n = 0;
+        if (vx_pg_list(pg, &f, after[0] ? after : NULL, 1000, &rows, &n, next, err)) {
+            cJSON_Delete(arr);
+            return NULL;
+        }
+        for (size_t i = 0; i < n; i++) {
+            cJSON *o = cJSON_CreateObject();
+            cJSON_AddStringToObject(o, "id", rows[i].id);
+            cJSON_AddNumberToObject(o, "attempt", rows[i].attempt);
+            cJSON_AddItemToObject(o, "params", rows[i].params);
+            cJSON_AddItemToObject(o, "result",
+                                  rows[i].result ? rows[i].result : cJSON_CreateObject());
+            rows[i].params = rows[i].result = NULL;
+            cJSON_AddItemToArray(arr, o);
+        }
+        vx_pg_jobs_free(rows, n);
+        snprintf(after, sizeof after, "%s", next);
+    } while (after[0]);
+    return arr;
 }
 
 /* Makes a claimed row a local job and queues it for the GL thread; what
@@ -530,6 +688,12 @@ static void adopt(vx_jobs *j, vx_pg_job *row)
         jb->attempts = row->attempt;
         jb->created = row->created;
         jb->state = ST_QUEUED;
+        if (row->children > 0 && !(jb->children = children_of(j, j->cl->work, row->id, &err))) {
+            job_free(jb);
+            jb = NULL;
+            retry = 1;
+            goto report;
+        }
         /* The job holds its meshes (and blobs) here while it runs; one
          * that is gone from the store fails when it runs. */
         pin_job(j, jb->mesh, k, jb->params, 1, &jb->pins, NULL);
@@ -554,6 +718,7 @@ static void adopt(vx_jobs *j, vx_pg_job *row)
         retry = 1;
     }
     free(jb);
+report:;
     char state[16] = "";
     if (vx_pg_fail(c->work, row->id, row->attempt, &err, retry, state, NULL) == 0)
         notify(j, row->id, strcmp(state, "queued") != 0);
@@ -749,17 +914,23 @@ static cJSON *manifest(vx_jobs *j, vx_job_run *r)
     cJSON_ArrayForEach(it, r->outputs)
     {
         const char *file = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(it, "file"));
+        /* rid: a child job's output, in its place (vx_run_output_of_child) */
+        const char *rid = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(it, "rid"));
         cJSON *o = cJSON_AddObjectToObject(outs, it->string);
         cJSON_AddStringToObject(o, "file", file ? file : "");
         cJSON_AddStringToObject(
             o, "content_type",
             cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(it, "content_type")) ?: "");
         char loc[256], path[VX_PATH_MAX];
-        snprintf(loc, sizeof loc, "results/%s/%s", r->rid, file ? file : "");
+        snprintf(loc, sizeof loc, "results/%s/%s", rid ? rid : r->rid, file ? file : "");
         cJSON_AddStringToObject(o, "location", loc);
-        snprintf(path, sizeof path, "%s/%s", r->dir, file ? file : "");
         struct stat st;
-        cJSON_AddNumberToObject(o, "bytes", stat(path, &st) == 0 ? (double)st.st_size : 0);
+        snprintf(path, sizeof path, "%s/%s", r->dir, file ? file : "");
+        double bytes = rid ? cJSON_GetNumberValue(cJSON_GetObjectItemCaseSensitive(it, "bytes"))
+                       : stat(path, &st) == 0 ? (double)st.st_size
+                                              : 0;
+        cJSON_AddNumberToObject(o, "bytes", bytes == bytes ? bytes : 0);
+        if (rid) cJSON_AddStringToObject(o, "rid", rid);
     }
     (void)j;
     cJSON_AddItemReferenceToObject(m, "stats", r->stats);

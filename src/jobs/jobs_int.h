@@ -50,6 +50,9 @@ typedef struct job {
     char *idem;     /* its Idempotency-Key (owned), or NULL */
     int lease_lost; /* cluster mode: the attempt is no longer ours (renewal said so) */
     int reporting;  /* cluster mode: its end is being reported (no more renewals) */
+    /* cluster mode, a job split into child jobs (kind.h split): each child
+     * as {id, attempt, params, result}, read when it was claimed */
+    cJSON *children;
 } job;
 
 struct vx_job_run {

@@ -64,6 +64,22 @@ cJSON *vx_run_stats(vx_job_run *r);
  * path to write it to (owned by the run, valid until the run ends). */
 const char *vx_run_output(vx_job_run *r, const char *name, const char *file_ext,
                           const char *content_type, vx_err *err);
+/* Cluster mode, a job that its kind's split made into child jobs (which
+ * all succeeded before it ran): how many there are (0 otherwise). */
+size_t vx_run_children(const vx_job_run *r);
+/* Child i (in no particular order): its id, its normalised params and its
+ * stats (objects owned by the run), or -1 when there is no such child. */
+int vx_run_child(const vx_job_run *r, size_t i, const char **id, const cJSON **params,
+                 const cJSON **stats);
+/* A local path of child i's output name (NULL = its primary one), fetched
+ * from the store when another replica made it; 0, or -1 with err
+ * (output_not_found, result_evicted, store_failed). */
+int vx_run_child_output(vx_job_run *r, size_t i, const char *name, char *path, size_t n,
+                        vx_err *err);
+/* Child i's output child_name becomes this job's output name as it is, in
+ * the child's place in the store (no copy); 0, or -1 with err. */
+int vx_run_output_of_child(vx_job_run *r, const char *name, size_t i, const char *child_name,
+                           vx_err *err);
 
 typedef struct vx_kind {
     const char *name;
@@ -93,6 +109,14 @@ typedef struct vx_kind {
      * store and its params as {"blob": SHA-256, "bytes": n, "count": array
      * length}; the stages get the params with the data back in place. */
     const char *const *blob_fields;
+    /* Optional, cluster mode: the separate jobs this one runs as (bricks
+     * of a large grid, which any replica may claim), as an owned JSON
+     * array of params of this kind, or NULL when it runs as one (err
+     * untouched) or with err. Called at submission with the normalised
+     * params' struct and the mesh's metadata (its `bbox`,
+     * `boundary_edges`...). The job itself then runs once every child has
+     * succeeded (vx_run_children); a child that fails fails it. */
+    cJSON *(*split)(const void *params, const cJSON *mesh_meta, const vx_limits *lim, vx_err *err);
 } vx_kind;
 
 /* Inline data smaller than this stays in the params (bytes of JSON). */

@@ -98,6 +98,28 @@ static const char *const migrations[] = {
     "CREATE UNIQUE INDEX vx_jobs_idem ON vx_jobs (idem_key) WHERE idem_key IS NOT NULL;"
     "CREATE INDEX vx_jobs_fp ON vx_jobs (fp, id) WHERE state = 'succeeded';"
     "CREATE INDEX vx_jobs_mesh ON vx_jobs (mesh, id);",
+    /* 3: jobs split into child jobs (bricks): `children` counts them; the
+     * parent is claimable once they all succeeded (vx_pg_claim); a child
+     * that fails or is canceled fails its waiting parent and cancels its
+     * siblings (this trigger, so that it holds whoever ends the child: its
+     * replica, the re-queue of an expired lease, a cancel). */
+    "ALTER TABLE vx_jobs ADD COLUMN children integer NOT NULL DEFAULT 0;"
+    "CREATE FUNCTION vx_jobs_child_ended() RETURNS trigger LANGUAGE plpgsql AS $$ BEGIN"
+    " IF NEW.state IN ('failed', 'canceled') AND OLD.state IN ('queued', 'running') THEN"
+    "  UPDATE vx_jobs SET state = 'failed', finished = now(), updated = now(),"
+    "   errors = errors || jsonb_build_array(jsonb_build_object('attempt', attempt,"
+    "    'replica', NEW.replica, 'kind', 'unproc', 'code', 'child_' || NEW.state,"
+    "    'message', 'child job ' || NEW.id || ' ' || NEW.state"
+    "     || coalesce(': ' || (NEW.errors -> -1 ->> 'message'), ''), 'at', now()))"
+    "   WHERE id = NEW.parent_id AND state = 'queued';"
+    "  UPDATE vx_jobs SET cancel_requested = true,"
+    "   state = CASE WHEN state = 'queued' THEN 'canceled' ELSE state END,"
+    "   finished = CASE WHEN state = 'queued' THEN now() ELSE finished END, updated = now()"
+    "   WHERE parent_id = NEW.parent_id AND state IN ('queued', 'running')"
+    "   AND NOT cancel_requested;"
+    " END IF; RETURN NULL; END $$;"
+    "CREATE TRIGGER vx_jobs_child_ended AFTER UPDATE OF state ON vx_jobs FOR EACH ROW"
+    " WHEN (NEW.parent_id IS NOT NULL) EXECUTE FUNCTION vx_jobs_child_ended();",
 };
 _Static_assert(sizeof migrations / sizeof migrations[0] == VX_PG_SCHEMA_VERSION,
                "one migration per schema version");
@@ -109,7 +131,7 @@ _Static_assert(sizeof migrations / sizeof migrations[0] == VX_PG_SCHEMA_VERSION,
     " coalesce(extract(epoch from started), 0), coalesce(extract(epoch from finished), 0),"        \
     " coalesce(extract(epoch from lease_expires), 0), extract(epoch from not_before),"             \
     " params::text, result::text, errors::text, progress, coalesce(idem_key, ''),"                 \
-    " coalesce(fp, '')"
+    " coalesce(fp, ''), children"
 
 /* The backoff before attempt + 1, from the desc's base ($B) and ceiling ($M). */
 #define BACKOFF(B, M)                                                                              \
@@ -396,6 +418,7 @@ static void read_row(const PGresult *r, int i, vx_pg_job *jb)
     jb->progress = strtod(PQgetvalue(r, i, 17), NULL);
     snprintf(jb->idem, sizeof jb->idem, "%s", PQgetvalue(r, i, 18));
     snprintf(jb->fp, sizeof jb->fp, "%s", PQgetvalue(r, i, 19));
+    jb->children = atoi(PQgetvalue(r, i, 20));
 }
 
 int vx_pg_submit(vx_pg *pg, const vx_pg_new_job *jobs, size_t n, vx_err *err)
@@ -416,14 +439,16 @@ int vx_pg_submit(vx_pg *pg, const vx_pg_new_job *jobs, size_t n, vx_err *err)
         char maxa[16];
         snprintf(maxa, sizeof maxa, "%d",
                  jobs[i].max_attempts > 0 ? jobs[i].max_attempts : pg->desc.max_attempts);
-        const char *vals[] = {jobs[i].id,     jobs[i].kind,           jobs[i].mesh,
-                              jobs[i].parent, params ? params : "{}", maxa,
-                              jobs[i].fp};
+        char nch[16];
+        snprintf(nch, sizeof nch, "%d", jobs[i].children);
+        const char *vals[] = {
+            jobs[i].id, jobs[i].kind, jobs[i].mesh, jobs[i].parent, params ? params : "{}",
+            maxa,       jobs[i].fp,   nch,          jobs[i].idem};
         int bad = exec_locked(pg, 0,
                               "INSERT INTO vx_jobs (id, kind, mesh, parent_id, params,"
-                              " max_attempts, fp) VALUES ($1, $2, $3, $4, $5::json, $6::integer,"
-                              " $7)",
-                              7, vals, err);
+                              " max_attempts, fp, children, idem_key) VALUES ($1, $2, $3, $4,"
+                              " $5::json, $6::integer, $7, $8::integer, $9)",
+                              9, vals, err);
         cJSON_free(params);
         if (bad) {
             if (tx && pg->conn) exec_locked(pg, 0, "ROLLBACK", 0, NULL, NULL);
@@ -559,6 +584,38 @@ int vx_pg_ping(vx_pg *pg, vx_err *err)
     return rc;
 }
 
+int vx_pg_child_counts(vx_pg *pg, const char *id, int *done, int *total, vx_err *err)
+{
+    *done = *total = 0;
+    const char *vals[] = {id};
+    pthread_mutex_lock(&pg->lock);
+    PGresult *r = run_locked(pg, 1,
+                             "SELECT count(*) FILTER (WHERE state = 'succeeded'), count(*) FROM"
+                             " vx_jobs WHERE parent_id = $1",
+                             1, vals, err);
+    pthread_mutex_unlock(&pg->lock);
+    if (!r) return -1;
+    *done = atoi(PQgetvalue(r, 0, 0));
+    *total = atoi(PQgetvalue(r, 0, 1));
+    PQclear(r);
+    return 0;
+}
+
+int vx_pg_find_idem(vx_pg *pg, const char *key, vx_pg_job *out, vx_err *err)
+{
+    memset(out, 0, sizeof *out);
+    const char *vals[] = {key};
+    pthread_mutex_lock(&pg->lock);
+    PGresult *r =
+        run_locked(pg, 1, "SELECT " JOB_COLS " FROM vx_jobs WHERE idem_key = $1", 1, vals, err);
+    pthread_mutex_unlock(&pg->lock);
+    if (!r) return -1;
+    int got = PQntuples(r) == 1;
+    if (got) read_row(r, 0, out);
+    PQclear(r);
+    return got;
+}
+
 int vx_pg_list(vx_pg *pg, const vx_pg_filter *f, const char *after, int limit, vx_pg_job **out,
                size_t *n, char next[33], vx_err *err)
 {
@@ -617,8 +674,10 @@ int vx_pg_claim(vx_pg *pg, const char *kinds, vx_pg_job *out, vx_err *err)
         "UPDATE vx_jobs SET state = 'running', replica = $1, attempt = attempt + 1,"
         " lease_expires = now() + make_interval(secs => $2::float8), started = now(),"
         " progress = 0, updated = now()"
-        " WHERE id = (SELECT id FROM vx_jobs WHERE state = 'queued' AND not_before <= now()"
+        " WHERE id = (SELECT id FROM vx_jobs j WHERE state = 'queued' AND not_before <= now()"
         "  AND ($3::text IS NULL OR kind = ANY (string_to_array($3, ',')))"
+        "  AND (children = 0 OR NOT EXISTS (SELECT 1 FROM vx_jobs c WHERE c.parent_id = j.id"
+        "   AND c.state <> 'succeeded'))"
         "  ORDER BY id LIMIT 1 FOR UPDATE SKIP LOCKED)"
         " AND state = 'queued' RETURNING " JOB_COLS,
         3, vals, err);
@@ -812,7 +871,12 @@ int vx_pg_cancel(vx_pg *pg, const char *id, int *was_running, vx_err *err)
     pthread_mutex_lock(&pg->lock);
     PGresult *r = run_locked(
         pg, 0,
-        "UPDATE vx_jobs SET cancel_requested = true,"
+        "WITH kids AS (UPDATE vx_jobs SET cancel_requested = true,"
+        "  state = CASE WHEN state = 'queued' THEN 'canceled' ELSE state END,"
+        "  finished = CASE WHEN state = 'queued' THEN now() ELSE finished END, updated = now()"
+        "  WHERE parent_id = $1 AND state IN ('queued', 'running') AND NOT cancel_requested"
+        "  RETURNING 1)"
+        " UPDATE vx_jobs SET cancel_requested = true,"
         " state = CASE WHEN state = 'queued' THEN 'canceled' ELSE state END,"
         " finished = CASE WHEN state = 'queued' THEN now() ELSE finished END, updated = now()"
         " WHERE id = $1 AND state IN ('queued', 'running') RETURNING state",

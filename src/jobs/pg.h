@@ -34,7 +34,7 @@
 #include "util/err.h"
 
 /* The schema version this binary creates and understands. */
-#define VX_PG_SCHEMA_VERSION 2
+#define VX_PG_SCHEMA_VERSION 3
 /* The NOTIFY channel every state change is sent on. */
 #define VX_PG_CHANNEL "vx_jobs"
 
@@ -66,6 +66,7 @@ typedef struct vx_pg_job {
     double progress; /* 0..1, as the running replica last renewed it */
     char idem[201];  /* its Idempotency-Key; "" = none */
     char fp[17];     /* the request's fingerprint (hex); "" = none */
+    int children;    /* child jobs it was split into (it runs once they all succeeded) */
     cJSON *params;   /* object (owned) */
     cJSON *result;   /* the result manifest (owned), NULL until succeeded */
     cJSON *errors;   /* array of {attempt, replica, kind, code, message, at} (owned) */
@@ -80,7 +81,8 @@ typedef struct vx_pg_new_job {
     const cJSON *params; /* NULL = {} */
     int max_attempts;    /* 0 = the desc's */
     const char *fp;      /* the request's fingerprint (reuse); NULL = none */
-    const char *idem;    /* vx_pg_submit_idem: its Idempotency-Key; NULL = none */
+    const char *idem;    /* its Idempotency-Key (unique: a taken one is job_exists); NULL = none */
+    int children;        /* the child jobs submitted with it (they name it as parent) */
 } vx_pg_new_job;
 
 /* What a list keeps: NULL fields keep every job. */
@@ -124,6 +126,10 @@ int vx_pg_submit_idem(vx_pg *pg, const vx_pg_new_job *job, vx_pg_job *existing, 
 /* The newest succeeded job of fingerprint fp into *out: 1 found, 0 none,
  * -1 err. */
 int vx_pg_find_done(vx_pg *pg, const char *fp, vx_pg_job *out, vx_err *err);
+/* Of job id's child jobs: how many succeeded, how many there are. */
+int vx_pg_child_counts(vx_pg *pg, const char *id, int *done, int *total, vx_err *err);
+/* The job holding Idempotency-Key key into *out: 1 found, 0 none, -1 err. */
+int vx_pg_find_idem(vx_pg *pg, const char *key, vx_pg_job *out, vx_err *err);
 /* Deletes a finished job (its results index rows go with it).
  * VX_ENOTFOUND job_not_found, VX_ECONFLICT job_not_finished. */
 int vx_pg_delete(vx_pg *pg, const char *id, vx_err *err);

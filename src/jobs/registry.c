@@ -32,6 +32,7 @@ void job_free(job *jb)
     cJSON_Delete(jb->outputs);
     free(jb->frozen);
     free(jb->idem);
+    cJSON_Delete(jb->children);
     pinset_free(&jb->pins);
     free(jb);
 }

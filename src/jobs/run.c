@@ -68,6 +68,68 @@ cJSON *vx_run_stats(vx_job_run *r)
     return r->stats;
 }
 
+size_t vx_run_children(const vx_job_run *r)
+{
+    return r->job->children ? (size_t)cJSON_GetArraySize(r->job->children) : 0;
+}
+
+int vx_run_child(const vx_job_run *r, size_t i, const char **id, const cJSON **params,
+                 const cJSON **stats)
+{
+    const cJSON *c = r->job->children ? cJSON_GetArrayItem(r->job->children, (int)i) : NULL;
+    if (!c) return -1;
+    if (id) *id = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(c, "id"));
+    if (params) *params = cJSON_GetObjectItemCaseSensitive(c, "params");
+    if (stats)
+        *stats = cJSON_GetObjectItemCaseSensitive(cJSON_GetObjectItemCaseSensitive(c, "result"),
+                                                  "stats");
+    return 0;
+}
+
+int vx_run_child_output(vx_job_run *r, size_t i, const char *name, char *path, size_t n,
+                        vx_err *err)
+{
+    const cJSON *c = r->job->children ? cJSON_GetArrayItem(r->job->children, (int)i) : NULL;
+    const char *id = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(c, "id"));
+    const cJSON *outs =
+        cJSON_GetObjectItemCaseSensitive(cJSON_GetObjectItemCaseSensitive(c, "result"), "outputs");
+    const cJSON *o =
+        name ? cJSON_GetObjectItemCaseSensitive(outs, name) : (outs ? outs->child : NULL);
+    const char *file = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(o, "file"));
+    if (!id || !file)
+        return vx_err_set(err, VX_ENOTFOUND, "output_not_found", "child job %zu has no output %s",
+                          i, name ? name : "");
+    char rid[48];
+    snprintf(rid, sizeof rid, "%s/%d", id,
+             (int)cJSON_GetNumberValue(cJSON_GetObjectItemCaseSensitive(c, "attempt")));
+    return vx_store_result_file(r->jobs->desc.store, rid, file, path, n, err);
+}
+
+int vx_run_output_of_child(vx_job_run *r, const char *name, size_t i, const char *child_name,
+                           vx_err *err)
+{
+    const cJSON *c = r->job->children ? cJSON_GetArrayItem(r->job->children, (int)i) : NULL;
+    const char *id = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(c, "id"));
+    const cJSON *o = cJSON_GetObjectItemCaseSensitive(
+        cJSON_GetObjectItemCaseSensitive(cJSON_GetObjectItemCaseSensitive(c, "result"), "outputs"),
+        child_name);
+    if (!id || !cJSON_IsObject(o))
+        return vx_err_set(err, VX_ENOTFOUND, "output_not_found", "child job %zu has no output %s",
+                          i, child_name);
+    char rid[48];
+    snprintf(rid, sizeof rid, "%s/%d", id,
+             (int)cJSON_GetNumberValue(cJSON_GetObjectItemCaseSensitive(c, "attempt")));
+    cJSON *d = cJSON_Duplicate(o, 1);
+    cJSON_DeleteItemFromObjectCaseSensitive(d, "location");
+    if (!d || !cJSON_AddStringToObject(d, "rid", rid)) {
+        cJSON_Delete(d);
+        return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory");
+    }
+    cJSON_DeleteItemFromObjectCaseSensitive(r->outputs, name);
+    cJSON_AddItemToObject(r->outputs, name, d);
+    return 0;
+}
+
 const char *vx_run_output(vx_job_run *r, const char *name, const char *file_ext,
                           const char *content_type, vx_err *err)
 {

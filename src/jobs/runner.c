@@ -53,6 +53,7 @@ static void sync_outputs(vx_job_run *r)
     const cJSON *it;
     cJSON_ArrayForEach(it, r->outputs)
     {
+        if (cJSON_GetObjectItemCaseSensitive(it, "rid")) continue; /* a child's, stored */
         char p[VX_PATH_MAX];
         snprintf(p, sizeof p, "%s/%s", r->dir,
                  cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(it, "file")));

@@ -172,6 +172,7 @@ typedef struct vstate {
     vx_grid whole;
     int brick_size, nbricks, merge;
     char **brick_paths;
+    int brick_jobs; /* cluster mode: the bricks are child jobs' files (theirs to keep) */
     char *out_path; /* the primary output: the merged .vdb or the manifest */
 } vstate;
 
@@ -693,6 +694,168 @@ static int run_bricks(vx_job_run *r, const vx_mesh *mesh, const vparams *p,
     return vx_run_progress(r, 1.0 - prog->share, err);
 }
 
+/* A mesh with only what the grid and the default inside rule read: the
+ * bbox and the boundary edges, from a stored mesh's metadata. */
+static int mesh_of_meta(const cJSON *meta, vx_mesh *m, vx_err *err)
+{
+    memset(m, 0, sizeof *m);
+    const cJSON *bb = cJSON_GetObjectItemCaseSensitive(meta, "bbox");
+    const cJSON *lo = cJSON_GetObjectItemCaseSensitive(bb, "min"),
+                *hi = cJSON_GetObjectItemCaseSensitive(bb, "max");
+    if (cJSON_GetArraySize(lo) != 3 || cJSON_GetArraySize(hi) != 3)
+        return vx_err_set(err, VX_EINTERNAL, "mesh_meta", "the mesh's metadata has no bbox");
+    for (int a = 0; a < 3; a++) {
+        m->bbox_min[a] = cJSON_GetNumberValue(cJSON_GetArrayItem(lo, a));
+        m->bbox_max[a] = cJSON_GetNumberValue(cJSON_GetArrayItem(hi, a));
+    }
+    m->boundary_edges =
+        (size_t)cJSON_GetNumberValue(cJSON_GetObjectItemCaseSensitive(meta, "boundary_edges"));
+    return 0;
+}
+
+/* Cluster mode (kind.h split): a bricked grid as one child job per brick,
+ * each an explicit box of the grid's lattice written in the grid's index
+ * space (vdb_index_base), the inside rule decided for the whole mesh. */
+static cJSON *voxelize_split(const void *params, const cJSON *mesh_meta, const vx_limits *lim,
+                             vx_err *err)
+{
+    const vparams *p = params;
+    vx_mesh m;
+    vx_grid w;
+    if (mesh_of_meta(mesh_meta, &m, err) || grid_of(p, &m, lim, &w, err)) return NULL;
+    const int S = brick_size_of(p, w.dims, lim);
+    if (!S) return NULL;
+    vx_voxelize_desc d;
+    desc_of(p, &m, lim, &w, &d);
+    const vx_vdb_class cls =
+        p->vdb_grid == VX_VDB_LEVEL_SET ? VX_VDB_BOOL : (vx_vdb_class)p->vdb_grid;
+    int nb[3];
+    for (int a = 0; a < 3; a++)
+        nb[a] = (w.dims[a] + S - 1) / S;
+    cJSON *list = cJSON_CreateArray();
+    double base[3] = {(double)w.index[0], (double)w.index[1], (double)w.index[2]};
+    for (int b = 0; list && b < nb[0] * nb[1] * nb[2]; b++) {
+        const int bi[3] = {b % nb[0], b / nb[0] % nb[1], b / (nb[0] * nb[1])};
+        int at[3], bd[3];
+        for (int a = 0; a < 3; a++) {
+            at[a] = bi[a] * S;
+            bd[a] = w.dims[a] - at[a] < S ? w.dims[a] - at[a] : S;
+        }
+        cJSON *c = brick_params(p, &w, at, bd, d.inside, cls);
+        if (!c || !cJSON_AddItemToObject(c, "vdb_index_base", array3(base)) ||
+            !cJSON_AddItemToArray(list, c)) {
+            cJSON_Delete(c);
+            cJSON_Delete(list);
+            list = NULL;
+        }
+    }
+    if (!list) vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for the brick jobs");
+    return list;
+}
+
+/* A bricked run whose bricks were child jobs (cluster mode): their .vdb
+ * files, in the grid's index space, become the brick list that
+ * voxelize_encode merges (or, merge false, lists by their URLs); the stats
+ * list each brick with its job and sum theirs. No GL work. */
+static int bricks_from_children(vx_job_run *r, const vx_mesh *mesh, const vparams *p,
+                                const vx_voxelize_desc *d, int S, vprog *prog, vstate *s,
+                                vx_err *err)
+{
+    const vx_grid *w = &d->grid;
+    int nb[3];
+    for (int a = 0; a < 3; a++)
+        nb[a] = (w->dims[a] + S - 1) / S;
+    const int n = nb[0] * nb[1] * nb[2];
+    if ((size_t)n != vx_run_children(r))
+        return vx_err_set(err, VX_EINTERNAL, "bricks_mismatch",
+                          "the grid has %d bricks, the job %zu brick jobs", n, vx_run_children(r));
+    s->whole = *w;
+    s->brick_size = S;
+    s->inside = d->inside;
+    s->merge = p->merge;
+    s->nbricks = n;
+    s->brick_paths = calloc((size_t)n, sizeof *s->brick_paths);
+    s->brick_jobs = 1;
+    cJSON **entry = calloc((size_t)n, sizeof *entry);
+    if (!s->brick_paths || !entry) {
+        free(entry);
+        return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for the brick list");
+    }
+    const char *first = p->merge ? vx_run_output(r, "voxels", "vdb", "application/x-openvdb", err)
+                                 : vx_run_output(r, "manifest", "json", "application/json", err);
+    int rc = first && (s->out_path = strdup(first)) ? 0 : -1;
+    if (first && !s->out_path) vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory");
+    vx_voxelize_stats sum = {0};
+    uint64_t inside = 0;
+    for (size_t i = 0; !rc && i < (size_t)n; i++) {
+        const char *cid;
+        const cJSON *cp, *cst;
+        vx_run_child(r, i, &cid, &cp, &cst);
+        const cJSON *io = cJSON_GetObjectItemCaseSensitive(
+            cJSON_GetObjectItemCaseSensitive(cp, "grid"), "index_offset");
+        int at[3], b = 0, ok = cJSON_GetArraySize(io) == 3;
+        for (int a = 0; ok && a < 3; a++) {
+            at[a] = (int)(cJSON_GetNumberValue(cJSON_GetArrayItem(io, a)) - (double)w->index[a]);
+            ok = at[a] >= 0 && at[a] % S == 0 && at[a] / S < nb[a];
+        }
+        if (ok) b = at[0] / S + nb[0] * (at[1] / S + nb[1] * (at[2] / S));
+        if (!ok || s->brick_paths[b]) {
+            rc = vx_err_set(err, VX_EINTERNAL, "bricks_mismatch",
+                            "brick job %s is not one of the grid's bricks", cid);
+            break;
+        }
+        char path[VX_PATH_MAX];
+        if (vx_run_child_output(r, i, "voxels", path, sizeof path, err)) {
+            rc = -1;
+            break;
+        }
+        if (!(s->brick_paths[b] = strdup(path))) {
+            rc = vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory");
+            break;
+        }
+        char bname[64];
+        snprintf(bname, sizeof bname, "brick_%d_%d_%d", at[0] / S, at[1] / S, at[2] / S);
+        if (!p->merge && vx_run_output_of_child(r, bname, i, "voxels", err)) {
+            rc = -1;
+            break;
+        }
+        double v = cJSON_GetNumberValue(cJSON_GetObjectItemCaseSensitive(cst, "voxels_inside"));
+        inside += v > 0 ? (uint64_t)v : 0;
+        const cJSON *mt = cJSON_GetObjectItemCaseSensitive(cst, "method");
+        if (cJSON_IsString(mt)) sum.method = mt->valuestring;
+        double off[3] = {at[0], at[1], at[2]}, dd[3], idx[3];
+        const cJSON *dims =
+            cJSON_GetObjectItemCaseSensitive(cJSON_GetObjectItemCaseSensitive(cp, "grid"), "dims");
+        for (int a = 0; a < 3; a++) {
+            dd[a] = cJSON_GetNumberValue(cJSON_GetArrayItem(dims, a));
+            idx[a] = (double)(w->index[a] + at[a]);
+        }
+        cJSON *e = cJSON_CreateObject();
+        cJSON_AddItemToObject(e, "offset", array3(off));
+        cJSON_AddItemToObject(e, "index_offset", array3(idx));
+        cJSON_AddItemToObject(e, "dims", array3(dd));
+        cJSON_AddNumberToObject(e, "voxels_inside", v);
+        cJSON_AddNumberToObject(
+            e, "ms", cJSON_GetNumberValue(cJSON_GetObjectItemCaseSensitive(cst, "run_ms")));
+        cJSON_AddStringToObject(e, "job", cid);
+        entry[b] = e;
+    }
+    cJSON *list = cJSON_CreateArray();
+    for (int b = 0; b < n; b++)
+        if (entry[b] && !cJSON_AddItemToArray(list, entry[b])) cJSON_Delete(entry[b]);
+    free(entry);
+    cJSON *stats = vx_run_stats(r);
+    stat_set(stats, "bricks", list);
+    if (rc) return -1;
+    double nbd[3] = {nb[0], nb[1], nb[2]};
+    stat_set(stats, "bricks_done", cJSON_CreateNumber(n));
+    stat_set(stats, "brick_size", cJSON_CreateNumber(S));
+    stat_set(stats, "brick_grid", array3(nbd));
+    stats_grid(stats, w, mesh, sum.method, d->inside, inside);
+    stats_engine(stats, &sum);
+    return vx_run_progress(r, 1.0 - prog->share, err);
+}
+
 static int voxelize_run_gl(vx_job_run *r, const vx_mesh *mesh, const void *params, void **state,
                            vx_err *err)
 {
@@ -711,6 +874,7 @@ static int voxelize_run_gl(vx_job_run *r, const vx_mesh *mesh, const void *param
     *state = s; /* from here on the runner frees it through free_state */
     s->inside = d.inside;
     const int S = brick_size_of(&p, d.grid.dims, lim);
+    if (S && vx_run_children(r)) return bricks_from_children(r, mesh, &p, &d, S, &prog, s, err);
     if (S) return run_bricks(r, mesh, &p, &d, S, &prog, s, err);
     if (vx_voxelize(vx_run_gl(r), mesh, &d, &s->grid, &s->st, err)) return -1;
     s->have_grid = 1;
@@ -752,6 +916,14 @@ static int encode_bricks(vx_job_run *r, const vparams *p, vstate *s, vprog *prog
             snprintf(name, sizeof name, "%s", slash ? slash + 1 : s->brick_paths[b]);
             char *dot = strrchr(name, '.');
             if (dot) *dot = 0;
+            if (s->brick_jobs) {
+                /* cluster mode: the output of that name is the brick job's file */
+                const cJSON *off = cJSON_GetObjectItemCaseSensitive(it, "offset");
+                int q[3];
+                for (int a = 0; a < 3; a++)
+                    q[a] = (int)cJSON_GetNumberValue(cJSON_GetArrayItem(off, a)) / s->brick_size;
+                snprintf(name, sizeof name, "brick_%d_%d_%d", q[0], q[1], q[2]);
+            }
             snprintf(url, sizeof url, "/v1/jobs/%s/result/%s", vx_run_job_id(r), name);
             cJSON_AddStringToObject(o, "name", name);
             cJSON_AddStringToObject(o, "url", url);
@@ -777,7 +949,7 @@ static int encode_bricks(vx_job_run *r, const vparams *p, vstate *s, vprog *prog
     for (int b = 0; !rc && b < s->nbricks; b++) {
         rc = vx_run_progress(r, 1.0 - prog->share + prog->share * 0.7 * b / s->nbricks, err);
         if (!rc) rc = vx_vdb_merge_add(m, s->brick_paths[b], err);
-        if (!rc) remove(s->brick_paths[b]);
+        if (!rc && !s->brick_jobs) remove(s->brick_paths[b]); /* the brick jobs' stay theirs */
         if (!rc && lim && vx_vdb_merge_bytes(m) + one > lim)
             rc = vx_err_set(err, VX_ETOOBIG, "job_memory_limit",
                             "the merged OpenVDB tree of %d of %d bricks holds %llu bytes, "
@@ -890,8 +1062,10 @@ static void voxelize_free_state(void *state)
     if (!s) return;
     vx_bitgrid_free(&s->grid);
     for (int b = 0; b < s->nbricks; b++) {
-        if (s->merge && s->brick_paths[b]) remove(s->brick_paths[b]); /* a failed merge's */
-        free(s->brick_paths[b]);
+        /* a failed merge's (the brick jobs' files stay theirs) */
+        if (s->merge && s->brick_paths && s->brick_paths[b] && !s->brick_jobs)
+            remove(s->brick_paths[b]);
+        if (s->brick_paths) free(s->brick_paths[b]);
     }
     free(s->brick_paths);
     free(s->out_path);
@@ -909,4 +1083,5 @@ const vx_kind vx_kind_voxelize = {
     .run_cpu = NULL,
     .encode = voxelize_encode,
     .free_state = voxelize_free_state,
+    .split = voxelize_split,
 };

@@ -4,6 +4,11 @@
 # one file:// blob store, each with its own data dir:
 # - upload on r1, submit on r2, download from r3 (byte for byte as from r1);
 #   ?wait on one replica wakes when another finishes the job;
+# - a bricked voxelize is split into 8 child jobs run on several replicas
+#   and merged: equal to the same grid as one job voxel by voxel; with
+#   merge false its brick outputs are the brick jobs' files (deleting it
+#   deletes them, a brick job alone is 409); canceling
+#   it cancels its children;
 # - an Idempotency-Key answers the same job on any replica, and 422 for
 #   another request;
 # - a cancel on one replica reaches the job running on another;
@@ -136,6 +141,77 @@ check "the result is under results/JOB/ATTEMPT in the shared store" test -d "$SH
 on 2
 api GET "/v1/jobs?limit=5&kind=voxelize&mesh=$B"
 check "r2 lists it (filter by mesh)" jq -e --arg j "$J" '[.items[].id] | index($j) != null' "$BODY"
+
+# A bricked voxelize: split at submission into one child job per brick,
+# which any replica claims; the parent merges them once all succeeded. The
+# merged grid equals the same grid as one job, voxel by voxel.
+BP='{"resolution":40,"padding":2,"method":"slice","inside":"robust"}'
+submit 1 voxelize "$B" "$(jq -c '. + {format: "raw8", bricks: {size: 0}}' <<<"$BP")"
+wait_final 1 "$JOB" 60
+check "one job of the grid" jq -e '.state == "succeeded"' "$BODY"
+read -r NX NY NZ < <(jq -r '.stats.dims | map(tostring) | join(" ")' "$BODY")
+WHOLE_IN=$(jqb .stats.voxels_inside)
+api GET "/v1/jobs/$JOB/result"
+cp "$BODY" "$TMP/one.raw"
+submit 2 voxelize "$B" "$(jq -c '. + {format: "vdb", vdb_grid: "fog", bricks: {size: 24}}' <<<"$BP")"
+expect_status "bricked submit" 202
+P=$JOB
+check "split into 8 child jobs" jq -e '.child_jobs == 8 and .state == "queued"' "$BODY"
+wait_final 3 "$P" 120
+check "the bricked job succeeded, its stats list 8 brick jobs and sum them" jq -e --argjson n "$WHOLE_IN" \
+    '.state == "succeeded" and (.stats.bricks | length) == 8 and all(.stats.bricks[]; .job | test("^[0-9a-f]{32}$")) and .stats.voxels_inside == $n' "$BODY"
+: >"$TMP/reps"
+for c in $(jqb '.stats.bricks[].job'); do # not in $(...): api counts its requests
+    api GET "/v1/jobs/$c"
+    jq -r --arg p "$P" 'select(.parent == $p and .state == "succeeded") | .replica' "$BODY" >>"$TMP/reps"
+done
+reps=$(sort -u "$TMP/reps" | wc -l)
+check "its bricks ran on more than one replica ($reps), each a child of it" test "$reps" -ge 2
+api GET "/v1/jobs/$P/result"
+cp "$BODY" "$TMP/bricked.vdb"
+check "the merged bricks equal the one job voxel by voxel" "$VX_TOOLS/vdbcheck" "$TMP/bricked.vdb" "$TMP/one.raw" "$NX" "$NY" "$NZ"
+# merge false: the manifest lists the job's brick outputs, which are the
+# brick jobs' own files (not copies).
+submit 3 voxelize "$B" "$(jq -c '. + {format: "vdb", vdb_grid: "bool", bricks: {size: 24}, merge: false}' <<<"$BP")"
+wait_final 1 "$JOB" 120
+api GET "/v1/jobs/$JOB/result"
+cp "$BODY" "$TMP/manifest.json"
+total=0 badb=0
+for url in $(jq -r '.bricks[].url' "$TMP/manifest.json"); do
+    api GET "$url"
+    [[ $STATUS == 200 ]] || badb=$((badb + 1))
+    total=$((total + $("$VX_TOOLS/vdbinfo" "$BODY" | jq -r '.grids[0].active_voxels')))
+done
+check "manifest: all 8 brick URLs download ($badb bad)" test "$badb" = 0
+check "manifest: the bricks are outputs of the job itself" jq -e --arg j "$JOB" \
+    '(.bricks | length) == 8 and all(.bricks[]; .url == "/v1/jobs/\($j)/result/\(.name)")' "$TMP/manifest.json"
+api GET "/v1/jobs/$JOB"
+check "its outputs name the manifest and the 8 bricks" jq -e '(.outputs | keys | map(select(startswith("brick_"))) | length) == 8 and .outputs.manifest' "$BODY"
+check "manifest: the brick files hold the one job's voxels ($total)" test "$total" = "$WHOLE_IN"
+# A brick job is its parent's to delete: deleting the parent takes the
+# brick jobs and their files with it.
+M=$JOB
+C=$(jq -r '.stats.bricks[0].job' "$BODY")
+CF=$(find "$SHARED" -path "*$C*" -name 'voxels.vdb' | head -n 1)
+check "the brick job's file is in the shared store" test -n "$CF"
+on 2
+api DELETE "/v1/jobs/$C"
+expect_error "deleting a brick job" 409 job_has_parent
+api DELETE "/v1/jobs/$M"
+expect_status "deleting the parent" 204
+api GET "/v1/jobs/$C"
+expect_error "its brick job went with it" 404 job_not_found
+check "and the brick job's file too" test ! -e "$CF"
+# Canceling the parent cancels its waiting children.
+submit 1 voxelize "$B" "$(jq -c '. + {resolution: 300, format: "vdb", bricks: {size: 64}}' <<<"$BP")"
+P=$JOB
+on 2
+api DELETE "/v1/jobs/$P"
+wait_final 2 "$P" 60
+check "the parent canceled" jq -e '.state == "canceled"' "$BODY"
+sleep 2
+api GET "/v1/jobs?limit=200&state=queued&kind=voxelize"
+check "none of its children left queued" jq -e --arg p "$P" '[.items[] | select(.parent == $p)] | length == 0' "$BODY"
 
 # ?wait on r1 wakes when another replica finishes (NOTIFY, not the deadline).
 submit 3 preview "$B" '{"width":256,"height":256}'

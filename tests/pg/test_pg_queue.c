@@ -727,6 +727,85 @@ static void test_v2(void **state)
     vx_pg_close(pg);
 }
 
+/* Schema 3: a job split into child jobs is claimable only once they all
+ * succeeded; a child that fails fails its parent and cancels its waiting
+ * siblings; canceling the parent cancels its children. */
+static void test_children(void **state)
+{
+    (void)state;
+    vx_pg *pg = open_as("kids", 30);
+    vx_err err = {0};
+    char par[33], k1[33], k2[33];
+    make_id(par, 9101);
+    make_id(k1, 9102);
+    make_id(k2, 9103);
+    vx_pg_new_job jobs[3] = {{.id = par, .kind = "voxelize", .children = 2},
+                             {.id = k1, .kind = "voxelize", .parent = par},
+                             {.id = k2, .kind = "voxelize", .parent = par}};
+    assert_int_equal(vx_pg_submit(pg, jobs, 3, &err), 0);
+    vx_pg_job a, b, c;
+    /* The parent is oldest, but the children come first. */
+    assert_int_equal(vx_pg_claim(pg, "voxelize", &a, &err), 1);
+    assert_string_equal(a.parent, par);
+    assert_int_equal(vx_pg_claim(pg, "voxelize", &b, &err), 1);
+    assert_string_equal(b.parent, par);
+    assert_int_equal(vx_pg_claim(pg, "voxelize", &c, &err), 0);
+    cJSON *res = cJSON_Parse("{\"outputs\":{}}");
+    assert_int_equal(vx_pg_complete(pg, a.id, a.attempt, res, &err), 0);
+    assert_int_equal(vx_pg_claim(pg, "voxelize", &c, &err), 0); /* one child still runs */
+    int done = 0, total = 0;
+    assert_int_equal(vx_pg_child_counts(pg, par, &done, &total, &err), 0);
+    assert_int_equal(done, 1);
+    assert_int_equal(total, 2);
+    assert_int_equal(vx_pg_complete(pg, b.id, b.attempt, res, &err), 0);
+    assert_int_equal(vx_pg_claim(pg, "voxelize", &c, &err), 1);
+    assert_string_equal(c.id, par);
+    assert_int_equal(c.children, 2);
+    vx_pg_job_clear(&a);
+    vx_pg_job_clear(&b);
+    vx_pg_job_clear(&c);
+
+    /* A child that fails for good fails its parent, cancels its sibling. */
+    make_id(par, 9111);
+    make_id(k1, 9112);
+    make_id(k2, 9113);
+    assert_int_equal(vx_pg_submit(pg, jobs, 3, &err), 0);
+    assert_int_equal(vx_pg_claim(pg, "voxelize", &a, &err), 1);
+    vx_err why;
+    vx_err_set(&why, VX_EUNPROC, "invalid_params", "no such brick");
+    char st[16];
+    assert_int_equal(vx_pg_fail(pg, a.id, a.attempt, &why, 0, st, &err), 0);
+    assert_string_equal(st, "failed");
+    assert_int_equal(vx_pg_get(pg, par, &c, &err), 0);
+    assert_string_equal(c.state, "failed");
+    const cJSON *last = cJSON_GetArrayItem(c.errors, cJSON_GetArraySize(c.errors) - 1);
+    assert_string_equal(cJSON_GetStringValue(cJSON_GetObjectItem(last, "code")), "child_failed");
+    assert_non_null(
+        strstr(cJSON_GetStringValue(cJSON_GetObjectItem(last, "message")), "no such brick"));
+    vx_pg_job_clear(&c);
+    const char *sib = strcmp(a.id, k1) ? k1 : k2;
+    assert_int_equal(vx_pg_get(pg, sib, &c, &err), 0);
+    assert_string_equal(c.state, "canceled");
+    vx_pg_job_clear(&c);
+    vx_pg_job_clear(&a);
+
+    /* Canceling the parent cancels its children. */
+    make_id(par, 9121);
+    make_id(k1, 9122);
+    make_id(k2, 9123);
+    assert_int_equal(vx_pg_submit(pg, jobs, 3, &err), 0);
+    int was_running = 1;
+    assert_int_equal(vx_pg_cancel(pg, par, &was_running, &err), 0);
+    assert_int_equal(was_running, 0);
+    for (int i = 0; i < 2; i++) {
+        assert_int_equal(vx_pg_get(pg, i ? k2 : k1, &c, &err), 0);
+        assert_string_equal(c.state, "canceled");
+        vx_pg_job_clear(&c);
+    }
+    cJSON_Delete(res);
+    vx_pg_close(pg);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -739,6 +818,7 @@ int main(void)
         cmocka_unit_test_setup(test_notify, setup),
         cmocka_unit_test_setup(test_restart, setup),
         cmocka_unit_test_setup(test_v2, setup),
+        cmocka_unit_test_setup(test_children, setup),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }
