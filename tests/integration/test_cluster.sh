@@ -22,7 +22,8 @@
 # - PostgreSQL stopped: the API answers 503 database_unavailable with
 #   Retry-After and /readyz names the database; started again, the replicas
 #   recover by themselves and run what was queued;
-# - 30 jobs while replicas are killed and restarted at random: every job
+# - 30 jobs and uploads while replicas are killed and restarted at random:
+#   every upload reads back byte for byte from another replica, every job
 #   ends succeeded exactly once, within max_attempts, and completes once
 #   (one row, one results index entry per output);
 # - /metrics: the database's counts by state and kind, claims.
@@ -330,10 +331,16 @@ check "runs after the restart" jq -e '.state == "succeeded"' "$BODY"
 seed=${VX_SEED:-$RANDOM}
 RANDOM=$seed
 echo "seed $seed"
-ids=()
+ids=() ups=() upbad=0
 for n in $(seq 1 30); do
     submit $((n % 3 + 1)) voxelize "$B" "{\"resolution\":$((40 + n)),\"method\":\"slice\",\"format\":\"summary\"}"
     ids+=("$JOB")
+    # and an upload of a mesh of its own on the next replica
+    on $(((n + 1) % 3 + 1))
+    printf 'v 0 0 0\nv %d 0 0\nv 0 1 0\nv 0 0 %d.%d\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n' \
+        "$n" "$RANDOM" "$n" >"$TMP/up$n.obj"
+    upload "$TMP/up$n.obj"
+    if [[ $STATUS == 201 || $STATUS == 200 ]]; then ups+=("$n:$MESH_ID"); else upbad=$((upbad + 1)); fi
     if ((n % 6 == 0)); then
         v=$((RANDOM % 3 + 1))
         kill -KILL "${RPID[$v]}"
@@ -348,6 +355,14 @@ for id in "${ids[@]}"; do
     jq -e '.state == "succeeded" and .attempt >= 1 and .attempt <= 4' "$BODY" >/dev/null || { bad=$((bad + 1)); echo "  job $id: $(jq -c '{state, attempt, error}' "$BODY")"; }
 done
 check "30 jobs under restarts: all succeeded within max_attempts ($bad bad)" test $bad -eq 0
+check "30 uploads under restarts: all acknowledged ($upbad not)" test $upbad -eq 0
+for u in "${ups[@]}"; do
+    n=${u%%:*}
+    on $((n % 3 + 1)) # another replica than the one it was uploaded to
+    api GET "/v1/meshes/${u#*:}/file"
+    cmp -s "$BODY" "$TMP/up$n.obj" || upbad=$((upbad + 1))
+done
+check "each acknowledged upload reads back byte for byte from another replica ($upbad differ)" test $upbad -eq 0
 on 2
 api GET "/v1/jobs?limit=100&state=succeeded&kind=voxelize"
 check "each listed once" bash -c "jq -e '[.items[].id] | length == (unique | length)' '$BODY'"
