@@ -17,7 +17,10 @@ int vx_route_mesh_list(vx_http *h, struct MHD_Connection *c, req *r)
     int limit = r->q.limit;
     const char *after = r->q.has_after ? r->q.after : NULL;
     char next[65];
-    cJSON *items = vx_store_mesh_list(h->d.store, after, limit, next);
+    vx_err err;
+    vx_err_clear(&err);
+    cJSON *items = vx_store_mesh_list(h->d.store, after, limit, next, &err);
+    if (!items) return vx_resp_err(c, r, &err);
     return vx_resp_page(c, r, items, next);
 }
 

@@ -48,6 +48,7 @@ struct vx_cluster {
     char kinds[1024]; /* comma-separated: what the claimer asks for */
     double renew_s;
     vx_jobs_cluster_stats stats; /* atomics */
+    vx_mesh_catalog catalog;     /* the store's view of meshes: vx_meshes */
 };
 
 /* ---- a job state that keeps nothing: the database is the state ---------- */
@@ -121,6 +122,81 @@ void cluster_wake(vx_jobs *j)
     pthread_mutex_unlock(&c->lock);
 }
 
+/* ---- the mesh catalog: vx_meshes, through the API's connection ----------- */
+
+static int cat_lock(void *ud, const char *id, vx_err *err)
+{
+    return vx_pg_mesh_lock(ud, id, err);
+}
+
+static void cat_unlock(void *ud, const char *id)
+{
+    vx_pg_mesh_unlock(ud, id);
+}
+
+static int cat_put(void *ud, const char *id, const cJSON *meta, int *existed, vx_err *err)
+{
+    return vx_pg_mesh_put(ud, id, meta, existed, NULL, err);
+}
+
+static int cat_get(void *ud, const char *id, cJSON **meta, vx_err *err)
+{
+    return vx_pg_mesh_get(ud, id, meta, err);
+}
+
+static int cat_remove(void *ud, const char *id, vx_err *err)
+{
+    return vx_pg_mesh_delete(ud, id, err);
+}
+
+static cJSON *cat_list(void *ud, const char *after, int limit, char next[65], vx_err *err)
+{
+    return vx_pg_mesh_list(ud, after, limit, next, err);
+}
+
+static long cat_count(void *ud, vx_err *err)
+{
+    return vx_pg_mesh_count(ud, err);
+}
+
+static int purge_bytes(void *ud, const char *id, const char *format)
+{
+    return vx_store_mesh_purge(ud, id, format);
+}
+
+/* The catalog takes over the store's view of meshes, after adding the
+ * meshes the store holds that it lacks (stored before the catalog was). */
+static int catalog_start(vx_jobs *j, vx_err *err)
+{
+    vx_cluster *c = j->cl;
+    cJSON *all = vx_store_mesh_local(j->desc.store), *batch = cJSON_CreateArray();
+    int added = 0, rc = 0;
+    while (!rc && all && batch && cJSON_GetArraySize(all) > 0) {
+        cJSON_AddItemToArray(batch, cJSON_DetachItemFromArray(all, 0));
+        if (cJSON_GetArraySize(batch) < 1000 && cJSON_GetArraySize(all) > 0) continue;
+        int n = vx_pg_mesh_add_missing(c->api, batch, err);
+        if (n < 0) rc = -1;
+        added += n > 0 ? n : 0;
+        cJSON_Delete(batch);
+        batch = cJSON_CreateArray();
+    }
+    if (!all || !batch) rc = vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory");
+    cJSON_Delete(all);
+    cJSON_Delete(batch);
+    if (rc) return -1;
+    if (added) VX_INFO("cluster.meshes_cataloged", "added=%d", added);
+    c->catalog = (vx_mesh_catalog){.ud = c->api,
+                                   .lock = cat_lock,
+                                   .unlock = cat_unlock,
+                                   .put = cat_put,
+                                   .get = cat_get,
+                                   .remove = cat_remove,
+                                   .list = cat_list,
+                                   .count = cat_count};
+    vx_store_set_catalog(j->desc.store, &c->catalog);
+    return 0;
+}
+
 int cluster_open(vx_jobs *j, vx_err *err)
 {
     vx_cluster *c = calloc(1, sizeof *c);
@@ -149,7 +225,7 @@ int cluster_open(vx_jobs *j, vx_err *err)
         nap(1);
     }
     if (!(c->work = vx_pg_open(&d, err)) || !(c->lease = vx_pg_open(&d, err)) ||
-        !(c->listen = vx_pg_open(&d, err)) || vx_pg_listen(c->listen, err))
+        !(c->listen = vx_pg_open(&d, err)) || vx_pg_listen(c->listen, err) || catalog_start(j, err))
         return -1;
     size_t n = 0;
     for (size_t i = 0; i < j->desc.kinds->n && n + 1 < sizeof c->kinds; i++)
@@ -228,6 +304,7 @@ void cluster_free(vx_jobs *j)
 {
     vx_cluster *c = j->cl;
     if (!c) return;
+    if (c->catalog.ud) vx_store_set_catalog(j->desc.store, NULL);
     vx_pg_close(c->api);
     vx_pg_close(c->work);
     vx_pg_close(c->lease);
@@ -838,6 +915,9 @@ static void *renewer_main(void *arg)
             if (moved > 0)
                 __atomic_add_fetch(&c->stats.requeued_expired, (uint64_t)moved, __ATOMIC_RELAXED);
             if (requeued > 0) cluster_wake(j);
+            /* and purges the bytes of deleted meshes no job needs now */
+            if (vx_pg_mesh_purge(c->work, 100, purge_bytes, j->desc.store, &err) < 0)
+                VX_DEBUG("cluster.mesh_purge_failed", "code=%s", err.code);
             next_requeue = vx_mono() + c->renew_s;
         }
         pthread_mutex_lock(&c->lock);

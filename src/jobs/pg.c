@@ -14,20 +14,9 @@
 #include <libpq-fe.h>
 
 #include "jobs/jobs.h"
+#include "jobs/pg_int.h"
 #include "util/clock.h"
 #include "util/log.h"
-
-struct vx_pg {
-    vx_pg_desc desc; /* defaults filled; url points at url below */
-    char *url;
-    char replica[128];
-    PGconn *conn; /* NULL while disconnected */
-    pthread_mutex_t lock;
-    double next_try; /* monotonic: no connection attempt before */
-    double backoff;  /* the wait after the next failed attempt */
-    int listening;   /* LISTEN again after a reconnection */
-    int missed;      /* reconnected while listening: notifications may be lost */
-};
 
 /* Schema migrations: migrations[v - 1] brings version v - 1 to v. Each is
  * applied in the transaction that records it in vx_schema. */
@@ -120,6 +109,11 @@ static const char *const migrations[] = {
     " END IF; RETURN NULL; END $$;"
     "CREATE TRIGGER vx_jobs_child_ended AFTER UPDATE OF state ON vx_jobs FOR EACH ROW"
     " WHEN (NEW.parent_id IS NOT NULL) EXECUTE FUNCTION vx_jobs_child_ended();",
+    /* 4: the mesh catalog (pg_mesh.c): a deleted mesh keeps its row, marked,
+     * until no unfinished job names it; metadata keeps its key order. */
+    "ALTER TABLE vx_meshes ALTER COLUMN meta TYPE json USING meta::json,"
+    " ALTER COLUMN meta SET DEFAULT '{}'::json, ADD COLUMN deleted timestamptz;"
+    "CREATE INDEX vx_meshes_deleted ON vx_meshes (deleted) WHERE deleted IS NOT NULL;",
 };
 _Static_assert(sizeof migrations / sizeof migrations[0] == VX_PG_SCHEMA_VERSION,
                "one migration per schema version");
@@ -235,11 +229,8 @@ static int map_error(vx_pg *pg, const PGresult *r, int lost, vx_err *err)
     return vx_err_set(err, VX_EINTERNAL, "database_error", "database error %s: %s", state, msg);
 }
 
-/* Runs sql (n text params; n = 0 allows several statements) and returns
- * its result (PQclear it) or NULL with err. retry: when the connection was
- * lost, once more on a new one (for statements that may run twice). */
-static PGresult *run_locked(vx_pg *pg, int retry, const char *sql, int n, const char *const *vals,
-                            vx_err *err)
+PGresult *pg_run_locked(vx_pg *pg, int retry, const char *sql, int n, const char *const *vals,
+                        vx_err *err)
 {
     for (int tries = 0;; tries++) {
         if (connect_locked(pg, err)) return NULL;
@@ -258,11 +249,10 @@ static PGresult *run_locked(vx_pg *pg, int retry, const char *sql, int n, const 
     }
 }
 
-/* Runs a statement whose result is not needed. */
-static int exec_locked(vx_pg *pg, int retry, const char *sql, int n, const char *const *vals,
-                       vx_err *err)
+int pg_exec_locked(vx_pg *pg, int retry, const char *sql, int n, const char *const *vals,
+                   vx_err *err)
 {
-    PGresult *r = run_locked(pg, retry, sql, n, vals, err);
+    PGresult *r = pg_run_locked(pg, retry, sql, n, vals, err);
     PQclear(r);
     return r ? 0 : -1;
 }
@@ -342,15 +332,15 @@ int vx_pg_migrate(vx_pg *pg, vx_err *err)
     pthread_mutex_lock(&pg->lock);
     int version = -1;
     PGresult *r = NULL;
-    if (exec_locked(pg, 1, "BEGIN", 0, NULL, err)) goto out;
+    if (pg_exec_locked(pg, 1, "BEGIN", 0, NULL, err)) goto out;
     /* Replicas starting together migrate one after the other. */
-    if (exec_locked(pg, 0,
-                    "SELECT pg_advisory_xact_lock(7876198); "
-                    "CREATE TABLE IF NOT EXISTS vx_schema (version integer PRIMARY KEY,"
-                    " applied timestamptz NOT NULL DEFAULT now())",
-                    0, NULL, err))
+    if (pg_exec_locked(pg, 0,
+                       "SELECT pg_advisory_xact_lock(7876198); "
+                       "CREATE TABLE IF NOT EXISTS vx_schema (version integer PRIMARY KEY,"
+                       " applied timestamptz NOT NULL DEFAULT now())",
+                       0, NULL, err))
         goto rollback;
-    r = run_locked(pg, 0, "SELECT coalesce(max(version), 0) FROM vx_schema", 0, NULL, err);
+    r = pg_run_locked(pg, 0, "SELECT coalesce(max(version), 0) FROM vx_schema", 0, NULL, err);
     if (!r) goto rollback;
     int have = atoi(PQgetvalue(r, 0, 0));
     PQclear(r);
@@ -365,16 +355,16 @@ int vx_pg_migrate(vx_pg *pg, vx_err *err)
         char num[16];
         snprintf(num, sizeof num, "%d", v);
         const char *vals[] = {num};
-        if (exec_locked(pg, 0, migrations[v - 1], 0, NULL, err) ||
-            exec_locked(pg, 0, "INSERT INTO vx_schema (version) VALUES ($1::integer)", 1, vals,
-                        err))
+        if (pg_exec_locked(pg, 0, migrations[v - 1], 0, NULL, err) ||
+            pg_exec_locked(pg, 0, "INSERT INTO vx_schema (version) VALUES ($1::integer)", 1, vals,
+                           err))
             goto rollback;
         vx_log(VX_LOG_INFO, "pg.migrated", "version=%d", v);
     }
-    if (exec_locked(pg, 0, "COMMIT", 0, NULL, err) == 0) version = VX_PG_SCHEMA_VERSION;
+    if (pg_exec_locked(pg, 0, "COMMIT", 0, NULL, err) == 0) version = VX_PG_SCHEMA_VERSION;
     goto out;
 rollback:
-    if (pg->conn) exec_locked(pg, 0, "ROLLBACK", 0, NULL, NULL);
+    if (pg->conn) pg_exec_locked(pg, 0, "ROLLBACK", 0, NULL, NULL);
 out:
     pthread_mutex_unlock(&pg->lock);
     return version;
@@ -433,7 +423,7 @@ int vx_pg_submit(vx_pg *pg, const vx_pg_new_job *jobs, size_t n, vx_err *err)
     pthread_mutex_lock(&pg->lock);
     int rc = -1;
     int tx = n > 1;
-    if (tx && exec_locked(pg, 1, "BEGIN", 0, NULL, err)) goto out;
+    if (tx && pg_exec_locked(pg, 1, "BEGIN", 0, NULL, err)) goto out;
     for (size_t i = 0; i < n; i++) {
         char *params = jobs[i].params ? cJSON_PrintUnformatted(jobs[i].params) : NULL;
         char maxa[16];
@@ -444,18 +434,18 @@ int vx_pg_submit(vx_pg *pg, const vx_pg_new_job *jobs, size_t n, vx_err *err)
         const char *vals[] = {
             jobs[i].id, jobs[i].kind, jobs[i].mesh, jobs[i].parent, params ? params : "{}",
             maxa,       jobs[i].fp,   nch,          jobs[i].idem};
-        int bad = exec_locked(pg, 0,
-                              "INSERT INTO vx_jobs (id, kind, mesh, parent_id, params,"
-                              " max_attempts, fp, children, idem_key) VALUES ($1, $2, $3, $4,"
-                              " $5::json, $6::integer, $7, $8::integer, $9)",
-                              9, vals, err);
+        int bad = pg_exec_locked(pg, 0,
+                                 "INSERT INTO vx_jobs (id, kind, mesh, parent_id, params,"
+                                 " max_attempts, fp, children, idem_key) VALUES ($1, $2, $3, $4,"
+                                 " $5::json, $6::integer, $7, $8::integer, $9)",
+                                 9, vals, err);
         cJSON_free(params);
         if (bad) {
-            if (tx && pg->conn) exec_locked(pg, 0, "ROLLBACK", 0, NULL, NULL);
+            if (tx && pg->conn) pg_exec_locked(pg, 0, "ROLLBACK", 0, NULL, NULL);
             goto out;
         }
     }
-    if (tx && exec_locked(pg, 0, "COMMIT", 0, NULL, err)) goto out;
+    if (tx && pg_exec_locked(pg, 0, "COMMIT", 0, NULL, err)) goto out;
     rc = 0;
 out:
     pthread_mutex_unlock(&pg->lock);
@@ -469,7 +459,8 @@ int vx_pg_get(vx_pg *pg, const char *id, vx_pg_job *out, vx_err *err)
         return vx_err_set(err, VX_ENOTFOUND, "job_not_found", "no job %.40s", id ? id : "");
     const char *vals[] = {id};
     pthread_mutex_lock(&pg->lock);
-    PGresult *r = run_locked(pg, 1, "SELECT " JOB_COLS " FROM vx_jobs WHERE id = $1", 1, vals, err);
+    PGresult *r =
+        pg_run_locked(pg, 1, "SELECT " JOB_COLS " FROM vx_jobs WHERE id = $1", 1, vals, err);
     pthread_mutex_unlock(&pg->lock);
     if (!r) return -1;
     int rc = 0;
@@ -496,7 +487,7 @@ int vx_pg_submit_idem(vx_pg *pg, const vx_pg_new_job *job, vx_pg_job *existing, 
     pthread_mutex_lock(&pg->lock);
     /* One statement: inserted, or the row that holds the key (a key's
      * first job wins; a concurrent insert of the same key waits for it). */
-    PGresult *r = run_locked(
+    PGresult *r = pg_run_locked(
         pg, 0,
         "WITH ins AS (INSERT INTO vx_jobs (id, kind, mesh, params, max_attempts, fp, idem_key)"
         "  VALUES ($1, $2, $3, $4::json, $5::integer, $6, $7)"
@@ -526,10 +517,10 @@ int vx_pg_find_done(vx_pg *pg, const char *fp, vx_pg_job *out, vx_err *err)
     memset(out, 0, sizeof *out);
     const char *vals[] = {fp};
     pthread_mutex_lock(&pg->lock);
-    PGresult *r = run_locked(pg, 1,
-                             "SELECT " JOB_COLS " FROM vx_jobs WHERE fp = $1 AND state ="
-                             " 'succeeded' ORDER BY id DESC LIMIT 1",
-                             1, vals, err);
+    PGresult *r = pg_run_locked(pg, 1,
+                                "SELECT " JOB_COLS " FROM vx_jobs WHERE fp = $1 AND state ="
+                                " 'succeeded' ORDER BY id DESC LIMIT 1",
+                                1, vals, err);
     pthread_mutex_unlock(&pg->lock);
     if (!r) return -1;
     int got = PQntuples(r) == 1;
@@ -544,12 +535,12 @@ int vx_pg_delete(vx_pg *pg, const char *id, vx_err *err)
         return vx_err_set(err, VX_ENOTFOUND, "job_not_found", "no job %.40s", id ? id : "");
     const char *vals[] = {id};
     pthread_mutex_lock(&pg->lock);
-    PGresult *r = run_locked(pg, 0,
-                             "WITH del AS (DELETE FROM vx_jobs WHERE id = $1 AND state IN"
-                             " ('succeeded', 'failed', 'canceled') RETURNING id)"
-                             " SELECT (SELECT count(*) FROM del),"
-                             " (SELECT state FROM vx_jobs WHERE id = $1)",
-                             1, vals, err);
+    PGresult *r = pg_run_locked(pg, 0,
+                                "WITH del AS (DELETE FROM vx_jobs WHERE id = $1 AND state IN"
+                                " ('succeeded', 'failed', 'canceled') RETURNING id)"
+                                " SELECT (SELECT count(*) FROM del),"
+                                " (SELECT state FROM vx_jobs WHERE id = $1)",
+                                1, vals, err);
     pthread_mutex_unlock(&pg->lock);
     if (!r) return -1;
     int rc = 0;
@@ -568,7 +559,7 @@ long vx_pg_queued(vx_pg *pg, vx_err *err)
 {
     pthread_mutex_lock(&pg->lock);
     PGresult *r =
-        run_locked(pg, 1, "SELECT count(*) FROM vx_jobs WHERE state = 'queued'", 0, NULL, err);
+        pg_run_locked(pg, 1, "SELECT count(*) FROM vx_jobs WHERE state = 'queued'", 0, NULL, err);
     pthread_mutex_unlock(&pg->lock);
     if (!r) return -1;
     long n = atol(PQgetvalue(r, 0, 0));
@@ -579,7 +570,7 @@ long vx_pg_queued(vx_pg *pg, vx_err *err)
 int vx_pg_ping(vx_pg *pg, vx_err *err)
 {
     pthread_mutex_lock(&pg->lock);
-    int rc = exec_locked(pg, 1, "SELECT 1", 0, NULL, err);
+    int rc = pg_exec_locked(pg, 1, "SELECT 1", 0, NULL, err);
     pthread_mutex_unlock(&pg->lock);
     return rc;
 }
@@ -589,10 +580,10 @@ int vx_pg_child_counts(vx_pg *pg, const char *id, int *done, int *total, vx_err 
     *done = *total = 0;
     const char *vals[] = {id};
     pthread_mutex_lock(&pg->lock);
-    PGresult *r = run_locked(pg, 1,
-                             "SELECT count(*) FILTER (WHERE state = 'succeeded'), count(*) FROM"
-                             " vx_jobs WHERE parent_id = $1",
-                             1, vals, err);
+    PGresult *r = pg_run_locked(pg, 1,
+                                "SELECT count(*) FILTER (WHERE state = 'succeeded'), count(*) FROM"
+                                " vx_jobs WHERE parent_id = $1",
+                                1, vals, err);
     pthread_mutex_unlock(&pg->lock);
     if (!r) return -1;
     *done = atoi(PQgetvalue(r, 0, 0));
@@ -607,7 +598,7 @@ int vx_pg_find_idem(vx_pg *pg, const char *key, vx_pg_job *out, vx_err *err)
     const char *vals[] = {key};
     pthread_mutex_lock(&pg->lock);
     PGresult *r =
-        run_locked(pg, 1, "SELECT " JOB_COLS " FROM vx_jobs WHERE idem_key = $1", 1, vals, err);
+        pg_run_locked(pg, 1, "SELECT " JOB_COLS " FROM vx_jobs WHERE idem_key = $1", 1, vals, err);
     pthread_mutex_unlock(&pg->lock);
     if (!r) return -1;
     int got = PQntuples(r) == 1;
@@ -642,7 +633,7 @@ int vx_pg_list(vx_pg *pg, const vx_pg_filter *f, const char *after, int limit, v
         " AND ($6::text IS NULL OR mesh = $6)"
         " AND ($4::text IS NULL OR id < $4) ORDER BY id DESC LIMIT $5::integer";
     pthread_mutex_lock(&pg->lock);
-    PGresult *r = run_locked(pg, 1, f->desc ? desc : asc, 6, vals, err);
+    PGresult *r = pg_run_locked(pg, 1, f->desc ? desc : asc, 6, vals, err);
     pthread_mutex_unlock(&pg->lock);
     if (!r) return -1;
     int rows = PQntuples(r);
@@ -669,7 +660,7 @@ int vx_pg_claim(vx_pg *pg, const char *kinds, vx_pg_job *out, vx_err *err)
     snprintf(lease, sizeof lease, "%.3f", pg->desc.lease_s);
     const char *vals[] = {pg->replica, lease, kinds && *kinds ? kinds : NULL};
     pthread_mutex_lock(&pg->lock);
-    PGresult *r = run_locked(
+    PGresult *r = pg_run_locked(
         pg, 0,
         "UPDATE vx_jobs SET state = 'running', replica = $1, attempt = attempt + 1,"
         " lease_expires = now() + make_interval(secs => $2::float8), started = now(),"
@@ -699,12 +690,12 @@ int vx_pg_renew(vx_pg *pg, const char *id, int attempt, double progress, int *ca
     *cancel = 0;
     pthread_mutex_lock(&pg->lock);
     /* Idempotent: re-run on a new connection after a lost one. */
-    PGresult *r = run_locked(pg, 1,
-                             "UPDATE vx_jobs SET lease_expires = now() + make_interval(secs =>"
-                             " $4::float8), progress = $5::float8 WHERE id = $1 AND attempt ="
-                             " $2::integer AND replica = $3 AND state = 'running'"
-                             " RETURNING cancel_requested",
-                             5, vals, err);
+    PGresult *r = pg_run_locked(pg, 1,
+                                "UPDATE vx_jobs SET lease_expires = now() + make_interval(secs =>"
+                                " $4::float8), progress = $5::float8 WHERE id = $1 AND attempt ="
+                                " $2::integer AND replica = $3 AND state = 'running'"
+                                " RETURNING cancel_requested",
+                                5, vals, err);
     pthread_mutex_unlock(&pg->lock);
     if (!r) return -1;
     int held = PQntuples(r) == 1;
@@ -730,7 +721,7 @@ int vx_pg_complete(vx_pg *pg, const char *id, int attempt, const cJSON *result, 
     const char *vals[] = {id, att, pg->replica, manifest};
     pthread_mutex_lock(&pg->lock);
     /* One statement: the fenced update and the results index of its outputs. */
-    PGresult *r = run_locked(
+    PGresult *r = pg_run_locked(
         pg, 0,
         "WITH done AS (UPDATE vx_jobs SET state = 'succeeded', result = $4::json,"
         "  finished = now(), lease_expires = NULL, progress = 1, updated = now()"
@@ -772,7 +763,7 @@ int vx_pg_fail(vx_pg *pg, const char *id, int attempt, const vx_err *why, int re
                           top};
     pthread_mutex_lock(&pg->lock);
 #define RETRY_NOW "(NOT $7::boolean AND $8::boolean AND attempt < max_attempts)"
-    PGresult *r = run_locked(
+    PGresult *r = pg_run_locked(
         pg, 0,
         "UPDATE vx_jobs SET errors = errors || jsonb_build_array(jsonb_build_object("
         "  'attempt', attempt, 'replica', replica, 'kind', $4::text, 'code', $5::text,"
@@ -803,15 +794,15 @@ int vx_pg_release(vx_pg *pg, const char *id, int attempt, vx_err *err)
     snprintf(att, sizeof att, "%d", attempt);
     const char *vals[] = {id, att, pg->replica};
     pthread_mutex_lock(&pg->lock);
-    PGresult *r =
-        run_locked(pg, 0,
-                   "UPDATE vx_jobs SET state = CASE WHEN cancel_requested THEN 'canceled' ELSE"
-                   " 'queued' END, finished = CASE WHEN cancel_requested THEN now() END,"
-                   " max_attempts = max_attempts + 1, lease_expires = NULL, not_before = now(),"
-                   " updated = now()"
-                   " WHERE id = $1 AND attempt = $2::integer AND replica = $3 AND state = 'running'"
-                   " RETURNING state",
-                   3, vals, err);
+    PGresult *r = pg_run_locked(
+        pg, 0,
+        "UPDATE vx_jobs SET state = CASE WHEN cancel_requested THEN 'canceled' ELSE"
+        " 'queued' END, finished = CASE WHEN cancel_requested THEN now() END,"
+        " max_attempts = max_attempts + 1, lease_expires = NULL, not_before = now(),"
+        " updated = now()"
+        " WHERE id = $1 AND attempt = $2::integer AND replica = $3 AND state = 'running'"
+        " RETURNING state",
+        3, vals, err);
     pthread_mutex_unlock(&pg->lock);
     if (!r) return -1;
     int done = PQntuples(r) == 1;
@@ -830,7 +821,7 @@ int vx_pg_requeue_expired(vx_pg *pg, int max, int *requeued, int *failed, vx_err
     const char *vals[] = {lim, base, top, pg->replica};
     pthread_mutex_lock(&pg->lock);
 #define AGAIN "(NOT cancel_requested AND attempt < max_attempts)"
-    PGresult *r = run_locked(
+    PGresult *r = pg_run_locked(
         pg, 1,
         "UPDATE vx_jobs SET errors = errors || jsonb_build_array(jsonb_build_object("
         "  'attempt', attempt, 'replica', replica, 'kind', 'unavail', 'code', 'lease_expired',"
@@ -869,7 +860,7 @@ int vx_pg_cancel(vx_pg *pg, const char *id, int *was_running, vx_err *err)
         return vx_err_set(err, VX_ENOTFOUND, "job_not_found", "no job %.40s", id ? id : "");
     const char *vals[] = {id};
     pthread_mutex_lock(&pg->lock);
-    PGresult *r = run_locked(
+    PGresult *r = pg_run_locked(
         pg, 0,
         "WITH kids AS (UPDATE vx_jobs SET cancel_requested = true,"
         "  state = CASE WHEN state = 'queued' THEN 'canceled' ELSE state END,"
@@ -883,7 +874,7 @@ int vx_pg_cancel(vx_pg *pg, const char *id, int *was_running, vx_err *err)
         1, vals, err);
     PGresult *q = NULL;
     if (r && PQntuples(r) == 0)
-        q = run_locked(pg, 1, "SELECT state FROM vx_jobs WHERE id = $1", 1, vals, err);
+        q = pg_run_locked(pg, 1, "SELECT state FROM vx_jobs WHERE id = $1", 1, vals, err);
     pthread_mutex_unlock(&pg->lock);
     if (!r) return -1;
     int rc = 0;
@@ -905,7 +896,7 @@ int vx_pg_cancel(vx_pg *pg, const char *id, int *was_running, vx_err *err)
 int vx_pg_listen(vx_pg *pg, vx_err *err)
 {
     pthread_mutex_lock(&pg->lock);
-    int rc = exec_locked(pg, 1, "LISTEN " VX_PG_CHANNEL, 0, NULL, err);
+    int rc = pg_exec_locked(pg, 1, "LISTEN " VX_PG_CHANNEL, 0, NULL, err);
     if (rc == 0) pg->listening = 1;
     pthread_mutex_unlock(&pg->lock);
     return rc;
@@ -970,10 +961,10 @@ int vx_pg_counts(vx_pg *pg, vx_pg_count **out, size_t *n, vx_err *err)
     *out = NULL;
     *n = 0;
     pthread_mutex_lock(&pg->lock);
-    PGresult *r = run_locked(pg, 1,
-                             "SELECT state, kind, count(*) FROM vx_jobs GROUP BY state, kind"
-                             " ORDER BY state, kind",
-                             0, NULL, err);
+    PGresult *r = pg_run_locked(pg, 1,
+                                "SELECT state, kind, count(*) FROM vx_jobs GROUP BY state, kind"
+                                " ORDER BY state, kind",
+                                0, NULL, err);
     pthread_mutex_unlock(&pg->lock);
     if (!r) return -1;
     int rows = PQntuples(r);

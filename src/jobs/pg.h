@@ -34,7 +34,7 @@
 #include "util/err.h"
 
 /* The schema version this binary creates and understands. */
-#define VX_PG_SCHEMA_VERSION 3
+#define VX_PG_SCHEMA_VERSION 4
 /* The NOTIFY channel every state change is sent on. */
 #define VX_PG_CHANNEL "vx_jobs"
 
@@ -193,6 +193,42 @@ int vx_pg_listen(vx_pg *pg, vx_err *err);
  * timeout or while the database is unreachable (the caller then re-reads
  * what it waits for: the polling fallback), -1 when not listening. */
 int vx_pg_wait(vx_pg *pg, double timeout_s, char *payload, size_t payload_n, vx_err *err);
+
+/* The mesh catalog (pg_mesh.c): which meshes exist, for every replica.
+ * An upload holds its id's lock (shared) from before its bytes go into
+ * the blob store until its row is written, so that a purge never takes
+ * the bytes of a mesh that is coming back. */
+int vx_pg_mesh_lock(vx_pg *pg, const char *id, vx_err *err);
+void vx_pg_mesh_unlock(vx_pg *pg, const char *id);
+/* Writes mesh id's row from its metadata (an object with format, bytes,
+ * triangles): *existed = 1 when a live row was there (it stays as it was),
+ * else the row is new or a deleted one is back; *stored (may be NULL) =
+ * the row's metadata now (owned). 0 or -1 with err. */
+int vx_pg_mesh_put(vx_pg *pg, const char *id, const cJSON *meta, int *existed, cJSON **stored,
+                   vx_err *err);
+/* A live mesh's metadata into *meta (owned): 1, 0 when there is none
+ * (absent or deleted), -1 with err. */
+int vx_pg_mesh_get(vx_pg *pg, const char *id, cJSON **meta, vx_err *err);
+/* Marks a live mesh deleted (gone for the API at once; its bytes stay for
+ * the jobs that name it). VX_ENOTFOUND mesh_not_found. */
+int vx_pg_mesh_delete(vx_pg *pg, const char *id, vx_err *err);
+/* Up to limit (1..1000) live meshes' metadata by id after `after` (NULL =
+ * first): an owned array, next = the last id when more follow, else "";
+ * NULL with err. */
+cJSON *vx_pg_mesh_list(vx_pg *pg, const char *after, int limit, char next[65], vx_err *err);
+/* Live meshes, or -1 with err. */
+long vx_pg_mesh_count(vx_pg *pg, vx_err *err);
+/* Adds the meshes of an array of metadata objects that have no row (a
+ * store that held meshes before the catalog did); rows that exist, live or
+ * deleted, stay. Returns how many it added, or -1. */
+int vx_pg_mesh_add_missing(vx_pg *pg, const cJSON *metas, vx_err *err);
+/* Removes the bytes of one purged mesh (format: its metadata's) from the
+ * blob store: 0, or -1 to keep its row for a later purge. */
+typedef int (*vx_pg_purge_fn)(void *ud, const char *id, const char *format);
+/* For up to max (0 = 100) deleted meshes that no queued or running job
+ * names: under the mesh's lock, deletes the row and calls fn, in one
+ * transaction. Returns how many went, or -1 with err. */
+int vx_pg_mesh_purge(vx_pg *pg, int max, vx_pg_purge_fn fn, void *ud, vx_err *err);
 
 /* Jobs per (state, kind), every state (owned array, free()). The KEDA
  * trigger's query is in docs/scaling.md. */

@@ -257,13 +257,36 @@ static int mesh_commit_new_locked(vx_store *s, vx_upload *u, const char *id, con
     return rc;
 }
 
-int vx_store_mesh_commit(vx_store *s, vx_upload *u, const char *id, const char *ext,
-                         const cJSON *meta, int *existed, vx_err *err)
+/* With a catalog: the bytes of an entry that the catalog's purge (another
+ * daemon's) removed: the entry goes, and the upload stores them again. */
+static void mesh_drop_purged(vx_store *s, const char *id)
+{
+    char key[128];
+    pthread_mutex_lock(&s->lock);
+    int found;
+    size_t at = mesh_find(s, id, &found);
+    if (found) mesh_data_key(key, sizeof key, id, mesh_at(s, at)->ext);
+    pthread_mutex_unlock(&s->lock);
+    /* (a remote store's stat is a request: not under the lock) */
+    if (!found || s->ops->stat(s->blob, key, NULL, NULL) == 0 || errno != ENOENT) return;
+    pthread_mutex_lock(&s->lock);
+    at = mesh_find(s, id, &found);
+    if (found && !mesh_at(s, at)->deleted && !mesh_at(s, at)->pins) {
+        VX_INFO("store.mesh_purged_elsewhere", "mesh=%s", id);
+        free(mesh_at(s, at)->meta);
+        free(vx_sorted_remove_at(&s->meshes, at));
+    }
+    pthread_mutex_unlock(&s->lock);
+}
+
+static int mesh_commit_here(vx_store *s, vx_upload *u, const char *id, const char *ext,
+                            const cJSON *meta, int *existed, vx_err *err)
 {
     char key[128], mkey[128];
     mesh_data_key(key, sizeof key, id, ext);
     mesh_key(mkey, sizeof mkey, id, ".json");
     *existed = 0;
+    if (s->catalog) mesh_drop_purged(s, id);
     pthread_mutex_lock(&s->lock);
     int found;
     size_t at = mesh_find(s, id, &found);
@@ -286,6 +309,23 @@ int vx_store_mesh_commit(vx_store *s, vx_upload *u, const char *id, const char *
         s->ops->remove(s->blob, mkey);
         s->ops->remove(s->blob, key);
     }
+    return rc;
+}
+
+int vx_store_mesh_commit(vx_store *s, vx_upload *u, const char *id, const char *ext,
+                         const cJSON *meta, int *existed, vx_err *err)
+{
+    const vx_mesh_catalog *c = s->catalog;
+    if (!c) return mesh_commit_here(s, u, id, ext, meta, existed, err);
+    /* The bytes first, then the catalog's row: a mesh the catalog names
+     * has its bytes in the store. */
+    if (c->lock(c->ud, id, err)) {
+        vx_upload_abort(u);
+        return -1;
+    }
+    int here, rc = mesh_commit_here(s, u, id, ext, meta, &here, err);
+    if (!rc) rc = c->put(c->ud, id, meta, existed, err);
+    c->unlock(c->ud, id);
     return rc;
 }
 /* On a shared store (file://, s3://) a mesh another daemon committed after
@@ -334,6 +374,13 @@ static int mesh_fetch_shared(vx_store *s, const char *id, vx_err *err)
 
 cJSON *vx_store_mesh_meta(vx_store *s, const char *id, vx_err *err)
 {
+    const vx_mesh_catalog *c = s->catalog;
+    if (c) {
+        cJSON *meta = NULL;
+        int got = vx_store_valid_mesh_id(id) ? c->get(c->ud, id, &meta, err) : 0;
+        if (!got) vx_err_set(err, VX_ENOTFOUND, "mesh_not_found", "no mesh with id %.80s", id);
+        return got > 0 ? meta : NULL;
+    }
     if (mesh_fetch_shared(s, id, err) < 0) return NULL;
     pthread_mutex_lock(&s->lock);
     int found;
@@ -364,6 +411,8 @@ int vx_store_mesh_path(vx_store *s, const char *id, char *buf, size_t n, vx_err 
 
 int vx_store_mesh_delete(vx_store *s, const char *id, vx_err *err)
 {
+    const vx_mesh_catalog *c = s->catalog;
+    if (c) return c->remove(c->ud, id, err); /* the bytes stay until the purge */
     pthread_mutex_lock(&s->lock);
     int found;
     size_t at = mesh_find(s, id, &found);
@@ -426,8 +475,10 @@ void vx_store_mesh_unpin(vx_store *s, const char *id)
     if (removed) fsync_meshes_dir(s);
 }
 
-cJSON *vx_store_mesh_list(vx_store *s, const char *after, int limit, char next[65])
+cJSON *vx_store_mesh_list(vx_store *s, const char *after, int limit, char next[65], vx_err *err)
 {
+    const vx_mesh_catalog *c = s->catalog;
+    if (c) return c->list(c->ud, after, limit, next, err);
     cJSON *arr = cJSON_CreateArray();
     next[0] = 0;
     pthread_mutex_lock(&s->lock);
@@ -451,6 +502,9 @@ cJSON *vx_store_mesh_list(vx_store *s, const char *after, int limit, char next[6
 
 size_t vx_store_mesh_count(vx_store *s)
 {
+    const vx_mesh_catalog *c = s->catalog;
+    long cn = c ? c->count(c->ud, NULL) : -1;
+    if (cn >= 0) return (size_t)cn;
     pthread_mutex_lock(&s->lock);
     size_t n = s->meshes.n - s->ndeleted;
     pthread_mutex_unlock(&s->lock);
@@ -466,4 +520,48 @@ size_t vx_store_collect_meshes_locked(vx_store *s)
             meshes++;
         }
     return meshes;
+}
+
+void vx_store_set_catalog(vx_store *s, const vx_mesh_catalog *c)
+{
+    s->catalog = c;
+}
+
+int vx_store_mesh_purge(vx_store *s, const char *id, const char *format)
+{
+    pthread_mutex_lock(&s->lock);
+    int found;
+    size_t at = mesh_find(s, id, &found);
+    if (found && mesh_at(s, at)->pins) {
+        pthread_mutex_unlock(&s->lock);
+        return -1;
+    }
+    char key[128];
+    const char *ext = vx_intake_ext_of_name(format);
+    if (ext) { /* the catalog's format, whatever this store's entry says */
+        mesh_data_key(key, sizeof key, id, ext);
+        s->ops->remove(s->blob, key);
+    }
+    if (found) {
+        mesh_remove_locked(s, at);
+    } else {
+        mesh_key(key, sizeof key, id, ".json");
+        s->ops->remove(s->blob, key);
+    }
+    pthread_mutex_unlock(&s->lock);
+    fsync_meshes_dir(s);
+    return 0;
+}
+
+cJSON *vx_store_mesh_local(vx_store *s)
+{
+    cJSON *arr = cJSON_CreateArray();
+    pthread_mutex_lock(&s->lock);
+    for (size_t i = 0; arr && i < s->meshes.n; i++) {
+        if (mesh_at(s, i)->deleted || !mesh_at(s, i)->meta) continue;
+        cJSON *m = cJSON_Parse(mesh_at(s, i)->meta);
+        if (m && !cJSON_AddItemToArray(arr, m)) cJSON_Delete(m);
+    }
+    pthread_mutex_unlock(&s->lock);
+    return arr;
 }

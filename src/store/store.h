@@ -89,9 +89,43 @@ void vx_store_mesh_unpin(vx_store *s, const char *id);
  * after the journal replay has pinned what unfinished jobs use. */
 void vx_store_collect(vx_store *s);
 /* Page of metadata sorted by id, starting after `after` (NULL = first).
- * Returns an owned array; next[0] = 0 when this is the last page. */
-cJSON *vx_store_mesh_list(vx_store *s, const char *after, int limit, char next[65]);
+ * Returns an owned array; next[0] = 0 when this is the last page; NULL
+ * with err only when a catalog cannot answer. */
+cJSON *vx_store_mesh_list(vx_store *s, const char *after, int limit, char next[65], vx_err *err);
+/* Meshes stored (the catalog's count when it answers). */
 size_t vx_store_mesh_count(vx_store *s);
+
+/* A catalog of the meshes that exist, shared by several daemons on one
+ * blob store (cluster mode: PostgreSQL's vx_meshes, src/jobs/cluster.c).
+ * With one, what the API sees of meshes (metadata, list, count, delete,
+ * whether an upload is new) is the catalog's; the store keeps the bytes,
+ * and its own index only as a cache of them. A delete only tells the
+ * catalog: the bytes stay for the jobs that name the mesh until the
+ * catalog's owner purges them (vx_store_mesh_purge). Each call returns -1
+ * with err when the catalog cannot answer (the API's 503). */
+typedef struct vx_mesh_catalog {
+    void *ud;
+    /* Held (shared) from before an upload's bytes go in until put. */
+    int (*lock)(void *ud, const char *id, vx_err *err);
+    void (*unlock)(void *ud, const char *id);
+    /* *existed = 1 when the mesh was there, live, already. */
+    int (*put)(void *ud, const char *id, const cJSON *meta, int *existed, vx_err *err);
+    /* 1 with *meta (owned), 0 when there is no such live mesh. */
+    int (*get)(void *ud, const char *id, cJSON **meta, vx_err *err);
+    /* 0, or VX_ENOTFOUND mesh_not_found. */
+    int (*remove)(void *ud, const char *id, vx_err *err);
+    cJSON *(*list)(void *ud, const char *after, int limit, char next[65], vx_err *err);
+    long (*count)(void *ud, vx_err *err);
+} vx_mesh_catalog;
+/* Sets the catalog (NULL: none, this store's index is the catalog); it
+ * must stay valid until unset. */
+void vx_store_set_catalog(vx_store *s, const vx_mesh_catalog *c);
+/* The catalog's purge of a deleted mesh: removes its bytes (format: its
+ * metadata's) and this store's entry. -1 while a job here pins it. */
+int vx_store_mesh_purge(vx_store *s, const char *id, const char *format);
+/* The metadata of every live mesh in this store's own index (owned
+ * array): what a new catalog adds. */
+cJSON *vx_store_mesh_local(vx_store *s);
 /* 1 when id is 64 lowercase hex digits. */
 int vx_store_valid_mesh_id(const char *id);
 

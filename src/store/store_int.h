@@ -51,7 +51,8 @@ struct vx_store {
     uint64_t results_bytes;
     uint64_t evicted; /* results the budget removed (atomic) */
     unsigned long upload_seq;
-    int lock_fd; /* DATA/voxeld.lock, flock'd for the store's life */
+    int lock_fd;                    /* DATA/voxeld.lock, flock'd for the store's life */
+    const vx_mesh_catalog *catalog; /* NULL = none (the index is the catalog) */
 };
 
 struct vx_upload {

@@ -11,6 +11,9 @@
 #   it cancels its children;
 # - an Idempotency-Key answers the same job on any replica, and 422 for
 #   another request;
+# - the mesh catalog: a mesh uploaded on one replica is listed on another
+#   at once; a delete is a 404 everywhere at once, its bytes stay while a
+#   job names it and are purged once none does; uploaded again, it is new;
 # - a cancel on one replica reaches the job running on another;
 # - kill -9 of the replica running a job: it finishes on another as attempt
 #   2, the first attempt's lease_expired recorded;
@@ -142,6 +145,50 @@ check "the result is under results/JOB/ATTEMPT in the shared store" test -d "$SH
 on 2
 api GET "/v1/jobs?limit=5&kind=voxelize&mesh=$B"
 check "r2 lists it (filter by mesh)" jq -e --arg j "$J" '[.items[].id] | index($j) != null' "$BODY"
+
+# The mesh catalog: a mesh uploaded on r1 is listed by r2 at once (which
+# never used it), and a delete on r1 is a 404 on every replica at once; its
+# bytes stay while a job names it, and go once none does.
+on 1
+printf 'v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 %d\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n' "$RANDOM" >"$TMP/cat.obj"
+upload "$TMP/cat.obj"
+expect_status "catalog: upload on r1" 201
+M=$MESH_ID
+on 2
+api GET "/v1/meshes?limit=1000"
+check "catalog: r2 lists the mesh uploaded on r1" jq -e --arg m "$M" '[.items[].id] | index($m) != null' "$BODY"
+api GET /v1/info
+n2=$(jqb .meshes)
+on 3
+api GET /v1/info
+check "catalog: r2 and r3 count the same meshes ($n2)" test "$(jqb .meshes)" = "$n2"
+# A queued job of a kind no replica runs names the mesh (it stays queued).
+HELD=$(printf '%032x' "$RANDOM$RANDOM")
+psql "$URL" -qAtc "INSERT INTO vx_jobs (id, kind, mesh, max_attempts) VALUES ('$HELD', 'held', '$M', 1)" >/dev/null
+MF=$(find "$SHARED" -name "$M.obj" | head -n 1)
+check "catalog: the mesh's bytes are in the shared store" test -n "$MF"
+on 1
+api DELETE "/v1/meshes/$M"
+expect_status "catalog: delete on r1" 204
+on 2
+api GET "/v1/meshes/$M"
+expect_error "catalog: a 404 on r2 at once" 404 mesh_not_found
+submit 3 voxelize "$M" '{"resolution":16}'
+expect_error "catalog: no new job on r3" 404 mesh_not_found
+api GET "/v1/meshes?limit=1000"
+check "catalog: r3 no longer lists it" jq -e --arg m "$M" '[.items[].id] | index($m) == null' "$BODY"
+sleep 3 # past a few purge rounds (one per renewal: 1 s here)
+check "catalog: its bytes stay while a queued job names it" test -e "$MF"
+psql "$URL" -qAtc "UPDATE vx_jobs SET state = 'canceled', finished = now() WHERE id = '$HELD'" >/dev/null
+for i in $(seq 1 50); do [[ -e $MF ]] || break; sleep 0.2; done
+check "catalog: and go once none does" test ! -e "$MF"
+# Uploaded again (on a replica that knew it): new, and whole everywhere.
+on 1
+upload "$TMP/cat.obj"
+expect_status "catalog: the same bytes again are a new mesh" 201
+on 3
+api GET "/v1/meshes/$M/file"
+check "catalog: read back from r3 byte for byte" cmp -s "$BODY" "$TMP/cat.obj"
 
 # A bricked voxelize: split at submission into one child job per brick,
 # which any replica claims; the parent merges them once all succeeded. The
@@ -312,6 +359,13 @@ api DELETE "/v1/jobs/$Q"
 expect_error "delete with the database down" 503 database_unavailable
 submit 1 voxelize "$B" '{"resolution":24,"format":"summary"}'
 expect_error "submit with the database down (not acknowledged)" 503 database_unavailable
+api GET "/v1/meshes?limit=5"
+expect_error "mesh list with the database down" 503 database_unavailable
+api GET "/v1/meshes/$B"
+expect_error "mesh metadata with the database down" 503 database_unavailable
+printf 'v 0 0 0\nv 2 0 0\nv 0 2 0\nv 0 0 2\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n' >"$TMP/down.obj"
+upload "$TMP/down.obj"
+expect_error "upload with the database down (not acknowledged)" 503 database_unavailable
 api GET /readyz
 check "readyz 503, database not ok" bash -c "test '$STATUS' = 503 && jq -e '.database.ok == false and (.reason | test(\"database\"))' '$BODY'"
 bash "$PGSH" start "$PGDIR" >/dev/null

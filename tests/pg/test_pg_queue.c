@@ -1,7 +1,8 @@
 /* The PostgreSQL job queue (src/jobs/pg.c) against a real PostgreSQL that
  * tests/support/pg.sh starts (VX_PG_URL, VX_PG_DIR, VX_PG_SH): schema
  * migration, submit/get/list, concurrent claims, lease expiry and fencing,
- * max_attempts, cancel, NOTIFY, counts and a server restart. */
+ * max_attempts, cancel, NOTIFY, counts, a server restart, child jobs and
+ * the mesh catalog. */
 #include <pthread.h>
 #include <setjmp.h>
 #include <stdarg.h>
@@ -806,6 +807,178 @@ static void test_children(void **state)
     vx_pg_close(pg);
 }
 
+/* The mesh catalog (pg_mesh.c). */
+static char purged[4][65];
+static int npurged, purge_fails;
+
+static int on_purge(void *ud, const char *id, const char *format)
+{
+    (void)ud;
+    assert_string_equal(format, "obj");
+    if (purge_fails) return -1;
+    if (npurged < 4) snprintf(purged[npurged++], 65, "%s", id);
+    return 0;
+}
+
+typedef struct purge_run {
+    vx_pg *pg;
+    int n;
+} purge_run;
+
+static void *purge_thread(void *arg)
+{
+    purge_run *pr = arg;
+    vx_err err = {0};
+    pr->n = vx_pg_mesh_purge(pr->pg, 0, on_purge, NULL, &err);
+    return NULL;
+}
+
+static void mesh_id(char id[65], int n)
+{
+    snprintf(id, 65, "%064x", n);
+}
+
+static cJSON *mesh_meta(const char *id, const char *name)
+{
+    cJSON *m = cJSON_CreateObject();
+    cJSON_AddStringToObject(m, "id", id);
+    cJSON_AddStringToObject(m, "format", "obj");
+    cJSON_AddStringToObject(m, "name", name);
+    cJSON_AddNumberToObject(m, "bytes", 123);
+    cJSON_AddNumberToObject(m, "triangles", 4);
+    return m;
+}
+
+static void test_meshes(void **state)
+{
+    (void)state;
+    PQclear(sql("DELETE FROM vx_meshes"));
+    vx_pg *pg = open_as("meshes", 30), *other = open_as("meshes2", 30);
+    vx_err err = {0};
+    char ids[5][65];
+    int existed = -1;
+    for (int i = 0; i < 5; i++) {
+        mesh_id(ids[i], 0x5a0 + i);
+        cJSON *m = mesh_meta(ids[i], "first");
+        assert_int_equal(vx_pg_mesh_put(pg, ids[i], m, &existed, NULL, &err), 0);
+        assert_int_equal(existed, 0);
+        cJSON_Delete(m);
+    }
+    /* Again, another name: it existed, and the first upload's row stays. */
+    cJSON *m = mesh_meta(ids[0], "second"), *got = NULL, *stored = NULL;
+    assert_int_equal(vx_pg_mesh_put(other, ids[0], m, &existed, &stored, &err), 0);
+    assert_int_equal(existed, 1);
+    assert_string_equal(cJSON_GetStringValue(cJSON_GetObjectItem(stored, "name")), "first");
+    cJSON_Delete(stored);
+    cJSON_Delete(m);
+    assert_int_equal(vx_pg_mesh_get(other, ids[0], &got, &err), 1);
+    /* the metadata keeps its key order (json, not jsonb) */
+    assert_string_equal(got->child->string, "id");
+    cJSON_Delete(got);
+    assert_int_equal(vx_pg_mesh_count(pg, &err), 5);
+    /* Pages of 2: 2, 2, 1, in id order. */
+    char next[65] = "", after[65] = "";
+    int pages = 0, seen = 0;
+    do {
+        cJSON *page = vx_pg_mesh_list(other, after[0] ? after : NULL, 2, next, &err);
+        assert_non_null(page);
+        const cJSON *it;
+        cJSON_ArrayForEach(it, page)
+        {
+            assert_string_equal(cJSON_GetStringValue(cJSON_GetObjectItem(it, "id")), ids[seen]);
+            seen++;
+        }
+        cJSON_Delete(page);
+        snprintf(after, sizeof after, "%s", next);
+        pages++;
+    } while (after[0]);
+    assert_int_equal(pages, 3);
+    assert_int_equal(seen, 5);
+
+    /* Deleted: gone for get, list and count at once; a second delete is 404. */
+    assert_int_equal(vx_pg_mesh_delete(pg, ids[1], &err), 0);
+    assert_int_equal(vx_pg_mesh_get(other, ids[1], &got, &err), 0);
+    assert_int_equal(vx_pg_mesh_count(other, &err), 4);
+    assert_int_equal(vx_pg_mesh_delete(other, ids[1], &err), -1);
+    assert_string_equal(err.code, "mesh_not_found");
+    /* A queued job names ids[2] (its mesh) and a running one ids[3] (in
+     * its params): deleted, their bytes wait for the jobs. */
+    assert_int_equal(vx_pg_mesh_delete(pg, ids[2], &err), 0);
+    assert_int_equal(vx_pg_mesh_delete(pg, ids[3], &err), 0);
+    char j1[33], j2[33];
+    make_id(j1, 9201);
+    make_id(j2, 9202);
+    char params[200];
+    snprintf(params, sizeof params, "{\"meshes\":[{\"mesh\":\"%s\"}]}", ids[3]);
+    cJSON *pj = cJSON_Parse(params);
+    vx_pg_new_job jobs[2] = {{.id = j1, .kind = "render", .mesh = ids[2]},
+                             {.id = j2, .kind = "render", .mesh = ids[4], .params = pj}};
+    assert_int_equal(vx_pg_submit(pg, jobs, 2, &err), 0);
+    vx_pg_job run;
+    assert_int_equal(vx_pg_claim(pg, "render", &run, &err), 1);
+    assert_string_equal(run.id, j1);
+    vx_pg_job_clear(&run);
+    assert_int_equal(vx_pg_claim(pg, "render", &run, &err), 1);
+    npurged = 0;
+    assert_int_equal(vx_pg_mesh_purge(other, 0, on_purge, NULL, &err), 1);
+    assert_string_equal(purged[0], ids[1]);
+    assert_int_equal(sql_long("SELECT count(*) FROM vx_meshes"), 4);
+    /* A failing byte removal keeps the row for the next purge. */
+    cJSON *res = cJSON_Parse("{\"outputs\":{}}");
+    assert_int_equal(vx_pg_complete(pg, j1, 1, res, &err), 0);
+    purge_fails = 1;
+    assert_int_equal(vx_pg_mesh_purge(other, 0, on_purge, NULL, &err), -1);
+    purge_fails = 0;
+    assert_int_equal(sql_long("SELECT count(*) FROM vx_meshes"), 4);
+    npurged = 0;
+    assert_int_equal(vx_pg_mesh_purge(other, 0, on_purge, NULL, &err), 1);
+    assert_string_equal(purged[0], ids[2]);
+    /* An upload in progress (its lock held) holds the purge back until it
+     * is done; a re-upload brings a deleted mesh back. */
+    assert_int_equal(vx_pg_complete(pg, j2, run.attempt, res, &err), 0);
+    vx_pg_job_clear(&run);
+    assert_int_equal(vx_pg_mesh_lock(pg, ids[3], &err), 0);
+    purge_run pr = {other, -2};
+    pthread_t t;
+    npurged = 0;
+    assert_int_equal(pthread_create(&t, NULL, purge_thread, &pr), 0);
+    nap(0.5);
+    assert_int_equal(npurged, 0); /* waiting for the upload */
+    m = mesh_meta(ids[3], "again");
+    assert_int_equal(vx_pg_mesh_put(pg, ids[3], m, &existed, NULL, &err), 0);
+    assert_int_equal(existed, 0);
+    vx_pg_mesh_unlock(pg, ids[3]);
+    pthread_join(t, NULL);
+    assert_int_equal(pr.n, 0); /* it came back: not purged */
+    assert_int_equal(npurged, 0);
+    assert_int_equal(vx_pg_mesh_get(other, ids[3], &got, &err), 1);
+    assert_string_equal(cJSON_GetStringValue(cJSON_GetObjectItem(got, "name")), "again");
+    cJSON_Delete(got);
+    cJSON_Delete(m);
+    /* What a store held before the catalog: added, but neither a live nor
+     * a deleted row changes. */
+    assert_int_equal(vx_pg_mesh_delete(pg, ids[4], &err), 0);
+    cJSON *arr = cJSON_CreateArray();
+    char fresh[65];
+    mesh_id(fresh, 0x5b0);
+    cJSON_AddItemToArray(arr, mesh_meta(fresh, "old"));
+    cJSON_AddItemToArray(arr, mesh_meta(ids[0], "old"));
+    cJSON_AddItemToArray(arr, mesh_meta(ids[4], "old"));
+    cJSON_AddItemToArray(arr, mesh_meta("not-an-id", "old"));
+    assert_int_equal(vx_pg_mesh_add_missing(pg, arr, &err), 1);
+    cJSON_Delete(arr);
+    assert_int_equal(vx_pg_mesh_get(pg, fresh, &got, &err), 1);
+    cJSON_Delete(got);
+    assert_int_equal(vx_pg_mesh_get(pg, ids[4], &got, &err), 0);
+    assert_int_equal(vx_pg_mesh_get(pg, ids[0], &got, &err), 1);
+    assert_string_equal(cJSON_GetStringValue(cJSON_GetObjectItem(got, "name")), "first");
+    cJSON_Delete(got);
+    cJSON_Delete(pj);
+    cJSON_Delete(res);
+    vx_pg_close(pg);
+    vx_pg_close(other);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -819,6 +992,7 @@ int main(void)
         cmocka_unit_test_setup(test_restart, setup),
         cmocka_unit_test_setup(test_v2, setup),
         cmocka_unit_test_setup(test_children, setup),
+        cmocka_unit_test_setup(test_meshes, setup),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

@@ -107,7 +107,7 @@ static void test_list_pages(void **state)
     char next[65], after[65] = "", prev[65] = "";
     int total = 0;
     for (int page = 0; page < 10; page++) {
-        cJSON *arr = vx_store_mesh_list(s, after[0] ? after : NULL, 3, next);
+        cJSON *arr = vx_store_mesh_list(s, after[0] ? after : NULL, 3, next, NULL);
         const cJSON *it;
         cJSON_ArrayForEach(it, arr)
         {
@@ -225,7 +225,7 @@ static void test_pins(void **state)
     assert_string_equal(err.code, "mesh_not_found");
     assert_int_equal(vx_store_mesh_count(s), 1);
     char next[65];
-    cJSON *l = vx_store_mesh_list(s, NULL, 10, next);
+    cJSON *l = vx_store_mesh_list(s, NULL, 10, next, NULL);
     assert_int_equal(cJSON_GetArraySize(l), 1);
     cJSON_Delete(l);
     assert_int_equal(vx_store_mesh_pin(s, a, 0, &err), -1); /* new jobs: 404 */
