@@ -311,7 +311,8 @@ static void test_params(void **st)
         "{\"resolution\":256,\"voxel_size\":null,\"grid\":null,\"padding\":0,\"method\":\"auto\","
         "\"inside\":null,\"fill\":\"solid\",\"supersample\":1,\"samples\":\"cube\","
         "\"threshold\":4,"
-        "\"format\":\"vdb\",\"vdb_grid\":\"fog\",\"bricks\":null,\"merge\":true}");
+        "\"format\":\"vdb\",\"vdb_grid\":\"fog\",\"bricks\":null,\"merge\":true,"
+        "\"vdb_index_base\":null}");
     /* normalised params parse to themselves */
     cJSON *again = vx_kind_parse(&vx_kind_voxelize, o, NULL, &err);
     char *s2 = cJSON_PrintUnformatted(again);
