@@ -17,8 +17,8 @@ int vx_pg_mesh_lock(vx_pg *pg, const char *id, vx_err *err)
 {
     const char *vals[] = {id};
     pthread_mutex_lock(&pg->lock);
-    int rc = pg_exec_locked(pg, 1, "SELECT pg_advisory_lock_shared(" MESH_LOCK_KEY ")", 1, vals,
-                            err);
+    int rc =
+        pg_exec_locked(pg, 1, "SELECT pg_advisory_lock_shared(" MESH_LOCK_KEY ")", 1, vals, err);
     pthread_mutex_unlock(&pg->lock);
     return rc;
 }
@@ -127,8 +127,8 @@ cJSON *vx_pg_mesh_list(vx_pg *pg, const char *after, int limit, char next[65], v
 long vx_pg_mesh_count(vx_pg *pg, vx_err *err)
 {
     pthread_mutex_lock(&pg->lock);
-    PGresult *r = pg_run_locked(pg, 1, "SELECT count(*) FROM vx_meshes WHERE deleted IS NULL", 0,
-                                NULL, err);
+    PGresult *r =
+        pg_run_locked(pg, 1, "SELECT count(*) FROM vx_meshes WHERE deleted IS NULL", 0, NULL, err);
     pthread_mutex_unlock(&pg->lock);
     if (!r) return -1;
     long n = atol(PQgetvalue(r, 0, 0));
@@ -142,14 +142,14 @@ int vx_pg_mesh_add_missing(vx_pg *pg, const cJSON *metas, vx_err *err)
     if (!text) return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory");
     const char *vals[] = {text};
     pthread_mutex_lock(&pg->lock);
-    PGresult *r = pg_run_locked(
-        pg, 1,
-        "INSERT INTO vx_meshes (id, format, bytes, triangles, meta)"
-        " SELECT e ->> 'id', e ->> 'format', coalesce((e ->> 'bytes')::bigint, 0),"
-        "  (e ->> 'triangles')::bigint, e FROM json_array_elements($1::json) e"
-        " WHERE (e ->> 'id') ~ '^[0-9a-f]{64}$'"
-        " ON CONFLICT (id) DO NOTHING",
-        1, vals, err);
+    PGresult *r =
+        pg_run_locked(pg, 1,
+                      "INSERT INTO vx_meshes (id, format, bytes, triangles, meta)"
+                      " SELECT e ->> 'id', e ->> 'format', coalesce((e ->> 'bytes')::bigint, 0),"
+                      "  (e ->> 'triangles')::bigint, e FROM json_array_elements($1::json) e"
+                      " WHERE (e ->> 'id') ~ '^[0-9a-f]{64}$'"
+                      " ON CONFLICT (id) DO NOTHING",
+                      1, vals, err);
     pthread_mutex_unlock(&pg->lock);
     cJSON_free(text);
     if (!r) return -1;
@@ -169,10 +169,11 @@ int vx_pg_mesh_purge(vx_pg *pg, int max, vx_pg_purge_fn fn, void *ud, vx_err *er
     " NOT EXISTS (SELECT 1 FROM vx_jobs j WHERE j.state IN ('queued', 'running') AND"              \
     "  (j.mesh = m.id OR strpos(j.params::text, m.id) > 0))"
     pthread_mutex_lock(&pg->lock);
-    PGresult *c = pg_run_locked(pg, 1,
-                                "SELECT id FROM vx_meshes m WHERE deleted IS NOT NULL AND"
-                                UNUSED_BY_JOBS " ORDER BY deleted LIMIT $1::integer",
-                                1, lv, err);
+    PGresult *c =
+        pg_run_locked(pg, 1,
+                      "SELECT id FROM vx_meshes m WHERE deleted IS NOT NULL AND" UNUSED_BY_JOBS
+                      " ORDER BY deleted LIMIT $1::integer",
+                      1, lv, err);
     pthread_mutex_unlock(&pg->lock);
     if (!c) return -1;
     int done = 0, rc = 0;
