@@ -1,5 +1,5 @@
 /* Store: upload hashing, commit/dedup, metadata, listing, delete, restart,
- * incomplete commits, result budget and LRU eviction. */
+ * incomplete commits, result budget and LRU eviction, a mesh catalog. */
 #include <setjmp.h>
 #include <stdarg.h>
 #include <stddef.h>
@@ -330,6 +330,192 @@ static void test_blobs(void **state)
     vx_store_close(s);
 }
 
+/* A catalog in memory (what cluster mode's vx_meshes is to the store). */
+typedef struct fake_catalog {
+    char ids[8][65];
+    char *meta[8];
+    int n, down;
+    char calls[64]; /* L lock, P put, U unlock, G get, R remove */
+} fake_catalog;
+
+static void called(fake_catalog *f, char c)
+{
+    size_t n = strlen(f->calls);
+    if (n + 1 < sizeof f->calls) f->calls[n] = c;
+}
+
+static int fake_find(fake_catalog *f, const char *id)
+{
+    for (int i = 0; i < f->n; i++)
+        if (!strcmp(f->ids[i], id) && f->meta[i]) return i;
+    return -1;
+}
+
+static int fake_down(fake_catalog *f, vx_err *err)
+{
+    return f->down ? vx_err_set(err, VX_EUNAVAIL, "database_unavailable", "down") : 0;
+}
+
+static int fake_lock(void *ud, const char *id, vx_err *err)
+{
+    (void)id;
+    called(ud, 'L');
+    return fake_down(ud, err);
+}
+
+static void fake_unlock(void *ud, const char *id)
+{
+    (void)id;
+    called(ud, 'U');
+}
+
+static int fake_put(void *ud, const char *id, const cJSON *meta, int *existed, vx_err *err)
+{
+    fake_catalog *f = ud;
+    called(f, 'P');
+    if (fake_down(f, err)) return -1;
+    *existed = fake_find(f, id) >= 0;
+    if (!*existed) {
+        snprintf(f->ids[f->n], 65, "%s", id);
+        f->meta[f->n++] = cJSON_PrintUnformatted(meta);
+    }
+    return 0;
+}
+
+static int fake_get(void *ud, const char *id, cJSON **meta, vx_err *err)
+{
+    fake_catalog *f = ud;
+    called(f, 'G');
+    if (fake_down(f, err)) return -1;
+    int i = fake_find(f, id);
+    *meta = i >= 0 ? cJSON_Parse(f->meta[i]) : NULL;
+    return i >= 0;
+}
+
+static int fake_remove(void *ud, const char *id, vx_err *err)
+{
+    fake_catalog *f = ud;
+    called(f, 'R');
+    int i = fake_find(f, id);
+    if (i < 0) return vx_err_set(err, VX_ENOTFOUND, "mesh_not_found", "no mesh");
+    free(f->meta[i]);
+    f->meta[i] = NULL;
+    return 0;
+}
+
+static cJSON *fake_list(void *ud, const char *after, int limit, char next[65], vx_err *err)
+{
+    fake_catalog *f = ud;
+    (void)after, (void)limit;
+    next[0] = 0;
+    if (fake_down(f, err)) return NULL;
+    cJSON *arr = cJSON_CreateArray();
+    for (int i = 0; i < f->n; i++)
+        if (f->meta[i]) cJSON_AddItemToArray(arr, cJSON_Parse(f->meta[i]));
+    return arr;
+}
+
+static long fake_count(void *ud, vx_err *err)
+{
+    fake_catalog *f = ud;
+    if (fake_down(f, err)) return -1;
+    long n = 0;
+    for (int i = 0; i < f->n; i++)
+        n += f->meta[i] != NULL;
+    return n;
+}
+
+static void test_catalog(void **state)
+{
+    (void)state;
+    char cdir[300], path[400];
+    snprintf(cdir, sizeof cdir, "%s/catalog", dir);
+    vx_err err;
+    /* A mesh stored before there was a catalog: vx_store_mesh_local has it. */
+    vx_store *s = vx_store_open(cdir, NULL, &err);
+    assert_non_null(s);
+    char old[65], id[65];
+    int existed;
+    put(s, "v 0 0 0\n", old, &existed);
+    fake_catalog f = {0};
+    vx_mesh_catalog c = {.ud = &f,
+                         .lock = fake_lock,
+                         .unlock = fake_unlock,
+                         .put = fake_put,
+                         .get = fake_get,
+                         .remove = fake_remove,
+                         .list = fake_list,
+                         .count = fake_count};
+    cJSON *local = vx_store_mesh_local(s);
+    assert_int_equal(cJSON_GetArraySize(local), 1);
+    cJSON_Delete(local);
+    vx_store_set_catalog(s, &c);
+    /* What the API sees is the catalog's: the old mesh is not in it. */
+    assert_null(vx_store_mesh_meta(s, old, &err));
+    assert_string_equal(err.code, "mesh_not_found");
+    assert_int_equal(vx_store_mesh_count(s), 0);
+    /* An upload: lock, bytes, put, unlock; new for the catalog. */
+    f.calls[0] = 0;
+    put(s, "v 1 1 1\n", id, &existed);
+    assert_string_equal(f.calls, "LPU");
+    assert_int_equal(existed, 0);
+    assert_int_equal(vx_store_mesh_count(s), 1);
+    cJSON *m = vx_store_mesh_meta(s, id, &err);
+    assert_non_null(m);
+    cJSON_Delete(m);
+    char next[65];
+    cJSON *l = vx_store_mesh_list(s, NULL, 10, next, &err);
+    assert_int_equal(cJSON_GetArraySize(l), 1);
+    cJSON_Delete(l);
+    /* The old mesh uploaded again: its bytes were here, the catalog says new. */
+    put(s, "v 0 0 0\n", old, &existed);
+    assert_int_equal(existed, 0);
+    put(s, "v 0 0 0\n", old, &existed);
+    assert_int_equal(existed, 1);
+    /* A delete tells the catalog only: the bytes stay for jobs. */
+    assert_int_equal(vx_store_mesh_delete(s, id, &err), 0);
+    assert_null(vx_store_mesh_meta(s, id, &err));
+    assert_int_equal(vx_store_mesh_path(s, id, path, sizeof path, &err), 0);
+    assert_int_equal(access(path, F_OK), 0);
+    assert_int_equal(vx_store_mesh_delete(s, id, &err), -1);
+    assert_string_equal(err.code, "mesh_not_found");
+    /* The purge: not while a job here pins it; then bytes and entry go. */
+    assert_int_equal(vx_store_mesh_pin(s, id, 1, &err), 0);
+    assert_int_equal(vx_store_mesh_purge(s, id, "obj"), -1);
+    assert_int_equal(access(path, F_OK), 0);
+    vx_store_mesh_unpin(s, id);
+    assert_int_equal(vx_store_mesh_purge(s, id, "obj"), 0);
+    assert_int_equal(access(path, F_OK), -1);
+    assert_int_equal(vx_store_mesh_path(s, id, path, sizeof path, &err), -1);
+    /* Bytes another daemon purged (the entry here still names them): an
+     * upload stores them again. */
+    assert_int_equal(vx_store_mesh_path(s, old, path, sizeof path, &err), 0);
+    assert_int_equal(unlink(path), 0);
+    fake_remove(&f, old, &err);
+    put(s, "v 0 0 0\n", old, &existed);
+    assert_int_equal(existed, 0);
+    assert_int_equal(vx_store_mesh_path(s, old, path, sizeof path, &err), 0);
+    assert_int_equal(access(path, F_OK), 0);
+    /* The catalog down: an upload is not acknowledged, lists fail, the
+     * count falls back to this store's own. */
+    f.down = 1;
+    vx_upload *u = vx_upload_begin(s, &err);
+    assert_int_equal(vx_upload_write(u, "v 2 2 2\n", 8, &err), 0);
+    assert_int_equal(vx_upload_finish(u, id, &err), 0);
+    cJSON *meta = cJSON_CreateObject();
+    assert_int_equal(vx_store_mesh_commit(s, u, id, "obj", meta, &existed, &err), -1);
+    cJSON_Delete(meta);
+    assert_string_equal(err.code, "database_unavailable");
+    assert_null(vx_store_mesh_list(s, NULL, 10, next, &err));
+    assert_null(vx_store_mesh_meta(s, old, &err));
+    assert_string_equal(err.code, "database_unavailable");
+    assert_int_equal(vx_store_mesh_count(s), 1);
+    vx_store_set_catalog(s, NULL);
+    for (int i = 0; i < f.n; i++)
+        free(f.meta[i]);
+    vx_store_close(s);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -339,6 +525,7 @@ int main(void)
         cmocka_unit_test(test_upload_abort),
         cmocka_unit_test(test_pins),
         cmocka_unit_test(test_blobs),
+        cmocka_unit_test(test_catalog),
     };
     return cmocka_run_group_tests(tests, setup, teardown);
 }
