@@ -5,7 +5,8 @@
 bench_voxeld() {
     local log=$1
     shift
-    "$build/voxeld" --listen 127.0.0.1:0 "$@" 2>"$log" &
+    : >"$log" # there before the first read below
+    "$build/voxeld" --listen 127.0.0.1:0 "$@" 2>>"$log" &
     vpid=$!
     port=
     for _ in $(seq 300); do

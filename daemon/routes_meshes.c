@@ -174,6 +174,10 @@ int vx_route_upload(vx_http *h, struct MHD_Connection *c, req *r)
     if (vx_intake_resolve(r->declared, head, nhead, vx_upload_bytes(r->up), &fmt, &err))
         return vx_resp_err(c, r, &err);
     cJSON *meta = vx_store_mesh_meta(h->d.store, id, NULL);
+    if (meta && !vx_store_mesh_stored(h->d.store, id)) { /* the catalog's, not here */
+        cJSON_Delete(meta);
+        meta = NULL;
+    }
     if (meta) {
         VX_INFO("mesh.uploaded", "mesh=%s new=0", id);
         return vx_resp_json(c, r, 200, meta, NULL, NULL);

@@ -18,46 +18,9 @@ counts=${4:-1,2}
 mesh=${VX_MESH_DIR:-$root/../shared/data/meshes}/stanford-bunny.obj
 [[ -f $mesh ]] || { echo "no $mesh" >&2; exit 1; }
 work=$(mktemp -d /tmp/vxbench.XXXXXX)
-pgdir=$(mktemp -d /tmp/vxpg.XXXXXX)
-pids=()
-cleanup() {
-    for p in "${pids[@]}"; do kill -KILL "$p" 2>/dev/null || true; done
-    "$root/tests/support/pg.sh" stop "$pgdir" >/dev/null 2>&1 || true
-    rm -rf "$work" "$pgdir"
-}
-trap cleanup EXIT
-url=$("$root/tests/support/pg.sh" start "$pgdir")
+source "$root/bench/cluster/lib.sh"
+big=(--max-job-memory 16G --job-timeout 86400 --max-queued-jobs 100000)
 echo "bunny at $res, bricks of $size; load before: $(cut -d' ' -f1-3 /proc/loadavg) on $(nproc) cores"
-
-# start N MODE: N replicas (cluster) or one local daemon; sets bases[].
-start() {
-    local n=$1 mode=$2 i
-    bases=()
-    for i in $(seq 1 "$n"); do
-        local log=$work/$mode$n-$i.log flags=()
-        if [[ $mode == cluster ]]; then
-            flags=(--database "$url" --blob-store "file://$work/shared-$n" --replica-name "r$i"
-                --lease-ttl 120)
-        fi
-        "$build/voxeld" --listen 127.0.0.1:0 --data-dir "$work/$mode$n-data$i" --workers 2 \
-            --max-job-memory 16G --job-timeout 86400 --max-queued-jobs 100000 \
-            "${flags[@]}" 2>"$log" &
-        pids+=($!)
-        local port=
-        for _ in $(seq 300); do
-            port=$(sed -n 's/.*event=voxeld.ready port=\([0-9]*\).*/\1/p' "$log")
-            [[ -n "$port" ]] && break
-            sleep 0.1
-        done
-        [[ -n "$port" ]] || { echo "voxeld did not start" >&2; tail -5 "$log" >&2; exit 1; }
-        bases+=("http://127.0.0.1:$port")
-    done
-}
-stop() {
-    for p in "${pids[@]}"; do kill -TERM "$p" 2>/dev/null || true; done
-    for p in "${pids[@]}"; do wait "$p" 2>/dev/null || true; done
-    pids=()
-}
 
 run() {
     local label=$1
@@ -65,8 +28,9 @@ run() {
     id=$(curl -sf -H 'Content-Type: model/obj' --data-binary "@$mesh" "${bases[0]}/v1/meshes" | jq -r .id)
     params="{\"resolution\":$res,\"format\":\"vdb\",\"vdb_grid\":\"bool\",\"bricks\":{\"size\":$size}}"
     t0=$(date +%s.%N)
-    jid=$(curl -sf -H 'Content-Type: application/json' \
-        -d "{\"mesh\":\"$id\",\"kind\":\"voxelize\",\"params\":$params}" "${bases[0]}/v1/jobs" | jq -r .id)
+    jid=$(curl -s -H 'Content-Type: application/json' \
+        -d "{\"mesh\":\"$id\",\"kind\":\"voxelize\",\"params\":$params}" "${bases[0]}/v1/jobs" | tee "$work/submit.json" | jq -r ".id // empty")
+    [[ -n "$jid" ]] || { echo "$label: submission refused: $(cat "$work/submit.json")"; return; }
     while :; do
         body=$(curl -s "${bases[0]}/v1/jobs/$jid?wait=30")
         case $(jq -r .state <<<"$body") in succeeded | failed | canceled) break ;; esac
@@ -85,12 +49,12 @@ run() {
         "$(stat -c %s "$work/out.vdb")" "$active" "$reps"
 }
 
-start 1 local
+start 1 local "${big[@]}"
 run local1
 stop
 IFS=, read -ra ns <<<"$counts"
 for n in "${ns[@]}"; do
-    start "$n" cluster
+    start "$n" cluster "${big[@]}" --lease-ttl 120
     run "cluster$n"
     stop
 done

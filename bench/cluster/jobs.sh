@@ -17,44 +17,8 @@ counts=${3:-1,2,3}
 mesh=${VX_MESH_DIR:-$root/../shared/data/meshes}/stanford-bunny.obj
 [[ -f $mesh ]] || { echo "no $mesh" >&2; exit 1; }
 work=$(mktemp -d /tmp/vxbench.XXXXXX)
-pgdir=$(mktemp -d /tmp/vxpg.XXXXXX)
-pids=()
-cleanup() {
-    for p in "${pids[@]}"; do kill -KILL "$p" 2>/dev/null || true; done
-    "$root/tests/support/pg.sh" stop "$pgdir" >/dev/null 2>&1 || true
-    rm -rf "$work" "$pgdir"
-}
-trap cleanup EXIT
-url=$("$root/tests/support/pg.sh" start "$pgdir")
+source "$root/bench/cluster/lib.sh"
 echo "load before: $(cut -d' ' -f1-3 /proc/loadavg) on $(nproc) cores; $njobs jobs, 8 clients"
-
-# start N MODE: N replicas (cluster) or one local daemon; sets bases[].
-start() {
-    local n=$1 mode=$2 i
-    bases=()
-    for i in $(seq 1 "$n"); do
-        local log=$work/$mode$n-$i.log flags=()
-        if [[ $mode == cluster ]]; then
-            flags=(--database "$url" --blob-store "file://$work/shared-$n" --replica-name "r$i")
-        fi
-        "$build/voxeld" --listen 127.0.0.1:0 --data-dir "$work/$mode$n-data$i" --workers 2 \
-            --max-queued-jobs 1000 "${flags[@]}" 2>"$log" &
-        pids+=($!)
-        local port=
-        for _ in $(seq 300); do
-            port=$(sed -n 's/.*event=voxeld.ready port=\([0-9]*\).*/\1/p' "$log")
-            [[ -n "$port" ]] && break
-            sleep 0.1
-        done
-        [[ -n "$port" ]] || { echo "voxeld did not start" >&2; tail -5 "$log" >&2; exit 1; }
-        bases+=("http://127.0.0.1:$port")
-    done
-}
-stop() {
-    for p in "${pids[@]}"; do kill -TERM "$p" 2>/dev/null || true; done
-    for p in "${pids[@]}"; do wait "$p" 2>/dev/null || true; done
-    pids=()
-}
 
 # run LABEL: uploads the mesh, then njobs jobs from 8 clients; prints jobs/s
 # and the latency quantiles.
@@ -95,12 +59,12 @@ print("%d jobs in %.1f s: %.1f jobs/s, latency p50 %.0f ms, p90 %.0f ms, max %.0
 PY
 }
 
-start 1 local
+start 1 local --max-queued-jobs 1000
 run "local, 1 daemon"
 stop
 IFS=, read -r -a ns <<<"$counts"
 for n in "${ns[@]}"; do
-    start "$n" cluster
+    start "$n" cluster --max-queued-jobs 1000
     run "cluster, $n replica(s)"
     stop
 done

@@ -654,40 +654,23 @@ int cluster_output(vx_jobs *j, const char *jid, const char *name, char *path, si
     if (vx_pg_get(j->cl->api, jid, &row, err)) return -1;
     int rc = -1;
     char file[160] = "", rid[48];
-    if (!strcmp(row.state, "queued") || !strcmp(row.state, "running")) {
-        vx_err_set(err, VX_ECONFLICT, "job_not_finished", "job %s is %s", jid, row.state);
-    } else if (!strcmp(row.state, "failed")) {
-        const cJSON *last = NULL, *it;
-        cJSON_ArrayForEach(it, row.errors) last = it;
-        vx_err_set(err, VX_ECONFLICT, "job_failed", "job %s failed: %s", jid,
-                   cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(last, "message"))
-                       ?: "unknown error");
-    } else if (!strcmp(row.state, "canceled")) {
-        vx_err_set(err, VX_ECONFLICT, "job_canceled", "job %s was canceled", jid);
-    } else {
-        const cJSON *outs = cJSON_GetObjectItemCaseSensitive(row.result, "outputs");
-        const cJSON *o =
-            name ? cJSON_GetObjectItemCaseSensitive(outs, name) : (outs ? outs->child : NULL);
-        if (!o) {
-            vx_err_set(err, VX_ENOTFOUND, "output_not_found", "job %s has no output '%.64s'", jid,
-                       name ? name : "");
+    const cJSON *last = NULL, *it;
+    cJSON_ArrayForEach(it, row.errors) last = it;
+    const cJSON *o = job_output_entry(
+        jid, row.state,
+        cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(last, "message")) ?: "unknown error",
+        cJSON_GetObjectItemCaseSensitive(row.result, "outputs"), name, file, ctype, err);
+    if (o) {
+        const char *of = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(o, "rid"));
+        if (of) { /* a child job's output, under this job's name for it */
+            const char *ext = strrchr(file, '.');
+            snprintf(fname, 128, "%s-%s%s", jid, o->string, ext ? ext : "");
+            snprintf(rid, sizeof rid, "%s", of);
         } else {
-            snprintf(file, sizeof file, "%s",
-                     cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(o, "file")) ?: "");
-            snprintf(ctype, 64, "%s",
-                     cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(o, "content_type"))
-                         ?: "application/octet-stream");
-            const char *of = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(o, "rid"));
-            if (of) { /* a child job's output, under this job's name for it */
-                const char *ext = strrchr(file, '.');
-                snprintf(fname, 128, "%s-%s%s", jid, o->string, ext ? ext : "");
-                snprintf(rid, sizeof rid, "%s", of);
-            } else {
-                snprintf(fname, 128, "%s-%s", jid, file);
-                snprintf(rid, sizeof rid, "%s/%d", jid, row.attempt);
-            }
-            rc = 0;
+            snprintf(fname, 128, "%s-%s", jid, file);
+            snprintf(rid, sizeof rid, "%s/%d", jid, row.attempt);
         }
+        rc = 0;
     }
     vx_pg_job_clear(&row);
     if (rc) return rc;

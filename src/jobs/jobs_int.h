@@ -113,6 +113,13 @@ job *job_at(const vx_jobs *j, size_t i);
 job *find_job(vx_jobs *j, const char *id);
 void trim_history_locked(vx_jobs *j, char (*dropped)[33], size_t *ndropped, size_t max);
 void notify(vx_jobs *j, const char *jid, int terminal);
+/* Output name (NULL = the primary: the first) of job jid in state (a
+ * state name; failure = why it failed): its entry in outputs, with its file
+ * name and content type; NULL with err (job_not_finished, job_failed,
+ * job_canceled, output_not_found). */
+const cJSON *job_output_entry(const char *jid, const char *state, const char *failure,
+                              const cJSON *outputs, const char *name, char file[160],
+                              char ctype[64], vx_err *err);
 
 /* pins.c */
 void unpin_job(vx_jobs *j, pinset *ps);

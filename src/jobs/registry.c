@@ -488,6 +488,37 @@ int vx_jobs_delete(vx_jobs *j, const char *jid, vx_err *err)
     return rc;
 }
 
+const cJSON *job_output_entry(const char *jid, const char *state, const char *failure,
+                              const cJSON *outputs, const char *name, char file[160],
+                              char ctype[64], vx_err *err)
+{
+    if (!strcmp(state, "queued") || !strcmp(state, "running")) {
+        vx_err_set(err, VX_ECONFLICT, "job_not_finished", "job %s is %s", jid, state);
+        return NULL;
+    }
+    if (!strcmp(state, "failed")) {
+        vx_err_set(err, VX_ECONFLICT, "job_failed", "job %s failed: %s", jid, failure);
+        return NULL;
+    }
+    if (!strcmp(state, "canceled")) {
+        vx_err_set(err, VX_ECONFLICT, "job_canceled", "job %s was canceled", jid);
+        return NULL;
+    }
+    const cJSON *o =
+        name ? cJSON_GetObjectItemCaseSensitive(outputs, name) : (outputs ? outputs->child : NULL);
+    if (!o) {
+        vx_err_set(err, VX_ENOTFOUND, "output_not_found", "job %s has no output '%.64s'", jid,
+                   name ? name : "");
+        return NULL;
+    }
+    snprintf(file, 160, "%s",
+             cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(o, "file")) ?: "");
+    snprintf(ctype, 64, "%s",
+             cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(o, "content_type"))
+                 ?: "application/octet-stream");
+    return o;
+}
+
 int vx_jobs_output(vx_jobs *j, const char *jid, const char *name, char *path, size_t pathn,
                    char ctype[64], char fname[128], vx_err *err)
 {
@@ -498,27 +529,11 @@ int vx_jobs_output(vx_jobs *j, const char *jid, const char *name, char *path, si
     int rc = -1;
     if (!jb) {
         vx_err_set(err, VX_ENOTFOUND, "job_not_found", "no job with id %.64s", jid);
-    } else if (jb->state == ST_QUEUED || jb->state == ST_RUNNING) {
-        vx_err_set(err, VX_ECONFLICT, "job_not_finished", "job %s is %s", jid,
-                   state_names[jb->state]);
-    } else if (jb->state == ST_FAILED) {
-        vx_err_set(err, VX_ECONFLICT, "job_failed", "job %s failed: %s", jid, jb->error.message);
-    } else if (jb->state == ST_CANCELED) {
-        vx_err_set(err, VX_ECONFLICT, "job_canceled", "job %s was canceled", jid);
     } else {
         cJSON *outputs = NULL;
-        job_parts(jb, NULL, NULL, &outputs);
-        const cJSON *o = name ? cJSON_GetObjectItemCaseSensitive(outputs, name)
-                              : (outputs ? outputs->child : NULL);
-        if (!o) {
-            vx_err_set(err, VX_ENOTFOUND, "output_not_found", "job %s has no output '%.64s'", jid,
-                       name ? name : "");
-        } else {
-            snprintf(file, sizeof file, "%s",
-                     cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(o, "file")) ?: "");
-            snprintf(ctype, 64, "%s",
-                     cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(o, "content_type"))
-                         ?: "application/octet-stream");
+        if (jb->state == ST_SUCCEEDED) job_parts(jb, NULL, NULL, &outputs);
+        if (job_output_entry(jid, state_names[jb->state], jb->error.message, outputs, name, file,
+                             ctype, err)) {
             snprintf(fname, 128, "%s-%s", jb->id, file);
             snprintf(id, sizeof id, "%s", jb->id);
             rc = 0;

@@ -522,6 +522,18 @@ size_t vx_store_collect_meshes_locked(vx_store *s)
     return meshes;
 }
 
+int vx_store_mesh_stored(vx_store *s, const char *id)
+{
+    if (s->catalog) mesh_drop_purged(s, id);
+    if (mesh_fetch_shared(s, id, NULL) < 0) return 0;
+    pthread_mutex_lock(&s->lock);
+    int found;
+    size_t at = mesh_find(s, id, &found);
+    found = found && !mesh_at(s, at)->deleted;
+    pthread_mutex_unlock(&s->lock);
+    return found;
+}
+
 void vx_store_set_catalog(vx_store *s, const vx_mesh_catalog *c)
 {
     s->catalog = c;

@@ -123,6 +123,11 @@ void vx_store_set_catalog(vx_store *s, const vx_mesh_catalog *c);
 /* The catalog's purge of a deleted mesh: removes its bytes (format: its
  * metadata's) and this store's entry. -1 while a job here pins it. */
 int vx_store_mesh_purge(vx_store *s, const char *id, const char *format);
+/* 1 when mesh id's bytes are in the store. Without a catalog, as
+ * vx_store_mesh_meta; with one, the catalog may name a mesh whose bytes
+ * are not here (a store emptied or replaced under the same database): an
+ * upload of it must then store them again. */
+int vx_store_mesh_stored(vx_store *s, const char *id);
 /* The metadata of every live mesh in this store's own index (owned
  * array): what a new catalog adds. */
 cJSON *vx_store_mesh_local(vx_store *s);

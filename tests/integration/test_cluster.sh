@@ -31,63 +31,15 @@
 #   (one row, one results index entry per output);
 # - /metrics: the database's counts by state and kind, claims.
 source "$(dirname "$0")/lib.sh"
-
-PGSH="$VX_SOURCE_DIR/tests/support/pg.sh"
-if ! bash "$PGSH" url /nonexistent >/dev/null 2>&1 || [[ ! -x /usr/lib/postgresql/15/bin/initdb ]]; then
-    echo "skip: no PostgreSQL server (apt-get install postgresql-15)"
-    exit 77
-fi
 BUNNY="$VX_MESH_DIR/stanford-bunny.obj"
 [[ -f "$BUNNY" ]] || { echo "skip: $BUNNY missing"; exit 77; }
-# PostgreSQL's dir outside $TMP (mode 700, root's): the server runs as nobody.
-PGDIR=$(mktemp -d /tmp/vxpg.XXXXXX)
+source "$(dirname "$0")/cluster.sh"
 SHARED=$TMP/shared
 mkdir -p "$SHARED"
-declare -a RPID RBASE RDATA
-stop_all() {
-    for i in 1 2 3; do
-        [[ -n "${RPID[$i]:-}" ]] && kill -KILL "${RPID[$i]}" 2>/dev/null
-    done
-    bash "$PGSH" stop "$PGDIR" >/dev/null 2>&1
-    rm -rf "$PGDIR"
-}
-trap 'stop_all; cleanup' EXIT
-URL=$(bash "$PGSH" start "$PGDIR") || { echo "cannot start PostgreSQL"; exit 1; }
-
-# start_replica I: replica rI on a free port, lease 3 s (renewed every 1 s).
-start_replica() {
-    local i=$1 log=$TMP/r$1.log
-    RDATA[$i]=$TMP/data$i
-    touch "$log"
-    local from
-    from=$(($(wc -l <"$log") + 1))
-    "$VOXELD" --listen 127.0.0.1:0 --data-dir "${RDATA[$i]}" --workers 2 --http-threads 4 \
-        --blob-store "file://$SHARED" --database "$URL" --replica-name "r$i" --lease-ttl 3 \
-        --retry-backoff 0.2 --max-attempts 4 2>>"$log" &
-    RPID[$i]=$!
-    local t port
-    for t in $(seq 1 600); do
-        port=$(tail -n +"$from" "$log" | grep -a 'event=voxeld.ready' | sed -n 's/.*port=\([0-9]*\).*/\1/p')
-        if [[ -n "$port" ]]; then
-            RBASE[$i]="http://127.0.0.1:$port"
-            return 0
-        fi
-        if ! kill -0 "${RPID[$i]}" 2>/dev/null; then
-            echo "replica r$i exited during start:"; tail -n 20 "$log"; RPID[$i]=; return 1
-        fi
-        sleep 0.1
-    done
-    echo "replica r$i did not become ready"; return 1
-}
-on() { BASE=${RBASE[$1]}; }
+# lease 3 s (renewed every 1 s)
+REPLICA_FLAGS=(--blob-store "file://$SHARED" --lease-ttl 3 --retry-backoff 0.2 --max-attempts 4)
 # rnum NAME: the replica number of "rN".
 rnum() { echo "${1#r}"; }
-submit() { # submit I KIND MESH PARAMS [curl args]: JOB = its id
-    on "$1"
-    api POST /v1/jobs -H "Content-Type: application/json" "${@:5}" \
-        -d "{\"mesh\":\"$3\",\"kind\":\"$2\",\"params\":$4}"
-    JOB=$(jqb '.id // empty')
-}
 # wait_running JID: until it runs (up to 30 s); RUNS_ON = its replica number.
 wait_running() {
     local t
@@ -98,17 +50,6 @@ wait_running() {
             return 0
         fi
         sleep 0.1
-    done
-    return 1
-}
-# wait_final I JID SECONDS: polls replica I until the job has finished.
-wait_final() {
-    on "$1"
-    local t=0
-    while ((t < $3)); do
-        api GET "/v1/jobs/$2?wait=5"
-        case "$(jqb .state)" in succeeded | failed | canceled) return 0 ;; esac
-        t=$((t + 5))
     done
     return 1
 }
@@ -189,6 +130,15 @@ expect_status "catalog: the same bytes again are a new mesh" 201
 on 3
 api GET "/v1/meshes/$M/file"
 check "catalog: read back from r3 byte for byte" cmp -s "$BODY" "$TMP/cat.obj"
+# Its bytes lost from the store (a bucket emptied under the same database):
+# the catalog still names it, and an upload stores the bytes again.
+rm -f "$SHARED/meshes/$M".*
+on 2
+upload "$TMP/cat.obj"
+expect_status "catalog: uploaded again after its bytes were lost: it existed" 200
+on 1
+api GET "/v1/meshes/$M/file"
+check "catalog: and its bytes are back" cmp -s "$BODY" "$TMP/cat.obj"
 
 # A bricked voxelize: split at submission into one child job per brick,
 # which any replica claims; the parent merges them once all succeeded. The

@@ -12,19 +12,14 @@
 #   a later attempt, its result readable from both.
 source "$(dirname "$0")/lib.sh"
 
-PGSH="$VX_SOURCE_DIR/tests/support/pg.sh"
 S3RVER=$VX_SOURCE_DIR/tools/s3rver/node_modules/.bin/s3rver
-if [[ ! -x /usr/lib/postgresql/15/bin/initdb ]]; then
-    echo "skip: no PostgreSQL server (apt-get install postgresql-15)"
-    exit 77
-fi
 if [[ ! -x "$S3RVER" ]] || ! command -v node >/dev/null; then
     echo "skip: s3rver not installed (npm ci --prefix tools/s3rver)"
     exit 77
 fi
 BUNNY="$VX_MESH_DIR/stanford-bunny.obj"
 [[ -f "$BUNNY" ]] || { echo "skip: $BUNNY missing"; exit 77; }
-PGDIR=$(mktemp -d /tmp/vxpg.XXXXXX)
+source "$(dirname "$0")/cluster.sh"
 S3DIR=$TMP/s3
 mkdir -p "$S3DIR"
 S3PID=
@@ -40,58 +35,16 @@ start_s3() {
     echo "s3rver did not start"; cat "$TMP/s3rver.log"; return 1
 }
 stop_s3() { kill "$S3PID" 2>/dev/null; wait "$S3PID" 2>/dev/null; S3PID=; }
-declare -a RPID RBASE
-stop_all() {
-    for i in 1 2; do [[ -n "${RPID[$i]:-}" ]] && kill -KILL "${RPID[$i]}" 2>/dev/null; done
-    stop_s3
-    bash "$PGSH" stop "$PGDIR" >/dev/null 2>&1
-    rm -rf "$PGDIR"
-}
-trap 'stop_all; cleanup' EXIT
-URL=$(bash "$PGSH" start "$PGDIR") || { echo "cannot start PostgreSQL"; exit 1; }
+CLUSTER_STOP=stop_s3
 start_s3 || exit 1
 cat >"$TMP/creds" <<'EOF'
 aws_access_key_id = S3RVER
 aws_secret_access_key = S3RVER
 EOF
 BUCKET="s3://vx-bucket/cluster?endpoint=http://127.0.0.1:$S3PORT&region=us-east-1"
-
 # Retries that outlast a 10 s outage: 2, 4, 8, 16 s between attempts.
-start_replica() {
-    local i=$1 log=$TMP/r$1.log
-    touch "$log"
-    local from
-    from=$(($(wc -l <"$log") + 1))
-    "$VOXELD" --listen 127.0.0.1:0 --data-dir "$TMP/data$i" --workers 2 --http-threads 4 \
-        --blob-store "$BUCKET" --blob-credentials "$TMP/creds" --blob-retries 1 --blob-timeout 2 \
-        --database "$URL" --replica-name "r$i" --lease-ttl 3 --retry-backoff 2 --max-attempts 5 \
-        2>>"$log" &
-    RPID[$i]=$!
-    local t port
-    for t in $(seq 1 600); do
-        port=$(tail -n +"$from" "$log" | grep -a 'event=voxeld.ready' | sed -n 's/.*port=\([0-9]*\).*/\1/p')
-        if [[ -n "$port" ]]; then
-            RBASE[$i]="http://127.0.0.1:$port"
-            return 0
-        fi
-        if ! kill -0 "${RPID[$i]}" 2>/dev/null; then
-            echo "replica r$i exited during start:"; tail -n 20 "$log"; RPID[$i]=; return 1
-        fi
-        sleep 0.1
-    done
-    echo "replica r$i did not become ready"; return 1
-}
-on() { BASE=${RBASE[$1]}; }
-wait_final() { # wait_final I JID SECONDS
-    on "$1"
-    local t=0
-    while ((t < $3)); do
-        api GET "/v1/jobs/$2?wait=5"
-        case "$(jqb .state)" in succeeded | failed | canceled) return 0 ;; esac
-        t=$((t + 5))
-    done
-    return 1
-}
+REPLICA_FLAGS=(--blob-store "$BUCKET" --blob-credentials "$TMP/creds" --blob-retries 1
+    --blob-timeout 2 --lease-ttl 3 --retry-backoff 2 --max-attempts 5)
 for i in 1 2; do start_replica "$i" || exit 1; done
 
 on 1

@@ -490,7 +490,9 @@ static void test_catalog(void **state)
     /* Bytes another daemon purged (the entry here still names them): an
      * upload stores them again. */
     assert_int_equal(vx_store_mesh_path(s, old, path, sizeof path, &err), 0);
+    assert_int_equal(vx_store_mesh_stored(s, old), 1);
     assert_int_equal(unlink(path), 0);
+    assert_int_equal(vx_store_mesh_stored(s, old), 0); /* the catalog still names it */
     fake_remove(&f, old, &err);
     put(s, "v 0 0 0\n", old, &existed);
     assert_int_equal(existed, 0);
