@@ -170,10 +170,12 @@ static int catalog_start(vx_jobs *j, vx_err *err)
 {
     vx_cluster *c = j->cl;
     cJSON *all = vx_store_mesh_local(j->desc.store), *batch = cJSON_CreateArray();
-    int added = 0, rc = 0;
-    while (!rc && all && batch && cJSON_GetArraySize(all) > 0) {
+    int added = 0, rc = 0, left = cJSON_GetArraySize(all), inbatch = 0;
+    while (!rc && all && batch && left > 0) {
         cJSON_AddItemToArray(batch, cJSON_DetachItemFromArray(all, 0));
-        if (cJSON_GetArraySize(batch) < 1000 && cJSON_GetArraySize(all) > 0) continue;
+        left--;
+        if (++inbatch < 1000 && left > 0) continue;
+        inbatch = 0;
         int n = vx_pg_mesh_add_missing(c->api, batch, err);
         if (n < 0) rc = -1;
         added += n > 0 ? n : 0;
