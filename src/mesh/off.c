@@ -47,11 +47,17 @@ static int fail(vx_err *err, off_in *in, const char *what)
                       in->lineno, what);
 }
 
+/* The separators of the header's words, as vx_declared_check reads them. */
+static int blank(char c)
+{
+    return c == ' ' || c == '\t' || c == '\r' || c == '\f' || c == '\v';
+}
+
 /* Reads an unsigned integer token at *s. */
 static int read_uint(char **s, unsigned long long *v)
 {
     char *e;
-    while (**s == ' ' || **s == '\t' || **s == '\r')
+    while (blank(**s))
         (*s)++;
     if (**s < '0' || **s > '9') return -1;
     *v = strtoull(*s, &e, 10);
@@ -63,17 +69,17 @@ static int read_header(off_in *in, unsigned long long c[2], vx_err *err)
 {
     if (next_line(in) <= 0) return fail(err, in, "no header");
     char *s = in->line;
-    while (*s == ' ' || *s == '\t')
+    while (blank(*s))
         s++;
     char *w = s;
-    while (*s && *s != ' ' && *s != '\t' && *s != '\r')
+    while (*s && !blank(*s))
         s++;
     size_t wl = (size_t)(s - w);
     if (wl < 3 || strncmp(s - 3, "OFF", 3)) return fail(err, in, "the first word is not OFF");
     if (memchr(w, '4', wl - 3) || memchr(w, 'n', wl - 3))
         return fail(err, in, "4OFF and nOFF (other dimensions) are not read");
     for (int k = 0; k < 2; k++) {
-        while (*s == ' ' || *s == '\t' || *s == '\r')
+        while (blank(*s))
             s++;
         if (!*s) {
             if (next_line(in) <= 0) return fail(err, in, "no vertex and face counts");
@@ -92,6 +98,9 @@ vx_mesh *vx_off_read_mem(const unsigned char *data, size_t n, const vx_mesh_limi
     off_in in = {.p = (const char *)data, .end = (const char *)data + n};
     unsigned long long c[2];
     if (read_header(&in, c, err)) return NULL;
+    /* Only counts the size check saw may size the arrays. */
+    if (c[0] != d.vertices || c[1] != d.faces)
+        return fail(err, &in, "the header's counts cannot be read one way"), NULL;
     vx_mesh *m = vx_mesh_new();
     if (!m) goto oom;
     size_t nv = (size_t)c[0], nf = (size_t)c[1], cap = 3 * nf + 16, used = 0, ntris = 0;
