@@ -86,39 +86,41 @@ int vx_run_child(const vx_job_run *r, size_t i, const char **id, const cJSON **p
     return 0;
 }
 
-int vx_run_child_output(vx_job_run *r, size_t i, const char *name, char *path, size_t n,
-                        vx_err *err)
+/* Child i, its outputs object and its place in the store (rid, "ID/ATTEMPT"),
+ * or NULL when there is no such child. */
+static const cJSON *child_outputs(const vx_job_run *r, size_t i, char rid[48])
 {
     const cJSON *c = r->job->children ? cJSON_GetArrayItem(r->job->children, (int)i) : NULL;
     const char *id = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(c, "id"));
-    const cJSON *outs =
-        cJSON_GetObjectItemCaseSensitive(cJSON_GetObjectItemCaseSensitive(c, "result"), "outputs");
+    if (!id) return NULL;
+    snprintf(rid, 48, "%s/%d", id,
+             (int)cJSON_GetNumberValue(cJSON_GetObjectItemCaseSensitive(c, "attempt")));
+    return cJSON_GetObjectItemCaseSensitive(cJSON_GetObjectItemCaseSensitive(c, "result"),
+                                            "outputs");
+}
+
+int vx_run_child_output(vx_job_run *r, size_t i, const char *name, char *path, size_t n,
+                        vx_err *err)
+{
+    char rid[48];
+    const cJSON *outs = child_outputs(r, i, rid);
     const cJSON *o =
         name ? cJSON_GetObjectItemCaseSensitive(outs, name) : (outs ? outs->child : NULL);
     const char *file = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(o, "file"));
-    if (!id || !file)
+    if (!file)
         return vx_err_set(err, VX_ENOTFOUND, "output_not_found", "child job %zu has no output %s",
                           i, name ? name : "");
-    char rid[48];
-    snprintf(rid, sizeof rid, "%s/%d", id,
-             (int)cJSON_GetNumberValue(cJSON_GetObjectItemCaseSensitive(c, "attempt")));
     return vx_store_result_file(r->jobs->desc.store, rid, file, path, n, err);
 }
 
 int vx_run_output_of_child(vx_job_run *r, const char *name, size_t i, const char *child_name,
                            vx_err *err)
 {
-    const cJSON *c = r->job->children ? cJSON_GetArrayItem(r->job->children, (int)i) : NULL;
-    const char *id = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(c, "id"));
-    const cJSON *o = cJSON_GetObjectItemCaseSensitive(
-        cJSON_GetObjectItemCaseSensitive(cJSON_GetObjectItemCaseSensitive(c, "result"), "outputs"),
-        child_name);
-    if (!id || !cJSON_IsObject(o))
+    char rid[48];
+    const cJSON *o = cJSON_GetObjectItemCaseSensitive(child_outputs(r, i, rid), child_name);
+    if (!cJSON_IsObject(o))
         return vx_err_set(err, VX_ENOTFOUND, "output_not_found", "child job %zu has no output %s",
                           i, child_name);
-    char rid[48];
-    snprintf(rid, sizeof rid, "%s/%d", id,
-             (int)cJSON_GetNumberValue(cJSON_GetObjectItemCaseSensitive(c, "attempt")));
     cJSON *d = cJSON_Duplicate(o, 1);
     cJSON_DeleteItemFromObjectCaseSensitive(d, "location");
     if (!d || !cJSON_AddStringToObject(d, "rid", rid)) {
