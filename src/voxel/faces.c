@@ -26,10 +26,15 @@
  * is centred on the face between voxels i-1 and i), against y and against
  * z. Each is voxelized at its centres by the requested method (auto: scan),
  * with the same inside rule and tie rule; a voxel's count is its centre plus
- * its two faces along each axis. */
+ * its two faces along each axis, added on the GPU (vx_faces_count,
+ * shaders/voxel_faces_count.comp) a z slab at a time: the four sample slabs
+ * go up, the bits and the per-voxel counts come back. */
 #include <stdlib.h>
 #include <string.h>
 
+#include "util/clock.h"
+#include "voxel/faces_int.h"
+#include "voxel/peel_int.h"
 #include "voxel/voxel.h"
 
 typedef struct sub_progress {
@@ -57,39 +62,102 @@ static void add_stats(vx_voxelize_stats *st, const vx_voxelize_stats *s)
     st->readback_ms += s->readback_ms;
 }
 
-static inline uint32_t word(const vx_bitgrid *g, int j, int k, size_t w)
+/* Bytes of GPU buffers per slab: the four sample slabs, the bits and the
+ * counts. Small enough to stay in llvmpipe's caches between upload and
+ * read-back, big enough that the round trips don't dominate (as scan.c's
+ * SCAN_DELTA_CAP). */
+#define FACES_SLAB_CAP (16u << 20)
+
+/* Buffer bytes one z row of each of the six slab buffers needs. */
+static void row_bytes(const vx_bitgrid *out, size_t wx1, uint64_t b[6])
 {
-    if (w >= g->wx) return 0;
-    return g->bits[((size_t)k * (size_t)g->grid.dims[1] + (size_t)j) * g->wx + w];
+    const uint64_t ny = (uint64_t)out->grid.dims[1], wx = out->wx;
+    b[0] = ny * wx * 4u;
+    b[1] = ny * wx1 * 4u;
+    b[2] = (ny + 1u) * wx * 4u;
+    b[3] = ny * wx * 4u; /* and one more row per slab */
+    b[4] = ny * wx * 4u;
+    b[5] = ny * (uint64_t)out->grid.dims[0] + 1u; /* + rounding the slab up to uints */
 }
 
-/* out->counts[i,j,k] = samples inside; out->bits where >= threshold. */
-static void combine(const vx_bitgrid g[4], int threshold, vx_bitgrid *out)
+int vx_faces_count(vx_gl *gl, const vx_bitgrid g[4], int threshold, vx_bitgrid *out,
+                   const vx_faces_count_desc *fd, vx_voxelize_stats *st, vx_err *err)
 {
     const int nx = out->grid.dims[0], ny = out->grid.dims[1], nz = out->grid.dims[2];
-    for (int k = 0; k < nz; k++)
-        for (int j = 0; j < ny; j++) {
-            uint8_t *cnt = out->counts + ((size_t)k * ny + j) * (size_t)nx;
-            uint32_t *row = out->bits + ((size_t)k * ny + j) * out->wx;
-            for (size_t w = 0; w < out->wx; w++) {
-                /* the centre, then the lower and upper face along x, y, z */
-                uint32_t x0 = word(&g[1], j, k, w), xn = word(&g[1], j, k, w + 1);
-                uint32_t s[7] = {word(&g[0], j, k, w),     x0,
-                                 (x0 >> 1) | (xn << 31),   word(&g[2], j, k, w),
-                                 word(&g[2], j + 1, k, w), word(&g[3], j, k, w),
-                                 word(&g[3], j, k + 1, w)};
-                int n = nx - (int)(32 * w) < 32 ? nx - (int)(32 * w) : 32;
-                uint32_t set = 0;
-                for (int b = 0; b < n; b++) {
-                    int c = 0;
-                    for (int q = 0; q < 7; q++)
-                        c += (int)((s[q] >> b) & 1u);
-                    cnt[32 * w + (size_t)b] = (uint8_t)c;
-                    if (c >= threshold) set |= 1u << b;
-                }
-                row[w] = set;
-            }
-        }
+    const size_t wx = out->wx, wx1 = g[1].wx;
+    uint64_t rb[6], per_row = 0, widest = 0;
+    row_bytes(out, wx1, rb);
+    for (int b = 0; b < 6; b++) {
+        per_row += rb[b];
+        if (rb[b] > widest) widest = rb[b];
+    }
+    const long max_ssbo = vx_gl_get_info(gl)->max_ssbo_bytes;
+    uint64_t rows = FACES_SLAB_CAP / per_row;
+    if (max_ssbo > 0 && rows > (uint64_t)max_ssbo / widest - 1)
+        rows = (uint64_t)max_ssbo / widest - 1;
+    if (fd && fd->max_rows > 0 && rows > (uint64_t)fd->max_rows) rows = (uint64_t)fd->max_rows;
+    if (fd && fd->max_bytes > 0 && rows > fd->max_bytes / per_row) rows = fd->max_bytes / per_row;
+    if (rows > (uint64_t)nz) rows = (uint64_t)nz;
+    if (rows < 1) {
+        if (max_ssbo > 0 && 2u * widest > (uint64_t)max_ssbo)
+            return vx_err_set(err, VX_ETOOBIG, "grid_too_large",
+                              "one z layer of the faces count (%llu bytes) exceeds this GPU's "
+                              "storage block size (%ld bytes)",
+                              (unsigned long long)widest, max_ssbo);
+        return vx_err_set(err, VX_ETOOBIG, "job_memory_limit",
+                          "the faces count on a %dx%dx%d grid needs %llu bytes of GPU buffers, "
+                          "more than the job has left",
+                          nx, ny, nz, (unsigned long long)per_row);
+    }
+    GLuint prog = vx_gl_compute_program(gl, "voxel_faces_count.comp", err);
+    if (!prog) return -1;
+    while (glGetError() != GL_NO_ERROR) {
+    }
+    GLuint buf[6];
+    glCreateBuffers(6, buf);
+    for (int b = 0; b < 6; b++)
+        glNamedBufferStorage(buf[b], (GLsizeiptr)((rb[b] * (rows + (b == 3)) + 3u) & ~3ull), NULL,
+                             GL_DYNAMIC_STORAGE_BIT);
+    int rc = -1;
+    if (vx_gl_check(gl, "faces.buffers", err)) goto done;
+    glUseProgram(prog);
+    glProgramUniform4i(prog, 0, nx, ny, (int)wx, 0);
+    glProgramUniform2i(prog, 1, (int)wx1, threshold);
+    for (GLuint b = 0; b < 6; b++)
+        glBindBufferBase(GL_SHADER_STORAGE_BUFFER, b, buf[b]);
+    for (int k0 = 0; k0 < nz; k0 += (int)rows) {
+        const int r = nz - k0 < (int)rows ? nz - k0 : (int)rows;
+        double t0 = vx_mono_ms();
+        /* Each sample slab is contiguous in its grid: rows k0.. of g0-g2,
+         * and one more of g3 (the upper z faces). */
+        const uint64_t zn[4] = {(uint64_t)r, (uint64_t)r, (uint64_t)r, (uint64_t)r + 1u};
+        const uint64_t rstride[4] = {rb[0], rb[1], rb[2], rb[3]};
+        for (int s = 0; s < 4; s++)
+            glNamedBufferSubData(buf[s], 0, (GLsizeiptr)(rstride[s] * zn[s]),
+                                 (const char *)g[s].bits + rstride[s] * (uint64_t)k0);
+        glClearNamedBufferData(buf[5], GL_R32UI, GL_RED_INTEGER, GL_UNSIGNED_INT, NULL);
+        st->upload_ms += vx_mono_ms() - t0;
+        vx_gl_timer t;
+        vx_gl_timer_begin(&t);
+        glProgramUniform4i(prog, 0, nx, ny, (int)wx, r);
+        vx_peel_dispatch_2d((uint64_t)ny * wx * (uint64_t)r);
+        glMemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT | GL_BUFFER_UPDATE_BARRIER_BIT);
+        st->gpu_fill_ms += vx_gl_timer_end_compute_ms(&t);
+        t0 = vx_mono_ms();
+        glGetNamedBufferSubData(buf[4], 0, (GLsizeiptr)(rb[4] * (uint64_t)r),
+                                out->bits + (size_t)k0 * (size_t)ny * wx);
+        glGetNamedBufferSubData(buf[5], 0, (GLsizeiptr)((uint64_t)ny * (uint64_t)nx * (uint64_t)r),
+                                out->counts + (size_t)k0 * (size_t)ny * (size_t)nx);
+        st->readback_ms += vx_mono_ms() - t0;
+        if (vx_gl_check(gl, "faces.count", err)) goto done;
+    }
+    rc = 0;
+done:
+    for (GLuint b = 0; b < 6; b++)
+        glBindBufferBase(GL_SHADER_STORAGE_BUFFER, b, 0);
+    glUseProgram(0);
+    glDeleteBuffers(6, buf);
+    return rc;
 }
 
 int vx_voxelize_faces(vx_gl *gl, const vx_mesh *m, const vx_voxelize_desc *d, vx_bitgrid *out,
@@ -144,7 +212,10 @@ int vx_voxelize_faces(vx_gl *gl, const vx_mesh *m, const vx_voxelize_desc *d, vx
         add_stats(st, &s);
         held += vx_bitgrid_bytes(sub.grid.dims, 1);
     }
-    combine(g, d->threshold, out);
+    /* What the count may take: what the four runs left of max_memory. */
+    vx_faces_count_desc fd = {
+        .max_bytes = d->max_memory ? (held < d->max_memory ? d->max_memory - held : 1) : 0};
+    if (vx_faces_count(gl, g, d->threshold, out, &fd, st, err)) goto done;
     st->voxels_inside = vx_bitgrid_count(out);
     rc = 0;
 done:

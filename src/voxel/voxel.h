@@ -170,8 +170,10 @@ int vx_voxelize_slice(vx_gl *gl, const vx_mesh *m, const vx_voxelize_desc *d, vx
                       vx_voxelize_stats *st, vx_err *err);
 /* supersample 2 with VX_SAMPLES_FACES (src/voxel/faces.c): the voxel
  * centres and the face centres, as four centre-sampled grids voxelized by
- * d->method (auto: scan), counted per voxel into out->counts. d validated
- * by vx_voxelize (fill solid). st sums the four runs. */
+ * d->method (auto: scan), counted per voxel into out->counts on the GPU
+ * (shaders/voxel_faces_count.comp). d validated by vx_voxelize (fill
+ * solid). st sums the four runs and the count (gpu_fill_ms, upload_ms,
+ * readback_ms). */
 int vx_voxelize_faces(vx_gl *gl, const vx_mesh *m, const vx_voxelize_desc *d, vx_bitgrid *out,
                       vx_voxelize_stats *st, vx_err *err);
 /* inside winding (src/voxel/winding.c): the centres where the mesh's

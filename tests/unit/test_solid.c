@@ -20,6 +20,7 @@
 
 #include "ref_voxel.h"
 #include "shapes.h"
+#include "voxel/faces_int.h"
 #include "voxel/voxel.h"
 #include "voxel/xing.h"
 
@@ -694,6 +695,83 @@ static void test_faces_pattern(void **state)
     vx_mesh_free(ball);
 }
 
+/* The faces count on the GPU (vx_faces_count) on random sample grids:
+ * widths on and off word and uint boundaries, one z row per slab up to the
+ * whole grid, every threshold, against a voxel-by-voxel count here. */
+static void test_faces_count_random(void **state)
+{
+    (void)state;
+    srand(20261202);
+    vx_err err = {0};
+    size_t checked = 0;
+    for (int it = 0; it < 60; it++) {
+        vx_grid grid = {.h = 1, .dims = {1 + rand() % 100, 1 + rand() % 13, 1 + rand() % 9}};
+        if (it == 0) grid.dims[0] = 200, grid.dims[1] = 37, grid.dims[2] = 11;
+        const int nx = grid.dims[0], ny = grid.dims[1], nz = grid.dims[2];
+        const int density = rand() % 101; /* percent of sample bits set */
+        vx_bitgrid g[4], out;
+        for (int s = 0; s < 4; s++) {
+            vx_grid gs = grid;
+            if (s > 0) gs.dims[s - 1] += 1;
+            assert_int_equal(vx_bitgrid_alloc(&g[s], &gs, 0, &err), 0);
+            for (int k = 0; k < gs.dims[2]; k++)
+                for (int j = 0; j < gs.dims[1]; j++)
+                    for (int i = 0; i < gs.dims[0]; i++)
+                        if (rand() % 100 < density)
+                            g[s].bits[((size_t)k * gs.dims[1] + j) * g[s].wx + i / 32] |=
+                                1u << (i % 32);
+        }
+        assert_int_equal(vx_bitgrid_alloc(&out, &grid, 1, &err), 0);
+        memset(out.counts, 0xee, (size_t)nx * ny * nz);
+        const int thr = 1 + it % 7;
+        vx_faces_count_desc fd = {.max_rows = it % 3 == 0 ? 0 : 1 + rand() % nz};
+        vx_voxelize_stats st = {0};
+        int rc = vx_faces_count(vx_test_gl, g, thr, &out, &fd, &st, &err);
+        if (rc) fprintf(stderr, "faces count: %s: %s\n", err.code, err.message);
+        assert_int_equal(rc, 0);
+        size_t bad = 0;
+        for (int k = 0; k < nz; k++)
+            for (int j = 0; j < ny; j++)
+                for (int i = 0; i < nx; i++) {
+                    int want = vx_bitgrid_get(&g[0], i, j, k) + vx_bitgrid_get(&g[1], i, j, k) +
+                               vx_bitgrid_get(&g[1], i + 1, j, k) + vx_bitgrid_get(&g[2], i, j, k) +
+                               vx_bitgrid_get(&g[2], i, j + 1, k) + vx_bitgrid_get(&g[3], i, j, k) +
+                               vx_bitgrid_get(&g[3], i, j, k + 1);
+                    bad += out.counts[((size_t)k * ny + j) * nx + i] != want;
+                    bad += vx_bitgrid_get(&out, i, j, k) != (want >= thr);
+                    checked++;
+                }
+        /* no bits beyond nx in any row */
+        for (size_t r = 0; r < (size_t)ny * nz; r++)
+            if (nx % 32) bad += (out.bits[r * out.wx + out.wx - 1] >> (nx % 32)) != 0;
+        if (bad)
+            fprintf(stderr, "faces count %dx%dx%d threshold %d rows %d: %zu wrong\n", nx, ny, nz,
+                    thr, fd.max_rows, bad);
+        assert_int_equal(bad, 0);
+        for (int s = 0; s < 4; s++)
+            vx_bitgrid_free(&g[s]);
+        vx_bitgrid_free(&out);
+    }
+    printf("faces count: %zu voxels of 60 random grids right\n", checked);
+
+    /* a budget too small for one z row */
+    vx_grid grid = {.h = 1, .dims = {40, 40, 4}};
+    vx_bitgrid g[4], out;
+    for (int s = 0; s < 4; s++) {
+        vx_grid gs = grid;
+        if (s > 0) gs.dims[s - 1] += 1;
+        assert_int_equal(vx_bitgrid_alloc(&g[s], &gs, 0, &err), 0);
+    }
+    assert_int_equal(vx_bitgrid_alloc(&out, &grid, 1, &err), 0);
+    vx_faces_count_desc small = {.max_bytes = 1000};
+    vx_voxelize_stats st = {0};
+    assert_int_equal(vx_faces_count(vx_test_gl, g, 1, &out, &small, &st, &err), -1);
+    assert_string_equal(err.code, "job_memory_limit");
+    for (int s = 0; s < 4; s++)
+        vx_bitgrid_free(&g[s]);
+    vx_bitgrid_free(&out);
+}
+
 static void test_dispatcher_routes(void **state)
 {
     vx_mesh *m = shape_box((double[]){0, 0, 0}, (double[]){1, 1, 1});
@@ -869,6 +947,7 @@ int main(void)
         BOTH(test_limits_and_progress),
         cmocka_unit_test(test_overflow),
         cmocka_unit_test(test_faces_pattern),
+        cmocka_unit_test(test_faces_count_random),
         cmocka_unit_test(test_dispatcher_routes),
         cmocka_unit_test(test_dispatcher_params),
         cmocka_unit_test(test_diag),

@@ -1,0 +1,27 @@
+/* The faces sample pattern's count (src/voxel/faces.c), exposed for its
+ * unit test. Not a public API. */
+#ifndef VX_FACES_INT_H
+#define VX_FACES_INT_H
+
+#include <stdint.h>
+
+#include "gl/gl.h"
+#include "voxel/voxel.h"
+
+/* Zero means default: slabs as FACES_SLAB_CAP and the GPU allow. */
+typedef struct vx_faces_count_desc {
+    int max_rows;       /* z rows per slab at most (tests force many slabs) */
+    uint64_t max_bytes; /* GPU buffer bytes the count may take */
+} vx_faces_count_desc;
+
+/* out->counts[i,j,k] = how many of voxel (i,j,k)'s centre (g[0]) and face
+ * centres (g[1] lower and upper x, g[2] y, g[3] z: the grid moved half a
+ * voxel against that axis, one voxel longer along it) are set, and out's
+ * bits where that count >= threshold, counted on the GPU a z slab at a
+ * time. out is allocated with counts, its grid the voxel grid; fd may be
+ * NULL. Adds upload, count and read-back times to st. GL thread. 0 or -1
+ * (grid_too_large, job_memory_limit, GL errors). */
+int vx_faces_count(vx_gl *gl, const vx_bitgrid g[4], int threshold, vx_bitgrid *out,
+                   const vx_faces_count_desc *fd, vx_voxelize_stats *st, vx_err *err);
+
+#endif
