@@ -1,12 +1,14 @@
 /* raw8, raw1 and binvox writers (io.h). Each works a word of the bit grid
  * at a time (32 voxels) and writes through a buffer of about 1 MiB, so the
- * only memory beyond the grid is that buffer (binvox: plus 32 x-columns of
- * the grid, transposed). */
+ * only memory beyond the grid is that buffer (binvox: plus two blocks of 32
+ * x-columns of the grid, transposed, one coded while the next is made). */
 #include <errno.h>
+#include <pthread.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
+#include "util/par.h"
 #include "voxel/io.h"
 #include "voxel/io_int.h"
 
@@ -175,14 +177,23 @@ typedef struct rle {
     uint64_t run;
 } rle;
 
+/* One (value, count) pair into the buffer. */
+static inline int rle_pair(vx_out *o, unsigned value, unsigned count)
+{
+    if (o->n + 2 > VX_OUT_BUF && vx_out_flush(o)) return -1;
+    o->buf[o->n] = (uint8_t)value;
+    o->buf[o->n + 1] = (uint8_t)count;
+    o->n += 2;
+    return 0;
+}
+
 static int rle_flush(rle *r)
 {
-    uint8_t pair[2] = {(uint8_t)r->cur, 255};
     for (; r->run >= 255; r->run -= 255)
-        if (vx_out_write(r->o, pair, 2)) return -1;
-    pair[1] = (uint8_t)r->run;
+        if (rle_pair(r->o, r->cur, 255)) return -1;
+    unsigned last = (unsigned)r->run;
     r->run = 0;
-    return pair[1] ? vx_out_write(r->o, pair, 2) : 0;
+    return last ? rle_pair(r->o, r->cur, last) : 0;
 }
 
 /* Appends the n (1..32) low bits of w, least significant first. */
@@ -212,14 +223,121 @@ static int rle_zeros(rle *r, uint64_t n)
     return 0;
 }
 
+/* binvox's pipeline works on groups of x blocks (32 x columns each): a
+ * group's columns transposed so that y runs along the bits, read from the
+ * grid a few words per row at a time (one word per row per pass would read
+ * a whole cache line for each word used). cols[((b * 32 + ii) * nz + k) *
+ * wy + jw]: bit jj = voxel (32 (x0 + b) + ii, 32 jw + jj, k). A group's
+ * columns take at most BINVOX_GROUP_BYTES (or io->binvox_group_bytes; one
+ * block at least). */
+#define BINVOX_GROUP_BYTES ((size_t)16 << 20)
+
+static void binvox_transpose(const vx_bitgrid *g, size_t x0, size_t nb, uint32_t *cols)
+{
+    const int ny = g->grid.dims[1], nz = g->grid.dims[2];
+    const size_t wy = ((size_t)ny + 31) / 32, ncols = 32 * (size_t)nz * wy;
+    uint32_t a[32][32];
+    for (int k = 0; k < nz; k++)
+        for (size_t jw = 0; jw < wy; jw++) {
+            for (int jj = 0; jj < 32; jj++) {
+                size_t j = 32 * jw + (size_t)jj;
+                const uint32_t *row = g->bits + ((size_t)k * ny + j) * g->wx;
+                for (size_t b = 0; b < nb; b++)
+                    a[b][jj] = j < (size_t)ny ? vx_row_word(g, row, x0 + b) : 0;
+            }
+            for (size_t b = 0; b < nb; b++) {
+                transpose32(a[b]);
+                uint32_t *c = cols + b * ncols + (size_t)k * wy + jw;
+                for (int ii = 0; ii < 32; ii++)
+                    c[(size_t)ii * nz * wy] = a[b][ii];
+            }
+        }
+}
+
+/* The run-length code of x block x (from its transposed columns), in
+ * binvox order: x, then z, then y fastest, each y column padded to the
+ * cube's side d with zeros, each x slice to d x d. */
+static int binvox_rle(const vx_bitgrid *g, size_t x, int d, const uint32_t *cols, rle *r)
+{
+    const int nx = g->grid.dims[0], ny = g->grid.dims[1], nz = g->grid.dims[2];
+    const size_t wy = ((size_t)ny + 31) / 32;
+    const unsigned ylast = (unsigned)(ny - 32 * (int)(wy - 1));
+    for (int ii = 0; ii < 32 && 32 * (int)x + ii < nx; ii++) {
+        for (int k = 0; k < nz; k++) {
+            const uint32_t *c = cols + ((size_t)ii * nz + k) * wy;
+            for (size_t jw = 0; jw < wy; jw++) {
+                /* most words continue the current run whole */
+                if (jw + 1 < wy && c[jw] == (r->cur ? 0xffffffffu : 0u)) {
+                    r->run += 32;
+                    continue;
+                }
+                if (rle_bits(r, c[jw], jw + 1 < wy ? 32 : ylast)) return -1;
+            }
+            if (rle_zeros(r, (uint64_t)(d - ny))) return -1;
+        }
+        if (rle_zeros(r, (uint64_t)(d - nz) * d)) return -1;
+    }
+    return 0;
+}
+
+/* Two stages run side by side on two threads: group q + 1 is transposed
+ * while group q is coded and written (the coder is sequential: a run
+ * crosses block boundaries). The coder runs on the calling thread, which
+ * alone reports progress (and so polls the job's stop hook, util/par.h). */
+typedef struct binvox_pipe {
+    const vx_bitgrid *g;
+    size_t q, per, ncols; /* the group being coded, blocks per group, words per block */
+    int d;
+    uint32_t *cols[2];
+    rle *r;
+    const vx_voxel_io *io;
+    vx_err *err;
+    pthread_t caller;
+    int rc; /* the coder's */
+} binvox_pipe;
+
+static size_t group_blocks(const binvox_pipe *p, size_t q)
+{
+    size_t x0 = q * p->per;
+    return x0 >= p->g->wx ? 0 : (p->g->wx - x0 < p->per ? p->g->wx - x0 : p->per);
+}
+
+static void transpose_next(binvox_pipe *p)
+{
+    size_t nb = group_blocks(p, p->q + 1);
+    if (nb) binvox_transpose(p->g, (p->q + 1) * p->per, nb, p->cols[(p->q + 1) & 1]);
+}
+
+static void *binvox_stage(void *ud)
+{
+    binvox_pipe *p = ud;
+    if (!pthread_equal(pthread_self(), p->caller)) {
+        transpose_next(p);
+        return NULL;
+    }
+    for (size_t b = 0; b < group_blocks(p, p->q) && !p->rc; b++) {
+        size_t x = p->q * p->per + b;
+        if (p->io && p->io->progress && p->io->progress(p->io->ud, (double)(32 * x) / p->d, p->err))
+            p->rc = -1;
+        else if (binvox_rle(p->g, x, p->d, p->cols[p->q & 1] + b * p->ncols, p->r))
+            p->rc = -1;
+    }
+    return NULL;
+}
+
 int vx_voxel_write_binvox(const vx_bitgrid *g, const char *path, const vx_voxel_io *io, vx_err *err)
 {
     const int nx = g->grid.dims[0], ny = g->grid.dims[1], nz = g->grid.dims[2];
     int d = nx > ny ? nx : ny;
     if (nz > d) d = nz;
     const size_t wy = ((size_t)ny + 31) / 32; /* words of a transposed y column */
-    /* cols[(ii * nz + k) * wy + jw]: bit jj = voxel (32 x + ii, 32 jw + jj, k) */
-    uint32_t *cols = malloc(32 * (size_t)nz * wy * sizeof *cols);
+    const size_t ncols = 32 * (size_t)nz * wy;
+    size_t per = (io && io->binvox_group_bytes ? io->binvox_group_bytes : BINVOX_GROUP_BYTES) /
+                 (ncols * sizeof(uint32_t));
+    if (per < 1) per = 1;
+    if (per > 32) per = 32;
+    if (per > g->wx) per = g->wx;
+    uint32_t *cols = malloc(2 * per * ncols * sizeof *cols);
     if (!cols)
         return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for binvox columns");
     vx_out o;
@@ -230,34 +348,15 @@ int vx_voxel_write_binvox(const vx_bitgrid *g, const char *path, const vx_voxel_
                  "#binvox 1\ndim %d %d %d\ntranslate %.17g %.17g %.17g\nscale %.17g\ndata\n", d, d,
                  d, g->grid.origin[0], g->grid.origin[1], g->grid.origin[2], d * g->grid.h);
     if (ok && vx_out_write(&o, hdr, (size_t)hn)) ok = 0;
-    /* binvox order: x outermost, then z, then y fastest: 32 x at a time,
-     * the grid's words transposed so that y runs along the bits. */
     rle r = {&o, 0, 0};
-    const unsigned ylast = (unsigned)(ny - 32 * (int)(wy - 1));
-    for (size_t x = 0; ok && x < g->wx; x++) {
-        if (io && io->progress && io->progress(io->ud, (double)(32 * x) / d, err)) ok = 0;
-        for (int k = 0; ok && k < nz; k++)
-            for (size_t jw = 0; jw < wy; jw++) {
-                uint32_t a[32];
-                for (int jj = 0; jj < 32; jj++) {
-                    size_t j = 32 * jw + (size_t)jj;
-                    a[jj] = j < (size_t)ny
-                                ? vx_row_word(g, g->bits + ((size_t)k * ny + j) * g->wx, x)
-                                : 0;
-                }
-                transpose32(a);
-                for (int ii = 0; ii < 32; ii++)
-                    cols[((size_t)ii * nz + k) * wy + jw] = a[ii];
-            }
-        for (int ii = 0; ok && ii < 32 && 32 * (int)x + ii < nx; ii++) {
-            for (int k = 0; ok && k < nz; k++) {
-                const uint32_t *c = cols + ((size_t)ii * nz + k) * wy;
-                for (size_t jw = 0; ok && jw < wy; jw++)
-                    if (rle_bits(&r, c[jw], jw + 1 < wy ? 32 : ylast)) ok = 0;
-                if (ok && rle_zeros(&r, (uint64_t)(d - ny))) ok = 0;
-            }
-            if (ok && rle_zeros(&r, (uint64_t)(d - nz) * d)) ok = 0;
-        }
+    binvox_pipe p = {g,  0,  per, ncols,          d, {cols, cols + per * ncols},
+                     &r, io, err, pthread_self(), 0};
+    if (ok) binvox_transpose(g, 0, group_blocks(&p, 0), cols);
+    for (size_t q = 0; ok && q * per < g->wx; q++) {
+        p.q = q;
+        /* one thread only (none could be made): the next group after */
+        if (vx_par_run(2, binvox_stage, &p) < 2) transpose_next(&p);
+        if (p.rc) ok = 0;
     }
     if (ok && rle_zeros(&r, (uint64_t)(d - nx) * d * d)) ok = 0;
     if (ok && r.run && rle_flush(&r)) ok = 0;

@@ -50,6 +50,10 @@
 typedef struct vx_voxel_io {
     int (*progress)(void *ud, double fraction, vx_err *err);
     void *ud;
+    /* binvox: bytes of transposed columns per group of 32-column blocks
+     * (0 = 16 MiB; at least one block): smaller groups read the grid more
+     * often, larger ones take more memory (twice this). */
+    size_t binvox_group_bytes;
 } vx_voxel_io;
 
 /* Parameters recorded as grid metadata in .vdb files (strings may be NULL). */

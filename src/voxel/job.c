@@ -973,7 +973,7 @@ static int encode_bricks(vx_job_run *r, const vparams *p, vstate *s, vprog *prog
         if (cJSON_IsString(mt)) method = mt->valuestring;
         vx_vdb_meta meta = meta_of(p, r, method, s->inside);
         vprog tail = {r, prog->share * 0.3};
-        vx_voxel_io io = {encode_progress, &tail};
+        vx_voxel_io io = {.progress = encode_progress, .ud = &tail};
         rc = vx_vdb_merge_write(m, (vx_vdb_class)p->vdb_grid, &corner, &meta, path, &io, err);
     }
     vx_vdb_merge_free(m);
@@ -1002,7 +1002,7 @@ static int voxelize_encode(vx_job_run *r, const void *params, void *state, vx_er
             s->grid.grid.index[a] = p.vdb_index_base[a];
         }
     s->grid.grid = corner_of(&s->grid.grid);
-    vx_voxel_io io = {encode_progress, &prog};
+    vx_voxel_io io = {.progress = encode_progress, .ud = &prog};
     int rc = 0;
     const char *path = NULL;
     switch ((vformat)p.format) {

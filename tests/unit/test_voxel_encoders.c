@@ -145,6 +145,17 @@ static void test_raw_binvox(void **st)
                     fail_msg("%s differs from the reference on %dx%dx%d kind %d", enc[e].name,
                              sizes[s][0], sizes[s][1], sizes[s][2], kind);
             }
+            /* binvox's pipeline in groups of 1, 2 and 3 blocks (the last
+             * group short), not only the whole grid in one group */
+            const size_t block = 32u * (size_t)sizes[s][2] * ((sizes[s][1] + 31u) / 32u) * 4u;
+            for (size_t per = 1; per <= 3; per++) {
+                vx_voxel_io io = {.binvox_group_bytes = per * block};
+                snprintf(a, sizeof a, "%s/fast.binvox", dir);
+                assert_int_equal(vx_voxel_write_binvox(&g, a, &io, &err), 0);
+                if (!same_file(a, b))
+                    fail_msg("binvox in groups of %zu blocks differs on %dx%dx%d kind %d", per,
+                             sizes[s][0], sizes[s][1], sizes[s][2], kind);
+            }
             vx_bitgrid_free(&g);
         }
 }
@@ -218,7 +229,7 @@ static void test_progress(void **st)
     for (int w = 0; w < 9; w++) {
         static seen s;
         s.n = 0;
-        vx_voxel_io io = {record, &s};
+        vx_voxel_io io = {.progress = record, .ud = &s};
         vx_err err;
         int rc = w < 6 ? fns[w](&g, p, &io, &err)
                        : vx_voxel_write_vdb(&g,

@@ -269,7 +269,7 @@ static void test_write_canceled(void **st)
     make_grid(&g, 4, 4, 32, 0);
     char p[256];
     path_of(p, sizeof p, "x.raw");
-    vx_voxel_io io = {stop_at_half, NULL};
+    vx_voxel_io io = {.progress = stop_at_half};
     vx_err err;
     assert_int_equal(vx_voxel_write_raw1(&g, p, &io, &err), -1);
     assert_int_equal(err.kind, VX_ECANCELED);
