@@ -114,7 +114,9 @@ static void run_finish(vx_jobs *j, vx_job_run *r, int ok, const vx_err *e)
     int requeue = !ok && e->kind == VX_ECANCELED && vx_err_has(e, VX_EF_SHUTDOWN);
     if (ok) {
         sync_outputs(r);
-        vx_store_result_added(j->desc.store, jb->id);
+        /* a job without files of its own (summary, brick parents) has no
+         * result directory to sync or account */
+        if (r->dir[0]) vx_store_result_added(j->desc.store, jb->id);
     } else if (r->dir[0] || requeue) {
         vx_store_result_remove(j->desc.store, jb->id);
     }

@@ -77,6 +77,8 @@ for m in "${METHODS[@]}"; do
     check "$m cube: summary has no outputs" jq -e '.outputs == {}' "$TMP/job.json"
     api GET "/v1/jobs/$VJ/result"
     expect_error "$m summary result" 404 output_not_found
+    # no result directory to sync: no error logged for it
+    check "$m summary: no store error logged" bash -c "! grep -a 'event=store.result_unsynced job=$VJ' '$TMP/daemon.log'"
 
     vox "$m cube r8 padding 2" "$M_cube" "{\"resolution\":8,\"padding\":2,\"method\":\"$m\",\"format\":\"raw8\"}"
     check "$m padded cube: dims 12^3, origin -0.25" jq -e '.stats.dims == [12,12,12] and .stats.origin == [-0.25,-0.25,-0.25] and .stats.voxels_inside == 512' "$TMP/job.json"
