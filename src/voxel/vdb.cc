@@ -129,6 +129,49 @@ int gather_leaf(const vx_bitgrid *g, int X, int Y, int Z, uint64_t w[8])
     return LEAF_PART;
 }
 
+// The kinds of a row of leaves (Y = 8 yl, Z = 8 zl; kind[xl] for X = 8 xl)
+// as gather_leaf would return them, from the leaves' row bytes ORed and
+// ANDed a whole row at a time:
+// only partial leaves then need gather_leaf's transposes. any and all are
+// scratch of lx bytes each; rows are read eight bytes at a time.
+void classify_leaves(const vx_bitgrid *g, int yl, int zl, uint8_t *any, uint8_t *all, uint8_t *kind)
+{
+    const int nx = g->grid.dims[0], ny = g->grid.dims[1], nz = g->grid.dims[2];
+    const int lx = (nx + 7) / 8;
+    memset(any, 0, (size_t)lx);
+    memset(all, 0xff, (size_t)lx);
+    for (int y = 0; y < 8; y++)
+        for (int z = 0; z < 8; z++) {
+            const int j = 8 * yl + y, k = 8 * zl + z;
+            if (j >= ny || k >= nz) { // voxels outside the grid are 0
+                memset(all, 0, (size_t)lx);
+                continue;
+            }
+            const uint8_t *row = (const uint8_t *)(g->bits + ((size_t)k * ny + j) * g->wx);
+            int xl = 0;
+            for (; xl + 8 <= lx; xl += 8) { // eight leaves a word
+                uint64_t r, a, l;
+                memcpy(&r, row + xl, 8);
+                memcpy(&a, any + xl, 8);
+                memcpy(&l, all + xl, 8);
+                a |= r;
+                l &= r;
+                memcpy(any + xl, &a, 8);
+                memcpy(all + xl, &l, 8);
+            }
+            for (; xl < lx; xl++) {
+                any[xl] |= row[xl];
+                all[xl] &= row[xl];
+            }
+        }
+    if (nx & 7) { // the last leaf is cut by the grid's end
+        any[lx - 1] &= (uint8_t)((1u << (nx & 7)) - 1u);
+        all[lx - 1] = 0;
+    }
+    for (int xl = 0; xl < lx; xl++)
+        kind[xl] = !any[xl] ? LEAF_EMPTY : all[xl] == 0xff ? LEAF_FULL : LEAF_PART;
+}
+
 // Counts-based fog leaf: value count / nsamples, active where count > 0.
 template <typename LeafT> int coverage_leaf(const vx_bitgrid *g, int X, int Y, int Z, LeafT *&out)
 {
@@ -168,7 +211,7 @@ template <typename LeafT> struct Slab {
 template <typename TreeT, typename MakeLeaf>
 int build_tree(const vx_bitgrid *g, TreeT &tree, const typename TreeT::ValueType &on,
                const openvdb::Coord &at, const vx_voxel_io *io, double span, vx_err *err,
-               MakeLeaf make)
+               bool by_bits, MakeLeaf make)
 {
     using LeafT = typename TreeT::LeafNodeType;
     const int nx = g->grid.dims[0], ny = g->grid.dims[1], nz = g->grid.dims[2];
@@ -177,11 +220,16 @@ int build_tree(const vx_bitgrid *g, TreeT &tree, const typename TreeT::ValueType
     for (int zl = 0; zl < lz; zl++) {
         if (io && io->progress && io->progress(io->ud, span * zl / lz, err)) return -1;
         tbb::parallel_for(tbb::blocked_range<int>(0, ly), [&](const tbb::blocked_range<int> &r) {
+            std::vector<uint8_t> scratch(by_bits ? 3 * (size_t)lx : 0);
+            uint8_t *kinds = scratch.data() + 2 * (size_t)lx;
             for (int yl = r.begin(); yl < r.end(); yl++) {
                 Slab<LeafT> &s = rows[(size_t)yl];
+                if (by_bits) classify_leaves(g, yl, zl, scratch.data(), scratch.data() + lx, kinds);
                 for (int xl = 0; xl < lx; xl++) {
                     LeafT *leaf = nullptr;
-                    int kind = make(8 * xl, 8 * yl, 8 * zl, leaf);
+                    int kind = by_bits && kinds[xl] != LEAF_PART
+                                   ? kinds[xl]
+                                   : make(8 * xl, 8 * yl, 8 * zl, leaf);
                     if (kind == LEAF_PART) s.leaves.push_back(leaf);
                     if (kind == LEAF_FULL)
                         s.fulls.push_back(openvdb::Coord(8 * xl, 8 * yl, 8 * zl));
@@ -209,19 +257,19 @@ openvdb::BoolGrid::Ptr bool_grid(const vx_bitgrid *g, const openvdb::Coord &at,
 {
     openvdb::BoolGrid::Ptr grid = openvdb::BoolGrid::create(false);
     using LeafT = openvdb::BoolGrid::TreeType::LeafNodeType;
-    int rc =
-        build_tree(g, grid->tree(), true, at, io, span, err, [g](int X, int Y, int Z, LeafT *&out) {
-            uint64_t w[8];
-            int kind = gather_leaf(g, X, Y, Z, w);
-            if (kind != LEAF_PART) return kind;
-            out = new LeafT(openvdb::Coord(X, Y, Z), false, false);
-            uint64_t *buf = out->buffer().data();
-            for (int x = 0; x < 8; x++) {
-                out->getValueMask().template getWord<uint64_t>(x) = w[x];
-                buf[x] = w[x];
-            }
-            return kind;
-        });
+    int rc = build_tree(g, grid->tree(), true, at, io, span, err, true,
+                        [g](int X, int Y, int Z, LeafT *&out) {
+                            uint64_t w[8];
+                            int kind = gather_leaf(g, X, Y, Z, w);
+                            if (kind != LEAF_PART) return kind;
+                            out = new LeafT(openvdb::Coord(X, Y, Z), false, false);
+                            uint64_t *buf = out->buffer().data();
+                            for (int x = 0; x < 8; x++) {
+                                out->getValueMask().template getWord<uint64_t>(x) = w[x];
+                                buf[x] = w[x];
+                            }
+                            return kind;
+                        });
     if (rc) return nullptr;
     grid->setTransform(transform_of(g->grid));
     return grid;
@@ -235,10 +283,10 @@ openvdb::FloatGrid::Ptr fog_grid(const vx_bitgrid *g, const openvdb::Coord &at,
     int rc;
     if (g->counts)
         rc = build_tree(
-            g, grid->tree(), 1.0f, at, io, span, err,
+            g, grid->tree(), 1.0f, at, io, span, err, false,
             [g](int X, int Y, int Z, LeafT *&out) { return coverage_leaf(g, X, Y, Z, out); });
     else
-        rc = build_tree(g, grid->tree(), 1.0f, at, io, span, err,
+        rc = build_tree(g, grid->tree(), 1.0f, at, io, span, err, true,
                         [g](int X, int Y, int Z, LeafT *&out) {
                             uint64_t w[8];
                             int kind = gather_leaf(g, X, Y, Z, w);
@@ -304,14 +352,17 @@ extern "C" uint64_t vx_voxel_vdb_grid_bytes(const vx_bitgrid *g, vx_vdb_class cl
               lz = (g->grid.dims[2] + 7) / 8;
     std::atomic<uint64_t> partial{0}, full{0};
     tbb::parallel_for(tbb::blocked_range<int>(0, lz), [&](const tbb::blocked_range<int> &r) {
-        uint64_t p = 0, f = 0, w[8];
+        uint64_t p = 0, f = 0;
+        std::vector<uint8_t> scratch(3 * (size_t)lx);
+        uint8_t *kinds = scratch.data() + 2 * (size_t)lx;
         for (int zl = r.begin(); zl < r.end(); zl++)
-            for (int yl = 0; yl < ly; yl++)
+            for (int yl = 0; yl < ly; yl++) {
+                classify_leaves(g, yl, zl, scratch.data(), scratch.data() + lx, kinds);
                 for (int xl = 0; xl < lx; xl++) {
-                    int kind = gather_leaf(g, 8 * xl, 8 * yl, 8 * zl, w);
-                    p += kind == LEAF_PART;
-                    f += kind == LEAF_FULL;
+                    p += kinds[xl] == LEAF_PART;
+                    f += kinds[xl] == LEAF_FULL;
                 }
+            }
         partial += p;
         full += f;
     });
