@@ -21,8 +21,11 @@ bench_voxeld "$tmp/voxeld.log" --data-dir "$tmp/data" --max-job-memory 16G
 # job MESH PARAMS -> the finished job's JSON on stdout
 job() {
     local id body
-    id=$(curl -s -H 'Content-Type: application/json' \
-        -d "{\"mesh\":\"$1\",\"kind\":\"voxelize\",\"params\":$2}" "$base/v1/jobs" | jq -r .id)
+    body=$(curl -s -H 'Content-Type: application/json' \
+        -d "{\"mesh\":\"$1\",\"kind\":\"voxelize\",\"params\":$2}" "$base/v1/jobs")
+    id=$(jq -r '.id // empty' <<<"$body")
+    # refused (e.g. 422 job_memory_limit): the error body, reported as failed
+    [[ -n $id ]] || { echo "$body"; return; }
     while :; do
         body=$(curl -s "$base/v1/jobs/$id?wait=30")
         case $(jq -r .state <<<"$body") in succeeded | failed | canceled) break ;; esac

@@ -58,6 +58,16 @@ typedef struct vox_brick {
     uint64_t count;
 } vox_brick;
 
+static inline void put_le32(uint8_t *p, uint32_t v)
+{
+#if defined(__BYTE_ORDER__) && __BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__
+    memcpy(p, &v, 4);
+#else
+    p[0] = (uint8_t)v, p[1] = (uint8_t)(v >> 8), p[2] = (uint8_t)(v >> 16),
+    p[3] = (uint8_t)(v >> 24);
+#endif
+}
+
 /* Counts the set voxels of the brick and, with o, writes each as XYZI's
  * (x, y, z, colour 1) relative to the brick, z, y, x order (x fastest). */
 static uint64_t brick_scan(const vx_bitgrid *g, const vox_brick *b, vx_out *o)
@@ -79,11 +89,18 @@ static uint64_t brick_scan(const vx_bitgrid *g, const vox_brick *b, vx_out *o)
                 }
                 if (o->n + 4 * 32 > VX_OUT_BUF && vx_out_flush(o)) return n;
                 uint8_t *p = o->buf + o->n;
-                for (; w; w &= w - 1, n++, p += 4) {
-                    p[0] = (uint8_t)(32 * x + (size_t)__builtin_ctz(w) - (size_t)i0);
-                    p[1] = (uint8_t)(j - b->o[1]);
-                    p[2] = (uint8_t)(k - b->o[2]);
-                    p[3] = 1;
+                /* (x, y, z, 1) as one little-endian word: y, z and the
+                 * colour are the row's, x the bit's */
+                const uint32_t row_yz = (uint32_t)(uint8_t)(j - b->o[1]) << 8 |
+                                        (uint32_t)(uint8_t)(k - b->o[2]) << 16 | 1u << 24;
+                const uint32_t x_at = (uint32_t)(32 * x - (size_t)i0);
+                if (w == 0xffffffffu) { /* inside a solid: 32 in a row */
+                    for (uint32_t q = 0; q < 32; q++, p += 4)
+                        put_le32(p, row_yz | (uint8_t)(x_at + q));
+                    n += 32;
+                } else {
+                    for (; w; w &= w - 1, n++, p += 4)
+                        put_le32(p, row_yz | (uint8_t)(x_at + (uint32_t)__builtin_ctz(w)));
                 }
                 o->n = (size_t)(p - o->buf);
             }

@@ -122,11 +122,13 @@ int vx_voxel_write_vdb_float(const float *v, const int dims[3], const double ori
 
 /* Bytes the vdb writer may hold in memory beyond the bit grid, known from
  * the dims (OpenVDB's trees for a grid whose every leaf is partial: the
- * worst case; a 0/1 fog grid's topology only, its float leaves are
- * vx_voxel_vdb_grid_bytes's); coverage: the grid has sample counts. */
+ * worst case; a 0/1 fog grid's or a level set's topology only, their float
+ * leaves are vx_voxel_vdb_grid_bytes's); coverage: the grid has sample
+ * counts. */
 uint64_t vx_voxel_vdb_bytes(const int dims[3], vx_vdb_class cls, int coverage);
-/* The same for the grid g itself (a 0/1 fog grid: its partial leaves as
- * floats, counted in parallel; other classes as vx_voxel_vdb_bytes). */
+/* The same for the grid g itself (a 0/1 fog grid or a level set: from its
+ * partial leaves, counted in parallel; other classes as
+ * vx_voxel_vdb_bytes). */
 uint64_t vx_voxel_vdb_grid_bytes(const vx_bitgrid *g, vx_vdb_class cls);
 
 #endif

@@ -1036,7 +1036,8 @@ static int voxelize_encode(vx_job_run *r, const void *params, void *state, vx_er
         path = vx_run_output(r, "voxels", "vdb", "application/x-openvdb", err);
         if (!path) return -1;
         vx_vdb_meta m = meta_of(&p, r, s->st.method, s->inside);
-        /* A fog grid's float leaves are known only now: within the limit? */
+        /* A fog grid's float leaves and a level set's band are known only now:
+         * within the limit? */
         uint64_t lim = vx_run_limits(r)->max_job_memory;
         uint64_t need = lim ? vx_voxel_vdb_grid_bytes(&s->grid, (vx_vdb_class)p.vdb_grid) : 0;
         if (lim && need + vx_bitgrid_bytes(s->grid.grid.dims, s->grid.counts ? 2 : 1) > lim)

@@ -337,16 +337,16 @@ extern "C" uint64_t vx_voxel_vdb_bytes(const int dims[3], vx_vdb_class cls, int 
 {
     uint64_t n = (uint64_t)dims[0] * (uint64_t)dims[1] * (uint64_t)dims[2];
     uint64_t leaves = n / 512 + 1;
-    // A 0/1 fog grid's float leaves are only the partial ones, known from
-    // the grid (vx_voxel_vdb_grid_bytes checks them before the writer runs):
-    // here the topology, as for bool.
-    if (cls == VX_VDB_FOG && !coverage) cls = VX_VDB_BOOL;
+    // A 0/1 fog grid's float leaves are only the partial ones, and a level
+    // set's band follows them: known from the grid (vx_voxel_vdb_grid_bytes
+    // checks them before the writer runs); here the topology, as for bool.
+    if ((cls == VX_VDB_FOG || cls == VX_VDB_LEVEL_SET) && !coverage) cls = VX_VDB_BOOL;
     return leaves * leaf_bytes(cls, coverage) * 2;
 }
 
 extern "C" uint64_t vx_voxel_vdb_grid_bytes(const vx_bitgrid *g, vx_vdb_class cls)
 {
-    if (g->counts || cls != VX_VDB_FOG)
+    if (g->counts || cls == VX_VDB_BOOL)
         return vx_voxel_vdb_bytes(g->grid.dims, cls, g->counts != 0);
     const int lx = (g->grid.dims[0] + 7) / 8, ly = (g->grid.dims[1] + 7) / 8,
               lz = (g->grid.dims[2] + 7) / 8;
@@ -366,10 +366,11 @@ extern "C" uint64_t vx_voxel_vdb_grid_bytes(const vx_bitgrid *g, vx_vdb_class cl
         partial += p;
         full += f;
     });
-    // Partial leaves as floats, full ones as tiles, and the internal nodes
-    // (one of 16^3 children per 128^3 voxels, ~64 KiB each).
+    // Partial leaves as floats (fog) or as the bool tree and its band of up
+    // to 3 float leaves a leaf (level set), full ones as tiles, and the
+    // internal nodes (one of 16^3 children per 128^3 voxels, ~64 KiB each).
     uint64_t nodes = (uint64_t)lx * ly * lz / 4096 + 1;
-    return (partial * leaf_bytes(VX_VDB_FOG, 0) + full * 64 + nodes * 65536) * 2;
+    return (partial * leaf_bytes(cls, 0) + full * 64 + nodes * 65536) * 2;
 }
 
 extern "C" int vx_voxel_write_vdb(const vx_bitgrid *g, vx_vdb_class cls, const vx_vdb_meta *meta,

@@ -273,5 +273,10 @@ api POST "/v1/jobs?wait=60" -H "Content-Type: application/json" \
 check "voxel_size over memory: the job fails with job_memory_limit" \
     jq -e '.state == "failed" and .error.code == "job_memory_limit"' "$BODY"
 
+# A level set's memory follows the surface, not the grid: a 256^3 sphere
+# (the worst case of every leaf partial would be ~470 MB) runs under 256M.
+vox "sphere r256 level set" "$M_sphere" '{"resolution":256,"format":"vdb","vdb_grid":"level_set"}'
+check "sphere r256 level set: succeeded with a .vdb" jq -e '.state == "succeeded" and (.outputs.voxels | endswith("/result/voxels"))' "$TMP/job.json"
+
 stop_daemon
 finish
