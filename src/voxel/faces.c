@@ -39,13 +39,15 @@
 
 typedef struct sub_progress {
     const vx_voxelize_desc *d;
-    int part; /* 0..3 */
+    int part; /* 0..3 the sample grids, 4 the count */
 } sub_progress;
 
+/* The four runs take the first 90 % of the bar, the count the rest. */
 static int progress(void *ud, double f, vx_err *err)
 {
     sub_progress *p = ud;
-    return p->d->progress(p->d->ud, (p->part + f) / 4.0, err);
+    double at = p->part < 4 ? 0.9 * (p->part + f) / 4.0 : 0.9 + 0.1 * f;
+    return p->d->progress(p->d->ud, at, err);
 }
 
 static void add_stats(vx_voxelize_stats *st, const vx_voxelize_stats *s)
@@ -93,8 +95,10 @@ int vx_faces_count(vx_gl *gl, const vx_bitgrid g[4], int threshold, vx_bitgrid *
     }
     const long max_ssbo = vx_gl_get_info(gl)->max_ssbo_bytes;
     uint64_t rows = FACES_SLAB_CAP / per_row;
-    if (max_ssbo > 0 && rows > (uint64_t)max_ssbo / widest - 1)
-        rows = (uint64_t)max_ssbo / widest - 1;
+    if (max_ssbo > 0) { /* g3's slab has one row more */
+        const uint64_t fit = (uint64_t)max_ssbo / widest;
+        if (rows > (fit > 0 ? fit - 1 : 0)) rows = fit > 0 ? fit - 1 : 0;
+    }
     if (fd && fd->max_rows > 0 && rows > (uint64_t)fd->max_rows) rows = (uint64_t)fd->max_rows;
     if (fd && fd->max_bytes > 0 && rows > fd->max_bytes / per_row) rows = fd->max_bytes / per_row;
     if (rows > (uint64_t)nz) rows = (uint64_t)nz;
@@ -127,6 +131,7 @@ int vx_faces_count(vx_gl *gl, const vx_bitgrid g[4], int threshold, vx_bitgrid *
         glBindBufferBase(GL_SHADER_STORAGE_BUFFER, b, buf[b]);
     for (int k0 = 0; k0 < nz; k0 += (int)rows) {
         const int r = nz - k0 < (int)rows ? nz - k0 : (int)rows;
+        if (fd && fd->progress && fd->progress(fd->ud, (double)k0 / nz, err)) goto done;
         double t0 = vx_mono_ms();
         /* Each sample slab is contiguous in its grid: rows k0.. of g0-g2,
          * and one more of g3 (the upper z faces). */
@@ -213,8 +218,11 @@ int vx_voxelize_faces(vx_gl *gl, const vx_mesh *m, const vx_voxelize_desc *d, vx
         held += vx_bitgrid_bytes(sub.grid.dims, 1);
     }
     /* What the count may take: what the four runs left of max_memory. */
+    sp.part = 4;
     vx_faces_count_desc fd = {
-        .max_bytes = d->max_memory ? (held < d->max_memory ? d->max_memory - held : 1) : 0};
+        .max_bytes = d->max_memory ? (held < d->max_memory ? d->max_memory - held : 1) : 0,
+        .progress = d->progress ? progress : NULL,
+        .ud = &sp};
     if (vx_faces_count(gl, g, d->threshold, out, &fd, st, err)) goto done;
     st->voxels_inside = vx_bitgrid_count(out);
     rc = 0;

@@ -12,6 +12,10 @@
 typedef struct vx_faces_count_desc {
     int max_rows;       /* z rows per slab at most (tests force many slabs) */
     uint64_t max_bytes; /* GPU buffer bytes the count may take */
+    /* called before each slab with the fraction done (and so polls the
+     * job's stop hook); nonzero stops the count: -1 with err as it set */
+    int (*progress)(void *ud, double fraction, vx_err *err);
+    void *ud;
 } vx_faces_count_desc;
 
 /* out->counts[i,j,k] = how many of voxel (i,j,k)'s centre (g[0]) and face

@@ -1,7 +1,8 @@
 /* raw8, raw1 and binvox writers (io.h). Each works a word of the bit grid
  * at a time (32 voxels) and writes through a buffer of about 1 MiB, so the
- * only memory beyond the grid is that buffer (binvox: plus two blocks of 32
- * x-columns of the grid, transposed, one coded while the next is made). */
+ * only memory beyond the grid is that buffer (binvox: plus two groups of
+ * transposed x-columns, 16 MiB each or one block of 32 columns if larger,
+ * one coded while the next is made). */
 #include <errno.h>
 #include <pthread.h>
 #include <stdio.h>
@@ -349,8 +350,15 @@ int vx_voxel_write_binvox(const vx_bitgrid *g, const char *path, const vx_voxel_
                  d, g->grid.origin[0], g->grid.origin[1], g->grid.origin[2], d * g->grid.h);
     if (ok && vx_out_write(&o, hdr, (size_t)hn)) ok = 0;
     rle r = {&o, 0, 0};
-    binvox_pipe p = {g,  0,  per, ncols,          d, {cols, cols + per * ncols},
-                     &r, io, err, pthread_self(), 0};
+    binvox_pipe p = {.g = g,
+                     .per = per,
+                     .ncols = ncols,
+                     .d = d,
+                     .cols = {cols, cols + per * ncols},
+                     .r = &r,
+                     .io = io,
+                     .err = err,
+                     .caller = pthread_self()};
     if (ok) binvox_transpose(g, 0, group_blocks(&p, 0), cols);
     for (size_t q = 0; ok && q * per < g->wx; q++) {
         p.q = q;

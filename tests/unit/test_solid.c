@@ -695,6 +695,14 @@ static void test_faces_pattern(void **state)
     vx_mesh_free(ball);
 }
 
+static int stop_second(void *ud, double fraction, vx_err *err)
+{
+    (void)fraction;
+    int *calls = ud;
+    if (++*calls < 2) return 0;
+    return vx_err_set(err, VX_ECANCELED, "canceled", "stopped");
+}
+
 /* The faces count on the GPU (vx_faces_count) on random sample grids:
  * widths on and off word and uint boundaries, one z row per slab up to the
  * whole grid, every threshold, against a voxel-by-voxel count here. */
@@ -753,6 +761,27 @@ static void test_faces_count_random(void **state)
         vx_bitgrid_free(&out);
     }
     printf("faces count: %zu voxels of 60 random grids right\n", checked);
+
+    /* a stop asked for between slabs ends the count with its error */
+    {
+        vx_grid grid = {.h = 1, .dims = {40, 9, 12}};
+        vx_bitgrid g[4], out;
+        for (int s = 0; s < 4; s++) {
+            vx_grid gs = grid;
+            if (s > 0) gs.dims[s - 1] += 1;
+            assert_int_equal(vx_bitgrid_alloc(&g[s], &gs, 0, &err), 0);
+        }
+        assert_int_equal(vx_bitgrid_alloc(&out, &grid, 1, &err), 0);
+        int calls = 0;
+        vx_faces_count_desc stop = {.max_rows = 2, .progress = stop_second, .ud = &calls};
+        vx_voxelize_stats st = {0};
+        assert_int_equal(vx_faces_count(vx_test_gl, g, 1, &out, &stop, &st, &err), -1);
+        assert_string_equal(err.code, "canceled");
+        assert_int_equal(calls, 2);
+        for (int s = 0; s < 4; s++)
+            vx_bitgrid_free(&g[s]);
+        vx_bitgrid_free(&out);
+    }
 
     /* a budget too small for one z row */
     vx_grid grid = {.h = 1, .dims = {40, 40, 4}};
