@@ -45,6 +45,11 @@ VSTATS = {"method": "peel", "inside": "nonzero", "boundary_edges": 0, "dims": [8
 VJOB_SUMMARY = dict(JOB_OK, kind="voxelize", params=VPARAMS, stats=VSTATS, outputs={})
 VJOB_VDB = dict(VJOB_SUMMARY, params=dict(VPARAMS, format="vdb"),
                 outputs={"voxels": "/v1/jobs/%s/result/voxels" % JID})
+# a bricked voxelize still waiting: queued, nothing started or made
+VJOB_QUEUED = dict(VJOB_SUMMARY, params=dict(VPARAMS, format="vdb", bricks={"size": 8}),
+                   state="queued", progress=0, attempts=0, attempt=0, replica=None,
+                   started=None, finished=None, stats={}, outputs={},
+                   timings={"queue_ms": 5.0, "run_ms": None, "total_ms": None})
 # merge false: a manifest and one .vdb per brick, no voxels
 BRICK = {"offset": [0, 0, 0], "index_offset": [0, 0, 0], "dims": [8, 8, 8], "voxels_inside": 512,
          "ms": 1.5}
@@ -120,6 +125,15 @@ CASES = [
                                headers={"location": "/v1/meshes/" + MESH}), MESH_OK, False),
     ("job ok, with wait", dict(method="GET", path="/v1/jobs/%s?wait=2" % JID, status=200,
                                content_type="application/json; charset=utf-8"), JOB_OK, False),
+    ("queued job with progress", dict(method="GET", path="/v1/jobs/" + JID, status=200,
+                                      content_type="application/json"),
+     dict(VJOB_QUEUED, progress=0.3), True),
+    ("queued parent counting its children", dict(method="GET", path="/v1/jobs/" + JID,
+                                                 status=200, content_type="application/json"),
+     dict(VJOB_QUEUED, progress=0.3375, child_jobs=8), False),
+    ("queued parent over 1", dict(method="GET", path="/v1/jobs/" + JID, status=200,
+                                  content_type="application/json"),
+     dict(VJOB_QUEUED, progress=1.5, child_jobs=8), True),
     ("job params not normalised", dict(method="GET", path="/v1/jobs/" + JID, status=200,
                                        content_type="application/json"),
      dict(JOB_OK, params={"width": 64}), True),
