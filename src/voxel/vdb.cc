@@ -131,9 +131,8 @@ int gather_leaf(const vx_bitgrid *g, int X, int Y, int Z, uint64_t w[8])
 
 // The kinds of a row of leaves (Y = 8 yl, Z = 8 zl; kind[xl] for X = 8 xl)
 // as gather_leaf would return them, from the leaves' row bytes ORed and
-// ANDed a whole row at a time:
-// only partial leaves then need gather_leaf's transposes. any and all are
-// scratch of lx bytes each; rows are read eight bytes at a time.
+// ANDed a whole grid row (eight bytes) at a time, so that only partial
+// leaves need gather_leaf's transposes. any and all: scratch of lx bytes.
 void classify_leaves(const vx_bitgrid *g, int yl, int zl, uint8_t *any, uint8_t *all, uint8_t *kind)
 {
     const int nx = g->grid.dims[0], ny = g->grid.dims[1], nz = g->grid.dims[2];
