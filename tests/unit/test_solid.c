@@ -695,6 +695,25 @@ static void test_faces_pattern(void **state)
     vx_mesh_free(ball);
 }
 
+/* The four sample grids of a voxel grid (zeroed) and the result with counts. */
+static void alloc_samples(const vx_grid *grid, vx_bitgrid g[4], vx_bitgrid *out)
+{
+    vx_err err = {0};
+    for (int s = 0; s < 4; s++) {
+        vx_grid gs = *grid;
+        if (s > 0) gs.dims[s - 1] += 1;
+        assert_int_equal(vx_bitgrid_alloc(&g[s], &gs, 0, &err), 0);
+    }
+    assert_int_equal(vx_bitgrid_alloc(out, grid, 1, &err), 0);
+}
+
+static void free_samples(vx_bitgrid g[4], vx_bitgrid *out)
+{
+    for (int s = 0; s < 4; s++)
+        vx_bitgrid_free(&g[s]);
+    vx_bitgrid_free(out);
+}
+
 static int stop_second(void *ud, double fraction, vx_err *err)
 {
     (void)fraction;
@@ -718,18 +737,15 @@ static void test_faces_count_random(void **state)
         const int nx = grid.dims[0], ny = grid.dims[1], nz = grid.dims[2];
         const int density = rand() % 101; /* percent of sample bits set */
         vx_bitgrid g[4], out;
+        alloc_samples(&grid, g, &out);
         for (int s = 0; s < 4; s++) {
-            vx_grid gs = grid;
-            if (s > 0) gs.dims[s - 1] += 1;
-            assert_int_equal(vx_bitgrid_alloc(&g[s], &gs, 0, &err), 0);
-            for (int k = 0; k < gs.dims[2]; k++)
-                for (int j = 0; j < gs.dims[1]; j++)
-                    for (int i = 0; i < gs.dims[0]; i++)
+            const int *gd = g[s].grid.dims;
+            for (int k = 0; k < gd[2]; k++)
+                for (int j = 0; j < gd[1]; j++)
+                    for (int i = 0; i < gd[0]; i++)
                         if (rand() % 100 < density)
-                            g[s].bits[((size_t)k * gs.dims[1] + j) * g[s].wx + i / 32] |=
-                                1u << (i % 32);
+                            g[s].bits[((size_t)k * gd[1] + j) * g[s].wx + i / 32] |= 1u << (i % 32);
         }
-        assert_int_equal(vx_bitgrid_alloc(&out, &grid, 1, &err), 0);
         memset(out.counts, 0xee, (size_t)nx * ny * nz);
         const int thr = 1 + it % 7;
         vx_faces_count_desc fd = {.max_rows = it % 3 == 0 ? 0 : 1 + rand() % nz};
@@ -756,9 +772,7 @@ static void test_faces_count_random(void **state)
             fprintf(stderr, "faces count %dx%dx%d threshold %d rows %d: %zu wrong\n", nx, ny, nz,
                     thr, fd.max_rows, bad);
         assert_int_equal(bad, 0);
-        for (int s = 0; s < 4; s++)
-            vx_bitgrid_free(&g[s]);
-        vx_bitgrid_free(&out);
+        free_samples(g, &out);
     }
     printf("faces count: %zu voxels of 60 random grids right\n", checked);
 
@@ -766,39 +780,25 @@ static void test_faces_count_random(void **state)
     {
         vx_grid grid = {.h = 1, .dims = {40, 9, 12}};
         vx_bitgrid g[4], out;
-        for (int s = 0; s < 4; s++) {
-            vx_grid gs = grid;
-            if (s > 0) gs.dims[s - 1] += 1;
-            assert_int_equal(vx_bitgrid_alloc(&g[s], &gs, 0, &err), 0);
-        }
-        assert_int_equal(vx_bitgrid_alloc(&out, &grid, 1, &err), 0);
+        alloc_samples(&grid, g, &out);
         int calls = 0;
         vx_faces_count_desc stop = {.max_rows = 2, .progress = stop_second, .ud = &calls};
         vx_voxelize_stats st = {0};
         assert_int_equal(vx_faces_count(vx_test_gl, g, 1, &out, &stop, &st, &err), -1);
         assert_string_equal(err.code, "canceled");
         assert_int_equal(calls, 2);
-        for (int s = 0; s < 4; s++)
-            vx_bitgrid_free(&g[s]);
-        vx_bitgrid_free(&out);
+        free_samples(g, &out);
     }
 
     /* a budget too small for one z row */
     vx_grid grid = {.h = 1, .dims = {40, 40, 4}};
     vx_bitgrid g[4], out;
-    for (int s = 0; s < 4; s++) {
-        vx_grid gs = grid;
-        if (s > 0) gs.dims[s - 1] += 1;
-        assert_int_equal(vx_bitgrid_alloc(&g[s], &gs, 0, &err), 0);
-    }
-    assert_int_equal(vx_bitgrid_alloc(&out, &grid, 1, &err), 0);
+    alloc_samples(&grid, g, &out);
     vx_faces_count_desc small = {.max_bytes = 1000};
     vx_voxelize_stats st = {0};
     assert_int_equal(vx_faces_count(vx_test_gl, g, 1, &out, &small, &st, &err), -1);
     assert_string_equal(err.code, "job_memory_limit");
-    for (int s = 0; s < 4; s++)
-        vx_bitgrid_free(&g[s]);
-    vx_bitgrid_free(&out);
+    free_samples(g, &out);
 }
 
 static void test_dispatcher_routes(void **state)
