@@ -22,7 +22,7 @@ RUN apt-get update -qq \
  && apt-get install -y -qq --no-install-recommends \
       build-essential cmake pkg-config \
       libegl-dev libgl-dev libopengl-dev \
-      libmicrohttpd-dev libcjson-dev libdraco-dev libassimp-dev libeigen3-dev \
+      libmicrohttpd-dev libcjson-dev libdraco-dev libtinygltf-dev nlohmann-json3-dev libeigen3-dev \
       libopenvdb-dev libboost-dev libboost-iostreams-dev libtbb-dev libimath-dev \
       libblosc-dev zlib1g-dev libzstd-dev \
       libfftw3-dev libosd-dev libpng-dev libsystemd-dev nettle-dev libcurl4-openssl-dev libpq-dev \
@@ -62,7 +62,7 @@ COPY --from=build /build/runtime-packages /tmp/runtime-packages
 # (its libcurl4 is also voxelctl's).
 RUN apt-get update -qq \
  && apt-get install -y -qq --no-install-recommends \
-      libmicrohttpd12 libcjson1 libdraco7 libassimp5 libpng16-16 libsystemd0 libnettle8 libzstd1 libpq5 \
+      libmicrohttpd12 libcjson1 libdraco7 libpng16-16 libsystemd0 libnettle8 libzstd1 libpq5 \
       libegl1 libopengl0 libgl1 libegl-mesa0 libgl1-mesa-dri \
       libfftw3-single3 libfftw3-double3 libopenvdb10.0 libosdcpu3.5.0 \
       curl \

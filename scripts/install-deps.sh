@@ -24,8 +24,8 @@ run_pkgs=(
   build-essential cmake pkg-config git ca-certificates
   # GL through EGL: glvnd loaders + headers, Mesa's EGL and DRI drivers (llvmpipe)
   libegl-dev libgl-dev libopengl-dev libegl1 libegl-mesa0 libgl1-mesa-dri
-  # HTTP, JSON, meshes (assimp: STL, PLY, glTF); libcurl: voxelctl
-  libmicrohttpd-dev libcjson-dev libdraco-dev libassimp-dev libcurl4-openssl-dev
+  # HTTP, JSON, meshes (tinygltf on nlohmann's JSON: glTF); libcurl: voxelctl
+  libmicrohttpd-dev libcjson-dev libdraco-dev libtinygltf-dev nlohmann-json3-dev libcurl4-openssl-dev
   # libdraco's glTF encoder header (the glb writer) includes Eigen
   libeigen3-dev
   # compressed result downloads (Content-Encoding zstd; gzip is zlib)

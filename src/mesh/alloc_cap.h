@@ -1,5 +1,5 @@
 /* AllocCap: a per-thread ceiling on operator new, for decoders whose
- * libraries size their tables from counts in the file (libdraco, assimp).
+ * libraries size their tables from counts in the file (libdraco, tinygltf).
  *
  * While an AllocCap lives, its thread's operator new allocations are
  * counted (malloc_usable_size, frees subtracted) and one that would pass

@@ -2,7 +2,7 @@
  * that follow before any library decodes the file, and the sniffing of
  * these formats (mesh.h: vx_declared_check, vx_mesh_sniff_sized).
  *
- * assimp sizes arrays from declared counts (PLY's element counts, OFF's
+ * Readers size arrays from declared counts (PLY's element counts, OFF's
  * vertex and face counts, glTF accessor counts) before reading the data;
  * a count is accepted here only when the rest of the file can hold it at
  * the format's densest encoding. */
@@ -91,7 +91,7 @@ static int blank(unsigned char c)
 
 /* ---- STL ------------------------------------------------------------- */
 
-/* The shortest ASCII facet assimp reads ("facet vertex 0 0 0 ..."). */
+/* The shortest ASCII facet the STL reader takes ("facet vertex 0 0 0 ..."). */
 #define STL_ASCII_MIN_FACET 32
 
 /* "solid" first (binary headers often start so too). */
@@ -239,7 +239,7 @@ static int check_off(const unsigned char *p, size_t n, uint64_t size, vx_mesh_de
         if (parse_u64((const char *)p + i, j - i, &c[k]))
             return corrupt(err, F, "the header has no vertex and face counts");
     }
-    /* The edge count is optional for assimp: not read here. */
+    /* The edge count is optional: not read here. */
     uint64_t left = size - j + 1;
     /* A vertex takes three numbers and their separators; a face at least
      * its size and a separator. */
@@ -585,10 +585,10 @@ int vx_declared_check(vx_mesh_format fmt, const unsigned char *data, size_t n, u
 
 uint64_t vx_declared_decode_bound(vx_mesh_format fmt, uint64_t size, const vx_mesh_declared *d)
 {
-    /* assimp's own copy of the file and its parse state (glTF: the JSON
-     * DOM and the decoded data: URIs), then per element what its scene
-     * holds: a face is an aiFace and its index array, a vertex a position
-     * and what else the file carries (normals, colours, coordinates). */
+    /* The parser's own copy of the file and its parse state (glTF:
+     * tinygltf's JSON tree, its copies of the buffers and the decoded
+     * data: URIs), then per element what the reader gathers: a face and
+     * its corners, a vertex and its position. */
     uint64_t per_byte = fmt == VX_MESH_GLTF || fmt == VX_MESH_GLB ? 16 : 4;
     return per_byte * size + 48 * d->faces + 8 * d->indices + 64 * d->vertices +
            (UINT64_C(16) << 20);

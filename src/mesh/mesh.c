@@ -212,10 +212,11 @@ static uint64_t draco_cost(const char *path, uint64_t bytes, const vx_mesh_limit
            (UINT64_C(12) << 20);
 }
 
-/* The assimp formats: the file, the decode bound (assimp, held to it), and
+/* The formats of mesh/import.cc: the file, the decode bound (the glTF
+ * parse is held to it), and
  * the vx_mesh made from it with its analysis, from the declared counts of
  * a window at the start of the file (glTF: of the whole JSON). */
-static uint64_t assimp_cost(const char *path, vx_mesh_format fmt, uint64_t bytes,
+static uint64_t import_cost(const char *path, vx_mesh_format fmt, uint64_t bytes,
                             const vx_mesh_limits *lim)
 {
     vx_mesh_declared d = {0};
@@ -252,7 +253,7 @@ uint64_t vx_mesh_parse_cost(const char *path, vx_mesh_format fmt, uint64_t bytes
     case VX_MESH_GLTF:
     case VX_MESH_GLB:
     case VX_MESH_OFF:
-        return assimp_cost(path, fmt, bytes, lim);
+        return import_cost(path, fmt, bytes, lim);
     case VX_MESH_DRACO:
         return draco_cost(path, bytes, lim);
     case VX_MESH_BPT: {

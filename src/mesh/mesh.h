@@ -7,7 +7,7 @@
  * `face_idx` (no copy). Positions are doubles: engines normalise in double
  * before converting to float for upload.
  *
- * Readers (OBJ, Draco, .bpt, STL, PLY, OFF; glTF through assimp) and
+ * Readers (OBJ, Draco, .bpt, STL, PLY, OFF; glTF through tinygltf) and
  * writers (OBJ, binary PLY, Draco, glb) live beside this file. Any thread may call these functions
  * on meshes it owns. */
 #ifndef VX_MESH_H
@@ -23,7 +23,7 @@ typedef enum vx_mesh_format {
     VX_MESH_OBJ = 1,
     VX_MESH_DRACO = 2,
     VX_MESH_BPT = 3,  /* Newell's Bézier patch text format (mesh/bpt.c) */
-    VX_MESH_STL = 4,  /* binary or ASCII (mesh/assimp.cc, from here on) */
+    VX_MESH_STL = 4,  /* binary or ASCII (mesh/import.cc, from here on) */
     VX_MESH_PLY = 5,  /* ASCII, binary little or big endian */
     VX_MESH_GLTF = 6, /* glTF 2.0 JSON with data: URI buffers */
     VX_MESH_GLB = 7,  /* binary glTF 2.0 */
@@ -178,8 +178,8 @@ typedef struct vx_mesh_declared {
 int vx_declared_check(vx_mesh_format fmt, const unsigned char *data, size_t n, uint64_t size,
                       const vx_mesh_limits *lim, vx_mesh_declared *d, vx_err *err);
 /* The most bytes that decoding a size-byte file of format fmt with header
- * counts d may allocate through operator new (the assimp decode runs held
- * to it, see mesh/assimp.cc). */
+ * counts d may allocate through operator new (the glTF decode runs held
+ * to it, see mesh/import.cc). */
 uint64_t vx_declared_decode_bound(vx_mesh_format fmt, uint64_t size, const vx_mesh_declared *d);
 /* Tells the formats of mesh/declared.c by their first n bytes and their
  * size: glb ("glTF" magic), PLY ("ply" line), binary STL (80-byte header
@@ -188,25 +188,25 @@ uint64_t vx_declared_decode_bound(vx_mesh_format fmt, uint64_t size, const vx_me
  * "facet" or "endsolid"); else vx_mesh_sniff. */
 vx_mesh_format vx_mesh_sniff_sized(const unsigned char *head, size_t n, uint64_t size);
 
-/* Reads an STL, PLY, glTF, glb or OFF file (PLY and OFF by vx_ply_read_mem
- * and vx_off_read_mem, STL by its own parser in mesh/assimp.cc, glTF
- * through assimp): the file is checked by vx_declared_check first, and
- * assimp runs under vx_declared_decode_bound (past it: VX_EINVAL
+/* Reads an STL, PLY, glTF, glb or OFF file (mesh/import.cc: PLY and OFF
+ * by vx_ply_read_mem and vx_off_read_mem, STL by its own parser, glTF
+ * through tinygltf): the file is checked by vx_declared_check first, and
+ * the glTF decode runs under vx_declared_decode_bound (past it: VX_EINVAL
  * gltf_corrupt). Node
  * transforms are applied (glTF); STL and glTF vertices with equal
  * positions are merged into one. Polygons are kept (quads stay quads).
  * Errors: VX_EINVAL <fmt>_corrupt naming the format, VX_EUNPROC
  * <fmt>_no_faces, VX_ETOOBIG mesh_too_big. Returns an owned analysed mesh
  * or NULL. */
-vx_mesh *vx_assimp_read_path(const char *path, vx_mesh_format fmt, const vx_mesh_limits *lim,
+vx_mesh *vx_import_read_path(const char *path, vx_mesh_format fmt, const vx_mesh_limits *lim,
                              vx_err *err);
-/* Reads an OFF file from memory (mesh/off.c, not assimp: its OFF importer
+/* Reads an OFF file from memory (mesh/off.c, voxeld's own: assimp's OFF importer
  * crashed on fuzzed input): header counts checked first, polygons kept,
  * errors VX_EINVAL off_corrupt naming the line, VX_EUNPROC off_no_faces,
  * VX_ETOOBIG mesh_too_big. Owned analysed mesh or NULL. */
 vx_mesh *vx_off_read_mem(const unsigned char *data, size_t n, const vx_mesh_limits *lim,
                          vx_err *err);
-/* Reads a PLY file from memory (mesh/ply.c, not assimp: its PLY importer
+/* Reads a PLY file from memory (mesh/ply.c, voxeld's own: assimp's PLY importer
  * read past its buffer on fuzzed input): ASCII, binary little or big
  * endian; the vertex element's x, y, z and the face element's
  * vertex_indices (or vertex_index) list, every other element and property
@@ -217,7 +217,7 @@ vx_mesh *vx_ply_read_mem(const unsigned char *data, size_t n, const vx_mesh_limi
                          vx_err *err);
 /* The same from memory (the fuzz targets); OFF and PLY go to
  * vx_off_read_mem and vx_ply_read_mem. */
-vx_mesh *vx_assimp_read_mem(const unsigned char *data, size_t n, vx_mesh_format fmt,
+vx_mesh *vx_import_read_mem(const unsigned char *data, size_t n, vx_mesh_format fmt,
                             const vx_mesh_limits *lim, vx_err *err);
 
 /* Reads any format: STL, PLY, glTF, glb and OFF by the path's extension

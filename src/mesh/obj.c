@@ -661,7 +661,7 @@ vx_mesh *vx_mesh_read_as(const char *path, vx_mesh_format fmt, const vx_mesh_lim
     case VX_MESH_GLB:
     case VX_MESH_OFF:
         fclose(f);
-        return vx_assimp_read_path(path, fmt, lim, err);
+        return vx_import_read_path(path, fmt, lim, err);
     default:
         vx_err_set(err, VX_EINVAL, "mesh_format",
                    "not an OBJ, .bpt, Draco, STL, PLY, glTF or OFF file");

@@ -1,6 +1,7 @@
 /* libFuzzer target: the glTF 2.0 reader on arbitrary bytes, as glb when
  * they start with the glb magic and as glTF JSON otherwise: the JSON and
- * count checks (mesh/declared.c), then assimp under its allocation cap,
+ * count checks (mesh/declared.c), then tinygltf under its allocation cap
+ * and the scene walk (mesh/import.cc),
  * through the C API (oracle: fuzz_reader.h). */
 #include <string.h>
 

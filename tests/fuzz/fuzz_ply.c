@@ -1,5 +1,5 @@
 /* libFuzzer target: the PLY reader (ASCII, binary little and big endian) on arbitrary bytes: the
- * header-count check (mesh/declared.c), then assimp under its allocation cap, through the C API
+ * header-count check (mesh/declared.c), then voxeld's PLY reader, through the C API
  * (oracle: fuzz_reader.h). */
 #include "fuzz_reader.h"
 

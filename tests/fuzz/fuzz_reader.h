@@ -31,14 +31,14 @@ static inline void fuzz_reader_check(vx_mesh *m, const vx_mesh_limits *lim, cons
     vx_mesh_free(m);
 }
 
-/* An assimp format (STL, PLY, glTF, glb, OFF) read from memory, as the
+/* A format of mesh/import.cc (STL, PLY, glTF, glb, OFF) read from memory, as the
  * daemon does after reading the whole upload. */
 static inline int fuzz_reader_run_mem(const uint8_t *data, size_t size, vx_mesh_format fmt)
 {
     vx_mesh_limits lim = {.max_triangles = 1u << 20};
     vx_err err;
     vx_err_clear(&err);
-    fuzz_reader_check(vx_assimp_read_mem(data, size, fmt, &lim, &err), &lim, &err);
+    fuzz_reader_check(vx_import_read_mem(data, size, fmt, &lim, &err), &lim, &err);
     return 0;
 }
 

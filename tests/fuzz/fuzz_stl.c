@@ -1,5 +1,5 @@
 /* libFuzzer target: the STL reader (binary and ASCII) on arbitrary bytes: the header-count
- * check (mesh/declared.c), then assimp under its allocation cap, through
+ * check (mesh/declared.c), then voxeld's STL reader, through
  * the C API (oracle: fuzz_reader.h). */
 #include "fuzz_reader.h"
 

@@ -154,7 +154,7 @@ check "catmull-clark glb: model/gltf-binary" test "$CTYPE" = model/gltf-binary
 cp "$BODY" "$TMP/cc.glb"
 glb_check "$TMP/cc.glb" "catmull-clark"
 check "catmull-clark glb: 26 vertices, 48 triangles (24 quads) (got $(cat "$TMP/glb.txt"))" test "$(cat "$TMP/glb.txt")" = "26 48"
-# The glb goes back in as an upload (assimp reads what libdraco wrote).
+# The glb goes back in as an upload (tinygltf reads what libdraco wrote).
 upload "$TMP/cc.glb" model/gltf-binary
 check "the catmull-clark glb uploads: 48 triangles, closed" jq -e '.triangles == 48 and .boundary_edges == 0' "$BODY"
 run_job catmull-clark "$BOX" '{"levels":1,"format":"glb"}'

@@ -228,7 +228,7 @@ static void test_round_trip(void **state)
             check_same(r, &m, s.format == VX_PLY_ASCII ? VX_PLY_F64 : s.coord);
             vx_mesh_free(r);
             /* The same through the public entry the daemon's intake uses. */
-            r = vx_assimp_read_mem((const unsigned char *)b.p, b.n, VX_MESH_PLY, NULL, &err);
+            r = vx_import_read_mem((const unsigned char *)b.p, b.n, VX_MESH_PLY, NULL, &err);
             assert_non_null(r);
             vx_mesh_free(r);
             free(b.p);

@@ -1,10 +1,10 @@
-/* The STL reader (mesh/assimp.cc, without assimp: its STL importer leaked
- * on every malformed ASCII file): random triangle soups written binary
+/* The STL reader (mesh/import.cc, voxeld's own: assimp's STL importer
+ * leaked on every malformed ASCII file): random triangle soups written binary
  * (headers that start with "solid" too) and ASCII (tabs, CRLF, several
  * solids, names with blanks, no endsolid) read back welded, corner by
  * corner; every truncation of a binary file and a set of malformed ASCII
  * files fail with stl_corrupt; the limits hold. The sanitized build's leak
- * check covers the failures (nothing of assimp is involved any more). */
+ * check covers the failures. */
 #include <stdarg.h>
 #include <stddef.h>
 #include <stdint.h>
@@ -123,7 +123,7 @@ static void check_soup(const vx_mesh *m, const float *c, size_t ntri)
 static vx_mesh *read_buf(const tbuf *b, vx_err *err)
 {
     memset(err, 0, sizeof *err);
-    return vx_assimp_read_mem((const unsigned char *)b->p, b->n, VX_MESH_STL, NULL, err);
+    return vx_import_read_mem((const unsigned char *)b->p, b->n, VX_MESH_STL, NULL, err);
 }
 
 static void test_round_trip(void **state)
@@ -154,7 +154,7 @@ static void test_truncations(void **state)
         vx_err err = {0};
         unsigned char *copy = malloc(n + 1);
         memcpy(copy, b.p, n);
-        vx_mesh *m = vx_assimp_read_mem(copy, n, VX_MESH_STL, NULL, &err);
+        vx_mesh *m = vx_import_read_mem(copy, n, VX_MESH_STL, NULL, &err);
         assert_null(m);
         /* Before the count's zero bytes the "solid" header reads as an
          * empty ASCII solid. */
@@ -213,12 +213,12 @@ static void test_hostile(void **state)
     float *pool, *c = random_soup(10, 8, &pool);
     b = write_ascii(c, 10, 0);
     vx_mesh_limits lim = {.max_triangles = 9};
-    assert_null(vx_assimp_read_mem((const unsigned char *)b.p, b.n, VX_MESH_STL, &lim, &err));
+    assert_null(vx_import_read_mem((const unsigned char *)b.p, b.n, VX_MESH_STL, &lim, &err));
     assert_string_equal(err.code, "mesh_too_big");
     free(b.p);
     b = write_binary(c, 10, 0);
     lim = (vx_mesh_limits){.max_vertices = 3};
-    assert_null(vx_assimp_read_mem((const unsigned char *)b.p, b.n, VX_MESH_STL, &lim, &err));
+    assert_null(vx_import_read_mem((const unsigned char *)b.p, b.n, VX_MESH_STL, &lim, &err));
     assert_string_equal(err.code, "mesh_too_big");
     free(b.p);
     free(c);

@@ -1,0 +1,723 @@
+/* STL and glTF 2.0 readers behind the C API of mesh.h (vx_import_read_*),
+ * sharing the gather and weld; OFF and PLY go to mesh/off.c and
+ * mesh/ply.c from here.
+ *
+ * No file is read by a library that sizes its work from the file's claims
+ * before checking them: vx_declared_check checks the declared counts and
+ * bounds first, and the decode runs under a vx::AllocCap of
+ * vx_declared_decode_bound. STL is parsed here. glTF and glb are parsed by
+ * tinygltf (Debian's libtinygltf-dev, the implementation compiled into
+ * this file with its file system and image decoding left out, so no
+ * external buffer or image can be opened), and the scene is walked here
+ * with every index and byte range checked again.
+ *
+ * assimp read these formats before; its importers leaked (STL), read past
+ * their buffers (PLY), crashed (OFF) and, for glTF, overwrote heap blocks
+ * on fuzzed files (fuzz_gltf), which the daemon could only contain by
+ * importing in a forked child. */
+/* <fstream> first: tinygltf 2.7's writers still name std::ofstream when
+ * TINYGLTF_NO_FS leaves it out (they are never called here). */
+#include <fstream>
+
+#define TINYGLTF_IMPLEMENTATION
+#define TINYGLTF_NO_FS
+#define TINYGLTF_NO_STB_IMAGE
+#define TINYGLTF_NO_STB_IMAGE_WRITE
+#define TINYGLTF_NO_EXTERNAL_IMAGE
+#include <tiny_gltf.h>
+
+#include <algorithm>
+#include <cctype>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <memory>
+#include <new>
+#include <string>
+#include <vector>
+
+#include <sys/stat.h>
+
+#include "mesh/alloc_cap.h"
+
+extern "C" {
+#include "mesh/mesh.h"
+#include "util/log.h"
+}
+
+namespace
+{
+
+struct FormatInfo {
+    const char *name, *hint, *corrupt, *no_faces;
+};
+
+const FormatInfo *info(vx_mesh_format fmt)
+{
+    static const FormatInfo stl{"STL", "stl", "stl_corrupt", "stl_no_faces"};
+    static const FormatInfo gltf{"glTF", "gltf", "gltf_corrupt", "gltf_no_faces"};
+    static const FormatInfo glb{"glTF", "glb", "gltf_corrupt", "gltf_no_faces"};
+    switch (fmt) {
+    case VX_MESH_STL:
+        return &stl;
+    case VX_MESH_GLTF:
+        return &gltf;
+    case VX_MESH_GLB:
+        return &glb;
+    default:
+        return nullptr;
+    }
+}
+
+struct MeshDeleter {
+    void operator()(vx_mesh *m) const { vx_mesh_free(m); }
+};
+using MeshPtr = std::unique_ptr<vx_mesh, MeshDeleter>;
+
+/* What the node walk gathers: positions and polygons, all in one mesh. */
+struct Gather {
+    std::vector<double> pos;
+    std::vector<uint32_t> idx, start;
+    size_t ntris = 0;
+    const vx_mesh_limits *lim;
+    const FormatInfo *fi;
+    vx_err *err;
+};
+
+int too_big(Gather &g, const char *what, size_t n, size_t limit)
+{
+    return vx_err_set(g.err, VX_ETOOBIG, "mesh_too_big",
+                      "the %s file has more than %zu %s (the "
+                      "limit), at least %zu",
+                      g.fi->name, limit, what, n);
+}
+
+/* Merges vertices with equal positions (a triangle soup's corners). */
+void weld(Gather &g)
+{
+    size_t nv = g.pos.size() / 3;
+    std::vector<uint32_t> order(nv), remap(nv);
+    for (size_t i = 0; i < nv; i++)
+        order[i] = uint32_t(i);
+    const double *p = g.pos.data();
+    std::sort(order.begin(), order.end(), [p](uint32_t a, uint32_t b) {
+        const double *x = p + 3 * size_t(a), *y = p + 3 * size_t(b);
+        if (x[0] != y[0]) return x[0] < y[0];
+        if (x[1] != y[1]) return x[1] < y[1];
+        if (x[2] != y[2]) return x[2] < y[2];
+        return a < b;
+    });
+    /* Each run of equal positions maps to its lowest index. */
+    std::vector<char> keep(nv, 0);
+    for (size_t i = 0; i < nv;) {
+        size_t j = i;
+        while (j < nv &&
+               !std::memcmp(p + 3 * size_t(order[i]), p + 3 * size_t(order[j]), 3 * sizeof(double)))
+            j++;
+        for (size_t k = i; k < j; k++)
+            remap[order[k]] = order[i];
+        keep[order[i]] = 1;
+        i = j;
+    }
+    std::vector<uint32_t> newid(nv);
+    size_t out = 0;
+    for (size_t i = 0; i < nv; i++)
+        if (keep[i]) {
+            newid[i] = uint32_t(out);
+            std::memmove(g.pos.data() + 3 * out, p + 3 * i, 3 * sizeof(double));
+            out++;
+        }
+    g.pos.resize(3 * out);
+    for (auto &v : g.idx)
+        v = newid[remap[v]];
+}
+
+/* Moves what g gathered into a new vx_mesh (malloc'd arrays). */
+vx_mesh *to_mesh(Gather &g)
+{
+    MeshPtr m(vx_mesh_new());
+    if (!m) throw std::bad_alloc();
+    size_t nv = g.pos.size() / 3, nf = g.start.size();
+    bool all_tris = g.idx.size() == 3 * nf;
+    m->pos = static_cast<double *>(std::malloc(g.pos.size() * sizeof(double) + 1));
+    m->face_idx = static_cast<uint32_t *>(std::malloc(g.idx.size() * sizeof(uint32_t) + 1));
+    if (!m->pos || !m->face_idx) throw std::bad_alloc();
+    std::memcpy(m->pos, g.pos.data(), g.pos.size() * sizeof(double));
+    std::memcpy(m->face_idx, g.idx.data(), g.idx.size() * sizeof(uint32_t));
+    if (!all_tris) {
+        m->face_start = static_cast<uint32_t *>(std::malloc((nf + 1) * sizeof(uint32_t)));
+        if (!m->face_start) throw std::bad_alloc();
+        std::memcpy(m->face_start, g.start.data(), nf * sizeof(uint32_t));
+        m->face_start[nf] = uint32_t(g.idx.size());
+    }
+    m->nverts = nv;
+    m->nfaces = nf;
+    return m.release();
+}
+
+/* ---- STL, without assimp ---------------------------------------------
+ * assimp 5.2's STL importer leaks the mesh and node it allocated (2.4 KB)
+ * whenever it throws on a malformed ASCII file, so every bad upload grew
+ * the daemon (and fuzz_stl ran a leak scan per input: 100 inputs/s). STL
+ * is read here: binary (the 84-byte header, then 50 bytes a triangle: a
+ * normal, three vertices, an attribute word; vx_declared_check holds the
+ * count to the size) or ASCII (`solid` NAME, then per facet `facet normal
+ * x y z` `outer loop` three `vertex x y z` `endloop` `endfacet`, ended by
+ * `endsolid` (or the end of the file); several solids may follow each
+ * other). Normals are ignored;
+ * corners are welded by position (weld). */
+
+/* A whitespace-separated token reader over the file. */
+struct Tokens {
+    const char *p, *end;
+    size_t line = 1; /* of the last token read */
+    /* The next token into [*s, *s + *len); false at the end. */
+    bool next(const char **s, size_t *len)
+    {
+        while (p < end && std::isspace(static_cast<unsigned char>(*p))) {
+            if (*p == '\n') line++;
+            p++;
+        }
+        if (p == end) return false;
+        *s = p;
+        while (p < end && !std::isspace(static_cast<unsigned char>(*p)))
+            p++;
+        *len = size_t(p - *s);
+        return true;
+    }
+    bool is(const char *word)
+    {
+        const char *s;
+        size_t len;
+        return next(&s, &len) && len == std::strlen(word) && !std::memcmp(s, word, len);
+    }
+    bool number(double *v)
+    {
+        const char *s;
+        size_t len;
+        char buf[64];
+        if (!next(&s, &len) || len >= sizeof buf) return false;
+        std::memcpy(buf, s, len);
+        buf[len] = 0;
+        char *e;
+        *v = std::strtod(buf, &e);
+        return *e == 0;
+    }
+    void skip_line()
+    {
+        while (p < end && *p != '\n')
+            p++;
+    }
+};
+
+int stl_fail(Gather &g, const char *what, size_t line)
+{
+    return vx_err_set(g.err, VX_EINVAL, "stl_corrupt", "not a valid STL file: line %zu: %s", line,
+                      what);
+}
+
+/* Adds one triangle's corners; checks them and the limits. */
+int stl_triangle(Gather &g, const double c[9])
+{
+    for (int k = 0; k < 9; k++)
+        if (!std::isfinite(c[k]))
+            return vx_err_set(g.err, VX_EINVAL, "stl_corrupt",
+                              "not a valid STL file: triangle %zu has a NaN or infinite "
+                              "coordinate",
+                              g.start.size());
+    if (g.lim && g.lim->max_triangles && g.start.size() + 1 > g.lim->max_triangles)
+        return too_big(g, "triangles", g.start.size() + 1, g.lim->max_triangles);
+    uint32_t base = uint32_t(g.pos.size() / 3);
+    g.pos.insert(g.pos.end(), c, c + 9);
+    g.start.push_back(uint32_t(g.idx.size()));
+    g.idx.insert(g.idx.end(), {base, base + 1, base + 2});
+    return 0;
+}
+
+/* vx_declared_check held 84 + 50 * count to the size (d.exact). */
+int stl_binary(Gather &g, const unsigned char *data)
+{
+    uint32_t count = uint32_t(data[80]) | uint32_t(data[81]) << 8 | uint32_t(data[82]) << 16 |
+                     uint32_t(data[83]) << 24;
+    g.pos.reserve(9 * size_t(count));
+    for (uint32_t t = 0; t < count; t++) {
+        const unsigned char *q = data + 84 + 50 * size_t(t) + 12; /* past the normal */
+        double c[9];
+        for (int k = 0; k < 9; k++) {
+            const unsigned char *b = q + 4 * k;
+            uint32_t u =
+                uint32_t(b[0]) | uint32_t(b[1]) << 8 | uint32_t(b[2]) << 16 | uint32_t(b[3]) << 24;
+            float f;
+            std::memcpy(&f, &u, 4);
+            c[k] = f;
+        }
+        if (stl_triangle(g, c)) return -1;
+    }
+    return 0;
+}
+
+int stl_ascii(Gather &g, const unsigned char *data, size_t n)
+{
+    Tokens t{reinterpret_cast<const char *>(data), reinterpret_cast<const char *>(data) + n};
+    const char *s;
+    size_t len;
+    bool any = false;
+    while (t.next(&s, &len)) {
+        if (!(len == 5 && !std::memcmp(s, "solid", 5)))
+            return stl_fail(g, any ? "text after endsolid that is not a solid" : "no \"solid\"",
+                            t.line);
+        any = true;
+        t.skip_line(); /* the solid's name */
+        for (;;) {
+            if (!t.next(&s, &len)) return 0; /* a missing endsolid is forgiven */
+            size_t at = t.line;
+            if (len == 8 && !std::memcmp(s, "endsolid", 8)) {
+                t.skip_line();
+                break;
+            }
+            if (!(len == 5 && !std::memcmp(s, "facet", 5)))
+                return stl_fail(g, "expected facet or endsolid", at);
+            double nrm[3], c[9];
+            if (!t.is("normal") || !t.number(&nrm[0]) || !t.number(&nrm[1]) || !t.number(&nrm[2]) ||
+                !t.is("outer") || !t.is("loop"))
+                return stl_fail(g, "a facet without its normal and outer loop", at);
+            for (int v = 0; v < 3; v++)
+                if (!t.is("vertex") || !t.number(&c[3 * v]) || !t.number(&c[3 * v + 1]) ||
+                    !t.number(&c[3 * v + 2]))
+                    return stl_fail(g, "a facet without three vertices of three numbers", at);
+            if (!t.is("endloop") || !t.is("endfacet"))
+                return stl_fail(g, "a facet without endloop and endfacet after three vertices", at);
+            if (stl_triangle(g, c)) return -1;
+        }
+    }
+    return any ? 0 : stl_fail(g, "no \"solid\"", 1);
+}
+
+vx_mesh *read_stl(const unsigned char *data, size_t n, const FormatInfo *fi,
+                  const vx_mesh_limits *lim, vx_err *err)
+{
+    vx_mesh_declared d;
+    if (vx_declared_check(VX_MESH_STL, data, n, n, lim, &d, err)) return nullptr;
+    Gather g;
+    g.lim = lim;
+    g.fi = fi;
+    g.err = err;
+    /* The declared check told the two apart: an exact binary size wins. */
+    if (d.exact ? stl_binary(g, data) : stl_ascii(g, data, n)) return nullptr;
+    if (g.start.empty()) {
+        vx_err_set(err, VX_EUNPROC, fi->no_faces, "the %s file has no faces", fi->name);
+        return nullptr;
+    }
+    weld(g);
+    if (lim && lim->max_vertices && g.pos.size() / 3 > lim->max_vertices) {
+        too_big(g, "vertices", g.pos.size() / 3, lim->max_vertices);
+        return nullptr;
+    }
+    MeshPtr m(to_mesh(g));
+    if (vx_mesh_analyze(m.get(), err)) return nullptr;
+    return m.release();
+}
+
+/* ---- glTF 2.0 through tinygltf ----------------------------------------- */
+
+/* Images carry nothing a mesh needs: accepted and not decoded. */
+bool skip_image(tinygltf::Image *, const int, std::string *, std::string *, int, int,
+                const unsigned char *, int, void *)
+{
+    return true;
+}
+
+int gl_corrupt(Gather &g, const char *what, int i)
+{
+    return vx_err_set(g.err, VX_EINVAL, g.fi->corrupt, "not a valid %s file: %s %d is malformed",
+                      g.fi->name, what, i);
+}
+
+/* Where element 0 of a view-backed part starts and its stride, once
+ * count elements of elem bytes are known to fit the view's buffer. */
+const unsigned char *span(const tinygltf::Model &mo, int view, size_t off, size_t count,
+                          size_t elem, size_t *stride)
+{
+    if (view < 0 || size_t(view) >= mo.bufferViews.size() || !count) return nullptr;
+    const tinygltf::BufferView &bv = mo.bufferViews[size_t(view)];
+    if (bv.buffer < 0 || size_t(bv.buffer) >= mo.buffers.size()) return nullptr;
+    const std::vector<unsigned char> &buf = mo.buffers[size_t(bv.buffer)].data;
+    size_t st = bv.byteStride ? bv.byteStride : elem;
+    if (st < elem || bv.byteOffset > buf.size() || bv.byteLength > buf.size() - bv.byteOffset)
+        return nullptr;
+    if (off > bv.byteLength || elem > bv.byteLength - off ||
+        count - 1 > (bv.byteLength - off - elem) / st)
+        return nullptr;
+    *stride = st;
+    return buf.data() + bv.byteOffset + off;
+}
+
+/* Component c of an element as a double (normalized integers mapped as
+ * glTF says: unsigned to [0, 1], signed to [-1, 1]). */
+double component(const unsigned char *p, int type, bool normalized)
+{
+    switch (type) {
+    case TINYGLTF_COMPONENT_TYPE_BYTE: {
+        int8_t v;
+        std::memcpy(&v, p, 1);
+        return normalized ? std::max(v / 127.0, -1.0) : v;
+    }
+    case TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE:
+        return normalized ? *p / 255.0 : *p;
+    case TINYGLTF_COMPONENT_TYPE_SHORT: {
+        int16_t v;
+        std::memcpy(&v, p, 2);
+        return normalized ? std::max(v / 32767.0, -1.0) : v;
+    }
+    case TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT: {
+        uint16_t v;
+        std::memcpy(&v, p, 2);
+        return normalized ? v / 65535.0 : v;
+    }
+    case TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT: {
+        uint32_t v;
+        std::memcpy(&v, p, 4);
+        return normalized ? v / 4294967295.0 : v;
+    }
+    default: { /* FLOAT */
+        float v;
+        std::memcpy(&v, p, 4);
+        return v;
+    }
+    }
+}
+
+size_t comp_bytes(int type)
+{
+    switch (type) {
+    case TINYGLTF_COMPONENT_TYPE_BYTE:
+    case TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE:
+        return 1;
+    case TINYGLTF_COMPONENT_TYPE_SHORT:
+    case TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT:
+        return 2;
+    case TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT:
+    case TINYGLTF_COMPONENT_TYPE_FLOAT:
+        return 4;
+    default:
+        return 0;
+    }
+}
+
+/* Accessor ai's elements, ncomp components each (the accessor must have
+ * that many), as doubles into out, sparse substitutions applied. */
+int read_accessor(Gather &g, const tinygltf::Model &mo, int ai, int ncomp, bool index,
+                  std::vector<double> &out)
+{
+    if (ai < 0 || size_t(ai) >= mo.accessors.size()) return gl_corrupt(g, "accessor", ai);
+    const tinygltf::Accessor &a = mo.accessors[size_t(ai)];
+    size_t cb = comp_bytes(a.componentType);
+    bool ok_type = index ? a.type == TINYGLTF_TYPE_SCALAR &&
+                               (a.componentType == TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE ||
+                                a.componentType == TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT ||
+                                a.componentType == TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT)
+                         : a.type == TINYGLTF_TYPE_VEC3 && cb;
+    if (!ok_type || !a.count || (ncomp != 1 && ncomp != 3)) return gl_corrupt(g, "accessor", ai);
+    size_t elem = cb * size_t(ncomp), stride = 0;
+    const unsigned char *p = span(mo, a.bufferView, a.byteOffset, a.count, elem, &stride);
+    if (!p) return gl_corrupt(g, "accessor", ai);
+    out.resize(a.count * size_t(ncomp));
+    for (size_t e = 0; e < a.count; e++)
+        for (int c = 0; c < ncomp; c++)
+            out[e * size_t(ncomp) + size_t(c)] =
+                component(p + e * stride + size_t(c) * cb, a.componentType, a.normalized);
+    if (!a.sparse.isSparse) return 0;
+    const auto &sp = a.sparse;
+    size_t icb = comp_bytes(sp.indices.componentType), ist = 0, vst = 0;
+    if (sp.count < 1 || size_t(sp.count) > a.count || !icb || sp.indices.byteOffset < 0 ||
+        sp.values.byteOffset < 0 || sp.indices.componentType == TINYGLTF_COMPONENT_TYPE_FLOAT ||
+        sp.indices.componentType == TINYGLTF_COMPONENT_TYPE_BYTE ||
+        sp.indices.componentType == TINYGLTF_COMPONENT_TYPE_SHORT)
+        return gl_corrupt(g, "sparse accessor", ai);
+    const unsigned char *ip =
+        span(mo, sp.indices.bufferView, size_t(sp.indices.byteOffset), size_t(sp.count), icb, &ist);
+    const unsigned char *vp =
+        span(mo, sp.values.bufferView, size_t(sp.values.byteOffset), size_t(sp.count), elem, &vst);
+    if (!ip || !vp) return gl_corrupt(g, "sparse accessor", ai);
+    /* Sparse parts are tightly packed, whatever the view's stride says. */
+    for (size_t k = 0; k < size_t(sp.count); k++) {
+        double t = component(ip + k * icb, sp.indices.componentType, false);
+        if (!(t < double(a.count))) return gl_corrupt(g, "sparse accessor", ai);
+        for (int c = 0; c < ncomp; c++)
+            out[size_t(t) * size_t(ncomp) + size_t(c)] =
+                component(vp + k * elem + size_t(c) * cb, a.componentType, a.normalized);
+    }
+    return 0;
+}
+
+/* A 4x4 column-major transform. */
+struct Mat {
+    double m[16];
+    static Mat identity()
+    {
+        Mat r{};
+        r.m[0] = r.m[5] = r.m[10] = r.m[15] = 1;
+        return r;
+    }
+    Mat operator*(const Mat &b) const
+    {
+        Mat r{};
+        for (int c = 0; c < 4; c++)
+            for (int row = 0; row < 4; row++)
+                for (int k = 0; k < 4; k++)
+                    r.m[4 * c + row] += m[4 * k + row] * b.m[4 * c + k];
+        return r;
+    }
+    double det3() const
+    {
+        return m[0] * (m[5] * m[10] - m[9] * m[6]) - m[4] * (m[1] * m[10] - m[9] * m[2]) +
+               m[8] * (m[1] * m[6] - m[5] * m[2]);
+    }
+};
+
+/* A node's local transform: its matrix, or T * R * S. */
+Mat local(const tinygltf::Node &n)
+{
+    Mat t = Mat::identity();
+    if (n.matrix.size() == 16) {
+        std::copy(n.matrix.begin(), n.matrix.end(), t.m);
+        return t;
+    }
+    Mat r = Mat::identity(), s = Mat::identity();
+    if (n.translation.size() == 3)
+        for (int i = 0; i < 3; i++)
+            t.m[12 + i] = n.translation[size_t(i)];
+    if (n.rotation.size() == 4) {
+        double x = n.rotation[0], y = n.rotation[1], z = n.rotation[2], w = n.rotation[3];
+        double len = std::sqrt(x * x + y * y + z * z + w * w);
+        if (len > 0) x /= len, y /= len, z /= len, w /= len;
+        double q[9] = {1 - 2 * (y * y + z * z), 2 * (x * y + z * w),     2 * (x * z - y * w),
+                       2 * (x * y - z * w),     1 - 2 * (x * x + z * z), 2 * (y * z + x * w),
+                       2 * (x * z + y * w),     2 * (y * z - x * w),     1 - 2 * (x * x + y * y)};
+        for (int c = 0; c < 3; c++)
+            for (int row = 0; row < 3; row++)
+                r.m[4 * c + row] = q[3 * c + row];
+    }
+    if (n.scale.size() == 3)
+        for (int i = 0; i < 3; i++)
+            s.m[5 * i] = n.scale[size_t(i)];
+    return t * r * s;
+}
+
+/* One primitive, its positions through t; triangles, strips and fans
+ * become triangles (winding reversed where t mirrors), points and lines
+ * are skipped. */
+int add_primitive(Gather &g, const tinygltf::Model &mo, const tinygltf::Primitive &pr, const Mat &t,
+                  int mi)
+{
+    int mode = pr.mode < 0 ? TINYGLTF_MODE_TRIANGLES : pr.mode;
+    if (mode != TINYGLTF_MODE_TRIANGLES && mode != TINYGLTF_MODE_TRIANGLE_STRIP &&
+        mode != TINYGLTF_MODE_TRIANGLE_FAN)
+        return 0;
+    auto at = pr.attributes.find("POSITION");
+    if (at == pr.attributes.end()) return gl_corrupt(g, "mesh (a primitive without POSITION)", mi);
+    std::vector<double> pos, ix;
+    if (read_accessor(g, mo, at->second, 3, false, pos)) return -1;
+    size_t nv = pos.size() / 3, base = g.pos.size() / 3;
+    if (base + nv > UINT32_MAX) return too_big(g, "vertices", base + nv, UINT32_MAX);
+    if (g.lim && g.lim->max_vertices && base + nv > g.lim->max_vertices)
+        return too_big(g, "vertices", base + nv, g.lim->max_vertices);
+    if (pr.indices >= 0) {
+        if (read_accessor(g, mo, pr.indices, 1, true, ix)) return -1;
+    } else {
+        ix.resize(nv);
+        for (size_t v = 0; v < nv; v++)
+            ix[v] = double(v);
+    }
+    for (size_t v = 0; v < nv; v++) {
+        const double *p = &pos[3 * v];
+        double q[3];
+        for (int r = 0; r < 3; r++)
+            q[r] = t.m[r] * p[0] + t.m[4 + r] * p[1] + t.m[8 + r] * p[2] + t.m[12 + r];
+        if (!std::isfinite(q[0]) || !std::isfinite(q[1]) || !std::isfinite(q[2]))
+            return vx_err_set(g.err, VX_EINVAL, g.fi->corrupt,
+                              "not a valid %s file: a vertex of mesh %d has a NaN or infinite "
+                              "coordinate",
+                              g.fi->name, mi);
+        g.pos.insert(g.pos.end(), {q[0], q[1], q[2]});
+    }
+    for (double i : ix)
+        if (!(i < double(nv)))
+            return vx_err_set(g.err, VX_EINVAL, g.fi->corrupt,
+                              "not a valid %s file: mesh %d uses vertex %.0f of %zu", g.fi->name,
+                              mi, i, nv);
+    bool flip = t.det3() < 0;
+    size_t ntri = mode == TINYGLTF_MODE_TRIANGLES ? ix.size() / 3
+                  : ix.size() >= 3                ? ix.size() - 2
+                                                  : 0;
+    for (size_t k = 0; k < ntri; k++) {
+        size_t c[3];
+        if (mode == TINYGLTF_MODE_TRIANGLES)
+            c[0] = 3 * k, c[1] = 3 * k + 1, c[2] = 3 * k + 2;
+        else if (mode == TINYGLTF_MODE_TRIANGLE_STRIP)
+            c[0] = k, c[1] = k + 1 + k % 2, c[2] = k + 2 - k % 2;
+        else
+            c[0] = k + 1, c[1] = k + 2, c[2] = 0;
+        if (flip) std::swap(c[1], c[2]);
+        g.start.push_back(uint32_t(g.idx.size()));
+        for (size_t j : c)
+            g.idx.push_back(uint32_t(base + size_t(ix[j])));
+        g.ntris++;
+        if (g.lim && g.lim->max_triangles && g.ntris > g.lim->max_triangles)
+            return too_big(g, "triangles", g.ntris, g.lim->max_triangles);
+        if (g.idx.size() > UINT32_MAX / 2) return too_big(g, "face corners", g.idx.size(), 0);
+    }
+    return 0;
+}
+
+int walk(Gather &g, const tinygltf::Model &mo, int ni, const Mat &parent, int depth,
+         std::vector<char> &seen)
+{
+    if (ni < 0 || size_t(ni) >= mo.nodes.size() || seen[size_t(ni)] || depth > 256)
+        return gl_corrupt(g, "node", ni);
+    seen[size_t(ni)] = 1;
+    const tinygltf::Node &n = mo.nodes[size_t(ni)];
+    Mat t = parent * local(n);
+    if (n.mesh >= 0) {
+        if (size_t(n.mesh) >= mo.meshes.size()) return gl_corrupt(g, "node", ni);
+        for (const auto &pr : mo.meshes[size_t(n.mesh)].primitives)
+            if (add_primitive(g, mo, pr, t, n.mesh)) return -1;
+    }
+    for (int c : n.children)
+        if (walk(g, mo, c, t, depth + 1, seen)) return -1;
+    return 0;
+}
+
+/* A tinygltf message as ASCII without controls and on one line, so that it
+ * can go into a JSON answer whatever bytes the file put into it. */
+void ascii_only(const std::string &in, char *out, size_t n)
+{
+    size_t o = 0;
+    for (size_t i = 0; i < in.size() && o + 1 < n; i++)
+        out[o++] = in[i] >= 0x20 && in[i] < 0x7f ? in[i] : ' ';
+    while (o && out[o - 1] == ' ')
+        o--;
+    out[o] = 0;
+}
+
+vx_mesh *read_gltf(const unsigned char *data, size_t n, const FormatInfo *fi, vx_mesh_format fmt,
+                   const vx_mesh_limits *lim, vx_err *err)
+{
+    vx_mesh_declared d;
+    if (vx_declared_check(fmt, data, n, n, lim, &d, err)) return nullptr;
+    if (n > UINT32_MAX) { /* tinygltf takes a 32-bit length; glb's own limit */
+        vx_err_set(err, VX_EINVAL, fi->corrupt, "not a valid %s file: over 4 GiB", fi->name);
+        return nullptr;
+    }
+    Gather g;
+    g.lim = lim;
+    g.fi = fi;
+    g.err = err;
+    char why[160] = "";
+    int rc = -1;
+    {
+        vx::AllocCap cap(vx_declared_decode_bound(fmt, n, &d));
+        try {
+            tinygltf::TinyGLTF loader;
+            loader.SetImageLoader(skip_image, nullptr);
+            tinygltf::Model mo;
+            std::string e, w;
+            bool ok = fmt == VX_MESH_GLB
+                          ? loader.LoadBinaryFromMemory(&mo, &e, &w, data, unsigned(n))
+                          : loader.LoadASCIIFromString(
+                                &mo, &e, &w, reinterpret_cast<const char *>(data), unsigned(n), "");
+            if (!ok) {
+                ascii_only(e.empty() ? std::string("tinygltf could not load it") : e, why,
+                           sizeof why);
+            } else {
+                int si = mo.defaultScene >= 0 ? mo.defaultScene : 0;
+                if (size_t(si) >= mo.scenes.size()) {
+                    rc = 0; /* no scene: nothing to show, no faces */
+                } else {
+                    std::vector<char> seen(mo.nodes.size(), 0);
+                    rc = 0;
+                    for (int r : mo.scenes[size_t(si)].nodes)
+                        if ((rc = walk(g, mo, r, Mat::identity(), 0, seen))) break;
+                }
+            }
+        } catch (const std::bad_alloc &) {
+            if (!cap.tripped()) throw;
+        }
+        if (cap.tripped()) {
+            vx_err_set(err, VX_EINVAL, fi->corrupt,
+                       "not a valid %s file: decoding it would take more than %llu bytes of "
+                       "memory for %llu declared faces",
+                       fi->name, (unsigned long long)cap.limit(), (unsigned long long)d.faces);
+            return nullptr;
+        }
+        VX_DEBUG("mesh.gltf_peak", "format=%s bytes=%zu peak=%llu", fi->hint, n,
+                 (unsigned long long)cap.peak());
+    }
+    if (why[0]) {
+        vx_err_set(err, VX_EINVAL, fi->corrupt, "not a valid %s file: %s", fi->name, why);
+        return nullptr;
+    }
+    if (rc) return nullptr; /* err set by the walk */
+    if (g.start.empty()) {
+        vx_err_set(err, VX_EUNPROC, fi->no_faces, "the %s file has no faces", fi->name);
+        return nullptr;
+    }
+    weld(g);
+    MeshPtr m(to_mesh(g));
+    if (vx_mesh_analyze(m.get(), err)) return nullptr;
+    return m.release();
+}
+
+} // namespace
+
+extern "C" vx_mesh *vx_import_read_mem(const unsigned char *data, size_t n, vx_mesh_format fmt,
+                                       const vx_mesh_limits *lim, vx_err *err)
+{
+    if (fmt == VX_MESH_OFF) return vx_off_read_mem(data, n, lim, err);
+    if (fmt == VX_MESH_PLY) return vx_ply_read_mem(data, n, lim, err);
+    const FormatInfo *fi = info(fmt);
+    if (!fi) {
+        vx_err_set(err, VX_EINTERNAL, "mesh_format", "format %d is not read here", int(fmt));
+        return nullptr;
+    }
+    try {
+        if (fmt == VX_MESH_STL) return read_stl(data, n, fi, lim, err);
+        return read_gltf(data, n, fi, fmt, lim, err);
+    } catch (const std::bad_alloc &) {
+        vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory to read the %s file", fi->name);
+    } catch (...) {
+        vx_err_set(err, VX_EINVAL, fi->corrupt, "not a valid %s file: the reader failed", fi->name);
+    }
+    return nullptr;
+}
+
+extern "C" vx_mesh *vx_import_read_path(const char *path, vx_mesh_format fmt,
+                                        const vx_mesh_limits *lim, vx_err *err)
+{
+    FILE *f = vx_mesh_open(path, err);
+    if (!f) return nullptr;
+    struct stat st;
+    if (fstat(fileno(f), &st) || !S_ISREG(st.st_mode) || st.st_size < 0) {
+        std::fclose(f);
+        vx_err_set(err, VX_EIO, "mesh_io", "cannot read %s: not a regular file", path);
+        return nullptr;
+    }
+    size_t n = size_t(st.st_size);
+    unsigned char *data = static_cast<unsigned char *>(std::malloc(n + 1));
+    if (!data) {
+        std::fclose(f);
+        vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for a %zu-byte file", n);
+        return nullptr;
+    }
+    size_t got = std::fread(data, 1, n, f);
+    int e = std::ferror(f) ? errno : 0;
+    std::fclose(f);
+    vx_mesh *m = nullptr;
+    if (got != n)
+        vx_err_set(err, VX_EIO, "mesh_io", "cannot read %s: %s", path,
+                   e ? std::strerror(e) : "short read");
+    else
+        m = vx_import_read_mem(data, n, fmt, lim, err);
+    std::free(data);
+    return m;
+}
