@@ -333,8 +333,9 @@ int gl_corrupt(Gather &g, const char *what, int i)
                       g.fi->name, what, i);
 }
 
-/* Where element 0 of a view-backed part starts and its stride, once
- * count elements of elem bytes are known to fit the view's buffer. */
+/* Where element 0 of count elements of elem bytes at off in view starts,
+ * and (*stride) the view's stride; NULL unless they fit the view and the
+ * view its buffer. */
 const unsigned char *span(const tinygltf::Model &mo, int view, size_t off, size_t count,
                           size_t elem, size_t *stride)
 {
@@ -352,8 +353,8 @@ const unsigned char *span(const tinygltf::Model &mo, int view, size_t off, size_
     return buf.data() + bv.byteOffset + off;
 }
 
-/* Component c of an element as a double (normalized integers mapped as
- * glTF says: unsigned to [0, 1], signed to [-1, 1]). */
+/* The component of the given type at p as a double (normalized integers
+ * mapped as glTF says: unsigned to [0, 1], signed to [-1, 1]). */
 double component(const unsigned char *p, int type, bool normalized)
 {
     switch (type) {
@@ -404,11 +405,13 @@ size_t comp_bytes(int type)
     }
 }
 
-/* Accessor ai's elements, ncomp components each (the accessor must have
- * that many), as doubles into out, sparse substitutions applied. */
-int read_accessor(Gather &g, const tinygltf::Model &mo, int ai, int ncomp, bool index,
+/* Accessor ai's elements as doubles into out, sparse substitutions
+ * applied: unsigned integer scalars (index) or VEC3s of any component
+ * type (positions). */
+int read_accessor(Gather &g, const tinygltf::Model &mo, int ai, bool index,
                   std::vector<double> &out)
 {
+    const int ncomp = index ? 1 : 3;
     if (ai < 0 || size_t(ai) >= mo.accessors.size()) return gl_corrupt(g, "accessor", ai);
     const tinygltf::Accessor &a = mo.accessors[size_t(ai)];
     size_t cb = comp_bytes(a.componentType);
@@ -417,7 +420,7 @@ int read_accessor(Gather &g, const tinygltf::Model &mo, int ai, int ncomp, bool 
                                 a.componentType == TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT ||
                                 a.componentType == TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT)
                          : a.type == TINYGLTF_TYPE_VEC3 && cb;
-    if (!ok_type || !a.count || (ncomp != 1 && ncomp != 3)) return gl_corrupt(g, "accessor", ai);
+    if (!ok_type || !a.count) return gl_corrupt(g, "accessor", ai);
     size_t elem = cb * size_t(ncomp), stride = 0;
     const unsigned char *p = span(mo, a.bufferView, a.byteOffset, a.count, elem, &stride);
     if (!p) return gl_corrupt(g, "accessor", ai);
@@ -517,13 +520,13 @@ int add_primitive(Gather &g, const tinygltf::Model &mo, const tinygltf::Primitiv
     auto at = pr.attributes.find("POSITION");
     if (at == pr.attributes.end()) return gl_corrupt(g, "mesh (a primitive without POSITION)", mi);
     std::vector<double> pos, ix;
-    if (read_accessor(g, mo, at->second, 3, false, pos)) return -1;
+    if (read_accessor(g, mo, at->second, false, pos)) return -1;
     size_t nv = pos.size() / 3, base = g.pos.size() / 3;
     if (base + nv > UINT32_MAX) return too_big(g, "vertices", base + nv, UINT32_MAX);
     if (g.lim && g.lim->max_vertices && base + nv > g.lim->max_vertices)
         return too_big(g, "vertices", base + nv, g.lim->max_vertices);
     if (pr.indices >= 0) {
-        if (read_accessor(g, mo, pr.indices, 1, true, ix)) return -1;
+        if (read_accessor(g, mo, pr.indices, true, ix)) return -1;
     } else {
         ix.resize(nv);
         for (size_t v = 0; v < nv; v++)

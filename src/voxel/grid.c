@@ -46,7 +46,8 @@ void vx_bitgrid_free(vx_bitgrid *g)
 #if defined(__x86_64__)
 __attribute__((target_clones("popcnt", "default")))
 #endif
-uint64_t vx_bitgrid_count(const vx_bitgrid *g)
+uint64_t
+vx_bitgrid_count(const vx_bitgrid *g)
 {
     size_t n = g->wx * (size_t)g->grid.dims[1] * (size_t)g->grid.dims[2], i = 0;
     uint64_t c = 0;
