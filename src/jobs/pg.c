@@ -701,7 +701,9 @@ int vx_pg_renew(vx_pg *pg, const char *id, int attempt, double progress, int *ca
     int held = PQntuples(r) == 1;
     if (held) *cancel = PQgetvalue(r, 0, 0)[0] == 't';
     PQclear(r);
-    if (!held) vx_log(VX_LOG_WARN, "pg.lease_lost", "job=%s attempt=%d", id, attempt);
+    /* Not always a loss: the job may have just been completed by this
+     * replica's GL thread. The caller tells them apart (cluster.c: lose). */
+    if (!held) VX_DEBUG("pg.lease_not_held", "job=%s attempt=%d", id, attempt);
     return held ? 0 : 1;
 }
 
