@@ -213,9 +213,9 @@ static uint64_t draco_cost(const char *path, uint64_t bytes, const vx_mesh_limit
 }
 
 /* The formats of mesh/import.cc: the file, the decode bound (the glTF
- * parse is held to it), and
- * the vx_mesh made from it with its analysis, from the declared counts of
- * a window at the start of the file (glTF: of the whole JSON). */
+ * parse is held to it), and the vx_mesh made from it with its analysis,
+ * from the declared counts of a window at the start of the file (glTF: of
+ * the whole JSON). */
 static uint64_t import_cost(const char *path, vx_mesh_format fmt, uint64_t bytes,
                             const vx_mesh_limits *lim)
 {
