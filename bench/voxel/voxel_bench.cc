@@ -177,6 +177,7 @@ static vx_method parse_method(const char *s)
     return !strcmp(s, "peel")    ? VX_METHOD_PEEL
            : !strcmp(s, "slice") ? VX_METHOD_SLICE
            : !strcmp(s, "scan")  ? VX_METHOD_SCAN
+           : !strcmp(s, "cpu")   ? VX_METHOD_CPU
                                  : VX_METHOD_AUTO;
 }
 
@@ -299,6 +300,7 @@ int main(int argc, char **argv)
             method == VX_METHOD_PEEL    ? "peel"
             : method == VX_METHOD_SLICE ? "slice"
             : method == VX_METHOD_SCAN  ? "scan"
+            : method == VX_METHOD_CPU   ? "cpu"
                                         : "auto");
         for (auto &spec : meshes) {
             Mesh m = load(spec);

@@ -14,12 +14,12 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <unistd.h>
 
 #include "bandlimit/bandlimit.h"
 #include "bandlimit/fft_int.h"
 #include "bandlimit/job.h"
 #include "image/png.h"
+#include "util/par.h"
 #include "util/vec3.h"
 #include "util/stop.h"
 #include "voxel/io.h"
@@ -372,17 +372,11 @@ static int lowpass_progress(void *ud, double fraction, vx_err *err)
     return vx_run_progress(ud, 0.3 + 0.3 * fraction, err);
 }
 
-static int nthreads(void)
-{
-    long n = sysconf(_SC_NPROCESSORS_ONLN);
-    return n < 1 ? 1 : n > 16 ? 16 : (int)n;
-}
-
 static int run_cpu(vx_job_run *r, const rparams *pp, void *state, vx_err *err)
 {
     const rparams p = *pp;
     rstate *s = state;
-    const int N = (int)p.N, R = (int)p.R, M = (int)(p.L * p.N), nt = nthreads();
+    const int N = (int)p.N, R = (int)p.R, M = (int)(p.L * p.N), nt = vx_par_cpus();
     vx_bl_filter flt = {p.filter.D0, p.filter.n};
     vx_bl_bits bits = {s->grids, s->nmeshes, lowpass_progress, r};
     vx_bl_lowpass_stats lst;
@@ -479,7 +473,7 @@ static void make_camera(const rparams *p, const rstate *s, int f, vx_bl_camera *
 static int cast_method(const rstate *s, const rparams *p, const vx_bl_camera *cam, int method,
                        vx_bl_hits *h, vx_err *err)
 {
-    int nt = nthreads();
+    int nt = vx_par_cpus();
     if (method == VX_BL_SPECTRAL) return vx_bl_cast(&s->vm, p->iso, cam, nt, h, err);
     vx_bl_volume v = s->vn;
     if (method == VX_BL_SOBEL3D)

@@ -3,6 +3,7 @@
 
 #include <pthread.h>
 #include <stdatomic.h>
+#include <unistd.h>
 
 int vx_par_run(int nthreads, void *(*worker)(void *ud), void *ud)
 {
@@ -49,4 +50,10 @@ int vx_par_for(int n, int nthreads, int (*fn)(int i, int t, void *ud), void *ud)
     atomic_init(&p.rc, 0);
     vx_par_run(nthreads, par_for_worker, &p);
     return atomic_load(&p.rc);
+}
+
+int vx_par_cpus(void)
+{
+    long n = sysconf(_SC_NPROCESSORS_ONLN);
+    return n < 1 ? 1 : n > VX_PAR_MAX ? VX_PAR_MAX : (int)n;
 }

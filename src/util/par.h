@@ -17,4 +17,7 @@ int vx_par_run(int nthreads, void *(*worker)(void *ud), void *ud);
  * further item is started. Returns 0, or the first nonzero value fn gave. */
 int vx_par_for(int n, int nthreads, int (*fn)(int i, int t, void *ud), void *ud);
 
+/* The CPUs online, clamped to 1..VX_PAR_MAX: the CPU engines' thread count. */
+int vx_par_cpus(void);
+
 #endif

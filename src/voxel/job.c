@@ -23,7 +23,7 @@ typedef enum vformat {
     F_NPY
 } vformat;
 
-static const char *const method_names[] = {"auto", "peel", "slice", "scan", NULL};
+static const char *const method_names[] = {"auto", "peel", "slice", "scan", "cpu", NULL};
 static const char *const inside_names[] = {"nonzero", "parity", "robust", "winding",
                                            NULL}; /* vx_inside order */
 static const char *const fill_names[] = {"solid", "surface", NULL};
@@ -310,6 +310,13 @@ static int voxelize_check(void *params, const vx_limits *lim, vx_err *err)
         return vx_err_set(err, VX_EUNPROC, "invalid_params",
                           "params.fill \"surface\" needs params.method peel or auto (slice fills "
                           "solids only)");
+    if (p->method == VX_METHOD_CPU &&
+        (fill_of(p) == VX_FILL_SURFACE || (p->inside_set && p->inside == VX_INSIDE_ROBUST) ||
+         (p->supersample == 2 && p->samples == VX_SAMPLES_CUBE)))
+        return vx_err_set(err, VX_EUNPROC, "invalid_params",
+                          "params.method \"cpu\" fills solids by nonzero or parity at voxel "
+                          "centres (params.supersample 2 with params.samples \"faces\"); use "
+                          "peel, slice or auto");
     if (fill_of(p) == VX_FILL_SURFACE && p->method == VX_METHOD_AUTO && p->supersample == 2)
         return vx_err_set(err, VX_EUNPROC, "invalid_params",
                           "params.fill \"surface\" cannot be supersampled: with "

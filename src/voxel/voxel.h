@@ -9,8 +9,9 @@
  * Methods: `peel` (seed 000, depth peeling along x, entry/exit pairing on
  * the GPU), `slice` (seed 003, a near plane stepped through the slices),
  * `scan` (one draw per slab counting signed crossings into per-voxel
- * counters, then a prefix sum along x; no peeling), `auto` (the fastest
- * correct one for the request). */
+ * counters, then a prefix sum along x; no peeling), `cpu` (scan's
+ * crossing counts on the CPU threads, no GL), `auto` (the fastest correct
+ * one for the request and the renderer). */
 #ifndef VX_VOXEL_H
 #define VX_VOXEL_H
 
@@ -64,6 +65,7 @@ typedef enum vx_method {
     VX_METHOD_PEEL,
     VX_METHOD_SLICE,
     VX_METHOD_SCAN,
+    VX_METHOD_CPU,
 } vx_method;
 typedef enum vx_inside {
     VX_INSIDE_NONZERO = 0, /* signed crossings: front face +1, back face -1; union of parts */
@@ -112,10 +114,11 @@ typedef struct vx_bitgrid {
     uint32_t *bits;  /* wx * ny * nz words */
     uint8_t *counts; /* supersample 2: samples inside per voxel, x fastest; else NULL */
     int nsamples;    /* with counts: samples per voxel (8 cube, 7 faces) */
+    size_t bits_mapped, counts_mapped; /* vx_bitgrid_alloc's: bytes mmap'd, or 0 */
 } vx_bitgrid;
 
 typedef struct vx_voxelize_stats {
-    const char *method; /* "peel", "slice" or "scan" as run */
+    const char *method; /* "peel", "slice", "scan", "cpu" or "winding" as run */
     uint64_t voxels_inside;
     int layers;       /* peel: most depth layers of one ray (max over axes for robust); scan: 0 */
     int passes;       /* peel: geometry passes drawn, over all slabs and axes; else 0 */
@@ -147,9 +150,10 @@ int vx_grid_from_voxel_size(const vx_mesh *m, double h, int padding, vx_grid *ou
 
 /* Voxelizes m into out (allocated here; free with vx_bitgrid_free). GL thread.
  * Validates d (VX_EUNPROC invalid_params), then auto runs slice when
- * supersample is 2 (peeling and scan have no supersampling), scan for
- * nonzero/parity solid fills (peel when scan fails with
- * too_many_crossings), else peel; st->method says which ran. */
+ * supersample is 2 (peeling, scan and cpu have no supersampling); for
+ * nonzero/parity solid fills cpu where the renderer is a CPU rasterizer
+ * (vx_gl_info_software), else scan (peel when scan fails with
+ * too_many_crossings); else peel. st->method says which ran. */
 int vx_voxelize(vx_gl *gl, const vx_mesh *m, const vx_voxelize_desc *d, vx_bitgrid *out,
                 vx_voxelize_stats *st, vx_err *err);
 /* Depth peeling along x (src/voxel/peel.c); also runs fill=surface (GPU
@@ -166,6 +170,15 @@ int vx_voxelize_peel(vx_gl *gl, const vx_mesh *m, const vx_voxelize_desc *d, vx_
  * vx_voxelize_peel (st->method "peel"). */
 int vx_voxelize_scan(vx_gl *gl, const vx_mesh *m, const vx_voxelize_desc *d, vx_bitgrid *out,
                      vx_voxelize_stats *st, vx_err *err);
+/* Scan's crossing counts on the CPU threads (src/voxel/cpu.c), no GL: the
+ * same voxels as scan wherever the GPU's coverage tie rule is cpu's, and
+ * brick-exact. nonzero and parity, fill solid, supersample 1 (vx_voxelize
+ * refuses the rest for method cpu). Errors: VX_ETOOBIG job_memory_limit
+ * (max_memory), VX_EUNPROC invalid_params (a vertex 2^50 voxels away),
+ * VX_EINTERNAL out_of_memory, or the progress hook's own. Any thread;
+ * progress runs on the calling one. */
+int vx_voxelize_cpu(const vx_mesh *m, const vx_voxelize_desc *d, vx_bitgrid *out,
+                    vx_voxelize_stats *st, vx_err *err);
 int vx_voxelize_slice(vx_gl *gl, const vx_mesh *m, const vx_voxelize_desc *d, vx_bitgrid *out,
                       vx_voxelize_stats *st, vx_err *err);
 /* supersample 2 with VX_SAMPLES_FACES (src/voxel/faces.c): the voxel

@@ -37,7 +37,7 @@ int vx_voxelize(vx_gl *gl, const vx_mesh *m, const vx_voxelize_desc *d, vx_bitgr
     if (faces && d->fill != VX_FILL_SOLID)
         return vx_err_set(err, VX_EUNPROC, "invalid_params",
                           "the faces sample pattern needs fill solid");
-    if (d->method < VX_METHOD_AUTO || d->method > VX_METHOD_SCAN)
+    if (d->method < VX_METHOD_AUTO || d->method > VX_METHOD_CPU)
         return vx_err_set(err, VX_EUNPROC, "invalid_params", "unknown method %d", (int)d->method);
     if (d->inside < VX_INSIDE_NONZERO || d->inside > VX_INSIDE_WINDING)
         return vx_err_set(err, VX_EUNPROC, "invalid_params", "unknown inside rule %d",
@@ -61,15 +61,27 @@ int vx_voxelize(vx_gl *gl, const vx_mesh *m, const vx_voxelize_desc *d, vx_bitgr
     }
     if (dd.inside == VX_INSIDE_WINDING) dd.inside = VX_INSIDE_NONZERO; /* surface: no inside */
     vx_method method = dd.method;
-    /* Peeling and scan sample each voxel once at its centre; only slicing
-     * supersamples (seed 003's accuracy improvement). Scan counts crossings
-     * along x only: robust (three axes) and the surface fill are peel's. */
+    /* Peeling, scan and cpu sample each voxel once at its centre; only
+     * slicing supersamples (seed 003's accuracy improvement). Scan and cpu
+     * count crossings along x only: robust (three axes) and the surface
+     * fill are peel's. Where the renderer is a CPU rasterizer, scan's draw
+     * and sums are cpu's work behind a driver: cpu runs them directly. */
     int scan_fits = dd.supersample == 1 && dd.fill == VX_FILL_SOLID &&
                     (dd.inside == VX_INSIDE_NONZERO || dd.inside == VX_INSIDE_PARITY);
-    if (method == VX_METHOD_AUTO)
+    if (method == VX_METHOD_AUTO) {
+        int software = gl && vx_gl_info_software(vx_gl_get_info(gl));
         method = dd.supersample == 2 ? VX_METHOD_SLICE
-                 : scan_fits         ? VX_METHOD_SCAN
-                                     : VX_METHOD_PEEL;
+                 : !scan_fits        ? VX_METHOD_PEEL
+                 : software          ? VX_METHOD_CPU
+                                     : VX_METHOD_SCAN;
+    }
+    if (method == VX_METHOD_CPU) {
+        if (!scan_fits)
+            return vx_err_set(err, VX_EUNPROC, "invalid_params",
+                              "method cpu fills solids by nonzero or parity at voxel centres; use "
+                              "peel, slice or auto");
+        return vx_voxelize_cpu(m, &dd, out, st, err);
+    }
     if (method == VX_METHOD_PEEL || method == VX_METHOD_SCAN) {
         if (dd.supersample == 2)
             return vx_err_set(err, VX_EUNPROC, "invalid_params",

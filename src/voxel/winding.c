@@ -26,7 +26,6 @@
 #include <stdatomic.h>
 #include <stdlib.h>
 #include <string.h>
-#include <unistd.h>
 
 #include "util/clock.h"
 #include "util/par.h"
@@ -366,12 +365,6 @@ static int fill_row(int j, int t, void *ud)
 
 /* ---- the driver --------------------------------------------------------- */
 
-static int threads(void)
-{
-    long n = sysconf(_SC_NPROCESSORS_ONLN);
-    return n < 1 ? 1 : n > VX_PAR_MAX ? VX_PAR_MAX : (int)n;
-}
-
 /* A parallel stage over n items, progress from p0 to p1. */
 static int stage(wctx *c, int n, int (*fn)(int, int, void *), double p0, double p1, vx_err *err)
 {
@@ -379,7 +372,7 @@ static int stage(wctx *c, int n, int (*fn)(int, int, void *), double p0, double 
     c->total = n;
     c->p0 = p0;
     c->p1 = p1;
-    vx_par_for(n, threads(), fn, c);
+    vx_par_for(n, vx_par_cpus(), fn, c);
     if (atomic_load(&c->stop)) {
         if (err) *err = c->err;
         return -1;

@@ -57,8 +57,8 @@ M_long=$MESH_ID
 api GET /v1/info
 check "info lists voxelize" jq -e '[.kinds[].name] | index("voxelize") != null' "$BODY"
 
-# Which methods the engine has: peel and scan always; slice once its branch is in.
-METHODS=(peel scan)
+# Which methods the engine has: peel, scan and cpu always; slice once its branch is in.
+METHODS=(peel scan cpu)
 api POST "/v1/jobs?wait=60" -H "Content-Type: application/json" \
     -d "{\"mesh\":\"$M_cube\",\"kind\":\"voxelize\",\"params\":{\"resolution\":4,\"method\":\"slice\",\"format\":\"summary\"}}"
 if jq -e '.state == "succeeded"' "$BODY" >/dev/null; then
@@ -121,6 +121,12 @@ for m in "${METHODS[@]}"; do
     # every method's parity counts crossings: the symmetric difference
     near "$m two spheres, parity = symmetric difference" "$(st volume)" "$(vol two_xor)" $TOL
 
+    if [[ $m == cpu ]]; then
+        api POST /v1/jobs -H "Content-Type: application/json" \
+            -d "{\"mesh\":\"$M_open\",\"kind\":\"voxelize\",\"params\":{\"method\":\"cpu\",\"inside\":\"robust\"}}"
+        expect_error "cpu robust refused at submission" 422 invalid_params
+        continue
+    fi
     vox "$m open robust" "$M_open" "{\"resolution\":32,\"method\":\"$m\",\"inside\":\"robust\",\"format\":\"summary\"}"
     near "$m open mesh, robust ~ the closed sphere" "$(st volume)" "$(vol open_closed)" 0.04
     if [[ $m == scan ]]; then
@@ -128,12 +134,14 @@ for m in "${METHODS[@]}"; do
     fi
 done
 
-# --- scan and peel agree voxel for voxel on closed meshes (raw8 identical) ---
-for s in cube long tie sphere torus hollow nested two; do
-    mis=$(cmp -l "$TMP/peel-$s.raw8" "$TMP/scan-$s.raw8" 2>/dev/null | wc -l)
-    check "peel and scan raw8 both there for $s" test -s "$TMP/scan-$s.raw8" -a -s "$TMP/peel-$s.raw8"
-    echo "peel vs scan, $s: $mis voxels differ"
-    check "peel vs scan agree on $s ($mis differ)" cmp -s "$TMP/peel-$s.raw8" "$TMP/scan-$s.raw8"
+# --- scan, cpu and peel agree voxel for voxel on closed meshes (raw8 identical) ---
+for other in scan cpu; do
+    for s in cube long tie sphere torus hollow nested two; do
+        mis=$(cmp -l "$TMP/peel-$s.raw8" "$TMP/$other-$s.raw8" 2>/dev/null | wc -l)
+        check "peel and $other raw8 both there for $s" test -s "$TMP/$other-$s.raw8" -a -s "$TMP/peel-$s.raw8"
+        echo "peel vs $other, $s: $mis voxels differ"
+        check "peel vs $other agree on $s ($mis differ)" cmp -s "$TMP/peel-$s.raw8" "$TMP/$other-$s.raw8"
+    done
 done
 
 # --- peel and slice agree voxel for voxel on closed meshes ---
@@ -147,7 +155,8 @@ fi
 
 # --- every format, on the sphere ---
 vox "sphere vdb" "$M_sphere" '{"resolution":24,"vdb_grid":"bool"}'
-check "default format is vdb" jq -e '.params.format == "vdb" and .params.method == "auto" and .stats.method == "scan"' "$TMP/job.json"
+# auto: cpu where the renderer is a CPU rasterizer (llvmpipe), else scan
+check "default format is vdb" jq -e '.params.format == "vdb" and .params.method == "auto" and (.stats.method | IN("cpu", "scan"))' "$TMP/job.json"
 N_IN=$(st voxels_inside)
 H=$(st voxel_size)
 fetch "$TMP/s.vdb"
@@ -164,7 +173,7 @@ check "vdb: metadata" jq -e --slurpfile j "$TMP/job.json" \
     '.grids[0].metadata as $m | $j[0] as $j | $m.method == $j.stats.method and $m.inside == "nonzero" and $m.mesh == $j.mesh and $m.dims == $j.stats.dims and $m.supersample == 1' "$TMP/s.vdb.json"
 
 # Supersampling is slicing's (auto picks slice for it).
-if [[ ${#METHODS[@]} -eq 2 ]]; then
+if [[ " ${METHODS[*]} " == *" slice "* ]]; then
     vox "sphere vdb supersample 2" "$M_sphere" '{"resolution":24,"supersample":2,"threshold":4,"vdb_grid":"fog"}'
     check "supersample 2 ran slice" test "$(st method)" = slice
     fetch "$TMP/c.vdb"
@@ -174,14 +183,16 @@ if [[ ${#METHODS[@]} -eq 2 ]]; then
     near "supersample 2 volume" "$(st volume)" "$(vol sphere)" 0.05
 fi
 
-# The faces pattern: centre + six face centres, any method (auto: scan).
+# The faces pattern: centre + six face centres, any method (auto: cpu or scan).
 vox "sphere vdb samples faces" "$M_sphere" '{"resolution":24,"supersample":2,"samples":"faces","threshold":1,"vdb_grid":"fog"}'
-check "faces echoed, auto ran scan" jq -e '.params.samples == "faces" and .params.threshold == 1 and .stats.method == "scan"' "$TMP/job.json"
+check "faces echoed, auto ran cpu or scan" jq -e '.params.samples == "faces" and .params.threshold == 1 and (.stats.method | IN("cpu", "scan"))' "$TMP/job.json"
 fetch "$TMP/f.vdb"
 "$VX_TOOLS/vdbinfo" "$TMP/f.vdb" >"$TMP/f.vdb.json"
 check "faces vdb: coverage in sevenths, active = voxels_inside at threshold 1" jq -e --argjson n "$(st voxels_inside)" \
     '.grids[0] | .name == "coverage" and .active_voxels == $n and .metadata.samples == "faces" and .metadata.threshold == 1' "$TMP/f.vdb.json"
 N_FACES1=$(st voxels_inside)
+vox "sphere samples faces by cpu" "$M_sphere" '{"resolution":24,"supersample":2,"samples":"faces","threshold":1,"method":"cpu","format":"summary"}'
+check "faces by cpu: cpu ran, the same count" test "$(st method) $(st voxels_inside)" = "cpu $N_FACES1"
 vox "sphere samples faces threshold 4" "$M_sphere" '{"resolution":24,"supersample":2,"samples":"faces","threshold":4,"format":"summary"}'
 near "faces threshold 4 volume" "$(st volume)" "$(vol sphere)" 0.05
 N_FACES4=$(st voxels_inside)
@@ -257,6 +268,8 @@ bad "threshold 9" '{"supersample":2,"threshold":9}' params.threshold
 bad "supersample 3" '{"supersample":3}' params.supersample
 bad "supersample 2 with peel" '{"supersample":2,"method":"peel"}' params.supersample
 bad "supersample 2 with scan" '{"supersample":2,"method":"scan"}' params.supersample
+bad "supersample 2 with cpu" '{"supersample":2,"method":"cpu"}' params.supersample
+bad "fill surface with cpu" '{"fill":"surface","method":"cpu"}' params.method
 bad "faces without supersample 2" '{"samples":"faces"}' params.samples
 bad "faces threshold 8" '{"supersample":2,"samples":"faces","threshold":8}' params.threshold
 bad "faces with fill surface" '{"supersample":2,"samples":"faces","fill":"surface"}' params.fill

@@ -37,7 +37,7 @@ const char *__lsan_default_suppressions(void)
     return "leak:add_to_global_resize\n";
 }
 
-static const char *const method_name[] = {"auto", "peel", "slice", "scan"};
+static const char *const method_name[] = {"auto", "peel", "slice", "scan", "cpu"};
 static const char *const rule_name[] = {"nonzero", "parity", "robust", "winding"};
 
 /* A configuration to voxelize with. */
@@ -150,10 +150,11 @@ static void test_bricks_stitch(void **state)
         assert_non_null(m);
         vx_grid whole;
         lattice(m, 64, &whole);
-        for (int method = 0; method < 4; method++)
+        for (int method = 0; method < 5; method++)
             for (int rule = 0; rule < 3; rule++)
                 for (int fill = 0; fill < 2; fill++) {
                     if (method == VX_METHOD_SLICE && fill == VX_FILL_SURFACE) continue;
+                    if (method == VX_METHOD_CPU && (fill || rule == VX_INSIDE_ROBUST)) continue;
                     if (fill == VX_FILL_SURFACE && rule != VX_INSIDE_NONZERO) continue;
                     vx_bitgrid w;
                     voxelize(m, &whole, (vx_method)method, (vx_inside)rule, (vx_fill)fill, &w);
@@ -248,6 +249,9 @@ static void test_bricks_random(void **state)
     const cfg cfgs[] = {
         {VX_METHOD_SCAN, VX_INSIDE_NONZERO, VX_FILL_SOLID, 1, 0},
         {VX_METHOD_SCAN, VX_INSIDE_PARITY, VX_FILL_SOLID, 1, 0},
+        {VX_METHOD_CPU, VX_INSIDE_NONZERO, VX_FILL_SOLID, 1, 0},
+        {VX_METHOD_CPU, VX_INSIDE_PARITY, VX_FILL_SOLID, 1, 0},
+        {VX_METHOD_CPU, VX_INSIDE_NONZERO, VX_FILL_SOLID, 2, VX_SAMPLES_FACES},
         {VX_METHOD_PEEL, VX_INSIDE_NONZERO, VX_FILL_SOLID, 1, 0},
         {VX_METHOD_PEEL, VX_INSIDE_PARITY, VX_FILL_SOLID, 1, 0},
         {VX_METHOD_PEEL, VX_INSIDE_ROBUST, VX_FILL_SOLID, 1, 0},

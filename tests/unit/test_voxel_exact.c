@@ -93,7 +93,7 @@ static uint8_t *reference(const vx_mesh *m, const vx_grid *g, vx_inside rule)
     return r;
 }
 
-static const char *const method_name[] = {"auto", "peel", "slice", "scan"};
+static const char *const method_name[] = {"auto", "peel", "slice", "scan", "cpu"};
 static const char *const rule_name[] = {"nonzero", "parity", "robust"};
 
 /* Runs one configuration and returns its difference from ref. */
@@ -127,8 +127,8 @@ static void test_rocker_arm_column(void **state)
     assert_int_equal(vx_grid_from_resolution(m, 64, 0, &g, NULL), 0);
     for (int rule = 0; rule < 3; rule++) {
         uint8_t *ref = reference(m, &g, (vx_inside)rule);
-        for (int method = 0; method < 4; method++) {
-            if (method == VX_METHOD_SCAN && rule == VX_INSIDE_ROBUST) continue;
+        for (int method = 0; method < 5; method++) {
+            if (method >= VX_METHOD_SCAN && rule == VX_INSIDE_ROBUST) continue;
             diff d = run_one(m, &g, (vx_method)method, (vx_inside)rule, 1, ref, "rocker-arm 64");
             /* was: slice set column (19,13) for z = 32..63 (11218 voxels
              * against 11185) */
@@ -199,8 +199,8 @@ static void test_random_grids(void **state)
         snprintf(what, sizeof what, "%s case %d", c % 4 == 3 ? "torus" : names[c % 4], c);
         for (int rule = 0; rule < 3; rule++) {
             uint8_t *ref = reference(m, &g, (vx_inside)rule);
-            for (int method = 0; method < 4; method++) {
-                if (method == VX_METHOD_SCAN && rule == VX_INSIDE_ROBUST) continue;
+            for (int method = 0; method < 5; method++) {
+                if (method >= VX_METHOD_SCAN && rule == VX_INSIDE_ROBUST) continue;
                 diff d = run_one(m, &g, (vx_method)method, (vx_inside)rule, 1, ref, what);
                 /* Peel and scan (rays along x) still interpolate a
                  * crossing's x unclamped: a sliver seen edge-on may put

@@ -1,0 +1,515 @@
+/* Crossing counts on the CPU threads (voxel.h, method `cpu`): scan's
+ * algorithm without a GPU.
+ *
+ * Where the GL renderer is itself a CPU rasterizer (llvmpipe), scan's draw
+ * and compute dispatches run on the same cores behind a driver: most of a
+ * 1024^3 job is the driver's (spot: ~190 ms draw, ~350 ms prefix sums).
+ * Here the same crossings are found directly, rays along x (the packed
+ * axis, so a run of inside voxels is a few whole words):
+ *   1. setup: every vertex in the lattice's units (p - origin) / h, and
+ *      snapped to 1/VX_GRID_SNAP voxel as exact integers (y, z); triangles
+ *      binned by bands of z rows;
+ *   2. per band (a task for any thread): each triangle covers the column
+ *      centres (j, k) its snapped (y, z) projection contains, decided by
+ *      integer edge functions with a tie rule that perturbs the centre by
+ *      (eps, eps^2): exact, and a centre on an edge or vertex shared by
+ *      triangles of a closed mesh is covered exactly once. Each covered
+ *      centre is a crossing, placed by xing() (voxel_xing.glsl's formula in
+ *      double, from the lattice's unsnapped units), signed +1 where the
+ *      triangle faces +x;
+ *   3. per row: the crossings sorted along x, counted from each centre
+ *      towards +x (the [entry, exit) rule of scan, peel and the CPU
+ *      reference), and runs of inside voxels written as whole words.
+ * Everything a column sees is computed from lattice numbers (the column's
+ * lattice index, never the brick's), so every brick of a lattice gives
+ * the same voxels, bit for bit. On a GPU with the same coverage tie rule
+ * the voxels are scan's too.
+ *
+ * nonzero and parity, fill solid, supersample 1 (vx_voxelize checks). */
+#include <math.h>
+#include <stdatomic.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "util/clock.h"
+#include "util/par.h"
+#include "voxel/voxel.h"
+
+#define CPU_BAND 4 /* z rows per task when max_slab_rows does not say */
+
+/* Snapped coordinates (VX_GRID_SNAP units) stay within +-2^58 so that edge
+ * functions fit __int128 and centres int64 (lattice index <= 2^40). */
+#define CPU_SNAP_MAX 288230376151711744.0 /* 2^58 */
+
+typedef __int128 i128;
+
+typedef struct xtri {
+    int jlo, jhi, klo, khi; /* column centres of the grid its snapped bbox holds */
+    int8_t sign;            /* +1 facing +x (counter-clockwise in (y, z)) */
+} xtri;
+
+typedef struct xent {
+    uint32_t row; /* (k - band's first row) * ny + j */
+    int32_t ib2;  /* 2 ib + (sign > 0) */
+} xent;
+
+typedef struct scratch {
+    xent *e, *sorted; /* the band's crossings, then sorted by row */
+    size_t n, cap, scap;
+    uint32_t *cnt; /* rows of a band + 1 */
+} scratch;
+
+typedef struct cctx {
+    const vx_mesh *m;
+    const vx_voxelize_desc *d;
+    vx_bitgrid *out;
+    int nx, ny, nz, band, nbands, parity;
+    double ix[3];   /* the brick's lattice index */
+    int64_t iy, iz; /* the same, as integers */
+    double *u;      /* 3 doubles a vertex: (p - origin) / h */
+    int64_t *s;     /* 2 a vertex: y, z snapped */
+    xtri *tri;
+    size_t *bin_off;
+    uint32_t *bin;
+    scratch sc[VX_PAR_MAX];
+    uint64_t limit;          /* max_memory, or no limit */
+    _Atomic uint64_t used;   /* bytes taken so far */
+    _Atomic uint64_t inside; /* voxels set */
+    atomic_int stop, done;
+    vx_err err;
+} cctx;
+
+/* Takes `bytes` more of the job's memory: 0, or -1 with c->err set (the
+ * first error wins) and every thread told to stop. */
+static int charge(cctx *c, uint64_t bytes)
+{
+    uint64_t now = atomic_fetch_add(&c->used, bytes) + bytes;
+    if (now <= c->limit) return 0;
+    if (!atomic_exchange(&c->stop, 1))
+        vx_err_set(&c->err, VX_ETOOBIG, "job_memory_limit",
+                   "the cpu method needs more than %llu bytes for this grid's crossings, over "
+                   "the job memory limit of %llu",
+                   (unsigned long long)now, (unsigned long long)c->limit);
+    return -1;
+}
+
+/* Out of memory: c->err set (the first error wins), every thread stops. */
+static int no_memory(cctx *c)
+{
+    if (!atomic_exchange(&c->stop, 1))
+        vx_err_set(&c->err, VX_EINTERNAL, "out_of_memory", "no memory for the crossings");
+    return -1;
+}
+
+/* floor(a / b), b > 0 */
+static int64_t floor_div(int64_t a, int64_t b)
+{
+    int64_t q = a / b;
+    return (a % b != 0 && a < 0) ? q - 1 : q;
+}
+
+/* Column centres c with lo <= (index + c) * SNAP + SNAP / 2 <= hi, as the
+ * range [*a, *b] clipped to 0..n-1 (empty: *a > *b). */
+static void centre_range(int64_t lo, int64_t hi, int64_t index, int n, int *a, int *b)
+{
+    const int64_t S = (int64_t)VX_GRID_SNAP, H = S / 2;
+    int64_t first = -floor_div(-(lo - H), S) - index, last = floor_div(hi - H, S) - index;
+    *a = first < 0 ? 0 : first > n ? n : (int)first;
+    *b = last > n - 1 ? n - 1 : last < -1 ? -1 : (int)last;
+}
+
+static int setup(cctx *c, vx_err *err)
+{
+    const vx_mesh *m = c->m;
+    const vx_grid *g = &c->d->grid;
+    for (size_t v = 0; v < m->nverts; v++)
+        for (int a = 0; a < 3; a++) {
+            double u = (m->pos[3 * v + a] - g->origin[a]) / g->h;
+            if (!(fabs(u * VX_GRID_SNAP) < CPU_SNAP_MAX))
+                return vx_err_set(err, VX_EUNPROC, "invalid_params",
+                                  "vertex %zu lies more than 2^50 voxels from the grid origin; "
+                                  "use a larger voxel size",
+                                  v);
+            c->u[3 * v + a] = u;
+            if (a > 0) c->s[2 * v + a - 1] = (int64_t)nearbyint(u * VX_GRID_SNAP);
+        }
+    for (size_t t = 0; t < m->ntris; t++) {
+        const uint32_t *q = m->tri + 3 * t;
+        const int64_t *A = c->s + 2 * q[0], *B = c->s + 2 * q[1], *C = c->s + 2 * q[2];
+        i128 det = (i128)(B[0] - A[0]) * (C[1] - A[1]) - (i128)(B[1] - A[1]) * (C[0] - A[0]);
+        xtri *x = &c->tri[t];
+        x->sign = det > 0 ? 1 : det < 0 ? -1 : 0;
+        int64_t y0 = A[0], y1 = A[0], z0 = A[1], z1 = A[1];
+        for (int k = 1; k < 3; k++) {
+            const int64_t *P = c->s + 2 * q[k];
+            y0 = P[0] < y0 ? P[0] : y0;
+            y1 = P[0] > y1 ? P[0] : y1;
+            z0 = P[1] < z0 ? P[1] : z0;
+            z1 = P[1] > z1 ? P[1] : z1;
+        }
+        centre_range(y0, y1, c->iy, c->ny, &x->jlo, &x->jhi);
+        centre_range(z0, z1, c->iz, c->nz, &x->klo, &x->khi);
+        /* a triangle wholly before the first centre along x counts for no
+         * voxel (every crossing of it has ib <= 0, XING_REACH included) */
+        double xmax = fmax(c->u[3 * q[0]], fmax(c->u[3 * q[1]], c->u[3 * q[2]]));
+        if (x->sign == 0 || xmax + 1.0 < c->ix[0]) x->jlo = x->jhi + 1;
+    }
+    return 0;
+}
+
+static int bin_tris(cctx *c, vx_err *err)
+{
+    c->bin_off = calloc((size_t)c->nbands + 2, sizeof *c->bin_off);
+    if (!c->bin_off) goto oom;
+    for (int pass = 0; pass < 2; pass++) {
+        for (size_t t = 0; t < c->m->ntris; t++) {
+            const xtri *x = &c->tri[t];
+            if (x->jlo > x->jhi || x->klo > x->khi) continue;
+            for (int b = x->klo / c->band; b <= x->khi / c->band; b++) {
+                if (pass == 0)
+                    c->bin_off[b + 1]++;
+                else
+                    c->bin[c->bin_off[b]++] = (uint32_t)t;
+            }
+        }
+        if (pass == 0) {
+            for (int b = 0; b < c->nbands; b++)
+                c->bin_off[b + 1] += c->bin_off[b];
+            if (charge(c, c->bin_off[c->nbands] * sizeof *c->bin +
+                              ((size_t)c->nbands + 2) * sizeof *c->bin_off)) {
+                *err = c->err;
+                return -1;
+            }
+            c->bin = malloc(c->bin_off[c->nbands] * sizeof *c->bin + 1);
+            if (!c->bin) goto oom;
+        } else {
+            memmove(c->bin_off + 1, c->bin_off, (size_t)c->nbands * sizeof *c->bin_off);
+            c->bin_off[0] = 0;
+        }
+    }
+    return 0;
+oom:
+    return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for the triangle bins");
+}
+
+/* ---- crossings ---------------------------------------------------------- */
+
+/* Closest point to x of the segment p -> q: (squared distance, parameter),
+ * as xing_seg in voxel_xing.glsl. */
+static void seg(const double p[2], const double q[2], const double x[2], double out[2])
+{
+    double d[2] = {q[0] - p[0], q[1] - p[1]};
+    double dd = d[0] * d[0] + d[1] * d[1];
+    double s = dd > 0.0 ? ((x[0] - p[0]) * d[0] + (x[1] - p[1]) * d[1]) / dd : 0.0;
+    s = s < 0.0 ? 0.0 : s > 1.0 ? 1.0 : s;
+    double r[2] = {x[0] - p[0] - s * d[0], x[1] - p[1] - s * d[1]};
+    out[0] = r[0] * r[0] + r[1] * r[1];
+    out[1] = s;
+}
+
+/* xing() of voxel_xing.glsl for rays along x, ss = 1: ib, the first centre
+ * at or beyond the crossing of the ray through lattice centre (cy, cz)
+ * with the triangle (a, e1, e2 from its first vertex), less the brick's
+ * index, clamped to +-2^29. Kept operation for operation (no contraction:
+ * this file builds with -ffp-contract=off). */
+static int32_t xing(const double a[3], const double e1[3], const double e2[3], double cy,
+                    double cz, double ix)
+{
+    const double XING_REACH = 1.0 / 64.0;
+    double x[2] = {cy - a[1], cz - a[2]};
+    double p1[2] = {e1[1], e1[2]}, p2[2] = {e2[1], e2[2]};
+    double t1 = e1[0], t2 = e2[0];
+    double det = p1[0] * p2[1] - p1[1] * p2[0];
+    double bb = (x[0] * p2[1] - x[1] * p2[0]) / det, bc = (p1[0] * x[1] - p1[1] * x[0]) / det;
+    double dt = bb * t1 + bc * t2;
+    if (det == 0.0 || bb < 0.0 || bc < 0.0 || bb + bc > 1.0) {
+        const double o[2] = {0.0, 0.0};
+        double s0[2], s1[2], s2[2];
+        seg(o, p1, x, s0);
+        seg(p1, p2, x, s1);
+        seg(p2, o, x, s2);
+        double near = s0[1] * t1;
+        if (s1[0] < s0[0]) near = t1 + s1[1] * (t2 - t1);
+        if (s2[0] < fmin(s0[0], s1[0])) near = (1.0 - s2[1]) * t2;
+        if (det == 0.0)
+            dt = near;
+        else
+            dt = dt < near - XING_REACH ? near - XING_REACH : dt > near + XING_REACH ? near + XING_REACH : dt;
+    }
+    double u = (a[0] + dt) - 0.5;
+    double cb = ceil(u) - ix;
+    cb = cb < -536870912.0 ? -536870912.0 : cb > 536870912.0 ? 536870912.0 : cb;
+    return (int32_t)cb;
+}
+
+static int push(cctx *c, scratch *s, uint32_t row, int32_t ib2)
+{
+    if (s->n == s->cap) {
+        size_t cap = s->cap ? 2 * s->cap : 1024;
+        /* the sorted copy grows with it */
+        if (charge(c, 2 * (cap - s->cap) * sizeof *s->e)) return -1;
+        xent *e = realloc(s->e, cap * sizeof *e);
+        if (!e) return no_memory(c);
+        s->e = e;
+        s->cap = cap;
+    }
+    s->e[s->n++] = (xent){row, ib2};
+    return 0;
+}
+
+/* Edge A -> B of a counter-clockwise triangle: E(q) = (B - A) x (q - A),
+ * positive inside; `bias` 1 where a centre on the edge counts as inside
+ * (the centre perturbed by (eps, eps^2): the sign of -(Bz - Az), else of
+ * By - Ay), so that the two triangles of a shared edge split its centres
+ * and exactly one triangle of a fan holds its vertex. */
+typedef struct edge {
+    i128 row0; /* E at (jlo, k) */
+    i128 dj;   /* E step per column along y */
+    i128 dk;   /* per row along z */
+} edge;
+
+static void edge_set(edge *e, const int64_t *A, const int64_t *B, int64_t cy0, int64_t cz0)
+{
+    const int64_t S = (int64_t)VX_GRID_SNAP;
+    int64_t dy = B[0] - A[0], dz = B[1] - A[1];
+    int bias = dz != 0 ? dz < 0 : dy > 0;
+    e->row0 = (i128)dy * (cz0 - A[1]) - (i128)dz * (cy0 - A[0]) + bias;
+    e->dj = -(i128)dz * S;
+    e->dk = (i128)dy * S;
+}
+
+/* Triangle t's crossings of the columns in rows k0..k1-1. */
+static int raster_tri(cctx *c, scratch *sc, size_t t, int k0, int k1)
+{
+    const xtri *x = &c->tri[t];
+    const uint32_t *q = c->m->tri + 3 * t;
+    const int64_t *P[3] = {c->s + 2 * q[0], c->s + 2 * q[1], c->s + 2 * q[2]};
+    if (x->sign < 0) { /* counter-clockwise for the edge tests */
+        const int64_t *tmp = P[1];
+        P[1] = P[2];
+        P[2] = tmp;
+    }
+    int ka = x->klo > k0 ? x->klo : k0, kb = x->khi < k1 - 1 ? x->khi : k1 - 1;
+    const int64_t S = (int64_t)VX_GRID_SNAP;
+    int64_t cy0 = (c->iy + x->jlo) * S + S / 2, cz0 = (c->iz + ka) * S + S / 2;
+    edge e[3];
+    for (int i = 0; i < 3; i++)
+        edge_set(&e[i], P[i], P[(i + 1) % 3], cy0, cz0);
+    const double *a = c->u + 3 * q[0], *b = c->u + 3 * q[1], *d = c->u + 3 * q[2];
+    double e1[3], e2[3];
+    for (int i = 0; i < 3; i++) {
+        e1[i] = b[i] - a[i];
+        e2[i] = d[i] - a[i];
+    }
+    const int32_t pos = x->sign > 0;
+    for (int k = ka; k <= kb; k++) {
+        i128 f0 = e[0].row0, f1 = e[1].row0, f2 = e[2].row0;
+        double cz = (c->ix[2] + k) + 0.5;
+        uint32_t row0 = (uint32_t)((k - k0) * c->ny);
+        for (int j = x->jlo; j <= x->jhi; j++) {
+            if (f0 > 0 && f1 > 0 && f2 > 0) {
+                int32_t ib = xing(a, e1, e2, (c->ix[1] + j) + 0.5, cz, c->ix[0]);
+                if (ib > 0 && push(c, sc, row0 + (uint32_t)j, 2 * ib + pos)) return -1;
+            }
+            f0 += e[0].dj;
+            f1 += e[1].dj;
+            f2 += e[2].dj;
+        }
+        for (int i = 0; i < 3; i++)
+            e[i].row0 += e[i].dk;
+    }
+    return 0;
+}
+
+/* ---- rows --------------------------------------------------------------- */
+
+static void set_run(uint32_t *w, int lo, int hi) /* bits lo..hi-1 */
+{
+    if (lo >= hi) return;
+    int a = lo >> 5, b = (hi - 1) >> 5;
+    uint32_t ma = ~0u << (lo & 31), mb = ~0u >> (31 - ((hi - 1) & 31));
+    if (a == b) {
+        w[a] |= ma & mb;
+        return;
+    }
+    w[a] |= ma;
+    for (int i = a + 1; i < b; i++)
+        w[i] = ~0u;
+    w[b] |= mb;
+}
+
+static int ent_cmp(const void *p, const void *q)
+{
+    int32_t a = ((const xent *)p)->ib2, b = ((const xent *)q)->ib2;
+    return a < b ? -1 : a > b;
+}
+
+/* One row's crossings (n of them) into its words: voxel i is inside when
+ * the crossings with ib > i sum to nonzero (odd for parity). Returns the
+ * voxels set (the runs are disjoint). */
+static uint64_t fill_row(const cctx *c, xent *e, size_t n, uint32_t *w)
+{
+    if (n > 24) {
+        qsort(e, n, sizeof *e, ent_cmp);
+    } else {
+        for (size_t a = 1; a < n; a++) {
+            xent v = e[a];
+            size_t b = a;
+            for (; b > 0 && e[b - 1].ib2 > v.ib2; b--)
+                e[b] = e[b - 1];
+            e[b] = v;
+        }
+    }
+    int cur = 0;
+    for (size_t a = 0; a < n; a++)
+        cur += (e[a].ib2 & 1) ? 1 : -1;
+    int prev = 0;
+    uint64_t set = 0;
+    for (size_t a = 0; a < n && prev < c->nx; a++) {
+        int ib = e[a].ib2 >> 1; /* ib >= 1 (push dropped the rest) */
+        if (ib > prev) {
+            int end = ib < c->nx ? ib : c->nx;
+            if (c->parity ? (cur & 1) : cur != 0) {
+                set_run(w, prev, end);
+                set += (uint64_t)(end - prev);
+            }
+            prev = ib;
+        }
+        cur -= (e[a].ib2 & 1) ? 1 : -1;
+    }
+    return set;
+}
+
+/* The progress hook, from the calling thread (t = 0) only; 1 once any
+ * thread said stop. */
+static int poll(cctx *c, int t, double f)
+{
+    if (atomic_load(&c->stop)) return 1;
+    if (t != 0 || !c->d->progress) return 0;
+    if (c->d->progress(c->d->ud, f, &c->err)) {
+        if (c->err.kind == VX_EOK)
+            vx_err_set(&c->err, VX_ECANCELED, "canceled", "voxelization stopped by its caller");
+        atomic_store(&c->stop, 1);
+        return 1;
+    }
+    return 0;
+}
+
+static int band_task(int b, int t, void *ud)
+{
+    cctx *c = ud;
+    if (poll(c, t, (double)atomic_load(&c->done) / c->nbands)) return 1;
+    scratch *sc = &c->sc[t];
+    int k0 = b * c->band, k1 = k0 + c->band < c->nz ? k0 + c->band : c->nz;
+    size_t rows = (size_t)(k1 - k0) * c->ny;
+    sc->n = 0;
+    for (size_t i = c->bin_off[b]; i < c->bin_off[b + 1]; i++)
+        if (raster_tri(c, sc, c->bin[i], k0, k1)) return 1;
+    if (!sc->cnt) sc->cnt = malloc(((size_t)c->band * c->ny + 1) * sizeof *sc->cnt);
+    if (!sc->cnt) return no_memory(c);
+    if (sc->scap < sc->cap) {
+        free(sc->sorted);
+        sc->sorted = malloc(sc->cap * sizeof *sc->sorted);
+        sc->scap = sc->sorted ? sc->cap : 0;
+        if (!sc->sorted) return no_memory(c);
+    }
+    xent *sorted = sc->sorted;
+    /* counting sort by row */
+    memset(sc->cnt, 0, (rows + 1) * sizeof *sc->cnt);
+    for (size_t i = 0; i < sc->n; i++)
+        sc->cnt[sc->e[i].row + 1]++;
+    for (size_t r = 0; r < rows; r++)
+        sc->cnt[r + 1] += sc->cnt[r];
+    for (size_t i = 0; i < sc->n; i++)
+        sorted[sc->cnt[sc->e[i].row]++] = sc->e[i];
+    /* cnt[r] is now the end of row r */
+    uint32_t *words = c->out->bits + (size_t)k0 * c->ny * c->out->wx;
+    size_t begin = 0;
+    uint64_t set = 0;
+    for (size_t r = 0; r < rows; r++) {
+        size_t end = sc->cnt[r];
+        if (end > begin) set += fill_row(c, sorted + begin, end - begin, words + r * c->out->wx);
+        begin = end;
+    }
+    atomic_fetch_add(&c->inside, set);
+    atomic_fetch_add(&c->done, 1);
+    return 0;
+}
+
+int vx_voxelize_cpu(const vx_mesh *m, const vx_voxelize_desc *d, vx_bitgrid *out,
+                    vx_voxelize_stats *st, vx_err *err)
+{
+    vx_voxelize_stats dummy;
+    if (!st) st = &dummy;
+    memset(st, 0, sizeof *st);
+    st->method = "cpu";
+    memset(out, 0, sizeof *out);
+    const vx_grid *g = &d->grid;
+    for (size_t i = 0; i < 3 * m->ntris; i++)
+        if (m->tri[i] >= m->nverts)
+            return vx_err_set(err, VX_EINTERNAL, "mesh_invalid", "triangle %zu uses vertex %u of %zu",
+                              i / 3, m->tri[i], m->nverts);
+    double t0 = vx_mono();
+    cctx *c = calloc(1, sizeof *c);
+    if (!c) return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for the job");
+    c->m = m;
+    c->d = d;
+    c->out = out;
+    c->nx = g->dims[0];
+    c->ny = g->dims[1];
+    c->nz = g->dims[2];
+    c->parity = d->inside == VX_INSIDE_PARITY;
+    c->band = d->max_slab_rows > 0 ? d->max_slab_rows : CPU_BAND;
+    if (c->band > c->nz) c->band = c->nz;
+    /* a band's rows are numbered in 32 bits */
+    if ((uint64_t)c->band * (uint64_t)c->ny > UINT32_MAX / 2) c->band = 1;
+    c->nbands = (c->nz + c->band - 1) / c->band;
+    for (int a = 0; a < 3; a++)
+        c->ix[a] = (double)g->index[a];
+    c->iy = g->index[1];
+    c->iz = g->index[2];
+    int rc = -1;
+    /* the grid, the mesh's setup and every thread's row counters; bins
+     * and crossings are charged as they are made */
+    c->limit = d->max_memory ? d->max_memory : UINT64_MAX;
+    uint64_t fixed = vx_bitgrid_bytes(g->dims, 1) + (uint64_t)m->nverts * 40u +
+                     (uint64_t)m->ntris * sizeof(xtri) +
+                     (uint64_t)vx_par_cpus() * ((uint64_t)c->band * c->ny + 1) * 4u;
+    if (charge(c, fixed)) {
+        *err = c->err;
+        goto done;
+    }
+    if (poll(c, 0, 0.0)) goto stopped;
+    c->u = malloc(m->nverts * 3 * sizeof *c->u + 1);
+    c->s = malloc(m->nverts * 2 * sizeof *c->s + 1);
+    c->tri = malloc(m->ntris * sizeof *c->tri + 1);
+    if (!c->u || !c->s || !c->tri) {
+        vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for the mesh");
+        goto done;
+    }
+    if (setup(c, err) || bin_tris(c, err) || vx_bitgrid_alloc(out, g, 0, err)) goto done;
+    st->upload_ms = (vx_mono() - t0) * 1e3;
+    if (poll(c, 0, 0.0)) goto stopped;
+    vx_par_for(c->nbands, vx_par_cpus(), band_task, c);
+    if (atomic_load(&c->stop) || poll(c, 0, 1.0)) goto stopped;
+    st->voxels_inside = atomic_load(&c->inside);
+    st->chunks = c->nbands;
+    rc = 0;
+    goto done;
+stopped:
+    if (err) *err = c->err;
+done:
+    if (rc) vx_bitgrid_free(out);
+    for (int t = 0; t < VX_PAR_MAX; t++) {
+        free(c->sc[t].e);
+        free(c->sc[t].sorted);
+        free(c->sc[t].cnt);
+    }
+    free(c->u);
+    free(c->s);
+    free(c->tri);
+    free(c->bin_off);
+    free(c->bin);
+    free(c);
+    return rc;
+}
