@@ -322,22 +322,25 @@ static void greg_setup(Greg &g, const vx_mesh *m, int n, int weld)
 }
 
 // GPU pass: best of runs; *wall_ms adds the read-back (the whole call).
-// GPU pass, best of runs: one-shot (fresh buffers every call, as a job's
-// first frame; *wall_ms = the whole call with buffer set-up and read-back)
-// and steady (*steady_ms: buffers kept, as for deformation frames).
-static double greg_tess(vx_gl *gl, Greg &g, double *wall_ms, double *steady_ms)
+// The tessellation pass on engine e, best of runs: one-shot (a fresh
+// tessellator every call, as a job's first frame; *wall_ms = the whole call
+// with buffer set-up and read-back) and steady (*steady_ms: buffers kept, as
+// for deformation frames). The CPU engine has no buffers: its pass is the
+// whole call.
+static double greg_tess(vx_gl *gl, Greg &g, vx_gtess_engine e, double *wall_ms, double *steady_ms)
 {
     double best = 1e300, best_wall = 1e300, best_steady = 1e300;
     vx_err err;
     for (int run = 0; run < g_runs; run++) {
         double ms;
         auto t0 = clk::now();
-        if (vx_gregory_tessellate(gl, g.set, g.layout, g.origin, g.grid.data(), &ms, &err))
-            die(err);
+        vx_gtess *t = vx_gtess_new_on(gl, g.layout, e, &err);
+        if (!t || vx_gtess_run(t, g.set, g.origin, g.grid.data(), &ms, &err)) die(err);
+        vx_gtess_free(t);
         best_wall = std::min(best_wall, ms_since(t0));
         best = std::min(best, ms);
     }
-    vx_gtess *t = vx_gtess_new(gl, g.layout, &err);
+    vx_gtess *t = vx_gtess_new_on(gl, g.layout, e, &err);
     if (!t) die(err);
     for (int run = -1; run < g_runs; run++) { /* run -1: first touch of the buffers */
         double ms;
@@ -353,17 +356,19 @@ static double greg_tess(vx_gl *gl, Greg &g, double *wall_ms, double *steady_ms)
 static int cmd_rate(vx_gl *gl, int argc, char **argv)
 {
     vx_mesh *m = load(argv[0]);
-    printf(
-        "| mesh | N | points | voxeld GPU pass M vert/s (ms), fresh buffers | buffers kept | "
-        "fresh incl. set-up + read-back M/s | OpenSubdiv OmpEvaluator 2 threads pos+normal M/s | "
-        "OpenSubdiv Far 1 thread pos+normal M/s | pos only M/s | "
-        "ratio vs OmpEvaluator 2 threads (fresh / kept) | ratio vs Far 1 thread |\n");
-    printf("|---|---|---|---|---|---|---|---|---|---|---|\n");
+    printf("| mesh | N | points | voxeld GPU pass M vert/s (ms), fresh buffers | buffers kept | "
+           "fresh incl. set-up + read-back M/s | voxeld CPU engine M vert/s (ms), whole call | "
+           "OpenSubdiv OmpEvaluator 2 threads pos+normal M/s | "
+           "OpenSubdiv Far 1 thread pos+normal M/s | pos only M/s | "
+           "engine auto runs | its ratio vs OmpEvaluator 2 threads | vs Far 1 thread |\n");
+    printf("|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
     for (int a = 1; a < argc; a++) {
         int n = atoi(argv[a]);
         Greg g;
         greg_setup(g, m, n, 0);
-        double wall, steady, ms = greg_tess(gl, g, &wall, &steady);
+        double wall, steady, ms = greg_tess(gl, g, VX_GTESS_GPU, &wall, &steady);
+        double cwall, csteady;
+        greg_tess(gl, g, VX_GTESS_CPU, &cwall, &csteady);
         double pts = (double)g.layout->voff[g.set->npatches];
         double oms_n, oms_p, oms_2, setup;
         size_t on = osd_limit(m, n, true, &oms_n, &setup);
@@ -371,12 +376,20 @@ static int cmd_rate(vx_gl *gl, int argc, char **argv)
         size_t o2 = osd_omp(m, n, 2, &oms_2);
         double ours = pts / ms / 1e3, osdn = (double)on / oms_n / 1e3,
                osdp = (double)op / oms_p / 1e3, osd2 = (double)o2 / oms_2 / 1e3;
+        double cpu = pts / cwall / 1e3;
+        vx_err err;
+        vx_gtess *t = vx_gtess_new(gl, g.layout, &err);
+        if (!t) die(err);
+        bool on_cpu = !strcmp(vx_gtess_engine_name(t), "cpu");
+        vx_gtess_free(t);
+        /* auto's engine: the CPU one as a whole call, the GPU's fresh pass */
+        double runs = on_cpu ? cpu : ours;
         const char *name = strrchr(argv[0], '/') ? strrchr(argv[0], '/') + 1 : argv[0];
         double st = pts / steady / 1e3;
-        printf("| %s | %d | %.0f | %.1f (%.2f) | %.1f (%.2f) | %.1f | %.1f | %.1f | %.1f | "
-               "%.2fx / %.2fx | %.2fx |\n",
-               name, n, pts, ours, ms, st, steady, pts / wall / 1e3, osd2, osdn, osdp, ours / osd2,
-               st / osd2, ours / osdn);
+        printf("| %s | %d | %.0f | %.1f (%.2f) | %.1f (%.2f) | %.1f | %.1f (%.2f) | %.1f | %.1f | "
+               "%.1f | %s | %.2fx | %.2fx |\n",
+               name, n, pts, ours, ms, st, steady, pts / wall / 1e3, cpu, cwall, osd2, osdn, osdp,
+               on_cpu ? "cpu" : "gpu", runs / osd2, runs / osdn);
         fflush(stdout);
     }
     vx_mesh_free(m);
@@ -417,7 +430,7 @@ static int cmd_seed(vx_gl *gl)
     vx_mesh *m = grid3();
     const int gens = 10;
     printf("| division | vertices | Catmull-Clark (OpenSubdiv, topology + positions) | "
-           "OpenSubdiv positions only | Gregory voxeld (control points + GPU + weld) | "
+           "OpenSubdiv positions only | Gregory voxeld (control points + tessellation + weld) | "
            "Gregory CPU eval (vx_gpatch_eval) | seed CC | seed Gregory |\n");
     printf("|---|---|---|---|---|---|---|---|\n");
     static const char *seed_cc[] = {"8.7", "43.9", "237.6", "1489.6", "13208.6"};
@@ -514,10 +527,9 @@ static int cmd_frames(vx_gl *gl, const char *path, int n)
         }
     }
     int f = frames - 1;
-    printf(
-        "| mesh | N | patches | vertices | control points ms | GPU pass ms | tessellate call ms | "
-        "weld gather ms | frame ms (mean) | best frame ms "
-        "|\n|---|---|---|---|---|---|---|---|---|---|\n");
+    printf("| mesh | N | patches | vertices | control points ms | pass ms | tessellate call ms | "
+           "weld gather ms | frame ms (mean) | best frame ms "
+           "|\n|---|---|---|---|---|---|---|---|---|---|\n");
     const char *name = strrchr(path, '/') ? strrchr(path, '/') + 1 : path;
     printf("| %s | %d | %zu | %zu | %.3f | %.3f | %.3f | %.3f | %.3f | %.3f |\n", name, n,
            g.set->npatches, g.layout->nverts, build / f, gpu / f, tess_ms / f, gather / f,

@@ -5,7 +5,9 @@
 // sdfInteriorMask turns into the mask (the peer the ratios use); plus the
 // seed tables (000 Table 1, 003 Table 1).
 //
-//   voxel_bench compare MESH.obj[:SUBDIV] RES... [--method peel|slice|scan|auto] [--runs N]
+//   voxel_bench compare MESH.obj[:SUBDIV] RES... [--method peel|slice|scan|cpu|auto] [--runs N]
+//                                  [--no-filled]  (best of N for voxeld and the narrow band,
+//                                   worst in brackets; the filled band once, unless skipped)
 //   voxel_bench seed000 MESH.obj                     (peel/fill ms at 128, 256 for 1, 4, 16, 64x
 //   faces) voxel_bench seed003 MESH.obj... [--res 512] [--shifts N]
 //                                  (mean surface-voxel distance, supersample off/on; with
@@ -267,8 +269,11 @@ int main(int argc, char **argv)
     std::vector<int> res;
     vx_method method = VX_METHOD_AUTO;
     int runs = 3, res003 = 512, shifts = 0;
+    bool filled = true;
     for (int i = 2; i < argc; i++) {
-        if (!strcmp(argv[i], "--method") && i + 1 < argc)
+        if (!strcmp(argv[i], "--no-filled"))
+            filled = false;
+        else if (!strcmp(argv[i], "--method") && i + 1 < argc)
             method = parse_method(argv[++i]);
         else if (!strcmp(argv[i], "--runs") && i + 1 < argc)
             runs = atoi(argv[++i]);
@@ -308,26 +313,35 @@ int main(int argc, char **argv)
             for (int r : res) {
                 vx_grid g;
                 vx_grid_from_resolution(vm, r, 0, &g, &err);
-                double best = 1e30, ms = 0;
+                double best = 1e30, worst = 0, ms = 0;
                 vx_bitgrid out{};
                 vx_voxelize_stats st{};
                 bool ok = true;
                 for (int k = 0; k < runs + 1 && ok; k++) { // first run warms up (shader JIT)
                     vx_bitgrid_free(&out);
                     ok = ours(gl, vm, g, method, 1, &out, &st, &ms);
-                    if (k) best = std::min(best, ms);
+                    if (k) best = std::min(best, ms), worst = std::max(worst, ms);
                 }
                 if (!ok) continue;
-                VdbResult v = vdb_interior(m, g, true);
+                double vbest = 1e30, vworst = 0;
                 uint64_t nv = 0, nf = 0;
-                double u = iou(out, *v.mask, &nv);
-                v.mask.reset();
-                VdbResult f = vdb_interior(m, g, false);
-                double uf = iou(out, *f.mask, &nf);
-                printf("| %s | %zu | %dx%dx%d | %.1f | %.1f | %.1fx | %.1f | %.1fx | %.5f | %.5f | "
-                       "%llu | %llu |\n",
+                double u = 0;
+                for (int k = 0; k < runs; k++) {
+                    VdbResult v = vdb_interior(m, g, true);
+                    vbest = std::min(vbest, v.ms);
+                    vworst = std::max(vworst, v.ms);
+                    if (k == 0) u = iou(out, *v.mask, &nv);
+                }
+                double uf = 0, fms = 0;
+                if (filled) {
+                    VdbResult f = vdb_interior(m, g, false);
+                    uf = iou(out, *f.mask, &nf);
+                    fms = f.ms;
+                }
+                printf("| %s | %zu | %dx%dx%d | %.1f (%.1f) | %.1f (%.1f) | %.1fx | %.1f | %.1fx | "
+                       "%.5f | %.5f | %llu | %llu |\n",
                        m.name.c_str(), m.tri.size() / 3, g.dims[0], g.dims[1], g.dims[2], best,
-                       v.ms, v.ms / best, f.ms, f.ms / best, u, uf,
+                       worst, vbest, vworst, vbest / best, fms, fms / best, u, uf,
                        (unsigned long long)vx_bitgrid_count(&out), (unsigned long long)nv);
                 fflush(stdout);
                 vx_bitgrid_free(&out);

@@ -684,7 +684,10 @@ static int run_gl(vx_job_run *r, const vx_mesh *mesh, const gparams *pp, void **
     if (!tess) goto done;
     if (tessellate_frames(r, &b, pos, s, tess, grid, origin, frame_ms, &t, err)) goto done;
     add_stats(r, mesh, &p, &b, ndiv, s, gv, build_ms, cc_distance, &t, &frame_ms);
-    if (vx_run_stats(r)) cJSON_AddNumberToObject(vx_run_stats(r), "folded_patches", (double)folded);
+    if (vx_run_stats(r)) {
+        cJSON_AddNumberToObject(vx_run_stats(r), "folded_patches", (double)folded);
+        cJSON_AddStringToObject(vx_run_stats(r), "tess_engine", vx_gtess_engine_name(tess));
+    }
     rc = 0;
 done:
     vx_gtess_free(tess);

@@ -1,16 +1,15 @@
-/* GPU tessellation of a Gregory patch set (tess.h): shaders/
- * gregory_tess.comp.glsl evaluates every grid vertex in one compute pass. */
+/* Tessellation of a Gregory patch set (tess.h): shaders/
+ * gregory_tess.comp.glsl evaluates every grid vertex in one compute pass,
+ * or tess_cpu.c the same formulas on the CPU threads. */
 #include <stdlib.h>
 
-#include "gregory/tess.h"
+#include "gregory/tess_int.h"
 #include "util/stop.h"
 
 /* llvmpipe's SSBO limit (ARCHITECTURE.md); the driver's own value when lower. */
 #define SSBO_CAP ((uint64_t)128 << 20)
 
-/* Floats per patch in the shader's buffer: 20 points relative to the
- * first, the first relative to the origin, a pad. */
-#define CP_FLOATS 64
+#define CP_FLOATS VX_GTESS_CP_FLOATS
 /* The shader's local size. */
 #define GROUP 64
 /* Bytes per output vertex: position and normal. */
@@ -26,6 +25,7 @@ typedef struct chunk {
 } chunk;
 
 struct vx_gtess {
+    int cpu; /* the CPU engine: no GL objects */
     vx_gl *gl;
     const vx_gtess_layout *l;
     GLuint prog;
@@ -54,12 +54,36 @@ static vx_gtess *oom_free(vx_gtess *t, vx_err *err)
     return NULL;
 }
 
+void vx_gtess_pack(const vx_gpatch_set *s, size_t p, const double origin[3], float *f)
+{
+    const double *src = s->cp + p * VX_GPATCH_POINTS * 3;
+    for (int j = 0; j < VX_GPATCH_POINTS; j++)
+        for (int a = 0; a < 3; a++)
+            f[3 * j + a] = (float)(src[3 * j + a] - src[a]);
+    for (int a = 0; a < 3; a++)
+        f[60 + a] = (float)(src[a] - origin[a]);
+    f[63] = 0;
+}
+
 vx_gtess *vx_gtess_new(vx_gl *gl, const vx_gtess_layout *l, vx_err *err)
+{
+    return vx_gtess_new_on(gl, l, VX_GTESS_AUTO, err);
+}
+
+const char *vx_gtess_engine_name(const vx_gtess *t)
+{
+    return t->cpu ? "cpu" : "gpu";
+}
+
+vx_gtess *vx_gtess_new_on(vx_gl *gl, const vx_gtess_layout *l, vx_gtess_engine engine, vx_err *err)
 {
     vx_gtess *t = calloc(1, sizeof *t);
     if (!t) return oom_free(t, err);
     t->gl = gl;
     t->l = l;
+    t->cpu = engine == VX_GTESS_CPU ||
+             (engine == VX_GTESS_AUTO && (!gl || vx_gl_info_software(vx_gl_get_info(gl))));
+    if (t->cpu) return t;
     t->prog = vx_gl_compute_program(gl, "gregory_tess.comp", err);
     if (!t->prog) {
         vx_gtess_free(t);
@@ -142,19 +166,12 @@ int vx_gtess_run(vx_gtess *t, const vx_gpatch_set *s, const double origin[3], fl
     if (s->npatches != t->l->npatches)
         return vx_err_set(err, VX_EINTERNAL, "gregory_layout", "%zu patches for a layout of %zu",
                           s->npatches, t->l->npatches);
+    if (t->cpu) return vx_gtess_cpu_run(t->l, s, origin, grid, gpu_ms, err);
     for (size_t c = 0; c < t->nchunks; c++) {
         chunk *k = &t->ch[c];
         size_t np = k->p1 - k->p0;
-        for (size_t i = 0; i < np; i++) {
-            const double *src = s->cp + (k->p0 + i) * VX_GPATCH_POINTS * 3;
-            float *dst = t->cpf + i * CP_FLOATS;
-            for (int j = 0; j < VX_GPATCH_POINTS; j++)
-                for (int a = 0; a < 3; a++)
-                    dst[3 * j + a] = (float)(src[3 * j + a] - src[a]);
-            for (int a = 0; a < 3; a++)
-                dst[60 + a] = (float)(src[a] - origin[a]);
-            dst[63] = 0;
-        }
+        for (size_t i = 0; i < np; i++)
+            vx_gtess_pack(s, k->p0 + i, origin, t->cpf + i * CP_FLOATS);
         glNamedBufferSubData(k->buf[0], 0, (GLsizeiptr)(np * CP_FLOATS * sizeof(float)), t->cpf);
         if (vx_stop_poll(err)) return -1;
     }

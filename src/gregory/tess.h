@@ -73,13 +73,22 @@ void vx_gregory_layout_free(vx_gtess_layout *l);
 /* A tessellator for one layout: the GPU buffers (per-patch info, control
  * points, outputs) made once, so that deformation frames only upload their
  * control points and run the pass. Owned (free with vx_gtess_free); l must
- * outlive it. NULL with err (also the stop hook's, util/stop.h). GL thread. */
+ * outlive it. NULL with err (also the stop hook's, util/stop.h). GL thread.
+ * Engines: the GPU pass, or the same formulas on the CPU threads
+ * (tess_cpu.c: no GL objects, the grid written in place); AUTO (what
+ * vx_gtess_new and vx_gregory_tessellate take) runs the CPU where the
+ * renderer is a CPU rasterizer (vx_gl_info_software) or gl is NULL. */
 typedef struct vx_gtess vx_gtess;
+typedef enum vx_gtess_engine { VX_GTESS_AUTO = 0, VX_GTESS_GPU, VX_GTESS_CPU } vx_gtess_engine;
 vx_gtess *vx_gtess_new(vx_gl *gl, const vx_gtess_layout *l, vx_err *err);
+vx_gtess *vx_gtess_new_on(vx_gl *gl, const vx_gtess_layout *l, vx_gtess_engine engine, vx_err *err);
+/* "gpu" or "cpu": the engine t runs. */
+const char *vx_gtess_engine_name(const vx_gtess *t);
 void vx_gtess_free(vx_gtess *t);
 /* One pass over s (the layout's patch count), as vx_gregory_tessellate;
- * between chunks (about 10^6 grid vertices each) it waits for the GPU and
- * polls the thread's stop hook (util/stop.h): -1 with its err. GL thread. */
+ * between chunks (about 10^6 grid vertices each; cpu: 64 patches) it waits
+ * for the GPU and polls the thread's stop hook (util/stop.h): -1 with its
+ * err. *gpu_ms: the pass (cpu: its wall time). GL thread. */
 int vx_gtess_run(vx_gtess *t, const vx_gpatch_set *s, const double origin[3], float *grid,
                  double *gpu_ms, vx_err *err);
 

@@ -212,8 +212,8 @@ static void seg(const double p[2], const double q[2], const double x[2], double 
  * with the triangle (a, e1, e2 from its first vertex), less the brick's
  * index, clamped to +-2^29. Kept operation for operation (no contraction:
  * this file builds with -ffp-contract=off). */
-static int32_t xing(const double a[3], const double e1[3], const double e2[3], double cy,
-                    double cz, double ix)
+static int32_t xing(const double a[3], const double e1[3], const double e2[3], double cy, double cz,
+                    double ix)
 {
     const double XING_REACH = 1.0 / 64.0;
     double x[2] = {cy - a[1], cz - a[2]};
@@ -234,7 +234,9 @@ static int32_t xing(const double a[3], const double e1[3], const double e2[3], d
         if (det == 0.0)
             dt = near;
         else
-            dt = dt < near - XING_REACH ? near - XING_REACH : dt > near + XING_REACH ? near + XING_REACH : dt;
+            dt = dt < near - XING_REACH   ? near - XING_REACH
+                 : dt > near + XING_REACH ? near + XING_REACH
+                                          : dt;
     }
     double u = (a[0] + dt) - 0.5;
     double cb = ceil(u) - ix;
@@ -447,8 +449,8 @@ int vx_voxelize_cpu(const vx_mesh *m, const vx_voxelize_desc *d, vx_bitgrid *out
     const vx_grid *g = &d->grid;
     for (size_t i = 0; i < 3 * m->ntris; i++)
         if (m->tri[i] >= m->nverts)
-            return vx_err_set(err, VX_EINTERNAL, "mesh_invalid", "triangle %zu uses vertex %u of %zu",
-                              i / 3, m->tri[i], m->nverts);
+            return vx_err_set(err, VX_EINTERNAL, "mesh_invalid",
+                              "triangle %zu uses vertex %u of %zu", i / 3, m->tri[i], m->nverts);
     double t0 = vx_mono();
     cctx *c = calloc(1, sizeof *c);
     if (!c) return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for the job");

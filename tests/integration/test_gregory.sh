@@ -133,6 +133,11 @@ greg "prism frames (ids)" "$M_prism" "{\"divisions\":5,\"frames\":[\"$M_prism2\"
 job_ok "prism frames (ids)"
 check "frames: outputs mesh, frame_001, frame_002" jq -e '.outputs | keys == ["frame_001", "frame_002", "mesh"]' "$TMP/job.json"
 check "frames: 3 frames, 3 frame times" jq -e '.stats.frames == 3 and (.stats.frame_ms | length) == 3' "$TMP/job.json"
+# the engine: cpu where the renderer is a CPU rasterizer (voxeld_info's gl_renderer)
+RENDERER=$(curl -s "$BASE/metrics" | sed -n 's/^voxeld_info{.*gl_renderer="\([^"]*\)".*/\1/p')
+WANT_ENGINE=gpu
+[[ $RENDERER =~ llvmpipe|softpipe|swrast ]] && WANT_ENGINE=cpu
+check "tess_engine is $WANT_ENGINE on $RENDERER" jq -e --arg e "$WANT_ENGINE" '.stats.tess_engine == $e' "$TMP/job.json"
 fetch mesh "$TMP/f0.obj"
 fetch frame_001 "$TMP/f2.obj"
 fetch frame_002 "$TMP/f3.obj"

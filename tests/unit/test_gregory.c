@@ -424,16 +424,20 @@ static void test_counts_and_weld(void **state)
     vx_mesh_free(m);
 }
 
-/* GPU grid vertices against vx_gpatch_eval. */
-static void check_gpu(const vx_gpatch_set *s, const uint32_t *nd, double dg, double ptol,
-                      double ntol_deg, size_t stride)
+/* Grid vertices of the tessellator's engine against vx_gpatch_eval. */
+static void check_engine(const vx_gpatch_set *s, const uint32_t *nd, double dg, double ptol,
+                         double ntol_deg, size_t stride, vx_gtess_engine engine)
 {
     vx_err err = {0};
     vx_gtess_layout *l = vx_gregory_layout_new(s, nd, 0, &err);
     assert_non_null(l);
     float *grid = malloc(6 * l->voff[s->npatches] * sizeof *grid);
     double origin[3] = {0.25, -0.5, 0.125}, ms = 0;
-    assert_int_equal(vx_gregory_tessellate(vx_test_gl, s, l, origin, grid, &ms, &err), 0);
+    vx_gtess *t = vx_gtess_new_on(vx_test_gl, l, engine, &err);
+    assert_non_null(t);
+    assert_string_equal(vx_gtess_engine_name(t), engine == VX_GTESS_CPU ? "cpu" : "gpu");
+    assert_int_equal(vx_gtess_run(t, s, origin, grid, &ms, &err), 0);
+    vx_gtess_free(t);
     double worst_p = 0, worst_n = 0;
     size_t seen = 0;
     for (size_t p = 0; p < s->npatches; p++) {
@@ -463,8 +467,9 @@ static void check_gpu(const vx_gpatch_set *s, const uint32_t *nd, double dg, dou
                             j, n, a, g[3], g[4], g[5], nn[0], nn[1], nn[2]);
             }
     }
-    fprintf(stderr, "  GPU vs CPU: position %.3g of the diagonal, normal %.3g deg (%.2f ms)\n",
-            worst_p, worst_n, ms);
+    fprintf(stderr,
+            "  %s float vs double CPU: position %.3g of the diagonal, normal %.3g deg (%.2f ms)\n",
+            engine == VX_GTESS_CPU ? "cpu" : "gpu", worst_p, worst_n, ms);
     assert_true(worst_p <= ptol);
     assert_true(worst_n <= ntol_deg);
     free(grid);
@@ -490,7 +495,9 @@ static void gpu_vs_cpu(const char *name, int n, double edge_div, size_t stride, 
     }
     uint64_t nv, nt;
     assert_int_equal(vx_gregory_count(s, nd, grid_verts, &nv, &nt, &err), 0);
-    check_gpu(s, nd, diag(m), 1e-5, 0.01, stride);
+    /* the GPU pass and the CPU engine (the shader's formulas in float) */
+    check_engine(s, nd, diag(m), 1e-5, 0.01, stride, VX_GTESS_GPU);
+    check_engine(s, nd, diag(m), 1e-5, 0.01, stride, VX_GTESS_CPU);
     free(nd);
     vx_gpatch_set_free(s);
     vx_mesh_free(m);

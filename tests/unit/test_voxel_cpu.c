@@ -75,8 +75,9 @@ static void test_boxes_known(void **state)
     (void)state;
     srand48(1);
     for (int trial = 0; trial < 200; trial++) {
-        vx_grid g = {.h = 1, .dims = {1 + (int)(drand48() * 70), 1 + (int)(drand48() * 40),
-                                      1 + (int)(drand48() * 40)}};
+        vx_grid g = {.h = 1,
+                     .dims = {1 + (int)(drand48() * 70), 1 + (int)(drand48() * 40),
+                              1 + (int)(drand48() * 40)}};
         double lo[3], hi[3];
         for (int a = 0; a < 3; a++) {
             int n = g.dims[a];
@@ -403,7 +404,8 @@ static void test_hostile(void **state)
     assert_int_equal(cpu(m, &one, &b, &st), 0);
     assert_int_equal(st.voxels_inside, 1);
     vx_bitgrid_free(&b);
-    vx_voxelize_desc small = {.grid = {{-1, -1, -1}, 1.0 / 64, {128, 128, 128}}, .max_memory = 1000};
+    vx_voxelize_desc small = {.grid = {{-1, -1, -1}, 1.0 / 64, {128, 128, 128}},
+                              .max_memory = 1000};
     memset(&err, 0, sizeof err);
     assert_int_equal(vx_voxelize_cpu(m, &small, &b, &st, &err), -1);
     assert_string_equal(err.code, "job_memory_limit");
@@ -432,9 +434,12 @@ static void test_auto(void **state)
 int main(void)
 {
     const struct CMUnitTest tests[] = {
-        cmocka_unit_test(test_boxes_known),       cmocka_unit_test(test_tetrahedra_known),
-        cmocka_unit_test(test_vertices_on_centres), cmocka_unit_test(test_same_as_scan),
-        cmocka_unit_test(test_bands),             cmocka_unit_test(test_hostile),
+        cmocka_unit_test(test_boxes_known),
+        cmocka_unit_test(test_tetrahedra_known),
+        cmocka_unit_test(test_vertices_on_centres),
+        cmocka_unit_test(test_same_as_scan),
+        cmocka_unit_test(test_bands),
+        cmocka_unit_test(test_hostile),
         cmocka_unit_test(test_auto),
     };
     return cmocka_run_group_tests(tests, vx_test_gl_setup, vx_test_gl_teardown);
