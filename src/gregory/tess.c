@@ -166,7 +166,7 @@ int vx_gtess_run(vx_gtess *t, const vx_gpatch_set *s, const double origin[3], fl
     if (s->npatches != t->l->npatches)
         return vx_err_set(err, VX_EINTERNAL, "gregory_layout", "%zu patches for a layout of %zu",
                           s->npatches, t->l->npatches);
-    if (t->cpu) return vx_gtess_cpu_run(t->l, s, origin, grid, gpu_ms, err);
+    if (t->cpu) return vx_gtess_cpu_run(t->l, s, origin, grid, 0, gpu_ms, err);
     for (size_t c = 0; c < t->nchunks; c++) {
         chunk *k = &t->ch[c];
         size_t np = k->p1 - k->p0;

@@ -14,9 +14,11 @@
 void vx_gtess_pack(const vx_gpatch_set *s, size_t p, const double origin[3], float *f);
 
 /* Every grid vertex of l on the CPU threads (tess_cpu.c): the shader's
- * formulas, the same grid layout. *ms = the pass's wall time. 0, or -1
- * with err when the calling thread's stop hook says stop. */
+ * formulas, the same grid layout, `lanes` vertices of a row at once (4:
+ * SSE; 8: AVX2 with FMA, where the CPU has them; 0: the widest it has).
+ * *ms = the pass's wall time. 0, or -1 with err when the calling thread's
+ * stop hook says stop. */
 int vx_gtess_cpu_run(const vx_gtess_layout *l, const vx_gpatch_set *s, const double origin[3],
-                     float *grid, double *ms, vx_err *err);
+                     float *grid, int lanes, double *ms, vx_err *err);
 
 #endif

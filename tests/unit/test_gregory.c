@@ -17,6 +17,7 @@
 #include "gregory/gregory.h"
 #include "gregory/job.h"
 #include "gregory/tess.h"
+#include "gregory/tess_int.h"
 
 static vx_mesh *load(const char *name)
 {
@@ -438,6 +439,22 @@ static void check_engine(const vx_gpatch_set *s, const uint32_t *nd, double dg, 
     assert_string_equal(vx_gtess_engine_name(t), engine == VX_GTESS_CPU ? "cpu" : "gpu");
     assert_int_equal(vx_gtess_run(t, s, origin, grid, &ms, &err), 0);
     vx_gtess_free(t);
+    if (engine == VX_GTESS_CPU) {
+        /* the 4-lane kernel (x86-64's baseline) against the widest one
+         * the CPU has (here AVX2 with FMA, 8 lanes, where it has them) */
+        uint64_t ng = l->voff[s->npatches];
+        float *g4 = malloc(6 * ng * sizeof *g4);
+        double ms4;
+        assert_int_equal(vx_gtess_cpu_run(l, s, origin, g4, 4, &ms4, &err), 0);
+        double worst = 0;
+        for (uint64_t v = 0; v < ng; v++)
+            for (int c = 0; c < 6; c++)
+                worst = fmax(worst, fabs(g4[6 * v + c] - grid[6 * v + c]) / (c < 3 ? dg : 1));
+        fprintf(stderr, "  cpu 4 lanes vs widest: %.3g (%.2f ms against %.2f ms)\n", worst, ms4,
+                ms);
+        assert_true(worst <= 1e-5);
+        free(g4);
+    }
     double worst_p = 0, worst_n = 0;
     size_t seen = 0;
     for (size_t p = 0; p < s->npatches; p++) {
