@@ -118,8 +118,10 @@ static int same_file(const char *a, const char *b)
     return system(cmd) == 0;
 }
 
-static const int sizes[][3] = {{1, 1, 1},    {13, 5, 3},    {32, 32, 32}, {33, 70, 9},
-                               {64, 8, 129}, {100, 37, 61}, {7, 300, 2},  {260, 3, 40}};
+/* Widths on and off word and byte boundaries; 40 and 72: rows of whole
+ * bytes that start mid-word in raw1. */
+static const int sizes[][3] = {{1, 1, 1},     {13, 5, 3},  {32, 32, 32}, {33, 70, 9}, {64, 8, 129},
+                               {100, 37, 61}, {7, 300, 2}, {260, 3, 40}, {40, 9, 7},  {72, 130, 3}};
 
 static void test_raw_binvox(void **st)
 {
@@ -158,6 +160,26 @@ static void test_raw_binvox(void **st)
             }
             vx_bitgrid_free(&g);
         }
+}
+
+/* raw1 on rows wider than its 16 KiB buffer, byte aligned
+ * and not (binvox's cube would be 131080^3). */
+static void test_raw_wide_rows(void **st)
+{
+    char a[256], b[256];
+    const int wide[][3] = {{131080, 2, 3}, {131075, 3, 2}};
+    for (int s = 0; s < 2; s++) {
+        vx_bitgrid g;
+        random_grid(&g, wide[s][0], wide[s][1], wide[s][2], 1, 0);
+        vx_err err;
+        snprintf(a, sizeof a, "%s/fast.raw1", dir);
+        snprintf(b, sizeof b, "%s/ref.raw1", dir);
+        assert_int_equal(vx_voxel_write_raw1(&g, a, NULL, &err), 0);
+        ref_raw1(&g, b);
+        if (!same_file(a, b))
+            fail_msg("raw1 differs on %dx%dx%d", wide[s][0], wide[s][1], wide[s][2]);
+        vx_bitgrid_free(&g);
+    }
 }
 
 static void vdbcheck(const vx_bitgrid *g, vx_vdb_class cls, int coverage)
@@ -265,6 +287,7 @@ int main(void)
 {
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_raw_binvox),
+        cmocka_unit_test(test_raw_wide_rows),
         cmocka_unit_test(test_vdb),
         cmocka_unit_test(test_progress),
     };
