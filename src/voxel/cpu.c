@@ -177,7 +177,7 @@ static int bin_tris(cctx *c, vx_err *err)
                 c->bin_off[b + 1] += c->bin_off[b];
             if (charge(c, c->bin_off[c->nbands] * sizeof *c->bin +
                               ((size_t)c->nbands + 2) * sizeof *c->bin_off)) {
-                *err = c->err;
+                if (err) *err = c->err;
                 return -1;
             }
             c->bin = malloc(c->bin_off[c->nbands] * sizeof *c->bin + 1);
@@ -388,10 +388,11 @@ static int poll(cctx *c, int t, double f)
 {
     if (atomic_load(&c->stop)) return 1;
     if (t != 0 || !c->d->progress) return 0;
-    if (c->d->progress(c->d->ud, f, &c->err)) {
-        if (c->err.kind == VX_EOK)
-            vx_err_set(&c->err, VX_ECANCELED, "canceled", "voxelization stopped by its caller");
-        atomic_store(&c->stop, 1);
+    vx_err e = {0};
+    if (c->d->progress(c->d->ud, f, &e)) {
+        if (e.kind == VX_EOK)
+            vx_err_set(&e, VX_ECANCELED, "canceled", "voxelization stopped by its caller");
+        if (!atomic_exchange(&c->stop, 1)) c->err = e; /* the first error wins */
         return 1;
     }
     return 0;
@@ -478,7 +479,7 @@ int vx_voxelize_cpu(const vx_mesh *m, const vx_voxelize_desc *d, vx_bitgrid *out
                      (uint64_t)m->ntris * sizeof(xtri) +
                      (uint64_t)vx_par_cpus() * ((uint64_t)c->band * c->ny + 1) * 4u;
     if (charge(c, fixed)) {
-        *err = c->err;
+        if (err) *err = c->err;
         goto done;
     }
     if (poll(c, 0, 0.0)) goto stopped;
