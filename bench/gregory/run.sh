@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Gregory tessellation benchmarks (issue #5, seed 001): voxeld's one-pass
-# GPU tessellation vs OpenSubdiv 3.5's CPU limit evaluation of the same mesh
+# tessellation (the GPU pass and the CPU engine, tess_cpu.c; the table says
+# which one the daemon runs here) vs OpenSubdiv 3.5's CPU limit evaluation of the same mesh
 # (same run: OpenSubdiv's OmpEvaluator on 2 threads, the peer, and one
 # thread of Far), the seed's table 3.2 (3x3 quad mesh, 10
 # generations, vs uniform Catmull-Clark by OpenSubdiv), and the time per
