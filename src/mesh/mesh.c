@@ -101,6 +101,15 @@ static int count_edges(vx_mesh *m, size_t nedges, vx_err *err)
     return 0;
 }
 
+int vx_mesh_check_indices(const vx_mesh *m, vx_err *err)
+{
+    for (size_t i = 0; i < 3 * m->ntris; i++)
+        if (m->tri[i] >= m->nverts)
+            return vx_err_set(err, VX_EINTERNAL, "mesh_invalid",
+                              "triangle %zu uses vertex %u of %zu", i / 3, m->tri[i], m->nverts);
+    return 0;
+}
+
 int vx_mesh_analyze(vx_mesh *m, vx_err *err)
 {
     /* Triangulated view: a fan per face. */

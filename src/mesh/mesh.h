@@ -77,6 +77,11 @@ const uint32_t *vx_mesh_face(const vx_mesh *m, size_t f);
  * code that builds a mesh by hand calls it before use. */
 int vx_mesh_analyze(vx_mesh *m, vx_err *err);
 
+/* 0 when every triangle index names a vertex, else -1 with VX_EINTERNAL
+ * mesh_invalid: what an engine checks before it reads positions by index
+ * (a hand-built or corrupted mesh must fail there, not fault). Any thread. */
+int vx_mesh_check_indices(const vx_mesh *m, vx_err *err);
+
 /* Opens path to read a mesh from, or NULL with VX_EIO mesh_io naming it. */
 FILE *vx_mesh_open(const char *path, vx_err *err);
 /* Reads an OBJ file, streaming it line by line (memory: the mesh plus one

@@ -224,12 +224,7 @@ static int check_inputs(const vx_mesh *m, const vx_preview_params *p, vx_err *er
                           max_rb);
     /* A bad index would make the GPU read outside the vertex buffer: a
      * hand-built or corrupted mesh must fail here, not fault there. */
-    const size_t nidx = 3 * m->ntris;
-    for (size_t i = 0; i < nidx; i++)
-        if (m->tri[i] >= m->nverts)
-            return vx_err_set(err, VX_EINTERNAL, "mesh_invalid",
-                              "triangle %zu uses vertex %u of %zu", i / 3, m->tri[i], m->nverts);
-    return 0;
+    return vx_mesh_check_indices(m, err);
 }
 
 /* The sample count asked for, clamped to 1..the GPU's maximum. */

@@ -448,10 +448,7 @@ int vx_voxelize_cpu(const vx_mesh *m, const vx_voxelize_desc *d, vx_bitgrid *out
     st->method = "cpu";
     memset(out, 0, sizeof *out);
     const vx_grid *g = &d->grid;
-    for (size_t i = 0; i < 3 * m->ntris; i++)
-        if (m->tri[i] >= m->nverts)
-            return vx_err_set(err, VX_EINTERNAL, "mesh_invalid",
-                              "triangle %zu uses vertex %u of %zu", i / 3, m->tri[i], m->nverts);
+    if (vx_mesh_check_indices(m, err)) return -1;
     double t0 = vx_mono();
     cctx *c = calloc(1, sizeof *c);
     if (!c) return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for the job");

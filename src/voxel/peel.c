@@ -830,11 +830,7 @@ int vx_peel_check_input(const vx_mesh *m, const vx_voxelize_desc *d, vx_err *err
     if (!(g->h > 0) || !isfinite(g->h))
         return vx_err_set(err, VX_EUNPROC, "invalid_params", "voxel size must be positive");
     /* A bad index would make the GPU read outside the vertex buffer. */
-    for (size_t i = 0; i < 3 * m->ntris; i++)
-        if (m->tri[i] >= m->nverts)
-            return vx_err_set(err, VX_EINTERNAL, "mesh_invalid",
-                              "triangle %zu uses vertex %u of %zu", i / 3, m->tri[i], m->nverts);
-    return 0;
+    return vx_mesh_check_indices(m, err);
 }
 
 /* Compiles the programs the fill mode needs; for fill=surface also checks
