@@ -1,8 +1,9 @@
 /* Gregory tessellation on the CPU threads (tess.h, engine cpu): the
- * formulas of shaders/gregory_tess.comp.glsl in float, a grid row at a
- * time, four vertices of a row at once (GCC vector types: SSE on x86-64's
- * baseline; eight with AVX2 and FMA where the CPU has them), patches
- * handed to vx_par_for's threads.
+ * formulas of shaders/gregory_tess.comp.glsl in float (rearranged so that
+ * what depends on u or v alone is computed once a patch or a row), four
+ * vertices of a row at once (GCC vector types: SSE on x86-64's baseline;
+ * eight with AVX2 and FMA where the CPU has them), patches handed to
+ * vx_par_for's threads.
  *
  * On a CPU rasterizer (llvmpipe) the compute pass runs this same work on the
  * same cores behind a driver, plus the invocations' overhead and the
@@ -10,6 +11,9 @@
 #include <math.h>
 #include <stdatomic.h>
 #include <string.h>
+#if defined(__x86_64__)
+#include <immintrin.h>
+#endif
 
 #include "gregory/tess_int.h"
 #include "util/clock.h"
@@ -23,11 +27,6 @@
 typedef struct v3 {
     float x, y, z;
 } v3;
-
-static v3 cp(const float *c, int slot)
-{
-    return (v3){c[3 * slot], c[3 * slot + 1], c[3 * slot + 2]};
-}
 
 static void bern(float t, float b[4], float d[4])
 {
@@ -113,31 +112,81 @@ static void degenerate_normal(const float *c, float u, float v, float n[3])
     n[2] = 1.0f;
 }
 
-/* The row kernel, for SSE (x86-64's baseline: 4 lanes) and, chosen at run
- * time, AVX2 with FMA (8 lanes). */
+/* Lane vectors (GCC's vector extension) and the stores of a chunk's
+ * vertices: 6 lane vectors (x y z nx ny nz) transposed to 6 floats a
+ * vertex; a partial chunk (the row's last) lane by lane. */
+typedef float vf4 __attribute__((vector_size(16)));
+typedef int vi4 __attribute__((vector_size(16)));
+typedef float vf8 __attribute__((vector_size(32)));
+typedef int vi8 __attribute__((vector_size(32)));
+#define STORE_LANES(o, t, m)                                                                       \
+    for (uint32_t k_ = 0; k_ < (m); k_++)                                                          \
+        for (int a_ = 0; a_ < 6; a_++)                                                             \
+    (o)[6 * k_ + a_] = (t)[a_][k_]
+#if defined(__x86_64__)
+/* x0..3 y z nx ny nz as 4 vertices [x y z nx] + [ny nz] */
+#define STORE4_HALVES(o, x, y, z, nx, ny, nz)                                                      \
+    do {                                                                                           \
+        __m128 a0_ = _mm_unpacklo_ps(x, y), a1_ = _mm_unpackhi_ps(x, y);                           \
+        __m128 b0_ = _mm_unpacklo_ps(z, nx), b1_ = _mm_unpackhi_ps(z, nx);                         \
+        __m128 c0_ = _mm_unpacklo_ps(ny, nz), c1_ = _mm_unpackhi_ps(ny, nz);                       \
+        _mm_storeu_ps((o), _mm_movelh_ps(a0_, b0_));                                               \
+        _mm_storel_pi((__m64 *)((o) + 4), c0_);                                                    \
+        _mm_storeu_ps((o) + 6, _mm_movehl_ps(b0_, a0_));                                           \
+        _mm_storeh_pi((__m64 *)((o) + 10), c0_);                                                   \
+        _mm_storeu_ps((o) + 12, _mm_movelh_ps(a1_, b1_));                                          \
+        _mm_storel_pi((__m64 *)((o) + 16), c1_);                                                   \
+        _mm_storeu_ps((o) + 18, _mm_movehl_ps(b1_, a1_));                                          \
+        _mm_storeh_pi((__m64 *)((o) + 22), c1_);                                                   \
+    } while (0)
+
+static inline void store4(float *o, const vf4 *t)
+{
+    STORE4_HALVES(o, (__m128)t[0], (__m128)t[1], (__m128)t[2], (__m128)t[3], (__m128)t[4],
+                  (__m128)t[5]);
+}
+
+__attribute__((target("avx2,fma"))) static inline void store8(float *o, const vf8 *t)
+{
+#define HALF(k, h) _mm256_extractf128_ps((__m256)t[k], h)
+    STORE4_HALVES(o, HALF(0, 0), HALF(1, 0), HALF(2, 0), HALF(3, 0), HALF(4, 0), HALF(5, 0));
+    STORE4_HALVES(o + 24, HALF(0, 1), HALF(1, 1), HALF(2, 1), HALF(3, 1), HALF(4, 1), HALF(5, 1));
+#undef HALF
+}
+#define STORE4(o, t, m) ((m) == 4 ? store4(o, t) : ({ STORE_LANES(o, t, m); }))
+#define STORE8(o, t, m) ((m) == 8 ? store8(o, t) : ({ STORE_LANES(o, t, m); }))
+#else
+#define STORE4(o, t, m) STORE_LANES(o, t, m)
+#endif
+
+/* The patch kernel, for SSE (x86-64's baseline: 4 lanes) and, chosen at
+ * run time, AVX2 with FMA (8 lanes). */
 #define ROW_LANES 4
-#define ROW_NAME row4
+#define ROW_NAME patch4
 #define ROW_ATTR
+#define ROW_STORE STORE4
 #include "gregory/tess_cpu_row.inc"
 #if defined(__x86_64__)
 #define ROW_LANES 8
-#define ROW_NAME row8
+#define ROW_NAME patch8
 #define ROW_ATTR __attribute__((target("avx2,fma")))
+#define ROW_STORE STORE8
 #include "gregory/tess_cpu_row.inc"
 #endif
 
-typedef void (*row_fn)(const float *c, uint32_t n, uint32_t j, float *out);
+typedef void (*patch_fn)(const float *c, uint32_t n, float *out);
 
-static row_fn pick_row(int lanes)
+static patch_fn pick_kernel(int lanes)
 {
 #if defined(__x86_64__)
-    if (lanes != 4 && __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma")) return row8;
+    if (lanes != 4 && __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma"))
+        return patch8;
 #endif
-    return row4;
+    return patch4;
 }
 
 typedef struct tctx {
-    row_fn row;
+    patch_fn patch;
     const vx_gtess_layout *l;
     const vx_gpatch_set *s;
     const double *origin;
@@ -154,10 +203,7 @@ static int task(int item, int t, void *ud)
     float f[VX_GTESS_CP_FLOATS];
     for (size_t p = p0; p < p1; p++) {
         vx_gtess_pack(c->s, p, c->origin, f);
-        uint32_t n = c->l->ndiv[p];
-        float *out = c->grid + 6 * c->l->voff[p];
-        for (uint32_t j = 0; j <= n; j++)
-            c->row(f, n, j, out + 6 * (size_t)j * (n + 1));
+        c->patch(f, c->l->ndiv[p], c->grid + 6 * c->l->voff[p]);
     }
     return 0;
 }
@@ -166,7 +212,8 @@ int vx_gtess_cpu_run(const vx_gtess_layout *l, const vx_gpatch_set *s, const dou
                      float *grid, int lanes, double *ms, vx_err *err)
 {
     double t0 = vx_mono_ms();
-    tctx c = {.row = pick_row(lanes), .l = l, .s = s, .origin = origin, .grid = grid, .err = err};
+    tctx c = {
+        .patch = pick_kernel(lanes), .l = l, .s = s, .origin = origin, .grid = grid, .err = err};
     size_t items = (l->npatches + TASK_PATCHES - 1) / TASK_PATCHES;
     int rc = items ? vx_par_for((int)items, vx_par_cpus(), task, &c) : 0;
     *ms = vx_mono_ms() - t0;
