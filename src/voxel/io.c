@@ -257,7 +257,14 @@ static void binvox_transpose(const vx_bitgrid *g, size_t x0, size_t nb, uint32_t
                     a[b][jj] = j < (size_t)ny ? vx_row_word(g, row, x0 + b) : 0;
             }
             for (size_t b = 0; b < nb; b++) {
-                transpose32(a[b]);
+                /* a block all 0 or all 1 (most, inside and outside) is its
+                 * own transpose */
+                uint32_t any = 0, all = ~0u;
+                for (int ii = 0; ii < 32; ii++) {
+                    any |= a[b][ii];
+                    all &= a[b][ii];
+                }
+                if (any && ~all) transpose32(a[b]);
                 uint32_t *c = cols + b * ncols + (size_t)k * wy + jw;
                 for (int ii = 0; ii < 32; ii++)
                     c[(size_t)ii * nz * wy] = a[b][ii];
