@@ -5,6 +5,7 @@
  * one coded while the next is made). */
 #include <errno.h>
 #include <pthread.h>
+#include <stdatomic.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -243,12 +244,14 @@ static int rle_zeros(rle *r, uint64_t n)
  * block at least). */
 #define BINVOX_GROUP_BYTES ((size_t)16 << 20)
 
-static void binvox_transpose(const vx_bitgrid *g, size_t x0, size_t nb, uint32_t *cols)
+/* Slices k0..k1-1 of nb blocks from x block x0. */
+static void binvox_transpose(const vx_bitgrid *g, size_t x0, size_t nb, int k0, int k1,
+                             uint32_t *cols)
 {
     const int ny = g->grid.dims[1], nz = g->grid.dims[2];
     const size_t wy = ((size_t)ny + 31) / 32, ncols = 32 * (size_t)nz * wy;
     uint32_t a[32][32];
-    for (int k = 0; k < nz; k++)
+    for (int k = k0; k < k1; k++)
         for (size_t jw = 0; jw < wy; jw++) {
             for (int jj = 0; jj < 32; jj++) {
                 size_t j = 32 * jw + (size_t)jj;
@@ -283,13 +286,16 @@ static int binvox_rle(const vx_bitgrid *g, size_t x, int d, const uint32_t *cols
     for (int ii = 0; ii < 32 && 32 * (int)x + ii < nx; ii++) {
         for (int k = 0; k < nz; k++) {
             const uint32_t *c = cols + ((size_t)ii * nz + k) * wy;
-            for (size_t jw = 0; jw < wy; jw++) {
-                /* most words continue the current run whole */
-                if (jw + 1 < wy && c[jw] == (r->cur ? 0xffffffffu : 0u)) {
-                    r->run += 32;
-                    continue;
-                }
-                if (rle_bits(r, c[jw], jw + 1 < wy ? 32 : ylast)) return -1;
+            for (size_t jw = 0; jw < wy;) {
+                /* most words continue the current run whole (counted here,
+                 * not in r, so that the count stays in a register) */
+                const uint32_t same = r->cur ? 0xffffffffu : 0u;
+                size_t e = jw;
+                while (e + 1 < wy && c[e] == same)
+                    e++;
+                r->run += 32 * (uint64_t)(e - jw);
+                if (rle_bits(r, c[e], e + 1 < wy ? 32 : ylast)) return -1;
+                jw = e + 1;
             }
             if (rle_zeros(r, (uint64_t)(d - ny))) return -1;
         }
@@ -298,15 +304,19 @@ static int binvox_rle(const vx_bitgrid *g, size_t x, int d, const uint32_t *cols
     return 0;
 }
 
-/* Two stages run side by side on two threads: group q + 1 is transposed
- * while group q is coded and written (the coder is sequential: a run
- * crosses block boundaries). The coder runs on the calling thread, which
- * alone reports progress (and so polls the job's stop hook, util/par.h). */
+/* Two threads: group q is coded on the calling thread (the coder is
+ * sequential: a run crosses block boundaries) while group q + 1 is
+ * transposed, a few slices at a time, by the other thread and then by the
+ * coder too once it is done. The calling thread alone reports progress
+ * (and so polls the job's stop hook, util/par.h). */
+#define BINVOX_SLICES 16 /* slices per piece of a group's transposition */
+
 typedef struct binvox_pipe {
     const vx_bitgrid *g;
     size_t q, per, ncols; /* the group being coded, blocks per group, words per block */
-    int d;
+    int d, coding;        /* coding: group q is coded (else only transposed) */
     uint32_t *cols[2];
+    atomic_int piece; /* the next piece of group q + 1 to transpose */
     rle *r;
     const vx_voxel_io *io;
     vx_err *err;
@@ -320,26 +330,33 @@ static size_t group_blocks(const binvox_pipe *p, size_t q)
     return x0 >= p->g->wx ? 0 : (p->g->wx - x0 < p->per ? p->g->wx - x0 : p->per);
 }
 
-static void transpose_next(binvox_pipe *p)
+/* Pieces of group q's transposition until none is left. */
+static void transpose_pieces(binvox_pipe *p, size_t q)
 {
-    size_t nb = group_blocks(p, p->q + 1);
-    if (nb) binvox_transpose(p->g, (p->q + 1) * p->per, nb, p->cols[(p->q + 1) & 1]);
+    const int nz = p->g->grid.dims[2];
+    size_t nb = group_blocks(p, q);
+    for (int k0; nb && (k0 = BINVOX_SLICES * atomic_fetch_add(&p->piece, 1)) < nz;)
+        binvox_transpose(p->g, q * p->per, nb, k0,
+                         k0 + BINVOX_SLICES < nz ? k0 + BINVOX_SLICES : nz, p->cols[q & 1]);
 }
 
 static void *binvox_stage(void *ud)
 {
     binvox_pipe *p = ud;
-    if (!pthread_equal(pthread_self(), p->caller)) {
-        transpose_next(p);
+    if (!p->coding) {
+        transpose_pieces(p, p->q);
         return NULL;
     }
-    for (size_t b = 0; b < group_blocks(p, p->q) && !p->rc; b++) {
-        size_t x = p->q * p->per + b;
-        if (p->io && p->io->progress && p->io->progress(p->io->ud, (double)(32 * x) / p->d, p->err))
-            p->rc = -1;
-        else if (binvox_rle(p->g, x, p->d, p->cols[p->q & 1] + b * p->ncols, p->r))
-            p->rc = -1;
-    }
+    if (pthread_equal(pthread_self(), p->caller))
+        for (size_t b = 0; b < group_blocks(p, p->q) && !p->rc; b++) {
+            size_t x = p->q * p->per + b;
+            if (p->io && p->io->progress &&
+                p->io->progress(p->io->ud, (double)(32 * x) / p->d, p->err))
+                p->rc = -1;
+            else if (binvox_rle(p->g, x, p->d, p->cols[p->q & 1] + b * p->ncols, p->r))
+                p->rc = -1;
+        }
+    transpose_pieces(p, p->q + 1);
     return NULL;
 }
 
@@ -376,11 +393,14 @@ int vx_voxel_write_binvox(const vx_bitgrid *g, const char *path, const vx_voxel_
                      .io = io,
                      .err = err,
                      .caller = pthread_self()};
-    if (ok) binvox_transpose(g, 0, group_blocks(&p, 0), cols);
+    /* group 0 transposed, then each group coded while the next is (with
+     * one thread only, when none could be made, in turn) */
+    if (ok) vx_par_run(2, binvox_stage, &p);
     for (size_t q = 0; ok && q * per < g->wx; q++) {
         p.q = q;
-        /* one thread only (none could be made): the next group after */
-        if (vx_par_run(2, binvox_stage, &p) < 2) transpose_next(&p);
+        p.coding = 1;
+        atomic_store(&p.piece, 0);
+        vx_par_run(2, binvox_stage, &p);
         if (p.rc) ok = 0;
     }
     if (ok && rle_zeros(&r, (uint64_t)(d - nx) * d * d)) ok = 0;
