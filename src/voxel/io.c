@@ -1,8 +1,9 @@
 /* raw8, raw1 and binvox writers (io.h). Each works a word of the bit grid
  * at a time (32 voxels) and writes through a buffer of about 1 MiB, so the
- * only memory beyond the grid is that buffer (binvox: plus two groups of
- * transposed x-columns, 16 MiB each or one block of 32 columns if larger,
- * one coded while the next is made). */
+ * only memory beyond the grid is that buffer (raw1 with rows that start
+ * mid-byte: plus two chunks of about 1 MiB, one packed while the other is
+ * written; binvox: plus two groups of transposed x-columns, 16 MiB each or
+ * one block of 32 columns if larger, one coded while the next is made). */
 #include <errno.h>
 #include <pthread.h>
 #include <stdatomic.h>
@@ -42,6 +43,11 @@ int vx_out_flush(vx_out *o)
 int vx_out_write(vx_out *o, const void *p, size_t n)
 {
     const uint8_t *s = p;
+    if (n >= VX_OUT_BUF) { /* a block as large as the buffer goes as it is */
+        if (vx_out_flush(o)) return -1;
+        if (fwrite(s, 1, n, o->f) != n) o->failed = errno ? errno : EIO;
+        return o->failed ? -1 : 0;
+    }
     while (n) {
         if (o->n == VX_OUT_BUF && vx_out_flush(o)) return -1;
         size_t c = VX_OUT_BUF - o->n < n ? VX_OUT_BUF - o->n : n;
@@ -119,53 +125,112 @@ int vx_voxel_write_raw8(const vx_bitgrid *g, const char *path, const vx_voxel_io
     return vx_out_close(&o, vx_out_raw8(&o, g, io, err) == 0, err);
 }
 
+/* raw1 rows are packed continuously: when nx % 8 != 0 they start mid-byte
+ * and go through a 64-bit accumulator. Chunks of rows whose first row
+ * starts on a byte are packed on one thread while the previous chunk is
+ * written on the calling thread (which alone reports progress). */
+#define RAW1_CHUNK_BYTES ((size_t)1 << 20)
+
+/* Rows r0..r1-1 (the first on a byte) into out; the bytes written. */
+static size_t raw1_pack(const vx_bitgrid *g, size_t r0, size_t r1, uint8_t *out)
+{
+    const unsigned last = (unsigned)(g->grid.dims[0] - 32 * (int)(g->wx - 1));
+    uint64_t acc = 0;
+    unsigned nacc = 0;
+    size_t n = 0;
+    for (size_t r = r0; r < r1; r++) {
+        const uint32_t *row = g->bits + r * g->wx;
+        for (size_t x = 0; x < g->wx; x++) {
+            acc |= (uint64_t)vx_row_word(g, row, x) << nacc;
+            nacc += x + 1 < g->wx ? 32 : last;
+            if (nacc >= 32) {
+                uint32_t w = (uint32_t)acc;
+                memcpy(out + n, &w, 4);
+                n += 4;
+                acc >>= 32;
+                nacc -= 32;
+            }
+        }
+    }
+    for (; nacc; nacc = nacc > 8 ? nacc - 8 : 0, acc >>= 8)
+        out[n++] = (uint8_t)acc;
+    return n;
+}
+
+typedef struct raw1_pipe {
+    const vx_bitgrid *g;
+    size_t rows, per, c; /* rows, rows per chunk, the chunk being written */
+    uint8_t *buf[2];
+    size_t n[2];
+    vx_out *o;
+    const vx_voxel_io *io;
+    vx_err *err;
+    pthread_t caller;
+    int rc;
+} raw1_pipe;
+
+static void raw1_pack_chunk(raw1_pipe *p, size_t c)
+{
+    size_t r0 = c * p->per, r1 = r0 + p->per < p->rows ? r0 + p->per : p->rows;
+    if (r0 < p->rows) p->n[c & 1] = raw1_pack(p->g, r0, r1, p->buf[c & 1]);
+}
+
+static void *raw1_stage(void *ud)
+{
+    raw1_pipe *p = ud;
+    if (!pthread_equal(pthread_self(), p->caller)) {
+        raw1_pack_chunk(p, p->c + 1);
+        return NULL;
+    }
+    if (p->io && p->io->progress &&
+        p->io->progress(p->io->ud, (double)(p->c * p->per) / p->rows, p->err))
+        p->rc = -1;
+    else if (vx_out_write(p->o, p->buf[p->c & 1], p->n[p->c & 1]))
+        p->rc = -1;
+    return NULL;
+}
+
 int vx_voxel_write_raw1(const vx_bitgrid *g, const char *path, const vx_voxel_io *io, vx_err *err)
 {
     const int nx = g->grid.dims[0], ny = g->grid.dims[1], nz = g->grid.dims[2];
     vx_out o;
-    int ok = vx_out_open(&o, path, err) == 0;
-    /* Rows are packed continuously: when nx % 8 != 0 they start mid-byte,
-     * so words go through a 64-bit accumulator, then a local buffer (a
-     * write call per 4 bytes took 318 ms for spot's 72 MB at 1024^3). */
-    uint64_t acc = 0;
-    unsigned nacc = 0;
-    enum { NBUF = 4096 };
-    uint32_t buf[NBUF];
-    size_t nbuf = 0;
-    const unsigned last = (unsigned)(nx - 32 * (int)(g->wx - 1)); /* bits of a row's last word */
-    for (int k = 0; ok && k < nz; k++) {
-        if (vx_out_progress(io, k, nz, err)) ok = 0;
-        for (int j = 0; ok && j < ny; j++) {
-            const uint32_t *row = g->bits + ((size_t)k * ny + j) * g->wx;
-            if (!nacc && !(nx & 7)) { /* byte aligned: the row as it is */
-                if (nbuf && vx_out_write(&o, buf, nbuf * 4)) ok = 0;
-                nbuf = 0;
-                if (vx_out_write(&o, row, (size_t)nx / 8)) ok = 0;
-                continue;
-            }
-            for (size_t x = 0; x < g->wx; x++) {
-                unsigned n = x + 1 < g->wx ? 32 : last;
-                acc |= (uint64_t)vx_row_word(g, row, x) << nacc;
-                nacc += n;
-                if (nacc >= 32) {
-                    buf[nbuf++] = (uint32_t)acc;
-                    acc >>= 32;
-                    nacc -= 32;
-                    if (nbuf == NBUF) {
-                        if (vx_out_write(&o, buf, sizeof buf)) ok = 0;
-                        nbuf = 0;
-                    }
-                }
-            }
+    if (vx_out_open(&o, path, err)) return -1;
+    int ok = 1;
+    const size_t rows = (size_t)ny * nz;
+    if (!(nx & 7)) { /* rows of whole bytes: written as they are */
+        for (size_t r = 0; ok && r < rows; r++) {
+            if (r % (size_t)ny == 0 && vx_out_progress(io, (int)(r / ny), nz, err)) ok = 0;
+            if (ok && vx_out_write(&o, g->bits + r * g->wx, (size_t)nx / 8)) ok = 0;
         }
+        return vx_out_close(&o, ok, err);
     }
-    if (ok && nbuf && vx_out_write(&o, buf, nbuf * 4)) ok = 0;
-    while (ok && nacc) {
-        uint8_t b = (uint8_t)acc;
-        if (vx_out_write(&o, &b, 1)) ok = 0;
-        acc >>= 8;
-        nacc = nacc > 8 ? nacc - 8 : 0;
+    /* chunks of a multiple of 8 rows, each starting on a byte: about
+     * RAW1_CHUNK_BYTES, and at least 16 of them (the progress steps) */
+    size_t per = RAW1_CHUNK_BYTES * 8 / (size_t)nx;
+    if (per > rows / 16) per = rows / 16;
+    per = per < 8 ? 8 : per / 8 * 8;
+    size_t cap = (per * (size_t)nx + 7) / 8 + 8;
+    uint8_t *buf = malloc(2 * cap);
+    if (!buf) {
+        vx_out_close(&o, 0, err);
+        return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for raw1 rows");
     }
+    raw1_pipe p = {.g = g,
+                   .rows = rows,
+                   .per = per,
+                   .buf = {buf, buf + cap},
+                   .o = &o,
+                   .io = io,
+                   .err = err,
+                   .caller = pthread_self()};
+    raw1_pack_chunk(&p, 0);
+    for (size_t c = 0; ok && c * per < rows; c++) {
+        p.c = c;
+        /* one thread only (none could be made): the next chunk after */
+        if (vx_par_run(2, raw1_stage, &p) < 2) raw1_pack_chunk(&p, c + 1);
+        if (p.rc) ok = 0;
+    }
+    free(buf);
     return vx_out_close(&o, ok, err);
 }
 
