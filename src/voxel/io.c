@@ -1,9 +1,10 @@
 /* raw8, raw1 and binvox writers (io.h). Each works a word of the bit grid
- * at a time (32 voxels) and writes through a buffer of about 1 MiB, so the
- * only memory beyond the grid is that buffer (raw1 with rows that start
- * mid-byte: plus two chunks of about 1 MiB, one packed while the other is
- * written; binvox: plus two groups of transposed x-columns, 16 MiB each or
- * one block of 32 columns if larger, one coded while the next is made). */
+ * at a time (32 voxels) and writes through a buffer of about 1 MiB (raw8,
+ * and raw1 with rows that start mid-byte: two chunks of about 4 MiB
+ * instead, one made while the other is written), so the only memory
+ * beyond the grid is that (binvox: plus two groups of transposed
+ * x-columns, 16 MiB each or one block of 32 columns if larger, one coded
+ * while the next is made). */
 #include <errno.h>
 #include <pthread.h>
 #include <stdatomic.h>
@@ -83,6 +84,58 @@ int vx_out_progress(const vx_voxel_io *io, int k, int nz, vx_err *err)
     return io->progress(io->ud, (double)k / nz, err) ? -1 : 0;
 }
 
+typedef struct out_pipe {
+    vx_out *o;
+    size_t n, c; /* chunks, the chunk being written */
+    uint8_t *buf[2];
+    size_t len[2];
+    vx_out_fill_fn fill;
+    void *ud;
+    const vx_voxel_io *io;
+    vx_err *err;
+    pthread_t caller;
+    int rc;
+} out_pipe;
+
+static void pipe_fill(out_pipe *p, size_t c)
+{
+    if (c < p->n) p->len[c & 1] = p->fill(p->ud, c, p->buf[c & 1]);
+}
+
+static void *pipe_stage(void *ud)
+{
+    out_pipe *p = ud;
+    if (!pthread_equal(pthread_self(), p->caller))
+        pipe_fill(p, p->c + 1);
+    else if (p->io && p->io->progress && p->io->progress(p->io->ud, (double)p->c / p->n, p->err))
+        p->rc = -1;
+    else if (vx_out_write(p->o, p->buf[p->c & 1], p->len[p->c & 1]))
+        p->rc = -1;
+    return NULL;
+}
+
+int vx_out_chunks(vx_out *o, size_t n, size_t cap, vx_out_fill_fn fill, void *ud,
+                  const vx_voxel_io *io, vx_err *err)
+{
+    uint8_t *buf = malloc(2 * cap);
+    if (!buf) return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for output chunks");
+    out_pipe p = {.o = o,
+                  .n = n,
+                  .buf = {buf, buf + cap},
+                  .fill = fill,
+                  .ud = ud,
+                  .io = io,
+                  .err = err,
+                  .caller = pthread_self()};
+    pipe_fill(&p, 0);
+    for (size_t c = 0; !p.rc && c < n; c++) {
+        p.c = c;
+        if (vx_par_run(2, pipe_stage, &p) < 2) pipe_fill(&p, c + 1);
+    }
+    free(buf);
+    return p.rc;
+}
+
 uint32_t vx_row_word(const vx_bitgrid *g, const uint32_t *row, size_t x)
 {
     uint32_t w = row[x];
@@ -91,31 +144,47 @@ uint32_t vx_row_word(const vx_bitgrid *g, const uint32_t *row, size_t x)
     return w;
 }
 
+/* Output chunks: about VX_CHUNK_BYTES, at least 16 (the progress steps). */
+#define VX_CHUNK_BYTES ((size_t)4 << 20)
+
+typedef struct raw8_job {
+    const vx_bitgrid *g;
+    size_t rows, per;     /* rows, rows per chunk */
+    uint64_t spread[256]; /* the 8 bytes 0/1 of byte b's bits, least significant first */
+} raw8_job;
+
+static size_t raw8_fill(void *ud, size_t c, uint8_t *out)
+{
+    const raw8_job *j = ud;
+    const size_t nx = (size_t)j->g->grid.dims[0], nb = (nx + 7) / 8;
+    size_t r0 = c * j->per, r1 = r0 + j->per < j->rows ? r0 + j->per : j->rows;
+    for (size_t r = r0; r < r1; r++, out += nx) { /* a row's last 8 bytes may run past nx: slack */
+        const uint8_t *w = (const uint8_t *)(j->g->bits + r * j->g->wx);
+        for (size_t b = 0; b < nb; b++)
+            memcpy(out + 8 * b, &j->spread[w[b]], 8);
+    }
+    return (r1 - r0) * nx;
+}
+
 int vx_out_raw8(vx_out *o, const vx_bitgrid *g, const vx_voxel_io *io, vx_err *err)
 {
-    const int nx = g->grid.dims[0], ny = g->grid.dims[1], nz = g->grid.dims[2];
-    /* spread[b]: the 8 bytes 0/1 of byte b's bits, least significant first */
-    uint64_t spread[256];
+    const size_t nx = (size_t)g->grid.dims[0], rows = (size_t)g->grid.dims[1] * g->grid.dims[2];
+    raw8_job *j = malloc(sizeof *j);
+    if (!j) return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for raw8");
+    j->g = g;
+    j->rows = rows;
     for (int b = 0; b < 256; b++) {
         uint64_t v = 0;
         for (int i = 0; i < 8; i++)
             v |= (uint64_t)((b >> i) & 1) << (8 * i);
-        spread[b] = v;
+        j->spread[b] = v;
     }
-    uint8_t *row = malloc(g->wx * 32);
-    if (!row) return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for a row");
-    int ok = 1;
-    for (int k = 0; ok && k < nz; k++) {
-        if (vx_out_progress(io, k, nz, err)) ok = 0;
-        for (int j = 0; ok && j < ny; j++) {
-            const uint8_t *w = (const uint8_t *)(g->bits + ((size_t)k * ny + j) * g->wx);
-            for (size_t b = 0; b < g->wx * 4; b++)
-                memcpy(row + 8 * b, &spread[w[b]], 8);
-            if (vx_out_write(o, row, (size_t)nx)) ok = 0;
-        }
-    }
-    free(row);
-    return ok ? 0 : -1;
+    j->per = VX_CHUNK_BYTES / nx;
+    if (j->per > rows / 16) j->per = rows / 16;
+    if (j->per < 1) j->per = 1;
+    int rc = vx_out_chunks(o, (rows + j->per - 1) / j->per, j->per * nx + 8, raw8_fill, j, io, err);
+    free(j);
+    return rc;
 }
 
 int vx_voxel_write_raw8(const vx_bitgrid *g, const char *path, const vx_voxel_io *io, vx_err *err)
@@ -126,15 +195,19 @@ int vx_voxel_write_raw8(const vx_bitgrid *g, const char *path, const vx_voxel_io
 }
 
 /* raw1 rows are packed continuously: when nx % 8 != 0 they start mid-byte
- * and go through a 64-bit accumulator. Chunks of rows whose first row
- * starts on a byte are packed on one thread while the previous chunk is
- * written on the calling thread (which alone reports progress). */
-#define RAW1_CHUNK_BYTES ((size_t)1 << 20)
+ * and go through a 64-bit accumulator, in chunks of a multiple of 8 rows
+ * (each starting on a byte). */
+typedef struct raw1_job {
+    const vx_bitgrid *g;
+    size_t rows, per; /* rows, rows per chunk */
+} raw1_job;
 
-/* Rows r0..r1-1 (the first on a byte) into out; the bytes written. */
-static size_t raw1_pack(const vx_bitgrid *g, size_t r0, size_t r1, uint8_t *out)
+static size_t raw1_fill(void *ud, size_t c, uint8_t *out)
 {
+    const raw1_job *j = ud;
+    const vx_bitgrid *g = j->g;
     const unsigned last = (unsigned)(g->grid.dims[0] - 32 * (int)(g->wx - 1));
+    size_t r0 = c * j->per, r1 = r0 + j->per < j->rows ? r0 + j->per : j->rows;
     uint64_t acc = 0;
     unsigned nacc = 0;
     size_t n = 0;
@@ -157,39 +230,6 @@ static size_t raw1_pack(const vx_bitgrid *g, size_t r0, size_t r1, uint8_t *out)
     return n;
 }
 
-typedef struct raw1_pipe {
-    const vx_bitgrid *g;
-    size_t rows, per, c; /* rows, rows per chunk, the chunk being written */
-    uint8_t *buf[2];
-    size_t n[2];
-    vx_out *o;
-    const vx_voxel_io *io;
-    vx_err *err;
-    pthread_t caller;
-    int rc;
-} raw1_pipe;
-
-static void raw1_pack_chunk(raw1_pipe *p, size_t c)
-{
-    size_t r0 = c * p->per, r1 = r0 + p->per < p->rows ? r0 + p->per : p->rows;
-    if (r0 < p->rows) p->n[c & 1] = raw1_pack(p->g, r0, r1, p->buf[c & 1]);
-}
-
-static void *raw1_stage(void *ud)
-{
-    raw1_pipe *p = ud;
-    if (!pthread_equal(pthread_self(), p->caller)) {
-        raw1_pack_chunk(p, p->c + 1);
-        return NULL;
-    }
-    if (p->io && p->io->progress &&
-        p->io->progress(p->io->ud, (double)(p->c * p->per) / p->rows, p->err))
-        p->rc = -1;
-    else if (vx_out_write(p->o, p->buf[p->c & 1], p->n[p->c & 1]))
-        p->rc = -1;
-    return NULL;
-}
-
 int vx_voxel_write_raw1(const vx_bitgrid *g, const char *path, const vx_voxel_io *io, vx_err *err)
 {
     const int nx = g->grid.dims[0], ny = g->grid.dims[1], nz = g->grid.dims[2];
@@ -204,33 +244,11 @@ int vx_voxel_write_raw1(const vx_bitgrid *g, const char *path, const vx_voxel_io
         }
         return vx_out_close(&o, ok, err);
     }
-    /* chunks of a multiple of 8 rows, each starting on a byte: about
-     * RAW1_CHUNK_BYTES, and at least 16 of them (the progress steps) */
-    size_t per = RAW1_CHUNK_BYTES * 8 / (size_t)nx;
-    if (per > rows / 16) per = rows / 16;
-    per = per < 8 ? 8 : per / 8 * 8;
-    size_t cap = (per * (size_t)nx + 7) / 8 + 8;
-    uint8_t *buf = malloc(2 * cap);
-    if (!buf) {
-        vx_out_close(&o, 0, err);
-        return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for raw1 rows");
-    }
-    raw1_pipe p = {.g = g,
-                   .rows = rows,
-                   .per = per,
-                   .buf = {buf, buf + cap},
-                   .o = &o,
-                   .io = io,
-                   .err = err,
-                   .caller = pthread_self()};
-    raw1_pack_chunk(&p, 0);
-    for (size_t c = 0; ok && c * per < rows; c++) {
-        p.c = c;
-        /* one thread only (none could be made): the next chunk after */
-        if (vx_par_run(2, raw1_stage, &p) < 2) raw1_pack_chunk(&p, c + 1);
-        if (p.rc) ok = 0;
-    }
-    free(buf);
+    raw1_job j = {g, rows, VX_CHUNK_BYTES * 8 / (size_t)nx};
+    if (j.per > rows / 16) j.per = rows / 16;
+    j.per = j.per < 8 ? 8 : j.per / 8 * 8;
+    ok = vx_out_chunks(&o, (rows + j.per - 1) / j.per, (j.per * (size_t)nx + 7) / 8 + 8, raw1_fill,
+                       &j, io, err) == 0;
     return vx_out_close(&o, ok, err);
 }
 
