@@ -68,27 +68,27 @@ static inline void put_le32(uint8_t *p, uint32_t v)
 #endif
 }
 
-/* Counts the set voxels of the brick and, with o, writes each as XYZI's
- * (x, y, z, colour 1) relative to the brick, z, y, x order (x fastest). */
-static uint64_t brick_scan(const vx_bitgrid *g, const vox_brick *b, vx_out *o)
+/* Counts the set voxels of slices k0..k1-1 of the brick and, with out,
+ * writes each there as XYZI's (x, y, z, colour 1) relative to the brick, z,
+ * y, x order (x fastest). */
+static uint64_t brick_scan(const vx_bitgrid *g, const vox_brick *b, int k0, int k1, uint8_t *out)
 {
     const int ny = g->grid.dims[1];
     uint64_t n = 0;
     const int i0 = b->o[0], i1 = b->o[0] + b->s[0];
     const size_t x0 = (size_t)i0 / 32, x1 = ((size_t)i1 + 31) / 32;
-    for (int k = b->o[2]; k < b->o[2] + b->s[2]; k++)
+    uint8_t *p = out;
+    for (int k = k0; k < k1; k++)
         for (int j = b->o[1]; j < b->o[1] + b->s[1]; j++) {
             const uint32_t *row = g->bits + ((size_t)k * ny + j) * g->wx;
+            if (!out) { /* the brick's words end at a multiple of 256 or the row's */
+                n += vx_bits_count(row + x0, x1 - x0);
+                continue;
+            }
             for (size_t x = x0; x < x1; x++) {
                 uint32_t w = vx_row_word(g, row, x);
                 /* bricks start on multiples of 256: only the grid's end cuts a word */
                 if (32 * x + 32 > (size_t)i1) w &= (1u << (i1 - 32 * (int)x)) - 1u;
-                if (!o) {
-                    n += (uint64_t)__builtin_popcount(w);
-                    continue;
-                }
-                if (o->n + 4 * 32 > VX_OUT_BUF && vx_out_flush(o)) return n;
-                uint8_t *p = o->buf + o->n;
                 /* (x, y, z, 1) as one little-endian word: y, z and the
                  * colour are the row's, x the bit's */
                 const uint32_t row_yz = (uint32_t)(uint8_t)(j - b->o[1]) << 8 |
@@ -102,10 +102,51 @@ static uint64_t brick_scan(const vx_bitgrid *g, const vox_brick *b, vx_out *o)
                     for (; w; w &= w - 1, n++, p += 4)
                         put_le32(p, row_yz | (uint8_t)(x_at + (uint32_t)__builtin_ctz(w)));
                 }
-                o->n = (size_t)(p - o->buf);
             }
         }
     return n;
+}
+
+/* The models' SIZE and XYZI chunks as output chunks of VOX_SLICES slices
+ * of a brick (at most 4 MiB of XYZI), the first of each brick with its
+ * headers, made on a second thread while the one before is written. */
+#define VOX_SLICES 16
+
+typedef struct vox_job {
+    const vx_bitgrid *g;
+    const vox_brick *b;
+    const size_t *first; /* first[m]: model m's first output chunk */
+    int nm;
+} vox_job;
+
+static size_t vox_fill(void *ud, size_t c, uint8_t *out)
+{
+    const vox_job *j = ud;
+    int m = 0;
+    while (m + 1 < j->nm && j->first[m + 1] <= c)
+        m++;
+    const vox_brick *b = &j->b[m];
+    int k0 = b->o[2] + VOX_SLICES * (int)(c - j->first[m]);
+    int k1 = k0 + VOX_SLICES < b->o[2] + b->s[2] ? k0 + VOX_SLICES : b->o[2] + b->s[2];
+    uint8_t *p = out;
+    if (c == j->first[m]) { /* SIZE (x, y, z), then XYZI's header and count */
+        uint32_t h[] = {0,
+                        12,
+                        0,
+                        (uint32_t)b->s[0],
+                        (uint32_t)b->s[1],
+                        (uint32_t)b->s[2],
+                        0,
+                        (uint32_t)(4 + 4 * b->count),
+                        0,
+                        (uint32_t)b->count};
+        for (int q = 0; q < 10; q++)
+            put_le32(p + 4 * q, h[q]);
+        memcpy(p, "SIZE", 4);
+        memcpy(p + 24, "XYZI", 4);
+        p += 40;
+    }
+    return (size_t)(p - out) + 4 * (size_t)brick_scan(j->g, b, k0, k1, p);
 }
 
 static int put32(vx_out *o, int32_t v)
@@ -183,12 +224,13 @@ int vx_voxel_write_vox(const vx_bitgrid *g, const char *path, const vx_voxel_io 
                     m->o[a] = at[a] * VOX_BRICK;
                     m->s[a] = d[a] - m->o[a] < VOX_BRICK ? d[a] - m->o[a] : VOX_BRICK;
                 }
-                m->count = brick_scan(g, m, NULL);
+                m->count = brick_scan(g, m, m->o[2], m->o[2] + m->s[2], NULL);
                 /* an empty grid keeps one empty model, the last brick's */
                 if (m->count || (!nm && bx + 1 == nb[0] && by + 1 == nb[1] && bz + 1 == nb[2]))
                     nm++;
             }
-    if (io && io->progress && io->progress(io->ud, 0.3, err)) {
+    /* (the count is a small part of the work: the chunks report progress) */
+    if (io && io->progress && io->progress(io->ud, 0.0, err)) {
         free(b);
         return -1;
     }
@@ -213,13 +255,18 @@ int vx_voxel_write_vox(const vx_bitgrid *g, const char *path, const vx_voxel_io 
     int ok = vx_out_open(&o, path, err) == 0;
     ok = ok && !vx_out_write(&o, "VOX ", 4) && !put32(&o, 150) &&
          !chunk(&o, "MAIN", 0, (int32_t)children);
-    for (int m = 0; ok && m < nm; m++) {
-        if (io && io->progress && io->progress(io->ud, 0.3 + 0.7 * m / nm, err)) ok = 0;
-        ok = ok && !chunk(&o, "SIZE", 12, 0) && !put32(&o, b[m].s[0]) && !put32(&o, b[m].s[1]) &&
-             !put32(&o, b[m].s[2]) && !chunk(&o, "XYZI", (int32_t)(4 + 4 * b[m].count), 0) &&
-             !put32(&o, (int32_t)b[m].count);
-        ok = ok && brick_scan(g, &b[m], &o) == b[m].count && !o.failed;
+    size_t *first = malloc(((size_t)nm + 1) * sizeof *first);
+    if (ok && !first)
+        ok = 0, vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for vox bricks");
+    if (ok) {
+        first[0] = 0;
+        for (int m = 0; m < nm; m++)
+            first[m + 1] = first[m] + (size_t)(b[m].s[2] + VOX_SLICES - 1) / VOX_SLICES;
+        vox_job j = {g, b, first, nm};
+        size_t cap = 40 + 4 * (size_t)VOX_BRICK * VOX_BRICK * VOX_SLICES;
+        ok = vx_out_chunks(&o, first[nm], cap, vox_fill, &j, io, err) == 0;
     }
+    free(first);
     ok = ok && !node_trn(&o, 0, 1, NULL) && !node_grp(&o, 1, 2, nm);
     for (int m = 0; ok && m < nm; m++) {
         brick_t(&b[m], t, sizeof t);

@@ -95,13 +95,17 @@ __attribute__((target("popcnt"))) static uint64_t count_bits_popcnt(const uint32
 }
 #endif
 
+uint64_t vx_bits_count(const uint32_t *w, size_t n)
+{
+#if defined(__x86_64__)
+    if (__builtin_cpu_supports("popcnt")) return count_bits_popcnt(w, n);
+#endif
+    return count_bits(w, n);
+}
+
 uint64_t vx_bitgrid_count(const vx_bitgrid *g)
 {
-    size_t n = g->wx * (size_t)g->grid.dims[1] * (size_t)g->grid.dims[2];
-#if defined(__x86_64__)
-    if (__builtin_cpu_supports("popcnt")) return count_bits_popcnt(g->bits, n);
-#endif
-    return count_bits(g->bits, n);
+    return vx_bits_count(g->bits, g->wx * (size_t)g->grid.dims[1] * (size_t)g->grid.dims[2]);
 }
 
 int vx_grid_from_voxel_size(const vx_mesh *m, double h, int padding, vx_grid *out, vx_err *err)

@@ -136,14 +136,6 @@ int vx_out_chunks(vx_out *o, size_t n, size_t cap, vx_out_fill_fn fill, void *ud
     return p.rc;
 }
 
-uint32_t vx_row_word(const vx_bitgrid *g, const uint32_t *row, size_t x)
-{
-    uint32_t w = row[x];
-    const int tail = g->grid.dims[0] & 31;
-    if (tail && x == g->wx - 1) w &= (1u << tail) - 1u; /* row padding: never set */
-    return w;
-}
-
 /* Output chunks: about VX_CHUNK_BYTES, at least 16 (the progress steps). */
 #define VX_CHUNK_BYTES ((size_t)4 << 20)
 

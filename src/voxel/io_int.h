@@ -39,6 +39,12 @@ int vx_out_chunks(vx_out *o, size_t n, size_t cap, vx_out_fill_fn fill, void *ud
 /* The raw8 body (io.h) of g into o (err set when the hook stops it). */
 int vx_out_raw8(vx_out *o, const vx_bitgrid *g, const vx_voxel_io *io, vx_err *err);
 /* Word x of a row, the padding bits past nx cleared. */
-uint32_t vx_row_word(const vx_bitgrid *g, const uint32_t *row, size_t x);
+static inline uint32_t vx_row_word(const vx_bitgrid *g, const uint32_t *row, size_t x)
+{
+    uint32_t w = row[x];
+    const int tail = g->grid.dims[0] & 31;
+    if (tail && x == g->wx - 1) w &= (1u << tail) - 1u; /* row padding: never set */
+    return w;
+}
 
 #endif

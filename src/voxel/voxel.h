@@ -140,6 +140,9 @@ static inline int vx_bitgrid_get(const vx_bitgrid *g, int i, int j, int k)
     return (int)((g->bits[w] >> (i & 31)) & 1u);
 }
 uint64_t vx_bitgrid_count(const vx_bitgrid *g);
+/* The set bits of n words from w (with the POPCNT instruction where the
+ * CPU has it). */
+uint64_t vx_bits_count(const uint32_t *w, size_t n);
 
 /* Grid covering the mesh bbox: `resolution` cells along the longest axis,
  * the others proportional (at least 1), plus `padding` voxels each side. */
