@@ -18,8 +18,8 @@
  *   vdb     an OpenVDB file with one grid, by vx_vdb_class: a level set
  *           FloatGrid "surface" (grid class level set: the narrow-band
  *           signed distance, 3 voxels each side, to the boundary between set
- *           and unset voxels, by OpenVDB's topologyToLevelSet; negative
- *           inside, background 3 h), a fog FloatGrid "density" (1 inside,
+ *           and unset voxels, exact (band.h); negative inside, background
+ *           3 h), a fog FloatGrid "density" (1 inside,
  *           active, background 0) or, with sample counts, "coverage"
  *           (samples inside / samples per voxel, active where > 0), or a
  *           BoolGrid "voxels" (active and true = inside). Index (i,j,k) maps

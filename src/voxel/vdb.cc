@@ -6,7 +6,9 @@
 // OpenVDB leaf is 8^3 voxels whose masks are 8 words of 64 bits, word x
 // holding bit 8 y + z of the leaf's (x, y, z). Each leaf gathers its 64
 // bytes (one per (y, z) row, bits x) from the grid and transposes them;
-// a full leaf becomes an active tile, an empty one is left out.
+// a full leaf becomes an active tile, an empty one is left out. A level
+// set's leaves are its band (band.h), made in parallel from the bit grid's
+// rows, or from a merged bool tree's rows a few z slabs at a time.
 #include <atomic>
 #include <cmath>
 #include <cstdio>
@@ -19,10 +21,11 @@
 #include <openvdb/openvdb.h>
 #include <openvdb/tools/Count.h>
 #include <openvdb/tools/Prune.h>
-#include <openvdb/tools/TopologyToLevelSet.h>
+#include <openvdb/tools/SignedFloodFill.h>
 #include <tbb/parallel_for.h>
 
 extern "C" {
+#include "voxel/band.h"
 #include "voxel/io.h"
 }
 
@@ -305,19 +308,168 @@ openvdb::FloatGrid::Ptr fog_grid(const vx_bitgrid *g, const openvdb::Coord &at,
     return grid;
 }
 
-// Forwards OpenVDB's interrupter polls to the progress hook (which may
-// cancel); the fraction stays where it was.
-struct Interrupter {
-    const vx_voxel_io *io;
-    vx_err *err;
-    double at;
-    bool stopped = false;
-    void start(const char * = nullptr) {}
-    void end() {}
-    bool wasInterrupted(int = -1)
+// The level set of rows (band.h): the narrow band as float leaves, values
+// -d h at set voxels and d h at unset ones, the inactive voxels of a leaf
+// -3h or 3h by their state; OpenVDB's signedFloodFill then gives the tiles
+// inside -3h, and pruneLevelSet merges them. hold(zl0, zl1) makes the rows
+// that z slabs zl0..zl1 (z = 8 zl) read held; progress moves from f0 to f1.
+template <typename Hold>
+openvdb::FloatGrid::Ptr band_grid(vx_band_rows &rows, const openvdb::Coord &at, double h, Hold hold,
+                                  const vx_voxel_io *io, double f0, double f1, vx_err *err)
+{
+    using LeafT = openvdb::FloatGrid::TreeType::LeafNodeType;
+    const float bg = (float)(VX_BAND_HALF * h);
+    openvdb::FloatGrid::Ptr grid = openvdb::FloatGrid::create(bg);
+    const int ny = rows.dims[1], nz = rows.dims[2];
+    const int W = vx_band_columns(&rows);
+    float dist[VX_BAND_LEVELS + 1];
+    for (int l = 0; l <= VX_BAND_LEVELS; l++)
+        dist[l] = l ? (float)(0.5 * std::sqrt((double)vx_band_q[l]) * h) : bg;
+    // slabs zl from -1 and y chunks from y = -8: the band reaches 3 voxels out
+    const int zl_end = (nz + VX_BAND_HALF - 1) / 8 + 1;
+    const int chunks = (ny + VX_BAND_HALF + 8 + VX_BAND_TY - 1) / VX_BAND_TY;
+    const int per_round = std::max(1, 16 / chunks);
+    struct Task { // owns its leaves until the tree takes them
+        std::vector<LeafT *> leaves;
+        ~Task()
+        {
+            for (LeafT *l : leaves)
+                delete l;
+        }
+    };
+    std::vector<Task> tasks((size_t)per_round * chunks);
+    for (int zl0 = -1; zl0 < zl_end; zl0 += per_round) {
+        const int zl1 = std::min(zl_end - 1, zl0 + per_round - 1);
+        if (io && io->progress &&
+            io->progress(io->ud, f0 + (f1 - f0) * (zl0 + 1) / (zl_end + 1), err))
+            return nullptr;
+        if (hold(zl0, zl1)) return nullptr;
+        const int n = (zl1 - zl0 + 1) * chunks;
+        tbb::parallel_for(tbb::blocked_range<int>(0, n, 1), [&](const tbb::blocked_range<int> &r) {
+            static thread_local std::vector<uint64_t> scratch;
+            static thread_local std::vector<uint8_t> need, lev;
+            scratch.resize(vx_band_scratch_bytes(&rows) / 8);
+            need.resize((size_t)W);
+            lev.resize((size_t)8 * VX_BAND_TY * W * 64);
+            for (int t = r.begin(); t < r.end(); t++) {
+                const int z0 = 8 * (zl0 + t / chunks), y0 = -8 + VX_BAND_TY * (t % chunks);
+                vx_band_task(&rows, z0, y0, scratch.data(), need.data(), lev.data());
+                std::vector<LeafT *> &out = tasks[(size_t)t].leaves;
+                for (int p = 0; p < W; p++) {
+                    if (!need[(size_t)p]) continue;
+                    for (int yy = 0; yy < VX_BAND_TY; yy += 8)
+                        for (int xx = 0; xx < 64; xx += 8) {
+                            const uint8_t *l0 = lev.data() + ((size_t)yy * W + p) * 64 + xx;
+                            const size_t zs = (size_t)VX_BAND_TY * W * 64, ys = (size_t)W * 64;
+                            uint64_t any = 0;
+                            for (int z = 0; z < 8; z++)
+                                for (int y = 0; y < 8; y++) {
+                                    uint64_t v;
+                                    memcpy(&v, l0 + z * zs + y * ys, 8);
+                                    any |= v;
+                                }
+                            if (!any) continue;
+                            const int X = 64 * (p - 1) + xx, Y = y0 + yy;
+                            LeafT *leaf = new LeafT(openvdb::Coord(X, Y, z0) + at, bg, false);
+                            float *d = leaf->buffer().data();
+                            for (int y = 0; y < 8; y++)
+                                for (int z = 0; z < 8; z++) {
+                                    const unsigned set = vx_band_byte(&rows, X, Y + y, z0 + z);
+                                    for (int x = 0; x < 8; x++) {
+                                        const int l = l0[z * zs + y * ys + x];
+                                        const int n_ = 64 * x + 8 * y + z;
+                                        d[n_] = set >> x & 1u ? -dist[l] : dist[l];
+                                        if (l) leaf->getValueMask().setOn((openvdb::Index)n_);
+                                    }
+                                }
+                            out.push_back(leaf);
+                        }
+                }
+            }
+        });
+        for (int t = 0; t < n; t++) {
+            for (LeafT *leaf : tasks[(size_t)t].leaves)
+                grid->tree().addLeaf(leaf);
+            tasks[(size_t)t].leaves.clear();
+        }
+    }
+    openvdb::tools::signedFloodFill(grid->tree());
+    openvdb::tools::pruneLevelSet(grid->tree());
+    grid->setGridClass(openvdb::GRID_LEVEL_SET);
+    return grid;
+}
+
+// A bool tree's set voxels as rows for band_grid (grid index 0 at tree
+// index 0), held a few z slabs at a time: its leaves and active tiles are
+// listed by z slab once, and hold(zl0, zl1) fills rows 8 zl0 - 8 to
+// 8 zl1 + 16 from them.
+struct TreeRows {
+    using LeafT = openvdb::BoolTree::LeafNodeType;
+    int dims[3];
+    size_t wx;
+    std::vector<std::vector<const LeafT *>> leaves; // by z slab
+    std::vector<std::vector<openvdb::CoordBBox>> tiles;
+    std::vector<uint32_t> buf;
+
+    TreeRows(const openvdb::BoolTree &tree, const int d[3])
     {
-        if (!stopped && io && io->progress && io->progress(io->ud, at, err)) stopped = true;
-        return stopped;
+        memcpy(dims, d, sizeof dims);
+        wx = ((size_t)dims[0] + 31) / 32;
+        const int lz = (dims[2] + 7) / 8;
+        leaves.resize((size_t)lz);
+        tiles.resize((size_t)lz);
+        for (auto it = tree.cbeginLeaf(); it; ++it) {
+            const int zl = it->origin().z() >> 3;
+            if (zl >= 0 && zl < lz) leaves[(size_t)zl].push_back(&*it);
+        }
+        const openvdb::CoordBBox box(openvdb::Coord(0),
+                                     openvdb::Coord(dims[0] - 1, dims[1] - 1, dims[2] - 1));
+        auto it = tree.cbeginValueOn();
+        it.setMaxDepth(openvdb::BoolTree::ValueOnCIter::LEAF_DEPTH - 1);
+        for (; it; ++it) {
+            if (!it.isTileValue()) continue;
+            openvdb::CoordBBox bb;
+            it.getBoundingBox(bb);
+            bb.intersect(box);
+            if (bb.empty()) continue;
+            for (int zl = bb.min().z() >> 3; zl <= bb.max().z() >> 3; zl++)
+                tiles[(size_t)zl].push_back(bb);
+        }
+    }
+
+    static size_t window_bytes(const int d[3])
+    {
+        return (size_t)24 * d[1] * (((size_t)d[0] + 31) / 32) * 4;
+    }
+
+    int hold(vx_band_rows &rows, int zl0, int zl1)
+    {
+        const int k0 = std::max(0, 8 * zl0 - 8), k1 = std::min(dims[2], 8 * zl1 + 16);
+        const size_t rw = wx, plane = (size_t)dims[1] * rw;
+        buf.assign(k1 > k0 ? (size_t)(k1 - k0) * plane : 0, 0u);
+        auto set = [&](int i, int j, int k) {
+            buf[(size_t)(k - k0) * plane + (size_t)j * rw + (size_t)(i >> 5)] |= 1u << (i & 31);
+        };
+        for (int zl = k0 >> 3; zl < (k1 + 7) >> 3; zl++) {
+            for (const LeafT *leaf : leaves[(size_t)zl]) {
+                const openvdb::Coord o = leaf->origin();
+                for (auto v = leaf->getValueMask().beginOn(); v; ++v) {
+                    const int n = (int)v.pos();
+                    const int i = o.x() + (n >> 6), j = o.y() + ((n >> 3) & 7), k = o.z() + (n & 7);
+                    if (i < dims[0] && j < dims[1] && k >= k0 && k < k1) set(i, j, k);
+                }
+            }
+            for (const openvdb::CoordBBox &bb : tiles[(size_t)zl])
+                for (int k = std::max(bb.min().z(), std::max(k0, 8 * zl));
+                     k <= std::min(bb.max().z(), std::min(k1 - 1, 8 * zl + 7)); k++)
+                    for (int j = bb.min().y(); j <= bb.max().y(); j++)
+                        for (int i = bb.min().x(); i <= bb.max().x(); i++)
+                            set(i, j, k);
+        }
+        rows.bits = buf.data();
+        rows.k0 = k0;
+        rows.k1 = k1;
+        return 0;
     }
 };
 
@@ -398,17 +550,18 @@ extern "C" int vx_voxel_write_vdb_at(const vx_bitgrid *g, const int at_[3], vx_v
             set_meta(*f, g, meta);
             out = f;
         } else {
-            openvdb::BoolGrid::Ptr b = bool_grid(g, at, io, 0.3, err);
-            if (!b) return -1;
-            // The narrow band (3 voxels each side) of the signed distance to
-            // the boundary between set and unset voxels, by OpenVDB's own
-            // tool; no closing, so the topology is the grid's.
-            Interrupter intr{io, err, 0.3};
-            openvdb::FloatGrid::Ptr ls = openvdb::tools::topologyToLevelSet(*b, 3, 0, 0, 0, &intr);
-            if (intr.stopped) return -1;
-            b.reset();
+            // The narrow band (3 voxels each side) of the exact signed
+            // distance to the boundary between set and unset voxels.
+            vx_band_rows rows = {{g->grid.dims[0], g->grid.dims[1], g->grid.dims[2]},
+                                 g->wx,
+                                 g->bits,
+                                 0,
+                                 g->grid.dims[2]};
+            openvdb::FloatGrid::Ptr ls = band_grid(
+                rows, at, g->grid.h, [](int, int) { return 0; }, io, 0.0, 0.8, err);
+            if (!ls) return -1;
             ls->setName("surface");
-            ls->setGridClass(openvdb::GRID_LEVEL_SET);
+            ls->setTransform(transform_of(g->grid));
             set_meta(*ls, g, meta);
             out = ls;
         }
@@ -516,7 +669,12 @@ extern "C" int vx_vdb_merge_add(vx_vdb_merge *m, const char *path, vx_err *err)
 extern "C" uint64_t vx_vdb_merge_level_set_bytes(const vx_vdb_merge *m)
 {
     auto b = m->grid ? openvdb::GridBase::grid<openvdb::BoolGrid>(m->grid) : nullptr;
-    return b ? (uint64_t)b->tree().leafCount() * 3 * leaf_bytes(VX_VDB_FOG, 0) : 0;
+    if (!b) return 0;
+    // the band's leaves, and the rows held while they are made
+    openvdb::CoordBBox bb = b->evalActiveVoxelBoundingBox();
+    const int d[3] = {bb.max().x() + 1, bb.max().y() + 1, bb.max().z() + 1};
+    return (uint64_t)b->tree().leafCount() * 3 * leaf_bytes(VX_VDB_FOG, 0) +
+           (bb.empty() ? 0 : TreeRows::window_bytes(d));
 }
 
 extern "C" int vx_vdb_merge_write(vx_vdb_merge *m, vx_vdb_class cls, const vx_grid *grid,
@@ -532,10 +690,17 @@ extern "C" int vx_vdb_merge_write(vx_vdb_merge *m, vx_vdb_class cls, const vx_gr
         if (auto b = openvdb::GridBase::grid<openvdb::BoolGrid>(m->grid)) {
             openvdb::tools::prune(b->tree());
             if (cls == VX_VDB_LEVEL_SET) {
-                Interrupter intr{io, err, 0.2};
-                openvdb::FloatGrid::Ptr ls =
-                    openvdb::tools::topologyToLevelSet(*b, 3, 0, 0, 0, &intr);
-                if (intr.stopped) return -1;
+                TreeRows tr(b->tree(), whole->grid.dims);
+                vx_band_rows rows = {
+                    {whole->grid.dims[0], whole->grid.dims[1], whole->grid.dims[2]},
+                    tr.wx,
+                    nullptr,
+                    0,
+                    0};
+                openvdb::FloatGrid::Ptr ls = band_grid(
+                    rows, openvdb::Coord(0), whole->grid.h,
+                    [&](int zl0, int zl1) { return tr.hold(rows, zl0, zl1); }, io, 0.0, 0.8, err);
+                if (!ls) return -1;
                 m->grid.reset();
                 ls->setName("surface");
                 ls->setGridClass(openvdb::GRID_LEVEL_SET);

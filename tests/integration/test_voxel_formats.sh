@@ -2,7 +2,8 @@
 # voxelize's outputs in the field's tools, through the API: every vdb_grid
 # class read by OpenVDB's own vdb_print, the scalar ones rendered by
 # vdb_render and turned into a mesh by vdb_tool (-iso2ls, -ls2mesh) whose
-# bounds are the sphere's; vox, nrrd and npy read back by independent
+# bounds are the sphere's, the level set's band checked voxel by voxel
+# (vdbcheck, with OpenVDB's checkLevelSet); vox, nrrd and npy read back by independent
 # readers (a MagicaVoxel chunk reader written here, an NRRD header parser,
 # NumPy) and compared voxel for voxel with the raw8 output of the same job.
 # Skips (77) only when the OpenVDB tools or NumPy are missing
@@ -46,6 +47,12 @@ for c in level_set bool; do
 done
 N_IN=$(st voxels_inside)
 H=$(st voxel_size)
+# the level set's band, voxel by voxel, against the same job's raw8 voxels
+vox "raw8 sphere" '{"resolution":32,"format":"raw8"}'
+fetch "$TMP/sphere.raw8"
+read -r NX NY NZ < <(jq -r '.stats.dims | map(tostring) | join(" ")' "$TMP/job.json")
+check "level_set: the exact band of the raw8 voxels (vdbcheck)" \
+    "$VX_TOOLS/vdbcheck" "$TMP/level_set.vdb" "$TMP/sphere.raw8" "$NX" "$NY" "$NZ"
 "$VX_TOOLS/vdbinfo" "$TMP/level_set.vdb" >"$TMP/ls.json"
 check "level_set: FloatGrid surface" jq -e '.grids | length == 1 and .[0].name == "surface" and .[0].type == "float"' "$TMP/ls.json"
 "$VX_TOOLS/vdbinfo" "$TMP/fog.vdb" >"$TMP/fog.json"

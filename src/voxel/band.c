@@ -1,0 +1,162 @@
+/* The narrow band of a bit grid's distance field (band.h).
+ *
+ * Along one axis, a voxel d voxels away (d > 0) is at (d - 1/2) voxels from
+ * a centre: in quarter voxels squared G(d) = (2d - 1)^2, 1, 9, 25 for d = 1,
+ * 2, 3. A voxel of state s is at level q when the nearest cube of state !s
+ * costs G(|dx|) + G(|dy|) + G(|dz|) = q, with q < 36 (3 voxels). For each
+ * row and state t, near[a] marks the voxels with a t voxel within a of them
+ * along x; level q is then reached where some near[a] of the row at (dy,
+ * dz) with G(a) + G(|dy|) + G(|dz|) <= q has the voxel's bit: a union of
+ * 64-bit words, the terms taken in order of cost. */
+#include "voxel/band.h"
+
+#include <string.h>
+
+const int vx_band_q[VX_BAND_LEVELS + 1] = {0, 1, 2, 3, 9, 10, 11, 18, 19, 25, 26, 27, 34, 35};
+
+enum { NK = 8 + 2 * VX_BAND_HALF, NJ = VX_BAND_TY + 2 * VX_BAND_HALF };
+
+typedef struct term {
+    int a, level;
+    int off; /* the row's offset in the window, rows */
+} term;
+
+static const int G[4] = {0, 1, 9, 25};
+
+/* The terms in order of cost, each with the level its cost is (costs are
+ * exactly the levels' q). */
+static int terms(term *t)
+{
+    int n = 0;
+    for (int l = 1; l <= VX_BAND_LEVELS; l++)
+        for (int a = 0; a <= 3; a++)
+            for (int dz = -3; dz <= 3; dz++)
+                for (int dy = -3; dy <= 3; dy++) {
+                    int q = G[a] + G[dy < 0 ? -dy : dy] + G[dz < 0 ? -dz : dz];
+                    if (q != vx_band_q[l]) continue;
+                    t[n++] = (term){a, l, dz * NJ + dy};
+                }
+    return n;
+}
+
+int vx_band_columns(const vx_band_rows *r)
+{
+    return (r->dims[0] + 63) / 64 + 2;
+}
+
+/* Window rows, their columns (W + 2 words: column -1 to W), and the near
+ * words of one column for every window row (8: t = 1 then t = 0). */
+size_t vx_band_scratch_bytes(const vx_band_rows *r)
+{
+    size_t W = (size_t)vx_band_columns(r);
+    return ((size_t)NK * NJ * ((W + 2) + 8) + (size_t)NK * VX_BAND_TY * 2) * sizeof(uint64_t);
+}
+
+static const uint32_t *row_of(const vx_band_rows *r, int j, int k)
+{
+    if (j < 0 || j >= r->dims[1] || k < 0 || k >= r->dims[2] || k < r->k0 || k >= r->k1)
+        return NULL;
+    return r->bits + ((size_t)(k - r->k0) * r->dims[1] + j) * r->wx;
+}
+
+unsigned vx_band_byte(const vx_band_rows *r, int i, int j, int k)
+{
+    const uint32_t *row = i < 0 || i >= r->dims[0] ? NULL : row_of(r, j, k);
+    unsigned b = row ? (row[i >> 5] >> (i & 31)) & 0xffu : 0;
+    return r->dims[0] - i < 8 ? b & ((1u << (r->dims[0] - i)) - 1u) : b;
+}
+
+/* Column q (x from 64 (q - 1)) of a row; 0 outside the grid. */
+static uint64_t column(const vx_band_rows *r, const uint32_t *row, int q)
+{
+    const int nx = r->dims[0], c = q - 1;
+    if (!row || c < 0 || 64 * c >= nx) return 0;
+    uint64_t w = row[2 * c];
+    if ((size_t)(2 * c + 1) < r->wx) w |= (uint64_t)row[2 * c + 1] << 32;
+    if (nx - 64 * c < 64) w &= ((uint64_t)1 << (nx - 64 * c)) - 1;
+    return w;
+}
+
+static void near_of(uint64_t a, uint64_t b, uint64_t d, uint64_t *n)
+{
+    n[0] = b;
+    n[1] = n[0] | b >> 1 | d << 63 | b << 1 | a >> 63;
+    n[2] = n[1] | b >> 2 | d << 62 | b << 2 | a >> 62;
+    n[3] = n[2] | b >> 3 | d << 61 | b << 3 | a >> 61;
+}
+
+void vx_band_task(const vx_band_rows *r, int z0, int y0, void *scratch, uint8_t *need,
+                  uint8_t *lev)
+{
+    static __thread term tt[7 * 7 * 4];
+    static __thread int nt;
+    if (!nt) nt = terms(tt);
+    const int W = vx_band_columns(r), WC = W + 2;
+    uint64_t *cols = scratch;                         /* [NK * NJ][WC]: column q at q + 1 */
+    uint64_t *near = cols + (size_t)NK * NJ * WC;     /* [NK * NJ][8] */
+    uint64_t *ybox = near + (size_t)NK * NJ * 8;      /* [NK * VX_BAND_TY][2] */
+    for (int kk = 0; kk < NK; kk++)
+        for (int jj = 0; jj < NJ; jj++) {
+            const uint32_t *row = row_of(r, y0 - VX_BAND_HALF + jj, z0 - VX_BAND_HALF + kk);
+            uint64_t *c = cols + (size_t)(kk * NJ + jj) * WC;
+            for (int q = -1; q <= W; q++)
+                c[q + 1] = column(r, row, q);
+        }
+    for (int p = 0; p < W; p++) {
+        /* band voxels in column p have both states within 3 of them */
+        uint64_t or_ = 0, and_ = ~(uint64_t)0;
+        for (int w = 0; w < NK * NJ; w++) {
+            const uint64_t *c = cols + (size_t)w * WC + p;
+            or_ |= c[0] | c[1] | c[2];
+            and_ &= c[0] & c[1] & c[2];
+        }
+        need[p] = or_ != 0 && and_ != ~(uint64_t)0;
+        if (!need[p]) continue;
+        for (int w = 0; w < NK * NJ; w++) {
+            const uint64_t *c = cols + (size_t)w * WC + p;
+            near_of(c[0], c[1], c[2], near + 8 * w);
+            near_of(~c[0], ~c[1], ~c[2], near + 8 * w + 4);
+        }
+        for (int kk = 0; kk < NK; kk++)
+            for (int y = 0; y < VX_BAND_TY; y++) {
+                const uint64_t *n = near + 8 * (kk * NJ + y);
+                uint64_t b1 = 0, b0 = 0;
+                for (int dy = 0; dy <= 2 * VX_BAND_HALF; dy++, n += 8) {
+                    b1 |= n[3];
+                    b0 |= n[7];
+                }
+                ybox[2 * (kk * VX_BAND_TY + y)] = b1;
+                ybox[2 * (kk * VX_BAND_TY + y) + 1] = b0;
+            }
+        for (int z = 0; z < 8; z++)
+            for (int y = 0; y < VX_BAND_TY; y++) {
+                const int w0 = (z + VX_BAND_HALF) * NJ + y + VX_BAND_HALF;
+                const uint64_t own = cols[(size_t)w0 * WC + p + 1];
+                uint8_t *out = lev + ((size_t)(z * VX_BAND_TY + y) * W + p) * 64;
+                memset(out, 0, 64);
+                /* the voxels with one of the other state in the 7^3 box
+                 * around them: the band's voxels are among them */
+                uint64_t box1 = 0, box0 = 0;
+                for (int dz = 0; dz <= 2 * VX_BAND_HALF; dz++) {
+                    box1 |= ybox[2 * ((z + dz) * VX_BAND_TY + y)];
+                    box0 |= ybox[2 * ((z + dz) * VX_BAND_TY + y) + 1];
+                }
+                if (!((own & box0) | (~own & box1))) continue;
+                /* acc1: a set voxel near (for unset voxels); acc0: an unset one */
+                uint64_t acc1 = 0, acc0 = 0, done = 0;
+                for (int i = 0; i < nt;) {
+                    const int l = tt[i].level;
+                    for (; i < nt && tt[i].level == l; i++) {
+                        const uint64_t *n = near + 8 * (w0 + tt[i].off);
+                        acc1 |= n[tt[i].a];
+                        acc0 |= n[4 + tt[i].a];
+                    }
+                    uint64_t fresh = ((own & acc0) | (~own & acc1)) & ~done;
+                    done |= fresh;
+                    for (; fresh; fresh &= fresh - 1)
+                        out[__builtin_ctzll(fresh)] = (uint8_t)l;
+                    if (done == ~(uint64_t)0) break;
+                }
+            }
+    }
+}
