@@ -62,7 +62,8 @@ static const uint32_t *row_of(const vx_band_rows *r, int j, int k)
 unsigned vx_band_byte(const vx_band_rows *r, int i, int j, int k)
 {
     const uint32_t *row = i < 0 || i >= r->dims[0] ? NULL : row_of(r, j, k);
-    unsigned b = row ? (row[i >> 5] >> (i & 31)) & 0xffu : 0;
+    if (!row) return 0;
+    const unsigned b = (row[i >> 5] >> (i & 31)) & 0xffu;
     return r->dims[0] - i < 8 ? b & ((1u << (r->dims[0] - i)) - 1u) : b;
 }
 
