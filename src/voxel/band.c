@@ -16,9 +16,12 @@ const int vx_band_q[VX_BAND_LEVELS + 1] = {0, 1, 2, 3, 9, 10, 11, 18, 19, 25, 26
 
 enum { NK = 8 + 2 * VX_BAND_HALF, NJ = VX_BAND_TY + 2 * VX_BAND_HALF };
 
+/* near words of both states side by side: [0] t = 1, [1] t = 0 */
+typedef uint64_t v2 __attribute__((vector_size(16)));
+
 typedef struct term {
-    int a, level;
-    int off; /* the row's offset in the window, rows */
+    int level;
+    int at; /* near word a of the row at (dy, dz): 4 (dz NJ + dy) + a */
 } term;
 
 static const int G[4] = {0, 1, 9, 25};
@@ -34,7 +37,7 @@ static int terms(term *t)
                 for (int dy = -3; dy <= 3; dy++) {
                     int q = G[a] + G[dy < 0 ? -dy : dy] + G[dz < 0 ? -dz : dz];
                     if (q != vx_band_q[l]) continue;
-                    t[n++] = (term){a, l, dz * NJ + dy};
+                    t[n++] = (term){l, 4 * (dz * NJ + dy) + a};
                 }
     return n;
 }
@@ -78,24 +81,25 @@ static uint64_t column(const vx_band_rows *r, const uint32_t *row, int q)
     return w;
 }
 
-static void near_of(uint64_t a, uint64_t b, uint64_t d, uint64_t *n)
+/* near[a] of a column b (a before it, d after) for both states */
+static void near_of(uint64_t a, uint64_t b, uint64_t d, v2 *n)
 {
-    n[0] = b;
-    n[1] = n[0] | b >> 1 | d << 63 | b << 1 | a >> 63;
-    n[2] = n[1] | b >> 2 | d << 62 | b << 2 | a >> 62;
-    n[3] = n[2] | b >> 3 | d << 61 | b << 3 | a >> 61;
+    v2 A = {a, ~a}, B = {b, ~b}, D = {d, ~d};
+    n[0] = B;
+    n[1] = n[0] | B >> 1 | D << 63 | B << 1 | A >> 63;
+    n[2] = n[1] | B >> 2 | D << 62 | B << 2 | A >> 62;
+    n[3] = n[2] | B >> 3 | D << 61 | B << 3 | A >> 61;
 }
 
-void vx_band_task(const vx_band_rows *r, int z0, int y0, void *scratch, uint8_t *need,
-                  uint8_t *lev)
+void vx_band_task(const vx_band_rows *r, int z0, int y0, void *scratch, uint8_t *need, uint8_t *lev)
 {
     static __thread term tt[7 * 7 * 4];
     static __thread int nt;
     if (!nt) nt = terms(tt);
     const int W = vx_band_columns(r), WC = W + 2;
-    uint64_t *cols = scratch;                         /* [NK * NJ][WC]: column q at q + 1 */
-    uint64_t *near = cols + (size_t)NK * NJ * WC;     /* [NK * NJ][8] */
-    uint64_t *ybox = near + (size_t)NK * NJ * 8;      /* [NK * VX_BAND_TY][2] */
+    v2 *near = scratch;                                            /* [NK * NJ][4] */
+    v2 *ybox = near + (size_t)NK * NJ * 4;                         /* [NK * VX_BAND_TY] */
+    uint64_t *cols = (uint64_t *)(ybox + (size_t)NK * VX_BAND_TY); /* [NK * NJ][WC] */
     for (int kk = 0; kk < NK; kk++)
         for (int jj = 0; jj < NJ; jj++) {
             const uint32_t *row = row_of(r, y0 - VX_BAND_HALF + jj, z0 - VX_BAND_HALF + kk);
@@ -115,19 +119,15 @@ void vx_band_task(const vx_band_rows *r, int z0, int y0, void *scratch, uint8_t 
         if (!need[p]) continue;
         for (int w = 0; w < NK * NJ; w++) {
             const uint64_t *c = cols + (size_t)w * WC + p;
-            near_of(c[0], c[1], c[2], near + 8 * w);
-            near_of(~c[0], ~c[1], ~c[2], near + 8 * w + 4);
+            near_of(c[0], c[1], c[2], near + 4 * w);
         }
         for (int kk = 0; kk < NK; kk++)
             for (int y = 0; y < VX_BAND_TY; y++) {
-                const uint64_t *n = near + 8 * (kk * NJ + y);
-                uint64_t b1 = 0, b0 = 0;
-                for (int dy = 0; dy <= 2 * VX_BAND_HALF; dy++, n += 8) {
-                    b1 |= n[3];
-                    b0 |= n[7];
-                }
-                ybox[2 * (kk * VX_BAND_TY + y)] = b1;
-                ybox[2 * (kk * VX_BAND_TY + y) + 1] = b0;
+                const v2 *n = near + 4 * (kk * NJ + y) + 3;
+                v2 b = {0, 0};
+                for (int dy = 0; dy <= 2 * VX_BAND_HALF; dy++, n += 4)
+                    b |= *n;
+                ybox[kk * VX_BAND_TY + y] = b;
             }
         for (int z = 0; z < 8; z++)
             for (int y = 0; y < VX_BAND_TY; y++) {
@@ -137,22 +137,19 @@ void vx_band_task(const vx_band_rows *r, int z0, int y0, void *scratch, uint8_t 
                 memset(out, 0, 64);
                 /* the voxels with one of the other state in the 7^3 box
                  * around them: the band's voxels are among them */
-                uint64_t box1 = 0, box0 = 0;
-                for (int dz = 0; dz <= 2 * VX_BAND_HALF; dz++) {
-                    box1 |= ybox[2 * ((z + dz) * VX_BAND_TY + y)];
-                    box0 |= ybox[2 * ((z + dz) * VX_BAND_TY + y) + 1];
-                }
-                if (!((own & box0) | (~own & box1))) continue;
-                /* acc1: a set voxel near (for unset voxels); acc0: an unset one */
-                uint64_t acc1 = 0, acc0 = 0, done = 0;
+                v2 box = {0, 0};
+                for (int dz = 0; dz <= 2 * VX_BAND_HALF; dz++)
+                    box |= ybox[(z + dz) * VX_BAND_TY + y];
+                if (!((own & box[1]) | (~own & box[0]))) continue;
+                /* acc[0]: a set voxel near (for unset voxels); acc[1]: an unset one */
+                const v2 *n = near + 4 * w0;
+                v2 acc = {0, 0};
+                uint64_t done = 0;
                 for (int i = 0; i < nt;) {
                     const int l = tt[i].level;
-                    for (; i < nt && tt[i].level == l; i++) {
-                        const uint64_t *n = near + 8 * (w0 + tt[i].off);
-                        acc1 |= n[tt[i].a];
-                        acc0 |= n[4 + tt[i].a];
-                    }
-                    uint64_t fresh = ((own & acc0) | (~own & acc1)) & ~done;
+                    for (; i < nt && tt[i].level == l; i++)
+                        acc |= n[tt[i].at];
+                    uint64_t fresh = ((own & acc[1]) | (~own & acc[0])) & ~done;
                     done |= fresh;
                     for (; fresh; fresh &= fresh - 1)
                         out[__builtin_ctzll(fresh)] = (uint8_t)l;

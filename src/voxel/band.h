@@ -36,7 +36,7 @@ typedef struct vx_band_rows {
 /* Columns of 64 voxels a task covers: x from -64 to 64 (columns - 1), so
  * that the band outside the grid (x down to -3 and up to dims[0] + 2) is in. */
 int vx_band_columns(const vx_band_rows *r);
-/* Scratch bytes vx_band_task needs. */
+/* Scratch bytes vx_band_task needs (16-byte aligned, as malloc gives). */
 size_t vx_band_scratch_bytes(const vx_band_rows *r);
 /* The band's levels for z in [z0, z0 + 8) and y in [y0, y0 + VX_BAND_TY)
  * (any z0, y0; rows outside the grid included): need[p] (columns bytes) is
