@@ -5,6 +5,8 @@
 # bytes, and encode_ms against the summary job's run_ms; the disk's
 # sequential write speed (dd, the raw8 size, with fdatasync) in the same run.
 #   bench/voxel/jobs.sh [build dir] [res...]   (default 512 1024)
+# VX_BENCH_MESHES and VX_BENCH_FORMATS (e.g. "vdb:level_set binvox") limit
+# the meshes and the formats.
 set -euo pipefail
 here=$(cd "$(dirname "$0")" && pwd)
 root=$(cd "$here/../.." && pwd)
@@ -14,6 +16,7 @@ res=("$@")
 [[ ${#res[@]} -gt 0 ]] || res=(512 1024)
 M=$root/../shared/data/meshes
 meshes=(${VX_BENCH_MESHES:-$M/spot_triangulated.obj $M/stanford-bunny.obj})
+formats=(${VX_BENCH_FORMATS:-vdb:fog vdb:level_set vdb:bool binvox raw8 raw1 vox nrrd npy})
 tmp=$(mktemp -d)
 trap 'kill $vpid 2>/dev/null; wait $vpid 2>/dev/null; rm -rf "$tmp"' EXIT
 source "$root/bench/lib.sh"
@@ -43,7 +46,7 @@ for m in "${meshes[@]}"; do
         eng=$(jq -r .timings.run_ms <<<"$s")
         dims=$(jq -r '.stats.dims | map(tostring) | join("x")' <<<"$s")
         echo "| $name | $dims | summary (engine) | $eng | | | | |"
-        for f in vdb:fog vdb:level_set vdb:bool binvox raw8 raw1 vox nrrd npy; do
+        for f in "${formats[@]}"; do
             p="\"format\":\"${f%%:*}\""
             [[ $f == vdb:* ]] && p="$p,\"vdb_grid\":\"${f#vdb:}\""
             j=$(job "$id" "{\"resolution\":$r,$p}")
