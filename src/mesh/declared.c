@@ -461,7 +461,8 @@ static int gltf_mesh(gltf_ctx *g, double mi)
         double mode = num(p, "mode", 4);
         double t = mode == 4 ? floor(ic / 3) : (mode == 5 || mode == 6) && ic >= 3 ? ic - 2 : 0;
         g->tris += (uint64_t)t;
-        g->verts += (uint64_t)pc;
+        /* the reader keeps only the vertices the indices name */
+        g->verts += (uint64_t)(ic < pc ? ic : pc);
     }
     return 0;
 }

@@ -522,9 +522,7 @@ int add_primitive(Gather &g, const tinygltf::Model &mo, const tinygltf::Primitiv
     std::vector<double> pos, ix;
     if (read_accessor(g, mo, at->second, false, pos)) return -1;
     size_t nv = pos.size() / 3, base = g.pos.size() / 3;
-    if (base + nv > UINT32_MAX) return too_big(g, "vertices", base + nv, UINT32_MAX);
-    if (g.lim && g.lim->max_vertices && base + nv > g.lim->max_vertices)
-        return too_big(g, "vertices", base + nv, g.lim->max_vertices);
+    if (nv > UINT32_MAX) return too_big(g, "vertices", nv, UINT32_MAX);
     if (pr.indices >= 0) {
         if (read_accessor(g, mo, pr.indices, true, ix)) return -1;
     } else {
@@ -532,8 +530,29 @@ int add_primitive(Gather &g, const tinygltf::Model &mo, const tinygltf::Primitiv
         for (size_t v = 0; v < nv; v++)
             ix[v] = double(v);
     }
-    for (size_t v = 0; v < nv; v++) {
-        const double *p = &pos[3 * v];
+    for (double i : ix)
+        if (!(i >= 0 && i < double(nv)))
+            return vx_err_set(g.err, VX_EINVAL, g.fi->corrupt,
+                              "not a valid %s file: mesh %d uses vertex %.0f of %zu", g.fi->name,
+                              mi, i, nv);
+    // The vertices the primitive uses, each once, in accessor order: many
+    // primitives may each index a few vertices of one shared accessor.
+    std::vector<uint32_t> used;
+    if (pr.indices >= 0) {
+        used.reserve(ix.size());
+        for (double i : ix)
+            used.push_back(uint32_t(i));
+        std::sort(used.begin(), used.end());
+        used.erase(std::unique(used.begin(), used.end()), used.end());
+        for (double &i : ix)
+            i = double(std::lower_bound(used.begin(), used.end(), uint32_t(i)) - used.begin());
+    }
+    const size_t nu = pr.indices >= 0 ? used.size() : nv;
+    if (base + nu > UINT32_MAX) return too_big(g, "vertices", base + nu, UINT32_MAX);
+    if (g.lim && g.lim->max_vertices && base + nu > g.lim->max_vertices)
+        return too_big(g, "vertices", base + nu, g.lim->max_vertices);
+    for (size_t u = 0; u < nu; u++) {
+        const double *p = &pos[3 * (pr.indices >= 0 ? size_t(used[u]) : u)];
         double q[3];
         for (int r = 0; r < 3; r++)
             q[r] = t.m[r] * p[0] + t.m[4 + r] * p[1] + t.m[8 + r] * p[2] + t.m[12 + r];
@@ -544,11 +563,6 @@ int add_primitive(Gather &g, const tinygltf::Model &mo, const tinygltf::Primitiv
                               g.fi->name, mi);
         g.pos.insert(g.pos.end(), {q[0], q[1], q[2]});
     }
-    for (double i : ix)
-        if (!(i < double(nv)))
-            return vx_err_set(g.err, VX_EINVAL, g.fi->corrupt,
-                              "not a valid %s file: mesh %d uses vertex %.0f of %zu", g.fi->name,
-                              mi, i, nv);
     bool flip = t.det3() < 0;
     size_t ntri = mode == TINYGLTF_MODE_TRIANGLES ? ix.size() / 3
                   : ix.size() >= 3                ? ix.size() - 2

@@ -2,7 +2,8 @@
  * files built here, as glTF with a data: URI and as glb with a BIN chunk,
  * read back to the geometry they hold: node transforms (matrix, T * R * S,
  * nested), mirrored nodes keeping outward winding, strips and fans,
- * quantized and sparse positions, images ignored; refusals (indices out
+ * quantized and sparse positions, images ignored, many primitives over one
+ * shared accessor (only the vertices they index are kept); refusals (indices out
  * of range, external buffers, NaNs, limits, no scene); and mutated files,
  * which must fail with an error or give a consistent mesh. */
 #include <stdarg.h>
@@ -375,6 +376,67 @@ static void test_gltf_refusals(void **state)
     free(f.p);
 }
 
+/* 600 primitives, each a triangle of 3 of the 20000 vertices of one shared
+ * POSITION accessor, each in its own node: the mesh keeps the 1800
+ * vertices the indices name (its box is theirs, not the accessor's), and a
+ * limit of 100000 vertices holds it (counted per instance over the whole
+ * accessor it would be 12 million). */
+static void test_gltf_shared_accessor(void **state)
+{
+    (void)state;
+    enum { NV = 20000, NP = 600 };
+    float *pos = malloc(sizeof(float) * 3 * NV);
+    uint32_t *idx = malloc(sizeof(uint32_t) * 3 * NP);
+    assert_non_null(pos);
+    assert_non_null(idx);
+    for (int v = 0; v < NV; v++)
+        pos[3 * v] = (float)v, pos[3 * v + 1] = (float)(v % 5), pos[3 * v + 2] = (float)-v;
+    for (int j = 0; j < NP; j++)
+        for (int c = 0; c < 3; c++)
+            idx[3 * j + c] = (uint32_t)(30 * j + c);
+    size_t off[2];
+    part parts[2] = {{pos, sizeof(float) * 3 * NV}, {idx, sizeof(uint32_t) * 3 * NP}};
+    tbuf bin = pack(parts, 2, off);
+    tbuf body = {0};
+    tbuf_printf(&body,
+                "\"bufferViews\":[{\"buffer\":0,\"byteOffset\":%zu,\"byteLength\":%zu},"
+                "{\"buffer\":0,\"byteOffset\":%zu,\"byteLength\":%zu}],\"accessors\":["
+                "{\"bufferView\":0,\"componentType\":5126,\"count\":%d,\"type\":\"VEC3\"}",
+                off[0], parts[0].bytes, off[1], parts[1].bytes, NV);
+    for (int j = 0; j < NP; j++)
+        tbuf_printf(&body,
+                    ",{\"bufferView\":1,\"byteOffset\":%d,\"componentType\":5125,\"count\":3,"
+                    "\"type\":\"SCALAR\"}",
+                    12 * j);
+    tbuf_printf(&body, "],\"meshes\":[");
+    for (int j = 0; j < NP; j++)
+        tbuf_printf(&body, "%s{\"primitives\":[{\"attributes\":{\"POSITION\":0},\"indices\":%d}]}",
+                    j ? "," : "", j + 1);
+    tbuf_printf(&body, "],\"nodes\":[");
+    for (int j = 0; j < NP; j++)
+        tbuf_printf(&body, "%s{\"mesh\":%d}", j ? "," : "", j);
+    tbuf_printf(&body, "],\"scenes\":[{\"nodes\":[");
+    for (int j = 0; j < NP; j++)
+        tbuf_printf(&body, "%s%d", j ? "," : "", j);
+    tbuf_printf(&body, "]}]");
+    for (int glb = 0; glb < 2; glb++) {
+        tbuf f = make_file(body.p, &bin, glb);
+        vx_err err;
+        vx_mesh *m = read_file(&f, glb, &(vx_mesh_limits){.max_vertices = 100000}, &err);
+        if (!m) fail_msg("%s: %s", err.code, err.message);
+        assert_int_equal(m->ntris, NP);
+        assert_int_equal(m->nverts, 3 * NP);
+        const double last = 30.0 * (NP - 1) + 2;
+        expect_box(m, (double[]){0, 0, -last}, (double[]){last, 2, 0});
+        vx_mesh_free(m);
+        free(f.p);
+    }
+    free(body.p);
+    free(bin.p);
+    free(pos);
+    free(idx);
+}
+
 /* Random byte changes, insertions and truncations of good files: each
  * either fails with a reader error or reads a mesh whose every index is
  * in range (the sanitized build checks the memory on the way). */
@@ -437,7 +499,7 @@ int main(void)
         cmocka_unit_test(test_gltf_cube),           cmocka_unit_test(test_gltf_transforms),
         cmocka_unit_test(test_gltf_strip_fan),      cmocka_unit_test(test_gltf_quantized_sparse),
         cmocka_unit_test(test_gltf_images_ignored), cmocka_unit_test(test_gltf_refusals),
-        cmocka_unit_test(test_gltf_mutations),
+        cmocka_unit_test(test_gltf_mutations),      cmocka_unit_test(test_gltf_shared_accessor),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }
