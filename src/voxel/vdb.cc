@@ -462,9 +462,16 @@ struct TreeRows {
             for (const openvdb::CoordBBox &bb : tiles[(size_t)zl])
                 for (int k = std::max(bb.min().z(), std::max(k0, 8 * zl));
                      k <= std::min(bb.max().z(), std::min(k1 - 1, 8 * zl + 7)); k++)
-                    for (int j = bb.min().y(); j <= bb.max().y(); j++)
-                        for (int i = bb.min().x(); i <= bb.max().x(); i++)
-                            set(i, j, k);
+                    for (int j = bb.min().y(); j <= bb.max().y(); j++) {
+                        // bits x0..x1 of the row, a word at a time
+                        uint32_t *row = buf.data() + (size_t)(k - k0) * plane + (size_t)j * rw;
+                        const int x0 = bb.min().x(), x1 = bb.max().x();
+                        for (int w = x0 >> 5; w <= x1 >> 5; w++) {
+                            const int a = std::max(x0 - 32 * w, 0), b = std::min(x1 - 32 * w, 31);
+                            row[w] |=
+                                (uint32_t)((((uint64_t)2 << b) - 1) & ~(((uint64_t)1 << a) - 1));
+                        }
+                    }
         }
         rows.bits = buf.data();
         rows.k0 = k0;
@@ -703,7 +710,6 @@ extern "C" int vx_vdb_merge_write(vx_vdb_merge *m, vx_vdb_class cls, const vx_gr
                 if (!ls) return -1;
                 m->grid.reset();
                 ls->setName("surface");
-                ls->setGridClass(openvdb::GRID_LEVEL_SET);
                 set_meta(*ls, whole, meta);
                 out = ls;
             } else {
