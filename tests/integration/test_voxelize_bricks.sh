@@ -9,6 +9,7 @@
 #   job voxel by voxel (vdbcheck against the one job's raw8), with the one
 #   job's transform;
 # - the stats list the bricks (offset, dims, voxels_inside, ms) and sum;
+# - a 200^3 level set as 27 bricks has the one job's band;
 # - --brick-threshold bricks a large .vdb by default; bricks {size: 0} opts out;
 # - the manifest lists every brick's URL and index offset; each brick file
 #   holds its voxels at its offset of the whole grid's index space;
@@ -79,6 +80,21 @@ get_result "" "$TMP/one.vdb"
 "$VX_TOOLS/vdbinfo" "$TMP/one.vdb" | jq -c '.grids[0] | {transform, active_voxels, bbox, name}' >"$TMP/one.json"
 "$VX_TOOLS/vdbinfo" "$TMP/bunny_bool.vdb" | jq -c '.grids[0] | {transform, active_voxels, bbox, name}' >"$TMP/bb.json"
 check "bricked .vdb: same transform, bbox and voxels as one job's" cmp "$TMP/one.json" "$TMP/bb.json"
+
+# A level set of nested spheres at 200^3 as one job and as 3x3x3 bricks of
+# 72 (the merged tree's interior is tiles): the same band.
+upload "$TMP/shapes/nested.obj"
+expect_status "upload nested spheres" 201
+N=$MESH_ID
+for b in 0 72; do
+    run_job voxelize "$N" "{\"resolution\":200,\"format\":\"vdb\",\"vdb_grid\":\"level_set\",\"bricks\":{\"size\":$b}}"
+    job_ok "nested spheres level set, bricks of $b"
+    get_result "" "$TMP/ls$b.vdb"
+    "$VX_TOOLS/vdbinfo" "$TMP/ls$b.vdb" | jq -c '.grids[0] | {transform, active_voxels, value_sum, bbox, name}' >"$TMP/ls$b.json"
+done
+check "bricked level set: 27 bricks" jq -e '.stats.brick_grid == [3,3,3]' "$TMP/job.json"
+check "bricked level set: the one job's band (voxels, value sum, bbox)" cmp "$TMP/ls0.json" "$TMP/ls72.json"
+check "the level set has a band" jq -e '.active_voxels > 100000' "$TMP/ls0.json"
 
 # A generated torus on random lattices: origin and voxel size not binary
 # fractions, random index offsets and brick sizes, every method.
