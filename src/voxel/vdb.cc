@@ -484,11 +484,11 @@ struct TreeRows {
 
 // A leaf holds 512 voxels: a value mask (64 B) plus a bool mask (64 B) or
 // 512 floats (2 KiB), ~100 B of node overhead; the file buffer is about the
-// same again (compression works per leaf). A level set holds the bool tree
-// and its float band (dilated: up to 3 leaves a leaf).
+// same again (compression works per leaf). A level set holds its float
+// band: up to 3 leaves a partial leaf (~1.7 on spot).
 static uint64_t leaf_bytes(vx_vdb_class cls, int coverage)
 {
-    return cls == VX_VDB_BOOL ? 240 : cls == VX_VDB_FOG || coverage ? 2300 : 240 + 3 * 2300;
+    return cls == VX_VDB_BOOL ? 240 : cls == VX_VDB_FOG || coverage ? 2300 : 3 * 2300;
 }
 
 extern "C" uint64_t vx_voxel_vdb_bytes(const int dims[3], vx_vdb_class cls, int coverage)
@@ -524,9 +524,9 @@ extern "C" uint64_t vx_voxel_vdb_grid_bytes(const vx_bitgrid *g, vx_vdb_class cl
         partial += p;
         full += f;
     });
-    // Partial leaves as floats (fog) or as the bool tree and its band of up
-    // to 3 float leaves a leaf (level set), full ones as tiles, and the
-    // internal nodes (one of 16^3 children per 128^3 voxels, ~64 KiB each).
+    // Partial leaves as floats (fog) or as a band of up to 3 float leaves a
+    // leaf (level set), full ones as tiles, and the internal nodes (one of
+    // 16^3 children per 128^3 voxels, ~64 KiB each).
     uint64_t nodes = (uint64_t)lx * ly * lz / 4096 + 1;
     return (partial * leaf_bytes(cls, 0) + full * 64 + nodes * 65536) * 2;
 }
