@@ -47,12 +47,14 @@ int vx_band_columns(const vx_band_rows *r)
     return (r->dims[0] + 63) / 64 + 2;
 }
 
-/* Window rows, their columns (W + 2 words: column -1 to W), and the near
- * words of one column for every window row (8: t = 1 then t = 0). */
+/* The near words of one column for every window row (4 v2: a = 0..3),
+ * their near[3] ORed over 7 rows in y (1 v2 a row of the task), then the
+ * window rows' columns (W + 2 words: column -1 to W). */
 size_t vx_band_scratch_bytes(const vx_band_rows *r)
 {
     size_t W = (size_t)vx_band_columns(r);
-    return ((size_t)NK * NJ * ((W + 2) + 8) + (size_t)NK * VX_BAND_TY * 2) * sizeof(uint64_t);
+    return ((size_t)NK * NJ * 4 + (size_t)NK * VX_BAND_TY) * sizeof(v2) +
+           (size_t)NK * NJ * (W + 2) * sizeof(uint64_t);
 }
 
 static const uint32_t *row_of(const vx_band_rows *r, int j, int k)
