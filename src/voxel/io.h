@@ -100,8 +100,9 @@ void vx_vdb_merge_free(vx_vdb_merge *m);
 int vx_vdb_merge_add(vx_vdb_merge *m, const char *path, vx_err *err);
 /* Bytes the merged tree holds now. */
 uint64_t vx_vdb_merge_bytes(const vx_vdb_merge *m);
-/* Bytes the level set of the merged bool tree would add (its band). */
-uint64_t vx_vdb_merge_level_set_bytes(const vx_vdb_merge *m);
+/* Bytes the level set of the merged bool tree of the whole grid of dims
+ * would add (its band, and the rows held while it is made). */
+uint64_t vx_vdb_merge_level_set_bytes(const vx_vdb_merge *m, const int dims[3]);
 /* Prunes the merged tree and writes it to path as the one grid of a
  * voxelize .vdb of the whole grid `grid` (index 0 = its voxel (0,0,0)):
  * bool bricks as "voxels", or with cls VX_VDB_LEVEL_SET as the level set

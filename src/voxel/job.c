@@ -965,13 +965,13 @@ static int encode_bricks(vx_job_run *r, const vparams *p, vstate *s, vprog *prog
                             (unsigned long long)lim);
     }
     if (!rc && p->vdb_grid == VX_VDB_LEVEL_SET && lim &&
-        vx_vdb_merge_bytes(m) + vx_vdb_merge_level_set_bytes(m) > lim)
-        rc = vx_err_set(
-            err, VX_ETOOBIG, "job_memory_limit",
-            "the level set of the merged grid needs about %llu bytes, over the job "
-            "memory limit of %llu (vdb_grid \" fog\" or \" bool\" needs less)",
-            (unsigned long long)(vx_vdb_merge_bytes(m) + vx_vdb_merge_level_set_bytes(m)),
-            (unsigned long long)lim);
+        vx_vdb_merge_bytes(m) + vx_vdb_merge_level_set_bytes(m, corner.dims) > lim)
+        rc = vx_err_set(err, VX_ETOOBIG, "job_memory_limit",
+                        "the level set of the merged grid needs about %llu bytes, over the job "
+                        "memory limit of %llu (vdb_grid \" fog\" or \" bool\" needs less)",
+                        (unsigned long long)(vx_vdb_merge_bytes(m) +
+                                             vx_vdb_merge_level_set_bytes(m, corner.dims)),
+                        (unsigned long long)lim);
     if (!rc) {
         stat_set(vx_run_stats(r), "merged_tree_bytes",
                  cJSON_CreateNumber((double)vx_vdb_merge_bytes(m)));

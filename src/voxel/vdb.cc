@@ -673,15 +673,12 @@ extern "C" int vx_vdb_merge_add(vx_vdb_merge *m, const char *path, vx_err *err)
     }
 }
 
-extern "C" uint64_t vx_vdb_merge_level_set_bytes(const vx_vdb_merge *m)
+extern "C" uint64_t vx_vdb_merge_level_set_bytes(const vx_vdb_merge *m, const int dims[3])
 {
     auto b = m->grid ? openvdb::GridBase::grid<openvdb::BoolGrid>(m->grid) : nullptr;
-    if (!b) return 0;
-    // the band's leaves, and the rows held while they are made
-    openvdb::CoordBBox bb = b->evalActiveVoxelBoundingBox();
-    const int d[3] = {bb.max().x() + 1, bb.max().y() + 1, bb.max().z() + 1};
-    return (uint64_t)b->tree().leafCount() * 3 * leaf_bytes(VX_VDB_FOG, 0) +
-           (bb.empty() ? 0 : TreeRows::window_bytes(d));
+    return b ? (uint64_t)b->tree().leafCount() * 3 * leaf_bytes(VX_VDB_FOG, 0) +
+                   TreeRows::window_bytes(dims)
+             : 0;
 }
 
 extern "C" int vx_vdb_merge_write(vx_vdb_merge *m, vx_vdb_class cls, const vx_grid *grid,

@@ -122,6 +122,11 @@ int main(int argc, char **argv)
             return i >= 0 && j >= 0 && k >= 0 && i < nx && j < ny && k < nz &&
                    raw[at(openvdb::Coord(i, j, k))] != 0;
         };
+        // (|d| - 1/2)^2: a voxel cube d voxels away along one axis
+        auto g1 = [](int d) {
+            double e = std::abs(d) - 0.5;
+            return e > 0 ? e * e : 0.0;
+        };
         auto facc = f->getConstAccessor();
         uint64_t band = 0;
         for (int k = -4; k < nz + 4; k++)
@@ -133,10 +138,6 @@ int main(int argc, char **argv)
                         for (int dy = -3; dy <= 3; dy++)
                             for (int dx = -3; dx <= 3; dx++) {
                                 if (state(i + dx, j + dy, k + dz) == s) continue;
-                                auto g1 = [](int d) {
-                                    double e = std::abs(d) - 0.5;
-                                    return e > 0 ? e * e : 0.0;
-                                };
                                 best = std::min(best, g1(dx) + g1(dy) + g1(dz));
                             }
                     const double d = std::sqrt(best);
