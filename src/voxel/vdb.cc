@@ -9,12 +9,15 @@
 // a full leaf becomes an active tile, an empty one is left out. A level
 // set's leaves are its band (band.h), made in parallel from the bit grid's
 // rows, or from a merged bool tree's rows a few z slabs at a time.
+#include <algorithm>
 #include <atomic>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
 #include <exception>
+#include <memory>
 #include <mutex>
+#include <sstream>
 #include <string>
 #include <vector>
 
@@ -60,6 +63,52 @@ openvdb::math::Transform::Ptr transform_of(const vx_grid &gr)
     xf->postTranslate(openvdb::Vec3d(gr.origin[0] + 0.5 * gr.h, gr.origin[1] + 0.5 * gr.h,
                                      gr.origin[2] + 0.5 * gr.h));
     return xf;
+}
+
+// A FloatGrid whose leaf buffers OpenVDB's own writer gets from every
+// thread. A tree's buffers section is each leaf's LeafNode::writeBuffers in
+// tree order (the root and internal nodes only descend), and each leaf's
+// bytes depend only on the leaf and on the stream's compression and
+// background. So windows of leaves are written into memory streams in
+// parallel, a chunk each, and appended in order: the bytes of
+// Tree::writeBuffers (vdbcheck reads every value back).
+class ParallelFloatGrid final : public openvdb::FloatGrid
+{
+  public:
+    explicit ParallelFloatGrid(float background) : openvdb::FloatGrid(background) {}
+
+    void writeBuffers(std::ostream &os) const override
+    {
+        using LeafT = openvdb::FloatTree::LeafNodeType;
+        std::vector<const LeafT *> leaves;
+        leaves.reserve(constTree().leafCount());
+        constTree().getNodes(leaves);
+        const bool half = saveFloatAsHalf();
+        const uint32_t compression = openvdb::io::getDataCompression(os);
+        const void *background = openvdb::io::getGridBackgroundValuePtr(os);
+        constexpr size_t chunk = 128, window = 64 * chunk;
+        std::vector<std::string> out(window / chunk);
+        for (size_t w0 = 0; w0 < leaves.size(); w0 += window) {
+            const size_t w1 = std::min(leaves.size(), w0 + window);
+            const size_t nc = (w1 - w0 + chunk - 1) / chunk;
+            tbb::parallel_for(size_t(0), nc, [&](size_t c) {
+                std::ostringstream ss;
+                openvdb::io::setDataCompression(ss, compression);
+                openvdb::io::setGridBackgroundValuePtr(ss, background);
+                const size_t a = w0 + c * chunk, b = std::min(w1, a + chunk);
+                for (size_t i = a; i < b; i++)
+                    leaves[i]->writeBuffers(ss, half);
+                out[c] = ss.str();
+            });
+            for (size_t c = 0; c < nc; c++)
+                os.write(out[c].data(), (std::streamsize)out[c].size());
+        }
+    }
+};
+
+openvdb::FloatGrid::Ptr make_float_grid(float background)
+{
+    return std::make_shared<ParallelFloatGrid>(background);
 }
 
 // Builds grids (build(grids) returns 0, or -1 with err set) and writes them
@@ -280,7 +329,7 @@ openvdb::BoolGrid::Ptr bool_grid(const vx_bitgrid *g, const openvdb::Coord &at,
 openvdb::FloatGrid::Ptr fog_grid(const vx_bitgrid *g, const openvdb::Coord &at,
                                  const vx_voxel_io *io, double span, vx_err *err)
 {
-    openvdb::FloatGrid::Ptr grid = openvdb::FloatGrid::create(0.0f);
+    openvdb::FloatGrid::Ptr grid = make_float_grid(0.0f);
     using LeafT = openvdb::FloatGrid::TreeType::LeafNodeType;
     int rc;
     if (g->counts)
@@ -319,7 +368,7 @@ openvdb::FloatGrid::Ptr band_grid(vx_band_rows &rows, const openvdb::Coord &at, 
 {
     using LeafT = openvdb::FloatGrid::TreeType::LeafNodeType;
     const float bg = (float)(VX_BAND_HALF * h);
-    openvdb::FloatGrid::Ptr grid = openvdb::FloatGrid::create(bg);
+    openvdb::FloatGrid::Ptr grid = make_float_grid(bg);
     const int ny = rows.dims[1], nz = rows.dims[2];
     const int W = vx_band_columns(&rows);
     float dist[VX_BAND_LEVELS + 1];
@@ -587,7 +636,7 @@ extern "C" int vx_voxel_write_vdb_float(const float *v, const int dims[3], const
                                         const char *path, vx_err *err)
 {
     return write_grids(path, err, [&](openvdb::GridPtrVec &grids) {
-        openvdb::FloatGrid::Ptr grid = openvdb::FloatGrid::create(0.0f);
+        openvdb::FloatGrid::Ptr grid = make_float_grid(0.0f);
         grid->setName(name);
         grid->setGridClass(openvdb::GRID_FOG_VOLUME);
         auto acc = grid->getAccessor();

@@ -8,11 +8,17 @@
 //     nearest voxel of the other state (outside the grid: unset), searched
 //     voxel by voxel, active where under 3 voxels, negative exactly at the
 //     set voxels.
+// A float grid's leaf buffers, which the daemon writes on all threads, must
+// also end the file byte for byte as OpenVDB's own serial
+// Tree::writeBuffers of the grid read back writes them.
 // Exit 0 when equal, 1 with a message on the first difference.
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <cstdlib>
+#include <sstream>
+#include <string>
 #include <vector>
 
 #include <openvdb/openvdb.h>
@@ -80,6 +86,7 @@ int main(int argc, char **argv)
     try {
         openvdb::io::File file(argv[1]);
         file.open();
+        const uint32_t compression = file.compression();
         openvdb::GridPtrVecPtr grids = file.getGrids();
         file.close();
         if (grids->size() != 1) return fprintf(stderr, "vdbcheck: %zu grids\n", grids->size()), 1;
@@ -97,6 +104,22 @@ int main(int argc, char **argv)
         }
         auto f = openvdb::gridPtrCast<openvdb::FloatGrid>(g);
         if (!f) return fprintf(stderr, "vdbcheck: neither bool nor float\n"), 1;
+        {
+            // fog volumes and level sets are written without zlib
+            std::ostringstream ss;
+            openvdb::io::setDataCompression(ss, compression & ~openvdb::io::COMPRESS_ZIP);
+            openvdb::io::setGridBackgroundValuePtr(ss, &f->tree().background());
+            f->tree().writeBuffers(ss, f->saveFloatAsHalf());
+            const std::string want = ss.str();
+            const std::vector<unsigned char> bytes = slurp(argv[1]);
+            if (bytes.size() < want.size() ||
+                memcmp(bytes.data() + bytes.size() - want.size(), want.data(), want.size()))
+                return fprintf(stderr,
+                               "vdbcheck: the leaf buffers are not OpenVDB's serial ones "
+                               "(%zu bytes)\n",
+                               want.size()),
+                       1;
+        }
         if (f->getGridClass() == openvdb::GRID_FOG_VOLUME) {
             if (!counts.empty())
                 return compare(*f, nx, ny, nz, covered,
