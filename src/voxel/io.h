@@ -54,6 +54,11 @@ typedef struct vx_voxel_io {
      * (0 = 16 MiB; at least one block): smaller groups read the grid more
      * often, larger ones take more memory (twice this). */
     size_t binvox_group_bytes;
+    /* vdb: bytes the tree may need beyond the bit grid (0 = no limit; as
+     * vx_voxel_vdb_grid_bytes counts them). A 0/1 fog grid checks it as its
+     * leaves are classified, slab by slab, and stops with VX_ETOOBIG
+     * job_memory_limit once over it. */
+    uint64_t vdb_max_bytes;
 } vx_voxel_io;
 
 /* Parameters recorded as grid metadata in .vdb files (strings may be NULL). */
@@ -129,7 +134,8 @@ int vx_voxel_write_vdb_float(const float *v, const int dims[3], const double ori
 uint64_t vx_voxel_vdb_bytes(const int dims[3], vx_vdb_class cls, int coverage);
 /* The same for the grid g itself (a 0/1 fog grid or a level set: from its
  * partial leaves, counted in parallel; other classes as
- * vx_voxel_vdb_bytes). */
+ * vx_voxel_vdb_bytes). A 0/1 fog grid's writer counts them itself as it
+ * builds (vx_voxel_io.vdb_max_bytes), so a job need not call this first. */
 uint64_t vx_voxel_vdb_grid_bytes(const vx_bitgrid *g, vx_vdb_class cls);
 
 #endif

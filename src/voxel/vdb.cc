@@ -258,12 +258,37 @@ template <typename LeafT> struct Slab {
     std::vector<openvdb::Coord> fulls;
 };
 
+// A leaf holds 512 voxels: a value mask (64 B) plus a bool mask (64 B) or
+// 512 floats (2 KiB), ~100 B of node overhead; the file buffer is about the
+// same again (compression works per leaf). A level set holds its float
+// band: up to 3 leaves a partial leaf (~1.7 on spot).
+uint64_t leaf_bytes(vx_vdb_class cls, int coverage)
+{
+    return cls == VX_VDB_BOOL ? 240 : cls == VX_VDB_FOG || coverage ? 2300 : 3 * 2300;
+}
+
+// Bytes a tree of the grid g's dims with `partial` leaves of part_bytes
+// each and `full` leaf tiles holds, with its internal nodes (one of 16^3
+// children per 128^3 voxels, ~64 KiB each), and its file buffer about as
+// much again.
+uint64_t tree_bytes(const vx_bitgrid *g, uint64_t partial, uint64_t full, uint64_t part_bytes)
+{
+    const uint64_t lx = (g->grid.dims[0] + 7) / 8, ly = (g->grid.dims[1] + 7) / 8,
+                   lz = (g->grid.dims[2] + 7) / 8;
+    const uint64_t nodes = lx * ly * lz / 4096 + 1;
+    return (partial * part_bytes + full * 64 + nodes * 65536) * 2;
+}
+
 // at: the index of voxel (0,0,0) in the tree (multiples of 8: a brick).
+// part_bytes: with io->vdb_max_bytes, what a partial leaf costs in
+// tree_bytes, checked after each z slab (0: not checked).
 template <typename TreeT, typename MakeLeaf>
 int build_tree(const vx_bitgrid *g, TreeT &tree, const typename TreeT::ValueType &on,
                const openvdb::Coord &at, const vx_voxel_io *io, double span, vx_err *err,
-               bool by_bits, MakeLeaf make)
+               bool by_bits, uint64_t part_bytes, MakeLeaf make)
 {
+    const uint64_t max_bytes = io && part_bytes ? io->vdb_max_bytes : 0;
+    uint64_t partial = 0, full = 0;
     using LeafT = typename TreeT::LeafNodeType;
     const int nx = g->grid.dims[0], ny = g->grid.dims[1], nz = g->grid.dims[2];
     const int lx = (nx + 7) / 8, ly = (ny + 7) / 8, lz = (nz + 7) / 8;
@@ -287,6 +312,22 @@ int build_tree(const vx_bitgrid *g, TreeT &tree, const typename TreeT::ValueType
                 }
             }
         });
+        for (const Slab<LeafT> &s : rows) {
+            partial += s.leaves.size();
+            full += s.fulls.size();
+        }
+        if (max_bytes && tree_bytes(g, partial, full, part_bytes) > max_bytes) {
+            for (Slab<LeafT> &s : rows) {
+                for (LeafT *leaf : s.leaves)
+                    delete leaf;
+                s.leaves.clear();
+            }
+            return vx_err_set(err, VX_ETOOBIG, "job_memory_limit",
+                              "the OpenVDB grid of these voxels needs over %llu bytes beside "
+                              "them, over the job memory limit (vdb_grid \"bool\" or another "
+                              "format needs less)",
+                              (unsigned long long)max_bytes);
+        }
         for (Slab<LeafT> &s : rows) {
             for (LeafT *leaf : s.leaves) {
                 leaf->setOrigin(leaf->origin() + at);
@@ -308,7 +349,7 @@ openvdb::BoolGrid::Ptr bool_grid(const vx_bitgrid *g, const openvdb::Coord &at,
 {
     openvdb::BoolGrid::Ptr grid = openvdb::BoolGrid::create(false);
     using LeafT = openvdb::BoolGrid::TreeType::LeafNodeType;
-    int rc = build_tree(g, grid->tree(), true, at, io, span, err, true,
+    int rc = build_tree(g, grid->tree(), true, at, io, span, err, true, 0,
                         [g](int X, int Y, int Z, LeafT *&out) {
                             uint64_t w[8];
                             int kind = gather_leaf(g, X, Y, Z, w);
@@ -334,10 +375,10 @@ openvdb::FloatGrid::Ptr fog_grid(const vx_bitgrid *g, const openvdb::Coord &at,
     int rc;
     if (g->counts)
         rc = build_tree(
-            g, grid->tree(), 1.0f, at, io, span, err, false,
+            g, grid->tree(), 1.0f, at, io, span, err, false, 0,
             [g](int X, int Y, int Z, LeafT *&out) { return coverage_leaf(g, X, Y, Z, out); });
     else
-        rc = build_tree(g, grid->tree(), 1.0f, at, io, span, err, true,
+        rc = build_tree(g, grid->tree(), 1.0f, at, io, span, err, true, leaf_bytes(VX_VDB_FOG, 0),
                         [g](int X, int Y, int Z, LeafT *&out) {
                             uint64_t w[8];
                             int kind = gather_leaf(g, X, Y, Z, w);
@@ -531,22 +572,13 @@ struct TreeRows {
 
 } // namespace
 
-// A leaf holds 512 voxels: a value mask (64 B) plus a bool mask (64 B) or
-// 512 floats (2 KiB), ~100 B of node overhead; the file buffer is about the
-// same again (compression works per leaf). A level set holds its float
-// band: up to 3 leaves a partial leaf (~1.7 on spot).
-static uint64_t leaf_bytes(vx_vdb_class cls, int coverage)
-{
-    return cls == VX_VDB_BOOL ? 240 : cls == VX_VDB_FOG || coverage ? 2300 : 3 * 2300;
-}
-
 extern "C" uint64_t vx_voxel_vdb_bytes(const int dims[3], vx_vdb_class cls, int coverage)
 {
     uint64_t n = (uint64_t)dims[0] * (uint64_t)dims[1] * (uint64_t)dims[2];
     uint64_t leaves = n / 512 + 1;
     // A 0/1 fog grid's float leaves are only the partial ones, and a level
-    // set's band follows them: known from the grid (vx_voxel_vdb_grid_bytes
-    // checks them before the writer runs); here the topology, as for bool.
+    // set's band follows them: known from the grid (vx_voxel_vdb_grid_bytes,
+    // or the fog writer as it builds); here the topology, as for bool.
     if ((cls == VX_VDB_FOG || cls == VX_VDB_LEVEL_SET) && !coverage) cls = VX_VDB_BOOL;
     return leaves * leaf_bytes(cls, coverage) * 2;
 }
@@ -574,10 +606,8 @@ extern "C" uint64_t vx_voxel_vdb_grid_bytes(const vx_bitgrid *g, vx_vdb_class cl
         full += f;
     });
     // Partial leaves as floats (fog) or as a band of up to 3 float leaves a
-    // leaf (level set), full ones as tiles, and the internal nodes (one of
-    // 16^3 children per 128^3 voxels, ~64 KiB each).
-    uint64_t nodes = (uint64_t)lx * ly * lz / 4096 + 1;
-    return (partial * leaf_bytes(cls, 0) + full * 64 + nodes * 65536) * 2;
+    // leaf (level set), full ones as tiles.
+    return tree_bytes(g, partial, full, leaf_bytes(cls, 0));
 }
 
 extern "C" int vx_voxel_write_vdb(const vx_bitgrid *g, vx_vdb_class cls, const vx_vdb_meta *meta,

@@ -221,6 +221,36 @@ static void test_vdb(void **st)
         }
 }
 
+/* A 0/1 fog grid's writer counts its leaves as it builds (the job then
+ * skips vx_voxel_vdb_grid_bytes): under a budget of one byte less than
+ * vx_voxel_vdb_grid_bytes it stops with job_memory_limit and leaves no
+ * file; at exactly that budget it writes the grid. Noise (every leaf
+ * partial, many z slabs) and balls (full leaves as tiles too). */
+static void test_vdb_fog_budget(void **st)
+{
+    char p[256];
+    snprintf(p, sizeof p, "%s/budget.vdb", dir);
+    for (int kind = 2; kind <= 3; kind++) {
+        vx_bitgrid g;
+        random_grid(&g, 90, 50, 200, kind, 0);
+        const uint64_t need = vx_voxel_vdb_grid_bytes(&g, VX_VDB_FOG);
+        vx_voxel_io io = {.vdb_max_bytes = need - 1};
+        vx_err err;
+        remove(p);
+        assert_int_equal(vx_voxel_write_vdb(&g, VX_VDB_FOG, NULL, p, &io, &err), -1);
+        assert_int_equal(err.kind, VX_ETOOBIG);
+        assert_string_equal(err.code, "job_memory_limit");
+        FILE *f = fopen(p, "rb");
+        assert_null(f);
+        io.vdb_max_bytes = need;
+        assert_int_equal(vx_voxel_write_vdb(&g, VX_VDB_FOG, NULL, p, &io, &err), 0);
+        f = fopen(p, "rb");
+        assert_non_null(f);
+        fclose(f);
+        vx_bitgrid_free(&g);
+    }
+}
+
 /* The progress hook: fractions seen, in order. */
 typedef struct seen {
     double f[4096];
@@ -286,9 +316,8 @@ static int teardown(void **st)
 int main(void)
 {
     const struct CMUnitTest tests[] = {
-        cmocka_unit_test(test_raw_binvox),
-        cmocka_unit_test(test_raw_wide_rows),
-        cmocka_unit_test(test_vdb),
+        cmocka_unit_test(test_raw_binvox), cmocka_unit_test(test_raw_wide_rows),
+        cmocka_unit_test(test_vdb),        cmocka_unit_test(test_vdb_fog_budget),
         cmocka_unit_test(test_progress),
     };
     return cmocka_run_group_tests(tests, setup, teardown);
