@@ -319,9 +319,15 @@ static int rle_zeros(rle *r, uint64_t n)
  * block at least). */
 #define BINVOX_GROUP_BYTES ((size_t)16 << 20)
 
-/* Slices k0..k1-1 of nb blocks from x block x0. */
+/* Slices k0..k1-1 of nb blocks from x block x0. kinds[(b * nz + k) * wy +
+ * jw]: the 32 x 32 block's voxels all 0 (BLOCK_ZEROS), all 1 (BLOCK_ONES),
+ * or mixed (BLOCK_MIXED): only a mixed block's words are stored in cols
+ * (most blocks of a solid are uniform: their words are neither written nor
+ * read again). */
+enum { BLOCK_ZEROS = 0, BLOCK_ONES = 1, BLOCK_MIXED = 2 };
+
 static void binvox_transpose(const vx_bitgrid *g, size_t x0, size_t nb, int k0, int k1,
-                             uint32_t *cols)
+                             uint32_t *cols, uint8_t *kinds)
 {
     const int ny = g->grid.dims[1], nz = g->grid.dims[2];
     const size_t wy = ((size_t)ny + 31) / 32, ncols = 32 * (size_t)nz * wy;
@@ -335,14 +341,18 @@ static void binvox_transpose(const vx_bitgrid *g, size_t x0, size_t nb, int k0, 
                     a[b][jj] = j < (size_t)ny ? vx_row_word(g, row, x0 + b) : 0;
             }
             for (size_t b = 0; b < nb; b++) {
-                /* a block all 0 or all 1 (most, inside and outside) is its
-                 * own transpose */
                 uint32_t any = 0, all = ~0u;
                 for (int ii = 0; ii < 32; ii++) {
                     any |= a[b][ii];
                     all &= a[b][ii];
                 }
-                if (any && ~all) transpose32(a[b]);
+                uint8_t *kind = kinds + (b * (size_t)nz + (size_t)k) * wy + jw;
+                if (!any || !~all) {
+                    *kind = any ? BLOCK_ONES : BLOCK_ZEROS;
+                    continue;
+                }
+                *kind = BLOCK_MIXED;
+                transpose32(a[b]);
                 uint32_t *c = cols + b * ncols + (size_t)k * wy + jw;
                 for (int ii = 0; ii < 32; ii++)
                     c[(size_t)ii * nz * wy] = a[b][ii];
@@ -350,10 +360,17 @@ static void binvox_transpose(const vx_bitgrid *g, size_t x0, size_t nb, int k0, 
         }
 }
 
+/* Word e of a transposed column c whose blocks' kinds are kind[]. */
+static inline uint32_t col_word(const uint8_t *kind, const uint32_t *c, size_t e)
+{
+    return kind[e] == BLOCK_MIXED ? c[e] : kind[e] == BLOCK_ONES ? 0xffffffffu : 0u;
+}
+
 /* The run-length code of x block x (from its transposed columns), in
  * binvox order: x, then z, then y fastest, each y column padded to the
  * cube's side d with zeros, each x slice to d x d. */
-static int binvox_rle(const vx_bitgrid *g, size_t x, int d, const uint32_t *cols, rle *r)
+static int binvox_rle(const vx_bitgrid *g, size_t x, int d, const uint32_t *cols,
+                      const uint8_t *kinds, rle *r)
 {
     const int nx = g->grid.dims[0], ny = g->grid.dims[1], nz = g->grid.dims[2];
     const size_t wy = ((size_t)ny + 31) / 32;
@@ -361,15 +378,16 @@ static int binvox_rle(const vx_bitgrid *g, size_t x, int d, const uint32_t *cols
     for (int ii = 0; ii < 32 && 32 * (int)x + ii < nx; ii++) {
         for (int k = 0; k < nz; k++) {
             const uint32_t *c = cols + ((size_t)ii * nz + k) * wy;
+            const uint8_t *kind = kinds + (size_t)k * wy;
             for (size_t jw = 0; jw < wy;) {
                 /* most words continue the current run whole (counted here,
                  * not in r, so that the count stays in a register) */
                 const uint32_t same = r->cur ? 0xffffffffu : 0u;
                 size_t e = jw;
-                while (e + 1 < wy && c[e] == same)
+                while (e + 1 < wy && col_word(kind, c, e) == same)
                     e++;
                 r->run += 32 * (uint64_t)(e - jw);
-                if (rle_bits(r, c[e], e + 1 < wy ? 32 : ylast)) return -1;
+                if (rle_bits(r, col_word(kind, c, e), e + 1 < wy ? 32 : ylast)) return -1;
                 jw = e + 1;
             }
             if (rle_zeros(r, (uint64_t)(d - ny))) return -1;
@@ -391,7 +409,8 @@ typedef struct binvox_pipe {
     size_t q, per, ncols; /* the group being coded, blocks per group, words per block */
     int d, coding;        /* coding: group q is coded (else only transposed) */
     uint32_t *cols[2];
-    atomic_int piece; /* the next piece of group q + 1 to transpose */
+    uint8_t *kinds[2]; /* nz * wy bytes a block */
+    atomic_int piece;  /* the next piece of group q + 1 to transpose */
     rle *r;
     const vx_voxel_io *io;
     vx_err *err;
@@ -412,7 +431,8 @@ static void transpose_pieces(binvox_pipe *p, size_t q)
     size_t nb = group_blocks(p, q);
     for (int k0; nb && (k0 = BINVOX_SLICES * atomic_fetch_add(&p->piece, 1)) < nz;)
         binvox_transpose(p->g, q * p->per, nb, k0,
-                         k0 + BINVOX_SLICES < nz ? k0 + BINVOX_SLICES : nz, p->cols[q & 1]);
+                         k0 + BINVOX_SLICES < nz ? k0 + BINVOX_SLICES : nz, p->cols[q & 1],
+                         p->kinds[q & 1]);
 }
 
 static void *binvox_stage(void *ud)
@@ -428,7 +448,8 @@ static void *binvox_stage(void *ud)
             if (p->io && p->io->progress &&
                 p->io->progress(p->io->ud, (double)(32 * x) / p->d, p->err))
                 p->rc = -1;
-            else if (binvox_rle(p->g, x, p->d, p->cols[p->q & 1] + b * p->ncols, p->r))
+            else if (binvox_rle(p->g, x, p->d, p->cols[p->q & 1] + b * p->ncols,
+                                p->kinds[p->q & 1] + b * (p->ncols / 32), p->r))
                 p->rc = -1;
         }
     transpose_pieces(p, p->q + 1);
@@ -448,8 +469,12 @@ int vx_voxel_write_binvox(const vx_bitgrid *g, const char *path, const vx_voxel_
     if (per > 32) per = 32;
     if (per > g->wx) per = g->wx;
     uint32_t *cols = malloc(2 * per * ncols * sizeof *cols);
-    if (!cols)
+    uint8_t *kinds = malloc(2 * per * (ncols / 32));
+    if (!cols || !kinds) {
+        free(cols);
+        free(kinds);
         return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for binvox columns");
+    }
     vx_out o;
     int ok = vx_out_open(&o, path, err) == 0;
     char hdr[256];
@@ -464,6 +489,7 @@ int vx_voxel_write_binvox(const vx_bitgrid *g, const char *path, const vx_voxel_
                      .ncols = ncols,
                      .d = d,
                      .cols = {cols, cols + per * ncols},
+                     .kinds = {kinds, kinds + per * (ncols / 32)},
                      .r = &r,
                      .io = io,
                      .err = err,
@@ -481,5 +507,6 @@ int vx_voxel_write_binvox(const vx_bitgrid *g, const char *path, const vx_voxel_
     if (ok && rle_zeros(&r, (uint64_t)(d - nx) * d * d)) ok = 0;
     if (ok && r.run && rle_flush(&r)) ok = 0;
     free(cols);
+    free(kinds);
     return vx_out_close(&o, ok, err);
 }
