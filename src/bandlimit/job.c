@@ -338,6 +338,15 @@ static int render_run_gl(vx_job_run *r, const vx_mesh *mesh, const void *params,
     }
     s->radius = 0.5 * sqrt(diag);
     s->P = ext * (1 + 2 * VX_BL_PAD);
+    /* the voxels output's voxel (interp.c: P / N) must make a .vdb */
+    if (p.outputs[OUT_VOXELS] && !vx_vdb_voxel_size_ok(s->P / p.N)) {
+        vx_err_set(err, VX_EUNPROC, "voxel_size_too_small",
+                   "the voxels output's voxel size is %.6g (the box %.6g / N %d), under the "
+                   "%.6g that OpenVDB's transforms take: a mesh in smaller units, or no "
+                   "voxels output",
+                   s->P / p.N, s->P, (int)p.N, vx_vdb_min_voxel_size());
+        goto out;
+    }
     vx_voxelize_desc d = {0};
     for (int a = 0; a < 3; a++) {
         s->box_origin[a] = s->centre[a] - s->P / 2;

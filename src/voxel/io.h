@@ -126,6 +126,14 @@ int vx_vdb_merge_write(vx_vdb_merge *m, vx_vdb_class cls, const vx_grid *grid,
 int vx_voxel_write_vdb_float(const float *v, const int dims[3], const double origin[3], double h,
                              const char *name, const char *mesh, const char *path, vx_err *err);
 
+/* Nonzero when voxel size h can make a .vdb: OpenVDB's linear transforms
+ * refuse a scale whose determinant h^3 is under 3e-15 ("Non-zero scale
+ * values required"), so h must be at least ~1.4423e-5 world units (with a
+ * margin of 1e-6 on h^3 for the ulps OpenVDB's map loses). */
+int vx_vdb_voxel_size_ok(double h);
+/* The smallest h that can (for messages). */
+double vx_vdb_min_voxel_size(void);
+
 /* Bytes the vdb writer may hold in memory beyond the bit grid, known from
  * the dims (OpenVDB's trees for a grid whose every leaf is partial: the
  * worst case; a 0/1 fog grid's or a level set's topology only, their float

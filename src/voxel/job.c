@@ -217,6 +217,20 @@ static int brick_size_of(const vparams *p, const int dims[3], const vx_limits *l
     return n > t ? BRICK_DEFAULT : 0;
 }
 
+/* A .vdb's voxel size h against OpenVDB's smallest (vx_vdb_voxel_size_ok):
+ * what names the parameter that gives h; code invalid_params at submission,
+ * voxel_size_too_small once the mesh gives h. */
+static int check_vdb_voxel(const vparams *p, double h, const char *what, const char *code,
+                           vx_err *err)
+{
+    if (p->format != F_VDB || vx_vdb_voxel_size_ok(h)) return 0;
+    return vx_err_set(err, VX_EUNPROC, code,
+                      "%s gives a voxel size of %.6g, under the %.6g that OpenVDB's transforms "
+                      "take: a .vdb needs larger voxels (or a mesh in smaller units); the "
+                      "other formats have no such bound",
+                      what, h, vx_vdb_min_voxel_size());
+}
+
 static int check_grid(const int dims[3], const vparams *p, const vx_limits *lim, const char *what,
                       vx_err_kind kind, vx_err *err)
 {
@@ -361,10 +375,13 @@ static int voxelize_check(void *params, const vx_limits *lim, vx_err *err)
                 err, VX_EUNPROC, "invalid_params",
                 "params.padding is not allowed with params.grid (make the box larger)");
         int dims[3] = {(int)p->grid.dims[0], (int)p->grid.dims[1], (int)p->grid.dims[2]};
+        if (check_vdb_voxel(p, p->grid.voxel_size, "params.grid.voxel_size", "invalid_params", err))
+            return -1;
         return check_grid(dims, p, lim, "params.grid", VX_EUNPROC, err);
     }
-    if (p->voxel_size_set) return 0; /* the dims depend on the mesh: checked in run_gl */
-    p->resolution_set = 1;           /* the default */
+    if (p->voxel_size_set) /* the dims depend on the mesh: checked in run_gl */
+        return check_vdb_voxel(p, p->voxel_size, "params.voxel_size", "invalid_params", err);
+    p->resolution_set = 1; /* the default */
     /* The dims depend on the mesh's bbox; check the largest grid the
      * resolution can give (a cubic bbox), so that a job never fails for a
      * limit its params already broke. */
@@ -444,9 +461,9 @@ static int grid_of(const vparams *p, const vx_mesh *mesh, const vx_limits *lim, 
                  ? vx_grid_from_resolution(mesh, (int)p->resolution, (int)p->padding, g, err)
                  : vx_grid_from_voxel_size(mesh, p->voxel_size, (int)p->padding, g, err);
     if (rc) return -1;
-    return check_grid(g->dims, p, lim,
-                      p->resolution_set ? "params.resolution" : "params.voxel_size", VX_ETOOBIG,
-                      err);
+    const char *what = p->resolution_set ? "params.resolution" : "params.voxel_size";
+    if (check_vdb_voxel(p, g->h, what, "voxel_size_too_small", err)) return -1;
+    return check_grid(g->dims, p, lim, what, VX_ETOOBIG, err);
 }
 
 /* The engine's desc for p on grid g (no progress hook yet). */

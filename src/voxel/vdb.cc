@@ -572,6 +572,23 @@ struct TreeRows {
 
 } // namespace
 
+// OpenVDB's ScaleMap refuses h^3 under 3 Tolerance<double> (3e-15); the
+// scale it checks is taken back from the map's matrix, translation and all,
+// and may be an ulp or two under h: a margin of 1e-6 on h^3 keeps clear.
+extern "C" int vx_vdb_voxel_size_ok(double h)
+{
+    return h > 0 && std::isfinite(h) &&
+           h * h * h >= 3.0 * openvdb::math::Tolerance<double>::value() * (1 + 1e-6);
+}
+
+extern "C" double vx_vdb_min_voxel_size(void)
+{
+    double h = std::cbrt(3.0 * openvdb::math::Tolerance<double>::value() * (1 + 1e-6));
+    while (!vx_vdb_voxel_size_ok(h))
+        h = std::nextafter(h, HUGE_VAL);
+    return h;
+}
+
 extern "C" uint64_t vx_voxel_vdb_bytes(const int dims[3], vx_vdb_class cls, int coverage)
 {
     uint64_t n = (uint64_t)dims[0] * (uint64_t)dims[1] * (uint64_t)dims[2];

@@ -163,5 +163,21 @@ bad "zero light" '{"lights":[{"direction":[0,0,0]}]}' "params.lights\[0\].direct
 bad "filter D0" '{"filter":{"D0":-1}}' params.filter.D0
 bad "too many pixels" '{"width":8192,"height":8192,"compare":true}' params.width
 
+# A mesh so small that its voxels are under what OpenVDB's transforms take
+# (h^3 >= 3e-15): the voxels output fails the job with voxel_size_too_small
+# (not an OpenVDB exception as io_error at the end); without it the render
+# runs.
+tet_obj() { # FILE SCALE
+    printf 'v %s 0 0\nv 0 %s 0\nv 0 0 %s\nv 0 0 0\nf 1 2 3\nf 1 3 4\nf 1 4 2\nf 2 4 3\n' "$2" "$2" "$2" >"$1"
+}
+tet_obj "$TMP/tiny.obj" 1e-4
+upload "$TMP/tiny.obj"
+expect_status "upload tiny" 201
+TINY=$MESH_ID
+run_job render "$TINY" '{"N":32,"outputs":["voxels"]}'
+check "tiny mesh, voxels output: voxel_size_too_small" \
+    jq -e '.state == "failed" and .error.code == "voxel_size_too_small"' "$TMP/job.json"
+job "tiny mesh, image only" "$TINY" '{"N":32}'
+
 stop_daemon
 finish

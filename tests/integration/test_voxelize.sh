@@ -318,5 +318,28 @@ check "plates fog 512^3 over memory: the job fails with job_memory_limit" \
 vox "plates bool 512^3" "$M_plates" "{$PG,\"format\":\"vdb\",\"vdb_grid\":\"bool\"}"
 check "plates: 64 plates of 2 voxels" test "$(st voxels_inside)" = $((64 * 2 * 512 * 512))
 
+# A .vdb needs a voxel of at least ~1.44e-5 (OpenVDB's transforms refuse
+# h^3 under 3e-15); the other formats have no such bound. A tetrahedron of
+# edge 1e-4 at resolution 32 (h 3.1e-6) fails as vdb with
+# voxel_size_too_small, runs as raw8; explicit voxel sizes under the bound
+# are 422; edge 4.7e-4 (h 1.47e-5, just over) writes a .vdb.
+tet_obj() { # FILE SCALE
+    printf 'v %s 0 0\nv 0 %s 0\nv 0 0 %s\nv 0 0 0\nf 1 2 3\nf 1 3 4\nf 1 4 2\nf 2 4 3\n' "$2" "$2" "$2" >"$1"
+}
+tet_obj "$TMP/tiny.obj" 1e-4
+upload "$TMP/tiny.obj"
+expect_status "upload tiny" 201
+M_tiny=$MESH_ID
+run_job voxelize "$M_tiny" '{"resolution":32,"format":"vdb"}'
+check "tiny vdb: the job fails with voxel_size_too_small" \
+    jq -e '.state == "failed" and .error.code == "voxel_size_too_small"' "$TMP/job.json"
+vox "tiny raw8" "$M_tiny" '{"resolution":32,"format":"raw8"}'
+check "tiny raw8: voxels set" test "$(st voxels_inside)" -gt 0
+bad "vdb voxel_size 1e-6" '{"voxel_size":1e-6,"format":"vdb"}' params.voxel_size
+bad "vdb grid voxel_size 1e-6" '{"grid":{"origin":[0,0,0],"voxel_size":1e-6,"dims":[4,4,4]}}' params.grid.voxel_size
+tet_obj "$TMP/small.obj" 4.7e-4
+upload "$TMP/small.obj"
+vox "small vdb (h just over the bound)" "$MESH_ID" '{"resolution":32,"format":"vdb"}'
+
 stop_daemon
 finish

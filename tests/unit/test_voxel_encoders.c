@@ -3,6 +3,7 @@
  * raw8, raw1 and binvox byte for byte against voxel-by-voxel encoders
  * written here; .vdb (every grid class) through the vdbcheck tool, which
  * builds its reference tree voxel by voxel through OpenVDB's accessor. */
+#include <math.h>
 #include <setjmp.h>
 #include <stdarg.h>
 #include <stddef.h>
@@ -251,6 +252,29 @@ static void test_vdb_fog_budget(void **st)
     }
 }
 
+/* vx_vdb_voxel_size_ok is OpenVDB's own bound, with a margin of 1e-6 on
+ * h^3: a grid of voxel vx_vdb_min_voxel_size (at an origin off zero) writes,
+ * and 1e-6 under it the check refuses and OpenVDB's writer fails too (a job
+ * refuses such a grid before it runs). */
+static void test_vdb_min_voxel(void **st)
+{
+    const double h = vx_vdb_min_voxel_size(), under = h * (1 - 1e-6);
+    assert_true(h > 1.44e-5 && h < 1.45e-5);
+    assert_true(vx_vdb_voxel_size_ok(h));
+    assert_false(vx_vdb_voxel_size_ok(under));
+    assert_false(vx_vdb_voxel_size_ok(NAN));
+    vx_bitgrid g;
+    random_grid(&g, 16, 16, 16, 3, 0);
+    char p[256];
+    snprintf(p, sizeof p, "%s/minvoxel.vdb", dir);
+    vx_err err;
+    g.grid.h = h;
+    assert_int_equal(vx_voxel_write_vdb(&g, VX_VDB_FOG, NULL, p, NULL, &err), 0);
+    g.grid.h = under;
+    assert_int_equal(vx_voxel_write_vdb(&g, VX_VDB_FOG, NULL, p, NULL, &err), -1);
+    vx_bitgrid_free(&g);
+}
+
 /* The progress hook: fractions seen, in order. */
 typedef struct seen {
     double f[4096];
@@ -316,9 +340,9 @@ static int teardown(void **st)
 int main(void)
 {
     const struct CMUnitTest tests[] = {
-        cmocka_unit_test(test_raw_binvox), cmocka_unit_test(test_raw_wide_rows),
-        cmocka_unit_test(test_vdb),        cmocka_unit_test(test_vdb_fog_budget),
-        cmocka_unit_test(test_progress),
+        cmocka_unit_test(test_raw_binvox),    cmocka_unit_test(test_raw_wide_rows),
+        cmocka_unit_test(test_vdb),           cmocka_unit_test(test_vdb_fog_budget),
+        cmocka_unit_test(test_vdb_min_voxel), cmocka_unit_test(test_progress),
     };
     return cmocka_run_group_tests(tests, setup, teardown);
 }
