@@ -83,6 +83,10 @@ typedef enum vx_vdb_class { VX_VDB_LEVEL_SET = 0, VX_VDB_FOG, VX_VDB_BOOL } vx_v
 int vx_voxel_write_vdb(const vx_bitgrid *g, vx_vdb_class cls, const vx_vdb_meta *meta,
                        const char *path, const vx_voxel_io *io, vx_err *err);
 
+/* The largest |index| a .vdb's voxels may have: OpenVDB's coordinates are
+ * 32-bit, and its nodes' bounds (origin + edge) must not wrap either. */
+#define VX_VDB_MAX_INDEX (1L << 30)
+
 /* vx_voxel_write_vdb with voxel (0,0,0) at index `at` of the file's index
  * space (multiples of 8, leaf-aligned): a brick of a larger grid whose
  * corner g->grid.origin is the whole grid's (index_offset already folded

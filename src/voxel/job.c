@@ -363,11 +363,19 @@ static int voxelize_check(void *params, const vx_limits *lim, vx_err *err)
             return vx_err_set(err, VX_EUNPROC, "invalid_params",
                               "params.vdb_index_base needs params.grid (the box's index_offset "
                               "says where it lies) and params.bricks {\"size\": 0}");
-        for (int a = 0; a < 3; a++)
-            if ((p->grid.index_offset[a] - p->vdb_index_base[a]) % 8)
+        for (int a = 0; a < 3; a++) {
+            const long at = p->grid.index_offset[a] - p->vdb_index_base[a];
+            if (at % 8)
                 return vx_err_set(err, VX_EUNPROC, "invalid_params",
                                   "params.grid.index_offset - params.vdb_index_base must be a "
                                   "multiple of 8 on every axis (OpenVDB's leaf edge)");
+            if (at < -VX_VDB_MAX_INDEX || at + (long)p->grid.dims[a] > VX_VDB_MAX_INDEX)
+                return vx_err_set(err, VX_EUNPROC, "invalid_params",
+                                  "params.grid.index_offset - params.vdb_index_base puts the "
+                                  "box at %ld..%ld along axis %d of the .vdb's index space, "
+                                  "outside +-2^30 (OpenVDB's coordinates are 32-bit)",
+                                  at, at + (long)p->grid.dims[a] - 1, a);
+        }
     }
     if (p->grid_set) {
         if (p->padding)

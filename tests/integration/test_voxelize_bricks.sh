@@ -190,6 +190,8 @@ bad "manifest of level sets" '{"bricks":{"size":64},"merge":false,"vdb_grid":"le
 bad "dense format past one job" '{"resolution":4096,"format":"raw1"}' "2048^3 for one job"
 bad "vdb_index_base off the leaf grid" '{"grid":{"origin":[0,0,0],"voxel_size":0.1,"dims":[8,8,8],"index_offset":[4,0,0]},"bricks":{"size":0},"vdb_index_base":[0,0,0]}' "multiple of 8"
 bad "vdb_index_base with a dense format" '{"grid":{"origin":[0,0,0],"voxel_size":0.1,"dims":[8,8,8]},"bricks":{"size":0},"format":"raw8","vdb_index_base":[0,0,0]}' 'params.format "vdb"'
+bad "vdb_index_base past 32-bit coordinates" '{"grid":{"origin":[0,0,0],"voxel_size":0.1,"dims":[16,16,16],"index_offset":[2147483640,0,0]},"bricks":{"size":0},"vdb_index_base":[0,0,0]}' "outside +-2^30"
+bad "vdb_index_base far below" '{"grid":{"origin":[0,0,0],"voxel_size":0.1,"dims":[16,16,16],"index_offset":[0,-1099511627776,0]},"bricks":{"size":0},"vdb_index_base":[0,0,0]}' "axis 1"
 bad "vdb_index_base without a grid" '{"resolution":32,"bricks":{"size":0},"vdb_index_base":[0,0,0]}' "params.grid"
 stop_daemon
 
