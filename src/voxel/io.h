@@ -137,6 +137,10 @@ int vx_voxel_write_vdb_float(const float *v, const int dims[3], const double ori
 int vx_vdb_voxel_size_ok(double h);
 /* The smallest h that can (for messages). */
 double vx_vdb_min_voxel_size(void);
+/* The largest voxel size a grid of class cls can have: a level set's
+ * background, 3 voxels, must be a finite float (FLT_MAX / 3); HUGE_VAL for
+ * fog and bool. */
+double vx_vdb_max_voxel_size(int cls);
 
 /* Bytes the vdb writer may hold in memory beyond the bit grid, known from
  * the dims (OpenVDB's trees for a grid whose every leaf is partial: the

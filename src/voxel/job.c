@@ -217,18 +217,27 @@ static int brick_size_of(const vparams *p, const int dims[3], const vx_limits *l
     return n > t ? BRICK_DEFAULT : 0;
 }
 
-/* A .vdb's voxel size h against OpenVDB's smallest (vx_vdb_voxel_size_ok):
- * what names the parameter that gives h; code invalid_params at submission,
- * voxel_size_too_small once the mesh gives h. */
-static int check_vdb_voxel(const vparams *p, double h, const char *what, const char *code,
+/* A .vdb's voxel size h against OpenVDB's smallest (vx_vdb_voxel_size_ok)
+ * and a level set's largest: what names the parameter that gives h; at
+ * submission invalid_params, once the mesh gives h voxel_size_too_small or
+ * voxel_size_too_large. */
+static int check_vdb_voxel(const vparams *p, double h, const char *what, int submission,
                            vx_err *err)
 {
-    if (p->format != F_VDB || vx_vdb_voxel_size_ok(h)) return 0;
-    return vx_err_set(err, VX_EUNPROC, code,
-                      "%s gives a voxel size of %.6g, under the %.6g that OpenVDB's transforms "
-                      "take: a .vdb needs larger voxels (or a mesh in smaller units); the "
-                      "other formats have no such bound",
-                      what, h, vx_vdb_min_voxel_size());
+    if (p->format != F_VDB) return 0;
+    if (!vx_vdb_voxel_size_ok(h))
+        return vx_err_set(err, VX_EUNPROC, submission ? "invalid_params" : "voxel_size_too_small",
+                          "%s gives a voxel size of %.6g, under the %.6g that OpenVDB's "
+                          "transforms take: a .vdb needs larger voxels (or a mesh in smaller "
+                          "units); the other formats have no such bound",
+                          what, h, vx_vdb_min_voxel_size());
+    const double max = vx_vdb_max_voxel_size(p->vdb_grid);
+    if (h > max)
+        return vx_err_set(err, VX_EUNPROC, submission ? "invalid_params" : "voxel_size_too_large",
+                          "%s gives a voxel size of %.6g, over the %.6g whose 3-voxel distances "
+                          "a level set's floats hold: smaller voxels, or vdb_grid fog or bool",
+                          what, h, max);
+    return 0;
 }
 
 static int check_grid(const int dims[3], const vparams *p, const vx_limits *lim, const char *what,
@@ -383,12 +392,11 @@ static int voxelize_check(void *params, const vx_limits *lim, vx_err *err)
                 err, VX_EUNPROC, "invalid_params",
                 "params.padding is not allowed with params.grid (make the box larger)");
         int dims[3] = {(int)p->grid.dims[0], (int)p->grid.dims[1], (int)p->grid.dims[2]};
-        if (check_vdb_voxel(p, p->grid.voxel_size, "params.grid.voxel_size", "invalid_params", err))
-            return -1;
+        if (check_vdb_voxel(p, p->grid.voxel_size, "params.grid.voxel_size", 1, err)) return -1;
         return check_grid(dims, p, lim, "params.grid", VX_EUNPROC, err);
     }
     if (p->voxel_size_set) /* the dims depend on the mesh: checked in run_gl */
-        return check_vdb_voxel(p, p->voxel_size, "params.voxel_size", "invalid_params", err);
+        return check_vdb_voxel(p, p->voxel_size, "params.voxel_size", 1, err);
     p->resolution_set = 1; /* the default */
     /* The dims depend on the mesh's bbox; check the largest grid the
      * resolution can give (a cubic bbox), so that a job never fails for a
@@ -470,7 +478,7 @@ static int grid_of(const vparams *p, const vx_mesh *mesh, const vx_limits *lim, 
                  : vx_grid_from_voxel_size(mesh, p->voxel_size, (int)p->padding, g, err);
     if (rc) return -1;
     const char *what = p->resolution_set ? "params.resolution" : "params.voxel_size";
-    if (check_vdb_voxel(p, g->h, what, "voxel_size_too_small", err)) return -1;
+    if (check_vdb_voxel(p, g->h, what, 0, err)) return -1;
     return check_grid(g->dims, p, lim, what, VX_ETOOBIG, err);
 }
 

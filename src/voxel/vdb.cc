@@ -11,6 +11,7 @@
 // rows, or from a merged bool tree's rows a few z slabs at a time.
 #include <algorithm>
 #include <atomic>
+#include <cfloat>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
@@ -587,6 +588,11 @@ extern "C" double vx_vdb_min_voxel_size(void)
     while (!vx_vdb_voxel_size_ok(h))
         h = std::nextafter(h, HUGE_VAL);
     return h;
+}
+
+extern "C" double vx_vdb_max_voxel_size(int cls)
+{
+    return cls == VX_VDB_LEVEL_SET ? (double)FLT_MAX / VX_BAND_HALF : HUGE_VAL;
 }
 
 extern "C" uint64_t vx_voxel_vdb_bytes(const int dims[3], vx_vdb_class cls, int coverage)

@@ -186,7 +186,7 @@ int main(int argc, char **argv)
         const std::string diag = openvdb::tools::checkLevelSet(*f, 8);
         if (!diag.empty())
             return fprintf(stderr, "vdbcheck: OpenVDB's checkLevelSet: %s\n", diag.c_str()), 1;
-        if (f->background() != (float)(3 * h))
+        if (!std::isfinite(f->background()) || f->background() != (float)(3 * h))
             return fprintf(stderr, "vdbcheck: background %g, want 3 voxels\n", f->background()), 1;
         return 0;
     } catch (const std::exception &e) {

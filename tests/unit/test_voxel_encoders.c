@@ -263,6 +263,11 @@ static void test_vdb_min_voxel(void **st)
     assert_true(vx_vdb_voxel_size_ok(h));
     assert_false(vx_vdb_voxel_size_ok(under));
     assert_false(vx_vdb_voxel_size_ok(NAN));
+    /* a level set's background, 3 voxels, is a float: finite up to the max */
+    const double max = vx_vdb_max_voxel_size(VX_VDB_LEVEL_SET);
+    assert_true(isfinite((float)(3 * max)));
+    assert_false(isfinite((float)(3 * max * (1 + 1e-6))));
+    assert_true(isinf(vx_vdb_max_voxel_size(VX_VDB_FOG)));
     vx_bitgrid g;
     random_grid(&g, 16, 16, 16, 3, 0);
     char p[256];
