@@ -76,6 +76,10 @@ void eval_raw(uint base, float u, float v, out vec3 pos, out vec3 du, out vec3 d
 // Sine of the angle between a and b; n = unit a x b (when nonzero).
 float cross_unit(vec3 a, vec3 b, out vec3 n)
 {
+    float ma = max(max(abs(a.x), abs(a.y)), abs(a.z));
+    float mb = max(max(abs(b.x), abs(b.y)), abs(b.z));
+    a /= max(ma, 1e-37);
+    b /= max(mb, 1e-37);
     vec3 c = cross(a, b);
     float l = length(c), la = length(a), lb = length(b);
     n = l > 0.0 ? c / l : vec3(0.0, 0.0, 1.0);
@@ -150,6 +154,13 @@ void main()
             du += (dbi * bj) * qq + (bi * bj) * qu;
             dv += (bi * dbj) * qq + (bi * bj) * qv;
         }
+        // the tangents scale with the mesh: each to its largest component
+        // first, so that the products neither overflow nor underflow (the
+        // normal and the angle test do not change)
+        float mu = max(max(abs(du.x), abs(du.y)), abs(du.z));
+        float mv = max(max(abs(dv.x), abs(dv.y)), abs(dv.z));
+        du /= max(mu, 1e-37);
+        dv /= max(mv, 1e-37);
         vec3 nrm = cross(du, dv);
         float l2 = dot(nrm, nrm);
         nrm *= inversesqrt(l2);

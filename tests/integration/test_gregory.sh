@@ -247,5 +247,49 @@ check "frame topology (mesh id): job error" jq -e '.state == "failed" and .error
 greg "frame with too few vertices" "$M_prism" '{"divisions":2,"frames":[[0,0,0,1,1,1]]}'
 check "frame topology (positions): job error" jq -e '.state == "failed" and .error.code == "frame_topology"' "$TMP/job.json"
 
+# The mesh's scale: the same cube 1e10 and 1e-20 across has the unit cube's
+# normals and its positions times the scale (the tangents' products had
+# overflowed floats, giving zero normals from ~1e9 across, and underflowed
+# them below ~1e-18).
+cube_at() { # FILE SCALE
+    python3 - "$1" "$2" <<'EOF2'
+import sys
+s = float(sys.argv[2])
+with open(sys.argv[1], "w") as f:
+    for z in (-1, 1):
+        for y in (-1, 1):
+            for x in (-1, 1):
+                f.write("v %r %r %r\n" % (x * s, y * s, z * s))
+    for q in ((1, 3, 4, 2), (5, 6, 8, 7), (1, 2, 6, 5), (2, 4, 8, 6), (4, 3, 7, 8), (3, 1, 5, 7)):
+        f.write("f %d %d %d %d\n" % q)
+EOF2
+}
+for sc in 1 1e10 1e-20; do
+    cube_at "$TMP/cube_$sc.obj" "$sc"
+    upload "$TMP/cube_$sc.obj"
+    greg "cube at scale $sc" "$MESH_ID" '{"divisions":6}'
+    job_ok "cube at scale $sc"
+    fetch mesh "$TMP/cube_out_$sc.obj"
+done
+for sc in 1e10 1e-20; do
+    check "cube at scale $sc: the unit cube's normals, positions times $sc" python3 - "$TMP/cube_out_1.obj" "$TMP/cube_out_$sc.obj" "$sc" <<'EOF2'
+import sys
+def load(p):
+    v, n = [], []
+    for l in open(p):
+        t = l.split()
+        if t and t[0] in ("v", "vn"):
+            (v if t[0] == "v" else n).append([float(x) for x in t[1:4]])
+    return v, n
+v1, n1 = load(sys.argv[1])
+v, n = load(sys.argv[2])
+s = float(sys.argv[3])
+assert len(v) == len(v1) > 0 and len(n) == len(n1) == len(v)
+assert max(abs(a / s - b) for p, q in zip(v, v1) for a, b in zip(p, q)) < 1e-5
+assert max(abs(a - b) for p, q in zip(n, n1) for a, b in zip(p, q)) < 1e-4
+assert min(sum(a * a for a in p) for p in n) > 0.99
+EOF2
+done
+
 stop_daemon
 finish
