@@ -18,3 +18,7 @@ f 3 4 8 7
 f 4 1 5 8
 OBJ
 }
+# tet_obj FILE SCALE: a tetrahedron, edges SCALE along the axes from 0.
+tet_obj() {
+    printf 'v %s 0 0\nv 0 %s 0\nv 0 0 %s\nv 0 0 0\nf 1 2 3\nf 1 3 4\nf 1 4 2\nf 2 4 3\n' "$2" "$2" "$2" >"$1"
+}

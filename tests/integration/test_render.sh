@@ -7,6 +7,7 @@
 # image's six labelled panels; summed meshes; turntable frames; 16-bit PNG;
 # the VDB FloatGrid; orbit cameras; params errors and limits.
 source "$(dirname "$0")/lib.sh"
+source "$(dirname "$0")/box.sh"
 # 1G: the N=64 renders need about 0.3 GB; N=256 does not fit.
 start_daemon --max-job-memory 1G || exit 1
 
@@ -167,9 +168,6 @@ bad "too many pixels" '{"width":8192,"height":8192,"compare":true}' params.width
 # (h^3 >= 3e-15): the voxels output fails the job with voxel_size_too_small
 # (not an OpenVDB exception as io_error at the end); without it the render
 # runs.
-tet_obj() { # FILE SCALE
-    printf 'v %s 0 0\nv 0 %s 0\nv 0 0 %s\nv 0 0 0\nf 1 2 3\nf 1 3 4\nf 1 4 2\nf 2 4 3\n' "$2" "$2" "$2" >"$1"
-}
 tet_obj "$TMP/tiny.obj" 1e-4
 upload "$TMP/tiny.obj"
 expect_status "upload tiny" 201

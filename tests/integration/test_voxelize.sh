@@ -323,9 +323,6 @@ check "plates: 64 plates of 2 voxels" test "$(st voxels_inside)" = $((64 * 2 * 5
 # edge 1e-4 at resolution 32 (h 3.1e-6) fails as vdb with
 # voxel_size_too_small, runs as raw8; explicit voxel sizes under the bound
 # are 422; edge 4.7e-4 (h 1.47e-5, just over) writes a .vdb.
-tet_obj() { # FILE SCALE
-    printf 'v %s 0 0\nv 0 %s 0\nv 0 0 %s\nv 0 0 0\nf 1 2 3\nf 1 3 4\nf 1 4 2\nf 2 4 3\n' "$2" "$2" "$2" >"$1"
-}
 tet_obj "$TMP/tiny.obj" 1e-4
 upload "$TMP/tiny.obj"
 expect_status "upload tiny" 201
