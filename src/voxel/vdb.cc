@@ -72,7 +72,8 @@ openvdb::math::Transform::Ptr transform_of(const vx_grid &gr)
 // bytes depend only on the leaf and on the stream's compression and
 // background. So windows of leaves are written into memory streams in
 // parallel, a chunk each, and appended in order: the bytes of
-// Tree::writeBuffers (vdbcheck reads every value back).
+// Tree::writeBuffers (vdbcheck compares them with it, on the grid read
+// back).
 class ParallelFloatGrid final : public openvdb::FloatGrid
 {
   public:
