@@ -4,6 +4,7 @@
  * (approximate-cc, osd.h) and the output layout -> OBJ / PLY / Draco per
  * frame. */
 #include <errno.h>
+#include <float.h>
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -64,18 +65,20 @@ static long frame_count(const cJSON *f, size_t index, vx_err *err)
     const cJSON *e;
     cJSON_ArrayForEach(e, f)
     {
-        int is_num = cJSON_IsNumber(e) && isfinite(e->valuedouble);
+        /* positions are tessellated in floats: within +-FLT_MAX */
+        int is_num = cJSON_IsNumber(e) && fabs(e->valuedouble) <= FLT_MAX;
         int is_triple = cJSON_IsArray(e) && cJSON_GetArraySize(e) == 3;
         if (is_triple)
             for (int c = 0; c < 3; c++) {
                 const cJSON *x = cJSON_GetArrayItem(e, c);
-                is_triple &= cJSON_IsNumber(x) && isfinite(x->valuedouble);
+                is_triple &= cJSON_IsNumber(x) && fabs(x->valuedouble) <= FLT_MAX;
             }
         if (nested < 0) nested = is_triple;
         if (nested ? !is_triple : !is_num)
             return vx_err_set(err, VX_EUNPROC, "invalid_params",
-                              "params.frames[%zu][%ld] must be a finite number (flat x, y, z "
-                              "list) or an [x, y, z] array, the same form throughout",
+                              "params.frames[%zu][%ld] must be a finite number within the range "
+                              "of 32-bit floats (flat x, y, z list) or an [x, y, z] array of "
+                              "them, the same form throughout",
                               index, n);
         n++;
     }

@@ -1,5 +1,7 @@
 #include "mesh/intake.h"
 
+#include <float.h>
+#include <math.h>
 #include <stdio.h>
 #include <string.h>
 
@@ -179,6 +181,15 @@ const char *vx_intake_ext_of_name(const char *name)
 
 int vx_intake_check(const vx_mesh *m, vx_err *err)
 {
+    /* every engine works in 32-bit floats (GL, the patches, the writers) */
+    for (int a = 0; a < 3; a++)
+        if (!(fabs(m->bbox_min[a]) <= FLT_MAX && fabs(m->bbox_max[a]) <= FLT_MAX))
+            return vx_err_set(err, VX_EUNPROC, "coordinate_out_of_range",
+                              "the mesh reaches %g along axis %d, beyond what 32-bit floats hold "
+                              "(+-%g): the engines work in floats",
+                              fabs(m->bbox_min[a]) > fabs(m->bbox_max[a]) ? m->bbox_min[a]
+                                                                          : m->bbox_max[a],
+                              a, (double)FLT_MAX);
     if (m->degenerate_tris == m->ntris)
         return vx_err_set(err, VX_EUNPROC, "degenerate_mesh",
                           "every triangle of the mesh has zero area");

@@ -30,6 +30,9 @@ bad_obj "face with two vertices" 400 obj_face_short 'v 0 0 0\nv 1 0 0\nf 1 2\n'
 bad_obj "face repeating a vertex" 400 obj_face_repeat 'v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 2\n'
 bad_obj "no faces" 422 obj_no_faces 'v 0 0 0\nv 1 0 0\nv 0 1 0\n'
 bad_obj "only degenerate triangles" 422 degenerate_mesh 'v 0 0 0\nv 1 0 0\nv 2 0 0\nf 1 2 3\n'
+# every engine works in floats: a coordinate past FLT_MAX (a double here)
+bad_obj "coordinate past 32-bit floats" 422 coordinate_out_of_range 'v 0 0 0\nv 1e39 0 0\nv 0 1 0\nf 1 2 3\n'
+bad_obj "negative coordinate past 32-bit floats" 422 coordinate_out_of_range 'v 0 0 0\nv 1 0 0\nv 0 0 -4e38\nf 1 2 3\n'
 head -c 3000 /dev/urandom >"$TMP/noise.bin"
 printf 'DRACO' | cat - "$TMP/noise.bin" >"$TMP/corrupt.drc"
 api POST /v1/meshes -H "Content-Type: model/x-draco" --data-binary "@$TMP/corrupt.drc"

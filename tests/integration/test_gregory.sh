@@ -244,6 +244,13 @@ greg "spot over max_triangles" "$M_spot" '{"divisions":16}'
 check "triangle limit: job error" jq -e '.state == "failed" and .error.code == "triangle_limit"' "$TMP/job.json"
 greg "frame of another topology" "$M_prism" "{\"divisions\":2,\"frames\":[\"$M_spot\"]}"
 check "frame topology (mesh id): job error" jq -e '.state == "failed" and .error.code == "frame_topology"' "$TMP/job.json"
+# frame positions are tessellated in floats: a coordinate past FLT_MAX is
+# refused at submission (it came out as NaN vertices)
+api POST /v1/jobs -H "Content-Type: application/json" \
+    -d "{\"mesh\":\"$M_prism\",\"kind\":\"gregory\",\"params\":{\"frames\":[[1e39,0,0]]}}"
+expect_error "frame coordinate past 32-bit floats" 422 invalid_params
+check "frame coordinate past 32-bit floats: message names params.frames[0][0]" \
+    jq -e '.error.message | test("frames\\[0\\]\\[0\\]")' "$BODY"
 greg "frame with too few vertices" "$M_prism" '{"divisions":2,"frames":[[0,0,0,1,1,1]]}'
 check "frame topology (positions): job error" jq -e '.state == "failed" and .error.code == "frame_topology"' "$TMP/job.json"
 
