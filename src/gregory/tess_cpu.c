@@ -87,21 +87,9 @@ static void eval_raw(const float *c, float u, float v, float pos[3], float du[3]
     }
 }
 
-/* The sine of the angle between a and b; n = unit a x b (+z when 0).
- * Each of a and b is taken to its largest component first: neither the
- * normal nor the sine depends on their lengths, and the products stay
- * within floats whatever the mesh's scale. */
-static float cross_unit(const float a_[3], const float b_[3], float n[3])
+/* The sine of the angle between a and b; n = unit a x b (+z when 0). */
+static float cross_unit(const float a[3], const float b[3], float n[3])
 {
-    float a[3], b[3], ma = 1e-37f, mb = 1e-37f; /* 1 / m stays finite */
-    for (int k = 0; k < 3; k++) {
-        ma = fmaxf(ma, fabsf(a_[k]));
-        mb = fmaxf(mb, fabsf(b_[k]));
-    }
-    for (int k = 0; k < 3; k++) {
-        a[k] = a_[k] / ma;
-        b[k] = b_[k] / mb;
-    }
     float c[3] = {a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]};
     float l = sqrtf(c[0] * c[0] + c[1] * c[1] + c[2] * c[2]);
     float la = sqrtf(a[0] * a[0] + a[1] * a[1] + a[2] * a[2]);
@@ -112,7 +100,8 @@ static float cross_unit(const float a_[3], const float b_[3], float n[3])
 }
 
 /* The shader's fallback at a collapsed edge or corner: the normal found
- * approaching along the diagonal towards the centre. */
+ * approaching along the diagonal towards the centre (c: the control points
+ * at the patch's scale, as the row evaluates them). */
 static void degenerate_normal(const float *c, float u, float v, float n[3])
 {
     for (float t = 1e-4f; t < 0.1f; t *= 10.0f) {
