@@ -415,18 +415,20 @@ static int peel(peel_ctx *c, layer_set *o, int axis, int k0, int rows, int *nslo
     while (((int64_t)1 << ibbits) - 2 < n)
         ibbits++;
     o->shift = 32 - ibbits;
-    /* power-of-two viewports (xing.h) over the w x h image */
-    const int vw = vx_xing_pow2(w), vh = vx_xing_pow2(h);
+    /* the w x h image's targets bound the fragments, the viewport holds
+     * the mesh (xing.h) */
+    const int off[2] = {uoff, voff};
+    const double lo[2] = {c->tlo[ua], c->tlo[va]}, hi[2] = {c->thi[ua], c->thi[va]};
+    float ndc[4];
+    vx_xing_viewport(w, h, off, 1, lo, hi, ndc);
     GLuint p = c->prog_peel;
     glProgramUniform3i(p, 0, axis, ua, va);
-    glProgramUniform4f(p, 1, (float)(2.0 / vw), (float)(-1.0 - 2.0 * uoff / vw), (float)(2.0 / vh),
-                       (float)(-1.0 - 2.0 * voff / vh));
+    glProgramUniform4f(p, 1, ndc[0], ndc[1], ndc[2], ndc[3]);
     glProgramUniform2i(p, 3, o->shift, n);
     glProgramUniform1i(p, 4, 0);
     glProgramUniform2i(p, 6, uoff, voff);
 
     glBindFramebuffer(GL_FRAMEBUFFER, o->fbo);
-    glViewport(0, 0, vw, vh);
     /* State other code may have left behind; cull nothing, both faces are
      * crossings; no depth test (the cascade orders the crossings). */
     vx_peel_raster_state();

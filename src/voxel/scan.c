@@ -155,16 +155,17 @@ static int draw(peel_ctx *c, int k0, int rows)
     glNamedFramebufferParameteri(o->scan_fbo, GL_FRAMEBUFFER_DEFAULT_WIDTH, w);
     glNamedFramebufferParameteri(o->scan_fbo, GL_FRAMEBUFFER_DEFAULT_HEIGHT, h);
     GLuint p = c->prog_scan;
-    /* voxel_peel.vert: ray x, window (y, z - k0); a power-of-two viewport
-     * (xing.h) over the w x h image, which bounds the fragments */
-    const int vw = vx_xing_pow2(w), vh = vx_xing_pow2(h);
+    /* voxel_peel.vert: ray x, window (y, z - k0); the framebuffer's w x h
+     * bounds the fragments, the viewport holds the mesh (xing.h) */
+    const int off[2] = {0, k0};
+    const double lo[2] = {c->tlo[1], c->tlo[2]}, hi[2] = {c->thi[1], c->thi[2]};
+    float ndc[4];
+    vx_xing_viewport(w, h, off, 1, lo, hi, ndc);
     glProgramUniform3i(p, 0, 0, 1, 2);
-    glProgramUniform4f(p, 1, (float)(2.0 / vw), -1.0f, (float)(2.0 / vh),
-                       (float)(-1.0 - 2.0 * k0 / vh));
+    glProgramUniform4f(p, 1, ndc[0], ndc[1], ndc[2], ndc[3]);
     glProgramUniform4i(p, 2, c->dims[0], w, (int)delta_row_uints(c), (int)block_row_uints(c));
     glProgramUniform1i(p, 3, k0);
     glBindFramebuffer(GL_FRAMEBUFFER, o->scan_fbo);
-    glViewport(0, 0, vw, vh);
     /* State other code may have left behind: no tests, no culling (both
      * faces are crossings), every covered pixel centre one fragment. */
     glDisable(GL_DEPTH_TEST);

@@ -601,19 +601,20 @@ static int do_tile(run *r, int a, int k0, const int rect[4], int w0, int w1, vx_
     for (int b0 = w0; b0 < w1; b0 += p->batch) {
         int nb = w1 - b0 < p->batch ? w1 - b0 : p->batch;
         glBindFramebuffer(GL_FRAMEBUFFER, r->o->fbo);
-        /* A power-of-two viewport (xing.h) scissored to the tile's image:
-         * window = (grid units - tile corner) * ss, exactly. */
+        /* A viewport that holds the mesh (xing.h), scissored to the
+         * tile's image: window = (grid units - tile corner) * ss, exactly. */
         int iw = rect[2] * p->ss, ih = rect[3] * p->ss;
-        int vw = vx_xing_pow2(iw), vh = vx_xing_pow2(ih);
-        glViewport(0, 0, vw, vh);
+        const int off[2] = {rect[0], rect[1]};
+        const double lo[2] = {r->wmin_all[pm[0]], r->wmin_all[pm[1]]},
+                     hi[2] = {r->wmax_all[pm[0]], r->wmax_all[pm[1]]};
+        float ndc[4];
+        vx_xing_viewport(iw, ih, off, p->ss, lo, hi, ndc);
         glEnable(GL_SCISSOR_TEST);
         glScissor(0, 0, iw, ih);
         glUseProgram(r->draw_prog);
         glBindVertexArray(r->o->vao);
         glProgramUniform3i(r->draw_prog, 0, pm[0], pm[1], pm[2]);
-        glProgramUniform4f(r->draw_prog, 1, (float)(2.0 * p->ss / vw),
-                           (float)(-1.0 - 2.0 * p->ss * rect[0] / vw), (float)(2.0 * p->ss / vh),
-                           (float)(-1.0 - 2.0 * p->ss * rect[1] / vh));
+        glProgramUniform4f(r->draw_prog, 1, ndc[0], ndc[1], ndc[2], ndc[3]);
         glProgramUniform2i(r->draw_prog, 7, rect[0] * p->ss, rect[1] * p->ss);
         vx_gl_timer timer = {0};
         int timing = 0;

@@ -2,6 +2,7 @@
  * shaders/voxel_xing.glsl (xing.h). */
 #include "voxel/xing.h"
 
+#include <math.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -87,4 +88,41 @@ int vx_xing_pow2(int n)
     while (p < n)
         p *= 2;
     return p;
+}
+
+/* One axis of vx_xing_viewport: origin and size in window pixels. */
+static void view_axis(int n, int off, int ss, double lo, double hi, int maxdim, double bound,
+                      int *origin, int *size)
+{
+    *origin = 0;
+    *size = vx_xing_pow2(n);
+    if (!(lo <= hi)) return; /* no vertices */
+    /* the vertices' window range, a pixel wider (positions are exact) */
+    double a = floor((lo - off) * ss) - 1, b = ceil((hi - off) * ss) + 1;
+    if (a > 0) a = 0;
+    if (b < n) b = n;
+    if (a < -bound || b - a > maxdim) return;
+    *origin = (int)a;
+    *size = vx_xing_pow2((int)(b - a));
+    if (*size > maxdim) *origin = 0, *size = vx_xing_pow2(n);
+}
+
+void vx_xing_viewport(int w, int h, const int off[2], int ss, const double lo[2],
+                      const double hi[2], float ndc[4])
+{
+    GLint dims[2] = {0, 0};
+    GLfloat range[2] = {0, 0};
+    glGetIntegerv(GL_MAX_VIEWPORT_DIMS, dims);
+    glGetFloatv(GL_VIEWPORT_BOUNDS_RANGE, range);
+    const double bound = fmin(-(double)range[0], (double)range[1]);
+    int o[2], sz[2];
+    view_axis(w, off[0], ss, lo[0], hi[0], dims[0], bound, &o[0], &sz[0]);
+    view_axis(h, off[1], ss, lo[1], hi[1], dims[1], bound, &o[1], &sz[1]);
+    glViewport(o[0], o[1], sz[0], sz[1]);
+    /* window = (NDC + 1) size / 2 + origin = (p - off) ss: exact in float,
+     * the scale a power of two and NDC within [-1, 1] */
+    for (int a = 0; a < 2; a++) {
+        ndc[2 * a] = (float)(2.0 * ss / sz[a]);
+        ndc[2 * a + 1] = (float)(-1.0 - 2.0 * ((double)off[a] * ss + o[a]) / sz[a]);
+    }
 }

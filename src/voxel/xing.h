@@ -9,9 +9,14 @@
  *      brick's integer index, so they are exact floats (within 2^15 voxels
  *      of the brick);
  *   2. window coordinates are those positions times powers of two
- *      (vx_xing_pow2 viewports, scissored to the image), so the
- *      rasterizer's fixed-point coverage test sees a brick as an integer
- *      translate of the whole grid and covers the same pixel centres;
+ *      (vx_xing_viewport: power-of-two viewports, the image bounded by
+ *      the framebuffer or a scissor), so the rasterizer's fixed-point
+ *      coverage test sees a brick as an integer translate of the whole
+ *      grid and covers the same pixel centres; and the viewport holds
+ *      every vertex drawn, so nothing is clipped: a clipped triangle's new
+ *      corners are snapped again, and its edges can then cover other
+ *      pixel centres (on llvmpipe a slab's rows differed from the whole
+ *      grid's where the viewport ended at the slab);
  *   3. the fragment shader computes where the ray crosses the triangle
  *      (xing() in the shader) in double from the lattice's own unsnapped
  *      units (p - origin) / h, the same numbers for every brick, and the
@@ -59,5 +64,13 @@ void vx_xing_draw(GLuint prog, size_t first, size_t n);
 /* The least power of two >= n (n >= 1): viewport sizes whose NDC scale
  * 2 / size is exact. */
 int vx_xing_pow2(int n);
+/* Sets the viewport for an image of w x h pixels whose window coordinates
+ * are (p - off) * ss for p a rasterizer position (grid units) along each
+ * window axis, and writes the vertex shader's mapping: NDC = p * ndc[0] +
+ * ndc[1] across, p * ndc[2] + ndc[3] up. The viewport holds the image and
+ * the vertices' positions lo..hi along each axis when the GPU's viewport
+ * limits allow, else the image alone; its sizes are powers of two. */
+void vx_xing_viewport(int w, int h, const int off[2], int ss, const double lo[2],
+                      const double hi[2], float ndc[4]);
 
 #endif
