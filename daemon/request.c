@@ -5,10 +5,13 @@
 #include "request.h"
 
 #include <stdio.h>
+#include <stdlib.h>
 #include <string.h>
 #include <strings.h>
 #include <sys/random.h>
 #include <time.h>
+
+#include <cJSON.h>
 
 #include "jobs/jobs.h"
 #include "store/store.h"
@@ -520,6 +523,119 @@ int vx_req_json_text_ok(const char *body, size_t len, char *msg, size_t msgn)
     return 0;
 }
 
+/* Length of the JSON number at p (p < end, *p '-' or a digit), or 0 when
+ * the run of number characters there is not one. */
+static size_t json_number(const char *p, const char *end)
+{
+    const char *s = p, *e = p;
+    while (e < end && ((*e >= '0' && *e <= '9') || *e == '-' || *e == '+' || *e == '.' ||
+                       *e == 'e' || *e == 'E'))
+        e++;
+    if (s < e && *s == '-') s++;
+    if (s == e || *s < '0' || *s > '9') return 0;
+    if (*s++ == '0') {
+        if (s < e && *s >= '0' && *s <= '9') return 0; /* a leading zero */
+    } else {
+        while (s < e && *s >= '0' && *s <= '9')
+            s++;
+    }
+    if (s < e && *s == '.') {
+        const char *f = ++s;
+        while (s < e && *s >= '0' && *s <= '9')
+            s++;
+        if (s == f) return 0;
+    }
+    if (s < e && (*s == 'e' || *s == 'E')) {
+        s++;
+        if (s < e && (*s == '+' || *s == '-')) s++;
+        const char *f = s;
+        while (s < e && *s >= '0' && *s <= '9')
+            s++;
+        if (s == f) return 0;
+    }
+    return s == e ? (size_t)(e - p) : 0;
+}
+
+static int cmp_key(const void *a, const void *b)
+{
+    return strcmp(*(const char *const *)a, *(const char *const *)b);
+}
+
+/* The first key an object of v's tree holds twice, or NULL. */
+static const char *json_dup_key(const cJSON *v)
+{
+    if (!cJSON_IsObject(v) && !cJSON_IsArray(v)) return NULL;
+    size_t n = 0;
+    for (const cJSON *c = v->child; c; c = c->next) {
+        const char *d = json_dup_key(c);
+        if (d) return d;
+        n++;
+    }
+    if (!cJSON_IsObject(v) || n < 2) return NULL;
+    const char **k = malloc(n * sizeof *k);
+    if (!k) return "?"; /* no memory to check: refuse rather than guess */
+    n = 0;
+    for (const cJSON *c = v->child; c; c = c->next)
+        k[n++] = c->string;
+    qsort(k, n, sizeof *k, cmp_key);
+    const char *dup = NULL;
+    for (size_t i = 1; i < n && !dup; i++)
+        if (!strcmp(k[i - 1], k[i])) dup = k[i];
+    free(k);
+    return dup;
+}
+
+cJSON *vx_req_json_parse(const char *body, size_t len, char *msg, size_t msgn)
+{
+    if (vx_req_json_text_ok(body, len, msg, msgn)) return NULL;
+    const char *end = body + len;
+    for (const char *p = body; p < end;) {
+        if (*p == '"') { /* a string: escapes are two characters, no raw controls */
+            for (p++; p < end && *p != '"'; p++) {
+                if ((unsigned char)*p < 0x20) {
+                    snprintf(msg, msgn, "a string holds a raw control character (escape it)");
+                    return NULL;
+                }
+                if (*p == '\\') p++;
+            }
+            p++;
+        } else if (*p == '-' || (*p >= '0' && *p <= '9')) {
+            size_t n = json_number(p, end);
+            if (!n) {
+                snprintf(msg, msgn, "a number is not in JSON's form (at byte %zu)",
+                         (size_t)(p - body));
+                return NULL;
+            }
+            p += n;
+        } else {
+            p++;
+        }
+    }
+    const char *stop = NULL;
+    cJSON *doc = cJSON_ParseWithLengthOpts(body, len, &stop, 0);
+    if (!doc) {
+        snprintf(msg, msgn, "the body is not valid JSON");
+        return NULL;
+    }
+    while (stop && stop < end && (*stop == ' ' || *stop == '\t' || *stop == '\n' || *stop == '\r'))
+        stop++;
+    if (stop && stop < end) {
+        snprintf(msg, msgn, "the body has more after its JSON value (at byte %zu)",
+                 (size_t)(stop - body));
+        cJSON_Delete(doc);
+        return NULL;
+    }
+    const char *dup = json_dup_key(doc);
+    if (dup) {
+        char key[64];
+        snprintf(msg, msgn, "an object has the key \"%s\" twice",
+                 vx_req_utf8_sanitize(dup, key, sizeof key));
+        cJSON_Delete(doc);
+        return NULL;
+    }
+    return doc;
+}
+
 /* ---- content negotiation, ranges, validators ------------------------ */
 
 /* The q of one Accept-Encoding element's parameters (p after the coding,
@@ -573,16 +689,16 @@ vx_req_coding vx_req_accept_coding(const char *ae)
     return VX_CODING_IDENTITY;
 }
 
-/* Parses digits at *p (at most 19), advancing it. 0 or -1. */
+/* Parses digits at *p, advancing it; a number past 19 digits is
+ * UINT64_MAX (past any end: a first-pos that large is 416, as any other
+ * past the end). 0 or -1. */
 static int range_num(const char **p, uint64_t *v)
 {
     const char *s = *p;
     uint64_t x = 0;
     int n = 0;
-    for (; *s >= '0' && *s <= '9'; s++, n++) {
-        if (n == 19) return -1;
-        x = x * 10 + (uint64_t)(*s - '0');
-    }
+    for (; *s >= '0' && *s <= '9'; s++, n++)
+        x = n >= 19 ? UINT64_MAX : x * 10 + (uint64_t)(*s - '0');
     if (!n) return -1;
     *p = s;
     *v = x;

@@ -141,5 +141,11 @@ char *vx_req_utf8_sanitize(const char *s, char *out, size_t n);
 /* Checks a JSON body before parsing: 0 when it is valid UTF-8 without a
  * \u0000 escape (which would cut a string short), else -1 with why in msg. */
 int vx_req_json_text_ok(const char *body, size_t len, char *msg, size_t msgn);
+/* Parses a JSON request body strictly (RFC 8259): vx_req_json_text_ok's
+ * checks, then no raw control character in a string, numbers in JSON's
+ * grammar (no leading zeros, "1.", "+1" or ".5"), nothing but whitespace
+ * after the value, and no object with a key twice. The document, or NULL
+ * with why in msg. */
+struct cJSON *vx_req_json_parse(const char *body, size_t len, char *msg, size_t msgn);
 
 #endif

@@ -55,10 +55,8 @@ int vx_route_job_post(vx_http *h, struct MHD_Connection *c, req *r)
                             "the JSON body is larger than max-json-bytes");
     double wait_s = wait_seconds(h, r);
     char why[128];
-    if (vx_req_json_text_ok(r->buf ? r->buf : "", r->len, why, sizeof why))
-        return vx_resp_fail(c, r, VX_EINVAL, "invalid_json", "%s", why);
-    cJSON *doc = cJSON_ParseWithLength(r->buf ? r->buf : "", r->len);
-    if (!doc) return vx_resp_fail(c, r, VX_EINVAL, "invalid_json", "the body is not valid JSON");
+    cJSON *doc = vx_req_json_parse(r->buf ? r->buf : "", r->len, why, sizeof why);
+    if (!doc) return vx_resp_fail(c, r, VX_EINVAL, "invalid_json", "%s", why);
     const char *msg = job_request_error(doc);
     const cJSON *mesh = cJSON_GetObjectItemCaseSensitive(doc, "mesh");
     const cJSON *kind = cJSON_GetObjectItemCaseSensitive(doc, "kind");

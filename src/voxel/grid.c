@@ -116,11 +116,15 @@ int vx_grid_from_voxel_size(const vx_mesh *m, double h, int padding, vx_grid *ou
     if (padding < 0) return vx_err_set(err, VX_EUNPROC, "invalid_params", "padding must be >= 0");
     for (int a = 0; a < 3; a++) {
         double ext = m->bbox_max[a] - m->bbox_min[a];
-        double n = ceil(ext / h);
+        /* ext / h a rounding error above an integer (0.9 / 0.1 is
+         * 9.000000000000002, and ext / (ext / r) can be r + 2^-50 r) is that
+         * integer: an extra layer would put the centres on the bbox's faces */
+        double n = ceil(ext / h * (1.0 - 0x1p-40));
         if (n < 1) n = 1;
         if (n + 2.0 * padding > 1 << 20)
             return vx_err_set(err, VX_EUNPROC, "invalid_params",
-                              "voxel_size %g gives %.0f cells along an axis", h, n);
+                              "voxel_size %g gives %.3g cells along an axis (at most 2^20)", h,
+                              n + 2.0 * padding);
         out->dims[a] = (int)n + 2 * padding;
         out->index[a] = 0; /* the grid is its own lattice */
         /* centre the grid on the bbox: the leftover of ceil splits evenly */

@@ -326,6 +326,10 @@ static int voxelize_check(void *params, const vx_limits *lim, vx_err *err)
             return vx_err_set(err, VX_EUNPROC, "invalid_params",
                               "params.inside \"winding\" samples voxel centres: params.supersample "
                               "2 needs params.samples \"faces\"");
+        if (fill_of(p) == VX_FILL_SURFACE)
+            return vx_err_set(err, VX_EUNPROC, "invalid_params",
+                              "params.inside \"winding\" fills solids: params.fill \"surface\" "
+                              "(peel's shell) takes no winding number");
     }
     /* Slicing fills solids only; auto slices whenever it supersamples
      * (cube pattern). Refused here, not when the job runs (issue 14). */
@@ -993,7 +997,7 @@ static int encode_bricks(vx_job_run *r, const vparams *p, vstate *s, vprog *prog
         if (!rc && lim && vx_vdb_merge_bytes(m) + one > lim)
             rc = vx_err_set(err, VX_ETOOBIG, "job_memory_limit",
                             "the merged OpenVDB tree of %d of %d bricks holds %llu bytes, "
-                            "near the job memory limit of %llu (vdb_grid \" bool\" needs less)",
+                            "near the job memory limit of %llu (vdb_grid \"bool\" needs less)",
                             b + 1, s->nbricks, (unsigned long long)vx_vdb_merge_bytes(m),
                             (unsigned long long)lim);
     }
@@ -1001,7 +1005,7 @@ static int encode_bricks(vx_job_run *r, const vparams *p, vstate *s, vprog *prog
         vx_vdb_merge_bytes(m) + vx_vdb_merge_level_set_bytes(m, corner.dims) > lim)
         rc = vx_err_set(err, VX_ETOOBIG, "job_memory_limit",
                         "the level set of the merged grid needs about %llu bytes, over the job "
-                        "memory limit of %llu (vdb_grid \" fog\" or \" bool\" needs less)",
+                        "memory limit of %llu (vdb_grid \"fog\" or \"bool\" needs less)",
                         (unsigned long long)(vx_vdb_merge_bytes(m) +
                                              vx_vdb_merge_level_set_bytes(m, corner.dims)),
                         (unsigned long long)lim);

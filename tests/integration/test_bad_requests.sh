@@ -78,6 +78,18 @@ api POST /v1/jobs "${JSON[@]}" -d '{"mesh": '
 expect_error "malformed JSON" 400 invalid_json
 api POST /v1/jobs "${JSON[@]}" -d '[1,2]'
 expect_error "JSON not an object" 400 invalid_request
+# strict JSON (RFC 8259): each of these would otherwise run as a job
+api POST /v1/jobs "${JSON[@]}" -d "{\"mesh\":\"$BOX\",\"kind\":\"preview\"} x"
+expect_error "junk after the JSON value" 400 invalid_json
+api POST /v1/jobs "${JSON[@]}" -d "{\"mesh\":\"$BOX\",\"kind\":\"preview\"}{}"
+expect_error "a second JSON value" 400 invalid_json
+api POST /v1/jobs "${JSON[@]}" -d "{\"mesh\":\"$BOX\",\"kind\":\"voxelize\",\"params\":{\"resolution\":016}}"
+expect_error "a number with a leading zero" 400 invalid_json
+api POST /v1/jobs "${JSON[@]}" -d "{\"mesh\":\"$BOX\",\"kind\":\"voxelize\",\"params\":{\"resolution\":8,\"resolution\":16}}"
+expect_error "a key twice" 400 invalid_json
+check "the error names the key" jq -e '.error.message | contains("resolution")' "$BODY"
+api POST /v1/jobs "${JSON[@]}" --data-binary "$(printf '{"mesh":"%s","kind":"pre\tview"}' "$BOX")"
+expect_error "a raw tab in a string" 400 invalid_json
 api POST /v1/jobs "${JSON[@]}" -d '{"kind":"preview"}'
 expect_error "missing mesh" 400 invalid_request
 api POST /v1/jobs "${JSON[@]}" -d "{\"mesh\":\"$BOX\",\"kind\":7}"

@@ -118,7 +118,8 @@ echo "note: bunny nonzero run $(jq .timings.run_ms "$TMP/job.json") ms"
 
 # Refused at submission.
 for p in '{"inside":"winding","method":"peel"}' '{"inside":"winding","method":"slice"}' \
-    '{"inside":"winding","supersample":2}' '{"inside":"winding","supersample":2,"samples":"cube"}'; do
+    '{"inside":"winding","supersample":2}' '{"inside":"winding","supersample":2,"samples":"cube"}' \
+    '{"inside":"winding","fill":"surface"}'; do
     api POST /v1/jobs -H "Content-Type: application/json" -d "{\"mesh\":\"$M_nest\",\"kind\":\"voxelize\",\"params\":$p}"
     expect_error "refused: $p" 422 invalid_params
 done

@@ -414,6 +414,51 @@ static void test_hostile(void **state)
 }
 
 /* auto runs cpu where the renderer is a CPU rasterizer, scan elsewhere */
+/* A resolution's dims: an extent that is a whole number of voxels up to
+ * rounding gets that many (0.9 / 0.1 is 9.000000000000002: an extra layer
+ * put the centres on the box's faces), and the box's voxels are exact. */
+static void test_resolution_dims(void **state)
+{
+    (void)state;
+    vx_mesh *m = shape_box((double[]){0.1, 0.2, 0.3}, (double[]){1.7, 1.1, 0.9});
+    vx_voxelize_desc d = {0};
+    assert_int_equal(vx_grid_from_resolution(m, 16, 0, &d.grid, NULL), 0);
+    assert_int_equal(d.grid.dims[0], 16);
+    assert_int_equal(d.grid.dims[1], 9);
+    assert_int_equal(d.grid.dims[2], 6);
+    vx_bitgrid b;
+    vx_voxelize_stats st;
+    assert_int_equal(vx_voxelize_cpu(m, &d, &b, &st, NULL), 0);
+    assert_int_equal(vx_bitgrid_count(&b), 16 * 9 * 6);
+    vx_bitgrid_free(&b);
+    vx_mesh_free(m);
+    /* every resolution of boxes with decimal extents, and a cube at 1e30 */
+    for (int r = 1; r <= 300; r++) {
+        static const double ext[][3] = {{1.6, 0.9, 0.6}, {0.3, 0.7, 0.1}, {3.3, 1.1, 2.2}};
+        for (int e = 0; e < 3; e++) {
+            m = shape_box((double[]){0.1, 0.2, 0.3},
+                          (double[]){0.1 + ext[e][0], 0.2 + ext[e][1], 0.3 + ext[e][2]});
+            assert_int_equal(vx_grid_from_resolution(m, r, 0, &d.grid, NULL), 0);
+            double big = fmax(ext[e][0], fmax(ext[e][1], ext[e][2]));
+            for (int a = 0; a < 3; a++) {
+                /* the exact count, ext / big * r, to a rounding error */
+                double want = ext[e][a] / big * r;
+                int n = (int)ceil(want - 1e-9);
+                if (n < 1) n = 1;
+                if (d.grid.dims[a] != n)
+                    fail_msg("res %d box %d axis %d: dims %d, want %d", r, e, a, d.grid.dims[a], n);
+            }
+            vx_mesh_free(m);
+        }
+    }
+    m = shape_box((double[]){1e30, 2e30, 0}, (double[]){1.8e30, 2.9e30, 1e30});
+    assert_int_equal(vx_grid_from_resolution(m, 16, 0, &d.grid, NULL), 0);
+    assert_int_equal(d.grid.dims[0], 13);
+    assert_int_equal(d.grid.dims[1], 15);
+    assert_int_equal(d.grid.dims[2], 16);
+    vx_mesh_free(m);
+}
+
 static void test_auto(void **state)
 {
     (void)state;
@@ -440,6 +485,7 @@ int main(void)
         cmocka_unit_test(test_same_as_scan),
         cmocka_unit_test(test_bands),
         cmocka_unit_test(test_hostile),
+        cmocka_unit_test(test_resolution_dims),
         cmocka_unit_test(test_auto),
     };
     return cmocka_run_group_tests(tests, vx_test_gl_setup, vx_test_gl_teardown);
