@@ -417,8 +417,12 @@ vx_http *vx_http_start(const vx_http_desc *desc, vx_err *err)
     }
     unsigned flags = MHD_USE_INTERNAL_POLLING_THREAD | MHD_USE_EPOLL | MHD_ALLOW_SUSPEND_RESUME |
                      MHD_USE_ERROR_LOG | (v6 ? MHD_USE_IPv6 : 0);
-    /* Without --reuse-port libmicrohttpd sets only SO_REUSEADDR: a port
-     * another process listens on cannot be bound (EADDRINUSE). */
+    /* --reuse-port: MHD_OPTION_LISTENING_ADDRESS_REUSE 1 (SO_REUSEPORT).
+     * Without it the option is left out (MHD_OPTION_END stops the list
+     * there): libmicrohttpd's default sets SO_REUSEADDR, so a restart binds
+     * while the last run's connections sit in TIME_WAIT, and a port another
+     * process listens on still cannot be bound (EADDRINUSE). An explicit 0
+     * would turn SO_REUSEADDR off. */
     errno = 0;
     h->mhd = MHD_start_daemon(
         flags, 0, NULL, NULL, on_request, h, MHD_OPTION_EXTERNAL_LOGGER, mhd_log, NULL,
@@ -429,8 +433,8 @@ vx_http *vx_http_start(const vx_http_desc *desc, vx_err *err)
         (unsigned)cfg->max_connections_per_ip, MHD_OPTION_CONNECTION_MEMORY_LIMIT,
         (size_t)(256 * 1024), MHD_OPTION_NOTIFY_COMPLETED, on_completed, h,
         MHD_OPTION_NOTIFY_CONNECTION, vx_conns_notify, h->conns, MHD_OPTION_URI_LOG_CALLBACK,
-        vx_conns_on_uri, h->conns, MHD_OPTION_LISTENING_ADDRESS_REUSE, cfg->reuse_port ? 1u : 0u,
-        MHD_OPTION_END);
+        vx_conns_on_uri, h->conns,
+        cfg->reuse_port ? MHD_OPTION_LISTENING_ADDRESS_REUSE : MHD_OPTION_END, 1u, MHD_OPTION_END);
     if (!h->mhd) {
         int e = errno;
         vx_err_set(err, VX_EIO, "listen_failed", "cannot listen on %s: %s", cfg->listen,

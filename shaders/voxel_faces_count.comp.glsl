@@ -1,11 +1,9 @@
 #version 450 core
 // The faces sample pattern's count (src/voxel/faces.c): a voxel's count is
-// its centre and the centres of its six faces inside, read from the four
-// sample grids of one z slab:
-//   g0  the grid itself                       rows     x ny     x wx words
-//   g1  moved half a voxel against x (nx + 1)  rows     x ny     x wx1
-//   g2  moved against y (ny + 1 rows)          rows     x (ny+1) x wx
-//   g3  moved against z (one more z row)       (rows+1) x ny     x wx
+// its centre and the six samples just inside its faces that are inside,
+// read from the seven sample grids of one z slab, each with the voxel
+// grid's layout (rows x ny x wx words), one after another in G: the
+// centres, then the lower and upper face samples along x, y and z.
 // One invocation per output word (32 voxels along x, the voxel.h layout)
 // adds the seven sample words bit-sliced (full adders: three count bits per
 // voxel), writes the word of voxels whose count reaches the threshold
@@ -14,28 +12,21 @@
 // that this word covers whole is stored; one it shares with the neighbouring
 // word (nx not a multiple of 4) is ORed into the buffer the host cleared.
 layout(local_size_x = 64) in;
-layout(std430, binding = 0) readonly buffer G0 { uint g0[]; };
-layout(std430, binding = 1) readonly buffer G1 { uint g1[]; };
-layout(std430, binding = 2) readonly buffer G2 { uint g2[]; };
-layout(std430, binding = 3) readonly buffer G3 { uint g3[]; };
-layout(std430, binding = 4) writeonly buffer Bits { uint bits[]; };
-layout(std430, binding = 5) coherent buffer Counts { uint counts[]; };
+layout(std430, binding = 0) readonly buffer G { uint g[]; };
+layout(std430, binding = 1) writeonly buffer Bits { uint bits[]; };
+layout(std430, binding = 2) coherent buffer Counts { uint counts[]; };
 layout(location = 0) uniform ivec4 u_grid; // nx, ny, wx, slab rows
-layout(location = 1) uniform ivec2 u_par;  // words per row of g1, threshold (1..7)
+layout(location = 1) uniform int u_threshold; // 1..7
 
 void main()
 {
     uint id = gl_GlobalInvocationID.y * (gl_NumWorkGroups.x * 64u) + gl_GlobalInvocationID.x;
     uint nx = uint(u_grid.x), ny = uint(u_grid.y), wx = uint(u_grid.z);
-    uint wx1 = uint(u_par.x);
-    if (id >= ny * wx * uint(u_grid.w)) return;
+    uint slab = ny * wx * uint(u_grid.w);
+    if (id >= slab) return;
     uint w = id % wx, row = id / wx; // row = z * ny + y within the slab
-    uint y = row % ny, z = row / ny;
-    uint x0 = g1[row * wx1 + w], xn = w + 1u < wx1 ? g1[row * wx1 + w + 1u] : 0u;
-    uint r2 = (z * (ny + 1u) + y) * wx + w;
-    // the centre, the lower and upper face along x, along y, along z
-    uint s0 = g0[id], s1 = x0, s2 = (x0 >> 1) | (xn << 31), s3 = g2[r2], s4 = g2[r2 + wx],
-         s5 = g3[id], s6 = g3[id + ny * wx];
+    uint s0 = g[id], s1 = g[slab + id], s2 = g[2u * slab + id], s3 = g[3u * slab + id],
+         s4 = g[4u * slab + id], s5 = g[5u * slab + id], s6 = g[6u * slab + id];
     // 7 one-bit numbers per lane -> c2 c1 c0
     uint a0 = s0 ^ s1 ^ s2, a1 = (s0 & s1) | (s2 & (s0 ^ s1));
     uint b0 = s3 ^ s4 ^ s5, b1 = (s3 & s4) | (s5 & (s3 ^ s4));
@@ -50,7 +41,7 @@ void main()
     uint eq = 0xffffffffu, ge = 0u;
     for (int i = 2; i >= 0; i--) {
         uint x = i == 2 ? c2 : (i == 1 ? c1 : c0);
-        if (((u_par.y >> i) & 1) == 0) {
+        if (((u_threshold >> i) & 1) == 0) {
             ge |= eq & x;
             eq &= ~x;
         } else {

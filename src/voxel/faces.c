@@ -21,13 +21,19 @@
  * thresholds shrink the solid back towards centre sampling (4 of 7: the
  * centre's own answer wherever the surface is flat within the voxel).
  *
- * The samples are the centres of four grids: the voxel grid itself, and the
- * grid moved by half a voxel against x (one more voxel along x: its voxel i
- * is centred on the face between voxels i-1 and i), against y and against
- * z. Each is voxelized at its centres by the requested method (auto: scan),
- * with the same inside rule and tie rule; a voxel's count is its centre plus
+ * The samples are the centres of seven grids: the voxel grid itself, and
+ * for each axis the grid moved half a voxel less FACES_INSET against it
+ * and along it, whose voxel i is centred FACES_INSET inside voxel i's
+ * lower (upper) face. Inside the face, not on it: a face of the mesh lying
+ * on voxel faces (grid-aligned parts) is then never on a sample, and each
+ * voxel sees it from its own side. (Samples on the faces, shared by the
+ * voxels either side, met such a face in a tie, and the tie rule counted
+ * it for the voxel on one side only: a box filling voxels 1..3 exactly
+ * gave 8 voxels at threshold 7, and a layer on its low sides at 1.) Each
+ * is voxelized at its centres by the requested method (auto: scan), with
+ * the same inside rule and tie rule; a voxel's count is its centre plus
  * its two faces along each axis, added on the GPU (vx_faces_count,
- * shaders/voxel_faces_count.comp) a z slab at a time: the four sample slabs
+ * shaders/voxel_faces_count.comp) a z slab at a time: the seven sample slabs
  * go up, the bits and the per-voxel counts come back. */
 #include <stdlib.h>
 #include <string.h>
@@ -39,14 +45,19 @@
 
 typedef struct sub_progress {
     const vx_voxelize_desc *d;
-    int part; /* 0..3 the sample grids, 4 the count */
+    int part; /* 0..6 the sample grids, 7 the count */
 } sub_progress;
 
-/* The four runs take the first 90 % of the bar, the count the rest. */
+/* The face samples' distance inside the face, voxels: one snapping step
+ * (positions are multiples of it in every grid of the lattice, so none
+ * lies on a sample that is not on a voxel face too). */
+#define FACES_INSET (1.0 / VX_GRID_SNAP)
+
+/* The seven runs take the first 90 % of the bar, the count the rest. */
 static int progress(void *ud, double f, vx_err *err)
 {
     sub_progress *p = ud;
-    double at = p->part < 4 ? 0.9 * (p->part + f) / 4.0 : 0.9 + 0.1 * f;
+    double at = p->part < VX_FACES_SAMPLES ? 0.9 * (p->part + f) / VX_FACES_SAMPLES : 0.9 + 0.1 * f;
     return p->d->progress(p->d->ud, at, err);
 }
 
@@ -64,46 +75,29 @@ static void add_stats(vx_voxelize_stats *st, const vx_voxelize_stats *s)
     st->readback_ms += s->readback_ms;
 }
 
-/* Bytes of GPU buffers per slab: the four sample slabs, the bits and the
+/* Bytes of GPU buffers per slab: the seven sample slabs, the bits and the
  * counts. Small enough to stay in llvmpipe's caches between upload and
  * read-back, big enough that the round trips don't dominate (as scan.c's
  * SCAN_DELTA_CAP). */
 #define FACES_SLAB_CAP (16u << 20)
 
-/* Buffer bytes one z row of each of the six slab buffers needs. */
-static void row_bytes(const vx_bitgrid *out, size_t wx1, uint64_t b[6])
-{
-    const uint64_t ny = (uint64_t)out->grid.dims[1], wx = out->wx;
-    b[0] = ny * wx * 4u;
-    b[1] = ny * wx1 * 4u;
-    b[2] = (ny + 1u) * wx * 4u;
-    b[3] = ny * wx * 4u; /* and one more row per slab */
-    b[4] = ny * wx * 4u;
-    b[5] = ny * (uint64_t)out->grid.dims[0] + 1u; /* + rounding the slab up to uints */
-}
-
-int vx_faces_count(vx_gl *gl, const vx_bitgrid g[4], int threshold, vx_bitgrid *out,
+int vx_faces_count(vx_gl *gl, const vx_bitgrid g[VX_FACES_SAMPLES], int threshold, vx_bitgrid *out,
                    const vx_faces_count_desc *fd, vx_voxelize_stats *st, vx_err *err)
 {
     const int nx = out->grid.dims[0], ny = out->grid.dims[1], nz = out->grid.dims[2];
-    const size_t wx = out->wx, wx1 = g[1].wx;
-    uint64_t rb[6], per_row = 0, widest = 0;
-    row_bytes(out, wx1, rb);
-    for (int b = 0; b < 6; b++) {
-        per_row += rb[b];
-        if (rb[b] > widest) widest = rb[b];
-    }
+    const size_t wx = out->wx;
+    /* one z row: of a sample grid (and of the bits), of the counts */
+    const uint64_t rb = (uint64_t)ny * wx * 4u, rc_ = (uint64_t)ny * (uint64_t)nx;
+    const uint64_t per_row = (VX_FACES_SAMPLES + 1) * rb + rc_ + 4u;
+    const uint64_t widest = VX_FACES_SAMPLES * rb;
     const long max_ssbo = vx_gl_get_info(gl)->max_ssbo_bytes;
     uint64_t rows = FACES_SLAB_CAP / per_row;
-    if (max_ssbo > 0) { /* g3's slab has one row more */
-        const uint64_t fit = (uint64_t)max_ssbo / widest;
-        if (rows > (fit > 0 ? fit - 1 : 0)) rows = fit > 0 ? fit - 1 : 0;
-    }
+    if (max_ssbo > 0 && rows > (uint64_t)max_ssbo / widest) rows = (uint64_t)max_ssbo / widest;
     if (fd && fd->max_rows > 0 && rows > (uint64_t)fd->max_rows) rows = (uint64_t)fd->max_rows;
     if (fd && fd->max_bytes > 0 && rows > fd->max_bytes / per_row) rows = fd->max_bytes / per_row;
     if (rows > (uint64_t)nz) rows = (uint64_t)nz;
     if (rows < 1) {
-        if (max_ssbo > 0 && 2u * widest > (uint64_t)max_ssbo)
+        if (max_ssbo > 0 && widest > (uint64_t)max_ssbo)
             return vx_err_set(err, VX_ETOOBIG, "grid_too_large",
                               "one z layer of the faces count (%llu bytes) exceeds this GPU's "
                               "storage block size (%ld bytes)",
@@ -117,51 +111,49 @@ int vx_faces_count(vx_gl *gl, const vx_bitgrid g[4], int threshold, vx_bitgrid *
     if (!prog) return -1;
     while (glGetError() != GL_NO_ERROR) {
     }
-    GLuint buf[6];
-    glCreateBuffers(6, buf);
-    for (int b = 0; b < 6; b++)
-        glNamedBufferStorage(buf[b], (GLsizeiptr)((rb[b] * (rows + (b == 3)) + 3u) & ~3ull), NULL,
-                             GL_DYNAMIC_STORAGE_BIT);
+    /* the seven sample slabs one after another, the bits, the counts */
+    const uint64_t size[3] = {VX_FACES_SAMPLES * rb * rows, rb * rows, (rc_ * rows + 3u) & ~3ull};
+    GLuint buf[3];
+    glCreateBuffers(3, buf);
+    for (int b = 0; b < 3; b++)
+        glNamedBufferStorage(buf[b], (GLsizeiptr)size[b], NULL, GL_DYNAMIC_STORAGE_BIT);
     int rc = -1;
     if (vx_gl_check(gl, "faces.buffers", err)) goto done;
     glUseProgram(prog);
-    glProgramUniform4i(prog, 0, nx, ny, (int)wx, 0);
-    glProgramUniform2i(prog, 1, (int)wx1, threshold);
-    for (GLuint b = 0; b < 6; b++)
+    for (GLuint b = 0; b < 3; b++)
         glBindBufferBase(GL_SHADER_STORAGE_BUFFER, b, buf[b]);
     for (int k0 = 0; k0 < nz; k0 += (int)rows) {
         const int r = nz - k0 < (int)rows ? nz - k0 : (int)rows;
         if (fd && fd->progress && fd->progress(fd->ud, (double)k0 / nz, err)) goto done;
         double t0 = vx_mono_ms();
-        /* Each sample slab is contiguous in its grid: rows k0.. of g0-g2,
-         * and one more of g3 (the upper z faces). */
-        const uint64_t zn[4] = {(uint64_t)r, (uint64_t)r, (uint64_t)r, (uint64_t)r + 1u};
-        const uint64_t rstride[4] = {rb[0], rb[1], rb[2], rb[3]};
-        for (int s = 0; s < 4; s++)
-            glNamedBufferSubData(buf[s], 0, (GLsizeiptr)(rstride[s] * zn[s]),
-                                 (const char *)g[s].bits + rstride[s] * (uint64_t)k0);
-        glClearNamedBufferData(buf[5], GL_R32UI, GL_RED_INTEGER, GL_UNSIGNED_INT, NULL);
+        /* each sample slab is rows k0.. of its grid, contiguous */
+        for (int s = 0; s < VX_FACES_SAMPLES; s++)
+            glNamedBufferSubData(buf[0], (GLintptr)(rb * (uint64_t)r * (uint64_t)s),
+                                 (GLsizeiptr)(rb * (uint64_t)r),
+                                 (const char *)g[s].bits + rb * (uint64_t)k0);
+        glClearNamedBufferData(buf[2], GL_R32UI, GL_RED_INTEGER, GL_UNSIGNED_INT, NULL);
         st->upload_ms += vx_mono_ms() - t0;
         vx_gl_timer t;
         vx_gl_timer_begin(&t);
         glProgramUniform4i(prog, 0, nx, ny, (int)wx, r);
+        glProgramUniform1i(prog, 1, threshold);
         vx_peel_dispatch_2d((uint64_t)ny * wx * (uint64_t)r);
         glMemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT | GL_BUFFER_UPDATE_BARRIER_BIT);
         st->gpu_fill_ms += vx_gl_timer_end_compute_ms(&t);
         t0 = vx_mono_ms();
-        glGetNamedBufferSubData(buf[4], 0, (GLsizeiptr)(rb[4] * (uint64_t)r),
+        glGetNamedBufferSubData(buf[1], 0, (GLsizeiptr)(rb * (uint64_t)r),
                                 out->bits + (size_t)k0 * (size_t)ny * wx);
-        glGetNamedBufferSubData(buf[5], 0, (GLsizeiptr)((uint64_t)ny * (uint64_t)nx * (uint64_t)r),
+        glGetNamedBufferSubData(buf[2], 0, (GLsizeiptr)(rc_ * (uint64_t)r),
                                 out->counts + (size_t)k0 * (size_t)ny * (size_t)nx);
         st->readback_ms += vx_mono_ms() - t0;
         if (vx_gl_check(gl, "faces.count", err)) goto done;
     }
     rc = 0;
 done:
-    for (GLuint b = 0; b < 6; b++)
+    for (GLuint b = 0; b < 3; b++)
         glBindBufferBase(GL_SHADER_STORAGE_BUFFER, b, 0);
     glUseProgram(0);
-    glDeleteBuffers(6, buf);
+    glDeleteBuffers(3, buf);
     return rc;
 }
 
@@ -173,7 +165,7 @@ int vx_voxelize_faces(vx_gl *gl, const vx_mesh *m, const vx_voxelize_desc *d, vx
     memset(st, 0, sizeof *st);
     memset(out, 0, sizeof *out);
     const vx_grid *grid = &d->grid;
-    /* The result's bits and counts, then the four sample grids, live
+    /* The result's bits and counts, then the seven sample grids, live
      * together: each run gets what the ones before it left of max_memory. */
     uint64_t held = vx_bitgrid_bytes(grid->dims, 2);
     if (d->max_memory && held > d->max_memory)
@@ -185,7 +177,7 @@ int vx_voxelize_faces(vx_gl *gl, const vx_mesh *m, const vx_voxelize_desc *d, vx
     if (vx_bitgrid_alloc(out, grid, 1, err)) return -1;
     out->nsamples = 7;
 
-    vx_bitgrid g[4];
+    vx_bitgrid g[VX_FACES_SAMPLES];
     memset(g, 0, sizeof g);
     sub_progress sp = {d, 0};
     vx_voxelize_desc sub = *d;
@@ -194,12 +186,11 @@ int vx_voxelize_faces(vx_gl *gl, const vx_mesh *m, const vx_voxelize_desc *d, vx
     sub.progress = d->progress ? progress : NULL;
     sub.ud = &sp;
     int rc = -1;
-    for (int part = 0; part < 4; part++) {
+    for (int part = 0; part < VX_FACES_SAMPLES; part++) {
+        /* part 2a + 1: the lower faces along axis a, 2a + 2 the upper */
         sub.grid = *grid;
-        if (part > 0) {
-            sub.grid.origin[part - 1] -= 0.5 * grid->h;
-            sub.grid.dims[part - 1] += 1;
-        }
+        if (part > 0)
+            sub.grid.origin[(part - 1) / 2] += (part % 2 ? -1 : 1) * (0.5 - FACES_INSET) * grid->h;
         if (d->max_memory) {
             if (held >= d->max_memory) {
                 vx_err_set(err, VX_ETOOBIG, "job_memory_limit",
@@ -217,8 +208,8 @@ int vx_voxelize_faces(vx_gl *gl, const vx_mesh *m, const vx_voxelize_desc *d, vx
         add_stats(st, &s);
         held += vx_bitgrid_bytes(sub.grid.dims, 1);
     }
-    /* What the count may take: what the four runs left of max_memory. */
-    sp.part = 4;
+    /* What the count may take: what the seven runs left of max_memory. */
+    sp.part = VX_FACES_SAMPLES;
     vx_faces_count_desc fd = {
         .max_bytes = d->max_memory ? (held < d->max_memory ? d->max_memory - held : 1) : 0,
         .progress = d->progress ? progress : NULL,
@@ -227,7 +218,7 @@ int vx_voxelize_faces(vx_gl *gl, const vx_mesh *m, const vx_voxelize_desc *d, vx
     st->voxels_inside = vx_bitgrid_count(out);
     rc = 0;
 done:
-    for (int part = 0; part < 4; part++)
+    for (int part = 0; part < VX_FACES_SAMPLES; part++)
         vx_bitgrid_free(&g[part]);
     if (rc) vx_bitgrid_free(out);
     return rc;

@@ -18,14 +18,19 @@ typedef struct vx_faces_count_desc {
     void *ud;
 } vx_faces_count_desc;
 
-/* out->counts[i,j,k] = how many of voxel (i,j,k)'s centre (g[0]) and face
- * centres (g[1] lower and upper x, g[2] y, g[3] z: the grid moved half a
- * voxel against that axis, one voxel longer along it) are set, and out's
- * bits where that count >= threshold, counted on the GPU a z slab at a
- * time. out is allocated with counts, its grid the voxel grid; fd may be
- * NULL. Adds upload, count and read-back times to st. GL thread. 0 or -1
- * (grid_too_large, job_memory_limit, GL errors). */
-int vx_faces_count(vx_gl *gl, const vx_bitgrid g[4], int threshold, vx_bitgrid *out,
+/* The sample grids: the centres, then the lower and upper face samples
+ * along x, y and z. */
+#define VX_FACES_SAMPLES 7
+
+/* out->counts[i,j,k] = how many of the seven sample grids g (each of the
+ * voxel grid's dims: g[0] the centres, g[2a + 1] and g[2a + 2] the samples
+ * just inside voxel (i,j,k)'s lower and upper face along axis a) have
+ * voxel (i,j,k) set, and out's bits where that count >= threshold,
+ * counted on the GPU a z slab at a time. out is allocated with counts, its
+ * grid the voxel grid; fd may be NULL. Adds upload, count and read-back
+ * times to st. GL thread. 0 or -1 (grid_too_large, job_memory_limit, GL
+ * errors). */
+int vx_faces_count(vx_gl *gl, const vx_bitgrid g[VX_FACES_SAMPLES], int threshold, vx_bitgrid *out,
                    const vx_faces_count_desc *fd, vx_voxelize_stats *st, vx_err *err);
 
 #endif

@@ -2,6 +2,8 @@
 # One daemon per port (issue #10, defect 1): a second voxeld on a port that
 # is taken exits non-zero and says the address is in use; sharing the port
 # (SO_REUSEPORT) happens only when both ask for it with --reuse-port yes.
+# A restart on the port a stopped daemon served binds at once, with the
+# closed connections still in TIME_WAIT (SO_REUSEADDR).
 source "$(dirname "$0")/lib.sh"
 start_daemon || exit 1
 
@@ -36,7 +38,16 @@ check "its stderr says the address is in use" grep -aqi 'address in use' "$TMP/s
 check "its message names no server path" bash -c "! grep -a 'listen_failed' '$TMP/second.log' | grep -q '$TMP'"
 api GET /livez
 expect_status "the first daemon still serves" 200
+# connections the server closes leave it TIME_WAIT sockets on the port
+for i in 1 2 3; do
+    python3 -c 'import sys, urllib.request; urllib.request.urlopen(sys.argv[1] + "/livez").read()' "$BASE"
+done
 stop_daemon
+tw=$(ss -tan state time-wait "( sport = :$PORT )" 2>/dev/null | tail -n +2 | wc -l)
+echo "note: $tw TIME_WAIT sockets on port $PORT"
+second_daemon "$TMP/restart.log"
+rc=$?
+check "a restart on the stopped daemon's port starts at once (got $rc)" test "$rc" -eq 0
 
 # --reuse-port yes on both: the second one starts.
 start_daemon --reuse-port yes || exit 1

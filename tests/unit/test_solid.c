@@ -642,6 +642,7 @@ static void test_faces_pattern(void **state)
     (void)state;
     static const int off[7][3] = {{0, 0, 0}, {-1, 0, 0}, {1, 0, 0}, {0, -1, 0},
                                   {0, 1, 0}, {0, 0, -1}, {0, 0, 1}};
+    const double in = 0.5 - 1.0 / VX_GRID_SNAP; /* the samples just inside the faces */
     const double lo[3] = {1.3, 2.2, 0.7}, hi[3] = {5.8, 6.4, 3.1};
     vx_mesh *box = shape_box(lo, hi), *ball = shape_sphere(0.1, -0.05, 0.03, 1, 0);
     vx_voxelize_desc d = {
@@ -667,8 +668,8 @@ static void test_faces_pattern(void **state)
                     for (int i = 0; i < 8; i++) {
                         int want = 0;
                         for (int q = 0; q < 7; q++) {
-                            double p[3] = {i + 0.5 + 0.5 * off[q][0], j + 0.5 + 0.5 * off[q][1],
-                                           k + 0.5 + 0.5 * off[q][2]};
+                            double p[3] = {i + 0.5 + in * off[q][0], j + 0.5 + in * off[q][1],
+                                           k + 0.5 + in * off[q][2]};
                             want += box_has(lo, hi, p);
                         }
                         bad += b.counts[(k * 8 + j) * 8 + i] != want;
@@ -680,6 +681,36 @@ static void test_faces_pattern(void **state)
             assert_int_equal(st.voxels_inside, set);
             vx_bitgrid_free(&b);
         }
+
+    /* A box on voxel faces fills voxels 1..3 exactly: every sample of
+     * those voxels is inside and none of the others', at every threshold
+     * and by every method (samples on the faces counted the box's faces
+     * for the voxel below them only: 8 voxels at threshold 7, a layer on
+     * the low sides at 1). */
+    vx_mesh *aligned = shape_box((double[]){1, 1, 1}, (double[]){4, 4, 4});
+    const vx_method all[4] = {VX_METHOD_CPU, VX_METHOD_SCAN, VX_METHOD_PEEL, VX_METHOD_SLICE};
+    vx_voxelize_desc da = {
+        .grid = {{0, 0, 0}, 1, {6, 6, 6}}, .supersample = 2, .samples = VX_SAMPLES_FACES};
+    for (int mi = 0; mi < 4; mi++)
+        for (int thr = 1; thr <= 7; thr++) {
+            da.method = all[mi];
+            da.threshold = thr;
+            assert_int_equal(vx_voxelize(vx_test_gl, aligned, &da, &b, &st, &err), 0);
+            size_t bad = 0;
+            for (int k = 0; k < 6; k++)
+                for (int j = 0; j < 6; j++)
+                    for (int i = 0; i < 6; i++) {
+                        int in_box = i >= 1 && i <= 3 && j >= 1 && j <= 3 && k >= 1 && k <= 3;
+                        bad += b.counts[(k * 6 + j) * 6 + i] != (in_box ? 7 : 0);
+                        bad += vx_bitgrid_get(&b, i, j, k) != in_box;
+                    }
+            if (bad)
+                fprintf(stderr, "aligned box %s threshold %d: %zu wrong\n", st.method, thr, bad);
+            assert_int_equal(bad, 0);
+            assert_int_equal(st.voxels_inside, 27);
+            vx_bitgrid_free(&b);
+        }
+    vx_mesh_free(aligned);
 
     /* a sphere against the winding number at every sample */
     d.method = VX_METHOD_AUTO;
@@ -693,9 +724,9 @@ static void test_faces_pattern(void **state)
             for (int i = 0; i < g->dims[0]; i++, n++) {
                 int want = 0;
                 for (int q = 0; q < 7; q++) {
-                    double p[3] = {g->origin[0] + (i + 0.5 + 0.5 * off[q][0]) * g->h,
-                                   g->origin[1] + (j + 0.5 + 0.5 * off[q][1]) * g->h,
-                                   g->origin[2] + (k + 0.5 + 0.5 * off[q][2]) * g->h};
+                    double p[3] = {g->origin[0] + (i + 0.5 + in * off[q][0]) * g->h,
+                                   g->origin[1] + (j + 0.5 + in * off[q][1]) * g->h,
+                                   g->origin[2] + (k + 0.5 + in * off[q][2]) * g->h};
                     want += ref_winding_number(ball, p) > 0.5;
                 }
                 bad += b.counts[n] != want;
@@ -726,21 +757,18 @@ static void test_faces_pattern(void **state)
     vx_mesh_free(ball);
 }
 
-/* The four sample grids of a voxel grid (zeroed) and the result with counts. */
-static void alloc_samples(const vx_grid *grid, vx_bitgrid g[4], vx_bitgrid *out)
+/* The seven sample grids of a voxel grid (zeroed) and the result with counts. */
+static void alloc_samples(const vx_grid *grid, vx_bitgrid g[VX_FACES_SAMPLES], vx_bitgrid *out)
 {
     vx_err err = {0};
-    for (int s = 0; s < 4; s++) {
-        vx_grid gs = *grid;
-        if (s > 0) gs.dims[s - 1] += 1;
-        assert_int_equal(vx_bitgrid_alloc(&g[s], &gs, 0, &err), 0);
-    }
+    for (int s = 0; s < VX_FACES_SAMPLES; s++)
+        assert_int_equal(vx_bitgrid_alloc(&g[s], grid, 0, &err), 0);
     assert_int_equal(vx_bitgrid_alloc(out, grid, 1, &err), 0);
 }
 
-static void free_samples(vx_bitgrid g[4], vx_bitgrid *out)
+static void free_samples(vx_bitgrid g[VX_FACES_SAMPLES], vx_bitgrid *out)
 {
-    for (int s = 0; s < 4; s++)
+    for (int s = 0; s < VX_FACES_SAMPLES; s++)
         vx_bitgrid_free(&g[s]);
     vx_bitgrid_free(out);
 }
@@ -767,9 +795,9 @@ static void test_faces_count_random(void **state)
         if (it == 0) grid.dims[0] = 200, grid.dims[1] = 37, grid.dims[2] = 11;
         const int nx = grid.dims[0], ny = grid.dims[1], nz = grid.dims[2];
         const int density = rand() % 101; /* percent of sample bits set */
-        vx_bitgrid g[4], out;
+        vx_bitgrid g[VX_FACES_SAMPLES], out;
         alloc_samples(&grid, g, &out);
-        for (int s = 0; s < 4; s++) {
+        for (int s = 0; s < VX_FACES_SAMPLES; s++) {
             const int *gd = g[s].grid.dims;
             for (int k = 0; k < gd[2]; k++)
                 for (int j = 0; j < gd[1]; j++)
@@ -788,10 +816,9 @@ static void test_faces_count_random(void **state)
         for (int k = 0; k < nz; k++)
             for (int j = 0; j < ny; j++)
                 for (int i = 0; i < nx; i++) {
-                    int want = vx_bitgrid_get(&g[0], i, j, k) + vx_bitgrid_get(&g[1], i, j, k) +
-                               vx_bitgrid_get(&g[1], i + 1, j, k) + vx_bitgrid_get(&g[2], i, j, k) +
-                               vx_bitgrid_get(&g[2], i, j + 1, k) + vx_bitgrid_get(&g[3], i, j, k) +
-                               vx_bitgrid_get(&g[3], i, j, k + 1);
+                    int want = 0;
+                    for (int q = 0; q < VX_FACES_SAMPLES; q++)
+                        want += vx_bitgrid_get(&g[q], i, j, k);
                     bad += out.counts[((size_t)k * ny + j) * nx + i] != want;
                     bad += vx_bitgrid_get(&out, i, j, k) != (want >= thr);
                     checked++;
@@ -810,7 +837,7 @@ static void test_faces_count_random(void **state)
     /* a stop asked for between slabs ends the count with its error */
     {
         vx_grid grid = {.h = 1, .dims = {40, 9, 12}};
-        vx_bitgrid g[4], out;
+        vx_bitgrid g[VX_FACES_SAMPLES], out;
         alloc_samples(&grid, g, &out);
         int calls = 0;
         vx_faces_count_desc stop = {.max_rows = 2, .progress = stop_second, .ud = &calls};
@@ -823,7 +850,7 @@ static void test_faces_count_random(void **state)
 
     /* a budget too small for one z row */
     vx_grid grid = {.h = 1, .dims = {40, 40, 4}};
-    vx_bitgrid g[4], out;
+    vx_bitgrid g[VX_FACES_SAMPLES], out;
     alloc_samples(&grid, g, &out);
     vx_faces_count_desc small = {.max_bytes = 1000};
     vx_voxelize_stats st = {0};
