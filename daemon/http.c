@@ -42,10 +42,19 @@ void vx_http_job_changed(vx_http *h, const char *jid, int terminal)
 
 /* ---- dispatch ------------------------------------------------------ */
 
-static enum MHD_Result count_host(void *cls, enum MHD_ValueKind kind, const char *key,
+/* How many times the headers that must come once came. */
+typedef struct once_counts {
+    int host, length, idem;
+} once_counts;
+
+static enum MHD_Result count_once(void *cls, enum MHD_ValueKind kind, const char *key,
                                   const char *value)
 {
-    if (key && !strcasecmp(key, MHD_HTTP_HEADER_HOST)) (*(int *)cls)++;
+    once_counts *n = cls;
+    if (!key) return MHD_YES;
+    if (!strcasecmp(key, MHD_HTTP_HEADER_HOST)) n->host++;
+    if (!strcasecmp(key, MHD_HTTP_HEADER_CONTENT_LENGTH)) n->length++;
+    if (!strcasecmp(key, "Idempotency-Key")) n->idem++;
     return MHD_YES;
 }
 
@@ -60,24 +69,38 @@ static enum MHD_Result take_arg(void *cls, enum MHD_ValueKind kind, const char *
                : MHD_YES;
 }
 
+/* A 400 after which the connection closes: the body's framing is in
+ * doubt, so nothing after this head may be read as another request
+ * (request smuggling behind a proxy that framed it otherwise). */
+static int fail_framing(struct MHD_Connection *c, req *r, const char *why)
+{
+    vx_err e;
+    vx_err_set(&e, VX_EINVAL, "invalid_request", "%s", why);
+    return vx_resp_err_with(c, r, &e, MHD_HTTP_HEADER_CONNECTION, "close");
+}
+
 /* Framing the access handler can still answer in JSON: Host, the transfer
- * coding, both lengths at once. Returns a queued answer or -1. */
+ * coding, the length, headers that must come once. Returns a queued answer
+ * or -1. */
 static int check_framing(struct MHD_Connection *c, req *r, const char *version)
 {
-    int hosts = 0;
-    MHD_get_connection_values(c, MHD_HEADER_KIND, count_host, &hosts);
-    if (strcmp(version, MHD_HTTP_VERSION_1_0) != 0 && hosts != 1)
+    once_counts n = {0};
+    MHD_get_connection_values(c, MHD_HEADER_KIND, count_once, &n);
+    if (strcmp(version, MHD_HTTP_VERSION_1_0) != 0 && n.host != 1)
         return vx_resp_fail(c, r, VX_EINVAL, "invalid_request",
-                            hosts ? "more than one Host header"
-                                  : "an HTTP/1.1 request needs a Host header");
+                            n.host ? "more than one Host header"
+                                   : "an HTTP/1.1 request needs a Host header");
+    if (n.length > 1) return fail_framing(c, r, "more than one Content-Length header");
     const char *te = vx_resp_header(c, MHD_HTTP_HEADER_TRANSFER_ENCODING);
     int coding = vx_req_transfer_encoding(te);
     if (coding < 0)
         return vx_resp_fail(c, r, VX_ENOTIMPL, "not_implemented",
                             "the only transfer coding taken is chunked (no gzip, no lists)");
-    if (coding > 0 && vx_resp_header(c, MHD_HTTP_HEADER_CONTENT_LENGTH))
+    if (coding > 0 && n.length)
+        return fail_framing(c, r, "Content-Length and Transfer-Encoding together");
+    if (n.idem > 1)
         return vx_resp_fail(c, r, VX_EINVAL, "invalid_request",
-                            "Content-Length and Transfer-Encoding together");
+                            "more than one Idempotency-Key header");
     return -1;
 }
 

@@ -259,6 +259,33 @@ raw_http telist 'POST /v1/meshes HTTP/1.1\r\nHost: x\r\nContent-Type: model/obj\
 expect_raw telist 501 not_implemented
 raw_http clte 'POST /v1/jobs HTTP/1.1\r\nHost: x\r\nContent-Type: application/json\r\nContent-Length: 2\r\nTransfer-Encoding: chunked\r\n\r\n2\r\n{}\r\n0\r\n\r\n'
 expect_raw clte 400 invalid_request
+# Two Content-Lengths: 400, and the connection closes, so the rest of the
+# body is never read as a second request (smuggling behind a proxy that
+# took the other length).
+python3 - "$PORT" >"$TMP/twolen.raw" <<'PY'
+import socket, sys
+s = socket.create_connection(("127.0.0.1", int(sys.argv[1])))
+inner = b"GET /v1/info HTTP/1.1\r\nHost: x\r\n\r\n"
+body = b"{}" + inner
+s.sendall(b"POST /v1/jobs HTTP/1.1\r\nHost: x\r\nContent-Type: application/json\r\n"
+          b"Content-Length: 2\r\nContent-Length: " + str(len(body)).encode() + b"\r\n\r\n" + body)
+s.settimeout(3)
+got = b""
+try:
+    while True:
+        b = s.recv(65536)
+        if not b:
+            break
+        got += b
+except OSError:
+    pass
+sys.stdout.buffer.write(got)
+PY
+expect_raw twolen 400 invalid_request
+check "twolen: one answer only (no smuggled request)" test "$(grep -ac '^HTTP/1.1 ' "$TMP/twolen.raw")" = 1
+check "twolen: the answer closes the connection" bash -c "tr -d '\r' <'$TMP/twolen.raw' | sed '/^$/q' | grep -qi '^connection: close'"
+raw_http twoidem "POST /v1/jobs HTTP/1.1\\r\\nHost: x\\r\\nContent-Type: application/json\\r\\nIdempotency-Key: a\\r\\nIdempotency-Key: b\\r\\nContent-Length: 2\\r\\n\\r\\n{}"
+expect_raw twoidem 400 invalid_request
 long=$(printf 'a%.0s' {1..20000})
 raw_http longuri "GET /v1/meshes?x=$long HTTP/1.1\\r\\nHost: x\\r\\n\\r\\n"
 expect_raw longuri 414 uri_too_long
