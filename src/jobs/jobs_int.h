@@ -61,6 +61,8 @@ struct vx_job_run {
     const vx_kind *kind;
     vx_gl *gl;
     double t0;        /* monotonic start of this attempt */
+    double handed;    /* when the GL stage handed it to the CPU workers */
+    double waited;    /* seconds it waited for a worker (not held to the timeout) */
     double last_ping; /* watchdog */
     cJSON *stats;
     cJSON *outputs;

@@ -10,8 +10,9 @@
 
 struct vx_queue {
     pthread_mutex_t lock;
-    pthread_cond_t cond;
-    void **items; /* ring buffer */
+    pthread_cond_t cond;  /* an item came, or the queue closed */
+    pthread_cond_t space; /* an item left, or the queue closed */
+    void **items;         /* ring buffer */
     size_t head, count, cap, capacity;
     int closed;
 };
@@ -32,6 +33,7 @@ vx_queue *vx_queue_new(size_t capacity)
     pthread_condattr_init(&ca);
     pthread_condattr_setclock(&ca, CLOCK_MONOTONIC);
     pthread_cond_init(&q->cond, &ca);
+    pthread_cond_init(&q->space, &ca);
     pthread_condattr_destroy(&ca);
     return q;
 }
@@ -41,6 +43,7 @@ void vx_queue_free(vx_queue *q)
     if (!q) return;
     pthread_mutex_destroy(&q->lock);
     pthread_cond_destroy(&q->cond);
+    pthread_cond_destroy(&q->space);
     free(q->items);
     free(q);
 }
@@ -89,9 +92,25 @@ void *vx_queue_pop(vx_queue *q, double timeout_s)
         item = q->items[q->head];
         q->head = (q->head + 1) % q->cap;
         q->count--;
+        pthread_cond_broadcast(&q->space);
     }
     pthread_mutex_unlock(&q->lock);
     return item;
+}
+
+int vx_queue_wait_below(vx_queue *q, size_t n, double timeout_s)
+{
+    struct timespec dl;
+    vx_mono_deadline(timeout_s, &dl);
+    pthread_mutex_lock(&q->lock);
+    while (q->count >= n && !q->closed && timeout_s != 0) {
+        int rc = timeout_s < 0 ? pthread_cond_wait(&q->space, &q->lock)
+                               : pthread_cond_timedwait(&q->space, &q->lock, &dl);
+        if (rc == ETIMEDOUT) break;
+    }
+    int below = q->count < n || q->closed;
+    pthread_mutex_unlock(&q->lock);
+    return below ? 0 : -1;
 }
 
 int vx_queue_remove(vx_queue *q, void *item)
@@ -103,6 +122,7 @@ int vx_queue_remove(vx_queue *q, void *item)
         for (size_t k = i; k + 1 < q->count; k++)
             q->items[(q->head + k) % q->cap] = q->items[(q->head + k + 1) % q->cap];
         q->count--;
+        pthread_cond_broadcast(&q->space);
         found = 1;
         break;
     }
@@ -128,5 +148,6 @@ void vx_queue_close(vx_queue *q)
     pthread_mutex_lock(&q->lock);
     q->closed = 1;
     pthread_cond_broadcast(&q->cond);
+    pthread_cond_broadcast(&q->space);
     pthread_mutex_unlock(&q->lock);
 }

@@ -20,6 +20,9 @@ void *vx_queue_pop(vx_queue *q, double timeout_s);
 int vx_queue_remove(vx_queue *q, void *item);
 size_t vx_queue_depth(vx_queue *q);
 size_t vx_queue_capacity(vx_queue *q);
+/* Waits up to timeout_s (< 0: forever) until fewer than n items are
+ * queued or the queue is closed: 0, or -1 on timeout. */
+int vx_queue_wait_below(vx_queue *q, size_t n, double timeout_s);
 /* Wakes every waiter; later pushes fail, pops drain what is left. */
 void vx_queue_close(vx_queue *q);
 

@@ -25,7 +25,7 @@ int vx_run_progress(vx_job_run *r, double fraction, vx_err *err)
         return vx_err_set_flagged(err, VX_ECANCELED, VX_EF_SHUTDOWN, "shutdown",
                                   "the daemon is shutting down");
     double limit = j->desc.limits.job_timeout_s;
-    if (limit > 0 && now - r->t0 > limit)
+    if (limit > 0 && now - r->t0 - r->waited > limit)
         return vx_err_set(err, VX_ETIMEOUT, "job_timeout", "the job ran longer than %g s", limit);
     return 0;
 }

@@ -295,6 +295,7 @@ static void run_job_gl(vx_jobs *j, vx_gl *gl, mesh_cache *mc, job *jb)
         run_finish(j, r, 0, &err);
         return;
     }
+    r->handed = vx_mono();
     vx_queue_push(j->cpu, r, 1);
 }
 
@@ -328,6 +329,12 @@ static void *gl_main(void *arg)
             jobs_alive(j);
             last_ping = now;
         }
+        /* The GL stage runs at most one job ahead of the CPU workers: a
+         * finished GL stage holds its job's memory until a worker takes
+         * it, so while one waits no other starts, and a burst of jobs
+         * stays in the job queue (bounded: 429 queue_full) instead of
+         * piling up here (at most workers + 2 jobs hold memory at once). */
+        if (vx_queue_wait_below(j->cpu, 1, 0.5)) continue;
         job *jb = vx_queue_pop(j->queue, 0.5);
         if (!jb) continue;
         if (j->stopping) { /* popped but not started: stays queued in the journal */
@@ -347,6 +354,8 @@ static void *worker_main(void *arg)
     while ((r = vx_queue_pop(j->cpu, -1))) {
         vx_err err;
         vx_err_clear(&err);
+        r->waited += vx_mono() - r->handed;
+        cJSON_AddNumberToObject(r->stats, "cpu_wait_ms", ms_between(0, r->waited));
         const vx_kind *k = r->job->kind;
         int ok = 1;
         if (k->run_cpu) ok = k->run_cpu(r, r->typed, r->state, &err) == 0;

@@ -7,6 +7,7 @@
 #include <cmocka.h>
 
 #include "jobs/queue.h"
+#include "util/clock.h"
 #include "util/fsutil.h"
 
 static void test_fifo_and_capacity(void **state)
@@ -78,13 +79,44 @@ static void test_blocking_pop_and_close(void **state)
     vx_queue_free(q);
 }
 
+static void *consumer(void *arg)
+{
+    struct timespec ts = {0, 50 * 1000 * 1000};
+    nanosleep(&ts, NULL);
+    vx_queue_pop(arg, 0);
+    return NULL;
+}
+
+/* wait_below: at once when below, a timeout when not, woken by a pop or a
+ * close. */
+static void test_wait_below(void **state)
+{
+    vx_queue *q = vx_queue_new(0);
+    int a = 1, b = 2;
+    assert_int_equal(vx_queue_wait_below(q, 1, 0), 0);
+    vx_queue_push(q, &a, 0);
+    vx_queue_push(q, &b, 0);
+    assert_int_equal(vx_queue_wait_below(q, 3, 0), 0);
+    assert_int_equal(vx_queue_wait_below(q, 2, 0), -1);
+    double t0 = vx_mono();
+    assert_int_equal(vx_queue_wait_below(q, 2, 0.1), -1);
+    assert_true(vx_mono() - t0 >= 0.09);
+    pthread_t t;
+    pthread_create(&t, NULL, consumer, q);
+    assert_int_equal(vx_queue_wait_below(q, 2, -1), 0); /* the pop wakes it */
+    assert_int_equal(vx_queue_depth(q), 1);
+    pthread_join(t, NULL);
+    vx_queue_close(q);
+    assert_int_equal(vx_queue_wait_below(q, 1, -1), 0); /* closed: does not block */
+    vx_queue_free(q);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
-        cmocka_unit_test(test_fifo_and_capacity),
-        cmocka_unit_test(test_grow_and_remove),
-        cmocka_unit_test(test_timeout),
-        cmocka_unit_test(test_blocking_pop_and_close),
+        cmocka_unit_test(test_fifo_and_capacity), cmocka_unit_test(test_grow_and_remove),
+        cmocka_unit_test(test_timeout),           cmocka_unit_test(test_blocking_pop_and_close),
+        cmocka_unit_test(test_wait_below),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }
