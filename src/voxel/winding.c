@@ -189,8 +189,12 @@ static int raster_band(int b, int t, void *ud)
     wctx *c = ud;
     if (poll(c, t)) return 1;
     int j0 = b * BAND, j1 = j0 + BAND < c->ny ? j0 + BAND : c->ny;
-    for (size_t k = c->bin_off[b]; k < c->bin_off[b + 1]; k++)
+    /* a band of a triangle soup can hold 10^5 large triangles: the stop
+     * check comes every 64 of them, not only between bands */
+    for (size_t k = c->bin_off[b]; k < c->bin_off[b + 1]; k++) {
+        if ((k & 63) == 63 && poll(c, t)) return 1;
         raster_tri(c, c->bin[k], j0, j1);
+    }
     atomic_fetch_add(&c->done, 1);
     return 0;
 }
@@ -357,8 +361,10 @@ static int fill_row(int j, int t, void *ud)
     wctx *c = ud;
     if (poll(c, t)) return 1;
     if (j >= c->lo[1] && j <= c->hi[1])
-        for (int i = c->lo[0]; i <= c->hi[0]; i++)
+        for (int i = c->lo[0]; i <= c->hi[0]; i++) {
+            if (poll(c, t)) return 1; /* a column of a soup can take 0.1 s */
             column(c, i, j);
+        }
     atomic_fetch_add(&c->done, 1);
     return 0;
 }

@@ -90,6 +90,23 @@ big "voxelize ogre 2048 raw1" voxelize "$OGRE" '{"resolution":2048,"format":"raw
 # with a stop check between them.
 big "voxelize ogre 1024 peel robust" voxelize "$OGRE" \
     '{"resolution":1024,"method":"peel","inside":"robust","format":"raw1"}'
+# winding (the default on an open mesh) on a soup of 20,000 large random
+# triangles, every edge a boundary: a band of rows holds thousands of
+# them and a column seconds of winding numbers, so the stop check comes
+# every 64 triangles and every column (it overran a 20 s limit by 30 s).
+python3 - "$TMP/soup.obj" <<'PY'
+import random, sys
+random.seed(5)
+with open(sys.argv[1], "w") as f:
+    n = 60000
+    for i in range(n):
+        f.write("v %f %f %f\n" % (random.random(), random.random(), random.random()))
+    for i in range(1, n - 1, 3):
+        f.write("f %d %d %d\n" % (i, i + 1, i + 2))
+PY
+upload "$TMP/soup.obj"
+big "voxelize a triangle soup 128 winding" voxelize "$MESH_ID" '{"resolution":128,"format":"summary"}'
+check "the soup ran winding" bash -c "[[ \$(jq -r '.stats.inside // .error.code' '$TMP/job.json') =~ ^(winding|job_timeout)$ ]]"
 # gregory: 13.5M triangles, welded, Draco (the encoder runs in a child).
 big "gregory spot divisions 96 drc" gregory "$SPOT" '{"divisions":96,"format":"drc"}'
 big "gregory spot divisions 96 obj" gregory "$SPOT" '{"divisions":96,"format":"obj"}'
