@@ -438,6 +438,12 @@ static int construct_all(vx_job_run *r, builder *b, const double *const *pos, si
     return rc;
 }
 
+/* Where face f's indices start in m->face_idx (f = nfaces: their count). */
+static size_t face_at(const vx_mesh *m, size_t f)
+{
+    return m->face_start ? (size_t)m->face_start[f] : 3 * f;
+}
+
 /* Positions of frame k >= 1: from the params, or a loaded mesh. */
 static const double *frame_positions(vx_job_run *r, const vx_mesh *mesh, const gparams *p, size_t k,
                                      vx_mesh **loaded, vx_err *err)
@@ -447,14 +453,14 @@ static const double *frame_positions(vx_job_run *r, const vx_mesh *mesh, const g
         const char *id = g->id[k - 1];
         vx_mesh *m = vx_run_load_mesh(r, id, err);
         if (!m) return NULL;
-        int same = m->nverts == mesh->nverts && m->nfaces == mesh->nfaces &&
-                   (m->face_start == NULL) == (mesh->face_start == NULL) &&
-                   m->npatches == mesh->npatches;
-        if (same && mesh->face_start)
-            same = memcmp(m->face_start, mesh->face_start,
-                          (mesh->nfaces + 1) * sizeof *mesh->face_start) == 0;
+        int same =
+            m->nverts == mesh->nverts && m->nfaces == mesh->nfaces && m->npatches == mesh->npatches;
+        /* the same faces, however each reader stored them (no face_start:
+         * every face a triangle; an OFF of triangles has one, an OBJ not) */
+        for (size_t f = 0; same && f <= mesh->nfaces; f++)
+            same = face_at(m, f) == face_at(mesh, f);
         if (same) {
-            size_t nidx = mesh->face_start ? mesh->face_start[mesh->nfaces] : 3 * mesh->nfaces;
+            size_t nidx = face_at(mesh, mesh->nfaces);
             same = memcmp(m->face_idx, mesh->face_idx, nidx * sizeof *mesh->face_idx) == 0;
         }
         if (same && mesh->npatches)

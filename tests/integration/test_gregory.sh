@@ -244,6 +244,19 @@ greg "spot over max_triangles" "$M_spot" '{"divisions":16}'
 check "triangle limit: job error" jq -e '.state == "failed" and .error.code == "triangle_limit"' "$TMP/job.json"
 greg "frame of another topology" "$M_prism" "{\"divisions\":2,\"frames\":[\"$M_spot\"]}"
 check "frame topology (mesh id): job error" jq -e '.state == "failed" and .error.code == "frame_topology"' "$TMP/job.json"
+# The same tetrahedron as OBJ and as OFF (read into other structures: the
+# OFF reader keeps face offsets even for triangles): each is a frame of the
+# other (it failed with frame_topology).
+printf 'v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n' >"$TMP/tet.obj"
+printf 'OFF\n4 4 0\n0 0 0\n2 0 0\n0 2 0\n0 0 2\n3 0 2 1\n3 0 1 3\n3 0 3 2\n3 1 2 3\n' >"$TMP/tet.off"
+upload "$TMP/tet.obj"
+M_tet_obj=$MESH_ID
+upload "$TMP/tet.off" model/x-off
+M_tet_off=$MESH_ID
+greg "an OFF frame of an OBJ mesh" "$M_tet_obj" "{\"divisions\":2,\"frames\":[\"$M_tet_off\"]}"
+job_ok "an OFF frame of an OBJ mesh"
+greg "an OBJ frame of an OFF mesh" "$M_tet_off" "{\"divisions\":2,\"frames\":[\"$M_tet_obj\"]}"
+job_ok "an OBJ frame of an OFF mesh"
 # frame positions are tessellated in floats: a coordinate past FLT_MAX is
 # refused at submission (it came out as NaN vertices)
 api POST /v1/jobs -H "Content-Type: application/json" \
