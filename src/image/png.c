@@ -47,9 +47,11 @@ int vx_png_write_path_poll(const char *path, const void *pixels, int width, int 
     static const int color_type[] = {PNG_COLOR_TYPE_GRAY, PNG_COLOR_TYPE_GRAY_ALPHA,
                                      PNG_COLOR_TYPE_RGB, PNG_COLOR_TYPE_RGB_ALPHA};
 
+    /* messages name the file, not where the server keeps it (the log does) */
+    const char *name = strrchr(path, '/') ? strrchr(path, '/') + 1 : path;
     FILE *f = fopen(path, "wb");
     if (!f)
-        return vx_err_set(err, VX_EIO, "png_write", "cannot create %s: %s", path, strerror(errno));
+        return vx_err_set(err, VX_EIO, "png_write", "cannot create %s: %s", name, strerror(errno));
     /* A failed write removes the partial file, but never a device or FIFO
      * the caller pointed us at. */
     struct stat sb;
@@ -61,7 +63,7 @@ int vx_png_write_path_poll(const char *path, const void *pixels, int width, int 
         png_destroy_write_struct(&png, NULL);
         fclose(f);
         if (regular) unlink(path);
-        return vx_err_set(err, VX_EIO, "png_write", "libpng could not start writing %s", path);
+        return vx_err_set(err, VX_EIO, "png_write", "libpng could not start writing %s", name);
     }
     /* Only f, png and info are used after a longjmp, and none of them is
      * modified after setjmp, so they need not be volatile. */
@@ -70,7 +72,7 @@ int vx_png_write_path_poll(const char *path, const void *pixels, int width, int 
         fclose(f);
         if (regular) unlink(path);
         VX_ERROR("png.write_failed", "path=%s", path);
-        return vx_err_set(err, VX_EIO, "png_write", "writing %s failed: %s", path, ctx.msg);
+        return vx_err_set(err, VX_EIO, "png_write", "writing %s failed: %s", name, ctx.msg);
     }
     png_init_io(png, f);
     png_set_IHDR(png, info, (png_uint_32)width, (png_uint_32)height, bit_depth,
@@ -107,7 +109,7 @@ int vx_png_write_path_poll(const char *path, const void *pixels, int width, int 
         int e = errno;
         if (regular) unlink(path);
         VX_ERROR("png.write_failed", "path=%s errno=%d", path, e);
-        return vx_err_set(err, VX_EIO, "png_write", "writing %s failed: %s", path, strerror(e));
+        return vx_err_set(err, VX_EIO, "png_write", "writing %s failed: %s", name, strerror(e));
     }
     return 0;
 }

@@ -54,6 +54,14 @@ api POST /v1/meshes -H "Content-Type: model/x-draco" --data-binary "@$TMP/box.ob
 expect_error "Draco declared, text sent" 415 unsupported_media_type
 api POST /v1/meshes -H "Content-Type: application/octet-stream" --data-binary "@$TMP/noise.bin"
 expect_error "binary junk, sniffed" 415 unsupported_media_type
+# a binary STL (a header that says nothing, then triangles) declared as text
+python3 -c 'import struct, sys
+t = [(0,0,0, 0,0,0, 1,0,0, 0,1,0), (0,0,0, 0,0,0, 0,1,0, 0,0,1)]
+sys.stdout.buffer.write(b"X" * 80 + struct.pack("<I", len(t)) + b"".join(struct.pack("<12fH", *v, 0) for v in t))' >"$TMP/bin.stl"
+api POST /v1/meshes -H "Content-Type: model/obj" --data-binary "@$TMP/bin.stl"
+expect_error "OBJ declared, binary STL sent" 415 unsupported_media_type
+api POST /v1/meshes -H "Content-Type: text/plain" --data-binary "@$TMP/bin.stl"
+expect_error "text declared, binary STL sent" 415 unsupported_media_type
 api POST /v1/meshes -H "Content-Type: model/obj" --data-binary ""
 expect_error "empty body" 422 obj_no_faces
 api POST /v1/meshes -H "Content-Type: model/obj" --data-binary "@$VX_MESH_DIR/stanford-bunny.obj"
