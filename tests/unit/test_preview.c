@@ -617,7 +617,9 @@ static void test_png_roundtrip(void **state)
     /* Failure: a directory that does not exist. */
     assert_int_equal(vx_png_write_path("/nonexistent/dir/x.png", img, 200, 120, 4, 8, &err), -1);
     assert_int_equal(err.kind, VX_EIO);
-    assert_non_null(strstr(err.message, "/nonexistent/dir/x.png"));
+    /* the message names the file, not the server's directories */
+    assert_non_null(strstr(err.message, "x.png"));
+    assert_null(strstr(err.message, "/nonexistent"));
     /* Full disk surfaces as an error too, not as a truncated file. */
     if (access("/dev/full", W_OK) == 0) {
         assert_int_equal(vx_png_write_path("/dev/full", img, 200, 120, 4, 8, &err), -1);
