@@ -98,7 +98,8 @@ static int split(bpt_reader *r, char **fields, int n, const char *what)
     return 0;
 }
 
-/* Unsigned decimal integer field, saturating far above any valid count. */
+/* Unsigned decimal integer field; past 2^40 (far above any valid count)
+ * it is UINT64_MAX, which messages call "over 2^40" (count_text). */
 static int parse_uint(bpt_reader *r, const char *s, const char *what, uint64_t *out)
 {
     uint64_t v = 0;
@@ -109,10 +110,18 @@ static int parse_uint(bpt_reader *r, const char *s, const char *what, uint64_t *
         if (*p < '0' || *p > '9')
             return bpt_fail(r, VX_EINVAL, "bpt_junk", "%s: '%.40s' is not an unsigned integer",
                             what, s);
-        if (v < UINT64_C(1) << 40) v = v * 10 + (uint64_t)(*p - '0');
+        v = v < UINT64_C(1) << 40 ? v * 10 + (uint64_t)(*p - '0') : UINT64_MAX;
     }
     *out = v;
     return 0;
+}
+
+/* A count for a message: its digits, or "over 2^40" when it was past that. */
+static const char *count_text(uint64_t v, char buf[24])
+{
+    if (v == UINT64_MAX) return "over 2^40";
+    snprintf(buf, 24, "%llu", (unsigned long long)v);
+    return buf;
 }
 
 /* Bytes of the file after the current position, or UINT64_MAX when the
@@ -414,10 +423,14 @@ static int check_patch_count(bpt_reader *r, uint64_t np, const vx_mesh_limits *l
      * face corners would not fit the uint32 offsets). */
     uint64_t tris = np * 2 * VX_BPT_TESS * VX_BPT_TESS;
     if ((lim && lim->max_triangles && tris > lim->max_triangles) ||
-        np > UINT32_MAX / (4 * VX_BPT_TESS * VX_BPT_TESS))
-        return bpt_fail(r, VX_ETOOBIG, "mesh_too_big",
-                        "%llu patches make %llu triangles, over the limit", (unsigned long long)np,
-                        (unsigned long long)tris);
+        np > UINT32_MAX / (4 * VX_BPT_TESS * VX_BPT_TESS)) {
+        char b[24];
+        return np == UINT64_MAX ? bpt_fail(r, VX_ETOOBIG, "mesh_too_big",
+                                           "a patch count %s is over the limit", count_text(np, b))
+                                : bpt_fail(r, VX_ETOOBIG, "mesh_too_big",
+                                           "%llu patches make %llu triangles, over the limit",
+                                           (unsigned long long)np, (unsigned long long)tris);
+    }
     /* The counts are untrusted: storage grows as lines arrive. Where the
      * file's size is known, a count the rest of the file cannot hold (a
      * patch line takes BPT_MIN_PATCH_LINE bytes at least) ends the read at
@@ -469,10 +482,11 @@ static int read_patches(bpt_reader *r, vx_mesh *m, uint64_t np, uint64_t *maxidx
 static int check_point_count(bpt_reader *r, uint64_t npts, const vx_mesh_limits *lim,
                              uint64_t maxidx, size_t maxline)
 {
-    if (npts == 0 || (lim && lim->max_vertices && npts > lim->max_vertices) || npts >= UINT32_MAX)
+    if (npts == 0 || (lim && lim->max_vertices && npts > lim->max_vertices) || npts >= UINT32_MAX) {
+        char b[24];
         return bpt_fail(r, npts ? VX_ETOOBIG : VX_EINVAL, npts ? "mesh_too_big" : "bpt_count",
-                        "point count %llu is %s", (unsigned long long)npts,
-                        npts ? "over the limit" : "0");
+                        "point count %s is %s", count_text(npts, b), npts ? "over the limit" : "0");
+    }
     if (maxidx > npts) {
         r->lineno = maxline;
         return bpt_fail(r, VX_EINVAL, "bpt_index",

@@ -235,6 +235,10 @@ static void test_errors(void **state)
     lim = (vx_mesh_limits){.max_vertices = 20};
     assert_null(read_str(flat_patch(), &lim, &err));
     assert_string_equal(err.code, "mesh_too_big");
+    /* counts past 2^40 are said so, not as a cut-off number */
+    assert_null(read_str("99999999999999999999\n", NULL, &err));
+    assert_string_equal(err.code, "mesh_too_big");
+    assert_string_equal(err.message, "line 1: a patch count over 2^40 is over the limit");
     char *big = malloc(6000);
     memset(big, '1', 5000);
     strcpy(big + 5000, "\n");
