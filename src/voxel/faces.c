@@ -48,9 +48,11 @@ typedef struct sub_progress {
     int part; /* 0..6 the sample grids, 7 the count */
 } sub_progress;
 
-/* The face samples' distance inside the face, voxels: one snapping step
- * (positions are multiples of it in every grid of the lattice, so none
- * lies on a sample that is not on a voxel face too). */
+/* The face samples' distance inside the face, voxels: one snapping step.
+ * The moved grids' lattices are the voxel grid's shifted by a whole number
+ * of steps, so every grid snaps a position to the same point, and a face
+ * of the mesh meets a sample only when it lies exactly one step off a
+ * voxel face (never when it lies on one). */
 #define FACES_INSET (1.0 / VX_GRID_SNAP)
 
 /* The seven runs take the first 90 % of the bar, the count the rest. */
