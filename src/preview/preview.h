@@ -47,9 +47,11 @@ typedef struct vx_preview_stats {
 /* The render is cut so that each piece is a small fraction of a job's time
  * limit on a CPU rasteriser: bands of about this many samples (pixels x
  * MSAA samples: ~0.1 s on a loaded llvmpipe), each drawn in draws of at
- * most this many triangles. */
+ * most CHUNK_TRIS triangles, starting at CHUNK_MIN and sized by how long
+ * the draws take (about 50 ms each). */
 #define VX_PREVIEW_BAND_SAMPLES (4 << 20)
 #define VX_PREVIEW_CHUNK_TRIS (1 << 20)
+#define VX_PREVIEW_CHUNK_MIN (1 << 14)
 
 /* Renders into rgba (width*height*4 bytes, top row first). GL thread. */
 int vx_preview_render(vx_gl *gl, const vx_mesh *m, const vx_preview_params *p, uint8_t *rgba,

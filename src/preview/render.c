@@ -269,24 +269,34 @@ static void reset_state(void)
     glPixelStorei(GL_PACK_ROW_LENGTH, 0);
 }
 
-/* Draws the mesh into band b of nbands in chunks, polling between them. */
+/* Draws the mesh into band b of nbands in chunks, polling between them.
+ * *chunk (kept from band to band) is the triangles a draw takes: it starts
+ * at VX_PREVIEW_CHUNK_MIN and follows how long the draws take, doubling
+ * while a draw takes under 25 ms (up to VX_PREVIEW_CHUNK_TRIS) and shrunk
+ * to about 50 ms when one takes over 100 ms: a soup of large triangles
+ * (each covering the band) is a few thousand triangles a draw, not 1M. */
 static int draw_chunks(GLuint prog, GLuint vao, size_t nidx, int b, int nbands,
-                       const vx_preview_params *p, vx_err *err)
+                       const vx_preview_params *p, size_t *chunk, vx_err *err)
 {
-    /* glDrawElements counts in GLsizei, and one draw is one piece of work:
-     * draws of at most VX_PREVIEW_CHUNK_TRIS triangles. */
-    const size_t step = (size_t)3 * VX_PREVIEW_CHUNK_TRIS;
     glUseProgram(prog);
     glBindVertexArray(vao);
-    for (size_t first = 0; first < nidx; first += step) {
+    for (size_t first = 0; first < nidx;) {
         if (first > 0) {
-            glFinish();
             double f = ((double)b + 0.5 * (double)first / (double)nidx) / nbands;
             if (poll_render(p, 0.05 + 0.9 * f, err)) return -1;
         }
-        size_t count = nidx - first < step ? nidx - first : step;
+        /* glDrawElements counts in GLsizei */
+        size_t count = nidx - first < 3 * *chunk ? nidx - first : 3 * *chunk;
+        double t0 = vx_mono();
         glDrawElements(GL_TRIANGLES, (GLsizei)count, GL_UNSIGNED_INT,
                        (const void *)(uintptr_t)(first * sizeof(uint32_t)));
+        glFinish();
+        double dt = vx_mono() - t0;
+        if (dt < 0.025 && count == 3 * *chunk && *chunk < VX_PREVIEW_CHUNK_TRIS)
+            *chunk *= 2;
+        else if (dt > 0.1)
+            *chunk = (size_t)fmax(VX_PREVIEW_CHUNK_MIN / 16, (double)*chunk * 0.05 / dt);
+        first += count;
     }
     glBindVertexArray(0);
     glUseProgram(0);
@@ -360,6 +370,7 @@ int vx_preview_render(vx_gl *gl, const vx_mesh *m, const vx_preview_params *p, u
     GLuint target = samples > 1 ? o.fbo_ms : o.fbo;
     reset_state();
     const int nbands = (h + rows - 1) / rows;
+    size_t chunk = VX_PREVIEW_CHUNK_MIN; /* triangles a draw takes (draw_chunks) */
     for (int b = 0; b < nbands; b++) {
         const int y0 = b * rows, n = h - y0 < rows ? h - y0 : rows;
         glBindFramebuffer(GL_FRAMEBUFFER, target);
@@ -372,7 +383,7 @@ int vx_preview_render(vx_gl *gl, const vx_mesh *m, const vx_preview_params *p, u
          * framebuffer and then reports the time since boot. */
         vx_gl_timer_begin(&timer);
         timing = 1;
-        if (draw && draw_chunks(prog, o.vao, nidx, b, nbands, p, err)) goto done;
+        if (draw && draw_chunks(prog, o.vao, nidx, b, nbands, p, &chunk, err)) goto done;
         if (samples > 1) {
             glFinish(); /* the draw and the resolve are two pieces */
             if (poll_render(p, 0.05 + 0.9 * (b + 0.5) / nbands, err)) goto done;
