@@ -110,23 +110,20 @@ int vx_intake_resolve(vx_intake_media declared, const unsigned char *head, size_
         }
         return why ? vx_err_set(err, VX_EMEDIA, "unsupported_media_type", "%s", why) : 0;
     }
-    /* a text type on bytes no text format holds (a NUL byte: binary STL,
-     * glb, PLY's binary body comes after a text header) */
-    const int binary = memchr(head, 0, n) != NULL && sniffed != VX_MESH_PLY;
-    switch (declared) {
-    case VX_INTAKE_OBJ:
+    /* A text type on a Draco file, or on bytes no text format holds (a
+     * NUL byte: binary STL, glb; PLY's binary body follows a text header). */
+    if (declared == VX_INTAKE_OBJ || declared == VX_INTAKE_TEXT) {
         if (sniffed == VX_MESH_DRACO)
             why = "Content-Type says text (OBJ or .bpt) but the body is a Draco file";
-        else if (binary)
+        else if (memchr(head, 0, n) && sniffed != VX_MESH_PLY)
             why = "Content-Type says text (OBJ or .bpt) but the body holds binary data";
+    }
+    switch (declared) {
+    case VX_INTAKE_OBJ:
         *fmt = VX_MESH_OBJ;
         break;
     case VX_INTAKE_TEXT:
         /* Text is OBJ unless text/plain holds another text format. */
-        if (sniffed == VX_MESH_DRACO)
-            why = "Content-Type says text (OBJ or .bpt) but the body is a Draco file";
-        else if (binary)
-            why = "Content-Type says text (OBJ or .bpt) but the body holds binary data";
         *fmt = sniffed == VX_MESH_BPT || sniffed == VX_MESH_STL || sniffed == VX_MESH_PLY ||
                        sniffed == VX_MESH_OFF || sniffed == VX_MESH_GLTF
                    ? sniffed
