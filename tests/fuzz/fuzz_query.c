@@ -7,11 +7,14 @@
  * path matches the same route, id and name; an accepted query respects the
  * limits and, written back by vx_req_query_format, parses to the same
  * result; a rejected one says why. The UTF-8 sanitizer's output is valid
- * UTF-8, and the other helpers hold their contracts on the same bytes. */
+ * UTF-8, and the other helpers hold their contracts on the same bytes; the
+ * strict JSON parser's accepted bodies print back to bodies it accepts. */
 #include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+
+#include <cjson/cJSON.h>
 
 #include "jobs/jobs.h"
 #include "request.h"
@@ -130,6 +133,29 @@ static void check_query(vx_route rt, const char *method, const char *s, size_t n
     if (memcmp(&q, &r, sizeof q)) abort();
 }
 
+/* A job body the strict parser accepts prints back (cJSON, unformatted)
+ * to text it accepts again and that prints the same; a refused one says
+ * why. */
+static void check_json(const char *s, size_t n)
+{
+    char why[160] = "";
+    cJSON *doc = vx_req_json_parse(s, n, why, sizeof why);
+    if (!doc) {
+        if (!why[0]) abort();
+        return;
+    }
+    char *text = cJSON_PrintUnformatted(doc);
+    if (!text) abort();
+    cJSON *back = vx_req_json_parse(text, strlen(text), why, sizeof why);
+    if (!back) abort();
+    char *again = cJSON_PrintUnformatted(back);
+    if (!again || strcmp(text, again)) abort();
+    cJSON_free(again);
+    cJSON_free(text);
+    cJSON_Delete(back);
+    cJSON_Delete(doc);
+}
+
 static void check_text(const char *s, size_t n)
 {
     /* A NUL-terminated copy, as message text would be. */
@@ -165,6 +191,7 @@ static void check_text(const char *s, size_t n)
     if (!vx_req_json_text_ok(s, n, why, sizeof why) && !vx_req_utf8_valid(s, n)) abort();
     int te = vx_req_transfer_encoding(z);
     if (te < -1 || te > 1) abort();
+    check_json(s, n);
     free(z);
 }
 
