@@ -338,11 +338,18 @@ int main(int argc, char **argv)
                     uf = iou(out, *f.mask, &nf);
                     fms = f.ms;
                 }
-                printf("| %s | %zu | %dx%dx%d | %.1f (%.1f) | %.1f (%.1f) | %.1fx | %.1f | %.1fx | "
-                       "%.5f | %.5f | %llu | %llu |\n",
-                       m.name.c_str(), m.tri.size() / 3, g.dims[0], g.dims[1], g.dims[2], best,
-                       worst, vbest, vworst, vbest / best, fms, fms / best, u, uf,
-                       (unsigned long long)vx_bitgrid_count(&out), (unsigned long long)nv);
+                // the filled band's columns, "-" when skipped (--no-filled)
+                char fms_s[64] = "- | -", uf_s[32] = "-";
+                if (filled) {
+                    snprintf(fms_s, sizeof fms_s, "%.1f | %.1fx", fms, fms / best);
+                    snprintf(uf_s, sizeof uf_s, "%.5f", uf);
+                }
+                printf(
+                    "| %s | %zu | %dx%dx%d | %.1f (%.1f) | %.1f (%.1f) | %.1fx | %s | %.5f | %s | "
+                    "%llu | %llu |\n",
+                    m.name.c_str(), m.tri.size() / 3, g.dims[0], g.dims[1], g.dims[2], best, worst,
+                    vbest, vworst, vbest / best, fms_s, u, uf_s,
+                    (unsigned long long)vx_bitgrid_count(&out), (unsigned long long)nv);
                 fflush(stdout);
                 vx_bitgrid_free(&out);
             }
