@@ -1,6 +1,8 @@
 // The approximate-cc construction and its distance to the Catmull-Clark
 // limit surface, through OpenSubdiv Far patch tables (osd.h). No exception
 // crosses into C.
+#include <algorithm>
+#include <array>
 #include <climits>
 #include <cmath>
 #include <cstring>
@@ -50,6 +52,20 @@ struct QuadMesh {
     }
 };
 
+// True when two quads of m have the same four vertices (a double-sided
+// sheet). OpenSubdiv 3.5's Gregory end caps of such a quad index points
+// that do not exist; refined once, its quads no longer share all corners.
+bool twin_quads(const vx_mesh *m)
+{
+    std::vector<std::array<uint32_t, 4>> k(m->nfaces);
+    for (size_t f = 0; f < m->nfaces; f++) {
+        std::copy(m->face_idx + 4 * f, m->face_idx + 4 * f + 4, k[f].begin());
+        std::sort(k[f].begin(), k[f].end());
+    }
+    std::sort(k.begin(), k.end());
+    return std::adjacent_find(k.begin(), k.end()) != k.end();
+}
+
 int quad_mesh(const vx_mesh *m, QuadMesh &q, vx_err *err)
 {
     if (m->nverts > (size_t)INT_MAX / 8 || m->nfaces > (size_t)INT_MAX / 8)
@@ -59,7 +75,7 @@ int quad_mesh(const vx_mesh *m, QuadMesh &q, vx_err *err)
     bool quads = true;
     for (size_t f = 0; f < m->nfaces && quads; f++)
         quads = vx_mesh_face_size(m, f) == 4;
-    if (quads) {
+    if (quads && !twin_quads(m)) {
         q.nverts = (int)m->nverts;
         q.idx.assign(m->face_idx, m->face_idx + 4 * m->nfaces);
         q.parent.resize(m->nfaces);
@@ -152,6 +168,29 @@ int make_patches(const QuadMesh &q, int isolation, Patches &pt, vx_err *err)
         return vx_err_set(err, VX_EUNPROC, "osd_patches", "OpenSubdiv made no patch table");
     pt.points.resize((size_t)pt.refiner->GetNumVerticesTotal() +
                      (size_t)pt.table->GetNumLocalPoints());
+    // Every end-cap point must be an affine combination of refined
+    // vertices; a table that is not (a topology OpenSubdiv mishandles) is
+    // refused rather than read out of bounds.
+    if (const Far::StencilTableReal<double> *st = pt.table->GetLocalPointStencilTable<double>()) {
+        const int nref = pt.refiner->GetNumVerticesTotal();
+        const std::vector<Far::Index> &ci = st->GetControlIndices();
+        const std::vector<double> &cw = st->GetWeights();
+        const std::vector<int> &sz = st->GetSizes();
+        bool ok = ci.size() == cw.size();
+        for (size_t i = 0, at = 0; ok && i < sz.size(); at += (size_t)sz[i++]) {
+            double sum = 0;
+            ok = sz[i] >= 0 && at + (size_t)sz[i] <= ci.size();
+            for (size_t j = at; ok && j < at + (size_t)sz[i]; j++) {
+                ok = ci[j] >= 0 && ci[j] < nref && std::isfinite(cw[j]);
+                sum += cw[j];
+            }
+            ok = ok && std::fabs(sum - 1) < 1e-6;
+        }
+        if (!ok)
+            return vx_err_set(err, VX_EUNPROC, "osd_patches",
+                              "OpenSubdiv's end-cap points for this mesh are not combinations "
+                              "of its vertices (an unusual topology)");
+    }
     pt.map.reset(new Far::PatchMap(*pt.table));
     return 0;
 }

@@ -125,8 +125,8 @@ static double check(const char *what, vx_mesh *m, size_t want_patches)
     assert_true(d >= 0);
     assert_true(gap < 1e-12);
     /* faces: every input face gives as many patches as it has corners
-     * (quads: one, when the whole mesh is quads) */
-    int quads = m->faces_by_size[1] == m->nfaces;
+     * (quads: one, when the whole mesh is quads and used as it is) */
+    int quads = m->faces_by_size[1] == m->nfaces && want_patches == m->nfaces;
     size_t p = 0;
     for (size_t f = 0; f < m->nfaces; f++)
         for (uint32_t k = 0; k < (quads ? 1 : vx_mesh_face_size(m, f)); k++, p++) {
@@ -192,6 +192,39 @@ static void test_suzanne_boundaries(void **state)
     assert_true(d > 1e-5);
     assert_true(d < 0.0065);
     vx_mesh_free(m);
+}
+
+/* Two quads on the same four corners, facing away from each other (a
+ * double-sided sheet): OpenSubdiv's end caps of such quads index points
+ * that do not exist (a crash), so the mesh is refined once first, as a mesh
+ * with non-quads is: four patches a quad. Flat, it stays flat; bent, the
+ * patches still meet and stay inside the corners' box. */
+static void test_twin_quads(void **state)
+{
+    (void)state;
+    for (int bent = 0; bent < 2; bent++) {
+        const double p[] = {0, 0, 0, 1, 0, 0, 1, 1, 0.5 * bent, 0, 1, 0};
+        const uint32_t f[] = {0, 1, 2, 3, 3, 2, 1, 0};
+        vx_mesh *m = shape_poly_mesh(4, p, 2, NULL, f);
+        assert_non_null(m);
+        vx_gpatch_set *s = NULL;
+        vx_err err = {0};
+        assert_int_equal(vx_gregory_build_approx_cc(m, &s, &err), 0);
+        assert_int_equal(s->npatches, 8);
+        for (size_t i = 0; i < s->npatches; i++)
+            assert_int_equal(s->face[i], i / 4);
+        for (size_t i = 0; i < s->npatches * VX_GPATCH_POINTS; i++) {
+            const double *c = s->cp + 3 * i;
+            for (int a = 0; a < 3; a++) {
+                assert_true(isfinite(c[a]));
+                assert_true(c[a] >= m->bbox_min[a] - 1e-12 && c[a] <= m->bbox_max[a] + 1e-12);
+            }
+            if (!bent) assert_true(fabs(c[2]) < 1e-15);
+        }
+        assert_true(seam_gap(s) < 1e-12);
+        vx_gpatch_set_free(s);
+        vx_mesh_free(m);
+    }
 }
 
 /* Max |a - b| over two sets' control points. */
@@ -267,7 +300,7 @@ int main(void)
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_torus_regular), cmocka_unit_test(test_cube),
         cmocka_unit_test(test_spot),          cmocka_unit_test(test_suzanne_boundaries),
-        cmocka_unit_test(test_frames),
+        cmocka_unit_test(test_frames),        cmocka_unit_test(test_twin_quads),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }
