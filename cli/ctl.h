@@ -49,7 +49,8 @@ cJSON *ctl_http_events(const ctl *c, const char *jid, void (*on_job)(void *, con
 /* Starts a private voxeld (next to this program, $VOXELD_BIN or on PATH)
  * on 127.0.0.1 with a temporary data dir and points c at it. 0 or -1. */
 int ctl_local_start(ctl *c);
-/* Stops it and removes its data dir. */
+/* Stops it and removes its data dir (also on SIGINT, SIGTERM, SIGHUP or
+ * SIGQUIT, which then end the process). */
 void ctl_local_stop(void);
 
 /* ---- ctl_cmds.c ---- */

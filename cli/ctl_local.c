@@ -21,6 +21,33 @@ static char g_dir[PATH_MAX];
 static FILE *g_log;
 static pthread_t g_drain;
 static int g_draining;
+static pthread_mutex_t g_stop_mu = PTHREAD_MUTEX_INITIALIZER;
+static const int g_signals[] = {SIGINT, SIGTERM, SIGHUP, SIGQUIT};
+
+static void signal_set(sigset_t *set)
+{
+    sigemptyset(set);
+    for (size_t i = 0; i < sizeof g_signals / sizeof g_signals[0]; i++)
+        sigaddset(set, g_signals[i]);
+}
+
+/* Interrupted (Ctrl-C, kill): the private voxeld is stopped and its data
+ * dir removed, then the signal ends the process as it would have. The
+ * signals are blocked in every other thread and waited for here. */
+static void *signal_main(void *arg)
+{
+    (void)arg;
+    sigset_t set;
+    signal_set(&set);
+    int sig = 0;
+    while (sigwait(&set, &sig) != 0)
+        ;
+    ctl_local_stop();
+    signal(sig, SIG_DFL);
+    pthread_sigmask(SIG_UNBLOCK, &set, NULL);
+    raise(sig);
+    _exit(128 + sig);
+}
 
 /* The voxeld to start: $VOXELD_BIN, the one next to this program, or PATH. */
 static void find_voxeld(char *out, size_t n)
@@ -60,6 +87,16 @@ static int rm_entry(const char *path, const struct stat *st, int flag, struct FT
 
 int ctl_local_start(ctl *c)
 {
+    /* Before any thread (libcurl's resolver, the log drain) is made, so
+     * every one inherits the blocked signals. */
+    sigset_t set;
+    pthread_t sig_thread;
+    signal_set(&set);
+    pthread_sigmask(SIG_BLOCK, &set, NULL);
+    if (pthread_create(&sig_thread, NULL, signal_main, NULL) == 0)
+        pthread_detach(sig_thread);
+    else
+        pthread_sigmask(SIG_UNBLOCK, &set, NULL);
     const char *tmp = getenv("TMPDIR");
     snprintf(g_dir, sizeof g_dir, "%s/voxelctl.XXXXXX", tmp && *tmp ? tmp : "/tmp");
     if (!mkdtemp(g_dir)) {
@@ -74,7 +111,8 @@ int ctl_local_start(ctl *c)
     g_pid = fork();
     if (g_pid < 0) return -1;
     if (g_pid == 0) {
-        prctl(PR_SET_PDEATHSIG, SIGTERM); /* voxelctl killed: so is its voxeld */
+        pthread_sigmask(SIG_UNBLOCK, &set, NULL); /* exec keeps the mask */
+        prctl(PR_SET_PDEATHSIG, SIGTERM);         /* voxelctl killed: so is its voxeld */
         dup2(fds[1], 2);
         close(fds[0]);
         close(fds[1]);
@@ -107,6 +145,7 @@ int ctl_local_start(ctl *c)
 
 void ctl_local_stop(void)
 {
+    pthread_mutex_lock(&g_stop_mu); /* the signal thread and the main one */
     if (g_pid > 0) {
         kill(g_pid, SIGTERM);
         int st;
@@ -120,4 +159,5 @@ void ctl_local_stop(void)
     g_log = NULL;
     if (g_dir[0]) nftw(g_dir, rm_entry, 16, FTW_DEPTH | FTW_PHYS);
     g_dir[0] = 0;
+    pthread_mutex_unlock(&g_stop_mu);
 }

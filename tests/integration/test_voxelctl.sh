@@ -91,6 +91,25 @@ check "voxeld run: the same grid" cmp -s local.binvox run.binvox
 "$CTL" --local voxelize "$MESH" -r 99999 2>ctl.err
 check "--local: a bad param still exits 1 with the message" sh -c "test $? -eq 1 && grep -q invalid_params ctl.err"
 check "--local: its temporary data dirs are removed" test -z "$(ls -A "$TMP/ltmp")"
+# Interrupted mid-job (Ctrl-C, kill): the private voxeld and its data dir go
+# too, and the signal still ends the command. SIGINT is given back its
+# default first (a script's background job starts with it ignored).
+for sig in INT TERM; do
+    python3 -c 'import os, signal, sys
+signal.signal(signal.SIGINT, signal.SIG_DFL)
+os.execvp(sys.argv[1], sys.argv[1:])' "$CTL" --local --quiet render "$VX_MESH_DIR/spot_triangulated.obj" \
+        -p N=64 -p R=1024 -p width=128 -p height=128 -o int.png 2>/dev/null &
+    ipid=$!
+    for _ in $(seq 100); do [[ -n "$(ls -A "$TMP/ltmp")" ]] && break; sleep 0.1; done
+    sleep 1
+    kill -"$sig" "$ipid"
+    wait "$ipid"
+    rc=$?
+    check "--local, SIG$sig mid-job: ended by the signal (rc $rc)" test "$rc" -eq $((128 + $(kill -l "$sig")))
+    check "--local, SIG$sig mid-job: no result written" test ! -e int.png
+    check "--local, SIG$sig mid-job: the data dir is removed" test -z "$(ls -A "$TMP/ltmp")"
+    check "--local, SIG$sig mid-job: its voxeld is gone" sh -c "! pgrep -f '$TMP/ltm[p]' >/dev/null"
+done
 
 stop_daemon
 finish
