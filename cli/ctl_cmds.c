@@ -2,6 +2,7 @@
  * get and cancel. Human output goes to stderr (progress) and stdout
  * (tables); --json prints the server's JSON on stdout instead. */
 #include <ctype.h>
+#include <curl/curl.h>
 #include <stdlib.h>
 #include <string.h>
 #include <strings.h>
@@ -59,11 +60,31 @@ static int is_mesh_id(const char *s)
     return n == 64;
 }
 
-/* Uploads file; the mesh id into id[65]. 0 or the exit status. */
+/* "&KEY=VALUE" (VALUE %-escaped) when v is set, else "". Owned. */
+static char *query_arg(const char *key, const char *v)
+{
+    char *e = v ? curl_easy_escape(NULL, v, 0) : NULL;
+    size_t n = e ? strlen(key) + strlen(e) + 3 : 1;
+    char *q = malloc(n);
+    if (q) snprintf(q, n, "%s%s%s%s", e ? "&" : "", e ? key : "", e ? "=" : "", e ? e : "");
+    curl_free(e);
+    return q;
+}
+
+/* Uploads file, named by its base name where the server takes it as a
+ * mesh name (1..100 bytes, no control character, '\\' or '"'); the mesh
+ * id into id[65]. 0 or the exit status. */
 static int upload(ctl *c, const char *file, char *id)
 {
     ctl_buf b = {0};
-    long st = ctl_http(c, "POST", "/v1/meshes", mesh_type(file), NULL, file, &b, NULL, NULL, 0);
+    const char *base = strrchr(file, '/') ? strrchr(file, '/') + 1 : file;
+    int named = *base && strlen(base) <= 100;
+    for (const unsigned char *p = (const unsigned char *)base; named && *p; p++)
+        named = *p >= 0x20 && *p != 0x7f && *p != '\\' && *p != '"';
+    char *q = named ? query_arg("name", base) : NULL, path[400];
+    snprintf(path, sizeof path, "/v1/meshes%s%s", q ? "?" : "", q ? q + 1 : "");
+    free(q);
+    long st = ctl_http(c, "POST", path, mesh_type(file), NULL, file, &b, NULL, NULL, 0);
     int rc = 0;
     cJSON *doc = st == 200 || st == 201 ? cJSON_Parse(b.p) : NULL;
     if (!doc)
@@ -246,6 +267,10 @@ static int list(ctl *c, const char *path, void (*row)(const cJSON *))
         } else {
             row(doc);
         }
+        const char *next = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(doc, "next"));
+        if (next && !c->quiet)
+            fprintf(stderr, "voxelctl: more after these %d: --after %s (or --limit up to 1000)\n",
+                    cJSON_GetArraySize(items), next);
     }
     cJSON_Delete(doc);
     return rc;
@@ -266,19 +291,33 @@ static void mesh_row(const cJSON *m)
            str(m, "name"));
 }
 
-int ctl_cmd_jobs(ctl *c, const char *state, int limit)
+int ctl_cmd_jobs(ctl *c, const char *state, int limit, const char *after)
 {
-    char path[200];
-    snprintf(path, sizeof path, "/v1/jobs?limit=%d%s%s", limit, state ? "&state=" : "",
-             state ? state : "");
-    return list(c, path, job_row);
+    char *s = query_arg("state", state), *a = query_arg("after", after);
+    char *path = s && a ? malloc(strlen(s) + strlen(a) + 40) : NULL;
+    int rc = 1;
+    if (path) {
+        sprintf(path, "/v1/jobs?limit=%d%s%s", limit, s, a);
+        rc = list(c, path, job_row);
+    }
+    free(path);
+    free(s);
+    free(a);
+    return rc;
 }
 
-int ctl_cmd_meshes(ctl *c, int limit)
+int ctl_cmd_meshes(ctl *c, int limit, const char *after)
 {
-    char path[100];
-    snprintf(path, sizeof path, "/v1/meshes?limit=%d", limit);
-    return list(c, path, mesh_row);
+    char *a = query_arg("after", after);
+    char *path = a ? malloc(strlen(a) + 40) : NULL;
+    int rc = 1;
+    if (path) {
+        sprintf(path, "/v1/meshes?limit=%d%s", limit, a);
+        rc = list(c, path, mesh_row);
+    }
+    free(path);
+    free(a);
+    return rc;
 }
 
 static void job_show(const cJSON *j)

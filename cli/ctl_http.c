@@ -1,5 +1,6 @@
 /* HTTP for voxelctl, through libcurl (ctl.h). */
 #include <curl/curl.h>
+#include <errno.h>
 #include <stdlib.h>
 #include <string.h>
 #include <strings.h>
@@ -49,24 +50,62 @@ static size_t on_body(char *p, size_t size, size_t n, void *ud)
     return buf_add(s->buf, p, size * n) ? 0 : size * n;
 }
 
-/* Content-Disposition: attachment; filename="NAME" → NAME (no path parts). */
+static int hexval(int c)
+{
+    if (c >= '0' && c <= '9') return c - '0';
+    if (c >= 'a' && c <= 'f') return c - 'a' + 10;
+    if (c >= 'A' && c <= 'F') return c - 'A' + 10;
+    return -1;
+}
+
+/* A file name from a Content-Disposition parameter value v (quoted, or
+ * RFC 8187 UTF-8''%-encoded when ext): its last path part, into out; 0 when
+ * nothing safe is left (empty, ".", "..", control bytes, a NUL). */
+static int disp_name(const char *v, int ext, char *out, size_t n)
+{
+    char raw[512];
+    size_t o = 0;
+    if (ext) {
+        if (strncasecmp(v, "UTF-8''", 7)) return 0;
+        for (v += 7; *v && !strchr(" \t\r\n;", *v) && o + 1 < sizeof raw; v++) {
+            int h1, h2;
+            if (*v == '%' && (h1 = hexval(v[1])) >= 0 && (h2 = hexval(v[2])) >= 0) {
+                raw[o++] = (char)(h1 * 16 + h2);
+                v += 2;
+            } else {
+                raw[o++] = *v;
+            }
+        }
+    } else {
+        if (*v == '"') v++;
+        for (; *v && !strchr("\"\r\n;", *v) && o + 1 < sizeof raw; v++)
+            raw[o++] = *v;
+    }
+    raw[o] = 0;
+    if (strlen(raw) != o) return 0; /* a %00 */
+    char *base = raw;
+    for (char *p = raw; *p; p++) {
+        if ((unsigned char)*p < 0x20 || *p == 0x7f) return 0;
+        if (*p == '/' || *p == '\\') base = p + 1;
+    }
+    if (!*base || !strcmp(base, ".") || !strcmp(base, "..")) return 0;
+    snprintf(out, n, "%s", base);
+    return 1;
+}
+
+/* Content-Disposition: attachment; filename="NAME"; filename*=UTF-8''NAME
+ * → NAME (no path parts), filename* first (RFC 6266 4.3). */
 static size_t on_header(char *p, size_t size, size_t n, void *ud)
 {
     sink *s = ud;
     size_t len = size * n;
     static const char key[] = "content-disposition:";
     if (s->disp && len > sizeof key && !strncasecmp(p, key, sizeof key - 1)) {
-        char line[512];
+        char line[1024];
         snprintf(line, sizeof line, "%.*s", (int)len, p);
-        char *f = strstr(line, "filename=");
-        if (f) {
-            f += 9;
-            if (*f == '"') f++;
-            size_t k = strcspn(f, "\"\r\n;");
-            f[k] = 0;
-            char *slash = strrchr(f, '/');
-            snprintf(s->disp, s->dispn, "%s", slash ? slash + 1 : f);
-        }
+        char *fx = strcasestr(line, "filename*="), *f = strcasestr(line, "filename=");
+        if (!(fx && disp_name(fx + 10, 1, s->disp, s->dispn)) && f)
+            disp_name(f + 9, 0, s->disp, s->dispn);
     }
     return len;
 }
@@ -107,8 +146,12 @@ long ctl_http(const ctl *c, const char *method, const char *path, const char *ct
     if (upload) {
         in = fopen(upload, "rb");
         struct stat st;
-        if (!in || fstat(fileno(in), &st) != 0) {
-            fprintf(stderr, "voxelctl: cannot read %s\n", upload);
+        int e = in ? 0 : errno;
+        if (in && fstat(fileno(in), &st) != 0) e = errno;
+        if (!e && !S_ISREG(st.st_mode)) e = S_ISDIR(st.st_mode) ? EISDIR : EINVAL;
+        if (e) {
+            fprintf(stderr, "voxelctl: cannot read %s: %s\n", upload,
+                    e == EINVAL ? "not a regular file" : strerror(e));
             if (in) fclose(in);
             curl_slist_free_all(hl);
             curl_easy_cleanup(h);

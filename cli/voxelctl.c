@@ -1,8 +1,10 @@
 /* voxelctl: command line (see usage() and docs/man/voxelctl.1). */
 #include <curl/curl.h>
+#include <errno.h>
 #include <getopt.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include "ctl.h"
@@ -25,7 +27,7 @@ static void usage(FILE *out)
         "    --no-wait               print the job id and exit\n"
         "Other commands:\n"
         "  upload FILE               store a mesh, print its id\n"
-        "  jobs [--state S] [--limit N]    meshes [--limit N]\n"
+        "  jobs [--state S] [--limit N] [--after ID]    meshes [--limit N] [--after ID]\n"
         "  get JOB [-o FILE] [--name OUTPUT]  show a job, or download an output\n"
         "  cancel JOB                cancel a queued or running job (a finished one: error)\n"
         "  delete JOB                delete a finished job and its results (or cancel it)\n"
@@ -73,7 +75,7 @@ static int is_job_kind(const char *s)
 }
 
 typedef struct args {
-    const char *out, *name, *state, *resolution, *format;
+    const char *out, *name, *state, *after, *resolution, *format;
     int limit, no_wait, local;
     cJSON *params;
 } args;
@@ -91,26 +93,20 @@ static int read_options(ctl *c, args *a, int argc, char **argv)
         O_NAME,
         O_STATE,
         O_LIMIT,
+        O_AFTER,
         O_NOWAIT,
         O_VERSION
     };
-    static const struct option opts[] = {{"server", required_argument, 0, O_SERVER},
-                                         {"token", required_argument, 0, O_TOKEN},
-                                         {"local", no_argument, 0, O_LOCAL},
-                                         {"json", no_argument, 0, O_JSON},
-                                         {"quiet", no_argument, 0, O_QUIET},
-                                         {"param", required_argument, 0, 'p'},
-                                         {"params", required_argument, 0, O_PARAMS},
-                                         {"output", required_argument, 0, 'o'},
-                                         {"resolution", required_argument, 0, 'r'},
-                                         {"format", required_argument, 0, 'f'},
-                                         {"name", required_argument, 0, O_NAME},
-                                         {"state", required_argument, 0, O_STATE},
-                                         {"limit", required_argument, 0, O_LIMIT},
-                                         {"no-wait", no_argument, 0, O_NOWAIT},
-                                         {"help", no_argument, 0, 'h'},
-                                         {"version", no_argument, 0, O_VERSION},
-                                         {0, 0, 0, 0}};
+    static const struct option opts[] = {
+        {"server", required_argument, 0, O_SERVER}, {"token", required_argument, 0, O_TOKEN},
+        {"local", no_argument, 0, O_LOCAL},         {"json", no_argument, 0, O_JSON},
+        {"quiet", no_argument, 0, O_QUIET},         {"param", required_argument, 0, 'p'},
+        {"params", required_argument, 0, O_PARAMS}, {"output", required_argument, 0, 'o'},
+        {"resolution", required_argument, 0, 'r'},  {"format", required_argument, 0, 'f'},
+        {"name", required_argument, 0, O_NAME},     {"state", required_argument, 0, O_STATE},
+        {"limit", required_argument, 0, O_LIMIT},   {"after", required_argument, 0, O_AFTER},
+        {"no-wait", no_argument, 0, O_NOWAIT},      {"help", no_argument, 0, 'h'},
+        {"version", no_argument, 0, O_VERSION},     {0, 0, 0, 0}};
     int ch;
     while ((ch = getopt_long(argc, argv, "p:o:r:f:hq", opts, NULL)) != -1) {
         switch (ch) {
@@ -166,8 +162,20 @@ static int read_options(ctl *c, args *a, int argc, char **argv)
         case O_STATE:
             a->state = optarg;
             break;
-        case O_LIMIT:
-            a->limit = atoi(optarg);
+        case O_LIMIT: {
+            char *end;
+            errno = 0;
+            long v = strtol(optarg, &end, 10);
+            if (errno || end == optarg || *end || v < 1 || v > 1000) {
+                fprintf(stderr, "voxelctl: --limit wants a whole number 1..1000, not '%s'\n",
+                        optarg);
+                return -1;
+            }
+            a->limit = (int)v;
+            break;
+        }
+        case O_AFTER:
+            a->after = optarg;
             break;
         case O_NOWAIT:
             a->no_wait = 1;
@@ -200,18 +208,48 @@ static void shortcuts(const char *kind, args *a)
     }
 }
 
+/* Whether -o FILE cannot be written (said on stderr): checked before the
+ * job runs rather than after. "-" is stdout. */
+static int out_unwritable(const char *out)
+{
+    if (!out || !strcmp(out, "-")) return 0;
+    struct stat st;
+    if (stat(out, &st) == 0 && S_ISDIR(st.st_mode)) {
+        fprintf(stderr, "voxelctl: -o %s: is a directory\n", out);
+        return 1;
+    }
+    char dir[4096];
+    snprintf(dir, sizeof dir, "%s", out);
+    char *slash = strrchr(dir, '/');
+    if (slash)
+        slash == dir ? (void)(slash[1] = 0) : (void)(*slash = 0);
+    else
+        snprintf(dir, sizeof dir, ".");
+    const char *what = access(out, F_OK) == 0 ? out : dir;
+    if (access(what, W_OK) != 0) {
+        fprintf(stderr, "voxelctl: -o %s: cannot write %s: %s\n", out, what, strerror(errno));
+        return 1;
+    }
+    return 0;
+}
+
 static int run(ctl *c, args *a, int n, char **pos)
 {
     const char *cmd = pos[0];
     if (is_job_kind(cmd) && n == 2) {
+        if (a->no_wait && a->out) {
+            fprintf(stderr, "voxelctl: -o needs the job's result: not with --no-wait (use get)\n");
+            return 2;
+        }
+        if (out_unwritable(a->out)) return 1;
         shortcuts(cmd, a);
         cJSON *p = a->params;
         a->params = NULL;
         return ctl_cmd_job(c, cmd, pos[1], p, a->out, a->no_wait);
     }
     if (!strcmp(cmd, "upload") && n == 2) return ctl_cmd_upload(c, pos[1]);
-    if (!strcmp(cmd, "jobs") && n == 1) return ctl_cmd_jobs(c, a->state, a->limit);
-    if (!strcmp(cmd, "meshes") && n == 1) return ctl_cmd_meshes(c, a->limit);
+    if (!strcmp(cmd, "jobs") && n == 1) return ctl_cmd_jobs(c, a->state, a->limit, a->after);
+    if (!strcmp(cmd, "meshes") && n == 1) return ctl_cmd_meshes(c, a->limit, a->after);
     if (!strcmp(cmd, "get") && n == 2) return ctl_cmd_get(c, pos[1], a->name, a->out);
     if (!strcmp(cmd, "cancel") && n == 2) return ctl_cmd_cancel(c, pos[1]);
     if (!strcmp(cmd, "delete") && n == 2) return ctl_cmd_delete(c, pos[1]);

@@ -71,6 +71,38 @@ check "an unknown command: exit 2" test $? -eq 2
 "$CTL" --server http://127.0.0.1:1 jobs 2>ctl.err
 check "no server: exit 1 with curl's reason" sh -c "test $? -eq 1 && grep -qi 'connect' ctl.err"
 
+# Local mistakes are said at once, before anything is sent.
+mkdir -p adir
+s0=$(date +%s%N)
+"$CTL" upload adir 2>ctl.err
+rc=$?
+ms=$((($(date +%s%N) - s0) / 1000000))
+check "a directory to upload: exit 1 at once (${ms} ms), said so" sh -c "test $rc -eq 1 && test $ms -lt 1500 && grep -q 'adir: Is a directory' ctl.err"
+for bad in abc 2x 0 1001; do
+    "$CTL" jobs --limit "$bad" >/dev/null 2>ctl.err
+    check "--limit $bad: a bad command line, exit 2" sh -c "test $? -eq 2 && grep -q 'limit wants' ctl.err"
+done
+"$CTL" --no-wait voxelize "$MID" -r 16 -o nw.binvox 2>ctl.err
+check "--no-wait with -o: exit 2" sh -c "test $? -eq 2 && test ! -e nw.binvox"
+njobs=$("$CTL" --json jobs --limit 1000 | jq '.items | length')
+"$CTL" voxelize "$MID" -r 16 -o /nonexistent-dir/x.binvox 2>ctl.err
+check "-o into a missing dir: exit 1, said before the job" sh -c "test $? -eq 1 && grep -q 'cannot write /nonexistent-dir' ctl.err"
+check "-o into a missing dir: no job was submitted" test "$("$CTL" --json jobs --limit 1000 | jq '.items | length')" -eq "$njobs"
+# Uploads are named by the file's base name; a download without -o takes
+# the server's name (filename*, UTF-8).
+# (a comment makes new bytes: the mesh itself was stored unnamed above)
+printf '# named\n' | cat - "$MESH" >"named mesh é.obj"
+NMID=$("$CTL" upload "named mesh é.obj" 2>/dev/null)
+check "upload: named by its file" sh -c "'$CTL' meshes --limit 1000 | grep '^$NMID' | grep -q 'named mesh é.obj'"
+mkdir -p dl && (cd dl && "$CTL" --quiet preview "$NMID" -p width=32 -p height=32 2>../ctl.err)
+check "a download without -o: the server's UTF-8 name ($(ls dl))" sh -c "ls dl | grep -Eq '^named mesh é-[0-9a-f]{32}-image\.png$'"
+# Paging: the rest after --after, said on stderr when there is more.
+"$CTL" meshes --limit 1 >page1 2>ctl.err
+AFTER=$(sed -n 's/.*--after \([0-9a-f]*\).*/\1/p' ctl.err)
+check "meshes --limit 1: says there are more ($(cat ctl.err))" test -n "$AFTER"
+"$CTL" meshes --limit 1 --after "$AFTER" >page2 2>/dev/null
+check "meshes --after: the next page" sh -c "test -s page2 && ! cmp -s page1 page2 && test \"\$(cut -c1-64 page2)\" \\> \"$AFTER\""
+
 # --no-wait prints the id; cancel takes it.
 NJ=$("$CTL" --no-wait voxelize "$MID" -r 512 2>/dev/null)
 check "--no-wait: a job id ($NJ)" grep -Eq '^[0-9a-f]{32}$' <<<"$NJ"
