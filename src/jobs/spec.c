@@ -82,15 +82,18 @@ static int read_enum_set(const vx_pspec *f, const cJSON *it, const char *path, i
         return BAD("params.%s must be an array of %s", path, list);
     }
     const cJSON *e;
+    uint64_t seen = 0; /* a set: each name at most once (uniqueItems) */
     cJSON_ArrayForEach(e, it)
     {
         int k = -1;
-        for (int i = 0; cJSON_IsString(e) && f->names[i]; i++)
+        for (int i = 0; cJSON_IsString(e) && f->names[i] && i < 64; i++)
             if (strcmp(f->names[i], e->valuestring) == 0) k = i;
         if (k < 0) {
             name_list(f->names, " or ", list, sizeof list);
             return BAD("params.%s entries must be %s", path, list);
         }
+        if (seen >> k & 1) return BAD("params.%s lists \"%s\" twice", path, f->names[k]);
+        seen |= (uint64_t)1 << k;
         out[k] = 1;
     }
     return 0;

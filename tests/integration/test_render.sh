@@ -160,6 +160,7 @@ bad "bad axis" '{"camera":{"axis":"x"}}' params.camera.axis
 bad "frames on the axis camera" '{"frames":4}' params.frames
 bad "bits 12" '{"bits":12}' params.bits
 bad "unknown output" '{"outputs":["mesh"]}' params.outputs
+bad "an output twice" '{"outputs":["depth","normal","depth"]}' 'params.outputs lists .*depth.* twice'
 bad "zero light" '{"lights":[{"direction":[0,0,0]}]}' "params.lights\[0\].direction"
 bad "filter D0" '{"filter":{"D0":-1}}' params.filter.D0
 bad "too many pixels" '{"width":8192,"height":8192,"compare":true}' params.width

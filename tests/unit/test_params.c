@@ -404,7 +404,7 @@ static void test_spec_values(void **state)
     vx_err err;
     char *norm;
     const char *in =
-        "{\"tags\":[\"r\",\"p\",\"r\"],\"n\":7,\"sub\":{\"mode\":\"one\"},\"flag\":false,"
+        "{\"tags\":[\"r\",\"p\"],\"n\":7,\"sub\":{\"mode\":\"one\"},\"flag\":false,"
         "\"id\":\"" /* 64 hex digits */
         "0123456789abcdef0123456789abcdef0123456789abcdef0123456789abcdef\","
         "\"items\":[{\"dir\":[1,2,3]},{\"dir\":[0,0,-1],\"w\":9}],\"a\":3,\"b\":null,\"x\":-1}";
@@ -452,6 +452,7 @@ static void test_spec_errors(void **state)
             "params.items[0].w must be in [1, 9], got 0");
     t_fails("{\"tags\":\"p\"}", "params.tags must be an array of p, q, r");
     t_fails("{\"tags\":[\"s\"]}", "params.tags entries must be p, q or r");
+    t_fails("{\"tags\":[\"q\",\"p\",\"q\"]}", "params.tags lists \"q\" twice");
     /* exclusions go before types: on presence alone */
     t_fails("{\"a\":\"x\",\"b\":1}", "params.a and params.b exclude each other");
     /* the minimum of n is lo; its maximum follows the limits */
