@@ -30,7 +30,11 @@ static void objs_free(objs *o)
 }
 
 /* Column-major view and projection for the orbit camera around the origin
- * (where the normalised mesh's bbox centre is). */
+ * (where the normalised mesh's bbox centre is). The view only turns: its
+ * space is centred on the mesh (z towards the eye), and the eye's distance
+ * is in the projection, so no vertex is a small difference of two large
+ * numbers. Else a tiny field of view (the eye 1e5 radii away) left the
+ * depth a few hundred levels over the mesh and its shading noise. */
 static void camera(const vx_preview_params *p, float view[16], float proj[16])
 {
     const double deg = M_PI / 180.0;
@@ -40,37 +44,35 @@ static void camera(const vx_preview_params *p, float view[16], float proj[16])
      * azimuth swings towards +X, elevation lifts towards +Y. */
     double e[3] = {cos(el) * sin(az), sin(el), cos(el) * cos(az)};
 
-    double dist, near, far;
     memset(proj, 0, 16 * sizeof *proj);
     if (p->fov_deg > 0) {
         double tv = tan(0.5 * p->fov_deg * deg), th = aspect * tv;
         /* The narrower of the two half-angles decides: the sphere must fit
          * both ways, whatever the aspect ratio. */
         double half = atan(tv < th ? tv : th);
-        dist = VX_PREVIEW_MARGIN / sin(half);
-        near = dist - 1.1;
-        far = dist + 1.1;
+        double dist = VX_PREVIEW_MARGIN / sin(half);
+        double near = dist - 1.1, far = dist + 1.1;
         if (near < 0.01 * dist) near = 0.01 * dist;
-        double f = 1.0 / tv;
+        /* w = dist - z (z: the view space's, towards the eye); the usual
+         * depth a w + b with a + b / near = -1 and a + b / far = 1, written
+         * in z: (a dist + b) - a z, its constant taken in double. */
+        double f = 1.0 / tv, a = (far + near) / (far - near), b = -2.0 * far * near / (far - near);
         proj[0] = (float)(f / aspect);
         proj[5] = (float)f;
-        proj[10] = (float)((far + near) / (near - far));
+        proj[10] = (float)-a;
         proj[11] = -1.0f;
-        proj[14] = (float)(2.0 * far * near / (near - far));
+        proj[14] = (float)(a * dist + b);
+        proj[15] = (float)dist;
     } else {
-        /* The unit sphere fills the smaller image dimension. */
+        /* The unit sphere fills the smaller image dimension; depth -1 at
+         * z = 1.1 (nearest), 1 at z = -1.1. */
         double hx = aspect >= 1 ? aspect : 1, hy = aspect >= 1 ? 1 : 1 / aspect;
-        dist = 3.0;
-        near = dist - 1.1;
-        far = dist + 1.1;
         proj[0] = (float)(1.0 / hx);
         proj[5] = (float)(1.0 / hy);
-        proj[10] = (float)(-2.0 / (far - near));
-        proj[14] = (float)(-(far + near) / (far - near));
+        proj[10] = (float)(-1.0 / 1.1);
         proj[15] = 1.0f;
     }
 
-    double eye[3] = {dist * e[0], dist * e[1], dist * e[2]};
     double f[3] = {-e[0], -e[1], -e[2]}, up[3] = {0, 1, 0}, s[3], u[3];
     vx_v3_cross(f, up, s);
     vx_v3_unit(s);
@@ -81,9 +83,6 @@ static void camera(const vx_preview_params *p, float view[16], float proj[16])
         view[4 * i + 1] = (float)u[i];
         view[4 * i + 2] = (float)-f[i];
     }
-    view[12] = (float)-vx_v3_dot(s, eye);
-    view[13] = (float)-vx_v3_dot(u, eye);
-    view[14] = (float)vx_v3_dot(f, eye);
     view[15] = 1.0f;
 }
 

@@ -18,6 +18,7 @@
 #include "gl/gl.h"
 #include "image/png.h"
 #include "preview/preview.h"
+#include "shapes.h"
 
 static vx_gl *g_gl;
 
@@ -540,6 +541,35 @@ static void test_million_triangles(void **state)
     vx_mesh_free(m);
 }
 
+/* A field of view of a thousandth of a degree puts the eye 1e5 radii away.
+ * The picture is then all but orthographic: it must match one at 0.05
+ * degrees (eye 2,400 radii away) to a few pixels, not show the depth
+ * fighting and shading noise of float coordinates that large (the old
+ * camera: 4,683 of 65,536 pixels off by more than 40 levels on spot). */
+static void test_tiny_fov(void **state)
+{
+    (void)state;
+    vx_mesh *m = shape_load("spot_triangulated.obj");
+    assert_non_null(m);
+    vx_preview_params p = params(256, 256, 30, 20, 0.001), q = params(256, 256, 30, 20, 0.05);
+    uint8_t *a = render(m, &p, NULL), *b = render(m, &q, NULL);
+    size_t off = 0;
+    for (size_t i = 0; i < 256 * 256; i++) {
+        int d = 0;
+        for (int k = 0; k < 3; k++)
+            d = fmax(d, abs((int)a[4 * i + k] - (int)b[4 * i + k]));
+        off += d > 40;
+    }
+    box bb = bounds(a, &p);
+    printf("  fov 0.001 vs 0.05: %zu pixels differ by more than 40 levels (covered %llu)\n", off,
+           (unsigned long long)bb.covered);
+    assert_true(bb.covered > 256 * 256 / 10);
+    assert_true(off < 64);
+    free(a);
+    free(b);
+    vx_mesh_free(m);
+}
+
 /* ---- PNG ------------------------------------------------------------------ */
 
 /* Reads a PNG with libpng's classic API, 16-bit samples in host order. */
@@ -642,6 +672,7 @@ int main(void)
         cmocka_unit_test(test_aspect_and_background),
         cmocka_unit_test(test_empty_and_bad),
         cmocka_unit_test(test_million_triangles),
+        cmocka_unit_test(test_tiny_fov),
         cmocka_unit_test(test_bands_and_stop),
         cmocka_unit_test(test_png_roundtrip),
     };
