@@ -672,22 +672,29 @@ static void face_centre(const vx_gregory_topo *t, const double *pos, uint32_t f,
         if (vx_v3_unit(n)) n[0] = n[1] = 0, n[2] = 1;
     }
     memcpy(nn + 3 * cn, n, sizeof n);
-    /* Midpoint -> centre curves: at the midpoint square to the edge,
-     * towards the face's side (left of the face's direction along
-     * the edge); at the centre from the centre's fan. */
+    /* Midpoint -> centre curves: at the midpoint towards the centre in
+     * the midpoint's plane (square to the edge in a regular face; in a
+     * thin one, leaving square would cross the curve from the next
+     * midpoint, two sides of a 9 degree sector 0.08 apart, and fold the
+     * patch), square to the edge where that direction runs along the edge
+     * or away from the face (a degenerate face), towards the face's side (left of the face's
+     * direction along the edge); at the centre from the centre's fan. */
     fan_dirs(cp, n, np, ids, k, 1, cdir);
     for (uint32_t i = 0; i < k; i++) {
         uint32_t e = t->fedge[s0 + i], m = ids[i], c = (uint32_t)(2 * t->nedges + s0 + i);
-        double tf[3], dm[3];
+        double tf[3], dm[3], sq[3];
         memcpy(tf, mt + 3 * e, sizeof tf);
         if (t->fidx[s0 + i] != t->edge_v[2 * e])
             for (int d = 0; d < 3; d++)
                 tf[d] = -tf[d];
-        vx_v3_cross(nn + 3 * m, tf, dm);
-        if (vx_v3_unit(dm)) {
-            vx_v3_sub(cp, np + 3 * m, dm);
-            project_dir(dm, nn + 3 * m, dm);
-        }
+        vx_v3_cross(nn + 3 * m, tf, sq);
+        int sq_ok = vx_v3_unit(sq) == 0;
+        vx_v3_sub(cp, np + 3 * m, dm);
+        project_dir(dm, nn + 3 * m, dm);
+        double along = vx_v3_dot(dm, tf);
+        int chord_ok = vx_v3_norm(dm) > 0 && fabs(along) < 1 - 1e-9 && /* not along it */
+                       (!sq_ok || vx_v3_dot(dm, sq) > 0);
+        if (!chord_ok && sq_ok) memcpy(dm, sq, sizeof dm);
         dir_curve(np + 3 * m, dm, cp, cdir + 3 * i, cvs + 12 * c);
     }
 }

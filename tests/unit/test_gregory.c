@@ -272,6 +272,57 @@ static void test_g1_suzanne(void **state)
     vx_mesh_free(m);
 }
 
+/* A flat disc of n triangles around one vertex (z = 0): the surface is the
+ * disc itself, every patch in the plane and facing +z everywhere. The
+ * curves from edge midpoints to face centres used to leave square to the
+ * edge: in sectors under ~12 degrees (n >= 30) the two from the spokes
+ * crossed, and every centre patch folded over (40 of 120 at n = 40). */
+static void test_flat_fan(void **state)
+{
+    (void)state;
+    const int ns[] = {6, 29, 30, 40, 100, 300, 1000};
+    for (size_t k = 0; k < sizeof ns / sizeof ns[0]; k++) {
+        int n = ns[k];
+        double *p = malloc(3 * (size_t)(n + 1) * sizeof *p);
+        uint32_t *f = malloc(3 * (size_t)n * sizeof *f), *sz = malloc((size_t)n * sizeof *sz);
+        assert_true(p && f && sz);
+        p[0] = p[1] = p[2] = 0;
+        for (int i = 0; i < n; i++) {
+            p[3 * (i + 1)] = cos(2 * M_PI * i / n);
+            p[3 * (i + 1) + 1] = sin(2 * M_PI * i / n);
+            p[3 * (i + 1) + 2] = 0;
+            f[3 * i] = 0;
+            f[3 * i + 1] = (uint32_t)(1 + i);
+            f[3 * i + 2] = (uint32_t)(1 + (i + 1) % n);
+            sz[i] = 3;
+        }
+        vx_mesh *m = shape_poly_mesh((size_t)n + 1, p, (size_t)n, sz, f);
+        assert_non_null(m);
+        vx_gpatch_set *s = build(m, NULL);
+        size_t folded = vx_gpatch_folded(s, m), flipped = 0;
+        for (size_t q = 0; q < s->npatches; q++) {
+            const double *cp = s->cp + q * VX_GPATCH_POINTS * 3;
+            for (int i = 0; i < VX_GPATCH_POINTS; i++)
+                assert_true(cp[3 * i + 2] == 0);
+            for (int a = 0; a <= 4; a++)
+                for (int b = 0; b <= 4; b++) {
+                    double x[3], nrm[3];
+                    vx_gpatch_eval(cp, 0.05 + 0.225 * a, 0.05 + 0.225 * b, x, nrm);
+                    flipped += !(nrm[2] > 0);
+                }
+        }
+        print_message("flat fan of %d: %zu of %zu patches folded, %zu of %zu samples facing -z\n",
+                      n, folded, s->npatches, flipped, 25 * s->npatches);
+        assert_int_equal(folded, 0);
+        assert_int_equal(flipped, 0);
+        vx_gpatch_set_free(s);
+        vx_mesh_free(m);
+        free(p);
+        free(f);
+        free(sz);
+    }
+}
+
 static void test_g1_ngon(void **state)
 {
     (void)state;
@@ -1186,17 +1237,12 @@ static void test_params(void **state)
 int main(void)
 {
     const struct CMUnitTest cpu[] = {
-        cmocka_unit_test(test_g1_spot),
-        cmocka_unit_test(test_g1_suzanne),
-        cmocka_unit_test(test_g1_ngon),
-        cmocka_unit_test(test_g1_open_quads),
-        cmocka_unit_test(test_g1_quads),
-        cmocka_unit_test(test_counts_and_weld),
-        cmocka_unit_test(test_frames_reuse_topology),
-        cmocka_unit_test(test_from_bezier_small),
-        cmocka_unit_test(test_max_edge),
-        cmocka_unit_test(test_max_edge_strip),
-        cmocka_unit_test(test_params),
+        cmocka_unit_test(test_g1_spot),           cmocka_unit_test(test_g1_suzanne),
+        cmocka_unit_test(test_g1_ngon),           cmocka_unit_test(test_flat_fan),
+        cmocka_unit_test(test_g1_open_quads),     cmocka_unit_test(test_g1_quads),
+        cmocka_unit_test(test_counts_and_weld),   cmocka_unit_test(test_frames_reuse_topology),
+        cmocka_unit_test(test_from_bezier_small), cmocka_unit_test(test_max_edge),
+        cmocka_unit_test(test_max_edge_strip),    cmocka_unit_test(test_params),
     };
     const struct CMUnitTest gl[] = {
         cmocka_unit_test(test_gpu_matches_cpu), cmocka_unit_test(test_gpu_mixed_divisions),
