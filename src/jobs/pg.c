@@ -484,31 +484,63 @@ int vx_pg_submit_idem(vx_pg *pg, const vx_pg_new_job *job, vx_pg_job *existing, 
              job->max_attempts > 0 ? job->max_attempts : pg->desc.max_attempts);
     const char *vals[] = {job->id, job->kind, job->mesh, params ? params : "{}",
                           maxa,    job->fp,   job->idem};
-    pthread_mutex_lock(&pg->lock);
-    /* One statement: inserted, or the row that holds the key (a key's
-     * first job wins; a concurrent insert of the same key waits for it). */
-    PGresult *r = pg_run_locked(
-        pg, 0,
-        "WITH ins AS (INSERT INTO vx_jobs (id, kind, mesh, params, max_attempts, fp, idem_key)"
-        "  VALUES ($1, $2, $3, $4::json, $5::integer, $6, $7)"
-        "  ON CONFLICT (idem_key) WHERE idem_key IS NOT NULL DO NOTHING RETURNING id)"
-        " SELECT " JOB_COLS " FROM vx_jobs WHERE idem_key = $7 AND NOT EXISTS (SELECT 1 FROM ins)",
-        7, vals, err);
-    pthread_mutex_unlock(&pg->lock);
-    cJSON_free(params);
-    if (!r) return -1;
-    int rc = 0;
-    if (PQntuples(r) == 1) {
-        read_row(r, 0, existing);
-        if (strcmp(existing->fp, job->fp ? job->fp : "")) {
-            vx_pg_job_clear(existing);
-            rc = vx_err_set(err, VX_EUNPROC, "idempotency_key_reused",
-                            "the Idempotency-Key was used for another request");
-        } else {
-            rc = 1;
+    /* Inserted, or the row that holds the key: a key's first job wins (a
+     * concurrent insert of the same key waits for it, then does nothing).
+     * The winner is read by a statement of its own: the insert's snapshot
+     * was taken before the winner committed, so a SELECT in the same
+     * statement does not see it (the job was then reported as inserted,
+     * 202, and never existed). It can be gone by then (deleted): try again. */
+    int rc = -1, failed = 0, settled = 0;
+    for (int attempt = 0; attempt < 8 && !failed; attempt++) {
+        pthread_mutex_lock(&pg->lock);
+        PGresult *r = pg_run_locked(
+            pg, 0,
+            "INSERT INTO vx_jobs (id, kind, mesh, params, max_attempts, fp, idem_key)"
+            " VALUES ($1, $2, $3, $4::json, $5::integer, $6, $7)"
+            " ON CONFLICT (idem_key) WHERE idem_key IS NOT NULL DO NOTHING RETURNING id",
+            7, vals, err);
+        pthread_mutex_unlock(&pg->lock);
+        if (!r) {
+            failed = 1;
+            break;
+        }
+        int inserted = PQntuples(r) == 1;
+        PQclear(r);
+        if (inserted) {
+            rc = 0;
+            settled = 1;
+            break;
+        }
+        const char *key[] = {job->idem};
+        pthread_mutex_lock(&pg->lock);
+        r = pg_run_locked(pg, 1, "SELECT " JOB_COLS " FROM vx_jobs WHERE idem_key = $1", 1, key,
+                          err);
+        pthread_mutex_unlock(&pg->lock);
+        if (!r) {
+            failed = 1;
+            break;
+        }
+        int found = PQntuples(r) == 1;
+        if (found) {
+            read_row(r, 0, existing);
+            if (strcmp(existing->fp, job->fp ? job->fp : "")) {
+                vx_pg_job_clear(existing);
+                rc = vx_err_set(err, VX_EUNPROC, "idempotency_key_reused",
+                                "the Idempotency-Key was used for another request");
+            } else {
+                rc = 1;
+            }
+        }
+        PQclear(r);
+        if (found) {
+            settled = 1;
+            break;
         }
     }
-    PQclear(r);
+    if (!settled && !failed)
+        vx_err_set(err, VX_EOVERLOAD, "database_overloaded",
+                   "the Idempotency-Key's job kept changing; try again");
+    cJSON_free(params);
     return rc;
 }
 

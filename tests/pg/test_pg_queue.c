@@ -240,6 +240,80 @@ static void *race(void *ud)
     return NULL;
 }
 
+/* The same Idempotency-Key from several replicas at once: one job, which
+ * every other submission answers. Before, a loser's statement could not
+ * see the winner (committed after its snapshot), reported itself as
+ * inserted, and its job id (answered 202) never existed. */
+enum { IDEM_RACERS = 3, IDEM_ROUNDS = 40 };
+typedef struct idem_racer {
+    int n;
+    pthread_barrier_t *bar;
+    int rc[IDEM_ROUNDS];
+    char mine[IDEM_ROUNDS][33], got[IDEM_ROUNDS][33];
+} idem_racer;
+
+static void *idem_race(void *arg)
+{
+    idem_racer *r = arg;
+    char name[16];
+    snprintf(name, sizeof name, "idem%d", r->n);
+    vx_pg *pg = open_as(name, 30);
+    for (int k = 0; k < IDEM_ROUNDS; k++) {
+        char key[32];
+        snprintf(key, sizeof key, "race-%d", k);
+        make_id(r->mine[k], (unsigned)(20000 + 100 * k + r->n));
+        vx_pg_new_job nj = {.id = r->mine[k],
+                            .kind = "idem",
+                            .mesh =
+                                "aaaa000000000000000000000000000000000000000000000000000000000002",
+                            .fp = "00000000000000cc",
+                            .idem = key};
+        vx_pg_job ex;
+        vx_err err = {0};
+        pthread_barrier_wait(r->bar);
+        r->rc[k] = vx_pg_submit_idem(pg, &nj, &ex, &err);
+        snprintf(r->got[k], 33, "%s", r->rc[k] == 1 ? ex.id : r->rc[k] == 0 ? r->mine[k] : "");
+        if (r->rc[k] == 1) vx_pg_job_clear(&ex);
+    }
+    vx_pg_close(pg);
+    return NULL;
+}
+
+static void test_idem_race(void **state)
+{
+    (void)state;
+    pthread_barrier_t bar;
+    pthread_barrier_init(&bar, NULL, IDEM_RACERS);
+    static idem_racer rs[IDEM_RACERS];
+    pthread_t th[IDEM_RACERS];
+    for (int i = 0; i < IDEM_RACERS; i++) {
+        memset(&rs[i], 0, sizeof rs[i]);
+        rs[i].n = i;
+        rs[i].bar = &bar;
+        pthread_create(&th[i], NULL, idem_race, &rs[i]);
+    }
+    for (int i = 0; i < IDEM_RACERS; i++)
+        pthread_join(th[i], NULL);
+    pthread_barrier_destroy(&bar);
+    for (int k = 0; k < IDEM_ROUNDS; k++) {
+        int won = 0;
+        const char *winner = NULL;
+        for (int i = 0; i < IDEM_RACERS; i++) {
+            assert_true(rs[i].rc[k] == 0 || rs[i].rc[k] == 1);
+            if (rs[i].rc[k] == 0) won++, winner = rs[i].mine[k];
+        }
+        assert_int_equal(won, 1);
+        for (int i = 0; i < IDEM_RACERS; i++)
+            assert_string_equal(rs[i].got[k], winner);
+        char q[160];
+        snprintf(q, sizeof q,
+                 "SELECT count(*) FROM vx_jobs WHERE idem_key = 'race-%d' AND id = '%s'", k,
+                 winner);
+        assert_int_equal(sql_long(q), 1);
+    }
+    assert_int_equal(sql_long("SELECT count(*) FROM vx_jobs WHERE kind = 'idem'"), IDEM_ROUNDS);
+}
+
 static void test_concurrent_claims(void **state)
 {
     vx_pg *pg = open_as("feeder", 0);
@@ -991,6 +1065,7 @@ int main(void)
         cmocka_unit_test_setup(test_notify, setup),
         cmocka_unit_test_setup(test_restart, setup),
         cmocka_unit_test_setup(test_v2, setup),
+        cmocka_unit_test_setup(test_idem_race, setup),
         cmocka_unit_test_setup(test_children, setup),
         cmocka_unit_test_setup(test_meshes, setup),
     };
