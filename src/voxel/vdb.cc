@@ -15,7 +15,9 @@
 #include <cmath>
 #include <cstdio>
 #include <cstring>
+#include <cerrno>
 #include <exception>
+#include <fstream>
 #include <memory>
 #include <mutex>
 #include <sstream>
@@ -113,6 +115,24 @@ openvdb::FloatGrid::Ptr make_float_grid(float background)
     return std::make_shared<ParallelFloatGrid>(background);
 }
 
+// OpenVDB's own archive writer (the format io::File writes: seekable, with
+// grid offsets) into a stream of ours. io::File::write does not look at its
+// stream after writing, so a full disk gave a short file and no error; this
+// stream throws on any failed write, flush or close.
+class CheckedArchive final : public openvdb::io::Archive
+{
+  public:
+    void write_file(const std::string &path, const openvdb::GridPtrVec &grids) const
+    {
+        std::ofstream os;
+        os.exceptions(std::ios_base::failbit | std::ios_base::badbit);
+        os.open(path, std::ios_base::out | std::ios_base::binary | std::ios_base::trunc);
+        Archive::write(os, grids, /*seekable=*/true, openvdb::MetaMap());
+        os.flush();
+        os.close();
+    }
+};
+
 // Builds grids (build(grids) returns 0, or -1 with err set) and writes them
 // to path through path.tmp and a rename, inside one try: no exception
 // crosses into C, and a failed write leaves no file behind.
@@ -123,9 +143,7 @@ template <typename Build> int write_grids(const char *path, vx_err *err, Build b
         std::call_once(init_once, [] { openvdb::initialize(); });
         openvdb::GridPtrVec grids;
         if (build(grids)) return -1;
-        openvdb::io::File file(tmp);
-        file.write(grids);
-        file.close();
+        CheckedArchive().write_file(tmp, grids);
         if (std::rename(tmp.c_str(), path) != 0) {
             std::remove(tmp.c_str());
             return vx_err_set(err, VX_EIO, "io_error", "rename %s failed", tmp.c_str());
@@ -134,6 +152,11 @@ template <typename Build> int write_grids(const char *path, vx_err *err, Build b
     } catch (const std::bad_alloc &) {
         std::remove(tmp.c_str());
         return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for the OpenVDB grid");
+    } catch (const std::ios_base::failure &e) {
+        int e_no = errno;
+        std::remove(tmp.c_str());
+        return vx_err_set(err, VX_EIO, "io_error", "writing the .vdb failed: %s",
+                          e_no ? strerror(e_no) : "a stream error");
     } catch (const std::exception &e) {
         std::remove(tmp.c_str());
         return vx_err_set(err, VX_EIO, "io_error", "OpenVDB: %s", e.what());

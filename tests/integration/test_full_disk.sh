@@ -114,5 +114,30 @@ wait_job "$AFTER" 120
 check "the job acknowledged after the full disk ran" jq -e '.state == "succeeded"' "$BODY"
 upload "$TMP/box2.obj"
 expect_status "upload with room again" 201
+
+# A result that runs out of space while it is written fails the job
+# (io_error, no path named) and leaves no file: a .vdb used to be cut short
+# (or left empty) and served as a succeeded job's result.
+upload "$VX_MESH_DIR/spot_triangulated.obj"
+expect_status "upload spot" 201
+SPOT=$MESH_ID
+kill9_daemon
+start_daemon --min-free-disk 0 || exit 1
+for f in vdb:fog vdb:level_set vdb:bool raw8 npy; do
+    p="\"format\":\"${f%%:*}\""
+    [[ $f == vdb:* ]] && p="$p,\"vdb_grid\":\"${f#vdb:}\""
+    fill_to $((192 << 10))
+    run_job voxelize "$SPOT" "{\"resolution\":256,$p}"
+    check "$f on a disk that fills: failed io_error ($(jq -c '.state, .error' "$TMP/job.json" | tr '\n' ' '))" \
+        jq -e '.state == "failed" and .error.code == "io_error"' "$TMP/job.json"
+    cp "$TMP/job.json" "$BODY"
+    check "$f: the error names no server path" no_paths
+    api GET "/v1/jobs/$JOB/result"
+    check "$f: no result served (got $STATUS)" test "$STATUS" != 200
+    check "$f: no file left behind" test -z "$(find "$DATA" -path "*$JOB*" -type f 2>/dev/null)"
+done
+rm -f "$DISK/filler" "$DISK/filler2"
+run_job voxelize "$SPOT" '{"resolution":256,"format":"vdb","vdb_grid":"fog"}'
+job_ok "vdb fog with room again"
 stop_daemon
 finish
