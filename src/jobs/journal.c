@@ -78,10 +78,23 @@ static cJSON *parse_framed(const char *p, size_t n)
     return cJSON_ParseWithLength(p + FRAME_HEAD, n - FRAME_HEAD);
 }
 
+/* Whether a frame's head ("#" and 8 hex digits and a space) ends just
+ * before p (line <= p). */
+static int after_frame_head(const char *line, const char *p)
+{
+    if (p - line < FRAME_HEAD || p[-FRAME_HEAD] != '#' || p[-1] != ' ') return 0;
+    for (const char *h = p - FRAME_HEAD + 1; h < p - 1; h++)
+        if (!((*h >= '0' && *h <= '9') || (*h >= 'a' && *h <= 'f') || (*h >= 'A' && *h <= 'F')))
+            return 0;
+    return 1;
+}
+
 /* A line that is not one good record may be a fragment that a failed write
  * left behind with a good record glued on after it (journals written before
  * failed appends were truncated): the last frame (or, unframed, the first
- * JSON suffix) that checks out is that record. */
+ * JSON suffix) that checks out is that record. The unframed search is for
+ * journals of versions that wrote no frames: it never reads a frame's own
+ * payload, whose CRC failed (a bit flipped on disk is not a record). */
 static cJSON *salvage(const char *line, size_t n)
 {
     for (size_t i = n; i-- > 1;)
@@ -89,9 +102,11 @@ static cJSON *salvage(const char *line, size_t n)
             cJSON *rec = parse_framed(line + i, n - i);
             if (rec) return rec;
         }
+    if (line[0] == '#') return NULL; /* a framed record: its CRC decides */
     static const char key[] = "{\"job\":";
     for (const char *p = line + 1; (p = memmem(p, n - (size_t)(p - line), key, sizeof key - 1));
          p++) {
+        if (after_frame_head(line, p)) continue;
         cJSON *rec = cJSON_ParseWithLength(p, n - (size_t)(p - line));
         if (rec) return rec;
     }
