@@ -1022,8 +1022,10 @@ void cluster_report(vx_jobs *j, job *jb, vx_job_run *r, int ok, const vx_err *e,
     vx_err_clear(&serr);
     if (ok && r->dir[0] && vx_store_result_commit(j->desc.store, r->rid, &serr)) {
         ok = 0;
+        char why[sizeof serr.message]; /* not formatted into itself (it doubled) */
+        snprintf(why, sizeof why, "%s", serr.message);
         vx_err_set(&serr, serr.kind == VX_EUNAVAIL ? VX_EUNAVAIL : VX_EIO, "store_failed",
-                   "the results could not be stored: %s", serr.message);
+                   "the results could not be stored: %s", why);
         e = &serr;
     }
     cJSON *m = ok ? manifest(j, r) : NULL;

@@ -157,13 +157,17 @@ static void drop_locked(vx_pg *pg)
     if (pg->listening) pg->missed = 1;
 }
 
+/* libpq's reason goes to the log only: it names the server's socket path
+ * or host, which answers to clients never do (the header Retry-After says
+ * when to try again). */
 static int unavailable(vx_pg *pg, vx_err *err, const char *what)
 {
     char line[400];
     first_line(line, sizeof line, what);
+    if (strcmp(what, "waiting to reconnect")) /* logged once a failure, not per request */
+        VX_WARN("pg.unavailable", "reason=\"%s\" retry_in_s=%d", line, vx_pg_retry_after(pg));
     return vx_err_set(err, VX_EUNAVAIL, "database_unavailable",
-                      "the database is unreachable (%s); retry in %d s", line,
-                      vx_pg_retry_after(pg));
+                      "the database is unreachable; try again shortly");
 }
 
 /* Makes sure there is a connection; VX_EUNAVAIL (without trying) while the

@@ -27,7 +27,9 @@ int vx_out_open(vx_out *o, const char *path, vx_err *err)
     if (!o->f) {
         free(o->buf);
         o->buf = NULL;
-        return vx_err_set(err, VX_EIO, "io_error", "open %s: %s", o->tmp, strerror(errno));
+        int e = errno;
+        const char *base = strrchr(o->tmp, '/') ? strrchr(o->tmp, '/') + 1 : o->tmp;
+        return vx_err_set(err, VX_EIO, "io_error", "creating %s failed: %s", base, strerror(e));
     }
     setvbuf(o->f, NULL, _IONBF, 0); /* the buffer is ours */
     return 0;
@@ -69,11 +71,14 @@ int vx_out_close(vx_out *o, int ok, vx_err *err)
     o->f = NULL;
     free(o->buf);
     o->buf = NULL;
+    /* Messages name the file, never its server path. */
+    const char *base = strrchr(o->tmp, '/') ? strrchr(o->tmp, '/') + 1 : o->tmp;
     if (e || (ok && c))
         ok = 0,
-        vx_err_set(err, VX_EIO, "io_error", "write %s: %s", o->tmp, strerror(e ? e : errno));
+        vx_err_set(err, VX_EIO, "io_error", "writing %s failed: %s", base, strerror(e ? e : errno));
     if (ok && rename(o->tmp, o->path))
-        ok = 0, vx_err_set(err, VX_EIO, "io_error", "rename %s: %s", o->tmp, strerror(errno));
+        ok = 0,
+        vx_err_set(err, VX_EIO, "io_error", "renaming %s failed: %s", base, strerror(errno));
     if (!ok) remove(o->tmp);
     return ok ? 0 : -1;
 }

@@ -145,8 +145,10 @@ template <typename Build> int write_grids(const char *path, vx_err *err, Build b
         if (build(grids)) return -1;
         CheckedArchive().write_file(tmp, grids);
         if (std::rename(tmp.c_str(), path) != 0) {
+            int e_no = errno;
             std::remove(tmp.c_str());
-            return vx_err_set(err, VX_EIO, "io_error", "rename %s failed", tmp.c_str());
+            return vx_err_set(err, VX_EIO, "io_error", "renaming %s failed: %s",
+                              tmp.substr(tmp.rfind('/') + 1).c_str(), strerror(e_no));
         }
         return 0;
     } catch (const std::bad_alloc &) {

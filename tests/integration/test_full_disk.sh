@@ -132,6 +132,7 @@ for f in vdb:fog vdb:level_set vdb:bool raw8 npy; do
         jq -e '.state == "failed" and .error.code == "io_error"' "$TMP/job.json"
     cp "$TMP/job.json" "$BODY"
     check "$f: the error names no server path" no_paths
+    check "$f: nor any path: the file only ($(jq -r .error.message "$TMP/job.json"))" sh -c "! jq -r .error.message '$TMP/job.json' | grep -q /"
     api GET "/v1/jobs/$JOB/result"
     check "$f: no result served (got $STATUS)" test "$STATUS" != 200
     check "$f: no file left behind" test -z "$(find "$DATA" -path "*$JOB*" -type f 2>/dev/null)"
