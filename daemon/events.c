@@ -160,10 +160,14 @@ static void poll_stream(vx_events *ev, vx_stream *s, double now)
         return;
     }
     vx_err err;
+    vx_err_clear(&err);
     cJSON *doc = vx_jobs_get(ev->jobs, s->jid, NULL, &err);
-    if (!doc) {
+    /* The database down a while (cluster mode): the stream waits, kept
+     * alive, and goes on when it answers again. */
+    int transient = !doc && (err.kind == VX_EUNAVAIL || err.kind == VX_EOVERLOAD);
+    if (!doc && !transient) {
         s->ended = 1; /* dropped from the history */
-    } else if (news(s, doc)) {
+    } else if (doc && news(s, doc)) {
         int terminal = 0;
         push_locked(s, format_event(s, doc, &terminal));
         if (terminal) s->ended = 1;

@@ -550,7 +550,16 @@ cJSON *cluster_submit(vx_jobs *j, const char *mesh, const vx_kind *k, cJSON *par
     if (got < 0) return NULL;
     if (got == 1) {
         *existing = 1;
-    } else if (vx_pg_get(c->api, id, &row, err)) {
+    } else if (!vx_pg_get(c->api, id, &row, err)) {
+        /* The 202 answers the job as committed, queued: a replica may have
+         * claimed it between the commit and this read. */
+        if (!strcmp(row.state, "running")) {
+            snprintf(row.state, sizeof row.state, "queued");
+            row.replica[0] = 0;
+            row.attempt = 0;
+            row.started = row.lease_expires = row.progress = 0;
+        }
+    } else {
         /* Committed, but not read back: answer from what was sent. */
         snprintf(row.id, sizeof row.id, "%s", id);
         snprintf(row.kind, sizeof row.kind, "%s", k->name);

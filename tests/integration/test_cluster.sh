@@ -298,6 +298,15 @@ start_replica "$T" || exit 1
 submit 2 voxelize "$B" '{"resolution":24,"format":"summary"}'
 Q=$JOB
 wait_final 2 "$Q" 30
+# An event stream open through the outage waits (kept alive) and still
+# ends with the job's last state; it used to end at once, the job running.
+submit 2 render "$B" '{"N":64,"R":1024,"width":128,"height":128}'
+SJ=$JOB
+wait_running "$SJ"
+python3 "$VX_SOURCE_DIR/tests/integration/sse.py" "${RBASE[1]}/v1/jobs/$SJ/events" --max-time 150 \
+    --ready "$TMP/outage_sse.ready" >"$TMP/outage_sse.json" 2>&1 &
+SSEPID=$!
+for _ in $(seq 50); do [[ -e "$TMP/outage_sse.ready" ]] && break; sleep 0.1; done
 bash "$PGSH" stop "$PGDIR"
 on 1
 api GET "/v1/jobs/$Q"
@@ -330,6 +339,9 @@ submit 3 voxelize "$B" '{"resolution":26,"format":"summary"}'
 expect_status "submit after the restart" 202
 wait_final 1 "$JOB" 60
 check "runs after the restart" jq -e '.state == "succeeded"' "$BODY"
+wait "$SSEPID"
+check "the event stream through the outage ended on the job's last state ($(jq -c '[.complete, .events[-1].data.state]' "$TMP/outage_sse.json"))" \
+    jq -e '.complete and (.events[-1].data.state | test("succeeded|failed"))' "$TMP/outage_sse.json"
 
 # 30 jobs while replicas are killed and restarted at random.
 seed=${VX_SEED:-$RANDOM}
