@@ -671,7 +671,10 @@ int cluster_output(vx_jobs *j, const char *jid, const char *name, char *path, si
         jid, row.state,
         cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(last, "message")) ?: "unknown error",
         cJSON_GetObjectItemCaseSensitive(row.result, "outputs"), name, file, ctype, err);
+    double want = -1;
     if (o) {
+        const cJSON *b = cJSON_GetObjectItemCaseSensitive(o, "bytes");
+        if (cJSON_IsNumber(b) && b->valuedouble > 0) want = b->valuedouble;
         const char *of = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(o, "rid"));
         if (of) { /* a child job's output, under this job's name for it */
             const char *ext = strrchr(file, '.');
@@ -685,7 +688,8 @@ int cluster_output(vx_jobs *j, const char *jid, const char *name, char *path, si
     }
     vx_pg_job_clear(&row);
     if (rc) return rc;
-    return vx_store_result_file(j->desc.store, rid, file, path, pathn, err);
+    if (vx_store_result_file(j->desc.store, rid, file, path, pathn, err)) return -1;
+    return job_output_check_size(jid, path, want, err);
 }
 
 /* ---- claims ------------------------------------------------------------------- */

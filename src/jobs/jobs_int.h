@@ -122,6 +122,9 @@ void notify(vx_jobs *j, const char *jid, int terminal);
 const cJSON *job_output_entry(const char *jid, const char *state, const char *failure,
                               const cJSON *outputs, const char *name, char file[160],
                               char ctype[64], vx_err *err);
+/* 0, or -1 with VX_EGONE result_damaged when the file at path is not the
+ * want bytes its job recorded (want < 0: not recorded, as before). */
+int job_output_check_size(const char *jid, const char *path, double want, vx_err *err);
 
 /* pins.c */
 void unpin_job(vx_jobs *j, pinset *ps);

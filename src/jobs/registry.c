@@ -6,6 +6,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
 #include <sys/random.h>
 
 #include "util/fsutil.h"
@@ -519,11 +520,23 @@ const cJSON *job_output_entry(const char *jid, const char *state, const char *fa
     return o;
 }
 
+int job_output_check_size(const char *jid, const char *path, double want, vx_err *err)
+{
+    struct stat st;
+    if (!(want >= 0) || stat(path, &st) != 0 || (double)st.st_size == want) return 0;
+    VX_ERROR("job.result_damaged", "job=%s bytes=%lld want=%.0f", jid, (long long)st.st_size, want);
+    return vx_err_set(err, VX_EGONE, "result_damaged",
+                      "the result file is not the one job %s wrote (%lld of %.0f bytes); run the "
+                      "job again",
+                      jid, (long long)st.st_size, want);
+}
+
 int vx_jobs_output(vx_jobs *j, const char *jid, const char *name, char *path, size_t pathn,
                    char ctype[64], char fname[128], vx_err *err)
 {
     if (j->cl) return cluster_output(j, jid, name, path, pathn, ctype, fname, err);
     char file[160] = {0}, id[33];
+    double want = -1;
     pthread_mutex_lock(&j->lock);
     job *jb = vx_jobs_valid_id(jid) ? find_job(j, jid) : NULL;
     int rc = -1;
@@ -532,8 +545,11 @@ int vx_jobs_output(vx_jobs *j, const char *jid, const char *name, char *path, si
     } else {
         cJSON *outputs = NULL;
         if (jb->state == ST_SUCCEEDED) job_parts(jb, NULL, NULL, &outputs);
-        if (job_output_entry(jid, state_names[jb->state], jb->error.message, outputs, name, file,
-                             ctype, err)) {
+        const cJSON *o = job_output_entry(jid, state_names[jb->state], jb->error.message, outputs,
+                                          name, file, ctype, err);
+        if (o) {
+            const cJSON *b = cJSON_GetObjectItemCaseSensitive(o, "bytes");
+            if (cJSON_IsNumber(b)) want = b->valuedouble;
             snprintf(fname, 128, "%s-%s", jb->id, file);
             snprintf(id, sizeof id, "%s", jb->id);
             rc = 0;
@@ -542,7 +558,8 @@ int vx_jobs_output(vx_jobs *j, const char *jid, const char *name, char *path, si
     }
     pthread_mutex_unlock(&j->lock);
     if (rc) return rc;
-    return vx_store_result_file(j->desc.store, id, file, path, pathn, err);
+    if (vx_store_result_file(j->desc.store, id, file, path, pathn, err)) return -1;
+    return job_output_check_size(id, path, want, err);
 }
 
 int vx_jobs_ready(vx_jobs *j)

@@ -8,6 +8,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include "util/fsutil.h"
@@ -48,9 +49,11 @@ static void run_free(vx_job_run *r)
     if (big) malloc_trim(0); /* as at submission */
 }
 
+/* Syncs each output file and records its size in its entry ("bytes"):
+ * a result file found another size later is not served (result_damaged). */
 static void sync_outputs(vx_job_run *r)
 {
-    const cJSON *it;
+    cJSON *it;
     cJSON_ArrayForEach(it, r->outputs)
     {
         if (cJSON_GetObjectItemCaseSensitive(it, "rid")) continue; /* a child's, stored */
@@ -60,6 +63,11 @@ static void sync_outputs(vx_job_run *r)
         int fd = open(p, O_RDONLY | O_CLOEXEC);
         if (fd >= 0) {
             fsync(fd);
+            struct stat st;
+            if (fstat(fd, &st) == 0) {
+                cJSON_DeleteItemFromObjectCaseSensitive(it, "bytes");
+                cJSON_AddNumberToObject(it, "bytes", (double)st.st_size);
+            }
             close(fd);
         }
     }

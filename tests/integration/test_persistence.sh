@@ -73,5 +73,26 @@ api GET "/v1/jobs/$DONE/result"
 expect_error "evicted result" 410 result_evicted
 api GET "/v1/jobs/$DONE"
 check "the evicted job is still known" jq -e '.state == "succeeded"' "$BODY"
+
+# A result file cut short on disk (or grown) is not served as the job's:
+# 410 result_damaged, each output on its own, across a restart.
+stop_daemon
+start_daemon || exit 1
+run_job voxelize "$BOX" '{"resolution":40,"format":"npy"}'
+job_ok "npy job"
+DJ=$JOB
+api GET "/v1/jobs/$DJ/result"
+expect_status "npy result" 200
+FULL=$(stat -c %s "$BODY")
+stop_daemon
+NPY=$(find "$DATA" -path "*$DJ*" -name '*.npy' | head -n 1)
+check "the result file is on disk" test -s "$NPY"
+truncate -s 1000 "$NPY"
+start_daemon || exit 1
+api GET "/v1/jobs/$DJ/result"
+expect_error "a result cut short" 410 result_damaged
+check "the message says the sizes" jq -e --arg f "$FULL" '.error.message | test("1000 of " + $f + " bytes")' "$BODY"
+api GET "/v1/jobs/$DJ"
+check "the job itself is still known" jq -e '.state == "succeeded"' "$BODY"
 stop_daemon
 finish
