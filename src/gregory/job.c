@@ -16,6 +16,7 @@
 #include "gregory/job.h"
 #include "gregory/osd.h"
 #include "gregory/tess.h"
+#include "mesh/intake.h"
 #include "store/store.h"
 #include "util/fsutil.h"
 #include "util/child.h"
@@ -65,21 +66,20 @@ static long frame_count(const cJSON *f, size_t index, vx_err *err)
     const cJSON *e;
     cJSON_ArrayForEach(e, f)
     {
-        /* positions are tessellated in floats: within +-FLT_MAX */
-        int is_num = cJSON_IsNumber(e) && fabs(e->valuedouble) <= FLT_MAX;
+        /* positions are tessellated in floats: within what meshes may hold */
+        int is_num = cJSON_IsNumber(e) && fabs(e->valuedouble) <= VX_MESH_COORD_MAX;
         int is_triple = cJSON_IsArray(e) && cJSON_GetArraySize(e) == 3;
         if (is_triple)
             for (int c = 0; c < 3; c++) {
                 const cJSON *x = cJSON_GetArrayItem(e, c);
-                is_triple &= cJSON_IsNumber(x) && fabs(x->valuedouble) <= FLT_MAX;
+                is_triple &= cJSON_IsNumber(x) && fabs(x->valuedouble) <= VX_MESH_COORD_MAX;
             }
         if (nested < 0) nested = is_triple;
         if (nested ? !is_triple : !is_num)
             return vx_err_set(err, VX_EUNPROC, "invalid_params",
-                              "params.frames[%zu][%ld] must be a finite number within the range "
-                              "of 32-bit floats (flat x, y, z list) or an [x, y, z] array of "
-                              "them, the same form throughout",
-                              index, n);
+                              "params.frames[%zu][%ld] must be a number within +-%g (flat x, y, "
+                              "z list) or an [x, y, z] array of them, the same form throughout",
+                              index, n, VX_MESH_COORD_MAX);
         n++;
     }
     if (nested) return n;

@@ -187,13 +187,14 @@ int vx_intake_check(const vx_mesh *m, vx_err *err)
 {
     /* every engine works in 32-bit floats (GL, the patches, the writers) */
     for (int a = 0; a < 3; a++)
-        if (!(fabs(m->bbox_min[a]) <= FLT_MAX && fabs(m->bbox_max[a]) <= FLT_MAX))
+        if (!(fabs(m->bbox_min[a]) <= VX_MESH_COORD_MAX &&
+              fabs(m->bbox_max[a]) <= VX_MESH_COORD_MAX))
             return vx_err_set(err, VX_EUNPROC, "coordinate_out_of_range",
-                              "the mesh reaches %g along axis %d, beyond what 32-bit floats hold "
-                              "(+-%g): the engines work in floats",
+                              "the mesh reaches %g along axis %d, beyond +-%g: the engines work "
+                              "in 32-bit floats, and what they derive must stay finite",
                               fabs(m->bbox_min[a]) > fabs(m->bbox_max[a]) ? m->bbox_min[a]
                                                                           : m->bbox_max[a],
-                              a, (double)FLT_MAX);
+                              a, VX_MESH_COORD_MAX);
     if (m->degenerate_tris == m->ntris)
         return vx_err_set(err, VX_EUNPROC, "degenerate_mesh",
                           "every triangle of the mesh has zero area");

@@ -54,8 +54,15 @@ vx_mesh_format vx_intake_format_by_name(const char *name);
 /* File extension of the format a Mesh JSON names; "obj" for unknown names. */
 const char *vx_intake_ext_of_name(const char *name);
 
-/* The rule a parsed upload must pass before it is stored: 0, or -1
- * (VX_EUNPROC degenerate_mesh) when every triangle has zero area. */
+/* The largest coordinate a mesh (or a gregory frame) may have. The engines
+ * work in 32-bit floats, and what they derive from coordinates (extents,
+ * camera distances, an interpolating surface's bulge) must stay finite in
+ * them too: a cube at 3e38 gave a Gregory surface of NaN and depths of inf. */
+#define VX_MESH_COORD_MAX 1e30
+
+/* The rules a parsed upload must pass before it is stored: 0, or -1
+ * (VX_EUNPROC) coordinate_out_of_range (past +-VX_MESH_COORD_MAX) or
+ * degenerate_mesh (every triangle of zero area). */
 int vx_intake_check(const vx_mesh *m, vx_err *err);
 /* The Mesh JSON (api/openapi.yaml, Mesh) of mesh m stored as id from a
  * bytes-byte upload in format fmt, created now. Owned; NULL without memory. */

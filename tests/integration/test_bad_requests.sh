@@ -33,6 +33,10 @@ bad_obj "only degenerate triangles" 422 degenerate_mesh 'v 0 0 0\nv 1 0 0\nv 2 0
 # every engine works in floats: a coordinate past FLT_MAX (a double here)
 bad_obj "coordinate past 32-bit floats" 422 coordinate_out_of_range 'v 0 0 0\nv 1e39 0 0\nv 0 1 0\nf 1 2 3\n'
 bad_obj "negative coordinate past 32-bit floats" 422 coordinate_out_of_range 'v 0 0 0\nv 1 0 0\nv 0 0 -4e38\nf 1 2 3\n'
+# ...and what they derive must stay finite: the bound is 1e30 (a cube at
+# 3e38 was stored, and its Gregory surface came out NaN; test_gregory
+# stores one at 1e30)
+bad_obj "coordinate past 1e30" 422 coordinate_out_of_range 'v 0 0 0\nv 1.5e30 0 0\nv 0 1 0\nf 1 2 3\n'
 head -c 3000 /dev/urandom >"$TMP/noise.bin"
 printf 'DRACO' | cat - "$TMP/noise.bin" >"$TMP/corrupt.drc"
 api POST /v1/meshes -H "Content-Type: model/x-draco" --data-binary "@$TMP/corrupt.drc"

@@ -257,13 +257,23 @@ greg "an OFF frame of an OBJ mesh" "$M_tet_obj" "{\"divisions\":2,\"frames\":[\"
 job_ok "an OFF frame of an OBJ mesh"
 greg "an OBJ frame of an OFF mesh" "$M_tet_off" "{\"divisions\":2,\"frames\":[\"$M_tet_obj\"]}"
 job_ok "an OBJ frame of an OFF mesh"
-# frame positions are tessellated in floats: a coordinate past FLT_MAX is
-# refused at submission (it came out as NaN vertices)
-api POST /v1/jobs -H "Content-Type: application/json" \
-    -d "{\"mesh\":\"$M_prism\",\"kind\":\"gregory\",\"params\":{\"frames\":[[1e39,0,0]]}}"
-expect_error "frame coordinate past 32-bit floats" 422 invalid_params
-check "frame coordinate past 32-bit floats: message names params.frames[0][0]" \
-    jq -e '.error.message | test("frames\\[0\\]\\[0\\]")' "$BODY"
+# frame positions are tessellated in floats: a coordinate past what a mesh
+# may hold (1e30) is refused at submission (3e38 came out as NaN vertices)
+for c in 1e39 3e38 2e30; do
+    api POST /v1/jobs -H "Content-Type: application/json" \
+        -d "{\"mesh\":\"$M_prism\",\"kind\":\"gregory\",\"params\":{\"frames\":[[$c,0,0]]}}"
+    expect_error "frame coordinate $c" 422 invalid_params
+    check "frame coordinate $c: message names params.frames[0][0]" \
+        jq -e '.error.message | test("frames\\[0\\]\\[0\\]")' "$BODY"
+done
+# A mesh at the bound gives a finite surface.
+printf 'v -1e30 -1e30 -1e30\nv 1e30 -1e30 -1e30\nv 1e30 1e30 -1e30\nv -1e30 1e30 -1e30\nv -1e30 -1e30 1e30\nv 1e30 -1e30 1e30\nv 1e30 1e30 1e30\nv -1e30 1e30 1e30\nf 1 4 3 2\nf 5 6 7 8\nf 1 2 6 5\nf 2 3 7 6\nf 3 4 8 7\nf 4 1 5 8\n' >"$TMP/cube30.obj"
+upload "$TMP/cube30.obj"
+expect_status "a cube at 1e30" 201
+greg "a cube at 1e30" "$MESH_ID" '{"divisions":2}'
+job_ok "a cube at 1e30"
+api GET "/v1/jobs/$JOB/result"
+check "a cube at 1e30: every vertex finite" sh -c "grep '^v ' '$BODY' | grep -qiv 'nan\|inf' && ! grep '^v ' '$BODY' | grep -qi 'nan\|inf'"
 greg "frame with too few vertices" "$M_prism" '{"divisions":2,"frames":[[0,0,0,1,1,1]]}'
 check "frame topology (positions): job error" jq -e '.state == "failed" and .error.code == "frame_topology"' "$TMP/job.json"
 
