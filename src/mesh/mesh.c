@@ -283,3 +283,25 @@ FILE *vx_mesh_open(const char *path, vx_err *err)
     if (!f) vx_err_set(err, VX_EIO, "mesh_io", "cannot open %s: %s", path, strerror(errno));
     return f;
 }
+
+int vx_mesh_face_repeat(const uint32_t *v, size_t n, uint32_t *scratch, uint32_t *rep)
+{
+    if (n <= 16) {
+        for (size_t i = 0; i < n; i++)
+            for (size_t j = i + 1; j < n; j++)
+                if (v[i] == v[j]) {
+                    *rep = v[i];
+                    return 1;
+                }
+        return 0;
+    }
+    /* Long n-gons: sort a copy instead of the quadratic scan. */
+    memcpy(scratch, v, n * sizeof *v);
+    qsort(scratch, n, sizeof *scratch, cmp_u32);
+    for (size_t i = 1; i < n; i++)
+        if (scratch[i] == scratch[i - 1]) {
+            *rep = scratch[i];
+            return 1;
+        }
+    return 0;
+}

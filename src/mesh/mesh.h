@@ -72,6 +72,11 @@ void vx_mesh_free(vx_mesh *m);
 uint32_t vx_mesh_face_size(const vx_mesh *m, size_t f);
 const uint32_t *vx_mesh_face(const vx_mesh *m, size_t f);
 
+/* 1 with *rep the vertex when face v[0..n) uses one twice (the readers
+ * refuse such a face: its fan would fold over itself), else 0. scratch
+ * holds n indices (sorted there when n > 16). */
+int vx_mesh_face_repeat(const uint32_t *v, size_t n, uint32_t *scratch, uint32_t *rep);
+
 /* Builds `tri` from the faces (fan) if needed and fills bbox, faces_by_size,
  * boundary/non-manifold edge counts and degenerate_tris. Readers call it;
  * code that builds a mesh by hand calls it before use. */

@@ -309,35 +309,6 @@ static int resolve(obj_reader *r, const char *tok, int len, int64_t idx, size_t 
                     len, tok, count, whats);
 }
 
-static int cmp_u32(const void *a, const void *b)
-{
-    uint32_t x = *(const uint32_t *)a, y = *(const uint32_t *)b;
-    return (x > y) - (x < y);
-}
-
-/* Returns 1 and the repeated vertex if the face uses a vertex twice. */
-static int has_repeat(const uint32_t *v, size_t n, uint32_t *scratch, uint32_t *rep)
-{
-    if (n <= 16) {
-        for (size_t i = 0; i < n; i++)
-            for (size_t j = i + 1; j < n; j++)
-                if (v[i] == v[j]) {
-                    *rep = v[i];
-                    return 1;
-                }
-        return 0;
-    }
-    /* Long n-gons: sort a copy instead of the quadratic scan. */
-    memcpy(scratch, v, n * sizeof *v);
-    qsort(scratch, n, sizeof *scratch, cmp_u32);
-    for (size_t i = 1; i < n; i++)
-        if (scratch[i] == scratch[i - 1]) {
-            *rep = scratch[i];
-            return 1;
-        }
-    return 0;
-}
-
 static int stmt_f(obj_reader *r, char *p, const char *end)
 {
     vx_mesh *m = r->m;
@@ -372,7 +343,7 @@ static int stmt_f(obj_reader *r, char *p, const char *end)
             }
         }
         if (!is_end(*p)) return junk(r, "f", tok);
-        /* Twice the face: the second half is has_repeat's sort scratch. */
+        /* Twice the face: the second half is vx_mesh_face_repeat's sort scratch. */
         if (grow((void **)&r->face, &r->cap_face, 2 * (n + 1), sizeof(uint32_t)))
             return obj_oom(r, "face");
         r->face[n++] = v;
@@ -380,7 +351,7 @@ static int stmt_f(obj_reader *r, char *p, const char *end)
     if (p != end) return junk(r, "f", p);
     if (n < 3) return obj_fail(r, VX_EINVAL, "obj_face_short", "face has %zu vertices, needs 3", n);
     uint32_t rep;
-    if (has_repeat(r->face, n, r->face + n, &rep))
+    if (vx_mesh_face_repeat(r->face, n, r->face + n, &rep))
         return obj_fail(r, VX_EINVAL, "obj_face_repeat", "face uses vertex %u twice", rep + 1);
 
     r->ntris += n - 2;

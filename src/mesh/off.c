@@ -146,6 +146,13 @@ vx_mesh *vx_off_read_mem(const unsigned char *data, size_t n, const vx_mesh_limi
             m->face_idx[used + i] = (uint32_t)idx;
         }
         if (k < 3) continue; /* points and edges */
+        uint32_t rep, scr[4096];
+        if (vx_mesh_face_repeat(m->face_idx + used, (size_t)k, scr, &rep)) {
+            char what[64];
+            snprintf(what, sizeof what, "a face uses vertex %u twice", rep);
+            fail(err, &in, what);
+            goto out;
+        }
         m->face_start[kept++] = (uint32_t)used;
         used += k;
         ntris += k - 2;
@@ -156,7 +163,13 @@ vx_mesh *vx_off_read_mem(const unsigned char *data, size_t n, const vx_mesh_limi
         }
     }
     if (!kept) {
-        vx_err_set(err, VX_EUNPROC, "off_no_faces", "the OFF file has no faces");
+        if (nf)
+            vx_err_set(err, VX_EUNPROC, "off_no_faces",
+                       "the OFF file has no faces of three or more vertices (each of its %zu is "
+                       "a point or an edge)",
+                       nf);
+        else
+            vx_err_set(err, VX_EUNPROC, "off_no_faces", "the OFF file has no faces");
         goto out;
     }
     m->face_start[kept] = (uint32_t)used;

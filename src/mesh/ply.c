@@ -299,6 +299,14 @@ static int read_face(ply_in *in, ply_out *o, vx_ply_type t, uint64_t k, size_t n
         o->m->face_idx[o->used + i] = (uint32_t)v;
     }
     if (k < 3) return 0; /* points and edges */
+    uint32_t rep, small[16], *scr = k > 16 ? malloc((size_t)k * sizeof *scr) : small;
+    if (!scr)
+        return vx_err_set(in->err, VX_EINTERNAL, "out_of_memory", "no memory to read the PLY file");
+    int twice = vx_mesh_face_repeat(o->m->face_idx + o->used, (size_t)k, scr, &rep);
+    if (scr != small) free(scr);
+    if (twice)
+        return fail(in->err, "element '%s' entry %llu uses vertex %u twice", in->elem,
+                    (unsigned long long)in->entry, rep);
     o->m->face_start[o->kept++] = (uint32_t)o->used;
     o->used += k;
     o->ntris += k - 2;
@@ -388,7 +396,10 @@ vx_mesh *vx_ply_read_mem(const unsigned char *data, size_t n, const vx_mesh_limi
             goto out;
         }
     if (!o.kept) {
-        vx_err_set(err, VX_EUNPROC, "ply_no_faces", "the PLY file has no faces");
+        vx_err_set(err, VX_EUNPROC, "ply_no_faces",
+                   "the PLY file has no faces of three or more vertices (each of its %zu face "
+                   "entries is a point or an edge)",
+                   (size_t)fe->count);
         goto out;
     }
     m->face_start[o.kept] = (uint32_t)o.used;

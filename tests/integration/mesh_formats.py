@@ -132,6 +132,9 @@ def main():
         "lie.gltf": gltf(count=1000000000),
         "lie.glb": glb(count=1000000000),
         "lie.off": off(nv=8, nf=2000000000),
+        # a face naming one vertex twice (its fan folds onto itself), as OBJ
+        "repeat.off": b"OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n4 0 1 2 1\n",
+        "repeat.ply": ply("ascii", Q).replace(b"\n4 0 2 3 1\n", b"\n4 0 2 3 2\n", 1),
         "external.gltf": gltf(uri="../../../etc/passwd"),
         "cycle.glb": glb(node={"mesh": 0, "children": [0]}),
     }

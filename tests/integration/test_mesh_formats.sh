@@ -67,6 +67,13 @@ bad lie_faces.ply application/octet-stream ply_corrupt PLY
 bad lie.gltf model/gltf+json gltf_corrupt glTF
 bad lie.glb application/x-www-form-urlencoded gltf_corrupt glTF
 bad lie.off model/x-off off_corrupt OFF
+bad repeat.off model/x-off off_corrupt "uses vertex 1 twice"
+bad repeat.ply model/x-ply ply_corrupt "uses vertex 2 twice"
+# Faces that are points or edges only: 422, said so.
+printf 'OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n2 0 1\n' >"$F/edges.off"
+upload "$F/edges.off" model/x-off
+expect_error "an OFF of edges only" 422 off_no_faces
+check "edges only: the message says why" jq -e '.error.message | test("point or an edge")' "$BODY"
 bad external.gltf model/gltf+json gltf_corrupt "external file"
 bad cycle.glb model/gltf-binary gltf_corrupt "reached twice"
 # A count the bytes could hold but the limit does not: 413 before decoding.

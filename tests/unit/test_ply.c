@@ -90,9 +90,19 @@ static mesh_in random_mesh(size_t nv, size_t nf, vx_ply_type index)
     size_t used = 0;
     for (size_t f = 0; f < nf; f++) {
         m.start[f] = (uint32_t)used;
-        size_t k = 3 + rnd() % 4;
-        for (size_t j = 0; j < k; j++)
-            m.idx[used++] = (uint32_t)(rnd() % most);
+        /* 3..6 corners, no vertex twice (readers refuse that) */
+        size_t k = 3 + rnd() % (most < 6 ? most - 2 : 4);
+        for (size_t j = 0; j < k; j++) {
+            uint32_t v;
+            int again;
+            do {
+                v = (uint32_t)(rnd() % most);
+                again = 0;
+                for (size_t i = m.start[f]; i < used; i++)
+                    again |= m.idx[i] == v;
+            } while (again);
+            m.idx[used++] = v;
+        }
     }
     m.start[nf] = (uint32_t)used;
     return m;
@@ -358,10 +368,14 @@ static void test_hostile(void **state)
     expect(HEAD_V "property float z\nelement face 4000000000\nproperty list uchar int "
                   "vertex_indices\nend_header\n" TRI "3 0 1 2\n",
            "ply_corrupt", "declares");
+    /* A face naming one vertex twice, as OBJ's obj_face_repeat. */
+    expect(HEAD_V "property float z\nelement face 1\nproperty list uchar int "
+                  "vertex_indices\nend_header\n" TRI "4 0 1 2 1\n",
+           "ply_corrupt", "uses vertex 1 twice");
     /* The face limit counts triangles of the polygons read. */
     vx_mesh_limits lim = {.max_triangles = 1};
-    const char *quad = HEAD_V "property float z\nelement face 1\nproperty list uchar int "
-                              "vertex_indices\nend_header\n" TRI "4 0 1 2 0\n";
+    const char *quad = HEAD_V "property float z\nelement face 2\nproperty list uchar int "
+                              "vertex_indices\nend_header\n" TRI "3 0 1 2\n3 0 2 1\n";
     r = vx_ply_read_mem((const unsigned char *)quad, strlen(quad), &lim, &err);
     assert_null(r);
     assert_string_equal(err.code, "mesh_too_big");
