@@ -31,6 +31,8 @@ static void signal_set(sigset_t *set)
         sigaddset(set, g_signals[i]);
 }
 
+static void stop_locked(void);
+
 /* Interrupted (Ctrl-C, kill): the private voxeld is stopped and its data
  * dir removed, then the signal ends the process as it would have. The
  * signals are blocked in every other thread and waited for here. */
@@ -42,7 +44,11 @@ static void *signal_main(void *arg)
     int sig = 0;
     while (sigwait(&set, &sig) != 0)
         ;
-    ctl_local_stop();
+    /* The lock is kept to the end: the main thread, which sees its voxeld
+     * go and would exit 1, waits in ctl_local_stop until the signal ends
+     * the process. */
+    pthread_mutex_lock(&g_stop_mu);
+    stop_locked();
     signal(sig, SIG_DFL);
     pthread_sigmask(SIG_UNBLOCK, &set, NULL);
     raise(sig);
@@ -143,9 +149,8 @@ int ctl_local_start(ctl *c)
     return 0;
 }
 
-void ctl_local_stop(void)
+static void stop_locked(void)
 {
-    pthread_mutex_lock(&g_stop_mu); /* the signal thread and the main one */
     if (g_pid > 0) {
         kill(g_pid, SIGTERM);
         int st;
@@ -159,5 +164,11 @@ void ctl_local_stop(void)
     g_log = NULL;
     if (g_dir[0]) nftw(g_dir, rm_entry, 16, FTW_DEPTH | FTW_PHYS);
     g_dir[0] = 0;
+}
+
+void ctl_local_stop(void)
+{
+    pthread_mutex_lock(&g_stop_mu); /* the signal thread and the main one */
+    stop_locked();
     pthread_mutex_unlock(&g_stop_mu);
 }
