@@ -182,7 +182,7 @@ static int download(ctl *c, const char *jid, const char *name, const char *out)
         if (rename(tmp, final) != 0) {
             fprintf(stderr, "voxelctl: cannot write %s\n", final);
             rc = 1;
-        } else if (!c->json) {
+        } else if (!c->json && !c->quiet) {
             struct stat sb;
             stat(final, &sb);
             fprintf(stderr, "wrote %s (%lld bytes)\n", final, (long long)sb.st_size);

@@ -44,7 +44,7 @@ check "meshes: lists the mesh" sh -c "'$CTL' meshes | grep -q '^$MID'"
 VOXELD_TOKEN=wrong "$CTL" --token s3cret-token --quiet preview "$MID" -p width=64 -p height=48 -o p.png 2>ctl.err
 check "preview by mesh id: exit 0 ($(cat ctl.err))" test $? -eq 0
 check "preview: a PNG" sh -c "head -c 8 p.png | od -An -c | grep -q 'P   N   G'"
-check "--quiet: no progress lines" sh -c "! grep -q '%' ctl.err"
+check "--quiet: no progress lines, no 'wrote' line" sh -c "! grep -q -e '%' -e wrote ctl.err"
 
 # Failures: the server's message, exit 1; bad usage, exit 2.
 VOXELD_TOKEN=wrong "$CTL" jobs >/dev/null 2>ctl.err
