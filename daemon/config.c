@@ -6,6 +6,7 @@
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include "util/fsutil.h"
@@ -58,9 +59,9 @@ static const opt_def opts[] = {
     {"min-body-rate", T_SIZE, F(min_body_rate), 0,
      "slowest request body, bytes/s over 2 s windows after a 2 s grace (default 1024; 0 = off)"},
     {"max-uri-bytes", T_SIZE, F(max_uri_bytes), 0,
-     "longest request target, path and query (default 16K)"},
+     "longest request target, path and query (default 16K; at least 256)"},
     {"max-header-bytes", T_SIZE, F(max_header_bytes), 0,
-     "largest request head, all header lines (default 64K)"},
+     "largest request head, all header lines (default 64K; at least 1K)"},
     {"reuse-port", T_BOOL, F(reuse_port), 0,
      "share the port with other processes (SO_REUSEPORT): yes or no (default)"},
     {"max-connections", T_SIZE, F(max_connections), 0, "open connections in all (default 512)"},
@@ -210,7 +211,9 @@ static int set_opt(vx_config *c, const opt_def *d, const char *val, const char *
     case T_SECONDS: {
         errno = 0;
         double v = strtod(val, &end);
-        if (errno || *end || end == val || !isfinite(v) || v < 0) goto bad;
+        /* at most 1e9 s (31 years): a library takes some of these as
+         * 32-bit counts, which a bigger one would wrap */
+        if (errno || *end || end == val || !isfinite(v) || v < 0 || v > 1e9) goto bad;
         *(double *)(base + d->off) = v;
         return 0;
     }
@@ -262,16 +265,27 @@ static char *trim(char *s)
 static int load_file(vx_config *c, const char *path)
 {
     FILE *f = fopen(path, "re");
+    struct stat st;
+    if (f && fstat(fileno(f), &st) == 0 && !S_ISREG(st.st_mode)) {
+        fclose(f);
+        f = NULL;
+        errno = S_ISDIR(st.st_mode) ? EISDIR : EINVAL;
+    }
     if (!f) {
-        fprintf(stderr, "voxeld: cannot open config file %s: %s\n", path, strerror(errno));
+        fprintf(stderr, "voxeld: cannot open config file %s: %s\n", path,
+                errno == EINVAL ? "not a regular file" : strerror(errno));
         return -1;
     }
     char line[2048], where[1200];
     int lineno = 0, rc = 0;
     while (fgets(line, sizeof line, f)) {
         lineno++;
-        char *hash = strchr(line, '#');
-        if (hash) *hash = 0;
+        /* a comment: '#' at the start or after a blank ("node#1" is a value) */
+        for (char *h = line; *h; h++)
+            if (*h == '#' && (h == line || isspace((unsigned char)h[-1]))) {
+                *h = 0;
+                break;
+            }
         char *s = trim(line);
         if (!*s) continue;
         char *eq = strchr(s, '=');
@@ -332,6 +346,9 @@ void vx_config_usage(FILE *out)
         snprintf(flag, sizeof flag, "--%s %s", opts[i].name,
                  opts[i].type == T_BOOL                            ? "yes|no"
                  : opts[i].type == T_STR || opts[i].type == T_LIST ? "VALUE"
+                 : opts[i].type == T_LEVEL                         ? "LEVEL"
+                 : opts[i].type == T_DEVICE                        ? "N|auto"
+                 : opts[i].type == T_SECONDS                       ? "SECONDS"
                                                                    : "N");
         fprintf(out, "  %-29s %s\n", flag, opts[i].help);
     }
@@ -372,7 +389,13 @@ int vx_config_load(vx_config *c, int argc, char **argv)
             printf("voxeld %s\n", VX_VERSION);
             return 1;
         }
-        if (ch == 'c') snprintf(c->config_file, sizeof c->config_file, "%s", optarg);
+        if (ch == 'c') {
+            if (!*optarg) {
+                fprintf(stderr, "voxeld: --config needs a file name\n");
+                return -1;
+            }
+            snprintf(c->config_file, sizeof c->config_file, "%s", optarg);
+        }
     }
     if (c->config_file[0] && load_file(c, c->config_file)) return -1;
     if (load_env(c)) return -1;
@@ -420,6 +443,15 @@ int vx_config_load(vx_config *c, int argc, char **argv)
     }
     if (c->max_queued_jobs < 1) {
         fprintf(stderr, "voxeld: max-queued-jobs must be at least 1\n");
+        return -1;
+    }
+    /* Below these not even GET /livez fits: health checks could never pass. */
+    if (c->max_uri_bytes < 256) {
+        fprintf(stderr, "voxeld: max-uri-bytes must be at least 256\n");
+        return -1;
+    }
+    if (c->max_header_bytes < 1024) {
+        fprintf(stderr, "voxeld: max-header-bytes must be at least 1K\n");
         return -1;
     }
     return 0;

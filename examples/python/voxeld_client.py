@@ -16,13 +16,15 @@ As a program:
     voxeld_client.py [--server URL] [--token T] KIND FILE [-p KEY=VALUE ...] [-o OUT]
 
 The server and token default to $VOXELD_URL and $VOXELD_TOKEN. Errors from
-the server raise VoxeldError with its code and message.
+the server raise VoxeldError with its code and message; a server that cannot
+be reached raises VoxeldError with status 0 and code "unreachable".
 """
 import argparse
 import json
 import os
 import sys
 import urllib.error
+import urllib.parse
 import urllib.request
 
 MESH_TYPES = {".obj": "model/obj", ".bpt": "model/x-bpt", ".drc": "model/x-draco",
@@ -62,6 +64,8 @@ class Client:
                 raise VoxeldError(e.code, err["code"], err["message"]) from None
             except (ValueError, KeyError, TypeError):
                 raise VoxeldError(e.code, "http_error", raw[:200].decode("utf-8", "replace")) from None
+        except urllib.error.URLError as e:
+            raise VoxeldError(0, "unreachable", "%s: %s" % (self.server, e.reason)) from None
 
     def _json(self, method, path, doc=None):
         body = json.dumps(doc).encode() if doc is not None else None
@@ -82,14 +86,16 @@ class Client:
 
     def job(self, jid, wait=0, progress=None):
         """The Job; wait > 0 holds until it ends (or reaches progress)."""
-        q = "?wait=%g" % wait if wait else ""
+        q = "?wait=" + _decimal(wait) if wait else ""
         if wait and progress is not None:
-            q += "&progress=%g" % progress
-        return self._json("GET", "/v1/jobs/" + jid + q)
+            q += "&progress=" + _decimal(progress)
+        return self._json("GET", "/v1/jobs/" + urllib.parse.quote(jid, safe="") + q)
 
     def jobs(self, state=None, limit=100):
-        q = "?limit=%d" % limit + ("&state=" + state if state else "")
-        return self._json("GET", "/v1/jobs" + q)["items"]
+        q = {"limit": "%d" % limit}
+        if state:
+            q["state"] = state
+        return self._json("GET", "/v1/jobs?" + urllib.parse.urlencode(q))["items"]
 
     def meshes(self, limit=100):
         return self._json("GET", "/v1/meshes?limit=%d" % limit)["items"]
@@ -148,6 +154,12 @@ class Client:
         return out
 
 
+def _decimal(x):
+    """x as the plain decimal the server's query parameters take (no
+    exponent: 1e+06 is refused), to the microsecond."""
+    return ("%.6f" % x).rstrip("0").rstrip(".")
+
+
 def _param(kv):
     key, sep, value = kv.partition("=")
     if not sep or not key:
@@ -183,6 +195,9 @@ def main(argv=None):
         return 0
     except VoxeldError as e:
         print("voxeld: %s" % e, file=sys.stderr)
+        return 1
+    except OSError as e:  # the mesh file or the output file
+        print("voxeld_client: %s" % e, file=sys.stderr)
         return 1
 
 

@@ -53,9 +53,31 @@ try:
     raise SystemExit("a deleted job is still there")
 except VoxeldError as e:
     assert e.status == 404 and e.code == "job_not_found", e
+# Query values the server takes: plain decimals (1e+06 was refused), and
+# a state that is not a name is refused as itself, not read as two params.
+small = c.submit(mesh["id"], "voxelize", {"resolution": 16})["id"]
+assert c.job(small, wait=1000000, progress=0.00001)["state"] in ("running", "succeeded")
+try:
+    c.jobs(state="succeeded&limit=1")
+    raise SystemExit("a state with '&' was taken")
+except VoxeldError as e:
+    assert e.status == 400 and "state" in e.message, e
+# A server that is not there: VoxeldError, status 0.
+try:
+    Client("http://127.0.0.1:1").meshes()
+    raise SystemExit("no error without a server")
+except VoxeldError as e:
+    assert e.status == 0 and e.code == "unreachable", e
 print("module ok", len(events), "events")
 PY
 check "module: events, wait, download, lists and errors ($(tail -n 1 module.out))" grep -q '^module ok' module.out
+
+# The program: no server, or no such file, is a message and exit 1, not a
+# traceback.
+python3 "$PYC" --server http://127.0.0.1:1 voxelize "$MESH" 2>py.err
+check "program: no server exits 1 with a message" sh -c "test $? -eq 1 && grep -q unreachable py.err && ! grep -q Traceback py.err"
+python3 "$PYC" --server "$BASE" --token py-token voxelize "$TMP/none.obj" 2>py.err
+check "program: a missing file exits 1 with a message" sh -c "test $? -eq 1 && grep -q 'No such file' py.err && ! grep -q Traceback py.err"
 
 stop_daemon
 finish

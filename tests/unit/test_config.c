@@ -93,12 +93,59 @@ static void test_env_over_file(void **state)
     unlink(path);
 }
 
+/* Values that must be refused rather than run: a config that is a
+ * directory or named "", times past 1e9 s (a library takes some as 32-bit:
+ * 4294967297 s of connection-timeout closed connections after 1 s), URI
+ * and head limits no request fits. A '#' inside a value is the value's. */
+static void test_refused_and_comments(void **state)
+{
+    (void)state;
+    vx_config c;
+    char dir[] = "/tmp/vx-config-dir-XXXXXX";
+    assert_non_null(mkdtemp(dir));
+    char *a1[] = {"voxeld", "--config", dir, NULL};
+    assert_int_equal(load(&c, 3, a1), -1);
+    char *a2[] = {"voxeld", "--config", "", NULL};
+    assert_int_equal(load(&c, 3, a2), -1);
+    rmdir(dir);
+    const char *bad[][2] = {{"--connection-timeout", "4294967297"},
+                            {"--job-timeout", "99999999999999999999"},
+                            {"--event-keepalive", "1e10"},
+                            {"--max-uri-bytes", "0"},
+                            {"--max-uri-bytes", "255"},
+                            {"--max-header-bytes", "0"},
+                            {"--max-header-bytes", "1023"}};
+    for (size_t i = 0; i < sizeof bad / sizeof bad[0]; i++) {
+        char *av[] = {"voxeld", (char *)bad[i][0], (char *)bad[i][1], NULL};
+        assert_int_equal(load(&c, 3, av), -1);
+    }
+    char *ok[] = {"voxeld", "--connection-timeout", "1e9", "--max-uri-bytes", "256", NULL};
+    assert_int_equal(load(&c, 5, ok), 0);
+    assert_true(c.connection_timeout_s == 1e9);
+    char path[] = "/tmp/vx-config-XXXXXX";
+    int fd = mkstemp(path);
+    assert_true(fd >= 0);
+    FILE *f = fdopen(fd, "w");
+    fprintf(f, "# a comment\nreplica-name = node#1  # the first\nworkers = 3#\n");
+    fclose(f);
+    char *a3[] = {"voxeld", "--config", path, NULL};
+    assert_int_equal(load(&c, 3, a3), -1); /* "3#" is no count */
+    f = fopen(path, "w");
+    fprintf(f, "# a comment\nreplica-name = node#1  # the first\nworkers = 3 #\n");
+    fclose(f);
+    assert_int_equal(load(&c, 3, a3), 0);
+    assert_string_equal(c.replica_name, "node#1");
+    assert_int_equal(c.workers, 3);
+    unlink(path);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_env_sets_every_kind),
         cmocka_unit_test(test_env_bad_value),
         cmocka_unit_test(test_env_over_file),
+        cmocka_unit_test(test_refused_and_comments),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }
