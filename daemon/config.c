@@ -277,10 +277,17 @@ static int load_file(vx_config *c, const char *path)
                 errno == EINVAL ? "not a regular file" : strerror(errno));
         return -1;
     }
-    char line[2048], where[1200];
+    char *line = NULL, where[1200];
+    size_t cap = 0;
+    ssize_t n;
     int lineno = 0, rc = 0;
-    while (fgets(line, sizeof line, f)) {
+    while ((n = getline(&line, &cap, f)) >= 0) {
         lineno++;
+        if ((size_t)n != strlen(line)) { /* a NUL would cut the value short */
+            fprintf(stderr, "voxeld: %s:%d: a NUL byte in the line\n", path, lineno);
+            rc = -1;
+            continue;
+        }
         /* a comment: '#' at the start or after a blank ("node#1" is a value) */
         for (char *h = line; *h; h++)
             if (*h == '#' && (h == line || isspace((unsigned char)h[-1]))) {
@@ -306,6 +313,7 @@ static int load_file(vx_config *c, const char *path)
         }
         if (set_opt(c, d, val, where)) rc = -1;
     }
+    free(line);
     fclose(f);
     return rc;
 }
@@ -320,7 +328,20 @@ static void env_name(const char *flag, char *out, size_t n)
     out[o] = 0;
 }
 
-/* Every flag set in the environment (VOXELD_*), over the config file. */
+/* VOXELD_* variables that are no option of the daemon's yet its own or its
+ * clients' (voxelctl's server, token and daemon; the tests' hooks). */
+static int env_known_other(const char *name, size_t len)
+{
+    static const char *const other[] = {"VOXELD_CONFIG", "VOXELD_URL", "VOXELD_TOKEN",
+                                        "VOXELD_BIN"};
+    for (size_t i = 0; i < sizeof other / sizeof other[0]; i++)
+        if (strlen(other[i]) == len && !strncmp(name, other[i], len)) return 1;
+    return !strncmp(name, "VOXELD_TEST_", 12);
+}
+
+/* Every flag set in the environment (VOXELD_*), over the config file. A
+ * VOXELD_ variable that names no option (a misspelling) is warned about:
+ * the prefix is shared with the clients' variables, so it is no error. */
 static int load_env(vx_config *c)
 {
     int rc = 0;
@@ -331,6 +352,19 @@ static int load_env(vx_config *c)
         if (!v) continue;
         snprintf(where, sizeof where, "environment %s", name);
         if (set_opt(c, &opts[i], v, where)) rc = -1;
+    }
+    for (char **e = environ; *e; e++) {
+        if (strncmp(*e, "VOXELD_", 7)) continue;
+        size_t len = strcspn(*e, "=");
+        int known = env_known_other(*e, len);
+        for (size_t i = 0; i < NOPTS && !known; i++) {
+            char name[80];
+            env_name(opts[i].name, name, sizeof name);
+            known = strlen(name) == len && !strncmp(*e, name, len);
+        }
+        if (!known)
+            fprintf(stderr, "voxeld: warning: %.*s names no option (ignored; see voxeld --help)\n",
+                    (int)(len > 80 ? 80 : len), *e);
     }
     return rc;
 }

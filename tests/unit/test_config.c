@@ -136,16 +136,63 @@ static void test_refused_and_comments(void **state)
     assert_int_equal(load(&c, 3, a3), 0);
     assert_string_equal(c.replica_name, "node#1");
     assert_int_equal(c.workers, 3);
+    /* A NUL in a line is an error (it cut the value short); a comment of
+     * 3000 bytes is one line (a 2 KiB buffer read its tail as another). */
+    f = fopen(path, "w");
+    fputs("replica-name = ab", f);
+    fputc(0, f);
+    fputs("cd\n", f);
+    fclose(f);
+    assert_int_equal(load(&c, 3, a3), -1);
+    f = fopen(path, "w");
+    fputs("# ", f);
+    for (int i = 0; i < 3000; i++)
+        fputc('x', f);
+    fputs("\nreplica-name = ", f);
+    for (int i = 0; i < 100; i++)
+        fputc('r', f);
+    fputs("\n", f);
+    fclose(f);
+    assert_int_equal(load(&c, 3, a3), 0);
+    assert_int_equal(strlen(c.replica_name), 100);
     unlink(path);
+}
+
+/* A VOXELD_ variable that names no option is warned about on stderr and
+ * ignored; the clients' own (VOXELD_URL, ...) are not. */
+static void test_unknown_env_warned(void **state)
+{
+    (void)state;
+    char errpath[] = "/tmp/vx-config-err-XXXXXX";
+    int fd = mkstemp(errpath);
+    assert_true(fd >= 0);
+    int saved = dup(2);
+    dup2(fd, 2);
+    setenv("VOXELD_WORKER", "3", 1); /* WORKERS misspelled */
+    setenv("VOXELD_URL", "http://x", 1);
+    vx_config c;
+    char *argv[] = {"voxeld", NULL};
+    int rc = load(&c, 1, argv);
+    fflush(stderr);
+    dup2(saved, 2);
+    close(saved);
+    unsetenv("VOXELD_WORKER");
+    unsetenv("VOXELD_URL");
+    assert_int_equal(rc, 0);
+    char buf[1024] = {0};
+    assert_true(pread(fd, buf, sizeof buf - 1, 0) > 0);
+    close(fd);
+    unlink(errpath);
+    assert_non_null(strstr(buf, "VOXELD_WORKER names no option"));
+    assert_null(strstr(buf, "VOXELD_URL"));
 }
 
 int main(void)
 {
     const struct CMUnitTest tests[] = {
-        cmocka_unit_test(test_env_sets_every_kind),
-        cmocka_unit_test(test_env_bad_value),
-        cmocka_unit_test(test_env_over_file),
-        cmocka_unit_test(test_refused_and_comments),
+        cmocka_unit_test(test_env_sets_every_kind), cmocka_unit_test(test_env_bad_value),
+        cmocka_unit_test(test_env_over_file),       cmocka_unit_test(test_refused_and_comments),
+        cmocka_unit_test(test_unknown_env_warned),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }
