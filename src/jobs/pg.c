@@ -494,8 +494,8 @@ int vx_pg_submit_idem(vx_pg *pg, const vx_pg_new_job *job, vx_pg_job *existing, 
      * was taken before the winner committed, so a SELECT in the same
      * statement does not see it (the job was then reported as inserted,
      * 202, and never existed). It can be gone by then (deleted): try again. */
-    int rc = -1, failed = 0, settled = 0;
-    for (int attempt = 0; attempt < 8 && !failed; attempt++) {
+    int rc = -2; /* -2: neither inserted nor the key's row read yet */
+    for (int attempt = 0; attempt < 8 && rc == -2; attempt++) {
         pthread_mutex_lock(&pg->lock);
         PGresult *r = pg_run_locked(
             pg, 0,
@@ -505,14 +505,13 @@ int vx_pg_submit_idem(vx_pg *pg, const vx_pg_new_job *job, vx_pg_job *existing, 
             7, vals, err);
         pthread_mutex_unlock(&pg->lock);
         if (!r) {
-            failed = 1;
+            rc = -1;
             break;
         }
         int inserted = PQntuples(r) == 1;
         PQclear(r);
         if (inserted) {
             rc = 0;
-            settled = 1;
             break;
         }
         const char *key[] = {job->idem};
@@ -521,11 +520,10 @@ int vx_pg_submit_idem(vx_pg *pg, const vx_pg_new_job *job, vx_pg_job *existing, 
                           err);
         pthread_mutex_unlock(&pg->lock);
         if (!r) {
-            failed = 1;
+            rc = -1;
             break;
         }
-        int found = PQntuples(r) == 1;
-        if (found) {
+        if (PQntuples(r) == 1) {
             read_row(r, 0, existing);
             if (strcmp(existing->fp, job->fp ? job->fp : "")) {
                 vx_pg_job_clear(existing);
@@ -536,14 +534,10 @@ int vx_pg_submit_idem(vx_pg *pg, const vx_pg_new_job *job, vx_pg_job *existing, 
             }
         }
         PQclear(r);
-        if (found) {
-            settled = 1;
-            break;
-        }
     }
-    if (!settled && !failed)
-        vx_err_set(err, VX_EOVERLOAD, "database_overloaded",
-                   "the Idempotency-Key's job kept changing; try again");
+    if (rc == -2)
+        rc = vx_err_set(err, VX_EOVERLOAD, "database_overloaded",
+                        "the Idempotency-Key's job kept changing; try again");
     cJSON_free(params);
     return rc;
 }
