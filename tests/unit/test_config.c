@@ -6,6 +6,7 @@
 #include <setjmp.h>
 #include <cmocka.h>
 
+#include <fcntl.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -16,6 +17,17 @@
 static int load(vx_config *c, int argc, char **argv)
 {
     return vx_config_load(c, argc, argv);
+}
+
+/* Writes n bytes of text (n 0: up to its NUL) to path, a mkstemp template
+ * the first time (its XXXXXX still there), the file it named after. */
+static void config_file(char *path, const char *text, size_t n)
+{
+    int fd = strstr(path, "XXXXXX") ? mkstemp(path) : open(path, O_WRONLY | O_TRUNC);
+    assert_true(fd >= 0);
+    if (!n) n = strlen(text);
+    assert_int_equal(write(fd, text, n), (ssize_t)n);
+    close(fd);
 }
 
 static void test_env_sets_every_kind(void **state)
@@ -73,11 +85,7 @@ static void test_env_bad_value(void **state)
 static void test_env_over_file(void **state)
 {
     char path[] = "/tmp/vx-config-XXXXXX";
-    int fd = mkstemp(path);
-    assert_true(fd >= 0);
-    FILE *f = fdopen(fd, "w");
-    fprintf(f, "workers = 5\nmax-queued-jobs = 11\n");
-    fclose(f);
+    config_file(path, "workers = 5\nmax-queued-jobs = 11\n", 0);
     setenv("VOXELD_CONFIG", path, 1);
     setenv("VOXELD_WORKERS", "6", 1);
     vx_config c;
@@ -123,36 +131,22 @@ static void test_refused_and_comments(void **state)
     assert_int_equal(load(&c, 5, ok), 0);
     assert_true(c.connection_timeout_s == 1e9);
     char path[] = "/tmp/vx-config-XXXXXX";
-    int fd = mkstemp(path);
-    assert_true(fd >= 0);
-    FILE *f = fdopen(fd, "w");
-    fprintf(f, "# a comment\nreplica-name = node#1  # the first\nworkers = 3#\n");
-    fclose(f);
     char *a3[] = {"voxeld", "--config", path, NULL};
+    config_file(path, "# a comment\nreplica-name = node#1  # the first\nworkers = 3#\n", 0);
     assert_int_equal(load(&c, 3, a3), -1); /* "3#" is no count */
-    f = fopen(path, "w");
-    fprintf(f, "# a comment\nreplica-name = node#1  # the first\nworkers = 3 #\n");
-    fclose(f);
+    config_file(path, "# a comment\nreplica-name = node#1  # the first\nworkers = 3 #\n", 0);
     assert_int_equal(load(&c, 3, a3), 0);
     assert_string_equal(c.replica_name, "node#1");
     assert_int_equal(c.workers, 3);
     /* A NUL in a line is an error (it cut the value short); a comment of
      * 3000 bytes is one line (a 2 KiB buffer read its tail as another). */
-    f = fopen(path, "w");
-    fputs("replica-name = ab", f);
-    fputc(0, f);
-    fputs("cd\n", f);
-    fclose(f);
+    static const char nul[] = "replica-name = ab\0cd\n";
+    config_file(path, nul, sizeof nul - 1);
     assert_int_equal(load(&c, 3, a3), -1);
-    f = fopen(path, "w");
-    fputs("# ", f);
-    for (int i = 0; i < 3000; i++)
-        fputc('x', f);
-    fputs("\nreplica-name = ", f);
-    for (int i = 0; i < 100; i++)
-        fputc('r', f);
-    fputs("\n", f);
-    fclose(f);
+    char text[3200] = "# ";
+    memset(text + 2, 'x', 3000);
+    snprintf(text + 3002, sizeof text - 3002, "\nreplica-name = %0100d\n", 0);
+    config_file(path, text, 0);
     assert_int_equal(load(&c, 3, a3), 0);
     assert_int_equal(strlen(c.replica_name), 100);
     unlink(path);

@@ -193,6 +193,22 @@ static void test_failed_write_is_cut_back(void **state)
     expect_replay(path, 2, 1, 3);
 }
 
+/* Rewrites the file at path with one byte changed: the one at offset off
+ * from the first occurrence of needle. */
+static void set_byte(const char *path, const char *needle, size_t off, char c)
+{
+    vx_err err;
+    char *text = vx_read_file(path, 1 << 20, NULL, &err);
+    assert_non_null(text);
+    char *at = strstr(text, needle);
+    assert_non_null(at);
+    at[off] = c;
+    FILE *f = fopen(path, "w");
+    fputs(text, f);
+    fclose(f);
+    free(text);
+}
+
 /* A record whose bytes changed fails its CRC and is skipped; its
  * neighbours are read. */
 static void test_crc_mismatch_skipped(void **state)
@@ -204,15 +220,7 @@ static void test_crc_mismatch_skipped(void **state)
     for (int i = 1; i <= 3; i++)
         append_v(j, i);
     vx_journal_close(j);
-    char *text = vx_read_file(path, 1 << 20, NULL, &err);
-    assert_non_null(text);
-    char *two = strstr(text, "\"v\":2}");
-    assert_non_null(two);
-    two[4] = '5'; /* still valid JSON, wrong CRC */
-    FILE *f = fopen(path, "w");
-    fputs(text, f);
-    fclose(f);
-    free(text);
+    set_byte(path, "\"v\":2}", 4, '5'); /* still valid JSON, wrong CRC */
     expect_replay(path, 2, 1, 3);
 }
 
@@ -232,15 +240,8 @@ static void test_crc_mismatch_job_skipped(void **state)
         cJSON_Delete(r);
     }
     vx_journal_close(j);
-    char *text = vx_read_file(path, 1 << 20, NULL, &err);
-    assert_non_null(text);
-    char *line2 = strchr(text, '\n') + 1, *res = strstr(line2, "\"resolution\":64");
-    assert_non_null(res);
-    res[13] = '9'; /* still valid JSON, wrong CRC */
-    FILE *f = fopen(path, "w");
-    fputs(text, f);
-    fclose(f);
-    free(text);
+    /* the second line's 64 becomes 94: still valid JSON, wrong CRC */
+    set_byte(path, "\"resolution\":64}},\"v\":2}", 13, '9');
     expect_replay(path, 2, 1, 3);
 }
 
