@@ -10,6 +10,7 @@
 #include <unistd.h>
 
 #include "ctl.h"
+#include "util/json.h"
 
 static const char *str(const cJSON *o, const char *k)
 {
@@ -30,7 +31,7 @@ static int terminal(const char *state)
 
 static void print_json(const cJSON *doc)
 {
-    char *t = cJSON_PrintUnformatted(doc);
+    char *t = vx_json_print(doc, 0);
     if (t) printf("%s\n", t);
     free(t);
 }
@@ -207,7 +208,7 @@ int ctl_cmd_job(ctl *c, const char *kind, const char *src, cJSON *params, const 
     cJSON_AddStringToObject(req, "kind", kind);
     cJSON_AddItemToObject(req, "params", params);
     params = NULL;
-    char *body = cJSON_PrintUnformatted(req);
+    char *body = vx_json_print(req, 0);
     cJSON_Delete(req);
     ctl_buf b = {0};
     long st = ctl_http(c, "POST", "/v1/jobs", "application/json", body, NULL, &b, NULL, NULL, 0);

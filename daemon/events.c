@@ -12,6 +12,7 @@
 #include "http_int.h"
 #include "util/clock.h"
 #include "util/fsutil.h"
+#include "util/json.h"
 
 #define POLL_S 0.1 /* progress is coalesced to this period */
 
@@ -57,7 +58,7 @@ static char *format_event(vx_stream *s, const cJSON *doc, int *terminal)
     s->attempts = (int)cJSON_GetNumberValue(cJSON_GetObjectItemCaseSensitive(doc, "attempts"));
     *terminal = !strcmp(s->state, "succeeded") || !strcmp(s->state, "failed") ||
                 !strcmp(s->state, "canceled");
-    char *json = cJSON_PrintUnformatted(doc);
+    char *json = vx_json_print(doc, 0);
     if (!json) return NULL;
     size_t n = strlen(json) + 64;
     char *text = malloc(n);

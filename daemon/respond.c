@@ -11,6 +11,7 @@
 #include "http_int.h"
 #include "util/fsutil.h"
 #include "util/log.h"
+#include "util/json.h"
 
 static const char *g_data_dir, *g_cors;
 
@@ -88,7 +89,7 @@ int vx_resp_text(struct MHD_Connection *c, req *r, unsigned status, char *text, 
 int vx_resp_json(struct MHD_Connection *c, req *r, unsigned status, cJSON *doc, const char *h1,
                  const char *v1)
 {
-    char *text = doc ? cJSON_PrintUnformatted(doc) : NULL;
+    char *text = doc ? vx_json_print(doc, 0) : NULL;
     cJSON_Delete(doc);
     if (!text) text = strdup("{\"error\":{\"code\":\"internal\",\"message\":\"out of memory\"}}");
     return vx_resp_text(c, r, status, text, "application/json", h1, v1);

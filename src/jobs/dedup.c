@@ -4,6 +4,7 @@
  * (normalised, large fields as their blob references), so replayed jobs get
  * the same one; a match is confirmed by comparing the params themselves. */
 #include "jobs/jobs_int.h"
+#include "util/json.h"
 
 #include <stdlib.h>
 #include <string.h>
@@ -22,7 +23,7 @@ uint64_t request_fp(const char *kind, const char *mesh, const cJSON *params)
     uint64_t h = 14695981039346656037ull;
     h = fnv(h, kind, strlen(kind) + 1);
     h = fnv(h, mesh, strlen(mesh) + 1);
-    char *text = params ? cJSON_PrintUnformatted(params) : NULL;
+    char *text = params ? vx_json_print(params, 0) : NULL;
     if (text) h = fnv(h, text, strlen(text));
     free(text);
     return h;

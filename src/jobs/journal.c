@@ -12,6 +12,7 @@
 
 #include "util/fsutil.h"
 #include "util/log.h"
+#include "util/json.h"
 
 struct vx_journal {
     char path[VX_PATH_MAX];
@@ -166,7 +167,7 @@ long vx_journal_replay(vx_journal *j, void (*fn)(const cJSON *rec, void *ud), vo
 /* The record as one framed line; owned, its length in *n. */
 static char *frame(const cJSON *rec, size_t *n)
 {
-    char *json = cJSON_PrintUnformatted(rec);
+    char *json = vx_json_print(rec, 0);
     if (!json) return NULL;
     size_t len = strlen(json);
     char *line = malloc(len + FRAME_HEAD + 2);

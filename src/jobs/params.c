@@ -4,6 +4,7 @@
 #include <string.h>
 
 #include "jobs/kind.h"
+#include "util/json.h"
 
 void *vx_kind_read(const vx_kind *k, const cJSON *params, const vx_limits *lim, vx_err *err)
 {
@@ -41,7 +42,7 @@ cJSON *vx_params_normalize(const vx_kind *k, const cJSON *params, const vx_limit
     cJSON *norm = vx_kind_parse(k, params, lim, err);
     if (!norm) return NULL;
     /* What the journal keeps and the runner reads back. */
-    char *text = cJSON_PrintUnformatted(norm);
+    char *text = vx_json_print(norm, 0);
     cJSON *back = text ? cJSON_Parse(text) : NULL;
     free(text);
     if (!back) {

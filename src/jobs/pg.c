@@ -17,6 +17,7 @@
 #include "jobs/pg_int.h"
 #include "util/clock.h"
 #include "util/log.h"
+#include "util/json.h"
 
 /* Schema migrations: migrations[v - 1] brings version v - 1 to v. Each is
  * applied in the transaction that records it in vx_schema. */
@@ -429,7 +430,7 @@ int vx_pg_submit(vx_pg *pg, const vx_pg_new_job *jobs, size_t n, vx_err *err)
     int tx = n > 1;
     if (tx && pg_exec_locked(pg, 1, "BEGIN", 0, NULL, err)) goto out;
     for (size_t i = 0; i < n; i++) {
-        char *params = jobs[i].params ? cJSON_PrintUnformatted(jobs[i].params) : NULL;
+        char *params = jobs[i].params ? vx_json_print(jobs[i].params, 0) : NULL;
         char maxa[16];
         snprintf(maxa, sizeof maxa, "%d",
                  jobs[i].max_attempts > 0 ? jobs[i].max_attempts : pg->desc.max_attempts);
@@ -482,7 +483,7 @@ int vx_pg_submit_idem(vx_pg *pg, const vx_pg_new_job *job, vx_pg_job *existing, 
     if (!job->idem || !*job->idem) return vx_pg_submit(pg, job, 1, err);
     if (!vx_jobs_valid_id(job->id) || !job->kind || !*job->kind)
         return vx_err_set(err, VX_EUNPROC, "invalid_params", "a job needs a valid id and kind");
-    char *params = job->params ? cJSON_PrintUnformatted(job->params) : NULL;
+    char *params = job->params ? vx_json_print(job->params, 0) : NULL;
     char maxa[16];
     snprintf(maxa, sizeof maxa, "%d",
              job->max_attempts > 0 ? job->max_attempts : pg->desc.max_attempts);
@@ -746,7 +747,7 @@ int vx_pg_complete(vx_pg *pg, const char *id, int attempt, const cJSON *result, 
 {
     if (!cJSON_IsObject(result))
         return vx_err_set(err, VX_EINTERNAL, "invalid_result", "a result manifest is an object");
-    char *manifest = cJSON_PrintUnformatted(result);
+    char *manifest = vx_json_print(result, 0);
     if (!manifest) return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "out of memory");
     char att[16];
     snprintf(att, sizeof att, "%d", attempt);

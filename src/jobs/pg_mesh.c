@@ -9,6 +9,7 @@
 
 #include "jobs/pg_int.h"
 #include "util/log.h"
+#include "util/json.h"
 
 /* The advisory lock of mesh $1 (uploads take it shared, the purge alone). */
 #define MESH_LOCK_KEY "hashtextextended('vx_mesh:' || $1, 0)"
@@ -37,7 +38,7 @@ int vx_pg_mesh_put(vx_pg *pg, const char *id, const cJSON *meta, int *existed, c
 {
     *existed = 0;
     if (stored) *stored = NULL;
-    char *text = cJSON_PrintUnformatted(meta);
+    char *text = vx_json_print(meta, 0);
     if (!text) return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory");
     const char *vals[] = {id, text};
     pthread_mutex_lock(&pg->lock);
@@ -138,7 +139,7 @@ long vx_pg_mesh_count(vx_pg *pg, vx_err *err)
 
 int vx_pg_mesh_add_missing(vx_pg *pg, const cJSON *metas, vx_err *err)
 {
-    char *text = cJSON_PrintUnformatted(metas);
+    char *text = vx_json_print(metas, 0);
     if (!text) return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory");
     const char *vals[] = {text};
     pthread_mutex_lock(&pg->lock);

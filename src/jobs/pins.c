@@ -7,6 +7,7 @@
 #include <string.h>
 
 #include "util/log.h"
+#include "util/json.h"
 
 static int pinset_add(char (**arr)[65], size_t *n, const char *id)
 {
@@ -96,7 +97,7 @@ int externalize(vx_jobs *j, const vx_kind *k, cJSON *params, pinset *ps, vx_err 
             cJSON_Delete(probe);
             if (m) continue;
         }
-        char *text = cJSON_PrintUnformatted(it);
+        char *text = vx_json_print(it, 0);
         if (!text) return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory");
         size_t len = strlen(text);
         if (len < VX_BLOB_MIN_BYTES) {

@@ -11,6 +11,7 @@
 
 #include "util/fsutil.h"
 #include "util/log.h"
+#include "util/json.h"
 
 const char *const state_names[5] = {"queued", "running", "succeeded", "failed", "canceled"};
 
@@ -174,7 +175,7 @@ void freeze_locked(vx_jobs *j, job *jb)
     if (o && (!jb->params || cJSON_AddItemReferenceToObject(o, "params", jb->params)) &&
         (!jb->stats || cJSON_AddItemReferenceToObject(o, "stats", jb->stats)) &&
         (!jb->outputs || cJSON_AddItemReferenceToObject(o, "outputs", jb->outputs)))
-        text = cJSON_PrintUnformatted(o);
+        text = vx_json_print(o, 0);
     cJSON_Delete(o);
     if (text) {
         cJSON_Delete(jb->params);

@@ -10,6 +10,7 @@
 #include "util/fsutil.h"
 #include "util/sorted.h"
 #include "util/log.h"
+#include "util/json.h"
 
 int vx_store_valid_mesh_id(const char *id)
 {
@@ -48,7 +49,7 @@ static size_t mesh_find(vx_store *s, const char *id, int *found)
 static int mesh_insert(vx_store *s, const char *id, const char *ext, cJSON *meta, int deleted)
 {
     char *text = NULL;
-    if (!deleted && !(text = cJSON_PrintUnformatted(meta))) return -1;
+    if (!deleted && !(text = vx_json_print(meta, 0))) return -1;
     int found;
     size_t at = mesh_find(s, id, &found);
     if (found) {
@@ -200,7 +201,7 @@ static int mesh_revive_locked(vx_store *s, size_t at, vx_upload *u, const char *
         s->ops->remove(s->blob, old);
         snprintf(e->ext, sizeof e->ext, "%s", ext);
     }
-    char *text = cJSON_PrintUnformatted(meta);
+    char *text = vx_json_print(meta, 0);
     char *copy = text ? strdup(text) : NULL;
     mesh_key(key, sizeof key, e->id, ".json");
     int rc = -1;
@@ -233,7 +234,7 @@ static int mesh_commit_new_locked(vx_store *s, vx_upload *u, const char *id, con
     close(u->fd);
     u->fd = -1;
     int rc = -1;
-    char *text = cJSON_PrintUnformatted(meta);
+    char *text = vx_json_print(meta, 0);
     if (!text) {
         vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory");
     } else if (s->ops->put_file(s->blob, u->path, key) != 0) {

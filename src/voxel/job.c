@@ -11,6 +11,7 @@
 #include "voxel/io.h"
 #include "voxel/job.h"
 #include "voxel/voxel.h"
+#include "util/json.h"
 
 typedef enum vformat {
     F_VDB = 0,
@@ -610,7 +611,7 @@ static int run_brick(vx_job_run *r, const vx_mesh *mesh, const cJSON *bspec, con
                      bprog *q, const char *path, vx_voxelize_stats *st, vx_err *err)
 {
     const vx_limits *lim = vx_run_limits(r);
-    char *text = cJSON_PrintUnformatted(bspec);
+    char *text = vx_json_print(bspec, 0);
     cJSON *back = text ? cJSON_Parse(text) : NULL;
     free(text);
     vparams *bp = back ? vx_kind_read(&vx_kind_voxelize, back, lim, err) : NULL;
@@ -974,7 +975,7 @@ static int encode_bricks(vx_job_run *r, const vparams *p, vstate *s, vprog *prog
             if (!cJSON_AddItemToArray(list, o)) cJSON_Delete(o);
             b++;
         }
-        char *text = cJSON_Print(m);
+        char *text = vx_json_print(m, 1);
         cJSON_Delete(m);
         if (!text) return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory");
         int rc = vx_write_atomic(path, text, strlen(text), err);

@@ -1,4 +1,4 @@
-/* util: the clock, the parallel-for and the vec3 set. */
+/* util: the clock, the parallel-for, the vec3 set and exact JSON numbers. */
 #include <stdarg.h>
 #include <stddef.h>
 #include <stdint.h>
@@ -13,6 +13,7 @@
 #include "util/clock.h"
 #include "util/err.h"
 #include "util/fsutil.h"
+#include "util/json.h"
 #include "util/par.h"
 #include "util/vec3.h"
 
@@ -145,12 +146,58 @@ static void test_vec3(void **state)
     assert_true(a[0] == 0 && a[1] == 0 && a[2] == 0);
 }
 
+/* Every number printed reads back as the same double (cJSON's own printer
+ * gave 0.3 for 0.30000000000000004 and -0.125 for -0.12500000000000003: a
+ * grid origin echoed, journaled or compared for reuse was another lattice),
+ * in the fewest digits; the tree printed is left as it was. */
+static void test_json_exact(void **state)
+{
+    (void)state;
+    const double v[] = {-0.12500000000000003,
+                        0.30000000000000004,
+                        1.0000000000000002,
+                        100.00000000000001,
+                        1.0000000000000001e-07,
+                        0.1,
+                        1.0 / 3,
+                        -2.5,
+                        1e300,
+                        4.9406564584124654e-324,
+                        123456.78901234567,
+                        42};
+    const size_t n = sizeof v / sizeof v[0];
+    cJSON *doc = cJSON_CreateObject(), *arr = cJSON_AddArrayToObject(doc, "a");
+    for (size_t i = 0; i < n; i++)
+        cJSON_AddItemToArray(arr, cJSON_CreateNumber(v[i]));
+    cJSON_AddItemToObject(cJSON_AddObjectToObject(doc, "o"), "x", cJSON_CreateNumber(v[0]));
+    for (int formatted = 0; formatted <= 1; formatted++) {
+        char *text = vx_json_print(doc, formatted);
+        assert_non_null(text);
+        cJSON *back = cJSON_Parse(text);
+        assert_non_null(back);
+        const cJSON *b = cJSON_GetObjectItem(back, "a");
+        assert_int_equal(cJSON_GetArraySize(b), (int)n);
+        for (size_t i = 0; i < n; i++)
+            assert_true(cJSON_GetArrayItem(b, (int)i)->valuedouble == v[i]);
+        assert_true(cJSON_GetObjectItem(cJSON_GetObjectItem(back, "o"), "x")->valuedouble == v[0]);
+        cJSON_Delete(back);
+        cJSON_free(text);
+    }
+    char *text = vx_json_print(arr, 0);
+    assert_non_null(strstr(text, "0.1,"));
+    assert_non_null(strstr(text, "0.30000000000000004,"));
+    assert_non_null(strstr(text, ",42]"));
+    cJSON_free(text);
+    assert_true(cJSON_IsNumber(cJSON_GetArrayItem(arr, 0))); /* not changed in place */
+    cJSON_Delete(doc);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_err_utf8), cmocka_unit_test(test_clock),
         cmocka_unit_test(test_par_for),  cmocka_unit_test(test_par_run),
-        cmocka_unit_test(test_vec3),
+        cmocka_unit_test(test_vec3),     cmocka_unit_test(test_json_exact),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

@@ -1,0 +1,60 @@
+/* Exact JSON numbers (json.h). */
+#include "util/json.h"
+
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+/* Whether cJSON's own 15 digits read back as exactly d (it prints integers
+ * exactly too, and non-finite numbers as null). */
+static int prints_exact(double d)
+{
+    if (!isfinite(d)) return 1;
+    char buf[32];
+    snprintf(buf, sizeof buf, "%1.15g", d);
+    return strtod(buf, NULL) == d;
+}
+
+/* Whether j or a value inside it is a number 15 digits would change. */
+static int any_inexact(const cJSON *j)
+{
+    if (cJSON_IsNumber(j) && !prints_exact(j->valuedouble)) return 1;
+    for (const cJSON *c = j->child; c; c = c->next)
+        if (any_inexact(c)) return 1;
+    return 0;
+}
+
+/* Turns each number of the (copied) tree that 15 digits would change into
+ * raw text of the digits that do not. Returns 0, or -1 out of memory. */
+static int make_exact(cJSON *j)
+{
+    if (cJSON_IsNumber(j) && !prints_exact(j->valuedouble)) {
+        char buf[32];
+        for (int p = 16; p <= 17; p++) {
+            snprintf(buf, sizeof buf, "%1.*g", p, j->valuedouble);
+            if (strtod(buf, NULL) == j->valuedouble) break;
+        }
+        size_t n = strlen(buf) + 1;
+        char *raw = cJSON_malloc(n);
+        if (!raw) return -1;
+        memcpy(raw, buf, n);
+        j->type = cJSON_Raw | (j->type & cJSON_StringIsConst);
+        j->valuestring = raw;
+    }
+    for (cJSON *c = j->child; c; c = c->next)
+        if (make_exact(c) != 0) return -1;
+    return 0;
+}
+
+char *vx_json_print(const cJSON *doc, int formatted)
+{
+    if (!doc) return NULL;
+    if (!any_inexact(doc)) return formatted ? cJSON_Print(doc) : cJSON_PrintUnformatted(doc);
+    cJSON *copy = cJSON_Duplicate(doc, 1);
+    if (!copy) return NULL;
+    char *text = NULL;
+    if (make_exact(copy) == 0) text = formatted ? cJSON_Print(copy) : cJSON_PrintUnformatted(copy);
+    cJSON_Delete(copy);
+    return text;
+}
