@@ -190,6 +190,10 @@ int vx_journal_append(vx_journal *j, const cJSON *rec, vx_err *err)
     int rc = vx_write_all(j->fd, text, n);
     if (rc == 0) rc = fdatasync(j->fd);
     int e = errno;
+    /* A journal removed under the daemon (rm -rf of the data dir) still
+     * takes appends, into a file no restart will read: not durable. */
+    struct stat st;
+    if (rc == 0 && fstat(j->fd, &st) == 0 && st.st_nlink == 0) rc = -1, e = ENOENT;
     if (rc == 0) {
         j->size += (off_t)n;
     } else if (ftruncate(j->fd, j->size) != 0 || fdatasync(j->fd) != 0) {
@@ -202,6 +206,9 @@ int vx_journal_append(vx_journal *j, const cJSON *rec, vx_err *err)
     free(text);
     if (rc != 0) {
         VX_ERROR("journal.append_failed", "path=%s error=%d", j->path, e);
+        if (e == ENOENT)
+            return vx_err_set(err, VX_EIO, "journal_failed",
+                              "the job journal was removed from the data directory");
         return vx_err_set(err, vx_err_io_kind(e),
                           e == ENOSPC || e == EDQUOT ? "insufficient_storage" : "journal_failed",
                           "the job journal could not be written: %s", strerror(e));

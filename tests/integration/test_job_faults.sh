@@ -39,4 +39,19 @@ check "no result dir for the failed job" test ! -e "$DATA/results/$(jqb .id)"
 api GET /metrics
 check "failed job counted" grep -q 'voxeld_jobs_total{kind="preview",state="failed"} 1' "$BODY"
 stop_daemon
+# The data dir removed under a running daemon: the journal takes appends
+# into a file no restart reads, so a job is not acknowledged (it was 202,
+# then gone after a restart).
+start_daemon || exit 1
+upload "$VX_SOURCE_DIR/examples/meshes/torus.obj"
+M=$MESH_ID
+rm -rf "$DATA"
+api POST /v1/jobs -H "Content-Type: application/json" -d "{\"mesh\":\"$M\",\"kind\":\"preview\"}"
+expect_error "job on a removed data dir" 500 journal_failed
+api GET /readyz
+expect_status "readyz on a removed data dir" 503
+kill -KILL "$PID"
+wait "$PID" 2>/dev/null
+PID=
+mkdir -p "$DATA"
 finish
