@@ -120,12 +120,19 @@ static void run_finish(vx_jobs *j, vx_job_run *r, int ok, const vx_err *e)
     }
     job *jb = r->job;
     int requeue = !ok && e->kind == VX_ECANCELED && vx_err_has(e, VX_EF_SHUTDOWN);
+    vx_err serr;
     if (ok) {
         sync_outputs(r);
         /* a job without files of its own (summary, brick parents) has no
-         * result directory to sync or account */
-        if (r->dir[0]) vx_store_result_added(j->desc.store, jb->id);
-    } else if (r->dir[0] || requeue) {
+         * result directory to sync or account. A result the blob store did
+         * not take (an S3 outage) fails the job: succeeded would name a
+         * result that the next start does not have. */
+        if (r->dir[0] && vx_store_result_commit(j->desc.store, jb->id, &serr) != 0) {
+            ok = 0;
+            e = &serr;
+        }
+    }
+    if (!ok && (r->dir[0] || requeue)) {
         vx_store_result_remove(j->desc.store, jb->id);
     }
     pthread_mutex_lock(&j->lock);

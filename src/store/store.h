@@ -153,9 +153,8 @@ int vx_store_result_dir(vx_store *s, const char *jid, char *buf, size_t n, vx_er
 /* Records a finished result dir in the budget (after its files are written):
  * makes it durable in the store (a remote one: uploads it) and indexes it.
  * -1 with err when it could not be made durable (the local copy stays
- * indexed). vx_store_result_added ignores (logs) that. */
+ * indexed until vx_store_result_remove). */
 int vx_store_result_commit(vx_store *s, const char *jid, vx_err *err);
-void vx_store_result_added(vx_store *s, const char *jid);
 /* Path of an output file; marks the result used (LRU). -1 with VX_EGONE
  * code result_evicted when the result dir is gone. */
 int vx_store_result_file(vx_store *s, const char *jid, const char *file, char *buf, size_t n,

@@ -116,11 +116,6 @@ int vx_store_result_commit(vx_store *s, const char *jid, vx_err *err)
     return rc ? -1 : 0;
 }
 
-void vx_store_result_added(vx_store *s, const char *jid)
-{
-    vx_store_result_commit(s, jid, NULL);
-}
-
 int vx_store_result_file(vx_store *s, const char *jid, const char *file, char *buf, size_t n,
                          vx_err *err)
 {

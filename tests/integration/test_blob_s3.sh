@@ -97,6 +97,14 @@ check "readyz says the blob store is not ok" jq -e '.blob_store.ok == false' "$B
 api GET "/v1/jobs/$JOB/result"
 expect_status "result download while the bucket is down" 503
 check "its 503 has Retry-After" test -n "$(header Retry-After)"
+# A job on the cached mesh runs, but its result cannot be uploaded: it
+# fails store_failed (it said succeeded, and the result was gone after a
+# restart).
+KEEP=$JOB
+run_job voxelize "$BOX" '{"resolution":17,"format":"binvox"}'
+JOB=$KEEP
+check "a result the bucket did not take fails the job ($(jq -c '{state,error}' "$TMP/job.json"))" \
+    jq -e '.state == "failed" and .error.code == "store_failed"' "$TMP/job.json"
 check "daemon still alive" kill -0 "$PID"
 start_s3 || exit 1
 api GET /readyz

@@ -243,7 +243,7 @@ static void test_store_uses_backend(void **state)
     char f[4200];
     snprintf(f, sizeof f, "%s/out.txt", path);
     assert_int_equal(vx_write_atomic(f, "12345", 5, &err), 0);
-    vx_store_result_added(s, "ab12");
+    assert_int_equal(vx_store_result_commit(s, "ab12", NULL), 0);
     assert_int_equal(vx_store_results_bytes(s), 5);
     assert_int_equal(vx_store_result_file(s, "ab12", "out.txt", path, sizeof path, &err), 0);
     assert_int_equal(access(path, R_OK), 0);

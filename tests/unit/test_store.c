@@ -135,7 +135,7 @@ static void write_result(vx_store *s, const char *jid, size_t bytes)
     char *buf = calloc(1, bytes);
     assert_int_equal(vx_write_atomic(p, buf, bytes, &err), 0);
     free(buf);
-    vx_store_result_added(s, jid);
+    assert_int_equal(vx_store_result_commit(s, jid, NULL), 0);
 }
 
 static void test_results_budget(void **state)
