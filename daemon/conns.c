@@ -67,7 +67,8 @@ struct vx_conn {
     int kill_status; /* the status we wrote, 0 for none */
     int rd_closed;   /* shutdown(SHUT_RD) done */
     double t_killed;
-    char rid[72]; /* BODY: the request's id; else the id of the answer written here */
+    char rid[72];    /* BODY: the request's id; else the id of the answer written here */
+    int path_escape; /* the current request's path has %00 or %2F (see vx_conns_on_uri) */
 };
 
 struct vx_conns {
@@ -173,8 +174,18 @@ void vx_conns_notify(void *cls, struct MHD_Connection *c, void **socket_context,
 void *vx_conns_on_uri(void *cls, const char *uri, struct MHD_Connection *c)
 {
     vx_conns *s = cls;
-    vx_conn *vc;
-    if (strlen(uri) <= s->cfg->max_uri_bytes || !(vc = vx_conns_of(c))) return NULL;
+    vx_conn *vc = vx_conns_of(c);
+    if (vc) {
+        /* libmicrohttpd decodes the path before routing: %00 cut it short
+         * there and %2F made a separator, so "/v1/jobs/ID%00x" was job ID. */
+        size_t plen = strcspn(uri, "?");
+        int esc = 0;
+        for (size_t i = 0; i + 2 < plen && !esc; i++)
+            esc = uri[i] == '%' && ((uri[i + 1] == '0' && uri[i + 2] == '0') ||
+                                    (uri[i + 1] == '2' && (uri[i + 2] | 0x20) == 'f'));
+        vc->path_escape = esc;
+    }
+    if (strlen(uri) <= s->cfg->max_uri_bytes || !vc) return NULL;
     pthread_mutex_lock(&s->lock);
     size_t n = vc->killed ? 0
                           : kill_conn(vc, 414, "uri_too_long",
@@ -381,4 +392,9 @@ int vx_conns_done(vx_conns *s, vx_conn *vc)
     }
     pthread_mutex_unlock(&s->lock);
     return status;
+}
+
+int vx_conns_path_escape(const vx_conn *vc)
+{
+    return vc && vc->path_escape;
 }

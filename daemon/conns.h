@@ -29,6 +29,10 @@ void vx_conns_notify(void *cls, struct MHD_Connection *c, void **socket_context,
 /* MHD_OPTION_URI_LOG_CALLBACK (cls: the vx_conns): a request target over
  * max_uri_bytes gets a JSON 414. Returns NULL (no request context). */
 void *vx_conns_on_uri(void *cls, const char *uri, struct MHD_Connection *c);
+/* 1 when the current request's path (before '?') had %00 or %2F, which
+ * libmicrohttpd decoded into a NUL or a separator: such a path names no
+ * resource (404). */
+int vx_conns_path_escape(const vx_conn *vc);
 /* The tracked connection of c, or NULL when untracked. */
 vx_conn *vx_conns_of(struct MHD_Connection *c);
 

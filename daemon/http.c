@@ -252,8 +252,8 @@ static enum MHD_Result on_head(vx_http *h, struct MHD_Connection *c, const char 
     r->t0 = vx_mono();
     snprintf(r->method, sizeof r->method, "%s", method);
     identify(c, r, url);
-    vx_req_target t;
-    r->route = vx_req_route(url, strlen(url), &t);
+    vx_req_target t = {0};
+    r->route = vx_conns_path_escape(vc) ? VX_R_UNKNOWN : vx_req_route(url, strlen(url), &t);
     memcpy(r->id, t.id, sizeof r->id);
     memcpy(r->name, t.name, sizeof r->name);
     int rc = first_call(h, c, r, version);

@@ -298,6 +298,16 @@ api GET "/v1/meshes/$BOX"
 expect_status "the box is still there" 200
 api POST "/v1/jobs?wait=60" "${JSON[@]}" -d "{\"mesh\":\"$BOX\",\"kind\":\"preview\",\"params\":{\"width\":64,\"height\":64}}"
 check "a good job still runs" jq -e '.state == "succeeded"' "$BODY"
+GJ=$(jqb .id)
+# A path with %00 or %2F names nothing: libmicrohttpd decodes them before
+# routing, so the job (and its result) answered as if they were not there.
+for p in "/v1/jobs/$GJ%00" "/v1/jobs/$GJ%00x" "/v1/jobs/$GJ%2fresult" "/v1/jobs/$GJ%2Fresult" \
+    "/v1/jobs/$GJ/result/image%00x" "/v1/meshes/$BOX%00"; do
+    api GET "$p"
+    expect_error "GET $p" 404
+done
+api GET "/v1/jobs/$GJ/result/image"
+expect_status "the same output by its plain path" 200
 api GET /v1/meshes
 check "only the box was stored" jq -e '(.items|length) == 1' "$BODY"
 check "no temp files left" test -z "$(ls -A "$DATA/tmp")"
