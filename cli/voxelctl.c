@@ -150,9 +150,19 @@ static int read_options(ctl *c, args *a, int argc, char **argv)
         case 'o':
             a->out = optarg;
             break;
-        case 'r':
+        case 'r': {
+            /* a whole number: the server's own range check (422) would come
+             * only after the mesh's upload, and exit 1, not 2 */
+            char *end;
+            errno = 0;
+            long v = strtol(optarg, &end, 10);
+            if (errno || end == optarg || *end || v < 1) {
+                fprintf(stderr, "voxelctl: -r wants a whole number above 0, not '%s'\n", optarg);
+                return -1;
+            }
             a->resolution = optarg;
             break;
+        }
         case 'f':
             a->format = optarg;
             break;

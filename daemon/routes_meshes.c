@@ -66,8 +66,12 @@ int vx_route_mesh_file(vx_http *h, struct MHD_Connection *c, req *r)
     }
     int fd = -1;
     struct stat st;
-    if (vx_store_mesh_path(h->d.store, r->id, path, sizeof path, &err) == 0)
+    if (vx_store_mesh_path(h->d.store, r->id, path, sizeof path, &err) != 0) {
+        /* the blob store unreachable (503 store_failed) is not a deleted mesh */
+        if (err.kind == VX_EUNAVAIL) return vx_resp_err(c, r, &err);
+    } else {
         fd = open(path, O_RDONLY | O_CLOEXEC);
+    }
     if (fd < 0 || fstat(fd, &st) != 0) {
         if (fd >= 0) close(fd);
         return vx_resp_fail(c, r, VX_ENOTFOUND, "mesh_not_found", "the mesh was deleted");

@@ -356,9 +356,19 @@ async function showImages(job) {
   document.body.dataset.resultShown = 'image';
 }
 
+// A voxelize job's params as one binvox job: bricks, merge and the vdb-only
+// fields are refused with a dense format (422).
+function binvoxParams(params) {
+  const { bricks, merge, vdb_grid, vdb_index_base, ...rest } = params;
+  return { ...rest, format: 'binvox' };
+}
+
 async function showMesh(job) {
   const fmt = job.params?.format || 'obj';
-  if (fmt === 'drc') { $('view-note').textContent = 'Draco output: download it below (the 3D view reads OBJ and PLY).'; return; }
+  if (fmt !== 'obj' && fmt !== 'ply') { // drc, glb: download only
+    $('view-note').textContent = `${fmt === 'drc' ? 'Draco' : fmt} output: download it below (the 3D view reads OBJ and PLY).`;
+    return;
+  }
   const v = await get3D();
   $('view-wrap').hidden = false;
   v.resize();
@@ -400,7 +410,7 @@ async function showVoxels(job) {
       again.onclick = async () => {
         try {
           const j = await apiJSON('/v1/jobs', { method: 'POST', headers: { 'Content-Type': 'application/json' },
-            body: JSON.stringify({ mesh: job.mesh, kind: job.kind, params: { ...job.params, format: 'binvox' } }) });
+            body: JSON.stringify({ mesh: job.mesh, kind: job.kind, params: binvoxParams(job.params) }) });
           openJob(j.id, j);
           refreshJobs().catch(() => {});
         } catch (e) { showError(e, 'view-note'); }

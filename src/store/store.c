@@ -423,6 +423,16 @@ int vx_store_mesh_delete(vx_store *s, const char *id, vx_err *err)
     }
     mesh_entry *e = mesh_at(s, at);
     if (e->pins == 0) {
+        /* Its metadata first, checked: a remove the store did not take (an
+         * S3 outage) must not answer 204 for a mesh that comes back. */
+        char key[128];
+        mesh_key(key, sizeof key, id, ".json");
+        if (s->ops->remove(s->blob, key) != 0) {
+            int e2 = errno;
+            pthread_mutex_unlock(&s->lock);
+            return vx_err_set(err, vx_err_io_kind(e2), "store_failed",
+                              "cannot delete mesh %.80s: %s", id, strerror(e2));
+        }
         mesh_remove_locked(s, at);
     } else {
         /* Jobs still use it: the metadata becomes a tombstone (the mesh is
@@ -434,8 +444,8 @@ int vx_store_mesh_delete(vx_store *s, const char *id, vx_err *err)
         if (s->ops->move(s->blob, from, to) != 0) {
             int e2 = errno;
             pthread_mutex_unlock(&s->lock);
-            return vx_err_set(err, VX_EIO, "store_failed", "cannot delete mesh %.80s: %s", id,
-                              strerror(e2));
+            return vx_err_set(err, vx_err_io_kind(e2), "store_failed",
+                              "cannot delete mesh %.80s: %s", id, strerror(e2));
         }
         VX_INFO("store.mesh_deleted", "mesh=%s kept_for_jobs=%d", id, e->pins);
         free(e->meta);

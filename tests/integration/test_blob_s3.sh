@@ -103,6 +103,15 @@ check "its 503 has Retry-After" test -n "$(header Retry-After)"
 KEEP=$JOB
 run_job voxelize "$BOX" '{"resolution":17,"format":"binvox"}'
 JOB=$KEEP
+# A delete the bucket does not take is not answered 204 (the mesh came
+# back with the bucket).
+api DELETE "/v1/meshes/$BOX"
+expect_error "delete while the bucket is down" 503 store_failed
+check "its 503 has Retry-After" test -n "$(header Retry-After)"
+# A mesh not in the cache cannot be fetched: 503, not "deleted" (404).
+rm -f "$DATA/blobcache/meshes/$BOX.obj"
+api GET "/v1/meshes/$BOX/file"
+expect_error "a mesh's bytes while the bucket is down" 503 store_failed
 check "a result the bucket did not take fails the job ($(jq -c '{state,error}' "$TMP/job.json"))" \
     jq -e '.state == "failed" and .error.code == "store_failed"' "$TMP/job.json"
 check "daemon still alive" kill -0 "$PID"
@@ -111,6 +120,8 @@ api GET /readyz
 expect_status "readyz after the bucket is back" 200
 api GET "/v1/jobs/$JOB/result"
 check "result served again after the outage" cmp -s "$BODY" "$TMP/result1"
+api GET "/v1/meshes/$BOX"
+expect_status "the mesh whose delete failed is still there" 200
 upload "$TMP/box2.obj"
 expect_status "upload after the bucket is back" 201
 BOX2=$MESH_ID

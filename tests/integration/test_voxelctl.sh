@@ -82,6 +82,10 @@ for bad in abc 2x 0 1001; do
     "$CTL" jobs --limit "$bad" >/dev/null 2>ctl.err
     check "--limit $bad: a bad command line, exit 2" sh -c "test $? -eq 2 && grep -q 'limit wants' ctl.err"
 done
+for bad in abc 2x 0; do
+    "$CTL" voxelize "$MID" -r "$bad" >/dev/null 2>ctl.err
+    check "-r $bad: a bad command line, exit 2" sh -c "test $? -eq 2 && grep -q 'r wants' ctl.err"
+done
 "$CTL" --no-wait voxelize "$MID" -r 16 -o nw.binvox 2>ctl.err
 check "--no-wait with -o: exit 2" sh -c "test $? -eq 2 && test ! -e nw.binvox"
 njobs=$("$CTL" --json jobs --limit 1000 | jq '.items | length')
