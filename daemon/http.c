@@ -253,7 +253,13 @@ static enum MHD_Result on_head(vx_http *h, struct MHD_Connection *c, const char 
     snprintf(r->method, sizeof r->method, "%s", method);
     identify(c, r, url);
     vx_req_target t = {0};
-    r->route = vx_conns_path_escape(vc) ? VX_R_UNKNOWN : vx_req_route(url, strlen(url), &t);
+    r->route = vx_req_route(url, strlen(url), &t);
+    if (vx_conns_path_escape(vc)) { /* names nothing: its resource's own 404 */
+        if (t.id[0])
+            snprintf(t.id, sizeof t.id, "-");
+        else
+            r->route = VX_R_UNKNOWN;
+    }
     memcpy(r->id, t.id, sizeof r->id);
     memcpy(r->name, t.name, sizeof r->name);
     int rc = first_call(h, c, r, version);
