@@ -1,6 +1,7 @@
 /* voxelctl: command line (see usage() and docs/man/voxelctl.1). */
 #include <curl/curl.h>
 #include <errno.h>
+#include <limits.h>
 #include <getopt.h>
 #include <stdlib.h>
 #include <string.h>
@@ -81,6 +82,15 @@ typedef struct args {
 } args;
 
 /* Reads the options (anywhere on the line); the rest stay in argv[optind..]. */
+/* s as a whole number in lo..hi (lo > 0), or 0 when it is not one. */
+static long whole(const char *s, long lo, long hi)
+{
+    char *end;
+    errno = 0;
+    long v = strtol(s, &end, 10);
+    return errno || end == s || *end || v < lo || v > hi ? 0 : v;
+}
+
 static int read_options(ctl *c, args *a, int argc, char **argv)
 {
     enum {
@@ -150,19 +160,15 @@ static int read_options(ctl *c, args *a, int argc, char **argv)
         case 'o':
             a->out = optarg;
             break;
-        case 'r': {
-            /* a whole number: the server's own range check (422) would come
+        case 'r':
+            /* checked here: the server's own range check (422) would come
              * only after the mesh's upload, and exit 1, not 2 */
-            char *end;
-            errno = 0;
-            long v = strtol(optarg, &end, 10);
-            if (errno || end == optarg || *end || v < 1) {
+            if (!whole(optarg, 1, LONG_MAX)) {
                 fprintf(stderr, "voxelctl: -r wants a whole number above 0, not '%s'\n", optarg);
                 return -1;
             }
             a->resolution = optarg;
             break;
-        }
         case 'f':
             a->format = optarg;
             break;
@@ -172,18 +178,13 @@ static int read_options(ctl *c, args *a, int argc, char **argv)
         case O_STATE:
             a->state = optarg;
             break;
-        case O_LIMIT: {
-            char *end;
-            errno = 0;
-            long v = strtol(optarg, &end, 10);
-            if (errno || end == optarg || *end || v < 1 || v > 1000) {
+        case O_LIMIT:
+            if (!(a->limit = (int)whole(optarg, 1, 1000))) {
                 fprintf(stderr, "voxelctl: --limit wants a whole number 1..1000, not '%s'\n",
                         optarg);
                 return -1;
             }
-            a->limit = (int)v;
             break;
-        }
         case O_AFTER:
             a->after = optarg;
             break;

@@ -78,15 +78,17 @@ static int mesh_insert(vx_store *s, const char *id, const char *ext, cJSON *meta
 }
 
 /* Removes entry `at` and its files (data, metadata or tombstone). Caller
- * holds the lock and syncs the meshes namespace. */
-static void mesh_remove_locked(vx_store *s, size_t at)
+ * holds the lock and syncs the meshes namespace. With checked, a metadata
+ * removal the store did not take (an S3 outage) returns -1 (errno set) and
+ * leaves everything; else returns 0. */
+static int mesh_remove_locked(vx_store *s, size_t at, int checked)
 {
     mesh_entry *e = mesh_at(s, at);
     char key[128];
     /* Metadata first: without it the mesh no longer exists, even if the
      * process dies before the data file is gone (load_meshes cleans up). */
     mesh_key(key, sizeof key, e->id, ".json");
-    s->ops->remove(s->blob, key);
+    if (s->ops->remove(s->blob, key) != 0 && checked) return -1;
     mesh_key(key, sizeof key, e->id, ".deleted");
     s->ops->remove(s->blob, key);
     mesh_data_key(key, sizeof key, e->id, e->ext);
@@ -95,6 +97,7 @@ static void mesh_remove_locked(vx_store *s, size_t at)
     free(e->meta);
     if (e->deleted) s->ndeleted--;
     free(vx_sorted_remove_at(&s->meshes, at));
+    return 0;
 }
 
 static void fsync_meshes_dir(vx_store *s)
@@ -423,17 +426,14 @@ int vx_store_mesh_delete(vx_store *s, const char *id, vx_err *err)
     }
     mesh_entry *e = mesh_at(s, at);
     if (e->pins == 0) {
-        /* Its metadata first, checked: a remove the store did not take (an
-         * S3 outage) must not answer 204 for a mesh that comes back. */
-        char key[128];
-        mesh_key(key, sizeof key, id, ".json");
-        if (s->ops->remove(s->blob, key) != 0) {
+        /* checked: a remove the store did not take (an S3 outage) must not
+         * answer 204 for a mesh that comes back */
+        if (mesh_remove_locked(s, at, 1) != 0) {
             int e2 = errno;
             pthread_mutex_unlock(&s->lock);
             return vx_err_set(err, vx_err_io_kind(e2), "store_failed",
                               "cannot delete mesh %.80s: %s", id, strerror(e2));
         }
-        mesh_remove_locked(s, at);
     } else {
         /* Jobs still use it: the metadata becomes a tombstone (the mesh is
          * gone for the API, also after a restart) and the file stays until
@@ -479,7 +479,7 @@ void vx_store_mesh_unpin(vx_store *s, const char *id)
     size_t at = mesh_find(s, id, &found);
     if (found && mesh_at(s, at)->pins > 0 && --mesh_at(s, at)->pins == 0 &&
         mesh_at(s, at)->deleted) {
-        mesh_remove_locked(s, at);
+        mesh_remove_locked(s, at, 0);
         removed = 1;
     }
     pthread_mutex_unlock(&s->lock);
@@ -527,7 +527,7 @@ size_t vx_store_collect_meshes_locked(vx_store *s)
     size_t meshes = 0;
     for (size_t i = s->meshes.n; i-- > 0;)
         if (mesh_at(s, i)->deleted && mesh_at(s, i)->pins == 0) {
-            mesh_remove_locked(s, i);
+            mesh_remove_locked(s, i, 0);
             meshes++;
         }
     return meshes;
@@ -566,7 +566,7 @@ int vx_store_mesh_purge(vx_store *s, const char *id, const char *format)
         s->ops->remove(s->blob, key);
     }
     if (found) {
-        mesh_remove_locked(s, at);
+        mesh_remove_locked(s, at, 0);
     } else {
         mesh_key(key, sizeof key, id, ".json");
         s->ops->remove(s->blob, key);

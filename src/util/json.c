@@ -6,20 +6,26 @@
 #include <stdlib.h>
 #include <string.h>
 
-/* Whether cJSON's own 15 digits read back as exactly d (it prints integers
- * exactly too, and non-finite numbers as null). */
-static int prints_exact(double d)
+/* Writes d with the fewest digits, 15 to 17, that strtod reads back as
+ * exactly d into buf; returns that count (15 for what cJSON's own 15
+ * digits already print exactly, integers and non-finite numbers too). */
+static int exact_digits(double d, char buf[32])
 {
-    if (!isfinite(d)) return 1;
-    char buf[32];
-    snprintf(buf, sizeof buf, "%1.15g", d);
-    return strtod(buf, NULL) == d;
+    int p = 15;
+    if (!isfinite(d)) return p;
+    for (; p < 17; p++) {
+        snprintf(buf, 32, "%1.*g", p, d);
+        if (strtod(buf, NULL) == d) return p;
+    }
+    snprintf(buf, 32, "%1.17g", d);
+    return p;
 }
 
 /* Whether j or a value inside it is a number 15 digits would change. */
 static int any_inexact(const cJSON *j)
 {
-    if (cJSON_IsNumber(j) && !prints_exact(j->valuedouble)) return 1;
+    char buf[32];
+    if (cJSON_IsNumber(j) && exact_digits(j->valuedouble, buf) > 15) return 1;
     for (const cJSON *c = j->child; c; c = c->next)
         if (any_inexact(c)) return 1;
     return 0;
@@ -29,12 +35,8 @@ static int any_inexact(const cJSON *j)
  * raw text of the digits that do not. Returns 0, or -1 out of memory. */
 static int make_exact(cJSON *j)
 {
-    if (cJSON_IsNumber(j) && !prints_exact(j->valuedouble)) {
-        char buf[32];
-        for (int p = 16; p <= 17; p++) {
-            snprintf(buf, sizeof buf, "%1.*g", p, j->valuedouble);
-            if (strtod(buf, NULL) == j->valuedouble) break;
-        }
+    char buf[32];
+    if (cJSON_IsNumber(j) && exact_digits(j->valuedouble, buf) > 15) {
         size_t n = strlen(buf) + 1;
         char *raw = cJSON_malloc(n);
         if (!raw) return -1;

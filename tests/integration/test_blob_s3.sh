@@ -103,6 +103,8 @@ check "its 503 has Retry-After" test -n "$(header Retry-After)"
 KEEP=$JOB
 run_job voxelize "$BOX" '{"resolution":17,"format":"binvox"}'
 JOB=$KEEP
+check "a result the bucket did not take fails the job ($(jq -c '{state,error}' "$TMP/job.json"))" \
+    jq -e '.state == "failed" and .error.code == "store_failed"' "$TMP/job.json"
 # A delete the bucket does not take is not answered 204 (the mesh came
 # back with the bucket).
 api DELETE "/v1/meshes/$BOX"
@@ -112,8 +114,6 @@ check "its 503 has Retry-After" test -n "$(header Retry-After)"
 rm -f "$DATA/blobcache/meshes/$BOX.obj"
 api GET "/v1/meshes/$BOX/file"
 expect_error "a mesh's bytes while the bucket is down" 503 store_failed
-check "a result the bucket did not take fails the job ($(jq -c '{state,error}' "$TMP/job.json"))" \
-    jq -e '.state == "failed" and .error.code == "store_failed"' "$TMP/job.json"
 check "daemon still alive" kill -0 "$PID"
 start_s3 || exit 1
 api GET /readyz
