@@ -14,9 +14,9 @@
  *      integer edge functions with a tie rule that perturbs the centre by
  *      (eps, eps^2): exact, and a centre on an edge or vertex shared by
  *      triangles of a closed mesh is covered exactly once. Each covered
- *      centre is a crossing, placed by xing() (voxel_xing.glsl's formula in
- *      double, from the lattice's unsnapped units), signed +1 where the
- *      triangle faces +x;
+ *      centre is a crossing, placed by voxel_xing.glsl's formula in double
+ *      from the lattice's unsnapped units, signed +1 where the triangle
+ *      faces +x (those rules are lattice.h's, shared with winding.c);
  *   3. per row: the crossings sorted along x, counted from each centre
  *      towards +x (the [entry, exit) rule of scan, peel and the CPU
  *      reference), and runs of inside voxels written as whole words.
@@ -33,15 +33,10 @@
 
 #include "util/clock.h"
 #include "util/par.h"
+#include "voxel/lattice.h"
 #include "voxel/voxel.h"
 
 #define CPU_BAND 4 /* z rows per task when max_slab_rows does not say */
-
-/* Snapped coordinates (VX_GRID_SNAP units) stay within +-2^58 so that edge
- * functions fit __int128 and centres int64 (lattice index <= 2^40). */
-#define CPU_SNAP_MAX 288230376151711744.0 /* 2^58 */
-
-typedef __int128 i128;
 
 typedef struct xtri {
     int jlo, jhi, klo, khi; /* column centres of the grid its snapped bbox holds */
@@ -101,42 +96,24 @@ static int no_memory(cctx *c)
     return -1;
 }
 
-/* floor(a / b), b > 0 */
-static int64_t floor_div(int64_t a, int64_t b)
-{
-    int64_t q = a / b;
-    return (a % b != 0 && a < 0) ? q - 1 : q;
-}
-
-/* Column centres c with lo <= (index + c) * SNAP + SNAP / 2 <= hi, as the
- * range [*a, *b] clipped to 0..n-1 (empty: *a > *b). */
-static void centre_range(int64_t lo, int64_t hi, int64_t index, int n, int *a, int *b)
-{
-    const int64_t S = (int64_t)VX_GRID_SNAP, H = S / 2;
-    int64_t first = -floor_div(-(lo - H), S) - index, last = floor_div(hi - H, S) - index;
-    *a = first < 0 ? 0 : first > n ? n : (int)first;
-    *b = last > n - 1 ? n - 1 : last < -1 ? -1 : (int)last;
-}
-
 static int setup(cctx *c, vx_err *err)
 {
     const vx_mesh *m = c->m;
     const vx_grid *g = &c->d->grid;
-    for (size_t v = 0; v < m->nverts; v++)
-        for (int a = 0; a < 3; a++) {
-            double u = (m->pos[3 * v + a] - g->origin[a]) / g->h;
-            if (!(fabs(u * VX_GRID_SNAP) < CPU_SNAP_MAX))
-                return vx_err_set(err, VX_EUNPROC, "invalid_params",
-                                  "vertex %zu lies more than 2^50 voxels from the grid origin; "
-                                  "use a larger voxel size",
-                                  v);
-            c->u[3 * v + a] = u;
-            if (a > 0) c->s[2 * v + a - 1] = (int64_t)nearbyint(u * VX_GRID_SNAP);
-        }
+    for (size_t v = 0; v < m->nverts; v++) {
+        double *u = c->u + 3 * v;
+        if (vx_lattice_unit(g, m->pos + 3 * v, u))
+            return vx_err_set(err, VX_EUNPROC, "invalid_params",
+                              "vertex %zu lies more than 2^50 voxels from the grid origin; "
+                              "use a larger voxel size",
+                              v);
+        c->s[2 * v] = vx_lattice_snap(u[1]);
+        c->s[2 * v + 1] = vx_lattice_snap(u[2]);
+    }
     for (size_t t = 0; t < m->ntris; t++) {
         const uint32_t *q = m->tri + 3 * t;
         const int64_t *A = c->s + 2 * q[0], *B = c->s + 2 * q[1], *C = c->s + 2 * q[2];
-        i128 det = (i128)(B[0] - A[0]) * (C[1] - A[1]) - (i128)(B[1] - A[1]) * (C[0] - A[0]);
+        vx_i128 det = vx_lattice_det(A, B, C);
         xtri *x = &c->tri[t];
         x->sign = det > 0 ? 1 : det < 0 ? -1 : 0;
         int64_t y0 = A[0], y1 = A[0], z0 = A[1], z1 = A[1];
@@ -147,8 +124,8 @@ static int setup(cctx *c, vx_err *err)
             z0 = P[1] < z0 ? P[1] : z0;
             z1 = P[1] > z1 ? P[1] : z1;
         }
-        centre_range(y0, y1, c->iy, c->ny, &x->jlo, &x->jhi);
-        centre_range(z0, z1, c->iz, c->nz, &x->klo, &x->khi);
+        vx_lattice_centres(y0, y1, c->iy, c->ny, &x->jlo, &x->jhi);
+        vx_lattice_centres(z0, z1, c->iz, c->nz, &x->klo, &x->khi);
         /* a triangle wholly before the first centre along x counts for no
          * voxel (every crossing of it has ib <= 0, XING_REACH included) */
         double xmax = fmax(c->u[3 * q[0]], fmax(c->u[3 * q[1]], c->u[3 * q[2]]));
@@ -192,58 +169,6 @@ oom:
     return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for the triangle bins");
 }
 
-/* ---- crossings ---------------------------------------------------------- */
-
-/* Closest point to x of the segment p -> q: (squared distance, parameter),
- * as xing_seg in voxel_xing.glsl. */
-static void seg(const double p[2], const double q[2], const double x[2], double out[2])
-{
-    double d[2] = {q[0] - p[0], q[1] - p[1]};
-    double dd = d[0] * d[0] + d[1] * d[1];
-    double s = dd > 0.0 ? ((x[0] - p[0]) * d[0] + (x[1] - p[1]) * d[1]) / dd : 0.0;
-    s = s < 0.0 ? 0.0 : s > 1.0 ? 1.0 : s;
-    double r[2] = {x[0] - p[0] - s * d[0], x[1] - p[1] - s * d[1]};
-    out[0] = r[0] * r[0] + r[1] * r[1];
-    out[1] = s;
-}
-
-/* xing() of voxel_xing.glsl for rays along x, ss = 1: ib, the first centre
- * at or beyond the crossing of the ray through lattice centre (cy, cz)
- * with the triangle (a, e1, e2 from its first vertex), less the brick's
- * index, clamped to +-2^29. Kept operation for operation (no contraction:
- * this file builds with -ffp-contract=off). */
-static int32_t xing(const double a[3], const double e1[3], const double e2[3], double cy, double cz,
-                    double ix)
-{
-    const double XING_REACH = 1.0 / 64.0;
-    double x[2] = {cy - a[1], cz - a[2]};
-    double p1[2] = {e1[1], e1[2]}, p2[2] = {e2[1], e2[2]};
-    double t1 = e1[0], t2 = e2[0];
-    double det = p1[0] * p2[1] - p1[1] * p2[0];
-    double bb = (x[0] * p2[1] - x[1] * p2[0]) / det, bc = (p1[0] * x[1] - p1[1] * x[0]) / det;
-    double dt = bb * t1 + bc * t2;
-    if (det == 0.0 || bb < 0.0 || bc < 0.0 || bb + bc > 1.0) {
-        const double o[2] = {0.0, 0.0};
-        double s0[2], s1[2], s2[2];
-        seg(o, p1, x, s0);
-        seg(p1, p2, x, s1);
-        seg(p2, o, x, s2);
-        double near = s0[1] * t1;
-        if (s1[0] < s0[0]) near = t1 + s1[1] * (t2 - t1);
-        if (s2[0] < fmin(s0[0], s1[0])) near = (1.0 - s2[1]) * t2;
-        if (det == 0.0)
-            dt = near;
-        else
-            dt = dt < near - XING_REACH   ? near - XING_REACH
-                 : dt > near + XING_REACH ? near + XING_REACH
-                                          : dt;
-    }
-    double u = (a[0] + dt) - 0.5;
-    double cb = ceil(u) - ix;
-    cb = cb < -536870912.0 ? -536870912.0 : cb > 536870912.0 ? 536870912.0 : cb;
-    return (int32_t)cb;
-}
-
 static int push(cctx *c, scratch *s, uint32_t row, int32_t ib2)
 {
     if (s->n == s->cap) {
@@ -257,27 +182,6 @@ static int push(cctx *c, scratch *s, uint32_t row, int32_t ib2)
     }
     s->e[s->n++] = (xent){row, ib2};
     return 0;
-}
-
-/* Edge A -> B of a counter-clockwise triangle: E(q) = (B - A) x (q - A),
- * positive inside; `bias` 1 where a centre on the edge counts as inside
- * (the centre perturbed by (eps, eps^2): the sign of -(Bz - Az), else of
- * By - Ay), so that the two triangles of a shared edge split its centres
- * and exactly one triangle of a fan holds its vertex. */
-typedef struct edge {
-    i128 row0; /* E at (jlo, k) */
-    i128 dj;   /* E step per column along y */
-    i128 dk;   /* per row along z */
-} edge;
-
-static void edge_set(edge *e, const int64_t *A, const int64_t *B, int64_t cy0, int64_t cz0)
-{
-    const int64_t S = (int64_t)VX_GRID_SNAP;
-    int64_t dy = B[0] - A[0], dz = B[1] - A[1];
-    int bias = dz != 0 ? dz < 0 : dy > 0;
-    e->row0 = (i128)dy * (cz0 - A[1]) - (i128)dz * (cy0 - A[0]) + bias;
-    e->dj = -(i128)dz * S;
-    e->dk = (i128)dy * S;
 }
 
 /* Triangle t's crossings of the columns in rows k0..k1-1. */
@@ -294,9 +198,9 @@ static int raster_tri(cctx *c, scratch *sc, size_t t, int k0, int k1)
     int ka = x->klo > k0 ? x->klo : k0, kb = x->khi < k1 - 1 ? x->khi : k1 - 1;
     const int64_t S = (int64_t)VX_GRID_SNAP;
     int64_t cy0 = (c->iy + x->jlo) * S + S / 2, cz0 = (c->iz + ka) * S + S / 2;
-    edge e[3];
+    vx_lattice_edge e[3];
     for (int i = 0; i < 3; i++)
-        edge_set(&e[i], P[i], P[(i + 1) % 3], cy0, cz0);
+        vx_lattice_edge_set(&e[i], P[i], P[(i + 1) % 3], cy0, cz0);
     const double *a = c->u + 3 * q[0], *b = c->u + 3 * q[1], *d = c->u + 3 * q[2];
     double e1[3], e2[3];
     for (int i = 0; i < 3; i++) {
@@ -305,20 +209,20 @@ static int raster_tri(cctx *c, scratch *sc, size_t t, int k0, int k1)
     }
     const int32_t pos = x->sign > 0;
     for (int k = ka; k <= kb; k++) {
-        i128 f0 = e[0].row0, f1 = e[1].row0, f2 = e[2].row0;
+        vx_i128 f0 = e[0].at, f1 = e[1].at, f2 = e[2].at;
         double cz = (c->ix[2] + k) + 0.5;
         uint32_t row0 = (uint32_t)((k - k0) * c->ny);
         for (int j = x->jlo; j <= x->jhi; j++) {
             if (f0 > 0 && f1 > 0 && f2 > 0) {
-                int32_t ib = xing(a, e1, e2, (c->ix[1] + j) + 0.5, cz, c->ix[0]);
+                int32_t ib = vx_lattice_xing(a, e1, e2, (c->ix[1] + j) + 0.5, cz, c->ix[0]);
                 if (ib > 0 && push(c, sc, row0 + (uint32_t)j, 2 * ib + pos)) return -1;
             }
-            f0 += e[0].dj;
-            f1 += e[1].dj;
-            f2 += e[2].dj;
+            f0 += e[0].d1;
+            f1 += e[1].d1;
+            f2 += e[2].d1;
         }
         for (int i = 0; i < 3; i++)
-            e[i].row0 += e[i].dk;
+            e[i].at += e[i].d2;
     }
     return 0;
 }

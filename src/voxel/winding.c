@@ -7,9 +7,13 @@
  * connected part of the boundary (a hole), so that S + K has no boundary.
  * Then w_S(q) = w_{S+K}(q) - w_K(q), where w_{S+K}(q) is an integer: the
  * signed crossings of S + K along the z ray above q (front +1 where the
- * surface faces +z), counted exactly per voxel column by a CPU rasterizer
- * with watertight edge tests. w_K is smooth between K's crossings. On a
- * run of centres between two crossings, when a bound of |w_K| (area over
+ * surface faces +z), counted exactly per voxel column by lattice.h's
+ * rules (cpu.c's, along z): coverage by exact integer edge tests on the
+ * positions snapped to 1/256 voxel in the lattice, each crossing placed
+ * at its first centre at or beyond it by the shaders' formula, so a
+ * centre on a face counts half-open [entry, exit) along every axis and a
+ * brick gives the whole grid's voxels. w_K is smooth between K's
+ * crossings. On a run of centres between two crossings, when a bound of |w_K| (area over
  * squared distance per tree node) stays under the crossing count's margin
  * to 1/2, the count decides alone; else w_K is evaluated with a tree over
  * K (wtree.c, Barill et al. 2018) at both ends of the run (and its middle
@@ -29,6 +33,7 @@
 
 #include "util/clock.h"
 #include "util/par.h"
+#include "voxel/lattice.h"
 #include "voxel/voxel.h"
 #include "voxel/winding_int.h"
 
@@ -41,14 +46,16 @@ typedef struct wctx {
     size_t ncone, ntot;
     int nx, ny, nz, nbands;
     double o[3], h;
-    double ix[3];    /* grid.index_offset: centre i of axis a is o + (ix + i + 1/2) h */
-    size_t *bin_off; /* nbands + 1 */
-    uint32_t *bin;   /* triangle ids per band */
-    uint32_t *cnt;   /* crossings per column (pass 1), then fill cursor */
-    size_t *off;     /* ncols + 1 */
-    double *z;       /* crossing heights in voxel units (voxel k's centre at k) */
-    int8_t *sg;      /* +1 front (facing +z), -1 back */
-    int pass;        /* 0 count, 1 fill */
+    double ix[3];     /* grid.index_offset: centre i of axis a is o + (ix + i + 1/2) h */
+    int64_t index[3]; /* the same, as integers */
+    double *lat;      /* lattice units (p - o) / h: 3 a mesh vertex, then 9 a cone triangle */
+    size_t *bin_off;  /* nbands + 1 */
+    uint32_t *bin;    /* triangle ids per band */
+    uint32_t *cnt;    /* crossings per column (pass 1), then fill cursor */
+    size_t *off;      /* ncols + 1 */
+    int32_t *z;       /* per crossing, the first centre k at or beyond it */
+    int8_t *sg;       /* +1 front (facing +z), -1 back */
+    int pass;         /* 0 count, 1 fill */
     vx_wtree tree;
     int lo[3], hi[3], open; /* centres that can be inside (the bbox for an open mesh) */
     vx_bitgrid *out;
@@ -58,112 +65,93 @@ typedef struct wctx {
     vx_err err;
 } wctx;
 
-static void tri_of(const wctx *c, size_t t, double v[9])
+/* ---- crossings per column --------------------------------------------- */
+
+/* Triangle t's vertices in the lattice's units, x y z each. */
+static void tri_lat(const wctx *c, size_t t, double u[9])
 {
     if (t < c->m->ntris) {
         for (int q = 0; q < 3; q++)
-            memcpy(v + 3 * q, c->m->pos + 3 * (size_t)c->m->tri[3 * t + q], 3 * sizeof *v);
+            memcpy(u + 3 * q, c->lat + 3 * (size_t)c->m->tri[3 * t + q], 3 * sizeof *u);
     } else {
-        memcpy(v, c->cone + 9 * (t - c->m->ntris), 9 * sizeof *v);
+        memcpy(u, c->lat + 3 * c->m->nverts + 9 * (t - c->m->ntris), 9 * sizeof *u);
     }
 }
 
-/* ---- crossings per column --------------------------------------------- */
-
-/* Column range [*lo, *hi] whose centres o + (i + 1/2) h may fall in
- * [a, b] (one more each side against rounding; the exact test decides). */
-static void col_range(double a, double b, double o, double ix, double h, int n, int *lo, int *hi)
+/* Triangle t's snapped (x, y) corners, counter-clockwise, and the column
+ * centres its snapped bounding box holds; its crossings' sign (+1 facing
+ * +z), or 0 when it covers no centre (edge-on to z, or off the grid). */
+static int tri_cols(const wctx *c, const double u[9], int64_t P[3][2], int r[4])
 {
-    double fa = floor((a - o) / h - ix - 0.5), fb = ceil((b - o) / h - ix - 0.5);
-    int l = fa < 0 ? 0 : fa > n ? n : (int)fa, u = fb < -1 ? -1 : fb > n - 1 ? n - 1 : (int)fb;
-    /* then exactly the centres in [a, b], computed as the tests compute them
-     * (one outside cannot be in the triangle, even perturbed) */
-    while (l <= u && o + (ix + l + 0.5) * h < a)
-        l++;
-    while (u >= l && o + (ix + u + 0.5) * h > b)
-        u--;
-    *lo = l;
-    *hi = u;
+    for (int q = 0; q < 3; q++) {
+        P[q][0] = vx_lattice_snap(u[3 * q]);
+        P[q][1] = vx_lattice_snap(u[3 * q + 1]);
+    }
+    vx_i128 det = vx_lattice_det(P[0], P[1], P[2]);
+    if (det == 0) return 0;
+    if (det < 0) { /* counter-clockwise for the edge tests */
+        int64_t tmp[2] = {P[1][0], P[1][1]};
+        memcpy(P[1], P[2], sizeof tmp);
+        memcpy(P[2], tmp, sizeof tmp);
+    }
+    const int n[2] = {c->nx, c->ny};
+    for (int a = 0; a < 2; a++) {
+        int64_t lo = P[0][a], hi = P[0][a];
+        for (int q = 1; q < 3; q++) {
+            lo = P[q][a] < lo ? P[q][a] : lo;
+            hi = P[q][a] > hi ? P[q][a] : hi;
+        }
+        vx_lattice_centres(lo, hi, c->index[a], n[a], &r[2 * a], &r[2 * a + 1]);
+        if (r[2 * a] > r[2 * a + 1]) return 0;
+    }
+    return det > 0 ? 1 : -1;
 }
 
-#define MIN3(a, b, c) ((a) < (b) ? ((a) < (c) ? (a) : (c)) : ((b) < (c) ? (b) : (c)))
-#define MAX3(a, b, c) ((a) > (b) ? ((a) > (c) ? (a) : (c)) : ((b) > (c) ? (b) : (c)))
-
-/* One edge of a triangle, evaluated identically for both triangles that
- * share it: from its lexicographically smaller end point, with a
- * perturbation of the query point by (eps, eps^2) when it lies on it. */
-typedef struct edge {
-    double lx, ly, dx, dy;
-    int flip, tie; /* tie: the side of a point exactly on the edge */
-} edge;
-
-static int lex_less(const double *p, const double *q)
-{
-    for (int k = 0; k < 3; k++)
-        if (p[k] != q[k]) return p[k] < q[k];
-    return 0;
-}
-
-static void edge_set(edge *e, const double *a, const double *b)
-{
-    e->flip = lex_less(b, a);
-    const double *l = e->flip ? b : a, *u = e->flip ? a : b;
-    e->lx = l[0];
-    e->ly = l[1];
-    e->dx = u[0] - l[0];
-    e->dy = u[1] - l[1];
-    /* d/d eps of dx (qy + eps^2 - ly) - dy (qx + eps - lx) */
-    e->tie = e->dy != 0 ? (e->dy < 0 ? 1 : -1) : e->dx > 0 ? 1 : e->dx < 0 ? -1 : 0;
-}
-
-/* Signed edge function of q (sign = side, 0 only for a point edge). */
-static double edge_eval(const edge *e, double qx, double qy, int *side)
-{
-    double v = e->dx * (qy - e->ly) - e->dy * (qx - e->lx);
-    int s = v > 0 ? 1 : v < 0 ? -1 : e->tie;
-    *side = e->flip ? -s : s;
-    return e->flip ? -v : v;
-}
-
-static void add_crossing(wctx *c, size_t col, double z, int s)
+/* Crossing of column col: kb, the first centre at or beyond it, sign s. */
+static void add_crossing(wctx *c, size_t col, int32_t kb, int s)
 {
     if (c->pass == 0) {
         c->cnt[col]++;
         return;
     }
     size_t at = c->off[col] + c->cnt[col]++;
-    c->z[at] = (z - c->o[2]) / c->h - c->ix[2] - 0.5;
+    c->z[at] = kb;
     c->sg[at] = (int8_t)s;
 }
 
-/* Triangle t's crossings of the columns of rows [j0, j1). */
+/* Triangle t's crossings of the columns of rows [j0, j1): coverage by
+ * lattice.h's snapped edge tests, each crossing placed by its formula with
+ * z as the ray's axis. */
 static void raster_tri(wctx *c, size_t t, int j0, int j1)
 {
-    double v[9];
-    tri_of(c, t, v);
-    double x0 = MIN3(v[0], v[3], v[6]), x1 = MAX3(v[0], v[3], v[6]);
-    double y0 = MIN3(v[1], v[4], v[7]), y1 = MAX3(v[1], v[4], v[7]);
-    int ilo, ihi, jlo, jhi;
-    col_range(x0, x1, c->o[0], c->ix[0], c->h, c->nx, &ilo, &ihi);
-    col_range(y0, y1, c->o[1], c->ix[1], c->h, c->ny, &jlo, &jhi);
-    if (jlo < j0) jlo = j0;
-    if (jhi > j1 - 1) jhi = j1 - 1;
-    edge e[3]; /* e[q] is the edge opposite vertex q */
+    double u[9];
+    tri_lat(c, t, u);
+    int64_t P[3][2];
+    int r[4];
+    int sign = tri_cols(c, u, P, r);
+    if (!sign) return;
+    int jlo = r[2] < j0 ? j0 : r[2], jhi = r[3] > j1 - 1 ? j1 - 1 : r[3];
+    const int64_t S = (int64_t)VX_GRID_SNAP;
+    int64_t cx0 = (c->index[0] + r[0]) * S + S / 2, cy0 = (c->index[1] + jlo) * S + S / 2;
+    vx_lattice_edge e[3];
     for (int q = 0; q < 3; q++)
-        edge_set(&e[q], v + 3 * ((q + 1) % 3), v + 3 * ((q + 2) % 3));
+        vx_lattice_edge_set(&e[q], P[q], P[(q + 1) % 3], cx0, cy0);
+    /* (z, x, y): the ray's axis first */
+    double a[3] = {u[2], u[0], u[1]}, e1[3] = {u[5] - u[2], u[3] - u[0], u[4] - u[1]},
+           e2[3] = {u[8] - u[2], u[6] - u[0], u[7] - u[1]};
     for (int j = jlo; j <= jhi; j++) {
-        double qy = c->o[1] + (c->ix[1] + j + 0.5) * c->h;
-        for (int i = ilo; i <= ihi; i++) {
-            double qx = c->o[0] + (c->ix[0] + i + 0.5) * c->h, f[3];
-            int s[3];
-            for (int q = 0; q < 3; q++)
-                f[q] = edge_eval(&e[q], qx, qy, &s[q]);
-            if (s[0] == 0 || s[0] != s[1] || s[1] != s[2]) continue;
-            double sum = f[0] + f[1] + f[2];
-            double z = sum != 0 ? (f[0] * v[2] + f[1] * v[5] + f[2] * v[8]) / sum
-                                : (v[2] + v[5] + v[8]) / 3;
-            add_crossing(c, (size_t)j * c->nx + i, z, s[0]);
+        vx_i128 f0 = e[0].at, f1 = e[1].at, f2 = e[2].at;
+        double cy = (c->ix[1] + j) + 0.5;
+        for (int i = r[0]; i <= r[1]; i++) {
+            if (f0 > 0 && f1 > 0 && f2 > 0)
+                add_crossing(c, (size_t)j * c->nx + i,
+                             vx_lattice_xing(a, e1, e2, (c->ix[0] + i) + 0.5, cy, c->ix[2]), sign);
+            f0 += e[0].d1;
+            f1 += e[1].d1;
+            f2 += e[2].d1;
         }
+        for (int q = 0; q < 3; q++)
+            e[q].at += e[q].d2;
     }
 }
 
@@ -206,15 +194,12 @@ static int bin_tris(wctx *c, vx_err *err)
     if (!c->bin_off) goto oom;
     for (int pass = 0; pass < 2; pass++) {
         for (size_t t = 0; t < c->ntot; t++) {
-            double v[9];
-            tri_of(c, t, v);
-            int lo, hi, ilo, ihi;
-            col_range(MIN3(v[1], v[4], v[7]), MAX3(v[1], v[4], v[7]), c->o[1], c->ix[1], c->h,
-                      c->ny, &lo, &hi);
-            col_range(MIN3(v[0], v[3], v[6]), MAX3(v[0], v[3], v[6]), c->o[0], c->ix[0], c->h,
-                      c->nx, &ilo, &ihi);
-            if (lo > hi || ilo > ihi) continue;
-            for (int b = lo / BAND; b <= hi / BAND; b++) {
+            double u[9];
+            tri_lat(c, t, u);
+            int64_t P[3][2];
+            int r[4];
+            if (!tri_cols(c, u, P, r)) continue;
+            for (int b = r[2] / BAND; b <= r[3] / BAND; b++) {
                 if (pass == 0)
                     c->bin_off[b + 1]++;
                 else
@@ -283,17 +268,17 @@ static void fill_run(wctx *c, int i, int j, int ka, int kb, int da, int db, int 
 }
 
 typedef struct zs {
-    double z;
+    int32_t z;
     int s;
 } zs;
 
 static int zs_cmp(const void *a, const void *b)
 {
-    double x = ((const zs *)a)->z, y = ((const zs *)b)->z;
+    int32_t x = ((const zs *)a)->z, y = ((const zs *)b)->z;
     return x < y ? -1 : x > y;
 }
 
-static void sort_column(double *z, int8_t *s, size_t n)
+static void sort_column(int32_t *z, int8_t *s, size_t n)
 {
     zs *t = n > 64 ? malloc(n * sizeof *t) : NULL;
     if (t) { /* long columns; without memory, the insertion sort below */
@@ -308,7 +293,7 @@ static void sort_column(double *z, int8_t *s, size_t n)
         return;
     }
     for (size_t a = 1; a < n; a++) {
-        double zv = z[a];
+        int32_t zv = z[a];
         int8_t sv = s[a];
         size_t b = a;
         for (; b > 0 && z[b - 1] > zv; b--) {
@@ -323,7 +308,7 @@ static void sort_column(double *z, int8_t *s, size_t n)
 static void column(wctx *c, int i, int j)
 {
     size_t col = (size_t)j * c->nx + i, n = c->off[col + 1] - c->off[col];
-    double *z = c->z + c->off[col];
+    int32_t *z = c->z + c->off[col];
     int8_t *s = c->sg + c->off[col];
     sort_column(z, s, n);
     int cnt = 0;
@@ -331,9 +316,8 @@ static void column(wctx *c, int i, int j)
         cnt += s[a];
     for (size_t r = 0; r <= n; r++) {
         /* run r: centres k with z[r-1] <= k < z[r] have cnt crossings above */
-        double lo = r ? ceil(z[r - 1]) : -HUGE_VAL, hi = r < n ? ceil(z[r]) - 1 : HUGE_VAL;
-        int ka = lo < c->lo[2] ? c->lo[2] : (int)fmin(lo, INT32_MAX / 2);
-        int kb = hi > c->hi[2] ? c->hi[2] : (int)fmax(hi, -1.0);
+        int ka = r && z[r - 1] > c->lo[2] ? z[r - 1] : c->lo[2];
+        int kb = r < n && z[r] - 1 < c->hi[2] ? z[r] - 1 : c->hi[2];
         if (ka <= kb) {
             if (!c->open || far_run(c, i, j, ka, kb, cnt)) {
                 fill_run(c, i, j, ka, kb, cnt >= 1, cnt >= 1, cnt);
@@ -400,8 +384,9 @@ static int crossings(wctx *c, vx_err *err)
     for (size_t i = 0; i < ncols; i++)
         c->off[i + 1] = c->off[i] + c->cnt[i];
     size_t n = c->off[ncols];
-    uint64_t bytes = vx_bitgrid_bytes(c->out->grid.dims, 1) + (uint64_t)n * 9 +
-                     (uint64_t)ncols * 12 + c->bin_off[c->nbands] * 4;
+    uint64_t bytes = vx_bitgrid_bytes(c->out->grid.dims, 1) + (uint64_t)n * 5 +
+                     (uint64_t)ncols * 12 + c->bin_off[c->nbands] * 4 +
+                     ((uint64_t)c->m->nverts * 3 + (uint64_t)c->ncone * 9) * 8;
     if (c->d->max_memory && bytes > c->d->max_memory)
         return vx_err_set(err, VX_ETOOBIG, "job_memory_limit",
                           "the winding rule needs %llu bytes for %zu crossings of %zu columns, "
@@ -418,19 +403,41 @@ static int crossings(wctx *c, vx_err *err)
 }
 
 /* The centres that can be inside: the grid, and for an open mesh those in
- * the mesh's bounding box. */
+ * the mesh's bounding box (its vertices' lattice units). */
 static void inside_range(wctx *c)
 {
     const int n[3] = {c->nx, c->ny, c->nz};
     for (int a = 0; a < 3; a++) {
         c->lo[a] = 0;
         c->hi[a] = n[a] - 1;
-        if (!c->open) continue;
-        double lo = ceil((c->m->bbox_min[a] - c->o[a]) / c->h - c->ix[a] - 0.5),
-               hi = floor((c->m->bbox_max[a] - c->o[a]) / c->h - c->ix[a] - 0.5);
+        if (!c->open || !c->m->nverts) continue;
+        double umin = HUGE_VAL, umax = -HUGE_VAL;
+        for (size_t v = 0; v < c->m->nverts; v++) {
+            umin = fmin(umin, c->lat[3 * v + a]);
+            umax = fmax(umax, c->lat[3 * v + a]);
+        }
+        double lo = ceil(umin - 0.5) - c->ix[a], hi = floor(umax - 0.5) - c->ix[a];
         if (lo > c->lo[a]) c->lo[a] = lo > n[a] ? n[a] : (int)lo;
         if (hi < c->hi[a]) c->hi[a] = hi < -1 ? -1 : (int)hi;
     }
+}
+
+/* Every mesh vertex and cone corner in the lattice's units. */
+static int lattice_units(wctx *c, vx_err *err)
+{
+    const vx_mesh *m = c->m;
+    c->lat = malloc((m->nverts * 3 + c->ncone * 9) * sizeof *c->lat + 1);
+    if (!c->lat) return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for positions");
+    for (size_t v = 0; v < m->nverts; v++)
+        if (vx_lattice_unit(&c->d->grid, m->pos + 3 * v, c->lat + 3 * v))
+            return vx_err_set(err, VX_EUNPROC, "invalid_params",
+                              "vertex %zu lies more than 2^50 voxels from the grid origin; "
+                              "use a larger voxel size",
+                              v);
+    /* a cone's corners are boundary vertices and their mean: in range too */
+    for (size_t v = 0; v < 3 * c->ncone; v++)
+        vx_lattice_unit(&c->d->grid, c->cone + 3 * v, c->lat + 3 * (m->nverts + v));
+    return 0;
 }
 
 int vx_voxelize_winding(const vx_mesh *m, const vx_voxelize_desc *d, vx_bitgrid *out,
@@ -449,8 +456,10 @@ int vx_voxelize_winding(const vx_mesh *m, const vx_voxelize_desc *d, vx_bitgrid 
     c->nz = d->grid.dims[2];
     c->nbands = (c->ny + BAND - 1) / BAND;
     memcpy(c->o, d->grid.origin, sizeof c->o);
-    for (int a = 0; a < 3; a++)
+    for (int a = 0; a < 3; a++) {
+        c->index[a] = d->grid.index[a];
         c->ix[a] = (double)d->grid.index[a];
+    }
     c->h = d->grid.h;
     c->out = out;
     int rc = -1;
@@ -458,7 +467,9 @@ int vx_voxelize_winding(const vx_mesh *m, const vx_voxelize_desc *d, vx_bitgrid 
         goto done;
     c->ntot = m->ntris + c->ncone;
     c->open = c->ncone > 0;
-    if (vx_wtree_build(&c->tree, c->ncone, c->cone, err) || bin_tris(c, err)) goto done;
+    if (lattice_units(c, err) || vx_wtree_build(&c->tree, c->ncone, c->cone, err) ||
+        bin_tris(c, err))
+        goto done;
     st->upload_ms = (vx_mono() - t0) * 1e3;
     if (crossings(c, err)) goto done;
     inside_range(c);
@@ -472,6 +483,7 @@ done:
     if (rc) vx_bitgrid_free(out);
     vx_wtree_free(&c->tree);
     free(c->cone);
+    free(c->lat);
     free(c->bin_off);
     free(c->bin);
     free(c->cnt);

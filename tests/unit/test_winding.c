@@ -172,38 +172,178 @@ static void test_open_shells(void **state)
     vx_mesh_free(cup);
 }
 
+/* m's vertices moved onto the lattice of g (power-of-two h, origin a
+ * multiple of h / 256, so lattice units are exact): x and y onto
+ * 1/256-voxel steps, or with `centres` onto column centres (every column
+ * through a vertex or along an edge: ties for the coverage rule), and z
+ * to 1/256-voxel steps plus 0.37 of one (never on a centre). Coverage is
+ * then decided on the true positions, and a closed mesh's winding voxels
+ * must be the exact reference's. */
+static void onto_lattice(vx_mesh *m, const vx_grid *g, int centres)
+{
+    for (size_t v = 0; v < m->nverts; v++) {
+        double *p = m->pos + 3 * v;
+        for (int a = 0; a < 3; a++) {
+            double u = (p[a] - g->origin[a]) / g->h;
+            u = a == 2    ? (floor(u * 256) + 0.37) / 256
+                : centres ? floor(u) + 0.5
+                          : nearbyint(u * 256) / 256;
+            p[a] = g->origin[a] + u * g->h;
+        }
+    }
+}
+
 /* Closed meshes: winding >= 1/2 is the crossing count, the same voxels as
- * the exact nonzero reference. */
+ * the exact nonzero reference, the shared meshes and overlapping parts,
+ * with their vertices on the lattice's 1/256-voxel steps across z (where
+ * winding snaps them anyway) and on column centres. */
 static void test_closed_exact(void **state)
 {
     (void)state;
-    const char *names[] = {"spot_triangulated.obj", "rocker-arm.obj", "fandisk.obj"};
-    for (int n = 0; n < 3; n++) {
-        vx_mesh *m = shape_load(names[n]);
+    const char *names[] = {"spot_triangulated.obj", "rocker-arm.obj", "fandisk.obj", NULL};
+    for (int n = 0; n < 4; n++) {
+        vx_mesh *m;
+        if (names[n]) {
+            m = shape_load(names[n]);
+        } else { /* the generated torus with a box through it */
+            vx_mesh *parts[2] = {
+                shape_param_mesh(64, 32, 0, 0, 0, 0.01, 0.02, 1, 0.4),
+                shape_box((double[]){-0.3, -1.7, -0.2}, (double[]){0.35, 1.6, 0.25})};
+            m = shape_merge(parts, 2);
+            vx_mesh_free(parts[0]);
+            vx_mesh_free(parts[1]);
+        }
         assert_non_null(m);
         assert_int_equal(m->boundary_edges, 0);
-        vx_bitgrid g;
-        vx_voxelize_stats st;
-        run(m, VX_INSIDE_WINDING, 96, &g, &st);
-        double iou;
-        size_t bad = ref_compare(names[n], m, &g.grid, VX_INSIDE_NONZERO, &g, &iou);
-        assert_int_equal(bad, 0);
-        vx_bitgrid_free(&g);
+        for (int centres = 0; centres < 2; centres++) {
+            vx_voxelize_desc d = {.inside = VX_INSIDE_WINDING};
+            assert_int_equal(vx_grid_from_resolution(m, centres ? 40 : 96, 2, &d.grid, NULL), 0);
+            d.grid.h = exp2(ceil(log2(d.grid.h)));
+            for (int a = 0; a < 3; a++)
+                d.grid.origin[a] = floor(d.grid.origin[a] / d.grid.h * 256) * d.grid.h / 256;
+            onto_lattice(m, &d.grid, centres);
+            vx_bitgrid g;
+            vx_voxelize_stats st;
+            vx_err err = {0};
+            assert_int_equal(vx_voxelize(NULL, m, &d, &g, &st, &err), 0);
+            double iou;
+            size_t bad = ref_compare(names[n] ? names[n] : "torus + box", m, &g.grid,
+                                     VX_INSIDE_NONZERO, &g, &iou);
+            assert_int_equal(bad, 0);
+            assert_true(st.voxels_inside > 0);
+            vx_bitgrid_free(&g);
+        }
         vx_mesh_free(m);
     }
-    /* and the generated torus with a box through it (overlapping parts) */
-    vx_mesh *parts[2] = {shape_param_mesh(64, 32, 0, 0, 0.01, 0.02, 0.03, 1, 0.4),
-                         shape_box((double[]){-0.3, -1.7, -0.2}, (double[]){0.35, 1.6, 0.25})};
-    vx_mesh *m = shape_merge(parts, 2);
-    vx_bitgrid g;
-    vx_voxelize_stats st;
-    run(m, VX_INSIDE_WINDING, 100, &g, &st);
-    double iou;
-    assert_int_equal(ref_compare("torus + box", m, &g.grid, VX_INSIDE_NONZERO, &g, &iou), 0);
-    vx_bitgrid_free(&g);
-    vx_mesh_free(m);
-    vx_mesh_free(parts[0]);
-    vx_mesh_free(parts[1]);
+}
+
+/* Centres c of one axis (lattice index ix + c) inside [lo, hi) of a box
+ * whose faces have lattice units lo, hi: across z by the snapped coverage
+ * and its tie (the centre perturbed towards +), along z by the crossing's
+ * first centre at or beyond it, ceil(u - 1/2). */
+static int box_centres(double lo, double hi, int64_t ix, int n, int along_ray)
+{
+    int k = 0;
+    for (int c = 0; c < n; c++) {
+        double at = (double)(ix + c);
+        if (along_ray)
+            k += at >= ceil(lo - 0.5) && at < ceil(hi - 0.5);
+        else
+            k += (ix + c) * 256 + 128 >= nearbyint(lo * 256) &&
+                 (ix + c) * 256 + 128 < nearbyint(hi * 256);
+    }
+    return k;
+}
+
+/* 1 when a face at lattice units u along a ray's axis (x for cpu, z for
+ * winding) gives the same centres unsnapped as snapped with the tie: it
+ * lies on a 1/256-voxel step, or farther than one from every centre. */
+static int same_rule(double u)
+{
+    double f = u - 0.5 - floor(u - 0.5);
+    return u * 256 == nearbyint(u * 256) || (f > 1.0 / 256 && f < 1 - 1.0 / 256);
+}
+
+/* Boxes on lattices whose origin and voxel size are not binary fractions,
+ * with faces anywhere and on centre planes (a face on a row of centres in
+ * every axis): the voxels are the half-open [lo, hi) count along every
+ * axis, in any brick, and the cpu method's (rays along x, winding's along
+ * z) wherever snapping cannot move a face across a centre on either ray
+ * axis. The
+ * first box is one a user found: winding set 35 voxels of its top face's
+ * plane and dropped the layer on its x and y entry faces. */
+static void test_closed_ties(void **state)
+{
+    (void)state;
+    srand48(7);
+    int same_as_cpu = 0;
+    for (int trial = 0; trial < 120; trial++) {
+        double lo[3] = {0.013, 0.027, 0.05}, hi[3] = {3.013, 1.027, 2.05};
+        vx_grid g = {.origin = {-0.2, -0.2, -0.2}, .h = 0.1, .dims = {34, 14, 26}};
+        if (trial > 0) {
+            g.h = (0.05 + drand48()) / 7;
+            for (int a = 0; a < 3; a++) {
+                g.origin[a] = (drand48() - 0.5) * 3;
+                g.dims[a] = 4 + (int)(drand48() * 30);
+                g.index[a] = trial % 3 ? 0 : (int64_t)(drand48() * 40) - 20;
+                /* faces at centres (i + 1/2), at 1/256 steps, or anywhere */
+                for (int e = 0; e < 2; e++) {
+                    double c = (double)g.index[a] + drand48() * g.dims[a], u;
+                    int kind = (int)(drand48() * 3);
+                    u = kind == 0 ? floor(c) + 0.5 : kind == 1 ? floor(c * 256) / 256 : c;
+                    (e ? hi : lo)[a] = g.origin[a] + u * g.h;
+                }
+                if (lo[a] > hi[a]) {
+                    double t = lo[a];
+                    lo[a] = hi[a];
+                    hi[a] = t;
+                }
+                if (hi[a] - lo[a] < g.h / 8) hi[a] = lo[a] + g.h;
+            }
+        }
+        vx_mesh *m = shape_box(lo, hi);
+        int want = 1, comparable = 1;
+        for (int a = 0; a < 3; a++) {
+            double ul = (lo[a] - g.origin[a]) / g.h, uh = (hi[a] - g.origin[a]) / g.h;
+            want *= box_centres(ul, uh, g.index[a], g.dims[a], a == 2);
+            if (a != 1) comparable &= same_rule(ul) && same_rule(uh);
+        }
+        vx_voxelize_desc d = {.grid = g, .inside = VX_INSIDE_WINDING};
+        vx_bitgrid w, c;
+        vx_voxelize_stats st;
+        vx_err err = {0};
+        assert_int_equal(vx_voxelize(NULL, m, &d, &w, &st, &err), 0);
+        if ((int)st.voxels_inside != want)
+            printf("box %d: winding %llu, the [lo, hi) count %d\n", trial,
+                   (unsigned long long)st.voxels_inside, want);
+        assert_int_equal((int)st.voxels_inside, want);
+        if (comparable) {
+            d.inside = VX_INSIDE_NONZERO;
+            assert_int_equal(vx_voxelize_cpu(m, &d, &c, &st, &err), 0);
+            size_t words = c.wx * (size_t)g.dims[1] * g.dims[2], differ = 0;
+            for (size_t q = 0; q < words; q++)
+                differ += (size_t)__builtin_popcount(c.bits[q] ^ w.bits[q]);
+            assert_int_equal(differ, 0);
+            same_as_cpu++;
+            vx_bitgrid_free(&c);
+        }
+        if (trial == 0) { /* the top face's plane (k = 22) is empty, x = 0.05 set */
+            int top = 0, entry = 0;
+            for (int j = 0; j < g.dims[1]; j++)
+                for (int i = 0; i < g.dims[0]; i++)
+                    top += vx_bitgrid_get(&w, i, j, 22);
+            for (int k = 0; k < g.dims[2]; k++)
+                for (int j = 0; j < g.dims[1]; j++)
+                    entry += vx_bitgrid_get(&w, 2, j, k);
+            assert_int_equal(top, 0);
+            assert_int_equal(entry, 10 * 20);
+            assert_int_equal(want, 30 * 10 * 20);
+        }
+        vx_bitgrid_free(&w);
+        vx_mesh_free(m);
+    }
+    printf("120 boxes: the [lo, hi) count; %d of them also the cpu method's voxels\n", same_as_cpu);
+    assert_true(same_as_cpu >= 40);
 }
 
 /* The open bunny: every voxel agrees with the direct winding number at
@@ -321,13 +461,10 @@ int main(int argc, char **argv)
 {
     if (argc > 1) cmocka_set_test_filter(argv[1]); /* e.g. test_tree */
     const struct CMUnitTest tests[] = {
-        cmocka_unit_test(test_overlap_open),
-        cmocka_unit_test(test_nested),
-        cmocka_unit_test(test_open_shells),
-        cmocka_unit_test(test_closed_exact),
-        cmocka_unit_test(test_bunny),
-        cmocka_unit_test(test_tree),
-        cmocka_unit_test(test_default_and_stop),
+        cmocka_unit_test(test_overlap_open), cmocka_unit_test(test_nested),
+        cmocka_unit_test(test_open_shells),  cmocka_unit_test(test_closed_exact),
+        cmocka_unit_test(test_closed_ties),  cmocka_unit_test(test_bunny),
+        cmocka_unit_test(test_tree),         cmocka_unit_test(test_default_and_stop),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }
