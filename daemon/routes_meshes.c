@@ -67,8 +67,9 @@ int vx_route_mesh_file(vx_http *h, struct MHD_Connection *c, req *r)
     int fd = -1;
     struct stat st;
     if (vx_store_mesh_path(h->d.store, r->id, path, sizeof path, &err) != 0) {
-        /* the blob store unreachable (503 store_failed) is not a deleted mesh */
-        if (err.kind == VX_EUNAVAIL) return vx_resp_err(c, r, &err);
+        /* the blob store unreachable (503 store_failed) or a damaged file
+         * (410 mesh_damaged) is not a deleted mesh */
+        if (err.kind != VX_ENOTFOUND) return vx_resp_err(c, r, &err);
     } else {
         fd = open(path, O_RDONLY | O_CLOEXEC);
     }
@@ -181,6 +182,10 @@ int vx_route_upload(vx_http *h, struct MHD_Connection *c, req *r)
     if (meta && !vx_store_mesh_stored(h->d.store, id)) { /* the catalog's, not here */
         cJSON_Delete(meta);
         meta = NULL;
+    }
+    if (meta && vx_store_mesh_repair(h->d.store, r->up, id, vx_intake_format_ext(fmt), &err)) {
+        cJSON_Delete(meta);
+        return vx_resp_err(c, r, &err);
     }
     if (meta) {
         VX_INFO("mesh.uploaded", "mesh=%s new=0", id);

@@ -1,8 +1,10 @@
 /* Content-addressed mesh index (store.h); the bytes go through s->ops. */
 #include <errno.h>
+#include <fcntl.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include "mesh/intake.h"
@@ -283,6 +285,102 @@ static void mesh_drop_purged(vx_store *s, const char *id)
     pthread_mutex_unlock(&s->lock);
 }
 
+/* The stat fields that change with a file's bytes, as mesh_entry.checked. */
+static void file_version(const struct stat *st, int64_t v[7])
+{
+    v[0] = (int64_t)st->st_dev;
+    v[1] = (int64_t)st->st_ino;
+    v[2] = (int64_t)st->st_size;
+    v[3] = (int64_t)st->st_mtim.tv_sec;
+    v[4] = (int64_t)st->st_mtim.tv_nsec;
+    v[5] = (int64_t)st->st_ctim.tv_sec;
+    v[6] = (int64_t)st->st_ctim.tv_nsec;
+}
+
+/* The hex SHA-256 of the file at path into hex: 0, or -1 (errno). */
+static int hash_file(const char *path, char hex[65])
+{
+    int fd = open(path, O_RDONLY | O_CLOEXEC);
+    if (fd < 0) return -1;
+    enum { CHUNK = 1 << 20 };
+    unsigned char *buf = malloc(CHUNK);
+    if (!buf) {
+        close(fd);
+        errno = ENOMEM;
+        return -1;
+    }
+    struct sha256_ctx sha;
+    sha256_init(&sha);
+    ssize_t got;
+    while ((got = read(fd, buf, CHUNK)) != 0) {
+        if (got < 0 && errno == EINTR) continue;
+        if (got < 0) break;
+        sha256_update(&sha, (size_t)got, buf);
+    }
+    int e = errno;
+    free(buf);
+    close(fd);
+    if (got < 0) {
+        errno = e;
+        return -1;
+    }
+    uint8_t digest[SHA256_DIGEST_SIZE];
+    sha256_digest(&sha, sizeof digest, digest);
+    vx_store_hex(digest, hex);
+    return 0;
+}
+
+/* 1 when the file at path holds mesh id's bytes (its SHA-256 is the id),
+ * hashed once per version of the file; 0 when it does not or is missing;
+ * -1 when it cannot be read (errno). */
+static int mesh_file_intact(vx_store *s, const char *id, const char *path)
+{
+    struct stat st;
+    if (stat(path, &st) != 0) return errno == ENOENT ? 0 : -1;
+    int64_t v[7];
+    file_version(&st, v);
+    pthread_mutex_lock(&s->lock);
+    int found;
+    size_t at = mesh_find(s, id, &found);
+    int known = found && memcmp(mesh_at(s, at)->checked, v, sizeof v) == 0;
+    pthread_mutex_unlock(&s->lock);
+    if (known) return 1;
+    char hex[65];
+    if (hash_file(path, hex)) return errno == ENOENT ? 0 : -1;
+    if (strcmp(hex, id) != 0) return 0;
+    /* the version stat saw before the hash: one changed since differs */
+    pthread_mutex_lock(&s->lock);
+    at = mesh_find(s, id, &found);
+    if (found) memcpy(mesh_at(s, at)->checked, v, sizeof v);
+    pthread_mutex_unlock(&s->lock);
+    return 1;
+}
+
+int vx_store_mesh_repair(vx_store *s, vx_upload *u, const char *id, const char *ext, vx_err *err)
+{
+    char key[128], path[VX_PATH_MAX];
+    pthread_mutex_lock(&s->lock);
+    int found;
+    size_t at = mesh_find(s, id, &found);
+    /* a deleted mesh read as another format is stored anew by its revival */
+    if (found && mesh_at(s, at)->deleted && strcmp(mesh_at(s, at)->ext, ext) != 0) found = 0;
+    if (found) mesh_data_key(key, sizeof key, id, mesh_at(s, at)->ext);
+    pthread_mutex_unlock(&s->lock);
+    /* a blob store out of reach: the bytes are checked on their next use */
+    if (!found || s->ops->path(s->blob, key, path, sizeof path)) return 0;
+    if (mesh_file_intact(s, id, path) == 1) return 0;
+    close(u->fd);
+    u->fd = -1;
+    if (s->ops->put_file(s->blob, u->path, key) != 0 || s->ops->sync(s->blob, "meshes", NULL)) {
+        int e = errno;
+        VX_ERROR("store.mesh_repair_failed", "mesh=%s error=%d", id, e);
+        return vx_err_set(err, vx_err_io_kind(e), "store_failed", "cannot store mesh %s: %s", id,
+                          strerror(e));
+    }
+    VX_WARN("store.mesh_repaired", "mesh=%s", id);
+    return 0;
+}
+
 static int mesh_commit_here(vx_store *s, vx_upload *u, const char *id, const char *ext,
                             const cJSON *meta, int *existed, vx_err *err)
 {
@@ -291,6 +389,10 @@ static int mesh_commit_here(vx_store *s, vx_upload *u, const char *id, const cha
     mesh_key(mkey, sizeof mkey, id, ".json");
     *existed = 0;
     if (s->catalog) mesh_drop_purged(s, id);
+    if (vx_store_mesh_repair(s, u, id, ext, err)) {
+        vx_upload_abort(u);
+        return -1;
+    }
     pthread_mutex_lock(&s->lock);
     int found;
     size_t at = mesh_find(s, id, &found);
@@ -410,6 +512,17 @@ int vx_store_mesh_path(vx_store *s, const char *id, char *buf, size_t n, vx_err 
     if (s->ops->path(s->blob, key, buf, n))
         return vx_err_set(err, vx_err_io_kind(errno), "store_failed",
                           "cannot read mesh %.80s from the blob store: %s", id, strerror(errno));
+    int intact = mesh_file_intact(s, id, buf);
+    if (intact < 0)
+        return vx_err_set(err, vx_err_io_kind(errno), "store_failed", "cannot read mesh %.80s: %s",
+                          id, strerror(errno));
+    if (!intact) {
+        VX_ERROR("store.mesh_damaged", "mesh=%s path=%s", id, buf);
+        return vx_err_set(err, VX_EGONE, "mesh_damaged",
+                          "the stored file of mesh %.80s is missing or not the bytes uploaded; "
+                          "upload the mesh again to repair it",
+                          id);
+    }
     return 0;
 }
 

@@ -68,10 +68,17 @@ void vx_upload_abort(vx_upload *u);
  * already there (u is then discarded). */
 int vx_store_mesh_commit(vx_store *s, vx_upload *u, const char *id, const char *ext,
                          const cJSON *meta, int *existed, vx_err *err);
+/* An upload u of mesh id's bytes (finished) that the store has, deleted
+ * but pinned included: where the stored file is missing or no longer
+ * hashes to id, writes it again from u (logged store.mesh_repaired); u
+ * stays the caller's to free. 0, or -1 with err (store_failed). */
+int vx_store_mesh_repair(vx_store *s, vx_upload *u, const char *id, const char *ext, vx_err *err);
 /* Owned copy of a mesh's metadata, or NULL (VX_ENOTFOUND mesh_not_found). */
 cJSON *vx_store_mesh_meta(vx_store *s, const char *id, vx_err *err);
 /* Path of the mesh file into buf, also of a deleted mesh that pins still
- * hold (the runner's); -1 (VX_ENOTFOUND) when unknown. */
+ * hold (the runner's); -1 (VX_ENOTFOUND) when unknown, VX_EGONE
+ * mesh_damaged when the file is missing or does not hash to id (hashed
+ * once per version of the file: again when its stat changes). */
 int vx_store_mesh_path(vx_store *s, const char *id, char *buf, size_t n, vx_err *err);
 /* Deletes a mesh: it disappears from meta, list and count at once (404 for
  * new jobs); its file stays while pins hold it (vx_store_mesh_path still

@@ -17,6 +17,10 @@ typedef struct mesh_entry {
     char *meta; /* the metadata as compact JSON text (a fifth of a cJSON tree); NULL once deleted */
     int pins;   /* unfinished jobs using it */
     int deleted; /* gone from the API; the file stays while pinned */
+    /* The version of its file last found to hash to its id (dev, inode,
+     * size, mtime, ctime; all 0 = none yet): not hashed again while the
+     * file's stat says the same. */
+    int64_t checked[7];
 } mesh_entry;
 
 /* The index's key: a mesh entry's id. */

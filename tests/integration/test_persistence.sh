@@ -94,5 +94,60 @@ expect_error "a result cut short" 410 result_damaged
 check "the message says the sizes" jq -e --arg f "$FULL" '.error.message | test("1000 of " + $f + " bytes")' "$BODY"
 api GET "/v1/jobs/$DJ"
 check "the job itself is still known" jq -e '.state == "succeeded"' "$BODY"
+
+# A mesh file changed on disk is neither served nor read as the mesh: 410
+# mesh_damaged (a job on it fails with that code), across a restart; the
+# same bytes uploaded again repair it. Once with one byte changed (same
+# size, after the file was checked once), once with the file gone.
+api GET "/v1/meshes/$BOX/file"
+expect_status "the box's file" 200
+MF=$(find "$DATA/meshes" -name "$BOX.*" ! -name '*.json' | head -n 1)
+check "the box's file is on disk" test -s "$MF"
+logged() { grep -c "event=store.mesh_$1 mesh=$BOX" "$TMP/daemon.log"; }
+for damage in flip remove; do
+    DAMAGED=$(logged damaged) REPAIRED=$(logged repaired)
+    if [[ $damage == flip ]]; then
+        printf 'X' | dd of="$MF" bs=1 seek=3 conv=notrunc status=none
+    else
+        rm -f "$MF"
+    fi
+    api GET "/v1/meshes/$BOX/file"
+    expect_error "a mesh file damaged ($damage)" 410 mesh_damaged
+    check "logged ($damage)" test "$(logged damaged)" -gt "$DAMAGED"
+    if [[ $damage == flip ]]; then
+        stop_daemon
+        start_daemon || exit 1
+        api GET "/v1/meshes/$BOX/file"
+        expect_error "a mesh file damaged ($damage), after a restart" 410 mesh_damaged
+    fi
+    # (the job thread keeps its last mesh loaded: another one first)
+    run_job voxelize "$ROCKER" '{"resolution":8,"format":"raw1"}'
+    run_job voxelize "$BOX" '{"resolution":16,"format":"raw1"}'
+    check "a job on the damaged mesh fails mesh_damaged ($damage)" \
+        jq -e '.state == "failed" and .error.code == "mesh_damaged"' "$TMP/job.json"
+    api GET "/v1/meshes/$BOX"
+    expect_status "the mesh is still listed ($damage)" 200
+    upload "$TMP/box.obj"
+    expect_status "the same bytes again ($damage)" 200
+    check "the upload wrote the file again ($damage)" \
+        test "$(sha256sum <"$MF" | cut -c1-64)" = "$BOX"
+    check "logged the repair ($damage)" test "$(logged repaired)" -gt "$REPAIRED"
+    api GET "/v1/meshes/$BOX/file"
+    expect_status "the repaired file ($damage)" 200
+    check "served as uploaded ($damage)" cmp -s "$BODY" "$TMP/box.obj"
+    run_job voxelize "$BOX" '{"resolution":16,"format":"raw1"}'
+    job_ok "a job on the repaired mesh ($damage)"
+done
+# A mesh whose file is gone at start-up is not indexed (404), and its
+# upload stores it anew.
+rm -f "$MF"
+stop_daemon
+start_daemon || exit 1
+api GET "/v1/meshes/$BOX"
+expect_error "a mesh without its file after a restart" 404 mesh_not_found
+upload "$TMP/box.obj"
+expect_status "its bytes again" 201
+api GET "/v1/meshes/$BOX/file"
+check "stored anew" cmp -s "$BODY" "$TMP/box.obj"
 stop_daemon
 finish
