@@ -25,6 +25,9 @@
  *     however many addresses drip heads, a fresh client finds a slot (or
  *     waits in the listen backlog, ahead of the victims' reconnections,
  *     for at most one sweep) and is served.
+ * When the server stops (SIGTERM), vx_conns_shutdown answers every HEAD
+ * and BODY still arriving after the grace with a JSON 503 shutting_down
+ * the same way, so a client is told to send it again rather than cut off.
  * A request line longer than --max-uri-bytes gets a JSON 414 the same way
  * (from the URI log callback, in the connection's own thread), and a head
  * larger than --max-header-bytes a JSON 431 from the access handler. What
@@ -43,6 +46,7 @@
 #include <string.h>
 #include <sys/ioctl.h>
 #include <sys/socket.h>
+#include <time.h>
 #include <unistd.h>
 
 #include "metrics.h"
@@ -67,8 +71,9 @@ struct vx_conn {
     int kill_status; /* the status we wrote, 0 for none */
     int rd_closed;   /* shutdown(SHUT_RD) done */
     double t_killed;
-    char rid[72];    /* BODY: the request's id; else the id of the answer written here */
-    int path_escape; /* the current request's path has %00 or %2F (see vx_conns_on_uri) */
+    char rid[72];     /* BODY: the request's id; else the id of the answer written here */
+    char origin[256]; /* BODY: the request's origin when CORS allows it, else "" */
+    int path_escape;  /* the current request's path has %00 or %2F (see vx_conns_on_uri) */
 };
 
 struct vx_conns {
@@ -101,19 +106,32 @@ vx_conn *vx_conns_of(struct MHD_Connection *c)
  * socket, with s->lock held. Returns the bytes written. */
 static size_t kill_conn(vx_conn *vc, int status, const char *code, const char *message, int rd)
 {
-    char body[256], msg[600];
+    char body[256], msg[1200], date[64], cors[512] = "";
     int n = 0;
     if (status) {
         int bn = snprintf(body, sizeof body, "{\"error\":{\"code\":\"%s\",\"message\":\"%s\"}}",
                           code, message);
-        /* A body's request has its id; before the head is read there is
-         * no client id to echo: a new one. */
-        if (vc->phase != P_BODY || !vc->rid[0]) vx_req_new_id(vc->rid);
-        n = snprintf(
-            msg, sizeof msg,
-            "HTTP/1.1 %d %s\r\nContent-Type: application/json\r\nCache-Control: no-store\r\n"
-            "X-Request-Id: %s\r\nConnection: close\r\nContent-Length: %d\r\n\r\n%s",
-            status, status == 408 ? "Request Timeout" : "URI Too Long", vc->rid, bn, body);
+        /* A body's request has its id (and origin); before the head is
+         * read there is no client id to echo: a new one. */
+        int body_phase = vc->phase == P_BODY && vc->rid[0];
+        if (!body_phase) vx_req_new_id(vc->rid);
+        if (body_phase && vc->origin[0])
+            snprintf(cors, sizeof cors,
+                     "Access-Control-Allow-Origin: %s\r\nAccess-Control-Expose-Headers: %s\r\n"
+                     "Vary: Origin\r\n",
+                     vc->origin, VX_CORS_EXPOSE);
+        time_t now = time(NULL);
+        struct tm tm;
+        strftime(date, sizeof date, "%a, %d %b %Y %H:%M:%S GMT", gmtime_r(&now, &tm));
+        n = snprintf(msg, sizeof msg,
+                     "HTTP/1.1 %d %s\r\nDate: %s\r\nContent-Type: application/json\r\n"
+                     "Cache-Control: no-store\r\nX-Request-Id: %s\r\n%s%sConnection: close\r\n"
+                     "Content-Length: %d\r\n\r\n%s",
+                     status,
+                     status == 408   ? "Request Timeout"
+                     : status == 503 ? "Service Unavailable"
+                                     : "URI Too Long",
+                     date, vc->rid, status == 503 ? "Retry-After: 1\r\n" : "", cors, bn, body);
         if (send(vc->fd, msg, (size_t)n, MSG_NOSIGNAL | MSG_DONTWAIT) < 0) n = 0;
     }
     shutdown(vc->fd, rd ? SHUT_RDWR : SHUT_WR);
@@ -333,6 +351,23 @@ void vx_conns_stop(vx_conns *s)
     s->sweeper_started = 0;
 }
 
+int vx_conns_shutdown(vx_conns *s)
+{
+    int n = 0;
+    double now = vx_mono();
+    pthread_mutex_lock(&s->lock);
+    for (vx_conn *vc = s->list; vc; vc = vc->next) {
+        if (vc->killed || (vc->phase != P_HEAD && vc->phase != P_BODY)) continue;
+        int head = vc->phase == P_HEAD;
+        size_t bytes = kill_conn(vc, 503, "shutting_down",
+                                 "the server is shutting down; send the request again", 0);
+        if (head) note_head_kill(vc, 503, now - vc->t_phase, bytes, "shutting_down");
+        n++;
+    }
+    pthread_mutex_unlock(&s->lock);
+    return n;
+}
+
 void vx_conns_free(vx_conns *s)
 {
     if (!s) return;
@@ -352,11 +387,15 @@ int vx_conns_head_in(vx_conns *s, vx_conn *vc)
     return dead;
 }
 
-void vx_conns_body_begins(vx_conns *s, vx_conn *vc, const char *rid)
+void vx_conns_body_begins(vx_conns *s, vx_conn *vc, const char *rid, const char *origin)
 {
     if (!vc) return;
     pthread_mutex_lock(&s->lock);
     snprintf(vc->rid, sizeof vc->rid, "%s", rid);
+    /* an origin too long for the buffer goes without CORS, never cut */
+    snprintf(vc->origin, sizeof vc->origin, "%s",
+             origin && strlen(origin) < sizeof vc->origin && !strpbrk(origin, "\r\n") ? origin
+                                                                                      : "");
     vc->phase = P_BODY;
     vc->t_phase = vx_mono();
     vc->body_bytes = 0;

@@ -15,10 +15,21 @@
 typedef struct vx_conns vx_conns;
 typedef struct vx_conn vx_conn;
 
+/* What a browser script on an allowed origin may read of an answer (the
+ * handlers' and the canned ones written here). */
+#define VX_CORS_EXPOSE                                                                             \
+    "Location, ETag, Retry-After, X-Request-Id, Content-Range, Content-Encoding, "                 \
+    "Content-Disposition, Accept-Ranges, WWW-Authenticate, Allow"
+
 /* Starts the sweeper for the limits of cfg (kept). Owned; NULL without memory. */
 vx_conns *vx_conns_start(const vx_config *cfg);
 /* Stops the sweeper (before libmicrohttpd stops: it writes to sockets). */
 void vx_conns_stop(vx_conns *s);
+/* The server is stopping: answers every connection whose request head or
+ * body is still arriving with a JSON 503 shutting_down (Retry-After: 1).
+ * Returns how many were answered (their clients need a moment to read it
+ * before libmicrohttpd closes the sockets). */
+int vx_conns_shutdown(vx_conns *s);
 /* Stops the sweeper if running and frees s (after libmicrohttpd has
  * stopped: its close notifications use s). */
 void vx_conns_free(vx_conns *s);
@@ -40,9 +51,10 @@ vx_conn *vx_conns_of(struct MHD_Connection *c);
 /* The head is in: vc is busy. 1 when the sweeper has already answered it
  * (then nothing may be queued on it). */
 int vx_conns_head_in(vx_conns *s, vx_conn *vc);
-/* A body follows: its arrival rate is watched from now; a 408 for it
- * carries the request's id rid. */
-void vx_conns_body_begins(vx_conns *s, vx_conn *vc, const char *rid);
+/* A body follows: its arrival rate is watched from now; a 408 (or 503)
+ * for it carries the request's id rid and, when CORS allows the request's
+ * origin, that origin (NULL: none). */
+void vx_conns_body_begins(vx_conns *s, vx_conn *vc, const char *rid, const char *origin);
 /* n bytes of the body came (n 0: the body is complete, vc is busy). 1 when
  * the sweeper has answered vc (drain, never queue). */
 int vx_conns_body(vx_conns *s, vx_conn *vc, size_t n);

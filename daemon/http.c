@@ -265,7 +265,7 @@ static enum MHD_Result on_head(vx_http *h, struct MHD_Connection *c, const char 
     int rc = first_call(h, c, r, version);
     if (rc >= 0) return rc;
     if (!strcmp(r->method, "POST")) /* a body follows: rate it */
-        vx_conns_body_begins(h->conns, vc, r->rid);
+        vx_conns_body_begins(h->conns, vc, r->rid, vx_resp_cors_origin(c));
     /* Answer on the next call even without a body: a response queued in
      * the first call makes libmicrohttpd 0.9.75 close the connection (it
      * cannot know yet that no body follows). */
@@ -509,6 +509,8 @@ void vx_http_stop(vx_http *h, double grace_s)
         if (!di || di->num_connections == 0) break;
         usleep(20000);
     }
+    /* a head or body still arriving gets a 503, read before the close */
+    if (vx_conns_shutdown(h->conns) > 0) usleep(500000);
     vx_conns_stop(h->conns);
     MHD_stop_daemon(h->mhd);
     vx_events_free(h->events);

@@ -15,11 +15,6 @@
 
 static const char *g_data_dir, *g_cors;
 
-/* What a browser script on an allowed origin may read of an answer. */
-#define CORS_EXPOSE                                                                                \
-    "Location, ETag, Retry-After, X-Request-Id, Content-Range, Content-Encoding, "                 \
-    "Content-Disposition, Accept-Ranges, WWW-Authenticate, Allow"
-
 void vx_resp_init(const char *data_dir, const char *cors_origins)
 {
     g_data_dir = data_dir;
@@ -59,7 +54,7 @@ int vx_resp_queue(struct MHD_Connection *c, req *r, unsigned status, struct MHD_
     if (origin) {
         /* The origin itself, not "*": the answer then varies by Origin. */
         MHD_add_response_header(resp, MHD_HTTP_HEADER_ACCESS_CONTROL_ALLOW_ORIGIN, origin);
-        MHD_add_response_header(resp, "Access-Control-Expose-Headers", CORS_EXPOSE);
+        MHD_add_response_header(resp, "Access-Control-Expose-Headers", VX_CORS_EXPOSE);
         MHD_add_response_header(resp, MHD_HTTP_HEADER_VARY, "Origin");
     }
     r->status = (int)status;

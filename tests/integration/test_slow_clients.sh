@@ -73,4 +73,30 @@ expect_status "an upload at 200 KB/s (1.5 s)" 201
 api GET /livez
 expect_status "still serving" 200
 stop_daemon
+
+# --- canned answers carry Date, and CORS for an allowed origin's body ---
+start_daemon --min-body-rate 1024 --cors-origin http://viewer.example || exit 1
+STALL_HEAD='POST /v1/meshes HTTP/1.1\r\nHost: x\r\nOrigin: http://viewer.example\r\nContent-Type: model/obj\r\nContent-Length: 100000\r\n\r\nv 0 0 0\n'
+$SLOW stall "$PORT" "$STALL_HEAD" 8 >"$TMP/cors408.json"
+check "stalled body with an Origin: 408 ($(jq -c . "$TMP/cors408.json" | head -c 200))" \
+    jq -e '.response | test("^HTTP/1.1 408")' "$TMP/cors408.json"
+check "the 408 has Date" jq -e '.response | test("\r\nDate: [A-Z][a-z]{2}, [0-9]{2} [A-Z][a-z]{2} [0-9]{4} [0-9:]{8} GMT\r\n")' "$TMP/cors408.json"
+check "the 408 allows the origin" jq -e '.response | test("\r\nAccess-Control-Allow-Origin: http://viewer.example\r\n")' "$TMP/cors408.json"
+
+# --- SIGTERM while a body arrives: a JSON 503 to retry, not a bare close ---
+$SLOW stall "$PORT" "$STALL_HEAD" 8 >"$TMP/term.json" &
+STALL=$!
+sleep 0.5
+T0=$(date +%s.%N)
+stop_daemon
+wait "$STALL"
+T1=$(date +%s.%N)
+check "SIGTERM during an upload body: 503 ($(jq -c . "$TMP/term.json" | head -c 300))" \
+    jq -e '.response | test("^HTTP/1.1 503")' "$TMP/term.json"
+check "the 503 says shutting_down" \
+    jq -e '.response | split("\r\n\r\n")[1] | fromjson | .error.code == "shutting_down"' "$TMP/term.json"
+check "the 503 has Retry-After, Date and the origin" \
+    jq -e '.response | test("\r\nRetry-After: 1\r\n") and test("\r\nDate: ") and test("\r\nAccess-Control-Allow-Origin: http://viewer.example\r\n")' "$TMP/term.json"
+check "the daemon stopped within 4 s of SIGTERM" awk -v a="$T0" -v b="$T1" 'BEGIN {exit !(b - a < 4)}'
+check "logged as a 503" grep -q 'route=/v1/meshes .*status=503' "$TMP/daemon.log"
 finish
