@@ -313,17 +313,30 @@ void vx_events_free(vx_events *ev)
     free(ev);
 }
 
+/* HEAD's body: none (libmicrohttpd sends a HEAD answer's head only). */
+static ssize_t no_body(void *cls, uint64_t pos, char *buf, size_t max)
+{
+    (void)cls;
+    (void)pos;
+    (void)buf;
+    (void)max;
+    return MHD_CONTENT_READER_END_OF_STREAM;
+}
+
 int vx_route_events(vx_http *h, struct MHD_Connection *c, req *r)
 {
     vx_err err;
-    if (!strcmp(r->method, "HEAD")) {
+    struct MHD_Response *resp;
+    if (!strcmp(r->method, "HEAD")) { /* GET's head: a stream of unknown length */
         cJSON *doc = vx_jobs_get(h->d.jobs, r->id, NULL, &err);
         if (!doc) return vx_resp_err(c, r, &err);
         cJSON_Delete(doc);
-        return vx_resp_text(c, r, 200, NULL, "text/event-stream", NULL, NULL);
+        resp = MHD_create_response_from_callback(MHD_SIZE_UNKNOWN, 64, no_body, NULL, NULL);
+    } else {
+        resp = vx_events_open(h->events, c, r->id, &err);
+        if (!resp) return vx_resp_err(c, r, &err);
     }
-    struct MHD_Response *resp = vx_events_open(h->events, c, r->id, &err);
-    if (!resp) return vx_resp_err(c, r, &err);
+    if (!resp) return MHD_NO;
     MHD_add_response_header(resp, MHD_HTTP_HEADER_CONTENT_TYPE, "text/event-stream");
     MHD_add_response_header(resp, MHD_HTTP_HEADER_CACHE_CONTROL, "no-store");
     MHD_add_response_header(resp, "X-Accel-Buffering", "no"); /* proxies: do not buffer */
