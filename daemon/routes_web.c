@@ -4,10 +4,44 @@
  * routes are public even with --token (http.c asks a token of /v1/ paths
  * only): they hold nothing but the program's own files, and the page sends
  * the token the user enters with its API calls. */
+#include <nettle/base64.h>
+#include <nettle/sha2.h>
+#include <stdio.h>
 #include <string.h>
 
 #include "http_int.h"
 #include "web.h"
+
+/* The Content-Security-Policy of an HTML page into out: scripts from the
+ * daemon, and each inline script by the SHA-256 of its text (the viewer's
+ * import map), so that no other inline script runs. */
+static void page_csp(const vx_web_file *f, char *out, size_t n)
+{
+    size_t at = (size_t)snprintf(out, n, "default-src 'self'; script-src 'self'");
+    const char *p = (const char *)f->data, *end = p + f->len;
+    while (at < n && (p = memmem(p, (size_t)(end - p), "<script", 7))) {
+        const char *gt = memchr(p, '>', (size_t)(end - p));
+        const char *text = gt ? gt + 1 : end;
+        const char *close = gt ? memmem(text, (size_t)(end - text), "</script>", 9) : NULL;
+        if (!close) break;
+        if (!memmem(p, (size_t)(gt - p), " src=", 5)) {
+            struct sha256_ctx sha;
+            uint8_t digest[SHA256_DIGEST_SIZE];
+            char b64[BASE64_ENCODE_RAW_LENGTH(SHA256_DIGEST_SIZE) + 1];
+            sha256_init(&sha);
+            sha256_update(&sha, (size_t)(close - text), (const uint8_t *)text);
+            sha256_digest(&sha, sizeof digest, digest);
+            base64_encode_raw(b64, sizeof digest, digest);
+            b64[sizeof b64 - 1] = 0;
+            at += (size_t)snprintf(out + at, n - at, " 'sha256-%s'", b64);
+        }
+        p = close + 9;
+    }
+    if (at < n)
+        snprintf(out + at, n - at,
+                 "; img-src 'self' blob: data:; object-src 'none'; base-uri 'none'; "
+                 "frame-ancestors 'none'");
+}
 
 /* 1 when an If-None-Match value lists etag (or is "*"). */
 static int etag_matches(const char *inm, const char *etag)
@@ -43,10 +77,10 @@ int vx_route_web(vx_http *h, struct MHD_Connection *c, req *r)
     if (fresh) return vx_resp_queue(c, r, 304, resp, 0);
     MHD_add_response_header(resp, MHD_HTTP_HEADER_CONTENT_TYPE, f->ctype);
     MHD_add_response_header(resp, "X-Content-Type-Options", "nosniff");
-    if (!strncmp(f->ctype, "text/html", 9)) /* inline: only the import map */
-        MHD_add_response_header(resp, "Content-Security-Policy",
-                                "default-src 'self'; script-src 'self' 'unsafe-inline'; "
-                                "img-src 'self' blob: data:; object-src 'none'; base-uri 'none'; "
-                                "frame-ancestors 'none'");
+    if (!strncmp(f->ctype, "text/html", 9)) {
+        char csp[1024];
+        page_csp(f, csp, sizeof csp);
+        MHD_add_response_header(resp, "Content-Security-Policy", csp);
+    }
     return vx_resp_queue(c, r, 200, resp, f->len);
 }

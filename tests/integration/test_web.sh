@@ -24,7 +24,12 @@ api GET / -H 'If-None-Match: "0000000000000000"'
 expect_status "/ with another ETag" 200
 csp=$(header Content-Security-Policy)
 has() { [[ "$1" == *"$2"* ]]; }
-check "/ loads from its own origin only ($csp)" has "$csp" "default-src 'self'; script-src 'self' 'unsafe-inline';"
+# the one inline script (the import map) by its hash, no other
+MAPHASH=$(sed -n 's|.*<script type="importmap">\(.*\)</script>.*|\1|p' "$BODY" | tr -d '\n' |
+    /usr/bin/python3 -c 'import sys, hashlib, base64; print(base64.b64encode(hashlib.sha256(sys.stdin.buffer.read()).digest()).decode())')
+check "/ loads from its own origin only, the import map by its hash ($csp)" \
+    has "$csp" "default-src 'self'; script-src 'self' 'sha256-$MAPHASH';"
+check "/ allows no other inline script" bash -c "[[ '$csp' != *unsafe-inline* ]]"
 check "/ is not framed" has "$csp" "frame-ancestors 'none'"
 api HEAD /
 expect_status "HEAD /" 200
