@@ -185,16 +185,14 @@ const char *vx_intake_ext_of_name(const char *name)
 
 int vx_intake_check(const vx_mesh *m, vx_err *err)
 {
-    /* every engine works in 32-bit floats (GL, the patches, the writers) */
-    for (int a = 0; a < 3; a++)
-        if (!(fabs(m->bbox_min[a]) <= VX_MESH_COORD_MAX &&
-              fabs(m->bbox_max[a]) <= VX_MESH_COORD_MAX))
+    /* every engine works in 32-bit floats (GL, the patches, the writers):
+     * every vertex, used by a face or not (the bbox holds the used ones) */
+    for (size_t i = 0; i < 3 * m->nverts; i++)
+        if (!(fabs(m->pos[i]) <= VX_MESH_COORD_MAX))
             return vx_err_set(err, VX_EUNPROC, "coordinate_out_of_range",
-                              "the mesh reaches %g along axis %d, beyond +-%g: the engines work "
-                              "in 32-bit floats, and what they derive must stay finite",
-                              fabs(m->bbox_min[a]) > fabs(m->bbox_max[a]) ? m->bbox_min[a]
-                                                                          : m->bbox_max[a],
-                              a, VX_MESH_COORD_MAX);
+                              "vertex %zu reaches %g along axis %d, beyond +-%g: the engines "
+                              "work in 32-bit floats, and what they derive must stay finite",
+                              i / 3, m->pos[i], (int)(i % 3), VX_MESH_COORD_MAX);
     if (m->degenerate_tris == m->ntris)
         return vx_err_set(err, VX_EUNPROC, "degenerate_mesh",
                           "every triangle of the mesh has zero area");

@@ -138,16 +138,27 @@ int vx_mesh_analyze(vx_mesh *m, vx_err *err)
         m->ntris = m->nfaces;
     }
 
+    /* The box of the vertices the faces and patches use: one no face uses
+     * (left over in an OBJ, say) would stretch every grid made from it. */
+    uint8_t *used = calloc(m->nverts + 1, 1);
+    if (!used) return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for the analysis");
+    for (size_t i = 0; i < 3 * m->ntris; i++)
+        if (m->tri[i] < m->nverts) used[m->tri[i]] = 1;
+    for (size_t i = 0; i < 16 * m->npatches; i++)
+        if (m->patch_idx[i] < m->nverts) used[m->patch_idx[i]] = 1;
     for (int a = 0; a < 3; a++) {
-        m->bbox_min[a] = m->nverts ? INFINITY : 0;
-        m->bbox_max[a] = m->nverts ? -INFINITY : 0;
+        m->bbox_min[a] = INFINITY;
+        m->bbox_max[a] = -INFINITY;
     }
     for (size_t i = 0; i < m->nverts; i++)
-        for (int a = 0; a < 3; a++) {
+        for (int a = 0; a < 3 && used[i]; a++) {
             double x = m->pos[3 * i + a];
             if (x < m->bbox_min[a]) m->bbox_min[a] = x;
             if (x > m->bbox_max[a]) m->bbox_max[a] = x;
         }
+    free(used);
+    for (int a = 0; a < 3; a++)
+        if (m->bbox_min[a] > m->bbox_max[a]) m->bbox_min[a] = m->bbox_max[a] = 0; /* none used */
 
     m->faces_by_size[0] = m->faces_by_size[1] = m->faces_by_size[2] = 0;
     size_t nedges = 0;

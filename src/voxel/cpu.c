@@ -102,16 +102,18 @@ static int setup(cctx *c, vx_err *err)
     const vx_grid *g = &c->d->grid;
     for (size_t v = 0; v < m->nverts; v++) {
         double *u = c->u + 3 * v;
-        if (vx_lattice_unit(g, m->pos + 3 * v, u))
-            return vx_err_set(err, VX_EUNPROC, "invalid_params",
-                              "vertex %zu lies more than 2^50 voxels from the grid origin; "
-                              "use a larger voxel size",
-                              v);
-        c->s[2 * v] = vx_lattice_snap(u[1]);
-        c->s[2 * v + 1] = vx_lattice_snap(u[2]);
+        int in = vx_lattice_unit(g, m->pos + 3 * v, u) == 0; /* checked where a face uses it */
+        c->s[2 * v] = in ? vx_lattice_snap(u[1]) : 0;
+        c->s[2 * v + 1] = in ? vx_lattice_snap(u[2]) : 0;
     }
     for (size_t t = 0; t < m->ntris; t++) {
         const uint32_t *q = m->tri + 3 * t;
+        for (int k = 0; k < 3; k++)
+            if (!vx_lattice_in_range(c->u + 3 * (size_t)q[k]))
+                return vx_err_set(err, VX_EUNPROC, "invalid_params",
+                                  "vertex %u lies more than 2^50 voxels from the grid origin; "
+                                  "use a larger voxel size",
+                                  q[k]);
         const int64_t *A = c->s + 2 * q[0], *B = c->s + 2 * q[1], *C = c->s + 2 * q[2];
         vx_i128 det = vx_lattice_det(A, B, C);
         xtri *x = &c->tri[t];

@@ -3,11 +3,9 @@
 
 int vx_lattice_unit(const vx_grid *g, const double p[3], double u[3])
 {
-    for (int a = 0; a < 3; a++) {
+    for (int a = 0; a < 3; a++)
         u[a] = (p[a] - g->origin[a]) / g->h;
-        if (!(fabs(u[a] * VX_GRID_SNAP) < VX_LATTICE_SNAP_MAX)) return -1;
-    }
-    return 0;
+    return vx_lattice_in_range(u) ? 0 : -1;
 }
 
 /* floor(a / b), b > 0 */

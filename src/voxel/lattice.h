@@ -23,8 +23,17 @@ typedef __int128 vx_i128;
  * functions fit __int128 and centres int64 (lattice index <= 2^40). */
 #define VX_LATTICE_SNAP_MAX 288230376151711744.0 /* 2^58 */
 
-/* u[a] = (p[a] - origin[a]) / h for a = 0..2: 0, or -1 when a coordinate
- * lies 2^50 voxels or more from the origin (or is not finite). */
+/* 1 when lattice position u lies within 2^50 voxels of the origin along
+ * every axis (so it snaps into int64 with room for the edge functions). */
+static inline int vx_lattice_in_range(const double u[3])
+{
+    return fabs(u[0] * VX_GRID_SNAP) < VX_LATTICE_SNAP_MAX &&
+           fabs(u[1] * VX_GRID_SNAP) < VX_LATTICE_SNAP_MAX &&
+           fabs(u[2] * VX_GRID_SNAP) < VX_LATTICE_SNAP_MAX;
+}
+
+/* u[a] = (p[a] - origin[a]) / h for a = 0..2: 0, or -1 when u is not
+ * vx_lattice_in_range (or not finite). */
 int vx_lattice_unit(const vx_grid *g, const double p[3], double u[3]);
 
 /* Lattice coordinate u snapped to 1/VX_GRID_SNAP voxel, in those units. */

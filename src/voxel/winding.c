@@ -403,19 +403,17 @@ static int crossings(wctx *c, vx_err *err)
 }
 
 /* The centres that can be inside: the grid, and for an open mesh those in
- * the mesh's bounding box (its vertices' lattice units). */
+ * the bounding box of the vertices its faces use, in lattice units (each
+ * bound is one vertex's coordinate: the number lattice_units gave it). */
 static void inside_range(wctx *c)
 {
     const int n[3] = {c->nx, c->ny, c->nz};
     for (int a = 0; a < 3; a++) {
         c->lo[a] = 0;
         c->hi[a] = n[a] - 1;
-        if (!c->open || !c->m->nverts) continue;
-        double umin = HUGE_VAL, umax = -HUGE_VAL;
-        for (size_t v = 0; v < c->m->nverts; v++) {
-            umin = fmin(umin, c->lat[3 * v + a]);
-            umax = fmax(umax, c->lat[3 * v + a]);
-        }
+        if (!c->open) continue;
+        double umin = (c->m->bbox_min[a] - c->o[a]) / c->h,
+               umax = (c->m->bbox_max[a] - c->o[a]) / c->h;
         double lo = ceil(umin - 0.5) - c->ix[a], hi = floor(umax - 0.5) - c->ix[a];
         if (lo > c->lo[a]) c->lo[a] = lo > n[a] ? n[a] : (int)lo;
         if (hi < c->hi[a]) c->hi[a] = hi < -1 ? -1 : (int)hi;
@@ -429,11 +427,14 @@ static int lattice_units(wctx *c, vx_err *err)
     c->lat = malloc((m->nverts * 3 + c->ncone * 9) * sizeof *c->lat + 1);
     if (!c->lat) return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for positions");
     for (size_t v = 0; v < m->nverts; v++)
-        if (vx_lattice_unit(&c->d->grid, m->pos + 3 * v, c->lat + 3 * v))
+        vx_lattice_unit(&c->d->grid, m->pos + 3 * v, c->lat + 3 * v);
+    /* the vertices a face uses (one left over may lie anywhere) */
+    for (size_t i = 0; i < 3 * m->ntris; i++)
+        if (!vx_lattice_in_range(c->lat + 3 * (size_t)m->tri[i]))
             return vx_err_set(err, VX_EUNPROC, "invalid_params",
-                              "vertex %zu lies more than 2^50 voxels from the grid origin; "
+                              "vertex %u lies more than 2^50 voxels from the grid origin; "
                               "use a larger voxel size",
-                              v);
+                              m->tri[i]);
     /* a cone's corners are boundary vertices and their mean: in range too */
     for (size_t v = 0; v < 3 * c->ncone; v++)
         vx_lattice_unit(&c->d->grid, c->cone + 3 * v, c->lat + 3 * (m->nverts + v));

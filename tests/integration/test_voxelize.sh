@@ -348,6 +348,24 @@ vox "huge level set" "$M_huge" '{"resolution":1,"format":"vdb","vdb_grid":"level
 vox "huge fog" "$M_huge" '{"resolution":1,"format":"vdb","vdb_grid":"fog"}'
 vox "huge level set at resolution 2 (h 1e30)" "$M_huge" '{"resolution":2,"format":"vdb","vdb_grid":"level_set"}'
 bad "level set voxel_size 2e38" '{"grid":{"origin":[0,0,0],"voxel_size":2e38,"dims":[2,2,2]},"format":"vdb","vdb_grid":"level_set"}' params.grid.voxel_size
+
+# Vertices no face uses (left over in an OBJ): outside the mesh's bbox and
+# every grid made from it, and one far away (past 2^50 voxels of the grid)
+# bothers neither CPU engine; the same voxels as the mesh without them.
+{ cat "$TMP/sphere.obj"; printf 'v 100 100 100\nv 1e20 -1e20 1e20\n'; } >"$TMP/stray.obj"
+upload "$TMP/stray.obj"
+expect_status "upload a sphere with two unused vertices" 201
+M_stray=$MESH_ID
+check "its bbox holds the used vertices only ($(jqb -c .bbox))" \
+    jq -e '([.bbox.max[] | . <= 1.0001] | all) and ([.bbox.min[] | . >= -1.0001] | all)' "$BODY"
+check "its vertices count them all" test "$(jqb .vertices)" -eq "$(grep -c '^v ' "$TMP/stray.obj")"
+for p in '"method":"cpu"' '"inside":"winding"' '"method":"auto"'; do
+    vox "sphere ($p)" "$M_sphere" "{\"resolution\":32,\"format\":\"raw1\",$p}"
+    A=$(st voxels_inside) DA=$(jq -c .stats.dims "$TMP/job.json")
+    vox "sphere with unused vertices ($p)" "$M_stray" "{\"resolution\":32,\"format\":\"raw1\",$p}"
+    check "unused vertices: the same grid and voxels ($p: $A in $DA, got $(st voxels_inside) in $(jq -c .stats.dims "$TMP/job.json"))" \
+        test "$(st voxels_inside)-$(jq -c .stats.dims "$TMP/job.json")" = "$A-$DA"
+done
 tet_obj "$TMP/small.obj" 4.7e-4
 upload "$TMP/small.obj"
 vox "small vdb (h just over the bound)" "$MESH_ID" '{"resolution":32,"format":"vdb"}'

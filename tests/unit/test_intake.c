@@ -4,6 +4,7 @@
 #include <stdarg.h>
 #include <stddef.h>
 #include <stdint.h>
+#include <math.h>
 #include <setjmp.h>
 #include <cmocka.h>
 
@@ -171,6 +172,8 @@ static void test_check_and_meta(void **state)
     (void)state;
     vx_mesh m;
     memset(&m, 0, sizeof m);
+    double pos[12] = {0, 0, 0, 1, 0, 0, 1, 1, 0, 0, 1, 0};
+    m.pos = pos;
     m.nverts = 4;
     m.ntris = 2;
     m.nfaces = 1;
@@ -185,6 +188,15 @@ static void test_check_and_meta(void **state)
     assert_int_equal(err.kind, VX_EUNPROC);
     assert_string_equal(err.code, "degenerate_mesh");
     assert_string_equal(err.message, "every triangle of the mesh has zero area");
+    /* every vertex is in the 32-bit range, used by a face or not */
+    pos[7] = -2e30;
+    assert_int_equal(vx_intake_check(&m, &err), -1);
+    assert_string_equal(err.code, "coordinate_out_of_range");
+    assert_non_null(strstr(err.message, "vertex 2 reaches -2e+30 along axis 1"));
+    pos[7] = NAN;
+    assert_int_equal(vx_intake_check(&m, &err), -1);
+    assert_string_equal(err.code, "coordinate_out_of_range");
+    pos[7] = 1;
 
     cJSON *o = vx_intake_meta("ab", VX_MESH_DRACO, 123, &m);
     assert_non_null(o);
