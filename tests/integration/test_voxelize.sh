@@ -359,7 +359,7 @@ M_stray=$MESH_ID
 check "its bbox holds the used vertices only ($(jqb -c .bbox))" \
     jq -e '([.bbox.max[] | . <= 1.0001] | all) and ([.bbox.min[] | . >= -1.0001] | all)' "$BODY"
 check "its vertices count them all" test "$(jqb .vertices)" -eq "$(grep -c '^v ' "$TMP/stray.obj")"
-for p in '"method":"cpu"' '"inside":"winding"' '"method":"auto"'; do
+for p in '"method":"cpu"' '"inside":"winding"' '"method":"scan"' '"method":"peel"' '"method":"slice"'; do
     vox "sphere ($p)" "$M_sphere" "{\"resolution\":32,\"format\":\"raw1\",$p}"
     A=$(st voxels_inside) DA=$(jq -c .stats.dims "$TMP/job.json")
     vox "sphere with unused vertices ($p)" "$M_stray" "{\"resolution\":32,\"format\":\"raw1\",$p}"
