@@ -120,7 +120,8 @@ static int s3_config(vx_blob *b, const vx_blob_conf *conf, vx_err *err)
     if (blen < 3 || blen >= sizeof b->bucket || !safe_name(url, plen) ||
         memchr(url, '.', blen) != NULL)
         return vx_err_set(err, VX_EINVAL, "bad_blob_store",
-                          "s3:// needs a bucket name (letters, digits, - and _)");
+                          "s3:// needs a bucket name of 3 to %zu letters, digits, - and _",
+                          sizeof b->bucket - 1);
     memcpy(b->bucket, url, blen);
     b->bucket[blen] = 0;
     if (slash && plen > blen + 1) {

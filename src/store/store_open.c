@@ -85,8 +85,10 @@ vx_store *vx_store_open(const char *data_dir, const vx_store_desc *desc, vx_err 
      * retries). The data dir has always been listable. */
     if ((vx_store_load_meshes(s) || vx_store_load_results(s)) && s->ops->shared) {
         int e = errno;
+        /* a listing that is not there: the bucket (or the shared dir) is */
         vx_err_set(err, vx_err_io_kind(e), "blob_store_unreachable",
-                   "cannot list the %s blob store: %s", s->ops->name, strerror(e));
+                   "cannot list the %s blob store: %s", s->ops->name,
+                   e == ENOENT ? "no such bucket or directory (create it first)" : strerror(e));
         vx_store_close(s);
         return NULL;
     }

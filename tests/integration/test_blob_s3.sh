@@ -168,6 +168,14 @@ api GET "/v1/meshes/$BOX/file"
 check "an evicted mesh is fetched again" cmp -s "$BODY" "$TMP/box.obj"
 stop_daemon
 
+# A bucket that does not exist: the daemon does not start, and says so.
+NOB=("${FLAGS[@]}")
+NOB[1]="s3://no-such-bucket?endpoint=http://127.0.0.1:$S3PORT&region=us-east-1"
+"$VOXELD" --listen 127.0.0.1:0 --data-dir "$TMP/data4" "${NOB[@]}" 2>"$TMP/nob.log"
+check "a missing bucket: the daemon exits ($?)" test $? -ne 0
+check "saying the bucket is missing ($(grep -o 'cannot list[^"]*' "$TMP/nob.log" | head -n 1))" \
+    grep -q 'no such bucket or directory' "$TMP/nob.log"
+
 # The credentials reach the server: an unknown access key is refused, and
 # a daemon that cannot list the bucket does not start (an empty index it
 # would never reload). (s3rver checks a V4 request's access key, not its

@@ -183,6 +183,8 @@ static void test_backend_of_url(void **state)
     vx_blob_conf bad = {.url = "s3://b?endpoint=http://127.0.0.1:9"};
     assert_null(vx_blob_s3.open(dir, &bad, &err)); /* a bucket name of 1 letter */
     assert_string_equal(err.code, "bad_blob_store");
+    assert_string_equal(err.message,
+                        "s3:// needs a bucket name of 3 to 63 letters, digits, - and _");
     vx_blob_conf ftp = {.url = "s3://bucket?endpoint=ftp://x"};
     assert_null(vx_blob_s3.open(dir, &ftp, &err));
     vx_blob_conf small = {.url = "s3://bucket?endpoint=http://127.0.0.1:9", .part_size = 1 << 20};
