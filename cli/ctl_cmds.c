@@ -75,7 +75,9 @@ static char *query_arg(const char *key, const char *v)
 /* Uploads file, named by its base name where the server takes it as a
  * mesh name (1..100 bytes, no control character, '\\' or '"'); the mesh
  * id into id[65]. 0 or the exit status. */
-static int upload(ctl *c, const char *file, char *id)
+/* Uploads file: its mesh id into id, and with --json and `echo` the
+ * server's Mesh on stdout. */
+static int upload(ctl *c, const char *file, char *id, int echo)
 {
     ctl_buf b = {0};
     const char *base = strrchr(file, '/') ? strrchr(file, '/') + 1 : file;
@@ -92,6 +94,7 @@ static int upload(ctl *c, const char *file, char *id)
         rc = ctl_http_fail("upload", st, &b);
     else
         snprintf(id, 65, "%s", str(doc, "id"));
+    if (doc && echo && c->json) print_json(doc);
     cJSON_Delete(doc);
     free(b.p);
     return rc;
@@ -201,7 +204,7 @@ int ctl_cmd_job(ctl *c, const char *kind, const char *src, cJSON *params, const 
     int rc = 0;
     if (is_mesh_id(src) && stat(src, &sb) != 0)
         snprintf(mesh, sizeof mesh, "%s", src);
-    else if ((rc = upload(c, src, mesh)))
+    else if ((rc = upload(c, src, mesh, 0)))
         goto done;
     cJSON *req = cJSON_CreateObject();
     cJSON_AddStringToObject(req, "mesh", mesh);
@@ -392,7 +395,7 @@ int ctl_cmd_delete(ctl *c, const char *jid)
 int ctl_cmd_upload(ctl *c, const char *file)
 {
     char id[65];
-    int rc = upload(c, file, id);
-    if (!rc) printf("%s\n", id);
+    int rc = upload(c, file, id, 1);
+    if (!rc && !c->json) printf("%s\n", id);
     return rc;
 }

@@ -98,6 +98,9 @@ check "-o into a missing dir: no job was submitted" test "$("$CTL" --json jobs -
 printf '# named\n' | cat - "$MESH" >"named mesh é.obj"
 NMID=$("$CTL" upload "named mesh é.obj" 2>/dev/null)
 check "upload: named by its file" sh -c "'$CTL' meshes --limit 1000 | grep '^$NMID' | grep -q 'named mesh é.obj'"
+"$CTL" --json upload "named mesh é.obj" >up.json 2>/dev/null
+check "upload --json: the server's mesh ($(head -c 120 up.json))" \
+    jq -e --arg id "$NMID" '.id == $id and .name == "named mesh é.obj" and .triangles > 0 and (.bbox.max | length) == 3' up.json
 mkdir -p dl && (cd dl && "$CTL" --quiet preview "$NMID" -p width=32 -p height=32 2>../ctl.err)
 check "a download without -o: the server's UTF-8 name ($(ls dl))" sh -c "ls dl | grep -Eq '^named mesh é-[0-9a-f]{32}-image\.png$'"
 # Paging: the rest after --after, said on stderr when there is more.
