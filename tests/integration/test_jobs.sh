@@ -149,6 +149,24 @@ expect_error "unknown output" 404 output_not_found
 api GET /metrics
 check "metrics: job histogram" grep -q 'voxeld_job_duration_seconds_count{kind="preview"}' "$BODY"
 check "metrics: jobs_total" grep -q 'voxeld_jobs_total{kind="preview",state="succeeded"}' "$BODY"
+stop_daemon
 
+# A preview's memory: 12 bytes a pixel (the picture, its color and depth
+# targets) against --max-job-memory, and what the process really grows by
+# stays within it (llvmpipe keeps its targets in host memory).
+start_daemon --max-job-memory 180M || exit 1
+upload "$TMP/box.obj"
+PB=$MESH_ID
+run_job preview "$PB" '{"width":4096,"height":4096,"samples":4}'
+check "a 4096^2 preview over 180M (12 bytes a pixel) fails job_memory_limit ($(jq -c .error "$TMP/job.json"))" \
+    jq -e '.state == "failed" and .error.code == "job_memory_limit" and (.error.message | test("12 a pixel"))' "$TMP/job.json"
+HWM0=$(awk '/^VmHWM:/ {print $2}' "/proc/$PID/status")
+run_job preview "$PB" '{"width":3840,"height":3840,"samples":4}'
+job_ok "a 3840^2 preview within 180M"
+HWM1=$(awk '/^VmHWM:/ {print $2}' "/proc/$PID/status")
+if ! ldd "$VOXELD" 2>/dev/null | grep -q libasan; then
+    check "its peak memory grew by no more than the estimate ($(((HWM1 - HWM0) / 1024)) MiB of $((3840 * 3840 * 12 / 1048576)))" \
+        test $(((HWM1 - HWM0) * 1024)) -le $((3840 * 3840 * 12))
+fi
 stop_daemon
 finish
