@@ -25,14 +25,34 @@ static double atan2_fast(double y, double x)
     return y < 0 ? -r : r;
 }
 
+/* tan(omega / 2) of the triangle seen along unit vectors u0..2, from the
+ * pair (i, j) whose sum s = ui + uj is shortest, k the third: det(u0, u1,
+ * u2) = s . (uj x uk) and 1 + u0.u1 + u1.u2 + u2.u0 = |s|^2 / 2 + s . uk,
+ * exactly, both from s itself (see vx_wtree_tri). */
+static double tri_near_edge(double u[3][3])
+{
+    int best = 0;
+    double s[3][3], ss[3];
+    for (int p = 0; p < 3; p++) {
+        for (int k = 0; k < 3; k++)
+            s[p][k] = u[p][k] + u[(p + 1) % 3][k];
+        ss[p] = s[p][0] * s[p][0] + s[p][1] * s[p][1] + s[p][2] * s[p][2];
+        if (ss[p] < ss[best]) best = p;
+    }
+    const double *t = s[best], *uj = u[(best + 1) % 3], *uk = u[(best + 2) % 3];
+    double det = t[0] * (uj[1] * uk[2] - uj[2] * uk[1]) - t[1] * (uj[0] * uk[2] - uj[2] * uk[0]) +
+                 t[2] * (uj[0] * uk[1] - uj[1] * uk[0]);
+    double den = 0.5 * ss[best] + t[0] * uk[0] + t[1] * uk[1] + t[2] * uk[2];
+    return atan2_fast(det, den) / (2 * M_PI);
+}
+
 double vx_wtree_tri(const double *v, const double q[3])
 {
-    double a[3], b[3], c[3];
-    for (int k = 0; k < 3; k++) {
-        a[k] = v[k] - q[k];
-        b[k] = v[3 + k] - q[k];
-        c[k] = v[6 + k] - q[k];
-    }
+    double u[3][3];
+    for (int i = 0; i < 3; i++)
+        for (int k = 0; k < 3; k++)
+            u[i][k] = v[3 * i + k] - q[k];
+    const double *a = u[0], *b = u[1], *c = u[2];
     double la = sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2]);
     double lb = sqrt(b[0] * b[0] + b[1] * b[1] + b[2] * b[2]);
     double lc = sqrt(c[0] * c[0] + c[1] * c[1] + c[2] * c[2]);
@@ -42,8 +62,20 @@ double vx_wtree_tri(const double *v, const double q[3])
     double bc = b[0] * c[0] + b[1] * c[1] + b[2] * c[2];
     double ca = c[0] * a[0] + c[1] * a[1] + c[2] * a[2];
     double den = la * lb * lc + ab * lc + bc * la + ca * lb;
-    /* tan(omega / 2) = det / den; w = omega / (4 pi) */
-    return atan2_fast(det, den) / (2 * M_PI);
+    /* Van Oosterom & Strackee: tan(omega / 2) = det / den; w = omega /
+     * (4 pi). Both carry rounding of about 1e-16 la lb lc: seen from near
+     * a long edge, where the unit vectors of its ends nearly cancel, that
+     * is every digit (a triangle 1e8 long seen from 0.1 away gave w off by
+     * 1/2). Then the same angle from the unit vectors, where the
+     * cancelling pair's sum carries it (tri_near_edge). */
+    double scale = la * lb * lc;
+    if (det * det + den * den > 1e-12 * scale * scale) return atan2_fast(det, den) / (2 * M_PI);
+    if (la == 0 || lb == 0 || lc == 0) return 0; /* at a corner */
+    const double l[3] = {la, lb, lc};
+    for (int i = 0; i < 3; i++)
+        for (int k = 0; k < 3; k++)
+            u[i][k] /= l[i];
+    return tri_near_edge(u);
 }
 
 typedef struct build {

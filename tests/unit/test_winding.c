@@ -346,6 +346,39 @@ static void test_closed_ties(void **state)
     assert_true(same_as_cpu >= 40);
 }
 
+/* A closed box and one open sliver triangle through it, 2L long: the
+ * sliver's own winding number is negligible, so the voxels are the box's
+ * 1000. The cone that closes the sliver is as long; seen from the box, its
+ * corners' unit vectors nearly cancel, and the solid angle once lost
+ * every digit to that (1135 voxels at L = 1e8, whole planes wrong). */
+static void test_far_sliver(void **state)
+{
+    (void)state;
+    const double L[] = {1e4, 1e8, 1e10, 1e12, 1e13};
+    for (int n = 0; n < 5; n++) {
+        vx_mesh *parts[2] = {
+            shape_box((double[]){0.01, 0.02, 0.03}, (double[]){1.01, 1.02, 1.03}),
+            shape_mesh_from(3, (double[]){-L[n], 0.56, 0.57, L[n], 0.56, 0.57, L[n], 0.5601, 0.58},
+                            1, (uint32_t[]){0, 1, 2})};
+        vx_mesh *m = shape_merge(parts, 2);
+        assert_int_equal(m->boundary_edges, 3);
+        vx_voxelize_desc d = {
+            .inside = VX_INSIDE_WINDING,
+            .grid = {.origin = {-0.2, -0.2, -0.2}, .h = 0.1, .dims = {16, 16, 16}}};
+        vx_bitgrid g;
+        vx_voxelize_stats st;
+        vx_err err = {0};
+        assert_int_equal(vx_voxelize(NULL, m, &d, &g, &st, &err), 0);
+        printf("box + sliver of half-length %g: %llu voxels\n", L[n],
+               (unsigned long long)st.voxels_inside);
+        assert_int_equal(st.voxels_inside, 1000);
+        vx_bitgrid_free(&g);
+        vx_mesh_free(m);
+        vx_mesh_free(parts[0]);
+        vx_mesh_free(parts[1]);
+    }
+}
+
 /* The open bunny: every voxel agrees with the direct winding number at
  * sampled centres, and none is set outside the mesh's bounding box. */
 static void test_bunny(void **state)
@@ -461,10 +494,15 @@ int main(int argc, char **argv)
 {
     if (argc > 1) cmocka_set_test_filter(argv[1]); /* e.g. test_tree */
     const struct CMUnitTest tests[] = {
-        cmocka_unit_test(test_overlap_open), cmocka_unit_test(test_nested),
-        cmocka_unit_test(test_open_shells),  cmocka_unit_test(test_closed_exact),
-        cmocka_unit_test(test_closed_ties),  cmocka_unit_test(test_bunny),
-        cmocka_unit_test(test_tree),         cmocka_unit_test(test_default_and_stop),
+        cmocka_unit_test(test_overlap_open),
+        cmocka_unit_test(test_nested),
+        cmocka_unit_test(test_open_shells),
+        cmocka_unit_test(test_closed_exact),
+        cmocka_unit_test(test_closed_ties),
+        cmocka_unit_test(test_far_sliver),
+        cmocka_unit_test(test_bunny),
+        cmocka_unit_test(test_tree),
+        cmocka_unit_test(test_default_and_stop),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }
