@@ -75,6 +75,8 @@ int32_t vx_lattice_xing(const double a[3], const double e1[3], const double e2[3
     }
     double u = (a[0] + dt) - 0.5;
     double cb = ceil(u) - ix;
-    cb = cb < -536870912.0 ? -536870912.0 : cb > 536870912.0 ? 536870912.0 : cb;
+    cb = cb < -VX_LATTICE_XING_MAX  ? -VX_LATTICE_XING_MAX
+         : cb > VX_LATTICE_XING_MAX ? VX_LATTICE_XING_MAX
+                                    : cb;
     return (int32_t)cb;
 }

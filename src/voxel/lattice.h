@@ -67,6 +67,9 @@ static inline vx_i128 vx_lattice_det(const int64_t A[2], const int64_t B[2], con
     return (vx_i128)(B[0] - A[0]) * (C[1] - A[1]) - (vx_i128)(B[1] - A[1]) * (C[0] - A[0]);
 }
 
+/* The most |centre index| vx_lattice_xing answers (it clamps to it). */
+#define VX_LATTICE_XING_MAX 536870912.0 /* 2^29 */
+
 /* xing() of shaders/voxel_xing.glsl, one sample per voxel: the first
  * centre along x at or beyond where the ray through lattice centre
  * (cy, cz) crosses the triangle (vertex a, edges e1, e2 from it, lattice

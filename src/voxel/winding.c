@@ -58,6 +58,10 @@ typedef struct wctx {
     int pass;         /* 0 count, 1 fill */
     vx_wtree tree;
     int lo[3], hi[3], open; /* centres that can be inside (the bbox for an open mesh) */
+    /* An open mesh's runs along z are cut to its bbox's centres rlo..rhi,
+     * counted from this brick but not cut to it: a run is sampled the same
+     * way in every brick it crosses (and the whole grid's). */
+    int rlo, rhi;
     vx_bitgrid *out;
     atomic_int stop, done;
     int total;
@@ -249,22 +253,27 @@ static int far_run(const wctx *c, int i, int j, int ka, int kb, int n)
 }
 
 /* Centres ka..kb of one run between crossings: ends known (da, db). */
+/* Centres ka..kb of one run between crossings, ends known (da, db), the
+ * run possibly reaching past the brick: only its centres in the brick are
+ * set, and only halves that reach into the brick are looked at (which
+ * decides nothing in it: each half is decided from its own samples). */
 static void fill_run(wctx *c, int i, int j, int ka, int kb, int da, int db, int n)
 {
+    if (kb < 0 || ka > c->nz - 1) return;
     if (da == db) {
         if (da)
-            for (int k = ka; k <= kb; k++)
+            for (int k = ka < 0 ? 0 : ka; k <= kb && k < c->nz; k++)
                 set_bit(c, i, j, k);
         return;
     }
     if (kb - ka <= 1) {
-        if (da) set_bit(c, i, j, ka);
-        if (db) set_bit(c, i, j, kb);
+        if (da && ka >= 0) set_bit(c, i, j, ka);
+        if (db && kb < c->nz) set_bit(c, i, j, kb);
         return;
     }
-    int km = ka + (kb - ka) / 2, dm = inside_at(c, i, j, km, n);
-    fill_run(c, i, j, ka, km, da, dm, n);
-    fill_run(c, i, j, km + 1, kb, inside_at(c, i, j, km + 1, n), db, n);
+    int km = ka + (kb - ka) / 2;
+    if (km >= 0) fill_run(c, i, j, ka, km, da, inside_at(c, i, j, km, n), n);
+    if (km + 1 <= c->nz - 1) fill_run(c, i, j, km + 1, kb, inside_at(c, i, j, km + 1, n), db, n);
 }
 
 typedef struct zs {
@@ -315,10 +324,12 @@ static void column(wctx *c, int i, int j)
     for (size_t a = 0; a < n; a++)
         cnt += s[a];
     for (size_t r = 0; r <= n; r++) {
-        /* run r: centres k with z[r-1] <= k < z[r] have cnt crossings above */
-        int ka = r && z[r - 1] > c->lo[2] ? z[r - 1] : c->lo[2];
-        int kb = r < n && z[r] - 1 < c->hi[2] ? z[r] - 1 : c->hi[2];
-        if (ka <= kb) {
+        /* run r: centres k with z[r-1] <= k < z[r] have cnt crossings above;
+         * for an open mesh the whole run in its bbox, past the brick */
+        int lo = c->open ? c->rlo : c->lo[2], hi = c->open ? c->rhi : c->hi[2];
+        int ka = r && z[r - 1] > lo ? z[r - 1] : lo;
+        int kb = r < n && z[r] - 1 < hi ? z[r] - 1 : hi;
+        if (ka <= kb && kb >= 0 && ka <= c->nz - 1) {
             if (!c->open || far_run(c, i, j, ka, kb, cnt)) {
                 fill_run(c, i, j, ka, kb, cnt >= 1, cnt >= 1, cnt);
             } else {
@@ -417,6 +428,10 @@ static void inside_range(wctx *c)
         double lo = ceil(umin - 0.5) - c->ix[a], hi = floor(umax - 0.5) - c->ix[a];
         if (lo > c->lo[a]) c->lo[a] = lo > n[a] ? n[a] : (int)lo;
         if (hi < c->hi[a]) c->hi[a] = hi < -1 ? -1 : (int)hi;
+        if (a == 2) { /* as the crossings are clamped */
+            c->rlo = (int)fmax(fmin(lo, VX_LATTICE_XING_MAX), -VX_LATTICE_XING_MAX);
+            c->rhi = (int)fmax(fmin(hi, VX_LATTICE_XING_MAX), -VX_LATTICE_XING_MAX);
+        }
     }
 }
 
