@@ -132,6 +132,7 @@ static size_t kill_conn(vx_conn *vc, int status, const char *code, const char *m
                      : status == 503 ? "Service Unavailable"
                                      : "URI Too Long",
                      date, vc->rid, status == 503 ? "Retry-After: 1\r\n" : "", cors, bn, body);
+        if (n >= (int)sizeof msg) n = (int)sizeof msg - 1; /* (never: the parts are bounded) */
         if (send(vc->fd, msg, (size_t)n, MSG_NOSIGNAL | MSG_DONTWAIT) < 0) n = 0;
     }
     shutdown(vc->fd, rd ? SHUT_RDWR : SHUT_WR);
