@@ -261,8 +261,9 @@ static void fill_run(wctx *c, int i, int j, int ka, int kb, int da, int db, int 
 {
     if (kb < 0 || ka > c->nz - 1) return;
     if (da == db) {
+        int k0 = ka < 0 ? 0 : ka, k1 = kb > c->nz - 1 ? c->nz - 1 : kb;
         if (da)
-            for (int k = ka < 0 ? 0 : ka; k <= kb && k < c->nz; k++)
+            for (int k = k0; k <= k1; k++)
                 set_bit(c, i, j, k);
         return;
     }
