@@ -227,10 +227,12 @@ oom:
 
 /* ---- inside per column ------------------------------------------------ */
 
-static void set_bit(wctx *c, int i, int j, int k)
+/* Voxel (i, k) of the row being filled: its slice of the grid, the words
+ * of every z row for this y, contiguous (a column's voxels are a row of
+ * the grid apart: set in place they missed the cache at every bit). */
+static void set_bit(const wctx *c, uint32_t *slice, int i, int k)
 {
-    vx_bitgrid *g = c->out;
-    g->bits[((size_t)k * (size_t)c->ny + (size_t)j) * g->wx + (size_t)(i >> 5)] |= 1u << (i & 31);
+    slice[(size_t)k * c->out->wx + (size_t)(i >> 5)] |= 1u << (i & 31);
 }
 
 /* w >= 1/2 at centre k of column (i, j), whose crossing count above is n. */
@@ -257,24 +259,25 @@ static int far_run(const wctx *c, int i, int j, int ka, int kb, int n)
  * run possibly reaching past the brick: only its centres in the brick are
  * set, and only halves that reach into the brick are looked at (which
  * decides nothing in it: each half is decided from its own samples). */
-static void fill_run(wctx *c, int i, int j, int ka, int kb, int da, int db, int n)
+static void fill_run(wctx *c, uint32_t *slice, int i, int j, int ka, int kb, int da, int db, int n)
 {
     if (kb < 0 || ka > c->nz - 1) return;
     if (da == db) {
         int k0 = ka < 0 ? 0 : ka, k1 = kb > c->nz - 1 ? c->nz - 1 : kb;
         if (da)
             for (int k = k0; k <= k1; k++)
-                set_bit(c, i, j, k);
+                set_bit(c, slice, i, k);
         return;
     }
     if (kb - ka <= 1) {
-        if (da && ka >= 0) set_bit(c, i, j, ka);
-        if (db && kb < c->nz) set_bit(c, i, j, kb);
+        if (da && ka >= 0) set_bit(c, slice, i, ka);
+        if (db && kb < c->nz) set_bit(c, slice, i, kb);
         return;
     }
     int km = ka + (kb - ka) / 2;
-    if (km >= 0) fill_run(c, i, j, ka, km, da, inside_at(c, i, j, km, n), n);
-    if (km + 1 <= c->nz - 1) fill_run(c, i, j, km + 1, kb, inside_at(c, i, j, km + 1, n), db, n);
+    if (km >= 0) fill_run(c, slice, i, j, ka, km, da, inside_at(c, i, j, km, n), n);
+    if (km + 1 <= c->nz - 1)
+        fill_run(c, slice, i, j, km + 1, kb, inside_at(c, i, j, km + 1, n), db, n);
 }
 
 typedef struct zs {
@@ -315,7 +318,7 @@ static void sort_column(int32_t *z, int8_t *s, size_t n)
     }
 }
 
-static void column(wctx *c, int i, int j)
+static void column(wctx *c, uint32_t *slice, int i, int j)
 {
     size_t col = (size_t)j * c->nx + i, n = c->off[col + 1] - c->off[col];
     int32_t *z = c->z + c->off[col];
@@ -332,19 +335,20 @@ static void column(wctx *c, int i, int j)
         int kb = r < n && z[r] - 1 < hi ? z[r] - 1 : hi;
         if (ka <= kb && kb >= 0 && ka <= c->nz - 1) {
             if (!c->open || far_run(c, i, j, ka, kb, cnt)) {
-                fill_run(c, i, j, ka, kb, cnt >= 1, cnt >= 1, cnt);
+                fill_run(c, slice, i, j, ka, kb, cnt >= 1, cnt >= 1, cnt);
             } else {
                 int da = inside_at(c, i, j, ka, cnt),
                     db = ka == kb ? da : inside_at(c, i, j, kb, cnt);
                 if (kb - ka >= 8 && da == db) {
                     int km = ka + (kb - ka) / 2, dm = inside_at(c, i, j, km, cnt);
                     if (dm != da) {
-                        fill_run(c, i, j, ka, km, da, dm, cnt);
-                        fill_run(c, i, j, km + 1, kb, inside_at(c, i, j, km + 1, cnt), db, cnt);
+                        fill_run(c, slice, i, j, ka, km, da, dm, cnt);
+                        fill_run(c, slice, i, j, km + 1, kb, inside_at(c, i, j, km + 1, cnt), db,
+                                 cnt);
                         goto next;
                     }
                 }
-                fill_run(c, i, j, ka, kb, da, db, cnt);
+                fill_run(c, slice, i, j, ka, kb, da, db, cnt);
             }
         }
     next:
@@ -356,11 +360,26 @@ static int fill_row(int j, int t, void *ud)
 {
     wctx *c = ud;
     if (poll(c, t)) return 1;
-    if (j >= c->lo[1] && j <= c->hi[1])
-        for (int i = c->lo[0]; i <= c->hi[0]; i++) {
-            if (poll(c, t)) return 1; /* a column of a soup can take 0.1 s */
-            column(c, i, j);
+    if (j >= c->lo[1] && j <= c->hi[1]) {
+        size_t wx = c->out->wx;
+        uint32_t *slice = calloc((size_t)c->nz * wx + 1, sizeof *slice);
+        if (!slice) {
+            if (!atomic_exchange(&c->stop, 1))
+                vx_err_set(&c->err, VX_EINTERNAL, "out_of_memory", "no memory for a row");
+            return 1;
         }
+        for (int i = c->lo[0]; i <= c->hi[0]; i++) {
+            if (poll(c, t)) { /* a column of a soup can take 0.1 s */
+                free(slice);
+                return 1;
+            }
+            column(c, slice, i, j);
+        }
+        for (int k = 0; k < c->nz; k++)
+            memcpy(c->out->bits + ((size_t)k * c->ny + (size_t)j) * wx, slice + (size_t)k * wx,
+                   wx * sizeof *slice);
+        free(slice);
+    }
     atomic_fetch_add(&c->done, 1);
     return 0;
 }
