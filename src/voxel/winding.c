@@ -417,7 +417,8 @@ static int crossings(wctx *c, vx_err *err)
     size_t n = c->off[ncols];
     uint64_t bytes = vx_bitgrid_bytes(c->out->grid.dims, 1) + (uint64_t)n * 5 +
                      (uint64_t)ncols * 12 + c->bin_off[c->nbands] * 4 +
-                     ((uint64_t)c->m->nverts * 3 + (uint64_t)c->ncone * 9) * 8;
+                     ((uint64_t)c->m->nverts * 3 + (uint64_t)c->ncone * 9) * 8 +
+                     (uint64_t)vx_par_cpus() * (uint64_t)c->nz * c->out->wx * 4; /* row slices */
     if (c->d->max_memory && bytes > c->d->max_memory)
         return vx_err_set(err, VX_ETOOBIG, "job_memory_limit",
                           "the winding rule needs %llu bytes for %zu crossings of %zu columns, "
