@@ -313,25 +313,18 @@ void vx_events_free(vx_events *ev)
     free(ev);
 }
 
-/* HEAD's body: none (libmicrohttpd sends a HEAD answer's head only). */
-static ssize_t no_body(void *cls, uint64_t pos, char *buf, size_t max)
-{
-    (void)cls;
-    (void)pos;
-    (void)buf;
-    (void)max;
-    return MHD_CONTENT_READER_END_OF_STREAM;
-}
-
 int vx_route_events(vx_http *h, struct MHD_Connection *c, req *r)
 {
     vx_err err;
     struct MHD_Response *resp;
-    if (!strcmp(r->method, "HEAD")) { /* GET's head: a stream of unknown length */
+    if (!strcmp(r->method, "HEAD")) {
+        /* GET's headers but its framing: libmicrohttpd sends a chunked
+         * answer's last chunk even to HEAD, a body HEAD may not have, so
+         * this one is empty (Content-Length: 0) */
         cJSON *doc = vx_jobs_get(h->d.jobs, r->id, NULL, &err);
         if (!doc) return vx_resp_err(c, r, &err);
         cJSON_Delete(doc);
-        resp = MHD_create_response_from_callback(MHD_SIZE_UNKNOWN, 64, no_body, NULL, NULL);
+        resp = MHD_create_response_from_buffer(0, (void *)"", MHD_RESPMEM_PERSISTENT);
     } else {
         resp = vx_events_open(h->events, c, r->id, &err);
         if (!resp) return vx_resp_err(c, r, &err);

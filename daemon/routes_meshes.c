@@ -51,7 +51,7 @@ int vx_route_mesh_file(vx_http *h, struct MHD_Connection *c, req *r)
     const cJSON *fj = cJSON_GetObjectItemCaseSensitive(meta, "format");
     const cJSON *nj = cJSON_GetObjectItemCaseSensitive(meta, "name");
     vx_mesh_format fmt = vx_intake_format_by_name(cJSON_IsString(fj) ? fj->valuestring : NULL);
-    char etag[80], disp[400], path[VX_PATH_MAX];
+    char etag[80], disp[400];
     /* The id is the SHA-256 of the bytes: a strong validator. */
     snprintf(etag, sizeof etag, "\"%s\"", r->id);
     vx_resp_disposition(disp, sizeof disp, cJSON_IsString(nj) ? nj->valuestring : NULL, NULL, r->id,
@@ -66,12 +66,11 @@ int vx_route_mesh_file(vx_http *h, struct MHD_Connection *c, req *r)
     }
     int fd = -1;
     struct stat st;
-    if (vx_store_mesh_path(h->d.store, r->id, path, sizeof path, &err) != 0) {
+    /* the fd checked is the one served: a file replaced meanwhile is not */
+    if ((fd = vx_store_mesh_open(h->d.store, r->id, &err)) < 0) {
         /* the blob store unreachable (503 store_failed) or a damaged file
          * (410 mesh_damaged) is not a deleted mesh */
         if (err.kind != VX_ENOTFOUND) return vx_resp_err(c, r, &err);
-    } else {
-        fd = open(path, O_RDONLY | O_CLOEXEC);
     }
     if (fd < 0 || fstat(fd, &st) != 0) {
         if (fd >= 0) close(fd);

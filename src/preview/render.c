@@ -99,8 +99,10 @@ static int upload(vx_gl *gl, const vx_mesh *m, const vx_preview_params *p, objs 
     double c[3], r2 = 0;
     for (int a = 0; a < 3; a++)
         c[a] = 0.5 * (m->bbox_min[a] + m->bbox_max[a]);
-    for (size_t i = 0; i < m->nverts; i++) {
-        const double *v = m->pos + 3 * i;
+    /* the vertices the triangles use, as the bbox (a vertex no face uses
+     * left the picture empty) */
+    for (size_t i = 0; i < 3 * m->ntris; i++) {
+        const double *v = m->pos + 3 * (size_t)m->tri[i];
         double dx = v[0] - c[0], dy = v[1] - c[1], dz = v[2] - c[2];
         double d2 = dx * dx + dy * dy + dz * dz;
         if (d2 > r2) r2 = d2;

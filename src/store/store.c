@@ -297,29 +297,27 @@ static void file_version(const struct stat *st, int64_t v[7])
     v[6] = (int64_t)st->st_ctim.tv_nsec;
 }
 
-/* The hex SHA-256 of the file at path into hex: 0, or -1 (errno). */
-static int hash_file(const char *path, char hex[65])
+/* The hex SHA-256 of open file fd from its start into hex: 0, or -1 (errno). */
+static int hash_fd(int fd, char hex[65])
 {
-    int fd = open(path, O_RDONLY | O_CLOEXEC);
-    if (fd < 0) return -1;
     enum { CHUNK = 1 << 20 };
     unsigned char *buf = malloc(CHUNK);
     if (!buf) {
-        close(fd);
         errno = ENOMEM;
         return -1;
     }
     struct sha256_ctx sha;
     sha256_init(&sha);
     ssize_t got;
-    while ((got = read(fd, buf, CHUNK)) != 0) {
+    off_t at = 0;
+    while ((got = pread(fd, buf, CHUNK, at)) != 0) {
         if (got < 0 && errno == EINTR) continue;
         if (got < 0) break;
         sha256_update(&sha, (size_t)got, buf);
+        at += got;
     }
     int e = errno;
     free(buf);
-    close(fd);
     if (got < 0) {
         errno = e;
         return -1;
@@ -330,13 +328,15 @@ static int hash_file(const char *path, char hex[65])
     return 0;
 }
 
-/* 1 when the file at path holds mesh id's bytes (its SHA-256 is the id),
- * hashed once per version of the file; 0 when it does not or is missing;
- * -1 when it cannot be read (errno). */
-static int mesh_file_intact(vx_store *s, const char *id, const char *path)
+/* 1 when open file fd holds mesh id's bytes (a regular file whose SHA-256
+ * is the id), hashed once per version of the file; 0 when it does not;
+ * -1 when it cannot be read (errno). Checking the open file, not a path,
+ * is what makes the bytes served or parsed the ones checked. */
+static int mesh_fd_intact(vx_store *s, const char *id, int fd)
 {
     struct stat st;
-    if (stat(path, &st) != 0) return errno == ENOENT ? 0 : -1;
+    if (fstat(fd, &st) != 0) return -1;
+    if (!S_ISREG(st.st_mode)) return 0; /* a directory, FIFO or device */
     int64_t v[7];
     file_version(&st, v);
     pthread_mutex_lock(&s->lock);
@@ -346,14 +346,40 @@ static int mesh_file_intact(vx_store *s, const char *id, const char *path)
     pthread_mutex_unlock(&s->lock);
     if (known) return 1;
     char hex[65];
-    if (hash_file(path, hex)) return errno == ENOENT ? 0 : -1;
+    if (hash_fd(fd, hex)) return -1;
     if (strcmp(hex, id) != 0) return 0;
-    /* the version stat saw before the hash: one changed since differs */
+    /* the version fstat saw before the hash: one changed since differs */
     pthread_mutex_lock(&s->lock);
     at = mesh_find(s, id, &found);
     if (found) memcpy(mesh_at(s, at)->checked, v, sizeof v);
     pthread_mutex_unlock(&s->lock);
     return 1;
+}
+
+/* The file at path opened for mesh id if it holds its bytes: the fd, or
+ * -1 with *intact 0 (missing or other bytes: damaged) or -1 (errno). A
+ * FIFO does not block the open, and is not read. */
+static int mesh_open_intact(vx_store *s, const char *id, const char *path, int *intact)
+{
+    int fd = open(path, O_RDONLY | O_CLOEXEC | O_NONBLOCK);
+    if (fd < 0) {
+        *intact = errno == ENOENT || errno == ENXIO || errno == ELOOP ? 0 : -1;
+        return -1;
+    }
+    *intact = mesh_fd_intact(s, id, fd);
+    if (*intact == 1) return fd;
+    int e = errno;
+    close(fd);
+    errno = e;
+    return -1;
+}
+
+/* 1 when the file at path holds mesh id's bytes, 0 when not, -1 (errno). */
+static int mesh_file_intact(vx_store *s, const char *id, const char *path)
+{
+    int intact, fd = mesh_open_intact(s, id, path, &intact);
+    if (fd >= 0) close(fd);
+    return intact;
 }
 
 int vx_store_mesh_repair(vx_store *s, vx_upload *u, const char *id, const char *ext, vx_err *err)
@@ -371,6 +397,8 @@ int vx_store_mesh_repair(vx_store *s, vx_upload *u, const char *id, const char *
     if (mesh_file_intact(s, id, path) == 1) return 0;
     close(u->fd);
     u->fd = -1;
+    struct stat st;
+    if (lstat(path, &st) == 0 && S_ISDIR(st.st_mode)) vx_remove_tree(path); /* not renamed over */
     if (s->ops->put_file(s->blob, u->path, key) != 0 || s->ops->sync(s->blob, "meshes", NULL)) {
         int e = errno;
         VX_ERROR("store.mesh_repair_failed", "mesh=%s error=%d", id, e);
@@ -498,7 +526,9 @@ cJSON *vx_store_mesh_meta(vx_store *s, const char *id, vx_err *err)
     return copy;
 }
 
-int vx_store_mesh_path(vx_store *s, const char *id, char *buf, size_t n, vx_err *err)
+/* The path of mesh id's file into buf, opened and checked: the fd, or -1
+ * with err (as vx_store_mesh_path says). */
+static int mesh_open_checked(vx_store *s, const char *id, char *buf, size_t n, vx_err *err)
 {
     if (mesh_fetch_shared(s, id, err) < 0) return -1;
     pthread_mutex_lock(&s->lock);
@@ -512,18 +542,30 @@ int vx_store_mesh_path(vx_store *s, const char *id, char *buf, size_t n, vx_err 
     if (s->ops->path(s->blob, key, buf, n))
         return vx_err_set(err, vx_err_io_kind(errno), "store_failed",
                           "cannot read mesh %.80s from the blob store: %s", id, strerror(errno));
-    int intact = mesh_file_intact(s, id, buf);
+    int intact, fd = mesh_open_intact(s, id, buf, &intact);
+    if (fd >= 0) return fd;
     if (intact < 0)
         return vx_err_set(err, vx_err_io_kind(errno), "store_failed", "cannot read mesh %.80s: %s",
                           id, strerror(errno));
-    if (!intact) {
-        VX_ERROR("store.mesh_damaged", "mesh=%s path=%s", id, buf);
-        return vx_err_set(err, VX_EGONE, "mesh_damaged",
-                          "the stored file of mesh %.80s is missing or not the bytes uploaded; "
-                          "upload the mesh again to repair it",
-                          id);
-    }
+    VX_ERROR("store.mesh_damaged", "mesh=%s path=%s", id, buf);
+    return vx_err_set(err, VX_EGONE, "mesh_damaged",
+                      "the stored file of mesh %.80s is missing or not the bytes uploaded; "
+                      "upload the mesh again to repair it",
+                      id);
+}
+
+int vx_store_mesh_path(vx_store *s, const char *id, char *buf, size_t n, vx_err *err)
+{
+    int fd = mesh_open_checked(s, id, buf, n, err);
+    if (fd < 0) return -1;
+    close(fd);
     return 0;
+}
+
+int vx_store_mesh_open(vx_store *s, const char *id, vx_err *err)
+{
+    char path[VX_PATH_MAX];
+    return mesh_open_checked(s, id, path, sizeof path, err);
 }
 
 int vx_store_mesh_delete(vx_store *s, const char *id, vx_err *err)

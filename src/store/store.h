@@ -80,6 +80,10 @@ cJSON *vx_store_mesh_meta(vx_store *s, const char *id, vx_err *err);
  * mesh_damaged when the file is missing or does not hash to id (hashed
  * once per version of the file: again when its stat changes). */
 int vx_store_mesh_path(vx_store *s, const char *id, char *buf, size_t n, vx_err *err);
+/* Mesh id's file opened read-only after the same checks, the fd checked
+ * being the one returned (so the bytes read are the ones hashed); -1 with
+ * err as vx_store_mesh_path. The caller closes it. */
+int vx_store_mesh_open(vx_store *s, const char *id, vx_err *err);
 /* Deletes a mesh: it disappears from meta, list and count at once (404 for
  * new jobs); its file stays while pins hold it (vx_store_mesh_path still
  * answers), and goes with the last unpin. */

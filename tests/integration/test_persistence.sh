@@ -97,20 +97,22 @@ check "the job itself is still known" jq -e '.state == "succeeded"' "$BODY"
 
 # A mesh file changed on disk is neither served nor read as the mesh: 410
 # mesh_damaged (a job on it fails with that code), across a restart; the
-# same bytes uploaded again repair it. Once with one byte changed (same
-# size, after the file was checked once), once with the file gone.
+# same bytes uploaded again repair it. With one byte changed (same size,
+# after the file was checked once), the file gone, a FIFO (which once hung
+# every HTTP thread) and a directory in its place.
 api GET "/v1/meshes/$BOX/file"
 expect_status "the box's file" 200
 MF=$(find "$DATA/meshes" -name "$BOX.*" ! -name '*.json' | head -n 1)
 check "the box's file is on disk" test -s "$MF"
 logged() { grep -c "event=store.mesh_$1 mesh=$BOX" "$TMP/daemon.log"; }
-for damage in flip remove; do
+for damage in flip remove fifo directory; do
     DAMAGED=$(logged damaged) REPAIRED=$(logged repaired)
-    if [[ $damage == flip ]]; then
-        printf 'X' | dd of="$MF" bs=1 seek=3 conv=notrunc status=none
-    else
-        rm -f "$MF"
-    fi
+    case $damage in
+    flip) printf 'X' | dd of="$MF" bs=1 seek=3 conv=notrunc status=none ;;
+    remove) rm -f "$MF" ;;
+    fifo) rm -f "$MF" && mkfifo "$MF" ;; # must not block a reader
+    directory) rm -f "$MF" && mkdir "$MF" && touch "$MF/x" ;;
+    esac
     api GET "/v1/meshes/$BOX/file"
     expect_error "a mesh file damaged ($damage)" 410 mesh_damaged
     check "logged ($damage)" test "$(logged damaged)" -gt "$DAMAGED"

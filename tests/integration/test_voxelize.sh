@@ -359,6 +359,11 @@ M_stray=$MESH_ID
 check "its bbox holds the used vertices only ($(jqb -c .bbox))" \
     jq -e '([.bbox.max[] | . <= 1.0001] | all) and ([.bbox.min[] | . >= -1.0001] | all)' "$BODY"
 check "its vertices count them all" test "$(jqb .vertices)" -eq "$(grep -c '^v ' "$TMP/stray.obj")"
+run_job preview "$M_sphere" '{"width":64,"height":64}'
+PX=$(st pixels_covered)
+run_job preview "$M_stray" '{"width":64,"height":64}'
+check "unused vertices: the preview frames the same sphere ($PX pixels, got $(st pixels_covered))" \
+    test "$(st pixels_covered)" = "$PX" -a "$PX" -gt 1000
 for p in '"method":"cpu"' '"inside":"winding"' '"method":"scan"' '"method":"peel"' '"method":"slice"'; do
     vox "sphere ($p)" "$M_sphere" "{\"resolution\":32,\"format\":\"raw1\",$p}"
     A=$(st voxels_inside) DA=$(jq -c .stats.dims "$TMP/job.json")
