@@ -1,7 +1,6 @@
 /* /v1/meshes: listing, metadata, delete and the end of an upload (the body
  * has been streamed to a temp file by http.c): what it is (mesh/intake.c),
  * a parse under the --max-parse-memory budget, the store. */
-#include <fcntl.h>
 #include <stdio.h>
 #include <string.h>
 #include <sys/stat.h>
