@@ -9,8 +9,9 @@
 // rasterizer would interpolate (that starts from where the triangle sits in
 // the window, which differs between bricks) but computed here in double
 // from the lattice's unsnapped units (p - origin) / h, the same numbers in
-// every brick, and the lattice index of the pixel's centre; only the last
-// step subtracts the brick's index, exactly.
+// every brick, and the lattice index of the pixel's centre, then snapped
+// to 2^-20 voxel along the ray; only the last step subtracts the brick's
+// index, exactly.
 //
 // Vertex positions (3 doubles as RG32UI texels a vertex) and the triangles
 // drawn (RGB32UI, one texel each: the element buffer) as texture buffers.
@@ -42,11 +43,11 @@ dvec2 xing_seg(dvec2 p, dvec2 q, dvec2 x)
 // ax.x through the brick's (pu, pv) along axes ax.y, ax.z ((ax.x, ax.y, ax.z)
 // a cyclic permutation of (0, 1, 2)), in a frame scaled by ss (1, or 2
 // where supersampling puts its sample planes at the half-integers of the
-// doubled frame; pu, pv in it). Returns ib = ceil(t - 1/2) less the brick's
-// index, the brick's first sample centre at or beyond the crossing: the
+// doubled frame; pu, pv in it). Returns ib, the first sample centre at or
+// beyond the crossing t snapped to 2^-20 voxel, less the brick's index: the
 // crossing lies beyond centres i < ib (the half-open [entry, exit) rule),
-// clamped to +-2^29. frac in (0, 1] places it between centres ib - 1 and ib,
-// for ordering crossings only.
+// clamped to +-2^29. frac in (0, 1] places the unsnapped t between centres
+// ib - 1 and ib, for ordering crossings only.
 //
 // The rasterizer covers the triangle with its corners snapped to 1/256
 // voxel, so the ray may pass just outside the exact triangle (within about
@@ -80,8 +81,13 @@ int xing(ivec3 ax, double pu, double pv, double ss, out float frac)
         double reach = XING_REACH * ss;
         dt = det == 0.0 ? near : clamp(dt, near - reach, near + reach);
     }
-    precise double u = (a[ax.x] + dt) - 0.5;
-    double cu = ceil(u);
-    frac = float(u - (cu - 1.0));
+    // The crossing snapped to 2^-20 voxel (VX_GRID_XING_SNAP), so that a
+    // face on a plane of centres is exactly on it on any lattice, a tie
+    // decided half-open: s in those units of the frame, exact in double,
+    // centres at sh + k * sv.
+    precise double t = a[ax.x] + dt;
+    double sv = 1048576.0 / ss, sh = 524288.0 / ss;
+    double cu = ceil((roundEven(t * sv) - sh) / sv);
+    frac = float(min(t - 0.5 - (cu - 1.0), 1.0));
     return int(clamp(cu - idx[ax.x], -536870912.0, 536870912.0));
 }

@@ -15,7 +15,8 @@
  *      (eps, eps^2): exact, and a centre on an edge or vertex shared by
  *      triangles of a closed mesh is covered exactly once. Each covered
  *      centre is a crossing, placed by voxel_xing.glsl's formula in double
- *      from the lattice's unsnapped units, signed +1 where the triangle
+ *      from the lattice's unsnapped units (then snapped to 2^-20 voxel
+ *      along x), signed +1 where the triangle
  *      faces +x (those rules are lattice.h's, shared with winding.c);
  *   3. per row: the crossings sorted along x, counted from each centre
  *      towards +x (the [entry, exit) rule of scan, peel and the CPU

@@ -73,8 +73,9 @@ int32_t vx_lattice_xing(const double a[3], const double e1[3], const double e2[3
                  : dt > near + XING_REACH ? near + XING_REACH
                                           : dt;
     }
-    double u = (a[0] + dt) - 0.5;
-    double cb = ceil(u) - ix;
+    double t = a[0] + dt;
+    double cb =
+        ceil((nearbyint(t * VX_GRID_XING_SNAP) - VX_GRID_XING_SNAP / 2) / VX_GRID_XING_SNAP) - ix;
     cb = cb < -VX_LATTICE_XING_MAX  ? -VX_LATTICE_XING_MAX
          : cb > VX_LATTICE_XING_MAX ? VX_LATTICE_XING_MAX
                                     : cb;

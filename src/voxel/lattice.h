@@ -2,7 +2,8 @@
  * GL side): positions in the lattice's units (p - origin) / h, coverage
  * decided on those positions snapped to 1/VX_GRID_SNAP voxel by exact
  * integer edge functions with one tie rule, and each crossing placed by
- * shaders/voxel_xing.glsl's formula in double. cpu.c (rays along x) and
+ * shaders/voxel_xing.glsl's formula in double, then snapped to
+ * 1/VX_GRID_XING_SNAP voxel. cpu.c (rays along x) and
  * winding.c (rays along z) both decide their voxels here, so a column's
  * voxels come from lattice numbers only and every brick of a lattice gives
  * the same ones. The two axes across a ray are called (y, z) below, the
@@ -73,7 +74,8 @@ static inline vx_i128 vx_lattice_det(const int64_t A[2], const int64_t B[2], con
 /* xing() of shaders/voxel_xing.glsl, one sample per voxel: the first
  * centre along x at or beyond where the ray through lattice centre
  * (cy, cz) crosses the triangle (vertex a, edges e1, e2 from it, lattice
- * units, x first), less the brick's index ix, clamped to +-2^29. A ray the
+ * units, x first), that crossing snapped to 1/VX_GRID_XING_SNAP voxel, less the
+ * brick's index ix, clamped to +-2^29. A ray the
  * snapped coverage gave the triangle but that misses it by a rounding is
  * placed at the nearest point of its edges, within 1/64 voxel of the
  * plane's own crossing. */

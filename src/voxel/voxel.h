@@ -49,6 +49,12 @@ static inline double vx_grid_coord(const vx_grid *g, int a, double p)
  * snap window coordinates to anyway (8 subpixel bits). */
 #define VX_GRID_SNAP 256.0
 
+/* Steps per voxel every engine snaps a crossing along its ray to (2^20):
+ * far below any real geometry, far above the rounding of (p - origin) / h,
+ * so a face on a plane of centres (0.15 on origin -0.2, h 0.1) is exactly
+ * on it, a tie decided half-open, on any lattice. */
+#define VX_GRID_XING_SNAP 1048576.0
+
 /* Position p along axis a as the GPU methods upload it (xing.h): the
  * lattice's units (p - origin) / h snapped to 1/VX_GRID_SNAP, the same
  * number for every brick, less the brick's integer index. Exact as a float

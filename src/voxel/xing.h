@@ -20,9 +20,11 @@
  *   3. the fragment shader computes where the ray crosses the triangle
  *      (xing() in the shader) in double from the lattice's own unsnapped
  *      units (p - origin) / h, the same numbers for every brick, and the
- *      lattice index of the pixel's centre; only the last step subtracts
- *      the brick's index. Never from a varying the rasterizer interpolated
- *      from where the triangle sits in the window.
+ *      lattice index of the pixel's centre, and snaps it to 1/VX_GRID_XING_SNAP
+ *      voxel (so a face on a plane of centres is the same half-open tie
+ *      on every lattice, as rule 1 makes it across the ray); only the
+ *      last step subtracts the brick's index. Never from a varying the
+ *      rasterizer interpolated from where the triangle sits in the window.
  * The fragment shader reads the lattice positions (3 doubles a vertex) and
  * the triangles drawn (the element buffer) as texture buffers on units 6
  * and 7, and the brick's index from u_xing_index. */

@@ -371,6 +371,16 @@ for p in '"method":"cpu"' '"inside":"winding"' '"method":"scan"' '"method":"peel
     check "unused vertices: the same grid and voxels ($p: $A in $DA, got $(st voxels_inside) in $(jq -c .stats.dims "$TMP/job.json"))" \
         test "$(st voxels_inside)-$(jq -c .stats.dims "$TMP/job.json")" = "$A-$DA"
 done
+# Faces on planes of centres of a lattice whose origin and voxel size are
+# not binary fractions: the half-open [entry, exit) tie along every axis,
+# 3 x 3 x 3, with every method (it was 18: a layer lost along the rays).
+box_obj "$TMP/ctr.obj" -0.15 -0.15 -0.15 0.15 0.15 0.15
+upload "$TMP/ctr.obj"
+M_ctr=$MESH_ID
+for p in '"method":"cpu"' '"inside":"winding"' '"method":"scan"' '"method":"peel"' '"method":"slice"' '"method":"peel","inside":"robust"'; do
+    vox "box on centre planes ($p)" "$M_ctr" "{\"grid\":{\"origin\":[-0.2,-0.2,-0.2],\"voxel_size\":0.1,\"dims\":[4,4,4]},\"format\":\"summary\",$p}"
+    check "box on centre planes ($p): 27 voxels (got $(st voxels_inside))" test "$(st voxels_inside)" = 27
+done
 tet_obj "$TMP/small.obj" 4.7e-4
 upload "$TMP/small.obj"
 vox "small vdb (h just over the bound)" "$MESH_ID" '{"resolution":32,"format":"vdb"}'

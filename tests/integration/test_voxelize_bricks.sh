@@ -195,26 +195,28 @@ bad "vdb_index_base past 32-bit coordinates" '{"grid":{"origin":[0,0,0],"voxel_s
 bad "vdb_index_base far below" '{"grid":{"origin":[0,0,0],"voxel_size":0.1,"dims":[16,16,16],"index_offset":[0,-1099511627776,0]},"bricks":{"size":0},"vdb_index_base":[0,0,0]}' "axis 1"
 bad "vdb_index_base without a grid" '{"resolution":32,"bricks":{"size":0},"vdb_index_base":[0,0,0]}' "params.grid"
 
-# An origin 17 digits long (-0.125 - 2^-55): the centres of slab 0 sit
-# 2.8e-17 outside the box [0,3]^3. The job, its bricks, its echo and reuse
-# must all keep that double (cJSON's printer gave -0.125: bricks set the
-# slab, and reuse answered the -0.125 job).
-box_obj "$TMP/box3.obj" 0 0 0 3 3 3
+# An origin 16 digits long (1e12 - 0.125 less one ulp, 1.2e-4): the centres
+# of slab 0 sit 1/2048 voxel outside the box [1e12, 1e12 + 2.9] x
+# [1e12, 1e12 + 3]^2 (beyond the 2^-20-voxel snap of a crossing). The job,
+# its bricks, its echo and reuse must all keep that double (cJSON's printer
+# gave 15 digits, 999999999999.875: bricks set the slab, and reuse answered
+# the other job).
+box_obj "$TMP/box3.obj" 1e12 1e12 1e12 1000000000002.9 1000000000003 1000000000003
 upload "$TMP/box3.obj"
-near='{"origin":[-0.12500000000000003,-0.1,-0.1],"voxel_size":0.25,"dims":[16,16,16]}'
+near='{"origin":[999999999999.8749,999999999999.9,999999999999.9],"voxel_size":0.25,"dims":[16,16,16]}'
 for size in 0 8; do
     run_job voxelize "$MESH_ID" "{\"grid\":$near,\"vdb_grid\":\"bool\",\"bricks\":{\"size\":$size}}"
-    job_ok "origin of 17 digits, bricks $size"
-    check "origin of 17 digits, bricks $size: 11 x 12 x 12 voxels (got $(st voxels_inside))" test "$(st voxels_inside)" = 1584
-    check "origin of 17 digits, bricks $size: echoed exactly" jq -e '.params.grid.origin[0] == -0.12500000000000003 and .stats.origin[0] == -0.12500000000000003' "$TMP/job.json"
+    job_ok "origin of 16 digits, bricks $size"
+    check "origin of 16 digits, bricks $size: 11 x 12 x 12 voxels (got $(st voxels_inside))" test "$(st voxels_inside)" = 1584
+    check "origin of 16 digits, bricks $size: echoed exactly" jq -e '.params.grid.origin[0] == 999999999999.8749 and .stats.origin[0] == 999999999999.8749' "$TMP/job.json"
 done
 NEAR=$JOB
-run_job voxelize "$MESH_ID" '{"grid":{"origin":[-0.125,-0.1,-0.1],"voxel_size":0.25,"dims":[16,16,16]},"vdb_grid":"bool","bricks":{"size":8}}'
-check "origin -0.125: 12 x 12 x 12 voxels, another job" jq -e --arg j "$NEAR" '.id != $j and .stats.voxels_inside == 1728' "$TMP/job.json"
+run_job voxelize "$MESH_ID" '{"grid":{"origin":[999999999999.875,999999999999.9,999999999999.9],"voxel_size":0.25,"dims":[16,16,16]},"vdb_grid":"bool","bricks":{"size":8}}'
+check "origin 999999999999.875: 12 x 12 x 12 voxels, another job" jq -e --arg j "$NEAR" '.id != $j and .stats.voxels_inside == 1728' "$TMP/job.json"
 api POST "/v1/jobs?wait=60" -H "Content-Type: application/json" \
     -d "{\"mesh\":\"$MESH_ID\",\"kind\":\"voxelize\",\"reuse\":true,\"params\":{\"grid\":$near,\"vdb_grid\":\"bool\",\"bricks\":{\"size\":8}}}"
 cp "$BODY" "$TMP/job.json"
-check "reuse of the 17-digit origin answers its own job" jq -e --arg j "$NEAR" '.id == $j' "$TMP/job.json"
+check "reuse of the 16-digit origin answers its own job" jq -e --arg j "$NEAR" '.id == $j' "$TMP/job.json"
 stop_daemon
 
 # Admission follows one brick: under 64M a 1024^3 box is refused as one

@@ -92,7 +92,11 @@ int ref_voxelize(const vx_mesh *m, const vx_grid *g, vx_inside rule, uint8_t *ou
                 if (s0 != want || s1 != want || s2 != want) continue;
                 double nyc = (b[2] - a[2]) * (c[0] - a[0]) - (b[0] - a[0]) * (c[2] - a[2]);
                 double nzc = (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0]);
-                hits[nh].x = a[0] - (nyc * (py - a[1]) + nzc * (pz - a[2])) / nxc;
+                /* in the lattice's units, snapped to 1/VX_GRID_XING_SNAP voxel as
+                 * every engine snaps it (shaders/voxel_xing.glsl) */
+                double x = a[0] - (nyc * (py - a[1]) + nzc * (pz - a[2])) / nxc;
+                hits[nh].x =
+                    nearbyint((x - g->origin[0]) / g->h * VX_GRID_XING_SNAP) / VX_GRID_XING_SNAP;
                 hits[nh].s = want;
                 nh++;
             }
@@ -106,7 +110,7 @@ int ref_voxelize(const vx_mesh *m, const vx_grid *g, vx_inside rule, uint8_t *ou
             size_t q = 0;
             uint8_t *o = out + row * (size_t)nx;
             for (int i = 0; i < nx; i++) {
-                double xc = g->origin[0] + ((double)g->index[0] + i + 0.5) * g->h;
+                double xc = (double)g->index[0] + i + 0.5;
                 while (q < nh && hits[q].x <= xc) {
                     w -= hits[q].s;
                     par ^= 1;
