@@ -41,13 +41,59 @@ static int cmp_u32(const void *a, const void *b)
     return (x > y) - (x < y);
 }
 
-/* Counts boundary (used once) and non-manifold (used 3+ times) undirected
- * edges. Edges are bucketed by their lower vertex (CSR: 4 bytes per edge
- * plus 4 per vertex), then each small bucket is sorted: a quarter of the
- * memory of sorting 64-bit edge keys, which matters at 10^7 triangles. */
-static int count_edges(vx_mesh *m, size_t nedges, vx_err *err)
+static uint64_t mix(uint64_t x)
 {
-    m->boundary_edges = m->nonmanifold_edges = 0;
+    x ^= x >> 33;
+    x *= 0xff51afd7ed558ccdull;
+    x ^= x >> 33;
+    x *= 0xc4ceb9fe1a85ec53ull;
+    return x ^ (x >> 33);
+}
+
+uint32_t *vx_mesh_weld(const vx_mesh *m)
+{
+    size_t cap = 16;
+    while (cap < 2 * m->nverts)
+        cap <<= 1;
+    uint32_t *slot = malloc(cap * sizeof *slot), *canon = malloc(m->nverts * sizeof *canon + 1);
+    if (!slot || !canon) {
+        free(slot);
+        free(canon);
+        return NULL;
+    }
+    memset(slot, 0xff, cap * sizeof *slot);
+    for (size_t v = 0; v < m->nverts; v++) {
+        const double *p = m->pos + 3 * v;
+        uint64_t b[3];
+        memcpy(b, p, sizeof b);
+        size_t at = (size_t)(mix(b[0] ^ mix(b[1] ^ mix(b[2])))) & (cap - 1);
+        for (;; at = (at + 1) & (cap - 1)) {
+            if (slot[at] == UINT32_MAX) {
+                slot[at] = (uint32_t)v;
+                canon[v] = (uint32_t)v;
+                break;
+            }
+            if (!memcmp(m->pos + 3 * (size_t)slot[at], p, 3 * sizeof *p)) {
+                canon[v] = slot[at];
+                break;
+            }
+        }
+    }
+    free(slot);
+    return canon;
+}
+
+/* Counts boundary (used once) and non-manifold (used 3+ times) undirected
+ * edges into out[0], out[1], with vertex v read as canon[v] (canon NULL:
+ * as itself). Edges are bucketed by their lower vertex (CSR: 4 bytes per
+ * edge plus 4 per vertex), then each small bucket is sorted: a quarter of
+ * the memory of sorting 64-bit edge keys, which matters at 10^7
+ * triangles. An edge whose two ends weld into one is not an edge. */
+static int count_edges(const vx_mesh *m, size_t nedges, const uint32_t *canon, size_t out[2],
+                       vx_err *err)
+{
+#define V(x) (canon ? canon[x] : (x))
+    out[0] = out[1] = 0;
     if (nedges >= UINT32_MAX)
         return vx_err_set(err, VX_ETOOBIG, "mesh_too_big", "%zu edges is too many", nedges);
     uint32_t *start = calloc(m->nverts + 1, sizeof *start);
@@ -61,20 +107,20 @@ static int count_edges(vx_mesh *m, size_t nedges, vx_err *err)
         const uint32_t *v = vx_mesh_face(m, f);
         uint32_t n = vx_mesh_face_size(m, f);
         for (uint32_t k = 0; k < n; k++) {
-            uint32_t a = v[k], b = v[(k + 1) % n];
-            start[a < b ? a : b]++;
+            uint32_t a = V(v[k]), b = V(v[(k + 1) % n]);
+            if (a != b) start[a < b ? a : b]++;
         }
     }
     for (size_t i = 1; i <= m->nverts; i++)
         start[i] += start[i - 1];
-    start[m->nverts] = (uint32_t)nedges;
     /* start[v] holds the end of v's bucket; filling backwards leaves it at
      * the bucket's beginning. */
     for (size_t f = 0; f < m->nfaces; f++) {
         const uint32_t *v = vx_mesh_face(m, f);
         uint32_t n = vx_mesh_face_size(m, f);
         for (uint32_t k = 0; k < n; k++) {
-            uint32_t a = v[k], b = v[(k + 1) % n];
+            uint32_t a = V(v[k]), b = V(v[(k + 1) % n]);
+            if (a == b) continue;
             if (a < b)
                 nbr[--start[a]] = b;
             else
@@ -90,15 +136,16 @@ static int count_edges(vx_mesh *m, size_t nedges, vx_err *err)
             while (j < n && e[j] == e[i])
                 j++;
             if (j - i == 1)
-                m->boundary_edges++;
+                out[0]++;
             else if (j - i > 2)
-                m->nonmanifold_edges++;
+                out[1]++;
             i = j;
         }
     }
     free(start);
     free(nbr);
     return 0;
+#undef V
 }
 
 int vx_mesh_check_indices(const vx_mesh *m, vx_err *err)
@@ -179,7 +226,20 @@ int vx_mesh_analyze(vx_mesh *m, vx_err *err)
         if (n[0] == 0 && n[1] == 0 && n[2] == 0) m->degenerate_tris++;
     }
 
-    return count_edges(m, nedges, err);
+    size_t c[2];
+    if (count_edges(m, nedges, NULL, c, err)) return -1;
+    m->boundary_edges = c[0];
+    m->nonmanifold_edges = c[1];
+    m->boundary_edges_welded = c[0];
+    if (!c[0]) return 0; /* welding cannot open a closed mesh */
+    uint32_t *canon = vx_mesh_weld(m);
+    if (!canon)
+        return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory to weld %zu vertices",
+                          m->nverts);
+    int rc = count_edges(m, nedges, canon, c, err);
+    free(canon);
+    if (!rc) m->boundary_edges_welded = c[0];
+    return rc;
 }
 
 #define COST_BASE (UINT64_C(16) << 20)

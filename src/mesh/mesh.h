@@ -50,11 +50,12 @@ typedef struct vx_mesh {
 
     /* What load-time analysis found (vx_mesh_analyze). */
     double bbox_min[3], bbox_max[3];
-    size_t faces_by_size[3];     /* triangles, quads, n-gons (n >= 5) */
-    size_t boundary_edges;       /* undirected edges used by exactly one face; 0 = closed */
-    size_t nonmanifold_edges;    /* undirected edges used by three or more faces */
-    size_t degenerate_tris;      /* triangles of zero area (kept, reported) */
-    size_t ntexcoords, nnormals; /* vt / vn records seen (not kept) */
+    size_t faces_by_size[3];      /* triangles, quads, n-gons (n >= 5) */
+    size_t boundary_edges;        /* undirected edges used by exactly one face; 0 = closed */
+    size_t boundary_edges_welded; /* the same with vertices at one position as one vertex */
+    size_t nonmanifold_edges;     /* undirected edges used by three or more faces */
+    size_t degenerate_tris;       /* triangles of zero area (kept, reported) */
+    size_t ntexcoords, nnormals;  /* vt / vn records seen (not kept) */
 } vx_mesh;
 
 /* Limits a reader enforces while it streams; 0 = no limit. */
@@ -78,9 +79,15 @@ const uint32_t *vx_mesh_face(const vx_mesh *m, size_t f);
 int vx_mesh_face_repeat(const uint32_t *v, size_t n, uint32_t *scratch, uint32_t *rep);
 
 /* Builds `tri` from the faces (fan) if needed and fills bbox, faces_by_size,
- * boundary/non-manifold edge counts and degenerate_tris. Readers call it;
+ * boundary/non-manifold edge counts (boundary edges also with vertices
+ * welded by position) and degenerate_tris. Readers call it;
  * code that builds a mesh by hand calls it before use. */
 int vx_mesh_analyze(vx_mesh *m, vx_err *err);
+
+/* canon[v] (malloc'd, nverts entries): the first vertex at v's exact
+ * position (the coordinates' bits), so that vertices split at seams weld
+ * into one; NULL without memory. Any thread. */
+uint32_t *vx_mesh_weld(const vx_mesh *m);
 
 /* 0 when every triangle index names a vertex, else -1 with VX_EINTERNAL
  * mesh_invalid: what an engine checks before it reads positions by index

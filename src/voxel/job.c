@@ -524,6 +524,8 @@ static void stats_grid(cJSON *stats, const vx_grid *g, const vx_mesh *mesh, cons
     stat_set(stats, "method", cJSON_CreateString(method ? method : "unknown"));
     stat_set(stats, "inside", cJSON_CreateString(inside_names[inside]));
     stat_set(stats, "boundary_edges", cJSON_CreateNumber((double)mesh->boundary_edges));
+    stat_set(stats, "boundary_edges_welded",
+             cJSON_CreateNumber((double)mesh->boundary_edges_welded));
     stat_set(stats, "dims", array3(dims));
     stat_set(stats, "origin", array3(g->origin));
     double index[3] = {(double)g->index[0], (double)g->index[1], (double)g->index[2]};
@@ -755,6 +757,9 @@ static int mesh_of_meta(const cJSON *meta, vx_mesh *m, vx_err *err)
     }
     m->boundary_edges =
         (size_t)cJSON_GetNumberValue(cJSON_GetObjectItemCaseSensitive(meta, "boundary_edges"));
+    /* metadata stored before the welded count: the plain one */
+    const cJSON *w = cJSON_GetObjectItemCaseSensitive(meta, "boundary_edges_welded");
+    m->boundary_edges_welded = cJSON_IsNumber(w) ? (size_t)w->valuedouble : m->boundary_edges;
     return 0;
 }
 

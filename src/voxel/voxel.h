@@ -208,7 +208,8 @@ int vx_voxelize_faces(vx_gl *gl, const vx_mesh *m, const vx_voxelize_desc *d, vx
 int vx_voxelize_winding(const vx_mesh *m, const vx_voxelize_desc *d, vx_bitgrid *out,
                         vx_voxelize_stats *st, vx_err *err);
 /* The inside rule when the request names none: winding for a mesh with
- * boundary edges when d could run it (method auto, fill solid, no cube
+ * boundary edges (vertices welded by position: a seam of split vertices
+ * is not a hole) when d could run it (method auto, fill solid, no cube
  * supersampling), else nonzero. */
 vx_inside vx_voxelize_default_inside(const vx_mesh *m, const vx_voxelize_desc *d);
 

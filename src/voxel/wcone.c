@@ -21,56 +21,6 @@ static uint32_t root(uint32_t *up, uint32_t v)
     return v;
 }
 
-static uint64_t mix(uint64_t x)
-{
-    x ^= x >> 33;
-    x *= 0xff51afd7ed558ccdull;
-    x ^= x >> 33;
-    x *= 0xc4ceb9fe1a85ec53ull;
-    return x ^ (x >> 33);
-}
-
-static size_t pow2_at_least(size_t n)
-{
-    size_t p = 16;
-    while (p < n)
-        p <<= 1;
-    return p;
-}
-
-/* canon[v]: the first vertex at v's position (vertices welded by position;
- * a hash of the coordinates' bits). */
-static uint32_t *weld(const vx_mesh *m)
-{
-    size_t cap = pow2_at_least(2 * m->nverts);
-    uint32_t *slot = malloc(cap * sizeof *slot), *canon = malloc(m->nverts * sizeof *canon + 1);
-    if (!slot || !canon) {
-        free(slot);
-        free(canon);
-        return NULL;
-    }
-    memset(slot, 0xff, cap * sizeof *slot);
-    for (size_t v = 0; v < m->nverts; v++) {
-        const double *p = m->pos + 3 * v;
-        uint64_t b[3];
-        memcpy(b, p, sizeof b);
-        size_t at = (size_t)(mix(b[0] ^ mix(b[1] ^ mix(b[2])))) & (cap - 1);
-        for (;; at = (at + 1) & (cap - 1)) {
-            if (slot[at] == UINT32_MAX) {
-                slot[at] = (uint32_t)v;
-                canon[v] = (uint32_t)v;
-                break;
-            }
-            if (!memcmp(m->pos + 3 * (size_t)slot[at], p, 3 * sizeof *p)) {
-                canon[v] = slot[at];
-                break;
-            }
-        }
-    }
-    free(slot);
-    return canon;
-}
-
 /* Occurrences of b in list[0..n). */
 static uint32_t occurs(const uint32_t *list, uint32_t n, uint32_t b)
 {
@@ -142,7 +92,7 @@ int vx_wcone_build(const vx_mesh *m, double **cone, size_t *ncone, vx_err *err)
 {
     *cone = NULL;
     *ncone = 0;
-    uint32_t *canon = weld(m);
+    uint32_t *canon = vx_mesh_weld(m);
     dedge *e = NULL;
     size_t nb = 0, w = canon ? net_edges(m, canon, &e) : (size_t)-1;
     if (w == (size_t)-1) goto oom;

@@ -535,5 +535,5 @@ vx_inside vx_voxelize_default_inside(const vx_mesh *m, const vx_voxelize_desc *d
 {
     int fits = d->method == VX_METHOD_AUTO && d->fill == VX_FILL_SOLID &&
                (d->supersample != 2 || d->samples == VX_SAMPLES_FACES);
-    return m->boundary_edges > 0 && fits ? VX_INSIDE_WINDING : VX_INSIDE_NONZERO;
+    return m->boundary_edges_welded > 0 && fits ? VX_INSIDE_WINDING : VX_INSIDE_NONZERO;
 }

@@ -67,6 +67,32 @@ echo "note: overlap robust $(st volume) vs winding union $(W want)"
 check "overlap robust drops part of the overlap (> 3% short; winding is the fix)" \
     awk -v a="$(st volume)" -v b="$(W want)" 'BEGIN { exit !(a < 0.97 * b) }'
 
+# A cube written face by face (24 vertices, every edge a seam) is closed
+# once welded: the default stays nonzero. Without one face it is open there
+# and the default runs winding.
+python3 - "$TMP" <<'PY'
+import sys
+quad = [(0, 3, 2, 1), (4, 5, 6, 7), (0, 1, 5, 4), (1, 2, 6, 5), (2, 3, 7, 6), (3, 0, 4, 7)]
+c = [(-1, -1, -1), (1, -1, -1), (1, 1, -1), (-1, 1, -1), (-1, -1, 1), (1, -1, 1), (1, 1, 1), (-1, 1, 1)]
+for name, faces in (("split", 6), ("split_open", 5)):
+    with open(f"{sys.argv[1]}/{name}.obj", "w") as f:
+        for q in quad[:faces]:
+            for v in q:
+                f.write("v %d %d %d\n" % c[v])
+        for i in range(faces):
+            f.write("f %d %d %d %d\n" % (4 * i + 1, 4 * i + 2, 4 * i + 3, 4 * i + 4))
+PY
+upload "$TMP/split.obj"
+check "split cube: 24 seams, closed welded" jq -e '.boundary_edges == 24 and .boundary_edges_welded == 0' "$BODY"
+M_split=$MESH_ID
+vox "split cube default" "$M_split" '{"resolution":16,"format":"summary"}'
+check "split cube default: nonzero, both counts in the stats" \
+    jq -e '.stats.inside == "nonzero" and .stats.boundary_edges == 24 and .stats.boundary_edges_welded == 0' "$TMP/job.json"
+upload "$TMP/split_open.obj"
+check "split cube without one face: open welded" jq -e '.boundary_edges == 20 and .boundary_edges_welded == 4' "$BODY"
+vox "split open box default" "$MESH_ID" '{"resolution":16,"format":"summary"}'
+check "split open box default: winding" jq -e '.stats.inside == "winding" and .stats.boundary_edges_welded == 4' "$TMP/job.json"
+
 vox "nested default" "$M_nest" '{"resolution":96,"format":"summary"}'
 check "nested default: closed, nonzero" jq -e '.stats.inside == "nonzero" and .stats.boundary_edges == 0' "$TMP/job.json"
 NZ=$(st voxels_inside)

@@ -205,7 +205,8 @@ static void test_check_and_meta(void **state)
     const char *want = "{\"id\":\"ab\",\"format\":\"draco\",\"bytes\":123,\"vertices\":4,"
                        "\"triangles\":2,\"faces\":{\"total\":1,\"triangles\":0,\"quads\":1,"
                        "\"ngons\":0},\"bbox\":{\"min\":[0,0,0],\"max\":[1,1,0]},"
-                       "\"boundary_edges\":0,\"nonmanifold_edges\":0,\"degenerate_triangles\":2,"
+                       "\"boundary_edges\":0,\"boundary_edges_welded\":0,\"nonmanifold_edges\":0,"
+                       "\"degenerate_triangles\":2,"
                        "\"texcoords\":0,\"normals\":0,\"patches\":0,\"created\":\"";
     assert_memory_equal(text, want, strlen(want));
     const cJSON *created = cJSON_GetObjectItemCaseSensitive(o, "created");

@@ -216,6 +216,52 @@ static void test_cube_closed_and_open(void **state)
     assert_non_null(m);
     assert_int_equal(m->nfaces, 5);
     assert_int_equal(m->boundary_edges, 4);
+    assert_int_equal(m->boundary_edges_welded, 4);
+    vx_mesh_free(m);
+}
+
+/* The cube written face by face (24 vertices, none shared, as a glTF
+ * with hard edges or an OBJ exported per face): every edge is a seam,
+ * used once, and none is a hole once the vertices are welded by position.
+ * Without its lid, the lid's 4 edges stay open; a sliver whose two
+ * vertices weld into one has no edge there. */
+static void test_split_vertices_weld(void **state)
+{
+    (void)state;
+    static const int quad[6][4] = {{0, 3, 2, 1}, {4, 5, 6, 7}, {0, 1, 5, 4},
+                                   {1, 2, 6, 5}, {2, 3, 7, 6}, {3, 0, 4, 7}};
+    static const int c[8][3] = {{-1, -1, -1}, {1, -1, -1}, {1, 1, -1}, {-1, 1, -1},
+                                {-1, -1, 1},  {1, -1, 1},  {1, 1, 1},  {-1, 1, 1}};
+    for (int faces = 6; faces >= 5; faces--) {
+        char text[2048];
+        size_t n = 0;
+        for (int f = 0; f < faces; f++)
+            for (int k = 0; k < 4; k++) {
+                const int *p = c[quad[f][k]];
+                n += (size_t)snprintf(text + n, sizeof text - n, "v %d %d %d\n", p[0], p[1], p[2]);
+            }
+        for (int f = 0; f < faces; f++)
+            n += (size_t)snprintf(text + n, sizeof text - n, "f %d %d %d %d\n", 4 * f + 1,
+                                  4 * f + 2, 4 * f + 3, 4 * f + 4);
+        vx_err err = {0};
+        vx_mesh *m = read_str(text, &err);
+        assert_non_null(m);
+        assert_int_equal(m->nverts, 4 * (size_t)faces);
+        assert_int_equal(m->boundary_edges, 4 * (size_t)faces);
+        assert_int_equal(m->boundary_edges_welded, faces == 6 ? 0 : 4);
+        assert_int_equal(m->nonmanifold_edges, 0);
+        vx_mesh_free(m);
+    }
+    /* two triangles on one edge, plus a sliver 4 5 6 whose vertices 5 and
+     * 6 sit at one place: welded, its edge 5-6 is no edge, 4-5 and 6-4 are
+     * one edge used twice, and the pair's outline stays open (4 edges) */
+    vx_err err = {0};
+    vx_mesh *m = read_str("v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 2 2 0\nv 2 2 0\n"
+                          "f 1 2 3\nf 1 3 4\nf 4 5 6\n",
+                          &err);
+    assert_non_null(m);
+    assert_int_equal(m->boundary_edges, 7);
+    assert_int_equal(m->boundary_edges_welded, 4);
     vx_mesh_free(m);
 }
 
@@ -615,6 +661,7 @@ int main(void)
         cmocka_unit_test(test_ngons),
         cmocka_unit_test(test_late_quad),
         cmocka_unit_test(test_cube_closed_and_open),
+        cmocka_unit_test(test_split_vertices_weld),
         cmocka_unit_test(test_syntax_variants),
         cmocka_unit_test(test_number_parsing),
         cmocka_unit_test(test_errors),
