@@ -56,13 +56,6 @@ int vx_route_mesh_file(vx_http *h, struct MHD_Connection *c, req *r)
     vx_resp_disposition(disp, sizeof disp, cJSON_IsString(nj) ? nj->valuestring : NULL, NULL, r->id,
                         vx_intake_format_ext(fmt ? fmt : VX_MESH_OBJ));
     cJSON_Delete(meta);
-    const char *inm = vx_resp_header(c, MHD_HTTP_HEADER_IF_NONE_MATCH);
-    if (inm && (strstr(inm, etag) || !strcmp(inm, "*"))) {
-        struct MHD_Response *resp =
-            MHD_create_response_from_buffer(0, (void *)"", MHD_RESPMEM_PERSISTENT);
-        MHD_add_response_header(resp, MHD_HTTP_HEADER_ETAG, etag);
-        return vx_resp_queue(c, r, 304, resp, 0);
-    }
     int fd = -1;
     struct stat st;
     /* the fd checked is the one served: a file replaced meanwhile is not */
@@ -74,6 +67,17 @@ int vx_route_mesh_file(vx_http *h, struct MHD_Connection *c, req *r)
     if (fd < 0 || fstat(fd, &st) != 0) {
         if (fd >= 0) close(fd);
         return vx_resp_fail(c, r, VX_ENOTFOUND, "mesh_not_found", "the mesh was deleted");
+    }
+    /* 304 only for a file that is there and intact (so "*" too) */
+    const char *inm = vx_resp_header(c, MHD_HTTP_HEADER_IF_NONE_MATCH);
+    if (inm && (strstr(inm, etag) || !strcmp(inm, "*"))) {
+        close(fd);
+        struct MHD_Response *nm =
+            MHD_create_response_from_buffer(0, (void *)"", MHD_RESPMEM_PERSISTENT);
+        MHD_add_response_header(nm, MHD_HTTP_HEADER_ETAG, etag);
+        MHD_add_response_header(nm, MHD_HTTP_HEADER_CACHE_CONTROL,
+                                "private, max-age=86400, immutable");
+        return vx_resp_queue(c, r, 304, nm, 0);
     }
     struct MHD_Response *resp = MHD_create_response_from_fd64((uint64_t)st.st_size, fd);
     if (!resp) {

@@ -105,6 +105,8 @@ for f in cube_bin.stl:model/stl cube.glb:model/gltf-binary cube_ascii.ply:model/
     check "file of $file: ETag is the id" test "$(header ETag)" = "\"$id\""
     api GET "/v1/meshes/$id/file" -H "If-None-Match: \"$id\""
     expect_status "file of $file, If-None-Match" 304
+    check "file of $file, 304: ETag and Cache-Control kept" \
+        test "$(header ETag)-$(header Cache-Control)" = "\"$id\"-private, max-age=86400, immutable"
 done
 api GET "/v1/meshes/$(printf 'f%.0s' $(seq 64))/file"
 expect_error "file of an unknown mesh" 404 mesh_not_found

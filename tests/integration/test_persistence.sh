@@ -116,6 +116,11 @@ for damage in flip remove fifo directory; do
     api GET "/v1/meshes/$BOX/file"
     expect_error "a mesh file damaged ($damage)" 410 mesh_damaged
     check "logged ($damage)" test "$(logged damaged)" -gt "$DAMAGED"
+    # no 304 for a file that is not there as its id says
+    api GET "/v1/meshes/$BOX/file" -H 'If-None-Match: *'
+    expect_error "a mesh file damaged ($damage), If-None-Match: *" 410 mesh_damaged
+    api GET "/v1/meshes/$BOX/file" -H "If-None-Match: \"$BOX\""
+    expect_error "a mesh file damaged ($damage), If-None-Match: its id" 410 mesh_damaged
     if [[ $damage == flip ]]; then
         stop_daemon
         start_daemon || exit 1
