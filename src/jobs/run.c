@@ -3,6 +3,7 @@
 
 #include <pthread.h>
 #include <stdio.h>
+#include <unistd.h>
 
 #include "util/fsutil.h"
 
@@ -58,9 +59,13 @@ const char *vx_run_job_id(const vx_job_run *r)
 vx_mesh *vx_run_load_mesh(vx_job_run *r, const char *id, vx_err *err)
 {
     char path[VX_PATH_MAX];
-    if (vx_store_mesh_path(r->jobs->desc.store, id, path, sizeof path, err)) return NULL;
+    /* the file read is the one checked, whatever its path holds by then */
+    int fd = vx_store_mesh_open_path(r->jobs->desc.store, id, path, sizeof path, err);
+    if (fd < 0) return NULL;
     vx_mesh_limits lim = {.max_triangles = r->jobs->desc.limits.max_triangles};
-    return vx_mesh_read_path(path, &lim, err);
+    vx_mesh *m = vx_mesh_read_fd(fd, path, &lim, err);
+    close(fd);
+    return m;
 }
 
 cJSON *vx_run_stats(vx_job_run *r)

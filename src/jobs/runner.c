@@ -210,9 +210,12 @@ static const vx_mesh *load_mesh(vx_jobs *j, mesh_cache *mc, const char *id, vx_e
     mc->mesh = NULL;
     mc->id[0] = 0;
     char path[VX_PATH_MAX];
-    if (vx_store_mesh_path(j->desc.store, id, path, sizeof path, err)) return NULL;
+    /* the file read is the one checked, whatever its path holds by then */
+    int fd = vx_store_mesh_open_path(j->desc.store, id, path, sizeof path, err);
+    if (fd < 0) return NULL;
     vx_mesh_limits lim = {.max_triangles = j->desc.limits.max_triangles};
-    mc->mesh = vx_mesh_read_path(path, &lim, err);
+    mc->mesh = vx_mesh_read_fd(fd, path, &lim, err);
+    close(fd);
     if (mc->mesh) snprintf(mc->id, sizeof mc->id, "%s", id);
     return mc->mesh;
 }

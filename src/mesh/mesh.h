@@ -241,6 +241,10 @@ vx_mesh *vx_import_read_mem(const unsigned char *data, size_t n, vx_mesh_format 
  * (how the store names them), the rest told by the first bytes
  * (vx_mesh_sniff). */
 vx_mesh *vx_mesh_read_path(const char *path, const vx_mesh_limits *lim, vx_err *err);
+/* The same from the open file fd (reopened through /proc/self/fd, so the
+ * file read is the one fd names whatever its path now holds), its format
+ * told by name's extension or its first bytes. fd stays open. */
+vx_mesh *vx_mesh_read_fd(int fd, const char *name, const vx_mesh_limits *lim, vx_err *err);
 /* Reads path as the given format (no sniffing). */
 vx_mesh *vx_mesh_read_as(const char *path, vx_mesh_format fmt, const vx_mesh_limits *lim,
                          vx_err *err);

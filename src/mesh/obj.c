@@ -661,9 +661,12 @@ static vx_mesh_format format_of_ext(const char *path)
     return 0;
 }
 
-vx_mesh *vx_mesh_read_path(const char *path, const vx_mesh_limits *lim, vx_err *err)
+/* Reads the file at path, its format told by name's extension or else by
+ * its first bytes. */
+static vx_mesh *read_named(const char *path, const char *name, const vx_mesh_limits *lim,
+                           vx_err *err)
 {
-    vx_mesh_format by_ext = format_of_ext(path);
+    vx_mesh_format by_ext = format_of_ext(name);
     if (by_ext) return vx_mesh_read_as(path, by_ext, lim, err);
     FILE *f = vx_mesh_open(path, err);
     if (!f) return NULL;
@@ -676,4 +679,16 @@ vx_mesh *vx_mesh_read_path(const char *path, const vx_mesh_limits *lim, vx_err *
         return NULL;
     }
     return vx_mesh_read_as(path, vx_mesh_sniff(head, n), lim, err);
+}
+
+vx_mesh *vx_mesh_read_path(const char *path, const vx_mesh_limits *lim, vx_err *err)
+{
+    return read_named(path, path, lim, err);
+}
+
+vx_mesh *vx_mesh_read_fd(int fd, const char *name, const vx_mesh_limits *lim, vx_err *err)
+{
+    char path[64];
+    snprintf(path, sizeof path, "/proc/self/fd/%d", fd);
+    return read_named(path, name, lim, err);
 }

@@ -562,6 +562,11 @@ int vx_store_mesh_path(vx_store *s, const char *id, char *buf, size_t n, vx_err 
     return 0;
 }
 
+int vx_store_mesh_open_path(vx_store *s, const char *id, char *buf, size_t n, vx_err *err)
+{
+    return mesh_open_checked(s, id, buf, n, err);
+}
+
 int vx_store_mesh_open(vx_store *s, const char *id, vx_err *err)
 {
     char path[VX_PATH_MAX];

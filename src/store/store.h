@@ -84,6 +84,9 @@ int vx_store_mesh_path(vx_store *s, const char *id, char *buf, size_t n, vx_err 
  * being the one returned (so the bytes read are the ones hashed); -1 with
  * err as vx_store_mesh_path. The caller closes it. */
 int vx_store_mesh_open(vx_store *s, const char *id, vx_err *err);
+/* The same with the file's path into buf (its extension names the format:
+ * vx_mesh_read_fd). */
+int vx_store_mesh_open_path(vx_store *s, const char *id, char *buf, size_t n, vx_err *err);
 /* Deletes a mesh: it disappears from meta, list and count at once (404 for
  * new jobs); its file stays while pins hold it (vx_store_mesh_path still
  * answers), and goes with the last unpin. */

@@ -6,6 +6,7 @@
 #include <setjmp.h>
 #include <cmocka.h>
 
+#include <fcntl.h>
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -263,6 +264,58 @@ static void test_split_vertices_weld(void **state)
     assert_int_equal(m->boundary_edges, 7);
     assert_int_equal(m->boundary_edges_welded, 4);
     vx_mesh_free(m);
+}
+
+/* Writes text to path (replacing it: a new file renamed over it). */
+static void replace_file(const char *path, const char *text)
+{
+    char tmp[256];
+    snprintf(tmp, sizeof tmp, "%s.new", path);
+    FILE *f = fopen(tmp, "wb");
+    assert_non_null(f);
+    assert_int_equal(fwrite(text, 1, strlen(text), f), strlen(text));
+    assert_int_equal(fclose(f), 0);
+    assert_int_equal(rename(tmp, path), 0);
+}
+
+/* vx_mesh_read_fd reads the file its fd names, not what the path holds by
+ * then (a job reads the mesh file the store checked; one swapped in after
+ * the check is not read), its format told by the name's extension (OFF,
+ * through the importer) or by its bytes (OBJ). */
+static void test_read_fd_not_path(void **state)
+{
+    (void)state;
+    static const char *tet_obj = "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\n"
+                                 "f 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n";
+    static const char *tri_obj = "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n";
+    static const char *tet_off = "OFF\n4 4 0\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n"
+                                 "3 0 2 1\n3 0 1 3\n3 0 3 2\n3 1 2 3\n";
+    static const char *tri_off = "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n";
+    const char *names[] = {"/tmp/vx_test_fd_%d.obj", "/tmp/vx_test_fd_%d.off"};
+    for (int k = 0; k < 2; k++) {
+        char path[128];
+        snprintf(path, sizeof path, names[k], (int)getpid());
+        replace_file(path, k ? tet_off : tet_obj);
+        int fd = open(path, O_RDONLY);
+        assert_true(fd >= 0);
+        replace_file(path, k ? tri_off : tri_obj); /* swapped after the open */
+        vx_err err = {0};
+        vx_mesh_limits lim = {0};
+        vx_mesh *m = vx_mesh_read_fd(fd, path, &lim, &err);
+        assert_non_null(m);
+        assert_int_equal(m->ntris, 4); /* the file opened */
+        vx_mesh_free(m);
+        m = vx_mesh_read_fd(fd, path, &lim, &err); /* fd unchanged: again */
+        assert_non_null(m);
+        assert_int_equal(m->ntris, 4);
+        vx_mesh_free(m);
+        close(fd);
+        m = vx_mesh_read_path(path, &lim, &err);
+        assert_non_null(m);
+        assert_int_equal(m->ntris, 1); /* the path's file now */
+        vx_mesh_free(m);
+        unlink(path);
+    }
 }
 
 /* CRLF, no final newline, comments, blank lines, tabs, continuation, BOM,
@@ -662,6 +715,7 @@ int main(void)
         cmocka_unit_test(test_late_quad),
         cmocka_unit_test(test_cube_closed_and_open),
         cmocka_unit_test(test_split_vertices_weld),
+        cmocka_unit_test(test_read_fd_not_path),
         cmocka_unit_test(test_syntax_variants),
         cmocka_unit_test(test_number_parsing),
         cmocka_unit_test(test_errors),
