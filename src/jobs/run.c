@@ -60,10 +60,18 @@ vx_mesh *vx_run_load_mesh(vx_job_run *r, const char *id, vx_err *err)
 {
     char path[VX_PATH_MAX];
     /* the file read is the one checked, whatever its path holds by then */
-    int fd = vx_store_mesh_open_path(r->jobs->desc.store, id, path, sizeof path, err);
+    int64_t version[7];
+    int fd = vx_store_mesh_open_path(r->jobs->desc.store, id, path, sizeof path, version, err);
     if (fd < 0) return NULL;
     vx_mesh_limits lim = {.max_triangles = r->jobs->desc.limits.max_triangles};
     vx_mesh *m = vx_mesh_read_fd(fd, path, &lim, err);
+    /* a file written in place while it was read (its parse error too) */
+    vx_err changed = {0};
+    if (vx_store_mesh_still_intact(id, fd, version, &changed)) {
+        vx_mesh_free(m);
+        m = NULL;
+        *err = changed;
+    }
     close(fd);
     return m;
 }

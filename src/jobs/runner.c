@@ -211,10 +211,18 @@ static const vx_mesh *load_mesh(vx_jobs *j, mesh_cache *mc, const char *id, vx_e
     mc->id[0] = 0;
     char path[VX_PATH_MAX];
     /* the file read is the one checked, whatever its path holds by then */
-    int fd = vx_store_mesh_open_path(j->desc.store, id, path, sizeof path, err);
+    int64_t version[7];
+    int fd = vx_store_mesh_open_path(j->desc.store, id, path, sizeof path, version, err);
     if (fd < 0) return NULL;
     vx_mesh_limits lim = {.max_triangles = j->desc.limits.max_triangles};
     mc->mesh = vx_mesh_read_fd(fd, path, &lim, err);
+    /* a file written in place while it was read (its parse error too) */
+    vx_err changed = {0};
+    if (vx_store_mesh_still_intact(id, fd, version, &changed)) {
+        vx_mesh_free(mc->mesh);
+        mc->mesh = NULL;
+        *err = changed;
+    }
     close(fd);
     if (mc->mesh) snprintf(mc->id, sizeof mc->id, "%s", id);
     return mc->mesh;

@@ -92,9 +92,13 @@ int too_big(Gather &g, const char *what, size_t n, size_t limit)
                       g.fi->name, limit, what, n);
 }
 
-/* Merges vertices with equal positions (a triangle soup's corners). */
+/* Merges vertices with equal positions (a triangle soup's corners); a
+ * coordinate -0 is written +0 first (the same place, and runs of equal
+ * positions are found by their bits). */
 void weld(Gather &g)
 {
+    for (double &x : g.pos)
+        x += 0.0;
     size_t nv = g.pos.size() / 3;
     std::vector<uint32_t> order(nv), remap(nv);
     for (size_t i = 0; i < nv; i++)

@@ -50,6 +50,15 @@ static uint64_t mix(uint64_t x)
     return x ^ (x >> 33);
 }
 
+/* The bits of position p with -0 read as +0 (one place, two spellings). */
+static void pos_key(const double *p, uint64_t b[3])
+{
+    for (int k = 0; k < 3; k++) {
+        double x = p[k] + 0.0;
+        memcpy(&b[k], &x, sizeof x);
+    }
+}
+
 uint32_t *vx_mesh_weld(const vx_mesh *m)
 {
     size_t cap = 16;
@@ -63,9 +72,8 @@ uint32_t *vx_mesh_weld(const vx_mesh *m)
     }
     memset(slot, 0xff, cap * sizeof *slot);
     for (size_t v = 0; v < m->nverts; v++) {
-        const double *p = m->pos + 3 * v;
-        uint64_t b[3];
-        memcpy(b, p, sizeof b);
+        uint64_t b[3], o[3];
+        pos_key(m->pos + 3 * v, b);
         size_t at = (size_t)(mix(b[0] ^ mix(b[1] ^ mix(b[2])))) & (cap - 1);
         for (;; at = (at + 1) & (cap - 1)) {
             if (slot[at] == UINT32_MAX) {
@@ -73,7 +81,8 @@ uint32_t *vx_mesh_weld(const vx_mesh *m)
                 canon[v] = (uint32_t)v;
                 break;
             }
-            if (!memcmp(m->pos + 3 * (size_t)slot[at], p, 3 * sizeof *p)) {
+            pos_key(m->pos + 3 * (size_t)slot[at], o);
+            if (!memcmp(o, b, sizeof b)) {
                 canon[v] = slot[at];
                 break;
             }

@@ -85,8 +85,8 @@ int vx_mesh_face_repeat(const uint32_t *v, size_t n, uint32_t *scratch, uint32_t
 int vx_mesh_analyze(vx_mesh *m, vx_err *err);
 
 /* canon[v] (malloc'd, nverts entries): the first vertex at v's exact
- * position (the coordinates' bits), so that vertices split at seams weld
- * into one; NULL without memory. Any thread. */
+ * position (the coordinates' bits, -0 read as +0), so that vertices split
+ * at seams weld into one; NULL without memory. Any thread. */
 uint32_t *vx_mesh_weld(const vx_mesh *m);
 
 /* 0 when every triangle index names a vertex, else -1 with VX_EINTERNAL

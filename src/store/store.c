@@ -332,26 +332,55 @@ static int hash_fd(int fd, char hex[65])
  * is the id), hashed once per version of the file; 0 when it does not;
  * -1 when it cannot be read (errno). Checking the open file, not a path,
  * is what makes the bytes served or parsed the ones checked. */
-static int mesh_fd_intact(vx_store *s, const char *id, int fd)
+/* The "bytes" of a mesh's metadata text, or -1 (none, or deleted). */
+static long long meta_bytes(const char *meta)
+{
+    cJSON *o = meta ? cJSON_Parse(meta) : NULL;
+    const cJSON *b = cJSON_GetObjectItemCaseSensitive(o, "bytes");
+    long long n = cJSON_IsNumber(b) && b->valuedouble >= 0 ? (long long)b->valuedouble : -1;
+    cJSON_Delete(o);
+    return n;
+}
+
+/* Records version v of mesh id's file as damaged. */
+static void mark_bad(vx_store *s, const char *id, const int64_t v[7])
+{
+    pthread_mutex_lock(&s->lock);
+    int found;
+    size_t at = mesh_find(s, id, &found);
+    if (found) memcpy(mesh_at(s, at)->bad, v, 7 * sizeof *v);
+    pthread_mutex_unlock(&s->lock);
+}
+
+static int mesh_fd_intact(vx_store *s, const char *id, int fd, int64_t v[7])
 {
     struct stat st;
     if (fstat(fd, &st) != 0) return -1;
     if (!S_ISREG(st.st_mode)) return 0; /* a directory, FIFO or device */
-    int64_t v[7];
     file_version(&st, v);
     pthread_mutex_lock(&s->lock);
     int found;
     size_t at = mesh_find(s, id, &found);
-    int known = found && memcmp(mesh_at(s, at)->checked, v, sizeof v) == 0;
+    int known = found && memcmp(mesh_at(s, at)->checked, v, 7 * sizeof *v) == 0;
+    int known_bad = found && memcmp(mesh_at(s, at)->bad, v, 7 * sizeof *v) == 0;
+    long long bytes = found ? meta_bytes(mesh_at(s, at)->meta) : -1;
     pthread_mutex_unlock(&s->lock);
     if (known) return 1;
+    if (known_bad) return 0;
     char hex[65];
+    if (bytes >= 0 && (long long)st.st_size != bytes) {
+        mark_bad(s, id, v);
+        return 0;
+    }
     if (hash_fd(fd, hex)) return -1;
-    if (strcmp(hex, id) != 0) return 0;
+    if (strcmp(hex, id) != 0) {
+        mark_bad(s, id, v);
+        return 0;
+    }
     /* the version fstat saw before the hash: one changed since differs */
     pthread_mutex_lock(&s->lock);
     at = mesh_find(s, id, &found);
-    if (found) memcpy(mesh_at(s, at)->checked, v, sizeof v);
+    if (found) memcpy(mesh_at(s, at)->checked, v, 7 * sizeof *v);
     pthread_mutex_unlock(&s->lock);
     return 1;
 }
@@ -359,14 +388,15 @@ static int mesh_fd_intact(vx_store *s, const char *id, int fd)
 /* The file at path opened for mesh id if it holds its bytes: the fd, or
  * -1 with *intact 0 (missing or other bytes: damaged) or -1 (errno). A
  * FIFO does not block the open, and is not read. */
-static int mesh_open_intact(vx_store *s, const char *id, const char *path, int *intact)
+static int mesh_open_intact(vx_store *s, const char *id, const char *path, int *intact,
+                            int64_t v[7])
 {
     int fd = open(path, O_RDONLY | O_CLOEXEC | O_NONBLOCK);
     if (fd < 0) {
         *intact = errno == ENOENT || errno == ENXIO || errno == ELOOP ? 0 : -1;
         return -1;
     }
-    *intact = mesh_fd_intact(s, id, fd);
+    *intact = mesh_fd_intact(s, id, fd, v);
     if (*intact == 1) return fd;
     int e = errno;
     close(fd);
@@ -377,7 +407,8 @@ static int mesh_open_intact(vx_store *s, const char *id, const char *path, int *
 /* 1 when the file at path holds mesh id's bytes, 0 when not, -1 (errno). */
 static int mesh_file_intact(vx_store *s, const char *id, const char *path)
 {
-    int intact, fd = mesh_open_intact(s, id, path, &intact);
+    int64_t v[7];
+    int intact, fd = mesh_open_intact(s, id, path, &intact, v);
     if (fd >= 0) close(fd);
     return intact;
 }
@@ -528,7 +559,8 @@ cJSON *vx_store_mesh_meta(vx_store *s, const char *id, vx_err *err)
 
 /* The path of mesh id's file into buf, opened and checked: the fd, or -1
  * with err (as vx_store_mesh_path says). */
-static int mesh_open_checked(vx_store *s, const char *id, char *buf, size_t n, vx_err *err)
+static int mesh_open_checked(vx_store *s, const char *id, char *buf, size_t n, int64_t v[7],
+                             vx_err *err)
 {
     if (mesh_fetch_shared(s, id, err) < 0) return -1;
     pthread_mutex_lock(&s->lock);
@@ -542,7 +574,7 @@ static int mesh_open_checked(vx_store *s, const char *id, char *buf, size_t n, v
     if (s->ops->path(s->blob, key, buf, n))
         return vx_err_set(err, vx_err_io_kind(errno), "store_failed",
                           "cannot read mesh %.80s from the blob store: %s", id, strerror(errno));
-    int intact, fd = mesh_open_intact(s, id, buf, &intact);
+    int intact, fd = mesh_open_intact(s, id, buf, &intact, v);
     if (fd >= 0) return fd;
     if (intact < 0)
         return vx_err_set(err, vx_err_io_kind(errno), "store_failed", "cannot read mesh %.80s: %s",
@@ -556,21 +588,39 @@ static int mesh_open_checked(vx_store *s, const char *id, char *buf, size_t n, v
 
 int vx_store_mesh_path(vx_store *s, const char *id, char *buf, size_t n, vx_err *err)
 {
-    int fd = mesh_open_checked(s, id, buf, n, err);
+    int64_t v[7];
+    int fd = mesh_open_checked(s, id, buf, n, v, err);
     if (fd < 0) return -1;
     close(fd);
     return 0;
 }
 
-int vx_store_mesh_open_path(vx_store *s, const char *id, char *buf, size_t n, vx_err *err)
+int vx_store_mesh_open_path(vx_store *s, const char *id, char *buf, size_t n, int64_t version[7],
+                            vx_err *err)
 {
-    return mesh_open_checked(s, id, buf, n, err);
+    return mesh_open_checked(s, id, buf, n, version, err);
+}
+
+int vx_store_mesh_still_intact(const char *id, int fd, const int64_t version[7], vx_err *err)
+{
+    struct stat st;
+    int64_t v[7];
+    if (fstat(fd, &st) == 0) {
+        file_version(&st, v);
+        if (memcmp(v, version, sizeof v) == 0) return 0;
+    }
+    VX_ERROR("store.mesh_damaged", "mesh=%s changed=while_read", id);
+    return vx_err_set(err, VX_EGONE, "mesh_damaged",
+                      "the stored file of mesh %.80s changed while it was read; "
+                      "upload the mesh again to repair it",
+                      id);
 }
 
 int vx_store_mesh_open(vx_store *s, const char *id, vx_err *err)
 {
     char path[VX_PATH_MAX];
-    return mesh_open_checked(s, id, path, sizeof path, err);
+    int64_t v[7];
+    return mesh_open_checked(s, id, path, sizeof path, v, err);
 }
 
 int vx_store_mesh_delete(vx_store *s, const char *id, vx_err *err)

@@ -85,8 +85,14 @@ int vx_store_mesh_path(vx_store *s, const char *id, char *buf, size_t n, vx_err 
  * err as vx_store_mesh_path. The caller closes it. */
 int vx_store_mesh_open(vx_store *s, const char *id, vx_err *err);
 /* The same with the file's path into buf (its extension names the format:
- * vx_mesh_read_fd). */
-int vx_store_mesh_open_path(vx_store *s, const char *id, char *buf, size_t n, vx_err *err);
+ * vx_mesh_read_fd) and the version checked (its stat: device, inode, size,
+ * times) into version. */
+int vx_store_mesh_open_path(vx_store *s, const char *id, char *buf, size_t n, int64_t version[7],
+                            vx_err *err);
+/* 0 when the file fd is still the version vx_store_mesh_open_path checked,
+ * as after reading it; else -1 with VX_EGONE mesh_damaged (written in
+ * place meanwhile). */
+int vx_store_mesh_still_intact(const char *id, int fd, const int64_t version[7], vx_err *err);
 /* Deletes a mesh: it disappears from meta, list and count at once (404 for
  * new jobs); its file stays while pins hold it (vx_store_mesh_path still
  * answers), and goes with the last unpin. */

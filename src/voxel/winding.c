@@ -434,9 +434,20 @@ static int crossings(wctx *c, vx_err *err)
     return stage(c, c->nbands, raster_band, 0.15, 0.3, err);
 }
 
+/* u snapped as the crossings' rules see it along axis a: across the z
+ * rays to 1/VX_GRID_SNAP voxel (the coverage), along them to
+ * 1/VX_GRID_XING_SNAP (the crossings). */
+static double snapped(double u, int a)
+{
+    double k = a == 2 ? VX_GRID_XING_SNAP : VX_GRID_SNAP;
+    return nearbyint(u * k) / k;
+}
+
 /* The centres that can be inside: the grid, and for an open mesh those in
  * the bounding box of the vertices its faces use, in lattice units (each
- * bound is one vertex's coordinate: the number lattice_units gave it). */
+ * bound is one vertex's coordinate: the number lattice_units gave it)
+ * snapped as the crossings are, so a face on a plane of centres keeps
+ * its centres whichever way (p - origin) / h rounded. */
 static void inside_range(wctx *c)
 {
     const int n[3] = {c->nx, c->ny, c->nz};
@@ -444,8 +455,8 @@ static void inside_range(wctx *c)
         c->lo[a] = 0;
         c->hi[a] = n[a] - 1;
         if (!c->open) continue;
-        double umin = (c->m->bbox_min[a] - c->o[a]) / c->h,
-               umax = (c->m->bbox_max[a] - c->o[a]) / c->h;
+        double umin = snapped((c->m->bbox_min[a] - c->o[a]) / c->h, a),
+               umax = snapped((c->m->bbox_max[a] - c->o[a]) / c->h, a);
         double lo = ceil(umin - 0.5) - c->ix[a], hi = floor(umax - 0.5) - c->ix[a];
         if (lo > c->lo[a]) c->lo[a] = lo > n[a] ? n[a] : (int)lo;
         if (hi < c->hi[a]) c->hi[a] = hi < -1 ? -1 : (int)hi;

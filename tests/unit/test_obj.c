@@ -253,6 +253,21 @@ static void test_split_vertices_weld(void **state)
         assert_int_equal(m->nonmanifold_edges, 0);
         vx_mesh_free(m);
     }
+    /* the closed cube with a ninth vertex -0 -0 -0 where vertex 1 (0 0 0)
+     * is, used by one face: one place, closed once welded (the weld once
+     * compared the bits: 4 open edges and a default `winding`) */
+    {
+        vx_err e = {0};
+        vx_mesh *z = read_str("v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 0 0 1\nv 1 0 1\n"
+                              "v 1 1 1\nv 0 1 1\nv -0 -0 -0\n"
+                              "f 9 4 3 2\nf 5 6 7 8\nf 1 2 6 5\nf 2 3 7 6\nf 3 4 8 7\n"
+                              "f 4 1 5 8\n",
+                              &e);
+        assert_non_null(z);
+        assert_int_equal(z->boundary_edges, 4);
+        assert_int_equal(z->boundary_edges_welded, 0);
+        vx_mesh_free(z);
+    }
     /* two triangles on one edge, plus a sliver 4 5 6 whose vertices 5 and
      * 6 sit at one place: welded, its edge 5-6 is no edge, 4-5 and 6-4 are
      * one edge used twice, and the pair's outline stays open (4 edges) */

@@ -145,6 +145,41 @@ static void test_round_trip(void **state)
     }
 }
 
+/* A cube whose facets write one corner as -0 and the others as 0: one
+ * place, one vertex (the weld once compared the bits: 9 vertices and 6
+ * boundary edges, so a default voxelize ran `winding` on a closed cube). */
+static void test_negative_zero(void **state)
+{
+    (void)state;
+    static const int q[6][4] = {{0, 2, 3, 1}, {4, 5, 7, 6}, {0, 1, 5, 4},
+                                {2, 6, 7, 3}, {0, 4, 6, 2}, {1, 3, 7, 5}};
+    char text[8192];
+    size_t n = (size_t)snprintf(text, sizeof text, "solid c\n");
+    for (int f = 0; f < 6; f++)
+        for (int t = 0; t < 2; t++) {
+            int c[3] = {q[f][0], q[f][t + 1], q[f][t + 2]};
+            n += (size_t)snprintf(text + n, sizeof text - n, "facet normal 0 0 0\nouter loop\n");
+            for (int k = 0; k < 3; k++) {
+                int v = c[k];
+                /* vertex 0 as -0 -0 -0 in the first facet only */
+                const char *zero = f == 0 && t == 0 && v == 0 ? "-0" : "0";
+                n += (size_t)snprintf(text + n, sizeof text - n, "vertex %s %s %s\n",
+                                      v & 1 ? "1" : zero, v & 2 ? "1" : zero, v & 4 ? "1" : zero);
+            }
+            n += (size_t)snprintf(text + n, sizeof text - n, "endloop\nendfacet\n");
+        }
+    n += (size_t)snprintf(text + n, sizeof text - n, "endsolid c\n");
+    assert_true(n < sizeof text);
+    vx_err err;
+    memset(&err, 0, sizeof err);
+    vx_mesh *m = vx_import_read_mem((const unsigned char *)text, n, VX_MESH_STL, NULL, &err);
+    if (!m) fail_msg("%s", err.message);
+    assert_int_equal(m->nverts, 8);
+    assert_int_equal(m->boundary_edges, 0);
+    assert_int_equal(m->boundary_edges_welded, 0);
+    vx_mesh_free(m);
+}
+
 static void test_truncations(void **state)
 {
     (void)state;
@@ -229,6 +264,7 @@ int main(void)
 {
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_round_trip),
+        cmocka_unit_test(test_negative_zero),
         cmocka_unit_test(test_truncations),
         cmocka_unit_test(test_hostile),
     };

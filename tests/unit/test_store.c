@@ -7,6 +7,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <fcntl.h>
 #include <sys/stat.h>
 #include <unistd.h>
 #include <cmocka.h>
@@ -425,6 +426,41 @@ static long fake_count(void *ud, vx_err *err)
     return n;
 }
 
+/* A job reads the mesh through the fd the store checked, then asks
+ * whether that file is still the version checked: a write in place
+ * meanwhile (the same bytes written again included) makes it
+ * mesh_damaged; the file checked again afterwards is intact. */
+static void test_changed_while_read(void **state)
+{
+    (void)state;
+    char sdir[300], path[512];
+    snprintf(sdir, sizeof sdir, "%s/inplace", dir);
+    vx_err err;
+    vx_store *s = vx_store_open(sdir, NULL, &err);
+    assert_non_null(s);
+    char id[65];
+    int existed;
+    put(s, "v 1 2 3\n", id, &existed);
+    usleep(30000); /* past the file system's timestamp granularity */
+    int64_t ver[7];
+    int fd = vx_store_mesh_open_path(s, id, path, sizeof path, ver, &err);
+    assert_true(fd >= 0);
+    assert_int_equal(vx_store_mesh_still_intact(id, fd, ver, &err), 0);
+    int w = open(path, O_WRONLY);
+    assert_true(w >= 0);
+    assert_int_equal(pwrite(w, "v", 1, 0), 1); /* the same byte, written */
+    close(w);
+    memset(&err, 0, sizeof err);
+    assert_int_equal(vx_store_mesh_still_intact(id, fd, ver, &err), -1);
+    assert_string_equal(err.code, "mesh_damaged");
+    close(fd);
+    fd = vx_store_mesh_open_path(s, id, path, sizeof path, ver, &err);
+    assert_true(fd >= 0);
+    assert_int_equal(vx_store_mesh_still_intact(id, fd, ver, &err), 0);
+    close(fd);
+    vx_store_close(s);
+}
+
 static void test_catalog(void **state)
 {
     (void)state;
@@ -528,6 +564,7 @@ int main(void)
         cmocka_unit_test(test_pins),
         cmocka_unit_test(test_blobs),
         cmocka_unit_test(test_catalog),
+        cmocka_unit_test(test_changed_while_read),
     };
     return cmocka_run_group_tests(tests, setup, teardown);
 }
