@@ -134,6 +134,10 @@ int externalize(vx_jobs *j, const vx_kind *k, cJSON *params, pinset *ps, vx_err 
 cJSON *inline_params(vx_jobs *j, const vx_kind *k, const cJSON *params, int *big, vx_err *err);
 
 /* runner.c */
+/* Reads mesh id from the store: the file the store checked, read through
+ * its fd, and still that version once read (a write in place meanwhile:
+ * VX_EGONE mesh_damaged). An owned mesh, or NULL with err. Any thread. */
+vx_mesh *vx_jobs_read_mesh(vx_jobs *j, const char *id, vx_err *err);
 /* Calls the desc's alive hook (the daemon's watchdog ping). */
 void jobs_alive(vx_jobs *j);
 

@@ -3,7 +3,6 @@
 
 #include <pthread.h>
 #include <stdio.h>
-#include <unistd.h>
 
 #include "util/fsutil.h"
 
@@ -58,22 +57,7 @@ const char *vx_run_job_id(const vx_job_run *r)
 
 vx_mesh *vx_run_load_mesh(vx_job_run *r, const char *id, vx_err *err)
 {
-    char path[VX_PATH_MAX];
-    /* the file read is the one checked, whatever its path holds by then */
-    int64_t version[7];
-    int fd = vx_store_mesh_open_path(r->jobs->desc.store, id, path, sizeof path, version, err);
-    if (fd < 0) return NULL;
-    vx_mesh_limits lim = {.max_triangles = r->jobs->desc.limits.max_triangles};
-    vx_mesh *m = vx_mesh_read_fd(fd, path, &lim, err);
-    /* a file written in place while it was read (its parse error too) */
-    vx_err changed = {0};
-    if (vx_store_mesh_still_intact(id, fd, version, &changed)) {
-        vx_mesh_free(m);
-        m = NULL;
-        *err = changed;
-    }
-    close(fd);
-    return m;
+    return vx_jobs_read_mesh(r->jobs, id, err);
 }
 
 cJSON *vx_run_stats(vx_job_run *r)

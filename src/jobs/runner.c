@@ -196,6 +196,26 @@ static void run_finish(vx_jobs *j, vx_job_run *r, int ok, const vx_err *e)
     if (ok) vx_store_results_evict(j->desc.store);
 }
 
+vx_mesh *vx_jobs_read_mesh(vx_jobs *j, const char *id, vx_err *err)
+{
+    char path[VX_PATH_MAX];
+    /* the file read is the one checked, whatever its path holds by then */
+    int64_t version[7];
+    int fd = vx_store_mesh_open_path(j->desc.store, id, path, sizeof path, version, err);
+    if (fd < 0) return NULL;
+    vx_mesh_limits lim = {.max_triangles = j->desc.limits.max_triangles};
+    vx_mesh *m = vx_mesh_read_fd(fd, path, &lim, err);
+    /* a file written in place while it was read (its parse error too) */
+    vx_err changed = {0};
+    if (vx_store_mesh_still_intact(id, fd, version, &changed)) {
+        vx_mesh_free(m);
+        m = NULL;
+        *err = changed;
+    }
+    close(fd);
+    return m;
+}
+
 /* The mesh of the previous job stays loaded: jobs on one mesh often come
  * in a row. GL thread only. */
 typedef struct mesh_cache {
@@ -209,21 +229,7 @@ static const vx_mesh *load_mesh(vx_jobs *j, mesh_cache *mc, const char *id, vx_e
     vx_mesh_free(mc->mesh);
     mc->mesh = NULL;
     mc->id[0] = 0;
-    char path[VX_PATH_MAX];
-    /* the file read is the one checked, whatever its path holds by then */
-    int64_t version[7];
-    int fd = vx_store_mesh_open_path(j->desc.store, id, path, sizeof path, version, err);
-    if (fd < 0) return NULL;
-    vx_mesh_limits lim = {.max_triangles = j->desc.limits.max_triangles};
-    mc->mesh = vx_mesh_read_fd(fd, path, &lim, err);
-    /* a file written in place while it was read (its parse error too) */
-    vx_err changed = {0};
-    if (vx_store_mesh_still_intact(id, fd, version, &changed)) {
-        vx_mesh_free(mc->mesh);
-        mc->mesh = NULL;
-        *err = changed;
-    }
-    close(fd);
+    mc->mesh = vx_jobs_read_mesh(j, id, err);
     if (mc->mesh) snprintf(mc->id, sizeof mc->id, "%s", id);
     return mc->mesh;
 }
