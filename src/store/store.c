@@ -328,10 +328,6 @@ static int hash_fd(int fd, char hex[65])
     return 0;
 }
 
-/* 1 when open file fd holds mesh id's bytes (a regular file whose SHA-256
- * is the id), hashed once per version of the file; 0 when it does not;
- * -1 when it cannot be read (errno). Checking the open file, not a path,
- * is what makes the bytes served or parsed the ones checked. */
 /* The "bytes" of a mesh's metadata text, or -1 (none, or deleted). */
 static long long meta_bytes(const char *meta)
 {
@@ -352,6 +348,12 @@ static void mark_bad(vx_store *s, const char *id, const int64_t v[7])
     pthread_mutex_unlock(&s->lock);
 }
 
+/* 1 when open file fd holds mesh id's bytes (a regular file whose SHA-256
+ * is the id), hashed once per version of the file; 0 when it does not (a
+ * size other than the metadata's "bytes" decides unhashed; a version found
+ * so is not hashed again); -1 when it cannot be read (errno). v: the
+ * version (stat) checked. Checking the open file, not a path, is what
+ * makes the bytes served or parsed the ones checked. */
 static int mesh_fd_intact(vx_store *s, const char *id, int fd, int64_t v[7])
 {
     struct stat st;

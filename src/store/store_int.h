@@ -21,9 +21,9 @@ typedef struct mesh_entry {
      * size, mtime, ctime; all 0 = none yet): not hashed again while the
      * file's stat says the same. */
     int64_t checked[7];
-    /* The version last found not to (or the wrong size): not hashed again
-     * while the stat says the same (a huge file in its place would tie up
-     * every reader). */
+    /* The version last found damaged (another hash, or another size than
+     * the upload): not hashed again while the stat says the same (a huge
+     * file in its place would tie up every reader). */
     int64_t bad[7];
 } mesh_entry;
 
