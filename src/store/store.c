@@ -365,7 +365,8 @@ static int mesh_fd_intact(vx_store *s, const char *id, int fd, int64_t v[7])
     size_t at = mesh_find(s, id, &found);
     int known = found && memcmp(mesh_at(s, at)->checked, v, 7 * sizeof *v) == 0;
     int known_bad = found && memcmp(mesh_at(s, at)->bad, v, 7 * sizeof *v) == 0;
-    long long bytes = found ? meta_bytes(mesh_at(s, at)->meta) : -1;
+    /* the upload's size, parsed only for a version not yet decided */
+    long long bytes = found && !known && !known_bad ? meta_bytes(mesh_at(s, at)->meta) : -1;
     pthread_mutex_unlock(&s->lock);
     if (known) return 1;
     if (known_bad) return 0;

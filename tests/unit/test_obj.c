@@ -221,6 +221,17 @@ static void test_cube_closed_and_open(void **state)
     vx_mesh_free(m);
 }
 
+/* The OBJ text's boundary edges: as its indices say, and welded. */
+static void expect_edges(const char *text, size_t boundary, size_t welded)
+{
+    vx_err err = {0};
+    vx_mesh *m = read_str(text, &err);
+    assert_non_null(m);
+    assert_int_equal(m->boundary_edges, boundary);
+    assert_int_equal(m->boundary_edges_welded, welded);
+    vx_mesh_free(m);
+}
+
 /* The cube written face by face (24 vertices, none shared, as a glTF
  * with hard edges or an OBJ exported per face): every edge is a seam,
  * used once, and none is a hole once the vertices are welded by position.
@@ -256,29 +267,16 @@ static void test_split_vertices_weld(void **state)
     /* the closed cube with a ninth vertex -0 -0 -0 where vertex 1 (0 0 0)
      * is, used by one face: one place, closed once welded (the weld once
      * compared the bits: 4 open edges and a default `winding`) */
-    {
-        vx_err e = {0};
-        vx_mesh *z = read_str("v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 0 0 1\nv 1 0 1\n"
-                              "v 1 1 1\nv 0 1 1\nv -0 -0 -0\n"
-                              "f 9 4 3 2\nf 5 6 7 8\nf 1 2 6 5\nf 2 3 7 6\nf 3 4 8 7\n"
-                              "f 4 1 5 8\n",
-                              &e);
-        assert_non_null(z);
-        assert_int_equal(z->boundary_edges, 4);
-        assert_int_equal(z->boundary_edges_welded, 0);
-        vx_mesh_free(z);
-    }
+    expect_edges("v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 0 0 1\nv 1 0 1\n"
+                 "v 1 1 1\nv 0 1 1\nv -0 -0 -0\n"
+                 "f 9 4 3 2\nf 5 6 7 8\nf 1 2 6 5\nf 2 3 7 6\nf 3 4 8 7\nf 4 1 5 8\n",
+                 4, 0);
     /* two triangles on one edge, plus a sliver 4 5 6 whose vertices 5 and
      * 6 sit at one place: welded, its edge 5-6 is no edge, 4-5 and 6-4 are
      * one edge used twice, and the pair's outline stays open (4 edges) */
-    vx_err err = {0};
-    vx_mesh *m = read_str("v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 2 2 0\nv 2 2 0\n"
-                          "f 1 2 3\nf 1 3 4\nf 4 5 6\n",
-                          &err);
-    assert_non_null(m);
-    assert_int_equal(m->boundary_edges, 7);
-    assert_int_equal(m->boundary_edges_welded, 4);
-    vx_mesh_free(m);
+    expect_edges("v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 2 2 0\nv 2 2 0\n"
+                 "f 1 2 3\nf 1 3 4\nf 4 5 6\n",
+                 7, 4);
 }
 
 /* Writes text to path (replacing it: a new file renamed over it). */

@@ -367,10 +367,8 @@ static void test_open_box_ties(void **state)
 {
     (void)state;
     srand48(11);
-    static const uint32_t f[36] = {0, 2, 3, 0, 3, 1, 4, 5, 7, 4, 7, 6, 0, 1, 5, 0, 5, 4,
-                                   2, 6, 7, 2, 7, 3, 0, 4, 6, 0, 6, 2, 1, 3, 7, 1, 7, 5};
-    /* the face each pair of triangles above makes: axis 2 lo, 2 hi, 1 lo,
-     * 1 hi, 0 lo, 0 hi */
+    /* the face each pair of shape_box's triangles makes: axis 2 lo, 2 hi,
+     * 1 lo, 1 hi, 0 lo, 0 hi */
     static const int face_axis[6] = {2, 2, 1, 1, 0, 0}, face_hi[6] = {0, 1, 0, 1, 0, 1};
     int lost_before = 0;
     for (int trial = 0; trial < 150; trial++) {
@@ -389,16 +387,12 @@ static void test_open_box_ties(void **state)
             lo[a] = g.origin[a] + u0 * g.h;
             hi[a] = g.origin[a] + u1 * g.h;
         }
-        double p[24];
-        for (int v = 0; v < 8; v++)
-            for (int a = 0; a < 3; a++)
-                p[3 * v + a] = (v >> a) & 1 ? hi[a] : lo[a];
+        vx_mesh *box = shape_box(lo, hi);
         uint32_t idx[30];
         for (int t = 0, w = 0; t < 12; t++)
-            if (t / 2 != missing)
-                for (int q = 0; q < 3; q++)
-                    idx[3 * w + q] = f[3 * t + q], w += q == 2;
-        vx_mesh *m = shape_mesh_from(8, p, 10, idx);
+            if (t / 2 != missing) memcpy(idx + 3 * w++, box->tri + 3 * t, 3 * sizeof *idx);
+        vx_mesh *m = shape_mesh_from(8, box->pos, 10, idx);
+        vx_mesh_free(box);
         assert_true(m->boundary_edges > 0);
         int want = 1;
         for (int a = 0; a < 3; a++) {
