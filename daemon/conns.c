@@ -25,6 +25,13 @@
  *     however many addresses drip heads, a fresh client finds a slot (or
  *     waits in the listen backlog, ahead of the victims' reconnections,
  *     for at most one sweep) and is served.
+ * An answer that libmicrohttpd sent before the body was read (401, 413,
+ * 415 from the head alone) is followed by its close; closing a socket with
+ * unread bytes resets it, and the reset can reach the client before the
+ * answer. Such a connection is marked (vx_conns_linger); at its close a
+ * copy of the descriptor keeps the socket open, and the sweeper reads and
+ * drops what arrives until the client closes, for DRAIN_S at most (for at
+ * most a quarter of --max-connections sockets at once).
  * When the server stops (SIGTERM), vx_conns_shutdown answers every HEAD
  * and BODY still arriving after the grace with a JSON 503 shutting_down
  * the same way, so a client is told to send it again rather than cut off.
@@ -38,6 +45,8 @@
  * (400) and HTTP versions other than 1.x (505). */
 #include "conns.h"
 
+#include <errno.h>
+#include <fcntl.h>
 #include <netinet/in.h>
 #include <netinet/tcp.h>
 #include <pthread.h>
@@ -74,7 +83,15 @@ struct vx_conn {
     char rid[72];     /* BODY: the request's id; else the id of the answer written here */
     char origin[256]; /* BODY: the request's origin when CORS allows it, else "" */
     int path_escape;  /* the current request's path has %00 or %2F (see vx_conns_on_uri) */
+    int linger;       /* answered before its body was read: drain it after the close */
 };
+
+/* A socket answered before its body was read, kept open after
+ * libmicrohttpd closed its descriptor (see vx_conns_linger). */
+typedef struct lingerer {
+    int fd;
+    double t0;
+} lingerer;
 
 struct vx_conns {
     const vx_config *cfg;
@@ -84,6 +101,8 @@ struct vx_conns {
     pthread_t sweeper;
     int sweeper_started;
     int stop;
+    lingerer *ling; /* the sockets being drained, at most cap_ling */
+    size_t nling, cap_ling;
 };
 
 #define BODY_GRACE_S 2.0  /* a body is not rated before this */
@@ -91,6 +110,7 @@ struct vx_conns {
 #define KILL_LINGER_S 0.5 /* between our answer and closing the read side */
 #define SWEEP_US 100000
 #define EVICT_MIN_AGE_S 0.25 /* a head or idle time this young is nobody's attack */
+#define DRAIN_S 5.0          /* the longest an answered socket's body is read and dropped */
 
 vx_conn *vx_conns_of(struct MHD_Connection *c)
 {
@@ -178,6 +198,17 @@ void vx_conns_notify(void *cls, struct MHD_Connection *c, void **socket_context,
     vx_conn *vc = *socket_context;
     if (!vc) return;
     pthread_mutex_lock(&s->lock);
+    /* libmicrohttpd has written the answer and shut the socket for writing;
+     * its close would reset the connection while the body still arrives,
+     * and the client could lose the answer. A copy of the descriptor keeps
+     * the socket open until the sweeper has drained it. */
+    if (vc->linger && !vc->killed && s->nling < s->cap_ling) {
+        int fd = fcntl(vc->fd, F_DUPFD_CLOEXEC, 0);
+        if (fd >= 0) {
+            shutdown(fd, SHUT_WR);
+            s->ling[s->nling++] = (lingerer){fd, vx_mono()};
+        }
+    }
     if (vc->prev)
         vc->prev->next = vc->next;
     else
@@ -230,12 +261,33 @@ static int by_phase_time(const void *a, const void *b)
     return x < y ? -1 : x > y;
 }
 
+/* Reads and drops what waits on each lingering socket; closes it at the
+ * client's end of file, an error or after DRAIN_S. With s->lock held. */
+static void drain(vx_conns *s, double now)
+{
+    char sink[16384];
+    for (size_t i = 0; i < s->nling;) {
+        lingerer *l = &s->ling[i];
+        ssize_t got = 0;
+        for (int k = 0; k < 64; k++) /* at most 1 MiB a sweep per socket */
+            if ((got = recv(l->fd, sink, sizeof sink, MSG_DONTWAIT)) <= 0) break;
+        int open = got > 0 || (got < 0 && (errno == EAGAIN || errno == EWOULDBLOCK));
+        if (open && now - l->t0 < DRAIN_S) {
+            i++;
+            continue;
+        }
+        close(l->fd);
+        *l = s->ling[--s->nling];
+    }
+}
+
 /* One pass of the sweeper, with s->lock held. */
 static void sweep(vx_conns *s, vx_conn **cand)
 {
     const vx_config *cfg = s->cfg;
     double now = vx_mono();
     size_t live = 0, ncand = 0;
+    drain(s, now);
     for (vx_conn *vc = s->list; vc; vc = vc->next) {
         if (vc->killed) {
             if (!vc->rd_closed && now - vc->t_killed >= KILL_LINGER_S) {
@@ -340,6 +392,9 @@ vx_conns *vx_conns_start(const vx_config *cfg)
     vx_conns *s = calloc(1, sizeof *s);
     if (!s) return NULL;
     s->cfg = cfg;
+    /* a quarter of the connections more at most: descriptors, not slots */
+    s->ling = calloc((size_t)cfg->max_connections / 4 + 1, sizeof *s->ling);
+    if (s->ling) s->cap_ling = (size_t)cfg->max_connections / 4 + 1;
     pthread_mutex_init(&s->lock, NULL);
     if (pthread_create(&s->sweeper, NULL, sweeper_main, s) == 0) s->sweeper_started = 1;
     return s;
@@ -373,6 +428,9 @@ void vx_conns_free(vx_conns *s)
 {
     if (!s) return;
     vx_conns_stop(s);
+    for (size_t i = 0; i < s->nling; i++)
+        close(s->ling[i].fd);
+    free(s->ling);
     pthread_mutex_destroy(&s->lock);
     free(s);
 }
@@ -432,6 +490,14 @@ int vx_conns_done(vx_conns *s, vx_conn *vc)
     }
     pthread_mutex_unlock(&s->lock);
     return status;
+}
+
+void vx_conns_linger(vx_conns *s, vx_conn *vc)
+{
+    if (!vc) return;
+    pthread_mutex_lock(&s->lock);
+    vc->linger = 1;
+    pthread_mutex_unlock(&s->lock);
 }
 
 int vx_conns_path_escape(const vx_conn *vc)

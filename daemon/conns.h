@@ -58,6 +58,12 @@ void vx_conns_body_begins(vx_conns *s, vx_conn *vc, const char *rid, const char 
 /* n bytes of the body came (n 0: the body is complete, vc is busy). 1 when
  * the sweeper has answered vc (drain, never queue). */
 int vx_conns_body(vx_conns *s, vx_conn *vc, size_t n);
+/* An answer was queued before the request's body was read: libmicrohttpd
+ * will close the connection after it, and the socket is then kept open
+ * and its body read and dropped (up to 5 s, or until the client closes) so
+ * that the close does not reset the connection before the client has read
+ * the answer. */
+void vx_conns_linger(vx_conns *s, vx_conn *vc);
 /* The request is over: vc idles until the next head. Returns the status the
  * sweeper answered vc with, 0 when it did not. */
 int vx_conns_done(vx_conns *s, vx_conn *vc);

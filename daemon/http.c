@@ -236,6 +236,15 @@ static void identify(struct MHD_Connection *c, req *r, const char *url)
     }
 }
 
+/* 1 when the head announces a body (a length other than 0, or chunks). */
+static int declares_body(struct MHD_Connection *c)
+{
+    const char *cl = vx_resp_header(c, MHD_HTTP_HEADER_CONTENT_LENGTH);
+    uint64_t n;
+    return vx_resp_header(c, MHD_HTTP_HEADER_TRANSFER_ENCODING) ||
+           (cl && (vx_req_parse_length(cl, &n) || n > 0));
+}
+
 /* The first call: the head is in. Allocates r, routes it and answers what
  * the head alone decides (first_call). */
 static enum MHD_Result on_head(vx_http *h, struct MHD_Connection *c, const char *url,
@@ -263,7 +272,10 @@ static enum MHD_Result on_head(vx_http *h, struct MHD_Connection *c, const char 
     memcpy(r->id, t.id, sizeof r->id);
     memcpy(r->name, t.name, sizeof r->name);
     int rc = first_call(h, c, r, version);
-    if (rc >= 0) return rc;
+    if (rc >= 0) {
+        if (declares_body(c)) vx_conns_linger(h->conns, vc);
+        return rc;
+    }
     if (!strcmp(r->method, "POST")) /* a body follows: rate it */
         vx_conns_body_begins(h->conns, vc, r->rid, vx_resp_cors_origin(c));
     /* Answer on the next call even without a body: a response queued in
@@ -332,6 +344,7 @@ static enum MHD_Result on_request(void *cls, struct MHD_Connection *c, const cha
     } else if (*data_size) {
         if (take_body(h, r, data, *data_size)) {
             *data_size = 0;
+            vx_conns_linger(h->conns, r->vc);
             return vx_resp_fail(c, r, VX_EINTERNAL, "upload_failed", "could not store the body");
         }
         *data_size = 0;

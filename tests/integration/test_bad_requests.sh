@@ -72,11 +72,48 @@ api POST /v1/meshes -H "Content-Type: model/obj" --data-binary "@$VX_MESH_DIR/st
 expect_error "upload over max-upload-bytes" 413 too_large
 api POST /v1/meshes -H "Content-Type: model/obj" -H "Transfer-Encoding: chunked" --data-binary "@$VX_MESH_DIR/stanford-bunny.obj"
 expect_error "chunked upload over the limit" 413 too_large
-api POST /v1/meshes -H "Content-Type: model/obj" --data-binary "@$VX_MESH_DIR/ogre.obj" -H "Expect:"
-expect_error "ogre over the limit without Expect" 413 too_large
 head -c 1900000 "$VX_MESH_DIR/ogre.obj" | awk '/^v /' >"$TMP/many.obj"
 nv=$(wc -l <"$TMP/many.obj")
 for i in $(seq 1 3 $((nv - 2))); do echo "f $i $((i + 1)) $((i + 2))"; done >>"$TMP/many.obj"
+api POST /v1/meshes -H "Content-Type: model/obj" --data-binary "@$VX_MESH_DIR/ogre.obj" -H "Expect:"
+expect_error "ogre over the limit without Expect" 413 too_large
+# An answer given before the body is read is followed by a close. Closing a
+# socket with unread bytes resets it, and the reset could reach curl before
+# the answer (about 1 in 10 on loopback): the socket is drained instead.
+lost=0
+for i in $(seq 1 20); do
+    code=$(curl -s -o /dev/null -w '%{http_code}' -X POST -H "Content-Type: model/obj" -H "Expect:" \
+        --data-binary "@$VX_MESH_DIR/ogre.obj" "$BASE/v1/meshes")
+    [[ $code == 413 ]] || lost=$((lost + 1))
+    code=$(curl -s -o /dev/null -w '%{http_code}' -X POST -H "Content-Type: text/html" -H "Expect:" \
+        --data-binary "@$TMP/many.obj" "$BASE/v1/meshes")
+    [[ $code == 415 ]] || lost=$((lost + 1))
+done
+check "40 early answers with a body behind them all arrive ($lost lost)" test "$lost" = 0
+# A client that sends its body and never reads: the drain ends (DRAIN_S,
+# 5 s) and the socket closes; the client's send then fails.
+python3 - "$PORT" >"$TMP/nonreader.txt" <<'PY'
+import socket, sys, time
+s = socket.create_connection(("127.0.0.1", int(sys.argv[1])))
+s.sendall(b"POST /v1/meshes HTTP/1.1\r\nHost: x\r\nContent-Type: model/obj\r\n"
+          b"Content-Length: 4000000000\r\n\r\n")
+t0, chunk, ended = time.monotonic(), b"v 0 0 0\n" * 8192, "no"
+s.settimeout(1)
+while time.monotonic() - t0 < 30:
+    try:
+        s.send(chunk)
+    except socket.timeout:
+        continue
+    except OSError:
+        ended = "yes"
+        break
+print(ended, round(time.monotonic() - t0, 1))
+PY
+read -r ended secs <"$TMP/nonreader.txt"
+check "a client that never stops sending is cut off after the drain ($ended after $secs s)" \
+    test "$ended" = yes
+api GET /livez
+check "serving after the drained clients (got $STATUS)" test "$STATUS" = 200
 if [[ $(grep -c '^f' "$TMP/many.obj") -gt 100000 && $(stat -c %s "$TMP/many.obj") -lt 2000000 ]]; then
     api POST /v1/meshes -H "Content-Type: model/obj" --data-binary "@$TMP/many.obj"
     expect_error "more triangles than max-triangles" 413 mesh_too_big
