@@ -101,7 +101,10 @@ struct vx_conns {
     pthread_t sweeper;
     int sweeper_started;
     int stop;
-    lingerer *ling; /* the sockets being drained, at most cap_ling */
+    /* The sockets being drained (at most cap_ling), under ling_lock, not
+     * lock: a request never waits on the drain. */
+    pthread_mutex_t ling_lock;
+    lingerer *ling;
     size_t nling, cap_ling;
 };
 
@@ -202,12 +205,14 @@ void vx_conns_notify(void *cls, struct MHD_Connection *c, void **socket_context,
      * its close would reset the connection while the body still arrives,
      * and the client could lose the answer. A copy of the descriptor keeps
      * the socket open until the sweeper has drained it. */
-    if (vc->linger && !vc->killed && s->nling < s->cap_ling) {
-        int fd = fcntl(vc->fd, F_DUPFD_CLOEXEC, 0);
+    if (vc->linger && !vc->killed) {
+        pthread_mutex_lock(&s->ling_lock);
+        int fd = s->nling < s->cap_ling ? fcntl(vc->fd, F_DUPFD_CLOEXEC, 0) : -1;
         if (fd >= 0) {
             shutdown(fd, SHUT_WR);
             s->ling[s->nling++] = (lingerer){fd, vx_mono()};
         }
+        pthread_mutex_unlock(&s->ling_lock);
     }
     if (vc->prev)
         vc->prev->next = vc->next;
@@ -262,14 +267,17 @@ static int by_phase_time(const void *a, const void *b)
 }
 
 /* Reads and drops what waits on each lingering socket; closes it at the
- * client's end of file, an error or after DRAIN_S. With s->lock held. */
-static void drain(vx_conns *s, double now)
+ * client's end of file, an error or after DRAIN_S. Takes s->ling_lock
+ * (not s->lock: the requests' phase changes never wait on it). */
+static void drain(vx_conns *s)
 {
     char sink[16384];
+    pthread_mutex_lock(&s->ling_lock);
+    double now = vx_mono();
     for (size_t i = 0; i < s->nling;) {
         lingerer *l = &s->ling[i];
         ssize_t got = 0;
-        for (int k = 0; k < 64; k++) /* at most 1 MiB a sweep per socket */
+        for (int k = 0; k < 16; k++) /* at most 256 KiB a sweep per socket */
             if ((got = recv(l->fd, sink, sizeof sink, MSG_DONTWAIT)) <= 0) break;
         int open = got > 0 || (got < 0 && (errno == EAGAIN || errno == EWOULDBLOCK));
         if (open && now - l->t0 < DRAIN_S) {
@@ -279,6 +287,7 @@ static void drain(vx_conns *s, double now)
         close(l->fd);
         *l = s->ling[--s->nling];
     }
+    pthread_mutex_unlock(&s->ling_lock);
 }
 
 /* One pass of the sweeper, with s->lock held. */
@@ -287,7 +296,6 @@ static void sweep(vx_conns *s, vx_conn **cand)
     const vx_config *cfg = s->cfg;
     double now = vx_mono();
     size_t live = 0, ncand = 0;
-    drain(s, now);
     for (vx_conn *vc = s->list; vc; vc = vc->next) {
         if (vc->killed) {
             if (!vc->rd_closed && now - vc->t_killed >= KILL_LINGER_S) {
@@ -371,6 +379,7 @@ static void *sweeper_main(void *arg)
     vx_conn **cand = NULL;
     while (!__atomic_load_n(&s->stop, __ATOMIC_ACQUIRE)) {
         usleep(SWEEP_US);
+        drain(s);
         pthread_mutex_lock(&s->lock);
         if (s->n > cap) {
             size_t ncap = s->n * 2;
@@ -396,6 +405,7 @@ vx_conns *vx_conns_start(const vx_config *cfg)
     s->ling = calloc((size_t)cfg->max_connections / 4 + 1, sizeof *s->ling);
     if (s->ling) s->cap_ling = (size_t)cfg->max_connections / 4 + 1;
     pthread_mutex_init(&s->lock, NULL);
+    pthread_mutex_init(&s->ling_lock, NULL);
     if (pthread_create(&s->sweeper, NULL, sweeper_main, s) == 0) s->sweeper_started = 1;
     return s;
 }
@@ -431,6 +441,7 @@ void vx_conns_free(vx_conns *s)
     for (size_t i = 0; i < s->nling; i++)
         close(s->ling[i].fd);
     free(s->ling);
+    pthread_mutex_destroy(&s->ling_lock);
     pthread_mutex_destroy(&s->lock);
     free(s);
 }

@@ -90,10 +90,12 @@ def drip(port, seconds, out, addrs, per_addr):
         json.dump({"answered": done, "open_at_end": sum(1 for c in conns if c[0] is not None)}, f)
 
 
-def stall(port, data, seconds):
+def stall(port, data, seconds, sent=None):
     s = socket.create_connection(("127.0.0.1", port))
     t0 = time.time()
     s.sendall(data)
+    if sent:  # the caller waits for this file before it goes on
+        open(sent, "w").close()
     s.settimeout(seconds)
     got = b""
     try:
@@ -155,6 +157,7 @@ if __name__ == "__main__":
         addrs = args[2:] or ["127.0.0.%d" % i for i in range(2, 10)]
         drip(port, float(args[0]), args[1], addrs, per)
     elif cmd == "stall":
-        stall(port, sys.argv[3].encode().decode("unicode_escape").encode("latin-1"), float(sys.argv[4]))
+        stall(port, sys.argv[3].encode().decode("unicode_escape").encode("latin-1"), float(sys.argv[4]),
+              sys.argv[5] if len(sys.argv) > 5 else None)
     elif cmd == "keepalive-drip":
         keepalive_drip(port, float(sys.argv[3]))

@@ -50,8 +50,11 @@ LONG=$(jqb .id)
 api POST /v1/jobs -H "Content-Type: application/json" -d "{\"mesh\":\"$BOX\",\"kind\":\"preview\"}"
 NEXT=$(jqb .id)
 # A held request is answered on shutdown, not dropped.
-curl -s -o "$TMP/held.json" -w '%{http_code}' "$BASE/v1/jobs/$NEXT?wait=30" >"$TMP/held.code" &
+curl -sv -o "$TMP/held.json" -w '%{http_code}' "$BASE/v1/jobs/$NEXT?wait=30" >"$TMP/held.code" \
+    2>"$TMP/held.trace" &
 CURL=$!
+# the request is sent (curl -v prints its head then), and read a moment later
+for _ in $(seq 1 200); do grep -q '^> GET' "$TMP/held.trace" && break; sleep 0.1; done
 sleep 0.5
 stop_daemon
 wait "$CURL"

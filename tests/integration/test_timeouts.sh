@@ -62,7 +62,7 @@ check "reference preview covers pixels ($REF_COVERED)" test "${REF_COVERED:-0}" 
 # process that is killed at the limit.
 big "catmull-clark bunny levels 3" catmull-clark "$BUNNY" '{"levels":3,"format":"obj"}'
 CC_JOB=$JOB
-sleep 0.5
+for _ in $(seq 1 100); do [[ -z "$(ps -o pid= --ppid "$PID")" ]] && break; sleep 0.1; done
 check "the stopped child is reaped" test -z "$(ps -o pid= --ppid "$PID")"
 if [[ "$BIG_STATE" == failed ]]; then
     api GET "/v1/jobs/$CC_JOB/result"
