@@ -453,6 +453,7 @@ int vx_conns_head_in(vx_conns *s, vx_conn *vc)
     int dead = vc->killed;
     vc->phase = P_BUSY;
     vc->t_phase = vx_mono();
+    vc->linger = 0; /* a new request: only its own early answer lingers */
     pthread_mutex_unlock(&s->lock);
     return dead;
 }
