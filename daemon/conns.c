@@ -166,15 +166,39 @@ static size_t kill_conn(vx_conn *vc, int status, const char *code, const char *m
     return (size_t)n;
 }
 
-/* Logs and counts an answer given by kill_conn before the head was read
- * (no request, so on_completed never sees it). */
-static void note_head_kill(const vx_conn *vc, int status, double dt, size_t bytes, const char *why)
+/* An answer given by kill_conn before the head was read (no request, so
+ * on_completed never sees it): what its log line says. */
+typedef struct head_kill {
+    char rid[72];
+    int status;
+    double dt;
+    size_t bytes;
+    const char *why;
+} head_kill;
+
+/* Logs and counts k. Never with s->lock held: a log write that stalls
+ * (a slow disk) would hold every thread that accepts or closes a
+ * connection. */
+static void note_head_kill(const head_kill *k)
 {
-    vx_metrics_request(vx_req_route_name(VX_R_UNKNOWN), "other", status, dt, 0, bytes);
+    vx_metrics_request(vx_req_route_name(VX_R_UNKNOWN), "other", k->status, k->dt, 0, k->bytes);
     VX_INFO("http.request",
             "request_id=%s method=- route=unmatched status=%d ms=%.2f bytes_in=0 bytes_out=%zu "
             "reason=%s",
-            vc->rid, status, dt * 1e3, bytes, why);
+            k->rid, k->status, k->dt * 1e3, k->bytes, k->why);
+}
+
+/* Keeps vc's kill in ks (room for cap) for note_head_kill after the lock;
+ * without room, logs it at once. */
+static void head_killed(head_kill *ks, size_t *nk, size_t cap, const vx_conn *vc, int status,
+                        double dt, size_t bytes, const char *why)
+{
+    head_kill k = {.status = status, .dt = dt, .bytes = bytes, .why = why};
+    snprintf(k.rid, sizeof k.rid, "%s", vc->rid);
+    if (ks && *nk < cap)
+        ks[(*nk)++] = k;
+    else
+        note_head_kill(&k);
 }
 
 void vx_conns_notify(void *cls, struct MHD_Connection *c, void **socket_context,
@@ -245,9 +269,10 @@ void *vx_conns_on_uri(void *cls, const char *uri, struct MHD_Connection *c)
     size_t n = vc->killed ? 0
                           : kill_conn(vc, 414, "uri_too_long",
                                       "the request target is longer than max-uri-bytes", 0);
-    double dt = vx_mono() - vc->t_phase;
+    head_kill k = {.status = 414, .dt = vx_mono() - vc->t_phase, .bytes = n, .why = "uri_too_long"};
+    snprintf(k.rid, sizeof k.rid, "%s", vc->rid);
     pthread_mutex_unlock(&s->lock);
-    if (n) note_head_kill(vc, 414, dt, n, "uri_too_long");
+    if (n) note_head_kill(&k);
     return NULL;
 }
 
@@ -290,8 +315,9 @@ static void drain(vx_conns *s)
     pthread_mutex_unlock(&s->ling_lock);
 }
 
-/* One pass of the sweeper, with s->lock held. */
-static void sweep(vx_conns *s, vx_conn **cand)
+/* One pass of the sweeper, with s->lock held; the heads it answers go
+ * into ks (room for cap, as cand), for the caller to log. */
+static void sweep(vx_conns *s, vx_conn **cand, head_kill *ks, size_t *nk, size_t cap)
 {
     const vx_config *cfg = s->cfg;
     double now = vx_mono();
@@ -324,7 +350,7 @@ static void sweep(vx_conns *s, vx_conn **cand)
             snprintf(m, sizeof m, "the request head did not arrive within %g s",
                      cfg->header_timeout_s);
             size_t n = kill_conn(vc, 408, "request_timeout", m, 0);
-            note_head_kill(vc, 408, now - vc->t_phase, n, "header_timeout");
+            head_killed(ks, nk, cap, vc, 408, now - vc->t_phase, n, "header_timeout");
             continue;
         }
         if (vc->phase == P_BODY && cfg->min_body_rate && now - vc->t_phase >= BODY_GRACE_S) {
@@ -360,7 +386,7 @@ static void sweep(vx_conns *s, vx_conn **cand)
         if (vc->phase == P_HEAD) {
             size_t n = kill_conn(vc, 408, "request_timeout",
                                  "the server is busy and the request head was not complete", 1);
-            note_head_kill(vc, 408, now - vc->t_phase, n, "evicted");
+            head_killed(ks, nk, cap, vc, 408, now - vc->t_phase, n, "evicted");
         } else {
             kill_conn(vc, 0, NULL, NULL, 1);
         }
@@ -375,8 +401,9 @@ static void sweep(vx_conns *s, vx_conn **cand)
 static void *sweeper_main(void *arg)
 {
     vx_conns *s = arg;
-    size_t cap = 0;
+    size_t cap = 0, kcap = 0;
     vx_conn **cand = NULL;
+    head_kill *ks = NULL;
     while (!__atomic_load_n(&s->stop, __ATOMIC_ACQUIRE)) {
         usleep(SWEEP_US);
         drain(s);
@@ -389,10 +416,22 @@ static void *sweeper_main(void *arg)
                 cap = ncap;
             }
         }
-        sweep(s, s->n <= cap ? cand : NULL);
+        if (s->n > kcap) {
+            size_t ncap = s->n * 2;
+            head_kill *nk = realloc(ks, ncap * sizeof *nk);
+            if (nk) {
+                ks = nk;
+                kcap = ncap;
+            }
+        }
+        size_t nk = 0;
+        sweep(s, s->n <= cap ? cand : NULL, ks, &nk, kcap);
         pthread_mutex_unlock(&s->lock);
+        for (size_t i = 0; i < nk; i++)
+            note_head_kill(&ks[i]);
     }
     free(cand);
+    free(ks);
     return NULL;
 }
 
@@ -422,15 +461,20 @@ int vx_conns_shutdown(vx_conns *s)
     int n = 0;
     double now = vx_mono();
     pthread_mutex_lock(&s->lock);
+    size_t nk = 0, cap = s->n;
+    head_kill *ks = malloc(cap * sizeof *ks + 1);
     for (vx_conn *vc = s->list; vc; vc = vc->next) {
         if (vc->killed || (vc->phase != P_HEAD && vc->phase != P_BODY)) continue;
         int head = vc->phase == P_HEAD;
         size_t bytes = kill_conn(vc, 503, "shutting_down",
                                  "the server is shutting down; send the request again", 0);
-        if (head) note_head_kill(vc, 503, now - vc->t_phase, bytes, "shutting_down");
+        if (head) head_killed(ks, &nk, cap, vc, 503, now - vc->t_phase, bytes, "shutting_down");
         n++;
     }
     pthread_mutex_unlock(&s->lock);
+    for (size_t i = 0; i < nk; i++)
+        note_head_kill(&ks[i]);
+    free(ks);
     return n;
 }
 

@@ -36,17 +36,17 @@ def connect(port, addr):
 def drip(port, seconds, out, addrs, per_addr):
     conns = []  # [sock, addr, t_connect, offset, answer]
     done = []
-    t_end = time.time() + seconds
+    t_end = time.monotonic() + seconds
     for a in addrs:
         for _ in range(per_addr):
             try:
-                conns.append([connect(port, a), a, time.time(), 0, b""])
+                conns.append([connect(port, a), a, time.monotonic(), 0, b""])
             except OSError:
-                conns.append([None, a, time.time(), 0, b""])
-    next_byte = time.time()
-    while time.time() < t_end:
+                conns.append([None, a, time.monotonic(), 0, b""])
+    next_byte = time.monotonic()
+    while time.monotonic() < t_end:
         # Answers are looked for every 50 ms, head bytes sent every 0.5 s.
-        send_now = time.time() >= next_byte
+        send_now = time.monotonic() >= next_byte
         if send_now:
             next_byte += 0.5
         for c in conns:
@@ -54,7 +54,7 @@ def drip(port, seconds, out, addrs, per_addr):
             if s is None:
                 if send_now:
                     try:
-                        c[0], c[2], c[3], c[4] = connect(port, c[1]), time.time(), 0, b""
+                        c[0], c[2], c[3], c[4] = connect(port, c[1]), time.monotonic(), 0, b""
                     except OSError:
                         pass
                 continue
@@ -79,7 +79,7 @@ def drip(port, seconds, out, addrs, per_addr):
             if closed:
                 line = c[4].split(b"\r\n", 1)[0].decode("latin-1")
                 body = c[4].split(b"\r\n\r\n", 1)[1].decode("latin-1") if b"\r\n\r\n" in c[4] else ""
-                done.append({"addr": c[1], "seconds": time.time() - c[2], "status_line": line, "body": body})
+                done.append({"addr": c[1], "seconds": time.monotonic() - c[2], "status_line": line, "body": body})
                 s.close()
                 c[0] = None
         time.sleep(0.05)
@@ -92,7 +92,7 @@ def drip(port, seconds, out, addrs, per_addr):
 
 def stall(port, data, seconds, sent=None):
     s = socket.create_connection(("127.0.0.1", port))
-    t0 = time.time()
+    t0 = time.monotonic()
     s.sendall(data)
     if sent:  # the caller waits for this file before it goes on
         open(sent, "w").close()
@@ -111,7 +111,7 @@ def stall(port, data, seconds, sent=None):
                     break
     except (socket.timeout, OSError):
         pass
-    print(json.dumps({"seconds": time.time() - t0, "response": got.decode("latin-1")}))
+    print(json.dumps({"seconds": time.monotonic() - t0, "response": got.decode("latin-1")}))
 
 
 def keepalive_drip(port, seconds):
@@ -119,10 +119,10 @@ def keepalive_drip(port, seconds):
     s.sendall(b"GET /livez HTTP/1.1\r\nHost: x\r\n\r\n")
     s.settimeout(2)
     first = s.recv(4096)
-    t0 = time.time()
+    t0 = time.monotonic()
     s.setblocking(False)
     got, i, next_byte = b"", 0, t0
-    while time.time() - t0 < seconds:
+    while time.monotonic() - t0 < seconds:
         try:
             b = s.recv(4096)
             if not b:
@@ -133,7 +133,7 @@ def keepalive_drip(port, seconds):
             pass
         except OSError:
             break
-        if time.time() >= next_byte:
+        if time.monotonic() >= next_byte:
             next_byte += 0.5
             try:
                 s.send(HEAD[i:i + 1])
@@ -141,7 +141,7 @@ def keepalive_drip(port, seconds):
             except OSError:
                 break
         time.sleep(0.05)
-    print(json.dumps({"first": first.decode("latin-1").split("\r\n")[0], "seconds": time.time() - t0,
+    print(json.dumps({"first": first.decode("latin-1").split("\r\n")[0], "seconds": time.monotonic() - t0,
                       "response": got.decode("latin-1")}))
 
 

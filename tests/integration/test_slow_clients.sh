@@ -103,4 +103,37 @@ check "the 503 has Retry-After, Date and the origin" \
     jq -e '.response | test("\r\nRetry-After: 1\r\n") and test("\r\nDate: ") and test("\r\nAccess-Control-Allow-Origin: http://viewer.example\r\n")' "$TMP/term.json"
 check "the daemon stopped within 4 s of SIGTERM" awk -v a="$T0" -v b="$T1" 'BEGIN {exit !(b - a < 4)}'
 check "logged as a 503" grep -q 'route=/v1/meshes .*status=503' "$TMP/daemon.log"
+
+# --- a log nobody reads: the sweeper's log line waits, new connections do not ---
+# stderr is a pipe whose reader stops and which is then filled, so the next
+# log write blocks; the sweeper answers a silent head (408) and logs it.
+# Nothing it holds while logging may keep libmicrohttpd from taking the
+# next connection (/livez at info level writes no log line).
+mkfifo "$TMP/log.fifo"
+cat "$TMP/log.fifo" >"$TMP/fifo.log" &
+CAT=$!
+"$VOXELD" --listen 127.0.0.1:0 --data-dir "$DATA" --workers 1 --http-threads 4 \
+    --header-timeout 1 2>"$TMP/log.fifo" &
+PID=$!
+PORT=
+for _ in $(seq 1 300); do
+    PORT=$(grep -a 'event=voxeld.ready' "$TMP/fifo.log" | sed -n 's/.*port=\([0-9]*\).*/\1/p')
+    [[ -n $PORT ]] && break
+    sleep 0.1
+done
+BASE="http://127.0.0.1:$PORT"
+kill -STOP "$CAT"
+timeout 2 dd if=/dev/zero of="$TMP/log.fifo" bs=4096 count=1000 2>/dev/null
+timeout 1 dd if=/dev/zero of="$TMP/log.fifo" bs=1 count=100000 2>/dev/null
+$SLOW stall "$PORT" 'GET /livez HTTP/1.1\r\n' 4 >/dev/null &
+STALL=$!
+sleep 2 # the 408 is due after 1 s: the sweeper is in its log write
+code=$(curl -s -o /dev/null -w '%{http_code}' -m 3 "$BASE/livez")
+check "a connection is served while a log write blocks the sweeper (got $code)" test "$code" = 200
+kill -CONT "$CAT"
+wait "$STALL"
+for _ in $(seq 1 50); do grep -aq 'reason=header_timeout' "$TMP/fifo.log" && break; sleep 0.1; done
+check "the sweeper's 408 is logged once the log is read again" grep -aq 'reason=header_timeout' "$TMP/fifo.log"
+stop_daemon
+wait "$CAT"
 finish
