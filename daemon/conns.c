@@ -102,7 +102,7 @@ struct vx_conns {
     int sweeper_started;
     int stop;
     /* The sockets being drained (at most cap_ling), under ling_lock, not
-     * lock: a request never waits on the drain. */
+     * lock: only a close that adds one waits, for one non-blocking pass. */
     pthread_mutex_t ling_lock;
     lingerer *ling;
     size_t nling, cap_ling;
@@ -291,9 +291,9 @@ static int by_phase_time(const void *a, const void *b)
     return x < y ? -1 : x > y;
 }
 
-/* Reads and drops what waits on each lingering socket; closes it at the
- * client's end of file, an error or after DRAIN_S. Takes s->ling_lock
- * (not s->lock: the requests' phase changes never wait on it). */
+/* Reads and drops what waits on each lingering socket, without blocking;
+ * closes it at the client's end of file, an error or after DRAIN_S. Takes
+ * s->ling_lock, not s->lock. */
 static void drain(vx_conns *s)
 {
     char sink[16384];
