@@ -30,8 +30,9 @@
  * unread bytes resets it, and the reset can reach the client before the
  * answer. Such a connection is marked (vx_conns_linger); at its close a
  * copy of the descriptor keeps the socket open, and the sweeper reads and
- * drops what arrives until the client closes, for DRAIN_S at most (for at
- * most a quarter of --max-connections sockets at once).
+ * drops what arrives until the client closes, for DRAIN_S at most and
+ * DRAIN_IDLE_S without a byte (for at most a quarter of --max-connections
+ * sockets at once).
  * When the server stops (SIGTERM), vx_conns_shutdown answers every HEAD
  * and BODY still arriving after the grace with a JSON 503 shutting_down
  * the same way, so a client is told to send it again rather than cut off.
@@ -90,7 +91,7 @@ struct vx_conn {
  * libmicrohttpd closed its descriptor (see vx_conns_linger). */
 typedef struct lingerer {
     int fd;
-    double t0;
+    double t0, last; /* when it began, when a byte last came */
 } lingerer;
 
 struct vx_conns {
@@ -101,8 +102,8 @@ struct vx_conns {
     pthread_t sweeper;
     int sweeper_started;
     int stop;
-    /* The sockets being drained (at most cap_ling), under ling_lock, not
-     * lock: only a close that adds one waits, for one non-blocking pass. */
+    /* The sockets being drained (at most cap_ling), under ling_lock, never
+     * taken with lock held: a close that adds one waits for one pass. */
     pthread_mutex_t ling_lock;
     lingerer *ling;
     size_t nling, cap_ling;
@@ -114,6 +115,7 @@ struct vx_conns {
 #define SWEEP_US 100000
 #define EVICT_MIN_AGE_S 0.25 /* a head or idle time this young is nobody's attack */
 #define DRAIN_S 5.0          /* the longest an answered socket's body is read and dropped */
+#define DRAIN_IDLE_S 1.0     /* ... or until nothing came for this long */
 
 vx_conn *vx_conns_of(struct MHD_Connection *c)
 {
@@ -153,6 +155,7 @@ static size_t kill_conn(vx_conn *vc, int status, const char *code, const char *m
                      status,
                      status == 408   ? "Request Timeout"
                      : status == 503 ? "Service Unavailable"
+                     : status == 413 ? "Content Too Large"
                                      : "URI Too Long",
                      date, vc->rid, status == 503 ? "Retry-After: 1\r\n" : "", cors, bn, body);
         if (n >= (int)sizeof msg) n = (int)sizeof msg - 1; /* (never: the parts are bounded) */
@@ -225,19 +228,7 @@ void vx_conns_notify(void *cls, struct MHD_Connection *c, void **socket_context,
     vx_conn *vc = *socket_context;
     if (!vc) return;
     pthread_mutex_lock(&s->lock);
-    /* libmicrohttpd has written the answer and shut the socket for writing;
-     * its close would reset the connection while the body still arrives,
-     * and the client could lose the answer. A copy of the descriptor keeps
-     * the socket open until the sweeper has drained it. */
-    if (vc->linger && !vc->killed) {
-        pthread_mutex_lock(&s->ling_lock);
-        int fd = s->nling < s->cap_ling ? fcntl(vc->fd, F_DUPFD_CLOEXEC, 0) : -1;
-        if (fd >= 0) {
-            shutdown(fd, SHUT_WR);
-            s->ling[s->nling++] = (lingerer){fd, vx_mono()};
-        }
-        pthread_mutex_unlock(&s->ling_lock);
-    }
+    int linger = vc->linger && !vc->killed;
     if (vc->prev)
         vc->prev->next = vc->next;
     else
@@ -245,6 +236,20 @@ void vx_conns_notify(void *cls, struct MHD_Connection *c, void **socket_context,
     if (vc->next) vc->next->prev = vc->prev;
     s->n--;
     pthread_mutex_unlock(&s->lock);
+    /* libmicrohttpd has written the answer and shut the socket for writing;
+     * its close would reset the connection while the body still arrives,
+     * and the client could lose the answer. A copy of the descriptor keeps
+     * the socket open until the sweeper has drained it. */
+    if (linger) {
+        pthread_mutex_lock(&s->ling_lock);
+        int fd = s->nling < s->cap_ling ? fcntl(vc->fd, F_DUPFD_CLOEXEC, 0) : -1;
+        if (fd >= 0) {
+            shutdown(fd, SHUT_WR);
+            double now = vx_mono();
+            s->ling[s->nling++] = (lingerer){fd, now, now};
+        }
+        pthread_mutex_unlock(&s->ling_lock);
+    }
     free(vc);
     *socket_context = NULL;
 }
@@ -292,8 +297,9 @@ static int by_phase_time(const void *a, const void *b)
 }
 
 /* Reads and drops what waits on each lingering socket, without blocking;
- * closes it at the client's end of file, an error or after DRAIN_S. Takes
- * s->ling_lock, not s->lock. */
+ * closes it at the client's end of file, an error, after DRAIN_S, or when
+ * nothing came for DRAIN_IDLE_S (the body was all in already, and the
+ * client keeps its socket). Takes s->ling_lock, not s->lock. */
 static void drain(vx_conns *s)
 {
     char sink[16384];
@@ -302,10 +308,12 @@ static void drain(vx_conns *s)
     for (size_t i = 0; i < s->nling;) {
         lingerer *l = &s->ling[i];
         ssize_t got = 0;
-        for (int k = 0; k < 16; k++) /* at most 256 KiB a sweep per socket */
+        for (int k = 0; k < 256; k++) { /* at most 4 MiB a sweep per socket */
             if ((got = recv(l->fd, sink, sizeof sink, MSG_DONTWAIT)) <= 0) break;
+            l->last = now;
+        }
         int open = got > 0 || (got < 0 && (errno == EAGAIN || errno == EWOULDBLOCK));
-        if (open && now - l->t0 < DRAIN_S) {
+        if (open && now - l->t0 < DRAIN_S && now - l->last < DRAIN_IDLE_S) {
             i++;
             continue;
         }
@@ -553,6 +561,14 @@ void vx_conns_linger(vx_conns *s, vx_conn *vc)
     if (!vc) return;
     pthread_mutex_lock(&s->lock);
     vc->linger = 1;
+    pthread_mutex_unlock(&s->lock);
+}
+
+void vx_conns_refuse(vx_conns *s, vx_conn *vc, int status, const char *code, const char *message)
+{
+    if (!vc) return;
+    pthread_mutex_lock(&s->lock);
+    if (!vc->killed && vc->phase == P_BODY) kill_conn(vc, status, code, message, 0);
     pthread_mutex_unlock(&s->lock);
 }
 

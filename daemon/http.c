@@ -183,7 +183,7 @@ static int take_body(vx_http *h, req *r, const char *data, size_t n)
     if (r->body == BODY_UPLOAD) {
         if (r->too_big || r->body_err.kind != VX_EOK) return 0;
         if (r->bytes_in > h->d.cfg->max_upload_bytes) {
-            /* Keep reading (and dropping) the rest, answer 413 at the end. */
+            /* on_request answers 413 now; the rest is dropped */
             r->too_big = 1;
             vx_upload_abort(r->up);
             r->up = NULL;
@@ -348,6 +348,20 @@ static enum MHD_Result on_request(void *cls, struct MHD_Connection *c, const cha
             return vx_resp_fail(c, r, VX_EINTERNAL, "upload_failed", "could not store the body");
         }
         *data_size = 0;
+        if (r->too_big && !r->refused) {
+            /* Answer the 413 now, written past libmicrohttpd as the 408s
+             * are (it takes no answer in the middle of a body): a chunked
+             * body has no end to wait for, and one sent forever was read
+             * forever. What still comes is read and dropped, then closed. */
+            r->refused = 1;
+            char m[96];
+            if (r->body == BODY_UPLOAD)
+                snprintf(m, sizeof m, "the body is larger than the %llu-byte upload limit",
+                         (unsigned long long)h->d.cfg->max_upload_bytes);
+            else
+                snprintf(m, sizeof m, "the JSON body is larger than max-json-bytes");
+            vx_conns_refuse(h->conns, r->vc, 413, "too_large", m);
+        }
         return MHD_YES;
     }
     return dispatch(h, c, r);

@@ -112,6 +112,67 @@ PY
 read -r ended secs <"$TMP/nonreader.txt"
 check "a client that never stops sending is cut off after the drain ($ended after $secs s)" \
     test "$ended" = yes
+# A chunked body has no length to refuse up front: it is answered 413 as
+# soon as it passes the limit (it was read to its end: forever, for one
+# that never ends), then closed. Upload and JSON limits alike.
+endless_chunks() { # PATH CONTENT-TYPE -> "STATUS_LINE|CODE|SECONDS|END"
+    python3 - "$PORT" "$1" "$2" <<'PY'
+import json, socket, sys, time
+s = socket.create_connection(("127.0.0.1", int(sys.argv[1])))
+s.sendall(("POST %s HTTP/1.1\r\nHost: x\r\nContent-Type: %s\r\n"
+           "Transfer-Encoding: chunked\r\n\r\n" % (sys.argv[2], sys.argv[3])).encode())
+chunk = b"4000\r\n" + b"v 1 2 3\n" * 2048 + b"\r\n"
+t0, got, end = time.monotonic(), b"", "none"
+s.settimeout(0.02)
+while time.monotonic() - t0 < 15 and end == "none":
+    try:
+        s.send(chunk)
+    except socket.timeout:
+        pass
+    except OSError:
+        end = "reset"
+    try:
+        b = s.recv(65536)
+        got += b
+        if not b:
+            end = "eof"
+    except socket.timeout:
+        pass
+    except OSError:
+        end = "reset"
+    time.sleep(0.002)
+head, _, body = got.partition(b"\r\n\r\n")
+try:
+    code = json.loads(body)["error"]["code"]
+except ValueError:
+    code = "-"
+print("%s|%s|%.1f|%s" % (head.split(b"\r\n")[0].decode("latin-1"), code, time.monotonic() - t0, end))
+PY
+}
+IFS='|' read -r line code secs end < <(endless_chunks /v1/meshes model/obj)
+check "an endless chunked upload is answered 413 too_large ($line, $code, after ${secs}s, then $end)" \
+    test "$line" = "HTTP/1.1 413 Content Too Large" -a "$code" = too_large -a "$end" != none
+IFS='|' read -r line code secs end < <(endless_chunks /v1/jobs application/json)
+check "an endless chunked JSON body is answered 413 too_large ($line, $code, after ${secs}s, then $end)" \
+    test "$line" = "HTTP/1.1 413 Content Too Large" -a "$code" = too_large -a "$end" != none
+# A refused request whose whole body came with its head keeps no socket
+# open past a second without a byte, however long the client waits.
+base=$(ls "/proc/$PID/fd" | wc -l)
+python3 - "$PORT" >"$TMP/idle.txt" <<'PY' &
+import socket, sys, time
+socks = []
+for i in range(12):
+    s = socket.create_connection(("127.0.0.1", int(sys.argv[1])))
+    s.sendall(b"POST /v1/meshes HTTP/1.1\r\nHost: x\r\nContent-Type: text/html\r\n"
+              b"Content-Length: 2\r\n\r\nab")
+    socks.append(s)
+time.sleep(6)
+PY
+IDLE=$!
+sleep 3
+now=$(ls "/proc/$PID/fd" | wc -l)
+check "refused bodies already in hold no socket after 1 s idle ($now fds, $base before)" test "$now" -le "$base"
+wait "$IDLE"
 api GET /livez
 check "serving after the drained clients (got $STATUS)" test "$STATUS" = 200
 if [[ $(grep -c '^f' "$TMP/many.obj") -gt 100000 && $(stat -c %s "$TMP/many.obj") -lt 2000000 ]]; then
