@@ -157,6 +157,7 @@ check "an endless chunked JSON body is answered 413 too_large ($line, $code, aft
     test "$line" = "HTTP/1.1 413 Content Too Large" -a "$code" = too_large -a "$end" != none
 # A refused request whose whole body came with its head keeps no socket
 # open past a second without a byte, however long the client waits.
+sleep 1 # the sockets answered above are closed by now
 base=$(ls "/proc/$PID/fd" | wc -l)
 python3 - "$PORT" >"$TMP/idle.txt" <<'PY' &
 import socket, sys, time
