@@ -21,7 +21,7 @@ rss_kb() { awk '/^VmRSS:/ {print $2}' "/proc/$PID/status"; }
 # Under AddressSanitizer freed memory sits in its quarantine (256 MB): RSS
 # says nothing there, the other checks still hold.
 ASAN=0
-if ldd "$VOXELD" 2>/dev/null | grep -q libasan; then ASAN=1; echo "ASan build: RSS not checked"; fi
+if [[ $(ldd "$VOXELD" 2>/dev/null) == *libasan* ]]; then ASAN=1; echo "ASan build: RSS not checked"; fi
 check_rss() { # WHAT KB LIMIT_KB
     [[ $ASAN == 1 ]] || check "$1" test "$2" -lt "$3"
 }
