@@ -2,37 +2,9 @@
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
-#include <sys/mman.h>
 
+#include "util/bigmem.h"
 #include "voxel/voxel.h"
-
-/* Zeroed memory for a grid's bits or counts. Big ones are mapped with
- * transparent huge pages asked for: the engines write them once, and a
- * 1024^3 grid is 128 MiB, 32768 first-touch faults in 4 KiB pages (with
- * two threads each a TLB shootdown) against 64 in 2 MiB ones. *mapped is
- * the length mapped, 0 when calloc'd. */
-#define GRID_MAP_MIN ((size_t)4 << 20)
-
-static void *grid_zalloc(size_t bytes, size_t *mapped)
-{
-    *mapped = 0;
-    if (bytes < GRID_MAP_MIN) return calloc(bytes, 1);
-    void *p = mmap(NULL, bytes, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
-    if (p == MAP_FAILED) return NULL;
-#ifdef MADV_HUGEPAGE
-    madvise(p, bytes, MADV_HUGEPAGE); /* a hint: without THP, small pages */
-#endif
-    *mapped = bytes;
-    return p;
-}
-
-static void grid_zfree(void *p, size_t mapped)
-{
-    if (mapped)
-        munmap(p, mapped);
-    else
-        free(p);
-}
 
 uint64_t vx_bitgrid_bytes(const int dims[3], int supersample)
 {
@@ -49,8 +21,9 @@ int vx_bitgrid_alloc(vx_bitgrid *g, const vx_grid *grid, int with_counts, vx_err
     g->grid = *grid;
     g->wx = ((size_t)grid->dims[0] + 31) / 32;
     size_t rows = (size_t)grid->dims[1] * (size_t)grid->dims[2];
-    g->bits = grid_zalloc((g->wx * rows + 1) * sizeof *g->bits, &g->bits_mapped);
-    if (with_counts) g->counts = grid_zalloc((size_t)grid->dims[0] * rows + 1, &g->counts_mapped);
+    g->bits = vx_bigmem_alloc((g->wx * rows + 1) * sizeof *g->bits, &g->bits_mapped);
+    if (with_counts)
+        g->counts = vx_bigmem_alloc((size_t)grid->dims[0] * rows + 1, &g->counts_mapped);
     g->nsamples = with_counts ? 8 : 0;
     if (!g->bits || (with_counts && !g->counts)) {
         vx_bitgrid_free(g);
@@ -63,8 +36,8 @@ int vx_bitgrid_alloc(vx_bitgrid *g, const vx_grid *grid, int with_counts, vx_err
 void vx_bitgrid_free(vx_bitgrid *g)
 {
     if (!g) return;
-    if (g->bits) grid_zfree(g->bits, g->bits_mapped);
-    if (g->counts) grid_zfree(g->counts, g->counts_mapped);
+    if (g->bits) vx_bigmem_free(g->bits, g->bits_mapped);
+    if (g->counts) vx_bigmem_free(g->counts, g->counts_mapped);
     g->bits = NULL;
     g->counts = NULL;
     g->bits_mapped = g->counts_mapped = 0;

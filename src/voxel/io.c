@@ -12,6 +12,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "util/bigmem.h"
 #include "util/par.h"
 #include "voxel/io.h"
 #include "voxel/io_int.h"
@@ -473,11 +474,13 @@ int vx_voxel_write_binvox(const vx_bitgrid *g, const char *path, const vx_voxel_
     if (per < 1) per = 1;
     if (per > 32) per = 32;
     if (per > g->wx) per = g->wx;
-    uint32_t *cols = malloc(2 * per * ncols * sizeof *cols);
-    uint8_t *kinds = malloc(2 * per * (ncols / 32));
+    /* written once a group, sparsely: in huge pages (util/bigmem.h) */
+    size_t cols_mapped, kinds_mapped;
+    uint32_t *cols = vx_bigmem_alloc(2 * per * ncols * sizeof *cols, &cols_mapped);
+    uint8_t *kinds = vx_bigmem_alloc(2 * per * (ncols / 32), &kinds_mapped);
     if (!cols || !kinds) {
-        free(cols);
-        free(kinds);
+        vx_bigmem_free(cols, cols_mapped);
+        vx_bigmem_free(kinds, kinds_mapped);
         return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for binvox columns");
     }
     vx_out o;
@@ -511,7 +514,7 @@ int vx_voxel_write_binvox(const vx_bitgrid *g, const char *path, const vx_voxel_
     }
     if (ok && rle_zeros(&r, (uint64_t)(d - nx) * d * d)) ok = 0;
     if (ok && r.run && rle_flush(&r)) ok = 0;
-    free(cols);
-    free(kinds);
+    vx_bigmem_free(cols, cols_mapped);
+    vx_bigmem_free(kinds, kinds_mapped);
     return vx_out_close(&o, ok, err);
 }
