@@ -18,7 +18,7 @@
  * to 1/2, the count decides alone; else w_K is evaluated with a tree over
  * K (wtree.c, Barill et al. 2018) at both ends of the run (and its middle
  * when it is over 8 voxels), and where they disagree about w >= 1/2 the
- * run is halved until the change is found. A closed mesh has no cone:
+ * run is split (fill_run) until the change is found. A closed mesh has no cone:
  * then w is the crossing count and nothing is evaluated. Centres outside
  * the mesh's bounding box are outside (|w| < 1/2 outside its convex hull).
  *
@@ -26,6 +26,7 @@
  * say, so a dip of w across 1/2 and back between two samples is missed
  * (a column that grazes a hole's rim, where w varies fastest); far nodes
  * of the tree carry an error of about (1/beta)^3 of their field. */
+#include <limits.h>
 #include <math.h>
 #include <stdatomic.h>
 #include <stdlib.h>
@@ -235,12 +236,13 @@ static void set_bit(const wctx *c, uint32_t *slice, int i, int k)
     slice[(size_t)k * c->out->wx + (size_t)(i >> 5)] |= 1u << (i & 31);
 }
 
-/* w >= 1/2 at centre k of column (i, j), whose crossing count above is n. */
-static int inside_at(const wctx *c, int i, int j, int k, int n)
+/* n - w - 1/2 at centre k of column (i, j), whose crossing count above
+ * is n: the centre is inside (w >= 1/2) where it is >= 0. */
+static double margin_at(const wctx *c, int i, int j, int k, int n)
 {
     double q[3] = {c->o[0] + (c->ix[0] + i + 0.5) * c->h, c->o[1] + (c->ix[1] + j + 0.5) * c->h,
                    c->o[2] + (c->ix[2] + k + 0.5) * c->h};
-    return n - vx_wtree_eval(&c->tree, q) >= 0.5;
+    return n - vx_wtree_eval(&c->tree, q) - 0.5;
 }
 
 /* 1 when the cone's |w| stays under |n - 1/2| on centres ka..kb of column
@@ -254,14 +256,20 @@ static int far_run(const wctx *c, int i, int j, int ka, int kb, int n)
     return vx_wtree_bound(&c->tree, a, b, limit) < limit;
 }
 
-/* Centres ka..kb of one run between crossings: ends known (da, db). */
-/* Centres ka..kb of one run between crossings, ends known (da, db), the
- * run possibly reaching past the brick: only its centres in the brick are
- * set, and only halves that reach into the brick are looked at (which
- * decides nothing in it: each half is decided from its own samples). */
-static void fill_run(wctx *c, uint32_t *slice, int i, int j, int ka, int kb, int da, int db, int n)
+/* Centres ka..kb of one run between crossings, the margins at its ends
+ * known (fa, fb; margin_at), the run possibly reaching past the brick:
+ * only its centres in the brick are set, and only parts that reach into
+ * the brick are looked at (which decides nothing in it: each part is
+ * decided from its own samples). Where the ends disagree, the run is
+ * split where the margin's straight line through them crosses 0 (w is
+ * smooth along a run: the change is found in a few samples, not log2 of
+ * the run's length), or at its middle when the last split did not halve
+ * the part (prev, the length before it), as regula falsi can stall. */
+static void fill_run(wctx *c, uint32_t *slice, int i, int j, int ka, int kb, double fa, double fb,
+                     int n, int prev)
 {
     if (kb < 0 || ka > c->nz - 1) return;
+    int da = fa >= 0, db = fb >= 0;
     if (da == db) {
         int k0 = ka < 0 ? 0 : ka, k1 = kb > c->nz - 1 ? c->nz - 1 : kb;
         if (da)
@@ -275,9 +283,19 @@ static void fill_run(wctx *c, uint32_t *slice, int i, int j, int ka, int kb, int
         return;
     }
     int km = ka + (kb - ka) / 2;
-    if (km >= 0) fill_run(c, slice, i, j, ka, km, da, inside_at(c, i, j, km, n), n);
-    if (km + 1 <= c->nz - 1)
-        fill_run(c, slice, i, j, km + 1, kb, inside_at(c, i, j, km + 1, n), db, n);
+    if (2 * (kb - ka) <= prev) {
+        double t = fa / (fa - fb) * (kb - ka); /* in (0, kb - ka]: the ends' signs differ */
+        km = ka + (int)t;
+        if (km > kb - 1) km = kb - 1;
+    }
+    if (km >= 0) {
+        double fm = margin_at(c, i, j, km, n);
+        fill_run(c, slice, i, j, ka, km, fa, fm, n, kb - ka);
+    }
+    if (km + 1 <= c->nz - 1) {
+        double fm1 = margin_at(c, i, j, km + 1, n);
+        fill_run(c, slice, i, j, km + 1, kb, fm1, fb, n, kb - ka);
+    }
 }
 
 typedef struct zs {
@@ -335,20 +353,22 @@ static void column(wctx *c, uint32_t *slice, int i, int j)
         int kb = r < n && z[r] - 1 < hi ? z[r] - 1 : hi;
         if (ka <= kb && kb >= 0 && ka <= c->nz - 1) {
             if (!c->open || far_run(c, i, j, ka, kb, cnt)) {
-                fill_run(c, slice, i, j, ka, kb, cnt >= 1, cnt >= 1, cnt);
+                double f = cnt >= 1 ? 1 : -1;
+                fill_run(c, slice, i, j, ka, kb, f, f, cnt, 0);
             } else {
-                int da = inside_at(c, i, j, ka, cnt),
-                    db = ka == kb ? da : inside_at(c, i, j, kb, cnt);
-                if (kb - ka >= 8 && da == db) {
-                    int km = ka + (kb - ka) / 2, dm = inside_at(c, i, j, km, cnt);
-                    if (dm != da) {
-                        fill_run(c, slice, i, j, ka, km, da, dm, cnt);
-                        fill_run(c, slice, i, j, km + 1, kb, inside_at(c, i, j, km + 1, cnt), db,
-                                 cnt);
+                double fa = margin_at(c, i, j, ka, cnt),
+                       fb = ka == kb ? fa : margin_at(c, i, j, kb, cnt);
+                if (kb - ka >= 8 && (fa >= 0) == (fb >= 0)) {
+                    int km = ka + (kb - ka) / 2;
+                    double fm = margin_at(c, i, j, km, cnt);
+                    if ((fm >= 0) != (fa >= 0)) {
+                        fill_run(c, slice, i, j, ka, km, fa, fm, cnt, INT_MAX);
+                        fill_run(c, slice, i, j, km + 1, kb, margin_at(c, i, j, km + 1, cnt), fb,
+                                 cnt, INT_MAX);
                         goto next;
                     }
                 }
-                fill_run(c, slice, i, j, ka, kb, da, db, cnt);
+                fill_run(c, slice, i, j, ka, kb, fa, fb, cnt, INT_MAX);
             }
         }
     next:

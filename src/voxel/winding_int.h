@@ -8,24 +8,31 @@
 #define VX_VOXEL_WINDING_INT_H
 
 #include <stddef.h>
+#include <stdint.h>
 
 #include "mesh/mesh.h"
 #include "util/err.h"
 
 typedef struct vx_wtree_node {
-    double p[3];  /* area-weighted centre of its triangles */
-    double a[3];  /* sum of the vector areas (half cross products) */
-    double m[9];  /* sum of (centroid - p) (x) vector area, row-major */
-    double far2;  /* (beta * radius)^2: farther query points use the expansion */
-    double r;     /* radius: every vertex lies within r of p */
-    double area;  /* sum of the triangles' areas */
-    int kid[2];   /* children, or -1 for a leaf */
-    int first, n; /* leaf: triangles first..first+n-1 (tree order) */
+    double p[3];    /* area-weighted centre of its triangles */
+    double a[3];    /* sum of the vector areas (half cross products) */
+    double m[9];    /* sum of (centroid - p) (x) vector area, row-major */
+    double far2;    /* (beta * radius)^2: farther query points use the expansion */
+    double r;       /* radius: every vertex lies within r of p */
+    double area;    /* sum of the triangles' areas */
+    int kid[2];     /* children, or -1 for a leaf */
+    int first, n;   /* leaf: triangles first..first+n-1 (tree order) */
+    int vfirst, nv; /* leaf: its distinct corners vfirst..vfirst+nv-1 */
 } vx_wtree_node;
 
 typedef struct vx_wtree {
     size_t ntris;
     double *tv; /* 9 doubles a triangle (three vertices), in tree order */
+    /* Each leaf's distinct corners (3 doubles each; a leaf's fan of
+     * slivers shares most of them), and per triangle its corners' places
+     * in its leaf's list: a leaf's unit vectors are made once each. */
+    double *lv;
+    uint8_t *corner; /* 3 a triangle, tree order */
     vx_wtree_node *node;
     int nnodes;
 } vx_wtree;

@@ -9,6 +9,7 @@
 #include "voxel/winding_int.h"
 
 #define LEAF 8
+#define LEAF_CORNERS 64 /* a leaf with more distinct corners goes triangle by triangle */
 #define STACK 128
 
 /* atan2 to about 1e-5 radians (Abramowitz & Stegun 4.4.47 on [0, 1],
@@ -46,36 +47,47 @@ static double tri_near_edge(double u[3][3])
     return atan2_fast(det, den) / (2 * M_PI);
 }
 
+/* w of the triangle seen along unit vectors a, b, c (Van Oosterom &
+ * Strackee: tan(omega / 2) = det / den; w = omega / (4 pi)). det and den
+ * carry rounding of about 1e-16: seen from near a long edge, where the
+ * unit vectors of its ends nearly cancel, that is every digit (a triangle
+ * 1e8 long seen from 0.1 away gave w off by 1/2). Then the same angle
+ * from the pair whose sum carries it (tri_near_edge). */
+static double tri_units(const double *a, const double *b, const double *c)
+{
+    double det = a[0] * (b[1] * c[2] - b[2] * c[1]) - a[1] * (b[0] * c[2] - b[2] * c[0]) +
+                 a[2] * (b[0] * c[1] - b[1] * c[0]);
+    double den = 1 + (a[0] * b[0] + a[1] * b[1] + a[2] * b[2]) +
+                 (b[0] * c[0] + b[1] * c[1] + b[2] * c[2]) +
+                 (c[0] * a[0] + c[1] * a[1] + c[2] * a[2]);
+    if (det * det + den * den > 1e-12) return atan2_fast(det, den) / (2 * M_PI);
+    double u[3][3];
+    memcpy(u[0], a, sizeof u[0]);
+    memcpy(u[1], b, sizeof u[1]);
+    memcpy(u[2], c, sizeof u[2]);
+    return tri_near_edge(u);
+}
+
+/* *u = the unit vector from q to v; 0, or -1 where v is q. Divided, not
+ * multiplied by 1 / l: a coordinate that is the whole length then gives
+ * exactly +-1, which tri_near_edge's cancelling sums need (with 1 / l a
+ * sliver 1e8 long gave w off by 1 seen from 0.3 away). */
+static int unit_from(const double *v, const double q[3], double u[3])
+{
+    double d[3] = {v[0] - q[0], v[1] - q[1], v[2] - q[2]};
+    double l = sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+    if (l == 0) return -1;
+    for (int k = 0; k < 3; k++)
+        u[k] = d[k] / l;
+    return 0;
+}
+
 double vx_wtree_tri(const double *v, const double q[3])
 {
     double u[3][3];
     for (int i = 0; i < 3; i++)
-        for (int k = 0; k < 3; k++)
-            u[i][k] = v[3 * i + k] - q[k];
-    const double *a = u[0], *b = u[1], *c = u[2];
-    double la = sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2]);
-    double lb = sqrt(b[0] * b[0] + b[1] * b[1] + b[2] * b[2]);
-    double lc = sqrt(c[0] * c[0] + c[1] * c[1] + c[2] * c[2]);
-    double det = a[0] * (b[1] * c[2] - b[2] * c[1]) - a[1] * (b[0] * c[2] - b[2] * c[0]) +
-                 a[2] * (b[0] * c[1] - b[1] * c[0]);
-    double ab = a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
-    double bc = b[0] * c[0] + b[1] * c[1] + b[2] * c[2];
-    double ca = c[0] * a[0] + c[1] * a[1] + c[2] * a[2];
-    double den = la * lb * lc + ab * lc + bc * la + ca * lb;
-    /* Van Oosterom & Strackee: tan(omega / 2) = det / den; w = omega /
-     * (4 pi). Both carry rounding of about 1e-16 la lb lc: seen from near
-     * a long edge, where the unit vectors of its ends nearly cancel, that
-     * is every digit (a triangle 1e8 long seen from 0.1 away gave w off by
-     * 1/2). Then the same angle from the unit vectors, where the
-     * cancelling pair's sum carries it (tri_near_edge). */
-    double scale = la * lb * lc;
-    if (det * det + den * den > 1e-12 * scale * scale) return atan2_fast(det, den) / (2 * M_PI);
-    if (la == 0 || lb == 0 || lc == 0) return 0; /* at a corner */
-    const double l[3] = {la, lb, lc};
-    for (int i = 0; i < 3; i++)
-        for (int k = 0; k < 3; k++)
-            u[i][k] /= l[i];
-    return tri_near_edge(u);
+        if (unit_from(v + 3 * i, q, u[i])) return 0; /* at a corner */
+    return tri_units(u[0], u[1], u[2]);
 }
 
 typedef struct build {
@@ -194,6 +206,43 @@ static int node_build(build *b, int lo, int hi, int depth)
     return id;
 }
 
+/* Each leaf's distinct corners into t->lv, each triangle's places among
+ * them into t->corner (a leaf with over LEAF_CORNERS keeps nv 0). */
+static int leaf_corners(vx_wtree *t)
+{
+    t->lv = malloc(9 * t->ntris * sizeof *t->lv + 1);
+    t->corner = malloc(3 * t->ntris + 1);
+    if (!t->lv || !t->corner) return -1;
+    int nlv = 0;
+    for (int id = 0; id < t->nnodes; id++) {
+        vx_wtree_node *nd = &t->node[id];
+        nd->vfirst = nlv;
+        nd->nv = 0;
+        if (nd->kid[0] >= 0) continue;
+        int nv = 0;
+        for (int i = nd->first; i < nd->first + nd->n && nv >= 0; i++)
+            for (int q = 0; q < 3; q++) {
+                const double *v = t->tv + 9 * (size_t)i + 3 * q;
+                int at = 0;
+                while (at < nv && memcmp(t->lv + 3 * (size_t)(nlv + at), v, 3 * sizeof *v))
+                    at++;
+                if (at == nv) {
+                    if (nv == LEAF_CORNERS) {
+                        nv = -1;
+                        break;
+                    }
+                    memcpy(t->lv + 3 * (size_t)(nlv + nv++), v, 3 * sizeof *v);
+                }
+                t->corner[3 * (size_t)i + q] = (uint8_t)at;
+            }
+        if (nv > 0) {
+            nd->nv = nv;
+            nlv += nv;
+        }
+    }
+    return 0;
+}
+
 int vx_wtree_build(vx_wtree *t, size_t ntris, const double *tv, vx_err *err)
 {
     memset(t, 0, sizeof *t);
@@ -222,6 +271,10 @@ int vx_wtree_build(vx_wtree *t, size_t ntris, const double *tv, vx_err *err)
     t->ntris = ntris;
     free(b.idx);
     free(b.cen);
+    if (leaf_corners(t)) {
+        vx_wtree_free(t);
+        return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for the winding tree");
+    }
     return 0;
 }
 
@@ -239,6 +292,23 @@ static double far_field(const vx_wtree_node *nd, const double q[3])
     return first + tr * inv3 - 3 * rmr * inv5;
 }
 
+/* A leaf's triangles at q, each distinct corner's unit vector made once
+ * (a triangle with a corner at q counts 0, as vx_wtree_tri). */
+static double leaf_eval(const vx_wtree *t, const vx_wtree_node *nd, const double q[3])
+{
+    double u[LEAF_CORNERS][3];
+    uint64_t at_q = 0; /* corners at q */
+    for (int v = 0; v < nd->nv; v++)
+        if (unit_from(t->lv + 3 * (size_t)(nd->vfirst + v), q, u[v])) at_q |= (uint64_t)1 << v;
+    double w = 0;
+    for (int i = nd->first; i < nd->first + nd->n; i++) {
+        const uint8_t *c = t->corner + 3 * (size_t)i;
+        if (at_q && (at_q >> c[0] & 1 || at_q >> c[1] & 1 || at_q >> c[2] & 1)) continue;
+        w += tri_units(u[c[0]], u[c[1]], u[c[2]]);
+    }
+    return w;
+}
+
 double vx_wtree_eval(const vx_wtree *t, const double q[3])
 {
     if (!t->nnodes) return 0;
@@ -252,6 +322,8 @@ double vx_wtree_eval(const vx_wtree *t, const double q[3])
             d2 += (q[k] - nd->p[k]) * (q[k] - nd->p[k]);
         if (d2 > nd->far2 && nd->far2 > 0) {
             far += far_field(nd, q);
+        } else if (nd->kid[0] < 0 && nd->nv) {
+            w += leaf_eval(t, nd, q);
         } else if (nd->kid[0] < 0) {
             for (int i = nd->first; i < nd->first + nd->n; i++)
                 w += vx_wtree_tri(t->tv + 9 * (size_t)i, q);
@@ -308,5 +380,7 @@ void vx_wtree_free(vx_wtree *t)
     if (!t) return;
     free(t->tv);
     free(t->node);
+    free(t->lv);
+    free(t->corner);
     memset(t, 0, sizeof *t);
 }
