@@ -95,8 +95,12 @@ static uint64_t brick_scan(const vx_bitgrid *g, const vox_brick *b, int k0, int 
                                         (uint32_t)(uint8_t)(k - b->o[2]) << 16 | 1u << 24;
                 const uint32_t x_at = (uint32_t)(32 * x - (size_t)i0);
                 if (w == 0xffffffffu) { /* inside a solid: 32 in a row */
-                    for (uint32_t q = 0; q < 32; q++, p += 4)
-                        put_le32(p, row_yz | (uint8_t)(x_at + q));
+                    /* x_at is a multiple of 32 (bricks start on multiples
+                     * of 256): the records are base + 0..31, in vectors */
+                    const uint32_t base = row_yz | x_at;
+                    for (uint32_t q = 0; q < 32; q++)
+                        put_le32(p + 4 * q, base + q);
+                    p += 128;
                     n += 32;
                 } else {
                     for (; w; w &= w - 1, n++, p += 4)
