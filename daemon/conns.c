@@ -129,13 +129,42 @@ vx_conn *vx_conns_of(struct MHD_Connection *c)
  * too when rd (else the sweeper does it after KILL_LINGER_S; libmicrohttpd
  * then reads EOF and closes it). Only while libmicrohttpd is reading the
  * socket, with s->lock held. Returns the bytes written. */
+/* s as the inside of a JSON string into out (n bytes, cut short at a
+ * character: out is always valid): quotes, backslashes and control bytes
+ * escaped, the rest (UTF-8 from vx_resp_err_text, or ASCII) as it is. */
+static const char *json_inside(const char *s, char *out, size_t n)
+{
+    size_t o = 0;
+    int cut = 0;
+    for (; *s; s++) {
+        unsigned char ch = (unsigned char)*s;
+        char e[8];
+        int k = ch == '"' || ch == '\\' ? snprintf(e, sizeof e, "\\%c", ch)
+                : ch < 0x20             ? snprintf(e, sizeof e, "\\u%04x", ch)
+                                        : (e[0] = (char)ch, 1);
+        if (o + (size_t)k >= n) {
+            cut = 1;
+            break;
+        }
+        memcpy(out + o, e, (size_t)k);
+        o += (size_t)k;
+    }
+    if (cut) { /* never half a UTF-8 character: the last one goes whole */
+        while (o > 0 && ((unsigned char)out[o - 1] & 0xc0) == 0x80)
+            o--;
+        if (o > 0 && (unsigned char)out[o - 1] >= 0xc0) o--;
+    }
+    out[o] = 0;
+    return out;
+}
+
 static size_t kill_conn(vx_conn *vc, int status, const char *code, const char *message, int rd)
 {
-    char body[256], msg[1200], date[64], cors[512] = "";
+    char body[1400], msg[2400], date[64], cors[512] = "", qc[128], qm[1200];
     int n = 0;
     if (status) {
         int bn = snprintf(body, sizeof body, "{\"error\":{\"code\":\"%s\",\"message\":\"%s\"}}",
-                          code, message);
+                          json_inside(code, qc, sizeof qc), json_inside(message, qm, sizeof qm));
         /* A body's request has its id (and origin); before the head is
          * read there is no client id to echo: a new one. */
         int body_phase = vc->phase == P_BODY && vc->rid[0];
@@ -156,7 +185,9 @@ static size_t kill_conn(vx_conn *vc, int status, const char *code, const char *m
                      status == 408   ? "Request Timeout"
                      : status == 503 ? "Service Unavailable"
                      : status == 413 ? "Content Too Large"
-                                     : "URI Too Long",
+                     : status == 414 ? "URI Too Long"
+                     : status == 507 ? "Insufficient Storage"
+                                     : "Internal Server Error",
                      date, vc->rid, status == 503 ? "Retry-After: 1\r\n" : "", cors, bn, body);
         if (n >= (int)sizeof msg) n = (int)sizeof msg - 1; /* (never: the parts are bounded) */
         if (send(vc->fd, msg, (size_t)n, MSG_NOSIGNAL | MSG_DONTWAIT) < 0) n = 0;

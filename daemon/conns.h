@@ -65,10 +65,10 @@ int vx_conns_body(vx_conns *s, vx_conn *vc, size_t n);
  * that the close does not reset the connection before the client has read
  * the answer. */
 void vx_conns_linger(vx_conns *s, vx_conn *vc);
-/* The body arriving on vc is refused: a canned JSON answer (status 413,
- * code, message: plain ASCII) is written to the socket now, as the
- * sweeper's 408s are, and the rest of the body is dropped until the read
- * side is closed half a second later (vx_conns_body then says 1). */
+/* The body arriving on vc is refused: a JSON error answer (status 413,
+ * 507 or 500, code, message: escaped here) is written to the socket now,
+ * as the sweeper's 408s are, and the rest of the body is dropped until the
+ * read side is closed half a second later (vx_conns_body then says 1). */
 void vx_conns_refuse(vx_conns *s, vx_conn *vc, int status, const char *code, const char *message);
 /* The request is over: vc idles until the next head. Returns the status the
  * sweeper answered vc with, 0 when it did not. */

@@ -190,8 +190,7 @@ static int take_body(vx_http *h, req *r, const char *data, size_t n)
             return 0;
         }
         if (vx_upload_write(r->up, data, n, &r->body_err)) {
-            /* Keep reading (and dropping) the rest: the client gets the
-             * answer (507 on a full disk) at the end, not a dropped connection. */
+            /* on_request answers it now (507 on a full disk) */
             VX_ERROR("http.upload_failed", "code=%s", r->body_err.code);
             vx_upload_abort(r->up);
             r->up = NULL;
@@ -348,7 +347,16 @@ static enum MHD_Result on_request(void *cls, struct MHD_Connection *c, const cha
             return vx_resp_fail(c, r, VX_EINTERNAL, "upload_failed", "could not store the body");
         }
         *data_size = 0;
-        if (r->too_big && !r->refused) {
+        if (r->body == BODY_UPLOAD && r->body_err.kind != VX_EOK && !r->refused) {
+            /* Storing the body failed (the disk filled up): answer now, as
+             * the 413 below, not once the body ends (a chunked one on a
+             * full disk was read to its end first, forever if endless). */
+            r->refused = 1;
+            vx_resp_answer a;
+            char m[512];
+            const char *code = vx_resp_err_text(&r->body_err, &a, m, sizeof m);
+            vx_conns_refuse(h->conns, r->vc, (int)a.status, code, m);
+        } else if (r->too_big && !r->refused) {
             /* Answer the 413 now, written past libmicrohttpd as the 408s
              * are (it takes no answer in the middle of a body): a chunked
              * body has no end to wait for, and one sent forever was read

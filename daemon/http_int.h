@@ -96,6 +96,9 @@ int vx_resp_json(struct MHD_Connection *c, req *r, unsigned status, cJSON *doc, 
 int vx_resp_page(struct MHD_Connection *c, req *r, cJSON *items, const char *next);
 /* Answers e as {"error":{"code","message"}} through vx_resp_answer_of. */
 int vx_resp_err(struct MHD_Connection *c, req *r, const vx_err *e);
+/* How vx_resp_err answers e: *a, and the code (returned) and message (into
+ * msg, n bytes: the data dir scrubbed, valid UTF-8) of its body. */
+const char *vx_resp_err_text(const vx_err *e, vx_resp_answer *a, char *msg, size_t n);
 /* vx_resp_err with one more header h: v (used where the kind's answer has
  * none, e.g. Content-Range on a 416). */
 int vx_resp_err_with(struct MHD_Connection *c, req *r, const vx_err *e, const char *h,

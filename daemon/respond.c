@@ -137,21 +137,28 @@ int vx_resp_err(struct MHD_Connection *c, req *r, const vx_err *e)
     return vx_resp_err_with(c, r, e, NULL, NULL);
 }
 
-int vx_resp_err_with(struct MHD_Connection *c, req *r, const vx_err *e, const char *h,
-                     const char *v)
+const char *vx_resp_err_text(const vx_err *e, vx_resp_answer *a, char *msg, size_t n)
 {
-    vx_resp_answer a = vx_resp_answer_of(e);
-    const char *code = a.code ? a.code : e->code;
+    *a = vx_resp_answer_of(e);
     char scrubbed[600];
     snprintf(scrubbed, sizeof scrubbed, "%s", e->message);
     vx_scrub_path(scrubbed, g_data_dir);
-    cJSON *doc = cJSON_CreateObject();
-    cJSON *o = cJSON_AddObjectToObject(doc, "error");
-    char clean[512];
-    cJSON_AddStringToObject(o, "code", code);
     /* Messages may quote what the client sent: never echo bytes that are
      * not UTF-8 (the body would not be valid JSON text). */
-    cJSON_AddStringToObject(o, "message", vx_req_utf8_sanitize(scrubbed, clean, sizeof clean));
+    vx_req_utf8_sanitize(scrubbed, msg, n);
+    return a->code ? a->code : e->code;
+}
+
+int vx_resp_err_with(struct MHD_Connection *c, req *r, const vx_err *e, const char *h,
+                     const char *v)
+{
+    vx_resp_answer a;
+    char clean[512];
+    const char *code = vx_resp_err_text(e, &a, clean, sizeof clean);
+    cJSON *doc = cJSON_CreateObject();
+    cJSON *o = cJSON_AddObjectToObject(doc, "error");
+    cJSON_AddStringToObject(o, "code", code);
+    cJSON_AddStringToObject(o, "message", clean);
     if (a.status >= 500) VX_ERROR("http.error", "status=%u code=%s", a.status, code);
     if (!a.header) return vx_resp_json(c, r, a.status, doc, h, v);
     return vx_resp_json(c, r, a.status, doc, a.header,

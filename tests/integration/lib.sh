@@ -175,6 +175,45 @@ job_ok() { check "$1: succeeded ($(jq -c '.error' "$TMP/job.json" 2>/dev/null))"
 # st NAME: stats.NAME of the job in $TMP/job.json.
 st() { jq -r ".stats.$1" "$TMP/job.json"; }
 
+# endless_chunks PATH CONTENT-TYPE: a chunked POST whose body never ends
+# (16 KiB chunks for up to 15 s), reading while it sends; prints
+# "STATUS_LINE|CODE|SECONDS|END" (the error body's code, the seconds until
+# the connection ended, END none, eof or reset).
+endless_chunks() {
+    python3 - "$PORT" "$1" "$2" <<'PY'
+import json, socket, sys, time
+s = socket.create_connection(("127.0.0.1", int(sys.argv[1])))
+s.sendall(("POST %s HTTP/1.1\r\nHost: x\r\nContent-Type: %s\r\n"
+           "Transfer-Encoding: chunked\r\n\r\n" % (sys.argv[2], sys.argv[3])).encode())
+chunk = b"4000\r\n" + b"v 1 2 3\n" * 2048 + b"\r\n"
+t0, got, end = time.monotonic(), b"", "none"
+s.settimeout(0.02)
+while time.monotonic() - t0 < 15 and end == "none":
+    try:
+        s.send(chunk)
+    except socket.timeout:
+        pass
+    except OSError:
+        end = "reset"
+    try:
+        b = s.recv(65536)
+        got += b
+        if not b:
+            end = "eof"
+    except socket.timeout:
+        pass
+    except OSError:
+        end = "reset"
+    time.sleep(0.002)
+head, _, body = got.partition(b"\r\n\r\n")
+try:
+    code = json.loads(body)["error"]["code"]
+except ValueError:
+    code = "-"
+print("%s|%s|%.1f|%s" % (head.split(b"\r\n")[0].decode("latin-1"), code, time.monotonic() - t0, end))
+PY
+}
+
 finish() {
     echo "$(basename "$0"): $PASS passed, $FAIL failed"
     [[ $FAIL -eq 0 ]]

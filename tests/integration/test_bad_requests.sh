@@ -115,40 +115,6 @@ check "a client that never stops sending is cut off after the drain ($ended afte
 # A chunked body has no length to refuse up front: it is answered 413 as
 # soon as it passes the limit (it was read to its end: forever, for one
 # that never ends), then closed. Upload and JSON limits alike.
-endless_chunks() { # PATH CONTENT-TYPE -> "STATUS_LINE|CODE|SECONDS|END"
-    python3 - "$PORT" "$1" "$2" <<'PY'
-import json, socket, sys, time
-s = socket.create_connection(("127.0.0.1", int(sys.argv[1])))
-s.sendall(("POST %s HTTP/1.1\r\nHost: x\r\nContent-Type: %s\r\n"
-           "Transfer-Encoding: chunked\r\n\r\n" % (sys.argv[2], sys.argv[3])).encode())
-chunk = b"4000\r\n" + b"v 1 2 3\n" * 2048 + b"\r\n"
-t0, got, end = time.monotonic(), b"", "none"
-s.settimeout(0.02)
-while time.monotonic() - t0 < 15 and end == "none":
-    try:
-        s.send(chunk)
-    except socket.timeout:
-        pass
-    except OSError:
-        end = "reset"
-    try:
-        b = s.recv(65536)
-        got += b
-        if not b:
-            end = "eof"
-    except socket.timeout:
-        pass
-    except OSError:
-        end = "reset"
-    time.sleep(0.002)
-head, _, body = got.partition(b"\r\n\r\n")
-try:
-    code = json.loads(body)["error"]["code"]
-except ValueError:
-    code = "-"
-print("%s|%s|%.1f|%s" % (head.split(b"\r\n")[0].decode("latin-1"), code, time.monotonic() - t0, end))
-PY
-}
 IFS='|' read -r line code secs end < <(endless_chunks /v1/meshes model/obj)
 check "an endless chunked upload is answered 413 too_large ($line, $code, after ${secs}s, then $end)" \
     test "$line" = "HTTP/1.1 413 Content Too Large" -a "$code" = too_large -a "$end" != none

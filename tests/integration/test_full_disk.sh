@@ -58,6 +58,16 @@ upload "$TMP/big.obj"
 expect_error "upload that fills the disk mid-body ($(stat -c %s "$TMP/big.obj") bytes)" 507 insufficient_storage
 check "that error names no server path" no_paths
 check "the half-written upload is gone again" test "$(find "$DATA/tmp" -type f | wc -l)" -eq 0
+# A chunked upload that fills the disk is answered 507 when it does, not
+# at its end (it was read to its end first: never, for one that does not
+# end). The disk is above the floor, so the head is accepted.
+fill_to $((3 << 20))
+IFS='|' read -r line code secs end < <(endless_chunks /v1/meshes model/obj)
+check "an endless chunked upload on a filling disk is answered 507 insufficient_storage ($line, $code, after ${secs}s, then $end)" \
+    test "$line" = "HTTP/1.1 507 Insufficient Storage" -a "$code" = insufficient_storage -a "$end" != none
+check "its half-written upload is gone again" test "$(find "$DATA/tmp" -type f | wc -l)" -eq 0
+api GET /livez
+expect_status "serving after it" 200
 
 # Under the floor: writes answer 507 before the body, reads keep working.
 fill_to $((FLOOR / 2))
