@@ -204,22 +204,36 @@ static size_t raw1_fill(void *ud, size_t c, uint8_t *out)
 {
     const raw1_job *j = ud;
     const vx_bitgrid *g = j->g;
-    const unsigned last = (unsigned)(g->grid.dims[0] - 32 * (int)(g->wx - 1));
+    const unsigned nx = (unsigned)g->grid.dims[0], tail = nx & 63;
+    const size_t full = nx / 64; /* whole 64-bit pieces of a row */
     size_t r0 = c * j->per, r1 = r0 + j->per < j->rows ? r0 + j->per : j->rows;
+    /* acc holds nacc (< 64) bits not yet stored; a row's whole pieces
+     * leave nacc as it is, 64 bits stored per piece */
     uint64_t acc = 0;
     unsigned nacc = 0;
     size_t n = 0;
     for (size_t r = r0; r < r1; r++) {
-        const uint32_t *row = g->bits + r * g->wx;
-        for (size_t x = 0; x < g->wx; x++) {
-            acc |= (uint64_t)vx_row_word(g, row, x) << nacc;
-            nacc += x + 1 < g->wx ? 32 : last;
-            if (nacc >= 32) {
-                uint32_t w = (uint32_t)acc;
-                memcpy(out + n, &w, 4);
-                n += 4;
-                acc >>= 32;
-                nacc -= 32;
+        const uint8_t *row = (const uint8_t *)(g->bits + r * g->wx);
+        for (size_t q = 0; q < full; q++) {
+            uint64_t v;
+            memcpy(&v, row + 8 * q, 8); /* two grid words, little-endian: bits in order */
+            uint64_t w = acc | v << nacc;
+            memcpy(out + n, &w, 8);
+            n += 8;
+            acc = nacc ? v >> (64 - nacc) : 0;
+        }
+        if (tail) {
+            uint64_t v = 0;
+            memcpy(&v, row + 8 * full, tail > 32 ? 8 : 4);
+            v &= ((uint64_t)1 << tail) - 1; /* row padding: never set */
+            acc |= v << nacc;
+            if (nacc + tail >= 64) {
+                memcpy(out + n, &acc, 8);
+                n += 8;
+                acc = nacc ? v >> (64 - nacc) : 0;
+                nacc = nacc + tail - 64;
+            } else {
+                nacc += tail;
             }
         }
     }

@@ -120,9 +120,11 @@ static int same_file(const char *a, const char *b)
 }
 
 /* Widths on and off word and byte boundaries; 40 and 72: rows of whole
- * bytes that start mid-word in raw1. */
+ * bytes that start mid-word in raw1; 65, 127 and 191: raw1's 64-bit
+ * pieces with a tail of 1, 63 and 63 bits. */
 static const int sizes[][3] = {{1, 1, 1},     {13, 5, 3},  {32, 32, 32}, {33, 70, 9}, {64, 8, 129},
-                               {100, 37, 61}, {7, 300, 2}, {260, 3, 40}, {40, 9, 7},  {72, 130, 3}};
+                               {100, 37, 61}, {7, 300, 2}, {260, 3, 40}, {40, 9, 7},  {72, 130, 3},
+                               {65, 17, 5},   {127, 9, 4}, {191, 5, 3}};
 
 static void test_raw_binvox(void **st)
 {
