@@ -31,8 +31,9 @@
  * answer. Such a connection is marked (vx_conns_linger); at its close a
  * copy of the descriptor keeps the socket open, and the sweeper reads and
  * drops what arrives until the client closes, for DRAIN_S at most and
- * DRAIN_IDLE_S without a byte (for at most a quarter of --max-connections
- * sockets at once).
+ * DRAIN_IDLE_S without a byte (as many sockets at once as
+ * --max-connections where the descriptor limit leaves room, else a
+ * quarter of them, the one drained longest closed to make room).
  * When the server stops (SIGTERM), vx_conns_shutdown answers every HEAD
  * and BODY still arriving after the grace with a JSON 503 shutting_down
  * the same way, so a client is told to send it again rather than cut off.
@@ -55,6 +56,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include <sys/ioctl.h>
+#include <sys/resource.h>
 #include <sys/socket.h>
 #include <time.h>
 #include <unistd.h>
@@ -235,6 +237,22 @@ static void head_killed(head_kill *ks, size_t *nk, size_t cap, const vx_conn *vc
         note_head_kill(&k);
 }
 
+/* With every drain slot taken, the socket drained longest makes room (its
+ * client has had the most time to read its answer; the newest, closed at
+ * once, was the one most likely to be reset first): what waits on it is
+ * read once more, then it closes. With s->ling_lock held. */
+static void evict_oldest(vx_conns *s)
+{
+    size_t old = 0;
+    for (size_t i = 1; i < s->nling; i++)
+        if (s->ling[i].t0 < s->ling[old].t0) old = i;
+    char sink[16384];
+    while (recv(s->ling[old].fd, sink, sizeof sink, MSG_DONTWAIT) > 0)
+        ;
+    close(s->ling[old].fd);
+    s->ling[old] = s->ling[--s->nling];
+}
+
 void vx_conns_notify(void *cls, struct MHD_Connection *c, void **socket_context,
                      enum MHD_ConnectionNotificationCode code)
 {
@@ -273,6 +291,7 @@ void vx_conns_notify(void *cls, struct MHD_Connection *c, void **socket_context,
      * the socket open until the sweeper has drained it. */
     if (linger) {
         pthread_mutex_lock(&s->ling_lock);
+        if (s->nling && s->nling == s->cap_ling) evict_oldest(s);
         int fd = s->nling < s->cap_ling ? fcntl(vc->fd, F_DUPFD_CLOEXEC, 0) : -1;
         if (fd >= 0) {
             shutdown(fd, SHUT_WR);
@@ -474,14 +493,29 @@ static void *sweeper_main(void *arg)
     return NULL;
 }
 
+/* How many sockets may be drained at once: descriptors beyond the
+ * connections, not slots. As many as the connections where the descriptor
+ * limit leaves room for both (a burst of early answers as large as
+ * --max-connections then loses none; at a quarter, 2-3 of 40 concurrent
+ * 413s at --max-connections 32 were reset), else a quarter of them. */
+static size_t ling_cap(uint64_t max_connections)
+{
+    size_t quarter = (size_t)max_connections / 4 + 1, all = (size_t)max_connections + 1;
+    struct rlimit rl;
+    if (getrlimit(RLIMIT_NOFILE, &rl) != 0) return quarter;
+    if (rl.rlim_cur == RLIM_INFINITY || rl.rlim_cur >= 2 * (rlim_t)max_connections + 256)
+        return all;
+    return quarter;
+}
+
 vx_conns *vx_conns_start(const vx_config *cfg)
 {
     vx_conns *s = calloc(1, sizeof *s);
     if (!s) return NULL;
     s->cfg = cfg;
-    /* a quarter of the connections more at most: descriptors, not slots */
-    s->ling = calloc((size_t)cfg->max_connections / 4 + 1, sizeof *s->ling);
-    if (s->ling) s->cap_ling = (size_t)cfg->max_connections / 4 + 1;
+    size_t cap = ling_cap(cfg->max_connections);
+    s->ling = calloc(cap, sizeof *s->ling);
+    if (s->ling) s->cap_ling = cap;
     pthread_mutex_init(&s->lock, NULL);
     pthread_mutex_init(&s->ling_lock, NULL);
     if (pthread_create(&s->sweeper, NULL, sweeper_main, s) == 0) s->sweeper_started = 1;

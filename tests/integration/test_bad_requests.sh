@@ -377,4 +377,30 @@ api GET /v1/meshes
 check "only the box was stored" jq -e '(.items|length) == 1' "$BODY"
 check "no temp files left" test -z "$(ls -A "$DATA/tmp")"
 stop_daemon
+
+# A burst of early answers larger than a quarter of --max-connections: each
+# socket is drained after its answer, as many at once as the connections
+# when the descriptor limit leaves room (2-3 of 40 were reset with a
+# quarter), and with a low limit the one drained longest makes room.
+burst() { # -> how many of 40 concurrent over-limit uploads got no answer
+    local i
+    for i in $(seq 1 40); do
+        curl -s -o /dev/null -w '%{http_code}\n' -X POST -H "Content-Type: model/obj" -H "Expect:" \
+            --data-binary "@$VX_MESH_DIR/ogre.obj" "$BASE/v1/meshes" >"$TMP/burst$i.txt" &
+    done
+    wait
+    cat "$TMP"/burst*.txt | grep -vc '^413$'
+}
+start_daemon --max-upload-bytes 2M --max-connections 32 || exit 1
+lost=$(burst)
+check "40 concurrent early 413s at --max-connections 32 all arrive ($lost lost)" test "$lost" = 0
+stop_daemon
+nofile=$(ulimit -S -n)
+ulimit -S -n 200
+start_daemon --max-upload-bytes 2M --max-connections 32 || exit 1
+ulimit -S -n "$nofile"
+lost=$(burst)
+check "the same with 200 descriptors (a quarter drained at once, the oldest makes room; $lost lost)" \
+    test "$lost" = 0
+stop_daemon
 finish
