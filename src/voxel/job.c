@@ -280,6 +280,15 @@ static int check_grid(const int dims[3], const vparams *p, const vx_limits *lim,
                           "%s gives %dx%dx%d = %llu voxels, the limit is 2048^3 for one job "
                           "(format vdb runs larger grids as params.bricks)",
                           what, dims[0], dims[1], dims[2], (unsigned long long)n);
+    /* binvox stores a d^3 cube, d the longest axis: a 4096 x 1 x 1 grid
+     * wrote 539 MB of empty padding */
+    int d = dims[0] > dims[1] ? dims[0] : dims[1];
+    d = dims[2] > d ? dims[2] : d;
+    if (p->format == F_BINVOX && (uint64_t)d * d * d > VX_VOXELIZE_MAX_VOXELS)
+        return vx_err_set(err, kind, code,
+                          "%s gives %dx%dx%d; binvox pads it to a %d^3 cube, over the 2048^3 "
+                          "voxels of one job (use another format, or a grid nearer a cube)",
+                          what, dims[0], dims[1], dims[2], d);
     uint64_t bytes = job_bytes(dims, (int)p->supersample, (vx_samples)p->samples,
                                (vformat)p->format, (vx_vdb_class)p->vdb_grid);
     if (lim && lim->max_job_memory && bytes > lim->max_job_memory)

@@ -260,6 +260,8 @@ bad "grid dims 0" '{"grid":{"origin":[0,0,0],"voxel_size":1,"dims":[2,0,2]}}' 'p
 # one job (bricks size 0, or a dense format: a .vdb past --brick-threshold
 # runs as bricks, test_voxelize_bricks.sh)
 bad "grid too many voxels" '{"grid":{"origin":[0,0,0],"voxel_size":1,"dims":[4096,4096,4096]},"bricks":{"size":0}}' 2048^3
+# binvox writes a cube of the longest axis: 4096 x 1 x 1 was 539 MB
+bad "binvox of a 4096 x 1 x 1 grid" '{"grid":{"origin":[0,0,0],"voxel_size":1,"dims":[4096,1,1]},"format":"binvox"}' "binvox pads it to a 4096^3 cube"
 bad "grid over memory" '{"grid":{"origin":[0,0,0],"voxel_size":1,"dims":[2048,2048,512]},"format":"raw1"}' "job memory limit"
 bad "resolution over memory" '{"resolution":2048,"bricks":{"size":0}}' "job memory limit"
 bad "unknown method" '{"method":"magic"}' params.method
