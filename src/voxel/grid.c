@@ -94,10 +94,12 @@ int vx_grid_from_voxel_size(const vx_mesh *m, double h, int padding, vx_grid *ou
          * integer: an extra layer would put the centres on the bbox's faces */
         double n = ceil(ext / h * (1.0 - 0x1p-40));
         if (n < 1) n = 1;
-        if (n + 2.0 * padding > 1 << 20)
-            return vx_err_set(err, VX_EUNPROC, "invalid_params",
-                              "voxel_size %g gives %.3g cells along an axis (at most 2^20)", h,
-                              n + 2.0 * padding);
+        /* (the per-axis limit, checked as every grid's is: here before the
+         * count can pass an int; the same code as that check's) */
+        if (n + 2.0 * padding > VX_GRID_MAX_DIM)
+            return vx_err_set(err, VX_ETOOBIG, "job_memory_limit",
+                              "voxel_size %g gives %.3g voxels along axis %d, the limit is %d", h,
+                              n + 2.0 * padding, a, VX_GRID_MAX_DIM);
         out->dims[a] = (int)n + 2 * padding;
         out->index[a] = 0; /* the grid is its own lattice */
         /* centre the grid on the bbox: the leftover of ceil splits evenly */

@@ -154,7 +154,9 @@ uint64_t vx_bits_count(const uint32_t *w, size_t n);
  * the others proportional (at least 1), plus `padding` voxels each side. */
 int vx_grid_from_resolution(const vx_mesh *m, int resolution, int padding, vx_grid *out,
                             vx_err *err);
-/* Grid of voxel edge h covering the bbox plus padding. */
+/* Grid of voxel edge h covering the bbox plus padding; VX_ETOOBIG
+ * job_memory_limit past VX_GRID_MAX_DIM voxels along an axis. */
+#define VX_GRID_MAX_DIM 16384
 int vx_grid_from_voxel_size(const vx_mesh *m, double h, int padding, vx_grid *out, vx_err *err);
 
 /* Voxelizes m into out (allocated here; free with vx_bitgrid_free). GL thread.

@@ -287,6 +287,14 @@ api POST "/v1/jobs?wait=60" -H "Content-Type: application/json" \
     -d "{\"mesh\":\"$M_cube\",\"kind\":\"voxelize\",\"params\":{\"voxel_size\":0.001}}"
 check "voxel_size over memory: the job fails with job_memory_limit" \
     jq -e '.state == "failed" and .error.code == "job_memory_limit"' "$BODY"
+# past 16384 voxels along an axis, however far: the same code (2^20 along
+# an axis answered invalid_params, which the docs do not list for it)
+for vs in 1e-6 5e-324; do
+    api POST "/v1/jobs?wait=60" -H "Content-Type: application/json" \
+        -d "{\"mesh\":\"$M_cube\",\"kind\":\"voxelize\",\"params\":{\"voxel_size\":$vs,\"format\":\"raw8\"}}"
+    check "voxel_size $vs: the job fails with job_memory_limit naming the 16384 per axis ($(jq -c .error "$BODY"))" \
+        jq -e '.state == "failed" and .error.code == "job_memory_limit" and (.error.message | test("16384"))' "$BODY"
+done
 
 # A level set's memory follows the surface, not the grid: a 256^3 sphere
 # (the worst case of every leaf partial would be ~470 MB) runs under 256M.
