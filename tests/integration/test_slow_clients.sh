@@ -42,6 +42,14 @@ check "stalled body: within 5.5 s of the connect ($(jq -r .seconds "$TMP/stall.j
 $SLOW stall "$PORT" 'POST /v1/jobs HTTP/1.1\r\nHost: x\r\nContent-Type: application/json\r\nTransfer-Encoding: chunked\r\n\r\nffffffffffffffff\r\n{}' 8 >"$TMP/chunk.json"
 check "endless chunk: 408 within 5.5 s ($(jq -c . "$TMP/chunk.json" | head -c 200))" \
     jq -e '(.response | test("^HTTP/1.1 408")) and .seconds <= 5.5' "$TMP/chunk.json"
+# Any method's body is rated, not only a POST's: a GET or DELETE that
+# announces a body and stalls held its slot until the idle timeout (a
+# byte now and then kept it forever), past eviction and shutdown.
+for head in 'GET /livez' 'DELETE /v1/jobs/abc'; do
+    $SLOW stall "$PORT" "$head"' HTTP/1.1\r\nHost: x\r\nContent-Length: 100\r\n\r\nab' 8 >"$TMP/other.json"
+    check "$head with a stalled body: 408 request_timeout within 5.5 s ($(jq -c . "$TMP/other.json" | head -c 160))" \
+        jq -e '(.response | test("^HTTP/1.1 408")) and (.response | split("\r\n\r\n")[1] | fromjson | .error.code == "request_timeout") and .seconds <= 5.5' "$TMP/other.json"
+done
 
 # --- 8 addresses x 8 dripping connections fill --max-connections ---
 $SLOW drip "$PORT" 9 "$TMP/drip.json" &
