@@ -44,7 +44,7 @@ void vx_http_job_changed(vx_http *h, const char *jid, int terminal)
 
 /* How many times the headers that must come once came. */
 typedef struct once_counts {
-    int host, length, idem;
+    int host, length, idem, coding;
 } once_counts;
 
 static enum MHD_Result count_once(void *cls, enum MHD_ValueKind kind, const char *key,
@@ -55,6 +55,7 @@ static enum MHD_Result count_once(void *cls, enum MHD_ValueKind kind, const char
     if (!strcasecmp(key, MHD_HTTP_HEADER_HOST)) n->host++;
     if (!strcasecmp(key, MHD_HTTP_HEADER_CONTENT_LENGTH)) n->length++;
     if (!strcasecmp(key, "Idempotency-Key")) n->idem++;
+    if (!strcasecmp(key, MHD_HTTP_HEADER_TRANSFER_ENCODING)) n->coding++;
     return MHD_YES;
 }
 
@@ -92,7 +93,9 @@ static int check_framing(struct MHD_Connection *c, req *r, const char *version)
                                    : "an HTTP/1.1 request needs a Host header");
     if (n.length > 1) return fail_framing(c, r, "more than one Content-Length header");
     const char *te = vx_resp_header(c, MHD_HTTP_HEADER_TRANSFER_ENCODING);
-    int coding = vx_req_transfer_encoding(te);
+    /* two Transfer-Encoding lines are one list (RFC 9112): libmicrohttpd
+     * reads the first only, a proxy may go by the last */
+    int coding = n.coding > 1 ? -1 : vx_req_transfer_encoding(te);
     if (coding < 0)
         return vx_resp_fail(c, r, VX_ENOTIMPL, "not_implemented",
                             "the only transfer coding taken is chunked (no gzip, no lists)");

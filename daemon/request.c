@@ -144,12 +144,10 @@ void vx_req_media_type(const char *ct, char *out, size_t n)
 int vx_req_transfer_encoding(const char *te)
 {
     if (!te) return 0;
-    while (*te == ' ' || *te == '\t')
-        te++;
-    size_t n = strlen(te);
-    while (n && (te[n - 1] == ' ' || te[n - 1] == '\t'))
-        n--;
-    return n == 7 && !strncasecmp(te, "chunked", 7) ? 1 : -1;
+    /* exactly as libmicrohttpd reads it: "chunked " (trailing white space,
+     * which it keeps) it does not take as chunked, and read the body to
+     * the connection's end while this took it for chunks */
+    return !strcasecmp(te, "chunked") ? 1 : -1;
 }
 
 int vx_req_parse_length(const char *s, uint64_t *out)

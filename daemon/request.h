@@ -74,7 +74,8 @@ int vx_req_method_allowed(vx_route rt, const char *method);
 void vx_req_media_type(const char *ct, char *out, size_t n);
 
 /* Reads a Transfer-Encoding value (NULL = none): 0 for none, 1 for exactly
- * "chunked" (any case), -1 for anything else (gzip, lists, ...). */
+ * "chunked" (any case, no white space around it: libmicrohttpd's test),
+ * -1 for anything else (gzip, lists, "chunked " ...). */
 int vx_req_transfer_encoding(const char *te);
 /* Parses a Content-Length value: digits only (no sign or space), at most
  * 19 of them. 0 or -1. */
