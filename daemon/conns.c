@@ -42,9 +42,10 @@
  * larger than --max-header-bytes a JSON 431 from the access handler. What
  * libmicrohttpd still answers itself, with its own HTML body, is listed in
  * the README (Limits) and api/openapi.yaml: a request line or head too long
- * for the connection's 256 KiB buffer (414, 431), a malformed header line
- * or Content-Length (400), a chunk size over 64 bits (413), a bad chunk
- * (400) and HTTP versions other than 1.x (505). */
+ * for the connection's 256 KiB buffer (414, 431; about 60 bytes of it per
+ * header line too), a malformed header line or Content-Length (400), a
+ * chunk size over 64 bits (413), a bad chunk (400), a chunk line too long
+ * for the buffer (500) and HTTP versions other than 1.x (505). */
 #include "conns.h"
 
 #include <errno.h>
