@@ -319,6 +319,16 @@ void *vx_conns_on_uri(void *cls, const char *uri, struct MHD_Connection *c)
             esc = uri[i] == '%' && ((uri[i + 1] == '0' && uri[i + 2] == '0') ||
                                     (uri[i + 1] == '2' && (uri[i + 2] | 0x20) == 'f'));
         vc->path_escape = esc;
+        /* A request line is in: a head has begun. One pipelined behind
+         * the last request came before its answer, so the sweeper saw no
+         * byte after it and kept the connection idle (no 408, a silent
+         * close at the idle timeout). */
+        pthread_mutex_lock(&s->lock);
+        if (vc->phase == P_IDLE) {
+            vc->phase = P_HEAD;
+            vc->t_phase = vx_mono();
+        }
+        pthread_mutex_unlock(&s->lock);
     }
     if (strlen(uri) <= s->cfg->max_uri_bytes || !vc) return NULL;
     pthread_mutex_lock(&s->lock);

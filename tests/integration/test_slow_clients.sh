@@ -28,6 +28,29 @@ check "keep-alive: first answer 200" jq -e '.first | test("200")' "$TMP/ka.json"
 check "keep-alive: dripped second head gets 408 within 3.5 s ($(jq -c . "$TMP/ka.json" | head -c 200))" \
     jq -e '(.response | test("^HTTP/1.1 408")) and .seconds <= 3.5' "$TMP/ka.json"
 check "keep-alive: the 408 has a request id" jq -e '.response | test("\r\nX-Request-Id: [0-9a-f]{16}\r\n")' "$TMP/ka.json"
+# --- a partial head sent with the request before it: the same 408 (its
+# bytes came before the first answer, so none came after it, and the
+# connection was closed silently at the idle timeout) ---
+python3 - "$PORT" >"$TMP/pipe.txt" <<'PY'
+import socket, sys, time
+s = socket.create_connection(("127.0.0.1", int(sys.argv[1])))
+t0 = time.monotonic()
+s.sendall(b"GET /livez HTTP/1.1\r\nHost: x\r\n\r\nGET /livez HTTP/1.1\r\n")
+s.settimeout(8)
+got = b""
+try:
+    while True:
+        b = s.recv(65536)
+        if not b:
+            break
+        got += b
+except OSError:
+    pass
+print(got.count(b"HTTP/1.1 200 "), got.count(b"HTTP/1.1 408 "), round(time.monotonic() - t0, 1))
+PY
+read -r n200 n408 secs <"$TMP/pipe.txt"
+check "pipelined partial head: 200, then 408 within 3.5 s ($n200, $n408, ${secs} s)" \
+    awk -v a="$n200" -v b="$n408" -v t="$secs" 'BEGIN {exit !(a == 1 && b == 1 && t <= 3.5)}'
 
 # --- a body that stops: 408 within the grace + one window (2 + 2 s) ---
 $SLOW stall "$PORT" 'POST /v1/jobs HTTP/1.1\r\nHost: x\r\nContent-Type: application/json\r\nContent-Length: 1000\r\n\r\n{"mesh":"' 8 >"$TMP/stall.json"
