@@ -284,9 +284,11 @@ static void fill_run(wctx *c, uint32_t *slice, int i, int j, int ka, int kb, dou
     }
     int km = ka + (kb - ka) / 2;
     if (2 * (kb - ka) <= prev) {
-        double t = fa / (fa - fb) * (kb - ka); /* in (0, kb - ka]: the ends' signs differ */
-        km = ka + (int)t;
-        if (km > kb - 1) km = kb - 1;
+        double t = fa / (fa - fb) * (kb - ka); /* in [0, kb - ka]: the ends' signs differ */
+        if (t >= 0 && t <= kb - ka) {          /* (not a NaN) */
+            km = ka + (int)t;
+            if (km > kb - 1) km = kb - 1;
+        }
     }
     if (km >= 0) {
         double fm = margin_at(c, i, j, km, n);
