@@ -29,8 +29,8 @@ static double atan2_fast(double y, double x)
 /* tan(omega / 2) of the triangle seen along unit vectors u0..2, from the
  * pair (i, j) whose sum s = ui + uj is shortest, k the third: det(u0, u1,
  * u2) = s . (uj x uk) and 1 + u0.u1 + u1.u2 + u2.u0 = |s|^2 / 2 + s . uk,
- * exactly, both from s itself (see vx_wtree_tri). */
-static double tri_near_edge(double u[3][3])
+ * exactly, both from s itself (see tri_units). */
+static double tri_near_edge(const double *const u[3])
 {
     int best = 0;
     double s[3][3], ss[3];
@@ -61,11 +61,7 @@ static double tri_units(const double *a, const double *b, const double *c)
                  (b[0] * c[0] + b[1] * c[1] + b[2] * c[2]) +
                  (c[0] * a[0] + c[1] * a[1] + c[2] * a[2]);
     if (det * det + den * den > 1e-12) return atan2_fast(det, den) / (2 * M_PI);
-    double u[3][3];
-    memcpy(u[0], a, sizeof u[0]);
-    memcpy(u[1], b, sizeof u[1]);
-    memcpy(u[2], c, sizeof u[2]);
-    return tri_near_edge(u);
+    return tri_near_edge((const double *const[3]){a, b, c});
 }
 
 /* *u = the unit vector from q to v; 0, or -1 where v is q. Divided, not
