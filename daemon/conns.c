@@ -127,11 +127,6 @@ vx_conn *vx_conns_of(struct MHD_Connection *c)
     return ci ? ci->socket_context : NULL;
 }
 
-/* Answers a connection behind libmicrohttpd's back: writes a canned JSON
- * error (status 0: none), shuts the socket for writing, and for reading
- * too when rd (else the sweeper does it after KILL_LINGER_S; libmicrohttpd
- * then reads EOF and closes it). Only while libmicrohttpd is reading the
- * socket, with s->lock held. Returns the bytes written. */
 /* s as the inside of a JSON string into out (n bytes, cut short at a
  * character: out is always valid): quotes, backslashes and control bytes
  * escaped, the rest (UTF-8 from vx_resp_err_text, or ASCII) as it is. */
@@ -161,6 +156,11 @@ static const char *json_inside(const char *s, char *out, size_t n)
     return out;
 }
 
+/* Answers a connection behind libmicrohttpd's back: writes a canned JSON
+ * error (status 0: none), shuts the socket for writing, and for reading
+ * too when rd (else the sweeper does it after KILL_LINGER_S; libmicrohttpd
+ * then reads EOF and closes it). Only while libmicrohttpd is reading the
+ * socket, with s->lock held. Returns the bytes written. */
 static size_t kill_conn(vx_conn *vc, int status, const char *code, const char *message, int rd)
 {
     char body[1400], msg[2400], date[64], cors[512] = "", qc[128], qm[1200];
