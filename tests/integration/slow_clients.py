@@ -11,6 +11,9 @@
       Sends the given request bytes (\\r\\n escapes allowed), then nothing,
       and prints {"seconds": ..., "response": ...} when the server answers
       or closes (or SECONDS pass).
+  slow_clients.py stall-all PORT HEAD_HEX_OR_TEXT SECONDS
+      The same, but reads every answer until the server closes (or SECONDS
+      pass): for requests pipelined in one send.
   slow_clients.py keepalive-drip PORT SECONDS
       One full GET /livez, then the next head one byte per 0.5 s on the same
       connection; prints what came back and when (seconds after the first
@@ -90,7 +93,7 @@ def drip(port, seconds, out, addrs, per_addr):
         json.dump({"answered": done, "open_at_end": sum(1 for c in conns if c[0] is not None)}, f)
 
 
-def stall(port, data, seconds, sent=None):
+def stall(port, data, seconds, sent=None, whole=False):
     s = socket.create_connection(("127.0.0.1", port))
     t0 = time.monotonic()
     s.sendall(data)
@@ -104,7 +107,7 @@ def stall(port, data, seconds, sent=None):
             if not b:
                 break
             got += b
-            if b"\r\n\r\n" in got:
+            if not whole and b"\r\n\r\n" in got:
                 head, body = got.split(b"\r\n\r\n", 1)
                 n = [int(l.split(b":")[1]) for l in head.split(b"\r\n") if l.lower().startswith(b"content-length:")]
                 if n and len(body) >= n[0]:
@@ -159,5 +162,8 @@ if __name__ == "__main__":
     elif cmd == "stall":
         stall(port, sys.argv[3].encode().decode("unicode_escape").encode("latin-1"), float(sys.argv[4]),
               sys.argv[5] if len(sys.argv) > 5 else None)
+    elif cmd == "stall-all":
+        stall(port, sys.argv[3].encode().decode("unicode_escape").encode("latin-1"), float(sys.argv[4]),
+              whole=True)
     elif cmd == "keepalive-drip":
         keepalive_drip(port, float(sys.argv[3]))
