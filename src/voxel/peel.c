@@ -235,7 +235,7 @@ static int grow(peel_ctx *c, layer_set *o, int need, int keep)
                           "the mesh needs more than %d depth layers (GL_MAX_ARRAY_TEXTURE_LAYERS)",
                           max_layers);
     const GLuint empty = PEEL_EMPTY;
-    GLuint nk = new_array(GL_R32UI, o->w, o->h, cap), nc = new_array(GL_R32UI, o->w, o->h, cap);
+    GLuint nk = new_array(GL_R32UI, o->w, o->h, cap);
     glClearTexImage(nk, 0, GL_RED_INTEGER, GL_UNSIGNED_INT, &empty);
     if (keep > 0) {
         /* The last pass's image atomics must land before the copy. */
@@ -243,10 +243,12 @@ static int grow(peel_ctx *c, layer_set *o, int need, int keep)
         glCopyImageSubData(o->keys, GL_TEXTURE_2D_ARRAY, 0, 0, 0, 0, nk, GL_TEXTURE_2D_ARRAY, 0, 0,
                            0, 0, o->w, o->h, keep);
     }
+    /* The counts are made by the count pass, at the cap it needs: on
+     * llvmpipe making a 1024^2 x 32 array takes half a second. */
     GLuint old[2] = {o->keys, o->counts};
     glDeleteTextures(2, old);
     o->keys = nk;
-    o->counts = nc;
+    o->counts = 0;
     c->layers_now += layer_bytes(px, cap) - layer_bytes(px, o->cap);
     o->cap = cap;
     return vx_gl_check(c->gl, "peel.layers", c->err);
@@ -440,12 +442,18 @@ static int peel(peel_ctx *c, layer_set *o, int axis, int k0, int rows, int *nslo
     glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 0, po->peel_stat);
 
     /* A pass over a whole robust z slab (1024^2 rays of the whole mesh)
-     * takes about a second on llvmpipe: once a pass takes longer than
-     * PEEL_BAND_MS, the later ones (and the count pass) are drawn in bands,
-     * so a job's timeout or cancel is seen within about PEEL_BAND_MS after
-     * the first pass. */
+     * takes about a second on llvmpipe, and over two beside other work: a
+     * pass is drawn in bands of about PEEL_BAND_MS each, from the slowest
+     * rate per ray the job's passes have shown so far (the first z pass
+     * follows x's and y's), and once a pass takes longer than that the
+     * later ones (and the count pass) in more, so a job's timeout or cancel
+     * is seen within about PEEL_BAND_MS. */
     enum { PEEL_BAND_MS = 100, PEEL_MAX_BANDS = 64 };
-    int rc = -1, base = 0, bands = 1;
+    int rc = -1, base = 0;
+    int bands = (int)ceil(c->pass_ms_ray * w * h / PEEL_BAND_MS);
+    if (bands > PEEL_MAX_BANDS) bands = PEEL_MAX_BANDS;
+    if (bands > h) bands = h;
+    if (bands < 1) bands = 1;
     for (int pass = 0;; pass++) {
         /* 16 slots, then as many as so far: passes grow geometrically. */
         int k = pass == 0 ? first_cap(c) : base;
@@ -464,6 +472,7 @@ static int peel(peel_ctx *c, layer_set *o, int axis, int k0, int rows, int *nslo
         c->st->gpu_peel_ms += vx_gl_timer_end_ms(&t); /* ended even when stopped */
         if (stopped) goto done;
         double ms = vx_mono_ms() - t0;
+        if (ms / ((double)w * h) > c->pass_ms_ray) c->pass_ms_ray = ms / ((double)w * h);
         if (ms > PEEL_BAND_MS * bands && bands < PEEL_MAX_BANDS) {
             bands = (int)ceil(ms / PEEL_BAND_MS);
             if (bands > PEEL_MAX_BANDS) bands = PEEL_MAX_BANDS;
@@ -491,6 +500,7 @@ static int peel(peel_ctx *c, layer_set *o, int axis, int k0, int rows, int *nslo
     if (coincident) {
         vx_gl_timer t;
         vx_gl_timer_begin(&t);
+        if (!o->counts) o->counts = new_array(GL_R32UI, o->w, o->h, o->cap);
         glClearTexImage(o->counts, 0, GL_RED_INTEGER, GL_UNSIGNED_INT, NULL);
         glBindImageTexture(1, o->counts, 0, GL_TRUE, 0, GL_READ_WRITE, GL_R32UI);
         glProgramUniform1i(p, 4, 1);

@@ -52,7 +52,8 @@ typedef struct peel_ctx {
     uint64_t layers_now;   /* the layer arrays as allocated now */
     uint64_t limit;        /* max_memory, or UINT64_MAX */
     peel_objs o;
-    int slab, axis_i; /* for progress */
+    int slab, axis_i;   /* for progress */
+    double pass_ms_ray; /* slowest peel pass so far, ms per ray (0: none yet) */
     size_t ncpu_tris;
     uint32_t *cpu_tris; /* surface: triangles too large for one invocation */
     size_t *slab_first; /* with o.ibo_slab: first triangle of each slab, nslabs + 1 */

@@ -4,8 +4,11 @@
 # with job_timeout, and no run takes more than 50% over the limit
 # (timings.run_ms <= 3000: on an idle machine they stop within 10-20%, as
 # the run_ms each case prints shows; the suite runs two tests at once on
-# two cores, and there one llvmpipe draw of peel's, which cannot be stopped
-# inside, took voxelize ogre 1024 peel robust to 2.77 s beside a GL-heavy test).
+# two cores, and there voxelize ogre 1024 peel robust took 2.77 s, then 3.2 s,
+# beside a GL-heavy test: its first z pass was drawn whole, and growing the
+# layer arrays made both arrays at once, each over 0.4 s on llvmpipe; now
+# the pass is drawn in bands from the x and y passes' rate and the counts
+# array is made only by the count pass, 2.08 s beside two busy loops).
 # Before the fix catmull-clark ran 5-10 s inside
 # OpenSubdiv, a 8192^2 preview with 8x MSAA 4-16 s in one draw, a 8192^2
 # 16-bit render with float outputs 3-4 s in the interpolation and writers,
