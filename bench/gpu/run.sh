@@ -13,7 +13,8 @@
 #   engines.txt  gregory_bench (vs OpenSubdiv) and bl_bench
 #   voxeld.log   the daemon's log
 # Writes them under $OUT (or /tmp/vx-gpu-out). Each step has its own time limit,
-# and the whole fits in about 7 minutes on 16 cores.
+# and the files are written as it goes, so a run stopped at the call's limit
+# still returns the steps before.
 #   bash bench/gpu/run.sh          (carry .gpu)
 # To try it on a machine without a GPU: VX_GPU_SOFTWARE=1 (no
 # --require-gpu), VX_GPU_RES="64 128" and VX_GPU_TESTS="test_gl" to shorten.
@@ -36,6 +37,12 @@ for j in /usr/local/nvidia/share/glvnd/egl_vendor.d/10_nvidia.json \
     /usr/share/glvnd/egl_vendor.d/10_nvidia.json /etc/glvnd/egl_vendor.d/10_nvidia.json; do
     if [[ -f $j ]]; then export __EGL_VENDOR_LIBRARY_FILENAMES=$j; break; fi
 done
+# The driver's libraries (libEGL_nvidia and what it loads) where the
+# container runtime mounts them, in case the loader's cache lacks them.
+for d in /usr/local/nvidia/lib64 /usr/local/nvidia/lib; do
+    [[ -d $d ]] && LD_LIBRARY_PATH=$LD_LIBRARY_PATH:$d
+done
+export PYTHONUNBUFFERED=1
 # The tests find the meshes at the path compiled into them.
 md=$(cat "$V/meshdir")
 [[ -d $md ]] || { mkdir -p "$(dirname "$md")" && ln -sfn "$V/meshes" "$md"; }
@@ -56,6 +63,7 @@ gpu_flag=(--require-gpu yes)
     echo "LD_LIBRARY_PATH: $LD_LIBRARY_PATH"
     echo "missing libraries:"; ldd "$V/bin/voxeld" | grep 'not found' || echo "  none"
     "$V/bin/voxeld" --version
+    echo "NVIDIA EGL in the loader's cache:"; ldconfig -p 2>/dev/null | grep -i 'EGL_nvidia' || echo "  none"
     echo "## voxeld --list-egl-devices"
     timeout 60 "$V/bin/voxeld" --list-egl-devices 2>&1
 } >"$out/env.txt" 2>&1
@@ -64,7 +72,7 @@ gpu_flag=(--require-gpu yes)
 {
     for t in "${tests[@]}"; do
         s=$(date +%s.%N)
-        timeout 240 "$t" >"$W/t.log" 2>&1
+        timeout 120 "$t" >"$W/t.log" 2>&1
         rc=$?
         e=$(awk -v s="$s" -v e="$(date +%s.%N)" 'BEGIN{printf "%.1f", e - s}')
         echo "## $(basename "$t"): rc $rc, $e s"
