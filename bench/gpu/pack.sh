@@ -17,7 +17,7 @@ meshes=$(realpath "$meshes")
 tests=(test_gl test_solid test_voxel_bricks test_peel test_slice test_voxel_exact
     test_gregory test_preview test_bandlimit)
 bins=(voxeld voxelctl bench/voxel_bench bench/voxel_encode_bench bench/gregory_bench
-    bench/bl_bench)
+    bench/bl_bench bench/gldiag)
 
 stage=$(mktemp -d)
 trap 'rm -rf "$stage"' EXIT

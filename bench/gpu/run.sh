@@ -16,8 +16,14 @@
 # and the files are written as it goes, so a run stopped at the call's limit
 # still returns the steps before.
 #   bash bench/gpu/run.sh          (carry .gpu)
-# To try it on a machine without a GPU: VX_GPU_SOFTWARE=1 (no
-# --require-gpu), VX_GPU_RES="64 128" and VX_GPU_TESTS="test_gl" to shorten.
+#   diag.txt     (step diag) bench/gpu/gldiag: the rasterizer's limits and
+#                coverage, each GPU method against the CPU on shapes with
+#                known answers, GL debug messages; then the full output of
+#                the tests VX_GPU_DIAG_TESTS names (default test_solid)
+# VX_GPU_STEPS picks the steps (default "env tests jobs compare engines";
+# "env diag" for bring-up). To try it on a machine without a GPU:
+# VX_GPU_SOFTWARE=1 (no --require-gpu), VX_GPU_RES="64 128" and
+# VX_GPU_TESTS="test_gl" to shorten.
 set -uo pipefail
 root=$(cd "$(dirname "$0")/../.." && pwd)
 out=${OUT:-/tmp/vx-gpu-out}
@@ -53,8 +59,10 @@ tests=()
 for t in ${VX_GPU_TESTS:-$(cd "$V/bin" && ls test_*)}; do tests+=("$V/bin/$t"); done
 gpu_flag=(--require-gpu yes)
 [[ -n ${VX_GPU_SOFTWARE:-} ]] && gpu_flag=()
+steps=" ${VX_GPU_STEPS:-env tests jobs compare engines} "
+step() { [[ $steps == *" $1 "* ]]; }
 
-{
+step env && {
     echo "# GPU check: voxeld $(cat "$V/commit"), $(date -u +%FT%TZ)"
     uname -a
     echo "cores: $cores, memory: $(awk '/MemTotal/{print $2 " kB"}' /proc/meminfo)"
@@ -68,11 +76,21 @@ gpu_flag=(--require-gpu yes)
     timeout 60 "$V/bin/voxeld" --list-egl-devices 2>&1
 } >"$out/env.txt" 2>&1
 
+step diag && {
+    echo "## gldiag"
+    timeout 90 "$V/bin/gldiag" "$M/spot_triangulated.obj" 2>&1
+    for t in ${VX_GPU_DIAG_TESTS:-test_solid}; do
+        echo "## $t (the last 300 lines)"
+        VX_TEST_GL_DEBUG=1 timeout 60 stdbuf -oL -eL "$V/bin/$t" 2>&1 | tail -300
+        echo "rc ${PIPESTATUS[0]}"
+    done
+} >"$out/diag.txt" 2>&1
+
 # The GL unit tests, each on its own limit.
-{
+step tests && {
     for t in "${tests[@]}"; do
         s=$(date +%s.%N)
-        timeout 120 "$t" >"$W/t.log" 2>&1
+        timeout 120 stdbuf -oL -eL "$t" >"$W/t.log" 2>&1
         rc=$?
         e=$(awk -v s="$s" -v e="$(date +%s.%N)" 'BEGIN{printf "%.1f", e - s}')
         echo "## $(basename "$t"): rc $rc, $e s"
@@ -81,6 +99,7 @@ gpu_flag=(--require-gpu yes)
 } >"$out/tests.txt" 2>&1
 
 # The daemon on the GPU (refusing a software renderer), and jobs through it.
+step jobs && {
 log=$out/voxeld.log
 "$V/bin/voxeld" --listen 127.0.0.1:0 --data-dir "$W/data" "${gpu_flag[@]}" \
     --max-job-memory 32G --workers "$cores" 2>"$log" &
@@ -104,8 +123,9 @@ except Exception as e: print(e, e.read().decode() if hasattr(e, "read") else "")
     fi
 } >"$out/jobs.txt" 2>&1
 kill "$vpid" 2>/dev/null
+}
 
-{
+step compare && {
     echo "## voxel_bench compare (best of 3; OpenVDB narrow band is the peer)"
     for m in auto peel scan slice; do
         timeout 150 "$V/bin/voxel_bench" compare "$M/spot_triangulated.obj" "$M/stanford-bunny.obj" \
@@ -113,7 +133,7 @@ kill "$vpid" 2>/dev/null
     done
 } >"$out/compare.txt" 2>&1
 
-{
+step engines && {
     echo "## gregory_bench rate (vs OpenSubdiv)"
     timeout 90 "$V/bin/gregory_bench" rate "$M/spot_control_mesh.obj" 16 64 128 --runs 3 2>&1 | grep -v 'level=info'
     echo "## bl_bench render spot N=64 L=4 512^2"
