@@ -5,7 +5,12 @@
  * voxelizers draw them, then each GPU method on shapes with known answers
  * against the CPU reference, with a map of the z slices that differ.
  *
- *   gldiag [MESH.obj]      (the mesh: a real one beside the built-in shapes)
+ *   gldiag [--robust] [--case probe|cube0|cube2|box|sphere|robust|surface|mesh] [MESH.obj]
+ *
+ * --robust asks for a robust context (as voxeld does); --case runs one
+ * case (each in its own process, a fault in one cannot spoil the next);
+ * VX_GL_TRACE=1 logs every stage's GPU time (gl.h). MESH is voxelized at
+ * 64 beside the built-in shapes.
  */
 #include <math.h>
 #include <stdio.h>
@@ -203,7 +208,8 @@ typedef int (*runner)(vx_gl *, const vx_mesh *, const vx_voxelize_desc *, vx_bit
 static const struct {
     const char *name;
     runner run;
-} methods[] = {{"peel", vx_voxelize_peel}, {"scan", vx_voxelize_scan}, {"slice", vx_voxelize_slice}};
+} methods[] = {
+    {"peel", vx_voxelize_peel}, {"scan", vx_voxelize_scan}, {"slice", vx_voxelize_slice}};
 
 /* Each method against cpu on the grid; a map of up to 3 differing z slices
  * ('+' set only by the method, '-' only by cpu, '#' both). */
@@ -225,7 +231,10 @@ static void compare(vx_gl *gl, const char *name, const vx_mesh *m, const vx_grid
         vx_bitgrid_free(&b);
         return;
     }
-    if (vx_voxelize_cpu(m, &d, &ref, &st, &err)) {
+    /* robust on a closed mesh is parity; cpu does not vote */
+    vx_voxelize_desc dr = d;
+    if (inside == VX_INSIDE_ROBUST) dr.inside = VX_INSIDE_PARITY;
+    if (vx_voxelize_cpu(m, &dr, &ref, &st, &err)) {
         printf("%s: cpu: %s %s\n", name, err.code, err.message);
         return;
     }
@@ -270,66 +279,99 @@ static void compare(vx_gl *gl, const char *name, const vx_mesh *m, const vx_grid
             }
         }
         printf("  %-5s %llu voxels, %ld extra, %ld missing; layers %d passes %d slices %d "
-               "chunks %d; %.1f ms\n",
-               methods[k].name, (unsigned long long)vx_bitgrid_count(&b), extra, missing,
-               s2.layers, s2.passes, s2.slices, s2.chunks, ms);
+               "chunks %d; %.1f ms; reset status 0x%x\n",
+               methods[k].name, (unsigned long long)vx_bitgrid_count(&b), extra, missing, s2.layers,
+               s2.passes, s2.slices, s2.chunks, ms, glGetGraphicsResetStatus());
         vx_bitgrid_free(&b);
     }
     vx_bitgrid_free(&ref);
 }
 
+static int want(const char *only, const char *name)
+{
+    return !only || !strcmp(only, name);
+}
+
 int main(int argc, char **argv)
 {
-    vx_log_set_level(VX_LOG_DEBUG);
+    const char *only = NULL, *mesh = NULL;
+    int robust = 0;
+    for (int i = 1; i < argc; i++) {
+        if (!strcmp(argv[i], "--robust"))
+            robust = 1;
+        else if (!strcmp(argv[i], "--case") && i + 1 < argc)
+            only = argv[++i];
+        else
+            mesh = argv[i];
+    }
+    vx_log_set_level(getenv("VX_GL_TRACE") ? VX_LOG_INFO : VX_LOG_DEBUG);
     vx_err err = {0};
-    vx_gl_desc gd = {.debug = 1};
+    vx_gl_desc gd = {.debug = 1, .robust = robust};
     vx_gl *gl = vx_gl_new(&gd, &err);
     if (!gl) {
         printf("vx_gl_new: %s: %s\n", err.code, err.message);
         return 1;
     }
     const vx_gl_info *gi = vx_gl_get_info(gl);
-    printf("renderer %s | %s | %s\n", gi->renderer, gi->version, gi->device_kind);
+    printf("renderer %s | %s | %s | robust %d\n", gi->renderer, gi->version, gi->device_kind,
+           gi->robust);
     limits();
     setvbuf(stdout, NULL, _IONBF, 0);
 
-    /* the cube's top face as the 8^3 cube test draws it (grid units) */
-    const float sq[] = {0, 0, 0, 8, 0, 0, 0, 8, 0, 8, 8, 0};
-    const uint32_t sqi[] = {0, 2, 3, 0, 3, 1};
-    const int off0[2] = {0, 0};
-    probe(gl, "square 8x8 on pixel edges", sq, 4, sqi, 6, 8, 8, off0, (double[]){0, 0},
-          (double[]){8, 8});
-    const float sq2[] = {1, 1, 0, 9, 1, 0, 1, 9, 0, 9, 9, 0};
-    probe(gl, "square 8x8 at (1,1) in 10x10", sq2, 4, sqi, 6, 10, 10, off0, (double[]){1, 1},
-          (double[]){9, 9});
-
+    if (want(only, "probe")) {
+        /* the cube's top face as the 8^3 cube test draws it (grid units) */
+        const float sq[] = {0, 0, 0, 8, 0, 0, 0, 8, 0, 8, 8, 0};
+        const uint32_t sqi[] = {0, 2, 3, 0, 3, 1};
+        const int off0[2] = {0, 0};
+        probe(gl, "square 8x8 on pixel edges", sq, 4, sqi, 6, 8, 8, off0, (double[]){0, 0},
+              (double[]){8, 8});
+        const float sq2[] = {1, 1, 0, 9, 1, 0, 1, 9, 0, 9, 9, 0};
+        probe(gl, "square 8x8 at (1,1) in 10x10", sq2, 4, sqi, 6, 10, 10, off0, (double[]){1, 1},
+              (double[]){9, 9});
+        /* a square reaching past the 6x6 framebuffer: fragments only inside */
+        probe(gl, "square 8x8 past a 6x6 framebuffer", sq, 4, sqi, 6, 6, 6, off0, (double[]){0, 0},
+              (double[]){8, 8});
+    }
+    vx_grid g;
     vx_mesh *m = box(0, 0, 0, 1, 1, 1);
     for (int pad = 0; pad <= 2; pad += 2) {
-        vx_grid g;
-        vx_grid_from_resolution(m, 8, pad, &g, NULL);
         char nm[64];
-        snprintf(nm, sizeof nm, "cube 8 pad %d", pad);
-        compare(gl, nm, m, &g, VX_INSIDE_NONZERO, VX_FILL_SOLID);
+        snprintf(nm, sizeof nm, "cube%d", pad);
+        if (!want(only, nm)) continue;
+        vx_grid_from_resolution(m, 8, pad, &g, NULL);
+        for (int rule = VX_INSIDE_NONZERO; rule <= VX_INSIDE_PARITY; rule++)
+            compare(gl, nm, m, &g, (vx_inside)rule, VX_FILL_SOLID);
     }
     vx_mesh_free(m);
-    m = box(0.5, 0.25, 0, 10.25, 1.75, 1.5);
-    vx_grid g = {.origin = {0, 0, 0}, .h = 0.25, .dims = {45, 11, 9}};
-    compare(gl, "box on cell boundaries", m, &g, VX_INSIDE_NONZERO, VX_FILL_SOLID);
-    vx_mesh_free(m);
+    if (want(only, "box")) {
+        m = box(0.5, 0.25, 0, 10.25, 1.75, 1.5);
+        g = (vx_grid){.origin = {0, 0, 0}, .h = 0.25, .dims = {45, 11, 9}};
+        compare(gl, "box on cell boundaries", m, &g, VX_INSIDE_NONZERO, VX_FILL_SOLID);
+        g.dims[0] = 1; /* the narrow grid of test_solid, one voxel inside the box */
+        g.origin[0] = 2.5;
+        compare(gl, "box, a 1-voxel-wide grid", m, &g, VX_INSIDE_NONZERO, VX_FILL_SOLID);
+        vx_mesh_free(m);
+    }
     m = sphere(48, 24);
     vx_grid_from_resolution(m, 32, 1, &g, NULL);
-    compare(gl, "sphere 32", m, &g, VX_INSIDE_NONZERO, VX_FILL_SOLID);
-    compare(gl, "sphere 32 parity", m, &g, VX_INSIDE_PARITY, VX_FILL_SOLID);
-    compare(gl, "sphere 32 surface", m, &g, VX_INSIDE_NONZERO, VX_FILL_SURFACE);
+    if (want(only, "sphere")) {
+        compare(gl, "sphere 32", m, &g, VX_INSIDE_NONZERO, VX_FILL_SOLID);
+        compare(gl, "sphere 32 parity", m, &g, VX_INSIDE_PARITY, VX_FILL_SOLID);
+    }
+    if (want(only, "robust"))
+        compare(gl, "sphere 32 robust", m, &g, VX_INSIDE_ROBUST, VX_FILL_SOLID);
+    if (want(only, "surface"))
+        compare(gl, "sphere 32 surface", m, &g, VX_INSIDE_NONZERO, VX_FILL_SURFACE);
     vx_mesh_free(m);
-    if (argc > 1) {
-        m = vx_obj_read_path(argv[1], NULL, &err);
+    if (mesh && want(only, "mesh")) {
+        m = vx_obj_read_path(mesh, NULL, &err);
         if (m) {
             vx_grid_from_resolution(m, 64, 1, &g, NULL);
-            compare(gl, argv[1], m, &g, VX_INSIDE_NONZERO, VX_FILL_SOLID);
+            compare(gl, mesh, m, &g, VX_INSIDE_NONZERO, VX_FILL_SOLID);
             vx_mesh_free(m);
         }
     }
+    printf("reset status at the end: 0x%x\n", glGetGraphicsResetStatus());
     vx_gl_free(gl);
     return 0;
 }

@@ -1,29 +1,28 @@
 #!/usr/bin/env bash
 # The GPU check, in one run on a machine with an NVIDIA GPU (the device
-# tool's: bare, nothing installable), from the pack bench/gpu/pack.sh made:
-#   env.txt      the machine, the EGL devices voxeld sees, the renderer
-#   tests.txt    the GL unit tests (every GPU method against the CPU
-#                references: brick-exact grids, slabs, methods' agreement;
-#                Gregory, preview, band-limit) on the NVIDIA device
-#   jobs.txt     jobs through the API (bench/gpu/jobs.py): each method's
-#                run_ms at 512^3 and 1024^3, each format's encode_ms, render,
-#                preview and Gregory
-#   compare.txt  voxel_bench compare: voxeld against OpenVDB's narrow band
-#                in the same run (the peer of bench/RESULTS.md)
-#   engines.txt  gregory_bench (vs OpenSubdiv) and bl_bench
-#   voxeld.log   the daemon's log
-# Writes them under $OUT (or /tmp/vx-gpu-out). Each step has its own time limit,
-# and the files are written as it goes, so a run stopped at the call's limit
+# tool's: bare, nothing installable), from the pack bench/gpu/pack.sh made.
+# Steps, in this order (VX_GPU_STEPS picks some; default all), each writing
+# one file under $OUT (or /tmp/vx-gpu-out):
+#   env      env.txt: the machine, the EGL devices voxeld sees, the renderer
+#   diag     diag.txt: bench/gpu/gldiag case by case, each in its own
+#            process with every stage's GPU time traced (VX_GL_TRACE), then
+#            all cases in one robust context as voxeld makes it; then the
+#            full output of the tests VX_GPU_DIAG_TESTS names (default
+#            test_solid) in a debug context
+#   jobs     jobs.txt and voxeld.log: jobs through the API (jobs.py): each
+#            method's run_ms at 512^3 and 1024^3, each format's encode_ms,
+#            render, preview and Gregory
+#   compare  compare.txt: voxel_bench compare, voxeld against OpenVDB's
+#            narrow band in the same run (the peer of bench/RESULTS.md)
+#   tests    tests.txt: the GL unit tests (every GPU method against the CPU
+#            references; Gregory, preview, band-limit), 60 s each
+#   engines  engines.txt: gregory_bench (vs OpenSubdiv) and bl_bench
+# The files are written as it goes, so a run stopped at the call's limit
 # still returns the steps before.
-#   bash bench/gpu/run.sh          (carry .gpu)
-#   diag.txt     (step diag) bench/gpu/gldiag: the rasterizer's limits and
-#                coverage, each GPU method against the CPU on shapes with
-#                known answers, GL debug messages; then the full output of
-#                the tests VX_GPU_DIAG_TESTS names (default test_solid)
-# VX_GPU_STEPS picks the steps (default "env tests jobs compare engines";
-# "env diag" for bring-up). To try it on a machine without a GPU:
-# VX_GPU_SOFTWARE=1 (no --require-gpu), VX_GPU_RES="64 128" and
-# VX_GPU_TESTS="test_gl" to shorten.
+#   bash bench/gpu/run.sh                        (carry .gpu)
+#   VX_GPU_STEPS="env diag" bash bench/gpu/run.sh  (bring-up)
+# To try it on a machine without a GPU: VX_GPU_SOFTWARE=1 (no
+# --require-gpu), VX_GPU_RES="64 128" and VX_GPU_TESTS="test_gl" to shorten.
 set -uo pipefail
 root=$(cd "$(dirname "$0")/../.." && pwd)
 out=${OUT:-/tmp/vx-gpu-out}
@@ -59,7 +58,7 @@ tests=()
 for t in ${VX_GPU_TESTS:-$(cd "$V/bin" && ls test_*)}; do tests+=("$V/bin/$t"); done
 gpu_flag=(--require-gpu yes)
 [[ -n ${VX_GPU_SOFTWARE:-} ]] && gpu_flag=()
-steps=" ${VX_GPU_STEPS:-env tests jobs compare engines} "
+steps=" ${VX_GPU_STEPS:-env diag jobs compare tests engines} "
 step() { [[ $steps == *" $1 "* ]]; }
 
 step env && {
@@ -77,26 +76,23 @@ step env && {
 } >"$out/env.txt" 2>&1
 
 step diag && {
-    echo "## gldiag"
-    timeout 90 "$V/bin/gldiag" "$M/spot_triangulated.obj" 2>&1
+    # each case in its own process (a fault cannot spoil the next), every
+    # stage's GPU time traced; then all of them in one robust context, as
+    # voxeld makes it
+    for c in probe cube0 cube2 box sphere robust surface mesh; do
+        echo "## gldiag --case $c"
+        VX_GL_TRACE=1 timeout 30 "$V/bin/gldiag" --case "$c" "$M/spot_triangulated.obj" 2>&1
+        echo "rc $?"
+    done
+    echo "## gldiag --robust"
+    VX_GL_TRACE=1 timeout 60 "$V/bin/gldiag" --robust "$M/spot_triangulated.obj" 2>&1
+    echo "rc $?"
     for t in ${VX_GPU_DIAG_TESTS:-test_solid}; do
         echo "## $t (the last 300 lines)"
         VX_TEST_GL_DEBUG=1 timeout 60 stdbuf -oL -eL "$V/bin/$t" 2>&1 | tail -300
         echo "rc ${PIPESTATUS[0]}"
     done
 } >"$out/diag.txt" 2>&1
-
-# The GL unit tests, each on its own limit.
-step tests && {
-    for t in "${tests[@]}"; do
-        s=$(date +%s.%N)
-        timeout 120 stdbuf -oL -eL "$t" >"$W/t.log" 2>&1
-        rc=$?
-        e=$(awk -v s="$s" -v e="$(date +%s.%N)" 'BEGIN{printf "%.1f", e - s}')
-        echo "## $(basename "$t"): rc $rc, $e s"
-        grep -E 'gl.context|PASSED|FAILED|\[  FAILED|ERROR|Assertion|failure' "$W/t.log" | head -40
-    done
-} >"$out/tests.txt" 2>&1
 
 # The daemon on the GPU (refusing a software renderer), and jobs through it.
 step jobs && {
@@ -132,6 +128,18 @@ step compare && {
             "${res[@]}" --method "$m" --runs 3 --no-filled 2>&1 | grep -v 'level=info'
     done
 } >"$out/compare.txt" 2>&1
+
+# The GL unit tests, each on its own limit.
+step tests && {
+    for t in "${tests[@]}"; do
+        s=$(date +%s.%N)
+        timeout 60 stdbuf -oL -eL "$t" >"$W/t.log" 2>&1
+        rc=$?
+        e=$(awk -v s="$s" -v e="$(date +%s.%N)" 'BEGIN{printf "%.1f", e - s}')
+        echo "## $(basename "$t"): rc $rc, $e s"
+        grep -E 'gl.context|PASSED|FAILED|\[  FAILED|ERROR|Assertion|failure' "$W/t.log" | head -40
+    done
+} >"$out/tests.txt" 2>&1
 
 step engines && {
     echo "## gregory_bench rate (vs OpenSubdiv)"

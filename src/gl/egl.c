@@ -663,8 +663,27 @@ int vx_gl_rebuild(vx_gl *gl, vx_err *err)
     return 0;
 }
 
+/* VX_GL_TRACE set: each check waits for the GPU and logs how long that
+ * took, the time since the last check and the reset status (GPU bring-up:
+ * which stage stalls or faults). GL thread only. */
+static void trace_check(const char *where)
+{
+    static int on = -1;
+    static double last;
+    if (on < 0) on = getenv("VX_GL_TRACE") != NULL;
+    if (!on) return;
+    double t0 = vx_mono_ms();
+    glFinish();
+    double t1 = vx_mono_ms();
+    GLenum reset = glGetGraphicsResetStatus();
+    VX_INFO("gl.trace", "where=%s finish_ms=%.2f since_last_ms=%.2f reset=0x%x", where, t1 - t0,
+            last > 0 ? t0 - last : 0.0, reset);
+    last = t1;
+}
+
 int vx_gl_check(vx_gl *gl, const char *where, vx_err *err)
 {
+    trace_check(where);
     char names[256];
     size_t len = 0;
     int count = 0, oom = 0, lost = 0;

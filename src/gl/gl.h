@@ -66,7 +66,9 @@ int vx_gl_lost(vx_gl *gl);
 int vx_gl_rebuild(vx_gl *gl, vx_err *err);
 
 /* Drains glGetError; GL_OUT_OF_MEMORY -> VX_EGPU "gpu_out_of_memory", any
- * other error -> VX_EGPU "gl_error", naming `where`. Returns 0 or -1. */
+ * other error -> VX_EGPU "gl_error", naming `where`. Returns 0 or -1.
+ * With VX_GL_TRACE in the environment it first waits for the GPU and logs
+ * gl.trace (the wait, the time since the last check, the reset status). */
 int vx_gl_check(vx_gl *gl, const char *where, vx_err *err);
 
 /* Program built from embedded shaders/NAME files (e.g. "preview.vert",

@@ -369,18 +369,19 @@ static void draw_slab(peel_ctx *c, int axis)
 
 /* Draws the slab in `bands` bands of its h rows (the scissor keeps a
  * band's fragments; every ray is independent), with a stop check between
- * bands; *passed (if not NULL) is whether any fragment passed. */
+ * bands; *passed (if not NULL) is whether any fragment passed. The scissor
+ * is on with one band too: the framebuffer has no attachments, and a
+ * driver's bounds for those are its default size, which the scissor makes
+ * explicit. */
 static int draw_banded(peel_ctx *c, int axis, int w, int h, int bands, double within,
                        GLuint *passed)
 {
     peel_objs *po = &c->o;
     int rc = 0;
+    glEnable(GL_SCISSOR_TEST);
     for (int b = 0; b < bands && !rc; b++) {
-        if (bands > 1) {
-            int y0 = (int)((long long)h * b / bands), y1 = (int)((long long)h * (b + 1) / bands);
-            glEnable(GL_SCISSOR_TEST);
-            glScissor(0, y0, w, y1 - y0);
-        }
+        int y0 = (int)((long long)h * b / bands), y1 = (int)((long long)h * (b + 1) / bands);
+        glScissor(0, y0, w, y1 - y0);
         GLuint any = 0;
         if (passed) glBeginQuery(GL_ANY_SAMPLES_PASSED, po->query);
         draw_slab(c, axis);

@@ -170,6 +170,10 @@ static int draw(peel_ctx *c, int k0, int rows)
      * faces are crossings), every covered pixel centre one fragment. */
     glDisable(GL_DEPTH_TEST);
     vx_peel_raster_state();
+    /* the framebuffer has no attachments: its bounds made explicit, so no
+     * fragment can index past the counters' rows */
+    glEnable(GL_SCISSOR_TEST);
+    glScissor(0, 0, w, h);
     glUseProgram(p);
     glBindVertexArray(o->vao);
     for (GLuint b = 0; b < 4; b++)
@@ -178,6 +182,7 @@ static int draw(peel_ctx *c, int k0, int rows)
     vx_gl_timer_begin(&t);
     vx_peel_draw_slab(c, p, 1);
     c->st->gpu_peel_ms += vx_gl_timer_end_ms(&t);
+    glDisable(GL_SCISSOR_TEST);
     vx_xing_unbind();
     glBindVertexArray(0);
     glUseProgram(0);
