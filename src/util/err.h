@@ -46,9 +46,6 @@ enum {
     /* VX_ECANCELED by the daemon's shutdown, not by a client: the job goes
      * back to the queue. */
     VX_EF_SHUTDOWN = 1u << 0,
-    /* The method chosen cannot handle this input and another may (scan's
-     * crossing counters overflowed: peel counts per layer). */
-    VX_EF_OTHER_METHOD = 1u << 1,
 };
 
 typedef struct vx_err {

@@ -30,7 +30,7 @@
  * voxels either side, met such a face in a tie, and the tie rule counted
  * it for the voxel on one side only: a box filling voxels 1..3 exactly
  * gave 8 voxels at threshold 7, and a layer on its low sides at 1.) Each
- * is voxelized at its centres by the requested method (auto: scan), with
+ * is voxelized at its centres by the requested method (auto: cpu), with
  * the same inside rule and tie rule; a voxel's count is its centre plus
  * its two faces along each axis, added on the GPU (vx_faces_count,
  * shaders/voxel_faces_count.comp) a z slab at a time: the seven sample slabs

@@ -284,9 +284,9 @@ int vx_voxelize_scan(vx_gl *gl, const vx_mesh *m, const vx_voxelize_desc *d, vx_
     glGetNamedBufferSubData(o->scan_buf[2], 0, 4, &overflow);
     if (vx_gl_check(gl, "scan.flag", err)) goto done;
     if (overflow) {
-        vx_err_set_flagged(err, VX_EUNPROC, VX_EF_OTHER_METHOD, "too_many_crossings",
-                           "more than 32767 net crossings of one ray fall into one voxel; use "
-                           "method peel");
+        vx_err_set(err, VX_EUNPROC, "too_many_crossings",
+                   "more than 32767 net crossings of one ray fall into one voxel; use method "
+                   "peel or cpu");
         goto done;
     }
     st->voxels_inside = vx_bitgrid_count(out);

@@ -161,10 +161,10 @@ int vx_grid_from_voxel_size(const vx_mesh *m, double h, int padding, vx_grid *ou
 
 /* Voxelizes m into out (allocated here; free with vx_bitgrid_free). GL thread.
  * Validates d (VX_EUNPROC invalid_params), then auto runs slice when
- * supersample is 2 (peeling, scan and cpu have no supersampling); for
- * nonzero/parity solid fills cpu where the renderer is a CPU rasterizer
- * (vx_gl_info_software), else scan (peel when scan fails with
- * too_many_crossings); else peel. st->method says which ran. */
+ * supersample is 2 (peeling, scan and cpu have no supersampling); cpu for
+ * nonzero/parity solid fills (on every renderer: the GL engines are not
+ * yet right on NVIDIA, bench/RESULTS.md); else peel. st->method says which
+ * ran. */
 int vx_voxelize(vx_gl *gl, const vx_mesh *m, const vx_voxelize_desc *d, vx_bitgrid *out,
                 vx_voxelize_stats *st, vx_err *err);
 /* Depth peeling along x (src/voxel/peel.c); also runs fill=surface (GPU
@@ -194,7 +194,7 @@ int vx_voxelize_slice(vx_gl *gl, const vx_mesh *m, const vx_voxelize_desc *d, vx
                       vx_voxelize_stats *st, vx_err *err);
 /* supersample 2 with VX_SAMPLES_FACES (src/voxel/faces.c): the voxel
  * centres and the face centres, as four centre-sampled grids voxelized by
- * d->method (auto: scan), counted per voxel into out->counts on the GPU
+ * d->method (auto: cpu), counted per voxel into out->counts on the GPU
  * (shaders/voxel_faces_count.comp). d validated by vx_voxelize (fill
  * solid). st sums the four runs and the count (gpu_fill_ms, upload_ms,
  * readback_ms). */

@@ -64,17 +64,17 @@ int vx_voxelize(vx_gl *gl, const vx_mesh *m, const vx_voxelize_desc *d, vx_bitgr
     /* Peeling, scan and cpu sample each voxel once at its centre; only
      * slicing supersamples (seed 003's accuracy improvement). Scan and cpu
      * count crossings along x only: robust (three axes) and the surface
-     * fill are peel's. Where the renderer is a CPU rasterizer, scan's draw
-     * and sums are cpu's work behind a driver: cpu runs them directly. */
+     * fill are peel's. cpu gives scan's voxels on every renderer: on a CPU
+     * rasterizer scan's draw and sums are its work behind a driver, and on
+     * the one GPU tried (an NVIDIA H200, bench/RESULTS.md) the GL engines
+     * lost a context's later work after a stage stalled, so auto takes the
+     * CPU until they pass there; scan stays a request away. */
     int scan_fits = dd.supersample == 1 && dd.fill == VX_FILL_SOLID &&
                     (dd.inside == VX_INSIDE_NONZERO || dd.inside == VX_INSIDE_PARITY);
-    if (method == VX_METHOD_AUTO) {
-        int software = gl && vx_gl_info_software(vx_gl_get_info(gl));
+    if (method == VX_METHOD_AUTO)
         method = dd.supersample == 2 ? VX_METHOD_SLICE
                  : !scan_fits        ? VX_METHOD_PEEL
-                 : software          ? VX_METHOD_CPU
-                                     : VX_METHOD_SCAN;
-    }
+                                     : VX_METHOD_CPU;
     if (method == VX_METHOD_CPU) {
         if (!scan_fits)
             return vx_err_set(err, VX_EUNPROC, "invalid_params",
@@ -88,16 +88,7 @@ int vx_voxelize(vx_gl *gl, const vx_mesh *m, const vx_voxelize_desc *d, vx_bitgr
                               "method %s has no supersampling; use slice or auto",
                               method == VX_METHOD_PEEL ? "peel" : "scan");
         if (method == VX_METHOD_PEEL) return vx_voxelize_peel(gl, m, &dd, out, st, err);
-        vx_err tmp = {0};
-        if (!err) err = &tmp;
-        int rc = vx_voxelize_scan(gl, m, &dd, out, st, err);
-        /* A ray with more coincident crossings in one voxel than the
-         * counters hold: peel counts them per layer. */
-        if (rc && d->method == VX_METHOD_AUTO && vx_err_has(err, VX_EF_OTHER_METHOD)) {
-            memset(err, 0, sizeof *err);
-            rc = vx_voxelize_peel(gl, m, &dd, out, st, err);
-        }
-        return rc;
+        return vx_voxelize_scan(gl, m, &dd, out, st, err);
     }
     return vx_voxelize_slice(gl, m, &dd, out, st, err);
 }

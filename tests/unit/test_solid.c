@@ -45,12 +45,6 @@ static int cpu_run(vx_gl *gl, const vx_mesh *m, const vx_voxelize_desc *d, vx_bi
 }
 static const engine cpu = {"cpu", cpu_run, VX_INSIDE_PARITY, 0};
 
-/* What method auto runs for a nonzero or parity solid fill here. */
-static const char *auto_ran(void)
-{
-    return vx_gl_info_software(vx_gl_get_info(vx_test_gl)) ? "cpu" : "scan";
-}
-
 static double now_s(void)
 {
     struct timespec ts;
@@ -575,7 +569,8 @@ static void test_overflow(void **state)
 {
     /* 33000 copies of one box: every ray enters 33000 times inside one
      * voxel (x = 1 in a padded grid), beyond the 16-bit counters. scan
-     * fails with too_many_crossings; auto falls back to peel. */
+     * fails with too_many_crossings; auto runs cpu, which counts in 32
+     * bits. */
     enum { COPIES = 33000 };
     vx_mesh *one = shape_box((double[]){0, 0, 0}, (double[]){1, 1, 1});
     size_t nt = 12 * (size_t)COPIES;
@@ -591,15 +586,13 @@ static void test_overflow(void **state)
     vx_err err = {0};
     assert_int_equal(vx_voxelize_scan(vx_test_gl, m, &d, &b, &st, &err), -1);
     assert_string_equal(err.code, "too_many_crossings");
-    assert_true(vx_err_has(&err, VX_EF_OTHER_METHOD)); /* what auto falls back on */
     assert_null(b.bits);
     memset(&err, 0, sizeof err);
     d.max_layers = 4;
     int rc = vx_voxelize(vx_test_gl, m, &d, &b, &st, &err);
     if (rc) fprintf(stderr, "auto: %s: %s\n", err.code, err.message);
     assert_int_equal(rc, 0);
-    /* cpu counts in 32 bits (auto runs it on a software renderer) */
-    assert_string_equal(st.method, !strcmp(auto_ran(), "cpu") ? "cpu" : "peel");
+    assert_string_equal(st.method, "cpu");
     assert_int_equal(st.voxels_inside, 64);
     vx_bitgrid_free(&b);
     for (int rule = VX_INSIDE_NONZERO; rule <= VX_INSIDE_PARITY; rule++) {
@@ -648,7 +641,7 @@ static void test_faces_pattern(void **state)
     vx_voxelize_desc d = {
         .grid = {{0, 0, 0}, 1, {8, 8, 5}}, .supersample = 2, .samples = VX_SAMPLES_FACES};
     const vx_method methods[3] = {VX_METHOD_AUTO, VX_METHOD_PEEL, VX_METHOD_SLICE};
-    const char *expect[3] = {auto_ran(), "peel", "slice"};
+    const char *expect[3] = {"cpu", "peel", "slice"};
     vx_bitgrid b;
     vx_voxelize_stats st;
     vx_err err = {0};
@@ -873,8 +866,8 @@ static void test_dispatcher_routes(void **state)
         vx_fill fill;
         const char *ran;
     } cases[] = {
-        {VX_METHOD_AUTO, VX_INSIDE_NONZERO, VX_FILL_SOLID, auto_ran()},
-        {VX_METHOD_AUTO, VX_INSIDE_PARITY, VX_FILL_SOLID, auto_ran()},
+        {VX_METHOD_AUTO, VX_INSIDE_NONZERO, VX_FILL_SOLID, "cpu"},
+        {VX_METHOD_AUTO, VX_INSIDE_PARITY, VX_FILL_SOLID, "cpu"},
         {VX_METHOD_CPU, VX_INSIDE_NONZERO, VX_FILL_SOLID, "cpu"},
         {VX_METHOD_CPU, VX_INSIDE_PARITY, VX_FILL_SOLID, "cpu"},
         {VX_METHOD_AUTO, VX_INSIDE_ROBUST, VX_FILL_SOLID, "peel"},
@@ -932,10 +925,9 @@ static void test_dispatcher_params(void **state)
     vx_bitgrid b;
     vx_voxelize_stats st;
     vx_err err = {0};
-    /* auto: cpu (software renderer) or scan for nonzero/parity solid
-     * fills, peel for robust */
+    /* auto: cpu for nonzero/parity solid fills, peel for robust */
     assert_int_equal(vx_voxelize(vx_test_gl, m, &d, &b, &st, &err), 0);
-    assert_string_equal(st.method, auto_ran());
+    assert_string_equal(st.method, "cpu");
     assert_int_equal(st.voxels_inside, 512);
     vx_bitgrid_free(&b);
     d.inside = VX_INSIDE_ROBUST;
