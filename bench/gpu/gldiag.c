@@ -20,71 +20,11 @@
 #include "gl/gl.h"
 #include "gl/internal.h"
 #include "mesh/mesh.h"
+#include "shapes.h"
 #include "util/clock.h"
 #include "util/log.h"
 #include "voxel/voxel.h"
 #include "voxel/xing.h"
-
-static vx_mesh *mesh_from(size_t nv, const double *pos, size_t nt, const uint32_t *idx)
-{
-    vx_mesh *m = vx_mesh_new();
-    m->nverts = nv;
-    m->pos = malloc(nv * 3 * sizeof(double));
-    memcpy(m->pos, pos, nv * 3 * sizeof(double));
-    m->nfaces = nt;
-    m->face_idx = malloc(nt * 3 * sizeof(uint32_t));
-    memcpy(m->face_idx, idx, nt * 3 * sizeof(uint32_t));
-    if (vx_mesh_analyze(m, NULL) != 0) abort();
-    return m;
-}
-
-static vx_mesh *box(double x0, double y0, double z0, double x1, double y1, double z1)
-{
-    const double lo[3] = {x0, y0, z0}, hi[3] = {x1, y1, z1};
-    double p[24];
-    for (int v = 0; v < 8; v++)
-        for (int a = 0; a < 3; a++)
-            p[3 * v + a] = (v >> a) & 1 ? hi[a] : lo[a];
-    static const uint32_t f[36] = {0, 2, 3, 0, 3, 1, 4, 5, 7, 4, 7, 6, 0, 1, 5, 0, 5, 4,
-                                   2, 6, 7, 2, 7, 3, 0, 4, 6, 0, 6, 2, 1, 3, 7, 1, 7, 5};
-    return mesh_from(8, p, 12, f);
-}
-
-/* A UV sphere of radius 1 (outward faces). */
-static vx_mesh *sphere(int nu, int nv)
-{
-    size_t np = (size_t)nu * (nv - 1) + 2, nt = 2 * (size_t)nu * (nv - 1);
-    double *p = malloc(np * 3 * sizeof *p);
-    uint32_t *t = malloc(nt * 3 * sizeof *t);
-    size_t k = 0, q = 0;
-    p[k++] = 0, p[k++] = 0, p[k++] = 1;
-    for (int j = 1; j < nv; j++)
-        for (int i = 0; i < nu; i++) {
-            double th = M_PI * j / nv, ph = 2 * M_PI * i / nu;
-            p[k++] = sin(th) * cos(ph), p[k++] = sin(th) * sin(ph), p[k++] = cos(th);
-        }
-    p[k++] = 0, p[k++] = 0, p[k++] = -1;
-    uint32_t south = (uint32_t)np - 1;
-    for (int i = 0; i < nu; i++) {
-        uint32_t a = 1 + i, b = 1 + (i + 1) % nu;
-        t[q++] = 0, t[q++] = a, t[q++] = b;
-    }
-    for (int j = 1; j + 1 < nv; j++)
-        for (int i = 0; i < nu; i++) {
-            uint32_t a = 1 + (j - 1) * nu + i, b = 1 + (j - 1) * nu + (i + 1) % nu;
-            uint32_t c = a + nu, d = b + nu;
-            t[q++] = a, t[q++] = c, t[q++] = d;
-            t[q++] = a, t[q++] = d, t[q++] = b;
-        }
-    for (int i = 0; i < nu; i++) {
-        uint32_t a = 1 + (nv - 2) * nu + i, b = 1 + (nv - 2) * nu + (i + 1) % nu;
-        t[q++] = a, t[q++] = south, t[q++] = b;
-    }
-    vx_mesh *m = mesh_from(np, p, nt, t);
-    free(p);
-    free(t);
-    return m;
-}
 
 static void limits(void)
 {
@@ -333,7 +273,7 @@ int main(int argc, char **argv)
               (double[]){8, 8});
     }
     vx_grid g;
-    vx_mesh *m = box(0, 0, 0, 1, 1, 1);
+    vx_mesh *m = shape_box((double[]){0, 0, 0}, (double[]){1, 1, 1});
     for (int pad = 0; pad <= 2; pad += 2) {
         char nm[64];
         snprintf(nm, sizeof nm, "cube%d", pad);
@@ -344,7 +284,7 @@ int main(int argc, char **argv)
     }
     vx_mesh_free(m);
     if (want(only, "box")) {
-        m = box(0.5, 0.25, 0, 10.25, 1.75, 1.5);
+        m = shape_box((double[]){0.5, 0.25, 0}, (double[]){10.25, 1.75, 1.5});
         g = (vx_grid){.origin = {0, 0, 0}, .h = 0.25, .dims = {45, 11, 9}};
         compare(gl, "box on cell boundaries", m, &g, VX_INSIDE_NONZERO, VX_FILL_SOLID);
         g.dims[0] = 1; /* the narrow grid of test_solid, one voxel inside the box */
@@ -352,7 +292,7 @@ int main(int argc, char **argv)
         compare(gl, "box, a 1-voxel-wide grid", m, &g, VX_INSIDE_NONZERO, VX_FILL_SOLID);
         vx_mesh_free(m);
     }
-    m = sphere(48, 24);
+    m = shape_sphere(0, 0, 0, 1, 0);
     vx_grid_from_resolution(m, 32, 1, &g, NULL);
     if (want(only, "sphere")) {
         compare(gl, "sphere 32", m, &g, VX_INSIDE_NONZERO, VX_FILL_SOLID);

@@ -5,8 +5,9 @@
 # one file under $OUT (or /tmp/vx-gpu-out):
 #   env      env.txt: the machine, the EGL devices voxeld sees, the renderer
 #   diag     diag.txt: bench/gpu/gldiag case by case, each in its own
-#            process with every stage's GPU time traced (VX_GL_TRACE), then
-#            all cases in one robust context as voxeld makes it; then the
+#            process with every stage's GPU time traced (VX_GL_TRACE), two
+#            again without timer queries (VX_GL_NO_TIMERS), then all cases
+#            in one robust context as voxeld makes it; then the
 #            full output of the tests VX_GPU_DIAG_TESTS names (default
 #            test_solid) in a debug context
 #   jobs     jobs.txt and voxeld.log: jobs through the API (jobs.py): each
@@ -82,6 +83,12 @@ step diag && {
     for c in probe cube0 cube2 box sphere robust surface mesh; do
         echo "## gldiag --case $c"
         VX_GL_TRACE=1 timeout 30 "$V/bin/gldiag" --case "$c" "$M/spot_triangulated.obj" 2>&1
+        echo "rc $?"
+    done
+    # the two cases that stalled on the H200, without timer queries
+    for c in cube0 surface; do
+        echo "## gldiag --case $c, VX_GL_NO_TIMERS=1"
+        VX_GL_NO_TIMERS=1 VX_GL_TRACE=1 timeout 30 "$V/bin/gldiag" --case "$c" 2>&1
         echo "rc $?"
     done
     echo "## gldiag --robust"

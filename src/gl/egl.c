@@ -711,15 +711,24 @@ int vx_gl_check(vx_gl *gl, const char *where, vx_err *err)
 
 void vx_gl_timer_begin(vx_gl_timer *t)
 {
+    /* VX_GL_NO_TIMERS: no timer queries, wall-clock time only (GPU
+     * bring-up: a driver whose timer queries stall). GL thread only. */
+    static int off = -1;
+    if (off < 0) off = getenv("VX_GL_NO_TIMERS") != NULL;
     t->q = 0;
     t->cpu_start_ms = vx_mono_ms();
+    if (off) return;
     glGenQueries(1, &t->q);
     glBeginQuery(GL_TIME_ELAPSED, t->q);
 }
 
 double vx_gl_timer_end_ms(vx_gl_timer *t)
 {
-    if (!t->q) return 0;
+    if (!t->q) { /* without timer queries; 0 once ended */
+        double wall = t->cpu_start_ms < 0 ? 0 : vx_mono_ms() - t->cpu_start_ms;
+        t->cpu_start_ms = -1;
+        return wall;
+    }
     glEndQuery(GL_TIME_ELAPSED);
     GLuint64 ns = 0;
     glGetQueryObjectui64v(t->q, GL_QUERY_RESULT, &ns);

@@ -94,7 +94,9 @@ typedef struct vx_gl_timer {
 void vx_gl_timer_begin(vx_gl_timer *t);
 /* Ends the query and waits for its result, in milliseconds. A result longer
  * than the wall-clock time since begin is a driver bug (llvmpipe can report
- * the time since boot): the wall-clock time is returned instead. */
+ * the time since boot): the wall-clock time is returned instead. With
+ * VX_GL_NO_TIMERS in the environment there are no queries: the wall-clock
+ * time (GPU bring-up). */
 double vx_gl_timer_end_ms(vx_gl_timer *t);
 /* The same for compute dispatches: llvmpipe runs them outside what its
  * timer queries measure (~20 ns for milliseconds of work), so when the query
