@@ -497,6 +497,9 @@ static int peel(peel_ctx *c, layer_set *o, int axis, int k0, int rows, int *nslo
      * counts every key's fragments. The flag is the only value read back
      * between peeling and filling, besides the occlusion queries. */
     GLuint coincident = 0;
+    /* written by the fragment shader: without the barrier a GPU may hand
+     * back the buffer as cleared (llvmpipe does not) */
+    glMemoryBarrier(GL_BUFFER_UPDATE_BARRIER_BIT);
     glGetNamedBufferSubData(po->peel_stat, 0, 4, &coincident);
     if (coincident) {
         vx_gl_timer t;
