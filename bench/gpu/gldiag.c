@@ -1,8 +1,8 @@
 /* GPU bring-up diagnostics for the voxelizers (bench/gpu/run.sh): on the
  * machine's GL device, with a debug context (every KHR_debug message to
  * the log), prints the rasterizer limits the brick-exact crossings rely on,
- * what the rasterizer covers for two triangles drawn the way the
- * voxelizers draw them, then each GPU method on shapes with known answers
+ * what the rasterizer covers for squares (two triangles each) drawn the
+ * way the voxelizers draw them, then each GPU method on shapes with known answers
  * against the CPU reference, with a map of the z slices that differ.
  *
  *   gldiag [--robust] [--case probe|cube0|cube2|box|sphere|robust|surface|mesh] [MESH.obj]

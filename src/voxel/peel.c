@@ -398,6 +398,17 @@ static int draw_banded(peel_ctx *c, int axis, int w, int h, int bands, double wi
     return rc;
 }
 
+/* Bands of about PEEL_BAND_MS for a w x h pass at the slowest rate per
+ * ray the job has shown (peel below). */
+static int pass_bands(const peel_ctx *c, int w, int h)
+{
+    enum { PEEL_BAND_MS = 100, PEEL_MAX_BANDS = 64 };
+    int bands = (int)ceil(c->pass_ms_ray * w * h / PEEL_BAND_MS);
+    if (bands > PEEL_MAX_BANDS) bands = PEEL_MAX_BANDS;
+    if (bands > h) bands = h;
+    return bands < 1 ? 1 : bands;
+}
+
 /* Peels the mesh along `axis` for the slab, several layers per pass (see
  * the top of this file); sets *nslots to the key slots the fill walks. */
 static int peel(peel_ctx *c, layer_set *o, int axis, int k0, int rows, int *nslots)
@@ -444,17 +455,12 @@ static int peel(peel_ctx *c, layer_set *o, int axis, int k0, int rows, int *nslo
 
     /* A pass over a whole robust z slab (1024^2 rays of the whole mesh)
      * takes about a second on llvmpipe, and over two beside other work: a
-     * pass is drawn in bands of about PEEL_BAND_MS each, from the slowest
-     * rate per ray the job's passes have shown so far (the first z pass
-     * follows x's and y's), and once a pass takes longer than that the
-     * later ones (and the count pass) in more, so a job's timeout or cancel
-     * is seen within about PEEL_BAND_MS. */
-    enum { PEEL_BAND_MS = 100, PEEL_MAX_BANDS = 64 };
-    int rc = -1, base = 0;
-    int bands = (int)ceil(c->pass_ms_ray * w * h / PEEL_BAND_MS);
-    if (bands > PEEL_MAX_BANDS) bands = PEEL_MAX_BANDS;
-    if (bands > h) bands = h;
-    if (bands < 1) bands = 1;
+     * pass is drawn in bands of about 100 ms each (pass_bands), from the
+     * slowest rate per ray the job's passes have shown so far (the first z
+     * pass follows x's and y's; a slower pass makes the later ones and the
+     * count pass use more), so a job's timeout or cancel is seen within
+     * about 100 ms. */
+    int rc = -1, base = 0, bands = pass_bands(c, w, h);
     for (int pass = 0;; pass++) {
         /* 16 slots, then as many as so far: passes grow geometrically. */
         int k = pass == 0 ? first_cap(c) : base;
@@ -472,13 +478,9 @@ static int peel(peel_ctx *c, layer_set *o, int axis, int k0, int rows, int *nslo
         glMemoryBarrier(GL_SHADER_IMAGE_ACCESS_BARRIER_BIT);
         c->st->gpu_peel_ms += vx_gl_timer_end_ms(&t); /* ended even when stopped */
         if (stopped) goto done;
-        double ms = vx_mono_ms() - t0;
-        if (ms / ((double)w * h) > c->pass_ms_ray) c->pass_ms_ray = ms / ((double)w * h);
-        if (ms > PEEL_BAND_MS * bands && bands < PEEL_MAX_BANDS) {
-            bands = (int)ceil(ms / PEEL_BAND_MS);
-            if (bands > PEEL_MAX_BANDS) bands = PEEL_MAX_BANDS;
-            if (bands > h) bands = h;
-        }
+        double ms_ray = (vx_mono_ms() - t0) / ((double)w * h);
+        if (ms_ray > c->pass_ms_ray) c->pass_ms_ray = ms_ray;
+        bands = pass_bands(c, w, h);
         c->st->passes++;
         if (vx_gl_check(c->gl, "peel.pass", c->err)) goto done;
         base += k;
