@@ -584,15 +584,16 @@ static int render_frame(vx_job_run *r, const rparams *p, const rstate *s, int f,
         sd.color[a] = p->color[a];
         sd.background[a] = p->background[a];
     }
-    float *img = malloc(sizeof(float) * 3 * (size_t)IW * IH), *rgb = NULL;
+    /* One frame holds the selected method's hits, the image and (for the
+     * six panels) a panel's picture and the next method's hits; each big
+     * buffer is made between two polls. */
+    float *img = NULL, *rgb = NULL;
     vx_bl_hits h = {0}, keep = {0};
     int rc = -1;
-    if (!img || vx_bl_hits_alloc(&h, W, H, err)) {
-        if (!img) vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for the image");
-        goto out;
-    }
-    rgb = malloc(sizeof(float) * 3 * (size_t)W * H);
-    if (!rgb) {
+    if (vx_stop_poll(err) || vx_bl_hits_alloc(&h, W, H, err) || vx_stop_poll(err)) goto out;
+    img = malloc(sizeof(float) * 3 * (size_t)IW * IH);
+    rgb = panels == 1 ? img : malloc(sizeof(float) * 3 * (size_t)W * H);
+    if (!img || !rgb) {
         vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for the image");
         goto out;
     }
@@ -600,7 +601,7 @@ static int render_frame(vx_job_run *r, const rparams *p, const rstate *s, int f,
     for (int k = 0; k < panels; k++) {
         /* the selected method first: its hits are the float outputs */
         int method = !p->compare ? p->normals : k;
-        if (cast_method(s, p, &cam, method, &h, err)) goto out;
+        if (vx_stop_poll(err) || cast_method(s, p, &cam, method, &h, err)) goto out;
         sd.depth_only = method == VX_BL_DEPTH_ONLY;
         if (vx_bl_shade(&h, &sd, rgb, err)) goto out;
         if (p->compare) {
@@ -609,20 +610,23 @@ static int render_frame(vx_job_run *r, const rparams *p, const rstate *s, int f,
             vx_bl_label(rgb, W, H, 3 * sc, 3 * sc, sc, vx_bl_normals_names[method], ink);
         }
         int ox = (k % cols) * W, oy = (k / cols) * H;
-        for (int y = 0; y < H; y++) {
+        for (int y = 0; rgb != img && y < H; y++) {
             if (vx_stop_poll(err)) goto out;
             memcpy(img + 3 * ((size_t)(oy + y) * IW + ox), rgb + 3 * (size_t)y * W,
                    sizeof(float) * 3 * W);
         }
         if (method == p->normals) {
             keep = h;
-            if (vx_bl_hits_alloc(&h, W, H, err)) goto out;
+            memset(&h, 0, sizeof h);
+            if (k + 1 < panels && (vx_stop_poll(err) || vx_bl_hits_alloc(&h, W, H, err))) goto out;
         }
     }
     *render_ms += vx_mono_ms() - t0;
     t0 = vx_mono_ms();
-    for (size_t i = 0; i < (size_t)W * H; i++)
+    for (size_t i = 0; i < (size_t)W * H; i++) {
+        if ((i & 0xfffff) == 0 && vx_stop_poll(err)) goto out;
         *covered += !isnan(keep.depth[i]);
+    }
     const char *path = output(r, p, "image", f, "png", "image/png", err);
     if (!path || write_png(path, img, IW, IH, (int)p->bits, err)) goto out;
     static const char *pfm = "image/x-portable-floatmap";
@@ -640,8 +644,8 @@ static int render_frame(vx_job_run *r, const rparams *p, const rstate *s, int f,
 out:
     vx_bl_hits_free(&h);
     vx_bl_hits_free(&keep);
+    if (rgb != img) free(rgb);
     free(img);
-    free(rgb);
     return rc;
 }
 

@@ -119,6 +119,16 @@ echo "compare panels: $P"
 check "compare: every panel shows the shape, within 10% of the spectral one" jq -e \
     '.covered as $c | $c[0] > 3000 and ($c | all(. > 0.9 * $c[0] and . < 1.1 * $c[0]))' <<<"$P"
 check "compare: every panel is labelled" jq -e '.ink | all(. > 20)' <<<"$P"
+# The float outputs of a compare are the selected method's (here sobel2d,
+# a middle panel): the same bytes as the plain render with that method.
+job "compare sobel2d outputs" "$M_icosphere" '{"N":32,"width":96,"height":64,"compare":true,"normals":"sobel2d","outputs":["normal","depth"]}'
+get normal "$TMP/cn.pfm"
+get depth "$TMP/cd.pfm"
+job "sobel2d outputs" "$M_icosphere" '{"N":32,"width":96,"height":64,"normals":"sobel2d","outputs":["normal","depth"]}'
+get normal "$TMP/pn.pfm"
+get depth "$TMP/pd.pfm"
+check "compare: its normal output is the sobel2d render's" cmp -s "$TMP/cn.pfm" "$TMP/pn.pfm"
+check "compare: its depth output is the sobel2d render's" cmp -s "$TMP/cd.pfm" "$TMP/pd.pfm"
 
 # --- meshes: two overlapping balls summed ---
 job "one ball" "$M_ball_a" '{"N":32,"width":128,"height":128}'
