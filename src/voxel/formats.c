@@ -5,6 +5,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "util/par.h"
 #include "voxel/io.h"
 #include "voxel/io_int.h"
 
@@ -68,9 +69,9 @@ static inline void put_le32(uint8_t *p, uint32_t v)
 #endif
 }
 
-/* Counts the set voxels of slices k0..k1-1 of the brick and, with out,
- * writes each there as XYZI's (x, y, z, colour 1) relative to the brick, z,
- * y, x order (x fastest). */
+/* Writes the set voxels of slices k0..k1-1 of the brick to out as XYZI's
+ * (x, y, z, colour 1) relative to the brick, z, y, x order (x fastest);
+ * returns their number. */
 static uint64_t brick_scan(const vx_bitgrid *g, const vox_brick *b, int k0, int k1, uint8_t *out)
 {
     const int ny = g->grid.dims[1];
@@ -81,10 +82,6 @@ static uint64_t brick_scan(const vx_bitgrid *g, const vox_brick *b, int k0, int 
     for (int k = k0; k < k1; k++)
         for (int j = b->o[1]; j < b->o[1] + b->s[1]; j++) {
             const uint32_t *row = g->bits + ((size_t)k * ny + j) * g->wx;
-            if (!out) { /* the brick's words end at a multiple of 256 or the row's */
-                n += vx_bits_count(row + x0, x1 - x0);
-                continue;
-            }
             for (size_t x = x0; x < x1; x++) {
                 uint32_t w = vx_row_word(g, row, x);
                 /* bricks start on multiples of 256: only the grid's end cuts a word */
@@ -113,27 +110,71 @@ static uint64_t brick_scan(const vx_bitgrid *g, const vox_brick *b, int k0, int 
 
 /* The models' SIZE and XYZI chunks as output chunks of VOX_SLICES slices
  * of a brick (at most 4 MiB of XYZI), the first of each brick with its
- * headers, made on a second thread while the one before is written. */
+ * headers. The set voxels of each VOX_SLICES slices of each brick column
+ * are counted first (a pass over the grid's rows on all threads), so each
+ * chunk's size and place are known before it is made. */
 #define VOX_SLICES 16
 
 typedef struct vox_job {
     const vx_bitgrid *g;
+    int nb[3];        /* bricks along each axis */
+    uint64_t *counts; /* [slice group][brick row y][brick x]: set voxels */
     const vox_brick *b;
     const size_t *first; /* first[m]: model m's first output chunk */
     int nm;
 } vox_job;
 
-static size_t vox_fill(void *ud, size_t c, uint8_t *out)
+static int vox_count(int kg, int t, void *ud)
 {
+    (void)t;
     const vox_job *j = ud;
+    const vx_bitgrid *g = j->g;
+    const int ny = g->grid.dims[1], nz = g->grid.dims[2];
+    uint64_t *n = j->counts + (size_t)kg * j->nb[1] * j->nb[0];
+    const size_t per = VOX_BRICK / 32; /* words of a brick's row */
+    for (int k = kg * VOX_SLICES; k < nz && k < (kg + 1) * VOX_SLICES; k++)
+        for (int y = 0; y < ny; y++) {
+            const uint32_t *row = g->bits + ((size_t)k * ny + y) * g->wx;
+            uint64_t *nr = n + (size_t)(y / VOX_BRICK) * j->nb[0];
+            /* padding bits past nx are never set */
+            for (int bx = 0; bx < j->nb[0]; bx++) {
+                size_t x0 = bx * per, x1 = x0 + per < g->wx ? x0 + per : g->wx;
+                nr[bx] += vx_bits_count(row + x0, x1 - x0);
+            }
+        }
+    return 0;
+}
+
+/* Chunk c: model m, its slices k0..k1-1 (slice group k0 / VOX_SLICES). */
+static const vox_brick *vox_chunk(const vox_job *j, size_t c, int *k0, int *k1, int *head)
+{
     int m = 0;
     while (m + 1 < j->nm && j->first[m + 1] <= c)
         m++;
     const vox_brick *b = &j->b[m];
-    int k0 = b->o[2] + VOX_SLICES * (int)(c - j->first[m]);
-    int k1 = k0 + VOX_SLICES < b->o[2] + b->s[2] ? k0 + VOX_SLICES : b->o[2] + b->s[2];
+    *k0 = b->o[2] + VOX_SLICES * (int)(c - j->first[m]);
+    *k1 = *k0 + VOX_SLICES < b->o[2] + b->s[2] ? *k0 + VOX_SLICES : b->o[2] + b->s[2];
+    *head = c == j->first[m];
+    return b;
+}
+
+static size_t vox_size(void *ud, size_t c)
+{
+    const vox_job *j = ud;
+    int k0, k1, head;
+    const vox_brick *b = vox_chunk(j, c, &k0, &k1, &head);
+    size_t at = ((size_t)k0 / VOX_SLICES * j->nb[1] + (size_t)b->o[1] / VOX_BRICK) * j->nb[0] +
+                (size_t)b->o[0] / VOX_BRICK;
+    return (head ? 40 : 0) + 4 * (size_t)j->counts[at];
+}
+
+static size_t vox_fill(void *ud, size_t c, uint8_t *out)
+{
+    const vox_job *j = ud;
+    int k0, k1, head;
+    const vox_brick *b = vox_chunk(j, c, &k0, &k1, &head);
     uint8_t *p = out;
-    if (c == j->first[m]) { /* SIZE (x, y, z), then XYZI's header and count */
+    if (head) { /* SIZE (x, y, z), then XYZI's header and count */
         uint32_t h[] = {0,
                         12,
                         0,
@@ -212,12 +253,21 @@ static void brick_t(const vox_brick *b, char *t, size_t n)
 int vx_voxel_write_vox(const vx_bitgrid *g, const char *path, const vx_voxel_io *io, vx_err *err)
 {
     const int *d = g->grid.dims;
-    int nb[3], total = 1;
+    vox_job j = {.g = g};
+    int *nb = j.nb, total = 1;
     for (int a = 0; a < 3; a++)
         nb[a] = (d[a] + VOX_BRICK - 1) / VOX_BRICK, total *= nb[a];
+    const int groups = (d[2] + VOX_SLICES - 1) / VOX_SLICES;
     vox_brick *b = calloc((size_t)total, sizeof *b);
-    if (!b) return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for vox bricks");
-    /* pass 1: the bricks that hold voxels, and their counts */
+    j.counts = calloc((size_t)groups * nb[1] * nb[0], sizeof *j.counts);
+    if (!b || !j.counts) {
+        free(b);
+        free(j.counts);
+        return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for vox bricks");
+    }
+    /* pass 1: the set voxels of each slice group of each brick; the bricks
+     * that hold voxels */
+    vx_par_for(groups, vx_par_cpus(), vox_count, &j);
     int nm = 0;
     for (int bz = 0; bz < nb[2]; bz++)
         for (int by = 0; by < nb[1]; by++)
@@ -228,7 +278,9 @@ int vx_voxel_write_vox(const vx_bitgrid *g, const char *path, const vx_voxel_io 
                     m->o[a] = at[a] * VOX_BRICK;
                     m->s[a] = d[a] - m->o[a] < VOX_BRICK ? d[a] - m->o[a] : VOX_BRICK;
                 }
-                m->count = brick_scan(g, m, m->o[2], m->o[2] + m->s[2], NULL);
+                m->count = 0;
+                for (int kg = m->o[2] / VOX_SLICES; kg * VOX_SLICES < m->o[2] + m->s[2]; kg++)
+                    m->count += j.counts[((size_t)kg * nb[1] + by) * nb[0] + bx];
                 /* an empty grid keeps one empty model, the last brick's */
                 if (m->count || (!nm && bx + 1 == nb[0] && by + 1 == nb[1] && bz + 1 == nb[2]))
                     nm++;
@@ -236,6 +288,7 @@ int vx_voxel_write_vox(const vx_bitgrid *g, const char *path, const vx_voxel_io 
     /* (the count is a small part of the work: the chunks report progress) */
     if (io && io->progress && io->progress(io->ud, 0.0, err)) {
         free(b);
+        free(j.counts);
         return -1;
     }
     /* children of MAIN: models, then the scene: root nTRN 0 -> nGRP 1 ->
@@ -250,6 +303,7 @@ int vx_voxel_write_vox(const vx_bitgrid *g, const char *path, const vx_voxel_io 
     children += node_trn(NULL, 0, 1, NULL) + node_grp(NULL, 1, 2, nm);
     if (children > INT32_MAX) {
         free(b);
+        free(j.counts);
         return vx_err_set(err, VX_ETOOBIG, "vox_too_large",
                           "a .vox file holds at most 2^31 bytes; this grid needs %lld (use "
                           "another format)",
@@ -266,11 +320,14 @@ int vx_voxel_write_vox(const vx_bitgrid *g, const char *path, const vx_voxel_io 
         first[0] = 0;
         for (int m = 0; m < nm; m++)
             first[m + 1] = first[m] + (size_t)(b[m].s[2] + VOX_SLICES - 1) / VOX_SLICES;
-        vox_job j = {g, b, first, nm};
+        j.b = b;
+        j.first = first;
+        j.nm = nm;
         size_t cap = 40 + 4 * (size_t)VOX_BRICK * VOX_BRICK * VOX_SLICES;
-        ok = vx_out_chunks(&o, first[nm], cap, vox_fill, &j, io, err) == 0;
+        ok = vx_out_chunks(&o, first[nm], cap, vox_size, vox_fill, &j, io, err) == 0;
     }
     free(first);
+    free(j.counts);
     ok = ok && !node_trn(&o, 0, 1, NULL) && !node_grp(&o, 1, 2, nm);
     for (int m = 0; ok && m < nm; m++) {
         brick_t(&b[m], t, sizeof t);

@@ -1,7 +1,7 @@
 /* raw8, raw1 and binvox writers (io.h). Each works a word of the bit grid
  * at a time (32 voxels) and writes through a buffer of about 1 MiB (raw8,
- * and raw1 with rows that start mid-byte: two chunks of about 4 MiB
- * instead, one made while the other is written), so the only memory
+ * and raw1 with rows that start mid-byte: chunks of about 4 MiB instead,
+ * one per thread, each written at its place), so the only memory
  * beyond the grid is that (binvox: plus two groups of transposed
  * x-columns, 16 MiB each or one block of 32 columns if larger, one coded
  * while the next is made). */
@@ -11,6 +11,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <unistd.h>
 
 #include "util/bigmem.h"
 #include "util/par.h"
@@ -90,56 +91,104 @@ int vx_out_progress(const vx_voxel_io *io, int k, int nz, vx_err *err)
     return io->progress(io->ud, (double)k / nz, err) ? -1 : 0;
 }
 
-typedef struct out_pipe {
-    vx_out *o;
-    size_t n, c; /* chunks, the chunk being written */
-    uint8_t *buf[2];
-    size_t len[2];
+/* Chunks go out on several threads, each filling its own buffer and
+ * writing it at its place in the file (pwrite): the page cache's copy runs
+ * on all of them. */
+#define OUT_THREADS 4
+
+typedef struct out_par {
+    int fd;
+    off_t base;        /* the file offset of chunk 0 */
+    const size_t *off; /* off[c]: chunk c's place from base; off[n]: the total */
+    size_t n, cap;
+    uint8_t *buf[OUT_THREADS];
+    vx_out_size_fn size;
     vx_out_fill_fn fill;
     void *ud;
     const vx_voxel_io *io;
-    vx_err *err;
-    pthread_t caller;
-    int rc;
-} out_pipe;
+    vx_err *err;     /* set by thread 0 only */
+    atomic_int werr; /* errno of the first failed write */
+    atomic_int bad;  /* a fill that gave another size than size() said */
+    atomic_size_t done;
+} out_par;
 
-static void pipe_fill(out_pipe *p, size_t c)
+static int out_chunk(int c, int t, void *ud)
 {
-    if (c < p->n) p->len[c & 1] = p->fill(p->ud, c, p->buf[c & 1]);
-}
-
-static void *pipe_stage(void *ud)
-{
-    out_pipe *p = ud;
-    if (!pthread_equal(pthread_self(), p->caller))
-        pipe_fill(p, p->c + 1);
-    else if (p->io && p->io->progress && p->io->progress(p->io->ud, (double)p->c / p->n, p->err))
-        p->rc = -1;
-    else if (vx_out_write(p->o, p->buf[p->c & 1], p->len[p->c & 1]))
-        p->rc = -1;
-    return NULL;
-}
-
-int vx_out_chunks(vx_out *o, size_t n, size_t cap, vx_out_fill_fn fill, void *ud,
-                  const vx_voxel_io *io, vx_err *err)
-{
-    uint8_t *buf = malloc(2 * cap);
-    if (!buf) return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for output chunks");
-    out_pipe p = {.o = o,
-                  .n = n,
-                  .buf = {buf, buf + cap},
-                  .fill = fill,
-                  .ud = ud,
-                  .io = io,
-                  .err = err,
-                  .caller = pthread_self()};
-    pipe_fill(&p, 0);
-    for (size_t c = 0; !p.rc && c < n; c++) {
-        p.c = c;
-        if (vx_par_run(2, pipe_stage, &p) < 2) pipe_fill(&p, c + 1);
+    out_par *p = ud;
+    if (t == 0 && p->io && p->io->progress &&
+        p->io->progress(p->io->ud, (double)atomic_load(&p->done) / p->n, p->err))
+        return 1;
+    size_t len = p->fill(p->ud, (size_t)c, p->buf[t]), at = 0;
+    if (len != p->off[c + 1] - p->off[c]) {
+        atomic_store(&p->bad, 1);
+        return 1;
     }
+    while (at < len) {
+        ssize_t w = pwrite(p->fd, p->buf[t] + at, len - at, p->base + (off_t)(p->off[c] + at));
+        if (w < 0 && errno == EINTR) continue;
+        if (w <= 0) {
+            int zero = 0;
+            atomic_compare_exchange_strong(&p->werr, &zero, w < 0 && errno ? errno : EIO);
+            return 1;
+        }
+        at += (size_t)w;
+    }
+    atomic_fetch_add(&p->done, 1);
+    return 0;
+}
+
+int vx_out_chunks(vx_out *o, size_t n, size_t cap, vx_out_size_fn size, vx_out_fill_fn fill,
+                  void *ud, const vx_voxel_io *io, vx_err *err)
+{
+    if (n > INT32_MAX)
+        return vx_err_set(err, VX_EINTERNAL, "internal", "%zu output chunks are too many", n);
+    if (vx_out_flush(o)) return -1;
+    int nt = vx_par_cpus() < OUT_THREADS ? vx_par_cpus() : OUT_THREADS;
+    size_t *off = malloc((n + 1) * sizeof *off);
+    uint8_t *buf = malloc((size_t)nt * cap);
+    out_par p = {.fd = fileno(o->f),
+                 .base = ftello(o->f),
+                 .off = off,
+                 .n = n,
+                 .cap = cap,
+                 .size = size,
+                 .fill = fill,
+                 .ud = ud,
+                 .io = io,
+                 .err = err};
+    int rc = -1;
+    if (!off || !buf) {
+        vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for output chunks");
+        goto out;
+    }
+    if (p.base < 0) {
+        o->failed = errno ? errno : EIO;
+        goto out;
+    }
+    off[0] = 0;
+    for (size_t c = 0; c < n; c++)
+        off[c + 1] = off[c] + size(ud, c);
+    for (int t = 0; t < nt; t++)
+        p.buf[t] = buf + (size_t)t * cap;
+    atomic_init(&p.werr, 0);
+    atomic_init(&p.bad, 0);
+    atomic_init(&p.done, 0);
+    int stopped = vx_par_for((int)n, nt, out_chunk, &p);
+    if (atomic_load(&p.werr)) {
+        o->failed = atomic_load(&p.werr);
+    } else if (atomic_load(&p.bad)) {
+        vx_err_set(err, VX_EINTERNAL, "internal", "an output chunk's size was not as counted");
+    } else if (!stopped) {
+        /* the file goes on after the chunks */
+        if (fseeko(o->f, p.base + (off_t)off[n], SEEK_SET))
+            o->failed = errno ? errno : EIO;
+        else
+            rc = 0;
+    }
+out:
+    free(off);
     free(buf);
-    return p.rc;
+    return rc;
 }
 
 /* Output chunks: about VX_CHUNK_BYTES, at least 16 (the progress steps). */
@@ -150,6 +199,13 @@ typedef struct raw8_job {
     size_t rows, per;     /* rows, rows per chunk */
     uint64_t spread[256]; /* the 8 bytes 0/1 of byte b's bits, least significant first */
 } raw8_job;
+
+static size_t raw8_size(void *ud, size_t c)
+{
+    const raw8_job *j = ud;
+    size_t r0 = c * j->per, r1 = r0 + j->per < j->rows ? r0 + j->per : j->rows;
+    return (r1 - r0) * (size_t)j->g->grid.dims[0];
+}
 
 static size_t raw8_fill(void *ud, size_t c, uint8_t *out)
 {
@@ -180,7 +236,8 @@ int vx_out_raw8(vx_out *o, const vx_bitgrid *g, const vx_voxel_io *io, vx_err *e
     j->per = VX_CHUNK_BYTES / nx;
     if (j->per > rows / 16) j->per = rows / 16;
     if (j->per < 1) j->per = 1;
-    int rc = vx_out_chunks(o, (rows + j->per - 1) / j->per, j->per * nx + 8, raw8_fill, j, io, err);
+    int rc = vx_out_chunks(o, (rows + j->per - 1) / j->per, j->per * nx + 8, raw8_size, raw8_fill,
+                           j, io, err);
     free(j);
     return rc;
 }
@@ -199,6 +256,14 @@ typedef struct raw1_job {
     const vx_bitgrid *g;
     size_t rows, per; /* rows, rows per chunk */
 } raw1_job;
+
+/* A chunk starts on a byte: its rows' bits, the last byte padded. */
+static size_t raw1_size(void *ud, size_t c)
+{
+    const raw1_job *j = ud;
+    size_t r0 = c * j->per, r1 = r0 + j->per < j->rows ? r0 + j->per : j->rows;
+    return ((r1 - r0) * (size_t)j->g->grid.dims[0] + 7) / 8;
+}
 
 static size_t raw1_fill(void *ud, size_t c, uint8_t *out)
 {
@@ -259,8 +324,8 @@ int vx_voxel_write_raw1(const vx_bitgrid *g, const char *path, const vx_voxel_io
     raw1_job j = {g, rows, VX_CHUNK_BYTES * 8 / (size_t)nx};
     if (j.per > rows / 16) j.per = rows / 16;
     j.per = j.per < 8 ? 8 : j.per / 8 * 8;
-    ok = vx_out_chunks(&o, (rows + j.per - 1) / j.per, (j.per * (size_t)nx + 7) / 8 + 8, raw1_fill,
-                       &j, io, err) == 0;
+    ok = vx_out_chunks(&o, (rows + j.per - 1) / j.per, (j.per * (size_t)nx + 7) / 8 + 8, raw1_size,
+                       raw1_fill, &j, io, err) == 0;
     return vx_out_close(&o, ok, err);
 }
 

@@ -29,13 +29,16 @@ int vx_out_flush(vx_out *o);
 int vx_out_close(vx_out *o, int ok, vx_err *err);
 /* The progress hook at k of n, every 8th k; -1 when it stops the write. */
 int vx_out_progress(const vx_voxel_io *io, int k, int n, vx_err *err);
-/* Makes chunk c of n (fill returns its bytes, at most cap) on a second
- * thread while the calling thread writes chunk c - 1 and reports progress
- * (c / n; -1 with err set when the hook stops it or a write fails). With
- * one thread (none could be made) in turn. */
+/* Writes n chunks: chunk c is size(ud, c) bytes (at most cap), made by
+ * fill(ud, c, buf) into a buffer of cap bytes. Chunks are made and written
+ * at their places on a few threads; the calling thread reports progress
+ * (chunks done / n) before each of its chunks. 0, or -1 with err set (the
+ * hook stopped it, a fill gave another size) or a write failed (o->failed;
+ * vx_out_close reports it). */
+typedef size_t (*vx_out_size_fn)(void *ud, size_t c);
 typedef size_t (*vx_out_fill_fn)(void *ud, size_t c, uint8_t *buf);
-int vx_out_chunks(vx_out *o, size_t n, size_t cap, vx_out_fill_fn fill, void *ud,
-                  const vx_voxel_io *io, vx_err *err);
+int vx_out_chunks(vx_out *o, size_t n, size_t cap, vx_out_size_fn size, vx_out_fill_fn fill,
+                  void *ud, const vx_voxel_io *io, vx_err *err);
 /* The raw8 body (io.h) of g into o (err set when the hook stops it). */
 int vx_out_raw8(vx_out *o, const vx_bitgrid *g, const vx_voxel_io *io, vx_err *err);
 /* Word x of a row, the padding bits past nx cleared. */

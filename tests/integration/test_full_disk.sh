@@ -133,7 +133,7 @@ expect_status "upload spot" 201
 SPOT=$MESH_ID
 kill9_daemon
 start_daemon --min-free-disk 0 || exit 1
-for f in vdb:fog vdb:level_set vdb:bool raw8 npy; do
+for f in vdb:fog vdb:level_set vdb:bool raw8 npy vox; do
     p="\"format\":\"${f%%:*}\""
     [[ $f == vdb:* ]] && p="$p,\"vdb_grid\":\"${f#vdb:}\""
     fill_to $((192 << 10))

@@ -101,8 +101,10 @@ sys.exit(not ok)
 PY
 done
 
-# --- vox, nrrd, npy against raw8 on a grid larger than one vox model ---
-G='"grid":{"origin":[-1.1,-1.05,-0.3],"voxel_size":0.0075,"dims":[300,280,40]}'
+# --- vox, nrrd, npy against raw8 on a grid of 2 x 2 x 2 vox bricks (the
+# upper ones partial): the unit sphere reaches the first and the three next
+# to it along x, y and z (the other four are empty: no model) ---
+G='"grid":{"origin":[-1.1,-1.05,-1.1],"voxel_size":0.0075,"dims":[300,280,270]}'
 vox "raw8 slab" "{$G,\"format\":\"raw8\"}"
 fetch "$TMP/slab.raw8"
 SLAB_IN=$(st voxels_inside)
@@ -113,7 +115,7 @@ for f in vox nrrd npy; do
     check "$f disposition" bash -c "grep -qi 'filename=\"$VJ-voxels.$f\"' '$HDRS'"
     check "$f: voxels_inside as raw8" test "$(st voxels_inside)" = "$SLAB_IN"
 done
-check "vox: models <= 256, placed by the scene graph, = raw8" "$PY" - "$TMP/slab.vox" "$TMP/slab.raw8" 300 280 40 <<'PY'
+check "vox: models <= 256, placed by the scene graph, = raw8" "$PY" - "$TMP/slab.vox" "$TMP/slab.raw8" 300 280 270 <<'PY'
 import struct, sys
 import numpy as np
 d = open(sys.argv[1], "rb").read()
@@ -151,7 +153,7 @@ while p < len(d):
         nid = struct.unpack_from("<i", d, c)[0]; _, q = dict_at(c + 4)
         nodes[nid] = ("S", struct.unpack_from("<i", d, q + 4)[0])
     p = c + n + m
-assert len(sizes) == len(models) > 1, len(sizes)
+assert len(sizes) == len(models) == 4, len(sizes)
 assert all(max(s) <= 256 for s in sizes), sizes
 grid = np.zeros((nz, ny, nx), np.uint8)
 def walk(nid, t):
@@ -178,12 +180,12 @@ lines = head.decode().split("\n")
 assert lines[0].startswith("NRRD000"), lines[0]
 f = dict(l.split(": ", 1) for l in lines[1:] if not l.startswith("#"))
 assert f["type"] in ("uint8", "uchar", "unsigned char") and f["dimension"] == "3" and f["encoding"] == "raw"
-assert list(map(int, f["sizes"].split())) == [300, 280, 40]
+assert list(map(int, f["sizes"].split())) == [300, 280, 270]
 dirs = [list(map(float, v.split(","))) for v in re.findall(r"\(([^)]*)\)", f["space directions"])]
 h = 0.0075
 assert all(abs(dirs[a][b] - (h if a == b else 0)) < 1e-12 for a in range(3) for b in range(3)), dirs
 org = list(map(float, re.findall(r"\(([^)]*)\)", f["space origin"])[0].split(",")))
-want = [-1.1 + h / 2, -1.05 + h / 2, -0.3 + h / 2]
+want = [-1.1 + h / 2, -1.05 + h / 2, -1.1 + h / 2]
 assert all(abs(o - w) < 1e-12 for o, w in zip(org, want)), org
 sys.exit(body != open(sys.argv[2], "rb").read())
 PY
@@ -191,7 +193,7 @@ check "npy: NumPy reads shape (nx, ny, nz), a[i,j,k] = raw8" "$PY" - "$TMP/slab.
 import sys
 import numpy as np
 a = np.load(sys.argv[1])
-assert a.shape == (300, 280, 40) and a.dtype == np.uint8, (a.shape, a.dtype)
+assert a.shape == (300, 280, 270) and a.dtype == np.uint8, (a.shape, a.dtype)
 raw = np.fromfile(sys.argv[2], np.uint8)
 sys.exit(bool(not np.array_equal(a.flatten(order="F"), raw) or a[150, 140, 20] != raw[150 + 300 * (140 + 280 * 20)]))
 PY
