@@ -508,9 +508,14 @@ const cJSON *job_output_entry(const char *jid, const char *state, const char *fa
     }
     const cJSON *o =
         name ? cJSON_GetObjectItemCaseSensitive(outputs, name) : (outputs ? outputs->child : NULL);
+    if (!o && !name) {
+        vx_err_set(err, VX_ENOTFOUND, "output_not_found",
+                   "job %s wrote no file (a summary): its results are the job's stats", jid);
+        return NULL;
+    }
     if (!o) {
         vx_err_set(err, VX_ENOTFOUND, "output_not_found", "job %s has no output '%.64s'", jid,
-                   name ? name : "");
+                   name);
         return NULL;
     }
     snprintf(file, 160, "%s",

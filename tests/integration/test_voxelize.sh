@@ -77,6 +77,7 @@ for m in "${METHODS[@]}"; do
     check "$m cube: summary has no outputs" jq -e '.outputs == {}' "$TMP/job.json"
     api GET "/v1/jobs/$VJ/result"
     expect_error "$m summary result" 404 output_not_found
+    check "$m summary result: the message points at the stats" jq -e '.error.message | test("summary.*stats")' "$BODY"
     # no result directory to sync: no error logged for it
     check "$m summary: no store error logged" bash -c "! grep -a 'event=store.result_unsynced job=$VJ' '$TMP/daemon.log'"
 
