@@ -100,9 +100,8 @@ typedef struct out_par {
     int fd;
     off_t base;        /* the file offset of chunk 0 */
     const size_t *off; /* off[c]: chunk c's place from base; off[n]: the total */
-    size_t n, cap;
+    size_t n;
     uint8_t *buf[OUT_THREADS];
-    vx_out_size_fn size;
     vx_out_fill_fn fill;
     void *ud;
     const vx_voxel_io *io;
@@ -150,8 +149,6 @@ int vx_out_chunks(vx_out *o, size_t n, size_t cap, vx_out_size_fn size, vx_out_f
                  .base = ftello(o->f),
                  .off = off,
                  .n = n,
-                 .cap = cap,
-                 .size = size,
                  .fill = fill,
                  .ud = ud,
                  .io = io,
