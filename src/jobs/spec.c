@@ -54,8 +54,9 @@ static int read_number(const vx_pspec *f, const cJSON *it, double lo, double hi,
     if (!cJSON_IsNumber(it) || !isfinite(it->valuedouble))
         return BAD("params.%s must be a number", path);
     double v = it->valuedouble;
+    if ((f->flags & VX_PF_GT_LO) && v <= lo)
+        return BAD("params.%s must be > %g, got %g", path, lo, v);
     if (v < lo || v > hi) return BAD("params.%s must be in [%g, %g], got %g", path, lo, hi, v);
-    if ((f->flags & VX_PF_GT_LO) && v == lo) return BAD("params.%s must be > %g", path, lo);
     *out = v;
     return 0;
 }

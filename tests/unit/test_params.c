@@ -437,7 +437,8 @@ static void test_spec_errors(void **state)
     t_fails("{\"x\":2}", "params.x must be in [-1, 1], got 2");
     t_fails("{\"lo\":2.5}", "params.lo must be an integer");
     t_fails("{\"lo\":11}", "params.lo must be in [0, 10], got 11");
-    t_fails("{\"pos\":0}", "params.pos must be > 0");
+    t_fails("{\"pos\":0}", "params.pos must be > 0, got 0");
+    t_fails("{\"pos\":-2}", "params.pos must be > 0, got -2"); /* not "in [0, ...]" */
     t_fails("{\"flag\":1}", "params.flag must be true or false");
     t_fails("{\"mode\":\"three\"}", "params.mode must be one of one, two");
     t_fails("{\"id\":\"abc\"}", "params.id is not a mesh id (64 lowercase hex digits)");
