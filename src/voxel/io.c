@@ -91,9 +91,12 @@ int vx_out_progress(const vx_voxel_io *io, int k, int nz, vx_err *err)
     return io->progress(io->ud, (double)k / nz, err) ? -1 : 0;
 }
 
-/* Chunks go out on several threads, each filling its own buffer and
- * writing it at its place in the file (pwrite): the page cache's copy runs
- * on all of them. */
+/* Chunks go out on a few threads, each filling its own buffer and writing
+ * it at its place in the file (pwrite): the page cache's copy runs on all
+ * of them. Of T threads, thread t makes chunks t, t + T, t + 2 T, ...; the
+ * calling thread is thread 0 and reports progress (c / n) before each of
+ * its chunks c, so the bar moves in steps of T chunks whatever the
+ * scheduler does, and its hook stops the others within a chunk. */
 #define OUT_THREADS 4
 
 typedef struct out_par {
@@ -101,46 +104,66 @@ typedef struct out_par {
     off_t base;        /* the file offset of chunk 0 */
     const size_t *off; /* off[c]: chunk c's place from base; off[n]: the total */
     size_t n;
+    int nthreads; /* T */
     uint8_t *buf[OUT_THREADS];
     vx_out_fill_fn fill;
     void *ud;
     const vx_voxel_io *io;
-    vx_err *err;     /* set by thread 0 only */
-    atomic_int werr; /* errno of the first failed write */
-    atomic_int bad;  /* a fill that gave another size than size() said */
-    atomic_size_t done;
+    vx_err *err;         /* set by the calling thread only */
+    atomic_int tidx;     /* the next new thread's index, from 1 */
+    atomic_int stop;     /* the hook said stop or a chunk failed */
+    atomic_int werr;     /* errno of the first failed write */
+    atomic_int bad;      /* a fill that gave another size than size() said */
+    pthread_mutex_t *go; /* held until nthreads is known */
 } out_par;
 
-static int out_chunk(int c, int t, void *ud)
+/* Fills chunk c into buf and writes it at its place: 0, or -1 with bad or
+ * werr set. */
+static int out_one(out_par *p, size_t c, uint8_t *buf)
 {
-    out_par *p = ud;
-    if (t == 0 && p->io && p->io->progress &&
-        p->io->progress(p->io->ud, (double)atomic_load(&p->done) / p->n, p->err))
-        return 1;
-    size_t len = p->fill(p->ud, (size_t)c, p->buf[t]), at = 0;
+    size_t len = p->fill(p->ud, c, buf), at = 0;
     if (len != p->off[c + 1] - p->off[c]) {
         atomic_store(&p->bad, 1);
-        return 1;
+        return -1;
     }
     while (at < len) {
-        ssize_t w = pwrite(p->fd, p->buf[t] + at, len - at, p->base + (off_t)(p->off[c] + at));
+        ssize_t w = pwrite(p->fd, buf + at, len - at, p->base + (off_t)(p->off[c] + at));
         if (w < 0 && errno == EINTR) continue;
         if (w <= 0) {
             int zero = 0;
             atomic_compare_exchange_strong(&p->werr, &zero, w < 0 && errno ? errno : EIO);
-            return 1;
+            return -1;
         }
         at += (size_t)w;
     }
-    atomic_fetch_add(&p->done, 1);
     return 0;
+}
+
+/* Thread t's chunks. */
+static void out_thread(out_par *p, int t)
+{
+    for (size_t c = (size_t)t; c < p->n && !atomic_load(&p->stop); c += (size_t)p->nthreads) {
+        if (t == 0 && p->io && p->io->progress &&
+            p->io->progress(p->io->ud, (double)c / p->n, p->err)) {
+            atomic_store(&p->stop, 1);
+        } else if (out_one(p, c, p->buf[t])) {
+            atomic_store(&p->stop, 1);
+        }
+    }
+}
+
+static void *out_worker(void *ud)
+{
+    out_par *p = ud;
+    pthread_mutex_lock(p->go);
+    pthread_mutex_unlock(p->go);
+    out_thread(p, atomic_fetch_add(&p->tidx, 1));
+    return NULL;
 }
 
 int vx_out_chunks(vx_out *o, size_t n, size_t cap, vx_out_size_fn size, vx_out_fill_fn fill,
                   void *ud, const vx_voxel_io *io, vx_err *err)
 {
-    if (n > INT32_MAX)
-        return vx_err_set(err, VX_EINTERNAL, "internal", "%zu output chunks are too many", n);
     if (vx_out_flush(o)) return -1;
     int nt = vx_par_cpus() < OUT_THREADS ? vx_par_cpus() : OUT_THREADS;
     size_t *off = malloc((n + 1) * sizeof *off);
@@ -167,15 +190,29 @@ int vx_out_chunks(vx_out *o, size_t n, size_t cap, vx_out_size_fn size, vx_out_f
         off[c + 1] = off[c] + size(ud, c);
     for (int t = 0; t < nt; t++)
         p.buf[t] = buf + (size_t)t * cap;
+    atomic_init(&p.tidx, 1);
+    atomic_init(&p.stop, 0);
     atomic_init(&p.werr, 0);
     atomic_init(&p.bad, 0);
-    atomic_init(&p.done, 0);
-    int stopped = vx_par_for((int)n, nt, out_chunk, &p);
+    /* the threads that could be made share the chunks out; they start
+     * only once T is known */
+    pthread_t th[OUT_THREADS];
+    int started = 0;
+    pthread_mutex_t go = PTHREAD_MUTEX_INITIALIZER;
+    p.go = &go;
+    pthread_mutex_lock(&go);
+    for (int t = 1; t < nt; t++)
+        if (pthread_create(&th[started], NULL, out_worker, &p) == 0) started++;
+    p.nthreads = 1 + started;
+    pthread_mutex_unlock(&go);
+    out_thread(&p, 0);
+    for (int t = 0; t < started; t++)
+        pthread_join(th[t], NULL);
     if (atomic_load(&p.werr)) {
         o->failed = atomic_load(&p.werr);
     } else if (atomic_load(&p.bad)) {
         vx_err_set(err, VX_EINTERNAL, "internal", "an output chunk's size was not as counted");
-    } else if (!stopped) {
+    } else if (!atomic_load(&p.stop)) {
         /* the file goes on after the chunks */
         if (fseeko(o->f, p.base + (off_t)off[n], SEEK_SET))
             o->failed = errno ? errno : EIO;

@@ -31,10 +31,10 @@ int vx_out_close(vx_out *o, int ok, vx_err *err);
 int vx_out_progress(const vx_voxel_io *io, int k, int n, vx_err *err);
 /* Writes n chunks: chunk c is size(ud, c) bytes (at most cap), made by
  * fill(ud, c, buf) into a buffer of cap bytes. Chunks are made and written
- * at their places on a few threads; the calling thread reports progress
- * (chunks done / n) before each of its chunks. 0, or -1 with err set (the
- * hook stopped it, a fill gave another size) or a write failed (o->failed;
- * vx_out_close reports it). */
+ * at their places by a few writer threads while the calling thread reports
+ * progress (chunks done / n). 0, or -1 with err set (the hook stopped it, a
+ * fill gave another size) or a write failed (o->failed; vx_out_close
+ * reports it). */
 typedef size_t (*vx_out_size_fn)(void *ud, size_t c);
 typedef size_t (*vx_out_fill_fn)(void *ud, size_t c, uint8_t *buf);
 int vx_out_chunks(vx_out *o, size_t n, size_t cap, vx_out_size_fn size, vx_out_fill_fn fill,
