@@ -225,6 +225,12 @@ out:
     return rc;
 }
 
+/* The row after a chunk of per rows from r0, of rows in all. */
+static inline size_t chunk_end(size_t r0, size_t per, size_t rows)
+{
+    return r0 + per < rows ? r0 + per : rows;
+}
+
 /* Output chunks: about VX_CHUNK_BYTES, at least 16 (the progress steps). */
 #define VX_CHUNK_BYTES ((size_t)4 << 20)
 
@@ -237,7 +243,7 @@ typedef struct raw8_job {
 static size_t raw8_size(void *ud, size_t c)
 {
     const raw8_job *j = ud;
-    size_t r0 = c * j->per, r1 = r0 + j->per < j->rows ? r0 + j->per : j->rows;
+    size_t r0 = c * j->per, r1 = chunk_end(r0, j->per, j->rows);
     return (r1 - r0) * (size_t)j->g->grid.dims[0];
 }
 
@@ -245,7 +251,7 @@ static size_t raw8_fill(void *ud, size_t c, uint8_t *out)
 {
     const raw8_job *j = ud;
     const size_t nx = (size_t)j->g->grid.dims[0], nb = (nx + 7) / 8;
-    size_t r0 = c * j->per, r1 = r0 + j->per < j->rows ? r0 + j->per : j->rows;
+    size_t r0 = c * j->per, r1 = chunk_end(r0, j->per, j->rows);
     for (size_t r = r0; r < r1; r++, out += nx) { /* a row's last 8 bytes may run past nx: slack */
         const uint8_t *w = (const uint8_t *)(j->g->bits + r * j->g->wx);
         for (size_t b = 0; b < nb; b++)
@@ -295,7 +301,7 @@ typedef struct raw1_job {
 static size_t raw1_size(void *ud, size_t c)
 {
     const raw1_job *j = ud;
-    size_t r0 = c * j->per, r1 = r0 + j->per < j->rows ? r0 + j->per : j->rows;
+    size_t r0 = c * j->per, r1 = chunk_end(r0, j->per, j->rows);
     return ((r1 - r0) * (size_t)j->g->grid.dims[0] + 7) / 8;
 }
 
@@ -305,7 +311,7 @@ static size_t raw1_fill(void *ud, size_t c, uint8_t *out)
     const vx_bitgrid *g = j->g;
     const unsigned nx = (unsigned)g->grid.dims[0], tail = nx & 63;
     const size_t full = nx / 64; /* whole 64-bit pieces of a row */
-    size_t r0 = c * j->per, r1 = r0 + j->per < j->rows ? r0 + j->per : j->rows;
+    size_t r0 = c * j->per, r1 = chunk_end(r0, j->per, j->rows);
     /* acc holds nacc (< 64) bits not yet stored; a row's whole pieces
      * leave nacc as it is, 64 bits stored per piece */
     uint64_t acc = 0;

@@ -2,7 +2,6 @@
  * method that fits it. */
 #include <math.h>
 #include <stddef.h>
-#include <string.h>
 
 #include "voxel/voxel.h"
 
