@@ -10,6 +10,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <strings.h>
 
 #include <cjson/cJSON.h>
 
@@ -94,13 +95,14 @@ static int blank(unsigned char c)
 /* The shortest ASCII facet the STL reader takes ("facet vertex 0 0 0 ..."). */
 #define STL_ASCII_MIN_FACET 32
 
-/* "solid" first (binary headers often start so too). */
+/* "solid" first, in any case, after a UTF-8 byte order mark and blanks
+ * (binary headers often start so too). */
 static int solid_first(const unsigned char *p, size_t n)
 {
-    size_t i = 0;
+    size_t i = n >= 3 && !memcmp(p, "\xef\xbb\xbf", 3) ? 3 : 0;
     while (i < n && blank(p[i]))
         i++;
-    return n - i >= 5 && !memcmp(p + i, "solid", 5);
+    return n - i >= 5 && !strncasecmp((const char *)p + i, "solid", 5);
 }
 
 /* ASCII STL: "solid" first and no NUL in the first 512 bytes (binary
@@ -258,18 +260,38 @@ static int check_off(const unsigned char *p, size_t n, uint64_t size, vx_mesh_de
 
 /* ---- glTF ------------------------------------------------------------ */
 
-#define GLTF_MAX_DEPTH 64
+#define GLTF_MAX_DEPTH 256 /* nodes nested in nodes (import.cc walks as deep) */
 
 typedef struct gltf_ctx {
     cJSON *root;
     uint64_t bin_len; /* glb BIN chunk, or UINT64_MAX: none */
     uint64_t *buf_len, *view_len;
     int nbuf, nview;
+    /* the top-level arrays' items by index (cJSON's arrays are lists:
+     * indexing one item by item is quadratic in a file of many nodes) */
+    cJSON **views, **accs, **meshes, **nodes;
+    int nacc, nmesh;
     unsigned char *seen; /* nodes visited */
     int nnodes;
     uint64_t tris, verts;
     vx_err *err;
 } gltf_ctx;
+
+/* The items of root's array member key into *at (NULL and 0 when it has
+ * none); their number, or -1 without memory. */
+static int index_array(const cJSON *root, const char *key, cJSON ***at)
+{
+    cJSON *a = cJSON_GetObjectItemCaseSensitive(root, key), *e;
+    int n = 0;
+    *at = NULL;
+    if (!cJSON_IsArray(a)) return 0;
+    cJSON_ArrayForEach(e, a) n++;
+    *at = malloc(((size_t)n + 1) * sizeof **at);
+    if (!*at) return -1;
+    n = 0;
+    cJSON_ArrayForEach(e, a)(*at)[n++] = e;
+    return n;
+}
 
 static int gl_fail(gltf_ctx *g, const char *fmtstr, ...) __attribute__((format(printf, 2, 3)));
 static int gl_fail(gltf_ctx *g, const char *fmtstr, ...)
@@ -343,7 +365,6 @@ static int gltf_buffers(gltf_ctx *g)
 static int gltf_views(gltf_ctx *g)
 {
     cJSON *views = arr(g->root, "bufferViews"), *v;
-    g->nview = views ? cJSON_GetArraySize(views) : 0;
     g->view_len = calloc((size_t)g->nview + 1, sizeof *g->view_len);
     if (!g->view_len) return vx_err_set(g->err, VX_EINTERNAL, "out_of_memory", "no memory");
     int i = 0;
@@ -401,7 +422,6 @@ static int fits(gltf_ctx *g, double vi, double off, double stride, double count,
 static int gltf_accessors(gltf_ctx *g)
 {
     cJSON *accs = arr(g->root, "accessors"), *a;
-    cJSON *views = arr(g->root, "bufferViews");
     int i = 0;
     cJSON_ArrayForEach(a, accs)
     {
@@ -410,10 +430,14 @@ static int gltf_accessors(gltf_ctx *g)
         double count = num(a, "count", -1), vi = num(a, "bufferView", -1),
                off = num(a, "byteOffset", 0);
         if (!cs || !nc || count < 1) return gl_fail(g, "%s %d is malformed", "accessor", i);
-        if (vi < 0) return gl_fail(g, "%s %d has no bufferView", "accessor", i);
+        if (vi < 0)
+            return gl_fail(g,
+                           "%s %d has no bufferView (accessors of zeros, with or without sparse "
+                           "values, are not read)",
+                           "accessor", i);
         double elem = (double)cs * nc, stride = elem;
         if (vi < g->nview) {
-            double st = num(cJSON_GetArrayItem(views, (int)vi), "byteStride", 0);
+            double st = num(g->views[(int)vi], "byteStride", 0);
             if (st > 0) stride = st;
         }
         if (!fits(g, vi, off, stride, count, elem))
@@ -437,18 +461,15 @@ static int gltf_accessors(gltf_ctx *g)
 
 static double acc_count(gltf_ctx *g, double ai)
 {
-    cJSON *accs = arr(g->root, "accessors");
-    if (ai < 0 || !accs || ai >= cJSON_GetArraySize(accs)) return -1;
-    return num(cJSON_GetArrayItem(accs, (int)ai), "count", -1);
+    if (!(ai >= 0 && ai < g->nacc)) return -1;
+    return num(g->accs[(int)ai], "count", -1);
 }
 
 /* Adds mesh mi's triangles and vertices (one instance) to g. */
 static int gltf_mesh(gltf_ctx *g, double mi)
 {
-    cJSON *meshes = arr(g->root, "meshes");
-    if (mi < 0 || !meshes || mi >= cJSON_GetArraySize(meshes))
-        return gl_fail(g, "%s %.15g names no mesh", "node mesh", mi);
-    cJSON *prims = arr(cJSON_GetArrayItem(meshes, (int)mi), "primitives"), *p;
+    if (!(mi >= 0 && mi < g->nmesh)) return gl_fail(g, "%s %.15g names no mesh", "node mesh", mi);
+    cJSON *prims = arr(g->meshes[(int)mi], "primitives"), *p;
     cJSON_ArrayForEach(p, prims)
     {
         const cJSON *at = cJSON_GetObjectItemCaseSensitive(p, "attributes");
@@ -467,9 +488,41 @@ static int gltf_mesh(gltf_ctx *g, double mi)
     return 0;
 }
 
+/* Node member key: absent, or n finite numbers (*len: their length). */
+static int vec_ok(const cJSON *node, const char *key, int n, double *len)
+{
+    const cJSON *a = cJSON_GetObjectItemCaseSensitive(node, key), *e;
+    double l2 = 0;
+    int k = 0;
+    *len = 1;
+    if (!a) return 1;
+    if (!cJSON_IsArray(a)) return 0;
+    cJSON_ArrayForEach(e, a)
+    {
+        if (!cJSON_IsNumber(e) || !isfinite(e->valuedouble) || ++k > n) return 0;
+        l2 += e->valuedouble * e->valuedouble;
+    }
+    *len = sqrt(l2);
+    return k == n;
+}
+
+/* A node's transform: a matrix of 16 numbers, or a translation (3), a
+ * rotation (a quaternion of 4, not zero: it is normalized) and a scale (3). */
+static int gltf_transform(gltf_ctx *g, const cJSON *n, double ni)
+{
+    double len;
+    if (!vec_ok(n, "matrix", 16, &len))
+        return gl_fail(g, "node %.15g's matrix is not 16 finite numbers", ni);
+    if (!vec_ok(n, "translation", 3, &len) || !vec_ok(n, "scale", 3, &len))
+        return gl_fail(g, "node %.15g's translation or scale is not 3 finite numbers", ni);
+    if (!vec_ok(n, "rotation", 4, &len) || !(len > 0))
+        return gl_fail(
+            g, "node %.15g's rotation is not a quaternion of 4 finite numbers, not all 0", ni);
+    return 0;
+}
+
 static int gltf_node(gltf_ctx *g, double ni, int depth)
 {
-    cJSON *nodes = arr(g->root, "nodes");
     /* ni may be any number a file holds (found by fuzz_gltf): printed, not cast. */
     if (!(ni >= 0 && ni < g->nnodes)) return gl_fail(g, "%s %.15g does not exist", "node", ni);
     if (g->seen[(int)ni])
@@ -477,7 +530,8 @@ static int gltf_node(gltf_ctx *g, double ni, int depth)
     if (depth > GLTF_MAX_DEPTH)
         return gl_fail(g, "node %.15g is nested more than %d deep", ni, GLTF_MAX_DEPTH);
     g->seen[(int)ni] = 1;
-    cJSON *n = cJSON_GetArrayItem(nodes, (int)ni), *c;
+    cJSON *n = g->nodes[(int)ni], *c;
+    if (gltf_transform(g, n, ni)) return -1;
     if (cJSON_GetObjectItemCaseSensitive(n, "mesh") && gltf_mesh(g, num(n, "mesh", -1))) return -1;
     cJSON_ArrayForEach(c, arr(n, "children"))
     {
@@ -488,8 +542,7 @@ static int gltf_node(gltf_ctx *g, double ni, int depth)
 
 static int gltf_scene(gltf_ctx *g)
 {
-    cJSON *nodes = arr(g->root, "nodes"), *scenes = arr(g->root, "scenes"), *r;
-    g->nnodes = nodes ? cJSON_GetArraySize(nodes) : 0;
+    cJSON *scenes = arr(g->root, "scenes"), *r;
     g->seen = calloc((size_t)g->nnodes + 1, 1);
     if (!g->seen) return vx_err_set(g->err, VX_EINTERNAL, "out_of_memory", "no memory");
     double si = num(g->root, "scene", 0);
@@ -497,6 +550,27 @@ static int gltf_scene(gltf_ctx *g)
     cJSON_ArrayForEach(r, arr(cJSON_GetArrayItem(scenes, (int)si), "nodes"))
     {
         if (gltf_node(g, cJSON_IsNumber(r) ? r->valuedouble : -1, 0)) return -1;
+    }
+    return 0;
+}
+
+/* The extensions a file requires that change where its triangles are
+ * (compressed or instanced geometry) and that are not read; the others
+ * (materials, textures, lights) change nothing voxeld reads. */
+static int gltf_extensions(gltf_ctx *g)
+{
+    static const char *const unread[] = {"KHR_draco_mesh_compression", "EXT_meshopt_compression",
+                                         "KHR_meshopt_compression", "EXT_mesh_gpu_instancing"};
+    const cJSON *e;
+    cJSON_ArrayForEach(e, arr(g->root, "extensionsRequired"))
+    {
+        if (!cJSON_IsString(e)) continue;
+        for (size_t k = 0; k < sizeof unread / sizeof unread[0]; k++)
+            if (!strcmp(e->valuestring, unread[k]))
+                return gl_fail(g,
+                               "it requires %s, which is not read (decompress it first, e.g. "
+                               "with gltf-transform; a Draco mesh can be uploaded as .drc)",
+                               unread[k]);
     }
     return 0;
 }
@@ -542,7 +616,16 @@ static int check_gltf(vx_mesh_format fmt, const unsigned char *p, size_t n, uint
         corrupt(err, VX_MESH_GLTF, "asset.version is not 2.x (glTF 2.0 is read)");
         goto out;
     }
-    if (gltf_buffers(&g) || gltf_views(&g) || gltf_accessors(&g) || gltf_scene(&g)) goto out;
+    if ((g.nview = index_array(g.root, "bufferViews", &g.views)) < 0 ||
+        (g.nacc = index_array(g.root, "accessors", &g.accs)) < 0 ||
+        (g.nmesh = index_array(g.root, "meshes", &g.meshes)) < 0 ||
+        (g.nnodes = index_array(g.root, "nodes", &g.nodes)) < 0) {
+        vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory");
+        goto out;
+    }
+    if (gltf_extensions(&g) || gltf_buffers(&g) || gltf_views(&g) || gltf_accessors(&g) ||
+        gltf_scene(&g))
+        goto out;
     d->triangles = d->faces = g.tris;
     d->indices = 3 * g.tris;
     d->vertices = g.verts;
@@ -552,6 +635,10 @@ out:
     cJSON_Delete(g.root);
     free(g.buf_len);
     free(g.view_len);
+    free(g.views);
+    free(g.accs);
+    free(g.meshes);
+    free(g.nodes);
     free(g.seen);
     return rc;
 }
@@ -615,7 +702,8 @@ vx_mesh_format vx_mesh_sniff_sized(const unsigned char *p, size_t n, uint64_t si
         /* "solid" alone could start other text: look for a facet. */
         const char *s = (const char *)p;
         for (size_t k = i; k + 8 <= n; k++)
-            if (!memcmp(s + k, "facet", 5) || !memcmp(s + k, "endsolid", 8)) return VX_MESH_STL;
+            if (!strncasecmp(s + k, "facet", 5) || !strncasecmp(s + k, "endsolid", 8))
+                return VX_MESH_STL;
     }
     return vx_mesh_sniff(p, n);
 }

@@ -36,6 +36,7 @@
 #include <string>
 #include <vector>
 
+#include <strings.h>
 #include <sys/stat.h>
 
 #include "mesh/alloc_cap.h"
@@ -168,7 +169,8 @@ vx_mesh *to_mesh(Gather &g)
  * count to the size) or ASCII (`solid` NAME, then per facet `facet normal
  * x y z` `outer loop` three `vertex x y z` `endloop` `endfacet`, ended by
  * `endsolid` (or the end of the file); several solids may follow each
- * other). Normals are ignored;
+ * other; keywords in any case, as exporters write them, after an optional
+ * UTF-8 byte order mark). Normals are ignored;
  * corners are welded by position (weld). */
 
 /* A whitespace-separated token reader over the file. */
@@ -189,11 +191,16 @@ struct Tokens {
         *len = size_t(p - *s);
         return true;
     }
+    /* Whether [s, s + len) is the keyword word, in any case. */
+    static bool word_is(const char *s, size_t len, const char *word)
+    {
+        return len == std::strlen(word) && !strncasecmp(s, word, len);
+    }
     bool is(const char *word)
     {
         const char *s;
         size_t len;
-        return next(&s, &len) && len == std::strlen(word) && !std::memcmp(s, word, len);
+        return next(&s, &len) && word_is(s, len, word);
     }
     bool number(double *v)
     {
@@ -262,12 +269,13 @@ int stl_binary(Gather &g, const unsigned char *data)
 
 int stl_ascii(Gather &g, const unsigned char *data, size_t n)
 {
-    Tokens t{reinterpret_cast<const char *>(data), reinterpret_cast<const char *>(data) + n};
+    size_t bom = n >= 3 && !std::memcmp(data, "\xef\xbb\xbf", 3) ? 3 : 0;
+    Tokens t{reinterpret_cast<const char *>(data) + bom, reinterpret_cast<const char *>(data) + n};
     const char *s;
     size_t len;
     bool any = false;
     while (t.next(&s, &len)) {
-        if (!(len == 5 && !std::memcmp(s, "solid", 5)))
+        if (!Tokens::word_is(s, len, "solid"))
             return stl_fail(g, any ? "text after endsolid that is not a solid" : "no \"solid\"",
                             t.line);
         any = true;
@@ -275,11 +283,11 @@ int stl_ascii(Gather &g, const unsigned char *data, size_t n)
         for (;;) {
             if (!t.next(&s, &len)) return 0; /* a missing endsolid is forgiven */
             size_t at = t.line;
-            if (len == 8 && !std::memcmp(s, "endsolid", 8)) {
+            if (Tokens::word_is(s, len, "endsolid")) {
                 t.skip_line();
                 break;
             }
-            if (!(len == 5 && !std::memcmp(s, "facet", 5)))
+            if (!Tokens::word_is(s, len, "facet"))
                 return stl_fail(g, "expected facet or endsolid", at);
             double nrm[3], c[9];
             if (!t.is("normal") || !t.number(&nrm[0]) || !t.number(&nrm[1]) || !t.number(&nrm[2]) ||

@@ -641,18 +641,18 @@ vx_mesh *vx_mesh_read_as(const char *path, vx_mesh_format fmt, const vx_mesh_lim
     return m;
 }
 
-/* The format the store's extension for it names (mesh/intake.c's table;
- * the formats that the first bytes cannot always tell), or 0. */
+/* The format the store's extension for it names (mesh/intake.c's table:
+ * the format the upload was taken as, which the first bytes cannot always
+ * tell again: an OBJ declared model/obj may name its groups in Latin-1,
+ * which the sniff takes for binary), or 0. */
 static vx_mesh_format format_of_ext(const char *path)
 {
     static const struct {
         const char *ext;
         vx_mesh_format fmt;
-    } exts[] = {{".stl", VX_MESH_STL},
-                {".ply", VX_MESH_PLY},
-                {".gltf", VX_MESH_GLTF},
-                {".glb", VX_MESH_GLB},
-                {".off", VX_MESH_OFF}};
+    } exts[] = {{".stl", VX_MESH_STL}, {".ply", VX_MESH_PLY},  {".gltf", VX_MESH_GLTF},
+                {".glb", VX_MESH_GLB}, {".off", VX_MESH_OFF},  {".obj", VX_MESH_OBJ},
+                {".bpt", VX_MESH_BPT}, {".drc", VX_MESH_DRACO}};
     size_t n = strlen(path);
     for (size_t i = 0; i < sizeof exts / sizeof exts[0]; i++) {
         size_t k = strlen(exts[i].ext);

@@ -6,7 +6,9 @@
  * STOFF, ...; 4OFF and nOFF are refused), the vertex and face counts
  * (checked against the size first, vx_declared_check), then per vertex
  * line its first three numbers and per face line its size and indices
- * (colours after them are ignored). Polygons are kept. */
+ * (colours after them are ignored), and nothing but comments after the
+ * last face (a face count that is too small). Lines of any length.
+ * Polygons are kept. */
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
@@ -15,12 +17,12 @@
 
 typedef struct off_in {
     const char *p, *end;
-    char line[4096];
-    size_t lineno;
+    char *line; /* cap bytes, grown to the longest line */
+    size_t cap, lineno;
 } off_in;
 
 /* The next line with something on it but comments, NUL-terminated in
- * in->line; 0 at the end, -1 when it is too long. */
+ * in->line; 0 at the end, -1 for a NUL byte or without memory. */
 static int next_line(off_in *in)
 {
     while (in->p < in->end) {
@@ -28,7 +30,13 @@ static int next_line(off_in *in)
         const char *e = nl ? nl : in->end;
         size_t len = (size_t)(e - in->p);
         in->lineno++;
-        if (len >= sizeof in->line) return -1;
+        if (len >= in->cap) {
+            size_t cap = len + 1 > 2 * in->cap ? len + 1 : 2 * in->cap;
+            char *l = realloc(in->line, cap);
+            if (!l) return -1;
+            in->line = l;
+            in->cap = cap;
+        }
         memcpy(in->line, in->p, len);
         in->line[len] = 0;
         in->p = nl ? nl + 1 : in->end;
@@ -53,7 +61,7 @@ static int blank(char c)
     return c == ' ' || c == '\t' || c == '\r' || c == '\f' || c == '\v';
 }
 
-/* Reads an unsigned integer token at *s. */
+/* Reads an unsigned integer token at *s (a whole token: "6.5" is not 6). */
 static int read_uint(char **s, unsigned long long *v)
 {
     char *e;
@@ -61,6 +69,7 @@ static int read_uint(char **s, unsigned long long *v)
         (*s)++;
     if (**s < '0' || **s > '9') return -1;
     *v = strtoull(*s, &e, 10);
+    if (*e && !blank(*e)) return -1;
     *s = e;
     return 0;
 }
@@ -97,11 +106,16 @@ vx_mesh *vx_off_read_mem(const unsigned char *data, size_t n, const vx_mesh_limi
     if (vx_declared_check(VX_MESH_OFF, data, n, n, lim, &d, err)) return NULL;
     off_in in = {.p = (const char *)data, .end = (const char *)data + n};
     unsigned long long c[2];
-    if (read_header(&in, c, err)) return NULL;
+    vx_mesh *m = NULL;
+    uint32_t *scr = NULL; /* a face's indices, sorted for vx_mesh_face_repeat */
+    size_t scr_cap = 0;
+    if (read_header(&in, c, err)) goto out;
     /* Only counts the size check saw may size the arrays. */
-    if (c[0] != d.vertices || c[1] != d.faces)
-        return fail(err, &in, "the header's counts cannot be read one way"), NULL;
-    vx_mesh *m = vx_mesh_new();
+    if (c[0] != d.vertices || c[1] != d.faces) {
+        fail(err, &in, "the header's counts cannot be read one way");
+        goto out;
+    }
+    m = vx_mesh_new();
     if (!m) goto oom;
     size_t nv = (size_t)c[0], nf = (size_t)c[1], cap = 3 * nf + 16, used = 0, ntris = 0;
     m->pos = malloc(3 * nv * sizeof(double) + 1);
@@ -128,7 +142,8 @@ vx_mesh *vx_off_read_mem(const unsigned char *data, size_t n, const vx_mesh_limi
         unsigned long long k, idx;
         if (next_line(&in) <= 0) goto bad_f;
         char *s = in.line;
-        if (read_uint(&s, &k) || k > 4096) goto bad_f;
+        /* a corner takes 2 bytes of the file (a bound before any sum) */
+        if (read_uint(&s, &k) || k > (unsigned long long)n / 2 + 1) goto bad_f;
         if (used + k > cap) {
             cap = 2 * cap + k;
             if (cap > (size_t)n) cap = (size_t)n; /* a corner takes 2 bytes of the file */
@@ -138,7 +153,10 @@ vx_mesh *vx_off_read_mem(const unsigned char *data, size_t n, const vx_mesh_limi
             m->face_idx = g;
         }
         for (unsigned long long i = 0; i < k; i++) {
-            if (read_uint(&s, &idx)) goto bad_f;
+            if (read_uint(&s, &idx)) {
+                fail(err, &in, "a face without as many whole-number indices as its size says");
+                goto out;
+            }
             if (idx >= nv) {
                 fail(err, &in, "a face index out of range");
                 goto out;
@@ -146,7 +164,13 @@ vx_mesh *vx_off_read_mem(const unsigned char *data, size_t n, const vx_mesh_limi
             m->face_idx[used + i] = (uint32_t)idx;
         }
         if (k < 3) continue; /* points and edges */
-        uint32_t rep, scr[4096];
+        if (k > scr_cap) {
+            uint32_t *g = realloc(scr, (size_t)k * sizeof *scr);
+            if (!g) goto oom;
+            scr = g;
+            scr_cap = (size_t)k;
+        }
+        uint32_t rep;
         if (vx_mesh_face_repeat(m->face_idx + used, (size_t)k, scr, &rep)) {
             char what[64];
             snprintf(what, sizeof what, "a face uses vertex %u twice", rep);
@@ -162,6 +186,13 @@ vx_mesh *vx_off_read_mem(const unsigned char *data, size_t n, const vx_mesh_limi
             goto out;
         }
     }
+    int more = next_line(&in);
+    if (more) {
+        fail(err, &in,
+             more > 0 ? "more after the last face than the header's face count says"
+                      : "a NUL byte, or no memory for a line");
+        goto out;
+    }
     if (!kept) {
         if (nf)
             vx_err_set(err, VX_EUNPROC, "off_no_faces",
@@ -176,6 +207,8 @@ vx_mesh *vx_off_read_mem(const unsigned char *data, size_t n, const vx_mesh_limi
     m->nverts = nv;
     m->nfaces = kept;
     if (vx_mesh_analyze(m, err)) goto out;
+    free(in.line);
+    free(scr);
     return m;
 bad_v:
     fail(err, &in, "a vertex line without three numbers");
@@ -187,5 +220,7 @@ oom:
     vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory to read the OFF file");
 out:
     vx_mesh_free(m);
+    free(in.line);
+    free(scr);
     return NULL;
 }

@@ -8,7 +8,8 @@
  * binary little or big endian, every read checked against the bytes left.
  * The vertex element's x, y and z and the face element's vertex_indices
  * (or vertex_index) list are kept; every other element and property is
- * skipped. Polygons are kept. */
+ * skipped; nothing but blanks may follow the last element (a count too
+ * small otherwise reads out of step). Polygons are kept. */
 #include <math.h>
 #include <stdarg.h>
 #include <stdio.h>
@@ -389,6 +390,17 @@ vx_mesh *vx_ply_read_mem(const unsigned char *data, size_t n, const vx_mesh_limi
                     goto out;
             }
         }
+    }
+    /* What the header declares is the whole body: bytes after it (past
+     * blanks) mean a count that is too small or data out of step */
+    while (in.p < in.end && blank(*in.p))
+        in.p++;
+    if (in.p < in.end) {
+        fail(err,
+             "%llu bytes after the last element that the header declares (a count that is "
+             "too small, or entries out of step with the header)",
+             (unsigned long long)(in.end - in.p));
+        goto out;
     }
     for (size_t i = 0; i < o.used; i++)
         if (m->face_idx[i] >= nv) {

@@ -7,7 +7,9 @@ readers take, plus malformed and lying-count variants of each, into DIR.
 Files: cube_bin.stl (header starting with "solid "), cube_ascii.stl,
 cube_bin.ply (little endian), cube_be.ply, cube_ascii.ply (quads: 6 faces),
 cube.gltf (embedded data: URI buffer), cube.glb (a node translating by
-(10, 20, 30) and scaling by 2), cube.off (quads), and bad_* / lie_* files.
+(10, 20, 30) and scaling by 2), cube.off (quads), variants exporters write
+(cube_upper.stl, cube_bom.stl, cube_latin1.obj, cube_long.off,
+cube_deep.gltf), instances.glb (200000 nodes), and malformed ones.
 Standard library only."""
 import base64
 import json
@@ -106,6 +108,44 @@ def glb(count=None, node=None):
             struct.pack("<I", len(binary)) + b"BIN\0" + binary)
 
 
+def gltf_doc(doc):
+    """A glTF document of the cube with doc's keys changed (None removes one)."""
+    d, binary = gltf_parts()
+    d["buffers"][0]["uri"] = (
+        "data:application/octet-stream;base64," + base64.b64encode(binary).decode())
+    for k, v in doc.items():
+        if v is None:
+            d.pop(k, None)
+        else:
+            d[k] = v
+    return json.dumps(d).encode()
+
+
+def gltf_chain(depth):
+    """The cube at the end of a chain of depth nested nodes."""
+    nodes = [{"children": [k + 1]} for k in range(depth - 1)] + [{"mesh": 0}]
+    return gltf_doc({"nodes": nodes})
+
+
+def glb_instances(n):
+    """n nodes, each an instance of the cube (12 triangles each)."""
+    doc, binary = gltf_parts()
+    doc["nodes"] = [{"mesh": 0, "translation": [2.0 * (k % 100), 2.0 * (k // 100), 0.0]}
+                    for k in range(n)]
+    doc["scenes"] = [{"nodes": list(range(n))}]
+    j = json.dumps(doc, separators=(",", ":")).encode()
+    j += b" " * (-len(j) % 4)
+    binary += b"\0" * (-len(binary) % 4)
+    total = 12 + 8 + len(j) + 8 + len(binary)
+    return (b"glTF" + struct.pack("<II", 2, total) + struct.pack("<I", len(j)) + b"JSON" + j +
+            struct.pack("<I", len(binary)) + b"BIN\0" + binary)
+
+
+def obj_quads(head=b""):
+    s = head + b"".join(b"v %g %g %g\n" % v for v in V)
+    return s + b"".join(b"f %d %d %d %d\n" % tuple(i + 1 for i in q) for q in Q)
+
+
 def main():
     d = sys.argv[1]
     os.makedirs(d, exist_ok=True)
@@ -119,6 +159,15 @@ def main():
         "cube.gltf": gltf(),
         "cube.glb": glb(node=moved),
         "cube.off": off(),
+        # what exporters write too: keywords in capitals, a byte order
+        # mark, names in Latin-1, lines of any length
+        "cube_upper.stl": stl_ascii().upper(),
+        "cube_bom.stl": b"\xef\xbb\xbf" + stl_ascii(),
+        "cube_latin1.obj": obj_quads(b"# Exportiert von M\xe4x\ng W\xfcrfel\nusemtl M\xe4t\n"),
+        "cube_long.off": off().replace(b"# a cube\n", b"#" + b"x" * 6000 + b"\n").replace(
+            b"\n1 1 1\n", b"\n1 1 1" + b" " * 5000 + b"\n"),
+        "cube_deep.gltf": gltf_chain(200),
+        "instances.glb": glb_instances(200000),
         # malformed
         "bad.stl": stl_ascii().replace(b"vertex 1 1 1", b"vertex 1 x 1"),
         "bad.ply": ply("ascii", Q).replace(b"property float y", b"property quux y"),
@@ -136,6 +185,16 @@ def main():
         "repeat.off": b"OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n4 0 1 2 1\n",
         "repeat.ply": ply("ascii", Q).replace(b"\n4 0 2 3 1\n", b"\n4 0 2 3 2\n", 1),
         "external.gltf": gltf(uri="../../../etc/passwd"),
+        "too_deep.gltf": gltf_chain(300),
+        "draco.gltf": gltf_doc({"extensionsUsed": ["KHR_draco_mesh_compression"],
+                                "extensionsRequired": ["KHR_draco_mesh_compression"]}),
+        "short_matrix.gltf": gltf_doc({"nodes": [{"mesh": 0, "matrix": [1, 0, 0]}]}),
+        "zero_rotation.gltf": gltf_doc({"nodes": [{"mesh": 0, "rotation": [0, 0, 0, 0]}]}),
+        # counts too small, read out of step; an index that is not one
+        "short.off": off(nf=5),
+        "float_index.off": off().replace(b"\n4 1 3 7 5\n", b"\n4 1 3 7 5.5\n"),
+        "short.ply": ply("ascii", Q, nverts=7),
+        "trailing.ply": ply("binary_little_endian", T) + b"\x01\x02\x03\x04",
         "cycle.glb": glb(node={"mesh": 0, "children": [0]}),
     }
     for name, data in files.items():

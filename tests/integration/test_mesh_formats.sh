@@ -43,6 +43,20 @@ cube "$F/cube.glb" "" glb 0 '[10,20,30]' '[12,22,32]'
 cube "$F/cube.off" model/x-off off 6
 cube "$F/cube.off" "" off 6
 OFF_ID=$MESH_ID
+# What exporters write too: STL keywords in capitals (sniffed as well), a
+# byte order mark, OBJ names in Latin-1 (read again by the job: it takes
+# the upload's format, not a sniff of bytes that are not UTF-8), OFF lines
+# of any length, glTF nodes 200 deep.
+cube "$F/cube_upper.stl" model/stl stl 0
+cube "$F/cube_upper.stl" application/octet-stream stl 0
+cube "$F/cube_bom.stl" model/stl stl 0
+cube "$F/cube_latin1.obj" model/obj obj 6
+LATIN1_ID=$MESH_ID
+cube "$F/cube_long.off" model/x-off off 6
+cube "$F/cube_deep.gltf" model/gltf+json gltf 0
+run_job voxelize "$LATIN1_ID" '{"resolution":8,"format":"summary"}'
+job_ok "voxelize the OBJ with Latin-1 names"
+check "Latin-1 OBJ: 512 voxels in 8^3" jq -e '.stats.voxels_inside == 512' "$TMP/job.json"
 upload "$F/cube_bin.stl" model/x-draco
 expect_error "STL declared as Draco" 415 unsupported_media_type
 upload "$F/cube_bin.ply" model/stl
@@ -76,6 +90,20 @@ expect_error "an OFF of edges only" 422 off_no_faces
 check "edges only: the message says why" jq -e '.error.message | test("point or an edge")' "$BODY"
 bad external.gltf model/gltf+json gltf_corrupt "external file"
 bad cycle.glb model/gltf-binary gltf_corrupt "reached twice"
+bad too_deep.gltf model/gltf+json gltf_corrupt "nested more than 256 deep"
+bad draco.gltf model/gltf+json gltf_corrupt "requires KHR_draco_mesh_compression"
+bad short_matrix.gltf model/gltf+json gltf_corrupt "matrix is not 16"
+bad zero_rotation.gltf model/gltf+json gltf_corrupt "not all 0"
+# Counts too small (the rest read out of step), an index that is no integer
+bad short.off model/x-off off_corrupt "more after the last face"
+bad float_index.off model/x-off off_corrupt "whole-number indices"
+bad short.ply model/x-ply ply_corrupt "after the last element"
+bad trailing.ply model/x-ply ply_corrupt "4 bytes after the last element"
+# 200000 instances of the cube: the header check indexes the file's arrays
+# once (item by item, cJSON's lists made it quadratic: 158 s), so the
+# triangle count is over the limit in well under a minute.
+api POST /v1/meshes -H "Content-Type: model/gltf-binary" --max-time 60 --data-binary "@$F/instances.glb"
+expect_error "200000 glTF instances over --max-triangles 100000" 413 mesh_too_big
 # A count the bytes could hold but the limit does not: 413 before decoding.
 python3 - "$F/big.stl" <<'EOF'
 import struct, sys

@@ -609,7 +609,13 @@ static void test_draco_garbage(void **state)
     assert_null(vx_draco_read_path(path, NULL, &err));
     assert_int_equal(err.kind, VX_EINVAL);
     assert_string_equal(err.code, "draco_corrupt");
+    /* by its name (.drc, as the store names a Draco upload): the Draco
+     * reader's answer; under a name without a format, the sniffer's */
     assert_null(vx_mesh_read_path(path, NULL, &err));
+    assert_string_equal(err.code, "draco_corrupt");
+    const char *bare = tmp("garbage");
+    spill(bare, g, n);
+    assert_null(vx_mesh_read_path(bare, NULL, &err));
     assert_string_equal(err.code, "mesh_format");
 
     /* the magic followed by garbage, for every header version byte pair */
