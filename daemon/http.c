@@ -350,7 +350,9 @@ static enum MHD_Result on_request(void *cls, struct MHD_Connection *c, const cha
         if (take_body(h, r, data, *data_size)) {
             *data_size = 0;
             vx_conns_linger(h->conns, r->vc);
-            return vx_resp_fail(c, r, VX_EINTERNAL, "upload_failed", "could not store the body");
+            /* only the JSON body's buffer can fail here (an upload's
+             * errors are answered below): an allocation failure */
+            return vx_resp_fail(c, r, VX_EINTERNAL, "out_of_memory", "no memory for the body");
         }
         *data_size = 0;
         if (r->body == BODY_UPLOAD && r->body_err.kind != VX_EOK && !r->refused) {

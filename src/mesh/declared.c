@@ -289,7 +289,10 @@ static int index_array(const cJSON *root, const char *key, cJSON ***at)
     *at = malloc(((size_t)n + 1) * sizeof **at);
     if (!*at) return -1;
     n = 0;
-    cJSON_ArrayForEach(e, a)(*at)[n++] = e;
+    cJSON_ArrayForEach(e, a)
+    {
+        (*at)[n++] = e;
+    }
     return n;
 }
 
@@ -515,7 +518,7 @@ static int gltf_transform(gltf_ctx *g, const cJSON *n, double ni)
         return gl_fail(g, "node %.15g's matrix is not 16 finite numbers", ni);
     if (!vec_ok(n, "translation", 3, &len) || !vec_ok(n, "scale", 3, &len))
         return gl_fail(g, "node %.15g's translation or scale is not 3 finite numbers", ni);
-    if (!vec_ok(n, "rotation", 4, &len) || !(len > 0))
+    if (!vec_ok(n, "rotation", 4, &len) || !(len > 0 && len < HUGE_VAL))
         return gl_fail(
             g, "node %.15g's rotation is not a quaternion of 4 finite numbers, not all 0", ni);
     return 0;
