@@ -80,6 +80,7 @@ struct Gather {
     std::vector<double> pos;
     std::vector<uint32_t> idx, start;
     size_t ntris = 0;
+    std::vector<char> sparse_ok; /* per glTF accessor: its sparse indices checked */
     const vx_mesh_limits *lim;
     const FormatInfo *fi;
     vx_err *err;
@@ -417,11 +418,16 @@ size_t comp_bytes(int type)
     }
 }
 
-/* Accessor ai's elements as doubles into out, sparse substitutions
- * applied: unsigned integer scalars (index) or VEC3s of any component
- * type (positions). */
-int read_accessor(Gather &g, const tinygltf::Model &mo, int ai, bool index,
-                  std::vector<double> &out)
+/* Accessor ai's elements as doubles into out (ncomp a row), sparse
+ * substitutions applied: unsigned integer scalars (index) or VEC3s of any
+ * component type (positions); with pick, only elements pick[0..npick)
+ * (sorted, each below the count: the vertices a primitive uses, as many
+ * primitives may index a few of one shared accessor; decoding it whole
+ * for each made a file of 10^5 primitives over 10^6 vertices take hours),
+ * the sparse part found by binary search (its indices strictly increase,
+ * checked once per accessor: g.sparse_ok). */
+int read_accessor(Gather &g, const tinygltf::Model &mo, int ai, bool index, const uint32_t *pick,
+                  size_t npick, std::vector<double> &out)
 {
     const int ncomp = index ? 1 : 3;
     if (ai < 0 || size_t(ai) >= mo.accessors.size()) return gl_corrupt(g, "accessor", ai);
@@ -433,14 +439,17 @@ int read_accessor(Gather &g, const tinygltf::Model &mo, int ai, bool index,
                                 a.componentType == TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT)
                          : a.type == TINYGLTF_TYPE_VEC3 && cb;
     if (!ok_type || !a.count) return gl_corrupt(g, "accessor", ai);
-    size_t elem = cb * size_t(ncomp), stride = 0;
+    size_t elem = cb * size_t(ncomp), stride = 0, n = pick ? npick : a.count;
     const unsigned char *p = span(mo, a.bufferView, a.byteOffset, a.count, elem, &stride);
     if (!p) return gl_corrupt(g, "accessor", ai);
-    out.resize(a.count * size_t(ncomp));
-    for (size_t e = 0; e < a.count; e++)
+    auto put = [&](size_t row, const unsigned char *q) {
         for (int c = 0; c < ncomp; c++)
-            out[e * size_t(ncomp) + size_t(c)] =
-                component(p + e * stride + size_t(c) * cb, a.componentType, a.normalized);
+            out[row * size_t(ncomp) + size_t(c)] =
+                component(q + size_t(c) * cb, a.componentType, a.normalized);
+    };
+    out.resize(n * size_t(ncomp));
+    for (size_t r = 0; r < n; r++)
+        put(r, p + (pick ? size_t(pick[r]) : r) * stride);
     if (!a.sparse.isSparse) return 0;
     const auto &sp = a.sparse;
     size_t icb = comp_bytes(sp.indices.componentType), ist = 0, vst = 0;
@@ -455,12 +464,33 @@ int read_accessor(Gather &g, const tinygltf::Model &mo, int ai, bool index,
         span(mo, sp.values.bufferView, size_t(sp.values.byteOffset), size_t(sp.count), elem, &vst);
     if (!ip || !vp) return gl_corrupt(g, "sparse accessor", ai);
     /* Sparse parts are tightly packed, whatever the view's stride says. */
-    for (size_t k = 0; k < size_t(sp.count); k++) {
-        double t = component(ip + k * icb, sp.indices.componentType, false);
-        if (!(t < double(a.count))) return gl_corrupt(g, "sparse accessor", ai);
-        for (int c = 0; c < ncomp; c++)
-            out[size_t(t) * size_t(ncomp) + size_t(c)] =
-                component(vp + k * elem + size_t(c) * cb, a.componentType, a.normalized);
+    const size_t ns = size_t(sp.count);
+    auto at = [&](size_t k) { return component(ip + k * icb, sp.indices.componentType, false); };
+    if (g.sparse_ok.size() < mo.accessors.size()) g.sparse_ok.resize(mo.accessors.size());
+    if (!g.sparse_ok[size_t(ai)]) {
+        for (size_t k = 0; k < ns; k++)
+            if (!(at(k) < double(a.count)) || (k && !(at(k) > at(k - 1))))
+                return vx_err_set(g.err, VX_EINVAL, g.fi->corrupt,
+                                  "not a valid %s file: sparse accessor %d's indices are not "
+                                  "strictly increasing below its count",
+                                  g.fi->name, ai);
+        g.sparse_ok[size_t(ai)] = 1;
+    }
+    if (!pick) {
+        for (size_t k = 0; k < ns; k++)
+            put(size_t(at(k)), vp + k * elem);
+        return 0;
+    }
+    for (size_t r = 0; r < n; r++) {
+        size_t lo = 0, hi = ns; /* the first sparse index >= pick[r] */
+        while (lo < hi) {
+            size_t mid = lo + (hi - lo) / 2;
+            if (at(mid) < double(pick[r]))
+                lo = mid + 1;
+            else
+                hi = mid;
+        }
+        if (lo < ns && at(lo) == double(pick[r])) put(r, vp + lo * elem);
     }
     return 0;
 }
@@ -531,12 +561,13 @@ int add_primitive(Gather &g, const tinygltf::Model &mo, const tinygltf::Primitiv
         return 0;
     auto at = pr.attributes.find("POSITION");
     if (at == pr.attributes.end()) return gl_corrupt(g, "mesh (a primitive without POSITION)", mi);
+    if (at->second < 0 || size_t(at->second) >= mo.accessors.size())
+        return gl_corrupt(g, "accessor", at->second);
     std::vector<double> pos, ix;
-    if (read_accessor(g, mo, at->second, false, pos)) return -1;
-    size_t nv = pos.size() / 3, base = g.pos.size() / 3;
+    size_t nv = mo.accessors[size_t(at->second)].count, base = g.pos.size() / 3;
     if (nv > UINT32_MAX) return too_big(g, "vertices", nv, UINT32_MAX);
     if (pr.indices >= 0) {
-        if (read_accessor(g, mo, pr.indices, true, ix)) return -1;
+        if (read_accessor(g, mo, pr.indices, true, nullptr, 0, ix)) return -1;
     } else {
         ix.resize(nv);
         for (size_t v = 0; v < nv; v++)
@@ -547,8 +578,9 @@ int add_primitive(Gather &g, const tinygltf::Model &mo, const tinygltf::Primitiv
             return vx_err_set(g.err, VX_EINVAL, g.fi->corrupt,
                               "not a valid %s file: mesh %d uses vertex %.0f of %zu", g.fi->name,
                               mi, i, nv);
-    // The vertices the primitive uses, each once, in accessor order: many
-    // primitives may each index a few vertices of one shared accessor.
+    // The vertices the primitive uses, each once, in accessor order, and
+    // only they are decoded: many primitives may each index a few vertices
+    // of one shared accessor.
     std::vector<uint32_t> used;
     if (pr.indices >= 0) {
         used.reserve(ix.size());
@@ -560,11 +592,13 @@ int add_primitive(Gather &g, const tinygltf::Model &mo, const tinygltf::Primitiv
             i = double(std::lower_bound(used.begin(), used.end(), uint32_t(i)) - used.begin());
     }
     const size_t nu = pr.indices >= 0 ? used.size() : nv;
+    if (read_accessor(g, mo, at->second, false, pr.indices >= 0 ? used.data() : nullptr, nu, pos))
+        return -1;
     if (base + nu > UINT32_MAX) return too_big(g, "vertices", base + nu, UINT32_MAX);
     if (g.lim && g.lim->max_vertices && base + nu > g.lim->max_vertices)
         return too_big(g, "vertices", base + nu, g.lim->max_vertices);
     for (size_t u = 0; u < nu; u++) {
-        const double *p = &pos[3 * (pr.indices >= 0 ? size_t(used[u]) : u)];
+        const double *p = &pos[3 * u];
         double q[3];
         for (int r = 0; r < 3; r++)
             q[r] = t.m[r] * p[0] + t.m[4 + r] * p[1] + t.m[8 + r] * p[2] + t.m[12 + r];

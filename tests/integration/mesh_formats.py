@@ -9,7 +9,8 @@ cube_bin.ply (little endian), cube_be.ply, cube_ascii.ply (quads: 6 faces),
 cube.gltf (embedded data: URI buffer), cube.glb (a node translating by
 (10, 20, 30) and scaling by 2), cube.off (quads), variants exporters write
 (cube_upper.stl, cube_bom.stl, cube_latin1.obj, cube_long.off,
-cube_deep.gltf), instances.glb (200000 nodes), and malformed ones.
+cube_deep.gltf), instances.glb (200000 nodes), primitives.glb (40000
+primitives over one accessor of 400000 vertices), and malformed ones.
 Standard library only."""
 import base64
 import json
@@ -141,6 +142,31 @@ def glb_instances(n):
             struct.pack("<I", len(binary)) + b"BIN\0" + binary)
 
 
+def glb_primitives(nv, nprim):
+    """One accessor of nv vertices and nprim primitives of one triangle each
+    over it (its own 3 vertices)."""
+    pos = b"".join(struct.pack("<3f", float(i % 1000), float(i // 1000), float(i % 7))
+                   for i in range(nv))
+    idx = struct.pack("<%dI" % (3 * nprim), *[(3 * p + c) % nv for p in range(nprim)
+                                                 for c in range(3)])
+    binary = pos + idx
+    doc = {"asset": {"version": "2.0"}, "scene": 0, "scenes": [{"nodes": [0]}],
+           "nodes": [{"mesh": 0}],
+           "meshes": [{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1 + p}
+                                      for p in range(nprim)]}],
+           "buffers": [{"byteLength": len(binary)}],
+           "bufferViews": [{"buffer": 0, "byteOffset": 0, "byteLength": len(pos)},
+                           {"buffer": 0, "byteOffset": len(pos), "byteLength": len(idx)}],
+           "accessors": [{"bufferView": 0, "componentType": 5126, "count": nv, "type": "VEC3"}] +
+                        [{"bufferView": 1, "byteOffset": 12 * p, "componentType": 5125,
+                          "count": 3, "type": "SCALAR"} for p in range(nprim)]}
+    j = json.dumps(doc, separators=(",", ":")).encode()
+    j += b" " * (-len(j) % 4)
+    total = 12 + 8 + len(j) + 8 + len(binary)
+    return (b"glTF" + struct.pack("<II", 2, total) + struct.pack("<I", len(j)) + b"JSON" + j +
+            struct.pack("<I", len(binary)) + b"BIN\0" + binary)
+
+
 def obj_quads(head=b""):
     s = head + b"".join(b"v %g %g %g\n" % v for v in V)
     return s + b"".join(b"f %d %d %d %d\n" % tuple(i + 1 for i in q) for q in Q)
@@ -168,6 +194,7 @@ def main():
             b"\n1 1 1\n", b"\n1 1 1" + b" " * 5000 + b"\n"),
         "cube_deep.gltf": gltf_chain(200),
         "instances.glb": glb_instances(200000),
+        "primitives.glb": glb_primitives(400000, 40000),
         # malformed
         "bad.stl": stl_ascii().replace(b"vertex 1 1 1", b"vertex 1 x 1"),
         "bad.ply": ply("ascii", Q).replace(b"property float y", b"property quux y"),

@@ -104,6 +104,12 @@ bad trailing.ply model/x-ply ply_corrupt "4 bytes after the last element"
 # triangle count is over the limit in well under a minute.
 api POST /v1/meshes -H "Content-Type: model/gltf-binary" --max-time 60 --data-binary "@$F/instances.glb"
 expect_error "200000 glTF instances over --max-triangles 100000" 413 mesh_too_big
+# 40000 one-triangle primitives over one accessor of 400000 vertices: each
+# decodes only the 3 it indexes (decoded whole for each, it took minutes).
+api POST /v1/meshes -H "Content-Type: model/gltf-binary" --max-time 60 --data-binary "@$F/primitives.glb"
+check "40000 primitives over one shared accessor: 201 (got $STATUS)" test "$STATUS" = 201
+check "40000 primitives: 40000 triangles, 120000 vertices" \
+    jq -e '.triangles == 40000 and .vertices == 120000' "$BODY"
 # A count the bytes could hold but the limit does not: 413 before decoding.
 python3 - "$F/big.stl" <<'EOF'
 import struct, sys

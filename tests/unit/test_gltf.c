@@ -2,7 +2,8 @@
  * files built here, as glTF with a data: URI and as glb with a BIN chunk,
  * read back to the geometry they hold: node transforms (matrix, T * R * S,
  * nested), mirrored nodes keeping outward winding, strips and fans,
- * quantized and sparse positions, images ignored, many primitives over one
+ * quantized and sparse positions (sparse ones found by binary search for
+ * the vertices a primitive indexes), images ignored, many primitives over one
  * shared accessor (only the vertices they index are kept); refusals (indices out
  * of range, external buffers, NaNs, limits, no scene); and mutated files,
  * which must fail with an error or give a consistent mesh. */
@@ -312,6 +313,55 @@ static void test_gltf_quantized_sparse(void **state)
     free(bin.p);
 }
 
+/* An indexed primitive over a sparse accessor: only the vertices it
+ * indexes are decoded, each sparse one found among the sparse indices
+ * (1 and 3 replaced, 5 replaced but not used); sparse indices that do not
+ * strictly increase are refused, as the spec requires. */
+static void test_gltf_sparse_indexed(void **state)
+{
+    (void)state;
+    const float base[18] = {0, 0, 0, 1, 0, 0, 2, 0, 0, 3, 0, 0, 4, 0, 0, 5, 0, 0};
+    const uint16_t tri[6] = {0, 1, 3, 1, 3, 4};
+    const float sp_val[9] = {1, 5, 0, 3, 0, 7, 99, 99, 99};
+    for (int bad = 0; bad < 2; bad++) {
+        const uint8_t sp_idx[3] = {1, bad ? 1 : 3, 5};
+        size_t off[4];
+        part parts[4] = {{base, sizeof base}, {tri, sizeof tri}, {sp_idx, 3}, {sp_val, 36}};
+        tbuf bin = pack(parts, 4, off);
+        tbuf body = {0};
+        tbuf_printf(&body,
+                    "\"bufferViews\":[{\"buffer\":0,\"byteLength\":72},{\"buffer\":0,"
+                    "\"byteOffset\":%zu,\"byteLength\":12},{\"buffer\":0,\"byteOffset\":%zu,"
+                    "\"byteLength\":3},{\"buffer\":0,\"byteOffset\":%zu,\"byteLength\":36}],",
+                    off[1], off[2], off[3]);
+        tbuf_printf(&body,
+                    "\"accessors\":[{\"bufferView\":0,\"componentType\":5126,"
+                    "\"count\":6,\"type\":\"VEC3\",\"sparse\":{\"count\":3,\"indices\":{"
+                    "\"bufferView\":2,\"componentType\":5121},\"values\":{\"bufferView\":3}}},"
+                    "{\"bufferView\":1,\"componentType\":5123,\"count\":6,"
+                    "\"type\":\"SCALAR\"}],");
+        tbuf_printf(&body,
+                    "\"meshes\":[{\"primitives\":[{\"attributes\":{\"POSITION\":0},"
+                    "\"indices\":1}]}],\"scenes\":[{\"nodes\":[0]}],\"nodes\":[{\"mesh\":0}]");
+        for (int glb = 0; glb < 2; glb++) {
+            tbuf f = make_file(body.p, &bin, glb);
+            if (bad) {
+                expect_error(&f, glb, NULL, "gltf_corrupt", "strictly increasing");
+            } else {
+                vx_mesh *m = must_read(&f, glb);
+                assert_int_equal(m->ntris, 2);
+                assert_int_equal(m->nverts, 4);
+                /* (0,0,0), the sparse (1,5,0) and (3,0,7), and (4,0,0) */
+                expect_box(m, (double[]){0, 0, 0}, (double[]){4, 5, 7});
+                vx_mesh_free(m);
+            }
+            free(f.p);
+        }
+        free(body.p);
+        free(bin.p);
+    }
+}
+
 /* Images are not decoded and never opened: an external URI naming a
  * server file and an embedded one that is not an image leave the mesh
  * readable. */
@@ -496,10 +546,15 @@ static void test_gltf_mutations(void **state)
 int main(void)
 {
     const struct CMUnitTest tests[] = {
-        cmocka_unit_test(test_gltf_cube),           cmocka_unit_test(test_gltf_transforms),
-        cmocka_unit_test(test_gltf_strip_fan),      cmocka_unit_test(test_gltf_quantized_sparse),
-        cmocka_unit_test(test_gltf_images_ignored), cmocka_unit_test(test_gltf_refusals),
-        cmocka_unit_test(test_gltf_mutations),      cmocka_unit_test(test_gltf_shared_accessor),
+        cmocka_unit_test(test_gltf_cube),
+        cmocka_unit_test(test_gltf_transforms),
+        cmocka_unit_test(test_gltf_strip_fan),
+        cmocka_unit_test(test_gltf_quantized_sparse),
+        cmocka_unit_test(test_gltf_sparse_indexed),
+        cmocka_unit_test(test_gltf_images_ignored),
+        cmocka_unit_test(test_gltf_refusals),
+        cmocka_unit_test(test_gltf_mutations),
+        cmocka_unit_test(test_gltf_shared_accessor),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }
