@@ -11,11 +11,12 @@
 #include <stdio.h>
 
 typedef struct ctl {
-    char server[512]; /* base URL without a trailing slash */
-    char token[512];  /* empty: no Authorization header */
-    int json;         /* --json: machine-readable output on stdout */
-    int quiet;        /* --quiet: no progress */
-    int progress_tty; /* stderr is a terminal: a progress bar */
+    char server[512];    /* base URL without a trailing slash */
+    char token[512];     /* empty: no Authorization header */
+    int json;            /* --json: machine-readable output on stdout */
+    int quiet;           /* --quiet: no progress */
+    int progress_tty;    /* stderr is a terminal: a progress bar */
+    int quiet_transport; /* ctl_http: no message when no answer comes */
 } ctl;
 
 /* A growing response body. */

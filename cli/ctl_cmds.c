@@ -3,10 +3,13 @@
  * (tables); --json prints the server's JSON on stdout instead. */
 #include <ctype.h>
 #include <curl/curl.h>
+#include <errno.h>
+#include <signal.h>
 #include <stdlib.h>
 #include <string.h>
 #include <strings.h>
 #include <sys/stat.h>
+#include <time.h>
 #include <unistd.h>
 
 #include "ctl.h"
@@ -128,7 +131,10 @@ static void on_job(void *ud, const cJSON *job)
 }
 
 /* Follows job jid to its end: the event stream, or ?wait polling when the
- * server has no stream. The last Job (owned), or NULL (printed). */
+ * server has no stream. A server that stops answering (restarting: no
+ * connection, or 503 while it starts) is asked again for 2 minutes: a job
+ * it requeued goes on after a restart. The last Job (owned), or NULL
+ * (printed). */
 static cJSON *follow_job(ctl *c, const char *jid)
 {
     follow f = {.c = c, .tenth = -1};
@@ -138,9 +144,33 @@ static cJSON *follow_job(ctl *c, const char *jid)
     cJSON_Delete(job);
     char path[160];
     snprintf(path, sizeof path, "/v1/jobs/%s?wait=30", jid);
+    time_t lost = 0; /* when the server stopped answering */
     for (;;) {
         ctl_buf b = {0};
+        c->quiet_transport = lost != 0;
         st = ctl_http(c, "GET", path, NULL, NULL, NULL, &b, NULL, NULL, 0);
+        c->quiet_transport = 0;
+        if (st < 0 || st == 502 || st == 503 || st == 504) {
+            free(b.p);
+            time_t now = time(NULL);
+            if (!lost) {
+                lost = now;
+                if (c->progress_tty && !c->quiet) fputc('\n', stderr);
+                fprintf(stderr,
+                        "voxelctl: no answer about job %s (HTTP %ld); asking again for 2 "
+                        "minutes\n",
+                        jid, st);
+            } else if (now - lost > 120) {
+                fprintf(stderr,
+                        "voxelctl: no answer for 2 minutes: job %s may still run (voxelctl get "
+                        "%s)\n",
+                        jid, jid);
+                return NULL;
+            }
+            sleep(2);
+            continue;
+        }
+        lost = 0;
         job = st == 200 ? cJSON_Parse(b.p) : NULL;
         if (!job) {
             ctl_http_fail("job", st, &b);
@@ -154,45 +184,162 @@ static cJSON *follow_job(ctl *c, const char *jid)
     }
 }
 
+/* ---- where a result goes ------------------------------------------------ */
+
+/* The part file being written and the job being waited for, for a signal
+ * that ends the process: the part is removed, the job named. */
+static char g_part[4200], g_jid[40];
+
+static void say(const char *s)
+{
+    ssize_t w = write(2, s, strlen(s));
+    (void)w;
+}
+
+static void on_signal(int sig)
+{
+    if (g_part[0]) unlink(g_part);
+    if (g_jid[0]) {
+        say("\nvoxelctl: interrupted; job ");
+        say(g_jid);
+        say(" goes on (voxelctl cancel ");
+        say(g_jid);
+        say(" stops it)\n");
+    }
+    signal(sig, SIG_DFL);
+    raise(sig);
+}
+
+static void catch_signals(const char *jid)
+{
+    snprintf(g_jid, sizeof g_jid, "%s", jid ? jid : "");
+    static const int sigs[] = {SIGINT, SIGTERM, SIGHUP};
+    for (size_t i = 0; i < sizeof sigs / sizeof sigs[0]; i++)
+        signal(sigs[i], on_signal);
+}
+
+/* A result being written: to stdout, in place (out exists and is not a
+ * regular file: a device such as /dev/null, a FIFO), or through a part
+ * file beside the destination with a name of its own (parallel runs never
+ * share one), renamed over it once whole; a symlink is followed to its
+ * target, an existing file's mode kept. */
+typedef struct sink_file {
+    FILE *f;
+    int direct;
+    char final[4200]; /* "" until known (the server's file name) */
+} sink_file;
+
+static int sink_open(sink_file *o, const char *out)
+{
+    memset(o, 0, sizeof *o);
+    if (out && !strcmp(out, "-")) {
+        o->f = stdout;
+        return 0;
+    }
+    mode_t mask = umask(0), mode = 0666 & ~mask;
+    umask(mask);
+    struct stat st;
+    if (out) {
+        char *rp = realpath(out, NULL); /* the target of a symlink */
+        snprintf(o->final, sizeof o->final, "%s", rp ? rp : out);
+        free(rp);
+        if (stat(o->final, &st) == 0) {
+            o->direct = !S_ISREG(st.st_mode);
+            mode = st.st_mode & 07777;
+        }
+    }
+    if (o->direct) {
+        o->f = fopen(o->final, "wb");
+        if (!o->f) fprintf(stderr, "voxelctl: cannot write %s: %s\n", o->final, strerror(errno));
+        return o->f ? 0 : 1;
+    }
+    char dir[4200];
+    snprintf(dir, sizeof dir, "%s", o->final[0] ? o->final : "./result");
+    char *slash = strrchr(dir, '/');
+    if (slash == dir)
+        dir[1] = 0;
+    else if (slash)
+        *slash = 0;
+    else
+        snprintf(dir, sizeof dir, ".");
+    snprintf(g_part, sizeof g_part, "%s/.voxelctl-XXXXXX.part", dir);
+    int fd = mkstemps(g_part, 5);
+    if (fd >= 0 && fchmod(fd, mode) == 0) o->f = fdopen(fd, "wb");
+    if (!o->f) {
+        fprintf(stderr, "voxelctl: cannot write in %s: %s\n", dir, strerror(errno));
+        if (fd >= 0) {
+            close(fd);
+            unlink(g_part);
+        }
+        g_part[0] = 0;
+        return 1;
+    }
+    return 0;
+}
+
+/* Ends a result: kept (ok: renamed to final, or name when final is
+ * unknown) or discarded. 0, or 1 with the reason printed. */
+static int sink_close(sink_file *o, int ok, const char *name)
+{
+    int rc = 0;
+    if (o->f == stdout) {
+        if (fflush(stdout) != 0 || ferror(stdout)) {
+            if (ok) fprintf(stderr, "voxelctl: writing stdout: %s\n", strerror(errno));
+            rc = 1;
+        }
+        return ok ? rc : 1;
+    }
+    if (fclose(o->f) != 0 && ok) {
+        fprintf(stderr, "voxelctl: writing %s: %s\n", o->direct ? o->final : g_part,
+                strerror(errno));
+        ok = 0;
+    }
+    if (!o->final[0]) snprintf(o->final, sizeof o->final, "%s", name);
+    if (!o->direct) {
+        if (ok && rename(g_part, o->final) != 0) {
+            fprintf(stderr, "voxelctl: cannot write %s: %s\n", o->final, strerror(errno));
+            ok = 0;
+        }
+        if (!ok) unlink(g_part);
+        g_part[0] = 0;
+    }
+    return ok ? 0 : 1;
+}
+
 /* Downloads the primary result (name NULL) or output name of jid to out
  * (NULL: the server's file name). 0 or the exit status. */
 static int download(ctl *c, const char *jid, const char *name, const char *out)
 {
-    char path[256], disp[256], tmp[4200];
+    char path[256], disp[256];
     snprintf(path, sizeof path, "/v1/jobs/%s/result%s%s", jid, name ? "/" : "", name ? name : "");
-    const char *dest = out && strcmp(out, "-") ? out : NULL;
-    snprintf(tmp, sizeof tmp, "%s.part", dest ? dest : ".voxelctl-download");
-    FILE *f = out && !strcmp(out, "-") ? stdout : fopen(tmp, "wb");
-    if (!f) {
-        fprintf(stderr, "voxelctl: cannot write %s\n", tmp);
-        return 1;
-    }
+    sink_file o;
+    if (sink_open(&o, out)) return 1;
     ctl_buf b = {0};
-    long st = ctl_http(c, "GET", path, NULL, NULL, NULL, &b, f, disp, sizeof disp);
-    int rc = 0;
-    if (f == stdout) {
-        fflush(stdout);
-        if (st != 200) rc = ctl_http_fail("download", st, &b);
-        free(b.p);
-        return rc;
-    }
-    if (fclose(f) != 0) st = -1;
-    if (st != 200) {
-        rc = ctl_http_fail("download", st, &b);
-        unlink(tmp);
-    } else {
-        char final[4200];
-        snprintf(final, sizeof final, "%s", dest ? dest : disp[0] ? disp : "result");
-        if (rename(tmp, final) != 0) {
-            fprintf(stderr, "voxelctl: cannot write %s\n", final);
-            rc = 1;
-        } else if (!c->json && !c->quiet) {
-            struct stat sb;
-            stat(final, &sb);
-            fprintf(stderr, "wrote %s (%lld bytes)\n", final, (long long)sb.st_size);
-        }
-    }
+    long st = ctl_http(c, "GET", path, NULL, NULL, NULL, &b, o.f, disp, sizeof disp);
+    int rc = st == 200 ? 0 : ctl_http_fail("download", st, &b);
     free(b.p);
+    if (sink_close(&o, rc == 0, disp[0] ? disp : "result")) return 1;
+    if (!rc && o.f != stdout && !c->json && !c->quiet) {
+        struct stat sb;
+        if (stat(o.final, &sb) == 0)
+            fprintf(stderr, "wrote %s (%lld bytes)\n", o.final, (long long)sb.st_size);
+    }
+    return rc;
+}
+
+/* A job that wrote no file (voxelize's summary): its stats, as JSON, to
+ * out (stdout when NULL). 0 or the exit status. */
+static int write_stats(const cJSON *job, const char *out)
+{
+    char *t = vx_json_print(cJSON_GetObjectItemCaseSensitive(job, "stats"), 0);
+    if (!t) return 1;
+    sink_file o;
+    int rc = sink_open(&o, out ? out : "-");
+    if (!rc) {
+        int ok = fprintf(o.f, "%s\n", t) >= 0;
+        rc = sink_close(&o, ok, "stats.json");
+    }
+    free(t);
     return rc;
 }
 
@@ -231,6 +378,7 @@ int ctl_cmd_job(ctl *c, const char *kind, const char *src, cJSON *params, const 
         goto done;
     }
     cJSON_Delete(job);
+    catch_signals(jid);
     job = follow_job(c, jid);
     if (!job) {
         rc = 1;
@@ -244,7 +392,10 @@ int ctl_cmd_job(ctl *c, const char *kind, const char *src, cJSON *params, const 
         rc = 1;
     } else if (cJSON_GetArraySize(cJSON_GetObjectItemCaseSensitive(job, "outputs")) > 0) {
         rc = download(c, jid, NULL, out);
+    } else if (!c->json) {
+        rc = write_stats(job, out);
     }
+    g_jid[0] = 0;
     if (c->json) print_json(job);
     cJSON_Delete(job);
 done:
@@ -335,6 +486,7 @@ static void job_show(const cJSON *j)
 
 int ctl_cmd_get(ctl *c, const char *jid, const char *name, const char *out)
 {
+    catch_signals(NULL);
     if (out || name) return download(c, jid, name, out);
     char path[160];
     snprintf(path, sizeof path, "/v1/jobs/%s", jid);

@@ -120,6 +120,12 @@ static CURL *open_handle(const ctl *c, const char *path, const char *ctype, stru
     curl_easy_setopt(h, CURLOPT_URL, url);
     curl_easy_setopt(h, CURLOPT_USERAGENT, "voxelctl/" VX_VERSION);
     curl_easy_setopt(h, CURLOPT_NOSIGNAL, 1L);
+    /* a server that stopped answering (paused, or gone without a reset)
+     * is an error in a minute, not a wait forever: nothing arrived for
+     * 60 s (longer than the 30 s ?wait polls) */
+    curl_easy_setopt(h, CURLOPT_CONNECTTIMEOUT, 10L);
+    curl_easy_setopt(h, CURLOPT_LOW_SPEED_LIMIT, 1L);
+    curl_easy_setopt(h, CURLOPT_LOW_SPEED_TIME, 60L);
     *hl = NULL;
     if (c->token[0]) {
         snprintf(auth, sizeof auth, "Authorization: Bearer %s", c->token);
@@ -175,7 +181,7 @@ long ctl_http(const ctl *c, const char *method, const char *path, const char *ct
     long status = -1;
     if (rc == CURLE_OK)
         curl_easy_getinfo(h, CURLINFO_RESPONSE_CODE, &status);
-    else
+    else if (!c->quiet_transport)
         fprintf(stderr, "voxelctl: %s%s: %s\n", c->server, path, curl_easy_strerror(rc));
     if (in) fclose(in);
     curl_slist_free_all(hl);
@@ -269,9 +275,8 @@ cJSON *ctl_http_events(const ctl *c, const char *jid, void (*on_job)(void *, con
     stream s = {.curl = h, .on_job = on_job, .ud = ud};
     curl_easy_setopt(h, CURLOPT_WRITEFUNCTION, on_stream);
     curl_easy_setopt(h, CURLOPT_WRITEDATA, &s);
-    /* No byte for a minute (keepalives come every 15 s): the server is gone. */
-    curl_easy_setopt(h, CURLOPT_LOW_SPEED_LIMIT, 1L);
-    curl_easy_setopt(h, CURLOPT_LOW_SPEED_TIME, 60L);
+    /* (open_handle: no byte for a minute, where keepalives come every
+     * 15 s, means the server is gone) */
     CURLcode rc = curl_easy_perform(h);
     if (rc == CURLE_OK) curl_easy_getinfo(h, CURLINFO_RESPONSE_CODE, status);
     curl_slist_free_all(hl);

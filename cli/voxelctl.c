@@ -1,8 +1,10 @@
 /* voxelctl: command line (see usage() and docs/man/voxelctl.1). */
+#include <ctype.h>
 #include <curl/curl.h>
 #include <errno.h>
 #include <limits.h>
 #include <getopt.h>
+#include <math.h>
 #include <stdlib.h>
 #include <string.h>
 #include <sys/stat.h>
@@ -14,18 +16,24 @@ static void usage(FILE *out)
 {
     fprintf(
         out,
-        "usage: voxelctl [--server URL] [--token T] [--local] [--json] [--quiet] COMMAND ...\n"
+        "usage: voxelctl [--server URL] [--token T] [--local] [--json] [-q] COMMAND ...\n"
         "\n"
         "Jobs (upload FILE, or use a mesh id; follow the job; download its result):\n"
-        "  voxelize FILE [-r N] [-f vdb|binvox|raw8|raw1|summary] [-o OUT]\n"
-        "  render FILE [-r N] [-o OUT]        gregory FILE [-f FORMAT] [-o OUT]\n"
-        "  catmull-clark FILE [-f FORMAT] [-o OUT]   preview FILE [-o OUT]\n"
-        "    -p, --param KEY=VALUE   a job parameter (VALUE as JSON if it parses, else a\n"
-        "                            string; KEY.SUB for nested objects); repeatable\n"
-        "    --params JSON           all parameters as one JSON object\n"
-        "    -o, --output FILE       where the primary result goes (- = stdout;\n"
-        "                            default: the server's file name)\n"
+        "  voxelize FILE [-r N] [-f vdb|binvox|raw8|raw1|vox|nrrd|npy|summary] [-o OUT]\n"
+        "                            (summary: the job's stats as JSON, to OUT or stdout)\n"
+        "  render FILE [-r N] [-o OUT]        gregory FILE [-f obj|ply|drc|glb] [-o OUT]\n"
+        "  catmull-clark FILE [-f obj|ply|drc|glb] [-o OUT]   preview FILE [-o OUT]\n"
+        "    -r, --resolution N      voxelize's resolution, render's N\n"
+        "    -f, --format F          the output format\n"
+        "    -p, --param KEY=VALUE   a job parameter (VALUE as JSON if the whole of it\n"
+        "                            parses, else a string; KEY.SUB for nested objects);\n"
+        "                            repeatable, applied after --params\n"
+        "    --params JSON           parameters as one JSON object\n"
+        "    -o, --output FILE       where the primary result goes (- = stdout; a device\n"
+        "                            or FIFO is written in place; default: the server's\n"
+        "                            file name)\n"
         "    --no-wait               print the job id and exit\n"
+        "  Ctrl-C stops waiting, not the job: it says the job id to cancel.\n"
         "Other commands:\n"
         "  upload FILE               store a mesh, print its id\n"
         "  jobs [--state S] [--limit N] [--after ID]    meshes [--limit N] [--after ID]\n"
@@ -37,7 +45,8 @@ static void usage(FILE *out)
         "  --token T      bearer token (default $VOXELD_TOKEN)\n"
         "  --local        start a private voxeld for this command (no server needed)\n"
         "  --json         print the server's JSON on stdout\n"
-        "  --quiet        no progress on stderr\n"
+        "  -q, --quiet    no progress on stderr\n"
+        "  -h, --help     this text          --version   voxelctl's version\n"
         "Exit status: 0 done, 1 the server or the job failed, 2 bad usage.\n");
 }
 
@@ -48,7 +57,13 @@ static int set_param(cJSON *params, const char *kv)
     if (!eq || eq == kv) return -1;
     char key[256];
     snprintf(key, sizeof key, "%.*s", (int)(eq - kv), kv);
-    cJSON *v = cJSON_Parse(eq + 1);
+    /* JSON only when the whole value is (30deg is the string "30deg") */
+    cJSON *v = cJSON_ParseWithOpts(eq + 1, NULL, 1);
+    if (cJSON_IsNumber(v) && !isfinite(v->valuedouble)) {
+        fprintf(stderr, "voxelctl: -p %s: not a finite number\n", kv);
+        cJSON_Delete(v);
+        return -2;
+    }
     if (!v) v = cJSON_CreateString(eq + 1);
     cJSON *o = params;
     char *k = key, *dot;
@@ -79,7 +94,13 @@ typedef struct args {
     const char *out, *name, *state, *after, *resolution, *format;
     int limit, no_wait, local;
     cJSON *params;
+    const char **kv; /* the -p KEY=VALUEs, applied after every --params */
+    int nkv;
+    unsigned given; /* the command options given (OPT_ bits) */
 } args;
+
+/* Options that belong to some commands only. */
+enum { OPT_JOB = 1, OPT_OUT = 2, OPT_NAME = 4, OPT_STATE = 8, OPT_PAGE = 16 };
 
 /* Reads the options (anywhere on the line); the rest stay in argv[optind..]. */
 /* s as a whole number in lo..hi (lo > 0), or 0 when it is not one. */
@@ -136,14 +157,17 @@ static int read_options(ctl *c, args *a, int argc, char **argv)
         case O_QUIET:
             c->quiet = 1;
             break;
-        case 'p':
-            if (set_param(a->params, optarg)) {
-                fprintf(stderr, "voxelctl: -p wants KEY=VALUE, not '%s'\n", optarg);
-                return -1;
-            }
+        case 'p': {
+            const char **kv = realloc(a->kv, (size_t)(a->nkv + 1) * sizeof *kv);
+            if (!kv) return -1;
+            a->kv = kv;
+            a->kv[a->nkv++] = optarg;
+            a->given |= OPT_JOB;
             break;
+        }
         case O_PARAMS: {
-            cJSON *p = cJSON_Parse(optarg), *it;
+            a->given |= OPT_JOB;
+            cJSON *p = cJSON_ParseWithOpts(optarg, NULL, 1), *it;
             if (!cJSON_IsObject(p)) {
                 fprintf(stderr, "voxelctl: --params wants a JSON object\n");
                 cJSON_Delete(p);
@@ -159,6 +183,7 @@ static int read_options(ctl *c, args *a, int argc, char **argv)
         }
         case 'o':
             a->out = optarg;
+            a->given |= OPT_OUT;
             break;
         case 'r':
             /* checked here: the server's own range check (422) would come
@@ -168,15 +193,19 @@ static int read_options(ctl *c, args *a, int argc, char **argv)
                 return -1;
             }
             a->resolution = optarg;
+            a->given |= OPT_JOB;
             break;
         case 'f':
             a->format = optarg;
+            a->given |= OPT_JOB;
             break;
         case O_NAME:
             a->name = optarg;
+            a->given |= OPT_NAME;
             break;
         case O_STATE:
             a->state = optarg;
+            a->given |= OPT_STATE;
             break;
         case O_LIMIT:
             if (!(a->limit = (int)whole(optarg, 1, 1000))) {
@@ -184,12 +213,15 @@ static int read_options(ctl *c, args *a, int argc, char **argv)
                         optarg);
                 return -1;
             }
+            a->given |= OPT_PAGE;
             break;
         case O_AFTER:
             a->after = optarg;
+            a->given |= OPT_PAGE;
             break;
         case O_NOWAIT:
             a->no_wait = 1;
+            a->given |= OPT_JOB;
             break;
         case 'h':
             usage(stdout);
@@ -201,22 +233,43 @@ static int read_options(ctl *c, args *a, int argc, char **argv)
             return -1;
         }
     }
+    for (int i = 0; i < a->nkv; i++) {
+        int rc = set_param(a->params, a->kv[i]);
+        if (rc == -1) fprintf(stderr, "voxelctl: -p wants KEY=VALUE, not '%s'\n", a->kv[i]);
+        if (rc) return -1;
+    }
     return 0;
 }
 
-/* -r and -f as the kind's own parameters. */
-static void shortcuts(const char *kind, args *a)
+/* -r and -f as the kind's own parameters; 0, or -1 (said) when -p or
+ * --params gave the same one. */
+static int shortcuts(const char *kind, args *a)
 {
     char kv[300];
-    if (a->resolution) {
-        snprintf(kv, sizeof kv, "%s=%s", !strcmp(kind, "render") ? "N" : "resolution",
-                 a->resolution);
+    const char *res = !strcmp(kind, "render") ? "N" : "resolution";
+    const char *key[2] = {res, "format"}, *val[2] = {a->resolution, a->format};
+    for (int i = 0; i < 2; i++) {
+        if (!val[i]) continue;
+        if (cJSON_GetObjectItemCaseSensitive(a->params, key[i])) {
+            fprintf(stderr, "voxelctl: -%c and a parameter %s both given: one of them\n",
+                    i ? 'f' : 'r', key[i]);
+            return -1;
+        }
+        snprintf(kv, sizeof kv, i ? "%s=\"%s\"" : "%s=%s", key[i], val[i]);
         set_param(a->params, kv);
     }
-    if (a->format) {
-        snprintf(kv, sizeof kv, "format=\"%s\"", a->format);
-        set_param(a->params, kv);
-    }
+    return 0;
+}
+
+/* A job id as the server makes them (letters, digits, - and _): never a
+ * path of the API (../meshes/ID). */
+static int job_id_ok(const char *s)
+{
+    size_t n = strlen(s), ok = n && n <= 64;
+    for (size_t i = 0; i < n; i++)
+        ok &= isalnum((unsigned char)s[i]) || s[i] == '-' || s[i] == '_';
+    if (!ok) fprintf(stderr, "voxelctl: '%s' is not a job id\n", s);
+    return (int)ok;
 }
 
 /* Whether -o FILE cannot be written (said on stderr): checked before the
@@ -244,28 +297,78 @@ static int out_unwritable(const char *out)
     return 0;
 }
 
+/* The commands: name, arguments, and the command options they take. */
+static const struct {
+    const char *name;
+    int args;
+    unsigned opts;
+} commands[] = {
+    {"voxelize", 1, OPT_JOB | OPT_OUT},
+    {"render", 1, OPT_JOB | OPT_OUT},
+    {"gregory", 1, OPT_JOB | OPT_OUT},
+    {"catmull-clark", 1, OPT_JOB | OPT_OUT},
+    {"preview", 1, OPT_JOB | OPT_OUT},
+    {"upload", 1, 0},
+    {"jobs", 0, OPT_STATE | OPT_PAGE},
+    {"meshes", 0, OPT_PAGE},
+    {"get", 1, OPT_OUT | OPT_NAME},
+    {"cancel", 1, 0},
+    {"delete", 1, 0},
+};
+
+/* Whether the command line fits command k (what does not is said). */
+static int fits(int k, const args *a, int n)
+{
+    static const char *const what[] = {"-r, -f, -p, --params and --no-wait", "-o", "--name",
+                                       "--state", "--limit and --after"};
+    const char *cmd = commands[k].name;
+    if (n - 1 != commands[k].args) {
+        fprintf(stderr, "voxelctl: %s takes %s (see voxelctl --help)\n", cmd,
+                commands[k].args ? "one argument" : "no argument");
+        return 0;
+    }
+    for (int b = 0; b < 5; b++)
+        if (a->given & ~commands[k].opts & (1u << b)) {
+            fprintf(stderr, "voxelctl: %s is not an option of %s\n", what[b], cmd);
+            return 0;
+        }
+    return 1;
+}
+
 static int run(ctl *c, args *a, int n, char **pos)
 {
     const char *cmd = pos[0];
-    if (is_job_kind(cmd) && n == 2) {
+    int k = -1;
+    for (size_t i = 0; i < sizeof commands / sizeof commands[0]; i++)
+        if (!strcmp(cmd, commands[i].name)) k = (int)i;
+    if (k < 0) {
+        fprintf(stderr, "voxelctl: no command '%s' (see voxelctl --help)\n", cmd);
+        return 2;
+    }
+    if (!fits(k, a, n)) return 2;
+    if (c->json && a->out && !strcmp(a->out, "-")) {
+        fprintf(stderr, "voxelctl: --json and -o - would both write stdout\n");
+        return 2;
+    }
+    if (is_job_kind(cmd)) {
         if (a->no_wait && a->out) {
             fprintf(stderr, "voxelctl: -o needs the job's result: not with --no-wait (use get)\n");
             return 2;
         }
+        if (shortcuts(cmd, a)) return 2;
         if (out_unwritable(a->out)) return 1;
-        shortcuts(cmd, a);
         cJSON *p = a->params;
         a->params = NULL;
         return ctl_cmd_job(c, cmd, pos[1], p, a->out, a->no_wait);
     }
-    if (!strcmp(cmd, "upload") && n == 2) return ctl_cmd_upload(c, pos[1]);
-    if (!strcmp(cmd, "jobs") && n == 1) return ctl_cmd_jobs(c, a->state, a->limit, a->after);
-    if (!strcmp(cmd, "meshes") && n == 1) return ctl_cmd_meshes(c, a->limit, a->after);
-    if (!strcmp(cmd, "get") && n == 2) return ctl_cmd_get(c, pos[1], a->name, a->out);
-    if (!strcmp(cmd, "cancel") && n == 2) return ctl_cmd_cancel(c, pos[1]);
-    if (!strcmp(cmd, "delete") && n == 2) return ctl_cmd_delete(c, pos[1]);
-    fprintf(stderr, "voxelctl: bad command line (see voxelctl --help)\n");
-    return 2;
+    if (!strcmp(cmd, "upload")) return ctl_cmd_upload(c, pos[1]);
+    if (!strcmp(cmd, "jobs")) return ctl_cmd_jobs(c, a->state, a->limit, a->after);
+    if (!strcmp(cmd, "meshes")) return ctl_cmd_meshes(c, a->limit, a->after);
+    if (!job_id_ok(pos[1])) return 2;
+    if (!strcmp(cmd, "get"))
+        return out_unwritable(a->out) ? 1 : ctl_cmd_get(c, pos[1], a->name, a->out);
+    if (!strcmp(cmd, "cancel")) return ctl_cmd_cancel(c, pos[1]);
+    return ctl_cmd_delete(c, pos[1]);
 }
 
 int main(int argc, char **argv)
@@ -277,6 +380,7 @@ int main(int argc, char **argv)
     args a = {.limit = 100, .params = cJSON_CreateObject()};
     if (read_options(&c, &a, argc, argv)) {
         cJSON_Delete(a.params);
+        free(a.kv);
         return 2;
     }
     if (optind >= argc) {
@@ -296,6 +400,12 @@ int main(int argc, char **argv)
     int rc = run(&c, &a, argc - optind, argv + optind);
     if (a.local) ctl_local_stop();
     cJSON_Delete(a.params);
+    free(a.kv);
     curl_global_cleanup();
+    /* stdout that could not be written (a full disk, a closed pipe) */
+    if ((fflush(stdout) != 0 || ferror(stdout)) && rc == 0) {
+        fprintf(stderr, "voxelctl: writing stdout: %s\n", strerror(errno));
+        rc = 1;
+    }
     return rc;
 }
