@@ -181,11 +181,31 @@ static void defaults(vx_config *c)
     c->event_keepalive_s = 15;
 }
 
+/* The source that last set each list option: 1 the config file, 2 the
+ * environment, 3 the command line. A list takes its values from the last
+ * source that names it (a flag narrows what the file allowed), every use
+ * within that source appended. */
+static unsigned char list_source[NOPTS];
+
 static int set_opt(vx_config *c, const opt_def *d, const char *val, const char *where)
 {
     char *base = (char *)c;
     uint64_t u;
     char *end;
+    /* an empty file name would leave /v1 without a token: refused, as an
+     * empty token file is (VOXELD_TOKEN_FILE=$UNSET in a unit or .env) */
+    if (!*val && !strcmp(d->name, "token-file")) {
+        fprintf(stderr, "voxeld: %s: token-file is empty (name the file, or leave it out)\n",
+                where);
+        return -1;
+    }
+    if (d->type == T_LIST) {
+        unsigned char src = !strcmp(where, "command line")       ? 3
+                            : !strncmp(where, "environment ", 12) ? 2
+                                                                  : 1;
+        if (src > list_source[d - opts]) ((char *)base + d->off)[0] = 0;
+        list_source[d - opts] = src;
+    }
     switch (d->type) {
     case T_STR:
         if (strlen(val) >= d->len) goto bad;
@@ -399,6 +419,7 @@ void vx_config_usage(FILE *out)
 int vx_config_load(vx_config *c, int argc, char **argv)
 {
     defaults(c);
+    memset(list_source, 0, sizeof list_source);
     struct option lopts[NOPTS + 5];
     for (size_t i = 0; i < NOPTS; i++)
         lopts[i] = (struct option){opts[i].name, required_argument, NULL, (int)(256 + i)};

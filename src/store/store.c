@@ -107,6 +107,48 @@ static void fsync_meshes_dir(vx_store *s)
     s->ops->sync(s->blob, "meshes", NULL);
 }
 
+/* Mesh id's metadata made anew from its data file, whose metadata file
+ * (key) does not parse: damaged after the upload was acknowledged (a disk
+ * fault, a crash of the file system). The file is read again as the
+ * format its extension names, the metadata written over the damaged one
+ * (the upload's name is lost). 0, or -1 when no data file reads: then
+ * both are kept (nothing acknowledged is deleted) and said at error
+ * level. */
+static int rebuild_meta(vx_store *s, const char *id, const char *key)
+{
+    static const char *const names[] = {"obj", "draco", "bpt", "stl", "ply", "gltf", "glb", "off"};
+    for (size_t i = 0; i < sizeof names / sizeof names[0]; i++) {
+        const char *ext = vx_intake_ext_of_name(names[i]);
+        char mkey[128], mpath[VX_PATH_MAX];
+        uint64_t bytes = 0;
+        mesh_data_key(mkey, sizeof mkey, id, ext);
+        if (s->ops->stat(s->blob, mkey, &bytes, NULL) < 0) continue;
+        vx_err err = {0};
+        vx_mesh *m = NULL;
+        if (s->ops->path(s->blob, mkey, mpath, sizeof mpath) == 0)
+            m = vx_mesh_read_as(mpath, vx_intake_format_by_name(names[i]), NULL, &err);
+        cJSON *meta = m && vx_intake_check(m, &err) == 0
+                          ? vx_intake_meta(id, vx_intake_format_by_name(names[i]), bytes, m)
+                          : NULL;
+        vx_mesh_free(m);
+        char *text = meta ? vx_json_print(meta, 0) : NULL;
+        if (!text || s->ops->put_bytes(s->blob, key, text, strlen(text), NULL)) {
+            VX_ERROR("store.mesh_unrecovered", "mesh=%s data=%s code=%s", id, mkey,
+                     err.code[0] ? err.code : "store_failed");
+            free(text);
+            cJSON_Delete(meta);
+            return -1;
+        }
+        free(text);
+        fsync_meshes_dir(s);
+        VX_WARN("store.metadata_rebuilt", "mesh=%s format=%s", id, names[i]);
+        if (mesh_insert(s, id, ext, meta, 0)) cJSON_Delete(meta);
+        return 0;
+    }
+    VX_ERROR("store.mesh_unrecovered", "mesh=%s data=none", id);
+    return -1;
+}
+
 /* One metadata file, DATA/meshes/<id><suffix> (".json", or ".deleted" for a
  * deleted mesh that jobs still held): the entry, when its data file is
  * there. */
@@ -129,6 +171,7 @@ static void load_one(vx_store *s, const char *id, const char *suffix)
     if (!cJSON_IsString(fmt)) {
         VX_WARN("store.bad_metadata", "path=%s", path);
         cJSON_Delete(meta);
+        if (!deleted && !s->ops->shared) rebuild_meta(s, id, key);
         return;
     }
     const char *ext = vx_intake_ext_of_name(fmt->valuestring);
@@ -163,15 +206,17 @@ static int load_name(const char *name, void *ud)
     if (lp->pass == 1 && tomb) load_one(lp->s, id, dot);
     if (lp->pass == 2 && !meta && !tomb) {
         /* A mesh file without metadata is a commit that never
-         * finished: it was never acknowledged, so it can go. */
+         * finished: it was never acknowledged, so it can go. One whose
+         * metadata is there but damaged (rebuild_meta could not read it)
+         * was: it stays. */
         int found;
         mesh_find(lp->s, id, &found);
+        char key[128], mkey[128];
+        snprintf(key, sizeof key, "meshes/%s", name);
+        snprintf(mkey, sizeof mkey, "meshes/%s.json", id);
         /* On a shared store it may be another daemon's commit in flight. */
-        if (!found && !lp->s->ops->shared) {
-            char key[128];
-            snprintf(key, sizeof key, "meshes/%s", name);
+        if (!found && !lp->s->ops->shared && lp->s->ops->stat(lp->s->blob, mkey, NULL, NULL) < 0)
             lp->s->ops->remove(lp->s->blob, key);
-        }
     }
     return 0;
 }

@@ -58,6 +58,13 @@ printf 'no-such-key = 1\n' >"$TMP/bad.conf"
 "$VOXELD" --config "$TMP/bad.conf" 2>"$TMP/err2"
 check "unknown config key exits 2" test $? -eq 2
 check "unknown config key is named" grep -q "no-such-key" "$TMP/err2"
+# An empty token file name (VOXELD_TOKEN_FILE=$UNSET in a unit) would
+# leave /v1 open: refused like an empty token file.
+"$VOXELD" --token-file "" --listen 127.0.0.1:0 --data-dir "$TMP/d3" 2>"$TMP/err4"
+check "an empty --token-file exits 2" test $? -eq 2
+VOXELD_TOKEN_FILE= "$VOXELD" --listen 127.0.0.1:0 --data-dir "$TMP/d3" 2>"$TMP/err5"
+check "an empty VOXELD_TOKEN_FILE exits 2" test $? -eq 2
+check "and says so" grep -q 'token-file is empty' "$TMP/err5"
 "$VOXELD" --version >"$TMP/version"
 check "--version" grep -q '^voxeld [0-9]' "$TMP/version"
 "$VOXELD" --help >"$TMP/help"

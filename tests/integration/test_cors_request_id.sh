@@ -71,4 +71,18 @@ check "the log line has the template route" bash -c "grep -q 'route=/v1/jobs/{id
 check "the log line has the client address" bash -c "grep -q 'client=127.0.0.1 ' <<<'$LINE'"
 
 stop_daemon
+
+# A list option takes its values from the last source that names it: a
+# flag narrows what the config file allowed (they were merged: a file's *
+# let every origin in whatever the flag said).
+printf 'cors-origin = *\n' >"$TMP/cors.conf"
+VOXELD_CORS_ORIGIN=http://env.example start_daemon --config "$TMP/cors.conf" \
+    --cors-origin http://viewer.example || exit 1
+api GET /readyz -H "Origin: http://evil.example"
+check "the file's * is gone under the flag" bash -c "! grep -qi '^access-control-allow-origin' '$HDRS'"
+api GET /readyz -H "Origin: http://env.example"
+check "the environment's origin is gone under the flag" bash -c "! grep -qi '^access-control-allow-origin' '$HDRS'"
+api GET /readyz -H "Origin: http://viewer.example"
+check "the flag's origin is allowed" test "$(header Access-Control-Allow-Origin)" = http://viewer.example
+stop_daemon
 finish

@@ -162,5 +162,24 @@ upload "$TMP/box.obj"
 expect_status "its bytes again" 201
 api GET "/v1/meshes/$BOX/file"
 check "stored anew" cmp -s "$BODY" "$TMP/box.obj"
+# A mesh whose metadata file is damaged after the upload was acknowledged
+# (emptied, or garbage) keeps its data file: the metadata is made anew
+# from it at start-up, and jobs run on it (before, the data file was
+# deleted as an upload that never finished).
+upload "$VX_MESH_DIR/spot_triangulated.obj"
+SPOT=$MESH_ID
+SPOT_TRIS=$(jqb .triangles)
+kill9_daemon
+: >"$DATA/meshes/$BOX.json"
+printf '{garbage' >"$DATA/meshes/$SPOT.json"
+start_daemon || exit 1
+for m in "$BOX" "$SPOT"; do
+    api GET "/v1/meshes/$m"
+    expect_status "mesh $m with damaged metadata after a restart" 200
+done
+check "its metadata made anew from the file" jq -e ".format == \"obj\" and .triangles == $SPOT_TRIS" "$BODY"
+check "logged at warn" grep -q 'event=store.metadata_rebuilt' "$TMP/daemon.log"
+run_job voxelize "$BOX" '{"resolution":16,"format":"raw1"}'
+job_ok "a job on the mesh whose metadata was rebuilt"
 stop_daemon
 finish
