@@ -200,7 +200,7 @@ static int set_opt(vx_config *c, const opt_def *d, const char *val, const char *
         return -1;
     }
     if (d->type == T_LIST) {
-        unsigned char src = !strcmp(where, "command line")       ? 3
+        unsigned char src = !strcmp(where, "command line")        ? 3
                             : !strncmp(where, "environment ", 12) ? 2
                                                                   : 1;
         if (src > list_source[d - opts]) ((char *)base + d->off)[0] = 0;

@@ -6,6 +6,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <time.h>
 #include <sys/stat.h>
 #include <unistd.h>
 #include <zlib.h>
@@ -129,11 +130,20 @@ long vx_journal_replay(vx_journal *j, void (*fn)(const cJSON *rec, void *ud), vo
     long count = 0, lineno = 0;
     off_t good = 0; /* end of the last complete line */
     int torn = 0;
+    long damaged = 0; /* records that do not check out, past what a crash tears */
     while ((n = getline(&line, &cap, f)) > 0) {
         lineno++;
         if (line[n - 1] != '\n') {
-            /* Torn tail: written partly before a crash, never acknowledged. */
-            VX_WARN("journal.torn_tail", "path=%s line=%ld bytes=%zd", j->path, lineno, n);
+            /* Torn tail: written partly before a crash, never acknowledged:
+             * the start of one record, no NUL in it. Anything else there
+             * (zeros, garbage) is damage to acknowledged records. */
+            int record = (line[0] == '#' || line[0] == '{') && !memchr(line, 0, (size_t)n);
+            if (record) {
+                VX_WARN("journal.torn_tail", "path=%s line=%ld bytes=%zd", j->path, lineno, n);
+            } else {
+                VX_ERROR("journal.damaged_tail", "path=%s line=%ld bytes=%zd", j->path, lineno, n);
+                damaged++;
+            }
             torn = 1;
             break;
         }
@@ -143,7 +153,8 @@ long vx_journal_replay(vx_journal *j, void (*fn)(const cJSON *rec, void *ud), vo
         if (!rec && (rec = salvage(line, len)))
             VX_WARN("journal.salvaged", "path=%s line=%ld", j->path, lineno);
         if (!rec) {
-            VX_WARN("journal.bad_record", "path=%s line=%ld", j->path, lineno);
+            VX_ERROR("journal.bad_record", "path=%s line=%ld", j->path, lineno);
+            damaged++;
             continue;
         }
         fn(rec, ud);
@@ -152,6 +163,21 @@ long vx_journal_replay(vx_journal *j, void (*fn)(const cJSON *rec, void *ud), vo
     }
     free(line);
     fclose(f);
+    if (damaged) {
+        /* the evidence, before the cut and the compaction rewrite it */
+        char copy[4200];
+        int kept = 0;
+        long long now = (long long)time(NULL);
+        for (int k = 0; k < 10 && !kept; k++) { /* a name no copy has (two in one second) */
+            if (k)
+                snprintf(copy, sizeof copy, "%s.damaged-%lld.%d", j->path, now, k);
+            else
+                snprintf(copy, sizeof copy, "%s.damaged-%lld", j->path, now);
+            kept = vx_copy_file(j->path, copy) == 0;
+        }
+        VX_ERROR("journal.damaged", "path=%s records=%ld copy=%s", j->path, damaged,
+                 kept ? copy : "-");
+    }
     pthread_mutex_lock(&j->lock);
     if (torn) {
         /* Cut the torn tail so the next record starts on a line of its own
