@@ -116,6 +116,57 @@ check "--no-wait: a job id ($NJ)" grep -Eq '^[0-9a-f]{32}$' <<<"$NJ"
 "$CTL" cancel "$NJ" >cancel.out 2>&1
 check "cancel: exit 0 ($(cat cancel.out))" test $? -eq 0
 
+# Results land whole where they are asked for: parallel runs without -o
+# each through a part file of their own (they shared one: files swapped);
+# -o through a symlink replaces its target (the link and the mode stay);
+# -o on a FIFO (as a device) is written in place, not replaced by a file.
+TOKEN=s3cret-token
+mkdir -p par && (cd par && for r in 20 24 28 32; do "$CTL" -q voxelize "$MID" -r $r -f raw8 2>>../ctl.err & done && wait)
+check "parallel runs: 4 results" test "$(ls par | grep -c 'voxels\.raw$')" -eq 4
+bad=0
+for f in par/*voxels.raw; do
+    j=$(grep -Eo '[0-9a-f]{32}' <<<"$(basename "$f")")
+    api GET "/v1/jobs/$j/result"
+    cmp -s "$BODY" "$f" || bad=1
+done
+check "parallel runs: each file holds its own job's result" test $bad -eq 0
+check "parallel runs: no part file left" test -z "$(ls -A par | grep part)"
+echo old >target.binvox
+chmod 640 target.binvox
+ln -sf target.binvox link.binvox
+"$CTL" -q voxelize "$MID" -r 16 -f binvox -o link.binvox 2>ctl.err
+check "-o a symlink: the link stays" test -L link.binvox
+check "-o a symlink: its target holds the result" test "$(head -n 1 target.binvox)" = "#binvox 1"
+check "-o a symlink: the target's mode kept ($(stat -c %a target.binvox))" test "$(stat -c %a target.binvox)" = 640
+mkfifo fifo.out
+cat fifo.out >fifo.copy &
+catpid=$!
+"$CTL" -q voxelize "$MID" -r 16 -f binvox -o fifo.out 2>ctl.err
+rc=$?
+check "-o a FIFO: exit 0 ($(cat ctl.err))" test $rc -eq 0
+wait "$catpid"
+check "-o a FIFO: still a FIFO" test -p fifo.out
+check "-o a FIFO: the result went through it" cmp -s fifo.copy target.binvox
+# A summary: the stats, on stdout or into -o.
+"$CTL" -q voxelize "$MID" -r 16 -f summary >sum.json 2>ctl.err
+check "summary: the stats on stdout" jq -e '.voxels_inside > 0 and .dims[0] > 0' sum.json
+"$CTL" -q voxelize "$MID" -r 16 -f summary -o sum2.json 2>ctl.err
+check "summary -o: the stats in the file" jq -e '.voxels_inside > 0' sum2.json
+# Usage errors say what is wrong and exit 2 before anything is sent.
+for bad in "voxelize $MID -p azimuth=1e400" "voxelize $MID -r 8 -p resolution=16" \
+    "render $MID --name normal" "jobs --name x" "get ../meshes/$MID" "--json get x -o -" \
+    "voxelize" "frobnicate"; do
+    # shellcheck disable=SC2086
+    "$CTL" $bad >/dev/null 2>ctl.err
+    rc=$?
+    check "usage error exits 2: $bad ($(head -c 100 ctl.err))" test $rc -eq 2
+done
+"$CTL" -q voxelize "$MID" -r 8 -f binvox -o - >/dev/full 2>ctl.err
+rc=$?
+check "stdout that cannot be written: exit 1 ($(cat ctl.err))" test $rc -eq 1
+"$CTL" jobs >/dev/full 2>ctl.err
+check "jobs into a full stdout: exit 1" test $? -eq 1
+
 # One-shot, no server: --local and voxeld run give the server's bytes.
 "$CTL" voxelize "$MESH" -r 64 -f binvox -o local.binvox >/dev/null 2>&1 # via the daemon
 unset VOXELD_URL VOXELD_TOKEN
