@@ -177,8 +177,9 @@ static vx_jobs *open_jobs(const vx_config *cfg, vx_store *store, int start, vx_e
     vx_jobs *jobs = vx_jobs_open(&jd, err);
     __atomic_store_n(&g_jobs, jobs, __ATOMIC_RELEASE);
     if (!jobs) {
-        VX_ERROR("voxeld.fatal", "stage=%s code=%s message=\"%s\"",
-                 cfg->database[0] ? "database" : "journal", err->code, err->message);
+        VX_ERROR("voxeld.fatal", "stage=%s code=%s message=%s",
+                 cfg->database[0] ? "database" : "journal", err->code,
+                 vx_log_quote((char[600]){0}, 600, err->message));
         if (cfg->database[0]) fprintf(stderr, "voxeld: --database: %s\n", err->message);
         return NULL;
     }
@@ -262,7 +263,8 @@ int main(int argc, char **argv)
         .retries = cfg.blob_retries ? (int)(cfg.blob_retries > 100 ? 100 : cfg.blob_retries) : -1};
     const vx_blob_ops *bo = vx_blob_backend(cfg.blob_store, &err);
     if (!bo) {
-        VX_ERROR("voxeld.fatal", "stage=store code=%s message=\"%s\"", err.code, err.message);
+        VX_ERROR("voxeld.fatal", "stage=store code=%s message=%s", err.code,
+                 vx_log_quote((char[600]){0}, 600, err.message));
         return 1;
     }
     vx_store_desc sd = {.results_max_bytes = cfg.results_max_bytes,
@@ -271,7 +273,8 @@ int main(int argc, char **argv)
                         .blob_conf = &bc};
     vx_store *store = vx_store_open(cfg.data_dir, &sd, &err);
     if (!store) {
-        VX_ERROR("voxeld.fatal", "stage=store code=%s message=\"%s\"", err.code, err.message);
+        VX_ERROR("voxeld.fatal", "stage=store code=%s message=%s", err.code,
+                 vx_log_quote((char[600]){0}, 600, err.message));
         return 1;
     }
     vx_gl_info refused;
@@ -307,7 +310,8 @@ int main(int argc, char **argv)
                        .gpu_refused = soft ? &refused : NULL};
     vx_http *http = vx_http_start(&hd, &err);
     if (!http) {
-        VX_ERROR("voxeld.fatal", "stage=http code=%s message=\"%s\"", err.code, err.message);
+        VX_ERROR("voxeld.fatal", "stage=http code=%s message=%s", err.code,
+                 vx_log_quote((char[600]){0}, 600, err.message));
         vx_jobs_free(jobs);
         vx_store_close(store);
         return 1;

@@ -166,7 +166,8 @@ static int unavailable(vx_pg *pg, vx_err *err, const char *what)
     char line[400];
     first_line(line, sizeof line, what);
     if (strcmp(what, "waiting to reconnect")) /* logged once a failure, not per request */
-        VX_WARN("pg.unavailable", "reason=\"%s\" retry_in_s=%d", line, vx_pg_retry_after(pg));
+        VX_WARN("pg.unavailable", "reason=%s retry_in_s=%d",
+                vx_log_quote((char[480]){0}, 480, line), vx_pg_retry_after(pg));
     return vx_err_set(err, VX_EUNAVAIL, "database_unavailable",
                       "the database is unreachable; try again shortly");
 }

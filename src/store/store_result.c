@@ -107,7 +107,8 @@ int vx_store_result_commit(vx_store *s, const char *jid, vx_err *err)
     vx_err_clear(&e);
     int rc = s->ops->sync(s->blob, key, &e);
     if (rc) {
-        VX_ERROR("store.result_unsynced", "job=%s code=%s message=\"%s\"", jid, e.code, e.message);
+        VX_ERROR("store.result_unsynced", "job=%s code=%s message=%s", jid, e.code,
+                 vx_log_quote((char[600]){0}, 600, e.message));
         if (err) *err = e;
     }
     pthread_mutex_lock(&s->lock);
