@@ -61,7 +61,7 @@ void ctl_local_stop(void);
 int ctl_cmd_job(ctl *c, const char *kind, const char *src, cJSON *params, const char *out,
                 int no_wait);
 /* `jobs`, `meshes`, `get`, `cancel`, `upload`. Return the exit status. */
-int ctl_cmd_jobs(ctl *c, const char *state, int limit, const char *after);
+int ctl_cmd_jobs(ctl *c, const char *state, int newest, int limit, const char *after);
 int ctl_cmd_meshes(ctl *c, int limit, const char *after);
 int ctl_cmd_get(ctl *c, const char *jid, const char *name, const char *out);
 int ctl_cmd_cancel(ctl *c, const char *jid);

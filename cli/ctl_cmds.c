@@ -446,13 +446,13 @@ static void mesh_row(const cJSON *m)
            str(m, "name"));
 }
 
-int ctl_cmd_jobs(ctl *c, const char *state, int limit, const char *after)
+int ctl_cmd_jobs(ctl *c, const char *state, int newest, int limit, const char *after)
 {
     char *s = query_arg("state", state), *a = query_arg("after", after);
-    char *path = s && a ? malloc(strlen(s) + strlen(a) + 40) : NULL;
+    char *path = s && a ? malloc(strlen(s) + strlen(a) + 60) : NULL;
     int rc = 1;
     if (path) {
-        sprintf(path, "/v1/jobs?limit=%d%s%s", limit, s, a);
+        sprintf(path, "/v1/jobs?limit=%d%s%s%s", limit, newest ? "&order=desc" : "", s, a);
         rc = list(c, path, job_row);
     }
     free(path);

@@ -36,7 +36,8 @@ static void usage(FILE *out)
         "  Ctrl-C stops waiting, not the job: it says the job id to cancel.\n"
         "Other commands:\n"
         "  upload FILE               store a mesh, print its id\n"
-        "  jobs [--state S] [--limit N] [--after ID]    meshes [--limit N] [--after ID]\n"
+        "  jobs [--state S] [--newest] [--limit N] [--after ID]  (--newest: newest first)\n"
+        "  meshes [--limit N] [--after ID]\n"
         "  get JOB [-o FILE] [--name OUTPUT]  show a job, or download an output\n"
         "  cancel JOB                cancel a queued or running job (a finished one: error)\n"
         "  delete JOB                delete a finished job and its results (or cancel it)\n"
@@ -92,7 +93,7 @@ static int is_job_kind(const char *s)
 
 typedef struct args {
     const char *out, *name, *state, *after, *resolution, *format;
-    int limit, no_wait, local;
+    int limit, no_wait, local, newest;
     cJSON *params;
     const char **kv; /* the -p KEY=VALUEs, applied after every --params */
     int nkv;
@@ -126,18 +127,28 @@ static int read_options(ctl *c, args *a, int argc, char **argv)
         O_LIMIT,
         O_AFTER,
         O_NOWAIT,
-        O_VERSION
+        O_VERSION,
+        O_NEWEST
     };
-    static const struct option opts[] = {
-        {"server", required_argument, 0, O_SERVER}, {"token", required_argument, 0, O_TOKEN},
-        {"local", no_argument, 0, O_LOCAL},         {"json", no_argument, 0, O_JSON},
-        {"quiet", no_argument, 0, O_QUIET},         {"param", required_argument, 0, 'p'},
-        {"params", required_argument, 0, O_PARAMS}, {"output", required_argument, 0, 'o'},
-        {"resolution", required_argument, 0, 'r'},  {"format", required_argument, 0, 'f'},
-        {"name", required_argument, 0, O_NAME},     {"state", required_argument, 0, O_STATE},
-        {"limit", required_argument, 0, O_LIMIT},   {"after", required_argument, 0, O_AFTER},
-        {"no-wait", no_argument, 0, O_NOWAIT},      {"help", no_argument, 0, 'h'},
-        {"version", no_argument, 0, O_VERSION},     {0, 0, 0, 0}};
+    static const struct option opts[] = {{"server", required_argument, 0, O_SERVER},
+                                         {"token", required_argument, 0, O_TOKEN},
+                                         {"local", no_argument, 0, O_LOCAL},
+                                         {"json", no_argument, 0, O_JSON},
+                                         {"quiet", no_argument, 0, O_QUIET},
+                                         {"param", required_argument, 0, 'p'},
+                                         {"params", required_argument, 0, O_PARAMS},
+                                         {"output", required_argument, 0, 'o'},
+                                         {"resolution", required_argument, 0, 'r'},
+                                         {"format", required_argument, 0, 'f'},
+                                         {"name", required_argument, 0, O_NAME},
+                                         {"state", required_argument, 0, O_STATE},
+                                         {"limit", required_argument, 0, O_LIMIT},
+                                         {"after", required_argument, 0, O_AFTER},
+                                         {"no-wait", no_argument, 0, O_NOWAIT},
+                                         {"help", no_argument, 0, 'h'},
+                                         {"version", no_argument, 0, O_VERSION},
+                                         {"newest", no_argument, 0, O_NEWEST},
+                                         {0, 0, 0, 0}};
     int ch;
     while ((ch = getopt_long(argc, argv, "p:o:r:f:hq", opts, NULL)) != -1) {
         switch (ch) {
@@ -218,6 +229,10 @@ static int read_options(ctl *c, args *a, int argc, char **argv)
         case O_AFTER:
             a->after = optarg;
             a->given |= OPT_PAGE;
+            break;
+        case O_NEWEST:
+            a->newest = 1;
+            a->given |= OPT_STATE;
             break;
         case O_NOWAIT:
             a->no_wait = 1;
@@ -320,7 +335,7 @@ static const struct {
 static int fits(int k, const args *a, int n)
 {
     static const char *const what[] = {"-r, -f, -p, --params and --no-wait", "-o", "--name",
-                                       "--state", "--limit and --after"};
+                                       "--state and --newest", "--limit and --after"};
     const char *cmd = commands[k].name;
     if (n - 1 != commands[k].args) {
         fprintf(stderr, "voxelctl: %s takes %s (see voxelctl --help)\n", cmd,
@@ -362,7 +377,7 @@ static int run(ctl *c, args *a, int n, char **pos)
         return ctl_cmd_job(c, cmd, pos[1], p, a->out, a->no_wait);
     }
     if (!strcmp(cmd, "upload")) return ctl_cmd_upload(c, pos[1]);
-    if (!strcmp(cmd, "jobs")) return ctl_cmd_jobs(c, a->state, a->limit, a->after);
+    if (!strcmp(cmd, "jobs")) return ctl_cmd_jobs(c, a->state, a->newest, a->limit, a->after);
     if (!strcmp(cmd, "meshes")) return ctl_cmd_meshes(c, a->limit, a->after);
     if (!job_id_ok(pos[1])) return 2;
     if (!strcmp(cmd, "get"))

@@ -262,10 +262,11 @@ int main(int argc, char **argv)
         .timeout_s = cfg.blob_timeout_s,
         .retries = cfg.blob_retries ? (int)(cfg.blob_retries > 100 ? 100 : cfg.blob_retries) : -1};
     const vx_blob_ops *bo = vx_blob_backend(cfg.blob_store, &err);
-    if (!bo) {
+    if (!bo) { /* a bad option: exit 2, said on stderr as the others are */
+        fprintf(stderr, "voxeld: --blob-store: %s\n", err.message);
         VX_ERROR("voxeld.fatal", "stage=store code=%s message=%s", err.code,
                  vx_log_quote((char[600]){0}, 600, err.message));
-        return 1;
+        return 2;
     }
     vx_store_desc sd = {.results_max_bytes = cfg.results_max_bytes,
                         .results_max_age_s = cfg.results_max_age_s,

@@ -75,6 +75,6 @@ api_bad_url() {
 api_bad_url "file://relative/dir"
 check "a relative file:// dir is refused at start" test $? -ne 0
 api_bad_url "ftp://x"
-check "an unknown scheme is refused at start" test $? -ne 0
+check "an unknown scheme is refused at start, as a bad option (exit 2)" test $? -eq 2
 check "with a message" grep -q 'bad_blob_store' "$TMP/bad.log"
 finish

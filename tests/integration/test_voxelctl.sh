@@ -152,6 +152,9 @@ check "-o a FIFO: the result went through it" cmp -s fifo.copy target.binvox
 check "summary: the stats on stdout" jq -e '.voxels_inside > 0 and .dims[0] > 0' sum.json
 "$CTL" -q voxelize "$MID" -r 16 -f summary -o sum2.json 2>ctl.err
 check "summary -o: the stats in the file" jq -e '.voxels_inside > 0' sum2.json
+# --newest: the job just submitted comes first.
+"$CTL" -q voxelize "$MID" -r 12 -f summary --json >last.json 2>/dev/null
+check "jobs --newest: the latest job first" test "$("$CTL" jobs --newest --limit 1 | cut -c1-32)" = "$(jq -r .id last.json)"
 # Usage errors say what is wrong and exit 2 before anything is sent.
 for bad in "voxelize $MID -p azimuth=1e400" "voxelize $MID -r 8 -p resolution=16" \
     "render $MID --name normal" "jobs --name x" "get ../meshes/$MID" "--json get x -o -" \
