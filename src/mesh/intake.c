@@ -183,6 +183,14 @@ const char *vx_intake_ext_of_name(const char *name)
     return vx_intake_format_ext(vx_intake_format_by_name(name));
 }
 
+vx_mesh_format vx_intake_format_of_path(const char *path)
+{
+    const char *dot = strrchr(path, '.');
+    for (size_t i = 0; dot && !strchr(dot, '/') && i < NFORMATS; i++)
+        if (!strcmp(dot + 1, formats[i].ext)) return formats[i].fmt;
+    return 0;
+}
+
 int vx_intake_check(const vx_mesh *m, vx_err *err)
 {
     /* every engine works in 32-bit floats (GL, the patches, the writers):

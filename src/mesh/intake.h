@@ -53,6 +53,8 @@ const char *vx_intake_format_media(vx_mesh_format fmt);
 vx_mesh_format vx_intake_format_by_name(const char *name);
 /* File extension of the format a Mesh JSON names; "obj" for unknown names. */
 const char *vx_intake_ext_of_name(const char *name);
+/* The format whose stored extension ends path (".stl", ...), or 0. */
+vx_mesh_format vx_intake_format_of_path(const char *path);
 
 /* The largest coordinate a mesh (or a gregory frame) may have. The engines
  * work in 32-bit floats, and what they derive from coordinates (extents,

@@ -17,6 +17,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "mesh/intake.h"
 #include "mesh/text.h"
 #include "util/log.h"
 
@@ -641,32 +642,16 @@ vx_mesh *vx_mesh_read_as(const char *path, vx_mesh_format fmt, const vx_mesh_lim
     return m;
 }
 
-/* The format the store's extension for it names (mesh/intake.c's table:
- * the format the upload was taken as, which the first bytes cannot always
- * tell again: an OBJ declared model/obj may name its groups in Latin-1,
- * which the sniff takes for binary), or 0. */
-static vx_mesh_format format_of_ext(const char *path)
-{
-    static const struct {
-        const char *ext;
-        vx_mesh_format fmt;
-    } exts[] = {{".stl", VX_MESH_STL}, {".ply", VX_MESH_PLY},  {".gltf", VX_MESH_GLTF},
-                {".glb", VX_MESH_GLB}, {".off", VX_MESH_OFF},  {".obj", VX_MESH_OBJ},
-                {".bpt", VX_MESH_BPT}, {".drc", VX_MESH_DRACO}};
-    size_t n = strlen(path);
-    for (size_t i = 0; i < sizeof exts / sizeof exts[0]; i++) {
-        size_t k = strlen(exts[i].ext);
-        if (n > k && !strcmp(path + n - k, exts[i].ext)) return exts[i].fmt;
-    }
-    return 0;
-}
-
 /* Reads the file at path, its format told by name's extension or else by
  * its first bytes. */
 static vx_mesh *read_named(const char *path, const char *name, const vx_mesh_limits *lim,
                            vx_err *err)
 {
-    vx_mesh_format by_ext = format_of_ext(name);
+    /* the format the upload was taken as (the store's extension for it),
+     * which the first bytes cannot always tell again: an OBJ declared
+     * model/obj may name its groups in Latin-1, which the sniff takes for
+     * binary */
+    vx_mesh_format by_ext = vx_intake_format_of_path(name);
     if (by_ext) return vx_mesh_read_as(path, by_ext, lim, err);
     FILE *f = vx_mesh_open(path, err);
     if (!f) return NULL;

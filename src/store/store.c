@@ -116,9 +116,8 @@ static void fsync_meshes_dir(vx_store *s)
  * level. */
 static int rebuild_meta(vx_store *s, const char *id, const char *key)
 {
-    static const char *const names[] = {"obj", "draco", "bpt", "stl", "ply", "gltf", "glb", "off"};
-    for (size_t i = 0; i < sizeof names / sizeof names[0]; i++) {
-        const char *ext = vx_intake_ext_of_name(names[i]);
+    for (vx_mesh_format fmt = VX_MESH_OBJ; fmt <= VX_MESH_OFF; fmt++) { /* every format */
+        const char *ext = vx_intake_format_ext(fmt);
         char mkey[128], mpath[VX_PATH_MAX];
         uint64_t bytes = 0;
         mesh_data_key(mkey, sizeof mkey, id, ext);
@@ -126,10 +125,8 @@ static int rebuild_meta(vx_store *s, const char *id, const char *key)
         vx_err err = {0};
         vx_mesh *m = NULL;
         if (s->ops->path(s->blob, mkey, mpath, sizeof mpath) == 0)
-            m = vx_mesh_read_as(mpath, vx_intake_format_by_name(names[i]), NULL, &err);
-        cJSON *meta = m && vx_intake_check(m, &err) == 0
-                          ? vx_intake_meta(id, vx_intake_format_by_name(names[i]), bytes, m)
-                          : NULL;
+            m = vx_mesh_read_as(mpath, fmt, NULL, &err);
+        cJSON *meta = m && vx_intake_check(m, &err) == 0 ? vx_intake_meta(id, fmt, bytes, m) : NULL;
         vx_mesh_free(m);
         char *text = meta ? vx_json_print(meta, 0) : NULL;
         if (!text || s->ops->put_bytes(s->blob, key, text, strlen(text), NULL)) {
@@ -141,7 +138,7 @@ static int rebuild_meta(vx_store *s, const char *id, const char *key)
         }
         free(text);
         fsync_meshes_dir(s);
-        VX_WARN("store.metadata_rebuilt", "mesh=%s format=%s", id, names[i]);
+        VX_WARN("store.metadata_rebuilt", "mesh=%s format=%s", id, vx_intake_format_name(fmt));
         if (mesh_insert(s, id, ext, meta, 0)) cJSON_Delete(meta);
         return 0;
     }
