@@ -234,6 +234,11 @@ static int check_off(const unsigned char *p, size_t n, uint64_t size, vx_mesh_de
         return corrupt(err, F, "the first word is not OFF");
     }
     uint64_t c[2];
+    if (memchr(p + i, 'n', j - i - 3)) { /* nOFF: the dimension first (off.c reads it) */
+        i = off_skip(p, n, j);
+        j = off_word(p, n, i);
+        if (j == n && n < size) return 1;
+    }
     for (int k = 0; k < 2; k++) {
         i = off_skip(p, n, j);
         j = off_word(p, n, i);

@@ -273,9 +273,10 @@ static int stmt_v(obj_reader *r, char *p, const char *end)
     double v[7];
     int n;
     if (parse_numbers(r, "v", p, end, v, 7, &n)) return -1;
-    /* x y z, x y z w, or x y z r g b (vertex colours, a common extension) */
-    if (n != 3 && n != 4 && n != 6)
-        return obj_fail(r, VX_EINVAL, "obj_junk", "'v' needs 3, 4 or 6 numbers, got %d", n);
+    /* x y z, x y z w, or x y z r g b (a common extension: vertex colours),
+     * or x y z r g b a (the same with alpha) */
+    if (n != 3 && n != 4 && n != 6 && n != 7)
+        return obj_fail(r, VX_EINVAL, "obj_junk", "'v' needs 3, 4, 6 or 7 numbers, got %d", n);
     vx_mesh *m = r->m;
     if (r->lim && r->lim->max_vertices && m->nverts >= r->lim->max_vertices)
         return obj_fail(r, VX_ETOOBIG, "mesh_too_big", "more than %zu vertices (the limit)",
@@ -436,14 +437,29 @@ static void shrink(void **p, size_t bytes)
     if (q) *p = q;
 }
 
-/* Splits the stream into lines; handles CRLF, a last line without newline,
- * comments, and backslash continuation (joined into `join`). */
+/* The line end of a file whose first bytes are buf[0..n): '\r' where its
+ * first line break is a CR alone (classic Mac OS files), else '\n' (LF or
+ * CRLF). -1 while the first break is not yet in view (more = more bytes
+ * to come). */
+static int line_end_of(const char *buf, size_t n, int more)
+{
+    const char *cr = memchr(buf, '\r', n), *lf = memchr(buf, '\n', n);
+    if (lf && (!cr || lf < cr)) return '\n';
+    if (!cr) return more ? -1 : '\n';
+    if (cr + 1 == buf + n) return more ? -1 : '\r';
+    return cr[1] == '\n' ? '\n' : '\r';
+}
+
+/* Splits the stream into lines; handles LF, CRLF and CR line ends, a last
+ * line without one, comments, and backslash continuation (joined into
+ * `join`). */
 static int obj_stream(obj_reader *r, FILE *f, char *buf, char **join)
 {
     size_t beg = 0, end = 0, line = 0, jlen = 0, jline = 0;
-    int eof = 0;
+    int eof = 0, eol = -1;
     for (;;) {
-        char *nl = memchr(buf + beg, '\n', end - beg);
+        if (eol < 0) eol = line_end_of(buf + beg, end - beg, !eof);
+        char *nl = eol < 0 ? NULL : memchr(buf + beg, eol, end - beg);
         if (!nl) {
             if (!eof) {
                 size_t rest = end - beg;
@@ -478,6 +494,10 @@ static int obj_stream(obj_reader *r, FILE *f, char *buf, char **join)
         if (len > OBJ_MAX_LINE)
             return obj_fail(r, VX_EINVAL, "obj_line_too_long", "line longer than %d bytes",
                             OBJ_MAX_LINE);
+        if (eol == '\r' && len && *p == '\n') { /* CRLF after a first lone CR */
+            p++;
+            len--;
+        }
         if (line == 1 && len >= 3 && memcmp(p, "\xef\xbb\xbf", 3) == 0) {
             p += 3; /* UTF-8 byte order mark, written by some Windows tools */
             len -= 3;

@@ -3,9 +3,10 @@
  * assimp 5.2's OFF importer crashed (SEGV) on files that fuzz_off made of
  * a valid header and garbage face lines, so OFF is read here: line by
  * line, '#' comments dropped, the header word (OFF, COFF, NOFF, CNOFF,
- * STOFF, ...; 4OFF and nOFF are refused), the vertex and face counts
- * (checked against the size first, vx_declared_check), then per vertex
- * line its first three numbers and per face line its size and indices
+ * STOFF, 4OFF: homogeneous x y z w; nOFF: a dimension, 3 only, before the
+ * counts), the vertex and face counts (checked against the size first,
+ * vx_declared_check), then per vertex line its first three numbers (4OFF:
+ * four, divided by w) and per face line its size and indices
  * (colours after them are ignored), and nothing but comments after the
  * last face (a face count that is too small). Lines of any length.
  * Polygons are kept. */
@@ -74,7 +75,21 @@ static int read_uint(char **s, unsigned long long *v)
     return 0;
 }
 
-static int read_header(off_in *in, unsigned long long c[2], vx_err *err)
+/* The next unsigned integer of the header, on this line or the next. */
+static int header_uint(off_in *in, char **s, unsigned long long *v)
+{
+    while (blank(**s))
+        (*s)++;
+    if (!**s) {
+        if (next_line(in) <= 0) return -1;
+        *s = in->line;
+    }
+    return read_uint(s, v);
+}
+
+/* The header: its word ([ST][C][N][4][n]OFF), nOFF's dimension (3 only) and
+ * the vertex and face counts into c. *hom: 1 for 4OFF (x y z w vertices). */
+static int read_header(off_in *in, unsigned long long c[2], int *hom, vx_err *err)
 {
     if (next_line(in) <= 0) return fail(err, in, "no header");
     char *s = in->line;
@@ -85,17 +100,18 @@ static int read_header(off_in *in, unsigned long long c[2], vx_err *err)
         s++;
     size_t wl = (size_t)(s - w);
     if (wl < 3 || strncmp(s - 3, "OFF", 3)) return fail(err, in, "the first word is not OFF");
-    if (memchr(w, '4', wl - 3) || memchr(w, 'n', wl - 3))
-        return fail(err, in, "4OFF and nOFF (other dimensions) are not read");
-    for (int k = 0; k < 2; k++) {
-        while (blank(*s))
-            s++;
-        if (!*s) {
-            if (next_line(in) <= 0) return fail(err, in, "no vertex and face counts");
-            s = in->line;
+    *hom = memchr(w, '4', wl - 3) != NULL;
+    if (memchr(w, 'n', wl - 3)) {
+        unsigned long long dim;
+        if (header_uint(in, &s, &dim)) return fail(err, in, "nOFF without its dimension");
+        if (dim != 3) {
+            char what[96];
+            snprintf(what, sizeof what, "nOFF of dimension %llu (only 3 is read)", dim);
+            return fail(err, in, what);
         }
-        if (read_uint(&s, &c[k])) return fail(err, in, "bad vertex or face count");
     }
+    for (int k = 0; k < 2; k++)
+        if (header_uint(in, &s, &c[k])) return fail(err, in, "bad vertex or face count");
     return 0;
 }
 
@@ -106,10 +122,11 @@ vx_mesh *vx_off_read_mem(const unsigned char *data, size_t n, const vx_mesh_limi
     if (vx_declared_check(VX_MESH_OFF, data, n, n, lim, &d, err)) return NULL;
     off_in in = {.p = (const char *)data, .end = (const char *)data + n};
     unsigned long long c[2];
+    int hom = 0;
     vx_mesh *m = NULL;
     uint32_t *scr = NULL; /* a face's indices, sorted for vx_mesh_face_repeat */
     size_t scr_cap = 0;
-    if (read_header(&in, c, err)) goto out;
+    if (read_header(&in, c, &hom, err)) goto out;
     /* Only counts the size check saw may size the arrays. */
     if (c[0] != d.vertices || c[1] != d.faces) {
         fail(err, &in, "the header's counts cannot be read one way");
@@ -125,16 +142,23 @@ vx_mesh *vx_off_read_mem(const unsigned char *data, size_t n, const vx_mesh_limi
     for (size_t v = 0; v < nv; v++) {
         if (next_line(&in) <= 0) goto bad_v;
         char *s = in.line;
-        for (int a = 0; a < 3; a++) {
+        double x[4];
+        for (int a = 0; a < 3 + hom; a++) {
             char *e;
-            double x = strtod(s, &e);
+            x[a] = strtod(s, &e);
             if (e == s) goto bad_v;
-            if (!isfinite(x)) {
+            if (!isfinite(x[a])) {
                 fail(err, &in, "a NaN or infinite coordinate");
                 goto out;
             }
-            m->pos[3 * v + a] = x;
             s = e;
+        }
+        for (int a = 0; a < 3; a++) {
+            m->pos[3 * v + a] = hom ? x[a] / x[3] : x[a];
+            if (!isfinite(m->pos[3 * v + a])) {
+                fail(err, &in, "a 4OFF vertex whose w is 0 or too small");
+                goto out;
+            }
         }
     }
     size_t kept = 0;

@@ -8,8 +8,8 @@ Files: cube_bin.stl (header starting with "solid "), cube_ascii.stl,
 cube_bin.ply (little endian), cube_be.ply, cube_ascii.ply (quads: 6 faces),
 cube.gltf (embedded data: URI buffer), cube.glb (a node translating by
 (10, 20, 30) and scaling by 2), cube.off (quads), variants exporters write
-(cube_upper.stl, cube_bom.stl, cube_latin1.obj, cube_long.off,
-cube_deep.gltf), instances.glb (200000 nodes), primitives.glb (40000
+(cube_upper.stl, cube_bom.stl, cube_latin1.obj, cube_cr.obj, cube_rgba.obj,
+cube_long.off, cube_4.off, cube_n.off, cube_deep.gltf), instances.glb (200000 nodes), primitives.glb (40000
 primitives over one accessor of 400000 vertices), and malformed ones.
 Standard library only."""
 import base64
@@ -192,6 +192,18 @@ def main():
         "cube_latin1.obj": obj_quads(b"# Exportiert von M\xe4x\ng W\xfcrfel\nusemtl M\xe4t\n"),
         "cube_long.off": off().replace(b"# a cube\n", b"#" + b"x" * 6000 + b"\n").replace(
             b"\n1 1 1\n", b"\n1 1 1" + b" " * 5000 + b"\n"),
+        # classic Mac OS line ends (CR alone); vertex colours with alpha
+        "cube_cr.obj": obj_quads(b"# made on a Mac\n").replace(b"\n", b"\r"),
+        "cube_rgba.obj": obj_quads().replace(b"\nf", b" 0.5 0.25 1 0.75\nf", 1).replace(
+            b"\nv", b" 1 0 0 1\nv"),
+        # homogeneous vertices (w = 2: each coordinate doubled, then halved)
+        # and nOFF's dimension line
+        "cube_4.off": off().replace(b"OFF\n", b"4OFF\n").replace(b"\n0 0 0\n", b"\n0 0 0 2\n")
+        .replace(b"\n1 1 1\n", b"\n2 2 2 2\n").replace(b"\n1 0 0\n", b"\n2 0 0 2\n")
+        .replace(b"\n0 1 0\n", b"\n0 2 0 2\n").replace(b"\n1 1 0\n", b"\n2 2 0 2\n")
+        .replace(b"\n0 0 1\n", b"\n0 0 2 2\n").replace(b"\n1 0 1\n", b"\n2 0 2 2\n")
+        .replace(b"\n0 1 1\n", b"\n0 2 2 2\n"),
+        "cube_n.off": off().replace(b"OFF\n", b"nOFF\n3\n"),
         "cube_deep.gltf": gltf_chain(200),
         "instances.glb": glb_instances(200000),
         "primitives.glb": glb_primitives(400000, 40000),
@@ -220,6 +232,12 @@ def main():
         # counts too small, read out of step; an index that is not one
         "short.off": off(nf=5),
         "float_index.off": off().replace(b"\n4 1 3 7 5\n", b"\n4 1 3 7 5.5\n"),
+        "n4.off": off().replace(b"OFF\n", b"nOFF\n4\n"),
+        "w0.off": off().replace(b"OFF\n", b"4OFF\n").replace(b"\n0 0 0\n", b"\n0 0 0 0\n")
+        .replace(b"\n1 1 1\n", b"\n1 1 1 1\n").replace(b"\n1 0 0\n", b"\n1 0 0 1\n")
+        .replace(b"\n0 1 0\n", b"\n0 1 0 1\n").replace(b"\n1 1 0\n", b"\n1 1 0 1\n")
+        .replace(b"\n0 0 1\n", b"\n0 0 1 1\n").replace(b"\n1 0 1\n", b"\n1 0 1 1\n")
+        .replace(b"\n0 1 1\n", b"\n0 1 1 1\n"),
         "short.ply": ply("ascii", Q, nverts=7),
         "trailing.ply": ply("binary_little_endian", T) + b"\x01\x02\x03\x04",
         "cycle.glb": glb(node={"mesh": 0, "children": [0]}),

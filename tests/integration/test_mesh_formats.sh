@@ -46,13 +46,20 @@ OFF_ID=$MESH_ID
 # What exporters write too: STL keywords in capitals (sniffed as well), a
 # byte order mark, OBJ names in Latin-1 (read again by the job: it takes
 # the upload's format, not a sniff of bytes that are not UTF-8), OFF lines
-# of any length, glTF nodes 200 deep.
+# of any length, glTF nodes 200 deep, OBJ with CR line ends (classic Mac
+# OS) or RGBA vertex colours, 4OFF (x y z w) and nOFF of dimension 3.
 cube "$F/cube_upper.stl" model/stl stl 0
 cube "$F/cube_upper.stl" application/octet-stream stl 0
 cube "$F/cube_bom.stl" model/stl stl 0
 cube "$F/cube_latin1.obj" model/obj obj 6
 LATIN1_ID=$MESH_ID
 cube "$F/cube_long.off" model/x-off off 6
+cube "$F/cube_cr.obj" model/obj obj 6
+cube "$F/cube_cr.obj" "" obj 6
+cube "$F/cube_rgba.obj" model/obj obj 6
+cube "$F/cube_4.off" model/x-off off 6
+cube "$F/cube_4.off" "" off 6
+cube "$F/cube_n.off" model/x-off off 6
 cube "$F/cube_deep.gltf" model/gltf+json gltf 0
 run_job voxelize "$LATIN1_ID" '{"resolution":8,"format":"summary"}'
 job_ok "voxelize the OBJ with Latin-1 names"
@@ -97,6 +104,8 @@ bad zero_rotation.gltf model/gltf+json gltf_corrupt "not all 0"
 # Counts too small (the rest read out of step), an index that is no integer
 bad short.off model/x-off off_corrupt "more after the last face"
 bad float_index.off model/x-off off_corrupt "whole-number indices"
+bad n4.off model/x-off off_corrupt "nOFF of dimension 4"
+bad w0.off model/x-off off_corrupt "w is 0"
 bad short.ply model/x-ply ply_corrupt "after the last element"
 bad trailing.ply model/x-ply ply_corrupt "4 bytes after the last element"
 # 200000 instances of the cube: the header check indexes the file's arrays
