@@ -46,15 +46,15 @@ static const opt_def opts[] = {
      "yes or no (default)"},
     {"http-threads", T_COUNT, F(http_threads), 0, "HTTP thread pool size (default 4)"},
     {"workers", T_COUNT, F(workers), 0, "CPU worker threads (default: number of CPUs)"},
-    {"max-upload-bytes", T_SIZE, F(max_upload_bytes), 0, "largest mesh upload (default 1G)"},
-    {"max-triangles", T_SIZE, F(max_triangles), 0, "most triangles in a mesh (default 20000000)"},
+    {"max-upload-bytes", T_SIZE, F(max_upload_bytes), 0, "largest mesh upload (default 1G; at least 1)"},
+    {"max-triangles", T_SIZE, F(max_triangles), 0, "most triangles in a mesh (default 20000000; 0 = no limit)"},
     {"max-queued-jobs", T_SIZE, F(max_queued_jobs), 0, "queued jobs before 429 (default 64)"},
     {"job-timeout", T_SECONDS, F(job_timeout_s), 0,
      "longest a job may run, seconds (default 600; 0 = no limit)"},
     {"request-timeout", T_SECONDS, F(request_timeout_s), 0,
-     "longest a request is held by ?wait, seconds (default 60)"},
+     "longest a request is held by ?wait, seconds (default 60; 0 = ?wait answers at once)"},
     {"connection-timeout", T_SECONDS, F(connection_timeout_s), 0,
-     "idle connections are closed after this, seconds (default 30)"},
+     "idle connections are closed after this, seconds (default 30; 0 = never)"},
     {"header-timeout", T_SECONDS, F(header_timeout_s), 0,
      "the whole request head must arrive within this, seconds (default 10; 0 = off)"},
     {"min-body-rate", T_SIZE, F(min_body_rate), 0,
@@ -69,11 +69,11 @@ static const opt_def opts[] = {
     {"max-connections-per-ip", T_SIZE, F(max_connections_per_ip), 0,
      "open connections from one IP (default 64; 0 = no limit)"},
     {"max-image-pixels", T_SIZE, F(max_image_pixels), 0,
-     "largest rendered image, width*height (default 67108864)"},
-    {"max-job-memory", T_SIZE, F(max_job_memory), 0, "memory one job may use (default 4G)"},
+     "largest rendered image, width*height (default 67108864; 0 = no limit)"},
+    {"max-job-memory", T_SIZE, F(max_job_memory), 0, "memory one job may use (default 4G; 0 = no limit)"},
     {"brick-threshold", T_SIZE, F(brick_threshold), 0,
-     "voxelize grids of more cells run as bricks (vdb; default 1G = 1024^3)"},
-    {"max-json-bytes", T_SIZE, F(max_json_bytes), 0, "largest JSON request body (default 16M)"},
+     "voxelize grids of more cells run as bricks (vdb; default 1G = 1024^3; 0 = the default)"},
+    {"max-json-bytes", T_SIZE, F(max_json_bytes), 0, "largest JSON request body (default 16M; at least 1)"},
     {"max-parse-memory", T_SIZE, F(max_parse_memory), 0,
      "worst-case memory of concurrent upload parses before 503 (default 8 x max-upload-bytes "
      "+ 256M; 0 = no limit)"},
@@ -92,7 +92,7 @@ static const opt_def opts[] = {
     {"blob-part-size", T_SIZE, F(blob_part_size), 0,
      "s3: objects over this go up in parts of it (default 64M; at least 5M)"},
     {"blob-timeout", T_SECONDS, F(blob_timeout_s), 0,
-     "s3: connect timeout and longest stall of a transfer, seconds (default 30)"},
+     "s3: connect timeout and longest stall of a transfer, seconds (default 30; 0 = the default)"},
     {"blob-retries", T_SIZE, F(blob_retries), 0,
      "s3: retries, with backoff, of a request that met a 5xx or connection error (default 3)"},
     {"database", T_STR, S(database),
@@ -113,13 +113,14 @@ static const opt_def opts[] = {
      "disk)"},
     {"cors-origin", T_LIST, S(cors_origin),
      "origin a browser may call the API from (repeat, or a comma list; * = any; default none)"},
-    {"job-history", T_SIZE, F(job_history), 0, "finished jobs remembered (default 10000)"},
+    {"job-history", T_SIZE, F(job_history), 0, "finished jobs remembered (default 10000; at least 1)"},
     {"job-history-bytes", T_SIZE, F(job_history_bytes), 0,
      "memory the finished jobs remembered may take (default 64M; 0 = no limit)"},
     {"max-event-streams", T_SIZE, F(max_event_streams), 0,
-     "open GET /v1/jobs/{id}/events streams before 503 (default 64)"},
+     "open GET /v1/jobs/{id}/events streams before 503 (default 64; 0 = none: every one 503)"},
     {"event-keepalive", T_SECONDS, F(event_keepalive_s), 0,
-     "idle time before an event stream gets a keepalive comment, seconds (default 15)"},
+     "idle time before an event stream gets a keepalive comment, seconds (default 15; 0 = the "
+     "default)"},
 };
 #define NOPTS (sizeof opts / sizeof opts[0])
 
@@ -497,6 +498,19 @@ int vx_config_load(vx_config *c, int argc, char **argv)
         fprintf(stderr, "voxeld: max-connections must be from 1 to 1000000\n");
         return -1;
     }
+    /* 0 would refuse every upload, every JSON request, or remember no job
+     * (GET /v1/jobs/{id} 404 the moment a job ends): a mistake, not a limit */
+    static const struct {
+        const char *name;
+        size_t off;
+    } at_least_1[] = {{"max-upload-bytes", F(max_upload_bytes)},
+                      {"max-json-bytes", F(max_json_bytes)},
+                      {"job-history", F(job_history)}};
+    for (size_t i = 0; i < sizeof at_least_1 / sizeof at_least_1[0]; i++)
+        if (*(const uint64_t *)((const char *)c + at_least_1[i].off) < 1) {
+            fprintf(stderr, "voxeld: %s must be at least 1\n", at_least_1[i].name);
+            return -1;
+        }
     if (c->max_queued_jobs < 1) {
         fprintf(stderr, "voxeld: max-queued-jobs must be at least 1\n");
         return -1;

@@ -157,6 +157,14 @@ static void replica_name(const vx_config *cfg, char out[128])
 
 /* Opens the job runner and, when start, starts its GL thread; NULL (logged)
  * on failure. Not started, it keeps its queue and runs nothing. */
+/* Whether a failed start was a bad option's value (exit 2) that only the
+ * store or the queue could tell: a file:// store that is not absolute, a
+ * malformed s3:// or database URL. */
+static int bad_option(const vx_err *err)
+{
+    return !strcmp(err->code, "bad_blob_store") || !strcmp(err->code, "invalid_database_url");
+}
+
 static vx_jobs *open_jobs(const vx_config *cfg, vx_store *store, int start, vx_err *err)
 {
     vx_err cerr;
@@ -276,14 +284,16 @@ int main(int argc, char **argv)
     if (!store) {
         VX_ERROR("voxeld.fatal", "stage=store code=%s message=%s", err.code,
                  vx_log_quote((char[600]){0}, 600, err.message));
-        return 1;
+        if (!bad_option(&err)) return 1;
+        fprintf(stderr, "voxeld: --blob-store: %s\n", err.message);
+        return 2;
     }
     vx_gl_info refused;
     int soft = cfg.require_gpu && probe_software_gl(&cfg, &refused) == 1;
     vx_jobs *jobs = open_jobs(&cfg, store, !soft, &err);
     if (!jobs) {
         vx_store_close(store);
-        return 1;
+        return bad_option(&err) ? 2 : 1;
     }
     vx_gl_info gi = soft ? refused : vx_jobs_gl_info(jobs);
     char qr[300], qv[200];

@@ -65,6 +65,20 @@ check "an empty --token-file exits 2" test $? -eq 2
 VOXELD_TOKEN_FILE= "$VOXELD" --listen 127.0.0.1:0 --data-dir "$TMP/d3" 2>"$TMP/err5"
 check "an empty VOXELD_TOKEN_FILE exits 2" test $? -eq 2
 check "and says so" grep -q 'token-file is empty' "$TMP/err5"
+# A limit of 0 that would refuse every upload, or remember no job, is a
+# mistake: exit 2 naming it.
+for opt in max-upload-bytes max-json-bytes job-history; do
+    "$VOXELD" --$opt 0 --listen 127.0.0.1:0 --data-dir "$TMP/d3" 2>"$TMP/err0"
+    check "--$opt 0 exits 2" test $? -eq 2
+    check "--$opt 0 is named" grep -q "$opt must be at least 1" "$TMP/err0"
+done
+# Values only the queue can parse: a malformed database URL is a bad option
+# too (exit 2), said before any connection is tried.
+"$VOXELD" --database 'postgresql://u@[::1' --listen 127.0.0.1:0 --data-dir "$TMP/d3" 2>"$TMP/err6"
+check "a malformed --database URL exits 2" test $? -eq 2
+check "and says why" grep -q 'voxeld: --database: bad database URL' "$TMP/err6"
+"$VOXELD" --database 'mysql://x/y' --listen 127.0.0.1:0 --data-dir "$TMP/d3" 2>"$TMP/err7"
+check "a --database URL of another scheme exits 2" test $? -eq 2
 "$VOXELD" --version >"$TMP/version"
 check "--version" grep -q '^voxeld [0-9]' "$TMP/version"
 "$VOXELD" --help >"$TMP/help"

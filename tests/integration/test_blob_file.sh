@@ -73,7 +73,8 @@ api_bad_url() {
     "$VOXELD" --listen 127.0.0.1:0 --data-dir "$TMP/data4" --blob-store "$1" 2>"$TMP/bad.log"
 }
 api_bad_url "file://relative/dir"
-check "a relative file:// dir is refused at start" test $? -ne 0
+check "a relative file:// dir is refused at start, as a bad option (exit 2)" test $? -eq 2
+check "saying it must be absolute" grep -q 'voxeld: --blob-store: .*absolute' "$TMP/bad.log"
 api_bad_url "ftp://x"
 check "an unknown scheme is refused at start, as a bad option (exit 2)" test $? -eq 2
 check "with a message" grep -q 'bad_blob_store' "$TMP/bad.log"

@@ -568,7 +568,9 @@ static void test_many_lines(void **state)
         char *p = text;
         for (size_t i = 0; i < nv; i++)
             p += sprintf(p, "v %zu.5 %zu -%zu.25%s", i, i % 7, i % 13,
-                         cr ? "\r" : i % 2 ? "\r\n" : "\n");
+                         cr      ? "\r"
+                         : i % 2 ? "\r\n"
+                                 : "\n");
         for (size_t i = 0; i + 2 < nv; i += 2)
             p += sprintf(p, "f %zu %zu %zu%s", i + 1, i + 2, i + 3, cr ? "\r" : "\n");
         vx_err err = {0};
