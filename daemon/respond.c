@@ -159,7 +159,9 @@ int vx_resp_err_with(struct MHD_Connection *c, req *r, const vx_err *e, const ch
     cJSON *o = cJSON_AddObjectToObject(doc, "error");
     cJSON_AddStringToObject(o, "code", code);
     cJSON_AddStringToObject(o, "message", clean);
-    if (a.status >= 500) VX_ERROR("http.error", "status=%u code=%s", a.status, code);
+    if (a.status >= 500)
+        VX_ERROR("http.error", "request_id=%s status=%u code=%s", r && r->rid[0] ? r->rid : "-",
+                 a.status, code);
     if (!a.header) return vx_resp_json(c, r, a.status, doc, h, v);
     return vx_resp_json(c, r, a.status, doc, a.header,
                         a.header && !a.value ? vx_req_route_allow(r->route) : a.value);

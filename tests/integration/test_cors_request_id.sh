@@ -7,7 +7,7 @@ source "$(dirname "$0")/lib.sh"
 TOKEN=secret-token
 printf '%s\n' "$TOKEN" >"$TMP/token"
 start_daemon --token-file "$TMP/token" --cors-origin http://viewer.example \
-    --cors-origin "http://b.example:8000, http://c.example" || exit 1
+    --cors-origin "http://b.example:8000, http://c.example" --max-event-streams 0 || exit 1
 
 # Preflight: no credentials, answered 204 with what the browser asks about.
 # (Raw curl: OPTIONS is outside the contract's operations.)
@@ -69,6 +69,19 @@ check "the log line has the request id" test -n "$LINE"
 check "the log line has the concrete path" bash -c "grep -q 'path=/v1/jobs/01a200443ae27c41d09b5e3fa2c86d14 ' <<<'$LINE'"
 check "the log line has the template route" bash -c "grep -q 'route=/v1/jobs/{id} ' <<<'$LINE'"
 check "the log line has the client address" bash -c "grep -q 'client=127.0.0.1 ' <<<'$LINE'"
+# A 5xx's error line carries the request's id too (--max-event-streams 0:
+# every stream is 503).
+upload "$VX_SOURCE_DIR/examples/meshes/torus.obj"
+run_job voxelize "$MESH_ID" '{"resolution":8,"format":"summary"}'
+api GET "/v1/jobs/$JOB/events" -H "X-Request-Id: client-503.1"
+expect_error "no event streams allowed" 503 too_many_streams
+for _ in $(seq 1 100); do
+    LINE=$(grep -a 'event=http.error' "$TMP/daemon.log" | grep -a 'request_id=client-503.1 ' | tail -n 1)
+    [[ -n $LINE ]] && break
+    sleep 0.1
+done
+check "the http.error line names the request id" test -n "$LINE"
+check "and the status and code" bash -c "grep -q 'status=503 code=too_many_streams' <<<'$LINE'"
 
 stop_daemon
 
