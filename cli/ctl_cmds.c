@@ -75,22 +75,62 @@ static char *query_arg(const char *key, const char *v)
     return q;
 }
 
-/* Uploads file, named by its base name where the server takes it as a
- * mesh name (1..100 bytes, no control character, '\\' or '"'); the mesh
- * id into id[65]. 0 or the exit status. */
-/* Uploads file: its mesh id into id, and with --json and `echo` the
- * server's Mesh on stdout. */
+/* Copies standard input ("-"), a FIFO or a character device into a new
+ * temporary file (its name into spool): an upload needs the length first.
+ * 0, or 1 said on stderr (spool then holds no file). */
+static int spool_stream(const char *file, char *spool, size_t n)
+{
+    const char *dir = getenv("TMPDIR");
+    snprintf(spool, n, "%s/voxelctl-upload-XXXXXX", dir && *dir ? dir : "/tmp");
+    int fd = mkstemp(spool);
+    if (fd < 0) {
+        fprintf(stderr, "voxelctl: cannot make a file to hold %s: %s\n",
+                strcmp(file, "-") ? file : "standard input", strerror(errno));
+        spool[0] = 0;
+        return 1;
+    }
+    FILE *in = strcmp(file, "-") ? fopen(file, "rb") : stdin;
+    FILE *to = fdopen(fd, "wb");
+    int bad = !in || !to, rerr = 0;
+    char buf[1 << 16];
+    size_t got;
+    while (!bad && (got = fread(buf, 1, sizeof buf, in)) > 0)
+        bad = fwrite(buf, 1, got, to) != got;
+    if (in && ferror(in)) bad = rerr = 1;
+    int e = errno;
+    if (to ? fclose(to) != 0 : (close(fd), 0)) bad = 1, e = errno;
+    if (in && in != stdin) fclose(in);
+    if (bad) {
+        fprintf(stderr, "voxelctl: %s %s: %s\n", rerr || !in ? "cannot read" : "cannot hold",
+                strcmp(file, "-") ? file : "standard input", strerror(e));
+        unlink(spool);
+        spool[0] = 0;
+    }
+    return bad;
+}
+
+/* Uploads file ("-": standard input), named by its base name where the
+ * server takes it as a mesh name (1..100 bytes, no control character, '\\'
+ * or '"'): its mesh id into id[65], and with --json and `echo` the
+ * server's Mesh on stdout. 0 or the exit status. */
 static int upload(ctl *c, const char *file, char *id, int echo)
 {
+    char spool[4096] = "";
+    struct stat sb;
+    if (!strcmp(file, "-") ||
+        (stat(file, &sb) == 0 && (S_ISFIFO(sb.st_mode) || S_ISCHR(sb.st_mode))))
+        if (spool_stream(file, spool, sizeof spool)) return 1;
     ctl_buf b = {0};
     const char *base = strrchr(file, '/') ? strrchr(file, '/') + 1 : file;
-    int named = *base && strlen(base) <= 100;
+    int named = *base && strlen(base) <= 100 && strcmp(file, "-");
     for (const unsigned char *p = (const unsigned char *)base; named && *p; p++)
         named = *p >= 0x20 && *p != 0x7f && *p != '\\' && *p != '"';
     char *q = named ? query_arg("name", base) : NULL, path[400];
     snprintf(path, sizeof path, "/v1/meshes%s%s", q ? "?" : "", q ? q + 1 : "");
     free(q);
-    long st = ctl_http(c, "POST", path, mesh_type(file), NULL, file, &b, NULL, NULL, 0);
+    long st = ctl_http(c, "POST", path, mesh_type(file), NULL, spool[0] ? spool : file, &b, NULL,
+                       NULL, 0);
+    if (spool[0]) unlink(spool);
     int rc = 0;
     cJSON *doc = st == 200 || st == 201 ? cJSON_Parse(b.p) : NULL;
     if (!doc)
@@ -327,6 +367,43 @@ static int download(ctl *c, const char *jid, const char *name, const char *out)
     return rc;
 }
 
+/* out with "_NNN" (the frame's) put before its extension: spin.png ->
+ * spin_007.png; "-" stays stdout. Owned. */
+static char *frame_path(const char *out, const char *suffix)
+{
+    if (!strcmp(out, "-")) return strdup(out);
+    const char *slash = strrchr(out, '/'), *dot = strrchr(out, '.');
+    size_t at = dot && dot > (slash ? slash + 1 : out) ? (size_t)(dot - out) : strlen(out);
+    size_t n = strlen(out) + strlen(suffix) + 1;
+    char *p = malloc(n);
+    if (p) snprintf(p, n, "%.*s%s%s", (int)at, out, suffix, out + at);
+    return p;
+}
+
+/* Downloads a finished job's result: the primary output, or for a
+ * turntable (outputs image_000, image_001, ... in the job's outputs
+ * object, name -> URL, in frame order: a render of frames > 1)
+ * every frame of it, each to out with its frame number put in (all to
+ * stdout for -o -, as for ffmpeg's image2pipe), or to the server's file
+ * names. 0 or the exit status. */
+static int download_result(ctl *c, const char *jid, const cJSON *job, const char *out)
+{
+    const cJSON *outs = cJSON_GetObjectItemCaseSensitive(job, "outputs"), *it;
+    const char *first = outs && outs->child && outs->child->string ? outs->child->string : "";
+    size_t len = strlen(first);
+    if (len < 5 || strcmp(first + len - 4, "_000") != 0) return download(c, jid, NULL, out);
+    int rc = 0;
+    cJSON_ArrayForEach(it, outs)
+    {
+        const char *name = it->string ? it->string : "";
+        if (rc || strlen(name) != len || strncmp(name, first, len - 3) != 0) continue;
+        char *to = out ? frame_path(out, name + len - 4) : NULL;
+        rc = out && !to ? 1 : download(c, jid, name, to);
+        free(to);
+    }
+    return rc;
+}
+
 /* A job that wrote no file (voxelize's summary): its stats, as JSON, to
  * out (stdout when NULL). 0 or the exit status. */
 static int write_stats(const cJSON *job, const char *out)
@@ -391,7 +468,7 @@ int ctl_cmd_job(ctl *c, const char *kind, const char *src, cJSON *params, const 
                 str(e, "code"));
         rc = 1;
     } else if (cJSON_GetArraySize(cJSON_GetObjectItemCaseSensitive(job, "outputs")) > 0) {
-        rc = download(c, jid, NULL, out);
+        rc = download_result(c, jid, job, out);
     } else if (!c->json) {
         rc = write_stats(job, out);
     }

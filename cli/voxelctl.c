@@ -36,6 +36,7 @@ static void usage(FILE *out)
         "  Ctrl-C stops waiting, not the job: it says the job id to cancel.\n"
         "Other commands:\n"
         "  upload FILE               store a mesh, print its id\n"
+        "  (FILE: - is standard input; stdin, a FIFO or a device is read whole first)\n"
         "  jobs [--state S] [--newest] [--limit N] [--after ID]  (--newest: newest first)\n"
         "  meshes [--limit N] [--after ID]\n"
         "  get JOB [-o FILE] [--name OUTPUT]  show a job, or download an output\n"
@@ -101,7 +102,15 @@ typedef struct args {
 } args;
 
 /* Options that belong to some commands only. */
-enum { OPT_JOB = 1, OPT_OUT = 2, OPT_NAME = 4, OPT_STATE = 8, OPT_PAGE = 16 };
+enum {
+    OPT_JOB = 1,
+    OPT_OUT = 2,
+    OPT_NAME = 4,
+    OPT_STATE = 8,
+    OPT_PAGE = 16,
+    OPT_RES = 32, /* -r: voxelize's resolution, render's N */
+    OPT_FMT = 64  /* -f: the kinds with a format parameter */
+};
 
 /* Reads the options (anywhere on the line); the rest stay in argv[optind..]. */
 /* s as a whole number in lo..hi (lo > 0), or 0 when it is not one. */
@@ -204,11 +213,11 @@ static int read_options(ctl *c, args *a, int argc, char **argv)
                 return -1;
             }
             a->resolution = optarg;
-            a->given |= OPT_JOB;
+            a->given |= OPT_RES;
             break;
         case 'f':
             a->format = optarg;
-            a->given |= OPT_JOB;
+            a->given |= OPT_FMT;
             break;
         case O_NAME:
             a->name = optarg;
@@ -318,10 +327,10 @@ static const struct {
     int args;
     unsigned opts;
 } commands[] = {
-    {"voxelize", 1, OPT_JOB | OPT_OUT},
-    {"render", 1, OPT_JOB | OPT_OUT},
-    {"gregory", 1, OPT_JOB | OPT_OUT},
-    {"catmull-clark", 1, OPT_JOB | OPT_OUT},
+    {"voxelize", 1, OPT_JOB | OPT_OUT | OPT_RES | OPT_FMT},
+    {"render", 1, OPT_JOB | OPT_OUT | OPT_RES},
+    {"gregory", 1, OPT_JOB | OPT_OUT | OPT_FMT},
+    {"catmull-clark", 1, OPT_JOB | OPT_OUT | OPT_FMT},
     {"preview", 1, OPT_JOB | OPT_OUT},
     {"upload", 1, 0},
     {"jobs", 0, OPT_STATE | OPT_PAGE},
@@ -334,15 +343,16 @@ static const struct {
 /* Whether the command line fits command k (what does not is said). */
 static int fits(int k, const args *a, int n)
 {
-    static const char *const what[] = {"-r, -f, -p, --params and --no-wait", "-o", "--name",
-                                       "--state and --newest", "--limit and --after"};
+    static const char *const what[] = {"-p, --params and --no-wait", "-o", "--name",
+                                       "--state and --newest", "--limit and --after", "-r",
+                                       "-f"};
     const char *cmd = commands[k].name;
     if (n - 1 != commands[k].args) {
         fprintf(stderr, "voxelctl: %s takes %s (see voxelctl --help)\n", cmd,
                 commands[k].args ? "one argument" : "no argument");
         return 0;
     }
-    for (int b = 0; b < 5; b++)
+    for (int b = 0; b < 7; b++)
         if (a->given & ~commands[k].opts & (1u << b)) {
             fprintf(stderr, "voxelctl: %s is not an option of %s\n", what[b], cmd);
             return 0;

@@ -158,12 +158,36 @@ check "jobs --newest: the latest job first" test "$("$CTL" jobs --newest --limit
 # Usage errors say what is wrong and exit 2 before anything is sent.
 for bad in "voxelize $MID -p azimuth=1e400" "voxelize $MID -r 8 -p resolution=16" \
     "render $MID --name normal" "jobs --name x" "get ../meshes/$MID" "--json get x -o -" \
-    "voxelize" "frobnicate"; do
+    "voxelize" "frobnicate" "gregory $MID -r 8" "render $MID -f png" "preview $MID -f png"; do
     # shellcheck disable=SC2086
     "$CTL" $bad >/dev/null 2>ctl.err
     rc=$?
     check "usage error exits 2: $bad ($(head -c 100 ctl.err))" test $rc -eq 2
 done
+check "a kind without -r: said" sh -c "'$CTL' gregory '$MID' -r 8 2>&1 | grep -q -- '-r is not an option of gregory'"
+# A mesh from standard input or a FIFO (read whole first: an upload needs
+# its length).
+"$CTL" -q upload - <"$MESH" >stdin.id 2>ctl.err
+rc=$?
+check "upload -: exit 0 ($(cat ctl.err))" test $rc -eq 0
+check "upload -: the same mesh as the file" test "$(cat stdin.id)" = "$MID"
+mkfifo mesh.fifo
+cat "$MESH" >mesh.fifo &
+"$CTL" -q voxelize mesh.fifo -r 8 -f summary >fifo.json 2>ctl.err
+rc=$?
+check "voxelize a FIFO: exit 0 ($(cat ctl.err))" test $rc -eq 0
+check "voxelize a FIFO: the stats" jq -e '.voxels_inside > 0' fifo.json
+check "no spooled file left" test -z "$(ls "${TMPDIR:-/tmp}"/voxelctl-upload-* 2>/dev/null)"
+# A turntable: every frame downloaded, its number put into -o's name.
+TURN=(-r 16 -p camera.type=orbit -p width=32 -p height=24)
+"$CTL" -q render "$MID" "${TURN[@]}" -p frames=3 -o spin.png 2>ctl.err
+rc=$?
+check "turntable: exit 0 ($(cat ctl.err))" test $rc -eq 0
+check "turntable: three PNG frames" test "$(file -b spin_000.png spin_001.png spin_002.png | grep -c '32 x 24')" = 3
+check "turntable: no file under the plain name" test ! -e spin.png
+check "turntable: the frames differ" sh -c 'test -s spin_001.png && ! cmp -s spin_000.png spin_001.png'
+"$CTL" -q render "$MID" "${TURN[@]}" -p frames=3 -o - >spin.all 2>ctl.err
+check "turntable -o -: the frames in turn on stdout" sh -c 'cat spin_000.png spin_001.png spin_002.png | cmp -s - spin.all'
 "$CTL" -q voxelize "$MID" -r 8 -f binvox -o - >/dev/full 2>ctl.err
 rc=$?
 check "stdout that cannot be written: exit 1 ($(cat ctl.err))" test $rc -eq 1
