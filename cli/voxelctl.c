@@ -343,9 +343,9 @@ static const struct {
 /* Whether the command line fits command k (what does not is said). */
 static int fits(int k, const args *a, int n)
 {
-    static const char *const what[] = {"-p, --params and --no-wait", "-o", "--name",
-                                       "--state and --newest", "--limit and --after", "-r",
-                                       "-f"};
+    static const char *const what[] = {
+        "-p, --params and --no-wait", "-o", "--name", "--state and --newest",
+        "--limit and --after",        "-r", "-f"};
     const char *cmd = commands[k].name;
     if (n - 1 != commands[k].args) {
         fprintf(stderr, "voxelctl: %s takes %s (see voxelctl --help)\n", cmd,

@@ -604,10 +604,12 @@ static int first_line_is_count(const unsigned char *head, size_t n)
 vx_mesh_format vx_mesh_sniff(const unsigned char *head, size_t n)
 {
     if (n >= 5 && memcmp(head, "DRACO", 5) == 0) return VX_MESH_DRACO;
-    /* Text: printable ASCII, whitespace controls, and well-formed UTF-8
-     * (names in comments and groups). An empty file counts as text, so that
-     * the OBJ reader reports it as having no faces. */
-    size_t i = 0;
+    /* Text: printable ASCII and whitespace controls, with UTF-8 names in
+     * comments and groups, or names in a single-byte code page (Latin-1,
+     * Windows-1252: bytes over 0x7f that are not UTF-8), as long as those
+     * are at most 1 in 8 bytes. An empty file counts as text, so that the
+     * OBJ reader reports it as having no faces. */
+    size_t i = 0, single = 0;
     while (i < n) {
         unsigned c = head[i];
         if (c < 0x80) {
@@ -621,13 +623,17 @@ vx_mesh_format vx_mesh_sniff(const unsigned char *head, size_t n)
                      : c >= 0xe0 && c <= 0xef ? 3
                      : c >= 0xf0 && c <= 0xf4 ? 4
                                               : 0;
-        if (!len) return 0;
-        for (size_t k = 1; k < len; k++) {
-            if (i + k >= n) return VX_MESH_OBJ; /* sequence cut by the sniff window */
-            if ((head[i + k] & 0xc0) != 0x80) return 0;
+        size_t k = 1;
+        while (len && k < len && i + k < n && (head[i + k] & 0xc0) == 0x80)
+            k++;
+        if (len && (k == len || i + k == n)) { /* UTF-8, or cut by the window */
+            i += k;
+            continue;
         }
-        i += len;
+        single++;
+        i++;
     }
+    if (single > n / 8) return 0;
     return first_line_is_count(head, n) ? VX_MESH_BPT : VX_MESH_OBJ;
 }
 

@@ -53,6 +53,7 @@ cube "$F/cube_upper.stl" application/octet-stream stl 0
 cube "$F/cube_bom.stl" model/stl stl 0
 cube "$F/cube_latin1.obj" model/obj obj 6
 LATIN1_ID=$MESH_ID
+cube "$F/cube_latin1.obj" "" obj 6
 cube "$F/cube_long.off" model/x-off off 6
 cube "$F/cube_cr.obj" model/obj obj 6
 cube "$F/cube_cr.obj" "" obj 6

@@ -698,8 +698,13 @@ static void test_sniff(void **state)
     assert_int_equal(vx_mesh_sniff((const unsigned char *)"", 0), VX_MESH_OBJ);
     assert_int_equal(vx_mesh_sniff((const unsigned char *)"v 1\0", 4), 0);
     assert_int_equal(vx_mesh_sniff((const unsigned char *)"\x89PNG\r\n", 6), 0);
-    assert_int_equal(vx_mesh_sniff((const unsigned char *)"# \xc3\x28", 4), 0);
+    /* names in Latin-1 (not UTF-8): text, while such bytes are few */
+    const char *latin1 = "# caf\xe9 au lait \xc3\x28\nv 1 2 3\n";
+    assert_int_equal(vx_mesh_sniff((const unsigned char *)latin1, strlen(latin1)), VX_MESH_OBJ);
+    assert_int_equal(vx_mesh_sniff((const unsigned char *)"# M\xe4x W\xfcrfel\nv 1 2 3\n", 20),
+                     VX_MESH_OBJ);
     assert_int_equal(vx_mesh_sniff((const unsigned char *)"# \xff", 3), 0);
+    assert_int_equal(vx_mesh_sniff((const unsigned char *)"\xfe\xfa\xe0 x", 5), 0);
     assert_int_equal(vx_mesh_sniff((const unsigned char *)"ply\x1b", 4), 0);
     assert_int_equal(vx_mesh_sniff((const unsigned char *)"drACO", 5), VX_MESH_OBJ);
 }
