@@ -37,6 +37,10 @@
  * When the server stops (SIGTERM), vx_conns_shutdown answers every HEAD
  * and BODY still arriving after the grace with a JSON 503 shutting_down
  * the same way, so a client is told to send it again rather than cut off.
+ * A connection opened while its address has --max-connections-per-ip
+ * open is counted here at accept (libmicrohttpd's own per-IP limit closed
+ * it without a word) and its request answered 503 too_many_connections,
+ * Connection: close, by the access handler (vx_conns_over_ip).
  * A request line longer than --max-uri-bytes gets a JSON 414 the same way
  * (from the URI log callback, in the connection's own thread), and a head
  * larger than --max-header-bytes a JSON 431 from the access handler. What
@@ -88,6 +92,8 @@ struct vx_conn {
     char origin[256]; /* BODY: the request's origin when CORS allows it, else "" */
     int path_escape;  /* the current request's path has %00 or %2F (see vx_conns_on_uri) */
     int linger;       /* answered before its body was read: drain it after the close */
+    unsigned char peer[17]; /* the client's address family and address (0s: unknown) */
+    int over_ip;            /* opened past --max-connections-per-ip: its request gets a 503 */
 };
 
 /* A socket answered before its body was read, kept open after
@@ -254,6 +260,25 @@ static void evict_oldest(vx_conns *s)
     s->ling[old] = s->ling[--s->nling];
 }
 
+/* The client's address of c into peer (family, then the IPv4 or IPv6
+ * address); 0 when unknown. */
+static int peer_of(struct MHD_Connection *c, unsigned char peer[17])
+{
+    const union MHD_ConnectionInfo *ci =
+        MHD_get_connection_info(c, MHD_CONNECTION_INFO_CLIENT_ADDRESS);
+    memset(peer, 0, 17);
+    if (!ci || !ci->client_addr) return 0;
+    const struct sockaddr *sa = ci->client_addr;
+    peer[0] = (unsigned char)sa->sa_family;
+    if (sa->sa_family == AF_INET)
+        memcpy(peer + 1, &((const struct sockaddr_in *)sa)->sin_addr, 4);
+    else if (sa->sa_family == AF_INET6)
+        memcpy(peer + 1, &((const struct sockaddr_in6 *)sa)->sin6_addr, 16);
+    else
+        return 0;
+    return 1;
+}
+
 void vx_conns_notify(void *cls, struct MHD_Connection *c, void **socket_context,
                      enum MHD_ConnectionNotificationCode code)
 {
@@ -266,7 +291,12 @@ void vx_conns_notify(void *cls, struct MHD_Connection *c, void **socket_context,
         vc->fd = ci->connect_fd;
         vc->phase = P_HEAD;
         vc->t_phase = vx_mono();
+        int known = peer_of(c, vc->peer);
         pthread_mutex_lock(&s->lock);
+        uint64_t same = 1, max = s->cfg->max_connections_per_ip;
+        for (const vx_conn *o = s->list; known && max && o && same <= max; o = o->next)
+            same += !memcmp(o->peer, vc->peer, sizeof vc->peer);
+        vc->over_ip = known && max && same > max;
         vc->next = s->list;
         if (s->list) s->list->prev = vc;
         s->list = vc;
@@ -646,6 +676,11 @@ void vx_conns_refuse(vx_conns *s, vx_conn *vc, int status, const char *code, con
     pthread_mutex_lock(&s->lock);
     if (!vc->killed && vc->phase == P_BODY) kill_conn(vc, status, code, message, 0);
     pthread_mutex_unlock(&s->lock);
+}
+
+int vx_conns_over_ip(const vx_conn *vc)
+{
+    return vc && vc->over_ip;
 }
 
 int vx_conns_path_escape(const vx_conn *vc)

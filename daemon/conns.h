@@ -44,6 +44,10 @@ void *vx_conns_on_uri(void *cls, const char *uri, struct MHD_Connection *c);
  * libmicrohttpd decoded into a NUL or a separator: such a path names no
  * resource (404). */
 int vx_conns_path_escape(const vx_conn *vc);
+/* 1 when vc was opened while its client already had --max-connections-per-ip
+ * open: its request is answered 503 too_many_connections and the
+ * connection closed (libmicrohttpd's own limit closed it unanswered). */
+int vx_conns_over_ip(const vx_conn *vc);
 /* The tracked connection of c, or NULL when untracked. */
 vx_conn *vx_conns_of(struct MHD_Connection *c);
 

@@ -273,7 +273,15 @@ static enum MHD_Result on_head(vx_http *h, struct MHD_Connection *c, const char 
     }
     memcpy(r->id, t.id, sizeof r->id);
     memcpy(r->name, t.name, sizeof r->name);
-    int rc = first_call(h, c, r, version);
+    int rc;
+    if (vx_conns_over_ip(vc)) {
+        r->close = 1;
+        rc = vx_resp_fail(c, r, VX_EOVERLOAD, "too_many_connections",
+                          "%s has more than %llu connections open (--max-connections-per-ip)",
+                          r->client, (unsigned long long)h->d.cfg->max_connections_per_ip);
+    } else {
+        rc = first_call(h, c, r, version);
+    }
     if (rc >= 0) {
         if (declares_body(c)) vx_conns_linger(h->conns, vc);
         return rc;
@@ -503,8 +511,7 @@ vx_http *vx_http_start(const vx_http_desc *desc, vx_err *err)
         MHD_OPTION_SOCK_ADDR, (struct sockaddr *)&ss, MHD_OPTION_THREAD_POOL_SIZE,
         (unsigned)cfg->http_threads, MHD_OPTION_CONNECTION_TIMEOUT,
         (unsigned)ceil(cfg->connection_timeout_s), MHD_OPTION_CONNECTION_LIMIT,
-        (unsigned)cfg->max_connections, MHD_OPTION_PER_IP_CONNECTION_LIMIT,
-        (unsigned)cfg->max_connections_per_ip, MHD_OPTION_CONNECTION_MEMORY_LIMIT,
+        (unsigned)cfg->max_connections, MHD_OPTION_CONNECTION_MEMORY_LIMIT,
         (size_t)(256 * 1024), MHD_OPTION_NOTIFY_COMPLETED, on_completed, h,
         MHD_OPTION_NOTIFY_CONNECTION, vx_conns_notify, h->conns, MHD_OPTION_URI_LOG_CALLBACK,
         vx_conns_on_uri, h->conns,

@@ -45,6 +45,7 @@ typedef struct req {
     int post_existing; /* ... answered with a job that was there already (200) */
     int answered;
     int refused;     /* a 413 was written past libmicrohttpd (vx_conns_refuse) */
+    int close;       /* the answer closes the connection (Connection: close) */
     char rid[72];    /* X-Request-Id: the client's when sane, else made here */
     char path[256];  /* the concrete path (cut), for the log */
     char client[64]; /* the client's address, for the log */

@@ -50,6 +50,7 @@ int vx_resp_queue(struct MHD_Connection *c, req *r, unsigned status, struct MHD_
 {
     if (!resp) return MHD_NO;
     if (r->rid[0]) MHD_add_response_header(resp, "X-Request-Id", r->rid);
+    if (r->close) MHD_add_response_header(resp, MHD_HTTP_HEADER_CONNECTION, "close");
     const char *origin = vx_resp_cors_origin(c);
     if (origin) {
         /* The origin itself, not "*": the answer then varies by Origin. */

@@ -148,6 +148,47 @@ def keepalive_drip(port, seconds):
                       "response": got.decode("latin-1")}))
 
 
+def per_ip(port, addr, n):
+    """n silent connections from addr, then one more that asks for /livez
+    (past the per-address limit), read until it closes; then, the n closed,
+    /livez again from addr."""
+    held = [connect(port, addr) for _ in range(n)]
+    time.sleep(0.3)  # accepted and counted before the next one
+    s = connect(port, addr)
+    s.setblocking(True)
+    s.settimeout(5)
+    s.sendall(b"GET /livez HTTP/1.1\r\nHost: x\r\n\r\n")
+    got, closed = b"", False
+    try:
+        while True:
+            b = s.recv(4096)
+            if not b:
+                closed = True
+                break
+            got += b
+    except (socket.timeout, OSError):
+        pass
+    s.close()
+    for h in held:
+        h.close()
+    time.sleep(0.3)
+    s = connect(port, addr)
+    s.setblocking(True)
+    s.settimeout(5)
+    s.sendall(b"GET /livez HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n")
+    after = b""
+    try:
+        while True:
+            b = s.recv(4096)
+            if not b:
+                break
+            after += b
+    except (socket.timeout, OSError):
+        pass
+    print(json.dumps({"response": got.decode("latin-1"), "closed": closed,
+                      "after": after.decode("latin-1").split("\r\n")[0]}))
+
+
 if __name__ == "__main__":
     cmd, port = sys.argv[1], int(sys.argv[2])
     if cmd == "drip":
@@ -165,5 +206,7 @@ if __name__ == "__main__":
     elif cmd == "stall-all":
         stall(port, sys.argv[3].encode().decode("unicode_escape").encode("latin-1"), float(sys.argv[4]),
               whole=True)
+    elif cmd == "per-ip":
+        per_ip(port, sys.argv[3], int(sys.argv[4]))
     elif cmd == "keepalive-drip":
         keepalive_drip(port, float(sys.argv[3]))

@@ -60,6 +60,16 @@ for head in 'GET /livez' 'DELETE /v1/jobs/abc'; do
         jq -e '(.response | test("^HTTP/1.1 408")) and (.response | split("\r\n\r\n")[1] | fromjson | .error.code == "request_timeout") and .seconds <= 5.5' "$TMP/other.json"
 done
 
+# --- one address past --max-connections-per-ip: a JSON 503 to retry, and
+# the connection closed (libmicrohttpd's own limit closed it unanswered) ---
+$SLOW per-ip "$PORT" 127.0.0.10 8 >"$TMP/perip.json"
+check "the 9th connection from one address: 503 ($(jq -c . "$TMP/perip.json" | head -c 300))" \
+    jq -e '.response | test("^HTTP/1.1 503")' "$TMP/perip.json"
+check "the 503 says too_many_connections, with Retry-After" \
+    jq -e '(.response | split("\r\n\r\n")[1] | fromjson | .error.code == "too_many_connections") and (.response | test("\r\nRetry-After: [0-9]+\r\n"))' "$TMP/perip.json"
+check "and closes the connection" jq -e '.closed and (.response | test("\r\nConnection: close\r\n"; "i"))' "$TMP/perip.json"
+check "once the others closed, the address is served" jq -e '.after | test("^HTTP/1.1 200")' "$TMP/perip.json"
+
 # --- 8 addresses x 8 dripping connections fill --max-connections ---
 $SLOW drip "$PORT" 9 "$TMP/drip.json" &
 DRIP=$!
