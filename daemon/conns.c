@@ -88,10 +88,10 @@ struct vx_conn {
     int kill_status; /* the status we wrote, 0 for none */
     int rd_closed;   /* shutdown(SHUT_RD) done */
     double t_killed;
-    char rid[72];     /* BODY: the request's id; else the id of the answer written here */
-    char origin[256]; /* BODY: the request's origin when CORS allows it, else "" */
-    int path_escape;  /* the current request's path has %00 or %2F (see vx_conns_on_uri) */
-    int linger;       /* answered before its body was read: drain it after the close */
+    char rid[72];           /* BODY: the request's id; else the id of the answer written here */
+    char origin[256];       /* BODY: the request's origin when CORS allows it, else "" */
+    int path_escape;        /* the current request's path has %00 or %2F (see vx_conns_on_uri) */
+    int linger;             /* answered before its body was read: drain it after the close */
     unsigned char peer[17]; /* the client's address family and address (0s: unknown) */
     int over_ip;            /* opened past --max-connections-per-ip: its request gets a 503 */
 };

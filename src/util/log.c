@@ -3,8 +3,10 @@
 #include <pthread.h>
 #include <stdarg.h>
 #include <stdio.h>
+#include <stdlib.h>
 #include <string.h>
 #include <strings.h>
+#include <sys/stat.h>
 #include <time.h>
 
 static vx_log_level g_level = VX_LOG_INFO;
@@ -23,6 +25,24 @@ static void fork_done(void)
 __attribute__((constructor)) static void log_atfork(void)
 {
     pthread_atfork(fork_prepare, fork_done, fork_done);
+}
+
+/* 1 when stderr is the journal's stream (systemd sets JOURNAL_STREAM to its
+ * device:inode): then each line starts with its syslog priority, <3> to
+ * <7>, which journald takes as the level. Elsewhere (a container runtime,
+ * a terminal, a file) the prefix would only be noise. */
+static int journal_prefix(void)
+{
+    static int known = -1;
+    int k = __atomic_load_n(&known, __ATOMIC_ACQUIRE);
+    if (k >= 0) return k;
+    const char *js = getenv("JOURNAL_STREAM");
+    unsigned long long dev, ino;
+    struct stat st;
+    k = js && sscanf(js, "%llu:%llu", &dev, &ino) == 2 && fstat(2, &st) == 0 &&
+        (unsigned long long)st.st_dev == dev && (unsigned long long)st.st_ino == ino;
+    __atomic_store_n(&known, k, __ATOMIC_RELEASE);
+    return k;
 }
 
 void vx_log_set_level(vx_log_level level)
@@ -75,18 +95,20 @@ void vx_log(vx_log_level level, const char *event, const char *fmt, ...)
     struct tm tm;
     clock_gettime(CLOCK_REALTIME, &ts);
     gmtime_r(&ts.tv_sec, &tm);
-    int n =
-        snprintf(line, sizeof line, "<%d>ts=%04d-%02d-%02dT%02d:%02d:%02d.%03ldZ level=%s event=%s",
-                 (int)level, tm.tm_year + 1900, tm.tm_mon + 1, tm.tm_mday, tm.tm_hour, tm.tm_min,
-                 tm.tm_sec, ts.tv_nsec / 1000000, level_name(level), event);
-    if (n < 0) return;
+    int n = journal_prefix() ? snprintf(line, sizeof line, "<%d>", (int)level) : 0;
+    int m = snprintf(line + n, sizeof line - (size_t)n,
+                     "ts=%04d-%02d-%02dT%02d:%02d:%02d.%03ldZ level=%s event=%s",
+                     tm.tm_year + 1900, tm.tm_mon + 1, tm.tm_mday, tm.tm_hour, tm.tm_min,
+                     tm.tm_sec, ts.tv_nsec / 1000000, level_name(level), event);
+    if (n < 0 || m < 0) return;
+    n += m;
     if (fmt && fmt[0] && (size_t)n < sizeof line - 2) {
         line[n++] = ' ';
         va_list ap;
         va_start(ap, fmt);
-        int m = vsnprintf(line + n, sizeof line - (size_t)n, fmt, ap);
+        int k = vsnprintf(line + n, sizeof line - (size_t)n, fmt, ap);
         va_end(ap);
-        if (m > 0) n += m;
+        if (k > 0) n += k;
     }
     if ((size_t)n >= sizeof line - 1) n = (int)sizeof line - 2;
     /* One message is one line: newlines inside values would split it. */

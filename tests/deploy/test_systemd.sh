@@ -110,14 +110,19 @@ check "notify socket listening" test -S "$NOTIFY"
 # working directory that is not the data dir. The cache dir does not exist yet,
 # so that voxeld creating it shows it used $CACHE_DIRECTORY.
 mkdir -p "$TMP/state" "$TMP/cwd"
+# stderr is the journal's stream (JOURNAL_STREAM names its device:inode, as
+# systemd sets it): each line starts with its priority for journald.
+: >"$TMP/daemon.log"
+JS=$(stat -c '%d:%i' "$TMP/daemon.log")
 T0=$(python3 -c 'import time; print(f"{time.monotonic():.3f}")')
 (
     cd "$TMP/cwd" || exit 1
     umask 0027
     export NOTIFY_SOCKET=$NOTIFY WATCHDOG_USEC=30000000 WATCHDOG_PID=$BASHPID
     export STATE_DIRECTORY=$TMP/state:$TMP/state-second CACHE_DIRECTORY=$TMP/cachedir:$TMP/cache-second
+    export JOURNAL_STREAM=$JS
     exec "$VOXELD" --listen 127.0.0.1:0 --workers 2 --http-threads 4
-) 2>"$TMP/daemon.log" &
+) 2>>"$TMP/daemon.log" &
 PID=$!
 for i in $(seq 1 600); do
     grep -q ' READY=1$' "$NLOG" && break

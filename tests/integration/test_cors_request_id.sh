@@ -69,6 +69,7 @@ check "the log line has the request id" test -n "$LINE"
 check "the log line has the concrete path" bash -c "grep -q 'path=/v1/jobs/01a200443ae27c41d09b5e3fa2c86d14 ' <<<'$LINE'"
 check "the log line has the template route" bash -c "grep -q 'route=/v1/jobs/{id} ' <<<'$LINE'"
 check "the log line has the client address" bash -c "grep -q 'client=127.0.0.1 ' <<<'$LINE'"
+check "off the journal, lines start with ts= (no syslog priority)" bash -c "grep -q '^ts=' <<<'$LINE'"
 # A 5xx's error line carries the request's id too (--max-event-streams 0:
 # every stream is 503).
 upload "$VX_SOURCE_DIR/examples/meshes/torus.obj"
