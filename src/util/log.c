@@ -97,9 +97,9 @@ void vx_log(vx_log_level level, const char *event, const char *fmt, ...)
     gmtime_r(&ts.tv_sec, &tm);
     int n = journal_prefix() ? snprintf(line, sizeof line, "<%d>", (int)level) : 0;
     int m = snprintf(line + n, sizeof line - (size_t)n,
-                     "ts=%04d-%02d-%02dT%02d:%02d:%02d.%03ldZ level=%s event=%s",
-                     tm.tm_year + 1900, tm.tm_mon + 1, tm.tm_mday, tm.tm_hour, tm.tm_min,
-                     tm.tm_sec, ts.tv_nsec / 1000000, level_name(level), event);
+                     "ts=%04d-%02d-%02dT%02d:%02d:%02d.%03ldZ level=%s event=%s", tm.tm_year + 1900,
+                     tm.tm_mon + 1, tm.tm_mday, tm.tm_hour, tm.tm_min, tm.tm_sec,
+                     ts.tv_nsec / 1000000, level_name(level), event);
     if (n < 0 || m < 0) return;
     n += m;
     if (fmt && fmt[0] && (size_t)n < sizeof line - 2) {

@@ -6,11 +6,14 @@ source "$(dirname "$0")/lib.sh"
 BUILD=$(dirname "$VOXELD")
 P=$TMP/prefix
 cmake --install "$BUILD" --prefix "$P" >"$TMP/install.log" 2>&1
-check "cmake --install exits 0 ($(tail -n 1 "$TMP/install.log"))" test $? -eq 0
+rc=$?
+check "cmake --install exits 0 ($(tail -n 1 "$TMP/install.log"))" test $rc -eq 0
 for f in bin/voxeld bin/voxelctl lib/systemd/system/voxeld.service \
     share/doc/voxeld/voxeld.conf.example share/doc/voxeld/systemd/dropin-config.conf \
     share/doc/voxeld/examples/voxeld_client.py share/man/man8/voxeld.8 share/man/man1/voxelctl.1; do
     check "installed $f" test -s "$P/$f"
+    # what `xargs rm < install_manifest.txt` removes
+    check "install_manifest.txt lists $f" grep -qx "$P/$f" "$BUILD/install_manifest.txt"
 done
 extra=$(cd "$P" && find . -type f \( -name 'test_*' -o -name '*bench*' -o -name 'fuzz_*' -o -name '*.a' \
     -o -name '*.so*' -o -name '*.h' -o -name 'pngstat' -o -name 'params_spec' \) | tr '\n' ' ')
