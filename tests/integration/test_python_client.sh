@@ -9,7 +9,8 @@ cd "$TMP"
 MESH=$VX_MESH_DIR/suzanne.obj
 
 VOXELD_URL=$BASE VOXELD_TOKEN=py-token python3 "$PYC" voxelize "$MESH" -p resolution=48 -p format=binvox -o py.binvox >job.json 2>py.err
-check "program: exit 0 ($(tail -n 1 py.err))" test $? -eq 0
+rc=$?
+check "program: exit 0 ($(tail -n 1 py.err))" test $rc -eq 0
 check "program: the succeeded job" jq -e '.state == "succeeded" and .params.resolution == 48' job.json
 check "program: a binvox file" test "$(head -n 1 py.binvox)" = "#binvox 1"
 check "program: progress lines" grep -q 'succeeded 100%' py.err

@@ -70,7 +70,8 @@ for c in level_set fog; do
     # the path, and $TMP has one)
     (cd "$TMP" && vdb_render "$c.vdb" "$c.ppm" -res 48x48 -translate 0,0,4 -lookat 0,0,0 -cpus 1) \
         >"$TMP/$c.render" 2>&1
-    check "vdb_render renders $c ($(tail -c 200 "$TMP/$c.render"))" test $? = 0
+    rc=$?
+    check "vdb_render renders $c ($(tail -c 200 "$TMP/$c.render"))" test $rc = 0
     # the sphere fills the middle of the image: its centre pixel differs from a corner
     check "vdb_render $c: the sphere is in the image" python3 - "$TMP/$c.ppm" <<'PY'
 import sys

@@ -12,7 +12,8 @@ cd "$TMP"
 
 # voxelize: upload, follow (plain lines: stderr is not a terminal), download.
 "$CTL" voxelize "$MESH" -r 64 -f binvox -o out.binvox >ctl.out 2>ctl.err
-check "voxelize: exit 0 ($(tail -n 2 ctl.err))" test $? -eq 0
+rc=$?
+check "voxelize: exit 0 ($(tail -n 2 ctl.err))" test $rc -eq 0
 check "voxelize: a binvox file" test "$(head -n 1 out.binvox)" = "#binvox 1"
 check "voxelize: 64 voxels along the longest side" awk '/^dim/ { exit !($2 == 64 || $3 == 64 || $4 == 64) }' out.binvox
 check "voxelize: progress lines end with succeeded 100%" grep -Eq '^[0-9a-f]{32} succeeded 100%$' ctl.err
@@ -42,7 +43,8 @@ check "meshes: lists the mesh" sh -c "'$CTL' meshes | grep -q '^$MID'"
 
 # A mesh id instead of a file; the token from --token over the environment.
 VOXELD_TOKEN=wrong "$CTL" --token s3cret-token --quiet preview "$MID" -p width=64 -p height=48 -o p.png 2>ctl.err
-check "preview by mesh id: exit 0 ($(cat ctl.err))" test $? -eq 0
+rc=$?
+check "preview by mesh id: exit 0 ($(cat ctl.err))" test $rc -eq 0
 check "preview: a PNG" sh -c "head -c 8 p.png | od -An -c | grep -q 'P   N   G'"
 check "--quiet: no progress lines, no 'wrote' line" sh -c "! grep -q -e '%' -e wrote ctl.err"
 
@@ -114,7 +116,8 @@ check "meshes --after: the next page" sh -c "test -s page2 && ! cmp -s page1 pag
 NJ=$("$CTL" --no-wait voxelize "$MID" -r 512 2>/dev/null)
 check "--no-wait: a job id ($NJ)" grep -Eq '^[0-9a-f]{32}$' <<<"$NJ"
 "$CTL" cancel "$NJ" >cancel.out 2>&1
-check "cancel: exit 0 ($(cat cancel.out))" test $? -eq 0
+rc=$?
+check "cancel: exit 0 ($(cat cancel.out))" test $rc -eq 0
 
 # Results land whole where they are asked for: parallel runs without -o
 # each through a part file of their own (they shared one: files swapped);
@@ -200,10 +203,12 @@ unset VOXELD_URL VOXELD_TOKEN
 mkdir -p "$TMP/ltmp"
 export TMPDIR=$TMP/ltmp # where --local makes its data dir
 "$CTL" --local --quiet voxelize "$MESH" -r 64 -f binvox -o local2.binvox 2>ctl.err
-check "--local: exit 0 ($(cat ctl.err))" test $? -eq 0
+rc=$?
+check "--local: exit 0 ($(cat ctl.err))" test $rc -eq 0
 check "--local: the same grid as the daemon's" cmp -s local.binvox local2.binvox
 "$VOXELD" run voxelize "$MESH" -r 64 -f binvox -o run.binvox --quiet 2>ctl.err
-check "voxeld run: exit 0 ($(cat ctl.err))" test $? -eq 0
+rc=$?
+check "voxeld run: exit 0 ($(cat ctl.err))" test $rc -eq 0
 check "voxeld run: the same grid" cmp -s local.binvox run.binvox
 "$CTL" --local voxelize "$MESH" -r 99999 2>ctl.err
 check "--local: a bad param still exits 1 with the message" sh -c "test $? -eq 1 && grep -q invalid_params ctl.err"
