@@ -68,32 +68,39 @@ openvdb::math::Transform::Ptr transform_of(const vx_grid &gr)
     return xf;
 }
 
-// A FloatGrid whose leaf buffers OpenVDB's own writer gets from every
-// thread. A tree's buffers section is each leaf's LeafNode::writeBuffers in
-// tree order (the root and internal nodes only descend), and each leaf's
-// bytes depend only on the leaf and on the stream's compression and
-// background. So windows of leaves are written into memory streams in
-// parallel, a chunk each, and appended in order: the bytes of
-// Tree::writeBuffers (vdbcheck compares them with it, on the grid read
+// A grid (bool or float) whose topology and leaf buffers OpenVDB's own
+// writer gets from every thread. Both sections are OpenVDB's node calls in
+// tree order: the topology is the root's and each upper internal node's
+// own header (masks and tile values, written here as their writeTopology
+// writes them), then each lower internal node's writeTopology (its masks,
+// tile values and leaves' masks: most of the bytes); the buffers are each
+// leaf's writeBuffers. A node's bytes depend only on the node and on the
+// stream's compression and background, so the lower internal nodes and
+// windows of leaves are written into memory streams in parallel, a chunk
+// each, and appended in order: the bytes of Tree::writeTopology and
+// Tree::writeBuffers (vdbcheck compares them with those, on the grid read
 // back).
-class ParallelFloatGrid final : public openvdb::FloatGrid
+template <typename GridT> class ParallelGrid final : public GridT
 {
-  public:
-    explicit ParallelFloatGrid(float background) : openvdb::FloatGrid(background) {}
+    using TreeT = typename GridT::TreeType;
+    using RootT = typename TreeT::RootNodeType;
+    using UpperT = typename RootT::ChildNodeType;
+    using LowerT = typename UpperT::ChildNodeType;
+    using LeafT = typename TreeT::LeafNodeType;
+    using ValueT = typename GridT::ValueType;
 
-    void writeBuffers(std::ostream &os) const override
+    // Appends what write(ss, i) puts into a fresh memory stream (the
+    // compression and background of os) for i in [0, n), on all threads, a
+    // window of chunks at a time, in order.
+    template <typename Write>
+    static void in_parallel(std::ostream &os, size_t n, size_t chunk, Write write)
     {
-        using LeafT = openvdb::FloatTree::LeafNodeType;
-        std::vector<const LeafT *> leaves;
-        leaves.reserve(constTree().leafCount());
-        constTree().getNodes(leaves);
-        const bool half = saveFloatAsHalf();
         const uint32_t compression = openvdb::io::getDataCompression(os);
         const void *background = openvdb::io::getGridBackgroundValuePtr(os);
-        constexpr size_t chunk = 128, window = 64 * chunk;
+        const size_t window = 64 * chunk;
         std::vector<std::string> out(window / chunk);
-        for (size_t w0 = 0; w0 < leaves.size(); w0 += window) {
-            const size_t w1 = std::min(leaves.size(), w0 + window);
+        for (size_t w0 = 0; w0 < n; w0 += window) {
+            const size_t w1 = std::min(n, w0 + window);
             const size_t nc = (w1 - w0 + chunk - 1) / chunk;
             tbb::parallel_for(size_t(0), nc, [&](size_t c) {
                 std::ostringstream ss;
@@ -101,18 +108,78 @@ class ParallelFloatGrid final : public openvdb::FloatGrid
                 openvdb::io::setGridBackgroundValuePtr(ss, background);
                 const size_t a = w0 + c * chunk, b = std::min(w1, a + chunk);
                 for (size_t i = a; i < b; i++)
-                    leaves[i]->writeBuffers(ss, half);
+                    write(ss, i);
                 out[c] = ss.str();
             });
             for (size_t c = 0; c < nc; c++)
                 os.write(out[c].data(), (std::streamsize)out[c].size());
         }
     }
+
+    template <typename T> static void put(std::ostream &os, const T &v)
+    {
+        os.write(reinterpret_cast<const char *>(&v), sizeof v);
+    }
+
+  public:
+    explicit ParallelGrid(const ValueT &background) : GridT(background) {}
+
+    void writeTopology(std::ostream &os) const override
+    {
+        const bool half = this->saveFloatAsHalf();
+        const RootT &root = this->constTree().root();
+        put(os, int32_t(1)); // TreeBase::writeTopology: the buffer count
+        // RootNode::writeTopology
+        put(os, half ? openvdb::io::truncateRealToHalf(root.background()) : root.background());
+        openvdb::io::setGridBackgroundValuePtr(os, &root.background());
+        openvdb::Index tiles = 0;
+        for (auto it = root.cbeginValueAll(); it; ++it)
+            tiles++;
+        const openvdb::Index children = root.childCount();
+        put(os, tiles);
+        put(os, children);
+        if (tiles == 0 && children == 0) return;
+        for (auto it = root.cbeginValueAll(); it; ++it) {
+            put(os, it.getCoord());
+            put(os, *it);
+            put(os, bool(it.isValueOn()));
+        }
+        std::vector<const LowerT *> lower;
+        std::unique_ptr<ValueT[]> values(new ValueT[UpperT::NUM_VALUES]);
+        for (auto it = root.cbeginChildOn(); it; ++it) {
+            put(os, it.getCoord());
+            // InternalNode::writeTopology of the upper node
+            const UpperT &up = *it;
+            up.getChildMask().save(os);
+            up.getValueMask().save(os);
+            std::fill(values.get(), values.get() + UpperT::NUM_VALUES,
+                      openvdb::zeroVal<ValueT>());
+            for (auto v = up.cbeginValueAll(); v; ++v)
+                values[v.pos()] = *v;
+            openvdb::io::writeCompressedValues(os, values.get(), UpperT::NUM_VALUES,
+                                               up.getValueMask(), up.getChildMask(), half);
+            lower.clear();
+            for (auto c = up.cbeginChildOn(); c; ++c)
+                lower.push_back(&*c);
+            in_parallel(os, lower.size(), 1,
+                        [&](std::ostream &ss, size_t i) { lower[i]->writeTopology(ss, half); });
+        }
+    }
+
+    void writeBuffers(std::ostream &os) const override
+    {
+        std::vector<const LeafT *> leaves;
+        leaves.reserve(this->constTree().leafCount());
+        this->constTree().getNodes(leaves);
+        const bool half = this->saveFloatAsHalf();
+        in_parallel(os, leaves.size(), 128,
+                    [&](std::ostream &ss, size_t i) { leaves[i]->writeBuffers(ss, half); });
+    }
 };
 
 openvdb::FloatGrid::Ptr make_float_grid(float background)
 {
-    return std::make_shared<ParallelFloatGrid>(background);
+    return std::make_shared<ParallelGrid<openvdb::FloatGrid>>(background);
 }
 
 // OpenVDB's own archive writer (the format io::File writes: seekable, with
@@ -124,7 +191,11 @@ class CheckedArchive final : public openvdb::io::Archive
   public:
     void write_file(const std::string &path, const openvdb::GridPtrVec &grids) const
     {
+        // many small writes: through a buffer of 1 MiB, kept by the thread
+        // (a new one would fault in each page again), not the 8 KiB default
+        static thread_local std::unique_ptr<char[]> buf(new char[1 << 20]);
         std::ofstream os;
+        os.rdbuf()->pubsetbuf(buf.get(), 1 << 20);
         os.exceptions(std::ios_base::failbit | std::ios_base::badbit);
         os.open(path, std::ios_base::out | std::ios_base::binary | std::ios_base::trunc);
         Archive::write(os, grids, /*seekable=*/true, openvdb::MetaMap());
@@ -374,7 +445,7 @@ int build_tree(const vx_bitgrid *g, TreeT &tree, const typename TreeT::ValueType
 openvdb::BoolGrid::Ptr bool_grid(const vx_bitgrid *g, const openvdb::Coord &at,
                                  const vx_voxel_io *io, double span, vx_err *err)
 {
-    openvdb::BoolGrid::Ptr grid = openvdb::BoolGrid::create(false);
+    openvdb::BoolGrid::Ptr grid = std::make_shared<ParallelGrid<openvdb::BoolGrid>>(false);
     using LeafT = openvdb::BoolGrid::TreeType::LeafNodeType;
     int rc = build_tree(g, grid->tree(), true, at, io, span, err, true, 0,
                         [g](int X, int Y, int Z, LeafT *&out) {

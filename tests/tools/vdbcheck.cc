@@ -8,9 +8,10 @@
 //     nearest voxel of the other state (outside the grid: unset), searched
 //     voxel by voxel, active where under 3 voxels, negative exactly at the
 //     set voxels.
-// A float grid's leaf buffers, which the daemon writes on all threads, must
-// also end the file byte for byte as OpenVDB's own serial
-// Tree::writeBuffers of the grid read back writes them.
+// The grid's topology and leaf buffers, which the daemon writes on all
+// threads, must also end the file byte for byte as OpenVDB's own serial
+// Tree::writeTopology and Tree::writeBuffers of the grid read back write
+// them.
 // Exit 0 when equal, 1 with a message on the first difference.
 #include <algorithm>
 #include <cmath>
@@ -96,30 +97,37 @@ int main(int argc, char **argv)
             set += raw[i] != 0;
             covered += !counts.empty() && counts[i];
         }
+        // The topology and the leaf buffers, which the daemon writes on all
+        // threads, end the file as OpenVDB's own serial Tree::writeTopology
+        // and Tree::writeBuffers of the grid read back write them (fog
+        // volumes and level sets are written without zlib).
+        auto serial = [&](const auto &grid, uint32_t c) {
+            std::ostringstream ss;
+            openvdb::io::setDataCompression(ss, c);
+            openvdb::io::setGridBackgroundValuePtr(ss, &grid.tree().background());
+            grid.tree().writeTopology(ss, grid.saveFloatAsHalf());
+            grid.tree().writeBuffers(ss, grid.saveFloatAsHalf());
+            const std::string want = ss.str();
+            const std::vector<unsigned char> bytes = slurp(argv[1]);
+            if (bytes.size() < want.size() ||
+                memcmp(bytes.data() + bytes.size() - want.size(), want.data(), want.size()))
+                return fprintf(stderr,
+                               "vdbcheck: the topology and leaf buffers are not OpenVDB's serial "
+                               "ones (%zu bytes)\n",
+                               want.size()),
+                       1;
+            return 0;
+        };
         if (auto b = openvdb::gridPtrCast<openvdb::BoolGrid>(g)) {
             if (b->getName() != "voxels") return fprintf(stderr, "vdbcheck: bool grid name\n"), 1;
+            if (serial(*b, compression)) return 1;
             return compare(*b, nx, ny, nz, set, [&](const openvdb::Coord &c, bool &on, bool &v) {
                 on = v = raw[at(c)] != 0;
             });
         }
         auto f = openvdb::gridPtrCast<openvdb::FloatGrid>(g);
         if (!f) return fprintf(stderr, "vdbcheck: neither bool nor float\n"), 1;
-        {
-            // fog volumes and level sets are written without zlib
-            std::ostringstream ss;
-            openvdb::io::setDataCompression(ss, compression & ~openvdb::io::COMPRESS_ZIP);
-            openvdb::io::setGridBackgroundValuePtr(ss, &f->tree().background());
-            f->tree().writeBuffers(ss, f->saveFloatAsHalf());
-            const std::string want = ss.str();
-            const std::vector<unsigned char> bytes = slurp(argv[1]);
-            if (bytes.size() < want.size() ||
-                memcmp(bytes.data() + bytes.size() - want.size(), want.data(), want.size()))
-                return fprintf(stderr,
-                               "vdbcheck: the leaf buffers are not OpenVDB's serial ones "
-                               "(%zu bytes)\n",
-                               want.size()),
-                       1;
-        }
+        if (serial(*f, compression & ~openvdb::io::COMPRESS_ZIP)) return 1;
         if (f->getGridClass() == openvdb::GRID_FOG_VOLUME) {
             if (!counts.empty())
                 return compare(*f, nx, ny, nz, covered,
