@@ -126,6 +126,7 @@ typedef struct vx_bl_camera {
     int ortho;
     double ortho_height; /* orthographic: world extent of the image height */
     double fov_deg;      /* perspective: vertical field of view */
+    double depth_add;    /* added to every depth (an orthographic eye moved nearer) */
 } vx_bl_camera;
 
 /* Per-pixel result of casting: NaN everywhere for a miss. */

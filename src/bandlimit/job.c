@@ -474,6 +474,14 @@ static void make_camera(const rparams *p, const rstate *s, int f, vx_bl_camera *
                   : c->ortho             ? 2 * s->P
                                          : s->radius * 1.05 /
                                    sin(p->camera.fov * M_PI / 360 * (aspect >= 1 ? 1 : aspect));
+    /* Orthographic rays from farther than the fitting distance see the
+     * same image: they start there (from 1e12 mesh sizes away the rays'
+     * entry points would lose all precision), the depths made up for. */
+    c->depth_add = 0;
+    if (c->ortho && dist > 2 * s->P) {
+        c->depth_add = dist - 2 * s->P;
+        dist = 2 * s->P;
+    }
     for (int a = 0; a < 3; a++)
         c->eye[a] = s->centre[a] + dir[a] * dist;
 }

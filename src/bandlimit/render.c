@@ -117,7 +117,6 @@ static int clip_box(const double o[3], const double d[3], const double lo[3], co
     return a <= b;
 }
 
-/* The surface along one ray: t of the hit or NaN. */
 /* skip[b]: for a block below iso, its Chebyshev distance (in blocks, at
  * most 255) to the nearest block that is not, so that the cube of blocks
  * within skip - 1 of it is empty and can be crossed in one step; 0 for
@@ -161,18 +160,15 @@ static uint8_t *empty_distance(const vx_bl_volume *v, double iso)
     return a;
 }
 
-static double cast_ray(const vx_bl_volume *v, const uint8_t *skip, double iso, const double o[3],
-                       const double d[3])
+/* The first crossing of iso along o + t d, t in [0, t1] (o in the box):
+ * t, or NaN. Every step moves t on (a step below t's precision ends the
+ * ray: no hit). */
+static double march(const vx_bl_volume *v, const uint8_t *skip, double iso, const double o[3],
+                    const double d[3], double t1)
 {
-    const int M = v->M, nb = v->nb;
-    double lo[3], hi[3], t0, t1;
-    for (int a = 0; a < 3; a++) {
-        lo[a] = v->origin[a];
-        hi[a] = v->origin[a] + (M - 1) * v->h;
-    }
-    if (!clip_box(o, d, lo, hi, &t0, &t1)) return NAN;
+    const int nb = v->nb;
     const double dt = v->h, eps = 1e-4 * v->h;
-    double t = t0, f = sample_at(v, o, d, t);
+    double t = 0, f = sample_at(v, o, d, t);
     if (f >= iso) return t;
     while (t < t1) {
         /* the block the current point is in: skip it whole when empty */
@@ -194,7 +190,7 @@ static double cast_ray(const vx_bl_volume *v, const uint8_t *skip, double iso, c
             }
             double tn = te + eps;
             if (tn <= t) tn = t + eps;
-            if (tn > t1) return NAN;
+            if (tn > t1 || !(tn > t)) return NAN;
             t = tn;
             f = sample_at(v, o, d, t);
             if (f >= iso) return t; /* only on a block corner, within eps */
@@ -215,6 +211,7 @@ static double cast_ray(const vx_bl_volume *v, const uint8_t *skip, double iso, c
             tn = t + fmin(safe, fmax(dt, te - t + eps));
         }
         if (tn > t1) tn = t1;
+        if (!(tn > t)) break;
         double fn = sample_at(v, o, d, tn);
         if (fn >= iso) {
             double ta = t, fa = f, tb = tn, fb = fn;
@@ -237,6 +234,31 @@ static double cast_ray(const vx_bl_volume *v, const uint8_t *skip, double iso, c
     return NAN;
 }
 
+/* The surface along the ray eye + t d: t of the hit (its point in hit), or
+ * NaN. */
+static double cast_ray(const vx_bl_volume *v, const uint8_t *skip, double iso, const double eye[3],
+                       const double d[3], double hit[3])
+{
+    const int M = v->M;
+    double lo[3], hi[3], t0, t1, o[3];
+    for (int a = 0; a < 3; a++) {
+        lo[a] = v->origin[a];
+        hi[a] = v->origin[a] + (M - 1) * v->h;
+    }
+    if (!clip_box(eye, d, lo, hi, &t0, &t1)) return NAN;
+    /* Marched from where the ray enters the box, t from 0: a camera far
+     * away (t0 of 1e12 box sizes) would leave steps of 1e-4 voxels below
+     * the precision of t, and the march would never end. */
+    for (int a = 0; a < 3; a++)
+        o[a] = eye[a] + t0 * d[a];
+    t1 -= t0;
+    double th = march(v, skip, iso, o, d, t1);
+    if (isnan(th)) return NAN;
+    for (int a = 0; a < 3; a++)
+        hit[a] = o[a] + th * d[a];
+    return t0 + th;
+}
+
 /* Pixels go out in 16x16 tiles (neighbouring rays touch the same cache
  * lines of the grid), handed out in order to whichever thread is free. */
 #define TILE 16
@@ -257,18 +279,17 @@ static void cast_pixel(const cast_ctx *c, int px, int py)
     size_t i = (size_t)py * h->width + px;
     double o[3], d[3];
     vx_bl_camera_ray(c->cam, h->width, h->height, px, py, o, d);
-    double t = cast_ray(c->v, c->skip, c->iso, o, d);
+    double p[3], g[3], dep = 0;
+    double t = cast_ray(c->v, c->skip, c->iso, o, d, p);
     for (int a = 0; a < 3; a++)
         h->pos[3 * i + a] = h->nrm[3 * i + a] = NAN;
     h->depth[i] = NAN;
     if (isnan(t)) return;
-    double p[3], g[3], dep = 0;
     for (int a = 0; a < 3; a++) {
-        p[a] = o[a] + t * d[a];
         h->pos[3 * i + a] = (float)p[a];
         dep += (p[a] - c->cam->eye[a]) * c->cam->fwd[a];
     }
-    h->depth[i] = (float)dep;
+    h->depth[i] = (float)(dep + c->cam->depth_add);
     if (!c->v->g[0]) return;
     vx_bl_volume_sample(c->v, p, g);
     double n = vx_v3_norm(g);

@@ -188,5 +188,26 @@ check "tiny mesh, voxels output: voxel_size_too_small" \
     jq -e '.state == "failed" and .error.code == "voxel_size_too_small"' "$TMP/job.json"
 job "tiny mesh, image only" "$TINY" '{"N":32}'
 
+# Cameras far from the mesh: the rays are marched from where they enter the
+# grid (from 1e11 mesh sizes away a step of t was below t's precision, and
+# the job never ended: not for a cancel, the job timeout or SIGTERM), and
+# an orthographic eye farther than the fitting distance sees the image it
+# sees from there.
+far() { # WHAT MESH CAMERA: the render's pixels_covered into COV
+    run_job render "$2" "{\"N\":16,\"width\":32,\"height\":32,\"camera\":$3}" 60
+    job_ok "$1"
+    COV=$(jq -r '.stats.pixels_covered' "$TMP/job.json")
+}
+far "torus, orthographic from the fitting distance" "$M_torus" '{"type":"orbit","fov":0}'
+NEAR=$COV
+far "torus, orthographic from 1e12" "$M_torus" '{"type":"orbit","distance":1e12,"fov":0}'
+check "orthographic from 1e12: the same pixels as from near ($COV, $NEAR)" test "$COV" = "$NEAR" -a "$COV" -gt 0
+far "torus, perspective from 1e11 with a fov of 1e-9" "$M_torus" '{"type":"orbit","distance":1e11,"fov":1e-9}'
+check "perspective from 1e11: the torus in view ($COV pixels)" test "$COV" -gt 0
+tet_obj "$TMP/tinier.obj" 1e-30
+upload "$TMP/tinier.obj"
+far "a mesh of 1e-30, orthographic from 1" "$MESH_ID" '{"type":"orbit","distance":1,"fov":0}'
+check "a mesh of 1e-30 from 1e30 sizes away: in the image ($COV pixels)" test "$COV" -gt 0
+
 stop_daemon
 finish
