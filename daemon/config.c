@@ -108,7 +108,8 @@ static const opt_def opts[] = {
      "cluster mode: a running job's lease, renewed every third of it; a replica silent this "
      "long loses its job to another (default 30)"},
     {"max-attempts", T_COUNT, F(max_attempts), 0,
-     "cluster mode: attempts a job gets before it fails (default 3)"},
+     "attempts a job gets before it fails (cluster mode); starts a job may see the daemon die "
+     "during before it fails `interrupted` (local mode) (default 3)"},
     {"retry-backoff", T_SECONDS, F(retry_backoff_s), 0,
      "cluster mode: wait before a failed job's next attempt, doubled each attempt up to 60 s "
      "(default 1)"},

@@ -111,6 +111,7 @@ static vx_jobs_desc make_jobs_desc(const vx_config *cfg, vx_store *store, int ha
         .history = cfg->job_history,
         .history_bytes = cfg->job_history_bytes,
         .workers = cfg->workers,
+        .max_interruptions = cfg->max_attempts,
         .gl = {.pick_device = cfg->egl_device >= 0,
                .device = cfg->egl_device,
                .debug = cfg->gl_debug,

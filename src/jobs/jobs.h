@@ -48,6 +48,10 @@ typedef struct vx_jobs_desc {
     size_t history;         /* finished jobs kept; default 10000 */
     uint64_t history_bytes; /* and the memory they may take; 0 = no budget */
     int workers;            /* CPU workers; default 2 */
+    /* Starts a job may have that the daemon did not live through (a crash,
+     * kill -9, the out-of-memory killer): at the next start past this many
+     * it fails `interrupted` instead of running again; default 3. */
+    int max_interruptions;
     vx_gl_desc gl;
     vx_jobs_hooks hooks;
     /* Cluster mode (issue 15; src/jobs/cluster.c): the job state and queue

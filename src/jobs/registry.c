@@ -146,6 +146,7 @@ cJSON *job_json(const vx_jobs *j, const job *jb, int api)
     } else {
         cJSON_AddNumberToObject(o, "seq", (double)jb->seq);
         if (jb->idem) cJSON_AddStringToObject(o, "idempotency_key", jb->idem);
+        if (jb->interruptions) cJSON_AddNumberToObject(o, "interruptions", jb->interruptions);
     }
     cJSON_AddItemToObject(o, "stats", stats);
     if (api) {
@@ -395,8 +396,16 @@ cJSON *vx_jobs_cancel(vx_jobs *j, const char *jid, int *was_running, vx_err *err
             vx_err_clear(&jb->error);
             vx_queue_push(j->queue, jb, 1);
         }
-    } else {
+    } else if (!jb->cancel_requested) {
+        /* journaled: a restart before the job stops cancels it then */
         jb->cancel_requested = 1;
+        if (journal_locked(j, jb, err) == 0) {
+            *was_running = 1;
+            out = job_json(j, jb, 1);
+        } else {
+            jb->cancel_requested = 0; /* not recorded (507): not acknowledged */
+        }
+    } else {
         *was_running = 1;
         out = job_json(j, jb, 1);
     }

@@ -9,6 +9,7 @@
 #include <time.h>
 #include <unistd.h>
 
+#include "util/clock.h"
 #include "util/log.h"
 
 /* Journals a snapshot; caller holds the lock (so seq and file order agree). */
@@ -98,6 +99,9 @@ static void replay_one(const cJSON *rec, void *ud)
     if (jb->progress != jb->progress) jb->progress = 0;
     jb->attempts = (int)cJSON_GetNumberValue(cJSON_GetObjectItemCaseSensitive(o, "attempts"));
     jb->cancel_requested = cJSON_IsTrue(cJSON_GetObjectItemCaseSensitive(o, "cancel_requested"));
+    jb->interruptions =
+        (int)cJSON_GetNumberValue(cJSON_GetObjectItemCaseSensitive(o, "interruptions"));
+    if (jb->interruptions < 0) jb->interruptions = 0;
     double t[3] = {0, 0, 0};
     const char *tn[3] = {"created", "started", "finished"};
     for (int i = 0; i < 3; i++) {
@@ -139,6 +143,31 @@ static void replay_one(const cJSON *rec, void *ud)
     }
 }
 
+/* An unfinished job found at start: canceled when its cancel was asked
+ * for, failed `interrupted` when the daemon died during it (its journal
+ * says running) for the max_interruptions-th time. 1 when it ended so. */
+static int end_at_start(vx_jobs *j, job *jb)
+{
+    if (jb->state == ST_RUNNING) jb->interruptions++;
+    if (jb->cancel_requested) {
+        jb->state = ST_CANCELED;
+        vx_err_set(&jb->error, VX_ECANCELED, "canceled",
+                   "canceled (the daemon stopped before the job did)");
+    } else if (jb->state == ST_RUNNING && jb->interruptions >= j->desc.max_interruptions) {
+        jb->state = ST_FAILED;
+        vx_err_set(&jb->error, VX_EINTERNAL, "interrupted",
+                   "the daemon stopped during this job %d times (a crash, kill -9 or the "
+                   "out-of-memory killer?): it is not run again",
+                   jb->interruptions);
+    } else {
+        return 0;
+    }
+    jb->finished = vx_now();
+    VX_WARN("job.finished", "job=%s kind=%s state=%s code=%s at=start", jb->id, jb->kind->name,
+            state_names[jb->state], jb->error.code);
+    return 1;
+}
+
 vx_jobs *vx_jobs_open(const vx_jobs_desc *desc, vx_err *err)
 {
     vx_jobs *j = calloc(1, sizeof *j);
@@ -150,6 +179,7 @@ vx_jobs *vx_jobs_open(const vx_jobs_desc *desc, vx_err *err)
     if (!j->desc.max_queued) j->desc.max_queued = 64;
     if (!j->desc.history) j->desc.history = 10000;
     if (j->desc.workers <= 0) j->desc.workers = 2;
+    if (j->desc.max_interruptions <= 0) j->desc.max_interruptions = 3;
     vx_sorted_init(&j->jobs, job_key);
     pthread_mutex_init(&j->lock, NULL);
     pthread_cond_init(&j->gl_cond, NULL);
@@ -187,10 +217,14 @@ vx_jobs *vx_jobs_open(const vx_jobs_desc *desc, vx_err *err)
         return NULL;
     }
     /* Jobs that never finished run again, oldest first, whatever the
-     * queue limit: they were acknowledged. */
-    size_t requeued = 0;
+     * queue limit: they were acknowledged. But not one whose cancel was
+     * acknowledged (canceled now), nor one the daemon died during too many
+     * times: run again, a job that crashes it (or is killed for its memory)
+     * would at every start. */
+    size_t requeued = 0, ended = 0;
     for (size_t i = 0; i < j->jobs.n; i++) {
         job *jb = job_at(j, i);
+        if (!is_terminal(jb->state) && end_at_start(j, jb)) ended++;
         if (jb->state == ST_QUEUED || jb->state == ST_RUNNING) {
             jb->state = ST_QUEUED;
             jb->progress = 0;
@@ -226,7 +260,8 @@ vx_jobs *vx_jobs_open(const vx_jobs_desc *desc, vx_err *err)
         VX_WARN("journal.compact_skipped", "reason=disk_full");
         vx_err_clear(err);
     }
-    VX_INFO("jobs.replayed", "records=%ld jobs=%zu requeued=%zu", n, j->jobs.n, requeued);
+    VX_INFO("jobs.replayed", "records=%ld jobs=%zu requeued=%zu ended=%zu", n, j->jobs.n,
+            requeued, ended);
     return j;
 }
 

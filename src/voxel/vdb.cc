@@ -152,8 +152,7 @@ template <typename GridT> class ParallelGrid final : public GridT
             const UpperT &up = *it;
             up.getChildMask().save(os);
             up.getValueMask().save(os);
-            std::fill(values.get(), values.get() + UpperT::NUM_VALUES,
-                      openvdb::zeroVal<ValueT>());
+            std::fill(values.get(), values.get() + UpperT::NUM_VALUES, openvdb::zeroVal<ValueT>());
             for (auto v = up.cbeginValueAll(); v; ++v)
                 values[v.pos()] = *v;
             openvdb::io::writeCompressedValues(os, values.get(), UpperT::NUM_VALUES,

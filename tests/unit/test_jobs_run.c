@@ -52,8 +52,24 @@ static const vx_kind k_test = {.name = "two_outputs",
                                .spec = t_spec,
                                .params_size = sizeof(t_params),
                                .run_gl = t_run_gl};
-static const vx_kind *const rows[] = {&k_test};
-static const vx_kinds table = {rows, 1};
+/* Runs until released or stopped (a cancel). */
+static volatile int g_release;
+static int w_run_gl(vx_job_run *r, const vx_mesh *mesh, const void *params, void **state,
+                    vx_err *err)
+{
+    while (!g_release) {
+        if (vx_run_progress(r, 0.5, err)) return -1;
+        usleep(1000);
+    }
+    return 0;
+}
+static const vx_kind k_wait = {.name = "waits",
+                               .summary = "test",
+                               .spec = t_spec,
+                               .params_size = sizeof(t_params),
+                               .run_gl = w_run_gl};
+static const vx_kind *const rows[] = {&k_test, &k_wait};
+static const vx_kinds table = {rows, 2};
 
 static int g_lose, g_alive;
 static int lose_context(void *ud)
@@ -269,12 +285,90 @@ static void test_state_backend(void **state)
     g_state = NULL;
 }
 
+static const char *state_of(fixture *fx, const char *id, const char **code)
+{
+    static char st[16], cd[64];
+    vx_err err = {0};
+    int terminal = 0;
+    cJSON *j = vx_jobs_get(fx->jobs, id, &terminal, &err);
+    if (!j) fail_msg("get %s: %s", id, err.code);
+    snprintf(st, sizeof st, "%s", cJSON_GetStringValue(cJSON_GetObjectItem(j, "state")));
+    const cJSON *e = cJSON_GetObjectItem(j, "error");
+    snprintf(cd, sizeof cd, "%s", cJSON_IsObject(e) ? cJSON_GetStringValue(cJSON_GetObjectItem(e, "code")) : "");
+    cJSON_Delete(j);
+    if (code) *code = cd;
+    return st;
+}
+
+/* A running job's cancel is journaled before it is acknowledged; at a
+ * start, an unfinished job whose cancel was acknowledged is canceled, and
+ * one the daemon died during (its journal says running) for the third
+ * time fails `interrupted` instead of running again (a job that crashes
+ * the daemon would at every start); fewer times, it runs again. */
+static void test_restart_ends(void **state)
+{
+    fixture fx;
+    vx_err err = {0};
+    g_state = &mem_ops;
+    g_release = 0;
+    open_all(&fx);
+    cJSON *j = vx_jobs_submit(fx.jobs, fx.mesh, "waits", NULL, &err);
+    assert_non_null(j);
+    char id[33];
+    snprintf(id, sizeof id, "%s", cJSON_GetStringValue(cJSON_GetObjectItem(j, "id")));
+    cJSON_Delete(j);
+    for (int i = 0; i < 3000 && strcmp(state_of(&fx, id, NULL), "running"); i++)
+        usleep(1000);
+    assert_string_equal(state_of(&fx, id, NULL), "running");
+    size_t before = g_mem.n;
+    int was_running = 0;
+    j = vx_jobs_cancel(fx.jobs, id, &was_running, &err);
+    assert_non_null(j);
+    cJSON_Delete(j);
+    assert_int_equal(was_running, 1);
+    int journaled = 0;
+    for (size_t i = before; i < g_mem.n; i++)
+        journaled |= strstr(g_mem.rec[i], id) && strstr(g_mem.rec[i], "\"cancel_requested\":true") &&
+                     strstr(g_mem.rec[i], "\"running\"");
+    assert_true(journaled);
+    vx_jobs_free(fx.jobs);
+
+    /* What a daemon killed during three jobs leaves: running snapshots. */
+    mem_compact(&g_mem, NULL, 0, &err);
+    const char *ids[3] = {"0123456789abcdef0123456789abcde1", "0123456789abcdef0123456789abcde2",
+                          "0123456789abcdef0123456789abcde3"};
+    const char *extra[3] = {"\"cancel_requested\":true", "\"interruptions\":2",
+                            "\"interruptions\":1"};
+    for (int i = 0; i < 3; i++) {
+        char rec[1024];
+        snprintf(rec, sizeof rec,
+                 "{\"job\":{\"id\":\"%s\",\"kind\":\"two_outputs\",\"mesh\":\"%s\","
+                 "\"state\":\"running\",\"seq\":3,\"attempts\":3,\"params\":{},%s,"
+                 "\"created\":\"2026-12-05T00:00:00.000Z\"}}",
+                 ids[i], fx.mesh, extra[i]);
+        g_mem.rec[g_mem.n++] = strdup(rec);
+    }
+    open_jobs(&fx);
+    const char *code;
+    assert_string_equal(state_of(&fx, ids[0], &code), "canceled");
+    assert_string_equal(code, "canceled");
+    assert_string_equal(state_of(&fx, ids[1], &code), "failed");
+    assert_string_equal(code, "interrupted");
+    for (int i = 0; i < 3000 && strcmp(state_of(&fx, ids[2], NULL), "succeeded"); i++)
+        usleep(1000);
+    assert_string_equal(state_of(&fx, ids[2], NULL), "succeeded");
+    close_all(&fx);
+    mem_compact(&g_mem, NULL, 0, &err);
+    g_state = NULL;
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_two_paths_valid_together),
         cmocka_unit_test(test_retry_stats_once),
         cmocka_unit_test(test_state_backend),
+        cmocka_unit_test(test_restart_ends),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }
