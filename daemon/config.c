@@ -53,6 +53,9 @@ static const opt_def opts[] = {
     {"max-queued-jobs", T_SIZE, F(max_queued_jobs), 0, "queued jobs before 429 (default 64)"},
     {"job-timeout", T_SECONDS, F(job_timeout_s), 0,
      "longest a job may run, seconds (default 600; 0 = no limit)"},
+    {"stop-timeout", T_SECONDS, F(stop_timeout_s), 0,
+     "after SIGTERM, how long the running job may take to stop before voxeld exits 1 without "
+     "it (it runs again at the next start), seconds (default 30; 0 = wait)"},
     {"request-timeout", T_SECONDS, F(request_timeout_s), 0,
      "longest a request is held by ?wait, seconds (default 60; 0 = ?wait answers at once)"},
     {"connection-timeout", T_SECONDS, F(connection_timeout_s), 0,
@@ -162,6 +165,7 @@ static void defaults(vx_config *c)
     c->retry_backoff_s = 1;
     c->max_queued_jobs = 64;
     c->job_timeout_s = 600;
+    c->stop_timeout_s = 30;
     c->request_timeout_s = 60;
     c->connection_timeout_s = 30;
     c->header_timeout_s = 10;

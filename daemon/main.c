@@ -7,6 +7,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include <systemd/sd-daemon.h>
+#include <time.h>
 #include <unistd.h>
 
 #include "config.h"
@@ -204,6 +205,35 @@ static vx_jobs *open_jobs(const vx_config *cfg, vx_store *store, int start, vx_e
     return jobs;
 }
 
+/* After SIGTERM: a job that does not stop (stuck in a loop that never
+ * checks for a stop, or in a driver call) would keep the process alive
+ * until systemd or the kubelet kills it. Past the limit it exits 1: the
+ * journal holds everything acknowledged (each change was fsync'd), and
+ * the running job is queued again at the next start (counted as an
+ * interruption, see --max-attempts). */
+static void *stop_watchdog(void *arg)
+{
+    double s = *(double *)arg;
+    struct timespec ts = {.tv_sec = (time_t)s, .tv_nsec = (long)((s - (time_t)s) * 1e9)};
+    while (nanosleep(&ts, &ts) != 0 && errno == EINTR)
+        ;
+    VX_ERROR("voxeld.stop_timeout",
+             "seconds=%g action=\"exit 1: the running job did not stop; it runs again at the "
+             "next start\"",
+             s);
+    _exit(1);
+    return NULL;
+}
+
+static void start_stop_watchdog(double seconds)
+{
+    static double limit;
+    if (seconds <= 0) return;
+    limit = seconds;
+    pthread_t t;
+    if (pthread_create(&t, NULL, stop_watchdog, &limit) == 0) pthread_detach(t);
+}
+
 /* Waits for SIGTERM/SIGINT, running the once-a-minute maintenance meanwhile. */
 static void serve_until_signal(const sigset_t *sigs, vx_store *store, vx_jobs *jobs)
 {
@@ -337,6 +367,13 @@ int main(int argc, char **argv)
     serve_until_signal(&sigs, store, jobs);
 
     sd_notify(0, "STOPPING=1");
+    start_stop_watchdog(cfg.stop_timeout_s);
+    /* VOXELD_TEST_STOP_HANG=1 (tests only): the jobs never stop, as a job
+     * stuck where it checks for no stop would not */
+    const char *hang = getenv("VOXELD_TEST_STOP_HANG");
+    if (hang && atoi(hang) > 0)
+        for (;;)
+            pause();
     /* Order (issue #2): stop accepting, answer every held request, let the
      * running job finish or go back to the queue, flush the journal. */
     vx_http_quiesce(http);

@@ -36,7 +36,7 @@ typedef struct job {
     double progress;
     int cancel_requested;
     int attempts;
-    int interruptions; /* starts the daemon did not live through (journal only) */
+    int interruptions;                 /* starts the daemon did not live through (journal only) */
     double created, started, finished; /* wall clock; 0 = not yet */
     long seq;                          /* journal order of this job's snapshots */
     vx_err error;

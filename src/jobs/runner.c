@@ -79,11 +79,10 @@ static void run_finish_cluster(vx_jobs *j, vx_job_run *r, int ok, const vx_err *
 {
     job *jb = r->job;
     /* stopped by the shutdown: back to the queue, unless canceled too */
-    int requeue = !ok && e->kind == VX_ECANCELED && vx_err_has(e, VX_EF_SHUTDOWN) &&
-                  !jb->cancel_requested;
+    int requeue =
+        !ok && e->kind == VX_ECANCELED && vx_err_has(e, VX_EF_SHUTDOWN) && !jb->cancel_requested;
     vx_err cerr;
-    if (!ok && e->kind == VX_ECANCELED && jb->cancel_requested &&
-        vx_err_has(e, VX_EF_SHUTDOWN)) {
+    if (!ok && e->kind == VX_ECANCELED && jb->cancel_requested && vx_err_has(e, VX_EF_SHUTDOWN)) {
         vx_err_set(&cerr, VX_ECANCELED, "canceled", "the job was canceled");
         e = &cerr;
     }

@@ -260,8 +260,8 @@ vx_jobs *vx_jobs_open(const vx_jobs_desc *desc, vx_err *err)
         VX_WARN("journal.compact_skipped", "reason=disk_full");
         vx_err_clear(err);
     }
-    VX_INFO("jobs.replayed", "records=%ld jobs=%zu requeued=%zu ended=%zu", n, j->jobs.n,
-            requeued, ended);
+    VX_INFO("jobs.replayed", "records=%ld jobs=%zu requeued=%zu ended=%zu", n, j->jobs.n, requeued,
+            ended);
     return j;
 }
 

@@ -144,4 +144,17 @@ job_ok "gregory spot divisions 4"
 api GET /readyz
 expect_status "daemon still ready" 200
 stop_daemon
+
+# A job that does not stop after SIGTERM (VOXELD_TEST_STOP_HANG: the stop
+# never returns) holds the process only --stop-timeout: then exit 1, said.
+VOXELD_TEST_STOP_HANG=1 start_daemon --stop-timeout 1 || exit 1
+T0=$(date +%s.%N)
+kill -TERM "$PID"
+rc=0
+wait "$PID" || rc=$?
+T1=$(date +%s.%N)
+PID=
+check "a stop that hangs: exit 1 (got $rc)" test "$rc" -eq 1
+check "within --stop-timeout and a second" awk -v a="$T0" -v b="$T1" 'BEGIN {exit !(b - a < 2.5)}'
+check "logged as voxeld.stop_timeout" grep -q 'event=voxeld.stop_timeout seconds=1 ' "$TMP/daemon.log"
 finish

@@ -294,7 +294,8 @@ static const char *state_of(fixture *fx, const char *id, const char **code)
     if (!j) fail_msg("get %s: %s", id, err.code);
     snprintf(st, sizeof st, "%s", cJSON_GetStringValue(cJSON_GetObjectItem(j, "state")));
     const cJSON *e = cJSON_GetObjectItem(j, "error");
-    snprintf(cd, sizeof cd, "%s", cJSON_IsObject(e) ? cJSON_GetStringValue(cJSON_GetObjectItem(e, "code")) : "");
+    snprintf(cd, sizeof cd, "%s",
+             cJSON_IsObject(e) ? cJSON_GetStringValue(cJSON_GetObjectItem(e, "code")) : "");
     cJSON_Delete(j);
     if (code) *code = cd;
     return st;
@@ -328,7 +329,8 @@ static void test_restart_ends(void **state)
     assert_int_equal(was_running, 1);
     int journaled = 0;
     for (size_t i = before; i < g_mem.n; i++)
-        journaled |= strstr(g_mem.rec[i], id) && strstr(g_mem.rec[i], "\"cancel_requested\":true") &&
+        journaled |= strstr(g_mem.rec[i], id) &&
+                     strstr(g_mem.rec[i], "\"cancel_requested\":true") &&
                      strstr(g_mem.rec[i], "\"running\"");
     assert_true(journaled);
     vx_jobs_free(fx.jobs);
