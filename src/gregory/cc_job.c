@@ -180,7 +180,7 @@ static void cc_free_state(void *state)
 const vx_kind vx_kind_catmull_clark = {
     .name = "catmull-clark",
     .summary =
-        "Uniform Catmull-Clark subdivision (OpenSubdiv) to OBJ, PLY or Draco, with limit normals",
+        "Uniform Catmull-Clark subdivision (OpenSubdiv) to OBJ, PLY, Draco or glb, with limit normals",
     .spec = spec,
     .params_size = sizeof(cc_params),
     .run_gl = cc_run_gl,

@@ -787,12 +787,27 @@ static int greg_encode(vx_job_run *r, const void *params, void *state, vx_err *e
 /* Frames as positions can be megabytes: kept as a blob while the job waits. */
 static const char *const blob_fields[] = {"frames", NULL};
 
+/* Frames given as positions: as many vertices as the mesh (its metadata's
+ * `vertices`, what the job reads), else 422 rather than a failed job. */
+static int greg_check_mesh(const void *params, const cJSON *meta, vx_err *err)
+{
+    const gparams *p = params;
+    const cJSON *v = cJSON_GetObjectItemCaseSensitive(meta, "vertices");
+    if (!p->frames.n || p->frames.ids || !cJSON_IsNumber(v)) return 0;
+    if ((double)p->frames.nv != v->valuedouble)
+        return vx_err_set(err, VX_EUNPROC, "invalid_params",
+                          "params.frames[0] has %ld vertices, the mesh %.0f", p->frames.nv,
+                          v->valuedouble);
+    return 0;
+}
+
 const vx_kind vx_kind_gregory = {
     .name = "gregory",
     .summary = "Smooth surface of bicubic Gregory patches (seed 001), tessellated on the GPU",
     .spec = spec,
     .params_size = sizeof(gparams),
     .check = greg_check,
+    .check_mesh = greg_check_mesh,
     .run_gl = greg_run_gl,
     .run_cpu = NULL,
     .encode = greg_encode,

@@ -256,12 +256,21 @@ cJSON *vx_jobs_submit_with(vx_jobs *j, const char *mesh, const char *kind, const
     }
     cJSON *meta = vx_store_mesh_meta(j->desc.store, mesh, err);
     if (!meta) return NULL;
-    cJSON_Delete(meta);
     if (params && !cJSON_IsObject(params)) {
+        cJSON_Delete(meta);
         vx_err_set(err, VX_EUNPROC, "invalid_params", "params must be an object");
         return NULL;
     }
     cJSON *norm = vx_params_normalize(k, params, &j->desc.limits, err);
+    if (norm && k->check_mesh) {
+        void *typed = vx_kind_read(k, norm, &j->desc.limits, err);
+        if (!typed || k->check_mesh(typed, meta, err)) {
+            cJSON_Delete(norm);
+            norm = NULL;
+        }
+        vx_kind_params_free(k, typed);
+    }
+    cJSON_Delete(meta);
     if (!norm) return NULL;
     job *jb = calloc(1, sizeof *jb);
     if (!jb) {

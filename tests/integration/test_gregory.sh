@@ -257,6 +257,15 @@ greg "an OFF frame of an OBJ mesh" "$M_tet_obj" "{\"divisions\":2,\"frames\":[\"
 job_ok "an OFF frame of an OBJ mesh"
 greg "an OBJ frame of an OFF mesh" "$M_tet_off" "{\"divisions\":2,\"frames\":[\"$M_tet_obj\"]}"
 job_ok "an OBJ frame of an OFF mesh"
+# Frames as positions must have the mesh's vertex count: told at submission
+# from its metadata (422), not by a failed job.
+for fr in '[[0,0,0],[1,0,0],[0,1,0]]' '[]' '[0,0,0,1,0,0,0,1,0,0,0,1,1,1,1]'; do
+    post "{\"mesh\":\"$M_tet_obj\",\"kind\":\"gregory\",\"params\":{\"frames\":[$fr]}}"
+    expect_error "a frame of $fr for 4 vertices" 422 invalid_params
+    check "the message gives both counts ($(jqb -r .error.message))" jq -e '.error.message | test("has [0-9]+ vertices, the mesh 4")' "$BODY"
+done
+post "{\"mesh\":\"$M_tet_obj\",\"kind\":\"gregory\",\"params\":{\"divisions\":2,\"frames\":[[0,0,0,2,0,0,0,2,0,0,0,2]]}}"
+expect_status "a flat frame of 4 vertices" 202
 # frame positions are tessellated in floats: a coordinate past what a mesh
 # may hold (1e30) is refused at submission (3e38 came out as NaN vertices)
 for c in 1e39 3e38 2e30; do
@@ -274,8 +283,8 @@ greg "a cube at 1e30" "$MESH_ID" '{"divisions":2}'
 job_ok "a cube at 1e30"
 api GET "/v1/jobs/$JOB/result"
 check "a cube at 1e30: every vertex finite" sh -c "grep '^v ' '$BODY' | grep -qiv 'nan\|inf' && ! grep '^v ' '$BODY' | grep -qi 'nan\|inf'"
-greg "frame with too few vertices" "$M_prism" '{"divisions":2,"frames":[[0,0,0,1,1,1]]}'
-check "frame topology (positions): job error" jq -e '.state == "failed" and .error.code == "frame_topology"' "$TMP/job.json"
+post "{\"mesh\":\"$M_prism\",\"kind\":\"gregory\",\"params\":{\"divisions\":2,\"frames\":[[0,0,0,1,1,1]]}}"
+expect_error "frame with too few vertices (positions)" 422 invalid_params
 
 # The mesh's scale: the same cube 1e10 and 1e-20 across has the unit cube's
 # normals and its positions times the scale (the tangents' products had
