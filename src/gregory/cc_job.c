@@ -60,17 +60,30 @@ static vx_mesh *copy_faces(const vx_mesh *m)
     vx_mesh *c = vx_mesh_new();
     if (!c) return NULL;
     size_t nidx = m->face_start ? m->face_start[m->nfaces] : 3 * m->nfaces;
-    c->nverts = m->nverts;
     c->nfaces = m->nfaces;
     c->pos = malloc(3 * m->nverts * sizeof(double) + 1);
     c->face_idx = malloc(nidx * sizeof(uint32_t) + 1);
+    uint32_t *map = malloc(m->nverts * sizeof(uint32_t) + 1);
     if (m->face_start) c->face_start = malloc((m->nfaces + 1) * sizeof(uint32_t));
-    if (!c->pos || !c->face_idx || (m->face_start && !c->face_start)) {
+    if (!c->pos || !c->face_idx || !map || (m->face_start && !c->face_start)) {
+        free(map);
         vx_mesh_free(c);
         return NULL;
     }
-    memcpy(c->pos, m->pos, 3 * m->nverts * sizeof(double));
-    memcpy(c->face_idx, m->face_idx, nidx * sizeof(uint32_t));
+    /* Only the vertices a face uses (a .bpt's control points, an OBJ's
+     * stray ones): OpenSubdiv would carry the rest into the output with no
+     * face to give them a normal (a zero NORMAL is invalid glTF). */
+    memset(map, 0xff, m->nverts * sizeof(uint32_t));
+    for (size_t i = 0; i < nidx; i++)
+        map[m->face_idx[i]] = 0;
+    for (size_t v = 0; v < m->nverts; v++)
+        if (map[v] == 0) {
+            map[v] = (uint32_t)c->nverts;
+            memcpy(c->pos + 3 * c->nverts++, m->pos + 3 * v, 3 * sizeof(double));
+        }
+    for (size_t i = 0; i < nidx; i++)
+        c->face_idx[i] = map[m->face_idx[i]];
+    free(map);
     if (m->face_start) memcpy(c->face_start, m->face_start, (m->nfaces + 1) * sizeof(uint32_t));
     return c;
 }
@@ -179,8 +192,8 @@ static void cc_free_state(void *state)
 
 const vx_kind vx_kind_catmull_clark = {
     .name = "catmull-clark",
-    .summary =
-        "Uniform Catmull-Clark subdivision (OpenSubdiv) to OBJ, PLY, Draco or glb, with limit normals",
+    .summary = "Uniform Catmull-Clark subdivision (OpenSubdiv) to OBJ, PLY, Draco or glb, with "
+               "limit normals",
     .spec = spec,
     .params_size = sizeof(cc_params),
     .run_gl = cc_run_gl,
