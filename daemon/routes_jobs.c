@@ -32,8 +32,10 @@ static const char *job_request_error(const cJSON *doc)
     const cJSON *kind = cJSON_GetObjectItemCaseSensitive(doc, "kind");
     const cJSON *params = cJSON_GetObjectItemCaseSensitive(doc, "params");
     if (!cJSON_IsObject(doc)) return "the body must be a JSON object";
-    if (!cJSON_IsString(mesh)) return "\"mesh\" (a mesh id string) is required";
-    if (!cJSON_IsString(kind)) return "\"kind\" (a job kind string) is required";
+    if (!mesh) return "\"mesh\" (a mesh id string) is required";
+    if (!cJSON_IsString(mesh)) return "\"mesh\" must be a mesh id string";
+    if (!kind) return "\"kind\" (a job kind string) is required";
+    if (!cJSON_IsString(kind)) return "\"kind\" must be a job kind string";
     if (params && !cJSON_IsObject(params)) return "\"params\" must be an object";
     const cJSON *reuse = cJSON_GetObjectItemCaseSensitive(doc, "reuse");
     if (reuse && !cJSON_IsBool(reuse)) return "\"reuse\" must be true or false";

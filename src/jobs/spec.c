@@ -51,12 +51,14 @@ static int read_number(const vx_pspec *f, const cJSON *it, double lo, double hi,
     if ((f->flags & VX_PF_TERSE) && !(cJSON_IsNumber(it) && isfinite(it->valuedouble) &&
                                       it->valuedouble > lo && it->valuedouble <= hi))
         return BAD("params.%s must be a number > %g", path, lo);
-    if (!cJSON_IsNumber(it) || !isfinite(it->valuedouble))
-        return BAD("params.%s must be a number", path);
+    if (!cJSON_IsNumber(it)) return BAD("params.%s must be a number", path);
+    if (!isfinite(it->valuedouble))
+        return BAD("params.%s must be a finite number (1e999 is not one)", path);
     double v = it->valuedouble;
+    /* the value as given (360.0001, not %g's 360) */
     if ((f->flags & VX_PF_GT_LO) && v <= lo)
-        return BAD("params.%s must be > %g, got %g", path, lo, v);
-    if (v < lo || v > hi) return BAD("params.%s must be in [%g, %g], got %g", path, lo, hi, v);
+        return BAD("params.%s must be > %g, got %.15g", path, lo, v);
+    if (v < lo || v > hi) return BAD("params.%s must be in [%g, %g], got %.15g", path, lo, hi, v);
     *out = v;
     return 0;
 }

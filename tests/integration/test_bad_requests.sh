@@ -169,6 +169,10 @@ api POST /v1/jobs "${JSON[@]}" --data-binary "$(printf '{"mesh":"%s","kind":"pre
 expect_error "a raw tab in a string" 400 invalid_json
 api POST /v1/jobs "${JSON[@]}" -d '{"kind":"preview"}'
 expect_error "missing mesh" 400 invalid_request
+check "missing mesh: said so" jq -e '.error.message | contains("is required")' "$BODY"
+api POST /v1/jobs "${JSON[@]}" -d '{"kind":"preview","mesh":123}'
+expect_error "mesh not a string" 400 invalid_request
+check "mesh not a string: said so, not 'required'" jq -e '.error.message == "\"mesh\" must be a mesh id string"' "$BODY"
 api POST /v1/jobs "${JSON[@]}" -d "{\"mesh\":\"$BOX\",\"kind\":7}"
 expect_error "kind not a string" 400 invalid_request
 api POST /v1/jobs "${JSON[@]}" -d "{\"mesh\":\"$BOX\",\"kind\":\"preview\",\"color\":1}"
