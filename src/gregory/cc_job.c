@@ -1,6 +1,7 @@
 /* The `catmull-clark` row of the job table (kind.h; api/openapi.yaml has
  * the params and stats schemas). Runs on a CPU worker: run_gl only copies
  * the faces of the GL thread's cached mesh into the job state. */
+#include <math.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -86,6 +87,34 @@ static vx_mesh *copy_faces(const vx_mesh *m)
     free(map);
     if (m->face_start) memcpy(c->face_start, m->face_start, (m->nfaces + 1) * sizeof(uint32_t));
     return c;
+}
+
+/* The output's size, from the mesh's metadata: its corners are its
+ * triangles (fans) plus two a face. Over max_triangles or the job memory
+ * it is 422 at submission; the job checks the mesh it reads again. */
+static int cc_check_mesh(const void *params, const cJSON *meta, const vx_limits *lim,
+                         vx_err *err)
+{
+    const cc_params *p = params;
+    const cJSON *t = cJSON_GetObjectItemCaseSensitive(meta, "triangles");
+    const cJSON *f = cJSON_GetObjectItemCaseSensitive(
+        cJSON_GetObjectItemCaseSensitive(meta, "faces"), "total");
+    if (!lim || !cJSON_IsNumber(t) || !cJSON_IsNumber(f) || cJSON_GetNumberValue(
+            cJSON_GetObjectItemCaseSensitive(meta, "patches")) > 0)
+        return 0;
+    double quads = (t->valuedouble + 2 * f->valuedouble) * ldexp(1, 2 * ((int)p->levels - 1));
+    if (lim->max_triangles && 2 * quads > (double)lim->max_triangles)
+        return vx_err_set(err, VX_EUNPROC, "invalid_params",
+                          "params.levels = %ld gives %.0f triangles on this mesh, over "
+                          "max_triangles (%llu)",
+                          p->levels, 2 * quads, (unsigned long long)lim->max_triangles);
+    if (lim->max_job_memory && quads * CC_BYTES_PER_QUAD > (double)lim->max_job_memory)
+        return vx_err_set(err, VX_EUNPROC, "invalid_params",
+                          "params.levels = %ld needs about %.0f bytes on this mesh, over the job "
+                          "memory limit (%llu)",
+                          p->levels, quads * CC_BYTES_PER_QUAD,
+                          (unsigned long long)lim->max_job_memory);
+    return 0;
 }
 
 static int cc_run_gl(vx_job_run *r, const vx_mesh *mesh, const void *params, void **state,
@@ -196,6 +225,7 @@ const vx_kind vx_kind_catmull_clark = {
                "limit normals",
     .spec = spec,
     .params_size = sizeof(cc_params),
+    .check_mesh = cc_check_mesh,
     .run_gl = cc_run_gl,
     .run_cpu = cc_run_cpu,
     .encode = NULL,

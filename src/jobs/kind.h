@@ -97,7 +97,8 @@ typedef struct vx_kind {
      * submission from the mesh's metadata (its `vertices`, `bbox`...): 0,
      * or -1 with err (VX_EUNPROC invalid_params naming the field), so that
      * it is a 422 rather than a job that fails. */
-    int (*check_mesh)(const void *params, const cJSON *mesh_meta, vx_err *err);
+    int (*check_mesh)(const void *params, const cJSON *mesh_meta, const vx_limits *lim,
+                      vx_err *err);
     /* The stages get the typed struct, read once when the run starts. */
     int (*run_gl)(vx_job_run *r, const vx_mesh *mesh, const void *params, void **state,
                   vx_err *err);

@@ -264,7 +264,7 @@ cJSON *vx_jobs_submit_with(vx_jobs *j, const char *mesh, const char *kind, const
     cJSON *norm = vx_params_normalize(k, params, &j->desc.limits, err);
     if (norm && k->check_mesh) {
         void *typed = vx_kind_read(k, norm, &j->desc.limits, err);
-        if (!typed || k->check_mesh(typed, meta, err)) {
+        if (!typed || k->check_mesh(typed, meta, &j->desc.limits, err)) {
             cJSON_Delete(norm);
             norm = NULL;
         }
