@@ -92,15 +92,14 @@ static vx_mesh *copy_faces(const vx_mesh *m)
 /* The output's size, from the mesh's metadata: its corners are its
  * triangles (fans) plus two a face. Over max_triangles or the job memory
  * it is 422 at submission; the job checks the mesh it reads again. */
-static int cc_check_mesh(const void *params, const cJSON *meta, const vx_limits *lim,
-                         vx_err *err)
+static int cc_check_mesh(const void *params, const cJSON *meta, const vx_limits *lim, vx_err *err)
 {
     const cc_params *p = params;
     const cJSON *t = cJSON_GetObjectItemCaseSensitive(meta, "triangles");
-    const cJSON *f = cJSON_GetObjectItemCaseSensitive(
-        cJSON_GetObjectItemCaseSensitive(meta, "faces"), "total");
-    if (!lim || !cJSON_IsNumber(t) || !cJSON_IsNumber(f) || cJSON_GetNumberValue(
-            cJSON_GetObjectItemCaseSensitive(meta, "patches")) > 0)
+    const cJSON *f =
+        cJSON_GetObjectItemCaseSensitive(cJSON_GetObjectItemCaseSensitive(meta, "faces"), "total");
+    if (!lim || !cJSON_IsNumber(t) || !cJSON_IsNumber(f) ||
+        cJSON_GetNumberValue(cJSON_GetObjectItemCaseSensitive(meta, "patches")) > 0)
         return 0;
     double quads = (t->valuedouble + 2 * f->valuedouble) * ldexp(1, 2 * ((int)p->levels - 1));
     if (lim->max_triangles && 2 * quads > (double)lim->max_triangles)

@@ -789,8 +789,7 @@ static const char *const blob_fields[] = {"frames", NULL};
 
 /* Frames given as positions: as many vertices as the mesh (its metadata's
  * `vertices`, what the job reads), else 422 rather than a failed job. */
-static int greg_check_mesh(const void *params, const cJSON *meta, const vx_limits *lim,
-                           vx_err *err)
+static int greg_check_mesh(const void *params, const cJSON *meta, const vx_limits *lim, vx_err *err)
 {
     (void)lim;
     const gparams *p = params;
