@@ -231,6 +231,9 @@ static const vx_pspec spec[] = {
 static int greg_check(void *params, const vx_limits *lim, vx_err *err)
 {
     gparams *p = params;
+    /* no further frames is the default: [] normalises to null, so that a
+     * request with [] and one without are the same (reuse, idempotency) */
+    if (p->frames.n == 0) p->frames_set = 0;
     if (p->max_edge_set) return 0;
     p->divisions_set = 1; /* given or the default */
     /* Known at submission: the smallest mesh has one patch. */

@@ -266,6 +266,11 @@ for fr in '[[0,0,0],[1,0,0],[0,1,0]]' '[]' '[0,0,0,1,0,0,0,1,0,0,0,1,1,1,1]'; do
 done
 post "{\"mesh\":\"$M_tet_obj\",\"kind\":\"gregory\",\"params\":{\"divisions\":2,\"frames\":[[0,0,0,2,0,0,0,2,0,0,0,2]]}}"
 expect_status "a flat frame of 4 vertices" 202
+# No further frames is the default: [] normalises to null (reuse and
+# idempotency keys took [] and no frames for different requests).
+post "{\"mesh\":\"$M_tet_obj\",\"kind\":\"gregory\",\"params\":{\"divisions\":2,\"frames\":[]}}"
+expect_status "frames []" 202
+check "frames [] normalised to null" jq -e '.params.frames == null' "$BODY"
 # frame positions are tessellated in floats: a coordinate past what a mesh
 # may hold (1e30) is refused at submission (3e38 came out as NaN vertices)
 for c in 1e39 3e38 2e30; do
