@@ -717,6 +717,34 @@ static int render_encode(vx_job_run *r, const void *params, void *state, vx_err 
     return rc;
 }
 
+/* The voxels output of one mesh whose box makes voxels under what
+ * OpenVDB's transforms take: 422 at submission, from the mesh's bbox (with
+ * further meshes the box can only grow: the job tells). */
+static int render_check_mesh(const void *params, const cJSON *meta, const vx_limits *lim,
+                             vx_err *err)
+{
+    const rparams *p = params;
+    (void)lim;
+    if (!p->outputs[OUT_VOXELS] || p->nmeshes) return 0;
+    const cJSON *bb = cJSON_GetObjectItemCaseSensitive(meta, "bbox");
+    const cJSON *lo = cJSON_GetObjectItemCaseSensitive(bb, "min");
+    const cJSON *hi = cJSON_GetObjectItemCaseSensitive(bb, "max");
+    if (cJSON_GetArraySize(lo) != 3 || cJSON_GetArraySize(hi) != 3) return 0;
+    double ext = 0;
+    for (int a = 0; a < 3; a++) {
+        double d = cJSON_GetNumberValue(cJSON_GetArrayItem(hi, a)) -
+                   cJSON_GetNumberValue(cJSON_GetArrayItem(lo, a));
+        if (d > ext) ext = d;
+    }
+    double P = ext * (1 + 2 * VX_BL_PAD);
+    if (!(ext > 0) || vx_vdb_voxel_size_ok(P / p->N)) return 0;
+    return vx_err_set(err, VX_EUNPROC, "invalid_params",
+                      "params.outputs: the voxels output's voxel size would be %.6g (the box "
+                      "%.6g / N %d), under the %.6g that OpenVDB's transforms take: a mesh in "
+                      "smaller units, or no voxels output",
+                      P / p->N, P, (int)p->N, vx_vdb_min_voxel_size());
+}
+
 const vx_kind vx_kind_render = {
     .name = "render",
     .summary = "Band-limited iso-surface render of one or more meshes (seed 002): Algorithm I "
@@ -724,6 +752,7 @@ const vx_kind vx_kind_render = {
     .spec = spec,
     .params_size = sizeof(rparams),
     .check = render_check,
+    .check_mesh = render_check_mesh,
     .run_gl = render_run_gl,
     .run_cpu = render_run_cpu,
     .encode = render_encode,

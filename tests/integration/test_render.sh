@@ -183,8 +183,13 @@ tet_obj "$TMP/tiny.obj" 1e-4
 upload "$TMP/tiny.obj"
 expect_status "upload tiny" 201
 TINY=$MESH_ID
-run_job render "$TINY" '{"N":32,"outputs":["voxels"]}'
-check "tiny mesh, voxels output: voxel_size_too_small" \
+api POST /v1/jobs -H "Content-Type: application/json" \
+    -d "{\"mesh\":\"$TINY\",\"kind\":\"render\",\"params\":{\"N\":32,\"outputs\":[\"voxels\"]}}"
+expect_error "tiny mesh, voxels output: told at submission from its box" 422 invalid_params
+check "the message gives the voxel size" jq -e '.error.message | test("voxel size would be")' "$BODY"
+# with a second mesh the box may grow: the job tells
+run_job render "$TINY" "{\"N\":32,\"outputs\":[\"voxels\"],\"meshes\":[\"$TINY\"]}"
+check "tiny mesh twice, voxels output: voxel_size_too_small" \
     jq -e '.state == "failed" and .error.code == "voxel_size_too_small"' "$TMP/job.json"
 job "tiny mesh, image only" "$TINY" '{"N":32}'
 
