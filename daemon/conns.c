@@ -91,6 +91,7 @@ struct vx_conn {
     char rid[72];           /* BODY: the request's id; else the id of the answer written here */
     char origin[256];       /* BODY: the request's origin when CORS allows it, else "" */
     int path_escape;        /* the current request's path has %00 or %2F (see vx_conns_on_uri) */
+    int target_bad;         /* ... its target a raw space or control character */
     int linger;             /* answered before its body was read: drain it after the close */
     unsigned char peer[17]; /* the client's address family and address (0s: unknown) */
     int over_ip;            /* opened past --max-connections-per-ip: its request gets a 503 */
@@ -349,6 +350,10 @@ void *vx_conns_on_uri(void *cls, const char *uri, struct MHD_Connection *c)
             esc = uri[i] == '%' && ((uri[i + 1] == '0' && uri[i + 2] == '0') ||
                                     (uri[i + 1] == '2' && (uri[i + 2] | 0x20) == 'f'));
         vc->path_escape = esc;
+        int bad = 0;
+        for (const unsigned char *p = (const unsigned char *)uri; *p && !bad; p++)
+            bad = *p <= 0x20 || *p == 0x7f;
+        vc->target_bad = bad;
         /* A request line is in: a head has begun. One pipelined behind
          * the last request came before its answer, so the sweeper saw no
          * byte after it and kept the connection idle (no 408, a silent
@@ -681,6 +686,11 @@ void vx_conns_refuse(vx_conns *s, vx_conn *vc, int status, const char *code, con
 int vx_conns_over_ip(const vx_conn *vc)
 {
     return vc && vc->over_ip;
+}
+
+int vx_conns_target_bad(const vx_conn *vc)
+{
+    return vc && vc->target_bad;
 }
 
 int vx_conns_path_escape(const vx_conn *vc)

@@ -48,6 +48,9 @@ int vx_conns_path_escape(const vx_conn *vc);
  * open: its request is answered 503 too_many_connections and the
  * connection closed (libmicrohttpd's own limit closed it unanswered). */
 int vx_conns_over_ip(const vx_conn *vc);
+/* 1 when the current request's target had a raw space or control
+ * character (libmicrohttpd takes "GET /a b HTTP/1.1" as path "/a b"). */
+int vx_conns_target_bad(const vx_conn *vc);
 /* The tracked connection of c, or NULL when untracked. */
 vx_conn *vx_conns_of(struct MHD_Connection *c);
 

@@ -318,13 +318,11 @@ int vx_route_events(vx_http *h, struct MHD_Connection *c, req *r)
     vx_err err;
     struct MHD_Response *resp;
     if (!strcmp(r->method, "HEAD")) {
-        /* GET's headers but its framing: libmicrohttpd sends a chunked
-         * answer's last chunk even to HEAD, a body HEAD may not have, so
-         * this one is empty (Content-Length: 0) */
+        /* GET's headers: the stream has no length, and HEAD no body */
         cJSON *doc = vx_jobs_get(h->d.jobs, r->id, NULL, &err);
         if (!doc) return vx_resp_err(c, r, &err);
         cJSON_Delete(doc);
-        resp = MHD_create_response_from_buffer(0, (void *)"", MHD_RESPMEM_PERSISTENT);
+        resp = vx_resp_headers_only();
     } else {
         resp = vx_events_open(h->events, c, r->id, &err);
         if (!resp) return vx_resp_err(c, r, &err);

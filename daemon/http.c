@@ -18,6 +18,7 @@
  * body intake, dispatch, completion and the server's lifecycle. */
 #include "http_int.h"
 
+#include <ctype.h>
 #include <errno.h>
 #include <math.h>
 #include <netdb.h>
@@ -42,10 +43,30 @@ void vx_http_job_changed(vx_http *h, const char *jid, int terminal)
 
 /* ---- dispatch ------------------------------------------------------ */
 
-/* How many times the headers that must come once came. */
+/* How many times the headers that must come once came, and whether a
+ * field name or value was malformed. */
 typedef struct once_counts {
-    int host, length, idem, coding;
+    int host, length, idem, coding, bad;
 } once_counts;
+
+/* A field name must be a token, a value hold no NUL, CR or LF (RFC 9110
+ * 5.1, 5.5): libmicrohttpd took "Content-Length : 34" as a field of
+ * another name (the body then read as a second request). (A NUL it cuts
+ * the value at itself: the rest never reaches here.) */
+static enum MHD_Result check_field(void *cls, enum MHD_ValueKind kind, const char *key,
+                                   size_t klen, const char *value, size_t vlen)
+{
+    once_counts *n = cls;
+    (void)kind;
+    if (!key || !klen) return MHD_YES;
+    for (size_t i = 0; i < klen; i++) {
+        unsigned char ch = (unsigned char)key[i];
+        if (!(isalnum(ch) || strchr("!#$%&'*+-.^_`|~", ch)) || !ch) n->bad = 1;
+    }
+    for (size_t i = 0; value && i < vlen; i++)
+        if (value[i] == 0 || value[i] == '\r' || value[i] == '\n') n->bad = 1;
+    return n->bad ? MHD_NO : MHD_YES;
+}
 
 static enum MHD_Result count_once(void *cls, enum MHD_ValueKind kind, const char *key,
                                   const char *value)
@@ -87,6 +108,15 @@ static int check_framing(struct MHD_Connection *c, req *r, const char *version)
 {
     once_counts n = {0};
     MHD_get_connection_values(c, MHD_HEADER_KIND, count_once, &n);
+    MHD_get_connection_values_n(c, MHD_HEADER_KIND, check_field, &n);
+    if (n.bad)
+        return fail_framing(c, r,
+                            "a header field name that is not a token (a space before its "
+                            "colon?) or a value with a NUL, CR or LF");
+    if (vx_conns_target_bad(r->vc))
+        return fail_framing(c, r,
+                            "the request target has a space or a control character (escape it: "
+                            "%20)");
     if (strcmp(version, MHD_HTTP_VERSION_1_0) != 0 && n.host != 1)
         return vx_resp_fail(c, r, VX_EINVAL, "invalid_request",
                             n.host ? "more than one Host header"
@@ -262,6 +292,12 @@ static enum MHD_Result on_head(vx_http *h, struct MHD_Connection *c, const char 
     r->vc = vc;
     r->t0 = vx_mono();
     snprintf(r->method, sizeof r->method, "%s", method);
+    /* absolute-form (RFC 9112 3.2.2: a server must take it): the path */
+    int scheme = !strncasecmp(url, "http://", 7) ? 7 : !strncasecmp(url, "https://", 8) ? 8 : 0;
+    if (scheme) {
+        const char *slash = strchr(url + scheme, '/');
+        url = slash ? slash : "/";
+    }
     identify(c, r, url);
     vx_req_target t = {0};
     r->route = vx_req_route(url, strlen(url), &t);

@@ -83,6 +83,18 @@ const char *vx_resp_cors_origin(struct MHD_Connection *c);
 vx_resp_answer vx_resp_answer_of(const vx_err *e);
 /* Value of request header name, or NULL. */
 const char *vx_resp_header(struct MHD_Connection *c, const char *name);
+/* The values of every line of list header name, joined with ", " into buf
+ * (RFC 9110 5.3: If-None-Match or Accept-Encoding may come on several
+ * lines; vx_resp_header gives the first only); NULL when there is none or
+ * they do not fit. */
+const char *vx_resp_header_list(struct MHD_Connection *c, const char *name, char *buf, size_t n);
+/* A response of headers alone, no Content-Length and no body: a 304, or a
+ * HEAD whose GET has no length known up front (a coded result, an event
+ * stream). libmicrohttpd 0.9.75 adds Content-Length: 0 to a sized response
+ * and the last chunk (a body) to an unsized one, even for HEAD; this one
+ * is sent unsized in its HTTP/1.0-compatible mode, which closes the
+ * connection after it. NULL without memory. */
+struct MHD_Response *vx_resp_headers_only(void);
 /* Queues resp (taken, may be NULL: MHD_NO) as r's answer. */
 int vx_resp_queue(struct MHD_Connection *c, req *r, unsigned status, struct MHD_Response *resp,
                   uint64_t body_bytes);

@@ -45,6 +45,51 @@ const char *vx_resp_header(struct MHD_Connection *c, const char *name)
     return MHD_lookup_connection_value(c, MHD_HEADER_KIND, name);
 }
 
+typedef struct joined {
+    const char *name;
+    char *buf;
+    size_t n, len;
+    int lines, full;
+} joined;
+
+static enum MHD_Result join_line(void *cls, enum MHD_ValueKind kind, const char *key,
+                                 const char *value)
+{
+    joined *j = cls;
+    (void)kind;
+    if (!key || !value || strcasecmp(key, j->name)) return MHD_YES;
+    int w = snprintf(j->buf + j->len, j->n - j->len, "%s%s", j->lines ? ", " : "", value);
+    if (w < 0 || (size_t)w >= j->n - j->len) {
+        j->full = 1;
+        return MHD_NO;
+    }
+    j->len += (size_t)w;
+    j->lines++;
+    return MHD_YES;
+}
+
+const char *vx_resp_header_list(struct MHD_Connection *c, const char *name, char *buf, size_t n)
+{
+    joined j = {name, buf, n, 0, 0, 0};
+    if (n) buf[0] = 0;
+    MHD_get_connection_values(c, MHD_HEADER_KIND, join_line, &j);
+    return j.lines && !j.full ? buf : NULL;
+}
+
+static ssize_t no_body(void *cls, uint64_t pos, char *buf, size_t max)
+{
+    (void)cls, (void)pos, (void)buf, (void)max;
+    return MHD_CONTENT_READER_END_OF_STREAM;
+}
+
+struct MHD_Response *vx_resp_headers_only(void)
+{
+    struct MHD_Response *resp =
+        MHD_create_response_from_callback(MHD_SIZE_UNKNOWN, 64, no_body, NULL, NULL);
+    if (resp) MHD_set_response_options(resp, MHD_RF_HTTP_1_0_COMPATIBLE_STRICT, MHD_RO_END);
+    return resp;
+}
+
 int vx_resp_queue(struct MHD_Connection *c, req *r, unsigned status, struct MHD_Response *resp,
                   uint64_t body_bytes)
 {

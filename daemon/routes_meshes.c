@@ -69,11 +69,12 @@ int vx_route_mesh_file(vx_http *h, struct MHD_Connection *c, req *r)
         return vx_resp_fail(c, r, VX_ENOTFOUND, "mesh_not_found", "the mesh was deleted");
     }
     /* 304 only for a file that is there and intact (so "*" too) */
-    const char *inm = vx_resp_header(c, MHD_HTTP_HEADER_IF_NONE_MATCH);
+    char inmb[4096];
+    const char *inm = vx_resp_header_list(c, MHD_HTTP_HEADER_IF_NONE_MATCH, inmb, sizeof inmb);
     if (inm && (strstr(inm, etag) || !strcmp(inm, "*"))) {
         close(fd);
-        struct MHD_Response *nm =
-            MHD_create_response_from_buffer(0, (void *)"", MHD_RESPMEM_PERSISTENT);
+        struct MHD_Response *nm = vx_resp_headers_only(); /* no Content-Length */
+        if (!nm) return MHD_NO;
         MHD_add_response_header(nm, MHD_HTTP_HEADER_ETAG, etag);
         MHD_add_response_header(nm, MHD_HTTP_HEADER_CACHE_CONTROL,
                                 "private, max-age=86400, immutable");

@@ -29,23 +29,12 @@ static void result_headers(struct MHD_Response *resp, const char *etag)
     MHD_add_response_header(resp, MHD_HTTP_HEADER_ACCEPT_RANGES, "bytes");
 }
 
-static ssize_t no_body(void *cls, uint64_t pos, char *buf, size_t max)
-{
-    (void)cls, (void)pos, (void)buf, (void)max;
-    return MHD_CONTENT_READER_END_OF_STREAM;
-}
-
 /* 304: the validators and Cache-Control of the 200, no body and no
- * Content-Length (RFC 9110 15.4.5). libmicrohttpd 0.9.75 adds a
- * Content-Length: 0 to any sized response and chunked framing (a body) to
- * an unsized one, so the 304 is sent unsized in HTTP/1.0-compatible mode,
- * which closes the connection after it. */
+ * Content-Length (RFC 9110 15.4.5). */
 static int not_modified(struct MHD_Connection *c, req *r, const char *etag)
 {
-    struct MHD_Response *resp =
-        MHD_create_response_from_callback(MHD_SIZE_UNKNOWN, 64, no_body, NULL, NULL);
+    struct MHD_Response *resp = vx_resp_headers_only();
     if (!resp) return MHD_NO;
-    MHD_set_response_options(resp, MHD_RF_HTTP_1_0_COMPATIBLE_STRICT, MHD_RO_END);
     result_headers(resp, etag);
     return vx_resp_queue(c, r, 304, resp, 0);
 }
@@ -94,19 +83,25 @@ int vx_route_result(vx_http *h, struct MHD_Connection *c, req *r)
     uint64_t first = 0, last = 0;
     const char *range = vx_resp_header(c, MHD_HTTP_HEADER_RANGE);
     const char *if_range = vx_resp_header(c, MHD_HTTP_HEADER_IF_RANGE);
-    int rk = range && (!if_range || vx_req_etag_match(if_range, id_etag, 0, 0))
+    /* If-Range holds one tag or a date: a list (or a date, which has a
+     * comma and is never matched here) sends the whole result */
+    int rk = range && (!if_range || (!strchr(if_range, ',') &&
+                                     vx_req_etag_match(if_range, id_etag, 0, 0)))
                  ? vx_req_range(range, size, &first, &last)
                  : 0;
+    char ae[1024], inm[4096];
     vx_req_coding coding =
         rk == 0 && compressible(ctype)
-            ? vx_req_accept_coding(vx_resp_header(c, MHD_HTTP_HEADER_ACCEPT_ENCODING))
+            ? vx_req_accept_coding(
+                  vx_resp_header_list(c, MHD_HTTP_HEADER_ACCEPT_ENCODING, ae, sizeof ae))
             : VX_CODING_IDENTITY;
     if (coding == VX_CODING_IDENTITY)
         snprintf(etag, sizeof etag, "%s", id_etag);
     else
         snprintf(etag, sizeof etag, "\"%s+%s\"", fname, vx_compress_token(coding));
 
-    if (vx_req_etag_match(vx_resp_header(c, MHD_HTTP_HEADER_IF_NONE_MATCH), etag, 1, 1)) {
+    if (vx_req_etag_match(vx_resp_header_list(c, MHD_HTTP_HEADER_IF_NONE_MATCH, inm, sizeof inm),
+                          etag, 1, 1)) {
         close(fd);
         return not_modified(c, r, etag);
     }
@@ -127,6 +122,15 @@ int vx_route_result(vx_http *h, struct MHD_Connection *c, req *r)
         bytes = last - first + 1;
         resp = MHD_create_response_from_fd_at_offset64(bytes, fd, first);
         status = 206;
+    } else if (coding != VX_CODING_IDENTITY && !strcmp(r->method, "HEAD")) {
+        /* The coded length is not known without coding the file: no
+         * length and no body (a chunked answer's last chunk, sent to HEAD
+         * too, was read as the next answer by a client reusing the
+         * connection). */
+        close(fd);
+        fd = -1;
+        resp = vx_resp_headers_only();
+        bytes = 0;
     } else if (coding != VX_CODING_IDENTITY) {
         resp = vx_compress_response(fd, coding); /* fd is its own now */
         fd = -1;

@@ -67,9 +67,12 @@ int vx_route_web(vx_http *h, struct MHD_Connection *c, req *r)
                                                    : r->name;
     const vx_web_file *f = vx_web_find(name);
     if (!f) return vx_resp_fail(c, r, VX_ENOTFOUND, "not_found", "no such viewer file");
-    int fresh = etag_matches(vx_resp_header(c, MHD_HTTP_HEADER_IF_NONE_MATCH), f->etag);
-    struct MHD_Response *resp = MHD_create_response_from_buffer(
-        fresh ? 0 : f->len, fresh ? (void *)"" : (void *)f->data, MHD_RESPMEM_PERSISTENT);
+    char inm[4096];
+    int fresh = etag_matches(vx_resp_header_list(c, MHD_HTTP_HEADER_IF_NONE_MATCH, inm, sizeof inm),
+                             f->etag);
+    struct MHD_Response *resp =
+        fresh ? vx_resp_headers_only() /* 304: no Content-Length */
+              : MHD_create_response_from_buffer(f->len, (void *)f->data, MHD_RESPMEM_PERSISTENT);
     if (!resp) return MHD_NO;
     MHD_add_response_header(resp, MHD_HTTP_HEADER_ETAG, f->etag);
     /* Names are not versioned: keep a copy but ask each time (304 then). */

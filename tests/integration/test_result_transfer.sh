@@ -12,6 +12,7 @@ expect_status "upload box" 201
 run_job voxelize "$MESH_ID" '{"resolution":64,"format":"raw8"}'
 job_ok "voxelize raw8"
 R=/v1/jobs/$JOB/result
+RAW_JOB=$JOB
 
 api GET "$R"
 expect_status "identity download" 200
@@ -98,6 +99,17 @@ job_ok "preview"
 api GET "/v1/jobs/$JOB/result" -H "Accept-Encoding: zstd, gzip"
 expect_status "png download" 200
 check "png is not compressed again" test -z "$(header Content-Encoding)"
+
+# Framing and header edges on raw sockets (tests/integration/http_edges.py):
+# HEAD of a coded result or an event stream sends no length and no body,
+# 304s no Content-Length, list headers over several lines, If-Range with a
+# list, a space before a colon (smuggling), a space in the target,
+# absolute-form targets.
+python3 "$(dirname "$0")/http_edges.py" "$PORT" "$RAW_JOB" >"$TMP/edges.txt" 2>&1
+check "http_edges.py ran ($(tail -n 1 "$TMP/edges.txt"))" grep -q '^PASS ' "$TMP/edges.txt"
+while read -r verdict rest; do
+    check "$rest" test "$verdict" = PASS
+done <"$TMP/edges.txt"
 
 stop_daemon
 finish
