@@ -53,8 +53,8 @@ typedef struct once_counts {
  * 5.1, 5.5): libmicrohttpd took "Content-Length : 34" as a field of
  * another name (the body then read as a second request). (A NUL it cuts
  * the value at itself: the rest never reaches here.) */
-static enum MHD_Result check_field(void *cls, enum MHD_ValueKind kind, const char *key,
-                                   size_t klen, const char *value, size_t vlen)
+static enum MHD_Result check_field(void *cls, enum MHD_ValueKind kind, const char *key, size_t klen,
+                                   const char *value, size_t vlen)
 {
     once_counts *n = cls;
     (void)kind;

@@ -85,16 +85,15 @@ int vx_route_result(vx_http *h, struct MHD_Connection *c, req *r)
     const char *if_range = vx_resp_header(c, MHD_HTTP_HEADER_IF_RANGE);
     /* If-Range holds one tag or a date: a list (or a date, which has a
      * comma and is never matched here) sends the whole result */
-    int rk = range && (!if_range || (!strchr(if_range, ',') &&
-                                     vx_req_etag_match(if_range, id_etag, 0, 0)))
+    int rk = range && (!if_range ||
+                       (!strchr(if_range, ',') && vx_req_etag_match(if_range, id_etag, 0, 0)))
                  ? vx_req_range(range, size, &first, &last)
                  : 0;
     char ae[1024], inm[4096];
-    vx_req_coding coding =
-        rk == 0 && compressible(ctype)
-            ? vx_req_accept_coding(
-                  vx_resp_header_list(c, MHD_HTTP_HEADER_ACCEPT_ENCODING, ae, sizeof ae))
-            : VX_CODING_IDENTITY;
+    vx_req_coding coding = rk == 0 && compressible(ctype)
+                               ? vx_req_accept_coding(vx_resp_header_list(
+                                     c, MHD_HTTP_HEADER_ACCEPT_ENCODING, ae, sizeof ae))
+                               : VX_CODING_IDENTITY;
     if (coding == VX_CODING_IDENTITY)
         snprintf(etag, sizeof etag, "%s", id_etag);
     else

@@ -59,12 +59,16 @@ expect_error "unknown job" 404 job_not_found
 check "the client's id is echoed" test "$(header X-Request-Id)" = client-abc.123
 api GET /v1/meshes -H "X-Request-Id: bad id with spaces"
 check "an unsafe id is replaced" bash -c "[[ '$(header X-Request-Id)' =~ ^[0-9a-f]{16}$ ]]"
-# the line is written once the answer is sent: it may come after curl returns
-for _ in $(seq 1 100); do
-    LINE=$(grep -a 'event=http.request' "$TMP/daemon.log" | grep -a 'request_id=client-abc.123' | tail -n 1)
-    [[ -n $LINE ]] && break
-    sleep 0.1
-done
+# log_line EVENT ID: the last log line of EVENT with request_id=ID into LINE
+# (written once the answer is sent: it may come after curl returns)
+log_line() {
+    for _ in $(seq 1 100); do
+        LINE=$(grep -a "event=$1" "$TMP/daemon.log" | grep -a "request_id=$2 " | tail -n 1)
+        [[ -n $LINE ]] && break
+        sleep 0.1
+    done
+}
+log_line http.request client-abc.123
 check "the log line has the request id" test -n "$LINE"
 check "the log line has the concrete path" bash -c "grep -q 'path=/v1/jobs/01a200443ae27c41d09b5e3fa2c86d14 ' <<<'$LINE'"
 check "the log line has the template route" bash -c "grep -q 'route=/v1/jobs/{id} ' <<<'$LINE'"
@@ -76,11 +80,7 @@ upload "$VX_SOURCE_DIR/examples/meshes/torus.obj"
 run_job voxelize "$MESH_ID" '{"resolution":8,"format":"summary"}'
 api GET "/v1/jobs/$JOB/events" -H "X-Request-Id: client-503.1"
 expect_error "no event streams allowed" 503 too_many_streams
-for _ in $(seq 1 100); do
-    LINE=$(grep -a 'event=http.error' "$TMP/daemon.log" | grep -a 'request_id=client-503.1 ' | tail -n 1)
-    [[ -n $LINE ]] && break
-    sleep 0.1
-done
+log_line http.error client-503.1
 check "the http.error line names the request id" test -n "$LINE"
 check "and the status and code" bash -c "grep -q 'status=503 code=too_many_streams' <<<'$LINE'"
 
