@@ -78,14 +78,7 @@ static void sync_outputs(vx_job_run *r)
 static void run_finish_cluster(vx_jobs *j, vx_job_run *r, int ok, const vx_err *e)
 {
     job *jb = r->job;
-    /* stopped by the shutdown: back to the queue, unless canceled too */
-    int requeue =
-        !ok && e->kind == VX_ECANCELED && vx_err_has(e, VX_EF_SHUTDOWN) && !jb->cancel_requested;
-    vx_err cerr;
-    if (!ok && e->kind == VX_ECANCELED && jb->cancel_requested && vx_err_has(e, VX_EF_SHUTDOWN)) {
-        vx_err_set(&cerr, VX_ECANCELED, "canceled", "the job was canceled");
-        e = &cerr;
-    }
+    int requeue = !ok && e->kind == VX_ECANCELED && vx_err_has(e, VX_EF_SHUTDOWN);
     if (ok) sync_outputs(r);
     double run_s = vx_mono() - r->t0;
     cJSON_AddNumberToObject(r->stats, "run_ms", ms_between(0, run_s));
@@ -126,7 +119,14 @@ static void run_finish(vx_jobs *j, vx_job_run *r, int ok, const vx_err *e)
         return;
     }
     job *jb = r->job;
-    int requeue = !ok && e->kind == VX_ECANCELED && vx_err_has(e, VX_EF_SHUTDOWN);
+    /* stopped by the shutdown: back to the queue, unless canceled too */
+    int requeue =
+        !ok && e->kind == VX_ECANCELED && vx_err_has(e, VX_EF_SHUTDOWN) && !jb->cancel_requested;
+    vx_err cerr;
+    if (!ok && e->kind == VX_ECANCELED && jb->cancel_requested && vx_err_has(e, VX_EF_SHUTDOWN)) {
+        vx_err_set(&cerr, VX_ECANCELED, "canceled", "the job was canceled");
+        e = &cerr;
+    }
     vx_err serr;
     if (ok) {
         sync_outputs(r);
