@@ -86,6 +86,18 @@ static const cJSON *field(const cJSON *o, const char *name)
     return it && !cJSON_IsNull(it) ? it : NULL;
 }
 
+/* The voxels output's voxel (interp.c: the box P / N) must make a .vdb: 0,
+ * or -1 with err (VX_EUNPROC code). */
+static int voxels_fit(const rparams *p, double P, const char *code, vx_err *err)
+{
+    if (!p->outputs[OUT_VOXELS] || vx_vdb_voxel_size_ok(P / p->N)) return 0;
+    return vx_err_set(err, VX_EUNPROC, code,
+                      "params.outputs: the voxels output's voxel size would be %.6g (the box "
+                      "%.6g / N %d), under the %.6g that OpenVDB's transforms take: a mesh in "
+                      "smaller units, or no voxels output",
+                      P / p->N, P, (int)p->N, vx_vdb_min_voxel_size());
+}
+
 /* Bytes one job needs, by stage (the largest stage counts): bit grids
  * held throughout; Algorithm I; the volumes; a frame's hits and image. */
 static uint64_t job_bytes(const rparams *p)
@@ -338,15 +350,7 @@ static int render_run_gl(vx_job_run *r, const vx_mesh *mesh, const void *params,
     }
     s->radius = 0.5 * sqrt(diag);
     s->P = ext * (1 + 2 * VX_BL_PAD);
-    /* the voxels output's voxel (interp.c: P / N) must make a .vdb */
-    if (p.outputs[OUT_VOXELS] && !vx_vdb_voxel_size_ok(s->P / p.N)) {
-        vx_err_set(err, VX_EUNPROC, "voxel_size_too_small",
-                   "the voxels output's voxel size is %.6g (the box %.6g / N %d), under the "
-                   "%.6g that OpenVDB's transforms take: a mesh in smaller units, or no "
-                   "voxels output",
-                   s->P / p.N, s->P, (int)p.N, vx_vdb_min_voxel_size());
-        goto out;
-    }
+    if (voxels_fit(&p, s->P, "voxel_size_too_small", err)) goto out;
     vx_voxelize_desc d = {0};
     for (int a = 0; a < 3; a++) {
         s->box_origin[a] = s->centre[a] - s->P / 2;
@@ -719,7 +723,7 @@ static int render_encode(vx_job_run *r, const void *params, void *state, vx_err 
 
 /* The voxels output of one mesh whose box makes voxels under what
  * OpenVDB's transforms take: 422 at submission, from the mesh's bbox (with
- * further meshes the box can only grow: the job tells). */
+ * further meshes the box can only grow: the job tells, voxels_fit). */
 static int render_check_mesh(const void *params, const cJSON *meta, const vx_limits *lim,
                              vx_err *err)
 {
@@ -736,13 +740,7 @@ static int render_check_mesh(const void *params, const cJSON *meta, const vx_lim
                    cJSON_GetNumberValue(cJSON_GetArrayItem(lo, a));
         if (d > ext) ext = d;
     }
-    double P = ext * (1 + 2 * VX_BL_PAD);
-    if (!(ext > 0) || vx_vdb_voxel_size_ok(P / p->N)) return 0;
-    return vx_err_set(err, VX_EUNPROC, "invalid_params",
-                      "params.outputs: the voxels output's voxel size would be %.6g (the box "
-                      "%.6g / N %d), under the %.6g that OpenVDB's transforms take: a mesh in "
-                      "smaller units, or no voxels output",
-                      P / p->N, P, (int)p->N, vx_vdb_min_voxel_size());
+    return ext > 0 ? voxels_fit(p, ext * (1 + 2 * VX_BL_PAD), "invalid_params", err) : 0;
 }
 
 const vx_kind vx_kind_render = {

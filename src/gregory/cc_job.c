@@ -89,31 +89,41 @@ static vx_mesh *copy_faces(const vx_mesh *m)
     return c;
 }
 
+/* Whether `quads` output quads at `levels` fit max_triangles and the job
+ * memory: 0, or -1 with err, invalid_params at submission, else
+ * output_too_big or job_memory_limit. */
+static int cc_fits(long levels, double quads, const vx_limits *lim, int at_submission,
+                   vx_err *err)
+{
+    vx_err_kind kind = at_submission ? VX_EUNPROC : VX_ETOOBIG;
+    if (lim && lim->max_triangles && 2 * quads > (double)lim->max_triangles)
+        return vx_err_set(err, kind, at_submission ? "invalid_params" : "output_too_big",
+                          "params.levels = %ld gives %.0f triangles on this mesh, over "
+                          "max_triangles (%llu)",
+                          levels, 2 * quads, (unsigned long long)lim->max_triangles);
+    if (lim && lim->max_job_memory && quads * CC_BYTES_PER_QUAD > (double)lim->max_job_memory)
+        return vx_err_set(err, kind, at_submission ? "invalid_params" : "job_memory_limit",
+                          "params.levels = %ld needs about %.0f bytes on this mesh, over the job "
+                          "memory limit (%llu)",
+                          levels, quads * CC_BYTES_PER_QUAD,
+                          (unsigned long long)lim->max_job_memory);
+    return 0;
+}
+
 /* The output's size, from the mesh's metadata: its corners are its
- * triangles (fans) plus two a face. Over max_triangles or the job memory
- * it is 422 at submission; the job checks the mesh it reads again. */
+ * triangles (fans) plus two a face. The job checks the mesh it reads
+ * again (a .bpt's patches: only there). */
 static int cc_check_mesh(const void *params, const cJSON *meta, const vx_limits *lim, vx_err *err)
 {
     const cc_params *p = params;
     const cJSON *t = cJSON_GetObjectItemCaseSensitive(meta, "triangles");
     const cJSON *f =
         cJSON_GetObjectItemCaseSensitive(cJSON_GetObjectItemCaseSensitive(meta, "faces"), "total");
-    if (!lim || !cJSON_IsNumber(t) || !cJSON_IsNumber(f) ||
+    if (!cJSON_IsNumber(t) || !cJSON_IsNumber(f) ||
         cJSON_GetNumberValue(cJSON_GetObjectItemCaseSensitive(meta, "patches")) > 0)
         return 0;
     double quads = (t->valuedouble + 2 * f->valuedouble) * ldexp(1, 2 * ((int)p->levels - 1));
-    if (lim->max_triangles && 2 * quads > (double)lim->max_triangles)
-        return vx_err_set(err, VX_EUNPROC, "invalid_params",
-                          "params.levels = %ld gives %.0f triangles on this mesh, over "
-                          "max_triangles (%llu)",
-                          p->levels, 2 * quads, (unsigned long long)lim->max_triangles);
-    if (lim->max_job_memory && quads * CC_BYTES_PER_QUAD > (double)lim->max_job_memory)
-        return vx_err_set(err, VX_EUNPROC, "invalid_params",
-                          "params.levels = %ld needs about %.0f bytes on this mesh, over the job "
-                          "memory limit (%llu)",
-                          p->levels, quads * CC_BYTES_PER_QUAD,
-                          (unsigned long long)lim->max_job_memory);
-    return 0;
+    return cc_fits(p->levels, quads, lim, 1, err);
 }
 
 static int cc_run_gl(vx_job_run *r, const vx_mesh *mesh, const void *params, void **state,
@@ -121,16 +131,7 @@ static int cc_run_gl(vx_job_run *r, const vx_mesh *mesh, const void *params, voi
 {
     const cc_params p = *(const cc_params *)params;
     const vx_limits *lim = vx_run_limits(r);
-    uint64_t quads = vx_cc_quads(mesh, p.levels);
-    if (lim && lim->max_triangles && 2 * quads > lim->max_triangles)
-        return vx_err_set(err, VX_ETOOBIG, "output_too_big",
-                          "params.levels = %ld gives %llu triangles, over max_triangles (%llu)",
-                          p.levels, (unsigned long long)(2 * quads),
-                          (unsigned long long)lim->max_triangles);
-    if (lim && lim->max_job_memory && quads * CC_BYTES_PER_QUAD > lim->max_job_memory)
-        return vx_err_set(err, VX_ETOOBIG, "job_memory_limit",
-                          "params.levels = %ld needs about %llu bytes, over the job memory limit",
-                          p.levels, (unsigned long long)(quads * CC_BYTES_PER_QUAD));
+    if (cc_fits(p.levels, (double)vx_cc_quads(mesh, p.levels), lim, 0, err)) return -1;
     cc_state *s = calloc(1, sizeof *s);
     if (!s) return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for the job state");
     *state = s;
