@@ -92,8 +92,7 @@ static vx_mesh *copy_faces(const vx_mesh *m)
 /* Whether `quads` output quads at `levels` fit max_triangles and the job
  * memory: 0, or -1 with err, invalid_params at submission, else
  * output_too_big or job_memory_limit. */
-static int cc_fits(long levels, double quads, const vx_limits *lim, int at_submission,
-                   vx_err *err)
+static int cc_fits(long levels, double quads, const vx_limits *lim, int at_submission, vx_err *err)
 {
     vx_err_kind kind = at_submission ? VX_EUNPROC : VX_ETOOBIG;
     if (lim && lim->max_triangles && 2 * quads > (double)lim->max_triangles)

@@ -186,7 +186,7 @@ TURN=(-r 16 -p camera.type=orbit -p width=32 -p height=24)
 "$CTL" -q render "$MID" "${TURN[@]}" -p frames=3 -o spin.png 2>ctl.err
 rc=$?
 check "turntable: exit 0 ($(cat ctl.err))" test $rc -eq 0
-check "turntable: three PNG frames" test "$(file -b spin_000.png spin_001.png spin_002.png | grep -c '32 x 24')" = 3
+check "turntable: three PNG frames" test "$(for f in spin_000.png spin_001.png spin_002.png; do "$VX_TOOLS/pngstat" "$f"; done | jq -s 'map(select(.width == 32 and .height == 24)) | length')" = 3
 check "turntable: no file under the plain name" test ! -e spin.png
 check "turntable: the frames differ" sh -c 'test -s spin_001.png && ! cmp -s spin_000.png spin_001.png'
 "$CTL" -q render "$MID" "${TURN[@]}" -p frames=3 -o - >spin.all 2>ctl.err
