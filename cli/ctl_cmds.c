@@ -14,6 +14,7 @@
 
 #include "ctl.h"
 #include "util/json.h"
+#include "util/name.h"
 
 static const char *str(const cJSON *o, const char *k)
 {
@@ -110,9 +111,9 @@ static int spool_stream(const char *file, char *spool, size_t n)
 }
 
 /* Uploads file ("-": standard input), named by its base name where the
- * server takes it as a mesh name (1..100 bytes, no control character, '\\'
- * or '"'): its mesh id into id[65], and with --json and `echo` the
- * server's Mesh on stdout. 0 or the exit status. */
+ * server takes it as a mesh name (vx_name_ok; else unnamed): its mesh id
+ * into id[65], and with --json and `echo` the server's Mesh on stdout. 0 or
+ * the exit status. */
 static int upload(ctl *c, const char *file, char *id, int echo)
 {
     char spool[4096] = "";
@@ -122,9 +123,7 @@ static int upload(ctl *c, const char *file, char *id, int echo)
         if (spool_stream(file, spool, sizeof spool)) return 1;
     ctl_buf b = {0};
     const char *base = strrchr(file, '/') ? strrchr(file, '/') + 1 : file;
-    int named = *base && strlen(base) <= 100 && strcmp(file, "-");
-    for (const unsigned char *p = (const unsigned char *)base; named && *p; p++)
-        named = *p >= 0x20 && *p != 0x7f && *p != '\\' && *p != '"';
+    int named = strcmp(file, "-") && vx_name_ok(base, strlen(base));
     char *q = named ? query_arg("name", base) : NULL, path[400];
     snprintf(path, sizeof path, "/v1/meshes%s%s", q ? "?" : "", q ? q + 1 : "");
     free(q);

@@ -146,6 +146,11 @@ static int first_call(vx_http *h, struct MHD_Connection *c, req *r, const char *
                             "the request head is larger than max-header-bytes");
     int rc = check_framing(c, r, version);
     if (rc >= 0) return rc;
+    if (!vx_req_method_known(r->method))
+        return vx_resp_fail(c, r, VX_ENOTIMPL, "not_implemented",
+                            "method %.40s is not implemented (voxeld takes GET, HEAD, POST, DELETE "
+                            "and OPTIONS)",
+                            r->method);
     if (r->route == VX_R_UNKNOWN)
         return vx_resp_fail(c, r, VX_ENOTFOUND, "not_found", "no such route");
     /* A CORS preflight carries no credentials: answered before auth. */

@@ -88,6 +88,13 @@ const char *vx_resp_header(struct MHD_Connection *c, const char *name);
  * lines; vx_resp_header gives the first only); NULL when there is none or
  * they do not fit. */
 const char *vx_resp_header_list(struct MHD_Connection *c, const char *name, char *buf, size_t n);
+/* The preconditions of RFC 9110 13.2.2 on a GET or HEAD of a representation
+ * whose strong tag is etag (also: another tag of the same content that
+ * If-Match may name, or NULL): 412 when If-Match names neither (nor "*"),
+ * else 304 when If-None-Match names etag (weakly) or is "*", else 0. */
+int vx_resp_preconditions(struct MHD_Connection *c, const char *etag, const char *also);
+/* The JSON 412 precondition_failed of a resource tagged etag. */
+int vx_resp_precondition_failed(struct MHD_Connection *c, req *r, const char *etag);
 /* A response of headers alone, no Content-Length and no body: a 304, or a
  * HEAD whose GET has no length known up front (a coded result, an event
  * stream). libmicrohttpd 0.9.75 adds Content-Length: 0 to a sized response
@@ -118,9 +125,10 @@ int vx_resp_err_with(struct MHD_Connection *c, req *r, const vx_err *e, const ch
                      const char *v);
 /* A Content-Disposition attachment value into out. The name is
  * "<stem>-<file>" where stem is name without its extension, or (file NULL)
- * name itself, or "<fallback>.<ext>" without a name; it goes as UTF-8 in
- * filename*=, and filename= (ASCII, other bytes '_') carries fallback when
- * file is given (a result's own name), else the name. */
+ * name itself; without a name (NULL, or not one by vx_name_ok) it is
+ * file, or "<fallback>.<ext>". It goes as UTF-8 in filename*=, and
+ * filename= (ASCII, other bytes '_') carries fallback when file is given (a
+ * result's own name), else the name. */
 void vx_resp_disposition(char *out, size_t n, const char *name, const char *file,
                          const char *fallback, const char *ext);
 /* Answers an error made here: vx_err_set + vx_resp_err. */

@@ -21,22 +21,22 @@ static const struct {
     const char *allow;
 } routes[VX_R_COUNT] = {
     [VX_R_UNKNOWN] = {"unmatched", ""},
-    [VX_R_LIVEZ] = {"/livez", "GET, HEAD"},
-    [VX_R_READYZ] = {"/readyz", "GET, HEAD"},
-    [VX_R_METRICS] = {"/metrics", "GET, HEAD"},
-    [VX_R_INFO] = {"/v1/info", "GET, HEAD"},
-    [VX_R_MESHES] = {"/v1/meshes", "GET, HEAD, POST"},
-    [VX_R_MESH] = {"/v1/meshes/{id}", "GET, HEAD, DELETE"},
-    [VX_R_MESH_FILE] = {"/v1/meshes/{id}/file", "GET, HEAD"},
-    [VX_R_JOBS] = {"/v1/jobs", "GET, HEAD, POST"},
-    [VX_R_JOB] = {"/v1/jobs/{id}", "GET, HEAD, DELETE"},
-    [VX_R_RESULT] = {"/v1/jobs/{id}/result", "GET, HEAD"},
-    [VX_R_RESULT_NAME] = {"/v1/jobs/{id}/result/{name}", "GET, HEAD"},
-    [VX_R_WEB_INDEX] = {"/", "GET, HEAD"},
-    [VX_R_WEB_DOCS] = {"/docs", "GET, HEAD"},
-    [VX_R_WEB_SPEC] = {"/openapi.yaml", "GET, HEAD"},
-    [VX_R_WEB_ASSET] = {"/ui/{name}", "GET, HEAD"},
-    [VX_R_EVENTS] = {"/v1/jobs/{id}/events", "GET, HEAD"},
+    [VX_R_LIVEZ] = {"/livez", "GET, HEAD, OPTIONS"},
+    [VX_R_READYZ] = {"/readyz", "GET, HEAD, OPTIONS"},
+    [VX_R_METRICS] = {"/metrics", "GET, HEAD, OPTIONS"},
+    [VX_R_INFO] = {"/v1/info", "GET, HEAD, OPTIONS"},
+    [VX_R_MESHES] = {"/v1/meshes", "GET, HEAD, POST, OPTIONS"},
+    [VX_R_MESH] = {"/v1/meshes/{id}", "GET, HEAD, DELETE, OPTIONS"},
+    [VX_R_MESH_FILE] = {"/v1/meshes/{id}/file", "GET, HEAD, OPTIONS"},
+    [VX_R_JOBS] = {"/v1/jobs", "GET, HEAD, POST, OPTIONS"},
+    [VX_R_JOB] = {"/v1/jobs/{id}", "GET, HEAD, DELETE, OPTIONS"},
+    [VX_R_RESULT] = {"/v1/jobs/{id}/result", "GET, HEAD, OPTIONS"},
+    [VX_R_RESULT_NAME] = {"/v1/jobs/{id}/result/{name}", "GET, HEAD, OPTIONS"},
+    [VX_R_WEB_INDEX] = {"/", "GET, HEAD, OPTIONS"},
+    [VX_R_WEB_DOCS] = {"/docs", "GET, HEAD, OPTIONS"},
+    [VX_R_WEB_SPEC] = {"/openapi.yaml", "GET, HEAD, OPTIONS"},
+    [VX_R_WEB_ASSET] = {"/ui/{name}", "GET, HEAD, OPTIONS"},
+    [VX_R_EVENTS] = {"/v1/jobs/{id}/events", "GET, HEAD, OPTIONS"},
 };
 
 static int is(const char *p, size_t len, const char *lit)
@@ -119,6 +119,15 @@ const char *vx_req_route_name(vx_route rt)
 const char *vx_req_route_allow(vx_route rt)
 {
     return (unsigned)rt < VX_R_COUNT ? routes[rt].allow : "";
+}
+
+int vx_req_method_known(const char *m)
+{
+    static const char *known[] = {"GET",     "HEAD",    "POST",  "PUT",   "DELETE",
+                                  "CONNECT", "OPTIONS", "TRACE", "PATCH", NULL};
+    for (int i = 0; known[i]; i++)
+        if (!strcmp(m, known[i])) return 1;
+    return 0;
 }
 
 int vx_req_method_allowed(vx_route rt, const char *m)
@@ -328,11 +337,11 @@ int vx_req_query_add(vx_req_query *q, vx_route rt, const char *method, const cha
         if (!vx_store_valid_mesh_id(q->mesh)) goto bad_mesh;
         return 0;
     case Q_NAME:
-        if (!vx_req_name_ok(value, vlen)) {
+        if (!vx_name_ok(value, vlen)) {
             snprintf(msg, msgn,
                      "query parameter name must be 1 to %d bytes of UTF-8 without control "
                      "characters, '/', '\\' or '\"'",
-                     VX_REQ_NAME_MAX);
+                     VX_NAME_MAX);
             return -1;
         }
         memcpy(q->name, value, vlen);
@@ -401,7 +410,7 @@ int vx_req_query_format(const vx_req_query *q, char *out, size_t n)
             (unsigned)(q->progress_ppm % 1000000));
     if (q->has_name) {
         /* Percent-encoded but for unreserved characters. */
-        char enc[3 * VX_REQ_NAME_MAX + 1];
+        char enc[3 * VX_NAME_MAX + 1];
         size_t e = 0;
         for (const unsigned char *c = (const unsigned char *)q->name; *c; c++) {
             if ((*c >= 'a' && *c <= 'z') || (*c >= 'A' && *c <= 'Z') || (*c >= '0' && *c <= '9') ||
@@ -419,39 +428,103 @@ int vx_req_query_format(const vx_req_query *q, char *out, size_t n)
 
 /* ---- mesh names --------------------------------------------------------- */
 
-int vx_req_name_ok(const char *s, size_t len)
+/* Where the value of Content-Disposition parameter name (without '=')
+ * starts: at the value's start or after a ';' outside a quoted string;
+ * NULL when it is not there. */
+static const char *disposition_param(const char *cd, const char *name)
 {
-    if (!len || len > VX_REQ_NAME_MAX || !vx_req_utf8_valid(s, len)) return 0;
-    for (size_t i = 0; i < len; i++) {
-        unsigned char c = (unsigned char)s[i];
-        if (c < 0x20 || c == 0x7f || c == '/' || c == '\\' || c == '"') return 0;
+    size_t n = strlen(name);
+    int quoted = 0;
+    for (const char *p = cd; p && *p; p++) {
+        if (quoted) {
+            if (*p == '\\' && p[1])
+                p++;
+            else if (*p == '"')
+                quoted = 0;
+            continue;
+        }
+        if (*p == '"') quoted = 1;
+        if (p != cd && *p != ';') continue;
+        const char *q = p == cd ? p : p + 1;
+        while (*q == ' ' || *q == '\t')
+            q++;
+        if (strncasecmp(q, name, n) != 0) continue;
+        for (q += n; *q == ' ' || *q == '\t'; q++)
+            ;
+        if (*q != '=') continue;
+        for (q++; *q == ' ' || *q == '\t'; q++)
+            ;
+        return q;
     }
-    return 1;
+    return NULL;
+}
+
+static int hex_digit(int c)
+{
+    return c >= '0' && c <= '9'   ? c - '0'
+           : c >= 'a' && c <= 'f' ? c - 'a' + 10
+           : c >= 'A' && c <= 'F' ? c - 'A' + 10
+                                  : -1;
+}
+
+/* An RFC 8187 ext-value (charset'language'percent-encoded, the charset
+ * UTF-8 or ISO-8859-1) decoded into UTF-8 in out: 0, or -1 when it is not
+ * one (another charset, a bad or NUL escape, too long). */
+static int ext_value(const char *v, char *out, size_t n)
+{
+    const char *q1 = strchr(v, '\'');
+    if (!q1) return -1;
+    size_t cs = (size_t)(q1 - v);
+    int latin1 = cs == 10 && !strncasecmp(v, "ISO-8859-1", 10);
+    if (!latin1 && !(cs == 5 && !strncasecmp(v, "UTF-8", 5))) return -1;
+    const char *q2 = strchr(q1 + 1, '\'');
+    if (!q2) return -1;
+    size_t k = 0;
+    for (const char *p = q2 + 1; *p && *p != ';' && *p != ' ' && *p != '\t'; p++) {
+        int c = (unsigned char)*p;
+        if (c == '%') {
+            int hi = hex_digit(p[1]), lo = hi < 0 ? -1 : hex_digit(p[2]);
+            if (lo < 0 || (hi | lo) == 0) return -1;
+            c = hi << 4 | lo;
+            p += 2;
+        }
+        if (k + 3 >= n) return -1;
+        if (latin1 && c >= 0x80) {
+            out[k++] = (char)(0xC0 | c >> 6);
+            out[k++] = (char)(0x80 | (c & 0x3f));
+        } else {
+            out[k++] = (char)c;
+        }
+    }
+    out[k] = 0;
+    return 0;
 }
 
 int vx_req_disposition_name(const char *cd, char *out, size_t n)
 {
     out[0] = 0;
-    const char *p = cd;
-    /* filename=, not filename*= (RFC 6266 ext-value: not read). */
-    while (p && (p = strcasestr(p, "filename")) && p[8] != '=')
-        p += 8;
-    if (!p) return 0;
-    p += 9;
-    char buf[4 * VX_REQ_NAME_MAX];
+    char buf[4 * VX_NAME_MAX];
     size_t k = 0;
-    if (*p == '"') {
-        for (p++; *p && *p != '"'; p++) {
-            if (*p == '\\' && p[1]) p++;
-            if (k + 1 >= sizeof buf) return -1;
-            buf[k++] = *p;
+    /* filename*= (RFC 6266: preferred), else filename= */
+    const char *p = disposition_param(cd, "filename*");
+    if (p && !ext_value(p, buf, sizeof buf)) {
+        k = strlen(buf);
+    } else if ((p = disposition_param(cd, "filename"))) {
+        if (*p == '"') {
+            for (p++; *p && *p != '"'; p++) {
+                if (*p == '\\' && p[1]) p++;
+                if (k + 1 >= sizeof buf) return -1;
+                buf[k++] = *p;
+            }
+            if (*p != '"') return -1;
+        } else {
+            for (; *p && *p != ';' && *p != ' ' && *p != '\t'; p++) {
+                if (k + 1 >= sizeof buf) return -1;
+                buf[k++] = *p;
+            }
         }
-        if (*p != '"') return -1;
     } else {
-        for (; *p && *p != ';' && *p != ' ' && *p != '\t'; p++) {
-            if (k + 1 >= sizeof buf) return -1;
-            buf[k++] = *p;
-        }
+        return disposition_param(cd, "filename*") ? -1 : 0;
     }
     buf[k] = 0;
     /* The client's directories are no part of the name. */
@@ -459,7 +532,7 @@ int vx_req_disposition_name(const char *cd, char *out, size_t n)
     for (const char *q = buf; *q; q++)
         if (*q == '/' || *q == '\\') base = q + 1;
     size_t len = strlen(base);
-    if (!vx_req_name_ok(base, len) || len >= n) return -1;
+    if (!vx_name_ok(base, len) || len >= n) return -1;
     memcpy(out, base, len + 1);
     return 1;
 }

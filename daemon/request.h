@@ -8,6 +8,8 @@
 #include <stddef.h>
 #include <stdint.h>
 
+#include "util/name.h"
+
 typedef enum vx_route {
     VX_R_UNKNOWN,
     VX_R_LIVEZ,
@@ -42,22 +44,21 @@ typedef struct vx_req_target {
 #define VX_REQ_WAIT_MAX_US 1000000000000000000ull
 
 /* Longest mesh name, in bytes (?name=, a Content-Disposition filename). */
-#define VX_REQ_NAME_MAX 100
 
 /* The declared query parameters of one request, after strict parsing.
  * progress (GET /v1/jobs/{id} only) is a fraction from 0 to 1. */
 typedef struct vx_req_query {
     int has_limit, has_after, has_state, has_wait, has_progress, has_order, has_kind, has_mesh;
     int has_name;
-    int limit;                      /* 1..1000; 100 when absent */
-    char after[VX_REQ_ID_MAX];      /* a mesh or job id in form */
-    char state[16];                 /* a job state */
-    uint64_t wait_us;               /* not yet capped to the request timeout */
-    uint32_t progress_ppm;          /* ?progress: wake a ?wait at this progress, in 1e-6 (0..1e6) */
-    int desc;                       /* order=desc: newest first */
-    char kind[32];                  /* a job kind's name in form (the route checks it is known) */
-    char mesh[VX_REQ_ID_MAX];       /* a mesh id */
-    char name[VX_REQ_NAME_MAX + 1]; /* POST /v1/meshes: the mesh's name */
+    int limit;                  /* 1..1000; 100 when absent */
+    char after[VX_REQ_ID_MAX];  /* a mesh or job id in form */
+    char state[16];             /* a job state */
+    uint64_t wait_us;           /* not yet capped to the request timeout */
+    uint32_t progress_ppm;      /* ?progress: wake a ?wait at this progress, in 1e-6 (0..1e6) */
+    int desc;                   /* order=desc: newest first */
+    char kind[32];              /* a job kind's name in form (the route checks it is known) */
+    char mesh[VX_REQ_ID_MAX];   /* a mesh id */
+    char name[VX_NAME_MAX + 1]; /* POST /v1/meshes: the mesh's name */
 } vx_req_query;
 
 /* Matches path (the URL without its query string, exactly as sent: no
@@ -65,8 +66,12 @@ typedef struct vx_req_query {
 vx_route vx_req_route(const char *path, size_t len, vx_req_target *t);
 /* The path template of a route, e.g. "/v1/jobs/{id}" ("unmatched" for none). */
 const char *vx_req_route_name(vx_route rt);
-/* The Allow header of a route, e.g. "GET, HEAD, DELETE" ("" for none). */
+/* The Allow header of a route, e.g. "GET, HEAD, DELETE, OPTIONS" ("" for
+ * none). */
 const char *vx_req_route_allow(vx_route rt);
+/* 1 when m is a method of RFC 9110 or PATCH (405 where a route lacks it),
+ * else 0 (501). */
+int vx_req_method_known(const char *m);
 /* 1 when the route takes the method (HEAD wherever GET), else 0. */
 int vx_req_method_allowed(vx_route rt, const char *method);
 /* Writes the media type of a Content-Type value, parameters and white space
@@ -116,13 +121,11 @@ int vx_req_id_ok(const char *s);
 /* A new request id into out: 16 lower-case hex digits (getrandom, else a
  * counter and the clock). Any thread. */
 void vx_req_new_id(char out[17]);
-/* 1 when s[0..len) is a mesh name: 1 to VX_REQ_NAME_MAX bytes of valid
- * UTF-8 without control characters, '/', '\\' or '"'; else 0. */
-int vx_req_name_ok(const char *s, size_t len);
 /* The file name a Content-Disposition value (NULL: none) gives, its
- * directories dropped, into out (n > VX_REQ_NAME_MAX): 1 when there is a
- * valid name (vx_req_name_ok), 0 when there is no filename parameter, -1
- * when there is one that is not a valid name. */
+ * directories dropped, into out (n > VX_NAME_MAX): filename*= (RFC
+ * 8187, UTF-8 or ISO-8859-1) when it decodes, else filename=. 1 when there
+ * is a valid name (vx_name_ok), 0 when there is no filename parameter,
+ * -1 when there is one that is not a valid name. */
 int vx_req_disposition_name(const char *cd, char *out, size_t n);
 
 /* Parses a page size: a plain decimal integer in [1, 1000]. 0 or -1. */

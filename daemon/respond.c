@@ -76,6 +76,25 @@ const char *vx_resp_header_list(struct MHD_Connection *c, const char *name, char
     return j.lines && !j.full ? buf : NULL;
 }
 
+int vx_resp_preconditions(struct MHD_Connection *c, const char *etag, const char *also)
+{
+    char buf[4096];
+    if (vx_resp_header(c, MHD_HTTP_HEADER_IF_MATCH)) {
+        /* strong comparison; a list too long to read matches nothing */
+        const char *im = vx_resp_header_list(c, MHD_HTTP_HEADER_IF_MATCH, buf, sizeof buf);
+        if (!vx_req_etag_match(im, etag, 0, 1) && !(also && vx_req_etag_match(im, also, 0, 0)))
+            return 412;
+    }
+    const char *inm = vx_resp_header_list(c, MHD_HTTP_HEADER_IF_NONE_MATCH, buf, sizeof buf);
+    return vx_req_etag_match(inm, etag, 1, 1) ? 304 : 0;
+}
+
+int vx_resp_precondition_failed(struct MHD_Connection *c, req *r, const char *etag)
+{
+    return vx_resp_fail(c, r, VX_EPRECOND, "precondition_failed",
+                        "If-Match names no current tag of this resource (its ETag is %s)", etag);
+}
+
 static ssize_t no_body(void *cls, uint64_t pos, char *buf, size_t max)
 {
     (void)cls, (void)pos, (void)buf, (void)max;
@@ -173,6 +192,7 @@ vx_resp_answer vx_resp_answer_of(const vx_err *e)
         [VX_EHEADER] = {431},
         [VX_ENOTIMPL] = {501},
         [VX_ERANGE] = {416},
+        [VX_EPRECOND] = {412},
     };
     if ((unsigned)e->kind < VX_EKIND_COUNT) return by_kind[e->kind];
     return by_kind[VX_EOK];
@@ -228,10 +248,14 @@ void vx_resp_disposition(char *out, size_t n, const char *name, const char *file
                          const char *fallback, const char *ext)
 {
     char fn[3 * 128], stem[128];
+    /* a name stored before the rules of vx_name_ok is not used */
+    if (name && !vx_name_ok(name, strlen(name))) name = NULL;
     snprintf(stem, sizeof stem, "%s", name ? name : fallback);
     char *dot = strrchr(stem, '.');
     if (name && dot && dot != stem) *dot = 0;
-    if (file)
+    if (file && !name)
+        snprintf(fn, sizeof fn, "%s", file);
+    else if (file)
         snprintf(fn, sizeof fn, "%s-%s", stem, file);
     else if (name)
         snprintf(fn, sizeof fn, "%s", name);

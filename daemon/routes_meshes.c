@@ -68,10 +68,13 @@ int vx_route_mesh_file(vx_http *h, struct MHD_Connection *c, req *r)
         if (fd >= 0) close(fd);
         return vx_resp_fail(c, r, VX_ENOTFOUND, "mesh_not_found", "the mesh was deleted");
     }
-    /* 304 only for a file that is there and intact (so "*" too) */
-    char inmb[4096];
-    const char *inm = vx_resp_header_list(c, MHD_HTTP_HEADER_IF_NONE_MATCH, inmb, sizeof inmb);
-    if (inm && (strstr(inm, etag) || !strcmp(inm, "*"))) {
+    /* 304 and 412 only for a file that is there and intact (so "*" too) */
+    int pre = vx_resp_preconditions(c, etag, NULL);
+    if (pre == 412) {
+        close(fd);
+        return vx_resp_precondition_failed(c, r, etag);
+    }
+    if (pre == 304) {
         close(fd);
         struct MHD_Response *nm = vx_resp_headers_only(); /* no Content-Length */
         if (!nm) return MHD_NO;
@@ -108,7 +111,7 @@ static int upload_name(struct MHD_Connection *c, req *r, char *name, size_t n, v
         return vx_err_set(err, VX_EINVAL, "invalid_request",
                           "the Content-Disposition filename must be 1 to %d bytes of UTF-8 "
                           "without control characters, '\\' or '\"'",
-                          VX_REQ_NAME_MAX);
+                          VX_NAME_MAX);
     return 0;
 }
 
@@ -173,7 +176,7 @@ int vx_route_upload(vx_http *h, struct MHD_Connection *c, req *r)
     if (r->body_err.kind != VX_EOK) return vx_resp_err(c, r, &r->body_err);
     if (vx_upload_bytes(r->up) == 0)
         return vx_resp_fail(c, r, VX_EUNPROC, "obj_no_faces", "the body is empty: no faces");
-    char id[65], name[VX_REQ_NAME_MAX + 1];
+    char id[65], name[VX_NAME_MAX + 1];
     if (upload_name(c, r, name, sizeof name, &err)) return vx_resp_err(c, r, &err);
     if (vx_upload_finish(r->up, id, &err)) return vx_resp_err(c, r, &err);
     size_t nhead;

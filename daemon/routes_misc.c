@@ -193,7 +193,7 @@ int vx_route_options(vx_http *h, struct MHD_Connection *c, req *r)
         MHD_add_response_header(resp, MHD_HTTP_HEADER_ACCESS_CONTROL_ALLOW_METHODS, allow);
         MHD_add_response_header(resp, MHD_HTTP_HEADER_ACCESS_CONTROL_ALLOW_HEADERS,
                                 "Authorization, Content-Type, Idempotency-Key, X-Request-Id, "
-                                "Range, If-Range, If-None-Match");
+                                "Range, If-Range, If-None-Match, If-Match");
         MHD_add_response_header(resp, MHD_HTTP_HEADER_ACCESS_CONTROL_MAX_AGE, "600");
     }
     MHD_add_response_header(resp, MHD_HTTP_HEADER_CACHE_CONTROL, "no-store");

@@ -54,10 +54,7 @@ static void result_disposition(vx_http *h, const char *jid, const char *fname, c
     const cJSON *mj = cJSON_GetObjectItemCaseSensitive(job, "mesh");
     if (cJSON_IsString(mj)) meta = vx_store_mesh_meta(h->d.store, mj->valuestring, NULL);
     const cJSON *nj = cJSON_GetObjectItemCaseSensitive(meta, "name");
-    if (cJSON_IsString(nj))
-        vx_resp_disposition(disp, n, nj->valuestring, fname, fname, NULL);
-    else
-        snprintf(disp, n, "attachment; filename=\"%s\"", fname);
+    vx_resp_disposition(disp, n, cJSON_IsString(nj) ? nj->valuestring : NULL, fname, fname, NULL);
     cJSON_Delete(meta);
     cJSON_Delete(job);
 }
@@ -89,7 +86,7 @@ int vx_route_result(vx_http *h, struct MHD_Connection *c, req *r)
                        (!strchr(if_range, ',') && vx_req_etag_match(if_range, id_etag, 0, 0)))
                  ? vx_req_range(range, size, &first, &last)
                  : 0;
-    char ae[1024], inm[4096];
+    char ae[1024];
     vx_req_coding coding = rk == 0 && compressible(ctype)
                                ? vx_req_accept_coding(vx_resp_header_list(
                                      c, MHD_HTTP_HEADER_ACCEPT_ENCODING, ae, sizeof ae))
@@ -99,11 +96,11 @@ int vx_route_result(vx_http *h, struct MHD_Connection *c, req *r)
     else
         snprintf(etag, sizeof etag, "\"%s+%s\"", fname, vx_compress_token(coding));
 
-    if (vx_req_etag_match(vx_resp_header_list(c, MHD_HTTP_HEADER_IF_NONE_MATCH, inm, sizeof inm),
-                          etag, 1, 1)) {
-        close(fd);
-        return not_modified(c, r, etag);
-    }
+    /* If-Match may name the result in any coding: the bytes never change */
+    int pre = vx_resp_preconditions(c, etag, id_etag);
+    if (pre) close(fd);
+    if (pre == 412) return vx_resp_precondition_failed(c, r, etag);
+    if (pre == 304) return not_modified(c, r, etag);
     if (rk < 0) {
         close(fd);
         char cr[64];

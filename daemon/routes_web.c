@@ -43,22 +43,6 @@ static void page_csp(const vx_web_file *f, char *out, size_t n)
                  "frame-ancestors 'none'");
 }
 
-/* 1 when an If-None-Match value lists etag (or is "*"). */
-static int etag_matches(const char *inm, const char *etag)
-{
-    if (!inm) return 0;
-    if (!strcmp(inm, "*")) return 1;
-    size_t n = strlen(etag);
-    for (const char *p = inm; (p = strstr(p, etag)); p += n) {
-        const char *q = p + n;
-        /* a whole entry of the list (a weak W/ prefix compares alike) */
-        int left = p == inm || p[-1] == ' ' || p[-1] == ',' || p[-1] == '/';
-        int right = !*q || *q == ',' || *q == ' ';
-        if (left && right) return 1;
-    }
-    return 0;
-}
-
 int vx_route_web(vx_http *h, struct MHD_Connection *c, req *r)
 {
     const char *name = r->route == VX_R_WEB_INDEX  ? "index.html"
@@ -67,9 +51,9 @@ int vx_route_web(vx_http *h, struct MHD_Connection *c, req *r)
                                                    : r->name;
     const vx_web_file *f = vx_web_find(name);
     if (!f) return vx_resp_fail(c, r, VX_ENOTFOUND, "not_found", "no such viewer file");
-    char inm[4096];
-    int fresh = etag_matches(vx_resp_header_list(c, MHD_HTTP_HEADER_IF_NONE_MATCH, inm, sizeof inm),
-                             f->etag);
+    int pre = vx_resp_preconditions(c, f->etag, NULL);
+    if (pre == 412) return vx_resp_precondition_failed(c, r, f->etag);
+    int fresh = pre == 304;
     struct MHD_Response *resp =
         fresh ? vx_resp_headers_only() /* 304: no Content-Length */
               : MHD_create_response_from_buffer(f->len, (void *)f->data, MHD_RESPMEM_PERSISTENT);

@@ -38,6 +38,7 @@ typedef enum vx_err_kind {
     VX_EHEADER,   /* the request head is over its limit (431) */
     VX_ENOTIMPL,  /* a protocol feature that is not implemented (501) */
     VX_ERANGE,    /* a byte range outside the representation (416) */
+    VX_EPRECOND,  /* an If-Match the resource does not meet (412) */
     VX_EKIND_COUNT
 } vx_err_kind;
 

@@ -220,7 +220,15 @@ api GET /v1/nothing
 expect_error "unknown route" 404 not_found
 api PUT "/v1/meshes/$BOX"
 expect_error "PUT on a mesh" 405 method_not_allowed
-check "405 lists Allow" bash -c "grep -qi '^allow: GET, HEAD, DELETE' '$HDRS'"
+check "405 lists Allow ($(header Allow))" test "$(header Allow)" = "GET, HEAD, DELETE, OPTIONS"
+# A method that is not HTTP's: 501 on any path, known or not, before auth.
+api PROPFIND "/v1/meshes/$BOX"
+expect_error "PROPFIND on a mesh" 501 not_implemented
+check "501 has no Allow" test -z "$(header Allow)"
+api FOO /nothing
+expect_error "an unknown method on an unknown path" 501 not_implemented
+api get /livez
+expect_error "methods are case-sensitive" 501 not_implemented
 api DELETE /v1/meshes
 expect_error "DELETE the collection" 405 method_not_allowed
 api POST /livez

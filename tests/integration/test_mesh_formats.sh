@@ -172,6 +172,33 @@ api GET "/v1/meshes?limit=1000"
 check "the name in the list" jq -e --arg id "$BOX" '.items[] | select(.id == $id) | .name == "box.stl"' "$BODY"
 api POST "/v1/meshes?name=a/b" -H "Content-Type: model/stl" --data-binary "@$F/cube_ascii.stl"
 expect_error "a name with a slash" 400 invalid_request
+api POST "/v1/meshes?name=.." -H "Content-Type: model/stl" --data-binary "@$F/cube_ascii.stl"
+expect_error "the name .." 400 invalid_request
+api POST "/v1/meshes?name=evil%E2%80%AEgpj.stl" -H "Content-Type: model/stl" --data-binary "@$F/cube_ascii.stl"
+expect_error "a name holding U+202E (right-to-left override)" 400 invalid_request
+api POST /v1/meshes -H "Content-Type: model/stl" -H 'Content-Disposition: attachment; filename=".."' \
+    --data-binary "@$F/cube_ascii.stl"
+expect_error "a Content-Disposition filename .." 400 invalid_request
+# filename* (RFC 8187) wins over filename; only it, UTF-8 or ISO-8859-1
+sed 's/solid cube/solid star/' "$F/cube_ascii.stl" >"$F/star.stl"
+api POST /v1/meshes -H "Content-Type: model/stl" \
+    -H "Content-Disposition: attachment; filename=\"plain.stl\"; filename*=UTF-8''%C3%A9toile.stl" \
+    --data-binary "@$F/star.stl"
+check "filename* is preferred ($(jqb .name))" test "$(jqb .name)" = "étoile.stl"
+sed 's/solid cube/solid latin/' "$F/cube_ascii.stl" >"$F/latin.stl"
+api POST /v1/meshes -H "Content-Type: model/stl" \
+    -H "Content-Disposition: attachment; filename*=iso-8859-1'fr'caf%E9.stl" --data-binary "@$F/latin.stl"
+check "filename* alone, ISO-8859-1 ($(jqb .name))" test "$(jqb .name)" = "café.stl"
+api POST /v1/meshes -H "Content-Type: model/stl" \
+    -H "Content-Disposition: attachment; filename*=UTF-8''x%E2%80%AE.stl" --data-binary "@$F/latin.stl"
+expect_error "filename* holding U+202E" 400 invalid_request
+# If-Match on the file: its id, or *
+api GET "/v1/meshes/$BOX/file" -H "If-Match: \"$BOX\""
+expect_status "mesh file, If-Match of its id" 200
+api GET "/v1/meshes/$BOX/file" -H "If-Match: *"
+expect_status "mesh file, If-Match: *" 200
+api GET "/v1/meshes/$BOX/file" -H "If-Match: \"$(printf 'e%.0s' $(seq 64))\""
+expect_error "mesh file, If-Match of another id" 412 precondition_failed
 api POST "/v1/meshes?name=$(printf 'x%.0s' $(seq 101))" -H "Content-Type: model/stl" --data-binary "@$F/cube_ascii.stl"
 expect_error "a name of 101 bytes" 400 invalid_request
 

@@ -93,6 +93,25 @@ expect_status "conditional GET of the zstd representation" 304
 api GET "$R" -H "If-None-Match: $ETAG" -H "Accept-Encoding: zstd"
 expect_status "the identity ETag does not validate the zstd representation" 200
 
+# If-Match (RFC 9110 13.1.1): strong, before If-None-Match and Range.
+api GET "$R" -H "If-Match: $ETAG"
+expect_status "If-Match with the ETag" 200
+check "If-Match: all bytes" cmp -s "$BODY" "$TMP/full"
+api GET "$R" -H "If-Match: \"other\", $ZETAG" -H "Accept-Encoding: zstd"
+expect_status "If-Match with the zstd ETag in a list" 200
+api GET "$R" -H "If-Match: $ETAG" -H "Accept-Encoding: zstd"
+expect_status "If-Match with the identity ETag, zstd sent" 200
+api GET "$R" -H "If-Match: *" -H "Range: bytes=0-9"
+expect_status "If-Match: * and a range" 206
+api GET "$R" -H 'If-Match: "stale"'
+expect_error "If-Match with another ETag" 412 precondition_failed
+api GET "$R" -H "If-Match: W/$ETAG"
+expect_error "If-Match compares strongly" 412 precondition_failed
+api GET "$R" -H 'If-Match: "stale"' -H "If-None-Match: $ETAG" -H "Range: bytes=$SIZE-"
+expect_error "If-Match before If-None-Match and Range" 412 precondition_failed
+api HEAD "$R" -H 'If-Match: "stale"'
+expect_status "HEAD with a failing If-Match" 412
+
 # PNG is compressed already: sent as it is.
 run_job preview "$MESH_ID" '{"width":64,"height":64,"samples":1}'
 job_ok "preview"

@@ -103,6 +103,18 @@ check "upload: named by its file" sh -c "'$CTL' meshes --limit 1000 | grep '^$NM
 "$CTL" --json upload "named mesh é.obj" >up.json 2>/dev/null
 check "upload --json: the server's mesh ($(head -c 120 up.json))" \
     jq -e --arg id "$NMID" '.id == $id and .name == "named mesh é.obj" and .triangles > 0 and (.bbox.max | length) == 3' up.json
+# A file name the server would refuse as a mesh name (not UTF-8, a bidi
+# override) uploads unnamed instead of failing.
+printf '# latin-1\n' | cat - "$MESH" >"$(printf 'caf\xe9.obj')"
+"$CTL" --json upload "$(printf 'caf\xe9.obj')" >up1.json 2>ctl.err
+rc=$?
+check "upload of a Latin-1 file name: exit 0, unnamed ($rc, $(cat ctl.err))" \
+    sh -c "test $rc -eq 0 && jq -e '.id and (has(\"name\") | not)' up1.json >/dev/null"
+printf '# rlo\n' | cat - "$MESH" >"$(printf 'x\xe2\x80\xaegpj.obj')"
+"$CTL" --json upload "$(printf 'x\xe2\x80\xaegpj.obj')" >up2.json 2>ctl.err
+rc=$?
+check "upload of a file name with U+202E: exit 0, unnamed ($rc, $(cat ctl.err))" \
+    sh -c "test $rc -eq 0 && jq -e '.id and (has(\"name\") | not)' up2.json >/dev/null"
 mkdir -p dl && (cd dl && "$CTL" --quiet preview "$NMID" -p width=32 -p height=32 2>../ctl.err)
 check "a download without -o: the server's UTF-8 name ($(ls dl))" sh -c "ls dl | grep -Eq '^named mesh é-[0-9a-f]{32}-image\.png$'"
 # Paging: the rest after --after, said on stderr when there is more.

@@ -74,7 +74,11 @@ api GET /ui/../openapi.yaml --path-as-is
 expect_error "no path walking" 404 not_found
 api POST / -H "Content-Type: application/json" -d '{}'
 expect_error "POST /" 405 method_not_allowed
-check "405 Allow" test "$(header Allow)" = "GET, HEAD"
+check "405 Allow" test "$(header Allow)" = "GET, HEAD, OPTIONS"
+api GET / -H "If-Match: $etag"
+expect_status "/ with If-Match of its ETag" 200
+api GET /ui/app.js -H 'If-Match: "0000000000000000"'
+expect_error "a viewer file with If-Match of another ETag" 412 precondition_failed
 api DELETE /openapi.yaml
 expect_error "DELETE /openapi.yaml" 405 method_not_allowed
 # The API behind it still wants the token.

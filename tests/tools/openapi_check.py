@@ -70,6 +70,8 @@ import yaml
 warnings.simplefilter("ignore", DeprecationWarning)
 
 HTTP_METHODS = ("get", "put", "post", "delete", "options", "head", "patch", "trace")
+# Methods a server knows (RFC 9110 and PATCH): any other is 501 on any path.
+KNOWN_METHODS = ("GET", "HEAD", "POST", "PUT", "DELETE", "CONNECT", "OPTIONS", "TRACE", "PATCH")
 BASE_URI = "https://voxeld.invalid/openapi.yaml"
 MAX_SCHEMA_ERRORS = 5
 # Request bodies larger than this are not schema-checked (a 2 MB gregory
@@ -392,7 +394,7 @@ class Checker:
                     rec = json.loads(line)
                     if not isinstance(rec, dict):
                         raise ValueError("not an object")
-                    method = str(rec["method"]).upper()
+                    method = str(rec["method"])  # case-sensitive (RFC 9110 9.1)
                     raw = str(rec["path"])
                     status = int(rec["status"])
                 except (ValueError, KeyError, TypeError) as e:
@@ -427,6 +429,16 @@ class Checker:
         body = self.load_body(rec, where)
         ct = media_type(rec.get("content_type") or "")
 
+        if method not in KNOWN_METHODS:
+            if status != 501:
+                self.fail(where, "unknown method %s answered %d, expected 501" % (method, status))
+                return
+            gen = self.general_response(501)
+            if gen is None or body is None:
+                self.check_error_body(where, method, ct, body)
+            else:
+                self.check_response(where, method, None, gen[0], gen[1], ct, headers, body, {})
+            return
         try:
             m = match_path(list(self.paths), path)
         except ValueError as e:

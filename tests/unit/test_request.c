@@ -45,6 +45,12 @@ static void test_routes(void **state)
     assert_false(vx_req_method_allowed(VX_R_MESH, "POST"));
     assert_false(vx_req_method_allowed(VX_R_MESH, "ELE"));
     assert_false(vx_req_method_allowed(VX_R_MESH, ""));
+    assert_string_equal(vx_req_route_allow(VX_R_MESH), "GET, HEAD, DELETE, OPTIONS");
+    assert_true(vx_req_method_known("PATCH"));
+    assert_true(vx_req_method_known("TRACE"));
+    assert_false(vx_req_method_known("PROPFIND"));
+    assert_false(vx_req_method_known("get"));
+    assert_false(vx_req_method_known(""));
     assert_string_equal(vx_req_route_name(VX_R_JOB), "/v1/jobs/{id}");
 }
 
@@ -312,13 +318,86 @@ static void test_negotiation(void **state)
     assert_false(vx_req_id_ok(long_id));
 }
 
+static int name_of(const char *cd, char *out)
+{
+    return vx_req_disposition_name(cd, out, VX_NAME_MAX + 1);
+}
+
+/* Mesh names: what may be one, and where a Content-Disposition has it. */
+static void test_names(void **state)
+{
+    (void)state;
+    static const char *good[] = {"box.stl",
+                                 "Cube \xc3\xa9t\xc3\xa9.off",
+                                 "...",
+                                 ".hidden",
+                                 "a..b",
+                                 "\xe2\x80\x90"
+                                 "dash"}; /* U+2010 is a visible hyphen */
+    for (size_t i = 0; i < sizeof good / sizeof *good; i++)
+        assert_true(vx_name_ok(good[i], strlen(good[i])));
+    static const char *bad[] = {
+        ".",
+        "..",
+        "a/b",
+        "a\\b",
+        "a\"b",
+        "tab\there",
+        "del\x7f",
+        "c1\xc2\x85",              /* U+0085 NEL */
+        "evil\xe2\x80\xaegpj.exe", /* U+202E right-to-left override */
+        "iso\xe2\x81\xa6x",        /* U+2066 left-to-right isolate */
+        "zw\xe2\x80\x8b",          /* U+200B zero width space */
+        "\xef\xbb\xbf"
+        "bom",         /* U+FEFF */
+        "alm\xd8\x9c", /* U+061C Arabic letter mark */
+        "bad\xff",     /* not UTF-8 */
+        "",
+    };
+    for (size_t i = 0; i < sizeof bad / sizeof *bad; i++)
+        assert_false(vx_name_ok(bad[i], strlen(bad[i])));
+
+    char out[VX_NAME_MAX + 1];
+    assert_int_equal(name_of("attachment; filename=\"C:\\\\m\\\\box.stl\"", out), 1);
+    assert_string_equal(out, "box.stl");
+    assert_int_equal(name_of("attachment; filename=plain.obj; size=3", out), 1);
+    assert_string_equal(out, "plain.obj");
+    assert_int_equal(name_of("filename=first.obj", out), 1);
+    assert_string_equal(out, "first.obj");
+    /* filename* is preferred, UTF-8 or ISO-8859-1, percent-decoded */
+    assert_int_equal(
+        name_of("attachment; filename=\"fallback.stl\"; filename*=UTF-8''%C3%A9t%C3%A9.stl", out),
+        1);
+    assert_string_equal(out, "\xc3\xa9t\xc3\xa9.stl");
+    assert_int_equal(name_of("attachment; FILENAME*=utf-8'en'only%20star.obj", out), 1);
+    assert_string_equal(out, "only star.obj");
+    assert_int_equal(name_of("attachment; filename*=iso-8859-1''caf%E9.ply", out), 1);
+    assert_string_equal(out, "caf\xc3\xa9.ply");
+    /* an ext-value that cannot be read falls back to filename=, else is bad */
+    assert_int_equal(name_of("attachment; filename*=Shift_JIS''x.obj; filename=y.obj", out), 1);
+    assert_string_equal(out, "y.obj");
+    assert_int_equal(name_of("attachment; filename*=UTF-8''a%00b.obj", out), -1);
+    assert_int_equal(name_of("attachment; filename*=UTF-8''a%zzb.obj", out), -1);
+    assert_int_equal(name_of("attachment; filename*=UTF-8''%E2%80%AEgpj.exe", out), -1);
+    assert_int_equal(name_of("attachment; filename*=UTF-8''..%2F..%2Fetc%2Fpasswd", out), 1);
+    assert_string_equal(out, "passwd");
+    assert_int_equal(name_of("attachment; filename=\"..\"", out), -1);
+    assert_int_equal(name_of("attachment; filename=\"a/..\"", out), -1);
+    /* a parameter inside a quoted string is not a parameter */
+    assert_int_equal(name_of("attachment; filename=\"a; filename*=UTF-8''b.obj\"", out), 1);
+    assert_string_equal(out, "a; filename*=UTF-8''b.obj");
+    assert_int_equal(name_of("attachment; xfilename=z.obj", out), 0);
+    assert_int_equal(name_of("attachment", out), 0);
+    assert_int_equal(name_of(NULL, out), 0);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_routes),      cmocka_unit_test(test_web_routes),
         cmocka_unit_test(test_query),       cmocka_unit_test(test_numbers),
         cmocka_unit_test(test_utf8),        cmocka_unit_test(test_job_filters),
-        cmocka_unit_test(test_negotiation),
+        cmocka_unit_test(test_negotiation), cmocka_unit_test(test_names),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }
