@@ -19,6 +19,7 @@
 #include "store/store.h"
 #include "util/fsutil.h"
 #include "util/log.h"
+#include "util/stop.h"
 
 /* The jobs hooks need the HTTP layer, which starts after the jobs, and the
  * job table, which exists before any job runs. */
@@ -167,6 +168,16 @@ static int bad_option(const vx_err *err)
     return !strcmp(err->code, "bad_blob_store") || !strcmp(err->code, "invalid_database_url");
 }
 
+/* The start-up's stop hook: SIGTERM or SIGINT (blocked until the daemon
+ * serves, so pending) ends a wait for the database. */
+static int startup_stop(void *ud, vx_err *err)
+{
+    (void)ud;
+    sigset_t p;
+    if (sigpending(&p) || !(sigismember(&p, SIGTERM) || sigismember(&p, SIGINT))) return 0;
+    return vx_err_set(err, VX_ECANCELED, "stopped", "a signal came while starting");
+}
+
 static vx_jobs *open_jobs(const vx_config *cfg, vx_store *store, int start, vx_err *err)
 {
     vx_err cerr;
@@ -184,8 +195,14 @@ static vx_jobs *open_jobs(const vx_config *cfg, vx_store *store, int start, vx_e
     if (cfg->database[0]) jd.database = &pd;
     const char *lose = getenv("VOXELD_TEST_LOSE_CONTEXT");
     g_lose_context = lose && atoi(lose) > 0 ? atoi(lose) : 0;
+    vx_stop_set(startup_stop, NULL);
     vx_jobs *jobs = vx_jobs_open(&jd, err);
+    vx_stop_set(NULL, NULL);
     __atomic_store_n(&g_jobs, jobs, __ATOMIC_RELEASE);
+    if (!jobs && !strcmp(err->code, "stopped")) {
+        VX_INFO("voxeld.stop", "stage=database reason=signal");
+        return NULL;
+    }
     if (!jobs) {
         VX_ERROR("voxeld.fatal", "stage=%s code=%s message=%s",
                  cfg->database[0] ? "database" : "journal", err->code,
@@ -324,6 +341,7 @@ int main(int argc, char **argv)
     vx_jobs *jobs = open_jobs(&cfg, store, !soft, &err);
     if (!jobs) {
         vx_store_close(store);
+        if (!strcmp(err.code, "stopped")) return 0;
         return bad_option(&err) ? 2 : 1;
     }
     vx_gl_info gi = soft ? refused : vx_jobs_gl_info(jobs);

@@ -34,6 +34,7 @@
 #include "util/clock.h"
 #include "util/fsutil.h"
 #include "util/log.h"
+#include "util/stop.h"
 
 typedef struct vx_cluster vx_cluster;
 
@@ -224,7 +225,11 @@ int cluster_open(vx_jobs *j, vx_err *err)
         c->api = NULL;
         if (err->kind != VX_EUNAVAIL || vx_mono() > give_up) return -1;
         VX_WARN("cluster.database_wait", "code=%s", err->code);
-        nap(1);
+        /* a second between tries; a stop (SIGTERM at start-up) ends it */
+        for (int i = 0; i < 20; i++) {
+            if (vx_stop_poll(err)) return -1;
+            nap(0.05);
+        }
     }
     if (!(c->work = vx_pg_open(&d, err)) || !(c->lease = vx_pg_open(&d, err)) ||
         !(c->listen = vx_pg_open(&d, err)) || vx_pg_listen(c->listen, err) || catalog_start(j, err))

@@ -9,7 +9,7 @@
 static size_t disguising_char(const unsigned char *s, size_t left)
 {
     if (left >= 2 && s[0] == 0xC2 && s[1] >= 0x80 && s[1] <= 0x9F) return 2; /* U+0080-009F */
-    if (left >= 2 && s[0] == 0xD8 && s[1] == 0x9C) return 2;                  /* U+061C */
+    if (left >= 2 && s[0] == 0xD8 && s[1] == 0x9C) return 2;                 /* U+061C */
     if (left < 3) return 0;
     if (s[0] == 0xE2 && s[1] == 0x80 &&
         ((s[2] >= 0x8B && s[2] <= 0x8F) || (s[2] >= 0xAA && s[2] <= 0xAE)))

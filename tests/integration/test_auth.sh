@@ -79,6 +79,19 @@ check "a malformed --database URL exits 2" test $? -eq 2
 check "and says why" grep -q 'voxeld: --database: bad database URL' "$TMP/err6"
 "$VOXELD" --database 'mysql://x/y' --listen 127.0.0.1:0 --data-dir "$TMP/d3" 2>"$TMP/err7"
 check "a --database URL of another scheme exits 2" test $? -eq 2
+# SIGTERM while start-up waits for a database that is not up: exit 0 at
+# once, not at the end of the wait (30 s).
+"$VOXELD" --database 'postgresql://127.0.0.1:1/x' --listen 127.0.0.1:0 --data-dir "$TMP/d4" 2>"$TMP/dbwait.log" &
+DPID=$!
+for i in $(seq 1 100); do grep -q cluster.database_wait "$TMP/dbwait.log" && break; sleep 0.1; done
+check "start-up waits for the database" grep -q cluster.database_wait "$TMP/dbwait.log"
+T0=$(date +%s%N)
+kill -TERM $DPID
+wait $DPID
+rc=$?
+ms=$((($(date +%s%N) - T0) / 1000000))
+check "SIGTERM during the database wait: exit 0 in ${ms} ms (rc $rc)" test $rc -eq 0 -a $ms -lt 3000
+check "and logs why" grep -q 'event=voxeld.stop stage=database reason=signal' "$TMP/dbwait.log"
 "$VOXELD" --version >"$TMP/version"
 check "--version" grep -q '^voxeld [0-9]' "$TMP/version"
 "$VOXELD" --help >"$TMP/help"
