@@ -262,9 +262,16 @@ static size_t on_header(char *line, size_t size, size_t n, void *ud)
     return len;
 }
 
-/* errno for a finished transfer: 0 on 2xx. */
+/* errno for a finished transfer: 0 on 2xx. A failure to reach the server
+ * says which (refused, timed out, no host), for the messages; each of
+ * those and EAGAIN (5xx, 429) is tried again. */
 static int s3_errno(CURLcode rc, long status)
 {
+    if (rc == CURLE_COULDNT_CONNECT) return ECONNREFUSED;
+    if (rc == CURLE_COULDNT_RESOLVE_HOST) return EHOSTUNREACH;
+    if (rc == CURLE_OPERATION_TIMEDOUT) return ETIMEDOUT;
+    if (rc == CURLE_SEND_ERROR || rc == CURLE_RECV_ERROR || rc == CURLE_GOT_NOTHING)
+        return ECONNRESET;
     if (rc != CURLE_OK) return EAGAIN;
     if (status / 100 == 2) return 0;
     if (status == 404) return ENOENT;
@@ -274,7 +281,8 @@ static int s3_errno(CURLcode rc, long status)
 }
 
 /* Runs r, retrying connection errors and 5xx with backoff; 0 on 2xx, or -1
- * with errno (ENOENT: 404; EAGAIN: unreachable; EIO, EACCES). */
+ * with errno (ENOENT: 404; ECONNREFUSED, EHOSTUNREACH, ETIMEDOUT,
+ * ECONNRESET, EAGAIN: unreachable for now; EIO, EACCES). */
 static int s3_do(vx_blob *b, s3_req *r)
 {
     char url[2048];
@@ -346,7 +354,7 @@ static int s3_do(vx_blob *b, s3_req *r)
         status = 0;
         curl_easy_getinfo(h, CURLINFO_RESPONSE_CODE, &status);
         e = s3_errno(rc, status);
-        if (e != EAGAIN || attempt >= tries) {
+        if (vx_err_io_kind(e) != VX_EUNAVAIL || attempt >= tries) {
             /* A 404 is an answer (stat of a missing key), not a failure. */
             if (e == ENOENT)
                 VX_DEBUG("blob.s3_not_found", "method=%s key=%s", r->method, r->key ? r->key : "");

@@ -90,7 +90,10 @@ void vx_err_clear(vx_err *err)
 
 vx_err_kind vx_err_io_kind(int errnum)
 {
-    if (errnum == EAGAIN) return VX_EUNAVAIL; /* a remote byte store, unreachable for now */
+    /* a remote byte store, unreachable for now */
+    if (errnum == EAGAIN || errnum == ECONNREFUSED || errnum == EHOSTUNREACH ||
+        errnum == ETIMEDOUT || errnum == ECONNRESET)
+        return VX_EUNAVAIL;
     return errnum == ENOSPC || errnum == EDQUOT ? VX_ENOSPC : VX_EIO;
 }
 

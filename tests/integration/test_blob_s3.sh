@@ -90,6 +90,8 @@ t1=$(date +%s)
 expect_status "upload while the bucket is down" 503
 check "503 has Retry-After" test -n "$(header Retry-After)"
 check "the error is JSON" jq -e '.error.code | type == "string"' "$BODY"
+check "the message says the server refused the connection ($(jqb .error.message))" \
+    grep -q 'Connection refused' <<<"$(jqb .error.message)"
 check "answered within 20 s ($((t1 - t0)) s)" test $((t1 - t0)) -lt 20
 api GET /readyz
 expect_status "readyz while the bucket is down" 503
@@ -109,6 +111,7 @@ check "a result the bucket did not take fails the job ($(jq -c '{state,error}' "
 # back with the bucket).
 api DELETE "/v1/meshes/$BOX"
 expect_error "delete while the bucket is down" 503 store_failed
+check "its message says why ($(jqb .error.message))" grep -q 'Connection refused' <<<"$(jqb .error.message)"
 check "its 503 has Retry-After" test -n "$(header Retry-After)"
 # A mesh not in the cache cannot be fetched: 503, not "deleted" (404).
 rm -f "$DATA/blobcache/meshes/$BOX.obj"
