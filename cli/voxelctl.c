@@ -285,14 +285,14 @@ static int shortcuts(const char *kind, args *a)
     return 0;
 }
 
-/* A job id as the server makes them (letters, digits, - and _): never a
- * path of the API (../meshes/ID). */
+/* A job id as the server makes them (32 lower-case hex digits): never a
+ * path of the API (../meshes/ID); anything else is a usage error (2). */
 static int job_id_ok(const char *s)
 {
-    size_t n = strlen(s), ok = n && n <= 64;
+    size_t n = strlen(s), ok = n == 32;
     for (size_t i = 0; i < n; i++)
-        ok &= isalnum((unsigned char)s[i]) || s[i] == '-' || s[i] == '_';
-    if (!ok) fprintf(stderr, "voxelctl: '%s' is not a job id\n", s);
+        ok &= (s[i] >= '0' && s[i] <= '9') || (s[i] >= 'a' && s[i] <= 'f');
+    if (!ok) fprintf(stderr, "voxelctl: '%s' is not a job id (32 hex digits)\n", s);
     return (int)ok;
 }
 

@@ -34,7 +34,9 @@ typedef struct opt_def {
 #define S(field) F(field), sizeof(((vx_config *)0)->field)
 
 static const opt_def opts[] = {
-    {"listen", T_STR, S(listen), "ADDR:PORT to listen on (IPv6 as [ADDR]:PORT; port 0 = any free)"},
+    {"listen", T_STR, S(listen),
+     "ADDR:PORT to listen on (IPv6 as [ADDR]:PORT; an empty ADDR, :PORT, = every interface; "
+     "PORT 0 to 65535, 0 = any free)"},
     {"data-dir", T_STR, S(data_dir), "data directory (default $STATE_DIRECTORY or ./voxeld-data)"},
     {"cache-dir", T_STR, S(cache_dir), "cache directory (default $CACHE_DIRECTORY or DATA/cache)"},
     {"token-file", T_STR, S(token_file), "file holding the bearer token required on /v1 routes"},
@@ -44,13 +46,14 @@ static const opt_def opts[] = {
     {"require-gpu", T_BOOL, F(require_gpu), 0,
      "a software GL renderer (llvmpipe, softpipe, swrast) runs no job and /readyz answers 503: "
      "yes or no (default)"},
-    {"http-threads", T_COUNT, F(http_threads), 0, "HTTP thread pool size (default 4)"},
-    {"workers", T_COUNT, F(workers), 0, "CPU worker threads (default: number of CPUs)"},
+    {"http-threads", T_COUNT, F(http_threads), 0, "HTTP thread pool size (default 4; 1 to 1024)"},
+    {"workers", T_COUNT, F(workers), 0, "CPU worker threads (default: number of CPUs; 1 to 1024)"},
     {"max-upload-bytes", T_SIZE, F(max_upload_bytes), 0,
      "largest mesh upload (default 1G; at least 1)"},
     {"max-triangles", T_SIZE, F(max_triangles), 0,
      "most triangles in a mesh (default 20000000; 0 = no limit)"},
-    {"max-queued-jobs", T_SIZE, F(max_queued_jobs), 0, "queued jobs before 429 (default 64)"},
+    {"max-queued-jobs", T_SIZE, F(max_queued_jobs), 0,
+     "queued jobs before 429 (default 64; at least 1)"},
     {"job-timeout", T_SECONDS, F(job_timeout_s), 0,
      "longest a job may run, seconds (default 600; 0 = no limit)"},
     {"stop-timeout", T_SECONDS, F(stop_timeout_s), 0,
@@ -70,7 +73,8 @@ static const opt_def opts[] = {
      "largest request head, all header lines (default 64K; at least 1K)"},
     {"reuse-port", T_BOOL, F(reuse_port), 0,
      "share the port with other processes (SO_REUSEPORT): yes or no (default)"},
-    {"max-connections", T_SIZE, F(max_connections), 0, "open connections in all (default 512)"},
+    {"max-connections", T_SIZE, F(max_connections), 0,
+     "open connections in all (default 512; 1 to 1000000)"},
     {"max-connections-per-ip", T_SIZE, F(max_connections_per_ip), 0,
      "open connections from one IP (default 64; 0 = no limit)"},
     {"max-image-pixels", T_SIZE, F(max_image_pixels), 0,
@@ -112,7 +116,7 @@ static const opt_def opts[] = {
      "long loses its job to another (default 30)"},
     {"max-attempts", T_COUNT, F(max_attempts), 0,
      "attempts a job gets before it fails (cluster mode); starts a job may see the daemon die "
-     "during before it fails `interrupted` (local mode) (default 3)"},
+     "during before it fails `interrupted` (local mode) (default 3; 1 to 1024)"},
     {"retry-backoff", T_SECONDS, F(retry_backoff_s), 0,
      "cluster mode: wait before a failed job's next attempt, doubled each attempt up to 60 s "
      "(default 1)"},
@@ -272,8 +276,18 @@ static int set_opt(vx_config *c, const opt_def *d, const char *val, const char *
             goto bad;
         return 0;
     }
-bad:
-    fprintf(stderr, "voxeld: %s: invalid value for %s: '%s'\n", where, d->name, val);
+bad:;
+    static const char *want[] = {
+        [T_SIZE] = "a size in bytes: 123, 64K, 16M, 1G",
+        [T_COUNT] = "a whole number from 1 to 1024",
+        [T_SECONDS] = "seconds, a decimal number from 0 to 1e9",
+        [T_DEVICE] = "auto, or an index from 0 to 255",
+        [T_LEVEL] = "error, warn, info or debug",
+        [T_BOOL] = "yes or no",
+    };
+    const char *w = (size_t)d->type < sizeof want / sizeof want[0] ? want[d->type] : NULL;
+    fprintf(stderr, "voxeld: %s: invalid value for %s: '%s'%s%s%s\n", where, d->name, val,
+            w ? " (want " : "", w ? w : "", w ? ")" : "");
     return -1;
 }
 
@@ -292,6 +306,25 @@ static char *trim(char *s)
     while (e > s && isspace((unsigned char)e[-1]))
         *--e = 0;
     return s;
+}
+
+/* 1 when s is ADDR:PORT or [ADDR]:PORT with PORT a decimal from 0 to
+ * 65535 (ADDR may be empty: every interface; whether it resolves is
+ * found at start). */
+static int listen_ok(const char *s)
+{
+    const char *colon;
+    if (s[0] == '[') {
+        const char *rb = strchr(s, ']');
+        if (!rb || rb[1] != ':') return 0;
+        colon = rb + 1;
+    } else {
+        colon = strrchr(s, ':');
+        if (!colon || memchr(s, ':', (size_t)(colon - s))) return 0; /* IPv6 needs [] */
+    }
+    const char *p = colon + 1;
+    size_t n = strspn(p, "0123456789");
+    return n >= 1 && n <= 5 && !p[n] && atol(p) <= 65535;
 }
 
 static int load_file(vx_config *c, const char *path)
@@ -503,6 +536,17 @@ int vx_config_load(vx_config *c, int argc, char **argv)
             fprintf(stderr, "voxeld: token file %s is empty\n", c->token_file);
             return -1;
         }
+    }
+    if (!listen_ok(c->listen)) {
+        fprintf(stderr,
+                "voxeld: listen: '%s' is not ADDR:PORT ([ADDR]:PORT for IPv6, PORT from 0 to "
+                "65535)\n",
+                c->listen);
+        return -1;
+    }
+    if (c->blob_part_size < (5ull << 20)) {
+        fprintf(stderr, "voxeld: blob-part-size must be at least 5M (S3's smallest part)\n");
+        return -1;
     }
     if (c->max_connections < 1 || c->max_connections > 1000000) {
         fprintf(stderr, "voxeld: max-connections must be from 1 to 1000000\n");

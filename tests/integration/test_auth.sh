@@ -72,6 +72,18 @@ for opt in max-upload-bytes max-json-bytes job-history; do
     check "--$opt 0 exits 2" test $? -eq 2
     check "--$opt 0 is named" grep -q "$opt must be at least 1" "$TMP/err0"
 done
+# --listen must be ADDR:PORT with a port of 16 bits (99999 had wrapped to
+# another port; a missing port exited 1 after the GL context was made).
+for l in 127.0.0.1:99999 127.0.0.1 ::1:8080 localhost:http; do
+    timeout 20 "$VOXELD" --listen "$l" --data-dir "$TMP/d3" 2>"$TMP/errl"
+    rc=$?
+    check "--listen $l exits 2 ($rc)" test $rc -eq 2
+    check "--listen $l: said why" grep -q "voxeld: listen: '$l' is not ADDR:PORT" "$TMP/errl"
+done
+"$VOXELD" --workers 0 --listen 127.0.0.1:0 --data-dir "$TMP/d3" 2>"$TMP/errw"
+check "--workers 0 exits 2 naming the range" sh -c "test $? -eq 2 && grep -q 'a whole number from 1 to 1024' '$TMP/errw'"
+"$VOXELD" --blob-part-size 1M --listen 127.0.0.1:0 --data-dir "$TMP/d3" 2>"$TMP/errp"
+check "--blob-part-size 1M exits 2 without an s3 store too" sh -c "test $? -eq 2 && grep -q 'blob-part-size must be at least 5M' '$TMP/errp'"
 # Values only the queue can parse: a malformed database URL is a bad option
 # too (exit 2), said before any connection is tried.
 "$VOXELD" --database 'postgresql://u@[::1' --listen 127.0.0.1:0 --data-dir "$TMP/d3" 2>"$TMP/err6"

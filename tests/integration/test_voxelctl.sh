@@ -173,7 +173,8 @@ check "jobs --newest: the latest job first" test "$("$CTL" jobs --newest --limit
 # Usage errors say what is wrong and exit 2 before anything is sent.
 for bad in "voxelize $MID -p azimuth=1e400" "voxelize $MID -r 8 -p resolution=16" \
     "render $MID --name normal" "jobs --name x" "get ../meshes/$MID" "--json get x -o -" \
-    "voxelize" "frobnicate" "gregory $MID -r 8" "render $MID -f png" "preview $MID -f png"; do
+    "voxelize" "frobnicate" "gregory $MID -r 8" "render $MID -f png" "preview $MID -f png" \
+    "get notanid" "cancel 0123456789ABCDEF0123456789abcdef" "delete 0123456789abcdef"; do
     # shellcheck disable=SC2086
     "$CTL" $bad >/dev/null 2>ctl.err
     rc=$?
