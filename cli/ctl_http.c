@@ -182,7 +182,11 @@ long ctl_http(const ctl *c, const char *method, const char *path, const char *ct
     if (rc == CURLE_OK)
         curl_easy_getinfo(h, CURLINFO_RESPONSE_CODE, &status);
     else if (!c->quiet_transport)
-        fprintf(stderr, "voxelctl: %s%s: %s\n", c->server, path, curl_easy_strerror(rc));
+        fprintf(stderr, "voxelctl: %s%s: %s%s\n", c->server, path, curl_easy_strerror(rc),
+                rc == CURLE_COULDNT_CONNECT || rc == CURLE_COULDNT_RESOLVE_HOST
+                    ? " (is voxeld running there? --server URL or VOXELD_URL names another; "
+                      "--local runs the job without one)"
+                    : "");
     if (in) fclose(in);
     curl_slist_free_all(hl);
     curl_easy_cleanup(h);

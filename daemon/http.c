@@ -157,7 +157,10 @@ static int first_call(vx_http *h, struct MHD_Connection *c, req *r, const char *
     if (!strcmp(r->method, "OPTIONS")) return -1;
     if (!strncmp(vx_req_route_name(r->route), "/v1/", 4) && h->auth.on &&
         !vx_auth_ok(&h->auth, vx_resp_header(c, MHD_HTTP_HEADER_AUTHORIZATION)))
-        return vx_resp_fail(c, r, VX_EAUTH, "unauthorized", "a valid bearer token is required");
+        return vx_resp_fail(c, r, VX_EAUTH, "unauthorized",
+                            "a valid bearer token is required: send 'Authorization: Bearer "
+                            "TOKEN' with the token of the daemon's --token-file (voxelctl: "
+                            "--token or VOXELD_TOKEN)");
     if (!vx_req_method_allowed(r->route, r->method))
         return vx_resp_fail(c, r, VX_EMETHOD, "method_not_allowed", "method %s is not allowed here",
                             r->method);
@@ -175,7 +178,7 @@ static int first_call(vx_http *h, struct MHD_Connection *c, req *r, const char *
     if (!vx_route_disk_ok(h, &nfree))
         return vx_resp_fail(
             c, r, VX_ENOSPC, "insufficient_storage",
-            "the data dir is full: %llu bytes free, under the %llu-byte floor (--min-free-disk); "
+            "the data dir has %llu bytes free, under the %llu-byte floor (--min-free-disk); "
             "reads still work",
             (unsigned long long)(nfree == UINT64_MAX ? 0 : nfree),
             (unsigned long long)h->d.cfg->min_free_disk);

@@ -105,8 +105,8 @@ struct MHD_Response *vx_resp_headers_only(void);
 /* Queues resp (taken, may be NULL: MHD_NO) as r's answer. */
 int vx_resp_queue(struct MHD_Connection *c, req *r, unsigned status, struct MHD_Response *resp,
                   uint64_t body_bytes);
-/* Answers text (owned, NULL: empty) as ctype, no-store, with one optional
- * header h1: v1. */
+/* Answers text (owned, NULL: empty) as ctype (NULL: no Content-Type, for
+ * a 204), no-store, with one optional header h1: v1. */
 int vx_resp_text(struct MHD_Connection *c, req *r, unsigned status, char *text, const char *ctype,
                  const char *h1, const char *v1);
 /* Answers a JSON document (owned). */

@@ -140,7 +140,7 @@ int vx_resp_text(struct MHD_Connection *c, req *r, unsigned status, char *text, 
         free(text);
         return MHD_NO;
     }
-    MHD_add_response_header(resp, MHD_HTTP_HEADER_CONTENT_TYPE, ctype);
+    if (ctype) MHD_add_response_header(resp, MHD_HTTP_HEADER_CONTENT_TYPE, ctype);
     MHD_add_response_header(resp, MHD_HTTP_HEADER_CACHE_CONTROL, "no-store");
     if (h1 && v1) MHD_add_response_header(resp, h1, v1);
     return vx_resp_queue(c, r, status, resp, n);

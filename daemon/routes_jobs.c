@@ -25,8 +25,8 @@ static int answer_job(vx_http *h, struct MHD_Connection *c, req *r, const char *
 }
 
 /* Why doc is not a job request ({"mesh", "kind", "params"?, "reuse"?}),
- * or NULL. */
-static const char *job_request_error(const cJSON *doc)
+ * (a message of its own in buf[n] when it names a field), or NULL. */
+static const char *job_request_error(const cJSON *doc, char *buf, size_t n)
 {
     const cJSON *mesh = cJSON_GetObjectItemCaseSensitive(doc, "mesh");
     const cJSON *kind = cJSON_GetObjectItemCaseSensitive(doc, "kind");
@@ -39,15 +39,19 @@ static const char *job_request_error(const cJSON *doc)
     if (params && !cJSON_IsObject(params)) return "\"params\" must be an object";
     const cJSON *reuse = cJSON_GetObjectItemCaseSensitive(doc, "reuse");
     if (reuse && !cJSON_IsBool(reuse)) return "\"reuse\" must be true or false";
-    const char *msg = NULL;
     const cJSON *it;
     cJSON_ArrayForEach(it, doc)
     {
         if (strcmp(it->string, "mesh") && strcmp(it->string, "kind") &&
-            strcmp(it->string, "params") && strcmp(it->string, "reuse"))
-            msg = "unknown field in the job request";
+            strcmp(it->string, "params") && strcmp(it->string, "reuse")) {
+            snprintf(buf, n,
+                     "unknown field \"%.60s\" in the job request (it takes mesh, kind, params "
+                     "and reuse; a kind's parameters go in params)",
+                     it->string);
+            return buf;
+        }
     }
-    return msg;
+    return NULL;
 }
 
 int vx_route_job_post(vx_http *h, struct MHD_Connection *c, req *r)
@@ -59,7 +63,8 @@ int vx_route_job_post(vx_http *h, struct MHD_Connection *c, req *r)
     char why[128];
     cJSON *doc = vx_req_json_parse(r->buf ? r->buf : "", r->len, why, sizeof why);
     if (!doc) return vx_resp_fail(c, r, VX_EINVAL, "invalid_json", "%s", why);
-    const char *msg = job_request_error(doc);
+    char mbuf[200];
+    const char *msg = job_request_error(doc, mbuf, sizeof mbuf);
     const cJSON *mesh = cJSON_GetObjectItemCaseSensitive(doc, "mesh");
     const cJSON *kind = cJSON_GetObjectItemCaseSensitive(doc, "kind");
     const cJSON *params = cJSON_GetObjectItemCaseSensitive(doc, "params");
@@ -132,7 +137,7 @@ int vx_route_job(vx_http *h, struct MHD_Connection *c, req *r)
         cJSON *doc = vx_jobs_cancel(h->d.jobs, r->id, &running, &err);
         if (!doc && err.kind == VX_ECONFLICT) { /* finished: delete it and its results */
             if (vx_jobs_delete(h->d.jobs, r->id, &err)) return vx_resp_err(c, r, &err);
-            return vx_resp_text(c, r, 204, NULL, "application/json", NULL, NULL);
+            return vx_resp_text(c, r, 204, NULL, NULL, NULL, NULL);
         }
         if (!doc) return vx_resp_err(c, r, &err);
         return vx_resp_json(c, r, running ? 202 : 200, doc, NULL, NULL);

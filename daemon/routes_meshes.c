@@ -32,7 +32,7 @@ int vx_route_mesh(vx_http *h, struct MHD_Connection *c, req *r)
     if (!strcmp(r->method, "DELETE")) {
         if (vx_store_mesh_delete(h->d.store, r->id, &err)) return vx_resp_err(c, r, &err);
         VX_INFO("mesh.deleted", "mesh=%s", r->id);
-        return vx_resp_text(c, r, 204, NULL, "application/json", NULL, NULL);
+        return vx_resp_text(c, r, 204, NULL, NULL, NULL, NULL);
     }
     cJSON *meta = vx_store_mesh_meta(h->d.store, r->id, &err);
     if (!meta) return vx_resp_err(c, r, &err);

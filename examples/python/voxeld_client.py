@@ -72,12 +72,17 @@ class Client:
         with self._open(method, path, body, "application/json" if body else None) as r:
             return json.load(r)
 
-    def upload(self, path):
-        """Stores a mesh file; returns the Mesh (its "id" names it in jobs)."""
+    def upload(self, path, name=None):
+        """Stores a mesh file; returns the Mesh (its "id" names it in jobs).
+        The mesh is named after the file (or name) when the server would
+        take it as a name (1 to 100 bytes of UTF-8, no control character,
+        '/', '\\' or '"', not "." or ".."): result downloads carry it."""
         ctype = MESH_TYPES.get(os.path.splitext(path)[1].lower(), "application/octet-stream")
         with open(path, "rb") as f:
             data = f.read()
-        with self._open("POST", "/v1/meshes", data, ctype) as r:
+        name = os.path.basename(path) if name is None else name
+        q = "?name=" + urllib.parse.quote(name, safe="") if _name_ok(name) else ""
+        with self._open("POST", "/v1/meshes" + q, data, ctype) as r:
             return json.load(r)
 
     def submit(self, mesh, kind, params=None):
@@ -170,6 +175,22 @@ def _param(kv):
         return key, value
 
 
+def _name_ok(name):
+    """The server's rule for mesh names, in short (bidi and other invisible
+    format characters are refused too: such a name is simply not sent)."""
+    b = name.encode("utf-8", "surrogateescape")
+    try:
+        b.decode("utf-8")
+    except UnicodeDecodeError:
+        return False
+    bad = set(range(0x20)) | {0x7f, ord("/"), ord("\\"), ord('"')}
+    invisible = any(0x80 <= ord(ch) <= 0x9f or ord(ch) in (0x61c, 0xfeff)
+                    or 0x200b <= ord(ch) <= 0x200f or 0x202a <= ord(ch) <= 0x202e
+                    or 0x2060 <= ord(ch) <= 0x206f for ch in name)
+    return 1 <= len(b) <= 100 and name not in (".", "..") and not invisible \
+        and not any(c in bad for c in b)
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description="Run one voxeld job on a mesh file.")
     ap.add_argument("--server")
@@ -191,6 +212,9 @@ def main(argv=None):
         if a.output and job.get("outputs"):
             c.download(job["id"], a.output)
             print("wrote " + a.output, file=sys.stderr)
+        elif a.output:
+            print("job %s wrote no file (its results are its stats, printed below): %s not "
+                  "written" % (job["id"], a.output), file=sys.stderr)
         print(json.dumps(job))
         return 0
     except VoxeldError as e:

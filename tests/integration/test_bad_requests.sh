@@ -177,6 +177,7 @@ api POST /v1/jobs "${JSON[@]}" -d "{\"mesh\":\"$BOX\",\"kind\":7}"
 expect_error "kind not a string" 400 invalid_request
 api POST /v1/jobs "${JSON[@]}" -d "{\"mesh\":\"$BOX\",\"kind\":\"preview\",\"color\":1}"
 expect_error "unknown top-level field" 400 invalid_request
+check "it names the field ($(jqb .error.message))" grep -q 'unknown field "color"' <<<"$(jqb .error.message)"
 api POST /v1/jobs -H "Content-Type: text/plain" -d "{\"mesh\":\"$BOX\",\"kind\":\"preview\"}"
 expect_error "job body not JSON content type" 415 unsupported_media_type
 api POST /v1/jobs "${JSON[@]}" -d "{\"mesh\":\"$BOX\",\"kind\":\"preview\",\"params\":{\"pad\":\"$(head -c 5000 /dev/zero | tr '\0' x)\"}}"

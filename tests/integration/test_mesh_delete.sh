@@ -56,6 +56,7 @@ post_job "$B" gregory "{\"divisions\":2,\"frames\":[\"$A\"]}"
 Q2=$(jqb .id)
 api DELETE "/v1/meshes/$A"
 expect_status "delete A with jobs queued" 204
+check "a 204 has no Content-Type" test -z "$CTYPE"
 check "A's file kept while jobs use it" test -f "$DATA/meshes/$A.obj"
 check "Q1 was still queued at the delete" queued "$Q1"
 check "Q2 was still queued at the delete" queued "$Q2"

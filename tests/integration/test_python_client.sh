@@ -14,6 +14,10 @@ check "program: exit 0 ($(tail -n 1 py.err))" test $rc -eq 0
 check "program: the succeeded job" jq -e '.state == "succeeded" and .params.resolution == 48' job.json
 check "program: a binvox file" test "$(head -n 1 py.binvox)" = "#binvox 1"
 check "program: progress lines" grep -q 'succeeded 100%' py.err
+VOXELD_URL=$BASE VOXELD_TOKEN=py-token python3 "$PYC" voxelize "$MESH" -p resolution=16 -p format=summary -o none.raw >/dev/null 2>py.err
+rc=$?
+check "program: -o of a job with no file says so ($(tail -n 1 py.err))" \
+    sh -c "test $rc -eq 0 && test ! -e none.raw && grep -q 'wrote no file' py.err"
 python3 "$PYC" --server "$BASE" --token nope voxelize "$MESH" 2>py.err
 check "program: a wrong token exits 1 with the server's message" sh -c "test $? -eq 1 && grep -q 'unauthorized, HTTP 401' py.err"
 
@@ -24,6 +28,7 @@ base, mesh_file = sys.argv[1], sys.argv[2]
 c = Client(base, token="py-token")
 mesh = c.upload(mesh_file)
 assert len(mesh["id"]) == 64, mesh
+assert mesh.get("name") == "suzanne.obj", mesh  # named after its file
 job = c.submit(mesh["id"], "voxelize", {"resolution": 96})
 events = list(c.events(job["id"]))
 assert events, "no events"
