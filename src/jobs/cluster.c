@@ -519,6 +519,21 @@ cJSON *cluster_submit(vx_jobs *j, const char *mesh, const vx_kind *k, cJSON *par
     if (opts && opts->reuse && !(opts->idempotency_key && *opts->idempotency_key)) {
         got = vx_pg_find_done(c->api, fps, &row, err);
         if (got < 0) return NULL;
+        const cJSON *outs = cJSON_GetObjectItemCaseSensitive(row.result, "outputs");
+        if (got && cJSON_IsObject(outs) && outs->child) {
+            /* only a job whose results are still there (its primary output
+             * is, at the size it was written; else a new job) */
+            char path[VX_PATH_MAX], ct[64], fn[128];
+            vx_err oerr;
+            if (cluster_output(j, row.id, NULL, path, sizeof path, ct, fn, &oerr)) {
+                got = 0;
+                vx_pg_job_clear(&row);
+                if (oerr.kind != VX_EGONE) {
+                    *err = oerr;
+                    return NULL;
+                }
+            }
+        }
         if (got) {
             *existing = 1;
             out = row_json(j, &row, 1);
@@ -546,6 +561,24 @@ cJSON *cluster_submit(vx_jobs *j, const char *mesh, const vx_kind *k, cJSON *par
                         .idem = opts ? opts->idempotency_key : NULL};
     cJSON *kids = NULL;
     if (k->split && split(j, mesh, k, params, &kids, err)) return NULL;
+    /* a split job queues its children with it: they count against the
+     * queue's capacity (25,600 bricks had gone in past a limit of 64) */
+    long nkids = kids ? (long)cJSON_GetArraySize(kids) : 0;
+    if (nkids && (size_t)nkids + 1 > vx_queue_capacity(j->queue)) {
+        cJSON_Delete(kids);
+        vx_err_set(err, VX_EUNPROC, "invalid_params",
+                   "params.bricks makes %ld bricks, each a job: more than the queue holds "
+                   "(max_queued_jobs %zu); use larger bricks, or a larger --max-queued-jobs",
+                   nkids, vx_queue_capacity(j->queue));
+        return NULL;
+    }
+    if (nkids && (size_t)(queued + 1 + nkids) > vx_queue_capacity(j->queue)) {
+        cJSON_Delete(kids);
+        vx_err_set(err, VX_EBUSY, "queue_full",
+                   "the job queue is full: %ld queued, and this job queues %ld bricks with it",
+                   queued, nkids);
+        return NULL;
+    }
     if (kids) {
         got = submit_split(j, &nj, kids, &row, err);
         cJSON_Delete(kids);
@@ -880,7 +913,11 @@ static void renew_all(vx_jobs *j)
     pthread_mutex_lock(&j->lock);
     for (size_t i = 0; i < j->jobs.n && n < 64; i++) {
         job *jb = job_at(j, i);
-        if (jb->lease_lost || jb->reporting || is_terminal(jb->state)) continue;
+        /* a job reporting is renewed too: storing its results can take
+         * longer than the lease (a big result, a slow store), and another
+         * replica then ran it again and this attempt was thrown away (its
+         * completion, once recorded, makes the renewal a no-op) */
+        if (jb->lease_lost || is_terminal(jb->state)) continue;
         snprintf(h[n].id, sizeof h[n].id, "%s", jb->id);
         h[n].attempt = jb->attempts;
         h[n].progress = jb->progress;
@@ -1027,7 +1064,7 @@ void cluster_report(vx_jobs *j, job *jb, vx_job_run *r, int ok, const vx_err *e,
     state[0] = 0;
     pthread_mutex_lock(&j->lock);
     int lost = jb->lease_lost;
-    jb->reporting = 1; /* the renewer lets it be: its end is told below */
+    jb->reporting = 1; /* its end is told below (lose() lets it be) */
     pthread_mutex_unlock(&j->lock);
     if (lost) {
         /* Another attempt owns the job now: nothing to say. */

@@ -50,7 +50,7 @@ typedef struct job {
     uint64_t fp;    /* fingerprint of kind, mesh and normalised params (dedup.c) */
     char *idem;     /* its Idempotency-Key (owned), or NULL */
     int lease_lost; /* cluster mode: the attempt is no longer ours (renewal said so) */
-    int reporting;  /* cluster mode: its end is being reported (no more renewals) */
+    int reporting;  /* cluster mode: its end is being reported (still renewed) */
     /* cluster mode, a job split into child jobs (kind.h split): each child
      * as {id, attempt, params, result}, read when it was claimed */
     cJSON *children;

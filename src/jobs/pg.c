@@ -179,11 +179,27 @@ static int connect_locked(vx_pg *pg, vx_err *err)
     if (pg->conn && PQstatus(pg->conn) == CONNECTION_OK) return 0;
     if (pg->conn) drop_locked(pg);
     if (vx_mono() < pg->next_try) return unavailable(pg, err, "waiting to reconnect");
-    char timeout[32];
+    char timeout[32], options[128], user_timeout[32];
     snprintf(timeout, sizeof timeout, "%d", (int)(pg->desc.connect_timeout_s + 0.999));
-    /* Earlier keywords are defaults the URL (expanded at dbname) overrides. */
-    const char *keys[] = {"connect_timeout", "application_name", "dbname", NULL};
-    const char *vals[] = {timeout, "voxeld", pg->url, NULL};
+    int st_ms = (int)(pg->desc.statement_timeout_s * 1000);
+    snprintf(options, sizeof options, "-c statement_timeout=%d -c lock_timeout=%d", st_ms,
+             st_ms / 2);
+    snprintf(user_timeout, sizeof user_timeout, "%d", st_ms);
+    /* Earlier keywords are defaults the URL (expanded at dbname) overrides:
+     * keepalives and tcp_user_timeout find a peer that vanished, the
+     * server's timeouts a statement that waits on a lock or runs away. */
+    const char *keys[] = {"connect_timeout",
+                          "application_name",
+                          "keepalives",
+                          "keepalives_idle",
+                          "keepalives_interval",
+                          "keepalives_count",
+                          "tcp_user_timeout",
+                          "options",
+                          "dbname",
+                          NULL};
+    const char *vals[] = {timeout, "voxeld",     "1",     "5",     "2",
+                          "3",     user_timeout, options, pg->url, NULL};
     PGconn *c = PQconnectdbParams(keys, vals, 1);
     if (!c || PQstatus(c) != CONNECTION_OK) {
         char msg[400];
@@ -221,7 +237,9 @@ static int map_error(vx_pg *pg, const PGresult *r, int lost, vx_err *err)
                r && *PQresultErrorMessage(r) ? PQresultErrorMessage(r)
                                              : (pg->conn ? PQerrorMessage(pg->conn) : NULL));
     if (!state) state = "";
-    if (lost || !strncmp(state, "08", 2) || !strncmp(state, "57P", 3))
+    /* 57014: statement_timeout; 55P03: lock_timeout */
+    if (lost || !strncmp(state, "08", 2) || !strncmp(state, "57P", 3) || !strcmp(state, "57014") ||
+        !strcmp(state, "55P03"))
         return unavailable(pg, err, msg);
     if (!strcmp(state, "53100"))
         return vx_err_set(err, VX_ENOSPC, "database_full", "the database is full: %s", msg);
@@ -235,13 +253,58 @@ static int map_error(vx_pg *pg, const PGresult *r, int lost, vx_err *err)
     return vx_err_set(err, VX_EINTERNAL, "database_error", "database error %s: %s", state, msg);
 }
 
+/* PQexecParams (or PQexec when n is 0: the last result of the statements,
+ * or the first error) with a deadline of statement_timeout_s: a database
+ * that never answers (its link black-holed, the server stopped) made the
+ * calling thread wait forever, an HTTP thread included. NULL with
+ * *timed_out set past it. */
+static PGresult *exec_deadline(vx_pg *pg, const char *sql, int n, const char *const *vals,
+                               int *timed_out)
+{
+    *timed_out = 0;
+    int sent = n ? PQsendQueryParams(pg->conn, sql, n, NULL, vals, NULL, NULL, 0)
+                 : PQsendQuery(pg->conn, sql);
+    if (!sent) return NULL;
+    double deadline = vx_mono() + pg->desc.statement_timeout_s;
+    PGresult *keep = NULL;
+    for (;;) {
+        while (PQisBusy(pg->conn)) {
+            double left = deadline - vx_mono();
+            struct pollfd p = {.fd = PQsocket(pg->conn), .events = POLLIN};
+            int rc = left > 0 ? poll(&p, 1, (int)(left * 1000) + 1) : 0;
+            if (rc < 0 && errno == EINTR) continue;
+            if (rc == 0) {
+                *timed_out = 1;
+                PQclear(keep);
+                return NULL;
+            }
+            if (rc < 0 || !PQconsumeInput(pg->conn)) break; /* PQgetResult says why */
+        }
+        PGresult *r = PQgetResult(pg->conn);
+        if (!r) return keep;
+        if (keep && PQresultStatus(keep) == PGRES_FATAL_ERROR) {
+            PQclear(r); /* the first error stands */
+        } else {
+            PQclear(keep);
+            keep = r;
+        }
+    }
+}
+
 PGresult *pg_run_locked(vx_pg *pg, int retry, const char *sql, int n, const char *const *vals,
                         vx_err *err)
 {
     for (int tries = 0;; tries++) {
         if (connect_locked(pg, err)) return NULL;
-        PGresult *r =
-            n ? PQexecParams(pg->conn, sql, n, NULL, vals, NULL, NULL, 0) : PQexec(pg->conn, sql);
+        int timed_out;
+        PGresult *r = exec_deadline(pg, sql, n, vals, &timed_out);
+        if (timed_out) {
+            vx_log(VX_LOG_WARN, "pg.timeout", "replica=%s seconds=%.1f", pg->replica,
+                   pg->desc.statement_timeout_s);
+            drop_locked(pg);
+            unavailable(pg, err, "the database did not answer in time");
+            return NULL;
+        }
         ExecStatusType st = r ? PQresultStatus(r) : PGRES_FATAL_ERROR;
         if (st == PGRES_COMMAND_OK || st == PGRES_TUPLES_OK) return r;
         int lost = PQstatus(pg->conn) == CONNECTION_BAD;
@@ -296,6 +359,7 @@ vx_pg *vx_pg_open(const vx_pg_desc *desc, vx_err *err)
     pg->desc.backoff_max_s = dflt(desc->backoff_max_s, 60);
     pg->desc.connect_timeout_s = dflt(desc->connect_timeout_s, 5);
     pg->desc.reconnect_max_s = dflt(desc->reconnect_max_s, 5);
+    pg->desc.statement_timeout_s = dflt(desc->statement_timeout_s, 10);
     if (desc->replica && *desc->replica) {
         snprintf(pg->replica, sizeof pg->replica, "%s", desc->replica);
     } else if (gethostname(pg->replica, sizeof pg->replica - 1) != 0) {
@@ -768,11 +832,30 @@ int vx_pg_complete(vx_pg *pg, const char *id, int attempt, const cJSON *result, 
         "   THEN $4::jsonb->'outputs' ELSE '{}'::jsonb END) o RETURNING 1)"
         " SELECT (SELECT count(*) FROM done), (SELECT count(*) FROM idx)",
         4, vals, err);
-    pthread_mutex_unlock(&pg->lock);
     cJSON_free(manifest);
-    if (!r) return -1;
+    if (!r) {
+        pthread_mutex_unlock(&pg->lock);
+        return -1;
+    }
     int done = atoi(PQgetvalue(r, 0, 0)) == 1;
     PQclear(r);
+    if (!done) {
+        /* A try whose answer was lost with the connection may have
+         * committed: this very attempt already recorded is no stale one
+         * (its results are the job's; removing them lost a success). */
+        r = pg_run_locked(pg, 0,
+                          "SELECT 1 FROM vx_jobs WHERE id = $1 AND attempt = $2::integer"
+                          " AND replica = $3 AND state = 'succeeded'",
+                          3, vals, err);
+        if (!r) {
+            pthread_mutex_unlock(&pg->lock);
+            return -1;
+        }
+        done = PQntuples(r) == 1;
+        PQclear(r);
+        if (done) vx_log(VX_LOG_INFO, "pg.completion_recorded", "job=%s attempt=%d", id, attempt);
+    }
+    pthread_mutex_unlock(&pg->lock);
     if (!done) vx_log(VX_LOG_WARN, "pg.stale_completion", "job=%s attempt=%d", id, attempt);
     return done ? 0 : 1;
 }

@@ -49,6 +49,11 @@ typedef struct vx_pg_desc {
     double backoff_max_s;     /* its ceiling; 0 = 60 */
     double connect_timeout_s; /* one connection attempt; 0 = 5 (the URL's connect_timeout wins) */
     double reconnect_max_s;   /* ceiling of the wait between reconnection tries; 0 = 5 */
+    /* How long a statement may go unanswered before its connection is
+     * dropped (a database that hangs without closing: a black-holed link,
+     * a stopped server, a held lock); also the server's statement_timeout
+     * and lock_timeout. 0 = 10. */
+    double statement_timeout_s;
 } vx_pg_desc;
 
 /* A job row. Times are Unix seconds on the database clock; 0 = not set. */

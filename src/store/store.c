@@ -816,17 +816,24 @@ int vx_store_mesh_purge(vx_store *s, const char *id, const char *format)
     }
     char key[128];
     const char *ext = vx_intake_ext_of_name(format);
-    if (ext) { /* the catalog's format, whatever this store's entry says */
+    /* A removal the store does not take (an s3 outage, a read-only dir)
+     * fails the purge: the catalog row stays and the purge is tried again,
+     * where the bytes left behind had been cataloged anew at the next start
+     * (the deleted mesh back on every replica). */
+    /* Metadata first, as mesh_remove_locked: without it no start catalogs
+     * the mesh again. A missing object removes as 0. */
+    mesh_key(key, sizeof key, id, ".json");
+    int rc = s->ops->remove(s->blob, key);
+    if (!rc && ext) { /* the catalog's format, whatever this store's entry says */
         mesh_data_key(key, sizeof key, id, ext);
-        s->ops->remove(s->blob, key);
+        rc = s->ops->remove(s->blob, key);
     }
-    if (found) {
-        mesh_remove_locked(s, at, 0);
-    } else {
-        mesh_key(key, sizeof key, id, ".json");
-        s->ops->remove(s->blob, key);
-    }
+    if (!rc && found) mesh_remove_locked(s, at, 0);
     pthread_mutex_unlock(&s->lock);
+    if (rc) {
+        VX_WARN("store.mesh_purge_failed", "mesh=%s errno=%d", id, errno);
+        return -1;
+    }
     fsync_meshes_dir(s);
     return 0;
 }

@@ -134,16 +134,20 @@ int vx_store_result_file(vx_store *s, const char *jid, const char *file, char *b
     /* On a shared store another daemon may have written it (cluster mode:
      * the replica that ran the job): indexed once seen. */
     uint64_t bytes = 0;
+    errno = ENOENT;
     int st = found || s->ops->shared ? s->ops->stat(s->blob, key, &bytes, NULL) : -1;
+    int st_errno = errno;
     if (!found && st >= 0 && valid_jid(jid)) {
         pthread_mutex_lock(&s->lock);
         result_add_locked(s, jid, bytes, vx_now());
         pthread_mutex_unlock(&s->lock);
         found = 1;
     }
-    if (found && st < 0 && errno != ENOENT)
-        return vx_err_set(err, vx_err_io_kind(errno), "store_failed",
-                          "cannot reach the results of job %s: %s", jid, strerror(errno));
+    /* a store that cannot be asked (an s3 outage) is no answer: 503, not
+     * 410, also where this replica never saw the results */
+    if (st < 0 && st_errno != ENOENT)
+        return vx_err_set(err, vx_err_io_kind(st_errno), "store_failed",
+                          "cannot reach the results of job %s: %s", jid, strerror(st_errno));
     if (st < 0)
         return vx_err_set(err, VX_EGONE, "result_evicted",
                           "the results of job %s were removed by the results budget", jid);

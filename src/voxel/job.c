@@ -209,6 +209,26 @@ static uint64_t job_bytes(const int dims[3], int ss, vx_samples samples, vformat
  * VX_ETOOBIG when the mesh decided the dims (the job fails). */
 /* The brick edge a grid of dims runs with (0 = one job): params.bricks,
  * else BRICK_DEFAULT for a .vdb of more cells than --brick-threshold. */
+/* Most bricks one grid is cut into (each a .vdb; in cluster mode each a
+ * job): 2^16, a 16384^3 grid in bricks of 256. */
+#define BRICKS_MAX 65536
+
+/* The bricks of S^3 across dims into nb, and their count; -1 with err when
+ * there are more than BRICKS_MAX (their product had overflowed an int:
+ * bricks of 8 across 16384^3 are 2^33). */
+static int brick_grid(const int dims[3], int S, int nb[3], vx_err *err)
+{
+    for (int a = 0; a < 3; a++)
+        nb[a] = (dims[a] + S - 1) / S;
+    uint64_t n = (uint64_t)nb[0] * (uint64_t)nb[1] * (uint64_t)nb[2];
+    if (n > BRICKS_MAX)
+        return vx_err_set(err, VX_EUNPROC, "invalid_params",
+                          "params.bricks.size %d cuts this %dx%dx%d grid into %llu bricks, over "
+                          "the %d a grid may have: use larger bricks",
+                          S, dims[0], dims[1], dims[2], (unsigned long long)n, BRICKS_MAX);
+    return (int)n;
+}
+
 static int brick_size_of(const vparams *p, const int dims[3], const vx_limits *lim)
 {
     if (p->bricks_set) return (int)p->bricks.size;
@@ -661,9 +681,8 @@ static int run_bricks(vx_job_run *r, const vx_mesh *mesh, const vparams *p,
 {
     const vx_grid *w = &d->grid;
     int nb[3];
-    for (int a = 0; a < 3; a++)
-        nb[a] = (w->dims[a] + S - 1) / S;
-    const int n = nb[0] * nb[1] * nb[2];
+    const int n = brick_grid(w->dims, S, nb, err);
+    if (n < 0) return -1;
     s->whole = *w;
     s->brick_size = S;
     s->inside = d->inside;
@@ -775,6 +794,22 @@ static int mesh_of_meta(const cJSON *meta, vx_mesh *m, vx_err *err)
 /* Cluster mode (kind.h split): a bricked grid as one child job per brick,
  * each an explicit box of the grid's lattice written in the grid's index
  * space (vdb_index_base), the inside rule decided for the whole mesh. */
+/* At submission, from the mesh's metadata: a bricked grid of more than
+ * BRICKS_MAX bricks is 422 (what else the grid's making finds wrong, the
+ * job says, as before). */
+static int voxelize_check_mesh(const void *params, const cJSON *mesh_meta, const vx_limits *lim,
+                               vx_err *err)
+{
+    const vparams *p = params;
+    vx_mesh m;
+    vx_grid w;
+    vx_err ignored;
+    if (mesh_of_meta(mesh_meta, &m, &ignored) || grid_of(p, &m, lim, &w, &ignored)) return 0;
+    const int S = brick_size_of(p, w.dims, lim);
+    int nb[3];
+    return S && brick_grid(w.dims, S, nb, err) < 0 ? -1 : 0;
+}
+
 static cJSON *voxelize_split(const void *params, const cJSON *mesh_meta, const vx_limits *lim,
                              vx_err *err)
 {
@@ -789,8 +824,7 @@ static cJSON *voxelize_split(const void *params, const cJSON *mesh_meta, const v
     const vx_vdb_class cls =
         p->vdb_grid == VX_VDB_LEVEL_SET ? VX_VDB_BOOL : (vx_vdb_class)p->vdb_grid;
     int nb[3];
-    for (int a = 0; a < 3; a++)
-        nb[a] = (w.dims[a] + S - 1) / S;
+    if (brick_grid(w.dims, S, nb, err) < 0) return NULL;
     cJSON *list = cJSON_CreateArray();
     double base[3] = {(double)w.index[0], (double)w.index[1], (double)w.index[2]};
     for (int b = 0; list && b < nb[0] * nb[1] * nb[2]; b++) {
@@ -822,9 +856,8 @@ static int bricks_from_children(vx_job_run *r, const vx_mesh *mesh, const vparam
 {
     const vx_grid *w = &d->grid;
     int nb[3];
-    for (int a = 0; a < 3; a++)
-        nb[a] = (w->dims[a] + S - 1) / S;
-    const int n = nb[0] * nb[1] * nb[2];
+    const int n = brick_grid(w->dims, S, nb, err);
+    if (n < 0) return -1;
     if ((size_t)n != vx_run_children(r))
         return vx_err_set(err, VX_EINTERNAL, "bricks_mismatch",
                           "the grid has %d bricks, the job %zu brick jobs", n, vx_run_children(r));
@@ -1144,6 +1177,7 @@ const vx_kind vx_kind_voxelize = {
     .spec = spec,
     .params_size = sizeof(vparams),
     .check = voxelize_check,
+    .check_mesh = voxelize_check_mesh,
     .run_gl = voxelize_run_gl,
     .run_cpu = NULL,
     .encode = voxelize_encode,

@@ -151,6 +151,12 @@ read -r NX NY NZ < <(jq -r '.stats.dims | map(tostring) | join(" ")' "$BODY")
 WHOLE_IN=$(jqb .stats.voxels_inside)
 api GET "/v1/jobs/$JOB/result"
 cp "$BODY" "$TMP/one.raw"
+# Its bricks are jobs: more than the queue holds is 422 at submission
+# (25,600 bricks had gone in past a limit of 64, and every other client
+# then got 429).
+submit 2 voxelize "$B" '{"resolution":256,"format":"vdb","bricks":{"size":8}}'
+expect_error "more bricks than the queue holds" 422 invalid_params
+check "said so ($(jqb .error.message))" grep -q 'more than the queue holds' <<<"$(jqb .error.message)"
 submit 2 voxelize "$B" "$(jq -c '. + {format: "vdb", vdb_grid: "fog", bricks: {size: 24}}' <<<"$BP")"
 expect_status "bricked submit" 202
 P=$JOB
@@ -201,7 +207,7 @@ api GET "/v1/jobs/$C"
 expect_error "its brick job went with it" 404 job_not_found
 check "and the brick job's file too" test ! -e "$CF"
 # Canceling the parent cancels its waiting children.
-submit 1 voxelize "$B" "$(jq -c '. + {resolution: 300, format: "vdb", bricks: {size: 64}}' <<<"$BP")"
+submit 1 voxelize "$B" "$(jq -c '. + {resolution: 300, format: "vdb", bricks: {size: 80}}' <<<"$BP")"
 P=$JOB
 on 2
 api DELETE "/v1/jobs/$P"

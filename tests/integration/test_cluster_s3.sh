@@ -73,8 +73,31 @@ on 2
 upload "$TMP/tet2.obj"
 expect_status "upload of a second mesh" 201
 T2=$MESH_ID
+# A mesh to delete during the outage, and a finished job whose result no
+# one has asked for yet.
+box 4
+upload "$TMP/tet4.obj"
+TD=$MESH_ID
+api POST /v1/jobs -H "Content-Type: application/json" \
+    -d "{\"mesh\":\"$B\",\"kind\":\"voxelize\",\"params\":{\"resolution\":20,\"format\":\"raw8\"}}"
+JR=$(jqb .id)
+wait_final 2 "$JR" 60
 stop_s3
 t_down=$(date +%s)
+# A result the bucket cannot be asked about is no evicted one: 503 (or
+# 200 from a replica's copy), never 410.
+for i in 1 2; do
+    on "$i"
+    api GET "/v1/jobs/$JR/result"
+    check "a result during the outage from r$i: $STATUS $(jqb '.error.code // empty'), not 410" \
+        bash -c "test '$STATUS' = 200 || { test '$STATUS' = 503 && test -n '$(header Retry-After)'; }"
+done
+# The catalog takes the delete; the bytes' purge waits for the bucket
+# (a purge the bucket did not take had dropped the row, and the next start
+# cataloged the bytes again: the mesh was back).
+on 1
+api DELETE "/v1/meshes/$TD"
+expect_status "a mesh deleted during the outage" 204
 # r2 indexed the mesh at its upload: the submission is acknowledged; its
 # attempts fail as retryable while the bucket is away (the mesh or the
 # results unreachable) and back off 2, 4, 8 s.
@@ -116,6 +139,18 @@ done
 check "the same bytes from both" cmp "$TMP/t1" "$TMP/t2"
 upload "$TMP/tet3.obj"
 expect_status "upload after the outage" 201
+# The purge ran again once the bucket was back (every renewal, 1 s); a
+# restarted replica does not catalog the deleted mesh anew.
+sleep 3
+kill -TERM "${RPID[1]}"
+wait "${RPID[1]}"
+RPID[1]=
+start_replica 1 || exit 1
+for i in 1 2; do
+    on "$i"
+    api GET "/v1/meshes/$TD"
+    expect_error "the mesh deleted during the outage, after r1's restart, on r$i" 404 mesh_not_found
+done
 
 for i in 1 2; do
     kill -TERM "${RPID[$i]}"

@@ -193,6 +193,7 @@ bad "vdb_index_base off the leaf grid" '{"grid":{"origin":[0,0,0],"voxel_size":0
 bad "vdb_index_base with a dense format" '{"grid":{"origin":[0,0,0],"voxel_size":0.1,"dims":[8,8,8]},"bricks":{"size":0},"format":"raw8","vdb_index_base":[0,0,0]}' 'params.format "vdb"'
 bad "vdb_index_base past 32-bit coordinates" '{"grid":{"origin":[0,0,0],"voxel_size":0.1,"dims":[16,16,16],"index_offset":[2147483640,0,0]},"bricks":{"size":0},"vdb_index_base":[0,0,0]}' "outside +-2^30"
 bad "vdb_index_base far below" '{"grid":{"origin":[0,0,0],"voxel_size":0.1,"dims":[16,16,16],"index_offset":[0,-1099511627776,0]},"bricks":{"size":0},"vdb_index_base":[0,0,0]}' "axis 1"
+bad "more than 65,536 bricks" '{"grid":{"origin":[0,0,0],"voxel_size":0.01,"dims":[16384,2048,512]},"bricks":{"size":8}}' "over the 65536 a grid may have"
 bad "vdb_index_base without a grid" '{"resolution":32,"bricks":{"size":0},"vdb_index_base":[0,0,0]}' "params.grid"
 
 # An origin 16 digits long (1e12 - 0.125 less one ulp, 1.2e-4): the centres

@@ -3,7 +3,9 @@
  * migration, submit/get/list, concurrent claims, lease expiry and fencing,
  * max_attempts, cancel, NOTIFY, counts, a server restart, child jobs and
  * the mesh catalog. */
+#include <errno.h>
 #include <pthread.h>
+#include <signal.h>
 #include <setjmp.h>
 #include <stdarg.h>
 #include <stddef.h>
@@ -12,6 +14,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include <time.h>
+#include <unistd.h>
 #include <cmocka.h>
 
 #include <libpq-fe.h>
@@ -412,8 +415,11 @@ static void test_lease_expiry_and_fencing(void **state)
     cJSON *win = cJSON_Parse("{\"outputs\":{\"grid\":{\"location\":\"results/x/2/grid.vdb\","
                              "\"bytes\":2,\"content_type\":\"application/x-vdb\"}},\"by\":\"b\"}");
     assert_int_equal(vx_pg_complete(b, id, 2, win, &err), 0);
-    /* Once done, a second completion is stale too. */
-    assert_int_equal(vx_pg_complete(b, id, 2, win, &err), 1);
+    /* The winner's completion again (a try whose answer was lost with its
+     * connection, retried): already recorded, so 0, not stale (a stale
+     * answer made the winner remove its own results) and nothing changes;
+     * another attempt's stays stale. */
+    assert_int_equal(vx_pg_complete(b, id, 2, win, &err), 0);
     assert_int_equal(vx_pg_complete(a, id, 1, stale, &err), 1);
     assert_int_equal(vx_pg_get(a, id, &q, &err), 0);
     assert_string_equal(q.state, "succeeded");
@@ -457,6 +463,70 @@ static void test_lease_expiry_and_fencing(void **state)
     vx_pg_job_clear(&jb);
     vx_pg_close(a);
     vx_pg_close(b);
+}
+
+/* A database that holds a statement (a lock here; a black-holed link or a
+ * stopped server alike) answers 503 database_unavailable within the
+ * statement timeout, not never; the next statement reconnects. */
+static void test_statement_timeout(void **state)
+{
+    (void)state;
+    vx_pg_desc d = {.url = url(), .replica = "timeout", .statement_timeout_s = 1};
+    vx_err err = {0};
+    vx_pg *pg = vx_pg_open(&d, &err);
+    assert_non_null(pg);
+    char id[33];
+    make_id(id, 900);
+    submit(pg, id, "voxelize", 0);
+    PGconn *locker = PQconnectdb(url());
+    assert_int_equal(PQstatus(locker), CONNECTION_OK);
+    PGresult *r = PQexec(locker, "BEGIN; LOCK TABLE vx_jobs IN ACCESS EXCLUSIVE MODE");
+    assert_int_equal(PQresultStatus(r), PGRES_COMMAND_OK);
+    PQclear(r);
+    vx_pg_job jb;
+    double t0 = vx_mono();
+    assert_int_equal(vx_pg_get(pg, id, &jb, &err), -1);
+    double dt = vx_mono() - t0;
+    assert_int_equal(err.kind, VX_EUNAVAIL);
+    assert_string_equal(err.code, "database_unavailable");
+    if (dt > 3) fail_msg("the locked read took %.1f s", dt);
+    PQclear(PQexec(locker, "ROLLBACK"));
+    PQfinish(locker);
+    /* the lock gone, the module works again (after its reconnect backoff) */
+    int rc = -1, i;
+    for (i = 0; i < 50 && rc; i++) {
+        rc = vx_pg_get(pg, id, &jb, &err);
+        if (rc) nap(0.1);
+    }
+    assert_int_equal(rc, 0);
+    assert_string_equal(jb.state, "queued");
+    vx_pg_job_clear(&jb);
+    /* A server that answers nothing at all (its backend stopped, as a
+     * black-holed link or a frozen host): the server's own timeouts cannot
+     * fire, the module's deadline does. Needs the right to signal it. */
+    r = sql("SELECT pid FROM pg_stat_activity WHERE application_name = 'voxeld'");
+    assert_int_equal(PQntuples(r), 1);
+    pid_t backend = (pid_t)atol(PQgetvalue(r, 0, 0));
+    PQclear(r);
+    if (kill(backend, SIGSTOP) == 0) {
+        t0 = vx_mono();
+        rc = vx_pg_get(pg, id, &jb, &err);
+        dt = vx_mono() - t0;
+        kill(backend, SIGCONT);
+        assert_int_equal(rc, -1);
+        assert_string_equal(err.code, "database_unavailable");
+        if (dt < 0.9 || dt > 3) fail_msg("the stopped server's read took %.1f s", dt);
+        for (rc = -1, i = 0; i < 50 && rc; i++) {
+            rc = vx_pg_get(pg, id, &jb, &err);
+            if (rc) nap(0.1);
+        }
+        assert_int_equal(rc, 0);
+        vx_pg_job_clear(&jb);
+    } else {
+        printf("note: cannot stop the server's backend (%s): its deadline not checked\n",
+               strerror(errno));
+    }
+    vx_pg_close(pg);
 }
 
 static void claim_soon(vx_pg *pg, vx_pg_job *jb)
@@ -1068,6 +1138,7 @@ int main(void)
         cmocka_unit_test_setup(test_idem_race, setup),
         cmocka_unit_test_setup(test_children, setup),
         cmocka_unit_test_setup(test_meshes, setup),
+        cmocka_unit_test_setup(test_statement_timeout, setup),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }
