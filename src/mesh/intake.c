@@ -226,6 +226,7 @@ cJSON *vx_intake_meta(const char *id, vx_mesh_format fmt, uint64_t bytes, const 
     cJSON_AddNumberToObject(o, "boundary_edges", (double)m->boundary_edges);
     cJSON_AddNumberToObject(o, "boundary_edges_welded", (double)m->boundary_edges_welded);
     cJSON_AddNumberToObject(o, "nonmanifold_edges", (double)m->nonmanifold_edges);
+    cJSON_AddNumberToObject(o, "misoriented_edges", (double)m->misoriented_edges);
     cJSON_AddNumberToObject(o, "degenerate_triangles", (double)m->degenerate_tris);
     cJSON_AddNumberToObject(o, "texcoords", (double)m->ntexcoords);
     cJSON_AddNumberToObject(o, "normals", (double)m->nnormals);

@@ -92,19 +92,23 @@ uint32_t *vx_mesh_weld(const vx_mesh *m)
     return canon;
 }
 
-/* Counts boundary (used once) and non-manifold (used 3+ times) undirected
- * edges into out[0], out[1], with vertex v read as canon[v] (canon NULL:
- * as itself). Edges are bucketed by their lower vertex (CSR: 4 bytes per
- * edge plus 4 per vertex), then each small bucket is sorted: a quarter of
+/* Counts boundary (used once), non-manifold (used 3+ times) and
+ * misoriented (used twice, both times the same way: the faces either side
+ * disagree on their orientation) undirected edges into out[0], out[1],
+ * out[2], with vertex v read as canon[v] (canon NULL: as itself). Edges are bucketed by their lower
+ * vertex (CSR: 4 bytes per edge plus 4 per vertex), then each small bucket is sorted: a quarter of
  * the memory of sorting 64-bit edge keys, which matters at 10^7
  * triangles. An edge whose two ends weld into one is not an edge. */
-static int count_edges(const vx_mesh *m, size_t nedges, const uint32_t *canon, size_t out[2],
+static int count_edges(const vx_mesh *m, size_t nedges, const uint32_t *canon, size_t out[3],
                        vx_err *err)
 {
 #define V(x) (canon ? canon[x] : (x))
-    out[0] = out[1] = 0;
+    out[0] = out[1] = out[2] = 0;
     if (nedges >= UINT32_MAX)
         return vx_err_set(err, VX_ETOOBIG, "mesh_too_big", "%zu edges is too many", nedges);
+    /* each entry is the other end << 1 | the way the face goes along it */
+    if (m->nverts >= (size_t)1 << 31)
+        return vx_err_set(err, VX_ETOOBIG, "mesh_too_big", "%zu vertices is too many", m->nverts);
     uint32_t *start = calloc(m->nverts + 1, sizeof *start);
     uint32_t *nbr = malloc(nedges * sizeof *nbr + 1);
     if (!start || !nbr) {
@@ -131,9 +135,9 @@ static int count_edges(const vx_mesh *m, size_t nedges, const uint32_t *canon, s
             uint32_t a = V(v[k]), b = V(v[(k + 1) % n]);
             if (a == b) continue;
             if (a < b)
-                nbr[--start[a]] = b;
+                nbr[--start[a]] = b << 1;
             else
-                nbr[--start[b]] = a;
+                nbr[--start[b]] = a << 1 | 1u;
         }
     }
     for (size_t v = 0; v < m->nverts; v++) {
@@ -142,12 +146,14 @@ static int count_edges(const vx_mesh *m, size_t nedges, const uint32_t *canon, s
         if (n > 1) qsort(e, n, sizeof *e, cmp_u32);
         for (size_t i = 0; i < n;) {
             size_t j = i;
-            while (j < n && e[j] == e[i])
+            while (j < n && e[j] >> 1 == e[i] >> 1)
                 j++;
             if (j - i == 1)
                 out[0]++;
             else if (j - i > 2)
                 out[1]++;
+            else if (e[i] == e[i + 1])
+                out[2]++;
             i = j;
         }
     }
@@ -235,11 +241,12 @@ int vx_mesh_analyze(vx_mesh *m, vx_err *err)
         if (n[0] == 0 && n[1] == 0 && n[2] == 0) m->degenerate_tris++;
     }
 
-    size_t c[2];
+    size_t c[3];
     if (count_edges(m, nedges, NULL, c, err)) return -1;
     m->boundary_edges = c[0];
     m->nonmanifold_edges = c[1];
     m->boundary_edges_welded = c[0];
+    m->misoriented_edges = c[2];
     if (!c[0]) return 0; /* welding cannot open a closed mesh */
     uint32_t *canon = vx_mesh_weld(m);
     if (!canon)
@@ -247,7 +254,10 @@ int vx_mesh_analyze(vx_mesh *m, vx_err *err)
                           m->nverts);
     int rc = count_edges(m, nedges, canon, c, err);
     free(canon);
-    if (!rc) m->boundary_edges_welded = c[0];
+    if (!rc) {
+        m->boundary_edges_welded = c[0];
+        m->misoriented_edges = c[2]; /* a seam of split vertices hid some */
+    }
     return rc;
 }
 

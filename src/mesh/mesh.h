@@ -54,8 +54,11 @@ typedef struct vx_mesh {
     size_t boundary_edges;        /* undirected edges used by exactly one face; 0 = closed */
     size_t boundary_edges_welded; /* the same with vertices at one position as one vertex */
     size_t nonmanifold_edges;     /* undirected edges used by three or more faces */
-    size_t degenerate_tris;       /* triangles of zero area (kept, reported) */
-    size_t ntexcoords, nnormals;  /* vt / vn records seen (not kept) */
+    /* edges (vertices welded) two faces go along the same way: their
+     * orientations disagree (0 on a consistently oriented mesh) */
+    size_t misoriented_edges;
+    size_t degenerate_tris;      /* triangles of zero area (kept, reported) */
+    size_t ntexcoords, nnormals; /* vt / vn records seen (not kept) */
 } vx_mesh;
 
 /* Limits a reader enforces while it streams; 0 = no limit. */

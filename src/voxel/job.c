@@ -555,6 +555,7 @@ static void stats_grid(cJSON *stats, const vx_grid *g, const vx_mesh *mesh, cons
     stat_set(stats, "boundary_edges", cJSON_CreateNumber((double)mesh->boundary_edges));
     stat_set(stats, "boundary_edges_welded",
              cJSON_CreateNumber((double)mesh->boundary_edges_welded));
+    stat_set(stats, "misoriented_edges", cJSON_CreateNumber((double)mesh->misoriented_edges));
     stat_set(stats, "dims", array3(dims));
     stat_set(stats, "origin", array3(g->origin));
     double index[3] = {(double)g->index[0], (double)g->index[1], (double)g->index[2]};

@@ -212,7 +212,8 @@ int vx_voxelize_winding(const vx_mesh *m, const vx_voxelize_desc *d, vx_bitgrid 
 /* The inside rule when the request names none: winding for a mesh with
  * boundary edges (vertices welded by position: a seam of split vertices
  * is not a hole) when d could run it (method auto, fill solid, no cube
- * supersampling), else nonzero. */
+ * supersampling); parity for a closed mesh whose faces disagree on their
+ * orientation (misoriented edges); else nonzero. */
 vx_inside vx_voxelize_default_inside(const vx_mesh *m, const vx_voxelize_desc *d);
 
 #endif

@@ -568,5 +568,10 @@ vx_inside vx_voxelize_default_inside(const vx_mesh *m, const vx_voxelize_desc *d
 {
     int fits = d->method == VX_METHOD_AUTO && d->fill == VX_FILL_SOLID &&
                (d->supersample != 2 || d->samples == VX_SAMPLES_FACES);
-    return m->boundary_edges_welded > 0 && fits ? VX_INSIDE_WINDING : VX_INSIDE_NONZERO;
+    if (m->boundary_edges_welded > 0 && fits) return VX_INSIDE_WINDING;
+    /* closed, but faces either side of some edge disagree on the way
+     * round: the crossing count is no winding number then (streaks from
+     * the surface to the grid's edge), while parity needs no orientation */
+    return m->boundary_edges_welded == 0 && m->misoriented_edges > 0 ? VX_INSIDE_PARITY
+                                                                     : VX_INSIDE_NONZERO;
 }

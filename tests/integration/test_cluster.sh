@@ -235,6 +235,18 @@ expect_status "the same key on r3: the existing job" 200
 check "the same job" test "$JOB" = "$K1"
 submit 2 voxelize "$B" '{"resolution":25,"format":"summary"}' -H "Idempotency-Key: cluster-k1"
 expect_error "the key with another request" 422 idempotency_key_reused
+# reuse: the finished job while its results are there, a new one once
+# they are gone (it had answered the old job, whose result was then 410).
+RU='{"resolution":21,"format":"raw8"}'
+submit 1 voxelize "$B" "$RU"
+R1=$JOB
+wait_final 1 "$R1" 60
+api POST /v1/jobs -H "Content-Type: application/json" -d "{\"mesh\":\"$B\",\"kind\":\"voxelize\",\"reuse\":true,\"params\":$RU}"
+check "reuse on r1: the finished job ($STATUS)" bash -c "test '$STATUS' = 200 && test '$(jqb .id)' = '$R1'"
+find "$SHARED" -type d -name "$R1" -prune -exec rm -rf {} +
+on 2
+api POST /v1/jobs -H "Content-Type: application/json" -d "{\"mesh\":\"$B\",\"kind\":\"voxelize\",\"reuse\":true,\"params\":$RU}"
+check "reuse once its results are gone: a new job ($STATUS)" bash -c "test '$STATUS' = 202 && test '$(jqb .id)' != '$R1'"
 
 # A long job: slice with the robust vote, ~5 s on llvmpipe.
 LONG='{"resolution":320,"method":"slice","inside":"robust","format":"summary"}'

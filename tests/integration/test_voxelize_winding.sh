@@ -94,8 +94,35 @@ vox "split open box default" "$MESH_ID" '{"resolution":16,"format":"summary"}'
 check "split open box default: winding" jq -e '.stats.inside == "winding" and .stats.boundary_edges_welded == 4' "$TMP/job.json"
 
 vox "nested default" "$M_nest" '{"resolution":96,"format":"summary"}'
-check "nested default: closed, nonzero" jq -e '.stats.inside == "nonzero" and .stats.boundary_edges == 0' "$TMP/job.json"
+check "nested default: closed, nonzero" jq -e '.stats.inside == "nonzero" and .stats.boundary_edges == 0 and .stats.misoriented_edges == 0' "$TMP/job.json"
 NZ=$(st voxels_inside)
+# A closed ball with every 7th face turned round: nonzero made streaks
+# from the surface to the grid's edge (the crossing count is no winding
+# number); the default is parity, which needs no orientation, and gives
+# the voxels of the ball turned the right way.
+python3 - "$TMP" "$(dirname "$0")" <<'PY' || exit 1
+import os, sys
+sys.path.insert(0, sys.argv[2])
+from shapes import icosphere, write
+vs, ts = icosphere(4, 1.0, (0.011, 0.007, 0.003))
+write(os.path.join(sys.argv[1], "ball.obj"), vs, ts)
+write(os.path.join(sys.argv[1], "flipped.obj"), vs,
+      [(t[0], t[2], t[1]) if i % 7 == 0 else t for i, t in enumerate(ts)])
+PY
+upload "$TMP/ball.obj"
+check "the ball: no misoriented edges" jq -e '.misoriented_edges == 0 and .boundary_edges == 0' "$BODY"
+M_ball=$MESH_ID
+upload "$TMP/flipped.obj"
+check "the ball with faces turned round: misoriented edges counted ($(jqb .misoriented_edges))" jq -e '.misoriented_edges > 0 and .boundary_edges == 0' "$BODY"
+M_flip=$MESH_ID
+G='"grid":{"origin":[-1.1,-1.1,-1.1],"voxel_size":0.0392857,"dims":[56,56,56]}'
+vox "the ball" "$M_ball" "{$G,\"format\":\"summary\"}"
+BALL=$(st voxels_inside)
+vox "the ball turned round, by default" "$M_flip" "{$G,\"format\":\"summary\"}"
+check "by default parity, the ball's voxels ($(st voxels_inside) vs $BALL)" \
+    jq -e --argjson n "$BALL" '.stats.inside == "parity" and .stats.voxels_inside == $n and .stats.misoriented_edges > 0' "$TMP/job.json"
+vox "the ball turned round, nonzero" "$M_flip" "{$G,\"inside\":\"nonzero\",\"format\":\"summary\"}"
+check "nonzero on it sets voxels the ball lacks ($(st voxels_inside) vs $BALL; why parity is its default)" test "$(st voxels_inside)" -gt "$BALL"
 vox "nested winding" "$M_nest" '{"resolution":96,"inside":"winding","format":"summary"}'
 check "nested winding: the void kept, the same voxels as nonzero ($(st voxels_inside) vs $NZ)" test "$(st voxels_inside)" = "$NZ"
 near "nested winding: shell volume" "$(st volume)" "$(W nested)" 0.01

@@ -206,6 +206,7 @@ static void test_check_and_meta(void **state)
                        "\"triangles\":2,\"faces\":{\"total\":1,\"triangles\":0,\"quads\":1,"
                        "\"ngons\":0},\"bbox\":{\"min\":[0,0,0],\"max\":[1,1,0]},"
                        "\"boundary_edges\":0,\"boundary_edges_welded\":0,\"nonmanifold_edges\":0,"
+                       "\"misoriented_edges\":0,"
                        "\"degenerate_triangles\":2,"
                        "\"texcoords\":0,\"normals\":0,\"patches\":0,\"created\":\"";
     assert_memory_equal(text, want, strlen(want));

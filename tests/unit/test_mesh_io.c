@@ -134,6 +134,36 @@ static size_t count_lines(const char *text, const char *prefix)
     return n;
 }
 
+/* Misoriented edges: none on a consistently wound tetrahedron (closed or
+ * open), the three edges of a face turned round, and a seam of split
+ * vertices counted once welded. */
+static void test_orientation(void **state)
+{
+    (void)state;
+    static const double pos[] = {0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 0};
+    static const uint32_t sizes[] = {3, 3, 3, 3};
+    static const uint32_t good[] = {0, 2, 1, 0, 1, 3, 0, 3, 2, 1, 2, 3};
+    static const uint32_t flip[] = {0, 2, 1, 0, 1, 3, 0, 3, 2, 1, 3, 2};
+    static const uint32_t seam[] = {4, 2, 1, 0, 1, 3, 0, 3, 2, 1, 3, 2}; /* vertex 4 = 0 */
+    vx_mesh *m = make_mesh(4, pos, 4, sizes, good);
+    assert_int_equal(m->boundary_edges, 0);
+    assert_int_equal(m->misoriented_edges, 0);
+    vx_mesh_free(m);
+    m = make_mesh(4, pos, 3, sizes, good); /* open: one face missing */
+    assert_int_equal(m->boundary_edges, 3);
+    assert_int_equal(m->misoriented_edges, 0);
+    vx_mesh_free(m);
+    m = make_mesh(4, pos, 4, sizes, flip);
+    assert_int_equal(m->boundary_edges, 0);
+    assert_int_equal(m->misoriented_edges, 3);
+    vx_mesh_free(m);
+    m = make_mesh(5, pos, 4, sizes, seam);
+    assert_int_equal(m->boundary_edges, 4);
+    assert_int_equal(m->boundary_edges_welded, 0);
+    assert_int_equal(m->misoriented_edges, 3);
+    vx_mesh_free(m);
+}
+
 static void test_obj_round_trip(void **state)
 {
     vx_mesh *m = mixed_mesh();
@@ -675,7 +705,7 @@ int main(void)
         cmocka_unit_test(test_draco_round_trip), cmocka_unit_test(test_draco_normals),
         cmocka_unit_test(test_draco_limits),     cmocka_unit_test(test_draco_point_cloud),
         cmocka_unit_test(test_draco_truncated),  cmocka_unit_test(test_draco_garbage),
-        cmocka_unit_test(test_draco_mutations),
+        cmocka_unit_test(test_draco_mutations),  cmocka_unit_test(test_orientation),
     };
     return cmocka_run_group_tests(tests, setup_dir, remove_dir);
 }
