@@ -427,6 +427,19 @@ static int voxelize_check(void *params, const vx_limits *lim, vx_err *err)
                 "params.padding is not allowed with params.grid (make the box larger)");
         int dims[3] = {(int)p->grid.dims[0], (int)p->grid.dims[1], (int)p->grid.dims[2]};
         if (check_vdb_voxel(p, p->grid.voxel_size, "params.grid.voxel_size", 1, err)) return -1;
+        /* An explicit box must lie where meshes can (within +-1e30, as every
+         * coordinate): past it an origin became inf in the nrrd and binvox
+         * headers and a singular .vdb transform. */
+        for (int a = 0; a < 3; a++) {
+            const double h = p->grid.voxel_size;
+            const double lo = p->grid.origin[a] + (double)p->grid.index_offset[a] * h;
+            const double hi = lo + (double)p->grid.dims[a] * h;
+            if (!(fabs(lo) <= 1e30 && fabs(hi) <= 1e30))
+                return vx_err_set(err, VX_EUNPROC, "invalid_params",
+                                  "params.grid puts axis %d's voxels from %.6g to %.6g: outside "
+                                  "+-1e30, where every mesh lies",
+                                  a, lo, hi);
+        }
         return check_grid(dims, p, lim, "params.grid", VX_EUNPROC, err);
     }
     if (p->voxel_size_set) /* the dims depend on the mesh: checked in run_gl */

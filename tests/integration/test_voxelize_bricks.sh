@@ -193,6 +193,8 @@ bad "vdb_index_base off the leaf grid" '{"grid":{"origin":[0,0,0],"voxel_size":0
 bad "vdb_index_base with a dense format" '{"grid":{"origin":[0,0,0],"voxel_size":0.1,"dims":[8,8,8]},"bricks":{"size":0},"format":"raw8","vdb_index_base":[0,0,0]}' 'params.format "vdb"'
 bad "vdb_index_base past 32-bit coordinates" '{"grid":{"origin":[0,0,0],"voxel_size":0.1,"dims":[16,16,16],"index_offset":[2147483640,0,0]},"bricks":{"size":0},"vdb_index_base":[0,0,0]}' "outside +-2^30"
 bad "vdb_index_base far below" '{"grid":{"origin":[0,0,0],"voxel_size":0.1,"dims":[16,16,16],"index_offset":[0,-1099511627776,0]},"bricks":{"size":0},"vdb_index_base":[0,0,0]}' "axis 1"
+bad "a box past 1e30" '{"grid":{"origin":[0,0,0],"voxel_size":1e300,"dims":[4,4,4],"index_offset":[1099511627776,0,0]}}' "outside +-1e30"
+bad "an origin of 1e308" '{"grid":{"origin":[1e308,0,0],"voxel_size":1,"dims":[4,4,4]}}' "outside +-1e30"
 bad "more than 65,536 bricks" '{"grid":{"origin":[0,0,0],"voxel_size":0.01,"dims":[16384,2048,512]},"bricks":{"size":8}}' "over the 65536 a grid may have"
 bad "vdb_index_base without a grid" '{"resolution":32,"bricks":{"size":0},"vdb_index_base":[0,0,0]}' "params.grid"
 
