@@ -663,7 +663,7 @@ int cluster_delete(vx_jobs *j, const char *jid, vx_err *err)
 {
     vx_pg_job row;
     if (vx_pg_get(j->cl->api, jid, &row, err)) return -1;
-    int attempt = row.attempt, children = row.children;
+    int children = row.children;
     char parent[33];
     snprintf(parent, sizeof parent, "%s", row.parent);
     vx_pg_job_clear(&row);
@@ -680,16 +680,14 @@ int cluster_delete(vx_jobs *j, const char *jid, vx_err *err)
         cJSON_Delete(kids);
         return -1;
     }
-    char rid[48];
-    snprintf(rid, sizeof rid, "%s/%d", jid, attempt);
-    vx_store_result_remove(j->desc.store, rid);
+    /* every attempt's files and the job's own dir (a dir per job had been
+     * left behind, empty, at each delete) */
+    vx_store_result_remove(j->desc.store, jid);
     const cJSON *it;
     cJSON_ArrayForEach(it, kids)
     {
-        snprintf(rid, sizeof rid, "%s/%d",
-                 cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(it, "id")),
-                 (int)cJSON_GetNumberValue(cJSON_GetObjectItemCaseSensitive(it, "attempt")));
-        vx_store_result_remove(j->desc.store, rid);
+        const char *kid = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(it, "id"));
+        if (kid) vx_store_result_remove(j->desc.store, kid);
     }
     cJSON_Delete(kids);
     VX_INFO("job.deleted", "job=%s children=%d", jid, children > 0 ? children : 0);

@@ -206,6 +206,8 @@ expect_status "deleting the parent" 204
 api GET "/v1/jobs/$C"
 expect_error "its brick job went with it" 404 job_not_found
 check "and the brick job's file too" test ! -e "$CF"
+check "no dir of the parent or its bricks left in the store" \
+    test -z "$(find "$SHARED/results" -maxdepth 1 \( -name "$M" -o -name "$C" \) 2>/dev/null)"
 # Canceling the parent cancels its waiting children.
 submit 1 voxelize "$B" "$(jq -c '. + {resolution: 300, format: "vdb", bricks: {size: 80}}' <<<"$BP")"
 P=$JOB
