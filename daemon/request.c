@@ -339,8 +339,8 @@ int vx_req_query_add(vx_req_query *q, vx_route rt, const char *method, const cha
     case Q_NAME:
         if (!vx_name_ok(value, vlen)) {
             snprintf(msg, msgn,
-                     "query parameter name must be 1 to %d bytes of UTF-8 without control "
-                     "characters, '/', '\\' or '\"'",
+                     "query parameter name must be 1 to %d bytes of UTF-8 without control or "
+                     "invisible format characters, '/', '\\' or '\"', and not . or ..",
                      VX_NAME_MAX);
             return -1;
         }

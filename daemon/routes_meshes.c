@@ -110,7 +110,8 @@ static int upload_name(struct MHD_Connection *c, req *r, char *name, size_t n, v
     if (rc < 0)
         return vx_err_set(err, VX_EINVAL, "invalid_request",
                           "the Content-Disposition filename must be 1 to %d bytes of UTF-8 "
-                          "without control characters, '\\' or '\"'",
+                          "without control or invisible format characters, '\\' or '\"', and "
+                          "not . or ..",
                           VX_NAME_MAX);
     return 0;
 }

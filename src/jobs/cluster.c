@@ -377,8 +377,11 @@ static cJSON *row_json(vx_jobs *j, const vx_pg_job *row, int live)
         cJSON_AddStringToObject(o, "replica", row->replica);
     else
         cJSON_AddNullToObject(o, "replica");
+    /* queued again for a later attempt: not started, as the contract says
+     * of a queued job (the row keeps the last attempt's start) */
+    const double started = strcmp(row->state, "queued") ? row->started : 0;
     add_time(o, "created", row->created);
-    add_time(o, "started", row->started);
+    add_time(o, "started", started);
     add_time(o, "finished", row->finished);
     /* The last attempt's error, for a job that ended without success. */
     const cJSON *last = NULL, *it;
@@ -401,10 +404,9 @@ static cJSON *row_json(vx_jobs *j, const vx_pg_job *row, int live)
         cJSON_AddItemToObject(o, "attempt_errors", cJSON_Duplicate(row->errors, 1));
     cJSON *t = cJSON_AddObjectToObject(o, "timings");
     double now = vx_now(), end = row->finished > 0 ? row->finished : now;
-    cJSON_AddNumberToObject(t, "queue_ms",
-                            ms_between(row->created, row->started > 0 ? row->started : end));
-    if (row->started > 0)
-        cJSON_AddNumberToObject(t, "run_ms", ms_between(row->started, end));
+    cJSON_AddNumberToObject(t, "queue_ms", ms_between(row->created, started > 0 ? started : end));
+    if (started > 0)
+        cJSON_AddNumberToObject(t, "run_ms", ms_between(started, end));
     else
         cJSON_AddNullToObject(t, "run_ms");
     if (row->finished > 0)

@@ -17,7 +17,7 @@ st=$(pre -H "Origin: http://viewer.example" -H "Access-Control-Request-Method: P
     -H "Access-Control-Request-Headers: authorization, content-type" "$BASE/v1/jobs")
 check "preflight: 204 (got $st)" test "$st" = 204
 check "preflight: Allow-Origin is the origin" test "$(ph Access-Control-Allow-Origin)" = http://viewer.example
-check "preflight: the route's methods" test "$(ph Access-Control-Allow-Methods)" = "GET, HEAD, POST"
+check "preflight: the route's methods" test "$(ph Access-Control-Allow-Methods)" = "GET, HEAD, POST, OPTIONS"
 check "preflight: Authorization may be sent" bash -c "grep -qi '^access-control-allow-headers:.*Authorization' '$TMP/pre.h'"
 check "preflight: Content-Type may be sent" bash -c "grep -qi '^access-control-allow-headers:.*Content-Type' '$TMP/pre.h'"
 check "preflight: Max-Age" test -n "$(ph Access-Control-Max-Age)"
