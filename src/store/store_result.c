@@ -74,14 +74,20 @@ int vx_store_load_results(vx_store *s)
 }
 
 /* Drops jid's entry from the budget; caller holds the lock. */
+/* Forgets the results of jid and of everything under it ("jid/attempt":
+ * removing a key removes its whole prefix). */
 static void result_forget_locked(vx_store *s, const char *jid)
 {
-    for (size_t i = 0; i < s->nresults; i++)
-        if (strcmp(s->results[i].jid, jid) == 0) {
+    size_t n = strlen(jid);
+    for (size_t i = 0; i < s->nresults;) {
+        const char *k = s->results[i].jid;
+        if (!strncmp(k, jid, n) && (k[n] == 0 || k[n] == '/')) {
             s->results_bytes -= s->results[i].bytes;
             s->results[i] = s->results[--s->nresults];
-            break;
+        } else {
+            i++;
         }
+    }
 }
 
 int vx_store_result_dir(vx_store *s, const char *jid, char *buf, size_t n, vx_err *err)
