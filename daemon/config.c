@@ -308,23 +308,25 @@ static char *trim(char *s)
     return s;
 }
 
-/* 1 when s is ADDR:PORT or [ADDR]:PORT with PORT a decimal from 0 to
- * 65535 (ADDR may be empty: every interface; whether it resolves is
- * found at start). */
-static int listen_ok(const char *s)
+int vx_config_split_listen(const char *s, char host[256], char port[6])
 {
-    const char *colon;
+    const char *colon, *h = s;
     if (s[0] == '[') {
         const char *rb = strchr(s, ']');
-        if (!rb || rb[1] != ':') return 0;
+        if (!rb || rb[1] != ':') return -1;
+        h = s + 1;
         colon = rb + 1;
     } else {
         colon = strrchr(s, ':');
-        if (!colon || memchr(s, ':', (size_t)(colon - s))) return 0; /* IPv6 needs [] */
+        if (!colon || memchr(s, ':', (size_t)(colon - s))) return -1; /* IPv6 needs [] */
     }
     const char *p = colon + 1;
-    size_t n = strspn(p, "0123456789");
-    return n >= 1 && n <= 5 && !p[n] && atol(p) <= 65535;
+    size_t n = strspn(p, "0123456789"), hn = (size_t)(colon - h) - (s[0] == '[');
+    if (n < 1 || n > 5 || p[n] || atol(p) > 65535 || hn > 255) return -1;
+    memcpy(host, h, hn);
+    host[hn] = 0;
+    memcpy(port, p, n + 1);
+    return 0;
 }
 
 static int load_file(vx_config *c, const char *path)
@@ -537,7 +539,8 @@ int vx_config_load(vx_config *c, int argc, char **argv)
             return -1;
         }
     }
-    if (!listen_ok(c->listen)) {
+    char host[256], port[6];
+    if (vx_config_split_listen(c->listen, host, port)) {
         fprintf(stderr,
                 "voxeld: listen: '%s' is not ADDR:PORT ([ADDR]:PORT for IPv6, PORT from 0 to "
                 "65535)\n",

@@ -75,5 +75,9 @@ typedef struct vx_config {
 int vx_config_load(vx_config *cfg, int argc, char **argv);
 /* Prints the usage text. */
 void vx_config_usage(FILE *out);
+/* Splits a listen address, ADDR:PORT or [ADDR]:PORT with PORT a decimal
+ * from 0 to 65535 (ADDR may be empty: every interface), into host[256]
+ * and port[6]: 0, or -1 when it is not one. */
+int vx_config_split_listen(const char *s, char host[256], char port[6]);
 
 #endif

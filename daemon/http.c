@@ -483,19 +483,8 @@ static void mhd_log(void *cls, const char *fmt, va_list ap)
 static int parse_listen(const char *s, struct sockaddr_storage *ss, socklen_t *len, int *v6,
                         vx_err *err)
 {
-    char host[256], port[16];
-    const char *colon;
-    if (s[0] == '[') {
-        const char *rb = strchr(s, ']');
-        if (!rb || rb[1] != ':') goto bad;
-        snprintf(host, sizeof host, "%.*s", (int)(rb - s - 1), s + 1);
-        colon = rb + 1;
-    } else {
-        colon = strrchr(s, ':');
-        if (!colon) goto bad;
-        snprintf(host, sizeof host, "%.*s", (int)(colon - s), s);
-    }
-    snprintf(port, sizeof port, "%s", colon + 1);
+    char host[256], port[6];
+    if (vx_config_split_listen(s, host, port)) goto bad;
     struct addrinfo hints = {.ai_family = AF_UNSPEC,
                              .ai_socktype = SOCK_STREAM,
                              .ai_flags = AI_PASSIVE},
