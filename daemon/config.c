@@ -278,7 +278,7 @@ static int set_opt(vx_config *c, const opt_def *d, const char *val, const char *
     }
 bad:;
     static const char *want[] = {
-        [T_SIZE] = "a size in bytes: 123, 64K, 16M, 1G",
+        [T_SIZE] = "a whole number, K, M or G after it for 2^10, 2^20, 2^30: 64, 64K, 1G",
         [T_COUNT] = "a whole number from 1 to 1024",
         [T_SECONDS] = "seconds, a decimal number from 0 to 1e9",
         [T_DEVICE] = "auto, or an index from 0 to 255",
