@@ -330,7 +330,7 @@ char *vx_metrics_render(const vx_metrics_gauges *g)
         "# TYPE voxeld_data_dir_free_bytes gauge\nvoxeld_data_dir_free_bytes %llu\n"
         "# HELP voxeld_data_dir_min_free_bytes Free-space floor: below it writes answer 507.\n"
         "# TYPE voxeld_data_dir_min_free_bytes gauge\nvoxeld_data_dir_min_free_bytes %llu\n"
-        "# HELP voxeld_ready 1 when ready to run jobs.\n# TYPE voxeld_ready gauge\n"
+        "# HELP voxeld_ready 1 when ready to run jobs (what /readyz answers 200 for).\n# TYPE voxeld_ready gauge\n"
         "voxeld_ready %d\n"
         "# HELP voxeld_results_evicted_total Job results removed by the results budget.\n"
         "# TYPE voxeld_results_evicted_total counter\nvoxeld_results_evicted_total %llu\n"

@@ -52,29 +52,41 @@ void vx_route_not_ready_reason(vx_http *h, char *out, size_t n)
         snprintf(out, n, "the daemon is not ready");
 }
 
-int vx_route_readyz(vx_http *h, struct MHD_Connection *c, req *r)
+/* What /readyz checks; ok is what it answers and /metrics' voxeld_ready. */
+typedef struct {
+    int gl, gpu, dd, space, blob, db, cluster, ok;
+} readiness;
+
+static readiness ready_checks(vx_http *h)
 {
-    int gl = vx_jobs_ready(h->d.jobs);
-    int gpu = !h->d.gpu_refused;
-    size_t depth = vx_jobs_queue_depth(h->d.jobs), cap = vx_jobs_queue_capacity(h->d.jobs);
-    int dd = vx_store_writable(h->d.store);
-    int space = vx_route_disk_ok(h, NULL);
-    int blob = vx_store_reachable(h->d.store);
+    readiness k;
+    k.gl = vx_jobs_ready(h->d.jobs);
+    k.gpu = !h->d.gpu_refused;
+    k.dd = vx_store_writable(h->d.store);
+    k.space = vx_route_disk_ok(h, NULL);
+    k.blob = vx_store_reachable(h->d.store);
     vx_err dberr;
     vx_err_clear(&dberr);
-    int cluster = vx_jobs_cluster(h->d.jobs, NULL);
-    int db = vx_jobs_database_ok(h->d.jobs, &dberr);
+    k.cluster = vx_jobs_cluster(h->d.jobs, NULL);
+    k.db = vx_jobs_database_ok(h->d.jobs, &dberr);
     /* A full queue is backpressure (429 + Retry-After), not unreadiness. */
-    int ok = gl && gpu && dd && space && blob && db && !h->stopping;
+    k.ok = k.gl && k.gpu && k.dd && k.space && k.blob && k.db && !h->stopping;
+    return k;
+}
+
+int vx_route_readyz(vx_http *h, struct MHD_Connection *c, req *r)
+{
+    size_t depth = vx_jobs_queue_depth(h->d.jobs), cap = vx_jobs_queue_capacity(h->d.jobs);
+    readiness k = ready_checks(h);
     cJSON *doc = cJSON_CreateObject();
-    cJSON_AddStringToObject(doc, "status", ok ? "ready" : "not_ready");
-    if (!ok) {
+    cJSON_AddStringToObject(doc, "status", k.ok ? "ready" : "not_ready");
+    if (!k.ok) {
         char why[600];
-        if (gl && gpu && !h->stopping)
+        if (k.gl && k.gpu && !h->stopping)
             snprintf(why, sizeof why, "%s",
-                     !dd      ? "the data directory is not writable"
-                     : !space ? "the data directory has less free space than --min-free-disk"
-                     : !blob  ? "the blob store (--blob-store) cannot be reached"
+                     !k.dd      ? "the data directory is not writable"
+                     : !k.space ? "the data directory has less free space than --min-free-disk"
+                     : !k.blob  ? "the blob store (--blob-store) cannot be reached"
                               : "the database (--database) cannot be reached");
         else
             vx_route_not_ready_reason(h, why, sizeof why);
@@ -85,19 +97,19 @@ int vx_route_readyz(vx_http *h, struct MHD_Connection *c, req *r)
     cJSON_AddNumberToObject(q, "capacity", (double)cap);
     cJSON_AddBoolToObject(q, "full", depth >= cap);
     cJSON *chk = cJSON_AddObjectToObject(doc, "checks");
-    cJSON_AddBoolToObject(chk, "gl", gl);
-    cJSON_AddBoolToObject(chk, "gpu", gpu);
-    cJSON_AddBoolToObject(chk, "data_dir", dd);
-    cJSON_AddBoolToObject(chk, "disk_space", space);
+    cJSON_AddBoolToObject(chk, "gl", k.gl);
+    cJSON_AddBoolToObject(chk, "gpu", k.gpu);
+    cJSON_AddBoolToObject(chk, "data_dir", k.dd);
+    cJSON_AddBoolToObject(chk, "disk_space", k.space);
     cJSON *bs = cJSON_AddObjectToObject(doc, "blob_store");
     cJSON_AddStringToObject(bs, "backend", vx_store_backend(h->d.store));
-    cJSON_AddBoolToObject(bs, "ok", blob);
-    if (cluster) {
+    cJSON_AddBoolToObject(bs, "ok", k.blob);
+    if (k.cluster) {
         cJSON *dbo = cJSON_AddObjectToObject(doc, "database");
-        cJSON_AddBoolToObject(dbo, "ok", db);
+        cJSON_AddBoolToObject(dbo, "ok", k.db);
         cJSON_AddStringToObject(dbo, "replica", vx_jobs_replica(h->d.jobs));
     }
-    return vx_resp_json(c, r, ok ? 200 : 503, doc, NULL, NULL);
+    return vx_resp_json(c, r, k.ok ? 200 : 503, doc, NULL, NULL);
 }
 
 int vx_route_metrics(vx_http *h, struct MHD_Connection *c, req *r)
@@ -110,7 +122,7 @@ int vx_route_metrics(vx_http *h, struct MHD_Connection *c, req *r)
         .results_bytes = vx_store_results_bytes(h->d.store),
         .disk_free_bytes = vx_route_disk_free(h),
         .min_free_disk = h->d.cfg->min_free_disk,
-        .ready = vx_jobs_ready(h->d.jobs),
+        .ready = ready_checks(h).ok,
         .gl = shown_gl_info(h),
         .start_time = h->d.start_time,
         .evictions = vx_store_results_evicted(h->d.store),

@@ -94,6 +94,8 @@ vx_err_kind vx_err_io_kind(int errnum)
     if (errnum == EAGAIN || errnum == ECONNREFUSED || errnum == EHOSTUNREACH ||
         errnum == ETIMEDOUT || errnum == ECONNRESET)
         return VX_EUNAVAIL;
+    /* a file system mounted read-only: the operator's to fix, not the request's */
+    if (errnum == EROFS) return VX_EUNAVAIL;
     return errnum == ENOSPC || errnum == EDQUOT ? VX_ENOSPC : VX_EIO;
 }
 

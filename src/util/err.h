@@ -76,7 +76,8 @@ int vx_err_has(const vx_err *err, unsigned flags);
 void vx_err_clear(vx_err *err);
 /* VX_ENOSPC for ENOSPC / EDQUOT, VX_EUNAVAIL for EAGAIN, ECONNREFUSED,
  * EHOSTUNREACH, ETIMEDOUT and ECONNRESET (a remote byte store that is
- * unreachable for now), else VX_EIO: the kind of a failed write. */
+ * unreachable for now) and EROFS (a read-only mount), else VX_EIO: the
+ * kind of a failed write. */
 vx_err_kind vx_err_io_kind(int errnum);
 /* Short name of a kind, for logs. */
 const char *vx_err_kind_name(vx_err_kind kind);

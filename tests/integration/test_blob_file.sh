@@ -69,6 +69,34 @@ check "results bytes counted from DIR" grep -Eq '^voxeld_results_bytes [1-9]' "$
 stop_daemon
 check "the data dirs hold no meshes" test -z "$(ls "$TMP/data3/meshes" "$TMP/data2/meshes" 2>/dev/null)"
 
+# A store on a file system mounted read-only (root only: a tmpfs remounted
+# ro under a daemon that made its dirs): an upload is 503 store_failed with
+# Retry-After (EROFS is the operator's to fix, not a 500), /readyz and
+# voxeld_ready say not ready, and the daemon keeps serving.
+RO=$TMP/rostore
+mkdir -p "$RO"
+if [[ $(id -u) -eq 0 ]] && mount -t tmpfs -o size=8m voxeld-ro "$RO" 2>/dev/null; then
+    DATA=$TMP/data5
+    start_daemon --blob-store "file://$RO" || exit 1
+    stop_daemon
+    if mount -o remount,ro "$RO"; then
+        start_daemon --blob-store "file://$RO" || exit 1
+        upload "$TMP/box.obj"
+        expect_error "upload to a read-only store" 503 store_failed
+        check "Retry-After on it" test -n "$(header Retry-After)"
+        api GET /readyz
+        check "readyz 503, the blob store not ok" bash -c "test '$STATUS' = 503 && jq -e '.blob_store.ok == false' '$BODY'"
+        api GET /metrics
+        check "voxeld_ready 0 with it" grep -q '^voxeld_ready 0$' "$BODY"
+        api GET /livez
+        expect_status "still serving" 200
+        stop_daemon
+    fi
+    umount -l "$RO"
+else
+    echo "SKIP (part): a read-only store needs root to mount a tmpfs"
+fi
+
 api_bad_url() {
     "$VOXELD" --listen 127.0.0.1:0 --data-dir "$TMP/data4" --blob-store "$1" 2>"$TMP/bad.log"
 }

@@ -347,6 +347,8 @@ upload "$TMP/down.obj"
 expect_error "upload with the database down (not acknowledged)" 503 database_unavailable
 api GET /readyz
 check "readyz 503, database not ok" bash -c "test '$STATUS' = 503 && jq -e '.database.ok == false and (.reason | test(\"database\"))' '$BODY'"
+api GET /metrics
+check "metrics: voxeld_ready 0 while /readyz is 503" grep -q '^voxeld_ready 0$' "$BODY"
 bash "$PGSH" start "$PGDIR" >/dev/null
 ok=0
 for t in $(seq 1 100); do
