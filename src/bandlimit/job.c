@@ -721,15 +721,14 @@ static int render_encode(vx_job_run *r, const void *params, void *state, vx_err 
     return rc;
 }
 
-/* The voxels output of one mesh whose box makes voxels under what
- * OpenVDB's transforms take: 422 at submission, from the mesh's bbox (with
- * further meshes the box can only grow: the job tells, voxels_fit). */
+/* The voxels output of meshes whose box makes voxels under what OpenVDB's
+ * transforms take: 422 at submission, from the meshes' union bbox. */
 static int render_check_mesh(const void *params, const cJSON *meta, const vx_limits *lim,
                              vx_err *err)
 {
     const rparams *p = params;
     (void)lim;
-    if (!p->outputs[OUT_VOXELS] || p->nmeshes) return 0;
+    if (!p->outputs[OUT_VOXELS]) return 0;
     const cJSON *bb = cJSON_GetObjectItemCaseSensitive(meta, "bbox");
     const cJSON *lo = cJSON_GetObjectItemCaseSensitive(bb, "min");
     const cJSON *hi = cJSON_GetObjectItemCaseSensitive(bb, "max");

@@ -792,10 +792,35 @@ static const char *const blob_fields[] = {"frames", NULL};
 
 /* Frames given as positions: as many vertices as the mesh (its metadata's
  * `vertices`, what the job reads), else 422 rather than a failed job. */
+/* At least how many patches the mesh gives, from its metadata: a Bezier
+ * upload's patches; one a face when every face is a quad; else one a face
+ * corner (an n-gon counted as 5, its fewest); 0 when the metadata does not
+ * say. */
+static uint64_t patches_at_least(const cJSON *meta)
+{
+    const cJSON *f = cJSON_GetObjectItemCaseSensitive(meta, "faces");
+    double bez = cJSON_GetNumberValue(cJSON_GetObjectItemCaseSensitive(meta, "patches"));
+    double tri = cJSON_GetNumberValue(cJSON_GetObjectItemCaseSensitive(f, "triangles"));
+    double quad = cJSON_GetNumberValue(cJSON_GetObjectItemCaseSensitive(f, "quads"));
+    double ngon = cJSON_GetNumberValue(cJSON_GetObjectItemCaseSensitive(f, "ngons"));
+    if (bez > 0) return (uint64_t)bez;
+    if (!(tri >= 0 && quad >= 0 && ngon >= 0)) return 0; /* NaN: not in the metadata */
+    return tri == 0 && ngon == 0 ? (uint64_t)quad : (uint64_t)(3 * tri + 4 * quad + 5 * ngon);
+}
+
 static int greg_check_mesh(const void *params, const cJSON *meta, const vx_limits *lim, vx_err *err)
 {
-    (void)lim;
     const gparams *p = params;
+    /* Uniform divisions: 2N^2 triangles a patch (max_edge's are the job's
+     * to count). */
+    uint64_t np = patches_at_least(meta), nt = 2 * (uint64_t)p->divisions * (uint64_t)p->divisions;
+    if (!p->max_edge_set && lim && lim->max_triangles &&
+        (double)nt * (double)np > (double)lim->max_triangles)
+        return vx_err_set(err, VX_EUNPROC, "invalid_params",
+                          "params.divisions = %ld makes at least %.0f triangles on the mesh's %llu "
+                          "patches, over the limit of %llu (--max-triangles)",
+                          p->divisions, (double)nt * (double)np, (unsigned long long)np,
+                          (unsigned long long)lim->max_triangles);
     const cJSON *v = cJSON_GetObjectItemCaseSensitive(meta, "vertices");
     if (!p->frames.n || p->frames.ids || !cJSON_IsNumber(v)) return 0;
     if ((double)p->frames.nv != v->valuedouble)

@@ -94,7 +94,8 @@ typedef struct vx_kind {
      * -1 with err (VX_EUNPROC invalid_params naming the field). */
     int (*check)(void *params, const vx_limits *lim, vx_err *err);
     /* Optional: what the params rule out for the job's mesh, told at
-     * submission from the mesh's metadata (its `vertices`, `bbox`...): 0,
+     * submission from the mesh's metadata (its `vertices`, `bbox`...; the
+     * bbox grown to hold the further meshes mesh_refs names): 0,
      * or -1 with err (VX_EUNPROC invalid_params naming the field), so that
      * it is a 422 rather than a job that fails. */
     int (*check_mesh)(const void *params, const cJSON *mesh_meta, const vx_limits *lim,

@@ -245,6 +245,37 @@ cJSON *vx_jobs_submit(vx_jobs *j, const char *mesh, const char *kind, const cJSO
     return vx_jobs_submit_with(j, mesh, kind, params, NULL, NULL, err);
 }
 
+/* Grows meta's bbox to hold the further meshes the params name (a render
+ * of several meshes frames their union), so check_mesh sees the job's box.
+ * A mesh that is not stored is left out: pinning answers 404 for it. */
+static void union_bbox(vx_jobs *j, const vx_kind *k, const cJSON *norm, cJSON *meta)
+{
+    cJSON *bb = cJSON_GetObjectItemCaseSensitive(meta, "bbox");
+    cJSON *lo = cJSON_GetObjectItemCaseSensitive(bb, "min");
+    cJSON *hi = cJSON_GetObjectItemCaseSensitive(bb, "max");
+    if (!k->mesh_refs || cJSON_GetArraySize(lo) != 3 || cJSON_GetArraySize(hi) != 3) return;
+    const char *ids[256];
+    size_t n = k->mesh_refs(norm, ids, 256);
+    for (size_t i = 0; i < n && i < 256; i++) {
+        vx_err e;
+        cJSON *m = ids[i] && vx_store_valid_mesh_id(ids[i])
+                       ? vx_store_mesh_meta(j->desc.store, ids[i], &e)
+                       : NULL;
+        cJSON *mb = cJSON_GetObjectItemCaseSensitive(m, "bbox");
+        cJSON *mlo = cJSON_GetObjectItemCaseSensitive(mb, "min");
+        cJSON *mhi = cJSON_GetObjectItemCaseSensitive(mb, "max");
+        if (cJSON_GetArraySize(mlo) == 3 && cJSON_GetArraySize(mhi) == 3)
+            for (int a = 0; a < 3; a++) {
+                cJSON *l = cJSON_GetArrayItem(lo, a), *h = cJSON_GetArrayItem(hi, a);
+                double ml = cJSON_GetNumberValue(cJSON_GetArrayItem(mlo, a));
+                double mh = cJSON_GetNumberValue(cJSON_GetArrayItem(mhi, a));
+                if (ml < cJSON_GetNumberValue(l)) cJSON_SetNumberValue(l, ml);
+                if (mh > cJSON_GetNumberValue(h)) cJSON_SetNumberValue(h, mh);
+            }
+        cJSON_Delete(m);
+    }
+}
+
 cJSON *vx_jobs_submit_with(vx_jobs *j, const char *mesh, const char *kind, const cJSON *params,
                            const vx_jobs_submit_opts *opts, int *existing, vx_err *err)
 {
@@ -263,6 +294,7 @@ cJSON *vx_jobs_submit_with(vx_jobs *j, const char *mesh, const char *kind, const
     }
     cJSON *norm = vx_params_normalize(k, params, &j->desc.limits, err);
     if (norm && k->check_mesh) {
+        union_bbox(j, k, norm, meta);
         void *typed = vx_kind_read(k, norm, &j->desc.limits, err);
         if (!typed || k->check_mesh(typed, meta, &j->desc.limits, err)) {
             cJSON_Delete(norm);

@@ -37,6 +37,25 @@ static const vx_pspec spec[] = {
     VX_P_END,
 };
 
+/* The picture read back (4 bytes a pixel) and the single-sample color and
+ * depth targets (8): what a software renderer keeps in host memory
+ * (llvmpipe: ~8.4 bytes a pixel measured at 4096^2 for 1 to 8 samples; a
+ * GPU holds the multisample targets in its own memory), against the job
+ * memory limit: at submission 422 invalid_params, in the job (the limit
+ * may have changed since) job_memory_limit. */
+static int check_memory(long width, long height, const vx_limits *lim, int submission,
+                        vx_err *err)
+{
+    uint64_t bytes = (uint64_t)width * (uint64_t)height * 12;
+    if (!lim || !lim->max_job_memory || bytes <= lim->max_job_memory) return 0;
+    return vx_err_set(err, submission ? VX_EUNPROC : VX_ETOOBIG,
+                      submission ? "invalid_params" : "job_memory_limit",
+                      "%sa %ldx%ld preview needs %llu bytes (12 a pixel: the picture and its "
+                      "color and depth targets), over the job memory limit of %llu",
+                      submission ? "params.width * params.height: " : "", width, height,
+                      (unsigned long long)bytes, (unsigned long long)lim->max_job_memory);
+}
+
 static int preview_check(void *params, const vx_limits *lim, vx_err *err)
 {
     const pv_params *x = params;
@@ -48,7 +67,7 @@ static int preview_check(void *params, const vx_limits *lim, vx_err *err)
         return vx_err_set(err, VX_EUNPROC, "invalid_params",
                           "params.width * params.height = %ld exceeds the limit of %llu pixels",
                           x->width * x->height, (unsigned long long)lim->max_image_pixels);
-    return 0;
+    return check_memory(x->width, x->height, lim, 1, err);
 }
 
 /* The renderer's params (float) from the job's. */
@@ -84,19 +103,8 @@ static int preview_run_gl(vx_job_run *r, const vx_mesh *mesh, const void *params
 {
     vx_preview_params p;
     to_render(params, &p);
-    const vx_limits *lim = vx_run_limits(r);
-    /* The picture read back (4 bytes a pixel) and the single-sample color
-     * and depth targets (8): what a software renderer keeps in host memory
-     * (llvmpipe: ~8.4 bytes a pixel measured at 4096^2 for 1 to 8 samples;
-     * a GPU holds the multisample targets in its own memory). */
-    uint64_t px = (uint64_t)p.width * (uint64_t)p.height, bytes = px * 12;
-    if (lim && lim->max_job_memory && bytes > lim->max_job_memory)
-        return vx_err_set(err, VX_ETOOBIG, "job_memory_limit",
-                          "a %dx%d preview needs %llu bytes (12 a pixel: the picture and its "
-                          "color and depth targets), over the job memory limit of %llu",
-                          p.width, p.height, (unsigned long long)bytes,
-                          (unsigned long long)lim->max_job_memory);
-    bytes = px * 4; /* the picture's own buffer */
+    if (check_memory(p.width, p.height, vx_run_limits(r), 0, err)) return -1;
+    uint64_t bytes = (uint64_t)p.width * (uint64_t)p.height * 4; /* the picture's own buffer */
     preview_state *s = calloc(1, sizeof *s);
     if (s) s->rgba = malloc((size_t)bytes);
     if (!s || !s->rgba) {

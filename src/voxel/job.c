@@ -506,9 +506,8 @@ static void stat_set(cJSON *stats, const char *name, cJSON *v)
     if (!cJSON_AddItemToObject(stats, name, v)) cJSON_Delete(v);
 }
 
-/* The grid of p (explicit, or from the mesh and checked: VX_ETOOBIG). */
-static int grid_of(const vparams *p, const vx_mesh *mesh, const vx_limits *lim, vx_grid *g,
-                   vx_err *err)
+/* The grid of p: explicit, or from the mesh (not checked). */
+static int make_grid(const vparams *p, const vx_mesh *mesh, vx_grid *g, vx_err *err)
 {
     memset(g, 0, sizeof *g);
     if (p->grid_set) {
@@ -520,13 +519,28 @@ static int grid_of(const vparams *p, const vx_mesh *mesh, const vx_limits *lim, 
         }
         return 0;
     }
-    int rc = p->resolution_set
-                 ? vx_grid_from_resolution(mesh, (int)p->resolution, (int)p->padding, g, err)
-                 : vx_grid_from_voxel_size(mesh, p->voxel_size, (int)p->padding, g, err);
-    if (rc) return -1;
+    return p->resolution_set
+               ? vx_grid_from_resolution(mesh, (int)p->resolution, (int)p->padding, g, err)
+               : vx_grid_from_voxel_size(mesh, p->voxel_size, (int)p->padding, g, err);
+}
+
+/* A grid made from the mesh against the bounds (an explicit one was
+ * checked with the params): at submission VX_EUNPROC invalid_params, in
+ * the job VX_ETOOBIG and the .vdb voxel size codes. */
+static int check_mesh_grid(const vparams *p, const vx_grid *g, const vx_limits *lim,
+                           int submission, vx_err *err)
+{
+    if (p->grid_set) return 0;
     const char *what = p->resolution_set ? "params.resolution" : "params.voxel_size";
-    if (check_vdb_voxel(p, g->h, what, 0, err)) return -1;
-    return check_grid(g->dims, p, lim, what, VX_ETOOBIG, err);
+    if (check_vdb_voxel(p, g->h, what, submission, err)) return -1;
+    return check_grid(g->dims, p, lim, what, submission ? VX_EUNPROC : VX_ETOOBIG, err);
+}
+
+/* The grid of p (explicit, or from the mesh and checked: VX_ETOOBIG). */
+static int grid_of(const vparams *p, const vx_mesh *mesh, const vx_limits *lim, vx_grid *g,
+                   vx_err *err)
+{
+    return make_grid(p, mesh, g, err) || check_mesh_grid(p, g, lim, 0, err) ? -1 : 0;
 }
 
 /* The engine's desc for p on grid g (no progress hook yet). */
@@ -808,17 +822,23 @@ static int mesh_of_meta(const cJSON *meta, vx_mesh *m, vx_err *err)
 /* Cluster mode (kind.h split): a bricked grid as one child job per brick,
  * each an explicit box of the grid's lattice written in the grid's index
  * space (vdb_index_base), the inside rule decided for the whole mesh. */
-/* At submission, from the mesh's metadata: a bricked grid of more than
- * BRICKS_MAX bricks is 422 (what else the grid's making finds wrong, the
- * job says, as before). */
+/* At submission, from the mesh's metadata (its bbox, printed to round
+ * trip): a grid the mesh makes over the size bounds, voxels too small or
+ * large for a .vdb, or a bricked grid of more than BRICKS_MAX bricks is
+ * 422 (what the grid's making itself finds wrong, the job says). */
 static int voxelize_check_mesh(const void *params, const cJSON *mesh_meta, const vx_limits *lim,
                                vx_err *err)
 {
     const vparams *p = params;
     vx_mesh m;
     vx_grid w;
-    vx_err ignored;
-    if (mesh_of_meta(mesh_meta, &m, &ignored) || grid_of(p, &m, lim, &w, &ignored)) return 0;
+    vx_err e;
+    if (mesh_of_meta(mesh_meta, &m, &e)) return 0;
+    if (make_grid(p, &m, &w, &e)) /* past the per-axis bound: "voxel_size ... gives ..." */
+        return e.kind == VX_ETOOBIG ? vx_err_set(err, VX_EUNPROC, "invalid_params", "params.%s",
+                                                 e.message)
+                                    : 0;
+    if (check_mesh_grid(p, &w, lim, 1, err)) return -1;
     const int S = brick_size_of(p, w.dims, lim);
     int nb[3];
     return S && brick_grid(w.dims, S, nb, err) < 0 ? -1 : 0;

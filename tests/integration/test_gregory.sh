@@ -240,7 +240,10 @@ post "{\"mesh\":\"$M_spot\",\"kind\":\"gregory\",\"params\":{\"format\":\"stl\"}
 expect_error "format stl" 422 invalid_params
 post "{\"mesh\":\"$M_spot\",\"kind\":\"gregory\",\"params\":{\"frames\":[\"$(printf '%064d' 0)\"]}}"
 expect_error "unknown frame mesh" 404 mesh_not_found
-greg "spot over max_triangles" "$M_spot" '{"divisions":16}'
+post "{\"mesh\":\"$M_spot\",\"kind\":\"gregory\",\"params\":{\"divisions\":16}}"
+expect_error "spot's patches over max_triangles: 422 at submission, from its face counts" 422 invalid_params
+check "naming params.divisions and the patches" jq -e '.error.message | test("params.divisions = 16 makes at least [0-9]+ triangles on the mesh.s [0-9]+ patches")' "$BODY"
+greg "spot over max_triangles with max_edge (the job counts)" "$M_spot" '{"max_edge":1e-6}'
 check "triangle limit: job error" jq -e '.state == "failed" and .error.code == "triangle_limit"' "$TMP/job.json"
 greg "frame of another topology" "$M_prism" "{\"divisions\":2,\"frames\":[\"$M_spot\"]}"
 check "frame topology (mesh id): job error" jq -e '.state == "failed" and .error.code == "frame_topology"' "$TMP/job.json"

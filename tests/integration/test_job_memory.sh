@@ -61,18 +61,19 @@ with open(sys.argv[1], "w") as out:
         out.write(",[" + f + "]")
     out.write("]")
 EOF
-body() { # MESH I [DIVISIONS]: a gregory job on MESH whose frames start with I
-    { printf '{"mesh":"%s","kind":"gregory","params":{"divisions":%s,"frames":[[%s' "$1" "${3:-1}" "$2"; cat "$TMP/rest.json"; printf '}}'; } >"$TMP/body.json"
+body() { # MESH I [PARAM]: a gregory job on MESH whose frames start with I
+    { printf '{"mesh":"%s","kind":"gregory","params":{%s,"frames":[[%s' "$1" "${3:-\"divisions\":1}" "$2"; cat "$TMP/rest.json"; printf '}}'; } >"$TMP/body.json"
 }
-submit() { # MESH I [wait [DIVISIONS]]
-    body "$1" "$2" "${4:-1}"
+submit() { # MESH I [wait [PARAM]]
+    body "$1" "$2" "${4:-\"divisions\":1}"
     api POST "/v1/jobs?wait=${3:-30}" -H "Content-Type: application/json" --data-binary "@$TMP/body.json"
 }
 # A job that fails at once, after its frames were taken: the grid's 256
-# patches at 200 divisions are 20,480,000 triangles, over max_triangles
-# (submission checks one patch only; frames of another vertex count are
-# 422 at submission).
-fails() { submit "$GRID" "$1" 30 200; }
+# patches at max_edge 1e-6 take the most divisions, 256, and so make
+# 33,554,432 triangles, over max_triangles (adaptive divisions are the
+# job's to count; uniform ones over it, and frames of another vertex
+# count, are 422 at submission).
+fails() { submit "$GRID" "$1" 30 '"max_edge":1e-6'; }
 failed_ok() { jq -e '.state == "failed" and .error.code == "triangle_limit"' "$BODY" >/dev/null; }
 body "$GRID" 0
 SIZE=$(stat -c %s "$TMP/body.json")

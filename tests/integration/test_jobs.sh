@@ -160,9 +160,11 @@ stop_daemon
 start_daemon --max-job-memory 180M || exit 1
 upload "$TMP/box.obj"
 PB=$MESH_ID
-run_job preview "$PB" '{"width":4096,"height":4096,"samples":4}'
-check "a 4096^2 preview over 180M (12 bytes a pixel) fails job_memory_limit ($(jq -c .error "$TMP/job.json"))" \
-    jq -e '.state == "failed" and .error.code == "job_memory_limit" and (.error.message | test("12 a pixel"))' "$TMP/job.json"
+api POST /v1/jobs -H "Content-Type: application/json" \
+    -d "{\"mesh\":\"$PB\",\"kind\":\"preview\",\"params\":{\"width\":4096,\"height\":4096,\"samples\":4}}"
+expect_error "a 4096^2 preview over 180M (12 bytes a pixel): 422 at submission" 422 invalid_params
+check "naming the fields and the 12 bytes a pixel" \
+    jq -e '.error.message | test("params.width \\* params.height.*12 a pixel")' "$BODY"
 HWM0=$(awk '/^VmHWM:/ {print $2}' "/proc/$PID/status")
 run_job preview "$PB" '{"width":3840,"height":3840,"samples":4}'
 job_ok "a 3840^2 preview within 180M"

@@ -187,10 +187,16 @@ api POST /v1/jobs -H "Content-Type: application/json" \
     -d "{\"mesh\":\"$TINY\",\"kind\":\"render\",\"params\":{\"N\":32,\"outputs\":[\"voxels\"]}}"
 expect_error "tiny mesh, voxels output: told at submission from its box" 422 invalid_params
 check "the message gives the voxel size" jq -e '.error.message | test("voxel size would be")' "$BODY"
-# with a second mesh the box may grow: the job tells
-run_job render "$TINY" "{\"N\":32,\"outputs\":[\"voxels\"],\"meshes\":[\"$TINY\"]}"
-check "tiny mesh twice, voxels output: voxel_size_too_small" \
-    jq -e '.state == "failed" and .error.code == "voxel_size_too_small"' "$TMP/job.json"
+# with further meshes, the box is their union's: the same tiny mesh twice
+# is still 422, a tiny mesh beside a larger one renders.
+api POST /v1/jobs -H "Content-Type: application/json" \
+    -d "{\"mesh\":\"$TINY\",\"kind\":\"render\",\"params\":{\"N\":32,\"outputs\":[\"voxels\"],\"meshes\":[\"$TINY\"]}}"
+expect_error "tiny mesh twice, voxels output: told at submission from the union box" 422 invalid_params
+printf 'v 3.0001 0 0\nv 3 1e-4 0\nv 3 0 1e-4\nv 3 0 0\nf 1 2 3\nf 1 3 4\nf 1 4 2\nf 2 4 3\n' >"$TMP/tiny_far.obj"
+upload "$TMP/tiny_far.obj"
+expect_status "upload a tiny mesh 3 units away" 201
+job "two tiny meshes 3 apart, voxels output (their union box is large enough)" "$TINY" \
+    "{\"N\":32,\"outputs\":[\"voxels\"],\"meshes\":[\"$MESH_ID\"]}"
 job "tiny mesh, image only" "$TINY" '{"N":32}'
 
 # Cameras far from the mesh: the rays are marched from where they enter the

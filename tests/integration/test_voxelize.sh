@@ -283,18 +283,20 @@ bad "unknown samples" '{"supersample":2,"samples":"corners"}' params.samples
 bad "unknown format" '{"format":"stl"}' params.format
 bad "unknown field" '{"colour":"red"}' params.colour
 
-# voxel_size: the dims come from the mesh, so the limit fails the job.
+# voxel_size: the dims come from the mesh; its stored box tells them at
+# submission, so a grid over the memory limit is 422 naming the field.
 api POST "/v1/jobs?wait=60" -H "Content-Type: application/json" \
     -d "{\"mesh\":\"$M_cube\",\"kind\":\"voxelize\",\"params\":{\"voxel_size\":0.001}}"
-check "voxel_size over memory: the job fails with job_memory_limit" \
-    jq -e '.state == "failed" and .error.code == "job_memory_limit"' "$BODY"
-# past 16384 voxels along an axis, however far: the same code (2^20 along
-# an axis answered invalid_params, which the docs do not list for it)
+expect_error "voxel_size over memory: 422 at submission" 422 invalid_params
+check "naming params.voxel_size and the memory limit" \
+    jq -e '.error.message | test("params.voxel_size.*job memory limit")' "$BODY"
+# past 16384 voxels along an axis, however far: the same answer
 for vs in 1e-6 5e-324; do
     api POST "/v1/jobs?wait=60" -H "Content-Type: application/json" \
         -d "{\"mesh\":\"$M_cube\",\"kind\":\"voxelize\",\"params\":{\"voxel_size\":$vs,\"format\":\"raw8\"}}"
-    check "voxel_size $vs: the job fails with job_memory_limit naming the 16384 per axis ($(jq -c .error "$BODY"))" \
-        jq -e '.state == "failed" and .error.code == "job_memory_limit" and (.error.message | test("16384"))' "$BODY"
+    expect_error "voxel_size $vs: 422 at submission" 422 invalid_params
+    check "voxel_size $vs: naming the 16384 per axis ($(jq -c .error "$BODY"))" \
+        jq -e '.error.message | test("params.voxel_size .* gives .*16384")' "$BODY"
 done
 
 # A level set's memory follows the surface, not the grid: a 256^3 sphere
@@ -331,16 +333,18 @@ check "plates: 64 plates of 2 voxels" test "$(st voxels_inside)" = $((64 * 2 * 5
 
 # A .vdb needs a voxel of at least ~1.44e-5 (OpenVDB's transforms refuse
 # h^3 under 3e-15); the other formats have no such bound. A tetrahedron of
-# edge 1e-4 at resolution 32 (h 3.1e-6) fails as vdb with
-# voxel_size_too_small, runs as raw8; explicit voxel sizes under the bound
-# are 422; edge 4.7e-4 (h 1.47e-5, just over) writes a .vdb.
+# edge 1e-4 at resolution 32 (h 3.1e-6) is 422 as vdb at submission (the
+# mesh's box gives h), runs as raw8; explicit voxel sizes under the bound
+# are 422 too; edge 4.7e-4 (h 1.47e-5, just over) writes a .vdb.
 tet_obj "$TMP/tiny.obj" 1e-4
 upload "$TMP/tiny.obj"
 expect_status "upload tiny" 201
 M_tiny=$MESH_ID
-run_job voxelize "$M_tiny" '{"resolution":32,"format":"vdb"}'
-check "tiny vdb: the job fails with voxel_size_too_small" \
-    jq -e '.state == "failed" and .error.code == "voxel_size_too_small"' "$TMP/job.json"
+api POST /v1/jobs -H "Content-Type: application/json" \
+    -d "{\"mesh\":\"$M_tiny\",\"kind\":\"voxelize\",\"params\":{\"resolution\":32,\"format\":\"vdb\"}}"
+expect_error "tiny vdb: 422 at submission, from the mesh's box" 422 invalid_params
+check "naming params.resolution and the voxel size" \
+    jq -e '.error.message | test("params.resolution gives a voxel size")' "$BODY"
 vox "tiny raw8" "$M_tiny" '{"resolution":32,"format":"raw8"}'
 check "tiny raw8: voxels set" test "$(st voxels_inside)" -gt 0
 bad "vdb voxel_size 1e-6" '{"voxel_size":1e-6,"format":"vdb"}' params.voxel_size
