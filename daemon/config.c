@@ -108,7 +108,8 @@ static const opt_def opts[] = {
      "s3: retries, with backoff, of a request that met a 5xx or connection error (default 3)"},
     {"database", T_STR, S(database),
      "postgresql://USER@HOST/DB: the job state and queue in PostgreSQL, shared by every replica "
-     "given the same URL (cluster mode; default none: the local journal)"},
+     "given the same URL (cluster mode, with a shared --blob-store; default none: the local "
+     "journal)"},
     {"replica-name", T_STR, S(replica_name),
      "this replica's name in job resources and claims (default host name:port)"},
     {"lease-ttl", T_SECONDS, F(lease_ttl_s), 0,
@@ -545,6 +546,14 @@ int vx_config_load(vx_config *c, int argc, char **argv)
                 "voxeld: listen: '%s' is not ADDR:PORT ([ADDR]:PORT for IPv6, PORT from 0 to "
                 "65535)\n",
                 c->listen);
+        return -1;
+    }
+    /* Replicas read each other's meshes and results: with the data dir as
+     * the store a replica would claim jobs whose bytes are elsewhere. */
+    if (c->database[0] && !c->blob_store[0]) {
+        fprintf(stderr, "voxeld: database: cluster mode needs a --blob-store every replica "
+                        "shares (file:///DIR or s3://BUCKET/PREFIX?endpoint=URL), not the data "
+                        "dir\n");
         return -1;
     }
     if (c->blob_part_size < (5ull << 20)) {

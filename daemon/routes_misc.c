@@ -87,7 +87,7 @@ int vx_route_readyz(vx_http *h, struct MHD_Connection *c, req *r)
                      !k.dd      ? "the data directory is not writable"
                      : !k.space ? "the data directory has less free space than --min-free-disk"
                      : !k.blob  ? "the blob store (--blob-store) cannot be reached"
-                              : "the database (--database) cannot be reached");
+                                : "the database (--database) cannot be reached");
         else
             vx_route_not_ready_reason(h, why, sizeof why);
         cJSON_AddStringToObject(doc, "reason", why);

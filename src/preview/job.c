@@ -43,8 +43,7 @@ static const vx_pspec spec[] = {
  * GPU holds the multisample targets in its own memory), against the job
  * memory limit: at submission 422 invalid_params, in the job (the limit
  * may have changed since) job_memory_limit. */
-static int check_memory(long width, long height, const vx_limits *lim, int submission,
-                        vx_err *err)
+static int check_memory(long width, long height, const vx_limits *lim, int submission, vx_err *err)
 {
     uint64_t bytes = (uint64_t)width * (uint64_t)height * 12;
     if (!lim || !lim->max_job_memory || bytes <= lim->max_job_memory) return 0;

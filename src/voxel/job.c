@@ -249,8 +249,9 @@ static int check_vdb_voxel(const vparams *p, double h, const char *what, int sub
     if (!vx_vdb_voxel_size_ok(h))
         return vx_err_set(err, VX_EUNPROC, submission ? "invalid_params" : "voxel_size_too_small",
                           "%s gives a voxel size of %.6g, under the %.6g that OpenVDB's "
-                          "transforms take: a .vdb needs larger voxels (or a mesh in smaller "
-                          "units); the other formats have no such bound",
+                          "transforms take: a .vdb needs larger voxels (a lower resolution, a "
+                          "larger voxel size, or a mesh in smaller units); the other formats "
+                          "have no such bound",
                           what, h, vx_vdb_min_voxel_size());
     const double max = vx_vdb_max_voxel_size(p->vdb_grid);
     if (h > max)
@@ -527,8 +528,8 @@ static int make_grid(const vparams *p, const vx_mesh *mesh, vx_grid *g, vx_err *
 /* A grid made from the mesh against the bounds (an explicit one was
  * checked with the params): at submission VX_EUNPROC invalid_params, in
  * the job VX_ETOOBIG and the .vdb voxel size codes. */
-static int check_mesh_grid(const vparams *p, const vx_grid *g, const vx_limits *lim,
-                           int submission, vx_err *err)
+static int check_mesh_grid(const vparams *p, const vx_grid *g, const vx_limits *lim, int submission,
+                           vx_err *err)
 {
     if (p->grid_set) return 0;
     const char *what = p->resolution_set ? "params.resolution" : "params.voxel_size";
@@ -835,9 +836,9 @@ static int voxelize_check_mesh(const void *params, const cJSON *mesh_meta, const
     vx_err e;
     if (mesh_of_meta(mesh_meta, &m, &e)) return 0;
     if (make_grid(p, &m, &w, &e)) /* past the per-axis bound: "voxel_size ... gives ..." */
-        return e.kind == VX_ETOOBIG ? vx_err_set(err, VX_EUNPROC, "invalid_params", "params.%s",
-                                                 e.message)
-                                    : 0;
+        return e.kind == VX_ETOOBIG
+                   ? vx_err_set(err, VX_EUNPROC, "invalid_params", "params.%s", e.message)
+                   : 0;
     if (check_mesh_grid(p, &w, lim, 1, err)) return -1;
     const int S = brick_size_of(p, w.dims, lim);
     int nb[3];

@@ -86,14 +86,19 @@ check "--workers 0 exits 2 naming the range" sh -c "test $? -eq 2 && grep -q 'a 
 check "--blob-part-size 1M exits 2 without an s3 store too" sh -c "test $? -eq 2 && grep -q 'blob-part-size must be at least 5M' '$TMP/errp'"
 # Values only the queue can parse: a malformed database URL is a bad option
 # too (exit 2), said before any connection is tried.
-"$VOXELD" --database 'postgresql://u@[::1' --listen 127.0.0.1:0 --data-dir "$TMP/d3" 2>"$TMP/err6"
+"$VOXELD" --database 'postgresql://u@[::1' --blob-store "file://$TMP/shared" --listen 127.0.0.1:0 --data-dir "$TMP/d3" 2>"$TMP/err6"
 check "a malformed --database URL exits 2" test $? -eq 2
 check "and says why" grep -q 'voxeld: --database: bad database URL' "$TMP/err6"
-"$VOXELD" --database 'mysql://x/y' --listen 127.0.0.1:0 --data-dir "$TMP/d3" 2>"$TMP/err7"
+"$VOXELD" --database 'mysql://x/y' --blob-store "file://$TMP/shared" --listen 127.0.0.1:0 --data-dir "$TMP/d3" 2>"$TMP/err7"
 check "a --database URL of another scheme exits 2" test $? -eq 2
+# Cluster mode with the data dir as the store: replicas could not read
+# each other's meshes and results, so it is a bad option (exit 2).
+"$VOXELD" --database 'postgresql://127.0.0.1:1/x' --listen 127.0.0.1:0 --data-dir "$TMP/d3" 2>"$TMP/err8"
+check "--database without --blob-store exits 2" test $? -eq 2
+check "and says it needs a shared store" grep -q 'voxeld: database: cluster mode needs a --blob-store every replica shares' "$TMP/err8"
 # SIGTERM while start-up waits for a database that is not up: exit 0 at
 # once, not at the end of the wait (30 s).
-"$VOXELD" --database 'postgresql://127.0.0.1:1/x' --listen 127.0.0.1:0 --data-dir "$TMP/d4" 2>"$TMP/dbwait.log" &
+"$VOXELD" --database 'postgresql://127.0.0.1:1/x' --blob-store "file://$TMP/shared" --listen 127.0.0.1:0 --data-dir "$TMP/d4" 2>"$TMP/dbwait.log" &
 DPID=$!
 for i in $(seq 1 100); do grep -q cluster.database_wait "$TMP/dbwait.log" && break; sleep 0.1; done
 check "start-up waits for the database" grep -q cluster.database_wait "$TMP/dbwait.log"
