@@ -533,7 +533,26 @@ int vx_config_load(vx_config *c, int argc, char **argv)
             fprintf(stderr, "voxeld: token file: %s\n", err.message);
             return -1;
         }
-        snprintf(c->token, sizeof c->token, "%s", trim(tok));
+        /* The token is what a client sends after "Bearer ": visible ASCII.
+         * A NUL had cut it short silently (a binary token of 32 random
+         * bytes could end after 2). */
+        char *t = tok;
+        while (t < tok + len && isspace((unsigned char)*t))
+            t++;
+        size_t tl = (size_t)(tok + len - t);
+        while (tl && isspace((unsigned char)t[tl - 1]))
+            tl--;
+        for (size_t i = 0; i < tl; i++)
+            if ((unsigned char)t[i] < 0x21 || (unsigned char)t[i] > 0x7e) {
+                fprintf(stderr,
+                        "voxeld: token file %s holds a byte that cannot be sent in an HTTP "
+                        "header (byte %zu is 0x%02x; a token is visible ASCII, such as the "
+                        "output of 'openssl rand -hex 32')\n",
+                        c->token_file, (size_t)(t - tok) + i, (unsigned)(unsigned char)t[i]);
+                free(tok);
+                return -1;
+            }
+        snprintf(c->token, sizeof c->token, "%.*s", (int)tl, t);
         free(tok);
         if (!c->token[0]) {
             fprintf(stderr, "voxeld: token file %s is empty\n", c->token_file);

@@ -22,6 +22,7 @@
 #include <errno.h>
 #include <math.h>
 #include <netdb.h>
+#include <pthread.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -46,7 +47,7 @@ void vx_http_job_changed(vx_http *h, const char *jid, int terminal)
 /* How many times the headers that must come once came, and whether a
  * field name or value was malformed. */
 typedef struct once_counts {
-    int host, length, idem, coding, bad;
+    int host, length, idem, coding, auth, bad;
 } once_counts;
 
 /* A field name must be a token, a value hold no NUL, CR or LF (RFC 9110
@@ -76,6 +77,7 @@ static enum MHD_Result count_once(void *cls, enum MHD_ValueKind kind, const char
     if (!strcasecmp(key, MHD_HTTP_HEADER_HOST)) n->host++;
     if (!strcasecmp(key, MHD_HTTP_HEADER_CONTENT_LENGTH)) n->length++;
     if (!strcasecmp(key, "Idempotency-Key")) n->idem++;
+    if (!strcasecmp(key, MHD_HTTP_HEADER_AUTHORIZATION)) n->auth++;
     if (!strcasecmp(key, MHD_HTTP_HEADER_TRANSFER_ENCODING)) n->coding++;
     return MHD_YES;
 }
@@ -99,6 +101,15 @@ static int fail_framing(struct MHD_Connection *c, req *r, const char *why)
     vx_err e;
     vx_err_set(&e, VX_EINVAL, "invalid_request", "%s", why);
     return vx_resp_err_with(c, r, &e, MHD_HTTP_HEADER_CONNECTION, "close");
+}
+
+/* 1 when the head announces a body (a length other than 0, or chunks). */
+static int declares_body(struct MHD_Connection *c)
+{
+    const char *cl = vx_resp_header(c, MHD_HTTP_HEADER_CONTENT_LENGTH);
+    uint64_t n;
+    return vx_resp_header(c, MHD_HTTP_HEADER_TRANSFER_ENCODING) ||
+           (cl && (vx_req_parse_length(cl, &n) || n > 0));
 }
 
 /* Framing the access handler can still answer in JSON: Host, the transfer
@@ -134,6 +145,10 @@ static int check_framing(struct MHD_Connection *c, req *r, const char *version)
     if (n.idem > 1)
         return vx_resp_fail(c, r, VX_EINVAL, "invalid_request",
                             "more than one Idempotency-Key header");
+    /* the token check reads the first; a proxy may go by the last */
+    if (n.auth > 1)
+        return vx_resp_fail(c, r, VX_EINVAL, "invalid_request",
+                            "more than one Authorization header");
     return -1;
 }
 
@@ -153,6 +168,10 @@ static int first_call(vx_http *h, struct MHD_Connection *c, req *r, const char *
                             r->method);
     if (r->route == VX_R_UNKNOWN)
         return vx_resp_fail(c, r, VX_ENOTFOUND, "not_found", "no such route");
+    /* Only POST takes a body: any other's would be read into memory (up to
+     * max-json-bytes, before auth) and hold its slot while it trickles. */
+    if (strcmp(r->method, "POST") != 0 && declares_body(c))
+        return fail_framing(c, r, "only POST takes a request body");
     /* A CORS preflight carries no credentials: answered before auth. */
     if (!strcmp(r->method, "OPTIONS")) return -1;
     if (!strncmp(vx_req_route_name(r->route), "/v1/", 4) && h->auth.on &&
@@ -238,7 +257,7 @@ static int take_body(vx_http *h, req *r, const char *data, size_t n)
         }
         return 0;
     }
-    if (r->too_big) return 0;
+    if (r->too_big || r->body != BODY_JSON) return 0; /* no body is kept but a JSON one */
     if (r->len + n > h->d.cfg->max_json_bytes) {
         r->too_big = 1;
         return 0;
@@ -274,15 +293,6 @@ static void identify(struct MHD_Connection *c, req *r, const char *url)
             sa->sa_family == AF_INET6 ? sizeof(struct sockaddr_in6) : sizeof(struct sockaddr_in);
         getnameinfo(sa, len, r->client, sizeof r->client, NULL, 0, NI_NUMERICHOST);
     }
-}
-
-/* 1 when the head announces a body (a length other than 0, or chunks). */
-static int declares_body(struct MHD_Connection *c)
-{
-    const char *cl = vx_resp_header(c, MHD_HTTP_HEADER_CONTENT_LENGTH);
-    uint64_t n;
-    return vx_resp_header(c, MHD_HTTP_HEADER_TRANSFER_ENCODING) ||
-           (cl && (vx_req_parse_length(cl, &n) || n > 0));
 }
 
 /* The first call: the head is in. Allocates r, routes it and answers what
@@ -330,10 +340,8 @@ static enum MHD_Result on_head(vx_http *h, struct MHD_Connection *c, const char 
         if (declares_body(c)) vx_conns_linger(h->conns, vc);
         return rc;
     }
-    /* A body follows: rate it. Any method's: a GET or DELETE that
-     * announced one and sent it a byte at a time held its slot with no 408,
-     * no eviction and no 503 at shutdown (32 of them took every slot). */
-    if (!strcmp(r->method, "POST") || declares_body(c))
+    /* A body follows: rate it (another method's was refused above). */
+    if (!strcmp(r->method, "POST"))
         vx_conns_body_begins(h->conns, vc, r->rid, vx_resp_cors_origin(c));
     /* Answer on the next call even without a body: a response queued in
      * the first call makes libmicrohttpd 0.9.75 close the connection (it
@@ -426,10 +434,8 @@ static enum MHD_Result on_request(void *cls, struct MHD_Connection *c, const cha
             if (r->body == BODY_UPLOAD)
                 snprintf(m, sizeof m, "the body is larger than the %llu-byte upload limit",
                          (unsigned long long)h->d.cfg->max_upload_bytes);
-            else if (r->body == BODY_JSON)
-                snprintf(m, sizeof m, "the JSON body is larger than max-json-bytes");
             else
-                snprintf(m, sizeof m, "the request body is larger than max-json-bytes");
+                snprintf(m, sizeof m, "the JSON body is larger than max-json-bytes");
             vx_conns_refuse(h->conns, r->vc, 413, "too_large", m);
         }
         return MHD_YES;
@@ -459,11 +465,12 @@ static void on_completed(void *cls, struct MHD_Connection *c, void **con_cls,
                 status < 400
             ? VX_LOG_DEBUG
             : VX_LOG_INFO;
+    char mq[80]; /* the method is the client's bytes (escapes, bells) */
     vx_log(lvl, "http.request",
            "request_id=%s method=%s route=%s path=%s client=%s status=%d ms=%.2f bytes_in=%llu "
            "bytes_out=%llu%s",
-           r->rid, r->method, route, r->path, r->client, status, dt * 1e3,
-           (unsigned long long)r->bytes_in, (unsigned long long)r->bytes_out,
+           r->rid, vx_log_quote(mq, sizeof mq, r->method), route, r->path, r->client, status,
+           dt * 1e3, (unsigned long long)r->bytes_in, (unsigned long long)r->bytes_out,
            toe == MHD_REQUEST_TERMINATED_COMPLETED_OK ? "" : " aborted=1");
     vx_upload_abort(r->up);
     free(r->buf);
@@ -473,6 +480,29 @@ static void on_completed(void *cls, struct MHD_Connection *c, void **con_cls,
 
 static void mhd_log(void *cls, const char *fmt, va_list ap)
 {
+    /* At most MHD_LOG_BURST lines a second, then one line saying how many
+     * were left out: out of file descriptors, libmicrohttpd says the same
+     * thing at every accept (a million lines in 11 s). */
+    enum { MHD_LOG_BURST = 20 };
+    static pthread_mutex_t lock = PTHREAD_MUTEX_INITIALIZER;
+    static double window;
+    static unsigned shown, dropped;
+    double now = vx_mono();
+    pthread_mutex_lock(&lock);
+    unsigned was_dropped = 0;
+    if (now - window >= 1.0) {
+        was_dropped = dropped;
+        window = now;
+        shown = dropped = 0;
+    }
+    int show = shown < MHD_LOG_BURST;
+    if (show)
+        shown++;
+    else
+        dropped++;
+    pthread_mutex_unlock(&lock);
+    if (was_dropped) VX_WARN("http.mhd_suppressed", "lines=%u seconds=1", was_dropped);
+    if (!show) return;
     char msg[512], q[600];
     vsnprintf(msg, sizeof msg, fmt, ap);
     VX_WARN("http.mhd", "message=%s", vx_log_quote(q, sizeof q, msg));

@@ -3,6 +3,7 @@
 #include <errno.h>
 #include <pthread.h>
 #include <signal.h>
+#include <sys/resource.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -84,6 +85,44 @@ static int list_devices(void)
 }
 
 /* Blocks the signals the main thread takes synchronously, into *sigs. */
+/* Raises the soft descriptor limit to the hard one, and fits the
+ * connection limit into what is left after the daemon's own files: each
+ * connection may hold two descriptors (its socket, an upload's temp file).
+ * Past the limit libmicrohttpd's accept failed with EMFILE, answered no
+ * request, and logged that at every try. -1 when too few are left for
+ * any connection. */
+static int fit_fd_limit(vx_config *cfg)
+{
+    struct rlimit rl;
+    if (getrlimit(RLIMIT_NOFILE, &rl) != 0) return 0;
+    if (rl.rlim_cur != rl.rlim_max) {
+        rlim_t want = rl.rlim_max;
+        rl.rlim_cur = want;
+        if (setrlimit(RLIMIT_NOFILE, &rl) != 0) getrlimit(RLIMIT_NOFILE, &rl);
+    }
+    if (rl.rlim_cur == RLIM_INFINITY) return 0;
+    /* the store, the journal, the GL driver, each job's files, the HTTP
+     * threads' epoll and event descriptors */
+    uint64_t reserve = 32 + 4 * (uint64_t)cfg->http_threads + 4 * (uint64_t)cfg->workers;
+    uint64_t fit = rl.rlim_cur > reserve ? (rl.rlim_cur - reserve) / 2 : 0;
+    if (fit < 1) {
+        fprintf(stderr,
+                "voxeld: %llu file descriptors (ulimit -n) leave none for connections: it needs "
+                "%llu for itself and 2 a connection\n",
+                (unsigned long long)rl.rlim_cur, (unsigned long long)reserve);
+        return -1;
+    }
+    if (cfg->max_connections > fit) {
+        VX_WARN("http.fd_limit",
+                "nofile=%llu max_connections=%llu effective=%llu action=\"raise ulimit -n "
+                "(LimitNOFILE=) for more connections\"",
+                (unsigned long long)rl.rlim_cur, (unsigned long long)cfg->max_connections,
+                (unsigned long long)fit);
+        cfg->max_connections = fit;
+    }
+    return 0;
+}
+
 static void block_signals(sigset_t *sigs)
 {
     /* Signals are taken synchronously by the main thread: block them
@@ -302,6 +341,7 @@ int main(int argc, char **argv)
     vx_metrics_init(cfg.job_timeout_s);
     if (cfg.list_devices) return list_devices();
 
+    if (fit_fd_limit(&cfg)) return 2;
     sigset_t sigs;
     block_signals(&sigs);
 

@@ -225,7 +225,7 @@ int vx_resp_err_with(struct MHD_Connection *c, req *r, const vx_err *e, const ch
     cJSON *o = cJSON_AddObjectToObject(doc, "error");
     cJSON_AddStringToObject(o, "code", code);
     cJSON_AddStringToObject(o, "message", clean);
-    if (a.status >= 500)
+    if (a.status >= 500 && a.status != 501) /* 501: a method the client made up */
         VX_ERROR("http.error", "request_id=%s status=%u code=%s", r && r->rid[0] ? r->rid : "-",
                  a.status, code);
     if (!a.header) return vx_resp_json(c, r, a.status, doc, h, v);

@@ -7,7 +7,8 @@
  * path matches the same route, id and name; an accepted query respects the
  * limits and, written back by vx_req_query_format, parses to the same
  * result; a rejected one says why. The UTF-8 sanitizer's output is valid
- * UTF-8, and the other helpers hold their contracts on the same bytes; the
+ * UTF-8, and the other helpers hold their contracts on the same bytes (a
+ * name read from them as a Content-Disposition value is a valid name); the
  * strict JSON parser's accepted bodies print back to bodies it accepts. */
 #include <stdint.h>
 #include <stdio.h>
@@ -19,6 +20,7 @@
 #include "jobs/jobs.h"
 #include "request.h"
 #include "store/store.h"
+#include "util/name.h"
 
 static const char *methods[] = {"GET", "HEAD", "POST", "DELETE", "PUT", "PATCH", "OPTIONS", ""};
 
@@ -191,6 +193,10 @@ static void check_text(const char *s, size_t n)
     if (!vx_req_json_text_ok(s, n, why, sizeof why) && !vx_req_utf8_valid(s, n)) abort();
     int te = vx_req_transfer_encoding(z);
     if (te < -1 || te > 1) abort();
+    /* As a Content-Disposition value: a name it gives is a valid one. */
+    char name[VX_NAME_MAX + 8];
+    int nr = vx_req_disposition_name(z, name, sizeof name);
+    if (nr < -1 || nr > 1 || (nr == 1 && !vx_name_ok(name, strlen(name)))) abort();
     check_json(s, n);
     free(z);
 }

@@ -20,6 +20,17 @@ api GET /v1/meshes -H "Authorization: Bearer wrong"
 expect_error "wrong token" 401 unauthorized
 api GET /v1/meshes -H "Authorization: Bearer s3cret-token-and-more"
 expect_error "token with a suffix" 401 unauthorized
+# Authorization comes once: the check reads the first, a proxy may go by
+# the last.
+api GET /v1/meshes -H "Authorization: Bearer s3cret-token" -H "Authorization: Bearer wrong"
+expect_error "two Authorization headers, the first right" 400 invalid_request
+check "saying so" jq -e '.error.message | test("more than one Authorization")' "$BODY"
+# A body on a method that takes none is refused from the head, before
+# auth (it was read into memory first, up to max-json-bytes).
+api GET /livez --data-binary "@$TMP/box.obj" -X GET
+expect_error "GET with a body" 400 invalid_request
+api OPTIONS /v1/jobs -H "Content-Type: application/json" --data-binary '{}' -X OPTIONS
+expect_error "OPTIONS with a body, no token" 400 invalid_request
 api POST /v1/meshes -H "Content-Type: model/obj" --data-binary "@$TMP/box.obj"
 expect_error "upload without token" 401 unauthorized
 api GET /v1/jobs/0123456789abcdef0123456789abcdef
@@ -91,6 +102,16 @@ check "a malformed --database URL exits 2" test $? -eq 2
 check "and says why" grep -q 'voxeld: --database: bad database URL' "$TMP/err6"
 "$VOXELD" --database 'mysql://x/y' --blob-store "file://$TMP/shared" --listen 127.0.0.1:0 --data-dir "$TMP/d3" 2>"$TMP/err7"
 check "a --database URL of another scheme exits 2" test $? -eq 2
+# A token file is visible ASCII: a NUL cut the token short silently (the
+# file's first 2 bytes became the whole token), a control character or a
+# byte over 0x7e cannot be sent in a header.
+printf 'k7\000Q9-the-rest-of-a-long-secret\n' >"$TMP/token_nul"
+"$VOXELD" --token-file "$TMP/token_nul" --listen 127.0.0.1:0 --data-dir "$TMP/d3" 2>"$TMP/err9"
+check "a token file with a NUL exits 2" test $? -eq 2
+check "naming the byte" grep -q 'token file .* holds a byte that cannot be sent in an HTTP header (byte 2 is 0x00' "$TMP/err9"
+printf '  s3cret\tmore\n' >"$TMP/token_tab"
+"$VOXELD" --token-file "$TMP/token_tab" --listen 127.0.0.1:0 --data-dir "$TMP/d3" 2>"$TMP/err10"
+check "a token file with a tab inside exits 2" test $? -eq 2
 # Cluster mode with the data dir as the store: replicas could not read
 # each other's meshes and results, so it is a bad option (exit 2).
 "$VOXELD" --database 'postgresql://127.0.0.1:1/x' --listen 127.0.0.1:0 --data-dir "$TMP/d3" 2>"$TMP/err8"

@@ -470,9 +470,13 @@ class Checker:
                 self.fail(where, "OPTIONS 204 without Allow")
             return
         if not isinstance(op, dict):
+            gen = self.general_response(status) if status not in (404, 405) else None
+            if gen is not None:  # framing, timeouts, limits: answered before the method
+                self.check_response(where, method, None, gen[0], gen[1], ct, headers, body, params)
+                return
             if status != 405:
-                self.fail(where, "%s is not an operation of %s (only 405 is allowed), got %d"
-                          % (method, template, status))
+                self.fail(where, "%s is not an operation of %s (only 405 or x-general-responses "
+                          "are allowed), got %d" % (method, template, status))
                 return
             gen = self.general_response(405)
             if gen is None:
