@@ -18,9 +18,29 @@
 struct vx_journal {
     char path[VX_PATH_MAX];
     int fd;
-    off_t size; /* bytes of complete records: where the next one starts */
+    off_t size;     /* bytes of complete records: where the next one starts */
+    off_t reserved; /* blocks allocated up to here (fallocate, past the size) */
     pthread_mutex_t lock;
 };
+
+/* Space kept allocated past the journal's end, so that the records of jobs
+ * already running (their start and end) still go in on a full disk: a job
+ * whose end could not be written was told succeeded, and ran again after
+ * a restart. About 4,000 records; topped up when half is used. */
+#define RESERVE ((off_t)1 << 20)
+
+/* Tops the reserve up from j->size (lock held, or before the journal is
+ * shared). A file system without fallocate, or without room, keeps what
+ * it has: appends then take their chance as before. */
+static void reserve_tail(vx_journal *j)
+{
+    if (j->reserved - j->size >= RESERVE / 2) return;
+    int rc = fallocate(j->fd, FALLOC_FL_KEEP_SIZE, j->size, RESERVE);
+    if (rc == 0)
+        j->reserved = j->size + RESERVE;
+    else if (errno != EOPNOTSUPP && errno != ENOSYS)
+        VX_WARN("journal.reserve_failed", "path=%s error=%d", j->path, errno);
+}
 
 /* A record is one line: '#', the CRC-32 of the JSON as 8 hex digits, a
  * space, the JSON, '\n'. Lines of journals written before the framing (bare
@@ -51,6 +71,7 @@ vx_journal *vx_journal_open(const char *path, vx_err *err)
     }
     struct stat st;
     j->size = fstat(j->fd, &st) == 0 ? st.st_size : 0;
+    reserve_tail(j);
     pthread_mutex_init(&j->lock, NULL);
     return j;
 }
@@ -222,6 +243,7 @@ int vx_journal_append(vx_journal *j, const cJSON *rec, vx_err *err)
     if (rc == 0 && fstat(j->fd, &st) == 0 && st.st_nlink == 0) rc = -1, e = ENOENT;
     if (rc == 0) {
         j->size += (off_t)n;
+        reserve_tail(j);
     } else if (ftruncate(j->fd, j->size) != 0 || fdatasync(j->fd) != 0) {
         /* A torn write (ENOSPC after part of the line) must not stay in the
          * file: the next record would be glued onto it. Shrinking needs no
@@ -281,7 +303,8 @@ int vx_journal_compact(vx_journal *j, cJSON *const *recs, size_t n, vx_err *err)
         if (nfd >= 0) {
             close(j->fd);
             j->fd = nfd;
-            j->size = size;
+            j->size = j->reserved = size;
+            reserve_tail(j);
         } else {
             rc = -1;
         }

@@ -5,7 +5,8 @@
  * reads the records back in order, skips lines whose CRC fails, and cuts a
  * torn last line (a crash mid-write: that record was never acknowledged).
  * Compaction rewrites the file with one record per live job, atomically.
- * Thread-safe. */
+ * 1 MiB stays allocated past the end (fallocate), so that records still go
+ * in on a full disk. Thread-safe. */
 #ifndef VX_JOURNAL_H
 #define VX_JOURNAL_H
 

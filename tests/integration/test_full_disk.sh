@@ -150,5 +150,33 @@ done
 rm -f "$DISK/filler" "$DISK/filler2"
 run_job voxelize "$SPOT" '{"resolution":256,"format":"vdb","vdb_grid":"fog"}'
 job_ok "vdb fog with room again"
+
+# Jobs that end once the disk is full: their records still go into the
+# journal (the space it keeps allocated past its end), so what a client
+# was told stays true after kill -9. They were told succeeded, the end was
+# not written, and after a restart they were queued and ran again.
+api POST /v1/jobs -H "Content-Type: application/json" \
+    -d "{\"mesh\":\"$SPOT\",\"kind\":\"preview\",\"params\":{\"width\":4096,\"height\":4096,\"samples\":8}}"
+expect_status "a slow job in front" 202
+ENDS=()
+for r in 20 21 22; do
+    api POST /v1/jobs -H "Content-Type: application/json" \
+        -d "{\"mesh\":\"$SPOT\",\"kind\":\"voxelize\",\"params\":{\"resolution\":$r,\"format\":\"summary\"}}"
+    expect_status "summary job $r queued behind it" 202
+    ENDS+=("$(jqb .id)")
+done
+fill_to 0
+for id in "${ENDS[@]}"; do
+    wait_job "$id" 120
+    check "job $id ended on the full disk" jq -e '.state == "succeeded"' "$BODY"
+done
+check "no journal record failed" bash -c "! grep -q 'event=journal.append_failed' '$TMP/daemon.log'"
+kill9_daemon
+rm -f "$DISK/filler" "$DISK/filler2"
+start_daemon --min-free-disk 0 || exit 1
+for id in "${ENDS[@]}"; do
+    api GET "/v1/jobs/$id"
+    check "after kill -9, job $id is still succeeded ($(jqb .state))" jq -e '.state == "succeeded"' "$BODY"
+done
 stop_daemon
 finish
