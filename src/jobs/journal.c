@@ -70,7 +70,14 @@ vx_journal *vx_journal_open(const char *path, vx_err *err)
         return NULL;
     }
     struct stat st;
-    j->size = fstat(j->fd, &st) == 0 ? st.st_size : 0;
+    if (fstat(j->fd, &st) != 0 || !S_ISREG(st.st_mode)) { /* a FIFO's reads would block */
+        VX_ERROR("journal.open_failed", "path=%s error=not_a_regular_file", path);
+        vx_err_set(err, VX_EIO, "journal_failed", "the journal is not a regular file");
+        close(j->fd);
+        free(j);
+        return NULL;
+    }
+    j->size = st.st_size;
     reserve_tail(j);
     pthread_mutex_init(&j->lock, NULL);
     return j;

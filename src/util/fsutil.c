@@ -92,10 +92,21 @@ int vx_write_atomic(const char *path, const void *data, size_t len, vx_err *err)
 
 char *vx_read_file(const char *path, size_t max, size_t *len, vx_err *err)
 {
-    FILE *f = fopen(path, "rbe");
+    /* O_NONBLOCK: a FIFO in a file's place would block the open until a
+     * writer came (start-up hung, deaf to SIGTERM); only regular files. */
+    int fd = open(path, O_RDONLY | O_NONBLOCK | O_CLOEXEC);
+    struct stat st;
+    if (fd >= 0 && (fstat(fd, &st) != 0 || !S_ISREG(st.st_mode))) {
+        close(fd);
+        vx_err_set(err, VX_EIO, "read_failed", "cannot read the file: not a regular file");
+        return NULL;
+    }
+    FILE *f = fd >= 0 ? fdopen(fd, "rb") : NULL;
     if (!f) {
-        vx_err_set(err, errno == ENOENT ? VX_ENOTFOUND : VX_EIO, "read_failed",
-                   "cannot open the file: %s", strerror(errno));
+        int e = errno;
+        if (fd >= 0) close(fd);
+        vx_err_set(err, e == ENOENT ? VX_ENOTFOUND : VX_EIO, "read_failed",
+                   "cannot open the file: %s", strerror(e));
         return NULL;
     }
     size_t cap = 4096, n = 0;

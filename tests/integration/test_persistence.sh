@@ -182,4 +182,21 @@ check "logged at warn" grep -q 'event=store.metadata_rebuilt' "$TMP/daemon.log"
 run_job voxelize "$BOX" '{"resolution":16,"format":"raw1"}'
 job_ok "a job on the mesh whose metadata was rebuilt"
 stop_daemon
+# A FIFO where a file should be: start-up blocked in its open (or read)
+# forever, deaf to SIGTERM. As a mesh's metadata it is made anew; as the
+# journal the daemon exits 1, saying so.
+rm "$DATA/meshes/$BOX.json"
+mkfifo "$DATA/meshes/$BOX.json"
+start_daemon || exit 1
+api GET "/v1/meshes/$BOX"
+expect_status "a FIFO as a mesh's metadata: made anew" 200
+stop_daemon
+mv "$DATA/journal.log" "$TMP/journal.keep"
+mkfifo "$DATA/journal.log"
+timeout 20 "$VOXELD" --listen 127.0.0.1:0 --data-dir "$DATA" 2>"$TMP/fifo.log"
+rc=$?
+check "a FIFO as the journal: exit 1 at once (rc $rc)" test "$rc" -eq 1
+check "saying it is not a regular file" grep -q 'the journal is not a regular file' "$TMP/fifo.log"
+rm "$DATA/journal.log"
+mv "$TMP/journal.keep" "$DATA/journal.log"
 finish
