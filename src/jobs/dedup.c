@@ -8,6 +8,7 @@
 
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
 
 static uint64_t fnv(uint64_t h, const char *s, size_t n)
 {
@@ -50,12 +51,32 @@ static int same_request(const job *old, const job *jb)
 }
 
 /* 1 when old succeeded and its results can still be downloaded. */
+/* A succeeded job whose every output is still there, the size it wrote
+ * (what a download checks): a result evicted, removed or damaged since
+ * is no result to hand back. */
 static int reusable(vx_jobs *j, const job *old)
 {
     if (old->state != ST_SUCCEEDED) return 0;
-    int has_outputs = old->outputs ? old->outputs->child != NULL
-                                   : (old->frozen && !strstr(old->frozen, "\"outputs\":{}"));
-    return !has_outputs || vx_store_result_exists(j->desc.store, old->id);
+    cJSON *outputs = NULL;
+    job_parts(old, NULL, NULL, &outputs);
+    int ok = 1;
+    const cJSON *o;
+    cJSON_ArrayForEach(o, outputs)
+    {
+        const char *file = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(o, "file"));
+        const cJSON *b = cJSON_GetObjectItemCaseSensitive(o, "bytes");
+        char path[VX_PATH_MAX];
+        struct stat st;
+        vx_err e;
+        if (!file || vx_store_result_file(j->desc.store, old->id, file, path, sizeof path, &e) ||
+            stat(path, &st) != 0 ||
+            job_output_check_size(old->id, path, cJSON_IsNumber(b) ? b->valuedouble : -1, &e)) {
+            ok = 0;
+            break;
+        }
+    }
+    cJSON_Delete(outputs);
+    return ok;
 }
 
 job *find_existing_locked(vx_jobs *j, const job *jb, int reuse, vx_err *err)

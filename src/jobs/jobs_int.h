@@ -123,6 +123,10 @@ void notify(vx_jobs *j, const char *jid, int terminal);
 const cJSON *job_output_entry(const char *jid, const char *state, const char *failure,
                               const cJSON *outputs, const char *name, char file[160],
                               char ctype[64], vx_err *err);
+/* Owned copies of a job's params, stats and outputs (empty objects where
+ * there are none; NULL: not wanted): from its trees, or from the text of a
+ * finished job. */
+void job_parts(const job *jb, cJSON **params, cJSON **stats, cJSON **outputs);
 /* 0, or -1 with VX_EGONE result_damaged when the file at path is not the
  * want bytes its job recorded (want < 0: not recorded, as before). */
 int job_output_check_size(const char *jid, const char *path, double want, vx_err *err);

@@ -81,9 +81,7 @@ double ms_between(double a, double b)
     return (double)(long long)((b - a) * 1e6) / 1e3;
 }
 
-/* Owned copies of a job's params, stats and outputs (empty objects where
- * there are none): from its trees, or from the text of a finished job. */
-static void job_parts(const job *jb, cJSON **params, cJSON **stats, cJSON **outputs)
+void job_parts(const job *jb, cJSON **params, cJSON **stats, cJSON **outputs)
 {
     cJSON *f = jb->frozen ? cJSON_Parse(jb->frozen) : NULL;
     const cJSON *src[3] = {jb->params, jb->stats, jb->outputs};

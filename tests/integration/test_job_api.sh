@@ -120,6 +120,22 @@ api POST /v1/jobs -H "Content-Type: application/json" \
     -d "{\"mesh\":\"$A\",\"kind\":\"voxelize\",\"params\":{\"format\":\"raw8\",\"resolution\":16},\"reuse\":true}"
 expect_status "reuse after a restart" 200
 check "reuse after a restart: the same job" test "$(jqb .id)" = "$NEWJ"
+# A result damaged (another size than its job wrote) or removed under the
+# daemon is no result to reuse: the download would be 410.
+RF=$(find "$DATA/results/$NEWJ" -type f | head -n 1)
+truncate -s 10 "$RF"
+api POST /v1/jobs -H "Content-Type: application/json" \
+    -d "{\"mesh\":\"$A\",\"kind\":\"voxelize\",\"params\":{\"format\":\"raw8\",\"resolution\":16},\"reuse\":true}"
+expect_status "reuse of a job whose result was damaged: a new job" 202
+FRESH=$(jqb .id)
+check "not the damaged one" test "$FRESH" != "$NEWJ"
+wait_job "$FRESH"
+rm -rf "$DATA/results/$FRESH"
+api POST /v1/jobs -H "Content-Type: application/json" \
+    -d "{\"mesh\":\"$A\",\"kind\":\"voxelize\",\"params\":{\"format\":\"raw8\",\"resolution\":16},\"reuse\":true}"
+expect_status "reuse of a job whose result dir was removed: a new job" 202
+check "neither old one" bash -c "test '$(jqb .id)' != '$FRESH' -a '$(jqb .id)' != '$NEWJ'"
+wait_job "$(jqb .id)"
 
 stop_daemon
 finish
