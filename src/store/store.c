@@ -471,12 +471,24 @@ int vx_store_mesh_repair(vx_store *s, vx_upload *u, const char *id, const char *
     /* a blob store out of reach: the bytes are checked on their next use */
     if (!found || s->ops->path(s->blob, key, path, sizeof path)) return 0;
     if (mesh_file_intact(s, id, path) == 1) return 0;
+    /* The file is checked outside the lock: a delete in between removed it
+     * with its entry, and is no damage (the upload is then a new mesh, its
+     * temp file still the caller's). The move goes in under the lock. */
+    pthread_mutex_lock(&s->lock);
+    at = mesh_find(s, id, &found);
+    if (!found || strcmp(mesh_at(s, at)->ext, ext) != 0) {
+        pthread_mutex_unlock(&s->lock);
+        return 0;
+    }
     close(u->fd);
     u->fd = -1;
     struct stat st;
     if (lstat(path, &st) == 0 && S_ISDIR(st.st_mode)) vx_remove_tree(path); /* not renamed over */
-    if (s->ops->put_file(s->blob, u->path, key) != 0 || s->ops->sync(s->blob, "meshes", NULL)) {
-        int e = errno;
+    int rc = s->ops->put_file(s->blob, u->path, key);
+    int e = errno;
+    pthread_mutex_unlock(&s->lock);
+    if (rc != 0 || s->ops->sync(s->blob, "meshes", NULL)) {
+        if (!rc) e = errno;
         VX_ERROR("store.mesh_repair_failed", "mesh=%s error=%d", id, e);
         return vx_err_set(err, vx_err_io_kind(e), "store_failed", "cannot store mesh %s: %s", id,
                           strerror(e));
@@ -513,12 +525,12 @@ static int mesh_commit_here(vx_store *s, vx_upload *u, const char *id, const cha
         return rc;
     }
     int rc = mesh_commit_new_locked(s, u, id, ext, meta, key, mkey, err);
-    pthread_mutex_unlock(&s->lock);
-    vx_upload_abort(u);
-    if (rc) {
+    if (rc) { /* under the lock: an upload of the same bytes may commit next */
         s->ops->remove(s->blob, mkey);
         s->ops->remove(s->blob, key);
     }
+    pthread_mutex_unlock(&s->lock);
+    vx_upload_abort(u);
     return rc;
 }
 
