@@ -168,6 +168,13 @@ static int end_at_start(vx_jobs *j, job *jb)
     return 1;
 }
 
+/* vx_store_results_prune's test at open (one thread): a succeeded job's. */
+static int keep_result(void *ud, const char *jid)
+{
+    const job *jb = find_job(ud, jid);
+    return jb && jb->state == ST_SUCCEEDED;
+}
+
 vx_jobs *vx_jobs_open(const vx_jobs_desc *desc, vx_err *err)
 {
     vx_jobs *j = calloc(1, sizeof *j);
@@ -246,6 +253,9 @@ vx_jobs *vx_jobs_open(const vx_jobs_desc *desc, vx_err *err)
     trim_history_locked(j, dropped, &nd, 256);
     for (size_t i = 0; i < nd; i++)
         vx_store_result_remove(desc->store, dropped[i]);
+    /* Results no succeeded job names: a job killed mid-write (it runs
+     * again from nothing, or was canceled), a delete a crash cut short. */
+    vx_store_results_prune(desc->store, keep_result, j);
     /* What no unfinished job holds: meshes deleted while jobs used them,
      * blobs of jobs that finished or were never acknowledged. */
     vx_store_collect(desc->store);

@@ -180,6 +180,11 @@ int vx_store_result_commit(vx_store *s, const char *jid, vx_err *err);
 int vx_store_result_file(vx_store *s, const char *jid, const char *file, char *buf, size_t n,
                          vx_err *err);
 void vx_store_result_remove(vx_store *s, const char *jid);
+/* A local store's results whose job keep says no to (called under the
+ * store's lock; it may not call back): removed, at start-up, for jobs gone
+ * or not succeeded (a crash's partial outputs, a delete's files a crash
+ * kept). A shared store's are left alone. Returns how many. */
+size_t vx_store_results_prune(vx_store *s, int (*keep)(void *ud, const char *jid), void *ud);
 /* 1 when job jid's results are in the store (not evicted or removed). */
 int vx_store_result_exists(vx_store *s, const char *jid);
 /* Evicts least recently used results until the budget holds; returns how

@@ -177,6 +177,24 @@ void vx_store_result_remove(vx_store *s, const char *jid)
     s->ops->remove_prefix(s->blob, key);
 }
 
+size_t vx_store_results_prune(vx_store *s, int (*keep)(void *ud, const char *jid), void *ud)
+{
+    if (s->ops->shared) return 0; /* other daemons' results are theirs */
+    pthread_mutex_lock(&s->lock);
+    size_t nv = 0;
+    char(*victims)[sizeof s->results[0].jid] =
+        s->nresults ? malloc(s->nresults * sizeof *victims) : NULL;
+    for (size_t i = 0; victims && i < s->nresults; i++)
+        if (!keep(ud, s->results[i].jid)) memcpy(victims[nv++], s->results[i].jid, sizeof *victims);
+    pthread_mutex_unlock(&s->lock);
+    for (size_t i = 0; i < nv; i++) {
+        VX_INFO("store.result_pruned", "job=%s", victims[i]);
+        vx_store_result_remove(s, victims[i]);
+    }
+    free(victims);
+    return nv;
+}
+
 int vx_store_result_exists(vx_store *s, const char *jid)
 {
     pthread_mutex_lock(&s->lock);

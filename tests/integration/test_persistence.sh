@@ -182,6 +182,21 @@ check "logged at warn" grep -q 'event=store.metadata_rebuilt' "$TMP/daemon.log"
 run_job voxelize "$BOX" '{"resolution":16,"format":"raw1"}'
 job_ok "a job on the mesh whose metadata was rebuilt"
 stop_daemon
+# Results no succeeded job names are removed at start-up: a dir left by a
+# delete that a crash cut short (no such job), and partial outputs of a job
+# that never finished (it runs again from nothing). They had stayed across
+# every restart, counted against the results budget.
+ORPHAN=0123456789abcdef0123456789abcdef
+mkdir -p "$DATA/results/$ORPHAN"
+head -c 4096 /dev/zero >"$DATA/results/$ORPHAN/voxels.raw"
+start_daemon || exit 1
+check "an orphaned results dir is removed at start-up" test ! -e "$DATA/results/$ORPHAN"
+check "and logged" grep -q "event=store.result_pruned job=$ORPHAN" "$TMP/daemon.log"
+run_job voxelize "$BOX" '{"resolution":16,"format":"raw1"}'
+job_ok "a succeeded job's results"
+KEPT=$JOB
+stop_daemon
+check "a succeeded job's results stay" test -d "$DATA/results/$KEPT"
 # A FIFO where a file should be: start-up blocked in its open (or read)
 # forever, deaf to SIGTERM. As a mesh's metadata it is made anew; as the
 # journal the daemon exits 1, saying so.
