@@ -334,6 +334,10 @@ static int run_one_job(int argc, char **argv)
 int main(int argc, char **argv)
 {
     if (argc > 1 && !strcmp(argv[1], "run")) return run_one_job(argc, argv);
+    /* Before anything else: a SIGTERM in the first milliseconds took the
+     * default action (exit 143) instead of a clean stop. */
+    sigset_t sigs;
+    block_signals(&sigs);
     vx_config cfg;
     int rc = vx_config_load(&cfg, argc, argv);
     if (rc) return rc > 0 ? 0 : 2;
@@ -342,8 +346,6 @@ int main(int argc, char **argv)
     if (cfg.list_devices) return list_devices();
 
     if (fit_fd_limit(&cfg)) return 2;
-    sigset_t sigs;
-    block_signals(&sigs);
 
     double start = vx_now();
     VX_INFO("voxeld.start", "version=%s pid=%d data_dir=%s", VX_VERSION, (int)getpid(),

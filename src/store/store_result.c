@@ -156,7 +156,9 @@ int vx_store_result_file(vx_store *s, const char *jid, const char *file, char *b
                           "cannot reach the results of job %s: %s", jid, strerror(st_errno));
     if (st < 0)
         return vx_err_set(err, VX_EGONE, "result_evicted",
-                          "the results of job %s were removed by the results budget", jid);
+                          "the results of job %s are gone (%s): run the job again", jid,
+                          found ? "removed from the store, not by this daemon's budget"
+                                : "removed by the results budget");
     /* The mtime of the dir carries the LRU order across restarts. */
     s->ops->touch(s->blob, key);
     char dir[VX_PATH_MAX];
