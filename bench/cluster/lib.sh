@@ -23,7 +23,7 @@ start() {
     for i in $(seq 1 "$n"); do
         local flags=()
         if [[ $mode == cluster ]]; then
-            flags=(--database "$url" --blob-store "file://$work/shared-$n" --replica-name "r$i")
+            flags=(--database "$url" --blob-store "file://$work/shared" --replica-name "r$i")
         fi
         bench_voxeld "$work/$mode$n-$i.log" --data-dir "$work/$mode$n-data$i" --workers 2 \
             "${flags[@]}" "$@"

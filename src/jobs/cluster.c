@@ -27,6 +27,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/random.h>
 #include <sys/stat.h>
 #include <time.h>
 #include <unistd.h>
@@ -200,6 +201,47 @@ static int catalog_start(vx_jobs *j, vx_err *err)
     return 0;
 }
 
+/* vx_pg_store_id's check: the replica's blob store must be the one the
+ * cluster's database names (an id written into the store by the first
+ * replica). A replica given another store (its data dir, another bucket)
+ * claimed jobs whose bytes it could not read. */
+static int store_id_check(void *ud, const char *have, char out[VX_PG_STORE_ID], vx_err *err)
+{
+    vx_store *s = ud;
+    char mark[65] = "";
+    vx_err e;
+    vx_err_clear(&e);
+    int got = vx_store_id_read(s, mark, &e);
+    if (got < 0) { /* an outage: not the place to decide; uses will tell */
+        VX_WARN("cluster.store_id_unread", "code=%s", e.code);
+        return 1;
+    }
+    if (got && have && strcmp(mark, have) != 0)
+        return vx_err_set(err, VX_ECONFLICT, "blob_store_mismatch",
+                          "the blob store (--blob-store) belongs to another cluster: its id is "
+                          "%.64s, the database's %.64s (every replica needs the same store)",
+                          mark, have);
+    if (!got && have)
+        return vx_err_set(err, VX_ECONFLICT, "blob_store_mismatch",
+                          "the blob store (--blob-store) is not the cluster's: it holds no "
+                          "id, the database's is %.64s (every replica needs the same store)",
+                          have);
+    if (got) {
+        snprintf(out, VX_PG_STORE_ID, "%s", mark);
+        return 0;
+    }
+    /* The first replica of a cluster: the id goes into the store first,
+     * then (the caller) into the database. */
+    unsigned char r[16];
+    if (getrandom(r, sizeof r, 0) != (ssize_t)sizeof r)
+        return vx_err_set(err, VX_EINTERNAL, "random_failed", "no random bytes for the store id");
+    for (int i = 0; i < 16; i++)
+        snprintf(out + 2 * i, 3, "%02x", r[i]);
+    if (vx_store_id_write(s, out, err)) return -1;
+    VX_INFO("cluster.store_id", "id=%s action=written", out);
+    return 0;
+}
+
 int cluster_open(vx_jobs *j, vx_err *err)
 {
     vx_cluster *c = calloc(1, sizeof *c);
@@ -220,7 +262,9 @@ int cluster_open(vx_jobs *j, vx_err *err)
     for (;;) {
         vx_err_clear(err);
         c->api = vx_pg_open(&d, err);
-        if (c->api && vx_pg_migrate(c->api, err) >= 0) break;
+        if (c->api && vx_pg_migrate(c->api, err) >= 0 &&
+            vx_pg_store_id(c->api, store_id_check, j->desc.store, err) == 0)
+            break;
         vx_pg_close(c->api);
         c->api = NULL;
         if (err->kind != VX_EUNAVAIL || vx_mono() > give_up) return -1;

@@ -115,6 +115,8 @@ static const char *const migrations[] = {
     "ALTER TABLE vx_meshes ALTER COLUMN meta TYPE json USING meta::json,"
     " ALTER COLUMN meta SET DEFAULT '{}'::json, ADD COLUMN deleted timestamptz;"
     "CREATE INDEX vx_meshes_deleted ON vx_meshes (deleted) WHERE deleted IS NOT NULL;",
+    /* 5: settings the replicas share: the blob store's id (vx_pg_store_id). */
+    "CREATE TABLE vx_settings (key text PRIMARY KEY, value text NOT NULL);",
 };
 _Static_assert(sizeof migrations / sizeof migrations[0] == VX_PG_SCHEMA_VERSION,
                "one migration per schema version");
@@ -648,6 +650,40 @@ int vx_pg_delete(vx_pg *pg, const char *id, vx_err *err)
                             PQgetvalue(r, 0, 1));
     }
     PQclear(r);
+    return rc;
+}
+
+int vx_pg_store_id(vx_pg *pg,
+                   int (*check)(void *ud, const char *have, char out[VX_PG_STORE_ID], vx_err *err),
+                   void *ud, vx_err *err)
+{
+    pthread_mutex_lock(&pg->lock);
+    /* Replicas starting together decide one after the other (a session
+     * lock: the store is read and written between the statements). */
+    if (pg_exec_locked(pg, 1, "SELECT pg_advisory_lock(7876199)", 0, NULL, err)) {
+        pthread_mutex_unlock(&pg->lock);
+        return -1;
+    }
+    int rc = -1;
+    PGresult *r =
+        pg_run_locked(pg, 0, "SELECT value FROM vx_settings WHERE key = 'store_id'", 0, NULL, err);
+    if (r) {
+        char have[VX_PG_STORE_ID] = "", id[VX_PG_STORE_ID] = "";
+        if (PQntuples(r) == 1) snprintf(have, sizeof have, "%s", PQgetvalue(r, 0, 0));
+        PQclear(r);
+        rc = check(ud, have[0] ? have : NULL, id, err);
+        const char *vals[] = {id};
+        if (rc > 0)
+            rc = 0; /* not decided now */
+        else if (rc == 0 && !have[0])
+            rc = pg_exec_locked(pg, 0,
+                                "INSERT INTO vx_settings (key, value) VALUES ('store_id', $1)"
+                                " ON CONFLICT (key) DO NOTHING",
+                                1, vals, err);
+    }
+    vx_err ignored;
+    pg_exec_locked(pg, 0, "SELECT pg_advisory_unlock(7876199)", 0, NULL, &ignored);
+    pthread_mutex_unlock(&pg->lock);
     return rc;
 }
 

@@ -34,7 +34,7 @@
 #include "util/err.h"
 
 /* The schema version this binary creates and understands. */
-#define VX_PG_SCHEMA_VERSION 4
+#define VX_PG_SCHEMA_VERSION 5
 /* The NOTIFY channel every state change is sent on. */
 #define VX_PG_CHANNEL "vx_jobs"
 
@@ -113,6 +113,16 @@ void vx_pg_close(vx_pg *pg);
  * no-op when current. A newer schema than this binary knows is
  * VX_ECONFLICT database_schema_newer (refuse to start). Returns the version. */
 int vx_pg_migrate(vx_pg *pg, vx_err *err);
+/* The cluster's blob-store id (vx_settings.store_id), decided under a
+ * session advisory lock, so that replicas starting together take turns:
+ * check gets the database's id (NULL: none yet) and returns 0 with the id
+ * to keep in out (stored when the database had none), 1 to leave it
+ * undecided, or -1 with err (the replica's store is not the cluster's).
+ * 0, or -1 with err. */
+#define VX_PG_STORE_ID 65
+int vx_pg_store_id(vx_pg *pg,
+                   int (*check)(void *ud, const char *have, char out[VX_PG_STORE_ID], vx_err *err),
+                   void *ud, vx_err *err);
 /* Seconds a caller should wait before retrying after VX_EUNAVAIL (>= 1). */
 int vx_pg_retry_after(vx_pg *pg);
 /* This handle's replica name. */

@@ -180,6 +180,12 @@ int vx_store_result_commit(vx_store *s, const char *jid, vx_err *err);
 int vx_store_result_file(vx_store *s, const char *jid, const char *file, char *buf, size_t n,
                          vx_err *err);
 void vx_store_result_remove(vx_store *s, const char *jid);
+/* The id a cluster wrote into its shared store (cluster mode checks that
+ * every replica's store is the one its database names): 1 with it in out,
+ * 0 when the store has none, -1 with err when it cannot be read. */
+int vx_store_id_read(vx_store *s, char out[65], vx_err *err);
+/* Writes id as the store's id (replacing any). 0, or -1 with err. */
+int vx_store_id_write(vx_store *s, const char *id, vx_err *err);
 /* A local store's results whose job keep says no to (called under the
  * store's lock; it may not call back): removed, at start-up, for jobs gone
  * or not succeeded (a crash's partial outputs, a delete's files a crash

@@ -183,3 +183,33 @@ void vx_store_collect(vx_store *s)
     if (meshes) s->ops->sync(s->blob, "meshes", NULL);
     if (meshes || c.blobs) VX_INFO("store.collected", "meshes=%zu blobs=%zu", meshes, c.blobs);
 }
+
+/* The key of the store's id (cluster mode): under blobs/, whose names a
+ * shared store never collects. */
+#define STORE_ID_KEY "blobs/voxeld-store.id"
+
+int vx_store_id_read(vx_store *s, char out[65], vx_err *err)
+{
+    vx_err e;
+    vx_err_clear(&e);
+    size_t n = 0;
+    char *text = s->ops->read(s->blob, STORE_ID_KEY, 4096, &n, &e);
+    if (!text) {
+        if (e.kind == VX_ENOTFOUND) return 0;
+        *err = e;
+        return -1;
+    }
+    while (n && (text[n - 1] == '\n' || text[n - 1] == ' '))
+        text[--n] = 0;
+    snprintf(out, 65, "%s", text);
+    free(text);
+    return 1;
+}
+
+int vx_store_id_write(vx_store *s, const char *id, vx_err *err)
+{
+    char line[80];
+    int n = snprintf(line, sizeof line, "%s\n", id);
+    if (s->ops->make_prefix(s->blob, "blobs", err)) return -1;
+    return s->ops->put_bytes(s->blob, STORE_ID_KEY, line, (size_t)n, err);
+}

@@ -30,6 +30,7 @@
 #   ends succeeded exactly once, within max_attempts, and completes once
 #   (one row, one results index entry per output);
 # - /metrics: the database's counts by state and kind, claims.
+# - A replica whose --blob-store is not the cluster's is refused at start.
 source "$(dirname "$0")/lib.sh"
 BUNNY="$VX_MESH_DIR/stanford-bunny.obj"
 [[ -f "$BUNNY" ]] || { echo "skip: $BUNNY missing"; exit 77; }
@@ -62,6 +63,24 @@ for i in 1 2 3; do
     expect_status "r$i ready" 200
     check "r$i readyz: database ok, its name" jq -e ".database == {\"ok\":true,\"replica\":\"r$i\"}" "$BODY"
 done
+
+# Every replica's store is the one the database names: the first replica
+# wrote an id into it. Another store (empty, or another cluster's) is
+# refused at start (exit 1); before, such a replica joined and claimed
+# jobs whose bytes it could not read.
+check "the store holds the cluster's id" test -s "$SHARED/blobs/voxeld-store.id"
+"$VOXELD" --listen 127.0.0.1:0 --data-dir "$TMP/data-other" --database "$URL" \
+    --blob-store "file://$TMP/other-store" --replica-name rx 2>"$TMP/rx.log"
+rc=$?
+check "a replica with an empty store of its own: exit 1 (rc $rc)" test "$rc" -eq 1
+check "saying the store is not the cluster's" grep -q 'blob_store_mismatch.*is not the cluster' "$TMP/rx.log"
+mkdir -p "$TMP/third-store/blobs"
+echo 0123456789abcdef0123456789abcdef >"$TMP/third-store/blobs/voxeld-store.id"
+"$VOXELD" --listen 127.0.0.1:0 --data-dir "$TMP/data-other" --database "$URL" \
+    --blob-store "file://$TMP/third-store" --replica-name rx 2>"$TMP/rx2.log"
+rc=$?
+check "a replica with another cluster's store: exit 1 (rc $rc)" test "$rc" -eq 1
+check "saying it belongs to another cluster" grep -q 'blob_store_mismatch.*belongs to another cluster' "$TMP/rx2.log"
 
 # Upload on r1, submit on r2, download from r3.
 on 1
