@@ -20,7 +20,8 @@
  *     busy (a handler parsing a large mesh), not the client slow.
  *   - keeps headroom: when the open connections reach 90% of
  *     --max-connections, it closes the oldest HEAD (with a 408) and IDLE
- *     connections until they are down to 80%. A client that sends its head
+ *     connections until they are down to 80%, then if need be the slowest
+ *     BODY under 16 x --min-body-rate (408). A client that sends its head
  *     at once is BUSY within a millisecond and is never a victim, so
  *     however many addresses drip heads, a fresh client finds a slot (or
  *     waits in the listen backlog, ahead of the victims' reconnections,
@@ -84,9 +85,10 @@ struct vx_conn {
     int win_started;     /* BODY: the rate window is running */
     double win_t0;
     uint64_t win_bytes;
-    int killed;      /* answered (or closed) by us behind libmicrohttpd's back */
-    int kill_status; /* the status we wrote, 0 for none */
-    int rd_closed;   /* shutdown(SHUT_RD) done */
+    double last_rate; /* BODY: bytes/s over the last whole window (-1: none yet) */
+    int killed;       /* answered (or closed) by us behind libmicrohttpd's back */
+    int kill_status;  /* the status we wrote, 0 for none */
+    int rd_closed;    /* shutdown(SHUT_RD) done */
     double t_killed;
     char rid[72];           /* BODY: the request's id; else the id of the answer written here */
     char origin[256];       /* BODY: the request's origin when CORS allows it, else "" */
@@ -124,6 +126,7 @@ struct vx_conns {
 #define KILL_LINGER_S 0.5 /* between our answer and closing the read side */
 #define SWEEP_US 100000
 #define EVICT_MIN_AGE_S 0.25 /* a head or idle time this young is nobody's attack */
+#define PRESSURE_RATE_X 16   /* at the headroom mark, bodies under 16 x --min-body-rate go */
 #define DRAIN_S 5.0          /* the longest an answered socket's body is read and dropped */
 #define DRAIN_IDLE_S 1.0     /* ... or until nothing came for this long */
 
@@ -392,6 +395,12 @@ static int by_phase_time(const void *a, const void *b)
     return x < y ? -1 : x > y;
 }
 
+static int by_rate(const void *a, const void *b)
+{
+    double x = (*(vx_conn *const *)a)->last_rate, y = (*(vx_conn *const *)b)->last_rate;
+    return x < y ? -1 : x > y;
+}
+
 /* Reads and drops what waits on each lingering socket, without blocking;
  * closes it at the client's end of file, an error, after DRAIN_S, or when
  * nothing came for DRAIN_IDLE_S (the body was all in already, and the
@@ -471,6 +480,7 @@ static void sweep(vx_conns *s, vx_conn **cand, head_kill *ks, size_t *nk, size_t
                     kill_conn(vc, 408, "request_timeout", m, 0); /* on_completed logs it */
                     continue;
                 }
+                vc->last_rate = rate;
                 vc->win_t0 = now;
                 vc->win_bytes = vc->body_bytes;
             }
@@ -494,6 +504,23 @@ static void sweep(vx_conns *s, vx_conn **cand, head_kill *ks, size_t *nk, size_t
         } else {
             kill_conn(vc, 0, NULL, NULL, 1);
         }
+    }
+    /* Still over: the slowest bodies, under PRESSURE_RATE_X times
+     * --min-body-rate (one trickled just over the floor held its slot for
+     * as long as the body lasted: days, for a large upload). */
+    size_t nslow = 0;
+    double floor_rate = (double)cfg->min_body_rate * PRESSURE_RATE_X;
+    for (vx_conn *vc = s->list; vc && live > low && floor_rate > 0; vc = vc->next)
+        if (!vc->killed && vc->phase == P_BODY && vc->last_rate >= 0 && vc->last_rate < floor_rate)
+            cand[nslow++] = vc; /* (cand holds every connection) */
+    qsort(cand, nslow, sizeof *cand, by_rate);
+    for (size_t i = 0; i < nslow && live > low; i++) {
+        if (unread(cand[i])) continue;
+        live--;
+        char m[120];
+        snprintf(m, sizeof m, "the server is busy and the body arrived slower than %.0f bytes/s",
+                 floor_rate);
+        kill_conn(cand[i], 408, "request_timeout", m, 1); /* on_completed logs it */
     }
     for (vx_conn *vc = s->list; vc; vc = vc->next) /* free the victims' slots now */
         if (vc->killed && !vc->rd_closed) {
@@ -634,6 +661,7 @@ void vx_conns_body_begins(vx_conns *s, vx_conn *vc, const char *rid, const char 
     vc->t_phase = vx_mono();
     vc->body_bytes = 0;
     vc->win_started = 0;
+    vc->last_rate = -1;
     pthread_mutex_unlock(&s->lock);
 }
 

@@ -6,7 +6,8 @@
       (--per-addr, default 8) sending a request head one byte per 0.5 s,
       reconnecting when one is closed, for SECONDS. Writes to OUT.json, per
       connection that was answered or closed: seconds from connect to the
-      first byte of the answer (or the close) and the status line.
+      first byte of the answer (or the close) and the status line. With
+      --body each sends an upload's head at once, then its body at 4 KiB/s.
   slow_clients.py stall PORT HEAD_HEX_OR_TEXT SECONDS
       Sends the given request bytes (\\r\\n escapes allowed), then nothing,
       and prints {"seconds": ..., "response": ...} when the server answers
@@ -25,6 +26,9 @@ import sys
 import time
 
 HEAD = b"GET /livez HTTP/1.1\r\nHost: x\r\nX-Drip: " + b"a" * 200 + b"\r\n\r\n"
+# --body: an upload's head at once, then its body at 4 KiB/s (over a
+# --min-body-rate of 1024, under 16 times it).
+UPLOAD = b"POST /v1/meshes HTTP/1.1\r\nHost: x\r\nContent-Type: model/obj\r\nContent-Length: 100000000\r\n\r\n"
 
 
 def connect(port, addr):
@@ -36,7 +40,7 @@ def connect(port, addr):
     return s
 
 
-def drip(port, seconds, out, addrs, per_addr):
+def drip(port, seconds, out, addrs, per_addr, upload=False):
     conns = []  # [sock, addr, t_connect, offset, answer]
     done = []
     t_end = time.monotonic() + seconds
@@ -71,10 +75,14 @@ def drip(port, seconds, out, addrs, per_addr):
                 pass
             except OSError:
                 closed = True
-            if not closed and send_now and c[3] < len(HEAD):
+            if not closed and send_now and (upload or c[3] < len(HEAD)):
                 try:
-                    s.send(HEAD[c[3]:c[3] + 1])
-                    c[3] += 1
+                    if upload:
+                        chunk = UPLOAD if c[3] == 0 else b"# " + b"a" * 2045 + b"\n"
+                    else:
+                        chunk = HEAD[c[3]:c[3] + 1]
+                    s.send(chunk)
+                    c[3] += len(chunk)
                 except BlockingIOError:
                     pass
                 except OSError:
@@ -198,8 +206,11 @@ if __name__ == "__main__":
             k = args.index("--per-addr")
             per = int(args[k + 1])
             del args[k:k + 2]
+        upload = "--body" in args
+        if upload:
+            args.remove("--body")
         addrs = args[2:] or ["127.0.0.%d" % i for i in range(2, 10)]
-        drip(port, float(args[0]), args[1], addrs, per)
+        drip(port, float(args[0]), args[1], addrs, per, upload)
     elif cmd == "stall":
         stall(port, sys.argv[3].encode().decode("unicode_escape").encode("latin-1"), float(sys.argv[4]),
               sys.argv[5] if len(sys.argv) > 5 else None)

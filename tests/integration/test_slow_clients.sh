@@ -93,6 +93,26 @@ check "every dripped head answered 408 or closed within 3 s ($(jq -c '[.answered
 check "answers are 408 JSON or a close" \
     jq -e '[.answered[] | select(.status_line != "" and (.status_line | test("^HTTP/1.1 408") | not))] | length == 0' "$TMP/drip.json"
 
+# --- 8 addresses x 8 uploads trickling just over --min-body-rate (4 KiB/s)
+# fill --max-connections: at the headroom mark the slowest bodies (under 16
+# x the rate) are closed with a 408, so a fresh client is served (they held
+# their slots for as long as their bodies lasted: days) ---
+$SLOW drip "$PORT" 9 "$TMP/bdrip.json" --body &
+DRIP=$!
+sleep 5 # past the bodies' 2 s grace and a 2 s rate window
+ok=0
+for i in 1 2 3 4; do
+    code=$(curl -s -o /dev/null -w '%{http_code}' --max-time 2 "$BASE/livez")
+    [[ $code == 200 ]] && ok=$((ok + 1))
+    sleep 0.5
+done
+wait "$DRIP"
+check "fresh client served while 64 uploads trickle (4/4 got 200: $ok)" test "$ok" -eq 4
+check "trickling uploads were closed with a 408 ($(jq -c '[.answered[].status_line] | unique' "$TMP/bdrip.json"))" \
+    jq -e '[.answered[] | select(.status_line | test("^HTTP/1.1 408"))] | length >= 1' "$TMP/bdrip.json"
+check "saying the server is busy" \
+    jq -e '[.answered[] | select(.body | test("busy and the body arrived slower than 16384"))] | length >= 1' "$TMP/bdrip.json"
+
 # --- ordinary clients still work ---
 box_obj "$TMP/box.obj" 0 0 0 1 1 1
 upload "$TMP/box.obj"
