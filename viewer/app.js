@@ -76,6 +76,18 @@ function showError(e, where) {
 const short = id => id.slice(0, 12);
 const when = ts => (ts ? ts.replace('T', ' ').replace(/\.\d+Z$/, 'Z') : '');
 
+// A list item or zone that acts on a click acts on Enter and Space too, and
+// takes the focus in turn.
+function keyboard(node, act = () => node.onclick()) {
+  node.tabIndex = 0;
+  if (!node.getAttribute('role')) node.setAttribute('role', 'button');
+  node.onkeydown = e => {
+    if (e.key !== 'Enter' && e.key !== ' ') return;
+    e.preventDefault();
+    act();
+  };
+}
+
 async function refreshMeshes() {
   const meshes = await listAll('/v1/meshes');
   const ul = $('meshes'), sel = $('mesh'), keep = sel.value;
@@ -90,6 +102,7 @@ async function refreshMeshes() {
     li.querySelector('.id').textContent = m.name ? short(m.id) : '';
     li.querySelector('small').textContent = `${m.format}, ${m.triangles} triangles, ${when(m.created)}`;
     li.onclick = () => { sel.value = m.id; };
+    keyboard(li);
     ul.append(li);
     const o = document.createElement('option');
     o.value = m.id;
@@ -116,6 +129,7 @@ async function refreshJobs() {
     li.querySelector('.id').textContent = short(j.id);
     li.querySelector('small').textContent = `on ${short(j.mesh)}, ${when(j.created)}`;
     li.onclick = () => openJob(j.id);
+    keyboard(li);
     ul.append(li);
   }
 }
@@ -131,13 +145,25 @@ async function refreshAll() {
 
 const MEDIA = { obj: 'model/obj', drc: 'model/x-draco', bpt: 'model/x-bpt' };
 
+// The file's name as a mesh name the server takes (1 to 100 bytes of
+// UTF-8, no control characters, '/', '\\' or '"', not "." or ".."):
+// those characters become '_', a longer name keeps its end (the
+// extension); '' when nothing is left.
+function meshName(name) {
+  let n = name.replace(/[\u0000-\u001f\u007f-\u009f\/\\"\u200b-\u200f\u202a-\u202e\u2066-\u2069\ufeff]/g, '_');
+  const enc = new TextEncoder();
+  while (enc.encode(n).length > 100) n = Array.from(n).slice(1).join('');
+  return n === '.' || n === '..' ? '' : n;
+}
+
 async function upload(file) {
   const ext = (file.name.split('.').pop() || '').toLowerCase();
   // Formats the daemon does not name by type are sent for sniffing.
   const type = MEDIA[ext] || 'application/octet-stream';
   $('upload-status').textContent = `uploading ${file.name} (${file.size} bytes)...`;
   try {
-    const m = await apiJSON(`/v1/meshes?name=${encodeURIComponent(file.name)}`,
+    const name = meshName(file.name);
+    const m = await apiJSON(name ? `/v1/meshes?name=${encodeURIComponent(name)}` : '/v1/meshes',
       { method: 'POST', headers: { 'Content-Type': type }, body: file });
     await refreshMeshes();
     $('mesh').value = m.id;
@@ -158,6 +184,7 @@ function setupDrop() {
     for (const f of e.dataTransfer?.files || []) upload(f);
   });
   $('file').addEventListener('change', e => { for (const f of e.target.files) upload(f); e.target.value = ''; });
+  keyboard(drop, () => $('file').click());
 }
 
 // ---- the job form -----------------------------------------------------------
@@ -259,16 +286,42 @@ async function openJob(jid, first) {
       refreshJobs().catch(() => {});
     }
   };
+  // A server that stops answering (restarted, the network gone) is tried
+  // again, 1, 2, 4 ... 10 s apart, while this job is the one shown.
+  for (let wait = 1; seq === followSeq; wait = Math.min(2 * wait, 10)) {
+    try {
+      onJob(first || await apiJSON(`/v1/jobs/${jid}`));
+      first = null;
+      if (shown) return;
+      if (!(await followEvents(jid, seq, onJob))) await followPoll(jid, seq, onJob);
+      else if (!shown && seq === followSeq) await followPoll(jid, seq, onJob); // the stream broke off
+      return;
+    } catch (e) {
+      if (e instanceof ApiError && e.status !== 503) { showError(e, 'job-error'); return; }
+      if (seq !== followSeq) return;
+      $('job-error').textContent = `the server is not answering (${e.message}); trying again in ${wait} s`;
+      await new Promise(r => setTimeout(r, wait * 1000));
+    }
+  }
+}
+
+// Cancels the job shown (DELETE on a queued or running job): its stream
+// then tells it canceled.
+async function cancelJob() {
+  if (!current) return;
   try {
-    onJob(first || await apiJSON(`/v1/jobs/${jid}`));
-    if (shown) return;
-    if (!(await followEvents(jid, seq, onJob))) await followPoll(jid, seq, onJob);
-    else if (!shown && seq === followSeq) await followPoll(jid, seq, onJob); // the stream broke off
+    const res = await api(`/v1/jobs/${current.id}`, { method: 'DELETE' });
+    if (!res.ok && res.status !== 404) {
+      let body = null;
+      try { body = await res.json(); } catch { /* */ }
+      throw new ApiError(res.status, body);
+    }
   } catch (e) { showError(e, 'job-error'); }
 }
 
 function showState(job) {
   $('progress').value = job.progress;
+  $('cancel').hidden = TERMINAL.has(job.state);
   const pct = `${Math.round(100 * job.progress)}%`;
   $('state').textContent = `${job.kind} on ${short(job.mesh)}: ${job.state}${job.state === 'running' ? ` ${pct}` : ''}`;
   $('state').className = `state-${job.state}`;
@@ -305,6 +358,16 @@ async function fetchOutput(url, as) {
   return as === 'text' ? res.text() : as === 'blob' ? res.blob() : res.arrayBuffer();
 }
 
+// The file name a Content-Disposition answer gives: filename* (RFC 8187,
+// UTF-8) first, else filename; '' when there is none.
+function dispositionName(cd) {
+  if (!cd) return '';
+  const star = /filename\*\s*=\s*UTF-8''([^;]+)/i.exec(cd);
+  if (star) { try { return decodeURIComponent(star[1].trim()); } catch { /* fall back */ } }
+  const plain = /filename\s*=\s*"([^"]*)"/i.exec(cd) || /filename\s*=\s*([^;\s]+)/i.exec(cd);
+  return plain ? plain[1] : '';
+}
+
 function listOutputs(job) {
   for (const [name, url] of Object.entries(job.outputs || {})) {
     const li = document.createElement('li'), a = document.createElement('a');
@@ -313,8 +376,15 @@ function listOutputs(job) {
     a.onclick = async e => {
       e.preventDefault();
       try {
-        const blob = await fetchOutput(url, 'blob'), u = URL.createObjectURL(blob);
-        const d = Object.assign(document.createElement('a'), { href: u, download: `${short(job.id)}-${name}` });
+        const res = await api(url);
+        if (!res.ok) {
+          let body = null;
+          try { body = await res.json(); } catch { /* */ }
+          throw new ApiError(res.status, body);
+        }
+        const u = URL.createObjectURL(await res.blob());
+        const file = dispositionName(res.headers.get('Content-Disposition')) || `${short(job.id)}-${name}`;
+        const d = Object.assign(document.createElement('a'), { href: u, download: file });
         d.click();
         setTimeout(() => URL.revokeObjectURL(u), 10000);
       } catch (err) { showError(err, 'job-error'); }
@@ -335,11 +405,13 @@ async function get3D() {
   return view;
 }
 
-async function showImages(job) {
+async function showImages(job, seq) {
   const names = Object.keys(job.outputs).filter(n => /^image(_\d+)?$/.test(n)).sort();
   const urls = [];
   for (const n of names) {
-    const u = URL.createObjectURL(await fetchOutput(job.outputs[n], 'blob'));
+    const blob = await fetchOutput(job.outputs[n], 'blob');
+    if (seq !== followSeq) return; // another job was opened meanwhile
+    const u = URL.createObjectURL(blob);
     blobUrls.push(u);
     urls.push(u);
   }
@@ -363,18 +435,22 @@ function binvoxParams(params) {
   return { ...rest, format: 'binvox' };
 }
 
-async function showMesh(job) {
+async function showMesh(job, seq) {
   const fmt = job.params?.format || 'obj';
   if (fmt !== 'obj' && fmt !== 'ply') { // drc, glb: download only
     $('view-note').textContent = `${fmt === 'drc' ? 'Draco' : fmt} output: download it below (the 3D view reads OBJ and PLY).`;
     return;
   }
   const v = await get3D();
+  if (seq !== followSeq) return;
   $('view-wrap').hidden = false;
   v.resize();
-  const names = Object.keys(job.outputs).filter(n => n === 'mesh' || /^frame_\d+$/.test(n)).sort();
+  // the job's mesh first, then its frames in order (frame_001, frame_002...)
+  const names = ['mesh', ...Object.keys(job.outputs).filter(n => /^frame_\d+$/.test(n)).sort()];
   const as = fmt === 'ply' ? 'buffer' : 'text';
-  const tris = v.showMesh(await fetchOutput(job.outputs.mesh, as), fmt);
+  const data = await fetchOutput(job.outputs.mesh, as);
+  if (seq !== followSeq) return;
+  const tris = v.showMesh(data, fmt);
   $('view-note').textContent = `${job.kind}: ${tris} triangles; drag to orbit, wheel to zoom`;
   document.body.dataset.resultShown = 'mesh';
   if (names.length > 1) await playFrames(job, names.slice(0, 65), fmt, as, v);
@@ -400,7 +476,7 @@ async function playFrames(job, names, fmt, as, v) {
   turntable = setInterval(step, 1000 / 8);
 }
 
-async function showVoxels(job) {
+async function showVoxels(job, seq) {
   const fmt = job.params?.format || 'vdb';
   if (!['binvox', 'raw8', 'raw1'].includes(fmt)) {
     $('view-note').textContent = fmt === 'summary' ? 'format summary: no voxels, only the stats.'
@@ -420,9 +496,10 @@ async function showVoxels(job) {
     return;
   }
   const v = await get3D();
+  const buf = await fetchOutput(job.outputs.voxels, 'buffer');
+  if (seq !== followSeq) return; // another job was opened meanwhile
   $('view-wrap').hidden = false;
   v.resize();
-  const buf = await fetchOutput(job.outputs.voxels, 'buffer');
   const grid = fmt === 'binvox' ? viewLib.parseBinvox(buf) : viewLib.parseRaw(buf, fmt === 'raw1', job.stats);
   const r = v.showVoxels(grid);
   $('view-note').textContent = `voxels ${grid.dims.join(' x ')}: ${r.inside} inside, ${r.surface} on the surface, ${r.drawn} cubes drawn`;
@@ -435,9 +512,9 @@ async function showResult(job, seq) {
   showState(job);
   listOutputs(job);
   if (job.state !== 'succeeded' || seq !== followSeq) return;
-  if (job.kind === 'voxelize') await showVoxels(job);
-  else if (job.kind === 'gregory' || job.kind === 'catmull-clark') await showMesh(job);
-  else await showImages(job);
+  if (job.kind === 'voxelize') await showVoxels(job, seq);
+  else if (job.kind === 'gregory' || job.kind === 'catmull-clark') await showMesh(job, seq);
+  else await showImages(job, seq);
 }
 
 // ---- start ---------------------------------------------------------------------
@@ -447,6 +524,7 @@ async function main() {
   tok.value = localStorage.getItem(TOKEN_KEY) || '';
   tok.onchange = () => { localStorage.setItem(TOKEN_KEY, tok.value.trim()); refreshAll(); };
   $('refresh').onclick = () => refreshAll();
+  $('cancel').onclick = () => cancelJob();
   setupDrop();
   try {
     const info = await (await fetch('/v1/info', { headers: authHeaders() })).json();

@@ -54,7 +54,7 @@ export function buildForm(doc, schema, container) {
     const type = Array.isArray(s.type) ? s.type.find(t => t !== 'null') : s.type;
     const def = s0.default ?? s.default;
     const hint = el('p', { class: 'hint', text: firstLine(s0.description || s.description) });
-    const label = el('span', { text: name });
+    const label = el('label', { text: name, for: `param-${name}` });
     const field = el('div', { class: 'field', 'data-field': name });
     let input, read;
     if (!complex && Array.isArray(s.enum)) {
@@ -86,6 +86,7 @@ export function buildForm(doc, schema, container) {
         try { return JSON.parse(input.value); } catch (e) { throw new Error(`params.${name}: not JSON (${e.message})`); }
       };
     }
+    input.id = `param-${name}`;
     field.append(label, input, hint);
     container.append(field);
     readers.push([name, read]);

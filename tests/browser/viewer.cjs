@@ -151,6 +151,20 @@ async function runJob(page, kind, fields, shown) {
   }
   check('render: the turntable plays its frames', srcs.size >= 2, `${srcs.size} frames seen`);
   await page.locator('#right').screenshot({ path: path.join(outDir, 'viewer-render.png') });
+  // A download keeps the server's file name (Content-Disposition), with its
+  // extension (it was "<id>-image", no extension, for every format).
+  const [dl] = await Promise.all([page.waitForEvent('download', { timeout: 20000 }),
+    page.click('#outputs li:first-child a')]);
+  check('a download is named as the server names it', /-image(_\d+)?\.png$/.test(dl.suggestedFilename()), dl.suggestedFilename());
+  // The keyboard: a params field has its name as label, a job in the list
+  // opens on Enter.
+  check('a params field is labelled by its name', (await page.getByLabel('width', { exact: true }).count()) === 1);
+  await page.focus('#jobs li:last-child');
+  await page.keyboard.press('Enter');
+  const lastId = await page.getAttribute('#jobs li:last-child', 'data-id');
+  await page.waitForFunction(id => document.getElementById('job-title').textContent === id.slice(0, 12), lastId, { timeout: 10000 })
+    .catch(() => {});
+  check('a job opens on Enter', (await page.textContent('#job-title')) === lastId.slice(0, 12), await page.textContent('#job-title'));
 
   // The reference page.
   await page.goto(`${base}/docs`);
