@@ -65,7 +65,8 @@ function notice(text) {
 
 function showError(e, where) {
   const msg = e instanceof ApiError && e.status === 401
-    ? 'The server wants a bearer token: enter it at the top.'
+    ? ($('token').value.trim() ? 'The server refused this bearer token: check the one at the top.'
+      : 'The server wants a bearer token: enter it at the top.')
     : String(e.message || e);
   (where ? $(where) : $('notice')).textContent = msg;
   if (!where) $('notice').hidden = false;
@@ -273,13 +274,19 @@ async function followPoll(jid, seq, onJob) {
 async function openJob(jid, first) {
   const seq = ++followSeq;
   current = { id: jid };
+  // in the address (#job=ID): a reload, or Back from /docs, shows it again
+  if (location.hash !== `#job=${jid}`) history.replaceState(null, '', `#job=${jid}`);
   for (const li of $('jobs').children) li.classList.toggle('sel', li.dataset.id === jid);
   clearResult();
   $('job-title').textContent = short(jid);
   let shown = null;
+  let lastState = null;
   const onJob = job => {
     if (seq !== followSeq) return;
     showState(job);
+    // the list says what the panel says (it showed queued while running)
+    if (lastState !== null && job.state !== lastState && !TERMINAL.has(job.state)) refreshJobs().catch(() => {});
+    lastState = job.state;
     if (TERMINAL.has(job.state) && shown !== job.state) {
       shown = job.state;
       showResult(job, seq).catch(e => showError(e, 'view-note'));
@@ -539,6 +546,8 @@ async function main() {
     notice(`The job form needs js-yaml, which this build lacks (${e.message}): build voxeld after npm ci --prefix tools/viewer.`);
   }
   await refreshAll();
+  const m = /^#job=([0-9a-f]{32})$/.exec(location.hash);
+  if (m) openJob(m[1]);
   document.body.dataset.ready = '1';
 }
 

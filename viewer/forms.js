@@ -38,7 +38,8 @@ function el(tag, attrs = {}, ...kids) {
 
 function firstLine(text) {
   if (!text) return '';
-  const t = String(text).trim().split(/\n\s*\n/)[0].replace(/\s+/g, ' ');
+  // (Markdown's code spans shown as plain text)
+  const t = String(text).trim().split(/\n\s*\n/)[0].replace(/\s+/g, ' ').replace(/`/g, '');
   return t.length > 240 ? t.slice(0, 237) + '...' : t;
 }
 

@@ -165,6 +165,12 @@ async function runJob(page, kind, fields, shown) {
   await page.waitForFunction(id => document.getElementById('job-title').textContent === id.slice(0, 12), lastId, { timeout: 10000 })
     .catch(() => {});
   check('a job opens on Enter', (await page.textContent('#job-title')) === lastId.slice(0, 12), await page.textContent('#job-title'));
+  // The open job is in the address: a reload shows it again.
+  check('the open job is in the address', page.url().endsWith(`#job=${lastId}`), page.url());
+  await page.reload();
+  await page.waitForFunction(id => document.body.dataset.ready === '1' && document.getElementById('job-title').textContent === id.slice(0, 12),
+    lastId, { timeout: 20000 }).catch(() => {});
+  check('a reload shows the same job', (await page.textContent('#job-title')) === lastId.slice(0, 12), await page.textContent('#job-title'));
 
   // The reference page.
   await page.goto(`${base}/docs`);
