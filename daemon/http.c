@@ -538,6 +538,7 @@ vx_http *vx_http_start(const vx_http_desc *desc, vx_err *err)
         return NULL;
     }
     h->d = *desc;
+    pthread_mutex_init(&h->parse_budget.lock, NULL);
     vx_resp_init(vx_store_dir(desc->store), desc->cfg->cors_origin);
     const vx_config *cfg = desc->cfg;
     vx_auth_init(&h->auth, cfg->token);

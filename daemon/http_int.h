@@ -13,6 +13,7 @@
 #include "conns.h"
 #include "events.h"
 #include "http.h"
+#include "util/budget.h"
 #include "mesh/intake.h"
 #include "request.h"
 #include "wait.h"
@@ -59,6 +60,9 @@ struct vx_http {
     vx_wait *wait;
     vx_conns *conns;
     vx_events *events;
+    /* --max-parse-memory: the worst-case memory of the upload parses and
+     * JSON bodies being parsed now, reserved before each */
+    vx_budget parse_budget;
     int stopping;
 };
 

@@ -54,12 +54,42 @@ static const char *job_request_error(const cJSON *doc, char *buf, size_t n)
     return NULL;
 }
 
+/* What reading a JSON job body may take, per byte of it (cJSON's nodes,
+ * the normalised params, the job's copies). */
+#define JSON_COST_X 32
+
+static int job_post(vx_http *h, struct MHD_Connection *c, req *r, double wait_s);
+
 int vx_route_job_post(vx_http *h, struct MHD_Connection *c, req *r)
 {
     if (r->too_big)
         return vx_resp_fail(c, r, VX_ETOOBIG, "too_large",
                             "the JSON body is larger than max-json-bytes");
     double wait_s = wait_seconds(h, r);
+    /* The tree of a large body, and its normalised copies, take many times
+     * its bytes (16 MiB of "[]," is 420 MB): reserved from max-parse-memory
+     * first, as an upload's parse is. */
+    uint64_t cost = JSON_COST_X * (uint64_t)r->len + (64 << 10);
+    vx_budget_result br = vx_budget_reserve(&h->parse_budget, cost, h->d.cfg->max_parse_memory);
+    if (br == VX_BUDGET_TOO_BIG)
+        return vx_resp_fail(c, r, VX_ETOOBIG, "too_large",
+                            "a %zu-byte JSON body may take up to %llu bytes of memory to read, "
+                            "more than the max-parse-memory limit of %llu bytes",
+                            r->len, (unsigned long long)cost,
+                            (unsigned long long)h->d.cfg->max_parse_memory);
+    if (br != VX_BUDGET_OK)
+        return vx_resp_fail(c, r, VX_EOVERLOAD, "busy_parsing",
+                            "other requests being parsed hold the memory this %zu-byte JSON body "
+                            "may need (%llu of max-parse-memory's %llu bytes); retry later",
+                            r->len, (unsigned long long)cost,
+                            (unsigned long long)h->d.cfg->max_parse_memory);
+    int rc = job_post(h, c, r, wait_s);
+    vx_budget_release(&h->parse_budget, cost);
+    return rc;
+}
+
+static int job_post(vx_http *h, struct MHD_Connection *c, req *r, double wait_s)
+{
     char why[128];
     cJSON *doc = vx_req_json_parse(r->buf ? r->buf : "", r->len, why, sizeof why);
     if (!doc) return vx_resp_fail(c, r, VX_EINVAL, "invalid_json", "%s", why);

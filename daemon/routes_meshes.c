@@ -117,7 +117,6 @@ static int upload_name(struct MHD_Connection *c, req *r, char *name, size_t n, v
 }
 
 /* The worst-case memory of the upload parses running now (--max-parse-memory). */
-static vx_budget parse_budget = VX_BUDGET_INIT;
 
 /* Parses upload r (stored as id, in format fmt) under the parse-memory
  * budget and checks it: its Mesh JSON (owned), or NULL with err. */
@@ -130,11 +129,11 @@ static cJSON *parse_upload(vx_http *h, req *r, const char *id, vx_mesh_format fm
      * acknowledged, so a busy answer loses nothing. */
     uint64_t cost = vx_mesh_parse_cost(vx_upload_path(r->up), fmt, bytes, &lim);
     uint64_t budget = h->d.cfg->max_parse_memory;
-    vx_budget_result br = vx_budget_reserve(&parse_budget, cost, budget);
+    vx_budget_result br = vx_budget_reserve(&h->parse_budget, cost, budget);
     if (br != VX_BUDGET_OK) {
         VX_INFO("mesh.parse_budget", "format=%s bytes=%llu cost=%llu used=%llu limit=%llu", fname,
                 (unsigned long long)bytes, (unsigned long long)cost,
-                (unsigned long long)vx_budget_used(&parse_budget), (unsigned long long)budget);
+                (unsigned long long)vx_budget_used(&h->parse_budget), (unsigned long long)budget);
         if (br == VX_BUDGET_TOO_BIG)
             vx_err_set(err, VX_ETOOBIG, "parse_too_big",
                        "parsing this %s upload may take up to %llu bytes of memory, more than the "
@@ -162,7 +161,7 @@ static cJSON *parse_upload(vx_http *h, req *r, const char *id, vx_mesh_format fm
                 fname, (unsigned long long)bytes, m->nverts, m->ntris, parse_ms);
     }
     vx_mesh_free(m);
-    vx_budget_release(&parse_budget, cost);
+    vx_budget_release(&h->parse_budget, cost);
     return meta;
 }
 

@@ -181,4 +181,15 @@ for sha in "${acked[@]}"; do
 done
 check "all ${#acked[@]} acknowledged uploads stored after a restart ($lost lost)" test "$lost" -eq 0
 stop_daemon
+
+# A JSON job body reserves 32 times its bytes from the same budget (16 MiB
+# of "[]," held 420 MB while read): one alone over it is 413.
+start_daemon --max-parse-memory 2M || exit 1
+python3 -c 'import json; print(json.dumps({"mesh": "0" * 64, "kind": "voxelize", "params": {"pad": [[]] * 40000}}))' >"$TMP/big.json"
+api POST /v1/jobs -H "Content-Type: application/json" --data-binary "@$TMP/big.json"
+expect_error "a $(stat -c %s "$TMP/big.json")-byte job body over max-parse-memory / 32" 413 too_large
+check "saying why" jq -e '.error.message | test("may take up to [0-9]+ bytes of memory to read")' "$BODY"
+api POST /v1/jobs -H "Content-Type: application/json" -d '{"mesh":"'"$(printf '%064d' 0)"'","kind":"voxelize"}'
+expect_error "a small one still goes through (to its 404)" 404 mesh_not_found
+stop_daemon
 finish
