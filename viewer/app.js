@@ -546,8 +546,14 @@ async function main() {
     notice(`The job form needs js-yaml, which this build lacks (${e.message}): build voxeld after npm ci --prefix tools/viewer.`);
   }
   await refreshAll();
-  const m = /^#job=([0-9a-f]{32})$/.exec(location.hash);
-  if (m) openJob(m[1]);
+  // #job=ID opens that job: at load, and when the address changes (Back,
+  // Forward, a link)
+  const fromHash = () => {
+    const m = /^#job=([0-9a-f]{32})$/.exec(location.hash);
+    if (m && current?.id !== m[1]) openJob(m[1]);
+  };
+  window.addEventListener('hashchange', fromHash);
+  fromHash();
   document.body.dataset.ready = '1';
 }
 

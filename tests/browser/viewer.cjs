@@ -3,7 +3,9 @@
 // upload through the file control and one by a synthetic drop, a voxelize
 // and a gregory job from the generated form, each 3D result read back from
 // the canvas (pixels that differ from the background), live progress from
-// an event stream, a render turntable playing, and the /docs page. Run by
+// an event stream, a render turntable playing, gregory's frames played in
+// order, a download's name, the keyboard, the open job kept in the address,
+// and the /docs page. Run by
 // tests/integration/test_viewer.sh:
 //   node viewer.cjs BASE TOKEN SPOT_OBJ CONTROL_OBJ OUT_DIR
 // Prints one line per check; exits 1 when one fails.
@@ -171,6 +173,23 @@ async function runJob(page, kind, fields, shown) {
   await page.waitForFunction(id => document.body.dataset.ready === '1' && document.getElementById('job-title').textContent === id.slice(0, 12),
     lastId, { timeout: 20000 }).catch(() => {});
   check('a reload shows the same job', (await page.textContent('#job-title')) === lastId.slice(0, 12), await page.textContent('#job-title'));
+
+  // Deformation frames play after the job's mesh, in order: a gregory job
+  // of the control cage with one frame (every vertex moved), opened from
+  // the address. The page had fetched the mesh twice and never frame_001.
+  const auth = token ? { Authorization: `Bearer ${token}` } : {};
+  const meshes = await (await fetch(`${base}/v1/meshes?limit=100`, { headers: auth })).json();
+  const cage = meshes.items.find(m => m.name === path.basename(controlObj));
+  const frame = text.split('\n').filter(l => l.startsWith('v ')).flatMap(l => l.trim().split(/\s+/).slice(1, 4).map((v, i) => Number(v) * (i === 0 ? 1.2 : 1)));
+  const gj = await (await fetch(`${base}/v1/jobs?wait=60`, { method: 'POST', headers: { ...auth, 'Content-Type': 'application/json' },
+    body: JSON.stringify({ mesh: cage.id, kind: 'gregory', params: { divisions: 2, frames: [frame] } }) })).json();
+  const fetched = [];
+  const onResult = r => { const m = /\/result\/(\w+)$/.exec(r.url()); if (m) fetched.push(m[1]); };
+  page.on('request', onResult);
+  await page.goto(`${base}/#job=${gj.id}`);
+  await page.waitForFunction(() => /\(2 frames\)/.test(document.getElementById('images').textContent), null, { timeout: 30000 }).catch(() => {});
+  page.off('request', onResult);
+  check('gregory frames: the mesh, then frame_001', JSON.stringify(fetched) === '["mesh","frame_001"]', `${gj.state} ${JSON.stringify(fetched)}`);
 
   // The reference page.
   await page.goto(`${base}/docs`);
