@@ -159,18 +159,23 @@ check "logged as a 503" grep -q 'route=/v1/meshes .*status=503' "$TMP/daemon.log
 # log write blocks; the sweeper answers a silent head (408) and logs it.
 # Nothing it holds while logging may keep libmicrohttpd from taking the
 # next connection (/livez at info level writes no log line).
+# wait_port LOG: PORT from the voxeld.ready line of a daemon started here
+# by hand (up to 30 s).
+wait_port() {
+    PORT=
+    for _ in $(seq 1 300); do
+        PORT=$(grep -a 'event=voxeld.ready' "$1" | sed -n 's/.*port=\([0-9]*\).*/\1/p')
+        [[ -n $PORT ]] && return 0
+        sleep 0.1
+    done
+}
 mkfifo "$TMP/log.fifo"
 cat "$TMP/log.fifo" >"$TMP/fifo.log" &
 CAT=$!
 "$VOXELD" --listen 127.0.0.1:0 --data-dir "$DATA" --workers 1 --http-threads 4 \
     --header-timeout 1 2>"$TMP/log.fifo" &
 PID=$!
-PORT=
-for _ in $(seq 1 300); do
-    PORT=$(grep -a 'event=voxeld.ready' "$TMP/fifo.log" | sed -n 's/.*port=\([0-9]*\).*/\1/p')
-    [[ -n $PORT ]] && break
-    sleep 0.1
-done
+wait_port "$TMP/fifo.log"
 BASE="http://127.0.0.1:$PORT"
 kill -STOP "$CAT"
 timeout 2 dd if=/dev/zero of="$TMP/log.fifo" bs=4096 count=1000 2>/dev/null
@@ -196,12 +201,7 @@ wait "$CAT"
         --header-timeout 2
 ) 2>"$TMP/fd.log" &
 PID=$!
-PORT=
-for _ in $(seq 1 300); do
-    PORT=$(grep -a 'event=voxeld.ready' "$TMP/fd.log" | sed -n 's/.*port=\([0-9]*\).*/\1/p')
-    [[ -n $PORT ]] && break
-    sleep 0.1
-done
+wait_port "$TMP/fd.log"
 check "ulimit -n 64: the connection limit is fitted, and logged" \
     grep -aq 'event=http.fd_limit nofile=64 max_connections=512 effective=' "$TMP/fd.log"
 python3 - "$PORT" >"$TMP/fd.json" <<'PY'
