@@ -84,7 +84,6 @@ static int list_devices(void)
     return 0;
 }
 
-/* Blocks the signals the main thread takes synchronously, into *sigs. */
 /* Raises the soft descriptor limit to the hard one, and fits the
  * connection limit into what is left after the daemon's own files: each
  * connection may hold two descriptors (its socket, an upload's temp file).
@@ -96,8 +95,7 @@ static int fit_fd_limit(vx_config *cfg)
     struct rlimit rl;
     if (getrlimit(RLIMIT_NOFILE, &rl) != 0) return 0;
     if (rl.rlim_cur != rl.rlim_max) {
-        rlim_t want = rl.rlim_max;
-        rl.rlim_cur = want;
+        rl.rlim_cur = rl.rlim_max;
         if (setrlimit(RLIMIT_NOFILE, &rl) != 0) getrlimit(RLIMIT_NOFILE, &rl);
     }
     if (rl.rlim_cur == RLIM_INFINITY) return 0;
@@ -123,6 +121,7 @@ static int fit_fd_limit(vx_config *cfg)
     return 0;
 }
 
+/* Blocks the signals the main thread takes synchronously, into *sigs. */
 static void block_signals(sigset_t *sigs)
 {
     /* Signals are taken synchronously by the main thread: block them

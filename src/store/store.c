@@ -273,10 +273,12 @@ static int mesh_revive_locked(vx_store *s, size_t at, vx_upload *u, const char *
     return rc;
 }
 
-/* Moves upload u in as new mesh id: data file, sync, metadata. Caller holds
- * the lock; 0 or -1 (the keys are then removed by the caller). */
+/* Moves upload u in as new mesh id: data file (unless in_place: a repair
+ * moved it in already), sync, metadata. Caller holds the lock; 0 or -1
+ * (the keys are then removed by the caller). */
 static int mesh_commit_new_locked(vx_store *s, vx_upload *u, const char *id, const char *ext,
-                                  const cJSON *meta, const char *key, const char *mkey, vx_err *err)
+                                  const cJSON *meta, const char *key, const char *mkey,
+                                  int in_place, vx_err *err)
 {
     close(u->fd);
     u->fd = -1;
@@ -284,7 +286,7 @@ static int mesh_commit_new_locked(vx_store *s, vx_upload *u, const char *id, con
     char *text = vx_json_print(meta, 0);
     if (!text) {
         vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory");
-    } else if (s->ops->put_file(s->blob, u->path, key) != 0) {
+    } else if (!in_place && s->ops->put_file(s->blob, u->path, key) != 0) {
         int e = errno;
         char path[VX_PATH_MAX];
         s->ops->path(s->blob, key, path, sizeof path);
@@ -458,9 +460,12 @@ static int mesh_file_intact(vx_store *s, const char *id, const char *path)
     return intact;
 }
 
-int vx_store_mesh_repair(vx_store *s, vx_upload *u, const char *id, const char *ext, vx_err *err)
+/* vx_store_mesh_repair; *moved = 1 when the upload's file was moved in. */
+static int mesh_repair(vx_store *s, vx_upload *u, const char *id, const char *ext, int *moved,
+                       vx_err *err)
 {
     char key[128], path[VX_PATH_MAX];
+    *moved = 0;
     pthread_mutex_lock(&s->lock);
     int found;
     size_t at = mesh_find(s, id, &found);
@@ -470,13 +475,21 @@ int vx_store_mesh_repair(vx_store *s, vx_upload *u, const char *id, const char *
     pthread_mutex_unlock(&s->lock);
     /* a blob store out of reach: the bytes are checked on their next use */
     if (!found || s->ops->path(s->blob, key, path, sizeof path)) return 0;
+    struct stat before, now;
+    int had = stat(path, &before) == 0;
     if (mesh_file_intact(s, id, path) == 1) return 0;
     /* The file is checked outside the lock: a delete in between removed it
-     * with its entry, and is no damage (the upload is then a new mesh, its
-     * temp file still the caller's). The move goes in under the lock. */
+     * with its entry, and another upload may have stored it again since.
+     * Neither is damage (the upload then commits as usual, its temp file
+     * still the caller's): the move goes in under the lock, only while the
+     * entry and the file are what was checked. */
     pthread_mutex_lock(&s->lock);
     at = mesh_find(s, id, &found);
-    if (!found || strcmp(mesh_at(s, at)->ext, ext) != 0) {
+    int has = stat(path, &now) == 0;
+    if (!found || strcmp(mesh_at(s, at)->ext, ext) != 0 || has != had ||
+        (has && (now.st_ino != before.st_ino || now.st_dev != before.st_dev ||
+                 now.st_size != before.st_size || now.st_mtim.tv_sec != before.st_mtim.tv_sec ||
+                 now.st_mtim.tv_nsec != before.st_mtim.tv_nsec))) {
         pthread_mutex_unlock(&s->lock);
         return 0;
     }
@@ -486,6 +499,7 @@ int vx_store_mesh_repair(vx_store *s, vx_upload *u, const char *id, const char *
     if (lstat(path, &st) == 0 && S_ISDIR(st.st_mode)) vx_remove_tree(path); /* not renamed over */
     int rc = s->ops->put_file(s->blob, u->path, key);
     int e = errno;
+    *moved = rc == 0;
     pthread_mutex_unlock(&s->lock);
     if (rc != 0 || s->ops->sync(s->blob, "meshes", NULL)) {
         if (!rc) e = errno;
@@ -497,6 +511,12 @@ int vx_store_mesh_repair(vx_store *s, vx_upload *u, const char *id, const char *
     return 0;
 }
 
+int vx_store_mesh_repair(vx_store *s, vx_upload *u, const char *id, const char *ext, vx_err *err)
+{
+    int moved;
+    return mesh_repair(s, u, id, ext, &moved, err);
+}
+
 static int mesh_commit_here(vx_store *s, vx_upload *u, const char *id, const char *ext,
                             const cJSON *meta, int *existed, vx_err *err)
 {
@@ -505,7 +525,8 @@ static int mesh_commit_here(vx_store *s, vx_upload *u, const char *id, const cha
     mesh_key(mkey, sizeof mkey, id, ".json");
     *existed = 0;
     if (s->catalog) mesh_drop_purged(s, id);
-    if (vx_store_mesh_repair(s, u, id, ext, err)) {
+    int moved;
+    if (mesh_repair(s, u, id, ext, &moved, err)) {
         vx_upload_abort(u);
         return -1;
     }
@@ -524,7 +545,16 @@ static int mesh_commit_here(vx_store *s, vx_upload *u, const char *id, const cha
         vx_upload_abort(u);
         return rc;
     }
-    int rc = mesh_commit_new_locked(s, u, id, ext, meta, key, mkey, err);
+    /* A delete between the repair and here: the bytes the repair moved in
+     * are the mesh's (its id is their hash) unless the delete took them. */
+    struct stat st;
+    char path[VX_PATH_MAX];
+    int rc = -1;
+    if (moved && (s->ops->path(s->blob, key, path, sizeof path) || stat(path, &st) != 0))
+        vx_err_set(err, VX_EUNAVAIL, "store_failed",
+                   "the mesh was deleted while this upload stored it: send it again");
+    else
+        rc = mesh_commit_new_locked(s, u, id, ext, meta, key, mkey, moved, err);
     if (rc) { /* under the lock: an upload of the same bytes may commit next */
         s->ops->remove(s->blob, mkey);
         s->ops->remove(s->blob, key);
