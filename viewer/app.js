@@ -32,6 +32,15 @@ export async function api(path, opts = {}) {
   return fetch(path, { ...opts, headers: authHeaders(opts.headers || {}) });
 }
 
+// res when it is a success, else throws its ApiError (with the JSON error
+// body where there is one).
+async function checked(res) {
+  if (res.ok) return res;
+  let body = null;
+  try { body = await res.json(); } catch { /* not JSON */ }
+  throw new ApiError(res.status, body);
+}
+
 async function apiJSON(path, opts) {
   const res = await api(path, opts);
   let body = null;
@@ -318,11 +327,7 @@ async function cancelJob() {
   if (!current) return;
   try {
     const res = await api(`/v1/jobs/${current.id}`, { method: 'DELETE' });
-    if (!res.ok && res.status !== 404) {
-      let body = null;
-      try { body = await res.json(); } catch { /* */ }
-      throw new ApiError(res.status, body);
-    }
+    if (res.status !== 404) await checked(res); // 404: it ended and went meanwhile
   } catch (e) { showError(e, 'job-error'); }
 }
 
@@ -356,12 +361,7 @@ function clearResult() {
 }
 
 async function fetchOutput(url, as) {
-  const res = await api(url);
-  if (!res.ok) {
-    let body = null;
-    try { body = await res.json(); } catch { /* */ }
-    throw new ApiError(res.status, body);
-  }
+  const res = await checked(await api(url));
   return as === 'text' ? res.text() : as === 'blob' ? res.blob() : res.arrayBuffer();
 }
 
@@ -383,12 +383,7 @@ function listOutputs(job) {
     a.onclick = async e => {
       e.preventDefault();
       try {
-        const res = await api(url);
-        if (!res.ok) {
-          let body = null;
-          try { body = await res.json(); } catch { /* */ }
-          throw new ApiError(res.status, body);
-        }
+        const res = await checked(await api(url));
         const u = URL.createObjectURL(await res.blob());
         const file = dispositionName(res.headers.get('Content-Disposition')) || `${short(job.id)}-${name}`;
         const d = Object.assign(document.createElement('a'), { href: u, download: file });
