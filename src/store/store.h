@@ -191,8 +191,6 @@ int vx_store_id_write(vx_store *s, const char *id, vx_err *err);
  * or not succeeded (a crash's partial outputs, a delete's files a crash
  * kept). A shared store's are left alone. Returns how many. */
 size_t vx_store_results_prune(vx_store *s, int (*keep)(void *ud, const char *jid), void *ud);
-/* 1 when job jid's results are in the store (not evicted or removed). */
-int vx_store_result_exists(vx_store *s, const char *jid);
 /* Evicts least recently used results until the budget holds; returns how
  * many were removed. Called after each job and periodically. */
 int vx_store_results_evict(vx_store *s);

@@ -197,16 +197,6 @@ size_t vx_store_results_prune(vx_store *s, int (*keep)(void *ud, const char *jid
     return nv;
 }
 
-int vx_store_result_exists(vx_store *s, const char *jid)
-{
-    pthread_mutex_lock(&s->lock);
-    int found = 0;
-    for (size_t i = 0; i < s->nresults && !found; i++)
-        found = strcmp(s->results[i].jid, jid) == 0;
-    pthread_mutex_unlock(&s->lock);
-    return found;
-}
-
 int vx_store_results_evict(vx_store *s)
 {
     int removed = 0;
