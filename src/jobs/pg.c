@@ -928,6 +928,7 @@ int vx_pg_fail(vx_pg *pg, const char *id, int attempt, const vx_err *why, int re
             "$10") " ELSE"
                    "  not_before END,"
                    " finished = CASE WHEN " RETRY_NOW " THEN NULL ELSE now() END,"
+                   " progress = CASE WHEN " RETRY_NOW " THEN 0 ELSE progress END,"
                    " lease_expires = NULL, updated = now()"
                    " WHERE id = $1 AND attempt = $2::integer AND replica = $3 AND state = 'running'"
                    " RETURNING state",
@@ -951,6 +952,7 @@ int vx_pg_release(vx_pg *pg, const char *id, int attempt, vx_err *err)
         pg, 0,
         "UPDATE vx_jobs SET state = CASE WHEN cancel_requested THEN 'canceled' ELSE"
         " 'queued' END, finished = CASE WHEN cancel_requested THEN now() END,"
+        " progress = CASE WHEN cancel_requested THEN progress ELSE 0 END,"
         " max_attempts = max_attempts + 1, lease_expires = NULL, not_before = now(),"
         " updated = now()"
         " WHERE id = $1 AND attempt = $2::integer AND replica = $3 AND state = 'running'"
@@ -986,6 +988,7 @@ int vx_pg_requeue_expired(vx_pg *pg, int max, int *requeued, int *failed, vx_err
             "$2", "$3") " ELSE not_before"
                         "  END,"
                         " finished = CASE WHEN " AGAIN " THEN NULL ELSE now() END,"
+                        " progress = CASE WHEN " AGAIN " THEN 0 ELSE progress END,"
                         " lease_expires = NULL, updated = now()"
                         " WHERE id IN (SELECT id FROM vx_jobs WHERE state = 'running' AND "
                         "lease_expires < now()"

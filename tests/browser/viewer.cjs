@@ -184,7 +184,8 @@ async function runJob(page, kind, fields, shown) {
   const gj = await (await fetch(`${base}/v1/jobs?wait=60`, { method: 'POST', headers: { ...auth, 'Content-Type': 'application/json' },
     body: JSON.stringify({ mesh: cage.id, kind: 'gregory', params: { divisions: 2, frames: [frame] } }) })).json();
   const fetched = [];
-  const onResult = r => { const m = /\/result\/(\w+)$/.exec(r.url()); if (m) fetched.push(m[1]); };
+  // only this job's: the page left behind may still fetch its own job's
+  const onResult = r => { const m = /\/v1\/jobs\/([0-9a-f]{32})\/result\/(\w+)$/.exec(r.url()); if (m && m[1] === gj.id) fetched.push(m[2]); };
   page.on('request', onResult);
   await page.goto(`${base}/#job=${gj.id}`);
   await page.waitForFunction(() => /\(2 frames\)/.test(document.getElementById('images').textContent), null, { timeout: 30000 }).catch(() => {});

@@ -388,6 +388,7 @@ static void test_lease_expiry_and_fencing(void **state)
     vx_pg_job q;
     assert_int_equal(vx_pg_get(b, id, &q, &err), 0);
     assert_string_equal(q.state, "queued");
+    assert_true(q.progress == 0); /* renewed at 0.5: a queued job is at 0 */
     assert_true(q.not_before > ja.started + 1);
     assert_int_equal(cJSON_GetArraySize(q.errors), 1);
     cJSON *e0 = cJSON_GetArrayItem(q.errors, 0);
@@ -552,9 +553,14 @@ static void test_max_attempts(void **state)
     /* 1: fails with an error that may be retried. */
     claim_soon(a, &jb);
     assert_int_equal(jb.attempt, 1);
+    int cancel = 0;
+    assert_int_equal(vx_pg_renew(a, id, 1, 0.5, &cancel, &err), 0);
     vx_err_set(&why, VX_EGPU, "gl_context_lost", "context lost in attempt 1");
     assert_int_equal(vx_pg_fail(a, id, 1, &why, 1, st, &err), 0);
     assert_string_equal(st, "queued");
+    vx_pg_job_clear(&jb);
+    assert_int_equal(vx_pg_get(b, id, &jb, &err), 0);
+    assert_true(jb.progress == 0); /* queued again: back to 0 */
     vx_pg_job_clear(&jb);
     /* 2: the lease runs out. */
     claim_soon(a, &jb);
@@ -592,7 +598,11 @@ static void test_max_attempts(void **state)
     submit(a, id2, "flaky", 2);
     claim_soon(a, &jb);
     vx_pg_job_clear(&jb);
+    assert_int_equal(vx_pg_renew(a, id2, 1, 0.5, &cancel, &err), 0);
     assert_int_equal(vx_pg_release(a, id2, 1, &err), 0);
+    assert_int_equal(vx_pg_get(b, id2, &jb, &err), 0);
+    assert_true(jb.progress == 0);
+    vx_pg_job_clear(&jb);
     claim_soon(a, &jb);
     assert_int_equal(jb.attempt, 2);
     assert_int_equal(jb.max_attempts, 3);
