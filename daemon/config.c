@@ -67,6 +67,9 @@ static const opt_def opts[] = {
      "the whole request head must arrive within this, seconds (default 10; 0 = off)"},
     {"min-body-rate", T_SIZE, F(min_body_rate), 0,
      "slowest request body, bytes/s over 2 s windows after a 2 s grace (default 1024; 0 = off)"},
+    {"min-send-rate", T_SIZE, F(min_send_rate), 0,
+     "slowest reader of an answer, bytes/s over 2 s windows while the answer waits on the client "
+     "(default 1024; 0 = off)"},
     {"max-uri-bytes", T_SIZE, F(max_uri_bytes), 0,
      "longest request target, path and query (default 16K; at least 256)"},
     {"max-header-bytes", T_SIZE, F(max_header_bytes), 0,
@@ -175,6 +178,7 @@ static void defaults(vx_config *c)
     c->connection_timeout_s = 30;
     c->header_timeout_s = 10;
     c->min_body_rate = 1024;
+    c->min_send_rate = 1024;
     c->max_uri_bytes = 16 << 10;
     c->max_header_bytes = 64 << 10;
     c->max_connections = 512;

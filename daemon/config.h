@@ -33,6 +33,7 @@ typedef struct vx_config {
     double connection_timeout_s; /* idle connections are closed after this */
     double header_timeout_s;   /* accept (or the previous answer) to the end of the head; 0 = off */
     uint64_t min_body_rate;    /* bytes/s a request body must keep up; 0 = off */
+    uint64_t min_send_rate;    /* bytes/s a client must read an answer at; 0 = off */
     uint64_t max_uri_bytes;    /* longest request target: a longer one gets 414 */
     uint64_t max_header_bytes; /* largest request head: a larger one gets 431 */
     int reuse_port;            /* SO_REUSEPORT on the listening socket */

@@ -18,10 +18,18 @@
  *     before the close resets the connection. Neither deadline is applied
  *     while bytes wait unread in the kernel: then libmicrohttpd's thread is
  *     busy (a handler parsing a large mesh), not the client slow.
+ *   - cuts a BUSY connection whose answer the client reads slower than
+ *     --min-send-rate over a 10 s window during which unsent bytes of it
+ *     always waited in the kernel (the client's receive window full: a
+ *     client that keeps up, an event stream between events and a ?wait
+ *     hold never start one). libmicrohttpd is writing then, so no answer
+ *     can be written behind it: the socket is shut with SO_LINGER 0 and
+ *     libmicrohttpd's close resets it (sockq.c reads the kernel's counts).
  *   - keeps headroom: when the open connections reach 90% of
  *     --max-connections, it closes the oldest HEAD (with a 408) and IDLE
  *     connections until they are down to 80%, then if need be the slowest
- *     BODY under 16 x --min-body-rate (408). A client that sends its head
+ *     BODY under 16 x --min-body-rate (408), then the slowest readers of
+ *     answers under 16 x --min-send-rate (cut as above). A client that sends its head
  *     at once is BUSY within a millisecond and is never a victim, so
  *     however many addresses drip heads, a fresh client finds a slot (or
  *     waits in the listen backlog, ahead of the victims' reconnections,
@@ -69,6 +77,7 @@
 
 #include "metrics.h"
 #include "request.h"
+#include "sockq.h"
 #include "util/fsutil.h"
 #include "util/log.h"
 
@@ -86,9 +95,14 @@ struct vx_conn {
     double win_t0;
     uint64_t win_bytes;
     double last_rate; /* BODY: bytes/s over the last whole window (-1: none yet) */
-    int killed;       /* answered (or closed) by us behind libmicrohttpd's back */
-    int kill_status;  /* the status we wrote, 0 for none */
-    int rd_closed;    /* shutdown(SHUT_RD) done */
+    /* BUSY: the answer's window, while it waits on the client (see sweep) */
+    int out_started;
+    double out_t0;
+    uint64_t out_acked;
+    double out_rate; /* bytes/s over the last whole window (-1: none, or keeping up) */
+    int killed;      /* answered (or closed) by us behind libmicrohttpd's back */
+    int kill_status; /* the status we wrote, 0 for none */
+    int rd_closed;   /* shutdown(SHUT_RD) done */
     double t_killed;
     char rid[72];           /* BODY: the request's id; else the id of the answer written here */
     char origin[256];       /* BODY: the request's origin when CORS allows it, else "" */
@@ -121,9 +135,10 @@ struct vx_conns {
     size_t nling, cap_ling;
 };
 
-#define BODY_GRACE_S 2.0  /* a body is not rated before this */
-#define BODY_WINDOW_S 2.0 /* then each window must carry min_body_rate * window */
-#define KILL_LINGER_S 0.5 /* between our answer and closing the read side */
+#define BODY_GRACE_S 2.0   /* a body is not rated before this */
+#define BODY_WINDOW_S 2.0  /* then each window must carry min_body_rate * window */
+#define SEND_WINDOW_S 10.0 /* an answer must be read at min_send_rate over this */
+#define KILL_LINGER_S 0.5  /* between our answer and closing the read side */
 #define SWEEP_US 100000
 #define EVICT_MIN_AGE_S 0.25 /* a head or idle time this young is nobody's attack */
 #define PRESSURE_RATE_X 16   /* at the headroom mark, bodies under 16 x --min-body-rate go */
@@ -295,6 +310,7 @@ void vx_conns_notify(void *cls, struct MHD_Connection *c, void **socket_context,
         vc->fd = ci->connect_fd;
         vc->phase = P_HEAD;
         vc->t_phase = vx_mono();
+        vc->out_rate = -1;
         int known = peer_of(c, vc->peer);
         pthread_mutex_lock(&s->lock);
         uint64_t same = 1, max = s->cfg->max_connections_per_ip;
@@ -401,6 +417,28 @@ static int by_rate(const void *a, const void *b)
     return x < y ? -1 : x > y;
 }
 
+static int by_out_rate(const void *a, const void *b)
+{
+    double x = (*(vx_conn *const *)a)->out_rate, y = (*(vx_conn *const *)b)->out_rate;
+    return x < y ? -1 : x > y;
+}
+
+/* Cuts a connection while libmicrohttpd sends its answer (nothing can be
+ * written behind it then): the close that follows resets it (SO_LINGER 0,
+ * so the unsent answer is not kept in the kernel), and libmicrohttpd's next
+ * send fails and closes it. With s->lock held. */
+static void cut_reader(vx_conn *vc, double rate, const char *why)
+{
+    struct linger lg = {1, 0};
+    setsockopt(vc->fd, SOL_SOCKET, SO_LINGER, &lg, sizeof lg);
+    shutdown(vc->fd, SHUT_RDWR);
+    vc->killed = 1;
+    vc->kill_status = 0;
+    vc->rd_closed = 1;
+    vc->t_killed = vx_mono();
+    VX_WARN("http.slow_reader", "fd=%d rate=%.0f why=%s", vc->fd, rate, why);
+}
+
 /* Reads and drops what waits on each lingering socket, without blocking;
  * closes it at the client's end of file, an error, after DRAIN_S, or when
  * nothing came for DRAIN_IDLE_S (the body was all in already, and the
@@ -485,6 +523,29 @@ static void sweep(vx_conns *s, vx_conn **cand, head_kill *ks, size_t *nk, size_t
                 vc->win_bytes = vc->body_bytes;
             }
         }
+        /* An answer the client reads slower than --min-send-rate over a
+         * window during which it always waited on the client (a reader
+         * that keeps up, an event stream between events, a ?wait hold and
+         * a handler still working never start one). */
+        int64_t acked =
+            vc->phase == P_BUSY && cfg->min_send_rate ? vx_sockq_acked_while_waiting(vc->fd) : -1;
+        if (acked < 0) {
+            vc->out_started = 0;
+            vc->out_rate = -1;
+        } else if (!vc->out_started) {
+            vc->out_started = 1;
+            vc->out_t0 = now;
+            vc->out_acked = (uint64_t)acked;
+        } else if (now - vc->out_t0 >= SEND_WINDOW_S) {
+            double rate = (double)((uint64_t)acked - vc->out_acked) / (now - vc->out_t0);
+            if (rate < (double)cfg->min_send_rate) {
+                cut_reader(vc, rate, "min_send_rate");
+                continue;
+            }
+            vc->out_rate = rate;
+            vc->out_t0 = now;
+            vc->out_acked = (uint64_t)acked;
+        }
         live++;
         if ((vc->phase == P_HEAD || vc->phase == P_IDLE) && cand) cand[ncand++] = vc;
     }
@@ -522,6 +583,17 @@ static void sweep(vx_conns *s, vx_conn **cand, head_kill *ks, size_t *nk, size_t
                  floor_rate);
         kill_conn(cand[i], 408, "request_timeout", m, 1); /* on_completed logs it */
     }
+    /* Then the slowest readers of answers, under PRESSURE_RATE_X times
+     * --min-send-rate (a reader with a small receive window held its slot
+     * for as long as the answer lasted). */
+    nslow = 0;
+    floor_rate = (double)cfg->min_send_rate * PRESSURE_RATE_X;
+    for (vx_conn *vc = s->list; vc && live > low && floor_rate > 0; vc = vc->next)
+        if (!vc->killed && vc->phase == P_BUSY && vc->out_rate >= 0 && vc->out_rate < floor_rate)
+            cand[nslow++] = vc;
+    qsort(cand, nslow, sizeof *cand, by_out_rate);
+    for (size_t i = 0; i < nslow && live > low; i++, live--)
+        cut_reader(cand[i], cand[i]->out_rate, "evicted");
     for (vx_conn *vc = s->list; vc; vc = vc->next) /* free the victims' slots now */
         if (vc->killed && !vc->rd_closed) {
             shutdown(vc->fd, SHUT_RD);

@@ -165,6 +165,7 @@ int vx_route_info(vx_http *h, struct MHD_Connection *c, req *r)
     cJSON_AddNumberToObject(l, "connection_timeout_s", cfg->connection_timeout_s);
     cJSON_AddNumberToObject(l, "header_timeout_s", cfg->header_timeout_s);
     cJSON_AddNumberToObject(l, "min_body_rate", (double)cfg->min_body_rate);
+    cJSON_AddNumberToObject(l, "min_send_rate", (double)cfg->min_send_rate);
     cJSON_AddNumberToObject(l, "max_uri_bytes", (double)cfg->max_uri_bytes);
     cJSON_AddNumberToObject(l, "max_header_bytes", (double)cfg->max_header_bytes);
     cJSON_AddNumberToObject(l, "max_connections_per_ip", (double)cfg->max_connections_per_ip);

@@ -125,6 +125,55 @@ def stall(port, data, seconds, sent=None, whole=False):
     print(json.dumps({"seconds": time.monotonic() - t0, "response": got.decode("latin-1")}))
 
 
+def read_slowly(port, path, rate, seconds, addrs, per_addr):
+    """GETs path on per_addr connections from each address, each with a
+    small receive window, and reads the answer at `rate` bytes/s for at
+    most `seconds`. Prints, for each, the bytes of the body read, the
+    body's length, and when the server cut it (null: it did not)."""
+    conns = []  # [sock, t_connect, got, cut_at]
+    for a in addrs:
+        for _ in range(per_addr):
+            s = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+            s.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
+            s.bind((a, 0))
+            s.settimeout(2)
+            s.connect(("127.0.0.1", port))
+            s.sendall(b"GET " + path.encode() + b" HTTP/1.1\r\nHost: x\r\n\r\n")
+            s.setblocking(False)
+            conns.append([s, time.monotonic(), b"", None])
+    t0 = time.monotonic()
+    budget = 0.0
+    while time.monotonic() - t0 < seconds:
+        time.sleep(0.05)
+        budget += rate * 0.05
+        take = int(budget)
+        budget -= take
+        for c in conns:
+            # cut: reset by the server (what was received before the reset
+            # could still be read)
+            if c[3] is None and c[0].getsockopt(socket.IPPROTO_TCP, socket.TCP_INFO, 1)[0] != 1:
+                c[3] = time.monotonic() - c[1]
+            if c[3] is not None or take <= 0:
+                continue
+            try:
+                b = c[0].recv(take)
+                if not b:
+                    c[3] = time.monotonic() - c[1]
+                c[2] += b
+            except BlockingIOError:
+                pass
+            except OSError:
+                c[3] = time.monotonic() - c[1]
+    out = []
+    for s, _, got, cut in conns:
+        s.close()
+        head, _, body = got.partition(b"\r\n\r\n")
+        n = [int(l.split(b":")[1]) for l in head.split(b"\r\n") if l.lower().startswith(b"content-length:")]
+        out.append({"status_line": head.split(b"\r\n")[0].decode("latin-1"), "body_read": len(body),
+                    "length": n[0] if n else None, "cut_at": cut})
+    print(json.dumps(out))
+
+
 def keepalive_drip(port, seconds):
     s = socket.create_connection(("127.0.0.1", port))
     s.sendall(b"GET /livez HTTP/1.1\r\nHost: x\r\n\r\n")
@@ -219,5 +268,9 @@ if __name__ == "__main__":
               whole=True)
     elif cmd == "per-ip":
         per_ip(port, sys.argv[3], int(sys.argv[4]))
+    elif cmd == "read":  # read PORT PATH RATE SECONDS [PER_ADDR ADDR...]
+        per = int(sys.argv[6]) if len(sys.argv) > 6 else 1
+        read_slowly(port, sys.argv[3], float(sys.argv[4]), float(sys.argv[5]),
+                    sys.argv[7:] or ["127.0.0.1"], per)
     elif cmd == "keepalive-drip":
         keepalive_drip(port, float(sys.argv[3]))

@@ -12,6 +12,7 @@ start_daemon --max-connections 64 --max-connections-per-ip 8 --header-timeout 2 
 api GET /v1/info
 check "info lists header_timeout_s" jq -e '.limits.header_timeout_s == 2' "$BODY"
 check "info lists min_body_rate" jq -e '.limits.min_body_rate == 1024' "$BODY"
+check "info lists min_send_rate" jq -e '.limits.min_send_rate == 1024' "$BODY"
 
 # --- a dripped head: 408 JSON within header-timeout + 1 s ---
 $SLOW drip "$PORT" 4 "$TMP/one.json" 127.0.0.1 --per-addr 1
@@ -121,6 +122,33 @@ yes '# padding to make the upload take a while' | head -n 7000 >"$TMP/pad.obj"
 cat "$TMP/box.obj" >>"$TMP/pad.obj"
 api POST /v1/meshes -H "Content-Type: model/obj" --limit-rate 200k --data-binary "@$TMP/pad.obj"
 expect_status "an upload at 200 KB/s (1.5 s)" 201
+
+# --- answers read slowly, through a 4 KiB receive window: under
+# --min-send-rate (1024 bytes/s by default) over 10 s while the answer waits
+# on the client, the connection is reset; at the headroom mark the slowest
+# readers under 16 x the rate go first (a slow reader held its slot for as
+# long as its answer lasted) ---
+run_job voxelize "$MESH_ID" '{"resolution":256,"format":"raw8"}'
+job_ok "a 16 MiB result"
+RES=$(jq -r .outputs.voxels "$TMP/job.json")
+$SLOW read "$PORT" "$RES" 200 13 >"$TMP/sread.json" &
+SR=$!
+$SLOW read "$PORT" "$RES" 4000 13 >"$TMP/fread.json"
+wait "$SR"
+check "a reader at 200 bytes/s is cut within 12 s ($(cat "$TMP/sread.json"))" \
+    jq -e '.[0].cut_at != null and .[0].cut_at <= 12' "$TMP/sread.json"
+check "logged as a slow reader" grep -q 'event=http.slow_reader .*why=min_send_rate' "$TMP/daemon.log"
+check "a reader at 4000 bytes/s is not ($(cat "$TMP/fread.json"))" \
+    jq -e '.[0].cut_at == null and .[0].body_read > 40000' "$TMP/fread.json"
+$SLOW read "$PORT" "$RES" 4000 14 8 127.0.0.{2..9} >"$TMP/hread.json" &
+SR=$!
+sleep 12.5
+code=$(curl -s -o /dev/null -w '%{http_code}' --max-time 2 "$BASE/livez")
+wait "$SR"
+check "64 readers at 4000 bytes/s: a fresh client is served ($code)" test "$code" = 200
+ncut=$(jq '[.[] | select(.cut_at != null)] | length' "$TMP/hread.json")
+check "the slowest readers were cut down to 80% ($ncut of 64)" test "$ncut" -ge 10
+check "logged as evicted" grep -q 'event=http.slow_reader .*why=evicted' "$TMP/daemon.log"
 api GET /livez
 expect_status "still serving" 200
 stop_daemon
