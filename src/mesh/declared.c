@@ -92,6 +92,10 @@ static int blank(unsigned char c)
 
 /* ---- STL ------------------------------------------------------------- */
 
+/* Bytes after a binary STL's last triangle that the sniff takes (a
+ * declared STL may have any number). */
+#define STL_SNIFF_TRAILING 512
+
 /* The shortest ASCII facet the STL reader takes ("facet vertex 0 0 0 ..."). */
 #define STL_ASCII_MIN_FACET 32
 
@@ -736,7 +740,10 @@ vx_mesh_format vx_mesh_sniff_sized(const unsigned char *p, size_t n, uint64_t si
     }
     vx_mesh_format text = vx_mesh_sniff(p, n);
     /* Binary data, not Draco: a binary STL with bytes after its last
-     * triangle (vx_declared_check reads it so). */
-    if (!text && n >= 84 && 84 + 50 * (uint64_t)le32(p + 80) < size) return VX_MESH_STL;
+     * triangle (vx_declared_check reads it so), fewer than a sector's
+     * worth when only the bytes tell: other binary files (FBX, .blend)
+     * hold small counts at offset 80 too, which any size would take. */
+    uint64_t stl_end = n >= 84 ? 84 + 50 * (uint64_t)le32(p + 80) : UINT64_MAX;
+    if (!text && stl_end < size && size - stl_end < STL_SNIFF_TRAILING) return VX_MESH_STL;
     return text;
 }

@@ -203,8 +203,8 @@ int vx_declared_check(vx_mesh_format fmt, const unsigned char *data, size_t n, u
 uint64_t vx_declared_decode_bound(vx_mesh_format fmt, uint64_t size, const vx_mesh_declared *d);
 /* Tells the formats of mesh/declared.c by their first n bytes and their
  * size: glb ("glTF" magic), PLY ("ply" line), binary STL (80-byte header
- * and a triangle count that gives exactly size bytes, or fewer when the
- * bytes are not text), glTF JSON (a '{' first), OFF (a first word
+ * and a triangle count that gives exactly size bytes, or up to 511 fewer
+ * when the bytes are not text), glTF JSON (a '{' first), OFF (a first word
  * [prefix]OFF, or that with the first count glued to it), ASCII STL
  * ("solid" and then "facet" or "endsolid", or a first line longer than
  * the window); else vx_mesh_sniff. */

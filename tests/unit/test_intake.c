@@ -153,11 +153,17 @@ static void test_resolve(void **state)
     memcpy(stl, "\x01\x02", 2);
     assert_int_equal(vx_intake_resolve(VX_INTAKE_SNIFF, stl, sizeof stl, 134, &f, &e), 0);
     assert_int_equal(f, VX_MESH_STL);
-    /* bytes after the last triangle (the reader ignores them); too few is
-     * no STL */
+    /* bytes after the last triangle (the reader ignores them), up to 511
+     * of them by content alone (other binary files hold small numbers at
+     * offset 80 too); too few is no STL */
     f = 0;
     assert_int_equal(vx_intake_resolve(VX_INTAKE_SNIFF, stl, sizeof stl, 184, &f, &e), 0);
     assert_int_equal(f, VX_MESH_STL);
+    f = 0;
+    assert_int_equal(vx_intake_resolve(VX_INTAKE_SNIFF, stl, sizeof stl, 134 + 511, &f, &e), 0);
+    assert_int_equal(f, VX_MESH_STL);
+    assert_int_equal(vx_intake_resolve(VX_INTAKE_SNIFF, stl, sizeof stl, 134 + 512, &f, &e), -1);
+    assert_int_equal(resolve(VX_INTAKE_STL, stl, sizeof stl, &e), VX_MESH_STL);
     assert_int_equal(vx_intake_resolve(VX_INTAKE_SNIFF, stl, 100, 133, &f, &e), -1);
     /* an ASCII STL whose solid name runs past the sniffed bytes */
     char longname[512];
