@@ -92,6 +92,10 @@ static int blank(unsigned char c)
 
 /* ---- STL ------------------------------------------------------------- */
 
+/* Bytes after a binary STL's last triangle that the sniff takes (a
+ * declared STL may have any number). */
+#define STL_SNIFF_TRAILING 512
+
 /* The shortest ASCII facet the STL reader takes ("facet vertex 0 0 0 ..."). */
 #define STL_ASCII_MIN_FACET 32
 
@@ -117,7 +121,10 @@ static int check_stl(const unsigned char *p, size_t n, uint64_t size, vx_mesh_de
 {
     if (n >= 84) {
         uint64_t count = le32(p + 80);
-        if (84 + 50 * count == size) {
+        /* An exact size is binary whatever the header says; bytes after
+         * the last triangle (some exporters pad or append) are ignored
+         * unless the file reads as ASCII. */
+        if (84 + 50 * count == size || (84 + 50 * count < size && !ascii_stl(p, n))) {
             d->triangles = d->faces = count;
             d->vertices = d->indices = 3 * count;
             d->exact = 1;
@@ -126,7 +133,7 @@ static int check_stl(const unsigned char *p, size_t n, uint64_t size, vx_mesh_de
         if (!ascii_stl(p, n))
             return corrupt(err, VX_MESH_STL,
                            "the binary header declares %llu triangles (%llu bytes) but the file "
-                           "has %llu bytes",
+                           "has only %llu bytes",
                            (unsigned long long)count, (unsigned long long)(84 + 50 * count),
                            (unsigned long long)size);
     } else if (!ascii_stl(p, n)) {
@@ -224,17 +231,33 @@ static size_t off_word(const unsigned char *p, size_t n, size_t i)
     return i;
 }
 
+/* Where the header word [i, j) ends: past its "OFF" when it is a prefix
+ * of at most 6 letters ([ST][C][N][4][n]) and OFF, or that followed by
+ * digits: the first count with no blank before it, as ModelNet's files
+ * write it ("OFF490 518 0"); 0 when it is no OFF word. off.c reads it so. */
+static size_t off_magic(const unsigned char *p, size_t i, size_t j)
+{
+    for (size_t k = i; k + 3 <= j && k <= i + 6; k++) {
+        if (memcmp(p + k, "OFF", 3)) continue;
+        for (size_t m = k + 3; m < j; m++)
+            if (p[m] < '0' || p[m] > '9') return 0;
+        return k + 3;
+    }
+    return 0;
+}
+
 static int check_off(const unsigned char *p, size_t n, uint64_t size, vx_mesh_declared *d,
                      vx_err *err)
 {
     const vx_mesh_format F = VX_MESH_OFF;
-    size_t i = off_skip(p, n, 0), j = off_word(p, n, i);
-    if (j - i < 3 || memcmp(p + j - 3, "OFF", 3)) {
+    size_t i = off_skip(p, n, 0), j = off_word(p, n, i), w = off_magic(p, i, j);
+    if (!w) {
         if (j == n && n < size) return 1;
         return corrupt(err, F, "the first word is not OFF");
     }
     uint64_t c[2];
-    if (memchr(p + i, 'n', j - i - 3)) { /* nOFF: the dimension first (off.c reads it) */
+    j = w;
+    if (memchr(p + i, 'n', w - i - 3)) { /* nOFF: the dimension first (off.c reads it) */
         i = off_skip(p, n, j);
         j = off_word(p, n, i);
         if (j == n && n < size) return 1;
@@ -701,17 +724,26 @@ vx_mesh_format vx_mesh_sniff_sized(const unsigned char *p, size_t n, uint64_t si
         i++;
     if (i < n && p[i] == '{') return VX_MESH_GLTF;
     size_t j = off_word(p, n, i);
-    if (j - i >= 3 && j - i <= 8 && !memcmp(p + j - 3, "OFF", 3) && (j < n || n == size))
-        return VX_MESH_OFF;
+    if (j - i <= 18 && off_magic(p, i, j) && (j < n || n == size)) return VX_MESH_OFF;
     /* A binary STL whose header starts with "solid" but whose size does
      * not match its count: the reader says what is wrong. */
     if (solid_first(p, n) && n >= 84 && !ascii_stl(p, n)) return VX_MESH_STL;
     if (ascii_stl(p, n)) {
-        /* "solid" alone could start other text: look for a facet. */
+        /* "solid" alone could start other text: look for a facet, unless
+         * the first line (the solid's name) runs past the window. */
         const char *s = (const char *)p;
-        for (size_t k = i; k + 8 <= n; k++)
-            if (!strncasecmp(s + k, "facet", 5) || !strncasecmp(s + k, "endsolid", 8))
+        for (size_t k = i; k + 5 <= n; k++)
+            if (!strncasecmp(s + k, "facet", 5) ||
+                (k + 8 <= n && !strncasecmp(s + k, "endsolid", 8)))
                 return VX_MESH_STL;
+        if (n < size && !memchr(p + i, '\n', n - i)) return VX_MESH_STL;
     }
-    return vx_mesh_sniff(p, n);
+    vx_mesh_format text = vx_mesh_sniff(p, n);
+    /* Binary data, not Draco: a binary STL with bytes after its last
+     * triangle (vx_declared_check reads it so), fewer than a sector's
+     * worth when only the bytes tell: other binary files (FBX, .blend)
+     * hold small counts at offset 80 too, which any size would take. */
+    uint64_t stl_end = n >= 84 ? 84 + 50 * (uint64_t)le32(p + 80) : UINT64_MAX;
+    if (!text && stl_end < size && size - stl_end < STL_SNIFF_TRAILING) return VX_MESH_STL;
+    return text;
 }

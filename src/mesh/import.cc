@@ -167,11 +167,12 @@ vx_mesh *to_mesh(Gather &g)
  * the daemon (and fuzz_stl ran a leak scan per input: 100 inputs/s). STL
  * is read here: binary (the 84-byte header, then 50 bytes a triangle: a
  * normal, three vertices, an attribute word; vx_declared_check holds the
- * count to the size) or ASCII (`solid` NAME, then per facet `facet normal
- * x y z` `outer loop` three `vertex x y z` `endloop` `endfacet`, ended by
+ * count to the size, bytes after the last triangle being ignored) or ASCII (`solid` NAME, then per
+ * facet `facet normal x y z` `outer loop` three `vertex x y z` `endloop` `endfacet`, ended by
  * `endsolid` (or the end of the file); several solids may follow each
  * other; keywords in any case, as exporters write them, after an optional
- * UTF-8 byte order mark). Normals are ignored;
+ * UTF-8 byte order mark). Normals are ignored, so they may be any three
+ * tokens (MSVC's printf wrote NaN as -1.#IND00);
  * corners are welded by position (weld). */
 
 /* A whitespace-separated token reader over the file. */
@@ -202,6 +203,13 @@ struct Tokens {
         const char *s;
         size_t len;
         return next(&s, &len) && word_is(s, len, word);
+    }
+    /* Skips one token; false at the end. */
+    bool any()
+    {
+        const char *s;
+        size_t len;
+        return next(&s, &len);
     }
     bool number(double *v)
     {
@@ -246,7 +254,8 @@ int stl_triangle(Gather &g, const double c[9])
     return 0;
 }
 
-/* vx_declared_check held 84 + 50 * count to the size (d.exact). */
+/* vx_declared_check held 84 + 50 * count to the size (d.exact); bytes
+ * after the last triangle are not read. */
 int stl_binary(Gather &g, const unsigned char *data)
 {
     uint32_t count = uint32_t(data[80]) | uint32_t(data[81]) << 8 | uint32_t(data[82]) << 16 |
@@ -290,9 +299,9 @@ int stl_ascii(Gather &g, const unsigned char *data, size_t n)
             }
             if (!Tokens::word_is(s, len, "facet"))
                 return stl_fail(g, "expected facet or endsolid", at);
-            double nrm[3], c[9];
-            if (!t.is("normal") || !t.number(&nrm[0]) || !t.number(&nrm[1]) || !t.number(&nrm[2]) ||
-                !t.is("outer") || !t.is("loop"))
+            double c[9];
+            if (!t.is("normal") || !t.any() || !t.any() || !t.any() || !t.is("outer") ||
+                !t.is("loop"))
                 return stl_fail(g, "a facet without its normal and outer loop", at);
             for (int v = 0; v < 3; v++)
                 if (!t.is("vertex") || !t.number(&c[3 * v]) || !t.number(&c[3 * v + 1]) ||

@@ -203,9 +203,11 @@ int vx_declared_check(vx_mesh_format fmt, const unsigned char *data, size_t n, u
 uint64_t vx_declared_decode_bound(vx_mesh_format fmt, uint64_t size, const vx_mesh_declared *d);
 /* Tells the formats of mesh/declared.c by their first n bytes and their
  * size: glb ("glTF" magic), PLY ("ply" line), binary STL (80-byte header
- * and a triangle count that gives exactly size bytes), glTF JSON (a '{'
- * first), OFF (a first word ending in OFF), ASCII STL ("solid" and then
- * "facet" or "endsolid"); else vx_mesh_sniff. */
+ * and a triangle count that gives exactly size bytes, or up to 511 fewer
+ * when the bytes are not text), glTF JSON (a '{' first), OFF (a first word
+ * [prefix]OFF, or that with the first count glued to it), ASCII STL
+ * ("solid" and then "facet" or "endsolid", or a first line longer than
+ * the window); else vx_mesh_sniff. */
 vx_mesh_format vx_mesh_sniff_sized(const unsigned char *head, size_t n, uint64_t size);
 
 /* Reads an STL, PLY, glTF, glb or OFF file (mesh/import.cc: PLY and OFF

@@ -387,12 +387,15 @@ static int stmt_f(obj_reader *r, char *p, const char *end)
 }
 
 /* Statements that are valid OBJ but carry nothing the renderer uses:
- * grouping, materials, free-form geometry, display attributes. */
+ * grouping, materials and texture maps, free-form geometry (and the
+ * superseded Bezier and Cardinal patch statements of the 2.x spec),
+ * display attributes, the shell command `csh` (never run). */
 static const char *const obj_ignored[] = {
-    "o",        "g",        "s",    "usemtl",     "mtllib",    "l",     "p",     "vp",
-    "cstype",   "deg",      "bmat", "step",       "curv",      "curv2", "surf",  "parm",
-    "trim",     "hole",     "scrv", "sp",         "end",       "con",   "mg",    "bevel",
-    "c_interp", "d_interp", "lod",  "shadow_obj", "trace_obj", "ctech", "stech", NULL};
+    "o",     "g",     "s",        "usemtl",   "mtllib", "maplib",     "usemap",    "l",
+    "p",     "vp",    "cstype",   "deg",      "bmat",   "step",       "curv",      "curv2",
+    "surf",  "parm",  "trim",     "hole",     "scrv",   "sp",         "end",       "con",
+    "mg",    "bevel", "c_interp", "d_interp", "lod",    "shadow_obj", "trace_obj", "ctech",
+    "stech", "csh",   "bsp",      "bzp",      "cdc",    "cdp",        "res",       NULL};
 
 static int obj_line(obj_reader *r, char *p, char *end)
 {
@@ -424,6 +427,9 @@ static int obj_line(obj_reader *r, char *p, char *end)
     }
     for (size_t i = 0; obj_ignored[i]; i++)
         if (strlen(obj_ignored[i]) == klen && memcmp(obj_ignored[i], k, klen) == 0) return 0;
+    if (klen == 4 && memcmp(k, "call", 4) == 0)
+        return obj_fail(r, VX_EINVAL, "obj_junk",
+                        "'call' (the statements of another file) is not read: upload one file");
     return obj_fail(r, VX_EINVAL, "obj_junk", "unknown statement '%.*s'",
                     (int)(klen > 40 ? 40 : klen), k);
 }

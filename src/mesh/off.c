@@ -4,7 +4,8 @@
  * a valid header and garbage face lines, so OFF is read here: line by
  * line, '#' comments dropped, the header word (OFF, COFF, NOFF, CNOFF,
  * STOFF, 4OFF: homogeneous x y z w; nOFF: a dimension, 3 only, before the
- * counts), the vertex and face counts (checked against the size first,
+ * counts; the first count may follow the word without a blank, as in
+ * ModelNet's "OFF490 518 0"), the vertex and face counts (checked against the size first,
  * vx_declared_check), then per vertex line its first three numbers (4OFF:
  * four, divided by w) and per face line its size and indices
  * (colours after them are ignored), and nothing but comments after the
@@ -98,10 +99,18 @@ static int read_header(off_in *in, unsigned long long c[2], int *hom, vx_err *er
     char *w = s;
     while (*s && !blank(*s))
         s++;
-    size_t wl = (size_t)(s - w);
-    if (wl < 3 || strncmp(s - 3, "OFF", 3)) return fail(err, in, "the first word is not OFF");
-    *hom = memchr(w, '4', wl - 3) != NULL;
-    if (memchr(w, 'n', wl - 3)) {
+    /* [prefix]OFF, or that with the first count glued to it (ModelNet's
+     * "OFF490 518 0"), as vx_declared_check reads it */
+    char *off = NULL;
+    for (char *k = w; !off && k + 3 <= s && k <= w + 6; k++)
+        if (!strncmp(k, "OFF", 3)) off = k;
+    for (char *k = off ? off + 3 : s; k < s; k++)
+        if (*k < '0' || *k > '9') off = NULL;
+    if (!off) return fail(err, in, "the first word is not OFF");
+    size_t wl = (size_t)(off - w); /* the prefix */
+    s = off + 3;
+    *hom = memchr(w, '4', wl) != NULL;
+    if (memchr(w, 'n', wl)) {
         unsigned long long dim;
         if (header_uint(in, &s, &dim)) return fail(err, in, "nOFF without its dimension");
         if (dim != 3) {

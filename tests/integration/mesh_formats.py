@@ -9,7 +9,8 @@ cube_bin.ply (little endian), cube_be.ply, cube_ascii.ply (quads: 6 faces),
 cube.gltf (embedded data: URI buffer), cube.glb (a node translating by
 (10, 20, 30) and scaling by 2), cube.off (quads), variants exporters write
 (cube_upper.stl, cube_bom.stl, cube_latin1.obj, cube_cr.obj, cube_rgba.obj,
-cube_long.off, cube_4.off, cube_n.off, cube_deep.gltf), instances.glb (200000 nodes), primitives.glb (40000
+cube_long.off, cube_4.off, cube_n.off, cube_deep.gltf, cube_trailing.stl,
+cube_trailing_solid.stl, cube_ind.stl, cube_glued.off, cube_maplib.obj), instances.glb (200000 nodes), primitives.glb (40000
 primitives over one accessor of 400000 vertices), and malformed ones.
 Standard library only."""
 import base64
@@ -204,6 +205,17 @@ def main():
         .replace(b"\n0 0 1\n", b"\n0 0 2 2\n").replace(b"\n1 0 1\n", b"\n2 0 2 2\n")
         .replace(b"\n0 1 1\n", b"\n0 2 2 2\n"),
         "cube_n.off": off().replace(b"OFF\n", b"nOFF\n3\n"),
+        # binary STL with bytes after the last triangle (some exporters pad
+        # or append), with a "solid" header too; ASCII STL whose normals
+        # are MSVC's NaN (-1.#IND00) and whose name runs past the 512
+        # bytes the sniff sees; ModelNet's OFF header ("OFF8 6 0"); OBJ
+        # with the spec's texture map, shell and old patch statements
+        "cube_trailing.stl": stl_binary(b"exported by a CAD tool") + b"\0" * 7,
+        "cube_trailing_solid.stl": stl_binary() + b"\0\0\x01",
+        "cube_ind.stl": stl_ascii().replace(b"solid cube\n", b"solid " + b"c" * 600 + b"\n")
+        .replace(b"facet normal 0 0 0", b"facet normal -1.#IND00 -1.#IND00 -1.#IND00"),
+        "cube_glued.off": off().replace(b"OFF\n# a cube\n", b"OFF"),
+        "cube_maplib.obj": obj_quads(b"maplib a.map\nusemap wood\ncsh -echo\nbzp 1 2\nres 4 4\n"),
         "cube_deep.gltf": gltf_chain(200),
         "instances.glb": glb_instances(200000),
         "primitives.glb": glb_primitives(400000, 40000),
@@ -241,6 +253,8 @@ def main():
         "short.ply": ply("ascii", Q, nverts=7),
         "trailing.ply": ply("binary_little_endian", T) + b"\x01\x02\x03\x04",
         "cycle.glb": glb(node={"mesh": 0, "children": [0]}),
+        "call.obj": obj_quads(b"call other.obj\n"),
+        "trailing_short.stl": stl_binary()[:-1],
     }
     for name, data in files.items():
         with open(os.path.join(d, name), "wb") as f:

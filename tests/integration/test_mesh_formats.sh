@@ -62,6 +62,28 @@ cube "$F/cube_4.off" model/x-off off 6
 cube "$F/cube_4.off" "" off 6
 cube "$F/cube_n.off" model/x-off off 6
 cube "$F/cube_deep.gltf" model/gltf+json gltf 0
+# A binary STL with bytes after its last triangle (they are ignored; it
+# was 400 declared and 415 sniffed), its header "solid" too; ASCII STL
+# normals that are no numbers (not read) and a solid name longer than the
+# sniffed bytes (taken for OBJ); ModelNet's "OFF8 6 0"; OBJ's maplib,
+# usemap, csh and old patch statements (obj_junk).
+cube "$F/cube_trailing.stl" model/stl stl 0
+cube "$F/cube_trailing.stl" "" stl 0
+cube "$F/cube_trailing_solid.stl" model/stl stl 0
+cube "$F/cube_trailing_solid.stl" application/octet-stream stl 0
+cube "$F/cube_ind.stl" model/stl stl 0
+cube "$F/cube_ind.stl" "" stl 0
+cube "$F/cube_glued.off" model/x-off off 6
+cube "$F/cube_glued.off" "" off 6
+cube "$F/cube_maplib.obj" model/obj obj 6
+run_job voxelize "$MESH_ID" '{"resolution":8,"format":"summary"}'
+job_ok "voxelize the OBJ with maplib"
+check "maplib OBJ: 512 voxels in 8^3" jq -e '.stats.voxels_inside == 512' "$TMP/job.json"
+upload "$F/cube_trailing.stl" application/octet-stream
+TRAILING_ID=$MESH_ID
+run_job voxelize "$TRAILING_ID" '{"resolution":8,"format":"summary"}'
+job_ok "voxelize the STL with trailing bytes"
+check "trailing-bytes STL: 512 voxels in 8^3" jq -e '.stats.voxels_inside == 512' "$TMP/job.json"
 run_job voxelize "$LATIN1_ID" '{"resolution":8,"format":"summary"}'
 job_ok "voxelize the OBJ with Latin-1 names"
 check "Latin-1 OBJ: 512 voxels in 8^3" jq -e '.stats.voxels_inside == 512' "$TMP/job.json"
@@ -98,6 +120,8 @@ expect_error "an OFF of edges only" 422 off_no_faces
 check "edges only: the message says why" jq -e '.error.message | test("point or an edge")' "$BODY"
 bad external.gltf model/gltf+json gltf_corrupt "external file"
 bad cycle.glb model/gltf-binary gltf_corrupt "reached twice"
+bad call.obj model/obj obj_junk "'call'"
+bad trailing_short.stl model/stl stl_corrupt "has only 683 bytes"
 bad too_deep.gltf model/gltf+json gltf_corrupt "nested more than 256 deep"
 bad draco.gltf model/gltf+json gltf_corrupt "requires KHR_draco_mesh_compression"
 bad short_matrix.gltf model/gltf+json gltf_corrupt "matrix is not 16"

@@ -153,7 +153,30 @@ static void test_resolve(void **state)
     memcpy(stl, "\x01\x02", 2);
     assert_int_equal(vx_intake_resolve(VX_INTAKE_SNIFF, stl, sizeof stl, 134, &f, &e), 0);
     assert_int_equal(f, VX_MESH_STL);
-    assert_int_equal(vx_intake_resolve(VX_INTAKE_SNIFF, stl, sizeof stl, 184, &f, &e), -1);
+    /* bytes after the last triangle (the reader ignores them), up to 511
+     * of them by content alone (other binary files hold small numbers at
+     * offset 80 too); too few is no STL */
+    f = 0;
+    assert_int_equal(vx_intake_resolve(VX_INTAKE_SNIFF, stl, sizeof stl, 184, &f, &e), 0);
+    assert_int_equal(f, VX_MESH_STL);
+    f = 0;
+    assert_int_equal(vx_intake_resolve(VX_INTAKE_SNIFF, stl, sizeof stl, 134 + 511, &f, &e), 0);
+    assert_int_equal(f, VX_MESH_STL);
+    assert_int_equal(vx_intake_resolve(VX_INTAKE_SNIFF, stl, sizeof stl, 134 + 512, &f, &e), -1);
+    assert_int_equal(resolve(VX_INTAKE_STL, stl, sizeof stl, &e), VX_MESH_STL);
+    assert_int_equal(vx_intake_resolve(VX_INTAKE_SNIFF, stl, 100, 133, &f, &e), -1);
+    /* an ASCII STL whose solid name runs past the sniffed bytes */
+    char longname[512];
+    memset(longname, 'x', sizeof longname);
+    memcpy(longname, "solid ", 6);
+    f = 0;
+    assert_int_equal(vx_intake_resolve(VX_INTAKE_SNIFF, (const unsigned char *)longname,
+                                       sizeof longname, 4096, &f, &e),
+                     0);
+    assert_int_equal(f, VX_MESH_STL);
+    /* OFF with the first count glued to the word, as ModelNet writes it */
+    assert_int_equal(resolve(VX_INTAKE_SNIFF, HEAD("OFF3 1 0\n"), &e), VX_MESH_OFF);
+    assert_int_equal(resolve(VX_INTAKE_SNIFF, HEAD("COFF12 1 0\n"), &e), VX_MESH_OFF);
     /* ...and by Content-Type: trusted unless the bytes are another format. */
     assert_int_equal(resolve(VX_INTAKE_STL, HEAD(JUNK_HEAD), &e), VX_MESH_STL);
     assert_int_equal(resolve(VX_INTAKE_PLY, HEAD(OBJ_HEAD), &e), VX_MESH_PLY);

@@ -356,6 +356,10 @@ static void test_syntax_variants(void **state)
         "parm u 0 1\ntrim 0 1 1\nhole 0 1 1\nscrv 0 1 1\nsp 1\nend\ncon 1 0 1 1 2 0 1 1\n"
         "mg 1 0.5\nbevel off\nc_interp on\nd_interp off\nlod 1\nshadow_obj s.obj\n"
         "trace_obj t.obj\nctech cparm 1\nstech cparma 1 1\n",
+        /* the spec's texture map library, shell command and superseded
+         * patch statements (each had been obj_junk) */
+        "maplib a.map b.map\nusemap wood\ncsh -echo hi\nv 0 0 0\nv 1 0 0\nv 0 1 0\n"
+        "bzp 1 2 3 4\nbsp 1 2 3 4\ncdc 1 2 3 4\ncdp 1 2 3 4\nres 4 4\nf 1 2 3\n",
         "v 0e0 0.0 -0\nv 1e0 .0 +0\nv 0. 1.000 0E+00\nf 1 2 3\n",
     };
     for (size_t i = 0; i < sizeof texts / sizeof texts[0]; i++) {

@@ -2,9 +2,9 @@
  * leaked on every malformed ASCII file): random triangle soups written binary
  * (headers that start with "solid" too) and ASCII (tabs, CRLF, several
  * solids, names with blanks, no endsolid) read back welded, corner by
- * corner; every truncation of a binary file and a set of malformed ASCII
- * files fail with stl_corrupt; the limits hold. The sanitized build's leak
- * check covers the failures. */
+ * corner, binary files with bytes after the last triangle too; every truncation of a binary file
+ * and a set of malformed ASCII files fail with stl_corrupt; the limits hold. The sanitized build's
+ * leak check covers the failures. */
 #include <stdarg.h>
 #include <stddef.h>
 #include <stdint.h>
@@ -202,6 +202,36 @@ static void test_truncations(void **state)
     free(pool);
 }
 
+/* Bytes after the last triangle of a binary file (some exporters pad or
+ * append): the header's count is read, the rest ignored; with a "solid"
+ * header too (it had been 400 stl_corrupt, "the file has N bytes"). */
+static void test_trailing_bytes(void **state)
+{
+    (void)state;
+    static const size_t extra[] = {1, 2, 7, 49, 50, 51, 600};
+    for (size_t k = 0; k < sizeof extra / sizeof extra[0]; k++)
+        for (int solid = 0; solid < 2; solid++) {
+            size_t ntri = 1 + rnd() % 40;
+            float *pool, *c = random_soup(ntri, 3 + rnd() % 30, &pool);
+            tbuf b = write_binary(c, ntri, solid);
+            for (size_t i = 0; i < extra[k]; i++)
+                tbuf_put(&b, i % 3 ? "\0" : "x", 1);
+            vx_err err;
+            vx_mesh *m = read_buf(&b, &err);
+            if (!m) fail_msg("%zu bytes after, solid %d: %s", extra[k], solid, err.message);
+            check_soup(m, c, ntri);
+            vx_mesh_free(m);
+            /* sniffed as STL by its size too, up to 511 bytes after */
+            if (extra[k] < 512)
+                assert_int_equal(
+                    vx_mesh_sniff_sized((const unsigned char *)b.p, b.n < 512 ? b.n : 512, b.n),
+                    VX_MESH_STL);
+            free(b.p);
+            free(c);
+            free(pool);
+        }
+}
+
 static void expect(const char *text, const char *code, const char *in_message)
 {
     tbuf b = {0};
@@ -232,6 +262,9 @@ static void test_hostile(void **state)
            "stl_corrupt", "line 2");
     expect("solid x\n" F1 "endfacet\nendsolid x\ngarbage\n", "stl_corrupt", "after endsolid");
     expect("solid x\nfacet 0 0 1\n", "stl_corrupt", "normal");
+    expect("solid x\nfacet normal 0 0\nouter loop\nvertex 0 0 0\nvertex 1 0 0\nvertex 0 1 0\n"
+           "endloop\nendfacet\nendsolid\n",
+           "stl_corrupt", "normal");
     expect("solid x\nloop\n", "stl_corrupt", "facet or endsolid");
     expect("solid x\nendsolid x\n", "stl_no_faces", NULL);
     /* A missing endsolid is forgiven. */
@@ -241,6 +274,17 @@ static void test_hostile(void **state)
     vx_err err;
     vx_mesh *m = read_buf(&b, &err);
     assert_non_null(m);
+    assert_int_equal(m->nfaces, 1);
+    vx_mesh_free(m);
+    free(b.p);
+    /* Normals are not read: MSVC's printf wrote NaN as -1.#IND00, and
+     * such files were refused ("a facet without its normal"). */
+    b = (tbuf){0};
+    ok = "solid x\nfacet normal -1.#IND00 -1.#IND00 1.#QNAN0\nouter loop\nvertex 0 0 0\n"
+         "vertex 1 0 0\nvertex 0 1 0\nendloop\nendfacet\nendsolid x\n";
+    tbuf_put(&b, ok, strlen(ok));
+    m = read_buf(&b, &err);
+    if (!m) fail_msg("%s", err.message);
     assert_int_equal(m->nfaces, 1);
     vx_mesh_free(m);
     free(b.p);
@@ -263,9 +307,8 @@ static void test_hostile(void **state)
 int main(void)
 {
     const struct CMUnitTest tests[] = {
-        cmocka_unit_test(test_round_trip),
-        cmocka_unit_test(test_negative_zero),
-        cmocka_unit_test(test_truncations),
+        cmocka_unit_test(test_round_trip),  cmocka_unit_test(test_negative_zero),
+        cmocka_unit_test(test_truncations), cmocka_unit_test(test_trailing_bytes),
         cmocka_unit_test(test_hostile),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
