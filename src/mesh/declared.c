@@ -121,6 +121,10 @@ static int check_stl(const unsigned char *p, size_t n, uint64_t size, vx_mesh_de
 {
     if (n >= 84) {
         uint64_t count = le32(p + 80);
+        /* A count of 0 before whole triangles: a writer that streamed them
+         * and never filled the count in (the size tells it). */
+        if (count == 0 && size > 84 && (size - 84) % 50 == 0 && !ascii_stl(p, n))
+            count = (size - 84) / 50;
         /* An exact size is binary whatever the header says; bytes after
          * the last triangle (some exporters pad or append) are ignored
          * unless the file reads as ASCII. */

@@ -254,14 +254,13 @@ int stl_triangle(Gather &g, const double c[9])
     return 0;
 }
 
-/* vx_declared_check held 84 + 50 * count to the size (d.exact); bytes
- * after the last triangle are not read. */
-int stl_binary(Gather &g, const unsigned char *data)
+/* count: vx_declared_check's (the header's, held to the size; or the
+ * size's, where the header says 0); bytes after the last triangle are not
+ * read. */
+int stl_binary(Gather &g, const unsigned char *data, uint64_t count)
 {
-    uint32_t count = uint32_t(data[80]) | uint32_t(data[81]) << 8 | uint32_t(data[82]) << 16 |
-                     uint32_t(data[83]) << 24;
     g.pos.reserve(9 * size_t(count));
-    for (uint32_t t = 0; t < count; t++) {
+    for (uint64_t t = 0; t < count; t++) {
         const unsigned char *q = data + 84 + 50 * size_t(t) + 12; /* past the normal */
         double c[9];
         for (int k = 0; k < 9; k++) {
@@ -325,7 +324,7 @@ vx_mesh *read_stl(const unsigned char *data, size_t n, const FormatInfo *fi,
     g.fi = fi;
     g.err = err;
     /* The declared check told the two apart: an exact binary size wins. */
-    if (d.exact ? stl_binary(g, data) : stl_ascii(g, data, n)) return nullptr;
+    if (d.exact ? stl_binary(g, data, d.triangles) : stl_ascii(g, data, n)) return nullptr;
     if (g.start.empty()) {
         vx_err_set(err, VX_EUNPROC, fi->no_faces, "the %s file has no faces", fi->name);
         return nullptr;

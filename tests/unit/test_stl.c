@@ -232,6 +232,32 @@ static void test_trailing_bytes(void **state)
         }
 }
 
+/* A count of 0 before whole triangles (a writer that streamed them and
+ * never filled the count in): the size gives the count (it had been 422
+ * stl_no_faces). Not when a byte is left over: then 0 is what is meant,
+ * and the rest trailing bytes. */
+static void test_zero_count(void **state)
+{
+    (void)state;
+    for (int solid = 0; solid < 2; solid++) {
+        size_t ntri = 1 + rnd() % 40;
+        float *pool, *c = random_soup(ntri, 3 + rnd() % 30, &pool);
+        tbuf b = write_binary(c, ntri, solid);
+        memset(b.p + 80, 0, 4);
+        vx_err err;
+        vx_mesh *m = read_buf(&b, &err);
+        if (!m) fail_msg("count 0, %zu triangles, solid %d: %s", ntri, solid, err.message);
+        check_soup(m, c, ntri);
+        vx_mesh_free(m);
+        tbuf_put(&b, "x", 1);
+        assert_null(read_buf(&b, &err));
+        assert_string_equal(err.code, "stl_no_faces");
+        free(b.p);
+        free(c);
+        free(pool);
+    }
+}
+
 static void expect(const char *text, const char *code, const char *in_message)
 {
     tbuf b = {0};
@@ -309,7 +335,7 @@ int main(void)
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_round_trip),  cmocka_unit_test(test_negative_zero),
         cmocka_unit_test(test_truncations), cmocka_unit_test(test_trailing_bytes),
-        cmocka_unit_test(test_hostile),
+        cmocka_unit_test(test_zero_count),  cmocka_unit_test(test_hostile),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }
