@@ -239,7 +239,8 @@ static int render_check(void *params, const vx_limits *lim, vx_err *err)
         return bad(err, "params.%s > 1 (a turntable) needs params.camera.type orbit", "frames");
     for (int i = 0; i < p->nlights; i++) {
         const double *d = p->lights[i].direction;
-        if (!(sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]) > 0))
+        /* not the length: [1e-200, 0, 0]'s square underflows to 0 */
+        if (!(fmax(fabs(d[0]), fmax(fabs(d[1]), fabs(d[2]))) > 0))
             return vx_err_set(err, VX_EUNPROC, "invalid_params",
                               "params.lights[%d].direction must not be zero", i);
     }
@@ -471,13 +472,16 @@ static void make_camera(const rparams *p, const rstate *s, int f, vx_bl_camera *
     double fit = 2 * s->radius * 1.05;
     c->ortho = p->camera.fov == 0;
     c->fov_deg = p->camera.fov;
+    /* a fitted eye stays within 1.2e8 radii (VX_BL_MIN_FIT_FOV) */
+    if (!c->ortho && !(p->camera.distance > 0) && c->fov_deg < VX_BL_MIN_FIT_FOV)
+        c->fov_deg = VX_BL_MIN_FIT_FOV;
     double aspect = (double)p->width / p->height;
     double ow = p->camera.ortho_width > 0 ? p->camera.ortho_width : fit;
     c->ortho_height = aspect >= 1 ? ow : ow / aspect;
+    double half = c->fov_deg * M_PI / 360 * (aspect >= 1 ? 1 : aspect);
     double dist = p->camera.distance > 0 ? p->camera.distance
                   : c->ortho             ? 2 * s->P
-                                         : s->radius * 1.05 /
-                                   sin(p->camera.fov * M_PI / 360 * (aspect >= 1 ? 1 : aspect));
+                                         : s->radius * 1.05 / sin(half);
     /* Orthographic rays from farther than the fitting distance see the
      * same image: they start there (from 1e12 mesh sizes away the rays'
      * entry points would lose all precision), the depths made up for. */
@@ -585,6 +589,11 @@ static int render_frame(vx_job_run *r, const rparams *p, const rstate *s, int f,
     for (int i = 0; i < p->nlights; i++) {
         double d[3] = {p->lights[i].direction[0], p->lights[i].direction[1],
                        p->lights[i].direction[2]};
+        /* scaled to its largest component first: a tiny direction's square
+         * underflows (check: not all zero) */
+        double big = fmax(fabs(d[0]), fmax(fabs(d[1]), fabs(d[2])));
+        for (int a = 0; a < 3; a++)
+            d[a] /= big;
         vx_v3_unit(d);
         for (int a = 0; a < 3; a++) {
             lights[i].dir[a] = d[a];

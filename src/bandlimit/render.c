@@ -76,7 +76,7 @@ static inline double sample_at(const vx_bl_volume *v, const double o[3], const d
     double fr[3];
     for (int a = 0; a < 3; a++) {
         double u = (o[a] + t * d[a] - v->origin[a]) * ih;
-        u = u < 0 ? 0 : u > M - 1 ? M - 1 : u;
+        u = u > 0 ? (u < M - 1 ? u : M - 1) : 0; /* NaN: 0, never an index off the grid */
         int k = (int)u;
         k = k > M - 2 ? M - 2 : k;
         i[a] = k;
@@ -252,6 +252,9 @@ static double cast_ray(const vx_bl_volume *v, const uint8_t *skip, double iso, c
     for (int a = 0; a < 3; a++)
         o[a] = eye[a] + t0 * d[a];
     t1 -= t0;
+    /* a ray from no finite point (an eye past the doubles' range) sees
+     * nothing */
+    if (!(isfinite(o[0]) && isfinite(o[1]) && isfinite(o[2]) && isfinite(t1))) return NAN;
     double th = march(v, skip, iso, o, d, t1);
     if (isnan(th)) return NAN;
     for (int a = 0; a < 3; a++)

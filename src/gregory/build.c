@@ -389,13 +389,19 @@ fail_oom:
     return NULL;
 }
 
-/* Newell normal of face f (not normalised: its length is twice the area). */
+/* Newell normal of face f (not normalised: its length is twice the area),
+ * relative to its first vertex: the sums a + b of positions far from the
+ * origin for their size cancelled to noise (a unit quad at 1e15: vertex
+ * normals 7 degrees off, and the surface with them). */
 static void face_normal(const vx_gregory_topo *t, const double *pos, uint32_t f, double n[3])
 {
     n[0] = n[1] = n[2] = 0;
     uint32_t s = t->fstart[f], k = t->fstart[f + 1] - s;
+    const double *o = pos + 3 * t->fidx[s];
     for (uint32_t i = 0; i < k; i++) {
-        const double *a = pos + 3 * t->fidx[s + i], *b = pos + 3 * t->fidx[s + (i + 1) % k];
+        const double *A = pos + 3 * t->fidx[s + i], *B = pos + 3 * t->fidx[s + (i + 1) % k];
+        double a[3] = {A[0] - o[0], A[1] - o[1], A[2] - o[2]};
+        double b[3] = {B[0] - o[0], B[1] - o[1], B[2] - o[2]};
         n[0] += (a[1] - b[1]) * (a[2] + b[2]);
         n[1] += (a[2] - b[2]) * (a[0] + b[0]);
         n[2] += (a[0] - b[0]) * (a[1] + b[1]);

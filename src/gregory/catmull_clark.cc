@@ -43,6 +43,24 @@ Far::TopologyRefiner *refiner_new(const vx_mesh *m, vx_err *err)
     std::vector<Far::Index> idx(n);
     for (size_t i = 0; i < n; i++)
         idx[i] = (Far::Index)m->face_idx[i];
+    // OpenSubdiv refuses more than VALENCE_LIMIT faces or edges around a
+    // vertex (a boundary vertex has one edge more than faces) or vertices in
+    // a face, and says only that it failed: name the vertex or face.
+    std::vector<uint32_t> valence(m->nverts);
+    for (size_t i = 0; i < n; i++)
+        if (++valence[m->face_idx[i]] >= (uint32_t)Vtr::VALENCE_LIMIT) {
+            vx_err_set(err, VX_EUNPROC, "osd_topology",
+                       "vertex %u has %d or more faces around it: OpenSubdiv takes fewer",
+                       m->face_idx[i] + 1, Vtr::VALENCE_LIMIT);
+            return nullptr;
+        }
+    for (size_t f = 0; f < m->nfaces; f++)
+        if (sizes[f] > Vtr::VALENCE_LIMIT) {
+            vx_err_set(err, VX_EUNPROC, "osd_topology",
+                       "face %zu has %d vertices, over OpenSubdiv's limit of %d", f + 1, sizes[f],
+                       Vtr::VALENCE_LIMIT);
+            return nullptr;
+        }
     return refiner_new((int)m->nverts, (int)m->nfaces, sizes.data(), idx.data(), err);
 }
 

@@ -124,10 +124,21 @@ static int spans(const double du[3], const double dv[3], double noise, double mi
     return cross_unit(du, dv, nrm) > min_sine && su > noise && sv > noise;
 }
 
-void vx_gpatch_eval(const double *cp, double u, double v, double pos[3], double nrm[3])
+void vx_gpatch_eval(const double *cp0, double u, double v, double pos[3], double nrm[3])
 {
+    /* In coordinates relative to the patch's first point: the derivatives'
+     * rounding noise, and the bound below that tells it from a tangent,
+     * scale with the patch, not with its distance from the origin (a unit
+     * cube at 1e12 had every tangent under the bound 1e-12 x 1e12: normals
+     * of (0, 0, 1), and folded_patches counted the face looking down).
+     * Equal points stay equal, so a collapsed edge stays collapsed. */
+    double cp[3 * VX_GPATCH_POINTS];
+    for (int k = 0; k < 3 * VX_GPATCH_POINTS; k++)
+        cp[k] = cp0[k] - cp0[k % 3];
     double du[3], dv[3];
     eval_raw(cp, u, v, pos, du, dv);
+    for (int c = 0; c < 3; c++)
+        pos[c] += cp0[c];
     if (!nrm) return;
     double scale = 0;
     for (int k = 0; k < 3 * VX_GPATCH_POINTS; k++)
@@ -146,15 +157,20 @@ void vx_gpatch_eval(const double *cp, double u, double v, double pos[3], double 
     nrm[2] = 1; /* a patch collapsed to a curve or point has no normal */
 }
 
-/* The Newell normal of input face f (unnormalised), frame-0 positions. */
+/* The Newell normal of input face f (unnormalised), frame-0 positions,
+ * relative to its first vertex: the sums p + q of positions far from the
+ * origin for their size cancelled to noise (a unit quad at 1e15). */
 static void face_normal(const vx_mesh *m, size_t f, double n[3])
 {
     size_t a = m->face_start ? m->face_start[f] : 3 * f;
     size_t b = m->face_start ? m->face_start[f + 1] : 3 * f + 3;
+    const double *o = m->pos + 3 * (size_t)m->face_idx[a];
     n[0] = n[1] = n[2] = 0;
     for (size_t k = a; k < b; k++) {
-        const double *p = m->pos + 3 * (size_t)m->face_idx[k];
-        const double *q = m->pos + 3 * (size_t)m->face_idx[k + 1 < b ? k + 1 : a];
+        const double *P = m->pos + 3 * (size_t)m->face_idx[k];
+        const double *Q = m->pos + 3 * (size_t)m->face_idx[k + 1 < b ? k + 1 : a];
+        double p[3] = {P[0] - o[0], P[1] - o[1], P[2] - o[2]};
+        double q[3] = {Q[0] - o[0], Q[1] - o[1], Q[2] - o[2]};
         n[0] += (p[1] - q[1]) * (p[2] + q[2]);
         n[1] += (p[2] - q[2]) * (p[0] + q[0]);
         n[2] += (p[0] - q[0]) * (p[1] + q[1]);

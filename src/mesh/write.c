@@ -6,6 +6,7 @@
 #include "mesh/mesh.h"
 
 #include <errno.h>
+#include <math.h>
 #include <stdlib.h>
 #include <string.h>
 #include <sys/stat.h>
@@ -56,6 +57,42 @@ static int close_out(out_file *o, vx_err *err)
     return 0;
 }
 
+/* How far the mesh lies from the origin for its size: its largest
+ * coordinate magnitude over its largest bbox extent (1 when it has no
+ * extent or a coordinate is not finite). A mesh of size 1 at 1e12 printed
+ * with 9 digits or stored as floats was one point. */
+static double offset_ratio(const vx_mesh *m)
+{
+    double lo[3] = {0, 0, 0}, hi[3] = {0, 0, 0}, big = 0;
+    for (size_t i = 0; i < m->nverts; i++)
+        for (int a = 0; a < 3; a++) {
+            double x = m->pos[3 * i + (size_t)a];
+            if (i == 0 || x < lo[a]) lo[a] = x;
+            if (i == 0 || x > hi[a]) hi[a] = x;
+            if (fabs(x) > big) big = fabs(x);
+        }
+    double ext = 0;
+    for (int a = 0; a < 3; a++)
+        if (hi[a] - lo[a] > ext) ext = hi[a] - lo[a];
+    double r = big / ext;
+    return ext > 0 && isfinite(r) && r > 1 ? r : 1;
+}
+
+/* Past this offset_ratio a float (2^-24 of the coordinate) moves a vertex
+ * by over 1e-6 of the mesh's extent: PLY positions are then doubles, and
+ * OBJ coordinates get more digits than a float's 9. */
+#define FAR_RATIO (1e-6 * 16777216.0)
+
+/* Significant digits of an OBJ coordinate: 9 up to FAR_RATIO, one more
+ * for each tenfold past it (so a position keeps about as much of the
+ * extent as at FAR_RATIO), at most 17 (a double's). */
+static int obj_digits(const vx_mesh *m)
+{
+    double r = offset_ratio(m);
+    int d = r > FAR_RATIO ? 9 + (int)ceil(log10(r / FAR_RATIO)) : 9;
+    return d > 17 ? 17 : d;
+}
+
 int vx_obj_write_path(const vx_mesh *m, const vx_mesh_write_opts *o, const char *path, vx_err *err)
 {
     const float *nrm = o ? o->normals : NULL;
@@ -66,9 +103,10 @@ int vx_obj_write_path(const vx_mesh *m, const vx_mesh_write_opts *o, const char 
     FILE *f = out.f;
     errno = 0;
     if (fprintf(f, "# voxeld: %zu vertices, %zu faces\n", m->nverts, m->nfaces) < 0) goto io;
+    int dig = obj_digits(m);
     for (size_t i = 0; i < m->nverts; i++) {
         const double *p = m->pos + 3 * i;
-        if (fprintf(f, "v %.9g %.9g %.9g\n", p[0], p[1], p[2]) < 0) goto io;
+        if (fprintf(f, "v %.*g %.*g %.*g\n", dig, p[0], dig, p[1], dig, p[2]) < 0) goto io;
     }
     if (nrm)
         for (size_t i = 0; i < m->nverts; i++) {
@@ -129,6 +167,14 @@ static inline void le_f32(le_out *w, float x)
     le_u32(w, u);
 }
 
+static inline void le_f64(le_out *w, double x)
+{
+    uint64_t u;
+    memcpy(&u, &x, sizeof u);
+    le_u32(w, (uint32_t)u);
+    le_u32(w, (uint32_t)(u >> 32));
+}
+
 int vx_ply_write_path(const vx_mesh *m, const vx_mesh_write_opts *o, const char *path, vx_err *err)
 {
     const float *nrm = o ? o->normals : NULL;
@@ -139,6 +185,8 @@ int vx_ply_write_path(const vx_mesh *m, const vx_mesh_write_opts *o, const char 
     /* uchar counts are what every PLY reader expects; a face of more than
      * 255 vertices needs the wider count type. */
     int wide = maxn > 255;
+    int dbl = offset_ratio(m) > FAR_RATIO;
+    const char *ptype = dbl ? "double" : "float";
 
     le_out *w = malloc(sizeof *w);
     if (!w) return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for the PLY writer");
@@ -154,8 +202,8 @@ int vx_ply_write_path(const vx_mesh *m, const vx_mesh_write_opts *o, const char 
     errno = 0;
     if (fprintf(f,
                 "ply\nformat binary_little_endian 1.0\ncomment voxeld\n"
-                "element vertex %zu\nproperty float x\nproperty float y\nproperty float z\n",
-                m->nverts) < 0 ||
+                "element vertex %zu\nproperty %s x\nproperty %s y\nproperty %s z\n",
+                m->nverts, ptype, ptype, ptype) < 0 ||
         (nrm && fputs("property float nx\nproperty float ny\nproperty float nz\n", f) < 0) ||
         fprintf(f, "element face %zu\nproperty list %s uint vertex_indices\n", m->nfaces,
                 wide ? "uint" : "uchar") < 0 ||
@@ -163,7 +211,10 @@ int vx_ply_write_path(const vx_mesh *m, const vx_mesh_write_opts *o, const char 
         goto io;
     for (size_t i = 0; i < m->nverts && !w->failed; i++) {
         for (int a = 0; a < 3; a++)
-            le_f32(w, (float)m->pos[3 * i + a]);
+            if (dbl)
+                le_f64(w, m->pos[3 * i + a]);
+            else
+                le_f32(w, (float)m->pos[3 * i + a]);
         if (nrm)
             for (int a = 0; a < 3; a++)
                 le_f32(w, nrm[3 * i + a]);

@@ -38,6 +38,13 @@ typedef struct vx_preview_stats {
  * across the smaller image dimension; perspective views place the camera
  * so a sphere VX_PREVIEW_MARGIN times larger just fits. */
 #define VX_PREVIEW_MARGIN 1.05
+/* The narrowest perspective field of view drawn (degrees): a smaller fov
+ * (but not 0) is drawn as this one. The eye is then 1.2e8 radii away, so
+ * the perspective differs from any narrower one's by under a float's
+ * precision: the same picture (the framing fits the sphere whatever the
+ * fov). Below about 1e-13 the projection itself lost the mesh in float
+ * (an empty picture), and 1e-300 made it infinite. */
+#define VX_PREVIEW_MIN_FOV 1e-6
 /* Direction towards the key light in view space (unnormalised): from the
  * camera, slightly up and to the left. */
 #define VX_PREVIEW_LIGHT_X (-0.25)

@@ -46,7 +46,8 @@ static void camera(const vx_preview_params *p, float view[16], float proj[16])
 
     memset(proj, 0, 16 * sizeof *proj);
     if (p->fov_deg > 0) {
-        double tv = tan(0.5 * p->fov_deg * deg), th = aspect * tv;
+        double fov = p->fov_deg < VX_PREVIEW_MIN_FOV ? VX_PREVIEW_MIN_FOV : p->fov_deg;
+        double tv = tan(0.5 * fov * deg), th = aspect * tv;
         /* The narrower of the two half-angles decides: the sphere must fit
          * both ways, whatever the aspect ratio. */
         double half = atan(tv < th ? tv : th);

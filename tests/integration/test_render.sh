@@ -5,7 +5,8 @@
 # torus (spectral <= 0.06 deg for the sphere at N = 64, R = 8N, and >= 20x
 # better than central differences on the same voxels); the comparison
 # image's six labelled panels; summed meshes; turntable frames; 16-bit PNG;
-# the VDB FloatGrid; orbit cameras; params errors and limits.
+# the VDB FloatGrid; orbit cameras (far eyes, tiny fields of view); params
+# errors and limits.
 source "$(dirname "$0")/lib.sh"
 source "$(dirname "$0")/box.sh"
 # 1G: the N=64 renders need about 0.3 GB; N=256 does not fit.
@@ -219,6 +220,28 @@ tet_obj "$TMP/tinier.obj" 1e-30
 upload "$TMP/tinier.obj"
 far "a mesh of 1e-30, orthographic from 1" "$MESH_ID" '{"type":"orbit","distance":1,"fov":0}'
 check "a mesh of 1e-30 from 1e30 sizes away: in the image ($COV pixels)" test "$COV" -gt 0
+# A fitted perspective eye (distance 0) for a tiny fov: placed as for a fov
+# of 1e-6 degrees (VX_BL_MIN_FIT_FOV), the same picture. A fov of 1e-300 put
+# the eye 1e302 radii away (an empty image: the rays' entry points lost the
+# mesh), and on a mesh of 1e30 at infinity: NaN rays, read off the grid, and
+# the daemon died (SIGSEGV) on every restart until the job was dropped.
+far "torus, fitted perspective with a fov of 1e-6" "$M_torus" '{"type":"orbit","fov":1e-6}'
+NEAR=$COV
+far "torus, fitted perspective with a fov of 1e-300" "$M_torus" '{"type":"orbit","fov":1e-300}'
+check "fov 1e-300: the picture of fov 1e-6 ($COV, $NEAR pixels)" test "$COV" = "$NEAR" -a "$COV" -gt 0
+tet_obj "$TMP/huge.obj" 1e30
+upload "$TMP/huge.obj"
+far "a mesh of 1e30, fitted perspective with a fov of 1e-300" "$MESH_ID" '{"type":"orbit","azimuth":0,"elevation":0,"fov":1e-300}'
+check "a mesh of 1e30, fov 1e-300: in the image ($COV pixels)" test "$COV" -gt 0
+api GET /livez
+check "the daemon is still up after it" test "$STATUS" = 200
+# A light direction of [0, 0, 1e-200] is not zero (its length's square
+# underflows: it was 422 "must not be zero"): the light of [0, 0, 1].
+job "a light direction [0, 0, 1]" "$M_ball_a" '{"N":16,"width":32,"height":32,"lights":[{"direction":[0,0,1]}]}'
+get image "$TMP/l1.png"
+job "a light direction [0, 0, 1e-200]" "$M_ball_a" '{"N":16,"width":32,"height":32,"lights":[{"direction":[0,0,1e-200]}]}'
+get image "$TMP/l2.png"
+check "a light direction [0, 0, 1e-200]: the picture of [0, 0, 1]" cmp -s "$TMP/l1.png" "$TMP/l2.png"
 
 stop_daemon
 finish

@@ -392,6 +392,43 @@ static void test_cast_ball_and_methods(void **st)
     vx_bl_free(spec);
 }
 
+/* A camera whose eye is not a finite point (a fitted eye for a fov of
+ * 1e-300 on a mesh of 1e30 was at infinity, NaN across the view axis):
+ * every ray misses. Its NaN positions were read as grid indices off the
+ * volume (SIGSEGV). */
+static void test_cast_eye_not_finite(void **st)
+{
+    (void)st;
+    const int N = 8, R = 64, W = 8;
+    solid s;
+    float *spec = ball(R, N, N / 4.0, &s);
+    double x0[3] = {0.5 / R, 0.5 / R, 0.5 / R};
+    vx_bl_volume vm;
+    vx_err err = {0};
+    assert_int_equal(vx_bl_interp(spec, N, 4 * N, x0, 1.0, 1, 2, &vm, &err), 0);
+    assert_int_equal(vx_bl_volume_blocks(&vm, &err), 0);
+    const double eyes[][3] = {
+        {NAN, NAN, INFINITY}, {0.5, 0.5, INFINITY}, {INFINITY, 0.5, 0.5}, {NAN, 0.5, 0.5}};
+    vx_bl_hits h;
+    assert_int_equal(vx_bl_hits_alloc(&h, W, W, &err), 0);
+    for (size_t k = 0; k < sizeof eyes / sizeof eyes[0]; k++)
+        for (int ortho = 0; ortho < 2; ortho++) {
+            vx_bl_camera cam = {.eye = {eyes[k][0], eyes[k][1], eyes[k][2]},
+                                .fwd = {0, 0, -1},
+                                .right = {1, 0, 0},
+                                .up = {0, 1, 0},
+                                .ortho = ortho,
+                                .ortho_height = 0.8,
+                                .fov_deg = 1e-300};
+            assert_int_equal(vx_bl_cast(&vm, 0.5, &cam, 2, &h, &err), 0);
+            for (size_t i = 0; i < (size_t)W * W; i++)
+                assert_true(isnan(h.depth[i]));
+        }
+    vx_bl_hits_free(&h);
+    vx_bl_volume_free(&vm);
+    vx_bl_free(spec);
+}
+
 static void test_sobel3d_and_label(void **st)
 {
     /* a linear ramp f = 2 x: both operators give (2, 0, 0) away from the wrap */
@@ -453,6 +490,7 @@ int main(void)
         cmocka_unit_test(test_interp_closed_form),
         cmocka_unit_test(test_trilinear_l4_within_2_percent),
         cmocka_unit_test(test_cast_ball_and_methods),
+        cmocka_unit_test(test_cast_eye_not_finite),
         cmocka_unit_test(test_sobel3d_and_label),
         cmocka_unit_test(test_sample_bits),
     };

@@ -168,6 +168,39 @@ static void test_open_and_ngons(void **state)
     vx_mesh_free(p);
 }
 
+/* A vertex with more faces around it than OpenSubdiv takes (65535): the
+ * error names it (it was "OpenSubdiv cannot take the mesh's topology (70000
+ * faces)"). A fan of 70,000 triangles round its centre. */
+static void test_valence_limit(void **state)
+{
+    (void)state;
+    enum { K = 70000 };
+    double *pos = malloc(3 * (K + 1) * sizeof *pos);
+    uint32_t *sizes = malloc(K * sizeof *sizes), *idx = malloc(3 * K * sizeof *idx);
+    pos[0] = pos[1] = pos[2] = 0;
+    for (uint32_t i = 0; i < K; i++) {
+        pos[3 * (i + 1)] = cos(2 * M_PI * i / K);
+        pos[3 * (i + 1) + 1] = sin(2 * M_PI * i / K);
+        pos[3 * (i + 1) + 2] = 0;
+        sizes[i] = 3;
+        idx[3 * i] = 0;
+        idx[3 * i + 1] = 1 + i;
+        idx[3 * i + 2] = 1 + (i + 1) % K;
+    }
+    vx_mesh *m = shape_poly_mesh(K + 1, pos, K, sizes, idx);
+    vx_err err = {0};
+    vx_mesh *o = NULL;
+    float *n = NULL;
+    assert_int_equal(vx_cc_refine(m, 1, 0, &o, &n, &err), -1);
+    assert_string_equal(err.code, "osd_topology");
+    print_message("%s\n", err.message);
+    assert_non_null(strstr(err.message, "vertex 1 has 65535 or more faces"));
+    vx_mesh_free(m);
+    free(pos);
+    free(sizes);
+    free(idx);
+}
+
 static void test_real_meshes(void **state)
 {
     (void)state;
@@ -186,10 +219,9 @@ static void test_real_meshes(void **state)
 int main(void)
 {
     const struct CMUnitTest tests[] = {
-        cmocka_unit_test(test_cube),
-        cmocka_unit_test(test_limit),
-        cmocka_unit_test(test_open_and_ngons),
-        cmocka_unit_test(test_real_meshes),
+        cmocka_unit_test(test_cube),           cmocka_unit_test(test_limit),
+        cmocka_unit_test(test_open_and_ngons), cmocka_unit_test(test_real_meshes),
+        cmocka_unit_test(test_valence_limit),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

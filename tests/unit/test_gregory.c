@@ -476,6 +476,60 @@ static void test_counts_and_weld(void **state)
     vx_mesh_free(m);
 }
 
+/* The interpolate construction and the patch normals do not depend on
+ * where the mesh is: the twisted prism moved 1e12 away has the same
+ * patches up to that shift and the same normals (to its coordinates'
+ * rounding), and none folded, nor at 1e15.
+ * Newell's face normals summed positions (p + q, 2e15 for a unit face:
+ * vertex normals off by degrees), and vx_gpatch_eval took tangents under
+ * 1e-12 of the coordinates for noise (a unit patch at 1e12: the normal
+ * (0, 0, 1), so folded_patches counted every face looking down). */
+static void test_far_from_origin(void **state)
+{
+    (void)state;
+    vx_mesh *m = ngon_mesh();
+    vx_gpatch_set *s = build(m, NULL);
+    assert_int_equal(vx_gpatch_folded(s, m), 0);
+    const double shifts[] = {1e12, 1e15};
+    for (int k = 0; k < 2; k++) {
+        vx_mesh *f = ngon_mesh();
+        for (size_t i = 0; i < 3 * f->nverts; i++)
+            f->pos[i] += shifts[k];
+        vx_err err = {0};
+        assert_int_equal(vx_mesh_analyze(f, &err), 0);
+        vx_gpatch_set *t = build(f, NULL);
+        assert_int_equal(t->npatches, s->npatches);
+        size_t folded = vx_gpatch_folded(t, f);
+        double worst = 0, moved = 0;
+        for (size_t p = 0; p < s->npatches; p++) {
+            const double *a = s->cp + p * VX_GPATCH_POINTS * 3,
+                         *b = t->cp + p * VX_GPATCH_POINTS * 3;
+            for (int q = 0; q < 3 * VX_GPATCH_POINTS; q++)
+                moved = fmax(moved, fabs(b[q] - shifts[k] - a[q]));
+            for (int iu = 0; iu <= 4; iu++)
+                for (int iv = 0; iv <= 4; iv++) {
+                    double pa[3], na[3], pb[3], nb[3];
+                    vx_gpatch_eval(a, iu / 4.0, iv / 4.0, pa, na);
+                    vx_gpatch_eval(b, iu / 4.0, iv / 4.0, pb, nb);
+                    double d = na[0] * nb[0] + na[1] * nb[1] + na[2] * nb[2];
+                    worst = fmax(worst, acos(fmin(1, d)) * 180 / M_PI);
+                }
+        }
+        printf("  shifted %g: control points within %.3g, normals within %.3g deg, %zu folded\n",
+               shifts[k], moved, worst, folded);
+        assert_int_equal(folded, 0);
+        /* The coordinates themselves round, by 1e-4 at 1e12 (normals
+         * within 0.06 deg) and 0.125 at 1e15, 6% of the prism: only its
+         * patches' orientation (none folded) is kept there. */
+        assert_true(moved < (k ? 1.0 : 1e-3));
+        if (k == 0) assert_true(worst < 0.5);
+        vx_gpatch_set_free(t);
+        vx_mesh_free(f);
+    }
+    vx_gpatch_set_free(s);
+    vx_mesh_free(m);
+}
+
 /* Grid vertices of the tessellator's engine against vx_gpatch_eval. */
 static void check_engine(const vx_gpatch_set *s, const uint32_t *nd, double dg, double ptol,
                          double ntol_deg, size_t stride, vx_gtess_engine engine)
@@ -1243,6 +1297,7 @@ int main(void)
         cmocka_unit_test(test_counts_and_weld),   cmocka_unit_test(test_frames_reuse_topology),
         cmocka_unit_test(test_from_bezier_small), cmocka_unit_test(test_max_edge),
         cmocka_unit_test(test_max_edge_strip),    cmocka_unit_test(test_params),
+        cmocka_unit_test(test_far_from_origin),
     };
     const struct CMUnitTest gl[] = {
         cmocka_unit_test(test_gpu_matches_cpu), cmocka_unit_test(test_gpu_mixed_divisions),

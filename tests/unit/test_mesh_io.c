@@ -365,6 +365,52 @@ static void test_ply(void **state)
     vx_mesh_free(m);
 }
 
+/* A mesh far from the origin for its size: OBJ and PLY keep it. A unit
+ * cube at 1e12 was written as eight copies of "1e+12" (OBJ's 9 digits) and
+ * as floats (PLY: 1e12 rounds to 65536). Near the origin the files stay as
+ * they were (9 digits, float; check_ply above). */
+static void test_far_from_origin(void **state)
+{
+    (void)state;
+    static const uint32_t sizes[] = {4, 4, 4, 4, 4, 4};
+    static const uint32_t idx[] = {0, 1, 3, 2, 4, 6, 7, 5, 0, 4, 5, 1,
+                                   2, 3, 7, 6, 0, 2, 6, 4, 1, 5, 7, 3};
+    const double shifts[] = {10, 1e6, 1e12, -3e15};
+    for (int k = 0; k < 4; k++) {
+        double pos[24];
+        for (int v = 0; v < 8; v++)
+            for (int a = 0; a < 3; a++)
+                pos[3 * v + a] = shifts[k] + ((v >> (2 - a)) & 1) + 0.1 * a;
+        vx_mesh *m = make_mesh(8, pos, 6, sizes, idx);
+        vx_err err = {0};
+        assert_int_equal(vx_obj_write_path(m, NULL, tmp("far.obj"), &err), 0);
+        assert_int_equal(vx_ply_write_path(m, NULL, tmp("far.ply"), &err), 0);
+        vx_mesh *o = vx_obj_read_path(tmp("far.obj"), NULL, &err);
+        vx_mesh *p = vx_mesh_read_path(tmp("far.ply"), NULL, &err);
+        assert_non_null(o);
+        assert_non_null(p);
+        double eo = 0, ep = 0;
+        for (int i = 0; i < 24; i++) {
+            eo = fmax(eo, fabs(o->pos[i] - pos[i]));
+            ep = fmax(ep, fabs(p->pos[i] - pos[i]));
+        }
+        size_t n;
+        char *text = (char *)slurp(tmp("far.ply"), &n);
+        int dbl = strstr(text, "property double x\n") != NULL;
+        free(text);
+        printf("  cube at %g: OBJ within %.3g, PLY (%s) within %.3g\n", shifts[k], eo,
+               dbl ? "double" : "float", ep);
+        /* a unit cube: within 1e-6 of its size, or the double's own rounding */
+        double tol = fmax(1e-6, 4 * fabs(shifts[k]) * 0x1p-52);
+        assert_true(eo <= tol);
+        assert_true(ep <= tol);
+        assert_int_equal(dbl, k > 0); /* floats only for the cube at 10 */
+        vx_mesh_free(o);
+        vx_mesh_free(p);
+        vx_mesh_free(m);
+    }
+}
+
 /* --- Draco */
 
 static int cmp_tri(const void *a, const void *b)
@@ -706,6 +752,7 @@ int main(void)
         cmocka_unit_test(test_draco_limits),     cmocka_unit_test(test_draco_point_cloud),
         cmocka_unit_test(test_draco_truncated),  cmocka_unit_test(test_draco_garbage),
         cmocka_unit_test(test_draco_mutations),  cmocka_unit_test(test_orientation),
+        cmocka_unit_test(test_far_from_origin),
     };
     return cmocka_run_group_tests(tests, setup_dir, remove_dir);
 }

@@ -570,6 +570,33 @@ static void test_tiny_fov(void **state)
     vx_mesh_free(m);
 }
 
+/* Fields of view under VX_PREVIEW_MIN_FOV draw as that one: the same
+ * picture, bit for bit (the eye 1.2e8 radii away is orthographic to float
+ * precision). A fov of 1e-15 put the projection's depth out of range and
+ * 1e-300 made it infinite: an empty picture. */
+static void test_fov_under_min(void **state)
+{
+    (void)state;
+    vx_mesh *m = grid(8, 8);
+    vx_preview_params p = params(64, 64, 30, 20, VX_PREVIEW_MIN_FOV);
+    uint8_t *a = render(m, &p, NULL);
+    box ba = bounds(a, &p);
+    assert_true(ba.covered > 64 * 64 / 10);
+    const double tiny[] = {1e-9, 1e-15, 1e-40, 1e-300, 5e-324};
+    for (size_t k = 0; k < sizeof tiny / sizeof tiny[0]; k++) {
+        vx_preview_params q = params(64, 64, 30, 20, tiny[k]);
+        uint8_t *b = render(m, &q, NULL);
+        box bb = bounds(b, &q);
+        printf("  fov %g: covered %llu (%g: %llu)\n", tiny[k], (unsigned long long)bb.covered,
+               VX_PREVIEW_MIN_FOV, (unsigned long long)ba.covered);
+        assert_int_equal(bb.covered, ba.covered);
+        assert_memory_equal(a, b, 64 * 64 * 4);
+        free(b);
+    }
+    free(a);
+    vx_mesh_free(m);
+}
+
 /* ---- PNG ------------------------------------------------------------------ */
 
 /* Reads a PNG with libpng's classic API, 16-bit samples in host order. */
@@ -673,6 +700,7 @@ int main(void)
         cmocka_unit_test(test_empty_and_bad),
         cmocka_unit_test(test_million_triangles),
         cmocka_unit_test(test_tiny_fov),
+        cmocka_unit_test(test_fov_under_min),
         cmocka_unit_test(test_bands_and_stop),
         cmocka_unit_test(test_png_roundtrip),
     };
