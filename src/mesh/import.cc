@@ -659,6 +659,24 @@ int walk(Gather &g, const tinygltf::Model &mo, int ni, const Mat &parent, int de
     return 0;
 }
 
+/* A file without scenes (the spec allows one, "a library"): every root
+ * node (one no node names as a child) as the scene's nodes would be, and,
+ * with no nodes at all, every mesh as it is. */
+int walk_library(Gather &g, const tinygltf::Model &mo)
+{
+    std::vector<char> child(mo.nodes.size(), 0), seen(mo.nodes.size(), 0);
+    for (const auto &n : mo.nodes)
+        for (int c : n.children)
+            if (c >= 0 && size_t(c) < child.size()) child[size_t(c)] = 1;
+    for (size_t i = 0; i < mo.nodes.size(); i++)
+        if (!child[i] && walk(g, mo, int(i), Mat::identity(), 0, seen)) return -1;
+    if (mo.nodes.empty())
+        for (size_t mi = 0; mi < mo.meshes.size(); mi++)
+            for (const auto &pr : mo.meshes[mi].primitives)
+                if (add_primitive(g, mo, pr, Mat::identity(), int(mi))) return -1;
+    return 0;
+}
+
 /* A tinygltf message as ASCII without controls and on one line, so that it
  * can go into a JSON answer whatever bytes the file put into it. */
 void ascii_only(const std::string &in, char *out, size_t n)
@@ -702,8 +720,10 @@ vx_mesh *read_gltf(const unsigned char *data, size_t n, const FormatInfo *fi, vx
                            sizeof why);
             } else {
                 int si = mo.defaultScene >= 0 ? mo.defaultScene : 0;
-                if (size_t(si) >= mo.scenes.size()) {
-                    rc = 0; /* no scene: nothing to show, no faces */
+                if (mo.scenes.empty()) {
+                    rc = walk_library(g, mo);
+                } else if (size_t(si) >= mo.scenes.size()) {
+                    rc = 0; /* a scene named that is not there: no faces */
                 } else {
                     std::vector<char> seen(mo.nodes.size(), 0);
                     rc = 0;

@@ -184,6 +184,31 @@ static void test_gltf_cube(void **state)
     }
 }
 
+/* No scenes (a library, which the spec allows): the root nodes, each
+ * child once through its parent; with no nodes, the meshes as they are. It
+ * had been no faces (422 gltf_no_faces). */
+static void test_gltf_no_scenes(void **state)
+{
+    (void)state;
+    for (int glb = 0; glb < 2; glb++) {
+        tbuf f = cube_file("\"nodes\":[{\"mesh\":0,\"translation\":[5,0,0]},"
+                           "{\"mesh\":0,\"children\":[2]},{\"mesh\":0,\"translation\":[0,0,3]}]",
+                           glb);
+        vx_mesh *m = must_read(&f, glb);
+        assert_int_equal(m->ntris, 36);
+        assert_true(fabs(signed_volume(m) - 3) < 1e-9);
+        expect_box(m, (double[]){0, 0, 0}, (double[]){6, 1, 4});
+        vx_mesh_free(m);
+        free(f.p);
+        f = cube_file("\"extras\":{}", glb);
+        m = must_read(&f, glb);
+        assert_int_equal(m->ntris, 12);
+        expect_box(m, (double[]){0, 0, 0}, (double[]){1, 1, 1});
+        vx_mesh_free(m);
+        free(f.p);
+    }
+}
+
 /* Nested nodes: a translated parent, a child rotated 90 degrees about z
  * and scaled by 2 (T * R * S: scale first), a sibling given as a matrix,
  * and a mirrored instance whose winding must come out outward. */
@@ -396,8 +421,9 @@ static void test_gltf_refusals(void **state)
     memcpy(at + 12, &nan, 4);
     expect_error(&f, 1, NULL, "gltf_corrupt", "NaN");
     free(f.p);
-    /* No scene, or a scene of nodes without meshes: no faces. */
-    f = cube_file("\"nodes\":[{\"mesh\":0}]", 0);
+    /* A scene of nodes without meshes, or a library of nodes without
+     * meshes: no faces. */
+    f = cube_file("\"nodes\":[{}]", 0);
     expect_error(&f, 0, NULL, "gltf_no_faces", NULL);
     free(f.p);
     f = cube_file("\"scenes\":[{\"nodes\":[0]}],\"nodes\":[{}]", 0);
@@ -547,6 +573,7 @@ int main(void)
 {
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_gltf_cube),
+        cmocka_unit_test(test_gltf_no_scenes),
         cmocka_unit_test(test_gltf_transforms),
         cmocka_unit_test(test_gltf_strip_fan),
         cmocka_unit_test(test_gltf_quantized_sparse),
