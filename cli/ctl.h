@@ -78,5 +78,8 @@ int ctl_cmd_cancel(ctl *c, const char *jid);
 /* Deletes a job: cancels it when unfinished, else removes it and its results. */
 int ctl_cmd_delete(ctl *c, const char *jid);
 int ctl_cmd_upload(ctl *c, const char *file);
+/* Removes the part file being written and the spooled upload, if any
+ * (async-signal-safe: for a signal that ends the process). */
+void ctl_cmds_remove_temp(void);
 
 #endif

@@ -247,10 +247,15 @@ static void say(const char *s)
     (void)w;
 }
 
-static void on_signal(int sig)
+void ctl_cmds_remove_temp(void)
 {
     if (g_part[0]) unlink(g_part);
     if (g_spool[0]) unlink(g_spool);
+}
+
+static void on_signal(int sig)
+{
+    ctl_cmds_remove_temp();
     if (g_jid[0]) {
         say("\nvoxelctl: interrupted; job ");
         say(g_jid);

@@ -278,6 +278,20 @@ os.execvp(sys.argv[1], sys.argv[1:])' "$CTL" --local --quiet render "$VX_MESH_DI
     check "--local, SIG$sig mid-job: the data dir is removed" test -z "$(ls -A "$TMP/ltmp")"
     check "--local, SIG$sig mid-job: its voxeld is gone" sh -c "! pgrep -f '$TMP/ltm[p]' >/dev/null"
 done
+# The same while standard input is read: the spooled copy goes too.
+(exec 3>slow.fifo; head -c 1000 "$MESH" >&3; sleep 20) &
+feeder=$!
+"$CTL" -q --local upload - <slow.fifo >/dev/null 2>&1 &
+upid=$!
+for _ in $(seq 100); do ls "$TMP"/ltmp/voxelctl-upload-* >/dev/null 2>&1 && break; sleep 0.1; done
+check "--local upload -: spooled while stdin is read" sh -c "ls '$TMP'/ltmp/voxelctl-upload-*"
+kill -TERM "$upid"
+wait "$upid"
+rc=$?
+kill "$feeder" 2>/dev/null
+wait "$feeder" 2>/dev/null
+check "--local upload -, SIGTERM while reading: ended by it (rc $rc), spool and data dir removed" \
+    sh -c "test $rc -eq 143 && test -z \"\$(ls -A '$TMP/ltmp')\""
 
 # A full queue (429, Retry-After) is waited out: the job is submitted once
 # there is room, not failed at once.
