@@ -57,10 +57,10 @@ class Client:
         self.timeout = timeout
         self.retry_for = retry_for
 
-    def _open(self, method, path, body=None, ctype=None, accept=None):
+    def _open(self, method, path, body=None, ctype=None, accept=None, retry=True):
         """The response of a 2xx; a 429 or 503 with Retry-After is sent
-        again for up to retry_for seconds."""
-        give_up = time.monotonic() + self.retry_for
+        again for up to retry_for seconds (with retry)."""
+        give_up = time.monotonic() + (self.retry_for if retry else 0)
         while True:
             try:
                 return self._open_once(method, path, body, ctype, accept)
@@ -140,13 +140,13 @@ class Client:
         job = self.job(jid)
         if job["state"] in ("succeeded", "failed", "canceled"):
             raise VoxeldError(409, "job_finished", "job %s has already finished" % jid)
-        with self._open("DELETE", "/v1/jobs/" + jid) as r:
+        with self._open("DELETE", "/v1/jobs/" + urllib.parse.quote(jid, safe="")) as r:
             raw = r.read()
             return json.loads(raw) if raw else None  # 204: it finished meanwhile, deleted
 
     def delete(self, jid):
         """Deletes a finished job and its results (cancels an unfinished one)."""
-        with self._open("DELETE", "/v1/jobs/" + jid) as r:
+        with self._open("DELETE", "/v1/jobs/" + urllib.parse.quote(jid, safe="")) as r:
             raw = r.read()
             return json.loads(raw) if raw else None
 
@@ -154,7 +154,9 @@ class Client:
         """Yields the Job at each event of GET /v1/jobs/{jid}/events, until it
         ends (or the server closes the stream: a restart; a dropped
         connection raises VoxeldError unreachable)."""
-        with self._open("GET", "/v1/jobs/%s/events" % jid, accept="text/event-stream") as r:
+        # (no retry: wait() polls instead when streams are busy, 503)
+        with self._open("GET", "/v1/jobs/%s/events" % urllib.parse.quote(jid, safe=""),
+                        accept="text/event-stream", retry=False) as r:
             data = []
             while True:
                 try:
@@ -206,7 +208,8 @@ class Client:
         through a temporary file beside it renamed over it once whole: a
         failed or cut-short download (VoxeldError, code "incomplete") leaves
         no file, or the old one."""
-        path = "/v1/jobs/%s/result" % jid + ("/" + name if name else "")
+        path = "/v1/jobs/%s/result" % urllib.parse.quote(jid, safe="") + \
+            ("/" + urllib.parse.quote(name, safe="") if name else "")
         final = os.path.realpath(out)  # a symlink's target is replaced
         try:
             st = os.stat(final)

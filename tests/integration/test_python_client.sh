@@ -86,7 +86,7 @@ python3 "$PYC" --server "$BASE" --token py-token voxelize "$TMP/none.obj" 2>py.e
 check "program: a missing file exits 1 with a message" sh -c "test $? -eq 1 && grep -q 'No such file' py.err && ! grep -q Traceback py.err"
 
 # Against a stand-in server: a 429 with Retry-After is sent again, an event
-# stream that drops is followed by polling, and a download cut short raises
+# stream that drops or is refused (503) is followed by polling, and a download cut short raises
 # (code incomplete) and leaves the old file, with no part file beside it.
 PYTHONPATH=$(dirname "$PYC") python3 - >fake.out 2>&1 <<'PY'
 import http.server, json, os, threading, time
@@ -113,7 +113,9 @@ class H(http.server.BaseHTTPRequestHandler):
         else:
             self.answer(202, JOB)
     def do_GET(self):
-        if self.path.endswith("/events"):  # one event, then the connection drops
+        if self.path == "/v1/jobs/busy/events":  # no stream to spare
+            self.answer(503, {"error": {"code": "too_many_streams", "message": "busy"}}, [("Retry-After", "5")])
+        elif self.path.endswith("/events"):  # one event, then the connection drops
             self.send_response(200)
             self.send_header("Content-Type", "text/event-stream")
             self.send_header("Transfer-Encoding", "chunked")
@@ -122,7 +124,7 @@ class H(http.server.BaseHTTPRequestHandler):
             self.wfile.write(b"%x\r\n%s\r\n" % (len(d), d))
             self.wfile.flush()
             self.close_connection = True
-        elif self.path.startswith("/v1/jobs/j?"):
+        elif self.path.startswith("/v1/jobs/") and "?" in self.path:
             self.answer(200, dict(JOB, state="succeeded", progress=1))
         elif self.path == "/v1/jobs/short/result":  # 1000 of 100000 bytes
             self.send_response(200)
@@ -150,6 +152,9 @@ assert len(submits) == 2 and submits[1] - submits[0] >= 0.9, submits
 seen = []
 assert c.wait("j", seen.append)["state"] == "succeeded"
 assert seen[0]["progress"] == 0.5, seen
+t = time.monotonic()  # streams busy (503): polled at once, not retried
+assert c.wait("busy")["state"] == "succeeded"
+assert time.monotonic() - t < 4, time.monotonic() - t
 with open("old.bin", "wb") as f:
     f.write(b"old")
 try:
