@@ -367,8 +367,12 @@ static int sink_close(sink_file *o, int ok, const char *name)
  * (NULL: the server's file name). 0 or the exit status. */
 static int download(ctl *c, const char *jid, const char *name, const char *out)
 {
-    char path[256], disp[256];
-    snprintf(path, sizeof path, "/v1/jobs/%s/result%s%s", jid, name ? "/" : "", name ? name : "");
+    char path[1024], disp[256];
+    /* escaped: a name is one path segment (../x, spaces) */
+    char *en = name ? curl_easy_escape(NULL, name, 0) : NULL;
+    if (name && !en) return 1;
+    snprintf(path, sizeof path, "/v1/jobs/%s/result%s%s", jid, en ? "/" : "", en ? en : "");
+    curl_free(en);
     sink_file o;
     if (sink_open(&o, out)) return 1;
     ctl_buf b = {0};
@@ -385,7 +389,8 @@ static int download(ctl *c, const char *jid, const char *name, const char *out)
     if (sink_close(&o, rc == 0, disp[0] ? disp : "result")) return 1;
     if (!rc && o.f != stdout && !c->json && !c->quiet) {
         struct stat sb;
-        if (stat(o.final, &sb) == 0) /* (named as given: o.final is a symlink's target) */
+        /* (named as given: o.final is a symlink's target; a device has no size) */
+        if (stat(o.final, &sb) == 0 && S_ISREG(sb.st_mode))
             fprintf(stderr, "wrote %s (%lld bytes)\n", out ? out : o.final, (long long)sb.st_size);
     }
     return rc;

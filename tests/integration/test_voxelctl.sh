@@ -34,6 +34,13 @@ JID=$(jq -r .id job.json)
 MID=$(jq -r .mesh job.json)
 "$CTL" get "$JID" --name voxels -o again.raw 2>/dev/null
 check "get --name -o: the same bytes as the job's download" cmp -s out.raw again.raw
+# --name is one output's name, escaped: never another path of the API.
+"$CTL" get "$JID" --name "../../../meshes/$MID" -o escaped.json 2>ctl.err
+rc=$?
+check "get --name ../../../meshes/ID: exit 1, nothing written ($(cat ctl.err))" sh -c "test $rc -eq 1 && test ! -e escaped.json"
+"$CTL" get "$JID" --name "a b" -o ab.raw 2>ctl.err
+rc=$?
+check "get --name 'a b': the server's output_not_found ($(cat ctl.err))" sh -c "test $rc -eq 1 && grep -q output_not_found ctl.err"
 "$CTL" --json get "$JID" >get.json
 check "get --json: the job" jq -e --arg j "$JID" '.id == $j' get.json
 check "get: a table row" sh -c "'$CTL' get '$JID' | grep -q '^$JID  voxelize'"
