@@ -310,6 +310,7 @@ def main(argv=None):
     ap.add_argument("-o", "--output")
     a = ap.parse_args(argv)
     c = Client(a.server, a.token)
+    job = None
     try:
         mesh = c.upload(a.file)["id"]
         job = c.submit(mesh, a.kind, dict(a.param))
@@ -332,6 +333,11 @@ def main(argv=None):
     except OSError as e:  # the mesh file or the output file
         print("voxeld_client: %s" % e, file=sys.stderr)
         return 1
+    except KeyboardInterrupt:  # Ctrl-C: the job, if submitted, goes on
+        if job:
+            print("\nvoxeld_client: interrupted; job %s goes on (DELETE /v1/jobs/%s cancels it)"
+                  % (job["id"], job["id"]), file=sys.stderr)
+        return 130
 
 
 if __name__ == "__main__":

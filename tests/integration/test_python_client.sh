@@ -85,6 +85,21 @@ check "program: no server exits 1 with a message" sh -c "test $? -eq 1 && grep -
 python3 "$PYC" --server "$BASE" --token py-token voxelize "$TMP/none.obj" 2>py.err
 check "program: a missing file exits 1 with a message" sh -c "test $? -eq 1 && grep -q 'No such file' py.err && ! grep -q Traceback py.err"
 
+# Ctrl-C while the job runs: no traceback, exit 130, the job named (it goes
+# on). SIGINT is given back its default first (a script's background job
+# starts with it ignored).
+python3 -c 'import os, signal, sys
+signal.signal(signal.SIGINT, signal.SIG_DFL)
+os.execvp(sys.argv[1], sys.argv[1:])' python3 "$PYC" --server "$BASE" --token py-token render \
+    "$VX_MESH_DIR/spot_triangulated.obj" -p N=64 -p R=1024 -p width=256 -p height=256 -o int.png 2>int.err &
+ipid=$!
+for _ in $(seq 100); do grep -q running int.err && break; sleep 0.1; done
+kill -INT "$ipid"
+wait "$ipid"
+rc=$?
+check "program: Ctrl-C exits 130 and names the job ($(tail -n 1 int.err))" \
+    sh -c "test $rc -eq 130 && grep -Eq 'interrupted; job [0-9a-f]{32} goes on' int.err && ! grep -q Traceback int.err"
+
 # Against a stand-in server: a 429 with Retry-After is sent again, an event
 # stream that drops or is refused (503) is followed by polling, and a download cut short raises
 # (code incomplete) and leaves the old file, with no part file beside it.
