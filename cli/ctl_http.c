@@ -163,6 +163,17 @@ static CURL *open_handle(const ctl *c, const char *path, const char *ctype, stru
     return h;
 }
 
+static CURLcode g_last_rc; /* of the last request */
+
+static void say_no_answer(const ctl *c, const char *path, CURLcode rc)
+{
+    fprintf(stderr, "voxelctl: %s%s: %s%s\n", c->server, path, curl_easy_strerror(rc),
+            rc == CURLE_COULDNT_CONNECT || rc == CURLE_COULDNT_RESOLVE_HOST
+                ? " (is voxeld running there? --server URL or VOXELD_URL names another; "
+                  "--local runs the job without one)"
+                : "");
+}
+
 static long http_once(const ctl *c, const char *method, const char *path, const char *ctype,
                       const char *data, const char *upload, ctl_buf *resp, FILE *out, char *disp,
                       size_t dispn, long *retry_after)
@@ -171,6 +182,7 @@ static long http_once(const ctl *c, const char *method, const char *path, const 
     *retry_after = -1;
     ctl_http_error[0] = 0;
     ctl_http_write_errno = 0;
+    g_last_rc = CURLE_FAILED_INIT;
     CURL *h = open_handle(c, path, ctype, &hl);
     if (!h) return -1;
     sink s = {.curl = h, .buf = resp, .out = out, .disp = disp, .dispn = dispn, .retry_after = -1};
@@ -213,11 +225,8 @@ static long http_once(const ctl *c, const char *method, const char *path, const 
     else if (rc == CURLE_OK)
         curl_easy_getinfo(h, CURLINFO_RESPONSE_CODE, &status);
     else if (!c->quiet_transport)
-        fprintf(stderr, "voxelctl: %s%s: %s%s\n", c->server, path, curl_easy_strerror(rc),
-                rc == CURLE_COULDNT_CONNECT || rc == CURLE_COULDNT_RESOLVE_HOST
-                    ? " (is voxeld running there? --server URL or VOXELD_URL names another; "
-                      "--local runs the job without one)"
-                    : "");
+        say_no_answer(c, path, rc);
+    g_last_rc = rc;
     if (in) fclose(in);
     curl_slist_free_all(hl);
     curl_easy_cleanup(h);
@@ -230,11 +239,20 @@ long ctl_http(const ctl *c, const char *method, const char *path, const char *ct
               const char *data, const char *upload, ctl_buf *resp, FILE *out, char *disp,
               size_t dispn)
 {
-    time_t first = 0;
+    time_t first = 0; /* when the first 429 or 503 came */
+    ctl quiet = *c;   /* the tries after it */
+    quiet.quiet_transport = 1;
     for (;;) {
-        long ra, st = http_once(c, method, path, ctype, data, upload, resp, out, disp, dispn, &ra);
-        if ((st != 429 && st != 503) || ra < 0 || c->no_retry) return st;
-        long wait = ra < 1 ? 1 : ra > 30 ? 30 : ra;
+        long ra, st = http_once(first ? &quiet : c, method, path, ctype, data, upload, resp, out,
+                                disp, dispn, &ra);
+        /* after a 503 (nothing was done), no connection at all is the
+         * server restarting: tried again too */
+        int refused = first && st < 0 && g_last_rc == CURLE_COULDNT_CONNECT;
+        if (!refused && ((st != 429 && st != 503) || ra < 0 || c->no_retry)) {
+            if (first && st < 0 && !c->quiet_transport) say_no_answer(c, path, g_last_rc);
+            return st;
+        }
+        long wait = refused ? 2 : ra < 1 ? 1 : ra > 30 ? 30 : ra;
         time_t now = time(NULL);
         if (!first) {
             first = now;
@@ -253,7 +271,10 @@ long ctl_http(const ctl *c, const char *method, const char *path, const char *ct
                 cJSON_Delete(doc);
             }
         }
-        if (now + wait - first > CTL_RETRY_FOR) return st;
+        if (now + wait - first > CTL_RETRY_FOR) {
+            if (refused && !c->quiet_transport) say_no_answer(c, path, g_last_rc);
+            return st;
+        }
         sleep((unsigned)wait);
     }
 }

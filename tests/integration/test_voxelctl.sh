@@ -324,5 +324,47 @@ wait "$rpid"
 rc=$?
 check "429: submitted once there was room, exit 0 (rc $rc)" sh -c "test $rc -eq 0 && grep -Eq '^[0-9a-f]{32}$' retry.id"
 
+# A server that answers 503 (shutting down) and is then gone for a moment
+# (restarting): the upload is sent again once it is back (a stand-in).
+python3 - "$TMP/standin.port" >standin.log 2>&1 <<'PY' &
+import http.server, json, sys, time
+class H(http.server.BaseHTTPRequestHandler):
+    protocol_version = "HTTP/1.1"
+    def log_message(self, *a):
+        pass
+    def do_POST(self):
+        self.rfile.read(int(self.headers["Content-Length"]))
+        first = self.server.first
+        doc = {"error": {"code": "shutting_down", "message": "stopping"}} if first else {"id": "ab" * 32}
+        body = json.dumps(doc).encode()
+        self.send_response(503 if first else 201)
+        if first:
+            self.send_header("Retry-After", "1")
+        self.send_header("Content-Length", str(len(body)))
+        self.send_header("Connection", "close")
+        self.end_headers()
+        self.wfile.write(body)
+        self.close_connection = True
+srv = http.server.HTTPServer(("127.0.0.1", 0), H)
+port = srv.server_address[1]
+srv.first = True
+open(sys.argv[1] + ".tmp", "w").write(str(port))
+import os; os.rename(sys.argv[1] + ".tmp", sys.argv[1])
+srv.handle_request()  # the 503
+srv.server_close()
+time.sleep(3)  # gone: connections refused
+srv = http.server.HTTPServer(("127.0.0.1", port), H)
+srv.first = False
+srv.timeout = 20  # (a voxelctl that gave up never comes)
+srv.handle_request()
+PY
+spid=$!
+for _ in $(seq 100); do [[ -s "$TMP/standin.port" ]] && break; sleep 0.05; done
+"$CTL" --server "http://127.0.0.1:$(cat "$TMP/standin.port")" upload "$MESH" >standin.id 2>ctl.err
+rc=$?
+wait "$spid"
+check "503, then no server, then back: the upload is sent again, exit 0 ($rc, $(cat ctl.err))" \
+    sh -c "test $rc -eq 0 && test \"\$(cat standin.id)\" = $(printf 'ab%.0s' $(seq 32)) && grep -q 'shutting_down, HTTP 503' ctl.err && ! grep -q 'connect' ctl.err"
+
 stop_daemon
 finish
