@@ -17,6 +17,7 @@ typedef struct ctl {
     int quiet;           /* --quiet: no progress */
     int progress_tty;    /* stderr is a terminal: a progress bar */
     int quiet_transport; /* ctl_http: no message when no answer comes */
+    int no_retry;        /* ctl_http: a 429 or 503 is returned, not tried again */
 } ctl;
 
 /* A growing response body. */
@@ -32,8 +33,17 @@ int ctl_http_init(void);
  * file at upload (NULL: none), sent as ctype. The answer goes to resp
  * (NUL-terminated, caller frees resp->p) or, for a 2xx, to the file out
  * when out is not NULL. disp, if not NULL, gets the filename of the
- * Content-Disposition header ("" when none). Returns the HTTP status, or
- * -1 when no answer came (message printed). */
+ * Content-Disposition header ("" when none). A 429 or 503 with
+ * Retry-After (queue full, busy, restarting: nothing was done) is sent
+ * again after the seconds it says, for up to CTL_RETRY_FOR seconds in all
+ * (said once on stderr unless quiet), unless c->no_retry. Returns the HTTP
+ * status, or -1 when no answer came (message printed, unless
+ * c->quiet_transport; the reason in ctl_http_error, and for a body that
+ * could not be written to out, errno in ctl_http_write_errno, with no
+ * message). */
+#define CTL_RETRY_FOR 120
+extern char ctl_http_error[256];
+extern int ctl_http_write_errno;
 long ctl_http(const ctl *c, const char *method, const char *path, const char *ctype,
               const char *data, const char *upload, ctl_buf *resp, FILE *out, char *disp,
               size_t dispn);
@@ -68,5 +78,8 @@ int ctl_cmd_cancel(ctl *c, const char *jid);
 /* Deletes a job: cancels it when unfinished, else removes it and its results. */
 int ctl_cmd_delete(ctl *c, const char *jid);
 int ctl_cmd_upload(ctl *c, const char *file);
+/* Removes the part file being written and the spooled upload, if any
+ * (async-signal-safe: for a signal that ends the process). */
+void ctl_cmds_remove_temp(void);
 
 #endif

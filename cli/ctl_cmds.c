@@ -76,6 +76,9 @@ static char *query_arg(const char *key, const char *v)
     return q;
 }
 
+static void catch_signals(const char *jid);
+static char g_spool[4200];
+
 /* Copies standard input ("-"), a FIFO or a character device into a new
  * temporary file (its name into spool): an upload needs the length first.
  * 0, or 1 said on stderr (spool then holds no file). */
@@ -83,7 +86,9 @@ static int spool_stream(const char *file, char *spool, size_t n)
 {
     const char *dir = getenv("TMPDIR");
     snprintf(spool, n, "%s/voxelctl-upload-XXXXXX", dir && *dir ? dir : "/tmp");
+    catch_signals(NULL); /* Ctrl-C while reading or sending: the spool goes */
     int fd = mkstemp(spool);
+    if (fd >= 0) snprintf(g_spool, sizeof g_spool, "%s", spool);
     if (fd < 0) {
         fprintf(stderr, "voxelctl: cannot make a file to hold %s: %s\n",
                 strcmp(file, "-") ? file : "standard input", strerror(errno));
@@ -105,7 +110,7 @@ static int spool_stream(const char *file, char *spool, size_t n)
         fprintf(stderr, "voxelctl: %s %s: %s\n", rerr || !in ? "cannot read" : "cannot hold",
                 strcmp(file, "-") ? file : "standard input", strerror(e));
         unlink(spool);
-        spool[0] = 0;
+        spool[0] = g_spool[0] = 0;
     }
     return bad;
 }
@@ -130,6 +135,7 @@ static int upload(ctl *c, const char *file, char *id, int echo)
     long st = ctl_http(c, "POST", path, mesh_type(file), NULL, spool[0] ? spool : file, &b, NULL,
                        NULL, 0);
     if (spool[0]) unlink(spool);
+    g_spool[0] = 0;
     int rc = 0;
     cJSON *doc = st == 200 || st == 201 ? cJSON_Parse(b.p) : NULL;
     if (!doc)
@@ -186,19 +192,24 @@ static cJSON *follow_job(ctl *c, const char *jid)
     time_t lost = 0; /* when the server stopped answering */
     for (;;) {
         ctl_buf b = {0};
-        c->quiet_transport = lost != 0;
+        c->quiet_transport = c->no_retry = 1; /* said below, and tried again here */
         st = ctl_http(c, "GET", path, NULL, NULL, NULL, &b, NULL, NULL, 0);
-        c->quiet_transport = 0;
+        c->quiet_transport = c->no_retry = 0;
         if (st < 0 || st == 502 || st == 503 || st == 504) {
             free(b.p);
             time_t now = time(NULL);
             if (!lost) {
                 lost = now;
+                char why[300];
+                if (st < 0)
+                    snprintf(why, sizeof why, "%s", ctl_http_error);
+                else
+                    snprintf(why, sizeof why, "HTTP %ld", st);
                 if (c->progress_tty && !c->quiet) fputc('\n', stderr);
                 fprintf(stderr,
-                        "voxelctl: no answer about job %s (HTTP %ld); asking again for 2 "
+                        "voxelctl: no answer about job %s from %s (%s); asking again for 2 "
                         "minutes\n",
-                        jid, st);
+                        jid, c->server, why);
             } else if (now - lost > 120) {
                 fprintf(stderr,
                         "voxelctl: no answer for 2 minutes: job %s may still run (voxelctl get "
@@ -225,8 +236,9 @@ static cJSON *follow_job(ctl *c, const char *jid)
 
 /* ---- where a result goes ------------------------------------------------ */
 
-/* The part file being written and the job being waited for, for a signal
- * that ends the process: the part is removed, the job named. */
+/* The part file being written, the upload spool and the job being waited
+ * for, for a signal that ends the process: the files are removed, the job
+ * named. */
 static char g_part[4200], g_jid[40];
 
 static void say(const char *s)
@@ -235,9 +247,15 @@ static void say(const char *s)
     (void)w;
 }
 
-static void on_signal(int sig)
+void ctl_cmds_remove_temp(void)
 {
     if (g_part[0]) unlink(g_part);
+    if (g_spool[0]) unlink(g_spool);
+}
+
+static void on_signal(int sig)
+{
+    ctl_cmds_remove_temp();
     if (g_jid[0]) {
         say("\nvoxelctl: interrupted; job ");
         say(g_jid);
@@ -349,19 +367,31 @@ static int sink_close(sink_file *o, int ok, const char *name)
  * (NULL: the server's file name). 0 or the exit status. */
 static int download(ctl *c, const char *jid, const char *name, const char *out)
 {
-    char path[256], disp[256];
-    snprintf(path, sizeof path, "/v1/jobs/%s/result%s%s", jid, name ? "/" : "", name ? name : "");
+    char path[1024], disp[256];
+    /* escaped: a name is one path segment (../x, spaces) */
+    char *en = name ? curl_easy_escape(NULL, name, 0) : NULL;
+    if (name && !en) return 1;
+    snprintf(path, sizeof path, "/v1/jobs/%s/result%s%s", jid, en ? "/" : "", en ? en : "");
+    curl_free(en);
     sink_file o;
     if (sink_open(&o, out)) return 1;
     ctl_buf b = {0};
     long st = ctl_http(c, "GET", path, NULL, NULL, NULL, &b, o.f, disp, sizeof disp);
+    if (st < 0 && ctl_http_write_errno) /* a full disk: the file, not the server */
+        fprintf(stderr, "voxelctl: writing %s: %s\n",
+                o.f == stdout ? "standard output"
+                : o.final[0]  ? o.final
+                : disp[0]     ? disp
+                              : "the result",
+                strerror(ctl_http_write_errno));
     int rc = st == 200 ? 0 : ctl_http_fail("download", st, &b);
     free(b.p);
     if (sink_close(&o, rc == 0, disp[0] ? disp : "result")) return 1;
     if (!rc && o.f != stdout && !c->json && !c->quiet) {
         struct stat sb;
-        if (stat(o.final, &sb) == 0)
-            fprintf(stderr, "wrote %s (%lld bytes)\n", o.final, (long long)sb.st_size);
+        /* (named as given: o.final is a symlink's target; a device has no size) */
+        if (stat(o.final, &sb) == 0 && S_ISREG(sb.st_mode))
+            fprintf(stderr, "wrote %s (%lld bytes)\n", out ? out : o.final, (long long)sb.st_size);
     }
     return rc;
 }
@@ -468,7 +498,7 @@ int ctl_cmd_job(ctl *c, const char *kind, const char *src, cJSON *params, const 
         rc = 1;
     } else if (cJSON_GetArraySize(cJSON_GetObjectItemCaseSensitive(job, "outputs")) > 0) {
         rc = download_result(c, jid, job, out);
-    } else if (!c->json) {
+    } else if (!c->json || out) { /* (--json alone: the stats are in the job printed) */
         rc = write_stats(job, out);
     }
     g_jid[0] = 0;

@@ -5,8 +5,13 @@
 #include <string.h>
 #include <strings.h>
 #include <sys/stat.h>
+#include <time.h>
+#include <unistd.h>
 
 #include "ctl.h"
+
+char ctl_http_error[256];
+int ctl_http_write_errno;
 
 int ctl_http_init(void)
 {
@@ -38,6 +43,8 @@ typedef struct sink {
     FILE *out;
     char *disp;
     size_t dispn;
+    long retry_after; /* seconds; -1: no Retry-After header */
+    int werr;         /* errno of a write to out that failed */
 } sink;
 
 static size_t on_body(char *p, size_t size, size_t n, void *ud)
@@ -45,8 +52,12 @@ static size_t on_body(char *p, size_t size, size_t n, void *ud)
     sink *s = ud;
     long status = 0;
     curl_easy_getinfo(s->curl, CURLINFO_RESPONSE_CODE, &status);
-    if (s->out && status >= 200 && status < 300)
-        return fwrite(p, size, n, s->out) == n ? n * size : 0;
+    if (s->out && status >= 200 && status < 300) {
+        errno = 0;
+        if (fwrite(p, size, n, s->out) == n) return n * size;
+        s->werr = errno ? errno : EIO;
+        return 0;
+    }
     return buf_add(s->buf, p, size * n) ? 0 : size * n;
 }
 
@@ -99,7 +110,20 @@ static size_t on_header(char *p, size_t size, size_t n, void *ud)
 {
     sink *s = ud;
     size_t len = size * n;
-    static const char key[] = "content-disposition:";
+    static const char key[] = "content-disposition:", ra[] = "retry-after:";
+    if (!strncmp(p, "HTTP/", 5)) s->retry_after = -1; /* a new answer's head */
+    if (len > sizeof ra && !strncasecmp(p, ra, sizeof ra - 1)) {
+        /* delta-seconds, or an HTTP-date */
+        char v[128];
+        snprintf(v, sizeof v, "%.*s", (int)(len - (sizeof ra - 1)), p + sizeof ra - 1);
+        char *end;
+        long secs = strtol(v, &end, 10);
+        if (end == v) {
+            time_t at = curl_getdate(v, NULL);
+            secs = at < 0 ? 2 : (long)(at - time(NULL));
+        }
+        s->retry_after = secs < 0 ? 0 : secs;
+    }
     if (s->disp && len > sizeof key && !strncasecmp(p, key, sizeof key - 1)) {
         char line[1024];
         snprintf(line, sizeof line, "%.*s", (int)len, p);
@@ -139,14 +163,29 @@ static CURL *open_handle(const ctl *c, const char *path, const char *ctype, stru
     return h;
 }
 
-long ctl_http(const ctl *c, const char *method, const char *path, const char *ctype,
-              const char *data, const char *upload, ctl_buf *resp, FILE *out, char *disp,
-              size_t dispn)
+static CURLcode g_last_rc; /* of the last request */
+
+static void say_no_answer(const ctl *c, const char *path, CURLcode rc)
+{
+    fprintf(stderr, "voxelctl: %s%s: %s%s\n", c->server, path, curl_easy_strerror(rc),
+            rc == CURLE_COULDNT_CONNECT || rc == CURLE_COULDNT_RESOLVE_HOST
+                ? " (is voxeld running there? --server URL or VOXELD_URL names another; "
+                  "--local runs the job without one)"
+                : "");
+}
+
+static long http_once(const ctl *c, const char *method, const char *path, const char *ctype,
+                      const char *data, const char *upload, ctl_buf *resp, FILE *out, char *disp,
+                      size_t dispn, long *retry_after)
 {
     struct curl_slist *hl;
+    *retry_after = -1;
+    ctl_http_error[0] = 0;
+    ctl_http_write_errno = 0;
+    g_last_rc = CURLE_FAILED_INIT;
     CURL *h = open_handle(c, path, ctype, &hl);
     if (!h) return -1;
-    sink s = {.curl = h, .buf = resp, .out = out, .disp = disp, .dispn = dispn};
+    sink s = {.curl = h, .buf = resp, .out = out, .disp = disp, .dispn = dispn, .retry_after = -1};
     if (disp) disp[0] = 0;
     FILE *in = NULL;
     if (upload) {
@@ -179,19 +218,65 @@ long ctl_http(const ctl *c, const char *method, const char *path, const char *ct
     resp->n = 0;
     CURLcode rc = curl_easy_perform(h);
     long status = -1;
-    if (rc == CURLE_OK)
+    if (rc != CURLE_OK)
+        snprintf(ctl_http_error, sizeof ctl_http_error, "%s", curl_easy_strerror(rc));
+    if (rc == CURLE_WRITE_ERROR && s.werr)
+        ctl_http_write_errno = s.werr; /* the caller names the file */
+    else if (rc == CURLE_OK)
         curl_easy_getinfo(h, CURLINFO_RESPONSE_CODE, &status);
     else if (!c->quiet_transport)
-        fprintf(stderr, "voxelctl: %s%s: %s%s\n", c->server, path, curl_easy_strerror(rc),
-                rc == CURLE_COULDNT_CONNECT || rc == CURLE_COULDNT_RESOLVE_HOST
-                    ? " (is voxeld running there? --server URL or VOXELD_URL names another; "
-                      "--local runs the job without one)"
-                    : "");
+        say_no_answer(c, path, rc);
+    g_last_rc = rc;
     if (in) fclose(in);
     curl_slist_free_all(hl);
     curl_easy_cleanup(h);
     if (!resp->p) buf_add(resp, "", 0);
+    *retry_after = s.retry_after;
     return status;
+}
+
+long ctl_http(const ctl *c, const char *method, const char *path, const char *ctype,
+              const char *data, const char *upload, ctl_buf *resp, FILE *out, char *disp,
+              size_t dispn)
+{
+    time_t first = 0; /* when the first 429 or 503 came */
+    ctl quiet = *c;   /* the tries after it */
+    quiet.quiet_transport = 1;
+    for (;;) {
+        long ra, st = http_once(first ? &quiet : c, method, path, ctype, data, upload, resp, out,
+                                disp, dispn, &ra);
+        /* after a 503 (nothing was done), no connection at all is the
+         * server restarting: tried again too */
+        int refused = first && st < 0 && g_last_rc == CURLE_COULDNT_CONNECT;
+        if (!refused && ((st != 429 && st != 503) || ra < 0 || c->no_retry)) {
+            if (first && st < 0 && !c->quiet_transport) say_no_answer(c, path, g_last_rc);
+            return st;
+        }
+        long wait = refused ? 2 : ra < 1 ? 1 : ra > 30 ? 30 : ra;
+        time_t now = time(NULL);
+        if (!first) {
+            first = now;
+            if (!c->quiet) {
+                cJSON *doc = cJSON_Parse(resp->p);
+                const cJSON *e = cJSON_GetObjectItemCaseSensitive(doc, "error");
+                const char *code =
+                    cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(e, "code"));
+                const char *msg =
+                    cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(e, "message"));
+                fprintf(stderr,
+                        "voxelctl: %s %s: %s (%s, HTTP %ld): trying again every %ld s for up "
+                        "to %d s\n",
+                        method, path, msg ? msg : "busy", code ? code : "?", st, wait,
+                        CTL_RETRY_FOR);
+                cJSON_Delete(doc);
+            }
+        }
+        if (now + wait - first > CTL_RETRY_FOR) {
+            if (refused && !c->quiet_transport) say_no_answer(c, path, g_last_rc);
+            return st;
+        }
+        sleep((unsigned)wait);
+    }
 }
 
 int ctl_http_fail(const char *what, long status, const ctl_buf *resp)

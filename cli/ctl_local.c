@@ -48,6 +48,7 @@ static void *signal_main(void *arg)
      * go and would exit 1, waits in ctl_local_stop until the signal ends
      * the process. */
     pthread_mutex_lock(&g_stop_mu);
+    ctl_cmds_remove_temp(); /* (the handlers of ctl_cmds.c never run here) */
     stop_locked();
     signal(sig, SIG_DFL);
     pthread_sigmask(SIG_UNBLOCK, &set, NULL);

@@ -49,6 +49,9 @@ static void usage(FILE *out)
         "  --json         print the server's JSON on stdout\n"
         "  -q, --quiet    no progress on stderr\n"
         "  -h, --help     this text          --version   voxelctl's version\n"
+        "A 429 or 503 with Retry-After (queue full, busy, restarting) is sent again for\n"
+        "up to 2 minutes; a server that stops answering while a job runs is asked again\n"
+        "for 2 minutes.\n"
         "Exit status: 0 done, 1 the server or the job failed, 2 bad usage.\n");
 }
 
@@ -202,6 +205,10 @@ static int read_options(ctl *c, args *a, int argc, char **argv)
             break;
         }
         case 'o':
+            if (!*optarg) { /* -o "$UNSET": not the server's name in . */
+                fprintf(stderr, "voxelctl: -o wants a file name (- for standard output)\n");
+                return -1;
+            }
             a->out = optarg;
             a->given |= OPT_OUT;
             break;

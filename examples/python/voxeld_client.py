@@ -17,12 +17,20 @@ As a program:
 
 The server and token default to $VOXELD_URL and $VOXELD_TOKEN. Errors from
 the server raise VoxeldError with its code and message; a server that cannot
-be reached raises VoxeldError with status 0 and code "unreachable".
+be reached (or drops the connection) raises VoxeldError with status 0 and
+code "unreachable", a download cut short status 0 and code "incomplete".
+A 429 or 503 with Retry-After (queue full, busy, restarting: nothing was
+done) is sent again after the seconds it says, for up to retry_for seconds
+(120; 0: never); wait() rides out a server that restarts for as long.
 """
 import argparse
+import http.client
 import json
 import os
+import stat
 import sys
+import tempfile
+import time
 import urllib.error
 import urllib.parse
 import urllib.request
@@ -36,18 +44,35 @@ TERMINAL = ("succeeded", "failed", "canceled")
 class VoxeldError(Exception):
     """An error answer: status, code and message from {"error": {...}}."""
 
-    def __init__(self, status, code, message):
+    def __init__(self, status, code, message, retry_after=None):
         super().__init__("%s (%s, HTTP %d)" % (message, code, status))
         self.status, self.code, self.message = status, code, message
+        self.retry_after = retry_after  # seconds, from Retry-After; None without one
 
 
 class Client:
-    def __init__(self, server=None, token=None, timeout=120):
+    def __init__(self, server=None, token=None, timeout=120, retry_for=120):
         self.server = (server or os.environ.get("VOXELD_URL") or "http://127.0.0.1:8080").rstrip("/")
         self.token = token if token is not None else os.environ.get("VOXELD_TOKEN")
         self.timeout = timeout
+        self.retry_for = retry_for
 
-    def _open(self, method, path, body=None, ctype=None, accept=None):
+    def _open(self, method, path, body=None, ctype=None, accept=None, retry=True):
+        """The response of a 2xx; a 429 or 503 with Retry-After is sent
+        again for up to retry_for seconds (with retry)."""
+        give_up = time.monotonic() + (self.retry_for if retry else 0)
+        while True:
+            try:
+                return self._open_once(method, path, body, ctype, accept)
+            except VoxeldError as e:
+                if e.status not in (429, 503) or e.retry_after is None:
+                    raise
+                pause = min(max(e.retry_after, 1), 30)
+                if time.monotonic() + pause > give_up:
+                    raise
+                time.sleep(pause)
+
+    def _open_once(self, method, path, body, ctype, accept):
         req = urllib.request.Request(self.server + path, data=body, method=method)
         if ctype:
             req.add_header("Content-Type", ctype)
@@ -59,13 +84,17 @@ class Client:
             return urllib.request.urlopen(req, timeout=self.timeout)
         except urllib.error.HTTPError as e:
             raw = e.read()
+            retry_after = _retry_after(e.headers.get("Retry-After"))
             try:
                 err = json.loads(raw)["error"]
-                raise VoxeldError(e.code, err["code"], err["message"]) from None
+                code, message = err["code"], err["message"]
             except (ValueError, KeyError, TypeError):
-                raise VoxeldError(e.code, "http_error", raw[:200].decode("utf-8", "replace")) from None
+                code, message = "http_error", raw[:200].decode("utf-8", "replace")
+            raise VoxeldError(e.code, code, message, retry_after) from None
         except urllib.error.URLError as e:
             raise VoxeldError(0, "unreachable", "%s: %s" % (self.server, e.reason)) from None
+        except (http.client.HTTPException, OSError) as e:  # reset, timeout, closed early
+            raise VoxeldError(0, "unreachable", "%s: %s" % (self.server, e or type(e).__name__)) from None
 
     def _json(self, method, path, doc=None):
         body = json.dumps(doc).encode() if doc is not None else None
@@ -111,21 +140,31 @@ class Client:
         job = self.job(jid)
         if job["state"] in ("succeeded", "failed", "canceled"):
             raise VoxeldError(409, "job_finished", "job %s has already finished" % jid)
-        with self._open("DELETE", "/v1/jobs/" + jid) as r:
+        with self._open("DELETE", "/v1/jobs/" + urllib.parse.quote(jid, safe="")) as r:
             raw = r.read()
             return json.loads(raw) if raw else None  # 204: it finished meanwhile, deleted
 
     def delete(self, jid):
         """Deletes a finished job and its results (cancels an unfinished one)."""
-        with self._open("DELETE", "/v1/jobs/" + jid) as r:
+        with self._open("DELETE", "/v1/jobs/" + urllib.parse.quote(jid, safe="")) as r:
             raw = r.read()
             return json.loads(raw) if raw else None
 
     def events(self, jid):
-        """Yields the Job at each event of GET /v1/jobs/{jid}/events, until it ends."""
-        with self._open("GET", "/v1/jobs/%s/events" % jid, accept="text/event-stream") as r:
+        """Yields the Job at each event of GET /v1/jobs/{jid}/events, until it
+        ends (or the server closes the stream: a restart; a dropped
+        connection raises VoxeldError unreachable)."""
+        # (no retry: wait() polls instead when streams are busy, 503)
+        with self._open("GET", "/v1/jobs/%s/events" % urllib.parse.quote(jid, safe=""),
+                        accept="text/event-stream", retry=False) as r:
             data = []
-            for raw in r:
+            while True:
+                try:
+                    raw = r.readline()
+                except (http.client.HTTPException, OSError) as e:
+                    raise VoxeldError(0, "unreachable", "%s: %s" % (self.server, e or type(e).__name__)) from None
+                if not raw:
+                    return
                 line = raw.decode("utf-8").rstrip("\r\n")
                 if not line:
                     if data:
@@ -135,28 +174,98 @@ class Client:
                     data.append(line[5:].lstrip(" "))
 
     def wait(self, jid, on_event=None):
-        """Follows the job to its end; returns the last Job."""
+        """Follows the job to its end; returns the last Job. A server that
+        stops answering (unreachable, 502, 503, 504: restarting, where the
+        job goes on) is asked again for up to retry_for seconds."""
         last = None
-        for job in self.events(jid):
-            last = job
-            if on_event:
-                on_event(job)
-        if last is None or last["state"] not in TERMINAL:
-            last = self.job(jid)
-            while last["state"] not in TERMINAL:
+        try:
+            for job in self.events(jid):
+                last = job
+                if on_event:
+                    on_event(job)
+        except VoxeldError as e:
+            if e.status not in (0, 502, 503, 504):
+                raise
+        lost = None
+        while last is None or last["state"] not in TERMINAL:
+            try:
                 last = self.job(jid, wait=30)
+                lost = None
+            except VoxeldError as e:
+                if e.status not in (0, 502, 503, 504):
+                    raise
+                lost = lost or time.monotonic()
+                if time.monotonic() - lost > self.retry_for:
+                    raise
+                time.sleep(2)
+                continue
+            if on_event:
+                on_event(last)
         return last
 
     def download(self, jid, out, name=None):
-        """Writes the primary result (or output name) to the file out."""
-        path = "/v1/jobs/%s/result" % jid + ("/" + name if name else "")
-        with self._open("GET", path) as r, open(out, "wb") as f:
-            while True:
-                chunk = r.read(1 << 16)
-                if not chunk:
-                    break
-                f.write(chunk)
+        """Writes the primary result (or output name) to the file out,
+        through a temporary file beside it renamed over it once whole: a
+        failed or cut-short download (VoxeldError, code "incomplete") leaves
+        no file, or the old one."""
+        path = "/v1/jobs/%s/result" % urllib.parse.quote(jid, safe="") + \
+            ("/" + urllib.parse.quote(name, safe="") if name else "")
+        final = os.path.realpath(out)  # a symlink's target is replaced
+        try:
+            st = os.stat(final)
+        except FileNotFoundError:
+            st = None
+        part = None  # stays None for /dev/null, a FIFO: written in place
+        with self._open("GET", path) as r:
+            length = r.headers.get("Content-Length")
+            if st is None or stat.S_ISREG(st.st_mode):
+                fd, part = tempfile.mkstemp(prefix=".voxeld-", suffix=".part",
+                                            dir=os.path.dirname(final))
+            try:
+                if part:
+                    os.chmod(part, stat.S_IMODE(st.st_mode) if st else 0o666 & ~_umask())
+                got = 0
+                with (os.fdopen(fd, "wb") if part else open(final, "wb")) as f:
+                    while True:
+                        try:
+                            chunk = r.read(1 << 16)
+                        except (http.client.HTTPException, OSError) as e:
+                            raise VoxeldError(0, "incomplete", "%s after %d bytes: %s"
+                                              % (path, got, e or type(e).__name__)) from None
+                        if not chunk:
+                            break
+                        f.write(chunk)
+                        got += len(chunk)
+                if length is not None and length.isdigit() and got != int(length) \
+                        and not r.headers.get("Content-Encoding"):
+                    raise VoxeldError(0, "incomplete", "%s: %d of %s bytes" % (path, got, length))
+                if part:
+                    os.replace(part, final)
+            except BaseException:
+                if part:
+                    os.unlink(part)
+                raise
         return out
+
+
+def _retry_after(v):
+    """Retry-After's delay-seconds (an HTTP-date too) as seconds, or None."""
+    if v is None:
+        return None
+    v = v.strip()
+    if v.isdigit():
+        return int(v)
+    try:
+        import email.utils
+        return max(0, int(email.utils.parsedate_to_datetime(v).timestamp() - time.time()))
+    except (TypeError, ValueError, IndexError):
+        return None
+
+
+def _umask():
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
 
 
 def _decimal(x):
@@ -201,6 +310,7 @@ def main(argv=None):
     ap.add_argument("-o", "--output")
     a = ap.parse_args(argv)
     c = Client(a.server, a.token)
+    job = None
     try:
         mesh = c.upload(a.file)["id"]
         job = c.submit(mesh, a.kind, dict(a.param))
@@ -223,6 +333,11 @@ def main(argv=None):
     except OSError as e:  # the mesh file or the output file
         print("voxeld_client: %s" % e, file=sys.stderr)
         return 1
+    except KeyboardInterrupt:  # Ctrl-C: the job, if submitted, goes on
+        if job:
+            print("\nvoxeld_client: interrupted; job %s goes on (DELETE /v1/jobs/%s cancels it)"
+                  % (job["id"], job["id"]), file=sys.stderr)
+        return 130
 
 
 if __name__ == "__main__":

@@ -85,5 +85,105 @@ check "program: no server exits 1 with a message" sh -c "test $? -eq 1 && grep -
 python3 "$PYC" --server "$BASE" --token py-token voxelize "$TMP/none.obj" 2>py.err
 check "program: a missing file exits 1 with a message" sh -c "test $? -eq 1 && grep -q 'No such file' py.err && ! grep -q Traceback py.err"
 
+# Ctrl-C while the job runs: no traceback, exit 130, the job named (it goes
+# on). SIGINT is given back its default first (a script's background job
+# starts with it ignored).
+python3 -c 'import os, signal, sys
+signal.signal(signal.SIGINT, signal.SIG_DFL)
+os.execvp(sys.argv[1], sys.argv[1:])' python3 "$PYC" --server "$BASE" --token py-token render \
+    "$VX_MESH_DIR/spot_triangulated.obj" -p N=64 -p R=1024 -p width=256 -p height=256 -o int.png 2>int.err &
+ipid=$!
+for _ in $(seq 100); do grep -q running int.err && break; sleep 0.1; done
+kill -INT "$ipid"
+wait "$ipid"
+rc=$?
+check "program: Ctrl-C exits 130 and names the job ($(tail -n 1 int.err))" \
+    sh -c "test $rc -eq 130 && grep -Eq 'interrupted; job [0-9a-f]{32} goes on' int.err && ! grep -q Traceback int.err"
+
+# Against a stand-in server: a 429 with Retry-After is sent again, an event
+# stream that drops or is refused (503) is followed by polling, and a download cut short raises
+# (code incomplete) and leaves the old file, with no part file beside it.
+PYTHONPATH=$(dirname "$PYC") python3 - >fake.out 2>&1 <<'PY'
+import http.server, json, os, threading, time
+from voxeld_client import Client, VoxeldError
+JOB = {"id": "j", "state": "queued", "progress": 0}
+submits = []
+class H(http.server.BaseHTTPRequestHandler):
+    protocol_version = "HTTP/1.1"
+    def log_message(self, *a):
+        pass
+    def answer(self, status, doc, headers=()):
+        body = json.dumps(doc).encode()
+        self.send_response(status)
+        for k, v in headers:
+            self.send_header(k, v)
+        self.send_header("Content-Length", str(len(body)))
+        self.end_headers()
+        self.wfile.write(body)
+    def do_POST(self):
+        self.rfile.read(int(self.headers["Content-Length"]))
+        submits.append(time.monotonic())
+        if len(submits) == 1:
+            self.answer(429, {"error": {"code": "queue_full", "message": "full"}}, [("Retry-After", "1")])
+        else:
+            self.answer(202, JOB)
+    def do_GET(self):
+        if self.path == "/v1/jobs/busy/events":  # no stream to spare
+            self.answer(503, {"error": {"code": "too_many_streams", "message": "busy"}}, [("Retry-After", "5")])
+        elif self.path.endswith("/events"):  # one event, then the connection drops
+            self.send_response(200)
+            self.send_header("Content-Type", "text/event-stream")
+            self.send_header("Transfer-Encoding", "chunked")
+            self.end_headers()
+            d = b'data: {"id":"j","state":"running","progress":0.5}\n\n'
+            self.wfile.write(b"%x\r\n%s\r\n" % (len(d), d))
+            self.wfile.flush()
+            self.close_connection = True
+        elif self.path.startswith("/v1/jobs/") and "?" in self.path:
+            self.answer(200, dict(JOB, state="succeeded", progress=1))
+        elif self.path == "/v1/jobs/short/result":  # 1000 of 100000 bytes
+            self.send_response(200)
+            self.send_header("Content-Length", "100000")
+            self.end_headers()
+            self.wfile.write(b"x" * 1000)
+            self.close_connection = True
+        else:
+            self.send_response(200)
+            self.send_header("Content-Length", "10")
+            self.end_headers()
+            self.wfile.write(b"0123456789")
+srv = http.server.ThreadingHTTPServer(("127.0.0.1", 0), H)
+threading.Thread(target=srv.serve_forever, daemon=True).start()
+base = "http://127.0.0.1:%d" % srv.server_address[1]
+try:
+    Client(base, retry_for=0).submit("m", "voxelize")
+    raise SystemExit("retry_for=0 tried again")
+except VoxeldError as e:
+    assert e.status == 429 and e.retry_after == 1, e
+submits.clear()
+c = Client(base)
+assert c.submit("m", "voxelize")["id"] == "j"
+assert len(submits) == 2 and submits[1] - submits[0] >= 0.9, submits
+seen = []
+assert c.wait("j", seen.append)["state"] == "succeeded"
+assert seen[0]["progress"] == 0.5, seen
+t = time.monotonic()  # streams busy (503): polled at once, not retried
+assert c.wait("busy")["state"] == "succeeded"
+assert time.monotonic() - t < 4, time.monotonic() - t
+with open("old.bin", "wb") as f:
+    f.write(b"old")
+try:
+    c.download("short", "old.bin")
+    raise SystemExit("a download cut short was taken")
+except VoxeldError as e:
+    assert e.code == "incomplete", e
+assert open("old.bin", "rb").read() == b"old"
+assert not [f for f in os.listdir(".") if f.endswith(".part")], os.listdir(".")
+c.download("whole", "new.bin")
+assert open("new.bin", "rb").read() == b"0123456789"
+print("fake ok")
+PY
+check "stand-in server: 429 retried, a dropped stream polled, a short download refused ($(tail -n 1 fake.out))" grep -q '^fake ok' fake.out
+
 stop_daemon
 finish

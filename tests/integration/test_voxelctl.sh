@@ -34,6 +34,13 @@ JID=$(jq -r .id job.json)
 MID=$(jq -r .mesh job.json)
 "$CTL" get "$JID" --name voxels -o again.raw 2>/dev/null
 check "get --name -o: the same bytes as the job's download" cmp -s out.raw again.raw
+# --name is one output's name, escaped: never another path of the API.
+"$CTL" get "$JID" --name "../../../meshes/$MID" -o escaped.json 2>ctl.err
+rc=$?
+check "get --name ../../../meshes/ID: exit 1, nothing written ($(cat ctl.err))" sh -c "test $rc -eq 1 && test ! -e escaped.json"
+"$CTL" get "$JID" --name "a b" -o ab.raw 2>ctl.err
+rc=$?
+check "get --name 'a b': the server's output_not_found ($(cat ctl.err))" sh -c "test $rc -eq 1 && grep -q output_not_found ctl.err"
 "$CTL" --json get "$JID" >get.json
 check "get --json: the job" jq -e --arg j "$JID" '.id == $j' get.json
 check "get: a table row" sh -c "'$CTL' get '$JID' | grep -q '^$JID  voxelize'"
@@ -210,6 +217,39 @@ check "stdout that cannot be written: exit 1 ($(cat ctl.err))" test $rc -eq 1
 "$CTL" jobs >/dev/full 2>ctl.err
 check "jobs into a full stdout: exit 1" test $? -eq 1
 
+# -o "" (an unset variable) is a bad command line, not the server's name
+# in the current directory.
+mkdir -p emptyo && (cd emptyo && "$CTL" -q voxelize "$MID" -r 8 -f binvox -o "" 2>../ctl.err)
+rc=$?
+check "-o '': exit 2 before the job ($(cat ctl.err))" sh -c "test $rc -eq 2 && test -z \"\$(ls -A emptyo)\" && grep -q 'o wants a file name' ctl.err"
+# --json with a summary and -o: the stats still go into -o (they were
+# dropped), the job on stdout.
+"$CTL" -q --json voxelize "$MID" -r 8 -f summary -o jsum.json >jsum.job 2>ctl.err
+check "--json summary -o: the stats in the file ($(cat ctl.err))" jq -e '.voxels_inside > 0' jsum.json
+check "--json summary -o: the job on stdout" jq -e '.state == "succeeded"' jsum.job
+# A result that cannot be written (a full disk): the file and the reason,
+# not curl's "failed writing received data" after the server's URL.
+"$CTL" -q voxelize "$MID" -r 64 -f raw8 -o /dev/full 2>ctl.err
+rc=$?
+check "-o a full device: exit 1, names it and ENOSPC ($(cat ctl.err))" \
+    sh -c "test $rc -eq 1 && grep -q 'writing /dev/full: No space left on device' ctl.err && ! grep -q 'Failed writing' ctl.err"
+# Interrupted while standard input is read: the spooled copy is removed.
+mkdir -p "$TMP/spool"
+mkfifo slow.fifo
+(exec 3>slow.fifo; head -c 1000 "$MESH" >&3; sleep 20) &
+feeder=$!
+TMPDIR=$TMP/spool "$CTL" -q upload - <slow.fifo >/dev/null 2>&1 &
+upid=$!
+for _ in $(seq 100); do [[ -n "$(ls -A "$TMP/spool")" ]] && break; sleep 0.05; done
+check "upload -: spooled while stdin is read" test -n "$(ls -A "$TMP/spool")"
+kill -TERM "$upid"
+wait "$upid"
+rc=$?
+kill "$feeder" 2>/dev/null
+wait "$feeder" 2>/dev/null
+check "upload -, SIGTERM while reading: ended by it (rc $rc), the spool removed" \
+    sh -c "test $rc -eq 143 && test -z \"\$(ls -A '$TMP/spool')\""
+
 # One-shot, no server: --local and voxeld run give the server's bytes.
 "$CTL" voxelize "$MESH" -r 64 -f binvox -o local.binvox >/dev/null 2>&1 # via the daemon
 unset VOXELD_URL VOXELD_TOKEN
@@ -245,6 +285,86 @@ os.execvp(sys.argv[1], sys.argv[1:])' "$CTL" --local --quiet render "$VX_MESH_DI
     check "--local, SIG$sig mid-job: the data dir is removed" test -z "$(ls -A "$TMP/ltmp")"
     check "--local, SIG$sig mid-job: its voxeld is gone" sh -c "! pgrep -f '$TMP/ltm[p]' >/dev/null"
 done
+# The same while standard input is read: the spooled copy goes too.
+(exec 3>slow.fifo; head -c 1000 "$MESH" >&3; sleep 20) &
+feeder=$!
+"$CTL" -q --local upload - <slow.fifo >/dev/null 2>&1 &
+upid=$!
+for _ in $(seq 100); do ls "$TMP"/ltmp/voxelctl-upload-* >/dev/null 2>&1 && break; sleep 0.1; done
+check "--local upload -: spooled while stdin is read" sh -c "ls '$TMP'/ltmp/voxelctl-upload-*"
+kill -TERM "$upid"
+wait "$upid"
+rc=$?
+kill "$feeder" 2>/dev/null
+wait "$feeder" 2>/dev/null
+check "--local upload -, SIGTERM while reading: ended by it (rc $rc), spool and data dir removed" \
+    sh -c "test $rc -eq 143 && test -z \"\$(ls -A '$TMP/ltmp')\""
+
+# A full queue (429, Retry-After) is waited out: the job is submitted once
+# there is room, not failed at once.
+export VOXELD_URL VOXELD_TOKEN=s3cret-token
+stop_daemon
+start_daemon --token-file "$TMP/token" --workers 1 --max-queued-jobs 1 || exit 1
+VOXELD_URL=$BASE
+HEAVY='"params":{"N":64,"R":1024,"width":768,"height":768}'
+for _ in $(seq 20); do
+    api POST /v1/jobs -H 'Content-Type: application/json' -d "{\"mesh\":\"$MID\",\"kind\":\"render\",$HEAVY}"
+    [[ "$STATUS" == 429 ]] && break
+done
+check "the queue fills (got $STATUS)" test "$STATUS" = 429
+"$CTL" --no-wait voxelize "$MID" -r 8 -f summary >retry.id 2>retry.err &
+rpid=$!
+for _ in $(seq 100); do grep -q 'trying again' retry.err && break; sleep 0.1; done
+check "429: says it tries again ($(cat retry.err))" grep -q 'queue_full, HTTP 429.*trying again' retry.err
+api GET '/v1/jobs?limit=1000'
+for j in $(jq -r '.items[] | select(.state == "queued" or .state == "running") | .id' "$BODY"); do
+    api DELETE "/v1/jobs/$j"
+done
+wait "$rpid"
+rc=$?
+check "429: submitted once there was room, exit 0 (rc $rc)" sh -c "test $rc -eq 0 && grep -Eq '^[0-9a-f]{32}$' retry.id"
+
+# A server that answers 503 (shutting down) and is then gone for a moment
+# (restarting): the upload is sent again once it is back (a stand-in).
+python3 - "$TMP/standin.port" >standin.log 2>&1 <<'PY' &
+import http.server, json, sys, time
+class H(http.server.BaseHTTPRequestHandler):
+    protocol_version = "HTTP/1.1"
+    def log_message(self, *a):
+        pass
+    def do_POST(self):
+        self.rfile.read(int(self.headers["Content-Length"]))
+        first = self.server.first
+        doc = {"error": {"code": "shutting_down", "message": "stopping"}} if first else {"id": "ab" * 32}
+        body = json.dumps(doc).encode()
+        self.send_response(503 if first else 201)
+        if first:
+            self.send_header("Retry-After", "1")
+        self.send_header("Content-Length", str(len(body)))
+        self.send_header("Connection", "close")
+        self.end_headers()
+        self.wfile.write(body)
+        self.close_connection = True
+srv = http.server.HTTPServer(("127.0.0.1", 0), H)
+port = srv.server_address[1]
+srv.first = True
+open(sys.argv[1] + ".tmp", "w").write(str(port))
+import os; os.rename(sys.argv[1] + ".tmp", sys.argv[1])
+srv.handle_request()  # the 503
+srv.server_close()
+time.sleep(3)  # gone: connections refused
+srv = http.server.HTTPServer(("127.0.0.1", port), H)
+srv.first = False
+srv.timeout = 20  # (a voxelctl that gave up never comes)
+srv.handle_request()
+PY
+spid=$!
+for _ in $(seq 100); do [[ -s "$TMP/standin.port" ]] && break; sleep 0.05; done
+"$CTL" --server "http://127.0.0.1:$(cat "$TMP/standin.port")" upload "$MESH" >standin.id 2>ctl.err
+rc=$?
+wait "$spid"
+check "503, then no server, then back: the upload is sent again, exit 0 ($rc, $(cat ctl.err))" \
+    sh -c "test $rc -eq 0 && test \"\$(cat standin.id)\" = $(printf 'ab%.0s' $(seq 32)) && grep -q 'shutting_down, HTTP 503' ctl.err && ! grep -q 'connect' ctl.err"
 
 stop_daemon
 finish
