@@ -289,20 +289,39 @@ static void start_stop_watchdog(double seconds)
     if (pthread_create(&t, NULL, stop_watchdog, &limit) == 0) pthread_detach(t);
 }
 
-/* Waits for SIGTERM/SIGINT, running the once-a-minute maintenance meanwhile. */
-static void serve_until_signal(const sigset_t *sigs, vx_store *store, vx_jobs *jobs)
+/* Waits for SIGTERM/SIGINT, running the once-a-minute maintenance meanwhile.
+ * The GL thread pings the systemd watchdog (on_jobs_alive); when it does
+ * not run (--require-gpu refused a software renderer) the main thread
+ * pings it instead, at half the watchdog's period: the daemon serves, and
+ * systemd would otherwise kill and restart it every WatchdogSec. */
+static void serve_until_signal(const sigset_t *sigs, vx_store *store, vx_jobs *jobs,
+                               int ping_watchdog)
 {
+    uint64_t wd_usec = 0;
+    double ping_s = 0;
+    if (ping_watchdog && sd_watchdog_enabled(0, &wd_usec) > 0 && wd_usec > 0) {
+        ping_s = (double)wd_usec / 2e6;
+        if (ping_s < 0.05) ping_s = 0.05;
+        sd_notify(0, "WATCHDOG=1");
+    }
+    double next_maint = vx_mono() + 60;
     for (;;) {
-        struct timespec ts = {.tv_sec = 60};
+        double wait_s = next_maint - vx_mono();
+        if (ping_s > 0 && ping_s < wait_s) wait_s = ping_s;
+        if (wait_s < 0) wait_s = 0;
+        struct timespec ts = {.tv_sec = (time_t)wait_s,
+                              .tv_nsec = (long)((wait_s - (double)(time_t)wait_s) * 1e9)};
         int sig = sigtimedwait(sigs, NULL, &ts);
         if (sig == SIGTERM || sig == SIGINT) {
             VX_INFO("voxeld.signal", "signal=%s", sig == SIGTERM ? "TERM" : "INT");
             break;
         }
         if (sig == SIGHUP) VX_INFO("voxeld.signal", "signal=HUP action=none");
-        if (sig < 0 && errno == EAGAIN) {  /* once a minute */
+        if (ping_s > 0) sd_notify(0, "WATCHDOG=1");
+        if (vx_mono() >= next_maint) {     /* once a minute */
             vx_store_results_evict(store); /* the age budget */
             vx_jobs_maintain(jobs, 16L << 20);
+            next_maint = vx_mono() + 60;
         }
     }
 }
@@ -423,7 +442,7 @@ int main(int argc, char **argv)
                soft ? " (software: --require-gpu refuses it, no job runs)" : "");
     VX_INFO("voxeld.ready", "port=%d", vx_http_port(http));
 
-    serve_until_signal(&sigs, store, jobs);
+    serve_until_signal(&sigs, store, jobs, soft);
 
     sd_notify(0, "STOPPING=1");
     start_stop_watchdog(cfg.stop_timeout_s);
