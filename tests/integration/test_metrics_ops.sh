@@ -54,4 +54,28 @@ check "start time in the past" awk -v a="$(metric process_start_time_seconds)" -
 check "HELP and TYPE for the new families" bash -c "for f in voxeld_jobs_failed_total voxeld_job_queue_wait_seconds voxeld_results_evicted_total voxeld_gl_context_losses_total process_open_fds process_max_fds process_cpu_seconds_total process_resident_memory_bytes; do grep -q \"^# TYPE \$f \" '$BODY' || exit 1; done"
 
 stop_daemon
+
+# ---- /v1/info reports the limits as configured, 0 = no limit included ----------
+# Every option whose 0 is documented as "no limit" / "never" / "at once", set
+# to 0: /v1/info must say 0, and still fit api/openapi.yaml's Limits (which
+# once required these to be above 0, so a valid configuration answered a
+# /v1/info outside the contract). max_connections is reported as in effect.
+start_daemon --job-timeout 0 --request-timeout 0 --connection-timeout 0 --max-triangles 0 \
+    --max-connections-per-ip 0 --max-image-pixels 0 --max-job-memory 0 --header-timeout 0 \
+    --min-body-rate 0 --min-send-rate 0 --max-parse-memory 0 --results-max-bytes 0 \
+    --results-max-age 0 --job-history-bytes 0 --max-event-streams 0 --max-connections 300 || exit 1
+INFO_FROM=$(wc -l <"$VX_API_LOG")
+api GET /v1/info
+expect_status "info with zero limits" 200
+check "every zero limit reported as 0" jq -e '.limits | [.job_timeout_s, .max_wait_s, .request_timeout_s,
+    .connection_timeout_s, .max_triangles, .max_connections_per_ip, .max_image_pixels,
+    .max_job_memory_bytes, .header_timeout_s, .min_body_rate, .min_send_rate,
+    .max_parse_memory_bytes, .results_max_bytes, .results_max_age_s, .job_history_bytes,
+    .max_event_streams] | all(. == 0)' "$BODY"
+check "max_connections reported" jq -e '.limits.max_connections == 300' "$BODY"
+tail -n +"$((INFO_FROM + 1))" "$VX_API_LOG" >"$TMP/info-api.jsonl"
+check "the zero-limit /v1/info fits api/openapi.yaml" \
+    python3 "$VX_SOURCE_DIR/tests/tools/openapi_check.py" "$VX_SOURCE_DIR/api/openapi.yaml" "$TMP/info-api.jsonl"
+python3 "$VX_SOURCE_DIR/tests/tools/openapi_check.py" "$VX_SOURCE_DIR/api/openapi.yaml" "$TMP/info-api.jsonl" | head -n 12
+stop_daemon
 finish
