@@ -214,6 +214,11 @@ static int set_opt(vx_config *c, const opt_def *d, const char *val, const char *
     char *end;
     /* an empty file name would leave /v1 without a token: refused, as an
      * empty token file is (VOXELD_TOKEN_FILE=$UNSET in a unit or .env) */
+    if (!*val && !strcmp(d->name, "data-dir")) {
+        fprintf(stderr, "voxeld: %s: data-dir is empty (name the directory, or leave it out)\n",
+                where);
+        return -1;
+    }
     if (!*val && !strcmp(d->name, "token-file")) {
         fprintf(stderr, "voxeld: %s: token-file is empty (name the file, or leave it out)\n",
                 where);
@@ -283,7 +288,8 @@ static int set_opt(vx_config *c, const opt_def *d, const char *val, const char *
     }
 bad:;
     static const char *want[] = {
-        [T_SIZE] = "a whole number, K, M or G after it for 2^10, 2^20, 2^30: 64, 64K, 1G",
+        [T_SIZE] = "a whole number, K, M, G or T after it for 2^10, 2^20, 2^30, 2^40: 64, 64K, "
+                   "1G",
         [T_COUNT] = "a whole number from 1 to 1024",
         [T_SECONDS] = "seconds, a decimal number from 0 to 1e9",
         [T_DEVICE] = "auto, or an index from 0 to 255",

@@ -519,7 +519,11 @@ static int parse_listen(const char *s, struct sockaddr_storage *ss, socklen_t *l
                              .ai_socktype = SOCK_STREAM,
                              .ai_flags = AI_PASSIVE},
                     *ai;
-    if (getaddrinfo(host[0] ? host : NULL, port, &hints, &ai) != 0) goto bad;
+    int gai = getaddrinfo(host[0] ? host : NULL, port, &hints, &ai);
+    if (gai != 0) /* the form was checked at start: a host name that does not resolve */
+        return vx_err_set(err, VX_EINVAL, "bad_listen",
+                          "cannot resolve the host '%s' of listen address '%s': %s", host, s,
+                          gai == EAI_SYSTEM ? strerror(errno) : gai_strerror(gai));
     memcpy(ss, ai->ai_addr, ai->ai_addrlen);
     *len = ai->ai_addrlen;
     *v6 = ai->ai_family == AF_INET6;
