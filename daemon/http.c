@@ -597,7 +597,7 @@ vx_http *vx_http_start(const vx_http_desc *desc, vx_err *err)
     }
     const union MHD_DaemonInfo *di = MHD_get_daemon_info(h->mhd, MHD_DAEMON_INFO_BIND_PORT);
     h->port = di ? di->port : 0;
-    VX_INFO("http.listen", "listen=%s port=%d threads=%d auth=%d", cfg->listen, h->port,
+    VX_INFO("http.listen", "listen=%s port=%d threads=%d auth=%d", VX_Q(cfg->listen), h->port,
             cfg->http_threads, h->auth.on);
     return h;
 }

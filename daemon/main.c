@@ -220,7 +220,8 @@ static vx_jobs *open_jobs(const vx_config *cfg, vx_store *store, int start, vx_e
 {
     vx_err cerr;
     int have_cache = vx_mkdirs(cfg->cache_dir, &cerr) == 0;
-    if (!have_cache) VX_WARN("voxeld.no_cache_dir", "path=%s code=%s", cfg->cache_dir, cerr.code);
+    if (!have_cache)
+        VX_WARN("voxeld.no_cache_dir", "path=%s code=%s", VX_Q(cfg->cache_dir), cerr.code);
     vx_jobs_desc jd = make_jobs_desc(cfg, store, have_cache);
     char replica[128];
     replica_name(cfg, replica);
@@ -367,7 +368,7 @@ int main(int argc, char **argv)
 
     double start = vx_now();
     VX_INFO("voxeld.start", "version=%s pid=%d data_dir=%s", VX_VERSION, (int)getpid(),
-            cfg.data_dir);
+            VX_Q(cfg.data_dir));
     vx_err err;
     vx_err_clear(&err);
     vx_blob_conf bc = {

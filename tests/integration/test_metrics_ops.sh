@@ -78,4 +78,13 @@ check "the zero-limit /v1/info fits api/openapi.yaml" \
     python3 "$VX_SOURCE_DIR/tests/tools/openapi_check.py" "$VX_SOURCE_DIR/api/openapi.yaml" "$TMP/info-api.jsonl"
 python3 "$VX_SOURCE_DIR/tests/tools/openapi_check.py" "$VX_SOURCE_DIR/api/openapi.yaml" "$TMP/info-api.jsonl" | head -n 12
 stop_daemon
+
+# ---- a value with a blank stays one key=value pair in the log --------------------
+# The data dir is the operator's: "data dir" logged bare was data_dir=.../data
+# and a stray key "dir".
+DATA="$TMP/my data" start_daemon || exit 1
+stop_daemon
+check "data_dir with a blank is quoted in voxeld.start" \
+    grep -qF "data_dir=\"$TMP/my data\"" "$TMP/daemon.log"
+check "  ... and in store.open" grep -qF "event=store.open dir=\"$TMP/my data\"" "$TMP/daemon.log"
 finish
