@@ -35,8 +35,8 @@ typedef struct opt_def {
 
 static const opt_def opts[] = {
     {"listen", T_STR, S(listen),
-     "ADDR:PORT to listen on (IPv6 as [ADDR]:PORT; an empty ADDR, :PORT, = every interface; "
-     "PORT 0 to 65535, 0 = any free)"},
+     "ADDR:PORT to listen on (IPv6 as [ADDR]:PORT; an empty ADDR, :PORT, = every IPv4 "
+     "interface, [::]:PORT = every interface, IPv4 and IPv6; PORT 0 to 65535, 0 = any free)"},
     {"data-dir", T_STR, S(data_dir), "data directory (default $STATE_DIRECTORY or ./voxeld-data)"},
     {"cache-dir", T_STR, S(cache_dir), "cache directory (default $CACHE_DIRECTORY or DATA/cache)"},
     {"token-file", T_STR, S(token_file), "file holding the bearer token required on /v1 routes"},

@@ -371,6 +371,13 @@ int main(int argc, char **argv)
             VX_Q(cfg.data_dir));
     vx_err err;
     vx_err_clear(&err);
+    /* A port in use (or a host that does not resolve) fails here, before
+     * the journal is replayed and the GL thread starts its queued jobs. */
+    if (vx_http_check_listen(&cfg, &err)) {
+        VX_ERROR("voxeld.fatal", "stage=http code=%s message=%s", err.code,
+                 vx_log_quote((char[600]){0}, 600, err.message));
+        return 1;
+    }
     vx_blob_conf bc = {
         .url = cfg.blob_store,
         .credentials_file = cfg.blob_credentials,
