@@ -41,10 +41,15 @@ typedef struct job_counter {
     uint64_t n;
 } job_counter;
 
-#define MAXROWS 256
+/* Rows of voxeld_http_requests_total: every route x method label x status
+ * the daemon answers is at most 17 x 8 x ~50; the table grows to that. A
+ * fixed 256 rows were full after one pass of a scanner (every route with
+ * every method, with and without a token), after which no new series, a
+ * first 201 or 500 included, was ever counted. */
+#define MAXROWS 8192
 static pthread_mutex_t g_lock = PTHREAD_MUTEX_INITIALIZER;
-static req_counter g_req[MAXROWS];
-static size_t g_nreq;
+static req_counter *g_req;
+static size_t g_nreq, g_capreq;
 static hist g_req_hist[32];
 static size_t g_nreq_hist;
 static job_counter g_job[64];
@@ -57,7 +62,9 @@ typedef struct fail_counter {
     char kind[32], code[48];
     uint64_t n;
 } fail_counter;
-static fail_counter g_fail[64];
+/* kind x error code: ~100 codes exist in all, a kind meets a share of them */
+#define MAXFAIL 512
+static fail_counter g_fail[MAXFAIL];
 static size_t g_nfail;
 static hist g_wait[1];
 static size_t g_nwait;
@@ -101,7 +108,15 @@ void vx_metrics_request(const char *route, const char *method, int status, doubl
         if (g_req[i].status == status && !strcmp(g_req[i].route, route) &&
             !strcmp(g_req[i].method, method))
             break;
-    if (i == g_nreq && g_nreq < MAXROWS) {
+    if (i == g_nreq && g_nreq == g_capreq && g_capreq < MAXROWS) {
+        size_t cap = g_capreq ? 2 * g_capreq : 256;
+        req_counter *np = realloc(g_req, cap * sizeof *np);
+        if (np) {
+            g_req = np;
+            g_capreq = cap;
+        }
+    }
+    if (i == g_nreq && g_nreq < g_capreq) {
         snprintf(g_req[i].route, sizeof g_req[i].route, "%s", route);
         snprintf(g_req[i].method, sizeof g_req[i].method, "%s", method);
         g_req[i].status = status;
@@ -131,7 +146,7 @@ void vx_metrics_job(const char *kind, const char *state, double run_s, double qu
         size_t k;
         for (k = 0; k < g_nfail; k++)
             if (!strcmp(g_fail[k].kind, kind) && !strcmp(g_fail[k].code, code)) break;
-        if (k == g_nfail && g_nfail < 64) {
+        if (k == g_nfail && g_nfail < MAXFAIL) {
             snprintf(g_fail[k].kind, sizeof g_fail[k].kind, "%s", kind);
             snprintf(g_fail[k].code, sizeof g_fail[k].code, "%s", code);
             g_fail[k].n = 0;
