@@ -367,8 +367,8 @@ int main(int argc, char **argv)
     if (fit_fd_limit(&cfg)) return 2;
 
     double start = vx_now();
-    VX_INFO("voxeld.start", "version=%s pid=%d data_dir=%s", VX_VERSION, (int)getpid(),
-            VX_Q(cfg.data_dir));
+    VX_INFO("voxeld.start", "version=%s pid=%d data_dir=%s workers=%d http_threads=%d", VX_VERSION,
+            (int)getpid(), VX_Q(cfg.data_dir), cfg.workers, cfg.http_threads);
     vx_err err;
     vx_err_clear(&err);
     /* A port in use (or a host that does not resolve) fails here, before

@@ -122,6 +122,27 @@ check "the zero-limit /v1/info fits api/openapi.yaml" \
 python3 "$VX_SOURCE_DIR/tests/tools/openapi_check.py" "$VX_SOURCE_DIR/api/openapi.yaml" "$TMP/info-api.jsonl" | head -n 12
 stop_daemon
 
+# ---- the default --workers are the CPUs voxeld may use ----------------------------
+# Pinned to one CPU (taskset: a cpuset, as docker --cpuset-cpus makes) it
+# runs one worker, not one per CPU of the host; an explicit --workers wins.
+if command -v taskset >/dev/null && taskset -c 0 true 2>/dev/null; then
+    : >"$TMP/pin.log"
+    taskset -c 0 "$VOXELD" --listen 127.0.0.1:0 --data-dir "$TMP/pin-data" 2>"$TMP/pin.log" &
+    PIN=$!
+    for i in $(seq 1 300); do grep -q 'event=voxeld.ready' "$TMP/pin.log" && break; sleep 0.1; done
+    kill -TERM "$PIN"
+    wait "$PIN"
+    check "pinned to CPU 0: workers=1 logged" grep -q 'event=voxeld.start .*workers=1 ' "$TMP/pin.log"
+    taskset -c 0 "$VOXELD" --listen 127.0.0.1:0 --data-dir "$TMP/pin-data" --workers 3 2>"$TMP/pin3.log" &
+    PIN=$!
+    for i in $(seq 1 300); do grep -q 'event=voxeld.ready' "$TMP/pin3.log" && break; sleep 0.1; done
+    kill -TERM "$PIN"
+    wait "$PIN"
+    check "  ... --workers 3 wins" grep -q 'event=voxeld.start .*workers=3 ' "$TMP/pin3.log"
+else
+    echo "note: taskset cannot pin here: the --workers default check is skipped"
+fi
+
 # ---- a value with a blank stays one key=value pair in the log --------------------
 # The data dir is the operator's: "data dir" logged bare was data_dir=.../data
 # and a stray key "dir".
