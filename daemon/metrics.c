@@ -328,6 +328,10 @@ char *vx_metrics_render(const vx_metrics_gauges *g)
     }
     pthread_mutex_unlock(&g_lock);
 
+    /* UINT64_MAX: statvfs failed (the data dir removed): unknown, not 16 EiB */
+    char free_s[32] = "NaN";
+    if (g->disk_free_bytes != UINT64_MAX)
+        snprintf(free_s, sizeof free_s, "%llu", (unsigned long long)g->disk_free_bytes);
     sb_printf(
         &b,
         "# HELP voxeld_queue_depth Jobs waiting for the GL thread.\n# TYPE voxeld_queue_depth "
@@ -342,7 +346,7 @@ char *vx_metrics_render(const vx_metrics_gauges *g)
         "# HELP voxeld_results_bytes Bytes of job results on disk.\n"
         "# TYPE voxeld_results_bytes gauge\nvoxeld_results_bytes %llu\n"
         "# HELP voxeld_data_dir_free_bytes Bytes still free for the data dir.\n"
-        "# TYPE voxeld_data_dir_free_bytes gauge\nvoxeld_data_dir_free_bytes %llu\n"
+        "# TYPE voxeld_data_dir_free_bytes gauge\nvoxeld_data_dir_free_bytes %s\n"
         "# HELP voxeld_data_dir_min_free_bytes Free-space floor: below it writes answer 507.\n"
         "# TYPE voxeld_data_dir_min_free_bytes gauge\nvoxeld_data_dir_min_free_bytes %llu\n"
         "# HELP voxeld_ready 1 when ready to run jobs (what /readyz answers 200 for).\n# TYPE "
@@ -353,9 +357,8 @@ char *vx_metrics_render(const vx_metrics_gauges *g)
         "# HELP voxeld_gl_context_losses_total GL contexts lost during a job.\n"
         "# TYPE voxeld_gl_context_losses_total counter\nvoxeld_gl_context_losses_total %llu\n",
         g->queue_depth, g->queue_capacity, g->running, g->meshes,
-        (unsigned long long)g->results_bytes, (unsigned long long)g->disk_free_bytes,
-        (unsigned long long)g->min_free_disk, g->ready, (unsigned long long)g->evictions,
-        (unsigned long long)g->gl_context_loss);
+        (unsigned long long)g->results_bytes, free_s, (unsigned long long)g->min_free_disk,
+        g->ready, (unsigned long long)g->evictions, (unsigned long long)g->gl_context_loss);
     if (g->cluster) {
         sb_printf(&b, "# HELP voxeld_cluster_jobs Jobs in the shared database by state and kind "
                       "(every replica's: the autoscaler's view).\n"
