@@ -569,7 +569,7 @@ int vx_config_load(vx_config *c, int argc, char **argv)
         size_t len;
         char *tok = vx_read_file(c->token_file, sizeof c->token, &len, &err);
         if (!tok) {
-            fprintf(stderr, "voxeld: token file: %s\n", err.message);
+            fprintf(stderr, "voxeld: token file %s: %s\n", c->token_file, err.message);
             return -1;
         }
         /* The token is what a client sends after "Bearer ": visible ASCII.

@@ -183,6 +183,30 @@ static void test_empty_dir_and_signed_sizes(void **state)
     assert_true(c.min_free_disk == 2ull << 40);
 }
 
+/* A token file that cannot be read is named in the message: "token file:
+ * cannot open the file" left the operator to guess which. */
+static void test_token_file_named(void **state)
+{
+    (void)state;
+    char errpath[] = "/tmp/vx-config-err-XXXXXX";
+    int fd = mkstemp(errpath);
+    assert_true(fd >= 0);
+    int saved = dup(2);
+    dup2(fd, 2);
+    vx_config c;
+    char *argv[] = {"voxeld", "--token-file", "/nonexistent/vx-token", NULL};
+    int rc = load(&c, 3, argv);
+    fflush(stderr);
+    dup2(saved, 2);
+    close(saved);
+    assert_int_equal(rc, -1);
+    char buf[1024] = {0};
+    assert_true(pread(fd, buf, sizeof buf - 1, 0) > 0);
+    close(fd);
+    unlink(errpath);
+    assert_non_null(strstr(buf, "token file /nonexistent/vx-token: "));
+}
+
 /* A VOXELD_ variable that names no option is warned about on stderr and
  * ignored; the clients' own (VOXELD_URL, ...) are not. */
 static void test_unknown_env_warned(void **state)
@@ -221,6 +245,7 @@ int main(void)
         cmocka_unit_test(test_refused_and_comments),
         cmocka_unit_test(test_unknown_env_warned),
         cmocka_unit_test(test_empty_dir_and_signed_sizes),
+        cmocka_unit_test(test_token_file_named),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }
