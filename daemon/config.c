@@ -4,6 +4,7 @@
 #include <errno.h>
 #include <getopt.h>
 #include <math.h>
+#include <sched.h>
 #include <stdlib.h>
 #include <string.h>
 #include <sys/stat.h>
@@ -35,8 +36,8 @@ typedef struct opt_def {
 
 static const opt_def opts[] = {
     {"listen", T_STR, S(listen),
-     "ADDR:PORT to listen on (IPv6 as [ADDR]:PORT; an empty ADDR, :PORT, = every interface; "
-     "PORT 0 to 65535, 0 = any free)"},
+     "ADDR:PORT to listen on (IPv6 as [ADDR]:PORT; an empty ADDR, :PORT, = every IPv4 "
+     "interface, [::]:PORT = every interface, IPv4 and IPv6; PORT 0 to 65535, 0 = any free)"},
     {"data-dir", T_STR, S(data_dir), "data directory (default $STATE_DIRECTORY or ./voxeld-data)"},
     {"cache-dir", T_STR, S(cache_dir), "cache directory (default $CACHE_DIRECTORY or DATA/cache)"},
     {"token-file", T_STR, S(token_file), "file holding the bearer token required on /v1 routes"},
@@ -47,7 +48,9 @@ static const opt_def opts[] = {
      "a software GL renderer (llvmpipe, softpipe, swrast) runs no job and /readyz answers 503: "
      "yes or no (default)"},
     {"http-threads", T_COUNT, F(http_threads), 0, "HTTP thread pool size (default 4; 1 to 1024)"},
-    {"workers", T_COUNT, F(workers), 0, "CPU worker threads (default: number of CPUs; 1 to 1024)"},
+    {"workers", T_COUNT, F(workers), 0,
+     "CPU worker threads (default: the CPUs voxeld may use, its affinity and cgroup CPU limit; "
+     "1 to 1024)"},
     {"max-upload-bytes", T_SIZE, F(max_upload_bytes), 0,
      "largest mesh upload (default 1G; at least 1)"},
     {"max-triangles", T_SIZE, F(max_triangles), 0,
@@ -141,6 +144,33 @@ static const opt_def opts[] = {
 };
 #define NOPTS (sizeof opts / sizeof opts[0])
 
+/* The CPUs this process may run on: its affinity mask (taskset, a
+ * cpuset: docker --cpuset-cpus, Kubernetes' static CPU manager), and no
+ * more than the cgroup v2 CPU limit rounds up to (docker --cpus, a pod's
+ * limits.cpu). The online CPUs of the host were used: a container limited
+ * to 2 CPUs on a 64-CPU node ran 64 workers, each job on one holding its
+ * memory (--workers + 2 jobs at once). */
+static int cpus_usable(void)
+{
+    cpu_set_t set;
+    long n = 0;
+    if (sched_getaffinity(0, sizeof set, &set) == 0) n = CPU_COUNT(&set);
+    if (n <= 0) n = sysconf(_SC_NPROCESSORS_ONLN);
+    FILE *f = fopen("/sys/fs/cgroup/cpu.max", "re");
+    if (f) {
+        char quota[32];
+        unsigned long long period;
+        if (fscanf(f, "%31s %llu", quota, &period) == 2 && strcmp(quota, "max") != 0 &&
+            period > 0) {
+            unsigned long long q = strtoull(quota, NULL, 10);
+            long lim = (long)((q + period - 1) / period);
+            if (lim >= 1 && (n <= 0 || lim < n)) n = lim;
+        }
+        fclose(f);
+    }
+    return n > 0 ? (n > 1024 ? 1024 : (int)n) : 2;
+}
+
 static void defaults(vx_config *c)
 {
     memset(c, 0, sizeof *c);
@@ -164,8 +194,7 @@ static void defaults(vx_config *c)
     c->log_level = VX_LOG_INFO;
     c->gl_debug = 1;
     c->http_threads = 4;
-    long ncpu = sysconf(_SC_NPROCESSORS_ONLN);
-    c->workers = ncpu > 0 ? (int)ncpu : 2;
+    c->workers = cpus_usable();
     c->max_upload_bytes = 1ull << 30;
     c->max_triangles = 20000000;
     c->lease_ttl_s = 30;
@@ -214,6 +243,11 @@ static int set_opt(vx_config *c, const opt_def *d, const char *val, const char *
     char *end;
     /* an empty file name would leave /v1 without a token: refused, as an
      * empty token file is (VOXELD_TOKEN_FILE=$UNSET in a unit or .env) */
+    if (!*val && !strcmp(d->name, "data-dir")) {
+        fprintf(stderr, "voxeld: %s: data-dir is empty (name the directory, or leave it out)\n",
+                where);
+        return -1;
+    }
     if (!*val && !strcmp(d->name, "token-file")) {
         fprintf(stderr, "voxeld: %s: token-file is empty (name the file, or leave it out)\n",
                 where);
@@ -283,7 +317,8 @@ static int set_opt(vx_config *c, const opt_def *d, const char *val, const char *
     }
 bad:;
     static const char *want[] = {
-        [T_SIZE] = "a whole number, K, M or G after it for 2^10, 2^20, 2^30: 64, 64K, 1G",
+        [T_SIZE] = "a whole number, K, M, G or T after it for 2^10, 2^20, 2^30, 2^40: 64, 64K, "
+                   "1G",
         [T_COUNT] = "a whole number from 1 to 1024",
         [T_SECONDS] = "seconds, a decimal number from 0 to 1e9",
         [T_DEVICE] = "auto, or an index from 0 to 255",
@@ -534,7 +569,7 @@ int vx_config_load(vx_config *c, int argc, char **argv)
         size_t len;
         char *tok = vx_read_file(c->token_file, sizeof c->token, &len, &err);
         if (!tok) {
-            fprintf(stderr, "voxeld: token file: %s\n", err.message);
+            fprintf(stderr, "voxeld: token file %s: %s\n", c->token_file, err.message);
             return -1;
         }
         /* The token is what a client sends after "Bearer ": visible ASCII.

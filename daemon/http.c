@@ -28,6 +28,7 @@
 #include <string.h>
 #include <strings.h>
 #include <sys/random.h>
+#include <netinet/in.h>
 #include <sys/socket.h>
 #include <unistd.h>
 
@@ -510,6 +511,8 @@ static void mhd_log(void *cls, const char *fmt, va_list ap)
 
 /* ---- lifecycle ----------------------------------------------------- */
 
+/* *v6: 0 IPv4, 1 IPv6, 2 the IPv6 wildcard [::], which takes IPv4 too
+ * (dual stack: the one address that serves both). */
 static int parse_listen(const char *s, struct sockaddr_storage *ss, socklen_t *len, int *v6,
                         vx_err *err)
 {
@@ -519,15 +522,49 @@ static int parse_listen(const char *s, struct sockaddr_storage *ss, socklen_t *l
                              .ai_socktype = SOCK_STREAM,
                              .ai_flags = AI_PASSIVE},
                     *ai;
-    if (getaddrinfo(host[0] ? host : NULL, port, &hints, &ai) != 0) goto bad;
+    int gai = getaddrinfo(host[0] ? host : NULL, port, &hints, &ai);
+    if (gai != 0) /* the form was checked at start: a host name that does not resolve */
+        return vx_err_set(err, VX_EINVAL, "bad_listen",
+                          "cannot resolve the host '%s' of listen address '%s': %s", host, s,
+                          gai == EAI_SYSTEM ? strerror(errno) : gai_strerror(gai));
     memcpy(ss, ai->ai_addr, ai->ai_addrlen);
     *len = ai->ai_addrlen;
     *v6 = ai->ai_family == AF_INET6;
+    if (*v6 && IN6_IS_ADDR_UNSPECIFIED(&((struct sockaddr_in6 *)ss)->sin6_addr)) *v6 = 2;
     freeaddrinfo(ai);
     return 0;
 bad:
     return vx_err_set(err, VX_EINVAL, "bad_listen",
                       "cannot parse listen address '%s' (want ADDR:PORT)", s);
+}
+
+static int listen_failed(vx_err *err, const char *listen, int e)
+{
+    return vx_err_set(err, VX_EIO, "listen_failed", "cannot listen on %s: %s", listen,
+                      e == EADDRINUSE ? "address in use (another process listens on this port)"
+                      : e             ? strerror(e)
+                                      : "libmicrohttpd could not start (see http.mhd)");
+}
+
+int vx_http_check_listen(const vx_config *cfg, vx_err *err)
+{
+    struct sockaddr_storage ss;
+    socklen_t sslen;
+    int v6 = 0;
+    if (parse_listen(cfg->listen, &ss, &sslen, &v6, err)) return -1;
+    /* the options libmicrohttpd sets on its socket (SO_REUSEADDR by
+     * default, SO_REUSEPORT with --reuse-port, IPV6_V6ONLY but for dual
+     * stack), so that this bind fails exactly when its would */
+    int fd = socket(ss.ss_family, SOCK_STREAM | SOCK_CLOEXEC, 0);
+    if (fd < 0) return listen_failed(err, cfg->listen, errno);
+    int one = 1, v6only = v6 == 1;
+    setsockopt(fd, SOL_SOCKET, SO_REUSEADDR, &one, sizeof one);
+    if (cfg->reuse_port) setsockopt(fd, SOL_SOCKET, SO_REUSEPORT, &one, sizeof one);
+    if (v6) setsockopt(fd, IPPROTO_IPV6, IPV6_V6ONLY, &v6only, sizeof v6only);
+    int rc = bind(fd, (struct sockaddr *)&ss, sslen);
+    int e = errno;
+    close(fd);
+    return rc ? listen_failed(err, cfg->listen, e) : 0;
 }
 
 vx_http *vx_http_start(const vx_http_desc *desc, vx_err *err)
@@ -562,7 +599,10 @@ vx_http *vx_http_start(const vx_http_desc *desc, vx_err *err)
         return NULL;
     }
     unsigned flags = MHD_USE_INTERNAL_POLLING_THREAD | MHD_USE_EPOLL | MHD_ALLOW_SUSPEND_RESUME |
-                     MHD_USE_ERROR_LOG | (v6 ? MHD_USE_IPv6 : 0);
+                     MHD_USE_ERROR_LOG |
+                     (v6 == 2 ? MHD_USE_DUAL_STACK
+                      : v6    ? MHD_USE_IPv6
+                              : 0);
     /* --reuse-port: MHD_OPTION_LISTENING_ADDRESS_REUSE 1 (SO_REUSEPORT).
      * Without it the option is left out (MHD_OPTION_END stops the list
      * there): libmicrohttpd's default sets SO_REUSEADDR, so a restart binds
@@ -580,11 +620,7 @@ vx_http *vx_http_start(const vx_http_desc *desc, vx_err *err)
         h->conns, MHD_OPTION_URI_LOG_CALLBACK, vx_conns_on_uri, h->conns,
         cfg->reuse_port ? MHD_OPTION_LISTENING_ADDRESS_REUSE : MHD_OPTION_END, 1u, MHD_OPTION_END);
     if (!h->mhd) {
-        int e = errno;
-        vx_err_set(err, VX_EIO, "listen_failed", "cannot listen on %s: %s", cfg->listen,
-                   e == EADDRINUSE ? "address in use (another process listens on this port)"
-                   : e             ? strerror(e)
-                                   : "libmicrohttpd could not start (see http.mhd)");
+        listen_failed(err, cfg->listen, errno);
         vx_events_free(h->events);
         vx_wait_free(h->wait);
         vx_conns_free(h->conns);
@@ -593,7 +629,7 @@ vx_http *vx_http_start(const vx_http_desc *desc, vx_err *err)
     }
     const union MHD_DaemonInfo *di = MHD_get_daemon_info(h->mhd, MHD_DAEMON_INFO_BIND_PORT);
     h->port = di ? di->port : 0;
-    VX_INFO("http.listen", "listen=%s port=%d threads=%d auth=%d", cfg->listen, h->port,
+    VX_INFO("http.listen", "listen=%s port=%d threads=%d auth=%d", VX_Q(cfg->listen), h->port,
             cfg->http_threads, h->auth.on);
     return h;
 }

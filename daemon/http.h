@@ -20,6 +20,12 @@ typedef struct vx_http_desc {
     const vx_gl_info *gpu_refused;
 } vx_http_desc;
 
+/* Whether cfg->listen can be bound as vx_http_start will bind it (the host
+ * resolves, the port is free or --reuse-port shares it), by binding a
+ * socket and closing it: 0, or -1 (err: bad_listen, listen_failed). Run
+ * before the store, the journal and the GL context, so that a port in use
+ * fails at once instead of after a start that may already run jobs. */
+int vx_http_check_listen(const vx_config *cfg, vx_err *err);
 /* Binds and starts serving. Owned; stop with vx_http_stop. */
 vx_http *vx_http_start(const vx_http_desc *desc, vx_err *err);
 /* The port actually bound (useful with port 0). */

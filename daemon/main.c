@@ -220,7 +220,8 @@ static vx_jobs *open_jobs(const vx_config *cfg, vx_store *store, int start, vx_e
 {
     vx_err cerr;
     int have_cache = vx_mkdirs(cfg->cache_dir, &cerr) == 0;
-    if (!have_cache) VX_WARN("voxeld.no_cache_dir", "path=%s code=%s", cfg->cache_dir, cerr.code);
+    if (!have_cache)
+        VX_WARN("voxeld.no_cache_dir", "path=%s code=%s", VX_Q(cfg->cache_dir), cerr.code);
     vx_jobs_desc jd = make_jobs_desc(cfg, store, have_cache);
     char replica[128];
     replica_name(cfg, replica);
@@ -289,20 +290,39 @@ static void start_stop_watchdog(double seconds)
     if (pthread_create(&t, NULL, stop_watchdog, &limit) == 0) pthread_detach(t);
 }
 
-/* Waits for SIGTERM/SIGINT, running the once-a-minute maintenance meanwhile. */
-static void serve_until_signal(const sigset_t *sigs, vx_store *store, vx_jobs *jobs)
+/* Waits for SIGTERM/SIGINT, running the once-a-minute maintenance meanwhile.
+ * The GL thread pings the systemd watchdog (on_jobs_alive); when it does
+ * not run (--require-gpu refused a software renderer) the main thread
+ * pings it instead, at half the watchdog's period: the daemon serves, and
+ * systemd would otherwise kill and restart it every WatchdogSec. */
+static void serve_until_signal(const sigset_t *sigs, vx_store *store, vx_jobs *jobs,
+                               int ping_watchdog)
 {
+    uint64_t wd_usec = 0;
+    double ping_s = 0;
+    if (ping_watchdog && sd_watchdog_enabled(0, &wd_usec) > 0 && wd_usec > 0) {
+        ping_s = (double)wd_usec / 2e6;
+        if (ping_s < 0.05) ping_s = 0.05;
+        sd_notify(0, "WATCHDOG=1");
+    }
+    double next_maint = vx_mono() + 60;
     for (;;) {
-        struct timespec ts = {.tv_sec = 60};
+        double wait_s = next_maint - vx_mono();
+        if (ping_s > 0 && ping_s < wait_s) wait_s = ping_s;
+        if (wait_s < 0) wait_s = 0;
+        struct timespec ts = {.tv_sec = (time_t)wait_s,
+                              .tv_nsec = (long)((wait_s - (double)(time_t)wait_s) * 1e9)};
         int sig = sigtimedwait(sigs, NULL, &ts);
         if (sig == SIGTERM || sig == SIGINT) {
             VX_INFO("voxeld.signal", "signal=%s", sig == SIGTERM ? "TERM" : "INT");
             break;
         }
         if (sig == SIGHUP) VX_INFO("voxeld.signal", "signal=HUP action=none");
-        if (sig < 0 && errno == EAGAIN) {  /* once a minute */
+        if (ping_s > 0) sd_notify(0, "WATCHDOG=1");
+        if (vx_mono() >= next_maint) {     /* once a minute */
             vx_store_results_evict(store); /* the age budget */
             vx_jobs_maintain(jobs, 16L << 20);
+            next_maint = vx_mono() + 60;
         }
     }
 }
@@ -347,10 +367,17 @@ int main(int argc, char **argv)
     if (fit_fd_limit(&cfg)) return 2;
 
     double start = vx_now();
-    VX_INFO("voxeld.start", "version=%s pid=%d data_dir=%s", VX_VERSION, (int)getpid(),
-            cfg.data_dir);
+    VX_INFO("voxeld.start", "version=%s pid=%d data_dir=%s workers=%d http_threads=%d", VX_VERSION,
+            (int)getpid(), VX_Q(cfg.data_dir), cfg.workers, cfg.http_threads);
     vx_err err;
     vx_err_clear(&err);
+    /* A port in use (or a host that does not resolve) fails here, before
+     * the journal is replayed and the GL thread starts its queued jobs. */
+    if (vx_http_check_listen(&cfg, &err)) {
+        VX_ERROR("voxeld.fatal", "stage=http code=%s message=%s", err.code,
+                 vx_log_quote((char[600]){0}, 600, err.message));
+        return 1;
+    }
     vx_blob_conf bc = {
         .url = cfg.blob_store,
         .credentials_file = cfg.blob_credentials,
@@ -423,7 +450,7 @@ int main(int argc, char **argv)
                soft ? " (software: --require-gpu refuses it, no job runs)" : "");
     VX_INFO("voxeld.ready", "port=%d", vx_http_port(http));
 
-    serve_until_signal(&sigs, store, jobs);
+    serve_until_signal(&sigs, store, jobs, soft);
 
     sd_notify(0, "STOPPING=1");
     start_stop_watchdog(cfg.stop_timeout_s);

@@ -41,10 +41,15 @@ typedef struct job_counter {
     uint64_t n;
 } job_counter;
 
-#define MAXROWS 256
+/* Rows of voxeld_http_requests_total: every route x method label x status
+ * the daemon answers is at most 17 x 8 x ~50; the table grows to that. A
+ * fixed 256 rows were full after one pass of a scanner (every route with
+ * every method, with and without a token), after which no new series, a
+ * first 201 or 500 included, was ever counted. */
+#define MAXROWS 8192
 static pthread_mutex_t g_lock = PTHREAD_MUTEX_INITIALIZER;
-static req_counter g_req[MAXROWS];
-static size_t g_nreq;
+static req_counter *g_req;
+static size_t g_nreq, g_capreq;
 static hist g_req_hist[32];
 static size_t g_nreq_hist;
 static job_counter g_job[64];
@@ -57,7 +62,9 @@ typedef struct fail_counter {
     char kind[32], code[48];
     uint64_t n;
 } fail_counter;
-static fail_counter g_fail[64];
+/* kind x error code: ~100 codes exist in all, a kind meets a share of them */
+#define MAXFAIL 512
+static fail_counter g_fail[MAXFAIL];
 static size_t g_nfail;
 static hist g_wait[1];
 static size_t g_nwait;
@@ -101,7 +108,15 @@ void vx_metrics_request(const char *route, const char *method, int status, doubl
         if (g_req[i].status == status && !strcmp(g_req[i].route, route) &&
             !strcmp(g_req[i].method, method))
             break;
-    if (i == g_nreq && g_nreq < MAXROWS) {
+    if (i == g_nreq && g_nreq == g_capreq && g_capreq < MAXROWS) {
+        size_t cap = g_capreq ? 2 * g_capreq : 256;
+        req_counter *np = realloc(g_req, cap * sizeof *np);
+        if (np) {
+            g_req = np;
+            g_capreq = cap;
+        }
+    }
+    if (i == g_nreq && g_nreq < g_capreq) {
         snprintf(g_req[i].route, sizeof g_req[i].route, "%s", route);
         snprintf(g_req[i].method, sizeof g_req[i].method, "%s", method);
         g_req[i].status = status;
@@ -131,7 +146,7 @@ void vx_metrics_job(const char *kind, const char *state, double run_s, double qu
         size_t k;
         for (k = 0; k < g_nfail; k++)
             if (!strcmp(g_fail[k].kind, kind) && !strcmp(g_fail[k].code, code)) break;
-        if (k == g_nfail && g_nfail < 64) {
+        if (k == g_nfail && g_nfail < MAXFAIL) {
             snprintf(g_fail[k].kind, sizeof g_fail[k].kind, "%s", kind);
             snprintf(g_fail[k].code, sizeof g_fail[k].code, "%s", code);
             g_fail[k].n = 0;
@@ -313,6 +328,10 @@ char *vx_metrics_render(const vx_metrics_gauges *g)
     }
     pthread_mutex_unlock(&g_lock);
 
+    /* UINT64_MAX: statvfs failed (the data dir removed): unknown, not 16 EiB */
+    char free_s[32] = "NaN";
+    if (g->disk_free_bytes != UINT64_MAX)
+        snprintf(free_s, sizeof free_s, "%llu", (unsigned long long)g->disk_free_bytes);
     sb_printf(
         &b,
         "# HELP voxeld_queue_depth Jobs waiting for the GL thread.\n# TYPE voxeld_queue_depth "
@@ -327,7 +346,7 @@ char *vx_metrics_render(const vx_metrics_gauges *g)
         "# HELP voxeld_results_bytes Bytes of job results on disk.\n"
         "# TYPE voxeld_results_bytes gauge\nvoxeld_results_bytes %llu\n"
         "# HELP voxeld_data_dir_free_bytes Bytes still free for the data dir.\n"
-        "# TYPE voxeld_data_dir_free_bytes gauge\nvoxeld_data_dir_free_bytes %llu\n"
+        "# TYPE voxeld_data_dir_free_bytes gauge\nvoxeld_data_dir_free_bytes %s\n"
         "# HELP voxeld_data_dir_min_free_bytes Free-space floor: below it writes answer 507.\n"
         "# TYPE voxeld_data_dir_min_free_bytes gauge\nvoxeld_data_dir_min_free_bytes %llu\n"
         "# HELP voxeld_ready 1 when ready to run jobs (what /readyz answers 200 for).\n# TYPE "
@@ -338,9 +357,8 @@ char *vx_metrics_render(const vx_metrics_gauges *g)
         "# HELP voxeld_gl_context_losses_total GL contexts lost during a job.\n"
         "# TYPE voxeld_gl_context_losses_total counter\nvoxeld_gl_context_losses_total %llu\n",
         g->queue_depth, g->queue_capacity, g->running, g->meshes,
-        (unsigned long long)g->results_bytes, (unsigned long long)g->disk_free_bytes,
-        (unsigned long long)g->min_free_disk, g->ready, (unsigned long long)g->evictions,
-        (unsigned long long)g->gl_context_loss);
+        (unsigned long long)g->results_bytes, free_s, (unsigned long long)g->min_free_disk,
+        g->ready, (unsigned long long)g->evictions, (unsigned long long)g->gl_context_loss);
     if (g->cluster) {
         sb_printf(&b, "# HELP voxeld_cluster_jobs Jobs in the shared database by state and kind "
                       "(every replica's: the autoscaler's view).\n"

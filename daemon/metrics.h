@@ -13,7 +13,8 @@
 typedef struct vx_metrics_gauges {
     size_t queue_depth, queue_capacity, running, meshes;
     uint64_t results_bytes;
-    uint64_t disk_free_bytes, min_free_disk; /* the data dir's file system, the floor */
+    uint64_t disk_free_bytes, min_free_disk; /* the data dir's file system (UINT64_MAX: unknown,
+                                                written NaN), the floor */
     int ready;
     vx_gl_info gl;
     double start_time;

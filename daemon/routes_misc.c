@@ -168,6 +168,8 @@ int vx_route_info(vx_http *h, struct MHD_Connection *c, req *r)
     cJSON_AddNumberToObject(l, "min_send_rate", (double)cfg->min_send_rate);
     cJSON_AddNumberToObject(l, "max_uri_bytes", (double)cfg->max_uri_bytes);
     cJSON_AddNumberToObject(l, "max_header_bytes", (double)cfg->max_header_bytes);
+    /* as in effect: lowered at start to what the descriptor limit leaves */
+    cJSON_AddNumberToObject(l, "max_connections", (double)cfg->max_connections);
     cJSON_AddNumberToObject(l, "max_connections_per_ip", (double)cfg->max_connections_per_ip);
     cJSON_AddNumberToObject(l, "max_image_pixels", (double)cfg->max_image_pixels);
     cJSON_AddNumberToObject(l, "max_job_memory_bytes", (double)cfg->max_job_memory);

@@ -77,11 +77,11 @@ static void save_wisdom(void)
     if (ok && rename(tmp, wisdom_path) == 0) {
         free(wisdom_saved);
         wisdom_saved = now;
-        VX_INFO("fftw.wisdom_saved", "path=%s bytes=%zu", wisdom_path, strlen(now));
+        VX_INFO("fftw.wisdom_saved", "path=%s bytes=%zu", VX_Q(wisdom_path), strlen(now));
         return;
     }
     unlink(tmp);
-    VX_WARN("fftw.wisdom_not_saved", "path=%s", wisdom_path);
+    VX_WARN("fftw.wisdom_not_saved", "path=%s", VX_Q(wisdom_path));
     free(now);
 }
 

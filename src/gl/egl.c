@@ -8,6 +8,7 @@
 
 #include <EGL/egl.h>
 #include <EGL/eglext.h>
+#include <pthread.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -282,6 +283,35 @@ static const char *debug_type(GLenum t)
     }
 }
 
+/* At most GL_DEBUG_BURST gl.debug lines a second, then one line saying how
+ * many were left out: a driver may say the same thing at every draw (a
+ * shader recompiled for a state, a buffer's placement), thousands of lines
+ * a job, and the log is every job's. */
+enum { GL_DEBUG_BURST = 20 };
+
+static int debug_rate_ok(void)
+{
+    static pthread_mutex_t lock = PTHREAD_MUTEX_INITIALIZER;
+    static double window;
+    static unsigned shown, dropped;
+    double now = vx_mono();
+    pthread_mutex_lock(&lock);
+    unsigned was_dropped = 0;
+    if (now - window >= 1.0) {
+        was_dropped = dropped;
+        window = now;
+        shown = dropped = 0;
+    }
+    int show = shown < GL_DEBUG_BURST;
+    if (show)
+        shown++;
+    else
+        dropped++;
+    pthread_mutex_unlock(&lock);
+    if (was_dropped) VX_WARN("gl.debug_suppressed", "lines=%u seconds=1", was_dropped);
+    return show;
+}
+
 static void APIENTRY debug_cb(GLenum source, GLenum type, GLuint id, GLenum severity,
                               GLsizei length, const GLchar *message, const void *user)
 {
@@ -301,6 +331,7 @@ static void APIENTRY debug_cb(GLenum source, GLenum type, GLuint id, GLenum seve
         lv = VX_LOG_DEBUG, sev = "notification";
         break;
     }
+    if (lv > vx_log_get_level() || !debug_rate_ok()) return;
     char q[1024];
     vx_log(lv, "gl.debug", "source=%s type=%s id=%u severity=%s message=%s", debug_source(source),
            debug_type(type), id, sev, vx_log_quote(q, sizeof q, message));

@@ -71,7 +71,7 @@ int vx_png_write_path_poll(const char *path, const void *pixels, int width, int 
         png_destroy_write_struct(&png, &info);
         fclose(f);
         if (regular) unlink(path);
-        VX_ERROR("png.write_failed", "path=%s", path);
+        VX_ERROR("png.write_failed", "path=%s", VX_Q(path));
         return vx_err_set(err, VX_EIO, "png_write", "writing %s failed: %s", name, ctx.msg);
     }
     png_init_io(png, f);
@@ -108,7 +108,7 @@ int vx_png_write_path_poll(const char *path, const void *pixels, int width, int 
     if (bad) {
         int e = errno;
         if (regular) unlink(path);
-        VX_ERROR("png.write_failed", "path=%s errno=%d", path, e);
+        VX_ERROR("png.write_failed", "path=%s errno=%d", VX_Q(path), e);
         return vx_err_set(err, VX_EIO, "png_write", "writing %s failed: %s", name, strerror(e));
     }
     return 0;

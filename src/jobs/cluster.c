@@ -283,7 +283,8 @@ int cluster_open(vx_jobs *j, vx_err *err)
         n += (size_t)snprintf(c->kinds + n, sizeof c->kinds - n, "%s%s", n ? "," : "",
                               j->desc.kinds->rows[i]->name);
     c->renew_s = vx_pg_renew_interval(c->lease);
-    VX_INFO("cluster.open", "replica=%s kinds=%s renew_s=%.1f", j->replica, c->kinds, c->renew_s);
+    VX_INFO("cluster.open", "replica=%s kinds=%s renew_s=%.1f", VX_Q(j->replica), c->kinds,
+            c->renew_s);
     return 0;
 }
 
@@ -861,7 +862,7 @@ static void adopt(vx_jobs *j, vx_pg_job *row)
         if (!taken) {
             __atomic_add_fetch(&c->stats.claims, 1, __ATOMIC_RELAXED);
             VX_INFO("job.claimed", "job=%s kind=%s attempt=%d replica=%s", row->id, row->kind,
-                    row->attempt, j->replica);
+                    row->attempt, VX_Q(j->replica));
             notify(j, row->id, 0);
             return;
         }
@@ -939,7 +940,7 @@ static void lose(vx_jobs *j, const char *jid, int attempt)
     pthread_mutex_unlock(&j->lock);
     if (hit) {
         __atomic_add_fetch(&c->stats.lease_losses, 1, __ATOMIC_RELAXED);
-        VX_WARN("job.lease_lost", "job=%s attempt=%d replica=%s", jid, attempt, j->replica);
+        VX_WARN("job.lease_lost", "job=%s attempt=%d replica=%s", jid, attempt, VX_Q(j->replica));
     }
 }
 

@@ -39,7 +39,7 @@ static void reserve_tail(vx_journal *j)
     if (rc == 0)
         j->reserved = j->size + RESERVE;
     else if (errno != EOPNOTSUPP && errno != ENOSYS)
-        VX_WARN("journal.reserve_failed", "path=%s error=%d", j->path, errno);
+        VX_WARN("journal.reserve_failed", "path=%s error=%d", VX_Q(j->path), errno);
 }
 
 /* A record is one line: '#', the CRC-32 of the JSON as 8 hex digits, a
@@ -63,7 +63,7 @@ vx_journal *vx_journal_open(const char *path, vx_err *err)
     j->fd = open(path, O_RDWR | O_CREAT | O_APPEND | O_CLOEXEC, 0640);
     if (j->fd < 0) {
         int e = errno;
-        VX_ERROR("journal.open_failed", "path=%s error=%d", path, e);
+        VX_ERROR("journal.open_failed", "path=%s error=%d", VX_Q(path), e);
         vx_err_set(err, vx_err_io_kind(e), "journal_failed", "cannot open the journal: %s",
                    strerror(e));
         free(j);
@@ -71,7 +71,7 @@ vx_journal *vx_journal_open(const char *path, vx_err *err)
     }
     struct stat st;
     if (fstat(j->fd, &st) != 0 || !S_ISREG(st.st_mode)) { /* a FIFO's reads would block */
-        VX_ERROR("journal.open_failed", "path=%s error=not_a_regular_file", path);
+        VX_ERROR("journal.open_failed", "path=%s error=not_a_regular_file", VX_Q(path));
         vx_err_set(err, VX_EIO, "journal_failed", "the journal is not a regular file");
         close(j->fd);
         free(j);
@@ -148,7 +148,7 @@ long vx_journal_replay(vx_journal *j, void (*fn)(const cJSON *rec, void *ud), vo
     FILE *f = fopen(j->path, "rbe");
     if (!f) {
         int e = errno;
-        VX_ERROR("journal.open_failed", "path=%s error=%d", j->path, e);
+        VX_ERROR("journal.open_failed", "path=%s error=%d", VX_Q(j->path), e);
         return vx_err_set(err, VX_EIO, "journal_failed", "cannot read the journal: %s",
                           strerror(e));
     }
@@ -167,9 +167,11 @@ long vx_journal_replay(vx_journal *j, void (*fn)(const cJSON *rec, void *ud), vo
              * (zeros, garbage) is damage to acknowledged records. */
             int record = (line[0] == '#' || line[0] == '{') && !memchr(line, 0, (size_t)n);
             if (record) {
-                VX_WARN("journal.torn_tail", "path=%s line=%ld bytes=%zd", j->path, lineno, n);
+                VX_WARN("journal.torn_tail", "path=%s line=%ld bytes=%zd", VX_Q(j->path), lineno,
+                        n);
             } else {
-                VX_ERROR("journal.damaged_tail", "path=%s line=%ld bytes=%zd", j->path, lineno, n);
+                VX_ERROR("journal.damaged_tail", "path=%s line=%ld bytes=%zd", VX_Q(j->path),
+                         lineno, n);
                 damaged++;
             }
             torn = 1;
@@ -179,9 +181,9 @@ long vx_journal_replay(vx_journal *j, void (*fn)(const cJSON *rec, void *ud), vo
         size_t len = (size_t)n - 1;
         cJSON *rec = line[0] == '#' ? parse_framed(line, len) : cJSON_ParseWithLength(line, len);
         if (!rec && (rec = salvage(line, len)))
-            VX_WARN("journal.salvaged", "path=%s line=%ld", j->path, lineno);
+            VX_WARN("journal.salvaged", "path=%s line=%ld", VX_Q(j->path), lineno);
         if (!rec) {
-            VX_ERROR("journal.bad_record", "path=%s line=%ld", j->path, lineno);
+            VX_ERROR("journal.bad_record", "path=%s line=%ld", VX_Q(j->path), lineno);
             damaged++;
             continue;
         }
@@ -203,15 +205,15 @@ long vx_journal_replay(vx_journal *j, void (*fn)(const cJSON *rec, void *ud), vo
                 snprintf(copy, sizeof copy, "%s.damaged-%lld", j->path, now);
             kept = vx_copy_file(j->path, copy) == 0;
         }
-        VX_ERROR("journal.damaged", "path=%s records=%ld copy=%s", j->path, damaged,
-                 kept ? copy : "-");
+        VX_ERROR("journal.damaged", "path=%s records=%ld copy=%s", VX_Q(j->path), damaged,
+                 kept ? VX_Q(copy) : "-");
     }
     pthread_mutex_lock(&j->lock);
     if (torn) {
         /* Cut the torn tail so the next record starts on a line of its own
          * (compaction may not run: the disk can be full). */
         if (ftruncate(j->fd, good) != 0 || fdatasync(j->fd) != 0)
-            VX_ERROR("journal.truncate_failed", "path=%s error=%d", j->path, errno);
+            VX_ERROR("journal.truncate_failed", "path=%s error=%d", VX_Q(j->path), errno);
     }
     j->size = good;
     pthread_mutex_unlock(&j->lock);
@@ -255,12 +257,12 @@ int vx_journal_append(vx_journal *j, const cJSON *rec, vx_err *err)
         /* A torn write (ENOSPC after part of the line) must not stay in the
          * file: the next record would be glued onto it. Shrinking needs no
          * space; if even that fails, replay salvages the glued record. */
-        VX_ERROR("journal.truncate_failed", "path=%s error=%d", j->path, errno);
+        VX_ERROR("journal.truncate_failed", "path=%s error=%d", VX_Q(j->path), errno);
     }
     pthread_mutex_unlock(&j->lock);
     free(text);
     if (rc != 0) {
-        VX_ERROR("journal.append_failed", "path=%s error=%d", j->path, e);
+        VX_ERROR("journal.append_failed", "path=%s error=%d", VX_Q(j->path), e);
         if (e == ENOENT)
             return vx_err_set(err, VX_EIO, "journal_failed",
                               "the job journal was removed from the data directory");

@@ -166,7 +166,7 @@ static void load_one(vx_store *s, const char *id, const char *suffix)
     free(text);
     const cJSON *fmt = cJSON_GetObjectItemCaseSensitive(meta, "format");
     if (!cJSON_IsString(fmt)) {
-        VX_WARN("store.bad_metadata", "path=%s", path);
+        VX_WARN("store.bad_metadata", "path=%s", VX_Q(path));
         cJSON_Delete(meta);
         if (!deleted && !s->ops->shared) rebuild_meta(s, id, key);
         return;
@@ -176,7 +176,7 @@ static void load_one(vx_store *s, const char *id, const char *suffix)
     mesh_data_key(mkey, sizeof mkey, id, ext);
     if (s->ops->stat(s->blob, mkey, NULL, NULL) < 0) {
         s->ops->path(s->blob, mkey, mpath, sizeof mpath);
-        VX_WARN("store.missing_mesh_file", "path=%s", mpath);
+        VX_WARN("store.missing_mesh_file", "path=%s", VX_Q(mpath));
         cJSON_Delete(meta);
         if (deleted) s->ops->remove(s->blob, key);
         return;
@@ -290,7 +290,7 @@ static int mesh_commit_new_locked(vx_store *s, vx_upload *u, const char *id, con
         int e = errno;
         char path[VX_PATH_MAX];
         s->ops->path(s->blob, key, path, sizeof path);
-        VX_ERROR("store.rename_failed", "path=%s error=%d", path, e);
+        VX_ERROR("store.rename_failed", "path=%s error=%d", VX_Q(path), e);
         vx_err_set(err, vx_err_io_kind(e), "store_failed", "cannot store the mesh: %s",
                    strerror(e));
     } else if (s->ops->sync(s->blob, "meshes", err) == 0 &&
@@ -666,7 +666,7 @@ static int mesh_open_checked(vx_store *s, const char *id, char *buf, size_t n, i
     if (intact < 0)
         return vx_err_set(err, vx_err_io_kind(errno), "store_failed", "cannot read mesh %.80s: %s",
                           id, strerror(errno));
-    VX_ERROR("store.mesh_damaged", "mesh=%s path=%s", id, buf);
+    VX_ERROR("store.mesh_damaged", "mesh=%s path=%s", id, VX_Q(buf));
     return vx_err_set(err, VX_EGONE, "mesh_damaged",
                       "the stored file of mesh %.80s is missing or not the bytes uploaded; "
                       "upload the mesh again to repair it",

@@ -92,8 +92,8 @@ vx_store *vx_store_open(const char *data_dir, const vx_store_desc *desc, vx_err 
         vx_store_close(s);
         return NULL;
     }
-    VX_INFO("store.open", "dir=%s meshes=%zu results=%zu results_bytes=%llu", s->dir, s->meshes.n,
-            s->nresults, (unsigned long long)s->results_bytes);
+    VX_INFO("store.open", "dir=%s meshes=%zu results=%zu results_bytes=%llu", VX_Q(s->dir),
+            s->meshes.n, s->nresults, (unsigned long long)s->results_bytes);
     return s;
 }
 

@@ -31,7 +31,7 @@ vx_upload *vx_upload_begin(vx_store *s, vx_err *err)
     u->fd = open(u->path, O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0640);
     if (u->fd < 0) {
         int e = errno;
-        VX_ERROR("store.upload_create_failed", "path=%s error=%d", u->path, e);
+        VX_ERROR("store.upload_create_failed", "path=%s error=%d", VX_Q(u->path), e);
         vx_err_set(err, vx_err_io_kind(e), e == ENOSPC ? "insufficient_storage" : "upload_failed",
                    "cannot store the upload: %s", strerror(e));
         free(u);

@@ -1,6 +1,7 @@
 #include "util/fsutil.h"
 
 #include <dirent.h>
+#include <ctype.h>
 #include <errno.h>
 #include <fcntl.h>
 #include <stdio.h>
@@ -198,7 +199,9 @@ int vx_parse_size(const char *s, uint64_t *out)
 {
     char *end;
     errno = 0;
-    if (!s || !*s || *s == '-') return -1;
+    /* digits first: strtoull would skip blanks and take a sign (" -1" was
+     * 2^64 - 1) */
+    if (!s || !isdigit((unsigned char)*s)) return -1;
     unsigned long long v = strtoull(s, &end, 10);
     if (errno || end == s) return -1;
     uint64_t mul = 1;
@@ -228,8 +231,10 @@ int vx_parse_size(const char *s, uint64_t *out)
     default:
         return -1;
     }
-    if (*end == 'i' || *end == 'B') end++;
-    if (*end == 'B') end++;
+    if (mul > 1 && end[0] == 'i' && end[1] == 'B') /* 64KiB */
+        end += 2;
+    else if (*end == 'B') /* 64KB, 64B */
+        end++;
     if (*end) return -1;
     if (v > UINT64_MAX / mul) return -1;
     *out = v * mul;

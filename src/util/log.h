@@ -27,6 +27,11 @@ void vx_log(vx_log_level level, const char *event, const char *fmt, ...)
  * double-quoted with escapes. Returns buf. */
 const char *vx_log_quote(char *buf, unsigned long size, const char *s);
 
+/* A value quoted for the log in a buffer of its own, for use inside a VX_*
+ * call's arguments (a path, a name an operator chose: a blank in it would
+ * split the key=value pair). */
+#define VX_Q(s) vx_log_quote((char[1024]){0}, 1024, (s))
+
 #define VX_ERROR(ev, ...) vx_log(VX_LOG_ERR, ev, __VA_ARGS__)
 #define VX_WARN(ev, ...) vx_log(VX_LOG_WARN, ev, __VA_ARGS__)
 #define VX_INFO(ev, ...) vx_log(VX_LOG_INFO, ev, __VA_ARGS__)

@@ -50,6 +50,12 @@ api POST /v1/jobs -H "Content-Type: application/json" -d "{\"mesh\":\"$M\",\"kin
 expect_error "job on a removed data dir" 500 journal_failed
 api GET /readyz
 expect_status "readyz on a removed data dir" 503
+api GET /metrics
+expect_status "metrics on a removed data dir" 200
+check "voxeld_ready 0" grep -q '^voxeld_ready 0$' "$BODY"
+# its free space is unknown, not 2^64 - 1 bytes (16 EiB on a dashboard)
+check "voxeld_data_dir_free_bytes NaN ($(grep '^voxeld_data_dir_free_bytes' "$BODY"))" \
+    grep -q '^voxeld_data_dir_free_bytes NaN$' "$BODY"
 kill -KILL "$PID"
 wait "$PID" 2>/dev/null
 PID=

@@ -53,5 +53,102 @@ check "cpu seconds counted" awk -v a="$(metric process_cpu_seconds_total)" 'BEGI
 check "start time in the past" awk -v a="$(metric process_start_time_seconds)" -v now="$(date +%s)" 'BEGIN {exit !(a > 0 && a <= now + 1)}'
 check "HELP and TYPE for the new families" bash -c "for f in voxeld_jobs_failed_total voxeld_job_queue_wait_seconds voxeld_results_evicted_total voxeld_gl_context_losses_total process_open_fds process_max_fds process_cpu_seconds_total process_resident_memory_bytes; do grep -q \"^# TYPE \$f \" '$BODY' || exit 1; done"
 
+
+# ---- a scanner's pass does not stop the counting of new series ------------------
+# Every route with every method, with and without a body size, a token and a
+# query: some 250 (route, method, status) series. The table of series was a
+# fixed 256 rows: once full, a first 201 was never counted.
+python3 - "$PORT" <<'PY'
+import concurrent.futures, http.client, itertools, sys
+port = int(sys.argv[1])
+paths = ("/livez /readyz /metrics /v1/info /v1/meshes /v1/meshes/x /v1/meshes/x/file /v1/jobs "
+         "/v1/jobs/x /v1/jobs/x/result /v1/jobs/x/result/y / /docs /openapi.yaml /ui/x "
+         "/v1/jobs/x/events /nope").split()
+methods = "GET HEAD POST PUT DELETE OPTIONS PATCH TRACE FOO".split()
+headers = [{}, {"Authorization": "Bearer x"}, {"Content-Length": "99999999999"},
+           {"Content-Type": "application/json", "Content-Length": "2"}]
+def one(a):
+    path, method, h, q = a
+    try:
+        c = http.client.HTTPConnection("127.0.0.1", port, timeout=5)
+        c.putrequest(method, path + q, skip_accept_encoding=True)
+        for k, v in h.items():
+            c.putheader(k, v)
+        c.endheaders()
+        if h.get("Content-Length") == "2":
+            c.send(b"{}")
+        c.getresponse().read()
+        c.close()
+    except Exception:
+        pass
+with concurrent.futures.ThreadPoolExecutor(8) as ex:
+    list(ex.map(one, itertools.product(paths, methods, headers, ["", "?wait=x&limit=-1"])))
+PY
+api GET /metrics
+NSERIES=$(grep -c '^voxeld_http_requests_total{' "$BODY")
+echo "note: $NSERIES request series after the scan"
+check "the scan made over 256 series ($NSERIES)" test "$NSERIES" -gt 256
+box_obj "$TMP/box2.obj" 0 0 0 2 1 1
+upload "$TMP/box2.obj"
+expect_status "an upload after the scan" 201
+api DELETE "/v1/meshes/$MESH_ID"
+expect_status "a mesh deleted after the scan" 204
+api GET /metrics
+check "the first DELETE 204, a new series, is counted" \
+    grep -q '^voxeld_http_requests_total{route="/v1/meshes/{id}",method="DELETE",status="204"} 1$' "$BODY"
 stop_daemon
+
+# ---- /v1/info reports the limits as configured, 0 = no limit included ----------
+# Every option whose 0 is documented as "no limit" / "never" / "at once", set
+# to 0: /v1/info must say 0, and still fit api/openapi.yaml's Limits (which
+# once required these to be above 0, so a valid configuration answered a
+# /v1/info outside the contract). max_connections is reported as in effect.
+start_daemon --job-timeout 0 --request-timeout 0 --connection-timeout 0 --max-triangles 0 \
+    --max-connections-per-ip 0 --max-image-pixels 0 --max-job-memory 0 --header-timeout 0 \
+    --min-body-rate 0 --min-send-rate 0 --max-parse-memory 0 --results-max-bytes 0 \
+    --results-max-age 0 --job-history-bytes 0 --max-event-streams 0 --max-connections 300 || exit 1
+INFO_FROM=$(wc -l <"$VX_API_LOG")
+api GET /v1/info
+expect_status "info with zero limits" 200
+check "every zero limit reported as 0" jq -e '.limits | [.job_timeout_s, .max_wait_s, .request_timeout_s,
+    .connection_timeout_s, .max_triangles, .max_connections_per_ip, .max_image_pixels,
+    .max_job_memory_bytes, .header_timeout_s, .min_body_rate, .min_send_rate,
+    .max_parse_memory_bytes, .results_max_bytes, .results_max_age_s, .job_history_bytes,
+    .max_event_streams] | all(. == 0)' "$BODY"
+check "max_connections reported" jq -e '.limits.max_connections == 300' "$BODY"
+tail -n +"$((INFO_FROM + 1))" "$VX_API_LOG" >"$TMP/info-api.jsonl"
+check "the zero-limit /v1/info fits api/openapi.yaml" \
+    python3 "$VX_SOURCE_DIR/tests/tools/openapi_check.py" "$VX_SOURCE_DIR/api/openapi.yaml" "$TMP/info-api.jsonl"
+python3 "$VX_SOURCE_DIR/tests/tools/openapi_check.py" "$VX_SOURCE_DIR/api/openapi.yaml" "$TMP/info-api.jsonl" | head -n 12
+stop_daemon
+
+# ---- the default --workers are the CPUs voxeld may use ----------------------------
+# Pinned to one CPU (taskset: a cpuset, as docker --cpuset-cpus makes) it
+# runs one worker, not one per CPU of the host; an explicit --workers wins.
+if command -v taskset >/dev/null && taskset -c 0 true 2>/dev/null; then
+    : >"$TMP/pin.log"
+    taskset -c 0 "$VOXELD" --listen 127.0.0.1:0 --data-dir "$TMP/pin-data" 2>"$TMP/pin.log" &
+    PIN=$!
+    for i in $(seq 1 300); do grep -q 'event=voxeld.ready' "$TMP/pin.log" && break; sleep 0.1; done
+    kill -TERM "$PIN"
+    wait "$PIN"
+    check "pinned to CPU 0: workers=1 logged" grep -q 'event=voxeld.start .*workers=1 ' "$TMP/pin.log"
+    taskset -c 0 "$VOXELD" --listen 127.0.0.1:0 --data-dir "$TMP/pin-data" --workers 3 2>"$TMP/pin3.log" &
+    PIN=$!
+    for i in $(seq 1 300); do grep -q 'event=voxeld.ready' "$TMP/pin3.log" && break; sleep 0.1; done
+    kill -TERM "$PIN"
+    wait "$PIN"
+    check "  ... --workers 3 wins" grep -q 'event=voxeld.start .*workers=3 ' "$TMP/pin3.log"
+else
+    echo "note: taskset cannot pin here: the --workers default check is skipped"
+fi
+
+# ---- a value with a blank stays one key=value pair in the log --------------------
+# The data dir is the operator's: "data dir" logged bare was data_dir=.../data
+# and a stray key "dir".
+DATA="$TMP/my data" start_daemon || exit 1
+stop_daemon
+check "data_dir with a blank is quoted in voxeld.start" \
+    grep -qF "data_dir=\"$TMP/my data\"" "$TMP/daemon.log"
+check "  ... and in store.open" grep -qF "event=store.open dir=\"$TMP/my data\"" "$TMP/daemon.log"
 finish

@@ -36,6 +36,10 @@ check "a second daemon on a taken port exits non-zero (got $rc)" test "$rc" -ne 
 check "its stderr says listen_failed" grep -aq 'code=listen_failed' "$TMP/second.log"
 check "its stderr says the address is in use" grep -aqi 'address in use' "$TMP/second.log"
 check "its message names no server path" bash -c "! grep -a 'listen_failed' '$TMP/second.log' | grep -q '$TMP'"
+# ... and fails before it starts: no data dir opened (its journal's queued
+# jobs were replayed and started, then stopped again), no GL context made.
+check "it never opened its data dir" test ! -e "$TMP/data2"
+check "  ... nor made a GL context" bash -c "! grep -aqE 'event=(store.open|gl.context|jobs.replayed)' '$TMP/second.log'"
 api GET /livez
 expect_status "the first daemon still serves" 200
 # connections the server closes leave it TIME_WAIT sockets on the port
@@ -57,4 +61,15 @@ check "with --reuse-port yes on both, a second daemon starts (got $rc)" test "$r
 api GET /v1/info
 expect_status "info" 200
 stop_daemon
+
+# [::]:PORT, the IPv6 wildcard, serves IPv4 clients too (dual stack: the one
+# listen address for both); it was IPv6 only. :PORT is IPv4's every interface.
+if [[ -e /proc/net/if_inet6 ]] && python3 -c 'import socket; s = socket.socket(socket.AF_INET6); s.bind(("::1", 0))' 2>/dev/null; then
+    start_daemon --listen '[::]:0' || exit 1
+    check "[::]:PORT answers over IPv6" curl -fsS -o /dev/null "http://[::1]:$PORT/livez"
+    check "[::]:PORT answers over IPv4" curl -fsS -o /dev/null "http://127.0.0.1:$PORT/livez"
+    stop_daemon
+else
+    echo "note: no IPv6 loopback: the dual-stack check is skipped"
+fi
 finish

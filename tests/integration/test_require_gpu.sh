@@ -82,12 +82,43 @@ for j in "${QUEUED[@]}"; do
 done
 stop_daemon
 
-# ---- the environment variable does the same ------------------------------------------
-VOXELD_REQUIRE_GPU=yes start_daemon "${DEV[@]}" || exit 1
+# ---- the environment variable does the same; the systemd watchdog is fed ---------------
+# The GL thread, which feeds the watchdog (WATCHDOG=1), does not run here: the
+# main thread must feed it, or systemd (WatchdogSec=30 in the unit) would kill
+# the refusing daemon with SIGABRT and restart it every 30 s. A watchdog of
+# 2 s: a ping at least every second.
+NOTIFY=$TMP/notify.sock
+NLOG=$TMP/notify.log
+: >"$NLOG"
+python3 - "$NOTIFY" "$NLOG" <<'PY' &
+import socket, sys, time
+s = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
+s.bind(sys.argv[1])
+with open(sys.argv[2], "a", buffering=1) as f:
+    while True:
+        data = s.recv(65536)
+        t = time.monotonic()
+        for line in data.decode(errors="replace").split("\n"):
+            if line:
+                f.write(f"{t:.3f} {line}\n")
+PY
+LISTENER=$!
+trap 'kill "$LISTENER" 2>/dev/null; cleanup' EXIT
+for i in $(seq 1 50); do [[ -S "$NOTIFY" ]] && break; sleep 0.1; done
+NOTIFY_SOCKET=$NOTIFY WATCHDOG_USEC=2000000 VOXELD_REQUIRE_GPU=yes start_daemon "${DEV[@]}" || exit 1
 api GET /readyz
 expect_status "readyz with VOXELD_REQUIRE_GPU=yes" 503
 check "reason names the renderer" jq -e --arg r "$RENDERER" '.checks.gpu == false and (.reason | contains($r))' "$BODY"
+sleep 4
 stop_daemon
+sleep 0.3
+kill "$LISTENER" 2>/dev/null
+wait "$LISTENER" 2>/dev/null
+check "READY=1 sent" grep -q ' READY=1$' "$NLOG"
+NW=$(awk '/ READY=1$/ {r=1} / STOPPING=1$/ {r=0} r && / WATCHDOG=1$/ {n++} END {print n+0}' "$NLOG")
+GAP=$(awk '/ READY=1$/ {r=1; last=$1} / STOPPING=1$/ {r=0} r && / WATCHDOG=1$/ {g=$1-last; if (g>m) m=g; last=$1} END {printf "%.2f", m+0}' "$NLOG")
+check "WATCHDOG=1 fed while refusing the renderer ($NW pings in 4 s)" test "$NW" -ge 4
+check "longest WATCHDOG=1 gap ${GAP}s under the 2 s watchdog" awk -v g="$GAP" 'BEGIN {exit !(g > 0 && g < 1.5)}'
 
 # ---- without the flag again: the queued jobs run, nothing was lost ------------------
 start_daemon "${DEV[@]}" || exit 1

@@ -152,6 +152,61 @@ static void test_refused_and_comments(void **state)
     unlink(path);
 }
 
+/* An empty data dir (data-dir = in a file, VOXELD_DATA_DIR=$UNSET) is a bad
+ * option, as an empty listen is: it ran on and died at mkdir "" (exit 1).
+ * A size is digits and a unit: a blank or a sign before it is no size
+ * (" -1" read as 2^64 - 1), nor is a unit given twice. */
+static void test_empty_dir_and_signed_sizes(void **state)
+{
+    (void)state;
+    vx_config c;
+    const char *bad[][2] = {{"--data-dir", ""},
+                            {"--max-upload-bytes", " -1"},
+                            {"--max-upload-bytes", "-1"},
+                            {"--max-upload-bytes", "+5"},
+                            {"--max-upload-bytes", " 5"},
+                            {"--max-upload-bytes", "\t5"},
+                            {"--max-upload-bytes", "5BB"},
+                            {"--max-upload-bytes", "5iB"},
+                            {"--min-free-disk", " -64M"}};
+    for (size_t i = 0; i < sizeof bad / sizeof bad[0]; i++) {
+        char *av[] = {"voxeld", (char *)bad[i][0], (char *)bad[i][1], NULL};
+        assert_int_equal(load(&c, 3, av), -1);
+    }
+    setenv("VOXELD_DATA_DIR", "", 1);
+    char *argv[] = {"voxeld", NULL};
+    assert_int_equal(load(&c, 1, argv), -1);
+    unsetenv("VOXELD_DATA_DIR");
+    char *ok[] = {"voxeld", "--max-upload-bytes", "5KiB", "--min-free-disk", "2TB", NULL};
+    assert_int_equal(load(&c, 5, ok), 0);
+    assert_int_equal(c.max_upload_bytes, 5u << 10);
+    assert_true(c.min_free_disk == 2ull << 40);
+}
+
+/* A token file that cannot be read is named in the message: "token file:
+ * cannot open the file" left the operator to guess which. */
+static void test_token_file_named(void **state)
+{
+    (void)state;
+    char errpath[] = "/tmp/vx-config-err-XXXXXX";
+    int fd = mkstemp(errpath);
+    assert_true(fd >= 0);
+    int saved = dup(2);
+    dup2(fd, 2);
+    vx_config c;
+    char *argv[] = {"voxeld", "--token-file", "/nonexistent/vx-token", NULL};
+    int rc = load(&c, 3, argv);
+    fflush(stderr);
+    dup2(saved, 2);
+    close(saved);
+    assert_int_equal(rc, -1);
+    char buf[1024] = {0};
+    assert_true(pread(fd, buf, sizeof buf - 1, 0) > 0);
+    close(fd);
+    unlink(errpath);
+    assert_non_null(strstr(buf, "token file /nonexistent/vx-token: "));
+}
+
 /* A VOXELD_ variable that names no option is warned about on stderr and
  * ignored; the clients' own (VOXELD_URL, ...) are not. */
 static void test_unknown_env_warned(void **state)
@@ -184,9 +239,13 @@ static void test_unknown_env_warned(void **state)
 int main(void)
 {
     const struct CMUnitTest tests[] = {
-        cmocka_unit_test(test_env_sets_every_kind), cmocka_unit_test(test_env_bad_value),
-        cmocka_unit_test(test_env_over_file),       cmocka_unit_test(test_refused_and_comments),
+        cmocka_unit_test(test_env_sets_every_kind),
+        cmocka_unit_test(test_env_bad_value),
+        cmocka_unit_test(test_env_over_file),
+        cmocka_unit_test(test_refused_and_comments),
         cmocka_unit_test(test_unknown_env_warned),
+        cmocka_unit_test(test_empty_dir_and_signed_sizes),
+        cmocka_unit_test(test_token_file_named),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

@@ -366,6 +366,27 @@ static void test_init_failed_logged_once(void **state)
     assert_int_equal(count_logged("event=gl.init_failed", bad_device), 1);
 }
 
+/* A driver that says the same thing at every draw: 1000 messages in a burst
+ * log at most 20 gl.debug lines, and the next message after the second is
+ * out says how many were left out. */
+static void debug_flood(void)
+{
+    for (int i = 0; i < 1000; i++)
+        glDebugMessageInsert(GL_DEBUG_SOURCE_APPLICATION, GL_DEBUG_TYPE_PERFORMANCE, 7,
+                             GL_DEBUG_SEVERITY_MEDIUM, -1, "vx-test-flood");
+    usleep(1100 * 1000);
+    glDebugMessageInsert(GL_DEBUG_SOURCE_APPLICATION, GL_DEBUG_TYPE_PERFORMANCE, 7,
+                         GL_DEBUG_SEVERITY_MEDIUM, -1, "vx-test-flood");
+}
+
+static void test_debug_flood_limited(void **state)
+{
+    int n = count_logged("vx-test-flood", debug_flood);
+    assert_true(n >= 2);  /* the messages reach the log */
+    assert_true(n <= 21); /* a burst of 20, then the one after the second */
+    assert_int_equal(count_logged("event=gl.debug_suppressed lines=", debug_flood), 1);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -382,6 +403,7 @@ int main(void)
         cmocka_unit_test(test_rebuild),
         cmocka_unit_test(test_device_out_of_range),
         cmocka_unit_test(test_init_failed_logged_once),
+        cmocka_unit_test(test_debug_flood_limited),
     };
     const struct CMUnitTest alone[] = {
         cmocka_unit_test(test_explicit_device),
