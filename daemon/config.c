@@ -59,6 +59,9 @@ static const opt_def opts[] = {
      "queued jobs before 429 (default 64; at least 1)"},
     {"job-timeout", T_SECONDS, F(job_timeout_s), 0,
      "longest a job may run, seconds (default 600; 0 = no limit)"},
+    {"gl-stall-timeout", T_SECONDS, F(gl_stall_timeout_s), 0,
+     "/livez answers 503 once the GL thread has been silent this long (a driver call that does "
+     "not return), seconds (default 60; 0 = off)"},
     {"stop-timeout", T_SECONDS, F(stop_timeout_s), 0,
      "after SIGTERM, how long the running job may take to stop before voxeld exits 1 without "
      "it (it runs again at the next start), seconds (default 30; 0 = wait)"},
@@ -203,6 +206,7 @@ static void defaults(vx_config *c)
     c->max_queued_jobs = 64;
     c->job_timeout_s = 600;
     c->stop_timeout_s = 30;
+    c->gl_stall_timeout_s = 60;
     c->request_timeout_s = 60;
     c->connection_timeout_s = 30;
     c->header_timeout_s = 10;

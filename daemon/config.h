@@ -28,8 +28,9 @@ typedef struct vx_config {
     uint64_t max_triangles;
     uint64_t max_queued_jobs;
     double job_timeout_s;
-    double stop_timeout_s;    /* SIGTERM: exit 1 when the jobs have not stopped by then; 0 = wait */
-    double request_timeout_s; /* cap on how long ?wait holds a request */
+    double stop_timeout_s; /* SIGTERM: exit 1 when the jobs have not stopped by then; 0 = wait */
+    double gl_stall_timeout_s;   /* /livez 503 after the GL thread is silent this long; 0 = off */
+    double request_timeout_s;    /* cap on how long ?wait holds a request */
     double connection_timeout_s; /* idle connections are closed after this */
     double header_timeout_s;   /* accept (or the previous answer) to the end of the head; 0 = off */
     uint64_t min_body_rate;    /* bytes/s a request body must keep up; 0 = off */

@@ -18,6 +18,10 @@ typedef struct vx_http_desc {
     /* Non-NULL: --require-gpu found this software renderer, the job runner
      * was not started, /readyz answers 503 naming it. Not owned. */
     const vx_gl_info *gpu_refused;
+    /* Non-NULL: when the GL thread last said it was alive (vx_mono, set
+     * by it about once a second); /livez answers 503 gl_stalled past
+     * --gl-stall-timeout. NULL (no GL thread): not checked. Not owned. */
+    const _Atomic double *gl_alive_at;
 } vx_http_desc;
 
 /* Whether cfg->listen can be bound as vx_http_start will bind it (the host

@@ -3,6 +3,7 @@
 #include <errno.h>
 #include <pthread.h>
 #include <signal.h>
+#include <stdatomic.h>
 #include <sys/resource.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -51,9 +52,23 @@ static void on_job_changed(void *ud, const char *jid, int terminal)
     vx_http_job_changed(h, jid, terminal);
 }
 
-/* The GL thread pings the systemd watchdog through the jobs' alive hook. */
+/* When the GL thread last said it was alive (/livez's check). */
+static _Atomic double g_gl_alive_at;
+/* VOXELD_TEST_GL_STALL=S (tests only): the GL thread's third ping stalls
+ * it for S seconds, as a driver call that does not return would. */
+static double g_test_stall_s;
+
+/* The GL thread pings the systemd watchdog through the jobs' alive hook,
+ * and notes the time for /livez. */
 static void on_jobs_alive(void *ud)
 {
+    (void)ud;
+    static int pings; /* GL thread only */
+    if (g_test_stall_s > 0 && ++pings == 3) {
+        struct timespec ts = {.tv_sec = (time_t)g_test_stall_s};
+        nanosleep(&ts, NULL);
+    }
+    atomic_store(&g_gl_alive_at, vx_mono());
     sd_notify(0, "WATCHDOG=1");
 }
 
@@ -234,6 +249,9 @@ static vx_jobs *open_jobs(const vx_config *cfg, vx_store *store, int start, vx_e
     if (cfg->database[0]) jd.database = &pd;
     const char *lose = getenv("VOXELD_TEST_LOSE_CONTEXT");
     g_lose_context = lose && atoi(lose) > 0 ? atoi(lose) : 0;
+    const char *stall = getenv("VOXELD_TEST_GL_STALL");
+    g_test_stall_s = stall ? atof(stall) : 0;
+    atomic_store(&g_gl_alive_at, vx_mono());
     vx_stop_set(startup_stop, NULL);
     vx_jobs *jobs = vx_jobs_open(&jd, err);
     vx_stop_set(NULL, NULL);
@@ -435,7 +453,8 @@ int main(int argc, char **argv)
                        .store = store,
                        .jobs = jobs,
                        .start_time = start,
-                       .gpu_refused = soft ? &refused : NULL};
+                       .gpu_refused = soft ? &refused : NULL,
+                       .gl_alive_at = soft ? NULL : &g_gl_alive_at};
     vx_http *http = vx_http_start(&hd, &err);
     if (!http) {
         VX_ERROR("voxeld.fatal", "stage=http code=%s message=%s", err.code,

@@ -1,6 +1,7 @@
 /* Probes (/livez, /readyz), /metrics, /v1/info and the data dir's free
  * space that /readyz and every write check. */
 #include <math.h>
+#include <stdatomic.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -25,7 +26,21 @@ int vx_route_disk_ok(vx_http *h, uint64_t *free_bytes)
 
 int vx_route_livez(vx_http *h, struct MHD_Connection *c, req *r)
 {
-    (void)h;
+    double limit = h->d.cfg->gl_stall_timeout_s;
+    if (limit > 0 && h->d.gl_alive_at) {
+        double silent = vx_mono() - atomic_load(h->d.gl_alive_at);
+        if (silent > limit) {
+            static _Atomic double warned_at; /* one line a stall (and a minute) */
+            double last = atomic_load(&warned_at);
+            if (vx_mono() - last > 60 &&
+                atomic_compare_exchange_strong(&warned_at, &last, vx_mono()))
+                VX_ERROR("gl.stalled", "silent_s=%.1f limit_s=%g", silent, limit);
+            return vx_resp_fail(c, r, VX_EUNAVAIL, "gl_stalled",
+                                "the GL thread has not answered for %.0f s (over gl-stall-timeout "
+                                "%g s): a driver call that does not return; restart the daemon",
+                                silent, limit);
+        }
+    }
     return vx_resp_text(c, r, 200, strdup("{\"status\":\"ok\"}"), "application/json", NULL, NULL);
 }
 
@@ -166,6 +181,7 @@ int vx_route_info(vx_http *h, struct MHD_Connection *c, req *r)
     cJSON_AddNumberToObject(l, "header_timeout_s", cfg->header_timeout_s);
     cJSON_AddNumberToObject(l, "min_body_rate", (double)cfg->min_body_rate);
     cJSON_AddNumberToObject(l, "min_send_rate", (double)cfg->min_send_rate);
+    cJSON_AddNumberToObject(l, "gl_stall_timeout_s", cfg->gl_stall_timeout_s);
     cJSON_AddNumberToObject(l, "max_uri_bytes", (double)cfg->max_uri_bytes);
     cJSON_AddNumberToObject(l, "max_header_bytes", (double)cfg->max_header_bytes);
     /* as in effect: lowered at start to what the descriptor limit leaves */

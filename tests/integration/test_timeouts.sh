@@ -157,4 +157,37 @@ PID=
 check "a stop that hangs: exit 1 (got $rc)" test "$rc" -eq 1
 check "within --stop-timeout and a second" awk -v a="$T0" -v b="$T1" 'BEGIN {exit !(b - a < 2.5)}'
 check "logged as voxeld.stop_timeout" grep -q 'event=voxeld.stop_timeout seconds=1 ' "$TMP/daemon.log"
+
+# A GL thread that stops answering (VOXELD_TEST_GL_STALL=6: its third ping,
+# about 2 s after the start, sleeps 6 s, as a driver call that does not
+# return would): /livez answers 503 gl_stalled once it has been silent past
+# --gl-stall-timeout, and 200 again when it answers; logged once.
+VOXELD_TEST_GL_STALL=6 start_daemon --gl-stall-timeout 2 || exit 1
+api GET /v1/info
+check "info lists gl_stall_timeout_s" jq -e '.limits.gl_stall_timeout_s == 2' "$BODY"
+seen503=0 seen200after=0
+for i in $(seq 1 60); do
+    api GET /livez
+    if [[ $STATUS == 503 ]] && jq -e '.error.code == "gl_stalled"' "$BODY" >/dev/null; then
+        seen503=1
+    elif [[ $STATUS == 200 && $seen503 == 1 ]]; then
+        seen200after=1
+        break
+    fi
+    sleep 0.25
+done
+check "a stalled GL thread: /livez 503 gl_stalled" test "$seen503" = 1
+check "then 200 once it answers again" test "$seen200after" = 1
+check "logged as gl.stalled" grep -q 'event=gl.stalled ' "$TMP/daemon.log"
+stop_daemon
+# The default: a GL thread that answers keeps /livez at 200.
+start_daemon --gl-stall-timeout 2 || exit 1
+bad=0
+for i in $(seq 1 16); do
+    api GET /livez
+    [[ $STATUS == 200 ]] || bad=$((bad + 1))
+    sleep 0.25
+done
+check "an idle GL thread that answers: /livez 200 for 4 s ($bad not)" test "$bad" = 0
+stop_daemon
 finish
