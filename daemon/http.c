@@ -485,24 +485,10 @@ static void mhd_log(void *cls, const char *fmt, va_list ap)
      * were left out: out of file descriptors, libmicrohttpd says the same
      * thing at every accept (a million lines in 11 s). */
     enum { MHD_LOG_BURST = 20 };
-    static pthread_mutex_t lock = PTHREAD_MUTEX_INITIALIZER;
-    static double window;
-    static unsigned shown, dropped;
-    double now = vx_mono();
-    pthread_mutex_lock(&lock);
-    unsigned was_dropped = 0;
-    if (now - window >= 1.0) {
-        was_dropped = dropped;
-        window = now;
-        shown = dropped = 0;
-    }
-    int show = shown < MHD_LOG_BURST;
-    if (show)
-        shown++;
-    else
-        dropped++;
-    pthread_mutex_unlock(&lock);
-    if (was_dropped) VX_WARN("http.mhd_suppressed", "lines=%u seconds=1", was_dropped);
+    static vx_log_rate rate = VX_LOG_RATE_INIT;
+    unsigned dropped;
+    int show = vx_log_rate_ok(&rate, MHD_LOG_BURST, &dropped);
+    if (dropped) VX_WARN("http.mhd_suppressed", "lines=%u seconds=1", dropped);
     if (!show) return;
     char msg[512], q[600];
     vsnprintf(msg, sizeof msg, fmt, ap);

@@ -291,24 +291,10 @@ enum { GL_DEBUG_BURST = 20 };
 
 static int debug_rate_ok(void)
 {
-    static pthread_mutex_t lock = PTHREAD_MUTEX_INITIALIZER;
-    static double window;
-    static unsigned shown, dropped;
-    double now = vx_mono();
-    pthread_mutex_lock(&lock);
-    unsigned was_dropped = 0;
-    if (now - window >= 1.0) {
-        was_dropped = dropped;
-        window = now;
-        shown = dropped = 0;
-    }
-    int show = shown < GL_DEBUG_BURST;
-    if (show)
-        shown++;
-    else
-        dropped++;
-    pthread_mutex_unlock(&lock);
-    if (was_dropped) VX_WARN("gl.debug_suppressed", "lines=%u seconds=1", was_dropped);
+    static vx_log_rate rate = VX_LOG_RATE_INIT;
+    unsigned dropped;
+    int show = vx_log_rate_ok(&rate, GL_DEBUG_BURST, &dropped);
+    if (dropped) VX_WARN("gl.debug_suppressed", "lines=%u seconds=1", dropped);
     return show;
 }
 

@@ -121,6 +121,27 @@ void vx_log(vx_log_level level, const char *event, const char *fmt, ...)
     pthread_mutex_unlock(&g_lock);
 }
 
+int vx_log_rate_ok(vx_log_rate *r, unsigned burst, unsigned *dropped)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    double now = (double)ts.tv_sec + ts.tv_nsec * 1e-9;
+    pthread_mutex_lock(&r->lock);
+    *dropped = 0;
+    if (now - r->window >= 1.0) {
+        *dropped = r->dropped;
+        r->window = now;
+        r->shown = r->dropped = 0;
+    }
+    int show = r->shown < burst;
+    if (show)
+        r->shown++;
+    else
+        r->dropped++;
+    pthread_mutex_unlock(&r->lock);
+    return show;
+}
+
 const char *vx_log_quote(char *buf, unsigned long size, const char *s)
 {
     if (!s) s = "";

@@ -5,6 +5,8 @@
 #ifndef VX_LOG_H
 #define VX_LOG_H
 
+#include <pthread.h>
+
 typedef enum vx_log_level {
     VX_LOG_ERR = 3,
     VX_LOG_WARN = 4,
@@ -31,6 +33,22 @@ const char *vx_log_quote(char *buf, unsigned long size, const char *s);
  * call's arguments (a path, a name an operator chose: a blank in it would
  * split the key=value pair). */
 #define VX_Q(s) vx_log_quote((char[1024]){0}, 1024, (s))
+
+/* At most a burst of lines a second from one noisy source (a driver's
+ * debug messages, libmicrohttpd's: the same line at every draw or accept).
+ * Static, initialised with VX_LOG_RATE_INIT. */
+typedef struct vx_log_rate {
+    pthread_mutex_t lock;
+    double window;
+    unsigned shown, dropped;
+} vx_log_rate;
+#define VX_LOG_RATE_INIT                                                                           \
+    {                                                                                              \
+        PTHREAD_MUTEX_INITIALIZER, 0, 0, 0                                                         \
+    }
+/* 1 when one more line may go out now; *dropped: the lines left out in the
+ * second that just ended (for a line of the caller's saying so), else 0. */
+int vx_log_rate_ok(vx_log_rate *r, unsigned burst, unsigned *dropped);
 
 #define VX_ERROR(ev, ...) vx_log(VX_LOG_ERR, ev, __VA_ARGS__)
 #define VX_WARN(ev, ...) vx_log(VX_LOG_WARN, ev, __VA_ARGS__)
