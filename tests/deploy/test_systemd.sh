@@ -87,18 +87,7 @@ check "no Type=notify-reload (systemd 252)" bash -c "! grep -q '^Type=notify-rel
 NOTIFY=$TMP/notify.sock
 NLOG=$TMP/notify.log
 : >"$NLOG"
-python3 - "$NOTIFY" "$NLOG" <<'PY' &
-import socket, sys, time
-s = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
-s.bind(sys.argv[1])
-with open(sys.argv[2], "a", buffering=1) as f:
-    while True:
-        data, anc, flags, addr = s.recvmsg(65536, 0)
-        t = time.monotonic()
-        for line in data.decode(errors="replace").split("\n"):
-            if line:
-                f.write(f"{t:.3f} {line}\n")
-PY
+python3 "$(dirname "$0")/../integration/notify_listen.py" "$NOTIFY" "$NLOG" &
 LISTENER=$!
 stop_listener() { kill "$LISTENER" 2>/dev/null; wait "$LISTENER" 2>/dev/null; }
 trap 'stop_listener; cleanup' EXIT

@@ -90,18 +90,7 @@ stop_daemon
 NOTIFY=$TMP/notify.sock
 NLOG=$TMP/notify.log
 : >"$NLOG"
-python3 - "$NOTIFY" "$NLOG" <<'PY' &
-import socket, sys, time
-s = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
-s.bind(sys.argv[1])
-with open(sys.argv[2], "a", buffering=1) as f:
-    while True:
-        data = s.recv(65536)
-        t = time.monotonic()
-        for line in data.decode(errors="replace").split("\n"):
-            if line:
-                f.write(f"{t:.3f} {line}\n")
-PY
+python3 "$(dirname "$0")/notify_listen.py" "$NOTIFY" "$NLOG" &
 LISTENER=$!
 trap 'kill "$LISTENER" 2>/dev/null; cleanup' EXIT
 for i in $(seq 1 50); do [[ -S "$NOTIFY" ]] && break; sleep 0.1; done
