@@ -1,4 +1,4 @@
-/* Writers for voxelize's outputs: raw8, raw1, binvox (io.c) and OpenVDB
+/* Writers for voxelize's outputs: raw8, raw1 (io.c), binvox (binvox.c) and OpenVDB
  * (vdb.cc, the only C++ file; OpenVDB's templates stay behind this C API).
  *
  * Layouts (n = nx * ny * nz, voxel (i,j,k) has linear index
@@ -54,6 +54,10 @@ typedef struct vx_voxel_io {
      * (0 = 16 MiB; at least one block): smaller groups read the grid more
      * often, larger ones take more memory (twice this). */
     size_t binvox_group_bytes;
+    /* binvox: bytes the fast coder's event lists may take (0 = a quarter of
+     * the bit grid's, at least 4 MiB); past them the grid is coded again
+     * from transposed columns instead (binvox.c). */
+    size_t binvox_event_bytes;
     /* vdb: bytes the tree may need beyond the bit grid (0 = no limit; as
      * vx_voxel_vdb_grid_bytes counts them). A 0/1 fog grid checks it as its
      * leaves are classified, slab by slab, and stops with VX_ETOOBIG

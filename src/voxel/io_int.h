@@ -1,4 +1,4 @@
-/* What the writers of io.c and formats.c share: a buffered output file
+/* What the writers of io.c, binvox.c and formats.c share: a buffered output file
  * written to a temporary name and renamed on success. */
 #ifndef VX_VOXEL_IO_INT_H
 #define VX_VOXEL_IO_INT_H

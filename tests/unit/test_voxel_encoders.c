@@ -11,6 +11,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <unistd.h>
 
 #include <cmocka.h>
 
@@ -150,17 +151,25 @@ static void test_raw_binvox(void **st)
                     fail_msg("%s differs from the reference on %dx%dx%d kind %d", enc[e].name,
                              sizes[s][0], sizes[s][1], sizes[s][2], kind);
             }
-            /* binvox's pipeline in groups of 1, 2 and 3 blocks (the last
-             * group short), not only the whole grid in one group */
+            /* binvox's bounded coder (an event budget of 1 byte forces it)
+             * in groups of 1, 2 and 3 blocks (the last group short), not
+             * only the whole grid in one group */
             const size_t block = 32u * (size_t)sizes[s][2] * ((sizes[s][1] + 31u) / 32u) * 4u;
             for (size_t per = 1; per <= 3; per++) {
-                vx_voxel_io io = {.binvox_group_bytes = per * block};
+                vx_voxel_io io = {.binvox_group_bytes = per * block, .binvox_event_bytes = 1};
                 snprintf(a, sizeof a, "%s/fast.binvox", dir);
                 assert_int_equal(vx_voxel_write_binvox(&g, a, &io, &err), 0);
                 if (!same_file(a, b))
                     fail_msg("binvox in groups of %zu blocks differs on %dx%dx%d kind %d", per,
                              sizes[s][0], sizes[s][1], sizes[s][2], kind);
             }
+            /* the event coder's budget running out part way: the bounded
+             * coder starts again from the header */
+            vx_voxel_io part = {.binvox_event_bytes = 2048};
+            assert_int_equal(vx_voxel_write_binvox(&g, a, &part, &err), 0);
+            if (!same_file(a, b))
+                fail_msg("binvox past a 2 KiB event budget differs on %dx%dx%d kind %d",
+                         sizes[s][0], sizes[s][1], sizes[s][2], kind);
             vx_bitgrid_free(&g);
         }
 }
@@ -332,6 +341,46 @@ static void test_progress(void **st)
     vx_bitgrid_free(&g);
 }
 
+/* A hook that stops the write once the fraction reaches at. */
+typedef struct stopper {
+    double at;
+    int calls;
+} stopper;
+
+static int stop_at(void *ud, double f, vx_err *err)
+{
+    stopper *s = ud;
+    s->calls++;
+    if (f < s->at) return 0;
+    vx_err_set(err, VX_ECANCELED, "canceled", "stopped at %.3f", f);
+    return 1;
+}
+
+/* binvox stopped while it gathers its events (at its first call, below
+ * 0.7), while it codes its runs (0.7 on), and in its bounded coder: -1
+ * with the hook's error, and neither the file nor its temporary left. */
+static void test_binvox_stop(void **st)
+{
+    vx_bitgrid g;
+    random_grid(&g, 300, 70, 64, 3, 0);
+    char p[256], tmp[300];
+    snprintf(p, sizeof p, "%s/stop.binvox", dir);
+    snprintf(tmp, sizeof tmp, "%s.tmp", p);
+    const double ats[] = {0.0, 0.3, 0.7, 0.0, 0.5};
+    for (int i = 0; i < 5; i++) {
+        stopper s = {ats[i], 0};
+        vx_voxel_io io = {.progress = stop_at, .ud = &s, .binvox_event_bytes = i < 3 ? 0 : 1};
+        vx_err err = {0};
+        assert_int_equal(vx_voxel_write_binvox(&g, p, &io, &err), -1);
+        assert_int_equal(err.kind, VX_ECANCELED);
+        assert_string_equal(err.code, "canceled");
+        assert_true(s.calls > 0);
+        assert_int_equal(access(p, F_OK), -1);
+        assert_int_equal(access(tmp, F_OK), -1);
+    }
+    vx_bitgrid_free(&g);
+}
+
 static int setup(void **st)
 {
     return mkdtemp(dir) ? 0 : -1;
@@ -350,6 +399,7 @@ int main(void)
         cmocka_unit_test(test_raw_binvox),    cmocka_unit_test(test_raw_wide_rows),
         cmocka_unit_test(test_vdb),           cmocka_unit_test(test_vdb_fog_budget),
         cmocka_unit_test(test_vdb_min_voxel), cmocka_unit_test(test_progress),
+        cmocka_unit_test(test_binvox_stop),
     };
     return cmocka_run_group_tests(tests, setup, teardown);
 }
