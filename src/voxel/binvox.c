@@ -259,8 +259,7 @@ static void *binvox_stage(void *ud)
 
 /* The bounded coder: the header is written; the body from transposed
  * blocks. */
-static int binvox_blocks(const vx_bitgrid *g, vx_out *o, int d, const vx_voxel_io *io,
-                         vx_err *err)
+static int binvox_blocks(const vx_bitgrid *g, vx_out *o, int d, const vx_voxel_io *io, vx_err *err)
 {
     const int nx = g->grid.dims[0], ny = g->grid.dims[1], nz = g->grid.dims[2];
     const size_t wy = ((size_t)ny + 31) / 32; /* words of a transposed y column */
@@ -314,29 +313,30 @@ static int binvox_blocks(const vx_bitgrid *g, vx_out *o, int d, const vx_voxel_i
  * Voxel (x, j, k) starts a run in binvox order exactly where it differs
  * from (x, j - 1, k), rows -1 and ny counted as zeros (row ny: the cube's
  * padding in y). Row j xor row j - 1 gives those events for 32 x at once;
- * most words are 0. Each z slab (an item of vx_par_for) logs its rows'
- * nonzero xor words in order, then splits the log into its events (k <<
- * ybits | j) per x: slab s's events of slice x, in binvox order (k, then
- * j). The runs are the gaps between events, coded in x ranges on all
- * threads; a range's first and last runs are left open and the ranges
- * joined in order, so the bytes are those of one pass (a run goes on
- * across a range's edges). The log, the events and the ranges' pairs are
- * written once each, in huge pages (util/bigmem.h): on a virtual machine
- * first-touch faults in small pages cost more than the coding. */
+ * most words are 0. Each z slab (an item of vx_par_for) appends its events
+ * (k << ybits | j) to a list per x, in chunks of 64 taken from the slab's
+ * arena: slab s's events of slice x, in binvox order (k, then j). The runs
+ * are the gaps between events, coded in x ranges on all threads; a range's
+ * first and last runs are left open and the ranges joined in order, so the
+ * bytes are those of one pass (a run goes on across a range's edges). The
+ * arenas and the ranges' pairs are written once each, in huge pages
+ * (util/bigmem.h): on a virtual machine first-touch faults in small pages
+ * cost more than the coding. */
 
-/* The fast coder's log and events may take io->binvox_event_bytes, or by
+/* The fast coder's event chunks may take io->binvox_event_bytes, or by
  * default a quarter of the bit grid's bytes and at least this. */
 #define BINVOX_EVENT_MIN ((size_t)4 << 20)
 
 #define EV_PROGRESS 0.7 /* the gathering's share of the progress bar */
-#define EV_ROW (1ull << 63) /* a log entry that starts a row: the row's key */
+#define EV_CHUNK 64     /* events a chunk */
 
+/* A slab's events: slice x's n[x] events in chunks head[x], next[head[x]],
+ * ... (chunk c: ev + EV_CHUNK * c; chunk 0 is none), the last tail[x]. */
 typedef struct ev_slab_t {
-    uint64_t *log; /* EV_ROW | key, then (w << 32 | xor word) per nonzero word */
-    size_t nlog, log_mapped;
-    uint32_t *ev; /* events, slice by slice */
-    size_t ev_mapped;
-    uint32_t *off; /* off[x] .. off[x + 1]: slice x's in ev */
+    uint32_t *ev, *next; /* the arena: chunks, and each chunk's next */
+    size_t ev_mapped, next_mapped;
+    uint32_t nchunks, cap; /* chunks taken (from 1), chunks the arena holds */
+    uint32_t *n, *head, *tail;
 } ev_slab_t;
 
 typedef struct ev_job {
@@ -345,7 +345,7 @@ typedef struct ev_job {
     int ybits;
     const uint32_t *zeros; /* a row of zeros */
     ev_slab_t *s;
-    size_t budget; /* bytes of logs and events, all slabs together */
+    size_t budget; /* bytes of event chunks, all slabs together */
     atomic_size_t used;
     atomic_int over; /* the budget (or memory) ran out */
     const vx_voxel_io *io;
@@ -375,7 +375,7 @@ static inline uint64_t diff_words(const uint32_t *a, const uint32_t *b, size_t n
 
 #if defined(__x86_64__)
 __attribute__((target("avx2"))) static inline uint64_t diff_words_avx2(const uint32_t *a,
-                                                                        const uint32_t *b, size_t n)
+                                                                       const uint32_t *b, size_t n)
 {
     uint64_t m = 0;
     size_t w = 0;
@@ -395,20 +395,19 @@ __attribute__((target("avx2"))) static inline uint64_t diff_words_avx2(const uin
 
 typedef uint64_t (*diff_fn)(const uint32_t *a, const uint32_t *b, size_t n);
 
-/* Slab s's rows into its log (reserved at the whole budget, touched as
- * written; the bytes are charged to the budget a slice at a time), its
- * events counted per x on the way (off[x + 1]). Inlined with diff. */
+/* Slab s's events into its lists (chunks charged to the budget a slice at
+ * a time). Inlined with diff. */
 static inline __attribute__((always_inline)) int ev_rows_with(ev_job *j, int si, int t,
                                                               diff_fn diff)
 {
     const vx_bitgrid *g = j->g;
     const int nx = g->grid.dims[0], ny = g->grid.dims[1], nz = g->grid.dims[2];
-    const size_t wx = g->wx, cap = j->budget / sizeof(uint64_t);
-    const uint32_t tail = nx & 31 ? (1u << (nx & 31)) - 1u : ~0u;
+    const size_t wx = g->wx;
+    const uint32_t tailmask = nx & 31 ? (1u << (nx & 31)) - 1u : ~0u;
     ev_slab_t *s = j->s + si;
-    uint64_t *log = s->log;
-    uint32_t *count = s->off + 1;
-    size_t n = 0;
+    uint32_t *const ev = s->ev, *const next = s->next, *const n = s->n, *const head = s->head,
+                    *const tail = s->tail;
+    uint32_t nchunks = s->nchunks;
     const int k1 = (si + 1) * j->slab < nz ? (si + 1) * j->slab : nz;
     for (int k = si * j->slab; k < k1; k++) {
         if (atomic_load_explicit(&j->over, memory_order_relaxed)) return -1;
@@ -417,39 +416,44 @@ static inline __attribute__((always_inline)) int ev_rows_with(ev_job *j, int si,
             j->stopped = 1;
             return -1;
         }
-        const size_t n0 = n;
+        const uint32_t c0 = nchunks;
+        /* a slice takes at most one chunk per x and per EV_CHUNK events */
+        if ((uint64_t)nchunks + nx + (uint64_t)(ny + 1) * nx / EV_CHUNK + 1 > s->cap) {
+            atomic_store(&j->over, 1);
+            return -1;
+        }
         const uint32_t *prev = j->zeros;
         for (int y = 0; y <= ny; y++) {
             const uint32_t *cur = y < ny ? g->bits + ((size_t)k * ny + y) * wx : j->zeros;
-            const size_t row = n;
-            for (size_t w0 = 0; w0 < wx; w0 += 64) {
-                uint64_t m = diff(cur + w0, prev + w0, wx - w0 < 64 ? wx - w0 : 64);
-                if (!m) continue;
-                if (n + 1 + (size_t)__builtin_popcountll(m) > cap) {
-                    atomic_store(&j->over, 1);
-                    return -1;
-                }
-                if (n == row) log[n++] = EV_ROW | ((uint32_t)k << j->ybits | (uint32_t)y);
-                for (; m; m &= m - 1) {
+            const uint32_t key = (uint32_t)k << j->ybits | (uint32_t)y;
+            for (size_t w0 = 0; w0 < wx; w0 += 64)
+                for (uint64_t m = diff(cur + w0, prev + w0, wx - w0 < 64 ? wx - w0 : 64); m;
+                     m &= m - 1) {
                     const size_t w = w0 + (size_t)__builtin_ctzll(m);
                     uint32_t dw = cur[w] ^ prev[w];
-                    if (w == wx - 1) dw &= tail; /* row padding: never set */
-                    if (!dw) continue;
-                    log[n++] = (uint64_t)w << 32 | dw;
-                    for (; dw; dw &= dw - 1)
-                        count[32 * w + (unsigned)__builtin_ctz(dw)]++;
+                    if (w == wx - 1) dw &= tailmask; /* row padding: never set */
+                    for (; dw; dw &= dw - 1) {
+                        const size_t x = 32 * w + (unsigned)__builtin_ctz(dw);
+                        const uint32_t i = n[x]++;
+                        if (!(i % EV_CHUNK)) { /* a new chunk */
+                            if (i)
+                                next[tail[x]] = nchunks;
+                            else
+                                head[x] = nchunks;
+                            tail[x] = nchunks++;
+                        }
+                        ev[(size_t)tail[x] * EV_CHUNK + i % EV_CHUNK] = key;
+                    }
                 }
-            }
             prev = cur;
         }
-        /* a slice's entries charged at once */
-        if (atomic_fetch_add(&j->used, (n - n0) * sizeof *log) + (n - n0) * sizeof *log >
-            j->budget) {
+        const size_t bytes = (size_t)(nchunks - c0) * (EV_CHUNK + 1) * sizeof *ev;
+        if (atomic_fetch_add(&j->used, bytes) + bytes > j->budget) {
             atomic_store(&j->over, 1);
             return -1;
         }
     }
-    s->nlog = n;
+    s->nchunks = nchunks;
     return 0;
 }
 
@@ -473,43 +477,24 @@ static int ev_rows(ev_job *j, int si, int t)
     return ev_rows_sse2(j, si, t);
 }
 
-/* Slab s: its log, then its events per x, placed in order. */
+/* Slab s's arena (reserved at the whole budget, touched as used) and its
+ * events. */
 static int ev_slab(int si, int t, void *ud)
 {
     ev_job *j = ud;
     const int nx = j->g->grid.dims[0];
     ev_slab_t *s = j->s + si;
-    s->log = vx_bigmem_alloc(j->budget, &s->log_mapped);
-    s->off = calloc((size_t)nx + 1, sizeof *s->off);
-    if (!s->log || !s->off || ev_rows(j, si, t)) {
+    s->cap = (uint32_t)(j->budget / ((EV_CHUNK + 1) * sizeof(uint32_t)));
+    s->nchunks = 1;
+    s->ev = vx_bigmem_alloc((size_t)s->cap * EV_CHUNK * sizeof *s->ev, &s->ev_mapped);
+    s->next = vx_bigmem_alloc((size_t)s->cap * sizeof *s->next, &s->next_mapped);
+    s->n = calloc(3 * (size_t)nx, sizeof *s->n);
+    s->head = s->n + nx;
+    s->tail = s->head + nx;
+    if (!s->ev || !s->next || !s->n || ev_rows(j, si, t)) {
         atomic_store(&j->over, 1);
         return 1;
     }
-    uint32_t *off = s->off;
-    for (int x = 0; x < nx; x++)
-        off[x + 1] += off[x];
-    const size_t bytes = ((size_t)off[nx] + 1) * sizeof *s->ev;
-    if (atomic_fetch_add(&j->used, bytes) + bytes > j->budget ||
-        !(s->ev = vx_bigmem_alloc(bytes, &s->ev_mapped))) {
-        atomic_store(&j->over, 1);
-        return 1;
-    }
-    uint32_t key = 0;
-    for (size_t i = 0; i < s->nlog; i++) {
-        const uint64_t e = s->log[i];
-        if (e & EV_ROW) {
-            key = (uint32_t)e;
-            continue;
-        }
-        uint32_t *at = off + 32 * (e >> 32); /* off[x]: slice x's next place */
-        for (uint32_t dw = (uint32_t)e; dw; dw &= dw - 1)
-            s->ev[at[__builtin_ctz(dw)]++] = key;
-    }
-    /* the placing moved each off[x] to off[x + 1]: back by one slice */
-    memmove(off + 1, off, (size_t)nx * sizeof *off);
-    off[0] = 0;
-    vx_bigmem_free(s->log, s->log_mapped);
-    s->log = NULL;
     return 0;
 }
 
@@ -566,8 +551,9 @@ static int ev_code(int i, int t, void *ud)
     for (int x = r->x0; x < r->x1; x++)
         for (int si = 0; si < j->nslabs; si++) {
             const ev_slab_t *s = j->s + si;
-            for (uint32_t q = s->off[x]; q < s->off[x + 1]; q++) {
-                const uint32_t ev = s->ev[q];
+            for (uint32_t q = 0, c = s->head[x]; q < s->n[x]; q++) {
+                if (q && !(q % EV_CHUNK)) c = s->next[c];
+                const uint32_t ev = s->ev[(size_t)c * EV_CHUNK + q % EV_CHUNK];
                 const uint64_t pos = x * dd + (uint64_t)(ev >> j->ybits) * j->d + (ev & ymask);
                 if (pos != at) { /* two events at one place (y = ny = d): no run */
                     if (v != pv) {
@@ -596,15 +582,14 @@ static int ev_code(int i, int t, void *ud)
 
 /* The body from the events: 1 when the budget ran out (nothing written),
  * 0 when written, -1 on failure (err set). */
-static int binvox_events(const vx_bitgrid *g, vx_out *o, int d, const vx_voxel_io *io,
-                         vx_err *err)
+static int binvox_events(const vx_bitgrid *g, vx_out *o, int d, const vx_voxel_io *io, vx_err *err)
 {
     const int nx = g->grid.dims[0], ny = g->grid.dims[1], nz = g->grid.dims[2];
     ev_job j = {.g = g, .d = d, .io = io, .err = err};
     j.ybits = 32 - __builtin_clz((unsigned)ny); /* j = 0..ny */
     if (j.ybits >= 31 || ((uint64_t)(nz - 1) << j.ybits) >> 31) return 1;
     const size_t grid_bytes = g->wx * sizeof(uint32_t) * (size_t)ny * nz;
-    j.budget = io && io->binvox_event_bytes ? io->binvox_event_bytes
+    j.budget = io && io->binvox_event_bytes        ? io->binvox_event_bytes
                : grid_bytes / 4 > BINVOX_EVENT_MIN ? grid_bytes / 4
                                                    : BINVOX_EVENT_MIN;
     const int threads = vx_par_cpus();
@@ -636,12 +621,11 @@ static int binvox_events(const vx_bitgrid *g, vx_out *o, int d, const vx_voxel_i
             for (x = r->x0; x < r->x1; x++)
                 for (int si = 0; si < j.nslabs; si++) {
                     const ev_slab_t *s = j.s + si;
-                    const uint32_t n = s->off[x + 1] - s->off[x];
+                    const uint32_t n = s->n[x];
                     if (!n) continue;
-                    const uint32_t last = s->ev[s->off[x + 1] - 1];
+                    const uint32_t last = s->ev[(size_t)s->tail[x] * EV_CHUNK + (n - 1) % EV_CHUNK];
                     events += n;
-                    at = x * dd + (uint64_t)(last >> j.ybits) * d +
-                         (last & ((1u << j.ybits) - 1u));
+                    at = x * dd + (uint64_t)(last >> j.ybits) * d + (last & ((1u << j.ybits) - 1u));
                 }
             count += events;
             room += 2 * ((uint64_t)(r->x1 - r->x0) * dd / 255 + events + 2);
@@ -679,9 +663,9 @@ static int binvox_events(const vx_bitgrid *g, vx_out *o, int d, const vx_voxel_i
         rc = -1;
     }
     for (int si = 0; j.s && si < j.nslabs; si++) {
-        vx_bigmem_free(j.s[si].log, j.s[si].log_mapped);
         vx_bigmem_free(j.s[si].ev, j.s[si].ev_mapped);
-        free(j.s[si].off);
+        vx_bigmem_free(j.s[si].next, j.s[si].next_mapped);
+        free(j.s[si].n);
     }
     vx_bigmem_free(pairs, pairs_mapped);
     free(j.s);
