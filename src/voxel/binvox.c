@@ -8,12 +8,14 @@
  *   surface, so it is capped (io->binvox_event_bytes);
  * - from transposed 32 x 32 blocks (the bounded path, when the cap is
  *   reached): memory fixed by io->binvox_group_bytes. */
+#include <errno.h>
 #include <pthread.h>
 #include <stdatomic.h>
 #include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <unistd.h>
 #if defined(__x86_64__)
 #include <immintrin.h>
 #elif defined(__SSE2__)
@@ -327,8 +329,10 @@ static int binvox_blocks(const vx_bitgrid *g, vx_out *o, int d, const vx_voxel_i
  * default a quarter of the bit grid's bytes and at least this. */
 #define BINVOX_EVENT_MIN ((size_t)4 << 20)
 
-#define EV_PROGRESS 0.7 /* the gathering's share of the progress bar */
-#define EV_CHUNK 64     /* events a chunk */
+/* The progress bar: gathering to 0.6, measuring the runs to 0.7, writing
+ * them to 1. */
+#define EV_PROGRESS 0.6
+#define EV_CHUNK 64 /* events a chunk */
 
 /* A slab's events: slice x's n[x] events in chunks head[x], next[head[x]],
  * ... (chunk c: ev + EV_CHUNK * c; chunk 0 is none), the last tail[x]. */
@@ -498,9 +502,9 @@ static int ev_slab(int si, int t, void *ud)
     return 0;
 }
 
-/* An x range's runs: the first left open (head), those after it as pairs
- * at buf (room for at most cap bytes, counted from the range's voxels and
- * events), the last left open (tail). */
+/* An x range's runs: the first left open (head), those after it closed
+ * (the interior: bytes of pairs, written at off), the last left open
+ * (tail). */
 typedef struct ev_range {
     int x0, x1;
     unsigned v0;  /* the value after the last event before x0 */
@@ -508,46 +512,103 @@ typedef struct ev_range {
     unsigned head_v, tail_v;
     uint64_t head_len, tail_len;
     size_t finished; /* runs closed in the range */
+    uint64_t bytes, off;
+} ev_range;
+
+/* A run the join closes (an open run merged across ranges), written at off. */
+typedef struct ev_run {
+    uint64_t off, len;
+    unsigned v;
+} ev_run;
+
+/* Pairs made into a buffer and written at their place in the file. */
+typedef struct ev_sink {
     uint8_t *buf;
     size_t n;
-} ev_range;
+    int fd;
+    uint64_t off;
+    int err; /* errno of a failed write */
+} ev_sink;
+
+#define EV_SINK_BYTES ((size_t)256 << 10)
 
 typedef struct ev_emit {
     ev_job *j;
     ev_range *r;
     int nr;
+    ev_run *runs;
+    int nruns;
+    int writing; /* 0: the ranges measured, 1: written */
+    int fd;
+    uint8_t *bufs[VX_PAR_MAX]; /* a sink's buffer per thread */
+    atomic_int werr;
 } ev_emit;
 
-/* A closed run of the range: the head, or pairs in buf. */
-static inline void ev_close(ev_range *r, unsigned v, uint64_t len)
+static inline uint64_t pair_bytes(uint64_t len)
+{
+    return 2 * (len / 255 + (len % 255 != 0));
+}
+
+static void sink_flush(ev_sink *k)
+{
+    for (size_t done = 0; done < k->n && !k->err;) {
+        ssize_t w = pwrite(k->fd, k->buf + done, k->n - done, (off_t)(k->off + done));
+        if (w < 0 && errno == EINTR) continue;
+        if (w <= 0)
+            k->err = w < 0 ? errno : EIO;
+        else
+            done += (size_t)w;
+    }
+    k->off += k->n;
+    k->n = 0;
+}
+
+/* A run's pairs into the sink. */
+static void sink_run(ev_sink *k, unsigned v, uint64_t len)
+{
+    while (len) {
+        if (EV_SINK_BYTES - k->n < 2) sink_flush(k);
+        uint64_t q = (EV_SINK_BYTES - k->n) / 2;
+        if (q > len / 255) q = len / 255;
+        if (q) {
+            k->n = (size_t)(full_pairs(k->buf + k->n, v, (size_t)q) - k->buf);
+            len -= 255 * q;
+        } else { /* less than 255 left */
+            k->buf[k->n] = (uint8_t)v;
+            k->buf[k->n + 1] = (uint8_t)len;
+            k->n += 2;
+            len = 0;
+        }
+    }
+}
+
+/* A closed run of the range: the head, else counted (measuring) or
+ * written (k). */
+static inline void ev_close(ev_range *r, ev_sink *k, unsigned v, uint64_t len)
 {
     if (!r->finished++) {
         r->head_v = v;
         r->head_len = len;
-        return;
+    } else if (!k) {
+        r->bytes += pair_bytes(len);
+    } else if (len < 255 && EV_SINK_BYTES - k->n >= 2) {
+        k->buf[k->n] = (uint8_t)v;
+        k->buf[k->n + 1] = (uint8_t)len;
+        k->n += 2;
+    } else {
+        sink_run(k, v, len);
     }
-    uint8_t *p = r->buf + r->n;
-    if (len >= 255) p = full_pairs(p, v, (size_t)(len / 255));
-    if (len % 255) p[0] = (uint8_t)v, p[1] = (uint8_t)(len % 255), p += 2;
-    r->n = (size_t)(p - r->buf);
 }
 
-static int ev_code(int i, int t, void *ud)
+/* Range r's runs, measured or written (k): the same walk both times. */
+static void ev_walk(ev_emit *e, ev_range *r, ev_sink *k)
 {
-    ev_emit *e = ud;
     ev_job *j = e->j;
-    ev_range *r = e->r + i;
-    const int nx = j->g->grid.dims[0];
-    const vx_voxel_io *io = j->io;
-    if (t == 0 && io && io->progress &&
-        io->progress(io->ud, EV_PROGRESS + (1 - EV_PROGRESS) * r->x0 / nx, j->err)) {
-        j->stopped = 1;
-        return 1;
-    }
     const uint64_t dd = (uint64_t)j->d * j->d;
     const uint32_t ymask = (1u << j->ybits) - 1u;
     uint64_t at = r->at0, plen = 0; /* the open run: value pv, plen voxels */
     unsigned v = r->v0, pv = v;
+    r->finished = 0;
     for (int x = r->x0; x < r->x1; x++)
         for (int si = 0; si < j->nslabs; si++) {
             const ev_slab_t *s = j->s + si;
@@ -557,7 +618,7 @@ static int ev_code(int i, int t, void *ud)
                 const uint64_t pos = x * dd + (uint64_t)(ev >> j->ybits) * j->d + (ev & ymask);
                 if (pos != at) { /* two events at one place (y = ny = d): no run */
                     if (v != pv) {
-                        if (plen) ev_close(r, pv, plen);
+                        if (plen) ev_close(r, k, pv, plen);
                         pv = v;
                         plen = 0;
                     }
@@ -567,9 +628,9 @@ static int ev_code(int i, int t, void *ud)
                 v ^= 1u;
             }
         }
-    if (i + 1 == e->nr) { /* after the last event, zeros to the cube's end */
+    if (r == e->r + e->nr - 1) { /* after the last event, zeros to the cube's end */
         if (v != pv) {
-            if (plen) ev_close(r, pv, plen);
+            if (plen) ev_close(r, k, pv, plen);
             pv = v;
             plen = 0;
         }
@@ -577,17 +638,51 @@ static int ev_code(int i, int t, void *ud)
     }
     r->tail_v = pv;
     r->tail_len = plen;
-    return 0;
+}
+
+/* Item i: range i measured or written; when writing, items past the ranges
+ * are the join's runs. */
+static int ev_code(int i, int t, void *ud)
+{
+    ev_emit *e = ud;
+    ev_job *j = e->j;
+    const vx_voxel_io *io = j->io;
+    if (i < e->nr && t == 0 && io && io->progress) {
+        const double f = (double)e->r[i].x0 / j->g->grid.dims[0];
+        if (io->progress(io->ud, e->writing ? 0.7 + 0.3 * f : EV_PROGRESS + 0.1 * f, j->err)) {
+            j->stopped = 1;
+            return 1;
+        }
+    }
+    if (!e->writing) {
+        ev_walk(e, e->r + i, NULL);
+        return 0;
+    }
+    ev_sink k = {.buf = e->bufs[t], .fd = e->fd};
+    if (i < e->nr) {
+        ev_range *r = e->r + i;
+        k.off = r->off;
+        if (r->bytes) ev_walk(e, r, &k);
+    } else {
+        const ev_run *u = e->runs + (i - e->nr);
+        k.off = u->off;
+        sink_run(&k, u->v, u->len);
+    }
+    sink_flush(&k);
+    if (k.err) atomic_store(&e->werr, k.err);
+    return k.err ? 1 : 0;
 }
 
 /* The body from the events: 1 when the budget ran out (nothing written),
- * 0 when written, -1 on failure (err set). */
+ * 0 when written, -1 on failure (err set, or o->failed). The ranges are
+ * measured, laid out in the file by joining them as one pass would, then
+ * written at their places on all threads. */
 static int binvox_events(const vx_bitgrid *g, vx_out *o, int d, const vx_voxel_io *io, vx_err *err)
 {
     const int nx = g->grid.dims[0], ny = g->grid.dims[1], nz = g->grid.dims[2];
     ev_job j = {.g = g, .d = d, .io = io, .err = err};
     j.ybits = 32 - __builtin_clz((unsigned)ny); /* j = 0..ny */
-    if (j.ybits >= 31 || ((uint64_t)(nz - 1) << j.ybits) >> 31) return 1;
+    if (j.ybits >= 32 || ((uint64_t)(nz - 1) << j.ybits) >> 32) return 1;
     const size_t grid_bytes = g->wx * sizeof(uint32_t) * (size_t)ny * nz;
     j.budget = io && io->binvox_event_bytes        ? io->binvox_event_bytes
                : grid_bytes / 4 > BINVOX_EVENT_MIN ? grid_bytes / 4
@@ -602,63 +697,66 @@ static int binvox_events(const vx_bitgrid *g, vx_out *o, int d, const vx_voxel_i
     ev_emit e = {.j = &j};
     e.nr = 4 * threads < nx ? 4 * threads : nx;
     e.r = calloc((size_t)e.nr, sizeof *e.r);
-    uint8_t *pairs = NULL;
-    size_t pairs_mapped = 0;
+    e.runs = calloc(2 * (size_t)e.nr + 1, sizeof *e.runs);
+    atomic_init(&e.werr, 0);
     int rc = 1;
-    if (j.s && zeros && e.r && !vx_par_for(j.nslabs, threads, ev_slab, &j)) {
-        /* each range starts after the events of the slices before it; its
-         * pairs take at most 2 bytes per 255 voxels and per event, and 2 */
+    if (j.s && zeros && e.r && e.runs && !vx_par_for(j.nslabs, threads, ev_slab, &j)) {
+        /* each range starts after the events of the slices before it */
         const uint64_t dd = (uint64_t)d * d;
-        uint64_t count = 0, at = 0, room = 0;
+        uint64_t count = 0, at = 0;
         for (int i = 0, x = 0; i < e.nr; i++) {
             ev_range *r = e.r + i;
             r->x0 = (int)((int64_t)nx * i / e.nr);
             r->x1 = (int)((int64_t)nx * (i + 1) / e.nr);
             r->v0 = (unsigned)(count & 1);
             r->at0 = at;
-            r->n = (size_t)room; /* buf's offset, for now */
-            uint64_t events = 0;
             for (x = r->x0; x < r->x1; x++)
                 for (int si = 0; si < j.nslabs; si++) {
                     const ev_slab_t *s = j.s + si;
                     const uint32_t n = s->n[x];
                     if (!n) continue;
                     const uint32_t last = s->ev[(size_t)s->tail[x] * EV_CHUNK + (n - 1) % EV_CHUNK];
-                    events += n;
+                    count += n;
                     at = x * dd + (uint64_t)(last >> j.ybits) * d + (last & ((1u << j.ybits) - 1u));
                 }
-            count += events;
-            room += 2 * ((uint64_t)(r->x1 - r->x0) * dd / 255 + events + 2);
         }
-        pairs = vx_bigmem_alloc((size_t)room, &pairs_mapped);
-        if (!pairs) {
-            rc = -1;
-            vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for the binvox runs");
-        } else {
-            for (int i = 0; i < e.nr; i++) {
-                e.r[i].buf = pairs + e.r[i].n;
-                e.r[i].n = 0;
-            }
-            rc = vx_par_for(e.nr, threads, ev_code, &e) ? -1 : 0;
-        }
-        /* the ranges joined: an open run merges with the next range's head */
-        rle c = {o, 0, 0};
+        rc = vx_par_for(e.nr, threads, ev_code, &e) ? -1 : 0;
+        /* the join: an open run merges with the next range's head */
+        fflush(o->f);
+        uint64_t off = (uint64_t)ftello(o->f) + o->n, cl = 0;
+        unsigned cv = 0;
         for (int i = 0; !rc && i < e.nr; i++) {
-            const ev_range *r = e.r + i;
+            ev_range *r = e.r + i;
             const unsigned v = r->finished ? r->head_v : r->tail_v;
             const uint64_t len = r->finished ? r->head_len : r->tail_len;
-            if (len && v != c.cur) {
-                if (rle_flush(&c)) rc = -1;
-                c.cur = v;
+            if (len && v != cv) {
+                if (cl) e.runs[e.nruns++] = (ev_run){off, cl, cv}, off += pair_bytes(cl);
+                cv = v;
+                cl = 0;
             }
-            c.run += len;
+            cl += len;
             if (r->finished) {
-                if (rle_flush(&c) || vx_out_write(o, r->buf, r->n)) rc = -1;
-                c.cur = r->tail_v;
-                c.run = r->tail_len;
+                if (cl) e.runs[e.nruns++] = (ev_run){off, cl, cv}, off += pair_bytes(cl);
+                r->off = off;
+                off += r->bytes;
+                cv = r->tail_v;
+                cl = r->tail_len;
             }
         }
-        if (!rc && rle_flush(&c)) rc = -1;
+        if (cl) e.runs[e.nruns++] = (ev_run){off, cl, cv};
+        /* the header out first: the rest is written past it */
+        if (!rc && vx_out_flush(o)) rc = -1;
+        for (int t = 0; !rc && t < threads; t++)
+            if (!(e.bufs[t] = malloc(EV_SINK_BYTES))) {
+                rc = -1;
+                vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for binvox's pairs");
+            }
+        if (!rc) {
+            e.writing = 1;
+            e.fd = fileno(o->f);
+            if (vx_par_for(e.nr + e.nruns, threads, ev_code, &e)) rc = -1;
+            if (atomic_load(&e.werr)) o->failed = atomic_load(&e.werr);
+        }
     } else if (j.stopped) {
         rc = -1;
     }
@@ -667,9 +765,11 @@ static int binvox_events(const vx_bitgrid *g, vx_out *o, int d, const vx_voxel_i
         vx_bigmem_free(j.s[si].next, j.s[si].next_mapped);
         free(j.s[si].n);
     }
-    vx_bigmem_free(pairs, pairs_mapped);
+    for (int t = 0; t < VX_PAR_MAX; t++)
+        free(e.bufs[t]);
     free(j.s);
     free(e.r);
+    free(e.runs);
     free(zeros);
     return rc;
 }

@@ -357,8 +357,9 @@ static int stop_at(void *ud, double f, vx_err *err)
 }
 
 /* binvox stopped while it gathers its events (at its first call, below
- * 0.7), while it codes its runs (0.7 on), and in its bounded coder: -1
- * with the hook's error, and neither the file nor its temporary left. */
+ * 0.6), while it measures its runs (0.6 to 0.7), while it writes them (0.7
+ * on), and in its bounded coder: -1 with the hook's error, and neither
+ * the file nor its temporary left. */
 static void test_binvox_stop(void **st)
 {
     vx_bitgrid g;
@@ -366,10 +367,10 @@ static void test_binvox_stop(void **st)
     char p[256], tmp[300];
     snprintf(p, sizeof p, "%s/stop.binvox", dir);
     snprintf(tmp, sizeof tmp, "%s.tmp", p);
-    const double ats[] = {0.0, 0.3, 0.7, 0.0, 0.5};
-    for (int i = 0; i < 5; i++) {
+    const double ats[] = {0.0, 0.3, 0.6, 0.7, 0.0, 0.5};
+    for (int i = 0; i < 6; i++) {
         stopper s = {ats[i], 0};
-        vx_voxel_io io = {.progress = stop_at, .ud = &s, .binvox_event_bytes = i < 3 ? 0 : 1};
+        vx_voxel_io io = {.progress = stop_at, .ud = &s, .binvox_event_bytes = i < 4 ? 0 : 1};
         vx_err err = {0};
         assert_int_equal(vx_voxel_write_binvox(&g, p, &io, &err), -1);
         assert_int_equal(err.kind, VX_ECANCELED);
