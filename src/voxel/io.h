@@ -45,6 +45,9 @@
 
 #include "voxel/voxel.h"
 
+/* The trees a .vdb writer made, kept past the write (vx_voxel_io.vdb_keep). */
+typedef struct vx_vdb_tree vx_vdb_tree;
+
 /* Progress/cancel hook for long writes: called with 0..1 between z slabs;
  * a nonzero return stops the write (err filled by the callee). */
 typedef struct vx_voxel_io {
@@ -63,7 +66,17 @@ typedef struct vx_voxel_io {
      * leaves are classified, slab by slab, and stops with VX_ETOOBIG
      * job_memory_limit once over it. */
     uint64_t vdb_max_bytes;
+    /* vdb: not NULL: once the file is in place the writer leaves its tree
+     * in *vdb_keep (NULL if it failed before) for the caller to free with
+     * vx_vdb_tree_free, whatever the writer returns: freeing is off the
+     * write's path (a 0/1 fog grid's 40,000 float leaves at 1024^3 take
+     * 10-20 ms), and the memory stays the caller's until then. NULL: the
+     * writer frees it before returning. */
+    vx_vdb_tree **vdb_keep;
 } vx_voxel_io;
+
+/* Frees a tree a vdb writer kept (NULL is fine). */
+void vx_vdb_tree_free(vx_vdb_tree *t);
 
 /* Parameters recorded as grid metadata in .vdb files (strings may be NULL). */
 typedef struct vx_vdb_meta {

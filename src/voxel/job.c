@@ -175,6 +175,9 @@ typedef struct vstate {
     char **brick_paths;
     int brick_jobs; /* cluster mode: the bricks are child jobs' files (theirs to keep) */
     char *out_path; /* the primary output: the merged .vdb or the manifest */
+    /* the .vdb writer's tree, freed with the state: after the job has
+     * finished and been told, before its worker takes another */
+    vx_vdb_tree *vdb_tree;
 } vstate;
 
 /* Memory one job needs for a grid: the bit grid (and sample counts), the
@@ -1178,6 +1181,7 @@ static int voxelize_encode(vx_job_run *r, const void *params, void *state, vx_er
                               "job memory limit of %llu (vdb_grid \"bool\" or another format "
                               "needs less)",
                               (unsigned long long)need, (unsigned long long)lim);
+        io.vdb_keep = &s->vdb_tree;
         rc = p.vdb_index_base_set
                  ? vx_voxel_write_vdb_at(&s->grid, at, (vx_vdb_class)p.vdb_grid, &m, path, &io, err)
                  : vx_voxel_write_vdb(&s->grid, (vx_vdb_class)p.vdb_grid, &m, path, &io, err);
@@ -1193,6 +1197,7 @@ static void voxelize_free_state(void *state)
 {
     vstate *s = state;
     if (!s) return;
+    vx_vdb_tree_free(s->vdb_tree);
     vx_bitgrid_free(&s->grid);
     for (int b = 0; b < s->nbricks; b++) {
         /* a failed merge's (the brick jobs' files stay theirs) */

@@ -22,6 +22,8 @@
 #include <mutex>
 #include <sstream>
 #include <string>
+#include <tuple>
+#include <type_traits>
 #include <vector>
 
 #include <openvdb/openvdb.h>
@@ -203,15 +205,65 @@ class CheckedArchive final : public openvdb::io::Archive
     }
 };
 
+// Frees a grid's tree when grid holds the last reference to it: its leaves
+// on the calling thread, then the rest. OpenVDB's Tree::clear deletes the
+// leaves on all threads, but they were made on all threads, each in its
+// thread's malloc arena, and glibc's free of another arena's block waits on
+// that arena's lock: 6-12 ms for spot's 40,000 bool leaves at 1024^3,
+// against 1.5-4 ms on one thread.
+void release(openvdb::GridBase::Ptr &grid)
+{
+    auto leaves_of = [](auto &tree) {
+        std::vector<typename std::remove_reference<decltype(tree)>::type::LeafNodeType *> leaves;
+        leaves.reserve(tree.leafCount()); // stealNodes then cannot throw with leaves taken
+        tree.stealNodes(leaves);
+        for (auto *leaf : leaves)
+            delete leaf;
+    };
+    try {
+        if (grid.use_count() == 1) {
+            if (grid->isType<openvdb::BoolGrid>())
+                leaves_of(openvdb::gridPtrCast<openvdb::BoolGrid>(grid)->tree());
+            else if (grid->isType<openvdb::FloatGrid>())
+                leaves_of(openvdb::gridPtrCast<openvdb::FloatGrid>(grid)->tree());
+        }
+    } catch (const std::exception &) { // no memory for the list: the tree frees them
+    }
+    grid.reset();
+}
+
+} // namespace
+
+// The grids of a .vdb written, kept for the caller to free (io.h).
+struct vx_vdb_tree {
+    openvdb::GridPtrVec grids;
+};
+
+extern "C" void vx_vdb_tree_free(vx_vdb_tree *t)
+{
+    if (!t) return;
+    for (openvdb::GridBase::Ptr &grid : t->grids)
+        release(grid);
+    delete t;
+}
+
+namespace
+{
+
 // Builds grids (build(grids) returns 0, or -1 with err set) and writes them
 // to path through path.tmp and a rename, inside one try: no exception
-// crosses into C, and a failed write leaves no file behind.
-template <typename Build> int write_grids(const char *path, vx_err *err, Build build)
+// crosses into C, and a failed write leaves no file behind. Then frees
+// them, or with keep (not NULL) leaves them in *keep for the caller to free
+// later (NULL when the write failed).
+template <typename Build>
+int write_grids(const char *path, vx_vdb_tree **keep, vx_err *err, Build build)
 {
     std::string tmp = std::string(path) + ".tmp";
+    if (keep) *keep = nullptr;
     try {
         std::call_once(init_once, [] { openvdb::initialize(); });
-        openvdb::GridPtrVec grids;
+        std::unique_ptr<vx_vdb_tree> made(new vx_vdb_tree);
+        openvdb::GridPtrVec &grids = made->grids;
         if (build(grids)) return -1;
         CheckedArchive().write_file(tmp, grids);
         if (std::rename(tmp.c_str(), path) != 0) {
@@ -220,6 +272,10 @@ template <typename Build> int write_grids(const char *path, vx_err *err, Build b
             return vx_err_set(err, VX_EIO, "io_error", "renaming %s failed: %s",
                               tmp.substr(tmp.rfind('/') + 1).c_str(), strerror(e_no));
         }
+        if (keep)
+            *keep = made.release();
+        else
+            vx_vdb_tree_free(made.release());
         return 0;
     } catch (const std::bad_alloc &) {
         std::remove(tmp.c_str());
@@ -348,13 +404,6 @@ template <typename LeafT> int coverage_leaf(const vx_bitgrid *g, int X, int Y, i
     return LEAF_PART;
 }
 
-// One z slab of leaves (Z fixed), built in parallel over (X, Y): parts[n]
-// the partial leaves, fulls the origins of full ones.
-template <typename LeafT> struct Slab {
-    std::vector<LeafT *> leaves;
-    std::vector<openvdb::Coord> fulls;
-};
-
 // A leaf holds 512 voxels: a value mask (64 B) plus a bool mask (64 B) or
 // 512 floats (2 KiB), ~100 B of node overhead; the file buffer is about the
 // same again (compression works per leaf). A level set holds its float
@@ -376,68 +425,161 @@ uint64_t tree_bytes(const vx_bitgrid *g, uint64_t partial, uint64_t full, uint64
     return (partial * part_bytes + full * 64 + nodes * 65536) * 2;
 }
 
+// Whether node (a leaf or an internal node) holds one value in one state, as
+// tools::prune tells with tolerance 0 (it then takes the values' median:
+// the same number).
+template <typename NodeT>
+bool is_constant(const NodeT &node, typename NodeT::ValueType &value, bool &state)
+{
+    using ValueT = typename NodeT::ValueType;
+    if constexpr (std::is_same<ValueT, bool>::value) {
+        return node.isConstant(value, state, false);
+    } else {
+        ValueT hi;
+        return node.isConstant(value, hi, state, openvdb::zeroVal<ValueT>());
+    }
+}
+
 // at: the index of voxel (0,0,0) in the tree (multiples of 8: a brick).
 // part_bytes: with io->vdb_max_bytes, what a partial leaf costs in
-// tree_bytes, checked after each z slab (0: not checked).
+// tree_bytes, checked as each z slab of a row of nodes is made (0: not
+// checked).
+//
+// The tree is made a lower internal node (16^3 leaves of the tree's index
+// space) at a time, each node whole before the tree takes it: no leaf or
+// tile goes through the root's map, and what tools::prune did after (a
+// constant leaf or lower node becomes a tile of its parent) is done as each
+// node is finished, by the thread that made it. A task makes a row of lower
+// nodes along x (it reads whole grid rows, as classify_leaves does: nodes
+// side by side in x share the rows' cache lines). Rows are made on all
+// threads, in 8 rounds of 2 of each node's 16 z slabs (progress between).
 template <typename TreeT, typename MakeLeaf>
 int build_tree(const vx_bitgrid *g, TreeT &tree, const typename TreeT::ValueType &on,
                const openvdb::Coord &at, const vx_voxel_io *io, double span, vx_err *err,
                bool by_bits, uint64_t part_bytes, MakeLeaf make)
 {
-    const uint64_t max_bytes = io && part_bytes ? io->vdb_max_bytes : 0;
-    uint64_t partial = 0, full = 0;
+    using RootT = typename TreeT::RootNodeType;
+    using UpperT = typename RootT::ChildNodeType;
+    using LowerT = typename UpperT::ChildNodeType;
     using LeafT = typename TreeT::LeafNodeType;
+    using ValueT = typename TreeT::ValueType;
+    using Tile = std::tuple<openvdb::Coord, ValueT, bool>;
+    const uint64_t max_bytes = io && part_bytes ? io->vdb_max_bytes : 0;
     const int nx = g->grid.dims[0], ny = g->grid.dims[1], nz = g->grid.dims[2];
     const int lx = (nx + 7) / 8, ly = (ny + 7) / 8, lz = (nz + 7) / 8;
-    std::vector<Slab<LeafT>> rows((size_t)ly);
-    for (int zl = 0; zl < lz; zl++) {
-        if (io && io->progress && io->progress(io->ud, span * zl / lz, err)) return -1;
-        tbb::parallel_for(tbb::blocked_range<int>(0, ly), [&](const tbb::blocked_range<int> &r) {
-            std::vector<uint8_t> scratch(by_bits ? 3 * (size_t)lx : 0);
-            uint8_t *kinds = scratch.data() + 2 * (size_t)lx;
-            for (int yl = r.begin(); yl < r.end(); yl++) {
-                Slab<LeafT> &s = rows[(size_t)yl];
-                if (by_bits) classify_leaves(g, yl, zl, scratch.data(), scratch.data() + lx, kinds);
-                for (int xl = 0; xl < lx; xl++) {
-                    LeafT *leaf = nullptr;
-                    int kind = by_bits && kinds[xl] != LEAF_PART
-                                   ? kinds[xl]
-                                   : make(8 * xl, 8 * yl, 8 * zl, leaf);
-                    if (kind == LEAF_PART) s.leaves.push_back(leaf);
-                    if (kind == LEAF_FULL)
-                        s.fulls.push_back(openvdb::Coord(8 * xl, 8 * yl, 8 * zl));
+    // grid leaf l is tree leaf l + a, in lower node (l + a) >> 4 (b to e)
+    const int ax = at.x() >> 3, ay = at.y() >> 3, az = at.z() >> 3;
+    const int bx = ax >> 4, by = ay >> 4, bz = az >> 4;
+    const int ex = (ax + lx - 1) >> 4, ey = (ay + ly - 1) >> 4, ez = (az + lz - 1) >> 4;
+    const int rows = (ey - by + 1) * (ez - bz + 1), per_row = ex - bx + 1;
+    constexpr int ROUNDS = 8, SLABS = 16 / ROUNDS;
+    const ValueT bg = tree.background();
+    std::atomic<uint64_t> partial{0}, full{0};
+    std::atomic<bool> over{false};
+    struct Row { // a row's nodes while made, then what the tree takes
+        std::vector<std::unique_ptr<LowerT>> making, nodes;
+        std::vector<Tile> tiles; // nodes of one value
+    };
+    std::vector<Row> made((size_t)rows);
+    for (int round = 0; round < ROUNDS; round++) {
+        if (io && io->progress && io->progress(io->ud, span * round / ROUNDS, err)) return -1;
+        tbb::parallel_for(
+            tbb::blocked_range<int>(0, rows, 1), [&](const tbb::blocked_range<int> &r) {
+                std::vector<uint8_t> scratch(by_bits ? 3 * (size_t)lx : 0);
+                uint8_t *kinds = scratch.data() + 2 * (size_t)lx;
+                for (int t = r.begin(); t < r.end() && !over; t++) {
+                    const int cy = by + t % (ey - by + 1), cz = bz + t / (ey - by + 1);
+                    const int yl0 = std::max(0, 16 * cy - ay),
+                              yl1 = std::min(ly, 16 * cy + 16 - ay);
+                    const int z0 = 16 * cz + SLABS * round - az;
+                    const int zl0 = std::max(0, z0), zl1 = std::min(lz, z0 + SLABS);
+                    Row &row = made[(size_t)t];
+                    if (row.making.empty()) row.making.resize((size_t)per_row);
+                    for (int zl = zl0; zl < zl1 && !over; zl++) {
+                        uint64_t p = 0, f = 0;
+                        for (int yl = yl0; yl < yl1; yl++) {
+                            if (by_bits)
+                                classify_leaves(g, yl, zl, scratch.data(), scratch.data() + lx,
+                                                kinds);
+                            for (int xl = 0; xl < lx; xl++) {
+                                LeafT *leaf = nullptr;
+                                const int kind = by_bits && kinds[xl] != LEAF_PART
+                                                     ? kinds[xl]
+                                                     : make(8 * xl, 8 * yl, 8 * zl, leaf);
+                                if (kind == LEAF_EMPTY) continue;
+                                std::unique_ptr<LeafT> owned(leaf);
+                                const openvdb::Coord xyz =
+                                    openvdb::Coord(8 * xl, 8 * yl, 8 * zl) + at;
+                                std::unique_ptr<LowerT> &node =
+                                    row.making[(size_t)(((xl + ax) >> 4) - bx)];
+                                if (!node) node.reset(new LowerT(xyz, bg, false));
+                                if (kind == LEAF_FULL) {
+                                    node->addTile(LowerT::coordToOffset(xyz), on, true);
+                                    f++;
+                                } else {
+                                    leaf->setOrigin(xyz);
+                                    node->addLeaf(owned.release());
+                                    p++;
+                                }
+                            }
+                        }
+                        partial += p;
+                        full += f;
+                        if (max_bytes && tree_bytes(g, partial, full, part_bytes) > max_bytes)
+                            over = true;
+                    }
+                    if (round < ROUNDS - 1) continue;
+                    // the row is whole: what tools::prune made of its nodes
+                    for (std::unique_ptr<LowerT> &node : row.making) {
+                        if (!node) continue;
+                        ValueT v;
+                        bool state;
+                        for (auto it = node->beginChildOn(); it; ++it)
+                            if (is_constant(*it, v, state)) node->addTile(it.pos(), v, state);
+                        if (is_constant(*node, v, state))
+                            row.tiles.emplace_back(node->origin(), v, state);
+                        else
+                            row.nodes.push_back(std::move(node));
+                        node.reset();
+                    }
                 }
-            }
-        });
-        for (const Slab<LeafT> &s : rows) {
-            partial += s.leaves.size();
-            full += s.fulls.size();
-        }
-        if (max_bytes && tree_bytes(g, partial, full, part_bytes) > max_bytes) {
-            for (Slab<LeafT> &s : rows) {
-                for (LeafT *leaf : s.leaves)
-                    delete leaf;
-                s.leaves.clear();
-            }
+            });
+        if (over)
             return vx_err_set(err, VX_ETOOBIG, "job_memory_limit",
                               "the OpenVDB grid of these voxels needs over %llu bytes beside "
                               "them, over the job memory limit (vdb_grid \"bool\" or another "
                               "format needs less)",
                               (unsigned long long)max_bytes);
-        }
-        for (Slab<LeafT> &s : rows) {
-            for (LeafT *leaf : s.leaves) {
-                leaf->setOrigin(leaf->origin() + at);
-                tree.addLeaf(leaf);
-            }
-            for (const openvdb::Coord &c : s.fulls)
-                tree.addTile(1, c + at, on, true);
-            s.leaves.clear();
-            s.fulls.clear();
-        }
     }
-    // Full leaves' tiles that fill a whole internal node merge into one.
-    openvdb::tools::prune(tree);
+    RootT &root = tree.root();
+    auto upper = [&](const openvdb::Coord &c) {
+        UpperT *up = root.template probeNode<UpperT>(c);
+        if (!up) {
+            std::unique_ptr<UpperT> u(new UpperT(c, bg, false));
+            root.addChild(u.get());
+            up = u.release();
+        }
+        return up;
+    };
+    for (Row &row : made) {
+        for (std::unique_ptr<LowerT> &node : row.nodes) {
+            upper(node->origin())->addChild(node.get());
+            node.release();
+        }
+        for (const Tile &c : row.tiles)
+            upper(std::get<0>(c))
+                ->addTile(UpperT::coordToOffset(std::get<0>(c)), std::get<1>(c), std::get<2>(c));
+    }
+    // and the last step of tools::prune: upper nodes of one value become root tiles
+    std::vector<Tile> tops;
+    for (auto it = root.beginChildOn(); it; ++it) {
+        ValueT v;
+        bool state;
+        if (is_constant(*it, v, state)) tops.emplace_back(it.getCoord(), v, state);
+    }
+    for (const Tile &c : tops)
+        root.addTile(std::get<0>(c), std::get<1>(c), std::get<2>(c));
+    root.eraseBackgroundTiles();
     return 0;
 }
 
@@ -740,41 +882,42 @@ extern "C" int vx_voxel_write_vdb_at(const vx_bitgrid *g, const int at_[3], vx_v
                                      const vx_voxel_io *io, vx_err *err)
 {
     const openvdb::Coord at = at_ ? openvdb::Coord(at_[0], at_[1], at_[2]) : openvdb::Coord(0);
-    int rc = write_grids(path, err, [&](openvdb::GridPtrVec &grids) -> int {
-        openvdb::GridBase::Ptr out;
-        if (cls == VX_VDB_BOOL) {
-            openvdb::BoolGrid::Ptr b = bool_grid(g, at, io, 0.8, err);
-            if (!b) return -1;
-            b->setName("voxels");
-            set_meta(*b, g, meta);
-            out = b;
-        } else if (cls == VX_VDB_FOG) {
-            openvdb::FloatGrid::Ptr f = fog_grid(g, at, io, 0.8, err);
-            if (!f) return -1;
-            f->setName(g->counts ? "coverage" : "density");
-            set_meta(*f, g, meta);
-            out = f;
-        } else {
-            // The narrow band (3 voxels each side) of the exact signed
-            // distance to the boundary between set and unset voxels.
-            vx_band_rows rows = {{g->grid.dims[0], g->grid.dims[1], g->grid.dims[2]},
-                                 g->wx,
-                                 g->bits,
-                                 0,
-                                 g->grid.dims[2]};
-            openvdb::FloatGrid::Ptr ls = band_grid(
-                rows, at, g->grid.h, [](int, int) { return 0; }, io, 0.0, 0.8, err);
-            if (!ls) return -1;
-            ls->setName("surface");
-            ls->setTransform(transform_of(g->grid));
-            set_meta(*ls, g, meta);
-            out = ls;
-        }
-        if (at_) out->insertMeta("brick_offset", openvdb::Vec3IMetadata(openvdb::Vec3i(at_)));
-        if (io && io->progress && io->progress(io->ud, 0.85, err)) return -1;
-        grids.push_back(out);
-        return 0;
-    });
+    int rc =
+        write_grids(path, io ? io->vdb_keep : nullptr, err, [&](openvdb::GridPtrVec &grids) -> int {
+            openvdb::GridBase::Ptr out;
+            if (cls == VX_VDB_BOOL) {
+                openvdb::BoolGrid::Ptr b = bool_grid(g, at, io, 0.8, err);
+                if (!b) return -1;
+                b->setName("voxels");
+                set_meta(*b, g, meta);
+                out = b;
+            } else if (cls == VX_VDB_FOG) {
+                openvdb::FloatGrid::Ptr f = fog_grid(g, at, io, 0.8, err);
+                if (!f) return -1;
+                f->setName(g->counts ? "coverage" : "density");
+                set_meta(*f, g, meta);
+                out = f;
+            } else {
+                // The narrow band (3 voxels each side) of the exact signed
+                // distance to the boundary between set and unset voxels.
+                vx_band_rows rows = {{g->grid.dims[0], g->grid.dims[1], g->grid.dims[2]},
+                                     g->wx,
+                                     g->bits,
+                                     0,
+                                     g->grid.dims[2]};
+                openvdb::FloatGrid::Ptr ls = band_grid(
+                    rows, at, g->grid.h, [](int, int) { return 0; }, io, 0.0, 0.8, err);
+                if (!ls) return -1;
+                ls->setName("surface");
+                ls->setTransform(transform_of(g->grid));
+                set_meta(*ls, g, meta);
+                out = ls;
+            }
+            if (at_) out->insertMeta("brick_offset", openvdb::Vec3IMetadata(openvdb::Vec3i(at_)));
+            if (io && io->progress && io->progress(io->ud, 0.85, err)) return -1;
+            grids.push_back(out);
+            return 0;
+        });
     if (rc) return -1;
     if (io && io->progress && io->progress(io->ud, 1.0, err)) return -1;
     return 0;
@@ -784,7 +927,7 @@ extern "C" int vx_voxel_write_vdb_float(const float *v, const int dims[3], const
                                         double h, const char *name, const char *mesh,
                                         const char *path, vx_err *err)
 {
-    return write_grids(path, err, [&](openvdb::GridPtrVec &grids) {
+    return write_grids(path, nullptr, err, [&](openvdb::GridPtrVec &grids) {
         openvdb::FloatGrid::Ptr grid = make_float_grid(0.0f);
         grid->setName(name);
         grid->setGridClass(openvdb::GRID_FOG_VOLUME);
@@ -887,7 +1030,7 @@ extern "C" int vx_vdb_merge_write(vx_vdb_merge *m, vx_vdb_class cls, const vx_gr
     vx_bitgrid whole_ = {};
     whole_.grid = *grid;
     const vx_bitgrid *whole = &whole_;
-    return write_grids(path, err, [&](openvdb::GridPtrVec &grids) -> int {
+    return write_grids(path, nullptr, err, [&](openvdb::GridPtrVec &grids) -> int {
         openvdb::GridBase::Ptr out;
         if (auto b = openvdb::GridBase::grid<openvdb::BoolGrid>(m->grid)) {
             openvdb::tools::prune(b->tree());
