@@ -182,8 +182,10 @@ typedef struct vstate {
 
 /* Memory one job needs for a grid: the bit grid (and sample counts), the
  * GPU's copy of it plus float render targets the size of the largest grid
- * face (per sample), and the writer's own buffers (OpenVDB's tree; the
- * other writers stream a row at a time). An estimate, but an upper one. */
+ * face (per sample), and the writer's own buffers (OpenVDB's tree; binvox's
+ * events, at most a quarter of the bit grid, or its bounded coder's 32 MiB,
+ * fit in the GPU copy's share, gone by then; the other writers stream). An
+ * estimate, but an upper one. */
 static uint64_t job_bytes(const int dims[3], int ss, vx_samples samples, vformat format,
                           vx_vdb_class cls)
 {
