@@ -133,11 +133,14 @@ expect_status "upload spot" 201
 SPOT=$MESH_ID
 kill9_daemon
 start_daemon --min-free-disk 0 || exit 1
-for f in vdb:fog vdb:level_set vdb:bool raw8 npy vox; do
+# (binvox at 512: its 256^3 file would fit in the room left)
+for f in vdb:fog vdb:level_set vdb:bool raw8 raw1 npy vox binvox/512; do
+    res=256
+    [[ $f == */* ]] && res=${f#*/} f=${f%/*}
     p="\"format\":\"${f%%:*}\""
     [[ $f == vdb:* ]] && p="$p,\"vdb_grid\":\"${f#vdb:}\""
     fill_to $((192 << 10))
-    run_job voxelize "$SPOT" "{\"resolution\":256,$p}"
+    run_job voxelize "$SPOT" "{\"resolution\":$res,$p}"
     check "$f on a disk that fills: failed io_error ($(jq -c '.state, .error' "$TMP/job.json" | tr '\n' ' '))" \
         jq -e '.state == "failed" and .error.code == "io_error"' "$TMP/job.json"
     cp "$TMP/job.json" "$BODY"
