@@ -421,11 +421,6 @@ static inline __attribute__((always_inline)) int ev_rows_with(ev_job *j, int si,
             return -1;
         }
         const uint32_t c0 = nchunks;
-        /* a slice takes at most one chunk per x and per EV_CHUNK events */
-        if ((uint64_t)nchunks + nx + (uint64_t)(ny + 1) * nx / EV_CHUNK + 1 > s->cap) {
-            atomic_store(&j->over, 1);
-            return -1;
-        }
         const uint32_t *prev = j->zeros;
         for (int y = 0; y <= ny; y++) {
             const uint32_t *cur = y < ny ? g->bits + ((size_t)k * ny + y) * wx : j->zeros;
@@ -433,6 +428,11 @@ static inline __attribute__((always_inline)) int ev_rows_with(ev_job *j, int si,
             for (size_t w0 = 0; w0 < wx; w0 += 64)
                 for (uint64_t m = diff(cur + w0, prev + w0, wx - w0 < 64 ? wx - w0 : 64); m;
                      m &= m - 1) {
+                    /* a word's events take at most 32 new chunks */
+                    if (nchunks + 32 > s->cap) {
+                        atomic_store(&j->over, 1);
+                        return -1;
+                    }
                     const size_t w = w0 + (size_t)__builtin_ctzll(m);
                     uint32_t dw = cur[w] ^ prev[w];
                     if (w == wx - 1) dw &= tailmask; /* row padding: never set */
