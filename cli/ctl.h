@@ -73,6 +73,9 @@ int ctl_cmd_job(ctl *c, const char *kind, const char *src, cJSON *params, const 
 /* `jobs`, `meshes`, `get`, `cancel`, `upload`. Return the exit status. */
 int ctl_cmd_jobs(ctl *c, const char *state, int newest, int limit, const char *after);
 int ctl_cmd_meshes(ctl *c, int limit, const char *after);
+/* Shows job jid, or with out or name follows it to its end first, as a job
+ * command does, and downloads output name (NULL: the primary output, every
+ * frame of a turntable). */
 int ctl_cmd_get(ctl *c, const char *jid, const char *name, const char *out);
 int ctl_cmd_cancel(ctl *c, const char *jid);
 /* Deletes a job: cancels it when unfinished, else removes it and its results. */

@@ -449,6 +449,36 @@ static int write_stats(const cJSON *job, const char *out)
     return rc;
 }
 
+/* Follows job jid to its end, then writes what it made: output name when
+ * given, else the primary output (every frame of a turntable), else the
+ * stats of a job that wrote no file; a job that did not succeed is said
+ * (exit 1). With --json the last Job goes on stdout. Shared by the job
+ * commands and `get`, so both wait and download alike. The exit status. */
+static int wait_and_fetch(ctl *c, const char *jid, const char *name, const char *out)
+{
+    catch_signals(jid);
+    cJSON *job = follow_job(c, jid);
+    if (!job) return 1;
+    int rc = 0;
+    const char *state = str(job, "state");
+    if (strcmp(state, "succeeded") != 0) {
+        const cJSON *e = cJSON_GetObjectItemCaseSensitive(job, "error");
+        fprintf(stderr, "voxelctl: job %s %s: %s (%s)\n", jid, state, str(e, "message"),
+                str(e, "code"));
+        rc = 1;
+    } else if (name) {
+        rc = download(c, jid, name, out);
+    } else if (cJSON_GetArraySize(cJSON_GetObjectItemCaseSensitive(job, "outputs")) > 0) {
+        rc = download_result(c, jid, job, out);
+    } else if (!c->json || out) { /* (--json alone: the stats are in the job printed) */
+        rc = write_stats(job, out);
+    }
+    g_jid[0] = 0;
+    if (c->json) print_json(job);
+    cJSON_Delete(job);
+    return rc;
+}
+
 int ctl_cmd_job(ctl *c, const char *kind, const char *src, cJSON *params, const char *out,
                 int no_wait)
 {
@@ -484,26 +514,7 @@ int ctl_cmd_job(ctl *c, const char *kind, const char *src, cJSON *params, const 
         goto done;
     }
     cJSON_Delete(job);
-    catch_signals(jid);
-    job = follow_job(c, jid);
-    if (!job) {
-        rc = 1;
-        goto done;
-    }
-    const char *state = str(job, "state");
-    if (strcmp(state, "succeeded") != 0) {
-        const cJSON *e = cJSON_GetObjectItemCaseSensitive(job, "error");
-        fprintf(stderr, "voxelctl: job %s %s: %s (%s)\n", jid, state, str(e, "message"),
-                str(e, "code"));
-        rc = 1;
-    } else if (cJSON_GetArraySize(cJSON_GetObjectItemCaseSensitive(job, "outputs")) > 0) {
-        rc = download_result(c, jid, job, out);
-    } else if (!c->json || out) { /* (--json alone: the stats are in the job printed) */
-        rc = write_stats(job, out);
-    }
-    g_jid[0] = 0;
-    if (c->json) print_json(job);
-    cJSON_Delete(job);
+    rc = wait_and_fetch(c, jid, NULL, out);
 done:
     cJSON_Delete(params);
     return rc;
@@ -592,8 +603,10 @@ static void job_show(const cJSON *j)
 
 int ctl_cmd_get(ctl *c, const char *jid, const char *name, const char *out)
 {
+    /* A download waits for the job (an unfinished one has no result yet:
+     * 409); showing it does not, it is how its state is looked at. */
+    if (out || name) return wait_and_fetch(c, jid, name, out);
     catch_signals(NULL);
-    if (out || name) return download(c, jid, name, out);
     char path[160];
     snprintf(path, sizeof path, "/v1/jobs/%s", jid);
     return list(c, path, job_show);

@@ -214,11 +214,12 @@ static void replica_name(const vx_config *cfg, char out[128])
 /* Opens the job runner and, when start, starts its GL thread; NULL (logged)
  * on failure. Not started, it keeps its queue and runs nothing. */
 /* Whether a failed start was a bad option's value (exit 2) that only the
- * store or the queue could tell: a file:// store that is not absolute, a
- * malformed s3:// or database URL. */
+ * store, the queue or EGL could tell: a file:// store that is not absolute,
+ * a malformed s3:// or database URL, an --egl-device index with no device. */
 static int bad_option(const vx_err *err)
 {
-    return !strcmp(err->code, "bad_blob_store") || !strcmp(err->code, "invalid_database_url");
+    return !strcmp(err->code, "bad_blob_store") || !strcmp(err->code, "invalid_database_url") ||
+           !strcmp(err->code, "bad_egl_device");
 }
 
 /* The start-up's stop hook: SIGTERM or SIGINT (blocked until the daemon
@@ -271,7 +272,10 @@ static vx_jobs *open_jobs(const vx_config *cfg, vx_store *store, int start, vx_e
         char q[600];
         VX_ERROR("voxeld.fatal", "stage=gl code=%s message=%s", err->code,
                  vx_log_quote(q, sizeof q, err->message));
-        fprintf(stderr, "voxeld: cannot create the OpenGL context: %s\n", err->message);
+        if (bad_option(err))
+            fprintf(stderr, "voxeld: --egl-device: %s (voxeld --list-egl-devices)\n", err->message);
+        else
+            fprintf(stderr, "voxeld: cannot create the OpenGL context: %s\n", err->message);
         __atomic_store_n(&g_jobs, NULL, __ATOMIC_RELEASE);
         vx_jobs_free(jobs);
         return NULL;

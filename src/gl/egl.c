@@ -580,12 +580,14 @@ vx_gl *vx_gl_new(const vx_gl_desc *desc, vx_err *err)
         for (int i = 0; i < n; i++)
             if (devs[i].d.index == want) pick = &devs[i];
         if (!pick) {
+            /* Its own code: the caller's configuration is wrong (voxeld
+             * exits 2 for it), where gl_no_device is this machine's lack. */
             if (n > 0)
-                vx_err_set(err, VX_EGPU, "gl_no_device",
+                vx_err_set(err, VX_EGPU, "bad_egl_device",
                            "EGL device %d does not exist: %d EGL device%s found (indices 0..%d)",
                            want, n, n == 1 ? "" : "s", n - 1);
             else
-                vx_err_set(err, VX_EGPU, "gl_no_device",
+                vx_err_set(err, VX_EGPU, "bad_egl_device",
                            "EGL device %d does not exist: no EGL devices found", want);
             goto fail;
         }

@@ -49,7 +49,9 @@ int vx_gl_list_devices(vx_gl_device *out, int max, vx_err *err);
 
 /* Creates the context and makes it current on the calling thread, which
  * becomes the GL thread. Fails (VX_EGPU, code gl_unsupported) with a clear
- * message when GL 4.5 core with compute shaders is not available. Owned. */
+ * message when GL 4.5 core with compute shaders is not available, and with
+ * code bad_egl_device when desc picks a device index that does not exist.
+ * Owned. */
 vx_gl *vx_gl_new(const vx_gl_desc *desc, vx_err *err);
 /* Destroys the context; NULL is a no-op. The EGL display stays initialised
  * (it is shared per device and process; a later vx_gl_new reuses it). */

@@ -177,8 +177,12 @@ vx_mesh *to_mesh(Gather &g)
 
 /* A whitespace-separated token reader over the file. */
 struct Tokens {
+    /* The longest number token read: a double's shortest round trip takes
+     * at most 24 characters, so a longer one is refused, not cut short. */
+    static constexpr size_t max_number = 63;
     const char *p, *end;
-    size_t line = 1; /* of the last token read */
+    size_t line = 1;     /* of the last token read */
+    size_t long_len = 0; /* a number token over max_number seen: its length */
     /* The next token into [*s, *s + *len); false at the end. */
     bool next(const char **s, size_t *len)
     {
@@ -211,12 +215,18 @@ struct Tokens {
         size_t len;
         return next(&s, &len);
     }
+    /* The next token as a number; false at the end or when it is not one
+     * (long_len set when it was too long to be read). */
     bool number(double *v)
     {
         const char *s;
         size_t len;
-        char buf[64];
-        if (!next(&s, &len) || len >= sizeof buf) return false;
+        char buf[max_number + 1];
+        if (!next(&s, &len)) return false;
+        if (len > max_number) {
+            long_len = len;
+            return false;
+        }
         std::memcpy(buf, s, len);
         buf[len] = 0;
         char *e;
@@ -304,8 +314,16 @@ int stl_ascii(Gather &g, const unsigned char *data, size_t n)
                 return stl_fail(g, "a facet without its normal and outer loop", at);
             for (int v = 0; v < 3; v++)
                 if (!t.is("vertex") || !t.number(&c[3 * v]) || !t.number(&c[3 * v + 1]) ||
-                    !t.number(&c[3 * v + 2]))
-                    return stl_fail(g, "a facet without three vertices of three numbers", at);
+                    !t.number(&c[3 * v + 2])) {
+                    if (!t.long_len)
+                        return stl_fail(g, "a facet without three vertices of three numbers", at);
+                    /* said as such, on the number's own line: "without three
+                     * numbers" sent users looking for a missing one */
+                    char what[96];
+                    std::snprintf(what, sizeof what, "a number %zu characters long (at most %zu)",
+                                  t.long_len, Tokens::max_number);
+                    return stl_fail(g, what, t.line);
+                }
             if (!t.is("endloop") || !t.is("endfacet"))
                 return stl_fail(g, "a facet without endloop and endfacet after three vertices", at);
             if (stl_triangle(g, c)) return -1;

@@ -6,7 +6,8 @@
 # matter are asserted on the rendered objects: probes on the daemon's own
 # routes and port, the GPU request and --require-gpu on nvidia, a grace
 # period at least the job timeout, the KEDA trigger (min replicas >= 1), the
-# security context and that every reference resolves. Each single-replica
+# security context, LP_NUM_THREADS within the CPU request (llvmpipe would
+# size itself to the node) and that every reference resolves. Each single-replica
 # overlay's options (ConfigMap + container env + args) are then given to the
 # real voxeld here (llvmpipe): cpu must become ready, nvidia must answer
 # /readyz 503 naming the software renderer. A corrupted render must fail
@@ -134,6 +135,11 @@ for o in "${OVERLAYS[@]}"; do
     # Resources and security context.
     check "$o: memory requested and limited, CPU requested" q "$o" \
         "$CTR | .resources.requests.memory and .resources.limits.memory and .resources.requests.cpu"
+    # llvmpipe sizes its thread pool from the node's CPUs, not the pod's
+    # share: every overlay bounds it to at most the CPUs the pod requests.
+    LP=$(jq -r "$CENV | .LP_NUM_THREADS // \"unset\"" "$TMP/$o.json")
+    check "$o: LP_NUM_THREADS ($LP) is a whole number from 1 to the CPU request" q "$o" \
+        "($CTR | .resources.requests.cpu | tostring | if endswith(\"m\") then (.[:-1] | tonumber) / 1000 else tonumber end) as \$cpu | $CENV | .LP_NUM_THREADS | test(\"^[1-9][0-9]*\$\") and (tonumber <= \$cpu)"
     check "$o: non-root, no privilege escalation, capabilities dropped, read-only root" q "$o" \
         "($DEPLOY | .spec.template.spec.securityContext.runAsNonRoot == true) and ($CTR | .securityContext | .allowPrivilegeEscalation == false and .readOnlyRootFilesystem == true and (.capabilities.drop | index(\"ALL\")))"
     for dir in VOXELD_DATA_DIR VOXELD_CACHE_DIR; do

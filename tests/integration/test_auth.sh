@@ -135,8 +135,14 @@ check "--version" grep -q '^voxeld [0-9]' "$TMP/version"
 "$VOXELD" --help >"$TMP/help"
 check "--help lists every limit" bash -c "for f in max-upload-bytes max-triangles max-queued-jobs job-timeout request-timeout connection-timeout max-connections-per-ip; do grep -q -- \"--\$f\" '$TMP/help' || exit 1; done"
 "$VOXELD" --egl-device 99 --listen 127.0.0.1:0 --data-dir "$TMP/d2" 2>"$TMP/err3"
-check "missing EGL device fails start" test $? -ne 0
-check "missing EGL device is explained" grep -qi 'device' "$TMP/err3"
+rc=$?
+check "missing EGL device is a configuration error: exit 2 (rc $rc)" test $rc -eq 2
+check "missing EGL device is explained" grep -q -- '--egl-device: EGL device 99 does not exist' "$TMP/err3"
+check "and logged with its own code" grep -q 'code=bad_egl_device' "$TMP/err3"
+# --require-gpu first probes the device, then starts on it: exit 2 too
+"$VOXELD" --egl-device 99 --require-gpu yes --listen 127.0.0.1:0 --data-dir "$TMP/d2" 2>"$TMP/err3g"
+rc=$?
+check "missing EGL device with --require-gpu: exit 2 (rc $rc)" test $rc -eq 2
 STATE_DIRECTORY=$TMP/statedir timeout 20 "$VOXELD" --listen 127.0.0.1:0 2>"$TMP/sd.log" &
 SPID=$!
 for i in $(seq 1 100); do grep -q voxeld.ready "$TMP/sd.log" && break; sleep 0.1; done

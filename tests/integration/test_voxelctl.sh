@@ -211,6 +211,38 @@ check "turntable: no file under the plain name" test ! -e spin.png
 check "turntable: the frames differ" sh -c 'test -s spin_001.png && ! cmp -s spin_000.png spin_001.png'
 "$CTL" -q render "$MID" "${TURN[@]}" -p frames=3 -o - >spin.all 2>ctl.err
 check "turntable -o -: the frames in turn on stdout" sh -c 'cat spin_000.png spin_001.png spin_002.png | cmp -s - spin.all'
+# get -o on a job not yet finished waits for it as the job commands do
+# (it got 409 job_not_finished), then fetches every frame of a turntable
+# (it got the first only). A slow render ahead keeps it unfinished.
+SLOW='"params":{"N":64,"R":512,"width":512,"height":512}'
+api POST /v1/jobs -H 'Content-Type: application/json' -d "{\"mesh\":\"$MID\",\"kind\":\"render\",$SLOW}"
+"$CTL" --no-wait render "$MID" "${TURN[@]}" -p frames=3 >turn.id 2>ctl.err
+TJID=$(cat turn.id)
+api GET "/v1/jobs/$TJID"
+TSTATE=$(jq -r .state "$BODY")
+"$CTL" get "$TJID" -o getspin.png 2>ctl.err
+rc=$?
+check "get -o on a $TSTATE job: waits for it, exit 0 ($(tail -n 1 ctl.err))" \
+    sh -c "test $rc -eq 0 && test '$TSTATE' != succeeded && grep -Eq '^$TJID succeeded 100%$' ctl.err"
+check "get -o on a turntable: every frame, numbered as render -o numbers them" \
+    sh -c 'for i in 0 1 2; do cmp -s spin_00$i.png getspin_00$i.png || exit 1; done; test ! -e getspin.png'
+"$CTL" -q get "$TJID" -o again.png 2>ctl.err
+check "get -o on a finished turntable: every frame too" \
+    sh -c 'for i in 0 1 2; do cmp -s spin_00$i.png again_00$i.png || exit 1; done; test ! -e again.png'
+"$CTL" -q get "$TJID" --name image_002 -o frame2.png 2>ctl.err
+check "get --name one frame: that frame only" cmp -s spin_002.png frame2.png
+# A job canceled while get waits for it (seconds of work: cancel comes
+# first): said, exit 1, nothing written.
+api POST /v1/jobs -H 'Content-Type: application/json' -d "{\"mesh\":\"$MID\",\"kind\":\"render\",$SLOW}"
+CJID=$(jq -r .id "$BODY")
+"$CTL" get "$CJID" -o never.png 2>cget.err &
+gpid=$!
+for _ in $(seq 100); do grep -Eq "^$CJID (queued|running)" cget.err && break; sleep 0.05; done
+"$CTL" cancel "$CJID" >/dev/null 2>&1
+wait "$gpid"
+rc=$?
+check "get -o, the job canceled meanwhile: exit 1, said, nothing written ($(cat cget.err))" \
+    sh -c "test $rc -eq 1 && grep -q 'job $CJID canceled' cget.err && test ! -e never.png"
 "$CTL" -q voxelize "$MID" -r 8 -f binvox -o - >/dev/full 2>ctl.err
 rc=$?
 check "stdout that cannot be written: exit 1 ($(cat ctl.err))" test $rc -eq 1

@@ -273,7 +273,7 @@ static void test_device_out_of_range(void **state)
     assert_null(vx_gl_new(&desc, &err));
     printf("out of range: %s: %s\n", err.code, err.message);
     assert_int_equal(err.kind, VX_EGPU);
-    assert_string_equal(err.code, "gl_no_device");
+    assert_string_equal(err.code, "bad_egl_device");
     char want[64];
     snprintf(want, sizeof want, "%d EGL device", n);
     assert_non_null(strstr(err.message, want));

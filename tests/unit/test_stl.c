@@ -286,6 +286,12 @@ static void test_hostile(void **state)
     expect("solid x\nfacet normal 0 0 1\nouter loop\nvertex 0 x 0\nvertex 1 0 0\n"
            "vertex 0 1 0\nendloop\nendfacet\nendsolid\n",
            "stl_corrupt", "line 2");
+    /* A number over 63 characters is said as such, on its own line (it
+     * was "a facet without three vertices of three numbers", line 2). */
+    expect("solid x\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\nvertex 1 0 0\nvertex 0 "
+           "1.0000000000000000000000000000000000000000000000000000000000000000000 0\n"
+           "endloop\nendfacet\nendsolid\n",
+           "stl_corrupt", "line 6: a number 69 characters long (at most 63)");
     expect("solid x\n" F1 "endfacet\nendsolid x\ngarbage\n", "stl_corrupt", "after endsolid");
     expect("solid x\nfacet 0 0 1\n", "stl_corrupt", "normal");
     expect("solid x\nfacet normal 0 0\nouter loop\nvertex 0 0 0\nvertex 1 0 0\nvertex 0 1 0\n"
@@ -300,6 +306,18 @@ static void test_hostile(void **state)
     vx_err err;
     vx_mesh *m = read_buf(&b, &err);
     assert_non_null(m);
+    assert_int_equal(m->nfaces, 1);
+    vx_mesh_free(m);
+    free(b.p);
+    /* 63 characters are still a number. */
+    b = (tbuf){0};
+    ok = "solid x\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\nvertex 1 0 0\nvertex 0 "
+         "1.0000000000000000000000000000000000000000000000000000000000000 "
+         "0\nendloop\nendfacet\nendsolid\n";
+    tbuf_put(&b, ok, strlen(ok));
+    m = read_buf(&b, &err);
+    if (!m)
+        fail_msg("1.0000000000000000000000000000000000000000000000000000000000000", err.message);
     assert_int_equal(m->nfaces, 1);
     vx_mesh_free(m);
     free(b.p);
