@@ -211,8 +211,6 @@ static void replica_name(const vx_config *cfg, char out[128])
         snprintf(out, 128, "%s:pid%d", host, (int)getpid());
 }
 
-/* Opens the job runner and, when start, starts its GL thread; NULL (logged)
- * on failure. Not started, it keeps its queue and runs nothing. */
 /* Whether a failed start was a bad option's value (exit 2) that only the
  * store, the queue or EGL could tell: a file:// store that is not absolute,
  * a malformed s3:// or database URL, an --egl-device index with no device. */
@@ -232,6 +230,8 @@ static int startup_stop(void *ud, vx_err *err)
     return vx_err_set(err, VX_ECANCELED, "stopped", "a signal came while starting");
 }
 
+/* Opens the job runner and, when start, starts its GL thread; NULL (logged)
+ * on failure. Not started, it keeps its queue and runs nothing. */
 static vx_jobs *open_jobs(const vx_config *cfg, vx_store *store, int start, vx_err *err)
 {
     vx_err cerr;
