@@ -329,9 +329,10 @@ static int binvox_blocks(const vx_bitgrid *g, vx_out *o, int d, const vx_voxel_i
  * default a quarter of the bit grid's bytes and at least this. */
 #define BINVOX_EVENT_MIN ((size_t)4 << 20)
 
-/* The progress bar: gathering to 0.6, measuring the runs to 0.7, writing
- * them to 1. */
-#define EV_PROGRESS 0.6
+/* The progress bar: gathering to EV_GATHERED, measuring the runs to
+ * EV_MEASURED, writing them to 1. */
+#define EV_GATHERED 0.6
+#define EV_MEASURED 0.7
 #define EV_CHUNK 64 /* events a chunk */
 
 /* A slab's events: slice x's n[x] events in chunks head[x], next[head[x]],
@@ -356,6 +357,12 @@ typedef struct ev_job {
     vx_err *err;
     int stopped; /* the hook said stop (set by the calling thread) */
 } ev_job;
+
+/* Event ev of slice x: its place in binvox order. */
+static inline uint64_t ev_pos(const ev_job *j, int x, uint32_t ev)
+{
+    return ((uint64_t)x * j->d + (ev >> j->ybits)) * j->d + (ev & ((1u << j->ybits) - 1u));
+}
 
 /* Bit w set where a[w] != b[w], w < n <= 64 (SSE2: four words a compare;
  * diff_words_avx2, eight). */
@@ -416,7 +423,7 @@ static inline __attribute__((always_inline)) int ev_rows_with(ev_job *j, int si,
     for (int k = si * j->slab; k < k1; k++) {
         if (atomic_load_explicit(&j->over, memory_order_relaxed)) return -1;
         if (t == 0 && j->io && j->io->progress && !(k & 7) &&
-            j->io->progress(j->io->ud, EV_PROGRESS * k / nz, j->err)) {
+            j->io->progress(j->io->ud, EV_GATHERED * k / nz, j->err)) {
             j->stopped = 1;
             return -1;
         }
@@ -591,10 +598,6 @@ static inline void ev_close(ev_range *r, ev_sink *k, unsigned v, uint64_t len)
         r->head_len = len;
     } else if (!k) {
         r->bytes += pair_bytes(len);
-    } else if (len < 255 && EV_SINK_BYTES - k->n >= 2) {
-        k->buf[k->n] = (uint8_t)v;
-        k->buf[k->n + 1] = (uint8_t)len;
-        k->n += 2;
     } else {
         sink_run(k, v, len);
     }
@@ -604,8 +607,6 @@ static inline void ev_close(ev_range *r, ev_sink *k, unsigned v, uint64_t len)
 static void ev_walk(ev_emit *e, ev_range *r, ev_sink *k)
 {
     ev_job *j = e->j;
-    const uint64_t dd = (uint64_t)j->d * j->d;
-    const uint32_t ymask = (1u << j->ybits) - 1u;
     uint64_t at = r->at0, plen = 0; /* the open run: value pv, plen voxels */
     unsigned v = r->v0, pv = v;
     r->finished = 0;
@@ -615,7 +616,7 @@ static void ev_walk(ev_emit *e, ev_range *r, ev_sink *k)
             for (uint32_t q = 0, c = s->head[x]; q < s->n[x]; q++) {
                 if (q && !(q % EV_CHUNK)) c = s->next[c];
                 const uint32_t ev = s->ev[(size_t)c * EV_CHUNK + q % EV_CHUNK];
-                const uint64_t pos = x * dd + (uint64_t)(ev >> j->ybits) * j->d + (ev & ymask);
+                const uint64_t pos = ev_pos(j, x, ev);
                 if (pos != at) { /* two events at one place (y = ny = d): no run */
                     if (v != pv) {
                         if (plen) ev_close(r, k, pv, plen);
@@ -634,7 +635,7 @@ static void ev_walk(ev_emit *e, ev_range *r, ev_sink *k)
             pv = v;
             plen = 0;
         }
-        plen += dd * j->d - at;
+        plen += (uint64_t)j->d * j->d * j->d - at;
     }
     r->tail_v = pv;
     r->tail_len = plen;
@@ -649,7 +650,9 @@ static int ev_code(int i, int t, void *ud)
     const vx_voxel_io *io = j->io;
     if (i < e->nr && t == 0 && io && io->progress) {
         const double f = (double)e->r[i].x0 / j->g->grid.dims[0];
-        if (io->progress(io->ud, e->writing ? 0.7 + 0.3 * f : EV_PROGRESS + 0.1 * f, j->err)) {
+        const double f0 = e->writing ? EV_MEASURED : EV_GATHERED;
+        const double f1 = e->writing ? 1 : EV_MEASURED;
+        if (io->progress(io->ud, f0 + (f1 - f0) * f, j->err)) {
             j->stopped = 1;
             return 1;
         }
@@ -702,7 +705,6 @@ static int binvox_events(const vx_bitgrid *g, vx_out *o, int d, const vx_voxel_i
     int rc = 1;
     if (j.s && zeros && e.r && e.runs && !vx_par_for(j.nslabs, threads, ev_slab, &j)) {
         /* each range starts after the events of the slices before it */
-        const uint64_t dd = (uint64_t)d * d;
         uint64_t count = 0, at = 0;
         for (int i = 0, x = 0; i < e.nr; i++) {
             ev_range *r = e.r + i;
@@ -717,7 +719,7 @@ static int binvox_events(const vx_bitgrid *g, vx_out *o, int d, const vx_voxel_i
                     if (!n) continue;
                     const uint32_t last = s->ev[(size_t)s->tail[x] * EV_CHUNK + (n - 1) % EV_CHUNK];
                     count += n;
-                    at = x * dd + (uint64_t)(last >> j.ybits) * d + (last & ((1u << j.ybits) - 1u));
+                    at = ev_pos(&j, x, last);
                 }
         }
         rc = vx_par_for(e.nr, threads, ev_code, &e) ? -1 : 0;
