@@ -12,10 +12,14 @@
  * positions snapped to 1/256 voxel in the lattice, each crossing placed
  * at its first centre at or beyond it by the shaders' formula, so a
  * centre on a face counts half-open [entry, exit) along every axis and a
- * brick gives the whole grid's voxels. w_K is smooth between K's
- * crossings. On a run of centres between two crossings, when a bound of |w_K| (area over
- * squared distance per tree node) stays under the crossing count's margin
- * to 1/2, the count decides alone; else w_K is evaluated with a tree over
+ * brick gives the whole grid's voxels. Each task takes a band of rows
+ * of columns: its triangles' crossings (once each) sorted by column,
+ * then its rows filled, as cpu.c does along x. w_K is smooth between K's
+ * crossings. On a run of centres between two crossings, when a bound of
+ * |w_K| (area over squared distance per tree node; first over blocks of
+ * columns, then over one column, then over the run) stays under the
+ * crossing count's margin to 1/2, the count decides alone; else w_K is
+ * evaluated with a tree over
  * K (wtree.c, Barill et al. 2018) at both ends of the run (and its middle
  * when it is over 8 voxels), and where they disagree about w >= 1/2 the
  * run is split (fill_run) until the change is found. A closed mesh has no cone:
@@ -30,6 +34,7 @@
 #include <math.h>
 #include <stdatomic.h>
 #include <stdlib.h>
+#include <stdio.h>
 #include <string.h>
 
 #include "util/clock.h"
@@ -38,25 +43,46 @@
 #include "voxel/voxel.h"
 #include "voxel/winding_int.h"
 
-#define BAND 8 /* column rows per raster task */
+#define BAND 8       /* column rows (y) per task, at most */
+#define FAR_BLOCK 16 /* columns of a band's rows bounded together */
+
+typedef struct wtri {
+    int ilo, ihi, jlo, jhi; /* column centres its snapped bbox holds (ilo > ihi: none) */
+    int8_t sign;            /* +1 facing +z (counter-clockwise in (x, y)) */
+} wtri;
+
+typedef struct xent {
+    uint32_t col; /* (j - band's first row) * nx + i */
+    int32_t kz2;  /* 2 kb + (sign > 0), kb the first centre at or beyond it */
+} xent;
+
+typedef struct scratch {
+    xent *e, *sorted; /* the band's crossings, then sorted by column */
+    size_t n, cap, scap;
+    uint32_t *cnt;   /* columns of a band + 1 */
+    uint32_t *slice; /* a row's voxels, every z row of it (set_bit) */
+    int32_t *z;      /* a column's crossings, sorted */
+    uint8_t *far;    /* per block of FAR_BLOCK columns: the cone is far */
+    size_t zcap;
+} scratch;
 
 typedef struct wctx {
     const vx_mesh *m;
     const vx_voxelize_desc *d;
     double *cone; /* 9 doubles per cone triangle */
     size_t ncone, ntot;
-    int nx, ny, nz, nbands;
+    int nx, ny, nz, band, nbands; /* band: rows per task */
     double o[3], h;
     double ix[3];     /* grid.index_offset: centre i of axis a is o + (ix + i + 1/2) h */
     int64_t index[3]; /* the same, as integers */
-    double *lat;      /* lattice units (p - o) / h: 3 a mesh vertex, then 9 a cone triangle */
-    size_t *bin_off;  /* nbands + 1 */
-    uint32_t *bin;    /* triangle ids per band */
-    uint32_t *cnt;    /* crossings per column (pass 1), then fill cursor */
-    size_t *off;      /* ncols + 1 */
-    int32_t *z;       /* per crossing, the first centre k at or beyond it */
-    int8_t *sg;       /* +1 front (facing +z), -1 back */
-    int pass;         /* 0 count, 1 fill */
+    /* lattice units (p - o) / h, 3 a corner: the mesh's vertices, then the
+     * cone triangles' corners (3 each); and each corner's (x, y) snapped */
+    double *lat;
+    int64_t *snap;
+    wtri *tri;       /* ntot: the mesh's triangles, then the cone's */
+    size_t *bin_off; /* nbands + 1 */
+    uint32_t *bin;   /* triangle ids per band */
+    scratch sc[VX_PAR_MAX];
     vx_wtree tree;
     int lo[3], hi[3], open; /* centres that can be inside (the bbox for an open mesh) */
     /* An open mesh's runs along z are cut to its bbox's centres rlo..rhi,
@@ -64,93 +90,181 @@ typedef struct wctx {
      * way in every brick it crosses (and the whole grid's). */
     int rlo, rhi;
     vx_bitgrid *out;
+    uint64_t limit;        /* max_memory, or no limit */
+    _Atomic uint64_t used; /* bytes taken so far */
     atomic_int stop, done;
     int total;
     double p0, p1, last; /* progress span, last report */
     vx_err err;
 } wctx;
 
+/* Takes `bytes` more of the job's memory: 0, or -1 with c->err set (the
+ * first error wins) and every thread told to stop. */
+static int charge(wctx *c, uint64_t bytes)
+{
+    uint64_t now = atomic_fetch_add(&c->used, bytes) + bytes;
+    if (now <= c->limit) return 0;
+    if (!atomic_exchange(&c->stop, 1))
+        vx_err_set(&c->err, VX_ETOOBIG, "job_memory_limit",
+                   "the winding rule needs more than %llu bytes for this grid's crossings, "
+                   "over the job memory limit of %llu",
+                   (unsigned long long)now, (unsigned long long)c->limit);
+    return -1;
+}
+
+/* Out of memory: c->err set (the first error wins), every thread stops. */
+static int no_memory(wctx *c)
+{
+    if (!atomic_exchange(&c->stop, 1))
+        vx_err_set(&c->err, VX_EINTERNAL, "out_of_memory", "no memory for the crossings");
+    return -1;
+}
+
 /* ---- crossings per column --------------------------------------------- */
 
-/* Triangle t's vertices in the lattice's units, x y z each. */
-static void tri_lat(const wctx *c, size_t t, double u[9])
+/* Corner q of triangle t: its index into lat and snap. */
+static size_t corner(const wctx *c, size_t t, int q)
 {
-    if (t < c->m->ntris) {
-        for (int q = 0; q < 3; q++)
-            memcpy(u + 3 * q, c->lat + 3 * (size_t)c->m->tri[3 * t + q], 3 * sizeof *u);
-    } else {
-        memcpy(u, c->lat + 3 * c->m->nverts + 9 * (t - c->m->ntris), 9 * sizeof *u);
-    }
+    return t < c->m->ntris ? c->m->tri[3 * t + q] : c->m->nverts + 3 * (t - c->m->ntris) + q;
 }
 
-/* Triangle t's snapped (x, y) corners, counter-clockwise, and the column
- * centres its snapped bounding box holds; its crossings' sign (+1 facing
- * +z), or 0 when it covers no centre (edge-on to z, or off the grid). */
-static int tri_cols(const wctx *c, const double u[9], int64_t P[3][2], int r[4])
+#define SETUP_CHUNK 8192 /* corners, then triangles, per setup task */
+
+/* Corners [i * SETUP_CHUNK, +SETUP_CHUNK) in the lattice's units
+ * (lattice_units), and snapped. */
+static int setup_corners(int i, int t, void *ud)
 {
-    for (int q = 0; q < 3; q++) {
-        P[q][0] = vx_lattice_snap(u[3 * q]);
-        P[q][1] = vx_lattice_snap(u[3 * q + 1]);
+    (void)t;
+    wctx *c = ud;
+    size_t nv = c->m->nverts, n = nv + 3 * c->ncone, v0 = (size_t)i * SETUP_CHUNK;
+    size_t v1 = v0 + SETUP_CHUNK < n ? v0 + SETUP_CHUNK : n;
+    for (size_t v = v0; v < v1; v++) {
+        double *u = c->lat + 3 * v;
+        vx_lattice_unit(&c->d->grid, v < nv ? c->m->pos + 3 * v : c->cone + 3 * (v - nv), u);
+        int in = vx_lattice_in_range(u); /* checked where a face uses it */
+        c->snap[2 * v] = in ? vx_lattice_snap(u[0]) : 0;
+        c->snap[2 * v + 1] = in ? vx_lattice_snap(u[1]) : 0;
     }
-    vx_i128 det = vx_lattice_det(P[0], P[1], P[2]);
-    if (det == 0) return 0;
-    if (det < 0) { /* counter-clockwise for the edge tests */
-        int64_t tmp[2] = {P[1][0], P[1][1]};
-        memcpy(P[1], P[2], sizeof tmp);
-        memcpy(P[2], tmp, sizeof tmp);
-    }
+    return 0;
+}
+
+/* Triangles [i * SETUP_CHUNK, +SETUP_CHUNK): each one's columns and sign
+ * (0 when it covers no centre: edge-on to z, or off the grid). */
+static int setup_tris(int i, int t, void *ud)
+{
+    (void)t;
+    wctx *c = ud;
     const int n[2] = {c->nx, c->ny};
-    for (int a = 0; a < 2; a++) {
-        int64_t lo = P[0][a], hi = P[0][a];
-        for (int q = 1; q < 3; q++) {
-            lo = P[q][a] < lo ? P[q][a] : lo;
-            hi = P[q][a] > hi ? P[q][a] : hi;
+    size_t t0 = (size_t)i * SETUP_CHUNK,
+           t1 = t0 + SETUP_CHUNK < c->ntot ? t0 + SETUP_CHUNK : c->ntot;
+    for (size_t tr = t0; tr < t1; tr++) {
+        const int64_t *P[3];
+        for (int q = 0; q < 3; q++)
+            P[q] = c->snap + 2 * corner(c, tr, q);
+        wtri *x = &c->tri[tr];
+        vx_i128 det = vx_lattice_det(P[0], P[1], P[2]);
+        x->sign = det > 0 ? 1 : det < 0 ? -1 : 0;
+        int r[4];
+        for (int a = 0; a < 2; a++) {
+            int64_t lo = P[0][a], hi = P[0][a];
+            for (int q = 1; q < 3; q++) {
+                lo = P[q][a] < lo ? P[q][a] : lo;
+                hi = P[q][a] > hi ? P[q][a] : hi;
+            }
+            vx_lattice_centres(lo, hi, c->index[a], n[a], &r[2 * a], &r[2 * a + 1]);
         }
-        vx_lattice_centres(lo, hi, c->index[a], n[a], &r[2 * a], &r[2 * a + 1]);
-        if (r[2 * a] > r[2 * a + 1]) return 0;
+        x->ilo = r[0];
+        x->ihi = r[1];
+        x->jlo = r[2];
+        x->jhi = r[3];
+        if (!x->sign || x->jlo > x->jhi) x->ilo = x->ihi + 1;
     }
-    return det > 0 ? 1 : -1;
+    return 0;
 }
 
-/* Crossing of column col: kb, the first centre at or beyond it, sign s. */
-static void add_crossing(wctx *c, size_t col, int32_t kb, int s)
+/* Triangles by the bands of rows their columns fall in. */
+static int bin_tris(wctx *c, vx_err *err)
 {
-    if (c->pass == 0) {
-        c->cnt[col]++;
-        return;
+    c->bin_off = calloc((size_t)c->nbands + 2, sizeof *c->bin_off);
+    if (!c->bin_off) goto oom;
+    for (int pass = 0; pass < 2; pass++) {
+        for (size_t t = 0; t < c->ntot; t++) {
+            const wtri *x = &c->tri[t];
+            if (x->ilo > x->ihi) continue;
+            for (int b = x->jlo / c->band; b <= x->jhi / c->band; b++) {
+                if (pass == 0)
+                    c->bin_off[b + 1]++;
+                else
+                    c->bin[c->bin_off[b]++] = (uint32_t)t;
+            }
+        }
+        if (pass == 0) {
+            for (int b = 0; b < c->nbands; b++)
+                c->bin_off[b + 1] += c->bin_off[b];
+            if (charge(c, c->bin_off[c->nbands] * sizeof *c->bin)) {
+                if (err) *err = c->err;
+                return -1;
+            }
+            c->bin = malloc(c->bin_off[c->nbands] * sizeof *c->bin + 1);
+            if (!c->bin) goto oom;
+        } else {
+            memmove(c->bin_off + 1, c->bin_off, (size_t)c->nbands * sizeof *c->bin_off);
+            c->bin_off[0] = 0;
+        }
     }
-    size_t at = c->off[col] + c->cnt[col]++;
-    c->z[at] = kb;
-    c->sg[at] = (int8_t)s;
+    return 0;
+oom:
+    return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for the triangle bins");
+}
+
+static int push(wctx *c, scratch *s, uint32_t col, int32_t kz2)
+{
+    if (s->n == s->cap) {
+        size_t cap = s->cap ? 2 * s->cap : 1024;
+        /* the sorted copy grows with it */
+        if (charge(c, 2 * (cap - s->cap) * sizeof *s->e)) return -1;
+        xent *e = realloc(s->e, cap * sizeof *e);
+        if (!e) return no_memory(c);
+        s->e = e;
+        s->cap = cap;
+    }
+    s->e[s->n++] = (xent){col, kz2};
+    return 0;
 }
 
 /* Triangle t's crossings of the columns of rows [j0, j1): coverage by
  * lattice.h's snapped edge tests, each crossing placed by its formula with
  * z as the ray's axis. */
-static void raster_tri(wctx *c, size_t t, int j0, int j1)
+static int raster_tri(wctx *c, scratch *sc, size_t t, int j0, int j1)
 {
-    double u[9];
-    tri_lat(c, t, u);
-    int64_t P[3][2];
-    int r[4];
-    int sign = tri_cols(c, u, P, r);
-    if (!sign) return;
-    int jlo = r[2] < j0 ? j0 : r[2], jhi = r[3] > j1 - 1 ? j1 - 1 : r[3];
+    const wtri *x = &c->tri[t];
+    size_t v[3] = {corner(c, t, 0), corner(c, t, 1), corner(c, t, 2)};
+    const int64_t *P[3] = {c->snap + 2 * v[0], c->snap + 2 * v[1], c->snap + 2 * v[2]};
+    if (x->sign < 0) { /* counter-clockwise for the edge tests */
+        const int64_t *tmp = P[1];
+        P[1] = P[2];
+        P[2] = tmp;
+    }
+    int jlo = x->jlo < j0 ? j0 : x->jlo, jhi = x->jhi > j1 - 1 ? j1 - 1 : x->jhi;
     const int64_t S = (int64_t)VX_GRID_SNAP;
-    int64_t cx0 = (c->index[0] + r[0]) * S + S / 2, cy0 = (c->index[1] + jlo) * S + S / 2;
+    int64_t cx0 = (c->index[0] + x->ilo) * S + S / 2, cy0 = (c->index[1] + jlo) * S + S / 2;
     vx_lattice_edge e[3];
     for (int q = 0; q < 3; q++)
         vx_lattice_edge_set(&e[q], P[q], P[(q + 1) % 3], cx0, cy0);
     /* (z, x, y): the ray's axis first */
-    double a[3] = {u[2], u[0], u[1]}, e1[3] = {u[5] - u[2], u[3] - u[0], u[4] - u[1]},
-           e2[3] = {u[8] - u[2], u[6] - u[0], u[7] - u[1]};
+    const double *u0 = c->lat + 3 * v[0], *u1 = c->lat + 3 * v[1], *u2 = c->lat + 3 * v[2];
+    double a[3] = {u0[2], u0[0], u0[1]}, e1[3] = {u1[2] - u0[2], u1[0] - u0[0], u1[1] - u0[1]},
+           e2[3] = {u2[2] - u0[2], u2[0] - u0[0], u2[1] - u0[1]};
+    const int32_t pos = x->sign > 0;
     for (int j = jlo; j <= jhi; j++) {
         vx_i128 f0 = e[0].at, f1 = e[1].at, f2 = e[2].at;
         double cy = (c->ix[1] + j) + 0.5;
-        for (int i = r[0]; i <= r[1]; i++) {
-            if (f0 > 0 && f1 > 0 && f2 > 0)
-                add_crossing(c, (size_t)j * c->nx + i,
-                             vx_lattice_xing(a, e1, e2, (c->ix[0] + i) + 0.5, cy, c->ix[2]), sign);
+        uint32_t col0 = (uint32_t)((j - j0) * c->nx);
+        for (int i = x->ilo; i <= x->ihi; i++) {
+            if (f0 > 0 && f1 > 0 && f2 > 0) {
+                int32_t kb = vx_lattice_xing(a, e1, e2, (c->ix[0] + i) + 0.5, cy, c->ix[2]);
+                if (push(c, sc, col0 + (uint32_t)i, 2 * kb + pos)) return -1;
+            }
             f0 += e[0].d1;
             f1 += e[1].d1;
             f2 += e[2].d1;
@@ -158,6 +272,7 @@ static void raster_tri(wctx *c, size_t t, int j0, int j1)
         for (int q = 0; q < 3; q++)
             e[q].at += e[q].d2;
     }
+    return 0;
 }
 
 /* Progress and the stop check from the calling thread (t = 0); every
@@ -175,55 +290,6 @@ static int poll(wctx *c, int t)
         return 1;
     }
     return 0;
-}
-
-static int raster_band(int b, int t, void *ud)
-{
-    wctx *c = ud;
-    if (poll(c, t)) return 1;
-    int j0 = b * BAND, j1 = j0 + BAND < c->ny ? j0 + BAND : c->ny;
-    /* a band of a triangle soup can hold 10^5 large triangles: the stop
-     * check comes every 64 of them, not only between bands */
-    for (size_t k = c->bin_off[b]; k < c->bin_off[b + 1]; k++) {
-        if ((k & 63) == 63 && poll(c, t)) return 1;
-        raster_tri(c, c->bin[k], j0, j1);
-    }
-    atomic_fetch_add(&c->done, 1);
-    return 0;
-}
-
-/* Triangles by the bands of rows their columns may fall in. */
-static int bin_tris(wctx *c, vx_err *err)
-{
-    c->bin_off = calloc((size_t)c->nbands + 2, sizeof *c->bin_off);
-    if (!c->bin_off) goto oom;
-    for (int pass = 0; pass < 2; pass++) {
-        for (size_t t = 0; t < c->ntot; t++) {
-            double u[9];
-            tri_lat(c, t, u);
-            int64_t P[3][2];
-            int r[4];
-            if (!tri_cols(c, u, P, r)) continue;
-            for (int b = r[2] / BAND; b <= r[3] / BAND; b++) {
-                if (pass == 0)
-                    c->bin_off[b + 1]++;
-                else
-                    c->bin[c->bin_off[b]++] = (uint32_t)t;
-            }
-        }
-        if (pass == 0) {
-            for (int b = 0; b < c->nbands; b++)
-                c->bin_off[b + 1] += c->bin_off[b];
-            c->bin = malloc(c->bin_off[c->nbands] * sizeof *c->bin + 1);
-            if (!c->bin) goto oom;
-        } else {
-            memmove(c->bin_off + 1, c->bin_off, (size_t)c->nbands * sizeof *c->bin_off);
-            c->bin_off[0] = 0;
-        }
-    }
-    return 0;
-oom:
-    return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for the triangle bins");
 }
 
 /* ---- inside per column ------------------------------------------------ */
@@ -245,15 +311,17 @@ static double margin_at(const wctx *c, int i, int j, int k, int n)
     return n - vx_wtree_eval(&c->tree, q) - 0.5;
 }
 
-/* 1 when the cone's |w| stays under |n - 1/2| on centres ka..kb of column
- * (i, j): there w >= 1/2 exactly where n >= 1, with nothing evaluated. */
-static int far_run(const wctx *c, int i, int j, int ka, int kb, int n)
+/* 1 when the cone's |w| stays under |n - 1/2| on the centres of columns
+ * i0..i1 of rows j0..j1, ka..kb along z: there w >= 1/2 exactly where
+ * n >= 1, with nothing evaluated. */
+static int far_box(const wctx *c, int i0, int i1, int j0, int j1, int ka, int kb, int n)
 {
-    double a[3] = {c->o[0] + (c->ix[0] + i + 0.5) * c->h, c->o[1] + (c->ix[1] + j + 0.5) * c->h,
-                   c->o[2] + (c->ix[2] + ka + 0.5) * c->h};
-    double b[3] = {a[0], a[1], c->o[2] + (c->ix[2] + kb + 0.5) * c->h};
+    double lo[3] = {c->o[0] + (c->ix[0] + i0 + 0.5) * c->h, c->o[1] + (c->ix[1] + j0 + 0.5) * c->h,
+                    c->o[2] + (c->ix[2] + ka + 0.5) * c->h};
+    double hi[3] = {c->o[0] + (c->ix[0] + i1 + 0.5) * c->h, c->o[1] + (c->ix[1] + j1 + 0.5) * c->h,
+                    c->o[2] + (c->ix[2] + kb + 0.5) * c->h};
     double limit = fabs(n - 0.5);
-    return vx_wtree_bound(&c->tree, a, b, limit) < limit;
+    return vx_wtree_bound(&c->tree, lo, hi, limit) < limit;
 }
 
 /* Centres ka..kb of one run between crossings, the margins at its ends
@@ -300,61 +368,45 @@ static void fill_run(wctx *c, uint32_t *slice, int i, int j, int ka, int kb, dou
     }
 }
 
-typedef struct zs {
-    int32_t z;
-    int s;
-} zs;
-
-static int zs_cmp(const void *a, const void *b)
+/* Sorts z[0..n) (2 kb + front: by kb, then back before front). */
+static int i32_cmp(const void *a, const void *b)
 {
-    int32_t x = ((const zs *)a)->z, y = ((const zs *)b)->z;
+    int32_t x = *(const int32_t *)a, y = *(const int32_t *)b;
     return x < y ? -1 : x > y;
 }
 
-static void sort_column(int32_t *z, int8_t *s, size_t n)
+static void sort_column(int32_t *z, size_t n)
 {
-    zs *t = n > 64 ? malloc(n * sizeof *t) : NULL;
-    if (t) { /* long columns; without memory, the insertion sort below */
-        for (size_t a = 0; a < n; a++)
-            t[a] = (zs){z[a], s[a]};
-        qsort(t, n, sizeof *t, zs_cmp);
-        for (size_t a = 0; a < n; a++) {
-            z[a] = t[a].z;
-            s[a] = (int8_t)t[a].s;
-        }
-        free(t);
+    if (n > 64) {
+        qsort(z, n, sizeof *z, i32_cmp);
         return;
     }
     for (size_t a = 1; a < n; a++) {
-        int32_t zv = z[a];
-        int8_t sv = s[a];
+        int32_t v = z[a];
         size_t b = a;
-        for (; b > 0 && z[b - 1] > zv; b--) {
+        for (; b > 0 && z[b - 1] > v; b--)
             z[b] = z[b - 1];
-            s[b] = s[b - 1];
-        }
-        z[b] = zv;
-        s[b] = sv;
+        z[b] = v;
     }
 }
 
-static void column(wctx *c, uint32_t *slice, int i, int j)
+/* Column (i, j), its n crossings z (2 kb + front, sorted), into slice;
+ * far_col: the cone's |w| is under 1/2 on all of it (far_box with n = 1:
+ * |n - 1/2| >= 1/2 for every n, so every run is decided by its count). */
+static void column(wctx *c, uint32_t *slice, int i, int j, const int32_t *z, size_t n, int far_col)
 {
-    size_t col = (size_t)j * c->nx + i, n = c->off[col + 1] - c->off[col];
-    int32_t *z = c->z + c->off[col];
-    int8_t *s = c->sg + c->off[col];
-    sort_column(z, s, n);
     int cnt = 0;
     for (size_t a = 0; a < n; a++)
-        cnt += s[a];
+        cnt += z[a] & 1 ? 1 : -1;
     for (size_t r = 0; r <= n; r++) {
         /* run r: centres k with z[r-1] <= k < z[r] have cnt crossings above;
          * for an open mesh the whole run in its bbox, past the brick */
         int lo = c->open ? c->rlo : c->lo[2], hi = c->open ? c->rhi : c->hi[2];
-        int ka = r && z[r - 1] > lo ? z[r - 1] : lo;
-        int kb = r < n && z[r] - 1 < hi ? z[r] - 1 : hi;
+        int zp = r ? z[r - 1] >> 1 : 0, zr = r < n ? z[r] >> 1 : 0;
+        int ka = r && zp > lo ? zp : lo;
+        int kb = r < n && zr - 1 < hi ? zr - 1 : hi;
         if (ka <= kb && kb >= 0 && ka <= c->nz - 1) {
-            if (!c->open || far_run(c, i, j, ka, kb, cnt)) {
+            if (!c->open || far_col || far_box(c, i, i, j, j, ka, kb, cnt)) {
                 double f = cnt >= 1 ? 1 : -1;
                 fill_run(c, slice, i, j, ka, kb, f, f, cnt, 0);
             } else {
@@ -374,33 +426,76 @@ static void column(wctx *c, uint32_t *slice, int i, int j)
             }
         }
     next:
-        if (r < n) cnt -= s[r];
+        if (r < n) cnt -= z[r] & 1 ? 1 : -1;
     }
 }
 
-static int fill_row(int j, int t, void *ud)
+/* The rows of band b: its triangles' crossings into the thread's scratch,
+ * sorted by column, then each row's columns filled into the slice and
+ * copied into the grid. */
+static int band_task(int b, int t, void *ud)
 {
     wctx *c = ud;
     if (poll(c, t)) return 1;
-    if (j >= c->lo[1] && j <= c->hi[1]) {
-        size_t wx = c->out->wx;
-        uint32_t *slice = calloc((size_t)c->nz * wx + 1, sizeof *slice);
-        if (!slice) {
-            if (!atomic_exchange(&c->stop, 1))
-                vx_err_set(&c->err, VX_EINTERNAL, "out_of_memory", "no memory for a row");
-            return 1;
+    scratch *sc = &c->sc[t];
+    int j0 = b * c->band, j1 = j0 + c->band < c->ny ? j0 + c->band : c->ny;
+    size_t cols = (size_t)(j1 - j0) * c->nx, wx = c->out->wx;
+    sc->n = 0;
+    /* a band of a triangle soup can hold 10^5 large triangles: the stop
+     * check comes every 64 of them, not only between bands */
+    for (size_t k = c->bin_off[b]; k < c->bin_off[b + 1]; k++) {
+        if ((k & 63) == 63 && poll(c, t)) return 1;
+        if (raster_tri(c, sc, c->bin[k], j0, j1)) return 1;
+    }
+    if (!sc->cnt) sc->cnt = malloc(((size_t)c->band * c->nx + 1) * sizeof *sc->cnt);
+    if (!sc->slice) sc->slice = malloc((size_t)c->nz * wx * sizeof *sc->slice + 1);
+    if (!sc->far) sc->far = malloc((size_t)c->nx / FAR_BLOCK + 1);
+    if (!sc->cnt || !sc->slice || !sc->far) return no_memory(c);
+    if (sc->scap < sc->cap) {
+        free(sc->sorted);
+        sc->sorted = malloc(sc->cap * sizeof *sc->sorted);
+        sc->scap = sc->sorted ? sc->cap : 0;
+        if (!sc->sorted) return no_memory(c);
+    }
+    /* counting sort by column; cnt[col] is then the end of col */
+    memset(sc->cnt, 0, (cols + 1) * sizeof *sc->cnt);
+    for (size_t k = 0; k < sc->n; k++)
+        sc->cnt[sc->e[k].col + 1]++;
+    for (size_t k = 0; k < cols; k++)
+        sc->cnt[k + 1] += sc->cnt[k];
+    for (size_t k = 0; k < sc->n; k++)
+        sc->sorted[sc->cnt[sc->e[k].col]++] = sc->e[k];
+    /* the cone's bound over blocks of FAR_BLOCK columns of the band's rows
+     * first: most are far from every hole */
+    int ja = j0 > c->lo[1] ? j0 : c->lo[1], jb = j1 - 1 < c->hi[1] ? j1 - 1 : c->hi[1];
+    if (c->open)
+        for (int i = c->lo[0]; i <= c->hi[0] && ja <= jb; i += FAR_BLOCK) {
+            int ib = i + FAR_BLOCK - 1 < c->hi[0] ? i + FAR_BLOCK - 1 : c->hi[0];
+            sc->far[(i - c->lo[0]) / FAR_BLOCK] =
+                (uint8_t)far_box(c, i, ib, ja, jb, c->rlo, c->rhi, 1);
         }
+    for (int j = ja; j <= jb; j++) {
+        memset(sc->slice, 0, (size_t)c->nz * wx * sizeof *sc->slice);
         for (int i = c->lo[0]; i <= c->hi[0]; i++) {
-            if (poll(c, t)) { /* a column of a soup can take 0.1 s */
-                free(slice);
-                return 1;
+            if (poll(c, t)) return 1; /* a column of a soup can take 0.1 s */
+            size_t col = (size_t)(j - j0) * c->nx + i, end = sc->cnt[col];
+            size_t begin = col ? sc->cnt[col - 1] : 0, n = end - begin;
+            if (n > sc->zcap) {
+                int32_t *z = realloc(sc->z, n * sizeof *z);
+                if (!z) return no_memory(c);
+                sc->z = z;
+                sc->zcap = n;
             }
-            column(c, slice, i, j);
+            for (size_t k = 0; k < n; k++)
+                sc->z[k] = sc->sorted[begin + k].kz2;
+            sort_column(sc->z, n);
+            int far = c->open && (sc->far[(i - c->lo[0]) / FAR_BLOCK] ||
+                                  far_box(c, i, i, j, j, c->rlo, c->rhi, 1));
+            column(c, sc->slice, i, j, sc->z, n, far);
         }
         for (int k = 0; k < c->nz; k++)
-            memcpy(c->out->bits + ((size_t)k * c->ny + (size_t)j) * wx, slice + (size_t)k * wx,
-                   wx * sizeof *slice);
-        free(slice);
+            memcpy(c->out->bits + ((size_t)k * c->ny + (size_t)j) * wx, sc->slice + (size_t)k * wx,
+                   wx * sizeof *sc->slice);
     }
     atomic_fetch_add(&c->done, 1);
     return 0;
@@ -421,39 +516,6 @@ static int stage(wctx *c, int n, int (*fn)(int, int, void *), double p0, double 
         return -1;
     }
     return 0;
-}
-
-/* Counts, checks memory, then places every crossing of every column. */
-static int crossings(wctx *c, vx_err *err)
-{
-    size_t ncols = (size_t)c->nx * c->ny;
-    c->cnt = calloc(ncols + 1, sizeof *c->cnt);
-    c->off = malloc((ncols + 1) * sizeof *c->off);
-    if (!c->cnt || !c->off)
-        return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for the columns");
-    c->pass = 0;
-    if (stage(c, c->nbands, raster_band, 0.0, 0.15, err)) return -1;
-    c->off[0] = 0;
-    for (size_t i = 0; i < ncols; i++)
-        c->off[i + 1] = c->off[i] + c->cnt[i];
-    size_t n = c->off[ncols];
-    uint64_t bytes = vx_bitgrid_bytes(c->out->grid.dims, 1) + (uint64_t)n * 5 +
-                     (uint64_t)ncols * 12 + c->bin_off[c->nbands] * 4 +
-                     ((uint64_t)c->m->nverts * 3 + (uint64_t)c->ncone * 9) * 8 +
-                     (uint64_t)vx_par_cpus() * (uint64_t)c->nz * c->out->wx * 4; /* row slices */
-    if (c->d->max_memory && bytes > c->d->max_memory)
-        return vx_err_set(err, VX_ETOOBIG, "job_memory_limit",
-                          "the winding rule needs %llu bytes for %zu crossings of %zu columns, "
-                          "over the job memory limit of %llu",
-                          (unsigned long long)bytes, n, ncols,
-                          (unsigned long long)c->d->max_memory);
-    c->z = malloc(n * sizeof *c->z + 1);
-    c->sg = malloc(n + 1);
-    if (!c->z || !c->sg)
-        return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for %zu crossings", n);
-    memset(c->cnt, 0, ncols * sizeof *c->cnt);
-    c->pass = 1;
-    return stage(c, c->nbands, raster_band, 0.15, 0.3, err);
 }
 
 /* u snapped as the crossings' rules see it along axis a: across the z
@@ -489,24 +551,25 @@ static void inside_range(wctx *c)
     }
 }
 
-/* Every mesh vertex and cone corner in the lattice's units. */
+/* Every mesh vertex and cone corner in the lattice's units, and snapped
+ * (setup_corners); every vertex a face uses checked to be in range (one
+ * left over may lie anywhere; a cone's corners are boundary vertices and
+ * their means: in range too). */
 static int lattice_units(wctx *c, vx_err *err)
 {
     const vx_mesh *m = c->m;
-    c->lat = malloc((m->nverts * 3 + c->ncone * 9) * sizeof *c->lat + 1);
-    if (!c->lat) return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for positions");
-    for (size_t v = 0; v < m->nverts; v++)
-        vx_lattice_unit(&c->d->grid, m->pos + 3 * v, c->lat + 3 * v);
-    /* the vertices a face uses (one left over may lie anywhere) */
+    size_t n = m->nverts + 3 * c->ncone;
+    c->lat = malloc(3 * n * sizeof *c->lat + 1);
+    c->snap = malloc(2 * n * sizeof *c->snap + 1);
+    if (!c->lat || !c->snap)
+        return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for positions");
+    vx_par_for((int)((n + SETUP_CHUNK - 1) / SETUP_CHUNK), vx_par_cpus(), setup_corners, c);
     for (size_t i = 0; i < 3 * m->ntris; i++)
         if (!vx_lattice_in_range(c->lat + 3 * (size_t)m->tri[i]))
             return vx_err_set(err, VX_EUNPROC, "invalid_params",
                               "vertex %u lies more than 2^50 voxels from the grid origin; "
                               "use a larger voxel size",
                               m->tri[i]);
-    /* a cone's corners are boundary vertices and their mean: in range too */
-    for (size_t v = 0; v < 3 * c->ncone; v++)
-        vx_lattice_unit(&c->d->grid, c->cone + 3 * v, c->lat + 3 * (m->nverts + v));
     return 0;
 }
 
@@ -524,7 +587,11 @@ int vx_voxelize_winding(const vx_mesh *m, const vx_voxelize_desc *d, vx_bitgrid 
     c->nx = d->grid.dims[0];
     c->ny = d->grid.dims[1];
     c->nz = d->grid.dims[2];
-    c->nbands = (c->ny + BAND - 1) / BAND;
+    /* bands of BAND rows, fewer where that makes under 16 a thread: the
+     * columns near a hole cost most, and they lie in a few rows */
+    c->band = c->ny / (16 * vx_par_cpus());
+    c->band = c->band < 1 ? 1 : c->band > BAND ? BAND : c->band;
+    c->nbands = (c->ny + c->band - 1) / c->band;
     memcpy(c->o, d->grid.origin, sizeof c->o);
     for (int a = 0; a < 3; a++) {
         c->index[a] = d->grid.index[a];
@@ -532,18 +599,33 @@ int vx_voxelize_winding(const vx_mesh *m, const vx_voxelize_desc *d, vx_bitgrid 
     }
     c->h = d->grid.h;
     c->out = out;
+    c->limit = d->max_memory ? d->max_memory : UINT64_MAX;
     int rc = -1;
     if (vx_bitgrid_alloc(out, &d->grid, 0, err) || vx_wcone_build(m, &c->cone, &c->ncone, err))
         goto done;
     c->ntot = m->ntris + c->ncone;
     c->open = c->ncone > 0;
-    if (lattice_units(c, err) || vx_wtree_build(&c->tree, c->ncone, c->cone, err) ||
-        bin_tris(c, err))
+    /* the grid, the corners and triangles, and every thread's slice and
+     * column counters; bins and crossings are charged as they are made */
+    size_t ncorner = m->nverts + 3 * c->ncone;
+    if (charge(c, vx_bitgrid_bytes(d->grid.dims, 1) + (uint64_t)ncorner * 40u +
+                      (uint64_t)c->ntot * sizeof(wtri) +
+                      (uint64_t)vx_par_cpus() *
+                          ((uint64_t)c->nz * out->wx + (uint64_t)c->band * c->nx + 1) * 4u)) {
+        if (err) *err = c->err;
         goto done;
-    st->upload_ms = (vx_mono() - t0) * 1e3;
-    if (crossings(c, err)) goto done;
+    }
+    c->tri = malloc(c->ntot * sizeof *c->tri + 1);
+    if (!c->tri) {
+        vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for the triangles");
+        goto done;
+    }
+    if (lattice_units(c, err) || vx_wtree_build(&c->tree, c->ncone, c->cone, err)) goto done;
+    vx_par_for((int)((c->ntot + SETUP_CHUNK - 1) / SETUP_CHUNK), vx_par_cpus(), setup_tris, c);
+    if (bin_tris(c, err)) goto done;
     inside_range(c);
-    if (stage(c, c->ny, fill_row, 0.3, 1.0, err)) goto done;
+    st->upload_ms = (vx_mono() - t0) * 1e3;
+    if (stage(c, c->nbands, band_task, 0.0, 1.0, err)) goto done;
     st->voxels_inside = vx_bitgrid_count(out);
     st->chunks = 1;
     rc = 0;
@@ -552,14 +634,20 @@ done:
     st->readback_ms = 0;
     if (rc) vx_bitgrid_free(out);
     vx_wtree_free(&c->tree);
+    for (int t = 0; t < VX_PAR_MAX; t++) {
+        free(c->sc[t].e);
+        free(c->sc[t].sorted);
+        free(c->sc[t].cnt);
+        free(c->sc[t].slice);
+        free(c->sc[t].z);
+        free(c->sc[t].far);
+    }
     free(c->cone);
     free(c->lat);
+    free(c->snap);
+    free(c->tri);
     free(c->bin_off);
     free(c->bin);
-    free(c->cnt);
-    free(c->off);
-    free(c->z);
-    free(c->sg);
     free(c);
     return rc;
 }

@@ -48,10 +48,10 @@ int vx_wtree_build(vx_wtree *t, size_t ntris, const double *tv, vx_err *err);
  * outward-oriented closed surface). Read-only: any number of threads. */
 double vx_wtree_eval(const vx_wtree *t, const double q[3]);
 /* An upper bound of |winding number| of the triangles at every point of
- * the segment a-b (each triangle's solid angle is at most its area over
- * its squared distance), or a value >= limit once it reaches limit.
- * Any number of threads. */
-double vx_wtree_bound(const vx_wtree *t, const double a[3], const double b[3], double limit);
+ * the box lo..hi (lo <= hi; a segment along an axis is one): each
+ * triangle's solid angle is at most its area over its squared distance;
+ * or a value >= limit once it reaches limit. Any number of threads. */
+double vx_wtree_bound(const vx_wtree *t, const double lo[3], const double hi[3], double limit);
 /* The exact winding number at q of one triangle (v: 9 doubles). */
 double vx_wtree_tri(const double *v, const double q[3]);
 void vx_wtree_free(vx_wtree *t);

@@ -231,7 +231,12 @@ static int leaf_corners(vx_wtree *t)
                 }
                 t->corner[3 * (size_t)i + q] = (uint8_t)at;
             }
-        if (nv > 0) {
+        if (nv > 0) { /* found as x y z per corner; kept as nv x, nv y, nv z */
+            double tmp[3 * LEAF_CORNERS], *blk = t->lv + 3 * (size_t)nlv;
+            memcpy(tmp, blk, 3 * (size_t)nv * sizeof *tmp);
+            for (int v = 0; v < nv; v++)
+                for (int k = 0; k < 3; k++)
+                    blk[k * nv + v] = tmp[3 * v + k];
             nd->nv = nv;
             nlv += nv;
         }
@@ -288,21 +293,58 @@ static double far_field(const vx_wtree_node *nd, const double q[3])
     return first + tr * inv3 - 3 * rmr * inv5;
 }
 
-/* A leaf's triangles at q, each distinct corner's unit vector made once
- * (a triangle with a corner at q counts 0, as vx_wtree_tri). */
+/* A leaf's triangles at q (a triangle with a corner at q counts 0, as
+ * vx_wtree_tri). Each distinct corner's unit vector is made once, by a
+ * multiplication by 1 / l: its last-bit error moves tan(omega / 2) =
+ * det / den by about 1e-16, nothing against |(den, det)| > 1e-6. Below
+ * that (seen from near a long edge) the triangle goes through
+ * vx_wtree_tri, whose divided unit vectors tri_near_edge needs. The
+ * half-angles are summed as the argument of the product of the
+ * (den, det), one atan2 a leaf: a factor and the product so far both in
+ * the upper (lower) half-plane whose product falls in the other half
+ * went past pi (-pi) once more. Each factor's half-angle is in (-pi, pi],
+ * so no sum goes past twice; at most 8 factors of modulus in (1e-6,
+ * 4.1] neither overflow nor underflow. */
 static double leaf_eval(const vx_wtree *t, const vx_wtree_node *nd, const double q[3])
 {
-    double u[LEAF_CORNERS][3];
+    double u[3][LEAF_CORNERS], l2[LEAF_CORNERS];
+    const int nv = nd->nv;
+    const double *p = t->lv + 3 * (size_t)nd->vfirst; /* nv x, nv y, nv z */
+    for (int v = 0; v < nv; v++) {
+        double d0 = p[v] - q[0], d1 = p[nv + v] - q[1], d2 = p[2 * nv + v] - q[2];
+        l2[v] = d0 * d0 + d1 * d1 + d2 * d2;
+        double inv = 1 / sqrt(l2[v] + (l2[v] == 0)); /* its triangles are skipped */
+        u[0][v] = d0 * inv;
+        u[1][v] = d1 * inv;
+        u[2][v] = d2 * inv;
+    }
     uint64_t at_q = 0; /* corners at q */
-    for (int v = 0; v < nd->nv; v++)
-        if (unit_from(t->lv + 3 * (size_t)(nd->vfirst + v), q, u[v])) at_q |= (uint64_t)1 << v;
-    double w = 0;
+    for (int v = 0; v < nv; v++)
+        if (l2[v] == 0) at_q |= (uint64_t)1 << v;
+    double w = 0, re = 1, im = 0;
+    int turns = 0;
     for (int i = nd->first; i < nd->first + nd->n; i++) {
         const uint8_t *c = t->corner + 3 * (size_t)i;
         if (at_q && (at_q >> c[0] & 1 || at_q >> c[1] & 1 || at_q >> c[2] & 1)) continue;
-        w += tri_units(u[c[0]], u[c[1]], u[c[2]]);
+        const double a[3] = {u[0][c[0]], u[1][c[0]], u[2][c[0]]},
+                     b[3] = {u[0][c[1]], u[1][c[1]], u[2][c[1]]},
+                     e[3] = {u[0][c[2]], u[1][c[2]], u[2][c[2]]};
+        double det = a[0] * (b[1] * e[2] - b[2] * e[1]) - a[1] * (b[0] * e[2] - b[2] * e[0]) +
+                     a[2] * (b[0] * e[1] - b[1] * e[0]);
+        double den = 1 + (a[0] * b[0] + a[1] * b[1] + a[2] * b[2]) +
+                     (b[0] * e[0] + b[1] * e[1] + b[2] * e[2]) +
+                     (e[0] * a[0] + e[1] * a[1] + e[2] * a[2]);
+        if (!(det * det + den * den > 1e-12)) {
+            w += vx_wtree_tri(t->tv + 9 * (size_t)i, q);
+            continue;
+        }
+        double r2 = re * den - im * det, i2 = re * det + im * den;
+        if (im >= 0 && det >= 0 && i2 < 0) turns++;
+        if (im < 0 && det < 0 && i2 >= 0) turns--;
+        re = r2;
+        im = i2;
     }
-    return w;
+    return w + turns + atan2_fast(im, re) / (2 * M_PI);
 }
 
 double vx_wtree_eval(const vx_wtree *t, const double q[3])
@@ -331,24 +373,18 @@ double vx_wtree_eval(const vx_wtree *t, const double q[3])
     return w + far / (4 * M_PI);
 }
 
-/* Distance from p to the segment a-b. */
-static double seg_dist(const double a[3], const double b[3], const double p[3])
+/* Distance from p to the box lo..hi (corner by corner, lo <= hi). */
+static double box_dist(const double lo[3], const double hi[3], const double p[3])
 {
-    double ab[3], ap[3], l2 = 0, d = 0;
+    double r2 = 0;
     for (int k = 0; k < 3; k++) {
-        ab[k] = b[k] - a[k];
-        ap[k] = p[k] - a[k];
-        l2 += ab[k] * ab[k];
-        d += ab[k] * ap[k];
+        double g = p[k] < lo[k] ? lo[k] - p[k] : p[k] > hi[k] ? p[k] - hi[k] : 0;
+        r2 += g * g;
     }
-    double u = l2 > 0 ? d / l2 : 0, r2 = 0;
-    u = u < 0 ? 0 : u > 1 ? 1 : u;
-    for (int k = 0; k < 3; k++)
-        r2 += (ap[k] - u * ab[k]) * (ap[k] - u * ab[k]);
     return sqrt(r2);
 }
 
-double vx_wtree_bound(const vx_wtree *t, const double a[3], const double b[3], double limit)
+double vx_wtree_bound(const vx_wtree *t, const double lo[3], const double hi[3], double limit)
 {
     if (!t->nnodes) return 0;
     int stack[STACK], sp = 0;
@@ -356,7 +392,7 @@ double vx_wtree_bound(const vx_wtree *t, const double a[3], const double b[3], d
     stack[sp++] = 0;
     while (sp) {
         const vx_wtree_node *nd = &t->node[stack[--sp]];
-        double g = seg_dist(a, b, nd->p) - nd->r;
+        double g = box_dist(lo, hi, nd->p) - nd->r;
         double part = g > 0 ? nd->area / (4 * M_PI * g * g) : HUGE_VAL;
         if (sum + part < limit) {
             sum += part;

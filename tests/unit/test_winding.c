@@ -536,16 +536,23 @@ static void test_bunny(void **state)
     vx_mesh_free(m);
 }
 
+/* Triangles of m as 9 doubles each (what vx_wtree_build takes). */
+static double *tri_soup(const vx_mesh *m)
+{
+    double *tv = malloc(9 * m->ntris * sizeof *tv);
+    for (size_t t = 0; t < m->ntris; t++)
+        for (int q = 0; q < 3; q++)
+            memcpy(tv + 9 * t + 3 * q, m->pos + 3 * (size_t)m->tri[3 * t + q], 3 * sizeof *tv);
+    return tv;
+}
+
 /* The tree against the direct sum over the bunny's own triangles. */
 static void test_tree(void **state)
 {
     (void)state;
     vx_mesh *m = shape_load("stanford-bunny.obj");
     assert_non_null(m);
-    double *tv = malloc(9 * m->ntris * sizeof *tv);
-    for (size_t t = 0; t < m->ntris; t++)
-        for (int q = 0; q < 3; q++)
-            memcpy(tv + 9 * t + 3 * q, m->pos + 3 * (size_t)m->tri[3 * t + q], 3 * sizeof *tv);
+    double *tv = tri_soup(m);
     vx_wtree tree;
     assert_int_equal(vx_wtree_build(&tree, m->ntris, tv, NULL), 0);
     double worst = 0;
@@ -566,6 +573,135 @@ static void test_tree(void **state)
     vx_wtree_free(&tree);
     free(tv);
     vx_mesh_free(m);
+}
+
+/* A closed octahedron is one leaf of the tree: inside it the leaf's
+ * half-angles add up to 2 pi (w = 1), so the sum must count the turn past
+ * pi that one atan2 of their product cannot see; outside, 0. Reversed
+ * faces give -1. Points from near the centre to just off the faces. */
+static void test_tree_leaf_turns(void **state)
+{
+    (void)state;
+    const double pos[] = {1, 0, 0, -1, 0, 0, 0, 1, 0, 0, -1, 0, 0, 0, 1, 0, 0, -1};
+    const uint32_t idx[] = {0, 2, 4, 2, 1, 4, 1, 3, 4, 3, 0, 4, 2, 0, 5, 1, 2, 5, 3, 1, 5, 0, 3, 5};
+    vx_mesh *m = shape_mesh_from(6, pos, 8, idx);
+    assert_true(shape_signed_volume(m) > 0);
+    for (int flip = 0; flip < 2; flip++) {
+        if (flip) shape_flip(m);
+        double *tv = tri_soup(m);
+        vx_wtree tree;
+        assert_int_equal(vx_wtree_build(&tree, m->ntris, tv, NULL), 0);
+        assert_int_equal(tree.nnodes, 1);
+        double worst = 0, want_in = flip ? -1 : 1;
+        uint64_t s = 11;
+        for (int n = 0; n < 2000; n++) {
+            double q[3], l1 = 0;
+            for (int a = 0; a < 3; a++) {
+                s = s * 6364136223846793005ull + 1442695040888963407ull;
+                q[a] = 2.4 * ((double)(s >> 11) / 9007199254740992.0) - 1.2;
+                l1 += fabs(q[a]);
+            }
+            if (fabs(l1 - 1) < 1e-6) continue; /* on a face */
+            double w = vx_wtree_eval(&tree, q), want = l1 < 1 ? want_in : 0;
+            double e = fabs(w - want), r = fabs(w - ref_winding_number(m, q));
+            worst = e > worst ? e : worst;
+            worst = r > worst ? r : worst;
+        }
+        printf("octahedron%s, one leaf: worst error %.2e over 2000 points\n",
+               flip ? " (reversed)" : "", worst);
+        assert_true(worst < 1e-4); /* atan2_fast: about 1e-5 radians */
+        vx_wtree_free(&tree);
+        free(tv);
+    }
+    vx_mesh_free(m);
+}
+
+/* vx_wtree_bound over a box is at least |w| anywhere in it: boxes of
+ * every shape (segments along each axis included) at random places
+ * around the bunny, w sampled at their corners and inside. */
+static void test_tree_bound_box(void **state)
+{
+    (void)state;
+    vx_mesh *m = shape_load("stanford-bunny.obj");
+    assert_non_null(m);
+    double *tv = tri_soup(m);
+    vx_wtree tree;
+    assert_int_equal(vx_wtree_build(&tree, m->ntris, tv, NULL), 0);
+    uint64_t s = 5;
+    int bounded = 0;
+    for (int n = 0; n < 300; n++) {
+        double lo[3], hi[3];
+        for (int a = 0; a < 3; a++) {
+            double u[2];
+            for (int k = 0; k < 2; k++) {
+                s = s * 6364136223846793005ull + 1442695040888963407ull;
+                u[k] = (double)(s >> 11) / 9007199254740992.0;
+            }
+            double e = m->bbox_max[a] - m->bbox_min[a];
+            lo[a] = m->bbox_min[a] - 1.5 * e + 4 * e * u[0];
+            hi[a] = n % 4 == a ? lo[a] : lo[a] + 0.8 * e * u[1]; /* a segment along the rest */
+        }
+        double b = vx_wtree_bound(&tree, lo, hi, 10);
+        if (b >= 10) continue;
+        bounded++;
+        for (int k = 0; k < 27; k++) {
+            double q[3];
+            for (int a = 0; a < 3; a++) {
+                int f = k / (a == 0 ? 1 : a == 1 ? 3 : 9) % 3; /* 0, middle, 1 */
+                q[a] = lo[a] + (hi[a] - lo[a]) * (f == 0 ? 0 : f == 1 ? 0.37 : 1);
+            }
+            double w = fabs(vx_wtree_eval(&tree, q));
+            if (w > b) printf("box %d point %d: |w| %.4f over the bound %.4f\n", n, k, w, b);
+            assert_true(w <= b);
+        }
+    }
+    printf("%d of 300 boxes bounded under 10, none exceeded\n", bounded);
+    assert_true(bounded >= 100);
+    vx_wtree_free(&tree);
+    free(tv);
+    vx_mesh_free(m);
+    /* one triangle, segments along each axis from 10 away to 1 away
+     * (either end the near one): the bound holds at the near end */
+    const double tri[9] = {0, 0, 0, 1, 0, 0, 0, 1, 0};
+    assert_int_equal(vx_wtree_build(&tree, 1, tri, NULL), 0);
+    for (int a = 0; a < 3; a++)
+        for (int near_hi = 0; near_hi < 2; near_hi++) {
+            double lo[3] = {0.3, 0.3, 0.3}, hi[3] = {0.3, 0.3, 0.3}, q[3] = {0.3, 0.3, 0.3};
+            lo[a] = near_hi ? -10 : 1.5;
+            hi[a] = near_hi ? -1.5 : 10;
+            q[a] = near_hi ? hi[a] : lo[a];
+            double b = vx_wtree_bound(&tree, lo, hi, 10), w = fabs(vx_wtree_eval(&tree, q));
+            printf("one triangle, axis %d, near end %s: bound %.4f, |w| there %.4f\n", a,
+                   near_hi ? "hi" : "lo", b, w);
+            assert_true(w > 1e-3);
+            assert_true(b >= w);
+        }
+    vx_wtree_free(&tree);
+}
+
+/* A memory limit the crossings pass: job_memory_limit, nothing returned;
+ * a larger one runs. */
+static void test_memory_limit(void **state)
+{
+    (void)state;
+    double top;
+    vx_mesh *bowl = cut_above(shape_sphere(0, 0, 0, 1, 0), 0.5, &top);
+    vx_voxelize_desc d = {.inside = VX_INSIDE_WINDING};
+    assert_int_equal(vx_grid_from_resolution(bowl, 128, 0, &d.grid, NULL), 0);
+    uint64_t grid = vx_bitgrid_bytes(d.grid.dims, 1);
+    d.max_memory = grid + 1024;
+    vx_bitgrid g;
+    vx_voxelize_stats st;
+    vx_err err = {0};
+    assert_int_equal(vx_voxelize(NULL, bowl, &d, &g, &st, &err), -1);
+    assert_int_equal(err.kind, VX_ETOOBIG);
+    assert_string_equal(err.code, "job_memory_limit");
+    assert_null(g.bits);
+    d.max_memory = grid + (16u << 20);
+    assert_int_equal(vx_voxelize(NULL, bowl, &d, &g, &st, &err), 0);
+    assert_true(st.voxels_inside > 0);
+    vx_bitgrid_free(&g);
+    vx_mesh_free(bowl);
 }
 
 static int stop_now(void *ud, double f, vx_err *err)
@@ -616,17 +752,13 @@ int main(int argc, char **argv)
 {
     if (argc > 1) cmocka_set_test_filter(argv[1]); /* e.g. test_tree */
     const struct CMUnitTest tests[] = {
-        cmocka_unit_test(test_overlap_open),
-        cmocka_unit_test(test_nested),
-        cmocka_unit_test(test_open_shells),
-        cmocka_unit_test(test_closed_exact),
-        cmocka_unit_test(test_closed_ties),
-        cmocka_unit_test(test_far_sliver),
-        cmocka_unit_test(test_open_box_ties),
-        cmocka_unit_test(test_bricks_open),
-        cmocka_unit_test(test_bunny),
-        cmocka_unit_test(test_tree),
-        cmocka_unit_test(test_default_and_stop),
+        cmocka_unit_test(test_overlap_open),    cmocka_unit_test(test_nested),
+        cmocka_unit_test(test_open_shells),     cmocka_unit_test(test_closed_exact),
+        cmocka_unit_test(test_closed_ties),     cmocka_unit_test(test_far_sliver),
+        cmocka_unit_test(test_open_box_ties),   cmocka_unit_test(test_bricks_open),
+        cmocka_unit_test(test_bunny),           cmocka_unit_test(test_tree),
+        cmocka_unit_test(test_tree_leaf_turns), cmocka_unit_test(test_tree_bound_box),
+        cmocka_unit_test(test_memory_limit),    cmocka_unit_test(test_default_and_stop),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }
