@@ -22,6 +22,7 @@ void vx_mesh_free(vx_mesh *m)
     free(m->face_start);
     free(m->pos);
     free(m->patch_idx);
+    free(m->net);
     free(m);
 }
 
@@ -92,15 +93,32 @@ uint32_t *vx_mesh_weld(const vx_mesh *m)
     return canon;
 }
 
+/* Appends edge (lo, hi, net) to *net (*n of them, room for *cap): 0, or -1
+ * without memory. */
+static int push_net(vx_mesh_edge **net, size_t *n, size_t *cap, uint32_t lo, uint32_t hi, int32_t d)
+{
+    if (*n == *cap) {
+        size_t c = *cap ? 2 * *cap : 64;
+        vx_mesh_edge *e = realloc(*net, c * sizeof *e);
+        if (!e) return -1;
+        *net = e;
+        *cap = c;
+    }
+    (*net)[(*n)++] = (vx_mesh_edge){lo, hi, d};
+    return 0;
+}
+
 /* Counts boundary (used once), non-manifold (used 3+ times) and
  * misoriented (used twice, both times the same way: the faces either side
  * disagree on their orientation) undirected edges into out[0], out[1],
- * out[2], with vertex v read as canon[v] (canon NULL: as itself). Edges are bucketed by their lower
- * vertex (CSR: 4 bytes per edge plus 4 per vertex), then each small bucket is sorted: a quarter of
- * the memory of sorting 64-bit edge keys, which matters at 10^7
- * triangles. An edge whose two ends weld into one is not an edge. */
+ * out[2], with vertex v read as canon[v] (canon NULL: as itself); with net
+ * not NULL, the edges whose uses do not cancel into *net (malloc'd, *nnet
+ * of them; past keep of them, none: *net NULL and *nnet keep + 1). Edges are bucketed by their
+ * lower vertex (CSR: 4 bytes per edge plus 4 per vertex), then each small bucket is sorted: a
+ * quarter of the memory of sorting 64-bit edge keys, which matters at 10^7 triangles. An edge whose
+ * two ends weld into one is not an edge. */
 static int count_edges(const vx_mesh *m, size_t nedges, const uint32_t *canon, size_t out[3],
-                       vx_err *err)
+                       vx_mesh_edge **net, size_t *nnet, size_t keep, vx_err *err)
 {
 #define V(x) (canon ? canon[x] : (x))
     out[0] = out[1] = out[2] = 0;
@@ -140,25 +158,45 @@ static int count_edges(const vx_mesh *m, size_t nedges, const uint32_t *canon, s
                 nbr[--start[b]] = a << 1 | 1u;
         }
     }
-    for (size_t v = 0; v < m->nverts; v++) {
+    size_t cap = 0;
+    int rc = 0;
+    if (net) {
+        *net = NULL;
+        *nnet = 0;
+    }
+    for (size_t v = 0; v < m->nverts && !rc; v++) {
         uint32_t *e = nbr + start[v];
         size_t n = start[v + 1] - start[v];
         if (n > 1) qsort(e, n, sizeof *e, cmp_u32);
         for (size_t i = 0; i < n;) {
-            size_t j = i;
-            while (j < n && e[j] >> 1 == e[i] >> 1)
-                j++;
+            size_t j = i, back = 0; /* entries with the way bit: hi -> lo */
+            for (; j < n && e[j] >> 1 == e[i] >> 1; j++)
+                back += e[j] & 1;
             if (j - i == 1)
                 out[0]++;
             else if (j - i > 2)
                 out[1]++;
             else if (e[i] == e[i + 1])
                 out[2]++;
+            int32_t d = (int32_t)(j - i - back) - (int32_t)back;
+            if (net && d && *nnet == keep) { /* too many to keep */
+                free(*net);
+                *net = NULL;
+                *nnet = keep + 1;
+            }
+            if (net && d && *nnet < keep && push_net(net, nnet, &cap, (uint32_t)v, e[i] >> 1, d))
+                rc = -1;
             i = j;
         }
     }
     free(start);
     free(nbr);
+    if (rc) {
+        free(*net);
+        *net = NULL;
+        *nnet = 0;
+        return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for the boundary edges");
+    }
     return 0;
 #undef V
 }
@@ -242,22 +280,60 @@ int vx_mesh_analyze(vx_mesh *m, vx_err *err)
     }
 
     size_t c[3];
-    if (count_edges(m, nedges, NULL, c, err)) return -1;
+    free(m->net);
+    m->net = NULL;
+    m->nnet = 0;
+    m->net_known = 0;
+    /* whether any edge's uses do not cancel (keep 0: nnet 1 if one does) */
+    if (count_edges(m, nedges, NULL, c, &m->net, &m->nnet, 0, err)) return -1;
     m->boundary_edges = c[0];
     m->nonmanifold_edges = c[1];
     m->boundary_edges_welded = c[0];
     m->misoriented_edges = c[2];
-    if (!c[0]) return 0; /* welding cannot open a closed mesh */
+    /* welding merges edges, adding their nets: none stays none */
+    m->net_known = !m->nnet;
+    if (!m->nnet) return 0;
+    m->nnet = 0;
     uint32_t *canon = vx_mesh_weld(m);
     if (!canon)
         return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory to weld %zu vertices",
                           m->nverts);
-    int rc = count_edges(m, nedges, canon, c, err);
+    int rc = count_edges(m, nedges, canon, c, &m->net, &m->nnet, VX_MESH_NET_KEEP, err);
     free(canon);
-    if (!rc) {
+    if (rc) return rc;
+    if (m->boundary_edges) { /* a closed mesh with odd non-manifold edges keeps its counts */
         m->boundary_edges_welded = c[0];
         m->misoriented_edges = c[2]; /* a seam of split vertices hid some */
     }
+    if (m->nnet > VX_MESH_NET_KEEP) /* not kept: found again when asked */
+        m->nnet = 0;
+    else
+        m->net_known = 1;
+    return 0;
+}
+
+int vx_mesh_net_edges(const vx_mesh *m, vx_mesh_edge **out, size_t *n, vx_err *err)
+{
+    *out = NULL;
+    *n = 0;
+    if (m->net_known) {
+        if (!m->nnet) return 0;
+        *out = malloc(m->nnet * sizeof **out);
+        if (!*out)
+            return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for the boundary");
+        memcpy(*out, m->net, m->nnet * sizeof **out);
+        *n = m->nnet;
+        return 0;
+    }
+    size_t nedges = 0, c[3];
+    for (size_t f = 0; f < m->nfaces; f++)
+        nedges += vx_mesh_face_size(m, f);
+    uint32_t *canon = vx_mesh_weld(m);
+    if (!canon)
+        return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory to weld %zu vertices",
+                          m->nverts);
+    int rc = count_edges(m, nedges, canon, c, out, n, SIZE_MAX - 1, err);
+    free(canon);
     return rc;
 }
 

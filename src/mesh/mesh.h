@@ -30,6 +30,13 @@ typedef enum vx_mesh_format {
     VX_MESH_OFF = 8,  /* Object File Format (OFF, COFF, NOFF, ...) */
 } vx_mesh_format;
 
+/* An undirected edge between welded vertices lo < hi, and its uses lo -> hi
+ * less its uses hi -> lo (vx_mesh_net_edges). */
+typedef struct vx_mesh_edge {
+    uint32_t lo, hi;
+    int32_t net;
+} vx_mesh_edge;
+
 typedef struct vx_mesh {
     size_t nverts;
     double *pos; /* 3 * nverts */
@@ -57,7 +64,13 @@ typedef struct vx_mesh {
     /* edges (vertices welded) two faces go along the same way: their
      * orientations disagree (0 on a consistently oriented mesh) */
     size_t misoriented_edges;
-    size_t degenerate_tris;      /* triangles of zero area (kept, reported) */
+    size_t degenerate_tris; /* triangles of zero area (kept, reported) */
+    /* the welded edges whose uses do not cancel, as analysis found them
+     * (net_known), where there are at most VX_MESH_NET_KEEP; else
+     * vx_mesh_net_edges finds them again */
+    vx_mesh_edge *net;
+    size_t nnet;
+    int net_known;
     size_t ntexcoords, nnormals; /* vt / vn records seen (not kept) */
 } vx_mesh;
 
@@ -86,6 +99,16 @@ int vx_mesh_face_repeat(const uint32_t *v, size_t n, uint32_t *scratch, uint32_t
  * welded by position) and degenerate_tris. Readers call it;
  * code that builds a mesh by hand calls it before use. */
 int vx_mesh_analyze(vx_mesh *m, vx_err *err);
+
+/* The most net edges vx_mesh_analyze keeps in the mesh (12 bytes each). */
+#define VX_MESH_NET_KEEP ((size_t)1 << 20)
+
+/* The edges of m, vertices welded by position, whose uses one way do not
+ * cancel those the other way: a closed, consistently oriented mesh has
+ * none; each hole's rim is a loop of them. Into *out (malloc'd, *n of
+ * them; NULL and 0 when none), from the analysis when it kept them. 0, or
+ * -1 with VX_EINTERNAL out_of_memory or VX_ETOOBIG mesh_too_big. */
+int vx_mesh_net_edges(const vx_mesh *m, vx_mesh_edge **out, size_t *n, vx_err *err);
 
 /* canon[v] (malloc'd, nverts entries): the first vertex at v's exact
  * position (the coordinates' bits, -0 read as +0), so that vertices split

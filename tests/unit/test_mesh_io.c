@@ -164,6 +164,64 @@ static void test_orientation(void **state)
     vx_mesh_free(m);
 }
 
+/* Checks vx_mesh_net_edges on m against want (n edges as lo, hi, net):
+ * as the analysis kept them, and found again without it. */
+static void expect_net(vx_mesh *m, const int32_t (*want)[3], size_t n)
+{
+    for (int again = 0; again < 2; again++) {
+        if (again) m->net_known = 0; /* as for a list over VX_MESH_NET_KEEP */
+        vx_mesh_edge *e;
+        size_t got;
+        vx_err err = {0};
+        assert_int_equal(vx_mesh_net_edges(m, &e, &got, &err), 0);
+        assert_int_equal(got, n);
+        for (size_t i = 0; i < n; i++) {
+            assert_int_equal(e[i].lo, want[i][0]);
+            assert_int_equal(e[i].hi, want[i][1]);
+            assert_int_equal(e[i].net, want[i][2]);
+        }
+        free(e);
+    }
+}
+
+/* The edges whose uses do not cancel: none on a closed, consistently
+ * wound tetrahedron; the rim of a missing face, each its way round; the
+ * three edges of a face turned round, used twice the same way; the same
+ * with a seam of split vertices, welded; a quad's fan diagonal cancels. */
+static void test_net_edges(void **state)
+{
+    (void)state;
+    static const double pos[] = {0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 0};
+    static const uint32_t sizes[] = {3, 3, 3, 3};
+    static const uint32_t good[] = {0, 2, 1, 0, 1, 3, 0, 3, 2, 1, 2, 3};
+    static const uint32_t flip[] = {0, 2, 1, 0, 1, 3, 0, 3, 2, 1, 3, 2};
+    static const uint32_t seam[] = {4, 2, 1, 0, 1, 3, 0, 3, 2, 1, 3, 2}; /* vertex 4 = 0 */
+    static const int32_t rim[][3] = {{1, 2, -1}, {1, 3, 1}, {2, 3, -1}};
+    static const int32_t twice[][3] = {{1, 2, -2}, {1, 3, 2}, {2, 3, -2}};
+    vx_mesh *m = make_mesh(4, pos, 4, sizes, good);
+    assert_true(m->net_known);
+    expect_net(m, NULL, 0);
+    vx_mesh_free(m);
+    m = make_mesh(4, pos, 3, sizes, good);
+    expect_net(m, rim, 3);
+    vx_mesh_free(m);
+    m = make_mesh(4, pos, 4, sizes, flip);
+    assert_int_equal(m->boundary_edges, 0); /* no edge used once, yet three do not cancel */
+    expect_net(m, twice, 3);
+    vx_mesh_free(m);
+    m = make_mesh(5, pos, 4, sizes, seam);
+    assert_int_equal(m->boundary_edges_welded, 0);
+    expect_net(m, twice, 3);
+    vx_mesh_free(m);
+    static const double quad_pos[] = {0, 0, 0, 1, 0, 0, 1, 1, 0, 0, 1, 0};
+    static const uint32_t quad_size[] = {4}, quad[] = {0, 1, 2, 3};
+    static const int32_t quad_rim[][3] = {{0, 1, 1}, {0, 3, -1}, {1, 2, 1}, {2, 3, 1}};
+    m = make_mesh(4, quad_pos, 1, quad_size, quad);
+    assert_int_equal(m->ntris, 2);
+    expect_net(m, quad_rim, 4);
+    vx_mesh_free(m);
+}
+
 static void test_obj_round_trip(void **state)
 {
     vx_mesh *m = mixed_mesh();
@@ -752,7 +810,7 @@ int main(void)
         cmocka_unit_test(test_draco_limits),     cmocka_unit_test(test_draco_point_cloud),
         cmocka_unit_test(test_draco_truncated),  cmocka_unit_test(test_draco_garbage),
         cmocka_unit_test(test_draco_mutations),  cmocka_unit_test(test_orientation),
-        cmocka_unit_test(test_far_from_origin),
+        cmocka_unit_test(test_far_from_origin),  cmocka_unit_test(test_net_edges),
     };
     return cmocka_run_group_tests(tests, setup_dir, remove_dir);
 }
