@@ -34,7 +34,6 @@
 #include <math.h>
 #include <stdatomic.h>
 #include <stdlib.h>
-#include <stdio.h>
 #include <string.h>
 
 #include "util/clock.h"
