@@ -456,34 +456,27 @@ static void test_far_sliver(void **state)
  * sampled its own part of a run decided voxels near w = 1/2 otherwise:
  * the bunny's (58, 4, 79..81) in a user's slab of 13). Slabs of 13 and
  * of 5 along z, and boxes cut along every axis. */
-static void test_bricks_open(void **state)
+/* Bricks of whole (3 ways of cutting it, index offsets from whole's)
+ * against whole voxelized at once: 0 voxels may differ. */
+static void bricks_match(const char *name, const vx_mesh *m, const vx_grid *whole)
 {
-    (void)state;
-    vx_mesh *m = shape_load("stanford-bunny.obj");
-    assert_non_null(m);
-    assert_true(m->boundary_edges > 0);
-    const vx_grid whole = {
-        .origin = {-0.09233759531834755, 0.03261293907263908, -0.05981440323721673},
-        .h = 0.0009375380490275355,
-        .dims = {170, 168, 132},
-        .index = {-4, -1, -4}};
-    vx_voxelize_desc d = {.grid = whole, .inside = VX_INSIDE_WINDING};
+    vx_voxelize_desc d = {.grid = *whole, .inside = VX_INSIDE_WINDING};
     vx_bitgrid g;
     vx_voxelize_stats st;
     vx_err err = {0};
     assert_int_equal(vx_voxelize(NULL, m, &d, &g, &st, &err), 0);
     size_t differ = 0, bricks = 0;
-    const int cuts[][3] = {{170, 168, 13}, {170, 168, 5}, {40, 56, 24}};
+    const int *n = whole->dims;
+    const int cuts[][3] = {{n[0], n[1], 13}, {n[0], 5, n[2]}, {40, 56, 24}};
     for (int c = 0; c < 3; c++)
-        for (int k0 = 0; k0 < whole.dims[2]; k0 += cuts[c][2])
-            for (int j0 = 0; j0 < whole.dims[1]; j0 += cuts[c][1])
-                for (int i0 = 0; i0 < whole.dims[0]; i0 += cuts[c][0]) {
+        for (int k0 = 0; k0 < n[2]; k0 += cuts[c][2])
+            for (int j0 = 0; j0 < n[1]; j0 += cuts[c][1])
+                for (int i0 = 0; i0 < n[0]; i0 += cuts[c][0]) {
                     int o[3] = {i0, j0, k0};
                     vx_voxelize_desc b = d;
                     for (int a = 0; a < 3; a++) {
-                        b.grid.index[a] = whole.index[a] + o[a];
-                        b.grid.dims[a] =
-                            whole.dims[a] - o[a] < cuts[c][a] ? whole.dims[a] - o[a] : cuts[c][a];
+                        b.grid.index[a] = whole->index[a] + o[a];
+                        b.grid.dims[a] = n[a] - o[a] < cuts[c][a] ? n[a] - o[a] : cuts[c][a];
                     }
                     vx_bitgrid bg;
                     assert_int_equal(vx_voxelize(NULL, m, &b, &bg, &st, &err), 0);
@@ -495,45 +488,80 @@ static void test_bricks_open(void **state)
                     vx_bitgrid_free(&bg);
                     bricks++;
                 }
-    printf("bunny, winding: %zu bricks, %zu voxels differ from the whole grid\n", bricks, differ);
+    printf("%s, winding: %zu bricks, %zu voxels differ from the whole grid\n", name, bricks,
+           differ);
     assert_int_equal(differ, 0);
     vx_bitgrid_free(&g);
-    vx_mesh_free(m);
 }
 
-/* The open bunny: every voxel agrees with the direct winding number at
- * sampled centres, and none is set outside the mesh's bounding box. */
-static void test_bunny(void **state)
+/* The bunny (its holes face y: rays along z) and suzanne (its eyes face
+ * z: rays along y), on lattices whose origin and voxel size are not
+ * binary fractions, cut into bricks three ways. */
+static void test_bricks_open(void **state)
 {
     (void)state;
     vx_mesh *m = shape_load("stanford-bunny.obj");
     assert_non_null(m);
     assert_true(m->boundary_edges > 0);
-    vx_bitgrid g;
-    vx_voxelize_stats st;
-    run(m, VX_INSIDE_WINDING, 64, &g, &st);
-    const vx_grid *gr = &g.grid;
-    size_t agree = 0, n = 0, outside = 0;
-    uint64_t s = 99;
-    for (int k = 0; k < gr->dims[2]; k++)
-        for (int j = 0; j < gr->dims[1]; j++)
-            for (int i = 0; i < gr->dims[0]; i++) {
-                double c[3] = {gr->origin[0] + (i + .5) * gr->h, gr->origin[1] + (j + .5) * gr->h,
-                               gr->origin[2] + (k + .5) * gr->h};
-                int in = vx_bitgrid_get(&g, i, j, k);
-                for (int a = 0; a < 3; a++)
-                    if (in && (c[a] < m->bbox_min[a] || c[a] > m->bbox_max[a])) outside++;
-                s = s * 6364136223846793005ull + 1442695040888963407ull;
-                if ((s >> 40) % 128) continue;
-                n++;
-                agree += (ref_winding_number(m, c) >= 0.5) == in;
-            }
-    printf("bunny 64: %llu inside, %zu/%zu sampled centres agree with the direct sum\n",
-           (unsigned long long)st.voxels_inside, agree, n);
-    assert_int_equal(outside, 0);
-    assert_true(agree >= n - n / 1000);
-    vx_bitgrid_free(&g);
+    const vx_grid bunny = {
+        .origin = {-0.09233759531834755, 0.03261293907263908, -0.05981440323721673},
+        .h = 0.0009375380490275355,
+        .dims = {170, 168, 132},
+        .index = {-4, -1, -4}};
+    bricks_match("bunny", m, &bunny);
     vx_mesh_free(m);
+    m = shape_load("suzanne.obj");
+    assert_non_null(m);
+    assert_true(m->boundary_edges > 0);
+    vx_grid suz;
+    assert_int_equal(vx_grid_from_resolution(m, 120, 3, &suz, NULL), 0);
+    suz.h *= 1.0137;
+    for (int a = 0; a < 3; a++) {
+        suz.origin[a] -= 0.0123 * (a + 1);
+        suz.index[a] = -3 + 2 * a;
+    }
+    bricks_match("suzanne", m, &suz);
+    vx_mesh_free(m);
+}
+
+/* The open bunny (rays along z) and suzanne (along y): every voxel agrees
+ * with the direct winding number at sampled centres, and none is set
+ * outside the mesh's bounding box. */
+static void test_bunny(void **state)
+{
+    (void)state;
+    const char *names[] = {"stanford-bunny.obj", "suzanne.obj"};
+    for (int s_ = 0; s_ < 2; s_++) {
+        vx_mesh *m = shape_load(names[s_]);
+        assert_non_null(m);
+        assert_true(m->boundary_edges > 0);
+        vx_bitgrid g;
+        vx_voxelize_stats st;
+        run(m, VX_INSIDE_WINDING, 64, &g, &st);
+        const vx_grid *gr = &g.grid;
+        size_t agree = 0, n = 0, outside = 0;
+        uint64_t s = 99;
+        for (int k = 0; k < gr->dims[2]; k++)
+            for (int j = 0; j < gr->dims[1]; j++)
+                for (int i = 0; i < gr->dims[0]; i++) {
+                    double c[3] = {gr->origin[0] + (i + .5) * gr->h,
+                                   gr->origin[1] + (j + .5) * gr->h,
+                                   gr->origin[2] + (k + .5) * gr->h};
+                    int in = vx_bitgrid_get(&g, i, j, k);
+                    for (int a = 0; a < 3; a++)
+                        if (in && (c[a] < m->bbox_min[a] || c[a] > m->bbox_max[a])) outside++;
+                    s = s * 6364136223846793005ull + 1442695040888963407ull;
+                    if ((s >> 40) % 64) continue;
+                    n++;
+                    agree += (ref_winding_number(m, c) >= 0.5) == in;
+                }
+        printf("%s 64: %llu inside, %zu/%zu sampled centres agree with the direct sum\n", names[s_],
+               (unsigned long long)st.voxels_inside, agree, n);
+        assert_int_equal(outside, 0);
+        assert_true(agree >= n - n / 1000);
+        vx_bitgrid_free(&g);
+        vx_mesh_free(m);
+    }
 }
 
 /* Triangles of m as 9 doubles each (what vx_wtree_build takes). */
