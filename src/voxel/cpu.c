@@ -36,6 +36,7 @@
 #include "util/par.h"
 #include "voxel/lattice.h"
 #include "voxel/voxel.h"
+#include "voxel/xband.h"
 
 #define CPU_BAND 4 /* z rows per task when max_slab_rows does not say */
 
@@ -43,17 +44,6 @@ typedef struct xtri {
     int jlo, jhi, klo, khi; /* column centres of the grid its snapped bbox holds */
     int8_t sign;            /* +1 facing +x (counter-clockwise in (y, z)) */
 } xtri;
-
-typedef struct xent {
-    uint32_t row; /* (k - band's first row) * ny + j */
-    int32_t ib2;  /* 2 ib + (sign > 0) */
-} xent;
-
-typedef struct scratch {
-    xent *e, *sorted; /* the band's crossings, then sorted by row */
-    size_t n, cap, scap;
-    uint32_t *cnt; /* rows of a band + 1 */
-} scratch;
 
 typedef struct cctx {
     const vx_mesh *m;
@@ -67,35 +57,12 @@ typedef struct cctx {
     xtri *tri;
     size_t *bin_off;
     uint32_t *bin;
-    scratch sc[VX_PAR_MAX];
-    uint64_t limit;          /* max_memory, or no limit */
-    _Atomic uint64_t used;   /* bytes taken so far */
+    vx_xband sc[VX_PAR_MAX];
+    vx_xmeter mem;
     _Atomic uint64_t inside; /* voxels set */
     atomic_int stop, done;
     vx_err err;
 } cctx;
-
-/* Takes `bytes` more of the job's memory: 0, or -1 with c->err set (the
- * first error wins) and every thread told to stop. */
-static int charge(cctx *c, uint64_t bytes)
-{
-    uint64_t now = atomic_fetch_add(&c->used, bytes) + bytes;
-    if (now <= c->limit) return 0;
-    if (!atomic_exchange(&c->stop, 1))
-        vx_err_set(&c->err, VX_ETOOBIG, "job_memory_limit",
-                   "the cpu method needs more than %llu bytes for this grid's crossings, over "
-                   "the job memory limit of %llu",
-                   (unsigned long long)now, (unsigned long long)c->limit);
-    return -1;
-}
-
-/* Out of memory: c->err set (the first error wins), every thread stops. */
-static int no_memory(cctx *c)
-{
-    if (!atomic_exchange(&c->stop, 1))
-        vx_err_set(&c->err, VX_EINTERNAL, "out_of_memory", "no memory for the crossings");
-    return -1;
-}
 
 static int setup(cctx *c, vx_err *err)
 {
@@ -137,58 +104,17 @@ static int setup(cctx *c, vx_err *err)
     return 0;
 }
 
-static int bin_tris(cctx *c, vx_err *err)
+/* Triangle t's z rows (vx_xband_bin): 0 when it covers no column. */
+static int tri_rows(const void *ud, size_t t, int *lo, int *hi)
 {
-    c->bin_off = calloc((size_t)c->nbands + 2, sizeof *c->bin_off);
-    if (!c->bin_off) goto oom;
-    for (int pass = 0; pass < 2; pass++) {
-        for (size_t t = 0; t < c->m->ntris; t++) {
-            const xtri *x = &c->tri[t];
-            if (x->jlo > x->jhi || x->klo > x->khi) continue;
-            for (int b = x->klo / c->band; b <= x->khi / c->band; b++) {
-                if (pass == 0)
-                    c->bin_off[b + 1]++;
-                else
-                    c->bin[c->bin_off[b]++] = (uint32_t)t;
-            }
-        }
-        if (pass == 0) {
-            for (int b = 0; b < c->nbands; b++)
-                c->bin_off[b + 1] += c->bin_off[b];
-            if (charge(c, c->bin_off[c->nbands] * sizeof *c->bin +
-                              ((size_t)c->nbands + 2) * sizeof *c->bin_off)) {
-                if (err) *err = c->err;
-                return -1;
-            }
-            c->bin = malloc(c->bin_off[c->nbands] * sizeof *c->bin + 1);
-            if (!c->bin) goto oom;
-        } else {
-            memmove(c->bin_off + 1, c->bin_off, (size_t)c->nbands * sizeof *c->bin_off);
-            c->bin_off[0] = 0;
-        }
-    }
-    return 0;
-oom:
-    return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for the triangle bins");
-}
-
-static int push(cctx *c, scratch *s, uint32_t row, int32_t ib2)
-{
-    if (s->n == s->cap) {
-        size_t cap = s->cap ? 2 * s->cap : 1024;
-        /* the sorted copy grows with it */
-        if (charge(c, 2 * (cap - s->cap) * sizeof *s->e)) return -1;
-        xent *e = realloc(s->e, cap * sizeof *e);
-        if (!e) return no_memory(c);
-        s->e = e;
-        s->cap = cap;
-    }
-    s->e[s->n++] = (xent){row, ib2};
-    return 0;
+    const xtri *x = &((const cctx *)ud)->tri[t];
+    *lo = x->klo;
+    *hi = x->khi;
+    return x->jlo <= x->jhi && x->klo <= x->khi;
 }
 
 /* Triangle t's crossings of the columns in rows k0..k1-1. */
-static int raster_tri(cctx *c, scratch *sc, size_t t, int k0, int k1)
+static int raster_tri(cctx *c, vx_xband *sc, size_t t, int k0, int k1)
 {
     const xtri *x = &c->tri[t];
     const uint32_t *q = c->m->tri + 3 * t;
@@ -218,7 +144,8 @@ static int raster_tri(cctx *c, scratch *sc, size_t t, int k0, int k1)
         for (int j = x->jlo; j <= x->jhi; j++) {
             if (f0 > 0 && f1 > 0 && f2 > 0) {
                 int32_t ib = vx_lattice_xing(a, e1, e2, (c->ix[1] + j) + 0.5, cz, c->ix[0]);
-                if (ib > 0 && push(c, sc, row0 + (uint32_t)j, 2 * ib + pos)) return -1;
+                if (ib > 0 && vx_xband_push(sc, &c->mem, row0 + (uint32_t)j, 2 * ib + pos))
+                    return -1;
             }
             f0 += e[0].d1;
             f1 += e[1].d1;
@@ -249,33 +176,33 @@ static void set_run(uint32_t *w, int lo, int hi) /* bits lo..hi-1 */
 
 static int ent_cmp(const void *p, const void *q)
 {
-    int32_t a = ((const xent *)p)->ib2, b = ((const xent *)q)->ib2;
+    int32_t a = ((const vx_xent *)p)->at2, b = ((const vx_xent *)q)->at2;
     return a < b ? -1 : a > b;
 }
 
 /* One row's crossings (n of them) into its words: voxel i is inside when
  * the crossings with ib > i sum to nonzero (odd for parity). Returns the
  * voxels set (the runs are disjoint). */
-static uint64_t fill_row(const cctx *c, xent *e, size_t n, uint32_t *w)
+static uint64_t fill_row(const cctx *c, vx_xent *e, size_t n, uint32_t *w)
 {
     if (n > 24) {
         qsort(e, n, sizeof *e, ent_cmp);
     } else {
         for (size_t a = 1; a < n; a++) {
-            xent v = e[a];
+            vx_xent v = e[a];
             size_t b = a;
-            for (; b > 0 && e[b - 1].ib2 > v.ib2; b--)
+            for (; b > 0 && e[b - 1].at2 > v.at2; b--)
                 e[b] = e[b - 1];
             e[b] = v;
         }
     }
     int cur = 0;
     for (size_t a = 0; a < n; a++)
-        cur += (e[a].ib2 & 1) ? 1 : -1;
+        cur += (e[a].at2 & 1) ? 1 : -1;
     int prev = 0;
     uint64_t set = 0;
     for (size_t a = 0; a < n && prev < c->nx; a++) {
-        int ib = e[a].ib2 >> 1; /* ib >= 1 (push dropped the rest) */
+        int ib = e[a].at2 >> 1; /* ib >= 1 (push dropped the rest) */
         if (ib > prev) {
             int end = ib < c->nx ? ib : c->nx;
             if (c->parity ? (cur & 1) : cur != 0) {
@@ -284,7 +211,7 @@ static uint64_t fill_row(const cctx *c, xent *e, size_t n, uint32_t *w)
             }
             prev = ib;
         }
-        cur -= (e[a].ib2 & 1) ? 1 : -1;
+        cur -= (e[a].at2 & 1) ? 1 : -1;
     }
     return set;
 }
@@ -309,36 +236,20 @@ static int band_task(int b, int t, void *ud)
 {
     cctx *c = ud;
     if (poll(c, t, (double)atomic_load(&c->done) / c->nbands)) return 1;
-    scratch *sc = &c->sc[t];
+    vx_xband *sc = &c->sc[t];
     int k0 = b * c->band, k1 = k0 + c->band < c->nz ? k0 + c->band : c->nz;
     size_t rows = (size_t)(k1 - k0) * c->ny;
     sc->n = 0;
     for (size_t i = c->bin_off[b]; i < c->bin_off[b + 1]; i++)
         if (raster_tri(c, sc, c->bin[i], k0, k1)) return 1;
-    if (!sc->cnt) sc->cnt = malloc(((size_t)c->band * c->ny + 1) * sizeof *sc->cnt);
-    if (!sc->cnt) return no_memory(c);
-    if (sc->scap < sc->cap) {
-        free(sc->sorted);
-        sc->sorted = malloc(sc->cap * sizeof *sc->sorted);
-        sc->scap = sc->sorted ? sc->cap : 0;
-        if (!sc->sorted) return no_memory(c);
-    }
-    xent *sorted = sc->sorted;
-    /* counting sort by row */
-    memset(sc->cnt, 0, (rows + 1) * sizeof *sc->cnt);
-    for (size_t i = 0; i < sc->n; i++)
-        sc->cnt[sc->e[i].row + 1]++;
-    for (size_t r = 0; r < rows; r++)
-        sc->cnt[r + 1] += sc->cnt[r];
-    for (size_t i = 0; i < sc->n; i++)
-        sorted[sc->cnt[sc->e[i].row]++] = sc->e[i];
-    /* cnt[r] is now the end of row r */
+    if (vx_xband_sort(sc, &c->mem, rows)) return 1;
     uint32_t *words = c->out->bits + (size_t)k0 * c->ny * c->out->wx;
     size_t begin = 0;
     uint64_t set = 0;
     for (size_t r = 0; r < rows; r++) {
-        size_t end = sc->cnt[r];
-        if (end > begin) set += fill_row(c, sorted + begin, end - begin, words + r * c->out->wx);
+        size_t end = sc->end[r];
+        if (end > begin)
+            set += fill_row(c, sc->sorted + begin, end - begin, words + r * c->out->wx);
         begin = end;
     }
     atomic_fetch_add(&c->inside, set);
@@ -378,11 +289,12 @@ int vx_voxelize_cpu(const vx_mesh *m, const vx_voxelize_desc *d, vx_bitgrid *out
     int rc = -1;
     /* the grid, the mesh's setup and every thread's row counters; bins
      * and crossings are charged as they are made */
-    c->limit = d->max_memory ? d->max_memory : UINT64_MAX;
+    c->mem = (vx_xmeter){
+        .limit = d->max_memory, .who = "the cpu method", .stop = &c->stop, .err = &c->err};
     uint64_t fixed = vx_bitgrid_bytes(g->dims, 1) + (uint64_t)m->nverts * 40u +
                      (uint64_t)m->ntris * sizeof(xtri) +
                      (uint64_t)vx_par_cpus() * ((uint64_t)c->band * c->ny + 1) * 4u;
-    if (charge(c, fixed)) {
+    if (vx_xmeter_charge(&c->mem, fixed)) {
         if (err) *err = c->err;
         goto done;
     }
@@ -394,7 +306,12 @@ int vx_voxelize_cpu(const vx_mesh *m, const vx_voxelize_desc *d, vx_bitgrid *out
         vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for the mesh");
         goto done;
     }
-    if (setup(c, err) || bin_tris(c, err) || vx_bitgrid_alloc(out, g, 0, err)) goto done;
+    if (setup(c, err)) goto done;
+    if (vx_xband_bin(m->ntris, tri_rows, c, c->band, c->nbands, &c->mem, &c->bin_off, &c->bin)) {
+        if (err) *err = c->err;
+        goto done;
+    }
+    if (vx_bitgrid_alloc(out, g, 0, err)) goto done;
     st->upload_ms = (vx_mono() - t0) * 1e3;
     if (poll(c, 0, 0.0)) goto stopped;
     vx_par_for(c->nbands, vx_par_cpus(), band_task, c);
@@ -408,9 +325,7 @@ stopped:
 done:
     if (rc) vx_bitgrid_free(out);
     for (int t = 0; t < VX_PAR_MAX; t++) {
-        free(c->sc[t].e);
-        free(c->sc[t].sorted);
-        free(c->sc[t].cnt);
+        vx_xband_free(&c->sc[t]);
     }
     free(c->u);
     free(c->s);

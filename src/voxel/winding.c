@@ -42,6 +42,7 @@
 #include "voxel/lattice.h"
 #include "voxel/voxel.h"
 #include "voxel/winding_int.h"
+#include "voxel/xband.h"
 
 #define BAND 8       /* column rows (y) per task, at most */
 #define FAR_BLOCK 16 /* columns of a band's rows bounded together */
@@ -51,15 +52,10 @@ typedef struct wtri {
     int8_t sign;            /* +1 facing +z (counter-clockwise in (x, y)) */
 } wtri;
 
-typedef struct xent {
-    uint32_t col; /* (j - band's first row) * nx + i */
-    int32_t kz2;  /* 2 kb + (sign > 0), kb the first centre at or beyond it */
-} xent;
-
+/* A thread's band: its crossings (row: the column, (j - band's first
+ * row) * nx + i), a row's slice and a column's sorted crossings. */
 typedef struct scratch {
-    xent *e, *sorted; /* the band's crossings, then sorted by column */
-    size_t n, cap, scap;
-    uint32_t *cnt;   /* columns of a band + 1 */
+    vx_xband x;
     uint32_t *slice; /* a row's voxels, every z row of it (set_bit) */
     int32_t *z;      /* a column's crossings, sorted */
     uint8_t *far;    /* per block of FAR_BLOCK columns: the cone is far */
@@ -87,6 +83,7 @@ typedef struct wctx {
     size_t *bin_off; /* nbands + 1 */
     uint32_t *bin;   /* triangle ids per band */
     scratch sc[VX_PAR_MAX];
+    vx_xmeter mem;
     vx_wtree tree;
     int lo[3], hi[3], open; /* centres that can be inside (the bbox for an open mesh) */
     /* An open mesh's runs along z are cut to its bbox's centres rlo..rhi,
@@ -94,35 +91,11 @@ typedef struct wctx {
      * way in every brick it crosses (and the whole grid's). */
     int rlo, rhi;
     vx_bitgrid *out;
-    uint64_t limit;        /* max_memory, or no limit */
-    _Atomic uint64_t used; /* bytes taken so far */
     atomic_int stop, done;
     int total;
     double p0, p1, last; /* progress span, last report */
     vx_err err;
 } wctx;
-
-/* Takes `bytes` more of the job's memory: 0, or -1 with c->err set (the
- * first error wins) and every thread told to stop. */
-static int charge(wctx *c, uint64_t bytes)
-{
-    uint64_t now = atomic_fetch_add(&c->used, bytes) + bytes;
-    if (now <= c->limit) return 0;
-    if (!atomic_exchange(&c->stop, 1))
-        vx_err_set(&c->err, VX_ETOOBIG, "job_memory_limit",
-                   "the winding rule needs more than %llu bytes for this grid's crossings, "
-                   "over the job memory limit of %llu",
-                   (unsigned long long)now, (unsigned long long)c->limit);
-    return -1;
-}
-
-/* Out of memory: c->err set (the first error wins), every thread stops. */
-static int no_memory(wctx *c)
-{
-    if (!atomic_exchange(&c->stop, 1))
-        vx_err_set(&c->err, VX_EINTERNAL, "out_of_memory", "no memory for the crossings");
-    return -1;
-}
 
 /* ---- crossings per column --------------------------------------------- */
 
@@ -188,60 +161,19 @@ static int setup_tris(int i, int t, void *ud)
     return 0;
 }
 
-/* Triangles by the bands of rows their columns fall in. */
-static int bin_tris(wctx *c, vx_err *err)
+/* Triangle t's rows of columns (vx_xband_bin): 0 when it covers none. */
+static int tri_rows(const void *ud, size_t t, int *lo, int *hi)
 {
-    c->bin_off = calloc((size_t)c->nbands + 2, sizeof *c->bin_off);
-    if (!c->bin_off) goto oom;
-    for (int pass = 0; pass < 2; pass++) {
-        for (size_t t = 0; t < c->ntot; t++) {
-            const wtri *x = &c->tri[t];
-            if (x->ilo > x->ihi) continue;
-            for (int b = x->jlo / c->band; b <= x->jhi / c->band; b++) {
-                if (pass == 0)
-                    c->bin_off[b + 1]++;
-                else
-                    c->bin[c->bin_off[b]++] = (uint32_t)t;
-            }
-        }
-        if (pass == 0) {
-            for (int b = 0; b < c->nbands; b++)
-                c->bin_off[b + 1] += c->bin_off[b];
-            if (charge(c, c->bin_off[c->nbands] * sizeof *c->bin)) {
-                if (err) *err = c->err;
-                return -1;
-            }
-            c->bin = malloc(c->bin_off[c->nbands] * sizeof *c->bin + 1);
-            if (!c->bin) goto oom;
-        } else {
-            memmove(c->bin_off + 1, c->bin_off, (size_t)c->nbands * sizeof *c->bin_off);
-            c->bin_off[0] = 0;
-        }
-    }
-    return 0;
-oom:
-    return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for the triangle bins");
-}
-
-static int push(wctx *c, scratch *s, uint32_t col, int32_t kz2)
-{
-    if (s->n == s->cap) {
-        size_t cap = s->cap ? 2 * s->cap : 1024;
-        /* the sorted copy grows with it */
-        if (charge(c, 2 * (cap - s->cap) * sizeof *s->e)) return -1;
-        xent *e = realloc(s->e, cap * sizeof *e);
-        if (!e) return no_memory(c);
-        s->e = e;
-        s->cap = cap;
-    }
-    s->e[s->n++] = (xent){col, kz2};
-    return 0;
+    const wtri *x = &((const wctx *)ud)->tri[t];
+    *lo = x->jlo;
+    *hi = x->jhi;
+    return x->ilo <= x->ihi;
 }
 
 /* Triangle t's crossings of the columns of rows [j0, j1): coverage by
  * lattice.h's snapped edge tests, each crossing placed by its formula with
  * z as the ray's axis. */
-static int raster_tri(wctx *c, scratch *sc, size_t t, int j0, int j1)
+static int raster_tri(wctx *c, vx_xband *sc, size_t t, int j0, int j1)
 {
     const wtri *x = &c->tri[t];
     size_t v[3] = {corner(c, t, 0), corner(c, t, 1), corner(c, t, 2)};
@@ -271,7 +203,7 @@ static int raster_tri(wctx *c, scratch *sc, size_t t, int j0, int j1)
         for (int i = x->ilo; i <= x->ihi; i++) {
             if (f0 > 0 && f1 > 0 && f2 > 0) {
                 int32_t kb = vx_lattice_xing(a, e1, e2, (c->ix[0] + i) + 0.5, cy, c->ix[2]);
-                if (push(c, sc, col0 + (uint32_t)i, 2 * kb + pos)) return -1;
+                if (vx_xband_push(sc, &c->mem, col0 + (uint32_t)i, 2 * kb + pos)) return -1;
             }
             f0 += e[0].d1;
             f1 += e[1].d1;
@@ -453,31 +385,17 @@ static int band_task(int b, int t, void *ud)
     scratch *sc = &c->sc[t];
     int j0 = b * c->band, j1 = j0 + c->band < c->ny ? j0 + c->band : c->ny;
     size_t cols = (size_t)(j1 - j0) * c->nx, wx = c->out->wx;
-    sc->n = 0;
+    sc->x.n = 0;
     /* a band of a triangle soup can hold 10^5 large triangles: the stop
      * check comes every 64 of them, not only between bands */
     for (size_t k = c->bin_off[b]; k < c->bin_off[b + 1]; k++) {
         if ((k & 63) == 63 && poll(c, t)) return 1;
-        if (raster_tri(c, sc, c->bin[k], j0, j1)) return 1;
+        if (raster_tri(c, &sc->x, c->bin[k], j0, j1)) return 1;
     }
-    if (!sc->cnt) sc->cnt = malloc(((size_t)c->band * c->nx + 1) * sizeof *sc->cnt);
     if (!sc->slice) sc->slice = malloc((size_t)c->nz * wx * sizeof *sc->slice + 1);
     if (!sc->far) sc->far = malloc((size_t)c->nx / FAR_BLOCK + 1);
-    if (!sc->cnt || !sc->slice || !sc->far) return no_memory(c);
-    if (sc->scap < sc->cap) {
-        free(sc->sorted);
-        sc->sorted = malloc(sc->cap * sizeof *sc->sorted);
-        sc->scap = sc->sorted ? sc->cap : 0;
-        if (!sc->sorted) return no_memory(c);
-    }
-    /* counting sort by column; cnt[col] is then the end of col */
-    memset(sc->cnt, 0, (cols + 1) * sizeof *sc->cnt);
-    for (size_t k = 0; k < sc->n; k++)
-        sc->cnt[sc->e[k].col + 1]++;
-    for (size_t k = 0; k < cols; k++)
-        sc->cnt[k + 1] += sc->cnt[k];
-    for (size_t k = 0; k < sc->n; k++)
-        sc->sorted[sc->cnt[sc->e[k].col]++] = sc->e[k];
+    if (!sc->slice || !sc->far) return vx_xmeter_oom(&c->mem);
+    if (vx_xband_sort(&sc->x, &c->mem, cols)) return 1;
     /* the cone's bound over blocks of FAR_BLOCK columns of the band's rows
      * first: most are far from every hole */
     int ja = j0 > c->lo[1] ? j0 : c->lo[1], jb = j1 - 1 < c->hi[1] ? j1 - 1 : c->hi[1];
@@ -491,16 +409,16 @@ static int band_task(int b, int t, void *ud)
         memset(sc->slice, 0, (size_t)c->nz * wx * sizeof *sc->slice);
         for (int i = c->lo[0]; i <= c->hi[0]; i++) {
             if (poll(c, t)) return 1; /* a column of a soup can take 0.1 s */
-            size_t col = (size_t)(j - j0) * c->nx + i, end = sc->cnt[col];
-            size_t begin = col ? sc->cnt[col - 1] : 0, n = end - begin;
+            size_t col = (size_t)(j - j0) * c->nx + i, end = sc->x.end[col];
+            size_t begin = col ? sc->x.end[col - 1] : 0, n = end - begin;
             if (n > sc->zcap) {
                 int32_t *z = realloc(sc->z, n * sizeof *z);
-                if (!z) return no_memory(c);
+                if (!z) return vx_xmeter_oom(&c->mem);
                 sc->z = z;
                 sc->zcap = n;
             }
             for (size_t k = 0; k < n; k++)
-                sc->z[k] = sc->sorted[begin + k].kz2;
+                sc->z[k] = sc->x.sorted[begin + k].at2;
             sort_column(sc->z, n);
             int far = c->open && (sc->far[(i - c->lo[0]) / FAR_BLOCK] ||
                                   far_box(c, i, i, j, j, c->rlo, c->rhi, 1));
@@ -629,7 +547,8 @@ int vx_voxelize_winding(const vx_mesh *m, const vx_voxelize_desc *d, vx_bitgrid 
     c->d = d;
     c->h = d->grid.h;
     c->out = out;
-    c->limit = d->max_memory ? d->max_memory : UINT64_MAX;
+    c->mem = (vx_xmeter){
+        .limit = d->max_memory, .who = "the winding rule", .stop = &c->stop, .err = &c->err};
     int rc = -1;
     if (vx_bitgrid_alloc(out, &d->grid, 0, err) || vx_wcone_build(m, &c->cone, &c->ncone, err))
         goto done;
@@ -652,10 +571,11 @@ int vx_voxelize_winding(const vx_mesh *m, const vx_voxelize_desc *d, vx_bitgrid 
     /* the grid, the corners and triangles, and every thread's slice and
      * column counters; bins and crossings are charged as they are made */
     size_t ncorner = m->nverts + 3 * c->ncone;
-    if (charge(c, vx_bitgrid_bytes(d->grid.dims, 1) + (uint64_t)ncorner * 40u +
-                      (uint64_t)c->ntot * sizeof(wtri) +
-                      (uint64_t)vx_par_cpus() *
-                          ((uint64_t)c->nz * out->wx + (uint64_t)c->band * c->nx + 1) * 4u)) {
+    if (vx_xmeter_charge(
+            &c->mem, vx_bitgrid_bytes(d->grid.dims, 1) + (uint64_t)ncorner * 40u +
+                         (uint64_t)c->ntot * sizeof(wtri) +
+                         (uint64_t)vx_par_cpus() *
+                             ((uint64_t)c->nz * out->wx + (uint64_t)c->band * c->nx + 1) * 4u)) {
         if (err) *err = c->err;
         goto done;
     }
@@ -666,7 +586,10 @@ int vx_voxelize_winding(const vx_mesh *m, const vx_voxelize_desc *d, vx_bitgrid 
     }
     if (lattice_units(c, err) || vx_wtree_build(&c->tree, c->ncone, c->cone, err)) goto done;
     vx_par_for((int)((c->ntot + SETUP_CHUNK - 1) / SETUP_CHUNK), vx_par_cpus(), setup_tris, c);
-    if (bin_tris(c, err)) goto done;
+    if (vx_xband_bin(c->ntot, tri_rows, c, c->band, c->nbands, &c->mem, &c->bin_off, &c->bin)) {
+        if (err) *err = c->err;
+        goto done;
+    }
     inside_range(c);
     st->upload_ms = (vx_mono() - t0) * 1e3;
     if (stage(c, c->nbands, band_task, 0.0, 1.0, err)) goto done;
@@ -679,9 +602,7 @@ done:
     if (rc) vx_bitgrid_free(out);
     vx_wtree_free(&c->tree);
     for (int t = 0; t < VX_PAR_MAX; t++) {
-        free(c->sc[t].e);
-        free(c->sc[t].sorted);
-        free(c->sc[t].cnt);
+        vx_xband_free(&c->sc[t].x);
         free(c->sc[t].slice);
         free(c->sc[t].z);
         free(c->sc[t].far);

@@ -574,15 +574,23 @@ static double *tri_soup(const vx_mesh *m)
     return tv;
 }
 
+/* The bunny, its triangles (*tv) and a tree over them. */
+static vx_mesh *bunny_tree(vx_wtree *tree, double **tv)
+{
+    vx_mesh *m = shape_load("stanford-bunny.obj");
+    assert_non_null(m);
+    *tv = tri_soup(m);
+    assert_int_equal(vx_wtree_build(tree, m->ntris, *tv, NULL), 0);
+    return m;
+}
+
 /* The tree against the direct sum over the bunny's own triangles. */
 static void test_tree(void **state)
 {
     (void)state;
-    vx_mesh *m = shape_load("stanford-bunny.obj");
-    assert_non_null(m);
-    double *tv = tri_soup(m);
     vx_wtree tree;
-    assert_int_equal(vx_wtree_build(&tree, m->ntris, tv, NULL), 0);
+    double *tv;
+    vx_mesh *m = bunny_tree(&tree, &tv);
     double worst = 0;
     uint64_t s = 7;
     for (int n = 0; n < 100; n++) {
@@ -650,11 +658,9 @@ static void test_tree_leaf_turns(void **state)
 static void test_tree_bound_box(void **state)
 {
     (void)state;
-    vx_mesh *m = shape_load("stanford-bunny.obj");
-    assert_non_null(m);
-    double *tv = tri_soup(m);
     vx_wtree tree;
-    assert_int_equal(vx_wtree_build(&tree, m->ntris, tv, NULL), 0);
+    double *tv;
+    vx_mesh *m = bunny_tree(&tree, &tv);
     uint64_t s = 5;
     int bounded = 0;
     for (int n = 0; n < 300; n++) {
