@@ -243,14 +243,20 @@ static void set_bit(const wctx *c, uint32_t *slice, int i, int k)
     slice[(size_t)k * c->out->wx + (size_t)(i >> 5)] |= 1u << (i & 31);
 }
 
+/* The world position of the engine's centre (i, j, k), in the grid's axes. */
+static void centre(const wctx *c, int i, int j, int k, double q[3])
+{
+    const int e[3] = {i, j, k};
+    for (int a = 0; a < 3; a++)
+        q[c->ax[a]] = c->o[a] + (c->ix[a] + e[a] + 0.5) * c->h;
+}
+
 /* n - w - 1/2 at centre k of column (i, j), whose crossing count above
  * is n: the centre is inside (w >= 1/2) where it is >= 0. */
 static double margin_at(const wctx *c, int i, int j, int k, int n)
 {
-    const int e[3] = {i, j, k};
     double q[3];
-    for (int a = 0; a < 3; a++)
-        q[c->ax[a]] = c->o[a] + (c->ix[a] + e[a] + 0.5) * c->h;
+    centre(c, i, j, k, q);
     return n - vx_wtree_eval(&c->tree, q) - 0.5;
 }
 
@@ -259,12 +265,9 @@ static double margin_at(const wctx *c, int i, int j, int k, int n)
  * n >= 1, with nothing evaluated. */
 static int far_box(const wctx *c, int i0, int i1, int j0, int j1, int ka, int kb, int n)
 {
-    const int e0[3] = {i0, j0, ka}, e1[3] = {i1, j1, kb};
     double lo[3], hi[3];
-    for (int a = 0; a < 3; a++) {
-        lo[c->ax[a]] = c->o[a] + (c->ix[a] + e0[a] + 0.5) * c->h;
-        hi[c->ax[a]] = c->o[a] + (c->ix[a] + e1[a] + 0.5) * c->h;
-    }
+    centre(c, i0, j0, ka, lo);
+    centre(c, i1, j1, kb, hi);
     double limit = fabs(n - 0.5);
     return vx_wtree_bound(&c->tree, lo, hi, limit) < limit;
 }

@@ -47,20 +47,28 @@ static double tri_near_edge(const double *const u[3])
     return atan2_fast(det, den) / (2 * M_PI);
 }
 
-/* w of the triangle seen along unit vectors a, b, c (Van Oosterom &
- * Strackee: tan(omega / 2) = det / den; w = omega / (4 pi)). det and den
- * carry rounding of about 1e-16: seen from near a long edge, where the
- * unit vectors of its ends nearly cancel, that is every digit (a triangle
- * 1e8 long seen from 0.1 away gave w off by 1/2). Then the same angle
- * from the pair whose sum carries it (tri_near_edge). */
+/* The triangle seen along unit vectors a, b, c (Van Oosterom & Strackee):
+ * tan(omega / 2) = *det / *den, w = omega / (4 pi). 1 when that pair
+ * carries the angle; 0 when it is too small to (under 1e-6: det and den
+ * carry rounding of about 1e-16, which seen from near a long edge, where
+ * the unit vectors of its ends nearly cancel, is every digit; a triangle
+ * 1e8 long seen from 0.1 away gave w off by 1/2): then tri_near_edge.
+ * Inlined always: leaf_eval's loop ran 10% slower with it called. */
+static inline __attribute__((always_inline)) int
+tri_half_angle(const double *a, const double *b, const double *c, double *det, double *den)
+{
+    *det = a[0] * (b[1] * c[2] - b[2] * c[1]) - a[1] * (b[0] * c[2] - b[2] * c[0]) +
+           a[2] * (b[0] * c[1] - b[1] * c[0]);
+    *den = 1 + (a[0] * b[0] + a[1] * b[1] + a[2] * b[2]) +
+           (b[0] * c[0] + b[1] * c[1] + b[2] * c[2]) + (c[0] * a[0] + c[1] * a[1] + c[2] * a[2]);
+    return *det * *det + *den * *den > 1e-12;
+}
+
+/* w of the triangle seen along unit vectors a, b, c. */
 static double tri_units(const double *a, const double *b, const double *c)
 {
-    double det = a[0] * (b[1] * c[2] - b[2] * c[1]) - a[1] * (b[0] * c[2] - b[2] * c[0]) +
-                 a[2] * (b[0] * c[1] - b[1] * c[0]);
-    double den = 1 + (a[0] * b[0] + a[1] * b[1] + a[2] * b[2]) +
-                 (b[0] * c[0] + b[1] * c[1] + b[2] * c[2]) +
-                 (c[0] * a[0] + c[1] * a[1] + c[2] * a[2]);
-    if (det * det + den * den > 1e-12) return atan2_fast(det, den) / (2 * M_PI);
+    double det, den;
+    if (tri_half_angle(a, b, c, &det, &den)) return atan2_fast(det, den) / (2 * M_PI);
     return tri_near_edge((const double *const[3]){a, b, c});
 }
 
@@ -329,12 +337,8 @@ static double leaf_eval(const vx_wtree *t, const vx_wtree_node *nd, const double
         const double a[3] = {u[0][c[0]], u[1][c[0]], u[2][c[0]]},
                      b[3] = {u[0][c[1]], u[1][c[1]], u[2][c[1]]},
                      e[3] = {u[0][c[2]], u[1][c[2]], u[2][c[2]]};
-        double det = a[0] * (b[1] * e[2] - b[2] * e[1]) - a[1] * (b[0] * e[2] - b[2] * e[0]) +
-                     a[2] * (b[0] * e[1] - b[1] * e[0]);
-        double den = 1 + (a[0] * b[0] + a[1] * b[1] + a[2] * b[2]) +
-                     (b[0] * e[0] + b[1] * e[1] + b[2] * e[2]) +
-                     (e[0] * a[0] + e[1] * a[1] + e[2] * a[2]);
-        if (!(det * det + den * den > 1e-12)) {
+        double det, den;
+        if (!tri_half_angle(a, b, e, &det, &den)) {
             w += vx_wtree_tri(t->tv + 9 * (size_t)i, q);
             continue;
         }
