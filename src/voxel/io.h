@@ -61,22 +61,19 @@ typedef struct vx_voxel_io {
      * the bit grid's, at least 4 MiB); past them the grid is coded again
      * from transposed columns instead (binvox.c). */
     size_t binvox_event_bytes;
-    /* vdb: bytes the tree may need beyond the bit grid (0 = no limit; as
-     * vx_voxel_vdb_grid_bytes counts them). A 0/1 fog grid checks it as its
-     * leaves are classified, slab by slab, and stops with VX_ETOOBIG
-     * job_memory_limit once over it. */
-    uint64_t vdb_max_bytes;
     /* vdb: not NULL: once the file is in place the writer leaves its tree
      * in *vdb_keep (NULL if it failed before) for the caller to free with
      * vx_vdb_tree_free, whatever the writer returns: freeing is off the
-     * write's path (a 0/1 fog grid's 40,000 float leaves at 1024^3 take
-     * 10-20 ms), and the memory stays the caller's until then. NULL: the
+     * write's path (a level set's 68,000 float leaves at 1024^3 take
+     * 20 ms), and the memory stays the caller's until then. NULL: the
      * writer frees it before returning. */
     vx_vdb_tree **vdb_keep;
 } vx_voxel_io;
 
 /* Frees a tree a vdb writer kept (NULL is fine). */
 void vx_vdb_tree_free(vx_vdb_tree *t);
+/* Bytes the kept tree t holds in memory (OpenVDB's memUsage of its grids). */
+uint64_t vx_vdb_tree_bytes(const vx_vdb_tree *t);
 
 /* Parameters recorded as grid metadata in .vdb files (strings may be NULL). */
 typedef struct vx_vdb_meta {
@@ -161,14 +158,12 @@ double vx_vdb_max_voxel_size(int cls);
 
 /* Bytes the vdb writer may hold in memory beyond the bit grid, known from
  * the dims (OpenVDB's trees for a grid whose every leaf is partial: the
- * worst case; a 0/1 fog grid's or a level set's topology only, their float
- * leaves are vx_voxel_vdb_grid_bytes's); coverage: the grid has sample
- * counts. */
+ * worst case; a 0/1 fog grid's leaves hold masks only, as a bool grid's; a
+ * level set's topology only, its band is vx_voxel_vdb_grid_bytes's);
+ * coverage: the grid has sample counts. */
 uint64_t vx_voxel_vdb_bytes(const int dims[3], vx_vdb_class cls, int coverage);
-/* The same for the grid g itself (a 0/1 fog grid or a level set: from its
- * partial leaves, counted in parallel; other classes as
- * vx_voxel_vdb_bytes). A 0/1 fog grid's writer counts them itself as it
- * builds (vx_voxel_io.vdb_max_bytes), so a job need not call this first. */
+/* The same for the grid g itself (a level set: from its partial leaves,
+ * counted in parallel; other classes as vx_voxel_vdb_bytes). */
 uint64_t vx_voxel_vdb_grid_bytes(const vx_bitgrid *g, vx_vdb_class cls);
 
 #endif

@@ -1168,16 +1168,14 @@ static int voxelize_encode(vx_job_run *r, const void *params, void *state, vx_er
         path = vx_run_output(r, "voxels", "vdb", "application/x-openvdb", err);
         if (!path) return -1;
         vx_vdb_meta m = meta_of(&p, r, s->st.method, s->inside);
-        /* A fog grid's float leaves and a level set's band are known only now:
-         * within the limit? (A 0/1 fog grid's writer counts its leaves as it
-         * builds them.) */
+        /* A level set's band is known only now: within the limit? (The
+         * other classes' worst case was counted at submission.) */
         uint64_t lim = vx_run_limits(r)->max_job_memory;
         uint64_t voxels = vx_bitgrid_bytes(s->grid.grid.dims, s->grid.counts ? 2 : 1);
-        int fog01 = p.vdb_grid == VX_VDB_FOG && !s->grid.counts;
-        if (lim && fog01) io.vdb_max_bytes = lim > voxels ? lim - voxels : 1;
+        int band = p.vdb_grid == VX_VDB_LEVEL_SET;
         uint64_t need =
-            lim && !fog01 ? vx_voxel_vdb_grid_bytes(&s->grid, (vx_vdb_class)p.vdb_grid) : 0;
-        if (lim && !fog01 && need + voxels > lim)
+            lim && band ? vx_voxel_vdb_grid_bytes(&s->grid, (vx_vdb_class)p.vdb_grid) : 0;
+        if (lim && band && need + voxels > lim)
             return vx_err_set(err, VX_ETOOBIG, "job_memory_limit",
                               "the OpenVDB grid of these voxels needs about %llu bytes, over the "
                               "job memory limit of %llu (vdb_grid \"bool\" or another format "

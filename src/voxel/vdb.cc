@@ -20,12 +20,15 @@
 #include <fstream>
 #include <memory>
 #include <mutex>
+#include <set>
+#include <stdexcept>
 #include <sstream>
 #include <string>
 #include <tuple>
 #include <type_traits>
 #include <vector>
 
+#include <openvdb/io/DelayedLoadMetadata.h>
 #include <openvdb/openvdb.h>
 #include <openvdb/tools/Count.h>
 #include <openvdb/tools/Prune.h>
@@ -70,19 +73,39 @@ openvdb::math::Transform::Ptr transform_of(const vx_grid &gr)
     return xf;
 }
 
-// A grid (bool or float) whose topology and leaf buffers OpenVDB's own
-// writer gets from every thread. Both sections are OpenVDB's node calls in
-// tree order: the topology is the root's and each upper internal node's
-// own header (masks and tile values, written here as their writeTopology
-// writes them), then each lower internal node's writeTopology (its masks,
-// tile values and leaves' masks: most of the bytes); the buffers are each
-// leaf's writeBuffers. A node's bytes depend only on the node and on the
-// stream's compression and background, so the lower internal nodes and
-// windows of leaves are written into memory streams in parallel, a chunk
-// each, and appended in order: the bytes of Tree::writeTopology and
-// Tree::writeBuffers (vdbcheck compares them with those, on the grid read
-// back).
-template <typename GridT> class ParallelGrid final : public GridT
+// What the archive below asks of a grid it writes itself (ParallelGrid).
+class Prepared
+{
+  public:
+    virtual ~Prepared() = default;
+    // Writes every leaf's buffer into memory, on all threads, for
+    // writeBuffers to append; for a float grid, fills dl with what OpenVDB's
+    // own archive writer computes for the grid's delayed-load metadata
+    // (each leaf's mask compression kind and the size of its compressed
+    // values), taken from the bytes written, and returns 1 (0 for a grid
+    // OpenVDB writes none for). os: the grid's compression set.
+    virtual int prepare(std::ostream &os, openvdb::io::DelayedLoadMetadata &dl) const = 0;
+    // Bytes the tree's memUsage leaves out for leaves made without values.
+    virtual uint64_t unloaded_bytes() const = 0;
+};
+
+// A grid (bool or float) whose topology and leaf buffers are written by
+// OpenVDB's own node calls from every thread, in tree order: the topology
+// is the root's and each upper internal node's own header (masks and tile
+// values, written here as their writeTopology writes them), then each lower
+// internal node's writeTopology (its masks, tile values and leaves' masks:
+// most of the bytes); the buffers are each leaf's writeBuffers. A node's
+// bytes depend only on the node and on the stream's compression and
+// background, so the lower internal nodes and chunks of leaves are written
+// into memory streams in parallel and appended in order: the bytes of
+// Tree::writeTopology and Tree::writeBuffers (vdbcheck compares them with
+// those, on the grid read back).
+//
+// A leaf may be made without values (LeafNode's PartialCreate: its mask
+// only; a 0/1 fog grid's 80 MB of floats at 1024^3 were the most of its
+// writer's time, made, faulted in and freed); fill then gives its values
+// in a scratch leaf as it is written.
+template <typename GridT> class ParallelGrid final : public GridT, public Prepared
 {
     using TreeT = typename GridT::TreeType;
     using RootT = typename TreeT::RootNodeType;
@@ -90,6 +113,10 @@ template <typename GridT> class ParallelGrid final : public GridT
     using LowerT = typename UpperT::ChildNodeType;
     using LeafT = typename TreeT::LeafNodeType;
     using ValueT = typename GridT::ValueType;
+    using Fill = void (*)(const LeafT &from, LeafT &to);
+
+    Fill fill_ = nullptr;
+    mutable std::vector<std::string> buffers_; // prepared: the buffers section, in chunks
 
     // Appends what write(ss, i) puts into a fresh memory stream (the
     // compression and background of os) for i in [0, n), on all threads, a
@@ -123,8 +150,37 @@ template <typename GridT> class ParallelGrid final : public GridT
         os.write(reinterpret_cast<const char *>(&v), sizeof v);
     }
 
+    // leaf's writeBuffers, or a scratch leaf's filled from it
+    void write_leaf(std::ostream &os, const LeafT &leaf, std::unique_ptr<LeafT> &scratch,
+                    bool half) const
+    {
+        if (!unloaded(leaf)) return leaf.writeBuffers(os, half);
+        if (!scratch) scratch.reset(new LeafT(leaf.origin()));
+        fill_(leaf, *scratch);
+        scratch->writeBuffers(os, half);
+    }
+
+    bool unloaded(const LeafT &leaf) const
+    {
+        if constexpr (std::is_same<ValueT, bool>::value) // a bool leaf always holds its values
+            return false;
+        else
+            return fill_ && leaf.buffer().empty();
+    }
+
+    std::vector<const LeafT *> leaves() const
+    {
+        std::vector<const LeafT *> out;
+        out.reserve(this->constTree().leafCount());
+        this->constTree().getNodes(out);
+        return out;
+    }
+
   public:
-    explicit ParallelGrid(const ValueT &background) : GridT(background) {}
+    explicit ParallelGrid(const ValueT &background, Fill fill_leaf = nullptr)
+        : GridT(background), fill_(fill_leaf)
+    {
+    }
 
     void writeTopology(std::ostream &os) const override
     {
@@ -169,12 +225,84 @@ template <typename GridT> class ParallelGrid final : public GridT
 
     void writeBuffers(std::ostream &os) const override
     {
-        std::vector<const LeafT *> leaves;
-        leaves.reserve(this->constTree().leafCount());
-        this->constTree().getNodes(leaves);
+        if (!buffers_.empty()) { // prepared
+            for (std::string &c : buffers_) {
+                os.write(c.data(), (std::streamsize)c.size());
+                std::string().swap(c);
+            }
+            buffers_.clear();
+            return;
+        }
+        const std::vector<const LeafT *> all = leaves();
         const bool half = this->saveFloatAsHalf();
-        in_parallel(os, leaves.size(), 128,
-                    [&](std::ostream &ss, size_t i) { leaves[i]->writeBuffers(ss, half); });
+        in_parallel(os, all.size(), 128, [&](std::ostream &ss, size_t i) {
+            static thread_local std::unique_ptr<LeafT> scratch;
+            write_leaf(ss, *all[i], scratch, half);
+        });
+    }
+
+    int prepare(std::ostream &os, openvdb::io::DelayedLoadMetadata &dl) const override
+    {
+        namespace io = openvdb::io;
+        constexpr bool has_dl = std::is_floating_point<ValueT>::value;
+        const std::vector<const LeafT *> all = leaves();
+        const bool half = this->saveFloatAsHalf();
+        const uint32_t compression = io::getDataCompression(os);
+        const bool sized = compression & (io::COMPRESS_BLOSC | io::COMPRESS_ZIP);
+        const ValueT &background = this->constTree().background();
+        if (has_dl && !all.empty()) {
+            dl.resizeMask(all.size());
+            if (sized) dl.resizeCompressedSize(all.size());
+        }
+        const size_t chunk = 128, nc = (all.size() + chunk - 1) / chunk;
+        buffers_.assign(nc, std::string());
+        tbb::parallel_for(size_t(0), nc, [&](size_t c) {
+            static thread_local std::unique_ptr<LeafT> scratch;
+            std::ostringstream ss;
+            io::setDataCompression(ss, compression);
+            io::setGridBackgroundValuePtr(ss, &background);
+            const size_t a = c * chunk, b = std::min(all.size(), a + chunk);
+            std::vector<size_t> ends(b - a);
+            for (size_t i = a; i < b; i++) {
+                write_leaf(ss, *all[i], scratch, half);
+                ends[i - a] = (size_t)ss.tellp();
+            }
+            buffers_[c] = ss.str();
+            if (!has_dl) return;
+            // A leaf's bytes: its value mask, writeCompressedValues' kind
+            // byte, the inactive values and selection mask that kind
+            // names, then the values as written (the size OpenVDB's
+            // writeCompressedValuesSize gives, and 8 bytes of count).
+            const std::string &s = buffers_[c];
+            size_t at = 0;
+            for (size_t i = a; i < b; i++) {
+                const size_t end = ends[i - a];
+                const size_t mask_bytes = LeafT::NodeMaskType::memUsage();
+                const int8_t kind = (int8_t)s.at(at + mask_bytes);
+                size_t head = mask_bytes + 1;
+                if (kind == io::NO_MASK_AND_ONE_INACTIVE_VAL ||
+                    kind == io::MASK_AND_ONE_INACTIVE_VAL)
+                    head += sizeof(ValueT);
+                if (kind == io::MASK_AND_TWO_INACTIVE_VALS) head += 2 * sizeof(ValueT);
+                if (kind == io::MASK_AND_NO_INACTIVE_VALS ||
+                    kind == io::MASK_AND_ONE_INACTIVE_VAL || kind == io::MASK_AND_TWO_INACTIVE_VALS)
+                    head += mask_bytes;
+                if (end - at < head) throw std::runtime_error("a leaf's buffer is short");
+                dl.setMask(i, kind);
+                if (sized) dl.setCompressedSize(i, end - at - head);
+                at = end;
+            }
+        });
+        return has_dl;
+    }
+
+    uint64_t unloaded_bytes() const override
+    {
+        uint64_t n = 0;
+        if (fill_)
+            for (const LeafT *leaf : leaves())
+                n += unloaded(*leaf) ? LeafT::SIZE * sizeof(ValueT) : 0;
+        return n;
     }
 };
 
@@ -183,12 +311,111 @@ openvdb::FloatGrid::Ptr make_float_grid(float background)
     return std::make_shared<ParallelGrid<openvdb::FloatGrid>>(background);
 }
 
-// OpenVDB's own archive writer (the format io::File writes: seekable, with
-// grid offsets) into a stream of ours. io::File::write does not look at its
+// OpenVDB's archive format as io::File writes it (seekable, with grid
+// offsets), into a stream of ours. io::File::write does not look at its
 // stream after writing, so a full disk gave a short file and no error; this
 // stream throws on any failed write, flush or close.
+//
+// A ParallelGrid is written by write_grid below: Archive::writeGrid's steps
+// in its order, but the leaf buffers are written (on all threads) before
+// the grid's metadata, and the delayed-load metadata OpenVDB puts there is
+// taken from them. Archive::writeGrid computes it by compressing every leaf
+// once more, apart from the write (45 ms of a 150 ms fog write at 1024^3).
+// vdbcheck compares the whole file with what io::File writes for the grid
+// read back.
 class CheckedArchive final : public openvdb::io::Archive
 {
+    // Archive::writeGrid's steps for a prepared grid.
+    void write_grid(openvdb::io::GridDescriptor &gd, const openvdb::GridBase::ConstPtr &grid,
+                    const Prepared &prep, std::ostream &os) const
+    {
+        namespace io = openvdb::io;
+        struct Restore { // the file's stream metadata, as Archive::writeGrid leaves it
+            std::ostream &os;
+            io::StreamMetadata::Ptr was;
+            ~Restore() { io::setStreamMetadataPtr(os, was, /*transfer=*/false); }
+        } restore{os, io::getStreamMetadataPtr(os)};
+        io::StreamMetadata::Ptr meta(restore.was ? new io::StreamMetadata(*restore.was)
+                                                 : new io::StreamMetadata);
+        meta->setHalfFloat(grid->saveFloatAsHalf());
+        meta->gridMetadata() = static_cast<const openvdb::MetaMap &>(*grid);
+        io::setStreamMetadataPtr(os, meta, /*transfer=*/false);
+        gd.writeHeader(os);
+        const std::streampos offsets = os.tellp();
+        gd.writeStreamPos(os);
+        gd.setGridPos(os.tellp());
+        setGridCompression(os, *grid);
+
+        const openvdb::GridBase::Ptr copy = openvdb::ConstPtrCast<openvdb::GridBase>(
+            grid->copyGrid()); // shallow: the metadata written
+        io::DelayedLoadMetadata dl;
+        if (prep.prepare(os, dl)) copy->insertMeta(openvdb::GridBase::META_FILE_DELAYED_LOAD, dl);
+        if (io::getWriteGridStatsMetadata(os)) {
+            copy->addStatsMetadata();
+            if (uint64_t more = prep.unloaded_bytes()) // as if every leaf held its values
+                copy->insertMeta(openvdb::GridBase::META_FILE_MEM_BYTES,
+                                 openvdb::Int64Metadata(copy->memUsage() + (int64_t)more));
+            copy->insertMeta(
+                openvdb::GridBase::META_FILE_COMPRESSION,
+                openvdb::StringMetadata(io::compressionToString(io::getDataCompression(os))));
+        }
+        copy->writeMeta(os);
+        grid->writeTransform(os);
+        grid->writeTopology(os);
+        gd.setBlockPos(os.tellp());
+        grid->writeBuffers(os);
+        gd.setEndPos(os.tellp());
+        os.seekp(offsets, std::ios_base::beg);
+        gd.writeStreamPos(os);
+        gd.seekToEnd(os);
+    }
+
+    // Archive::write's steps, each grid through write_grid where it can
+    // be; false (nothing written) for grids it leaves to Archive::write:
+    // names that are empty or not unique (Archive::write suffixes them),
+    // a shared tree (an instance), a float grid whose class drops ZIP
+    // compression (Archive sizes its delayed-load metadata with it all the
+    // same).
+    bool write_own(std::ostream &os, const openvdb::GridPtrVec &grids) const
+    {
+        namespace io = openvdb::io;
+        std::set<std::string> names;
+        std::set<const openvdb::TreeBase *> trees;
+        bool own = true;
+        for (const openvdb::GridBase::Ptr &g : grids) {
+            const openvdb::GridClass cls = g ? g->getGridClass() : openvdb::GRID_UNKNOWN;
+            own = own && g && dynamic_cast<const Prepared *>(g.get()) && !g->getName().empty() &&
+                  names.insert(g->getName()).second && trees.insert(&g->constBaseTree()).second &&
+                  (g->isType<openvdb::BoolGrid>() ||
+                   (cls != openvdb::GRID_LEVEL_SET && cls != openvdb::GRID_FOG_VOLUME) ||
+                   !(compression() & io::COMPRESS_ZIP));
+        }
+        if (!own) { // Archive's writer would read a leaf made without values
+            for (const openvdb::GridBase::Ptr &g : grids)
+                if (auto *p = dynamic_cast<const Prepared *>(g.get()))
+                    if (p->unloaded_bytes())
+                        throw std::logic_error("a grid of leaves without values for Archive");
+            return false;
+        }
+        io::StreamMetadata::Ptr meta = io::getStreamMetadataPtr(os);
+        if (!meta) {
+            meta.reset(new io::StreamMetadata);
+            io::setStreamMetadataPtr(os, meta, /*transfer=*/false);
+        }
+        io::setDataCompression(os, compression());
+        io::setWriteGridStatsMetadata(os, isGridStatsMetadataEnabled());
+        writeHeader(os, /*seekable=*/true);
+        openvdb::MetaMap().writeMeta(os);
+        const int32_t count = (int32_t)grids.size();
+        os.write(reinterpret_cast<const char *>(&count), sizeof count);
+        for (const openvdb::GridBase::Ptr &g : grids) {
+            io::GridDescriptor gd(g->getName(), g->type(), g->saveFloatAsHalf());
+            write_grid(gd, g, *dynamic_cast<const Prepared *>(g.get()), os);
+            io::setDataCompression(os, compression());
+        }
+        return true;
+    }
+
   public:
     void write_file(const std::string &path, const openvdb::GridPtrVec &grids) const
     {
@@ -199,7 +426,7 @@ class CheckedArchive final : public openvdb::io::Archive
         os.rdbuf()->pubsetbuf(buf.get(), 1 << 20);
         os.exceptions(std::ios_base::failbit | std::ios_base::badbit);
         os.open(path, std::ios_base::out | std::ios_base::binary | std::ios_base::trunc);
-        Archive::write(os, grids, /*seekable=*/true, openvdb::MetaMap());
+        if (!write_own(os, grids)) Archive::write(os, grids, /*seekable=*/true, openvdb::MetaMap());
         os.flush();
         os.close();
     }
@@ -238,6 +465,14 @@ void release(openvdb::GridBase::Ptr &grid)
 struct vx_vdb_tree {
     openvdb::GridPtrVec grids;
 };
+
+extern "C" uint64_t vx_vdb_tree_bytes(const vx_vdb_tree *t)
+{
+    uint64_t n = 0;
+    for (const openvdb::GridBase::Ptr &grid : t->grids)
+        n += grid->memUsage();
+    return n;
+}
 
 extern "C" void vx_vdb_tree_free(vx_vdb_tree *t)
 {
@@ -406,11 +641,13 @@ template <typename LeafT> int coverage_leaf(const vx_bitgrid *g, int X, int Y, i
 
 // A leaf holds 512 voxels: a value mask (64 B) plus a bool mask (64 B) or
 // 512 floats (2 KiB), ~100 B of node overhead; the file buffer is about the
-// same again (compression works per leaf). A level set holds its float
-// band: up to 3 leaves a partial leaf (~1.7 on spot).
+// same again (compression works per leaf). A 0/1 fog leaf is made without
+// its floats (its buffer, ~150 B, is held from prepare to the write). A
+// level set holds its float band: up to 3 leaves a partial leaf (~1.7 on
+// spot).
 uint64_t leaf_bytes(vx_vdb_class cls, int coverage)
 {
-    return cls == VX_VDB_BOOL ? 240 : cls == VX_VDB_FOG || coverage ? 2300 : 3 * 2300;
+    return coverage ? 2300 : cls == VX_VDB_LEVEL_SET ? 3 * 2300 : 240;
 }
 
 // Bytes a tree of the grid g's dims with `partial` leaves of part_bytes
@@ -441,9 +678,6 @@ bool is_constant(const NodeT &node, typename NodeT::ValueType &value, bool &stat
 }
 
 // at: the index of voxel (0,0,0) in the tree (multiples of 8: a brick).
-// part_bytes: with io->vdb_max_bytes, what a partial leaf costs in
-// tree_bytes, checked as each z slab of a row of nodes is made (0: not
-// checked).
 //
 // The tree is made a lower internal node (16^3 leaves of the tree's index
 // space) at a time, each node whole before the tree takes it: no leaf or
@@ -456,7 +690,7 @@ bool is_constant(const NodeT &node, typename NodeT::ValueType &value, bool &stat
 template <typename TreeT, typename MakeLeaf>
 int build_tree(const vx_bitgrid *g, TreeT &tree, const typename TreeT::ValueType &on,
                const openvdb::Coord &at, const vx_voxel_io *io, double span, vx_err *err,
-               bool by_bits, uint64_t part_bytes, MakeLeaf make)
+               bool by_bits, MakeLeaf make)
 {
     using RootT = typename TreeT::RootNodeType;
     using UpperT = typename RootT::ChildNodeType;
@@ -464,7 +698,6 @@ int build_tree(const vx_bitgrid *g, TreeT &tree, const typename TreeT::ValueType
     using LeafT = typename TreeT::LeafNodeType;
     using ValueT = typename TreeT::ValueType;
     using Tile = std::tuple<openvdb::Coord, ValueT, bool>;
-    const uint64_t max_bytes = io && part_bytes ? io->vdb_max_bytes : 0;
     const int nx = g->grid.dims[0], ny = g->grid.dims[1], nz = g->grid.dims[2];
     const int lx = (nx + 7) / 8, ly = (ny + 7) / 8, lz = (nz + 7) / 8;
     // grid leaf l is tree leaf l + a, in lower node (l + a) >> 4 (b to e)
@@ -474,8 +707,6 @@ int build_tree(const vx_bitgrid *g, TreeT &tree, const typename TreeT::ValueType
     const int rows = (ey - by + 1) * (ez - bz + 1), per_row = ex - bx + 1;
     constexpr int ROUNDS = 8, SLABS = 16 / ROUNDS;
     const ValueT bg = tree.background();
-    std::atomic<uint64_t> partial{0}, full{0};
-    std::atomic<bool> over{false};
     struct Row { // a row's nodes while made, then what the tree takes
         std::vector<std::unique_ptr<LowerT>> making, nodes;
         std::vector<Tile> tiles; // nodes of one value
@@ -487,7 +718,7 @@ int build_tree(const vx_bitgrid *g, TreeT &tree, const typename TreeT::ValueType
             tbb::blocked_range<int>(0, rows, 1), [&](const tbb::blocked_range<int> &r) {
                 std::vector<uint8_t> scratch(by_bits ? 3 * (size_t)lx : 0);
                 uint8_t *kinds = scratch.data() + 2 * (size_t)lx;
-                for (int t = r.begin(); t < r.end() && !over; t++) {
+                for (int t = r.begin(); t < r.end(); t++) {
                     const int cy = by + t % (ey - by + 1), cz = bz + t / (ey - by + 1);
                     const int yl0 = std::max(0, 16 * cy - ay),
                               yl1 = std::min(ly, 16 * cy + 16 - ay);
@@ -495,8 +726,7 @@ int build_tree(const vx_bitgrid *g, TreeT &tree, const typename TreeT::ValueType
                     const int zl0 = std::max(0, z0), zl1 = std::min(lz, z0 + SLABS);
                     Row &row = made[(size_t)t];
                     if (row.making.empty()) row.making.resize((size_t)per_row);
-                    for (int zl = zl0; zl < zl1 && !over; zl++) {
-                        uint64_t p = 0, f = 0;
+                    for (int zl = zl0; zl < zl1; zl++) {
                         for (int yl = yl0; yl < yl1; yl++) {
                             if (by_bits)
                                 classify_leaves(g, yl, zl, scratch.data(), scratch.data() + lx,
@@ -515,18 +745,12 @@ int build_tree(const vx_bitgrid *g, TreeT &tree, const typename TreeT::ValueType
                                 if (!node) node.reset(new LowerT(xyz, bg, false));
                                 if (kind == LEAF_FULL) {
                                     node->addTile(LowerT::coordToOffset(xyz), on, true);
-                                    f++;
                                 } else {
                                     leaf->setOrigin(xyz);
                                     node->addLeaf(owned.release());
-                                    p++;
                                 }
                             }
                         }
-                        partial += p;
-                        full += f;
-                        if (max_bytes && tree_bytes(g, partial, full, part_bytes) > max_bytes)
-                            over = true;
                     }
                     if (round < ROUNDS - 1) continue;
                     // the row is whole: what tools::prune made of its nodes
@@ -544,12 +768,6 @@ int build_tree(const vx_bitgrid *g, TreeT &tree, const typename TreeT::ValueType
                     }
                 }
             });
-        if (over)
-            return vx_err_set(err, VX_ETOOBIG, "job_memory_limit",
-                              "the OpenVDB grid of these voxels needs over %llu bytes beside "
-                              "them, over the job memory limit (vdb_grid \"bool\" or another "
-                              "format needs less)",
-                              (unsigned long long)max_bytes);
     }
     RootT &root = tree.root();
     auto upper = [&](const openvdb::Coord &c) {
@@ -588,7 +806,7 @@ openvdb::BoolGrid::Ptr bool_grid(const vx_bitgrid *g, const openvdb::Coord &at,
 {
     openvdb::BoolGrid::Ptr grid = std::make_shared<ParallelGrid<openvdb::BoolGrid>>(false);
     using LeafT = openvdb::BoolGrid::TreeType::LeafNodeType;
-    int rc = build_tree(g, grid->tree(), true, at, io, span, err, true, 0,
+    int rc = build_tree(g, grid->tree(), true, at, io, span, err, true,
                         [g](int X, int Y, int Z, LeafT *&out) {
                             uint64_t w[8];
                             int kind = gather_leaf(g, X, Y, Z, w);
@@ -606,31 +824,42 @@ openvdb::BoolGrid::Ptr bool_grid(const vx_bitgrid *g, const openvdb::Coord &at,
     return grid;
 }
 
+// A 0/1 fog leaf's values from its mask: 1 where active, 0 elsewhere.
+void fog_values(const openvdb::FloatTree::LeafNodeType &from, openvdb::FloatTree::LeafNodeType &to)
+{
+    to.setValueMask(from.getValueMask());
+    float *d = to.buffer().data();
+    for (int x = 0; x < 8; x++) {
+        const uint64_t w = from.getValueMask().template getWord<uint64_t>(x);
+        for (int n = 0; n < 64; n++)
+            d[64 * x + n] = (float)((w >> n) & 1u);
+    }
+}
+
 openvdb::FloatGrid::Ptr fog_grid(const vx_bitgrid *g, const openvdb::Coord &at,
                                  const vx_voxel_io *io, double span, vx_err *err)
 {
-    openvdb::FloatGrid::Ptr grid = make_float_grid(0.0f);
     using LeafT = openvdb::FloatGrid::TreeType::LeafNodeType;
     int rc;
-    if (g->counts)
+    openvdb::FloatGrid::Ptr grid;
+    if (g->counts) {
+        grid = make_float_grid(0.0f);
         rc = build_tree(
-            g, grid->tree(), 1.0f, at, io, span, err, false, 0,
+            g, grid->tree(), 1.0f, at, io, span, err, false,
             [g](int X, int Y, int Z, LeafT *&out) { return coverage_leaf(g, X, Y, Z, out); });
-    else
-        rc = build_tree(g, grid->tree(), 1.0f, at, io, span, err, true, leaf_bytes(VX_VDB_FOG, 0),
-                        [g](int X, int Y, int Z, LeafT *&out) {
-                            uint64_t w[8];
-                            int kind = gather_leaf(g, X, Y, Z, w);
-                            if (kind != LEAF_PART) return kind;
-                            out = new LeafT(openvdb::Coord(X, Y, Z), 0.0f, false);
-                            float *d = out->buffer().data();
-                            for (int x = 0; x < 8; x++) {
-                                out->getValueMask().template getWord<uint64_t>(x) = w[x];
-                                for (int n = 0; n < 64; n++)
-                                    d[64 * x + n] = (float)((w[x] >> n) & 1u);
-                            }
-                            return kind;
-                        });
+    } else { // leaves of masks only, their values made as they are written
+        grid = std::make_shared<ParallelGrid<openvdb::FloatGrid>>(0.0f, fog_values);
+        rc = build_tree(
+            g, grid->tree(), 1.0f, at, io, span, err, true, [g](int X, int Y, int Z, LeafT *&out) {
+                uint64_t w[8];
+                int kind = gather_leaf(g, X, Y, Z, w);
+                if (kind != LEAF_PART) return kind;
+                out = new LeafT(openvdb::PartialCreate(), openvdb::Coord(X, Y, Z), 0.0f, false);
+                for (int x = 0; x < 8; x++)
+                    out->getValueMask().template getWord<uint64_t>(x) = w[x];
+                return kind;
+            });
+    }
     if (rc) return nullptr;
     grid->setTransform(transform_of(g->grid));
     grid->setGridClass(openvdb::GRID_FOG_VOLUME);
@@ -837,16 +1066,16 @@ extern "C" uint64_t vx_voxel_vdb_bytes(const int dims[3], vx_vdb_class cls, int 
 {
     uint64_t n = (uint64_t)dims[0] * (uint64_t)dims[1] * (uint64_t)dims[2];
     uint64_t leaves = n / 512 + 1;
-    // A 0/1 fog grid's float leaves are only the partial ones, and a level
-    // set's band follows them: known from the grid (vx_voxel_vdb_grid_bytes,
-    // or the fog writer as it builds); here the topology, as for bool.
+    // A 0/1 fog grid's leaves hold masks only, as bool ones do; a level
+    // set's band follows the partial leaves, known from the grid
+    // (vx_voxel_vdb_grid_bytes): here the topology, as for bool.
     if ((cls == VX_VDB_FOG || cls == VX_VDB_LEVEL_SET) && !coverage) cls = VX_VDB_BOOL;
     return leaves * leaf_bytes(cls, coverage) * 2;
 }
 
 extern "C" uint64_t vx_voxel_vdb_grid_bytes(const vx_bitgrid *g, vx_vdb_class cls)
 {
-    if (g->counts || cls == VX_VDB_BOOL)
+    if (g->counts || cls != VX_VDB_LEVEL_SET)
         return vx_voxel_vdb_bytes(g->grid.dims, cls, g->counts != 0);
     const int lx = (g->grid.dims[0] + 7) / 8, ly = (g->grid.dims[1] + 7) / 8,
               lz = (g->grid.dims[2] + 7) / 8;
@@ -866,8 +1095,8 @@ extern "C" uint64_t vx_voxel_vdb_grid_bytes(const vx_bitgrid *g, vx_vdb_class cl
         partial += p;
         full += f;
     });
-    // Partial leaves as floats (fog) or as a band of up to 3 float leaves a
-    // leaf (level set), full ones as tiles.
+    // Partial leaves as a band of up to 3 float leaves a leaf, full ones as
+    // tiles.
     return tree_bytes(g, partial, full, leaf_bytes(cls, 0));
 }
 
@@ -1017,7 +1246,7 @@ extern "C" int vx_vdb_merge_add(vx_vdb_merge *m, const char *path, vx_err *err)
 extern "C" uint64_t vx_vdb_merge_level_set_bytes(const vx_vdb_merge *m, const int dims[3])
 {
     auto b = m->grid ? openvdb::GridBase::grid<openvdb::BoolGrid>(m->grid) : nullptr;
-    return b ? (uint64_t)b->tree().leafCount() * 3 * leaf_bytes(VX_VDB_FOG, 0) +
+    return b ? (uint64_t)b->tree().leafCount() * leaf_bytes(VX_VDB_LEVEL_SET, 0) +
                    TreeRows::window_bytes(dims)
              : 0;
 }

@@ -8,16 +8,17 @@
 //     nearest voxel of the other state (outside the grid: unset), searched
 //     voxel by voxel, active where under 3 voxels, negative exactly at the
 //     set voxels.
-// The grid's topology and leaf buffers, which the daemon writes on all
-// threads, must also end the file byte for byte as OpenVDB's own serial
-// Tree::writeTopology and Tree::writeBuffers of the grid read back write
-// them.
+// The file, whose topology, leaf buffers and delayed-load metadata the
+// daemon writes on all threads, must also be byte for byte what
+// OpenVDB's own io::File writes for the grid read back (but for the
+// header's random UUID).
 // Exit 0 when equal, 1 with a message on the first difference.
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
 #include <cstdlib>
+#include <unistd.h>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -86,7 +87,7 @@ int main(int argc, char **argv)
     };
     try {
         openvdb::io::File file(argv[1]);
-        file.open();
+        file.open(/*delayLoad=*/false);
         const uint32_t compression = file.compression();
         openvdb::GridPtrVecPtr grids = file.getGrids();
         file.close();
@@ -97,37 +98,40 @@ int main(int argc, char **argv)
             set += raw[i] != 0;
             covered += !counts.empty() && counts[i];
         }
-        // The topology and the leaf buffers, which the daemon writes on all
-        // threads, end the file as OpenVDB's own serial Tree::writeTopology
-        // and Tree::writeBuffers of the grid read back write them (fog
-        // volumes and level sets are written without zlib).
-        auto serial = [&](const auto &grid, uint32_t c) {
-            std::ostringstream ss;
-            openvdb::io::setDataCompression(ss, c);
-            openvdb::io::setGridBackgroundValuePtr(ss, &grid.tree().background());
-            grid.tree().writeTopology(ss, grid.saveFloatAsHalf());
-            grid.tree().writeBuffers(ss, grid.saveFloatAsHalf());
-            const std::string want = ss.str();
-            const std::vector<unsigned char> bytes = slurp(argv[1]);
-            if (bytes.size() < want.size() ||
-                memcmp(bytes.data() + bytes.size() - want.size(), want.data(), want.size()))
+        // The whole file as io::File writes the grid read back: the header
+        // (its UUID aside), the grid's metadata (delayed-load metadata and
+        // statistics included), topology and leaf buffers.
+        {
+            char tmp[] = "/tmp/vdbcheck-XXXXXX";
+            const int fd = mkstemp(tmp);
+            if (fd < 0) return fprintf(stderr, "vdbcheck: no temporary file\n"), 1;
+            close(fd);
+            openvdb::io::File out(tmp);
+            out.setCompression(compression);
+            out.write(*grids);
+            const std::vector<unsigned char> want = slurp(tmp), bytes = slurp(argv[1]);
+            unlink(tmp);
+            // magic 8, version 4, library version 8, grid offsets 1, then the UUID's 36
+            const size_t uuid = 21, uuid_end = uuid + 36;
+            size_t d = 0;
+            while (d < want.size() && d < bytes.size() &&
+                   (want[d] == bytes[d] || (d >= uuid && d < uuid_end)))
+                d++;
+            if (d != want.size() || d != bytes.size())
                 return fprintf(stderr,
-                               "vdbcheck: the topology and leaf buffers are not OpenVDB's serial "
-                               "ones (%zu bytes)\n",
-                               want.size()),
+                               "vdbcheck: the file is not what OpenVDB's io::File writes for its "
+                               "grid: %zu against %zu bytes, first difference at byte %zu\n",
+                               bytes.size(), want.size(), d),
                        1;
-            return 0;
-        };
+        }
         if (auto b = openvdb::gridPtrCast<openvdb::BoolGrid>(g)) {
             if (b->getName() != "voxels") return fprintf(stderr, "vdbcheck: bool grid name\n"), 1;
-            if (serial(*b, compression)) return 1;
             return compare(*b, nx, ny, nz, set, [&](const openvdb::Coord &c, bool &on, bool &v) {
                 on = v = raw[at(c)] != 0;
             });
         }
         auto f = openvdb::gridPtrCast<openvdb::FloatGrid>(g);
         if (!f) return fprintf(stderr, "vdbcheck: neither bool nor float\n"), 1;
-        if (serial(*f, compression & ~openvdb::io::COMPRESS_ZIP)) return 1;
         if (f->getGridClass() == openvdb::GRID_FOG_VOLUME) {
             if (!counts.empty())
                 return compare(*f, nx, ny, nz, covered,
