@@ -33,6 +33,7 @@
 #include <openvdb/tools/Count.h>
 #include <openvdb/tools/Prune.h>
 #include <openvdb/tools/SignedFloodFill.h>
+#include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
 
 extern "C" {
@@ -101,10 +102,14 @@ class Prepared
 // Tree::writeTopology and Tree::writeBuffers (vdbcheck compares them with
 // those, on the grid read back).
 //
-// A leaf may be made without values (LeafNode's PartialCreate: its mask
-// only; a 0/1 fog grid's 80 MB of floats at 1024^3 were the most of its
-// writer's time, made, faulted in and freed); fill then gives its values
-// in a scratch leaf as it is written.
+// With on_ set, a leaf may be made without values (LeafNode's
+// PartialCreate: its mask only): it holds on_ at its active voxels and the
+// background elsewhere (a 0/1 fog grid: its 80 MB of floats at 1024^3 were
+// most of its writer's time, made, faulted in and freed). Such a leaf's
+// buffer is its value mask, then what writeCompressedValues writes for its
+// values, which depends only on how many are active: OpenVDB's own bytes,
+// made once for each count a thread meets (a scratch leaf given the
+// leaf's values), are reused for every leaf of that count.
 template <typename GridT> class ParallelGrid final : public GridT, public Prepared
 {
     using TreeT = typename GridT::TreeType;
@@ -113,10 +118,15 @@ template <typename GridT> class ParallelGrid final : public GridT, public Prepar
     using LowerT = typename UpperT::ChildNodeType;
     using LeafT = typename TreeT::LeafNodeType;
     using ValueT = typename GridT::ValueType;
-    using Fill = void (*)(const LeafT &from, LeafT &to);
-
-    Fill fill_ = nullptr;
+    const bool by_mask_;
+    const ValueT on_;
     mutable std::vector<std::string> buffers_; // prepared: the buffers section, in chunks
+
+    // What a thread keeps for leaves made without values.
+    struct Unloaded {
+        std::unique_ptr<LeafT> scratch;
+        std::vector<std::string> tail; // by active count; empty: not made yet
+    };
 
     // Appends what write(ss, i) puts into a fresh memory stream (the
     // compression and background of os) for i in [0, n), on all threads, a
@@ -150,14 +160,38 @@ template <typename GridT> class ParallelGrid final : public GridT, public Prepar
         os.write(reinterpret_cast<const char *>(&v), sizeof v);
     }
 
-    // leaf's writeBuffers, or a scratch leaf's filled from it
-    void write_leaf(std::ostream &os, const LeafT &leaf, std::unique_ptr<LeafT> &scratch,
-                    bool half) const
+    // The leaf's writeBuffers: its own, or for a leaf made without values
+    // its mask and the bytes of its values' count.
+    void write_leaf(std::ostream &os, const LeafT &leaf, Unloaded &u, bool half) const
     {
-        if (!unloaded(leaf)) return leaf.writeBuffers(os, half);
-        if (!scratch) scratch.reset(new LeafT(leaf.origin()));
-        fill_(leaf, *scratch);
-        scratch->writeBuffers(os, half);
+        if constexpr (std::is_same<ValueT, bool>::value) {
+            return leaf.writeBuffers(os, half);
+        } else {
+            if (!unloaded(leaf)) return leaf.writeBuffers(os, half);
+            write_unloaded(os, leaf, u, half);
+        }
+    }
+
+    void write_unloaded(std::ostream &os, const LeafT &leaf, Unloaded &u, bool half) const
+    {
+        const typename LeafT::NodeMaskType &mask = leaf.getValueMask();
+        const openvdb::Index on = mask.countOn();
+        if (u.tail.empty()) u.tail.resize(LeafT::SIZE + 1);
+        std::string &tail = u.tail[on];
+        if (tail.empty()) {
+            if (!u.scratch) u.scratch.reset(new LeafT(leaf.origin()));
+            ValueT *d = u.scratch->buffer().data();
+            for (openvdb::Index n = 0; n < LeafT::SIZE; n++)
+                d[n] = mask.isOn(n) ? on_ : this->constTree().background();
+            std::ostringstream ss;
+            openvdb::io::setDataCompression(ss, openvdb::io::getDataCompression(os));
+            openvdb::io::setGridBackgroundValuePtr(ss, openvdb::io::getGridBackgroundValuePtr(os));
+            openvdb::io::writeCompressedValues(ss, d, LeafT::SIZE, mask,
+                                               typename LeafT::NodeMaskType(), half);
+            tail = ss.str();
+        }
+        mask.save(os);
+        os.write(tail.data(), (std::streamsize)tail.size());
     }
 
     bool unloaded(const LeafT &leaf) const
@@ -165,7 +199,7 @@ template <typename GridT> class ParallelGrid final : public GridT, public Prepar
         if constexpr (std::is_same<ValueT, bool>::value) // a bool leaf always holds its values
             return false;
         else
-            return fill_ && leaf.buffer().empty();
+            return by_mask_ && leaf.buffer().empty();
     }
 
     std::vector<const LeafT *> leaves() const
@@ -177,8 +211,13 @@ template <typename GridT> class ParallelGrid final : public GridT, public Prepar
     }
 
   public:
-    explicit ParallelGrid(const ValueT &background, Fill fill_leaf = nullptr)
-        : GridT(background), fill_(fill_leaf)
+    explicit ParallelGrid(const ValueT &background)
+        : GridT(background), by_mask_(false), on_(background)
+    {
+    }
+    // leaves made without values hold on at their active voxels
+    ParallelGrid(const ValueT &background, const ValueT &on)
+        : GridT(background), by_mask_(true), on_(on)
     {
     }
 
@@ -235,9 +274,9 @@ template <typename GridT> class ParallelGrid final : public GridT, public Prepar
         }
         const std::vector<const LeafT *> all = leaves();
         const bool half = this->saveFloatAsHalf();
+        tbb::enumerable_thread_specific<Unloaded> mine; // the tails are this write's
         in_parallel(os, all.size(), 128, [&](std::ostream &ss, size_t i) {
-            static thread_local std::unique_ptr<LeafT> scratch;
-            write_leaf(ss, *all[i], scratch, half);
+            write_leaf(ss, *all[i], mine.local(), half);
         });
     }
 
@@ -256,15 +295,16 @@ template <typename GridT> class ParallelGrid final : public GridT, public Prepar
         }
         const size_t chunk = 128, nc = (all.size() + chunk - 1) / chunk;
         buffers_.assign(nc, std::string());
+        tbb::enumerable_thread_specific<Unloaded> mine; // the tails are this write's
         tbb::parallel_for(size_t(0), nc, [&](size_t c) {
-            static thread_local std::unique_ptr<LeafT> scratch;
+            Unloaded &u = mine.local();
             std::ostringstream ss;
             io::setDataCompression(ss, compression);
             io::setGridBackgroundValuePtr(ss, &background);
             const size_t a = c * chunk, b = std::min(all.size(), a + chunk);
             std::vector<size_t> ends(b - a);
             for (size_t i = a; i < b; i++) {
-                write_leaf(ss, *all[i], scratch, half);
+                write_leaf(ss, *all[i], u, half);
                 ends[i - a] = (size_t)ss.tellp();
             }
             buffers_[c] = ss.str();
@@ -299,7 +339,7 @@ template <typename GridT> class ParallelGrid final : public GridT, public Prepar
     uint64_t unloaded_bytes() const override
     {
         uint64_t n = 0;
-        if (fill_)
+        if (by_mask_)
             for (const LeafT *leaf : leaves())
                 n += unloaded(*leaf) ? LeafT::SIZE * sizeof(ValueT) : 0;
         return n;
@@ -824,18 +864,6 @@ openvdb::BoolGrid::Ptr bool_grid(const vx_bitgrid *g, const openvdb::Coord &at,
     return grid;
 }
 
-// A 0/1 fog leaf's values from its mask: 1 where active, 0 elsewhere.
-void fog_values(const openvdb::FloatTree::LeafNodeType &from, openvdb::FloatTree::LeafNodeType &to)
-{
-    to.setValueMask(from.getValueMask());
-    float *d = to.buffer().data();
-    for (int x = 0; x < 8; x++) {
-        const uint64_t w = from.getValueMask().template getWord<uint64_t>(x);
-        for (int n = 0; n < 64; n++)
-            d[64 * x + n] = (float)((w >> n) & 1u);
-    }
-}
-
 openvdb::FloatGrid::Ptr fog_grid(const vx_bitgrid *g, const openvdb::Coord &at,
                                  const vx_voxel_io *io, double span, vx_err *err)
 {
@@ -848,7 +876,7 @@ openvdb::FloatGrid::Ptr fog_grid(const vx_bitgrid *g, const openvdb::Coord &at,
             g, grid->tree(), 1.0f, at, io, span, err, false,
             [g](int X, int Y, int Z, LeafT *&out) { return coverage_leaf(g, X, Y, Z, out); });
     } else { // leaves of masks only, their values made as they are written
-        grid = std::make_shared<ParallelGrid<openvdb::FloatGrid>>(0.0f, fog_values);
+        grid = std::make_shared<ParallelGrid<openvdb::FloatGrid>>(0.0f, 1.0f);
         rc = build_tree(
             g, grid->tree(), 1.0f, at, io, span, err, true, [g](int X, int Y, int Z, LeafT *&out) {
                 uint64_t w[8];
