@@ -1207,6 +1207,20 @@ extern "C" int vx_voxel_write_vdb_float(const float *v, const int dims[3], const
     });
 }
 
+namespace
+{
+// A ParallelGrid sharing grid's tree, with its metadata and transform.
+template <typename GridT> openvdb::GridBase::Ptr as_parallel(GridT &grid)
+{
+    auto p = std::make_shared<ParallelGrid<GridT>>(grid.background());
+    static_cast<openvdb::MetaMap &>(*p) = static_cast<const openvdb::MetaMap &>(grid);
+    p->setTree(grid.treePtr());
+    p->setTransform(grid.transformPtr());
+    p->setSaveFloatAsHalf(grid.saveFloatAsHalf());
+    return p;
+}
+} // namespace
+
 // The merge of brick files (io.h): one grid, bool or float as the first
 // brick's, whose tree takes each brick's nodes by OpenVDB's own Tree::merge
 // (the bricks are disjoint, so nodes move over, nothing is combined); the
@@ -1323,6 +1337,13 @@ extern "C" int vx_vdb_merge_write(vx_vdb_merge *m, vx_vdb_class cls, const vx_gr
         out->setTransform(transform_of(whole->grid));
         // The bricks' own metadata (the last brick's offset) is not the grid's.
         out->removeMeta("brick_offset");
+        // a grid read from a brick, written on all threads as ours are
+        if (!dynamic_cast<const Prepared *>(out.get())) {
+            if (auto b = openvdb::GridBase::grid<openvdb::BoolGrid>(out))
+                out = as_parallel(*b);
+            else if (auto f = openvdb::GridBase::grid<openvdb::FloatGrid>(out))
+                out = as_parallel(*f);
+        }
         if (io && io->progress && io->progress(io->ud, 0.85, err)) return -1;
         grids.push_back(out);
         return 0;
