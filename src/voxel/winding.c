@@ -234,13 +234,20 @@ static int poll(wctx *c, int t)
 
 /* ---- inside per column ------------------------------------------------ */
 
-/* Voxel (i, k) of the row being filled: its slice of the grid, the words
- * of every engine z row for this engine y, contiguous (with rays along z
- * a column's voxels are a row of the grid apart: set in place they missed
- * the cache at every bit; along y the slice is one layer of the grid). */
-static void set_bit(const wctx *c, uint32_t *slice, int i, int k)
+/* Voxels (i, k0..k1) of the row being filled, in its slice of the grid:
+ * the words of every engine z row for this engine y, contiguous (with rays
+ * along z a column's voxels are a row of the grid apart: set in place they
+ * missed the cache at every bit; along y the slice is one layer of the
+ * grid). The slice holds where each column's state changes along k, bit i
+ * flipped at k0 and past k1 (a column's runs are disjoint): slice_out
+ * makes the voxels of it by an XOR along k, a word of 32 columns at a
+ * time (a run set bit by bit was 13% of the bunny's time at 1024^3). */
+static void set_run(const wctx *c, uint32_t *slice, int i, int k0, int k1)
 {
-    slice[(size_t)k * c->out->wx + (size_t)(i >> 5)] |= 1u << (i & 31);
+    const size_t wx = c->out->wx, w = (size_t)(i >> 5);
+    const uint32_t bit = 1u << (i & 31);
+    slice[(size_t)k0 * wx + w] ^= bit;
+    if (k1 + 1 < c->nz) slice[(size_t)(k1 + 1) * wx + w] ^= bit;
 }
 
 /* The world position of the engine's centre (i, j, k), in the grid's axes. */
@@ -288,14 +295,12 @@ static void fill_run(wctx *c, uint32_t *slice, int i, int j, int ka, int kb, dou
     int da = fa >= 0, db = fb >= 0;
     if (da == db) {
         int k0 = ka < 0 ? 0 : ka, k1 = kb > c->nz - 1 ? c->nz - 1 : kb;
-        if (da)
-            for (int k = k0; k <= k1; k++)
-                set_bit(c, slice, i, k);
+        if (da && k0 <= k1) set_run(c, slice, i, k0, k1);
         return;
     }
     if (kb - ka <= 1) {
-        if (da && ka >= 0) set_bit(c, slice, i, ka);
-        if (db && kb < c->nz) set_bit(c, slice, i, kb);
+        if (da && ka >= 0) set_run(c, slice, i, ka, ka);
+        if (db && kb < c->nz) set_run(c, slice, i, kb, kb);
         return;
     }
     int km = ka + (kb - ka) / 2;
@@ -378,6 +383,23 @@ static void column(wctx *c, uint32_t *slice, int i, int j, const int32_t *z, siz
     }
 }
 
+/* The voxels of engine row j from its slice of state changes (set_run),
+ * into the grid: row j of every layer, or with rays along y layer j. */
+static void slice_out(const wctx *c, uint32_t *slice, int j)
+{
+    const size_t wx = c->out->wx;
+    for (int k = 0; k < c->nz; k++) {
+        uint32_t *s = slice + (size_t)k * wx;
+        const size_t row =
+            c->ax[2] == 2 ? (size_t)k * c->ny + (size_t)j : (size_t)j * c->nz + (size_t)k;
+        uint32_t *out = c->out->bits + row * wx;
+        if (k)
+            for (size_t w = 0; w < wx; w++)
+                s[w] ^= s[w - wx];
+        memcpy(out, s, wx * sizeof *s);
+    }
+}
+
 /* The rows of band b: its triangles' crossings into the thread's scratch,
  * sorted by column, then each row's columns filled into the slice and
  * copied into the grid. */
@@ -427,13 +449,7 @@ static int band_task(int b, int t, void *ud)
                                   far_box(c, i, i, j, j, c->rlo, c->rhi, 1));
             column(c, sc->slice, i, j, sc->z, n, far);
         }
-        if (c->ax[2] == 2) /* row j of every layer */
-            for (int k = 0; k < c->nz; k++)
-                memcpy(c->out->bits + ((size_t)k * c->ny + (size_t)j) * wx,
-                       sc->slice + (size_t)k * wx, wx * sizeof *sc->slice);
-        else /* rays along y: the slice is layer j */
-            memcpy(c->out->bits + (size_t)j * c->nz * wx, sc->slice,
-                   (size_t)c->nz * wx * sizeof *sc->slice);
+        slice_out(c, sc->slice, j);
     }
     atomic_fetch_add(&c->done, 1);
     return 0;
