@@ -393,8 +393,11 @@ class CheckedArchive final : public openvdb::io::Archive
         if (io::getWriteGridStatsMetadata(os)) {
             copy->addStatsMetadata();
             if (uint64_t more = prep.unloaded_bytes()) // as if every leaf held its values
-                copy->insertMeta(openvdb::GridBase::META_FILE_MEM_BYTES,
-                                 openvdb::Int64Metadata(copy->memUsage() + (int64_t)more));
+                copy->insertMeta(
+                    openvdb::GridBase::META_FILE_MEM_BYTES,
+                    openvdb::Int64Metadata(
+                        copy->metaValue<int64_t>(openvdb::GridBase::META_FILE_MEM_BYTES) +
+                        (int64_t)more));
             copy->insertMeta(
                 openvdb::GridBase::META_FILE_COMPRESSION,
                 openvdb::StringMetadata(io::compressionToString(io::getDataCompression(os))));
