@@ -393,9 +393,11 @@ static void slice_out(const wctx *c, uint32_t *slice, int j)
         const size_t row =
             c->ax[2] == 2 ? (size_t)k * c->ny + (size_t)j : (size_t)j * c->nz + (size_t)k;
         uint32_t *out = c->out->bits + row * wx;
-        if (k)
+        if (k) {
+            const uint32_t *above = s - wx;
             for (size_t w = 0; w < wx; w++)
-                s[w] ^= s[w - wx];
+                s[w] ^= above[w];
+        }
         memcpy(out, s, wx * sizeof *s);
     }
 }

@@ -19,7 +19,6 @@
 #include <cstring>
 #include <cstdlib>
 #include <unistd.h>
-#include <sstream>
 #include <string>
 #include <vector>
 
