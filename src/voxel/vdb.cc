@@ -264,20 +264,15 @@ template <typename GridT> class ParallelGrid final : public GridT, public Prepar
 
     void writeBuffers(std::ostream &os) const override
     {
-        if (!buffers_.empty()) { // prepared
-            for (std::string &c : buffers_) {
-                os.write(c.data(), (std::streamsize)c.size());
-                std::string().swap(c);
-            }
-            buffers_.clear();
-            return;
+        if (buffers_.empty()) { // not prepared: written by Archive's own writer
+            openvdb::io::DelayedLoadMetadata dl;
+            prepare(os, dl);
         }
-        const std::vector<const LeafT *> all = leaves();
-        const bool half = this->saveFloatAsHalf();
-        tbb::enumerable_thread_specific<Unloaded> mine; // the tails are this write's
-        in_parallel(os, all.size(), 128, [&](std::ostream &ss, size_t i) {
-            write_leaf(ss, *all[i], mine.local(), half);
-        });
+        for (std::string &c : buffers_) {
+            os.write(c.data(), (std::streamsize)c.size());
+            std::string().swap(c);
+        }
+        buffers_.clear();
     }
 
     int prepare(std::ostream &os, openvdb::io::DelayedLoadMetadata &dl) const override
