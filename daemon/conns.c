@@ -29,7 +29,8 @@
  *     --max-connections, it closes the oldest HEAD (with a 408) and IDLE
  *     connections until they are down to 80%, then if need be the slowest
  *     BODY under 16 x --min-body-rate (408), then the slowest readers of
- *     answers under 16 x --min-send-rate (cut as above). A client that sends its head
+ *     answers under 16 x --min-send-rate (cut as above), sweep after sweep
+ *     until 80% is reached. A client that sends its head
  *     at once is BUSY within a millisecond and is never a victim, so
  *     however many addresses drip heads, a fresh client finds a slot (or
  *     waits in the listen backlog, ahead of the victims' reconnections,
@@ -133,6 +134,10 @@ struct vx_conns {
     pthread_mutex_t ling_lock;
     lingerer *ling;
     size_t nling, cap_ling;
+    /* Set when the open connections reach the headroom mark, cleared when
+     * they are down to 80%: a victim whose rate is not known yet at the
+     * first sweep over the mark goes at a later one. */
+    int shedding;
 };
 
 #define BODY_GRACE_S 2.0   /* a body is not rated before this */
@@ -552,7 +557,9 @@ static void sweep(vx_conns *s, vx_conn **cand, head_kill *ks, size_t *nk, size_t
     /* Headroom: from 90% of the connections down to 80%, oldest first. */
     size_t max = (size_t)cfg->max_connections;
     size_t high = max >= 10 ? max - max / 10 : max, low = max >= 10 ? max - max / 5 : max - 1;
-    if (live < high || !cand) return;
+    if (live >= high) s->shedding = 1;
+    if (live <= low) s->shedding = 0;
+    if (!s->shedding || !cand) return;
     qsort(cand, ncand, sizeof *cand, by_phase_time);
     for (size_t i = 0; i < ncand && live > low; i++) {
         vx_conn *vc = cand[i];
@@ -594,6 +601,7 @@ static void sweep(vx_conns *s, vx_conn **cand, head_kill *ks, size_t *nk, size_t
     qsort(cand, nslow, sizeof *cand, by_out_rate);
     for (size_t i = 0; i < nslow && live > low; i++, live--)
         cut_reader(cand[i], cand[i]->out_rate, "evicted");
+    if (live <= low) s->shedding = 0;
     for (vx_conn *vc = s->list; vc; vc = vc->next) /* free the victims' slots now */
         if (vc->killed && !vc->rd_closed) {
             shutdown(vc->fd, SHUT_RD);
