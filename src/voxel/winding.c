@@ -17,9 +17,12 @@
  * task takes a band of rows of columns: its triangles' crossings (once
  * each) sorted by column, then its rows filled, as cpu.c does along x.
  * w_K is smooth between K's crossings. On a run of centres between two
- * crossings, when a bound of |w_K| (area over squared distance per tree
- * node; first over blocks of columns, then over one column, then over the
- * run) stays under the crossing count's margin to 1/2, the count decides
+ * crossings, when a bound of w_K (area over squared distance per tree
+ * node, the distance to its bounding box; first of |w_K| over blocks of
+ * columns, then over one column; then over the run, of w_K from the side
+ * that could flip it: from above where the count n >= 1, and there a
+ * triangle the whole run sees from its front adds nothing, from below
+ * where n <= 0) stays within the count's margin to 1/2, the count decides
  * alone; else w_K is evaluated with a tree over K (wtree.c, Barill et al.
  * 2018) at both ends of the run (and its middle when it is over 8
  * voxels), and where they disagree about w >= 1/2 the run is split
@@ -267,16 +270,17 @@ static double margin_at(const wctx *c, int i, int j, int k, int n)
     return n - vx_wtree_eval(&c->tree, q) - 0.5;
 }
 
-/* 1 when the cone's |w| stays under |n - 1/2| on the centres of columns
- * i0..i1 of rows j0..j1, ka..kb along z: there w >= 1/2 exactly where
- * n >= 1, with nothing evaluated. */
-static int far_box(const wctx *c, int i0, int i1, int j0, int j1, int ka, int kb, int n)
+/* 1 when the cone's w stays under n - 1/2 (side +1, for n >= 1), over it
+ * (side -1, n <= 0), or |w| under |n - 1/2| (side 0) on the centres of
+ * columns i0..i1 of rows j0..j1, ka..kb along z: there w >= 1/2 exactly
+ * where n >= 1, with nothing evaluated. */
+static int far_box(const wctx *c, int i0, int i1, int j0, int j1, int ka, int kb, int n, int side)
 {
     double lo[3], hi[3];
     centre(c, i0, j0, ka, lo);
     centre(c, i1, j1, kb, hi);
     double limit = fabs(n - 0.5);
-    return vx_wtree_bound(&c->tree, lo, hi, limit) < limit;
+    return vx_wtree_bound(&c->tree, lo, hi, limit, side) < limit;
 }
 
 /* Centres ka..kb of one run between crossings, the margins at its ends
@@ -359,7 +363,7 @@ static void column(wctx *c, uint32_t *slice, int i, int j, const int32_t *z, siz
         int ka = r && zp > lo ? zp : lo;
         int kb = r < n && zr - 1 < hi ? zr - 1 : hi;
         if (ka <= kb && kb >= 0 && ka <= c->nz - 1) {
-            if (!c->open || far_col || far_box(c, i, i, j, j, ka, kb, cnt)) {
+            if (!c->open || far_col || far_box(c, i, i, j, j, ka, kb, cnt, cnt >= 1 ? 1 : -1)) {
                 double f = cnt >= 1 ? 1 : -1;
                 fill_run(c, slice, i, j, ka, kb, f, f, cnt, 0);
             } else {
@@ -430,7 +434,7 @@ static int band_task(int b, int t, void *ud)
         for (int i = c->lo[0]; i <= c->hi[0] && ja <= jb; i += FAR_BLOCK) {
             int ib = i + FAR_BLOCK - 1 < c->hi[0] ? i + FAR_BLOCK - 1 : c->hi[0];
             sc->far[(i - c->lo[0]) / FAR_BLOCK] =
-                (uint8_t)far_box(c, i, ib, ja, jb, c->rlo, c->rhi, 1);
+                (uint8_t)far_box(c, i, ib, ja, jb, c->rlo, c->rhi, 1, 0);
         }
     for (int j = ja; j <= jb; j++) {
         memset(sc->slice, 0, (size_t)c->nz * wx * sizeof *sc->slice);
@@ -448,7 +452,7 @@ static int band_task(int b, int t, void *ud)
                 sc->z[k] = sc->x.sorted[begin + k].at2;
             sort_column(sc->z, n);
             int far = c->open && (sc->far[(i - c->lo[0]) / FAR_BLOCK] ||
-                                  far_box(c, i, i, j, j, c->rlo, c->rhi, 1));
+                                  far_box(c, i, i, j, j, c->rlo, c->rhi, 1, 0));
             column(c, sc->slice, i, j, sc->z, n, far);
         }
         slice_out(c, sc->slice, j);

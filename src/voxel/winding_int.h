@@ -14,15 +14,16 @@
 #include "util/err.h"
 
 typedef struct vx_wtree_node {
-    double p[3];    /* area-weighted centre of its triangles */
-    double a[3];    /* sum of the vector areas (half cross products) */
-    double m[9];    /* sum of (centroid - p) (x) vector area, row-major */
-    double far2;    /* (beta * radius)^2: farther query points use the expansion */
-    double r;       /* radius: every vertex lies within r of p */
-    double area;    /* sum of the triangles' areas */
-    int kid[2];     /* children, or -1 for a leaf */
-    int first, n;   /* leaf: triangles first..first+n-1 (tree order) */
-    int vfirst, nv; /* leaf: its distinct corners vfirst..vfirst+nv-1 */
+    double p[3];         /* area-weighted centre of its triangles */
+    double a[3];         /* sum of the vector areas (half cross products) */
+    double m[9];         /* sum of (centroid - p) (x) vector area, row-major */
+    double far2;         /* (beta * radius)^2: farther query points use the expansion */
+    double r;            /* radius: every vertex lies within r of p */
+    double lo[3], hi[3]; /* the bounding box of its vertices */
+    double area;         /* sum of the triangles' areas */
+    int kid[2];          /* children, or -1 for a leaf */
+    int first, n;        /* leaf: triangles first..first+n-1 (tree order) */
+    int vfirst, nv;      /* leaf: its distinct corners vfirst..vfirst+nv-1 */
 } vx_wtree_node;
 
 typedef struct vx_wtree {
@@ -33,6 +34,9 @@ typedef struct vx_wtree {
      * in its leaf's list: a leaf's unit vectors are made once each. */
     double *lv;
     uint8_t *corner; /* 3 a triangle, tree order */
+    /* per triangle, tree order: its area vector, area and bounding box
+     * (vx_wtree_bound's leaves) */
+    double *tb;
     vx_wtree_node *node;
     int nnodes;
 } vx_wtree;
@@ -50,8 +54,12 @@ double vx_wtree_eval(const vx_wtree *t, const double q[3]);
 /* An upper bound of |winding number| of the triangles at every point of
  * the box lo..hi (lo <= hi; a segment along an axis is one): each
  * triangle's solid angle is at most its area over its squared distance;
- * or a value >= limit once it reaches limit. Any number of threads. */
-double vx_wtree_bound(const vx_wtree *t, const double lo[3], const double hi[3], double limit);
+ * or a value >= limit once it reaches limit. side +1 bounds the winding
+ * number from above, -1 its negative from above (a triangle seen from its
+ * front from all of the box adds nothing to the first, one seen from its
+ * back to the second), 0 its magnitude. Any number of threads. */
+double vx_wtree_bound(const vx_wtree *t, const double lo[3], const double hi[3], double limit,
+                      int side);
 /* The exact winding number at q of one triangle (v: 9 doubles). */
 double vx_wtree_tri(const double *v, const double q[3]);
 void vx_wtree_free(vx_wtree *t);

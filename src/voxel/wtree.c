@@ -11,6 +11,7 @@
 #define LEAF 8
 #define LEAF_CORNERS 64 /* a leaf with more distinct corners goes triangle by triangle */
 #define STACK 128
+#define TB 10 /* doubles of tb a triangle */
 
 /* atan2 to about 1e-5 radians (Abramowitz & Stegun 4.4.47 on [0, 1],
  * then the octant), a few times faster than libm's. */
@@ -160,6 +161,10 @@ static void moments(build *b, vx_wtree_node *nd, int lo, int hi)
     for (int k = 0; k < 3; k++)
         nd->p[k] = area > 0 ? p[k] / area : b->cen[3 * b->idx[lo] + k];
     double r2 = 0;
+    for (int k = 0; k < 3; k++) {
+        nd->lo[k] = HUGE_VAL;
+        nd->hi[k] = -HUGE_VAL;
+    }
     for (int i = lo; i < hi; i++) {
         const double *v = b->src + 9 * (size_t)b->idx[i], *c = b->cen + 3 * b->idx[i];
         double n[3];
@@ -169,8 +174,12 @@ static void moments(build *b, vx_wtree_node *nd, int lo, int hi)
                 nd->m[3 * r + s] += (c[r] - nd->p[r]) * n[s];
         for (int q = 0; q < 3; q++) {
             double d2 = 0;
-            for (int k = 0; k < 3; k++)
-                d2 += (v[3 * q + k] - nd->p[k]) * (v[3 * q + k] - nd->p[k]);
+            for (int k = 0; k < 3; k++) {
+                double x = v[3 * q + k];
+                d2 += (x - nd->p[k]) * (x - nd->p[k]);
+                nd->lo[k] = x < nd->lo[k] ? x : nd->lo[k];
+                nd->hi[k] = x > nd->hi[k] ? x : nd->hi[k];
+            }
             if (d2 > r2) r2 = d2;
         }
     }
@@ -262,8 +271,9 @@ int vx_wtree_build(vx_wtree *t, size_t ntris, const double *tv, vx_err *err)
     b.idx = malloc(ntris * sizeof *b.idx);
     b.cen = malloc(3 * ntris * sizeof *b.cen);
     t->tv = malloc(9 * ntris * sizeof *t->tv);
+    t->tb = malloc(TB * ntris * sizeof *t->tb);
     t->node = malloc((size_t)b.cap * sizeof *t->node);
-    if (!b.idx || !b.cen || !t->tv || !t->node) {
+    if (!b.idx || !b.cen || !t->tv || !t->tb || !t->node) {
         free(b.idx);
         free(b.cen);
         vx_wtree_free(t);
@@ -278,6 +288,16 @@ int vx_wtree_build(vx_wtree *t, size_t ntris, const double *tv, vx_err *err)
     for (size_t i = 0; i < ntris; i++)
         memcpy(t->tv + 9 * i, tv + 9 * (size_t)b.idx[i], 9 * sizeof *tv);
     t->ntris = ntris;
+    for (size_t i = 0; i < ntris; i++) {
+        const double *v = t->tv + 9 * i;
+        double *d = t->tb + TB * i;
+        area_vector(v, d);
+        d[3] = sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+        for (int k = 0; k < 3; k++) {
+            d[4 + k] = fmin(fmin(v[k], v[3 + k]), v[6 + k]);
+            d[7 + k] = fmax(fmax(v[k], v[3 + k]), v[6 + k]);
+        }
+    }
     free(b.idx);
     free(b.cen);
     if (leaf_corners(t)) {
@@ -388,7 +408,46 @@ static double box_dist(const double lo[3], const double hi[3], const double p[3]
     return sqrt(r2);
 }
 
-double vx_wtree_bound(const vx_wtree *t, const double lo[3], const double hi[3], double limit)
+/* Squared distance between the boxes lo..hi and a..b. */
+static double boxes_dist2(const double lo[3], const double hi[3], const double a[3],
+                          const double b[3])
+{
+    double r2 = 0;
+    for (int k = 0; k < 3; k++) {
+        double g = a[k] > hi[k] ? a[k] - hi[k] : lo[k] > b[k] ? lo[k] - b[k] : 0;
+        r2 += g * g;
+    }
+    return r2;
+}
+
+/* A leaf's part of the bound (side as vx_wtree_bound) on the box lo..hi,
+ * triangle by triangle: a triangle's winding number has the sign of
+ * (corner - q) . normal, so one whose plane the box does not cut and whose
+ * sign is not `side` adds nothing; another adds its area over 4 pi times
+ * the squared distance between the box and its own bounding box (HUGE_VAL
+ * where they touch). */
+static double leaf_bound(const vx_wtree *t, const vx_wtree_node *nd, const double lo[3],
+                         const double hi[3], int side)
+{
+    double c[3], e[3], sum = 0;
+    for (int k = 0; k < 3; k++) {
+        c[k] = (lo[k] + hi[k]) / 2;
+        e[k] = (hi[k] - lo[k]) / 2;
+    }
+    for (int i = nd->first; i < nd->first + nd->n; i++) {
+        const double *v = t->tv + 9 * (size_t)i, *n = t->tb + TB * (size_t)i;
+        double proj = (v[0] - c[0]) * n[0] + (v[1] - c[1]) * n[1] + (v[2] - c[2]) * n[2];
+        double rad = fabs(n[0]) * e[0] + fabs(n[1]) * e[1] + fabs(n[2]) * e[2];
+        if ((side > 0 && proj < -rad) || (side < 0 && proj > rad)) continue;
+        double g2 = boxes_dist2(lo, hi, n + 4, n + 7);
+        if (g2 <= 0) return HUGE_VAL;
+        sum += n[3] / (4 * M_PI * g2);
+    }
+    return sum;
+}
+
+double vx_wtree_bound(const vx_wtree *t, const double lo[3], const double hi[3], double limit,
+                      int side)
 {
     if (!t->nnodes) return 0;
     int stack[STACK], sp = 0;
@@ -396,12 +455,15 @@ double vx_wtree_bound(const vx_wtree *t, const double lo[3], const double hi[3],
     stack[sp++] = 0;
     while (sp) {
         const vx_wtree_node *nd = &t->node[stack[--sp]];
-        double g = box_dist(lo, hi, nd->p) - nd->r;
+        double g = box_dist(lo, hi, nd->p) - nd->r, gb = sqrt(boxes_dist2(lo, hi, nd->lo, nd->hi));
+        if (gb > g) g = gb;
         double part = g > 0 ? nd->area / (4 * M_PI * g * g) : HUGE_VAL;
-        if (sum + part < limit) {
+        /* with a side, a node worth an eighth of the limit is opened: its
+         * leaves' triangles may add nothing */
+        if (sum + part < limit && (!side || part < limit / 8)) {
             sum += part;
         } else if (nd->kid[0] < 0) {
-            return HUGE_VAL; /* a leaf too near: no useful bound */
+            sum += fmin(part, leaf_bound(t, nd, lo, hi, side));
         } else {
             stack[sp++] = nd->kid[0];
             stack[sp++] = nd->kid[1];
@@ -415,6 +477,7 @@ void vx_wtree_free(vx_wtree *t)
 {
     if (!t) return;
     free(t->tv);
+    free(t->tb);
     free(t->node);
     free(t->lv);
     free(t->corner);

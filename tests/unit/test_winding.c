@@ -675,7 +675,7 @@ static void test_tree_bound_box(void **state)
             lo[a] = m->bbox_min[a] - 1.5 * e + 4 * e * u[0];
             hi[a] = n % 4 == a ? lo[a] : lo[a] + 0.8 * e * u[1]; /* a segment along the rest */
         }
-        double b = vx_wtree_bound(&tree, lo, hi, 10);
+        double b = vx_wtree_bound(&tree, lo, hi, 10, 0);
         if (b >= 10) continue;
         bounded++;
         for (int k = 0; k < 27; k++) {
@@ -704,12 +704,70 @@ static void test_tree_bound_box(void **state)
             lo[a] = near_hi ? -10 : 1.5;
             hi[a] = near_hi ? -1.5 : 10;
             q[a] = near_hi ? hi[a] : lo[a];
-            double b = vx_wtree_bound(&tree, lo, hi, 10), w = fabs(vx_wtree_eval(&tree, q));
+            double b = vx_wtree_bound(&tree, lo, hi, 10, 0), w = fabs(vx_wtree_eval(&tree, q));
             printf("one triangle, axis %d, near end %s: bound %.4f, |w| there %.4f\n", a,
                    near_hi ? "hi" : "lo", b, w);
             assert_true(w > 1e-3);
             assert_true(b >= w);
         }
+    vx_wtree_free(&tree);
+}
+
+/* The one-sided bounds on an open surface, where w does not cancel: a
+ * shallow cone of 48 triangles over a unit circle (a hole's cap), random
+ * segments and boxes within 2 of it. Where a side's bound is under 1/2,
+ * w sampled in the box stays under it; and from beside the cap, on the
+ * side where w < 0, the bound from above is often under 1/2 where the
+ * magnitude's is not. */
+static void test_tree_bound_sides(void **state)
+{
+    (void)state;
+    enum { N = 48 };
+    double tv[9 * N];
+    for (int t = 0; t < N; t++) {
+        double a0 = 2 * M_PI * t / N, a1 = 2 * M_PI * (t + 1) / N;
+        double v[9] = {cos(a1), sin(a1), 0, cos(a0), sin(a0), 0, 0, 0, 0.2};
+        memcpy(tv + 9 * t, v, sizeof v);
+    }
+    vx_wtree tree;
+    assert_int_equal(vx_wtree_build(&tree, N, tv, NULL), 0);
+    uint64_t s = 11;
+    int checked = 0, gained[2] = {0, 0};
+    for (int n = 0; n < 2000; n++) {
+        double lo[3], hi[3];
+        for (int a = 0; a < 3; a++) {
+            double u[2];
+            for (int k = 0; k < 2; k++) {
+                s = s * 6364136223846793005ull + 1442695040888963407ull;
+                u[k] = (double)(s >> 11) / 9007199254740992.0;
+            }
+            lo[a] = -2 + 4 * u[0];
+            hi[a] = n % 4 == a ? lo[a] : lo[a] + 0.6 * u[1];
+        }
+        double b = vx_wtree_bound(&tree, lo, hi, 0.5, 0),
+               bp = vx_wtree_bound(&tree, lo, hi, 0.5, 1),
+               bn = vx_wtree_bound(&tree, lo, hi, 0.5, -1);
+        gained[0] += bp < 0.5 && b >= 0.5;
+        gained[1] += bn < 0.5 && b >= 0.5;
+        for (int k = 0; k < 27 && (bp < 0.5 || bn < 0.5); k++) {
+            double q[3];
+            for (int a = 0; a < 3; a++) {
+                int f = k / (a == 0 ? 1 : a == 1 ? 3 : 9) % 3;
+                q[a] = lo[a] + (hi[a] - lo[a]) * (f == 0 ? 0 : f == 1 ? 0.61 : 1);
+            }
+            double w = vx_wtree_eval(&tree, q);
+            if ((bp < 0.5 && w > bp) || (bn < 0.5 && -w > bn))
+                printf("box %d point %d: w %.4f over the one-sided bounds %.4f, %.4f\n", n, k, w,
+                       bp, bn);
+            assert_true(bp >= 0.5 || w <= bp);
+            assert_true(bn >= 0.5 || -w <= bn);
+            checked++;
+        }
+    }
+    printf("a cap: %d points checked; w bounded under 1/2 from above %d times, from below %d "
+           "times, where |w| was not\n",
+           checked, gained[0], gained[1]);
+    assert_true(gained[0] >= 50 && gained[1] >= 50);
     vx_wtree_free(&tree);
 }
 
@@ -786,13 +844,21 @@ int main(int argc, char **argv)
 {
     if (argc > 1) cmocka_set_test_filter(argv[1]); /* e.g. test_tree */
     const struct CMUnitTest tests[] = {
-        cmocka_unit_test(test_overlap_open),    cmocka_unit_test(test_nested),
-        cmocka_unit_test(test_open_shells),     cmocka_unit_test(test_closed_exact),
-        cmocka_unit_test(test_closed_ties),     cmocka_unit_test(test_far_sliver),
-        cmocka_unit_test(test_open_box_ties),   cmocka_unit_test(test_bricks_open),
-        cmocka_unit_test(test_bunny),           cmocka_unit_test(test_tree),
-        cmocka_unit_test(test_tree_leaf_turns), cmocka_unit_test(test_tree_bound_box),
-        cmocka_unit_test(test_memory_limit),    cmocka_unit_test(test_default_and_stop),
+        cmocka_unit_test(test_overlap_open),
+        cmocka_unit_test(test_nested),
+        cmocka_unit_test(test_open_shells),
+        cmocka_unit_test(test_closed_exact),
+        cmocka_unit_test(test_closed_ties),
+        cmocka_unit_test(test_far_sliver),
+        cmocka_unit_test(test_open_box_ties),
+        cmocka_unit_test(test_bricks_open),
+        cmocka_unit_test(test_bunny),
+        cmocka_unit_test(test_tree),
+        cmocka_unit_test(test_tree_leaf_turns),
+        cmocka_unit_test(test_tree_bound_box),
+        cmocka_unit_test(test_tree_bound_sides),
+        cmocka_unit_test(test_memory_limit),
+        cmocka_unit_test(test_default_and_stop),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }
