@@ -652,6 +652,23 @@ static void test_tree_leaf_turns(void **state)
     vx_mesh_free(m);
 }
 
+/* A random box about the box at `at` of size e (its corner lo from at - 1.5 e
+ * to at + 2.5 e, each side up to `side` e long), flat along axis `flat` (0..2; 3:
+ * none), from the generator s. */
+static void random_box(uint64_t *s, int flat, const double at[3], const double e[3], double side,
+                       double lo[3], double hi[3])
+{
+    for (int a = 0; a < 3; a++) {
+        double u[2];
+        for (int k = 0; k < 2; k++) {
+            *s = *s * 6364136223846793005ull + 1442695040888963407ull;
+            u[k] = (double)(*s >> 11) / 9007199254740992.0;
+        }
+        lo[a] = at[a] - 1.5 * e[a] + 4 * e[a] * u[0];
+        hi[a] = flat == a ? lo[a] : lo[a] + side * e[a] * u[1];
+    }
+}
+
 /* vx_wtree_bound over a box is at least |w| anywhere in it: boxes of
  * every shape (segments along each axis included) at random places
  * around the bunny, w sampled at their corners and inside. */
@@ -664,17 +681,10 @@ static void test_tree_bound_box(void **state)
     uint64_t s = 5;
     int bounded = 0;
     for (int n = 0; n < 300; n++) {
-        double lo[3], hi[3];
-        for (int a = 0; a < 3; a++) {
-            double u[2];
-            for (int k = 0; k < 2; k++) {
-                s = s * 6364136223846793005ull + 1442695040888963407ull;
-                u[k] = (double)(s >> 11) / 9007199254740992.0;
-            }
-            double e = m->bbox_max[a] - m->bbox_min[a];
-            lo[a] = m->bbox_min[a] - 1.5 * e + 4 * e * u[0];
-            hi[a] = n % 4 == a ? lo[a] : lo[a] + 0.8 * e * u[1]; /* a segment along the rest */
-        }
+        double lo[3], hi[3], e[3];
+        for (int a = 0; a < 3; a++)
+            e[a] = m->bbox_max[a] - m->bbox_min[a];
+        random_box(&s, n % 4, m->bbox_min, e, 0.8, lo, hi);
         double b = vx_wtree_bound(&tree, lo, hi, 10, 0);
         if (b >= 10) continue;
         bounded++;
@@ -735,15 +745,8 @@ static void test_tree_bound_sides(void **state)
     int checked = 0, gained[2] = {0, 0};
     for (int n = 0; n < 2000; n++) {
         double lo[3], hi[3];
-        for (int a = 0; a < 3; a++) {
-            double u[2];
-            for (int k = 0; k < 2; k++) {
-                s = s * 6364136223846793005ull + 1442695040888963407ull;
-                u[k] = (double)(s >> 11) / 9007199254740992.0;
-            }
-            lo[a] = -2 + 4 * u[0];
-            hi[a] = n % 4 == a ? lo[a] : lo[a] + 0.6 * u[1];
-        }
+        random_box(&s, n % 4, (const double[3]){-0.5, -0.5, -0.5}, (const double[3]){1, 1, 1}, 0.6,
+                   lo, hi);
         double b = vx_wtree_bound(&tree, lo, hi, 0.5, 0),
                bp = vx_wtree_bound(&tree, lo, hi, 0.5, 1),
                bn = vx_wtree_bound(&tree, lo, hi, 0.5, -1);
