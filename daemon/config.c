@@ -142,6 +142,9 @@ static const opt_def opts[] = {
      "memory the finished jobs remembered may take (default 64M; 0 = no limit)"},
     {"max-event-streams", T_SIZE, F(max_event_streams), 0,
      "open GET /v1/jobs/{id}/events streams before 503 (default 64; 0 = none: every one 503)"},
+    {"max-waits", T_SIZE, F(max_waits), 0,
+     "requests held by ?wait at once; past it a GET ?wait is 503 too_many_waits and a POST "
+     "?wait answered at once (default 64; 0 = none held)"},
     {"event-keepalive", T_SECONDS, F(event_keepalive_s), 0,
      "idle time before an event stream gets a keepalive comment, seconds (default 15; 0 = the "
      "default)"},
@@ -232,6 +235,7 @@ static void defaults(vx_config *c)
     c->min_free_disk = 64ull << 20;
     c->job_history_bytes = 64ull << 20;
     c->max_event_streams = 64;
+    c->max_waits = 64;
     c->event_keepalive_s = 15;
 }
 

@@ -573,7 +573,7 @@ vx_http *vx_http_start(const vx_http_desc *desc, vx_err *err)
         free(h);
         return NULL;
     }
-    h->wait = vx_wait_start(desc->jobs);
+    h->wait = vx_wait_start(desc->jobs, cfg->max_waits);
     h->conns = vx_conns_start(cfg);
     h->events = vx_events_start(desc->jobs, cfg->max_event_streams, cfg->event_keepalive_s);
     if (!h->wait || !h->conns || !h->events) {

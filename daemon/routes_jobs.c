@@ -129,7 +129,9 @@ static int job_post(vx_http *h, struct MHD_Connection *c, req *r, double wait_s)
         r->post_job = 1;
         snprintf(r->id, sizeof r->id, "%s", jid);
         r->post_existing = existing;
-        if (vx_wait_hold(h->wait, &r->w, c, jid, wait_s)) {
+        /* not held (finished, or --max-waits held already): answered now,
+         * never refused: the job is in */
+        if (vx_wait_hold(h->wait, &r->w, c, jid, wait_s) > 0) {
             cJSON_Delete(job);
             return MHD_YES;
         }
@@ -175,7 +177,13 @@ int vx_route_job(vx_http *h, struct MHD_Connection *c, req *r)
     double wait_s = wait_seconds(h, r);
     r->w.by_progress = r->q.has_progress; /* ?progress: wake there too */
     r->w.wake_progress = r->q.progress_ppm / 1e6;
-    if (wait_s > 0 && vx_wait_hold(h->wait, &r->w, c, r->id, wait_s)) return MHD_YES;
+    int held = wait_s > 0 ? vx_wait_hold(h->wait, &r->w, c, r->id, wait_s) : 0;
+    if (held > 0) return MHD_YES;
+    if (held < 0)
+        return vx_resp_fail(c, r, VX_EOVERLOAD, "too_many_waits",
+                            "%llu requests are held by ?wait, the most --max-waits allows; ask "
+                            "again after Retry-After seconds, or without wait",
+                            (unsigned long long)h->d.cfg->max_waits);
     return answer_job(h, c, r, r->id, 200);
 }
 

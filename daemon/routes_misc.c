@@ -198,6 +198,7 @@ int vx_route_info(vx_http *h, struct MHD_Connection *c, req *r)
     cJSON_AddNumberToObject(l, "job_history", (double)cfg->job_history);
     cJSON_AddNumberToObject(l, "job_history_bytes", (double)cfg->job_history_bytes);
     cJSON_AddNumberToObject(l, "max_event_streams", (double)cfg->max_event_streams);
+    cJSON_AddNumberToObject(l, "max_waits", (double)cfg->max_waits);
     cJSON_AddNumberToObject(l, "event_keepalive_s", cfg->event_keepalive_s);
     cJSON *kinds = cJSON_AddArrayToObject(doc, "kinds");
     for (size_t i = 0; i < vx_kind_count(); i++) {

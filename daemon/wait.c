@@ -13,6 +13,7 @@ struct vx_wait {
     pthread_mutex_t lock;
     pthread_cond_t cond; /* on CLOCK_MONOTONIC: a new waiter, or stopping */
     vx_waiter *list;
+    size_t n, max; /* held now, at most */
     pthread_t timer;
     int timer_started;
     int stopping;
@@ -24,7 +25,10 @@ static void resume_locked(vx_wait *w, vx_waiter *wt)
     vx_waiter **pp = &w->list;
     while (*pp && *pp != wt)
         pp = &(*pp)->next;
-    if (*pp) *pp = wt->next;
+    if (*pp) {
+        *pp = wt->next;
+        w->n--;
+    }
     wt->waiting = 0;
     wt->resumed = 1;
     MHD_resume_connection(wt->conn);
@@ -67,11 +71,12 @@ static void *timer_main(void *arg)
     return NULL;
 }
 
-vx_wait *vx_wait_start(vx_jobs *jobs)
+vx_wait *vx_wait_start(vx_jobs *jobs, size_t max_holds)
 {
     vx_wait *w = calloc(1, sizeof *w);
     if (!w) return NULL;
     w->jobs = jobs;
+    w->max = max_holds;
     pthread_mutex_init(&w->lock, NULL);
     pthread_condattr_t ca;
     pthread_condattr_init(&ca);
@@ -99,6 +104,11 @@ int vx_wait_hold(vx_wait *w, vx_waiter *wt, struct MHD_Connection *c, const char
         pthread_mutex_unlock(&w->lock);
         return 0;
     }
+    if (w->n >= w->max) {
+        pthread_mutex_unlock(&w->lock);
+        return -1;
+    }
+    w->n++;
     wt->conn = c;
     snprintf(wt->jid, sizeof wt->jid, "%s", jid);
     wt->deadline = vx_mono() + wait_s;
@@ -135,7 +145,10 @@ void vx_wait_forget(vx_wait *w, vx_waiter *wt)
     vx_waiter **pp = &w->list;
     while (*pp && *pp != wt)
         pp = &(*pp)->next;
-    if (*pp) *pp = wt->next;
+    if (*pp) {
+        *pp = wt->next;
+        w->n--;
+    }
     pthread_mutex_unlock(&w->lock);
 }
 

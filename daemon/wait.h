@@ -6,7 +6,8 @@
  * vx_wait_quiesce at shutdown. The access handler is then called again and
  * answers as it would have without waiting (vx_waiter_resumed). A waiter
  * with by_progress set (?progress=) is also resumed once its job's progress
- * reaches wake_progress: the timer reads those jobs every 100 ms. All list
+ * reaches wake_progress: the timer reads those jobs every 100 ms. At most
+ * max_holds requests are held at once (each holds a connection). All list
  * changes are under one lock. */
 #ifndef VX_WAIT_H
 #define VX_WAIT_H
@@ -29,13 +30,15 @@ typedef struct vx_waiter {
     struct vx_waiter *next;
 } vx_waiter;
 
-/* Starts the timer thread; jobs is asked whether a job has finished.
- * Owned; free with vx_wait_free. NULL without memory. */
-vx_wait *vx_wait_start(vx_jobs *jobs);
+/* Starts the timer thread; jobs is asked whether a job has finished; at
+ * most max_holds requests are held at once. Owned; free with
+ * vx_wait_free. NULL without memory. */
+vx_wait *vx_wait_start(vx_jobs *jobs, size_t max_holds);
 /* Suspends c and holds it in w until job jid finishes or wait_s passes (or
  * its progress reaches wt->wake_progress, with wt->by_progress).
  * Returns 1 when held, 0 when jid is unknown or finished (or far enough
- * along) or the daemon is stopping (answer now). */
+ * along) or the daemon is stopping (answer now), -1 when max_holds
+ * requests are held already (not held). */
 int vx_wait_hold(vx_wait *w, vx_waiter *wt, struct MHD_Connection *c, const char *jid,
                  double wait_s);
 /* Resumes every request held on jid (the job hook: jid has finished). */

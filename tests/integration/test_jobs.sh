@@ -3,7 +3,7 @@
 # encoder -> result; ?wait, cancel, 429, results with ETag, listing.
 source "$(dirname "$0")/lib.sh"
 source "$(dirname "$0")/box.sh"
-start_daemon --max-queued-jobs 3 || exit 1
+start_daemon --max-queued-jobs 3 --max-waits 2 || exit 1
 
 # A 2 x 1 x 1 box far from the origin: the camera must aim at its centre.
 box_obj "$TMP/box.obj" 100 -5 7 102 -4 8
@@ -142,8 +142,46 @@ t1=$(date +%s.%N)
 expect_status "wait that times out" 200
 check "held about 1 s" awk -v a="$t0" -v b="$t1" 'BEGIN{exit !((b-a) >= 0.9 && (b-a) < 5)}'
 check "still not finished" jq -e '.state == "queued" or .state == "running"' "$BODY"
-api DELETE "/v1/jobs/$J5"
-wait_job "$J5"
+
+# At most --max-waits (2 here) requests held at once: a third GET ?wait is
+# 503 too_many_waits, a POST ?wait is answered at once (its job is in), a
+# plain GET and a ?wait on a finished job are answered as ever; once the
+# holds end, a ?wait is held again. J6 waits in the queue behind J5.
+api GET /v1/info
+check "info lists max_waits" jq -e '.limits.max_waits == 2' "$BODY"
+api POST /v1/jobs -H "Content-Type: application/json" -d "{\"mesh\":\"$OGRE\",\"kind\":\"preview\",$slow}"
+J6=$(jqb .id)
+held=()
+for n in 1 2; do
+    curl -s -o "$TMP/held$n.json" -w '%{http_code}' "$BASE/v1/jobs/$J6?wait=3" >"$TMP/held$n.code" &
+    held+=($!)
+done
+sleep 1
+api GET "/v1/jobs/$J6?wait=3"
+expect_error "a third hold" 503 too_many_waits
+check "with Retry-After ($(header Retry-After))" test -n "$(header Retry-After)"
+api GET "/v1/jobs/$J3?wait=3"
+expect_status "a ?wait on a finished job while the holds are full" 200
+api GET "/v1/jobs/$J6"
+expect_status "a plain GET while the holds are full" 200
+t0=$(date +%s.%N)
+api POST "/v1/jobs?wait=3" -H "Content-Type: application/json" -d "{\"mesh\":\"$SPOT\",\"kind\":\"preview\"}"
+t1=$(date +%s.%N)
+expect_status "a POST ?wait while the holds are full" 202
+check "answered at once ($(awk -v a="$t0" -v b="$t1" 'BEGIN{print b-a}') s)" awk -v a="$t0" -v b="$t1" 'BEGIN{exit !((b-a) < 1.5)}'
+check "with its job" jq -e '.id and .kind == "preview"' "$BODY"
+J7=$(jqb .id)
+wait "${held[@]}"
+check "the two holds were answered 200 ($(cat "$TMP/held1.code") $(cat "$TMP/held2.code"))" \
+    test "$(cat "$TMP/held1.code") $(cat "$TMP/held2.code")" = "200 200"
+t0=$(date +%s.%N)
+api GET "/v1/jobs/$J6?wait=1"
+t1=$(date +%s.%N)
+expect_status "a hold after they ended" 200
+check "held about 1 s again (or until J6 ended)" awk -v a="$t0" -v b="$t1" -v s="$(jqb .state)" \
+    'BEGIN{exit !(((b-a) >= 0.9 || s == "succeeded") && (b-a) < 5)}'
+for j in "$J5" "$J6" "$J7"; do api DELETE "/v1/jobs/$j"; done
+for j in "$J5" "$J6" "$J7"; do wait_job "$j"; done
 
 # Unknown job and output names.
 api GET "/v1/jobs/$JID/result/nope"

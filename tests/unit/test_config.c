@@ -71,6 +71,7 @@ static void test_env_sets_every_kind(void **state)
     assert_string_equal(c.listen, "127.0.0.1:8080");
     assert_int_equal(c.require_gpu, 0); /* off by default */
     assert_int_equal(c.max_event_streams, 64);
+    assert_int_equal(c.max_waits, 64);
 }
 
 static void test_env_bad_value(void **state)
