@@ -88,6 +88,11 @@ class Prepared
     virtual int prepare(std::ostream &os, openvdb::io::DelayedLoadMetadata &dl) const = 0;
     // Bytes the tree's memUsage leaves out for leaves made without values.
     virtual uint64_t unloaded_bytes() const = 0;
+    // Puts into g the statistics GridBase::addStatsMetadata would (active
+    // voxels' bounding box and count, memory, this with every leaf holding
+    // its values), found by prepare as it wrote the leaves; false when not
+    // prepared.
+    virtual bool stats_metadata(openvdb::GridBase &g) const = 0;
 };
 
 // A grid (bool or float) whose topology and leaf buffers are written by
@@ -121,6 +126,76 @@ template <typename GridT> class ParallelGrid final : public GridT, public Prepar
     const bool by_mask_;
     const ValueT on_;
     mutable std::vector<std::string> buffers_; // prepared: the buffers section, in chunks
+
+    // What addStatsMetadata's traversals find (tools::countActiveVoxels,
+    // tools::memUsage, evalActiveVoxelBoundingBox: 3.5 ms of a 29 ms bool
+    // write at 1024^3), and the bytes leaves made without values leave out
+    // of the memory.
+    struct Stats {
+        uint64_t count = 0, mem = 0, unloaded = 0;
+        openvdb::CoordBBox bbox; // empty: as evalActiveVoxelBoundingBox resets it
+        void add(const Stats &o)
+        {
+            count += o.count;
+            mem += o.mem;
+            unloaded += o.unloaded;
+            bbox.expand(o.bbox);
+        }
+    };
+    mutable std::unique_ptr<Stats> stats_; // prepared
+
+    // A leaf's part: its active voxels' bounding box from its mask's words
+    // (word x, bit 8 y + z), which evalActiveBoundingBox finds voxel by voxel.
+    void leaf_stats(const LeafT &leaf, Stats &st) const
+    {
+        const typename LeafT::NodeMaskType &m = leaf.getValueMask();
+        st.count += leaf.onVoxelCount();
+        st.mem += leaf.memUsage();
+        if (unloaded(leaf)) st.unloaded += LeafT::SIZE * sizeof(ValueT);
+        uint64_t any = 0;
+        int x0 = -1, x1 = -1;
+        for (int x = 0; x < 8; x++)
+            if (const uint64_t w = m.template getWord<uint64_t>((openvdb::Index)x)) {
+                x0 = x0 < 0 ? x : x0;
+                x1 = x;
+                any |= w;
+            }
+        if (!any) return;
+        unsigned zs = 0;
+        int y0 = -1, y1 = -1;
+        for (int y = 0; y < 8; y++)
+            if (const unsigned b = (unsigned)(any >> (8 * y)) & 0xffu) {
+                y0 = y0 < 0 ? y : y0;
+                y1 = y;
+                zs |= b;
+            }
+        const openvdb::Coord o = leaf.origin();
+        st.bbox.expand(openvdb::CoordBBox(o + openvdb::Coord(x0, y0, __builtin_ctz(zs)),
+                                          o + openvdb::Coord(x1, y1, 31 - __builtin_clz(zs))));
+    }
+
+    // An internal node's part and its children's, but for the leaves:
+    // MemUsageOp's bytes, ActiveVoxelCountOp's tiles, and the tiles' boxes.
+    template <typename NodeT> static void node_stats(const NodeT &node, Stats &st)
+    {
+        using ChildT = typename NodeT::ChildNodeType;
+        st.mem += NodeT::NUM_VALUES * sizeof(typename NodeT::UnionType) +
+                  node.getChildMask().memUsage() + node.getValueMask().memUsage() +
+                  sizeof(openvdb::Coord);
+        tiles_stats(node, st);
+        if constexpr (!std::is_same<ChildT, LeafT>::value)
+            for (auto it = node.cbeginChildOn(); it; ++it)
+                node_stats(*it, st);
+    }
+
+    template <typename NodeT> static void tiles_stats(const NodeT &node, Stats &st)
+    {
+        using ChildT = typename NodeT::ChildNodeType;
+        for (auto it = node.cbeginValueOn(); it; ++it) {
+            st.count += ChildT::NUM_VOXELS;
+            st.bbox.expand(it.getCoord(), ChildT::DIM);
+        }
+    }
 
     // What a thread keeps for leaves made without values.
     struct Unloaded {
@@ -273,6 +348,7 @@ template <typename GridT> class ParallelGrid final : public GridT, public Prepar
             std::string().swap(c);
         }
         buffers_.clear();
+        stats_.reset();
     }
 
     int prepare(std::ostream &os, openvdb::io::DelayedLoadMetadata &dl) const override
@@ -290,6 +366,7 @@ template <typename GridT> class ParallelGrid final : public GridT, public Prepar
         }
         const size_t chunk = 128, nc = (all.size() + chunk - 1) / chunk;
         buffers_.assign(nc, std::string());
+        std::vector<Stats> part(nc);
         tbb::enumerable_thread_specific<Unloaded> mine; // the tails are this write's
         tbb::parallel_for(size_t(0), nc, [&](size_t c) {
             Unloaded &u = mine.local();
@@ -301,6 +378,7 @@ template <typename GridT> class ParallelGrid final : public GridT, public Prepar
             for (size_t i = a; i < b; i++) {
                 write_leaf(ss, *all[i], u, half);
                 ends[i - a] = (size_t)ss.tellp();
+                leaf_stats(*all[i], part[c]);
             }
             buffers_[c] = ss.str();
             if (!has_dl) return;
@@ -328,16 +406,43 @@ template <typename GridT> class ParallelGrid final : public GridT, public Prepar
                 at = end;
             }
         });
+        stats_.reset(new Stats);
+        for (const Stats &p : part)
+            stats_->add(p);
+        const RootT &root = this->constTree().root();
+        stats_->mem += sizeof(TreeT) + sizeof(RootT);
+        tiles_stats(root, *stats_);
+        for (auto it = root.cbeginChildOn(); it; ++it)
+            node_stats(*it, *stats_);
         return has_dl;
     }
 
     uint64_t unloaded_bytes() const override
     {
+        if (stats_) return stats_->unloaded;
         uint64_t n = 0;
         if (by_mask_)
             for (const LeafT *leaf : leaves())
                 n += unloaded(*leaf) ? LeafT::SIZE * sizeof(ValueT) : 0;
         return n;
+    }
+
+    bool stats_metadata(openvdb::GridBase &g) const override
+    {
+        if (!stats_) return false;
+        using openvdb::GridBase;
+        for (const char *name : {GridBase::META_FILE_BBOX_MIN, GridBase::META_FILE_BBOX_MAX,
+                                 GridBase::META_FILE_MEM_BYTES, GridBase::META_FILE_VOXEL_COUNT})
+            g.removeMeta(name);
+        g.insertMeta(GridBase::META_FILE_BBOX_MIN,
+                     openvdb::Vec3IMetadata(stats_->bbox.min().asVec3i()));
+        g.insertMeta(GridBase::META_FILE_BBOX_MAX,
+                     openvdb::Vec3IMetadata(stats_->bbox.max().asVec3i()));
+        g.insertMeta(GridBase::META_FILE_MEM_BYTES,
+                     openvdb::Int64Metadata((int64_t)(stats_->mem + stats_->unloaded)));
+        g.insertMeta(GridBase::META_FILE_VOXEL_COUNT,
+                     openvdb::Int64Metadata((int64_t)stats_->count));
+        return true;
     }
 };
 
@@ -386,13 +491,15 @@ class CheckedArchive final : public openvdb::io::Archive
         io::DelayedLoadMetadata dl;
         if (prep.prepare(os, dl)) copy->insertMeta(openvdb::GridBase::META_FILE_DELAYED_LOAD, dl);
         if (io::getWriteGridStatsMetadata(os)) {
-            copy->addStatsMetadata();
-            if (uint64_t more = prep.unloaded_bytes()) // as if every leaf held its values
-                copy->insertMeta(
-                    openvdb::GridBase::META_FILE_MEM_BYTES,
-                    openvdb::Int64Metadata(
-                        copy->metaValue<int64_t>(openvdb::GridBase::META_FILE_MEM_BYTES) +
-                        (int64_t)more));
+            if (!prep.stats_metadata(*copy)) {
+                copy->addStatsMetadata();
+                if (uint64_t more = prep.unloaded_bytes()) // as if every leaf held its values
+                    copy->insertMeta(
+                        openvdb::GridBase::META_FILE_MEM_BYTES,
+                        openvdb::Int64Metadata(
+                            copy->metaValue<int64_t>(openvdb::GridBase::META_FILE_MEM_BYTES) +
+                            (int64_t)more));
+            }
             copy->insertMeta(
                 openvdb::GridBase::META_FILE_COMPRESSION,
                 openvdb::StringMetadata(io::compressionToString(io::getDataCompression(os))));
