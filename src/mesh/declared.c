@@ -717,6 +717,21 @@ uint64_t vx_declared_decode_bound(vx_mesh_format fmt, uint64_t size, const vx_me
            (UINT64_C(16) << 20);
 }
 
+/* 1 when p[i..n), which starts with '{', can be the head of a JSON object:
+ * blanks, then a key's quote or the closing brace (or the window's end),
+ * and no control byte but blanks anywhere (JSON escapes them in strings).
+ * Random bytes that happened to start with '{' were taken for glTF. */
+static int json_object_head(const unsigned char *p, size_t n, size_t i)
+{
+    size_t k = i + 1;
+    while (k < n && blank(p[k]))
+        k++;
+    if (k < n && p[k] != '"' && p[k] != '}') return 0;
+    for (k = i; k < n; k++)
+        if (p[k] < 0x20 && !blank(p[k])) return 0;
+    return 1;
+}
+
 vx_mesh_format vx_mesh_sniff_sized(const unsigned char *p, size_t n, uint64_t size)
 {
     if (n >= 12 && !memcmp(p, "glTF", 4)) return VX_MESH_GLB;
@@ -726,7 +741,7 @@ vx_mesh_format vx_mesh_sniff_sized(const unsigned char *p, size_t n, uint64_t si
     if (n >= 3 && !memcmp(p, "\xef\xbb\xbf", 3)) i = 3;
     while (i < n && blank(p[i]))
         i++;
-    if (i < n && p[i] == '{') return VX_MESH_GLTF;
+    if (i < n && p[i] == '{' && json_object_head(p, n, i)) return VX_MESH_GLTF;
     size_t j = off_word(p, n, i);
     if (j - i <= 18 && off_magic(p, i, j) && (j < n || n == size)) return VX_MESH_OFF;
     /* A binary STL whose header starts with "solid" but whose size does

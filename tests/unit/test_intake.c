@@ -141,6 +141,11 @@ static void test_resolve(void **state)
     assert_int_equal(resolve(VX_INTAKE_SNIFF, HEAD("ply\nformat ascii 1.0\n"), &e), VX_MESH_PLY);
     assert_int_equal(resolve(VX_INTAKE_SNIFF, HEAD("glTF\x02\0\0\0\x10\0\0\0"), &e), VX_MESH_GLB);
     assert_int_equal(resolve(VX_INTAKE_SNIFF, HEAD(" {\"asset\":{}}"), &e), VX_MESH_GLTF);
+    assert_int_equal(resolve(VX_INTAKE_SNIFF, HEAD("{\r\n  \"asset\""), &e), VX_MESH_GLTF);
+    assert_int_equal(resolve(VX_INTAKE_SNIFF, HEAD("{"), &e), VX_MESH_GLTF); /* cut */
+    /* ...but not binary bytes that start with a brace */
+    assert_int_equal(resolve(VX_INTAKE_SNIFF, HEAD("{\x93\x07\"\xfe"), &e), 0);
+    assert_int_equal(resolve(VX_INTAKE_SNIFF, HEAD("{\"a\x01\x02"), &e), 0);
     assert_int_equal(resolve(VX_INTAKE_SNIFF, HEAD("OFF\n3 1 0\n"), &e), VX_MESH_OFF);
     assert_int_equal(resolve(VX_INTAKE_SNIFF, HEAD("solid x\n facet normal 0 0 1\n"), &e),
                      VX_MESH_STL);
