@@ -110,7 +110,7 @@ check "r2 lists it (filter by mesh)" jq -e --arg j "$J" '[.items[].id] | index($
 # never used it), and a delete on r1 is a 404 on every replica at once; its
 # bytes stay while a job names it, and go once none does.
 on 1
-printf 'v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 %d\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n' "$RANDOM" >"$TMP/cat.obj"
+printf 'v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 %d\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n' "$((RANDOM + 1))" >"$TMP/cat.obj" # never flat
 upload "$TMP/cat.obj"
 expect_status "catalog: upload on r1" 201
 M=$MESH_ID
