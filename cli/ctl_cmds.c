@@ -175,11 +175,22 @@ static void on_job(void *ud, const cJSON *job)
     f->tenth = (int)(p * 10);
 }
 
+/* 1 when b holds a JSON error whose code is code. */
+static int error_code_is(const ctl_buf *b, const char *code)
+{
+    cJSON *doc = b->p ? cJSON_Parse(b->p) : NULL;
+    const char *got = str(cJSON_GetObjectItemCaseSensitive(doc, "error"), "code");
+    int is = got && !strcmp(got, code);
+    cJSON_Delete(doc);
+    return is;
+}
+
 /* Follows job jid to its end: the event stream, or ?wait polling when the
- * server has no stream. A server that stops answering (restarting: no
- * connection, or 503 while it starts) is asked again for 2 minutes: a job
- * it requeued goes on after a restart. The last Job (owned), or NULL
- * (printed). */
+ * server has no stream (and while it holds --max-waits requests already,
+ * 503 too_many_waits: plain GETs 2 s apart). A server that stops answering
+ * (restarting: no connection, or 503 while it starts) is asked again for
+ * 2 minutes: a job it requeued goes on after a restart. The last Job
+ * (owned), or NULL (printed). */
 static cJSON *follow_job(ctl *c, const char *jid)
 {
     follow f = {.c = c, .tenth = -1};
@@ -188,13 +199,22 @@ static cJSON *follow_job(ctl *c, const char *jid)
     if (job && terminal(str(job, "state"))) return job;
     cJSON_Delete(job);
     char path[160];
-    snprintf(path, sizeof path, "/v1/jobs/%s?wait=30", jid);
     time_t lost = 0; /* when the server stopped answering */
+    int plain = 0;   /* the server's waits were full: ask without one */
     for (;;) {
         ctl_buf b = {0};
+        snprintf(path, sizeof path, plain ? "/v1/jobs/%s" : "/v1/jobs/%s?wait=30", jid);
         c->quiet_transport = c->no_retry = 1; /* said below, and tried again here */
         st = ctl_http(c, "GET", path, NULL, NULL, NULL, &b, NULL, NULL, 0);
         c->quiet_transport = c->no_retry = 0;
+        if (st == 503 && !plain && error_code_is(&b, "too_many_waits")) {
+            free(b.p);
+            lost = 0;
+            plain = 1;
+            sleep(2);
+            continue;
+        }
+        plain = 0;
         if (st < 0 || st == 502 || st == 503 || st == 504) {
             free(b.p);
             time_t now = time(NULL);

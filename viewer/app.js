@@ -272,9 +272,18 @@ async function followEvents(jid, seq, onJob) {
   return terminal || seq !== followSeq;
 }
 
+// Polls with ?wait=1; while the server holds as many waits as it allows
+// (503 too_many_waits) it is asked without one, a second apart.
 async function followPoll(jid, seq, onJob) {
   while (seq === followSeq) {
-    const job = await apiJSON(`/v1/jobs/${jid}?wait=1`);
+    let job;
+    try {
+      job = await apiJSON(`/v1/jobs/${jid}?wait=1`);
+    } catch (e) {
+      if (!(e instanceof ApiError && e.body?.error?.code === 'too_many_waits')) throw e;
+      await new Promise(r => setTimeout(r, 1000));
+      job = await apiJSON(`/v1/jobs/${jid}`);
+    }
     onJob(job);
     if (TERMINAL.has(job.state)) return;
   }

@@ -65,7 +65,8 @@ class Client:
             try:
                 return self._open_once(method, path, body, ctype, accept)
             except VoxeldError as e:
-                if e.status not in (429, 503) or e.retry_after is None:
+                # (too_many_waits: the caller asks again without wait)
+                if e.status not in (429, 503) or e.retry_after is None or e.code == "too_many_waits":
                     raise
                 pause = min(max(e.retry_after, 1), 30)
                 if time.monotonic() + pause > give_up:
@@ -176,7 +177,9 @@ class Client:
     def wait(self, jid, on_event=None):
         """Follows the job to its end; returns the last Job. A server that
         stops answering (unreachable, 502, 503, 504: restarting, where the
-        job goes on) is asked again for up to retry_for seconds."""
+        job goes on) is asked again for up to retry_for seconds; one that
+        holds as many waits as it allows (503 too_many_waits) is asked
+        without one, Retry-After seconds apart."""
         last = None
         try:
             for job in self.events(jid):
@@ -192,6 +195,13 @@ class Client:
                 last = self.job(jid, wait=30)
                 lost = None
             except VoxeldError as e:
+                if e.code == "too_many_waits":
+                    time.sleep(min(max(e.retry_after or 2, 1), 30))
+                    last = self.job(jid)
+                    lost = None
+                    if on_event:
+                        on_event(last)
+                    continue
                 if e.status not in (0, 502, 503, 504):
                     raise
                 lost = lost or time.monotonic()

@@ -143,6 +143,32 @@ async function runJob(page, kind, fields, shown) {
   const first = await page.textContent('#jobs li:first-child b');
   check('jobs are listed newest first', first === 'gregory', first);
 
+  // No stream and no ?wait hold to spare (503 too_many_streams, then 503
+  // too_many_waits, as a daemon at --max-event-streams and --max-waits
+  // answers): the job is followed by plain GETs, and the page never says
+  // the server is not answering.
+  const busy = code => route => route.fulfill({ status: 503,
+    headers: { 'Content-Type': 'application/json', 'Retry-After': '1' },
+    body: JSON.stringify({ error: { code, message: 'the most it allows' } }) });
+  await page.route(/\/v1\/jobs\/[0-9a-f]+\/events$/, busy('too_many_streams'));
+  await page.route(/\/v1\/jobs\/[0-9a-f]+\?wait=/, busy('too_many_waits'));
+  let plainGets = 0;
+  const onPlain = r => { if (/\/v1\/jobs\/[0-9a-f]{32}$/.test(r.url())) plainGets++; };
+  page.on('request', onPlain);
+  await page.evaluate(() => {
+    window.notAnswering = [];
+    const e = document.getElementById('job-error');
+    new MutationObserver(() => { if (/not answering/.test(e.textContent)) window.notAnswering.push(e.textContent); })
+      .observe(e, { childList: true, characterData: true, subtree: true });
+  });
+  await runJob(page, 'render', { N: 64, width: 512, height: 512 }, 'image');
+  const said = await page.evaluate(() => window.notAnswering);
+  check('waits and streams full: followed by plain GETs, never "not answering"',
+    said.length === 0 && plainGets >= 2, `${plainGets} plain GETs; ${said.join('; ')}`);
+  page.off('request', onPlain);
+  await page.unroute(/\/v1\/jobs\/[0-9a-f]+\/events$/);
+  await page.unroute(/\/v1\/jobs\/[0-9a-f]+\?wait=/);
+
   // A render turntable on spot: its frames play in turn.
   await page.selectOption('#mesh', { label: await page.locator('#mesh option', { hasText: '5856 tris' }).textContent() });
   await runJob(page, 'render', { N: 16, width: 64, height: 48, frames: 3, camera: { type: 'orbit' } }, 'image');

@@ -108,6 +108,7 @@ import http.server, json, os, threading, time
 from voxeld_client import Client, VoxeldError
 JOB = {"id": "j", "state": "queued", "progress": 0}
 submits = []
+plain = []
 class H(http.server.BaseHTTPRequestHandler):
     protocol_version = "HTTP/1.1"
     def log_message(self, *a):
@@ -128,7 +129,12 @@ class H(http.server.BaseHTTPRequestHandler):
         else:
             self.answer(202, JOB)
     def do_GET(self):
-        if self.path == "/v1/jobs/busy/events":  # no stream to spare
+        if self.path == "/v1/jobs/full?wait=30":  # no wait to spare
+            self.answer(503, {"error": {"code": "too_many_waits", "message": "full"}}, [("Retry-After", "1")])
+        elif self.path == "/v1/jobs/full":  # running, then done at the second look
+            plain.append(time.monotonic())
+            self.answer(200, dict(JOB, state="succeeded" if len(plain) > 1 else "running"))
+        elif self.path in ("/v1/jobs/busy/events", "/v1/jobs/full/events"):  # no stream to spare
             self.answer(503, {"error": {"code": "too_many_streams", "message": "busy"}}, [("Retry-After", "5")])
         elif self.path.endswith("/events"):  # one event, then the connection drops
             self.send_response(200)
@@ -170,6 +176,10 @@ assert seen[0]["progress"] == 0.5, seen
 t = time.monotonic()  # streams busy (503): polled at once, not retried
 assert c.wait("busy")["state"] == "succeeded"
 assert time.monotonic() - t < 4, time.monotonic() - t
+t = time.monotonic()  # waits full (503 too_many_waits): asked without, a second apart
+assert c.wait("full")["state"] == "succeeded"
+assert len(plain) == 2 and plain[1] - plain[0] >= 0.9, plain
+assert time.monotonic() - t < 8, time.monotonic() - t
 with open("old.bin", "wb") as f:
     f.write(b"old")
 try:
@@ -183,7 +193,7 @@ c.download("whole", "new.bin")
 assert open("new.bin", "rb").read() == b"0123456789"
 print("fake ok")
 PY
-check "stand-in server: 429 retried, a dropped stream polled, a short download refused ($(tail -n 1 fake.out))" grep -q '^fake ok' fake.out
+check "stand-in server: 429 retried, a dropped stream polled, full waits polled without one, a short download refused ($(tail -n 1 fake.out))" grep -q '^fake ok' fake.out
 
 stop_daemon
 finish

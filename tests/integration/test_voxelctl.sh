@@ -333,10 +333,12 @@ check "--local upload -, SIGTERM while reading: ended by it (rc $rc), spool and 
     sh -c "test $rc -eq 143 && test -z \"\$(ls -A '$TMP/ltmp')\""
 
 # A full queue (429, Retry-After) is waited out: the job is submitted once
-# there is room, not failed at once.
+# there is room, not failed at once. (No event streams or ?wait holds on
+# this daemon: see below.)
 export VOXELD_URL VOXELD_TOKEN=s3cret-token
 stop_daemon
-start_daemon --token-file "$TMP/token" --workers 1 --max-queued-jobs 1 || exit 1
+start_daemon --token-file "$TMP/token" --workers 1 --max-queued-jobs 1 --max-waits 0 \
+    --max-event-streams 0 || exit 1
 VOXELD_URL=$BASE
 HEAVY='"params":{"N":64,"R":1024,"width":768,"height":768}'
 for _ in $(seq 20); do
@@ -355,6 +357,14 @@ done
 wait "$rpid"
 rc=$?
 check "429: submitted once there was room, exit 0 (rc $rc)" sh -c "test $rc -eq 0 && grep -Eq '^[0-9a-f]{32}$' retry.id"
+
+# With no stream and no ?wait hold to spare (503 too_many_streams, then 503
+# too_many_waits), a job is followed by plain GETs to its end: not taken
+# for a server that stopped answering (given up after 2 minutes).
+"$CTL" voxelize "$MID" -r 8 -f summary -o full.json 2>full.err
+rc=$?
+check "waits full: followed to its end, exit 0 ($rc, $(tr '\n' ' ' <full.err))" \
+    sh -c "test $rc -eq 0 && jq -e .voxels_inside full.json >/dev/null && ! grep -q 'no answer' full.err"
 
 # A server that answers 503 (shutting down) and is then gone for a moment
 # (restarting): the upload is sent again once it is back (a stand-in).
