@@ -49,6 +49,8 @@ async function runJob(page, kind, fields, shown) {
     if ((await f.evaluate(e => e.tagName)) === 'SELECT') await f.selectOption(JSON.stringify(value));
     else await f.fill(typeof value === 'object' ? JSON.stringify(value) : String(value));
   }
+  // (the last job's result may still be marked shown: same kind, same mark)
+  await page.evaluate(() => { delete document.body.dataset.resultShown; delete document.body.dataset.jobState; });
   await page.click('#submit');
   await page.waitForFunction(
     want => document.body.dataset.resultShown === want || ['failed', 'canceled'].includes(document.body.dataset.jobState),
