@@ -180,7 +180,7 @@ static int error_code_is(const ctl_buf *b, const char *code)
 {
     cJSON *doc = b->p ? cJSON_Parse(b->p) : NULL;
     const char *got = str(cJSON_GetObjectItemCaseSensitive(doc, "error"), "code");
-    int is = got && !strcmp(got, code);
+    int is = !strcmp(got, code);
     cJSON_Delete(doc);
     return is;
 }

@@ -90,9 +90,8 @@ class Prepared
     virtual uint64_t unloaded_bytes() const = 0;
     // Puts into g the statistics GridBase::addStatsMetadata would (active
     // voxels' bounding box and count, memory, this with every leaf holding
-    // its values), found by prepare as it wrote the leaves; false when not
-    // prepared.
-    virtual bool stats_metadata(openvdb::GridBase &g) const = 0;
+    // its values), found by prepare as it wrote the leaves. After prepare.
+    virtual void stats_metadata(openvdb::GridBase &g) const = 0;
 };
 
 // A grid (bool or float) whose topology and leaf buffers are written by
@@ -420,7 +419,6 @@ template <typename GridT> class ParallelGrid final : public GridT, public Prepar
 
     uint64_t unloaded_bytes() const override
     {
-        if (stats_) return stats_->unloaded;
         uint64_t n = 0;
         if (by_mask_)
             for (const LeafT *leaf : leaves())
@@ -428,9 +426,9 @@ template <typename GridT> class ParallelGrid final : public GridT, public Prepar
         return n;
     }
 
-    bool stats_metadata(openvdb::GridBase &g) const override
+    void stats_metadata(openvdb::GridBase &g) const override
     {
-        if (!stats_) return false;
+        if (!stats_) throw std::logic_error("grid statistics asked for before prepare");
         using openvdb::GridBase;
         for (const char *name : {GridBase::META_FILE_BBOX_MIN, GridBase::META_FILE_BBOX_MAX,
                                  GridBase::META_FILE_MEM_BYTES, GridBase::META_FILE_VOXEL_COUNT})
@@ -443,7 +441,6 @@ template <typename GridT> class ParallelGrid final : public GridT, public Prepar
                      openvdb::Int64Metadata((int64_t)(stats_->mem + stats_->unloaded)));
         g.insertMeta(GridBase::META_FILE_VOXEL_COUNT,
                      openvdb::Int64Metadata((int64_t)stats_->count));
-        return true;
     }
 };
 
@@ -492,15 +489,7 @@ class CheckedArchive final : public openvdb::io::Archive
         io::DelayedLoadMetadata dl;
         if (prep.prepare(os, dl)) copy->insertMeta(openvdb::GridBase::META_FILE_DELAYED_LOAD, dl);
         if (io::getWriteGridStatsMetadata(os)) {
-            if (!prep.stats_metadata(*copy)) {
-                copy->addStatsMetadata();
-                if (uint64_t more = prep.unloaded_bytes()) // as if every leaf held its values
-                    copy->insertMeta(
-                        openvdb::GridBase::META_FILE_MEM_BYTES,
-                        openvdb::Int64Metadata(
-                            copy->metaValue<int64_t>(openvdb::GridBase::META_FILE_MEM_BYTES) +
-                            (int64_t)more));
-            }
+            prep.stats_metadata(*copy);
             copy->insertMeta(
                 openvdb::GridBase::META_FILE_COMPRESSION,
                 openvdb::StringMetadata(io::compressionToString(io::getDataCompression(os))));
