@@ -235,17 +235,20 @@ extern "C" int vx_draco_check_header(const unsigned char *data, size_t n, uint64
     h->major = major;
     h->minor = minor;
     h->method = method;
-    if (type == 0)
+    /* A point cloud is named only under a version libdraco writes point
+     * clouds in (1.0 to 1.3, 2.0 to 2.3): junk after the magic whose third
+     * byte is 0 is corrupt, not a point cloud. */
+    if (type == 0 && (major == 1 || major == 2) && minor <= 3)
         return vx_err_set(err, VX_EUNPROC, "draco_point_cloud",
                           "the Draco file holds a point cloud, not a mesh");
-    if (type != 1)
-        return vx_err_set(err, VX_EINVAL, "draco_corrupt", "unknown Draco geometry type %u", type);
     /* Mesh bitstreams libdraco reads: 1.0 to 1.3 and 2.0 to 2.2. */
     unsigned v = version_of(major, minor);
     if (!((major == 1 && minor <= 3) || (major == 2 && minor <= 2)))
         return vx_err_set(err, VX_EINVAL, "draco_corrupt",
                           "unsupported Draco bitstream version %u.%u (1.0 to 2.2 are read)", major,
                           minor);
+    if (type != 1)
+        return vx_err_set(err, VX_EINVAL, "draco_corrupt", "unknown Draco geometry type %u", type);
     if (method > 1)
         return vx_err_set(err, VX_EINVAL, "draco_corrupt", "unknown Draco encoding method %u",
                           method);
