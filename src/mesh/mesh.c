@@ -210,9 +210,116 @@ int vx_mesh_check_indices(const vx_mesh *m, vx_err *err)
     return 0;
 }
 
+/* 2 x the signed area of (a, b, c) in the plane of projection. */
+static double orient2(const double *a, const double *b, const double *c)
+{
+    return (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0]);
+}
+
+/* Whether p lies in the counter-clockwise triangle (a, b, c), its edges
+ * included. */
+static int in_triangle(const double *p, const double *a, const double *b, const double *c)
+{
+    return orient2(a, b, p) >= 0 && orient2(b, c, p) >= 0 && orient2(c, a, p) >= 0;
+}
+
+/* Face v[0..n) as the n - 2 triangles of a fan from v[0], into out. */
+static void fan(const uint32_t *v, uint32_t n, uint32_t *out)
+{
+    for (uint32_t k = 1; k + 1 < n; k++) {
+        out[3 * (k - 1)] = v[0];
+        out[3 * (k - 1) + 1] = v[k];
+        out[3 * (k - 1) + 2] = v[k + 1];
+    }
+}
+
+/* Face v[0..n) (n >= 4) as n - 2 triangles into out: a fan where the face
+ * is convex in the plane its Newell normal is most along (every turn to
+ * the same side), else ear clipping there (up to VX_MESH_EAR_MAX vertices;
+ * a fan beyond), so that no triangle covers what lies outside a concave
+ * face. Scratch: q 2 n doubles, nx 2 n ints. */
+static void triangulate(const double *pos, size_t nverts, const uint32_t *v, uint32_t n,
+                        uint32_t *out, double *q, int *nx)
+{
+    if (n > VX_MESH_EAR_MAX) return fan(v, n, out);
+    for (uint32_t i = 0; i < n; i++)
+        if (v[i] >= nverts) return fan(v, n, out); /* refused by vx_mesh_check_indices */
+    double N[3] = {0, 0, 0};
+    for (uint32_t i = 0; i < n; i++) {
+        const double *a = pos + 3 * (size_t)v[i], *b = pos + 3 * (size_t)v[(i + 1) % n];
+        N[0] += (a[1] - b[1]) * (a[2] + b[2]);
+        N[1] += (a[2] - b[2]) * (a[0] + b[0]);
+        N[2] += (a[0] - b[0]) * (a[1] + b[1]);
+    }
+    int ax = fabs(N[0]) >= fabs(N[1]) && fabs(N[0]) >= fabs(N[2]) ? 0
+             : fabs(N[1]) >= fabs(N[2])                           ? 1
+                                                                  : 2;
+    /* the other two axes, in the order that makes the face counter-clockwise */
+    int u = (ax + 1) % 3, w = (ax + 2) % 3;
+    if (N[ax] < 0) {
+        int t = u;
+        u = w;
+        w = t;
+    }
+    int convex = 1;
+    for (uint32_t i = 0; i < n; i++) {
+        const double *p = pos + 3 * (size_t)v[i];
+        q[2 * i] = p[u];
+        q[2 * i + 1] = p[w];
+    }
+    for (uint32_t i = 0; i < n && convex; i++)
+        convex = orient2(q + 2 * i, q + 2 * ((i + 1) % n), q + 2 * ((i + 2) % n)) >= 0;
+    if (convex || !(N[ax] != 0)) return fan(v, n, out);
+    /* ear clipping on the ring (nx next, pv previous), with a budget of
+     * 4 n^2 containment tests: past it (a face no simple polygon would
+     * need it for) the rest of the ring is a fan */
+    int *pv = nx + n;
+    uint64_t budget = 4 * (uint64_t)n * n;
+    for (uint32_t i = 0; i < n; i++) {
+        nx[i] = (int)((i + 1) % n);
+        pv[i] = (int)((i + n - 1) % n);
+    }
+    uint32_t left = n, t = 0, miss = 0;
+    int i = 0;
+    while (left > 3) {
+        int a = pv[i], c = nx[i];
+        const double *A = q + 2 * a, *B = q + 2 * i, *C = q + 2 * c;
+        int ear = orient2(A, B, C) > 0;
+        for (int k = nx[c]; ear && k != a && budget; k = nx[k], budget--)
+            if (in_triangle(q + 2 * k, A, B, C) &&
+                /* a vertex at a corner of the ear (a repeated position) does not block it */
+                !((q[2 * k] == A[0] && q[2 * k + 1] == A[1]) ||
+                  (q[2 * k] == C[0] && q[2 * k + 1] == C[1])))
+                ear = 0;
+        if (!budget) break;
+        /* no ear in a whole turn (a self-crossing or degenerate face): cut
+         * here anyway */
+        if (ear || miss >= left) {
+            out[3 * t] = v[a];
+            out[3 * t + 1] = v[i];
+            out[3 * t + 2] = v[c];
+            t++;
+            nx[a] = c;
+            pv[c] = a;
+            left--;
+            miss = 0;
+            i = a;
+        } else {
+            miss++;
+            i = c;
+        }
+    }
+    for (int k = nx[i]; nx[k] != i; k = nx[k]) { /* the ring left: 3 vertices, or more */
+        out[3 * t] = v[i];
+        out[3 * t + 1] = v[k];
+        out[3 * t + 2] = v[nx[k]];
+        t++;
+    }
+}
+
 int vx_mesh_analyze(vx_mesh *m, vx_err *err)
 {
-    /* Triangulated view: a fan per face. */
+    /* Triangulated view: a fan per convex face, ear clipping for the rest. */
     if (m->face_start && !m->tri) {
         size_t nt = 0;
         for (size_t f = 0; f < m->nfaces; f++)
@@ -221,16 +328,18 @@ int vx_mesh_analyze(vx_mesh *m, vx_err *err)
         if (!m->tri)
             return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for %zu triangles",
                               nt);
+        double q[2 * VX_MESH_EAR_MAX];
+        int nx[2 * VX_MESH_EAR_MAX];
         size_t t = 0;
         for (size_t f = 0; f < m->nfaces; f++) {
             const uint32_t *v = vx_mesh_face(m, f);
             uint32_t n = vx_mesh_face_size(m, f);
-            for (uint32_t k = 1; k + 1 < n; k++) {
-                m->tri[3 * t] = v[0];
-                m->tri[3 * t + 1] = v[k];
-                m->tri[3 * t + 2] = v[k + 1];
-                t++;
+            if (n == 3) {
+                memcpy(m->tri + 3 * t, v, 3 * sizeof *v);
+            } else {
+                triangulate(m->pos, m->nverts, v, n, m->tri + 3 * t, q, nx);
             }
+            t += n - 2;
         }
         m->ntris = nt;
     } else if (!m->face_start) {

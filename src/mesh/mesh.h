@@ -2,7 +2,8 @@
  * rasterizing engines draw.
  *
  * The face structure is kept (quads and n-gons matter to Gregory patches);
- * `tri` is a fan triangulation of every face, made once at load time. When
+ * `tri` is a triangulation of every face (a fan where the face is convex, ear
+ * clipping where it is not), made once at load time. When
  * every face is already a triangle, `face_start` is NULL and `tri` aliases
  * `face_idx` (no copy). Positions are doubles: engines normalise in double
  * before converting to float for upload.
@@ -94,7 +95,12 @@ const uint32_t *vx_mesh_face(const vx_mesh *m, size_t f);
  * holds n indices (sorted there when n > 16). */
 int vx_mesh_face_repeat(const uint32_t *v, size_t n, uint32_t *scratch, uint32_t *rep);
 
-/* Builds `tri` from the faces (fan) if needed and fills bbox, faces_by_size,
+/* The most vertices of a face that vx_mesh_analyze triangulates by ear
+ * clipping when it is not convex (a fan beyond). */
+#define VX_MESH_EAR_MAX 64
+
+/* Builds `tri` from the faces (a fan from the first vertex for a convex
+ * face, ear clipping in its plane for one that is not) if needed and fills bbox, faces_by_size,
  * boundary/non-manifold edge counts (boundary edges also with vertices
  * welded by position) and degenerate_tris. Readers call it;
  * code that builds a mesh by hand calls it before use. */

@@ -229,6 +229,36 @@ sys.exit(any(((r1[i >> 3] >> (i & 7)) & 1) != r8[i] for i in range(len(r8))))' "
 vox "sphere surface" "$M_sphere" '{"resolution":24,"fill":"surface","format":"summary"}'
 check "surface: a shell (0 < n < solid)" test "$(st voxels_inside)" -gt 0 -a "$(st voxels_inside)" -lt "$N_IN"
 
+# A U-shaped prism whose caps are single concave 8-gons: ear-clipped, its
+# surface is that of the same prism with the caps triangulated by hand (a
+# fan from a cap's first corner would span the notch)
+python3 - "$TMP" <<'PY'
+import sys
+U = [(0, 0), (3, 0), (3, 2), (2, 2), (2, 1), (1, 1), (1, 2), (0, 2)]
+tris = [(0, 1, 4), (1, 2, 3), (1, 3, 4), (0, 4, 5), (0, 5, 7), (5, 6, 7)]
+for name, caps in (("u_ngon", [list(range(8))]), ("u_tris", [list(t) for t in tris])):
+    with open(f"{sys.argv[1]}/{name}.obj", "w") as f:
+        for z in (0, 1):
+            for x, y in U:
+                f.write(f"v {x} {y} {z + 0.013}\n")
+        for c in caps:
+            f.write("f " + " ".join(str(i + 1) for i in reversed(c)) + "\n")  # bottom, facing -z
+            f.write("f " + " ".join(str(i + 9) for i in c) + "\n")
+        for i in range(8):
+            j = (i + 1) % 8
+            f.write(f"f {i + 1} {j + 1} {j + 9} {i + 9}\n")
+PY
+for u in u_ngon u_tris; do
+    upload "$TMP/$u.obj"
+    expect_status "upload $u" 201
+    vox "$u surface" "$MESH_ID" '{"resolution":30,"fill":"surface","format":"summary"}'
+    declare "S_$u=$(st voxels_inside)"
+    vox "$u solid" "$MESH_ID" '{"resolution":30,"format":"summary"}'
+    declare "V_$u=$(st voxels_inside)"
+done
+check "concave caps: the surface of the hand-triangulated prism ($S_u_tris)" test "$S_u_ngon" = "$S_u_tris"
+check "concave caps: the same solid ($V_u_tris)" test "$V_u_ngon" = "$V_u_tris"
+
 vox "sphere voxel_size" "$M_sphere" '{"voxel_size":0.1,"format":"summary"}'
 check "voxel_size: 20 cells across" jq -e '.stats.dims == [20,20,20] and .stats.voxel_size == 0.1 and .params.resolution == null' "$TMP/job.json"
 

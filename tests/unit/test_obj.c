@@ -175,6 +175,112 @@ static void test_ngons(void **state)
     vx_mesh_free(m);
 }
 
+/* Face f's triangles (m->tri from 3 t0) against the face: their areas,
+ * each facing the face's way, add up to the face's own (a fan of a
+ * concave face covers what lies outside it twice, and backwards). */
+static void check_cover(const vx_mesh *m, size_t f, size_t t0)
+{
+    const uint32_t *v = vx_mesh_face(m, f);
+    uint32_t n = vx_mesh_face_size(m, f);
+    double N[3] = {0, 0, 0}; /* 2 x the vector area (Newell) */
+    for (uint32_t i = 0; i < n; i++) {
+        const double *a = m->pos + 3 * v[i], *b = m->pos + 3 * v[(i + 1) % n];
+        N[0] += a[1] * b[2] - a[2] * b[1];
+        N[1] += a[2] * b[0] - a[0] * b[2];
+        N[2] += a[0] * b[1] - a[1] * b[0];
+    }
+    double area = sqrt(N[0] * N[0] + N[1] * N[1] + N[2] * N[2]), sum = 0;
+    for (uint32_t k = 0; k + 2 < n; k++) {
+        const uint32_t *t = m->tri + 3 * (t0 + k);
+        const double *a = m->pos + 3 * t[0], *b = m->pos + 3 * t[1], *c = m->pos + 3 * t[2];
+        double u[3] = {b[0] - a[0], b[1] - a[1], b[2] - a[2]},
+               w[3] = {c[0] - a[0], c[1] - a[1], c[2] - a[2]};
+        double x[3] = {u[1] * w[2] - u[2] * w[1], u[2] * w[0] - u[0] * w[2],
+                       u[0] * w[1] - u[1] * w[0]};
+        double along = (x[0] * N[0] + x[1] * N[1] + x[2] * N[2]) / area;
+        if (along < -1e-9 * area) print_error("face %zu triangle %u faces backwards\n", f, k);
+        assert_true(along >= -1e-9 * area);
+        sum += sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2]);
+        for (int i = 0; i < 3; i++) { /* a triangle of the face's own vertices */
+            int found = 0;
+            for (uint32_t j = 0; j < n; j++)
+                found |= t[i] == v[j];
+            assert_true(found);
+        }
+    }
+    if (fabs(sum - area) > 1e-9 * area)
+        print_error("face %zu (%u vertices): triangles cover %.17g, the face %.17g\n", f, n, sum,
+                    area);
+    assert_true(fabs(sum - area) <= 1e-9 * area);
+}
+
+/* Concave faces are ear-clipped in their plane, convex ones stay fans: an
+ * L, a dart (a quad whose fan diagonal lies outside), and random
+ * star-shaped faces of 4 to VX_MESH_EAR_MAX vertices in random planes. */
+static void test_concave_faces(void **state)
+{
+    (void)state;
+    vx_err err = {0};
+    vx_mesh *m = read_str("v 0 0 0\nv 2 0 0\nv 2 1 0\nv 1 1 0\nv 1 2 0\nv 0 2 0\n"
+                          "v 0 0 0\nv 1 3 0\nv 0 1 0\nv -1 3 0\n"
+                          "f 4 5 6 1 2 3\n" /* the L from its inner corner */
+                          "f 9 10 7 8\n",   /* the dart from its reflex vertex */
+                          &err);
+    assert_non_null(m);
+    assert_int_equal(m->ntris, 4 + 2);
+    check_cover(m, 0, 0);
+    check_cover(m, 1, 4);
+    vx_mesh_free(m);
+    /* a convex face keeps its fan, collinear vertices and all */
+    m = read_str("v 0 0 0\nv 1 0 0\nv 2 0 0\nv 2 1 0\nv 0 1 0\nf 1 2 3 4 5\n", &err);
+    assert_non_null(m);
+    static const uint32_t fan[] = {0, 1, 2, 0, 2, 3, 0, 3, 4};
+    assert_memory_equal(m->tri, fan, sizeof fan);
+    vx_mesh_free(m);
+
+    srand48(11);
+    char *text = malloc(200 * (VX_MESH_EAR_MAX + 2) + 64);
+    int concave = 0;
+    for (int trial = 0; trial < 300; trial++) {
+        int n = 4 + (int)(drand48() * (VX_MESH_EAR_MAX - 3));
+        /* a random plane: orthonormal e1, e2 from a random rotation */
+        double a = drand48() * 2 * M_PI, b = acos(2 * drand48() - 1), c = drand48() * 2 * M_PI;
+        double z[3] = {sin(b) * cos(a), sin(b) * sin(a), cos(b)};
+        double h[3] = {fabs(z[0]) < 0.9 ? 1 : 0, fabs(z[0]) < 0.9 ? 0 : 1, 0};
+        double e1[3] = {h[1] * z[2] - h[2] * z[1], h[2] * z[0] - h[0] * z[2],
+                        h[0] * z[1] - h[1] * z[0]};
+        double l = sqrt(e1[0] * e1[0] + e1[1] * e1[1] + e1[2] * e1[2]);
+        for (int i = 0; i < 3; i++)
+            e1[i] /= l;
+        double e2[3] = {z[1] * e1[2] - z[2] * e1[1], z[2] * e1[0] - z[0] * e1[2],
+                        z[0] * e1[1] - z[1] * e1[0]};
+        char *p = text;
+        int reflex = 0;
+        double prev_r = 0;
+        for (int i = 0; i < n; i++) {
+            double t = 2 * M_PI * (i + 0.5 * drand48()) / n + c;
+            double r = 0.2 + drand48();
+            reflex |= i && fabs(r - prev_r) > 0.3;
+            prev_r = r;
+            double x = r * cos(t), y = r * sin(t);
+            p += sprintf(p, "v %.17g %.17g %.17g\n", 5 + x * e1[0] + y * e2[0],
+                         -3 + x * e1[1] + y * e2[1], 1 + x * e1[2] + y * e2[2]);
+        }
+        concave += reflex;
+        p += sprintf(p, "f");
+        for (int i = 0; i < n; i++)
+            p += sprintf(p, " %d", trial % 2 ? n - i : i + 1); /* either way round */
+        sprintf(p, "\n");
+        m = read_str(text, &err);
+        assert_non_null(m);
+        assert_int_equal(m->ntris, (size_t)n - 2);
+        check_cover(m, 0, 0);
+        vx_mesh_free(m);
+    }
+    assert_true(concave > 200);
+    free(text);
+}
+
 /* Triangles first, then a quad: the offsets of the earlier faces are
  * made up when face_start is created late. */
 static void test_late_quad(void **state)
@@ -747,6 +853,7 @@ int main(void)
         cmocka_unit_test(test_index_forms),
         cmocka_unit_test(test_relative_interleaved),
         cmocka_unit_test(test_ngons),
+        cmocka_unit_test(test_concave_faces),
         cmocka_unit_test(test_late_quad),
         cmocka_unit_test(test_cube_closed_and_open),
         cmocka_unit_test(test_split_vertices_weld),
