@@ -141,11 +141,15 @@ def read_slowly(port, path, rate, seconds, addrs, per_addr):
             s.sendall(b"GET " + path.encode() + b" HTTP/1.1\r\nHost: x\r\n\r\n")
             s.setblocking(False)
             conns.append([s, time.monotonic(), b"", None])
-    t0 = time.monotonic()
+    t0 = last = time.monotonic()
     budget = 0.0
     while time.monotonic() - t0 < seconds:
         time.sleep(0.05)
-        budget += rate * 0.05
+        # the rate by the clock, not by the passes (a loaded machine's
+        # sleeps overrun: 50 ms passes would read less than `rate`)
+        now = time.monotonic()
+        budget += rate * (now - last)
+        last = now
         take = int(budget)
         budget -= take
         for c in conns:

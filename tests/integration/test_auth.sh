@@ -128,7 +128,7 @@ kill -TERM $DPID
 wait $DPID
 rc=$?
 ms=$((($(date +%s%N) - T0) / 1000000))
-check "SIGTERM during the database wait: exit 0 in ${ms} ms (rc $rc)" test $rc -eq 0 -a $ms -lt 3000
+check "SIGTERM during the database wait: exit 0 in ${ms} ms (rc $rc)" test $rc -eq 0 -a $ms -lt 5000
 check "and logs why" grep -q 'event=voxeld.stop stage=database reason=signal' "$TMP/dbwait.log"
 "$VOXELD" --version >"$TMP/version"
 check "--version" grep -q '^voxeld [0-9]' "$TMP/version"

@@ -280,9 +280,10 @@ check "the long job runs" test -n "${RUNS_ON:-}"
 on "$(other "$RUNS_ON")"
 api DELETE "/v1/jobs/$J"
 check "cancel from another replica: 202, cancel requested" bash -c "test '$STATUS' = 202 && jq -e '.cancel_requested == true' '$BODY'"
-t0=$(date +%s)
+t0=$(date +%s.%N)
 wait_final "$(other "$RUNS_ON")" "$J" 30
-check "canceled within a lease period ($(($(date +%s) - t0)) s)" bash -c "jq -e '.state == \"canceled\" and .error.code == \"canceled\"' '$BODY' && test $(($(date +%s) - t0)) -le 6"
+took=$(awk -v a="$t0" -v b="$(date +%s.%N)" 'BEGIN {printf "%.1f", b - a}')
+check "canceled within a lease period or two ($took s)" bash -c "jq -e '.state == \"canceled\" and .error.code == \"canceled\"' '$BODY' && awk -v t=$took 'BEGIN {exit !(t <= 7)}'"
 
 # kill -9 the replica running a job: attempt 2 elsewhere.
 submit 2 voxelize "$B" "$LONG"

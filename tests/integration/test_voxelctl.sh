@@ -196,11 +196,12 @@ check "upload -: exit 0 ($(cat ctl.err))" test $rc -eq 0
 check "upload -: the same mesh as the file" test "$(cat stdin.id)" = "$MID"
 mkfifo mesh.fifo
 cat "$MESH" >mesh.fifo &
-"$CTL" -q voxelize mesh.fifo -r 8 -f summary >fifo.json 2>ctl.err
+mkdir -p "$TMP/fifo-spool" # (its own spool dir: /tmp may hold another run's)
+TMPDIR=$TMP/fifo-spool "$CTL" -q voxelize mesh.fifo -r 8 -f summary >fifo.json 2>ctl.err
 rc=$?
 check "voxelize a FIFO: exit 0 ($(cat ctl.err))" test $rc -eq 0
 check "voxelize a FIFO: the stats" jq -e '.voxels_inside > 0' fifo.json
-check "no spooled file left" test -z "$(ls "${TMPDIR:-/tmp}"/voxelctl-upload-* 2>/dev/null)"
+check "no spooled file left" test -z "$(ls "$TMP/fifo-spool"/voxelctl-upload-* 2>/dev/null)"
 # A turntable: every frame downloaded, its number put into -o's name.
 TURN=(-r 16 -p camera.type=orbit -p width=32 -p height=24)
 "$CTL" -q render "$MID" "${TURN[@]}" -p frames=3 -o spin.png 2>ctl.err

@@ -101,7 +101,9 @@ static void test_child_stopped(void **state)
     double took = vx_mono() - t0;
     printf("  stopped after %.0f ms, %d polls\n", took * 1e3, polls);
     assert_string_equal(err.code, "job_timeout");
-    assert_true(took >= 0.3 && took < 0.3 + 0.1);
+    /* (soon after the deadline: the bug this guards against waited for the
+     * child's own 600 s; a loaded machine's wakeups add tens of ms) */
+    assert_true(took >= 0.3 && took < 0.3 + 1.0);
     assert_true(polls >= 5);
     /* The reaper thread collects it. */
     for (int i = 0; i < 100 && waitpid(-1, NULL, WNOHANG) != -1; i++)
