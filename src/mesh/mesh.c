@@ -267,8 +267,13 @@ static void triangulate(const double *pos, size_t nverts, const uint32_t *v, uin
         q[2 * i] = p[u];
         q[2 * i + 1] = p[w];
     }
-    for (uint32_t i = 0; i < n && convex; i++)
-        convex = orient2(q + 2 * i, q + 2 * ((i + 1) % n), q + 2 * ((i + 2) % n)) >= 0;
+    for (uint32_t i = 0; i < n && convex; i++) {
+        /* every turn to the left, or straight on (not back: a spike) */
+        const double *a = q + 2 * i, *b = q + 2 * ((i + 1) % n), *c = q + 2 * ((i + 2) % n);
+        double o = orient2(a, b, c);
+        convex =
+            o > 0 || (o == 0 && (b[0] - a[0]) * (c[0] - b[0]) + (b[1] - a[1]) * (c[1] - b[1]) >= 0);
+    }
     if (convex || !(N[ax] != 0)) return fan(v, n, out);
     /* ear clipping on the ring (nx next, pv previous), with a budget of
      * 4 n^2 containment tests: past it (a face no simple polygon would
@@ -279,22 +284,26 @@ static void triangulate(const double *pos, size_t nverts, const uint32_t *v, uin
         nx[i] = (int)((i + 1) % n);
         pv[i] = (int)((i + n - 1) % n);
     }
+    /* What a corner must be to be cut, raised after a whole turn finds
+     * none: 0 an ear (a left turn with no other vertex in its triangle;
+     * one at a corner's position, as a hole's bridge repeats them, does
+     * not count), 1 an ear or a flat one (collinear corners), 2 any left
+     * turn, 3 any corner (a face that crosses itself). */
     uint32_t left = n, t = 0, miss = 0;
-    int i = 0;
+    int i = 0, level = 0;
     while (left > 3) {
         int a = pv[i], c = nx[i];
         const double *A = q + 2 * a, *B = q + 2 * i, *C = q + 2 * c;
-        int ear = orient2(A, B, C) > 0;
-        for (int k = nx[c]; ear && k != a && budget; k = nx[k], budget--)
-            if (in_triangle(q + 2 * k, A, B, C) &&
-                /* a vertex at a corner of the ear (a repeated position) does not block it */
-                !((q[2 * k] == A[0] && q[2 * k + 1] == A[1]) ||
-                  (q[2 * k] == C[0] && q[2 * k + 1] == C[1])))
+        double o = orient2(A, B, C);
+        int ear = level >= 3 || (level == 1 ? o >= 0 : o > 0);
+        for (int k = nx[c]; level < 2 && ear && k != a && budget; k = nx[k], budget--) {
+            const double *K = q + 2 * k;
+            if (in_triangle(K, A, B, C) && !(K[0] == A[0] && K[1] == A[1]) &&
+                !(K[0] == B[0] && K[1] == B[1]) && !(K[0] == C[0] && K[1] == C[1]))
                 ear = 0;
+        }
         if (!budget) break;
-        /* no ear in a whole turn (a self-crossing or degenerate face): cut
-         * here anyway */
-        if (ear || miss >= left) {
+        if (ear) {
             out[3 * t] = v[a];
             out[3 * t + 1] = v[i];
             out[3 * t + 2] = v[c];
@@ -303,9 +312,13 @@ static void triangulate(const double *pos, size_t nverts, const uint32_t *v, uin
             pv[c] = a;
             left--;
             miss = 0;
+            level = 0;
             i = a;
         } else {
-            miss++;
+            if (++miss >= left) {
+                miss = 0;
+                level++;
+            }
             i = c;
         }
     }

@@ -223,14 +223,36 @@ static void test_concave_faces(void **state)
     vx_err err = {0};
     vx_mesh *m = read_str("v 0 0 0\nv 2 0 0\nv 2 1 0\nv 1 1 0\nv 1 2 0\nv 0 2 0\n"
                           "v 0 0 0\nv 1 3 0\nv 0 1 0\nv -1 3 0\n"
-                          "f 4 5 6 1 2 3\n" /* the L from its inner corner */
-                          "f 9 10 7 8\n",   /* the dart from its reflex vertex */
+                          "f 3 4 5 6 1 2\n" /* the L: its fan would span the notch */
+                          "f 8 9 10 7\n",   /* the dart from a wing tip: the same */
                           &err);
     assert_non_null(m);
     assert_int_equal(m->ntris, 4 + 2);
     check_cover(m, 0, 0);
     check_cover(m, 1, 4);
     vx_mesh_free(m);
+    /* a square with a square hole, joined by a bridge of no width (its two
+     * ends repeat positions), from every corner; and a spike of no width
+     * into a square (a turn straight back is not convex) */
+    static const double hole[10][2] = {{0, 0}, {4, 0}, {4, 4}, {0, 4}, {0, 0},
+                                       {1, 1}, {1, 3}, {3, 3}, {3, 1}, {1, 1}};
+    static const double spike[7][2] = {{0, 0}, {4, 0}, {4, 4}, {0, 4}, {0, 2}, {2, 2}, {0, 2}};
+    char buf[1024];
+    for (int s0 = 0; s0 < 11; s0++) {
+        int n = s0 < 10 ? 10 : 7;
+        const double(*p)[2] = s0 < 10 ? hole : spike;
+        char *w = buf;
+        for (int k = 0; k < n; k++)
+            w += sprintf(w, "v %g %g 1\n", p[(k + s0) % n][0], p[(k + s0) % n][1]);
+        w += sprintf(w, "f");
+        for (int k = 1; k <= n; k++)
+            w += sprintf(w, " %d", k);
+        sprintf(w, "\n");
+        m = read_str(buf, &err);
+        assert_non_null(m);
+        check_cover(m, 0, 0);
+        vx_mesh_free(m);
+    }
     /* a convex face keeps its fan, collinear vertices and all */
     m = read_str("v 0 0 0\nv 1 0 0\nv 2 0 0\nv 2 1 0\nv 0 1 0\nf 1 2 3 4 5\n", &err);
     assert_non_null(m);
