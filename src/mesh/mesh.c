@@ -234,8 +234,8 @@ static void fan(const uint32_t *v, uint32_t n, uint32_t *out)
 }
 
 /* Face v[0..n) (n >= 4) as n - 2 triangles into out: a fan where the face
- * is convex in the plane its Newell normal is most along (every turn to
- * the same side), else ear clipping there (up to VX_MESH_EAR_MAX vertices;
+ * is convex in the plane its Newell normal is most along (no turn to the
+ * right, none straight back), else ear clipping there (up to VX_MESH_EAR_MAX vertices;
  * a fan beyond), so that no triangle covers what lies outside a concave
  * face. Scratch: q 2 n doubles, nx 2 n ints. */
 static void triangulate(const double *pos, size_t nverts, const uint32_t *v, uint32_t n,
