@@ -153,11 +153,13 @@ api POST /v1/jobs -H "Content-Type: application/json" -d "{\"mesh\":\"$OGRE\",\"
 J6=$(jqb .id)
 held=()
 # (held 10 s: the checks below must all fall within the holds on a loaded
-# machine; the third request is tried until both holds are in)
+# machine. The two start first: a third request ahead of one would take
+# its place. Then the third is tried until both holds are in.)
 for n in 1 2; do
     curl -s -o "$TMP/held$n.json" -w '%{http_code}' "$BASE/v1/jobs/$J6?wait=10" >"$TMP/held$n.code" &
     held+=($!)
 done
+sleep 2
 for _ in $(seq 20); do
     api GET "/v1/jobs/$J6?wait=1"
     [[ $STATUS == 503 ]] && break
