@@ -261,12 +261,12 @@ static void triangulate(const double *pos, size_t nverts, const uint32_t *v, uin
         u = w;
         w = t;
     }
-    int convex = 1;
     for (uint32_t i = 0; i < n; i++) {
         const double *p = pos + 3 * (size_t)v[i];
         q[2 * i] = p[u];
         q[2 * i + 1] = p[w];
     }
+    int convex = 1;
     for (uint32_t i = 0; i < n && convex; i++) {
         /* every turn to the left, or straight on (not back: a spike) */
         const double *a = q + 2 * i, *b = q + 2 * ((i + 1) % n), *c = q + 2 * ((i + 2) % n);

@@ -66,7 +66,7 @@ api POST /v1/meshes -H "Content-Type: model/x-draco" --data-binary "@$TMP/box.ob
 expect_error "Draco declared, text sent" 415 unsupported_media_type
 api POST /v1/meshes -H "Content-Type: application/octet-stream" --data-binary "@$TMP/noise.bin"
 expect_error "binary junk, sniffed" 415 unsupported_media_type
-printf '{\x93\x07' | cat - "$TMP/noise.bin" >"$TMP/brace.bin" # as junk from a client may
+printf '{\x93\x07' | cat - "$TMP/noise.bin" >"$TMP/brace.bin" # (junk can start with a brace)
 api POST /v1/meshes -H "Content-Type: application/octet-stream" --data-binary "@$TMP/brace.bin"
 expect_error "binary junk that starts with a brace, sniffed (not glTF)" 415 unsupported_media_type
 # a binary STL (a header that says nothing, then triangles) declared as text
