@@ -166,7 +166,7 @@ static int check_ply(const unsigned char *p, size_t n, uint64_t size, vx_mesh_de
     uint64_t left = size - (uint64_t)h->body, need = 0;
     /* ASCII: the last number may end the file without a separator. */
     if (ascii) left += 1;
-    int isz = 1;
+    int isz = 0;
     for (int i = 0; i < h->nelems; i++) {
         const vx_ply_elem *e = &h->elems[i];
         /* An entry's shortest encoding, lists empty: a digit and a blank
@@ -177,8 +177,11 @@ static int check_ply(const unsigned char *p, size_t n, uint64_t size, vx_mesh_de
             minb += ascii ? 2
                           : (uint64_t)vx_ply_type_size(pr->count_type ? (vx_ply_type)pr->count_type
                                                                       : (vx_ply_type)pr->type);
-            if (pr->count_type && !strcmp(e->name, "face"))
-                isz = ascii ? 2 : vx_ply_type_size((vx_ply_type)pr->type);
+            /* a face's corner, or a strip's index (a triangle at most) */
+            if (pr->count_type && (!strcmp(e->name, "face") || !strcmp(e->name, "tristrips"))) {
+                int s = ascii ? 2 : vx_ply_type_size((vx_ply_type)pr->type);
+                isz = s < isz || isz == 0 ? s : isz;
+            }
         }
         if (!minb) minb = 1;
         if (e->count > left / minb || need + e->count * minb > left) {
@@ -194,7 +197,7 @@ static int check_ply(const unsigned char *p, size_t n, uint64_t size, vx_mesh_de
     }
     free(h);
     if (rc) return rc;
-    d->indices = (left - need) / (uint64_t)isz;
+    d->indices = (left - need) / (uint64_t)(isz ? isz : 1);
     d->triangles = d->indices;
     return 0;
 }

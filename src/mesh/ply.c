@@ -6,10 +6,12 @@
  * read here: the header's elements and properties (any of the eight value
  * types, lists with any integer count type), then the body in ASCII,
  * binary little or big endian, every read checked against the bytes left.
- * The vertex element's x, y and z and the face element's vertex_indices
- * (or vertex_index) list are kept; every other element and property is
- * skipped; nothing but blanks may follow the last element (a count too
- * small otherwise reads out of step). Polygons are kept. */
+ * The vertex element's x, y and z, the face element's vertex_indices
+ * (or vertex_index) list and the tristrips element's vertex_indices list
+ * (strips of triangles, -1 between strips, as Stanford's scanning tools
+ * wrote them) are kept; every other element and property is skipped;
+ * nothing but blanks may follow the last element (a count too small
+ * otherwise reads out of step). Polygons are kept. */
 #include <math.h>
 #include <stdarg.h>
 #include <stdio.h>
@@ -275,29 +277,100 @@ static int find_prop(const vx_ply_header *h, const vx_ply_elem *e, const char *n
 typedef struct ply_out {
     vx_mesh *m;
     size_t cap, used, kept, ntris;
+    size_t fcap; /* face_start's room, less its closing entry */
     const vx_mesh_limits *lim;
 } ply_out;
 
-static int read_face(ply_in *in, ply_out *o, vx_ply_type t, uint64_t k, size_t n)
+/* Room for k more corners in face_idx; a face's corner takes a byte of
+ * the file at least, a strip's triangle (three corners) one of its own
+ * indices: at most 3 n + 16 in all. */
+static int room(ply_in *in, ply_out *o, uint64_t k, size_t n)
 {
-    if (o->used + k > o->cap) {
-        size_t cap = 2 * o->cap + (size_t)k;
-        if (cap > n + 16) cap = n + 16; /* a corner takes a byte of the file at least */
-        if (o->used + k > cap) return short_body(in);
-        uint32_t *g = realloc(o->m->face_idx, cap * sizeof(uint32_t));
-        if (!g)
+    if (o->used + k <= o->cap) return 0;
+    size_t cap = 2 * o->cap + (size_t)k;
+    if (cap > 3 * n + 16) cap = 3 * n + 16;
+    if (o->used + k > cap) return short_body(in);
+    uint32_t *g = realloc(o->m->face_idx, cap * sizeof(uint32_t));
+    if (!g)
+        return vx_err_set(in->err, VX_EINTERNAL, "out_of_memory", "no memory to read the PLY file");
+    o->m->face_idx = g;
+    o->cap = cap;
+    return 0;
+}
+
+/* Closes the face of the corners face_idx[used..used + k) (k >= 3). */
+static int keep_face(ply_in *in, ply_out *o, uint64_t k, size_t n)
+{
+    if (o->kept == o->fcap) {
+        size_t fcap = 2 * o->fcap + 16;
+        if (fcap > n + 16) fcap = n + 16; /* a face or strip triangle per byte at most */
+        if (o->kept == fcap) return short_body(in);
+        uint32_t *f = realloc(o->m->face_start, (fcap + 1) * sizeof(uint32_t));
+        if (!f)
             return vx_err_set(in->err, VX_EINTERNAL, "out_of_memory",
                               "no memory to read the PLY file");
-        o->m->face_idx = g;
-        o->cap = cap;
+        o->m->face_start = f;
+        o->fcap = fcap;
     }
+    o->m->face_start[o->kept++] = (uint32_t)o->used;
+    o->used += k;
+    o->ntris += k - 2;
+    if (o->lim && o->lim->max_triangles && o->ntris > o->lim->max_triangles)
+        return vx_err_set(in->err, VX_ETOOBIG, "mesh_too_big",
+                          "the PLY file has more than %zu triangles (the limit)",
+                          o->lim->max_triangles);
+    return 0;
+}
+
+/* A vertex index read as v: a whole number in 0..UINT32_MAX - 1. */
+static int vertex_index(ply_in *in, double v, uint32_t *out)
+{
+    if (!(v >= 0) || v != floor(v) || v >= UINT32_MAX)
+        return fail(in->err, "element '%s' entry %llu: a bad vertex index", in->elem,
+                    (unsigned long long)in->entry);
+    *out = (uint32_t)v;
+    return 0;
+}
+
+/* A tristrips entry of k indices: each index after a strip's first two
+ * makes a triangle with the two before it, every second one turned so
+ * that the strip keeps one orientation; -1 starts a new strip. A
+ * triangle that repeats a vertex (strips are stitched with them) is
+ * dropped. */
+static int read_strip(ply_in *in, ply_out *o, vx_ply_type t, uint64_t k, size_t n)
+{
+    uint32_t a = 0, b = 0;
+    uint64_t have = 0; /* indices of the current strip so far */
     for (uint64_t i = 0; i < k; i++) {
         double v;
+        uint32_t c = 0;
         if (read_value(in, t, &v)) return -1;
-        if (!(v >= 0) || v != floor(v) || v >= UINT32_MAX)
-            return fail(in->err, "element '%s' entry %llu: a bad vertex index", in->elem,
-                        (unsigned long long)in->entry);
-        o->m->face_idx[o->used + i] = (uint32_t)v;
+        if (v == -1) {
+            have = 0;
+            continue;
+        }
+        if (vertex_index(in, v, &c)) return -1;
+        if (have >= 2 && a != b && b != c && a != c) {
+            if (room(in, o, 3, n)) return -1;
+            uint32_t *f = o->m->face_idx + o->used;
+            f[0] = have % 2 ? b : a;
+            f[1] = have % 2 ? a : b;
+            f[2] = c;
+            if (keep_face(in, o, 3, n)) return -1;
+        }
+        a = b;
+        b = c;
+        have++;
+    }
+    return 0;
+}
+
+static int read_face(ply_in *in, ply_out *o, vx_ply_type t, uint64_t k, size_t n)
+{
+    if (room(in, o, k, n)) return -1;
+    for (uint64_t i = 0; i < k; i++) {
+        double v;
+        if (read_value(in, t, &v) || vertex_index(in, v, &o->m->face_idx[o->used + i])) return -1;
     }
     if (k < 3) return 0; /* points and edges */
     uint32_t rep, small[16], *scr = k > 16 ? malloc((size_t)k * sizeof *scr) : small;
@@ -308,14 +381,7 @@ static int read_face(ply_in *in, ply_out *o, vx_ply_type t, uint64_t k, size_t n
     if (twice)
         return fail(in->err, "element '%s' entry %llu uses vertex %u twice", in->elem,
                     (unsigned long long)in->entry, rep);
-    o->m->face_start[o->kept++] = (uint32_t)o->used;
-    o->used += k;
-    o->ntris += k - 2;
-    if (o->lim && o->lim->max_triangles && o->ntris > o->lim->max_triangles)
-        return vx_err_set(in->err, VX_ETOOBIG, "mesh_too_big",
-                          "the PLY file has more than %zu triangles (the limit)",
-                          o->lim->max_triangles);
-    return 0;
+    return keep_face(in, o, k, n);
 }
 
 vx_mesh *vx_ply_read_mem(const unsigned char *data, size_t n, const vx_mesh_limits *lim,
@@ -327,12 +393,13 @@ vx_mesh *vx_ply_read_mem(const unsigned char *data, size_t n, const vx_mesh_limi
     vx_mesh *m = vx_mesh_new();
     if (!h || !m) goto oom;
     if (vx_ply_header_parse(data, n, n, h, err)) goto out;
-    const vx_ply_elem *ve = NULL, *fe = NULL;
+    const vx_ply_elem *ve = NULL, *fe = NULL, *te = NULL;
     for (int i = 0; i < h->nelems; i++) {
         if (!ve && !strcmp(h->elems[i].name, "vertex")) ve = &h->elems[i];
         if (!fe && !strcmp(h->elems[i].name, "face")) fe = &h->elems[i];
+        if (!te && !strcmp(h->elems[i].name, "tristrips")) te = &h->elems[i];
     }
-    int xyz[3] = {-1, -1, -1}, fi = -1;
+    int xyz[3] = {-1, -1, -1}, fi = -1, ti = -1;
     if (ve)
         for (int a = 0; a < 3; a++) {
             xyz[a] = find_prop(h, ve, (const char *[]){"x", "y", "z"}[a]);
@@ -349,13 +416,20 @@ vx_mesh *vx_ply_read_mem(const unsigned char *data, size_t n, const vx_mesh_limi
             goto out;
         }
     }
-    if (!ve || !fe || !fe->count) {
+    if (te) {
+        ti = find_prop(h, te, "vertex_indices");
+        if (ti < 0 || h->props[ti].count_type == VX_PLY_NONE) {
+            fail(err, "the tristrips element has no vertex_indices list");
+            goto out;
+        }
+    }
+    if (!ve || !((fe && fe->count) || (te && te->count))) {
         vx_err_set(err, VX_EUNPROC, "ply_no_faces", "the PLY file has no faces");
         goto out;
     }
-    /* vx_declared_check held both counts to the bytes after the header. */
-    size_t nv = (size_t)ve->count, nf = (size_t)fe->count;
-    ply_out o = {.m = m, .cap = 3 * nf + 16, .lim = lim};
+    /* vx_declared_check held the counts to the bytes after the header. */
+    size_t nv = (size_t)ve->count, nf = fe ? (size_t)fe->count : 0;
+    ply_out o = {.m = m, .cap = 3 * nf + 16, .fcap = nf, .lim = lim};
     if (o.cap > n + 16) o.cap = n + 16;
     m->pos = malloc(3 * nv * sizeof(double) + 1);
     m->face_start = malloc((nf + 1) * sizeof(uint32_t));
@@ -385,8 +459,9 @@ vx_mesh *vx_ply_read_mem(const unsigned char *data, size_t n, const vx_mesh_limi
                     continue;
                 }
                 if (read_count(&in, pr->count_type, pr->type, &k)) goto out;
-                if (e == fe && j == fi ? read_face(&in, &o, pr->type, k, n)
-                                       : skip_values(&in, pr->type, k))
+                if (e == fe && j == fi   ? read_face(&in, &o, pr->type, k, n)
+                    : e == te && j == ti ? read_strip(&in, &o, pr->type, k, n)
+                                         : skip_values(&in, pr->type, k))
                     goto out;
             }
         }
@@ -410,8 +485,9 @@ vx_mesh *vx_ply_read_mem(const unsigned char *data, size_t n, const vx_mesh_limi
     if (!o.kept) {
         vx_err_set(err, VX_EUNPROC, "ply_no_faces",
                    "the PLY file has no faces of three or more vertices (each of its %zu face "
-                   "entries is a point or an edge)",
-                   (size_t)fe->count);
+                   "entries is a point or an edge, and its strips make no triangle that uses "
+                   "three vertices)",
+                   nf);
         goto out;
     }
     m->face_start[o.kept] = (uint32_t)o.used;

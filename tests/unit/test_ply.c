@@ -408,6 +408,134 @@ static void test_header_prefix(void **state)
     free(h);
 }
 
+/* The unit cube's six faces, each counter-clockwise seen from outside
+ * (vertex x + 2 y + 4 z), as a strip a b d c of quad a b c d. */
+static const int cube_strip[6][4] = {{0, 2, 1, 3}, {4, 5, 6, 7}, {0, 1, 4, 5},
+                                     {2, 6, 3, 7}, {0, 4, 2, 6}, {1, 3, 5, 7}};
+
+/* A tristrips file of the cube in format f, index type t (signed: -1
+ * ends a strip): layout 0 one entry of six strips split by -1, 1 six
+ * entries, 2 one strip stitched through repeated indices (triangles that
+ * use a vertex twice, to be dropped). With a face element of the cube's
+ * top face too when face is set (read as well: 14 triangles). */
+static tbuf cube_strips(vx_ply_format f, vx_ply_type t, int layout, int face)
+{
+    static const char *fmt_name[] = {"ascii", "binary_little_endian", "binary_big_endian"};
+    tbuf b = {0};
+    int entries = layout == 1 ? 6 : 1;
+    tbuf_printf(&b,
+                "ply\nformat %s 1.0\nelement vertex 8\nproperty double x\nproperty double "
+                "y\nproperty double z\n",
+                fmt_name[f]);
+    if (face) tbuf_printf(&b, "element face 1\nproperty list uchar int vertex_indices\n");
+    tbuf_printf(&b, "element tristrips %d\nproperty list int %s vertex_indices\nend_header\n",
+                entries, type_name[t]);
+    for (int v = 0; v < 8; v++) {
+        for (int a = 0; a < 3; a++)
+            put_value(&b, f, VX_PLY_F64, v >> a & 1);
+        if (f == VX_PLY_ASCII) tbuf_printf(&b, "\n");
+    }
+    if (face) {
+        put_value(&b, f, VX_PLY_U8, 4);
+        static const int top[4] = {4, 5, 7, 6};
+        for (int k = 0; k < 4; k++)
+            put_value(&b, f, VX_PLY_I32, top[k]);
+    }
+    int list[64], n = 0;
+    for (int s = 0; s < 6; s++) {
+        if (layout == 1) {
+            put_value(&b, f, VX_PLY_I32, 4);
+            for (int k = 0; k < 4; k++)
+                put_value(&b, f, t, cube_strip[s][k]);
+            continue;
+        }
+        if (s && layout == 0) list[n++] = -1;
+        if (s && layout == 2) { /* the last index and the next strip's first, again */
+            list[n++] = cube_strip[s - 1][3];
+            list[n++] = cube_strip[s][0];
+        }
+        for (int k = 0; k < 4; k++)
+            list[n++] = cube_strip[s][k];
+    }
+    if (layout != 1) {
+        put_value(&b, f, VX_PLY_I32, n);
+        for (int k = 0; k < n; k++)
+            put_value(&b, f, t, list[k]);
+    }
+    return b;
+}
+
+/* Six times the signed volume of m's triangles. */
+static double volume6(const vx_mesh *m)
+{
+    double v = 0;
+    for (size_t t = 0; t < m->ntris; t++) {
+        const double *a = m->pos + 3 * m->tri[3 * t], *b = m->pos + 3 * m->tri[3 * t + 1],
+                     *c = m->pos + 3 * m->tri[3 * t + 2];
+        v += a[0] * (b[1] * c[2] - b[2] * c[1]) - a[1] * (b[0] * c[2] - b[2] * c[0]) +
+             a[2] * (b[0] * c[1] - b[1] * c[0]);
+    }
+    return v;
+}
+
+/* Triangle strips (element tristrips): every second triangle turned, -1
+ * between strips, stitching triangles dropped; a closed cube of one
+ * orientation whatever the layout, format and index type. */
+static void test_tristrips(void **state)
+{
+    (void)state;
+    static const vx_ply_type types[] = {VX_PLY_I8, VX_PLY_I16, VX_PLY_I32};
+    for (int f = 0; f < 3; f++)
+        for (int ti = 0; ti < 3; ti++)
+            for (int layout = 0; layout < 3; layout++)
+                for (int face = 0; face < 2; face++) {
+                    tbuf b = cube_strips((vx_ply_format)f, types[ti], layout, face);
+                    vx_err err = {0};
+                    vx_mesh *m = vx_ply_read_mem((const unsigned char *)b.p, b.n, NULL, &err);
+                    if (!m) fail_msg("format %d type %d layout %d: %s", f, ti, layout, err.message);
+                    assert_int_equal(m->ntris, face ? 14 : 12);
+                    assert_int_equal(m->nfaces, face ? 13 : 12);
+                    if (!face) {
+                        assert_int_equal(m->boundary_edges, 0);
+                        assert_int_equal(m->misoriented_edges, 0);
+                        assert_true(fabs(volume6(m) - 6) < 1e-12);
+                    }
+                    vx_mesh_free(m);
+                    free(b.p);
+                }
+    /* A limit on triangles counts the strips' triangles. */
+    tbuf b = cube_strips(VX_PLY_LE, VX_PLY_I32, 0, 0);
+    vx_mesh_limits lim = {.max_triangles = 11};
+    vx_err err = {0};
+    assert_null(vx_ply_read_mem((const unsigned char *)b.p, b.n, &lim, &err));
+    assert_string_equal(err.code, "mesh_too_big");
+    free(b.p);
+    const char *strip = "property float z\nelement tristrips 1\nproperty list int int "
+                        "vertex_indices\nend_header\n" TRI;
+    char f[1024];
+    snprintf(f, sizeof f, HEAD_V "%s4 0 1 2 7\n", strip);
+    expect(f, "ply_corrupt", "out of range");
+    snprintf(f, sizeof f, HEAD_V "%s4 0 1 2 -2\n", strip);
+    expect(f, "ply_corrupt", "bad vertex index");
+    snprintf(f, sizeof f, HEAD_V "%s5 0 1 -1 2 0\n", strip);
+    expect(f, "ply_no_faces", "strips");
+    snprintf(f, sizeof f, HEAD_V "%s4 0 1 1 2\n", strip);
+    expect(f, "ply_no_faces", NULL);
+    expect(HEAD_V "property float z\nelement tristrips 1\nproperty list int int corners\n"
+                  "end_header\n" TRI "3 0 1 2\n",
+           "ply_corrupt", "tristrips element has no vertex_indices");
+    /* A strip of a quad: (0 1 2), then (2 1 3) */
+    vx_mesh *r = read_str("ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty "
+                          "float y\nproperty float z\nelement tristrips 1\nproperty list int int "
+                          "vertex_indices\nend_header\n0 0 0\n1 0 0\n0 1 0\n1 1 0\n4 0 1 2 3\n",
+                          &err);
+    if (!r) fail_msg("%s", err.message);
+    static const uint32_t want[6] = {0, 1, 2, 2, 1, 3};
+    assert_int_equal(r->nfaces, 2);
+    assert_memory_equal(r->face_idx, want, sizeof want);
+    vx_mesh_free(r);
+}
+
 /* What voxeld writes (vx_ply_write_path) reads back. */
 static void test_own_writer(void **state)
 {
@@ -439,7 +567,7 @@ int main(void)
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_round_trip), cmocka_unit_test(test_truncations),
         cmocka_unit_test(test_hostile),    cmocka_unit_test(test_header_prefix),
-        cmocka_unit_test(test_own_writer),
+        cmocka_unit_test(test_own_writer), cmocka_unit_test(test_tristrips),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }
