@@ -18,7 +18,6 @@ typedef struct vx_wtree_node {
     double a[3];         /* sum of the vector areas (half cross products) */
     double m[9];         /* sum of (centroid - p) (x) vector area, row-major */
     double far2;         /* (beta * radius)^2: farther query points use the expansion */
-    double r;            /* radius: every vertex lies within r of p */
     double lo[3], hi[3]; /* the bounding box of its vertices */
     double area;         /* sum of the triangles' areas */
     int kid[2];          /* children, or -1 for a leaf */

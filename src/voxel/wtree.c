@@ -184,7 +184,6 @@ static void moments(build *b, vx_wtree_node *nd, int lo, int hi)
         }
     }
     nd->far2 = VX_WTREE_BETA * VX_WTREE_BETA * r2;
-    nd->r = sqrt(r2);
     nd->area = area;
 }
 
@@ -397,17 +396,6 @@ double vx_wtree_eval(const vx_wtree *t, const double q[3])
     return w + far / (4 * M_PI);
 }
 
-/* Distance from p to the box lo..hi (corner by corner, lo <= hi). */
-static double box_dist(const double lo[3], const double hi[3], const double p[3])
-{
-    double r2 = 0;
-    for (int k = 0; k < 3; k++) {
-        double g = p[k] < lo[k] ? lo[k] - p[k] : p[k] > hi[k] ? p[k] - hi[k] : 0;
-        r2 += g * g;
-    }
-    return sqrt(r2);
-}
-
 /* Squared distance between the boxes lo..hi and a..b. */
 static double boxes_dist2(const double lo[3], const double hi[3], const double a[3],
                           const double b[3])
@@ -455,9 +443,12 @@ double vx_wtree_bound(const vx_wtree *t, const double lo[3], const double hi[3],
     stack[sp++] = 0;
     while (sp) {
         const vx_wtree_node *nd = &t->node[stack[--sp]];
-        double g = box_dist(lo, hi, nd->p) - nd->r, gb = sqrt(boxes_dist2(lo, hi, nd->lo, nd->hi));
-        if (gb > g) g = gb;
-        double part = g > 0 ? nd->area / (4 * M_PI * g * g) : HUGE_VAL;
+        /* the gap between the boxes, no square root: the distance to the
+         * ball of radius r about p was tighter for some nodes, but its
+         * square root at every node visited cost more (6-8% of the bunny's
+         * and suzanne's time at 1024^3) than it saved */
+        double g2 = boxes_dist2(lo, hi, nd->lo, nd->hi);
+        double part = g2 > 0 ? nd->area / (4 * M_PI * g2) : HUGE_VAL;
         /* with a side, a node worth an eighth of the limit is opened: its
          * leaves' triangles may add nothing */
         if (sum + part < limit && (!side || part < limit / 8)) {
