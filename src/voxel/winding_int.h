@@ -33,8 +33,9 @@ typedef struct vx_wtree {
      * in its leaf's list: a leaf's unit vectors are made once each. */
     double *lv;
     uint8_t *corner; /* 3 a triangle, tree order */
-    /* per triangle, tree order: its area vector, area and bounding box
-     * (vx_wtree_bound's leaves) */
+    /* per triangle, tree order: its area vector, area over 4 pi, bounding
+     * box and plane (area vector . a corner), what vx_wtree_bound's
+     * leaves read */
     double *tb;
     vx_wtree_node *node;
     int nnodes;
