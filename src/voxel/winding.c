@@ -26,14 +26,18 @@
  * evaluated with a tree over K (wtree.c, Barill et al. 2018) at both ends
  * of the run (and its middle when it is over 8 voxels), and where they
  * disagree about w >= 1/2 the run is split (fill_run), one evaluation a
- * split, until the change is found. A closed mesh has no cone: then w is
- * the crossing count and nothing is evaluated. Centres outside the
- * mesh's bounding box are outside (|w| < 1/2 outside its convex hull).
+ * split, until the change is found. A run that starts after crossings of
+ * the mesh alone (no cone triangle crosses its column) takes w_K of the
+ * centre before them, the end of the run before (evaluated once for both). A closed mesh has no
+ * cone: then w is the crossing count and nothing is evaluated. Centres outside the mesh's bounding
+ * box are outside (|w| < 1/2 outside its convex hull).
  *
  * The approximation: a run whose sampled centres agree is filled as they
  * say, so a dip of w across 1/2 and back between two samples is missed
- * (a column that grazes a hole's rim, where w varies fastest); far nodes
- * of the tree carry an error of about (1/beta)^3 of their field. */
+ * (a column that grazes a hole's rim, where w varies fastest); a run's
+ * first centre that takes w_K from one centre back is off by w_K's change
+ * over a voxel (large only next to a rim); far nodes of the tree carry an
+ * error of about (1/beta)^3 of their field. */
 #include <limits.h>
 #include <math.h>
 #include <stdatomic.h>
@@ -62,6 +66,7 @@ typedef struct scratch {
     uint32_t *slice; /* a row's voxels, every z row of it (set_bit) */
     int32_t *z;      /* a column's crossings, sorted */
     uint8_t *far;    /* per block of FAR_BLOCK columns: the cone is far */
+    uint8_t *cone;   /* per column of the band: a cone triangle crosses it */
     size_t zcap;
 } scratch;
 
@@ -176,7 +181,7 @@ static int tri_rows(const void *ud, size_t t, int *lo, int *hi)
 /* Triangle t's crossings of the columns of rows [j0, j1): coverage by
  * lattice.h's snapped edge tests, each crossing placed by its formula with
  * z as the ray's axis. */
-static int raster_tri(wctx *c, vx_xband *sc, size_t t, int j0, int j1)
+static int raster_tri(wctx *c, vx_xband *sc, uint8_t *cone, size_t t, int j0, int j1)
 {
     const wtri *x = &c->tri[t];
     size_t v[3] = {corner(c, t, 0), corner(c, t, 1), corner(c, t, 2)};
@@ -207,6 +212,7 @@ static int raster_tri(wctx *c, vx_xband *sc, size_t t, int j0, int j1)
             if (f0 > 0 && f1 > 0 && f2 > 0) {
                 int32_t kb = vx_lattice_xing(a, e1, e2, (c->ix[0] + i) + 0.5, cy, c->ix[2]);
                 if (vx_xband_push(sc, &c->mem, col0 + (uint32_t)i, 2 * kb + pos)) return -1;
+                if (t >= c->m->ntris) cone[col0 + (uint32_t)i] = 1;
             }
             f0 += e[0].d1;
             f1 += e[1].d1;
@@ -261,13 +267,19 @@ static void centre(const wctx *c, int i, int j, int k, double q[3])
         q[c->ax[a]] = c->o[a] + (c->ix[a] + e[a] + 0.5) * c->h;
 }
 
+/* The cones' w at centre k of column (i, j). */
+static double cone_w(const wctx *c, int i, int j, int k)
+{
+    double q[3];
+    centre(c, i, j, k, q);
+    return vx_wtree_eval(&c->tree, q);
+}
+
 /* n - w - 1/2 at centre k of column (i, j), whose crossing count above
  * is n: the centre is inside (w >= 1/2) where it is >= 0. */
 static double margin_at(const wctx *c, int i, int j, int k, int n)
 {
-    double q[3];
-    centre(c, i, j, k, q);
-    return n - vx_wtree_eval(&c->tree, q) - 0.5;
+    return n - cone_w(c, i, j, k) - 0.5;
 }
 
 /* 1 when the cone's w stays under n - 1/2 (side +1, for n >= 1), over it
@@ -353,11 +365,14 @@ static void sort_column(int32_t *z, size_t n)
  * count). A column outside such a block is not bounded as a whole before
  * its runs are: near a hole that seldom holds (12% of those columns on
  * the bunny at 1024^3), and its runs' own bounds hold in 70%. */
-static void column(wctx *c, uint32_t *slice, int i, int j, const int32_t *z, size_t n, int far_col)
+static void column(wctx *c, uint32_t *slice, int i, int j, const int32_t *z, size_t n, int far_col,
+                   int cone_col)
 {
     int cnt = 0;
     for (size_t a = 0; a < n; a++)
         cnt += z[a] & 1 ? 1 : -1;
+    int w_at = INT_MIN; /* the last centre where the cones' w was evaluated, w */
+    double w = 0;
     for (size_t r = 0; r <= n; r++) {
         /* run r: centres k with z[r-1] <= k < z[r] have cnt crossings above;
          * for an open mesh the whole run in its bbox, past the brick */
@@ -370,8 +385,23 @@ static void column(wctx *c, uint32_t *slice, int i, int j, const int32_t *z, siz
                 double f = cnt >= 1 ? 1 : -1;
                 fill_run(c, slice, i, j, ka, kb, f, f, 1, cnt, 0);
             } else {
-                double fa = margin_at(c, i, j, ka, cnt),
-                       fb = ka == kb ? fa : margin_at(c, i, j, kb, cnt);
+                double fa, fb;
+                if (r && ka == zp && !cone_col) { /* across crossings of the mesh alone */
+                    if (w_at != ka - 1) w = cone_w(c, i, j, ka - 1);
+                    w_at = ka - 1;
+                    fa = cnt - w - 0.5;
+                } else {
+                    fa = margin_at(c, i, j, ka, cnt);
+                    w_at = ka;
+                    w = cnt - fa - 0.5;
+                }
+                if (ka < kb) {
+                    fb = margin_at(c, i, j, kb, cnt);
+                    w_at = kb;
+                    w = cnt - fb - 0.5;
+                } else {
+                    fb = fa;
+                }
                 if (kb - ka >= 8 && (fa >= 0) == (fb >= 0)) {
                     int km = ka + (kb - ka) / 2;
                     double fm = margin_at(c, i, j, km, cnt);
@@ -419,15 +449,17 @@ static int band_task(int b, int t, void *ud)
     int j0 = b * c->band, j1 = j0 + c->band < c->ny ? j0 + c->band : c->ny;
     size_t cols = (size_t)(j1 - j0) * c->nx, wx = c->out->wx;
     sc->x.n = 0;
+    if (!sc->slice) sc->slice = malloc((size_t)c->nz * wx * sizeof *sc->slice + 1);
+    if (!sc->far) sc->far = malloc((size_t)c->nx / FAR_BLOCK + 1);
+    if (!sc->cone) sc->cone = malloc((size_t)c->band * c->nx + 1);
+    if (!sc->slice || !sc->far || !sc->cone) return vx_xmeter_oom(&c->mem);
+    memset(sc->cone, 0, cols);
     /* a band of a triangle soup can hold 10^5 large triangles: the stop
      * check comes every 64 of them, not only between bands */
     for (size_t k = c->bin_off[b]; k < c->bin_off[b + 1]; k++) {
         if ((k & 63) == 63 && poll(c, t)) return 1;
-        if (raster_tri(c, &sc->x, c->bin[k], j0, j1)) return 1;
+        if (raster_tri(c, &sc->x, sc->cone, c->bin[k], j0, j1)) return 1;
     }
-    if (!sc->slice) sc->slice = malloc((size_t)c->nz * wx * sizeof *sc->slice + 1);
-    if (!sc->far) sc->far = malloc((size_t)c->nx / FAR_BLOCK + 1);
-    if (!sc->slice || !sc->far) return vx_xmeter_oom(&c->mem);
     if (vx_xband_sort(&sc->x, &c->mem, cols)) return 1;
     /* the cone's bound over blocks of FAR_BLOCK columns of the band's rows
      * first: most are far from every hole */
@@ -454,7 +486,7 @@ static int band_task(int b, int t, void *ud)
                 sc->z[k] = sc->x.sorted[begin + k].at2;
             sort_column(sc->z, n);
             int far = c->open && sc->far[(i - c->lo[0]) / FAR_BLOCK];
-            column(c, sc->slice, i, j, sc->z, n, far);
+            column(c, sc->slice, i, j, sc->z, n, far, sc->cone[col]);
         }
         slice_out(c, sc->slice, j);
     }
@@ -594,14 +626,16 @@ int vx_voxelize_winding(const vx_mesh *m, const vx_voxelize_desc *d, vx_bitgrid 
     c->band = c->ny / (16 * vx_par_cpus());
     c->band = c->band < 1 ? 1 : c->band > BAND ? BAND : c->band;
     c->nbands = (c->ny + c->band - 1) / c->band;
-    /* the grid, the corners and triangles, and every thread's slice and
-     * column counters; bins and crossings are charged as they are made */
+    /* the grid, the corners and triangles, and every thread's slice,
+     * column counters and cone flags; bins and crossings are charged as
+     * they are made */
     size_t ncorner = m->nverts + 3 * c->ncone;
-    if (vx_xmeter_charge(
-            &c->mem, vx_bitgrid_bytes(d->grid.dims, 1) + (uint64_t)ncorner * 40u +
-                         (uint64_t)c->ntot * sizeof(wtri) +
-                         (uint64_t)vx_par_cpus() *
-                             ((uint64_t)c->nz * out->wx + (uint64_t)c->band * c->nx + 1) * 4u)) {
+    if (vx_xmeter_charge(&c->mem,
+                         vx_bitgrid_bytes(d->grid.dims, 1) + (uint64_t)ncorner * 40u +
+                             (uint64_t)c->ntot * sizeof(wtri) +
+                             (uint64_t)vx_par_cpus() *
+                                 (((uint64_t)c->nz * out->wx + (uint64_t)c->band * c->nx + 1) * 4u +
+                                  (uint64_t)c->band * c->nx))) {
         if (err) *err = c->err;
         goto done;
     }
@@ -632,6 +666,7 @@ done:
         free(c->sc[t].slice);
         free(c->sc[t].z);
         free(c->sc[t].far);
+        free(c->sc[t].cone);
     }
     free(c->cone);
     free(c->lat);
