@@ -28,9 +28,10 @@
  * disagree about w >= 1/2 the run is split (fill_run), one evaluation a
  * split, until the change is found. A run that starts after crossings of
  * the mesh alone (no cone triangle crosses its column) takes w_K of the
- * centre before them, the end of the run before (evaluated once for both). A closed mesh has no
- * cone: then w is the crossing count and nothing is evaluated. Centres outside the mesh's bounding
- * box are outside (|w| < 1/2 outside its convex hull).
+ * centre before them, the end of the run before (evaluated once for
+ * both). A closed mesh has no cone: then w is the crossing count and
+ * nothing is evaluated. Centres outside the mesh's bounding box are
+ * outside (|w| < 1/2 outside its convex hull).
  *
  * The approximation: a run whose sampled centres agree is filled as they
  * say, so a dip of w across 1/2 and back between two samples is missed

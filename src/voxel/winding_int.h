@@ -33,9 +33,11 @@ typedef struct vx_wtree {
      * in its leaf's list: a leaf's unit vectors are made once each. */
     double *lv;
     uint8_t *corner; /* 3 a triangle, tree order */
-    /* per triangle, tree order: its area vector, area over 4 pi, bounding
-     * box and plane (area vector . a corner), what vx_wtree_bound's
-     * leaves read */
+    /* per triangle, tree order: its area vector, area over 4 pi and
+     * bounding box (vx_wtree_bound's leaves; the side test takes the
+     * corner from tv: (corner - box centre) . area vector stays exact far
+     * from the origin, where corner . area vector less the centre's would
+     * cancel) */
     double *tb;
     vx_wtree_node *node;
     int nnodes;

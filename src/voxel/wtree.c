@@ -11,7 +11,7 @@
 #define LEAF 8
 #define LEAF_CORNERS 64 /* a leaf with more distinct corners goes triangle by triangle */
 #define STACK 128
-#define TB 11 /* doubles of tb a triangle */
+#define TB 10 /* doubles of tb a triangle */
 
 /* atan2 to about 1e-5 radians (Abramowitz & Stegun 4.4.47 on [0, 1],
  * then the octant), a few times faster than libm's. */
@@ -296,7 +296,6 @@ int vx_wtree_build(vx_wtree *t, size_t ntris, const double *tv, vx_err *err)
             d[4 + k] = fmin(fmin(v[k], v[3 + k]), v[6 + k]);
             d[7 + k] = fmax(fmax(v[k], v[3 + k]), v[6 + k]);
         }
-        d[10] = v[0] * d[0] + v[1] * d[1] + v[2] * d[2];
     }
     free(b.idx);
     free(b.cen);
@@ -424,8 +423,8 @@ static double leaf_bound(const vx_wtree *t, const vx_wtree_node *nd, const doubl
         e[k] = (hi[k] - lo[k]) / 2;
     }
     for (int i = nd->first; i < nd->first + nd->n; i++) {
-        const double *n = t->tb + TB * (size_t)i;
-        double proj = n[10] - (c[0] * n[0] + c[1] * n[1] + c[2] * n[2]);
+        const double *v = t->tv + 9 * (size_t)i, *n = t->tb + TB * (size_t)i;
+        double proj = (v[0] - c[0]) * n[0] + (v[1] - c[1]) * n[1] + (v[2] - c[2]) * n[2];
         double rad = fabs(n[0]) * e[0] + fabs(n[1]) * e[1] + fabs(n[2]) * e[2];
         if ((side > 0 && proj < -rad) || (side < 0 && proj > rad)) continue;
         double g2 = boxes_dist2(lo, hi, n + 4, n + 7);
