@@ -510,17 +510,22 @@ static void test_tristrips(void **state)
     assert_null(vx_ply_read_mem((const unsigned char *)b.p, b.n, &lim, &err));
     assert_string_equal(err.code, "mesh_too_big");
     free(b.p);
-    const char *strip = "property float z\nelement tristrips 1\nproperty list int int "
-                        "vertex_indices\nend_header\n" TRI;
-    char f[1024];
-    snprintf(f, sizeof f, HEAD_V "%s4 0 1 2 7\n", strip);
-    expect(f, "ply_corrupt", "out of range");
-    snprintf(f, sizeof f, HEAD_V "%s4 0 1 2 -2\n", strip);
-    expect(f, "ply_corrupt", "bad vertex index");
-    snprintf(f, sizeof f, HEAD_V "%s5 0 1 -1 2 0\n", strip);
-    expect(f, "ply_no_faces", "strips");
-    snprintf(f, sizeof f, HEAD_V "%s4 0 1 1 2\n", strip);
-    expect(f, "ply_no_faces", NULL);
+    /* Hostile strips: an index past the vertices, one below -1, and
+     * strips that make no triangle of three vertices. */
+    static const struct {
+        const char *list, *code, *words;
+    } bad[] = {{"4 0 1 2 7", "ply_corrupt", "out of range"},
+               {"4 0 1 2 -2", "ply_corrupt", "bad vertex index"},
+               {"5 0 1 -1 2 0", "ply_no_faces", "strips"},
+               {"4 0 1 1 2", "ply_no_faces", NULL}};
+    for (size_t k = 0; k < sizeof bad / sizeof bad[0]; k++) {
+        char f[1024];
+        snprintf(f, sizeof f,
+                 HEAD_V "property float z\nelement tristrips 1\nproperty list int int "
+                        "vertex_indices\nend_header\n" TRI "%s\n",
+                 bad[k].list);
+        expect(f, bad[k].code, bad[k].words);
+    }
     expect(HEAD_V "property float z\nelement tristrips 1\nproperty list int int corners\n"
                   "end_header\n" TRI "3 0 1 2\n",
            "ply_corrupt", "tristrips element has no vertex_indices");

@@ -17,17 +17,20 @@
 #include "voxel/voxel.h"
 #include "voxel/winding_int.h"
 
-/* m without the triangles whose three vertices lie above z = c (a cap
- * hole at the top); *top = the highest z left (the hole's rim). */
-static vx_mesh *cut_above(vx_mesh *m, double c, double *top)
+/* m without the triangles whose three vertices lie above the plane z =
+ * c + slope y (a cap hole at the top); *top = the highest z left (the
+ * rim of a level hole). */
+static vx_mesh *cut_plane(vx_mesh *m, double c, double slope, double *top)
 {
     uint32_t *idx = malloc(3 * m->ntris * sizeof *idx);
     size_t nt = 0;
     *top = -HUGE_VAL;
     for (size_t t = 0; t < m->ntris; t++) {
         int above = 1;
-        for (int q = 0; q < 3; q++)
-            above &= m->pos[3 * (size_t)m->tri[3 * t + q] + 2] > c;
+        for (int q = 0; q < 3; q++) {
+            const double *p = m->pos + 3 * (size_t)m->tri[3 * t + q];
+            above &= p[2] > c + slope * p[1];
+        }
         if (above) continue;
         for (int q = 0; q < 3; q++) {
             idx[3 * nt + q] = m->tri[3 * t + q];
@@ -40,6 +43,11 @@ static vx_mesh *cut_above(vx_mesh *m, double c, double *top)
     free(idx);
     vx_mesh_free(m);
     return o;
+}
+
+static vx_mesh *cut_above(vx_mesh *m, double c, double *top)
+{
+    return cut_plane(m, c, 0, top);
 }
 
 static double ball(double r)
@@ -182,22 +190,9 @@ static void test_open_shells(void **state)
 static void test_run_starts(void **state)
 {
     (void)state;
-    vx_mesh *s = shape_param_mesh(40, 20, 1, 0, 0.013, 0.007, 0.003, 1, 0);
-    uint32_t *idx = malloc(3 * s->ntris * sizeof *idx);
-    size_t nt = 0;
-    for (size_t t = 0; t < s->ntris; t++) {
-        int above = 1;
-        for (int q = 0; q < 3; q++) {
-            const double *p = s->pos + 3 * (size_t)s->tri[3 * t + q];
-            above &= p[2] > 0.3 + 0.45 * p[1];
-        }
-        for (int q = 0; q < 3 && !above; q++)
-            idx[3 * nt + q] = s->tri[3 * t + q];
-        nt += !above;
-    }
-    vx_mesh *m = shape_mesh_from(s->nverts, s->pos, nt, idx);
-    free(idx);
-    vx_mesh_free(s);
+    double top;
+    vx_mesh *m =
+        cut_plane(shape_param_mesh(40, 20, 1, 0, 0.013, 0.007, 0.003, 1, 0), 0.3, 0.45, &top);
     assert_true(m->boundary_edges > 0);
     vx_bitgrid g;
     vx_voxelize_stats st;
