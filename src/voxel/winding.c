@@ -386,22 +386,15 @@ static void column(wctx *c, uint32_t *slice, int i, int j, const int32_t *z, siz
                 double f = cnt >= 1 ? 1 : -1;
                 fill_run(c, slice, i, j, ka, kb, f, f, 1, cnt, 0);
             } else {
-                double fa, fb;
-                if (r && ka == zp && !cone_col) { /* across crossings of the mesh alone */
-                    if (w_at != ka - 1) w = cone_w(c, i, j, ka - 1);
-                    w_at = ka - 1;
-                    fa = cnt - w - 0.5;
-                } else {
-                    fa = margin_at(c, i, j, ka, cnt);
-                    w_at = ka;
-                    w = cnt - fa - 0.5;
-                }
+                /* the start across crossings of the mesh alone: w one centre back */
+                int at = r && ka == zp && !cone_col ? ka - 1 : ka;
+                if (w_at != at) w = cone_w(c, i, j, at);
+                w_at = at;
+                double fa = cnt - w - 0.5, fb = fa;
                 if (ka < kb) {
-                    fb = margin_at(c, i, j, kb, cnt);
+                    w = cone_w(c, i, j, kb);
                     w_at = kb;
-                    w = cnt - fb - 0.5;
-                } else {
-                    fb = fa;
+                    fb = cnt - w - 0.5;
                 }
                 if (kb - ka >= 8 && (fa >= 0) == (fb >= 0)) {
                     int km = ka + (kb - ka) / 2;

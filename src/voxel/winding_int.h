@@ -19,7 +19,7 @@ typedef struct vx_wtree_node {
     double m[9];         /* sum of (centroid - p) (x) vector area, row-major */
     double far2;         /* (beta * radius)^2: farther query points use the expansion */
     double lo[3], hi[3]; /* the bounding box of its vertices */
-    double area;         /* sum of the triangles' areas */
+    double area;         /* sum of the triangles' areas, over 4 pi */
     int kid[2];          /* children, or -1 for a leaf */
     int first, n;        /* leaf: triangles first..first+n-1 (tree order) */
     int vfirst, nv;      /* leaf: its distinct corners vfirst..vfirst+nv-1 */
@@ -34,10 +34,7 @@ typedef struct vx_wtree {
     double *lv;
     uint8_t *corner; /* 3 a triangle, tree order */
     /* per triangle, tree order: its area vector, area over 4 pi and
-     * bounding box (vx_wtree_bound's leaves; the side test takes the
-     * corner from tv: (corner - box centre) . area vector stays exact far
-     * from the origin, where corner . area vector less the centre's would
-     * cancel) */
+     * bounding box (vx_wtree_bound's leaves) */
     double *tb;
     vx_wtree_node *node;
     int nnodes;

@@ -184,7 +184,7 @@ static void moments(build *b, vx_wtree_node *nd, int lo, int hi)
         }
     }
     nd->far2 = VX_WTREE_BETA * VX_WTREE_BETA * r2;
-    nd->area = area;
+    nd->area = area / (4 * M_PI);
 }
 
 /* Node over idx[lo..hi); returns its index. The tree has at most
@@ -448,15 +448,15 @@ double vx_wtree_bound(const vx_wtree *t, const double lo[3], const double hi[3],
          * square root at every node visited cost more (6-8% of the bunny's
          * and suzanne's time at 1024^3) than it saved */
         double g2 = boxes_dist2(lo, hi, nd->lo, nd->hi);
-        /* its part, area / (4 pi g2), is added where it fits under the
-         * limit; with a side, a node worth an eighth of the limit is opened
-         * (its leaves' triangles may add nothing). Compared without a
-         * division: most nodes visited are opened. */
+        /* its part, area / g2 (the area over 4 pi), is added where it fits
+         * under the limit; with a side, a node worth an eighth of the
+         * limit is opened (its leaves' triangles may add nothing).
+         * Compared without a division: most nodes visited are opened. */
         double room = side && limit / 8 < limit - sum ? limit / 8 : limit - sum;
-        if (nd->area < room * (4 * M_PI) * g2) {
-            sum += nd->area / (4 * M_PI * g2);
+        if (nd->area < room * g2) {
+            sum += nd->area / g2;
         } else if (nd->kid[0] < 0) {
-            double part = g2 > 0 ? nd->area / (4 * M_PI * g2) : HUGE_VAL;
+            double part = g2 > 0 ? nd->area / g2 : HUGE_VAL;
             sum += fmin(part, leaf_bound(t, nd, lo, hi, side));
         } else {
             stack[sp++] = nd->kid[0];
