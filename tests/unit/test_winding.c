@@ -647,7 +647,7 @@ static void test_middle_sample(void **state)
     vx_err err = {0};
     assert_int_equal(vx_voxelize(NULL, m, &d, &g, &st, &err), 0);
     const vx_grid *gr = &g.grid;
-    size_t n = 0, differ = 0, bump = 0;
+    size_t n = 0, differ = 0, bump = 0, bump_in = 0;
     for (int i = 44; i <= 48; i++)
         for (int j = 0; j <= 4; j++)
             for (int k = 0; k < gr->dims[2]; k++) {
@@ -655,15 +655,19 @@ static void test_middle_sample(void **state)
                                gr->origin[2] + (k + .5) * gr->h};
                 double w = ref_winding_number(m, c);
                 int in = vx_bitgrid_get(&g, i, j, k);
-                if (i == 46 && j == 2 && k >= 49 && k <= 60) bump += w >= 0.5 && in;
                 if (fabs(w - 0.5) < 0.05) continue;
+                if (i == 46 && j == 2 && k >= 49 && k <= 60 && w > 0.5) {
+                    bump++;
+                    bump_in += in;
+                }
                 n++;
                 differ += (w >= 0.5) != in;
             }
     printf("bunny 128, columns 44..48 x 0..4: %zu of %zu centres clear of 1/2 differ from the "
-           "direct sum; %zu of column (46, 2)'s z 49..60 inside\n",
-           differ, n, bump);
-    assert_int_equal(bump, 12);
+           "direct sum; column (46, 2), z 49..60: %zu of its %zu centres clear over 1/2 inside\n",
+           differ, n, bump_in, bump);
+    assert_true(bump >= 10); /* the case is still there */
+    assert_int_equal(bump_in, bump);
     assert_int_equal(differ, 0);
     vx_bitgrid_free(&g);
     vx_mesh_free(m);
