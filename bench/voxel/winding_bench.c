@@ -22,7 +22,6 @@ static int dcmp(const void *a, const void *b)
     return x < y ? -1 : x > y;
 }
 
-/* Runs one rule `runs` times; t[] the sorted times in ms; returns voxels. */
 /* One run of rule on m over g: its engine time in ms; *n its voxels. */
 static double time_once(vx_gl *gl, const vx_mesh *m, const vx_grid *g, vx_inside rule,
                         unsigned long long *n)

@@ -50,6 +50,14 @@ static vx_mesh *cut_above(vx_mesh *m, double c, double *top)
     return cut_plane(m, c, 0, top);
 }
 
+/* The world position of centre (i, j, k) of gr. */
+static void grid_centre(const vx_grid *gr, int i, int j, int k, double c[3])
+{
+    const int e[3] = {i, j, k};
+    for (int a = 0; a < 3; a++)
+        c[a] = gr->origin[a] + (e[a] + .5) * gr->h;
+}
+
 static double ball(double r)
 {
     return 4.0 / 3.0 * M_PI * r * r * r;
@@ -218,9 +226,8 @@ static void test_run_starts(void **state)
         for (int k = 0; k < gr->dims[2]; k++)
             for (int j = 0; j < gr->dims[1]; j++)
                 for (int i = 0; i < gr->dims[0]; i++) {
-                    double p[3] = {gr->origin[0] + (i + .5) * gr->h,
-                                   gr->origin[1] + (j + .5) * gr->h,
-                                   gr->origin[2] + (k + .5) * gr->h};
+                    double p[3];
+                    grid_centre(gr, i, j, k, p);
                     if (fabs(p[2] - c - slope * p[1]) > 0.4) continue;
                     double w = ref_winding_number(m, p);
                     if (fabs(w - 0.5) < 0.05) continue;
@@ -609,9 +616,8 @@ static void test_bunny(void **state)
         for (int k = 0; k < gr->dims[2]; k++)
             for (int j = 0; j < gr->dims[1]; j++)
                 for (int i = 0; i < gr->dims[0]; i++) {
-                    double c[3] = {gr->origin[0] + (i + .5) * gr->h,
-                                   gr->origin[1] + (j + .5) * gr->h,
-                                   gr->origin[2] + (k + .5) * gr->h};
+                    double c[3];
+                    grid_centre(gr, i, j, k, c);
                     int in = vx_bitgrid_get(&g, i, j, k);
                     for (int a = 0; a < 3; a++)
                         if (in && (c[a] < m->bbox_min[a] || c[a] > m->bbox_max[a])) outside++;
@@ -651,8 +657,8 @@ static void test_middle_sample(void **state)
     for (int i = 44; i <= 48; i++)
         for (int j = 0; j <= 4; j++)
             for (int k = 0; k < gr->dims[2]; k++) {
-                double c[3] = {gr->origin[0] + (i + .5) * gr->h, gr->origin[1] + (j + .5) * gr->h,
-                               gr->origin[2] + (k + .5) * gr->h};
+                double c[3];
+                grid_centre(gr, i, j, k, c);
                 double w = ref_winding_number(m, c);
                 int in = vx_bitgrid_get(&g, i, j, k);
                 if (fabs(w - 0.5) < 0.05) continue;
