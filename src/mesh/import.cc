@@ -737,11 +737,16 @@ vx_mesh *read_gltf(const unsigned char *data, size_t n, const FormatInfo *fi, vx
                 ascii_only(e.empty() ? std::string("tinygltf could not load it") : e, why,
                            sizeof why);
             } else {
+                /* "scene" absent reads as -1 (then the first scene, or
+                 * with none the library); one that names no scene is a
+                 * broken reference, as a node's would be */
                 int si = mo.defaultScene >= 0 ? mo.defaultScene : 0;
-                if (mo.scenes.empty()) {
+                if (mo.defaultScene < -1 ||
+                    (mo.defaultScene >= 0 && size_t(mo.defaultScene) >= mo.scenes.size())) {
+                    snprintf(why, sizeof why, "scene %d does not exist (the file has %zu)",
+                             mo.defaultScene, mo.scenes.size());
+                } else if (mo.scenes.empty()) {
                     rc = walk_library(g, mo);
-                } else if (size_t(si) >= mo.scenes.size()) {
-                    rc = 0; /* a scene named that is not there: no faces */
                 } else {
                     std::vector<char> seen(mo.nodes.size(), 0);
                     rc = 0;

@@ -451,11 +451,10 @@ static int voxelize_check(void *params, const vx_limits *lim, vx_err *err)
     if (p->voxel_size_set) /* the dims depend on the mesh: checked in run_gl */
         return check_vdb_voxel(p, p->voxel_size, "params.voxel_size", 1, err);
     p->resolution_set = 1; /* the default */
-    /* The dims depend on the mesh's bbox; check the largest grid the
-     * resolution can give (a cubic bbox), so that a job never fails for a
-     * limit its params already broke. */
-    int n = (int)(p->resolution + 2 * p->padding), cube[3] = {n, n, n};
-    return check_grid(cube, p, lim, "params.resolution (checked as a cube)", VX_EUNPROC, err);
+    /* The dims depend on the mesh's bbox: voxelize_check_mesh checks the
+     * grid the resolution gives it at submission (a flat mesh at 4096 is
+     * far under the limit a cube of 4096 is over), the run again. */
+    return 0;
 }
 
 static cJSON *array3(const double *v)

@@ -295,6 +295,16 @@ bad "grid too many voxels" '{"grid":{"origin":[0,0,0],"voxel_size":1,"dims":[409
 bad "binvox of a 4096 x 1 x 1 grid" '{"grid":{"origin":[0,0,0],"voxel_size":1,"dims":[4096,1,1]},"format":"binvox"}' "binvox pads it to a 4096^3 cube"
 bad "grid over memory" '{"grid":{"origin":[0,0,0],"voxel_size":1,"dims":[2048,2048,512]},"format":"raw1"}' "job memory limit"
 bad "resolution over memory" '{"resolution":2048,"bricks":{"size":0}}' "job memory limit"
+# a resolution is checked with the grid the mesh's box gives, not a cube:
+# a flat plate at 3000 (3002 x 3002 x 3 with padding 1) runs; a cube at
+# 3000 is over 2048^3
+box_obj "$TMP/plate.obj" 0 0 0 1 1 0.0001
+upload "$TMP/plate.obj"
+M_plate=$MESH_ID
+vox "flat plate at resolution 3000" "$M_plate" '{"resolution":3000,"padding":1,"format":"summary"}'
+check "flat plate at 3000: dims 3002 x 3002 x 3 ($(jq -c .stats.dims "$TMP/job.json"))" \
+    test "$(jq -c .stats.dims "$TMP/job.json")" = "[3002,3002,3]"
+bad "cube at resolution 3000" '{"resolution":3000,"format":"summary"}' "2048^3 for one job"
 bad "unknown method" '{"method":"magic"}' params.method
 bad "unknown inside" '{"inside":"odd"}' params.inside
 bad "threshold 9" '{"supersample":2,"threshold":9}' params.threshold

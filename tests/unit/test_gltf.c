@@ -429,6 +429,19 @@ static void test_gltf_refusals(void **state)
     f = cube_file("\"scenes\":[{\"nodes\":[0]}],\"nodes\":[{}]", 0);
     expect_error(&f, 0, NULL, "gltf_no_faces", NULL);
     free(f.p);
+    /* A scene index that names no scene is a broken reference (it was no
+     * faces); a file without scenes naming scene 0 too. */
+    for (int glb = 0; glb < 2; glb++) {
+        f = cube_file("\"scene\":1,\"scenes\":[{\"nodes\":[0]}],\"nodes\":[{\"mesh\":0}]", glb);
+        expect_error(&f, glb, NULL, "gltf_corrupt", "scene 1 does not exist (the file has 1)");
+        free(f.p);
+        f = cube_file("\"scene\":-7,\"scenes\":[{\"nodes\":[0]}],\"nodes\":[{\"mesh\":0}]", glb);
+        expect_error(&f, glb, NULL, "gltf_corrupt", "scene -7 does not exist");
+        free(f.p);
+        f = cube_file("\"scene\":0,\"nodes\":[{\"mesh\":0}]", glb);
+        expect_error(&f, glb, NULL, "gltf_corrupt", "scene 0 does not exist (the file has 0)");
+        free(f.p);
+    }
     /* Limits: 12 triangles against 11, 8 vertices against 7. */
     f = cube_file(one, 0);
     expect_error(&f, 0, &(vx_mesh_limits){.max_triangles = 11}, "mesh_too_big", "triangles");
