@@ -53,7 +53,7 @@ static int read_number(const vx_pspec *f, const cJSON *it, double lo, double hi,
         return BAD("params.%s must be a number > %g", path, lo);
     if (!cJSON_IsNumber(it)) return BAD("params.%s must be a number", path);
     if (!isfinite(it->valuedouble))
-        return BAD("params.%s must be a finite number (1e999 is not one)", path);
+        return BAD("params.%s must be a finite number (it is past the largest double)", path);
     double v = it->valuedouble;
     /* the value as given (360.0001, not %g's 360) */
     if ((f->flags & VX_PF_GT_LO) && v <= lo)
