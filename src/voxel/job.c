@@ -392,8 +392,7 @@ static int voxelize_check(void *params, const vx_limits *lim, vx_err *err)
     if (p->bricks_set && p->bricks.size && p->format != F_VDB)
         return vx_err_set(err, VX_EUNPROC, "invalid_params",
                           "params.bricks needs params.format \"vdb\" (one merged sparse grid, or "
-                          "with merge false a manifest of brick .vdb files); %s is a dense format, "
-                          "run as one job",
+                          "with merge false a manifest of brick .vdb files); %s runs as one job",
                           format_names[p->format]);
     if (!p->merge) {
         if (!p->bricks_set || !p->bricks.size)
