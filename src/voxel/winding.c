@@ -29,7 +29,11 @@
  * split, until the change is found. A run that starts after crossings of
  * the mesh alone (no cone triangle crosses its column) takes w_K of the
  * centre before them, the end of the run before (evaluated once for
- * both). A closed mesh has no cone: then w is the crossing count and
+ * both). The runs of a row's columns are taken a block at a time: their
+ * bounds four at a time, then the samples of those left open four at a
+ * time (vx_wtree_bound4, vx_wtree_eval4: one walk of the tree for four
+ * lanes of AVX2, each lane the bits of one walk alone), then filled in
+ * order: the same voxels as run by run. A closed mesh has no cone: then w is the crossing count and
  * nothing is evaluated. Centres outside the mesh's bounding box are
  * outside (|w| < 1/2 outside its convex hull).
  *
@@ -360,20 +364,128 @@ static void sort_column(int32_t *z, size_t n)
     }
 }
 
-/* Column (i, j), its n crossings z (2 kb + front, sorted), into slice;
- * far_col: the cone's |w| is under 1/2 on all of its block (far_box with
- * n = 1: |n - 1/2| >= 1/2 for every n, so every run is decided by its
- * count). A column outside such a block is not bounded as a whole before
- * its runs are: near a hole that seldom holds (12% of those columns on
- * the bunny at 1024^3), and its runs' own bounds hold in 70%. */
-static void column(wctx *c, uint32_t *slice, int i, int j, const int32_t *z, size_t n, int far_col,
-                   int cone_col)
+/* Runs of a row's columns decided together: their bounds taken four at
+ * a time (vx_wtree_bound4), then the w of the centres of those the bounds
+ * leave open (vx_wtree_eval4), then the runs filled in order. */
+#define RUN_BLOCK 64
+
+typedef struct wrun {
+    int i, ka, kb, cnt;
+    int at;    /* the centre whose w its start takes: ka, or the one before */
+    int first; /* the first run of its column in the row */
+    int open;  /* its own bound is to be taken (an open mesh, its block of
+                * columns not far), then: the bound did not decide it */
+    /* where the w of its start, end and middle centres are in the block's
+     * samples: -1 none (the middle of a run under 8), -3 the start is the
+     * block before's last sample */
+    int ia, ib, im;
+} wrun;
+
+typedef struct wblock {
+    wrun run[RUN_BLOCK];
+    double q[3 * RUN_BLOCK][3], w[3 * RUN_BLOCK];
+    int nr, nq;
+    int w_at;     /* the column's last centre whose w is sampled (INT_MIN: none) */
+    int last;     /* its sample, or -3 */
+    double carry; /* its w once the block is flushed */
+} wblock;
+
+static int sample(const wctx *c, wblock *b, int i, int j, int k)
 {
-    int cnt = 0;
+    centre(c, i, j, k, b->q[b->nq]);
+    return b->nq++;
+}
+
+/* The open runs' bounds (far_box's, four at a time): a run whose bound
+ * stays under its limit is decided by its count. */
+static void bound_runs(const wctx *c, int j, wblock *b)
+{
+    int idx[4], n = 0;
+    double lo[4][3], hi[4][3], limit[4], out[4];
+    int side[4];
+    for (int r = 0; r <= b->nr; r++) {
+        if (r < b->nr && b->run[r].open) {
+            const wrun *u = &b->run[r];
+            centre(c, u->i, j, u->ka, lo[n]);
+            centre(c, u->i, j, u->kb, hi[n]);
+            limit[n] = fabs(u->cnt - 0.5);
+            side[n] = u->cnt >= 1 ? 1 : -1;
+            idx[n++] = r;
+        }
+        if (n == 4 || (r == b->nr && n)) {
+            vx_wtree_bound4(&c->tree, (const double(*)[3])lo, (const double(*)[3])hi, limit, side,
+                            n, out);
+            for (int l = 0; l < n; l++)
+                if (out[l] < limit[l]) b->run[idx[l]].open = 0;
+            n = 0;
+        }
+    }
+}
+
+/* Decides the block's runs into slice, in order: the bounds, then the
+ * samples of the runs left open (a run's start shares the sample of its
+ * column's centre before it where that is the last one sampled), their w,
+ * then each run filled: one whose ends agree is probed at its middle when
+ * it has one (8 centres or more), and split there where that disagrees. */
+static void flush(wctx *c, uint32_t *slice, int j, wblock *b)
+{
+    bound_runs(c, j, b);
+    for (int r = 0; r < b->nr; r++) {
+        wrun *u = &b->run[r];
+        if (u->first) b->w_at = INT_MIN;
+        if (!u->open) continue;
+        const int i = u->i, ka = u->ka, kb = u->kb;
+        u->ia = b->w_at == u->at ? b->last : sample(c, b, i, j, u->at);
+        u->ib = ka < kb ? sample(c, b, i, j, kb) : u->ia;
+        u->im = kb - ka >= 8 ? sample(c, b, i, j, ka + (kb - ka) / 2) : -1;
+        b->w_at = ka < kb ? kb : u->at;
+        b->last = u->ib;
+    }
+    for (int a = 0; a < b->nq; a += 4)
+        vx_wtree_eval4(&c->tree, (const double(*)[3])b->q[a], b->nq - a < 4 ? b->nq - a : 4,
+                       b->w + a);
+    for (int r = 0; r < b->nr; r++) {
+        const wrun *u = &b->run[r];
+        const int i = u->i, ka = u->ka, kb = u->kb, cnt = u->cnt;
+        if (!u->open) {
+            double f = cnt >= 1 ? 1 : -1;
+            fill_run(c, slice, i, j, ka, kb, f, f, 1, cnt, 0);
+            continue;
+        }
+        double fa = cnt - (u->ia == -3 ? b->carry : b->w[u->ia]) - 0.5, fb = fa;
+        if (ka < kb) fb = cnt - b->w[u->ib] - 0.5;
+        if (u->im >= 0 && (fa >= 0) == (fb >= 0)) {
+            const int km = ka + (kb - ka) / 2;
+            const double fm = cnt - b->w[u->im] - 0.5;
+            if ((fm >= 0) != (fa >= 0)) {
+                fill_run(c, slice, i, j, ka, km, fa, fm, 1, cnt, INT_MAX);
+                fill_run(c, slice, i, j, km, kb, fm, fb, 0, cnt, INT_MAX);
+                continue;
+            }
+        }
+        fill_run(c, slice, i, j, ka, kb, fa, fb, 1, cnt, INT_MAX);
+    }
+    if (b->last >= 0) {
+        b->carry = b->w[b->last];
+        b->last = -3;
+    }
+    b->nr = b->nq = 0;
+}
+
+/* Column (i, j), its n crossings z (2 kb + front, sorted), into the block
+ * (flushed into slice when full; the row's caller flushes the rest);
+ * far_col: the cone's |w| is under 1/2 on all of its block of columns
+ * (far_box with n = 1: |n - 1/2| >= 1/2 for every n, so every run is
+ * decided by its count). A column outside such a block is not bounded as
+ * a whole before its runs are: near a hole that seldom holds (12% of
+ * those columns on the bunny at 1024^3), and its runs' own bounds hold in
+ * 70%. */
+static void column(wctx *c, uint32_t *slice, wblock *b, int i, int j, const int32_t *z, size_t n,
+                   int far_col, int cone_col)
+{
+    int cnt = 0, first = 1;
     for (size_t a = 0; a < n; a++)
         cnt += z[a] & 1 ? 1 : -1;
-    int w_at = INT_MIN; /* the last centre where the cones' w was evaluated, w */
-    double w = 0;
     for (size_t r = 0; r <= n; r++) {
         /* run r: centres k with z[r-1] <= k < z[r] have cnt crossings above;
          * for an open mesh the whole run in its bbox, past the brick */
@@ -382,33 +494,20 @@ static void column(wctx *c, uint32_t *slice, int i, int j, const int32_t *z, siz
         int ka = r && zp > lo ? zp : lo;
         int kb = r < n && zr - 1 < hi ? zr - 1 : hi;
         if (ka <= kb && kb >= 0 && ka <= c->nz - 1) {
-            if (!c->open || far_col || far_box(c, i, i, j, j, ka, kb, cnt, cnt >= 1 ? 1 : -1)) {
-                double f = cnt >= 1 ? 1 : -1;
-                fill_run(c, slice, i, j, ka, kb, f, f, 1, cnt, 0);
-            } else {
-                /* the start across crossings of the mesh alone: w one centre back */
-                int at = r && ka == zp && !cone_col ? ka - 1 : ka;
-                if (w_at != at) w = cone_w(c, i, j, at);
-                w_at = at;
-                double fa = cnt - w - 0.5, fb = fa;
-                if (ka < kb) {
-                    w = cone_w(c, i, j, kb);
-                    w_at = kb;
-                    fb = cnt - w - 0.5;
-                }
-                if (kb - ka >= 8 && (fa >= 0) == (fb >= 0)) {
-                    int km = ka + (kb - ka) / 2;
-                    double fm = margin_at(c, i, j, km, cnt);
-                    if ((fm >= 0) != (fa >= 0)) {
-                        fill_run(c, slice, i, j, ka, km, fa, fm, 1, cnt, INT_MAX);
-                        fill_run(c, slice, i, j, km, kb, fm, fb, 0, cnt, INT_MAX);
-                        goto next;
-                    }
-                }
-                fill_run(c, slice, i, j, ka, kb, fa, fb, 1, cnt, INT_MAX);
-            }
+            if (b->nr == RUN_BLOCK) flush(c, slice, j, b);
+            /* the start across crossings of the mesh alone: w one centre back */
+            b->run[b->nr++] = (wrun){.i = i,
+                                     .ka = ka,
+                                     .kb = kb,
+                                     .cnt = cnt,
+                                     .at = r && ka == zp && !cone_col ? ka - 1 : ka,
+                                     .first = first,
+                                     .open = c->open && !far_col,
+                                     .ia = -1,
+                                     .ib = -1,
+                                     .im = -1};
+            first = 0;
         }
-    next:
         if (r < n) cnt -= z[r] & 1 ? 1 : -1;
     }
 }
@@ -458,6 +557,7 @@ static int band_task(int b, int t, void *ud)
     /* the cone's bound over blocks of FAR_BLOCK columns of the band's rows
      * first: most are far from every hole */
     int ja = j0 > c->lo[1] ? j0 : c->lo[1], jb = j1 - 1 < c->hi[1] ? j1 - 1 : c->hi[1];
+    wblock blk = {.nr = 0, .nq = 0, .w_at = INT_MIN, .last = -1};
     if (c->open)
         for (int i = c->lo[0]; i <= c->hi[0] && ja <= jb; i += FAR_BLOCK) {
             int ib = i + FAR_BLOCK - 1 < c->hi[0] ? i + FAR_BLOCK - 1 : c->hi[0];
@@ -480,8 +580,9 @@ static int band_task(int b, int t, void *ud)
                 sc->z[k] = sc->x.sorted[begin + k].at2;
             sort_column(sc->z, n);
             int far = c->open && sc->far[(i - c->lo[0]) / FAR_BLOCK];
-            column(c, sc->slice, i, j, sc->z, n, far, sc->cone[col]);
+            column(c, sc->slice, &blk, i, j, sc->z, n, far, sc->cone[col]);
         }
+        flush(c, sc->slice, j, &blk);
         slice_out(c, sc->slice, j);
     }
     atomic_fetch_add(&c->done, 1);

@@ -50,6 +50,9 @@ int vx_wtree_build(vx_wtree *t, size_t ntris, const double *tv, vx_err *err);
  * over 4 pi (positive where q sees a triangle's back, the inside of an
  * outward-oriented closed surface). Read-only: any number of threads. */
 double vx_wtree_eval(const vx_wtree *t, const double q[3]);
+/* vx_wtree_eval at the n points q[0..n) (1 <= n <= 4) into w[0..n), the
+ * same bits, four at a time where the CPU has AVX2. Any number of threads. */
+void vx_wtree_eval4(const vx_wtree *t, const double (*q)[3], int n, double *w);
 /* An upper bound of |winding number| of the triangles at every point of
  * the box lo..hi (lo <= hi; a segment along an axis is one): each
  * triangle's solid angle is at most its area over its squared distance;
@@ -59,6 +62,11 @@ double vx_wtree_eval(const vx_wtree *t, const double q[3]);
  * back to the second), 0 its magnitude. Any number of threads. */
 double vx_wtree_bound(const vx_wtree *t, const double lo[3], const double hi[3], double limit,
                       int side);
+/* vx_wtree_bound of the n boxes lo[l]..hi[l] (1 <= n <= 4), each with its
+ * own limit and side, into out[0..n): the same bits, four at a time where
+ * the CPU has AVX2. Any number of threads. */
+void vx_wtree_bound4(const vx_wtree *t, const double (*lo)[3], const double (*hi)[3],
+                     const double *limit, const int *side, int n, double *out);
 /* The exact winding number at q of one triangle (v: 9 doubles). */
 double vx_wtree_tri(const double *v, const double q[3]);
 void vx_wtree_free(vx_wtree *t);

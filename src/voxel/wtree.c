@@ -1,6 +1,7 @@
 /* The winding-number tree (winding_int.h): a bounding-volume hierarchy of
  * triangles split at the median centroid along the widest axis, each node
  * carrying the first two moments of its dipole field. */
+#include <immintrin.h>
 #include <math.h>
 #include <stdint.h>
 #include <stdlib.h>
@@ -396,6 +397,167 @@ double vx_wtree_eval(const vx_wtree *t, const double q[3])
     return w + far / (4 * M_PI);
 }
 
+/* ---- four points at once (AVX2) -----------------------------------------
+ * The same operations as vx_wtree_eval, in the same order, each lane one
+ * point: the tree walked once for all four (a node opened where any lane
+ * is near it, the others masked), each lane's terms summed in its own
+ * walk's order. No fused multiply-adds (the target is avx2 alone), and
+ * sqrt and the division are IEEE's in both: every lane gives the bits
+ * vx_wtree_eval gives. A lane that meets a corner at its point or a
+ * triangle seen edge-on (tri_half_angle's fallback) has that leaf
+ * summed by leaf_eval itself. */
+
+typedef double v4d __attribute__((vector_size(32)));
+typedef long long v4m __attribute__((vector_size(32))); /* a lane's all ones or zero */
+
+#define V4_ATTR __attribute__((target("avx2"), always_inline)) static inline
+
+V4_ATTR v4d v4_splat(double x)
+{
+    return (v4d){x, x, x, x};
+}
+V4_ATTR v4d v4_sel(v4m m, v4d a, v4d b) /* m ? a : b */
+{
+    return (v4d)(((v4m)a & m) | ((v4m)b & ~m));
+}
+V4_ATTR int v4_bits(v4m m)
+{
+    return _mm256_movemask_pd((__m256d)m);
+}
+V4_ATTR v4m v4_from_bits(int b)
+{
+    return (v4m){-(long long)(b & 1), -(long long)(b >> 1 & 1), -(long long)(b >> 2 & 1),
+                 -(long long)(b >> 3 & 1)};
+}
+
+/* atan2_fast, lane by lane. */
+V4_ATTR v4d atan2_fast4(v4d y, v4d x)
+{
+    const v4m sign = (v4m)v4_splat(-0.0);
+    v4d ax = (v4d)((v4m)x & ~sign), ay = (v4d)((v4m)y & ~sign);
+    v4m xbig = ax > ay;
+    v4d mx = v4_sel(xbig, ax, ay), mn = v4_sel(xbig, ay, ax);
+    v4d a = mn / mx, s = a * a;
+    v4d r = a * (v4_splat(0.9998660) +
+                 s * (v4_splat(-0.3302995) +
+                      s * (v4_splat(0.1801410) + s * (v4_splat(-0.0851330) + s * 0.0208351))));
+    r = v4_sel(ay > ax, v4_splat(M_PI_2) - r, r);
+    r = v4_sel(x < 0, v4_splat(M_PI) - r, r);
+    r = v4_sel(y < 0, -r, r);
+    return v4_sel(mx == 0, v4_splat(0), r);
+}
+
+/* far_field, lane by lane. */
+V4_ATTR v4d far_field4(const vx_wtree_node *nd, v4d qx, v4d qy, v4d qz)
+{
+    v4d r0 = nd->p[0] - qx, r1 = nd->p[1] - qy, r2 = nd->p[2] - qz;
+    v4d rr = r0 * r0 + r1 * r1 + r2 * r2;
+    v4d inv = 1 / (v4d)_mm256_sqrt_pd((__m256d)rr), inv3 = inv * inv * inv, inv5 = inv3 * inv * inv;
+    v4d first = (r0 * nd->a[0] + r1 * nd->a[1] + r2 * nd->a[2]) * inv3;
+    const double *m = nd->m;
+    double tr = m[0] + m[4] + m[8];
+    v4d rmr = r0 * (m[0] * r0 + m[1] * r1 + m[2] * r2);
+    rmr += r1 * (m[3] * r0 + m[4] * r1 + m[5] * r2);
+    rmr += r2 * (m[6] * r0 + m[7] * r1 + m[8] * r2);
+    return first + tr * inv3 - 3 * rmr * inv5;
+}
+
+/* leaf_eval for the lanes of live (bits); returns the lanes that need
+ * leaf_eval itself (a corner at the point, a triangle edge-on). */
+V4_ATTR int leaf_eval4(const vx_wtree *t, const vx_wtree_node *nd, v4d qx, v4d qy, v4d qz, int live,
+                       v4d *w)
+{
+    v4d u[3][LEAF_CORNERS];
+    const int nv = nd->nv;
+    const double *p = t->lv + 3 * (size_t)nd->vfirst;
+    v4m at_q = {0, 0, 0, 0};
+    for (int v = 0; v < nv; v++) {
+        v4d d0 = p[v] - qx, d1 = p[nv + v] - qy, d2 = p[2 * nv + v] - qz;
+        v4d l2 = d0 * d0 + d1 * d1 + d2 * d2;
+        v4m zero = l2 == 0;
+        at_q |= zero;
+        v4d inv = 1 / (v4d)_mm256_sqrt_pd((__m256d)(l2 + (v4d)(zero & (v4m)v4_splat(1))));
+        u[0][v] = d0 * inv;
+        u[1][v] = d1 * inv;
+        u[2][v] = d2 * inv;
+    }
+    v4m edge = {0, 0, 0, 0};
+    v4d re = v4_splat(1), im = v4_splat(0), turns = v4_splat(0);
+    for (int i = nd->first; i < nd->first + nd->n; i++) {
+        const uint8_t *c = t->corner + 3 * (size_t)i;
+        const v4d a0 = u[0][c[0]], a1 = u[1][c[0]], a2 = u[2][c[0]];
+        const v4d b0 = u[0][c[1]], b1 = u[1][c[1]], b2 = u[2][c[1]];
+        const v4d e0 = u[0][c[2]], e1 = u[1][c[2]], e2 = u[2][c[2]];
+        v4d det = a0 * (b1 * e2 - b2 * e1) - a1 * (b0 * e2 - b2 * e0) + a2 * (b0 * e1 - b1 * e0);
+        v4d den = 1 + (a0 * b0 + a1 * b1 + a2 * b2) + (b0 * e0 + b1 * e1 + b2 * e2) +
+                  (e0 * a0 + e1 * a1 + e2 * a2);
+        edge |= ~(det * det + den * den > 1e-12);
+        v4d r2 = re * den - im * det, i2 = re * det + im * den;
+        v4m up = (im >= 0) & (det >= 0) & (i2 < 0), down = (im < 0) & (det < 0) & (i2 >= 0);
+        turns += (v4d)(up & (v4m)v4_splat(1)) - (v4d)(down & (v4m)v4_splat(1));
+        re = r2;
+        im = i2;
+    }
+    int own = live & ~v4_bits(at_q | edge);
+    v4d leaf = v4_splat(0) + turns + atan2_fast4(im, re) / (2 * M_PI);
+    *w = v4_sel(v4_from_bits(own), *w + leaf, *w);
+    return live & ~own;
+}
+
+__attribute__((target("avx2"))) static void eval4_avx2(const vx_wtree *t, const double (*q)[3],
+                                                       int n, double *out)
+{
+    v4d qx, qy, qz;
+    for (int l = 0; l < 4; l++) {
+        const double *p = q[l < n ? l : 0]; /* lanes past n repeat the first */
+        qx[l] = p[0];
+        qy[l] = p[1];
+        qz[l] = p[2];
+    }
+    v4d w = v4_splat(0), far = v4_splat(0);
+    int stack[STACK], lanes[STACK], sp = 0;
+    stack[sp] = 0;
+    lanes[sp++] = (1 << n) - 1;
+    while (sp) {
+        sp--;
+        const vx_wtree_node *nd = &t->node[stack[sp]];
+        int live = lanes[sp];
+        v4d d0 = qx - nd->p[0], d1 = qy - nd->p[1], d2 = qz - nd->p[2];
+        v4d dd = d0 * d0 + d1 * d1 + d2 * d2;
+        int fl = nd->far2 > 0 ? live & v4_bits(dd > nd->far2) : 0;
+        if (fl) far = v4_sel(v4_from_bits(fl), far + far_field4(nd, qx, qy, qz), far);
+        live &= ~fl;
+        if (!live) continue;
+        if (nd->kid[0] >= 0) {
+            stack[sp] = nd->kid[0];
+            lanes[sp++] = live;
+            stack[sp] = nd->kid[1];
+            lanes[sp++] = live;
+            continue;
+        }
+        int own = nd->nv ? leaf_eval4(t, nd, qx, qy, qz, live, &w) : live;
+        for (int l = 0; l < 4; l++) {
+            if (!(own >> l & 1)) continue;
+            const double p[3] = {qx[l], qy[l], qz[l]};
+            if (nd->nv) {
+                w[l] += leaf_eval(t, nd, p);
+            } else {
+                for (int i = nd->first; i < nd->first + nd->n; i++)
+                    w[l] += vx_wtree_tri(t->tv + 9 * (size_t)i, p);
+            }
+        }
+    }
+    for (int l = 0; l < n; l++)
+        out[l] = w[l] + far[l] / (4 * M_PI);
+}
+
+void vx_wtree_eval4(const vx_wtree *t, const double (*q)[3], int n, double *w)
+{
+    if (n > 1 && t->nnodes && __builtin_cpu_supports("avx2")) return eval4_avx2(t, q, n, w);
+    for (int l = 0; l < n; l++)
+        w[l] = vx_wtree_eval(t, q[l]);
+}
+
 /* Squared distance between the boxes lo..hi and a..b. */
 static double boxes_dist2(const double lo[3], const double hi[3], const double a[3],
                           const double b[3])
@@ -465,6 +627,100 @@ double vx_wtree_bound(const vx_wtree *t, const double lo[3], const double hi[3],
         if (sum >= limit) return sum;
     }
     return sum;
+}
+
+/* ---- four boxes at once (AVX2): vx_wtree_bound's operations, in its
+ * order, each lane one box with its own limit and side; a lane stops where
+ * vx_wtree_bound returns. Every lane gives vx_wtree_bound's bits. */
+
+/* boxes_dist2 of the lanes' boxes lo..hi and the box a..b. */
+V4_ATTR v4d boxes_dist2_4(const v4d lo[3], const v4d hi[3], const double a[3], const double b[3])
+{
+    v4d r2 = v4_splat(0);
+    for (int k = 0; k < 3; k++) {
+        v4d g = v4_sel(a[k] > hi[k], a[k] - hi[k], v4_sel(lo[k] > b[k], lo[k] - b[k], v4_splat(0)));
+        r2 += g * g;
+    }
+    return r2;
+}
+
+/* leaf_bound, lane by lane (pos, neg: the lanes whose side is +1, -1). */
+V4_ATTR v4d leaf_bound4(const vx_wtree *t, const vx_wtree_node *nd, const v4d lo[3],
+                        const v4d hi[3], v4m pos, v4m neg)
+{
+    v4d c[3], e[3], sum = v4_splat(0);
+    v4m touch = {0, 0, 0, 0};
+    for (int k = 0; k < 3; k++) {
+        c[k] = (lo[k] + hi[k]) / 2;
+        e[k] = (hi[k] - lo[k]) / 2;
+    }
+    for (int i = nd->first; i < nd->first + nd->n; i++) {
+        const double *v = t->tv + 9 * (size_t)i, *n = t->tb + TB * (size_t)i;
+        v4d proj = (v[0] - c[0]) * n[0] + (v[1] - c[1]) * n[1] + (v[2] - c[2]) * n[2];
+        v4d rad = fabs(n[0]) * e[0] + fabs(n[1]) * e[1] + fabs(n[2]) * e[2];
+        v4m skip = (pos & (proj < -rad)) | (neg & (proj > rad));
+        v4d g2 = boxes_dist2_4(lo, hi, n + 4, n + 7);
+        v4m add = ~skip & ~touch, zero = g2 <= 0;
+        touch |= add & zero;
+        sum = v4_sel(add & ~zero, sum + n[3] / g2, sum);
+    }
+    return v4_sel(touch, v4_splat(HUGE_VAL), sum);
+}
+
+__attribute__((target("avx2"))) static void bound4_avx2(const vx_wtree *t, const double (*blo)[3],
+                                                        const double (*bhi)[3], const double *limit,
+                                                        const int *side, int n, double *out)
+{
+    v4d lo[3], hi[3], lim, sum = v4_splat(0);
+    v4m pos, neg, sided;
+    for (int l = 0; l < 4; l++) {
+        const int s = l < n ? l : 0; /* lanes past n repeat the first */
+        for (int k = 0; k < 3; k++) {
+            lo[k][l] = blo[s][k];
+            hi[k][l] = bhi[s][k];
+        }
+        lim[l] = limit[s];
+        pos[l] = -(long long)(side[s] > 0);
+        neg[l] = -(long long)(side[s] < 0);
+    }
+    sided = pos | neg;
+    const v4d eighth = lim / 8;
+    int stack[STACK], lanes[STACK], sp = 0, done = 0;
+    stack[sp] = 0;
+    lanes[sp++] = (1 << n) - 1;
+    while (sp) {
+        sp--;
+        const vx_wtree_node *nd = &t->node[stack[sp]];
+        const int live = lanes[sp] & ~done;
+        if (!live) continue;
+        v4d g2 = boxes_dist2_4(lo, hi, nd->lo, nd->hi);
+        v4d room = v4_sel(sided & (eighth < lim - sum), eighth, lim - sum);
+        int fl = live & v4_bits(nd->area < room * g2);
+        if (fl) sum = v4_sel(v4_from_bits(fl), sum + nd->area / g2, sum);
+        int rest = live & ~fl;
+        if (rest && nd->kid[0] < 0) {
+            v4d part = v4_sel(g2 > 0, nd->area / g2, v4_splat(HUGE_VAL));
+            v4d lb = leaf_bound4(t, nd, lo, hi, pos, neg);
+            sum = v4_sel(v4_from_bits(rest), sum + v4_sel(lb < part, lb, part), sum);
+        } else if (rest) {
+            stack[sp] = nd->kid[0];
+            lanes[sp++] = rest;
+            stack[sp] = nd->kid[1];
+            lanes[sp++] = rest;
+        }
+        done |= live & v4_bits(sum >= lim);
+    }
+    for (int l = 0; l < n; l++)
+        out[l] = sum[l];
+}
+
+void vx_wtree_bound4(const vx_wtree *t, const double (*lo)[3], const double (*hi)[3],
+                     const double *limit, const int *side, int n, double *out)
+{
+    if (n > 1 && t->nnodes && __builtin_cpu_supports("avx2"))
+        return bound4_avx2(t, lo, hi, limit, side, n, out);
+    for (int l = 0; l < n; l++)
+        out[l] = vx_wtree_bound(t, lo[l], hi[l], limit[l], side[l]);
 }
 
 void vx_wtree_free(vx_wtree *t)

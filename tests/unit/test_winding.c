@@ -784,6 +784,104 @@ static void random_box(uint64_t *s, int flat, const double at[3], const double e
     }
 }
 
+/* vx_wtree_eval4 gives each of its points the bits vx_wtree_eval gives
+ * (the same operations, four lanes at a time): on the bunny's tree
+ * (leaves with their corners listed) and a long sliver's (the edge-on
+ * fallback), for points at random, at corners of the triangles, on their
+ * edges and at edge midpoints, n = 1..4 a call, the points of a call
+ * near each other (one walk of the tree) or far apart (lanes masked).
+ * vx_wtree_bound4 gives each box vx_wtree_bound's bits: boxes of every
+ * shape about the tree, each lane its own limit and side. */
+static void test_tree_four(void **state)
+{
+    (void)state;
+    vx_wtree trees[2];
+    double *tv;
+    vx_mesh *m = bunny_tree(&trees[0], &tv);
+    const double sliver[9] = {-1e8, 0, 0, 1e8, 0, 0, 0, 1e-3, 0};
+    assert_int_equal(vx_wtree_build(&trees[1], 1, sliver, NULL), 0);
+    uint64_t s = 5;
+    long compared = 0, differ = 0, special = 0;
+    for (int tr = 0; tr < 2; tr++) {
+        const vx_wtree *t = &trees[tr];
+        const double *lo = tr ? (const double[3]){-2, -1, -1} : m->bbox_min,
+                     *hi = tr ? (const double[3]){2, 1, 1} : m->bbox_max;
+        for (int call = 0; call < 20000; call++) {
+            double q[4][3], w4[4];
+            int n = 1 + call % 4;
+            for (int l = 0; l < n; l++) {
+                s = s * 6364136223846793005ull + 1442695040888963407ull;
+                int kind = (int)(s >> 60) % 4; /* random, corner, on an edge, near the last */
+                size_t k = (size_t)(s >> 20) % t->ntris;
+                const double *v = t->tv + 9 * k;
+                for (int a = 0; a < 3; a++) {
+                    s = s * 6364136223846793005ull + 1442695040888963407ull;
+                    double u = (double)(s >> 11) / 9007199254740992.0;
+                    if (kind == 0 || (kind == 3 && l == 0))
+                        q[l][a] = lo[a] - 0.2 * (hi[a] - lo[a]) + 1.4 * (hi[a] - lo[a]) * u;
+                    else if (kind == 1)
+                        q[l][a] = v[a];
+                    else if (kind == 2)
+                        q[l][a] = call % 3 ? v[a] + u * (v[3 + a] - v[a]) : (v[a] + v[3 + a]) / 2;
+                    else
+                        q[l][a] = q[l - 1][a] + 1e-3 * (hi[a] - lo[a]) * (u - 0.5);
+                }
+                special += kind == 1 || kind == 2;
+            }
+            vx_wtree_eval4(t, (const double(*)[3])q, n, w4);
+            for (int l = 0; l < n; l++) {
+                double w = vx_wtree_eval(t, q[l]);
+                compared++;
+                if (memcmp(&w, &w4[l], sizeof w) && !(w == 0 && w4[l] == 0)) {
+                    if (differ++ < 5)
+                        printf("tree %d call %d lane %d: %.17g, alone %.17g\n", tr, call, l, w4[l],
+                               w);
+                }
+            }
+        }
+    }
+    printf("eval4 against eval: %ld points (%ld at corners or on edges), %ld differ\n", compared,
+           special, differ);
+    assert_int_equal(differ, 0);
+    assert_true(special > 10000);
+    long boxes = 0, bdiffer = 0, under = 0;
+    for (int tr = 0; tr < 2; tr++) {
+        const vx_wtree *t = &trees[tr];
+        double at[3], e[3];
+        for (int a = 0; a < 3; a++) {
+            at[a] = tr ? -1 : m->bbox_min[a];
+            e[a] = tr ? 0.5 : (m->bbox_max[a] - m->bbox_min[a]) / 4;
+        }
+        for (int call = 0; call < 5000; call++) {
+            double lo[4][3], hi[4][3], limit[4], b4[4];
+            int side[4], n = 1 + call % 4;
+            for (int l = 0; l < n; l++) {
+                random_box(&s, (call + l) % 4, at, e, l % 2 ? 0.05 : 0.6, lo[l], hi[l]);
+                s = s * 6364136223846793005ull + 1442695040888963407ull;
+                limit[l] = 0.5 + (double)(s >> 61); /* 0.5 .. 7.5 */
+                side[l] = (int)(s >> 40) % 3 - 1;
+            }
+            vx_wtree_bound4(t, (const double(*)[3])lo, (const double(*)[3])hi, limit, side, n, b4);
+            for (int l = 0; l < n; l++) {
+                double b = vx_wtree_bound(t, lo[l], hi[l], limit[l], side[l]);
+                boxes++;
+                under += b < limit[l];
+                if (memcmp(&b, &b4[l], sizeof b) && bdiffer++ < 5)
+                    printf("tree %d box call %d lane %d: %.17g, alone %.17g\n", tr, call, l, b4[l],
+                           b);
+            }
+        }
+    }
+    printf("bound4 against bound: %ld boxes (%ld under their limits), %ld differ\n", boxes, under,
+           bdiffer);
+    assert_int_equal(bdiffer, 0);
+    assert_true(under > boxes / 10 && under < boxes - boxes / 10);
+    for (int tr = 0; tr < 2; tr++)
+        vx_wtree_free(&trees[tr]);
+    free(tv);
+    vx_mesh_free(m);
+}
+
 /* vx_wtree_bound over a box is at least |w| anywhere in it: boxes of
  * every shape (segments along each axis included) at random places
  * around the bunny, w sampled at their corners and inside. */
@@ -962,15 +1060,15 @@ int main(int argc, char **argv)
 {
     if (argc > 1) cmocka_set_test_filter(argv[1]); /* e.g. test_tree */
     const struct CMUnitTest tests[] = {
-        cmocka_unit_test(test_overlap_open),     cmocka_unit_test(test_nested),
-        cmocka_unit_test(test_open_shells),      cmocka_unit_test(test_run_starts),
-        cmocka_unit_test(test_closed_exact),     cmocka_unit_test(test_closed_ties),
-        cmocka_unit_test(test_far_sliver),       cmocka_unit_test(test_open_box_ties),
-        cmocka_unit_test(test_bricks_open),      cmocka_unit_test(test_bunny),
-        cmocka_unit_test(test_middle_sample),    cmocka_unit_test(test_tree),
-        cmocka_unit_test(test_tree_leaf_turns),  cmocka_unit_test(test_tree_bound_box),
-        cmocka_unit_test(test_tree_bound_sides), cmocka_unit_test(test_memory_limit),
-        cmocka_unit_test(test_default_and_stop),
+        cmocka_unit_test(test_overlap_open),   cmocka_unit_test(test_nested),
+        cmocka_unit_test(test_open_shells),    cmocka_unit_test(test_run_starts),
+        cmocka_unit_test(test_closed_exact),   cmocka_unit_test(test_closed_ties),
+        cmocka_unit_test(test_far_sliver),     cmocka_unit_test(test_open_box_ties),
+        cmocka_unit_test(test_bricks_open),    cmocka_unit_test(test_bunny),
+        cmocka_unit_test(test_middle_sample),  cmocka_unit_test(test_tree),
+        cmocka_unit_test(test_tree_four),      cmocka_unit_test(test_tree_leaf_turns),
+        cmocka_unit_test(test_tree_bound_box), cmocka_unit_test(test_tree_bound_sides),
+        cmocka_unit_test(test_memory_limit),   cmocka_unit_test(test_default_and_stop),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }
