@@ -300,6 +300,27 @@ static void expect_invalid(const char *json, const char *needle)
         fail_msg("%s: message '%s' lacks '%s'", json, err.message, needle);
 }
 
+/* The kind's check at submission of json's params for a mesh whose box
+ * is (0, 0, 0)..max: 0, or -1 with err. */
+static int check_with_box(const char *json, const double max[3], const vx_limits *lim, vx_err *err)
+{
+    cJSON *o = parse(json, lim, err);
+    assert_non_null(o);
+    void *typed = vx_kind_read(&vx_kind_voxelize, o, lim, err);
+    assert_non_null(typed);
+    char text[256];
+    snprintf(text, sizeof text,
+             "{\"bbox\":{\"min\":[0,0,0],\"max\":[%.17g,%.17g,%.17g]},\"boundary_edges\":0}",
+             max[0], max[1], max[2]);
+    cJSON *meta = cJSON_Parse(text);
+    assert_non_null(meta);
+    int rc = vx_kind_voxelize.check_mesh(typed, meta, lim, err);
+    cJSON_Delete(meta);
+    vx_kind_params_free(&vx_kind_voxelize, typed);
+    cJSON_Delete(o);
+    return rc;
+}
+
 static void test_params(void **st)
 {
     vx_err err;
@@ -356,14 +377,21 @@ static void test_params(void **st)
     expect_invalid("{\"format\":\"stl\"}", "params.format");
     expect_invalid("{\"vdb_grid\":\"points\"}", "params.vdb_grid");
     expect_invalid("{\"colour\":1}", "params.colour");
-    /* 2048^3 bits is 1 GiB: twice that (CPU + GPU) is over a 1 GiB limit */
-    expect_invalid("{\"resolution\":2048,\"bricks\":{\"size\":0}}", "job memory limit");
+    /* A resolution's grid depends on the mesh's box: checked with it at
+     * submission (check_mesh). 2048^3 bits is 1 GiB: twice that (CPU +
+     * GPU) is over a 1 GiB limit for a cube; a flat plate's 2048 x 2048 x
+     * 3 is not (the params alone had been checked as a cube). */
+    vx_limits lim = {.max_job_memory = 1ull << 30};
+    const double cube[3] = {1, 1, 1}, plate[3] = {1, 1, 1e-3};
+    assert_int_equal(
+        check_with_box("{\"resolution\":2048,\"bricks\":{\"size\":0}}", cube, &lim, &err), -1);
+    assert_int_equal(err.kind, VX_EUNPROC);
+    assert_non_null(strstr(err.message, "job memory limit"));
+    assert_int_equal(
+        check_with_box("{\"resolution\":2048,\"bricks\":{\"size\":0}}", plate, &lim, &err), 0);
     /* as bricks (a .vdb past the 1024^3 default threshold) only one
      * brick's job counts: accepted under the same 1 GiB */
-    vx_limits lim = {.max_job_memory = 1ull << 30};
-    o = parse("{\"resolution\":2048}", &lim, &err);
-    assert_non_null(o);
-    cJSON_Delete(o);
+    assert_int_equal(check_with_box("{\"resolution\":2048}", cube, &lim, &err), 0);
     expect_invalid("{\"bricks\":{\"size\":20}}", "multiple of 8");
     expect_invalid("{\"bricks\":{\"size\":64},\"format\":\"binvox\"}", "params.bricks");
     expect_invalid("{\"merge\":false}", "params.merge");
