@@ -276,6 +276,39 @@ template <typename GridT> class ParallelGrid final : public GridT, public Prepar
         os.write(reinterpret_cast<const char *>(&v), sizeof v);
     }
 
+    // A leaf's value mask as NodeMask::save writes it (its words).
+    static void copy_mask(char *p, const typename LeafT::NodeMaskType &m)
+    {
+        for (openvdb::Index w = 0; w < LeafT::NodeMaskType::WORD_COUNT; w++) {
+            const uint64_t word = m.template getWord<uint64_t>(w);
+            std::memcpy(p + 8 * w, &word, 8);
+        }
+    }
+    static constexpr size_t MASK_BYTES = LeafT::NodeMaskType::WORD_COUNT * 8;
+    static_assert(sizeof(typename LeafT::NodeMaskType::Word) == 8, "64-bit mask words");
+
+    // InternalNode::writeTopology of a lower node: its child and value
+    // masks, its values (a tile's, 0 under a child) as
+    // writeCompressedValues writes them, then each leaf's writeTopology
+    // (its value mask), here copied into one write rather than a stream
+    // write a leaf.
+    static void lower_topology(std::ostream &os, const LowerT &node, bool half)
+    {
+        node.getChildMask().save(os);
+        node.getValueMask().save(os);
+        std::unique_ptr<ValueT[]> values(new ValueT[LowerT::NUM_VALUES]);
+        std::fill(values.get(), values.get() + LowerT::NUM_VALUES, openvdb::zeroVal<ValueT>());
+        for (auto v = node.cbeginValueAll(); v; ++v)
+            values[v.pos()] = *v;
+        openvdb::io::writeCompressedValues(os, values.get(), LowerT::NUM_VALUES,
+                                           node.getValueMask(), node.getChildMask(), half);
+        std::string masks(node.getChildMask().countOn() * MASK_BYTES, '\0');
+        char *p = &masks[0];
+        for (auto c = node.cbeginChildOn(); c; ++c, p += MASK_BYTES)
+            copy_mask(p, c->getValueMask());
+        os.write(masks.data(), (std::streamsize)masks.size());
+    }
+
     // The leaf's writeBuffers: its own, or for a leaf made without values
     // its mask and the bytes of its values' count.
     void write_leaf(std::ostream &os, const LeafT &leaf, Unloaded &u, bool half) const
@@ -290,24 +323,33 @@ template <typename GridT> class ParallelGrid final : public GridT, public Prepar
 
     void write_unloaded(std::ostream &os, const LeafT &leaf, Unloaded &u, bool half) const
     {
+        const std::string &t = tail(leaf, u, half, openvdb::io::getDataCompression(os),
+                                    openvdb::io::getGridBackgroundValuePtr(os));
+        leaf.getValueMask().save(os);
+        os.write(t.data(), (std::streamsize)t.size());
+    }
+
+    // What writeCompressedValues writes for the values of a leaf made
+    // without them, under compression and background (made once a count).
+    const std::string &tail(const LeafT &leaf, Unloaded &u, bool half, uint32_t compression,
+                            const void *background) const
+    {
         const typename LeafT::NodeMaskType &mask = leaf.getValueMask();
-        const openvdb::Index on = mask.countOn();
         if (u.tail.empty()) u.tail.resize(LeafT::SIZE + 1);
-        std::string &tail = u.tail[on];
-        if (tail.empty()) {
+        std::string &t = u.tail[mask.countOn()];
+        if (t.empty()) {
             if (!u.scratch) u.scratch.reset(new LeafT(leaf.origin()));
             ValueT *d = u.scratch->buffer().data();
             for (openvdb::Index n = 0; n < LeafT::SIZE; n++)
                 d[n] = mask.isOn(n) ? on_ : this->constTree().background();
             std::ostringstream ss;
-            openvdb::io::setDataCompression(ss, openvdb::io::getDataCompression(os));
-            openvdb::io::setGridBackgroundValuePtr(ss, openvdb::io::getGridBackgroundValuePtr(os));
+            openvdb::io::setDataCompression(ss, compression);
+            openvdb::io::setGridBackgroundValuePtr(ss, background);
             openvdb::io::writeCompressedValues(ss, d, LeafT::SIZE, mask,
                                                typename LeafT::NodeMaskType(), half);
-            tail = ss.str();
+            t = ss.str();
         }
-        mask.save(os);
-        os.write(tail.data(), (std::streamsize)tail.size());
+        return t;
     }
 
     bool unloaded(const LeafT &leaf) const
@@ -374,7 +416,7 @@ template <typename GridT> class ParallelGrid final : public GridT, public Prepar
             for (auto c = up.cbeginChildOn(); c; ++c)
                 lower.push_back(&*c);
             in_parallel(os, lower.size(), 1,
-                        [&](std::ostream &ss, size_t i) { lower[i]->writeTopology(ss, half); });
+                        [&](std::ostream &ss, size_t i) { lower_topology(ss, *lower[i], half); });
         }
     }
 
@@ -412,41 +454,83 @@ template <typename GridT> class ParallelGrid final : public GridT, public Prepar
         std::vector<Stats> part(nc);
         tbb::enumerable_thread_specific<Unloaded> mine; // the tails are this write's
         tbb::parallel_for(size_t(0), nc, [&](size_t c) {
-            Unloaded &u = mine.local();
-            std::ostringstream ss;
-            io::setDataCompression(ss, compression);
-            io::setGridBackgroundValuePtr(ss, &background);
             const size_t a = c * chunk, b = std::min(all.size(), a + chunk);
-            std::vector<size_t> ends(b - a);
-            for (size_t i = a; i < b; i++) {
-                write_leaf(ss, *all[i], u, half);
-                ends[i - a] = (size_t)ss.tellp();
-                leaf_stats(*all[i], part[c]);
-            }
-            buffers_[c] = ss.str();
-            if (!has_dl) return;
-            // A leaf's bytes: its value mask, writeCompressedValues' kind
-            // byte, the inactive values and selection mask that kind
-            // names, then the values as written (the size OpenVDB's
-            // writeCompressedValuesSize gives, and 8 bytes of count).
-            const std::string &s = buffers_[c];
-            size_t at = 0;
-            for (size_t i = a; i < b; i++) {
-                const size_t end = ends[i - a];
-                const size_t mask_bytes = LeafT::NodeMaskType::memUsage();
-                const int8_t kind = (int8_t)s.at(at + mask_bytes);
-                size_t head = mask_bytes + 1;
-                if (kind == io::NO_MASK_AND_ONE_INACTIVE_VAL ||
-                    kind == io::MASK_AND_ONE_INACTIVE_VAL)
-                    head += sizeof(ValueT);
-                if (kind == io::MASK_AND_TWO_INACTIVE_VALS) head += 2 * sizeof(ValueT);
-                if (kind == io::MASK_AND_NO_INACTIVE_VALS ||
-                    kind == io::MASK_AND_ONE_INACTIVE_VAL || kind == io::MASK_AND_TWO_INACTIVE_VALS)
-                    head += mask_bytes;
-                if (end - at < head) throw std::runtime_error("a leaf's buffer is short");
-                dl.setMask(i, kind);
-                if (sized) dl.setCompressedSize(i, end - at - head);
-                at = end;
+            if constexpr (std::is_same<ValueT, bool>::value) {
+                // LeafNode<bool>::writeBuffers' bytes, copied (a stream
+                // write for each of its three parts cost more): its value
+                // mask, its origin, its values
+                constexpr size_t B = 2 * MASK_BYTES + 3 * sizeof(int32_t);
+                std::string bytes((b - a) * B, '\0');
+                char *p = &bytes[0];
+                for (size_t i = a; i < b; i++, p += B) {
+                    const LeafT &leaf = *all[i];
+                    const int32_t xyz[3] = {leaf.origin().x(), leaf.origin().y(),
+                                            leaf.origin().z()};
+                    copy_mask(p, leaf.getValueMask());
+                    std::memcpy(p + MASK_BYTES, xyz, sizeof xyz);
+                    std::memcpy(p + MASK_BYTES + sizeof xyz, leaf.buffer().data(), MASK_BYTES);
+                    leaf_stats(leaf, part[c]);
+                }
+                buffers_[c] = std::move(bytes);
+            } else {
+                Unloaded &u = mine.local();
+                std::vector<size_t> ends(b - a);
+                bool direct = by_mask_;
+                for (size_t i = a; i < b && direct; i++)
+                    direct = unloaded(*all[i]);
+                if (direct) {
+                    // leaves made without values (write_unloaded's bytes),
+                    // copied: a mask and a count's tail each
+                    size_t at = 0;
+                    for (size_t i = a; i < b; i++)
+                        ends[i - a] = at +=
+                            MASK_BYTES + tail(*all[i], u, half, compression, &background).size();
+                    std::string bytes(at, '\0');
+                    char *p = &bytes[0];
+                    for (size_t i = a; i < b; i++) {
+                        const std::string &t = tail(*all[i], u, half, compression, &background);
+                        copy_mask(p, all[i]->getValueMask());
+                        std::memcpy(p + MASK_BYTES, t.data(), t.size());
+                        p += MASK_BYTES + t.size();
+                        leaf_stats(*all[i], part[c]);
+                    }
+                    buffers_[c] = std::move(bytes);
+                } else {
+                    std::ostringstream ss;
+                    io::setDataCompression(ss, compression);
+                    io::setGridBackgroundValuePtr(ss, &background);
+                    for (size_t i = a; i < b; i++) {
+                        write_leaf(ss, *all[i], u, half);
+                        ends[i - a] = (size_t)ss.tellp();
+                        leaf_stats(*all[i], part[c]);
+                    }
+                    buffers_[c] = ss.str();
+                }
+                if (!has_dl) return;
+                // A leaf's bytes: its value mask, writeCompressedValues' kind
+                // byte, the inactive values and selection mask that kind
+                // names, then the values as written (the size OpenVDB's
+                // writeCompressedValuesSize gives, and 8 bytes of count).
+                const std::string &s = buffers_[c];
+                size_t at = 0;
+                for (size_t i = a; i < b; i++) {
+                    const size_t end = ends[i - a];
+                    const size_t mask_bytes = LeafT::NodeMaskType::memUsage();
+                    const int8_t kind = (int8_t)s.at(at + mask_bytes);
+                    size_t head = mask_bytes + 1;
+                    if (kind == io::NO_MASK_AND_ONE_INACTIVE_VAL ||
+                        kind == io::MASK_AND_ONE_INACTIVE_VAL)
+                        head += sizeof(ValueT);
+                    if (kind == io::MASK_AND_TWO_INACTIVE_VALS) head += 2 * sizeof(ValueT);
+                    if (kind == io::MASK_AND_NO_INACTIVE_VALS ||
+                        kind == io::MASK_AND_ONE_INACTIVE_VAL ||
+                        kind == io::MASK_AND_TWO_INACTIVE_VALS)
+                        head += mask_bytes;
+                    if (end - at < head) throw std::runtime_error("a leaf's buffer is short");
+                    dl.setMask(i, kind);
+                    if (sized) dl.setCompressedSize(i, end - at - head);
+                    at = end;
+                }
             }
         });
         stats_.reset(new Stats);
