@@ -33,8 +33,8 @@
  * bounds four at a time, then the samples of those left open four at a
  * time (vx_wtree_bound4, vx_wtree_eval4: one walk of the tree for four
  * lanes of AVX2, each lane the bits of one walk alone), then filled in
- * order: the same voxels as run by run. A closed mesh has no cone: then w is the crossing count and
- * nothing is evaluated. Centres outside the mesh's bounding box are
+ * order: the same voxels as run by run. A closed mesh has no cone: then
+ * w is the crossing count and nothing is evaluated. Centres outside the mesh's bounding box are
  * outside (|w| < 1/2 outside its convex hull).
  *
  * The approximation: a run whose sampled centres agree is filled as they

@@ -1,13 +1,17 @@
 /* The winding-number tree (winding_int.h): a bounding-volume hierarchy of
  * triangles split at the median centroid along the widest axis, each node
  * carrying the first two moments of its dipole field. */
-#include <immintrin.h>
 #include <math.h>
 #include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
 
 #include "voxel/winding_int.h"
+
+#if defined(__x86_64__)
+#include <immintrin.h>
+#define VX_WTREE_AVX2 1 /* eval4 and bound4's lanes (else one point at a time) */
+#endif
 
 #define LEAF 8
 #define LEAF_CORNERS 64 /* a leaf with more distinct corners goes triangle by triangle */
@@ -407,6 +411,7 @@ double vx_wtree_eval(const vx_wtree *t, const double q[3])
  * triangle seen edge-on (tri_half_angle's fallback) has that leaf
  * summed by leaf_eval itself. */
 
+#if defined(VX_WTREE_AVX2)
 typedef double v4d __attribute__((vector_size(32)));
 typedef long long v4m __attribute__((vector_size(32))); /* a lane's all ones or zero */
 
@@ -551,9 +556,13 @@ __attribute__((target("avx2"))) static void eval4_avx2(const vx_wtree *t, const 
         out[l] = w[l] + far[l] / (4 * M_PI);
 }
 
+#endif
+
 void vx_wtree_eval4(const vx_wtree *t, const double (*q)[3], int n, double *w)
 {
+#if defined(VX_WTREE_AVX2)
     if (n > 1 && t->nnodes && __builtin_cpu_supports("avx2")) return eval4_avx2(t, q, n, w);
+#endif
     for (int l = 0; l < n; l++)
         w[l] = vx_wtree_eval(t, q[l]);
 }
@@ -629,6 +638,7 @@ double vx_wtree_bound(const vx_wtree *t, const double lo[3], const double hi[3],
     return sum;
 }
 
+#if defined(VX_WTREE_AVX2)
 /* ---- four boxes at once (AVX2): vx_wtree_bound's operations, in its
  * order, each lane one box with its own limit and side; a lane stops where
  * vx_wtree_bound returns. Every lane gives vx_wtree_bound's bits. */
@@ -714,11 +724,15 @@ __attribute__((target("avx2"))) static void bound4_avx2(const vx_wtree *t, const
         out[l] = sum[l];
 }
 
+#endif
+
 void vx_wtree_bound4(const vx_wtree *t, const double (*lo)[3], const double (*hi)[3],
                      const double *limit, const int *side, int n, double *out)
 {
+#if defined(VX_WTREE_AVX2)
     if (n > 1 && t->nnodes && __builtin_cpu_supports("avx2"))
         return bound4_avx2(t, lo, hi, limit, side, n, out);
+#endif
     for (int l = 0; l < n; l++)
         out[l] = vx_wtree_bound(t, lo[l], hi[l], limit[l], side[l]);
 }
