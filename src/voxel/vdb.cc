@@ -133,17 +133,17 @@ class Prepared
     virtual void stats_metadata(openvdb::GridBase &g) const = 0;
 };
 
-// A grid (bool or float) whose topology and leaf buffers are written by
-// OpenVDB's own node calls from every thread, in tree order: the topology
-// is the root's and each upper internal node's own header (masks and tile
-// values, written here as their writeTopology writes them), then each lower
-// internal node's writeTopology (its masks, tile values and leaves' masks:
-// most of the bytes); the buffers are each leaf's writeBuffers. A node's
-// bytes depend only on the node and on the stream's compression and
-// background, so the lower internal nodes and chunks of leaves are written
-// into memory streams in parallel and appended in order: the bytes of
-// Tree::writeTopology and Tree::writeBuffers (vdbcheck compares them with
-// those, on the grid read back).
+// A grid (bool or float) whose topology and leaf buffers are written from
+// every thread, in tree order: the topology is the root's and each upper
+// internal node's own header (masks and tile values, written here as their
+// writeTopology writes them), then each lower internal node's (its masks
+// and tile values through OpenVDB's calls, then its leaves' masks copied:
+// most of the bytes); the buffers are each leaf's writeBuffers (a bool
+// leaf's copied). A node's bytes depend only on the node and on the
+// stream's compression and background, so the lower internal nodes and
+// chunks of leaves are written into memory in parallel and appended in
+// order: the bytes of Tree::writeTopology and Tree::writeBuffers (vdbcheck
+// compares them with those, on the grid read back).
 //
 // With on_ set, a leaf may be made without values (LeafNode's
 // PartialCreate: its mask only): it holds on_ at its active voxels and the
@@ -313,16 +313,7 @@ template <typename GridT> class ParallelGrid final : public GridT, public Prepar
     // its mask and the bytes of its values' count.
     void write_leaf(std::ostream &os, const LeafT &leaf, Unloaded &u, bool half) const
     {
-        if constexpr (std::is_same<ValueT, bool>::value) {
-            return leaf.writeBuffers(os, half);
-        } else {
-            if (!unloaded(leaf)) return leaf.writeBuffers(os, half);
-            write_unloaded(os, leaf, u, half);
-        }
-    }
-
-    void write_unloaded(std::ostream &os, const LeafT &leaf, Unloaded &u, bool half) const
-    {
+        if (!unloaded(leaf)) return leaf.writeBuffers(os, half);
         const std::string &t = tail(leaf, u, half, openvdb::io::getDataCompression(os),
                                     openvdb::io::getGridBackgroundValuePtr(os));
         leaf.getValueMask().save(os);
@@ -436,6 +427,89 @@ template <typename GridT> class ParallelGrid final : public GridT, public Prepar
         stats_.reset();
     }
 
+    // Leaves a..b of a bool grid: LeafNode<bool>::writeBuffers' bytes
+    // (its value mask, origin and values), copied, not three stream writes
+    // a leaf.
+    std::string bool_bytes(const std::vector<const LeafT *> &all, size_t a, size_t b,
+                           Stats &st) const
+    {
+        constexpr size_t B = 2 * MASK_BYTES + 3 * sizeof(int32_t);
+        std::string bytes((b - a) * B, '\0');
+        char *p = &bytes[0];
+        for (size_t i = a; i < b; i++, p += B) {
+            const LeafT &leaf = *all[i];
+            const int32_t xyz[3] = {leaf.origin().x(), leaf.origin().y(), leaf.origin().z()};
+            copy_mask(p, leaf.getValueMask());
+            std::memcpy(p + MASK_BYTES, xyz, sizeof xyz);
+            std::memcpy(p + MASK_BYTES + sizeof xyz, leaf.buffer().data(), MASK_BYTES);
+            leaf_stats(leaf, st);
+        }
+        return bytes;
+    }
+
+    // Leaves a..b of a float grid (write_leaf's bytes), and where each
+    // leaf's end: leaves made without values copied (a mask and its
+    // count's tail), a chunk with others through a stream.
+    std::string value_bytes(const std::vector<const LeafT *> &all, size_t a, size_t b, Unloaded &u,
+                            bool half, uint32_t compression, const ValueT *background,
+                            std::vector<size_t> &ends, Stats &st) const
+    {
+        bool direct = by_mask_;
+        for (size_t i = a; i < b && direct; i++)
+            direct = unloaded(*all[i]);
+        if (!direct) {
+            std::ostringstream ss;
+            openvdb::io::setDataCompression(ss, compression);
+            openvdb::io::setGridBackgroundValuePtr(ss, background);
+            for (size_t i = a; i < b; i++) {
+                write_leaf(ss, *all[i], u, half);
+                ends[i - a] = (size_t)ss.tellp();
+                leaf_stats(*all[i], st);
+            }
+            return ss.str();
+        }
+        size_t at = 0;
+        for (size_t i = a; i < b; i++)
+            ends[i - a] = at += MASK_BYTES + tail(*all[i], u, half, compression, background).size();
+        std::string bytes(at, '\0');
+        char *p = &bytes[0];
+        for (size_t i = a; i < b; i++) {
+            const std::string &t = tail(*all[i], u, half, compression, background);
+            copy_mask(p, all[i]->getValueMask());
+            std::memcpy(p + MASK_BYTES, t.data(), t.size());
+            p += MASK_BYTES + t.size();
+            leaf_stats(*all[i], st);
+        }
+        return bytes;
+    }
+
+    // The delayed-load record of the leaves from a whose bytes s holds
+    // (each ending at ends): a leaf's bytes are its value mask,
+    // writeCompressedValues' kind byte, the inactive values and selection
+    // mask that kind names, then the values as written (the size
+    // OpenVDB's writeCompressedValuesSize gives, and 8 bytes of count).
+    static void delayed_load(const std::string &s, size_t a, const std::vector<size_t> &ends,
+                             bool sized, openvdb::io::DelayedLoadMetadata &dl)
+    {
+        namespace io = openvdb::io;
+        size_t at = 0;
+        for (size_t k = 0; k < ends.size(); k++) {
+            const size_t end = ends[k];
+            const int8_t kind = (int8_t)s.at(at + MASK_BYTES);
+            size_t head = MASK_BYTES + 1;
+            if (kind == io::NO_MASK_AND_ONE_INACTIVE_VAL || kind == io::MASK_AND_ONE_INACTIVE_VAL)
+                head += sizeof(ValueT);
+            if (kind == io::MASK_AND_TWO_INACTIVE_VALS) head += 2 * sizeof(ValueT);
+            if (kind == io::MASK_AND_NO_INACTIVE_VALS || kind == io::MASK_AND_ONE_INACTIVE_VAL ||
+                kind == io::MASK_AND_TWO_INACTIVE_VALS)
+                head += MASK_BYTES;
+            if (end - at < head) throw std::runtime_error("a leaf's buffer is short");
+            dl.setMask(a + k, kind);
+            if (sized) dl.setCompressedSize(a + k, end - at - head);
+            at = end;
+        }
+    }
+
     int prepare(std::ostream &os, openvdb::io::DelayedLoadMetadata &dl) const override
     {
         namespace io = openvdb::io;
@@ -456,81 +530,12 @@ template <typename GridT> class ParallelGrid final : public GridT, public Prepar
         tbb::parallel_for(size_t(0), nc, [&](size_t c) {
             const size_t a = c * chunk, b = std::min(all.size(), a + chunk);
             if constexpr (std::is_same<ValueT, bool>::value) {
-                // LeafNode<bool>::writeBuffers' bytes, copied (a stream
-                // write for each of its three parts cost more): its value
-                // mask, its origin, its values
-                constexpr size_t B = 2 * MASK_BYTES + 3 * sizeof(int32_t);
-                std::string bytes((b - a) * B, '\0');
-                char *p = &bytes[0];
-                for (size_t i = a; i < b; i++, p += B) {
-                    const LeafT &leaf = *all[i];
-                    const int32_t xyz[3] = {leaf.origin().x(), leaf.origin().y(),
-                                            leaf.origin().z()};
-                    copy_mask(p, leaf.getValueMask());
-                    std::memcpy(p + MASK_BYTES, xyz, sizeof xyz);
-                    std::memcpy(p + MASK_BYTES + sizeof xyz, leaf.buffer().data(), MASK_BYTES);
-                    leaf_stats(leaf, part[c]);
-                }
-                buffers_[c] = std::move(bytes);
+                buffers_[c] = bool_bytes(all, a, b, part[c]);
             } else {
-                Unloaded &u = mine.local();
                 std::vector<size_t> ends(b - a);
-                bool direct = by_mask_;
-                for (size_t i = a; i < b && direct; i++)
-                    direct = unloaded(*all[i]);
-                if (direct) {
-                    // leaves made without values (write_unloaded's bytes),
-                    // copied: a mask and a count's tail each
-                    size_t at = 0;
-                    for (size_t i = a; i < b; i++)
-                        ends[i - a] = at +=
-                            MASK_BYTES + tail(*all[i], u, half, compression, &background).size();
-                    std::string bytes(at, '\0');
-                    char *p = &bytes[0];
-                    for (size_t i = a; i < b; i++) {
-                        const std::string &t = tail(*all[i], u, half, compression, &background);
-                        copy_mask(p, all[i]->getValueMask());
-                        std::memcpy(p + MASK_BYTES, t.data(), t.size());
-                        p += MASK_BYTES + t.size();
-                        leaf_stats(*all[i], part[c]);
-                    }
-                    buffers_[c] = std::move(bytes);
-                } else {
-                    std::ostringstream ss;
-                    io::setDataCompression(ss, compression);
-                    io::setGridBackgroundValuePtr(ss, &background);
-                    for (size_t i = a; i < b; i++) {
-                        write_leaf(ss, *all[i], u, half);
-                        ends[i - a] = (size_t)ss.tellp();
-                        leaf_stats(*all[i], part[c]);
-                    }
-                    buffers_[c] = ss.str();
-                }
-                if (!has_dl) return;
-                // A leaf's bytes: its value mask, writeCompressedValues' kind
-                // byte, the inactive values and selection mask that kind
-                // names, then the values as written (the size OpenVDB's
-                // writeCompressedValuesSize gives, and 8 bytes of count).
-                const std::string &s = buffers_[c];
-                size_t at = 0;
-                for (size_t i = a; i < b; i++) {
-                    const size_t end = ends[i - a];
-                    const size_t mask_bytes = LeafT::NodeMaskType::memUsage();
-                    const int8_t kind = (int8_t)s.at(at + mask_bytes);
-                    size_t head = mask_bytes + 1;
-                    if (kind == io::NO_MASK_AND_ONE_INACTIVE_VAL ||
-                        kind == io::MASK_AND_ONE_INACTIVE_VAL)
-                        head += sizeof(ValueT);
-                    if (kind == io::MASK_AND_TWO_INACTIVE_VALS) head += 2 * sizeof(ValueT);
-                    if (kind == io::MASK_AND_NO_INACTIVE_VALS ||
-                        kind == io::MASK_AND_ONE_INACTIVE_VAL ||
-                        kind == io::MASK_AND_TWO_INACTIVE_VALS)
-                        head += mask_bytes;
-                    if (end - at < head) throw std::runtime_error("a leaf's buffer is short");
-                    dl.setMask(i, kind);
-                    if (sized) dl.setCompressedSize(i, end - at - head);
-                    at = end;
-                }
+                buffers_[c] = value_bytes(all, a, b, mine.local(), half, compression, &background,
+                                          ends, part[c]);
+                if (has_dl) delayed_load(buffers_[c], a, ends, sized, dl);
             }
         });
         stats_.reset(new Stats);
