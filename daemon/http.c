@@ -492,7 +492,12 @@ static void mhd_log(void *cls, const char *fmt, va_list ap)
     if (!show) return;
     char msg[512], q[600];
     vsnprintf(msg, sizeof msg, fmt, ap);
-    VX_WARN("http.mhd", "message=%s", vx_log_quote(q, sizeof q, msg));
+    /* a client that went away (an events stream closed by its browser)
+     * is no fault of the daemon's: debug, not a warning a stream */
+    const int gone = strstr(msg, "no longer available") || strstr(msg, "onnection reset") ||
+                     strstr(msg, "closed by remote");
+    vx_log(gone ? VX_LOG_DEBUG : VX_LOG_WARN, "http.mhd", "message=%s",
+           vx_log_quote(q, sizeof q, msg));
 }
 
 /* ---- lifecycle ----------------------------------------------------- */

@@ -117,6 +117,26 @@ expect_error "unknown job's events" 404 job_not_found
 api GET /v1/jobs/nothex/events
 expect_error "malformed job id's events" 404
 
+# --- a client that resets its stream is not a warning ------------------
+# Two streams of a running job closed with a reset: the keepalive (0.5 s)
+# writes to them within the second after, and libmicrohttpd reports the
+# failed send; that is logged at debug (it had been a warning a stream).
+submit 1024 "$SLOW"
+from=$(($(wc -l <"$TMP/daemon.log") + 1))
+python3 - "$PORT" "$JOB" <<'PY'
+import socket, struct, sys, time
+for _ in range(2):
+    s = socket.create_connection(("127.0.0.1", int(sys.argv[1])))
+    s.sendall(("GET /v1/jobs/%s/events HTTP/1.1\r\nHost: x\r\n\r\n" % sys.argv[2]).encode())
+    s.recv(4096)
+    s.setsockopt(socket.SOL_SOCKET, socket.SO_LINGER, struct.pack("ii", 1, 0))
+    s.close()
+time.sleep(1.5)
+PY
+n=$(tail -n +"$from" "$TMP/daemon.log" | grep -ac 'level=warn event=http.mhd' || true)
+check "streams reset by their clients: no warnings ($n)" test "$n" = 0
+api DELETE "/v1/jobs/$JOB"
+
 # --- shutdown ends open streams ---------------------------------------
 submit 1024
 $SSE "$BASE/v1/jobs/$JOB/events" --ready "$TMP/last.ready" >"$TMP/shutdown.json" &
