@@ -46,6 +46,14 @@ static void test_preview_params(void **state)
     cJSON *again = vx_kind_parse(k, norm, &lim, &err);
     assert_true(cJSON_Compare(norm, again, 1));
     cJSON_Delete(again);
+    /* a field given as null reads as absent (openapi's JobRequest) */
+    cJSON *with_null = cJSON_Parse("{\"width\": 100, \"height\": 100, \"azimuth\": 45, "
+                                   "\"elevation\": null, \"color\": null}");
+    again = vx_kind_parse(k, with_null, &lim, &err);
+    assert_non_null(again);
+    assert_true(cJSON_Compare(norm, again, 1));
+    cJSON_Delete(again);
+    cJSON_Delete(with_null);
     cJSON_Delete(norm);
     cJSON_Delete(in);
     static const char *bad[] = {
