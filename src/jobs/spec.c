@@ -59,7 +59,7 @@ static int read_number(const vx_pspec *f, const cJSON *it, double lo, double hi,
     if ((f->flags & VX_PF_GT_LO) && v <= lo)
         return BAD("params.%s must be > %g, got %.15g", path, lo, v);
     if (v < lo || v > hi) return BAD("params.%s must be in [%g, %g], got %.15g", path, lo, hi, v);
-    *out = v;
+    *out = v == 0 ? 0 : v; /* -0 as 0: the same normalised params (reuse, keys) */
     return 0;
 }
 

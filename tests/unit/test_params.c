@@ -54,6 +54,18 @@ static void test_preview_params(void **state)
     assert_true(cJSON_Compare(norm, again, 1));
     cJSON_Delete(again);
     cJSON_Delete(with_null);
+    /* -0 normalises as 0: the same request for reuse and idempotency */
+    cJSON *neg = cJSON_Parse("{\"width\": 100, \"height\": 100, \"azimuth\": -0}"),
+          *pos = cJSON_Parse("{\"width\": 100, \"height\": 100, \"azimuth\": 0}");
+    cJSON *nn = vx_kind_parse(k, neg, &lim, &err), *np = vx_kind_parse(k, pos, &lim, &err);
+    char *tn = cJSON_PrintUnformatted(nn), *tp = cJSON_PrintUnformatted(np);
+    assert_string_equal(tn, tp);
+    free(tn);
+    free(tp);
+    cJSON_Delete(nn);
+    cJSON_Delete(np);
+    cJSON_Delete(neg);
+    cJSON_Delete(pos);
     cJSON_Delete(norm);
     cJSON_Delete(in);
     static const char *bad[] = {
