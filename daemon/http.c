@@ -321,8 +321,8 @@ static enum MHD_Result on_head(vx_http *h, struct MHD_Connection *c, const char 
     vx_req_target t = {0};
     r->route = vx_req_route(url, strlen(url), &t);
     if (vx_conns_path_escape(vc)) { /* names nothing: its resource's own 404 */
-        if (t.id[0])
-            snprintf(t.id, sizeof t.id, "-");
+        if (t.id[0])                /* what the 404's message names */
+            snprintf(t.id, sizeof t.id, "(a path with %%00 or %%2F)");
         else
             r->route = VX_R_UNKNOWN;
     }

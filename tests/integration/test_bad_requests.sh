@@ -411,6 +411,8 @@ for p in "/v1/jobs/$GJ%00" "/v1/jobs/$GJ%00x" "/v1/jobs/$GJ%2fresult" "/v1/jobs/
     "/v1/jobs/$GJ/result/image%00x" "/v1/meshes/$BOX%00"; do
     api GET "$p"
     expect_error "GET $p" 404
+    [[ $p == /v1/jobs/* ]] && check "GET $p: the message says why ($(jqb .error.message))" \
+        bash -c "jq -r .error.message '$BODY' | grep -qF '(a path with %00 or %2F)'"
 done
 api GET "/v1/jobs/$GJ/result/image"
 expect_status "the same output by its plain path" 200
