@@ -2,6 +2,7 @@
 
 #include <ctype.h>
 #include <errno.h>
+#include <fcntl.h>
 #include <getopt.h>
 #include <math.h>
 #include <sched.h>
@@ -380,7 +381,11 @@ int vx_config_split_listen(const char *s, char host[256], char port[6])
 
 static int load_file(vx_config *c, const char *path)
 {
-    FILE *f = fopen(path, "re");
+    /* O_NONBLOCK: a FIFO named here would block the open until a writer
+     * came (start-up hung, deaf to SIGTERM); only regular files */
+    int fd = open(path, O_RDONLY | O_NONBLOCK | O_CLOEXEC);
+    FILE *f = fd >= 0 ? fdopen(fd, "r") : NULL;
+    if (fd >= 0 && !f) close(fd);
     struct stat st;
     if (f && fstat(fileno(f), &st) == 0 && !S_ISREG(st.st_mode)) {
         fclose(f);

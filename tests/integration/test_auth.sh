@@ -69,6 +69,13 @@ printf 'no-such-key = 1\n' >"$TMP/bad.conf"
 "$VOXELD" --config "$TMP/bad.conf" 2>"$TMP/err2"
 check "unknown config key exits 2" test $? -eq 2
 check "unknown config key is named" grep -q "no-such-key" "$TMP/err2"
+# A FIFO named as the config file is refused at once, not waited on (an
+# open of a FIFO blocks until a writer comes, deaf to SIGTERM).
+mkfifo "$TMP/conf.fifo"
+timeout -s KILL 10 "$VOXELD" --config "$TMP/conf.fifo" --listen 127.0.0.1:0 --data-dir "$TMP/d3" \
+    2>"$TMP/err3"
+check "a FIFO as --config exits 2 ($?)" test $? -eq 2
+check "and says it is not a regular file" grep -q 'not a regular file' "$TMP/err3"
 # An empty token file name (VOXELD_TOKEN_FILE=$UNSET in a unit) would
 # leave /v1 open: refused like an empty token file.
 "$VOXELD" --token-file "" --listen 127.0.0.1:0 --data-dir "$TMP/d3" 2>"$TMP/err4"
