@@ -131,8 +131,9 @@ check "meshes --limit 1: says there are more ($(cat ctl.err))" test -n "$AFTER"
 "$CTL" meshes --limit 1 --after "$AFTER" >page2 2>/dev/null
 check "meshes --after: the next page" sh -c "test -s page2 && ! cmp -s page1 page2 && test \"\$(cut -c1-64 page2)\" \\> \"$AFTER\""
 
-# --no-wait prints the id; cancel takes it.
-NJ=$("$CTL" --no-wait voxelize "$MID" -r 512 2>/dev/null)
+# --no-wait prints the id; cancel takes it (a job that takes seconds:
+# peel with three-axis voting; a plain 512^3 job had finished first).
+NJ=$("$CTL" --no-wait voxelize "$MID" -r 1024 -p method=peel -p inside=robust 2>/dev/null)
 check "--no-wait: a job id ($NJ)" grep -Eq '^[0-9a-f]{32}$' <<<"$NJ"
 "$CTL" cancel "$NJ" >cancel.out 2>&1
 rc=$?
