@@ -287,21 +287,28 @@ template <typename GridT> class ParallelGrid final : public GridT, public Prepar
     static constexpr size_t MASK_BYTES = LeafT::NodeMaskType::WORD_COUNT * 8;
     static_assert(sizeof(typename LeafT::NodeMaskType::Word) == 8, "64-bit mask words");
 
-    // InternalNode::writeTopology of a lower node: its child and value
-    // masks, its values (a tile's, 0 under a child) as
-    // writeCompressedValues writes them, then each leaf's writeTopology
-    // (its value mask), here copied into one write rather than a stream
-    // write a leaf.
-    static void lower_topology(std::ostream &os, const LowerT &node, bool half)
+    // An internal node's own part of InternalNode::writeTopology: its child
+    // and value masks, then its values (a tile's, 0 under a child) as
+    // writeCompressedValues writes them.
+    template <typename NodeT>
+    static void node_header(std::ostream &os, const NodeT &node, bool half)
     {
         node.getChildMask().save(os);
         node.getValueMask().save(os);
-        std::unique_ptr<ValueT[]> values(new ValueT[LowerT::NUM_VALUES]);
-        std::fill(values.get(), values.get() + LowerT::NUM_VALUES, openvdb::zeroVal<ValueT>());
+        std::unique_ptr<ValueT[]> values(new ValueT[NodeT::NUM_VALUES]);
+        std::fill(values.get(), values.get() + NodeT::NUM_VALUES, openvdb::zeroVal<ValueT>());
         for (auto v = node.cbeginValueAll(); v; ++v)
             values[v.pos()] = *v;
-        openvdb::io::writeCompressedValues(os, values.get(), LowerT::NUM_VALUES,
-                                           node.getValueMask(), node.getChildMask(), half);
+        openvdb::io::writeCompressedValues(os, values.get(), NodeT::NUM_VALUES, node.getValueMask(),
+                                           node.getChildMask(), half);
+    }
+
+    // InternalNode::writeTopology of a lower node: its header, then each
+    // leaf's writeTopology (its value mask), here copied into one write
+    // rather than a stream write a leaf.
+    static void lower_topology(std::ostream &os, const LowerT &node, bool half)
+    {
+        node_header(os, node, half);
         std::string masks(node.getChildMask().countOn() * MASK_BYTES, '\0');
         char *p = &masks[0];
         for (auto c = node.cbeginChildOn(); c; ++c, p += MASK_BYTES)
@@ -391,18 +398,11 @@ template <typename GridT> class ParallelGrid final : public GridT, public Prepar
             put(os, bool(it.isValueOn()));
         }
         std::vector<const LowerT *> lower;
-        std::unique_ptr<ValueT[]> values(new ValueT[UpperT::NUM_VALUES]);
         for (auto it = root.cbeginChildOn(); it; ++it) {
             put(os, it.getCoord());
             // InternalNode::writeTopology of the upper node
             const UpperT &up = *it;
-            up.getChildMask().save(os);
-            up.getValueMask().save(os);
-            std::fill(values.get(), values.get() + UpperT::NUM_VALUES, openvdb::zeroVal<ValueT>());
-            for (auto v = up.cbeginValueAll(); v; ++v)
-                values[v.pos()] = *v;
-            openvdb::io::writeCompressedValues(os, values.get(), UpperT::NUM_VALUES,
-                                               up.getValueMask(), up.getChildMask(), half);
+            node_header(os, up, half);
             lower.clear();
             for (auto c = up.cbeginChildOn(); c; ++c)
                 lower.push_back(&*c);
