@@ -2,13 +2,11 @@
 
 #include <ctype.h>
 #include <errno.h>
-#include <fcntl.h>
 #include <getopt.h>
 #include <math.h>
 #include <sched.h>
 #include <stdlib.h>
 #include <string.h>
-#include <sys/stat.h>
 #include <unistd.h>
 
 #include "util/fsutil.h"
@@ -381,17 +379,9 @@ int vx_config_split_listen(const char *s, char host[256], char port[6])
 
 static int load_file(vx_config *c, const char *path)
 {
-    /* O_NONBLOCK: a FIFO named here would block the open until a writer
-     * came (start-up hung, deaf to SIGTERM); only regular files */
-    int fd = open(path, O_RDONLY | O_NONBLOCK | O_CLOEXEC);
+    int fd = vx_open_regular(path);
     FILE *f = fd >= 0 ? fdopen(fd, "r") : NULL;
     if (fd >= 0 && !f) close(fd);
-    struct stat st;
-    if (f && fstat(fileno(f), &st) == 0 && !S_ISREG(st.st_mode)) {
-        fclose(f);
-        f = NULL;
-        errno = S_ISDIR(st.st_mode) ? EISDIR : EINVAL;
-    }
     if (!f) {
         fprintf(stderr, "voxeld: cannot open config file %s: %s\n", path,
                 errno == EINVAL ? "not a regular file" : strerror(errno));

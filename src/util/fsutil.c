@@ -91,14 +91,27 @@ int vx_write_atomic(const char *path, const void *data, size_t len, vx_err *err)
     return vx_fsync_dir(slash ? dir : ".", err);
 }
 
-char *vx_read_file(const char *path, size_t max, size_t *len, vx_err *err)
+int vx_open_regular(const char *path)
 {
     /* O_NONBLOCK: a FIFO in a file's place would block the open until a
-     * writer came (start-up hung, deaf to SIGTERM); only regular files. */
+     * writer came (start-up hung, deaf to SIGTERM) */
     int fd = open(path, O_RDONLY | O_NONBLOCK | O_CLOEXEC);
+    if (fd < 0) return -1;
     struct stat st;
-    if (fd >= 0 && (fstat(fd, &st) != 0 || !S_ISREG(st.st_mode))) {
-        close(fd);
+    int e = fstat(fd, &st) != 0   ? errno
+            : S_ISREG(st.st_mode) ? 0
+            : S_ISDIR(st.st_mode) ? EISDIR
+                                  : EINVAL;
+    if (!e) return fd;
+    close(fd);
+    errno = e;
+    return -1;
+}
+
+char *vx_read_file(const char *path, size_t max, size_t *len, vx_err *err)
+{
+    int fd = vx_open_regular(path);
+    if (fd < 0 && (errno == EINVAL || errno == EISDIR)) {
         vx_err_set(err, VX_EIO, "read_failed", "cannot read the file: not a regular file");
         return NULL;
     }

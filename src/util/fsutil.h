@@ -15,6 +15,10 @@ int vx_mkdirs(const char *path, vx_err *err);
 int vx_fsync_dir(const char *dir, vx_err *err);
 /* Writes data to path atomically: temp file, fsync, rename, fsync dir. */
 int vx_write_atomic(const char *path, const void *data, size_t len, vx_err *err);
+/* Opens a regular file to read, never waiting on a FIFO: the descriptor,
+ * or -1 with errno (EISDIR a directory, EINVAL another file that is not
+ * regular). */
+int vx_open_regular(const char *path);
 /* Reads a whole (small) file into an owned NUL-terminated buffer; NULL on error. */
 char *vx_read_file(const char *path, size_t max, size_t *len, vx_err *err);
 /* rm -r of a directory tree (results); 0 or -1. */
