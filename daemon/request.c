@@ -660,8 +660,19 @@ cJSON *vx_req_json_parse(const char *body, size_t len, char *msg, size_t msgn)
 {
     if (vx_req_json_text_ok(body, len, msg, msgn)) return NULL;
     const char *end = body + len;
+    int depth = 0;
     for (const char *p = body; p < end;) {
-        if (*p == '"') { /* a string: escapes are two characters, no raw controls */
+        if (*p == '[' || *p == '{') {
+            if (++depth > CJSON_NESTING_LIMIT) {
+                snprintf(msg, msgn, "arrays and objects nest deeper than %d levels (at byte %zu)",
+                         CJSON_NESTING_LIMIT, (size_t)(p - body));
+                return NULL;
+            }
+            p++;
+        } else if (*p == ']' || *p == '}') {
+            depth--;
+            p++;
+        } else if (*p == '"') { /* a string: escapes are two characters, no raw controls */
             for (p++; p < end && *p != '"'; p++) {
                 if ((unsigned char)*p < 0x20) {
                     snprintf(msg, msgn, "a string holds a raw control character (escape it)");
@@ -684,8 +695,11 @@ cJSON *vx_req_json_parse(const char *body, size_t len, char *msg, size_t msgn)
     }
     const char *stop = NULL;
     cJSON *doc = cJSON_ParseWithLengthOpts(body, len, &stop, 0);
-    if (!doc) {
-        snprintf(msg, msgn, "the body is not valid JSON");
+    if (!doc) { /* cJSON leaves stop where it failed */
+        if (stop && stop >= body && stop <= end)
+            snprintf(msg, msgn, "the body is not valid JSON (at byte %zu)", (size_t)(stop - body));
+        else
+            snprintf(msg, msgn, "the body is not valid JSON");
         return NULL;
     }
     while (stop && stop < end && (*stop == ' ' || *stop == '\t' || *stop == '\n' || *stop == '\r'))

@@ -173,6 +173,17 @@ check "411 JSON error" jq -e '.error.code == "length_required"' "$TMP/411.body"
 # --- JSON job requests ---
 api POST /v1/jobs "${JSON[@]}" -d '{"mesh": '
 expect_error "malformed JSON" 400 invalid_json
+api POST /v1/jobs "${JSON[@]}" -d '{"mesh": "x", "kind": }'
+expect_error "a missing value" 400 invalid_json
+check "the error gives the byte ($(jqb .error.message))" test "$(jqb .error.message)" = "the body is not valid JSON (at byte 22)"
+# cJSON's nesting limit (1000 levels), named as such
+deep=$(printf '%*s' 1000 '' | tr ' ' '[')$(printf '%*s' 1000 '' | tr ' ' ']')
+api POST /v1/jobs "${JSON[@]}" -d "{\"mesh\":\"$BOX\",\"kind\":\"preview\",\"params\":{\"a\":$deep}}"
+expect_error "nesting 1002 levels deep" 400 invalid_json
+check "the error names the nesting ($(jqb .error.message))" grep -q 'nest deeper than 1000 levels' <<<"$(jqb .error.message)"
+deep=$(printf '%*s' 997 '' | tr ' ' '[')$(printf '%*s' 997 '' | tr ' ' ']')
+api POST /v1/jobs "${JSON[@]}" -d "{\"mesh\":\"$BOX\",\"kind\":\"preview\",\"params\":{\"a\":$deep}}"
+check "nesting 999 levels deep is JSON: the params are what is refused ($STATUS $(jqb .error.code))" test "$(jqb .error.code)" = invalid_params
 api POST /v1/jobs "${JSON[@]}" -d '[1,2]'
 expect_error "JSON not an object" 400 invalid_request
 # strict JSON (RFC 8259): each of these would otherwise run as a job
