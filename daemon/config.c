@@ -90,6 +90,9 @@ static const opt_def opts[] = {
      "largest rendered image, width*height (default 67108864; 0 = no limit)"},
     {"max-job-memory", T_SIZE, F(max_job_memory), 0,
      "memory one job may use (default 4G; 0 = no limit)"},
+    {"keep-memory", T_SIZE, F(keep_memory), 0,
+     "memory freed by jobs kept for the next job, beyond max-job-memory (default 256M; 0 = give "
+     "it back at once)"},
     {"brick-threshold", T_SIZE, F(brick_threshold), 0,
      "voxelize grids of more cells run as bricks (vdb; default 1G = 1024^3; 0 = the default)"},
     {"max-json-bytes", T_SIZE, F(max_json_bytes), 0,
@@ -221,6 +224,7 @@ static void defaults(vx_config *c)
     c->max_connections_per_ip = 64;
     c->max_image_pixels = 8192ull * 8192ull;
     c->max_job_memory = 4ull << 30;
+    c->keep_memory = 256ull << 20;
     c->brick_threshold = 1ull << 30;
     c->max_json_bytes = 16ull << 20;
     c->max_parse_memory = UINT64_MAX; /* 8 x max_upload_bytes + 256M, see vx_config_load */

@@ -9,6 +9,8 @@
 #include <unistd.h>
 #include <dirent.h>
 
+#include "util/bigmem.h"
+
 #define NBUCKETS 16
 typedef struct buckets {
     int n;
@@ -355,10 +357,14 @@ char *vx_metrics_render(const vx_metrics_gauges *g)
         "# HELP voxeld_results_evicted_total Job results removed by the results budget.\n"
         "# TYPE voxeld_results_evicted_total counter\nvoxeld_results_evicted_total %llu\n"
         "# HELP voxeld_gl_context_losses_total GL contexts lost during a job.\n"
-        "# TYPE voxeld_gl_context_losses_total counter\nvoxeld_gl_context_losses_total %llu\n",
+        "# TYPE voxeld_gl_context_losses_total counter\nvoxeld_gl_context_losses_total %llu\n"
+        "# HELP voxeld_kept_memory_bytes Big job buffers freed and kept mapped for the next "
+        "job (keep-memory).\n"
+        "# TYPE voxeld_kept_memory_bytes gauge\nvoxeld_kept_memory_bytes %zu\n",
         g->queue_depth, g->queue_capacity, g->running, g->meshes,
         (unsigned long long)g->results_bytes, free_s, (unsigned long long)g->min_free_disk,
-        g->ready, (unsigned long long)g->evictions, (unsigned long long)g->gl_context_loss);
+        g->ready, (unsigned long long)g->evictions, (unsigned long long)g->gl_context_loss,
+        vx_bigmem_kept());
     if (g->cluster) {
         sb_printf(&b, "# HELP voxeld_cluster_jobs Jobs in the shared database by state and kind "
                       "(every replica's: the autoscaler's view).\n"

@@ -189,6 +189,7 @@ int vx_route_info(vx_http *h, struct MHD_Connection *c, req *r)
     cJSON_AddNumberToObject(l, "max_connections_per_ip", (double)cfg->max_connections_per_ip);
     cJSON_AddNumberToObject(l, "max_image_pixels", (double)cfg->max_image_pixels);
     cJSON_AddNumberToObject(l, "max_job_memory_bytes", (double)cfg->max_job_memory);
+    cJSON_AddNumberToObject(l, "keep_memory_bytes", (double)cfg->keep_memory);
     cJSON_AddNumberToObject(l, "brick_threshold_cells", (double)cfg->brick_threshold);
     cJSON_AddNumberToObject(l, "max_json_bytes", (double)cfg->max_json_bytes);
     cJSON_AddNumberToObject(l, "min_free_disk_bytes", (double)cfg->min_free_disk);

@@ -1,28 +1,111 @@
 /* Big zeroed buffers (bigmem.h). */
 #include "util/bigmem.h"
 
+#include <pthread.h>
+#include <stdint.h>
 #include <stdlib.h>
+#include <string.h>
 #include <sys/mman.h>
 
 #define BIGMEM_MAP_MIN ((size_t)4 << 20)
+#define BIGMEM_ROUND ((size_t)2 << 20) /* mappings in whole huge pages, to fit again */
+#define KEPT_MAX 16
+
+/* The kept mappings, unordered. */
+static pthread_mutex_t mu = PTHREAD_MUTEX_INITIALIZER;
+static struct {
+    void *p;
+    size_t len;
+} kept[KEPT_MAX];
+static int nkept;
+static size_t kept_bytes, keep_limit;
+
+void vx_bigmem_keep(size_t bytes)
+{
+    pthread_mutex_lock(&mu);
+    keep_limit = bytes;
+    while (nkept && kept_bytes > keep_limit) {
+        nkept--;
+        kept_bytes -= kept[nkept].len;
+        munmap(kept[nkept].p, kept[nkept].len);
+    }
+    pthread_mutex_unlock(&mu);
+}
+
+size_t vx_bigmem_kept(void)
+{
+    pthread_mutex_lock(&mu);
+    size_t n = kept_bytes;
+    pthread_mutex_unlock(&mu);
+    return n;
+}
+
+/* The smallest kept mapping that holds len and is at most twice it, taken
+ * out of the list. */
+static void *take(size_t len, size_t *got)
+{
+    pthread_mutex_lock(&mu);
+    int best = -1;
+    for (int i = 0; i < nkept; i++)
+        if (kept[i].len >= len && kept[i].len / 2 <= len &&
+            (best < 0 || kept[i].len < kept[best].len))
+            best = i;
+    void *p = NULL;
+    if (best >= 0) {
+        p = kept[best].p;
+        *got = kept[best].len;
+        kept_bytes -= kept[best].len;
+        kept[best] = kept[--nkept];
+    }
+    pthread_mutex_unlock(&mu);
+    return p;
+}
 
 void *vx_bigmem_alloc(size_t bytes, size_t *mapped)
 {
     *mapped = 0;
     if (bytes < BIGMEM_MAP_MIN) return calloc(bytes ? bytes : 1, 1);
-    void *p = mmap(NULL, bytes, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
+    size_t len = (bytes + BIGMEM_ROUND - 1) / BIGMEM_ROUND * BIGMEM_ROUND;
+    size_t got = 0;
+    void *p = take(len, &got);
+    if (p) {
+        memset(p, 0, bytes);
+        *mapped = got;
+        return p;
+    }
+    p = mmap(NULL, len, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
     if (p == MAP_FAILED) return NULL;
 #ifdef MADV_HUGEPAGE
-    madvise(p, bytes, MADV_HUGEPAGE); /* a hint: without THP, small pages */
+    madvise(p, len, MADV_HUGEPAGE); /* a hint: without THP, small pages */
 #endif
-    *mapped = bytes;
+    *mapped = len;
     return p;
 }
 
 void vx_bigmem_free(void *p, size_t mapped)
 {
-    if (mapped)
-        munmap(p, mapped);
-    else
+    if (!mapped) {
         free(p);
+        return;
+    }
+    pthread_mutex_lock(&mu);
+    if (mapped <= keep_limit) {
+        /* room for it: the smallest kept ones go first (a big one fits
+         * more of what comes) */
+        while (nkept && (kept_bytes + mapped > keep_limit || nkept == KEPT_MAX)) {
+            int s = 0;
+            for (int i = 1; i < nkept; i++)
+                if (kept[i].len < kept[s].len) s = i;
+            kept_bytes -= kept[s].len;
+            munmap(kept[s].p, kept[s].len);
+            kept[s] = kept[--nkept];
+        }
+        kept[nkept].p = p;
+        kept[nkept].len = mapped;
+        nkept++;
+        kept_bytes += mapped;
+        p = NULL;
+    }
+    pthread_mutex_unlock(&mu);
+    if (p) munmap(p, mapped);
 }

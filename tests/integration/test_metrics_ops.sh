@@ -106,7 +106,8 @@ stop_daemon
 start_daemon --job-timeout 0 --request-timeout 0 --connection-timeout 0 --max-triangles 0 \
     --max-connections-per-ip 0 --max-image-pixels 0 --max-job-memory 0 --header-timeout 0 \
     --min-body-rate 0 --min-send-rate 0 --max-parse-memory 0 --results-max-bytes 0 \
-    --results-max-age 0 --job-history-bytes 0 --max-event-streams 0 --max-connections 300 || exit 1
+    --results-max-age 0 --job-history-bytes 0 --max-event-streams 0 --max-connections 300 \
+    --keep-memory 0 || exit 1
 INFO_FROM=$(wc -l <"$VX_API_LOG")
 api GET /v1/info
 expect_status "info with zero limits" 200
@@ -114,12 +115,44 @@ check "every zero limit reported as 0" jq -e '.limits | [.job_timeout_s, .max_wa
     .connection_timeout_s, .max_triangles, .max_connections_per_ip, .max_image_pixels,
     .max_job_memory_bytes, .header_timeout_s, .min_body_rate, .min_send_rate,
     .max_parse_memory_bytes, .results_max_bytes, .results_max_age_s, .job_history_bytes,
-    .max_event_streams] | all(. == 0)' "$BODY"
+    .max_event_streams, .keep_memory_bytes] | all(. == 0)' "$BODY"
 check "max_connections reported" jq -e '.limits.max_connections == 300' "$BODY"
 tail -n +"$((INFO_FROM + 1))" "$VX_API_LOG" >"$TMP/info-api.jsonl"
 check "the zero-limit /v1/info fits api/openapi.yaml" \
     python3 "$VX_SOURCE_DIR/tests/tools/openapi_check.py" "$VX_SOURCE_DIR/api/openapi.yaml" "$TMP/info-api.jsonl"
 python3 "$VX_SOURCE_DIR/tests/tools/openapi_check.py" "$VX_SOURCE_DIR/api/openapi.yaml" "$TMP/info-api.jsonl" | head -n 12
+# --keep-memory 0: a job's 16 MB grid is given back
+upload "$TMP/box.obj"
+run_job voxelize "$MESH_ID" '{"resolution":512,"format":"summary"}'
+job_ok "a 512^3 job"
+api GET /metrics
+check "keep-memory 0: nothing kept ($(metric voxeld_kept_memory_bytes))" test "$(metric voxeld_kept_memory_bytes)" = 0
+stop_daemon
+
+# ---- --keep-memory: a job's big buffers stay mapped for the next --------------------
+start_daemon --keep-memory 20M || exit 1
+api GET /v1/info
+check "info: keep_memory_bytes" jq -e '.limits.keep_memory_bytes == 20971520' "$BODY"
+api GET /metrics
+check "nothing kept before a job" test "$(metric voxeld_kept_memory_bytes)" = 0
+# The unit box, then one an eighth of it on the same 512^3 grid (16 MB of
+# bits): each grid after the first is the memory kept from the one before,
+# and must hold its own voxels only.
+upload "$TMP/box.obj"
+FULL=$MESH_ID
+box_obj "$TMP/small.obj" 0 0 0 0.5 0.5 0.5
+upload "$TMP/small.obj"
+SMALL=$MESH_ID
+G='"grid":{"origin":[0,0,0],"voxel_size":0.001953125,"dims":[512,512,512]},"format":"raw1"'
+for m in FULL SMALL FULL; do
+    run_job voxelize "${!m}" "{$G}"
+    job_ok "a 512^3 job ($m)"
+    [[ $m == FULL ]] && n=$((512 * 512 * 512)) || n=$((256 * 256 * 256))
+    check "the $m box's voxels: $n" jq -e ".stats.voxels_inside == $n" "$TMP/job.json"
+    api GET /metrics
+    K=$(metric voxeld_kept_memory_bytes)
+    check "after it its grid is kept, within the 20M ($K)" test "$K" -ge 16777216 -a "$K" -le 20971520
+done
 stop_daemon
 
 # ---- the default --workers are the CPUs voxeld may use ----------------------------

@@ -75,6 +75,7 @@ METRICS = "".join("# HELP %s x\n# TYPE %s %s\n" % (n, n, t) for n, t in [
     ("voxeld_results_bytes", "gauge"), ("voxeld_info", "gauge"), ("voxeld_ready", "gauge"),
     ("voxeld_jobs_failed_total", "counter"), ("voxeld_job_queue_wait_seconds", "histogram"),
     ("voxeld_results_evicted_total", "counter"), ("voxeld_gl_context_losses_total", "counter"),
+    ("voxeld_kept_memory_bytes", "gauge"),
     ("process_cpu_seconds_total", "counter"), ("process_resident_memory_bytes", "gauge"),
     ("process_virtual_memory_bytes", "gauge"), ("process_open_fds", "gauge"),
     ("process_max_fds", "gauge"),

@@ -1,4 +1,5 @@
-/* util: the clock, the parallel-for, the vec3 set and exact JSON numbers. */
+/* util: the clock, the parallel-for, the vec3 set, exact JSON numbers and
+ * big buffers kept between jobs. */
 #include <stdarg.h>
 #include <stddef.h>
 #include <stdint.h>
@@ -10,6 +11,7 @@
 #include <string.h>
 #include <time.h>
 
+#include "util/bigmem.h"
 #include "util/clock.h"
 #include "util/err.h"
 #include "util/fsutil.h"
@@ -192,12 +194,71 @@ static void test_json_exact(void **state)
     cJSON_Delete(doc);
 }
 
+static int all_zero(const unsigned char *p, size_t n)
+{
+    for (size_t i = 0; i < n; i++)
+        if (p[i]) return 0;
+    return 1;
+}
+
+/* Freed mappings are kept up to the limit and handed out again zeroed, to
+ * a buffer that fits them and is at least half their size. */
+static void test_bigmem_keep(void **state)
+{
+    (void)state;
+    const size_t MB = 1 << 20;
+    size_t m1, m2, m3;
+    /* small buffers come from calloc, never kept */
+    unsigned char *s = vx_bigmem_alloc(1000, &m1);
+    assert_non_null(s);
+    assert_int_equal(m1, 0);
+    vx_bigmem_free(s, m1);
+    vx_bigmem_keep(0);
+    unsigned char *a = vx_bigmem_alloc(10 * MB + 1, &m1);
+    assert_non_null(a);
+    assert_int_equal(m1, 12 * MB); /* whole huge pages */
+    memset(a, 0xab, 10 * MB + 1);
+    vx_bigmem_free(a, m1);
+    assert_int_equal(vx_bigmem_kept(), 0); /* the default keeps nothing */
+
+    vx_bigmem_keep(40 * MB);
+    a = vx_bigmem_alloc(10 * MB, &m1);
+    memset(a, 0xab, 10 * MB);
+    vx_bigmem_free(a, m1);
+    assert_int_equal(vx_bigmem_kept(), 10 * MB);
+    unsigned char *b = vx_bigmem_alloc(9 * MB, &m2); /* fits: the same, cleared */
+    assert_ptr_equal(b, a);
+    assert_int_equal(m2, 10 * MB);
+    assert_true(all_zero(b, 9 * MB));
+    assert_int_equal(vx_bigmem_kept(), 0);
+    vx_bigmem_free(b, m2);
+    unsigned char *c = vx_bigmem_alloc(4 * MB, &m3); /* under half of 10: not it */
+    assert_ptr_not_equal(c, a);
+    assert_int_equal(vx_bigmem_kept(), 10 * MB);
+    unsigned char *d = vx_bigmem_alloc(30 * MB, &m2); /* bigger than any kept */
+    assert_true(all_zero(d, 30 * MB));
+    vx_bigmem_free(c, m3);
+    assert_int_equal(vx_bigmem_kept(), 14 * MB);
+    vx_bigmem_free(d, m2); /* 44 > 40: the smallest kept ones leave */
+    assert_true(vx_bigmem_kept() <= 40 * MB);
+    assert_int_equal(vx_bigmem_kept(), 40 * MB);
+    size_t m4;
+    unsigned char *e = vx_bigmem_alloc(50 * MB, &m4); /* over the limit: unmapped */
+    vx_bigmem_free(e, m4);
+    assert_int_equal(vx_bigmem_kept(), 40 * MB);
+    vx_bigmem_keep(15 * MB); /* lowered: unmapped down to it */
+    assert_true(vx_bigmem_kept() <= 15 * MB);
+    vx_bigmem_keep(0);
+    assert_int_equal(vx_bigmem_kept(), 0);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
-        cmocka_unit_test(test_err_utf8), cmocka_unit_test(test_clock),
-        cmocka_unit_test(test_par_for),  cmocka_unit_test(test_par_run),
-        cmocka_unit_test(test_vec3),     cmocka_unit_test(test_json_exact),
+        cmocka_unit_test(test_err_utf8),    cmocka_unit_test(test_clock),
+        cmocka_unit_test(test_par_for),     cmocka_unit_test(test_par_run),
+        cmocka_unit_test(test_vec3),        cmocka_unit_test(test_json_exact),
+        cmocka_unit_test(test_bigmem_keep),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }
