@@ -774,20 +774,46 @@ vx_req_coding vx_req_accept_coding(const char *ae)
     return VX_CODING_IDENTITY;
 }
 
-/* Parses digits at *p, advancing it; a number past 19 digits is
- * UINT64_MAX (past any end: a first-pos that large is 416, as any other
- * past the end). 0 or -1. */
+/* Parses digits at *p, advancing it; leading zeros are digits like any
+ * other, and a number of more than 19 digits after them is UINT64_MAX
+ * (past any end: a first-pos that large is 416, as any other past the
+ * end). 0 or -1. */
 static int range_num(const char **p, uint64_t *v)
 {
     const char *s = *p;
     uint64_t x = 0;
-    int n = 0;
-    for (; *s >= '0' && *s <= '9'; s++, n++)
-        x = n >= 19 ? UINT64_MAX : x * 10 + (uint64_t)(*s - '0');
+    int n = 0, sig = 0;
+    for (; *s >= '0' && *s <= '9'; s++, n++) {
+        if (!sig && *s == '0') continue;
+        x = sig >= 19 ? UINT64_MAX : x * 10 + (uint64_t)(*s - '0');
+        sig++;
+    }
     if (!n) return -1;
     *p = s;
     *v = x;
     return 0;
+}
+
+/* One range-spec, [p, e) with no blanks around it: as vx_req_range. */
+static int range_spec(const char *p, const char *e, uint64_t size, uint64_t *first,
+                      uint64_t *last)
+{
+    uint64_t a = 0, b = UINT64_MAX;
+    if (*p == '-') { /* a suffix: the last b bytes */
+        p++;
+        if (range_num(&p, &b) || p != e) return 0;
+        if (b == 0 || size == 0) return -1;
+        *first = b >= size ? 0 : size - b;
+        *last = size - 1;
+        return 1;
+    }
+    if (range_num(&p, &a) || p == e || *p++ != '-') return 0;
+    if (p < e && range_num(&p, &b)) return 0;
+    if (p != e || b < a) return 0;
+    if (a >= size) return -1;
+    *first = a;
+    *last = b >= size ? size - 1 : b;
+    return 1;
 }
 
 int vx_req_range(const char *v, uint64_t size, uint64_t *first, uint64_t *last)
@@ -796,31 +822,24 @@ int vx_req_range(const char *v, uint64_t size, uint64_t *first, uint64_t *last)
     while (*v == ' ' || *v == '\t')
         v++;
     if (strncasecmp(v, "bytes=", 6)) return 0;
-    const char *p = v + 6;
-    while (*p == ' ')
-        p++;
-    if (strchr(p, ',')) return 0; /* several ranges: the whole body */
-    uint64_t a = 0, b = UINT64_MAX;
-    if (*p == '-') { /* a suffix: the last b bytes */
-        p++;
-        if (range_num(&p, &b)) return 0;
-        while (*p == ' ' || *p == '\t')
+    /* A list whose empty elements are ignored (RFC 9110 5.6.1.2): one range
+     * left is served, several are the whole body. */
+    const char *one = NULL, *one_end = NULL;
+    for (const char *p = v + 6; *p;) {
+        while (*p == ' ' || *p == '\t' || *p == ',')
             p++;
-        if (*p) return 0;
-        if (b == 0 || size == 0) return -1;
-        *first = b >= size ? 0 : size - b;
-        *last = size - 1;
-        return 1;
+        const char *s = p;
+        while (*p && *p != ',')
+            p++;
+        const char *e = p;
+        while (e > s && (e[-1] == ' ' || e[-1] == '\t'))
+            e--;
+        if (e == s) continue;
+        if (one) return 0;
+        one = s;
+        one_end = e;
     }
-    if (range_num(&p, &a) || *p++ != '-') return 0;
-    if (*p >= '0' && *p <= '9' && range_num(&p, &b)) return 0;
-    while (*p == ' ' || *p == '\t')
-        p++;
-    if (*p || b < a) return 0;
-    if (a >= size) return -1;
-    *first = a;
-    *last = b >= size ? size - 1 : b;
-    return 1;
+    return one ? range_spec(one, one_end, size, first, last) : 0;
 }
 
 int vx_req_etag_match(const char *list, const char *etag, int weak_ok, int star_ok)

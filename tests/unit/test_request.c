@@ -298,6 +298,18 @@ static void test_negotiation(void **state)
     assert_true(a == 10 && b == 999);
     assert_int_equal(vx_req_range("bytes=-99999999999999999999", 1000, &a, &b), 1);
     assert_true(a == 0 && b == 999);
+    /* empty list elements are ignored (RFC 9110 5.6.1.2); leading zeros
+     * are digits */
+    assert_int_equal(vx_req_range("bytes=0-9,", 1000, &a, &b), 1);
+    assert_true(a == 0 && b == 9);
+    assert_int_equal(vx_req_range("bytes=, ,-10 ,", 1000, &a, &b), 1);
+    assert_true(a == 990 && b == 999);
+    assert_int_equal(vx_req_range("bytes=,", 1000, &a, &b), 0);
+    assert_int_equal(vx_req_range("bytes=0-1, ,5-9", 1000, &a, &b), 0);
+    assert_int_equal(vx_req_range("bytes=00000000000000000000000000005-0009", 1000, &a, &b), 1);
+    assert_true(a == 5 && b == 9);
+    assert_int_equal(vx_req_range("bytes=0000000000000000000000001000-", 1000, &a, &b), -1);
+    assert_int_equal(vx_req_range("bytes=0 -9", 1000, &a, &b), 0);
 
     assert_true(vx_req_etag_match("\"a\", \"b\"", "\"b\"", 1, 1));
     assert_false(vx_req_etag_match("\"ab\"", "\"a\"", 1, 1));
