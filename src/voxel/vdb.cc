@@ -1443,7 +1443,9 @@ template <typename GridT> openvdb::GridBase::Ptr as_parallel(GridT &grid)
     static_cast<openvdb::MetaMap &>(*p) = static_cast<const openvdb::MetaMap &>(grid);
     p->setTree(grid.treePtr());
     p->setTransform(grid.transformPtr());
-    p->setSaveFloatAsHalf(grid.saveFloatAsHalf());
+    // (setSaveFloatAsHalf writes the "is_saved_as_half_float" metadata, which
+    // a grid of ours has only when it is true)
+    if (grid.saveFloatAsHalf()) p->setSaveFloatAsHalf(true);
     return p;
 }
 } // namespace

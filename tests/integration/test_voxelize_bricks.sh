@@ -78,9 +78,9 @@ run_job voxelize "$B" "$(jq -c '. + {format: "vdb", vdb_grid: "bool", bricks: {s
 job_ok "bunny bool one job"
 check "bricks {size: 0} is one job" jq -e '.stats.bricks == null' "$TMP/job.json"
 get_result "" "$TMP/one.vdb"
-"$VX_TOOLS/vdbinfo" "$TMP/one.vdb" | jq -c '.grids[0] | {transform, active_voxels, bbox, name}' >"$TMP/one.json"
-"$VX_TOOLS/vdbinfo" "$TMP/bunny_bool.vdb" | jq -c '.grids[0] | {transform, active_voxels, bbox, name}' >"$TMP/bb.json"
-check "bricked .vdb: same transform, bbox and voxels as one job's" cmp "$TMP/one.json" "$TMP/bb.json"
+"$VX_TOOLS/vdbinfo" "$TMP/one.vdb" | jq -c '.grids[0] | {transform, active_voxels, bbox, name, meta: (.metadata | keys)}' >"$TMP/one.json"
+"$VX_TOOLS/vdbinfo" "$TMP/bunny_bool.vdb" | jq -c '.grids[0] | {transform, active_voxels, bbox, name, meta: (.metadata | keys)}' >"$TMP/bb.json"
+check "bricked .vdb: same transform, bbox, voxels and metadata keys as one job's" cmp "$TMP/one.json" "$TMP/bb.json"
 
 # A level set of nested spheres at 200^3 as one job and as 3x3x3 bricks of
 # 72 (the merged tree's interior is tiles): the same band.
@@ -91,10 +91,10 @@ for b in 0 72; do
     run_job voxelize "$N" "{\"resolution\":200,\"format\":\"vdb\",\"vdb_grid\":\"level_set\",\"bricks\":{\"size\":$b}}"
     job_ok "nested spheres level set, bricks of $b"
     get_result "" "$TMP/ls$b.vdb"
-    "$VX_TOOLS/vdbinfo" "$TMP/ls$b.vdb" | jq -c '.grids[0] | {transform, active_voxels, value_sum, bbox, name}' >"$TMP/ls$b.json"
+    "$VX_TOOLS/vdbinfo" "$TMP/ls$b.vdb" | jq -c '.grids[0] | {transform, active_voxels, value_sum, bbox, name, meta: (.metadata | keys)}' >"$TMP/ls$b.json"
 done
 check "bricked level set: 27 bricks" jq -e '.stats.brick_grid == [3,3,3]' "$TMP/job.json"
-check "bricked level set: the one job's band (voxels, value sum, bbox)" cmp "$TMP/ls0.json" "$TMP/ls72.json"
+check "bricked level set: the one job's band (voxels, value sum, bbox, metadata keys)" cmp "$TMP/ls0.json" "$TMP/ls72.json"
 check "the level set has a band" jq -e '.active_voxels > 100000' "$TMP/ls0.json"
 
 # A generated torus on random lattices: origin and voxel size not binary
