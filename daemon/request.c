@@ -795,8 +795,7 @@ static int range_num(const char **p, uint64_t *v)
 }
 
 /* One range-spec, [p, e) with no blanks around it: as vx_req_range. */
-static int range_spec(const char *p, const char *e, uint64_t size, uint64_t *first,
-                      uint64_t *last)
+static int range_spec(const char *p, const char *e, uint64_t size, uint64_t *first, uint64_t *last)
 {
     uint64_t a = 0, b = UINT64_MAX;
     if (*p == '-') { /* a suffix: the last b bytes */

@@ -676,9 +676,20 @@ static int encode(vx_job_run *r, const rparams *pp, void *state, vx_err *err)
     rstate *s = state;
     double render_ms = 0, encode_ms = 0;
     uint64_t covered = 0;
+    double fastest = INFINITY; /* seconds of the quickest frame so far */
     for (int f = 0; f < p.frames; f++) {
+        double t0 = vx_mono_ms();
         if (render_frame(r, &p, s, f, &render_ms, &encode_ms, &covered, err)) return -1;
         if (vx_run_progress(r, 0.75 + 0.2 * (f + 1) / p.frames, err)) return -1;
+        /* A turntable that cannot finish in time, even at its fastest
+         * frame's pace, stops now rather than at the timeout. */
+        fastest = fmin(fastest, (vx_mono_ms() - t0) / 1e3);
+        const long left = p.frames - f - 1;
+        if (left > 0 && left * fastest > vx_run_time_left(r))
+            return vx_err_set(err, VX_ETIMEOUT, "job_timeout",
+                              "the turntable would run past the job timeout of %g s: %ld of %ld "
+                              "frames left at %.3g s or more each (fewer frames, or smaller ones)",
+                              vx_run_limits(r)->job_timeout_s, left, p.frames, fastest);
     }
     if (p.outputs[OUT_VOXELS]) {
         double t0 = vx_mono_ms();

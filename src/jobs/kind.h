@@ -41,6 +41,9 @@ typedef struct vx_job_run vx_job_run;
  * (VX_ECANCELED / VX_ETIMEOUT) when the job must stop; the stage then
  * cleans up and returns -1 with that err. */
 int vx_run_progress(vx_job_run *r, double fraction, vx_err *err);
+/* Seconds this run has left before the job timeout (INFINITY when there
+ * is none): a stage that knows it needs longer may fail at once. */
+double vx_run_time_left(const vx_job_run *r);
 /* The GL context; only valid in run_gl. */
 vx_gl *vx_run_gl(vx_job_run *r);
 /* The id of the job's mesh (64 hex digits), for outputs that record it. */

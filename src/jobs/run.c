@@ -1,6 +1,7 @@
 /* The vx_run_* service the kinds call from their stages (kind.h). */
 #include "jobs/jobs_int.h"
 
+#include <math.h>
 #include <pthread.h>
 #include <stdio.h>
 
@@ -28,6 +29,12 @@ int vx_run_progress(vx_job_run *r, double fraction, vx_err *err)
     if (limit > 0 && now - r->t0 - r->waited > limit)
         return vx_err_set(err, VX_ETIMEOUT, "job_timeout", "the job ran longer than %g s", limit);
     return 0;
+}
+
+double vx_run_time_left(const vx_job_run *r)
+{
+    double limit = r->jobs->desc.limits.job_timeout_s;
+    return limit > 0 ? limit - (vx_mono() - r->t0 - r->waited) : INFINITY;
 }
 
 vx_gl *vx_run_gl(vx_job_run *r)

@@ -242,6 +242,16 @@ get image "$TMP/l1.png"
 job "a light direction [0, 0, 1e-200]" "$M_ball_a" '{"N":16,"width":32,"height":32,"lights":[{"direction":[0,0,1e-200]}]}'
 get image "$TMP/l2.png"
 check "a light direction [0, 0, 1e-200]: the picture of [0, 0, 1]" cmp -s "$TMP/l1.png" "$TMP/l2.png"
+stop_daemon
 
+# A turntable that cannot finish within the job timeout stops once its
+# first frame shows it (it had run the whole timeout, then failed).
+start_daemon --max-job-memory 1G --job-timeout 40 || exit 1
+upload "$TMP/torus.obj"
+run_job render "$MESH_ID" '{"N":16,"width":1024,"height":1024,"frames":360,"camera":{"type":"orbit"}}' 120
+check "a 360-frame 1024^2 turntable under a 40 s timeout: job_timeout ($(jq -c .error "$TMP/job.json"))" \
+    jq -e '.state == "failed" and .error.code == "job_timeout" and (.error.message | contains("would run past the job timeout of 40 s"))' "$TMP/job.json"
+check "it stopped well before the timeout ($(jq .timings.run_ms "$TMP/job.json") ms)" \
+    jq -e '.timings.run_ms < 30000' "$TMP/job.json"
 stop_daemon
 finish
