@@ -195,13 +195,17 @@ static int first_call(vx_http *h, struct MHD_Connection *c, req *r, const char *
     if (r->qerr[0]) return vx_resp_fail(c, r, VX_EINVAL, "invalid_request", "%s", r->qerr);
 
     uint64_t nfree;
-    if (!vx_route_disk_ok(h, &nfree))
+    if (!vx_route_disk_ok(h, &nfree)) {
+        if (!h->d.cfg->min_free_disk)
+            return vx_resp_fail(c, r, VX_ENOSPC, "insufficient_storage",
+                                "the data dir's disk is full; reads still work");
         return vx_resp_fail(
             c, r, VX_ENOSPC, "insufficient_storage",
             "the data dir has %llu bytes free, under the %llu-byte floor (--min-free-disk); "
             "reads still work",
             (unsigned long long)(nfree == UINT64_MAX ? 0 : nfree),
             (unsigned long long)h->d.cfg->min_free_disk);
+    }
     char mt[128];
     vx_req_media_type(vx_resp_header(c, MHD_HTTP_HEADER_CONTENT_TYPE), mt, sizeof mt);
     if (r->route == VX_R_MESHES) {

@@ -74,9 +74,9 @@ static long none_replay(void *st, void (*fn)(const cJSON *rec, void *ud), void *
     return 0;
 }
 
-static int none_append(void *st, const cJSON *rec, vx_err *err)
+static int none_append(void *st, const cJSON *rec, size_t owed, vx_err *err)
 {
-    (void)st, (void)rec, (void)err;
+    (void)st, (void)rec, (void)owed, (void)err;
     return 0;
 }
 

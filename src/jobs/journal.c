@@ -18,8 +18,9 @@
 struct vx_journal {
     char path[VX_PATH_MAX];
     int fd;
-    off_t size;     /* bytes of complete records: where the next one starts */
-    off_t reserved; /* blocks allocated up to here (fallocate, past the size) */
+    off_t size;       /* bytes of complete records: where the next one starts */
+    off_t reserved;   /* blocks allocated up to here (fallocate, past the size) */
+    int no_fallocate; /* the file system has none: nothing is reserved */
     pthread_mutex_t lock;
 };
 
@@ -28,17 +29,26 @@ struct vx_journal {
  * whose end could not be written was told succeeded, and ran again after
  * a restart. About 4,000 records; topped up when half is used. */
 #define RESERVE ((off_t)1 << 20)
+/* What a new job's first record must leave of the reserve at least, for
+ * the records owed to the jobs accepted before it (each record is about a
+ * job's snapshot, 1.2 KB for a voxelize job: 512 KiB is some 200 jobs'
+ * start and end). On a full disk new jobs are refused (507) from there on. */
+#define RESERVE_FLOOR (RESERVE / 2)
 
-/* Tops the reserve up from j->size (lock held, or before the journal is
- * shared). A file system without fallocate, or without room, keeps what
- * it has: appends then take their chance as before. */
-static void reserve_tail(vx_journal *j)
+/* Makes at least need bytes past j->size reserved, topping up to RESERVE
+ * or need (lock held, or before the journal is shared). A file system
+ * without fallocate, or without room, keeps what it has: appends then take
+ * their chance as before. */
+static void reserve_tail(vx_journal *j, off_t need)
 {
-    if (j->reserved - j->size >= RESERVE / 2) return;
-    int rc = fallocate(j->fd, FALLOC_FL_KEEP_SIZE, j->size, RESERVE);
+    if (j->no_fallocate || j->reserved - j->size >= need) return;
+    off_t len = need > RESERVE ? need : RESERVE;
+    int rc = fallocate(j->fd, FALLOC_FL_KEEP_SIZE, j->size, len);
     if (rc == 0)
-        j->reserved = j->size + RESERVE;
-    else if (errno != EOPNOTSUPP && errno != ENOSYS)
+        j->reserved = j->size + len;
+    else if (errno == EOPNOTSUPP || errno == ENOSYS)
+        j->no_fallocate = 1;
+    else
         VX_WARN("journal.reserve_failed", "path=%s error=%d", VX_Q(j->path), errno);
 }
 
@@ -78,7 +88,7 @@ vx_journal *vx_journal_open(const char *path, vx_err *err)
         return NULL;
     }
     j->size = st.st_size;
-    reserve_tail(j);
+    reserve_tail(j, RESERVE / 2);
     pthread_mutex_init(&j->lock, NULL);
     return j;
 }
@@ -237,12 +247,27 @@ static char *frame(const cJSON *rec, size_t *n)
     return line;
 }
 
-int vx_journal_append(vx_journal *j, const cJSON *rec, vx_err *err)
+int vx_journal_append(vx_journal *j, const cJSON *rec, size_t owed, vx_err *err)
 {
     size_t n;
     char *text = frame(rec, &n);
     if (!text) return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory");
     pthread_mutex_lock(&j->lock);
+    if (owed) { /* records of this one's size, and some room for their stats */
+        off_t floor =
+            (off_t)(owed > ((size_t)1 << 30) / (n + 1024) ? ((size_t)1 << 30) : owed * (n + 1024));
+        if (floor < RESERVE_FLOOR) floor = RESERVE_FLOOR;
+        reserve_tail(j, floor + (off_t)n);
+        if (!j->no_fallocate && j->reserved - j->size < floor + (off_t)n) {
+            pthread_mutex_unlock(&j->lock);
+            free(text);
+            VX_WARN("journal.reserve_kept", "path=%s reserved=%lld", VX_Q(j->path),
+                    (long long)(j->reserved - j->size));
+            return vx_err_set(err, VX_ENOSPC, "insufficient_storage",
+                              "the disk is full: the job journal's last space is kept for the "
+                              "jobs already accepted");
+        }
+    }
     int rc = vx_write_all(j->fd, text, n);
     if (rc == 0) rc = fdatasync(j->fd);
     int e = errno;
@@ -252,7 +277,7 @@ int vx_journal_append(vx_journal *j, const cJSON *rec, vx_err *err)
     if (rc == 0 && fstat(j->fd, &st) == 0 && st.st_nlink == 0) rc = -1, e = ENOENT;
     if (rc == 0) {
         j->size += (off_t)n;
-        reserve_tail(j);
+        reserve_tail(j, RESERVE / 2);
     } else if (ftruncate(j->fd, j->size) != 0 || fdatasync(j->fd) != 0) {
         /* A torn write (ENOSPC after part of the line) must not stay in the
          * file: the next record would be glued onto it. Shrinking needs no
@@ -313,7 +338,7 @@ int vx_journal_compact(vx_journal *j, cJSON *const *recs, size_t n, vx_err *err)
             close(j->fd);
             j->fd = nfd;
             j->size = j->reserved = size;
-            reserve_tail(j);
+            reserve_tail(j, RESERVE / 2);
         } else {
             rc = -1;
         }

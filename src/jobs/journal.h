@@ -27,8 +27,12 @@ void vx_journal_close(vx_journal *j);
 long vx_journal_replay(vx_journal *j, void (*fn)(const cJSON *rec, void *ud), void *ud,
                        vx_err *err);
 /* Appends one record and makes it durable (fdatasync); on failure the file
- * is as before (VX_ENOSPC insufficient_storage when the disk is full). */
-int vx_journal_append(vx_journal *j, const cJSON *rec, vx_err *err);
+ * is as before (VX_ENOSPC insufficient_storage when the disk is full).
+ * owed: for a new job's first record, the records the jobs accepted so far
+ * (it included) still have to write, 0 for any other record. Such a record
+ * must leave them room in the space reserved past the end (at least half of
+ * it), or is refused (VX_ENOSPC) where the reserve cannot be topped up. */
+int vx_journal_append(vx_journal *j, const cJSON *rec, size_t owed, vx_err *err);
 /* Replaces the whole journal with recs (temp file, fsync, rename). */
 int vx_journal_compact(vx_journal *j, cJSON *const *recs, size_t n, vx_err *err);
 /* Bytes in the file now. */

@@ -15,10 +15,14 @@
 /* Journals a snapshot; caller holds the lock (so seq and file order agree). */
 int journal_locked(vx_jobs *j, job *jb, vx_err *err)
 {
+    /* A new job's first record: the jobs not yet finished (the queued and
+     * the running ones, this one too) each still write a start and an end. */
+    const size_t owed =
+        jb->seq ? 0 : 2 * (vx_queue_depth(j->queue) + vx_queue_depth(j->cpu) + j->running + 1);
     jb->seq++;
     cJSON *rec = cJSON_CreateObject();
     cJSON_AddItemToObject(rec, "job", job_json(j, jb, 0));
-    int rc = j->st_ops->append(j->st, rec, err);
+    int rc = j->st_ops->append(j->st, rec, owed, err);
     cJSON_Delete(rec);
     return rc;
 }
@@ -31,7 +35,7 @@ int journal_delete_locked(vx_jobs *j, job *jb, vx_err *err)
     cJSON_AddStringToObject(o, "id", jb->id);
     cJSON_AddNumberToObject(o, "seq", (double)jb->seq);
     cJSON_AddBoolToObject(o, "deleted", 1);
-    int rc = j->st_ops->append(j->st, rec, err);
+    int rc = j->st_ops->append(j->st, rec, 0, err);
     cJSON_Delete(rec);
     if (rc) jb->seq--;
     return rc;

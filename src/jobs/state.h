@@ -38,9 +38,12 @@ typedef struct vx_jobstate_ops {
     void (*close)(void *st);
     /* Calls fn for every record in order; returns their number, or -1. */
     long (*replay)(void *st, void (*fn)(const cJSON *rec, void *ud), void *ud, vx_err *err);
-    /* Appends one record durably. Errors: VX_ENOSPC insufficient_storage
-     * (full: the API answers 507), VX_EIO. */
-    int (*append)(void *st, const cJSON *rec, vx_err *err);
+    /* Appends one record durably. owed: for a new job's first record, the
+     * records the unfinished jobs (it included) are still to write, which
+     * the backend may keep room for by refusing this one; 0 otherwise.
+     * Errors: VX_ENOSPC insufficient_storage (full: the API answers 507),
+     * VX_EIO. */
+    int (*append)(void *st, const cJSON *rec, size_t owed, vx_err *err);
     /* Replaces the whole state with recs, atomically. */
     int (*compact)(void *st, cJSON *const *recs, size_t n, vx_err *err);
     /* Bytes the state holds, which grow with appends until a compact

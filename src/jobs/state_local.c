@@ -18,9 +18,9 @@ static long local_replay(void *st, void (*fn)(const cJSON *rec, void *ud), void 
     return vx_journal_replay(st, fn, ud, err);
 }
 
-static int local_append(void *st, const cJSON *rec, vx_err *err)
+static int local_append(void *st, const cJSON *rec, size_t owed, vx_err *err)
 {
-    return vx_journal_append(st, rec, err);
+    return vx_journal_append(st, rec, owed, err);
 }
 
 static int local_compact(void *st, cJSON *const *recs, size_t n, vx_err *err)

@@ -181,5 +181,64 @@ for id in "${ENDS[@]}"; do
     api GET "/v1/jobs/$id"
     check "after kill -9, job $id is still succeeded ($(jqb .state))" jq -e '.state == "succeeded"' "$BODY"
 done
+
+# New jobs on a full disk with no floor (--min-free-disk 0): each takes the
+# journal's reserve only down to what the jobs not yet finished still need
+# (a start and an end each, at least half the reserve), then new ones get
+# 507, and the records of the jobs accepted before still go in. They had
+# taken all of it: a job told succeeded ran again after kill -9. Sent
+# without waiting, many are queued at the 507. (300 KB stay free: too
+# little to top the reserve up, enough to pass the free-space check.)
+stop_daemon
+start_daemon --min-free-disk 0 --max-queued-jobs 1000 || exit 1
+fill_to 300000
+# submit.py: new jobs until the first refusal; prints the accepted ids,
+# then the refusal's status and body. check.py: every id succeeded, once.
+cat >"$TMP/submit.py" <<'PY'
+import json, sys, urllib.request, urllib.error
+base, mesh = sys.argv[1], sys.argv[2]
+for i in range(1, 1001):
+    p = {"resolution": 8 + i // 100, "padding": i % 50, "format": "summary",
+         "supersample": 1 + i // 50 % 2}
+    req = urllib.request.Request(base + "/v1/jobs", data=json.dumps(
+        {"mesh": mesh, "kind": "voxelize", "params": p}).encode(),
+        headers={"Content-Type": "application/json"})
+    try:
+        with urllib.request.urlopen(req) as r:
+            print(json.load(r)["id"])
+    except urllib.error.HTTPError as e:
+        print("refused", e.code, e.read().decode())
+        break
+PY
+cat >"$TMP/check.py" <<'PY'
+import json, sys, time, urllib.request
+base, bad = sys.argv[1], 0
+for jid in open(sys.argv[2]).read().split():
+    for _ in range(1200):
+        with urllib.request.urlopen(base + "/v1/jobs/" + jid) as r:
+            j = json.load(r)
+        if j["state"] in ("succeeded", "failed", "canceled"):
+            break
+        time.sleep(0.1)
+    if j["state"] != "succeeded" or j["attempts"] != 1:
+        bad += 1
+        print(jid, j["state"], j["attempts"])
+print(bad)
+PY
+python3 "$TMP/submit.py" "$BASE" "$BOX" >"$TMP/submitted"
+grep -v '^refused' "$TMP/submitted" >"$TMP/accepted"
+N=$(wc -l <"$TMP/accepted")
+echo "accepted $N jobs before the refusal"
+check "then 507 insufficient_storage ($(tail -n 1 "$TMP/submitted"))" \
+    grep -q '^refused 507 .*insufficient_storage.*kept for the jobs already accepted' "$TMP/submitted"
+check "some jobs were accepted first ($N)" test "$N" -gt 20
+check "the accepted jobs all succeeded" test "$(python3 "$TMP/check.py" "$BASE" "$TMP/accepted" | tail -n 1)" = 0
+check "every record of the accepted jobs went in" bash -c "! grep -q 'event=journal.append_failed' '$TMP/daemon.log'"
+kill9_daemon
+FROM=$(wc -l <"$TMP/daemon.log")
+start_daemon --min-free-disk 0 || exit 1
+check "after kill -9 the $N accepted jobs are still succeeded, run once" \
+    test "$(python3 "$TMP/check.py" "$BASE" "$TMP/accepted" | tail -n 1)" = 0
+check "none was replayed to run again" bash -c "tail -n +$((FROM + 1)) '$TMP/daemon.log' | grep -q 'event=jobs.replayed.* requeued=0 '"
 stop_daemon
 finish

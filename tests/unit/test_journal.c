@@ -48,7 +48,7 @@ static void append_v(vx_journal *j, int v)
     cJSON *r = cJSON_CreateObject();
     cJSON_AddNumberToObject(r, "v", v);
     vx_err err;
-    assert_int_equal(vx_journal_append(j, r, &err), 0);
+    assert_int_equal(vx_journal_append(j, r, 0, &err), 0);
     cJSON_Delete(r);
 }
 
@@ -234,7 +234,7 @@ static void test_failed_write_is_cut_back(void **state)
     cJSON *r = cJSON_CreateObject();
     cJSON_AddNumberToObject(r, "v", 2);
     cJSON_AddStringToObject(r, "pad", "a record longer than the eight bytes that fit");
-    assert_int_equal(vx_journal_append(j, r, &err), -1);
+    assert_int_equal(vx_journal_append(j, r, 0, &err), -1);
     cJSON_Delete(r);
     assert_int_equal(setrlimit(RLIMIT_FSIZE, &old), 0);
     assert_int_equal(file_size(path), good);
@@ -286,7 +286,7 @@ static void test_crc_mismatch_job_skipped(void **state)
     for (int i = 1; i <= 3; i++) {
         cJSON *r = cJSON_Parse("{\"job\":{\"id\":\"x\",\"params\":{\"resolution\":64}}}");
         cJSON_AddNumberToObject(r, "v", i);
-        assert_int_equal(vx_journal_append(j, r, &err), 0);
+        assert_int_equal(vx_journal_append(j, r, 0, &err), 0);
         cJSON_Delete(r);
     }
     vx_journal_close(j);
