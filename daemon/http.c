@@ -206,6 +206,12 @@ static int first_call(vx_http *h, struct MHD_Connection *c, req *r, const char *
             (unsigned long long)(nfree == UINT64_MAX ? 0 : nfree),
             (unsigned long long)h->d.cfg->min_free_disk);
     }
+    /* A data dir gone read-only (a remount) took uploads' bodies to fail
+     * late and jobs to fail at their first output: refused here as /readyz
+     * is (a file made and removed in DATA/tmp). */
+    if (!vx_store_writable(h->d.store))
+        return vx_resp_fail(c, r, VX_EUNAVAIL, "not_ready",
+                            "the data directory is not writable; reads still work");
     char mt[128];
     vx_req_media_type(vx_resp_header(c, MHD_HTTP_HEADER_CONTENT_TYPE), mt, sizeof mt);
     if (r->route == VX_R_MESHES) {

@@ -240,5 +240,26 @@ start_daemon --min-free-disk 0 || exit 1
 check "after kill -9 the $N accepted jobs are still succeeded, run once" \
     test "$(python3 "$TMP/check.py" "$BASE" "$TMP/accepted" | tail -n 1)" = 0
 check "none was replayed to run again" bash -c "tail -n +$((FROM + 1)) '$TMP/daemon.log' | grep -q 'event=jobs.replayed.* requeued=0 '"
+
+# The data dir made read-only under the daemon (a read-only bind mount over
+# it): uploads and new jobs get 503 not_ready, as /readyz says, instead of
+# a job accepted (202) that failed at its first output; reads still work.
+rm -f "$DISK/filler" "$DISK/filler2"
+if mount --bind "$DATA" "$DATA" && mount -o remount,ro,bind "$DATA"; then
+    api GET /readyz
+    expect_status "readyz on a read-only data dir" 503
+    run_job voxelize "$BOX" '{"resolution":8,"format":"summary","padding":7}'
+    check "a new job on a read-only data dir: 503 not_ready ($(jq -c .error "$TMP/job.json"))" \
+        jq -e '.error.code == "not_ready" and (.error.message | contains("not writable"))' "$TMP/job.json"
+    upload "$TMP/box.obj"
+    expect_error "an upload on a read-only data dir" 503 not_ready
+    api GET "/v1/jobs/$DONE"
+    expect_status "reads still work" 200
+    umount "$DATA"
+    run_job voxelize "$BOX" '{"resolution":8,"format":"summary","padding":7}'
+    job_ok "writable again: the job runs"
+else
+    echo "SKIP: no read-only bind mount here"
+fi
 stop_daemon
 finish
