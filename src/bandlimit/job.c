@@ -10,10 +10,12 @@
  *            outputs (so frames are never all held at once); the voxels.
  * Renders sample the precomputed M^3 grid trilinearly (L >= 4 is the
  * default; the unit tests measure it against exact evaluation). */
+#include <errno.h>
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <unistd.h>
 
 #include "bandlimit/bandlimit.h"
 #include "bandlimit/fft_int.h"
@@ -514,17 +516,25 @@ static int cast_method(const rstate *s, const rparams *p, const vx_bl_camera *ca
 static int write_pfm(const char *path, const float *v, int w, int h, int ch, vx_err *err)
 {
     FILE *f = fopen(path, "wb");
-    if (!f) return vx_err_set(err, VX_EIO, "io_error", "cannot write %s", path);
+    /* messages name the file, not where the server keeps it */
+    const char *name = strrchr(path, '/') ? strrchr(path, '/') + 1 : path;
+    if (!f)
+        return vx_err_set(err, VX_EIO, "io_error", "cannot write %s: %s", name, strerror(errno));
     fprintf(f, "%s\n%d %d\n-1.0\n", ch == 3 ? "PF" : "Pf", w, h);
-    for (int y = h - 1; y >= 0; y--) {
+    int e = 0;
+    for (int y = h - 1; y >= 0 && !e; y--) {
         if (vx_stop_poll(err)) {
             fclose(f);
+            unlink(path);
             return -1;
         }
-        fwrite(v + (size_t)y * w * ch, sizeof(float), (size_t)w * ch, f);
+        if (fwrite(v + (size_t)y * w * ch, sizeof(float), (size_t)w * ch, f) != (size_t)w * ch)
+            e = errno;
     }
-    if (fclose(f)) return vx_err_set(err, VX_EIO, "io_error", "cannot write %s", path);
-    return 0;
+    if (fclose(f) && !e) e = errno;
+    if (!e) return 0;
+    unlink(path); /* no partial file left (a full disk) */
+    return vx_err_set(err, VX_EIO, "io_error", "cannot write %s: %s", name, strerror(e ? e : EIO));
 }
 
 static int png_poll(void *ud, double fraction, vx_err *err)

@@ -13,6 +13,7 @@
 
 typedef struct png_ctx {
     char msg[200];
+    int errno_at; /* errno when libpng gave up: a failed fwrite's */
 } png_ctx;
 
 /* libpng reports errors by calling this and expecting it not to return:
@@ -20,6 +21,7 @@ typedef struct png_ctx {
 static void on_error(png_structp png, png_const_charp msg)
 {
     png_ctx *c = png_get_error_ptr(png);
+    c->errno_at = errno;
     snprintf(c->msg, sizeof c->msg, "%s", msg);
     png_longjmp(png, 1);
 }
@@ -51,19 +53,19 @@ int vx_png_write_path_poll(const char *path, const void *pixels, int width, int 
     const char *name = strrchr(path, '/') ? strrchr(path, '/') + 1 : path;
     FILE *f = fopen(path, "wb");
     if (!f)
-        return vx_err_set(err, VX_EIO, "png_write", "cannot create %s: %s", name, strerror(errno));
+        return vx_err_set(err, VX_EIO, "io_error", "cannot create %s: %s", name, strerror(errno));
     /* A failed write removes the partial file, but never a device or FIFO
      * the caller pointed us at. */
     struct stat sb;
     const int regular = fstat(fileno(f), &sb) == 0 && S_ISREG(sb.st_mode);
-    png_ctx ctx = {{0}};
+    png_ctx ctx = {{0}, 0};
     png_structp png = png_create_write_struct(PNG_LIBPNG_VER_STRING, &ctx, on_error, on_warning);
     png_infop info = png ? png_create_info_struct(png) : NULL;
     if (!png || !info) {
         png_destroy_write_struct(&png, NULL);
         fclose(f);
         if (regular) unlink(path);
-        return vx_err_set(err, VX_EIO, "png_write", "libpng could not start writing %s", name);
+        return vx_err_set(err, VX_EIO, "io_error", "libpng could not start writing %s", name);
     }
     /* Only f, png and info are used after a longjmp, and none of them is
      * modified after setjmp, so they need not be volatile. */
@@ -72,7 +74,11 @@ int vx_png_write_path_poll(const char *path, const void *pixels, int width, int 
         fclose(f);
         if (regular) unlink(path);
         VX_ERROR("png.write_failed", "path=%s", VX_Q(path));
-        return vx_err_set(err, VX_EIO, "png_write", "writing %s failed: %s", name, ctx.msg);
+        /* libpng's own words for a failed fwrite are "Write Error" */
+        if (ctx.errno_at && !strcmp(ctx.msg, "Write Error"))
+            return vx_err_set(err, VX_EIO, "io_error", "writing %s failed: %s", name,
+                              strerror(ctx.errno_at));
+        return vx_err_set(err, VX_EIO, "io_error", "writing %s failed: %s", name, ctx.msg);
     }
     png_init_io(png, f);
     png_set_IHDR(png, info, (png_uint_32)width, (png_uint_32)height, bit_depth,
@@ -109,7 +115,7 @@ int vx_png_write_path_poll(const char *path, const void *pixels, int width, int 
         int e = errno;
         if (regular) unlink(path);
         VX_ERROR("png.write_failed", "path=%s errno=%d", VX_Q(path), e);
-        return vx_err_set(err, VX_EIO, "png_write", "writing %s failed: %s", name, strerror(e));
+        return vx_err_set(err, VX_EIO, "io_error", "writing %s failed: %s", name, strerror(e));
     }
     return 0;
 }

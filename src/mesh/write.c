@@ -19,6 +19,14 @@ typedef struct out_file {
     int regular; /* only a regular file is removed after a failure */
 } out_file;
 
+/* The file's name without its directories: messages name the file, not
+ * where the server keeps it (the log does). */
+static const char *base_name(const char *path)
+{
+    const char *s = strrchr(path, '/');
+    return s ? s + 1 : path;
+}
+
 /* Reports a write error with errno's text; closes the file and removes it
  * when it is a regular file (never a device or FIFO the caller named). */
 static int write_fail(out_file *o, int e, vx_err *err)
@@ -26,8 +34,9 @@ static int write_fail(out_file *o, int e, vx_err *err)
     if (o->f) fclose(o->f);
     o->f = NULL;
     if (o->regular) remove(o->path);
-    VX_ERROR("mesh.write_failed", "errno=%d", e);
-    return vx_err_set(err, VX_EIO, "mesh_io", "cannot write %s: %s", o->path, strerror(e));
+    VX_ERROR("mesh.write_failed", "path=%s errno=%d", VX_Q(o->path), e);
+    return vx_err_set(err, VX_EIO, "io_error", "cannot write %s: %s", base_name(o->path),
+                      strerror(e));
 }
 
 static int open_out(out_file *o, const char *path, vx_err *err)
@@ -38,7 +47,8 @@ static int open_out(out_file *o, const char *path, vx_err *err)
     if (!o->f) {
         int e = errno;
         VX_ERROR("mesh.write_failed", "errno=%d", e);
-        return vx_err_set(err, VX_EIO, "mesh_io", "cannot create %s: %s", path, strerror(e));
+        return vx_err_set(err, VX_EIO, "io_error", "cannot create %s: %s", base_name(path),
+                          strerror(e));
     }
     struct stat st;
     o->regular = fstat(fileno(o->f), &st) == 0 && S_ISREG(st.st_mode);

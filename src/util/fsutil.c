@@ -32,11 +32,10 @@ int vx_mkdirs(const char *path, vx_err *err)
     for (char *p = buf + 1; *p; p++) {
         if (*p != '/') continue;
         *p = 0;
-        if (mkdir(buf, 0750) != 0 && errno != EEXIST)
-            return io_fail(err, "mkdir_failed", "mkdir", buf);
+        if (mkdir(buf, 0750) != 0 && errno != EEXIST) return io_fail(err, "io_error", "mkdir", buf);
         *p = '/';
     }
-    if (mkdir(buf, 0750) != 0 && errno != EEXIST) return io_fail(err, "mkdir_failed", "mkdir", buf);
+    if (mkdir(buf, 0750) != 0 && errno != EEXIST) return io_fail(err, "io_error", "mkdir", buf);
     return 0;
 }
 

@@ -150,6 +150,20 @@ for f in vdb:fog vdb:level_set vdb:bool raw8 raw1 npy vox binvox/512; do
     check "$f: no result served (got $STATUS)" test "$STATUS" != 200
     check "$f: no file left behind" test -z "$(find "$DATA" -path "*$JOB*" -type f 2>/dev/null)"
 done
+# The other kinds' writers alike: io_error with errno's words and the
+# file's name only (they were png_write "Write Error", mesh_io with the
+# path, and a render's PFM without its reason).
+for kp in 'preview|{"width":2048,"height":2048}' 'render|{"N":16,"width":512,"height":512,"outputs":["image","depth"]}' \
+    'gregory|{"divisions":8,"format":"ply"}' 'gregory|{"divisions":8,"format":"glb"}' \
+    'catmull-clark|{"levels":3,"format":"obj"}'; do
+    k=${kp%%|*} p=${kp#*|}
+    fill_to $((16 << 10))
+    run_job "$k" "$SPOT" "$p"
+    check "$k $p on a disk that fills: failed io_error ($(jq -c '.state, .error' "$TMP/job.json" | tr '\n' ' '))" \
+        jq -e '.state == "failed" and .error.code == "io_error" and (.error.message | contains("No space left on device"))' "$TMP/job.json"
+    check "$k: the file only, no path ($(jq -r .error.message "$TMP/job.json"))" sh -c "! jq -r .error.message '$TMP/job.json' | grep -q /"
+    check "$k: no file left behind" test -z "$(find "$DATA" -path "*$JOB*" -type f 2>/dev/null)"
+done
 rm -f "$DISK/filler" "$DISK/filler2"
 run_job voxelize "$SPOT" '{"resolution":256,"format":"vdb","vdb_grid":"fog"}'
 job_ok "vdb fog with room again"

@@ -275,7 +275,7 @@ static void test_write_errors(void **state)
     vx_err err = {0};
     assert_int_equal(vx_obj_write_path(m, NULL, "/nonexistent/dir/x.obj", &err), -1);
     assert_int_equal(err.kind, VX_EIO);
-    assert_string_equal(err.code, "mesh_io");
+    assert_string_equal(err.code, "io_error");
     assert_non_null(strstr(err.message, "No such file"));
     assert_int_equal(vx_ply_write_path(m, NULL, "/nonexistent/dir/x.ply", &err), -1);
     assert_int_equal(err.kind, VX_EIO);

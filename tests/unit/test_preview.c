@@ -681,6 +681,9 @@ static void test_png_roundtrip(void **state)
     if (access("/dev/full", W_OK) == 0) {
         assert_int_equal(vx_png_write_path("/dev/full", img, 200, 120, 4, 8, &err), -1);
         assert_int_equal(err.kind, VX_EIO);
+        assert_string_equal(err.code, "io_error");
+        /* errno's words, not libpng's "Write Error" */
+        assert_non_null(strstr(err.message, "No space left on device"));
         printf("  /dev/full: %s\n", err.message);
     }
     free(img);
