@@ -227,7 +227,7 @@ static void defaults(vx_config *c)
     c->keep_memory = 256ull << 20;
     c->brick_threshold = 1ull << 30;
     c->max_json_bytes = 16ull << 20;
-    c->max_parse_memory = UINT64_MAX; /* 8 x max_upload_bytes + 256M, see vx_config_load */
+    c->max_parse_memory = 0; /* unless given: 8 x max_upload_bytes + 256M (vx_config_load) */
     c->results_max_bytes = 10ull << 30;
     c->results_max_age_s = 7 * 86400;
     c->blob_cache_max_bytes = 10ull << 30;
@@ -247,12 +247,15 @@ static void defaults(vx_config *c)
  * source that names it (a flag narrows what the file allowed), every use
  * within that source appended. */
 static unsigned char list_source[NOPTS];
+/* Whether each option was given at all (file, environment or flag). */
+static unsigned char given[NOPTS];
 
 static int set_opt(vx_config *c, const opt_def *d, const char *val, const char *where)
 {
     char *base = (char *)c;
     uint64_t u;
     char *end;
+    given[d - opts] = 1;
     /* an empty file name would leave /v1 without a token: refused, as an
      * empty token file is (VOXELD_TOKEN_FILE=$UNSET in a unit or .env) */
     if (!*val && !strcmp(d->name, "data-dir")) {
@@ -296,6 +299,10 @@ static int set_opt(vx_config *c, const opt_def *d, const char *val, const char *
         return 0;
     }
     case T_SECONDS: {
+        /* a decimal number: digits first (strtod also takes blanks, a
+         * sign, hex and inf) */
+        if (!isdigit((unsigned char)val[0]) || strspn(val, "0123456789.eE+-") != strlen(val))
+            goto bad;
         errno = 0;
         double v = strtod(val, &end);
         /* at most 1e9 s (31 years): a library takes some of these as
@@ -397,6 +404,11 @@ static int load_file(vx_config *c, const char *path)
     int lineno = 0, rc = 0;
     while ((n = getline(&line, &cap, f)) >= 0) {
         lineno++;
+        /* a UTF-8 byte order mark (an editor's) is no part of the first key */
+        if (lineno == 1 && !strncmp(line, "\xef\xbb\xbf", 3)) {
+            memmove(line, line + 3, (size_t)n - 2);
+            n -= 3;
+        }
         if ((size_t)n != strlen(line)) { /* a NUL would cut the value short */
             fprintf(stderr, "voxeld: %s:%d: a NUL byte in the line\n", path, lineno);
             rc = -1;
@@ -514,6 +526,7 @@ int vx_config_load(vx_config *c, int argc, char **argv)
 {
     defaults(c);
     memset(list_source, 0, sizeof list_source);
+    memset(given, 0, sizeof given);
     struct option lopts[NOPTS + 5];
     for (size_t i = 0; i < NOPTS; i++)
         lopts[i] = (struct option){opts[i].name, required_argument, NULL, (int)(256 + i)};
@@ -568,7 +581,7 @@ int vx_config_load(vx_config *c, int argc, char **argv)
     if (!c->cache_dir[0]) snprintf(c->cache_dir, sizeof c->cache_dir, "%s/cache", c->data_dir);
     /* Enough for one upload of the largest size in the costliest format
      * (vx_mesh_parse_cost: OBJ, 8 x the file). */
-    if (c->max_parse_memory == UINT64_MAX)
+    if (!given[find_opt("max-parse-memory") - opts])
         c->max_parse_memory = c->max_upload_bytes > (UINT64_MAX - (256ull << 20)) / 8
                                   ? 0
                                   : 8 * c->max_upload_bytes + (256ull << 20);

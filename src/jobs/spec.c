@@ -58,7 +58,9 @@ static int read_number(const vx_pspec *f, const cJSON *it, double lo, double hi,
     /* the value as given (360.0001, not %g's 360) */
     if ((f->flags & VX_PF_GT_LO) && v <= lo)
         return BAD("params.%s must be > %g, got %.15g", path, lo, v);
-    if (v < lo || v > hi) return BAD("params.%s must be in [%g, %g], got %.15g", path, lo, hi, v);
+    if (v < lo || v > hi)
+        return BAD("params.%s must be in %c%g, %g], got %.15g", path,
+                   f->flags & VX_PF_GT_LO ? '(' : '[', lo, hi, v);
     *out = v == 0 ? 0 : v; /* -0 as 0: the same normalised params (reuse, keys) */
     return 0;
 }

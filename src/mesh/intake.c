@@ -198,7 +198,7 @@ int vx_intake_check(const vx_mesh *m, vx_err *err)
     for (size_t i = 0; i < 3 * m->nverts; i++)
         if (!(fabs(m->pos[i]) <= VX_MESH_COORD_MAX))
             return vx_err_set(err, VX_EUNPROC, "coordinate_out_of_range",
-                              "vertex %zu reaches %g along axis %d, beyond +-%g: the engines "
+                              "vertex %zu reaches %.9g along axis %d, beyond +-%g: the engines "
                               "work in 32-bit floats, and what they derive must stay finite",
                               i / 3, m->pos[i], (int)(i % 3), VX_MESH_COORD_MAX);
     if (m->degenerate_tris == m->ntris)

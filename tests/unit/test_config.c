@@ -123,7 +123,13 @@ static void test_refused_and_comments(void **state)
                             {"--max-uri-bytes", "0"},
                             {"--max-uri-bytes", "255"},
                             {"--max-header-bytes", "0"},
-                            {"--max-header-bytes", "1023"}};
+                            {"--max-header-bytes", "1023"},
+                            /* seconds are a decimal number, as documented */
+                            {"--job-timeout", "0x10"},
+                            {"--job-timeout", "+5"},
+                            {"--job-timeout", " 5"},
+                            {"--job-timeout", "inf"},
+                            {"--job-timeout", "5 "}};
     for (size_t i = 0; i < sizeof bad / sizeof bad[0]; i++) {
         char *av[] = {"voxeld", (char *)bad[i][0], (char *)bad[i][1], NULL};
         assert_int_equal(load(&c, 3, av), -1);
@@ -150,7 +156,25 @@ static void test_refused_and_comments(void **state)
     config_file(path, text, 0);
     assert_int_equal(load(&c, 3, a3), 0);
     assert_int_equal(strlen(c.replica_name), 100);
+    /* a UTF-8 byte order mark before the first key is no part of it */
+    config_file(path, "\xef\xbb\xbfmax-queued-jobs = 7\n", 0);
+    assert_int_equal(load(&c, 3, a3), 0);
+    assert_int_equal(c.max_queued_jobs, 7);
     unlink(path);
+    /* max-parse-memory: its default follows max-upload-bytes; any value
+     * given is kept, 2^64 - 1 too (it was the mark of "not given") */
+    char *p1[] = {"voxeld", "--max-upload-bytes", "1M", NULL};
+    assert_int_equal(load(&c, 3, p1), 0);
+    assert_true(c.max_parse_memory == (8ull << 20) + (256ull << 20));
+    char *p2[] = {"voxeld", "--max-parse-memory", "18446744073709551615", NULL};
+    assert_int_equal(load(&c, 3, p2), 0);
+    assert_true(c.max_parse_memory == UINT64_MAX);
+    char *p3[] = {"voxeld", "--max-parse-memory", "0", NULL};
+    assert_int_equal(load(&c, 3, p3), 0);
+    assert_true(c.max_parse_memory == 0);
+    char *ts[] = {"voxeld", "--job-timeout", "2.5e1", NULL};
+    assert_int_equal(load(&c, 3, ts), 0);
+    assert_true(c.job_timeout_s == 25);
 }
 
 /* An empty data dir (data-dir = in a file, VOXELD_DATA_DIR=$UNSET) is a bad

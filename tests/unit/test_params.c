@@ -88,6 +88,18 @@ static void test_preview_params(void **state)
     }
 }
 
+/* A range whose low end is open says so: gregory's max_edge is > 0. */
+static void test_open_range_message(void **state)
+{
+    (void)state;
+    const vx_kind *k = vx_kind_find("gregory");
+    vx_err err;
+    cJSON *in = cJSON_Parse("{\"max_edge\": 1.1e300}");
+    assert_null(vx_kind_parse(k, in, &(vx_limits){0}, &err));
+    assert_non_null(strstr(err.message, "params.max_edge must be in (0, 1e+300], got 1.1e+300"));
+    cJSON_Delete(in);
+}
+
 /* An array of mesh ids (render's meshes). */
 typedef struct t_ids {
     char m[2][VX_MESH_ID_SIZE];
@@ -511,11 +523,12 @@ static void test_spec_describe(void **state)
 int main(void)
 {
     const struct CMUnitTest tests[] = {
-        cmocka_unit_test(test_mesh_ids),       cmocka_unit_test(test_kind_table),
-        cmocka_unit_test(test_preview_params), cmocka_unit_test(test_render_defaults),
-        cmocka_unit_test(test_seeds),          cmocka_unit_test(test_normalize_checks),
-        cmocka_unit_test(test_spec_defaults),  cmocka_unit_test(test_spec_values),
-        cmocka_unit_test(test_spec_errors),    cmocka_unit_test(test_spec_describe),
+        cmocka_unit_test(test_mesh_ids),         cmocka_unit_test(test_kind_table),
+        cmocka_unit_test(test_preview_params),   cmocka_unit_test(test_open_range_message),
+        cmocka_unit_test(test_render_defaults),  cmocka_unit_test(test_seeds),
+        cmocka_unit_test(test_normalize_checks), cmocka_unit_test(test_spec_defaults),
+        cmocka_unit_test(test_spec_values),      cmocka_unit_test(test_spec_errors),
+        cmocka_unit_test(test_spec_describe),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }
