@@ -7,6 +7,7 @@
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
+#include <strings.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
@@ -422,6 +423,24 @@ int main(int argc, char **argv)
         cJSON_Delete(a.params);
         return 2;
     }
+    /* Refused at once (exit 2), not after a request: a server that is no
+     * http(s) URL, a token a header line cannot carry (a newline in it
+     * would start another header; voxeld takes visible ASCII only). */
+    if (strncasecmp(c.server, "http://", 7) && strncasecmp(c.server, "https://", 8)) {
+        fprintf(stderr, "voxelctl: --server wants an http:// or https:// URL, not '%s'\n",
+                c.server);
+        cJSON_Delete(a.params);
+        free(a.kv);
+        return 2;
+    }
+    for (const char *t = c.token; *t; t++)
+        if (*t < 0x21 || *t > 0x7e) {
+            fprintf(stderr, "voxelctl: the token (--token or VOXELD_TOKEN) holds a blank or "
+                            "control character, which no header can carry\n");
+            cJSON_Delete(a.params);
+            free(a.kv);
+            return 2;
+        }
     size_t sl = strlen(c.server);
     while (sl && c.server[sl - 1] == '/')
         c.server[--sl] = 0;

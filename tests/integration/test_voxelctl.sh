@@ -97,6 +97,12 @@ for bad in abc 2x 0; do
 done
 "$CTL" --no-wait voxelize "$MID" -r 16 -o nw.binvox 2>ctl.err
 check "--no-wait with -o: exit 2" sh -c "test $? -eq 2 && test ! -e nw.binvox"
+for bad in '' ftp://127.0.0.1:1 127.0.0.1:8080; do
+    "$CTL" --server "$bad" jobs >/dev/null 2>ctl.err
+    check "--server '$bad': exit 2, said so" sh -c "test $? -eq 2 && grep -q 'server wants an http' ctl.err"
+done
+"$CTL" --token $'s3cret\nX-Injected: 1' jobs >/dev/null 2>ctl.err
+check "a token with a newline: exit 2, never sent" sh -c "test $? -eq 2 && grep -q 'no header can carry' ctl.err"
 njobs=$("$CTL" --json jobs --limit 1000 | jq '.items | length')
 "$CTL" voxelize "$MID" -r 16 -o /nonexistent-dir/x.binvox 2>ctl.err
 check "-o into a missing dir: exit 1, said before the job" sh -c "test $? -eq 1 && grep -q 'cannot write /nonexistent-dir' ctl.err"
