@@ -27,7 +27,7 @@ typedef struct zsrc {
     size_t ilen, ipos; /* input not yet taken by the encoder */
     size_t olen, opos; /* output not yet handed out */
     int eof, done;
-    uint64_t sent; /* compressed bytes handed out */
+    uint64_t *sent; /* the request's bytes_out: compressed bytes handed out */
 } zsrc;
 
 const char *vx_compress_token(vx_req_coding coding)
@@ -91,7 +91,7 @@ static ssize_t reader(void *cls, uint64_t pos, char *buf, size_t max)
     size_t n = s->olen - s->opos < max ? s->olen - s->opos : max;
     memcpy(buf, s->out + s->opos, n);
     s->opos += n;
-    s->sent += n;
+    *s->sent += n; /* the request is alive while its body is read */
     return (ssize_t)n;
 }
 
@@ -99,14 +99,13 @@ static void src_free(void *cls)
 {
     zsrc *s = cls;
     if (!s) return;
-    vx_metrics_bytes_sent(s->sent); /* the request counted 0 (unknown then) */
     ZSTD_freeCCtx(s->zc);
     if (s->gz_on) deflateEnd(&s->gz);
     if (s->fd >= 0) close(s->fd);
     free(s);
 }
 
-struct MHD_Response *vx_compress_response(int fd, vx_req_coding coding)
+struct MHD_Response *vx_compress_response(int fd, vx_req_coding coding, uint64_t *sent)
 {
     zsrc *s = calloc(1, sizeof *s);
     if (!s) {
@@ -115,6 +114,7 @@ struct MHD_Response *vx_compress_response(int fd, vx_req_coding coding)
     }
     s->fd = fd;
     s->coding = coding;
+    s->sent = sent;
     int ok = 0;
     if (coding == VX_CODING_ZSTD) {
         s->zc = ZSTD_createCCtx();

@@ -132,13 +132,6 @@ void vx_metrics_request(const char *route, const char *method, int status, doubl
     pthread_mutex_unlock(&g_lock);
 }
 
-void vx_metrics_bytes_sent(uint64_t bytes)
-{
-    pthread_mutex_lock(&g_lock);
-    g_bytes_out += bytes;
-    pthread_mutex_unlock(&g_lock);
-}
-
 void vx_metrics_job(const char *kind, const char *state, double run_s, double queue_s,
                     const char *code)
 {

@@ -33,9 +33,6 @@ typedef struct vx_metrics_gauges {
 void vx_metrics_init(double job_timeout_s);
 void vx_metrics_request(const char *route, const char *method, int status, double seconds,
                         uint64_t bytes_in, uint64_t bytes_out);
-/* Adds body bytes sent outside a request's own count (compressed
- * downloads, whose size is known only once they are sent). */
-void vx_metrics_bytes_sent(uint64_t bytes);
 /* A job finished: run_s and queue_s < 0 when it never ran; code = its
  * error code when it failed (NULL otherwise). */
 void vx_metrics_job(const char *kind, const char *state, double run_s, double queue_s,

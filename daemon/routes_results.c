@@ -128,9 +128,9 @@ int vx_route_result(vx_http *h, struct MHD_Connection *c, req *r)
         resp = vx_resp_headers_only();
         bytes = 0;
     } else if (coding != VX_CODING_IDENTITY) {
-        resp = vx_compress_response(fd, coding); /* fd is its own now */
+        resp = vx_compress_response(fd, coding, &r->bytes_out); /* fd is its own now */
         fd = -1;
-        bytes = 0; /* counted as sent by libmicrohttpd: unknown here */
+        bytes = 0; /* counted as the coder hands its bytes out */
     } else {
         resp = MHD_create_response_from_fd64(size, fd);
     }

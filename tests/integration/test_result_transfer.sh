@@ -31,6 +31,11 @@ check "zstd body is smaller" test "$(stat -c %s "$BODY")" -lt "$((SIZE / 4))"
 check "zstd body decodes to the file" bash -c "zstd -dc '$BODY' | cmp -s - '$TMP/full'"
 check "the zstd representation has its own ETag" test "$(header ETag)" != "$ETAG"
 ZETAG=$(header ETag)
+# its log line and the metrics count the bytes sent (the log said 0)
+ZBYTES=$(stat -c %s "$BODY")
+sleep 0.2
+ZLINE=$(grep -a 'event=http.request' "$TMP/daemon.log" | grep -a "route=/v1/jobs/{id}/result" | tail -n 1)
+check "the zstd download's log line: bytes_out=$ZBYTES ($ZLINE)" grep -q "bytes_out=$ZBYTES " <<<"$ZLINE "
 
 api GET "$R" -H "Accept-Encoding: gzip, deflate"
 expect_status "gzip download" 200
