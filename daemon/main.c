@@ -139,6 +139,25 @@ static int fit_fd_limit(vx_config *cfg)
     return 0;
 }
 
+/* Held requests (?wait holds, event streams) are never swept for headroom:
+ * together they may take at most half of --max-connections (as in effect),
+ * so that a prompt client always finds a slot. Lowered with a warning. */
+static void fit_holds(vx_config *cfg)
+{
+    uint64_t half = cfg->max_connections / 2;
+    if (cfg->max_waits + cfg->max_event_streams <= half) return;
+    uint64_t waits = cfg->max_waits, streams = cfg->max_event_streams;
+    /* shared in proportion to what was asked */
+    cfg->max_waits = waits * half / (waits + streams);
+    cfg->max_event_streams = half - cfg->max_waits;
+    VX_WARN("http.holds_limit",
+            "max_connections=%llu max_waits=%llu max_event_streams=%llu effective_waits=%llu "
+            "effective_streams=%llu action=\"raise --max-connections for more held requests\"",
+            (unsigned long long)cfg->max_connections, (unsigned long long)waits,
+            (unsigned long long)streams, (unsigned long long)cfg->max_waits,
+            (unsigned long long)cfg->max_event_streams);
+}
+
 /* Blocks the signals the main thread takes synchronously, into *sigs. */
 static void block_signals(sigset_t *sigs)
 {
@@ -406,6 +425,7 @@ int main(int argc, char **argv)
     if (cfg.list_devices) return list_devices();
 
     if (fit_fd_limit(&cfg)) return 2;
+    fit_holds(&cfg);
     keep_memory(cfg.keep_memory);
 
     double start = vx_now();

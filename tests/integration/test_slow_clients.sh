@@ -16,6 +16,11 @@ api GET /v1/info
 check "info lists header_timeout_s" jq -e '.limits.header_timeout_s == 2' "$BODY"
 check "info lists min_body_rate" jq -e '.limits.min_body_rate == 1024' "$BODY"
 check "info lists min_send_rate" jq -e '.limits.min_send_rate == 1024' "$BODY"
+# Held requests never sweep: ?wait holds and event streams (64 + 64 by
+# default) are lowered to half of --max-connections 64, with a warning.
+check "held requests take at most half the connections ($(jq -c '.limits | [.max_waits, .max_event_streams]' "$BODY"))" \
+    jq -e '.limits.max_waits == 16 and .limits.max_event_streams == 16' "$BODY"
+check "and it is logged" grep -q 'event=http.holds_limit .*effective_waits=16 effective_streams=16' "$TMP/daemon.log"
 
 # --- a dripped head: 408 JSON soon after --header-timeout (2 s) ---
 $SLOW drip "$PORT" 4 "$TMP/one.json" 127.0.0.1 --per-addr 1
