@@ -126,7 +126,7 @@ static const opt_def opts[] = {
      "this replica's name in job resources and claims (default host name:port)"},
     {"lease-ttl", T_SECONDS, F(lease_ttl_s), 0,
      "cluster mode: a running job's lease, renewed every third of it; a replica silent this "
-     "long loses its job to another (default 30)"},
+     "long loses its job to another (default 30; 0 = the default)"},
     {"max-attempts", T_COUNT, F(max_attempts), 0,
      "attempts a job gets before it fails (cluster mode); starts a job may see the daemon die "
      "during before it fails `interrupted` (local mode) (default 3; 1 to 1024)"},

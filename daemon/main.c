@@ -397,9 +397,9 @@ static int run_one_job(int argc, char **argv)
 /* A job's big buffers, and glibc's heap, stay mapped after the job for the
  * next one, up to bytes: on a virtual machine that returns freed memory to
  * its host (free page reporting), every page faulted in afresh costs a host
- * fault, which was half of a 1024^3 voxelize job's time (spot, `summary`:
- * 70 ms against 31). The heap keeps up to bytes free at the top of each
- * arena (M_TRIM_THRESHOLD), and serves blocks up to 32 MiB itself
+ * fault, which was half of a 1024^3 voxelize job's time or more (spot,
+ * `summary`: 80-130 ms, 28-43 with the default; bench/RESULTS.md). The heap keeps up to bytes free
+ * at the top of each arena (M_TRIM_THRESHOLD), and serves blocks up to 32 MiB itself
  * (M_MMAP_THRESHOLD; glibc's own threshold moves with each block freed). */
 static void keep_memory(uint64_t bytes)
 {

@@ -21,6 +21,7 @@
 #include "bandlimit/fft_int.h"
 #include "bandlimit/job.h"
 #include "image/png.h"
+#include "util/fsutil.h"
 #include "util/par.h"
 #include "util/vec3.h"
 #include "util/stop.h"
@@ -517,7 +518,7 @@ static int write_pfm(const char *path, const float *v, int w, int h, int ch, vx_
 {
     FILE *f = fopen(path, "wb");
     /* messages name the file, not where the server keeps it */
-    const char *name = strrchr(path, '/') ? strrchr(path, '/') + 1 : path;
+    const char *name = vx_path_base(path);
     if (!f)
         return vx_err_set(err, VX_EIO, "io_error", "cannot write %s: %s", name, strerror(errno));
     fprintf(f, "%s\n%d %d\n-1.0\n", ch == 3 ? "PF" : "Pf", w, h);

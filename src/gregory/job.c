@@ -45,8 +45,7 @@ typedef struct gframes {
     int ids; /* id[] holds them, else pos[] */
     long nv; /* vertices per frame (positions) */
     char (*id)[VX_MESH_ID_SIZE];
-    double *pos;                                 /* n * nv * 3 */
-    unsigned char nested[VX_GREGORY_MAX_FRAMES]; /* given as [[x, y, z], ...] */
+    double *pos; /* n * nv * 3 */
 } gframes;
 
 typedef struct gparams {
@@ -153,8 +152,6 @@ static int frames_read(const cJSON *fr, void *field, const char *path, vx_err *e
             return vx_err_set(err, VX_EUNPROC, "invalid_params",
                               "params.frames[%zu] has %ld vertices, frames[0] %ld", i, nv, n0);
         n0 = nv;
-        const cJSON *e0 = cJSON_GetArrayItem(f, 0);
-        g->nested[i] = e0 && cJSON_IsArray(e0);
         i++;
     }
     g->nv = n0 < 0 ? 0 : n0;
@@ -170,21 +167,11 @@ static int frames_read(const cJSON *fr, void *field, const char *path, vx_err *e
     return 0;
 }
 
-/* Frame f as it was given: flat or as [x, y, z] triples. */
+/* Frame f, normalised flat (x0, y0, z0, x1, ...) however it was given:
+ * the same positions are the same request for reuse and Idempotency-Key. */
 static cJSON *frame_json(const gframes *g, int f)
 {
-    const double *v = g->pos + (size_t)f * (size_t)g->nv * 3;
-    if (!g->nested[f]) return cJSON_CreateDoubleArray(v, (int)(3 * g->nv));
-    cJSON *a = cJSON_CreateArray();
-    for (long k = 0; a && k < g->nv; k++) {
-        cJSON *t = cJSON_CreateDoubleArray(v + 3 * k, 3);
-        if (!t || !cJSON_AddItemToArray(a, t)) {
-            cJSON_Delete(t);
-            cJSON_Delete(a);
-            return NULL;
-        }
-    }
-    return a;
+    return cJSON_CreateDoubleArray(g->pos + (size_t)f * (size_t)g->nv * 3, (int)(3 * g->nv));
 }
 
 static cJSON *frames_write(const void *field)

@@ -9,6 +9,7 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include "util/fsutil.h"
 #include "util/log.h"
 
 typedef struct png_ctx {
@@ -50,7 +51,7 @@ int vx_png_write_path_poll(const char *path, const void *pixels, int width, int 
                                      PNG_COLOR_TYPE_RGB, PNG_COLOR_TYPE_RGB_ALPHA};
 
     /* messages name the file, not where the server keeps it (the log does) */
-    const char *name = strrchr(path, '/') ? strrchr(path, '/') + 1 : path;
+    const char *name = vx_path_base(path);
     FILE *f = fopen(path, "wb");
     if (!f)
         return vx_err_set(err, VX_EIO, "io_error", "cannot create %s: %s", name, strerror(errno));

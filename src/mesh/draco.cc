@@ -22,6 +22,7 @@
 
 extern "C" {
 #include "mesh/mesh.h"
+#include "util/fsutil.h"
 #include "util/log.h"
 }
 
@@ -488,18 +489,11 @@ void add_float3(draco::Mesh &dm, draco::GeometryAttribute::Type type, size_t n, 
     }
 }
 
-// The file's name without its directories (messages name the file).
-const char *base_name(const char *path)
-{
-    const char *s = std::strrchr(path, '/');
-    return s ? s + 1 : path;
-}
-
 int write_file(const char *path, const char *data, size_t size, vx_err *err)
 {
     FILE *f = std::fopen(path, "wb");
     if (!f)
-        return vx_err_set(err, VX_EIO, "io_error", "cannot create %s: %s", base_name(path),
+        return vx_err_set(err, VX_EIO, "io_error", "cannot create %s: %s", vx_path_base(path),
                           std::strerror(errno));
     struct stat st;
     /* Only a regular file is removed after a failure, never a device. */
@@ -514,7 +508,7 @@ int write_file(const char *path, const char *data, size_t size, vx_err *err)
     if (ok) return 0;
     if (regular) std::remove(path);
     VX_ERROR("mesh.write_failed", "errno=%d", e);
-    return vx_err_set(err, VX_EIO, "io_error", "cannot write %s: %s", base_name(path),
+    return vx_err_set(err, VX_EIO, "io_error", "cannot write %s: %s", vx_path_base(path),
                       std::strerror(e ? e : EIO));
 }
 

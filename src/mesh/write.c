@@ -11,6 +11,7 @@
 #include <string.h>
 #include <sys/stat.h>
 
+#include "util/fsutil.h"
 #include "util/log.h"
 
 typedef struct out_file {
@@ -18,14 +19,6 @@ typedef struct out_file {
     const char *path;
     int regular; /* only a regular file is removed after a failure */
 } out_file;
-
-/* The file's name without its directories: messages name the file, not
- * where the server keeps it (the log does). */
-static const char *base_name(const char *path)
-{
-    const char *s = strrchr(path, '/');
-    return s ? s + 1 : path;
-}
 
 /* Reports a write error with errno's text; closes the file and removes it
  * when it is a regular file (never a device or FIFO the caller named). */
@@ -35,7 +28,7 @@ static int write_fail(out_file *o, int e, vx_err *err)
     o->f = NULL;
     if (o->regular) remove(o->path);
     VX_ERROR("mesh.write_failed", "path=%s errno=%d", VX_Q(o->path), e);
-    return vx_err_set(err, VX_EIO, "io_error", "cannot write %s: %s", base_name(o->path),
+    return vx_err_set(err, VX_EIO, "io_error", "cannot write %s: %s", vx_path_base(o->path),
                       strerror(e));
 }
 
@@ -47,7 +40,7 @@ static int open_out(out_file *o, const char *path, vx_err *err)
     if (!o->f) {
         int e = errno;
         VX_ERROR("mesh.write_failed", "errno=%d", e);
-        return vx_err_set(err, VX_EIO, "io_error", "cannot create %s: %s", base_name(path),
+        return vx_err_set(err, VX_EIO, "io_error", "cannot create %s: %s", vx_path_base(path),
                           strerror(e));
     }
     struct stat st;

@@ -65,6 +65,7 @@ void *vx_bigmem_alloc(size_t bytes, size_t *mapped)
 {
     *mapped = 0;
     if (bytes < BIGMEM_MAP_MIN) return calloc(bytes ? bytes : 1, 1);
+    if (bytes > SIZE_MAX - BIGMEM_ROUND) return NULL; /* no such mapping */
     size_t len = (bytes + BIGMEM_ROUND - 1) / BIGMEM_ROUND * BIGMEM_ROUND;
     size_t got = 0;
     void *p = take(len, &got);

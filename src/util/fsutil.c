@@ -207,6 +207,12 @@ void vx_rfc3339(double t, char out[32])
              tm.tm_mday, tm.tm_hour, tm.tm_min, tm.tm_sec, ms);
 }
 
+const char *vx_path_base(const char *path)
+{
+    const char *s = strrchr(path, '/');
+    return s ? s + 1 : path;
+}
+
 int vx_parse_size(const char *s, uint64_t *out)
 {
     char *end;

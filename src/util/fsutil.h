@@ -41,6 +41,9 @@ int vx_disk_free(const char *dir, uint64_t *free_bytes);
 /* Removes every occurrence of dir (and the '/' after it) from msg, in
  * place: messages that reach clients name no server paths. */
 void vx_scrub_path(char *msg, const char *dir);
+/* The file name of path, after its last '/' (path itself without one):
+ * what an error message names, not where the server keeps the file. */
+const char *vx_path_base(const char *path);
 /* Parses a size with an optional K/M/G/T suffix (powers of 1024); 0 or -1. */
 int vx_parse_size(const char *s, uint64_t *out);
 

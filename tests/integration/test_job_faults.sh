@@ -41,13 +41,15 @@ check "failed job counted" grep -q 'voxeld_jobs_total{kind="preview",state="fail
 stop_daemon
 # The data dir removed under a running daemon: the journal takes appends
 # into a file no restart reads, so a job is not acknowledged (it was 202,
-# then gone after a restart).
+# then gone after a restart). The write check before the body finds the
+# data dir gone: 503 not_ready, as /readyz (journal_failed, 500, was the
+# journal's own check behind it).
 start_daemon || exit 1
 upload "$VX_SOURCE_DIR/examples/meshes/torus.obj"
 M=$MESH_ID
 rm -rf "$DATA"
 api POST /v1/jobs -H "Content-Type: application/json" -d "{\"mesh\":\"$M\",\"kind\":\"preview\"}"
-expect_error "job on a removed data dir" 500 journal_failed
+expect_error "job on a removed data dir" 503 not_ready
 api GET /readyz
 expect_status "readyz on a removed data dir" 503
 api GET /metrics

@@ -1248,7 +1248,17 @@ static void test_params(void **state)
     o = parse("{\"max_edge\": 0.5, \"frames\": [[0,0,0,1,1,1], [[0,0,0],[1,1,2]]]}", &err);
     assert_non_null(o);
     assert_true(cJSON_IsNull(cJSON_GetObjectItem(o, "divisions")));
+    /* frames normalise flat, however given: the same positions are the
+     * same params (reuse, Idempotency-Key) */
+    char *fr = cJSON_PrintUnformatted(cJSON_GetObjectItem(o, "frames"));
+    assert_string_equal(fr, "[[0,0,0,1,1,1],[0,0,0,1,1,2]]");
+    free(fr);
     cJSON_Delete(o);
+    cJSON *flat = parse("{\"frames\": [[0,0,0,1,1,2]]}", &err),
+          *nested = parse("{\"frames\": [[[0,0,0],[1,1,2]]]}", &err);
+    assert_true(flat && nested && cJSON_Compare(flat, nested, 1));
+    cJSON_Delete(flat);
+    cJSON_Delete(nested);
     static const char *bad[][2] = {
         {"{\"divisions\": 4, \"max_edge\": 1}", "max_edge"},
         {"{\"divisions\": 0}", "divisions"},
