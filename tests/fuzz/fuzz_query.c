@@ -8,7 +8,8 @@
  * limits and, written back by vx_req_query_format, parses to the same
  * result; a rejected one says why. The UTF-8 sanitizer's output is valid
  * UTF-8, and the other helpers hold their contracts on the same bytes (a
- * name read from them as a Content-Disposition value is a valid name); the
+ * name read from them as a Content-Disposition value is a valid name, a
+ * byte range read from them lies within the file); the
  * strict JSON parser's accepted bodies print back to bodies it accepts. */
 #include <stdint.h>
 #include <stdio.h>
@@ -193,6 +194,15 @@ static void check_text(const char *s, size_t n)
     if (!vx_req_json_text_ok(s, n, why, sizeof why) && !vx_req_utf8_valid(s, n)) abort();
     int te = vx_req_transfer_encoding(z);
     if (te < -1 || te > 1) abort();
+    /* As a Range value over a file of some sizes: one range within it, or
+     * ignored (0), or unsatisfiable (-1, never for a range from 0 on a
+     * non-empty file) */
+    static const uint64_t sizes[] = {0, 1, 10, 1000, UINT64_MAX};
+    for (size_t i = 0; i < sizeof sizes / sizeof sizes[0]; i++) {
+        uint64_t first = 0, last = 0;
+        int rr = vx_req_range(z, sizes[i], &first, &last);
+        if (rr < -1 || rr > 1 || (rr == 1 && (first > last || last >= sizes[i]))) abort();
+    }
     /* As a Content-Disposition value: a name it gives is a valid one. */
     char name[VX_NAME_MAX + 8];
     int nr = vx_req_disposition_name(z, name, sizeof name);
