@@ -809,7 +809,17 @@ static int greg_check_mesh(const void *params, const cJSON *meta, const vx_limit
                           p->divisions, (double)nt * (double)np, (unsigned long long)np,
                           (unsigned long long)lim->max_triangles);
     const cJSON *v = cJSON_GetObjectItemCaseSensitive(meta, "vertices");
-    if (!p->frames.n || p->frames.ids || !cJSON_IsNumber(v)) return 0;
+    if (!p->frames.n || !cJSON_IsNumber(v)) return 0;
+    if (p->frames.ids) { /* each frame mesh has the mesh's vertices: copied as doubles */
+        double bytes = (double)p->frames.n * 3 * v->valuedouble * sizeof(double);
+        if (lim && lim->max_job_memory && bytes > (double)lim->max_job_memory)
+            return vx_err_set(err, VX_EUNPROC, "invalid_params",
+                              "params.frames: %d frame meshes of %.0f vertices need about %.0f "
+                              "bytes, over the job memory limit of %llu (--max-job-memory)",
+                              p->frames.n, v->valuedouble, bytes,
+                              (unsigned long long)lim->max_job_memory);
+        return 0;
+    }
     if ((double)p->frames.nv != v->valuedouble)
         return vx_err_set(err, VX_EUNPROC, "invalid_params",
                           "params.frames[0] has %ld vertices, the mesh %.0f", p->frames.nv,

@@ -337,6 +337,18 @@ assert max(abs(a - b) for p, q in zip(n, n1) for a, b in zip(p, q)) < 1e-4
 assert min(sum(a * a for a in p) for p in n) > 0.99
 EOF2
 done
+stop_daemon
 
+# Frames given as mesh ids whose copies cannot fit --max-job-memory: 422 at
+# submission (the job had loaded every frame first, then failed).
+start_daemon --max-job-memory 1M || exit 1
+upload "$VX_MESH_DIR/spot_quadrangulated.obj"
+SPOTQ=$MESH_ID
+F=$(python3 -c "import json,sys; print(json.dumps([sys.argv[1]] * 40))" "$SPOTQ")
+post "{\"mesh\":\"$SPOTQ\",\"kind\":\"gregory\",\"params\":{\"divisions\":2,\"frames\":$F}}"
+expect_error "40 frame meshes over a 1M job memory limit" 422 invalid_params
+check "it says so ($(jqb .error.message))" grep -q 'frame meshes of .* vertices need about .* over the job memory limit' <<<"$(jqb .error.message)"
+post "{\"mesh\":\"$SPOTQ\",\"kind\":\"gregory\",\"params\":{\"divisions\":2,\"frames\":[\"$SPOTQ\"]}}"
+check "one frame mesh fits: accepted ($STATUS)" test "$STATUS" = 202 -o "$STATUS" = 200 -o "$STATUS" = 201
 stop_daemon
 finish
