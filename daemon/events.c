@@ -262,7 +262,8 @@ struct MHD_Response *vx_events_open(vx_events *ev, struct MHD_Connection *c, con
         if (refuse == 1)
             return vx_err_set(err, VX_EUNAVAIL, "not_ready", "the daemon is stopping"), NULL;
         vx_err_set(err, VX_EOVERLOAD, "too_many_streams",
-                   "%zu event streams are open, the most --max-event-streams allows",
+                   "%zu event streams are open, the most --max-event-streams allows (with "
+                   "?wait holds, at most half of --max-connections)",
                    ev->max_streams);
         return NULL;
     }

@@ -194,24 +194,33 @@ static int first_call(vx_http *h, struct MHD_Connection *c, req *r, const char *
     }
     if (r->qerr[0]) return vx_resp_fail(c, r, VX_EINVAL, "invalid_request", "%s", r->qerr);
 
+    /* No room, or a data dir gone read-only (a remount: a file made and
+     * removed in DATA/tmp, as /readyz does): refused before the body, which
+     * would fail late (an upload) or at its first output (a job). A local
+     * job submission is answered still when it names a job already there
+     * (Idempotency-Key, reuse): it is refused only if it would make one. */
     uint64_t nfree;
+    vx_err no_room;
+    vx_err_clear(&no_room);
     if (!vx_route_disk_ok(h, &nfree)) {
         if (!h->d.cfg->min_free_disk)
-            return vx_resp_fail(c, r, VX_ENOSPC, "insufficient_storage",
-                                "the data dir's disk is full; reads still work");
-        return vx_resp_fail(
-            c, r, VX_ENOSPC, "insufficient_storage",
-            "the data dir has %llu bytes free, under the %llu-byte floor (--min-free-disk); "
-            "reads still work",
-            (unsigned long long)(nfree == UINT64_MAX ? 0 : nfree),
-            (unsigned long long)h->d.cfg->min_free_disk);
+            vx_err_set(&no_room, VX_ENOSPC, "insufficient_storage",
+                       "the data dir's disk is full; reads still work");
+        else
+            vx_err_set(&no_room, VX_ENOSPC, "insufficient_storage",
+                       "the data dir has %llu bytes free, under the %llu-byte floor "
+                       "(--min-free-disk); reads still work",
+                       (unsigned long long)(nfree == UINT64_MAX ? 0 : nfree),
+                       (unsigned long long)h->d.cfg->min_free_disk);
+    } else if (!vx_store_writable(h->d.store)) {
+        vx_err_set(&no_room, VX_EUNAVAIL, "not_ready",
+                   "the data directory is not writable; reads still work");
     }
-    /* A data dir gone read-only (a remount) took uploads' bodies to fail
-     * late and jobs to fail at their first output: refused here as /readyz
-     * is (a file made and removed in DATA/tmp). */
-    if (!vx_store_writable(h->d.store))
-        return vx_resp_fail(c, r, VX_EUNAVAIL, "not_ready",
-                            "the data directory is not writable; reads still work");
+    if (no_room.kind != VX_EOK) {
+        if (r->route != VX_R_JOBS || vx_jobs_cluster(h->d.jobs, NULL))
+            return vx_resp_err(c, r, &no_room);
+        r->new_refused = no_room;
+    }
     char mt[128];
     vx_req_media_type(vx_resp_header(c, MHD_HTTP_HEADER_CONTENT_TYPE), mt, sizeof mt);
     if (r->route == VX_R_MESHES) {

@@ -38,6 +38,8 @@ typedef struct req {
     int too_big;
     vx_err body_err; /* storing the body failed (full disk): answered at the end */
     /* JSON bodies */
+    vx_err new_refused; /* POST /v1/jobs: why a new job may not be made (a full
+                           disk), while an existing one is still answered */
     char *buf;
     size_t len, cap;
     /* ?wait */

@@ -108,7 +108,8 @@ static int job_post(vx_http *h, struct MHD_Connection *c, req *r, double wait_s)
     const char *key = vx_resp_header(c, "Idempotency-Key");
     vx_jobs_submit_opts opts = {.idempotency_key = key,
                                 .reuse =
-                                    cJSON_IsTrue(cJSON_GetObjectItemCaseSensitive(doc, "reuse"))};
+                                    cJSON_IsTrue(cJSON_GetObjectItemCaseSensitive(doc, "reuse")),
+                                .refuse_new = &r->new_refused};
     int existing = 0;
     if (!vx_store_valid_mesh_id(mesh->valuestring))
         vx_err_set(&err, VX_EINVAL, "invalid_request",
@@ -180,10 +181,12 @@ int vx_route_job(vx_http *h, struct MHD_Connection *c, req *r)
     int held = wait_s > 0 ? vx_wait_hold(h->wait, &r->w, c, r->id, wait_s) : 0;
     if (held > 0) return MHD_YES;
     if (held < 0)
-        return vx_resp_fail(c, r, VX_EOVERLOAD, "too_many_waits",
-                            "%llu requests are held by ?wait, the most --max-waits allows; ask "
-                            "again after Retry-After seconds, or without wait",
-                            (unsigned long long)h->d.cfg->max_waits);
+        return vx_resp_fail(
+            c, r, VX_EOVERLOAD, "too_many_waits",
+            "%llu requests are held by ?wait, the most --max-waits allows (with event "
+            "streams, at most half of --max-connections); ask "
+            "again after Retry-After seconds, or without wait",
+            (unsigned long long)h->d.cfg->max_waits);
     return answer_job(h, c, r, r->id, 200);
 }
 

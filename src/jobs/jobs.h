@@ -96,6 +96,10 @@ typedef struct vx_jobs_submit_opts {
     /* 1: a succeeded job with the same request whose results are still
      * there is answered instead of a new one. */
     int reuse;
+    /* Set (kind not VX_EOK): the error a submission that would make a new
+     * job fails with (a full disk); one answered by an existing job is
+     * answered still. Local mode. */
+    const vx_err *refuse_new;
 } vx_jobs_submit_opts;
 /* vx_jobs_submit with options; *existing = 1 when the answer is a job that
  * was there already (nothing was queued). */

@@ -21,6 +21,7 @@ struct vx_journal {
     off_t size;       /* bytes of complete records: where the next one starts */
     off_t reserved;   /* blocks allocated up to here (fallocate, past the size) */
     int no_fallocate; /* the file system has none: nothing is reserved */
+    int short_said;   /* a failed top-up or a refusal was logged: once until one works */
     pthread_mutex_t lock;
 };
 
@@ -44,12 +45,15 @@ static void reserve_tail(vx_journal *j, off_t need)
     if (j->no_fallocate || j->reserved - j->size >= need) return;
     off_t len = need > RESERVE ? need : RESERVE;
     int rc = fallocate(j->fd, FALLOC_FL_KEEP_SIZE, j->size, len);
-    if (rc == 0)
+    if (rc == 0) {
         j->reserved = j->size + len;
-    else if (errno == EOPNOTSUPP || errno == ENOSYS)
+        j->short_said = 0;
+    } else if (errno == EOPNOTSUPP || errno == ENOSYS) {
         j->no_fallocate = 1;
-    else
+    } else if (!j->short_said) { /* not once a request while the disk stays full */
+        j->short_said = 1;
         VX_WARN("journal.reserve_failed", "path=%s error=%d", VX_Q(j->path), errno);
+    }
 }
 
 /* A record is one line: '#', the CRC-32 of the JSON as 8 hex digits, a
@@ -259,10 +263,10 @@ int vx_journal_append(vx_journal *j, const cJSON *rec, size_t owed, vx_err *err)
         if (floor < RESERVE_FLOOR) floor = RESERVE_FLOOR;
         reserve_tail(j, floor + (off_t)n);
         if (!j->no_fallocate && j->reserved - j->size < floor + (off_t)n) {
+            const long long kept = (long long)(j->reserved - j->size);
             pthread_mutex_unlock(&j->lock);
             free(text);
-            VX_WARN("journal.reserve_kept", "path=%s reserved=%lld", VX_Q(j->path),
-                    (long long)(j->reserved - j->size));
+            VX_DEBUG("journal.reserve_kept", "path=%s reserved=%lld", VX_Q(j->path), kept);
             return vx_err_set(err, VX_ENOSPC, "insufficient_storage",
                               "the disk is full: the job journal's last space is kept for the "
                               "jobs already accepted");

@@ -358,6 +358,13 @@ cJSON *vx_jobs_submit_with(vx_jobs *j, const char *mesh, const char *kind, const
         if (doc && existing) *existing = 1;
         return doc;
     }
+    if (opts && opts->refuse_new && opts->refuse_new->kind != VX_EOK) {
+        pthread_mutex_unlock(&j->lock);
+        unpin_job(j, &jb->pins);
+        job_free(jb);
+        *err = *opts->refuse_new;
+        return NULL;
+    }
     if (j->stopping) {
         vx_err_set(err, VX_EUNAVAIL, "not_ready", "the daemon is shutting down");
     } else if (vx_queue_depth(j->queue) >= vx_queue_capacity(j->queue)) {

@@ -196,6 +196,25 @@ for id in "${ENDS[@]}"; do
     check "after kill -9, job $id is still succeeded ($(jqb .state))" jq -e '.state == "succeeded"' "$BODY"
 done
 
+# A retry of an accepted submission (the same Idempotency-Key and
+# request), and a reuse of a finished one, are answered with that job on a
+# full disk (200); only a new job is refused (it was 507 before the key
+# was looked at: a client whose 202 was lost thought it never went in).
+IK='{"mesh":"'$BOX'","kind":"voxelize","params":{"resolution":9,"format":"summary"}}'
+api POST "/v1/jobs?wait=30" -H "Content-Type: application/json" -H "Idempotency-Key: full-1" -d "$IK"
+expect_status "a job with a key, with room" 202
+KJ=$(jqb .id)
+fill_to 0
+api POST /v1/jobs -H "Content-Type: application/json" -H "Idempotency-Key: full-1" -d "$IK"
+expect_status "its retry on a full disk: the job" 200
+check "the same job ($(jqb .id))" test "$(jqb .id)" = "$KJ"
+api POST /v1/jobs -H "Content-Type: application/json" -d '{"mesh":"'$BOX'","kind":"voxelize","params":{"resolution":9,"format":"summary"},"reuse":true}'
+expect_status "reuse of it on a full disk: the job" 200
+check "reuse: the same job" test "$(jqb .id)" = "$KJ"
+api POST /v1/jobs -H "Content-Type: application/json" -H "Idempotency-Key: full-2" -d "$IK"
+expect_error "a new key on a full disk" 507 insufficient_storage
+rm -f "$DISK/filler" "$DISK/filler2"
+
 # New jobs on a full disk with no floor (--min-free-disk 0): each takes the
 # journal's reserve only down to what the jobs not yet finished still need
 # (a start and an end each, at least half the reserve), then new ones get
