@@ -25,9 +25,9 @@ int vx_run_progress(vx_job_run *r, double fraction, vx_err *err)
     if (j->stopping)
         return vx_err_set_flagged(err, VX_ECANCELED, VX_EF_SHUTDOWN, "shutdown",
                                   "the daemon is shutting down");
-    double limit = j->desc.limits.job_timeout_s;
-    if (limit > 0 && now - r->t0 - r->waited > limit)
-        return vx_err_set(err, VX_ETIMEOUT, "job_timeout", "the job ran longer than %g s", limit);
+    if (vx_run_time_left(r) < 0)
+        return vx_err_set(err, VX_ETIMEOUT, "job_timeout", "the job ran longer than %g s",
+                          j->desc.limits.job_timeout_s);
     return 0;
 }
 
