@@ -8,7 +8,9 @@
  * zeros through write(2), then with fsync).
  *
  *   voxel_encode_bench DIR MESH.obj RES... [--runs N] [--formats raw8,binvox,vdb:fog,...]
- * ("binvox:blocks" is binvox's bounded coder, forced).
+ *                      [--no-disk]
+ * ("binvox:blocks" is binvox's bounded coder, forced; --no-disk leaves the
+ * disk's speed out).
  * DIR receives the files (removed after each is measured). */
 #include <fcntl.h>
 #include <stdio.h>
@@ -92,16 +94,18 @@ typedef struct writer {
 int main(int argc, char **argv)
 {
     if (argc < 4) {
-        fprintf(stderr,
-                "usage: voxel_encode_bench DIR MESH.obj RES... [--runs N] [--formats a,b]\n");
+        fprintf(stderr, "usage: voxel_encode_bench DIR MESH.obj RES... [--runs N] [--formats a,b] "
+                        "[--no-disk]\n");
         return 2;
     }
     const char *dir = argv[1], *mesh = argv[2];
-    int runs = 2, res[16], nres = 0;
+    int runs = 2, res[16], nres = 0, no_disk = 0;
     const char *formats = NULL;
     for (int i = 3; i < argc; i++)
         if (!strcmp(argv[i], "--runs") && i + 1 < argc)
             runs = atoi(argv[++i]);
+        else if (!strcmp(argv[i], "--no-disk"))
+            no_disk = 1;
         else if (!strcmp(argv[i], "--formats") && i + 1 < argc)
             formats = argv[++i];
         else if (nres < 16)
@@ -182,6 +186,10 @@ int main(int argc, char **argv)
             fflush(stdout);
         }
         uint64_t raw8 = (uint64_t)n[0] * n[1] * n[2];
+        if (no_disk) {
+            vx_bitgrid_free(&g);
+            continue;
+        }
         snprintf(path, sizeof path, "%s/disk.out", dir);
         printf("| %s | %s | | disk: %llu bytes of zeros | page cache %.0f MB/s | with fsync %.0f "
                "MB/s | | | | |\n",

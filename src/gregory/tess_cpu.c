@@ -17,6 +17,7 @@
 
 #include "gregory/tess_int.h"
 #include "util/clock.h"
+#include "util/cpu.h"
 #include "util/par.h"
 #include "util/stop.h"
 
@@ -180,8 +181,7 @@ typedef void (*patch_fn)(const float *c, uint32_t n, float *out);
 static patch_fn pick_kernel(int lanes)
 {
 #if defined(__x86_64__)
-    if (lanes != 4 && __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma"))
-        return patch8;
+    if (lanes != 4 && vx_cpu_avx2_fma()) return patch8;
 #endif
     return patch4;
 }

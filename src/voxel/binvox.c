@@ -23,6 +23,7 @@
 #endif
 
 #include "util/bigmem.h"
+#include "util/cpu.h"
 #include "util/par.h"
 #include "voxel/io.h"
 #include "voxel/io_int.h"
@@ -483,7 +484,7 @@ __attribute__((target("avx2"))) static int ev_rows_avx2(ev_job *j, int si, int t
 static int ev_rows(ev_job *j, int si, int t)
 {
 #if defined(__x86_64__)
-    if (__builtin_cpu_supports("avx2")) return ev_rows_avx2(j, si, t);
+    if (vx_cpu_avx2()) return ev_rows_avx2(j, si, t);
 #endif
     return ev_rows_sse2(j, si, t);
 }

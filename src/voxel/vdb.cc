@@ -28,6 +28,10 @@
 #include <type_traits>
 #include <vector>
 
+#if defined(__x86_64__)
+#include <immintrin.h>
+#endif
+
 #include <openvdb/io/DelayedLoadMetadata.h>
 #include <openvdb/openvdb.h>
 #include <openvdb/tools/Count.h>
@@ -35,6 +39,8 @@
 #include <openvdb/tools/SignedFloodFill.h>
 #include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
+
+#include "util/cpu.h"
 
 extern "C" {
 #include "voxel/band.h"
@@ -271,6 +277,17 @@ template <typename GridT> class ParallelGrid final : public GridT, public Prepar
         }
     }
 
+    // The leaves are in the heap where the threads that made them put
+    // them, not in tree order: each one met is a cache miss (60% of
+    // bool_bytes' time) unless asked for AHEAD leaves before.
+    static constexpr size_t AHEAD = 8;
+    static void prefetch(const LeafT *leaf)
+    {
+        const char *p = reinterpret_cast<const char *>(leaf);
+        for (size_t at = 0; at < sizeof(LeafT) && at < 4 * 64; at += 64)
+            __builtin_prefetch(p + at);
+    }
+
     template <typename T> static void put(std::ostream &os, const T &v)
     {
         os.write(reinterpret_cast<const char *>(&v), sizeof v);
@@ -309,10 +326,16 @@ template <typename GridT> class ParallelGrid final : public GridT, public Prepar
     static void lower_topology(std::ostream &os, const LowerT &node, bool half)
     {
         node_header(os, node, half);
-        std::string masks(node.getChildMask().countOn() * MASK_BYTES, '\0');
+        std::vector<const LeafT *> leaves;
+        leaves.reserve(node.getChildMask().countOn());
+        for (auto c = node.cbeginChildOn(); c; ++c)
+            leaves.push_back(&*c);
+        std::string masks(leaves.size() * MASK_BYTES, '\0');
         char *p = &masks[0];
-        for (auto c = node.cbeginChildOn(); c; ++c, p += MASK_BYTES)
-            copy_mask(p, c->getValueMask());
+        for (size_t i = 0; i < leaves.size(); i++, p += MASK_BYTES) {
+            if (i + AHEAD < leaves.size()) prefetch(leaves[i + AHEAD]);
+            copy_mask(p, leaves[i]->getValueMask());
+        }
         os.write(masks.data(), (std::streamsize)masks.size());
     }
 
@@ -437,6 +460,7 @@ template <typename GridT> class ParallelGrid final : public GridT, public Prepar
         std::string bytes((b - a) * B, '\0');
         char *p = &bytes[0];
         for (size_t i = a; i < b; i++, p += B) {
+            if (i + AHEAD < b) prefetch(all[i + AHEAD]);
             const LeafT &leaf = *all[i];
             const int32_t xyz[3] = {leaf.origin().x(), leaf.origin().y(), leaf.origin().z()};
             copy_mask(p, leaf.getValueMask());
@@ -469,8 +493,10 @@ template <typename GridT> class ParallelGrid final : public GridT, public Prepar
             return ss.str();
         }
         size_t at = 0;
-        for (size_t i = a; i < b; i++)
+        for (size_t i = a; i < b; i++) {
+            if (i + AHEAD < b) prefetch(all[i + AHEAD]);
             ends[i - a] = at += MASK_BYTES + tail(*all[i], u, half, compression, background).size();
+        }
         std::string bytes(at, '\0');
         char *p = &bytes[0];
         for (size_t i = a; i < b; i++) {
@@ -795,81 +821,154 @@ int write_grids(const char *path, vx_vdb_tree **keep, vx_err *err, Build build)
 
 enum { LEAF_EMPTY = 0, LEAF_PART = 1, LEAF_FULL = 2 };
 
-// The 512 bits of the leaf at (X, Y, Z) (multiples of 8) in NodeMask order:
-// w[x] bit 8 y + z = voxel (X + x, Y + y, Z + z); voxels outside the grid
-// are 0. Returns LEAF_EMPTY, LEAF_PART or LEAF_FULL.
-int gather_leaf(const vx_bitgrid *g, int X, int Y, int Z, uint64_t w[8])
+// A leaf's 512 bits in NodeMask order: w[x] bit 8 y + z = voxel (X + x,
+// Y + y, Z + z) of the leaf at (X, Y, Z); voxels outside the grid are 0.
+//
+// The leaf's 64 row bytes b[8 y + z] (bit x) are transposed into the 8
+// words: with AVX2 by movemask (bit 7 of each byte, then each byte doubled),
+// 16 instructions in place of 64 multiplies.
+void transpose_leaf(const uint8_t b[64], uint64_t w[8])
 {
-    const int nx = g->grid.dims[0], ny = g->grid.dims[1], nz = g->grid.dims[2];
-    const unsigned xmask = nx - X >= 8 ? 0xffu : (1u << (nx - X)) - 1u;
-    uint8_t b[64]; // b[8 y + z]: bit x
-    uint64_t any = 0, all = ~0ull;
-    for (int y = 0; y < 8; y++)
-        for (int z = 0; z < 8; z++) {
-            const int j = Y + y, k = Z + z;
-            uint8_t v = 0;
-            if (j < ny && k < nz) {
-                const uint8_t *row = (const uint8_t *)(g->bits + ((size_t)k * ny + j) * g->wx);
-                v = (uint8_t)(row[X >> 3] & xmask);
-            }
-            b[8 * y + z] = v;
-        }
-    for (int q = 0; q < 8; q++) {
-        uint64_t v;
-        memcpy(&v, b + 8 * q, 8); // byte n = row (y = q, z = n)
-        any |= v;
-        all &= v;
-    }
-    if (!any) return LEAF_EMPTY;
-    if (all == ~0ull) return LEAF_FULL;
     for (int x = 0; x < 8; x++) {
         uint64_t word = 0;
         for (int q = 0; q < 8; q++) {
             uint64_t v;
-            memcpy(&v, b + 8 * q, 8);
+            memcpy(&v, b + 8 * q, 8); // byte n = row (y = q, z = n)
             // bit x of each of the 8 bytes, gathered into one byte (bit n = byte n)
             uint64_t t = (((v >> x) & 0x0101010101010101ull) * 0x0102040810204080ull) >> 56;
             word |= t << (8 * q);
         }
         w[x] = word;
     }
-    return LEAF_PART;
 }
 
-// The kinds of a row of leaves (Y = 8 yl, Z = 8 zl; kind[xl] for X = 8 xl)
-// as gather_leaf would return them, from the leaves' row bytes ORed and
-// ANDed a whole grid row (eight bytes) at a time, so that only partial
-// leaves need gather_leaf's transposes. any and all: scratch of lx bytes.
-void classify_leaves(const vx_bitgrid *g, int yl, int zl, uint8_t *any, uint8_t *all, uint8_t *kind)
+#if defined(__x86_64__)
+__attribute__((target("avx2"))) void transpose_leaf_avx2(const uint8_t b[64], uint64_t w[8])
+{
+    __m256i lo = _mm256_loadu_si256(reinterpret_cast<const __m256i *>(b));
+    __m256i hi = _mm256_loadu_si256(reinterpret_cast<const __m256i *>(b + 32));
+    for (int x = 7; x >= 0; x--) {
+        w[x] = (uint64_t)(uint32_t)_mm256_movemask_epi8(lo) |
+               (uint64_t)(uint32_t)_mm256_movemask_epi8(hi) << 32;
+        lo = _mm256_add_epi8(lo, lo);
+        hi = _mm256_add_epi8(hi, hi);
+    }
+}
+#endif
+
+// The words of partial leaf xl of a row of leaves, from its rows
+// (classify_leaves') bytes; xmask: the bits of the leaf inside the grid.
+void leaf_words(const uint8_t *const rows[64], int xl, unsigned xmask, uint64_t w[8])
+{
+    alignas(32) uint8_t b[64]; // b[8 y + z]: bit x
+    for (int y = 0; y < 8; y++)
+        for (int z = 0; z < 8; z++)
+            b[8 * y + z] = (uint8_t)(rows[8 * z + y][xl] & xmask);
+#if defined(__x86_64__)
+    if (vx_cpu_avx2()) return transpose_leaf_avx2(b, w);
+#endif
+    transpose_leaf(b, w);
+}
+
+// The OR and AND of nrows rows' first lx bytes, into any and all. With
+// AVX2 128 bytes at a time in registers (the grid read at memory speed: the
+// scalar form loads and stores any and all again for every row).
+#if defined(__x86_64__)
+__attribute__((target("avx2"))) void or_and_rows_avx2(const uint8_t *const rows[64], int nrows,
+                                                      int lx, uint8_t *any, uint8_t *all)
+{
+    int xl = 0;
+    for (; xl + 128 <= lx; xl += 128) {
+        __m256i a[4], l[4];
+        for (int v = 0; v < 4; v++) {
+            a[v] = _mm256_setzero_si256();
+            l[v] = _mm256_set1_epi8(-1);
+        }
+        for (int r = 0; r < nrows; r++)
+            for (int v = 0; v < 4; v++) {
+                const __m256i x =
+                    _mm256_loadu_si256(reinterpret_cast<const __m256i *>(rows[r] + xl + 32 * v));
+                a[v] = _mm256_or_si256(a[v], x);
+                l[v] = _mm256_and_si256(l[v], x);
+            }
+        for (int v = 0; v < 4; v++) {
+            _mm256_storeu_si256(reinterpret_cast<__m256i *>(any + xl + 32 * v), a[v]);
+            _mm256_storeu_si256(reinterpret_cast<__m256i *>(all + xl + 32 * v), l[v]);
+        }
+    }
+    for (; xl + 32 <= lx; xl += 32) {
+        __m256i a = _mm256_setzero_si256(), l = _mm256_set1_epi8(-1);
+        for (int r = 0; r < nrows; r++) {
+            const __m256i x = _mm256_loadu_si256(reinterpret_cast<const __m256i *>(rows[r] + xl));
+            a = _mm256_or_si256(a, x);
+            l = _mm256_and_si256(l, x);
+        }
+        _mm256_storeu_si256(reinterpret_cast<__m256i *>(any + xl), a);
+        _mm256_storeu_si256(reinterpret_cast<__m256i *>(all + xl), l);
+    }
+    for (; xl < lx; xl++) {
+        uint8_t a = 0, l = 0xff;
+        for (int r = 0; r < nrows; r++) {
+            a |= rows[r][xl];
+            l &= rows[r][xl];
+        }
+        any[xl] = a;
+        all[xl] = l;
+    }
+}
+#endif
+
+void or_and_rows(const uint8_t *const rows[64], int nrows, int lx, uint8_t *any, uint8_t *all)
+{
+#if defined(__x86_64__)
+    if (vx_cpu_avx2()) return or_and_rows_avx2(rows, nrows, lx, any, all);
+#endif
+    memset(any, 0, (size_t)lx);
+    memset(all, 0xff, (size_t)lx);
+    for (int r = 0; r < nrows; r++) {
+        const uint8_t *row = rows[r];
+        int xl = 0;
+        for (; xl + 8 <= lx; xl += 8) { // eight leaves a word
+            uint64_t x, a, l;
+            memcpy(&x, row + xl, 8);
+            memcpy(&a, any + xl, 8);
+            memcpy(&l, all + xl, 8);
+            a |= x;
+            l &= x;
+            memcpy(any + xl, &a, 8);
+            memcpy(all + xl, &l, 8);
+        }
+        for (; xl < lx; xl++) {
+            any[xl] |= row[xl];
+            all[xl] &= row[xl];
+        }
+    }
+}
+
+// The kinds of a row of leaves (Y = 8 yl, Z = 8 zl; kind[xl] for X = 8 xl):
+// LEAF_EMPTY, LEAF_PART or LEAF_FULL, from the leaves' rows ORed and ANDed,
+// so that only partial leaves need leaf_words' transposes. scratch: 3 lx
+// bytes, the last lx of them zero; rows[8 z + y]: the leaves' rows (Y + y,
+// Z + z), scratch's zeros for rows outside the grid.
+void classify_leaves(const vx_bitgrid *g, int yl, int zl, uint8_t *scratch, uint8_t *kind,
+                     const uint8_t *rows[64])
 {
     const int nx = g->grid.dims[0], ny = g->grid.dims[1], nz = g->grid.dims[2];
     const int lx = (nx + 7) / 8;
-    memset(any, 0, (size_t)lx);
-    memset(all, 0xff, (size_t)lx);
-    for (int y = 0; y < 8; y++)
-        for (int z = 0; z < 8; z++) {
+    uint8_t *any = scratch, *all = scratch + lx, *zero = scratch + 2 * lx;
+    const uint8_t *in[64];
+    int nrows = 0;
+    for (int z = 0; z < 8; z++)
+        for (int y = 0; y < 8; y++) {
             const int j = 8 * yl + y, k = 8 * zl + z;
-            if (j >= ny || k >= nz) { // voxels outside the grid are 0
-                memset(all, 0, (size_t)lx);
-                continue;
-            }
-            const uint8_t *row = (const uint8_t *)(g->bits + ((size_t)k * ny + j) * g->wx);
-            int xl = 0;
-            for (; xl + 8 <= lx; xl += 8) { // eight leaves a word
-                uint64_t r, a, l;
-                memcpy(&r, row + xl, 8);
-                memcpy(&a, any + xl, 8);
-                memcpy(&l, all + xl, 8);
-                a |= r;
-                l &= r;
-                memcpy(any + xl, &a, 8);
-                memcpy(all + xl, &l, 8);
-            }
-            for (; xl < lx; xl++) {
-                any[xl] |= row[xl];
-                all[xl] &= row[xl];
-            }
+            const uint8_t *row =
+                j < ny && k < nz ? (const uint8_t *)(g->bits + ((size_t)k * ny + j) * g->wx) : zero;
+            rows[8 * z + y] = row;
+            if (row != zero) in[nrows++] = row;
         }
+    or_and_rows(in, nrows, lx, any, all);
+    if (nrows < 64) // voxels outside the grid are 0
+        memset(all, 0, (size_t)lx);
     if (nx & 7) { // the last leaf is cut by the grid's end
         any[lx - 1] &= (uint8_t)((1u << (nx & 7)) - 1u);
         all[lx - 1] = 0;
@@ -954,6 +1053,10 @@ bool is_constant(const NodeT &node, typename NodeT::ValueType &value, bool &stat
 // nodes along x (it reads whole grid rows, as classify_leaves does: nodes
 // side by side in x share the rows' cache lines). Rows are made on all
 // threads, in 8 rounds of 2 of each node's 16 z slabs (progress between).
+// make(X, Y, Z, w, leaf) returns the kind of the leaf at (X, Y, Z) and
+// makes it (leaf) when partial. by_bits: the kinds come from the bit grid
+// (classify_leaves), and make is asked for partial leaves only, given
+// their words w (leaf_words); else w is null.
 template <typename TreeT, typename MakeLeaf>
 int build_tree(const vx_bitgrid *g, TreeT &tree, const typename TreeT::ValueType &on,
                const openvdb::Coord &at, const vx_voxel_io *io, double span, vx_err *err,
@@ -983,8 +1086,9 @@ int build_tree(const vx_bitgrid *g, TreeT &tree, const typename TreeT::ValueType
         if (io && io->progress && io->progress(io->ud, span * round / ROUNDS, err)) return -1;
         tbb::parallel_for(
             tbb::blocked_range<int>(0, rows, 1), [&](const tbb::blocked_range<int> &r) {
-                std::vector<uint8_t> scratch(by_bits ? 3 * (size_t)lx : 0);
-                uint8_t *kinds = scratch.data() + 2 * (size_t)lx;
+                std::vector<uint8_t> scratch(by_bits ? 4 * (size_t)lx : 0);
+                uint8_t *kinds = scratch.data() + 3 * (size_t)lx;
+                const uint8_t *leaf_rows[64];
                 for (int t = r.begin(); t < r.end(); t++) {
                     const int cy = by + t % (ey - by + 1), cz = bz + t / (ey - by + 1);
                     const int yl0 = std::max(0, 16 * cy - ay),
@@ -996,13 +1100,19 @@ int build_tree(const vx_bitgrid *g, TreeT &tree, const typename TreeT::ValueType
                     for (int zl = zl0; zl < zl1; zl++) {
                         for (int yl = yl0; yl < yl1; yl++) {
                             if (by_bits)
-                                classify_leaves(g, yl, zl, scratch.data(), scratch.data() + lx,
-                                                kinds);
+                                classify_leaves(g, yl, zl, scratch.data(), kinds, leaf_rows);
                             for (int xl = 0; xl < lx; xl++) {
                                 LeafT *leaf = nullptr;
-                                const int kind = by_bits && kinds[xl] != LEAF_PART
-                                                     ? kinds[xl]
-                                                     : make(8 * xl, 8 * yl, 8 * zl, leaf);
+                                int kind;
+                                if (!by_bits) {
+                                    kind = make(8 * xl, 8 * yl, 8 * zl, nullptr, leaf);
+                                } else if ((kind = kinds[xl]) == LEAF_PART) {
+                                    uint64_t w[8];
+                                    leaf_words(
+                                        leaf_rows, xl,
+                                        nx - 8 * xl >= 8 ? 0xffu : (1u << (nx - 8 * xl)) - 1u, w);
+                                    make(8 * xl, 8 * yl, 8 * zl, w, leaf);
+                                }
                                 if (kind == LEAF_EMPTY) continue;
                                 std::unique_ptr<LeafT> owned(leaf);
                                 const openvdb::Coord xyz =
@@ -1025,8 +1135,10 @@ int build_tree(const vx_bitgrid *g, TreeT &tree, const typename TreeT::ValueType
                         if (!node) continue;
                         ValueT v;
                         bool state;
-                        for (auto it = node->beginChildOn(); it; ++it)
-                            if (is_constant(*it, v, state)) node->addTile(it.pos(), v, state);
+                        // (a leaf made from bits has on and off voxels)
+                        if (!by_bits)
+                            for (auto it = node->beginChildOn(); it; ++it)
+                                if (is_constant(*it, v, state)) node->addTile(it.pos(), v, state);
                         if (is_constant(*node, v, state))
                             row.tiles.emplace_back(node->origin(), v, state);
                         else
@@ -1074,17 +1186,14 @@ openvdb::BoolGrid::Ptr bool_grid(const vx_bitgrid *g, const openvdb::Coord &at,
     openvdb::BoolGrid::Ptr grid = std::make_shared<ParallelGrid<openvdb::BoolGrid>>(false);
     using LeafT = openvdb::BoolGrid::TreeType::LeafNodeType;
     int rc = build_tree(g, grid->tree(), true, at, io, span, err, true,
-                        [g](int X, int Y, int Z, LeafT *&out) {
-                            uint64_t w[8];
-                            int kind = gather_leaf(g, X, Y, Z, w);
-                            if (kind != LEAF_PART) return kind;
+                        [](int X, int Y, int Z, const uint64_t *w, LeafT *&out) {
                             out = new LeafT(openvdb::Coord(X, Y, Z), false, false);
                             uint64_t *buf = out->buffer().data();
                             for (int x = 0; x < 8; x++) {
                                 out->getValueMask().template getWord<uint64_t>(x) = w[x];
                                 buf[x] = w[x];
                             }
-                            return kind;
+                            return (int)LEAF_PART;
                         });
     if (rc) return nullptr;
     grid->setTransform(transform_of(g->grid));
@@ -1099,21 +1208,20 @@ openvdb::FloatGrid::Ptr fog_grid(const vx_bitgrid *g, const openvdb::Coord &at,
     openvdb::FloatGrid::Ptr grid;
     if (g->counts) {
         grid = make_float_grid(0.0f);
-        rc = build_tree(
-            g, grid->tree(), 1.0f, at, io, span, err, false,
-            [g](int X, int Y, int Z, LeafT *&out) { return coverage_leaf(g, X, Y, Z, out); });
+        rc = build_tree(g, grid->tree(), 1.0f, at, io, span, err, false,
+                        [g](int X, int Y, int Z, const uint64_t *, LeafT *&out) {
+                            return coverage_leaf(g, X, Y, Z, out);
+                        });
     } else { // leaves of masks only, their values made as they are written
         grid = std::make_shared<ParallelGrid<openvdb::FloatGrid>>(0.0f, 1.0f);
-        rc = build_tree(
-            g, grid->tree(), 1.0f, at, io, span, err, true, [g](int X, int Y, int Z, LeafT *&out) {
-                uint64_t w[8];
-                int kind = gather_leaf(g, X, Y, Z, w);
-                if (kind != LEAF_PART) return kind;
-                out = new LeafT(openvdb::PartialCreate(), openvdb::Coord(X, Y, Z), 0.0f, false);
-                for (int x = 0; x < 8; x++)
-                    out->getValueMask().template getWord<uint64_t>(x) = w[x];
-                return kind;
-            });
+        rc = build_tree(g, grid->tree(), 1.0f, at, io, span, err, true,
+                        [](int X, int Y, int Z, const uint64_t *w, LeafT *&out) {
+                            out = new LeafT(openvdb::PartialCreate(), openvdb::Coord(X, Y, Z), 0.0f,
+                                            false);
+                            for (int x = 0; x < 8; x++)
+                                out->getValueMask().template getWord<uint64_t>(x) = w[x];
+                            return (int)LEAF_PART;
+                        });
     }
     if (rc) return nullptr;
     grid->setTransform(transform_of(g->grid));
@@ -1337,11 +1445,12 @@ extern "C" uint64_t vx_voxel_vdb_grid_bytes(const vx_bitgrid *g, vx_vdb_class cl
     std::atomic<uint64_t> partial{0}, full{0};
     tbb::parallel_for(tbb::blocked_range<int>(0, lz), [&](const tbb::blocked_range<int> &r) {
         uint64_t p = 0, f = 0;
-        std::vector<uint8_t> scratch(3 * (size_t)lx);
-        uint8_t *kinds = scratch.data() + 2 * (size_t)lx;
+        std::vector<uint8_t> scratch(4 * (size_t)lx);
+        uint8_t *kinds = scratch.data() + 3 * (size_t)lx;
+        const uint8_t *rows[64];
         for (int zl = r.begin(); zl < r.end(); zl++)
             for (int yl = 0; yl < ly; yl++) {
-                classify_leaves(g, yl, zl, scratch.data(), scratch.data() + lx, kinds);
+                classify_leaves(g, yl, zl, scratch.data(), kinds, rows);
                 for (int xl = 0; xl < lx; xl++) {
                     p += kinds[xl] == LEAF_PART;
                     f += kinds[xl] == LEAF_FULL;

@@ -6,6 +6,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "util/cpu.h"
 #include "voxel/winding_int.h"
 
 #if defined(__x86_64__)
@@ -561,7 +562,7 @@ __attribute__((target("avx2"))) static void eval4_avx2(const vx_wtree *t, const 
 void vx_wtree_eval4(const vx_wtree *t, const double (*q)[3], int n, double *w)
 {
 #if defined(VX_WTREE_AVX2)
-    if (n > 1 && t->nnodes && __builtin_cpu_supports("avx2")) return eval4_avx2(t, q, n, w);
+    if (n > 1 && t->nnodes && vx_cpu_avx2()) return eval4_avx2(t, q, n, w);
 #endif
     for (int l = 0; l < n; l++)
         w[l] = vx_wtree_eval(t, q[l]);
@@ -730,8 +731,7 @@ void vx_wtree_bound4(const vx_wtree *t, const double (*lo)[3], const double (*hi
                      const double *limit, const int *side, int n, double *out)
 {
 #if defined(VX_WTREE_AVX2)
-    if (n > 1 && t->nnodes && __builtin_cpu_supports("avx2"))
-        return bound4_avx2(t, lo, hi, limit, side, n, out);
+    if (n > 1 && t->nnodes && vx_cpu_avx2()) return bound4_avx2(t, lo, hi, limit, side, n, out);
 #endif
     for (int l = 0; l < n; l++)
         out[l] = vx_wtree_bound(t, lo[l], hi[l], limit[l], side[l]);

@@ -219,12 +219,19 @@ static void vdbcheck(const vx_bitgrid *g, vx_vdb_class cls, int coverage)
                  n[2]);
 }
 
+/* And for the vdb writer, rows of more than 128 bytes of leaves: its
+ * classifier's blocks of 128 bytes, then of 32, then bytes (binvox's cube
+ * of these would be 2 G voxels). */
+static const int wide[][3] = {{1100, 9, 10}, {1301, 17, 9}};
+
 static void test_vdb(void **st)
 {
-    for (size_t s = 0; s < sizeof sizes / sizeof *sizes; s++)
+    const size_t ns = sizeof sizes / sizeof *sizes, nw = sizeof wide / sizeof *wide;
+    for (size_t s = 0; s < ns + nw; s++)
         for (int kind = 0; kind < 4; kind++) {
+            const int *n = s < ns ? sizes[s] : wide[s - ns];
             vx_bitgrid g;
-            random_grid(&g, sizes[s][0], sizes[s][1], sizes[s][2], kind, 1);
+            random_grid(&g, n[0], n[1], n[2], kind, 1);
             vdbcheck(&g, VX_VDB_BOOL, 0);
             vdbcheck(&g, VX_VDB_FOG, 0);
             vdbcheck(&g, VX_VDB_FOG, 1);
@@ -307,11 +314,12 @@ static int record(void *ud, double f, vx_err *err)
 
 /* Every writer moves the progress while it writes (the job's bar follows
  * it): at least two distinct fractions strictly between 0 and 1, never
- * going back, and 1 at most. */
+ * going back, and 1 at most. (160 slices: vox reports per 16 slices of a
+ * model, and one of the two models may be empty.) */
 static void test_progress(void **st)
 {
     vx_bitgrid g;
-    random_grid(&g, 300, 70, 64, 3, 0);
+    random_grid(&g, 300, 70, 160, 3, 0);
     static const char *const names[] = {"raw8", "raw1",     "binvox",  "nrrd",         "npy",
                                         "vox",  "vdb bool", "vdb fog", "vdb level_set"};
     int (*const fns[])(const vx_bitgrid *, const char *, const vx_voxel_io *,
