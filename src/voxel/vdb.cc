@@ -156,9 +156,9 @@ class Prepared
 // background elsewhere (a 0/1 fog grid: its 80 MB of floats at 1024^3 were
 // most of its writer's time, made, faulted in and freed). Such a leaf's
 // buffer is its value mask, then what writeCompressedValues writes for its
-// values, which depends only on how many are active: OpenVDB's own bytes,
-// made once for each count a thread meets (a scratch leaf given the
-// leaf's values), are reused for every leaf of that count.
+// values, which depends only on how many are active: OpenVDB's own bytes
+// for each count (tails_for, made once a process from a scratch leaf) are
+// reused for every leaf of that count.
 template <typename GridT> class ParallelGrid final : public GridT, public Prepared
 {
     using TreeT = typename GridT::TreeType;
@@ -242,11 +242,50 @@ template <typename GridT> class ParallelGrid final : public GridT, public Prepar
         }
     }
 
-    // What a thread keeps for leaves made without values.
-    struct Unloaded {
-        std::unique_ptr<LeafT> scratch;
-        std::vector<std::string> tail; // by active count; empty: not made yet
-    };
+    // What writeCompressedValues writes for the values of a leaf made
+    // without them, by its active count: OpenVDB's own bytes for a scratch
+    // leaf holding on at that many voxels and background elsewhere, under
+    // one (compression, background, on, half). Made once a process, on the
+    // first write that needs them (each write's threads made them again:
+    // 1,022 of them, 3-5 ms of a fog write at 1024^3); the last few kept.
+    using Tails = std::vector<std::string>;
+    static std::shared_ptr<const Tails> tails_for(uint32_t compression, const ValueT &background,
+                                                  const ValueT &on, bool half)
+    {
+        struct Made {
+            uint32_t compression;
+            ValueT background, on;
+            bool half;
+            std::shared_ptr<const Tails> tails;
+        };
+        static std::mutex lock;
+        static std::vector<Made> made; // newest last
+        std::lock_guard<std::mutex> hold(lock);
+        for (const Made &m : made)
+            if (m.compression == compression && m.half == half &&
+                std::memcmp(&m.background, &background, sizeof(ValueT)) == 0 &&
+                std::memcmp(&m.on, &on, sizeof(ValueT)) == 0)
+                return m.tails;
+        std::shared_ptr<Tails> t = std::make_shared<Tails>(LeafT::SIZE + 1);
+        std::unique_ptr<LeafT> scratch(new LeafT(openvdb::Coord(0), background));
+        ValueT *d = scratch->buffer().data();
+        for (openvdb::Index n = 0; n <= LeafT::SIZE; n++) {
+            typename LeafT::NodeMaskType mask;
+            for (openvdb::Index i = 0; i < LeafT::SIZE; i++) {
+                if (i < n) mask.setOn(i);
+                d[i] = i < n ? on : background;
+            }
+            std::ostringstream ss;
+            openvdb::io::setDataCompression(ss, compression);
+            openvdb::io::setGridBackgroundValuePtr(ss, &background);
+            openvdb::io::writeCompressedValues(ss, d, LeafT::SIZE, mask,
+                                               typename LeafT::NodeMaskType(), half);
+            (*t)[n] = ss.str();
+        }
+        if (made.size() == 4) made.erase(made.begin());
+        made.push_back(Made{compression, background, on, half, t});
+        return t;
+    }
 
     // Appends what write(ss, i) puts into a fresh memory stream (the
     // compression and background of os) for i in [0, n), on all threads, a
@@ -340,37 +379,13 @@ template <typename GridT> class ParallelGrid final : public GridT, public Prepar
     }
 
     // The leaf's writeBuffers: its own, or for a leaf made without values
-    // its mask and the bytes of its values' count.
-    void write_leaf(std::ostream &os, const LeafT &leaf, Unloaded &u, bool half) const
+    // its mask and the bytes of its values' count (tails).
+    void write_leaf(std::ostream &os, const LeafT &leaf, const Tails *tails, bool half) const
     {
         if (!unloaded(leaf)) return leaf.writeBuffers(os, half);
-        const std::string &t = tail(leaf, u, half, openvdb::io::getDataCompression(os),
-                                    openvdb::io::getGridBackgroundValuePtr(os));
+        const std::string &t = (*tails)[leaf.getValueMask().countOn()];
         leaf.getValueMask().save(os);
         os.write(t.data(), (std::streamsize)t.size());
-    }
-
-    // What writeCompressedValues writes for the values of a leaf made
-    // without them, under compression and background (made once a count).
-    const std::string &tail(const LeafT &leaf, Unloaded &u, bool half, uint32_t compression,
-                            const void *background) const
-    {
-        const typename LeafT::NodeMaskType &mask = leaf.getValueMask();
-        if (u.tail.empty()) u.tail.resize(LeafT::SIZE + 1);
-        std::string &t = u.tail[mask.countOn()];
-        if (t.empty()) {
-            if (!u.scratch) u.scratch.reset(new LeafT(leaf.origin()));
-            ValueT *d = u.scratch->buffer().data();
-            for (openvdb::Index n = 0; n < LeafT::SIZE; n++)
-                d[n] = mask.isOn(n) ? on_ : this->constTree().background();
-            std::ostringstream ss;
-            openvdb::io::setDataCompression(ss, compression);
-            openvdb::io::setGridBackgroundValuePtr(ss, background);
-            openvdb::io::writeCompressedValues(ss, d, LeafT::SIZE, mask,
-                                               typename LeafT::NodeMaskType(), half);
-            t = ss.str();
-        }
-        return t;
     }
 
     bool unloaded(const LeafT &leaf) const
@@ -473,10 +488,11 @@ template <typename GridT> class ParallelGrid final : public GridT, public Prepar
 
     // Leaves a..b of a float grid (write_leaf's bytes), and where each
     // leaf's end: leaves made without values copied (a mask and its
-    // count's tail), a chunk with others through a stream.
-    std::string value_bytes(const std::vector<const LeafT *> &all, size_t a, size_t b, Unloaded &u,
-                            bool half, uint32_t compression, const ValueT *background,
-                            std::vector<size_t> &ends, Stats &st) const
+    // count's tail, from tails: null for a grid without such leaves), a
+    // chunk with others through a stream.
+    std::string value_bytes(const std::vector<const LeafT *> &all, size_t a, size_t b,
+                            const Tails *tails, bool half, uint32_t compression,
+                            const ValueT *background, std::vector<size_t> &ends, Stats &st) const
     {
         bool direct = by_mask_;
         for (size_t i = a; i < b && direct; i++)
@@ -486,7 +502,7 @@ template <typename GridT> class ParallelGrid final : public GridT, public Prepar
             openvdb::io::setDataCompression(ss, compression);
             openvdb::io::setGridBackgroundValuePtr(ss, background);
             for (size_t i = a; i < b; i++) {
-                write_leaf(ss, *all[i], u, half);
+                write_leaf(ss, *all[i], tails, half);
                 ends[i - a] = (size_t)ss.tellp();
                 leaf_stats(*all[i], st);
             }
@@ -495,12 +511,12 @@ template <typename GridT> class ParallelGrid final : public GridT, public Prepar
         size_t at = 0;
         for (size_t i = a; i < b; i++) {
             if (i + AHEAD < b) prefetch(all[i + AHEAD]);
-            ends[i - a] = at += MASK_BYTES + tail(*all[i], u, half, compression, background).size();
+            ends[i - a] = at += MASK_BYTES + (*tails)[all[i]->getValueMask().countOn()].size();
         }
         std::string bytes(at, '\0');
         char *p = &bytes[0];
         for (size_t i = a; i < b; i++) {
-            const std::string &t = tail(*all[i], u, half, compression, background);
+            const std::string &t = (*tails)[all[i]->getValueMask().countOn()];
             copy_mask(p, all[i]->getValueMask());
             std::memcpy(p + MASK_BYTES, t.data(), t.size());
             p += MASK_BYTES + t.size();
@@ -552,14 +568,16 @@ template <typename GridT> class ParallelGrid final : public GridT, public Prepar
         const size_t chunk = 128, nc = (all.size() + chunk - 1) / chunk;
         buffers_.assign(nc, std::string());
         std::vector<Stats> part(nc);
-        tbb::enumerable_thread_specific<Unloaded> mine; // the tails are this write's
+        std::shared_ptr<const Tails> tails;
+        if constexpr (!std::is_same<ValueT, bool>::value)
+            if (by_mask_) tails = tails_for(compression, background, on_, half);
         tbb::parallel_for(size_t(0), nc, [&](size_t c) {
             const size_t a = c * chunk, b = std::min(all.size(), a + chunk);
             if constexpr (std::is_same<ValueT, bool>::value) {
                 buffers_[c] = bool_bytes(all, a, b, part[c]);
             } else {
                 std::vector<size_t> ends(b - a);
-                buffers_[c] = value_bytes(all, a, b, mine.local(), half, compression, &background,
+                buffers_[c] = value_bytes(all, a, b, tails.get(), half, compression, &background,
                                           ends, part[c]);
                 if (has_dl) delayed_load(buffers_[c], a, ends, sized, dl);
             }
