@@ -61,16 +61,17 @@ static void *take(size_t len, size_t *got)
     return p;
 }
 
-void *vx_bigmem_alloc(size_t bytes, size_t *mapped)
+static void *bigmem(size_t bytes, size_t *mapped, int zero)
 {
     *mapped = 0;
-    if (bytes < BIGMEM_MAP_MIN) return calloc(bytes ? bytes : 1, 1);
+    if (bytes < BIGMEM_MAP_MIN)
+        return zero ? calloc(bytes ? bytes : 1, 1) : malloc(bytes ? bytes : 1);
     if (bytes > SIZE_MAX - BIGMEM_ROUND) return NULL; /* no such mapping */
     size_t len = (bytes + BIGMEM_ROUND - 1) / BIGMEM_ROUND * BIGMEM_ROUND;
     size_t got = 0;
     void *p = take(len, &got);
     if (p) {
-        memset(p, 0, bytes);
+        if (zero) memset(p, 0, bytes);
         *mapped = got;
         return p;
     }
@@ -81,6 +82,16 @@ void *vx_bigmem_alloc(size_t bytes, size_t *mapped)
 #endif
     *mapped = len;
     return p;
+}
+
+void *vx_bigmem_alloc(size_t bytes, size_t *mapped)
+{
+    return bigmem(bytes, mapped, 1);
+}
+
+void *vx_bigmem_scratch(size_t bytes, size_t *mapped)
+{
+    return bigmem(bytes, mapped, 0);
 }
 
 void vx_bigmem_free(void *p, size_t mapped)

@@ -16,6 +16,11 @@
 /* bytes of zeroed memory, or NULL; *mapped is what vx_bigmem_free needs
  * back (the length mapped, 0 when it came from calloc). */
 void *vx_bigmem_alloc(size_t bytes, size_t *mapped);
+/* As vx_bigmem_alloc, but the contents are undefined (a kept mapping is
+ * handed out as it was left, not cleared): for scratch that is written
+ * before it is read, reserved at the most it may take and touched as used
+ * (clearing all of a kept one would touch all of it). */
+void *vx_bigmem_scratch(size_t bytes, size_t *mapped);
 /* Frees p (NULL is fine) given the *mapped vx_bigmem_alloc set: kept
  * mapped while the kept ones stay within vx_bigmem_keep's bytes. */
 void vx_bigmem_free(void *p, size_t mapped);

@@ -498,8 +498,8 @@ static int ev_slab(int si, int t, void *ud)
     ev_slab_t *s = j->s + si;
     s->cap = (uint32_t)(j->budget / ((EV_CHUNK + 1) * sizeof(uint32_t)));
     s->nchunks = 1;
-    s->ev = vx_bigmem_alloc((size_t)s->cap * EV_CHUNK * sizeof *s->ev, &s->ev_mapped);
-    s->next = vx_bigmem_alloc((size_t)s->cap * sizeof *s->next, &s->next_mapped);
+    s->ev = vx_bigmem_scratch((size_t)s->cap * EV_CHUNK * sizeof *s->ev, &s->ev_mapped);
+    s->next = vx_bigmem_scratch((size_t)s->cap * sizeof *s->next, &s->next_mapped);
     s->n = calloc(3 * (size_t)nx, sizeof *s->n);
     s->head = s->n + nx;
     s->tail = s->head + nx;
@@ -610,24 +610,39 @@ static void ev_walk(ev_emit *e, ev_range *r, ev_sink *k)
     ev_job *j = e->j;
     uint64_t at = r->at0, plen = 0; /* the open run: value pv, plen voxels */
     unsigned v = r->v0, pv = v;
+    const uint64_t d = (uint64_t)j->d;
+    const int ybits = j->ybits;
+    const uint32_t ymask = (1u << ybits) - 1u;
     r->finished = 0;
     for (int x = r->x0; x < r->x1; x++)
         for (int si = 0; si < j->nslabs; si++) {
             const ev_slab_t *s = j->s + si;
-            for (uint32_t q = 0, c = s->head[x]; q < s->n[x]; q++) {
-                if (q && !(q % EV_CHUNK)) c = s->next[c];
-                const uint32_t ev = s->ev[(size_t)c * EV_CHUNK + q % EV_CHUNK];
-                const uint64_t pos = ev_pos(j, x, ev);
-                if (pos != at) { /* two events at one place (y = ny = d): no run */
-                    if (v != pv) {
-                        if (plen) ev_close(r, k, pv, plen);
-                        pv = v;
-                        plen = 0;
-                    }
-                    plen += pos - at;
-                    at = pos;
+            const uint32_t n = s->n[x];
+            const uint64_t base = (uint64_t)x * d * d; /* ev_pos's */
+            /* chunk by chunk, the next one asked for ahead: each is
+             * elsewhere in the arena (the walk waited on their loads) */
+            for (uint32_t q0 = 0, c = s->head[x]; q0 < n; q0 += EV_CHUNK) {
+                const uint32_t *ev = s->ev + (size_t)c * EV_CHUNK;
+                const uint32_t m = n - q0 < EV_CHUNK ? n - q0 : EV_CHUNK;
+                if (m == EV_CHUNK && q0 + EV_CHUNK < n) {
+                    c = s->next[c];
+                    const char *a = (const char *)(s->ev + (size_t)c * EV_CHUNK);
+                    for (size_t b = 0; b < EV_CHUNK * sizeof *ev; b += 64)
+                        __builtin_prefetch(a + b);
                 }
-                v ^= 1u;
+                for (uint32_t i = 0; i < m; i++) {
+                    const uint64_t pos = base + (uint64_t)(ev[i] >> ybits) * d + (ev[i] & ymask);
+                    if (pos != at) { /* two events at one place (y = ny = d): no run */
+                        if (v != pv) {
+                            if (plen) ev_close(r, k, pv, plen);
+                            pv = v;
+                            plen = 0;
+                        }
+                        plen += pos - at;
+                        at = pos;
+                    }
+                    v ^= 1u;
+                }
             }
         }
     if (r == e->r + e->nr - 1) { /* after the last event, zeros to the cube's end */

@@ -250,6 +250,30 @@ static void test_bigmem_keep(void **state)
     assert_true(vx_bigmem_kept() <= 15 * MB);
     vx_bigmem_keep(0);
     assert_int_equal(vx_bigmem_kept(), 0);
+
+    /* scratch: kept mappings reused as they were left (not touched again),
+     * a fresh one zero as any new mapping; small ones from malloc */
+    vx_bigmem_keep(40 * MB);
+    unsigned char *f = vx_bigmem_scratch(10 * MB, &m1);
+    assert_non_null(f);
+    assert_int_equal(m1, 10 * MB);
+    assert_true(all_zero(f, 10 * MB));
+    memset(f, 0xcd, 10 * MB);
+    vx_bigmem_free(f, m1);
+    unsigned char *g = vx_bigmem_scratch(8 * MB, &m2);
+    assert_ptr_equal(g, f);
+    assert_int_equal(g[0], 0xcd);
+    assert_int_equal(g[8 * MB - 1], 0xcd);
+    vx_bigmem_free(g, m2);
+    unsigned char *h = vx_bigmem_alloc(8 * MB, &m2); /* alloc clears it */
+    assert_ptr_equal(h, f);
+    assert_true(all_zero(h, 8 * MB));
+    vx_bigmem_free(h, m2);
+    unsigned char *i = vx_bigmem_scratch(1000, &m3);
+    assert_non_null(i);
+    assert_int_equal(m3, 0);
+    vx_bigmem_free(i, m3);
+    vx_bigmem_keep(0);
 }
 
 int main(void)
