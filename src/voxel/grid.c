@@ -1,9 +1,12 @@
 /* Grids and bit grids (voxel.h). */
+#include <limits.h>
 #include <math.h>
+#include <stdatomic.h>
 #include <stdlib.h>
 #include <string.h>
 
 #include "util/bigmem.h"
+#include "util/par.h"
 #include "voxel/voxel.h"
 
 uint64_t vx_bitgrid_bytes(const int dims[3], int supersample)
@@ -76,9 +79,35 @@ uint64_t vx_bits_count(const uint32_t *w, size_t n)
     return count_bits(w, n);
 }
 
+/* A grid's count on all CPUs, 4 MiB of words a piece (a 1024^3 grid took
+ * 3 ms of a winding job on one). */
+#define COUNT_PIECE ((size_t)1 << 20)
+
+typedef struct count_job {
+    const uint32_t *w;
+    size_t n;
+    _Atomic uint64_t total;
+} count_job;
+
+static int count_piece(int i, int t, void *ud)
+{
+    (void)t;
+    count_job *c = ud;
+    const size_t at = (size_t)i * COUNT_PIECE;
+    atomic_fetch_add(&c->total,
+                     vx_bits_count(c->w + at, c->n - at < COUNT_PIECE ? c->n - at : COUNT_PIECE));
+    return 0;
+}
+
 uint64_t vx_bitgrid_count(const vx_bitgrid *g)
 {
-    return vx_bits_count(g->bits, g->wx * (size_t)g->grid.dims[1] * (size_t)g->grid.dims[2]);
+    const size_t n = g->wx * (size_t)g->grid.dims[1] * (size_t)g->grid.dims[2];
+    const size_t pieces = (n + COUNT_PIECE - 1) / COUNT_PIECE;
+    if (pieces < 2 || pieces > INT_MAX) return vx_bits_count(g->bits, n);
+    count_job c = {.w = g->bits, .n = n};
+    atomic_init(&c.total, 0);
+    vx_par_for((int)pieces, vx_par_cpus(), count_piece, &c);
+    return atomic_load(&c.total);
 }
 
 int vx_grid_from_voxel_size(const vx_mesh *m, double h, int padding, vx_grid *out, vx_err *err)

@@ -231,6 +231,8 @@ static int raster_tri(wctx *c, vx_xband *sc, uint8_t *cone, size_t t, int j0, in
 
 /* Progress and the stop check from the calling thread (t = 0); every
  * thread stops once it said stop. */
+#define POLL_COLUMN 16
+#define POLL_WORK 1024 /* every 64 empty columns, or after 1,008 crossings */
 static int poll(wctx *c, int t)
 {
     if (atomic_load(&c->stop)) return 1;
@@ -564,12 +566,19 @@ static int band_task(int b, int t, void *ud)
             sc->far[(i - c->lo[0]) / FAR_BLOCK] =
                 (uint8_t)far_box(c, i, ib, ja, jb, c->rlo, c->rhi, 1, 0);
         }
+    /* the stop check and progress every POLL_WORK of work (a column, and
+     * its crossings): a column of a soup can take 0.1 s, but a clock read
+     * a column was a tenth of a 1024^3 job on a virtual machine's clock */
+    size_t work = POLL_WORK;
     for (int j = ja; j <= jb; j++) {
         memset(sc->slice, 0, (size_t)c->nz * wx * sizeof *sc->slice);
         for (int i = c->lo[0]; i <= c->hi[0]; i++) {
-            if (poll(c, t)) return 1; /* a column of a soup can take 0.1 s */
             size_t col = (size_t)(j - j0) * c->nx + i, end = sc->x.end[col];
             size_t begin = col ? sc->x.end[col - 1] : 0, n = end - begin;
+            if ((work += POLL_COLUMN + n) >= POLL_WORK) {
+                work = 0;
+                if (poll(c, t)) return 1;
+            }
             if (n > sc->zcap) {
                 int32_t *z = realloc(sc->z, n * sizeof *z);
                 if (!z) return vx_xmeter_oom(&c->mem);
