@@ -1,11 +1,14 @@
 /* Big zeroed buffers (bigmem.h). */
 #include "util/bigmem.h"
 
+#include <limits.h>
 #include <pthread.h>
 #include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
 #include <sys/mman.h>
+
+#include "util/par.h"
 
 #define BIGMEM_MAP_MIN ((size_t)4 << 20)
 #define BIGMEM_ROUND ((size_t)2 << 20) /* mappings in whole huge pages, to fit again */
@@ -61,6 +64,36 @@ static void *take(size_t len, size_t *got)
     return p;
 }
 
+/* A kept mapping is cleared on all CPUs, 8 MiB a piece (a fresh one's
+ * pages are cleared by the kernel as the threads that fill them first
+ * touch them, on all of them): a 72 MB grid's memset on one took 7 ms of
+ * a 40 ms spot job at 1024^3. */
+#define CLEAR_PIECE ((size_t)8 << 20)
+
+typedef struct clear_job {
+    unsigned char *p;
+    size_t n;
+} clear_job;
+
+static int clear_piece(int i, int t, void *ud)
+{
+    (void)t;
+    const clear_job *c = ud;
+    const size_t at = (size_t)i * CLEAR_PIECE;
+    memset(c->p + at, 0, c->n - at < CLEAR_PIECE ? c->n - at : CLEAR_PIECE);
+    return 0;
+}
+
+static void clear(void *p, size_t n)
+{
+    clear_job c = {p, n};
+    const size_t pieces = (n + CLEAR_PIECE - 1) / CLEAR_PIECE;
+    if (pieces < 2 || pieces > INT_MAX)
+        memset(p, 0, n);
+    else
+        vx_par_for((int)pieces, vx_par_cpus(), clear_piece, &c);
+}
+
 static void *bigmem(size_t bytes, size_t *mapped, int zero)
 {
     *mapped = 0;
@@ -71,7 +104,7 @@ static void *bigmem(size_t bytes, size_t *mapped, int zero)
     size_t got = 0;
     void *p = take(len, &got);
     if (p) {
-        if (zero) memset(p, 0, bytes);
+        if (zero) clear(p, bytes);
         *mapped = got;
         return p;
     }
