@@ -370,9 +370,9 @@ static char *trim(char *s)
 int vx_config_split_listen(const char *s, char host[256], char port[6])
 {
     const char *colon, *h = s;
-    if (s[0] == '[') {
+    if (s[0] == '[') { /* an IPv6 address: [127.0.0.1] or [] is none */
         const char *rb = strchr(s, ']');
-        if (!rb || rb[1] != ':') return -1;
+        if (!rb || rb[1] != ':' || !memchr(s + 1, ':', (size_t)(rb - s - 1))) return -1;
         h = s + 1;
         colon = rb + 1;
     } else {

@@ -129,7 +129,13 @@ static void test_refused_and_comments(void **state)
                             {"--job-timeout", "+5"},
                             {"--job-timeout", " 5"},
                             {"--job-timeout", "inf"},
-                            {"--job-timeout", "5 "}};
+                            {"--job-timeout", "5 "},
+                            /* brackets hold an IPv6 address only */
+                            {"--listen", "[127.0.0.1]:8080"},
+                            {"--listen", "[]:8080"},
+                            {"--listen", "[localhost]:8080"},
+                            {"--listen", "::1:8080"},
+                            {"--listen", "[::1]8080"}};
     for (size_t i = 0; i < sizeof bad / sizeof bad[0]; i++) {
         char *av[] = {"voxeld", (char *)bad[i][0], (char *)bad[i][1], NULL};
         assert_int_equal(load(&c, 3, av), -1);
@@ -137,6 +143,12 @@ static void test_refused_and_comments(void **state)
     char *ok[] = {"voxeld", "--connection-timeout", "1e9", "--max-uri-bytes", "256", NULL};
     assert_int_equal(load(&c, 5, ok), 0);
     assert_true(c.connection_timeout_s == 1e9);
+    static const char *const listens[] = {"[::1]:0", "[::]:8080", "[fe80::1%lo]:9", ":0",
+                                          "127.0.0.1:65535"};
+    for (size_t i = 0; i < sizeof listens / sizeof *listens; i++) {
+        char *av[] = {"voxeld", "--listen", (char *)listens[i], NULL};
+        assert_int_equal(load(&c, 3, av), 0);
+    }
     char path[] = "/tmp/vx-config-XXXXXX";
     char *a3[] = {"voxeld", "--config", path, NULL};
     config_file(path, "# a comment\nreplica-name = node#1  # the first\nworkers = 3#\n", 0);
