@@ -10,6 +10,7 @@
 #include "util/path.h"
 #include "voxel/io.h"
 #include "voxel/job.h"
+#include "voxel/lattice.h"
 #include "voxel/voxel.h"
 #include "util/json.h"
 
@@ -843,6 +844,15 @@ static int voxelize_check_mesh(const void *params, const cJSON *mesh_meta, const
                    ? vx_err_set(err, VX_EUNPROC, "invalid_params", "params.%s", e.message)
                    : 0;
     if (check_mesh_grid(p, &w, lim, 1, err)) return -1;
+    /* No engine runs a face vertex more than 2^50 voxels from the lattice
+     * origin (lattice.h; the cpu and winding engines failed the job, the
+     * GPU ones set voxels from floats that far off): the bbox's corners
+     * bound every vertex a face uses. */
+    double u[3];
+    if (vx_lattice_unit(&w, m.bbox_min, u) || vx_lattice_unit(&w, m.bbox_max, u))
+        return vx_err_set(err, VX_EUNPROC, "invalid_params",
+                          "params.grid: the mesh reaches more than 2^50 voxels from the grid "
+                          "origin; use a larger voxel_size");
     const int S = brick_size_of(p, w.dims, lim);
     int nb[3];
     return S && brick_grid(w.dims, S, nb, err) < 0 ? -1 : 0;

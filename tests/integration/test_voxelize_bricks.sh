@@ -195,6 +195,16 @@ bad "vdb_index_base past 32-bit coordinates" '{"grid":{"origin":[0,0,0],"voxel_s
 bad "vdb_index_base far below" '{"grid":{"origin":[0,0,0],"voxel_size":0.1,"dims":[16,16,16],"index_offset":[0,-1099511627776,0]},"bricks":{"size":0},"vdb_index_base":[0,0,0]}' "axis 1"
 bad "a box past 1e30" '{"grid":{"origin":[0,0,0],"voxel_size":1e300,"dims":[4,4,4],"index_offset":[1099511627776,0,0]}}' "outside +-1e30"
 bad "an origin of 1e308" '{"grid":{"origin":[1e308,0,0],"voxel_size":1,"dims":[4,4,4]}}' "outside +-1e30"
+# Voxels so small that the bunny reaches 10^19 of them from the origin:
+# no engine can run it (the cpu and winding ones failed the job, peel gave
+# too_many_layers, scan and slice wrong voxels). At 1e-15 it is 1.8e14 of
+# them, under 2^50, and runs.
+for extra in '' ',"method":"cpu"' ',"method":"peel"' ',"inside":"winding"'; do
+    bad "voxels of 1e-20$extra" '{"grid":{"origin":[0.1,0.2,0.3],"voxel_size":1e-20,"dims":[2,2,2]},"format":"summary"'"$extra"'}' "more than 2^50 voxels"
+done
+run_job voxelize "$B" '{"grid":{"origin":[-0.02,0.1,0],"voxel_size":1e-15,"dims":[2,2,2]},"format":"summary","method":"cpu"}'
+job_ok "voxels of 1e-15 inside the bunny"
+check "voxels of 1e-15 inside the bunny: all 8 set (got $(st voxels_inside))" test "$(st voxels_inside)" = 8
 bad "more than 65,536 bricks" '{"grid":{"origin":[0,0,0],"voxel_size":0.01,"dims":[16384,2048,512]},"bricks":{"size":8}}' "over the 65536 a grid may have"
 bad "vdb_index_base without a grid" '{"resolution":32,"bricks":{"size":0},"vdb_index_base":[0,0,0]}' "params.grid"
 
