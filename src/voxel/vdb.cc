@@ -13,6 +13,7 @@
 #include <atomic>
 #include <cfloat>
 #include <cmath>
+#include <limits>
 #include <cstdio>
 #include <cstring>
 #include <cerrno>
@@ -1257,7 +1258,11 @@ openvdb::FloatGrid::Ptr band_grid(vx_band_rows &rows, const openvdb::Coord &at, 
                                   const vx_voxel_io *io, double f0, double f1, vx_err *err)
 {
     using LeafT = openvdb::FloatGrid::TreeType::LeafNodeType;
-    const float bg = (float)(VX_BAND_HALF * h);
+    // 3 voxels, rounded up as a float: checkLevelSet wants the background
+    // at least 3 voxels in double, and (float)(3 h) is below it for h 0.01
+    float bg = (float)(VX_BAND_HALF * h);
+    if ((double)bg < VX_BAND_HALF * h && bg < std::numeric_limits<float>::max())
+        bg = std::nextafter(bg, std::numeric_limits<float>::infinity());
     openvdb::FloatGrid::Ptr grid = make_float_grid(bg);
     const int ny = rows.dims[1], nz = rows.dims[2];
     const int W = vx_band_columns(&rows);

@@ -53,6 +53,16 @@ fetch "$TMP/sphere.raw8"
 read -r NX NY NZ < <(jq -r '.stats.dims | map(tostring) | join(" ")' "$TMP/job.json")
 check "level_set: the exact band of the raw8 voxels (vdbcheck)" \
     "$VX_TOOLS/vdbcheck" "$TMP/level_set.vdb" "$TMP/sphere.raw8" "$NX" "$NY" "$NZ"
+# A voxel size whose 3 voxels round down as a float (0.03 ->
+# 0.0299999993): the background is rounded up, or checkLevelSet says it is
+# under 3 voxels (vdbcheck wants the float nearest 3 h from above).
+G='{"origin":[0.9,-0.1,-0.1],"voxel_size":0.01,"dims":[20,20,20]}'
+vox "level_set at h 0.01" "{\"grid\":$G,\"vdb_grid\":\"level_set\"}"
+fetch "$TMP/ls01.vdb"
+vox "raw8 at h 0.01" "{\"grid\":$G,\"format\":\"raw8\"}"
+fetch "$TMP/ls01.raw8"
+check "level_set at h 0.01: the exact band, a background of 3 voxels (vdbcheck)" \
+    "$VX_TOOLS/vdbcheck" "$TMP/ls01.vdb" "$TMP/ls01.raw8" 20 20 20
 "$VX_TOOLS/vdbinfo" "$TMP/level_set.vdb" >"$TMP/ls.json"
 check "level_set: FloatGrid surface" jq -e '.grids | length == 1 and .[0].name == "surface" and .[0].type == "float"' "$TMP/ls.json"
 "$VX_TOOLS/vdbinfo" "$TMP/fog.vdb" >"$TMP/fog.json"

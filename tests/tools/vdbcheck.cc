@@ -197,8 +197,12 @@ int main(int argc, char **argv)
         const std::string diag = openvdb::tools::checkLevelSet(*f, 8);
         if (!diag.empty())
             return fprintf(stderr, "vdbcheck: OpenVDB's checkLevelSet: %s\n", diag.c_str()), 1;
-        if (!std::isfinite(f->background()) || f->background() != (float)(3 * h))
-            return fprintf(stderr, "vdbcheck: background %g, want 3 voxels\n", f->background()), 1;
+        // 3 voxels: the float nearest 3 h from above (checkLevelSet's own
+        // check is in double, background >= 3 h)
+        const float bg = f->background();
+        if (!std::isfinite(bg) || (double)bg < 3 * h || (double)std::nextafter(bg, 0.0f) >= 3 * h)
+            return fprintf(stderr, "vdbcheck: background %.9g, want 3 voxels (%.17g)\n", bg, 3 * h),
+                   1;
         return 0;
     } catch (const std::exception &e) {
         fprintf(stderr, "vdbcheck: %s\n", e.what());
