@@ -5,6 +5,45 @@
 
 #include "voxel/voxel.h"
 
+/* The GL methods place vertices as floats in voxels from the box
+ * (vx_grid_unit): exact to the 1/256-voxel snap within 2^15 voxels of it
+ * (the limit their brick-exact voxels are documented to), off by up to
+ * 1/16 voxel at 2^20, whole voxels past 2^24. A face that reaches the
+ * box's rays (its bbox within a voxel of the box along two axes) from a
+ * vertex farther away would set voxels from such positions: the job is
+ * refused, pointing at the CPU engines, exact to 2^50 voxels. */
+#define GL_REACH 32768.0 /* 2^15 voxels */
+
+static int gl_reach_check(const vx_mesh *m, const vx_grid *g, vx_err *err)
+{
+    int near = 1;
+    for (int a = 0; a < 3; a++)
+        near &= vx_grid_coord(g, a, m->bbox_min[a]) > -GL_REACH &&
+                vx_grid_coord(g, a, m->bbox_max[a]) < g->dims[a] + GL_REACH;
+    if (near) return 0; /* the bbox bounds every vertex a face uses */
+    for (size_t t = 0; t < m->ntris; t++) {
+        int far = 0, over = 0;
+        for (int a = 0; a < 3; a++) {
+            double lo = INFINITY, hi = -INFINITY;
+            for (int i = 0; i < 3; i++) {
+                double x = vx_grid_coord(g, a, m->pos[3 * (size_t)m->tri[3 * t + i] + a]);
+                lo = fmin(lo, x);
+                hi = fmax(hi, x);
+            }
+            far |= lo < -GL_REACH || hi > g->dims[a] + GL_REACH;
+            over += lo <= g->dims[a] + 1 && hi >= -1;
+        }
+        if (far && over >= 2)
+            return vx_err_set(err, VX_EUNPROC, "invalid_params",
+                              "face %zu reaches the grid from more than 2^15 voxels away, where "
+                              "the GL methods' float positions are no longer exact; "
+                              "use method cpu or inside winding (exact to 2^50 voxels), or a "
+                              "larger voxel_size",
+                              t);
+    }
+    return 0;
+}
+
 int vx_voxelize(vx_gl *gl, const vx_mesh *m, const vx_voxelize_desc *d, vx_bitgrid *out,
                 vx_voxelize_stats *st, vx_err *err)
 {
@@ -81,6 +120,7 @@ int vx_voxelize(vx_gl *gl, const vx_mesh *m, const vx_voxelize_desc *d, vx_bitgr
                               "peel, slice or auto");
         return vx_voxelize_cpu(m, &dd, out, st, err);
     }
+    if (gl_reach_check(m, g, err)) return -1;
     if (method == VX_METHOD_PEEL || method == VX_METHOD_SCAN) {
         if (dd.supersample == 2)
             return vx_err_set(err, VX_EUNPROC, "invalid_params",

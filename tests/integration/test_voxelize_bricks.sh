@@ -205,6 +205,26 @@ done
 run_job voxelize "$B" '{"grid":{"origin":[-0.02,0.1,0],"voxel_size":1e-15,"dims":[2,2,2]},"format":"summary","method":"cpu"}'
 job_ok "voxels of 1e-15 inside the bunny"
 check "voxels of 1e-15 inside the bunny: all 8 set (got $(st voxels_inside))" test "$(st voxels_inside)" = 8
+# The GL methods' float positions: the faces the box's rays cross lie
+# 5e4 voxels away at 1e-6 and 5e11 at 1e-13, past the 2^15 where they are
+# exact: refused (peel set 0 of these 8 voxels at 1e-13, scan 1 to 4 at
+# 1e-12); cpu runs them. At 1e-5 (5e3 voxels) every method runs.
+tiny() { echo "{\"grid\":{\"origin\":[-0.02,0.1,0],\"voxel_size\":$1,\"dims\":[2,2,2]},\"format\":\"summary\"$2}"; }
+for m in peel scan slice; do
+    for h in 1e-13 1e-6; do
+        run_job voxelize "$B" "$(tiny $h ",\"method\":\"$m\"")"
+        check "voxels of $h, $m: failed invalid_params on the faces past 2^15 voxels ($(jq -c .error "$TMP/job.json"))" \
+            jq -e '.state == "failed" and .error.code == "invalid_params" and (.error.message | test("more than 2\\^15 voxels away.*method cpu"))' "$TMP/job.json"
+    done
+done
+for m in cpu peel scan slice; do
+    for h in 1e-13 1e-6 1e-5; do
+        [[ $m != cpu && $h != 1e-5 ]] && continue
+        run_job voxelize "$B" "$(tiny $h ",\"method\":\"$m\"")"
+        job_ok "voxels of $h, $m"
+        check "voxels of $h, $m: all 8 set (got $(st voxels_inside))" test "$(st voxels_inside)" = 8
+    done
+done
 bad "more than 65,536 bricks" '{"grid":{"origin":[0,0,0],"voxel_size":0.01,"dims":[16384,2048,512]},"bricks":{"size":8}}' "over the 65536 a grid may have"
 bad "vdb_index_base without a grid" '{"resolution":32,"bricks":{"size":0},"vdb_index_base":[0,0,0]}' "params.grid"
 
