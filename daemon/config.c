@@ -93,6 +93,9 @@ static const opt_def opts[] = {
     {"keep-memory", T_SIZE, F(keep_memory), 0,
      "memory freed by jobs kept for the next job, beyond max-job-memory (default 256M; 0 = give "
      "it back at once)"},
+    {"pretouch-memory", T_BOOL, F(pretouch_memory), 0,
+     "map and touch keep-memory's bytes at start, so that the first jobs do not fault them in: "
+     "yes or no (default)"},
     {"brick-threshold", T_SIZE, F(brick_threshold), 0,
      "voxelize grids of more cells run as bricks (vdb; default 1G = 1024^3; 0 = the default)"},
     {"max-json-bytes", T_SIZE, F(max_json_bytes), 0,

@@ -43,6 +43,7 @@ typedef struct vx_config {
     uint64_t max_image_pixels;
     uint64_t max_job_memory;
     uint64_t keep_memory;     /* freed job memory kept mapped for the next job (main.c) */
+    int pretouch_memory;      /* keep_memory mapped and touched at start (main.c) */
     uint64_t brick_threshold; /* voxelize to .vdb bricks grids of more cells by default */
     uint64_t max_json_bytes;
     uint64_t min_free_disk;    /* writes answer 507 below this many free bytes in the data dir */

@@ -43,22 +43,34 @@ size_t vx_bigmem_kept(void)
     return n;
 }
 
-/* The smallest kept mapping that holds len and is at most twice it, taken
- * out of the list. */
+/* Takes kept mapping i out of the list (mu held). */
+static void drop(int i)
+{
+    kept_bytes -= kept[i].len;
+    kept[i] = kept[--nkept];
+}
+
+/* The smallest kept mapping that holds len, taken out of the list; of one
+ * BIGMEM_MAP_MIN or more longer only the head is taken, the tail stays
+ * kept (a 4 MiB scratch does not hold a whole grid's mapping). */
 static void *take(size_t len, size_t *got)
 {
     pthread_mutex_lock(&mu);
     int best = -1;
     for (int i = 0; i < nkept; i++)
-        if (kept[i].len >= len && kept[i].len / 2 <= len &&
-            (best < 0 || kept[i].len < kept[best].len))
-            best = i;
+        if (kept[i].len >= len && (best < 0 || kept[i].len < kept[best].len)) best = i;
     void *p = NULL;
     if (best >= 0) {
         p = kept[best].p;
-        *got = kept[best].len;
-        kept_bytes -= kept[best].len;
-        kept[best] = kept[--nkept];
+        if (kept[best].len - len >= BIGMEM_MAP_MIN) {
+            kept[best].p = (unsigned char *)p + len;
+            kept[best].len -= len;
+            kept_bytes -= len;
+            *got = len;
+        } else {
+            *got = kept[best].len;
+            drop(best);
+        }
     }
     pthread_mutex_unlock(&mu);
     return p;
@@ -135,15 +147,32 @@ void vx_bigmem_free(void *p, size_t mapped)
     }
     pthread_mutex_lock(&mu);
     if (mapped <= keep_limit) {
+        /* joined to the kept pieces beside it (the rest of a mapping it
+         * was taken from), within the limit: whole again for a buffer as
+         * big as before */
+        for (int i = 0; i < nkept;) {
+            unsigned char *q = kept[i].p;
+            if (mapped + kept[i].len > keep_limit) {
+                i++;
+            } else if (q + kept[i].len == (unsigned char *)p) {
+                p = q;
+                mapped += kept[i].len;
+                drop(i);
+            } else if ((unsigned char *)p + mapped == q) {
+                mapped += kept[i].len;
+                drop(i);
+            } else {
+                i++;
+            }
+        }
         /* room for it: the smallest kept ones go first (a big one fits
          * more of what comes) */
         while (nkept && (kept_bytes + mapped > keep_limit || nkept == KEPT_MAX)) {
             int s = 0;
             for (int i = 1; i < nkept; i++)
                 if (kept[i].len < kept[s].len) s = i;
-            kept_bytes -= kept[s].len;
             munmap(kept[s].p, kept[s].len);
-            kept[s] = kept[--nkept];
+            drop(s);
         }
         kept[nkept].p = p;
         kept[nkept].len = mapped;
@@ -153,4 +182,21 @@ void vx_bigmem_free(void *p, size_t mapped)
     }
     pthread_mutex_unlock(&mu);
     if (p) munmap(p, mapped);
+}
+
+size_t vx_bigmem_pretouch(size_t bytes)
+{
+    pthread_mutex_lock(&mu);
+    size_t room = keep_limit > kept_bytes ? keep_limit - kept_bytes : 0;
+    pthread_mutex_unlock(&mu);
+    const size_t len = (bytes < room ? bytes : room) / BIGMEM_ROUND * BIGMEM_ROUND;
+    if (len < BIGMEM_MAP_MIN) return 0;
+    void *p = mmap(NULL, len, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
+    if (p == MAP_FAILED) return 0;
+#ifdef MADV_HUGEPAGE
+    madvise(p, len, MADV_HUGEPAGE);
+#endif
+    clear(p, len); /* every page written: faulted in now */
+    vx_bigmem_free(p, len);
+    return len;
 }

@@ -22,12 +22,19 @@ void *vx_bigmem_alloc(size_t bytes, size_t *mapped);
  * (clearing all of a kept one would touch all of it). */
 void *vx_bigmem_scratch(size_t bytes, size_t *mapped);
 /* Frees p (NULL is fine) given the *mapped vx_bigmem_alloc set: kept
- * mapped while the kept ones stay within vx_bigmem_keep's bytes. */
+ * mapped while the kept ones stay within vx_bigmem_keep's bytes, joined to
+ * a kept piece beside it. A kept mapping serves any buffer it holds, a
+ * long one its head only. */
 void vx_bigmem_free(void *p, size_t mapped);
 /* Keeps up to bytes of freed mappings (0, the default: none), unmapping
  * what is over it now. */
 void vx_bigmem_keep(size_t bytes);
 /* Bytes of freed mappings kept now. */
 size_t vx_bigmem_kept(void);
+/* Maps up to bytes (whole 2 MiB pages, within what vx_bigmem_keep leaves
+ * room for), touches every page on all CPUs and keeps it, so that the
+ * first buffers do not pay their first-touch faults either; the bytes
+ * kept. */
+size_t vx_bigmem_pretouch(size_t bytes);
 
 #endif

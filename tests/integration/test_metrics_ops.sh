@@ -154,6 +154,21 @@ for m in FULL SMALL FULL; do
     check "after it its grid is kept, within the 20M ($K)" test "$K" -ge 16777216 -a "$K" -le 20971520
 done
 stop_daemon
+# --pretouch-memory: the 20M mapped at start, the grids pieces of it, the
+# whole 20M kept again after each job
+start_daemon --keep-memory 20M --pretouch-memory yes || exit 1
+check "pretouched at start (logged)" grep -q 'event=memory.pretouched bytes=20971520 ' "$TMP/daemon.log"
+api GET /metrics
+check "pretouched: 20M kept before a job ($(metric voxeld_kept_memory_bytes))" test "$(metric voxeld_kept_memory_bytes)" = 20971520
+for m in FULL SMALL; do
+    run_job voxelize "${!m}" "{$G}"
+    job_ok "pretouched: a 512^3 job ($m)"
+    [[ $m == FULL ]] && n=$((512 * 512 * 512)) || n=$((256 * 256 * 256))
+    check "pretouched: the $m box's voxels: $n" jq -e ".stats.voxels_inside == $n" "$TMP/job.json"
+    api GET /metrics
+    check "pretouched: 20M kept after it ($(metric voxeld_kept_memory_bytes))" test "$(metric voxeld_kept_memory_bytes)" = 20971520
+done
+stop_daemon
 
 # ---- the default --workers are the CPUs voxeld may use ----------------------------
 # Pinned to one CPU (taskset: a cpuset, as docker --cpuset-cpus makes) it

@@ -201,8 +201,8 @@ static int all_zero(const unsigned char *p, size_t n)
     return 1;
 }
 
-/* Freed mappings are kept up to the limit and handed out again zeroed, to
- * a buffer that fits them and is at least half their size. */
+/* Freed mappings are kept up to the limit and handed out again zeroed, a
+ * long one's head to a buffer 4 MiB or more shorter. */
 static void test_bigmem_keep(void **state)
 {
     (void)state;
@@ -232,20 +232,43 @@ static void test_bigmem_keep(void **state)
     assert_true(all_zero(b, 9 * MB));
     assert_int_equal(vx_bigmem_kept(), 0);
     vx_bigmem_free(b, m2);
-    unsigned char *c = vx_bigmem_alloc(4 * MB, &m3); /* under half of 10: not it */
-    assert_ptr_not_equal(c, a);
-    assert_int_equal(vx_bigmem_kept(), 10 * MB);
+    unsigned char *c = vx_bigmem_alloc(4 * MB, &m3); /* 6 MB over: its head, cleared */
+    assert_ptr_equal(c, a);
+    assert_int_equal(m3, 4 * MB);
+    assert_true(all_zero(c, 4 * MB));
+    assert_int_equal(vx_bigmem_kept(), 6 * MB);
+    memset(c, 0xab, 4 * MB);
     unsigned char *d = vx_bigmem_alloc(30 * MB, &m2); /* bigger than any kept */
     assert_true(all_zero(d, 30 * MB));
+    vx_bigmem_free(c, m3); /* joined to its tail again */
+    assert_int_equal(vx_bigmem_kept(), 10 * MB);
+    c = vx_bigmem_alloc(10 * MB, &m3);
+    assert_ptr_equal(c, a);
+    assert_int_equal(m3, 10 * MB);
+    assert_true(all_zero(c, 10 * MB));
     vx_bigmem_free(c, m3);
-    assert_int_equal(vx_bigmem_kept(), 14 * MB);
-    vx_bigmem_free(d, m2); /* 44 > 40: the smallest kept ones leave */
-    assert_true(vx_bigmem_kept() <= 40 * MB);
+    unsigned char *x = vx_bigmem_alloc(8 * MB, &m3); /* 2 MB over the 10: all of it */
+    assert_ptr_equal(x, a);
+    assert_int_equal(m3, 10 * MB);
+    vx_bigmem_free(x, m3);
+    vx_bigmem_free(d, m2); /* 40: kept (one piece where the two lie side by side) */
     assert_int_equal(vx_bigmem_kept(), 40 * MB);
+    x = vx_bigmem_alloc(12 * MB, &m3); /* a head of the kept */
+    assert_int_equal(m3, 12 * MB);
+    assert_int_equal(vx_bigmem_kept(), 28 * MB);
+    unsigned char *z = vx_bigmem_alloc(30 * MB, &m2); /* more than any kept: mapped */
+    vx_bigmem_free(x, m3);
+    assert_int_equal(vx_bigmem_kept(), 40 * MB);
+    vx_bigmem_free(z, m2); /* 70 > 40: the smallest kept ones leave, z stays */
+    assert_int_equal(vx_bigmem_kept(), 30 * MB);
+    z = vx_bigmem_alloc(30 * MB, &m2);
+    assert_int_equal(m2, 30 * MB);
+    assert_int_equal(vx_bigmem_kept(), 0);
+    vx_bigmem_free(z, m2);
     size_t m4;
     unsigned char *e = vx_bigmem_alloc(50 * MB, &m4); /* over the limit: unmapped */
     vx_bigmem_free(e, m4);
-    assert_int_equal(vx_bigmem_kept(), 40 * MB);
+    assert_int_equal(vx_bigmem_kept(), 30 * MB);
     vx_bigmem_keep(15 * MB); /* lowered: unmapped down to it */
     assert_true(vx_bigmem_kept() <= 15 * MB);
     vx_bigmem_keep(0);
@@ -274,6 +297,30 @@ static void test_bigmem_keep(void **state)
     assert_int_equal(m3, 0);
     vx_bigmem_free(i, m3);
     vx_bigmem_keep(0);
+
+    /* pretouched: mapped and written at once, up to the room kept, then
+     * handed out a head at a time and whole again once all come back */
+    assert_int_equal(vx_bigmem_pretouch(100 * MB), 0); /* nothing kept: no room */
+    vx_bigmem_keep(40 * MB);
+    assert_int_equal(vx_bigmem_pretouch(100 * MB), 40 * MB);
+    assert_int_equal(vx_bigmem_kept(), 40 * MB);
+    assert_int_equal(vx_bigmem_pretouch(100 * MB), 0); /* full */
+    unsigned char *p1 = vx_bigmem_alloc(10 * MB, &m1), *p2 = vx_bigmem_alloc(20 * MB, &m2);
+    assert_int_equal(m1, 10 * MB);
+    assert_int_equal(m2, 20 * MB);
+    assert_ptr_equal(p2, p1 + 10 * MB);
+    assert_true(all_zero(p1, 10 * MB) && all_zero(p2, 20 * MB));
+    assert_int_equal(vx_bigmem_kept(), 10 * MB);
+    memset(p2, 1, 20 * MB);
+    vx_bigmem_free(p2, m2);
+    vx_bigmem_free(p1, m1);
+    unsigned char *all = vx_bigmem_alloc(40 * MB, &m3);
+    assert_ptr_equal(all, p1);
+    assert_int_equal(m3, 40 * MB);
+    assert_true(all_zero(all, 40 * MB));
+    vx_bigmem_free(all, m3);
+    vx_bigmem_keep(0);
+    assert_int_equal(vx_bigmem_kept(), 0);
 }
 
 int main(void)
