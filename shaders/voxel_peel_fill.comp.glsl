@@ -36,8 +36,8 @@ int crossings(ivec2 p, int l)
     return u_counted != 0 ? int(texelFetch(u_counts, ivec3(p, l), 0).r) : 1;
 }
 
-int g_base, g_word;
-uint g_acc;
+int g_base = 0, g_word = 0;
+uint g_acc = 0u;
 
 // Axis 0: the column is one x row of the slab; words are produced in order.
 void put_word(int w)
