@@ -398,16 +398,20 @@ static int run_one_job(int argc, char **argv)
  * next one, up to bytes: on a virtual machine that returns freed memory to
  * its host (free page reporting), every page faulted in afresh costs a host
  * fault, which was half of a 1024^3 voxelize job's time or more (spot,
- * `summary`: 80-130 ms, 28-43 with the default; bench/RESULTS.md). The heap keeps up to bytes free
- * at the top of each arena (M_TRIM_THRESHOLD), and serves blocks up to 32 MiB itself
- * (M_MMAP_THRESHOLD; glibc's own threshold moves with each block freed). */
+ * `summary`: 80-130 ms, 28-43 with the default; bench/RESULTS.md). The heap
+ * serves blocks up to 32 MiB itself (M_MMAP_THRESHOLD; glibc's own threshold
+ * moves with each block freed) and keeps up to that much free at the top of
+ * each thread's arena (M_TRIM_THRESHOLD), or bytes if less: a whole keep
+ * in each of a dozen arenas had the HTTP threads hold their JSON parse
+ * peaks, and the jobs' own heap (crossing lists, 22 MB a bunny 1024^3 job)
+ * fits the 32 MiB (no job was slower for the cap). */
 static void keep_memory(uint64_t bytes, int pretouch)
 {
     if (!bytes) return;
     size_t keep = bytes > SIZE_MAX / 2 ? SIZE_MAX / 2 : (size_t)bytes;
     vx_bigmem_keep(keep);
     mallopt(M_MMAP_THRESHOLD, 32 << 20);
-    mallopt(M_TRIM_THRESHOLD, keep > INT_MAX ? INT_MAX : (int)keep);
+    mallopt(M_TRIM_THRESHOLD, keep > (32 << 20) ? 32 << 20 : (int)keep);
     if (!pretouch) return;
     /* The first job's grid faulted in too (spot 1024^3 `summary`: its
      * first job 130 ms, the next ones 30-40): all of it mapped now. */

@@ -11,7 +11,7 @@ source "$(dirname "$0")/lib.sh"
 # under the same 50 MB. Before frames became blobs each job kept 14 MB.
 # VX_MEMORY_JOBS=100 runs the full count (measured: RSS 115 -> 113 MiB,
 # journal +180 KB).
-# The daemon runs with --keep-memory 0: by default glibc keeps up to 256 MB
+# The daemon runs with --keep-memory 0: by default glibc keeps up to 32 MiB
 # free at the top of each thread's arena (M_TRIM_THRESHOLD, which
 # malloc_trim does not override there), and the HTTP threads' arenas kept
 # their parse peaks, 20-30 MB each, reached after a varying number of jobs
