@@ -196,9 +196,9 @@ bad "vdb_index_base far below" '{"grid":{"origin":[0,0,0],"voxel_size":0.1,"dims
 bad "a box past 1e30" '{"grid":{"origin":[0,0,0],"voxel_size":1e300,"dims":[4,4,4],"index_offset":[1099511627776,0,0]}}' "outside +-1e30"
 bad "an origin of 1e308" '{"grid":{"origin":[1e308,0,0],"voxel_size":1,"dims":[4,4,4]}}' "outside +-1e30"
 # Voxels so small that the bunny reaches 10^19 of them from the origin:
-# no engine can run it (the cpu and winding ones failed the job, peel gave
-# too_many_layers, scan and slice wrong voxels). At 1e-15 it is 1.8e14 of
-# them, under 2^50, and runs.
+# no engine can run it (the cpu and winding ones failed the job
+# invalid_params, peel too_many_layers). At 1e-15 it is 1.8e14 of them,
+# under 2^50, and cpu runs it.
 for extra in '' ',"method":"cpu"' ',"method":"peel"' ',"inside":"winding"'; do
     bad "voxels of 1e-20$extra" '{"grid":{"origin":[0.1,0.2,0.3],"voxel_size":1e-20,"dims":[2,2,2]},"format":"summary"'"$extra"'}' "more than 2^50 voxels"
 done
