@@ -106,6 +106,18 @@ static void clear(void *p, size_t n)
         vx_par_for((int)pieces, vx_par_cpus(), clear_piece, &c);
 }
 
+/* A fresh mapping of len bytes (zero, not yet faulted in), huge pages
+ * asked for; NULL if none. */
+static void *map_fresh(size_t len)
+{
+    void *p = mmap(NULL, len, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
+    if (p == MAP_FAILED) return NULL;
+#ifdef MADV_HUGEPAGE
+    madvise(p, len, MADV_HUGEPAGE); /* a hint: without THP, small pages */
+#endif
+    return p;
+}
+
 static void *bigmem(size_t bytes, size_t *mapped, int zero)
 {
     *mapped = 0;
@@ -120,12 +132,8 @@ static void *bigmem(size_t bytes, size_t *mapped, int zero)
         *mapped = got;
         return p;
     }
-    p = mmap(NULL, len, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
-    if (p == MAP_FAILED) return NULL;
-#ifdef MADV_HUGEPAGE
-    madvise(p, len, MADV_HUGEPAGE); /* a hint: without THP, small pages */
-#endif
-    *mapped = len;
+    p = map_fresh(len);
+    if (p) *mapped = len;
     return p;
 }
 
@@ -191,11 +199,8 @@ size_t vx_bigmem_pretouch(size_t bytes)
     pthread_mutex_unlock(&mu);
     const size_t len = (bytes < room ? bytes : room) / BIGMEM_ROUND * BIGMEM_ROUND;
     if (len < BIGMEM_MAP_MIN) return 0;
-    void *p = mmap(NULL, len, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
-    if (p == MAP_FAILED) return 0;
-#ifdef MADV_HUGEPAGE
-    madvise(p, len, MADV_HUGEPAGE);
-#endif
+    void *p = map_fresh(len);
+    if (!p) return 0;
     clear(p, len); /* every page written: faulted in now */
     vx_bigmem_free(p, len);
     return len;
