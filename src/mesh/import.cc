@@ -445,8 +445,9 @@ size_t comp_bytes(int type)
 }
 
 /* Accessor ai's elements as doubles into out (ncomp a row), sparse
- * substitutions applied: unsigned integer scalars (index) or VEC3s of any
- * component type (positions); with pick, only elements pick[0..npick)
+ * substitutions applied: unsigned integer scalars (index) or VEC3s of
+ * float or KHR_mesh_quantization's (signed or unsigned) bytes and shorts
+ * (positions); with pick, only elements pick[0..npick)
  * (sorted, each below the count: the vertices a primitive uses, as many
  * primitives may index a few of one shared accessor; decoding it whole
  * for each made a file of 10^5 primitives over 10^6 vertices take hours),
@@ -463,7 +464,8 @@ int read_accessor(Gather &g, const tinygltf::Model &mo, int ai, bool index, cons
                                (a.componentType == TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE ||
                                 a.componentType == TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT ||
                                 a.componentType == TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT)
-                         : a.type == TINYGLTF_TYPE_VEC3 && cb;
+                         : a.type == TINYGLTF_TYPE_VEC3 && cb &&
+                               a.componentType != TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT;
     if (!ok_type || !a.count) return gl_corrupt(g, "accessor", ai);
     size_t elem = cb * size_t(ncomp), stride = 0, n = pick ? npick : a.count;
     const unsigned char *p = span(mo, a.bufferView, a.byteOffset, a.count, elem, &stride);

@@ -303,7 +303,7 @@ static void test_gltf_strip_fan(void **state)
 
 /* KHR_mesh_quantization: positions as normalized shorts, in a view with a
  * stride of 8, one vertex replaced by a sparse accessor, no index
- * accessor (the corners in order). */
+ * accessor (the corners in order); 32-bit integer positions refused. */
 static void test_gltf_quantized_sparse(void **state)
 {
     (void)state;
@@ -335,6 +335,29 @@ static void test_gltf_quantized_sparse(void **state)
         free(f.p);
     }
     free(body.p);
+    free(bin.p);
+    /* Positions of 32-bit integers, unsigned or signed: neither glTF nor
+     * KHR_mesh_quantization has them (unsigned ones were read as
+     * coordinates, a float's bits as an integer). */
+    const uint32_t u[9] = {0, 0, 0, 1, 0, 0, 0, 1, 0};
+    part upart = {u, sizeof u};
+    bin = pack(&upart, 1, off);
+    for (int ct = 5124; ct <= 5125; ct++) {
+        body = (tbuf){0};
+        tbuf_printf(&body,
+                    "\"extensionsUsed\":[\"KHR_mesh_quantization\"],\"bufferViews\":[{"
+                    "\"buffer\":0,\"byteLength\":36}],\"accessors\":[{\"bufferView\":0,"
+                    "\"componentType\":%d,\"count\":3,\"type\":\"VEC3\"}],",
+                    ct);
+        tbuf_printf(&body, "\"meshes\":[{\"primitives\":[{\"attributes\":{\"POSITION\":0}}]}],"
+                           "\"scenes\":[{\"nodes\":[0]}],\"nodes\":[{\"mesh\":0}]");
+        for (int glb = 0; glb < 2; glb++) {
+            tbuf f = make_file(body.p, &bin, glb);
+            expect_error(&f, glb, NULL, "gltf_corrupt", "accessor 0");
+            free(f.p);
+        }
+        free(body.p);
+    }
     free(bin.p);
 }
 
