@@ -627,6 +627,24 @@ static size_t json_number(const char *p, const char *end)
     return s == e ? (size_t)(e - p) : 0;
 }
 
+/* Whether the number token p[0..n) (JSON's form) has a nonzero digit
+ * before its exponent but reads as 0 in a double (1e-400): cJSON would
+ * take it as 0, and a field that must be over 0 would see 0. */
+static int json_number_underflows(const char *p, size_t n)
+{
+    int nonzero = 0;
+    for (size_t i = 0; i < n && p[i] != 'e' && p[i] != 'E'; i++)
+        nonzero |= p[i] >= '1' && p[i] <= '9';
+    if (!nonzero) return 0;
+    char small[128], *t = n < sizeof small ? small : malloc(n + 1);
+    if (!t) return 0; /* no memory to tell: cJSON reads it as before */
+    memcpy(t, p, n);
+    t[n] = 0;
+    const int under = strtod(t, NULL) == 0.0;
+    if (t != small) free(t);
+    return under;
+}
+
 static int cmp_key(const void *a, const void *b)
 {
     return strcmp(*(const char *const *)a, *(const char *const *)b);
@@ -685,6 +703,12 @@ cJSON *vx_req_json_parse(const char *body, size_t len, char *msg, size_t msgn)
             size_t n = json_number(p, end);
             if (!n) {
                 snprintf(msg, msgn, "a number is not in JSON's form (at byte %zu)",
+                         (size_t)(p - body));
+                return NULL;
+            }
+            if (json_number_underflows(p, n)) {
+                snprintf(msg, msgn,
+                         "a number is nearer 0 than any double and would read as 0 (at byte %zu)",
                          (size_t)(p - body));
                 return NULL;
             }

@@ -193,6 +193,18 @@ api POST /v1/jobs "${JSON[@]}" -d "{\"mesh\":\"$BOX\",\"kind\":\"preview\"}{}"
 expect_error "a second JSON value" 400 invalid_json
 api POST /v1/jobs "${JSON[@]}" -d "{\"mesh\":\"$BOX\",\"kind\":\"voxelize\",\"params\":{\"resolution\":016}}"
 expect_error "a number with a leading zero" 400 invalid_json
+# a nonzero number nearer 0 than any double: it read as 0, so a fov of
+# 1e-400 (which must be > 0 to be perspective) drew an orthographic image
+for tiny in 1e-400 -1e-400 0.000001e-330; do
+    api POST /v1/jobs "${JSON[@]}" -d "{\"mesh\":\"$BOX\",\"kind\":\"preview\",\"params\":{\"fov\":$tiny}}"
+    expect_error "fov $tiny, below the smallest double" 400 invalid_json
+    check "the error says why ($(jqb .error.message))" grep -q 'nearer 0 than any double' <<<"$(jqb .error.message)"
+done
+# a subnormal double and a zero written small are numbers like any other
+api POST /v1/jobs "${JSON[@]}" -d "{\"mesh\":\"$BOX\",\"kind\":\"voxelize\",\"params\":{\"resolution\":8,\"padding\":0e-400}}"
+check "0e-400 is 0 ($STATUS)" test "$STATUS" = 202
+api POST /v1/jobs "${JSON[@]}" -d "{\"mesh\":\"$BOX\",\"kind\":\"preview\",\"params\":{\"width\":16,\"height\":16,\"fov\":1e-320}}"
+check "fov 1e-320, a subnormal, is accepted ($STATUS)" test "$STATUS" = 202
 api POST /v1/jobs "${JSON[@]}" -d "{\"mesh\":\"$BOX\",\"kind\":\"voxelize\",\"params\":{\"resolution\":8,\"resolution\":16}}"
 expect_error "a key twice" 400 invalid_json
 check "the error names the key" jq -e '.error.message | contains("resolution")' "$BODY"
