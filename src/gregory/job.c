@@ -564,17 +564,34 @@ typedef struct tess_times {
     double gpu_ms, first_tess_ms;
 } tess_times;
 
+/* The centre of the box of a set's control points: the grid holds floats
+ * relative to it, so each frame has its own (a frame far from the mesh, or
+ * much smaller, lost its digits against the mesh's centre). */
+static void set_centre(const vx_gpatch_set *set, double origin[3])
+{
+    double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+    const size_t n = set->npatches * VX_GPATCH_POINTS;
+    for (size_t i = 0; i < n; i++)
+        for (int c = 0; c < 3; c++) {
+            lo[c] = fmin(lo[c], set->cp[3 * i + c]);
+            hi[c] = fmax(hi[c], set->cp[3 * i + c]);
+        }
+    for (int c = 0; c < 3; c++)
+        origin[c] = n ? 0.5 * lo[c] + 0.5 * hi[c] : 0;
+}
+
 /* Tessellates every frame (positions pos[k]) on the GPU and gathers its
  * positions and normals into s; appends each frame's time to frame_ms when it is not NULL. */
 static int tessellate_frames(vx_job_run *r, builder *b, const double *const *pos, greg_state *s,
-                             vx_gtess *tess, float *grid, const double origin[3], cJSON *frame_ms,
-                             tess_times *t, vx_err *err)
+                             vx_gtess *tess, float *grid, cJSON *frame_ms, tess_times *t,
+                             vx_err *err)
 {
     size_t nframes = s->nframes;
     for (size_t k = 0; k < nframes; k++) {
         double f0 = vx_mono_ms();
         if (k > 0 && (b->fd >= 0 ? load_frame(b, k, err) : construct(b, pos[k], err))) return -1;
-        double ms;
+        double origin[3], ms;
+        set_centre(b->set, origin);
         if (vx_gtess_run(tess, b->set, origin, grid, &ms, err)) return -1;
         t->gpu_ms += ms;
         if (k == 0) t->first_tess_ms = ms;
@@ -675,13 +692,10 @@ static int run_gl(vx_job_run *r, const vx_mesh *mesh, const gparams *pp, void **
     s->nframes = nframes;
     s->layout = vx_gregory_layout_new(b.set, ndiv, p.weld, err);
     if (!s->layout) goto done;
-    double origin[3];
-    for (int c = 0; c < 3; c++)
-        origin[c] = 0.5 * (mesh->bbox_min[c] + mesh->bbox_max[c]);
     tess_times t = {0, 0};
     tess = vx_gtess_new(vx_run_gl(r), s->layout, err);
     if (!tess) goto done;
-    if (tessellate_frames(r, &b, pos, s, tess, grid, origin, frame_ms, &t, err)) goto done;
+    if (tessellate_frames(r, &b, pos, s, tess, grid, frame_ms, &t, err)) goto done;
     add_stats(r, mesh, &p, &b, ndiv, s, gv, build_ms, cc_distance, &t, &frame_ms);
     if (vx_run_stats(r)) {
         cJSON_AddNumberToObject(vx_run_stats(r), "folded_patches", (double)folded);

@@ -180,6 +180,34 @@ D=$(maxdiff "$TMP/fresh0.obj" "$TMP/f3.obj")
 check "frame 2 (the mesh itself) = frame 0 ($D)" small "$D" 0 0
 D=$(maxdiff "$TMP/fresh0.obj" "$TMP/f1.obj")
 check "frames differ from frame 0 ($D)" awk -v s="$D" 'BEGIN { split(s, x, " "); exit !(x[1] > 1e-3) }'
+# Frames far from the mesh or much smaller than it: each frame's grid
+# holds floats relative to its own centre (relative to the mesh's, a frame
+# at +1e7 was off by 0.4 of its size and one at 1e-10 the size by 25 times).
+python3 - "$TMP/prism2.obj" "$TMP" <<'EOF'
+import sys
+src = open(sys.argv[1]).read().splitlines()
+for name, f in (("far", lambda c: c + 1e7), ("small", lambda c: c * 1e-10)):
+    with open("%s/prism_%s.obj" % (sys.argv[2], name), "w") as o:
+        for l in src:
+            t = l.split()
+            o.write("v %.17g %.17g %.17g\n" % tuple(f(float(x)) for x in t[1:4]) if t and t[0] == "v" else l + "\n")
+EOF
+upload "$TMP/prism_far.obj"
+M_far=$MESH_ID
+upload "$TMP/prism_small.obj"
+M_small=$MESH_ID
+greg "prism frames far and small" "$M_prism" "{\"divisions\":5,\"frames\":[\"$M_far\",\"$M_small\"]}"
+job_ok "prism frames far and small"
+fetch frame_001 "$TMP/ffar.obj"
+fetch frame_002 "$TMP/fsmall.obj"
+for m in far small; do
+    id=M_$m
+    greg "prism $m fresh" "${!id}" '{"divisions":5}'
+    job_ok "prism $m fresh"
+    fetch mesh "$TMP/fresh_$m.obj"
+    D=$(maxdiff "$TMP/fresh_$m.obj" "$TMP/f$m.obj")
+    check "a frame $m from the mesh = a fresh job on it ($D)" small "$D" 1e-6 1e-5
+done
 
 # --- approximate-cc: one patch per quad of the (once refined) cage, close
 # to OpenSubdiv's limit surface, welded closed, frames as fresh jobs ---
