@@ -74,7 +74,7 @@ static const opt_def opts[] = {
     {"min-body-rate", T_SIZE, F(min_body_rate), 0,
      "slowest request body, bytes/s over 2 s windows after a 2 s grace (default 1024; 0 = off)"},
     {"min-send-rate", T_SIZE, F(min_send_rate), 0,
-     "slowest reader of an answer, bytes/s over 2 s windows while the answer waits on the client "
+     "slowest reader of an answer, bytes/s over 10 s windows while the answer waits on the client "
      "(default 1024; 0 = off)"},
     {"max-uri-bytes", T_SIZE, F(max_uri_bytes), 0,
      "longest request target, path and query (default 16K; at least 256)"},

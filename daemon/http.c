@@ -619,15 +619,21 @@ vx_http *vx_http_start(const vx_http_desc *desc, vx_err *err)
      * while the last run's connections sit in TIME_WAIT, and a port another
      * process listens on still cannot be bound (EADDRINUSE). An explicit 0
      * would turn SO_REUSEADDR off. */
+    /* One HTTP thread is the internal polling thread alone, without the
+     * pool option (the library warns that it ignores a pool of 1, or 0). */
+    struct MHD_OptionItem pool[] = {
+        {cfg->http_threads > 1 ? MHD_OPTION_THREAD_POOL_SIZE : MHD_OPTION_END,
+         (intptr_t)cfg->http_threads, NULL},
+        {MHD_OPTION_END, 0, NULL}};
     errno = 0;
     h->mhd = MHD_start_daemon(
         flags, 0, NULL, NULL, on_request, h, MHD_OPTION_EXTERNAL_LOGGER, mhd_log, NULL,
-        MHD_OPTION_SOCK_ADDR, (struct sockaddr *)&ss, MHD_OPTION_THREAD_POOL_SIZE,
-        (unsigned)cfg->http_threads, MHD_OPTION_CONNECTION_TIMEOUT,
-        (unsigned)ceil(cfg->connection_timeout_s), MHD_OPTION_CONNECTION_LIMIT,
-        (unsigned)cfg->max_connections, MHD_OPTION_CONNECTION_MEMORY_LIMIT, (size_t)(256 * 1024),
-        MHD_OPTION_NOTIFY_COMPLETED, on_completed, h, MHD_OPTION_NOTIFY_CONNECTION, vx_conns_notify,
-        h->conns, MHD_OPTION_URI_LOG_CALLBACK, vx_conns_on_uri, h->conns,
+        MHD_OPTION_SOCK_ADDR, (struct sockaddr *)&ss, MHD_OPTION_ARRAY, pool,
+        MHD_OPTION_CONNECTION_TIMEOUT, (unsigned)ceil(cfg->connection_timeout_s),
+        MHD_OPTION_CONNECTION_LIMIT, (unsigned)cfg->max_connections,
+        MHD_OPTION_CONNECTION_MEMORY_LIMIT, (size_t)(256 * 1024), MHD_OPTION_NOTIFY_COMPLETED,
+        on_completed, h, MHD_OPTION_NOTIFY_CONNECTION, vx_conns_notify, h->conns,
+        MHD_OPTION_URI_LOG_CALLBACK, vx_conns_on_uri, h->conns,
         cfg->reuse_port ? MHD_OPTION_LISTENING_ADDRESS_REUSE : MHD_OPTION_END, 1u, MHD_OPTION_END);
     if (!h->mhd) {
         listen_failed(err, cfg->listen, errno);

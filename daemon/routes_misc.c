@@ -99,7 +99,8 @@ int vx_route_readyz(vx_http *h, struct MHD_Connection *c, req *r)
         char why[600];
         if (k.gl && k.gpu && !h->stopping)
             snprintf(why, sizeof why, "%s",
-                     !k.dd      ? "the data directory is not writable"
+                     !k.dd                                  ? "the data directory is not writable"
+                     : !k.space && !h->d.cfg->min_free_disk ? "the data directory's disk is full"
                      : !k.space ? "the data directory has less free space than --min-free-disk"
                      : !k.blob  ? "the blob store (--blob-store) cannot be reached"
                                 : "the database (--database) cannot be reached");

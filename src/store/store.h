@@ -43,7 +43,8 @@ typedef struct vx_store_desc {
 vx_store *vx_store_open(const char *data_dir, const vx_store_desc *desc, vx_err *err);
 void vx_store_close(vx_store *s);
 const char *vx_store_dir(const vx_store *s);
-/* 1 when a file can be created in the data dir now. */
+/* 1 when a file can be created in the data dir now, or only room is
+ * missing (ENOSPC, EDQUOT: the free space check's to report). */
 int vx_store_writable(vx_store *s);
 /* The byte store's backend name ("local", "file", "s3"), and 1 when it is
  * reachable now (one quick try: /readyz). */

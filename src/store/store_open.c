@@ -134,8 +134,10 @@ int vx_store_writable(vx_store *s)
     char p[VX_PATH_MAX];
     snprintf(p, sizeof p, "%s/tmp/.probe.%d", s->dir, (int)gettid());
     int fd = open(p, O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0600);
-    if (fd < 0) return 0;
-    int ok = write(fd, "x", 1) == 1;
+    /* a full disk (or quota) is a writable dir without room: the free
+     * space check's to report (507), not a read-only one's (503) */
+    if (fd < 0) return errno == ENOSPC || errno == EDQUOT;
+    int ok = write(fd, "x", 1) == 1 || errno == ENOSPC || errno == EDQUOT;
     close(fd);
     unlink(p);
     return ok;

@@ -13,6 +13,8 @@ VOXELD_EVENT_KEEPALIVE=0.5 VOXELD_MAX_EVENT_STREAMS=50 \
 api GET /v1/info
 check "info: the limits from the environment and the flag" \
     jq -e '.limits.event_keepalive_s == 0.5 and .limits.max_event_streams == 3' "$BODY"
+check "one HTTP thread is not a pool of 1 to libmicrohttpd (it warned that it ignored it)" \
+    bash -c "! grep -q 'thread pool size' '$TMP/daemon.log'"
 upload "$VX_MESH_DIR/stanford-bunny.obj"
 expect_status "upload" 201
 submit() { # submit RESOLUTION [MORE PARAMS]: JOB = the new voxelize job

@@ -105,6 +105,16 @@ kill9_daemon
 start_daemon --min-free-disk 0 || exit 1
 api POST /v1/jobs -H "Content-Type: application/json" -d "{\"mesh\":\"$BOX\",\"kind\":\"preview\"}"
 check "job with floor 0 on a full disk: 507 (got $STATUS)" test "$STATUS" = 507
+# A full disk is a writable data dir without room: 507 and disk_space
+# false, not the read-only dir's 503 and data_dir false (its probe file
+# failing with ENOSPC was taken for a read-only dir).
+upload "$TMP/box2.obj"
+expect_error "upload with floor 0 on a full disk" 507 insufficient_storage
+api GET /readyz
+expect_status "readyz on a full disk" 503
+check "readyz: data_dir true, disk_space false ($(jq -c .checks "$BODY"))" \
+    jq -e '.checks.data_dir == true and .checks.disk_space == false' "$BODY"
+check "readyz: the reason is the full disk ($(jqb .reason))" test "$(jqb .reason)" = "the data directory's disk is full"
 
 # Room again: writes work without a restart, and what they acknowledge
 # survives kill -9 (a crash mid-record left a torn tail before it).
