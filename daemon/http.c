@@ -340,7 +340,15 @@ static enum MHD_Result on_head(vx_http *h, struct MHD_Connection *c, const char 
     vx_req_target t = {0};
     r->route = vx_req_route(url, strlen(url), &t);
     if (vx_conns_path_escape(vc)) { /* names nothing: its resource's own 404 */
-        if (t.id[0])                /* what the 404's message names */
+        /* a %2F last decodes to a trailing '/', which no route has: the
+         * route is the one without it (/v1/jobs/ID%2F is a job's 404) */
+        size_t n = strlen(url);
+        while (!t.id[0] && n > 1 && url[n - 1] == '/') {
+            vx_req_target u = {0};
+            vx_route rt = vx_req_route(url, --n, &u);
+            if (u.id[0]) r->route = rt, t = u;
+        }
+        if (t.id[0]) /* what the 404's message names */
             snprintf(t.id, sizeof t.id, "(a path with %%00 or %%2F)");
         else
             r->route = VX_R_UNKNOWN;
