@@ -258,7 +258,9 @@ int cluster_open(vx_jobs *j, vx_err *err)
     /* A database that is not up yet (replicas and PostgreSQL starting
      * together): wait for it a while, then give up (the service manager
      * restarts the daemon). */
-    double give_up = vx_mono() + (d.connect_timeout_s > 0 ? 6 * d.connect_timeout_s : 30);
+    double ct = vx_pg_url_connect_timeout(d.url);
+    if (ct <= 0) ct = d.connect_timeout_s;
+    double give_up = vx_mono() + (ct > 0 ? 6 * ct : 30);
     for (;;) {
         vx_err_clear(err);
         c->api = vx_pg_open(&d, err);

@@ -328,6 +328,19 @@ int pg_exec_locked(vx_pg *pg, int retry, const char *sql, int n, const char *con
     return r ? 0 : -1;
 }
 
+double vx_pg_url_connect_timeout(const char *url)
+{
+    PQconninfoOption *opts = url ? PQconninfoParse(url, NULL) : NULL;
+    double t = 0;
+    for (PQconninfoOption *o = opts; o && o->keyword; o++)
+        if (!strcmp(o->keyword, "connect_timeout") && o->val && *o->val) {
+            t = atof(o->val);
+            if (t > 0 && t < 2) t = 2; /* libpq waits 2 s at least */
+        }
+    PQconninfoFree(opts);
+    return t > 0 ? t : 0;
+}
+
 vx_pg *vx_pg_open(const vx_pg_desc *desc, vx_err *err)
 {
     if (!desc || !desc->url ||

@@ -56,6 +56,10 @@ typedef struct vx_pg_desc {
     double statement_timeout_s;
 } vx_pg_desc;
 
+/* The connect_timeout a libpq URL sets (seconds, as libpq takes it: 2 at
+ * least), 0 when it sets none or does not parse. */
+double vx_pg_url_connect_timeout(const char *url);
+
 /* A job row. Times are Unix seconds on the database clock; 0 = not set. */
 typedef struct vx_pg_job {
     char id[33]; /* vx_jobs_valid_id */

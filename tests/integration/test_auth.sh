@@ -124,6 +124,13 @@ check "a token file with a tab inside exits 2" test $? -eq 2
 "$VOXELD" --database 'postgresql://127.0.0.1:1/x' --listen 127.0.0.1:0 --data-dir "$TMP/d3" 2>"$TMP/err8"
 check "--database without --blob-store exits 2" test $? -eq 2
 check "and says it needs a shared store" grep -q 'voxeld: database: cluster mode needs a --blob-store every replica shares' "$TMP/err8"
+# The URL's connect_timeout sets the start-up wait: six of them (12 s for
+# 2), not 30 s (it was read from an option nothing set). In the
+# background while the checks below run.
+T_CT=$(date +%s%N)
+"$VOXELD" --database 'postgresql://127.0.0.1:1/x?connect_timeout=2' --blob-store "file://$TMP/shared" \
+    --listen 127.0.0.1:0 --data-dir "$TMP/d5" 2>"$TMP/dbwait_ct.log" &
+CTPID=$!
 # SIGTERM while start-up waits for a database that is not up: exit 0 at
 # once, not at the end of the wait (30 s).
 "$VOXELD" --database 'postgresql://127.0.0.1:1/x' --blob-store "file://$TMP/shared" --listen 127.0.0.1:0 --data-dir "$TMP/d4" 2>"$TMP/dbwait.log" &
@@ -137,6 +144,11 @@ rc=$?
 ms=$((($(date +%s%N) - T0) / 1000000))
 check "SIGTERM during the database wait: exit 0 in ${ms} ms (rc $rc)" test $rc -eq 0 -a $ms -lt 5000
 check "and logs why" grep -q 'event=voxeld.stop stage=database reason=signal' "$TMP/dbwait.log"
+wait $CTPID
+rc=$?
+ms=$((($(date +%s%N) - T_CT) / 1000000))
+check "connect_timeout=2: start-up gives up after six of them, exit 1 in ${ms} ms (rc $rc)" \
+    test $rc -eq 1 -a $ms -ge 11000 -a $ms -lt 24000
 "$VOXELD" --version >"$TMP/version"
 check "--version" grep -q '^voxeld [0-9]' "$TMP/version"
 "$VOXELD" --help >"$TMP/help"
