@@ -126,7 +126,8 @@ static const opt_def opts[] = {
      "given the same URL (cluster mode, with a shared --blob-store; default none: the local "
      "journal)"},
     {"replica-name", T_STR, S(replica_name),
-     "this replica's name in job resources and claims (default host name:port)"},
+     "this replica's name in job resources and claims, UTF-8 without blanks or control "
+     "characters (default host name:port)"},
     {"lease-ttl", T_SECONDS, F(lease_ttl_s), 0,
      "cluster mode: a running job's lease, renewed every third of it; a replica silent this "
      "long loses its job to another (default 30; 0 = the default)"},
@@ -270,6 +271,19 @@ static int set_opt(vx_config *c, const opt_def *d, const char *val, const char *
         fprintf(stderr, "voxeld: %s: token-file is empty (name the file, or leave it out)\n",
                 where);
         return -1;
+    }
+    /* a replica's name goes into the database (as text: UTF-8), its log
+     * lines (unquoted) and job resources */
+    if (!strcmp(d->name, "replica-name")) {
+        const unsigned char *p = (const unsigned char *)val;
+        for (size_t n = strlen(val), k; n; p += k, n -= k)
+            if (*p <= ' ' || *p == 0x7f || !(k = vx_err_utf8_len(p, n))) {
+                fprintf(stderr,
+                        "voxeld: %s: replica-name must be UTF-8 without blanks or control "
+                        "characters (byte %zu is 0x%02x)\n",
+                        where, (size_t)(p - (const unsigned char *)val), *p);
+                return -1;
+            }
     }
     if (d->type == T_LIST) {
         unsigned char src = !strcmp(where, "command line")        ? 3

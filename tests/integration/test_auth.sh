@@ -124,6 +124,17 @@ check "a token file with a tab inside exits 2" test $? -eq 2
 "$VOXELD" --database 'postgresql://127.0.0.1:1/x' --listen 127.0.0.1:0 --data-dir "$TMP/d3" 2>"$TMP/err8"
 check "--database without --blob-store exits 2" test $? -eq 2
 check "and says it needs a shared store" grep -q 'voxeld: database: cluster mode needs a --blob-store every replica shares' "$TMP/err8"
+# A replica name that is not UTF-8 (the database refused it at every
+# claim while /readyz said ready), or holds a blank or a control character
+# (a newline forged log fields): exit 2 at start.
+for name in $'\xff\xfe' $'a\nts=x level=error' 'node 1' $'n\x7f'; do
+    timeout 20 "$VOXELD" --replica-name "$name" --listen 127.0.0.1:0 --data-dir "$TMP/d3" 2>"$TMP/err_rn"
+    rc=$?
+    check "replica-name $(printf %q "$name"): exit 2 (rc $rc)" test $rc -eq 2
+    check "replica-name $(printf %q "$name"): says why" grep -q 'replica-name must be UTF-8 without blanks or control characters' "$TMP/err_rn"
+done
+"$VOXELD" --replica-name 'nœud-1.eu' --database 'postgresql://127.0.0.1:1/x' --listen 127.0.0.1:0 --data-dir "$TMP/d3" 2>"$TMP/err_rn"
+check "a UTF-8 replica name is taken (the next complaint is the store's)" grep -q 'needs a --blob-store' "$TMP/err_rn"
 # The URL's connect_timeout sets the start-up wait: six of them (12 s for
 # 2), not 30 s (it was read from an option nothing set). In the
 # background while the checks below run.
