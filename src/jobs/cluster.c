@@ -1192,6 +1192,13 @@ int vx_jobs_cluster(vx_jobs *j, vx_jobs_cluster_stats *out)
     return 1;
 }
 
+long cluster_queued(vx_jobs *j)
+{
+    vx_err err;
+    vx_err_clear(&err);
+    return vx_pg_queued(j->cl->api, &err);
+}
+
 int vx_jobs_database_ok(vx_jobs *j, vx_err *err)
 {
     if (!j->cl) return 1;

@@ -140,7 +140,11 @@ int vx_jobs_output(vx_jobs *j, const char *jid, const char *name, char *path, si
 int vx_jobs_ready(vx_jobs *j);
 /* Copy of the GL info taken when the context came up (zeroed before). */
 vx_gl_info vx_jobs_gl_info(vx_jobs *j);
+/* Jobs queued: this daemon's queue, or in cluster mode the database's
+ * (every replica's: what a submission's 429 counts; the local queue while
+ * the database does not answer). */
 size_t vx_jobs_queue_depth(vx_jobs *j);
+/* --max-queued-jobs. */
 size_t vx_jobs_queue_capacity(vx_jobs *j);
 size_t vx_jobs_running(vx_jobs *j);
 /* GL contexts lost during jobs since the table was opened. */

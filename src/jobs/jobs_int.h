@@ -189,6 +189,9 @@ void cluster_report(vx_jobs *j, job *jb, vx_job_run *r, int ok, const vx_err *e,
                     char state[16]);
 /* Wakes the claimer (a job finished: the GL thread is free). */
 void cluster_wake(vx_jobs *j);
+/* Jobs queued in the database, every replica's (what a submission's 429
+ * counts); -1 when it does not answer. */
+long cluster_queued(vx_jobs *j);
 
 /* snapshot.c */
 /* Journals that jb is deleted (a record replay drops it on). */

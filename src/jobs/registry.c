@@ -641,7 +641,8 @@ vx_gl_info vx_jobs_gl_info(vx_jobs *j)
 
 size_t vx_jobs_queue_depth(vx_jobs *j)
 {
-    return vx_queue_depth(j->queue);
+    long q = j->cl ? cluster_queued(j) : -1;
+    return q >= 0 ? (size_t)q : vx_queue_depth(j->queue);
 }
 
 size_t vx_jobs_queue_capacity(vx_jobs *j)

@@ -125,6 +125,25 @@ check "catalog: r2 and r3 count the same meshes ($n2)" test "$(jqb .meshes)" = "
 # A queued job of a kind no replica runs names the mesh (it stays queued).
 HELD=$(printf '%032x' "$RANDOM$RANDOM")
 psql "$URL" -qAtc "INSERT INTO vx_jobs (id, kind, mesh, max_attempts) VALUES ('$HELD', 'held', '$M', 1)" >/dev/null
+# /readyz and /metrics count the database's queued jobs, every replica's,
+# as a submission's 429 does (they showed this replica's own queue: 0 and
+# not full while every submission got 429).
+on 2
+api GET /readyz
+Q=$(psql "$URL" -qAtc "SELECT count(*) FROM vx_jobs WHERE state = 'queued'")
+check "readyz: the queue depth is the database's ($(jq -c .queue "$BODY"), $Q queued)" \
+    jq -e --argjson q "$Q" '.queue.depth == $q and .queue.depth >= 1 and .queue.full == false' "$BODY"
+CAP=$(jqb .queue.capacity)
+psql "$URL" -qAtc "INSERT INTO vx_jobs (id, kind, mesh, max_attempts) SELECT md5(random()::text || g), 'held', '$M', 1 FROM generate_series(1, $((CAP - Q))) g" >/dev/null
+on 3
+submit 3 voxelize "$B" '{"resolution":16}'
+expect_error "a full database queue" 429 queue_full
+api GET /readyz
+check "readyz: full when the database's queue is ($(jq -c .queue "$BODY"))" \
+    jq -e --argjson c "$CAP" '.queue.depth == $c and .queue.full == true' "$BODY"
+api GET /metrics
+check "metrics: voxeld_queue_depth is the database's" grep -qx "voxeld_queue_depth $CAP" "$BODY"
+psql "$URL" -qAtc "UPDATE vx_jobs SET state = 'canceled', finished = now() WHERE kind = 'held' AND id <> '$HELD'" >/dev/null
 MF=$(find "$SHARED" -name "$M.obj" | head -n 1)
 check "catalog: the mesh's bytes are in the shared store" test -n "$MF"
 on 1
