@@ -242,6 +242,8 @@ static int store_id_check(void *ud, const char *have, char out[VX_PG_STORE_ID], 
     return 0;
 }
 
+#define API_LOCK_WAIT_S 2.0
+
 int cluster_open(vx_jobs *j, vx_err *err)
 {
     vx_cluster *c = calloc(1, sizeof *c);
@@ -261,9 +263,14 @@ int cluster_open(vx_jobs *j, vx_err *err)
     double ct = vx_pg_url_connect_timeout(d.url);
     if (ct <= 0) ct = d.connect_timeout_s;
     double give_up = vx_mono() + (ct > 0 ? 6 * ct : 30);
+    /* HTTP threads share the API handle: one that waits on a database
+     * that does not answer (up to the statement timeout) holds the others
+     * back 2 s at most, so some thread is left for /livez */
+    vx_pg_desc api = d;
+    api.lock_wait_s = API_LOCK_WAIT_S;
     for (;;) {
         vx_err_clear(err);
-        c->api = vx_pg_open(&d, err);
+        c->api = vx_pg_open(&api, err);
         if (c->api && vx_pg_migrate(c->api, err) >= 0 &&
             vx_pg_store_id(c->api, store_id_check, j->desc.store, err) == 0)
             break;

@@ -304,6 +304,10 @@ PGresult *pg_run_locked(vx_pg *pg, int retry, const char *sql, int n, const char
             vx_log(VX_LOG_WARN, "pg.timeout", "replica=%s seconds=%.1f", pg->replica,
                    pg->desc.statement_timeout_s);
             drop_locked(pg);
+            /* the next try waits out a backoff: the callers queued behind
+             * this one answer 503 at once rather than each wait a connect
+             * timeout on a database that does not answer */
+            pg->next_try = vx_mono() + pg->backoff;
             unavailable(pg, err, "the database did not answer in time");
             return NULL;
         }
@@ -318,6 +322,28 @@ PGresult *pg_run_locked(vx_pg *pg, int retry, const char *sql, int n, const char
         }
         if (!lost || !retry || tries > 0) return NULL;
     }
+}
+
+int pg_lock(vx_pg *pg, vx_err *err)
+{
+    if (!(pg->desc.lock_wait_s > 0)) return pthread_mutex_lock(&pg->lock);
+    struct timespec t;
+    clock_gettime(CLOCK_MONOTONIC, &t);
+    double at = (double)t.tv_sec + (double)t.tv_nsec * 1e-9 + pg->desc.lock_wait_s;
+    t.tv_sec = (time_t)at;
+    t.tv_nsec = (long)((at - (double)t.tv_sec) * 1e9);
+    if (pthread_mutex_clocklock(&pg->lock, CLOCK_MONOTONIC, &t) == 0) return 0;
+    return vx_err_set(err, VX_EUNAVAIL, "database_unavailable",
+                      "the database is not answering (another statement waits on it); try again "
+                      "shortly");
+}
+
+PGresult *pg_run(vx_pg *pg, int retry, const char *sql, int n, const char *const *vals, vx_err *err)
+{
+    if (pg_lock(pg, err)) return NULL;
+    PGresult *r = pg_run_locked(pg, retry, sql, n, vals, err);
+    pthread_mutex_unlock(&pg->lock);
+    return r;
 }
 
 int pg_exec_locked(vx_pg *pg, int retry, const char *sql, int n, const char *const *vals,
@@ -505,7 +531,7 @@ int vx_pg_submit(vx_pg *pg, const vx_pg_new_job *jobs, size_t n, vx_err *err)
                               "job %zu: a job needs a valid id and kind (and parent id)", i);
     }
     if (n == 0) return 0;
-    pthread_mutex_lock(&pg->lock);
+    if (pg_lock(pg, err)) return -1;
     int rc = -1;
     int tx = n > 1;
     if (tx && pg_exec_locked(pg, 1, "BEGIN", 0, NULL, err)) goto out;
@@ -543,10 +569,7 @@ int vx_pg_get(vx_pg *pg, const char *id, vx_pg_job *out, vx_err *err)
     if (!vx_jobs_valid_id(id))
         return vx_err_set(err, VX_ENOTFOUND, "job_not_found", "no job %.40s", id ? id : "");
     const char *vals[] = {id};
-    pthread_mutex_lock(&pg->lock);
-    PGresult *r =
-        pg_run_locked(pg, 1, "SELECT " JOB_COLS " FROM vx_jobs WHERE id = $1", 1, vals, err);
-    pthread_mutex_unlock(&pg->lock);
+    PGresult *r = pg_run(pg, 1, "SELECT " JOB_COLS " FROM vx_jobs WHERE id = $1", 1, vals, err);
     if (!r) return -1;
     int rc = 0;
     if (PQntuples(r) == 1)
@@ -577,14 +600,12 @@ int vx_pg_submit_idem(vx_pg *pg, const vx_pg_new_job *job, vx_pg_job *existing, 
      * 202, and never existed). It can be gone by then (deleted): try again. */
     int rc = -2; /* -2: neither inserted nor the key's row read yet */
     for (int attempt = 0; attempt < 8 && rc == -2; attempt++) {
-        pthread_mutex_lock(&pg->lock);
-        PGresult *r = pg_run_locked(
-            pg, 0,
-            "INSERT INTO vx_jobs (id, kind, mesh, params, max_attempts, fp, idem_key)"
-            " VALUES ($1, $2, $3, $4::json, $5::integer, $6, $7)"
-            " ON CONFLICT (idem_key) WHERE idem_key IS NOT NULL DO NOTHING RETURNING id",
-            7, vals, err);
-        pthread_mutex_unlock(&pg->lock);
+        PGresult *r =
+            pg_run(pg, 0,
+                   "INSERT INTO vx_jobs (id, kind, mesh, params, max_attempts, fp, idem_key)"
+                   " VALUES ($1, $2, $3, $4::json, $5::integer, $6, $7)"
+                   " ON CONFLICT (idem_key) WHERE idem_key IS NOT NULL DO NOTHING RETURNING id",
+                   7, vals, err);
         if (!r) {
             rc = -1;
             break;
@@ -596,10 +617,7 @@ int vx_pg_submit_idem(vx_pg *pg, const vx_pg_new_job *job, vx_pg_job *existing, 
             break;
         }
         const char *key[] = {job->idem};
-        pthread_mutex_lock(&pg->lock);
-        r = pg_run_locked(pg, 1, "SELECT " JOB_COLS " FROM vx_jobs WHERE idem_key = $1", 1, key,
-                          err);
-        pthread_mutex_unlock(&pg->lock);
+        r = pg_run(pg, 1, "SELECT " JOB_COLS " FROM vx_jobs WHERE idem_key = $1", 1, key, err);
         if (!r) {
             rc = -1;
             break;
@@ -627,12 +645,10 @@ int vx_pg_find_done(vx_pg *pg, const char *fp, vx_pg_job *out, vx_err *err)
 {
     memset(out, 0, sizeof *out);
     const char *vals[] = {fp};
-    pthread_mutex_lock(&pg->lock);
-    PGresult *r = pg_run_locked(pg, 1,
-                                "SELECT " JOB_COLS " FROM vx_jobs WHERE fp = $1 AND state ="
-                                " 'succeeded' ORDER BY id DESC LIMIT 1",
-                                1, vals, err);
-    pthread_mutex_unlock(&pg->lock);
+    PGresult *r = pg_run(pg, 1,
+                         "SELECT " JOB_COLS " FROM vx_jobs WHERE fp = $1 AND state ="
+                         " 'succeeded' ORDER BY id DESC LIMIT 1",
+                         1, vals, err);
     if (!r) return -1;
     int got = PQntuples(r) == 1;
     if (got) read_row(r, 0, out);
@@ -645,14 +661,12 @@ int vx_pg_delete(vx_pg *pg, const char *id, vx_err *err)
     if (!vx_jobs_valid_id(id))
         return vx_err_set(err, VX_ENOTFOUND, "job_not_found", "no job %.40s", id ? id : "");
     const char *vals[] = {id};
-    pthread_mutex_lock(&pg->lock);
-    PGresult *r = pg_run_locked(pg, 0,
-                                "WITH del AS (DELETE FROM vx_jobs WHERE id = $1 AND state IN"
-                                " ('succeeded', 'failed', 'canceled') RETURNING id)"
-                                " SELECT (SELECT count(*) FROM del),"
-                                " (SELECT state FROM vx_jobs WHERE id = $1)",
-                                1, vals, err);
-    pthread_mutex_unlock(&pg->lock);
+    PGresult *r = pg_run(pg, 0,
+                         "WITH del AS (DELETE FROM vx_jobs WHERE id = $1 AND state IN"
+                         " ('succeeded', 'failed', 'canceled') RETURNING id)"
+                         " SELECT (SELECT count(*) FROM del),"
+                         " (SELECT state FROM vx_jobs WHERE id = $1)",
+                         1, vals, err);
     if (!r) return -1;
     int rc = 0;
     if (atoi(PQgetvalue(r, 0, 0)) != 1) {
@@ -702,10 +716,8 @@ int vx_pg_store_id(vx_pg *pg,
 
 long vx_pg_queued(vx_pg *pg, vx_err *err)
 {
-    pthread_mutex_lock(&pg->lock);
     PGresult *r =
-        pg_run_locked(pg, 1, "SELECT count(*) FROM vx_jobs WHERE state = 'queued'", 0, NULL, err);
-    pthread_mutex_unlock(&pg->lock);
+        pg_run(pg, 1, "SELECT count(*) FROM vx_jobs WHERE state = 'queued'", 0, NULL, err);
     if (!r) return -1;
     long n = atol(PQgetvalue(r, 0, 0));
     PQclear(r);
@@ -714,9 +726,9 @@ long vx_pg_queued(vx_pg *pg, vx_err *err)
 
 int vx_pg_ping(vx_pg *pg, vx_err *err)
 {
-    pthread_mutex_lock(&pg->lock);
-    int rc = pg_exec_locked(pg, 1, "SELECT 1", 0, NULL, err);
-    pthread_mutex_unlock(&pg->lock);
+    PGresult *r = pg_run(pg, 1, "SELECT 1", 0, NULL, err);
+    int rc = r ? 0 : -1;
+    PQclear(r);
     return rc;
 }
 
@@ -724,12 +736,10 @@ int vx_pg_child_counts(vx_pg *pg, const char *id, int *done, int *total, vx_err 
 {
     *done = *total = 0;
     const char *vals[] = {id};
-    pthread_mutex_lock(&pg->lock);
-    PGresult *r = pg_run_locked(pg, 1,
-                                "SELECT count(*) FILTER (WHERE state = 'succeeded'), count(*) FROM"
-                                " vx_jobs WHERE parent_id = $1",
-                                1, vals, err);
-    pthread_mutex_unlock(&pg->lock);
+    PGresult *r = pg_run(pg, 1,
+                         "SELECT count(*) FILTER (WHERE state = 'succeeded'), count(*) FROM"
+                         " vx_jobs WHERE parent_id = $1",
+                         1, vals, err);
     if (!r) return -1;
     *done = atoi(PQgetvalue(r, 0, 0));
     *total = atoi(PQgetvalue(r, 0, 1));
@@ -741,10 +751,8 @@ int vx_pg_find_idem(vx_pg *pg, const char *key, vx_pg_job *out, vx_err *err)
 {
     memset(out, 0, sizeof *out);
     const char *vals[] = {key};
-    pthread_mutex_lock(&pg->lock);
     PGresult *r =
-        pg_run_locked(pg, 1, "SELECT " JOB_COLS " FROM vx_jobs WHERE idem_key = $1", 1, vals, err);
-    pthread_mutex_unlock(&pg->lock);
+        pg_run(pg, 1, "SELECT " JOB_COLS " FROM vx_jobs WHERE idem_key = $1", 1, vals, err);
     if (!r) return -1;
     int got = PQntuples(r) == 1;
     if (got) read_row(r, 0, out);
@@ -777,9 +785,7 @@ int vx_pg_list(vx_pg *pg, const vx_pg_filter *f, const char *after, int limit, v
         " AND ($2::text IS NULL OR kind = $2) AND ($3::text IS NULL OR parent_id = $3)"
         " AND ($6::text IS NULL OR mesh = $6)"
         " AND ($4::text IS NULL OR id < $4) ORDER BY id DESC LIMIT $5::integer";
-    pthread_mutex_lock(&pg->lock);
-    PGresult *r = pg_run_locked(pg, 1, f->desc ? desc : asc, 6, vals, err);
-    pthread_mutex_unlock(&pg->lock);
+    PGresult *r = pg_run(pg, 1, f->desc ? desc : asc, 6, vals, err);
     if (!r) return -1;
     int rows = PQntuples(r);
     int keep = rows > limit ? limit : rows;
@@ -804,8 +810,7 @@ int vx_pg_claim(vx_pg *pg, const char *kinds, vx_pg_job *out, vx_err *err)
     char lease[32];
     snprintf(lease, sizeof lease, "%.3f", pg->desc.lease_s);
     const char *vals[] = {pg->replica, lease, kinds && *kinds ? kinds : NULL};
-    pthread_mutex_lock(&pg->lock);
-    PGresult *r = pg_run_locked(
+    PGresult *r = pg_run(
         pg, 0,
         "UPDATE vx_jobs SET state = 'running', replica = $1, attempt = attempt + 1,"
         " lease_expires = now() + make_interval(secs => $2::float8), started = now(),"
@@ -817,7 +822,6 @@ int vx_pg_claim(vx_pg *pg, const char *kinds, vx_pg_job *out, vx_err *err)
         "  ORDER BY id LIMIT 1 FOR UPDATE SKIP LOCKED)"
         " AND state = 'queued' RETURNING " JOB_COLS,
         3, vals, err);
-    pthread_mutex_unlock(&pg->lock);
     if (!r) return -1;
     int got = PQntuples(r) == 1;
     if (got) read_row(r, 0, out);
@@ -960,18 +964,16 @@ int vx_pg_release(vx_pg *pg, const char *id, int attempt, vx_err *err)
     char att[16];
     snprintf(att, sizeof att, "%d", attempt);
     const char *vals[] = {id, att, pg->replica};
-    pthread_mutex_lock(&pg->lock);
-    PGresult *r = pg_run_locked(
-        pg, 0,
-        "UPDATE vx_jobs SET state = CASE WHEN cancel_requested THEN 'canceled' ELSE"
-        " 'queued' END, finished = CASE WHEN cancel_requested THEN now() END,"
-        " progress = CASE WHEN cancel_requested THEN progress ELSE 0 END,"
-        " max_attempts = max_attempts + 1, lease_expires = NULL, not_before = now(),"
-        " updated = now()"
-        " WHERE id = $1 AND attempt = $2::integer AND replica = $3 AND state = 'running'"
-        " RETURNING state",
-        3, vals, err);
-    pthread_mutex_unlock(&pg->lock);
+    PGresult *r =
+        pg_run(pg, 0,
+               "UPDATE vx_jobs SET state = CASE WHEN cancel_requested THEN 'canceled' ELSE"
+               " 'queued' END, finished = CASE WHEN cancel_requested THEN now() END,"
+               " progress = CASE WHEN cancel_requested THEN progress ELSE 0 END,"
+               " max_attempts = max_attempts + 1, lease_expires = NULL, not_before = now(),"
+               " updated = now()"
+               " WHERE id = $1 AND attempt = $2::integer AND replica = $3 AND state = 'running'"
+               " RETURNING state",
+               3, vals, err);
     if (!r) return -1;
     int done = PQntuples(r) == 1;
     PQclear(r);
@@ -1028,7 +1030,7 @@ int vx_pg_cancel(vx_pg *pg, const char *id, int *was_running, vx_err *err)
     if (!vx_jobs_valid_id(id))
         return vx_err_set(err, VX_ENOTFOUND, "job_not_found", "no job %.40s", id ? id : "");
     const char *vals[] = {id};
-    pthread_mutex_lock(&pg->lock);
+    if (pg_lock(pg, err)) return -1;
     PGresult *r = pg_run_locked(
         pg, 0,
         "WITH kids AS (UPDATE vx_jobs SET cancel_requested = true,"
@@ -1129,12 +1131,10 @@ int vx_pg_counts(vx_pg *pg, vx_pg_count **out, size_t *n, vx_err *err)
 {
     *out = NULL;
     *n = 0;
-    pthread_mutex_lock(&pg->lock);
-    PGresult *r = pg_run_locked(pg, 1,
-                                "SELECT state, kind, count(*) FROM vx_jobs GROUP BY state, kind"
-                                " ORDER BY state, kind",
-                                0, NULL, err);
-    pthread_mutex_unlock(&pg->lock);
+    PGresult *r = pg_run(pg, 1,
+                         "SELECT state, kind, count(*) FROM vx_jobs GROUP BY state, kind"
+                         " ORDER BY state, kind",
+                         0, NULL, err);
     if (!r) return -1;
     int rows = PQntuples(r);
     if (rows > 0 && !(*out = calloc((size_t)rows, sizeof **out))) {

@@ -54,6 +54,10 @@ typedef struct vx_pg_desc {
      * a stopped server, a held lock); also the server's statement_timeout
      * and lock_timeout. 0 = 10. */
     double statement_timeout_s;
+    /* How long a call waits for the handle another thread's statement
+     * holds before it answers 503 database_unavailable; 0 = as long as it
+     * takes (the API handle sets it: its callers are HTTP threads). */
+    double lock_wait_s;
 } vx_pg_desc;
 
 /* The connect_timeout a libpq URL sets (seconds, as libpq takes it: 2 at

@@ -21,6 +21,14 @@ struct vx_pg {
     int missed;      /* reconnected while listening: notifications may be lost */
 };
 
+/* Takes pg->lock, waiting at most desc.lock_wait_s when it is set (the
+ * handle HTTP threads use: a statement waiting on a database that does not
+ * answer held every HTTP thread behind it, /livez's too); 0, or -1 with a
+ * 503 database_unavailable in err. */
+int pg_lock(vx_pg *pg, vx_err *err);
+/* pg_run_locked under pg_lock. */
+PGresult *pg_run(vx_pg *pg, int retry, const char *sql, int n, const char *const *vals,
+                 vx_err *err);
 /* Runs sql (n text params; n = 0 allows several statements) and returns
  * its result (PQclear it) or NULL with err; the caller holds pg->lock.
  * retry: when the connection was lost, once more on a new one (for

@@ -17,7 +17,7 @@
 int vx_pg_mesh_lock(vx_pg *pg, const char *id, vx_err *err)
 {
     const char *vals[] = {id};
-    pthread_mutex_lock(&pg->lock);
+    if (pg_lock(pg, err)) return -1;
     int rc =
         pg_exec_locked(pg, 1, "SELECT pg_advisory_lock_shared(" MESH_LOCK_KEY ")", 1, vals, err);
     pthread_mutex_unlock(&pg->lock);
@@ -41,7 +41,10 @@ int vx_pg_mesh_put(vx_pg *pg, const char *id, const cJSON *meta, int *existed, c
     char *text = vx_json_print(meta, 0);
     if (!text) return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory");
     const char *vals[] = {id, text};
-    pthread_mutex_lock(&pg->lock);
+    if (pg_lock(pg, err)) {
+        cJSON_free(text);
+        return -1;
+    }
     /* A live row stays as it is (the first upload's name wins, as on one
      * node); a deleted one comes back with this upload's metadata. */
     PGresult *r = pg_run_locked(
@@ -69,10 +72,8 @@ int vx_pg_mesh_get(vx_pg *pg, const char *id, cJSON **meta, vx_err *err)
 {
     *meta = NULL;
     const char *vals[] = {id};
-    pthread_mutex_lock(&pg->lock);
-    PGresult *r = pg_run_locked(
+    PGresult *r = pg_run(
         pg, 1, "SELECT meta::text FROM vx_meshes WHERE id = $1 AND deleted IS NULL", 1, vals, err);
-    pthread_mutex_unlock(&pg->lock);
     if (!r) return -1;
     int got = PQntuples(r) == 1;
     if (got && !(*meta = cJSON_Parse(PQgetvalue(r, 0, 0)))) {
@@ -85,12 +86,10 @@ int vx_pg_mesh_get(vx_pg *pg, const char *id, cJSON **meta, vx_err *err)
 int vx_pg_mesh_delete(vx_pg *pg, const char *id, vx_err *err)
 {
     const char *vals[] = {id};
-    pthread_mutex_lock(&pg->lock);
-    PGresult *r = pg_run_locked(pg, 1,
-                                "UPDATE vx_meshes SET deleted = now() WHERE id = $1 AND deleted"
-                                " IS NULL RETURNING id",
-                                1, vals, err);
-    pthread_mutex_unlock(&pg->lock);
+    PGresult *r = pg_run(pg, 1,
+                         "UPDATE vx_meshes SET deleted = now() WHERE id = $1 AND deleted"
+                         " IS NULL RETURNING id",
+                         1, vals, err);
     if (!r) return -1;
     int n = PQntuples(r);
     PQclear(r);
@@ -106,12 +105,10 @@ cJSON *vx_pg_mesh_list(vx_pg *pg, const char *after, int limit, char next[65], v
     char lim[16];
     snprintf(lim, sizeof lim, "%d", limit + 1);
     const char *vals[] = {after, lim};
-    pthread_mutex_lock(&pg->lock);
-    PGresult *r = pg_run_locked(pg, 1,
-                                "SELECT id, meta::text FROM vx_meshes WHERE deleted IS NULL AND"
-                                " ($1::text IS NULL OR id > $1) ORDER BY id LIMIT $2::integer",
-                                2, vals, err);
-    pthread_mutex_unlock(&pg->lock);
+    PGresult *r = pg_run(pg, 1,
+                         "SELECT id, meta::text FROM vx_meshes WHERE deleted IS NULL AND"
+                         " ($1::text IS NULL OR id > $1) ORDER BY id LIMIT $2::integer",
+                         2, vals, err);
     if (!r) return NULL;
     cJSON *arr = cJSON_CreateArray();
     int n = PQntuples(r);
@@ -127,10 +124,8 @@ cJSON *vx_pg_mesh_list(vx_pg *pg, const char *after, int limit, char next[65], v
 
 long vx_pg_mesh_count(vx_pg *pg, vx_err *err)
 {
-    pthread_mutex_lock(&pg->lock);
     PGresult *r =
-        pg_run_locked(pg, 1, "SELECT count(*) FROM vx_meshes WHERE deleted IS NULL", 0, NULL, err);
-    pthread_mutex_unlock(&pg->lock);
+        pg_run(pg, 1, "SELECT count(*) FROM vx_meshes WHERE deleted IS NULL", 0, NULL, err);
     if (!r) return -1;
     long n = atol(PQgetvalue(r, 0, 0));
     PQclear(r);
@@ -142,16 +137,13 @@ int vx_pg_mesh_add_missing(vx_pg *pg, const cJSON *metas, vx_err *err)
     char *text = vx_json_print(metas, 0);
     if (!text) return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory");
     const char *vals[] = {text};
-    pthread_mutex_lock(&pg->lock);
-    PGresult *r =
-        pg_run_locked(pg, 1,
-                      "INSERT INTO vx_meshes (id, format, bytes, triangles, meta)"
-                      " SELECT e ->> 'id', e ->> 'format', coalesce((e ->> 'bytes')::bigint, 0),"
-                      "  (e ->> 'triangles')::bigint, e FROM json_array_elements($1::json) e"
-                      " WHERE (e ->> 'id') ~ '^[0-9a-f]{64}$'"
-                      " ON CONFLICT (id) DO NOTHING",
-                      1, vals, err);
-    pthread_mutex_unlock(&pg->lock);
+    PGresult *r = pg_run(pg, 1,
+                         "INSERT INTO vx_meshes (id, format, bytes, triangles, meta)"
+                         " SELECT e ->> 'id', e ->> 'format', coalesce((e ->> 'bytes')::bigint, 0),"
+                         "  (e ->> 'triangles')::bigint, e FROM json_array_elements($1::json) e"
+                         " WHERE (e ->> 'id') ~ '^[0-9a-f]{64}$'"
+                         " ON CONFLICT (id) DO NOTHING",
+                         1, vals, err);
     cJSON_free(text);
     if (!r) return -1;
     int n = atoi(PQcmdTuples(r));
@@ -169,13 +161,10 @@ int vx_pg_mesh_purge(vx_pg *pg, int max, vx_pg_purge_fn fn, void *ud, vx_err *er
 #define UNUSED_BY_JOBS                                                                             \
     " NOT EXISTS (SELECT 1 FROM vx_jobs j WHERE j.state IN ('queued', 'running') AND"              \
     "  (j.mesh = m.id OR strpos(j.params::text, m.id) > 0))"
-    pthread_mutex_lock(&pg->lock);
-    PGresult *c =
-        pg_run_locked(pg, 1,
-                      "SELECT id FROM vx_meshes m WHERE deleted IS NOT NULL AND" UNUSED_BY_JOBS
-                      " ORDER BY deleted LIMIT $1::integer",
-                      1, lv, err);
-    pthread_mutex_unlock(&pg->lock);
+    PGresult *c = pg_run(pg, 1,
+                         "SELECT id FROM vx_meshes m WHERE deleted IS NOT NULL AND" UNUSED_BY_JOBS
+                         " ORDER BY deleted LIMIT $1::integer",
+                         1, lv, err);
     if (!c) return -1;
     int done = 0, rc = 0;
     for (int i = 0; i < PQntuples(c) && !rc; i++) {

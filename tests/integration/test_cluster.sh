@@ -452,6 +452,35 @@ api GET /metrics
 check "metrics: the database's counts by state and kind" grep -Eq '^voxeld_cluster_jobs\{state="succeeded",kind="voxelize"\} [0-9]+' "$BODY"
 check "metrics: claims counted" grep -Eq '^voxeld_cluster_claims_total [0-9]+' "$BODY"
 
+# A database that stops answering without closing (its processes
+# stopped): the first request waits out the statement timeout (10 s), the
+# ones queued behind it answer 503 within about 2 s, and /livez, which
+# needs no database, is answered meanwhile (every HTTP thread had waited
+# in line, 14-19 s, /livez too).
+PGPIDS="$(head -n 1 "$PGDIR/data/postmaster.pid") $(pgrep -P "$(head -n 1 "$PGDIR/data/postmaster.pid")" | tr '\n' ' ')"
+kill -STOP $PGPIDS
+on 1
+CURLS=()
+for n in 1 2 3 4 5 6; do
+    curl -s -o /dev/null -m 60 -w '%{http_code} %{time_total}\n' "$BASE/v1/jobs?limit=1" >"$TMP/frozen$n" &
+    CURLS+=($!)
+done
+sleep 0.5
+curl -s -o /dev/null -m 30 -w '%{http_code} %{time_total}\n' "$BASE/livez" >"$TMP/frozen_livez"
+wait "${CURLS[@]}"
+kill -CONT $PGPIDS
+read -r code secs <"$TMP/frozen_livez"
+check "/livez with the database frozen: 200 in ${secs} s" awk -v c="$code" -v s="$secs" 'BEGIN { exit !(c == 200 && s < 4) }'
+slow=$(cat "$TMP"/frozen[1-6] | awk '$2 >= 13 || ($1 != 200 && $1 != 503)' | wc -l)
+check "requests with the database frozen: 200 or 503, none over 13 s ($(cat "$TMP"/frozen[1-6] | tr '\n' ' '))" test "$slow" -eq 0
+check "some were answered 503 at once" bash -c "cat '$TMP'/frozen[1-6] | awk '\$1 == 503 && \$2 < 4' | grep -q ."
+for i in $(seq 1 100); do
+    api GET "/v1/jobs?limit=1"
+    [[ $STATUS == 200 ]] && break
+    sleep 0.2
+done
+expect_status "r1 answers again once the database does" 200
+
 for i in 1 2 3; do
     kill -TERM "${RPID[$i]}"
     rc=0
