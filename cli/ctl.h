@@ -81,6 +81,10 @@ int ctl_cmd_cancel(ctl *c, const char *jid);
 /* Deletes a job: cancels it when unfinished, else removes it and its results. */
 int ctl_cmd_delete(ctl *c, const char *jid);
 int ctl_cmd_upload(ctl *c, const char *file);
+/* Whether -o out cannot be written (said on stderr), checked before a job
+ * is submitted rather than after it ran: a part file is made where the
+ * result would go (through symlinks) and removed. "-" is stdout. */
+int ctl_out_unwritable(const char *out);
 /* Removes the part file being written and the spooled upload, if any
  * (async-signal-safe: for a signal that ends the process). */
 void ctl_cmds_remove_temp(void);

@@ -153,12 +153,14 @@ static int upload(ctl *c, const char *file, char *id, int echo)
 typedef struct follow {
     ctl *c;
     char state[16];
-    int tenth; /* the last tenth of progress reported (plain lines) */
+    int tenth;    /* the last tenth of progress reported (plain lines) */
+    int answered; /* the server has answered during this command */
 } follow;
 
 static void on_job(void *ud, const cJSON *job)
 {
     follow *f = ud;
+    f->answered = 1;
     if (f->c->quiet) return;
     const char *state = str(job, "state");
     double p = num(job, "progress");
@@ -188,14 +190,17 @@ static int error_code_is(const ctl_buf *b, const char *code)
 /* Follows job jid to its end: the event stream, or ?wait polling when the
  * server has no stream (and while it holds --max-waits requests already,
  * 503 too_many_waits: plain GETs 2 s apart). A server that stops answering
- * (restarting: no connection, or 503 while it starts) is asked again for
- * 2 minutes: a job it requeued goes on after a restart. The last Job
- * (owned), or NULL (printed). */
-static cJSON *follow_job(ctl *c, const char *jid)
+ * (restarting: no connection, or 503 while it starts) after it answered
+ * during this command (answered: already before) is asked again for 2
+ * minutes: a job it requeued goes on after a restart. One that never
+ * answered is no server there: said at once. The last Job (owned), or
+ * NULL (printed). */
+static cJSON *follow_job(ctl *c, const char *jid, int answered)
 {
-    follow f = {.c = c, .tenth = -1};
+    follow f = {.c = c, .tenth = -1, .answered = answered};
     long st;
     cJSON *job = ctl_http_events(c, jid, on_job, &f, &st);
+    if (st) f.answered = 1;
     if (job && terminal(str(job, "state"))) return job;
     cJSON_Delete(job);
     char path[160];
@@ -204,9 +209,16 @@ static cJSON *follow_job(ctl *c, const char *jid)
     for (;;) {
         ctl_buf b = {0};
         snprintf(path, sizeof path, plain ? "/v1/jobs/%s" : "/v1/jobs/%s?wait=30", jid);
-        c->quiet_transport = c->no_retry = 1; /* said below, and tried again here */
+        /* said below, and tried again here (no answer yet: ctl_http says it) */
+        c->quiet_transport = f.answered;
+        c->no_retry = 1;
         st = ctl_http(c, "GET", path, NULL, NULL, NULL, &b, NULL, NULL, 0);
         c->quiet_transport = c->no_retry = 0;
+        if (st < 0 && !f.answered) {
+            free(b.p);
+            return NULL;
+        }
+        f.answered = 1;
         if (st == 503 && !plain && error_code_is(&b, "too_many_waits")) {
             free(b.p);
             lost = 0;
@@ -295,6 +307,99 @@ static void catch_signals(const char *jid)
         signal(sigs[i], on_signal);
 }
 
+/* The directory of path into dir: "." when it names none. */
+static void dir_of(const char *path, char *dir, size_t n)
+{
+    snprintf(dir, n, "%s", path);
+    char *slash = strrchr(dir, '/');
+    if (slash == dir)
+        dir[1] = 0;
+    else if (slash)
+        *slash = 0;
+    else
+        snprintf(dir, n, ".");
+}
+
+/* The file that -o out writes into final: through a symlink (or a chain of
+ * them, a relative one from its own directory) to the target, which may
+ * not exist yet (realpath() fails on such a dangling link), else out.
+ * 0, or -1 with errno (ELOOP, ENAMETOOLONG). */
+static int out_target(const char *out, char *final, size_t n)
+{
+    char cur[4200], link[4096], dir[4200];
+    snprintf(cur, sizeof cur, "%s", out);
+    for (int hops = 0;; hops++) {
+        char *rp = realpath(cur, NULL);
+        if (rp) {
+            snprintf(final, n, "%s", rp);
+            free(rp);
+            return 0;
+        }
+        ssize_t k = readlink(cur, link, sizeof link);
+        if (k < 0) { /* no link: a file to make */
+            snprintf(final, n, "%s", cur);
+            return 0;
+        }
+        if (k == (ssize_t)sizeof link || hops == 40) {
+            errno = hops == 40 ? ELOOP : ENAMETOOLONG;
+            return -1;
+        }
+        link[k] = 0;
+        dir_of(cur, dir, sizeof dir);
+        if (link[0] == '/')
+            snprintf(cur, sizeof cur, "%s", link);
+        else
+            snprintf(cur, sizeof cur, "%s/%s", strcmp(dir, "/") ? dir : "", link);
+    }
+}
+
+/* Makes a part file with mode in dir, its name into part. Its fd, or -1
+ * with errno (nothing left). */
+static int part_open(const char *dir, mode_t mode, char *part, size_t n)
+{
+    snprintf(part, n, "%s/.voxelctl-XXXXXX.part", dir);
+    int fd = mkstemps(part, 5);
+    if (fd >= 0 && fchmod(fd, mode) != 0) {
+        int e = errno;
+        close(fd);
+        unlink(part);
+        errno = e;
+        fd = -1;
+    }
+    return fd;
+}
+
+int ctl_out_unwritable(const char *out)
+{
+    if (!out || !strcmp(out, "-")) return 0;
+    char final[4200], dir[4200], part[4300];
+    if (out_target(out, final, sizeof final)) {
+        fprintf(stderr, "voxelctl: -o %s: %s\n", out, strerror(errno));
+        return 1;
+    }
+    struct stat st;
+    int exists = stat(final, &st) == 0;
+    if (exists && S_ISDIR(st.st_mode)) {
+        fprintf(stderr, "voxelctl: -o %s: is a directory\n", out);
+        return 1;
+    }
+    if (exists && access(final, W_OK) != 0) {
+        fprintf(stderr, "voxelctl: -o %s: cannot write %s: %s\n", out, final, strerror(errno));
+        return 1;
+    }
+    if (exists && !S_ISREG(st.st_mode)) return 0; /* written in place */
+    /* a part file made and removed: access() lets root "write" in /proc */
+    dir_of(final, dir, sizeof dir);
+    int fd = part_open(dir, 0600, part, sizeof part);
+    if (fd < 0) {
+        fprintf(stderr, "voxelctl: -o %s: cannot write %s: %s\n", out, dir, strerror(errno));
+        return 1;
+    }
+    close(fd);
+    unlink(part);
+    return 0;
+}
+
 /* A result being written: to stdout, in place (out exists and is not a
  * regular file: a device such as /dev/null, a FIFO), or through a part
  * file beside the destination with a name of its own (parallel runs never
@@ -317,9 +422,10 @@ static int sink_open(sink_file *o, const char *out)
     umask(mask);
     struct stat st;
     if (out) {
-        char *rp = realpath(out, NULL); /* the target of a symlink */
-        snprintf(o->final, sizeof o->final, "%s", rp ? rp : out);
-        free(rp);
+        if (out_target(out, o->final, sizeof o->final)) {
+            fprintf(stderr, "voxelctl: cannot write %s: %s\n", out, strerror(errno));
+            return 1;
+        }
         if (stat(o->final, &st) == 0) {
             o->direct = !S_ISREG(st.st_mode);
             mode = st.st_mode & 07777;
@@ -331,17 +437,9 @@ static int sink_open(sink_file *o, const char *out)
         return o->f ? 0 : 1;
     }
     char dir[4200];
-    snprintf(dir, sizeof dir, "%s", o->final[0] ? o->final : "./result");
-    char *slash = strrchr(dir, '/');
-    if (slash == dir)
-        dir[1] = 0;
-    else if (slash)
-        *slash = 0;
-    else
-        snprintf(dir, sizeof dir, ".");
-    snprintf(g_part, sizeof g_part, "%s/.voxelctl-XXXXXX.part", dir);
-    int fd = mkstemps(g_part, 5);
-    if (fd >= 0 && fchmod(fd, mode) == 0) o->f = fdopen(fd, "wb");
+    dir_of(o->final[0] ? o->final : "./result", dir, sizeof dir);
+    int fd = part_open(dir, mode, g_part, sizeof g_part);
+    if (fd >= 0) o->f = fdopen(fd, "wb");
     if (!o->f) {
         fprintf(stderr, "voxelctl: cannot write in %s: %s\n", dir, strerror(errno));
         if (fd >= 0) {
@@ -473,11 +571,12 @@ static int write_stats(const cJSON *job, const char *out)
  * given, else the primary output (every frame of a turntable), else the
  * stats of a job that wrote no file; a job that did not succeed is said
  * (exit 1). With --json the last Job goes on stdout. Shared by the job
- * commands and `get`, so both wait and download alike. The exit status. */
-static int wait_and_fetch(ctl *c, const char *jid, const char *name, const char *out)
+ * commands and `get`, so both wait and download alike (answered: the
+ * server has answered this command already, follow_job). The exit status. */
+static int wait_and_fetch(ctl *c, const char *jid, const char *name, const char *out, int answered)
 {
     catch_signals(jid);
-    cJSON *job = follow_job(c, jid);
+    cJSON *job = follow_job(c, jid, answered);
     if (!job) return 1;
     int rc = 0;
     const char *state = str(job, "state");
@@ -534,15 +633,17 @@ int ctl_cmd_job(ctl *c, const char *kind, const char *src, cJSON *params, const 
         goto done;
     }
     cJSON_Delete(job);
-    rc = wait_and_fetch(c, jid, NULL, out);
+    rc = wait_and_fetch(c, jid, NULL, out, 1);
 done:
     cJSON_Delete(params);
     return rc;
 }
 
 /* GET path; prints the answer as JSON (--json) or through row() for each
- * item of a list page. The exit status. */
-static int list(ctl *c, const char *path, void (*row)(const cJSON *))
+ * item of a list page, and when there are more the options of the next
+ * page: flags (this page's, to keep its filters and order) and --after.
+ * The exit status. */
+static int list(ctl *c, const char *path, void (*row)(const cJSON *), const char *flags)
 {
     ctl_buf b = {0};
     long st = ctl_http(c, "GET", path, NULL, NULL, NULL, &b, NULL, NULL, 0);
@@ -561,8 +662,8 @@ static int list(ctl *c, const char *path, void (*row)(const cJSON *))
         }
         const char *next = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(doc, "next"));
         if (next && !c->quiet)
-            fprintf(stderr, "voxelctl: more after these %d: --after %s (or --limit up to 1000)\n",
-                    cJSON_GetArraySize(items), next);
+            fprintf(stderr, "voxelctl: more after these %d: %s--after %s (or --limit up to 1000)\n",
+                    cJSON_GetArraySize(items), flags ? flags : "", next);
     }
     cJSON_Delete(doc);
     return rc;
@@ -586,11 +687,14 @@ static void mesh_row(const cJSON *m)
 int ctl_cmd_jobs(ctl *c, const char *state, int newest, int limit, const char *after)
 {
     char *s = query_arg("state", state), *a = query_arg("after", after);
-    char *path = s && a ? malloc(strlen(s) + strlen(a) + 60) : NULL;
+    char *path = s && a ? malloc(strlen(s) + strlen(a) + 60) : NULL, flags[300];
     int rc = 1;
     if (path) {
         sprintf(path, "/v1/jobs?limit=%d%s%s%s", limit, newest ? "&order=desc" : "", s, a);
-        rc = list(c, path, job_row);
+        /* (a state is one of a few words: the server refuses others) */
+        snprintf(flags, sizeof flags, "%s%s%s%s--limit %d ", newest ? "--newest " : "",
+                 state ? "--state " : "", state ? state : "", state ? " " : "", limit);
+        rc = list(c, path, job_row, flags);
     }
     free(path);
     free(s);
@@ -604,8 +708,10 @@ int ctl_cmd_meshes(ctl *c, int limit, const char *after)
     char *path = a ? malloc(strlen(a) + 40) : NULL;
     int rc = 1;
     if (path) {
+        char flags[40];
+        snprintf(flags, sizeof flags, "--limit %d ", limit);
         sprintf(path, "/v1/meshes?limit=%d%s", limit, a);
-        rc = list(c, path, mesh_row);
+        rc = list(c, path, mesh_row, flags);
     }
     free(path);
     free(a);
@@ -625,11 +731,11 @@ int ctl_cmd_get(ctl *c, const char *jid, const char *name, const char *out)
 {
     /* A download waits for the job (an unfinished one has no result yet:
      * 409); showing it does not, it is how its state is looked at. */
-    if (out || name) return wait_and_fetch(c, jid, name, out);
+    if (out || name) return wait_and_fetch(c, jid, name, out, 0);
     catch_signals(NULL);
     char path[160];
     snprintf(path, sizeof path, "/v1/jobs/%s", jid);
-    return list(c, path, job_show);
+    return list(c, path, job_show, NULL);
 }
 
 /* DELETE /v1/jobs/{jid}: cancels a queued or running job, and deletes a

@@ -8,7 +8,6 @@
 #include <stdlib.h>
 #include <string.h>
 #include <strings.h>
-#include <sys/stat.h>
 #include <unistd.h>
 
 #include "ctl.h"
@@ -53,8 +52,8 @@ static void usage(FILE *out)
         "  -q, --quiet    no progress on stderr\n"
         "  -h, --help     this text          --version   voxelctl's version\n"
         "A 429 or 503 with Retry-After (queue full, busy, restarting) is sent again for\n"
-        "up to 2 minutes; a server that stops answering while a job runs is asked again\n"
-        "for 2 minutes.\n"
+        "up to 2 minutes; a server that stops answering while a job is followed (after\n"
+        "it answered) is asked again for 2 minutes.\n"
         "Exit status: 0 done, 1 the server or the job failed, 2 bad usage.\n");
 }
 
@@ -306,31 +305,6 @@ static int job_id_ok(const char *s)
     return (int)ok;
 }
 
-/* Whether -o FILE cannot be written (said on stderr): checked before the
- * job runs rather than after. "-" is stdout. */
-static int out_unwritable(const char *out)
-{
-    if (!out || !strcmp(out, "-")) return 0;
-    struct stat st;
-    if (stat(out, &st) == 0 && S_ISDIR(st.st_mode)) {
-        fprintf(stderr, "voxelctl: -o %s: is a directory\n", out);
-        return 1;
-    }
-    char dir[4096];
-    snprintf(dir, sizeof dir, "%s", out);
-    char *slash = strrchr(dir, '/');
-    if (slash)
-        slash == dir ? (void)(slash[1] = 0) : (void)(*slash = 0);
-    else
-        snprintf(dir, sizeof dir, ".");
-    const char *what = access(out, F_OK) == 0 ? out : dir;
-    if (access(what, W_OK) != 0) {
-        fprintf(stderr, "voxelctl: -o %s: cannot write %s: %s\n", out, what, strerror(errno));
-        return 1;
-    }
-    return 0;
-}
-
 /* The commands: name, arguments, and the command options they take. */
 static const struct {
     const char *name;
@@ -391,7 +365,7 @@ static int run(ctl *c, args *a, int n, char **pos)
             return 2;
         }
         if (shortcuts(cmd, a)) return 2;
-        if (out_unwritable(a->out)) return 1;
+        if (ctl_out_unwritable(a->out)) return 1;
         cJSON *p = a->params;
         a->params = NULL;
         return ctl_cmd_job(c, cmd, pos[1], p, a->out, a->no_wait);
@@ -401,7 +375,7 @@ static int run(ctl *c, args *a, int n, char **pos)
     if (!strcmp(cmd, "meshes")) return ctl_cmd_meshes(c, a->limit, a->after);
     if (!job_id_ok(pos[1])) return 2;
     if (!strcmp(cmd, "get"))
-        return out_unwritable(a->out) ? 1 : ctl_cmd_get(c, pos[1], a->name, a->out);
+        return ctl_out_unwritable(a->out) ? 1 : ctl_cmd_get(c, pos[1], a->name, a->out);
     if (!strcmp(cmd, "cancel")) return ctl_cmd_cancel(c, pos[1]);
     return ctl_cmd_delete(c, pos[1]);
 }

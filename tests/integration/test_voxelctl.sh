@@ -79,6 +79,17 @@ check "a missing file: exit 1" test $? -eq 1
 check "an unknown command: exit 2" test $? -eq 2
 "$CTL" --server http://127.0.0.1:1 jobs 2>ctl.err
 check "no server: exit 1 with curl's reason" sh -c "test $? -eq 1 && grep -qi 'connect' ctl.err"
+# get -o / --name too: no server there is said at once (it was taken for a
+# server gone while the job was followed: asked again for 2 minutes).
+for opt in "-o never.raw" "--name voxels"; do
+    s0=$(date +%s%N)
+    # shellcheck disable=SC2086
+    timeout 10 "$CTL" --server http://127.0.0.1:1 get 0123456789abcdef0123456789abcdef $opt 2>ctl.err
+    rc=$?
+    ms=$((($(date +%s%N) - s0) / 1000000))
+    check "get $opt, no server: exit 1 at once (rc $rc, ${ms} ms) with curl's reason ($(head -c 150 ctl.err))" \
+        sh -c "test $rc -eq 1 && test $ms -lt 5000 && grep -qi 'connect' ctl.err && ! grep -q 'asking again' ctl.err"
+done
 
 # Local mistakes are said at once, before anything is sent.
 mkdir -p adir
@@ -107,6 +118,18 @@ njobs=$("$CTL" --json jobs --limit 1000 | jq '.items | length')
 "$CTL" voxelize "$MID" -r 16 -o /nonexistent-dir/x.binvox 2>ctl.err
 check "-o into a missing dir: exit 1, said before the job" sh -c "test $? -eq 1 && grep -q 'cannot write /nonexistent-dir' ctl.err"
 check "-o into a missing dir: no job was submitted" test "$("$CTL" --json jobs --limit 1000 | jq '.items | length')" -eq "$njobs"
+# The same through a dangling symlink (its target's dir is checked, not the
+# link's), and in /proc, where access(W_OK) lets root pass (it ran the job
+# and failed after it): a part file is tried.
+ln -s /nonexistent-dir/x.binvox lost.binvox
+"$CTL" voxelize "$MID" -r 16 -o lost.binvox 2>ctl.err
+rc=$?
+check "-o a link into a missing dir: exit 1, said before the job ($(cat ctl.err))" \
+    sh -c "test $rc -eq 1 && grep -q 'cannot write /nonexistent-dir' ctl.err && test -L lost.binvox"
+"$CTL" voxelize "$MID" -r 16 -o /proc/x.binvox 2>ctl.err
+rc=$?
+check "-o in /proc: exit 1, said before the job ($(cat ctl.err))" sh -c "test $rc -eq 1 && grep -q 'cannot write /proc' ctl.err"
+check "-o a link into a missing dir, -o in /proc: no job was submitted" test "$("$CTL" --json jobs --limit 1000 | jq '.items | length')" -eq "$njobs"
 # Uploads are named by the file's base name; a download without -o takes
 # the server's name (filename*, UTF-8).
 # (a comment makes new bytes: the mesh itself was stored unnamed above)
@@ -167,6 +190,18 @@ ln -sf target.binvox link.binvox
 check "-o a symlink: the link stays" test -L link.binvox
 check "-o a symlink: its target holds the result" test "$(head -n 1 target.binvox)" = "#binvox 1"
 check "-o a symlink: the target's mode kept ($(stat -c %a target.binvox))" test "$(stat -c %a target.binvox)" = 640
+# A dangling symlink: its target is made (the link was replaced by a file),
+# also at the end of a chain of relative links.
+ln -s made.binvox dangling.binvox
+"$CTL" -q voxelize "$MID" -r 16 -f binvox -o dangling.binvox 2>ctl.err
+check "-o a dangling symlink: the link stays ($(cat ctl.err))" test -L dangling.binvox
+check "-o a dangling symlink: its target made" test "$(head -n 1 made.binvox)" = "#binvox 1"
+mkdir -p chain
+ln -s chain/hop.binvox chain1.binvox
+ln -s ../chained.binvox chain/hop.binvox
+"$CTL" -q voxelize "$MID" -r 16 -f binvox -o chain1.binvox 2>ctl.err
+check "-o two relative dangling links: both stay ($(cat ctl.err))" sh -c "test -L chain1.binvox && test -L chain/hop.binvox"
+check "-o two relative dangling links: the last target made" test "$(head -n 1 chained.binvox)" = "#binvox 1"
 mkfifo fifo.out
 cat fifo.out >fifo.copy &
 catpid=$!
@@ -184,6 +219,19 @@ check "summary -o: the stats in the file" jq -e '.voxels_inside > 0' sum2.json
 # --newest: the job just submitted comes first.
 "$CTL" -q voxelize "$MID" -r 12 -f summary --json >last.json 2>/dev/null
 check "jobs --newest: the latest job first" test "$("$CTL" jobs --newest --limit 1 | cut -c1-32)" = "$(jq -r .id last.json)"
+# The next page as stderr names it keeps this page's order and filters (it
+# said --after alone: that dropped --newest and --state).
+for f in "--newest" "--newest --state succeeded" "--state succeeded"; do
+    # shellcheck disable=SC2086
+    "$CTL" jobs $f --limit 2 >pg1 2>ctl.err
+    NEXT=$(sed -n 's/^voxelctl: more after these 2: \(.*--after [0-9a-f]*\) .*/\1/p' ctl.err)
+    # shellcheck disable=SC2086
+    "$CTL" jobs $NEXT >pg2 2>/dev/null
+    # shellcheck disable=SC2086
+    "$CTL" jobs $f --limit 4 >pg4 2>/dev/null
+    check "jobs $f --limit 2: the next page as said ($NEXT) follows it" \
+        sh -c "test -n '$NEXT' && test \$(wc -l <pg2) -eq 2 && cat pg1 pg2 | cmp -s - pg4"
+done
 # Usage errors say what is wrong and exit 2 before anything is sent.
 for bad in "voxelize $MID -p azimuth=1e400" "voxelize $MID -r 8 -p resolution=16" \
     "render $MID --name normal" "jobs --name x" "get ../meshes/$MID" "--json get x -o -" \
@@ -415,6 +463,48 @@ rc=$?
 wait "$spid"
 check "503, then no server, then back: the upload is sent again, exit 0 ($rc, $(cat ctl.err))" \
     sh -c "test $rc -eq 0 && test \"\$(cat standin.id)\" = $(printf 'ab%.0s' $(seq 32)) && grep -q 'shutting_down, HTTP 503' ctl.err && ! grep -q 'connect' ctl.err"
+
+# A server that answered while get followed the job, then was gone for a
+# moment (restarting), is asked again until it is back (a stand-in).
+python3 - "$TMP/standin2.port" >standin2.log 2>&1 <<'PY' &
+import http.server, json, sys, time
+class H(http.server.BaseHTTPRequestHandler):
+    protocol_version = "HTTP/1.1"
+    def log_message(self, *a):
+        pass
+    def do_GET(self):
+        done = self.server.done
+        job = {"id": "0123456789abcdef" * 2, "kind": "voxelize", "state": "succeeded" if done else "running",
+               "progress": 1 if done else 0.5, "outputs": {}, "stats": {"voxels_inside": 7}}
+        events = self.path.endswith("/events")
+        body = ("data: %s\n\n" % json.dumps(job) if events else json.dumps(job)).encode()
+        self.send_response(200)
+        self.send_header("Content-Type", "text/event-stream" if events else "application/json")
+        self.send_header("Content-Length", str(len(body)))
+        self.send_header("Connection", "close")
+        self.end_headers()
+        self.wfile.write(body)
+        self.close_connection = True
+srv = http.server.HTTPServer(("127.0.0.1", 0), H)
+port = srv.server_address[1]
+srv.done = False
+open(sys.argv[1] + ".tmp", "w").write(str(port))
+import os; os.rename(sys.argv[1] + ".tmp", sys.argv[1])
+srv.handle_request()  # the event stream: running, then it ends
+srv.server_close()
+time.sleep(1)  # gone: connections refused
+srv = http.server.HTTPServer(("127.0.0.1", port), H)
+srv.done = True
+srv.timeout = 20  # (a voxelctl that gave up never comes)
+srv.handle_request()
+PY
+spid=$!
+for _ in $(seq 100); do [[ -s "$TMP/standin2.port" ]] && break; sleep 0.05; done
+timeout 20 "$CTL" --server "http://127.0.0.1:$(cat "$TMP/standin2.port")" get 0123456789abcdef0123456789abcdef -o gone.json 2>ctl.err
+rc=$?
+wait "$spid"
+check "get -o, the server gone after it answered: asked again, exit 0 ($rc, $(tr '\n' ' ' <ctl.err))" \
+    sh -c "test $rc -eq 0 && grep -q 'asking again' ctl.err && jq -e '.voxels_inside == 7' gone.json"
 
 stop_daemon
 finish
