@@ -59,13 +59,15 @@ COPY --from=build /build/runtime-packages /tmp/runtime-packages
 # libegl-mesa0 + libgl1-mesa-dri: Mesa's EGL and llvmpipe, the CPU fallback
 # (dlopened by libglvnd, so ldd does not see them). OpenVDB, FFTW and
 # OpenSubdiv are listed as well as found by ldd. curl: the HEALTHCHECK
-# (its libcurl4 is also voxelctl's).
+# (its libcurl4 is also voxelctl's). ca-certificates: libcurl's TLS to an
+# https:// S3 endpoint (libcurl4 only recommends it: a cluster-mode pod
+# could not reach its bucket, curl error 77).
 RUN apt-get update -qq \
  && apt-get install -y -qq --no-install-recommends \
       libmicrohttpd12 libcjson1 libdraco7 libpng16-16 libsystemd0 libnettle8 libzstd1 libpq5 \
       libegl1 libopengl0 libgl1 libegl-mesa0 libgl1-mesa-dri \
       libfftw3-single3 libfftw3-double3 libopenvdb10.0 libosdcpu3.5.0 \
-      curl \
+      curl ca-certificates \
       $(cat /tmp/runtime-packages) \
  && rm -rf /var/lib/apt/lists/* /tmp/runtime-packages
 
@@ -79,8 +81,9 @@ ENV NVIDIA_VISIBLE_DEVICES=all \
     NVIDIA_DRIVER_CAPABILITIES=graphics,compute,utility
 
 # Non-root user; video/render give access to /dev/dri render nodes that a
-# runtime passes in (--device /dev/dri). Debian's base image has video (44)
-# but may lack render.
+# runtime passes in (--device /dev/dri) when their gids are the host's:
+# video's (44) is Debian's everywhere, render's is the host's own, so give
+# it with --group-add (README). Debian's base image may lack render.
 RUN getent group render >/dev/null || groupadd --system render \
  && groupadd --gid 10001 voxeld \
  && useradd --uid 10001 --gid 10001 --groups video,render --no-log-init \

@@ -123,6 +123,9 @@ brun cat /usr/share/glvnd/egl_vendor.d/10_nvidia.json >"$TMP/vendor.json" 2>&1
 check "NVIDIA glvnd vendor file" jq -e '.file_format_version == "1.0.0" and .ICD.library_path == "libEGL_nvidia.so.0"' "$TMP/vendor.json"
 brun cat /usr/share/glvnd/egl_vendor.d/50_mesa.json >"$TMP/mesa.json" 2>&1
 check "Mesa glvnd vendor file (llvmpipe fallback)" jq -e '.ICD.library_path | test("libEGL_mesa")' "$TMP/mesa.json"
+# the CA bundle libcurl verifies an https:// S3 endpoint with (libcurl4
+# only recommends ca-certificates: the image had none)
+check "the image has the CA certificates" brun test -s /etc/ssl/certs/ca-certificates.crt
 brun id >"$TMP/id.txt" 2>&1
 check "runs as uid/gid 10001 ($(cat "$TMP/id.txt"))" grep -q '^uid=10001(voxeld) gid=10001(voxeld)' "$TMP/id.txt"
 check "in groups video and render" bash -c "grep -q '(video)' '$TMP/id.txt' && grep -q '(render)' '$TMP/id.txt'"
