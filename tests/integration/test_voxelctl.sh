@@ -424,38 +424,7 @@ check "waits full: followed to its end, exit 0 ($rc, $(tr '\n' ' ' <full.err))" 
 
 # A server that answers 503 (shutting down) and is then gone for a moment
 # (restarting): the upload is sent again once it is back (a stand-in).
-python3 - "$TMP/standin.port" >standin.log 2>&1 <<'PY' &
-import http.server, json, sys, time
-class H(http.server.BaseHTTPRequestHandler):
-    protocol_version = "HTTP/1.1"
-    def log_message(self, *a):
-        pass
-    def do_POST(self):
-        self.rfile.read(int(self.headers["Content-Length"]))
-        first = self.server.first
-        doc = {"error": {"code": "shutting_down", "message": "stopping"}} if first else {"id": "ab" * 32}
-        body = json.dumps(doc).encode()
-        self.send_response(503 if first else 201)
-        if first:
-            self.send_header("Retry-After", "1")
-        self.send_header("Content-Length", str(len(body)))
-        self.send_header("Connection", "close")
-        self.end_headers()
-        self.wfile.write(body)
-        self.close_connection = True
-srv = http.server.HTTPServer(("127.0.0.1", 0), H)
-port = srv.server_address[1]
-srv.first = True
-open(sys.argv[1] + ".tmp", "w").write(str(port))
-import os; os.rename(sys.argv[1] + ".tmp", sys.argv[1])
-srv.handle_request()  # the 503
-srv.server_close()
-time.sleep(3)  # gone: connections refused
-srv = http.server.HTTPServer(("127.0.0.1", port), H)
-srv.first = False
-srv.timeout = 20  # (a voxelctl that gave up never comes)
-srv.handle_request()
-PY
+python3 "$VX_SOURCE_DIR/tests/integration/standin.py" "$TMP/standin.port" upload 3 >standin.log 2>&1 &
 spid=$!
 for _ in $(seq 100); do [[ -s "$TMP/standin.port" ]] && break; sleep 0.05; done
 "$CTL" --server "http://127.0.0.1:$(cat "$TMP/standin.port")" upload "$MESH" >standin.id 2>ctl.err
@@ -466,38 +435,7 @@ check "503, then no server, then back: the upload is sent again, exit 0 ($rc, $(
 
 # A server that answered while get followed the job, then was gone for a
 # moment (restarting), is asked again until it is back (a stand-in).
-python3 - "$TMP/standin2.port" >standin2.log 2>&1 <<'PY' &
-import http.server, json, sys, time
-class H(http.server.BaseHTTPRequestHandler):
-    protocol_version = "HTTP/1.1"
-    def log_message(self, *a):
-        pass
-    def do_GET(self):
-        done = self.server.done
-        job = {"id": "0123456789abcdef" * 2, "kind": "voxelize", "state": "succeeded" if done else "running",
-               "progress": 1 if done else 0.5, "outputs": {}, "stats": {"voxels_inside": 7}}
-        events = self.path.endswith("/events")
-        body = ("data: %s\n\n" % json.dumps(job) if events else json.dumps(job)).encode()
-        self.send_response(200)
-        self.send_header("Content-Type", "text/event-stream" if events else "application/json")
-        self.send_header("Content-Length", str(len(body)))
-        self.send_header("Connection", "close")
-        self.end_headers()
-        self.wfile.write(body)
-        self.close_connection = True
-srv = http.server.HTTPServer(("127.0.0.1", 0), H)
-port = srv.server_address[1]
-srv.done = False
-open(sys.argv[1] + ".tmp", "w").write(str(port))
-import os; os.rename(sys.argv[1] + ".tmp", sys.argv[1])
-srv.handle_request()  # the event stream: running, then it ends
-srv.server_close()
-time.sleep(1)  # gone: connections refused
-srv = http.server.HTTPServer(("127.0.0.1", port), H)
-srv.done = True
-srv.timeout = 20  # (a voxelctl that gave up never comes)
-srv.handle_request()
-PY
+python3 "$VX_SOURCE_DIR/tests/integration/standin.py" "$TMP/standin2.port" job 1 >standin2.log 2>&1 &
 spid=$!
 for _ in $(seq 100); do [[ -s "$TMP/standin2.port" ]] && break; sleep 0.05; done
 timeout 20 "$CTL" --server "http://127.0.0.1:$(cat "$TMP/standin2.port")" get 0123456789abcdef0123456789abcdef -o gone.json 2>ctl.err
