@@ -632,6 +632,12 @@ static size_t json_number(const char *p, const char *end)
  * take it as 0, and a field that must be over 0 would see 0. */
 static int json_number_underflows(const char *p, size_t n)
 {
+    /* Below the smallest double (4.9e-324) only with a negative exponent,
+     * or 323 zeros after the point: every other number (a frames body
+     * holds 10^5 of them) is not read twice. */
+    const char *e = memchr(p, 'e', n);
+    if (!e) e = memchr(p, 'E', n);
+    if (n <= 320 && !(e && e + 1 < p + n && e[1] == '-')) return 0;
     int nonzero = 0;
     for (size_t i = 0; i < n && p[i] != 'e' && p[i] != 'E'; i++)
         nonzero |= p[i] >= '1' && p[i] <= '9';
