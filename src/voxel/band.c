@@ -96,8 +96,15 @@ static void near_of(uint64_t a, uint64_t b, uint64_t d, v2 *n)
 void vx_band_task(const vx_band_rows *r, int z0, int y0, void *scratch, uint8_t *need, uint8_t *lev)
 {
     static __thread term tt[7 * 7 * 4];
-    static __thread int nt;
-    if (!nt) nt = terms(tt);
+    static __thread int nt, first[VX_BAND_LEVELS + 2]; /* level l: tt[first[l] .. first[l + 1]) */
+    if (!nt) {
+        nt = terms(tt);
+        for (int l = 1, i = 0; l <= VX_BAND_LEVELS + 1; l++) {
+            first[l] = i;
+            while (i < nt && tt[i].level == l)
+                i++;
+        }
+    }
     const int W = vx_band_columns(r), WC = W + 2;
     v2 *near = scratch;                                            /* [NK * NJ][4] */
     v2 *ybox = near + (size_t)NK * NJ * 4;                         /* [NK * VX_BAND_TY] */
@@ -147,10 +154,20 @@ void vx_band_task(const vx_band_rows *r, int z0, int y0, void *scratch, uint8_t 
                 const v2 *n = near + 4 * w0;
                 v2 acc = {0, 0};
                 uint64_t done = 0;
-                for (int i = 0; i < nt;) {
-                    const int l = tt[i].level;
-                    for (; i < nt && tt[i].level == l; i++)
-                        acc |= n[tt[i].at];
+                for (int l = 1; l <= VX_BAND_LEVELS; l++) {
+                    /* a level's terms in four chains, not one: the ORs
+                     * of one chain wait on each other */
+                    v2 p0 = {0, 0}, p1 = p0, p2 = p0, p3 = p0;
+                    int i = first[l];
+                    for (; i + 4 <= first[l + 1]; i += 4) {
+                        p0 |= n[tt[i].at];
+                        p1 |= n[tt[i + 1].at];
+                        p2 |= n[tt[i + 2].at];
+                        p3 |= n[tt[i + 3].at];
+                    }
+                    for (; i < first[l + 1]; i++)
+                        p0 |= n[tt[i].at];
+                    acc |= (p0 | p1) | (p2 | p3);
                     uint64_t fresh = ((own & acc[1]) | (~own & acc[0])) & ~done;
                     done |= fresh;
                     for (; fresh; fresh &= fresh - 1)

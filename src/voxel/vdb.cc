@@ -10,6 +10,7 @@
 // set's leaves are its band (band.h), made in parallel from the bit grid's
 // rows, or from a merged bool tree's rows a few z slabs at a time.
 #include <algorithm>
+#include <array>
 #include <atomic>
 #include <cfloat>
 #include <cmath>
@@ -19,6 +20,7 @@
 #include <cerrno>
 #include <exception>
 #include <fstream>
+#include <functional>
 #include <memory>
 #include <mutex>
 #include <set>
@@ -27,6 +29,7 @@
 #include <string>
 #include <tuple>
 #include <type_traits>
+#include <unordered_map>
 #include <vector>
 
 #if defined(__x86_64__)
@@ -37,7 +40,6 @@
 #include <openvdb/openvdb.h>
 #include <openvdb/tools/Count.h>
 #include <openvdb/tools/Prune.h>
-#include <openvdb/tools/SignedFloodFill.h>
 #include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
 
@@ -159,7 +161,9 @@ class Prepared
 // buffer is its value mask, then what writeCompressedValues writes for its
 // values, which depends only on how many are active: OpenVDB's own bytes
 // for each count (tails_for, made once a process from a scratch leaf) are
-// reused for every leaf of that count.
+// reused for every leaf of that count. With a values hook (set_values: a
+// level set's band), such a leaf's values are made by the hook as it is
+// written, and written as LeafNode::writeBuffers writes them.
 template <typename GridT> class ParallelGrid final : public GridT, public Prepared
 {
     using TreeT = typename GridT::TreeType;
@@ -170,6 +174,15 @@ template <typename GridT> class ParallelGrid final : public GridT, public Prepar
     using ValueT = typename GridT::ValueType;
     const bool by_mask_;
     const ValueT on_;
+
+  public:
+    // values(leaf, v): the SIZE values of a leaf made without them
+    using Values = std::function<void(const LeafT &, ValueT *)>;
+
+  private:
+    Values values_;
+    std::shared_ptr<void> values_data_; // what values_ reads, held with the grid
+    uint64_t values_bytes_ = 0;
     mutable std::vector<std::string> buffers_; // prepared: the buffers section, in chunks
 
     // What addStatsMetadata's traversals find (tools::countActiveVoxels,
@@ -384,6 +397,15 @@ template <typename GridT> class ParallelGrid final : public GridT, public Prepar
     void write_leaf(std::ostream &os, const LeafT &leaf, const Tails *tails, bool half) const
     {
         if (!unloaded(leaf)) return leaf.writeBuffers(os, half);
+        if constexpr (!std::is_same<ValueT, bool>::value)
+            if (values_) {
+                ValueT v[LeafT::SIZE];
+                values_(leaf, v);
+                leaf.getValueMask().save(os);
+                openvdb::io::writeCompressedValues(os, v, LeafT::SIZE, leaf.getValueMask(),
+                                                   typename LeafT::NodeMaskType(), half);
+                return;
+            }
         const std::string &t = (*tails)[leaf.getValueMask().countOn()];
         leaf.getValueMask().save(os);
         os.write(t.data(), (std::streamsize)t.size());
@@ -415,6 +437,18 @@ template <typename GridT> class ParallelGrid final : public GridT, public Prepar
         : GridT(background), by_mask_(true), on_(on)
     {
     }
+
+    // Leaves made without values get theirs from values (made without
+    // them: a grid of the two-value constructor), which reads data; bytes:
+    // data's size, counted in memUsage.
+    void set_values(Values values, std::shared_ptr<void> data, uint64_t bytes)
+    {
+        values_ = std::move(values);
+        values_data_ = std::move(data);
+        values_bytes_ = bytes;
+    }
+
+    openvdb::Index64 memUsage() const override { return GridT::memUsage() + values_bytes_; }
 
     void writeTopology(std::ostream &os) const override
     {
@@ -495,7 +529,7 @@ template <typename GridT> class ParallelGrid final : public GridT, public Prepar
                             const Tails *tails, bool half, uint32_t compression,
                             const ValueT *background, std::vector<size_t> &ends, Stats &st) const
     {
-        bool direct = by_mask_;
+        bool direct = by_mask_ && !values_;
         for (size_t i = a; i < b && direct; i++)
             direct = unloaded(*all[i]);
         if (!direct) {
@@ -571,7 +605,7 @@ template <typename GridT> class ParallelGrid final : public GridT, public Prepar
         std::vector<Stats> part(nc);
         std::shared_ptr<const Tails> tails;
         if constexpr (!std::is_same<ValueT, bool>::value)
-            if (by_mask_) tails = tails_for(compression, background, on_, half);
+            if (by_mask_ && !values_) tails = tails_for(compression, background, on_, half);
         tbb::parallel_for(size_t(0), nc, [&](size_t c) {
             const size_t a = c * chunk, b = std::min(all.size(), a + chunk);
             if constexpr (std::is_same<ValueT, bool>::value) {
@@ -1028,11 +1062,13 @@ template <typename LeafT> int coverage_leaf(const vx_bitgrid *g, int X, int Y, i
 // 512 floats (2 KiB), ~100 B of node overhead; the file buffer is about the
 // same again (compression works per leaf). A 0/1 fog leaf is made without
 // its floats (its buffer, ~150 B, is held from prepare to the write). A
-// level set holds its float band: up to 3 leaves a partial leaf (~1.7 on
-// spot).
+// level set's band is up to 3 leaves a partial leaf (~1.7 on spot), each
+// made without floats (~100 B) with a byte a voxel for them (512 B and its
+// index entry), and a buffer of at most its 512 floats (2.2 KiB with its
+// masks): 1,500 B a leaf, doubled, holds both.
 uint64_t leaf_bytes(vx_vdb_class cls, int coverage)
 {
-    return coverage ? 2300 : cls == VX_VDB_LEVEL_SET ? 3 * 2300 : 240;
+    return coverage ? 2300 : cls == VX_VDB_LEVEL_SET ? 3 * 1500 : 240;
 }
 
 // Bytes a tree of the grid g's dims with `partial` leaves of part_bytes
@@ -1248,39 +1284,93 @@ openvdb::FloatGrid::Ptr fog_grid(const vx_bitgrid *g, const openvdb::Coord &at,
     return grid;
 }
 
-// The level set of rows (band.h): the narrow band as float leaves, values
-// -d h at set voxels and d h at unset ones, the inactive voxels of a leaf
-// -3h or 3h by their state; OpenVDB's signedFloodFill then gives the tiles
-// inside -3h, and pruneLevelSet merges them. hold(zl0, zl1) makes the rows
-// that z slabs zl0..zl1 (z = 8 zl) read held; progress moves from f0 to f1.
+// OpenVDB's signedFloodFill on the inactive tiles of a level set's
+// internal nodes and root, their signs taken from each child's first and
+// last voxel as it takes them (first_neg, last_neg: whether that voxel's
+// value is negative), for a tree whose leaves hold no values. NodeT: an
+// internal node, its children done first.
+template <typename NodeT, typename FirstNeg, typename LastNeg>
+void flood_node(NodeT &node, float inside, float outside, FirstNeg first_neg, LastNeg last_neg)
+{
+    using openvdb::Index;
+    const typename NodeT::NodeMaskType &cm = node.getChildMask();
+    const typename NodeT::UnionType *table = node.getTable();
+    const Index first = cm.findFirstOn();
+    if (first >= NodeT::NUM_VALUES) {
+        const float v = table[0].getValue() < 0 ? inside : outside;
+        for (Index n = 0; n < NodeT::NUM_VALUES; n++)
+            node.addTile(n, v, false);
+        return;
+    }
+    constexpr Index D = 1 << NodeT::LOG2DIM;
+    bool xin = first_neg(*table[first].getChild()), yin, zin;
+    for (Index x = 0; x != D; x++) {
+        const Index x00 = x << (2 * NodeT::LOG2DIM);
+        if (cm.isOn(x00)) xin = last_neg(*table[x00].getChild());
+        yin = xin;
+        for (Index y = 0; y != D; y++) {
+            const Index xy0 = x00 + (y << NodeT::LOG2DIM);
+            if (cm.isOn(xy0)) yin = last_neg(*table[xy0].getChild());
+            zin = yin;
+            for (Index z = 0; z != D; z++) {
+                const Index xyz = xy0 + z;
+                if (cm.isOn(xyz))
+                    zin = last_neg(*table[xyz].getChild());
+                else
+                    node.addTile(xyz, zin ? inside : outside, false);
+            }
+        }
+    }
+}
+
+// The level set of rows (band.h): the narrow band, values -d h at set
+// voxels and d h at unset ones, the inactive voxels of a leaf -3h or 3h by
+// their state; the inactive tiles -3h or 3h as OpenVDB's signedFloodFill
+// gives them, then pruneLevelSet. The leaves are made without values
+// (their masks only): each keeps a byte a voxel, its level and (bit 4) its
+// state, from which the writer makes its floats (512 bytes in place of 2
+// KiB a leaf, and no pass over the floats to flood-fill them).
+// hold(zl0, zl1) makes the rows that z slabs zl0..zl1 (z = 8 zl) read
+// held; progress moves from f0 to f1.
 template <typename Hold>
 openvdb::FloatGrid::Ptr band_grid(vx_band_rows &rows, const openvdb::Coord &at, double h, Hold hold,
                                   const vx_voxel_io *io, double f0, double f1, vx_err *err)
 {
     using LeafT = openvdb::FloatGrid::TreeType::LeafNodeType;
+    using Code = std::array<uint8_t, LeafT::SIZE>; // a voxel's level | its state << 7
     // 3 voxels, rounded up as a float: checkLevelSet wants the background
     // at least 3 voxels in double, and (float)(3 h) is below it for h 0.01
     float bg = (float)(VX_BAND_HALF * h);
     if ((double)bg < VX_BAND_HALF * h && bg < std::numeric_limits<float>::max())
         bg = std::nextafter(bg, std::numeric_limits<float>::infinity());
-    openvdb::FloatGrid::Ptr grid = make_float_grid(bg);
+    auto grid = std::make_shared<ParallelGrid<openvdb::FloatGrid>>(bg, bg);
     const int ny = rows.dims[1], nz = rows.dims[2];
     const int W = vx_band_columns(&rows);
-    float dist[VX_BAND_LEVELS + 1];
-    for (int l = 0; l <= VX_BAND_LEVELS; l++)
-        dist[l] = l ? (float)(0.5 * std::sqrt((double)vx_band_q[l]) * h) : bg;
+    std::array<float, 2 * 16> dist; // [l | state << 4]: the value of level l
+    dist.fill(0.0f);
+    for (int l = 0; l <= VX_BAND_LEVELS; l++) {
+        dist[(size_t)l] = l ? (float)(0.5 * std::sqrt((double)vx_band_q[l]) * h) : bg;
+        dist[(size_t)l + 16] = -dist[(size_t)l];
+    }
     // slabs zl from -1 and y chunks from y = -8: the band reaches 3 voxels out
     const int zl_end = (nz + VX_BAND_HALF - 1) / 8 + 1;
     const int chunks = (ny + VX_BAND_HALF + 8 + VX_BAND_TY - 1) / VX_BAND_TY;
     const int per_round = std::max(1, 16 / chunks);
     struct Task { // owns its leaves until the tree takes them
         std::vector<LeafT *> leaves;
+        std::vector<Code> codes;
         ~Task()
         {
             for (LeafT *l : leaves)
                 delete l;
         }
     };
+    struct Codes { // the leaves' codes, held with the grid
+        std::vector<std::vector<Code>> blocks;
+        std::unordered_map<const LeafT *, const Code *> of;
+    };
+    auto codes = std::make_shared<Codes>();
+    uint64_t code_bytes = 0;
     std::vector<Task> tasks((size_t)per_round * chunks);
     for (int zl0 = -1; zl0 < zl_end; zl0 += per_round) {
         const int zl1 = std::min(zl_end - 1, zl0 + per_round - 1);
@@ -1292,19 +1382,21 @@ openvdb::FloatGrid::Ptr band_grid(vx_band_rows &rows, const openvdb::Coord &at, 
         tbb::parallel_for(tbb::blocked_range<int>(0, n, 1), [&](const tbb::blocked_range<int> &r) {
             static thread_local std::vector<uint64_t> scratch;
             static thread_local std::vector<uint8_t> need, lev;
+            static thread_local std::vector<std::array<int, 3>> found;
             scratch.resize(vx_band_scratch_bytes(&rows) / 8);
             need.resize((size_t)W);
             lev.resize((size_t)8 * VX_BAND_TY * W * 64);
+            const size_t zs = (size_t)VX_BAND_TY * W * 64, ys = (size_t)W * 64;
             for (int t = r.begin(); t < r.end(); t++) {
                 const int z0 = 8 * (zl0 + t / chunks), y0 = -8 + VX_BAND_TY * (t % chunks);
                 vx_band_task(&rows, z0, y0, scratch.data(), need.data(), lev.data());
-                std::vector<LeafT *> &out = tasks[(size_t)t].leaves;
+                // the leaves holding band voxels: (column, y and x in it)
+                found.clear();
                 for (int p = 0; p < W; p++) {
                     if (!need[(size_t)p]) continue;
                     for (int yy = 0; yy < VX_BAND_TY; yy += 8)
                         for (int xx = 0; xx < 64; xx += 8) {
                             const uint8_t *l0 = lev.data() + ((size_t)yy * W + p) * 64 + xx;
-                            const size_t zs = (size_t)VX_BAND_TY * W * 64, ys = (size_t)W * 64;
                             uint64_t any = 0;
                             for (int z = 0; z < 8; z++)
                                 for (int y = 0; y < 8; y++) {
@@ -1312,33 +1404,103 @@ openvdb::FloatGrid::Ptr band_grid(vx_band_rows &rows, const openvdb::Coord &at, 
                                     memcpy(&v, l0 + z * zs + y * ys, 8);
                                     any |= v;
                                 }
-                            if (!any) continue;
-                            const int X = 64 * (p - 1) + xx, Y = y0 + yy;
-                            LeafT *leaf = new LeafT(openvdb::Coord(X, Y, z0) + at, bg, false);
-                            float *d = leaf->buffer().data();
-                            for (int y = 0; y < 8; y++)
-                                for (int z = 0; z < 8; z++) {
-                                    const unsigned set = vx_band_byte(&rows, X, Y + y, z0 + z);
-                                    for (int x = 0; x < 8; x++) {
-                                        const int l = l0[z * zs + y * ys + x];
-                                        const int n_ = 64 * x + 8 * y + z;
-                                        d[n_] = set >> x & 1u ? -dist[l] : dist[l];
-                                        if (l) leaf->getValueMask().setOn((openvdb::Index)n_);
-                                    }
-                                }
-                            out.push_back(leaf);
+                            if (any) found.push_back({p, yy, xx});
                         }
+                }
+                Task &task = tasks[(size_t)t];
+                task.leaves.reserve(found.size());
+                task.codes.resize(found.size());
+                for (size_t f = 0; f < found.size(); f++) {
+                    const int p = found[f][0], yy = found[f][1], xx = found[f][2];
+                    const uint8_t *l0 = lev.data() + ((size_t)yy * W + p) * 64 + xx;
+                    const int X = 64 * (p - 1) + xx, Y = y0 + yy;
+                    uint8_t *c = task.codes[f].data();
+                    uint64_t mask[8] = {0};
+                    for (int y = 0; y < 8; y++)
+                        for (int z = 0; z < 8; z++) {
+                            const unsigned set = vx_band_byte(&rows, X, Y + y, z0 + z);
+                            for (int x = 0; x < 8; x++) {
+                                const unsigned l = l0[z * zs + y * ys + x];
+                                c[64 * x + 8 * y + z] = (uint8_t)(l | (set >> x & 1u) << 4);
+                                mask[x] |= (uint64_t)(l != 0) << (8 * y + z);
+                            }
+                        }
+                    LeafT *leaf = new LeafT(openvdb::PartialCreate(), openvdb::Coord(X, Y, z0) + at,
+                                            bg, false);
+                    for (int x = 0; x < 8; x++)
+                        leaf->getValueMask().template getWord<uint64_t>((openvdb::Index)x) =
+                            mask[x];
+                    task.leaves.push_back(leaf);
                 }
             }
         });
         for (int t = 0; t < n; t++) {
-            for (LeafT *leaf : tasks[(size_t)t].leaves)
-                grid->tree().addLeaf(leaf);
-            tasks[(size_t)t].leaves.clear();
+            Task &task = tasks[(size_t)t];
+            if (task.leaves.empty()) continue;
+            codes->blocks.push_back(std::move(task.codes));
+            const Code *c = codes->blocks.back().data();
+            for (size_t i = 0; i < task.leaves.size(); i++) {
+                codes->of.emplace(task.leaves[i], c + i);
+                grid->tree().addLeaf(task.leaves[i]);
+            }
+            code_bytes += task.leaves.size() * (sizeof(Code) + 4 * sizeof(void *));
+            task.leaves.clear();
+            task.codes = std::vector<Code>();
         }
     }
-    openvdb::tools::signedFloodFill(grid->tree());
+    const Codes &cs = *codes;
+    auto code_of = [&cs](const LeafT &leaf) -> const Code & { return *cs.of.at(&leaf); };
+    // inactive tiles: a leaf's first or last voxel's sign is its state
+    auto leaf_first = [&](const LeafT &l) { return (code_of(l)[0] & 16u) != 0; };
+    auto leaf_last = [&](const LeafT &l) { return (code_of(l)[LeafT::SIZE - 1] & 16u) != 0; };
+    using TreeT = openvdb::FloatTree;
+    using RootT = TreeT::RootNodeType;
+    using UpperT = RootT::ChildNodeType;
+    using LowerT = UpperT::ChildNodeType;
+    std::vector<LowerT *> lower;
+    std::vector<UpperT *> upper;
+    grid->tree().getNodes(lower);
+    grid->tree().getNodes(upper);
+    tbb::parallel_for(size_t(0), lower.size(),
+                      [&](size_t i) { flood_node(*lower[i], -bg, bg, leaf_first, leaf_last); });
+    // a lower node's first and last voxel: its first or last slot's
+    auto node_end = [&](const LowerT &node, openvdb::Index n) {
+        return node.getChildMask().isOn(n) ? (n ? leaf_last(*node.getTable()[n].getChild())
+                                                : leaf_first(*node.getTable()[n].getChild()))
+                                           : node.getTable()[n].getValue() < 0;
+    };
+    tbb::parallel_for(size_t(0), upper.size(), [&](size_t i) {
+        flood_node(
+            *upper[i], -bg, bg, [&](const LowerT &c) { return node_end(c, 0); },
+            [&](const LowerT &c) { return node_end(c, LowerT::NUM_VALUES - 1); });
+    });
+    // the root: inside tiles between children of one z line whose facing
+    // ends are inside
+    auto upper_end = [&](const UpperT &node, openvdb::Index n) {
+        return node.getChildMask().isOn(n)
+                   ? node_end(*node.getTable()[n].getChild(), n ? LowerT::NUM_VALUES - 1 : 0)
+                   : node.getTable()[n].getValue() < 0;
+    };
+    RootT &root = grid->tree().root();
+    std::vector<const UpperT *> tops;
+    for (auto it = root.cbeginChildOn(); it; ++it)
+        tops.push_back(&*it);
+    for (size_t i = 1; i < tops.size(); i++) {
+        const openvdb::Coord a = tops[i - 1]->origin(), b = tops[i]->origin(), d = b - a;
+        if (d[0] != 0 || d[1] != 0 || d[2] == (int)UpperT::DIM) continue;
+        if (!upper_end(*tops[i - 1], UpperT::NUM_VALUES - 1) || !upper_end(*tops[i], 0)) continue;
+        for (openvdb::Coord c = a + openvdb::Coord(0, 0, UpperT::DIM); c[2] != b[2];
+             c[2] += UpperT::DIM)
+            root.addTile(c, -bg, false);
+    }
     openvdb::tools::pruneLevelSet(grid->tree());
+    grid->set_values(
+        [codes, dist](const LeafT &leaf, float *v) {
+            const Code &c = *codes->of.at(&leaf);
+            for (size_t n = 0; n < LeafT::SIZE; n++)
+                v[n] = dist[c[n]];
+        },
+        codes, code_bytes);
     grid->setGridClass(openvdb::GRID_LEVEL_SET);
     return grid;
 }

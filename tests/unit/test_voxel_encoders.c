@@ -11,6 +11,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include <cmocka.h>
@@ -272,6 +273,35 @@ static void test_vdb_fog_memory(void **st)
     }
 }
 
+/* A level set's band leaves hold a byte a voxel, not their floats (made
+ * as they are written): the tree and the file (about the buffers held at
+ * the write) each fit in half the bytes a job counts for the grid. Noise
+ * (every leaf partial, the band as wide as it gets) and balls. */
+static void test_vdb_level_set_memory(void **st)
+{
+    char p[256];
+    snprintf(p, sizeof p, "%s/lsmem.vdb", dir);
+    for (int kind = 2; kind <= 3; kind++) {
+        vx_bitgrid g;
+        random_grid(&g, 90, 50, 200, kind, 0);
+        vx_vdb_tree *t = NULL;
+        vx_voxel_io io = {.vdb_keep = &t};
+        vx_err err;
+        assert_int_equal(vx_voxel_write_vdb(&g, VX_VDB_LEVEL_SET, NULL, p, &io, &err), 0);
+        assert_non_null(t);
+        const uint64_t tree = vx_vdb_tree_bytes(t),
+                       counted = vx_voxel_vdb_grid_bytes(&g, VX_VDB_LEVEL_SET);
+        vx_vdb_tree_free(t);
+        struct stat sb;
+        assert_int_equal(stat(p, &sb), 0);
+        if (tree > counted / 2 || (uint64_t)sb.st_size > counted / 2)
+            fail_msg("level set kind %d: tree %llu, file %lld bytes, counted %llu", kind,
+                     (unsigned long long)tree, (long long)sb.st_size, (unsigned long long)counted);
+        vdbcheck(&g, VX_VDB_LEVEL_SET, 0);
+        vx_bitgrid_free(&g);
+    }
+}
+
 /* vx_vdb_voxel_size_ok is OpenVDB's own bound, with a margin of 1e-6 on
  * h^3: a grid of voxel vx_vdb_min_voxel_size (at an origin off zero) writes,
  * and 1e-6 under it the check refuses and OpenVDB's writer fails too (a job
@@ -411,9 +441,13 @@ static int teardown(void **st)
 int main(void)
 {
     const struct CMUnitTest tests[] = {
-        cmocka_unit_test(test_raw_binvox),    cmocka_unit_test(test_raw_wide_rows),
-        cmocka_unit_test(test_vdb),           cmocka_unit_test(test_vdb_fog_memory),
-        cmocka_unit_test(test_vdb_min_voxel), cmocka_unit_test(test_progress),
+        cmocka_unit_test(test_raw_binvox),
+        cmocka_unit_test(test_raw_wide_rows),
+        cmocka_unit_test(test_vdb),
+        cmocka_unit_test(test_vdb_fog_memory),
+        cmocka_unit_test(test_vdb_level_set_memory),
+        cmocka_unit_test(test_vdb_min_voxel),
+        cmocka_unit_test(test_progress),
         cmocka_unit_test(test_binvox_stop),
     };
     return cmocka_run_group_tests(tests, setup, teardown);
