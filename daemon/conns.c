@@ -360,6 +360,18 @@ void vx_conns_notify(void *cls, struct MHD_Connection *c, void **socket_context,
     *socket_context = NULL;
 }
 
+int vx_mhd_in_place(void)
+{
+    static _Atomic int in_place = -1;
+    if (in_place < 0) {
+        unsigned a = 0, b = 0, m = 0;
+        const char *v = MHD_get_version();
+        in_place =
+            v && sscanf(v, "%u.%u.%u", &a, &b, &m) == 3 && a == 0 && (b < 9 || (b == 9 && m <= 75));
+    }
+    return in_place;
+}
+
 /* URI log callback: runs when the request line is in, before the headers. */
 void *vx_conns_on_uri(void *cls, const char *uri, struct MHD_Connection *c)
 {
@@ -377,6 +389,11 @@ void *vx_conns_on_uri(void *cls, const char *uri, struct MHD_Connection *c)
         int bad = 0;
         for (const unsigned char *p = (const unsigned char *)uri; *p && !bad; p++)
             bad = *p <= 0x20 || *p == 0x7f;
+        /* A raw NUL ends the target early: libmicrohttpd (0.9.75) puts the
+         * target in its buffer cut at the space before the version, so the
+         * version follows this NUL, or the target held one of its own
+         * ("/livez\0junk" was /livez). */
+        if (!bad && vx_mhd_in_place()) bad = strncmp(uri + strlen(uri) + 1, "HTTP/", 5) != 0;
         vc->target_bad = bad;
         /* A request line is in: a head has begun. One pipelined behind
          * the last request came before its answer, so the sweeper saw no

@@ -51,6 +51,11 @@ int vx_conns_over_ip(const vx_conn *vc);
 /* 1 when the current request's target had a raw space or control
  * character (libmicrohttpd takes "GET /a b HTTP/1.1" as path "/a b"). */
 int vx_conns_target_bad(const vx_conn *vc);
+/* 1 when the running libmicrohttpd parses a head in place in its buffer as
+ * 0.9.75 does (http.c and vx_conns_on_uri read that buffer around the
+ * fields it gives to find what it hid: folded lines, NULs); 0 for another
+ * version, whose buffer may be laid out otherwise (not read then). */
+int vx_mhd_in_place(void);
 /* The tracked connection of c, or NULL when untracked. */
 vx_conn *vx_conns_of(struct MHD_Connection *c);
 

@@ -46,15 +46,52 @@ void vx_http_job_changed(vx_http *h, const char *jid, int terminal)
 /* ---- dispatch ------------------------------------------------------ */
 
 /* How many times the headers that must come once came, and whether a
- * field name or value was malformed. */
+ * field name or value was malformed (bad), a line folded onto the last
+ * (fold) or a value cut at a NUL (nul). */
 typedef struct once_counts {
-    int host, length, idem, coding, auth, bad;
+    int host, length, idem, coding, auth, type, bad, fold, nul, badhost;
+    struct MHD_Connection *c;
 } once_counts;
+
+static enum MHD_Result key_at(void *cls, enum MHD_ValueKind kind, const char *key, size_t klen,
+                              const char *value, size_t vlen)
+{
+    const char **at = cls;
+    (void)kind, (void)klen, (void)value, (void)vlen;
+    if (key == *at) *at = NULL;
+    return *at ? MHD_YES : MHD_NO;
+}
+
+/* What libmicrohttpd 0.9.75 hides when it parses a head in place (its
+ * buffer holds "name\0 value\0\0" for "name: value\r\n", and the fields
+ * point into it), which a proxy in front may read otherwise:
+ * - a line folded onto the last (obs-fold, RFC 9112 5.2) is glued to the
+ *   field's NAME in a copy elsewhere ("Content-Length:\r\n 52" became a
+ *   field "Content-Length52" of no value, and the 52 bytes of body a
+ *   second request): the value then does not follow its name;
+ * - a NUL in a value ends it there ("Content-Length: 2\0" "99" framed 2
+ *   bytes): the line's end does not follow the value. (A bare LF ends a
+ *   line in one byte: the next field's name follows then.) */
+static void check_in_place(once_counts *n, const char *key, size_t klen, const char *value,
+                           size_t vlen)
+{
+    const uintptr_t k = (uintptr_t)key, v = (uintptr_t)value;
+    if (v < k + klen + 1 || v - (k + klen + 1) > 4096 || key[klen] != '\0') {
+        n->fold = 1;
+        return;
+    }
+    for (const char *p = key + klen + 1; p < value; p++)
+        if (*p != ' ' && *p != '\t') n->fold = 1;
+    if (value[vlen] == '\0' && value[vlen + 1] != '\0') {
+        const char *next = value + vlen + 1;
+        MHD_get_connection_values_n(n->c, MHD_HEADER_KIND, key_at, &next);
+        if (next) n->nul = 1;
+    }
+}
 
 /* A field name must be a token, a value hold no NUL, CR or LF (RFC 9110
  * 5.1, 5.5): libmicrohttpd took "Content-Length : 34" as a field of
- * another name (the body then read as a second request). (A NUL it cuts
- * the value at itself: the rest never reaches here.) */
+ * another name (the body then read as a second request). */
 static enum MHD_Result check_field(void *cls, enum MHD_ValueKind kind, const char *key, size_t klen,
                                    const char *value, size_t vlen)
 {
@@ -67,7 +104,17 @@ static enum MHD_Result check_field(void *cls, enum MHD_ValueKind kind, const cha
     }
     for (size_t i = 0; value && i < vlen; i++)
         if (value[i] == 0 || value[i] == '\r' || value[i] == '\n') n->bad = 1;
-    return n->bad ? MHD_NO : MHD_YES;
+    if (value && vx_mhd_in_place()) check_in_place(n, key, klen, value, vlen);
+    return n->bad || n->fold || n->nul ? MHD_NO : MHD_YES;
+}
+
+/* uri-host [":" port] (RFC 9112 3.2, RFC 3986 3.2.2): registered names,
+ * IP literals and ports; empty for a target without an authority. */
+static int host_ok(const char *v)
+{
+    for (; *v; v++)
+        if (!isalnum((unsigned char)*v) && !strchr("-._~%!$&'()*+,;=:[]", *v)) return 0;
+    return 1;
 }
 
 static enum MHD_Result count_once(void *cls, enum MHD_ValueKind kind, const char *key,
@@ -75,11 +122,15 @@ static enum MHD_Result count_once(void *cls, enum MHD_ValueKind kind, const char
 {
     once_counts *n = cls;
     if (!key) return MHD_YES;
-    if (!strcasecmp(key, MHD_HTTP_HEADER_HOST)) n->host++;
+    if (!strcasecmp(key, MHD_HTTP_HEADER_HOST)) {
+        n->host++;
+        if (value && !host_ok(value)) n->badhost = 1;
+    }
     if (!strcasecmp(key, MHD_HTTP_HEADER_CONTENT_LENGTH)) n->length++;
     if (!strcasecmp(key, "Idempotency-Key")) n->idem++;
     if (!strcasecmp(key, MHD_HTTP_HEADER_AUTHORIZATION)) n->auth++;
     if (!strcasecmp(key, MHD_HTTP_HEADER_TRANSFER_ENCODING)) n->coding++;
+    if (!strcasecmp(key, MHD_HTTP_HEADER_CONTENT_TYPE)) n->type++;
     return MHD_YES;
 }
 
@@ -118,13 +169,18 @@ static int declares_body(struct MHD_Connection *c)
  * or -1. */
 static int check_framing(struct MHD_Connection *c, req *r, const char *version)
 {
-    once_counts n = {0};
+    once_counts n = {.c = c};
     MHD_get_connection_values(c, MHD_HEADER_KIND, count_once, &n);
     MHD_get_connection_values_n(c, MHD_HEADER_KIND, check_field, &n);
     if (n.bad)
         return fail_framing(c, r,
                             "a header field name that is not a token (a space before its "
                             "colon?) or a value with a NUL, CR or LF");
+    if (n.fold)
+        return fail_framing(c, r,
+                            "a header line continued on the next (a line starting with a space or "
+                            "tab: obs-fold, RFC 9112 5.2): put each field on one line");
+    if (n.nul) return fail_framing(c, r, "a header value with a NUL");
     if (vx_conns_target_bad(r->vc))
         return fail_framing(c, r,
                             "the request target has a space or a control character (escape it: "
@@ -133,6 +189,9 @@ static int check_framing(struct MHD_Connection *c, req *r, const char *version)
         return vx_resp_fail(c, r, VX_EINVAL, "invalid_request",
                             n.host ? "more than one Host header"
                                    : "an HTTP/1.1 request needs a Host header");
+    if (n.badhost)
+        return vx_resp_fail(c, r, VX_EINVAL, "invalid_request",
+                            "a Host header that is not a host and port");
     if (n.length > 1) return fail_framing(c, r, "more than one Content-Length header");
     const char *te = vx_resp_header(c, MHD_HTTP_HEADER_TRANSFER_ENCODING);
     /* two Transfer-Encoding lines are one list (RFC 9112): libmicrohttpd
@@ -143,6 +202,11 @@ static int check_framing(struct MHD_Connection *c, req *r, const char *version)
                             "the only transfer coding taken is chunked (no gzip, no lists)");
     if (coding > 0 && n.length)
         return fail_framing(c, r, "Content-Length and Transfer-Encoding together");
+    /* RFC 9112 6.1: an HTTP/1.0 message's framing is faulty with one */
+    if (te && !strcmp(version, MHD_HTTP_VERSION_1_0))
+        return fail_framing(c, r, "Transfer-Encoding in an HTTP/1.0 request");
+    /* the upload reads the first; a proxy may go by the last */
+    if (n.type > 1) return fail_framing(c, r, "more than one Content-Type header");
     if (n.idem > 1)
         return vx_resp_fail(c, r, VX_EINVAL, "invalid_request",
                             "more than one Idempotency-Key header");

@@ -117,11 +117,14 @@ int vx_resp_queue(struct MHD_Connection *c, req *r, unsigned status, struct MHD_
     if (r->close) MHD_add_response_header(resp, MHD_HTTP_HEADER_CONNECTION, "close");
     const char *origin = vx_resp_cors_origin(c);
     if (origin) {
-        /* The origin itself, not "*": the answer then varies by Origin. */
+        /* The origin itself, not "*" */
         MHD_add_response_header(resp, MHD_HTTP_HEADER_ACCESS_CONTROL_ALLOW_ORIGIN, origin);
         MHD_add_response_header(resp, "Access-Control-Expose-Headers", VX_CORS_EXPOSE);
-        MHD_add_response_header(resp, MHD_HTTP_HEADER_VARY, "Origin");
     }
+    /* With origins allowed, every answer varies by Origin, those without
+     * CORS headers too: a cache that kept one for a request without Origin
+     * would give it to a page of an allowed origin, which then fails. */
+    if (g_cors && g_cors[0]) MHD_add_response_header(resp, MHD_HTTP_HEADER_VARY, "Origin");
     r->status = (int)status;
     r->bytes_out = body_bytes;
     r->answered = 1;

@@ -1220,8 +1220,9 @@ static void voxelize_free_state(void *state)
 
 const vx_kind vx_kind_voxelize = {
     .name = "voxelize",
-    .summary = "Solid voxelization on the GPU (depth peeling, slicing or crossing counts) to "
-               "OpenVDB, binvox or raw bits",
+    .summary = "Solid voxelization (depth peeling, slicing or crossing counts on the GPU, or "
+               "crossing counts and winding numbers on the CPU) to OpenVDB, binvox, raw bytes, "
+               "MagicaVoxel .vox, NRRD or NumPy .npy",
     .spec = spec,
     .params_size = sizeof(vparams),
     .check = voxelize_check,

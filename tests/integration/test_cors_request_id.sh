@@ -39,8 +39,11 @@ check "answer: Allow-Origin" test "$(header Access-Control-Allow-Origin)" = http
 check "answer: Expose-Headers names Location and X-Request-Id" bash -c "grep -qi '^access-control-expose-headers:.*Location.*X-Request-Id' '$HDRS'"
 api GET /v1/info -H "Origin: http://evil.example"
 check "answer to another origin: no CORS headers" bash -c "! grep -qi '^access-control-' '$HDRS'"
+check "answer to another origin: Vary: Origin all the same" bash -c "grep -qi '^vary: Origin' '$HDRS'"
 api GET /v1/info
 check "answer without Origin: no CORS headers" bash -c "! grep -qi '^access-control-' '$HDRS'"
+# a cache must not give this answer to a page of an allowed origin
+check "answer without Origin: Vary: Origin" bash -c "grep -qi '^vary: Origin' '$HDRS'"
 SAVED=$TOKEN
 TOKEN=
 api GET /v1/meshes -H "Origin: http://viewer.example"
