@@ -504,6 +504,15 @@ static void sweep(vx_conns *s, vx_conn **cand, head_kill *ks, size_t *nk, size_t
             continue;
         }
         if (vc->phase == P_IDLE) {
+            /* A client that shut its side after its request (nc -N, a
+             * half-close): libmicrohttpd read that EOF with the request and
+             * waits for the next one until --connection-timeout, the
+             * socket in CLOSE-WAIT. Nothing unread and EOF: closed here. */
+            char b;
+            if (recv(vc->fd, &b, 1, MSG_PEEK | MSG_DONTWAIT) == 0) {
+                kill_conn(vc, 0, NULL, NULL, 1);
+                continue;
+            }
             /* Has a byte of the next request come in since the answer? The
              * kernel knows when data last arrived; libmicrohttpd has
              * already read it into its buffer. */

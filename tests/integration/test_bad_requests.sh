@@ -452,6 +452,33 @@ for h in '[::1]:8080' 'example.com:80' '127.0.0.1' ''; do
     raw_http hostok "GET /livez HTTP/1.1\\r\\nHost: $h\\r\\n\\r\\n"
     check "Host: '$h': 200" bash -c "head -n 1 '$TMP/hostok.raw' | grep -q '^HTTP/1.1 200 '"
 done
+# A client that shuts its side after the request (nc -N): it gets the
+# answer and then the close, not a socket held in CLOSE-WAIT until
+# --connection-timeout (libmicrohttpd read that EOF with the request).
+halfclosed=$(python3 - "$PORT" <<'PY'
+import socket, sys, time
+slow = 0
+for i in range(10):
+    s = socket.create_connection(("127.0.0.1", int(sys.argv[1])))
+    s.sendall(b"GET /livez HTTP/1.1\r\nHost: x\r\n\r\n")
+    s.shutdown(socket.SHUT_WR)
+    s.settimeout(3)
+    t0, got = time.monotonic(), b""
+    try:
+        while True:
+            b = s.recv(65536)
+            if not b:
+                break
+            got += b
+    except OSError:
+        pass
+    if b" 200 " not in got or time.monotonic() - t0 > 2:
+        slow += 1
+    s.close()
+print(slow)
+PY
+)
+check "10 half-closed clients: each answered and closed within 2 s ($halfclosed not)" test "$halfclosed" = 0
 raw_http twoidem "POST /v1/jobs HTTP/1.1\\r\\nHost: x\\r\\nContent-Type: application/json\\r\\nIdempotency-Key: a\\r\\nIdempotency-Key: b\\r\\nContent-Length: 2\\r\\n\\r\\n{}"
 expect_raw twoidem 400 invalid_request
 long=$(printf 'a%.0s' {1..20000})
