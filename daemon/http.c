@@ -89,6 +89,36 @@ static void check_in_place(once_counts *n, const char *key, size_t klen, const c
     }
 }
 
+typedef struct last_end {
+    const char *lo, *hi, *end; /* the head's bytes; the last value's end in them */
+} last_end;
+
+static enum MHD_Result find_end(void *cls, enum MHD_ValueKind kind, const char *key, size_t klen,
+                                const char *value, size_t vlen)
+{
+    last_end *e = cls;
+    (void)kind, (void)key, (void)klen;
+    if (value && value >= e->lo && value + vlen < e->hi && value + vlen > e->end)
+        e->end = value + vlen;
+    return MHD_YES;
+}
+
+/* Whether libmicrohttpd 0.9.75 ended the head at a line with an empty
+ * field name (": x", or ":"), taking it for the empty line (what followed
+ * was read as the next request): the head's bytes (from its method, as
+ * many as it counted) end 2 to 4 bytes (line ends, one or two each) after
+ * the last value, or after the version when there are no fields. */
+static int head_cut(struct MHD_Connection *c, const char *head, const char *version)
+{
+    const union MHD_ConnectionInfo *ci =
+        MHD_get_connection_info(c, MHD_CONNECTION_INFO_REQUEST_HEADER_SIZE);
+    if (!ci || !head || version < head || version >= head + ci->header_size) return 0;
+    last_end e = {head, head + ci->header_size, version + strlen(version)};
+    MHD_get_connection_values_n(c, MHD_HEADER_KIND, find_end, &e);
+    const size_t gap = (size_t)(e.hi - e.end);
+    return gap < 2 || gap > 4;
+}
+
 /* A field name must be a token, a value hold no NUL, CR or LF (RFC 9110
  * 5.1, 5.5): libmicrohttpd took "Content-Length : 34" as a field of
  * another name (the body then read as a second request). */
@@ -167,7 +197,7 @@ static int declares_body(struct MHD_Connection *c)
 /* Framing the access handler can still answer in JSON: Host, the transfer
  * coding, the length, headers that must come once. Returns a queued answer
  * or -1. */
-static int check_framing(struct MHD_Connection *c, req *r, const char *version)
+static int check_framing(struct MHD_Connection *c, req *r, const char *head, const char *version)
 {
     once_counts n = {.c = c};
     MHD_get_connection_values(c, MHD_HEADER_KIND, count_once, &n);
@@ -181,6 +211,8 @@ static int check_framing(struct MHD_Connection *c, req *r, const char *version)
                             "a header line continued on the next (a line starting with a space or "
                             "tab: obs-fold, RFC 9112 5.2): put each field on one line");
     if (n.nul) return fail_framing(c, r, "a header value with a NUL");
+    if (vx_mhd_in_place() && head_cut(c, head, version))
+        return fail_framing(c, r, "a header line with an empty field name (': x', RFC 9110 5.1)");
     if (vx_conns_target_bad(r->vc))
         return fail_framing(c, r,
                             "the request target has a space or a control character (escape it: "
@@ -217,14 +249,15 @@ static int check_framing(struct MHD_Connection *c, req *r, const char *version)
     return -1;
 }
 
-static int first_call(vx_http *h, struct MHD_Connection *c, req *r, const char *version)
+static int first_call(vx_http *h, struct MHD_Connection *c, req *r, const char *head,
+                      const char *version)
 {
     const union MHD_ConnectionInfo *ci =
         MHD_get_connection_info(c, MHD_CONNECTION_INFO_REQUEST_HEADER_SIZE);
     if (ci && ci->header_size > h->d.cfg->max_header_bytes)
         return vx_resp_fail(c, r, VX_EHEADER, "header_too_large",
                             "the request head is larger than max-header-bytes");
-    int rc = check_framing(c, r, version);
+    int rc = check_framing(c, r, head, version);
     if (rc >= 0) return rc;
     if (!vx_req_method_known(r->method))
         return vx_resp_fail(c, r, VX_ENOTIMPL, "not_implemented",
@@ -426,7 +459,7 @@ static enum MHD_Result on_head(vx_http *h, struct MHD_Connection *c, const char 
                           "%s has more than %llu connections open (--max-connections-per-ip)",
                           r->client, (unsigned long long)h->d.cfg->max_connections_per_ip);
     } else {
-        rc = first_call(h, c, r, version);
+        rc = first_call(h, c, r, method, version);
     }
     if (rc >= 0) {
         if (declares_body(c)) vx_conns_linger(h->conns, vc);

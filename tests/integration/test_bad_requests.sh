@@ -414,7 +414,8 @@ check "twolen: the answer closes the connection" bash -c "tr -d '\r' <'$TMP/twol
 # second request smuggled in a body a proxy in front would frame: a field
 # folded onto the next line (its value was glued to the NAME: the body
 # read as empty, its bytes as the next request), a NUL in a value (the
-# length cut at it) or in the target (/livez\0junk was /livez). Each 400,
+# length cut at it) or in the target (/livez\0junk was /livez), a line
+# with an empty field name (taken for the head's end). Each 400,
 # one answer, the connection closed.
 SMUGGLED='GET /v1/info HTTP/1.1\r\nHost: x\r\n\r\n'
 raw_http foldlen "POST /v1/jobs HTTP/1.1\\r\\nHost: x\\r\\nContent-Type: application/json\\r\\nContent-Length:\\r\\n 36\\r\\n\\r\\n$SMUGGLED" all
@@ -423,13 +424,15 @@ raw_http foldother "GET /livez HTTP/1.1\\r\\nHost: x\\r\\nX-A: one\\r\\n two\\r\
 raw_http foldspaces "POST /v1/jobs HTTP/1.1\\r\\nHost: x\\r\\nContent-Type: application/json\\r\\nContent-Length:        \\r\\n 2\\r\\n\\r\\n{}$SMUGGLED" all
 raw_http nullen "POST /v1/jobs HTTP/1.1\\r\\nHost: x\\r\\nContent-Type: application/json\\r\\nContent-Length: 2\\x0034\\r\\n\\r\\n{}$SMUGGLED" all
 raw_http nulvalue "GET /livez HTTP/1.1\\r\\nHost: x\\r\\nX-A: a\\x00b\\r\\n\\r\\n$SMUGGLED" all
+raw_http emptyname "GET /livez HTTP/1.1\\r\\nHost: x\\r\\nX-A: a\\r\\n: x\\r\\n$SMUGGLED" all
+raw_http emptyname2 "GET /livez HTTP/1.1\\r\\nHost: x\\r\\n:\\r\\n$SMUGGLED" all
 raw_http nultarget "GET /livez\\x00junk HTTP/1.1\\r\\nHost: x\\r\\n\\r\\n$SMUGGLED" all
 raw_http nultarget2 "GET /livez\\x00 HTTP/1.1\\r\\nHost: x\\r\\n\\r\\n$SMUGGLED" all
 # HTTP/1.0 with Transfer-Encoding: its framing is faulty (RFC 9112 6.1);
 # two Content-Types: the upload reads the first, a proxy may the last.
 raw_http te10 "POST /v1/jobs HTTP/1.0\\r\\nConnection: keep-alive\\r\\nContent-Type: application/json\\r\\nTransfer-Encoding: chunked\\r\\n\\r\\n2\\r\\n{}\\r\\n0\\r\\n\\r\\n$SMUGGLED" all
 raw_http twotypes "POST /v1/meshes HTTP/1.1\\r\\nHost: x\\r\\nContent-Type: text/plain\\r\\nContent-Type: model/obj\\r\\nContent-Length: 2\\r\\n\\r\\n{}$SMUGGLED" all
-for t in foldlen foldte foldother foldspaces nullen nulvalue nultarget nultarget2 te10 twotypes; do
+for t in foldlen foldte foldother foldspaces nullen nulvalue emptyname emptyname2 nultarget nultarget2 te10 twotypes; do
     expect_raw $t 400 invalid_request
     check "$t: one answer only (no smuggled request)" test "$(grep -ao 'HTTP/1.1 [0-9]' "$TMP/$t.raw" | wc -l)" = 1
     check "$t: the answer closes the connection" bash -c "tr -d '\r' <'$TMP/$t.raw' | sed '/^$/q' | grep -qi '^connection: close'"
