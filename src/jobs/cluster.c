@@ -1133,8 +1133,10 @@ void cluster_report(vx_jobs *j, job *jb, vx_job_run *r, int ok, const vx_err *e,
         ok = 0;
         char why[sizeof serr.message]; /* not formatted into itself (it doubled) */
         snprintf(why, sizeof why, "%s", serr.message);
-        vx_err_set(&serr, serr.kind == VX_EUNAVAIL ? VX_EUNAVAIL : VX_EIO, "store_failed",
-                   "the results could not be stored: %s", why);
+        /* (a result over the whole budget fails as it is: no retry helps) */
+        if (strcmp(serr.code, "result_too_large") != 0)
+            vx_err_set(&serr, serr.kind == VX_EUNAVAIL ? VX_EUNAVAIL : VX_EIO, "store_failed",
+                       "the results could not be stored: %s", why);
         e = &serr;
     }
     cJSON *m = ok ? manifest(j, r) : NULL;

@@ -98,6 +98,10 @@ struct vx_jobs {
     int in_gl;             /* a job is in its GL stage (lock held) */
     char replica[128];     /* desc.replica, or the host name */
     struct vx_cluster *cl; /* cluster mode (desc.database), else NULL */
+    /* Jobs the replay saw deleted, sorted once it is done: their result
+     * dirs are a cut-short delete's leftovers (vx_jobs_open only). */
+    char (*gone)[33];
+    size_t ngone, capgone;
 };
 
 /* registry.c */

@@ -157,41 +157,150 @@ static cJSON *salvage(const char *line, size_t n)
     return NULL;
 }
 
+/* The journal read in pieces (replay): lines are kept up to MAX_LINE bytes;
+ * a longer one is no record this daemon wrote (damage: zeros, garbage) and
+ * is counted through, not held. */
+#define MAX_LINE (VX_JOURNAL_MAX_RECORD + FRAME_HEAD + 1)
+
+typedef struct reader {
+    int fd;
+    size_t at, end;
+    char buf[1 << 16];
+} reader;
+
+/* The next line of r into *line (grown as needed, up to MAX_LINE + 1
+ * bytes): 1 with *n its bytes, the '\n' included when there is one
+ * (*ended), and *over set when it is longer than MAX_LINE (its bytes not
+ * kept); 0 at the end of the file; -1 on a read or allocation error
+ * (errno). */
+static int next_line(reader *r, char **line, size_t *cap, off_t *n, int *over, int *ended)
+{
+    size_t kept = 0;
+    *n = 0;
+    *over = 0;
+    *ended = 0;
+    for (;;) {
+        if (r->at == r->end) {
+            ssize_t got = read(r->fd, r->buf, sizeof r->buf);
+            if (got < 0 && errno == EINTR) continue;
+            if (got < 0) return -1;
+            if (got == 0) return *n > 0;
+            r->at = 0;
+            r->end = (size_t)got;
+        }
+        char *p = r->buf + r->at, *nl = memchr(p, '\n', r->end - r->at);
+        size_t take = nl ? (size_t)(nl - p) + 1 : r->end - r->at;
+        if (!*over && kept + take > MAX_LINE) *over = 1;
+        if (!*over) {
+            if (kept + take + 1 > *cap) {
+                size_t want = 2 * *cap > kept + take + 1 ? 2 * *cap : kept + take + 1;
+                if (want > MAX_LINE + 1) want = MAX_LINE + 1;
+                char *g = realloc(*line, want);
+                if (!g) return -1;
+                *line = g;
+                *cap = want;
+            }
+            memcpy(*line + kept, p, take);
+            kept += take;
+        }
+        *n += (off_t)take;
+        r->at += take;
+        if (nl) return *ended = 1;
+    }
+}
+
+/* A copy of the file at src as dst, new, fsync'd, its runs of zeros left
+ * as holes: a sparse tail (truncate -s +1500M) copies as a few blocks. 0,
+ * or -1 (errno; dst removed). */
+static int copy_sparse(const char *src, const char *dst)
+{
+    int in = open(src, O_RDONLY | O_CLOEXEC);
+    if (in < 0) return -1;
+    int out = open(dst, O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0640);
+    if (out < 0) {
+        int e = errno;
+        close(in);
+        errno = e;
+        return -1;
+    }
+    static const char zeros[1 << 16];
+    char *buf = malloc(sizeof zeros);
+    struct stat st;
+    int e = buf && fstat(in, &st) == 0 ? 0 : errno ? errno : ENOMEM;
+    off_t at = 0;
+    while (!e && at < st.st_size) {
+        off_t data = lseek(in, at, SEEK_DATA); /* past a hole: nothing to read */
+        if (data < 0 && errno == ENXIO) break; /* a hole to the end */
+        if (data > at) at = data;
+        ssize_t n = pread(in, buf, sizeof zeros, at);
+        if (n < 0 && errno == EINTR) continue;
+        if (n < 0) e = errno;
+        if (n <= 0) break;
+        if (memcmp(buf, zeros, (size_t)n) != 0 &&
+            (lseek(out, at, SEEK_SET) < 0 || vx_write_all(out, buf, (size_t)n)))
+            e = errno;
+        at += n;
+    }
+    if (!e && ftruncate(out, st.st_size) != 0) e = errno;
+    if (!e && fsync(out) != 0) e = errno;
+    if (close(out) != 0 && !e) e = errno;
+    close(in);
+    free(buf);
+    if (e) {
+        unlink(dst);
+        errno = e;
+        return -1;
+    }
+    return 0;
+}
+
 long vx_journal_replay(vx_journal *j, void (*fn)(const cJSON *rec, void *ud), void *ud, vx_err *err)
 {
-    FILE *f = fopen(j->path, "rbe");
-    if (!f) {
-        int e = errno;
+    reader *r = malloc(sizeof *r);
+    int fd = r ? open(j->path, O_RDONLY | O_CLOEXEC) : -1;
+    if (fd < 0) {
+        int e = r ? errno : ENOMEM;
+        free(r);
         VX_ERROR("journal.open_failed", "path=%s error=%d", VX_Q(j->path), e);
         return vx_err_set(err, VX_EIO, "journal_failed", "cannot read the journal: %s",
                           strerror(e));
     }
+    r->fd = fd;
+    r->at = r->end = 0;
     char *line = NULL;
     size_t cap = 0;
-    ssize_t n;
+    off_t n;
+    int over, ended, got;
     long count = 0, lineno = 0;
     off_t good = 0; /* end of the last complete line */
     int torn = 0;
     long damaged = 0; /* records that do not check out, past what a crash tears */
-    while ((n = getline(&line, &cap, f)) > 0) {
+    while ((got = next_line(r, &line, &cap, &n, &over, &ended)) > 0) {
         lineno++;
-        if (line[n - 1] != '\n') {
+        if (!ended) {
             /* Torn tail: written partly before a crash, never acknowledged:
              * the start of one record, no NUL in it. Anything else there
-             * (zeros, garbage) is damage to acknowledged records. */
-            int record = (line[0] == '#' || line[0] == '{') && !memchr(line, 0, (size_t)n);
+             * (zeros, garbage, more than a record) is damage to acknowledged
+             * records. */
+            int record = !over && (line[0] == '#' || line[0] == '{') && !memchr(line, 0, (size_t)n);
             if (record) {
-                VX_WARN("journal.torn_tail", "path=%s line=%ld bytes=%zd", VX_Q(j->path), lineno,
-                        n);
+                VX_WARN("journal.torn_tail", "path=%s line=%ld bytes=%lld", VX_Q(j->path), lineno,
+                        (long long)n);
             } else {
-                VX_ERROR("journal.damaged_tail", "path=%s line=%ld bytes=%zd", VX_Q(j->path),
-                         lineno, n);
+                VX_ERROR("journal.damaged_tail", "path=%s line=%ld bytes=%lld", VX_Q(j->path),
+                         lineno, (long long)n);
                 damaged++;
             }
             torn = 1;
             break;
         }
         good += n;
+        if (over) {
+            VX_ERROR("journal.bad_record", "path=%s line=%ld bytes=%lld reason=too_long",
+                     VX_Q(j->path), lineno, (long long)n);
+            damaged++;
+            continue;
+        }
         size_t len = (size_t)n - 1;
         cJSON *rec = line[0] == '#' ? parse_framed(line, len) : cJSON_ParseWithLength(line, len);
         if (!rec && (rec = salvage(line, len)))
@@ -205,8 +314,15 @@ long vx_journal_replay(vx_journal *j, void (*fn)(const cJSON *rec, void *ud), vo
         cJSON_Delete(rec);
         count++;
     }
+    int e = errno;
     free(line);
-    fclose(f);
+    close(fd);
+    free(r);
+    if (got < 0) {
+        VX_ERROR("journal.read_failed", "path=%s line=%ld error=%d", VX_Q(j->path), lineno, e);
+        return vx_err_set(err, vx_err_io_kind(e), "journal_failed", "cannot read the journal: %s",
+                          strerror(e));
+    }
     if (damaged) {
         /* the evidence, before the cut and the compaction rewrite it */
         char copy[4200];
@@ -217,7 +333,7 @@ long vx_journal_replay(vx_journal *j, void (*fn)(const cJSON *rec, void *ud), vo
                 snprintf(copy, sizeof copy, "%s.damaged-%lld.%d", j->path, now, k);
             else
                 snprintf(copy, sizeof copy, "%s.damaged-%lld", j->path, now);
-            kept = vx_copy_file(j->path, copy) == 0;
+            kept = copy_sparse(j->path, copy) == 0;
         }
         VX_ERROR("journal.damaged", "path=%s records=%ld copy=%s", VX_Q(j->path), damaged,
                  kept ? VX_Q(copy) : "-");
@@ -256,6 +372,12 @@ int vx_journal_append(vx_journal *j, const cJSON *rec, size_t owed, vx_err *err)
     size_t n;
     char *text = frame(rec, &n);
     if (!text) return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory");
+    if (n > MAX_LINE) { /* replay would take it for damage */
+        free(text);
+        return vx_err_set(err, VX_ETOOBIG, "too_large",
+                          "the job's record is %zu bytes, over the journal's %d MiB a record", n,
+                          VX_JOURNAL_MAX_RECORD >> 20);
+    }
     pthread_mutex_lock(&j->lock);
     if (owed) { /* records of this one's size, and some room for their stats */
         off_t floor =

@@ -18,16 +18,25 @@
 
 typedef struct vx_journal vx_journal;
 
+/* The largest record's JSON (a job's snapshot: its params at most a
+ * --max-json-bytes body, large inline inputs stored as blobs): append
+ * refuses a larger one, and replay reads a longer line as damage, held in
+ * memory no further than this. */
+#define VX_JOURNAL_MAX_RECORD (64 << 20)
+
 /* Opens (creating) the journal at path. Owned. */
 vx_journal *vx_journal_open(const char *path, vx_err *err);
 void vx_journal_close(vx_journal *j);
 /* Calls fn for every complete record in file order. Returns the number of
- * records, or -1. Corrupt lines in the middle are logged and skipped; a torn
- * tail is truncated away. */
+ * records, or -1. Corrupt lines in the middle (one over
+ * VX_JOURNAL_MAX_RECORD too) are logged and skipped; a torn tail is
+ * truncated away. The file is read in pieces; one with damage is first
+ * copied to PATH.damaged-TIME, its runs of zeros as holes. */
 long vx_journal_replay(vx_journal *j, void (*fn)(const cJSON *rec, void *ud), void *ud,
                        vx_err *err);
 /* Appends one record and makes it durable (fdatasync); on failure the file
- * is as before (VX_ENOSPC insufficient_storage when the disk is full).
+ * is as before (VX_ENOSPC insufficient_storage when the disk is full;
+ * VX_ETOOBIG too_large over VX_JOURNAL_MAX_RECORD).
  * owed: for a new job's first record, the records the jobs accepted so far
  * (it included) still have to write, 0 for any other record. Such a record
  * must leave them room in the space reserved past the end (at least half of

@@ -70,6 +70,14 @@ static void replay_one(const cJSON *rec, void *ud)
         int found;
         size_t at = vx_sorted_find(&j->jobs, id, &found);
         if (found) job_free(vx_sorted_remove_at(&j->jobs, at));
+        if (j->ngone == j->capgone) {
+            size_t cap = j->capgone ? 2 * j->capgone : 64;
+            char(*n)[33] = realloc(j->gone, cap * sizeof *n);
+            if (!n) return; /* its results are then moved aside, not removed */
+            j->gone = n;
+            j->capgone = cap;
+        }
+        snprintf(j->gone[j->ngone++], sizeof *j->gone, "%s", id);
         return;
     }
     if (!vx_jobs_valid_id(id) || !kind || !mesh || !state) {
@@ -172,11 +180,22 @@ static int end_at_start(vx_jobs *j, job *jb)
     return 1;
 }
 
-/* vx_store_results_prune's test at open (one thread): a succeeded job's. */
+static int cmp_id(const void *a, const void *b)
+{
+    return strcmp(a, b);
+}
+
+/* vx_store_results_prune's test at open (one thread): a succeeded job's
+ * results stay; those of a job the journal names otherwise (not
+ * succeeded, or deleted) are a crash's leftovers; those of a job it never
+ * names are results it lost (emptied, removed, damaged): moved aside. */
 static int keep_result(void *ud, const char *jid)
 {
-    const job *jb = find_job(ud, jid);
-    return jb && jb->state == ST_SUCCEEDED;
+    vx_jobs *j = ud;
+    const job *jb = find_job(j, jid);
+    if (jb) return jb->state == ST_SUCCEEDED;
+    if (j->ngone && bsearch(jid, j->gone, j->ngone, sizeof *j->gone, cmp_id)) return 0;
+    return -1;
 }
 
 vx_jobs *vx_jobs_open(const vx_jobs_desc *desc, vx_err *err)
@@ -258,8 +277,13 @@ vx_jobs *vx_jobs_open(const vx_jobs_desc *desc, vx_err *err)
     for (size_t i = 0; i < nd; i++)
         vx_store_result_remove(desc->store, dropped[i]);
     /* Results no succeeded job names: a job killed mid-write (it runs
-     * again from nothing, or was canceled), a delete a crash cut short. */
+     * again from nothing, or was canceled), a delete a crash cut short;
+     * and results of jobs the journal does not know at all (lost). */
+    if (j->ngone) qsort(j->gone, j->ngone, sizeof *j->gone, cmp_id);
     vx_store_results_prune(desc->store, keep_result, j);
+    free(j->gone);
+    j->gone = NULL;
+    j->ngone = j->capgone = 0;
     /* What no unfinished job holds: meshes deleted while jobs used them,
      * blobs of jobs that finished or were never acknowledged. */
     vx_store_collect(desc->store);
@@ -302,6 +326,7 @@ void vx_jobs_free(vx_jobs *j)
     vx_sorted_free(&j->jobs);
     vx_queue_free(j->queue);
     vx_queue_free(j->cpu);
+    free(j->gone);
     if (j->st) j->st_ops->close(j->st);
     cluster_free(j);
     pthread_mutex_destroy(&j->lock);

@@ -107,6 +107,40 @@ static void fsync_meshes_dir(vx_store *s)
     s->ops->sync(s->blob, "meshes", NULL);
 }
 
+static int hash_fd(int fd, char hex[65]);
+
+/* Mesh id's metadata made anew from its data file (key: the metadata's),
+ * read as fmt: 1 when written and indexed (store.metadata_rebuilt), 0
+ * when there is no such data file, -1 when it does not read as a mesh
+ * (*code: why) or the metadata cannot be written. */
+static int rebuild_meta_as(vx_store *s, const char *id, vx_mesh_format fmt, const char *key,
+                           const char **code)
+{
+    const char *ext = vx_intake_format_ext(fmt);
+    char mkey[128], mpath[VX_PATH_MAX];
+    uint64_t bytes = 0;
+    mesh_data_key(mkey, sizeof mkey, id, ext);
+    if (s->ops->stat(s->blob, mkey, &bytes, NULL) < 0) return 0;
+    vx_err err = {0};
+    vx_mesh *m = NULL;
+    if (s->ops->path(s->blob, mkey, mpath, sizeof mpath) == 0)
+        m = vx_mesh_read_as(mpath, fmt, NULL, &err);
+    cJSON *meta = m && vx_intake_check(m, &err) == 0 ? vx_intake_meta(id, fmt, bytes, m) : NULL;
+    vx_mesh_free(m);
+    char *text = meta ? vx_json_print(meta, 0) : NULL;
+    if (!text || s->ops->put_bytes(s->blob, key, text, strlen(text), NULL)) {
+        *code = err.code[0] ? err.code : "store_failed";
+        free(text);
+        cJSON_Delete(meta);
+        return -1;
+    }
+    free(text);
+    fsync_meshes_dir(s);
+    VX_WARN("store.metadata_rebuilt", "mesh=%s format=%s", id, vx_intake_format_name(fmt));
+    if (mesh_insert(s, id, ext, meta, 0)) cJSON_Delete(meta);
+    return 1;
+}
+
 /* Mesh id's metadata made anew from its data file, whose metadata file
  * (key) does not parse: damaged after the upload was acknowledged (a disk
  * fault, a crash of the file system). The file is read again as the
@@ -117,33 +151,57 @@ static void fsync_meshes_dir(vx_store *s)
 static int rebuild_meta(vx_store *s, const char *id, const char *key)
 {
     for (vx_mesh_format fmt = VX_MESH_OBJ; fmt <= VX_MESH_OFF; fmt++) { /* every format */
-        const char *ext = vx_intake_format_ext(fmt);
-        char mkey[128], mpath[VX_PATH_MAX];
-        uint64_t bytes = 0;
-        mesh_data_key(mkey, sizeof mkey, id, ext);
-        if (s->ops->stat(s->blob, mkey, &bytes, NULL) < 0) continue;
-        vx_err err = {0};
-        vx_mesh *m = NULL;
-        if (s->ops->path(s->blob, mkey, mpath, sizeof mpath) == 0)
-            m = vx_mesh_read_as(mpath, fmt, NULL, &err);
-        cJSON *meta = m && vx_intake_check(m, &err) == 0 ? vx_intake_meta(id, fmt, bytes, m) : NULL;
-        vx_mesh_free(m);
-        char *text = meta ? vx_json_print(meta, 0) : NULL;
-        if (!text || s->ops->put_bytes(s->blob, key, text, strlen(text), NULL)) {
-            VX_ERROR("store.mesh_unrecovered", "mesh=%s data=%s code=%s", id, mkey,
-                     err.code[0] ? err.code : "store_failed");
-            free(text);
-            cJSON_Delete(meta);
+        const char *code = NULL;
+        int rc = rebuild_meta_as(s, id, fmt, key, &code);
+        if (rc == 0) continue;
+        if (rc < 0) {
+            char mkey[128];
+            mesh_data_key(mkey, sizeof mkey, id, vx_intake_format_ext(fmt));
+            VX_ERROR("store.mesh_unrecovered", "mesh=%s data=%s code=%s", id, mkey, code);
             return -1;
         }
-        free(text);
-        fsync_meshes_dir(s);
-        VX_WARN("store.metadata_rebuilt", "mesh=%s format=%s", id, vx_intake_format_name(fmt));
-        if (mesh_insert(s, id, ext, meta, 0)) cJSON_Delete(meta);
         return 0;
     }
     VX_ERROR("store.mesh_unrecovered", "mesh=%s data=none", id);
     return -1;
+}
+
+/* A data file DATA/meshes/<id>.<ext> (name) without metadata: a commit cut
+ * short before its metadata was written (never acknowledged), or a mesh
+ * whose metadata file was lost since (rm, a file system's crash). When the
+ * file's SHA-256 is its id and it reads as its format, the metadata is made
+ * anew (store.metadata_rebuilt; either way those are bytes an upload
+ * checked); else it goes (store.mesh_file_removed). A file that cannot be
+ * read stays, said at error level. */
+static void adopt_data_file(vx_store *s, const char *id, const char *name)
+{
+    char key[128], mkey[128], path[VX_PATH_MAX];
+    snprintf(key, sizeof key, "meshes/%s", name);
+    mesh_key(mkey, sizeof mkey, id, ".json");
+    vx_mesh_format fmt = vx_intake_format_of_path(name);
+    const char *why = "not_a_mesh_file";
+    if (fmt && s->ops->path(s->blob, key, path, sizeof path) == 0) {
+        int fd = open(path, O_RDONLY | O_CLOEXEC | O_NONBLOCK);
+        struct stat st;
+        char hex[65] = "";
+        int e = 0;
+        if (fd < 0 || fstat(fd, &st) != 0 || (S_ISREG(st.st_mode) && hash_fd(fd, hex)))
+            e = errno ? errno : EIO;
+        if (fd >= 0) close(fd);
+        if (e) {
+            VX_ERROR("store.unreadable_mesh_file", "mesh=%s path=%s error=%d message=%s", id,
+                     VX_Q(path), e, VX_Q(strerror(e)));
+            return;
+        }
+        why = "other_bytes";
+        const char *code = NULL;
+        if (strcmp(hex, id) == 0) {
+            if (rebuild_meta_as(s, id, fmt, mkey, &code) > 0) return;
+            why = code ? code : "store_failed";
+        }
+    }
+    VX_INFO("store.mesh_file_removed", "mesh=%s file=%s reason=%s", id, name, why);
+    s->ops->remove(s->blob, key);
 }
 
 /* One metadata file, DATA/meshes/<id><suffix> (".json", or ".deleted" for a
@@ -175,11 +233,24 @@ static void load_one(vx_store *s, const char *id, const char *suffix)
     char mkey[128], mpath[VX_PATH_MAX];
     mesh_data_key(mkey, sizeof mkey, id, ext);
     if (s->ops->stat(s->blob, mkey, NULL, NULL) < 0) {
+        int e = errno;
         s->ops->path(s->blob, mkey, mpath, sizeof mpath);
-        VX_WARN("store.missing_mesh_file", "path=%s", VX_Q(mpath));
-        cJSON_Delete(meta);
-        if (deleted) s->ops->remove(s->blob, key);
-        return;
+        /* The metadata is written after the data file and removed before
+         * it: metadata without its file is damage to an acknowledged mesh,
+         * not a commit cut short. It stays indexed, as at run time: 410
+         * mesh_damaged (or the read error) until its bytes are uploaded
+         * again. A deleted one's tombstone goes (nothing to keep for its
+         * jobs); on a shared store it is not indexed (fetched when seen). */
+        if (e == ENOENT)
+            VX_WARN("store.missing_mesh_file", "mesh=%s path=%s", id, VX_Q(mpath));
+        else
+            VX_ERROR("store.unreadable_mesh_file", "mesh=%s path=%s error=%d message=%s", id,
+                     VX_Q(mpath), e, VX_Q(strerror(e)));
+        if (deleted || s->ops->shared) {
+            cJSON_Delete(meta);
+            if (deleted) s->ops->remove(s->blob, key);
+            return;
+        }
     }
     if (mesh_insert(s, id, ext, meta, deleted)) cJSON_Delete(meta);
 }
@@ -193,6 +264,16 @@ static int load_name(const char *name, void *ud)
 {
     load_pass *lp = ud;
     char id[65];
+    vx_store *s = lp->s;
+    /* A staged file (tmp-*) that a crash kept from its rename: no daemon
+     * writes in the data dir but this one, which has not started yet. */
+    if (lp->pass == 2 && !s->ops->shared && strncmp(name, "tmp-", 4) == 0) {
+        char key[128];
+        snprintf(key, sizeof key, "meshes/%.100s", name);
+        VX_INFO("store.leftover_removed", "file=meshes/%s", name);
+        s->ops->remove(s->blob, key);
+        return 0;
+    }
     const char *dot = strchr(name, '.');
     if (!dot || dot - name != 64) return 0;
     memcpy(id, name, 64);
@@ -201,19 +282,26 @@ static int load_name(const char *name, void *ud)
     int meta = strcmp(dot, ".json") == 0, tomb = strcmp(dot, ".deleted") == 0;
     if (lp->pass == 0 && meta) load_one(lp->s, id, dot);
     if (lp->pass == 1 && tomb) load_one(lp->s, id, dot);
-    if (lp->pass == 2 && !meta && !tomb) {
-        /* A mesh file without metadata is a commit that never
-         * finished: it was never acknowledged, so it can go. One whose
-         * metadata is there but damaged (rebuild_meta could not read it)
-         * was: it stays. */
+    /* On a shared store these may be another daemon's writes in flight. */
+    if (lp->pass == 2 && !meta && !tomb && !s->ops->shared) {
         int found;
-        mesh_find(lp->s, id, &found);
+        mesh_find(s, id, &found);
         char key[128], mkey[128];
-        snprintf(key, sizeof key, "meshes/%s", name);
+        snprintf(key, sizeof key, "meshes/%.100s", name);
         snprintf(mkey, sizeof mkey, "meshes/%s.json", id);
-        /* On a shared store it may be another daemon's commit in flight. */
-        if (!found && !lp->s->ops->shared && lp->s->ops->stat(lp->s->blob, mkey, NULL, NULL) < 0)
-            lp->s->ops->remove(lp->s->blob, key);
+        if (!vx_intake_format_of_path(name)) {
+            /* no data file: a metadata write's temp file (ID.json.tmp.N;
+             * one a rebuild above renamed meanwhile is gone) */
+            if (s->ops->stat(s->blob, key, NULL, NULL) == 0) {
+                VX_INFO("store.leftover_removed", "file=meshes/%s", name);
+                s->ops->remove(s->blob, key);
+            }
+        } else if (!found && s->ops->stat(s->blob, mkey, NULL, NULL) < 0) {
+            /* A mesh file without metadata: adopted when its bytes are its
+             * id's, else removed. One whose metadata is there but damaged
+             * (rebuild_meta could not read it) stays. */
+            adopt_data_file(s, id, name);
+        }
     }
     return 0;
 }

@@ -187,10 +187,12 @@ void vx_store_result_remove(vx_store *s, const char *jid);
 int vx_store_id_read(vx_store *s, char out[65], vx_err *err);
 /* Writes id as the store's id (replacing any). 0, or -1 with err. */
 int vx_store_id_write(vx_store *s, const char *id, vx_err *err);
-/* A local store's results whose job keep says no to (called under the
- * store's lock; it may not call back): removed, at start-up, for jobs gone
- * or not succeeded (a crash's partial outputs, a delete's files a crash
- * kept). A shared store's are left alone. Returns how many. */
+/* A local store's results sorted at start-up by keep (called under the
+ * store's lock; it may not call back): 1 keeps them; 0 removes them (jobs
+ * gone or not succeeded: a crash's partial outputs, a delete's files a
+ * crash kept); -1 moves them into a new DATA/lost+found/results-TIME/ (jobs
+ * no record names: a journal lost or damaged), logged at error. A shared
+ * store's are left alone. Returns how many were removed or moved. */
 size_t vx_store_results_prune(vx_store *s, int (*keep)(void *ud, const char *jid), void *ud);
 /* Evicts least recently used results until the budget holds; returns how
  * many were removed. Called after each job and periodically. */

@@ -80,15 +80,39 @@ vx_store *vx_store_open(const char *data_dir, const vx_store_desc *desc, vx_err 
         vx_store_close(s);
         return NULL;
     }
-    /* A shared store that cannot be listed would leave this daemon with an
-     * empty index it never reloads: refuse to start instead (a supervisor
-     * retries). The data dir has always been listable. */
-    if ((vx_store_load_meshes(s) || vx_store_load_results(s)) && s->ops->shared) {
-        int e = errno;
+    /* A store that cannot be listed would leave this daemon with an empty
+     * index it never reloads (and every result answering 410, uncounted by
+     * the budget): refuse to start instead. A shared store may be out of
+     * reach for now (a supervisor retries); in the data dir it is a
+     * meshes/ or results/ that is no directory or not the daemon's to
+     * read (chmod 000, a plain file in its place). Both are listed, even
+     * when the first fails. */
+    const char *unlisted = NULL;
+    int e = 0;
+    if (vx_store_load_meshes(s)) {
+        e = errno;
+        unlisted = "meshes";
+    }
+    if (vx_store_load_results(s) && !unlisted) {
+        e = errno;
+        unlisted = "results";
+    }
+    if (unlisted && s->ops->shared) {
         /* a listing that is not there: the bucket (or the shared dir) is */
         vx_err_set(err, vx_err_io_kind(e), "blob_store_unreachable",
                    "cannot list the %s blob store: %s", s->ops->name,
                    e == ENOENT ? "no such bucket or directory (create it first)" : strerror(e));
+        vx_store_close(s);
+        return NULL;
+    }
+    if (unlisted) {
+        char p[VX_PATH_MAX];
+        snprintf(p, sizeof p, "%s/%s", s->dir, unlisted);
+        VX_ERROR("store.unlistable", "path=%s error=%d", VX_Q(p), e);
+        vx_err_set(err, VX_EIO, "data_dir_unusable",
+                   "cannot list %s/%s: %s (it must be a directory the daemon can read and "
+                   "write)",
+                   s->dir, unlisted, strerror(e));
         vx_store_close(s);
         return NULL;
     }

@@ -3,6 +3,8 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
+#include <time.h>
 
 #include "store/store_int.h"
 #include "util/fsutil.h"
@@ -109,6 +111,19 @@ int vx_store_result_commit(vx_store *s, const char *jid, vx_err *err)
     result_key(jid, key, sizeof key);
     uint64_t bytes = 0;
     s->ops->stat(s->blob, key, &bytes, NULL);
+    /* One result over the whole byte budget would evict every other result
+     * and then itself, its job said succeeded: it fails instead. */
+    uint64_t max = s->desc.results_max_bytes;
+    if (max && bytes > max) {
+        VX_WARN("store.result_too_large", "job=%s bytes=%llu results_max_bytes=%llu", jid,
+                (unsigned long long)bytes, (unsigned long long)max);
+        vx_store_result_remove(s, jid);
+        return vx_err_set(err, VX_ETOOBIG, "result_too_large",
+                          "the job's result is %llu bytes, more than the whole results budget "
+                          "(--results-max-bytes %llu): it was removed; ask for a smaller "
+                          "result or raise --results-max-bytes",
+                          (unsigned long long)bytes, (unsigned long long)max);
+    }
     vx_err e;
     vx_err_clear(&e);
     int rc = s->ops->sync(s->blob, key, &e);
@@ -179,22 +194,75 @@ void vx_store_result_remove(vx_store *s, const char *jid)
     s->ops->remove_prefix(s->blob, key);
 }
 
+/* Moves the results of jobs jids (n of them) into a new dir
+ * DATA/lost+found/results-TIME/ (TIME: UTC, to the second, a suffix when
+ * taken), forgotten by the budget; said at error level. One that cannot be
+ * moved stays where it is (and in the budget). */
+static void results_quarantine(vx_store *s, char (*jids)[sizeof s->results[0].jid], size_t n)
+{
+    char dir[VX_PATH_MAX], stamp[32];
+    time_t now = time(NULL);
+    struct tm tm;
+    gmtime_r(&now, &tm);
+    strftime(stamp, sizeof stamp, "%Y%m%dT%H%M%SZ", &tm);
+    snprintf(dir, sizeof dir, "%s/lost+found", s->dir);
+    int made = mkdir(dir, 0750) == 0 || errno == EEXIST;
+    for (int k = 0; made && k < 100; k++) { /* a name no earlier start took */
+        if (k)
+            snprintf(dir, sizeof dir, "%s/lost+found/results-%s.%d", s->dir, stamp, k);
+        else
+            snprintf(dir, sizeof dir, "%s/lost+found/results-%s", s->dir, stamp);
+        made = mkdir(dir, 0750) == 0;
+        if (made || errno != EEXIST) break;
+    }
+    int e = errno;
+    size_t moved = 0;
+    for (size_t i = 0; made && i < n; i++) {
+        char key[128], from[VX_PATH_MAX], to[VX_PATH_MAX];
+        result_key(jids[i], key, sizeof key);
+        if (strchr(jids[i], '/') || s->ops->path(s->blob, key, from, sizeof from) ||
+            snprintf(to, sizeof to, "%s/%s", dir, jids[i]) >= (int)sizeof to ||
+            rename(from, to) != 0) {
+            e = errno;
+            continue;
+        }
+        VX_INFO("store.result_quarantined", "job=%s", jids[i]);
+        pthread_mutex_lock(&s->lock);
+        result_forget_locked(s, jids[i]);
+        pthread_mutex_unlock(&s->lock);
+        moved++;
+    }
+    if (made) {
+        vx_fsync_dir(dir, NULL);
+        s->ops->sync(s->blob, "results", NULL);
+    }
+    VX_ERROR("store.results_quarantined",
+             "results=%zu moved=%zu dir=%s error=%d reason=\"no job record names them: the "
+             "journal was emptied, removed or damaged?\"",
+             n, moved, made ? VX_Q(dir) : "-", moved == n ? 0 : e);
+}
+
 size_t vx_store_results_prune(vx_store *s, int (*keep)(void *ud, const char *jid), void *ud)
 {
     if (s->ops->shared) return 0; /* other daemons' results are theirs */
     pthread_mutex_lock(&s->lock);
-    size_t nv = 0;
+    size_t nv = 0, nq = 0;
     char(*victims)[sizeof s->results[0].jid] =
-        s->nresults ? malloc(s->nresults * sizeof *victims) : NULL;
-    for (size_t i = 0; victims && i < s->nresults; i++)
-        if (!keep(ud, s->results[i].jid)) memcpy(victims[nv++], s->results[i].jid, sizeof *victims);
+        s->nresults ? malloc(2 * s->nresults * sizeof *victims) : NULL;
+    char(*lost)[sizeof s->results[0].jid] = victims ? victims + s->nresults : NULL;
+    for (size_t i = 0; victims && i < s->nresults; i++) {
+        int k = keep(ud, s->results[i].jid);
+        if (k == 0) memcpy(victims[nv++], s->results[i].jid, sizeof *victims);
+        if (k < 0) memcpy(lost[nq++], s->results[i].jid, sizeof *victims);
+    }
     pthread_mutex_unlock(&s->lock);
     for (size_t i = 0; i < nv; i++) {
         VX_INFO("store.result_pruned", "job=%s", victims[i]);
         vx_store_result_remove(s, victims[i]);
     }
+    if (nq) results_quarantine(s, lost, nq);
     free(victims);
-    return nv;
+    return nv + nq;
 }
 
 int vx_store_results_evict(vx_store *s)

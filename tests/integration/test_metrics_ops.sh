@@ -5,9 +5,10 @@
 source "$(dirname "$0")/lib.sh"
 source "$(dirname "$0")/box.sh"
 # Three lost contexts: the first job loses two (fails context_lost), the
-# second loses one and succeeds on the retry. A 1-byte results budget
-# evicts every result once its job has finished.
-VOXELD_TEST_LOSE_CONTEXT=3 start_daemon --job-timeout 90 --results-max-bytes 1 || exit 1
+# second loses one and succeeds on the retry. A 6000-byte results budget
+# holds one 16^3 raw8 result (4096 bytes): the third job's evicts the
+# second's.
+VOXELD_TEST_LOSE_CONTEXT=3 start_daemon --job-timeout 90 --results-max-bytes 6000 || exit 1
 metric() { awk -v n="$1" '$1 == n {print $2}' "$BODY"; }
 
 box_obj "$TMP/box.obj" 0 0 0 1 1 1
@@ -18,6 +19,8 @@ J1=$JOB
 run_job voxelize "$MESH_ID" '{"resolution":16,"format":"raw8"}'
 job_ok "job 2 (retried once)"
 J2=$JOB
+run_job voxelize "$MESH_ID" '{"resolution":15,"format":"raw8"}'
+job_ok "job 3"
 api GET "/v1/jobs/$J2/result"
 expect_error "job 2's result was evicted by the budget" 410 result_evicted
 
@@ -34,10 +37,10 @@ check "voxeld_up is gone" bash -c "! grep -q '^voxeld_up' '$BODY'"
 check "failed by code" test "$(metric 'voxeld_jobs_failed_total{kind="voxelize",code="context_lost"}')" = 1
 check "GL context losses" test "$(metric voxeld_gl_context_losses_total)" = 3
 check "evictions" test "$(metric voxeld_results_evicted_total)" -ge 1
-check "queue wait: both jobs that ran" test "$(metric voxeld_job_queue_wait_seconds_count)" = 2
-check "queue wait +Inf bucket" test "$(metric 'voxeld_job_queue_wait_seconds_bucket{le="+Inf"}')" = 2
+check "queue wait: the three jobs that ran" test "$(metric voxeld_job_queue_wait_seconds_count)" = 3
+check "queue wait +Inf bucket" test "$(metric 'voxeld_job_queue_wait_seconds_bucket{le="+Inf"}')" = 3
 check "job duration: the job timeout is the last bucket" \
-    grep -q '^voxeld_job_duration_seconds_bucket{kind="voxelize",le="90"} 2$' "$BODY"
+    grep -q '^voxeld_job_duration_seconds_bucket{kind="voxelize",le="90"} 3$' "$BODY"
 check "job duration: no bucket past the timeout" \
     bash -c "! grep -q 'voxeld_job_duration_seconds_bucket{kind=\"voxelize\",le=\"120\"}' '$BODY'"
 RSS=$(metric process_resident_memory_bytes)

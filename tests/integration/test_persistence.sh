@@ -67,15 +67,31 @@ for j in "$LONG" "$NEXT"; do
     check "job $j finished after SIGTERM + restart" jq -e '.state == "succeeded"' "$BODY"
 done
 
-# The result budget: a tiny byte budget evicts the least recently used.
+# The result budget: a small byte budget evicts the least recently used.
 stop_daemon
-start_daemon --results-max-bytes 1 || exit 1
+start_daemon --results-max-bytes 20000 || exit 1
 api POST "/v1/jobs?wait=60" -H "Content-Type: application/json" -d "{\"mesh\":\"$BOX\",\"kind\":\"preview\",\"params\":{\"width\":32,\"height\":32}}"
 EVJ=$(jqb .id)
+check "a result within the budget" jq -e '.state == "succeeded"' "$BODY"
 api GET "/v1/jobs/$DONE/result"
 expect_error "evicted result" 410 result_evicted
 api GET "/v1/jobs/$DONE"
 check "the evicted job is still known" jq -e '.state == "succeeded"' "$BODY"
+# A result larger than the whole budget on its own fails its job (it was
+# succeeded, every other result evicted, then its own: a 410 at once),
+# its files removed, nothing else evicted.
+api GET /metrics
+EVICTED=$(awk '$1 == "voxeld_results_evicted_total" {print $2}' "$BODY")
+run_job voxelize "$BOX" '{"resolution":80,"format":"raw8"}' # 80x54x27 bytes
+check "a result over the whole budget fails its job" \
+    jq -e '.state == "failed" and .error.code == "result_too_large"' "$TMP/job.json"
+check "the message says its size and the budget" \
+    jq -e '.error.message | test("is [0-9]{6} bytes") and test("--results-max-bytes 20000")' "$TMP/job.json"
+check "its files are removed" test ! -e "$DATA/results/$JOB"
+api GET "/v1/jobs/$EVJ/result"
+expect_status "the other results stay" 200
+api GET /metrics
+check "nothing evicted for it" test "$(awk '$1 == "voxeld_results_evicted_total" {print $2}' "$BODY")" = "$EVICTED"
 
 # A result file cut short on disk (or grown) is not served as the job's:
 # 410 result_damaged, each output on its own, across a restart.
@@ -138,6 +154,7 @@ for damage in flip remove fifo directory huge; do
     run_job voxelize "$BOX" '{"resolution":16,"format":"raw1"}'
     check "a job on the damaged mesh fails mesh_damaged ($damage)" \
         jq -e '.state == "failed" and .error.code == "mesh_damaged"' "$TMP/job.json"
+    FAILED_JOB=$JOB
     api GET "/v1/meshes/$BOX"
     expect_status "the mesh is still listed ($damage)" 200
     upload "$TMP/box.obj"
@@ -151,15 +168,19 @@ for damage in flip remove fifo directory huge; do
     run_job voxelize "$BOX" '{"resolution":16,"format":"raw1"}'
     job_ok "a job on the repaired mesh ($damage)"
 done
-# A mesh whose file is gone at start-up is not indexed (404), and its
-# upload stores it anew.
+# A mesh whose file is gone at start-up is damaged as at run time (it
+# vanished, 404, its metadata kept and warned about at every start): 410
+# mesh_damaged, and its upload repairs it.
 rm -f "$MF"
 stop_daemon
 start_daemon || exit 1
+check "logged" grep -q "event=store.missing_mesh_file mesh=$BOX" "$TMP/daemon.log"
 api GET "/v1/meshes/$BOX"
-expect_error "a mesh without its file after a restart" 404 mesh_not_found
+expect_status "a mesh without its file after a restart is still there" 200
+api GET "/v1/meshes/$BOX/file"
+expect_error "a mesh without its file after a restart" 410 mesh_damaged
 upload "$TMP/box.obj"
-expect_status "its bytes again" 201
+expect_status "its bytes again" 200
 api GET "/v1/meshes/$BOX/file"
 check "stored anew" cmp -s "$BODY" "$TMP/box.obj"
 # A mesh whose metadata file is damaged after the upload was acknowledged
@@ -181,22 +202,97 @@ check "its metadata made anew from the file" jq -e ".format == \"obj\" and .tria
 check "logged at warn" grep -q 'event=store.metadata_rebuilt' "$TMP/daemon.log"
 run_job voxelize "$BOX" '{"resolution":16,"format":"raw1"}'
 job_ok "a job on the mesh whose metadata was rebuilt"
-stop_daemon
-# Results no succeeded job names are removed at start-up: a dir left by a
-# delete that a crash cut short (no such job), and partial outputs of a job
-# that never finished (it runs again from nothing). They had stayed across
-# every restart, counted against the results budget.
-ORPHAN=0123456789abcdef0123456789abcdef
-mkdir -p "$DATA/results/$ORPHAN"
-head -c 4096 /dev/zero >"$DATA/results/$ORPHAN/voxels.raw"
+# A metadata file gone (removed) is made anew the same way: its data file
+# was deleted as a commit cut short. A data file of other bytes than its
+# name says, and the temp files of writes a crash cut short, go.
+kill9_daemon
+rm "$DATA/meshes/$SPOT.json"
+OTHER=$(printf '%064d' 7)
+printf 'v 0 0 0\n' >"$DATA/meshes/$OTHER.obj"
+printf '{"format":' >"$DATA/meshes/$BOX.json.tmp.999"
+printf 'x' >"$DATA/meshes/tmp-1-1"
 start_daemon || exit 1
-check "an orphaned results dir is removed at start-up" test ! -e "$DATA/results/$ORPHAN"
-check "and logged" grep -q "event=store.result_pruned job=$ORPHAN" "$TMP/daemon.log"
+api GET "/v1/meshes/$SPOT"
+expect_status "a mesh whose metadata file was removed, after a restart" 200
+check "its metadata made anew" jq -e ".format == \"obj\" and .triangles == $SPOT_TRIS" "$BODY"
+check "logged" grep -q "event=store.metadata_rebuilt mesh=$SPOT" "$TMP/daemon.log"
+api GET "/v1/meshes/$SPOT/file"
+check "its file served" cmp -s "$BODY" "$VX_MESH_DIR/spot_triangulated.obj"
+check "a data file of other bytes goes" test ! -e "$DATA/meshes/$OTHER.obj"
+check "a metadata write's temp file goes" test ! -e "$DATA/meshes/$BOX.json.tmp.999"
+check "a staged file goes" test ! -e "$DATA/meshes/tmp-1-1"
+stop_daemon
+# Results of a job the journal names but not as succeeded are removed at
+# start-up: partial outputs of a job that never finished (it runs again
+# from nothing), or failed. They had stayed across every restart, counted
+# against the results budget. Results of a job no record names (a journal
+# emptied, removed or damaged) are not a crash's: moved aside into
+# DATA/lost+found/results-TIME/, said at error level (they were deleted,
+# every one of them with a lost journal).
+ORPHAN=0123456789abcdef0123456789abcdef
+mkdir -p "$DATA/results/$ORPHAN" "$DATA/results/$FAILED_JOB"
+head -c 4096 /dev/zero >"$DATA/results/$ORPHAN/voxels.raw"
+head -c 4096 /dev/zero >"$DATA/results/$FAILED_JOB/voxels.raw"
+start_daemon || exit 1
+check "a failed job's results dir is removed at start-up" test ! -e "$DATA/results/$FAILED_JOB"
+check "and logged" grep -q "event=store.result_pruned job=$FAILED_JOB" "$TMP/daemon.log"
+check "a dir no job record names is moved aside" \
+    bash -c "test ! -e '$DATA/results/$ORPHAN' && test -s '$DATA'/lost+found/results-*/$ORPHAN/voxels.raw"
+check "logged at error" grep -q "level=error event=store.results_quarantined results=1 moved=1" "$TMP/daemon.log"
 run_job voxelize "$BOX" '{"resolution":16,"format":"raw1"}'
 job_ok "a succeeded job's results"
 KEPT=$JOB
 stop_daemon
 check "a succeeded job's results stay" test -d "$DATA/results/$KEPT"
+for lost in emptied removed; do
+    cp "$DATA/journal.log" "$TMP/journal.keep"
+    case $lost in
+    emptied) : >"$DATA/journal.log" ;;
+    removed) rm "$DATA/journal.log" ;;
+    esac
+    rm -rf "$DATA/lost+found"
+    start_daemon || exit 1
+    stop_daemon
+    check "a journal $lost: no result is deleted" \
+        bash -c "ls -A '$DATA'/lost+found/results-*/$KEPT | grep -q ."
+    check "a journal $lost: logged at error" \
+        grep -q "level=error event=store.results_quarantined results=[0-9]* moved=" "$TMP/daemon.log"
+    # (back as it was: the results and the journal)
+    mv "$DATA"/lost+found/results-*/* "$DATA/results/"
+    cp "$TMP/journal.keep" "$DATA/journal.log"
+done
+# A meshes/ or results/ that cannot be listed (a plain file in its place,
+# chmod 000): the daemon started with an empty index, or without its
+# results (each 410, none counted by the budget), or /readyz 200 with
+# every job failing io_error. It exits 1, saying which.
+for dir in meshes results; do
+    mv "$DATA/$dir" "$TMP/$dir.keep"
+    printf 'x' >"$DATA/$dir"
+    timeout 20 "$VOXELD" --listen 127.0.0.1:0 --data-dir "$DATA" 2>"$TMP/unlisted.log"
+    rc=$?
+    check "$dir a plain file: exit 1 (rc $rc)" test "$rc" -eq 1
+    check "$dir a plain file: saying so" grep -q "cannot list .*/$dir: Not a directory" "$TMP/unlisted.log"
+    rm "$DATA/$dir"
+    mv "$TMP/$dir.keep" "$DATA/$dir"
+done
+# A journal with a long damaged tail (here 300 MB of zeros, sparse) is read
+# in pieces (it was read whole: its size in memory, seconds), and the copy
+# kept as evidence keeps the zeros as holes (it was written out densely).
+JSIZE=$(stat -c %s "$DATA/journal.log")
+truncate -s +300M "$DATA/journal.log"
+start_daemon || exit 1
+HWM=$(awk '/VmHWM/ {print $2}' "/proc/$PID/status")
+check "logged as damage" grep -q 'level=error event=journal.damaged_tail' "$TMP/daemon.log"
+echo "note: peak memory with a 300 MB damaged tail: $HWM kB"
+check "read in pieces: peak memory ${HWM} kB" test "$HWM" -lt 250000
+check "the tail is cut" test "$(stat -c %s "$DATA/journal.log")" -le "$JSIZE"
+COPY=$(ls -t "$DATA"/journal.log.damaged-* | head -n 1)
+check "the damaged copy has the file's size" test "$(stat -c %s "$COPY")" -eq $((JSIZE + 300 * 1048576))
+check "the damaged copy is sparse ($(du -k "$COPY" | cut -f1) kB)" test "$(du -k "$COPY" | cut -f1)" -lt 10000
+api GET "/v1/jobs/$KEPT/result"
+expect_status "the jobs are all there" 200
+stop_daemon
+rm -f "$DATA"/journal.log.damaged-*
 # A FIFO where a file should be: start-up blocked in its open (or read)
 # forever, deaf to SIGTERM. As a mesh's metadata it is made anew; as the
 # journal the daemon exits 1, saying so.

@@ -163,6 +163,20 @@ static void test_results_budget(void **state)
     assert_int_equal(err.kind, VX_EGONE); /* 410, not 404 */
     assert_int_equal(vx_store_result_file(s, "aaaa", "out.bin", p, sizeof p, &err), 0);
     assert_int_equal(vx_store_result_file(s, "cccc", "out.bin", p, sizeof p, &err), 0);
+    /* A result over the whole budget is refused and removed, nothing else
+     * evicted (it had evicted every other result, then itself). */
+    char d2[512];
+    assert_int_equal(vx_store_result_dir(s, "dddd", d2, sizeof d2, &err), 0);
+    snprintf(p, sizeof p, "%s/out.bin", d2);
+    char *big = calloc(1, 3000);
+    assert_int_equal(vx_write_atomic(p, big, 3000, &err), 0);
+    free(big);
+    assert_int_equal(vx_store_result_commit(s, "dddd", &err), -1);
+    assert_string_equal(err.code, "result_too_large");
+    assert_non_null(strstr(err.message, "3000 bytes"));
+    assert_int_not_equal(access(d2, F_OK), 0);
+    assert_int_equal(vx_store_results_bytes(s), 2000);
+    assert_int_equal(vx_store_results_evict(s), 0);
     vx_store_close(s);
     /* Sizes are found again on open. */
     s = vx_store_open(sub, &d, &err);
