@@ -50,17 +50,8 @@ void vx_http_job_changed(vx_http *h, const char *jid, int terminal)
  * (fold) or a value cut at a NUL (nul). */
 typedef struct once_counts {
     int host, length, idem, coding, auth, type, bad, fold, nul, badhost;
-    struct MHD_Connection *c;
+    const char *next; /* where the next field's name must start (a bare LF before it) */
 } once_counts;
-
-static enum MHD_Result key_at(void *cls, enum MHD_ValueKind kind, const char *key, size_t klen,
-                              const char *value, size_t vlen)
-{
-    const char **at = cls;
-    (void)kind, (void)klen, (void)value, (void)vlen;
-    if (key == *at) *at = NULL;
-    return *at ? MHD_YES : MHD_NO;
-}
 
 /* What libmicrohttpd 0.9.75 hides when it parses a head in place (its
  * buffer holds "name\0 value\0\0" for "name: value\r\n", and the fields
@@ -71,22 +62,21 @@ static enum MHD_Result key_at(void *cls, enum MHD_ValueKind kind, const char *ke
  *   second request): the value then does not follow its name;
  * - a NUL in a value ends it there ("Content-Length: 2\0" "99" framed 2
  *   bytes): the line's end does not follow the value. (A bare LF ends a
- *   line in one byte: the next field's name follows then.) */
+ *   line in one byte: the next field's name, in the order they came,
+ *   follows then; after the last field, the empty line's end.) */
 static void check_in_place(once_counts *n, const char *key, size_t klen, const char *value,
                            size_t vlen)
 {
     const uintptr_t k = (uintptr_t)key, v = (uintptr_t)value;
+    if (n->next && key != n->next) n->nul = 1;
+    n->next = NULL;
     if (v < k + klen + 1 || v - (k + klen + 1) > 4096 || key[klen] != '\0') {
         n->fold = 1;
         return;
     }
     for (const char *p = key + klen + 1; p < value; p++)
         if (*p != ' ' && *p != '\t') n->fold = 1;
-    if (value[vlen] == '\0' && value[vlen + 1] != '\0') {
-        const char *next = value + vlen + 1;
-        MHD_get_connection_values_n(n->c, MHD_HEADER_KIND, key_at, &next);
-        if (next) n->nul = 1;
-    }
+    if (value[vlen] == '\0' && value[vlen + 1] != '\0') n->next = value + vlen + 1;
 }
 
 typedef struct last_end {
@@ -199,9 +189,10 @@ static int declares_body(struct MHD_Connection *c)
  * or -1. */
 static int check_framing(struct MHD_Connection *c, req *r, const char *head, const char *version)
 {
-    once_counts n = {.c = c};
+    once_counts n = {0};
     MHD_get_connection_values(c, MHD_HEADER_KIND, count_once, &n);
     MHD_get_connection_values_n(c, MHD_HEADER_KIND, check_field, &n);
+    if (n.next) n.nul = 1; /* the last field's value was cut */
     if (n.bad)
         return fail_framing(c, r,
                             "a header field name that is not a token (a space before its "
