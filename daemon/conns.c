@@ -105,10 +105,12 @@ struct vx_conn {
     int kill_status; /* the status we wrote, 0 for none */
     int rd_closed;   /* shutdown(SHUT_RD) done */
     double t_killed;
-    char rid[72];           /* BODY: the request's id; else the id of the answer written here */
-    char origin[256];       /* BODY: the request's origin when CORS allows it, else "" */
-    int path_escape;        /* the current request's path has %00 or %2F (see vx_conns_on_uri) */
-    int target_bad;         /* ... its target a raw space or control character */
+    char rid[72];     /* BODY: the request's id; else the id of the answer written here */
+    char origin[256]; /* BODY: the request's origin when CORS allows it, else "" */
+    int path_escape;  /* the current request's path has %00 or %2F (see vx_conns_on_uri) */
+    int target_bad;   /* ... its target a raw space or control character */
+    const char *uri;  /* ... its target in libmicrohttpd's buffer, as first seen */
+    size_t uri_len;
     int linger;             /* answered before its body was read: drain it after the close */
     unsigned char peer[17]; /* the client's address family and address (0s: unknown) */
     int over_ip;            /* opened past --max-connections-per-ip: its request gets a 503 */
@@ -389,12 +391,9 @@ void *vx_conns_on_uri(void *cls, const char *uri, struct MHD_Connection *c)
         int bad = 0;
         for (const unsigned char *p = (const unsigned char *)uri; *p && !bad; p++)
             bad = *p <= 0x20 || *p == 0x7f;
-        /* A raw NUL ends the target early: libmicrohttpd (0.9.75) puts the
-         * target in its buffer cut at the space before the version, so the
-         * version follows this NUL, or the target held one of its own
-         * ("/livez\0junk" was /livez). */
-        if (!bad && vx_mhd_in_place()) bad = strncmp(uri + strlen(uri) + 1, "HTTP/", 5) != 0;
         vc->target_bad = bad;
+        vc->uri = uri;
+        vc->uri_len = strlen(uri);
         /* A request line is in: a head has begun. One pipelined behind
          * the last request came before its answer, so the sweeper saw no
          * byte after it and kept the connection idle (no 408, a silent
@@ -820,6 +819,12 @@ void vx_conns_refuse(vx_conns *s, vx_conn *vc, int status, const char *code, con
 int vx_conns_over_ip(const vx_conn *vc)
 {
     return vc && vc->over_ip;
+}
+
+int vx_conns_line_cut(const vx_conn *vc, const char *method, const char *version)
+{
+    if (!vc || !vc->uri || !method || !version || !vx_mhd_in_place()) return 0;
+    return method + strlen(method) + 1 != vc->uri || vc->uri + vc->uri_len + 1 != version;
 }
 
 int vx_conns_target_bad(const vx_conn *vc)

@@ -51,6 +51,12 @@ int vx_conns_over_ip(const vx_conn *vc);
 /* 1 when the current request's target had a raw space or control
  * character (libmicrohttpd takes "GET /a b HTTP/1.1" as path "/a b"). */
 int vx_conns_target_bad(const vx_conn *vc);
+/* 1 when a NUL cut the request line's method or target short: libmicrohttpd
+ * (0.9.75) cuts the line in its buffer at its two spaces, so the target
+ * starts one byte after the method's end and the version one after the
+ * target's ("GET /livez\0junk HTTP/1.1" was /livez); 0 otherwise or when
+ * the buffer is not read (vx_mhd_in_place). */
+int vx_conns_line_cut(const vx_conn *vc, const char *method, const char *version);
 /* 1 when the running libmicrohttpd parses a head in place in its buffer as
  * 0.9.75 does (http.c and vx_conns_on_uri read that buffer around the
  * fields it gives to find what it hid: folded lines, NULs); 0 for another

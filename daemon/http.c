@@ -50,63 +50,54 @@ void vx_http_job_changed(vx_http *h, const char *jid, int terminal)
  * (fold) or a value cut at a NUL (nul). */
 typedef struct once_counts {
     int host, length, idem, coding, auth, type, bad, fold, nul, badhost;
-    const char *next; /* where the next field's name must start (a bare LF before it) */
+    const char *line_end; /* where the last line's text ended (check_in_place) */
 } once_counts;
 
 /* What libmicrohttpd 0.9.75 hides when it parses a head in place (its
- * buffer holds "name\0 value\0\0" for "name: value\r\n", and the fields
- * point into it), which a proxy in front may read otherwise:
+ * buffer holds "name\0 value\0\0" for "name: value\r\n", the fields
+ * pointing into it, one line after the other), which a proxy in front may
+ * read otherwise:
  * - a line folded onto the last (obs-fold, RFC 9112 5.2) is glued to the
  *   field's NAME in a copy elsewhere ("Content-Length:\r\n 52" became a
  *   field "Content-Length52" of no value, and the 52 bytes of body a
  *   second request): the value then does not follow its name;
- * - a NUL in a value ends it there ("Content-Length: 2\0" "99" framed 2
- *   bytes): the line's end does not follow the value. (A bare LF ends a
- *   line in one byte: the next field's name, in the order they came,
- *   follows then; after the last field, the empty line's end.) */
+ * - a NUL in a value ends it there ("Content-Length: 0\0" "99"): the next
+ *   line then does not start one or two bytes (LF, CR LF) after it. The
+ *   first line starts after the version's end (n->line_end at the start);
+ *   the last one's end is head_cut's. */
 static void check_in_place(once_counts *n, const char *key, size_t klen, const char *value,
                            size_t vlen)
 {
+    const char *e = n->line_end;
+    if (e && key != e + 1 && !(key == e + 2 && e[1] == '\0')) n->nul = 1;
+    n->line_end = NULL;
     const uintptr_t k = (uintptr_t)key, v = (uintptr_t)value;
-    if (n->next && key != n->next) n->nul = 1;
-    n->next = NULL;
-    if (v < k + klen + 1 || v - (k + klen + 1) > 4096 || key[klen] != '\0') {
+    /* (a key moved by a fold stays within the connection's 256 KiB) */
+    if (v < k + klen + 1 || v - (k + klen + 1) > ((size_t)256 << 10) || key[klen] != '\0') {
         n->fold = 1;
         return;
     }
     for (const char *p = key + klen + 1; p < value; p++)
         if (*p != ' ' && *p != '\t') n->fold = 1;
-    if (value[vlen] == '\0' && value[vlen + 1] != '\0') n->next = value + vlen + 1;
+    n->line_end = value + vlen;
 }
 
-typedef struct last_end {
-    const char *lo, *hi, *end; /* the head's bytes; the last value's end in them */
-} last_end;
-
-static enum MHD_Result find_end(void *cls, enum MHD_ValueKind kind, const char *key, size_t klen,
-                                const char *value, size_t vlen)
-{
-    last_end *e = cls;
-    (void)kind, (void)key, (void)klen;
-    if (value && value >= e->lo && value + vlen < e->hi && value + vlen > e->end)
-        e->end = value + vlen;
-    return MHD_YES;
-}
-
-/* Whether libmicrohttpd 0.9.75 ended the head at a line with an empty
- * field name (": x", or ":"), taking it for the empty line (what followed
- * was read as the next request): the head's bytes (from its method, as
- * many as it counted) end 2 to 4 bytes (line ends, one or two each) after
- * the last value, or after the version when there are no fields. */
-static int head_cut(struct MHD_Connection *c, const char *head, const char *version)
+/* Whether the head ends otherwise than after the last line's end (end:
+ * the last value's, or the version's) with its line end and the empty
+ * line, 2 to 4 bytes libmicrohttpd 0.9.75 made NULs: it took a line with
+ * an empty field name (": x") for the empty line and read what followed
+ * as the next request, or the last value held a NUL. A bare ":" ended by
+ * a lone LF leaves the same NULs as a line end, and passes. */
+static int head_cut(struct MHD_Connection *c, const char *head, const char *end)
 {
     const union MHD_ConnectionInfo *ci =
         MHD_get_connection_info(c, MHD_CONNECTION_INFO_REQUEST_HEADER_SIZE);
-    if (!ci || !head || version < head || version >= head + ci->header_size) return 0;
-    last_end e = {head, head + ci->header_size, version + strlen(version)};
-    MHD_get_connection_values_n(c, MHD_HEADER_KIND, find_end, &e);
-    const size_t gap = (size_t)(e.hi - e.end);
-    return gap < 2 || gap > 4;
+    if (!ci || !head || !end || end < head || end >= head + ci->header_size) return 0;
+    const size_t gap = (size_t)(head + ci->header_size - end);
+    if (gap < 2 || gap > 4) return 1;
+    for (size_t i = 0; i < gap; i++)
+        if (end[i] != '\0') return 1;
+    return 0;
 }
 
 /* A field name must be a token, a value hold no NUL, CR or LF (RFC 9110
@@ -117,7 +108,11 @@ static enum MHD_Result check_field(void *cls, enum MHD_ValueKind kind, const cha
 {
     once_counts *n = cls;
     (void)kind;
-    if (!key || !klen) return MHD_YES;
+    if (!key) return MHD_YES;
+    if (!klen) { /* a line ": x" (the head's first: libmicrohttpd kept it) */
+        n->bad = 1;
+        return MHD_NO;
+    }
     for (size_t i = 0; i < klen; i++) {
         unsigned char ch = (unsigned char)key[i];
         if (!(isalnum(ch) || strchr("!#$%&'*+-.^_`|~", ch)) || !ch) n->bad = 1;
@@ -129,11 +124,15 @@ static enum MHD_Result check_field(void *cls, enum MHD_ValueKind kind, const cha
 }
 
 /* uri-host [":" port] (RFC 9112 3.2, RFC 3986 3.2.2): registered names,
- * IP literals and ports; empty for a target without an authority. */
+ * IP literals and ports; empty for a target without an authority. Trailing
+ * white space libmicrohttpd 0.9.75 leaves in a value is not the value's. */
 static int host_ok(const char *v)
 {
-    for (; *v; v++)
-        if (!isalnum((unsigned char)*v) && !strchr("-._~%!$&'()*+,;=:[]", *v)) return 0;
+    size_t n = strlen(v);
+    while (n && (v[n - 1] == ' ' || v[n - 1] == '\t')) /* (not the value's: OWS) */
+        n--;
+    for (size_t i = 0; i < n; i++)
+        if (!isalnum((unsigned char)v[i]) && !strchr("-._~%!$&'()*+,;=:[]", v[i])) return 0;
     return 1;
 }
 
@@ -190,9 +189,10 @@ static int declares_body(struct MHD_Connection *c)
 static int check_framing(struct MHD_Connection *c, req *r, const char *head, const char *version)
 {
     once_counts n = {0};
+    const int in_place = vx_mhd_in_place();
+    if (in_place) n.line_end = version + strlen(version);
     MHD_get_connection_values(c, MHD_HEADER_KIND, count_once, &n);
     MHD_get_connection_values_n(c, MHD_HEADER_KIND, check_field, &n);
-    if (n.next) n.nul = 1; /* the last field's value was cut */
     if (n.bad)
         return fail_framing(c, r,
                             "a header field name that is not a token (a space before its "
@@ -202,8 +202,12 @@ static int check_framing(struct MHD_Connection *c, req *r, const char *head, con
                             "a header line continued on the next (a line starting with a space or "
                             "tab: obs-fold, RFC 9112 5.2): put each field on one line");
     if (n.nul) return fail_framing(c, r, "a header value with a NUL");
-    if (vx_mhd_in_place() && head_cut(c, head, version))
-        return fail_framing(c, r, "a header line with an empty field name (': x', RFC 9110 5.1)");
+    if (in_place && head_cut(c, head, n.line_end))
+        return fail_framing(c, r,
+                            "a header line with an empty field name (': x', RFC 9110 5.1) or a "
+                            "NUL at the last value's end");
+    if (vx_conns_line_cut(r->vc, head, version))
+        return fail_framing(c, r, "a NUL in the request line's method or target");
     if (vx_conns_target_bad(r->vc))
         return fail_framing(c, r,
                             "the request target has a space or a control character (escape it: "

@@ -426,13 +426,19 @@ raw_http nullen "POST /v1/jobs HTTP/1.1\\r\\nHost: x\\r\\nContent-Type: applicat
 raw_http nulvalue "GET /livez HTTP/1.1\\r\\nHost: x\\r\\nX-A: a\\x00b\\r\\n\\r\\n$SMUGGLED" all
 raw_http emptyname "GET /livez HTTP/1.1\\r\\nHost: x\\r\\nX-A: a\\r\\n: x\\r\\n$SMUGGLED" all
 raw_http emptyname2 "GET /livez HTTP/1.1\\r\\nHost: x\\r\\n:\\r\\n$SMUGGLED" all
+raw_http nulcrlf "POST /v1/jobs HTTP/1.1\\r\\nContent-Length: 0\\x00\\x0036\\r\\nHost: x\\r\\nContent-Type: application/json\\r\\n\\r\\n$SMUGGLED" all
+raw_http nulend "GET /livez HTTP/1.1\\r\\nX-A: b\\x00\\r\\nHost: x\\r\\n\\r\\n$SMUGGLED" all
+raw_http nulmethod "GET\\x00X /livez HTTP/1.1\\r\\nHost: x\\r\\n\\r\\n$SMUGGLED" all
+raw_http nulversion "GET /livez\\x00HTTP/junk HTTP/1.1\\r\\nHost: x\\r\\n\\r\\n$SMUGGLED" all
+raw_http emptyfirst "GET /livez HTTP/1.1\\r\\n: x\\r\\nHost: x\\r\\n\\r\\n$SMUGGLED" all
+raw_http emptylf "GET /livez HTTP/1.1\\nHost: x\\n:x\\n$SMUGGLED" all
 raw_http nultarget "GET /livez\\x00junk HTTP/1.1\\r\\nHost: x\\r\\n\\r\\n$SMUGGLED" all
 raw_http nultarget2 "GET /livez\\x00 HTTP/1.1\\r\\nHost: x\\r\\n\\r\\n$SMUGGLED" all
 # HTTP/1.0 with Transfer-Encoding: its framing is faulty (RFC 9112 6.1);
 # two Content-Types: the upload reads the first, a proxy may the last.
 raw_http te10 "POST /v1/jobs HTTP/1.0\\r\\nConnection: keep-alive\\r\\nContent-Type: application/json\\r\\nTransfer-Encoding: chunked\\r\\n\\r\\n2\\r\\n{}\\r\\n0\\r\\n\\r\\n$SMUGGLED" all
 raw_http twotypes "POST /v1/meshes HTTP/1.1\\r\\nHost: x\\r\\nContent-Type: text/plain\\r\\nContent-Type: model/obj\\r\\nContent-Length: 2\\r\\n\\r\\n{}$SMUGGLED" all
-for t in foldlen foldte foldother foldspaces nullen nulvalue emptyname emptyname2 nultarget nultarget2 te10 twotypes; do
+for t in foldlen foldte foldother foldspaces nullen nulvalue nulcrlf nulend nulmethod nulversion emptyname emptyname2 emptyfirst emptylf nultarget nultarget2 te10 twotypes; do
     expect_raw $t 400 invalid_request
     check "$t: one answer only (no smuggled request)" test "$(grep -ao 'HTTP/1.1 [0-9]' "$TMP/$t.raw" | wc -l)" = 1
     check "$t: the answer closes the connection" bash -c "tr -d '\r' <'$TMP/$t.raw' | sed '/^$/q' | grep -qi '^connection: close'"
@@ -444,6 +450,9 @@ check "nullen: the message names the NUL" bash -c "tr -d '\r' <'$TMP/nullen.raw'
 # pipelined twice on one connection.
 raw_http lfonly "GET /livez HTTP/1.1\\nHost: x\\nX-A: one\\nX-B:\\t \\t b \\nX-C:\\nX-D:   \\nAccept: */*\\n\\n" all
 check "bare LF lines, tabs, empty values: 200" bash -c "head -n 1 '$TMP/lfonly.raw' | grep -q '^HTTP/1.1 200 '"
+spaces=$(printf ' %.0s' {1..5000})
+raw_http widespace "GET /livez HTTP/1.1\\r\\nHost: x\\r\\nX-Wide:$spaces v\\r\\n\\r\\n"
+check "5000 spaces after a colon: 200" bash -c "head -n 1 '$TMP/widespace.raw' | grep -q '^HTTP/1.1 200 '"
 raw_http crlfmix "GET /livez HTTP/1.1\\r\\nHost: x\\r\\nX-B:\\t \\t b \\r\\nX-C:\\r\\nX-D:   \\r\\n\\r\\nGET /livez HTTP/1.1\\r\\nHost: x\\r\\nX-C:\\r\\n\\r\\n" all
 check "CRLF lines, tabs, empty values, two pipelined: two 200s" test "$(grep -ao 'HTTP/1.1 200 ' "$TMP/crlfmix.raw" | wc -l)" = 2
 # Host: a host and port (RFC 9112 3.2: 400 for an invalid value).
@@ -451,7 +460,7 @@ raw_http hostspace 'GET /livez HTTP/1.1\r\nHost: a b\r\n\r\n'
 expect_raw hostspace 400 invalid_request
 raw_http hostbytes 'GET /livez HTTP/1.1\r\nHost: \xff\xfe\r\n\r\n'
 expect_raw hostbytes 400 invalid_request
-for h in '[::1]:8080' 'example.com:80' '127.0.0.1' ''; do
+for h in '[::1]:8080' 'example.com:80' '127.0.0.1' '' 'a.example  ' 'a.example\t'; do
     raw_http hostok "GET /livez HTTP/1.1\\r\\nHost: $h\\r\\n\\r\\n"
     check "Host: '$h': 200" bash -c "head -n 1 '$TMP/hostok.raw' | grep -q '^HTTP/1.1 200 '"
 done
