@@ -9,6 +9,7 @@
  * representation with its own strong ETag ("<file>", "<file>+zstd",
  * "<file>+gzip"), and every answer says Vary: Accept-Encoding. If-Range
  * compares against the identity ETag. */
+#include <errno.h>
 #include <fcntl.h>
 #include <stdio.h>
 #include <string.h>
@@ -69,8 +70,15 @@ int vx_route_result(vx_http *h, struct MHD_Connection *c, req *r)
     int fd = open(path, O_RDONLY | O_CLOEXEC);
     struct stat st;
     if (fd < 0 || fstat(fd, &st) != 0) {
+        int e = errno;
         if (fd >= 0) close(fd);
-        return vx_resp_fail(c, r, VX_EGONE, "result_evicted", "the result file is gone");
+        if (e == ENOENT || e == ENOTDIR)
+            return vx_resp_fail(c, r, VX_EGONE, "result_evicted", "the result file is gone");
+        /* not the client's doing, and not gone: a permission, a disk */
+        VX_ERROR("result.unreadable", "job=%s path=%s error=%d", r->id, VX_Q(path), e);
+        const vx_err_kind k = vx_err_io_kind(e);
+        return vx_resp_fail(c, r, k, k == VX_EIO ? "io_error" : "store_failed",
+                            "cannot read the result file: %s", strerror(e));
     }
     uint64_t size = (uint64_t)st.st_size;
     char id_etag[160], etag[176], disp[600];

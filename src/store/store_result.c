@@ -173,7 +173,7 @@ int vx_store_result_file(vx_store *s, const char *jid, const char *file, char *b
         return vx_err_set(err, VX_EGONE, "result_evicted",
                           "the results of job %s are gone (%s): run the job again", jid,
                           found ? "removed from the store, not by this daemon's budget"
-                                : "removed by the results budget");
+                                : "removed by the results budget, or from the disk");
     /* The mtime of the dir carries the LRU order across restarts. */
     s->ops->touch(s->blob, key);
     char dir[VX_PATH_MAX];

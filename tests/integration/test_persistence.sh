@@ -113,6 +113,14 @@ expect_error "a result cut short" 410 result_damaged
 check "the message says the sizes" jq -e --arg f "$FULL" '.error.message | test("1000 of " + $f + " bytes")' "$BODY"
 api GET "/v1/jobs/$DJ"
 check "the job itself is still known" jq -e '.state == "succeeded"' "$BODY"
+# One there that cannot be read (a symlink loop here; a permission for an
+# unprivileged daemon) is the server's fault, not an eviction: 500.
+rm "$NPY"
+ln -s "$(basename "$NPY")" "$NPY"
+api GET "/v1/jobs/$DJ/result"
+expect_error "a result file that cannot be read" 500 io_error
+check "the message says why" jq -e '.error.message | test("cannot read the result file")' "$BODY"
+check "logged at error" grep -q "level=error event=result.unreadable job=$DJ" "$TMP/daemon.log"
 
 # A mesh file changed on disk is neither served nor read as the mesh: 410
 # mesh_damaged (a job on it fails with that code), across a restart; the
