@@ -58,8 +58,9 @@ int vx_conns_target_bad(const vx_conn *vc);
  * the buffer is not read (vx_mhd_in_place). */
 int vx_conns_line_cut(const vx_conn *vc, const char *method, const char *version);
 /* 1 when the running libmicrohttpd parses a head in place in its buffer as
- * 0.9.75 does (http.c and vx_conns_on_uri read that buffer around the
- * fields it gives to find what it hid: folded lines, NULs); 0 for another
+ * 0.9.75 does (http.c reads that buffer around the fields it gives, and
+ * vx_conns_line_cut compares where the request line's parts lie in it, to
+ * find what it hid: folded lines, NULs, empty field names); 0 for another
  * version, whose buffer may be laid out otherwise (not read then). */
 int vx_mhd_in_place(void);
 /* The tracked connection of c, or NULL when untracked. */
