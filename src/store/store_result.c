@@ -169,6 +169,12 @@ int vx_store_result_file(vx_store *s, const char *jid, const char *file, char *b
     if (st < 0 && st_errno != ENOENT)
         return vx_err_set(err, vx_err_io_kind(st_errno), "store_failed",
                           "cannot reach the results of job %s: %s", jid, strerror(st_errno));
+    if (st < 0 && found && !s->ops->shared) { /* removed behind the daemon: out of the budget */
+        VX_WARN("store.result_missing", "job=%s", jid);
+        pthread_mutex_lock(&s->lock);
+        result_forget_locked(s, jid);
+        pthread_mutex_unlock(&s->lock);
+    }
     if (st < 0)
         return vx_err_set(err, VX_EGONE, "result_evicted",
                           "the results of job %s are gone (%s): run the job again", jid,

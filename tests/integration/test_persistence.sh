@@ -121,6 +121,18 @@ api GET "/v1/jobs/$DJ/result"
 expect_error "a result file that cannot be read" 500 io_error
 check "the message says why" jq -e '.error.message | test("cannot read the result file")' "$BODY"
 check "logged at error" grep -q "level=error event=result.unreadable job=$DJ" "$TMP/daemon.log"
+# A result dir removed behind the running daemon: 410, and out of the
+# results budget's count (it stayed counted).
+run_job voxelize "$BOX" '{"resolution":24,"format":"raw8"}'
+job_ok "raw8 job"
+GONE=$JOB
+rb() { api GET /metrics && awk '$1 == "voxeld_results_bytes" {print $2}' "$BODY"; }
+RB0=$(rb)
+rm -rf "$DATA/results/$GONE"
+api GET "/v1/jobs/$GONE/result"
+expect_error "a result dir removed behind the daemon" 410 result_evicted
+RB1=$(rb)
+check "no longer counted in voxeld_results_bytes ($RB0 -> $RB1)" test "$RB1" -lt "$RB0"
 
 # A mesh file changed on disk is neither served nor read as the mesh: 410
 # mesh_damaged (a job on it fails with that code), across a restart; the
