@@ -126,11 +126,13 @@ check "logged at error" grep -q "level=error event=result.unreadable job=$DJ" "$
 run_job voxelize "$BOX" '{"resolution":24,"format":"raw8"}'
 job_ok "raw8 job"
 GONE=$JOB
-rb() { api GET /metrics && awk '$1 == "voxeld_results_bytes" {print $2}' "$BODY"; }
+rb() { awk '$1 == "voxeld_results_bytes" {print $2}' "$BODY"; }
+api GET /metrics
 RB0=$(rb)
 rm -rf "$DATA/results/$GONE"
 api GET "/v1/jobs/$GONE/result"
 expect_error "a result dir removed behind the daemon" 410 result_evicted
+api GET /metrics
 RB1=$(rb)
 check "no longer counted in voxeld_results_bytes ($RB0 -> $RB1)" test "$RB1" -lt "$RB0"
 
