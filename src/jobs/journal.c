@@ -209,51 +209,6 @@ static int next_line(reader *r, char **line, size_t *cap, off_t *n, int *over, i
     }
 }
 
-/* A copy of the file at src as dst, new, fsync'd, its runs of zeros left
- * as holes: a sparse tail (truncate -s +1500M) copies as a few blocks. 0,
- * or -1 (errno; dst removed). */
-static int copy_sparse(const char *src, const char *dst)
-{
-    int in = open(src, O_RDONLY | O_CLOEXEC);
-    if (in < 0) return -1;
-    int out = open(dst, O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0640);
-    if (out < 0) {
-        int e = errno;
-        close(in);
-        errno = e;
-        return -1;
-    }
-    static const char zeros[1 << 16];
-    char *buf = malloc(sizeof zeros);
-    struct stat st;
-    int e = buf && fstat(in, &st) == 0 ? 0 : errno ? errno : ENOMEM;
-    off_t at = 0;
-    while (!e && at < st.st_size) {
-        off_t data = lseek(in, at, SEEK_DATA); /* past a hole: nothing to read */
-        if (data < 0 && errno == ENXIO) break; /* a hole to the end */
-        if (data > at) at = data;
-        ssize_t n = pread(in, buf, sizeof zeros, at);
-        if (n < 0 && errno == EINTR) continue;
-        if (n < 0) e = errno;
-        if (n <= 0) break;
-        if (memcmp(buf, zeros, (size_t)n) != 0 &&
-            (lseek(out, at, SEEK_SET) < 0 || vx_write_all(out, buf, (size_t)n)))
-            e = errno;
-        at += n;
-    }
-    if (!e && ftruncate(out, st.st_size) != 0) e = errno;
-    if (!e && fsync(out) != 0) e = errno;
-    if (close(out) != 0 && !e) e = errno;
-    close(in);
-    free(buf);
-    if (e) {
-        unlink(dst);
-        errno = e;
-        return -1;
-    }
-    return 0;
-}
-
 long vx_journal_replay(vx_journal *j, void (*fn)(const cJSON *rec, void *ud), void *ud, vx_err *err)
 {
     reader *r = malloc(sizeof *r);
@@ -333,7 +288,7 @@ long vx_journal_replay(vx_journal *j, void (*fn)(const cJSON *rec, void *ud), vo
                 snprintf(copy, sizeof copy, "%s.damaged-%lld.%d", j->path, now, k);
             else
                 snprintf(copy, sizeof copy, "%s.damaged-%lld", j->path, now);
-            kept = copy_sparse(j->path, copy) == 0;
+            kept = vx_copy_file(j->path, copy) == 0;
         }
         VX_ERROR("journal.damaged", "path=%s records=%ld copy=%s", VX_Q(j->path), damaged,
                  kept ? VX_Q(copy) : "-");

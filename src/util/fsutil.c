@@ -305,21 +305,29 @@ int vx_copy_file(const char *src, const char *dst)
         errno = e;
         return -1;
     }
-    char buf[1 << 16];
-    int e = 0;
-    for (;;) {
-        ssize_t n = read(in, buf, sizeof buf);
+    static const char zeros[1 << 16];
+    char *buf = malloc(sizeof zeros);
+    struct stat st;
+    int e = buf && fstat(in, &st) == 0 ? 0 : errno ? errno : ENOMEM;
+    off_t at = 0;
+    while (!e && at < st.st_size) {
+        off_t data = lseek(in, at, SEEK_DATA); /* past a hole: nothing to read */
+        if (data < 0 && errno == ENXIO) break; /* a hole to the end */
+        if (data > at) at = data;
+        ssize_t n = pread(in, buf, sizeof zeros, at);
         if (n < 0 && errno == EINTR) continue;
         if (n < 0) e = errno;
         if (n <= 0) break;
-        if (vx_write_all(out, buf, (size_t)n)) {
+        if (memcmp(buf, zeros, (size_t)n) != 0 &&
+            (lseek(out, at, SEEK_SET) < 0 || vx_write_all(out, buf, (size_t)n)))
             e = errno;
-            break;
-        }
+        at += n;
     }
+    if (!e && ftruncate(out, st.st_size) != 0) e = errno;
     if (!e && fsync(out) != 0) e = errno;
     if (close(out) != 0 && !e) e = errno;
     close(in);
+    free(buf);
     if (e) {
         unlink(dst);
         errno = e;

@@ -33,8 +33,9 @@ int vx_write_all(int fd, const void *p, size_t n);
 /* Writes n bytes to a new file path (O_EXCL, mode 0640) and fsyncs it; 0,
  * or -1 with errno set (path is then removed). */
 int vx_write_new(const char *path, const void *data, size_t n);
-/* Copies src to a new file dst (O_EXCL) and fsyncs it; 0, or -1 with errno
- * set (dst is then removed). */
+/* Copies src to a new file dst (O_EXCL) and fsyncs it, runs of zeros left
+ * as holes (a sparse source, a damaged journal's tail of zeros, copies as a
+ * few blocks); 0, or -1 with errno set (dst is then removed). */
 int vx_copy_file(const char *src, const char *dst);
 /* Bytes an unprivileged process may still write on dir's file system; 0 or -1. */
 int vx_disk_free(const char *dir, uint64_t *free_bytes);
