@@ -23,8 +23,12 @@ void vx_resp_init(const char *data_dir, const char *cors_origins)
 
 const char *vx_resp_cors_origin(struct MHD_Connection *c)
 {
+    /* one origin: two Origin lines, or a list in one (RFC 6454 7.1), are
+     * no origin that can be echoed back in Access-Control-Allow-Origin */
     const char *origin = vx_resp_header(c, "Origin");
-    if (!origin || !origin[0] || !g_cors || !g_cors[0]) return NULL;
+    if (!origin || !origin[0] || !g_cors || !g_cors[0] || strpbrk(origin, " \t,")) return NULL;
+    char all[2048];
+    if (!vx_resp_header_list(c, "Origin", all, sizeof all) || strchr(all, ',')) return NULL;
     size_t n = strlen(origin);
     for (const char *p = g_cors; *p;) {
         while (*p == ' ' || *p == ',')

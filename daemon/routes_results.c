@@ -86,8 +86,12 @@ int vx_route_result(vx_http *h, struct MHD_Connection *c, req *r)
     result_disposition(h, r->id, fname, disp, sizeof disp);
 
     uint64_t first = 0, last = 0;
-    const char *range = vx_resp_header(c, MHD_HTTP_HEADER_RANGE);
-    const char *if_range = vx_resp_header(c, MHD_HTTP_HEADER_IF_RANGE);
+    /* every Range and If-Range line: two Range lines are two ranges (the
+     * whole body), two If-Range lines a list (no match) */
+    char rbuf[512], irbuf[512];
+    const char *range = vx_resp_header_list(c, MHD_HTTP_HEADER_RANGE, rbuf, sizeof rbuf);
+    const char *if_range = vx_resp_header_list(c, MHD_HTTP_HEADER_IF_RANGE, irbuf, sizeof irbuf);
+    if (!if_range && vx_resp_header(c, MHD_HTTP_HEADER_IF_RANGE)) if_range = ","; /* too long */
     /* If-Range holds one tag or a date: a list (or a date, which has a
      * comma and is never matched here) sends the whole result */
     int rk = range && (!if_range ||

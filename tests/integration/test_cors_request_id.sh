@@ -37,6 +37,10 @@ api GET /v1/info -H "Origin: http://c.example"
 expect_status "info from an allowed origin" 200
 check "answer: Allow-Origin" test "$(header Access-Control-Allow-Origin)" = http://c.example
 check "answer: Expose-Headers names Location and X-Request-Id" bash -c "grep -qi '^access-control-expose-headers:.*Location.*X-Request-Id' '$HDRS'"
+api GET /v1/info -H "Origin: http://c.example" -H "Origin: http://evil.example"
+check "two Origin lines: no CORS headers" bash -c "! grep -qi '^access-control-' '$HDRS'"
+api GET /v1/info -H "Origin: http://c.example http://evil.example"
+check "an Origin list: no CORS headers" bash -c "! grep -qi '^access-control-' '$HDRS'"
 api GET /v1/info -H "Origin: http://evil.example"
 check "answer to another origin: no CORS headers" bash -c "! grep -qi '^access-control-' '$HDRS'"
 check "answer to another origin: Vary: Origin all the same" bash -c "grep -qi '^vary: Origin' '$HDRS'"
@@ -101,5 +105,16 @@ api GET /readyz -H "Origin: http://env.example"
 check "the environment's origin is gone under the flag" bash -c "! grep -qi '^access-control-allow-origin' '$HDRS'"
 api GET /readyz -H "Origin: http://viewer.example"
 check "the flag's origin is allowed" test "$(header Access-Control-Allow-Origin)" = http://viewer.example
+stop_daemon
+
+# With * every origin is echoed back, but one only: an Origin list (RFC
+# 6454 7.1) or two Origin lines would make an Allow-Origin a browser refuses.
+start_daemon --cors-origin '*' || exit 1
+api GET /readyz -H "Origin: http://a.example"
+check "*: the origin is echoed" test "$(header Access-Control-Allow-Origin)" = http://a.example
+api GET /readyz -H "Origin: http://a.example http://b.example"
+check "*: an Origin list gets no Allow-Origin" bash -c "! grep -qi '^access-control-allow-origin' '$HDRS'"
+api GET /readyz -H "Origin: http://a.example" -H "Origin: http://b.example"
+check "*: two Origin lines get no Allow-Origin" bash -c "! grep -qi '^access-control-allow-origin' '$HDRS'"
 stop_daemon
 finish

@@ -82,6 +82,11 @@ expect_status "If-Range with another ETag: the whole file" 200
 check "stale If-Range: all bytes" cmp -s "$BODY" "$TMP/full"
 api GET "$R" -H "Range: bytes=0-1,5-9"
 expect_status "several ranges: the whole file" 200
+api GET "$R" -H "Range: bytes=0-1" -H "Range: bytes=5-9"
+expect_status "two Range lines are two ranges: the whole file" 200
+check "two Range lines: all bytes" cmp -s "$BODY" "$TMP/full"
+api GET "$R" -H "Range: bytes=0-9" -H "If-Range: $ETAG" -H "If-Range: $ETAG"
+expect_status "two If-Range lines are a list, which matches nothing: the whole file" 200
 
 api GET "$R" -H "Range: bytes=$SIZE-"
 expect_error "range past the end" 416 range_not_satisfiable
