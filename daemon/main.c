@@ -7,6 +7,7 @@
 #include <signal.h>
 #include <stdatomic.h>
 #include <sys/resource.h>
+#include <sys/stat.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -431,6 +432,10 @@ int main(int argc, char **argv)
     int rc = vx_config_load(&cfg, argc, argv);
     if (rc) return rc > 0 ? 0 : 2;
     vx_log_set_level(cfg.log_level);
+    /* Files 0640 and dirs 0750 at most, as the systemd unit's UMask=0027:
+     * the writers' own modes (fopen's 0666, OpenVDB's) are no wider then.
+     * A stricter umask stays. */
+    umask(umask(027) | 027);
     vx_metrics_init(cfg.job_timeout_s);
     if (cfg.list_devices) return list_devices();
 

@@ -3,6 +3,7 @@
 # restart; SIGTERM puts the running job back in the queue; results persist.
 source "$(dirname "$0")/lib.sh"
 source "$(dirname "$0")/box.sh"
+umask 022 # a caller's common umask: the daemon narrows it
 start_daemon || exit 1
 
 box_obj "$TMP/box.obj" 0 0 0 3 2 1
@@ -15,6 +16,11 @@ DONE=$(jqb .id)
 check "first job done" jq -e '.state == "succeeded"' "$BODY"
 api GET "/v1/jobs/$DONE/result"
 cp "$BODY" "$TMP/done.png"
+# whatever the caller's umask (this script's is 022), nothing in the data
+# dir is readable by others
+check "data dir: no file or dir others may read (umask 027)" \
+    test -z "$(find "$DATA" -perm /o=rwx -print -quit)"
+check "data dir: the result file is there" test -n "$(find "$DATA/results" -type f -print -quit)"
 
 # Many acknowledged jobs, then kill -9 straight away.
 JOBS=()
