@@ -185,6 +185,16 @@ for o in "${OVERLAYS[@]}"; do
         check "$o: VOXELD_BLOB_STORE is set (ConfigMap)" q "$o" "$CENV | .VOXELD_BLOB_STORE | startswith(\"s3://\")"
         check "$o: no PVC, a rolling update" q "$o" \
             "(any(.[]; .kind == \"PersistentVolumeClaim\") | not) and ($DEPLOY | .spec.strategy.type == \"RollingUpdate\")"
+        if [[ $o == nvidia-* ]]; then
+            # every GPU is taken by a pod: a surge pod would stay Pending
+            check "$o: the rolling update takes an old pod first (no surge pod waiting for a GPU)" q "$o" \
+                "$DEPLOY | .spec.strategy.rollingUpdate | .maxSurge == 0 and .maxUnavailable == 1"
+        else
+            check "$o: the rolling update surges (no gap)" q "$o" \
+                "$DEPLOY | .spec.strategy.rollingUpdate | .maxSurge == 1 and .maxUnavailable == 0"
+        fi
+        check "$o: no cooldownPeriod (KEDA uses it only to scale to zero)" q "$o" \
+            "$SO | (.spec.cooldownPeriod == null) and .spec.minReplicaCount >= 1"
     else
         check "$o: no ScaledObject (one replica on the local store)" q "$o" "any(.[]; .kind == \"ScaledObject\") | not"
         check "$o: one replica, Recreate (voxeld locks its data dir)" q "$o" \
