@@ -37,6 +37,8 @@ sed "s#^ExecStart=/usr/bin/voxeld #ExecStart=$VOXELD #" "$UNIT" >"$TMP/unit/voxe
 check "unit copy runs \$VOXELD" grep -q "^ExecStart=$VOXELD --listen 127.0.0.1:8080\$" "$TMP/unit/voxeld.service"
 check "the original unit runs /usr/bin/voxeld" grep -q '^ExecStart=/usr/bin/voxeld --listen 127.0.0.1:8080$' "$UNIT"
 check "voxeld.service verifies clean" verify_clean "$TMP/unit/voxeld.service"
+check "the unit is ordered after network.target but does not pull it in (a passive unit)" \
+    bash -c "grep -q '^After=network.target' '$UNIT' && ! grep -q '^Wants=.*network.target' '$UNIT'"
 [[ -s "$TMP/unit/voxeld.service.verify" ]] && cat "$TMP/unit/voxeld.service.verify"
 
 # The check must catch what verify only warns about.
