@@ -15,6 +15,7 @@
 #include <unistd.h>
 
 #include "util/fsutil.h"
+#include "util/log.h"
 #include "util/path.h"
 
 struct vx_blob {
@@ -79,6 +80,25 @@ static int local_path(vx_blob *b, const char *key, char *buf, size_t n)
     return 0;
 }
 
+/* After an ENOENT on path: makes its dir again when that dir alone is
+ * missing (DATA/meshes removed behind the daemon; DATA itself is not made
+ * again). 1 when made, so that the caller tries once more. */
+static int remake_parent(const char *path)
+{
+    if (errno != ENOENT) return 0;
+    char dir[VX_PATH_MAX];
+    const char *slash = strrchr(path, '/');
+    if (!slash || slash == path || (size_t)(slash - path) >= sizeof dir) return 0;
+    memcpy(dir, path, (size_t)(slash - path));
+    dir[slash - path] = 0;
+    if (mkdir(dir, 0750) != 0) {
+        errno = ENOENT;
+        return 0;
+    }
+    VX_WARN("store.dir_made_again", "path=%s", VX_Q(dir));
+    return 1;
+}
+
 /* DATA/<ns>/tmp-<pid>-<seq>, written and fsync'd. */
 static int local_stage(vx_blob *b, const char *ns, const void *data, size_t n, char *tmp,
                        size_t tmpn)
@@ -87,7 +107,8 @@ static int local_stage(vx_blob *b, const char *ns, const void *data, size_t n, c
     if (local_path(b, ns, dir, sizeof dir)) return -1;
     unsigned long seq = atomic_fetch_add(&b->seq, 1) + 1;
     snprintf(tmp, tmpn, "%s/tmp-%s-%lu", dir, b->tag, seq);
-    return vx_write_new(tmp, data, n);
+    if (vx_write_new(tmp, data, n) == 0) return 0;
+    return remake_parent(tmp) ? vx_write_new(tmp, data, n) : -1;
 }
 
 static void local_discard(vx_blob *b, const char *tmp)
@@ -123,7 +144,7 @@ static int local_put_file(vx_blob *b, const char *src, const char *key)
 {
     char path[VX_PATH_MAX];
     if (local_path(b, key, path, sizeof path)) return -1;
-    if (rename(src, path) == 0) return 0;
+    if (rename(src, path) == 0 || (remake_parent(path) && rename(src, path) == 0)) return 0;
     return errno == EXDEV ? copy_put(b, src, path) : -1;
 }
 
@@ -132,7 +153,9 @@ static int local_put_bytes(vx_blob *b, const char *key, const void *data, size_t
     char path[VX_PATH_MAX];
     if (local_path(b, key, path, sizeof path))
         return vx_err_set(err, VX_EIO, "path_too_long", "a path is too long");
-    return vx_write_atomic(path, data, n, err);
+    if (vx_write_atomic(path, data, n, NULL) == 0) return 0;
+    if (remake_parent(path) && vx_write_atomic(path, data, n, NULL) == 0) return 0;
+    return vx_write_atomic(path, data, n, err); /* the error, logged */
 }
 
 static char *local_read(vx_blob *b, const char *key, size_t max, size_t *n, vx_err *err)
@@ -224,7 +247,12 @@ static int local_list(vx_blob *b, const char *ns, int (*fn)(const char *name, vo
 static int local_ping(vx_blob *b)
 {
     char path[VX_PATH_MAX];
-    return local_path(b, "meshes", path, sizeof path) == 0 && access(path, W_OK | X_OK) == 0;
+    if (local_path(b, "meshes", path, sizeof path)) return 0;
+    if (access(path, W_OK | X_OK) == 0) return 1;
+    /* removed behind the daemon: made again, as an upload would */
+    char probe[VX_PATH_MAX + 8];
+    snprintf(probe, sizeof probe, "%s/x", path);
+    return remake_parent(probe) && access(path, W_OK | X_OK) == 0;
 }
 
 #define VX_POSIX_OPS                                                                               \

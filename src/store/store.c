@@ -588,7 +588,16 @@ static int mesh_repair(vx_store *s, vx_upload *u, const char *id, const char *ex
     int rc = s->ops->put_file(s->blob, u->path, key);
     int e = errno;
     *moved = rc == 0;
+    /* its metadata too, when that went with it (DATA/meshes removed behind
+     * the daemon): a restart would find the data file alone */
+    char mkey[128], *meta = NULL;
+    mesh_key(mkey, sizeof mkey, id, ".json");
+    if (rc == 0 && mesh_at(s, at)->meta && s->ops->stat(s->blob, mkey, NULL, NULL) < 0)
+        meta = strdup(mesh_at(s, at)->meta);
     pthread_mutex_unlock(&s->lock);
+    if (meta && s->ops->put_bytes(s->blob, mkey, meta, strlen(meta), NULL) == 0)
+        VX_WARN("store.mesh_metadata_rewritten", "mesh=%s", id);
+    free(meta);
     if (rc != 0 || s->ops->sync(s->blob, "meshes", NULL)) {
         if (!rc) e = errno;
         VX_ERROR("store.mesh_repair_failed", "mesh=%s error=%d", id, e);

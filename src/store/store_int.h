@@ -86,5 +86,8 @@ int vx_store_load_results(vx_store *s);
 size_t vx_store_collect_meshes_locked(vx_store *s);
 /* Hex SHA-256 of a digest into id. */
 void vx_store_hex(const uint8_t digest[SHA256_DIGEST_SIZE], char id[65]);
+/* After an ENOENT creating a file in DATA/tmp: makes DATA/tmp again (removed
+ * behind the daemon); 1 when made, so that the caller tries once more. */
+int store_tmp_again(vx_store *s);
 
 #endif

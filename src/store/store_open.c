@@ -5,6 +5,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include <sys/file.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include "store/store_int.h"
@@ -153,11 +154,25 @@ const char *vx_store_dir(const vx_store *s)
     return s->dir;
 }
 
+int store_tmp_again(vx_store *s)
+{
+    if (errno != ENOENT) return 0;
+    char tmp[VX_PATH_MAX];
+    snprintf(tmp, sizeof tmp, "%s/tmp", s->dir);
+    if (mkdir(tmp, 0750) != 0) {
+        errno = ENOENT;
+        return 0;
+    }
+    VX_WARN("store.dir_made_again", "path=%s", VX_Q(tmp));
+    return 1;
+}
+
 int vx_store_writable(vx_store *s)
 {
     char p[VX_PATH_MAX];
     snprintf(p, sizeof p, "%s/tmp/.probe.%d", s->dir, (int)gettid());
     int fd = open(p, O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0600);
+    if (fd < 0 && store_tmp_again(s)) fd = open(p, O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0600);
     /* a full disk (or quota) is a writable dir without room: the free
      * space check's to report (507), not a read-only one's (503) */
     if (fd < 0) return errno == ENOSPC || errno == EDQUOT;

@@ -29,6 +29,8 @@ vx_upload *vx_upload_begin(vx_store *s, vx_err *err)
     snprintf(u->path, sizeof u->path, "%s/tmp/upload-%lu-%lu", s->dir, (unsigned long)getpid(),
              seq);
     u->fd = open(u->path, O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0640);
+    if (u->fd < 0 && store_tmp_again(s))
+        u->fd = open(u->path, O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0640);
     if (u->fd < 0) {
         int e = errno;
         VX_ERROR("store.upload_create_failed", "path=%s error=%d", VX_Q(u->path), e);

@@ -21,7 +21,9 @@ static int io_fail(vx_err *err, const char *code, const char *op, const char *pa
     int e = errno;
     char q[600];
     VX_WARN("fs.failed", "op=%s path=%s error=%d", op, vx_log_quote(q, sizeof q, path), e);
-    return vx_err_set(err, vx_err_io_kind(e), code, "%s failed: %s", op, strerror(e));
+    vx_err_set(err, vx_err_io_kind(e), code, "%s failed: %s", op, strerror(e));
+    errno = e; /* for the caller, after the log's own calls */
+    return -1;
 }
 
 int vx_mkdirs(const char *path, vx_err *err)

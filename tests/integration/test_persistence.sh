@@ -211,6 +211,34 @@ upload "$TMP/box.obj"
 expect_status "its bytes again" 200
 api GET "/v1/meshes/$BOX/file"
 check "stored anew" cmp -s "$BODY" "$TMP/box.obj"
+# DATA/meshes, DATA/tmp and DATA/results removed behind the running daemon
+# (an operator's rm -rf): /readyz, uploads and jobs made them again (they
+# stayed 503 and 500 until a restart); the same bytes again repair the
+# mesh with its metadata, and a restart finds it as it was.
+api GET "/v1/meshes/$BOX"
+cp "$BODY" "$TMP/box-meta.json"
+rm -rf "$DATA/meshes" "$DATA/tmp" "$DATA/results"
+api GET /readyz
+expect_status "/readyz with DATA/meshes and DATA/tmp removed" 200
+check "DATA/meshes made again" test -d "$DATA/meshes"
+check "logged" grep -q "event=store.dir_made_again path=.*/meshes" "$TMP/daemon.log"
+rm -rf "$DATA/meshes" "$DATA/tmp"
+upload "$TMP/box.obj"
+expect_status "an upload with DATA/meshes and DATA/tmp removed: the mesh repaired" 200
+check "its metadata written again" test -s "$DATA/meshes/$BOX.json"
+box_obj "$TMP/box2.obj" 0 0 0 2 2 2
+upload "$TMP/box2.obj"
+expect_status "a new mesh" 201
+run_job voxelize "$BOX" '{"resolution":12,"format":"raw8"}'
+job_ok "a job with DATA/results removed"
+stop_daemon
+start_daemon || exit 1
+api GET "/v1/meshes/$BOX"
+check "after a restart, the repaired mesh's metadata as it was" jq -e --slurpfile m "$TMP/box-meta.json" '. == $m[0]' "$BODY"
+api GET "/v1/meshes/$BOX/file"
+check "and its file" cmp -s "$BODY" "$TMP/box.obj"
+api GET "/v1/jobs/$JOB/result"
+expect_status "the job's result after a restart" 200
 # A mesh whose metadata file is damaged after the upload was acknowledged
 # (emptied, or garbage) keeps its data file: the metadata is made anew
 # from it at start-up, and jobs run on it (before, the data file was
