@@ -55,6 +55,7 @@
  *
  * Known limits: parts thinner than the voxel spacing between two centres
  * vanish (seed 000 §3; use fill=surface to catch them). */
+#include <limits.h>
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
@@ -1000,7 +1001,9 @@ int vx_voxelize_peel(vx_gl *gl, const vx_mesh *m, const vx_voxelize_desc *d, vx_
     for (int a = 0; a < 3; a++)
         c.dims[a] = g->dims[a];
     c.wx = ((size_t)c.dims[0] + 31) / 32;
-    c.max_layers = d->max_layers > 0 ? d->max_layers : 256;
+    /* by default as many as the GL's array textures hold (grow() says so
+     * when a ray needs more) and the job's memory allows */
+    c.max_layers = d->max_layers > 0 ? d->max_layers : INT_MAX / 4;
     c.limit = d->max_memory ? d->max_memory : UINT64_MAX;
     const int surface = d->fill == VX_FILL_SURFACE;
     c.naxes = !surface && d->inside == VX_INSIDE_ROBUST ? 3 : 1;

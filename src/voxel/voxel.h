@@ -95,7 +95,7 @@ typedef struct vx_voxelize_desc {
     vx_samples samples;  /* with supersample 2: the sample pattern */
     int threshold;       /* with supersample 2: samples inside (1..8, faces 1..7) to set a voxel;
                             default 4 */
-    int max_layers;      /* peel: depth layers before giving up (0 = 256) */
+    int max_layers;      /* peel: depth layers before giving up (0 = GL_MAX_ARRAY_TEXTURE_LAYERS) */
     uint64_t max_memory; /* bytes of GPU + CPU memory this job may use (0 = no limit) */
     /* Called between passes with progress 0..1; nonzero return stops the job
      * (err filled by the callee). May be NULL. */

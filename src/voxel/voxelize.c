@@ -2,7 +2,9 @@
  * method that fits it. */
 #include <math.h>
 #include <stddef.h>
+#include <string.h>
 
+#include "util/log.h"
 #include "voxel/voxel.h"
 
 /* The GL methods place vertices as floats in voxels from the box
@@ -126,8 +128,18 @@ int vx_voxelize(vx_gl *gl, const vx_mesh *m, const vx_voxelize_desc *d, vx_bitgr
             return vx_err_set(err, VX_EUNPROC, "invalid_params",
                               "method %s has no supersampling; use slice or auto",
                               method == VX_METHOD_PEEL ? "peel" : "scan");
-        if (method == VX_METHOD_PEEL) return vx_voxelize_peel(gl, m, &dd, out, st, err);
-        return vx_voxelize_scan(gl, m, &dd, out, st, err);
+        if (method != VX_METHOD_PEEL) return vx_voxelize_scan(gl, m, &dd, out, st, err);
+        vx_err pe;
+        vx_err_clear(&pe);
+        if (vx_voxelize_peel(gl, m, &dd, out, st, &pe) == 0) return 0;
+        /* auto: a mesh with more depth layers than peeling holds along a
+         * ray is sliced instead (a solid fill: slicing has no surface) */
+        if (dd.method != VX_METHOD_AUTO || dd.fill != VX_FILL_SOLID ||
+            strcmp(pe.code, "too_many_layers") != 0) {
+            if (err) *err = pe;
+            return -1;
+        }
+        VX_INFO("voxelize.peel_to_slice", "reason=%s", VX_Q(pe.message));
     }
     return vx_voxelize_slice(gl, m, &dd, out, st, err);
 }

@@ -440,5 +440,43 @@ tet_obj "$TMP/small.obj" 4.7e-4
 upload "$TMP/small.obj"
 vox "small vdb (h just over the bound)" "$MESH_ID" '{"resolution":32,"format":"vdb"}'
 
+# Rays through many surfaces: N boxes side by side along x, 2N depth
+# layers a ray, each box around one voxel centre (faces a quarter voxel
+# away): N x 16 x 16 voxels. Peeling holds as many layers as the GL's array
+# textures (2048 on llvmpipe; it gave up at 256 before); past that, auto
+# slices instead.
+stack_obj() { # FILE N
+    python3 - "$1" "$2" <<'PY'
+import sys
+path, n = sys.argv[1], int(sys.argv[2])
+with open(path, "w") as f:
+    for i in range(n):
+        b = 8 * i
+        for x in (i + 0.25, i + 0.75):
+            for y in (0.3, 15.7):
+                for z in (0.4, 15.6):
+                    f.write(f"v {x!r} {y!r} {z!r}\n")
+        for q in ((1, 2, 4, 3), (5, 7, 8, 6), (1, 5, 6, 2), (3, 4, 8, 7), (1, 3, 7, 5), (2, 6, 8, 4)):
+            f.write("f %d %d %d %d\n" % tuple(b + v for v in q))
+PY
+}
+for n in 150 1100; do
+    stack_obj "$TMP/stack$n.obj" $n
+    upload "$TMP/stack$n.obj"
+    M_stack=$MESH_ID
+    G="{\"origin\":[0,0,0],\"voxel_size\":1,\"dims\":[$n,16,16]}"
+    vox "$n boxes along x ($((2 * n)) layers), auto robust" "$M_stack" "{\"grid\":$G,\"inside\":\"robust\",\"format\":\"summary\"}"
+    check "$n boxes, auto robust: $((n * 256)) voxels (got $(st voxels_inside) by $(st method))" \
+        test "$(st voxels_inside)" = $((n * 256))
+    if [[ $n == 150 ]]; then
+        check "300 layers: peeled" test "$(st method)" = peel
+    else
+        check "2200 layers (past llvmpipe's 2048): sliced" test "$(st method)" = slice
+        run_job voxelize "$M_stack" "{\"grid\":$G,\"inside\":\"robust\",\"method\":\"peel\",\"format\":\"summary\"}"
+        check "2200 layers, method peel asked for: fails too_many_layers" \
+            jq -e '.state == "failed" and .error.code == "too_many_layers"' "$TMP/job.json"
+    fi
+done
+
 stop_daemon
 finish
