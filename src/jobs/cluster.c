@@ -686,7 +686,10 @@ static void cancel_local(vx_jobs *j, const char *jid);
 cJSON *cluster_cancel(vx_jobs *j, const char *jid, int *was_running, vx_err *err)
 {
     if (vx_pg_cancel(j->cl->api, jid, was_running, err)) return NULL;
-    if (*was_running) cancel_local(j, jid);
+    if (*was_running) {
+        cancel_local(j, jid);
+        jobs_cancel_waiting(j, jid); /* one waiting for a CPU worker ends now */
+    }
     return cluster_get(j, jid, NULL, err);
 }
 
@@ -1049,6 +1052,9 @@ static void *listener_main(void *arg)
             cluster_wake(j);
         } else if (!strcmp(state, "cancel")) {
             cancel_local(j, id);
+            /* (not from the renewer: its report could hold the renewals
+             * up while the database is out) */
+            jobs_cancel_waiting(j, id);
         }
         int terminal =
             !strcmp(state, "succeeded") || !strcmp(state, "failed") || !strcmp(state, "canceled");

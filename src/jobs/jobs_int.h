@@ -35,6 +35,9 @@ typedef struct job {
     job_state state;
     double progress;
     int cancel_requested;
+    /* its run, while its finished GL stage waits in the CPU workers' queue
+     * (a cancel takes it out of there: no worker may be free for long) */
+    struct vx_job_run *waiting;
     int attempts;
     int interruptions;                 /* starts the daemon did not live through (journal only) */
     double created, started, finished; /* wall clock; 0 = not yet */
@@ -149,6 +152,10 @@ cJSON *inline_params(vx_jobs *j, const vx_kind *k, const cJSON *params, int *big
 vx_mesh *vx_jobs_read_mesh(vx_jobs *j, const char *id, vx_err *err);
 /* Calls the desc's alive hook (the daemon's watchdog ping). */
 void jobs_alive(vx_jobs *j);
+/* After a cancel was recorded for job jid: a run of it waiting for a CPU
+ * worker ends canceled now instead of when a worker takes it. Without the
+ * lock. */
+void jobs_cancel_waiting(vx_jobs *j, const char *jid);
 
 /* dedup.c */
 /* The fingerprint of a request: kind, mesh and its params as journaled. */

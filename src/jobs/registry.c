@@ -457,6 +457,7 @@ cJSON *vx_jobs_cancel(vx_jobs *j, const char *jid, int *was_running, vx_err *err
     }
     pthread_mutex_unlock(&j->lock);
     unpin_job(j, &pins);
+    if (*was_running) jobs_cancel_waiting(j, jid);
     if (changed) {
         VX_INFO("job.finished", "job=%s state=canceled run_ms=0", jid);
         if (j->desc.hooks.finished)

@@ -335,7 +335,26 @@ static void run_job_gl(vx_jobs *j, vx_gl *gl, mesh_cache *mc, job *jb)
         return;
     }
     r->handed = vx_mono();
+    pthread_mutex_lock(&j->lock);
+    jb->waiting = r;
     vx_queue_push(j->cpu, r, 1);
+    pthread_mutex_unlock(&j->lock);
+}
+
+void jobs_cancel_waiting(vx_jobs *j, const char *jid)
+{
+    pthread_mutex_lock(&j->lock);
+    job *jb = find_job(j, jid);
+    vx_job_run *r = jb ? jb->waiting : NULL;
+    int took = r && jb->cancel_requested && vx_queue_remove(j->cpu, r);
+    if (took) jb->waiting = NULL;
+    pthread_mutex_unlock(&j->lock);
+    if (!took) return; /* not waiting: its next progress check stops it */
+    r->waited += vx_mono() - r->handed;
+    cJSON_AddNumberToObject(r->stats, "cpu_wait_ms", ms_between(0, r->waited));
+    vx_err err;
+    vx_err_set(&err, VX_ECANCELED, "canceled", "the job was canceled");
+    run_finish(j, r, 0, &err);
 }
 
 void jobs_alive(vx_jobs *j)
@@ -391,6 +410,9 @@ static void *worker_main(void *arg)
     vx_jobs *j = arg;
     vx_job_run *r;
     while ((r = vx_queue_pop(j->cpu, -1))) {
+        pthread_mutex_lock(&j->lock);
+        r->job->waiting = NULL;
+        pthread_mutex_unlock(&j->lock);
         vx_err err;
         vx_err_clear(&err);
         r->waited += vx_mono() - r->handed;

@@ -39,6 +39,35 @@ check "no result dir for the failed job" test ! -e "$DATA/results/$(jqb .id)"
 api GET /metrics
 check "failed job counted" grep -q 'voxeld_jobs_total{kind="preview",state="failed"} 1' "$BODY"
 stop_daemon
+# A canceled job whose GL stage is done and waits for the one CPU worker
+# (busy with another job's long CPU stage) ends at once: it stayed running,
+# holding its memory and the GL thread's next job, until the worker took it.
+start_daemon --workers 1 || exit 1
+upload "$VX_MESH_DIR/stanford-bunny.obj"
+for iso in 0.62 0.63; do
+    api POST /v1/jobs "${JSON[@]}" -d "{\"mesh\":\"$MESH_ID\",\"kind\":\"render\",\"params\":{\"N\":128,\"iso\":$iso}}"
+    expect_status "render $iso submitted" 202
+    RJ+=("$(jqb .id)")
+done
+for _ in $(seq 1 100); do
+    api GET "/v1/jobs/${RJ[1]}"
+    [[ $(jqb .state) == running ]] && break
+    sleep 0.1
+done
+check "the second render started (its GL stage)" test "$(jqb .state)" = running
+sleep 1 # its GL stage done: it waits for the worker
+api DELETE "/v1/jobs/${RJ[1]}"
+expect_status "cancel the waiting render" 202
+api GET "/v1/jobs/${RJ[1]}?wait=3"
+check "canceled within 3 s" jq -e '.state == "canceled" and .error.code == "canceled"' "$BODY"
+api GET "/v1/jobs/${RJ[0]}"
+check "while the first still runs" test "$(jqb .state)" = running
+api DELETE "/v1/jobs/${RJ[0]}"
+wait_job "${RJ[0]}" 60
+check "the first canceled too" test "$(jqb .state)" = canceled
+api POST "/v1/jobs?wait=60" "${JSON[@]}" -d "{\"mesh\":\"$MESH_ID\",\"kind\":\"preview\",\"params\":{\"width\":64,\"height\":64}}"
+check "the next job runs" jq -e '.state == "succeeded"' "$BODY"
+stop_daemon
 # The data dir removed under a running daemon: the journal takes appends
 # into a file no restart reads, so a job is not acknowledged (it was 202,
 # then gone after a restart). The write check before the body finds the
