@@ -832,6 +832,16 @@ int vx_conns_target_bad(const vx_conn *vc)
     return vc && vc->target_bad;
 }
 
+int vx_conns_peer_gone(struct MHD_Connection *c)
+{
+    const union MHD_ConnectionInfo *ci =
+        MHD_get_connection_info(c, MHD_CONNECTION_INFO_CONNECTION_FD);
+    if (!ci) return 0;
+    char b;
+    ssize_t n = recv(ci->connect_fd, &b, 1, MSG_PEEK | MSG_DONTWAIT);
+    return n == 0 || (n < 0 && errno != EAGAIN && errno != EWOULDBLOCK && errno != EINTR);
+}
+
 int vx_conns_path_escape(const vx_conn *vc)
 {
     return vc && vc->path_escape;

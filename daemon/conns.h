@@ -44,6 +44,11 @@ void *vx_conns_on_uri(void *cls, const char *uri, struct MHD_Connection *c);
  * libmicrohttpd decoded into a NUL or a separator: such a path names no
  * resource (404). */
 int vx_conns_path_escape(const vx_conn *vc);
+/* 1 when the client of a held answer (a ?wait hold, an event stream
+ * between events: suspended connections, which libmicrohttpd does not
+ * watch) has closed or reset its connection: nothing unread and EOF, or a
+ * socket error. Any thread. */
+int vx_conns_peer_gone(struct MHD_Connection *c);
 /* 1 when vc was opened while its client already had --max-connections-per-ip
  * open: its request is answered 503 too_many_connections and the
  * connection closed (libmicrohttpd's own limit closed it unanswered). */

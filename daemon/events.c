@@ -9,6 +9,7 @@
 #include <string.h>
 #include <time.h>
 
+#include "conns.h"
 #include "http_int.h"
 #include "util/clock.h"
 #include "util/fsutil.h"
@@ -157,6 +158,13 @@ static void stream_free(void *cls)
 static void poll_stream(vx_events *ev, vx_stream *s, double now)
 {
     if (s->ended) {
+        wake_locked(s);
+        return;
+    }
+    /* a client gone between events: the stream ends now, not at the next
+     * keepalive's failed write (its slot of --max-event-streams with it) */
+    if (s->suspended && vx_conns_peer_gone(s->conn)) {
+        s->ended = 1;
         wake_locked(s);
         return;
     }

@@ -6,6 +6,7 @@
 #include <string.h>
 #include <time.h>
 
+#include "conns.h"
 #include "util/fsutil.h"
 
 struct vx_wait {
@@ -56,7 +57,10 @@ static void *timer_main(void *arg)
         double now = vx_mono(), next = now + 0.25;
         for (vx_waiter *wt = w->list, *nx; wt; wt = nx) {
             nx = wt->next;
-            if (wt->deadline <= now || (wt->by_progress && progress_reached(w, wt))) {
+            /* a client gone (an aborted curl) holds no slot of --max-waits
+             * until the deadline: answered now, to no one */
+            if (wt->deadline <= now || (wt->by_progress && progress_reached(w, wt)) ||
+                vx_conns_peer_gone(wt->conn)) {
                 resume_locked(w, wt);
                 continue;
             }

@@ -148,4 +148,40 @@ stop_daemon
 wait "$P4"
 check "shutdown: the stream is ended, not reset" jq -e '.complete and (.events | length) >= 1' "$TMP/shutdown.json"
 
+# --- clients gone between events free their stream slots at once ------
+# (not at the next keepalive's failed write: 30 s here). One stream slot,
+# a ?wait slot: a client closes, another resets, and the next is served.
+start_daemon --max-event-streams 1 --event-keepalive 30 --max-waits 1 || exit 1
+upload "$VX_MESH_DIR/stanford-bunny.obj"
+submit 1024 "$SLOW"
+RUN=$JOB
+submit 64 # queued behind RUN: its streams get no event meanwhile
+gone() { # gone PATH RST HEAD: a request whose client closes (RST 1: resets) after 1 s
+    python3 - "$PORT" "$1" "$2" "$3" <<'PY'
+import socket, struct, sys, time
+s = socket.create_connection(("127.0.0.1", int(sys.argv[1])))
+s.sendall(("GET %s HTTP/1.1\r\nHost: x\r\n\r\n" % sys.argv[2]).encode())
+if sys.argv[4] == "1":
+    s.settimeout(10)
+    assert s.recv(4096).startswith(b"HTTP/1.1 200"), "no stream"
+time.sleep(1)
+if sys.argv[3] == "1":
+    s.setsockopt(socket.SOL_SOCKET, socket.SO_LINGER, struct.pack("ii", 1, 0))
+s.close()
+PY
+}
+for rst in 0 1; do
+    gone "/v1/jobs/$JOB/events" $rst 1
+    sleep 0.8
+    check "a stream after one whose client went away (reset $rst)" \
+        test "$($SSE "$BASE/v1/jobs/$JOB/events" --max-time 1 | jq -r '.status')" = 200
+    gone "/v1/jobs/$JOB?wait=30" $rst 0
+    sleep 0.8
+    api GET "/v1/jobs/$JOB?wait=0.2"
+    expect_status "a ?wait after one whose client went away (reset $rst)" 200
+done
+api DELETE "/v1/jobs/$JOB"
+api DELETE "/v1/jobs/$RUN"
+stop_daemon
+
 finish
