@@ -99,23 +99,49 @@ using vx_osd::Point;
 
 // Area-weighted vertex normals of a quad mesh (the fallback where the limit
 // tangents are parallel).
+// Twice face f's vector area (Newell's method) into n.
+void face_area(const Far::TopologyLevel &lv, const std::vector<Point> &pos, int f, double n[3])
+{
+    Far::ConstIndexArray fv = lv.GetFaceVertices(f);
+    n[0] = n[1] = n[2] = 0;
+    for (int k = 0; k < fv.size(); k++) {
+        const double *a = pos[fv[k]].p, *b = pos[fv[(k + 1) % fv.size()]].p;
+        n[0] += (a[1] - b[1]) * (a[2] + b[2]);
+        n[1] += (a[2] - b[2]) * (a[0] + b[0]);
+        n[2] += (a[0] - b[0]) * (a[1] + b[1]);
+    }
+}
+
 void face_normals(const Far::TopologyLevel &lv, const std::vector<Point> &pos,
                   std::vector<double> &acc)
 {
     acc.assign(3 * pos.size(), 0.0);
     for (int f = 0; f < lv.GetNumFaces(); f++) {
+        double n[3];
+        face_area(lv, pos, f, n);
         Far::ConstIndexArray fv = lv.GetFaceVertices(f);
-        double nx = 0, ny = 0, nz = 0; // Newell's method: twice the vector area
-        for (int k = 0; k < fv.size(); k++) {
-            const double *a = pos[fv[k]].p, *b = pos[fv[(k + 1) % fv.size()]].p;
-            nx += (a[1] - b[1]) * (a[2] + b[2]);
-            ny += (a[2] - b[2]) * (a[0] + b[0]);
-            nz += (a[0] - b[0]) * (a[1] + b[1]);
-        }
-        for (int k = 0; k < fv.size(); k++) {
-            acc[3 * fv[k]] += nx;
-            acc[3 * fv[k] + 1] += ny;
-            acc[3 * fv[k] + 2] += nz;
+        for (int k = 0; k < fv.size(); k++)
+            for (int c = 0; c < 3; c++)
+                acc[3 * fv[k] + c] += n[c];
+    }
+}
+
+// Where the area-weighted normal vanishes too (faces that cancel: a sheet
+// with both sides, a fold): the normal of vertex v's largest face, else +z,
+// so that every normal written is of unit length (glTF requires it).
+void lone_normal(const Far::TopologyLevel &lv, const std::vector<Point> &pos, int v, double n[3])
+{
+    double best = 0;
+    n[0] = n[1] = 0;
+    n[2] = 1;
+    Far::ConstIndexArray vf = lv.GetVertexFaces(v);
+    for (int k = 0; k < vf.size(); k++) {
+        double f[3];
+        face_area(lv, pos, vf[k], f);
+        double l = std::sqrt(f[0] * f[0] + f[1] * f[1] + f[2] * f[2]);
+        if (std::isfinite(l) && l > best) {
+            best = l;
+            memcpy(n, f, sizeof f);
         }
     }
 }
@@ -157,6 +183,10 @@ int refine(const vx_mesh *m, int levels, int limit, vx_mesh **out, float **norma
             if (acc.empty()) face_normals(last, a, acc);
             memcpy(n, &acc[3 * i], sizeof n);
             len = std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+            if (!(len > 0) || !std::isfinite(len)) {
+                lone_normal(last, a, (int)i, n);
+                len = std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+            }
         }
         for (int k = 0; k < 3; k++)
             nv3[3 * i + (size_t)k] = len > 0 ? (float)(n[k] / len) : 0.0f;

@@ -122,5 +122,31 @@ check "stray vertex left out: 26 vertices" jq -e '.stats.vertices == 26' "$TMP/j
 api GET "/v1/jobs/$CJ/result/mesh"
 check "every normal unit length" awk '$1 == "vn" { l = $2*$2 + $3*$3 + $4*$4; if (l < 0.99 || l > 1.01) bad++ } END { exit bad > 0 }' "$BODY"
 check "no vertex at the stray point" sh -c "! grep -q '^v 100 100 100' '$BODY'"
+# A sheet with both sides (a quad and its reverse): on its rim the limit
+# normal and the area-weighted one both vanish (the faces cancel); every
+# normal is still unit length, in OBJ and in glb.
+printf 'v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3 4\nf 1 4 3 2\n' >"$TMP/sheet.obj"
+upload "$TMP/sheet.obj"
+SHEET=$MESH_ID
+cc "a two-sided sheet" "$SHEET" '{"levels":2}'
+job_ok "a two-sided sheet"
+api GET "/v1/jobs/$CJ/result/mesh"
+check "two-sided sheet: every normal unit length" awk '$1 == "vn" { n++; l = $2*$2 + $3*$3 + $4*$4; if (l < 0.99 || l > 1.01) bad++ } END { exit n == 0 || bad > 0 }' "$BODY"
+cc "a two-sided sheet as glb" "$SHEET" '{"levels":2,"format":"glb"}'
+job_ok "a two-sided sheet as glb"
+api GET "/v1/jobs/$CJ/result/mesh"
+check "two-sided sheet, glb: every NORMAL unit length" python3 - "$BODY" <<'PY'
+import json, struct, sys
+b = open(sys.argv[1], "rb").read()
+jl = struct.unpack_from("<I", b, 12)[0]
+g = json.loads(b[20:20 + jl])
+bin0 = 20 + jl + 8
+acc = g["accessors"][g["meshes"][0]["primitives"][0]["attributes"]["NORMAL"]]
+view = g["bufferViews"][acc["bufferView"]]
+off = bin0 + view.get("byteOffset", 0) + acc.get("byteOffset", 0)
+for i in range(acc["count"]):
+    x, y, z = struct.unpack_from("<3f", b, off + 12 * i)
+    assert abs(x * x + y * y + z * z - 1) < 1e-3, (i, x, y, z)
+PY
 
 finish
