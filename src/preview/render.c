@@ -142,8 +142,11 @@ static int upload(vx_gl *gl, const vx_mesh *m, const vx_preview_params *p, objs 
     return vx_gl_check(gl, "preview.vertex_array", err);
 }
 
-static int targets(vx_gl *gl, int w, int h, int samples, objs *o, vx_err *err)
+/* samples: asked for; set to what the implementation gave (it may round
+ * up: llvmpipe gives 4 for 2). */
+static int targets(vx_gl *gl, int w, int h, int *samples_io, objs *o, vx_err *err)
 {
+    const int samples = *samples_io;
     glCreateFramebuffers(1, &o->fbo);
     glCreateRenderbuffers(1, &o->rb_color);
     glNamedRenderbufferStorage(o->rb_color, GL_RGBA8, w, h);
@@ -160,6 +163,9 @@ static int targets(vx_gl *gl, int w, int h, int samples, objs *o, vx_err *err)
         glNamedFramebufferRenderbuffer(o->fbo_ms, GL_DEPTH_ATTACHMENT, GL_RENDERBUFFER,
                                        o->rb_ms_depth);
         draw = o->fbo_ms;
+        GLint got = 0;
+        glGetNamedRenderbufferParameteriv(o->rb_ms_color, GL_RENDERBUFFER_SAMPLES, &got);
+        if (got > 0) *samples_io = got;
     } else {
         glCreateRenderbuffers(1, &o->rb_depth);
         glNamedRenderbufferStorage(o->rb_depth, GL_DEPTH_COMPONENT24, w, h);
@@ -361,7 +367,8 @@ int vx_preview_render(vx_gl *gl, const vx_mesh *m, const vx_preview_params *p, u
      * so every band rasterises as the whole image would), and a band is a
      * piece of work the time limit can stop between. */
     const int rows = band_rows(p, samples);
-    if (targets(gl, w, rows, samples, &o, err)) goto done;
+    if (targets(gl, w, rows, &samples, &o, err)) goto done;
+    st->samples = samples;
     band = malloc((size_t)w * (size_t)rows * 4);
     if (!band) {
         vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for a %dx%d band", w, rows);
