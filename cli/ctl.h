@@ -63,6 +63,9 @@ int ctl_local_start(ctl *c);
 /* Stops it and removes its data dir (also on SIGINT, SIGTERM, SIGHUP or
  * SIGQUIT, which then end the process). */
 void ctl_local_stop(void);
+/* 1 once a signal is stopping the private voxeld: the server going away is
+ * then no news to report. */
+int ctl_local_interrupted(void);
 
 /* ---- ctl_cmds.c ---- */
 /* A job command: KIND on the mesh file (or mesh id) src with params (owned),

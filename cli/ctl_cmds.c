@@ -229,6 +229,7 @@ static cJSON *follow_job(ctl *c, const char *jid, int answered)
         plain = 0;
         if (st < 0 || st == 502 || st == 503 || st == 504) {
             free(b.p);
+            if (ctl_local_interrupted()) pause(); /* the signal ends the process */
             time_t now = time(NULL);
             if (!lost) {
                 lost = now;

@@ -7,6 +7,7 @@
 #include <limits.h>
 #include <pthread.h>
 #include <signal.h>
+#include <stdatomic.h>
 #include <stdlib.h>
 #include <string.h>
 #include <sys/prctl.h>
@@ -23,6 +24,12 @@ static pthread_t g_drain;
 static int g_draining;
 static pthread_mutex_t g_stop_mu = PTHREAD_MUTEX_INITIALIZER;
 static const int g_signals[] = {SIGINT, SIGTERM, SIGHUP, SIGQUIT};
+static atomic_int g_interrupted;
+
+int ctl_local_interrupted(void)
+{
+    return atomic_load(&g_interrupted);
+}
 
 static void signal_set(sigset_t *set)
 {
@@ -47,8 +54,14 @@ static void *signal_main(void *arg)
     /* The lock is kept to the end: the main thread, which sees its voxeld
      * go and would exit 1, waits in ctl_local_stop until the signal ends
      * the process. */
+    atomic_store(&g_interrupted, 1);
     pthread_mutex_lock(&g_stop_mu);
     ctl_cmds_remove_temp(); /* (the handlers of ctl_cmds.c never run here) */
+    /* the job dies with its private server: nothing to cancel later */
+    static const char msg[] = "\nvoxelctl: interrupted; the private voxeld (--local) and its "
+                              "job are stopped\n";
+    ssize_t w = write(2, msg, sizeof msg - 1);
+    (void)w;
     stop_locked();
     signal(sig, SIG_DFL);
     pthread_sigmask(SIG_UNBLOCK, &set, NULL);

@@ -361,7 +361,7 @@ for sig in INT TERM; do
     python3 -c 'import os, signal, sys
 signal.signal(signal.SIGINT, signal.SIG_DFL)
 os.execvp(sys.argv[1], sys.argv[1:])' "$CTL" --local --quiet render "$VX_MESH_DIR/spot_triangulated.obj" \
-        -p N=64 -p R=1024 -p width=128 -p height=128 -o int.png 2>/dev/null &
+        -p N=64 -p R=1024 -p width=128 -p height=128 -o int.png 2>int.err &
     ipid=$!
     for _ in $(seq 100); do [[ -n "$(ls -A "$TMP/ltmp")" ]] && break; sleep 0.1; done
     sleep 1
@@ -370,6 +370,8 @@ os.execvp(sys.argv[1], sys.argv[1:])' "$CTL" --local --quiet render "$VX_MESH_DI
     rc=$?
     check "--local, SIG$sig mid-job: ended by the signal (rc $rc)" test "$rc" -eq $((128 + $(kill -l "$sig")))
     check "--local, SIG$sig mid-job: no result written" test ! -e int.png
+    check "--local, SIG$sig mid-job: says the private voxeld and its job stopped ($(tr '\n' ' ' <int.err))" \
+        sh -c "grep -q 'interrupted; the private voxeld (--local) and its job are stopped' int.err && ! grep -q 'no answer' int.err"
     check "--local, SIG$sig mid-job: the data dir is removed" test -z "$(ls -A "$TMP/ltmp")"
     check "--local, SIG$sig mid-job: its voxeld is gone" sh -c "! pgrep -f '$TMP/ltm[p]' >/dev/null"
 done
