@@ -778,7 +778,7 @@ static double coding_q(const char *p, const char *end)
 vx_req_coding vx_req_accept_coding(const char *ae)
 {
     if (!ae) return VX_CODING_IDENTITY;
-    double qz = -1, qg = -1, qstar = -1;
+    double qz = -1, qg = -1, qstar = -1, qi = -1;
     for (const char *p = ae; *p;) {
         const char *end = strchr(p, ',');
         if (!end) end = p + strlen(p);
@@ -794,11 +794,15 @@ vx_req_coding vx_req_accept_coding(const char *ae)
             if ((n == 4 && !strncasecmp(p, "gzip", 4)) || (n == 6 && !strncasecmp(p, "x-gzip", 6)))
                 qg = q;
             if (n == 1 && *p == '*') qstar = q;
+            if (n == 8 && !strncasecmp(p, "identity", 8)) qi = q;
         }
         p = *end ? end + 1 : end;
     }
     if (qz < 0) qz = qstar;
     if (qg < 0) qg = qstar;
+    /* the client's preference (RFC 9110 12.5.3): identity given a higher
+     * q than every coding we have is sent as it is */
+    if (qi > (qz > qg ? qz : qg)) return VX_CODING_IDENTITY;
     if (qz > 0 && qz >= qg) return VX_CODING_ZSTD;
     if (qg > 0) return VX_CODING_GZIP;
     return VX_CODING_IDENTITY;

@@ -51,6 +51,9 @@ check "* picks zstd" test "$(header Content-Encoding)" = zstd
 api GET "$R" -H "Accept-Encoding: *;q=0, identity"
 check "*;q=0: identity" test -z "$(header Content-Encoding)"
 check "*;q=0: the whole file" cmp -s "$BODY" "$TMP/full"
+api GET "$R" -H "Accept-Encoding: gzip;q=0.5, zstd;q=0.5, identity"
+check "identity preferred by its q: sent as it is" test -z "$(header Content-Encoding)"
+check "identity preferred: the whole file" cmp -s "$BODY" "$TMP/full"
 api HEAD "$R" -H "Accept-Encoding: zstd"
 expect_status "HEAD with zstd" 200
 check "HEAD says the coding GET would send" test "$(header Content-Encoding)" = zstd

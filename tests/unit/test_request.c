@@ -271,6 +271,14 @@ static void test_negotiation(void **state)
     assert_int_equal(vx_req_accept_coding("identity"), VX_CODING_IDENTITY);
     assert_int_equal(vx_req_accept_coding("x-gzip"), VX_CODING_GZIP);
     assert_int_equal(vx_req_accept_coding("zstd;q=2"), VX_CODING_IDENTITY); /* malformed q */
+    /* identity preferred by q over every coding offered: sent as it is */
+    assert_int_equal(vx_req_accept_coding("identity, gzip;q=0.1"), VX_CODING_IDENTITY);
+    assert_int_equal(vx_req_accept_coding("gzip;q=0.5, identity;q=1"), VX_CODING_IDENTITY);
+    assert_int_equal(vx_req_accept_coding("*;q=0.5, identity;q=0.8"), VX_CODING_IDENTITY);
+    assert_int_equal(vx_req_accept_coding("identity;q=0.5, zstd"), VX_CODING_ZSTD);
+    assert_int_equal(vx_req_accept_coding("identity;q=0.5, gzip;q=0.5"),
+                     VX_CODING_GZIP); /* a tie */
+    assert_int_equal(vx_req_accept_coding("identity;q=0, gzip;q=0.2"), VX_CODING_GZIP);
 
     uint64_t a, b;
     assert_int_equal(vx_req_range("bytes=0-99", 1000, &a, &b), 1);
