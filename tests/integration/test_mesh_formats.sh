@@ -138,6 +138,30 @@ bad trailing.ply model/x-ply ply_corrupt "4 bytes after the last element"
 # triangle count is over the limit in well under a minute.
 api POST /v1/meshes -H "Content-Type: model/gltf-binary" --max-time 60 --data-binary "@$F/instances.glb"
 expect_error "200000 glTF instances over --max-triangles 100000" 413 mesh_too_big
+# An ASCII STL declares no count: 20000 facets as exporters write them
+# (about 250 bytes each, 5 MB: size / 32 is 156000) are under
+# --max-triangles 100000 (it was 413 mesh_too_big "declares 156000"), and
+# 100001 compact facets over it are 413 from the reader, which counts them.
+python3 - "$TMP/ascii20k.stl" "$TMP/ascii100k.stl" <<'PY'
+import sys
+with open(sys.argv[1], "w") as f:
+    f.write("solid exported\n")
+    for i in range(20000):
+        x = float(i)
+        f.write("  facet normal 0.000000e+00 0.000000e+00 1.000000e+00\n    outer loop\n")
+        for v in ((x, 0.0, 0.0), (x + 1, 0.0, 0.0), (x, 1.0, 0.0)):
+            f.write("      vertex %e %e %e\n" % v)
+        f.write("    endloop\n  endfacet\n")
+    f.write("endsolid exported\n")
+with open(sys.argv[2], "w") as f:
+    f.write("solid c\n")
+    f.write("facet normal 0 0 1 outer loop vertex 0 0 0 vertex 1 0 0 vertex 0 1 0 endloop endfacet\n" * 100001)
+PY
+api POST /v1/meshes -H "Content-Type: model/stl" --data-binary "@$TMP/ascii20k.stl"
+check "ASCII STL of 20000 facets (5 MB) under --max-triangles 100000: 201 (got $STATUS $(jqb .error.message))" test "$STATUS" = 201
+check "its 20000 triangles" jq -e '.triangles == 20000' "$BODY"
+api POST /v1/meshes -H "Content-Type: model/stl" --data-binary "@$TMP/ascii100k.stl"
+expect_error "ASCII STL of 100001 facets over --max-triangles 100000" 413 mesh_too_big
 # 40000 one-triangle primitives over one accessor of 400000 vertices: each
 # decodes only the 3 it indexes (decoded whole for each, it took minutes).
 api POST /v1/meshes -H "Content-Type: model/gltf-binary" --max-time 60 --data-binary "@$F/primitives.glb"
