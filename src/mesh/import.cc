@@ -453,19 +453,38 @@ size_t comp_bytes(int type)
  * for each made a file of 10^5 primitives over 10^6 vertices take hours),
  * the sparse part found by binary search (its indices strictly increase,
  * checked once per accessor: g.sparse_ok). */
-int read_accessor(Gather &g, const tinygltf::Model &mo, int ai, bool index, const uint32_t *pick,
+/* What an accessor is read as: indices (unsigned scalars), positions and
+ * morph target deltas (VEC3), skin joints and weights (VEC4), inverse bind
+ * matrices (float MAT4, column-major). */
+enum class Want { index = 1, vec3 = 3, vec4 = 4, mat4 = 16 };
+
+int read_accessor(Gather &g, const tinygltf::Model &mo, int ai, Want want, const uint32_t *pick,
                   size_t npick, std::vector<double> &out)
 {
-    const int ncomp = index ? 1 : 3;
+    const int ncomp = int(want);
     if (ai < 0 || size_t(ai) >= mo.accessors.size()) return gl_corrupt(g, "accessor", ai);
     const tinygltf::Accessor &a = mo.accessors[size_t(ai)];
     size_t cb = comp_bytes(a.componentType);
-    bool ok_type = index ? a.type == TINYGLTF_TYPE_SCALAR &&
-                               (a.componentType == TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE ||
-                                a.componentType == TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT ||
-                                a.componentType == TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT)
-                         : a.type == TINYGLTF_TYPE_VEC3 && cb &&
-                               a.componentType != TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT;
+    const bool uint_type = a.componentType == TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE ||
+                           a.componentType == TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT ||
+                           a.componentType == TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT;
+    bool ok_type = false;
+    switch (want) {
+    case Want::index:
+        ok_type = a.type == TINYGLTF_TYPE_SCALAR && uint_type;
+        break;
+    case Want::vec3:
+        ok_type = a.type == TINYGLTF_TYPE_VEC3 && cb &&
+                  a.componentType != TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT;
+        break;
+    case Want::vec4:
+        ok_type = a.type == TINYGLTF_TYPE_VEC4 && cb &&
+                  a.componentType != TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT;
+        break;
+    case Want::mat4:
+        ok_type = a.type == TINYGLTF_TYPE_MAT4 && a.componentType == TINYGLTF_COMPONENT_TYPE_FLOAT;
+        break;
+    }
     if (!ok_type || !a.count) return gl_corrupt(g, "accessor", ai);
     size_t elem = cb * size_t(ncomp), stride = 0, n = pick ? npick : a.count;
     const unsigned char *p = span(mo, a.bufferView, a.byteOffset, a.count, elem, &stride);
@@ -577,11 +596,57 @@ Mat local(const tinygltf::Node &n)
     return t * r * s;
 }
 
-/* One primitive, its positions through t; triangles, strips and fans
- * become triangles (winding reversed where t mirrors), points and lines
- * are skipped. */
+/* The per-vertex skinning matrices of the nu vertices pick (or the first
+ * nu) of primitive pr: sum over JOINTS_n/WEIGHTS_n of weight * joints[j]
+ * (a joint's world transform times its inverse bind matrix), the weights
+ * normalised to sum 1; a vertex of no weight keeps its position. */
+int skin_matrices(Gather &g, const tinygltf::Model &mo, const tinygltf::Primitive &pr, int mi,
+                  const std::vector<Mat> &joints, const uint32_t *pick, size_t nu,
+                  std::vector<Mat> &out)
+{
+    out.assign(nu, Mat{});
+    std::vector<double> wsum(nu, 0.0), jv, wv;
+    for (int set = 0;; set++) {
+        auto ja = pr.attributes.find("JOINTS_" + std::to_string(set));
+        auto wa = pr.attributes.find("WEIGHTS_" + std::to_string(set));
+        if (ja == pr.attributes.end() || wa == pr.attributes.end()) break;
+        if (read_accessor(g, mo, ja->second, Want::vec4, pick, nu, jv) ||
+            read_accessor(g, mo, wa->second, Want::vec4, pick, nu, wv))
+            return -1;
+        for (size_t u = 0; u < nu; u++)
+            for (int k = 0; k < 4; k++) {
+                double w = wv[4 * u + size_t(k)], j = jv[4 * u + size_t(k)];
+                if (w == 0) continue;
+                if (!(w > 0) || !(j >= 0 && j < double(joints.size())) || j != std::floor(j))
+                    return vx_err_set(g.err, VX_EINVAL, g.fi->corrupt,
+                                      "not a valid %s file: mesh %d names joint %.0f with weight "
+                                      "%g (its skin has %zu joints)",
+                                      g.fi->name, mi, j, w, joints.size());
+                const Mat &m = joints[size_t(j)];
+                for (int e = 0; e < 16; e++)
+                    out[u].m[e] += w * m.m[e];
+                wsum[u] += w;
+            }
+    }
+    for (size_t u = 0; u < nu; u++) {
+        if (wsum[u] > 0)
+            for (double &e : out[u].m)
+                e /= wsum[u];
+        else
+            out[u] = Mat::identity();
+    }
+    return 0;
+}
+
+/* One primitive, its positions through t (with joints, a skin's matrices
+ * per joint: through each vertex's blend of them instead), its morph
+ * targets' POSITION deltas added first with weights (the node's or the
+ * mesh's default weights); triangles, strips and fans become triangles
+ * (winding reversed where the transform mirrors), points and lines are
+ * skipped. */
 int add_primitive(Gather &g, const tinygltf::Model &mo, const tinygltf::Primitive &pr, const Mat &t,
-                  int mi)
+                  int mi, const std::vector<double> *weights = nullptr,
+                  const std::vector<Mat> *joints = nullptr)
 {
     int mode = pr.mode < 0 ? TINYGLTF_MODE_TRIANGLES : pr.mode;
     if (mode != TINYGLTF_MODE_TRIANGLES && mode != TINYGLTF_MODE_TRIANGLE_STRIP &&
@@ -595,7 +660,7 @@ int add_primitive(Gather &g, const tinygltf::Model &mo, const tinygltf::Primitiv
     size_t nv = mo.accessors[size_t(at->second)].count, base = g.pos.size() / 3;
     if (nv > UINT32_MAX) return too_big(g, "vertices", nv, UINT32_MAX);
     if (pr.indices >= 0) {
-        if (read_accessor(g, mo, pr.indices, true, nullptr, 0, ix)) return -1;
+        if (read_accessor(g, mo, pr.indices, Want::index, nullptr, 0, ix)) return -1;
     } else {
         ix.resize(nv);
         for (size_t v = 0; v < nv; v++)
@@ -620,16 +685,33 @@ int add_primitive(Gather &g, const tinygltf::Model &mo, const tinygltf::Primitiv
             i = double(std::lower_bound(used.begin(), used.end(), uint32_t(i)) - used.begin());
     }
     const size_t nu = pr.indices >= 0 ? used.size() : nv;
-    if (read_accessor(g, mo, at->second, false, pr.indices >= 0 ? used.data() : nullptr, nu, pos))
+    if (read_accessor(g, mo, at->second, Want::vec3, pr.indices >= 0 ? used.data() : nullptr, nu,
+                      pos))
         return -1;
     if (base + nu > UINT32_MAX) return too_big(g, "vertices", base + nu, UINT32_MAX);
     if (g.lim && g.lim->max_vertices && base + nu > g.lim->max_vertices)
         return too_big(g, "vertices", base + nu, g.lim->max_vertices);
+    const uint32_t *pick = pr.indices >= 0 ? used.data() : nullptr;
+    for (size_t k = 0; weights && k < pr.targets.size() && k < weights->size(); k++) {
+        const double w = (*weights)[k];
+        auto tp = pr.targets[k].find("POSITION");
+        if (w == 0 || tp == pr.targets[k].end()) continue;
+        if (tp->second < 0 || size_t(tp->second) >= mo.accessors.size() ||
+            mo.accessors[size_t(tp->second)].count != nv)
+            return gl_corrupt(g, "morph target accessor", tp->second);
+        std::vector<double> d;
+        if (read_accessor(g, mo, tp->second, Want::vec3, pick, nu, d)) return -1;
+        for (size_t i = 0; i < 3 * nu; i++)
+            pos[i] += w * d[i];
+    }
+    std::vector<Mat> vm;
+    if (joints && skin_matrices(g, mo, pr, mi, *joints, pick, nu, vm)) return -1;
     for (size_t u = 0; u < nu; u++) {
         const double *p = &pos[3 * u];
+        const Mat &tv = joints ? vm[u] : t;
         double q[3];
         for (int r = 0; r < 3; r++)
-            q[r] = t.m[r] * p[0] + t.m[4 + r] * p[1] + t.m[8 + r] * p[2] + t.m[12 + r];
+            q[r] = tv.m[r] * p[0] + tv.m[4 + r] * p[1] + tv.m[8 + r] * p[2] + tv.m[12 + r];
         if (!std::isfinite(q[0]) || !std::isfinite(q[1]) || !std::isfinite(q[2]))
             return vx_err_set(g.err, VX_EINVAL, g.fi->corrupt,
                               "not a valid %s file: a vertex of mesh %d has a NaN or infinite "
@@ -637,7 +719,7 @@ int add_primitive(Gather &g, const tinygltf::Model &mo, const tinygltf::Primitiv
                               g.fi->name, mi);
         g.pos.insert(g.pos.end(), {q[0], q[1], q[2]});
     }
-    bool flip = t.det3() < 0;
+    bool flip = (joints && nu ? vm[0] : t).det3() < 0;
     size_t ntri = mode == TINYGLTF_MODE_TRIANGLES ? ix.size() / 3
                   : ix.size() >= 3                ? ix.size() - 2
                                                   : 0;
@@ -661,6 +743,44 @@ int add_primitive(Gather &g, const tinygltf::Model &mo, const tinygltf::Primitiv
     return 0;
 }
 
+/* Node ni's world transform: its ancestors' local transforms and its own
+ * (parent: each node's parent or -1; the graph was checked acyclic). */
+Mat world_of(const tinygltf::Model &mo, const std::vector<int> &parent, int ni)
+{
+    Mat t = Mat::identity();
+    for (int k = 0; ni >= 0 && k <= 256; k++, ni = parent[size_t(ni)])
+        t = local(mo.nodes[size_t(ni)]) * t;
+    return t;
+}
+
+/* Skin si's joint matrices: each joint's world transform times its
+ * inverse bind matrix (identity without them). */
+int skin_joints(Gather &g, const tinygltf::Model &mo, int si, std::vector<Mat> &out)
+{
+    if (si < 0 || size_t(si) >= mo.skins.size()) return gl_corrupt(g, "skin", si);
+    const tinygltf::Skin &sk = mo.skins[size_t(si)];
+    if (sk.joints.empty()) return gl_corrupt(g, "skin (no joints)", si);
+    std::vector<int> parent(mo.nodes.size(), -1);
+    for (size_t i = 0; i < mo.nodes.size(); i++)
+        for (int c : mo.nodes[i].children)
+            if (c >= 0 && size_t(c) < parent.size()) parent[size_t(c)] = int(i);
+    std::vector<double> ibm;
+    if (sk.inverseBindMatrices >= 0) {
+        if (read_accessor(g, mo, sk.inverseBindMatrices, Want::mat4, nullptr, 0, ibm)) return -1;
+        if (ibm.size() < 16 * sk.joints.size())
+            return gl_corrupt(g, "skin (fewer inverse bind matrices than joints)", si);
+    }
+    out.resize(sk.joints.size());
+    for (size_t k = 0; k < sk.joints.size(); k++) {
+        int j = sk.joints[k];
+        if (j < 0 || size_t(j) >= mo.nodes.size()) return gl_corrupt(g, "skin (a joint)", si);
+        Mat b = Mat::identity();
+        if (!ibm.empty()) std::copy(&ibm[16 * k], &ibm[16 * k] + 16, b.m);
+        out[k] = world_of(mo, parent, j) * b;
+    }
+    return 0;
+}
+
 int walk(Gather &g, const tinygltf::Model &mo, int ni, const Mat &parent, int depth,
          std::vector<char> &seen)
 {
@@ -671,8 +791,15 @@ int walk(Gather &g, const tinygltf::Model &mo, int ni, const Mat &parent, int de
     Mat t = parent * local(n);
     if (n.mesh >= 0) {
         if (size_t(n.mesh) >= mo.meshes.size()) return gl_corrupt(g, "node", ni);
-        for (const auto &pr : mo.meshes[size_t(n.mesh)].primitives)
-            if (add_primitive(g, mo, pr, t, n.mesh)) return -1;
+        const tinygltf::Mesh &me = mo.meshes[size_t(n.mesh)];
+        /* morph weights: the node's, else the mesh's defaults */
+        const std::vector<double> *w = !n.weights.empty() ? &n.weights : &me.weights;
+        /* a skinned mesh is placed by its joints alone: the node's own
+         * transform is ignored (glTF 2.0, Skins) */
+        std::vector<Mat> joints;
+        if (n.skin >= 0 && skin_joints(g, mo, n.skin, joints)) return -1;
+        for (const auto &pr : me.primitives)
+            if (add_primitive(g, mo, pr, t, n.mesh, w, n.skin >= 0 ? &joints : nullptr)) return -1;
     }
     for (int c : n.children)
         if (walk(g, mo, c, t, depth + 1, seen)) return -1;
@@ -693,7 +820,8 @@ int walk_library(Gather &g, const tinygltf::Model &mo)
     if (mo.nodes.empty())
         for (size_t mi = 0; mi < mo.meshes.size(); mi++)
             for (const auto &pr : mo.meshes[mi].primitives)
-                if (add_primitive(g, mo, pr, Mat::identity(), int(mi))) return -1;
+                if (add_primitive(g, mo, pr, Mat::identity(), int(mi), &mo.meshes[mi].weights))
+                    return -1;
     return 0;
 }
 

@@ -10,7 +10,9 @@ cube.gltf (embedded data: URI buffer), cube.glb (a node translating by
 (10, 20, 30) and scaling by 2), cube.off (quads), variants exporters write
 (cube_upper.stl, cube_bom.stl, cube_latin1.obj, cube_cr.obj, cube_rgba.obj,
 cube_long.off, cube_4.off, cube_n.off, cube_deep.gltf, cube_trailing.stl,
-cube_trailing_solid.stl, cube_ind.stl, cube_glued.off, cube_maplib.obj), instances.glb (200000 nodes), primitives.glb (40000
+cube_trailing_solid.stl, cube_ind.stl, cube_glued.off, cube_maplib.obj),
+cube_morph.gltf and cube_morph_node.gltf (a morph target at the mesh's and
+the node's weights), cube_skin.gltf (skinned to one joint), instances.glb (200000 nodes), primitives.glb (40000
 primitives over one accessor of 400000 vertices), and malformed ones.
 Standard library only."""
 import base64
@@ -123,6 +125,58 @@ def gltf_doc(doc):
     return json.dumps(d).encode()
 
 
+def gltf_extra(doc_change, extra):
+    """The cube as glTF with buffer views and accessors appended: extra is
+    a list of (bytes, accessor dict without bufferView); doc_change(doc,
+    first) edits the document, first being the first new accessor's index."""
+    d, binary = gltf_parts()
+    first = len(d["accessors"])
+    for data, acc in extra:
+        d["bufferViews"].append({"buffer": 0, "byteOffset": len(binary), "byteLength": len(data)})
+        d["accessors"].append(dict(acc, bufferView=len(d["bufferViews"]) - 1))
+        binary += data
+    d["buffers"][0]["byteLength"] = len(binary)
+    d["buffers"][0]["uri"] = (
+        "data:application/octet-stream;base64," + base64.b64encode(binary).decode())
+    doc_change(d, first)
+    return json.dumps(d).encode()
+
+
+def gltf_morph(node_weights=None):
+    """The cube with one morph target moving it by +10 along x; the mesh's
+    default weight 1, the node's node_weights when given."""
+    delta = b"".join(struct.pack("<3f", 10, 0, 0) for _ in V)
+
+    def change(d, first):
+        d["meshes"][0]["primitives"][0]["targets"] = [{"POSITION": first}]
+        d["meshes"][0]["weights"] = [1.0]
+        if node_weights is not None:
+            d["nodes"][0]["weights"] = node_weights
+    return gltf_extra(change, [(delta, {"componentType": 5126, "count": len(V), "type": "VEC3"})])
+
+
+def gltf_skin():
+    """The cube skinned to one joint at x = 3 whose inverse bind matrix
+    translates by -1: it lands at x = 2. Its node's own translation (100)
+    is ignored, as glTF says."""
+    joints = b"".join(struct.pack("<4B", 0, 0, 0, 0) for _ in V)
+    weights = b"".join(struct.pack("<4f", 1, 0, 0, 0) for _ in V)
+    ibm = struct.pack("<16f", 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, -1, 0, 0, 1)
+
+    def change(d, first):
+        d["meshes"][0]["primitives"][0]["attributes"].update(
+            {"JOINTS_0": first, "WEIGHTS_0": first + 1})
+        d["nodes"] = [{"mesh": 0, "skin": 0, "translation": [100, 0, 0]},
+                      {"translation": [3, 0, 0]}]
+        d["scenes"][0]["nodes"] = [0, 1]
+        d["skins"] = [{"joints": [1], "inverseBindMatrices": first + 2}]
+    return gltf_extra(change, [
+        (joints, {"componentType": 5121, "count": len(V), "type": "VEC4"}),
+        (weights, {"componentType": 5126, "count": len(V), "type": "VEC4"}),
+        (ibm, {"componentType": 5126, "count": 1, "type": "MAT4"}),
+    ])
+
+
 def gltf_chain(depth):
     """The cube at the end of a chain of depth nested nodes."""
     nodes = [{"children": [k + 1]} for k in range(depth - 1)] + [{"mesh": 0}]
@@ -217,6 +271,9 @@ def main():
         "cube_glued.off": off().replace(b"OFF\n# a cube\n", b"OFF"),
         "cube_maplib.obj": obj_quads(b"maplib a.map\nusemap wood\ncsh -echo\nbzp 1 2\nres 4 4\n"),
         "cube_deep.gltf": gltf_chain(200),
+        "cube_morph.gltf": gltf_morph(),
+        "cube_morph_node.gltf": gltf_morph([0.5]),
+        "cube_skin.gltf": gltf_skin(),
         "instances.glb": glb_instances(200000),
         "primitives.glb": glb_primitives(400000, 40000),
         # malformed

@@ -62,6 +62,13 @@ cube "$F/cube_4.off" model/x-off off 6
 cube "$F/cube_4.off" "" off 6
 cube "$F/cube_n.off" model/x-off off 6
 cube "$F/cube_deep.gltf" model/gltf+json gltf 0
+# Morph targets at their default weights (the mesh's, or the node's over
+# them), and a skinned mesh placed by its joint and inverse bind matrix, its
+# node's own translation ignored (glTF 2.0; both were read as the base cube
+# and the node's transform).
+cube "$F/cube_morph.gltf" model/gltf+json gltf 0 '[10,0,0]' '[11,1,1]'
+cube "$F/cube_morph_node.gltf" model/gltf+json gltf 0 '[5,0,0]' '[6,1,1]'
+cube "$F/cube_skin.gltf" model/gltf+json gltf 0 '[2,0,0]' '[3,1,1]'
 # A binary STL with bytes after its last triangle (they are ignored; it
 # was 400 declared and 415 sniffed), its header "solid" too; ASCII STL
 # normals that are no numbers (not read) and a solid name longer than the
