@@ -326,9 +326,10 @@ static int stmt_f(obj_reader *r, char *p, const char *end)
         int vlen = (int)(q - p);
         if (resolve(r, p, vlen, vi, m->nverts, "vertex", "vertices", &v)) return -1;
         p = q;
+        /* empty slots ("1/", "1//", "1/2/") are taken, as other readers do */
         if (*p == '/') {
             p++;
-            if (*p != '/') {
+            if (*p != '/' && !is_end(*p)) {
                 char *t = p;
                 if (!(q = parse_index(p, &ti))) return junk(r, "f", tok);
                 if (resolve(r, t, (int)(q - t), ti, m->ntexcoords, "texture coordinate",
@@ -336,12 +337,14 @@ static int stmt_f(obj_reader *r, char *p, const char *end)
                     return -1;
                 p = q;
             }
-            if (*p == '/') {
+            if (*p == '/' && !is_end(p[1])) {
                 char *t = ++p;
                 if (!(q = parse_index(p, &ni))) return junk(r, "f", tok);
                 if (resolve(r, t, (int)(q - t), ni, m->nnormals, "normal", "normals", &unused))
                     return -1;
                 p = q;
+            } else if (*p == '/') {
+                p++;
             }
         }
         if (!is_end(*p)) return junk(r, "f", tok);

@@ -115,6 +115,9 @@ static void test_index_forms(void **state)
         "f -4/-4 -3/-3 -2/-2\nf -4/-4/-4 -2/-2/-2 -1/-1/-1\n",
         "f -4//-1 -3//-2 -2//-3\nf 1/-1 -2/2 4/1/-4\n",
         "f +1 +2 +3\nf\t1\t3\t4  \n",
+        /* empty slots, as some exporters leave them (other readers take them) */
+        "f 1/ 2/ 3/\nf 1// 3// 4//\n",
+        "f 1/1/ 2/2/ 3/3/\nf 1//\t3/ 4//4\n",
     };
     static const uint32_t want[] = {0, 1, 2, 0, 2, 3}, sizes[] = {3, 3};
     for (size_t i = 0; i < sizeof faces / sizeof faces[0]; i++) {
@@ -575,8 +578,8 @@ static void test_errors(void **state)
     expect_fail_str(WITH_V3("f 1 2 x\n"), "obj_junk", 4);
     expect_fail_str(WITH_V3("f 1 2 3 junk\n"), "obj_junk", 4);
     expect_fail_str(WITH_V3("f 1 2 3x\n"), "obj_junk", 4);
-    expect_fail_str(WITH_V3("f 1/ 2/ 3/\n"), "obj_junk", 4);
-    expect_fail_str(WITH_V3("f 1// 2// 3//\n"), "obj_junk", 4);
+    expect_fail_str(WITH_V3("f 1/// 2/// 3///\n"), "obj_junk", 4);
+    expect_fail_str(WITH_V3("f 1/x 2/ 3/\n"), "obj_junk", 4);
     expect_fail_str(WITH_V3("f 1.0 2 3\n"), "obj_junk", 4);
     expect_fail_str(WITH_V3("vt 0 0\nvn 0 0 1\nf 1/1/1/1 2 3\n"), "obj_junk", 6);
     expect_fail_str(WITH_V3("\nfoo 1 2 3\n"), "obj_junk", 5);
