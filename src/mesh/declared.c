@@ -362,13 +362,25 @@ static cJSON *arr(const cJSON *root, const char *key)
     return cJSON_IsArray(a) ? a : NULL;
 }
 
-/* Decoded length of a base64 data URI, or -1 when it is not one. */
+/* Decoded length of a base64 data URI of a buffer, -1 when it is not a
+ * data: URI, -2 when it is one the reader (tinygltf) does not decode: its
+ * media type must be glTF's (application/octet-stream or
+ * application/gltf-buffer) or one tinygltf takes besides, base64, the
+ * prefix in lower case as tinygltf compares it. */
 static double data_uri_len(const char *uri)
 {
-    if (strncmp(uri, "data:", 5)) return -1;
-    const char *b = strstr(uri, ";base64,");
-    if (!b) return -1;
-    b += 8;
+    static const char *const ok[] = {"data:application/octet-stream;base64,",
+                                     "data:application/gltf-buffer;base64,",
+                                     "data:text/plain;base64,",
+                                     "data:image/png;base64,",
+                                     "data:image/jpeg;base64,",
+                                     "data:image/bmp;base64,",
+                                     "data:image/gif;base64,"};
+    if (strncasecmp(uri, "data:", 5)) return -1;
+    const char *b = NULL;
+    for (size_t k = 0; k < sizeof ok / sizeof ok[0] && !b; k++)
+        if (!strncmp(uri, ok[k], strlen(ok[k]))) b = uri + strlen(ok[k]);
+    if (!b) return -2;
     size_t len = strlen(b);
     while (len && b[len - 1] == '=')
         len--;
@@ -388,6 +400,12 @@ static int gltf_buffers(gltf_ctx *g)
         const cJSON *uri = cJSON_GetObjectItemCaseSensitive(b, "uri");
         if (len < 0) return gl_fail(g, "%s %d has no byteLength", "buffer", i);
         if (uri) {
+            if (cJSON_IsString(uri) && (have = data_uri_len(uri->valuestring)) == -2)
+                return gl_fail(g,
+                               "%s %d's data: URI is not base64 of a media type the reader "
+                               "decodes (data:application/octet-stream;base64, or "
+                               "data:application/gltf-buffer;base64,)",
+                               "buffer", i);
             if (!cJSON_IsString(uri) || (have = data_uri_len(uri->valuestring)) < 0)
                 return gl_fail(g,
                                "%s %d refers to an external file (only data: URIs and the glb "

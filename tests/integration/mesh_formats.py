@@ -293,6 +293,10 @@ def main():
         "repeat.off": b"OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n4 0 1 2 1\n",
         "repeat.ply": ply("ascii", Q).replace(b"\n4 0 2 3 1\n", b"\n4 0 2 3 2\n", 1),
         "external.gltf": gltf(uri="../../../etc/passwd"),
+        # data: URIs the reader does not decode: said so (the first was
+        # tinygltf's "FS callback[s] not set", the second "external file")
+        "data_no_type.gltf": gltf(uri="data:;base64,AAAA"),
+        "data_upper.gltf": gltf(uri="DATA:application/octet-stream;base64,AAAA"),
         "too_deep.gltf": gltf_chain(300),
         "draco.gltf": gltf_doc({"extensionsUsed": ["KHR_draco_mesh_compression"],
                                 "extensionsRequired": ["KHR_draco_mesh_compression"]}),

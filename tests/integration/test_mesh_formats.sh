@@ -126,6 +126,8 @@ upload "$F/edges.off" model/x-off
 expect_error "an OFF of edges only" 422 off_no_faces
 check "edges only: the message says why" jq -e '.error.message | test("point or an edge")' "$BODY"
 bad external.gltf model/gltf+json gltf_corrupt "external file"
+bad data_no_type.gltf model/gltf+json gltf_corrupt "data: URI is not base64 of a media type the reader decodes"
+bad data_upper.gltf model/gltf+json gltf_corrupt "data: URI is not base64 of a media type the reader decodes"
 bad cycle.glb model/gltf-binary gltf_corrupt "reached twice"
 bad call.obj model/obj obj_junk "'call'"
 bad trailing_short.stl model/stl stl_corrupt "has only 683 bytes"
