@@ -73,6 +73,7 @@
 #include <sys/ioctl.h>
 #include <sys/resource.h>
 #include <sys/socket.h>
+#include <sys/stat.h>
 #include <time.h>
 #include <unistd.h>
 
@@ -114,6 +115,10 @@ struct vx_conn {
     int linger;             /* answered before its body was read: drain it after the close */
     unsigned char peer[17]; /* the client's address family and address (0s: unknown) */
     int over_ip;            /* opened past --max-connections-per-ip: its request gets a 503 */
+    /* BUSY, a file sent as it is (vx_conns_watch_file): its path (owned)
+     * and the size the answer needs; NULL when none */
+    char *watch;
+    uint64_t watch_need;
 };
 
 /* A socket answered before its body was read, kept open after
@@ -358,6 +363,7 @@ void vx_conns_notify(void *cls, struct MHD_Connection *c, void **socket_context,
         }
         pthread_mutex_unlock(&s->ling_lock);
     }
+    free(vc->watch);
     free(vc);
     *socket_context = NULL;
 }
@@ -552,6 +558,21 @@ static void sweep(vx_conns *s, vx_conn **cand, head_kill *ks, size_t *nk, size_t
                 vc->win_t0 = now;
                 vc->win_bytes = vc->body_bytes;
             }
+        }
+        /* A file sent as it is, cut short behind the daemon: libmicrohttpd
+         * waits for bytes that never come (until --connection-timeout);
+         * the client learns at once from the close that the answer is
+         * short. */
+        struct stat fst;
+        if (vc->phase == P_BUSY && vc->watch && stat(vc->watch, &fst) == 0 &&
+            (uint64_t)fst.st_size < vc->watch_need) {
+            VX_WARN("http.file_cut_short", "request_id=%s path=%s bytes=%llu need=%llu", vc->rid,
+                    VX_Q(vc->watch), (unsigned long long)fst.st_size,
+                    (unsigned long long)vc->watch_need);
+            free(vc->watch);
+            vc->watch = NULL;
+            kill_conn(vc, 0, NULL, NULL, 1);
+            continue;
         }
         /* An answer the client reads slower than --min-send-rate over a
          * window during which it always waited on the client (a reader
@@ -796,8 +817,21 @@ int vx_conns_done(vx_conns *s, vx_conn *vc)
         vc->phase = P_IDLE;
         vc->t_phase = vx_mono();
     }
+    free(vc->watch);
+    vc->watch = NULL;
     pthread_mutex_unlock(&s->lock);
     return status;
+}
+
+void vx_conns_watch_file(vx_conns *s, vx_conn *vc, const char *path, uint64_t need)
+{
+    if (!vc) return;
+    char *copy = strdup(path);
+    pthread_mutex_lock(&s->lock);
+    free(vc->watch);
+    vc->watch = copy;
+    vc->watch_need = need;
+    pthread_mutex_unlock(&s->lock);
 }
 
 void vx_conns_linger(vx_conns *s, vx_conn *vc)

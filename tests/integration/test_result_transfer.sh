@@ -143,5 +143,36 @@ while read -r verdict rest; do
     check "$rest" test "$verdict" = PASS
 done <"$TMP/edges.txt"
 
+# A result cut short on disk while it is sent as it is: the connection
+# closes at once, so the client sees the answer end short of its
+# Content-Length (libmicrohttpd waited for the missing bytes until
+# --connection-timeout, 30 s). 27 MB, more than the sockets buffer.
+run_job voxelize "$MESH_ID" '{"resolution":500,"format":"raw8"}'
+job_ok "a 27 MB raw8"
+CUT=$(python3 - "$PORT" "$JOB" "$DATA/results/$JOB" <<'PY'
+import glob, os, socket, sys, time
+s = socket.create_connection(("127.0.0.1", int(sys.argv[1])))
+s.sendall(("GET /v1/jobs/%s/result HTTP/1.1\r\nHost: x\r\n\r\n" % sys.argv[2]).encode())
+head = b""
+while b"\r\n\r\n" not in head:
+    head += s.recv(65536)
+clen = int([l.split(b":")[1] for l in head.split(b"\r\n") if l.lower().startswith(b"content-length")][0])
+got = len(head.split(b"\r\n\r\n", 1)[1])
+os.truncate(glob.glob(sys.argv[3] + "/*")[0], 100000)
+t0 = time.monotonic()
+s.settimeout(60)
+while got < clen:
+    d = s.recv(1 << 20)
+    if not d:
+        break
+    got += len(d)
+print("%d %d %.1f" % (got, clen, time.monotonic() - t0))
+PY
+)
+read -r CUT_GOT CUT_LEN CUT_S <<<"$CUT"
+check "cut short while sent: the answer ends short ($CUT)" test "${CUT_GOT:-0}" -lt "${CUT_LEN:-0}"
+check "cut short while sent: closed within 5 s ($CUT_S s)" awk -v t="${CUT_S:-99}" 'BEGIN{exit !(t < 5)}'
+check "logged" grep -q "event=http.file_cut_short" "$TMP/daemon.log"
+
 stop_daemon
 finish
