@@ -51,6 +51,16 @@ struct vx_cluster {
     double renew_s;
     vx_jobs_cluster_stats stats; /* atomics */
     vx_mesh_catalog catalog;     /* the store's view of meshes: vx_meshes */
+    /* Completions whose answer never came (the database out past the
+     * report's patience, or the row no longer ours meanwhile): they may
+     * have committed, so their results stay until the database says whose
+     * the row is (check_unsure, by the renewer). Under lock. */
+    struct unsure {
+        char id[33];
+        int attempt;
+        char rid[48];
+    } unsure[64];
+    int nunsure;
 };
 
 /* ---- a job state that keeps nothing: the database is the state ---------- */
@@ -994,6 +1004,47 @@ static void renew_all(vx_jobs *j)
     }
 }
 
+/* The completions cluster_report could not confirm: a row succeeded by
+ * that attempt keeps its results; a row another attempt has, or gone,
+ * has them removed; a database still out, or the row still running by
+ * that attempt (the lease not yet expired), asks again at the next turn. */
+static void check_unsure(vx_jobs *j)
+{
+    vx_cluster *c = j->cl;
+    struct unsure todo[sizeof c->unsure / sizeof c->unsure[0]];
+    pthread_mutex_lock(&c->lock);
+    int n = c->nunsure;
+    memcpy(todo, c->unsure, (size_t)n * sizeof todo[0]);
+    pthread_mutex_unlock(&c->lock);
+    for (int i = 0; i < n; i++) {
+        vx_pg_job row;
+        vx_err err;
+        vx_err_clear(&err);
+        int rc = vx_pg_get(c->lease, todo[i].id, &row, &err);
+        int gone = rc < 0 && err.kind == VX_ENOTFOUND;
+        if (rc < 0 && !gone) break; /* still out: the next turn (one wait a turn) */
+        int ours = !gone && row.attempt == todo[i].attempt;
+        int done = gone || !ours || strcmp(row.state, "running") != 0;
+        int keep = ours && !strcmp(row.state, "succeeded");
+        vx_pg_job_clear(&row);
+        if (!done) continue;
+        if (keep) {
+            VX_INFO("cluster.report_confirmed", "job=%s attempt=%d", todo[i].id, todo[i].attempt);
+        } else {
+            VX_WARN("job.stale_attempt", "job=%s attempt=%d", todo[i].id, todo[i].attempt);
+            __atomic_add_fetch(&c->stats.stale_completions, 1, __ATOMIC_RELAXED);
+            vx_store_result_remove(j->desc.store, todo[i].rid);
+        }
+        pthread_mutex_lock(&c->lock);
+        for (int k = 0; k < c->nunsure; k++)
+            if (!strcmp(c->unsure[k].id, todo[i].id) && c->unsure[k].attempt == todo[i].attempt) {
+                c->unsure[k] = c->unsure[--c->nunsure];
+                break;
+            }
+        pthread_mutex_unlock(&c->lock);
+    }
+}
+
 static void *renewer_main(void *arg)
 {
     vx_jobs *j = arg;
@@ -1003,6 +1054,7 @@ static void *renewer_main(void *arg)
     while (!c->stopping || j->running > 0) {
         pthread_mutex_unlock(&c->lock);
         renew_all(j);
+        check_unsure(j);
         if (vx_mono() >= next_requeue && !c->stopping) {
             /* Any replica re-queues the leases that expired (a replica that
              * died or stalled): the one whose claim is oldest goes first. */
@@ -1177,9 +1229,26 @@ void cluster_report(vx_jobs *j, job *jb, vx_job_run *r, int ok, const vx_err *e,
         if (lost) break;
     }
     cJSON_Delete(m);
-    if (rc != 0) {
-        /* Stale (another attempt won), or never recorded: this attempt's
-         * results are nobody's. */
+    if (rc < 0 && ok) {
+        /* No answer: the completion may have committed (its answer lost
+         * with the connection). Its results stay until the database tells
+         * (check_unsure): removed now, a committed row would point at
+         * nothing, 410 forever. */
+        pthread_mutex_lock(&c->lock);
+        int kept = c->nunsure < (int)(sizeof c->unsure / sizeof c->unsure[0]);
+        if (kept) {
+            struct unsure *u = &c->unsure[c->nunsure++];
+            snprintf(u->id, sizeof u->id, "%s", jb->id);
+            u->attempt = jb->attempts;
+            snprintf(u->rid, sizeof u->rid, "%s", r->rid);
+        }
+        pthread_mutex_unlock(&c->lock);
+        VX_WARN("cluster.report_unknown", "job=%s attempt=%d results=kept%s", jb->id, jb->attempts,
+                kept ? "" : " unchecked=1");
+        state[0] = 0;
+    } else if (rc != 0) {
+        /* Stale (another attempt won), or a failure never recorded: this
+         * attempt's results are nobody's. */
         if (rc == 1) {
             __atomic_add_fetch(&c->stats.stale_completions, 1, __ATOMIC_RELAXED);
             VX_WARN("job.stale_attempt", "job=%s attempt=%d", jb->id, jb->attempts);

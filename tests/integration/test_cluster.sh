@@ -31,6 +31,8 @@
 #   (one row, one results index entry per output);
 # - /metrics: the database's counts by state and kind, claims.
 # - A replica whose --blob-store is not the cluster's is refused at start.
+# - A completion that committed, its answer lost and the database out past
+#   the report's patience (tests/integration/pg_proxy.py): its results stay.
 source "$(dirname "$0")/lib.sh"
 BUNNY="$VX_MESH_DIR/stanford-bunny.obj"
 [[ -f "$BUNNY" ]] || { echo "skip: $BUNNY missing"; exit 77; }
@@ -489,4 +491,43 @@ for i in 1 2 3; do
     RPID[$i]=
     check "r$i exits 0" test $rc -eq 0
 done
+
+# A completion that committed but whose answer was lost, the database then
+# out past the report's patience (3 renewals): the results stay, and the
+# replica confirms them once the database answers (they were removed: the
+# row said succeeded, every download 410). Through a proxy that drops the
+# answers after the completion, then closes every connection.
+PPORT=$(python3 -c 'import socket; s = socket.socket(); s.bind(("127.0.0.1", 0)); print(s.getsockname()[1])')
+echo pass >"$TMP/proxy.mode"
+python3 "$(dirname "$0")/pg_proxy.py" "$PPORT" "$PGDIR/sock/.s.PGSQL.5432" "$TMP/proxy.mode" >"$TMP/proxy.out" 2>&1 &
+PROXY=$!
+CLUSTER_STOP="kill $PROXY"
+for _ in $(seq 50); do grep -q ready "$TMP/proxy.out" && break; sleep 0.1; done
+SAVED_URL=$URL
+URL="postgresql://voxeld@127.0.0.1:$PPORT/postgres?sslmode=disable"
+start_replica 4 || exit 1
+URL=$SAVED_URL
+on 4
+echo armdown >"$TMP/proxy.mode"
+submit 4 voxelize "$B" '{"resolution":48,"format":"raw8"}'
+LOSTJ=$JOB
+for _ in $(seq 100); do [[ $(cat "$TMP/proxy.mode") == down ]] && break; sleep 0.1; done
+check "the completion went through, its answer lost" test "$(cat "$TMP/proxy.mode")" = down
+sleep 5 # past the report's patience (3 s with 3 s leases)
+check "r4 gave the report up, results kept" grep -q "event=cluster.report_unknown job=$LOSTJ attempt=1 results=kept" "$TMP/r4.log"
+echo pass >"$TMP/proxy.mode"
+for _ in $(seq 100); do
+    grep -q "event=cluster.report_confirmed job=$LOSTJ" "$TMP/r4.log" && break
+    sleep 0.2
+done
+check "r4 confirmed the completion once the database answered" grep -q "event=cluster.report_confirmed job=$LOSTJ attempt=1" "$TMP/r4.log"
+wait_final 4 "$LOSTJ" 30
+check "the job succeeded" jq -e '.state == "succeeded"' "$BODY"
+api GET "/v1/jobs/$LOSTJ/result"
+expect_status "its result is there" 200
+kill -TERM "${RPID[4]}"
+wait "${RPID[4]}"
+RPID[4]=
+kill "$PROXY"
+CLUSTER_STOP=
 finish
