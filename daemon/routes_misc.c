@@ -91,8 +91,12 @@ static readiness ready_checks(vx_http *h)
 
 int vx_route_readyz(vx_http *h, struct MHD_Connection *c, req *r)
 {
-    size_t depth = vx_jobs_queue_depth(h->d.jobs), cap = vx_jobs_queue_capacity(h->d.jobs);
+    /* the database is asked for the queue only once it answered the
+     * check (a lock held on the jobs table made /readyz wait out two
+     * lock timeouts) */
     readiness k = ready_checks(h);
+    size_t depth = k.db ? vx_jobs_queue_depth(h->d.jobs) : 0,
+           cap = vx_jobs_queue_capacity(h->d.jobs);
     cJSON *doc = cJSON_CreateObject();
     cJSON_AddStringToObject(doc, "status", k.ok ? "ready" : "not_ready");
     if (!k.ok) {

@@ -726,7 +726,9 @@ long vx_pg_queued(vx_pg *pg, vx_err *err)
 
 int vx_pg_ping(vx_pg *pg, vx_err *err)
 {
-    PGresult *r = pg_run(pg, 1, "SELECT 1", 0, NULL, err);
+    /* a read of the jobs table, not SELECT 1: a lock held on it (which
+     * every job request waits on until lock_timeout) is an outage too */
+    PGresult *r = pg_run(pg, 1, "SELECT 1 FROM vx_jobs LIMIT 1", 0, NULL, err);
     int rc = r ? 0 : -1;
     PQclear(r);
     return rc;

@@ -158,7 +158,8 @@ int vx_pg_find_idem(vx_pg *pg, const char *key, vx_pg_job *out, vx_err *err);
 int vx_pg_delete(vx_pg *pg, const char *id, vx_err *err);
 /* Queued jobs in the whole table, or -1 with err. */
 long vx_pg_queued(vx_pg *pg, vx_err *err);
-/* One round trip (SELECT 1), reconnecting first when needed: /readyz. */
+/* One round trip (a read of vx_jobs: a lock held on the table fails it
+ * at lock_timeout), reconnecting first when needed: /readyz. */
 int vx_pg_ping(vx_pg *pg, vx_err *err);
 /* Reads a job into *out (vx_pg_job_clear it). VX_ENOTFOUND job_not_found. */
 int vx_pg_get(vx_pg *pg, const char *id, vx_pg_job *out, vx_err *err);

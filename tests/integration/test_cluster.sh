@@ -65,6 +65,21 @@ for i in 1 2 3; do
     expect_status "r$i ready" 200
     check "r$i readyz: database ok, its name" jq -e ".database == {\"ok\":true,\"replica\":\"r$i\"}" "$BODY"
 done
+# A lock held on the jobs table (every job request waits on it until
+# lock_timeout, then 503): /readyz is 503 too (its SELECT 1 passed).
+psql "$URL" -qAtc "BEGIN; LOCK TABLE vx_jobs IN ACCESS EXCLUSIVE MODE; SELECT pg_sleep(8); COMMIT" >/dev/null &
+LOCKER=$!
+sleep 0.5
+on 1
+t0=$(date +%s.%N)
+api GET /readyz -m 15
+t1=$(date +%s.%N)
+expect_status "/readyz with the jobs table locked" 503
+check "answered at the lock timeout (5 s; $(awk -v a="$t0" -v b="$t1" 'BEGIN{print b-a}') s)" awk -v a="$t0" -v b="$t1" 'BEGIN{exit !(b-a < 7)}'
+check "says the database is not ok" jq -e '.database.ok == false' "$BODY"
+wait "$LOCKER"
+api GET /readyz
+expect_status "/readyz once the lock is gone" 200
 
 # Every replica's store is the one the database names: the first replica
 # wrote an id into it. Another store (empty, or another cluster's) is
