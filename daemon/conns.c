@@ -115,9 +115,9 @@ struct vx_conn {
     int linger;             /* answered before its body was read: drain it after the close */
     unsigned char peer[17]; /* the client's address family and address (0s: unknown) */
     int over_ip;            /* opened past --max-connections-per-ip: its request gets a 503 */
-    /* BUSY, a file sent as it is (vx_conns_watch_file): its path (owned)
-     * and the size the answer needs; NULL when none */
-    char *watch;
+    /* BUSY, a file sent as it is (vx_conns_watch_file): a descriptor of
+     * it (owned; -1 when none) and the size the answer needs */
+    int watch_fd;
     uint64_t watch_need;
 };
 
@@ -198,6 +198,13 @@ static const char *json_inside(const char *s, char *out, size_t n)
  * too when rd (else the sweeper does it after KILL_LINGER_S; libmicrohttpd
  * then reads EOF and closes it). Only while libmicrohttpd is reading the
  * socket, with s->lock held. Returns the bytes written. */
+/* Stops watching vc's file (vx_conns_watch_file); lock held. */
+static void unwatch(vx_conn *vc)
+{
+    if (vc->watch_fd >= 0) close(vc->watch_fd);
+    vc->watch_fd = -1;
+}
+
 static size_t kill_conn(vx_conn *vc, int status, const char *code, const char *message, int rd)
 {
     char body[1400], msg[2400], date[64], cors[512] = "", qc[128], qm[1200];
@@ -320,6 +327,7 @@ void vx_conns_notify(void *cls, struct MHD_Connection *c, void **socket_context,
         vx_conn *vc = ci ? calloc(1, sizeof *vc) : NULL;
         if (!vc) return; /* untracked: only libmicrohttpd's timeouts apply */
         vc->fd = ci->connect_fd;
+        vc->watch_fd = -1;
         vc->phase = P_HEAD;
         vc->t_phase = vx_mono();
         vc->out_rate = -1;
@@ -363,7 +371,7 @@ void vx_conns_notify(void *cls, struct MHD_Connection *c, void **socket_context,
         }
         pthread_mutex_unlock(&s->ling_lock);
     }
-    free(vc->watch);
+    unwatch(vc);
     free(vc);
     *socket_context = NULL;
 }
@@ -564,13 +572,11 @@ static void sweep(vx_conns *s, vx_conn **cand, head_kill *ks, size_t *nk, size_t
          * the client learns at once from the close that the answer is
          * short. */
         struct stat fst;
-        if (vc->phase == P_BUSY && vc->watch && stat(vc->watch, &fst) == 0 &&
+        if (vc->phase == P_BUSY && vc->watch_fd >= 0 && fstat(vc->watch_fd, &fst) == 0 &&
             (uint64_t)fst.st_size < vc->watch_need) {
-            VX_WARN("http.file_cut_short", "request_id=%s path=%s bytes=%llu need=%llu", vc->rid,
-                    VX_Q(vc->watch), (unsigned long long)fst.st_size,
+            VX_WARN("http.file_cut_short", "bytes=%llu need=%llu", (unsigned long long)fst.st_size,
                     (unsigned long long)vc->watch_need);
-            free(vc->watch);
-            vc->watch = NULL;
+            unwatch(vc);
             kill_conn(vc, 0, NULL, NULL, 1);
             continue;
         }
@@ -817,19 +823,18 @@ int vx_conns_done(vx_conns *s, vx_conn *vc)
         vc->phase = P_IDLE;
         vc->t_phase = vx_mono();
     }
-    free(vc->watch);
-    vc->watch = NULL;
+    unwatch(vc);
     pthread_mutex_unlock(&s->lock);
     return status;
 }
 
-void vx_conns_watch_file(vx_conns *s, vx_conn *vc, const char *path, uint64_t need)
+void vx_conns_watch_file(vx_conns *s, vx_conn *vc, int fd, uint64_t need)
 {
     if (!vc) return;
-    char *copy = strdup(path);
+    int copy = fcntl(fd, F_DUPFD_CLOEXEC, 0);
     pthread_mutex_lock(&s->lock);
-    free(vc->watch);
-    vc->watch = copy;
+    unwatch(vc);
+    vc->watch_fd = copy;
     vc->watch_need = need;
     pthread_mutex_unlock(&s->lock);
 }

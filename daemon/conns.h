@@ -94,11 +94,12 @@ void vx_conns_linger(vx_conns *s, vx_conn *vc);
  * as the sweeper's 408s are, and the rest of the body is dropped until the
  * read side is closed half a second later (vx_conns_body then says 1). */
 void vx_conns_refuse(vx_conns *s, vx_conn *vc, int status, const char *code, const char *message);
-/* The answer sends the file at path as it is, up to byte need: should
+/* The answer sends the file open as fd as it is, up to byte need: should
  * the file be cut shorter meanwhile (truncated behind the daemon), the
  * sweeper closes the connection (libmicrohttpd would wait for the missing
- * bytes until --connection-timeout). Until vx_conns_done. */
-void vx_conns_watch_file(vx_conns *s, vx_conn *vc, const char *path, uint64_t need);
+ * bytes until --connection-timeout). Until vx_conns_done (a copy of fd is
+ * kept till then). */
+void vx_conns_watch_file(vx_conns *s, vx_conn *vc, int fd, uint64_t need);
 /* The request is over: vc idles until the next head. Returns the status the
  * sweeper answered vc with, 0 when it did not. */
 int vx_conns_done(vx_conns *s, vx_conn *vc);

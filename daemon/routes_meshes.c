@@ -88,6 +88,7 @@ int vx_route_mesh_file(vx_http *h, struct MHD_Connection *c, req *r)
         close(fd);
         return MHD_NO;
     }
+    vx_conns_watch_file(h->conns, r->vc, fd, (uint64_t)st.st_size);
     MHD_add_response_header(resp, MHD_HTTP_HEADER_CONTENT_TYPE,
                             vx_intake_format_media(fmt ? fmt : VX_MESH_OBJ));
     MHD_add_response_header(resp, MHD_HTTP_HEADER_ETAG, etag);

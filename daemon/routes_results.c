@@ -146,8 +146,7 @@ int vx_route_result(vx_http *h, struct MHD_Connection *c, req *r)
     } else {
         resp = MHD_create_response_from_fd64(size, fd);
     }
-    if (rk > 0 || coding == VX_CODING_IDENTITY)
-        vx_conns_watch_file(h->conns, r->vc, path, rk > 0 ? last + 1 : size);
+    if (fd >= 0) vx_conns_watch_file(h->conns, r->vc, fd, rk > 0 ? last + 1 : size);
     if (!resp) {
         if (fd >= 0) close(fd);
         return MHD_NO;
