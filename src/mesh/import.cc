@@ -610,6 +610,12 @@ int skin_matrices(Gather &g, const tinygltf::Model &mo, const tinygltf::Primitiv
         auto ja = pr.attributes.find("JOINTS_" + std::to_string(set));
         auto wa = pr.attributes.find("WEIGHTS_" + std::to_string(set));
         if (ja == pr.attributes.end() || wa == pr.attributes.end()) break;
+        /* one joint set a vertex (the picks index POSITION's elements) */
+        for (int a : {ja->second, wa->second})
+            if (a < 0 || size_t(a) >= mo.accessors.size() ||
+                mo.accessors[size_t(a)].count !=
+                    mo.accessors[size_t(pr.attributes.at("POSITION"))].count)
+                return gl_corrupt(g, "skin accessor (not one element a vertex)", a);
         if (read_accessor(g, mo, ja->second, Want::vec4, pick, nu, jv) ||
             read_accessor(g, mo, wa->second, Want::vec4, pick, nu, wv))
             return -1;
@@ -719,7 +725,7 @@ int add_primitive(Gather &g, const tinygltf::Model &mo, const tinygltf::Primitiv
                               g.fi->name, mi);
         g.pos.insert(g.pos.end(), {q[0], q[1], q[2]});
     }
-    bool flip = (joints && nu ? vm[0] : t).det3() < 0;
+    const bool flip_all = t.det3() < 0;
     size_t ntri = mode == TINYGLTF_MODE_TRIANGLES ? ix.size() / 3
                   : ix.size() >= 3                ? ix.size() - 2
                                                   : 0;
@@ -731,6 +737,13 @@ int add_primitive(Gather &g, const tinygltf::Model &mo, const tinygltf::Primitiv
             c[0] = k, c[1] = k + 1 + k % 2, c[2] = k + 2 - k % 2;
         else
             c[0] = k + 1, c[1] = k + 2, c[2] = 0;
+        /* skinned: each vertex has its own transform; the triangle turns
+         * where most of its corners' transforms mirror */
+        bool flip = flip_all;
+        if (joints)
+            flip = (vm[size_t(ix[c[0]])].det3() < 0) + (vm[size_t(ix[c[1]])].det3() < 0) +
+                       (vm[size_t(ix[c[2]])].det3() < 0) >=
+                   2;
         if (flip) std::swap(c[1], c[2]);
         g.start.push_back(uint32_t(g.idx.size()));
         for (size_t j : c)
@@ -753,17 +766,32 @@ Mat world_of(const tinygltf::Model &mo, const std::vector<int> &parent, int ni)
     return t;
 }
 
+/* Each skin's joint matrices, made once per model (many nodes may use one
+ * skin: made per node, a file of n nodes on an n-joint skin took n^2). */
+struct Skins {
+    std::vector<int> parent; /* each node's parent, or -1; made at the first skin */
+    std::vector<std::vector<Mat>> joints;
+};
+
 /* Skin si's joint matrices: each joint's world transform times its
- * inverse bind matrix (identity without them). */
-int skin_joints(Gather &g, const tinygltf::Model &mo, int si, std::vector<Mat> &out)
+ * inverse bind matrix (identity without them); kept in sc. */
+int skin_joints(Gather &g, const tinygltf::Model &mo, int si, Skins &sc,
+                const std::vector<Mat> **res)
 {
     if (si < 0 || size_t(si) >= mo.skins.size()) return gl_corrupt(g, "skin", si);
+    if (sc.joints.size() < mo.skins.size()) sc.joints.resize(mo.skins.size());
+    std::vector<Mat> &out = sc.joints[size_t(si)];
+    *res = &out;
+    if (!out.empty()) return 0;
     const tinygltf::Skin &sk = mo.skins[size_t(si)];
     if (sk.joints.empty()) return gl_corrupt(g, "skin (no joints)", si);
-    std::vector<int> parent(mo.nodes.size(), -1);
-    for (size_t i = 0; i < mo.nodes.size(); i++)
-        for (int c : mo.nodes[i].children)
-            if (c >= 0 && size_t(c) < parent.size()) parent[size_t(c)] = int(i);
+    if (sc.parent.empty()) {
+        sc.parent.assign(mo.nodes.size(), -1);
+        for (size_t i = 0; i < mo.nodes.size(); i++)
+            for (int c : mo.nodes[i].children)
+                if (c >= 0 && size_t(c) < sc.parent.size()) sc.parent[size_t(c)] = int(i);
+    }
+    const std::vector<int> &parent = sc.parent;
     std::vector<double> ibm;
     if (sk.inverseBindMatrices >= 0) {
         if (read_accessor(g, mo, sk.inverseBindMatrices, Want::mat4, nullptr, 0, ibm)) return -1;
@@ -782,7 +810,7 @@ int skin_joints(Gather &g, const tinygltf::Model &mo, int si, std::vector<Mat> &
 }
 
 int walk(Gather &g, const tinygltf::Model &mo, int ni, const Mat &parent, int depth,
-         std::vector<char> &seen)
+         std::vector<char> &seen, Skins &sc)
 {
     if (ni < 0 || size_t(ni) >= mo.nodes.size() || seen[size_t(ni)] || depth > 256)
         return gl_corrupt(g, "node", ni);
@@ -796,13 +824,13 @@ int walk(Gather &g, const tinygltf::Model &mo, int ni, const Mat &parent, int de
         const std::vector<double> *w = !n.weights.empty() ? &n.weights : &me.weights;
         /* a skinned mesh is placed by its joints alone: the node's own
          * transform is ignored (glTF 2.0, Skins) */
-        std::vector<Mat> joints;
-        if (n.skin >= 0 && skin_joints(g, mo, n.skin, joints)) return -1;
+        const std::vector<Mat> *joints = nullptr;
+        if (n.skin >= 0 && skin_joints(g, mo, n.skin, sc, &joints)) return -1;
         for (const auto &pr : me.primitives)
-            if (add_primitive(g, mo, pr, t, n.mesh, w, n.skin >= 0 ? &joints : nullptr)) return -1;
+            if (add_primitive(g, mo, pr, t, n.mesh, w, joints)) return -1;
     }
     for (int c : n.children)
-        if (walk(g, mo, c, t, depth + 1, seen)) return -1;
+        if (walk(g, mo, c, t, depth + 1, seen, sc)) return -1;
     return 0;
 }
 
@@ -812,11 +840,12 @@ int walk(Gather &g, const tinygltf::Model &mo, int ni, const Mat &parent, int de
 int walk_library(Gather &g, const tinygltf::Model &mo)
 {
     std::vector<char> child(mo.nodes.size(), 0), seen(mo.nodes.size(), 0);
+    Skins sc;
     for (const auto &n : mo.nodes)
         for (int c : n.children)
             if (c >= 0 && size_t(c) < child.size()) child[size_t(c)] = 1;
     for (size_t i = 0; i < mo.nodes.size(); i++)
-        if (!child[i] && walk(g, mo, int(i), Mat::identity(), 0, seen)) return -1;
+        if (!child[i] && walk(g, mo, int(i), Mat::identity(), 0, seen, sc)) return -1;
     if (mo.nodes.empty())
         for (size_t mi = 0; mi < mo.meshes.size(); mi++)
             for (const auto &pr : mo.meshes[mi].primitives)
@@ -879,9 +908,10 @@ vx_mesh *read_gltf(const unsigned char *data, size_t n, const FormatInfo *fi, vx
                     rc = walk_library(g, mo);
                 } else {
                     std::vector<char> seen(mo.nodes.size(), 0);
+                    Skins sc;
                     rc = 0;
                     for (int r : mo.scenes[size_t(si)].nodes)
-                        if ((rc = walk(g, mo, r, Mat::identity(), 0, seen))) break;
+                        if ((rc = walk(g, mo, r, Mat::identity(), 0, seen, sc))) break;
                 }
             }
         } catch (const std::bad_alloc &) {

@@ -177,6 +177,25 @@ def gltf_skin():
     ])
 
 
+def gltf_skin_short():
+    """The skinned cube with JOINTS_0 and WEIGHTS_0 of one element (its
+    eight vertices read past them: heap bytes came back in the message)."""
+    d = json.loads(gltf_skin())
+    for a in d["accessors"][2:4]:
+        a["count"] = 1
+    return json.dumps(d).encode()
+
+
+def gltf_skin_many(n):
+    """n nodes of the skinned cube on one skin of all n nodes as joints
+    (its joints were made again for each node: n^2)."""
+    d = json.loads(gltf_skin())
+    d["nodes"] = [{"mesh": 0, "skin": 0} for _ in range(n)]
+    d["scenes"][0]["nodes"] = list(range(n))
+    d["skins"] = [{"joints": list(range(n))}]
+    return json.dumps(d).encode()
+
+
 def gltf_chain(depth):
     """The cube at the end of a chain of depth nested nodes."""
     nodes = [{"children": [k + 1]} for k in range(depth - 1)] + [{"mesh": 0}]
@@ -274,6 +293,8 @@ def main():
         "cube_morph.gltf": gltf_morph(),
         "cube_morph_node.gltf": gltf_morph([0.5]),
         "cube_skin.gltf": gltf_skin(),
+        "skin_short.gltf": gltf_skin_short(),
+        "skin_many.gltf": gltf_skin_many(8000),
         "instances.glb": glb_instances(200000),
         "primitives.glb": glb_primitives(400000, 40000),
         # malformed

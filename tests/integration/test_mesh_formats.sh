@@ -69,6 +69,13 @@ cube "$F/cube_deep.gltf" model/gltf+json gltf 0
 cube "$F/cube_morph.gltf" model/gltf+json gltf 0 '[10,0,0]' '[11,1,1]'
 cube "$F/cube_morph_node.gltf" model/gltf+json gltf 0 '[5,0,0]' '[6,1,1]'
 cube "$F/cube_skin.gltf" model/gltf+json gltf 0 '[2,0,0]' '[3,1,1]'
+bad skin_short.gltf model/gltf+json gltf_corrupt "skin accessor"
+t0=$(date +%s.%N)
+upload "$F/skin_many.gltf" model/gltf+json
+t1=$(date +%s.%N)
+check "8000 skinned nodes on one skin of 8000 joints: 201 (got $STATUS $(jqb .error.message))" test "$STATUS" = 201
+check "... in well under the 9 s it took (its joints made once: $(awk -v a="$t0" -v b="$t1" 'BEGIN{print b-a}') s)" \
+    awk -v a="$t0" -v b="$t1" 'BEGIN{exit !(b-a < 4)}'
 # A binary STL with bytes after its last triangle (they are ignored; it
 # was 400 declared and 415 sniffed), its header "solid" too; ASCII STL
 # normals that are no numbers (not read) and a solid name longer than the
