@@ -225,9 +225,8 @@ static int grow(peel_ctx *c, layer_set *o, int need, int keep)
     while (cap < need)
         cap *= 2;
     if (cap > c->max_layers) cap = c->max_layers;
-    uint64_t px = (uint64_t)o->w * (uint64_t)o->h;
-    uint64_t total = c->fixed_bytes + c->layers_now + layer_bytes(px, cap);
-    if (total > c->limit) return vx_peel_too_big(c, total);
+    /* the GL's limit before the memory's: a doubling past it is not what
+     * the job would need, and too_many_layers is what auto slices on */
     GLint max_layers = 0;
     glGetIntegerv(GL_MAX_ARRAY_TEXTURE_LAYERS, &max_layers);
     if (cap > max_layers) cap = max_layers;
@@ -235,6 +234,9 @@ static int grow(peel_ctx *c, layer_set *o, int need, int keep)
         return vx_err_set(c->err, VX_EUNPROC, "too_many_layers",
                           "the mesh needs more than %d depth layers (GL_MAX_ARRAY_TEXTURE_LAYERS)",
                           max_layers);
+    uint64_t px = (uint64_t)o->w * (uint64_t)o->h;
+    uint64_t total = c->fixed_bytes + c->layers_now + layer_bytes(px, cap);
+    if (total > c->limit) return vx_peel_too_big(c, total);
     const GLuint empty = PEEL_EMPTY;
     GLuint nk = new_array(GL_R32UI, o->w, o->h, cap);
     glClearTexImage(nk, 0, GL_RED_INTEGER, GL_UNSIGNED_INT, &empty);

@@ -133,9 +133,11 @@ int vx_voxelize(vx_gl *gl, const vx_mesh *m, const vx_voxelize_desc *d, vx_bitgr
         vx_err_clear(&pe);
         if (vx_voxelize_peel(gl, m, &dd, out, st, &pe) == 0) return 0;
         /* auto: a mesh with more depth layers than peeling holds along a
-         * ray is sliced instead (a solid fill: slicing has no surface) */
+         * ray, in the GL's array textures or in the job's memory, is sliced
+         * instead (a solid fill: slicing has no surface; it keeps no
+         * layers) */
         if (dd.method != VX_METHOD_AUTO || dd.fill != VX_FILL_SOLID ||
-            strcmp(pe.code, "too_many_layers") != 0) {
+            (strcmp(pe.code, "too_many_layers") != 0 && strcmp(pe.code, "job_memory_limit") != 0)) {
             if (err) *err = pe;
             return -1;
         }

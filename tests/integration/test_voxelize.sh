@@ -477,6 +477,17 @@ for n in 150 1100; do
             jq -e '.state == "failed" and .error.code == "too_many_layers"' "$TMP/job.json"
     fi
 done
+stop_daemon
+
+# The layers a ray needs within the GL's limit but past the job's memory
+# (300 layers of 128^2 rays: 64 MiB at the next doubling): auto slices too.
+stack_obj "$TMP/stack150.obj" 150
+start_daemon --max-job-memory 64M || exit 1
+upload "$TMP/stack150.obj"
+G='{"origin":[0,0,0],"voxel_size":1,"dims":[150,128,128]}'
+vox "300 layers past --max-job-memory 64M, auto robust" "$MESH_ID" "{\"grid\":$G,\"inside\":\"robust\",\"format\":\"summary\"}"
+check "past the job's memory: sliced, $((150 * 256)) voxels (got $(st voxels_inside) by $(st method))" \
+    test "$(st method) $(st voxels_inside)" = "slice $((150 * 256))"
 
 stop_daemon
 finish
