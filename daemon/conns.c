@@ -145,6 +145,10 @@ struct vx_conns {
      * they are down to 80%: a victim whose rate is not known yet at the
      * first sweep over the mark goes at a later one. */
     int shedding;
+    /* Files found cut short by the last sweep (bytes, the size needed),
+     * logged by the sweeper once it let go of lock; ncut may pass 8. */
+    uint64_t cut[8][2];
+    size_t ncut;
 };
 
 #define BODY_GRACE_S 2.0   /* a body is not rated before this */
@@ -574,8 +578,11 @@ static void sweep(vx_conns *s, vx_conn **cand, head_kill *ks, size_t *nk, size_t
         struct stat fst;
         if (vc->phase == P_BUSY && vc->watch_fd >= 0 && fstat(vc->watch_fd, &fst) == 0 &&
             (uint64_t)fst.st_size < vc->watch_need) {
-            VX_WARN("http.file_cut_short", "bytes=%llu need=%llu", (unsigned long long)fst.st_size,
-                    (unsigned long long)vc->watch_need);
+            if (s->ncut < 8) {
+                s->cut[s->ncut][0] = (uint64_t)fst.st_size;
+                s->cut[s->ncut][1] = vc->watch_need;
+            }
+            s->ncut++;
             unwatch(vc);
             kill_conn(vc, 0, NULL, NULL, 1);
             continue;
@@ -689,9 +696,16 @@ static void *sweeper_main(void *arg)
         }
         size_t nk = 0;
         sweep(s, s->n <= cap ? cand : NULL, ks, &nk, kcap);
+        uint64_t cut[8][2];
+        size_t ncut = s->ncut;
+        memcpy(cut, s->cut, sizeof cut);
+        s->ncut = 0;
         pthread_mutex_unlock(&s->lock);
         for (size_t i = 0; i < nk; i++)
             note_head_kill(&ks[i]);
+        for (size_t i = 0; i < ncut && i < 8; i++)
+            VX_WARN("http.file_cut_short", "bytes=%llu need=%llu", (unsigned long long)cut[i][0],
+                    (unsigned long long)cut[i][1]);
     }
     free(cand);
     free(ks);

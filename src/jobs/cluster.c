@@ -1016,7 +1016,9 @@ static void check_unsure(vx_jobs *j)
     int n = c->nunsure;
     memcpy(todo, c->unsure, (size_t)n * sizeof todo[0]);
     pthread_mutex_unlock(&c->lock);
-    for (int i = 0; i < n; i++) {
+    /* a third of a renewal period a turn at most: the leases come first */
+    const double until = vx_mono() + c->renew_s / 3;
+    for (int i = 0; i < n && vx_mono() < until; i++) {
         vx_pg_job row;
         vx_err err;
         vx_err_clear(&err);

@@ -92,6 +92,7 @@ static int remake_parent(const char *path)
     memcpy(dir, path, (size_t)(slash - path));
     dir[slash - path] = 0;
     if (mkdir(dir, 0750) != 0) {
+        if (errno == EEXIST) return 1; /* another request made it meanwhile */
         errno = ENOENT;
         return 0;
     }

@@ -160,7 +160,8 @@ int store_tmp_again(vx_store *s)
     char tmp[VX_PATH_MAX];
     snprintf(tmp, sizeof tmp, "%s/tmp", s->dir);
     if (mkdir(tmp, 0750) != 0) {
-        errno = ENOENT;
+        if (errno == EEXIST) return 1; /* another request made it meanwhile */
+        if (errno != ENOSPC && errno != EDQUOT) errno = ENOENT; /* a full disk stays one */
         return 0;
     }
     VX_WARN("store.dir_made_again", "path=%s", VX_Q(tmp));
