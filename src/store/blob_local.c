@@ -15,7 +15,6 @@
 #include <unistd.h>
 
 #include "util/fsutil.h"
-#include "util/log.h"
 #include "util/path.h"
 
 struct vx_blob {
@@ -80,24 +79,18 @@ static int local_path(vx_blob *b, const char *key, char *buf, size_t n)
     return 0;
 }
 
-/* After an ENOENT on path: makes its dir again when that dir alone is
- * missing (DATA/meshes removed behind the daemon; DATA itself is not made
- * again). 1 when made, so that the caller tries once more. */
+/* After an ENOENT on path: its dir made again when that dir alone is
+ * missing (DATA/meshes removed behind the daemon: vx_mkdir_again). 1 when
+ * it is there, so that the caller tries once more. */
 static int remake_parent(const char *path)
 {
-    if (errno != ENOENT) return 0;
     char dir[VX_PATH_MAX];
     const char *slash = strrchr(path, '/');
-    if (!slash || slash == path || (size_t)(slash - path) >= sizeof dir) return 0;
+    if (errno != ENOENT || !slash || slash == path || (size_t)(slash - path) >= sizeof dir)
+        return 0;
     memcpy(dir, path, (size_t)(slash - path));
     dir[slash - path] = 0;
-    if (mkdir(dir, 0750) != 0) {
-        if (errno == EEXIST) return 1; /* another request made it meanwhile */
-        errno = ENOENT;
-        return 0;
-    }
-    VX_WARN("store.dir_made_again", "path=%s", VX_Q(dir));
-    return 1;
+    return vx_mkdir_again(dir);
 }
 
 /* DATA/<ns>/tmp-<pid>-<seq>, written and fsync'd. */
@@ -154,9 +147,8 @@ static int local_put_bytes(vx_blob *b, const char *key, const void *data, size_t
     char path[VX_PATH_MAX];
     if (local_path(b, key, path, sizeof path))
         return vx_err_set(err, VX_EIO, "path_too_long", "a path is too long");
-    if (vx_write_atomic(path, data, n, NULL) == 0) return 0;
-    if (remake_parent(path) && vx_write_atomic(path, data, n, NULL) == 0) return 0;
-    return vx_write_atomic(path, data, n, err); /* the error, logged */
+    if (vx_write_atomic(path, data, n, err) == 0) return 0;
+    return remake_parent(path) ? vx_write_atomic(path, data, n, err) : -1;
 }
 
 static char *local_read(vx_blob *b, const char *key, size_t max, size_t *n, vx_err *err)

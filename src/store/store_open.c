@@ -5,7 +5,6 @@
 #include <stdlib.h>
 #include <string.h>
 #include <sys/file.h>
-#include <sys/stat.h>
 #include <unistd.h>
 
 #include "store/store_int.h"
@@ -156,16 +155,9 @@ const char *vx_store_dir(const vx_store *s)
 
 int store_tmp_again(vx_store *s)
 {
-    if (errno != ENOENT) return 0;
     char tmp[VX_PATH_MAX];
     snprintf(tmp, sizeof tmp, "%s/tmp", s->dir);
-    if (mkdir(tmp, 0750) != 0) {
-        if (errno == EEXIST) return 1; /* another request made it meanwhile */
-        if (errno != ENOSPC && errno != EDQUOT) errno = ENOENT; /* a full disk stays one */
-        return 0;
-    }
-    VX_WARN("store.dir_made_again", "path=%s", VX_Q(tmp));
-    return 1;
+    return vx_mkdir_again(tmp);
 }
 
 int vx_store_writable(vx_store *s)

@@ -41,6 +41,19 @@ int vx_mkdirs(const char *path, vx_err *err)
     return 0;
 }
 
+int vx_mkdir_again(const char *dir)
+{
+    if (errno != ENOENT) return 0;
+    if (mkdir(dir, 0750) != 0) {
+        if (errno == EEXIST) return 1; /* another request made it meanwhile */
+        if (errno != ENOSPC && errno != EDQUOT) errno = ENOENT; /* a full disk stays one */
+        return 0;
+    }
+    char q[600];
+    VX_WARN("store.dir_made_again", "path=%s", vx_log_quote(q, sizeof q, dir));
+    return 1;
+}
+
 int vx_fsync_dir(const char *dir, vx_err *err)
 {
     int fd = open(dir, O_RDONLY | O_DIRECTORY | O_CLOEXEC);

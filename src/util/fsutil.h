@@ -11,6 +11,12 @@
 
 /* mkdir -p with mode 0750; 0 or -1 (VX_EIO). */
 int vx_mkdirs(const char *path, vx_err *err);
+/* After an ENOENT (errno) creating a file in dir: makes dir again, one
+ * level only (removed behind the daemon; its parent is not made), mode
+ * 0750, logged as store.dir_made_again. 1 when dir is there now (made, or
+ * by another thread meanwhile), so that the caller tries once more; else 0
+ * with errno ENOENT (ENOSPC or EDQUOT for a full disk). */
+int vx_mkdir_again(const char *dir);
 /* fsync of a directory, so renames and creations inside it survive a crash. */
 int vx_fsync_dir(const char *dir, vx_err *err);
 /* Writes data to path atomically: temp file, fsync, rename, fsync dir. */
