@@ -490,17 +490,17 @@ static int gltf_accessors(gltf_ctx *g)
         double count = num(a, "count", -1), vi = num(a, "bufferView", -1),
                off = num(a, "byteOffset", 0);
         if (!cs || !nc || count < 1) return gl_fail(g, "%s %d is malformed", "accessor", i);
-        if (vi < 0)
-            return gl_fail(g,
-                           "%s %d has no bufferView (accessors of zeros, with or without sparse "
-                           "values, are not read)",
-                           "accessor", i);
         double elem = (double)cs * nc, stride = elem;
-        if (vi < g->nview) {
+        if (vi >= 0 && vi < g->nview) {
             double st = num(g->views[(int)vi], "byteStride", 0);
             if (st > 0) stride = st;
         }
-        if (!fits(g, vi, off, stride, count, elem))
+        /* no bufferView: count zeros (glTF 2.0 3.6.2.3), with or without
+         * sparse values; nothing backs the count, so the readers read
+         * only the elements the limits already bound (the vertices the
+         * indices name, the indices of counted triangles, a skin's joints) */
+        if (cJSON_GetObjectItemCaseSensitive(a, "bufferView") &&
+            !fits(g, vi, off, stride, count, elem))
             return gl_fail(g, "%s %d declares more elements than its bufferView holds", "accessor",
                            i);
         const cJSON *sp = cJSON_GetObjectItemCaseSensitive(a, "sparse");
@@ -540,6 +540,9 @@ static int gltf_mesh(gltf_ctx *g, double mi)
                         : pc;
         if (ic < 0) return gl_fail(g, "%s %.15g has a primitive with bad indices", "mesh", mi);
         double mode = num(p, "mode", 4);
+        if (!(mode >= 0 && mode <= 6)) /* points, lines (3 kinds), triangles (3) */
+            return gl_fail(g, "%s %.15g has a primitive of mode %.15g (glTF's are 0 to 6)", "mesh",
+                           mi, mode);
         double t = mode == 4 ? floor(ic / 3) : (mode == 5 || mode == 6) && ic >= 3 ? ic - 2 : 0;
         g->tris += (uint64_t)t;
         /* the reader keeps only the vertices the indices name */

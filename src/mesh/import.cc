@@ -487,15 +487,17 @@ int read_accessor(Gather &g, const tinygltf::Model &mo, int ai, Want want, const
     }
     if (!ok_type || !a.count) return gl_corrupt(g, "accessor", ai);
     size_t elem = cb * size_t(ncomp), stride = 0, n = pick ? npick : a.count;
-    const unsigned char *p = span(mo, a.bufferView, a.byteOffset, a.count, elem, &stride);
-    if (!p) return gl_corrupt(g, "accessor", ai);
+    /* no bufferView: zeros, then the sparse values (declared.c) */
+    const unsigned char *p =
+        a.bufferView < 0 ? nullptr : span(mo, a.bufferView, a.byteOffset, a.count, elem, &stride);
+    if (!p && a.bufferView >= 0) return gl_corrupt(g, "accessor", ai);
     auto put = [&](size_t row, const unsigned char *q) {
         for (int c = 0; c < ncomp; c++)
             out[row * size_t(ncomp) + size_t(c)] =
                 component(q + size_t(c) * cb, a.componentType, a.normalized);
     };
-    out.resize(n * size_t(ncomp));
-    for (size_t r = 0; r < n; r++)
+    out.assign(n * size_t(ncomp), 0.0);
+    for (size_t r = 0; p && r < n; r++)
         put(r, p + (pick ? size_t(pick[r]) : r) * stride);
     if (!a.sparse.isSparse) return 0;
     const auto &sp = a.sparse;
@@ -794,9 +796,16 @@ int skin_joints(Gather &g, const tinygltf::Model &mo, int si, Skins &sc,
     const std::vector<int> &parent = sc.parent;
     std::vector<double> ibm;
     if (sk.inverseBindMatrices >= 0) {
-        if (read_accessor(g, mo, sk.inverseBindMatrices, Want::mat4, nullptr, 0, ibm)) return -1;
-        if (ibm.size() < 16 * sk.joints.size())
+        /* a matrix a joint, the first ones only: an accessor of zeros
+         * (no bufferView) has nothing that bounds its count */
+        const int ia = sk.inverseBindMatrices;
+        if (size_t(ia) >= mo.accessors.size()) return gl_corrupt(g, "accessor", ia);
+        if (mo.accessors[size_t(ia)].count < sk.joints.size())
             return gl_corrupt(g, "skin (fewer inverse bind matrices than joints)", si);
+        std::vector<uint32_t> first(sk.joints.size());
+        for (size_t k = 0; k < first.size(); k++)
+            first[k] = uint32_t(k);
+        if (read_accessor(g, mo, ia, Want::mat4, first.data(), first.size(), ibm)) return -1;
     }
     out.resize(sk.joints.size());
     for (size_t k = 0; k < sk.joints.size(); k++) {

@@ -177,6 +177,86 @@ def gltf_skin():
     ])
 
 
+def gltf_views(doc_change, blobs):
+    """The cube as glTF with buffer views appended, one per blob (4-byte
+    aligned); doc_change(doc, first) edits the document, first being the
+    first new view's index."""
+    d, binary = gltf_parts()
+    first = len(d["bufferViews"])
+    for data in blobs:
+        binary += b"\0" * (-len(binary) % 4)
+        d["bufferViews"].append({"buffer": 0, "byteOffset": len(binary), "byteLength": len(data)})
+        binary += data
+    d["buffers"][0]["byteLength"] = len(binary)
+    d["buffers"][0]["uri"] = (
+        "data:application/octet-stream;base64," + base64.b64encode(binary).decode())
+    doc_change(d, first)
+    return json.dumps(d).encode()
+
+
+def sparse(count, view, ctype=5123):
+    return {"count": count, "indices": {"bufferView": view, "componentType": ctype},
+            "values": {"bufferView": view + 1}}
+
+
+def gltf_sparse_morph():
+    """A morph target as Blender writes a shape key that moves few
+    vertices: an accessor with no bufferView (zeros) and sparse values,
+    here +10 along x for the four vertices at x = 1: the cube stretched
+    to x = 11."""
+    moved = [i for i, v in enumerate(V) if v[0] == 1]
+
+    def change(d, first):
+        d["accessors"].append({"componentType": 5126, "count": len(V), "type": "VEC3",
+                               "sparse": sparse(len(moved), first)})
+        d["meshes"][0]["primitives"][0]["targets"] = [{"POSITION": len(d["accessors"]) - 1}]
+        d["meshes"][0]["weights"] = [1.0]
+    return gltf_views(change, [struct.pack("<%dH" % len(moved), *moved),
+                               b"".join(struct.pack("<3f", 10, 0, 0) for _ in moved)])
+
+
+def gltf_sparse_positions():
+    """POSITION with no bufferView, every vertex a sparse value (the cube
+    moved by +20 along x), byte indices."""
+    def change(d, first):
+        d["accessors"][1] = {"componentType": 5126, "count": len(V), "type": "VEC3",
+                             "sparse": sparse(len(V), first, 5121)}
+    return gltf_views(change, [bytes(range(len(V))),
+                               b"".join(struct.pack("<3f", x + 20, y, z) for x, y, z in V)])
+
+
+def gltf_sparse_ibm(count=10**15):
+    """The skinned cube (gltf_skin) whose inverse bind matrices have no
+    bufferView and declare count matrices, the first a sparse value: only
+    the joint's matrix may be read (count of them would not fit memory)."""
+    joints = b"".join(struct.pack("<4B", 0, 0, 0, 0) for _ in V)
+    weights = b"".join(struct.pack("<4f", 1, 0, 0, 0) for _ in V)
+    ibm = struct.pack("<16f", 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, -1, 0, 0, 1)
+
+    def change(d, first):
+        d["accessors"] += [
+            {"bufferView": first, "componentType": 5121, "count": len(V), "type": "VEC4"},
+            {"bufferView": first + 1, "componentType": 5126, "count": len(V), "type": "VEC4"},
+            {"componentType": 5126, "count": count, "type": "MAT4",
+             "sparse": sparse(1, first + 2, 5125)}]
+        a = len(d["accessors"])
+        d["meshes"][0]["primitives"][0]["attributes"].update(
+            {"JOINTS_0": a - 3, "WEIGHTS_0": a - 2})
+        d["nodes"] = [{"mesh": 0, "skin": 0}, {"translation": [3, 0, 0]}]
+        d["scenes"][0]["nodes"] = [0, 1]
+        d["skins"] = [{"joints": [1], "inverseBindMatrices": a - 1}]
+    return gltf_views(change, [joints, weights, struct.pack("<I", 0), ibm])
+
+
+def gltf_zero_huge():
+    """POSITION with no bufferView and no indices declaring 10^12 vertices:
+    a count nothing backs, 413 by the triangle limit before any read."""
+    def change(d, first):
+        d["accessors"][1] = {"componentType": 5126, "count": 10**12, "type": "VEC3"}
+        del d["meshes"][0]["primitives"][0]["indices"]
+    return gltf_views(change, [])
+
+
 def gltf_skin_short():
     """The skinned cube with JOINTS_0 and WEIGHTS_0 of one element (its
     eight vertices read past them: heap bytes came back in the message)."""
@@ -293,6 +373,10 @@ def main():
         "cube_morph.gltf": gltf_morph(),
         "cube_morph_node.gltf": gltf_morph([0.5]),
         "cube_skin.gltf": gltf_skin(),
+        "cube_sparse_morph.gltf": gltf_sparse_morph(),
+        "cube_sparse_pos.gltf": gltf_sparse_positions(),
+        "cube_sparse_ibm.gltf": gltf_sparse_ibm(),
+        "zero_huge.gltf": gltf_zero_huge(),
         "skin_short.gltf": gltf_skin_short(),
         "skin_many.gltf": gltf_skin_many(8000),
         "instances.glb": glb_instances(200000),
@@ -303,6 +387,8 @@ def main():
         "bad.gltf": b'{"asset": {"version": "2.0"}, "buffers": [',
         "bad.glb": glb()[:40],
         "bad.off": b"OFF\n8 6 0\n0 0 0\n1 0 0\nzz\n",
+        "mode7.gltf": gltf_doc({"meshes": [{"primitives": [
+            {"attributes": {"POSITION": 1}, "indices": 0, "mode": 7}]}]}),
         # declared counts that lie
         "lie.stl": stl_binary()[:80] + struct.pack("<I", 4000000000) + stl_binary()[84:],
         "lie.ply": ply("binary_little_endian", T, nverts=2000000000),
