@@ -148,5 +148,12 @@ int vx_grid_from_resolution(const vx_mesh *m, int resolution, int padding, vx_gr
         ext = fmax(ext, m->bbox_max[a] - m->bbox_min[a]);
     if (!(ext > 0))
         return vx_err_set(err, VX_EUNPROC, "degenerate_mesh", "the mesh has an empty bbox");
+    /* the longest axis gets resolution voxels, and the padding: said in
+     * the params the user gave, not the voxel_size they make */
+    if (resolution + 2.0 * padding > VX_GRID_MAX_DIM)
+        return vx_err_set(err, VX_ETOOBIG, "job_memory_limit",
+                          "resolution %d with padding %d gives %.0f voxels along the longest "
+                          "axis, the limit is %d",
+                          resolution, padding, resolution + 2.0 * padding, VX_GRID_MAX_DIM);
     return vx_grid_from_voxel_size(m, ext / resolution, padding, out, err);
 }

@@ -437,6 +437,14 @@ static int voxelize_check(void *params, const vx_limits *lim, vx_err *err)
          * coordinate): past it an origin became inf in the nrrd and binvox
          * headers and a singular .vdb transform. */
         for (int a = 0; a < 3; a++) {
+            /* every voxel's index, not only the first: a bricked box's
+             * last brick is an index_offset of its own */
+            const long last = p->grid.index_offset[a] + (long)p->grid.dims[a] - 1;
+            if (last > VX_GRID_INDEX_MAX)
+                return vx_err_set(err, VX_EUNPROC, "invalid_params",
+                                  "params.grid.index_offset[%d] + dims[%d] - 1 is %ld: every "
+                                  "voxel's lattice index must lie within +-2^40",
+                                  a, a, last);
             const double h = p->grid.voxel_size;
             const double lo = p->grid.origin[a] + (double)p->grid.index_offset[a] * h;
             const double hi = lo + (double)p->grid.dims[a] * h;

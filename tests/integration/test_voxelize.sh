@@ -339,6 +339,14 @@ for vs in 1e-6 5e-324; do
         jq -e '.error.message | test("params.voxel_size .* gives .*16384")' "$BODY"
 done
 
+# resolution with padding past 16384 names the params given, not the
+# voxel_size they make
+api POST "/v1/jobs?wait=60" -H "Content-Type: application/json" \
+    -d "{\"mesh\":\"$M_cube\",\"kind\":\"voxelize\",\"params\":{\"resolution\":16384,\"padding\":1,\"format\":\"summary\"}}"
+expect_error "resolution 16384 padding 1: 422 at submission" 422 invalid_params
+check "resolution 16384 padding 1: naming both ($(jq -c .error "$BODY"))" \
+    jq -e '.error.message | test("params.resolution 16384 with padding 1 gives 16386 .*16384")' "$BODY"
+
 # A level set's memory follows the surface, not the grid: a 256^3 sphere
 # (the worst case of every leaf partial would be ~470 MB) runs under 256M.
 vox "sphere r256 level set" "$M_sphere" '{"resolution":256,"format":"vdb","vdb_grid":"level_set"}'

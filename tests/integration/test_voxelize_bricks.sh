@@ -119,6 +119,12 @@ for t in 0 1 2; do
     bricked "$T" "$(jq -c ". + {format: \"vdb\", vdb_grid: \"fog\", bricks: {size: $S}}" <<<"$P")" "torus $m dims $NX,$NY,$NZ offset $ix,$iy,$iz bricks of $S"
     check "torus $t: index_offset echoed" jq -e ".stats.index_offset == [$ix,$iy,$iz] and .stats.bricks[0].index_offset == [$ix,$iy,$iz]" "$TMP/job.json"
 done
+# The box's last voxel at lattice index 2^40 exactly, as bricks: each
+# brick's index_offset within the limit (422 past it, below)
+ix=$((1099511627776 - 99))
+P=$(python3 -c "print('{\"grid\":{\"origin\":[%r,-1.55,-0.52],\"voxel_size\":0.03125,\"dims\":[100,100,33],\"index_offset\":[$ix,0,0]}}' % (-1.55 - $ix * 0.03125))")
+whole "$T" "$P"
+bricked "$T" "$(jq -c '. + {format: "vdb", vdb_grid: "fog", bricks: {size: 64}}' <<<"$P")" "torus ending at index 2^40, bricks of 64"
 
 api GET /v1/info
 check "info: limits.brick_threshold_cells is the flag's" jq -e '.limits.brick_threshold_cells == 200000' "$BODY"
@@ -193,7 +199,12 @@ bad "vdb_index_base off the leaf grid" '{"grid":{"origin":[0,0,0],"voxel_size":0
 bad "vdb_index_base with a dense format" '{"grid":{"origin":[0,0,0],"voxel_size":0.1,"dims":[8,8,8]},"bricks":{"size":0},"format":"raw8","vdb_index_base":[0,0,0]}' 'params.format "vdb"'
 bad "vdb_index_base past 32-bit coordinates" '{"grid":{"origin":[0,0,0],"voxel_size":0.1,"dims":[16,16,16],"index_offset":[2147483640,0,0]},"bricks":{"size":0},"vdb_index_base":[0,0,0]}' "outside +-2^30"
 bad "vdb_index_base far below" '{"grid":{"origin":[0,0,0],"voxel_size":0.1,"dims":[16,16,16],"index_offset":[0,-1099511627776,0]},"bricks":{"size":0},"vdb_index_base":[0,0,0]}' "axis 1"
-bad "a box past 1e30" '{"grid":{"origin":[0,0,0],"voxel_size":1e300,"dims":[4,4,4],"index_offset":[1099511627776,0,0]}}' "outside +-1e30"
+bad "a box past 1e30" '{"grid":{"origin":[0,0,0],"voxel_size":1e300,"dims":[4,4,4],"index_offset":[1099511627773,0,0]}}' "outside +-1e30"
+# every voxel's index within 2^40, not only the first: the last brick of
+# a box from 2^40 - 7 was an index_offset past it, the job failed after
+# its first brick (bricked or one job alike: 422 at submission)
+bad "a box past index 2^40" '{"grid":{"origin":[0,0,0],"voxel_size":0.5,"dims":[9,6,7],"index_offset":[1099511627772,0,0]},"bricks":{"size":8}}' "index_offset[0] + dims[0] - 1 is 1099511627780"
+bad "one job past index 2^40" '{"grid":{"origin":[0,0,0],"voxel_size":0.5,"dims":[9,6,7],"index_offset":[0,0,1099511627772]},"format":"raw1"}' "within +-2^40"
 bad "an origin of 1e308" '{"grid":{"origin":[1e308,0,0],"voxel_size":1,"dims":[4,4,4]}}' "outside +-1e30"
 # Voxels so small that the bunny reaches 10^19 of them from the origin:
 # no engine can run it (the cpu and winding ones failed the job
