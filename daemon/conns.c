@@ -18,6 +18,11 @@
  *     before the close resets the connection. Neither deadline is applied
  *     while bytes wait unread in the kernel: then libmicrohttpd's thread is
  *     busy (a handler parsing a large mesh), not the client slow.
+ *   - cuts a BUSY connection whose client acknowledged none of the answer
+ *     for --connection-timeout while bytes of it waited unsent: the
+ *     libmicrohttpd timeout is off while an answer is sent (vx_resp_queue),
+ *     as it measures its own writes, and the kernel wakes a writer only
+ *     when a third of the send buffer has drained (minutes at 30 KB/s).
  *   - cuts a BUSY connection whose answer the client reads slower than
  *     --min-send-rate over a 10 s window during which unsent bytes of it
  *     always waited in the kernel (the client's receive window full: a
@@ -102,6 +107,10 @@ struct vx_conn {
     double out_t0;
     uint64_t out_acked;
     double out_rate; /* bytes/s over the last whole window (-1: none, or keeping up) */
+    /* BUSY: the acknowledged count last seen while the answer waited on
+     * the client (-1: it did not), and since when it has not moved */
+    int64_t stall_acked;
+    double stall_t;
     int killed;      /* answered (or closed) by us behind libmicrohttpd's back */
     int kill_status; /* the status we wrote, 0 for none */
     int rd_closed;   /* shutdown(SHUT_RD) done */
@@ -335,6 +344,7 @@ void vx_conns_notify(void *cls, struct MHD_Connection *c, void **socket_context,
         vc->phase = P_HEAD;
         vc->t_phase = vx_mono();
         vc->out_rate = -1;
+        vc->stall_acked = -1;
         int known = peer_of(c, vc->peer);
         pthread_mutex_lock(&s->lock);
         uint64_t same = 1, max = s->cfg->max_connections_per_ip;
@@ -591,8 +601,21 @@ static void sweep(vx_conns *s, vx_conn **cand, head_kill *ks, size_t *nk, size_t
          * window during which it always waited on the client (a reader
          * that keeps up, an event stream between events, a ?wait hold and
          * a handler still working never start one). */
-        int64_t acked =
-            vc->phase == P_BUSY && cfg->min_send_rate ? vx_sockq_acked_while_waiting(vc->fd) : -1;
+        int64_t acked = vc->phase == P_BUSY && (cfg->min_send_rate || cfg->connection_timeout_s > 0)
+                            ? vx_sockq_acked_while_waiting(vc->fd)
+                            : -1;
+        /* An answer the client took nothing of for --connection-timeout
+         * while it waited on the client: libmicrohttpd's own idle timeout
+         * is off while an answer is sent (vx_resp_queue). */
+        if (acked < 0 || acked != vc->stall_acked) {
+            vc->stall_acked = acked;
+            vc->stall_t = now;
+        } else if (cfg->connection_timeout_s > 0 &&
+                   now - vc->stall_t >= cfg->connection_timeout_s) {
+            cut_reader(vc, 0, "connection_timeout");
+            continue;
+        }
+        if (!cfg->min_send_rate) acked = -1;
         if (acked < 0) {
             vc->out_started = 0;
             vc->out_rate = -1;
@@ -746,6 +769,16 @@ void vx_conns_stop(vx_conns *s)
     __atomic_store_n(&s->stop, 1, __ATOMIC_RELEASE);
     if (s->sweeper_started) pthread_join(s->sweeper, NULL);
     s->sweeper_started = 0;
+}
+
+size_t vx_conns_pending(vx_conns *s)
+{
+    size_t n = 0;
+    pthread_mutex_lock(&s->lock);
+    for (const vx_conn *vc = s->list; vc; vc = vc->next)
+        n += !vc->killed && vc->phase != P_IDLE;
+    pthread_mutex_unlock(&s->lock);
+    return n;
 }
 
 int vx_conns_shutdown(vx_conns *s)

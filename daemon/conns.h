@@ -30,6 +30,9 @@ void vx_conns_stop(vx_conns *s);
  * Returns how many were answered (their clients need a moment to read it
  * before libmicrohttpd closes the sockets). */
 int vx_conns_shutdown(vx_conns *s);
+/* The open connections that are not idle between requests (a head or body
+ * arriving, an answer being made or sent): what a stop waits for. */
+size_t vx_conns_pending(vx_conns *s);
 /* Stops the sweeper if running and frees s (after libmicrohttpd has
  * stopped: its close notifications use s). */
 void vx_conns_free(vx_conns *s);

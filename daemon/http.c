@@ -28,11 +28,13 @@
 #include <string.h>
 #include <strings.h>
 #include <sys/random.h>
+#include <arpa/inet.h>
 #include <netinet/in.h>
 #include <sys/socket.h>
 #include <unistd.h>
 
 #include "metrics.h"
+#include "sockq.h"
 #include "util/fsutil.h"
 #include "util/log.h"
 
@@ -123,16 +125,46 @@ static enum MHD_Result check_field(void *cls, enum MHD_ValueKind kind, const cha
     return n->bad || n->fold || n->nul ? MHD_NO : MHD_YES;
 }
 
-/* uri-host [":" port] (RFC 9112 3.2, RFC 3986 3.2.2): registered names,
- * IP literals and ports; empty for a target without an authority. Trailing
- * white space libmicrohttpd 0.9.75 leaves in a value is not the value's. */
+/* uri-host [":" port] (RFC 9112 3.2, RFC 3986 3.2.2): a registered name
+ * (unreserved, sub-delims and %XX escapes) or an IP literal in brackets,
+ * then at most one ":" and a port of digits up to 65535; empty for a target
+ * without an authority. Trailing white space libmicrohttpd 0.9.75 leaves
+ * in a value is not the value's. */
 static int host_ok(const char *v)
 {
-    size_t n = strlen(v);
+    size_t n = strlen(v), i = 0;
     while (n && (v[n - 1] == ' ' || v[n - 1] == '\t')) /* (not the value's: OWS) */
         n--;
-    for (size_t i = 0; i < n; i++)
-        if (!isalnum((unsigned char)v[i]) && !strchr("-._~%!$&'()*+,;=:[]", v[i])) return 0;
+    if (n && v[0] == '[') { /* an IPv6 address, or IPvFuture ("v" hex "." ...) */
+        for (i = 1; i < n && v[i] != ']'; i++)
+            if (!isalnum((unsigned char)v[i]) && !strchr(":.-_~!$&'()*+,;=", v[i])) return 0;
+        if (i == n || i == 1 || i - 1 >= INET6_ADDRSTRLEN) return 0; /* no "]", "[]" */
+        char a[INET6_ADDRSTRLEN];
+        struct in6_addr six;
+        memcpy(a, v + 1, i - 1);
+        a[i - 1] = 0;
+        if (a[0] != 'v' && a[0] != 'V' && inet_pton(AF_INET6, a, &six) != 1) return 0;
+        i++;
+    } else {
+        for (; i < n && v[i] != ':'; i++) {
+            if (v[i] == '%') {
+                if (i + 2 >= n || !isxdigit((unsigned char)v[i + 1]) ||
+                    !isxdigit((unsigned char)v[i + 2]))
+                    return 0;
+                i += 2;
+            } else if (!isalnum((unsigned char)v[i]) && !strchr("-._~!$&'()*+,;=", v[i])) {
+                return 0;
+            }
+        }
+    }
+    if (i == n) return 1;
+    if (v[i] != ':') return 0; /* "[::1]x" */
+    unsigned long port = 0;
+    for (i++; i < n; i++) {
+        if (!isdigit((unsigned char)v[i])) return 0;
+        port = port * 10 + (unsigned long)(v[i] - '0');
+        if (port > 65535) return 0;
+    }
     return 1;
 }
 
@@ -575,6 +607,17 @@ static void on_completed(void *cls, struct MHD_Connection *c, void **con_cls,
     int status = r->status ? r->status : 499; /* closed before an answer */
     int killed_with = vx_conns_done(h->conns, r->vc);
     if (killed_with) status = killed_with;
+    const union MHD_ConnectionInfo *ci =
+        r->timeout_off ? MHD_get_connection_info(c, MHD_CONNECTION_INFO_CONNECTION_FD) : NULL;
+    if (ci && toe != MHD_REQUEST_TERMINATED_COMPLETED_OK && r->acked0 >= 0) {
+        /* what reached the client, not what was queued (heads included) */
+        const int64_t acked = vx_sockq_acked(ci->connect_fd);
+        if (acked >= r->acked0 && (uint64_t)(acked - r->acked0) < r->bytes_out)
+            r->bytes_out = (uint64_t)(acked - r->acked0);
+    }
+    if (ci && toe == MHD_REQUEST_TERMINATED_COMPLETED_OK) /* the connection stays: idle again */
+        MHD_set_connection_option(c, MHD_CONNECTION_OPTION_TIMEOUT,
+                                  (unsigned)ceil(h->d.cfg->connection_timeout_s));
     static const char *known[] = {"GET", "HEAD", "POST", "PUT", "DELETE", "PATCH", "OPTIONS", NULL};
     const char *mlabel = "other";
     for (int i = 0; known[i]; i++)
@@ -769,11 +812,13 @@ void vx_http_stop(vx_http *h, double grace_s)
 {
     if (!h) return;
     vx_http_quiesce(h);
+    /* (a keep-alive connection idle between requests is not waited for:
+     * each held the stop for the whole grace) */
     double until = vx_mono() + grace_s;
     while (vx_mono() < until) {
         const union MHD_DaemonInfo *di =
             MHD_get_daemon_info(h->mhd, MHD_DAEMON_INFO_CURRENT_CONNECTIONS);
-        if (!di || di->num_connections == 0) break;
+        if (!di || di->num_connections == 0 || vx_conns_pending(h->conns) == 0) break;
         usleep(20000);
     }
     /* a head or body still arriving gets a 503, read before the close */

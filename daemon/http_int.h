@@ -47,6 +47,12 @@ typedef struct req {
     int post_job;      /* the held request was POST /v1/jobs */
     int post_existing; /* ... answered with a job that was there already (200) */
     int answered;
+    /* the answer turned libmicrohttpd's idle timeout off for its sending
+     * (vx_resp_queue): at its completion the timeout is put back, and an
+     * aborted answer's bytes_out is what the client acknowledged since
+     * (acked0: the connection's count when it was queued; -1 unknown) */
+    int timeout_off;
+    int64_t acked0;
     int refused;     /* a 413 was written past libmicrohttpd (vx_conns_refuse) */
     int close;       /* the answer closes the connection (Connection: close) */
     char rid[72];    /* X-Request-Id: the client's when sane, else made here */

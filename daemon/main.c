@@ -312,12 +312,19 @@ static vx_jobs *open_jobs(const vx_config *cfg, vx_store *store, int start, vx_e
  * journal holds everything acknowledged (each change was fsync'd), and
  * the running job is queued again at the next start (counted as an
  * interruption, see --max-attempts). */
+static int g_jobs_stopped; /* the watchdog's job is done: it exits nothing */
+
 static void *stop_watchdog(void *arg)
 {
     double s = *(double *)arg;
     struct timespec ts = {.tv_sec = (time_t)s, .tv_nsec = (long)((s - (time_t)s) * 1e9)};
     while (nanosleep(&ts, &ts) != 0 && errno == EINTR)
         ;
+    /* the jobs stopped in time: what is left (the connections' grace,
+     * bounded on its own) is no job's (an idle keep-alive connection made
+     * a --stop-timeout under its 2 s grace exit 1, saying a job had not
+     * stopped where there was none) */
+    if (__atomic_load_n(&g_jobs_stopped, __ATOMIC_ACQUIRE)) return NULL;
     VX_ERROR("voxeld.stop_timeout",
              "seconds=%g action=\"exit 1: the running job did not stop; it runs again at the "
              "next start\"",
@@ -542,6 +549,7 @@ int main(int argc, char **argv)
      * running job finish or go back to the queue, flush the journal. */
     vx_http_quiesce(http);
     vx_jobs_stop(jobs);
+    __atomic_store_n(&g_jobs_stopped, 1, __ATOMIC_RELEASE);
     vx_http_stop(http, 2.0);
     __atomic_store_n(&g_http, NULL, __ATOMIC_RELEASE);
     __atomic_store_n(&g_jobs, NULL, __ATOMIC_RELEASE);

@@ -9,6 +9,7 @@
 #include <strings.h>
 
 #include "http_int.h"
+#include "sockq.h"
 #include "util/fsutil.h"
 #include "util/log.h"
 #include "util/json.h"
@@ -134,6 +135,18 @@ int vx_resp_queue(struct MHD_Connection *c, req *r, unsigned status, struct MHD_
     r->answered = 1;
     int rc = MHD_queue_response(c, status, resp);
     MHD_destroy_response(resp);
+    /* libmicrohttpd's timeout counts from its last write, and the kernel
+     * wakes a writer only when a third of the send buffer (megabytes) has
+     * drained: a client reading a large answer at 30-100 KB/s was closed
+     * as idle mid-answer. While the answer is sent the sweeper judges the
+     * client by what it acknowledges (conns.c); on_completed puts the
+     * timeout back. */
+    const union MHD_ConnectionInfo *ci =
+        rc == MHD_YES ? MHD_get_connection_info(c, MHD_CONNECTION_INFO_CONNECTION_FD) : NULL;
+    if (ci) {
+        r->acked0 = vx_sockq_acked(ci->connect_fd);
+        r->timeout_off = MHD_set_connection_option(c, MHD_CONNECTION_OPTION_TIMEOUT, 0u) == MHD_YES;
+    }
     return rc;
 }
 

@@ -15,6 +15,11 @@ int64_t vx_sockq_acked_while_waiting(int fd)
      * network's time, not the client's */
     int unsent = 0;
     if (ioctl(fd, SIOCOUTQNSD, &unsent) != 0 || unsent <= 0) return -1;
+    return vx_sockq_acked(fd);
+}
+
+int64_t vx_sockq_acked(int fd)
+{
     struct tcp_info ti;
     socklen_t tl = sizeof ti;
     memset(&ti, 0, sizeof ti);

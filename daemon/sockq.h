@@ -11,5 +11,8 @@
  * while bytes of the answer wait unsent in the kernel (the client's
  * receive window is full); -1 when none wait, or fd is not TCP. */
 int64_t vx_sockq_acked_while_waiting(int fd);
+/* The bytes the client has acknowledged on fd (the whole connection's,
+ * heads included); -1 when fd is not TCP. */
+int64_t vx_sockq_acked(int fd);
 
 #endif

@@ -87,6 +87,53 @@ static const char *level_name(vx_log_level l)
     }
 }
 
+/* The UTF-8 sequence at p (n bytes left): its length, and its code point
+ * in *cp; 0 when it is not valid UTF-8 (overlong, a surrogate, cut). */
+static int utf8_at(const unsigned char *p, int n, unsigned *cp)
+{
+    int len = p[0] >= 0xf0 ? 4 : p[0] >= 0xe0 ? 3 : p[0] >= 0xc0 ? 2 : 0;
+    if (!len || len > n || p[0] > 0xf4) return 0;
+    unsigned c = p[0] & (0x7fu >> len);
+    for (int k = 1; k < len; k++) {
+        if ((p[k] & 0xc0) != 0x80) return 0;
+        c = c << 6 | (p[k] & 0x3fu);
+    }
+    static const unsigned min[5] = {0, 0, 0x80, 0x800, 0x10000};
+    if (c < min[len] || c > 0x10ffff || (c >= 0xd800 && c <= 0xdfff)) return 0;
+    *cp = c;
+    return len;
+}
+
+/* One message is one line a terminal shows as it is: control characters
+ * (C0, DEL) become spaces; bytes that are not UTF-8, C1 controls (NEL, the
+ * 8-bit CSI), the line and paragraph separators and the bidi controls
+ * (which reorder what a viewer shows) become '?'. In place (never longer);
+ * the new length. */
+static int clean_line(char *line, int n)
+{
+    int o = 0;
+    for (int i = 0; i < n;) {
+        const unsigned char b = (unsigned char)line[i];
+        if (b < 0x80) {
+            line[o++] = b < 0x20 || b == 0x7f ? ' ' : (char)b;
+            i++;
+            continue;
+        }
+        unsigned c = 0;
+        const int len = utf8_at((const unsigned char *)line + i, n - i, &c);
+        const int bad = !len || c <= 0x9f || c == 0x061c || c == 0x200e || c == 0x200f ||
+                        (c >= 0x2028 && c <= 0x202e) || (c >= 0x2066 && c <= 0x2069);
+        if (bad) {
+            line[o++] = '?';
+            i += len ? len : 1;
+        } else {
+            for (int k = 0; k < len; k++)
+                line[o++] = line[i++];
+        }
+    }
+    return o;
+}
+
 void vx_log(vx_log_level level, const char *event, const char *fmt, ...)
 {
     if (level > g_level) return;
@@ -111,9 +158,7 @@ void vx_log(vx_log_level level, const char *event, const char *fmt, ...)
         if (k > 0) n += k;
     }
     if ((size_t)n >= sizeof line - 1) n = (int)sizeof line - 2;
-    /* One message is one line: newlines inside values would split it. */
-    for (int i = 0; i < n; i++)
-        if (line[i] == '\n' || line[i] == '\r') line[i] = ' ';
+    n = clean_line(line, n);
     line[n++] = '\n';
     pthread_mutex_lock(&g_lock);
     fwrite(line, 1, (size_t)n, stderr);

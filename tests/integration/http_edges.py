@@ -127,3 +127,16 @@ report("a space in the target: 400", status.startswith("HTTP/1.1 400"), status)
 r = exchange(b"GET http://x/livez HTTP/1.1\r\nHost: x\r\n\r\n")
 status, _ = head_of(r)
 report("absolute-form target: 200", status.startswith("HTTP/1.1 200"), status)
+# Host is a host and an optional port (RFC 9112 3.2: 400 for an invalid
+# value): a port of digits up to 65535, one ":", brackets around an IPv6
+# address only, %XX escapes whole (each of these but the space was 200)
+for h in [b"a:b", b"a:-1", b"a:99999999999999999999", b"a:65536", b"[::1", b"[zz]:80",
+          b"[::1]x", b"a:1:2", b"%4", b"a b"]:
+    r = exchange(b"GET /livez HTTP/1.1\r\nHost: " + h + b"\r\nConnection: close\r\n\r\n")
+    status, _ = head_of(r)
+    report("Host %r: 400" % h, status.startswith("HTTP/1.1 400") and b"invalid_request" in r, status)
+for h in [b"example.com", b"example.com:8080", b"127.0.0.1:80", b"[::1]:8080", b"[v1.fe]", b"%41",
+          b"x:"]:
+    r = exchange(b"GET /livez HTTP/1.1\r\nHost: " + h + b"\r\nConnection: close\r\n\r\n")
+    status, _ = head_of(r)
+    report("Host %r: 200" % h, status.startswith("HTTP/1.1 200"), status)

@@ -125,16 +125,18 @@ def stall(port, data, seconds, sent=None, whole=False):
     print(json.dumps({"seconds": time.monotonic() - t0, "response": got.decode("latin-1")}))
 
 
-def read_slowly(port, path, rate, seconds, addrs, per_addr):
+def read_slowly(port, path, rate, seconds, addrs, per_addr, small_window=True):
     """GETs path on per_addr connections from each address, each with a
-    small receive window, and reads the answer at `rate` bytes/s for at
-    most `seconds`. Prints, for each, the bytes of the body read, the
-    body's length, and when the server cut it (null: it did not)."""
+    small receive window (or the kernel's own, which grows to megabytes),
+    and reads the answer at `rate` bytes/s for at most `seconds`. Prints,
+    for each, the bytes of the body read, the body's length, and when the
+    server cut it (null: it did not)."""
     conns = []  # [sock, t_connect, got, cut_at]
     for a in addrs:
         for _ in range(per_addr):
             s = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
-            s.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
+            if small_window:
+                s.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
             s.bind((a, 0))
             s.settimeout(2)
             s.connect(("127.0.0.1", port))
@@ -276,5 +278,8 @@ if __name__ == "__main__":
         per = int(sys.argv[6]) if len(sys.argv) > 6 else 1
         read_slowly(port, sys.argv[3], float(sys.argv[4]), float(sys.argv[5]),
                     sys.argv[7:] or ["127.0.0.1"], per)
+    elif cmd == "read-big":  # read-big PORT PATH RATE SECONDS: the kernel's windows
+        read_slowly(port, sys.argv[3], float(sys.argv[4]), float(sys.argv[5]), ["127.0.0.1"], 1,
+                    small_window=False)
     elif cmd == "keepalive-drip":
         keepalive_drip(port, float(sys.argv[3]))

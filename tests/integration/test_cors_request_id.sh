@@ -81,6 +81,25 @@ check "the log line has the concrete path" bash -c "grep -q 'path=/v1/jobs/01a20
 check "the log line has the template route" bash -c "grep -q 'route=/v1/jobs/{id} ' <<<'$LINE'"
 check "the log line has the client address" bash -c "grep -q 'client=127.0.0.1 ' <<<'$LINE'"
 check "off the journal, lines start with ts= (no syslog priority)" bash -c "grep -q '^ts=' <<<'$LINE'"
+# What a terminal would act on reaches no log line (C0 controls were made
+# spaces; DEL, C1 controls, bidi controls and bytes that are not UTF-8
+# went through as they were): DEL, U+009B (8-bit CSI), U+0085 (NEL),
+# U+202E (right-to-left override), U+2028 and a lone 0xff, in a path.
+n=0
+for p in a%7fb a%c2%9b31mb a%c2%85b a%e2%80%aeb a%e2%80%a8b a%ffb; do
+    n=$((n + 1))
+    api GET "/v1/jobs/$p" -H "X-Request-Id: clean-$n"
+    log_line http.request "clean-$n"
+done
+check "those lines are clean UTF-8 with the characters replaced" python3 - "$TMP/daemon.log" <<'PY'
+import re, sys
+lines = [l for l in open(sys.argv[1], "rb").read().split(b"\n") if b"request_id=clean-" in l]
+bad = re.compile("[\x00-\x1f\x7f-\x9f\u061c\u200e\u200f\u2028-\u202e\u2066-\u2069]")
+ok = len(lines) == 6 and all(not bad.search(l.decode("utf-8")) and
+                             re.search(rb"path=/v1/jobs/a[ ?](31m)?b ", l) for l in lines)
+print(lines if not ok else "clean")
+sys.exit(0 if ok else 1)
+PY
 # A 5xx's error line carries the request's id too (--max-event-streams 0:
 # every stream is 503).
 upload "$VX_SOURCE_DIR/examples/meshes/torus.obj"

@@ -136,7 +136,7 @@ check "png is not compressed again" test -z "$(header Content-Encoding)"
 # HEAD of a coded result or an event stream sends no length and no body,
 # 304s no Content-Length, list headers over several lines, If-Range with a
 # list, a space before a colon (smuggling), a space in the target,
-# absolute-form targets.
+# absolute-form targets, Host values that are not a host and port.
 python3 "$(dirname "$0")/http_edges.py" "$PORT" "$RAW_JOB" >"$TMP/edges.txt" 2>&1
 check "http_edges.py ran ($(tail -n 1 "$TMP/edges.txt"))" grep -q '^PASS ' "$TMP/edges.txt"
 while read -r verdict rest; do

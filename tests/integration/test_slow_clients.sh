@@ -163,6 +163,34 @@ api GET /livez
 expect_status "still serving" 200
 stop_daemon
 
+# --- --connection-timeout is idleness, not an answer read steadily: the
+# kernel wakes libmicrohttpd only when a third of a send buffer of
+# megabytes has drained, so a client reading 100 KB/s (100 x
+# --min-send-rate) was closed as idle mid-answer, its download cut short.
+# A reader that takes nothing is still cut after the timeout, and the log
+# counts the bytes that reached it, not the answer's length ---
+# (The client cannot see that cut for long: the close waits behind the
+# megabytes the kernels hold. The daemon's log line of the request says
+# when it ended: at the client's leaving, 12 s, not at 3 s.)
+from=$(($(wc -l <"$TMP/daemon.log") + 1))
+start_daemon --connection-timeout 3 || exit 1
+$SLOW read-big "$PORT" "$RES" 100000 12 >"$TMP/bigread.json"
+check "a reader at 100 KB/s reads on ($(cat "$TMP/bigread.json"))" \
+    jq -e '.[0].cut_at == null and .[0].body_read > 800000' "$TMP/bigread.json"
+sleep 0.5
+ms=$(tail -n +"$from" "$TMP/daemon.log" | grep -a 'event=http.request .*status=200 .*aborted=1' | head -n 1 | sed -n 's/.* ms=\([0-9.]*\).*/\1/p')
+check "... and is not cut by a 3 s idle timeout: its answer ended when it left (ms=$ms)" \
+    awk -v ms="${ms:-0}" 'BEGIN { exit !(ms >= 11000) }'
+$SLOW read-big "$PORT" "$RES" 0 12 >"$TMP/stallread.json"
+check "a reader that takes nothing is cut within 3 + 5 s ($(cat "$TMP/stallread.json"))" \
+    jq -e '.[0].cut_at != null and .[0].cut_at <= 8' "$TMP/stallread.json"
+check "logged as idle" grep -q 'event=http.slow_reader .*why=connection_timeout' "$TMP/daemon.log"
+out=$(grep -a 'event=http.request .*status=200 .*aborted=1' "$TMP/daemon.log" | tail -n 1 | sed -n 's/.* bytes_out=\([0-9]*\).*/\1/p')
+check "its bytes_out is what reached it, under the 16 MiB answer ($out)" test "${out:-16777216}" -lt 16777216
+api GET /livez
+expect_status "still serving after the cuts" 200
+stop_daemon
+
 # --- canned answers carry Date, and CORS for an allowed origin's body ---
 start_daemon --min-body-rate 1024 --cors-origin http://viewer.example || exit 1
 STALL_HEAD='POST /v1/meshes HTTP/1.1\r\nHost: x\r\nOrigin: http://viewer.example\r\nContent-Type: model/obj\r\nContent-Length: 100000\r\n\r\nv 0 0 0\n'

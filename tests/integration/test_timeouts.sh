@@ -159,6 +159,33 @@ check "a stop that hangs: exit 1 (got $rc)" test "$rc" -eq 1
 check "within --stop-timeout and a second" awk -v a="$T0" -v b="$T1" 'BEGIN {exit !(b - a < 2.5)}'
 check "logged as voxeld.stop_timeout" grep -q 'event=voxeld.stop_timeout seconds=1 ' "$TMP/daemon.log"
 
+# Jobs that stop at once with a client's keep-alive connection open and
+# idle: exit 0, at once. (The stop waited the connections' 2 s grace for
+# it, and a --stop-timeout under that exited 1 saying a job had not
+# stopped, where there was none.)
+from=$(($(wc -l <"$TMP/daemon.log") + 1))
+start_daemon --stop-timeout 1 || exit 1
+python3 - "$PORT" "$PID" >"$TMP/idle_stop.txt" <<'PY'
+import os, signal, socket, sys, time
+s = socket.create_connection(("127.0.0.1", int(sys.argv[1])))
+s.sendall(b"GET /livez HTTP/1.1\r\nHost: x\r\n\r\n")
+s.recv(1000)
+t0 = time.monotonic()
+os.kill(int(sys.argv[2]), signal.SIGTERM)
+try:
+    os.waitpid(int(sys.argv[2]), 0)
+except ChildProcessError:  # not our child: wait for it to go
+    while os.path.exists("/proc/%s" % sys.argv[2]):
+        time.sleep(0.02)
+print("%.2f" % (time.monotonic() - t0))
+PY
+rc=0
+wait "$PID" || rc=$?
+PID=
+check "an idle keep-alive connection at SIGTERM: exit 0 (got $rc)" test "$rc" -eq 0
+check "... within a second ($(cat "$TMP/idle_stop.txt") s)" awk '{exit !($1 < 1.0)}' "$TMP/idle_stop.txt"
+check "... and no stop_timeout line" bash -c "! tail -n +$from '$TMP/daemon.log' | grep -q 'event=voxeld.stop_timeout'"
+
 # A GL thread that stops answering (VOXELD_TEST_GL_STALL=6: its third ping,
 # about 2 s after the start, sleeps 6 s, as a driver call that does not
 # return would): /livez answers 503 gl_stalled once it has been silent past
