@@ -126,7 +126,9 @@ int vx_store_result_commit(vx_store *s, const char *jid, vx_err *err)
     }
     vx_err e;
     vx_err_clear(&e);
-    int rc = s->ops->sync(s->blob, key, &e);
+    /* the job's dir, then results/ that names it: a power loss after the
+     * journal said succeeded lost the whole dir (its entry unsynced) */
+    int rc = s->ops->sync(s->blob, key, &e) || s->ops->sync(s->blob, "results", &e);
     if (rc) {
         VX_ERROR("store.result_unsynced", "job=%s code=%s message=%s", jid, e.code,
                  vx_log_quote((char[600]){0}, 600, e.message));
