@@ -23,6 +23,11 @@
  *     libmicrohttpd timeout is off while an answer is sent (vx_resp_queue),
  *     as it measures its own writes, and the kernel wakes a writer only
  *     when a third of the send buffer has drained (minutes at 30 KB/s).
+ *   - closes a connection idle between requests for --connection-timeout
+ *     while that timeout is still off (the answer's last bytes were in
+ *     the kernel when libmicrohttpd was done: its clock, put back then,
+ *     closed a steady reader's connection before it had read them),
+ *     counted from when the kernel held nothing of the answer.
  *   - cuts a BUSY connection whose answer the client reads slower than
  *     --min-send-rate over a 10 s window during which unsent bytes of it
  *     always waited in the kernel (the client's receive window full: a
@@ -72,6 +77,7 @@
 #include <netinet/in.h>
 #include <netinet/tcp.h>
 #include <pthread.h>
+#include <stdatomic.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -107,10 +113,15 @@ struct vx_conn {
     double out_t0;
     uint64_t out_acked;
     double out_rate; /* bytes/s over the last whole window (-1: none, or keeping up) */
-    /* BUSY: the acknowledged count last seen while the answer waited on
-     * the client (-1: it did not), and since when it has not moved */
+    /* BUSY: the acknowledged count last seen while bytes of the answer
+     * were outstanding (-1: none were), and since when it has not moved */
     int64_t stall_acked;
     double stall_t;
+    /* libmicrohttpd's idle timeout is off (vx_conns_own_idle; set and
+     * cleared by the connection's thread); IDLE or HEAD: since when the
+     * kernel has held no byte of the last answer */
+    _Atomic int own_idle;
+    double quiet_t;
     int killed;      /* answered (or closed) by us behind libmicrohttpd's back */
     int kill_status; /* the status we wrote, 0 for none */
     int rd_closed;   /* shutdown(SHUT_RD) done */
@@ -218,6 +229,10 @@ static void unwatch(vx_conn *vc)
     vc->watch_fd = -1;
 }
 
+/* Origins are allowed (--cors-origin): every answer varies by Origin, the
+ * canned ones too (set at start). */
+static int g_vary_origin;
+
 static size_t kill_conn(vx_conn *vc, int status, const char *code, const char *message, int rd)
 {
     char body[1400], msg[2400], date[64], cors[512] = "", qc[128], qm[1200];
@@ -234,6 +249,8 @@ static size_t kill_conn(vx_conn *vc, int status, const char *code, const char *m
                      "Access-Control-Allow-Origin: %s\r\nAccess-Control-Expose-Headers: %s\r\n"
                      "Vary: Origin\r\n",
                      vc->origin, VX_CORS_EXPOSE);
+        else if (g_vary_origin)
+            snprintf(cors, sizeof cors, "Vary: Origin\r\n");
         time_t now = time(NULL);
         struct tm tm;
         strftime(date, sizeof date, "%a, %d %b %Y %H:%M:%S GMT", gmtime_r(&now, &tm));
@@ -530,6 +547,24 @@ static void sweep(vx_conns *s, vx_conn **cand, head_kill *ks, size_t *nk, size_t
             }
             continue;
         }
+        /* Idle between requests while libmicrohttpd's timeout is off
+         * (after a large answer whose bytes the kernel still held when it
+         * was done: its own clock, put back then, closed a steady reader's
+         * keep-alive connection before the client had read the answer). */
+        if (atomic_load(&vc->own_idle) && (vc->phase == P_IDLE || vc->phase == P_HEAD) &&
+            cfg->connection_timeout_s > 0) {
+            if (vx_sockq_queued(vc->fd) != 0) vc->quiet_t = now;
+            struct tcp_info ti;
+            socklen_t tl = sizeof ti;
+            const double got = getsockopt(vc->fd, IPPROTO_TCP, TCP_INFO, &ti, &tl) == 0
+                                   ? now - ti.tcpi_last_data_recv / 1000.0
+                                   : now;
+            if (now - vc->quiet_t >= cfg->connection_timeout_s &&
+                now - got >= cfg->connection_timeout_s) {
+                kill_conn(vc, 0, NULL, NULL, 1);
+                continue;
+            }
+        }
         if (vc->phase == P_IDLE) {
             /* A client that shut its side after its request (nc -N, a
              * half-close): libmicrohttpd read that EOF with the request and
@@ -601,21 +636,23 @@ static void sweep(vx_conns *s, vx_conn **cand, head_kill *ks, size_t *nk, size_t
          * window during which it always waited on the client (a reader
          * that keeps up, an event stream between events, a ?wait hold and
          * a handler still working never start one). */
-        int64_t acked = vc->phase == P_BUSY && (cfg->min_send_rate || cfg->connection_timeout_s > 0)
-                            ? vx_sockq_acked_while_waiting(vc->fd)
-                            : -1;
-        /* An answer the client took nothing of for --connection-timeout
-         * while it waited on the client: libmicrohttpd's own idle timeout
-         * is off while an answer is sent (vx_resp_queue). */
-        if (acked < 0 || acked != vc->stall_acked) {
-            vc->stall_acked = acked;
+        /* An answer of which the client acknowledged nothing for
+         * --connection-timeout while bytes of it were outstanding (unsent
+         * or in flight: a client gone without a word acknowledges nothing
+         * that was sent): libmicrohttpd's own idle timeout is off while an
+         * answer is sent (vx_resp_queue). */
+        int64_t held = vc->phase == P_BUSY && cfg->connection_timeout_s > 0
+                           ? vx_sockq_acked_while_outstanding(vc->fd)
+                           : -1;
+        if (held < 0 || held != vc->stall_acked) {
+            vc->stall_acked = held;
             vc->stall_t = now;
-        } else if (cfg->connection_timeout_s > 0 &&
-                   now - vc->stall_t >= cfg->connection_timeout_s) {
+        } else if (now - vc->stall_t >= cfg->connection_timeout_s) {
             cut_reader(vc, 0, "connection_timeout");
             continue;
         }
-        if (!cfg->min_send_rate) acked = -1;
+        int64_t acked =
+            vc->phase == P_BUSY && cfg->min_send_rate ? vx_sockq_acked_while_waiting(vc->fd) : -1;
         if (acked < 0) {
             vc->out_started = 0;
             vc->out_rate = -1;
@@ -755,6 +792,7 @@ vx_conns *vx_conns_start(const vx_config *cfg)
     vx_conns *s = calloc(1, sizeof *s);
     if (!s) return NULL;
     s->cfg = cfg;
+    g_vary_origin = cfg->cors_origin[0] != 0;
     size_t cap = ling_cap(cfg->max_connections);
     s->ling = calloc(cap, sizeof *s->ling);
     if (s->ling) s->cap_ling = cap;
@@ -868,11 +906,21 @@ int vx_conns_done(vx_conns *s, vx_conn *vc)
         status = vc->kill_status;
     else { /* keep-alive: the next head starts with its first byte */
         vc->phase = P_IDLE;
-        vc->t_phase = vx_mono();
+        vc->t_phase = vc->quiet_t = vx_mono();
     }
     unwatch(vc);
     pthread_mutex_unlock(&s->lock);
     return status;
+}
+
+void vx_conns_own_idle(vx_conn *vc, int on)
+{
+    if (vc) atomic_store(&vc->own_idle, on);
+}
+
+int vx_conns_owns_idle(const vx_conn *vc)
+{
+    return vc && atomic_load(&vc->own_idle);
 }
 
 void vx_conns_watch_file(vx_conns *s, vx_conn *vc, int fd, uint64_t need)

@@ -106,5 +106,11 @@ void vx_conns_watch_file(vx_conns *s, vx_conn *vc, int fd, uint64_t need);
 /* The request is over: vc idles until the next head. Returns the status the
  * sweeper answered vc with, 0 when it did not. */
 int vx_conns_done(vx_conns *s, vx_conn *vc);
+/* libmicrohttpd's idle timeout is off on vc's connection (on 1) or back
+ * (0): while off the sweeper closes the connection once it is idle between
+ * requests for --connection-timeout, counted from when the kernel holds no
+ * byte of the last answer and no byte of a next request has come. */
+void vx_conns_own_idle(vx_conn *vc, int on);
+int vx_conns_owns_idle(const vx_conn *vc);
 
 #endif

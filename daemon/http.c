@@ -135,15 +135,23 @@ static int host_ok(const char *v)
     size_t n = strlen(v), i = 0;
     while (n && (v[n - 1] == ' ' || v[n - 1] == '\t')) /* (not the value's: OWS) */
         n--;
-    if (n && v[0] == '[') { /* an IPv6 address, or IPvFuture ("v" hex "." ...) */
+    if (n && v[0] == '[') { /* an IPv6 address, or IPvFuture */
         for (i = 1; i < n && v[i] != ']'; i++)
             if (!isalnum((unsigned char)v[i]) && !strchr(":.-_~!$&'()*+,;=", v[i])) return 0;
-        if (i == n || i == 1 || i - 1 >= INET6_ADDRSTRLEN) return 0; /* no "]", "[]" */
-        char a[INET6_ADDRSTRLEN];
-        struct in6_addr six;
-        memcpy(a, v + 1, i - 1);
-        a[i - 1] = 0;
-        if (a[0] != 'v' && a[0] != 'V' && inet_pton(AF_INET6, a, &six) != 1) return 0;
+        if (i == n) return 0;             /* no "]" */
+        if (v[1] == 'v' || v[1] == 'V') { /* "v" 1*HEXDIG "." 1*(unreserved / sub-delims / ":") */
+            size_t k = 2;
+            while (k < i && isxdigit((unsigned char)v[k]))
+                k++;
+            if (k == 2 || k >= i || v[k] != '.' || k + 1 == i) return 0;
+        } else {
+            char a[INET6_ADDRSTRLEN];
+            struct in6_addr six;
+            if (i - 1 >= sizeof a) return 0;
+            memcpy(a, v + 1, i - 1);
+            a[i - 1] = 0;
+            if (inet_pton(AF_INET6, a, &six) != 1) return 0;
+        }
         i++;
     } else {
         for (; i < n && v[i] != ':'; i++) {
@@ -239,7 +247,9 @@ static int check_framing(struct MHD_Connection *c, req *r, const char *head, con
                             "a header line with an empty field name (': x', RFC 9110 5.1) or a "
                             "NUL at the last value's end");
     if (vx_conns_line_cut(r->vc, head, version))
-        return fail_framing(c, r, "a NUL in the request line's method or target");
+        return fail_framing(c, r,
+                            "a request line whose method, target and version are not split by "
+                            "single spaces, or a NUL in its method or target");
     if (vx_conns_target_bad(r->vc))
         return fail_framing(c, r,
                             "the request target has a space or a control character (escape it: "
@@ -256,6 +266,7 @@ static int check_framing(struct MHD_Connection *c, req *r, const char *head, con
     /* two Transfer-Encoding lines are one list (RFC 9112): libmicrohttpd
      * reads the first only, a proxy may go by the last */
     int coding = n.coding > 1 ? -1 : vx_req_transfer_encoding(te);
+    if (coding == -2) return fail_framing(c, r, "an empty Transfer-Encoding header");
     if (coding < 0)
         return vx_resp_fail(c, r, VX_ENOTIMPL, "not_implemented",
                             "the only transfer coding taken is chunked (no gzip, no lists)");
@@ -276,9 +287,19 @@ static int check_framing(struct MHD_Connection *c, req *r, const char *head, con
     return -1;
 }
 
+/* libmicrohttpd's idle timeout back on c (it was off while an answer was
+ * sent: vx_resp_queue); in the connection's own thread. */
+static void own_timeout(vx_http *h, struct MHD_Connection *c, vx_conn *vc)
+{
+    MHD_set_connection_option(c, MHD_CONNECTION_OPTION_TIMEOUT,
+                              (unsigned)ceil(h->d.cfg->connection_timeout_s));
+    vx_conns_own_idle(vc, 0);
+}
+
 static int first_call(vx_http *h, struct MHD_Connection *c, req *r, const char *head,
                       const char *version)
 {
+    if (vx_conns_owns_idle(r->vc)) own_timeout(h, c, r->vc); /* a next request has come */
     const union MHD_ConnectionInfo *ci =
         MHD_get_connection_info(c, MHD_CONNECTION_INFO_REQUEST_HEADER_SIZE);
     if (ci && ci->header_size > h->d.cfg->max_header_bytes)
@@ -615,9 +636,12 @@ static void on_completed(void *cls, struct MHD_Connection *c, void **con_cls,
         if (acked >= r->acked0 && (uint64_t)(acked - r->acked0) < r->bytes_out)
             r->bytes_out = (uint64_t)(acked - r->acked0);
     }
-    if (ci && toe == MHD_REQUEST_TERMINATED_COMPLETED_OK) /* the connection stays: idle again */
-        MHD_set_connection_option(c, MHD_CONNECTION_OPTION_TIMEOUT,
-                                  (unsigned)ceil(h->d.cfg->connection_timeout_s));
+    /* The connection stays, idle again: libmicrohttpd's clock back at
+     * once if the kernel holds nothing of the answer; else the sweeper
+     * keeps it until the client has read the answer, and the next
+     * request's head puts it back (own_timeout). */
+    if (ci && toe == MHD_REQUEST_TERMINATED_COMPLETED_OK && vx_sockq_queued(ci->connect_fd) == 0)
+        own_timeout(h, c, r->vc);
     static const char *known[] = {"GET", "HEAD", "POST", "PUT", "DELETE", "PATCH", "OPTIONS", NULL};
     const char *mlabel = "other";
     for (int i = 0; known[i]; i++)

@@ -312,19 +312,35 @@ static vx_jobs *open_jobs(const vx_config *cfg, vx_store *store, int start, vx_e
  * journal holds everything acknowledged (each change was fsync'd), and
  * the running job is queued again at the next start (counted as an
  * interruption, see --max-attempts). */
-static int g_jobs_stopped; /* the watchdog's job is done: it exits nothing */
+/* When the jobs had stopped (vx_mono; 0 until then). */
+static _Atomic double g_jobs_stopped_at;
+#define STOP_HTTP_GRACE_S 2.0 /* vx_http_stop's grace for requests arriving */
+
+static void sleep_s(double s)
+{
+    struct timespec ts = {.tv_sec = (time_t)s, .tv_nsec = (long)((s - (time_t)s) * 1e9)};
+    while (nanosleep(&ts, &ts) != 0 && errno == EINTR)
+        ;
+}
 
 static void *stop_watchdog(void *arg)
 {
     double s = *(double *)arg;
-    struct timespec ts = {.tv_sec = (time_t)s, .tv_nsec = (long)((s - (time_t)s) * 1e9)};
-    while (nanosleep(&ts, &ts) != 0 && errno == EINTR)
-        ;
-    /* the jobs stopped in time: what is left (the connections' grace,
-     * bounded on its own) is no job's (an idle keep-alive connection made
-     * a --stop-timeout under its 2 s grace exit 1, saying a job had not
-     * stopped where there was none) */
-    if (__atomic_load_n(&g_jobs_stopped, __ATOMIC_ACQUIRE)) return NULL;
+    sleep_s(s);
+    /* The jobs stopped in time: what is left is the server's own stop,
+     * given the requests' grace and a second more past the jobs' stop (a
+     * --stop-timeout under that grace exited 1 with an idle keep-alive
+     * connection open, saying a job had not stopped where there was none). */
+    const double at = atomic_load(&g_jobs_stopped_at);
+    if (at > 0) {
+        const double left = at + STOP_HTTP_GRACE_S + 1.0 - vx_mono();
+        if (left > 0) sleep_s(left);
+        VX_ERROR("voxeld.stop_timeout",
+                 "seconds=%g action=\"exit 1: the jobs stopped, the server did not (a request "
+                 "or the store)\"",
+                 s);
+        _exit(1);
+    }
     VX_ERROR("voxeld.stop_timeout",
              "seconds=%g action=\"exit 1: the running job did not stop; it runs again at the "
              "next start\"",
@@ -549,8 +565,8 @@ int main(int argc, char **argv)
      * running job finish or go back to the queue, flush the journal. */
     vx_http_quiesce(http);
     vx_jobs_stop(jobs);
-    __atomic_store_n(&g_jobs_stopped, 1, __ATOMIC_RELEASE);
-    vx_http_stop(http, 2.0);
+    atomic_store(&g_jobs_stopped_at, vx_mono());
+    vx_http_stop(http, STOP_HTTP_GRACE_S);
     __atomic_store_n(&g_http, NULL, __ATOMIC_RELEASE);
     __atomic_store_n(&g_jobs, NULL, __ATOMIC_RELEASE);
     vx_jobs_free(jobs);

@@ -289,7 +289,7 @@ char *vx_metrics_render(const vx_metrics_gauges *g)
               "# TYPE voxeld_http_bytes_received_total counter\n"
               "voxeld_http_bytes_received_total %llu\n"
               "# HELP voxeld_http_bytes_sent_total Response body bytes sent (of an answer cut "
-              "short, the bytes the client acknowledged).\n"
+              "short, the bytes the client acknowledged, its head included).\n"
               "# TYPE voxeld_http_bytes_sent_total counter\n"
               "voxeld_http_bytes_sent_total %llu\n",
               (unsigned long long)g_bytes_in, (unsigned long long)g_bytes_out);

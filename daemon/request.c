@@ -153,6 +153,7 @@ void vx_req_media_type(const char *ct, char *out, size_t n)
 int vx_req_transfer_encoding(const char *te)
 {
     if (!te) return 0;
+    if (!te[strspn(te, " \t")]) return -2; /* an empty value: no coding at all, malformed */
     /* exactly as libmicrohttpd reads it: "chunked " (trailing white space,
      * which it keeps) it does not take as chunked, and read the body to
      * the connection's end while this took it for chunks */
@@ -767,6 +768,7 @@ static double coding_q(const char *p, const char *end)
     q = *p++ - '0';
     if (p < end && *p == '.')
         for (p++; p < end && *p >= '0' && *p <= '9'; p++) {
+            if (scale < 0.0015) return -1; /* qvalue: at most three decimals (RFC 9110 12.4.2) */
             scale /= 10;
             q += (*p - '0') * scale;
         }

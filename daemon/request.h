@@ -80,7 +80,8 @@ void vx_req_media_type(const char *ct, char *out, size_t n);
 
 /* Reads a Transfer-Encoding value (NULL = none): 0 for none, 1 for exactly
  * "chunked" (any case, no white space around it: libmicrohttpd's test),
- * -1 for anything else (gzip, lists, "chunked " ...). */
+ * -1 for anything else (gzip, lists, "chunked " ...), -2 for an empty value
+ * (white space only). */
 int vx_req_transfer_encoding(const char *te);
 /* Parses a Content-Length value: digits only (no sign or space), at most
  * 19 of them. 0 or -1. */

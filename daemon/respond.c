@@ -146,6 +146,7 @@ int vx_resp_queue(struct MHD_Connection *c, req *r, unsigned status, struct MHD_
     if (ci) {
         r->acked0 = vx_sockq_acked(ci->connect_fd);
         r->timeout_off = MHD_set_connection_option(c, MHD_CONNECTION_OPTION_TIMEOUT, 0u) == MHD_YES;
+        if (r->timeout_off) vx_conns_own_idle(r->vc, 1);
     }
     return rc;
 }

@@ -18,6 +18,17 @@ int64_t vx_sockq_acked_while_waiting(int fd)
     return vx_sockq_acked(fd);
 }
 
+int64_t vx_sockq_acked_while_outstanding(int fd)
+{
+    return vx_sockq_queued(fd) > 0 ? vx_sockq_acked(fd) : -1;
+}
+
+int64_t vx_sockq_queued(int fd)
+{
+    int queued = 0;
+    return ioctl(fd, SIOCOUTQ, &queued) == 0 ? queued : -1;
+}
+
 int64_t vx_sockq_acked(int fd)
 {
     struct tcp_info ti;

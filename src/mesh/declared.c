@@ -499,6 +499,9 @@ static int gltf_accessors(gltf_ctx *g)
          * sparse values; nothing backs the count, so the readers read
          * only the elements the limits already bound (the vertices the
          * indices name, the indices of counted triangles, a skin's joints) */
+        if (!cJSON_GetObjectItemCaseSensitive(a, "bufferView") && count > UINT32_MAX)
+            return gl_fail(g, "%s %d declares %.15g elements of zeros (at most 2^32 - 1)",
+                           "accessor", i, count);
         if (cJSON_GetObjectItemCaseSensitive(a, "bufferView") &&
             !fits(g, vi, off, stride, count, elem))
             return gl_fail(g, "%s %d declares more elements than its bufferView holds", "accessor",
@@ -525,6 +528,11 @@ static double acc_count(gltf_ctx *g, double ai)
     return num(g->accs[(int)ai], "count", -1);
 }
 
+static uint64_t sat_add(uint64_t a, uint64_t b)
+{
+    return a > UINT64_MAX - b ? UINT64_MAX : a + b;
+}
+
 /* Adds mesh mi's triangles and vertices (one instance) to g. */
 static int gltf_mesh(gltf_ctx *g, double mi)
 {
@@ -544,9 +552,11 @@ static int gltf_mesh(gltf_ctx *g, double mi)
             return gl_fail(g, "%s %.15g has a primitive of mode %.15g (glTF's are 0 to 6)", "mesh",
                            mi, mode);
         double t = mode == 4 ? floor(ic / 3) : (mode == 5 || mode == 6) && ic >= 3 ? ic - 2 : 0;
-        g->tris += (uint64_t)t;
+        /* (saturated: counts of zeros, which nothing backs, may be 2^32
+         * each, and a file of 10^4 instances of them wrapped the sums to 0) */
+        g->tris = sat_add(g->tris, (uint64_t)t);
         /* the reader keeps only the vertices the indices name */
-        g->verts += (uint64_t)(ic < pc ? ic : pc);
+        g->verts = sat_add(g->verts, (uint64_t)(ic < pc ? ic : pc));
     }
     return 0;
 }

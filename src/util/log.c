@@ -104,18 +104,22 @@ static int utf8_at(const unsigned char *p, int n, unsigned *cp)
     return len;
 }
 
-/* One message is one line a terminal shows as it is: control characters
- * (C0, DEL) become spaces; bytes that are not UTF-8, C1 controls (NEL, the
- * 8-bit CSI), the line and paragraph separators and the bidi controls
- * (which reorder what a viewer shows) become '?'. In place (never longer);
- * the new length. */
+/* One message is one line a terminal shows as it is: line ends and tabs
+ * become spaces (a value that may hold them is quoted: vx_log_quote); the
+ * other controls (C0, DEL: a space there would split a bare value into
+ * two fields), bytes that are not UTF-8, C1 controls (NEL, the 8-bit CSI),
+ * the line and paragraph separators and the bidi controls (which reorder
+ * what a viewer shows) become '?'. In place (never longer); the new
+ * length. */
 static int clean_line(char *line, int n)
 {
     int o = 0;
     for (int i = 0; i < n;) {
         const unsigned char b = (unsigned char)line[i];
         if (b < 0x80) {
-            line[o++] = b < 0x20 || b == 0x7f ? ' ' : (char)b;
+            line[o++] = b == '\n' || b == '\r' || b == '\t' ? ' '
+                        : b < 0x20 || b == 0x7f             ? '?'
+                                                            : (char)b;
             i++;
             continue;
         }

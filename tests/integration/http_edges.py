@@ -131,7 +131,7 @@ report("absolute-form target: 200", status.startswith("HTTP/1.1 200"), status)
 # value): a port of digits up to 65535, one ":", brackets around an IPv6
 # address only, %XX escapes whole (each of these but the space was 200)
 for h in [b"a:b", b"a:-1", b"a:99999999999999999999", b"a:65536", b"[::1", b"[zz]:80",
-          b"[::1]x", b"a:1:2", b"%4", b"a b"]:
+          b"[::1]x", b"a:1:2", b"%4", b"a b", b"[v]", b"[vzz]", b"[v1.]"]:
     r = exchange(b"GET /livez HTTP/1.1\r\nHost: " + h + b"\r\nConnection: close\r\n\r\n")
     status, _ = head_of(r)
     report("Host %r: 400" % h, status.startswith("HTTP/1.1 400") and b"invalid_request" in r, status)

@@ -125,21 +125,33 @@ def gltf_doc(doc):
     return json.dumps(d).encode()
 
 
-def gltf_extra(doc_change, extra):
-    """The cube as glTF with buffer views and accessors appended: extra is
-    a list of (bytes, accessor dict without bufferView); doc_change(doc,
-    first) edits the document, first being the first new accessor's index."""
+def gltf_views(doc_change, blobs):
+    """The cube as glTF with buffer views appended, one per blob (4-byte
+    aligned); doc_change(doc, first) edits the document, first being the
+    first new view's index."""
     d, binary = gltf_parts()
-    first = len(d["accessors"])
-    for data, acc in extra:
+    first = len(d["bufferViews"])
+    for data in blobs:
+        binary += b"\0" * (-len(binary) % 4)
         d["bufferViews"].append({"buffer": 0, "byteOffset": len(binary), "byteLength": len(data)})
-        d["accessors"].append(dict(acc, bufferView=len(d["bufferViews"]) - 1))
         binary += data
     d["buffers"][0]["byteLength"] = len(binary)
     d["buffers"][0]["uri"] = (
         "data:application/octet-stream;base64," + base64.b64encode(binary).decode())
     doc_change(d, first)
     return json.dumps(d).encode()
+
+
+def gltf_extra(doc_change, extra):
+    """The cube as glTF with buffer views and accessors appended: extra is
+    a list of (bytes, accessor dict without bufferView); doc_change(doc,
+    first) edits the document, first being the first new accessor's index."""
+    def change(d, view):
+        first = len(d["accessors"])
+        for k, (_, acc) in enumerate(extra):
+            d["accessors"].append(dict(acc, bufferView=view + k))
+        doc_change(d, first)
+    return gltf_views(change, [data for data, _ in extra])
 
 
 def gltf_morph(node_weights=None):
@@ -177,23 +189,6 @@ def gltf_skin():
     ])
 
 
-def gltf_views(doc_change, blobs):
-    """The cube as glTF with buffer views appended, one per blob (4-byte
-    aligned); doc_change(doc, first) edits the document, first being the
-    first new view's index."""
-    d, binary = gltf_parts()
-    first = len(d["bufferViews"])
-    for data in blobs:
-        binary += b"\0" * (-len(binary) % 4)
-        d["bufferViews"].append({"buffer": 0, "byteOffset": len(binary), "byteLength": len(data)})
-        binary += data
-    d["buffers"][0]["byteLength"] = len(binary)
-    d["buffers"][0]["uri"] = (
-        "data:application/octet-stream;base64," + base64.b64encode(binary).decode())
-    doc_change(d, first)
-    return json.dumps(d).encode()
-
-
 def sparse(count, view, ctype=5123):
     return {"count": count, "indices": {"bufferView": view, "componentType": ctype},
             "values": {"bufferView": view + 1}}
@@ -225,7 +220,7 @@ def gltf_sparse_positions():
                                b"".join(struct.pack("<3f", x + 20, y, z) for x, y, z in V)])
 
 
-def gltf_sparse_ibm(count=10**15):
+def gltf_sparse_ibm(count=2**32 - 1):
     """The skinned cube (gltf_skin) whose inverse bind matrices have no
     bufferView and declare count matrices, the first a sparse value: only
     the joint's matrix may be read (count of them would not fit memory)."""
@@ -248,11 +243,12 @@ def gltf_sparse_ibm(count=10**15):
     return gltf_views(change, [joints, weights, struct.pack("<I", 0), ibm])
 
 
-def gltf_zero_huge():
-    """POSITION with no bufferView and no indices declaring 10^12 vertices:
-    a count nothing backs, 413 by the triangle limit before any read."""
+def gltf_zero_huge(count=3 * 10**9):
+    """POSITION with no bufferView and no indices declaring count vertices:
+    a count nothing backs, 413 by the triangle limit before any read (past
+    2^32 - 1, what the importer reads at most, 400)."""
     def change(d, first):
-        d["accessors"][1] = {"componentType": 5126, "count": 10**12, "type": "VEC3"}
+        d["accessors"][1] = {"componentType": 5126, "count": count, "type": "VEC3"}
         del d["meshes"][0]["primitives"][0]["indices"]
     return gltf_views(change, [])
 
@@ -377,6 +373,7 @@ def main():
         "cube_sparse_pos.gltf": gltf_sparse_positions(),
         "cube_sparse_ibm.gltf": gltf_sparse_ibm(),
         "zero_huge.gltf": gltf_zero_huge(),
+        "zero_2e33.gltf": gltf_zero_huge(2**33),
         "skin_short.gltf": gltf_skin_short(),
         "skin_many.gltf": gltf_skin_many(8000),
         "instances.glb": glb_instances(200000),

@@ -180,6 +180,54 @@ def read_slowly(port, path, rate, seconds, addrs, per_addr, small_window=True):
     print(json.dumps(out))
 
 
+def read_then_reuse(port, path, rate):
+    """GETs path on a keep-alive connection with the kernel's own windows,
+    reads the whole answer at `rate` bytes/s, then sends GET /livez on the
+    same connection. Prints the body's length read and the second answer's
+    status line ("" when the server had closed the connection)."""
+    s = socket.create_connection(("127.0.0.1", port))
+    s.sendall(b"GET " + path.encode() + b" HTTP/1.1\r\nHost: x\r\n\r\n")
+    s.settimeout(10)
+    got = b""
+    while b"\r\n\r\n" not in got:
+        b = s.recv(65536)
+        if not b:
+            break
+        got += b
+    head, _, body = got.partition(b"\r\n\r\n")
+    n = [int(l.split(b":")[1]) for l in head.split(b"\r\n") if l.lower().startswith(b"content-length:")]
+    length = n[0] if n else 0
+    t0 = last = time.monotonic()
+    budget = 0.0
+    read = len(body)
+    while read < length:
+        time.sleep(0.02)
+        now = time.monotonic()
+        budget += rate * (now - last)
+        last = now
+        take = int(budget)
+        if take <= 0:
+            continue
+        b = s.recv(min(take, length - read))
+        if not b:
+            break
+        budget -= len(b)
+        read += len(b)
+    second = b""
+    try:
+        s.sendall(b"GET /livez HTTP/1.1\r\nHost: x\r\n\r\n")
+        while b"\r\n" not in second:
+            b = s.recv(4096)
+            if not b:
+                break
+            second += b
+    except OSError:
+        pass
+    s.close()
+    print(json.dumps({"body_read": read, "length": length, "seconds": round(time.monotonic() - t0, 2),
+                      "second": second.split(b"\r\n")[0].decode("latin-1")}))
+
+
 def keepalive_drip(port, seconds):
     s = socket.create_connection(("127.0.0.1", port))
     s.sendall(b"GET /livez HTTP/1.1\r\nHost: x\r\n\r\n")
@@ -281,5 +329,7 @@ if __name__ == "__main__":
     elif cmd == "read-big":  # read-big PORT PATH RATE SECONDS: the kernel's windows
         read_slowly(port, sys.argv[3], float(sys.argv[4]), float(sys.argv[5]), ["127.0.0.1"], 1,
                     small_window=False)
+    elif cmd == "read-reuse":  # read-reuse PORT PATH RATE
+        read_then_reuse(port, sys.argv[3], float(sys.argv[4]))
     elif cmd == "keepalive-drip":
         keepalive_drip(port, float(sys.argv[3]))

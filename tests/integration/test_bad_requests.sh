@@ -460,6 +460,14 @@ raw_http hostspace 'GET /livez HTTP/1.1\r\nHost: a b\r\n\r\n'
 expect_raw hostspace 400 invalid_request
 raw_http hostbytes 'GET /livez HTTP/1.1\r\nHost: \xff\xfe\r\n\r\n'
 expect_raw hostbytes 400 invalid_request
+# An empty Transfer-Encoding is malformed (400), not a coding voxeld lacks
+# (it was 501); two spaces in the request line are said to be that (the
+# message spoke of a NUL).
+raw_http teempty 'POST /v1/jobs HTTP/1.1\r\nHost: x\r\nTransfer-Encoding: \r\n\r\n'
+expect_raw teempty 400 invalid_request
+raw_http twospaces 'GET  /livez HTTP/1.1\r\nHost: x\r\n\r\n'
+expect_raw twospaces 400 invalid_request
+check "twospaces: the message says so" bash -c "tr -d '\r' <'$TMP/twospaces.raw' | sed '1,/^$/d' | jq -e '.error.message | test(\"single spaces\")'"
 for h in '[::1]:8080' 'example.com:80' '127.0.0.1' '' 'a.example  ' 'a.example\t'; do
     raw_http hostok "GET /livez HTTP/1.1\\r\\nHost: $h\\r\\n\\r\\n"
     check "Host: '$h': 200" bash -c "head -n 1 '$TMP/hostok.raw' | grep -q '^HTTP/1.1 200 '"

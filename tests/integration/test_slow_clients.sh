@@ -181,6 +181,16 @@ sleep 0.5
 ms=$(tail -n +"$from" "$TMP/daemon.log" | grep -a 'event=http.request .*status=200 .*aborted=1' | head -n 1 | sed -n 's/.* ms=\([0-9.]*\).*/\1/p')
 check "... and is not cut by a 3 s idle timeout: its answer ended when it left (ms=$ms)" \
     awk -v ms="${ms:-0}" 'BEGIN { exit !(ms >= 11000) }'
+# ... nor is its keep-alive connection closed while the kernel still holds
+# the answer's tail: a 4 MB answer read whole at 600 KB/s (7 s;
+# libmicrohttpd is done with it within the first second or two, and its
+# clock then closed the connection as idle 3 s later), and the next
+# request on it is answered
+run_job voxelize "$MESH_ID" '{"resolution":160,"format":"raw8"}'
+job_ok "a 4 MB result"
+$SLOW read-reuse "$PORT" "$(jq -r .outputs.voxels "$TMP/job.json")" 600000 >"$TMP/reuse.json"
+check "a 4 MB answer read at 600 KB/s, then a request on the same connection: 200 ($(cat "$TMP/reuse.json"))" \
+    jq -e '.body_read == .length and .length == 4096000 and (.second | startswith("HTTP/1.1 200"))' "$TMP/reuse.json"
 $SLOW read-big "$PORT" "$RES" 0 12 >"$TMP/stallread.json"
 check "a reader that takes nothing is cut within 3 + 5 s ($(cat "$TMP/stallread.json"))" \
     jq -e '.[0].cut_at != null and .[0].cut_at <= 8' "$TMP/stallread.json"
@@ -192,13 +202,19 @@ expect_status "still serving after the cuts" 200
 stop_daemon
 
 # --- canned answers carry Date, and CORS for an allowed origin's body ---
-start_daemon --min-body-rate 1024 --cors-origin http://viewer.example || exit 1
+start_daemon --min-body-rate 1024 --header-timeout 2 --cors-origin http://viewer.example || exit 1
 STALL_HEAD='POST /v1/meshes HTTP/1.1\r\nHost: x\r\nOrigin: http://viewer.example\r\nContent-Type: model/obj\r\nContent-Length: 100000\r\n\r\nv 0 0 0\n'
 $SLOW stall "$PORT" "$STALL_HEAD" 8 >"$TMP/cors408.json"
 check "stalled body with an Origin: 408 ($(jq -c . "$TMP/cors408.json" | head -c 200))" \
     jq -e '.response | test("^HTTP/1.1 408")' "$TMP/cors408.json"
 check "the 408 has Date" jq -e '.response | test("\r\nDate: [A-Z][a-z]{2}, [0-9]{2} [A-Z][a-z]{2} [0-9]{4} [0-9:]{8} GMT\r\n")' "$TMP/cors408.json"
 check "the 408 allows the origin" jq -e '.response | test("\r\nAccess-Control-Allow-Origin: http://viewer.example\r\n")' "$TMP/cors408.json"
+# a head that never came whole has no origin to allow, but with origins
+# allowed every answer varies by Origin, this 408 too
+$SLOW stall "$PORT" 'GET /livez HTTP/1.1\r\nHost: x\r\n' 8 >"$TMP/head408.json"
+check "a stalled head: 408 ($(jq -c . "$TMP/head408.json" | head -c 200))" \
+    jq -e '.response | test("^HTTP/1.1 408")' "$TMP/head408.json"
+check "... with Vary: Origin" jq -e '.response | test("\r\nVary: Origin\r\n")' "$TMP/head408.json"
 
 # --- SIGTERM while a body arrives: a JSON 503 to retry, not a bare close ---
 $SLOW stall "$PORT" "$STALL_HEAD" 8 "$TMP/term.sent" >"$TMP/term.json" &

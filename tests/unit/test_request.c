@@ -170,6 +170,9 @@ static void test_numbers(void **state)
     /* libmicrohttpd keeps trailing white space and then reads no chunks */
     assert_int_equal(vx_req_transfer_encoding("chunked "), -1);
     assert_int_equal(vx_req_transfer_encoding("chunked\t"), -1);
+    /* an empty value is malformed (400), not a coding not implemented (501) */
+    assert_int_equal(vx_req_transfer_encoding(""), -2);
+    assert_int_equal(vx_req_transfer_encoding(" \t"), -2);
 }
 
 static void test_utf8(void **state)
@@ -263,6 +266,9 @@ static void test_negotiation(void **state)
     assert_int_equal(vx_req_accept_coding("zstd"), VX_CODING_ZSTD);
     assert_int_equal(vx_req_accept_coding("gzip, zstd"), VX_CODING_ZSTD); /* a tie: zstd */
     assert_int_equal(vx_req_accept_coding("gzip;q=0.9, zstd;q=0.5"), VX_CODING_GZIP);
+    /* a qvalue has at most three decimals: a fourth makes the element void */
+    assert_int_equal(vx_req_accept_coding("gzip;q=0.001"), VX_CODING_GZIP);
+    assert_int_equal(vx_req_accept_coding("gzip;q=0.0001"), VX_CODING_IDENTITY);
     assert_int_equal(vx_req_accept_coding("zstd;q=0, gzip"), VX_CODING_GZIP);
     assert_int_equal(vx_req_accept_coding("ZSTD ; Q=1"), VX_CODING_ZSTD); /* case-insensitive */
     assert_int_equal(vx_req_accept_coding("*"), VX_CODING_ZSTD);
