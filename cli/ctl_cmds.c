@@ -57,12 +57,18 @@ static const char *mesh_type(const char *path)
     return "application/octet-stream";
 }
 
+/* s is n hex digits (a mesh id 64, a job id 32: what the server makes) */
+static int hex_id(const char *s, size_t n)
+{
+    size_t k = strlen(s);
+    for (size_t i = 0; i < k; i++)
+        if (!isxdigit((unsigned char)s[i])) return 0;
+    return k == n;
+}
+
 static int is_mesh_id(const char *s)
 {
-    size_t n = strlen(s);
-    for (size_t i = 0; i < n; i++)
-        if (!isxdigit((unsigned char)s[i])) return 0;
-    return n == 64;
+    return hex_id(s, 64);
 }
 
 /* "&KEY=VALUE" (VALUE %-escaped) when v is set, else "". Owned. */
@@ -138,10 +144,14 @@ static int upload(ctl *c, const char *file, char *id, int echo)
     g_spool[0] = 0;
     int rc = 0;
     cJSON *doc = st == 200 || st == 201 ? cJSON_Parse(b.p) : NULL;
-    if (!doc)
+    if (!doc) {
         rc = ctl_http_fail("upload", st, &b);
-    else
+    } else if (!is_mesh_id(str(doc, "id"))) { /* never a path put in a request */
+        fprintf(stderr, "voxelctl: upload: the server's answer has no mesh id (HTTP %ld)\n", st);
+        rc = 1;
+    } else {
         snprintf(id, 65, "%s", str(doc, "id"));
+    }
     if (doc && echo && c->json) print_json(doc);
     cJSON_Delete(doc);
     free(b.p);
@@ -164,6 +174,7 @@ static void on_job(void *ud, const cJSON *job)
     if (f->c->quiet) return;
     const char *state = str(job, "state");
     double p = num(job, "progress");
+    p = p >= 0 && p <= 1 ? p : p > 1 ? 1 : 0; /* the server's number: NaN, 1e20 */
     if (f->c->progress_tty) {
         int w = 30, k = (int)(p * w + 0.5);
         fprintf(stderr, "\r%-9s [%.*s%*s] %3d%%", state, k, "##############################", w - k,
@@ -625,6 +636,12 @@ int ctl_cmd_job(ctl *c, const char *kind, const char *src, cJSON *params, const 
     if (!job) goto done;
     char jid[40];
     snprintf(jid, sizeof jid, "%s", str(job, "id"));
+    if (!hex_id(str(job, "id"), 32)) { /* never a path put in a request ("../../x") */
+        fprintf(stderr, "voxelctl: submit: the server's answer has no job id (HTTP %ld)\n", st);
+        cJSON_Delete(job);
+        rc = 1;
+        goto done;
+    }
     if (no_wait) {
         if (c->json)
             print_json(job);

@@ -45,6 +45,7 @@ typedef struct sink {
     size_t dispn;
     long retry_after; /* seconds; -1: no Retry-After header */
     int werr;         /* errno of a write to out that failed */
+    char coded[32];   /* a Content-Encoding voxelctl did not ask for ("": none) */
 } sink;
 
 static size_t on_body(char *p, size_t size, size_t n, void *ud)
@@ -53,6 +54,7 @@ static size_t on_body(char *p, size_t size, size_t n, void *ud)
     long status = 0;
     curl_easy_getinfo(s->curl, CURLINFO_RESPONSE_CODE, &status);
     if (s->out && status >= 200 && status < 300) {
+        if (s->coded[0]) return 0; /* its bytes are not the result's (http_once says so) */
         errno = 0;
         if (fwrite(p, size, n, s->out) == n) return n * size;
         s->werr = errno ? errno : EIO;
@@ -71,7 +73,7 @@ static int hexval(int c)
 
 /* A file name from a Content-Disposition parameter value v (quoted, or
  * RFC 8187 UTF-8''%-encoded when ext): its last path part, into out; 0 when
- * nothing safe is left (empty, ".", "..", control bytes, a NUL). */
+ * nothing safe is left (empty, a leading dot, control bytes, a NUL). */
 static int disp_name(const char *v, int ext, char *out, size_t n)
 {
     char raw[512];
@@ -99,7 +101,9 @@ static int disp_name(const char *v, int ext, char *out, size_t n)
         if ((unsigned char)*p < 0x20 || *p == 0x7f) return 0;
         if (*p == '/' || *p == '\\') base = p + 1;
     }
-    if (!*base || !strcmp(base, ".") || !strcmp(base, "..")) return 0;
+    /* (a dot file: the server would name .profile or .bashrc in the
+     * user's directory) */
+    if (!*base || base[0] == '.') return 0;
     snprintf(out, n, "%s", base);
     return 1;
 }
@@ -110,8 +114,24 @@ static size_t on_header(char *p, size_t size, size_t n, void *ud)
 {
     sink *s = ud;
     size_t len = size * n;
-    static const char key[] = "content-disposition:", ra[] = "retry-after:";
-    if (!strncmp(p, "HTTP/", 5)) s->retry_after = -1; /* a new answer's head */
+    static const char key[] = "content-disposition:", ra[] = "retry-after:",
+                      ce[] = "content-encoding:";
+    if (!strncmp(p, "HTTP/", 5)) { /* a new answer's head */
+        s->retry_after = -1;
+        s->coded[0] = 0;
+    }
+    if (len > sizeof ce && !strncasecmp(p, ce, sizeof ce - 1)) {
+        /* voxelctl asks for none (no Accept-Encoding): the bytes as they are */
+        char v[32];
+        const char *q = p + sizeof ce - 1;
+        size_t k = len - (sizeof ce - 1);
+        while (k && (*q == ' ' || *q == '\t'))
+            q++, k--;
+        while (k && strchr(" \t\r\n", q[k - 1]))
+            k--;
+        snprintf(v, sizeof v, "%.*s", (int)k, q);
+        if (v[0] && strcasecmp(v, "identity")) snprintf(s->coded, sizeof s->coded, "%s", v);
+    }
     if (len > sizeof ra && !strncasecmp(p, ra, sizeof ra - 1)) {
         /* delta-seconds, or an HTTP-date */
         char v[128];
@@ -220,7 +240,12 @@ static long http_once(const ctl *c, const char *method, const char *path, const 
     long status = -1;
     if (rc != CURLE_OK)
         snprintf(ctl_http_error, sizeof ctl_http_error, "%s", curl_easy_strerror(rc));
-    if (rc == CURLE_WRITE_ERROR && s.werr)
+    if (rc == CURLE_WRITE_ERROR && s.coded[0])
+        fprintf(stderr,
+                "voxelctl: %s: the server sent the answer with Content-Encoding %s, which "
+                "voxelctl did not ask for: nothing written\n",
+                path, s.coded);
+    else if (rc == CURLE_WRITE_ERROR && s.werr)
         ctl_http_write_errno = s.werr; /* the caller names the file */
     else if (rc == CURLE_OK)
         curl_easy_getinfo(h, CURLINFO_RESPONSE_CODE, &status);
@@ -296,6 +321,8 @@ int ctl_http_fail(const char *what, long status, const ctl_buf *resp)
 
 /* ---- the event stream ------------------------------------------------ */
 
+#define CTL_EVENT_MAX ((size_t)1 << 20) /* an event's line or data at most */
+
 typedef struct stream {
     CURL *curl;
     ctl_buf line, data;
@@ -343,8 +370,9 @@ static size_t on_stream(char *p, size_t size, size_t n, void *ud)
             stream_line(s, s->line.p ? s->line.p : "");
             s->line.n = 0;
             if (s->line.p) s->line.p[0] = 0;
-        } else if (buf_add(&s->line, p + i, 1)) {
-            return 0;
+        } else if (s->line.n >= CTL_EVENT_MAX || s->data.n >= CTL_EVENT_MAX ||
+                   buf_add(&s->line, p + i, 1)) {
+            return 0; /* (a Job is a few KB: the stream ends, ?wait polling follows) */
         }
     }
     return len;

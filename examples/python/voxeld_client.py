@@ -82,7 +82,7 @@ class Client:
         if self.token:
             req.add_header("Authorization", "Bearer " + self.token)
         try:
-            return urllib.request.urlopen(req, timeout=self.timeout)
+            return _OPENER.open(req, timeout=self.timeout)
         except urllib.error.HTTPError as e:
             raw = e.read()
             retry_after = _retry_after(e.headers.get("Retry-After"))
@@ -161,15 +161,20 @@ class Client:
             data = []
             while True:
                 try:
-                    raw = r.readline()
+                    raw = r.readline(_EVENT_MAX)  # (a Job is a few KB: a line is held whole)
                 except (http.client.HTTPException, OSError) as e:
                     raise VoxeldError(0, "unreachable", "%s: %s" % (self.server, e or type(e).__name__)) from None
                 if not raw:
                     return
-                line = raw.decode("utf-8").rstrip("\r\n")
+                if len(raw) >= _EVENT_MAX and not raw.endswith(b"\n"):
+                    raise VoxeldError(0, "bad_answer", "an event line over %d bytes" % _EVENT_MAX)
+                line = raw.decode("utf-8", "replace").rstrip("\r\n")
                 if not line:
                     if data:
-                        yield json.loads("\n".join(data))
+                        try:
+                            yield json.loads("\n".join(data))
+                        except ValueError:
+                            raise VoxeldError(0, "bad_answer", "an event that is not JSON") from None
                     data = []
                 elif line.startswith("data:"):
                     data.append(line[5:].lstrip(" "))
@@ -228,6 +233,12 @@ class Client:
         part = None  # stays None for /dev/null, a FIFO: written in place
         with self._open("GET", path) as r:
             length = r.headers.get("Content-Length")
+            coding = r.headers.get("Content-Encoding", "identity").strip().lower()
+            # (no Range or Accept-Encoding was sent: anything but the whole
+            # file as it is would be saved as the result)
+            if r.status != 200 or coding != "identity":
+                raise VoxeldError(0, "incomplete", "%s: HTTP %d with Content-Encoding %s, where "
+                                  "the whole file as it is was asked for" % (path, r.status, coding))
             if st is None or stat.S_ISREG(st.st_mode):
                 fd, part = tempfile.mkstemp(prefix=".voxeld-", suffix=".part",
                                             dir=os.path.dirname(final))
@@ -256,6 +267,20 @@ class Client:
                     os.unlink(part)
                 raise
         return out
+
+
+_EVENT_MAX = 1 << 20
+
+
+class _NoRedirect(urllib.request.HTTPRedirectHandler):
+    """voxeld answers no redirect: a 3xx is an error (HTTPError), never
+    followed (urllib sent the token on to wherever Location pointed)."""
+
+    def redirect_request(self, req, fp, code, msg, headers, newurl):
+        return None
+
+
+_OPENER = urllib.request.build_opener(_NoRedirect)
 
 
 def _retry_after(v):

@@ -196,4 +196,21 @@ PY
 check "stand-in server: 429 retried, a dropped stream polled, full waits polled without one, a short download refused ($(tail -n 1 fake.out))" grep -q '^fake ok' fake.out
 
 stop_daemon
+
+# A result answered with a redirect (urllib followed it, Authorization and
+# all, and saved what came) or a 206 of its tail that was not asked for
+# (saved as the whole file): an error, no file (hostile_server.py).
+for m in redirect partial; do
+    mkdir -p "$TMP/h-$m"
+    python3 "$VX_SOURCE_DIR/tests/integration/hostile_server.py" "$TMP/h-$m/port" "$TMP/h-$m/log" "$m" &
+    HPID=$!
+    for _ in $(seq 100); do [[ -s "$TMP/h-$m/port" ]] && break; sleep 0.05; done
+    rc=0
+    python3 "$PYC" --server "http://127.0.0.1:$(cat "$TMP/h-$m/port")" --token SECRET voxelize \
+        "$VX_SOURCE_DIR/examples/meshes/torus.obj" -o "$TMP/h-$m/out.bin" >"$TMP/h-$m/out.txt" 2>&1 || rc=$?
+    kill "$HPID"
+    check "$m: the client fails (rc $rc: $(tail -n 1 "$TMP/h-$m/out.txt")), no file" \
+        bash -c "test $rc -ne 0 && ! test -e '$TMP/h-$m/out.bin' && ! grep -q Traceback '$TMP/h-$m/out.txt'"
+done
+check "redirect: nothing went to the Location (the token with it)" bash -c "! grep -q '^GET /steal' '$TMP/h-redirect/log'"
 finish

@@ -447,4 +447,39 @@ check "get -o, the server gone after it answered: asked again, exit 0 ($rc, $(tr
     sh -c "test $rc -eq 0 && grep -q 'asking again' ctl.err && jq -e '.voxels_inside == 7' gone.json"
 
 stop_daemon
+
+# A server that answers one thing wrong (hostile_server.py): its job id is
+# a path ("../../x": voxelctl went on to GET /x/result and saved it), it
+# names the result ".profile" (saved over the user's dot file), it sends
+# the result gzipped unasked (saved as the result), its progress is 1e20
+# (the bar wrote 2 GB of spaces to the terminal).
+# hostile MODE: the stand-in started in $TMP/h-MODE, its port in HPORT
+hostile() {
+    mkdir -p "$TMP/h-$1"
+    python3 "$VX_SOURCE_DIR/tests/integration/hostile_server.py" "$TMP/h-$1/port" "$TMP/h-$1/log" "$1" &
+    HPID=$!
+    for _ in $(seq 100); do [[ -s "$TMP/h-$1/port" ]] && break; sleep 0.05; done
+    HPORT=$(cat "$TMP/h-$1/port")
+}
+hostile badid
+(cd "$TMP/h-badid" && "$CTL" --server "http://127.0.0.1:$HPORT" voxelize "$VX_SOURCE_DIR/examples/meshes/torus.obj" >out.txt 2>err.txt; echo $? >rc)
+kill "$HPID"
+check "a job id that is a path: exit 1, said ($(cat "$TMP/h-badid/err.txt"))" \
+    bash -c "test \$(cat '$TMP/h-badid/rc') = 1 && grep -q 'no job id' '$TMP/h-badid/err.txt'"
+check "... and no request went to it" bash -c "! grep -q ' /x' '$TMP/h-badid/log'"
+hostile dotname
+(cd "$TMP/h-dotname" && "$CTL" --server "http://127.0.0.1:$HPORT" voxelize "$VX_SOURCE_DIR/examples/meshes/torus.obj" >out.txt 2>err.txt; echo $? >rc)
+kill "$HPID"
+check "a result named .profile: written under another name, no dot file ($(ls -A "$TMP/h-dotname" | tr '\n' ' '))" \
+    bash -c "test \$(cat '$TMP/h-dotname/rc') = 0 && ! test -e '$TMP/h-dotname/.profile' && grep -q '^wrote ' '$TMP/h-dotname/err.txt'"
+hostile gzip
+(cd "$TMP/h-gzip" && "$CTL" --server "http://127.0.0.1:$HPORT" voxelize "$VX_SOURCE_DIR/examples/meshes/torus.obj" -o out.bin >out.txt 2>err.txt; echo $? >rc)
+kill "$HPID"
+check "a gzipped result not asked for: exit 1, said, nothing written ($(cat "$TMP/h-gzip/err.txt"))" \
+    bash -c "test \$(cat '$TMP/h-gzip/rc') = 1 && grep -q 'Content-Encoding gzip' '$TMP/h-gzip/err.txt' && ! test -e '$TMP/h-gzip/out.bin'"
+hostile progress
+(cd "$TMP/h-progress" && script -qc "'$CTL' --server http://127.0.0.1:$HPORT voxelize '$VX_SOURCE_DIR/examples/meshes/torus.obj' -o out.bin" /dev/null >tty.txt 2>&1)
+kill "$HPID"
+check "progress 1e20 on a terminal: one bar's worth ($(wc -c <"$TMP/h-progress/tty.txt") bytes)" \
+    bash -c "test \$(wc -c <'$TMP/h-progress/tty.txt') -lt 2000 && grep -q '100%' '$TMP/h-progress/tty.txt'"
 finish

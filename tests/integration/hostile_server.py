@@ -1,0 +1,97 @@
+#!/usr/bin/env python3
+"""A voxeld stand-in that answers one thing wrong, for the clients' tests
+(test_voxelctl.sh, test_python_client.sh):
+
+    hostile_server.py PORTFILE LOG MODE
+
+Every request's method, path and Authorization go to LOG, a line each. It
+takes uploads and jobs and says each job succeeded; MODE breaks one answer:
+  badid     the job's id is "../../x" (a path, not 32 hex digits)
+  dotname   the result is named ".profile" by Content-Disposition
+  gzip      the result comes with Content-Encoding: gzip, not asked for
+  progress  the event stream says progress 1e20, then succeeded
+  redirect  the result is a 302 to /steal on this server
+  partial   the result is a 206 of its last 4 bytes, not asked for
+The port goes into PORTFILE (whole, by a rename) once it listens."""
+import gzip
+import http.server
+import json
+import os
+import sys
+
+portfile, log, mode = sys.argv[1], sys.argv[2], sys.argv[3]
+MESH = "ab" * 32
+JID = "../../x" if mode == "badid" else "cd" * 16
+BODY = b"#binvox 1\ndim 1 1 1\ntranslate 0 0 0\nscale 1\ndata\n\x01\x01"
+
+
+def job(state="succeeded", progress=1.0):
+    return {"id": JID, "kind": "voxelize", "state": state, "progress": progress, "mesh": MESH,
+            "params": {"format": "binvox"}, "created": "2026-01-01T00:00:00Z",
+            "outputs": {"voxels": "/v1/jobs/%s/result/voxels" % JID}}
+
+
+class H(http.server.BaseHTTPRequestHandler):
+    protocol_version = "HTTP/1.1"
+
+    def log_message(self, *a):
+        pass
+
+    def reply(self, status, ctype, body, headers=()):
+        self.send_response(status)
+        self.send_header("Content-Type", ctype)
+        for k, v in headers:
+            self.send_header(k, v)
+        self.send_header("Content-Length", str(len(body)))
+        self.end_headers()
+        self.wfile.write(body)
+
+    def note(self):
+        with open(log, "a") as f:
+            f.write("%s %s %s\n" % (self.command, self.path, self.headers.get("Authorization", "-")))
+
+    def do_POST(self):
+        self.note()
+        n = int(self.headers.get("Content-Length", "0"))
+        self.rfile.read(n)
+        if self.path.startswith("/v1/meshes"):
+            self.reply(201, "application/json", json.dumps(
+                {"id": MESH, "format": "obj", "triangles": 12, "vertices": 8}).encode())
+        else:
+            self.reply(202, "application/json", json.dumps(job("queued", 0)).encode())
+
+    def do_GET(self):
+        self.note()
+        p = self.path
+        if p.endswith("/events"):
+            ev = [job("running", 1e20), job()] if mode == "progress" else [job()]
+            body = b"".join(b"event: job\ndata: " + json.dumps(j).encode() + b"\n\n" for j in ev)
+            self.reply(200, "text/event-stream", body)
+        elif "/result" in p:
+            if mode == "dotname":
+                self.reply(200, "application/octet-stream", BODY,
+                           [("Content-Disposition", 'attachment; filename=".profile"')])
+            elif mode == "gzip":
+                self.reply(200, "application/octet-stream", gzip.compress(BODY),
+                           [("Content-Encoding", "gzip")])
+            elif mode == "redirect":
+                self.reply(302, "text/plain", b"moved",
+                           [("Location", "http://127.0.0.1:%d/steal" % self.server.server_port)])
+            elif mode == "partial":
+                self.reply(206, "application/octet-stream", BODY[-4:],
+                           [("Content-Range", "bytes %d-%d/%d" % (len(BODY) - 4, len(BODY) - 1,
+                                                                  len(BODY)))])
+            else:
+                self.reply(200, "application/octet-stream", BODY)
+        elif p.startswith("/v1/jobs/"):
+            self.reply(200, "application/json", json.dumps(job()).encode())
+        else:
+            self.reply(404, "application/json",
+                       b'{"error":{"code":"not_found","message":"no such route"}}')
+
+
+srv = http.server.ThreadingHTTPServer(("127.0.0.1", 0), H)
+with open(portfile + ".tmp", "w") as f:
+    f.write(str(srv.server_port))
+os.rename(portfile + ".tmp", portfile)
+srv.serve_forever()
