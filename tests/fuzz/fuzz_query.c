@@ -192,8 +192,9 @@ static void check_text(const char *s, size_t n)
     if (!vx_req_parse_limit(s, n, &lim) && (lim < 1 || lim > 1000)) abort();
     char why[160];
     if (!vx_req_json_text_ok(s, n, why, sizeof why) && !vx_req_utf8_valid(s, n)) abort();
+    /* -2 (an empty value) for blanks alone */
     int te = vx_req_transfer_encoding(z);
-    if (te < -1 || te > 1) abort();
+    if (te < -2 || te > 1 || (te == -2) != (z[strspn(z, " \t")] == 0)) abort();
     /* As a Range value over a file of some sizes: one range within it, or
      * ignored (0), or unsatisfiable (-1, never for a range from 0 on a
      * non-empty file) */
