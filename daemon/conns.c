@@ -19,7 +19,8 @@
  *     while bytes wait unread in the kernel: then libmicrohttpd's thread is
  *     busy (a handler parsing a large mesh), not the client slow.
  *   - cuts a BUSY connection whose client acknowledged none of the answer
- *     for --connection-timeout while bytes of it waited unsent: the
+ *     for --connection-timeout while bytes of it were outstanding (unsent,
+ *     or sent to a client gone without a word): the
  *     libmicrohttpd timeout is off while an answer is sent (vx_resp_queue),
  *     as it measures its own writes, and the kernel wakes a writer only
  *     when a third of the send buffer has drained (minutes at 30 KB/s).
