@@ -12,6 +12,8 @@ takes uploads and jobs and says each job succeeded; MODE breaks one answer:
   progress  the event stream says progress 1e20, then succeeded
   redirect  the result is a 302 to /steal on this server
   partial   the result is a 206 of its last 4 bytes, not asked for
+  html      the upload's 201 is an HTML page, not a Mesh
+  esc       the job's 422 message holds terminal escapes (clear, retitle)
 The port goes into PORTFILE (whole, by a rename) once it listens."""
 import gzip
 import http.server
@@ -54,7 +56,12 @@ class H(http.server.BaseHTTPRequestHandler):
         self.note()
         n = int(self.headers.get("Content-Length", "0"))
         self.rfile.read(n)
-        if self.path.startswith("/v1/meshes"):
+        if self.path.startswith("/v1/meshes") and mode == "html":
+            self.reply(201, "text/html", b"<html>a proxy's page</html>")
+        elif self.path.startswith("/v1/jobs") and mode == "esc":
+            self.reply(422, "application/json", json.dumps({"error": {
+                "code": "invalid\x1b[31m", "message": "bad\x1b[2J\x1b]0;pwned\x07"}}).encode())
+        elif self.path.startswith("/v1/meshes"):
             self.reply(201, "application/json", json.dumps(
                 {"id": MESH, "format": "obj", "triangles": 12, "vertices": 8}).encode())
         else:

@@ -482,4 +482,15 @@ hostile progress
 kill "$HPID"
 check "progress 1e20 on a terminal: one bar's worth ($(wc -c <"$TMP/h-progress/tty.txt") bytes)" \
     bash -c "test \$(wc -c <'$TMP/h-progress/tty.txt') -lt 2000 && grep -q '100%' '$TMP/h-progress/tty.txt'"
+# ... an upload's 201 that is an HTML page said so (it was "upload: HTTP
+# 201" alone), an error message's terminal escapes shown as '?'
+for m in html esc; do
+    hostile $m
+    (cd "$TMP/h-$m" && "$CTL" --server "http://127.0.0.1:$HPORT" voxelize "$VX_SOURCE_DIR/examples/meshes/torus.obj" -o out.bin >out.txt 2>err.txt; echo $? >rc)
+    kill "$HPID"
+done
+check "an HTML 201 to an upload: exit 1, the answer shown ($(cat "$TMP/h-html/err.txt"))" \
+    bash -c "test \$(cat '$TMP/h-html/rc') = 1 && grep -q 'not the JSON expected: <html>' '$TMP/h-html/err.txt'"
+check "escapes in an error: exit 1, none reaches the terminal ($(cat -v "$TMP/h-esc/err.txt"))" \
+    bash -c "test \$(cat '$TMP/h-esc/rc') = 1 && grep -q 'bad?' '$TMP/h-esc/err.txt' && ! grep -q \$'\\x1b' '$TMP/h-esc/err.txt'"
 finish
