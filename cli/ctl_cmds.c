@@ -284,6 +284,7 @@ static cJSON *follow_job(ctl *c, const char *jid, int answered)
  * for, for a signal that ends the process: the files are removed, the job
  * named. */
 static char g_part[4200], g_jid[40];
+static volatile sig_atomic_t g_job_ended; /* g_jid has ended: its result is downloading */
 
 static void say(const char *s)
 {
@@ -300,7 +301,13 @@ void ctl_cmds_remove_temp(void)
 static void on_signal(int sig)
 {
     ctl_cmds_remove_temp();
-    if (g_jid[0]) {
+    if (g_jid[0] && g_job_ended) {
+        say("\nvoxelctl: download interrupted; job ");
+        say(g_jid);
+        say(" has ended (voxelctl get ");
+        say(g_jid);
+        say(" -o FILE fetches its result)\n");
+    } else if (g_jid[0]) {
         say("\nvoxelctl: interrupted; job ");
         say(g_jid);
         say(" goes on (voxelctl cancel ");
@@ -314,6 +321,7 @@ static void on_signal(int sig)
 static void catch_signals(const char *jid)
 {
     snprintf(g_jid, sizeof g_jid, "%s", jid ? jid : "");
+    g_job_ended = 0;
     static const int sigs[] = {SIGINT, SIGTERM, SIGHUP};
     for (size_t i = 0; i < sizeof sigs / sizeof sigs[0]; i++)
         signal(sigs[i], on_signal);
@@ -590,6 +598,7 @@ static int wait_and_fetch(ctl *c, const char *jid, const char *name, const char 
     catch_signals(jid);
     cJSON *job = follow_job(c, jid, answered);
     if (!job) return 1;
+    g_job_ended = 1;
     int rc = 0;
     const char *state = str(job, "state");
     if (strcmp(state, "succeeded") != 0) {

@@ -100,7 +100,7 @@ class Client:
     def _json(self, method, path, doc=None):
         body = json.dumps(doc).encode() if doc is not None else None
         with self._open(method, path, body, "application/json" if body else None) as r:
-            return json.load(r)
+            return _load(r, path)
 
     def upload(self, path, name=None):
         """Stores a mesh file; returns the Mesh (its "id" names it in jobs).
@@ -113,11 +113,12 @@ class Client:
         name = os.path.basename(path) if name is None else name
         q = "?name=" + urllib.parse.quote(name, safe="") if _name_ok(name) else ""
         with self._open("POST", "/v1/meshes" + q, data, ctype) as r:
-            return json.load(r)
+            return _with_id(_load(r, "/v1/meshes"), 64)
 
     def submit(self, mesh, kind, params=None):
         """Queues a job; returns the Job."""
-        return self._json("POST", "/v1/jobs", {"mesh": mesh, "kind": kind, "params": params or {}})
+        return _with_id(self._json("POST", "/v1/jobs",
+                                   {"mesh": mesh, "kind": kind, "params": params or {}}), 32)
 
     def job(self, jid, wait=0, progress=None):
         """The Job; wait > 0 holds until it ends (or reaches progress)."""
@@ -270,6 +271,23 @@ class Client:
 
 
 _EVENT_MAX = 1 << 20
+
+
+def _load(r, path):
+    """The JSON of an answer; VoxeldError bad_answer when it is none."""
+    try:
+        return json.load(r)
+    except ValueError:
+        raise VoxeldError(0, "bad_answer", "%s: the answer is not JSON" % path) from None
+
+
+def _with_id(doc, n):
+    """doc when its "id" is n hex digits (what the server makes; it goes into
+    later paths), else VoxeldError bad_answer."""
+    i = doc.get("id") if isinstance(doc, dict) else None
+    if not (isinstance(i, str) and len(i) == n and all(c in "0123456789abcdefABCDEF" for c in i)):
+        raise VoxeldError(0, "bad_answer", "the answer has no id of %d hex digits" % n)
+    return doc
 
 
 class _NoRedirect(urllib.request.HTTPRedirectHandler):

@@ -14,12 +14,14 @@ takes uploads and jobs and says each job succeeded; MODE breaks one answer:
   partial   the result is a 206 of its last 4 bytes, not asked for
   html      the upload's 201 is an HTML page, not a Mesh
   esc       the job's 422 message holds terminal escapes (clear, retitle)
+  slow      the result comes at 100 KB/s (2 MB: 20 s)
 The port goes into PORTFILE (whole, by a rename) once it listens."""
 import gzip
 import http.server
 import json
 import os
 import sys
+import time
 
 portfile, log, mode = sys.argv[1], sys.argv[2], sys.argv[3]
 MESH = "ab" * 32
@@ -84,6 +86,18 @@ class H(http.server.BaseHTTPRequestHandler):
             elif mode == "redirect":
                 self.reply(302, "text/plain", b"moved",
                            [("Location", "http://127.0.0.1:%d/steal" % self.server.server_port)])
+            elif mode == "slow":
+                self.send_response(200)
+                self.send_header("Content-Type", "application/octet-stream")
+                self.send_header("Content-Length", str(2000000))
+                self.end_headers()
+                try:
+                    for _ in range(200):
+                        self.wfile.write(b"\0" * 10000)
+                        self.wfile.flush()
+                        time.sleep(0.1)
+                except OSError:
+                    pass
             elif mode == "partial":
                 self.reply(206, "application/octet-stream", BODY[-4:],
                            [("Content-Range", "bytes %d-%d/%d" % (len(BODY) - 4, len(BODY) - 1,

@@ -106,7 +106,7 @@ check "program: Ctrl-C exits 130 and names the job ($(tail -n 1 int.err))" \
 PYTHONPATH=$(dirname "$PYC") python3 - >fake.out 2>&1 <<'PY'
 import http.server, json, os, threading, time
 from voxeld_client import Client, VoxeldError
-JOB = {"id": "j", "state": "queued", "progress": 0}
+JOB = {"id": "0123456789abcdef0123456789abcdef", "state": "queued", "progress": 0}
 submits = []
 plain = []
 class H(http.server.BaseHTTPRequestHandler):
@@ -141,7 +141,7 @@ class H(http.server.BaseHTTPRequestHandler):
             self.send_header("Content-Type", "text/event-stream")
             self.send_header("Transfer-Encoding", "chunked")
             self.end_headers()
-            d = b'data: {"id":"j","state":"running","progress":0.5}\n\n'
+            d = b'data: {"id":"0123456789abcdef0123456789abcdef","state":"running","progress":0.5}\n\n'
             self.wfile.write(b"%x\r\n%s\r\n" % (len(d), d))
             self.wfile.flush()
             self.close_connection = True
@@ -168,7 +168,7 @@ except VoxeldError as e:
     assert e.status == 429 and e.retry_after == 1, e
 submits.clear()
 c = Client(base)
-assert c.submit("m", "voxelize")["id"] == "j"
+assert c.submit("m", "voxelize")["id"] == JOB["id"]
 assert len(submits) == 2 and submits[1] - submits[0] >= 0.9, submits
 seen = []
 assert c.wait("j", seen.append)["state"] == "succeeded"
@@ -199,8 +199,9 @@ stop_daemon
 
 # A result answered with a redirect (urllib followed it, Authorization and
 # all, and saved what came) or a 206 of its tail that was not asked for
-# (saved as the whole file): an error, no file (hostile_server.py).
-for m in redirect partial; do
+# (saved as the whole file), an upload answered with an HTML page or a job
+# whose id is a path (tracebacks): an error, no file (hostile_server.py).
+for m in redirect partial html badid; do
     mkdir -p "$TMP/h-$m"
     python3 "$VX_SOURCE_DIR/tests/integration/hostile_server.py" "$TMP/h-$m/port" "$TMP/h-$m/log" "$m" &
     HPID=$!

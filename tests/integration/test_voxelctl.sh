@@ -491,6 +491,13 @@ for m in html esc; do
 done
 check "an HTML 201 to an upload: exit 1, the answer shown ($(cat "$TMP/h-html/err.txt"))" \
     bash -c "test \$(cat '$TMP/h-html/rc') = 1 && grep -q 'not the JSON expected: <html>' '$TMP/h-html/err.txt'"
+# Ctrl-C while the result of a job that has ended downloads: said so (it
+# said the job "goes on", with how to cancel it)
+hostile slow
+(cd "$TMP/h-slow" && { "$CTL" --server "http://127.0.0.1:$HPORT" voxelize "$VX_SOURCE_DIR/examples/meshes/torus.obj" -o out.bin >out.txt 2>err.txt & CP=$!; sleep 2; kill -INT $CP; wait $CP; echo $? >rc; })
+kill "$HPID"
+check "Ctrl-C during the download: 130, the job said ended, no file ($(tail -n 1 "$TMP/h-slow/err.txt"))" \
+    bash -c "test \$(cat '$TMP/h-slow/rc') = 130 && grep -q 'download interrupted; job .* has ended' '$TMP/h-slow/err.txt' && ! test -e '$TMP/h-slow/out.bin'"
 check "escapes in an error: exit 1, none reaches the terminal ($(cat -v "$TMP/h-esc/err.txt"))" \
     bash -c "test \$(cat '$TMP/h-esc/rc') = 1 && grep -q 'bad?' '$TMP/h-esc/err.txt' && ! grep -q \$'\\x1b' '$TMP/h-esc/err.txt'"
 finish
