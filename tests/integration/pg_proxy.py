@@ -60,10 +60,12 @@ def pump(src, dst, to_server):
                 break
             if m == "oneway" and not to_server:
                 continue  # the answer is lost
-            dst.sendall(d)
+            # (one way before the completion goes on: its answer could come
+            # back through the other thread before the mode changed)
             if m == "armdown" and to_server and b"SET state = 'succeeded'" in d:
                 set_mode("oneway")
                 threading.Timer(0.5, go_down).start()
+            dst.sendall(d)
     except OSError:
         pass
     for s in (src, dst):
