@@ -230,6 +230,16 @@ static void unwatch(vx_conn *vc)
     vc->watch_fd = -1;
 }
 
+/* When data last came in on fd (the kernel knows; libmicrohttpd may have
+ * read it already), on the clock of now; -1 when it cannot say. */
+static double data_came(int fd, double now)
+{
+    struct tcp_info ti;
+    socklen_t tl = sizeof ti;
+    if (getsockopt(fd, IPPROTO_TCP, TCP_INFO, &ti, &tl) != 0) return -1;
+    return now - ti.tcpi_last_data_recv / 1000.0;
+}
+
 /* Origins are allowed (--cors-origin): every answer varies by Origin, the
  * canned ones too (set at start). */
 static int g_vary_origin;
@@ -555,12 +565,8 @@ static void sweep(vx_conns *s, vx_conn **cand, head_kill *ks, size_t *nk, size_t
         if (atomic_load(&vc->own_idle) && (vc->phase == P_IDLE || vc->phase == P_HEAD) &&
             cfg->connection_timeout_s > 0) {
             if (vx_sockq_queued(vc->fd) != 0) vc->quiet_t = now;
-            struct tcp_info ti;
-            socklen_t tl = sizeof ti;
-            const double got = getsockopt(vc->fd, IPPROTO_TCP, TCP_INFO, &ti, &tl) == 0
-                                   ? now - ti.tcpi_last_data_recv / 1000.0
-                                   : now;
-            if (now - vc->quiet_t >= cfg->connection_timeout_s &&
+            const double got = data_came(vc->fd, now);
+            if (now - vc->quiet_t >= cfg->connection_timeout_s && got >= 0 &&
                 now - got >= cfg->connection_timeout_s) {
                 kill_conn(vc, 0, NULL, NULL, 1);
                 continue;
@@ -579,14 +585,10 @@ static void sweep(vx_conns *s, vx_conn **cand, head_kill *ks, size_t *nk, size_t
             /* Has a byte of the next request come in since the answer? The
              * kernel knows when data last arrived; libmicrohttpd has
              * already read it into its buffer. */
-            struct tcp_info ti;
-            socklen_t tl = sizeof ti;
-            if (getsockopt(vc->fd, IPPROTO_TCP, TCP_INFO, &ti, &tl) == 0) {
-                double last = now - ti.tcpi_last_data_recv / 1000.0;
-                if (last > vc->t_phase + 0.02) {
-                    vc->phase = P_HEAD;
-                    vc->t_phase = last;
-                }
+            const double last = data_came(vc->fd, now);
+            if (last >= 0 && last > vc->t_phase + 0.02) {
+                vc->phase = P_HEAD;
+                vc->t_phase = last;
             }
         }
         if (vc->phase == P_HEAD && cfg->header_timeout_s > 0 &&

@@ -499,11 +499,11 @@ static int gltf_accessors(gltf_ctx *g)
          * sparse values; nothing backs the count, so the readers read
          * only the elements the limits already bound (the vertices the
          * indices name, the indices of counted triangles, a skin's joints) */
-        if (!cJSON_GetObjectItemCaseSensitive(a, "bufferView") && count > UINT32_MAX)
+        const int has_view = cJSON_GetObjectItemCaseSensitive(a, "bufferView") != NULL;
+        if (!has_view && count > UINT32_MAX)
             return gl_fail(g, "%s %d declares %.15g elements of zeros (at most 2^32 - 1)",
                            "accessor", i, count);
-        if (cJSON_GetObjectItemCaseSensitive(a, "bufferView") &&
-            !fits(g, vi, off, stride, count, elem))
+        if (has_view && !fits(g, vi, off, stride, count, elem))
             return gl_fail(g, "%s %d declares more elements than its bufferView holds", "accessor",
                            i);
         const cJSON *sp = cJSON_GetObjectItemCaseSensitive(a, "sparse");
