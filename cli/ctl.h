@@ -47,6 +47,10 @@ extern int ctl_http_write_errno;
 long ctl_http(const ctl *c, const char *method, const char *path, const char *ctype,
               const char *data, const char *upload, ctl_buf *resp, FILE *out, char *disp,
               size_t dispn);
+/* s (NULL: "") with its control bytes as '?' (the server's text on a
+ * terminal: an escape sequence could clear it or retitle it), at most
+ * n - 1 bytes of it, in out. */
+const char *ctl_printable(const char *s, char *out, size_t n);
 /* Prints the server's error of a >= 400 answer (its JSON message and code)
  * to stderr, after what ("upload", "submit", ...). Returns 1. */
 int ctl_http_fail(const char *what, long status, const ctl_buf *resp);
@@ -88,6 +92,9 @@ int ctl_cmd_upload(ctl *c, const char *file);
  * is submitted rather than after it ran: a part file is made where the
  * result would go (through symlinks) and removed. "-" is stdout. */
 int ctl_out_unwritable(const char *out);
+/* The same for a result written without -o: under the server's file name
+ * in the current directory. */
+int ctl_cwd_unwritable(void);
 /* Removes the part file being written and the spooled upload, if any
  * (async-signal-safe: for a signal that ends the process). */
 void ctl_cmds_remove_temp(void);

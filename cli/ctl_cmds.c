@@ -22,6 +22,16 @@ static const char *str(const cJSON *o, const char *k)
     return s ? s : "";
 }
 
+/* str() to be shown on a terminal: control bytes as '?' (ctl_printable),
+ * in one of four buffers used in turn (four to a line at most). */
+static const char *shown(const cJSON *o, const char *k)
+{
+    static char buf[4][512];
+    static int next;
+    char *b = buf[next++ % 4];
+    return ctl_printable(str(o, k), b, sizeof buf[0]);
+}
+
 static double num(const cJSON *o, const char *k)
 {
     const cJSON *v = cJSON_GetObjectItemCaseSensitive(o, k);
@@ -177,12 +187,13 @@ static void on_job(void *ud, const cJSON *job)
     p = p >= 0 && p <= 1 ? p : p > 1 ? 1 : 0; /* the server's number: NaN, 1e20 */
     if (f->c->progress_tty) {
         int w = 30, k = (int)(p * w + 0.5);
-        fprintf(stderr, "\r%-9s [%.*s%*s] %3d%%", state, k, "##############################", w - k,
-                "", (int)(p * 100 + 0.5));
+        fprintf(stderr, "\r%-9s [%.*s%*s] %3d%%", shown(job, "state"), k,
+                "##############################", w - k, "", (int)(p * 100 + 0.5));
         if (terminal(state)) fputc('\n', stderr);
         fflush(stderr);
     } else if (strcmp(state, f->state) || (int)(p * 10) > f->tenth) {
-        fprintf(stderr, "%s %s %d%%\n", str(job, "id"), state, (int)(p * 100 + 0.5));
+        fprintf(stderr, "%s %s %d%%\n", shown(job, "id"), shown(job, "state"),
+                (int)(p * 100 + 0.5));
     }
     snprintf(f->state, sizeof f->state, "%s", state);
     f->tenth = (int)(p * 10);
@@ -223,6 +234,8 @@ static cJSON *follow_job(ctl *c, const char *jid, int answered)
         /* said below, and tried again here (no answer yet: ctl_http says it) */
         c->quiet_transport = f.answered;
         c->no_retry = 1;
+        struct timespec t0, t1;
+        clock_gettime(CLOCK_MONOTONIC, &t0);
         st = ctl_http(c, "GET", path, NULL, NULL, NULL, &b, NULL, NULL, 0);
         c->quiet_transport = c->no_retry = 0;
         if (st < 0 && !f.answered) {
@@ -266,6 +279,11 @@ static cJSON *follow_job(ctl *c, const char *jid, int answered)
         }
         lost = 0;
         job = st == 200 ? cJSON_Parse(b.p) : NULL;
+        if (job && (strcmp(str(job, "id"), jid) != 0 ||
+                    !cJSON_IsString(cJSON_GetObjectItemCaseSensitive(job, "state")))) {
+            cJSON_Delete(job); /* not this job (said as not the JSON expected) */
+            job = NULL;
+        }
         if (!job) {
             ctl_http_fail("job", st, &b);
             free(b.p);
@@ -275,6 +293,11 @@ static cJSON *follow_job(ctl *c, const char *jid, int answered)
         on_job(&f, job);
         if (terminal(str(job, "state"))) return job;
         cJSON_Delete(job);
+        /* a server that answers ?wait at once (--request-timeout 0) is
+         * asked once a second, not as fast as it answers */
+        clock_gettime(CLOCK_MONOTONIC, &t1);
+        double took = (double)(t1.tv_sec - t0.tv_sec) + (t1.tv_nsec - t0.tv_nsec) / 1e9;
+        if (took < 1) usleep((useconds_t)((1 - took) * 1e6));
     }
 }
 
@@ -413,6 +436,22 @@ int ctl_out_unwritable(const char *out)
     int fd = part_open(dir, 0600, part, sizeof part);
     if (fd < 0) {
         fprintf(stderr, "voxelctl: -o %s: cannot write %s: %s\n", out, dir, strerror(errno));
+        return 1;
+    }
+    close(fd);
+    unlink(part);
+    return 0;
+}
+
+int ctl_cwd_unwritable(void)
+{
+    char part[4300];
+    int fd = part_open(".", 0600, part, sizeof part);
+    if (fd < 0) {
+        fprintf(stderr,
+                "voxelctl: cannot write the result in the current directory: %s "
+                "(give -o FILE, or -o - for stdout)\n",
+                strerror(errno));
         return 1;
     }
     close(fd);
@@ -603,8 +642,12 @@ static int wait_and_fetch(ctl *c, const char *jid, const char *name, const char 
     const char *state = str(job, "state");
     if (strcmp(state, "succeeded") != 0) {
         const cJSON *e = cJSON_GetObjectItemCaseSensitive(job, "error");
-        fprintf(stderr, "voxelctl: job %s %s: %s (%s)\n", jid, state, str(e, "message"),
-                str(e, "code"));
+        if (cJSON_IsObject(e))
+            fprintf(stderr, "voxelctl: job %s %s: %s (%s)\n", jid, shown(job, "state"),
+                    shown(e, "message"), shown(e, "code"));
+        else
+            fprintf(stderr, "voxelctl: job %s %s (the server gave no error)\n", jid,
+                    shown(job, "state"));
         rc = 1;
     } else if (name) {
         rc = download(c, jid, name, out);
@@ -669,8 +712,9 @@ done:
 /* GET path; prints the answer as JSON (--json) or through row() for each
  * item of a list page, and when there are more the options of the next
  * page: flags (this page's, to keep its filters and order) and --after.
- * The exit status. */
-static int list(ctl *c, const char *path, void (*row)(const cJSON *), const char *flags)
+ * An item row() cannot show (not a job or mesh: a wrong answer) is said,
+ * exit 1. The exit status. */
+static int list(ctl *c, const char *path, int (*row)(const cJSON *), const char *flags)
 {
     ctl_buf b = {0};
     long st = ctl_http(c, "GET", path, NULL, NULL, NULL, &b, NULL, NULL, 0);
@@ -682,33 +726,45 @@ static int list(ctl *c, const char *path, void (*row)(const cJSON *), const char
         print_json(doc);
     } else {
         const cJSON *it, *items = cJSON_GetObjectItemCaseSensitive(doc, "items");
-        if (cJSON_IsArray(items)) {
-            cJSON_ArrayForEach(it, items) row(it);
+        int bad = 0;
+        if (flags && !cJSON_IsArray(items)) {
+            bad = 1; /* a list page has items */
+        } else if (flags) {
+            cJSON_ArrayForEach(it, items) bad |= row(it);
         } else {
-            row(doc);
+            bad = row(doc);
         }
-        const char *next = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(doc, "next"));
-        if (next && !c->quiet)
+        if (bad) {
+            fprintf(stderr, "voxelctl: GET %s: HTTP 200, but the answer is not the JSON expected\n",
+                    path);
+            rc = 1;
+        }
+        if (flags && !c->quiet && cJSON_IsString(cJSON_GetObjectItemCaseSensitive(doc, "next")))
             fprintf(stderr, "voxelctl: more after these %d: %s--after %s (or --limit up to 1000)\n",
-                    cJSON_GetArraySize(items), flags ? flags : "", next);
+                    cJSON_GetArraySize(items), flags, shown(doc, "next"));
     }
     cJSON_Delete(doc);
     return rc;
 }
 
-static void job_row(const cJSON *j)
+/* A job's row; 1 (nothing printed) for what is not a job. */
+static int job_row(const cJSON *j)
 {
-    if (!cJSON_IsObject(j)) return;
+    if (!hex_id(str(j, "id"), 32) || !cJSON_IsString(cJSON_GetObjectItemCaseSensitive(j, "state")))
+        return 1;
     const cJSON *e = cJSON_GetObjectItemCaseSensitive(j, "error");
-    printf("%s  %-13s %-9s %3.0f%%  %s  %s\n", str(j, "id"), str(j, "kind"), str(j, "state"),
-           num(j, "progress") * 100, str(j, "created"), cJSON_IsObject(e) ? str(e, "code") : "");
+    printf("%s  %-13s %-9s %3.0f%%  %s  %s\n", str(j, "id"), shown(j, "kind"), shown(j, "state"),
+           num(j, "progress") * 100, shown(j, "created"), shown(e, "code"));
+    return 0;
 }
 
-static void mesh_row(const cJSON *m)
+/* A mesh's row; 1 (nothing printed) for what is not a mesh. */
+static int mesh_row(const cJSON *m)
 {
-    if (!cJSON_IsObject(m)) return;
-    printf("%s  %-6s %10.0f triangles  %s\n", str(m, "id"), str(m, "format"), num(m, "triangles"),
-           str(m, "name"));
+    if (!is_mesh_id(str(m, "id"))) return 1;
+    printf("%s  %-6s %10.0f triangles  %s\n", str(m, "id"), shown(m, "format"), num(m, "triangles"),
+           shown(m, "name"));
+    return 0;
 }
 
 int ctl_cmd_jobs(ctl *c, const char *state, int newest, int limit, const char *after)
@@ -745,13 +801,14 @@ int ctl_cmd_meshes(ctl *c, int limit, const char *after)
     return rc;
 }
 
-static void job_show(const cJSON *j)
+static int job_show(const cJSON *j)
 {
-    if (!cJSON_IsObject(j) || !cJSON_GetObjectItemCaseSensitive(j, "state")) return;
-    job_row(j);
+    if (job_row(j)) return 1;
     const cJSON *o, *outs = cJSON_GetObjectItemCaseSensitive(j, "outputs");
-    cJSON_ArrayForEach(o, outs) printf("  output %-10s %s\n", o->string ? o->string : "",
-                                       cJSON_GetStringValue(o) ? o->valuestring : "");
+    char k[128], v[512];
+    cJSON_ArrayForEach(o, outs) printf("  output %-10s %s\n", ctl_printable(o->string, k, sizeof k),
+                                       ctl_printable(cJSON_GetStringValue(o), v, sizeof v));
+    return 0;
 }
 
 int ctl_cmd_get(ctl *c, const char *jid, const char *name, const char *out)
@@ -798,7 +855,7 @@ static int delete_job(ctl *c, const char *jid, int cancel_only)
     int rc = doc || st == 204 ? 0 : ctl_http_fail(cancel_only ? "cancel" : "delete", st, &b);
     if (doc && c->json) print_json(doc);
     if (doc && !c->json)
-        printf("%s %s\n", jid, st == 202 ? "cancel requested (running)" : str(doc, "state"));
+        printf("%s %s\n", jid, st == 202 ? "cancel requested (running)" : shown(doc, "state"));
     if (st == 204 && c->json) printf("{\"id\":\"%s\",\"deleted\":true}\n", jid);
     if (st == 204 && !c->json) printf("%s deleted\n", jid);
     cJSON_Delete(doc);

@@ -304,9 +304,7 @@ long ctl_http(const ctl *c, const char *method, const char *path, const char *ct
     }
 }
 
-/* s with its control bytes as '?' (the server's text on a terminal: an
- * escape sequence could clear it or retitle it), at most n - 1 bytes. */
-static const char *printable(const char *s, char *out, size_t n)
+const char *ctl_printable(const char *s, char *out, size_t n)
 {
     size_t o = 0;
     for (; s && *s && o + 1 < n; s++)
@@ -324,14 +322,14 @@ int ctl_http_fail(const char *what, long status, const ctl_buf *resp)
     const char *code = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(e, "code"));
     char m[512], k[64];
     if (msg)
-        fprintf(stderr, "voxelctl: %s: %s (%s, HTTP %ld)\n", what, printable(msg, m, sizeof m),
-                printable(code ? code : "?", k, sizeof k), status);
+        fprintf(stderr, "voxelctl: %s: %s (%s, HTTP %ld)\n", what, ctl_printable(msg, m, sizeof m),
+                ctl_printable(code ? code : "?", k, sizeof k), status);
     else if (status >= 200 && status < 300) /* a success whose body is not what it should be */
         fprintf(stderr, "voxelctl: %s: HTTP %ld, but the answer is not the JSON expected: %s\n",
-                what, status, printable(resp->p && resp->n ? resp->p : "(empty)", m, 120));
+                what, status, ctl_printable(resp->p && resp->n ? resp->p : "(empty)", m, 120));
     else
         fprintf(stderr, "voxelctl: %s: HTTP %ld%s%s\n", what, status,
-                resp->p && resp->n ? ": " : "", printable(resp->p, m, 120));
+                resp->p && resp->n ? ": " : "", ctl_printable(resp->p, m, 120));
     cJSON_Delete(doc);
     return 1;
 }

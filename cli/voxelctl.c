@@ -366,6 +366,10 @@ static int run(ctl *c, args *a, int n, char **pos)
         }
         if (shortcuts(cmd, a)) return 2;
         if (ctl_out_unwritable(a->out)) return 1;
+        const char *fmt =
+            cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(a->params, "format"));
+        int stats_only = !strcmp(cmd, "voxelize") && fmt && !strcmp(fmt, "summary");
+        if (!a->out && !a->no_wait && !stats_only && ctl_cwd_unwritable()) return 1;
         cJSON *p = a->params;
         a->params = NULL;
         return ctl_cmd_job(c, cmd, pos[1], p, a->out, a->no_wait);
@@ -375,7 +379,9 @@ static int run(ctl *c, args *a, int n, char **pos)
     if (!strcmp(cmd, "meshes")) return ctl_cmd_meshes(c, a->limit, a->after);
     if (!job_id_ok(pos[1])) return 2;
     if (!strcmp(cmd, "get"))
-        return ctl_out_unwritable(a->out) ? 1 : ctl_cmd_get(c, pos[1], a->name, a->out);
+        return ctl_out_unwritable(a->out) || (a->name && !a->out && ctl_cwd_unwritable())
+                   ? 1
+                   : ctl_cmd_get(c, pos[1], a->name, a->out);
     if (!strcmp(cmd, "cancel")) return ctl_cmd_cancel(c, pos[1]);
     return ctl_cmd_delete(c, pos[1]);
 }

@@ -117,15 +117,15 @@ class Client:
 
     def submit(self, mesh, kind, params=None):
         """Queues a job; returns the Job."""
-        return _with_id(self._json("POST", "/v1/jobs",
-                                   {"mesh": mesh, "kind": kind, "params": params or {}}), 32)
+        return _as_job(self._json("POST", "/v1/jobs",
+                                  {"mesh": mesh, "kind": kind, "params": params or {}}))
 
     def job(self, jid, wait=0, progress=None):
         """The Job; wait > 0 holds until it ends (or reaches progress)."""
         q = "?wait=" + _decimal(wait) if wait else ""
         if wait and progress is not None:
             q += "&progress=" + _decimal(progress)
-        return self._json("GET", "/v1/jobs/" + urllib.parse.quote(jid, safe="") + q)
+        return _as_job(self._json("GET", "/v1/jobs/" + urllib.parse.quote(jid, safe="") + q))
 
     def jobs(self, state=None, limit=100):
         q = {"limit": "%d" % limit}
@@ -173,9 +173,10 @@ class Client:
                 if not line:
                     if data:
                         try:
-                            yield json.loads("\n".join(data))
+                            doc = json.loads("\n".join(data))
                         except ValueError:
                             raise VoxeldError(0, "bad_answer", "an event that is not JSON") from None
+                        yield _as_job(doc)
                     data = []
                 elif line.startswith("data:"):
                     data.append(line[5:].lstrip(" "))
@@ -290,6 +291,24 @@ def _with_id(doc, n):
     return doc
 
 
+def _as_job(doc):
+    """doc when it is a Job (a hex id, a state), else VoxeldError bad_answer."""
+    if not isinstance(_with_id(doc, 32).get("state"), str):
+        raise VoxeldError(0, "bad_answer", "the answer is not a Job (no state)")
+    return doc
+
+
+def _fraction(p):
+    """A progress from the server as 0..1 (a string, NaN, 1e20: clamped)."""
+    return min(max(p, 0.0), 1.0) if isinstance(p, (int, float)) and p == p else 0.0
+
+
+def _shown(s):
+    """The server's text for a terminal: control characters as '?' (an
+    escape sequence in a message could clear the screen or retitle it)."""
+    return "".join("?" if ord(ch) < 0x20 or 0x7f <= ord(ch) < 0xa0 else ch for ch in str(s))
+
+
 class _NoRedirect(urllib.request.HTTPRedirectHandler):
     """voxeld answers no redirect: a 3xx is an error (HTTPError), never
     followed (urllib sent the token on to wherever Location pointed)."""
@@ -367,10 +386,14 @@ def main(argv=None):
     try:
         mesh = c.upload(a.file)["id"]
         job = c.submit(mesh, a.kind, dict(a.param))
-        job = c.wait(job["id"], lambda j: print("%s %s %3.0f%%" % (j["id"], j["state"], 100 * j["progress"]),
+        job = c.wait(job["id"], lambda j: print("%s %s %3.0f%%" % (j["id"], _shown(j["state"]),
+                                                                 100 * _fraction(j.get("progress"))),
                                                file=sys.stderr))
         if job["state"] != "succeeded":
-            print("job %s: %s" % (job["state"], (job.get("error") or {}).get("message")), file=sys.stderr)
+            e = job.get("error")
+            said = "%s (%s)" % (e.get("message"), e.get("code")) if isinstance(e, dict) \
+                else "(the server gave no error)"
+            print("job %s: %s" % (_shown(job["state"]), _shown(said)), file=sys.stderr)
             return 1
         if a.output and job.get("outputs"):
             c.download(job["id"], a.output)
@@ -381,7 +404,7 @@ def main(argv=None):
         print(json.dumps(job))
         return 0
     except VoxeldError as e:
-        print("voxeld: %s" % e, file=sys.stderr)
+        print("voxeld: %s" % _shown(e), file=sys.stderr)
         return 1
     except OSError as e:  # the mesh file or the output file
         print("voxeld_client: %s" % e, file=sys.stderr)

@@ -13,8 +13,14 @@ takes uploads and jobs and says each job succeeded; MODE breaks one answer:
   redirect  the result is a 302 to /steal on this server
   partial   the result is a 206 of its last 4 bytes, not asked for
   html      the upload's 201 is an HTML page, not a Mesh
-  esc       the job's 422 message holds terminal escapes (clear, retitle)
+  esc       the job's 422 message holds terminal escapes (clear, retitle),
+            and so do the job and mesh lists' fields and a job's error
+  nullerr   the job ends failed with "error": null
+  shape     lists whose items are not jobs or meshes, a job and an event
+            that are {}
   slow      the result comes at 100 KB/s (2 MB: 20 s)
+  atonce    no event stream (503), and ?wait answered at once (as with
+            --request-timeout 0): running for 3 s, then succeeded
 The port goes into PORTFILE (whole, by a rename) once it listens."""
 import gzip
 import http.server
@@ -29,10 +35,30 @@ JID = "../../x" if mode == "badid" else "cd" * 16
 BODY = b"#binvox 1\ndim 1 1 1\ntranslate 0 0 0\nscale 1\ndata\n\x01\x01"
 
 
+ESC = "\x1b[2J\x1b]0;pwned\x07"
+
+
 def job(state="succeeded", progress=1.0):
-    return {"id": JID, "kind": "voxelize", "state": state, "progress": progress, "mesh": MESH,
-            "params": {"format": "binvox"}, "created": "2026-01-01T00:00:00Z",
-            "outputs": {"voxels": "/v1/jobs/%s/result/voxels" % JID}}
+    if mode == "nullerr" and state == "succeeded":
+        return {"id": JID, "kind": "voxelize", "state": "failed", "progress": 1.0, "mesh": MESH,
+                "error": None, "created": "2026-01-01T00:00:00Z", "outputs": {}}
+    j = {"id": JID, "kind": "voxelize", "state": state, "progress": progress, "mesh": MESH,
+         "params": {"format": "binvox"}, "created": "2026-01-01T00:00:00Z",
+         "outputs": {"voxels": "/v1/jobs/%s/result/voxels" % JID}}
+    if mode == "esc":
+        j.update(kind="voxelize" + ESC, created=ESC, outputs={"v" + ESC: "/x" + ESC},
+                 error={"code": "c" + ESC, "message": "m" + ESC})
+    return j
+
+
+def lists(path):
+    """The job or mesh list page (or, shape, one that is not)."""
+    if mode == "shape":
+        return {"items": [1, "x", {"foo": 1}]} if path.startswith("/v1/jobs") else {"items": "no"}
+    if path.startswith("/v1/jobs"):
+        return {"items": [job()], "next": "n" + ESC if mode == "esc" else None}
+    m = {"id": MESH, "format": "obj", "triangles": 12, "name": "a" + ESC if mode == "esc" else "a"}
+    return {"items": [m]}
 
 
 class H(http.server.BaseHTTPRequestHandler):
@@ -62,7 +88,7 @@ class H(http.server.BaseHTTPRequestHandler):
             self.reply(201, "text/html", b"<html>a proxy's page</html>")
         elif self.path.startswith("/v1/jobs") and mode == "esc":
             self.reply(422, "application/json", json.dumps({"error": {
-                "code": "invalid\x1b[31m", "message": "bad\x1b[2J\x1b]0;pwned\x07"}}).encode())
+                "code": "invalid\x1b[31m", "message": "bad" + ESC}}).encode())
         elif self.path.startswith("/v1/meshes"):
             self.reply(201, "application/json", json.dumps(
                 {"id": MESH, "format": "obj", "triangles": 12, "vertices": 8}).encode())
@@ -72,8 +98,12 @@ class H(http.server.BaseHTTPRequestHandler):
     def do_GET(self):
         self.note()
         p = self.path
-        if p.endswith("/events"):
-            ev = [job("running", 1e20), job()] if mode == "progress" else [job()]
+        if p.endswith("/events") and mode == "atonce":
+            self.reply(503, "application/json",
+                       b'{"error":{"code":"too_many_streams","message":"no streams"}}')
+        elif p.endswith("/events"):
+            ev = [job("running", 1e20), job()] if mode == "progress" else \
+                [{}] if mode == "shape" else [job()]
             body = b"".join(b"event: job\ndata: " + json.dumps(j).encode() + b"\n\n" for j in ev)
             self.reply(200, "text/event-stream", body)
         elif "/result" in p:
@@ -104,8 +134,14 @@ class H(http.server.BaseHTTPRequestHandler):
                                                                   len(BODY)))])
             else:
                 self.reply(200, "application/octet-stream", BODY)
+        elif p.startswith("/v1/jobs?") or p.startswith("/v1/meshes?"):
+            self.reply(200, "application/json", json.dumps(lists(p)).encode())
+        elif p.startswith("/v1/jobs/") and mode == "atonce":
+            first = self.server.__dict__.setdefault("first_poll", time.monotonic())
+            j = job() if time.monotonic() - first > 3 else job("running", 0.5)
+            self.reply(200, "application/json", json.dumps(j).encode())
         elif p.startswith("/v1/jobs/"):
-            self.reply(200, "application/json", json.dumps(job()).encode())
+            self.reply(200, "application/json", json.dumps({} if mode == "shape" else job()).encode())
         else:
             self.reply(404, "application/json",
                        b'{"error":{"code":"not_found","message":"no such route"}}')

@@ -214,4 +214,24 @@ for m in redirect partial html badid; do
         bash -c "test $rc -ne 0 && ! test -e '$TMP/h-$m/out.bin' && ! grep -q Traceback '$TMP/h-$m/out.txt'"
 done
 check "redirect: nothing went to the Location (the token with it)" bash -c "! grep -q '^GET /steal' '$TMP/h-redirect/log'"
+# A job that is {} (a KeyError traceback), a failed job whose error is
+# null ("job failed: None"), an error message with terminal escapes (they
+# reached the terminal)
+for m in shape nullerr esc; do
+    mkdir -p "$TMP/h-$m"
+    python3 "$VX_SOURCE_DIR/tests/integration/hostile_server.py" "$TMP/h-$m/port" "$TMP/h-$m/log" "$m" &
+    HPID=$!
+    for _ in $(seq 100); do [[ -s "$TMP/h-$m/port" ]] && break; sleep 0.05; done
+    rc=0
+    python3 "$PYC" --server "http://127.0.0.1:$(cat "$TMP/h-$m/port")" voxelize \
+        "$VX_SOURCE_DIR/examples/meshes/torus.obj" -o "$TMP/h-$m/out.bin" >"$TMP/h-$m/out.txt" 2>&1 || rc=$?
+    kill "$HPID"
+    echo $rc >"$TMP/h-$m/rc"
+done
+check "a job that is {}: bad_answer, exit 1 ($(tail -n 1 "$TMP/h-shape/out.txt"))" \
+    bash -c "test \$(cat '$TMP/h-shape/rc') = 1 && grep -q 'bad_answer' '$TMP/h-shape/out.txt' && ! grep -q Traceback '$TMP/h-shape/out.txt'"
+check "a failed job without an error: said ($(tail -n 1 "$TMP/h-nullerr/out.txt"))" \
+    bash -c "test \$(cat '$TMP/h-nullerr/rc') = 1 && grep -q 'job failed: (the server gave no error)' '$TMP/h-nullerr/out.txt'"
+check "escapes in an error: shown as '?' ($(tail -n 1 "$TMP/h-esc/out.txt" | cat -v))" \
+    bash -c "test \$(cat '$TMP/h-esc/rc') = 1 && grep -q 'bad?' '$TMP/h-esc/out.txt' && ! grep -q \$'\\x1b' '$TMP/h-esc/out.txt'"
 finish

@@ -456,6 +456,7 @@ stop_daemon
 # hostile MODE: the stand-in started in $TMP/h-MODE, its port in HPORT
 hostile() {
     mkdir -p "$TMP/h-$1"
+    rm -f "$TMP/h-$1/port" "$TMP/h-$1/log"
     python3 "$VX_SOURCE_DIR/tests/integration/hostile_server.py" "$TMP/h-$1/port" "$TMP/h-$1/log" "$1" &
     HPID=$!
     for _ in $(seq 100); do [[ -s "$TMP/h-$1/port" ]] && break; sleep 0.05; done
@@ -500,4 +501,48 @@ check "Ctrl-C during the download: 130, the job said ended, no file ($(tail -n 1
     bash -c "test \$(cat '$TMP/h-slow/rc') = 130 && grep -q 'download interrupted; job .* has ended' '$TMP/h-slow/err.txt' && ! test -e '$TMP/h-slow/out.bin'"
 check "escapes in an error: exit 1, none reaches the terminal ($(cat -v "$TMP/h-esc/err.txt"))" \
     bash -c "test \$(cat '$TMP/h-esc/rc') = 1 && grep -q 'bad?' '$TMP/h-esc/err.txt' && ! grep -q \$'\\x1b' '$TMP/h-esc/err.txt'"
+# ... nor through the lists, a job shown, or a failed job's error (they
+# printed the server's fields as they came)
+hostile esc
+H="http://127.0.0.1:$HPORT"
+(cd "$TMP/h-esc" && { "$CTL" --server "$H" jobs; "$CTL" --server "$H" meshes; "$CTL" --server "$H" get cdcdcdcdcdcdcdcdcdcdcdcdcdcdcdcd; } >lists.txt 2>&1)
+kill "$HPID"
+check "escapes in the lists and a job: shown as '?' ($(cat -v "$TMP/h-esc/lists.txt" | tr '\n' ' '))" \
+    bash -c "grep -q '^cdcd.*voxelize?' '$TMP/h-esc/lists.txt' && grep -q 'triangles  a?' '$TMP/h-esc/lists.txt' && ! grep -q \$'\\x1b' '$TMP/h-esc/lists.txt'"
+# A failed job whose error is null ("failed:  ()" before); lists and a job
+# that are not (blank rows, exit 0 before)
+hostile nullerr
+(cd "$TMP/h-nullerr" && "$CTL" --server "http://127.0.0.1:$HPORT" voxelize "$VX_SOURCE_DIR/examples/meshes/torus.obj" -o out.bin >out.txt 2>err.txt; echo $? >rc)
+kill "$HPID"
+check "a failed job without an error: exit 1, said ($(cat "$TMP/h-nullerr/err.txt"))" \
+    bash -c "test \$(cat '$TMP/h-nullerr/rc') = 1 && grep -q 'failed (the server gave no error)' '$TMP/h-nullerr/err.txt'"
+hostile shape
+H="http://127.0.0.1:$HPORT"
+for c in jobs meshes "get cdcdcdcdcdcdcdcdcdcdcdcdcdcdcdcd"; do
+    rc=0
+    (cd "$TMP/h-shape" && "$CTL" --server "$H" $c >out.txt 2>err.txt) || rc=$?
+    check "$c answered with what is not one: exit 1, said ($(cat "$TMP/h-shape/err.txt"))" \
+        bash -c "test $rc = 1 && grep -q 'not the JSON expected' '$TMP/h-shape/err.txt' && ! grep -q '[^[:space:]]' '$TMP/h-shape/out.txt'"
+done
+kill "$HPID"
+# A server that answers ?wait at once (--request-timeout 0) and has no
+# event stream is asked once a second (thousands of times a second before)
+hostile atonce
+(cd "$TMP/h-atonce" && "$CTL" --server "http://127.0.0.1:$HPORT" voxelize "$VX_SOURCE_DIR/examples/meshes/torus.obj" -o out.bin >out.txt 2>err.txt; echo $? >rc)
+kill "$HPID"
+check "?wait answered at once: polled once a second ($(grep -c '^GET /v1/jobs/[0-9a-f]*?wait' "$TMP/h-atonce/log") polls in 3 s), the result written" \
+    bash -c "test \$(cat '$TMP/h-atonce/rc') = 0 && test -s '$TMP/h-atonce/out.bin' && test \$(grep -c '^GET /v1/jobs/[0-9a-f]*?wait' '$TMP/h-atonce/log') -le 6"
+# Without -o, a current directory the result cannot be written in is said
+# before the upload (it was found after the job ran); a summary writes no
+# file there, so it goes on
+hostile badid
+H="http://127.0.0.1:$HPORT"
+rc=0
+(cd /proc && "$CTL" --server "$H" voxelize "$VX_SOURCE_DIR/examples/meshes/torus.obj" >"$TMP/h-badid/cwd.out" 2>"$TMP/h-badid/cwd.err") || rc=$?
+check "an unwritable current directory: exit 1, said, nothing sent ($(cat "$TMP/h-badid/cwd.err"))" \
+    bash -c "test $rc = 1 && grep -q 'cannot write the result in the current directory' '$TMP/h-badid/cwd.err' && ! grep -q POST '$TMP/h-badid/log'"
+(cd /proc && "$CTL" --server "$H" voxelize "$VX_SOURCE_DIR/examples/meshes/torus.obj" -f summary >/dev/null 2>"$TMP/h-badid/sum.err")
+kill "$HPID"
+check "... a summary there is submitted ($(cat "$TMP/h-badid/sum.err"))" \
+    bash -c "test \$(grep -c 'POST /v1/jobs' '$TMP/h-badid/log') = 1"
 finish
