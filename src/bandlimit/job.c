@@ -74,6 +74,7 @@ typedef struct rparams {
 typedef struct rstate {
     int nmeshes;
     vx_bitgrid *grids;
+    vx_inside inside[1 + VX_BL_MAX_MESHES]; /* each mesh's rule: voxelize's default for it */
     double box_origin[3], P, centre[3], radius;
     float *spec;
     vx_bl_volume vm; /* M^3 with the spectral gradient */
@@ -363,7 +364,6 @@ static int render_run_gl(vx_job_run *r, const vx_mesh *mesh, const void *params,
     }
     d.grid.h = s->P / p.R;
     d.method = VX_METHOD_AUTO;
-    d.inside = VX_INSIDE_NONZERO;
     d.fill = VX_FILL_SOLID;
     d.max_memory = lim ? lim->max_job_memory : 0;
     d.progress = voxel_progress;
@@ -372,6 +372,10 @@ static int render_run_gl(vx_job_run *r, const vx_mesh *mesh, const void *params,
         gl_progress gp = {r, k, nm};
         d.ud = &gp;
         vx_voxelize_stats vst;
+        /* an open mesh or one whose faces disagree on their way round
+         * takes the rule voxelize takes for it (nonzero drew streaks out
+         * to the box's edge, or left an open box a wall) */
+        s->inside[k] = d.inside = vx_voxelize_default_inside(k ? extra[k] : mesh, &d);
         if (vx_voxelize(vx_run_gl(r), k ? extra[k] : mesh, &d, &s->grids[k], &vst, err)) goto out;
         s->nmeshes = k + 1;
     }
@@ -717,6 +721,9 @@ static int encode(vx_job_run *r, const rparams *pp, void *state, vx_err *err)
     stat_set(st, "M", (double)(p.L * p.N));
     stat_set(st, "iso", p.iso);
     stat_set(st, "meshes", 1 + p.nmeshes);
+    cJSON *in = cJSON_AddArrayToObject(st, "inside");
+    for (int k = 0; in && k < 1 + p.nmeshes; k++)
+        cJSON_AddItemToArray(in, cJSON_CreateString(vx_inside_names[s->inside[k]]));
     stat_set(st, "box_size", s->P);
     stat_set(st, "mean_density", s->spec[0]);
     stat_set(st, "pixels_covered", (double)covered);

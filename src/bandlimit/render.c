@@ -296,9 +296,11 @@ static void cast_pixel(const cast_ctx *c, int px, int py)
     if (!c->v->g[0]) return;
     vx_bl_volume_sample(c->v, p, g);
     double n = vx_v3_norm(g);
-    if (n > 0)
-        for (int a = 0; a < 3; a++)
-            h->nrm[3 * i + a] = (float)(-g[a] / n);
+    /* a flat field (a tiny D0 keeps only the mean) has no gradient: the
+     * hit faces the camera, as the screen-space methods take it (a NaN
+     * normal said "missed" on a pixel that hit) */
+    for (int a = 0; a < 3; a++)
+        h->nrm[3 * i + a] = (float)(n > 0 ? -g[a] / n : -c->cam->fwd[a]);
 }
 
 /* Tile k (vx_par_for). The calling thread (t = 0) polls its stop hook

@@ -26,8 +26,6 @@ typedef enum vformat {
 } vformat;
 
 static const char *const method_names[] = {"auto", "peel", "slice", "scan", "cpu", NULL};
-static const char *const inside_names[] = {"nonzero", "parity", "robust", "winding",
-                                           NULL}; /* vx_inside order */
 static const char *const fill_names[] = {"solid", "surface", NULL};
 static const char *const samples_names[] = {"cube", "faces", NULL}; /* vx_samples order */
 static const char *const format_names[] = {"vdb", "binvox", "raw8", "raw1", "summary",
@@ -124,7 +122,7 @@ static const vx_pspec spec[] = {
      .doc = "an explicit grid box {origin, voxel_size, dims}"},
     VX_P_INT(vparams, padding, 0, 0, 1024, "empty voxels around the bbox"),
     VX_P_ENUM(vparams, method, method_names, 0, "voxelization method"),
-    VX_P_ENUM(vparams, inside, inside_names, 0, "inside rule", .flags = VX_PF_NULLABLE,
+    VX_P_ENUM(vparams, inside, vx_inside_names, 0, "inside rule", .flags = VX_PF_NULLABLE,
               SET(inside)),
     VX_P_ENUM(vparams, fill, fill_names, 0, "solid or surface shell"),
     VX_P_INT(vparams, supersample, 1, 1, 2, "samples per voxel edge"),
@@ -591,7 +589,7 @@ static void stats_grid(cJSON *stats, const vx_grid *g, const vx_mesh *mesh, cons
 {
     double dims[3] = {g->dims[0], g->dims[1], g->dims[2]};
     stat_set(stats, "method", cJSON_CreateString(method ? method : "unknown"));
-    stat_set(stats, "inside", cJSON_CreateString(inside_names[inside]));
+    stat_set(stats, "inside", cJSON_CreateString(vx_inside_names[inside]));
     stat_set(stats, "boundary_edges", cJSON_CreateNumber((double)mesh->boundary_edges));
     stat_set(stats, "boundary_edges_welded",
              cJSON_CreateNumber((double)mesh->boundary_edges_welded));
@@ -639,7 +637,7 @@ static cJSON *brick_params(const vparams *p, const vx_grid *whole, const int at[
     cJSON_AddItemToObject(g, "dims", array3(d));
     cJSON_AddItemToObject(g, "index_offset", array3(idx));
     cJSON_AddStringToObject(o, "method", method_names[p->method]);
-    cJSON_AddStringToObject(o, "inside", inside_names[inside]);
+    cJSON_AddStringToObject(o, "inside", vx_inside_names[inside]);
     cJSON_AddStringToObject(o, "fill", fill_names[p->fill]);
     cJSON_AddNumberToObject(o, "supersample", (double)p->supersample);
     cJSON_AddStringToObject(o, "samples", samples_names[p->samples]);
@@ -654,7 +652,7 @@ static vx_vdb_meta meta_of(const vparams *p, vx_job_run *r, const char *method, 
 {
     vx_vdb_meta m = {
         .method = method,
-        .inside = inside_names[inside],
+        .inside = vx_inside_names[inside],
         .fill = fill_names[p->fill],
         .mesh = vx_run_mesh_id(r),
         .supersample = (int)p->supersample,

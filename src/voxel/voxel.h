@@ -79,6 +79,8 @@ typedef enum vx_inside {
     VX_INSIDE_ROBUST,      /* for meshes with holes: majority of parity along x, y and z */
     VX_INSIDE_WINDING,     /* generalized winding number >= 1/2 (winding.c, on the CPU) */
 } vx_inside;
+/* The rules' names in the API, in vx_inside order, NULL-terminated. */
+extern const char *const vx_inside_names[];
 typedef enum vx_fill { VX_FILL_SOLID = 0, VX_FILL_SURFACE } vx_fill;
 /* Where supersample 2 samples a voxel (src/voxel/faces.c for FACES). */
 typedef enum vx_samples {

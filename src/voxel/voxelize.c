@@ -7,6 +7,8 @@
 #include "util/log.h"
 #include "voxel/voxel.h"
 
+const char *const vx_inside_names[] = {"nonzero", "parity", "robust", "winding", NULL};
+
 /* The GL methods place vertices as floats in voxels from the box
  * (vx_grid_unit): exact to the 1/256-voxel snap within 2^15 voxels of it
  * (the limit their brick-exact voxels are documented to), off by up to

@@ -235,6 +235,30 @@ far "a mesh of 1e30, fitted perspective with a fov of 1e-300" "$MESH_ID" '{"type
 check "a mesh of 1e30, fov 1e-300: in the image ($COV pixels)" test "$COV" -gt 0
 api GET /livez
 check "the daemon is still up after it" test "$STATUS" = 200
+# An open mesh and a closed one whose faces disagree on their way round
+# are sampled by the rule voxelize takes for them (nonzero left an open
+# box one wall, 0.073 of the box for 0.364, and a flipped face a flange)
+box_obj "$TMP/cube.obj" 0 0 0 1 1 1
+grep -v '^f 2 3 7 6$' "$TMP/cube.obj" >"$TMP/open.obj"
+sed 's/^f 1 4 3 2$/f 1 2 3 4/' "$TMP/cube.obj" >"$TMP/flip.obj"
+for s in cube open flip; do
+    upload "$TMP/$s.obj"
+    far "a unit cube, $s" "$MESH_ID" '{"type":"orbit"}'
+    declare "MD_$s=$(st mean_density)" "IN_$s=$(jq -c .stats.inside "$TMP/job.json")"
+done
+check "the rules: nonzero, winding (open), parity (flipped) ($IN_cube $IN_open $IN_flip)" \
+    test "$IN_cube$IN_open$IN_flip" = '["nonzero"]["winding"]["parity"]'
+check "an open cube, a flipped one: the solid cube's density ($MD_open, $MD_flip, $MD_cube)" \
+    awk -v a="$MD_open" -v b="$MD_flip" -v c="$MD_cube" 'BEGIN { exit !(c > 0.3 && (a - c) ^ 2 < (0.02 * c) ^ 2 && (b - c) ^ 2 < (0.02 * c) ^ 2) }'
+# A flat field (D0 1e-6 keeps the mean alone) has no gradient: a hit's
+# normal faces the camera (it was NaN, which says "missed")
+job "a flat field" "$M_icosphere" '{"N":16,"width":32,"height":32,"filter":{"D0":1e-6},"iso":0.01,"outputs":["normal","depth"]}'
+get normal "$TMP/fn.pfm"
+get depth "$TMP/fd.pfm"
+FN=$("$RC" pfm "$TMP/fn.pfm")
+FD=$("$RC" pfm "$TMP/fd.pfm")
+check "a flat field: hits ($FD) have normals ($FN)" \
+    jq -e --argjson d "$FD" '$d.nan < 1024 and .nan == 3 * $d.nan' <<<"$FN"
 # A light direction of [0, 0, 1e-200] is not zero (its length's square
 # underflows: it was 422 "must not be zero"): the light of [0, 0, 1].
 job "a light direction [0, 0, 1]" "$M_ball_a" '{"N":16,"width":32,"height":32,"lights":[{"direction":[0,0,1]}]}'
