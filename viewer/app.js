@@ -98,9 +98,19 @@ function keyboard(node, act = () => node.onclick()) {
   };
 }
 
+// The meshes list marks the mesh the form's menu has chosen.
+function markMesh() {
+  for (const li of $('meshes').children) {
+    const on = li.dataset.id === $('mesh').value;
+    li.classList.toggle('sel', on);
+    li.setAttribute('aria-pressed', on ? 'true' : 'false');
+  }
+}
+
 async function refreshMeshes() {
   const meshes = await listAll('/v1/meshes');
   const ul = $('meshes'), sel = $('mesh'), keep = sel.value;
+  const focused = ul.contains(document.activeElement) ? document.activeElement.dataset.id : null;
   ul.replaceChildren();
   sel.replaceChildren();
   for (const m of meshes) {
@@ -111,21 +121,27 @@ async function refreshMeshes() {
     li.querySelector('b').textContent = label;
     li.querySelector('.id').textContent = m.name ? short(m.id) : '';
     li.querySelector('small').textContent = `${m.format}, ${m.triangles} triangles, ${when(m.created)}`;
-    li.onclick = () => { sel.value = m.id; };
+    li.onclick = () => { sel.value = m.id; markMesh(); };
     keyboard(li);
     ul.append(li);
+    if (m.id === focused) li.focus();
     const o = document.createElement('option');
     o.value = m.id;
     o.textContent = `${label} (${m.triangles} tris)`;
     sel.append(o);
   }
   if (keep && meshes.some(m => m.id === keep)) sel.value = keep;
+  sel.onchange = markMesh;
+  markMesh();
   return meshes;
 }
 
 async function refreshJobs() {
   const jobs = (await listAll('/v1/jobs', 10)).slice(0, 200);
   const ul = $('jobs');
+  // the item with the keyboard's focus keeps it (the list is rebuilt at
+  // every change of state: the focus went back to the page's start)
+  const focused = ul.contains(document.activeElement) ? document.activeElement.dataset.id : null;
   ul.replaceChildren();
   for (const j of jobs) {
     const li = document.createElement('li');
@@ -141,6 +157,7 @@ async function refreshJobs() {
     li.onclick = () => openJob(j.id);
     keyboard(li);
     ul.append(li);
+    if (j.id === focused) li.focus();
   }
 }
 
@@ -156,11 +173,13 @@ async function refreshAll() {
 const MEDIA = { obj: 'model/obj', drc: 'model/x-draco', bpt: 'model/x-bpt' };
 
 // The file's name as a mesh name the server takes (1 to 100 bytes of
-// UTF-8, no control characters, '/', '\\' or '"', not "." or ".."):
+// UTF-8, no control or invisible format characters (the spec's list:
+// U+061C, U+200B-200F, U+202A-202E, U+2060-206F, U+FEFF), '/', '\\' or
+// '"', not "." or ".."):
 // those characters become '_', a longer name keeps its end (the
 // extension); '' when nothing is left.
 function meshName(name) {
-  let n = name.replace(/[\u0000-\u001f\u007f-\u009f\/\\"\u200b-\u200f\u202a-\u202e\u2066-\u2069\ufeff]/g, '_');
+  let n = name.replace(/[\u0000-\u001f\u007f-\u009f\/\\"\u061c\u200b-\u200f\u202a-\u202e\u2060-\u206f\ufeff]/g, '_');
   const enc = new TextEncoder();
   while (enc.encode(n).length > 100) n = Array.from(n).slice(1).join('');
   return n === '.' || n === '..' ? '' : n;
@@ -273,10 +292,13 @@ async function followEvents(jid, seq, onJob) {
 }
 
 // Polls with ?wait=1; while the server holds as many waits as it allows
-// (503 too_many_waits) it is asked without one, a second apart.
+// (503 too_many_waits) it is asked without one, a second apart. A server
+// that answers ?wait at once (--request-timeout 0) is asked once a second,
+// not as fast as it answers.
 async function followPoll(jid, seq, onJob) {
   while (seq === followSeq) {
     let job;
+    const t0 = performance.now();
     try {
       job = await apiJSON(`/v1/jobs/${jid}?wait=1`);
     } catch (e) {
@@ -286,6 +308,8 @@ async function followPoll(jid, seq, onJob) {
     }
     onJob(job);
     if (TERMINAL.has(job.state)) return;
+    const left = 1000 - (performance.now() - t0);
+    if (left > 0) await new Promise(r => setTimeout(r, left));
   }
 }
 
@@ -464,7 +488,13 @@ async function showMesh(job, seq) {
   const tris = v.showMesh(data, fmt);
   $('view-note').textContent = `${job.kind}: ${tris} triangles; drag to orbit, wheel to zoom`;
   document.body.dataset.resultShown = 'mesh';
-  if (names.length > 1) await playFrames(job, names.slice(0, 65), fmt, as, v);
+  if (names.length > 1) {
+    // every frame (at most 256) while they hold at most 16M triangles in all
+    const fit = Math.max(2, Math.floor(16e6 / Math.max(tris, 1)));
+    if (fit < names.length)
+      $('view-note').textContent += `; the first ${fit - 1} of ${names.length - 1} frames played (16M triangles in all)`;
+    await playFrames(job, names.slice(0, fit), fmt, as, v);
+  }
 }
 
 // Deformation frames (gregory's frame_001, ...): loaded, then played in
@@ -530,17 +560,23 @@ async function showResult(job, seq) {
 
 // ---- start ---------------------------------------------------------------------
 
-async function main() {
-  const tok = $('token');
-  tok.value = localStorage.getItem(TOKEN_KEY) || '';
-  tok.onchange = () => { localStorage.setItem(TOKEN_KEY, tok.value.trim()); refreshAll(); };
-  $('refresh').onclick = () => refreshAll();
-  $('cancel').onclick = () => cancelJob();
-  setupDrop();
+// The server's version at the top (again once a token is entered: without
+// it /v1/info is 401).
+async function showVersion() {
   try {
     const info = await (await fetch('/v1/info', { headers: authHeaders() })).json();
     if (info.version) $('server-info').textContent = `v${info.version}`;
   } catch { /* shown by the lists */ }
+}
+
+async function main() {
+  const tok = $('token');
+  tok.value = localStorage.getItem(TOKEN_KEY) || '';
+  tok.onchange = () => { localStorage.setItem(TOKEN_KEY, tok.value.trim()); refreshAll(); showVersion(); };
+  $('refresh').onclick = () => refreshAll();
+  $('cancel').onclick = () => cancelJob();
+  setupDrop();
+  await showVersion();
   try {
     const { load } = await import('/ui/js-yaml.mjs');
     spec = load(await (await fetch('/openapi.yaml')).text());

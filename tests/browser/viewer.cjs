@@ -4,8 +4,11 @@
 // and a gregory job from the generated form, each 3D result read back from
 // the canvas (pixels that differ from the background), live progress from
 // an event stream, a render turntable playing, gregory's frames played in
-// order, a download's name, the keyboard, the open job kept in the address,
-// and the /docs page. Run by
+// order (70 of them), a download's name, the keyboard (the focus kept
+// across the list's redraw), the open job kept in the address, a mesh
+// chosen marked, a name with invisible characters, polling a server that
+// answers ?wait at once, the version shown after the token, and the /docs
+// page. Run by
 // tests/integration/test_viewer.sh:
 //   node viewer.cjs BASE TOKEN SPOT_OBJ CONTROL_OBJ OUT_DIR
 // Prints one line per check; exits 1 when one fails.
@@ -92,6 +95,9 @@ async function runJob(page, kind, fields, shown) {
     await page.fill('#token', token);
     await page.dispatchEvent('#token', 'change');
     await page.waitForFunction(() => document.getElementById('notice').hidden, null, { timeout: 10000 });
+    // /v1/info was 401 before the token: asked again (the version stayed empty)
+    await page.waitForFunction(() => /^v\d/.test(document.getElementById('server-info').textContent), null, { timeout: 10000 }).catch(() => {});
+    check('the server version shows once the token is entered', /^v\d/.test(await page.textContent('#server-info')), await page.textContent('#server-info'));
   }
 
   // Upload by the file control.
@@ -195,6 +201,11 @@ async function runJob(page, kind, fields, shown) {
   await page.waitForFunction(id => document.getElementById('job-title').textContent === id.slice(0, 12), lastId, { timeout: 10000 })
     .catch(() => {});
   check('a job opens on Enter', (await page.textContent('#job-title')) === lastId.slice(0, 12), await page.textContent('#job-title'));
+  // ... and keeps the keyboard's focus while the list is rebuilt (it went
+  // to the page's body)
+  await page.waitForTimeout(1000);
+  const focus = await page.evaluate(() => `${document.activeElement.tagName} ${document.activeElement.dataset.id || ''}`);
+  check('the job opened keeps the focus', focus === `LI ${lastId}`, focus);
   // The open job is in the address: a reload shows it again.
   check('the open job is in the address', page.url().endsWith(`#job=${lastId}`), page.url());
   await page.reload();
@@ -219,6 +230,57 @@ async function runJob(page, kind, fields, shown) {
   await page.waitForFunction(() => /\(2 frames\)/.test(document.getElementById('images').textContent), null, { timeout: 30000 }).catch(() => {});
   page.off('request', onResult);
   check('gregory frames: the mesh, then frame_001', JSON.stringify(fetched) === '["mesh","frame_001"]', `${gj.state} ${JSON.stringify(fetched)}`);
+
+  // More deformation frames than 64 all play (the page took the first 64).
+  const many = await (await fetch(`${base}/v1/jobs?wait=120`, { method: 'POST', headers: { ...auth, 'Content-Type': 'application/json' },
+    body: JSON.stringify({ mesh: cage.id, kind: 'gregory', params: { divisions: 1, frames: Array.from({ length: 70 }, (_, k) => frame.map(x => x * (1 + k / 100))) } }) })).json();
+  await page.goto(`${base}/#job=${many.id}`);
+  await page.waitForFunction(() => /frames\)/.test(document.getElementById('images').textContent), null, { timeout: 60000 }).catch(() => {});
+  check('70 deformation frames: all played', /\(71 frames\)/.test(await page.textContent('#images')), `${many.state} ${await page.textContent('#images')}`);
+
+  // A mesh clicked in the list is marked (nothing showed it was chosen).
+  await page.click('#meshes li:last-child');
+  const marked = await page.evaluate(() => [...document.querySelectorAll('#meshes li')].map(li => `${li.classList.contains('sel')}:${li.getAttribute('aria-pressed')}`).join(' '));
+  check('a mesh clicked is marked', /^(false:false )*true:true$/.test(marked), marked);
+
+  // A file name with invisible format characters the server refuses in a
+  // name (U+2060, U+061C: 400 before) goes up with them made '_'.
+  const dt2 = await page.evaluateHandle(t => {
+    const d = new DataTransfer();
+    d.items.add(new File([`${t}\n# another file\n`], 'w\u2060j\u061c.obj', { type: '' }));
+    return d;
+  }, text);
+  await page.dispatchEvent('#drop', 'drop', { dataTransfer: dt2 });
+  await page.waitForFunction(() => /\.obj: (mesh|\d)/.test(document.getElementById('upload-status').textContent), null, { timeout: 20000 }).catch(() => {});
+  const named = (await (await fetch(`${base}/v1/meshes?limit=100`, { headers: auth })).json()).items.map(m => m.name);
+  check('a name with U+2060 and U+061C: uploaded as w_j_.obj', named.includes('w_j_.obj'), `${await page.textContent('#upload-status')}; ${named.join(' ')}`);
+
+  // A server that answers ?wait at once (--request-timeout 0) with no
+  // stream is asked once a second (it was asked as fast as it answered):
+  // the job is said running for 3 s.
+  await page.route(/\/v1\/jobs\/[0-9a-f]+\/events$/, busy('too_many_streams'));
+  let quick = 0, since = 0;
+  const seen = [];
+  const onSeen = r => seen.push(r.url().replace(base, ''));
+  page.on('request', onSeen);
+  const jobUrl = /\/v1\/jobs\/[0-9a-f]{32}(\?.*)?$/;
+  await page.route(jobUrl, async route => {
+    if (/\?wait=/.test(route.request().url())) quick++;
+    since = since || Date.now();
+    const real = await (await route.fetch({ url: route.request().url().replace(/\?.*/, '') })).json();
+    const j = Date.now() - since < 3000 ? { ...real, state: 'running', progress: 0.5, finished: null, outputs: {} } : real;
+    return route.fulfill({ status: 200, headers: { 'Content-Type': 'application/json' }, body: JSON.stringify(j) });
+  });
+  const pj = await (await fetch(`${base}/v1/jobs?wait=60`, { method: 'POST', headers: { ...auth, 'Content-Type': 'application/json' },
+    body: JSON.stringify({ mesh: cage.id, kind: 'gregory', params: { divisions: 1 } }) })).json();
+  await page.goto('about:blank'); // a fresh page (the last one's 70 frames may still load)
+  await page.goto(`${base}/#job=${pj.id}`);
+  await page.waitForFunction(id => document.getElementById('job-title').textContent === id.slice(0, 12) &&
+    /succeeded/.test(document.getElementById('state').textContent), pj.id, { timeout: 20000 }).catch(() => {});
+  page.off('request', onSeen);
+  check('?wait answered at once: polled about once a second', quick >= 2 && quick <= 6, `${quick} polls, ${await page.textContent('#state')}; ${seen.slice(0, 12).join(' ')}`);
+  await page.unroute(/\/v1\/jobs\/[0-9a-f]+\/events$/);
+  await page.unroute(jobUrl);
 
   // The reference page.
   await page.goto(`${base}/docs`);
