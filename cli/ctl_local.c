@@ -105,6 +105,34 @@ static int rm_entry(const char *path, const struct stat *st, int flag, struct FT
     return 0;
 }
 
+/* In the child, before its exec: the private voxeld takes nothing of the
+ * service it may run beside (a deployment's VOXELD_TOKEN_FILE answered
+ * its own client 401, its VOXELD_BLOB_STORE and VOXELD_DATABASE put the
+ * one job in the shared store and queue), nor reports to systemd for it
+ * (NOTIFY_SOCKET: READY=1 and STOPPING=1 of another process), nor takes
+ * its directories or sockets. */
+static void private_environment(void)
+{
+    static const char *const service[] = {"NOTIFY_SOCKET",   "WATCHDOG_USEC",   "WATCHDOG_PID",
+                                          "LISTEN_FDS",      "LISTEN_PID",      "LISTEN_FDNAMES",
+                                          "STATE_DIRECTORY", "CACHE_DIRECTORY", "JOURNAL_STREAM"};
+    for (size_t i = 0; i < sizeof service / sizeof service[0]; i++)
+        unsetenv(service[i]);
+    extern char **environ;
+    for (int again = 1; again;) { /* unsetenv moves environ's entries */
+        again = 0;
+        for (char **e = environ; e && *e; e++) {
+            const char *eq = strchr(*e, '=');
+            if (strncmp(*e, "VOXELD_", 7) != 0 || !eq || (size_t)(eq - *e) >= 128) continue;
+            char name[128];
+            snprintf(name, sizeof name, "%.*s", (int)(eq - *e), *e);
+            unsetenv(name);
+            again = 1;
+            break;
+        }
+    }
+}
+
 int ctl_local_start(ctl *c)
 {
     /* Before any thread (libcurl's resolver, the log drain) is made, so
@@ -136,6 +164,7 @@ int ctl_local_start(ctl *c)
         dup2(fds[1], 2);
         close(fds[0]);
         close(fds[1]);
+        private_environment();
         execlp(bin, bin, "--listen", "127.0.0.1:0", "--data-dir", data, "--log-level", "info",
                (char *)NULL);
         fprintf(stderr, "voxelctl: cannot run %s: %s\n", bin, strerror(errno));

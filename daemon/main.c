@@ -62,8 +62,12 @@ static _Atomic double g_gl_alive_at;
  * it for S seconds, as a driver call that does not return would. */
 static double g_test_stall_s;
 
+/* Whether systemd watches this process (WATCHDOG_USEC set, WATCHDOG_PID
+ * unset or this pid: sd_watchdog_enabled), read at start. */
+static int g_watchdog;
+
 /* The GL thread pings the systemd watchdog through the jobs' alive hook,
- * and notes the time for /livez. */
+ * when there is one, and notes the time for /livez. */
 static void on_jobs_alive(void *ud)
 {
     (void)ud;
@@ -73,7 +77,7 @@ static void on_jobs_alive(void *ud)
         nanosleep(&ts, NULL);
     }
     atomic_store(&g_gl_alive_at, vx_mono());
-    sd_notify(0, "WATCHDOG=1");
+    if (g_watchdog) sd_notify(0, "WATCHDOG=1");
 }
 
 /* VOXELD_TEST_LOSE_CONTEXT=N (tests only): the next N GL stages run as if
@@ -168,6 +172,8 @@ static void block_signals(sigset_t *sigs)
     sigaddset(sigs, SIGTERM);
     sigaddset(sigs, SIGINT);
     sigaddset(sigs, SIGHUP);
+    sigaddset(sigs, SIGUSR1); /* logged and ignored, as SIGHUP: they killed it */
+    sigaddset(sigs, SIGUSR2);
     pthread_sigmask(SIG_BLOCK, sigs, NULL);
     signal(SIGPIPE, SIG_IGN);
 }
@@ -385,7 +391,11 @@ static void serve_until_signal(const sigset_t *sigs, vx_store *store, vx_jobs *j
             VX_INFO("voxeld.signal", "signal=%s", sig == SIGTERM ? "TERM" : "INT");
             break;
         }
-        if (sig == SIGHUP) VX_INFO("voxeld.signal", "signal=HUP action=none");
+        if (sig == SIGHUP || sig == SIGUSR1 || sig == SIGUSR2)
+            VX_INFO("voxeld.signal", "signal=%s action=none",
+                    sig == SIGHUP    ? "HUP"
+                    : sig == SIGUSR1 ? "USR1"
+                                     : "USR2");
         if (ping_s > 0) sd_notify(0, "WATCHDOG=1");
         if (vx_mono() >= next_maint) {     /* once a minute */
             vx_store_results_evict(store); /* the age budget */
@@ -455,6 +465,8 @@ int main(int argc, char **argv)
     int rc = vx_config_load(&cfg, argc, argv);
     if (rc) return rc > 0 ? 0 : 2;
     vx_log_set_level(cfg.log_level);
+    uint64_t wd_usec = 0;
+    g_watchdog = sd_watchdog_enabled(0, &wd_usec) > 0 && wd_usec > 0;
     /* Files 0640 and dirs 0750 at most, as the systemd unit's UMask=0027:
      * the writers' own modes (fopen's 0666, OpenVDB's) are no wider then.
      * A stricter umask stays. */

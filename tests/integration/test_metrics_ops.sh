@@ -202,4 +202,26 @@ stop_daemon
 check "data_dir with a blank is quoted in voxeld.start" \
     grep -qF "data_dir=\"$TMP/my data\"" "$TMP/daemon.log"
 check "  ... and in store.open" grep -qF "event=store.open dir=\"$TMP/my data\"" "$TMP/daemon.log"
+
+# SIGUSR1 and SIGUSR2 are logged and ignored as SIGHUP (they killed it:
+# 138, 140); with a notify socket but no watchdog (no WATCHDOG_USEC) the
+# daemon says READY=1 and never WATCHDOG=1 (sd_watchdog_enabled's rule)
+python3 "$VX_SOURCE_DIR/tests/integration/notify_listen.py" "$TMP/ops-notify" "$TMP/ops-notify.log" &
+npid=$!
+for _ in $(seq 50); do [[ -S "$TMP/ops-notify" ]] && break; sleep 0.1; done
+NOTIFY_SOCKET=$TMP/ops-notify start_daemon || exit 1
+upload "$VX_SOURCE_DIR/examples/meshes/torus.obj"
+run_job voxelize "$MESH_ID" '{"resolution":16,"format":"summary"}' 60
+job_ok "a job with a notify socket and no watchdog"
+kill -USR1 "$PID"
+kill -USR2 "$PID"
+sleep 0.5
+api GET /livez
+check "SIGUSR1, SIGUSR2: still serving" test "$STATUS" = 200
+check "... each logged" sh -c "grep -q 'signal=USR1 action=none' '$TMP/daemon.log' && grep -q 'signal=USR2 action=none' '$TMP/daemon.log'"
+stop_daemon
+sleep 0.3
+kill "$npid"
+check "no watchdog asked for: READY=1, no WATCHDOG=1 ($(cut -d' ' -f2- "$TMP/ops-notify.log" | cut -c1-40 | sort | uniq -c | tr '\n' ' '))" \
+    sh -c "grep -q ' READY=1$' '$TMP/ops-notify.log' && ! grep -q 'WATCHDOG=1' '$TMP/ops-notify.log'"
 finish

@@ -353,6 +353,24 @@ check "voxeld run: exit 0 ($(cat ctl.err))" test $rc -eq 0
 check "voxeld run: the same grid" cmp -s local.binvox run.binvox
 "$CTL" --local voxelize "$MESH" -r 99999 2>ctl.err
 check "--local: a bad param still exits 1 with the message" sh -c "test $? -eq 1 && grep -q invalid_params ctl.err"
+# The private voxeld takes nothing of a service it runs beside: its token
+# file (its own client got 401), its blob store (the job's mesh stayed in
+# the shared store), its systemd socket (READY=1, STOPPING=1 of another)
+printf 'secret\n' >"$TMP/svc-token"
+mkdir -p "$TMP/svc-store"
+python3 "$VX_SOURCE_DIR/tests/integration/notify_listen.py" "$TMP/svc-notify" "$TMP/svc-notify.log" &
+npid=$!
+for _ in $(seq 50); do [[ -S "$TMP/svc-notify" ]] && break; sleep 0.1; done
+rc=0
+VOXELD_TOKEN_FILE=$TMP/svc-token VOXELD_BLOB_STORE=file://$TMP/svc-store NOTIFY_SOCKET=$TMP/svc-notify \
+    "$VOXELD" run voxelize "$MESH" -r 16 -f summary -o svc.json --quiet 2>ctl.err || rc=$?
+sleep 0.3
+kill "$npid"
+check "voxeld run beside a service's environment: exit 0 ($(cat ctl.err))" test $rc -eq 0
+check "... nothing in the service's store ($(find "$TMP/svc-store" -type f | head -n 3 | tr '\n' ' '))" \
+    test -z "$(find "$TMP/svc-store" -type f)"
+check "... nothing told to its systemd socket ($(tr '\n' ' ' <"$TMP/svc-notify.log" 2>/dev/null))" \
+    test ! -s "$TMP/svc-notify.log"
 check "--local: its temporary data dirs are removed" test -z "$(ls -A "$TMP/ltmp")"
 # Interrupted mid-job (Ctrl-C, kill): the private voxeld and its data dir go
 # too, and the signal still ends the command. SIGINT is given back its
