@@ -142,6 +142,10 @@ static const opt_def opts[] = {
      "disk)"},
     {"cors-origin", T_LIST, S(cors_origin),
      "origin a browser may call the API from (repeat, or a comma list; * = any; default none)"},
+    {"allowed-hosts", T_LIST, S(allowed_hosts),
+     "Host names answered besides IP addresses, localhost, *.localhost and names without a dot "
+     "(repeat, or a comma list; .NAME = NAME and the names under it; * = any; default none: only "
+     "those on a loopback address without --token-file, any elsewhere)"},
     {"job-history", T_SIZE, F(job_history), 0,
      "finished jobs remembered (default 10000; at least 1)"},
     {"job-history-bytes", T_SIZE, F(job_history_bytes), 0,

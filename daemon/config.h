@@ -67,6 +67,8 @@ typedef struct vx_config {
     uint64_t max_event_streams; /* open SSE streams before 503 too_many_streams */
     uint64_t max_waits;         /* ?wait holds at once before 503 too_many_waits */
     double event_keepalive_s;   /* idle time before a ": keepalive" comment */
+    char allowed_hosts[1024];   /* comma list of Host names taken besides IPs and localhost ("*" =
+                                   any) */
     char cors_origin[1024]; /* comma list of origins a browser may call from ("*" = any); empty = no
                                CORS */
     int gl_debug;

@@ -34,6 +34,7 @@
 #include <unistd.h>
 
 #include "metrics.h"
+#include "origin.h"
 #include "sockq.h"
 #include "util/fsutil.h"
 #include "util/log.h"
@@ -307,6 +308,12 @@ static int first_call(vx_http *h, struct MHD_Connection *c, req *r, const char *
                             "the request head is larger than max-header-bytes");
     int rc = check_framing(c, r, head, version);
     if (rc >= 0) return rc;
+    const char *host = vx_resp_header(c, MHD_HTTP_HEADER_HOST);
+    if (!vx_origin_host_ok(host))
+        return vx_resp_fail(c, r, VX_EFORBIDDEN, "host_not_allowed",
+                            "Host %.100s is not a name of this daemon: it answers IP addresses, "
+                            "localhost, names without a dot and --allowed-hosts",
+                            host);
     if (!vx_req_method_known(r->method))
         return vx_resp_fail(c, r, VX_ENOTIMPL, "not_implemented",
                             "method %.40s is not implemented (voxeld takes GET, HEAD, POST, DELETE "
@@ -320,6 +327,11 @@ static int first_call(vx_http *h, struct MHD_Connection *c, req *r, const char *
         return fail_framing(c, r, "only POST takes a request body");
     /* A CORS preflight carries no credentials: answered before auth. */
     if (!strcmp(r->method, "OPTIONS")) return -1;
+    if (vx_origin_cross_site_write(c, r->method))
+        return vx_resp_fail(c, r, VX_EFORBIDDEN, "cross_origin",
+                            "a %s from a page of another origin (%.100s) that --cors-origin does "
+                            "not allow",
+                            r->method, vx_resp_header(c, "Origin"));
     if (!strncmp(vx_req_route_name(r->route), "/v1/", 4) && h->auth.on &&
         !vx_auth_ok(&h->auth, vx_resp_header(c, MHD_HTTP_HEADER_AUTHORIZATION)))
         return vx_resp_fail(c, r, VX_EAUTH, "unauthorized",
@@ -744,6 +756,16 @@ int vx_http_check_listen(const vx_config *cfg, vx_err *err)
     return rc ? listen_failed(err, cfg->listen, e) : 0;
 }
 
+/* The listening address is a loopback one (127.0.0.0/8, ::1, or ::1's
+ * v4-mapped 127 form): no other host reaches it. */
+static int loopback(const struct sockaddr_storage *ss)
+{
+    if (ss->ss_family == AF_INET)
+        return (ntohl(((const struct sockaddr_in *)ss)->sin_addr.s_addr) >> 24) == 127;
+    const struct in6_addr *a = &((const struct sockaddr_in6 *)ss)->sin6_addr;
+    return IN6_IS_ADDR_LOOPBACK(a) || (IN6_IS_ADDR_V4MAPPED(a) && a->s6_addr[12] == 127);
+}
+
 vx_http *vx_http_start(const vx_http_desc *desc, vx_err *err)
 {
     vx_http *h = calloc(1, sizeof *h);
@@ -764,6 +786,7 @@ vx_http *vx_http_start(const vx_http_desc *desc, vx_err *err)
         free(h);
         return NULL;
     }
+    vx_origin_init(cfg->allowed_hosts, loopback(&ss) && !h->auth.on);
     h->wait = vx_wait_start(desc->jobs, cfg->max_waits);
     h->conns = vx_conns_start(cfg);
     h->events = vx_events_start(desc->jobs, cfg->max_event_streams, cfg->event_keepalive_s);

@@ -214,6 +214,7 @@ vx_resp_answer vx_resp_answer_of(const vx_err *e)
         [VX_ENOTIMPL] = {501},
         [VX_ERANGE] = {416},
         [VX_EPRECOND] = {412},
+        [VX_EFORBIDDEN] = {403},
     };
     if ((unsigned)e->kind < VX_EKIND_COUNT) return by_kind[e->kind];
     return by_kind[VX_EOK];

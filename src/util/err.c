@@ -105,7 +105,8 @@ const char *vx_err_kind_name(vx_err_kind kind)
         "ok",       "invalid",  "unprocessable",  "too_big",         "not_found",  "conflict",
         "media",    "busy",     "canceled",       "timeout",         "gpu",        "io",
         "internal", "no_space", "gone",           "unavailable",     "overloaded", "unauthorized",
-        "method",   "length",   "header_too_big", "not_implemented", "range",      "precondition"};
+        "method",   "length",   "header_too_big", "not_implemented", "range",      "precondition",
+        "forbidden"};
     _Static_assert(sizeof names / sizeof names[0] == VX_EKIND_COUNT, "a name for each kind");
     if ((unsigned)kind < sizeof names / sizeof names[0]) return names[kind];
     return "unknown";

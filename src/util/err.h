@@ -29,16 +29,17 @@ typedef enum vx_err_kind {
     VX_EINTERNAL, /* a bug or an allocation failure (500) */
     VX_ENOSPC,    /* the data dir is full or under its free-space floor (507) */
     /* Appended: job errors are journaled by number. */
-    VX_EGONE,     /* it existed and was removed (410) */
-    VX_EUNAVAIL,  /* the daemon is starting or stopping: retry in seconds (503) */
-    VX_EOVERLOAD, /* a shared budget is spent for now: retry soon (503) */
-    VX_EAUTH,     /* no valid credentials (401) */
-    VX_EMETHOD,   /* the resource does not take the method (405) */
-    VX_ELENGTH,   /* a body whose length is not declared (411) */
-    VX_EHEADER,   /* the request head is over its limit (431) */
-    VX_ENOTIMPL,  /* a protocol feature that is not implemented (501) */
-    VX_ERANGE,    /* a byte range outside the representation (416) */
-    VX_EPRECOND,  /* an If-Match the resource does not meet (412) */
+    VX_EGONE,      /* it existed and was removed (410) */
+    VX_EUNAVAIL,   /* the daemon is starting or stopping: retry in seconds (503) */
+    VX_EOVERLOAD,  /* a shared budget is spent for now: retry soon (503) */
+    VX_EAUTH,      /* no valid credentials (401) */
+    VX_EMETHOD,    /* the resource does not take the method (405) */
+    VX_ELENGTH,    /* a body whose length is not declared (411) */
+    VX_EHEADER,    /* the request head is over its limit (431) */
+    VX_ENOTIMPL,   /* a protocol feature that is not implemented (501) */
+    VX_ERANGE,     /* a byte range outside the representation (416) */
+    VX_EPRECOND,   /* an If-Match the resource does not meet (412) */
+    VX_EFORBIDDEN, /* a request this daemon does not take from where it came (403) */
     VX_EKIND_COUNT
 } vx_err_kind;
 

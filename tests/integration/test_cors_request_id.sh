@@ -136,5 +136,59 @@ api GET /readyz -H "Origin: http://a.example http://b.example"
 check "*: an Origin list gets no Allow-Origin" bash -c "! grep -qi '^access-control-allow-origin' '$HDRS'"
 api GET /readyz -H "Origin: http://a.example" -H "Origin: http://b.example"
 check "*: two Origin lines get no Allow-Origin" bash -c "! grep -qi '^access-control-allow-origin' '$HDRS'"
+api POST /v1/meshes -H "Origin: http://a.example" -H 'Content-Type: text/plain' --data-binary @"$VX_SOURCE_DIR/examples/meshes/torus.obj"
+check "*: a write from any origin is taken ($STATUS)" test "$STATUS" = 200 -o "$STATUS" = 201
+stop_daemon
+
+# Another site's page cannot write through a visitor's browser (a
+# text/plain POST needs no preflight: the upload was stored, 201), and a
+# daemon on a loopback address without a token answers only its own Host
+# names (DNS rebinding: a page of evil.example resolved to 127.0.0.1 read
+# the API as same-origin).
+TOKEN=
+DATA=$TMP/data-origin
+start_daemon --cors-origin http://viewer.example || exit 1
+TORUS=$VX_SOURCE_DIR/examples/meshes/torus.obj
+api POST /v1/meshes -H "Origin: http://evil.example" -H 'Content-Type: text/plain' --data-binary @"$TORUS"
+expect_error "a text/plain upload from another origin" 403 cross_origin
+api GET /v1/meshes
+check "... nothing stored ($(jq -c '[.items[].id]' "$BODY"))" jq -e '.items | length == 0' "$BODY"
+api POST /v1/meshes -H "Origin: null" -H 'Content-Type: model/obj' --data-binary @"$TORUS"
+expect_error "an upload from an opaque origin (null)" 403 cross_origin
+api POST /v1/meshes -H "Origin: http://127.0.0.1:$PORT" -H 'Content-Type: model/obj' --data-binary @"$TORUS"
+expect_status "an upload from the daemon's own origin (its page)" 201
+M=$(jq -r .id "$BODY")
+api POST /v1/meshes -H "Origin: http://127.0.0.1:$PORT" -H 'Sec-Fetch-Site: cross-site' -H 'Content-Type: model/obj' --data-binary @"$TORUS"
+expect_error "Sec-Fetch-Site cross-site (the browser's word over Origin's)" 403 cross_origin
+api POST /v1/meshes -H "Origin: https://voxeld.example" -H 'Sec-Fetch-Site: same-origin' -H 'Content-Type: model/obj' --data-binary @"$TORUS"
+expect_status "Sec-Fetch-Site same-origin (a proxy's name in Origin)" 200
+api POST /v1/meshes -H "Origin: http://viewer.example" -H 'Sec-Fetch-Site: cross-site' -H 'Content-Type: model/obj' --data-binary @"$TORUS"
+expect_status "an origin --cors-origin allows" 200
+api DELETE "/v1/meshes/$M" -H "Origin: http://evil.example"
+expect_error "a DELETE from another origin" 403 cross_origin
+api GET "/v1/meshes/$M" -H "Origin: http://evil.example"
+expect_status "a GET from another origin is answered (the browser keeps it from the page)" 200
+for h in evil.example "evil.example:$PORT" "a.b.c"; do
+    api GET /v1/meshes -H "Host: $h"
+    expect_error "Host $h on a loopback address without a token" 403 host_not_allowed
+done
+for h in "127.0.0.1:$PORT" "localhost:$PORT" "LOCALHOST." "app.localhost:$PORT" "[::1]:$PORT" "x" "voxeld:$PORT"; do
+    api GET /livez -H "Host: $h"
+    expect_status "Host $h" 200
+done
+stop_daemon
+start_daemon --allowed-hosts ".example.com, voxeld.test" || exit 1
+for h in example.com a.b.example.com voxeld.test; do
+    api GET /livez -H "Host: $h"
+    expect_status "--allowed-hosts: Host $h" 200
+done
+api GET /livez -H "Host: example.com.evil"
+expect_error "--allowed-hosts: Host example.com.evil" 403 host_not_allowed
+stop_daemon
+printf 'tok\n' >"$TMP/tok2"
+TOKEN=tok
+start_daemon --token-file "$TMP/tok2" || exit 1
+api GET /v1/meshes -H "Host: voxeld.example.com"
+expect_status "with a token any Host is answered (rebinding reaches nothing)" 200
 stop_daemon
 finish

@@ -25,12 +25,13 @@ static void test_statuses(void **state)
         vx_err_kind kind;
         unsigned status;
     } want[] = {
-        {VX_EINVAL, 400},    {VX_EUNPROC, 422}, {VX_ETOOBIG, 413},  {VX_ENOTFOUND, 404},
-        {VX_ECONFLICT, 409}, {VX_EMEDIA, 415},  {VX_EBUSY, 429},    {VX_ECANCELED, 409},
-        {VX_ETIMEOUT, 504},  {VX_EGPU, 500},    {VX_EIO, 500},      {VX_EINTERNAL, 500},
-        {VX_ENOSPC, 507},    {VX_EGONE, 410},   {VX_EUNAVAIL, 503}, {VX_EOVERLOAD, 503},
-        {VX_EAUTH, 401},     {VX_EMETHOD, 405}, {VX_ELENGTH, 411},  {VX_EHEADER, 431},
-        {VX_ENOTIMPL, 501},  {VX_ERANGE, 416},  {VX_EPRECOND, 412}, {VX_EOK, 500},
+        {VX_EINVAL, 400},     {VX_EUNPROC, 422}, {VX_ETOOBIG, 413},  {VX_ENOTFOUND, 404},
+        {VX_ECONFLICT, 409},  {VX_EMEDIA, 415},  {VX_EBUSY, 429},    {VX_ECANCELED, 409},
+        {VX_ETIMEOUT, 504},   {VX_EGPU, 500},    {VX_EIO, 500},      {VX_EINTERNAL, 500},
+        {VX_ENOSPC, 507},     {VX_EGONE, 410},   {VX_EUNAVAIL, 503}, {VX_EOVERLOAD, 503},
+        {VX_EAUTH, 401},      {VX_EMETHOD, 405}, {VX_ELENGTH, 411},  {VX_EHEADER, 431},
+        {VX_ENOTIMPL, 501},   {VX_ERANGE, 416},  {VX_EPRECOND, 412}, {VX_EOK, 500},
+        {VX_EFORBIDDEN, 403},
     };
     _Static_assert(sizeof want / sizeof want[0] == VX_EKIND_COUNT, "every kind is listed");
     for (size_t i = 0; i < sizeof want / sizeof want[0]; i++) {
