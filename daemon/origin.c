@@ -80,7 +80,9 @@ static long port_of(const char *auth, size_t n, long dflt, size_t *host_len)
  * Host; the scheme's default port where either leaves it out). */
 static int same_origin(const char *origin, const char *host)
 {
-    long dflt = !strncasecmp(origin, "http://", 7) ? 80 : !strncasecmp(origin, "https://", 8) ? 443 : 0;
+    long dflt = !strncasecmp(origin, "http://", 7)    ? 80
+                : !strncasecmp(origin, "https://", 8) ? 443
+                                                      : 0;
     if (!dflt || !host) return 0; /* "null", another scheme */
     const char *auth = origin + (dflt == 80 ? 7 : 8);
     if (strpbrk(auth, "/?#")) return 0;
