@@ -7,9 +7,11 @@
 #include <sched.h>
 #include <stdlib.h>
 #include <string.h>
+#include <strings.h>
 #include <unistd.h>
 
 #include "util/fsutil.h"
+#include "util/log.h"
 
 typedef enum opt_type {
     T_STR,
@@ -267,13 +269,14 @@ static int set_opt(vx_config *c, const opt_def *d, const char *val, const char *
     /* an empty file name would leave /v1 without a token: refused, as an
      * empty token file is (VOXELD_TOKEN_FILE=$UNSET in a unit or .env) */
     if (!*val && !strcmp(d->name, "data-dir")) {
-        fprintf(stderr, "voxeld: %s: data-dir is empty (name the directory, or leave it out)\n",
-                where);
+        vx_log_plain(VX_LOG_ERR,
+                     "voxeld: %s: data-dir is empty (name the directory, or leave it out)\n",
+                     where);
         return -1;
     }
     if (!*val && !strcmp(d->name, "token-file")) {
-        fprintf(stderr, "voxeld: %s: token-file is empty (name the file, or leave it out)\n",
-                where);
+        vx_log_plain(VX_LOG_ERR,
+                     "voxeld: %s: token-file is empty (name the file, or leave it out)\n", where);
         return -1;
     }
     /* a replica's name goes into the database (as text: UTF-8), its log
@@ -282,10 +285,10 @@ static int set_opt(vx_config *c, const opt_def *d, const char *val, const char *
         const unsigned char *p = (const unsigned char *)val;
         for (size_t n = strlen(val), k; n; p += k, n -= k)
             if (*p <= ' ' || *p == 0x7f || !(k = vx_err_utf8_len(p, n))) {
-                fprintf(stderr,
-                        "voxeld: %s: replica-name must be UTF-8 without blanks or control "
-                        "characters (byte %zu is 0x%02x)\n",
-                        where, (size_t)(p - (const unsigned char *)val), *p);
+                vx_log_plain(VX_LOG_ERR,
+                             "voxeld: %s: replica-name must be UTF-8 without blanks or control "
+                             "characters (byte %zu is 0x%02x)\n",
+                             where, (size_t)(p - (const unsigned char *)val), *p);
                 return -1;
             }
     }
@@ -346,10 +349,12 @@ static int set_opt(vx_config *c, const opt_def *d, const char *val, const char *
     case T_LEVEL:
         if (vx_log_parse_level(val, (vx_log_level *)(base + d->off))) goto bad;
         return 0;
-    case T_BOOL:
-        if (!strcmp(val, "yes") || !strcmp(val, "true") || !strcmp(val, "1"))
+    case T_BOOL: /* as systemd's: yes/no, true/false, on/off, 1/0, any case */
+        if (!strcasecmp(val, "yes") || !strcasecmp(val, "true") || !strcasecmp(val, "on") ||
+            !strcmp(val, "1"))
             *(int *)(base + d->off) = 1;
-        else if (!strcmp(val, "no") || !strcmp(val, "false") || !strcmp(val, "0"))
+        else if (!strcasecmp(val, "no") || !strcasecmp(val, "false") || !strcasecmp(val, "off") ||
+                 !strcmp(val, "0"))
             *(int *)(base + d->off) = 0;
         else
             goto bad;
@@ -363,11 +368,18 @@ bad:;
         [T_SECONDS] = "seconds, a decimal number from 0 to 1e9",
         [T_DEVICE] = "auto, or an index from 0 to 255",
         [T_LEVEL] = "error, warn, info or debug",
-        [T_BOOL] = "yes or no",
+        [T_BOOL] = "yes or no (true/false, on/off, 1/0, any case)",
     };
     const char *w = (size_t)d->type < sizeof want / sizeof want[0] ? want[d->type] : NULL;
-    fprintf(stderr, "voxeld: %s: invalid value for %s: '%s'%s%s%s\n", where, d->name, val,
-            w ? " (want " : "", w ? w : "", w ? ")" : "");
+    char longest[64];
+    if ((d->type == T_STR || d->type == T_LIST) && strlen(val) >= d->len) {
+        snprintf(longest, sizeof longest, "at most %zu bytes%s", d->len - 1,
+                 d->type == T_LIST ? " in all" : "");
+        w = longest;
+    }
+    /* a value of 100 KB (a config line) is not echoed whole */
+    vx_log_plain(VX_LOG_ERR, "voxeld: %s: invalid value for %s: '%.200s'%s%s%s%s\n", where, d->name,
+                 val, strlen(val) > 200 ? "..." : "", w ? " (want " : "", w ? w : "", w ? ")" : "");
     return -1;
 }
 
@@ -415,8 +427,8 @@ static int load_file(vx_config *c, const char *path)
     FILE *f = fd >= 0 ? fdopen(fd, "r") : NULL;
     if (fd >= 0 && !f) close(fd);
     if (!f) {
-        fprintf(stderr, "voxeld: cannot open config file %s: %s\n", path,
-                errno == EINVAL ? "not a regular file" : strerror(errno));
+        vx_log_plain(VX_LOG_ERR, "voxeld: cannot open config file %s: %s\n", path,
+                     errno == EINVAL ? "not a regular file" : strerror(errno));
         return -1;
     }
     char *line = NULL, where[1200];
@@ -431,7 +443,7 @@ static int load_file(vx_config *c, const char *path)
             n -= 3;
         }
         if ((size_t)n != strlen(line)) { /* a NUL would cut the value short */
-            fprintf(stderr, "voxeld: %s:%d: a NUL byte in the line\n", path, lineno);
+            vx_log_plain(VX_LOG_ERR, "voxeld: %s:%d: a NUL byte in the line\n", path, lineno);
             rc = -1;
             continue;
         }
@@ -446,7 +458,7 @@ static int load_file(vx_config *c, const char *path)
         char *eq = strchr(s, '=');
         snprintf(where, sizeof where, "%s:%d", path, lineno);
         if (!eq) {
-            fprintf(stderr, "voxeld: %s: expected key = value\n", where);
+            vx_log_plain(VX_LOG_ERR, "voxeld: %s: expected key = value\n", where);
             rc = -1;
             continue;
         }
@@ -454,7 +466,7 @@ static int load_file(vx_config *c, const char *path)
         char *key = trim(s), *val = trim(eq + 1);
         const opt_def *d = find_opt(key);
         if (!d) {
-            fprintf(stderr, "voxeld: %s: unknown key '%s'\n", where, key);
+            vx_log_plain(VX_LOG_ERR, "voxeld: %s: unknown key '%s'\n", where, key);
             rc = -1;
             continue;
         }
@@ -510,8 +522,9 @@ static int load_env(vx_config *c)
             known = strlen(name) == len && !strncmp(*e, name, len);
         }
         if (!known)
-            fprintf(stderr, "voxeld: warning: %.*s names no option (ignored; see voxeld --help)\n",
-                    (int)(len > 80 ? 80 : len), *e);
+            vx_log_plain(VX_LOG_WARN,
+                         "voxeld: warning: %.*s names no option (ignored; see voxeld --help)\n",
+                         (int)(len > 80 ? 80 : len), *e);
     }
     return rc;
 }
@@ -559,8 +572,11 @@ int vx_config_load(vx_config *c, int argc, char **argv)
 
     /* Pass 1: --config, --help, --version (the file comes before the flags). */
     const char *env_config = getenv("VOXELD_CONFIG");
-    if (env_config && *env_config)
-        snprintf(c->config_file, sizeof c->config_file, "%s", env_config);
+    if (env_config && !*env_config) { /* as --config '' (it was taken as unset) */
+        vx_log_plain(VX_LOG_ERR, "voxeld: VOXELD_CONFIG is empty (name the file, or unset it)\n");
+        return -1;
+    }
+    if (env_config) snprintf(c->config_file, sizeof c->config_file, "%s", env_config);
     opterr = 0;
     optind = 1;
     int ch;
@@ -575,7 +591,7 @@ int vx_config_load(vx_config *c, int argc, char **argv)
         }
         if (ch == 'c') {
             if (!*optarg) {
-                fprintf(stderr, "voxeld: --config needs a file name\n");
+                vx_log_plain(VX_LOG_ERR, "voxeld: --config needs a file name\n");
                 return -1;
             }
             snprintf(c->config_file, sizeof c->config_file, "%s", optarg);
@@ -596,7 +612,7 @@ int vx_config_load(vx_config *c, int argc, char **argv)
         if (ch >= 256 && set_opt(c, &opts[ch - 256], optarg, "command line")) return -1;
     }
     if (optind < argc) {
-        fprintf(stderr, "voxeld: unexpected argument '%s'\n", argv[optind]);
+        vx_log_plain(VX_LOG_ERR, "voxeld: unexpected argument '%s'\n", argv[optind]);
         return -1;
     }
     if (!c->cache_dir[0]) snprintf(c->cache_dir, sizeof c->cache_dir, "%s/cache", c->data_dir);
@@ -611,7 +627,7 @@ int vx_config_load(vx_config *c, int argc, char **argv)
         size_t len;
         char *tok = vx_read_file(c->token_file, sizeof c->token, &len, &err);
         if (!tok) {
-            fprintf(stderr, "voxeld: token file %s: %s\n", c->token_file, err.message);
+            vx_log_plain(VX_LOG_ERR, "voxeld: token file %s: %s\n", c->token_file, err.message);
             return -1;
         }
         /* The token is what a client sends after "Bearer ": visible ASCII.
@@ -625,43 +641,45 @@ int vx_config_load(vx_config *c, int argc, char **argv)
             tl--;
         for (size_t i = 0; i < tl; i++)
             if ((unsigned char)t[i] < 0x21 || (unsigned char)t[i] > 0x7e) {
-                fprintf(stderr,
-                        "voxeld: token file %s holds a byte that cannot be sent in an HTTP "
-                        "header (byte %zu is 0x%02x; a token is visible ASCII, such as the "
-                        "output of 'openssl rand -hex 32')\n",
-                        c->token_file, (size_t)(t - tok) + i, (unsigned)(unsigned char)t[i]);
+                vx_log_plain(VX_LOG_ERR,
+                             "voxeld: token file %s holds a byte that cannot be sent in an HTTP "
+                             "header (byte %zu is 0x%02x; a token is visible ASCII, such as the "
+                             "output of 'openssl rand -hex 32')\n",
+                             c->token_file, (size_t)(t - tok) + i, (unsigned)(unsigned char)t[i]);
                 free(tok);
                 return -1;
             }
         snprintf(c->token, sizeof c->token, "%.*s", (int)tl, t);
         free(tok);
         if (!c->token[0]) {
-            fprintf(stderr, "voxeld: token file %s is empty\n", c->token_file);
+            vx_log_plain(VX_LOG_ERR, "voxeld: token file %s is empty\n", c->token_file);
             return -1;
         }
     }
     char host[256], port[6];
     if (vx_config_split_listen(c->listen, host, port)) {
-        fprintf(stderr,
-                "voxeld: listen: '%s' is not ADDR:PORT ([ADDR]:PORT for IPv6, PORT from 0 to "
-                "65535)\n",
-                c->listen);
+        vx_log_plain(VX_LOG_ERR,
+                     "voxeld: listen: '%s' is not ADDR:PORT ([ADDR]:PORT for IPv6, PORT from 0 to "
+                     "65535)\n",
+                     c->listen);
         return -1;
     }
     /* Replicas read each other's meshes and results: with the data dir as
      * the store a replica would claim jobs whose bytes are elsewhere. */
     if (c->database[0] && !c->blob_store[0]) {
-        fprintf(stderr, "voxeld: database: cluster mode needs a --blob-store every replica "
-                        "shares (file:///DIR or s3://BUCKET/PREFIX?endpoint=URL), not the data "
-                        "dir\n");
+        vx_log_plain(VX_LOG_ERR,
+                     "voxeld: database: cluster mode needs a --blob-store every replica "
+                     "shares (file:///DIR or s3://BUCKET/PREFIX?endpoint=URL), not the data "
+                     "dir\n");
         return -1;
     }
     if (c->blob_part_size < (5ull << 20)) {
-        fprintf(stderr, "voxeld: blob-part-size must be at least 5M (S3's smallest part)\n");
+        vx_log_plain(VX_LOG_ERR,
+                     "voxeld: blob-part-size must be at least 5M (S3's smallest part)\n");
         return -1;
     }
     if (c->max_connections < 1 || c->max_connections > 1000000) {
-        fprintf(stderr, "voxeld: max-connections must be from 1 to 1000000\n");
+        vx_log_plain(VX_LOG_ERR, "voxeld: max-connections must be from 1 to 1000000\n");
         return -1;
     }
     /* 0 would refuse every upload, every JSON request, or remember no job
@@ -674,20 +692,20 @@ int vx_config_load(vx_config *c, int argc, char **argv)
                       {"job-history", F(job_history)}};
     for (size_t i = 0; i < sizeof at_least_1 / sizeof at_least_1[0]; i++)
         if (*(const uint64_t *)((const char *)c + at_least_1[i].off) < 1) {
-            fprintf(stderr, "voxeld: %s must be at least 1\n", at_least_1[i].name);
+            vx_log_plain(VX_LOG_ERR, "voxeld: %s must be at least 1\n", at_least_1[i].name);
             return -1;
         }
     if (c->max_queued_jobs < 1) {
-        fprintf(stderr, "voxeld: max-queued-jobs must be at least 1\n");
+        vx_log_plain(VX_LOG_ERR, "voxeld: max-queued-jobs must be at least 1\n");
         return -1;
     }
     /* Below these not even GET /livez fits: health checks could never pass. */
     if (c->max_uri_bytes < 256) {
-        fprintf(stderr, "voxeld: max-uri-bytes must be at least 256\n");
+        vx_log_plain(VX_LOG_ERR, "voxeld: max-uri-bytes must be at least 256\n");
         return -1;
     }
     if (c->max_header_bytes < 1024) {
-        fprintf(stderr, "voxeld: max-header-bytes must be at least 1K\n");
+        vx_log_plain(VX_LOG_ERR, "voxeld: max-header-bytes must be at least 1K\n");
         return -1;
     }
     return 0;

@@ -98,7 +98,7 @@ static int list_devices(void)
     vx_err err;
     int n = vx_gl_list_devices(devs, 32, &err);
     if (n < 0) {
-        fprintf(stderr, "voxeld: %s\n", err.message);
+        vx_log_plain(VX_LOG_ERR, "voxeld: %s\n", err.message);
         return 1;
     }
     printf("%d EGL device(s), in the order --egl-device auto tries them:\n", n);
@@ -127,10 +127,11 @@ static int fit_fd_limit(vx_config *cfg)
     uint64_t reserve = 32 + 4 * (uint64_t)cfg->http_threads + 4 * (uint64_t)cfg->workers;
     uint64_t fit = rl.rlim_cur > reserve ? (rl.rlim_cur - reserve) / 2 : 0;
     if (fit < 1) {
-        fprintf(stderr,
-                "voxeld: %llu file descriptors (ulimit -n) leave none for connections: it needs "
-                "%llu for itself and 2 a connection\n",
-                (unsigned long long)rl.rlim_cur, (unsigned long long)reserve);
+        vx_log_plain(
+            VX_LOG_ERR,
+            "voxeld: %llu file descriptors (ulimit -n) leave none for connections: it needs "
+            "%llu for itself and 2 a connection\n",
+            (unsigned long long)rl.rlim_cur, (unsigned long long)reserve);
         return -1;
     }
     if (cfg->max_connections > fit) {
@@ -294,7 +295,7 @@ static vx_jobs *open_jobs(const vx_config *cfg, vx_store *store, int start, vx_e
         VX_ERROR("voxeld.fatal", "stage=%s code=%s message=%s",
                  cfg->database[0] ? "database" : "journal", err->code,
                  vx_log_quote((char[600]){0}, 600, err->message));
-        if (cfg->database[0]) fprintf(stderr, "voxeld: --database: %s\n", err->message);
+        if (cfg->database[0]) vx_log_plain(VX_LOG_ERR, "voxeld: --database: %s\n", err->message);
         return NULL;
     }
     if (start && vx_jobs_start(jobs, err)) {
@@ -302,9 +303,11 @@ static vx_jobs *open_jobs(const vx_config *cfg, vx_store *store, int start, vx_e
         VX_ERROR("voxeld.fatal", "stage=gl code=%s message=%s", err->code,
                  vx_log_quote(q, sizeof q, err->message));
         if (bad_option(err))
-            fprintf(stderr, "voxeld: --egl-device: %s (voxeld --list-egl-devices)\n", err->message);
+            vx_log_plain(VX_LOG_ERR, "voxeld: --egl-device: %s (voxeld --list-egl-devices)\n",
+                         err->message);
         else
-            fprintf(stderr, "voxeld: cannot create the OpenGL context: %s\n", err->message);
+            vx_log_plain(VX_LOG_ERR, "voxeld: cannot create the OpenGL context: %s\n",
+                         err->message);
         __atomic_store_n(&g_jobs, NULL, __ATOMIC_RELEASE);
         vx_jobs_free(jobs);
         return NULL;
@@ -423,7 +426,7 @@ static int run_one_job(int argc, char **argv)
     for (int i = 2; i < argc; i++)
         av[i] = argv[i];
     execvp(ctl, av);
-    fprintf(stderr, "voxeld: run needs voxelctl (%s): %s\n", ctl, strerror(errno));
+    vx_log_plain(VX_LOG_ERR, "voxeld: run needs voxelctl (%s): %s\n", ctl, strerror(errno));
     free(av);
     return 1;
 }
@@ -499,7 +502,7 @@ int main(int argc, char **argv)
         .retries = cfg.blob_retries ? (int)(cfg.blob_retries > 100 ? 100 : cfg.blob_retries) : -1};
     const vx_blob_ops *bo = vx_blob_backend(cfg.blob_store, &err);
     if (!bo) { /* a bad option: exit 2, said on stderr as the others are */
-        fprintf(stderr, "voxeld: --blob-store: %s\n", err.message);
+        vx_log_plain(VX_LOG_ERR, "voxeld: --blob-store: %s\n", err.message);
         VX_ERROR("voxeld.fatal", "stage=store code=%s message=%s", err.code,
                  vx_log_quote((char[600]){0}, 600, err.message));
         return 2;
@@ -512,8 +515,11 @@ int main(int argc, char **argv)
     if (!store) {
         VX_ERROR("voxeld.fatal", "stage=store code=%s message=%s", err.code,
                  vx_log_quote((char[600]){0}, 600, err.message));
-        if (!bad_option(&err)) return 1;
-        fprintf(stderr, "voxeld: --blob-store: %s\n", err.message);
+        if (!bad_option(&err)) { /* the path said (the message has none: clients see them) */
+            vx_log_plain(VX_LOG_ERR, "voxeld: data dir %s: %s\n", cfg.data_dir, err.message);
+            return 1;
+        }
+        vx_log_plain(VX_LOG_ERR, "voxeld: --blob-store: %s\n", err.message);
         return 2;
     }
     vx_gl_info refused;
@@ -533,11 +539,12 @@ int main(int argc, char **argv)
                  "device_kind=%s device_index=%d renderer=%s version=%s action=\"no job runs, "
                  "/readyz answers 503\"",
                  gi.device_kind[0] ? gi.device_kind : "surfaceless", gi.device_index, qr, qv);
-        fprintf(stderr,
-                "voxeld: --require-gpu: the GL renderer \"%s\" is a software one, so no job will "
-                "run and /readyz answers 503 (is the GPU visible to EGL? NVIDIA needs "
-                "NVIDIA_DRIVER_CAPABILITIES to include graphics; voxeld --list-egl-devices)\n",
-                gi.renderer);
+        vx_log_plain(
+            VX_LOG_ERR,
+            "voxeld: --require-gpu: the GL renderer \"%s\" is a software one, so no job will "
+            "run and /readyz answers 503 (is the GPU visible to EGL? NVIDIA needs "
+            "NVIDIA_DRIVER_CAPABILITIES to include graphics; voxeld --list-egl-devices)\n",
+            gi.renderer);
     } else {
         VX_INFO("gl.ready", "device_kind=%s device_index=%d renderer=%s version=%s robust=%d",
                 gi.device_kind, gi.device_index, qr, qv, gi.robust);

@@ -19,8 +19,9 @@
 static int io_fail(vx_err *err, const char *code, const char *op, const char *path)
 {
     int e = errno;
-    char q[600];
-    VX_WARN("fs.failed", "op=%s path=%s error=%d", op, vx_log_quote(q, sizeof q, path), e);
+    char q[600], r[200];
+    VX_WARN("fs.failed", "op=%s path=%s error=%d reason=%s", op, vx_log_quote(q, sizeof q, path), e,
+            vx_log_quote(r, sizeof r, strerror(e)));
     vx_err_set(err, vx_err_io_kind(e), code, "%s failed: %s", op, strerror(e));
     errno = e; /* for the caller, after the log's own calls */
     return -1;
@@ -264,9 +265,10 @@ int vx_parse_size(const char *s, uint64_t *out)
     default:
         return -1;
     }
-    if (mul > 1 && end[0] == 'i' && end[1] == 'B') /* 64KiB */
+    /* 64KiB, 64KB, 64B, in any case as the K (64kib was refused, 64kB taken) */
+    if (mul > 1 && (end[0] == 'i' || end[0] == 'I') && (end[1] == 'B' || end[1] == 'b'))
         end += 2;
-    else if (*end == 'B') /* 64KB, 64B */
+    else if (*end == 'B' || *end == 'b')
         end++;
     if (*end) return -1;
     if (v > UINT64_MAX / mul) return -1;

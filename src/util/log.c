@@ -45,6 +45,17 @@ static int journal_prefix(void)
     return k;
 }
 
+void vx_log_plain(vx_log_level level, const char *fmt, ...)
+{
+    char line[4096];
+    int n = journal_prefix() ? snprintf(line, sizeof line, "<%d>", (int)level) : 0;
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(line + n, sizeof line - (size_t)n, fmt, ap);
+    va_end(ap);
+    fputs(line, stderr);
+}
+
 void vx_log_set_level(vx_log_level level)
 {
     g_level = level;

@@ -16,6 +16,10 @@ typedef enum vx_log_level {
 
 /* Messages above this level are dropped. Default VX_LOG_INFO. */
 void vx_log_set_level(vx_log_level level);
+/* A plain message on stderr (what the command line or the start met, for
+ * a person to read), starting with its priority where stderr is the
+ * journal as vx_log's lines do (journalctl -p warning shows it then). */
+void vx_log_plain(vx_log_level level, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
 vx_log_level vx_log_get_level(void);
 /* Parses "error|warn|info|debug"; returns 0 or -1. */
 int vx_log_parse_level(const char *s, vx_log_level *out);

@@ -242,4 +242,14 @@ PY
         test ! -s "$TMP/syscalls-denied.txt"
 fi
 
+# What the command line met reaches the journal at its priority too (plain
+# lines were info: journalctl -p warning hid why the unit failed).
+: >"$TMP/plain.log"
+rc=0
+JOURNAL_STREAM=$(stat -c '%d:%i' "$TMP/plain.log") VOXELD_JOBTIMEOUT=3 \
+    "$VOXELD" --job-timeout -1 2>>"$TMP/plain.log" || rc=$?
+check "a bad option under the journal: exit 2 ($rc), said at priority 3 ($(head -c 300 "$TMP/plain.log"))" \
+    sh -c "test $rc = 2 && grep -q '^<3>voxeld: command line: invalid value for job-timeout' '$TMP/plain.log'"
+check "... a misspelled variable warned at priority 4" grep -q '^<4>voxeld: warning: VOXELD_JOBTIMEOUT names no option' "$TMP/plain.log"
+
 finish

@@ -269,6 +269,50 @@ static void test_unknown_env_warned(void **state)
     assert_null(strstr(buf, "VOXELD_URL"));
 }
 
+/* The forms an operator writes: size suffixes in any case (64kib was
+ * refused while 64kB was taken), yes/no options as systemd's booleans
+ * (ON was refused while 1 was taken), an empty VOXELD_CONFIG refused as
+ * --config '' is (it was ignored), a value over its longest said so and
+ * not echoed whole (a 100 KB line was). */
+static void test_operator_forms(void **state)
+{
+    (void)state;
+    vx_config c;
+    const char *sizes[] = {"64kib", "64KIB", "64kb", "64Kb", "64K"};
+    for (size_t i = 0; i < sizeof sizes / sizeof sizes[0]; i++) {
+        char *av[] = {"voxeld", "--max-upload-bytes", (char *)sizes[i], NULL};
+        assert_int_equal(load(&c, 3, av), 0);
+        assert_int_equal(c.max_upload_bytes, 64u << 10);
+    }
+    const char *on[] = {"ON", "Yes", "TRUE", "on", "1"}, *off[] = {"OFF", "No", "False", "0"};
+    for (size_t i = 0; i < sizeof on / sizeof on[0]; i++) {
+        char *av[] = {"voxeld", "--reuse-port", (char *)on[i], NULL};
+        assert_int_equal(load(&c, 3, av), 0);
+        assert_int_equal(c.reuse_port, 1);
+    }
+    for (size_t i = 0; i < sizeof off / sizeof off[0]; i++) {
+        char *av[] = {"voxeld", "--reuse-port", (char *)off[i], NULL};
+        assert_int_equal(load(&c, 3, av), 0);
+        assert_int_equal(c.reuse_port, 0);
+    }
+    char *maybe[] = {"voxeld", "--reuse-port", "maybe", NULL};
+    assert_int_equal(load(&c, 3, maybe), -1);
+    char buf[2048];
+    setenv("VOXELD_CONFIG", "", 1);
+    char *none[] = {"voxeld", NULL};
+    int rc = load_said(&c, 1, none, buf, sizeof buf);
+    unsetenv("VOXELD_CONFIG");
+    assert_int_equal(rc, -1);
+    assert_non_null(strstr(buf, "VOXELD_CONFIG is empty"));
+    char name[1001];
+    memset(name, 'a', 1000);
+    name[1000] = 0;
+    char *lng[] = {"voxeld", "--replica-name", name, NULL};
+    assert_int_equal(load_said(&c, 3, lng, buf, sizeof buf), -1);
+    assert_non_null(strstr(buf, "(want at most 127 bytes)"));
+    assert_true(strlen(buf) < 400);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -279,6 +323,7 @@ int main(void)
         cmocka_unit_test(test_unknown_env_warned),
         cmocka_unit_test(test_empty_dir_and_signed_sizes),
         cmocka_unit_test(test_token_file_named),
+        cmocka_unit_test(test_operator_forms),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }
