@@ -146,8 +146,8 @@ static const opt_def opts[] = {
      "origin a browser may call the API from (repeat, or a comma list; * = any; default none)"},
     {"allowed-hosts", T_LIST, S(allowed_hosts),
      "Host names answered besides IP addresses, localhost, *.localhost and names without a dot "
-     "(repeat, or a comma list; .NAME = NAME and the names under it; * = any; default none: only "
-     "those on a loopback address without --token-file, any elsewhere)"},
+     "(repeat, or a comma list; .NAME = NAME and the names under it; * = any; no port; default "
+     "none: only those without --token-file, any with one)"},
     {"job-history", T_SIZE, F(job_history), 0,
      "finished jobs remembered (default 10000; at least 1)"},
     {"job-history-bytes", T_SIZE, F(job_history_bytes), 0,
@@ -291,6 +291,14 @@ static int set_opt(vx_config *c, const opt_def *d, const char *val, const char *
                              where, (size_t)(p - (const unsigned char *)val), *p);
                 return -1;
             }
+    }
+    /* a Host name, or .NAME, or *: a port or a path never matches one */
+    if (!strcmp(d->name, "allowed-hosts") && strpbrk(val, ":/@[]\t")) {
+        vx_log_plain(VX_LOG_ERR,
+                     "voxeld: %s: allowed-hosts takes host names (.NAME for the names under NAME, "
+                     "* for any), without a port: '%.200s'\n",
+                     where, val);
+        return -1;
     }
     if (d->type == T_LIST) {
         unsigned char src = !strcmp(where, "command line")        ? 3

@@ -255,7 +255,9 @@ static int check_framing(struct MHD_Connection *c, req *r, const char *head, con
         return fail_framing(c, r,
                             "the request target has a space or a control character (escape it: "
                             "%20)");
-    if (strcmp(version, MHD_HTTP_VERSION_1_0) != 0 && n.host != 1)
+    /* two Host lines are in doubt in HTTP/1.0 too (the first was taken,
+     * where the Host check went by it) */
+    if (n.host > 1 || (strcmp(version, MHD_HTTP_VERSION_1_0) != 0 && n.host != 1))
         return vx_resp_fail(c, r, VX_EINVAL, "invalid_request",
                             n.host ? "more than one Host header"
                                    : "an HTTP/1.1 request needs a Host header");
@@ -311,8 +313,9 @@ static int first_call(vx_http *h, struct MHD_Connection *c, req *r, const char *
     const char *host = vx_resp_header(c, MHD_HTTP_HEADER_HOST);
     if (!vx_origin_host_ok(host))
         return vx_resp_fail(c, r, VX_EFORBIDDEN, "host_not_allowed",
-                            "Host %.100s is not a name of this daemon: it answers IP addresses, "
-                            "localhost, names without a dot and --allowed-hosts",
+                            "Host %.100s is not a name of this daemon: without a token it "
+                            "answers IP addresses, localhost, names without a dot and "
+                            "--allowed-hosts",
                             host);
     if (!vx_req_method_known(r->method))
         return vx_resp_fail(c, r, VX_ENOTIMPL, "not_implemented",
@@ -469,6 +472,10 @@ static void identify(struct MHD_Connection *c, req *r, const char *url)
         socklen_t len =
             sa->sa_family == AF_INET6 ? sizeof(struct sockaddr_in6) : sizeof(struct sockaddr_in);
         getnameinfo(sa, len, r->client, sizeof r->client, NULL, 0, NI_NUMERICHOST);
+        /* an IPv4 client of a dual-stack listener ([::]) as IPv4, as on an
+         * IPv4 one (it was ::ffff:127.0.0.1) */
+        if (!strncasecmp(r->client, "::ffff:", 7) && strchr(r->client + 7, '.'))
+            memmove(r->client, r->client + 7, strlen(r->client + 7) + 1);
     }
 }
 
@@ -756,16 +763,6 @@ int vx_http_check_listen(const vx_config *cfg, vx_err *err)
     return rc ? listen_failed(err, cfg->listen, e) : 0;
 }
 
-/* The listening address is a loopback one (127.0.0.0/8, ::1, or ::1's
- * v4-mapped 127 form): no other host reaches it. */
-static int loopback(const struct sockaddr_storage *ss)
-{
-    if (ss->ss_family == AF_INET)
-        return (ntohl(((const struct sockaddr_in *)ss)->sin_addr.s_addr) >> 24) == 127;
-    const struct in6_addr *a = &((const struct sockaddr_in6 *)ss)->sin6_addr;
-    return IN6_IS_ADDR_LOOPBACK(a) || (IN6_IS_ADDR_V4MAPPED(a) && a->s6_addr[12] == 127);
-}
-
 vx_http *vx_http_start(const vx_http_desc *desc, vx_err *err)
 {
     vx_http *h = calloc(1, sizeof *h);
@@ -786,7 +783,7 @@ vx_http *vx_http_start(const vx_http_desc *desc, vx_err *err)
         free(h);
         return NULL;
     }
-    vx_origin_init(cfg->allowed_hosts, loopback(&ss) && !h->auth.on);
+    vx_origin_init(cfg->allowed_hosts, !h->auth.on);
     h->wait = vx_wait_start(desc->jobs, cfg->max_waits);
     h->conns = vx_conns_start(cfg);
     h->events = vx_events_start(desc->jobs, cfg->max_event_streams, cfg->event_keepalive_s);

@@ -17,10 +17,12 @@ void vx_origin_init(const char *allowed, int check)
     g_check = check;
 }
 
-/* name (n bytes) is entry (k bytes) of the list, or under a ".name" one */
+/* name (n bytes) is entry (k bytes) of the list, or under a ".name" one
+ * (an entry's trailing dot is as the name's: none) */
 static int listed(const char *name, size_t n, const char *entry, size_t k)
 {
     if (k == 1 && entry[0] == '*') return 1;
+    if (k > 1 && entry[k - 1] == '.') k--;
     if (k > 1 && entry[0] == '.') {
         if (n == k - 1 && !strncasecmp(name, entry + 1, n)) return 1;
         return n > k && !strncasecmp(name + n - k, entry, k);
@@ -31,7 +33,8 @@ static int listed(const char *name, size_t n, const char *entry, size_t k)
 int vx_origin_host_ok(const char *host)
 {
     if (!host || (!g_check && !g_allowed[0])) return 1;
-    if (host[0] == '[') return 1; /* an IPv6 address (the parser checked it) */
+    /* an IPv6 address (the parser checked it), not an IPvFuture "[v1.x]" */
+    if (host[0] == '[') return host[1] != 'v' && host[1] != 'V';
     const char *colon = strchr(host, ':');
     size_t n = colon ? (size_t)(colon - host) : strlen(host);
     while (n && (host[n - 1] == ' ' || host[n - 1] == '\t')) /* what libmicrohttpd leaves */
@@ -42,7 +45,7 @@ int vx_origin_host_ok(const char *host)
     memcpy(name, host, n);
     name[n] = 0;
     struct in_addr a;
-    if (inet_pton(AF_INET, name, &a) == 1 || !memchr(name, '.', n)) return 1;
+    if (inet_pton(AF_INET, name, &a) == 1 || !strpbrk(name, ".%")) return 1;
     static const char lh[] = ".localhost"; /* localhost and every name under it (RFC 6761) */
     if (listed(name, n, lh, sizeof lh - 1)) return 1;
     for (const char *p = g_allowed; *p;) {
@@ -99,5 +102,14 @@ int vx_origin_cross_site_write(struct MHD_Connection *c, const char *method)
     /* the browser's own word (Fetch Metadata), which a page cannot set */
     const char *site = vx_resp_header(c, "Sec-Fetch-Site");
     if (site) return strcasecmp(site, "same-origin") != 0 && strcasecmp(site, "none") != 0;
-    return !same_origin(origin, vx_resp_header(c, MHD_HTTP_HEADER_HOST));
+    /* a page cannot add X-Forwarded-Host to a request without a preflight,
+     * which the server refuses to other origins: a proxy's word */
+    const char *fwd = vx_resp_header(c, "X-Forwarded-Host");
+    char first[256] = ""; /* proxies after proxies append theirs: the first is the client's */
+    if (fwd) {
+        size_t k = strcspn(fwd, ", \t");
+        snprintf(first, sizeof first, "%.*s", (int)(k < sizeof first ? k : 0), fwd);
+    }
+    return !same_origin(origin, vx_resp_header(c, MHD_HTTP_HEADER_HOST)) &&
+           !(first[0] && same_origin(origin, first));
 }

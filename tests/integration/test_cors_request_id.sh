@@ -168,7 +168,13 @@ api DELETE "/v1/meshes/$M" -H "Origin: http://evil.example"
 expect_error "a DELETE from another origin" 403 cross_origin
 api GET "/v1/meshes/$M" -H "Origin: http://evil.example"
 expect_status "a GET from another origin is answered (the browser keeps it from the page)" 200
-for h in evil.example "evil.example:$PORT" "a.b.c"; do
+# A plain-HTTP proxy that rewrote Host (nginx's default) says the page's
+# own in X-Forwarded-Host (browsers send no Sec-Fetch-Site there)
+api POST /v1/meshes -H "Origin: http://voxel.test:8081" -H "X-Forwarded-Host: voxel.test:8081, inner" -H 'Content-Type: model/obj' --data-binary @"$TORUS"
+expect_status "an upload through a proxy that rewrote Host (X-Forwarded-Host)" 200
+api POST /v1/meshes -H "Origin: http://voxel.test:8081" -H "X-Forwarded-Host: other.test:8081" -H 'Content-Type: model/obj' --data-binary @"$TORUS"
+expect_error "... whose X-Forwarded-Host is another" 403 cross_origin
+for h in evil.example "evil.example:$PORT" "a.b.c" "evil%2eexample" "[v1.evil.example]"; do
     api GET /v1/meshes -H "Host: $h"
     expect_error "Host $h on a loopback address without a token" 403 host_not_allowed
 done
@@ -176,9 +182,18 @@ for h in "127.0.0.1:$PORT" "localhost:$PORT" "LOCALHOST." "app.localhost:$PORT" 
     api GET /livez -H "Host: $h"
     expect_status "Host $h" 200
 done
+check "HTTP/1.0 with two Host lines: 400" sh -c "printf 'GET /livez HTTP/1.0\r\nHost: 127.0.0.1\r\nHost: evil.example\r\n\r\n' | timeout 5 curl -s telnet://127.0.0.1:$PORT 2>/dev/null | head -n 1 | grep -q ' 400 '"
 stop_daemon
-start_daemon --allowed-hosts ".example.com, voxeld.test" || exit 1
-for h in example.com a.b.example.com voxeld.test; do
+# Every interface (0.0.0.0 answers on 127.0.0.1 too): the same, without a token
+start_daemon --listen 0.0.0.0:0 || exit 1
+api GET /v1/meshes -H "Host: evil.example"
+expect_error "Host evil.example on 0.0.0.0 without a token" 403 host_not_allowed
+stop_daemon
+rc=0
+"$VOXELD" --allowed-hosts 'a.test:8080' --data-dir "$TMP/nodata" 2>"$TMP/ah.err" || rc=$?
+check "--allowed-hosts with a port: exit 2, said ($(cat "$TMP/ah.err"))" sh -c "test $rc = 2 && grep -q 'without a port' '$TMP/ah.err'"
+start_daemon --allowed-hosts ".example.com, voxeld.test, dotted.test." || exit 1
+for h in example.com a.b.example.com voxeld.test dotted.test "dotted.test."; do
     api GET /livez -H "Host: $h"
     expect_status "--allowed-hosts: Host $h" 200
 done
