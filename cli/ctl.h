@@ -47,9 +47,9 @@ extern int ctl_http_write_errno;
 long ctl_http(const ctl *c, const char *method, const char *path, const char *ctype,
               const char *data, const char *upload, ctl_buf *resp, FILE *out, char *disp,
               size_t dispn);
-/* s (NULL: "") with its control bytes as '?' (the server's text on a
- * terminal: an escape sequence could clear it or retitle it), at most
- * n - 1 bytes of it, in out. */
+/* s (NULL: "") with its control characters (C0, DEL, C1 in UTF-8) as
+ * '?' (the server's text on a terminal: an escape sequence could clear it
+ * or retitle it), at most n - 1 bytes of it, in out. */
 const char *ctl_printable(const char *s, char *out, size_t n);
 /* Prints the server's error of a >= 400 answer (its JSON message and code)
  * to stderr, after what ("upload", "submit", ...). Returns 1. */

@@ -412,10 +412,22 @@ static int part_open(const char *dir, mode_t mode, char *part, size_t n)
     return fd;
 }
 
+/* 0 when a part file can be made in dir (made and removed: access() lets
+ * root "write" in /proc), else the errno why not. */
+static int dir_refuses(const char *dir)
+{
+    char part[4300];
+    int fd = part_open(dir, 0600, part, sizeof part);
+    if (fd < 0) return errno;
+    close(fd);
+    unlink(part);
+    return 0;
+}
+
 int ctl_out_unwritable(const char *out)
 {
     if (!out || !strcmp(out, "-")) return 0;
-    char final[4200], dir[4200], part[4300];
+    char final[4200], dir[4200];
     if (out_target(out, final, sizeof final)) {
         fprintf(stderr, "voxelctl: -o %s: %s\n", out, strerror(errno));
         return 1;
@@ -431,32 +443,21 @@ int ctl_out_unwritable(const char *out)
         return 1;
     }
     if (exists && !S_ISREG(st.st_mode)) return 0; /* written in place */
-    /* a part file made and removed: access() lets root "write" in /proc */
     dir_of(final, dir, sizeof dir);
-    int fd = part_open(dir, 0600, part, sizeof part);
-    if (fd < 0) {
-        fprintf(stderr, "voxelctl: -o %s: cannot write %s: %s\n", out, dir, strerror(errno));
-        return 1;
-    }
-    close(fd);
-    unlink(part);
-    return 0;
+    int e = dir_refuses(dir);
+    if (e) fprintf(stderr, "voxelctl: -o %s: cannot write %s: %s\n", out, dir, strerror(e));
+    return e != 0;
 }
 
 int ctl_cwd_unwritable(void)
 {
-    char part[4300];
-    int fd = part_open(".", 0600, part, sizeof part);
-    if (fd < 0) {
+    int e = dir_refuses(".");
+    if (e)
         fprintf(stderr,
                 "voxelctl: cannot write the result in the current directory: %s "
                 "(give -o FILE, or -o - for stdout)\n",
-                strerror(errno));
-        return 1;
-    }
-    close(fd);
-    unlink(part);
-    return 0;
+                strerror(e));
+    return e != 0;
 }
 
 /* A result being written: to stdout, in place (out exists and is not a

@@ -307,8 +307,12 @@ long ctl_http(const ctl *c, const char *method, const char *path, const char *ct
 const char *ctl_printable(const char *s, char *out, size_t n)
 {
     size_t o = 0;
-    for (; s && *s && o + 1 < n; s++)
-        out[o++] = (unsigned char)*s < 0x20 || *s == 0x7f ? '?' : *s;
+    for (; s && *s && o + 1 < n; s++) {
+        unsigned char b = (unsigned char)*s, next = (unsigned char)s[1];
+        int c1 = b == 0xc2 && next >= 0x80 && next <= 0x9f; /* U+0080-009F: U+009B is a CSI */
+        out[o++] = b < 0x20 || b == 0x7f || c1 ? '?' : *s;
+        s += c1;
+    }
     out[o] = 0;
     return out;
 }

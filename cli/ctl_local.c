@@ -105,32 +105,52 @@ static int rm_entry(const char *path, const struct stat *st, int flag, struct FT
     return 0;
 }
 
-/* In the child, before its exec: the private voxeld takes nothing of the
- * service it may run beside (a deployment's VOXELD_TOKEN_FILE answered
- * its own client 401, its VOXELD_BLOB_STORE and VOXELD_DATABASE put the
- * one job in the shared store and queue), nor reports to systemd for it
- * (NOTIFY_SOCKET: READY=1 and STOPPING=1 of another process), nor takes
- * its directories or sockets. */
-static void private_environment(void)
+/* The environment of the private voxeld, made before the fork (the child
+ * of a threaded process calls nothing that may lock): the caller's, less
+ * what ties a daemon to a service it may run beside: its token file (its
+ * own client got 401), blob store, database and config file (the one job
+ * went to the shared store and queue), its listener, dirs and name, and
+ * systemd's variables (READY=1 and STOPPING=1 of another process went to
+ * NOTIFY_SOCKET). Tuning (VOXELD_EGL_DEVICE, VOXELD_MAX_JOB_MEMORY, ...)
+ * stays. NULL without memory. */
+static char **private_environment(void)
 {
-    static const char *const service[] = {"NOTIFY_SOCKET",   "WATCHDOG_USEC",   "WATCHDOG_PID",
-                                          "LISTEN_FDS",      "LISTEN_PID",      "LISTEN_FDNAMES",
-                                          "STATE_DIRECTORY", "CACHE_DIRECTORY", "JOURNAL_STREAM"};
-    for (size_t i = 0; i < sizeof service / sizeof service[0]; i++)
-        unsetenv(service[i]);
+    static const char *const service[] = {"NOTIFY_SOCKET=",
+                                          "WATCHDOG_USEC=",
+                                          "WATCHDOG_PID=",
+                                          "LISTEN_FDS=",
+                                          "LISTEN_PID=",
+                                          "LISTEN_FDNAMES=",
+                                          "STATE_DIRECTORY=",
+                                          "CACHE_DIRECTORY=",
+                                          "JOURNAL_STREAM=",
+                                          "VOXELD_CONFIG=",
+                                          "VOXELD_TOKEN_FILE=",
+                                          "VOXELD_BLOB_STORE=",
+                                          "VOXELD_BLOB_CREDENTIALS=",
+                                          "VOXELD_DATABASE=",
+                                          "VOXELD_REPLICA_NAME=",
+                                          "VOXELD_LISTEN=",
+                                          "VOXELD_DATA_DIR=",
+                                          "VOXELD_CACHE_DIR=",
+                                          "VOXELD_REUSE_PORT=",
+                                          "VOXELD_CORS_ORIGIN=",
+                                          "VOXELD_ALLOWED_HOSTS=",
+                                          "VOXELD_LOG_LEVEL="};
     extern char **environ;
-    for (int again = 1; again;) { /* unsetenv moves environ's entries */
-        again = 0;
-        for (char **e = environ; e && *e; e++) {
-            const char *eq = strchr(*e, '=');
-            if (strncmp(*e, "VOXELD_", 7) != 0 || !eq || (size_t)(eq - *e) >= 128) continue;
-            char name[128];
-            snprintf(name, sizeof name, "%.*s", (int)(eq - *e), *e);
-            unsetenv(name);
-            again = 1;
-            break;
-        }
+    size_t n = 0;
+    while (environ && environ[n])
+        n++;
+    char **env = calloc(n + 1, sizeof *env);
+    if (!env) return NULL;
+    size_t k = 0;
+    for (size_t i = 0; i < n; i++) {
+        int drop = 0;
+        for (size_t j = 0; j < sizeof service / sizeof service[0] && !drop; j++)
+            drop = !strncmp(environ[i], service[j], strlen(service[j]));
+        if (!drop) env[k++] = environ[i];
     }
+    return env;
 }
 
 int ctl_local_start(ctl *c)
@@ -155,21 +175,29 @@ int ctl_local_start(ctl *c)
     find_voxeld(bin, sizeof bin);
     snprintf(data, sizeof data, "%s/data", g_dir);
     int fds[2];
-    if (pipe(fds)) return -1;
+    char **env = private_environment();
+    if (!env || pipe(fds)) {
+        free(env);
+        return -1;
+    }
     g_pid = fork();
-    if (g_pid < 0) return -1;
+    if (g_pid < 0) {
+        free(env);
+        return -1;
+    }
     if (g_pid == 0) {
         pthread_sigmask(SIG_UNBLOCK, &set, NULL); /* exec keeps the mask */
         prctl(PR_SET_PDEATHSIG, SIGTERM);         /* voxelctl killed: so is its voxeld */
         dup2(fds[1], 2);
         close(fds[0]);
         close(fds[1]);
-        private_environment();
-        execlp(bin, bin, "--listen", "127.0.0.1:0", "--data-dir", data, "--log-level", "info",
-               (char *)NULL);
+        char *argv[] = {bin,  "--listen",    "127.0.0.1:0", "--data-dir",
+                        data, "--log-level", "info",        NULL};
+        execvpe(bin, argv, env);
         fprintf(stderr, "voxelctl: cannot run %s: %s\n", bin, strerror(errno));
         _exit(127);
     }
+    free(env);
     close(fds[1]);
     g_log = fdopen(fds[0], "r");
     char line[4096], last[8][512];

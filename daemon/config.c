@@ -146,7 +146,8 @@ static const opt_def opts[] = {
      "origin a browser may call the API from (repeat, or a comma list; * = any; default none)"},
     {"allowed-hosts", T_LIST, S(allowed_hosts),
      "Host names answered besides IP addresses, localhost, *.localhost and names without a dot "
-     "(repeat, or a comma list; .NAME = NAME and the names under it; * = any; no port; default "
+     "(repeat, or a comma list; .NAME or *.NAME = NAME and the names under it; * = any; no port; "
+     "default "
      "none: only those without --token-file, any with one)"},
     {"job-history", T_SIZE, F(job_history), 0,
      "finished jobs remembered (default 10000; at least 1)"},
@@ -265,6 +266,7 @@ static int set_opt(vx_config *c, const opt_def *d, const char *val, const char *
     char *base = (char *)c;
     uint64_t u;
     char *end;
+    int over = 0; /* a list over its longest with the values before it */
     given[d - opts] = 1;
     /* an empty file name would leave /v1 without a token: refused, as an
      * empty token file is (VOXELD_TOKEN_FILE=$UNSET in a unit or .env) */
@@ -315,7 +317,10 @@ static int set_opt(vx_config *c, const opt_def *d, const char *val, const char *
     case T_LIST: {
         char *s = base + d->off;
         size_t n = strlen(s);
-        if (n + 1 + strlen(val) >= d->len) goto bad;
+        if (n + (n ? 1 : 0) + strlen(val) >= d->len) {
+            over = 1; /* with what came before: said below */
+            goto bad;
+        }
         snprintf(s + n, d->len - n, "%s%s", n ? "," : "", val);
         return 0;
     }
@@ -380,7 +385,7 @@ bad:;
     };
     const char *w = (size_t)d->type < sizeof want / sizeof want[0] ? want[d->type] : NULL;
     char longest[64];
-    if ((d->type == T_STR || d->type == T_LIST) && strlen(val) >= d->len) {
+    if (over || (d->type == T_STR && strlen(val) >= d->len)) {
         snprintf(longest, sizeof longest, "at most %zu bytes%s", d->len - 1,
                  d->type == T_LIST ? " in all" : "");
         w = longest;
@@ -580,11 +585,8 @@ int vx_config_load(vx_config *c, int argc, char **argv)
 
     /* Pass 1: --config, --help, --version (the file comes before the flags). */
     const char *env_config = getenv("VOXELD_CONFIG");
-    if (env_config && !*env_config) { /* as --config '' (it was taken as unset) */
-        vx_log_plain(VX_LOG_ERR, "voxeld: VOXELD_CONFIG is empty (name the file, or unset it)\n");
-        return -1;
-    }
     if (env_config) snprintf(c->config_file, sizeof c->config_file, "%s", env_config);
+    int config_flag = 0;
     opterr = 0;
     optind = 1;
     int ch;
@@ -603,7 +605,12 @@ int vx_config_load(vx_config *c, int argc, char **argv)
                 return -1;
             }
             snprintf(c->config_file, sizeof c->config_file, "%s", optarg);
+            config_flag = 1;
         }
+    }
+    if (env_config && !*env_config && !config_flag) { /* as --config '' (it was taken as unset) */
+        vx_log_plain(VX_LOG_ERR, "voxeld: VOXELD_CONFIG is empty (name the file, or unset it)\n");
+        return -1;
     }
     if (c->config_file[0] && load_file(c, c->config_file)) return -1;
     if (load_env(c)) return -1;

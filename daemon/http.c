@@ -313,9 +313,8 @@ static int first_call(vx_http *h, struct MHD_Connection *c, req *r, const char *
     const char *host = vx_resp_header(c, MHD_HTTP_HEADER_HOST);
     if (!vx_origin_host_ok(host))
         return vx_resp_fail(c, r, VX_EFORBIDDEN, "host_not_allowed",
-                            "Host %.100s is not a name of this daemon: without a token it "
-                            "answers IP addresses, localhost, names without a dot and "
-                            "--allowed-hosts",
+                            "Host %.100s is not a name of this daemon: it answers IP addresses, "
+                            "localhost, *.localhost, names without a dot and --allowed-hosts",
                             host);
     if (!vx_req_method_known(r->method))
         return vx_resp_fail(c, r, VX_ENOTIMPL, "not_implemented",

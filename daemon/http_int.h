@@ -88,6 +88,10 @@ typedef struct vx_resp_answer {
  * list, "*" = any, "" = none). Called once, before serving; both strings
  * must outlive the server. */
 void vx_resp_init(const char *data_dir, const char *cors_origins);
+/* The next entry of a comma list (an option's: blanks around entries
+ * dropped) from *p: its start, its length in *k, and *p past it; NULL at
+ * the list's end. */
+const char *vx_resp_list_next(const char **p, size_t *k);
 /* The origin of c's request when CORS allows it (the Origin header's
  * value), else NULL. */
 const char *vx_resp_cors_origin(struct MHD_Connection *c);

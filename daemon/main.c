@@ -63,8 +63,9 @@ static _Atomic double g_gl_alive_at;
 static double g_test_stall_s;
 
 /* Whether systemd watches this process (WATCHDOG_USEC set, WATCHDOG_PID
- * unset or this pid: sd_watchdog_enabled), read at start. */
+ * unset or this pid: sd_watchdog_enabled), and its period, read at start. */
 static int g_watchdog;
+static uint64_t g_watchdog_usec;
 
 /* The GL thread pings the systemd watchdog through the jobs' alive hook,
  * when there is one, and notes the time for /livez. */
@@ -375,10 +376,9 @@ static void start_stop_watchdog(double seconds)
 static void serve_until_signal(const sigset_t *sigs, vx_store *store, vx_jobs *jobs,
                                int ping_watchdog)
 {
-    uint64_t wd_usec = 0;
     double ping_s = 0;
-    if (ping_watchdog && sd_watchdog_enabled(0, &wd_usec) > 0 && wd_usec > 0) {
-        ping_s = (double)wd_usec / 2e6;
+    if (ping_watchdog && g_watchdog) {
+        ping_s = (double)g_watchdog_usec / 2e6;
         if (ping_s < 0.05) ping_s = 0.05;
         sd_notify(0, "WATCHDOG=1");
     }
@@ -468,8 +468,7 @@ int main(int argc, char **argv)
     int rc = vx_config_load(&cfg, argc, argv);
     if (rc) return rc > 0 ? 0 : 2;
     vx_log_set_level(cfg.log_level);
-    uint64_t wd_usec = 0;
-    g_watchdog = sd_watchdog_enabled(0, &wd_usec) > 0 && wd_usec > 0;
+    g_watchdog = sd_watchdog_enabled(0, &g_watchdog_usec) > 0 && g_watchdog_usec > 0;
     /* Files 0640 and dirs 0750 at most, as the systemd unit's UMask=0027:
      * the writers' own modes (fopen's 0666, OpenVDB's) are no wider then.
      * A stricter umask stays. */
@@ -515,8 +514,10 @@ int main(int argc, char **argv)
     if (!store) {
         VX_ERROR("voxeld.fatal", "stage=store code=%s message=%s", err.code,
                  vx_log_quote((char[600]){0}, 600, err.message));
-        if (!bad_option(&err)) { /* the path said (the message has none: clients see them) */
-            vx_log_plain(VX_LOG_ERR, "voxeld: data dir %s: %s\n", cfg.data_dir, err.message);
+        if (!bad_option(&err)) { /* where said (the message has no path: clients see them) */
+            int blob = !strncmp(err.code, "blob", 4);
+            vx_log_plain(VX_LOG_ERR, "voxeld: %s %s: %s\n", blob ? "blob store" : "data dir",
+                         blob ? cfg.blob_store : cfg.data_dir, err.message);
             return 1;
         }
         vx_log_plain(VX_LOG_ERR, "voxeld: --blob-store: %s\n", err.message);

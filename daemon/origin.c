@@ -17,12 +17,13 @@ void vx_origin_init(const char *allowed, int check)
     g_check = check;
 }
 
-/* name (n bytes) is entry (k bytes) of the list, or under a ".name" one
- * (an entry's trailing dot is as the name's: none) */
+/* name (n bytes) is entry (k bytes) of the list, or under a ".name" one,
+ * written "*.name" too (an entry's trailing dot is as the name's: none) */
 static int listed(const char *name, size_t n, const char *entry, size_t k)
 {
     if (k == 1 && entry[0] == '*') return 1;
     if (k > 1 && entry[k - 1] == '.') k--;
+    if (k > 2 && entry[0] == '*' && entry[1] == '.') entry++, k--;
     if (k > 1 && entry[0] == '.') {
         if (n == k - 1 && !strncasecmp(name, entry + 1, n)) return 1;
         return n > k && !strncasecmp(name + n - k, entry, k);
@@ -48,23 +49,19 @@ int vx_origin_host_ok(const char *host)
     if (inet_pton(AF_INET, name, &a) == 1 || !strpbrk(name, ".%")) return 1;
     static const char lh[] = ".localhost"; /* localhost and every name under it (RFC 6761) */
     if (listed(name, n, lh, sizeof lh - 1)) return 1;
-    for (const char *p = g_allowed; *p;) {
-        while (*p == ' ' || *p == ',')
-            p++;
-        const char *end = strchr(p, ',');
-        if (!end) end = p + strlen(p);
-        size_t k = (size_t)(end - p);
-        while (k && p[k - 1] == ' ')
-            k--;
-        if (k && listed(name, n, p, k)) return 1;
-        p = end;
-    }
+    const char *list = g_allowed, *e;
+    size_t k;
+    while ((e = vx_resp_list_next(&list, &k)))
+        if (k && listed(name, n, e, k)) return 1;
     return 0;
 }
 
-/* The port of an authority ("h", "h:8080", "[::1]:80"), or dflt. */
+/* The port of an authority ("h", "h:8080", "[::1]:80"; blanks after it
+ * dropped, as libmicrohttpd leaves them), or dflt. */
 static long port_of(const char *auth, size_t n, long dflt, size_t *host_len)
 {
+    while (n && (auth[n - 1] == ' ' || auth[n - 1] == '\t'))
+        n--;
     const char *end = auth + n, *close = auth[0] == '[' ? memchr(auth, ']', n) : NULL;
     const char *colon = NULL;
     for (const char *p = close ? close : auth; p < end; p++)

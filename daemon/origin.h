@@ -3,15 +3,17 @@
  * to resolve to 127.0.0.1 is same-origin with the API it reaches, and
  * reads it all; a listener on every interface answers on 127.0.0.1 too),
  * and writes from pages of other origins (CSRF: a text/plain POST needs
- * no preflight). Clients that are not browsers send no Origin and name
- * the daemon by an address or a name of it: they are not affected. */
+ * no preflight). Clients that are not browsers send no Origin (the write
+ * check passes them); one that reaches a daemon without a token by a DNS
+ * name needs that name in --allowed-hosts, as a browser does. */
 #ifndef VX_ORIGIN_H
 #define VX_ORIGIN_H
 
 #include <microhttpd.h>
 
 /* allowed: --allowed-hosts, a comma list of names ("*" = any, ".x.example"
- * = x.example and every name under it; "" = none beyond the defaults);
+ * or "*.x.example" = x.example and every name under it; "" = none beyond
+ * the defaults);
  * check: Host names are checked without a list too (no token). The list
  * must outlive the server. Called once, before serving. */
 void vx_origin_init(const char *allowed, int check);

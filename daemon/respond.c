@@ -30,19 +30,25 @@ const char *vx_resp_cors_origin(struct MHD_Connection *c)
     if (!origin || !origin[0] || !g_cors || !g_cors[0] || strpbrk(origin, " \t,")) return NULL;
     char all[2048];
     if (!vx_resp_header_list(c, "Origin", all, sizeof all) || strchr(all, ',')) return NULL;
-    size_t n = strlen(origin);
-    for (const char *p = g_cors; *p;) {
-        while (*p == ' ' || *p == ',')
-            p++;
-        const char *end = strchr(p, ',');
-        if (!end) end = p + strlen(p);
-        size_t k = (size_t)(end - p);
-        while (k && p[k - 1] == ' ')
-            k--;
-        if ((k == 1 && *p == '*') || (k == n && !strncasecmp(p, origin, n))) return origin;
-        p = end;
-    }
+    size_t n = strlen(origin), k;
+    const char *list = g_cors, *e;
+    while ((e = vx_resp_list_next(&list, &k)))
+        if ((k == 1 && *e == '*') || (k == n && !strncasecmp(e, origin, n))) return origin;
     return NULL;
+}
+
+const char *vx_resp_list_next(const char **p, size_t *k)
+{
+    const char *s = *p;
+    while (*s == ' ' || *s == ',')
+        s++;
+    if (!*s) return NULL;
+    const char *end = strchr(s, ',');
+    if (!end) end = s + strlen(s);
+    *p = end;
+    for (*k = (size_t)(end - s); *k && s[*k - 1] == ' ';)
+        --*k;
+    return s;
 }
 
 const char *vx_resp_header(struct MHD_Connection *c, const char *name)

@@ -489,11 +489,13 @@ async function showMesh(job, seq) {
   $('view-note').textContent = `${job.kind}: ${tris} triangles; drag to orbit, wheel to zoom`;
   document.body.dataset.resultShown = 'mesh';
   if (names.length > 1) {
-    // every frame (at most 256) while they hold at most 16M triangles in all
-    const fit = Math.max(2, Math.floor(16e6 / Math.max(tris, 1)));
+    // every frame (the spec allows 256) while they hold at most 16M
+    // triangles in all, the job's mesh with them
+    const fit = Math.min(names.length, Math.floor(16e6 / Math.max(tris, 1)));
     if (fit < names.length)
-      $('view-note').textContent += `; the first ${fit - 1} of ${names.length - 1} frames played (16M triangles in all)`;
-    await playFrames(job, names.slice(0, fit), fmt, as, v);
+      $('view-note').textContent += fit < 2 ? `; ${names.length - 1} frames not played (16M triangles in all)`
+        : `; the first ${fit - 1} of ${names.length - 1} frames played (16M triangles in all)`;
+    if (fit >= 2) await playFrames(job, names.slice(0, fit), fmt, as, v);
   }
 }
 

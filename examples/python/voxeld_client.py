@@ -198,9 +198,14 @@ class Client:
                 raise
         lost = None
         while last is None or last["state"] not in TERMINAL:
+            t0 = time.monotonic()
             try:
                 last = self.job(jid, wait=30)
                 lost = None
+                # a server that answers ?wait at once (--request-timeout 0)
+                # is asked once a second, not as fast as it answers
+                if last["state"] not in TERMINAL:
+                    time.sleep(max(0.0, 1.0 - (time.monotonic() - t0)))
             except VoxeldError as e:
                 if e.code == "too_many_waits":
                     time.sleep(min(max(e.retry_after or 2, 1), 30))

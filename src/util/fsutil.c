@@ -241,6 +241,8 @@ int vx_parse_size(const char *s, uint64_t *out)
     uint64_t mul = 1;
     switch (*end) {
     case 0:
+    case 'B': /* 64B, below */
+    case 'b':
         break;
     case 'k':
     case 'K':

@@ -35,7 +35,7 @@ JID = "../../x" if mode == "badid" else "cd" * 16
 BODY = b"#binvox 1\ndim 1 1 1\ntranslate 0 0 0\nscale 1\ndata\n\x01\x01"
 
 
-ESC = "\x1b[2J\x1b]0;pwned\x07"
+ESC = "\x1b[2J\x1b]0;pwned\x07\u009b2J"  # C0 escapes, then a C1 CSI (U+009B)
 
 
 def job(state="succeeded", progress=1.0):

@@ -217,7 +217,7 @@ check "redirect: nothing went to the Location (the token with it)" bash -c "! gr
 # A job that is {} (a KeyError traceback), a failed job whose error is
 # null ("job failed: None"), an error message with terminal escapes (they
 # reached the terminal)
-for m in shape nullerr esc; do
+for m in shape nullerr esc atonce; do
     mkdir -p "$TMP/h-$m"
     python3 "$VX_SOURCE_DIR/tests/integration/hostile_server.py" "$TMP/h-$m/port" "$TMP/h-$m/log" "$m" &
     HPID=$!
@@ -232,6 +232,8 @@ check "a job that is {}: bad_answer, exit 1 ($(tail -n 1 "$TMP/h-shape/out.txt")
     bash -c "test \$(cat '$TMP/h-shape/rc') = 1 && grep -q 'bad_answer' '$TMP/h-shape/out.txt' && ! grep -q Traceback '$TMP/h-shape/out.txt'"
 check "a failed job without an error: said ($(tail -n 1 "$TMP/h-nullerr/out.txt"))" \
     bash -c "test \$(cat '$TMP/h-nullerr/rc') = 1 && grep -q 'job failed: (the server gave no error)' '$TMP/h-nullerr/out.txt'"
+check "?wait answered at once: polled once a second ($(grep -c '^GET /v1/jobs/[0-9a-f]*?wait' "$TMP/h-atonce/log") polls in 3 s), the result written" \
+    bash -c "test \$(cat '$TMP/h-atonce/rc') = 0 && test -s '$TMP/h-atonce/out.bin' && test \$(grep -c '^GET /v1/jobs/[0-9a-f]*?wait' '$TMP/h-atonce/log') -le 6"
 check "escapes in an error: shown as '?' ($(tail -n 1 "$TMP/h-esc/out.txt" | cat -v))" \
     bash -c "test \$(cat '$TMP/h-esc/rc') = 1 && grep -q 'bad?' '$TMP/h-esc/out.txt' && ! grep -q \$'\\x1b' '$TMP/h-esc/out.txt'"
 finish

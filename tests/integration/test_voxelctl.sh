@@ -371,6 +371,10 @@ check "... nothing in the service's store ($(find "$TMP/svc-store" -type f | hea
     test -z "$(find "$TMP/svc-store" -type f)"
 check "... nothing told to its systemd socket ($(tr '\n' ' ' <"$TMP/svc-notify.log" 2>/dev/null))" \
     test ! -s "$TMP/svc-notify.log"
+# ... while a tuning setting applies to it
+rc=0
+VOXELD_MAX_JOB_MEMORY=1K "$VOXELD" run voxelize "$MESH" -r 16 -f summary -o svc2.json --quiet 2>ctl.err || rc=$?
+check "... VOXELD_MAX_JOB_MEMORY applies (rc $rc: $(tail -n 1 ctl.err))" sh -c "test $rc = 1 && grep -q job_memory_limit ctl.err"
 check "--local: its temporary data dirs are removed" test -z "$(ls -A "$TMP/ltmp")"
 # Interrupted mid-job (Ctrl-C, kill): the private voxeld and its data dir go
 # too, and the signal still ends the command. SIGINT is given back its
@@ -526,7 +530,7 @@ H="http://127.0.0.1:$HPORT"
 (cd "$TMP/h-esc" && { "$CTL" --server "$H" jobs; "$CTL" --server "$H" meshes; "$CTL" --server "$H" get cdcdcdcdcdcdcdcdcdcdcdcdcdcdcdcd; } >lists.txt 2>&1)
 kill "$HPID"
 check "escapes in the lists and a job: shown as '?' ($(cat -v "$TMP/h-esc/lists.txt" | tr '\n' ' '))" \
-    bash -c "grep -q '^cdcd.*voxelize?' '$TMP/h-esc/lists.txt' && grep -q 'triangles  a?' '$TMP/h-esc/lists.txt' && ! grep -q \$'\\x1b' '$TMP/h-esc/lists.txt'"
+    bash -c "grep -q '^cdcd.*voxelize?' '$TMP/h-esc/lists.txt' && grep -q 'triangles  a?' '$TMP/h-esc/lists.txt' && ! grep -q \$'\\x1b' '$TMP/h-esc/lists.txt' && ! grep -q \$'\\xc2\\x9b' '$TMP/h-esc/lists.txt'"
 # A failed job whose error is null ("failed:  ()" before); lists and a job
 # that are not (blank rows, exit 0 before)
 hostile nullerr

@@ -278,7 +278,7 @@ static void test_operator_forms(void **state)
 {
     (void)state;
     vx_config c;
-    const char *sizes[] = {"64kib", "64KIB", "64kb", "64Kb", "64K"};
+    const char *sizes[] = {"64kib", "64KIB", "64kb", "64Kb", "64K", "65536B"};
     for (size_t i = 0; i < sizeof sizes / sizeof sizes[0]; i++) {
         char *av[] = {"voxeld", "--max-upload-bytes", (char *)sizes[i], NULL};
         assert_int_equal(load(&c, 3, av), 0);
@@ -304,6 +304,24 @@ static void test_operator_forms(void **state)
     unsetenv("VOXELD_CONFIG");
     assert_int_equal(rc, -1);
     assert_non_null(strstr(buf, "VOXELD_CONFIG is empty"));
+    char path[] = "/tmp/vx-config-forms-XXXXXX"; /* ... but --config given wins */
+    config_file(path, "workers = 3\n", 0);
+    setenv("VOXELD_CONFIG", "", 1);
+    char *given[] = {"voxeld", "--config", path, NULL};
+    rc = load(&c, 3, given);
+    unsetenv("VOXELD_CONFIG");
+    unlink(path);
+    assert_int_equal(rc, 0);
+    assert_int_equal(c.workers, 3);
+    char *bytes[] = {"voxeld", "--max-upload-bytes", "64B", NULL};
+    assert_int_equal(load(&c, 3, bytes), 0);
+    assert_int_equal(c.max_upload_bytes, 64);
+    char part[700]; /* two list values over the list's longest together: said so */
+    memset(part, 'o', sizeof part - 1);
+    part[sizeof part - 1] = 0;
+    char *two[] = {"voxeld", "--cors-origin", part, "--cors-origin", part, NULL};
+    assert_int_equal(load_said(&c, 5, two, buf, sizeof buf), -1);
+    assert_non_null(strstr(buf, "(want at most 1023 bytes in all)"));
     char name[1001];
     memset(name, 'a', 1000);
     name[1000] = 0;
