@@ -201,15 +201,23 @@ stop_daemon
 # all, and saved what came) or a 206 of its tail that was not asked for
 # (saved as the whole file), an upload answered with an HTML page or a job
 # whose id is a path (tracebacks): an error, no file (hostile_server.py).
-for m in redirect partial html badid; do
+# at MODE [ARGS]: the client's voxelize of the torus (and ARGS) against
+# hostile_server.py in MODE, in $TMP/h-MODE: rc (also in the file rc), out.txt
+at() {
+    local m=$1
+    shift
     mkdir -p "$TMP/h-$m"
     python3 "$VX_SOURCE_DIR/tests/integration/hostile_server.py" "$TMP/h-$m/port" "$TMP/h-$m/log" "$m" &
-    HPID=$!
+    local hpid=$!
     for _ in $(seq 100); do [[ -s "$TMP/h-$m/port" ]] && break; sleep 0.05; done
     rc=0
-    python3 "$PYC" --server "http://127.0.0.1:$(cat "$TMP/h-$m/port")" --token SECRET voxelize \
+    python3 "$PYC" --server "http://127.0.0.1:$(cat "$TMP/h-$m/port")" "$@" voxelize \
         "$VX_SOURCE_DIR/examples/meshes/torus.obj" -o "$TMP/h-$m/out.bin" >"$TMP/h-$m/out.txt" 2>&1 || rc=$?
-    kill "$HPID"
+    kill "$hpid"
+    echo $rc >"$TMP/h-$m/rc"
+}
+for m in redirect partial html badid; do
+    at $m --token SECRET
     check "$m: the client fails (rc $rc: $(tail -n 1 "$TMP/h-$m/out.txt")), no file" \
         bash -c "test $rc -ne 0 && ! test -e '$TMP/h-$m/out.bin' && ! grep -q Traceback '$TMP/h-$m/out.txt'"
 done
@@ -218,15 +226,7 @@ check "redirect: nothing went to the Location (the token with it)" bash -c "! gr
 # null ("job failed: None"), an error message with terminal escapes (they
 # reached the terminal)
 for m in shape nullerr esc atonce; do
-    mkdir -p "$TMP/h-$m"
-    python3 "$VX_SOURCE_DIR/tests/integration/hostile_server.py" "$TMP/h-$m/port" "$TMP/h-$m/log" "$m" &
-    HPID=$!
-    for _ in $(seq 100); do [[ -s "$TMP/h-$m/port" ]] && break; sleep 0.05; done
-    rc=0
-    python3 "$PYC" --server "http://127.0.0.1:$(cat "$TMP/h-$m/port")" voxelize \
-        "$VX_SOURCE_DIR/examples/meshes/torus.obj" -o "$TMP/h-$m/out.bin" >"$TMP/h-$m/out.txt" 2>&1 || rc=$?
-    kill "$HPID"
-    echo $rc >"$TMP/h-$m/rc"
+    at $m
 done
 check "a job that is {}: bad_answer, exit 1 ($(tail -n 1 "$TMP/h-shape/out.txt"))" \
     bash -c "test \$(cat '$TMP/h-shape/rc') = 1 && grep -q 'bad_answer' '$TMP/h-shape/out.txt' && ! grep -q Traceback '$TMP/h-shape/out.txt'"

@@ -484,20 +484,23 @@ hostile() {
     for _ in $(seq 100); do [[ -s "$TMP/h-$1/port" ]] && break; sleep 0.05; done
     HPORT=$(cat "$TMP/h-$1/port")
 }
-hostile badid
-(cd "$TMP/h-badid" && "$CTL" --server "http://127.0.0.1:$HPORT" voxelize "$VX_SOURCE_DIR/examples/meshes/torus.obj" >out.txt 2>err.txt; echo $? >rc)
-kill "$HPID"
+# voxelize_at MODE [ARGS]: voxelctl voxelize of the torus (and ARGS) against
+# the stand-in in MODE, in $TMP/h-MODE: its exit status in rc, out.txt, err.txt
+voxelize_at() {
+    local m=$1
+    shift
+    hostile "$m"
+    (cd "$TMP/h-$m" && "$CTL" --server "http://127.0.0.1:$HPORT" voxelize "$VX_SOURCE_DIR/examples/meshes/torus.obj" "$@" >out.txt 2>err.txt; echo $? >rc)
+    kill "$HPID"
+}
+voxelize_at badid
 check "a job id that is a path: exit 1, said ($(cat "$TMP/h-badid/err.txt"))" \
     bash -c "test \$(cat '$TMP/h-badid/rc') = 1 && grep -q 'no job id' '$TMP/h-badid/err.txt'"
 check "... and no request went to it" bash -c "! grep -q ' /x' '$TMP/h-badid/log'"
-hostile dotname
-(cd "$TMP/h-dotname" && "$CTL" --server "http://127.0.0.1:$HPORT" voxelize "$VX_SOURCE_DIR/examples/meshes/torus.obj" >out.txt 2>err.txt; echo $? >rc)
-kill "$HPID"
+voxelize_at dotname
 check "a result named .profile: written under another name, no dot file ($(ls -A "$TMP/h-dotname" | tr '\n' ' '))" \
     bash -c "test \$(cat '$TMP/h-dotname/rc') = 0 && ! test -e '$TMP/h-dotname/.profile' && grep -q '^wrote ' '$TMP/h-dotname/err.txt'"
-hostile gzip
-(cd "$TMP/h-gzip" && "$CTL" --server "http://127.0.0.1:$HPORT" voxelize "$VX_SOURCE_DIR/examples/meshes/torus.obj" -o out.bin >out.txt 2>err.txt; echo $? >rc)
-kill "$HPID"
+voxelize_at gzip -o out.bin
 check "a gzipped result not asked for: exit 1, said, nothing written ($(cat "$TMP/h-gzip/err.txt"))" \
     bash -c "test \$(cat '$TMP/h-gzip/rc') = 1 && grep -q 'Content-Encoding gzip' '$TMP/h-gzip/err.txt' && ! test -e '$TMP/h-gzip/out.bin'"
 hostile progress
@@ -507,11 +510,8 @@ check "progress 1e20 on a terminal: one bar's worth ($(wc -c <"$TMP/h-progress/t
     bash -c "test \$(wc -c <'$TMP/h-progress/tty.txt') -lt 2000 && grep -q '100%' '$TMP/h-progress/tty.txt'"
 # ... an upload's 201 that is an HTML page said so (it was "upload: HTTP
 # 201" alone), an error message's terminal escapes shown as '?'
-for m in html esc; do
-    hostile $m
-    (cd "$TMP/h-$m" && "$CTL" --server "http://127.0.0.1:$HPORT" voxelize "$VX_SOURCE_DIR/examples/meshes/torus.obj" -o out.bin >out.txt 2>err.txt; echo $? >rc)
-    kill "$HPID"
-done
+voxelize_at html -o out.bin
+voxelize_at esc -o out.bin
 check "an HTML 201 to an upload: exit 1, the answer shown ($(cat "$TMP/h-html/err.txt"))" \
     bash -c "test \$(cat '$TMP/h-html/rc') = 1 && grep -q 'not the JSON expected: <html>' '$TMP/h-html/err.txt'"
 # Ctrl-C while the result of a job that has ended downloads: said so (it
@@ -533,9 +533,7 @@ check "escapes in the lists and a job: shown as '?' ($(cat -v "$TMP/h-esc/lists.
     bash -c "grep -q '^cdcd.*voxelize?' '$TMP/h-esc/lists.txt' && grep -q 'triangles  a?' '$TMP/h-esc/lists.txt' && ! grep -q \$'\\x1b' '$TMP/h-esc/lists.txt' && ! grep -q \$'\\xc2\\x9b' '$TMP/h-esc/lists.txt'"
 # A failed job whose error is null ("failed:  ()" before); lists and a job
 # that are not (blank rows, exit 0 before)
-hostile nullerr
-(cd "$TMP/h-nullerr" && "$CTL" --server "http://127.0.0.1:$HPORT" voxelize "$VX_SOURCE_DIR/examples/meshes/torus.obj" -o out.bin >out.txt 2>err.txt; echo $? >rc)
-kill "$HPID"
+voxelize_at nullerr -o out.bin
 check "a failed job without an error: exit 1, said ($(cat "$TMP/h-nullerr/err.txt"))" \
     bash -c "test \$(cat '$TMP/h-nullerr/rc') = 1 && grep -q 'failed (the server gave no error)' '$TMP/h-nullerr/err.txt'"
 hostile shape
@@ -549,9 +547,7 @@ done
 kill "$HPID"
 # A server that answers ?wait at once (--request-timeout 0) and has no
 # event stream is asked once a second (thousands of times a second before)
-hostile atonce
-(cd "$TMP/h-atonce" && "$CTL" --server "http://127.0.0.1:$HPORT" voxelize "$VX_SOURCE_DIR/examples/meshes/torus.obj" -o out.bin >out.txt 2>err.txt; echo $? >rc)
-kill "$HPID"
+voxelize_at atonce -o out.bin
 check "?wait answered at once: polled once a second ($(grep -c '^GET /v1/jobs/[0-9a-f]*?wait' "$TMP/h-atonce/log") polls in 3 s), the result written" \
     bash -c "test \$(cat '$TMP/h-atonce/rc') = 0 && test -s '$TMP/h-atonce/out.bin' && test \$(grep -c '^GET /v1/jobs/[0-9a-f]*?wait' '$TMP/h-atonce/log') -le 6"
 # Without -o, a current directory the result cannot be written in is said
