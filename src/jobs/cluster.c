@@ -456,8 +456,13 @@ static cJSON *row_json(vx_jobs *j, const vx_pg_job *row, int live)
         const char *msg = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(last, "message"));
         int canceled = !strcmp(row->state, "canceled");
         if (canceled && (!code || strcmp(code, "canceled"))) {
+            /* started is the last attempt's: one that ended in an error
+             * left the job queued for its retry */
+            const cJSON *la = cJSON_GetObjectItemCaseSensitive(last, "attempt");
+            int retrying = cJSON_IsNumber(la) && la->valuedouble == row->attempt;
             code = "canceled";
-            msg = row->started > 0 ? "canceled while running" : "canceled while queued";
+            msg =
+                row->started > 0 && !retrying ? "canceled while running" : "canceled while queued";
         }
         cJSON_AddStringToObject(e, "code", code ? code : "failed");
         cJSON_AddStringToObject(e, "message", msg ? msg : "");
@@ -572,6 +577,9 @@ static int submit_split(vx_jobs *j, vx_pg_new_job *parent, const cJSON *kids, vx
     return 1;
 }
 
+static int row_output(vx_jobs *j, const vx_pg_job *row, const char *name, char *path, size_t pathn,
+                      char ctype[64], char fname[128], vx_err *err);
+
 cJSON *cluster_submit(vx_jobs *j, const char *mesh, const vx_kind *k, cJSON *params, uint64_t fp,
                       const vx_jobs_submit_opts *opts, int *existing, vx_err *err)
 {
@@ -585,13 +593,21 @@ cJSON *cluster_submit(vx_jobs *j, const char *mesh, const vx_kind *k, cJSON *par
     if (opts && opts->reuse && !(opts->idempotency_key && *opts->idempotency_key)) {
         got = vx_pg_find_done(c->api, fps, &row, err);
         if (got < 0) return NULL;
-        const cJSON *outs = cJSON_GetObjectItemCaseSensitive(row.result, "outputs");
+        const cJSON *outs = cJSON_GetObjectItemCaseSensitive(row.result, "outputs"), *o;
         if (got && cJSON_IsObject(outs) && outs->child) {
-            /* only a job whose results are still there (its primary output
-             * is, at the size it was written; else a new job) */
+            /* only a job whose results are still there (every output, at
+             * the size it was written; else a new job) */
             char path[VX_PATH_MAX], ct[64], fn[128];
-            vx_err oerr;
-            if (cluster_output(j, row.id, NULL, path, sizeof path, ct, fn, &oerr)) {
+            vx_err oerr = {0};
+            int bad = 0;
+            cJSON_ArrayForEach(o, outs)
+            {
+                if (o->string && row_output(j, &row, o->string, path, sizeof path, ct, fn, &oerr)) {
+                    bad = 1;
+                    break;
+                }
+            }
+            if (bad) {
                 got = 0;
                 vx_pg_job_clear(&row);
                 if (oerr.kind != VX_EGONE) {
@@ -633,9 +649,10 @@ cJSON *cluster_submit(vx_jobs *j, const char *mesh, const vx_kind *k, cJSON *par
     if (nkids && (size_t)nkids + 1 > vx_queue_capacity(j->queue)) {
         cJSON_Delete(kids);
         vx_err_set(err, VX_EUNPROC, "invalid_params",
-                   "params.bricks makes %ld bricks, each a job: more than the queue holds "
-                   "(max_queued_jobs %zu); use larger bricks, or a larger --max-queued-jobs",
-                   nkids, vx_queue_capacity(j->queue));
+                   "params.bricks makes %ld bricks, each a job, and the job itself: %ld, more "
+                   "than the queue holds (max_queued_jobs %zu); use larger bricks, or a larger "
+                   "--max-queued-jobs",
+                   nkids, nkids + 1, vx_queue_capacity(j->queue));
         return NULL;
     }
     if (nkids && (size_t)(queued + 1 + nkids) > vx_queue_capacity(j->queue)) {
@@ -763,38 +780,43 @@ int cluster_delete(vx_jobs *j, const char *jid, vx_err *err)
     return 0;
 }
 
+/* Output name (NULL: the primary) of the job in row: its file in path,
+ * checked to be there at the size it was written, or -1 with err. */
+static int row_output(vx_jobs *j, const vx_pg_job *row, const char *name, char *path, size_t pathn,
+                      char ctype[64], char fname[128], vx_err *err)
+{
+    char file[160] = "", rid[48];
+    const cJSON *last = NULL, *it;
+    cJSON_ArrayForEach(it, row->errors) last = it;
+    const cJSON *o = job_output_entry(
+        row->id, row->state,
+        cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(last, "message")) ?: "unknown error",
+        cJSON_GetObjectItemCaseSensitive(row->result, "outputs"), name, file, ctype, err);
+    if (!o) return -1;
+    double want = -1;
+    const cJSON *b = cJSON_GetObjectItemCaseSensitive(o, "bytes");
+    if (cJSON_IsNumber(b) && b->valuedouble > 0) want = b->valuedouble;
+    const char *of = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(o, "rid"));
+    if (of) { /* a child job's output, under this job's name for it */
+        const char *ext = strrchr(file, '.');
+        snprintf(fname, 128, "%s-%s%s", row->id, o->string, ext ? ext : "");
+        snprintf(rid, sizeof rid, "%s", of);
+    } else {
+        snprintf(fname, 128, "%s-%s", row->id, file);
+        snprintf(rid, sizeof rid, "%s/%d", row->id, row->attempt);
+    }
+    if (vx_store_result_file(j->desc.store, rid, file, path, pathn, err)) return -1;
+    return job_output_check_size(row->id, path, want, err);
+}
+
 int cluster_output(vx_jobs *j, const char *jid, const char *name, char *path, size_t pathn,
                    char ctype[64], char fname[128], vx_err *err)
 {
     vx_pg_job row;
     if (vx_pg_get(j->cl->api, jid, &row, err)) return -1;
-    int rc = -1;
-    char file[160] = "", rid[48];
-    const cJSON *last = NULL, *it;
-    cJSON_ArrayForEach(it, row.errors) last = it;
-    const cJSON *o = job_output_entry(
-        jid, row.state,
-        cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(last, "message")) ?: "unknown error",
-        cJSON_GetObjectItemCaseSensitive(row.result, "outputs"), name, file, ctype, err);
-    double want = -1;
-    if (o) {
-        const cJSON *b = cJSON_GetObjectItemCaseSensitive(o, "bytes");
-        if (cJSON_IsNumber(b) && b->valuedouble > 0) want = b->valuedouble;
-        const char *of = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(o, "rid"));
-        if (of) { /* a child job's output, under this job's name for it */
-            const char *ext = strrchr(file, '.');
-            snprintf(fname, 128, "%s-%s%s", jid, o->string, ext ? ext : "");
-            snprintf(rid, sizeof rid, "%s", of);
-        } else {
-            snprintf(fname, 128, "%s-%s", jid, file);
-            snprintf(rid, sizeof rid, "%s/%d", jid, row.attempt);
-        }
-        rc = 0;
-    }
+    int rc = row_output(j, &row, name, path, pathn, ctype, fname, err);
     vx_pg_job_clear(&row);
-    if (rc) return rc;
-    if (vx_store_result_file(j->desc.store, rid, file, path, pathn, err)) return -1;
-    return job_output_check_size(jid, path, want, err);
+    return rc;
 }
 
 /* ---- claims ------------------------------------------------------------------- */
@@ -1260,6 +1282,15 @@ void cluster_report(vx_jobs *j, job *jb, vx_job_run *r, int ok, const vx_err *e,
     } else if (!ok && r->dir[0]) {
         vx_store_result_remove(j->desc.store, r->rid);
     }
+    /* The job has ended: what earlier attempts left (a replica killed
+     * mid-job wrote part of its outputs, and no one came back for them)
+     * is nobody's; only a delete of the job had removed it. */
+    if (rc == 0 && (ok || !strcmp(state, "failed")))
+        for (int a = 1; a < jb->attempts; a++) {
+            char rid[48];
+            snprintf(rid, sizeof rid, "%s/%d", jb->id, a);
+            vx_store_result_remove(j->desc.store, rid);
+        }
 }
 
 /* ---- status --------------------------------------------------------------------- */

@@ -135,7 +135,8 @@ const cJSON *job_output_entry(const char *jid, const char *state, const char *fa
  * finished job. */
 void job_parts(const job *jb, cJSON **params, cJSON **stats, cJSON **outputs);
 /* 0, or -1 with VX_EGONE result_damaged when the file at path is not the
- * want bytes its job recorded (want < 0: not recorded, as before). */
+ * want bytes its job recorded (want < 0: not recorded, as before), or
+ * result_evicted when it is not there at all. */
 int job_output_check_size(const char *jid, const char *path, double want, vx_err *err);
 
 /* pins.c */

@@ -293,10 +293,24 @@ static PGresult *exec_deadline(vx_pg *pg, const char *sql, int n, const char *co
     }
 }
 
+/* A connection whose server has closed it (a restart: its goodbye, then
+ * EOF, wait on the socket) is dropped before a statement goes out on it:
+ * found only by the statement, a write that is not retried (a cancel, a
+ * delete) answered 503 once per connection after every restart. */
+static void drop_if_closed(vx_pg *pg)
+{
+    struct pollfd p = {.fd = pg->conn ? PQsocket(pg->conn) : -1, .events = POLLIN};
+    if (p.fd < 0 || poll(&p, 1, 0) != 1) return;
+    if (PQconsumeInput(pg->conn) && PQstatus(pg->conn) != CONNECTION_BAD) return;
+    vx_log(VX_LOG_INFO, "pg.connection_closed", "replica=%s", pg->replica);
+    drop_locked(pg);
+}
+
 PGresult *pg_run_locked(vx_pg *pg, int retry, const char *sql, int n, const char *const *vals,
                         vx_err *err)
 {
     for (int tries = 0;; tries++) {
+        drop_if_closed(pg);
         if (connect_locked(pg, err)) return NULL;
         int timed_out;
         PGresult *r = exec_deadline(pg, sql, n, vals, &timed_out);

@@ -2,6 +2,7 @@
  * API over the table (submit, get, cancel, list, outputs). jobs_int.h. */
 #include "jobs/jobs_int.h"
 
+#include <errno.h>
 #include <malloc.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -585,7 +586,12 @@ const cJSON *job_output_entry(const char *jid, const char *state, const char *fa
 int job_output_check_size(const char *jid, const char *path, double want, vx_err *err)
 {
     struct stat st;
-    if (!(want >= 0) || stat(path, &st) != 0 || (double)st.st_size == want) return 0;
+    if (stat(path, &st) != 0) /* in its dir, gone (removed behind the daemon) */
+        return errno == ENOENT
+                   ? vx_err_set(err, VX_EGONE, "result_evicted",
+                                "the result file of job %s is gone: run the job again", jid)
+                   : 0;
+    if (!(want >= 0) || (double)st.st_size == want) return 0;
     VX_ERROR("job.result_damaged", "job=%s bytes=%lld want=%.0f", jid, (long long)st.st_size, want);
     return vx_err_set(err, VX_EGONE, "result_damaged",
                       "the result file is not the one job %s wrote (%lld of %.0f bytes); run the "

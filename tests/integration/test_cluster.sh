@@ -305,6 +305,26 @@ find "$SHARED" -type d -name "$R1" -prune -exec rm -rf {} +
 on 2
 api POST /v1/jobs -H "Content-Type: application/json" -d "{\"mesh\":\"$B\",\"kind\":\"voxelize\",\"reuse\":true,\"params\":$RU}"
 check "reuse once its results are gone: a new job ($STATUS)" bash -c "test '$STATUS' = 202 && test '$(jqb .id)' != '$R1'"
+# ... and once one output file is gone from its dir (the dir was checked,
+# not the file: the old job came back, its download 410)
+R2=$(jqb .id)
+wait_final 2 "$R2" 60
+find "$SHARED" -path "*/$R2/*" -type f ! -name '*.json' -delete
+on 3
+api POST /v1/jobs -H "Content-Type: application/json" -d "{\"mesh\":\"$B\",\"kind\":\"voxelize\",\"reuse\":true,\"params\":$RU}"
+check "reuse once its file is gone from its dir: a new job ($STATUS)" bash -c "test '$STATUS' = 202 && test '$(jqb .id)' != '$R2'"
+# A mesh whose stored file is gone (its metadata there) is damaged on
+# every replica, not deleted on the ones that had not read it (404 "the
+# mesh was deleted", and a job on it failed mesh_not_found)
+on 1
+upload "$VX_SOURCE_DIR/examples/meshes/torus.obj"
+DM=$MESH_ID
+find "$SHARED" -path "*/meshes/$DM.obj" -delete
+for i in 1 2 3; do
+    on $i
+    api GET "/v1/meshes/$DM/file"
+    expect_error "a mesh whose file is gone, on r$i" 410 mesh_damaged
+done
 
 # A long job: slice with the robust vote, ~5 s on llvmpipe.
 LONG='{"resolution":320,"method":"slice","inside":"robust","format":"summary"}'
@@ -330,9 +350,15 @@ K=$RUNS_ON
 kill -KILL "${RPID[$K]}"
 wait "${RPID[$K]}" 2>/dev/null
 RPID[$K]=
+# what the killed attempt had written of its outputs (a summary writes
+# none: made here as a render's frames would be)
+mkdir -p "$SHARED/results/$J/1"
+printf 'part' >"$SHARED/results/$J/1/image_000.png"
 wait_final "$(other "$K")" "$J" 90
 check "after kill -9 of r$K: succeeded as attempt 2 on another replica" jq -e --arg r "r$K" '.state == "succeeded" and .attempt == 2 and .replica != $r' "$BODY"
 check "attempt 1's lease_expired recorded" jq -e --arg r "r$K" '.attempt_errors[0] | .attempt == 1 and .code == "lease_expired" and .replica == $r' "$BODY"
+check "the killed attempt's files are removed once the job ended (they stayed until a delete)" \
+    test ! -e "$SHARED/results/$J/1"
 start_replica "$K" || exit 1
 
 # SIGSTOP past the lease, then SIGCONT: the stopped attempt is fenced off.
