@@ -440,6 +440,11 @@ for t in $(seq 1 100); do
     sleep 0.2
 done
 check "r1 ready again by itself" test $ok = 1
+# the first write on r2's connection since the restart (its server gone:
+# it was 503 database_unavailable once on each replica)
+on 2
+api DELETE "/v1/jobs/$Q"
+expect_status "the first delete on r2 after the restart" 204
 submit 3 voxelize "$B" '{"resolution":26,"format":"summary"}'
 expect_status "submit after the restart" 202
 wait_final 1 "$JOB" 60
