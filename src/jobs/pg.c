@@ -299,11 +299,16 @@ static PGresult *exec_deadline(vx_pg *pg, const char *sql, int n, const char *co
  * delete) answered 503 once per connection after every restart. */
 static void drop_if_closed(vx_pg *pg)
 {
-    struct pollfd p = {.fd = pg->conn ? PQsocket(pg->conn) : -1, .events = POLLIN};
-    if (p.fd < 0 || poll(&p, 1, 0) != 1) return;
-    if (PQconsumeInput(pg->conn) && PQstatus(pg->conn) != CONNECTION_BAD) return;
-    vx_log(VX_LOG_INFO, "pg.connection_closed", "replica=%s", pg->replica);
-    drop_locked(pg);
+    /* the goodbye (FATAL: terminating connection) is read as data and
+     * leaves the connection OK; the EOF after it, read next, does not */
+    for (int reads = 0; reads < 2; reads++) {
+        struct pollfd p = {.fd = pg->conn ? PQsocket(pg->conn) : -1, .events = POLLIN};
+        if (p.fd < 0 || poll(&p, 1, 0) != 1) return;
+        if (PQconsumeInput(pg->conn) && PQstatus(pg->conn) != CONNECTION_BAD) continue;
+        vx_log(VX_LOG_INFO, "pg.connection_closed", "replica=%s", pg->replica);
+        drop_locked(pg);
+        return;
+    }
 }
 
 PGresult *pg_run_locked(vx_pg *pg, int retry, const char *sql, int n, const char *const *vals,
