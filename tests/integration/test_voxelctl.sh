@@ -420,9 +420,14 @@ stop_daemon
 start_daemon --token-file "$TMP/token" --workers 1 --max-queued-jobs 1 --max-waits 0 \
     --max-event-streams 0 || exit 1
 VOXELD_URL=$BASE
+# renders of a closed mesh: their GL stage (nonzero at R 1024) holds the GL
+# thread, so the queued one stays queued (suzanne is open: sampled by
+# winding on the CPU, its GL stage ended at once and the queue emptied)
+upload "$VX_SOURCE_DIR/examples/meshes/torus.obj"
+HID=$MESH_ID
 HEAVY='"params":{"N":64,"R":1024,"width":768,"height":768}'
 for _ in $(seq 20); do
-    api POST /v1/jobs -H 'Content-Type: application/json' -d "{\"mesh\":\"$MID\",\"kind\":\"render\",$HEAVY}"
+    api POST /v1/jobs -H 'Content-Type: application/json' -d "{\"mesh\":\"$HID\",\"kind\":\"render\",$HEAVY}"
     [[ "$STATUS" == 429 ]] && break
 done
 check "the queue fills (got $STATUS)" test "$STATUS" = 429
