@@ -147,8 +147,7 @@ static const opt_def opts[] = {
     {"allowed-hosts", T_LIST, S(allowed_hosts),
      "Host names answered besides IP addresses, localhost, *.localhost and names without a dot "
      "(repeat, or a comma list; .NAME or *.NAME = NAME and the names under it; * = any; no port; "
-     "default "
-     "none: only those without --token-file, any with one)"},
+     "default none: only those without --token-file, any with one)"},
     {"job-history", T_SIZE, F(job_history), 0,
      "finished jobs remembered (default 10000; at least 1)"},
     {"job-history-bytes", T_SIZE, F(job_history_bytes), 0,

@@ -702,24 +702,22 @@ static int mesh_fetch_shared(vx_store *s, const char *id, vx_err *err)
     free(text);
     const cJSON *fmt = cJSON_GetObjectItemCaseSensitive(meta, "format");
     const char *ext = cJSON_IsString(fmt) ? vx_intake_ext_of_name(fmt->valuestring) : NULL;
+    if (!ext) {
+        cJSON_Delete(meta);
+        return 0;
+    }
+    /* Metadata without its data file (ENOENT) is a damaged mesh, not a
+     * deleted one (a delete removes the metadata first, an upload writes
+     * it last): known here, so that opening it says mesh_damaged, as on
+     * the replica that stored it (this one said "deleted", 404, and ran a
+     * job on it into mesh_not_found). */
     char mkey[128];
-    if (ext) mesh_data_key(mkey, sizeof mkey, id, ext);
-    if (!ext || s->ops->stat(s->blob, mkey, NULL, NULL) < 0) {
+    mesh_data_key(mkey, sizeof mkey, id, ext);
+    if (s->ops->stat(s->blob, mkey, NULL, NULL) < 0 && errno != ENOENT) {
         int e = errno;
-        if (ext && e != ENOENT) {
-            cJSON_Delete(meta);
-            return vx_err_set(err, vx_err_io_kind(e), "store_failed",
-                              "cannot reach mesh %s in the blob store: %s", id, strerror(e));
-        }
-        /* Metadata without its data file is a damaged mesh, not a deleted
-         * one (a delete removes the metadata first, an upload writes it
-         * last): known here, so that opening it says mesh_damaged, as on
-         * the replica that stored it (this one said "deleted", 404, and
-         * ran a job on it into mesh_not_found). */
-        if (!ext) {
-            cJSON_Delete(meta);
-            return 0;
-        }
+        cJSON_Delete(meta);
+        return vx_err_set(err, vx_err_io_kind(e), "store_failed",
+                          "cannot reach mesh %s in the blob store: %s", id, strerror(e));
     }
     pthread_mutex_lock(&s->lock);
     mesh_find(s, id, &found);
