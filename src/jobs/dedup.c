@@ -91,7 +91,10 @@ job *find_existing_locked(vx_jobs *j, const job *jb, int reuse, vx_err *err)
             return NULL;
         }
     }
-    if (reuse)
+    /* With a key, the key's own job answers every retry (a reused job
+     * would answer only this one: the key stays with the job it queues),
+     * as in cluster mode. */
+    if (reuse && !jb->idem)
         for (size_t i = j->jobs.n; i-- > 0;) {
             job *old = job_at(j, i);
             if (old->fp == jb->fp && reusable(j, old) && same_request(old, jb)) return old;

@@ -370,7 +370,7 @@ cJSON *vx_jobs_submit_with(vx_jobs *j, const char *mesh, const char *kind, const
         vx_err_set(err, VX_EUNAVAIL, "not_ready", "the daemon is shutting down");
     } else if (vx_queue_depth(j->queue) >= vx_queue_capacity(j->queue)) {
         vx_err_set(err, VX_EBUSY, "queue_full", "the job queue is full (%zu queued)",
-                   vx_queue_capacity(j->queue));
+                   vx_queue_depth(j->queue));
     } else if (vx_sorted_insert(&j->jobs, jb)) {
         vx_err_set(err, VX_EINTERNAL, "id_collision", "job id collision");
     } else if (journal_locked(j, jb, err)) {
@@ -414,6 +414,8 @@ cJSON *vx_jobs_cancel(vx_jobs *j, const char *jid, int *was_running, vx_err *err
     if (j->cl) return cluster_cancel(j, jid, was_running, err);
     char kind[64] = "";
     pinset pins = {0};
+    char dropped[16][33];
+    size_t nd = 0;
     pthread_mutex_lock(&j->lock);
     job *jb = vx_jobs_valid_id(jid) ? find_job(j, jid) : NULL;
     cJSON *out = NULL;
@@ -428,18 +430,23 @@ cJSON *vx_jobs_cancel(vx_jobs *j, const char *jid, int *was_running, vx_err *err
         vx_queue_remove(j->queue, jb);
         jb->state = ST_CANCELED;
         jb->finished = vx_now();
+        jb->cancel_requested = 1;
         vx_err_set(&jb->error, VX_ECANCELED, "canceled", "canceled while queued");
         if (journal_locked(j, jb, err) == 0) {
             out = job_json(j, jb, 1);
             pins = jb->pins;
             memset(&jb->pins, 0, sizeof jb->pins);
             freeze_locked(j, jb);
+            /* one more finished job: the history's limits hold (jb
+             * itself may go, when it is the oldest) */
+            trim_history_locked(j, dropped, &nd, 16);
             changed = 1;
         } else {
             /* Not recorded (a full disk: 507), so not done: the job stays
              * queued, as the journal and a restart would have it. */
             jb->state = ST_QUEUED;
             jb->finished = 0;
+            jb->cancel_requested = 0;
             vx_err_clear(&jb->error);
             vx_queue_push(j->queue, jb, 1);
         }
@@ -458,6 +465,8 @@ cJSON *vx_jobs_cancel(vx_jobs *j, const char *jid, int *was_running, vx_err *err
     }
     pthread_mutex_unlock(&j->lock);
     unpin_job(j, &pins);
+    for (size_t i = 0; i < nd; i++)
+        vx_store_result_remove(j->desc.store, dropped[i]);
     if (*was_running) jobs_cancel_waiting(j, jid);
     if (changed) {
         VX_INFO("job.finished", "job=%s state=canceled run_ms=0", jid);

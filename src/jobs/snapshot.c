@@ -273,9 +273,11 @@ vx_jobs *vx_jobs_open(const vx_jobs_desc *desc, vx_err *err)
     }
     char dropped[256][33];
     size_t nd;
-    trim_history_locked(j, dropped, &nd, 256);
-    for (size_t i = 0; i < nd; i++)
-        vx_store_result_remove(desc->store, dropped[i]);
+    do { /* a history of any length down to a lower limit */
+        trim_history_locked(j, dropped, &nd, 256);
+        for (size_t i = 0; i < nd; i++)
+            vx_store_result_remove(desc->store, dropped[i]);
+    } while (nd == 256);
     /* Results no succeeded job names: a job killed mid-write (it runs
      * again from nothing, or was canceled), a delete a crash cut short;
      * and results of jobs the journal does not know at all (lost). */

@@ -93,6 +93,27 @@ api POST /v1/jobs -H "Content-Type: application/json" \
     -d "{\"mesh\":\"$A\",\"kind\":\"voxelize\",\"reuse\":\"yes\"}"
 expect_error "reuse must be a boolean" 400 invalid_request
 wait_job "$NEWJ"
+# With a key the key's own job answers: a reused job would answer only
+# the first request, and its retries would queue new jobs. (J3, B's
+# preview, is the job reuse would answer.)
+PREVB="{\"mesh\":\"$B\",\"kind\":\"preview\",\"params\":{\"width\":32,\"height\":32,\"samples\":1}"
+api POST /v1/jobs -H "Content-Type: application/json" -d "$PREVB,\"reuse\":true}"
+expect_status "reuse without a key: J3" 200
+check "J3 reused" test "$(jqb .id)" = "$J3"
+api POST /v1/jobs -H "Content-Type: application/json" -H "Idempotency-Key: key-3" -d "$PREVB,\"reuse\":true}"
+expect_status "reuse with a key: the key's new job" 202
+K3=$(jqb .id)
+check "not J3" test "$K3" != "$J3"
+api POST /v1/jobs -H "Content-Type: application/json" -H "Idempotency-Key: key-3" -d "$PREVB}"
+expect_status "the key's retry without reuse" 200
+check "the key's job" test "$(jqb .id)" = "$K3"
+api POST /v1/jobs -H "Content-Type: application/json" -H "Idempotency-Key: key-3" -d "$PREVB,\"reuse\":true}"
+expect_status "the key's retry with reuse" 200
+check "the key's job again" test "$(jqb .id)" = "$K3"
+api POST /v1/jobs -H "Content-Type: application/json" -H "Idempotency-Key: key-3" \
+    -d "{\"mesh\":\"$B\",\"kind\":\"preview\",\"params\":{\"width\":33},\"reuse\":true}"
+expect_error "the key with another request and reuse" 422 idempotency_key_reused
+wait_job "$K3"
 
 # ---- delete a finished job ----
 check "J2's results are on disk" test -d "$DATA/results/$J2"
@@ -136,6 +157,51 @@ api POST /v1/jobs -H "Content-Type: application/json" \
 expect_status "reuse of a job whose result dir was removed: a new job" 202
 check "neither old one" bash -c "test '$(jqb .id)' != '$FRESH' -a '$(jqb .id)' != '$NEWJ'"
 wait_job "$(jqb .id)"
+
+# ---- jobs canceled while queued, the history's limit, a 429's count ----
+# A slow preview holds the GL thread; the jobs queued behind it are
+# canceled: each says its cancel was asked for, and the history keeps its
+# 3 finished jobs (canceled ones were kept past it until others finished).
+stop_daemon
+start_daemon --job-history 3 --max-queued-jobs 5 || exit 1
+api GET "/v1/jobs?state=succeeded&limit=1000"
+check "a history of 3 at the start" test "$(jqb '.items | length')" -le 3
+upload "$VX_MESH_DIR/ogre.obj"
+OGRE=$MESH_ID
+SLOWREQ="{\"mesh\":\"$OGRE\",\"kind\":\"preview\",\"params\":{\"width\":8192,\"height\":8192,\"samples\":8}}"
+api POST /v1/jobs -H "Content-Type: application/json" -d "$SLOWREQ"
+SLOW=$(jqb .id)
+for i in $(seq 1 50); do
+    api GET "/v1/jobs/$SLOW"
+    [[ "$(jqb .state)" == running ]] && break
+    sleep 0.2
+done
+Q=()
+for i in 1 2 3 4 5; do
+    api POST /v1/jobs -H "Content-Type: application/json" -d "{\"mesh\":\"$A\",\"kind\":\"preview\",\"params\":{\"width\":$((16 + i))}}"
+    expect_status "queued $i" 202
+    Q+=("$(jqb .id)")
+done
+for i in 0 1 2; do
+    api DELETE "/v1/jobs/${Q[$i]}"
+    expect_status "cancel queued $i" 200
+    check "queued $i: canceled, its cancel asked for" jq -e '.state == "canceled" and .cancel_requested == true' "$BODY"
+done
+api GET "/v1/jobs/${Q[0]}"
+check "the cancel stays asked for" jq -e '.state == "canceled" and .cancel_requested == true' "$BODY"
+api GET "/v1/jobs?limit=1000"
+check "3 finished jobs in the history ($(jqb -c '[.items[].state]'))" jq -e '[.items[] | select(.state != "queued" and .state != "running")] | length == 3' "$BODY"
+# A restart with room for 1: the slow job runs again, the last two queued
+# ones are queued again, 2 in a queue of 1, and a submission is told so.
+stop_daemon
+start_daemon --job-history 3 --max-queued-jobs 1 || exit 1
+api POST /v1/jobs -H "Content-Type: application/json" -d "$SLOWREQ"
+expect_error "a queue over its capacity" 429 queue_full
+check "the 429 counts the jobs queued ($(jqb -r .error.message))" jq -e '.error.message | test("[(]2 queued[)]")' "$BODY"
+api DELETE "/v1/jobs/$SLOW"
+check "the slow job: canceled or its cancel asked for ($STATUS)" test "$STATUS" = 202 -o "$STATUS" = 200
+wait_job "${Q[4]}" 120
+check "the last queued job ran" jq -e '.state == "succeeded"' "$BODY"
 
 stop_daemon
 finish
