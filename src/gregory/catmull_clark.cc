@@ -146,10 +146,30 @@ void lone_normal(const Far::TopologyLevel &lv, const std::vector<Point> &pos, in
     }
 }
 
+// The first edge of the base mesh that three or more faces share (the
+// same face repeated too), or -1. OpenSubdiv's limit evaluation sizes its
+// buffers by the most edges at a vertex, and a refined vertex on such an
+// edge has more faces than that: it wrote past them (heap corruption,
+// from 19 faces on one edge a crash).
+int nonmanifold_edge(const Far::TopologyLevel &lv)
+{
+    for (int e = 0; e < lv.GetNumEdges(); e++)
+        if (lv.GetEdgeFaces(e).size() > 2) return e;
+    return -1;
+}
+
 int refine(const vx_mesh *m, int levels, int limit, vx_mesh **out, float **normals, vx_err *err)
 {
     std::unique_ptr<Far::TopologyRefiner> r(vx_osd::refiner_new(m, err));
     if (!r) return -1;
+    const int bad = nonmanifold_edge(r->GetLevel(0));
+    if (bad >= 0 && limit) {
+        Far::ConstIndexArray ev = r->GetLevel(0).GetEdgeVertices(bad);
+        return vx_err_set(err, VX_EUNPROC, "osd_topology",
+                          "the edge from vertex %d to vertex %d borders %d faces: limit positions "
+                          "need every edge to border at most two (limit: false subdivides it)",
+                          ev[0] + 1, ev[1] + 1, r->GetLevel(0).GetEdgeFaces(bad).size());
+    }
     Far::TopologyRefiner::UniformOptions uo(levels);
     uo.fullTopologyInLastLevel = true; // PrimvarRefiner::Limit needs it
     r->RefineUniform(uo);
@@ -166,20 +186,31 @@ int refine(const vx_mesh *m, int levels, int limit, vx_mesh **out, float **norma
     }
     const Far::TopologyLevel &last = r->GetLevel(levels);
     size_t nv = (size_t)last.GetNumVertices(), nf = (size_t)last.GetNumFaces();
-    std::vector<Point> lim(nv), t1(nv), t2(nv);
-    pr.Limit(a, lim, t1, t2);
-    if (limit) a.swap(lim);
+    // Limit tangents give the normals; with an edge of three or more faces
+    // the faces' areas do.
+    std::vector<Point> lim, t1, t2;
+    if (bad < 0) {
+        lim.resize(nv);
+        t1.resize(nv);
+        t2.resize(nv);
+        pr.Limit(a, lim, t1, t2);
+        if (limit) a.swap(lim);
+    }
 
     std::vector<float> nv3(3 * nv);
     std::vector<double> acc;
     for (size_t i = 0; i < nv; i++) {
-        const double *u = t1[i].p, *v = t2[i].p;
-        double n[3] = {u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2],
-                       u[0] * v[1] - u[1] * v[0]};
-        double len = std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
-        double scale = std::sqrt(u[0] * u[0] + u[1] * u[1] + u[2] * u[2]) *
-                       std::sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
-        if (!(len > 1e-12 * scale) || !std::isfinite(len)) {
+        double n[3] = {0, 0, 0}, len = 0, scale = 0;
+        if (bad < 0) {
+            const double *u = t1[i].p, *v = t2[i].p;
+            n[0] = u[1] * v[2] - u[2] * v[1];
+            n[1] = u[2] * v[0] - u[0] * v[2];
+            n[2] = u[0] * v[1] - u[1] * v[0];
+            len = std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+            scale = std::sqrt(u[0] * u[0] + u[1] * u[1] + u[2] * u[2]) *
+                    std::sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+        }
+        if (bad >= 0 || !(len > 1e-12 * scale) || !std::isfinite(len)) {
             if (acc.empty()) face_normals(last, a, acc);
             memcpy(n, &acc[3 * i], sizeof n);
             len = std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);

@@ -129,10 +129,14 @@ int vx_child_call(vx_child_fn fn, void *ud, void *out, size_t out_size, vx_child
     /* Died without an answer: a stop that raced with it (SIGTERM of the
      * whole unit) says why; otherwise the kernel's OOM killer or a crash. */
     if (poll_fn && poll_fn(poll_ud, err)) return -1;
-    if (WIFSIGNALED(status))
+    if (WIFSIGNALED(status)) {
+        int sig = WTERMSIG(status);
+        /* SIGKILL from outside: the kernel's OOM killer as a rule; any
+         * other signal is the work's own crash */
         return vx_err_set(err, VX_EINTERNAL, "child_failed",
-                          "the worker process was killed by signal %d (out of memory?)",
-                          WTERMSIG(status));
+                          "the worker process was killed by signal %d (%s%s)", sig, strsignal(sig),
+                          sig == SIGKILL ? ": out of memory?" : ": a crash");
+    }
     return vx_err_set(err, VX_EINTERNAL, "child_failed",
                       "the worker process exited (status %d) without an answer",
                       WIFEXITED(status) ? WEXITSTATUS(status) : -1);

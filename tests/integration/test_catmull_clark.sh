@@ -149,4 +149,40 @@ for i in range(acc["count"]):
     assert abs(x * x + y * y + z * z - 1) < 1e-3, (i, x, y, z)
 PY
 
+# An edge that three or more faces border: OpenSubdiv's limit evaluation
+# wrote past its buffers there (19 pages on one edge, or one triangle 20
+# times, killed the worker with a corrupt heap). Subdivided with the
+# faces' normals; limit: true fails naming the edge. The daemon's log
+# stays free of the worker's crash.
+python3 - "$TMP/book.obj" "$TMP/same.obj" <<'PY'
+import math, sys
+n = 19
+with open(sys.argv[1], "w") as f:
+    f.write("v 0 0 0\nv 1 0 0\n")
+    for i in range(n):
+        a = 2 * math.pi * i / n
+        f.write("v 0.5 %.6f %.6f\n" % (math.cos(a), math.sin(a)))
+    for i in range(n):
+        f.write("f 1 2 %d\n" % (i + 3))
+with open(sys.argv[2], "w") as f:
+    f.write("v 0 0 0\nv 1 0 0\nv 0 1 0\n" + "f 1 2 3\n" * 20)
+PY
+for shape in book same; do
+    upload "$TMP/$shape.obj"
+    SHAPE=$MESH_ID
+    for fmt in obj glb; do
+        cc "$shape: levels 2, $fmt" "$SHAPE" "{\"levels\":2,\"format\":\"$fmt\"}"
+        job_ok "$shape: levels 2, $fmt"
+    done
+    api GET "/v1/jobs/$CJ/result/mesh"
+    check "$shape: a glb" test "$(head -c 4 "$BODY")" = glTF
+    cc "$shape: limit" "$SHAPE" '{"levels":1,"limit":true}'
+    check "$shape: limit fails osd_topology naming the edge ($(jq -c .error "$TMP/job.json"))" \
+        jq -e '.state == "failed" and .error.code == "osd_topology" and (.error.message | test("edge from vertex 1 to vertex 2 borders (19|20) faces"))' "$TMP/job.json"
+done
+cc "book: levels 1, obj" "$(sha256sum "$TMP/book.obj" | cut -c1-64)" '{"levels":1}'
+api GET "/v1/jobs/$CJ/result/mesh"
+check "book: every normal unit length" awk '$1 == "vn" { n++; l = $2*$2 + $3*$3 + $4*$4; if (l < 0.99 || l > 1.01) bad++ } END { exit n == 0 || bad > 0 }' "$BODY"
+check "no worker crashed" sh -c "! grep -q 'child_failed\|corruption\|invalid pointer' '$TMP/daemon.log'"
+
 finish

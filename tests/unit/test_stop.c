@@ -55,10 +55,13 @@ static int forever(void *ud, void *out, size_t out_size, vx_err *err)
     return 0;
 }
 
+/* Dies by the signal *(int *)ud: SIGKILL as the OOM killer sends it,
+ * SIGSEGV as a crash. */
 static int crash(void *ud, void *out, size_t out_size, vx_err *err)
 {
-    (void)ud, (void)out, (void)out_size, (void)err;
-    raise(SIGKILL);
+    (void)out, (void)out_size, (void)err;
+    signal(*(int *)ud, SIG_DFL);
+    raise(*(int *)ud);
     return 0;
 }
 
@@ -116,10 +119,19 @@ static void test_child_dies(void **state)
     (void)state;
     vx_err err = {0};
     double never = 1e300;
-    assert_int_equal(vx_child_call(crash, NULL, NULL, 0, until, &never, 20, &err), -1);
+    int sig = SIGKILL;
+    assert_int_equal(vx_child_call(crash, &sig, NULL, 0, until, &never, 20, &err), -1);
     assert_int_equal(err.kind, VX_EINTERNAL);
     assert_string_equal(err.code, "child_failed");
     assert_non_null(strstr(err.message, "signal 9"));
+    assert_non_null(strstr(err.message, "out of memory?"));
+    /* a crash is not blamed on memory */
+    sig = SIGSEGV;
+    assert_int_equal(vx_child_call(crash, &sig, NULL, 0, until, &never, 20, &err), -1);
+    assert_string_equal(err.code, "child_failed");
+    assert_non_null(strstr(err.message, "signal 11"));
+    assert_non_null(strstr(err.message, "a crash"));
+    assert_null(strstr(err.message, "memory"));
 }
 
 /* ---- the stop hook ------------------------------------------------------ */
