@@ -111,6 +111,26 @@ expect_status "upload the Draco result" 201
 meta "$MESH_ID"
 check "suzanne drc: triangles as reported" test "$(mv_ triangles)" = "$(jq -r .stats.triangles "$TMP/job.json")"
 check "suzanne: open input stays open" test "$(mv_ boundary_edges)" -gt 0
+check "suzanne drc: edgebreaker coded (method byte 1)" test "$(od -An -tu1 -j8 -N1 "$TMP/suz.drc" | tr -d ' ')" = 1
+# One triangle 2000 times: its welded patches put thousands of faces on
+# each edge, where Draco's edgebreaker takes time quadratic in them (30,000
+# copies: 11 s against 1 s as glb). Coded sequentially: the same counts.
+python3 - "$TMP/same.ply" <<'PY'
+import struct, sys
+n = 2000
+h = ("ply\nformat binary_little_endian 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
+     "property float z\nelement face %d\nproperty list uchar int vertex_indices\nend_header\n" % n)
+open(sys.argv[1], "wb").write(h.encode() + struct.pack("<9f", 0, 0, 0, 1, 0, 0, 0, 1, 0) + struct.pack("<B3i", 3, 0, 1, 2) * n)
+PY
+upload "$TMP/same.ply" model/x-ply
+greg "one triangle 2000 times, drc" "$MESH_ID" '{"divisions":2,"format":"drc"}'
+job_ok "one triangle 2000 times, drc"
+fetch mesh "$TMP/same.drc"
+check "repeated triangle drc: sequentially coded (method byte 0)" test "$(od -An -tu1 -j8 -N1 "$TMP/same.drc" | tr -d ' ')" = 0
+upload "$TMP/same.drc" model/x-draco
+expect_status "upload the sequential Draco result" 201
+meta "$MESH_ID"
+check "repeated triangle drc: triangles as reported" test "$(mv_ triangles)" = "$(jq -r .stats.triangles "$TMP/job.json")"
 
 # --- n-gon prism: closed, welded output closed ---
 greg "prism" "$M_prism" '{"divisions":6}'
