@@ -30,6 +30,8 @@ run_pkgs=(
   libeigen3-dev
   # compressed result downloads (Content-Encoding zstd; gzip is zlib)
   libzstd-dev
+  # the README's example requests (curl, jq)
+  curl jq
   # OpenVDB and what its headers need
   libopenvdb-dev libboost-dev libboost-iostreams-dev libtbb-dev libimath-dev libblosc-dev
   zlib1g-dev

@@ -113,6 +113,10 @@ for o in "${OVERLAYS[@]}"; do
         check "$o: $probe's port is the daemon's ($PORT)" q "$o" \
             "$CTR | .$probe.httpGet.port as \$pp | [.ports[] | select(.name == \$pp or .containerPort == \$pp) | .containerPort] == [$PORT]"
     done
+    # The endpoints drop a terminating pod some seconds after its SIGTERM;
+    # voxeld closes its port at SIGTERM, so the pod waits first.
+    check "$o: a preStop sleep of 5 s or more, within the grace period" q "$o" \
+        "($DEPLOY | .spec.template.spec.terminationGracePeriodSeconds) as \$g | $CTR | .lifecycle.preStop.exec.command | .[0] == \"sleep\" and (.[1] | tonumber) >= 5 and (.[1] | tonumber) < \$g"
     check "$o: the startup probe allows at least a minute" q "$o" \
         "$CTR | .startupProbe | (.periodSeconds // 10) * (.failureThreshold // 3) >= 60"
     check "$o: the Service targets that port" q "$o" \
@@ -183,6 +187,8 @@ for o in "${OVERLAYS[@]}"; do
                 ". as \$all | $CTR | [.envFrom[]?.secretRef.name // empty] | any(. as \$n | \$all[] | select(.kind == \"Secret\" and .metadata.name == \$n) | .data.$k != null)"
         done
         check "$o: VOXELD_BLOB_STORE is set (ConfigMap)" q "$o" "$CENV | .VOXELD_BLOB_STORE | startswith(\"s3://\")"
+        check "$o: no replicas in the Deployment (KEDA's HPA sets them; an apply would undo a scale-out)" q "$o" \
+            "$DEPLOY | .spec | has(\"replicas\") | not"
         check "$o: no PVC, a rolling update" q "$o" \
             "(any(.[]; .kind == \"PersistentVolumeClaim\") | not) and ($DEPLOY | .spec.strategy.type == \"RollingUpdate\")"
         if [[ $o == nvidia-* ]]; then
@@ -204,6 +210,20 @@ for o in "${OVERLAYS[@]}"; do
             "($DEPLOY | .spec.template.spec) as \$s | \$s.containers[0].volumeMounts[] | select(.mountPath == \"$D\") | .name as \$v | \$s.volumes[] | select(.name == \$v) | .persistentVolumeClaim.claimName as \$c | \$c != null"
     fi
 done
+
+# ---- a user's overlay sets the image as the README says ----------------------------------
+mkdir -p "$TMP/my-overlay"
+cat >"$TMP/my-overlay/kustomization.yaml" <<EOF
+resources:
+  - $(realpath --relative-to="$TMP/my-overlay" "$K8S/overlays/nvidia")
+images:
+  - name: $(sed -n 's/^ *kustomize edit set image \([^=]*\)=.*/\1/p' "$K8S/README.md" | head -n 1)
+    newName: myreg.example/team/voxeld
+    newTag: "1.2.3"
+EOF
+"${KUSTOMIZE[@]}" "$TMP/my-overlay" >"$TMP/my-overlay.yaml" 2>&1
+check "the README's image override takes ($(grep -m1 'image:' "$TMP/my-overlay.yaml"))" \
+    grep -q '^ *image: myreg.example/team/voxeld:1.2.3$' "$TMP/my-overlay.yaml"
 
 # ---- the options of the single-replica overlays, given to the real voxeld -----------------
 # The pod's environment (ConfigMap + env) and args, with the paths and the

@@ -251,5 +251,9 @@ JOURNAL_STREAM=$(stat -c '%d:%i' "$TMP/plain.log") VOXELD_JOBTIMEOUT=3 \
 check "a bad option under the journal: exit 2 ($rc), said at priority 3 ($(head -c 300 "$TMP/plain.log"))" \
     sh -c "test $rc = 2 && grep -q '^<3>voxeld: command line: invalid value for job-timeout' '$TMP/plain.log'"
 check "... a misspelled variable warned at priority 4" grep -q '^<4>voxeld: warning: VOXELD_JOBTIMEOUT names no option' "$TMP/plain.log"
+# The unit does not restart a configuration voxeld refuses (Restart=on-
+# failure looped on it until the start limit).
+check "the unit's RestartPreventExitStatus holds the refusal's exit code ($rc)" \
+    grep -Eq "^RestartPreventExitStatus=(.* )?$rc( |\$)" "$VX_SOURCE_DIR/systemd/voxeld.service"
 
 finish
