@@ -53,15 +53,37 @@ int vx_jobs_valid_id(const char *s)
     return 1;
 }
 
+/* Ids increase: within a millisecond (or a clock stepped back) the next
+ * id is the last one plus a random step under 2^32, so that ids sort in
+ * the order they were made and stay hard to guess. */
 void jobs_new_id(char out[33])
 {
+    static pthread_mutex_t lock = PTHREAD_MUTEX_INITIALIZER;
+    static unsigned long long last_ms;
+    static unsigned char last[10];
     unsigned char rnd[10] = {0};
     if (getrandom(rnd, sizeof rnd, 0) != (ssize_t)sizeof rnd) {
         for (size_t i = 0; i < sizeof rnd; i++)
             rnd[i] = (unsigned char)rand();
     }
-    unsigned long long ms = (unsigned long long)(vx_now() * 1000.0);
-    snprintf(out, 33, "%012llx", ms & 0xffffffffffffULL);
+    unsigned long long ms = (unsigned long long)(vx_now() * 1000.0) & 0xffffffffffffULL;
+    pthread_mutex_lock(&lock);
+    if (ms <= last_ms) {
+        /* last + 1 + (the random bytes' low 31 bits), carried up the bytes */
+        unsigned long long add =
+            1 + ((unsigned long long)(rnd[6] & 0x7f) << 24 | rnd[7] << 16 | rnd[8] << 8 | rnd[9]);
+        memcpy(rnd, last, sizeof rnd);
+        for (int i = 9; i >= 0 && add; i--) {
+            add += rnd[i];
+            rnd[i] = (unsigned char)add;
+            add >>= 8;
+        }
+        ms = last_ms + (add ? 1 : 0); /* all 80 bits spent: the next millisecond */
+    }
+    last_ms = ms;
+    memcpy(last, rnd, sizeof last);
+    pthread_mutex_unlock(&lock);
+    snprintf(out, 33, "%012llx", ms);
     for (int i = 0; i < 10; i++)
         snprintf(out + 12 + 2 * i, 3, "%02x", rnd[i]);
 }
@@ -331,7 +353,6 @@ cJSON *vx_jobs_submit_with(vx_jobs *j, const char *mesh, const char *kind, const
         job_free(jb);
         return out;
     }
-    jobs_new_id(jb->id);
     snprintf(jb->mesh, sizeof jb->mesh, "%s", mesh);
     jb->kind = k;
     jb->created = vx_now();
@@ -366,6 +387,9 @@ cJSON *vx_jobs_submit_with(vx_jobs *j, const char *mesh, const char *kind, const
         *err = *opts->refuse_new;
         return NULL;
     }
+    /* The id is made under the lock: ids increase in the order jobs enter
+     * the table, so a list after the newest id seen misses none. */
+    jobs_new_id(jb->id);
     if (j->stopping) {
         vx_err_set(err, VX_EUNAVAIL, "not_ready", "the daemon is shutting down");
     } else if (vx_queue_depth(j->queue) >= vx_queue_capacity(j->queue)) {

@@ -17,6 +17,7 @@
 #include <sys/stat.h>
 
 #include "jobs/jobs.h"
+#include "jobs/jobs_int.h"
 #include "jobs/state.h"
 #include "store/store.h"
 
@@ -366,12 +367,32 @@ static void test_restart_ends(void **state)
     g_state = NULL;
 }
 
+/* Job ids increase, also many in one millisecond: the API promises that
+ * they sort in creation order (a list after the newest id seen missed a
+ * job made in the same millisecond with a smaller random part). */
+static void test_ids_increase(void **state)
+{
+    (void)state;
+    char prev[33] = "", id[33];
+    int same_ms = 0;
+    for (int i = 0; i < 100000; i++) {
+        jobs_new_id(id);
+        assert_true(vx_jobs_valid_id(id));
+        if (prev[0]) {
+            if (strcmp(prev, id) >= 0) fail_msg("id %d: %s after %s", i, id, prev);
+            same_ms += !strncmp(prev, id, 12);
+        }
+        memcpy(prev, id, sizeof id);
+    }
+    printf("  %d of 100000 ids in the millisecond of the one before\n", same_ms);
+    assert_true(same_ms > 1000); /* what the test is about happened */
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
-        cmocka_unit_test(test_two_paths_valid_together),
-        cmocka_unit_test(test_retry_stats_once),
-        cmocka_unit_test(test_state_backend),
+        cmocka_unit_test(test_ids_increase),     cmocka_unit_test(test_two_paths_valid_together),
+        cmocka_unit_test(test_retry_stats_once), cmocka_unit_test(test_state_backend),
         cmocka_unit_test(test_restart_ends),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
