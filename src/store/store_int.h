@@ -60,6 +60,7 @@ struct vx_store {
     uint64_t evicted; /* results the budget removed (atomic) */
     unsigned long upload_seq;
     int lock_fd;                    /* DATA/voxeld.lock, flock'd for the store's life */
+    int dir_lock_fd;                /* DATA itself, flock'd too (-1: not lockable) */
     const vx_mesh_catalog *catalog; /* NULL = none (the index is the catalog) */
 };
 

@@ -11,30 +11,53 @@
 #include "util/fsutil.h"
 #include "util/log.h"
 
-/* One daemon per data dir: an exclusive flock on DATA/voxeld.lock, held
- * until vx_store_close (or the process dies: the kernel drops it, so a
- * kill -9 never leaves a stale lock). The file holds the owner's pid, for
- * the message a second daemon prints. */
+/* The refusal of a second daemon, with the owner's pid from the lock file
+ * when it is there to read. */
+static int locked_by_another(const vx_store *s, int fd, vx_err *err)
+{
+    char pid[32] = "";
+    ssize_t n = fd >= 0 ? pread(fd, pid, sizeof pid - 1, 0) : -1;
+    if (n > 0) pid[n] = 0;
+    pid[strcspn(pid, "\n")] = 0;
+    return vx_err_set(err, VX_EBUSY, "data_dir_locked",
+                      "the data dir %s is in use by another voxeld (pid %s): one daemon per data "
+                      "dir",
+                      s->dir, pid[0] ? pid : "unknown");
+}
+
+/* One daemon per data dir: exclusive flocks on the directory itself and on
+ * DATA/voxeld.lock, held until vx_store_close (or the process dies: the
+ * kernel drops them, so a kill -9 never leaves a stale lock). The file
+ * holds the owner's pid, for the message a second daemon prints; the
+ * directory's lock holds when the file is deleted (a second daemon had
+ * then made a new one and started beside the first). A file system that
+ * takes no lock on a directory has the file's alone. */
 static int lock_dir(vx_store *s, vx_err *err)
 {
     char p[VX_PATH_MAX];
     snprintf(p, sizeof p, "%s/voxeld.lock", s->dir);
+    int dfd = open(s->dir, O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+    if (dfd >= 0 && flock(dfd, LOCK_EX | LOCK_NB) != 0) {
+        int e = errno;
+        close(dfd);
+        dfd = -1;
+        if (e == EWOULDBLOCK) {
+            int pfd = open(p, O_RDONLY | O_CLOEXEC);
+            locked_by_another(s, pfd, err);
+            if (pfd >= 0) close(pfd);
+            return -1;
+        }
+    }
+    s->dir_lock_fd = dfd;
     int fd = open(p, O_RDWR | O_CREAT | O_CLOEXEC, 0640);
     if (fd < 0)
         return vx_err_set(err, VX_EIO, "data_dir_lock", "cannot open the lock file %s: %s", p,
                           strerror(errno));
     if (flock(fd, LOCK_EX | LOCK_NB) != 0) {
         int e = errno;
-        char pid[32] = "";
-        ssize_t n = pread(fd, pid, sizeof pid - 1, 0);
+        if (e == EWOULDBLOCK) locked_by_another(s, fd, err);
         close(fd);
-        if (n > 0) pid[n] = 0;
-        pid[strcspn(pid, "\n")] = 0;
-        if (e == EWOULDBLOCK)
-            return vx_err_set(
-                err, VX_EBUSY, "data_dir_locked",
-                "the data dir %s is in use by another voxeld (pid %s): one daemon per data dir",
-                s->dir, pid[0] ? pid : "unknown");
+        if (e == EWOULDBLOCK) return -1;
         return vx_err_set(err, VX_EIO, "data_dir_lock", "cannot lock %s: %s", p, strerror(e));
     }
     char pid[32];
@@ -62,7 +85,7 @@ vx_store *vx_store_open(const char *data_dir, const vx_store_desc *desc, vx_err 
     }
     if (desc) s->desc = *desc;
     s->ops = s->desc.blob_ops ? s->desc.blob_ops : &vx_blob_local;
-    s->lock_fd = -1;
+    s->lock_fd = s->dir_lock_fd = -1;
     pthread_mutex_init(&s->lock, NULL);
     /* The dir and its lock before anything in it is touched; then the byte
      * store's namespaces, and DATA/tmp (uploads in flight, always local). */
@@ -135,6 +158,7 @@ void vx_store_close(vx_store *s)
     if (s->blob) s->ops->close(s->blob);
     pthread_mutex_destroy(&s->lock);
     if (s->lock_fd >= 0) close(s->lock_fd); /* drops the flock */
+    if (s->dir_lock_fd >= 0) close(s->dir_lock_fd);
     free(s);
 }
 

@@ -26,6 +26,17 @@ ln -s "$DATA" "$TMP/alias"
 rc=0
 (cd "$TMP" && timeout 20 "$VOXELD" --listen 127.0.0.1:0 --data-dir alias 2>"$TMP/third.log") || rc=$?
 check "a symlink to the same data dir is refused too (got $rc)" test "$rc" -ne 0 -a "$rc" -ne 124
+# The lock file deleted under the first daemon: the directory's own lock
+# still refuses a second one (it had made a new lock file, started, and
+# its journal compaction replaced the first one's: acknowledged jobs were
+# lost at the next stop).
+rm "$DATA/voxeld.lock"
+rc=0
+timeout 20 "$VOXELD" --listen 127.0.0.1:0 --data-dir "$DATA" 2>"$TMP/fourth.log" || rc=$?
+check "with the lock file deleted, a second daemon is refused (got $rc: $(grep -m1 -o 'in use.*' "$TMP/fourth.log"))" \
+    test "$rc" -eq 1
+check "... saying the data dir is in use" grep -q "in use by another voxeld" "$TMP/fourth.log"
+check "... and the journal is still the first one's" test "$(stat -c %i "$DATA/journal.log")" = "$JOURNAL_INODE"
 
 api GET /livez
 expect_status "first daemon still serving" 200
@@ -40,6 +51,6 @@ api GET "/v1/jobs/$DONE"
 check "earlier job kept" jq -e '.state == "succeeded"' "$BODY"
 wait_job "$LATE" 60
 check "job acknowledged beside the refused daemon ran" jq -e '.state == "succeeded"' "$BODY"
-check "the lock file holds the new pid" test "$(cat "$DATA/voxeld.lock")" = "$PID"
+check "the lock file is back, holding the new pid" test "$(cat "$DATA/voxeld.lock")" = "$PID"
 stop_daemon
 finish
