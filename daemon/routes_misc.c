@@ -69,7 +69,7 @@ void vx_route_not_ready_reason(vx_http *h, char *out, size_t n)
 
 /* What /readyz checks; ok is what it answers and /metrics' voxeld_ready. */
 typedef struct {
-    int gl, gpu, dd, space, blob, db, cluster, ok;
+    int gl, gpu, dd, journal, space, blob, db, cluster, ok;
 } readiness;
 
 static readiness ready_checks(vx_http *h)
@@ -78,6 +78,7 @@ static readiness ready_checks(vx_http *h)
     k.gl = vx_jobs_ready(h->d.jobs);
     k.gpu = !h->d.gpu_refused;
     k.dd = vx_store_writable(h->d.store);
+    k.journal = vx_jobs_state_intact(h->d.jobs);
     k.space = vx_route_disk_ok(h, NULL);
     k.blob = vx_store_reachable(h->d.store);
     vx_err dberr;
@@ -85,7 +86,7 @@ static readiness ready_checks(vx_http *h)
     k.cluster = vx_jobs_cluster(h->d.jobs, NULL);
     k.db = vx_jobs_database_ok(h->d.jobs, &dberr);
     /* A full queue is backpressure (429 + Retry-After), not unreadiness. */
-    k.ok = k.gl && k.gpu && k.dd && k.space && k.blob && k.db && !h->stopping;
+    k.ok = k.gl && k.gpu && k.dd && k.journal && k.space && k.blob && k.db && !h->stopping;
     return k;
 }
 
@@ -103,7 +104,10 @@ int vx_route_readyz(vx_http *h, struct MHD_Connection *c, req *r)
         char why[600];
         if (k.gl && k.gpu && !h->stopping)
             snprintf(why, sizeof why, "%s",
-                     !k.dd                                  ? "the data directory is not writable"
+                     !k.dd ? "the data directory is not writable"
+                     : !k.journal
+                         ? "the job journal was removed or replaced in the data directory: new "
+                           "jobs cannot be recorded; restart the daemon"
                      : !k.space && !h->d.cfg->min_free_disk ? "the data directory's disk is full"
                      : !k.space ? "the data directory has less free space than --min-free-disk"
                      : !k.blob  ? "the blob store (--blob-store) cannot be reached"
@@ -120,6 +124,7 @@ int vx_route_readyz(vx_http *h, struct MHD_Connection *c, req *r)
     cJSON_AddBoolToObject(chk, "gl", k.gl);
     cJSON_AddBoolToObject(chk, "gpu", k.gpu);
     cJSON_AddBoolToObject(chk, "data_dir", k.dd);
+    cJSON_AddBoolToObject(chk, "journal", k.journal);
     cJSON_AddBoolToObject(chk, "disk_space", k.space);
     cJSON *bs = cJSON_AddObjectToObject(doc, "blob_store");
     cJSON_AddStringToObject(bs, "backend", vx_store_backend(h->d.store));

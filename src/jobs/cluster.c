@@ -102,8 +102,13 @@ static long none_size(void *st)
     return -1;
 }
 
-const vx_jobstate_ops cluster_state = {"database",  none_open,    none_close, none_replay,
-                                       none_append, none_compact, none_size};
+const vx_jobstate_ops cluster_state = {.name = "database",
+                                       .open = none_open,
+                                       .close = none_close,
+                                       .replay = none_replay,
+                                       .append = none_append,
+                                       .compact = none_compact,
+                                       .size = none_size};
 
 /* ---- life --------------------------------------------------------------- */
 

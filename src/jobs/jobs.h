@@ -165,6 +165,9 @@ int vx_jobs_cluster(vx_jobs *j, vx_jobs_cluster_stats *out);
 /* Cluster mode: 1 when the database answers now, 0 when not (err says
  * why); 1 in local mode. */
 int vx_jobs_database_ok(vx_jobs *j, vx_err *err);
+/* 1 while the job state takes records a restart reads (0: the journal was
+ * removed or replaced under the daemon; submissions answer 500). */
+int vx_jobs_state_intact(vx_jobs *j);
 /* Cluster mode: jobs per (state, kind) in the whole database (owned
  * array, free()); -1 with err, or in local mode (VX_ENOTIMPL). */
 int vx_jobs_cluster_counts(vx_jobs *j, vx_pg_count **out, size_t *n, vx_err *err);

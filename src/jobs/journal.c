@@ -435,6 +435,16 @@ int vx_journal_compact(vx_journal *j, cJSON *const *recs, size_t n, vx_err *err)
     return vx_fsync_dir(slash ? dir : ".", err);
 }
 
+int vx_journal_intact(vx_journal *j)
+{
+    struct stat mine, named;
+    pthread_mutex_lock(&j->lock);
+    int ok = fstat(j->fd, &mine) == 0 && stat(j->path, &named) == 0 && mine.st_nlink > 0 &&
+             mine.st_dev == named.st_dev && mine.st_ino == named.st_ino;
+    pthread_mutex_unlock(&j->lock);
+    return ok;
+}
+
 long vx_journal_size(vx_journal *j)
 {
     struct stat st;

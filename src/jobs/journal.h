@@ -46,5 +46,8 @@ int vx_journal_append(vx_journal *j, const cJSON *rec, size_t owed, vx_err *err)
 int vx_journal_compact(vx_journal *j, cJSON *const *recs, size_t n, vx_err *err);
 /* Bytes in the file now. */
 long vx_journal_size(vx_journal *j);
+/* 1 while the file appended to is the one at the journal's path (0: it was
+ * removed or another file put in its place: appends reach no restart). */
+int vx_journal_intact(vx_journal *j);
 
 #endif

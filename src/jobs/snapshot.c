@@ -305,6 +305,11 @@ vx_jobs *vx_jobs_open(const vx_jobs_desc *desc, vx_err *err)
     return j;
 }
 
+int vx_jobs_state_intact(vx_jobs *j)
+{
+    return !j->st_ops->intact || j->st_ops->intact(j->st);
+}
+
 void vx_jobs_maintain(vx_jobs *j, long max_journal_bytes)
 {
     long size = j->st_ops->size(j->st);

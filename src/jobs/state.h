@@ -50,6 +50,9 @@ typedef struct vx_jobstate_ops {
      * (vx_jobs_maintain compacts past a limit); -1 = unknown, never
      * compacted for size. */
     long (*size)(void *st);
+    /* 1 while appends reach what the next open replays (NULL: always);
+     * any thread, any time. */
+    int (*intact)(void *st);
 } vx_jobstate_ops;
 
 /* The local journal (state_local.c). */

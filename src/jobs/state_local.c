@@ -33,6 +33,11 @@ static long local_size(void *st)
     return vx_journal_size(st);
 }
 
+static int local_intact(void *st)
+{
+    return vx_journal_intact(st);
+}
+
 const vx_jobstate_ops vx_jobstate_local = {
     .name = "local",
     .open = local_open,
@@ -41,4 +46,5 @@ const vx_jobstate_ops vx_jobstate_local = {
     .append = local_append,
     .compact = local_compact,
     .size = local_size,
+    .intact = local_intact,
 };

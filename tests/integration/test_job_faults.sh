@@ -68,6 +68,25 @@ check "the first canceled too" test "$(jqb .state)" = canceled
 api POST "/v1/jobs?wait=60" "${JSON[@]}" -d "{\"mesh\":\"$MESH_ID\",\"kind\":\"preview\",\"params\":{\"width\":64,\"height\":64}}"
 check "the next job runs" jq -e '.state == "succeeded"' "$BODY"
 stop_daemon
+# The journal alone removed, then replaced by another file: the daemon is
+# not ready (it said ready while every submission answered 500
+# journal_failed), says why, and the jobs it holds are still answered.
+start_daemon || exit 1
+api GET /readyz
+check "readyz: the journal is intact" jq -e '.checks.journal == true' "$BODY"
+rm "$DATA/journal.log"
+api POST /v1/jobs -H "Content-Type: application/json" -d "{\"mesh\":\"$MESH_ID\",\"kind\":\"preview\"}"
+expect_error "a job with the journal removed" 500 journal_failed
+api GET /readyz
+expect_status "readyz with the journal removed" 503
+check "... checks.journal false, the reason says so ($(jqb -r .reason))" \
+    jq -e '.checks.journal == false and (.reason | test("journal was removed or replaced"))' "$BODY"
+echo '{}' >"$DATA/journal.log"
+api GET /readyz
+expect_status "readyz with another file as the journal" 503
+api GET "/v1/jobs/${RJ[0]}"
+expect_status "the jobs held are still answered" 200
+kill9_daemon
 # The data dir removed under a running daemon: the journal takes appends
 # into a file no restart reads, so a job is not acknowledged (it was 202,
 # then gone after a restart). The write check before the body finds the

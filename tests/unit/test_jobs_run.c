@@ -141,8 +141,13 @@ static long mem_size(void *st)
 {
     return -1;
 }
-static const vx_jobstate_ops mem_ops = {"memory",   mem_open,    mem_close, mem_replay,
-                                        mem_append, mem_compact, mem_size};
+static const vx_jobstate_ops mem_ops = {.name = "memory",
+                                        .open = mem_open,
+                                        .close = mem_close,
+                                        .replay = mem_replay,
+                                        .append = mem_append,
+                                        .compact = mem_compact,
+                                        .size = mem_size};
 
 static void open_jobs(fixture *fx)
 {
