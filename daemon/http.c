@@ -643,7 +643,11 @@ static void on_completed(void *cls, struct MHD_Connection *c, void **con_cls,
     vx_wait_forget(h->wait, &r->w); /* the connection died while held */
     double dt = vx_mono() - r->t0;
     const char *route = vx_req_route_name(r->route);
-    int status = r->status ? r->status : 499; /* closed before an answer */
+    /* closed before an answer: by libmicrohttpd's --connection-timeout
+     * (nothing came for that long: 408, as a proxy logs it), else by the
+     * client (499) */
+    const int timed_out = toe == MHD_REQUEST_TERMINATED_TIMEOUT_REACHED;
+    int status = r->status ? r->status : timed_out ? 408 : 499;
     int killed_with = vx_conns_done(h->conns, r->vc);
     if (killed_with) status = killed_with;
     const union MHD_ConnectionInfo *ci =
@@ -676,7 +680,9 @@ static void on_completed(void *cls, struct MHD_Connection *c, void **con_cls,
            "bytes_out=%llu%s",
            r->rid, vx_log_quote(mq, sizeof mq, r->method), route, r->path, r->client, status,
            dt * 1e3, (unsigned long long)r->bytes_in, (unsigned long long)r->bytes_out,
-           toe == MHD_REQUEST_TERMINATED_COMPLETED_OK ? "" : " aborted=1");
+           toe == MHD_REQUEST_TERMINATED_COMPLETED_OK ? ""
+           : timed_out                                ? " timed_out=1"
+                                                      : " aborted=1");
     vx_upload_abort(r->up);
     free(r->buf);
     free(r);

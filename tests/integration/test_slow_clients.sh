@@ -307,4 +307,22 @@ check "80 idle connections held: /livez still answered ($(cat "$TMP/fd.json"))" 
 n=$(grep -ac 'event=http.mhd ' "$TMP/fd.log")
 check "libmicrohttpd's repeated lines are capped ($n lines)" test "$n" -lt 200
 stop_daemon
+
+# A body that stops coming with --min-body-rate 0: libmicrohttpd's
+# --connection-timeout closes it, and the log says it timed out (408), not
+# that the client went away (499 aborted).
+start_daemon --min-body-rate 0 --connection-timeout 2 || exit 1
+from=$(wc -l <"$TMP/daemon.log")
+python3 - "$PORT" <<'PY'
+import socket, sys, time
+s = socket.create_connection(("127.0.0.1", int(sys.argv[1])))
+s.sendall(b"POST /v1/meshes?name=stalled HTTP/1.1\r\nHost: 127.0.0.1\r\nContent-Type: model/obj\r\n"
+          b"Content-Length: 1000\r\n\r\nv 0 0 0\n")
+time.sleep(5)
+s.close()
+PY
+line=$(tail -n +"$((from + 1))" "$TMP/daemon.log" | grep -a 'event=http.request .*path=/v1/meshes' | tail -n 1)
+check "a stalled body closed by the connection timeout is logged 408 timed_out ($line)" \
+    sh -c "echo '$line' | grep -q 'status=408 .*timed_out=1'"
+stop_daemon
 finish
