@@ -465,7 +465,8 @@ void vx_jobs_stop(vx_jobs *j)
     cluster_release_queued(j); /* claimed here, never started: back to the queue */
     pthread_mutex_lock(&j->lock);
     vx_err err;
-    compact_locked(j, &err);
+    /* the journal as appended stays (complete: replay reads it) */
+    if (compact_locked(j, &err)) VX_WARN("journal.compact_skipped", "at=stop code=%s", err.code);
     pthread_mutex_unlock(&j->lock);
     VX_INFO("jobs.stopped", "jobs=%zu queued=%zu", j->jobs.n, vx_queue_depth(j->queue));
 }

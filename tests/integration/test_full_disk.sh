@@ -115,6 +115,10 @@ expect_status "readyz on a full disk" 503
 check "readyz: data_dir true, disk_space false ($(jq -c .checks "$BODY"))" \
     jq -e '.checks.data_dir == true and .checks.disk_space == false' "$BODY"
 check "readyz: the reason is the full disk ($(jqb .reason))" test "$(jqb .reason)" = "the data directory's disk is full"
+# A stop on a full disk keeps the journal as appended, and says so.
+stop_daemon
+check "a stop on a full disk logs its compaction skipped" grep -q 'event=journal.compact_skipped at=stop' "$TMP/daemon.log"
+start_daemon --min-free-disk 0 || exit 1
 
 # Room again: writes work without a restart, and what they acknowledge
 # survives kill -9 (a crash mid-record left a torn tail before it).
