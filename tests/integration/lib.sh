@@ -157,6 +157,19 @@ wait_job() {
     return 1
 }
 
+# until_running JID [seconds]: polls the job until it runs (a slow job
+# holding the GL thread), at most that long (default 10); $BODY is its last
+# answer.
+until_running() {
+    local jid=$1 n=$((${2:-10} * 10)) i
+    for ((i = 0; i < n; i++)); do
+        api GET "/v1/jobs/$jid"
+        [[ "$(jqb .state)" == running ]] && return 0
+        sleep 0.1
+    done
+    return 1
+}
+
 # run_job KIND MESH PARAMS_JSON [seconds]: submits a job and waits until it
 # has finished; JOB = its id, $TMP/job.json = its last body (the caller
 # checks the state: failures are sometimes what a test wants).

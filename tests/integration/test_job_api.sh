@@ -171,11 +171,7 @@ OGRE=$MESH_ID
 SLOWREQ="{\"mesh\":\"$OGRE\",\"kind\":\"preview\",\"params\":{\"width\":8192,\"height\":8192,\"samples\":8}}"
 api POST /v1/jobs -H "Content-Type: application/json" -d "$SLOWREQ"
 SLOW=$(jqb .id)
-for i in $(seq 1 50); do
-    api GET "/v1/jobs/$SLOW"
-    [[ "$(jqb .state)" == running ]] && break
-    sleep 0.2
-done
+until_running "$SLOW"
 Q=()
 for i in 1 2 3 4 5; do
     api POST /v1/jobs -H "Content-Type: application/json" -d "{\"mesh\":\"$A\",\"kind\":\"preview\",\"params\":{\"width\":$((16 + i))}}"

@@ -49,11 +49,7 @@ for iso in 0.62 0.63; do
     expect_status "render $iso submitted" 202
     RJ+=("$(jqb .id)")
 done
-for _ in $(seq 1 100); do
-    api GET "/v1/jobs/${RJ[1]}"
-    [[ $(jqb .state) == running ]] && break
-    sleep 0.1
-done
+until_running "${RJ[1]}"
 check "the second render started (its GL stage)" test "$(jqb .state)" = running
 sleep 1 # its GL stage done: it waits for the worker
 api DELETE "/v1/jobs/${RJ[1]}"

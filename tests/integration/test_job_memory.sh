@@ -160,11 +160,7 @@ OGRE=$MESH_ID
 api POST /v1/jobs -H "Content-Type: application/json" \
     -d "{\"mesh\":\"$OGRE\",\"kind\":\"voxelize\",\"params\":{\"resolution\":1024,\"supersample\":2,\"method\":\"slice\",\"format\":\"summary\"}}"
 SLOW=$(jqb .id)
-for i in $(seq 1 100); do
-    api GET "/v1/jobs/$SLOW"
-    [[ "$(jqb .state)" == running ]] && break
-    sleep 0.1
-done
+until_running "$SLOW"
 submit "$GRID" 7 0
 expect_status "queued 2 MB frames job" 202
 Q=$(jqb .id)

@@ -98,11 +98,7 @@ OGRE=$MESH_ID
 slow='"params":{"width":8192,"height":8192,"samples":8}'
 api POST /v1/jobs -H "Content-Type: application/json" -d "{\"mesh\":\"$OGRE\",\"kind\":\"preview\",$slow}"
 SLOW=$(jqb .id)
-for i in 1 2 3 4 5 6; do
-    api GET "/v1/jobs/$SLOW"
-    [[ "$(jqb .state)" == running ]] && break
-    sleep 0.5
-done
+until_running "$SLOW"
 Q=()
 for i in 1 2 3; do
     api POST /v1/jobs -H "Content-Type: application/json" -d "{\"mesh\":\"$OGRE\",\"kind\":\"preview\",$slow}"
