@@ -170,6 +170,18 @@ until_running() {
     return 1
 }
 
+# slow_preview: uploads ogre.obj (OGRE) and submits SLOWREQ, an 8192^2
+# preview of it with 8 samples that holds the GL thread for a while (SLOW,
+# running on return unless the queue was busy).
+slow_preview() {
+    upload "$VX_MESH_DIR/ogre.obj"
+    OGRE=$MESH_ID
+    SLOWREQ="{\"mesh\":\"$OGRE\",\"kind\":\"preview\",\"params\":{\"width\":8192,\"height\":8192,\"samples\":8}}"
+    api POST /v1/jobs -H "Content-Type: application/json" -d "$SLOWREQ"
+    SLOW=$(jqb .id)
+    until_running "$SLOW"
+}
+
 # run_job KIND MESH PARAMS_JSON [seconds]: submits a job and waits until it
 # has finished; JOB = its id, $TMP/job.json = its last body (the caller
 # checks the state: failures are sometimes what a test wants).

@@ -166,12 +166,7 @@ stop_daemon
 start_daemon --job-history 3 --max-queued-jobs 5 || exit 1
 api GET "/v1/jobs?state=succeeded&limit=1000"
 check "a history of 3 at the start" test "$(jqb '.items | length')" -le 3
-upload "$VX_MESH_DIR/ogre.obj"
-OGRE=$MESH_ID
-SLOWREQ="{\"mesh\":\"$OGRE\",\"kind\":\"preview\",\"params\":{\"width\":8192,\"height\":8192,\"samples\":8}}"
-api POST /v1/jobs -H "Content-Type: application/json" -d "$SLOWREQ"
-SLOW=$(jqb .id)
-until_running "$SLOW"
+slow_preview
 Q=()
 for i in 1 2 3 4 5; do
     api POST /v1/jobs -H "Content-Type: application/json" -d "{\"mesh\":\"$A\",\"kind\":\"preview\",\"params\":{\"width\":$((16 + i))}}"

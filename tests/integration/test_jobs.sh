@@ -93,15 +93,10 @@ expect_status "GET wait on finished job" 200
 
 # Queue limit and cancel: a slow job holds the GL thread, three fill the
 # queue, the fourth gets 429; cancel a queued one, then the running one.
-upload "$VX_MESH_DIR/ogre.obj"
-OGRE=$MESH_ID
-slow='"params":{"width":8192,"height":8192,"samples":8}'
-api POST /v1/jobs -H "Content-Type: application/json" -d "{\"mesh\":\"$OGRE\",\"kind\":\"preview\",$slow}"
-SLOW=$(jqb .id)
-until_running "$SLOW"
+slow_preview
 Q=()
 for i in 1 2 3; do
-    api POST /v1/jobs -H "Content-Type: application/json" -d "{\"mesh\":\"$OGRE\",\"kind\":\"preview\",$slow}"
+    api POST /v1/jobs -H "Content-Type: application/json" -d "$SLOWREQ"
     expect_status "fill queue $i" 202
     Q+=("$(jqb .id)")
 done
@@ -148,7 +143,7 @@ check "slow job ended canceled (or had finished)" jq -e '.state == "canceled" or
 for j in "${Q[0]}" "${Q[1]}"; do api DELETE "/v1/jobs/$j"; done
 
 # ?wait times out and answers with the job as it is.
-api POST /v1/jobs -H "Content-Type: application/json" -d "{\"mesh\":\"$OGRE\",\"kind\":\"preview\",$slow}"
+api POST /v1/jobs -H "Content-Type: application/json" -d "$SLOWREQ"
 J5=$(jqb .id)
 t0=$(date +%s.%N)
 api GET "/v1/jobs/$J5?wait=1"
@@ -163,7 +158,7 @@ check "still not finished" jq -e '.state == "queued" or .state == "running"' "$B
 # holds end, a ?wait is held again. J6 waits in the queue behind J5.
 api GET /v1/info
 check "info lists max_waits" jq -e '.limits.max_waits == 2' "$BODY"
-api POST /v1/jobs -H "Content-Type: application/json" -d "{\"mesh\":\"$OGRE\",\"kind\":\"preview\",$slow}"
+api POST /v1/jobs -H "Content-Type: application/json" -d "$SLOWREQ"
 J6=$(jqb .id)
 held=()
 # (held 10 s: the checks below must all fall within the holds on a loaded
