@@ -105,6 +105,7 @@ struct vx_conn {
     cphase phase;
     double t_phase;      /* monotonic: when the phase began */
     uint64_t body_bytes; /* BODY: received so far */
+    double t_body;       /* BODY: when bytes of it last came (0: none yet) */
     int win_started;     /* BODY: the rate window is running */
     double win_t0;
     uint64_t win_bytes;
@@ -119,8 +120,9 @@ struct vx_conn {
     int64_t stall_acked;
     double stall_t;
     /* libmicrohttpd's idle timeout is off (vx_conns_own_idle; set and
-     * cleared by the connection's thread); IDLE or HEAD: since when the
-     * kernel has held no byte of the last answer */
+     * cleared by the connection's thread) while a POST body comes and an
+     * answer goes; IDLE or HEAD: since when the kernel has held no byte of
+     * the last answer */
     _Atomic int own_idle;
     double quiet_t;
     int killed;      /* answered (or closed) by us behind libmicrohttpd's back */
@@ -600,6 +602,23 @@ static void sweep(vx_conns *s, vx_conn **cand, head_kill *ks, size_t *nk, size_t
             head_killed(ks, nk, cap, vc, 408, now - vc->t_phase, n, "header_timeout");
             continue;
         }
+        /* A body none of whose bytes came for --connection-timeout, while
+         * libmicrohttpd's timeout is off (http.c): its clock, stale after
+         * the daemon was stopped (SIGSTOP, a paused VM), closed uploads
+         * whose bytes were waiting in the socket. Bytes unread or read
+         * since are not idle. */
+        if (atomic_load(&vc->own_idle) && vc->phase == P_BODY && cfg->connection_timeout_s > 0) {
+            const double got = data_came(vc->fd, now);
+            const double last = vc->t_body > vc->t_phase ? vc->t_body : vc->t_phase;
+            if (now - last >= cfg->connection_timeout_s && got >= 0 &&
+                now - got >= cfg->connection_timeout_s && !unread(vc)) {
+                char m[96];
+                snprintf(m, sizeof m, "no byte of the body came for %g s",
+                         cfg->connection_timeout_s);
+                kill_conn(vc, 408, "request_timeout", m, 0); /* on_completed logs it */
+                continue;
+            }
+        }
         if (vc->phase == P_BODY && cfg->min_body_rate && now - vc->t_phase >= BODY_GRACE_S) {
             if (!vc->win_started) {
                 vc->win_started = 1;
@@ -879,6 +898,7 @@ void vx_conns_body_begins(vx_conns *s, vx_conn *vc, const char *rid, const char 
                                                                                       : "");
     vc->phase = P_BODY;
     vc->t_phase = vx_mono();
+    vc->t_body = 0;
     vc->body_bytes = 0;
     vc->win_started = 0;
     vc->last_rate = -1;
@@ -890,9 +910,10 @@ int vx_conns_body(vx_conns *s, vx_conn *vc, size_t n)
     if (!vc) return 0;
     pthread_mutex_lock(&s->lock);
     int dead = vc->killed;
-    if (n)
+    if (n) {
         vc->body_bytes += n;
-    else if (vc->phase == P_BODY) {
+        vc->t_body = vx_mono();
+    } else if (vc->phase == P_BODY) {
         vc->phase = P_BUSY;
         vc->t_phase = vx_mono();
     }

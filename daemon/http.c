@@ -532,8 +532,13 @@ static enum MHD_Result on_head(vx_http *h, struct MHD_Connection *c, const char 
         return rc;
     }
     /* A body follows: rate it (another method's was refused above). */
-    if (!strcmp(r->method, "POST"))
+    if (!strcmp(r->method, "POST")) {
         vx_conns_body_begins(h->conns, vc, r->rid, vx_resp_cors_origin(c));
+        /* ... and time it out when idle (the sweeper: conns.c) */
+        if (h->d.cfg->connection_timeout_s > 0 &&
+            MHD_set_connection_option(c, MHD_CONNECTION_OPTION_TIMEOUT, 0u) == MHD_YES)
+            vx_conns_own_idle(vc, 1);
+    }
     /* Answer on the next call even without a body: a response queued in
      * the first call makes libmicrohttpd 0.9.75 close the connection (it
      * cannot know yet that no body follows). */
