@@ -191,5 +191,16 @@ expect_error "a $(stat -c %s "$TMP/big.json")-byte job body over max-parse-memor
 check "saying why" jq -e '.error.message | test("may take up to [0-9]+ bytes of memory to read")' "$BODY"
 api POST /v1/jobs -H "Content-Type: application/json" -d '{"mesh":"'"$(printf '%064d' 0)"'","kind":"voxelize"}'
 expect_error "a small one still goes through (to its 404)" 404 mesh_not_found
+# A compressed body is refused by its coding (a gzip'd OBJ was parsed as
+# it is: a format error about bytes the client never meant); identity is
+# taken.
+gzip -c "$VX_SOURCE_DIR/examples/meshes/torus.obj" >"$TMP/torus.obj.gz"
+api POST /v1/meshes -H "Content-Type: model/obj" -H "Content-Encoding: gzip" --data-binary "@$TMP/torus.obj.gz"
+expect_error "a gzip'd upload" 415 unsupported_media_type
+check "... naming the coding" jq -e '.error.message | test("^Content-Encoding gzip: the body must come uncompressed")' "$BODY"
+api POST /v1/jobs -H "Content-Type: application/json" -H "Content-Encoding: br" -d '{"mesh":"'"$(printf '%064d' 0)"'","kind":"voxelize"}'
+expect_error "a job body with Content-Encoding br" 415 unsupported_media_type
+api POST /v1/jobs -H "Content-Type: application/json" -H "Content-Encoding: Identity" -d '{"mesh":"'"$(printf '%064d' 0)"'","kind":"voxelize"}'
+expect_error "Content-Encoding identity is taken (to its 404)" 404 mesh_not_found
 stop_daemon
 finish
