@@ -607,11 +607,12 @@ static void sweep(vx_conns *s, vx_conn **cand, head_kill *ks, size_t *nk, size_t
          * the daemon was stopped (SIGSTOP, a paused VM), closed uploads
          * whose bytes were waiting in the socket. Bytes unread or read
          * since are not idle. */
-        if (atomic_load(&vc->own_idle) && vc->phase == P_BODY && cfg->connection_timeout_s > 0) {
+        if (atomic_load(&vc->own_idle) && vc->phase == P_BODY && cfg->connection_timeout_s > 0 &&
+            now - (vc->t_body > vc->t_phase ? vc->t_body : vc->t_phase) >=
+                cfg->connection_timeout_s) {
+            /* (the socket asked only then, not at every sweep) */
             const double got = data_came(vc->fd, now);
-            const double last = vc->t_body > vc->t_phase ? vc->t_body : vc->t_phase;
-            if (now - last >= cfg->connection_timeout_s && got >= 0 &&
-                now - got >= cfg->connection_timeout_s && !unread(vc)) {
+            if (got >= 0 && now - got >= cfg->connection_timeout_s && !unread(vc)) {
                 char m[96];
                 snprintf(m, sizeof m, "no byte of the body came for %g s",
                          cfg->connection_timeout_s);

@@ -382,16 +382,14 @@ static int first_call(vx_http *h, struct MHD_Connection *c, req *r, const char *
     }
     /* A compressed body would be parsed as it is (a gzip'd OBJ read as a
      * format nobody knows): refused by name (RFC 9110 15.5.16). */
-    const char *ce = vx_resp_header(c, MHD_HTTP_HEADER_CONTENT_ENCODING);
-    if (ce) {
-        ce += strspn(ce, " \t");
-        size_t n = strcspn(ce, " \t");
-        if (n && !(n == 8 && !strncasecmp(ce, "identity", 8)))
+    const char *codings = vx_resp_header(c, MHD_HTTP_HEADER_CONTENT_ENCODING), *ce;
+    size_t cn;
+    while (codings && (ce = vx_resp_list_next(&codings, &cn)))
+        if (cn && !(cn == 8 && !strncasecmp(ce, "identity", 8)))
             return vx_resp_fail(c, r, VX_EMEDIA, "unsupported_media_type",
                                 "Content-Encoding %.*s: the body must come uncompressed (Draco "
                                 "and glb files compress meshes themselves)",
-                                (int)(n < 40 ? n : 40), ce);
-    }
+                                (int)(cn < 40 ? cn : 40), ce);
     char mt[128];
     vx_req_media_type(vx_resp_header(c, MHD_HTTP_HEADER_CONTENT_TYPE), mt, sizeof mt);
     if (r->route == VX_R_MESHES) {
