@@ -172,6 +172,7 @@ struct vx_conns {
      * logged by the sweeper once it let go of lock; ncut may pass 8. */
     uint64_t cut[8][2];
     size_t ncut;
+    double last_sweep; /* monotonic: when sweep last ran (0: never) */
 };
 
 #define BODY_GRACE_S 2.0   /* a body is not rated before this */
@@ -551,6 +552,12 @@ static void sweep(vx_conns *s, vx_conn **cand, head_kill *ks, size_t *nk, size_t
 {
     const vx_config *cfg = s->cfg;
     double now = vx_mono();
+    /* A sweep a second after the last: the daemon did not run (SIGSTOP, a
+     * paused VM), and what clients sent meanwhile waits to be read, by
+     * libmicrohttpd's threads as they wake (a read of it can come after
+     * this sweep): no body is idle from before now. */
+    const int resumed = s->last_sweep > 0 && now - s->last_sweep > 1.0;
+    s->last_sweep = now;
     size_t live = 0, ncand = 0;
     for (vx_conn *vc = s->list; vc; vc = vc->next) {
         if (vc->killed) {
@@ -607,6 +614,7 @@ static void sweep(vx_conns *s, vx_conn **cand, head_kill *ks, size_t *nk, size_t
          * the daemon was stopped (SIGSTOP, a paused VM), closed uploads
          * whose bytes were waiting in the socket. Bytes unread or read
          * since are not idle. */
+        if (resumed && vc->phase == P_BODY) vc->t_body = now;
         if (atomic_load(&vc->own_idle) && vc->phase == P_BODY && cfg->connection_timeout_s > 0 &&
             now - (vc->t_body > vc->t_phase ? vc->t_body : vc->t_phase) >=
                 cfg->connection_timeout_s) {
