@@ -18,6 +18,7 @@ typedef struct ctl {
     int progress_tty;    /* stderr is a terminal: a progress bar */
     int quiet_transport; /* ctl_http: no message when no answer comes */
     int no_retry;        /* ctl_http: a 429 or 503 is returned, not tried again */
+    char idem_key[40];   /* ctl_http: sent as Idempotency-Key when not empty */
 } ctl;
 
 /* A growing response body. */
@@ -40,7 +41,10 @@ int ctl_http_init(void);
  * status, or -1 when no answer came (message printed, unless
  * c->quiet_transport; the reason in ctl_http_error, and for a body that
  * could not be written to out, errno in ctl_http_write_errno, with no
- * message). */
+ * message). With c->idem_key, a request whose answer was lost after it
+ * was sent (the connection reset or closed, no byte for a minute) is sent
+ * again with the same key, every 2 s for up to CTL_RETRY_FOR seconds,
+ * and so is one the server's port refuses after that (restarting). */
 #define CTL_RETRY_FOR 120
 extern char ctl_http_error[256];
 extern int ctl_http_write_errno;

@@ -663,6 +663,17 @@ static int wait_and_fetch(ctl *c, const char *jid, const char *name, const char 
     return rc;
 }
 
+/* A random Idempotency-Key (32 hex digits) in out; "" when none can be
+ * made (the submission then goes without one). */
+static void new_key(char *out, size_t n)
+{
+    unsigned char r[16];
+    out[0] = 0;
+    if (n < 2 * sizeof r + 1 || getentropy(r, sizeof r) != 0) return;
+    for (size_t i = 0; i < sizeof r; i++)
+        snprintf(out + 2 * i, 3, "%02x", r[i]);
+}
+
 int ctl_cmd_job(ctl *c, const char *kind, const char *src, cJSON *params, const char *out,
                 int no_wait)
 {
@@ -681,9 +692,12 @@ int ctl_cmd_job(ctl *c, const char *kind, const char *src, cJSON *params, const 
     char *body = vx_json_print(req, 0);
     cJSON_Delete(req);
     ctl_buf b = {0};
-    long st = ctl_http(c, "POST", "/v1/jobs", "application/json", body, NULL, &b, NULL, NULL, 0);
+    ctl keyed = *c; /* a submission whose answer is lost is sent again under its key */
+    new_key(keyed.idem_key, sizeof keyed.idem_key);
+    long st =
+        ctl_http(&keyed, "POST", "/v1/jobs", "application/json", body, NULL, &b, NULL, NULL, 0);
     free(body);
-    cJSON *job = st == 202 ? cJSON_Parse(b.p) : NULL;
+    cJSON *job = st == 202 || st == 200 ? cJSON_Parse(b.p) : NULL;
     if (!job) rc = ctl_http_fail("submit", st, &b);
     free(b.p);
     if (!job) goto done;

@@ -179,6 +179,11 @@ static CURL *open_handle(const ctl *c, const char *path, const char *ctype, stru
         snprintf(ct, sizeof ct, "Content-Type: %s", ctype);
         *hl = curl_slist_append(*hl, ct);
     }
+    if (c->idem_key[0]) {
+        char k[64];
+        snprintf(k, sizeof k, "Idempotency-Key: %s", c->idem_key);
+        *hl = curl_slist_append(*hl, k);
+    }
     curl_easy_setopt(h, CURLOPT_HTTPHEADER, *hl);
     return h;
 }
@@ -260,28 +265,45 @@ static long http_once(const ctl *c, const char *method, const char *path, const 
     return status;
 }
 
+/* Whether rc can be a request that reached the server whose answer was
+ * lost on the way back. */
+static int answer_lost(CURLcode rc)
+{
+    return rc == CURLE_RECV_ERROR || rc == CURLE_GOT_NOTHING || rc == CURLE_SEND_ERROR ||
+           rc == CURLE_PARTIAL_FILE || rc == CURLE_OPERATION_TIMEDOUT;
+}
+
 long ctl_http(const ctl *c, const char *method, const char *path, const char *ctype,
               const char *data, const char *upload, ctl_buf *resp, FILE *out, char *disp,
               size_t dispn)
 {
-    time_t first = 0; /* when the first 429 or 503 came */
+    time_t first = 0; /* when the first 429, 503 or lost answer came */
     ctl quiet = *c;   /* the tries after it */
     quiet.quiet_transport = 1;
     for (;;) {
-        long ra, st = http_once(first ? &quiet : c, method, path, ctype, data, upload, resp, out,
-                                disp, dispn, &ra);
-        /* after a 503 (nothing was done), no connection at all is the
-         * server restarting: tried again too */
+        long ra, st = http_once(first || c->idem_key[0] ? &quiet : c, method, path, ctype, data,
+                                upload, resp, out, disp, dispn, &ra);
+        /* after a 503 (nothing was done) or a lost answer, no connection
+         * at all is the server restarting: tried again too; so is a lost
+         * answer to a request with an Idempotency-Key (its job answers) */
+        int lost = st < 0 && c->idem_key[0] && answer_lost(g_last_rc);
         int refused = first && st < 0 && g_last_rc == CURLE_COULDNT_CONNECT;
-        if (!refused && ((st != 429 && st != 503) || ra < 0 || c->no_retry)) {
-            if (first && st < 0 && !c->quiet_transport) say_no_answer(c, path, g_last_rc);
+        if (lost) ra = 2;
+        if (!lost && !refused && ((st != 429 && st != 503) || ra < 0 || c->no_retry)) {
+            if ((first || c->idem_key[0]) && st < 0 && !c->quiet_transport)
+                say_no_answer(c, path, g_last_rc);
             return st;
         }
         long wait = refused ? 2 : ra < 1 ? 1 : ra > 30 ? 30 : ra;
         time_t now = time(NULL);
         if (!first) {
             first = now;
-            if (!c->quiet) {
+            if (lost && !c->quiet)
+                fprintf(stderr,
+                        "voxelctl: %s %s: the answer was lost (%s): sending it again with its "
+                        "Idempotency-Key every %ld s for up to %d s\n",
+                        method, path, curl_easy_strerror(g_last_rc), wait, CTL_RETRY_FOR);
+            else if (!c->quiet) {
                 cJSON *doc = cJSON_Parse(resp->p);
                 const cJSON *e = cJSON_GetObjectItemCaseSensitive(doc, "error");
                 const char *code =
@@ -297,7 +319,7 @@ long ctl_http(const ctl *c, const char *method, const char *path, const char *ct
             }
         }
         if (now + wait - first > CTL_RETRY_FOR) {
-            if (refused && !c->quiet_transport) say_no_answer(c, path, g_last_rc);
+            if ((refused || lost) && !c->quiet_transport) say_no_answer(c, path, g_last_rc);
             return st;
         }
         sleep((unsigned)wait);

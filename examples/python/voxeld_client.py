@@ -21,12 +21,18 @@ be reached (or drops the connection) raises VoxeldError with status 0 and
 code "unreachable", a download cut short status 0 and code "incomplete".
 A 429 or 503 with Retry-After (queue full, busy, restarting: nothing was
 done) is sent again after the seconds it says, for up to retry_for seconds
-(120; 0: never); wait() rides out a server that restarts for as long.
+(120; 0: never); wait() rides out a server that restarts for as long. A
+job submission goes with an Idempotency-Key (random unless given): when
+its answer is lost (the connection reset or closed after it was sent) it
+is sent again with the key, every 2 s for as long, and the job the first
+one queued answers it.
 """
 import argparse
+import binascii
 import http.client
 import json
 import os
+import socket
 import stat
 import sys
 import tempfile
@@ -48,6 +54,7 @@ class VoxeldError(Exception):
         super().__init__("%s (%s, HTTP %d)" % (message, code, status))
         self.status, self.code, self.message = status, code, message
         self.retry_after = retry_after  # seconds, from Retry-After; None without one
+        self.refused = False  # unreachable: no connection was made
 
 
 class Client:
@@ -57,26 +64,35 @@ class Client:
         self.timeout = timeout
         self.retry_for = retry_for
 
-    def _open(self, method, path, body=None, ctype=None, accept=None, retry=True):
+    def _open(self, method, path, body=None, ctype=None, accept=None, retry=True, key=None):
         """The response of a 2xx; a 429 or 503 with Retry-After is sent
-        again for up to retry_for seconds (with retry)."""
+        again for up to retry_for seconds (with retry), and so is a
+        request with an Idempotency-Key (key) whose answer was lost, or
+        whose server refuses connections after that (restarting)."""
         give_up = time.monotonic() + (self.retry_for if retry else 0)
+        lost = False
         while True:
             try:
-                return self._open_once(method, path, body, ctype, accept)
+                return self._open_once(method, path, body, ctype, accept, key)
             except VoxeldError as e:
+                lost = lost or (key is not None and e.status == 0 and not e.refused)
+                if lost and e.status == 0:
+                    pause = 2
                 # (too_many_waits: the caller asks again without wait)
-                if e.status not in (429, 503) or e.retry_after is None or e.code == "too_many_waits":
+                elif e.status not in (429, 503) or e.retry_after is None or e.code == "too_many_waits":
                     raise
-                pause = min(max(e.retry_after, 1), 30)
+                else:
+                    pause = min(max(e.retry_after, 1), 30)
                 if time.monotonic() + pause > give_up:
                     raise
                 time.sleep(pause)
 
-    def _open_once(self, method, path, body, ctype, accept):
+    def _open_once(self, method, path, body, ctype, accept, key=None):
         req = urllib.request.Request(self.server + path, data=body, method=method)
         if ctype:
             req.add_header("Content-Type", ctype)
+        if key:
+            req.add_header("Idempotency-Key", key)
         if accept:
             req.add_header("Accept", accept)
         if self.token:
@@ -93,13 +109,16 @@ class Client:
                 code, message = "http_error", raw[:200].decode("utf-8", "replace")
             raise VoxeldError(e.code, code, message, retry_after) from None
         except urllib.error.URLError as e:
-            raise VoxeldError(0, "unreachable", "%s: %s" % (self.server, e.reason)) from None
+            err = VoxeldError(0, "unreachable", "%s: %s" % (self.server, e.reason))
+            # (no connection was made: the request cannot have been taken)
+            err.refused = isinstance(e.reason, (ConnectionRefusedError, socket.gaierror))
+            raise err from None
         except (http.client.HTTPException, OSError) as e:  # reset, timeout, closed early
             raise VoxeldError(0, "unreachable", "%s: %s" % (self.server, e or type(e).__name__)) from None
 
-    def _json(self, method, path, doc=None):
+    def _json(self, method, path, doc=None, key=None):
         body = json.dumps(doc).encode() if doc is not None else None
-        with self._open(method, path, body, "application/json" if body else None) as r:
+        with self._open(method, path, body, "application/json" if body else None, key=key) as r:
             return _load(r, path)
 
     def upload(self, path, name=None):
@@ -115,10 +134,12 @@ class Client:
         with self._open("POST", "/v1/meshes" + q, data, ctype) as r:
             return _with_id(_load(r, "/v1/meshes"), 64)
 
-    def submit(self, mesh, kind, params=None):
-        """Queues a job; returns the Job."""
+    def submit(self, mesh, kind, params=None, idempotency_key=None):
+        """Queues a job; returns the Job (the one the key queued before,
+        when the same request came with it)."""
+        key = idempotency_key or binascii.hexlify(os.urandom(16)).decode()
         return _as_job(self._json("POST", "/v1/jobs",
-                                  {"mesh": mesh, "kind": kind, "params": params or {}}))
+                                  {"mesh": mesh, "kind": kind, "params": params or {}}, key))
 
     def job(self, jid, wait=0, progress=None):
         """The Job; wait > 0 holds until it ends (or reaches progress)."""

@@ -4,7 +4,8 @@
 
     hostile_server.py PORTFILE LOG MODE
 
-Every request's method, path and Authorization go to LOG, a line each. It
+Every request's method, path, Authorization and Idempotency-Key go to
+LOG, a line each. It
 takes uploads and jobs and says each job succeeded; MODE breaks one answer:
   badid     the job's id is "../../x" (a path, not 32 hex digits)
   dotname   the result is named ".profile" by Content-Disposition
@@ -21,6 +22,10 @@ takes uploads and jobs and says each job succeeded; MODE breaks one answer:
   slow      the result comes at 100 KB/s (2 MB: 20 s)
   atonce    no event stream (503), and ?wait answered at once (as with
             --request-timeout 0): running for 3 s, then succeeded
+  cut       the first job submission is closed unanswered (taken, its
+            answer lost); a later one with the same Idempotency-Key is
+            answered that job (200), one without a key or with another
+            a new job (202, another id)
 The port goes into PORTFILE (whole, by a rename) once it listens."""
 import gzip
 import http.server
@@ -78,7 +83,8 @@ class H(http.server.BaseHTTPRequestHandler):
 
     def note(self):
         with open(log, "a") as f:
-            f.write("%s %s %s\n" % (self.command, self.path, self.headers.get("Authorization", "-")))
+            f.write("%s %s %s %s\n" % (self.command, self.path, self.headers.get("Authorization", "-"),
+                                     self.headers.get("Idempotency-Key", "-")))
 
     def do_POST(self):
         self.note()
@@ -89,6 +95,18 @@ class H(http.server.BaseHTTPRequestHandler):
         elif self.path.startswith("/v1/jobs") and mode == "esc":
             self.reply(422, "application/json", json.dumps({"error": {
                 "code": "invalid\x1b[31m", "message": "bad" + ESC}}).encode())
+        elif self.path.startswith("/v1/jobs") and mode == "cut":
+            key, keys = self.headers.get("Idempotency-Key"), self.server.__dict__.setdefault("keys", [])
+            if not keys:
+                keys.append(key)
+                self.close_connection = True
+                self.connection.shutdown(2)
+            elif key is not None and key == keys[0]:
+                self.reply(200, "application/json", json.dumps(job("queued", 0)).encode())
+            else:
+                j = job("queued", 0)
+                j["id"] = "ef" * 16
+                self.reply(202, "application/json", json.dumps(j).encode())
         elif self.path.startswith("/v1/meshes"):
             self.reply(201, "application/json", json.dumps(
                 {"id": MESH, "format": "obj", "triangles": 12, "vertices": 8}).encode())

@@ -225,7 +225,7 @@ check "redirect: nothing went to the Location (the token with it)" bash -c "! gr
 # A job that is {} (a KeyError traceback), a failed job whose error is
 # null ("job failed: None"), an error message with terminal escapes (they
 # reached the terminal)
-for m in shape nullerr esc atonce; do
+for m in shape nullerr esc atonce cut; do
     at $m
 done
 check "a job that is {}: bad_answer, exit 1 ($(tail -n 1 "$TMP/h-shape/out.txt"))" \
@@ -234,6 +234,11 @@ check "a failed job without an error: said ($(tail -n 1 "$TMP/h-nullerr/out.txt"
     bash -c "test \$(cat '$TMP/h-nullerr/rc') = 1 && grep -q 'job failed: (the server gave no error)' '$TMP/h-nullerr/out.txt'"
 check "?wait answered at once: polled once a second ($(grep -c '^GET /v1/jobs/[0-9a-f]*?wait' "$TMP/h-atonce/log") polls in 3 s), the result written" \
     bash -c "test \$(cat '$TMP/h-atonce/rc') = 0 && test -s '$TMP/h-atonce/out.bin' && test \$(grep -c '^GET /v1/jobs/[0-9a-f]*?wait' '$TMP/h-atonce/log') -le 6"
+# A submission whose answer was lost (the connection closed after the
+# server took it): sent again under its Idempotency-Key, the first job
+# followed (it failed "unreachable"; without a key a retry queues another)
+check "a lost submit answer: sent again with one key, the first job followed ($(grep 'POST /v1/jobs' "$TMP/h-cut/log" | tr '\n' ' '))" \
+    bash -c "test \$(cat '$TMP/h-cut/rc') = 0 && test -s '$TMP/h-cut/out.bin' && test \$(grep '^POST /v1/jobs' '$TMP/h-cut/log' | awk '{print \$NF}' | grep -cE '^[0-9a-f]{32}\$') = 2 && test \$(grep '^POST /v1/jobs' '$TMP/h-cut/log' | awk '{print \$NF}' | sort -u | wc -l) = 1 && ! grep -q efef '$TMP/h-cut/log'"
 check "escapes in an error: shown as '?' ($(tail -n 1 "$TMP/h-esc/out.txt" | cat -v))" \
     bash -c "test \$(cat '$TMP/h-esc/rc') = 1 && grep -q 'bad?' '$TMP/h-esc/out.txt' && ! grep -q \$'\\x1b' '$TMP/h-esc/out.txt'"
 finish

@@ -555,6 +555,15 @@ kill "$HPID"
 voxelize_at atonce -o out.bin
 check "?wait answered at once: polled once a second ($(grep -c '^GET /v1/jobs/[0-9a-f]*?wait' "$TMP/h-atonce/log") polls in 3 s), the result written" \
     bash -c "test \$(cat '$TMP/h-atonce/rc') = 0 && test -s '$TMP/h-atonce/out.bin' && test \$(grep -c '^GET /v1/jobs/[0-9a-f]*?wait' '$TMP/h-atonce/log') -le 6"
+# A submission whose answer was lost (the connection closed after the
+# server took it) is sent again under the same Idempotency-Key, which
+# answers the job it made (it failed, "Empty reply from server", and a
+# retry without a key would have queued a second job)
+voxelize_at cut -o out.bin
+check "a lost submit answer: sent again with its key, the first job followed, exit 0 ($(tr '\n' ' ' <"$TMP/h-cut/err.txt"))" \
+    bash -c "test \$(cat '$TMP/h-cut/rc') = 0 && test -s '$TMP/h-cut/out.bin' && grep -q 'answer was lost' '$TMP/h-cut/err.txt' && grep -q '^GET /v1/jobs/cdcd' '$TMP/h-cut/log' && ! grep -q efef '$TMP/h-cut/log'"
+check "... both submissions with one key of 32 hex digits ($(grep 'POST /v1/jobs' "$TMP/h-cut/log" | tr '\n' ' '))" \
+    bash -c "test \$(grep '^POST /v1/jobs' '$TMP/h-cut/log' | awk '{print \$NF}' | grep -cE '^[0-9a-f]{32}\$') = 2 && test \$(grep '^POST /v1/jobs' '$TMP/h-cut/log' | awk '{print \$NF}' | sort -u | wc -l) = 1"
 # Without -o, a current directory the result cannot be written in is said
 # before the upload (it was found after the job ran); a summary writes no
 # file there, so it goes on
