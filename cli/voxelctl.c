@@ -232,10 +232,23 @@ static int read_options(ctl *c, args *a, int argc, char **argv)
             a->name = optarg;
             a->given |= OPT_NAME;
             break;
-        case O_STATE:
+        case O_STATE: {
+            static const char *const states[] = {"queued", "running", "succeeded", "failed",
+                                                 "canceled"};
+            size_t i = 0;
+            while (i < sizeof states / sizeof *states && strcmp(optarg, states[i]))
+                i++;
+            if (i == sizeof states / sizeof *states) {
+                fprintf(stderr,
+                        "voxelctl: --state wants queued, running, succeeded, failed or "
+                        "canceled, not '%s'\n",
+                        optarg);
+                return -1;
+            }
             a->state = optarg;
             a->given |= OPT_STATE;
             break;
+        }
         case O_LIMIT:
             if (!(a->limit = (int)whole(optarg, 1, 1000))) {
                 fprintf(stderr, "voxelctl: --limit wants a whole number 1..1000, not '%s'\n",

@@ -47,6 +47,9 @@ check "get: a table row" sh -c "'$CTL' get '$JID' | grep -q '^$JID  voxelize'"
 check "jobs: lists the job" sh -c "'$CTL' jobs | grep -q '^$JID'"
 check "jobs --json --state succeeded: the job among them" sh -c "'$CTL' --json jobs --state succeeded | jq -e --arg j '$JID' '[.items[].id] | index(\$j) != null'"
 check "meshes: lists the mesh" sh -c "'$CTL' meshes | grep -q '^$MID'"
+# a state that is none is a bad command line (exit 2, the states named;
+# it went to the server, whose 400 exited 1)
+check "jobs --state bogus: exit 2, the states named" sh -c "'$CTL' jobs --state bogus 2>st.err; test \$? = 2 && grep -q 'queued, running' st.err"
 
 # A mesh id instead of a file; the token from --token over the environment.
 VOXELD_TOKEN=wrong "$CTL" --token s3cret-token --quiet preview "$MID" -p width=64 -p height=48 -o p.png 2>ctl.err
