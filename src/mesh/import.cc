@@ -43,6 +43,7 @@
 
 extern "C" {
 #include "mesh/mesh.h"
+#include "mesh/text.h"
 #include "util/log.h"
 }
 
@@ -229,9 +230,8 @@ struct Tokens {
         }
         std::memcpy(buf, s, len);
         buf[len] = 0;
-        char *e;
-        *v = std::strtod(buf, &e);
-        return *e == 0;
+        char *e = vx_mesh_parse_double(buf, v); /* decimal, as OBJ's: no hex */
+        return e && *e == 0;
     }
     void skip_line()
     {

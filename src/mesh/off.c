@@ -16,6 +16,7 @@
 #include <string.h>
 
 #include "mesh/mesh.h"
+#include "mesh/text.h"
 
 typedef struct off_in {
     const char *p, *end;
@@ -153,9 +154,10 @@ vx_mesh *vx_off_read_mem(const unsigned char *data, size_t n, const vx_mesh_limi
         char *s = in.line;
         double x[4];
         for (int a = 0; a < 3 + hom; a++) {
-            char *e;
-            x[a] = strtod(s, &e);
-            if (e == s) goto bad_v;
+            while (vx_mesh_is_blank(*s))
+                s++;
+            char *e = vx_mesh_parse_double(s, &x[a]); /* decimal, as OBJ's: no hex */
+            if (!e) goto bad_v;
             if (!isfinite(x[a])) {
                 fail(err, &in, "a NaN or infinite coordinate");
                 goto out;

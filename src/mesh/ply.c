@@ -20,6 +20,7 @@
 
 #include "mesh/mesh.h"
 #include "mesh/ply.h"
+#include "mesh/text.h"
 
 static int fail(vx_err *err, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
 
@@ -55,6 +56,14 @@ static vx_ply_type type_of(const char *w, size_t len)
         if (strlen(ply_types[i].name) == len && !memcmp(ply_types[i].name, w, len))
             return ply_types[i].type;
     return VX_PLY_NONE;
+}
+
+/* The first name of t, for messages. */
+static const char *type_name(vx_ply_type t)
+{
+    for (size_t i = 0; i < sizeof ply_types / sizeof ply_types[0]; i++)
+        if (ply_types[i].type == t) return ply_types[i].name;
+    return "value";
 }
 
 static int blank(unsigned char c)
@@ -200,9 +209,19 @@ static int read_value(ply_in *in, vx_ply_type t, double *v)
         if (!len || len >= sizeof tok) return short_body(in);
         memcpy(tok, w, len);
         tok[len] = 0;
-        char *e;
-        *v = strtod(tok, &e);
-        if (*e) return short_body(in);
+        /* (the OBJ reader's numbers: decimal, no hex, the "C" locale) */
+        char *e = vx_mesh_parse_double(tok, v);
+        if (!e || *e) return short_body(in);
+        static const double
+            lo[VX_PLY_F64 +
+               1] = {[VX_PLY_I8] = INT8_MIN, [VX_PLY_I16] = INT16_MIN, [VX_PLY_I32] = INT32_MIN},
+               hi[VX_PLY_F64 + 1] = {
+                   [VX_PLY_I8] = INT8_MAX,    [VX_PLY_U8] = UINT8_MAX,  [VX_PLY_I16] = INT16_MAX,
+                   [VX_PLY_U16] = UINT16_MAX, [VX_PLY_I32] = INT32_MAX, [VX_PLY_U32] = UINT32_MAX};
+        if (t != VX_PLY_F32 && t != VX_PLY_F64 &&
+            (!(*v >= lo[t] && *v <= hi[t]) || *v != floor(*v)))
+            return fail(in->err, "element '%s' entry %llu: %s is not of type %s", in->elem,
+                        (unsigned long long)in->entry, tok, type_name(t));
         return 0;
     }
     int size = vx_ply_type_size(t);
@@ -422,6 +441,10 @@ vx_mesh *vx_ply_read_mem(const unsigned char *data, size_t n, const vx_mesh_limi
             fail(err, "the tristrips element has no vertex_indices list");
             goto out;
         }
+    }
+    if (!ve && ((fe && fe->count) || (te && te->count))) {
+        fail(err, "faces but no vertex element");
+        goto out;
     }
     if (!ve || !((fe && fe->count) || (te && te->count))) {
         vx_err_set(err, VX_EUNPROC, "ply_no_faces", "the PLY file has no faces");

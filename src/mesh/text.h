@@ -1,4 +1,4 @@
-/* What the text mesh readers (OBJ, .bpt) share: number parsing
+/* What the text mesh readers (OBJ, .bpt; numbers for OFF and ASCII PLY) share: number parsing
  * (locale-independent and correctly rounded) and line-numbered errors.
  * Private to src/mesh. */
 #ifndef VX_MESH_TEXT_H

@@ -271,6 +271,27 @@ static void test_off_header_blanks(void **state)
     check_bounded("off \\v header");
 }
 
+/* OFF's coordinates are decimal numbers, as OBJ's: strtod took hex
+ * ("0x10" was 16); blanks and CR line ends around them still pass. */
+static void test_off_numbers(void **state)
+{
+    (void)state;
+    vx_err err = {0};
+    const char *ok = "OFF\r\n3 1 0\r\n\t0 0 0 \r\n 1.5e0\t0 0 255 0 0\r\n0 1 0\r\n3 0 1 2\r\n";
+    vx_mesh *m = vx_off_read_mem((const unsigned char *)ok, strlen(ok), NULL, &err);
+    if (!m) print_error("%s\n", err.message);
+    assert_non_null(m);
+    assert_true(m->pos[3] == 1.5);
+    vx_mesh_free(m);
+    static const char *const bad[] = {"OFF\n3 1 0\n0x10 0 0\n1 0 0\n0 1 0\n3 0 1 2\n",
+                                      "OFF\n3 1 0\n0 0 0\n1 0 0x1p0\n0 1 0\n3 0 1 2\n",
+                                      "OFF\n3 1 0\n0 0 0\n1,0 0 0\n0 1 0\n3 0 1 2\n"};
+    for (size_t i = 0; i < sizeof bad / sizeof *bad; i++) {
+        assert_null(vx_off_read_mem((const unsigned char *)bad[i], strlen(bad[i]), NULL, &err));
+        assert_string_equal(err.code, "off_corrupt");
+    }
+}
+
 int main(void)
 {
     snprintf(corpus, sizeof corpus, "%s/fuzz_draco", VX_FUZZ_CORPUS);
@@ -279,6 +300,7 @@ int main(void)
         cmocka_unit_test(test_draco_reproducers), cmocka_unit_test(test_bpt_reproducers),
         cmocka_unit_test(test_obj_hostile),       cmocka_unit_test(test_draco_header),
         cmocka_unit_test(test_draco_real_files),  cmocka_unit_test(test_off_header_blanks),
+        cmocka_unit_test(test_off_numbers),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

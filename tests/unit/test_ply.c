@@ -329,11 +329,30 @@ static void test_hostile(void **state)
     snprintf(f, sizeof f, HEAD_V "%s3 0 1 -1\n", face);
     expect(f, "ply_corrupt", "bad vertex index");
     snprintf(f, sizeof f, HEAD_V "%s3 0 1 1.5\n", face);
-    expect(f, "ply_corrupt", "bad vertex index");
+    expect(f, "ply_corrupt", "1.5 is not of type int");
     snprintf(f, sizeof f, HEAD_V "%s200 0 1 2\n", face);
     expect(f, "ply_corrupt", "more than the file holds");
     snprintf(f, sizeof f, HEAD_V "%s-3 0 1 2\n", face);
-    expect(f, "ply_corrupt", "more than the file holds");
+    expect(f, "ply_corrupt", "-3 is not of type uchar");
+    /* An ASCII value outside its declared type (a uchar of 300, taken as
+     * it was), and hex numbers (strtod's: 0x10 was 16), as rply and the
+     * OBJ reader refuse them. */
+    snprintf(f, sizeof f, HEAD_V "%s300 0 1 2\n", face);
+    expect(f, "ply_corrupt", "300 is not of type uchar");
+    expect(HEAD_V "property float z\nproperty uchar red\nelement face 1\nproperty list uchar "
+                  "int vertex_indices\nend_header\n0 0 0 300\n1 0 0 0\n0 1 0 0\n3 0 1 2\n",
+           "ply_corrupt", "300 is not of type uchar");
+    expect(HEAD_V "property float z\nproperty short s\nelement face 1\nproperty list uchar "
+                  "int vertex_indices\nend_header\n0 0 0 -32769\n1 0 0 0\n0 1 0 0\n3 0 1 2\n",
+           "ply_corrupt", "-32769 is not of type short");
+    expect(HEAD_V "property float z\nelement face 1\nproperty list uchar int vertex_indices\n"
+                  "end_header\n0x10 0 0\n1 0 0\n0 1 0\n3 0 1 2\n",
+           "ply_corrupt", "entry 0");
+    /* Faces but no vertex element: said so (it was ply_no_faces, "no
+     * faces") */
+    expect("ply\nformat ascii 1.0\nelement face 1\nproperty list uchar int vertex_indices\n"
+           "end_header\n3 0 1 2\n",
+           "ply_corrupt", "no vertex element");
     snprintf(f, sizeof f, HEAD_V "%s3 0 1 x\n", face);
     expect(f, "ply_corrupt", "entry 0");
     expect(HEAD_V "property float z\nelement face 1\nproperty list uchar int vertex_indices\n"

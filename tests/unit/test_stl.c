@@ -286,6 +286,10 @@ static void test_hostile(void **state)
     expect("solid x\nfacet normal 0 0 1\nouter loop\nvertex 0 x 0\nvertex 1 0 0\n"
            "vertex 0 1 0\nendloop\nendfacet\nendsolid\n",
            "stl_corrupt", "line 2");
+    /* a hex number (strtod's: 0x1 was 1), as OBJ refuses it */
+    expect("solid x\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\nvertex 0x1 0 0\n"
+           "vertex 0 1 0\nendloop\nendfacet\nendsolid\n",
+           "stl_corrupt", "line 2");
     /* A number over 63 characters is said as such, on its own line (it
      * was "a facet without three vertices of three numbers", line 2). */
     expect("solid x\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\nvertex 1 0 0\nvertex 0 "
