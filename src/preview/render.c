@@ -65,9 +65,12 @@ static void camera(const vx_preview_params *p, float view[16], float proj[16])
         proj[14] = (float)(a * dist + b);
         proj[15] = (float)dist;
     } else {
-        /* The unit sphere fills the smaller image dimension; depth -1 at
-         * z = 1.1 (nearest), 1 at z = -1.1. */
+        /* A sphere VX_PREVIEW_MARGIN times the unit one fills the smaller
+         * image dimension, as in the narrowest perspective (the limit of
+         * its picture); depth -1 at z = 1.1 (nearest), 1 at z = -1.1. */
         double hx = aspect >= 1 ? aspect : 1, hy = aspect >= 1 ? 1 : 1 / aspect;
+        hx *= VX_PREVIEW_MARGIN;
+        hy *= VX_PREVIEW_MARGIN;
         proj[0] = (float)(1.0 / hx);
         proj[5] = (float)(1.0 / hy);
         proj[10] = (float)(-1.0 / 1.1);

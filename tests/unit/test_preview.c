@@ -217,9 +217,9 @@ static void test_cube_ortho(void **state)
     vx_preview_params p = params(256, 256, 0, 0, 0);
     vx_preview_stats st;
     uint8_t *img = render(m, &p, &st);
-    /* The unit bounding sphere spans the image; the cube's side is 2/sqrt(3)
-     * of the sphere's radius. */
-    assert_centred_square(img, &p, 256.0 / sqrt(3.0));
+    /* A sphere VX_PREVIEW_MARGIN times the bounding one spans the image;
+     * the cube's side is 2/sqrt(3) of the bounding sphere's radius. */
+    assert_centred_square(img, &p, 256.0 / sqrt(3.0) / VX_PREVIEW_MARGIN);
     box b = bounds(img, &p);
     assert_int_equal(st.pixels_covered, b.covered);
     assert_true(st.samples >= 1 && st.samples <= 4);
@@ -246,7 +246,7 @@ static void test_quad_cube_matches(void **state)
     assert_non_null(q->face_start);
     vx_preview_params p = params(256, 256, 0, 0, 0);
     uint8_t *a = render(t, &p, NULL);
-    assert_centred_square(a, &p, 256.0 / sqrt(3.0));
+    assert_centred_square(a, &p, 256.0 / sqrt(3.0) / VX_PREVIEW_MARGIN);
     p.fov_deg = 30;
     free(a);
     a = render(t, &p, NULL);
@@ -377,6 +377,24 @@ static void test_off_centre(void **state)
     vx_mesh_free(m);
     vx_mesh_free(t);
     vx_mesh_free(far);
+}
+
+/* fov 0 is the limit of a narrowing perspective: the same framing (the
+ * orthographic picture had no margin: a sphere touched the edges, where
+ * fov 1e-6 left 5%). */
+static void test_ortho_limit(void **state)
+{
+    vx_mesh *m = cube(0, 1, 0, 0, 0);
+    vx_preview_params p = params(256, 256, 30, 20, 0), q = params(256, 256, 30, 20, 1e-7);
+    uint8_t *a = render(m, &p, NULL), *b = render(m, &q, NULL);
+    box ba = bounds(a, &p), bb = bounds(b, &q);
+    printf("  fov 0 [%d,%d]-[%d,%d], fov 1e-7 [%d,%d]-[%d,%d]\n", ba.x0, ba.y0, ba.x1, ba.y1, bb.x0,
+           bb.y0, bb.x1, bb.y1);
+    assert_true(abs(ba.x0 - bb.x0) <= 1 && abs(ba.x1 - bb.x1) <= 1);
+    assert_true(abs(ba.y0 - bb.y0) <= 1 && abs(ba.y1 - bb.y1) <= 1);
+    free(a);
+    free(b);
+    vx_mesh_free(m);
 }
 
 static void test_aspect_and_background(void **state)
@@ -693,19 +711,13 @@ static void test_png_roundtrip(void **state)
 int main(void)
 {
     const struct CMUnitTest tests[] = {
-        cmocka_unit_test(test_cube_ortho),
-        cmocka_unit_test(test_cube_perspective),
-        cmocka_unit_test(test_quad_cube_matches),
-        cmocka_unit_test(test_azimuth_widens),
-        cmocka_unit_test(test_orientation),
-        cmocka_unit_test(test_off_centre),
-        cmocka_unit_test(test_aspect_and_background),
-        cmocka_unit_test(test_empty_and_bad),
-        cmocka_unit_test(test_million_triangles),
-        cmocka_unit_test(test_tiny_fov),
-        cmocka_unit_test(test_fov_under_min),
-        cmocka_unit_test(test_bands_and_stop),
-        cmocka_unit_test(test_png_roundtrip),
+        cmocka_unit_test(test_cube_ortho),        cmocka_unit_test(test_cube_perspective),
+        cmocka_unit_test(test_quad_cube_matches), cmocka_unit_test(test_azimuth_widens),
+        cmocka_unit_test(test_orientation),       cmocka_unit_test(test_off_centre),
+        cmocka_unit_test(test_ortho_limit),       cmocka_unit_test(test_aspect_and_background),
+        cmocka_unit_test(test_empty_and_bad),     cmocka_unit_test(test_million_triangles),
+        cmocka_unit_test(test_tiny_fov),          cmocka_unit_test(test_fov_under_min),
+        cmocka_unit_test(test_bands_and_stop),    cmocka_unit_test(test_png_roundtrip),
     };
     return cmocka_run_group_tests(tests, setup, teardown);
 }
