@@ -5,6 +5,7 @@
 #include <limits.h>
 #include <getopt.h>
 #include <math.h>
+#include <signal.h>
 #include <stdlib.h>
 #include <string.h>
 #include <strings.h>
@@ -77,10 +78,13 @@ static int set_param(cJSON *params, const char *kv)
     while ((dot = strchr(k, '.'))) {
         *dot = 0;
         cJSON *sub = cJSON_GetObjectItemCaseSensitive(o, k);
-        if (!cJSON_IsObject(sub)) {
-            cJSON_DeleteItemFromObjectCaseSensitive(o, k);
-            sub = cJSON_AddObjectToObject(o, k);
+        if (sub && !cJSON_IsObject(sub)) { /* -p camera=orbit -p camera.fov=10 */
+            fprintf(stderr, "voxelctl: -p %s: %.*s was given a value that is not an object\n", kv,
+                    (int)(dot - key), key);
+            cJSON_Delete(v);
+            return -2;
         }
+        if (!sub) sub = cJSON_AddObjectToObject(o, k);
         o = sub;
         k = dot + 1;
     }
@@ -99,12 +103,21 @@ static int is_job_kind(const char *s)
 
 typedef struct args {
     const char *out, *name, *state, *after, *resolution, *format;
-    int limit, no_wait, local, newest;
+    int limit, no_wait, local, newest, server_given;
     cJSON *params;
     const char **kv; /* the -p KEY=VALUEs, applied after every --params */
     int nkv;
-    unsigned given; /* the command options given (OPT_ bits) */
+    unsigned given;      /* the command options given (OPT_ bits) */
+    const char *seen[7]; /* for each OPT_ bit, the first option given of it */
 } args;
+
+/* Notes option name (as in --help) given for the group of bit. */
+static void mark(args *a, unsigned bit, const char *name)
+{
+    int b = __builtin_ctz(bit);
+    if (!(a->given & bit)) a->seen[b] = name;
+    a->given |= bit;
+}
 
 /* Options that belong to some commands only. */
 enum {
@@ -164,9 +177,11 @@ static int read_options(ctl *c, args *a, int argc, char **argv)
                                          {"newest", no_argument, 0, O_NEWEST},
                                          {0, 0, 0, 0}};
     int ch;
-    while ((ch = getopt_long(argc, argv, "p:o:r:f:hq", opts, NULL)) != -1) {
+    opterr = 0; /* said below, as voxelctl (getopt named the program's path) */
+    while ((ch = getopt_long(argc, argv, ":p:o:r:f:hq", opts, NULL)) != -1) {
         switch (ch) {
         case O_SERVER:
+            a->server_given = 1;
             snprintf(c->server, sizeof c->server, "%s", optarg);
             break;
         case O_TOKEN:
@@ -187,11 +202,11 @@ static int read_options(ctl *c, args *a, int argc, char **argv)
             if (!kv) return -1;
             a->kv = kv;
             a->kv[a->nkv++] = optarg;
-            a->given |= OPT_JOB;
+            mark(a, OPT_JOB, "-p");
             break;
         }
         case O_PARAMS: {
-            a->given |= OPT_JOB;
+            mark(a, OPT_JOB, "--params");
             cJSON *p = cJSON_ParseWithOpts(optarg, NULL, 1), *it;
             if (!cJSON_IsObject(p)) {
                 fprintf(stderr, "voxelctl: --params wants a JSON object\n");
@@ -212,7 +227,7 @@ static int read_options(ctl *c, args *a, int argc, char **argv)
                 return -1;
             }
             a->out = optarg;
-            a->given |= OPT_OUT;
+            mark(a, OPT_OUT, "-o");
             break;
         case 'r':
             /* checked here: the server's own range check (422) would come
@@ -222,15 +237,15 @@ static int read_options(ctl *c, args *a, int argc, char **argv)
                 return -1;
             }
             a->resolution = optarg;
-            a->given |= OPT_RES;
+            mark(a, OPT_RES, "-r");
             break;
         case 'f':
             a->format = optarg;
-            a->given |= OPT_FMT;
+            mark(a, OPT_FMT, "-f");
             break;
         case O_NAME:
             a->name = optarg;
-            a->given |= OPT_NAME;
+            mark(a, OPT_NAME, "--name");
             break;
         case O_STATE: {
             static const char *const states[] = {"queued", "running", "succeeded", "failed",
@@ -246,7 +261,7 @@ static int read_options(ctl *c, args *a, int argc, char **argv)
                 return -1;
             }
             a->state = optarg;
-            a->given |= OPT_STATE;
+            mark(a, OPT_STATE, "--state");
             break;
         }
         case O_LIMIT:
@@ -255,19 +270,19 @@ static int read_options(ctl *c, args *a, int argc, char **argv)
                         optarg);
                 return -1;
             }
-            a->given |= OPT_PAGE;
+            mark(a, OPT_PAGE, "--limit");
             break;
         case O_AFTER:
             a->after = optarg;
-            a->given |= OPT_PAGE;
+            mark(a, OPT_PAGE, "--after");
             break;
         case O_NEWEST:
             a->newest = 1;
-            a->given |= OPT_STATE;
+            mark(a, OPT_STATE, "--newest");
             break;
         case O_NOWAIT:
             a->no_wait = 1;
-            a->given |= OPT_JOB;
+            mark(a, OPT_JOB, "--no-wait");
             break;
         case 'h':
             usage(stdout);
@@ -275,8 +290,13 @@ static int read_options(ctl *c, args *a, int argc, char **argv)
         case O_VERSION:
             printf("voxelctl %s\n", VX_VERSION);
             exit(0);
-        default:
+        default: {
+            char shrt[3] = {'-', (char)optopt, 0};
+            const char *o = optopt > 0 && optopt < 128 ? shrt : argv[optind - 1];
+            fprintf(stderr, "voxelctl: %s '%s' (see voxelctl --help)\n",
+                    ch == ':' ? "a value is missing after" : "unknown option", o);
             return -1;
+        }
         }
     }
     for (int i = 0; i < a->nkv; i++) {
@@ -309,13 +329,18 @@ static int shortcuts(const char *kind, args *a)
 
 /* A job id as the server makes them (32 lower-case hex digits): never a
  * path of the API (../meshes/ID); anything else is a usage error (2). */
-static int job_id_ok(const char *s)
+static int hex_ok(const char *s, size_t want)
 {
-    size_t n = strlen(s), ok = n == 32;
+    size_t n = strlen(s), ok = n == want;
     for (size_t i = 0; i < n; i++)
         ok &= (s[i] >= '0' && s[i] <= '9') || (s[i] >= 'a' && s[i] <= 'f');
-    if (!ok) fprintf(stderr, "voxelctl: '%s' is not a job id (32 hex digits)\n", s);
     return (int)ok;
+}
+static int job_id_ok(const char *s)
+{
+    int ok = hex_ok(s, 32);
+    if (!ok) fprintf(stderr, "voxelctl: '%s' is not a job id (32 lower-case hex digits)\n", s);
+    return ok;
 }
 
 /* The commands: name, arguments, and the command options they take. */
@@ -340,9 +365,6 @@ static const struct {
 /* Whether the command line fits command k (what does not is said). */
 static int fits(int k, const args *a, int n)
 {
-    static const char *const what[] = {
-        "-p, --params and --no-wait", "-o", "--name", "--state and --newest",
-        "--limit and --after",        "-r", "-f"};
     const char *cmd = commands[k].name;
     if (n - 1 != commands[k].args) {
         fprintf(stderr, "voxelctl: %s takes %s (see voxelctl --help)\n", cmd,
@@ -351,7 +373,8 @@ static int fits(int k, const args *a, int n)
     }
     for (int b = 0; b < 7; b++)
         if (a->given & ~commands[k].opts & (1u << b)) {
-            fprintf(stderr, "voxelctl: %s is not an option of %s\n", what[b], cmd);
+            fprintf(stderr, "voxelctl: %s is not an option of %s (see voxelctl --help)\n",
+                    a->seen[b], cmd);
             return 0;
         }
     return 1;
@@ -368,6 +391,28 @@ static int run(ctl *c, args *a, int n, char **pos)
         return 2;
     }
     if (!fits(k, a, n)) return 2;
+    /* --local's server has the one command's jobs and meshes, and ends
+     * with it */
+    if (a->local &&
+        (a->server_given || a->no_wait || !(is_job_kind(cmd) || !strcmp(cmd, "upload")))) {
+        fprintf(stderr,
+                "voxelctl: --local starts a private voxeld for one job command (or "
+                "upload) and stops it after: not with %s\n",
+                a->server_given ? "--server"
+                : a->no_wait    ? "--no-wait"
+                                : cmd);
+        return 2;
+    }
+    /* --after names an item of the list (never a path of the API) */
+    int jobs = !strcmp(cmd, "jobs");
+    if (a->after && !hex_ok(a->after, jobs ? 32 : 64)) {
+        fprintf(stderr, "voxelctl: --after wants a %s id (%d lower-case hex digits), not '%s'\n",
+                jobs ? "job" : "mesh", jobs ? 32 : 64, a->after);
+        return 2;
+    }
+    if (!is_job_kind(cmd) && strcmp(cmd, "upload") && !jobs && strcmp(cmd, "meshes") &&
+        !job_id_ok(pos[1]))
+        return 2;
     if (c->json && a->out && !strcmp(a->out, "-")) {
         fprintf(stderr, "voxelctl: --json and -o - would both write stdout\n");
         return 2;
@@ -383,14 +428,15 @@ static int run(ctl *c, args *a, int n, char **pos)
             cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(a->params, "format"));
         int stats_only = !strcmp(cmd, "voxelize") && fmt && !strcmp(fmt, "summary");
         if (!a->out && !a->no_wait && !stats_only && ctl_cwd_unwritable()) return 1;
+        if (a->local && ctl_local_start(c)) return 1;
         cJSON *p = a->params;
         a->params = NULL;
         return ctl_cmd_job(c, cmd, pos[1], p, a->out, a->no_wait);
     }
-    if (!strcmp(cmd, "upload")) return ctl_cmd_upload(c, pos[1]);
-    if (!strcmp(cmd, "jobs")) return ctl_cmd_jobs(c, a->state, a->newest, a->limit, a->after);
+    if (!strcmp(cmd, "upload"))
+        return a->local && ctl_local_start(c) ? 1 : ctl_cmd_upload(c, pos[1]);
+    if (jobs) return ctl_cmd_jobs(c, a->state, a->newest, a->limit, a->after);
     if (!strcmp(cmd, "meshes")) return ctl_cmd_meshes(c, a->limit, a->after);
-    if (!job_id_ok(pos[1])) return 2;
     if (!strcmp(cmd, "get"))
         return ctl_out_unwritable(a->out) || (a->name && !a->out && ctl_cwd_unwritable())
                    ? 1
@@ -439,10 +485,9 @@ int main(int argc, char **argv)
         c.server[--sl] = 0;
     c.progress_tty = isatty(2);
     if (ctl_http_init()) return 1;
-    if (a.local && ctl_local_start(&c)) {
-        cJSON_Delete(a.params);
-        return 1;
-    }
+    /* a reader gone from stdout is a write error (exit 1, said), not death
+     * by SIGPIPE */
+    signal(SIGPIPE, SIG_IGN);
     int rc = run(&c, &a, argc - optind, argv + optind);
     if (a.local) ctl_local_stop();
     cJSON_Delete(a.params);

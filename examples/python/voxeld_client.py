@@ -59,10 +59,17 @@ class VoxeldError(Exception):
 
 class Client:
     def __init__(self, server=None, token=None, timeout=120, retry_for=120):
+        """ValueError for a server that is no http(s) URL or a token that no
+        header can carry (a blank or control character)."""
         self.server = (server or os.environ.get("VOXELD_URL") or "http://127.0.0.1:8080").rstrip("/")
         self.token = token if token is not None else os.environ.get("VOXELD_TOKEN")
         self.timeout = timeout
         self.retry_for = retry_for
+        if not self.server.lower().startswith(("http://", "https://")):
+            raise ValueError("the server wants an http:// or https:// URL, not %r" % self.server)
+        if self.token and not all(0x21 <= ord(ch) <= 0x7e for ch in self.token):
+            raise ValueError("the token holds a blank or control character, which no header "
+                             "can carry")
 
     def _open(self, method, path, body=None, ctype=None, accept=None, retry=True, key=None):
         """The response of a 2xx; a 429 or 503 with Retry-After is sent
@@ -106,7 +113,11 @@ class Client:
                 err = json.loads(raw)["error"]
                 code, message = err["code"], err["message"]
             except (ValueError, KeyError, TypeError):
-                code, message = "http_error", raw[:200].decode("utf-8", "replace")
+                code = "http_error"
+                message = raw[:200].decode("utf-8", "replace").strip() or \
+                    "HTTP %d %s" % (e.code, e.reason or "")
+                if 300 <= e.code < 400:
+                    message += " (a redirect to %s, not followed)" % e.headers.get("Location")
             raise VoxeldError(e.code, code, message, retry_after) from None
         except urllib.error.URLError as e:
             err = VoxeldError(0, "unreachable", "%s: %s" % (self.server, e.reason))
@@ -398,6 +409,21 @@ def _name_ok(name):
         and not any(c in bad for c in b)
 
 
+def _unwritable(out):
+    """Why download() could not write out (None: it could): a regular file
+    goes through a part file beside it, anything else (a device, a FIFO)
+    is written in place."""
+    final = os.path.realpath(out)
+    if os.path.isdir(final):
+        return "a directory"
+    if os.path.exists(final) and not os.path.isfile(final):
+        return None if os.access(final, os.W_OK) else "permission denied"
+    where = os.path.dirname(final)
+    if not os.path.isdir(where):
+        return "no such directory"
+    return None if os.access(where, os.W_OK | os.X_OK) else "permission denied"
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description="Run one voxeld job on a mesh file.")
     ap.add_argument("--server")
@@ -407,7 +433,15 @@ def main(argv=None):
     ap.add_argument("-p", "--param", type=_param, action="append", default=[])
     ap.add_argument("-o", "--output")
     a = ap.parse_args(argv)
-    c = Client(a.server, a.token)
+    try:
+        c = Client(a.server, a.token)
+    except ValueError as e:
+        print("voxeld_client: %s" % e, file=sys.stderr)
+        return 2
+    why = _unwritable(a.output) if a.output else None
+    if why:  # said before the job runs, not after
+        print("voxeld_client: cannot write %s: %s" % (a.output, why), file=sys.stderr)
+        return 1
     job = None
     try:
         mesh = c.upload(a.file)["id"]

@@ -222,6 +222,27 @@ for m in redirect partial html badid; do
         bash -c "test $rc -ne 0 && ! test -e '$TMP/h-$m/out.bin' && ! grep -q Traceback '$TMP/h-$m/out.txt'"
 done
 check "redirect: nothing went to the Location (the token with it)" bash -c "! grep -q '^GET /steal' '$TMP/h-redirect/log'"
+check "redirect: said as one, with its Location (a 302 without a body said nothing)" \
+    grep -q 'a redirect to http://127.0.0.1:[0-9]*/steal, not followed' "$TMP/h-redirect/out.txt"
+# A server that is no URL, a token with a newline: exit 2, said (tracebacks
+# of urllib's ValueError); an output that cannot be written: said before
+# anything is sent (it was found after the job ran, naming a part file)
+rc=0
+python3 "$PYC" --server nonsense voxelize "$VX_SOURCE_DIR/examples/meshes/torus.obj" >bad.out 2>&1 || rc=$?
+check "--server nonsense: exit 2, said ($(tail -n 1 bad.out))" bash -c "test $rc = 2 && grep -q 'http:// or https:// URL' bad.out && ! grep -q Traceback bad.out"
+rc=0
+python3 "$PYC" --server "http://127.0.0.1:1" --token $'ab\nX: y' voxelize "$VX_SOURCE_DIR/examples/meshes/torus.obj" >bad.out 2>&1 || rc=$?
+check "a token with a newline: exit 2, said ($(tail -n 1 bad.out))" bash -c "test $rc = 2 && grep -q 'no header' bad.out && ! grep -q Traceback bad.out"
+mkdir -p "$TMP/h-badid"
+python3 "$VX_SOURCE_DIR/tests/integration/hostile_server.py" "$TMP/h-badid/port2" "$TMP/h-badid/log2" badid &
+hpid=$!
+for _ in $(seq 100); do [[ -s "$TMP/h-badid/port2" ]] && break; sleep 0.05; done
+for o in /nonexistent-dir/out.bin "$TMP"; do
+    rc=0
+    python3 "$PYC" --server "http://127.0.0.1:$(cat "$TMP/h-badid/port2")" voxelize "$VX_SOURCE_DIR/examples/meshes/torus.obj" -o "$o" >bad.out 2>&1 || rc=$?
+    check "-o $o: exit 1 before anything is sent ($(tail -n 1 bad.out))" bash -c "test $rc = 1 && grep -q 'cannot write' bad.out && ! test -s '$TMP/h-badid/log2'"
+done
+kill "$hpid"
 # A job that is {} (a KeyError traceback), a failed job whose error is
 # null ("job failed: None"), an error message with terminal escapes (they
 # reached the terminal)

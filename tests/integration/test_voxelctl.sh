@@ -50,6 +50,33 @@ check "meshes: lists the mesh" sh -c "'$CTL' meshes | grep -q '^$MID'"
 # a state that is none is a bad command line (exit 2, the states named;
 # it went to the server, whose 400 exited 1)
 check "jobs --state bogus: exit 2, the states named" sh -c "'$CTL' jobs --state bogus 2>st.err; test \$? = 2 && grep -q 'queued, running' st.err"
+# Bad command lines said as voxelctl, naming what was given (exit 2, before
+# any request): getopt's messages named the binary's path; "--state and
+# --newest is not an option" for --newest alone; a malformed --after went
+# to the server (400, exit 1); -p camera.fov after -p camera=orbit dropped
+# "orbit"; --local with a command its private server cannot answer
+bad_line() { # bad_line WHAT PATTERN ARGS...: exit 2, PATTERN on stderr
+    local what=$1 pat=$2
+    shift 2
+    "$CTL" "$@" >/dev/null 2>bl.err
+    local rc=$?
+    check "$what: exit 2 ($(cat bl.err))" sh -c "test $rc = 2 && grep -q -- '$pat' bl.err"
+}
+bad_line "a missing option value" "^voxelctl: a value is missing after .--server" jobs --server
+bad_line "an unknown option" "^voxelctl: unknown option .-z" -z jobs
+bad_line "--newest to meshes" "^voxelctl: --newest is not an option of meshes" meshes --newest
+bad_line "--no-wait to jobs" "^voxelctl: --no-wait is not an option of jobs" jobs --no-wait
+bad_line "--after not a job id" "--after wants a job id" jobs --after xyz
+bad_line "--after a job id to meshes" "--after wants a mesh id" meshes --after 0123456789abcdef0123456789abcdef
+bad_line "-p under a value that is no object" "camera was given a value that is not an object" preview "$MESH" -p camera=orbit -p camera.fov=10
+bad_line "--local jobs" "not with jobs" --local jobs
+bad_line "--local --server" "not with --server" --local --server "$BASE" voxelize "$MESH"
+bad_line "--local --no-wait" "not with --no-wait" --local --no-wait voxelize "$MESH"
+# A reader that leaves stdout (head) is a write error said, exit 1: it was
+# death by SIGPIPE (141) without a word
+"$CTL" -q voxelize "$MESH" -r 128 -f raw8 -o - 2>pipe.err | head -c 10 >/dev/null
+rc=${PIPESTATUS[0]}
+check "-o - into a pipe closed early: exit 1, said ($rc: $(cat pipe.err))" sh -c "test $rc = 1 && grep -q 'Broken pipe' pipe.err"
 
 # A mesh id instead of a file; the token from --token over the environment.
 VOXELD_TOKEN=wrong "$CTL" --token s3cret-token --quiet preview "$MID" -p width=64 -p height=48 -o p.png 2>ctl.err
