@@ -448,9 +448,9 @@ static void project_dir(const double *dir, const double *n, double *out)
 
 /* Tangent directions at node p (unit normal n) towards its fan neighbours
  * P + 3 ids[i] (counter-clockwise): the neighbours' angles about p, scaled to
- * 2 pi (closed fan) or pi (open fan, the first and last neighbours on the
- * boundary), laid out in the tangent plane from the first neighbour's
- * projected direction (open: the direction from the last neighbour to the
+ * 2 pi (closed fan) or pi (open fan of two faces or more, the first and last
+ * neighbours on the boundary; one face is a corner: its chords), laid out in the tangent plane from
+ * the first neighbour's projected direction (open: the direction from the last neighbour to the
  * first, so the boundary curve is smooth through p). Unlike projecting
  * every chord, this keeps the directions in the fan's cyclic order even
  * where the mesh is crumpled around p, so neighbouring patches never fold
@@ -474,7 +474,12 @@ static void fan_dirs(const double *p, const double *n, const double *P, const ui
     else
         vx_v3_sub(P + 3 * ids[0], P + 3 * ids[m - 1], first);
     project_dir(first, n, d0);
-    if (!(total > 1e-12) || vx_v3_norm(d0) == 0 || m < 2) {
+    /* One face alone at p (an open fan of two neighbours) is a corner, as
+     * Catmull-Clark's boundary rules take it: its angle spread to pi made
+     * the boundary smooth through p and the face's corner flat, 180
+     * degrees, where its patch folded (a lone quad bulged past its edges,
+     * normals reversed). */
+    if (!(total > 1e-12) || vx_v3_norm(d0) == 0 || m < 2 || (!closed && m == 2)) {
         for (uint32_t i = 0; i < m; i++) {
             double a[3];
             vx_v3_sub(P + 3 * ids[i], p, a);

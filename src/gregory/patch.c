@@ -2,6 +2,7 @@
  * tessellator evaluates the same formulas in shaders/; this is the
  * reference its tests and the constructions compare against. */
 #include <math.h>
+#include <stdint.h>
 #include <stdlib.h>
 
 #include "gregory/gregory.h"
@@ -179,10 +180,11 @@ static void face_normal(const vx_mesh *m, size_t f, double n[3])
 
 size_t vx_gpatch_folded(const vx_gpatch_set *s, const vx_mesh *m)
 {
-    size_t folded = 0;
+    size_t folded = 0, last = SIZE_MAX;
+    double fn[3] = {0, 0, 0};
     for (size_t p = 0; p < s->npatches; p++) {
         const double *cp = s->cp + p * VX_GPATCH_POINTS * 3;
-        double pos[3], nrm[3], fn[3];
+        double pos[3], nrm[3];
         if (m->npatches || s->face[p] >= m->nfaces) { /* a Bézier patch: its corner quad */
             const double *c0 = cp, *c1 = cp + 9, *c2 = cp + 45, *c3 = cp + 36;
             double d[3] = {c2[0] - c0[0], c2[1] - c0[1], c2[2] - c0[2]},
@@ -190,8 +192,11 @@ size_t vx_gpatch_folded(const vx_gpatch_set *s, const vx_mesh *m)
             fn[0] = d[1] * e[2] - d[2] * e[1];
             fn[1] = d[2] * e[0] - d[0] * e[2];
             fn[2] = d[0] * e[1] - d[1] * e[0];
-        } else
+            last = SIZE_MAX;
+        } else if (s->face[p] != last) { /* an n-gon's n patches come together: once */
             face_normal(m, s->face[p], fn);
+            last = s->face[p];
+        }
         vx_gpatch_eval(cp, 0.5, 0.5, pos, nrm);
         if (nrm[0] * fn[0] + nrm[1] * fn[1] + nrm[2] * fn[2] < 0) folded++;
     }

@@ -323,6 +323,56 @@ static void test_flat_fan(void **state)
     }
 }
 
+/* A face alone (every corner on one face only): the corners are corners.
+ * A lone flat quad bulged 0.18 past its edges, and at two of its corners
+ * (which two, by the vertex its face starts at) the patches folded, their
+ * normals facing -z: the open fan's angle, spread to pi, made the corner
+ * flat. Every start, a triangle and a pentagon too: flat, +z, inside. */
+static void test_lone_faces(void **state)
+{
+    (void)state;
+    static const double quad[] = {0, 0, 0, 1, 0, 0, 1, 1, 0, 0, 1, 0},
+                        tri[] = {0, 0, 0, 2, 0, 0, 0.5, 1, 0},
+                        pent[] = {0, 0, 0, 1, 0, 0, 1.3, 0.8, 0, 0.5, 1.4, 0, -0.3, 0.8, 0};
+    const struct {
+        const double *p;
+        uint32_t n;
+    } faces[] = {{quad, 4}, {tri, 3}, {pent, 5}};
+    for (size_t k = 0; k < sizeof faces / sizeof faces[0]; k++)
+        for (uint32_t start = 0; start < faces[k].n; start++) {
+            uint32_t n = faces[k].n, f[5], sz = n;
+            double lo[2] = {1e9, 1e9}, hi[2] = {-1e9, -1e9};
+            for (uint32_t i = 0; i < n; i++) {
+                f[i] = (start + i) % n;
+                for (int c = 0; c < 2; c++) {
+                    lo[c] = fmin(lo[c], faces[k].p[3 * i + c]);
+                    hi[c] = fmax(hi[c], faces[k].p[3 * i + c]);
+                }
+            }
+            vx_mesh *m = shape_poly_mesh(n, faces[k].p, 1, &sz, f);
+            assert_non_null(m);
+            vx_gpatch_set *s = build(m, NULL);
+            size_t flipped = 0, outside = 0;
+            for (size_t q = 0; q < s->npatches; q++) {
+                const double *cp = s->cp + q * VX_GPATCH_POINTS * 3;
+                for (int a = 0; a <= 8; a++)
+                    for (int b = 0; b <= 8; b++) {
+                        double x[3], nrm[3];
+                        vx_gpatch_eval(cp, 0.02 + 0.12 * a, 0.02 + 0.12 * b, x, nrm);
+                        flipped += !(nrm[2] > 0) || x[2] != 0;
+                        outside += x[0] < lo[0] - 1e-9 || x[0] > hi[0] + 1e-9 ||
+                                   x[1] < lo[1] - 1e-9 || x[1] > hi[1] + 1e-9;
+                    }
+            }
+            print_message("lone %u-gon from vertex %u: %zu samples off +z, %zu outside its box\n",
+                          n, start, flipped, outside);
+            assert_int_equal(flipped, 0);
+            assert_int_equal(outside, 0);
+            vx_gpatch_set_free(s);
+            vx_mesh_free(m);
+        }
+}
+
 static void test_g1_ngon(void **state)
 {
     (void)state;
@@ -1301,12 +1351,19 @@ static void test_params(void **state)
 int main(void)
 {
     const struct CMUnitTest cpu[] = {
-        cmocka_unit_test(test_g1_spot),           cmocka_unit_test(test_g1_suzanne),
-        cmocka_unit_test(test_g1_ngon),           cmocka_unit_test(test_flat_fan),
-        cmocka_unit_test(test_g1_open_quads),     cmocka_unit_test(test_g1_quads),
-        cmocka_unit_test(test_counts_and_weld),   cmocka_unit_test(test_frames_reuse_topology),
-        cmocka_unit_test(test_from_bezier_small), cmocka_unit_test(test_max_edge),
-        cmocka_unit_test(test_max_edge_strip),    cmocka_unit_test(test_params),
+        cmocka_unit_test(test_g1_spot),
+        cmocka_unit_test(test_g1_suzanne),
+        cmocka_unit_test(test_g1_ngon),
+        cmocka_unit_test(test_flat_fan),
+        cmocka_unit_test(test_lone_faces),
+        cmocka_unit_test(test_g1_open_quads),
+        cmocka_unit_test(test_g1_quads),
+        cmocka_unit_test(test_counts_and_weld),
+        cmocka_unit_test(test_frames_reuse_topology),
+        cmocka_unit_test(test_from_bezier_small),
+        cmocka_unit_test(test_max_edge),
+        cmocka_unit_test(test_max_edge_strip),
+        cmocka_unit_test(test_params),
         cmocka_unit_test(test_far_from_origin),
     };
     const struct CMUnitTest gl[] = {
