@@ -90,6 +90,9 @@ static const opt_def opts[] = {
      "open connections from one IP (default 64; 0 = no limit)"},
     {"max-image-pixels", T_SIZE, F(max_image_pixels), 0,
      "largest rendered image, width*height (default 67108864; 0 = no limit)"},
+    {"max-cc-valence", T_SIZE, F(max_cc_valence), 0,
+     "gregory approximate-cc: most faces around a vertex, n-gons counted as vertices of n "
+     "(its end caps cost the square; default 512; 0 = no limit)"},
     {"max-job-memory", T_SIZE, F(max_job_memory), 0,
      "memory one job may use (default 4G; 0 = no limit)"},
     {"keep-memory", T_SIZE, F(keep_memory), 0,
@@ -233,6 +236,7 @@ static void defaults(vx_config *c)
     c->max_connections = 512;
     c->max_connections_per_ip = 64;
     c->max_image_pixels = 8192ull * 8192ull;
+    c->max_cc_valence = 512;
     c->max_job_memory = 4ull << 30;
     c->keep_memory = 256ull << 20;
     c->brick_threshold = 1ull << 30;

@@ -41,6 +41,7 @@ typedef struct vx_config {
     uint64_t max_connections;
     uint64_t max_connections_per_ip;
     uint64_t max_image_pixels;
+    uint64_t max_cc_valence; /* gregory approximate-cc: faces around a vertex */
     uint64_t max_job_memory;
     uint64_t keep_memory;     /* freed job memory kept mapped for the next job (main.c) */
     int pretouch_memory;      /* keep_memory mapped and touched at start (main.c) */

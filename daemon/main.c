@@ -190,6 +190,7 @@ static vx_jobs_desc make_jobs_desc(const vx_config *cfg, vx_store *store, int ha
         .limits = {.max_upload_bytes = cfg->max_upload_bytes,
                    .max_triangles = cfg->max_triangles,
                    .max_image_pixels = cfg->max_image_pixels,
+                   .max_cc_valence = cfg->max_cc_valence,
                    .max_job_memory = cfg->max_job_memory,
                    .brick_threshold = cfg->brick_threshold,
                    .job_timeout_s = cfg->job_timeout_s},

@@ -198,6 +198,7 @@ int vx_route_info(vx_http *h, struct MHD_Connection *c, req *r)
     cJSON_AddNumberToObject(l, "max_connections", (double)cfg->max_connections);
     cJSON_AddNumberToObject(l, "max_connections_per_ip", (double)cfg->max_connections_per_ip);
     cJSON_AddNumberToObject(l, "max_image_pixels", (double)cfg->max_image_pixels);
+    cJSON_AddNumberToObject(l, "max_cc_valence", (double)cfg->max_cc_valence);
     cJSON_AddNumberToObject(l, "max_job_memory_bytes", (double)cfg->max_job_memory);
     cJSON_AddNumberToObject(l, "keep_memory_bytes", (double)cfg->keep_memory);
     cJSON_AddNumberToObject(l, "brick_threshold_cells", (double)cfg->brick_threshold);

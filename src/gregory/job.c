@@ -641,6 +641,40 @@ static void add_stats(vx_job_run *r, const vx_mesh *mesh, const gparams *p, cons
     }
 }
 
+/* approximate-cc's limit on the faces around a vertex of the quad mesh
+ * OpenSubdiv gets (the input, or it refined once unless all quads: an
+ * n-gon's centre has n): its end caps' stencils take the square of it
+ * (a fan of 2,000 triangles took 20 s). 0, or -1 with cc_valence_limit. */
+static int cc_valence_ok(const vx_mesh *m, uint64_t limit, vx_err *err)
+{
+    if (!limit || m->npatches) return 0;
+    int quads = m->faces_by_size[0] == 0 && m->faces_by_size[2] == 0;
+    for (size_t f = 0; f < m->nfaces && !quads; f++) {
+        uint32_t n = vx_mesh_face_size(m, f);
+        if (n != 4 && n > limit)
+            return vx_err_set(err, VX_ETOOBIG, "cc_valence_limit",
+                              "face %zu has %u vertices; approximate-cc takes faces of at most "
+                              "%llu (--max-cc-valence: its patches there cost the square of it; "
+                              "the interpolate construction takes any)",
+                              f + 1, n, (unsigned long long)limit);
+    }
+    uint32_t *deg = calloc(m->nverts ? m->nverts : 1, sizeof *deg);
+    if (!deg) return vx_err_set(err, VX_EINTERNAL, "out_of_memory", "no memory for valences");
+    size_t ncorners = m->face_start ? m->face_start[m->nfaces] : 3 * m->nfaces;
+    for (size_t i = 0; i < ncorners; i++)
+        if (++deg[m->face_idx[i]] > limit) {
+            uint32_t v = m->face_idx[i];
+            free(deg);
+            return vx_err_set(err, VX_ETOOBIG, "cc_valence_limit",
+                              "vertex %u has more than %llu faces around it; approximate-cc takes "
+                              "at most that (--max-cc-valence: its patches there cost the square "
+                              "of it; the interpolate construction takes any)",
+                              v + 1, (unsigned long long)limit);
+        }
+    free(deg);
+    return 0;
+}
+
 static int run_gl(vx_job_run *r, const vx_mesh *mesh, const gparams *pp, void **state, vx_err *err)
 {
     const gparams p = *pp;
@@ -655,7 +689,8 @@ static int run_gl(vx_job_run *r, const vx_mesh *mesh, const gparams *pp, void **
     int rc = -1;
     cJSON *frame_ms = cJSON_CreateArray();
     double t0 = vx_mono_ms();
-    if (gather_positions(r, mesh, &p, nframes, pos, &copies, err) ||
+    if ((p.construction == CONS_APPROX_CC && cc_valence_ok(mesh, lim->max_cc_valence, err)) ||
+        gather_positions(r, mesh, &p, nframes, pos, &copies, err) ||
         construct_all(r, &b, pos, nframes, err))
         goto done;
     size_t folded = vx_gpatch_folded(b.set, mesh); /* of the mesh itself (frame 0) */

@@ -28,6 +28,7 @@ typedef struct vx_limits {
     uint64_t max_upload_bytes;
     uint64_t max_triangles;
     uint64_t max_image_pixels; /* width * height of any rendered image */
+    uint64_t max_cc_valence;   /* gregory approximate-cc: faces around a vertex (0 = none) */
     uint64_t max_job_memory;   /* bytes an engine may allocate for one job */
     uint64_t brick_threshold;  /* voxelize: grids of more cells run as bricks (0 = 1024^3) */
     double job_timeout_s;

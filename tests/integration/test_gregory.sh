@@ -399,4 +399,44 @@ check "it says so ($(jqb .error.message))" grep -q 'frame meshes of .* vertices 
 post "{\"mesh\":\"$SPOTQ\",\"kind\":\"gregory\",\"params\":{\"divisions\":2,\"frames\":[\"$SPOTQ\"]}}"
 check "one frame mesh fits: accepted ($STATUS)" test "$STATUS" = 202 -o "$STATUS" = 200 -o "$STATUS" = 201
 stop_daemon
+
+# approximate-cc past --max-cc-valence faces around a vertex (a flat fan)
+# or vertices in a face (an n-gon, refined into a vertex of n faces):
+# cc_valence_limit at once, naming it (OpenSubdiv's end caps took seconds
+# to minutes: a fan of 2,000 triangles 20 s); interpolate takes them; at
+# the limit it runs
+start_daemon --max-cc-valence 40 || exit 1
+api GET /v1/info
+check "info: limits.max_cc_valence 40" jq -e '.limits.max_cc_valence == 40' "$BODY"
+fan() { # FILE N: a flat fan of N triangles; FILE.ply: the N-gon around it
+    python3 - "$1" "$2" <<'EOF2'
+import math, sys
+f, n = sys.argv[1], int(sys.argv[2])
+pts = [(math.cos(2 * math.pi * k / n), math.sin(2 * math.pi * k / n)) for k in range(n)]
+with open(f, "w") as o:
+    o.write("v 0 0 0\n" + "".join("v %r %r 0\n" % p for p in pts))
+    o.write("".join("f 1 %d %d\n" % (k + 2, (k + 1) % n + 2) for k in range(n)))
+with open(f + ".ply", "w") as o:
+    o.write("ply\nformat ascii 1.0\nelement vertex %d\nproperty float x\nproperty float y\n"
+            "property float z\nelement face 1\nproperty list int int vertex_indices\nend_header\n" % n)
+    o.write("".join("%r %r 0\n" % p for p in pts) + "%d %s\n" % (n, " ".join(map(str, range(n)))))
+EOF2
+}
+fan "$TMP/fan41.obj" 41
+fan "$TMP/fan40.obj" 40
+for m in obj obj.ply; do
+    [[ $m == obj ]] && upload "$TMP/fan41.obj" || upload "$TMP/fan41.obj.ply" model/x-ply
+    run_job gregory "$MESH_ID" '{"divisions":2,"construction":"approximate-cc"}'
+    check "approximate-cc, 41 around a vertex ($m): cc_valence_limit, said ($(jq -c .error "$TMP/job.json"))" \
+        jq -e '.state == "failed" and .error.code == "cc_valence_limit" and (.error.message | test("(vertex 1 has more than 40 faces|face 1 has 41 vertices)"))' "$TMP/job.json"
+    run_job gregory "$MESH_ID" '{"divisions":2}'
+    job_ok "interpolate on it ($m)"
+done
+upload "$TMP/fan40.obj"
+run_job gregory "$MESH_ID" '{"divisions":2,"construction":"approximate-cc"}'
+job_ok "approximate-cc, 40 around a vertex"
+upload "$TMP/fan40.obj.ply" model/x-ply
+run_job gregory "$MESH_ID" '{"divisions":2,"construction":"approximate-cc"}'
+job_ok "approximate-cc, a 40-gon"
+stop_daemon
 finish
