@@ -378,7 +378,8 @@ static int mesh_commit_new_locked(vx_store *s, vx_upload *u, const char *id, con
         int e = errno;
         char path[VX_PATH_MAX];
         s->ops->path(s->blob, key, path, sizeof path);
-        VX_ERROR("store.rename_failed", "path=%s error=%d", VX_Q(path), e);
+        /* (a rename in the data dir, an upload to S3: the backend's put) */
+        VX_ERROR("store.put_failed", "path=%s errno=%d error=%s", VX_Q(path), e, VX_Q(strerror(e)));
         vx_err_set(err, vx_err_io_kind(e), "store_failed", "cannot store the mesh: %s",
                    strerror(e));
     } else if (s->ops->sync(s->blob, "meshes", err) == 0 &&
