@@ -511,7 +511,29 @@ int main(int argc, char **argv)
                         .results_max_age_s = cfg.results_max_age_s,
                         .blob_ops = bo,
                         .blob_conf = &bc};
-    vx_store *store = vx_store_open(cfg.data_dir, &sd, &err);
+    /* A shared store out of reach for now (an S3 server starting beside
+     * the replicas): tried again each second for 30 s, as the database
+     * is, then given up (the supervisor restarts the daemon). */
+    vx_store *store;
+    for (double give_up = vx_mono() + 30;;) {
+        store = vx_store_open(cfg.data_dir, &sd, &err);
+        if (store || err.kind != VX_EUNAVAIL || strcmp(err.code, "blob_store_unreachable") ||
+            vx_mono() > give_up)
+            break;
+        VX_WARN("store.blob_wait", "code=%s message=%s", err.code,
+                vx_log_quote((char[600]){0}, 600, err.message));
+        vx_stop_set(startup_stop, NULL);
+        int stopped = 0;
+        for (int i = 0; i < 20 && !stopped; i++) {
+            stopped = vx_stop_poll(&err) != 0;
+            if (!stopped) sleep_s(0.05);
+        }
+        vx_stop_set(NULL, NULL);
+        if (stopped) {
+            VX_INFO("voxeld.stop", "stage=store reason=signal");
+            return 0;
+        }
+    }
     if (!store) {
         VX_ERROR("voxeld.fatal", "stage=store code=%s message=%s", err.code,
                  vx_log_quote((char[600]){0}, 600, err.message));

@@ -190,6 +190,27 @@ check "saying why" grep -q 'blob_store_unreachable' "$TMP/bad.log"
 check "the server refused the key" grep -q 'event=blob.s3_failed.*status=403' "$TMP/bad.log"
 stop_s3
 sed -i 's/^aws_access_key_id = .*/aws_access_key_id = S3RVER/' "$TMP/creds"
-"$VOXELD" --listen 127.0.0.1:0 --data-dir "$TMP/data3" "${FLAGS[@]}" 2>"$TMP/down.log"
-check "nor with the bucket down ($?)" test $? -ne 0
+# With the server down it waits (an S3 server starting beside the
+# replicas: it exited 1 at once), each second for 30 s: a SIGTERM ends
+# the wait (exit 0), and a server that comes up is used
+"$VOXELD" --listen 127.0.0.1:0 --data-dir "$TMP/data3" "${FLAGS[@]}" 2>"$TMP/down.log" &
+DPID=$!
+for _ in $(seq 100); do grep -q 'event=store.blob_wait' "$TMP/down.log" && break; sleep 0.1; done
+check "with the server down: it waits, said ($(grep -c blob_wait "$TMP/down.log") waits)" \
+    sh -c "kill -0 $DPID && grep -q 'event=store.blob_wait.*blob_store_unreachable' '$TMP/down.log'"
+kill -TERM "$DPID"
+t0=$(date +%s)
+wait "$DPID"
+rc=$?
+check "SIGTERM ends the wait: exit 0 ($rc) within 3 s ($(($(date +%s) - t0)) s)" \
+    sh -c "test $rc = 0 && test $(($(date +%s) - t0)) -le 3"
+"$VOXELD" --listen 127.0.0.1:0 --data-dir "$TMP/data3" "${FLAGS[@]}" 2>"$TMP/down2.log" &
+DPID=$!
+for _ in $(seq 100); do grep -q 'event=store.blob_wait' "$TMP/down2.log" && break; sleep 0.1; done
+start_s3 || exit 1
+for _ in $(seq 300); do grep -q 'event=voxeld.ready' "$TMP/down2.log" && break; sleep 0.1; done
+check "the server up during the wait: ready ($(grep -o 'event=[a-z_.]*' "$TMP/down2.log" | sort | uniq -c | tr '\n' ' '))" \
+    sh -c "kill -0 $DPID && grep -q 'event=voxeld.ready' '$TMP/down2.log'"
+kill -TERM "$DPID"
+wait "$DPID"
 finish
