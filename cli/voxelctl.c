@@ -80,7 +80,7 @@ static int set_param(cJSON *params, const char *kv)
         cJSON *sub = cJSON_GetObjectItemCaseSensitive(o, k);
         if (sub && !cJSON_IsObject(sub)) { /* -p camera=orbit -p camera.fov=10 */
             fprintf(stderr, "voxelctl: -p %s: %.*s was given a value that is not an object\n", kv,
-                    (int)(dot - key), key);
+                    (int)(dot - key), kv);
             cJSON_Delete(v);
             return -2;
         }
@@ -291,10 +291,19 @@ static int read_options(ctl *c, args *a, int argc, char **argv)
             printf("voxelctl %s\n", VX_VERSION);
             exit(0);
         default: {
+            /* optopt: a short option's letter; a long option's value (256
+             * on) when it lacks its value or was given one it does not
+             * take; 0 for an unknown long option (the word given is
+             * argv[optind - 1]) */
             char shrt[3] = {'-', (char)optopt, 0};
-            const char *o = optopt > 0 && optopt < 128 ? shrt : argv[optind - 1];
+            const char *o = optopt > 0 && optopt < 128     ? shrt
+                            : optopt == 0 || optopt >= 256 ? argv[optind - 1]
+                                                           : "(a byte that is no ASCII letter)";
             fprintf(stderr, "voxelctl: %s '%s' (see voxelctl --help)\n",
-                    ch == ':' ? "a value is missing after" : "unknown option", o);
+                    ch == ':'       ? "a value is missing after"
+                    : optopt >= 256 ? "no value is taken by"
+                                    : "unknown option",
+                    o);
             return -1;
         }
         }

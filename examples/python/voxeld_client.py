@@ -32,7 +32,6 @@ import binascii
 import http.client
 import json
 import os
-import socket
 import stat
 import sys
 import tempfile
@@ -82,7 +81,9 @@ class Client:
             try:
                 return self._open_once(method, path, body, ctype, accept, key)
             except VoxeldError as e:
-                lost = lost or (key is not None and e.status == 0 and not e.refused)
+                if not lost and key is not None and e.status == 0 and not e.refused:
+                    lost = True  # the clock starts at the loss (a timeout took its own)
+                    give_up = time.monotonic() + self.retry_for
                 if lost and e.status == 0:
                     pause = 2
                 # (too_many_waits: the caller asks again without wait)
@@ -121,16 +122,28 @@ class Client:
             raise VoxeldError(e.code, code, message, retry_after) from None
         except urllib.error.URLError as e:
             err = VoxeldError(0, "unreachable", "%s: %s" % (self.server, e.reason))
-            # (no connection was made: the request cannot have been taken)
-            err.refused = isinstance(e.reason, (ConnectionRefusedError, socket.gaierror))
+            # (urllib raises it while connecting and sending: the request was
+            # not taken whole; a lost answer comes as what follows)
+            err.refused = True
             raise err from None
         except (http.client.HTTPException, OSError) as e:  # reset, timeout, closed early
             raise VoxeldError(0, "unreachable", "%s: %s" % (self.server, e or type(e).__name__)) from None
 
     def _json(self, method, path, doc=None, key=None):
+        """The JSON of a 2xx; with key, an answer cut short in its body is
+        asked for again too, as one lost before it."""
         body = json.dumps(doc).encode() if doc is not None else None
-        with self._open(method, path, body, "application/json" if body else None, key=key) as r:
-            return _load(r, path)
+        give_up = time.monotonic() + self.retry_for
+        while True:
+            with self._open(method, path, body, "application/json" if body else None, key=key) as r:
+                try:
+                    return _load(r, path)
+                except (http.client.HTTPException, OSError) as e:
+                    err = VoxeldError(0, "unreachable", "%s: the answer was cut short: %s"
+                                      % (path, e or type(e).__name__))
+            if key is None or time.monotonic() + 2 > give_up:
+                raise err
+            time.sleep(2)
 
     def upload(self, path, name=None):
         """Stores a mesh file; returns the Mesh (its "id" names it in jobs).

@@ -26,6 +26,8 @@ takes uploads and jobs and says each job succeeded; MODE breaks one answer:
             answer lost); a later one with the same Idempotency-Key is
             answered that job (200), one without a key or with another
             a new job (202, another id)
+  cutbody   the same, the first answer cut in its body (a 202 head, then
+            part of the job)
 The port goes into PORTFILE (whole, by a rename) once it listens."""
 import gzip
 import http.server
@@ -95,11 +97,18 @@ class H(http.server.BaseHTTPRequestHandler):
         elif self.path.startswith("/v1/jobs") and mode == "esc":
             self.reply(422, "application/json", json.dumps({"error": {
                 "code": "invalid\x1b[31m", "message": "bad" + ESC}}).encode())
-        elif self.path.startswith("/v1/jobs") and mode == "cut":
+        elif self.path.startswith("/v1/jobs") and mode in ("cut", "cutbody"):
             key, keys = self.headers.get("Idempotency-Key"), self.server.__dict__.setdefault("keys", [])
             if not keys:
                 keys.append(key)
                 self.close_connection = True
+                if mode == "cutbody":
+                    self.send_response(202)
+                    self.send_header("Content-Type", "application/json")
+                    self.send_header("Content-Length", "400")
+                    self.end_headers()
+                    self.wfile.write(b'{"id": "cdcd')
+                    self.wfile.flush()
                 self.connection.shutdown(2)
             elif key is not None and key == keys[0]:
                 self.reply(200, "application/json", json.dumps(job("queued", 0)).encode())

@@ -246,7 +246,7 @@ kill "$hpid"
 # A job that is {} (a KeyError traceback), a failed job whose error is
 # null ("job failed: None"), an error message with terminal escapes (they
 # reached the terminal)
-for m in shape nullerr esc atonce cut; do
+for m in shape nullerr esc atonce cut cutbody; do
     at $m
 done
 check "a job that is {}: bad_answer, exit 1 ($(tail -n 1 "$TMP/h-shape/out.txt"))" \
@@ -260,6 +260,8 @@ check "?wait answered at once: polled once a second ($(grep -c '^GET /v1/jobs/[0
 # followed (it failed "unreachable"; without a key a retry queues another)
 check "a lost submit answer: sent again with one key, the first job followed ($(grep 'POST /v1/jobs' "$TMP/h-cut/log" | tr '\n' ' '))" \
     bash -c "test \$(cat '$TMP/h-cut/rc') = 0 && test -s '$TMP/h-cut/out.bin' && test \$(grep '^POST /v1/jobs' '$TMP/h-cut/log' | awk '{print \$NF}' | grep -cE '^[0-9a-f]{32}\$') = 2 && test \$(grep '^POST /v1/jobs' '$TMP/h-cut/log' | awk '{print \$NF}' | sort -u | wc -l) = 1 && ! grep -q efef '$TMP/h-cut/log'"
+check "a submit answer cut in its body: sent again with its key, no traceback ($(tail -n 1 "$TMP/h-cutbody/out.txt"))" \
+    bash -c "test \$(cat '$TMP/h-cutbody/rc') = 0 && test -s '$TMP/h-cutbody/out.bin' && test \$(grep -c '^POST /v1/jobs' '$TMP/h-cutbody/log') = 2 && ! grep -q efef '$TMP/h-cutbody/log'"
 check "escapes in an error: shown as '?' ($(tail -n 1 "$TMP/h-esc/out.txt" | cat -v))" \
     bash -c "test \$(cat '$TMP/h-esc/rc') = 1 && grep -q 'bad?' '$TMP/h-esc/out.txt' && ! grep -q \$'\\x1b' '$TMP/h-esc/out.txt'"
 finish

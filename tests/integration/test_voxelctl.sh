@@ -64,11 +64,14 @@ bad_line() { # bad_line WHAT PATTERN ARGS...: exit 2, PATTERN on stderr
 }
 bad_line "a missing option value" "^voxelctl: a value is missing after .--server" jobs --server
 bad_line "an unknown option" "^voxelctl: unknown option .-z" -z jobs
+bad_line "a value to an option that takes none" "^voxelctl: no value is taken by .--json=1" --json=1 jobs
+bad_line "a non-ASCII short option" "unknown option .(a byte that is no ASCII letter)" -é jobs
 bad_line "--newest to meshes" "^voxelctl: --newest is not an option of meshes" meshes --newest
 bad_line "--no-wait to jobs" "^voxelctl: --no-wait is not an option of jobs" jobs --no-wait
 bad_line "--after not a job id" "--after wants a job id" jobs --after xyz
 bad_line "--after a job id to meshes" "--after wants a mesh id" meshes --after 0123456789abcdef0123456789abcdef
 bad_line "-p under a value that is no object" "camera was given a value that is not an object" preview "$MESH" -p camera=orbit -p camera.fov=10
+bad_line "... two levels down, named whole" "camera.x was given a value" preview "$MESH" -p camera.x=1 -p camera.x.y=2
 bad_line "--local jobs" "not with jobs" --local jobs
 bad_line "--local --server" "not with --server" --local --server "$BASE" voxelize "$MESH"
 bad_line "--local --no-wait" "not with --no-wait" --local --no-wait voxelize "$MESH"
@@ -589,6 +592,9 @@ check "?wait answered at once: polled once a second ($(grep -c '^GET /v1/jobs/[0
 # server took it) is sent again under the same Idempotency-Key, which
 # answers the job it made (it failed, "Empty reply from server", and a
 # retry without a key would have queued a second job)
+voxelize_at cutbody -o out.bin
+check "a submit answer cut in its body: sent again with its key, the first job followed ($(tr '\n' ' ' <"$TMP/h-cutbody/err.txt"))" \
+    bash -c "test \$(cat '$TMP/h-cutbody/rc') = 0 && test -s '$TMP/h-cutbody/out.bin' && test \$(grep -c '^POST /v1/jobs' '$TMP/h-cutbody/log') = 2 && ! grep -q efef '$TMP/h-cutbody/log'"
 voxelize_at cut -o out.bin
 check "a lost submit answer: sent again with its key, the first job followed, exit 0 ($(tr '\n' ' ' <"$TMP/h-cut/err.txt"))" \
     bash -c "test \$(cat '$TMP/h-cut/rc') = 0 && test -s '$TMP/h-cut/out.bin' && grep -q 'answer was lost' '$TMP/h-cut/err.txt' && grep -q '^GET /v1/jobs/cdcd' '$TMP/h-cut/log' && ! grep -q efef '$TMP/h-cut/log'"
