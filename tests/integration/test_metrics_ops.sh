@@ -110,7 +110,7 @@ start_daemon --job-timeout 0 --request-timeout 0 --connection-timeout 0 --max-tr
     --max-connections-per-ip 0 --max-image-pixels 0 --max-job-memory 0 --header-timeout 0 \
     --min-body-rate 0 --min-send-rate 0 --max-parse-memory 0 --results-max-bytes 0 \
     --results-max-age 0 --job-history-bytes 0 --max-event-streams 0 --max-connections 300 \
-    --keep-memory 0 || exit 1
+    --keep-memory 0 --max-cc-valence 0 || exit 1
 INFO_FROM=$(wc -l <"$VX_API_LOG")
 api GET /v1/info
 expect_status "info with zero limits" 200
@@ -118,7 +118,7 @@ check "every zero limit reported as 0" jq -e '.limits | [.job_timeout_s, .max_wa
     .connection_timeout_s, .max_triangles, .max_connections_per_ip, .max_image_pixels,
     .max_job_memory_bytes, .header_timeout_s, .min_body_rate, .min_send_rate,
     .max_parse_memory_bytes, .results_max_bytes, .results_max_age_s, .job_history_bytes,
-    .max_event_streams, .keep_memory_bytes] | all(. == 0)' "$BODY"
+    .max_event_streams, .keep_memory_bytes, .max_cc_valence] | all(. == 0)' "$BODY"
 check "max_connections reported" jq -e '.limits.max_connections == 300' "$BODY"
 tail -n +"$((INFO_FROM + 1))" "$VX_API_LOG" >"$TMP/info-api.jsonl"
 check "the zero-limit /v1/info fits api/openapi.yaml" \
