@@ -115,6 +115,14 @@ static int cc_fits(long levels, double quads, const vx_limits *lim, int at_submi
 static int cc_check_mesh(const void *params, const cJSON *meta, const vx_limits *lim, vx_err *err)
 {
     const cc_params *p = params;
+    /* no limit surface along an edge of three faces or more (the run
+     * says which edge, for metadata without the count) */
+    double nm = cJSON_GetNumberValue(cJSON_GetObjectItemCaseSensitive(meta, "nonmanifold_edges"));
+    if (p->limit && nm > 0)
+        return vx_err_set(err, VX_EUNPROC, "invalid_params",
+                          "params.limit: the mesh has %.0f edges that three or more faces "
+                          "border, where there is no limit surface (limit: false subdivides it)",
+                          nm);
     const cJSON *t = cJSON_GetObjectItemCaseSensitive(meta, "triangles");
     const cJSON *f =
         cJSON_GetObjectItemCaseSensitive(cJSON_GetObjectItemCaseSensitive(meta, "faces"), "total");

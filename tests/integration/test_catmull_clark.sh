@@ -152,7 +152,7 @@ PY
 # An edge that three or more faces border: OpenSubdiv's limit evaluation
 # wrote past its buffers there (19 pages on one edge, or one triangle 20
 # times, killed the worker with a corrupt heap). Subdivided with the
-# faces' normals; limit: true fails naming the edge. The daemon's log
+# faces' normals; limit: true is refused (422). The daemon's log
 # stays free of the worker's crash.
 python3 - "$TMP/book.obj" "$TMP/same.obj" <<'PY'
 import math, sys
@@ -176,9 +176,11 @@ for shape in book same; do
     done
     api GET "/v1/jobs/$CJ/result/mesh"
     check "$shape: a glb" test "$(head -c 4 "$BODY")" = glTF
-    cc "$shape: limit" "$SHAPE" '{"levels":1,"limit":true}'
-    check "$shape: limit fails osd_topology naming the edge ($(jq -c .error "$TMP/job.json"))" \
-        jq -e '.state == "failed" and .error.code == "osd_topology" and (.error.message | test("edge from vertex 1 to vertex 2 borders (19|20) faces"))' "$TMP/job.json"
+    # (refused at submission: it was a job that failed osd_topology)
+    api POST /v1/jobs -H "Content-Type: application/json" \
+        -d "{\"mesh\":\"$SHAPE\",\"kind\":\"catmull-clark\",\"params\":{\"levels\":1,\"limit\":true}}"
+    expect_error "$shape: limit" 422 invalid_params
+    check "$shape: ... saying why ($(jqb .error.message))" grep -q 'params.limit: the mesh has [0-9]* edges that three or more faces border' <<<"$(jqb .error.message)"
 done
 cc "book: levels 1, obj" "$(sha256sum "$TMP/book.obj" | cut -c1-64)" '{"levels":1}'
 api GET "/v1/jobs/$CJ/result/mesh"
