@@ -522,13 +522,9 @@ int main(int argc, char **argv)
             break;
         VX_WARN("store.blob_wait", "code=%s message=%s", err.code,
                 vx_log_quote((char[600]){0}, 600, err.message));
-        vx_stop_set(startup_stop, NULL);
         int stopped = 0;
-        for (int i = 0; i < 20 && !stopped; i++) {
-            stopped = vx_stop_poll(&err) != 0;
-            if (!stopped) sleep_s(0.05);
-        }
-        vx_stop_set(NULL, NULL);
+        for (int i = 0; i < 20 && !(stopped = startup_stop(NULL, &err) != 0); i++)
+            sleep_s(0.05);
         if (stopped) {
             VX_INFO("voxeld.stop", "stage=store reason=signal");
             return 0;

@@ -72,25 +72,17 @@ class Client:
 
     def _open(self, method, path, body=None, ctype=None, accept=None, retry=True, key=None):
         """The response of a 2xx; a 429 or 503 with Retry-After is sent
-        again for up to retry_for seconds (with retry), and so is a
-        request with an Idempotency-Key (key) whose answer was lost, or
-        whose server refuses connections after that (restarting)."""
+        again for up to retry_for seconds (with retry). key: sent as the
+        Idempotency-Key."""
         give_up = time.monotonic() + (self.retry_for if retry else 0)
-        lost = False
         while True:
             try:
                 return self._open_once(method, path, body, ctype, accept, key)
             except VoxeldError as e:
-                if not lost and key is not None and e.status == 0 and not e.refused:
-                    lost = True  # the clock starts at the loss (a timeout took its own)
-                    give_up = time.monotonic() + self.retry_for
-                if lost and e.status == 0:
-                    pause = 2
                 # (too_many_waits: the caller asks again without wait)
-                elif e.status not in (429, 503) or e.retry_after is None or e.code == "too_many_waits":
+                if e.status not in (429, 503) or e.retry_after is None or e.code == "too_many_waits":
                     raise
-                else:
-                    pause = min(max(e.retry_after, 1), 30)
+                pause = min(max(e.retry_after, 1), 30)
                 if time.monotonic() + pause > give_up:
                     raise
                 time.sleep(pause)
@@ -130,20 +122,28 @@ class Client:
             raise VoxeldError(0, "unreachable", "%s: %s" % (self.server, e or type(e).__name__)) from None
 
     def _json(self, method, path, doc=None, key=None):
-        """The JSON of a 2xx; with key, an answer cut short in its body is
-        asked for again too, as one lost before it."""
+        """The JSON of a 2xx. With key (an Idempotency-Key), a request
+        whose answer was lost after it was sent, before its head or in its
+        body, is sent again every 2 s for up to retry_for seconds from the
+        loss, and so is one the server refuses after that (restarting)."""
         body = json.dumps(doc).encode() if doc is not None else None
-        give_up = time.monotonic() + self.retry_for
+        give_up = None  # set at the first loss
         while True:
-            with self._open(method, path, body, "application/json" if body else None, key=key) as r:
-                try:
-                    return _load(r, path)
-                except (http.client.HTTPException, OSError) as e:
-                    err = VoxeldError(0, "unreachable", "%s: the answer was cut short: %s"
-                                      % (path, e or type(e).__name__))
-            if key is None or time.monotonic() + 2 > give_up:
-                raise err
-            time.sleep(2)
+            try:
+                with self._open(method, path, body, "application/json" if body else None,
+                                key=key) as r:
+                    try:
+                        return _load(r, path)
+                    except (http.client.HTTPException, OSError) as e:
+                        raise VoxeldError(0, "unreachable", "%s: the answer was cut short: %s"
+                                          % (path, e or type(e).__name__)) from None
+            except VoxeldError as e:
+                if key is None or e.code != "unreachable" or (e.refused and give_up is None):
+                    raise
+                give_up = give_up or time.monotonic() + self.retry_for
+                if time.monotonic() + 2 > give_up:
+                    raise
+                time.sleep(2)
 
     def upload(self, path, name=None):
         """Stores a mesh file; returns the Mesh (its "id" names it in jobs).

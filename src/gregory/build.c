@@ -449,9 +449,10 @@ static void project_dir(const double *dir, const double *n, double *out)
 /* Tangent directions at node p (unit normal n) towards its fan neighbours
  * P + 3 ids[i] (counter-clockwise): the neighbours' angles about p, scaled to
  * 2 pi (closed fan) or pi (open fan of two faces or more, the first and last
- * neighbours on the boundary; one face is a corner: its chords), laid out in the tangent plane from
- * the first neighbour's projected direction (open: the direction from the last neighbour to the
- * first, so the boundary curve is smooth through p). Unlike projecting
+ * neighbours on the boundary; one face is a corner: its chords), laid out
+ * in the tangent plane from the first neighbour's projected direction
+ * (open: the direction from the last neighbour to the first, so the
+ * boundary curve is smooth through p). Unlike projecting
  * every chord, this keeps the directions in the fan's cyclic order even
  * where the mesh is crumpled around p, so neighbouring patches never fold
  * over each other at p. Degenerate fans fall back to projected chords. */
