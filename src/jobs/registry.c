@@ -166,6 +166,10 @@ cJSON *job_json(const vx_jobs *j, const job *jb, int api)
             cJSON_AddNullToObject(t, "total_ms");
     } else {
         cJSON_AddNumberToObject(o, "seq", (double)jb->seq);
+        /* the times in full (the strings above keep milliseconds), so that
+         * a replayed job gives the same created and timings */
+        const double t[3] = {jb->created, jb->started, jb->finished};
+        cJSON_AddItemToObject(o, "times", cJSON_CreateDoubleArray(t, 3));
         if (jb->idem) cJSON_AddStringToObject(o, "idempotency_key", jb->idem);
         if (jb->interruptions) cJSON_AddNumberToObject(o, "interruptions", jb->interruptions);
     }

@@ -128,6 +128,12 @@ static void replay_one(const cJSON *rec, void *ud)
             t[i] = (double)timegm(&tm) + ms / 1000.0;
         }
     }
+    const cJSON *full = cJSON_GetObjectItemCaseSensitive(o, "times"); /* journals since 47 */
+    if (cJSON_GetArraySize(full) == 3)
+        for (int i = 0; i < 3; i++) {
+            const double v = cJSON_GetNumberValue(cJSON_GetArrayItem(full, i));
+            if (v == v) t[i] = v;
+        }
     jb->created = t[0];
     jb->started = t[1];
     jb->finished = t[2];

@@ -3,6 +3,7 @@
 #include <dirent.h>
 #include <ctype.h>
 #include <errno.h>
+#include <math.h>
 #include <fcntl.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -213,12 +214,14 @@ uint64_t vx_tree_bytes(const char *path)
 
 void vx_rfc3339(double t, char out[32])
 {
-    time_t s = (time_t)t;
+    /* to the nearest microsecond first: x.356 read back as x.35599999...
+     * is still .356 */
+    const long long us = llround(t * 1e6);
+    time_t s = (time_t)(us / 1000000);
     struct tm tm;
     gmtime_r(&s, &tm);
-    int ms = (int)((t - (double)s) * 1000.0);
+    int ms = (int)(us % 1000000 / 1000);
     if (ms < 0) ms = 0;
-    if (ms > 999) ms = 999;
     snprintf(out, 32, "%04d-%02d-%02dT%02d:%02d:%02d.%03dZ", tm.tm_year + 1900, tm.tm_mon + 1,
              tm.tm_mday, tm.tm_hour, tm.tm_min, tm.tm_sec, ms);
 }

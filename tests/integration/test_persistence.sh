@@ -16,6 +16,8 @@ DONE=$(jqb .id)
 check "first job done" jq -e '.state == "succeeded"' "$BODY"
 api GET "/v1/jobs/$DONE/result"
 cp "$BODY" "$TMP/done.png"
+api GET "/v1/jobs/$DONE"
+cp "$BODY" "$TMP/done.json"
 # whatever the caller's umask (this script's is 022), nothing in the data
 # dir is readable by others
 check "data dir: no file or dir others may read (umask 027)" \
@@ -41,6 +43,15 @@ for m in "$BOX" "$ROCKER" "$FANDISK"; do
 done
 api GET "/v1/jobs/$DONE/result"
 check "finished result kept" cmp -s "$BODY" "$TMP/done.png"
+# the journal keeps its times in full: created, started, finished and the
+# timings (fractions of a millisecond) read back as they were
+api GET "/v1/jobs/$DONE"
+check "a finished job reads back the same after kill -9 (times and timings too; the replica name holds the pid)" \
+    jq -e --slurpfile was "$TMP/done.json" 'del(.replica) == ($was[0] | del(.replica))' "$BODY"
+# created is not before the millisecond its id names
+ID_MS=$((16#${DONE:0:12}))
+CREATED_MS=$(jq -r '.created' "$BODY" | python3 -c 'import sys, datetime; t = sys.stdin.read().strip(); print(int(datetime.datetime.strptime(t, "%Y-%m-%dT%H:%M:%S.%fZ").replace(tzinfo=datetime.timezone.utc).timestamp() * 1000 + 0.5))')
+check "created ($CREATED_MS) is not before the id's time ($ID_MS)" test "$CREATED_MS" -ge "$ID_MS"
 for j in "${JOBS[@]}"; do
     wait_job "$j" 300
     check "job $j finished after restart" jq -e '.state == "succeeded"' "$BODY"
