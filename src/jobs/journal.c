@@ -50,9 +50,21 @@ static void reserve_tail(vx_journal *j, off_t need)
         j->short_said = 0;
     } else if (errno == EOPNOTSUPP || errno == ENOSYS) {
         j->no_fallocate = 1;
-    } else if (!j->short_said) { /* not once a request while the disk stays full */
-        j->short_said = 1;
-        VX_WARN("journal.reserve_failed", "path=%s error=%d", VX_Q(j->path), errno);
+    } else {
+        const int e = errno;
+        /* What the file holds already counts: the reserve a run before this
+         * one left (a restart on a full disk), or part of this top-up. The
+         * journal is written in order, so its blocks past the size are the
+         * reserve. */
+        struct stat st;
+        if (fstat(j->fd, &st) == 0 && (off_t)st.st_blocks * 512 > j->reserved)
+            j->reserved = (off_t)st.st_blocks * 512;
+        if (j->reserved < j->size) j->reserved = j->size;
+        if (!j->short_said) { /* not once a request while the disk stays full */
+            j->short_said = 1;
+            VX_WARN("journal.reserve_failed", "path=%s error=%d reserved=%lld", VX_Q(j->path), e,
+                    (long long)(j->reserved - j->size));
+        }
     }
 }
 

@@ -290,6 +290,35 @@ check "after kill -9 the $N accepted jobs are still succeeded, run once" \
     test "$(python3 "$TMP/check.py" "$BASE" "$TMP/accepted" | tail -n 1)" = 0
 check "none was replayed to run again" bash -c "tail -n +$((FROM + 1)) '$TMP/daemon.log' | grep -q 'event=jobs.replayed.* requeued=0 '"
 
+# A restart on a full disk keeps the journal's reserve it finds: the blocks
+# a run before left allocated past its end (it topped up to 1 MiB, jobs
+# used some). The failed top-up at start forgot them, and every new job was
+# 507 though no job was unfinished and more than half the reserve was there.
+rm -f "$DISK/filler" "$DISK/filler2"
+stop_daemon
+start_daemon --min-free-disk 0 || exit 1
+python3 - "$BASE" "$BOX" <<'PY'
+import json, sys, urllib.request
+base, mesh = sys.argv[1], sys.argv[2]
+for i in range(100):
+    req = urllib.request.Request(base + "/v1/jobs?wait=30", data=json.dumps(
+        {"mesh": mesh, "kind": "voxelize",
+         "params": {"resolution": 8, "padding": 100 + i, "format": "summary"}}).encode(),
+        headers={"Content-Type": "application/json"})
+    urllib.request.urlopen(req).read()
+PY
+past_end() { echo $(($(stat -c '%b * %B - %s' "$DATA/journal.log"))); }
+KEPT=$(past_end)
+check "jobs used some of the reserve: $KEPT bytes past the end, between half and all of 1 MiB" \
+    test "$KEPT" -gt $((600 << 10)) -a "$KEPT" -lt $((1 << 20))
+fill_to 0
+kill9_daemon
+start_daemon --min-free-disk 0 || exit 1
+check "its top-up failed, the reserve found is logged" grep -q "event=journal.reserve_failed .*reserved=$KEPT" "$TMP/daemon.log"
+fill_to 100000
+run_job voxelize "$BOX" '{"resolution":8,"padding":99,"format":"summary"}'
+job_ok "after a restart on a full disk, with 100 KB freed and the reserve found, a new job runs"
+
 # The data dir made read-only under the daemon (a read-only bind mount over
 # it): uploads and new jobs get 503 not_ready, as /readyz says, instead of
 # a job accepted (202) that failed at its first output; reads still work.
