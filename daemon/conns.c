@@ -840,14 +840,24 @@ void vx_conns_stop(vx_conns *s)
     s->sweeper_started = 0;
 }
 
-size_t vx_conns_pending(vx_conns *s)
+static size_t count_phase(vx_conns *s, int busy_only)
 {
     size_t n = 0;
     pthread_mutex_lock(&s->lock);
     for (const vx_conn *vc = s->list; vc; vc = vc->next)
-        n += !vc->killed && vc->phase != P_IDLE;
+        n += !vc->killed && (busy_only ? vc->phase == P_BUSY : vc->phase != P_IDLE);
     pthread_mutex_unlock(&s->lock);
     return n;
+}
+
+size_t vx_conns_pending(vx_conns *s)
+{
+    return count_phase(s, 0);
+}
+
+size_t vx_conns_answering(vx_conns *s)
+{
+    return count_phase(s, 1);
 }
 
 int vx_conns_shutdown(vx_conns *s)

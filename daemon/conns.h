@@ -33,6 +33,9 @@ int vx_conns_shutdown(vx_conns *s);
 /* The open connections that are not idle between requests (a head or body
  * arriving, an answer being made or sent): what a stop waits for. */
 size_t vx_conns_pending(vx_conns *s);
+/* Of those, the ones being answered (the answer made or sent, a result
+ * downloading): what a stop lets finish after the requests' grace. */
+size_t vx_conns_answering(vx_conns *s);
 /* Stops the sweeper if running and frees s (after libmicrohttpd has
  * stopped: its close notifications use s). */
 void vx_conns_free(vx_conns *s);

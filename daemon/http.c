@@ -887,6 +887,11 @@ void vx_http_stop(vx_http *h, double grace_s)
     }
     /* a head or body still arriving gets a 503, read before the close */
     if (vx_conns_shutdown(h->conns) > 0) usleep(500000);
+    /* an answer being sent (a result downloading) is let finish: main's
+     * stop watchdog (--stop-timeout) bounds the wait, and the sweeper still
+     * cuts a reader that stalls or is too slow */
+    while (vx_conns_answering(h->conns) > 0)
+        usleep(20000);
     vx_conns_stop(h->conns);
     MHD_stop_daemon(h->mhd);
     vx_events_free(h->events);

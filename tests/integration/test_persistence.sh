@@ -84,6 +84,38 @@ for j in "$LONG" "$NEXT"; do
     check "job $j finished after SIGTERM + restart" jq -e '.state == "succeeded"' "$BODY"
 done
 
+# A download under way at SIGTERM is let finish (the stop waits for answers
+# being sent, --stop-timeout bounding it): it was cut 2 s after the jobs
+# had stopped, and the daemon still exited 0.
+run_job voxelize "$BOX" '{"grid":{"origin":[0,0,0],"voxel_size":0.02,"dims":[256,256,256]},"format":"raw8"}'
+job_ok "a 16 MiB result"
+# read at about 2 MB/s through a small receive buffer (the kernel's own
+# buffers would otherwise hold what is left at the close)
+python3 - "$PORT" "/v1/jobs/$JOB/result" >"$TMP/dl.code" <<'PY' &
+import socket, sys, time
+s = socket.socket()
+s.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 65536)
+s.connect(("127.0.0.1", int(sys.argv[1])))
+s.settimeout(60)
+s.sendall(("GET %s HTTP/1.1\r\nHost: x\r\n\r\n" % sys.argv[2]).encode())
+got = b""
+while True:
+    x = s.recv(65536)
+    if not x:
+        break
+    got += x
+    time.sleep(0.03)
+head, _, body = got.partition(b"\r\n\r\n")
+print(head.split(b" ")[1].decode(), len(body))
+PY
+CURL=$!
+sleep 1
+stop_daemon
+wait "$CURL"
+check "a download read at 2 MB/s through the stop got all of it ($(cat "$TMP/dl.code"))" \
+    test "$(cat "$TMP/dl.code")" = "200 16777216"
+start_daemon || exit 1
+
 # The result budget: a small byte budget evicts the least recently used.
 stop_daemon
 start_daemon --results-max-bytes 20000 || exit 1
