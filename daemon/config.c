@@ -63,7 +63,7 @@ static const opt_def opts[] = {
      "longest a job may run, seconds (default 600; 0 = no limit)"},
     {"gl-stall-timeout", T_SECONDS, F(gl_stall_timeout_s), 0,
      "/livez answers 503 once the GL thread has been silent this long (a driver call that does "
-     "not return), seconds (default 60; 0 = off)"},
+     "not return), seconds (default 60; 0 = off, else at least 2)"},
     {"stop-timeout", T_SECONDS, F(stop_timeout_s), 0,
      "after SIGTERM, how long the running job may take to stop before voxeld exits 1 without "
      "it (it runs again at the next start), seconds (default 30; 0 = wait)"},
@@ -79,9 +79,9 @@ static const opt_def opts[] = {
      "slowest reader of an answer, bytes/s over 10 s windows while the answer waits on the client "
      "(default 1024; 0 = off)"},
     {"max-uri-bytes", T_SIZE, F(max_uri_bytes), 0,
-     "longest request target, path and query (default 16K; at least 256)"},
+     "longest request target, path and query (default 16K; 256 to 128K)"},
     {"max-header-bytes", T_SIZE, F(max_header_bytes), 0,
-     "largest request head, all header lines (default 64K; at least 1K)"},
+     "largest request head, all header lines (default 64K; 1K to 128K)"},
     {"reuse-port", T_BOOL, F(reuse_port), 0,
      "share the port with other processes (SO_REUSEPORT): yes or no (default)"},
     {"max-connections", T_SIZE, F(max_connections), 0,
@@ -724,6 +724,24 @@ int vx_config_load(vx_config *c, int argc, char **argv)
     }
     if (c->max_header_bytes < 1024) {
         vx_log_plain(VX_LOG_ERR, "voxeld: max-header-bytes must be at least 1K\n");
+        return -1;
+    }
+    /* Above these libmicrohttpd's own 256 KiB a connection answers first
+     * (its HTML 414 or 431): a larger limit would never be the one met. */
+    if (c->max_uri_bytes > VX_CONFIG_MAX_HEAD) {
+        vx_log_plain(VX_LOG_ERR, "voxeld: max-uri-bytes must be at most 128K\n");
+        return -1;
+    }
+    if (c->max_header_bytes > VX_CONFIG_MAX_HEAD) {
+        vx_log_plain(VX_LOG_ERR, "voxeld: max-header-bytes must be at most 128K\n");
+        return -1;
+    }
+    /* The GL thread says it is alive about once a second: a shorter limit
+     * would find an idle, healthy thread silent. */
+    if (c->gl_stall_timeout_s > 0 && c->gl_stall_timeout_s < 2) {
+        vx_log_plain(VX_LOG_ERR,
+                     "voxeld: gl-stall-timeout must be 0 (off) or at least 2 seconds (the GL "
+                     "thread says it is alive about once a second)\n");
         return -1;
     }
     return 0;

@@ -10,6 +10,10 @@
 #include <stdint.h>
 #include <stdio.h>
 
+/* The largest --max-uri-bytes and --max-header-bytes: what a connection's
+ * 256 KiB of libmicrohttpd memory holds of a head with room to spare. */
+#define VX_CONFIG_MAX_HEAD ((uint64_t)128 << 10)
+
 #include "util/log.h"
 #include "util/path.h"
 

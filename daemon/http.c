@@ -272,7 +272,8 @@ static int check_framing(struct MHD_Connection *c, req *r, const char *head, con
     if (coding == -2) return fail_framing(c, r, "an empty Transfer-Encoding header");
     if (coding < 0)
         return vx_resp_fail(c, r, VX_ENOTIMPL, "not_implemented",
-                            "the only transfer coding taken is chunked (no gzip, no lists)");
+                            "the only transfer coding taken is chunked, written so (no gzip, "
+                            "no lists, no blank after it)");
     if (coding > 0 && n.length)
         return fail_framing(c, r, "Content-Length and Transfer-Encoding together");
     /* RFC 9112 6.1: an HTTP/1.0 message's framing is faulty with one */
@@ -467,7 +468,8 @@ static int take_body(vx_http *h, req *r, const char *data, size_t n)
  * its path and the client's address, for the answer and the log. */
 static void identify(struct MHD_Connection *c, req *r, const char *url)
 {
-    const char *rid = vx_resp_header(c, "X-Request-Id");
+    char rbuf[sizeof r->rid];
+    const char *rid = vx_resp_header_trim(c, "X-Request-Id", rbuf, sizeof rbuf);
     if (vx_req_id_ok(rid))
         snprintf(r->rid, sizeof r->rid, "%s", rid);
     else

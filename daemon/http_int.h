@@ -99,6 +99,10 @@ const char *vx_resp_cors_origin(struct MHD_Connection *c);
 vx_resp_answer vx_resp_answer_of(const vx_err *e);
 /* Value of request header name, or NULL. */
 const char *vx_resp_header(struct MHD_Connection *c, const char *name);
+/* The same without the blanks after it (libmicrohttpd keeps them; RFC 9110
+ * 5.5 excludes them from the value), copied into buf when it had some and
+ * fits in n - 1 bytes (else the value as sent). */
+const char *vx_resp_header_trim(struct MHD_Connection *c, const char *name, char *buf, size_t n);
 /* The values of every line of list header name, joined with ", " into buf
  * (RFC 9110 5.3: If-None-Match or Accept-Encoding may come on several
  * lines; vx_resp_header gives the first only); NULL when there is none or

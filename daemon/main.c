@@ -1,6 +1,7 @@
 /* voxeld: configuration, signals, sd_notify and the wiring of store, jobs
  * (GL thread + workers) and the HTTP API. */
 #include <errno.h>
+#include <fcntl.h>
 #include <limits.h>
 #include <malloc.h>
 #include <pthread.h>
@@ -458,8 +459,20 @@ static void keep_memory(uint64_t bytes, int pretouch)
     VX_INFO("memory.pretouched", "bytes=%zu ms=%.1f", n, (vx_mono() - t0) * 1e3);
 }
 
+/* Descriptors 0 to 2 closed by whoever started us (`voxeld 2>&-`): the
+ * files opened next would take them, and the log (fd 2) went into the
+ * data dir's lock file. They are /dev/null instead. */
+static void hold_std_fds(void)
+{
+    int fd;
+    while ((fd = open("/dev/null", O_RDWR)) >= 0 && fd <= 2)
+        ;
+    if (fd > 2) close(fd);
+}
+
 int main(int argc, char **argv)
 {
+    hold_std_fds();
     if (argc > 1 && !strcmp(argv[1], "run")) return run_one_job(argc, argv);
     /* Before anything else: a SIGTERM in the first milliseconds took the
      * default action (exit 143) instead of a clean stop. */

@@ -56,6 +56,19 @@ const char *vx_resp_header(struct MHD_Connection *c, const char *name)
     return MHD_lookup_connection_value(c, MHD_HEADER_KIND, name);
 }
 
+const char *vx_resp_header_trim(struct MHD_Connection *c, const char *name, char *buf, size_t n)
+{
+    const char *v = vx_resp_header(c, name);
+    size_t len = v ? strlen(v) : 0;
+    if (!len || (v[len - 1] != ' ' && v[len - 1] != '\t')) return v;
+    while (len && (v[len - 1] == ' ' || v[len - 1] == '\t'))
+        len--;
+    if (len >= n) return v;
+    memcpy(buf, v, len);
+    buf[len] = 0;
+    return buf;
+}
+
 typedef struct joined {
     const char *name;
     char *buf;

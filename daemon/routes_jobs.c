@@ -105,7 +105,8 @@ static int job_post(vx_http *h, struct MHD_Connection *c, req *r, double wait_s)
     vx_err err;
     vx_err_clear(&err);
     cJSON *job = NULL;
-    const char *key = vx_resp_header(c, "Idempotency-Key");
+    char kbuf[256];
+    const char *key = vx_resp_header_trim(c, "Idempotency-Key", kbuf, sizeof kbuf);
     vx_jobs_submit_opts opts = {.idempotency_key = key,
                                 .reuse =
                                     cJSON_IsTrue(cJSON_GetObjectItemCaseSensitive(doc, "reuse")),

@@ -585,6 +585,21 @@ static int submit_split(vx_jobs *j, vx_pg_new_job *parent, const cJSON *kids, vx
 static int row_output(vx_jobs *j, const vx_pg_job *row, const char *name, char *path, size_t pathn,
                       char ctype[64], char fname[128], vx_err *err);
 
+cJSON *cluster_find_idem(vx_jobs *j, const char *key, uint64_t fp)
+{
+    char fps[17];
+    snprintf(fps, sizeof fps, "%016llx", (unsigned long long)fp);
+    vx_pg_job row;
+    memset(&row, 0, sizeof row);
+    vx_err err;
+    vx_err_clear(&err);
+    cJSON *out = NULL;
+    if (vx_pg_find_idem(j->cl->api, key, &row, &err) > 0 && !strcmp(row.fp, fps))
+        out = row_json(j, &row, 1);
+    vx_pg_job_clear(&row);
+    return out;
+}
+
 cJSON *cluster_submit(vx_jobs *j, const char *mesh, const vx_kind *k, cJSON *params, uint64_t fp,
                       const vx_jobs_submit_opts *opts, int *existing, vx_err *err)
 {

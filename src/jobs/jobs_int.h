@@ -185,6 +185,10 @@ void cluster_free(vx_jobs *j);
  * normalised ones, pins what the submission holds (released here). */
 cJSON *cluster_submit(vx_jobs *j, const char *mesh, const vx_kind *k, cJSON *params, uint64_t fp,
                       const vx_jobs_submit_opts *opts, int *existing, vx_err *err);
+/* The job an Idempotency-Key names, when it is the request of fingerprint
+ * fp; NULL otherwise (none, another request, or the database not
+ * answering). */
+cJSON *cluster_find_idem(vx_jobs *j, const char *key, uint64_t fp);
 cJSON *cluster_get(vx_jobs *j, const char *jid, int *terminal, vx_err *err);
 cJSON *cluster_cancel(vx_jobs *j, const char *jid, int *was_running, vx_err *err);
 cJSON *cluster_list(vx_jobs *j, const char *after, int limit, const vx_jobs_filter *f,

@@ -301,6 +301,38 @@ static void union_bbox(vx_jobs *j, const vx_kind *k, const cJSON *norm, cJSON *m
     }
 }
 
+/* A retry under an Idempotency-Key whose mesh is gone (deleted since the
+ * first try): the key's job, when it is this request (kind, mesh and
+ * normalised params), else NULL. */
+static cJSON *idem_retry(vx_jobs *j, const vx_kind *k, const char *mesh, const cJSON *params,
+                         const char *key)
+{
+    if (params && !cJSON_IsObject(params)) return NULL;
+    vx_err e;
+    vx_err_clear(&e);
+    cJSON *norm = vx_params_normalize(k, params, &j->desc.limits, &e);
+    if (!norm) return NULL;
+    const uint64_t fp = request_fp(k->name, mesh, norm);
+    cJSON *doc = NULL;
+    if (j->cl) {
+        doc = cluster_find_idem(j, key, fp);
+    } else {
+        job probe;
+        memset(&probe, 0, sizeof probe);
+        snprintf(probe.mesh, sizeof probe.mesh, "%s", mesh);
+        probe.kind = k;
+        probe.params = norm;
+        probe.fp = fp;
+        probe.idem = (char *)key;
+        pthread_mutex_lock(&j->lock);
+        const job *prior = find_existing_locked(j, &probe, 0, &e);
+        if (prior) doc = job_json(j, prior, 1);
+        pthread_mutex_unlock(&j->lock);
+    }
+    cJSON_Delete(norm);
+    return doc;
+}
+
 cJSON *vx_jobs_submit_with(vx_jobs *j, const char *mesh, const char *kind, const cJSON *params,
                            const vx_jobs_submit_opts *opts, int *existing, vx_err *err)
 {
@@ -311,7 +343,16 @@ cJSON *vx_jobs_submit_with(vx_jobs *j, const char *mesh, const char *kind, const
         return NULL;
     }
     cJSON *meta = vx_store_mesh_meta(j->desc.store, mesh, err);
-    if (!meta) return NULL;
+    if (!meta) {
+        cJSON *doc = opts && opts->idempotency_key && !strcmp(err->code, "mesh_not_found")
+                         ? idem_retry(j, k, mesh, params, opts->idempotency_key)
+                         : NULL;
+        if (doc) {
+            vx_err_clear(err);
+            if (existing) *existing = 1;
+        }
+        return doc;
+    }
     if (params && !cJSON_IsObject(params)) {
         cJSON_Delete(meta);
         vx_err_set(err, VX_EUNPROC, "invalid_params", "params must be an object");

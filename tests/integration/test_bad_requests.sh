@@ -501,6 +501,17 @@ print(slow)
 PY
 )
 check "10 half-closed clients: each answered and closed within 2 s ($halfclosed not)" test "$halfclosed" = 0
+# Blanks after a header's value are not part of it (RFC 9110 5.5):
+# libmicrohttpd keeps them; an Idempotency-Key with one was 400 and an
+# X-Request-Id with one was replaced.
+IDB="{\"mesh\":\"$BOX\",\"kind\":\"voxelize\",\"params\":{\"resolution\":6,\"format\":\"summary\"}}"
+raw_http idemows "POST /v1/jobs HTTP/1.1\\r\\nHost: x\\r\\nContent-Type: application/json\\r\\nIdempotency-Key: ows-key \\t\\r\\nX-Request-Id: ows-rid\\t \\r\\nContent-Length: ${#IDB}\\r\\n\\r\\n$IDB"
+check "a key with blanks after it: 202 ($(head -n 1 "$TMP/idemows.raw" | tr -d '\r'))" bash -c "head -n 1 '$TMP/idemows.raw' | grep -q '^HTTP/1.1 202 '"
+check "the request id without its blanks is echoed" bash -c "tr -d '\r' <'$TMP/idemows.raw' | sed '/^$/q' | grep -qx 'X-Request-Id: ows-rid'"
+OWSJ=$(tr -d '\r' <"$TMP/idemows.raw" | sed '1,/^$/d' | jq -r .id)
+api POST /v1/jobs -H "Content-Type: application/json" -H "Idempotency-Key: ows-key" -d "$IDB"
+expect_status "the same key without the blanks: the same job" 200
+check "its id ($OWSJ)" test "$(jqb .id)" = "$OWSJ"
 raw_http twoidem "POST /v1/jobs HTTP/1.1\\r\\nHost: x\\r\\nContent-Type: application/json\\r\\nIdempotency-Key: a\\r\\nIdempotency-Key: b\\r\\nContent-Length: 2\\r\\n\\r\\n{}"
 expect_raw twoidem 400 invalid_request
 long=$(printf 'a%.0s' {1..20000})

@@ -164,6 +164,9 @@ check "metrics: voxeld_queue_depth is the database's" grep -qx "voxeld_queue_dep
 psql "$URL" -qAtc "DELETE FROM vx_jobs WHERE kind = 'held' AND id <> '$HELD'" >/dev/null
 MF=$(find "$SHARED" -name "$M.obj" | head -n 1)
 check "catalog: the mesh's bytes are in the shared store" test -n "$MF"
+submit 2 voxelize "$M" '{"resolution":16,"format":"summary"}' -H "Idempotency-Key: cluster-kdel"
+expect_status "catalog: a keyed job on r2" 202
+KD=$JOB
 on 1
 api DELETE "/v1/meshes/$M"
 expect_status "catalog: delete on r1" 204
@@ -172,6 +175,9 @@ api GET "/v1/meshes/$M"
 expect_error "catalog: a 404 on r2 at once" 404 mesh_not_found
 submit 3 voxelize "$M" '{"resolution":16}'
 expect_error "catalog: no new job on r3" 404 mesh_not_found
+submit 3 voxelize "$M" '{"resolution":16,"format":"summary"}' -H "Idempotency-Key: cluster-kdel"
+expect_status "catalog: the keyed job's retry on r3 after the delete" 200
+check "catalog: the same job" test "$JOB" = "$KD"
 api GET "/v1/meshes?limit=1000"
 check "catalog: r3 no longer lists it" jq -e --arg m "$M" '[.items[].id] | index($m) == null' "$BODY"
 sleep 3 # past a few purge rounds (one per renewal: 1 s here)

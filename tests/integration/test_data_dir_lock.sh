@@ -53,4 +53,18 @@ wait_job "$LATE" 60
 check "job acknowledged beside the refused daemon ran" jq -e '.state == "succeeded"' "$BODY"
 check "the lock file is back, holding the new pid" test "$(cat "$DATA/voxeld.lock")" = "$PID"
 stop_daemon
+
+# Started with its stdout and stderr closed (`voxeld 1>&- 2>&-`): the files
+# it opened took descriptors 1 and 2, and its log went into the lock file
+# (a second daemon then named "pid ts=..." as the holder).
+FREE=$(python3 -c 'import socket; s = socket.socket(); s.bind(("127.0.0.1", 0)); print(s.getsockname()[1])')
+"$VOXELD" --listen "127.0.0.1:$FREE" --data-dir "$DATA" 1>&- 2>&- &
+PID=$!
+for _ in $(seq 1 300); do curl -sf -o /dev/null "http://127.0.0.1:$FREE/livez" && break; sleep 0.1; done
+check "with fds 1 and 2 closed it serves" curl -sf -o /dev/null "http://127.0.0.1:$FREE/livez"
+check "the lock file holds its pid only ($(head -c 80 "$DATA/voxeld.lock"))" test "$(cat "$DATA/voxeld.lock")" = "$PID"
+rc=0
+timeout 20 "$VOXELD" --listen 127.0.0.1:0 --data-dir "$DATA" 2>"$TMP/fifth.log" || rc=$?
+check "a second daemon names it as the holder" grep -q "in use by another voxeld (pid $PID)" "$TMP/fifth.log"
+stop_daemon
 finish

@@ -62,6 +62,10 @@ post_job "$A" preview '{"width":64,"height":64}'
 Q1=$(jqb .id)
 post_job "$B" gregory "{\"divisions\":2,\"frames\":[\"$A\"]}"
 Q2=$(jqb .id)
+KREQ="{\"mesh\":\"$A\",\"kind\":\"preview\",\"params\":{\"width\":40,\"height\":40}}"
+api POST /v1/jobs -H "Content-Type: application/json" -H "Idempotency-Key: del-key" -d "$KREQ"
+expect_status "a keyed job on A" 202
+QK=$(jqb .id)
 api DELETE "/v1/meshes/$A"
 expect_status "delete A with jobs queued" 204
 check "a 204 has no Content-Type" test -z "$CTYPE"
@@ -74,6 +78,13 @@ api GET "/v1/meshes?limit=100"
 check "A is not listed" jq -e '[.items[].id] | index("'"$A"'") == null and length == 2' "$BODY"
 post_job "$A" preview '{}'
 expect_error "a new job on A" 404 mesh_not_found
+# a retry under its Idempotency-Key still answers its job (it was 404)
+api POST /v1/jobs -H "Content-Type: application/json" -H "Idempotency-Key: del-key" -d "$KREQ"
+expect_status "the keyed job's retry after A's delete" 200
+check "the same job" test "$(jqb .id)" = "$QK"
+api POST /v1/jobs -H "Content-Type: application/json" -H "Idempotency-Key: del-key" \
+    -d "{\"mesh\":\"$A\",\"kind\":\"preview\",\"params\":{\"width\":41}}"
+expect_error "the key with another request on the deleted A" 404 mesh_not_found
 post_job "$B" gregory "{\"frames\":[\"$A\"]}"
 expect_error "a new job naming A" 404 mesh_not_found
 api DELETE "/v1/meshes/$A"

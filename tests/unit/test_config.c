@@ -124,6 +124,12 @@ static void test_refused_and_comments(void **state)
                             {"--max-uri-bytes", "255"},
                             {"--max-header-bytes", "0"},
                             {"--max-header-bytes", "1023"},
+                            /* past what libmicrohttpd's connection memory holds */
+                            {"--max-uri-bytes", "131073"},
+                            {"--max-header-bytes", "1G"},
+                            /* under the GL thread's pings, about a second apart */
+                            {"--gl-stall-timeout", "1.5"},
+                            {"--gl-stall-timeout", "0.001"},
                             /* seconds are a decimal number, as documented */
                             {"--job-timeout", "0x10"},
                             {"--job-timeout", "+5"},
@@ -143,6 +149,12 @@ static void test_refused_and_comments(void **state)
     char *ok[] = {"voxeld", "--connection-timeout", "1e9", "--max-uri-bytes", "256", NULL};
     assert_int_equal(load(&c, 5, ok), 0);
     assert_true(c.connection_timeout_s == 1e9);
+    char *ok2[] = {"voxeld", "--max-uri-bytes",    "128K", "--max-header-bytes",
+                   "128K",   "--gl-stall-timeout", "2",    NULL};
+    assert_int_equal(load(&c, 7, ok2), 0);
+    assert_true(c.max_header_bytes == 128 << 10 && c.gl_stall_timeout_s == 2);
+    char *off[] = {"voxeld", "--gl-stall-timeout", "0", NULL};
+    assert_int_equal(load(&c, 3, off), 0);
     static const char *const listens[] = {"[::1]:0", "[::]:8080", "[fe80::1%lo]:9", ":0",
                                           "127.0.0.1:65535"};
     for (size_t i = 0; i < sizeof listens / sizeof *listens; i++) {
