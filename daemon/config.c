@@ -146,7 +146,8 @@ static const opt_def opts[] = {
      "free space the data dir keeps: below it writes answer 507 (default 64M; 0 = only a full "
      "disk)"},
     {"cors-origin", T_LIST, S(cors_origin),
-     "origin a browser may call the API from (repeat, or a comma list; * = any; default none)"},
+     "origin a browser may call the API from, SCHEME://HOST[:PORT] (repeat, or a comma list; * = "
+     "any; default none)"},
     {"allowed-hosts", T_LIST, S(allowed_hosts),
      "Host names answered besides IP addresses, localhost, *.localhost and names without a dot "
      "(repeat, or a comma list; .NAME or *.NAME = NAME and the names under it; * = any; no port; "
@@ -264,6 +265,38 @@ static unsigned char list_source[NOPTS];
 /* Whether each option was given at all (file, environment or flag). */
 static unsigned char given[NOPTS];
 
+/* 1 when s[0..n) is an origin a browser may send (SCHEME://HOST[:PORT]),
+ * *, or empty. */
+static int origin_ok(const char *s, size_t n)
+{
+    if (n == 0 || (n == 1 && s[0] == '*')) return 1;
+    size_t i = 0;
+    if (!isalpha((unsigned char)s[0])) return 0;
+    while (i < n && (isalnum((unsigned char)s[i]) || s[i] == '+' || s[i] == '-' || s[i] == '.'))
+        i++;
+    if (n - i < 4 || memcmp(s + i, "://", 3)) return 0;
+    i += 3;
+    const size_t host = i;
+    if (s[i] == '[') { /* an IPv6 literal */
+        while (i < n && s[i] != ']')
+            i++;
+        if (i == n) return 0;
+        i++;
+    } else {
+        while (i < n && s[i] != ':' && !strchr("/?#@[] \t", s[i]))
+            i++;
+    }
+    if (i == host) return 0;
+    if (i < n && s[i] == ':') {
+        unsigned long port = 0;
+        size_t d = ++i;
+        while (i < n && isdigit((unsigned char)s[i]) && i - d < 6)
+            port = port * 10 + (unsigned long)(s[i++] - '0');
+        if (i == d || port < 1 || port > 65535) return 0;
+    }
+    return i == n;
+}
+
 static int set_opt(vx_config *c, const opt_def *d, const char *val, const char *where)
 {
     char *base = (char *)c;
@@ -296,6 +329,32 @@ static int set_opt(vx_config *c, const opt_def *d, const char *val, const char *
                              where, (size_t)(p - (const unsigned char *)val), *p);
                 return -1;
             }
+    }
+    /* an Origin is SCHEME://HOST[:PORT], no path, no slash after it: a
+     * value of another shape never matches a browser's, and was taken */
+    if (!strcmp(d->name, "cors-origin")) {
+        const char *bad_item = NULL;
+        int bad_len = 0;
+        for (const char *it = val; !bad_item;) {
+            const char *comma = strchr(it, ',');
+            int len = comma ? (int)(comma - it) : (int)strlen(it);
+            const char *o = it; /* blanks around a list's items are not part of them */
+            while (len && (*o == ' ' || *o == '\t'))
+                o++, len--;
+            while (len && (o[len - 1] == ' ' || o[len - 1] == '\t'))
+                len--;
+            if (!origin_ok(o, (size_t)len)) bad_item = o, bad_len = len;
+            if (!comma) break;
+            it = comma + 1;
+        }
+        if (bad_item) {
+            vx_log_plain(VX_LOG_ERR,
+                         "voxeld: %s: cors-origin takes origins as browsers send them, "
+                         "SCHEME://HOST[:PORT] without a path or a slash after it (or *): "
+                         "'%.*s'\n",
+                         where, bad_len > 200 ? 200 : bad_len, bad_item);
+            return -1;
+        }
     }
     /* a Host name, or .NAME, or *: a port or a path never matches one */
     if (!strcmp(d->name, "allowed-hosts") && strpbrk(val, ":/@[]\t")) {
@@ -634,6 +693,11 @@ int vx_config_load(vx_config *c, int argc, char **argv)
         return -1;
     }
     if (!c->cache_dir[0]) snprintf(c->cache_dir, sizeof c->cache_dir, "%s/cache", c->data_dir);
+    /* "0 = the default" as the value in effect (what /v1/info shows) */
+    if (!c->brick_threshold) c->brick_threshold = 1ull << 30;
+    if (!c->event_keepalive_s) c->event_keepalive_s = 15;
+    if (!c->lease_ttl_s) c->lease_ttl_s = 30;
+    if (!c->blob_timeout_s) c->blob_timeout_s = 30;
     /* Enough for one upload of the largest size in the costliest format
      * (vx_mesh_parse_cost: OBJ, 8 x the file). */
     if (!given[find_opt("max-parse-memory") - opts])

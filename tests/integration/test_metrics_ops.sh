@@ -110,7 +110,7 @@ start_daemon --job-timeout 0 --request-timeout 0 --connection-timeout 0 --max-tr
     --max-connections-per-ip 0 --max-image-pixels 0 --max-job-memory 0 --header-timeout 0 \
     --min-body-rate 0 --min-send-rate 0 --max-parse-memory 0 --results-max-bytes 0 \
     --results-max-age 0 --job-history-bytes 0 --max-event-streams 0 --max-connections 300 \
-    --keep-memory 0 --max-cc-valence 0 || exit 1
+    --keep-memory 0 --max-cc-valence 0 --brick-threshold 0 --event-keepalive 0 || exit 1
 INFO_FROM=$(wc -l <"$VX_API_LOG")
 api GET /v1/info
 expect_status "info with zero limits" 200
@@ -120,6 +120,9 @@ check "every zero limit reported as 0" jq -e '.limits | [.job_timeout_s, .max_wa
     .max_parse_memory_bytes, .results_max_bytes, .results_max_age_s, .job_history_bytes,
     .max_event_streams, .keep_memory_bytes, .max_cc_valence] | all(. == 0)' "$BODY"
 check "max_connections reported" jq -e '.limits.max_connections == 300' "$BODY"
+# those whose 0 is "the default" say the default they give (they said 0)
+check "brick_threshold_cells and event_keepalive_s 0: the defaults in effect" \
+    jq -e '.limits.brick_threshold_cells == 1073741824 and .limits.event_keepalive_s == 15' "$BODY"
 tail -n +"$((INFO_FROM + 1))" "$VX_API_LOG" >"$TMP/info-api.jsonl"
 check "the zero-limit /v1/info fits api/openapi.yaml" \
     python3 "$VX_SOURCE_DIR/tests/tools/openapi_check.py" "$VX_SOURCE_DIR/api/openapi.yaml" "$TMP/info-api.jsonl"

@@ -330,7 +330,22 @@ static void test_operator_forms(void **state)
     assert_int_equal(c.max_upload_bytes, 64);
     char part[700]; /* two list values over the list's longest together: said so */
     memset(part, 'o', sizeof part - 1);
+    memcpy(part, "http://", 7);
     part[sizeof part - 1] = 0;
+    /* an origin of another shape than a browser's never matches one */
+    static const char *const no_origin[] = {
+        "a.example",          "http://a.example/", "http://a.example:99999",
+        "http://a.example:0", "http://",           "http://a.example, b.example",
+        "http://a b"};
+    for (size_t i = 0; i < sizeof no_origin / sizeof *no_origin; i++) {
+        char *av[] = {"voxeld", "--cors-origin", (char *)no_origin[i], NULL};
+        assert_int_equal(load_said(&c, 3, av, buf, sizeof buf), -1);
+        assert_non_null(strstr(buf, "cors-origin takes origins"));
+    }
+    char *origins[] = {
+        "voxeld",        "--cors-origin",     "http://b.example:8000, https://c.example,*",
+        "--cors-origin", "http://[::1]:5173", NULL};
+    assert_int_equal(load(&c, 5, origins), 0);
     char *two[] = {"voxeld", "--cors-origin", part, "--cors-origin", part, NULL};
     assert_int_equal(load_said(&c, 5, two, buf, sizeof buf), -1);
     assert_non_null(strstr(buf, "(want at most 1023 bytes in all)"));
