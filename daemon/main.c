@@ -157,7 +157,14 @@ static void fit_holds(vx_config *cfg)
     uint64_t waits = cfg->max_waits, streams = cfg->max_event_streams;
     /* shared in proportion to what was asked */
     cfg->max_waits = waits * half / (waits + streams);
+    /* a share rounded down to 0 is 1 where the half has room: 0 is not a
+     * smaller limit but "none held" (every GET ?wait 503) */
+    if (waits && !cfg->max_waits && half >= 2) cfg->max_waits = 1;
     cfg->max_event_streams = half - cfg->max_waits;
+    if (streams && !cfg->max_event_streams && cfg->max_waits >= 2) {
+        cfg->max_waits--;
+        cfg->max_event_streams = 1;
+    }
     VX_WARN("http.holds_limit",
             "max_connections=%llu max_waits=%llu max_event_streams=%llu effective_waits=%llu "
             "effective_streams=%llu action=\"raise --max-connections for more held requests\"",

@@ -102,6 +102,19 @@ check "the first DELETE 204, a new series, is counted" \
 stop_daemon
 
 # ---- /v1/info reports the limits as configured, 0 = no limit included ----------
+# Held requests lowered to half of --max-connections in proportion: a
+# share that rounded down to 0 (none held) is 1.
+start_daemon --max-connections 100 --max-event-streams 100 --max-waits 1 || exit 1
+api GET /v1/info
+check "waits 1 of streams 100 in a half of 50: 1 and 49 ($(jq -c '.limits | [.max_waits, .max_event_streams]' "$BODY"))" \
+    jq -e '.limits.max_waits == 1 and .limits.max_event_streams == 49' "$BODY"
+stop_daemon
+start_daemon --max-connections 100 --max-event-streams 1 --max-waits 100 || exit 1
+api GET /v1/info
+check "streams 1 of waits 100: 49 and 1 ($(jq -c '.limits | [.max_waits, .max_event_streams]' "$BODY"))" \
+    jq -e '.limits.max_waits == 49 and .limits.max_event_streams == 1' "$BODY"
+stop_daemon
+
 # Every option whose 0 is documented as "no limit" / "never" / "at once", set
 # to 0: /v1/info must say 0, and still fit api/openapi.yaml's Limits (which
 # once required these to be above 0, so a valid configuration answered a
