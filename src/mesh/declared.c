@@ -773,7 +773,9 @@ static int json_object_head(const unsigned char *p, size_t n, size_t i)
 vx_mesh_format vx_mesh_sniff_sized(const unsigned char *p, size_t n, uint64_t size)
 {
     if (n >= 12 && !memcmp(p, "glTF", 4)) return VX_MESH_GLB;
-    if (n >= 4 && !memcmp(p, "ply", 3) && (p[3] == '\n' || p[3] == '\r')) return VX_MESH_PLY;
+    const size_t bom = n >= 3 && !memcmp(p, "\xef\xbb\xbf", 3) ? 3 : 0;
+    if (n >= bom + 4 && !memcmp(p + bom, "ply", 3) && (p[bom + 3] == '\n' || p[bom + 3] == '\r'))
+        return VX_MESH_PLY;
     if (n >= 84 && 84 + 50 * (uint64_t)le32(p + 80) == size) return VX_MESH_STL;
     size_t i = 0;
     if (n >= 3 && !memcmp(p, "\xef\xbb\xbf", 3)) i = 3;

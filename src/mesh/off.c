@@ -29,7 +29,10 @@ typedef struct off_in {
 static int next_line(off_in *in)
 {
     while (in->p < in->end) {
+        /* lines end at LF, CRLF or a lone CR (old Mac files) */
         const char *nl = memchr(in->p, '\n', (size_t)(in->end - in->p));
+        const char *cr = memchr(in->p, '\r', (size_t)((nl ? nl : in->end) - in->p));
+        if (cr && cr + 1 != nl) nl = cr;
         const char *e = nl ? nl : in->end;
         size_t len = (size_t)(e - in->p);
         in->lineno++;

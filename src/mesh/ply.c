@@ -99,7 +99,8 @@ int vx_ply_header_parse(const unsigned char *p, size_t n, uint64_t size, vx_ply_
     const char *s = (const char *)p, *end = s + (n < VX_PLY_MAX_HEADER ? n : VX_PLY_MAX_HEADER);
     memset(h, 0, sizeof *h);
     int format = -1, line = 0;
-    const char *at = s;
+    /* a UTF-8 byte order mark before "ply", as the text readers take it */
+    const char *at = end - s >= 3 && !memcmp(s, "\xef\xbb\xbf", 3) ? s + 3 : s;
     for (;;) {
         const char *nl = memchr(at, '\n', (size_t)(end - at));
         if (!nl) {

@@ -283,6 +283,19 @@ static void test_off_numbers(void **state)
     assert_non_null(m);
     assert_true(m->pos[3] == 1.5);
     vx_mesh_free(m);
+    /* lone CR line ends (old Mac files), as OBJ takes them: the whole file
+     * was one line, "a vertex line without three numbers" */
+    const char *mac = "OFF\r3 1 0\r0 0 0\r1 0 0 # a comment\r0 1 0\r3 0 1 2\r";
+    m = vx_off_read_mem((const unsigned char *)mac, strlen(mac), NULL, &err);
+    if (!m) print_error("%s\n", err.message);
+    assert_non_null(m);
+    assert_int_equal(m->ntris, 1);
+    assert_true(m->pos[3] == 1.0);
+    vx_mesh_free(m);
+    /* CRLF is one line end: a bad fourth line is line 4 */
+    const char *crlf = "OFF\r\n3 1 0\r\n0 0 0\r\n1 0\r\n0 1 0\r\n3 0 1 2\r\n";
+    assert_null(vx_off_read_mem((const unsigned char *)crlf, strlen(crlf), NULL, &err));
+    assert_non_null(strstr(err.message, "line 4:"));
     static const char *const bad[] = {"OFF\n3 1 0\n0x10 0 0\n1 0 0\n0 1 0\n3 0 1 2\n",
                                       "OFF\n3 1 0\n0 0 0\n1 0 0x1p0\n0 1 0\n3 0 1 2\n",
                                       "OFF\n3 1 0\n0 0 0\n1,0 0 0\n0 1 0\n3 0 1 2\n"};

@@ -419,6 +419,20 @@ static void test_header_prefix(void **state)
     assert_int_equal(h->elems[1].count, 1);
     assert_int_equal(h->props[h->elems[1].first_prop].count_type, VX_PLY_U8);
     assert_int_equal(h->props[h->elems[1].first_prop].type, VX_PLY_I32);
+    /* After a UTF-8 byte order mark (as OBJ, OFF and ASCII STL take one):
+     * sniffed and read as PLY, the body after the mark's 3 bytes too */
+    char *bom = malloc(n + 4);
+    memcpy(bom, "\xef\xbb\xbf", 3);
+    memcpy(bom + 3, s, n + 1);
+    assert_int_equal(vx_mesh_sniff_sized((const unsigned char *)bom, n + 3, n + 3), VX_MESH_PLY);
+    assert_int_equal(vx_ply_header_parse((const unsigned char *)bom, n + 3, n + 3, h, &err), 0);
+    assert_int_equal(h->body, body + 3);
+    vx_mesh *m = vx_ply_read_mem((const unsigned char *)bom, n + 3, NULL, &err);
+    if (!m) print_error("%s\n", err.message);
+    assert_non_null(m);
+    assert_int_equal(m->ntris, 1);
+    vx_mesh_free(m);
+    free(bom);
     /* The whole file without an end_header line is refused, not retried. */
     const char *cut = "ply\nformat ascii 1.0\nelement vertex 0\n";
     assert_int_equal(
