@@ -731,6 +731,14 @@ int vx_config_load(vx_config *c, int argc, char **argv)
                 free(tok);
                 return -1;
             }
+        if (tl >= sizeof c->token) { /* it was cut to its first 511 bytes, silently */
+            vx_log_plain(VX_LOG_ERR,
+                         "voxeld: token file %s holds a token of %zu bytes, over the %zu "
+                         "taken\n",
+                         c->token_file, tl, sizeof c->token - 1);
+            free(tok);
+            return -1;
+        }
         snprintf(c->token, sizeof c->token, "%.*s", (int)tl, t);
         free(tok);
         if (!c->token[0]) {

@@ -261,6 +261,24 @@ static void test_token_file_named(void **state)
     char buf[1024];
     assert_int_equal(load_said(&c, 3, argv, buf, sizeof buf), -1);
     assert_non_null(strstr(buf, "token file /nonexistent/vx-token: "));
+    /* a token of 511 bytes is taken whole; one of 512 was cut to 511 and
+     * the whole one refused (401) */
+    char path[] = "/tmp/vx-token-XXXXXX", tok[601];
+    for (size_t len = 511; len <= 600; len += 89) {
+        memset(tok, 'k', len);
+        tok[len] = '\n';
+        config_file(path, tok, len + 1);
+        char *av[] = {"voxeld", "--token-file", path, NULL};
+        int rc = load_said(&c, 3, av, buf, sizeof buf);
+        if (len == 511) {
+            assert_int_equal(rc, 0);
+            assert_int_equal(strlen(c.token), 511);
+        } else {
+            assert_int_equal(rc, -1);
+            assert_non_null(strstr(buf, "a token of 600 bytes, over the 511 taken"));
+        }
+    }
+    unlink(path);
 }
 
 /* A VOXELD_ variable that names no option is warned about on stderr and
