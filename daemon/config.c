@@ -65,8 +65,9 @@ static const opt_def opts[] = {
      "/livez answers 503 once the GL thread has been silent this long (a driver call that does "
      "not return), seconds (default 60; 0 = off, else at least 2)"},
     {"stop-timeout", T_SECONDS, F(stop_timeout_s), 0,
-     "after SIGTERM, how long the running job may take to stop before voxeld exits 1 without "
-     "it (it runs again at the next start), seconds (default 30; 0 = wait)"},
+     "after SIGTERM, how long the running job (and answers being sent) may take to stop before "
+     "voxeld exits 1 without it (it runs again at the next start), seconds (default 30; 0 = "
+     "wait for the job, answers 30 s)"},
     {"request-timeout", T_SECONDS, F(request_timeout_s), 0,
      "longest a request is held by ?wait, seconds (default 60; 0 = ?wait answers at once)"},
     {"connection-timeout", T_SECONDS, F(connection_timeout_s), 0,
@@ -265,11 +266,12 @@ static unsigned char list_source[NOPTS];
 /* Whether each option was given at all (file, environment or flag). */
 static unsigned char given[NOPTS];
 
-/* 1 when s[0..n) is an origin a browser may send (SCHEME://HOST[:PORT]),
- * *, or empty. */
+/* 1 when s[0..n) is an origin a browser may send (SCHEME://HOST[:PORT],
+ * the port not its scheme's default, which a browser leaves out; null, a
+ * sandboxed or file: page's), *, or empty. */
 static int origin_ok(const char *s, size_t n)
 {
-    if (n == 0 || (n == 1 && s[0] == '*')) return 1;
+    if (n == 0 || (n == 1 && s[0] == '*') || (n == 4 && !strncasecmp(s, "null", 4))) return 1;
     size_t i = 0;
     if (!isalpha((unsigned char)s[0])) return 0;
     while (i < n && (isalnum((unsigned char)s[i]) || s[i] == '+' || s[i] == '-' || s[i] == '.'))
@@ -292,7 +294,10 @@ static int origin_ok(const char *s, size_t n)
         size_t d = ++i;
         while (i < n && isdigit((unsigned char)s[i]) && i - d < 6)
             port = port * 10 + (unsigned long)(s[i++] - '0');
-        if (i == d || port < 1 || port > 65535) return 0;
+        if (i == d || s[d] == '0' || port > 65535) return 0;
+        if ((port == 80 && !strncasecmp(s, "http:", 5)) ||
+            (port == 443 && !strncasecmp(s, "https:", 6)))
+            return 0;
     }
     return i == n;
 }
@@ -350,7 +355,8 @@ static int set_opt(vx_config *c, const opt_def *d, const char *val, const char *
         if (bad_item) {
             vx_log_plain(VX_LOG_ERR,
                          "voxeld: %s: cors-origin takes origins as browsers send them, "
-                         "SCHEME://HOST[:PORT] without a path or a slash after it (or *): "
+                         "SCHEME://HOST[:PORT] without a path or a slash after it, nor its "
+                         "scheme's default port (or * or null): "
                          "'%.*s'\n",
                          where, bad_len > 200 ? 200 : bad_len, bad_item);
             return -1;

@@ -531,6 +531,7 @@ static enum MHD_Result on_head(vx_http *h, struct MHD_Connection *c, const char 
     memcpy(r->id, t.id, sizeof r->id);
     memcpy(r->name, t.name, sizeof r->name);
     int rc;
+    if (h->stopping) r->close = 1; /* a stop waits for no next request */
     if (vx_conns_over_ip(vc)) {
         r->close = 1;
         rc = vx_resp_fail(c, r, VX_EOVERLOAD, "too_many_connections",
@@ -874,7 +875,7 @@ void vx_http_quiesce(vx_http *h)
     vx_events_quiesce(h->events);
 }
 
-void vx_http_stop(vx_http *h, double grace_s)
+void vx_http_stop(vx_http *h, double grace_s, double answers_s)
 {
     if (!h) return;
     vx_http_quiesce(h);
@@ -887,13 +888,20 @@ void vx_http_stop(vx_http *h, double grace_s)
         if (!di || di->num_connections == 0 || vx_conns_pending(h->conns) == 0) break;
         usleep(20000);
     }
-    /* a head or body still arriving gets a 503, read before the close */
-    if (vx_conns_shutdown(h->conns) > 0) usleep(500000);
-    /* an answer being sent (a result downloading) is let finish: main's
-     * stop watchdog (--stop-timeout) bounds the wait, and the sweeper still
-     * cuts a reader that stalls or is too slow */
-    while (vx_conns_answering(h->conns) > 0)
+    /* A head or body still arriving gets a 503, read before the close. An
+     * answer being sent (a result downloading) is let finish, up to
+     * answers_s (0: main's stop watchdog bounds it; the sweeper still cuts
+     * a reader that stalls or is too slow); meanwhile a head still
+     * arriving gets the 503 too, and every answer while stopping closes
+     * its connection. */
+    double killed_at = vx_conns_shutdown(h->conns) > 0 ? vx_mono() : 0;
+    const double answers_until = answers_s > 0 ? vx_mono() + answers_s : 0;
+    while (vx_conns_answering(h->conns) > 0 && (!answers_until || vx_mono() < answers_until)) {
         usleep(20000);
+        if (vx_conns_shutdown(h->conns) > 0) killed_at = vx_mono();
+    }
+    const double left = killed_at ? killed_at + 0.5 - vx_mono() : 0;
+    if (left > 0) usleep((useconds_t)(left * 1e6));
     vx_conns_stop(h->conns);
     MHD_stop_daemon(h->mhd);
     vx_events_free(h->events);

@@ -39,7 +39,8 @@ void vx_http_job_changed(vx_http *h, const char *jid, int terminal);
 /* Stops accepting connections and answers every held request now. */
 void vx_http_quiesce(vx_http *h);
 /* Waits up to grace_s for requests arriving (then answers them 503) and
- * for answers being sent as long as they take, then stops and frees. */
-void vx_http_stop(vx_http *h, double grace_s);
+ * up to answers_s (0 = as long as they take) for answers being sent, then
+ * stops and frees. */
+void vx_http_stop(vx_http *h, double grace_s, double answers_s);
 
 #endif

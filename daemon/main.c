@@ -334,6 +334,7 @@ static vx_jobs *open_jobs(const vx_config *cfg, vx_store *store, int start, vx_e
 /* When the jobs had stopped (vx_mono; 0 until then). */
 static _Atomic double g_jobs_stopped_at;
 #define STOP_HTTP_GRACE_S 2.0 /* vx_http_stop's grace for requests arriving */
+#define STOP_ANSWERS_S 30.0   /* and for answers being sent, with --stop-timeout 0 */
 
 static void sleep_s(double s)
 {
@@ -625,7 +626,9 @@ int main(int argc, char **argv)
     vx_http_quiesce(http);
     vx_jobs_stop(jobs);
     atomic_store(&g_jobs_stopped_at, vx_mono());
-    vx_http_stop(http, STOP_HTTP_GRACE_S);
+    /* answers being sent: the watchdog bounds them, or with none (0 = wait
+     * for the job) STOP_ANSWERS_S */
+    vx_http_stop(http, STOP_HTTP_GRACE_S, cfg.stop_timeout_s > 0 ? 0 : STOP_ANSWERS_S);
     __atomic_store_n(&g_http, NULL, __ATOMIC_RELEASE);
     __atomic_store_n(&g_jobs, NULL, __ATOMIC_RELEASE);
     vx_jobs_free(jobs);

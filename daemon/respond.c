@@ -40,13 +40,13 @@ const char *vx_resp_cors_origin(struct MHD_Connection *c)
 const char *vx_resp_list_next(const char **p, size_t *k)
 {
     const char *s = *p;
-    while (*s == ' ' || *s == ',')
+    while (*s == ' ' || *s == '\t' || *s == ',')
         s++;
     if (!*s) return NULL;
     const char *end = strchr(s, ',');
     if (!end) end = s + strlen(s);
     *p = end;
-    for (*k = (size_t)(end - s); *k && s[*k - 1] == ' ';)
+    for (*k = (size_t)(end - s); *k && (s[*k - 1] == ' ' || s[*k - 1] == '\t');)
         --*k;
     return s;
 }

@@ -53,13 +53,22 @@ static void reserve_tail(vx_journal *j, off_t need)
     } else {
         const int e = errno;
         /* What the file holds already counts: the reserve a run before this
-         * one left (a restart on a full disk), or part of this top-up. The
-         * journal is written in order, so its blocks past the size are the
-         * reserve. */
-        struct stat st;
-        if (fstat(j->fd, &st) == 0 && (off_t)st.st_blocks * 512 > j->reserved)
-            j->reserved = (off_t)st.st_blocks * 512;
+         * one left (a restart on a full disk), or part of this top-up. It
+         * is found by halving (to 4 KiB) between what failed and what is
+         * known: a range already allocated costs nothing (the file's block
+         * count would also count metadata, and space a file system may
+         * take back). */
         if (j->reserved < j->size) j->reserved = j->size;
+        off_t ok = j->reserved - j->size, bad = len;
+        while (bad - ok > 4096) {
+            const off_t mid = (ok + (bad - ok) / 2) & ~(off_t)4095;
+            if (mid <= ok) break;
+            if (fallocate(j->fd, FALLOC_FL_KEEP_SIZE, j->size, mid) == 0)
+                ok = mid;
+            else
+                bad = mid;
+        }
+        j->reserved = j->size + ok;
         if (!j->short_said) { /* not once a request while the disk stays full */
             j->short_said = 1;
             VX_WARN("journal.reserve_failed", "path=%s error=%d reserved=%lld", VX_Q(j->path), e,
@@ -311,8 +320,10 @@ long vx_journal_replay(vx_journal *j, void (*fn)(const cJSON *rec, void *ud), vo
          * (compaction may not run: the disk can be full). */
         if (ftruncate(j->fd, good) != 0 || fdatasync(j->fd) != 0)
             VX_ERROR("journal.truncate_failed", "path=%s error=%d", VX_Q(j->path), errno);
+        j->reserved = good; /* a truncate frees the blocks past the end too */
     }
     j->size = good;
+    if (torn) reserve_tail(j, RESERVE / 2);
     pthread_mutex_unlock(&j->lock);
     return count;
 }
@@ -371,11 +382,14 @@ int vx_journal_append(vx_journal *j, const cJSON *rec, size_t owed, vx_err *err)
     if (rc == 0) {
         j->size += (off_t)n;
         reserve_tail(j, RESERVE / 2);
-    } else if (ftruncate(j->fd, j->size) != 0 || fdatasync(j->fd) != 0) {
+    } else {
         /* A torn write (ENOSPC after part of the line) must not stay in the
          * file: the next record would be glued onto it. Shrinking needs no
-         * space; if even that fails, replay salvages the glued record. */
-        VX_ERROR("journal.truncate_failed", "path=%s error=%d", VX_Q(j->path), errno);
+         * space; if even that fails, replay salvages the glued record. The
+         * truncate frees the reserve past the end too. */
+        if (ftruncate(j->fd, j->size) != 0 || fdatasync(j->fd) != 0)
+            VX_ERROR("journal.truncate_failed", "path=%s error=%d", VX_Q(j->path), errno);
+        j->reserved = j->size;
     }
     pthread_mutex_unlock(&j->lock);
     free(text);

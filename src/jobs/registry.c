@@ -311,6 +311,14 @@ static cJSON *idem_retry(vx_jobs *j, const vx_kind *k, const char *mesh, const c
     vx_err e;
     vx_err_clear(&e);
     cJSON *norm = vx_params_normalize(k, params, &j->desc.limits, &e);
+    /* large inline inputs as the blob references the job holds (the store
+     * has them: a put of the same bytes costs a hash) */
+    pinset pins = {0};
+    if (norm && externalize(j, k, norm, &pins, &e)) {
+        cJSON_Delete(norm);
+        norm = NULL;
+    }
+    unpin_job(j, &pins);
     if (!norm) return NULL;
     const uint64_t fp = request_fp(k->name, mesh, norm);
     cJSON *doc = NULL;
@@ -400,7 +408,6 @@ cJSON *vx_jobs_submit_with(vx_jobs *j, const char *mesh, const char *kind, const
     }
     snprintf(jb->mesh, sizeof jb->mesh, "%s", mesh);
     jb->kind = k;
-    jb->created = vx_now();
     jb->stats = cJSON_CreateObject();
     jb->outputs = cJSON_CreateObject();
     jb->fp = request_fp(k->name, mesh, norm);
@@ -435,6 +442,7 @@ cJSON *vx_jobs_submit_with(vx_jobs *j, const char *mesh, const char *kind, const
     /* The id is made under the lock: ids increase in the order jobs enter
      * the table, so a list after the newest id seen misses none. */
     jobs_new_id(jb->id);
+    jb->created = vx_now(); /* after the id's time: not in a millisecond before it */
     if (j->stopping) {
         vx_err_set(err, VX_EUNAVAIL, "not_ready", "the daemon is shutting down");
     } else if (vx_queue_depth(j->queue) >= vx_queue_capacity(j->queue)) {

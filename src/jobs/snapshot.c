@@ -132,7 +132,7 @@ static void replay_one(const cJSON *rec, void *ud)
     if (cJSON_GetArraySize(full) == 3)
         for (int i = 0; i < 3; i++) {
             const double v = cJSON_GetNumberValue(cJSON_GetArrayItem(full, i));
-            if (v == v) t[i] = v;
+            if (v >= 0 && v < 253402300800.0) t[i] = v; /* to year 9999; not NaN */
         }
     jb->created = t[0];
     jb->started = t[1];

@@ -215,7 +215,9 @@ uint64_t vx_tree_bytes(const char *path)
 void vx_rfc3339(double t, char out[32])
 {
     /* to the nearest microsecond first: x.356 read back as x.35599999...
-     * is still .356 */
+     * is still .356 (and within year 0 to 9999) */
+    if (!(t >= 0)) t = 0;
+    if (t > 253402300799.999) t = 253402300799.999;
     const long long us = llround(t * 1e6);
     time_t s = (time_t)(us / 1000000);
     struct tm tm;

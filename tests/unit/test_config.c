@@ -351,17 +351,23 @@ static void test_operator_forms(void **state)
     memcpy(part, "http://", 7);
     part[sizeof part - 1] = 0;
     /* an origin of another shape than a browser's never matches one */
-    static const char *const no_origin[] = {
-        "a.example",          "http://a.example/", "http://a.example:99999",
-        "http://a.example:0", "http://",           "http://a.example, b.example",
-        "http://a b"};
+    static const char *const no_origin[] = {"a.example",
+                                            "http://a.example/",
+                                            "http://a.example:99999",
+                                            "http://a.example:0",
+                                            "http://",
+                                            "http://a.example, b.example",
+                                            "http://a b",
+                                            "https://a.example:443",
+                                            "http://a.example:80",
+                                            "http://a.example:080"};
     for (size_t i = 0; i < sizeof no_origin / sizeof *no_origin; i++) {
         char *av[] = {"voxeld", "--cors-origin", (char *)no_origin[i], NULL};
         assert_int_equal(load_said(&c, 3, av, buf, sizeof buf), -1);
         assert_non_null(strstr(buf, "cors-origin takes origins"));
     }
     char *origins[] = {
-        "voxeld",        "--cors-origin",     "http://b.example:8000, https://c.example,*",
+        "voxeld",        "--cors-origin",     "http://b.example:8000,\thttps://c.example:80,null",
         "--cors-origin", "http://[::1]:5173", NULL};
     assert_int_equal(load(&c, 5, origins), 0);
     char *two[] = {"voxeld", "--cors-origin", part, "--cors-origin", part, NULL};
