@@ -156,7 +156,8 @@ static void fit_holds(vx_config *cfg)
     if (cfg->max_waits + cfg->max_event_streams <= half) return;
     uint64_t waits = cfg->max_waits, streams = cfg->max_event_streams;
     /* shared in proportion to what was asked */
-    cfg->max_waits = waits * half / (waits + streams);
+    cfg->max_waits = (uint64_t)((double)waits * (double)half / ((double)waits + (double)streams));
+    if (cfg->max_waits > half) cfg->max_waits = half;
     /* a share rounded down to 0 is 1 where the half has room: 0 is not a
      * smaller limit but "none held" (every GET ?wait 503) */
     if (waits && !cfg->max_waits && half >= 2) cfg->max_waits = 1;
