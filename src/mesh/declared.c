@@ -777,8 +777,7 @@ vx_mesh_format vx_mesh_sniff_sized(const unsigned char *p, size_t n, uint64_t si
     if (n >= bom + 4 && !memcmp(p + bom, "ply", 3) && (p[bom + 3] == '\n' || p[bom + 3] == '\r'))
         return VX_MESH_PLY;
     if (n >= 84 && 84 + 50 * (uint64_t)le32(p + 80) == size) return VX_MESH_STL;
-    size_t i = 0;
-    if (n >= 3 && !memcmp(p, "\xef\xbb\xbf", 3)) i = 3;
+    size_t i = bom;
     while (i < n && blank(p[i]))
         i++;
     if (i < n && p[i] == '{' && json_object_head(p, n, i)) return VX_MESH_GLTF;

@@ -390,6 +390,7 @@ typedef struct wblock {
     int w_at;     /* the column's last centre whose w is sampled (INT_MIN: none) */
     int last;     /* its sample, or -3 */
     double carry; /* its w once the block is flushed */
+    int t;        /* the thread's index, for poll */
 } wblock;
 
 static int sample(const wctx *c, wblock *b, int i, int j, int k)
@@ -431,6 +432,14 @@ static void bound_runs(const wctx *c, int j, wblock *b)
  * it has one (8 centres or more), and split there where that disagrees. */
 static void flush(wctx *c, uint32_t *slice, int j, wblock *b)
 {
+    /* The stop check here too: a block's evaluations are most of a
+     * column's cost where each is slow (a soup of large triangles: 0.9 s
+     * between the column loop's checks, 6 s past a 2 s job limit on a
+     * loaded machine). A stopped block is dropped: the job ends. */
+    if (poll(c, b->t)) {
+        b->nr = b->nq = 0;
+        return;
+    }
     bound_runs(c, j, b);
     for (int r = 0; r < b->nr; r++) {
         wrun *u = &b->run[r];
@@ -447,6 +456,10 @@ static void flush(wctx *c, uint32_t *slice, int j, wblock *b)
         vx_wtree_eval4(&c->tree, (const double(*)[3])b->q[a], b->nq - a < 4 ? b->nq - a : 4,
                        b->w + a);
     for (int r = 0; r < b->nr; r++) {
+        if ((r & 31) == 31 && poll(c, b->t)) { /* a run's splits evaluate one by one */
+            b->nr = b->nq = 0;
+            return;
+        }
         const wrun *u = &b->run[r];
         const int i = u->i, ka = u->ka, kb = u->kb, cnt = u->cnt;
         if (!u->open) {
@@ -559,7 +572,7 @@ static int band_task(int b, int t, void *ud)
     /* the cone's bound over blocks of FAR_BLOCK columns of the band's rows
      * first: most are far from every hole */
     int ja = j0 > c->lo[1] ? j0 : c->lo[1], jb = j1 - 1 < c->hi[1] ? j1 - 1 : c->hi[1];
-    wblock blk = {.nr = 0, .nq = 0, .w_at = INT_MIN, .last = -1};
+    wblock blk = {.nr = 0, .nq = 0, .w_at = INT_MIN, .last = -1, .t = t};
     if (c->open)
         for (int i = c->lo[0]; i <= c->hi[0] && ja <= jb; i += FAR_BLOCK) {
             int ib = i + FAR_BLOCK - 1 < c->hi[0] ? i + FAR_BLOCK - 1 : c->hi[0];
